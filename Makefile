@@ -1,0 +1,32 @@
+# Two set-up commands work on a fresh machine with Python 3.11, make and pip:
+#   make demo   creates .venv, installs, identifies the bundled datasets, writes demo_out/
+#   make test   creates .venv if missing, installs, runs the tests
+PYTHON ?= python3
+VENV := .venv
+PY := $(VENV)/bin/python
+STAMP := $(VENV)/.installed
+
+.PHONY: demo test bench experiment clean
+
+$(PY):
+	$(PYTHON) -m venv $(VENV)
+
+$(STAMP): $(PY) pyproject.toml
+	$(PY) -m pip install --quiet --upgrade pip
+	$(PY) -m pip install --quiet -e ".[test]"
+	touch $(STAMP)
+
+demo: $(STAMP)
+	$(PY) -m subid.demo --out demo_out
+
+test: $(STAMP)
+	OPENBLAS_NUM_THREADS=1 $(PY) -m pytest -q tests
+
+bench: $(STAMP)
+	OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 MKL_NUM_THREADS=1 $(PY) bench/run.py --out bench/results.md
+
+experiment: $(STAMP)
+	OPENBLAS_NUM_THREADS=1 $(PY) -m subid.experiments.seed001 --runs 1000 --out results/seed001
+
+clean:
+	rm -rf $(VENV) demo_out results

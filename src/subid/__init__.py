@@ -1,0 +1,36 @@
+"""subid: subspace identification of linear MIMO state-space models.
+
+Batch methods are functions ``method(data, order, ...) -> StateSpace``:
+:func:`ls_subspace` (SVD-free least squares, seed 001), and the classical
+baselines :func:`moesp` and :func:`n4sid`. Data live in :class:`IOData`,
+models in :class:`StateSpace`; :func:`markov_error`, :func:`fit_percent`
+and :func:`pole_error` validate them. Errors are :mod:`subid.errors`
+exceptions (all ``ValueError`` subclasses).
+"""
+
+from . import datasets, errors, plot, systems
+from .data import IOData
+from .io import read
+from .ls_subspace import ls_subspace
+from .metrics import fit_percent, markov_error, pole_error
+from .model import StateSpace
+from .moesp import moesp
+from .n4sid import n4sid
+
+__all__ = [
+    "IOData",
+    "StateSpace",
+    "read",
+    "ls_subspace",
+    "moesp",
+    "n4sid",
+    "markov_error",
+    "fit_percent",
+    "pole_error",
+    "errors",
+    "systems",
+    "datasets",
+    "plot",
+]
+
+__version__ = "0.1.0"

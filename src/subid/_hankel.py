@@ -1,0 +1,127 @@
+"""Block-Hankel data statistics shared by the subspace methods.
+
+Every subspace method here works on the triangular factor of the block-Hankel
+data matrix
+
+    H = [U_{0|s-1}; Y_{0|s-1}]  (s(nu+ny) rows, K = N - s + 1 columns),
+
+where block row ``i`` of ``U_{0|s-1}`` is ``[u(i), u(i+1), ..., u(i+K-1)]``.
+With ``H^T = Q R`` (thin QR, ``Q`` with orthonormal columns), ``H = L Q^T``
+with ``L = R^T`` lower triangular; every projection of the subspace
+algorithms acts on the row space of ``H`` only through ``L``, because
+``Q^T`` has orthonormal rows. The factor is accumulated in chunks of columns,
+so an N-column Hankel matrix is never built.
+
+A method that needs the rows in another order (say ``[U_f; U_p; Y_p; Y_f]``)
+re-triangularises ``L`` with the rows permuted: if ``H = L Q^T`` then
+``P H = (P L) Q^T`` and an LQ factorisation of the small matrix ``P L``
+gives the factor of ``P H`` exactly.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.linalg
+
+# Columns of H^T processed per QR update; bounds the working memory.
+_CHUNK = 16384
+
+
+@dataclass(frozen=True)
+class HankelFactor:
+    """Triangular factor of a block-Hankel data matrix.
+
+    Attributes
+    ----------
+    L : ndarray, shape (s*(nu+ny), s*(nu+ny))
+        Lower-triangular factor, scaled by ``1/sqrt(K)`` so that
+        ``L L^T = H H^T / K`` (a sample correlation matrix).
+    depth : int
+        Number of block rows ``s`` of each signal.
+    n_inputs, n_outputs : int
+    n_columns : int
+        ``K = N - s + 1``.
+    """
+
+    L: np.ndarray
+    depth: int
+    n_inputs: int
+    n_outputs: int
+    n_columns: int
+
+    def u_rows(self, first: int, stop: int) -> np.ndarray:
+        """Row indices of input block rows ``first .. stop-1``."""
+        nu = self.n_inputs
+        return np.arange(first * nu, stop * nu)
+
+    def y_rows(self, first: int, stop: int) -> np.ndarray:
+        """Row indices of output block rows ``first .. stop-1``."""
+        nu, ny, s = self.n_inputs, self.n_outputs, self.depth
+        return s * nu + np.arange(first * ny, stop * ny)
+
+    def rows(self, *blocks) -> np.ndarray:
+        """Rows of ``L`` for the concatenation of the given index arrays."""
+        return self.L[np.concatenate(blocks)]
+
+    def retriangularize(self, *blocks) -> np.ndarray:
+        """Lower-triangular factor of the Hankel rows ``blocks`` in that order.
+
+        Returns ``L'`` with ``P H = L' Q'^T`` for the row selection ``P``.
+        """
+        return lq_lower(self.rows(*blocks))
+
+
+def lq_lower(M: np.ndarray) -> np.ndarray:
+    """Lower-triangular ``L`` of the LQ factorisation ``M = L Q^T``.
+
+    ``M`` is (r, m); ``L`` is (r, r) when ``r <= m``. The sign of each
+    diagonal entry is made non-negative so the factor is unique.
+    """
+    r = scipy.linalg.qr(M.T, mode="r", check_finite=False)[0]
+    L = r[: M.shape[0]].T
+    if L.shape[1] < M.shape[0]:
+        L = np.hstack([L, np.zeros((M.shape[0], M.shape[0] - L.shape[1]))])
+    signs = np.sign(np.diag(L)[: min(L.shape)])
+    signs[signs == 0] = 1.0
+    L[:, : signs.size] *= signs
+    return L
+
+
+def hankel_chunk(u: np.ndarray, y: np.ndarray, depth: int, start: int, stop: int) -> np.ndarray:
+    """Columns ``start .. stop-1`` of ``H^T`` (rows = time, as a dense block)."""
+    nu, ny = u.shape[1], y.shape[1]
+    k = stop - start
+    out = np.empty((k, depth * (nu + ny)))
+    for i in range(depth):
+        out[:, i * nu:(i + 1) * nu] = u[start + i:stop + i]
+        out[:, depth * nu + i * ny: depth * nu + (i + 1) * ny] = y[start + i:stop + i]
+    return out
+
+
+def hankel_factor(u: np.ndarray, y: np.ndarray, depth: int) -> HankelFactor:
+    """Accumulate the triangular factor of the block-Hankel matrix of (u, y).
+
+    Parameters
+    ----------
+    u, y : ndarray, shape (N, nu), (N, ny)
+    depth : int
+        Block rows per signal (past + future horizon).
+    """
+    n = u.shape[0]
+    k_total = n - depth + 1
+    m = depth * (u.shape[1] + y.shape[1])
+    R = np.zeros((0, m))
+    for start in range(0, k_total, _CHUNK):
+        stop = min(start + _CHUNK, k_total)
+        block = np.vstack([R, hankel_chunk(u, y, depth, start, stop)])
+        R = scipy.linalg.qr(block, mode="r", check_finite=False)[0][:m]
+    if R.shape[0] < m:
+        R = np.vstack([R, np.zeros((m - R.shape[0], m))])
+    L = R.T / np.sqrt(k_total)
+    signs = np.sign(np.diag(L))
+    signs[signs == 0] = 1.0
+    L *= signs
+    return HankelFactor(L=L, depth=depth, n_inputs=u.shape[1], n_outputs=y.shape[1],
+                        n_columns=k_total)

@@ -1,0 +1,159 @@
+"""Linear least-squares estimation of B, D and the initial state x0 given (A, C).
+
+With A and C known, the output of (1) in seed 001 is linear in the remaining
+unknowns:
+
+    y(t) = C A^t x0 + sum_{k<t} C A^{t-1-k} B u(k) + D u(t)
+         = C S(t) [x0; vec(B)] + (u(t)^T kron I_ny) vec(D),
+
+where the sensitivity ``S(t)`` (n x (n + n*nu)) obeys
+
+    S(0) = [I_n, 0],   S(t+1) = A S(t) + [0, u(t)^T kron I_n]
+
+(``vec`` stacks columns, so ``B u = (u^T kron I_n) vec(B)``). The regressor
+rows ``Phi(t) = [C S(t), u(t)^T kron I_ny]`` are produced chunk by chunk by a
+compiled kernel and reduced at once by a sequential QR factorisation, so the
+memory used does not grow with the record length.
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+import scipy.linalg
+
+_CHUNK = 4096
+
+
+def sensitivity_rows_reference(A, C, u, S0, n_x0_cols):
+    """Plain-numpy reference of :func:`sensitivity_rows`.
+
+    Parameters
+    ----------
+    A : (n, n), C : (ny, n), u : (T, nu) inputs of the chunk,
+    S0 : (n, q) sensitivity at the first sample of the chunk, with
+        ``q = n_x0_cols + n*nu``.
+
+    Returns
+    -------
+    rows : (T, ny, q) the values ``C S(t)``; S_end : (n, q) sensitivity after
+    the chunk.
+    """
+    T, nu = u.shape
+    n = A.shape[0]
+    S = S0.copy()
+    rows = np.empty((T, C.shape[0], S0.shape[1]))
+    for t in range(T):
+        rows[t] = C @ S
+        S = A @ S
+        for j in range(nu):
+            c0 = n_x0_cols + j * n
+            S[:, c0:c0 + n] += u[t, j] * np.eye(n)
+    return rows, S
+
+
+@numba.njit(cache=True, nogil=True)
+def sensitivity_rows(A, C, u, S0, n_x0_cols):  # pragma: no cover - compiled
+    """Compiled kernel: same contract as :func:`sensitivity_rows_reference`."""
+    T, nu = u.shape
+    n = A.shape[0]
+    ny = C.shape[0]
+    q = S0.shape[1]
+    S = S0.copy()
+    S_next = np.empty_like(S)
+    rows = np.empty((T, ny, q))
+    for t in range(T):
+        for i in range(ny):
+            for c in range(q):
+                acc = 0.0
+                for k in range(n):
+                    acc += C[i, k] * S[k, c]
+                rows[t, i, c] = acc
+        for i in range(n):
+            for c in range(q):
+                acc = 0.0
+                for k in range(n):
+                    acc += A[i, k] * S[k, c]
+                S_next[i, c] = acc
+        for j in range(nu):
+            c0 = n_x0_cols + j * n
+            for i in range(n):
+                S_next[i, c0 + i] += u[t, j]
+        S, S_next = S_next, S
+    return rows, S
+
+
+def fit_b_d_x0(A, C, u, y, *, feedthrough=True, estimate_x0=True, kernel=sensitivity_rows):
+    """Least-squares B, D (and x0) for given A, C on the raw output samples.
+
+    Parameters
+    ----------
+    A, C : ndarray
+        Identified state and output matrices.
+    u, y : ndarray, shape (N, nu), (N, ny)
+    feedthrough : bool
+        Estimate D (else D = 0).
+    estimate_x0 : bool
+        Estimate the initial state (else x0 = 0).
+
+    Returns
+    -------
+    B, D, x0 : ndarray
+    diagnostics : dict
+        ``residual_rms`` (over all outputs), ``regression_condition`` (an estimate of
+        the 1-norm condition number of the triangular factor) and
+        ``regression_rank_deficient``.
+    """
+    n = A.shape[0]
+    N, nu = u.shape
+    ny = y.shape[1]
+    nx = n if estimate_x0 else 0
+    q = nx + n * nu
+    p = q + (ny * nu if feedthrough else 0)
+    S = np.zeros((n, q))
+    if estimate_x0:
+        S[:, :n] = np.eye(n)
+    R = np.zeros((0, p + 1))
+    A = np.ascontiguousarray(A)
+    C = np.ascontiguousarray(C)
+    for start in range(0, N, _CHUNK):
+        stop = min(start + _CHUNK, N)
+        uc = np.ascontiguousarray(u[start:stop])
+        rows, S = kernel(A, C, uc, S, nx)
+        T = stop - start
+        block = np.empty((T, ny, p + 1))
+        block[:, :, :q] = rows
+        if feedthrough:
+            # (u^T kron I_ny) vec(D): column j*ny + i multiplies D[i, j]
+            block[:, :, q:p] = _kron_u_identity(uc, ny)
+        block[:, :, p] = y[start:stop]
+        R = scipy.linalg.qr(np.vstack([R, block.reshape(T * ny, p + 1)]), mode="r",
+                            check_finite=False)[0][: p + 1]
+    Rt = R[:p, :p]
+    rhs = R[:p, p]
+    rcond = scipy.linalg.lapack.dtrcon(Rt, norm="1", uplo="U", diag="N")[0] if p else 1.0
+    deficient = bool(rcond < np.finfo(float).eps * p)
+    if deficient:
+        theta = scipy.linalg.lstsq(Rt, rhs, lapack_driver="gelsy", check_finite=False)[0]
+    else:
+        theta = scipy.linalg.solve_triangular(Rt, rhs, check_finite=False)
+    x0 = theta[:n] if estimate_x0 else np.zeros(n)
+    B = theta[nx:q].reshape(nu, n).T
+    D = theta[q:p].reshape(nu, ny).T if feedthrough else np.zeros((ny, nu))
+    resid_norm = abs(R[p, p]) if R.shape[0] > p else 0.0
+    diagnostics = {
+        "residual_rms": float(resid_norm / np.sqrt(N * ny)),
+        "regression_condition": float(1.0 / rcond) if rcond > 0 else float("inf"),
+        "regression_rank_deficient": deficient,
+    }
+    return B, D, x0, diagnostics
+
+
+def _kron_u_identity(u, ny):
+    """Rows of ``u(t)^T kron I_ny`` for every t: shape (T, ny, nu*ny)."""
+    T, nu = u.shape
+    out = np.zeros((T, ny, nu * ny))
+    for j in range(nu):
+        for i in range(ny):
+            out[:, i, j * ny + i] = u[:, j]
+    return out

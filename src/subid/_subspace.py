@@ -1,0 +1,183 @@
+"""Steps shared by the discrete-time subspace methods.
+
+Argument checks at the public boundary, the data statistic, the excitation
+check, the order choice from a gap, and the shift-invariance step that gives
+A and C from an extended observability matrix.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+
+import numpy as np
+import scipy.linalg
+
+from ._hankel import HankelFactor, hankel_factor
+from ._validation import check_int
+from .data import IOData
+from .errors import (DataError, ExcitationWarning, NotExcitingError, OrderError,
+                     TooFewSamplesError)
+
+# A diagonal entry of the input block of the Hankel factor below this fraction
+# of the largest one marks a linearly dependent Hankel row.
+RANK_TOL = 1e-10
+# Input-Hankel condition number above which identification warns.
+CONDITION_WARN = 1e7
+DEFAULT_HORIZON_UNKNOWN_ORDER = 10
+
+
+def check_data(data, method: str) -> IOData:
+    """The record a discrete-time method may use, or a clear error."""
+    if not isinstance(data, IOData):
+        raise DataError(f"{method} expects an IOData record, got {type(data).__name__}; "
+                        "wrap arrays as subid.IOData(u, y, dt=...)")
+    if not data.is_uniform:
+        raise DataError(f"{method} identifies a discrete-time model and needs uniformly "
+                        "sampled data; these time stamps are non-uniform "
+                        "(use a continuous-time method for them)")
+    std = data.y.std(axis=0)
+    flat = np.flatnonzero(std <= 1e-14 * np.maximum(np.abs(data.y).max(axis=0), 1e-300))
+    if flat.size:
+        names = ", ".join(data.output_names[k] for k in flat)
+        raise DataError(f"output {names} is constant over the whole record: it carries no "
+                        "information about the dynamics; drop that channel")
+    return data
+
+
+def default_horizon(order: int | None, n_outputs: int, n_inputs: int, n_samples: int,
+                    blocks_per_horizon: int) -> int:
+    """Horizon used when the caller gives none.
+
+    Seed 001 asks for ``horizon > order`` and uses 5 for a 3rd-order model;
+    shift invariance needs ``(horizon - 1) * n_outputs >= order``. With a
+    given order: ``max(5, ceil(order / n_outputs) + 2)``. With the order to
+    be estimated: 10, or the largest horizon the record supports (at least 2)
+    when it is too short for 10.
+    """
+    if order is not None:
+        return max(5, math.ceil(order / n_outputs) + 2)
+    horizon = DEFAULT_HORIZON_UNKNOWN_ORDER
+    while horizon > 2 and n_samples < min_samples(horizon * blocks_per_horizon, n_inputs,
+                                                   n_outputs):
+        horizon -= 1
+    return horizon
+
+
+def min_samples(depth: int, n_inputs: int, n_outputs: int) -> int:
+    """Samples needed for a full-rank Hankel factor with ``depth`` block rows."""
+    return depth * (n_inputs + n_outputs) + depth - 1
+
+
+def check_order_horizon(order, horizon, data: IOData, *, method: str,
+                        blocks_per_horizon: int = 2):
+    """Validate ``order`` (int, None or 'auto') and ``horizon`` (int or None)."""
+    if isinstance(order, str) and order == "auto":
+        order = None
+    elif order is not None:
+        order = check_int(order, "order", minimum=1)
+    n_outputs = data.n_outputs
+    horizon = default_horizon(order, n_outputs, data.n_inputs, data.n_samples,
+                              blocks_per_horizon) if horizon is None else \
+        check_int(horizon, "horizon", minimum=2)
+    max_order = (horizon - 1) * n_outputs
+    if order is not None and order > max_order:
+        need = math.ceil(order / n_outputs) + 1
+        raise OrderError(f"{method}: order {order} cannot be revealed with horizon {horizon} "
+                         f"and {n_outputs} output{'s' if n_outputs != 1 else ''}: the shifted "
+                         f"observability matrix has only {max_order} rows; use horizon >= {need}")
+    return order, horizon
+
+
+def data_factor(data: IOData, depth: int, *, method: str, horizon: int) -> HankelFactor:
+    """Hankel factor of ``data`` with ``depth`` block rows, after the sample check."""
+    nu, ny = data.n_inputs, data.n_outputs
+    rows = depth * (nu + ny)
+    need = min_samples(depth, nu, ny)
+    if data.n_samples < need:
+        raise TooFewSamplesError(
+            f"{method}: {data.n_samples} samples are too few for horizon {horizon} with "
+            f"{nu} input{'s' if nu != 1 else ''} and {ny} output{'s' if ny != 1 else ''}: "
+            f"the {depth}-block-row Hankel matrix has {rows} rows and needs at least "
+            f"{need} samples; reduce the horizon or supply more data")
+    return hankel_factor(data.u, data.y, depth)
+
+
+def check_excitation(hf: HankelFactor, data: IOData, *, method: str) -> float:
+    """Raise :class:`NotExcitingError` if the input Hankel rows are dependent.
+
+    The leading ``depth*nu`` rows of the factor are the factor of the input
+    block-Hankel matrix alone; a negligible diagonal entry marks the first
+    input row that is a combination of the earlier ones.
+
+    Returns
+    -------
+    float
+        Estimated 1-norm condition number of the input block-Hankel factor.
+    """
+    nu, depth = hf.n_inputs, hf.depth
+    Lu = hf.L[: depth * nu, : depth * nu]
+    d = np.abs(np.diag(Lu))
+    scale = d.max(initial=0.0)
+    dependent = np.flatnonzero(d <= RANK_TOL * scale) if scale > 0 else np.arange(d.size)
+    if dependent.size:
+        k = int(dependent[0])
+        achieved = k // nu
+        channel = data.input_names[k % nu]
+        if scale == 0:
+            what = "the input is identically zero"
+        elif achieved == 0:
+            what = f"input {channel} is a combination of the other inputs"
+        else:
+            what = (f"input {channel} at lag {achieved} is a linear combination of earlier "
+                    "input samples")
+        raise NotExcitingError(
+            f"{method}: the input is not sufficiently exciting: {what}. The method needs an "
+            f"input persistently exciting of order {depth} (its block-Hankel matrix with "
+            f"{depth} block rows must have full row rank {depth * nu}); these data are "
+            f"exciting of order {achieved} only. Use a richer input (white noise, PRBS, "
+            "multisine) or a smaller horizon",
+            required_order=depth, achieved_order=achieved)
+    rcond = scipy.linalg.lapack.dtrcon(np.ascontiguousarray(Lu.T), norm="1", uplo="U",
+                                       diag="N")[0]
+    cond = 1.0 / rcond if rcond > 0 else math.inf
+    if cond > CONDITION_WARN:
+        warnings.warn(f"{method}: the input block-Hankel matrix is ill-conditioned "
+                      f"(condition ~{cond:.1e}); the input barely excites order {depth} and "
+                      "the model may be unreliable", ExcitationWarning, stacklevel=3)
+    return float(cond)
+
+
+def order_from_gap(values, max_order: int) -> int:
+    """Order at the largest gap of a decreasing profile (log scale).
+
+    ``values`` are singular values, or pivots of an SVD-free rank profile
+    that need not be monotone; the gap after position ``k`` is
+    ``log(min(values[:k])) - log(max(values[k:]))``.
+    """
+    v = np.abs(np.asarray(values, dtype=float))
+    floor = max(v.max(initial=0.0), 1e-300) * np.finfo(float).eps * v.size
+    logv = np.log10(np.maximum(v, floor))
+    best, best_gap = 1, -np.inf
+    for k in range(1, min(max_order, v.size - 1) + 1):
+        gap = logv[:k].min() - logv[k:].max()
+        if gap > best_gap:
+            best, best_gap = k, gap
+    return best
+
+
+def shift_invariance(gamma: np.ndarray, n_outputs: int):
+    """A and C from an extended observability matrix by shift invariance.
+
+    ``C = Gamma[0:ny]`` and ``A`` solves ``Gamma[:-ny] A = Gamma[ny:]`` in the
+    least-squares sense (QR with column pivoting; no SVD).
+
+    Returns
+    -------
+    A, C, relative_residual
+    """
+    up, down = gamma[:-n_outputs], gamma[n_outputs:]
+    A = scipy.linalg.lstsq(up, down, lapack_driver="gelsy", check_finite=False)[0]
+    C = gamma[:n_outputs].copy()
+    resid = np.linalg.norm(up @ A - down) / max(np.linalg.norm(down), 1e-300)
+    return A, C, float(resid)

@@ -1,0 +1,132 @@
+"""Validation helpers used at the public boundary.
+
+Each helper either returns a clean float64 array or raises a
+:mod:`subid.errors` exception whose message names the array and the rows at
+fault. Code behind the boundary trusts its inputs.
+"""
+
+from __future__ import annotations
+
+import numbers
+
+import numpy as np
+
+from .errors import DataError, OrderError
+
+_MAX_ROWS_LISTED = 8
+
+
+def format_rows(rows) -> str:
+    """``'17, 18, 40'`` or ``'17, 18, ... (1200 rows in all)'``."""
+    rows = [int(r) for r in rows]
+    head = ", ".join(str(r) for r in rows[:_MAX_ROWS_LISTED])
+    if len(rows) > _MAX_ROWS_LISTED:
+        head += f", ... ({len(rows)} rows in all)"
+    return head
+
+
+def as_signal(values, name: str, *, allow_empty_columns: bool = False) -> np.ndarray:
+    """Return ``values`` as a C-contiguous float64 array of shape (N, channels).
+
+    A 1-D array is one channel. Time is axis 0; the orientation is never
+    guessed. Raises :class:`DataError` on complex, non-numeric, >2-D or
+    non-finite values.
+    """
+    if values is None:
+        raise DataError(f"{name} is missing: pass an array with time on axis 0")
+    arr = np.asarray(values)
+    if arr.dtype == object:
+        missing = np.flatnonzero(np.vectorize(lambda v: v is None, otypes=[bool])(arr)
+                                 .reshape(arr.shape[0], -1).any(axis=1)) if arr.ndim else []
+        if len(missing):
+            raise DataError(f"{name} has missing values (None) at row"
+                            f"{'s' if len(missing) != 1 else ''} {format_rows(missing)}; "
+                            "fill or remove them before identification")
+        try:
+            arr = arr.astype(np.float64)
+        except (TypeError, ValueError) as exc:
+            raise DataError(f"{name} holds values that are not numbers ({exc}); "
+                            "convert it to a numeric array first") from None
+    if arr.dtype.kind in "US":
+        raise DataError(f"{name} is an array of strings; convert it to numbers first")
+    if arr.dtype.kind == "c":
+        raise DataError(f"{name} is complex; subid identifies real-valued systems")
+    if arr.dtype.kind not in "biuf":
+        raise DataError(f"{name} has dtype {arr.dtype}, which is not numeric")
+    if arr.ndim == 0:
+        raise DataError(f"{name} is a scalar; pass an array with time on axis 0")
+    if arr.ndim == 1:
+        arr = arr[:, None]
+    if arr.ndim != 2:
+        raise DataError(f"{name} has {arr.ndim} dimensions (shape {arr.shape}); "
+                        "expected (samples, channels) with time on axis 0")
+    if arr.shape[1] == 0 and not allow_empty_columns:
+        raise DataError(f"{name} has no channels (shape {arr.shape})")
+    arr = np.array(arr, dtype=np.float64, order="C", copy=True)
+    check_finite(arr, name)
+    return arr
+
+
+def check_finite(arr: np.ndarray, name: str) -> None:
+    """Raise :class:`DataError` listing the rows of ``arr`` holding NaN or inf."""
+    if np.isfinite(arr).all():
+        return
+    nan_rows = np.flatnonzero(np.isnan(arr).any(axis=1) if arr.ndim == 2 else np.isnan(arr))
+    inf_rows = np.flatnonzero(np.isinf(arr).any(axis=1) if arr.ndim == 2 else np.isinf(arr))
+    parts = []
+    if nan_rows.size:
+        n_nan = int(np.isnan(arr).sum())
+        parts.append(f"{n_nan} NaN value{'s' if n_nan != 1 else ''} at row"
+                     f"{'s' if nan_rows.size != 1 else ''} {format_rows(nan_rows)}")
+    if inf_rows.size:
+        n_inf = int(np.isinf(arr).sum())
+        parts.append(f"{n_inf} infinite value{'s' if n_inf != 1 else ''} at row"
+                     f"{'s' if inf_rows.size != 1 else ''} {format_rows(inf_rows)}")
+    raise DataError(f"{name} has " + " and ".join(parts)
+                    + "; remove or interpolate them before identification")
+
+
+def check_time_stamps(t, n_samples: int, name: str = "time stamps t") -> np.ndarray:
+    """Validate strictly increasing, finite time stamps of length ``n_samples``."""
+    arr = np.asarray(t)
+    if arr.dtype.kind not in "iuf":
+        raise DataError(f"{name} must be numeric, got dtype {arr.dtype}")
+    arr = np.ascontiguousarray(arr, dtype=np.float64)
+    if arr.ndim == 2 and 1 in arr.shape:
+        arr = arr.reshape(-1)
+    if arr.ndim != 1:
+        raise DataError(f"{name} must be one-dimensional, got shape {arr.shape}")
+    if arr.shape[0] != n_samples:
+        raise DataError(f"{name} has {arr.shape[0]} entries but the signals have "
+                        f"{n_samples} samples")
+    check_finite(arr, name)
+    steps = np.diff(arr)
+    bad = np.flatnonzero(steps <= 0)
+    if bad.size:
+        kinds = "repeated" if np.all(steps[bad] == 0) else "not increasing"
+        raise DataError(f"{name} are {kinds} at row{'s' if bad.size != 1 else ''} "
+                        f"{format_rows(bad + 1)} (t[k] <= t[k-1]); time stamps must "
+                        "be strictly increasing")
+    return arr
+
+
+def check_dt(dt, *, allow_zero: bool = False, name: str = "dt") -> float:
+    """Validate a sampling period: a finite positive number (or 0 if allowed)."""
+    if isinstance(dt, bool) or not isinstance(dt, numbers.Real):
+        raise DataError(f"{name} must be a number, got {dt!r}")
+    dt = float(dt)
+    if not np.isfinite(dt) or dt < 0 or (dt == 0 and not allow_zero):
+        need = "a finite number >= 0 (0 = continuous time)" if allow_zero else \
+            "a finite positive number"
+        raise DataError(f"{name} must be {need}, got {dt!r}")
+    return dt
+
+
+def check_int(value, name: str, *, minimum: int = 1) -> int:
+    """Validate an integer parameter (order, horizon, ...)."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral):
+        raise OrderError(f"{name} must be an integer, got {value!r}")
+    value = int(value)
+    if value < minimum:
+        raise OrderError(f"{name} must be at least {minimum}, got {value}")
+    return value

@@ -1,0 +1,227 @@
+"""Input/output data records: :class:`IOData`."""
+
+from __future__ import annotations
+
+import numbers
+
+import numpy as np
+
+from ._validation import as_signal, check_dt, check_time_stamps
+from .errors import DataError
+
+__all__ = ["IOData"]
+
+# Relative tolerance under which explicitly given time stamps count as uniform.
+_UNIFORM_RTOL = 1e-9
+
+
+def _channel_names(names, count: int, prefix: str, which: str) -> tuple[str, ...]:
+    if names is None:
+        return tuple(f"{prefix}{k + 1}" for k in range(count))
+    if isinstance(names, str):
+        names = [names]
+    names = tuple(str(n) for n in names)
+    if len(names) != count:
+        raise DataError(f"{which} has {len(names)} name{'s' if len(names) != 1 else ''} "
+                        f"{list(names)} but {count} channel{'s' if count != 1 else ''}")
+    if len(set(names)) != len(names):
+        dup = sorted({n for n in names if names.count(n) > 1})
+        raise DataError(f"{which} repeats the channel name(s) {dup}; names must be unique")
+    return names
+
+
+class IOData:
+    """A record of sampled inputs and outputs.
+
+    Parameters
+    ----------
+    u : array_like, shape (N, n_inputs) or (N,)
+        Input samples. Time is axis 0; a 1-D array is one channel.
+    y : array_like, shape (N, n_outputs) or (N,)
+        Output samples, same number of rows as ``u``.
+    dt : float, optional
+        Uniform sampling period. Give either ``dt`` or ``t``; with neither,
+        ``dt = 1`` (time counted in samples).
+    t : array_like, shape (N,), optional
+        Strictly increasing time stamps, uniform or not. Non-uniform time
+        stamps are kept as given.
+    input_names, output_names : sequence of str, optional
+        Channel names (default ``u1, u2, ...`` and ``y1, y2, ...``).
+
+    Notes
+    -----
+    Arrays are copied to read-only float64 arrays; an ``IOData`` never
+    changes after construction. Methods that transform data (``detrend``,
+    slicing) return new objects.
+
+    Examples
+    --------
+    >>> import numpy as np, subid
+    >>> data = subid.IOData(np.ones((100, 2)), np.zeros(100), dt=0.1)
+    >>> data.n_samples, data.n_inputs, data.n_outputs
+    (100, 2, 1)
+    """
+
+    def __init__(self, u, y, dt=None, t=None, input_names=None, output_names=None):
+        u = as_signal(u, "input u")
+        y = as_signal(y, "output y")
+        if u.shape[0] != y.shape[0]:
+            hint = ""
+            if u.shape[1] == y.shape[0] or y.shape[1] == u.shape[0]:
+                hint = " (time is axis 0: was one of them passed transposed?)"
+            raise DataError(f"input u has {u.shape[0]} samples but output y has "
+                            f"{y.shape[0]}; they must have the same length{hint}")
+        if u.shape[0] == 0:
+            raise DataError("the record is empty (0 samples)")
+        n = u.shape[0]
+        if dt is not None and t is not None:
+            raise DataError("give either the sampling period dt or the time stamps t, not both")
+        if t is not None:
+            t = check_time_stamps(t, n)
+            steps = np.diff(t)
+            if n > 1 and np.ptp(steps) <= _UNIFORM_RTOL * np.abs(steps).max():
+                self._dt = float(np.mean(steps))
+            else:
+                self._dt = None
+            self._t = t
+            self._t0 = float(t[0])
+        else:
+            self._dt = 1.0 if dt is None else check_dt(dt)
+            self._t = None
+            self._t0 = 0.0
+        for arr in (u, y):
+            arr.setflags(write=False)
+        if self._t is not None:
+            self._t.setflags(write=False)
+        self._u = u
+        self._y = y
+        self.input_names = _channel_names(input_names, u.shape[1], "u", "input u")
+        self.output_names = _channel_names(output_names, y.shape[1], "y", "output y")
+        self.u_offset = None
+        self.y_offset = None
+
+    # -- basic properties -------------------------------------------------
+    @property
+    def u(self) -> np.ndarray:
+        """Inputs, shape (n_samples, n_inputs), read-only."""
+        return self._u
+
+    @property
+    def y(self) -> np.ndarray:
+        """Outputs, shape (n_samples, n_outputs), read-only."""
+        return self._y
+
+    @property
+    def n_samples(self) -> int:
+        return self._u.shape[0]
+
+    @property
+    def n_inputs(self) -> int:
+        return self._u.shape[1]
+
+    @property
+    def n_outputs(self) -> int:
+        return self._y.shape[1]
+
+    @property
+    def dt(self) -> float | None:
+        """Uniform sampling period, or None when the time stamps are non-uniform."""
+        return self._dt
+
+    @property
+    def is_uniform(self) -> bool:
+        return self._dt is not None
+
+    @property
+    def t(self) -> np.ndarray:
+        """Time stamps, shape (n_samples,)."""
+        if self._t is not None:
+            return self._t
+        t = self._t0 + self._dt * np.arange(self.n_samples)
+        t.setflags(write=False)
+        return t
+
+    def __len__(self) -> int:
+        return self.n_samples
+
+    def __repr__(self) -> str:
+        timing = f"dt={self._dt:g}" if self._dt is not None else "non-uniform t"
+        return (f"IOData(n_samples={self.n_samples}, inputs={list(self.input_names)}, "
+                f"outputs={list(self.output_names)}, {timing})")
+
+    # -- derived records --------------------------------------------------
+    def _derive(self, u, y, *, t=None, dt=None, t0=0.0) -> "IOData":
+        out = IOData.__new__(IOData)
+        u = np.ascontiguousarray(u)
+        y = np.ascontiguousarray(y)
+        u.setflags(write=False)
+        y.setflags(write=False)
+        out._u, out._y = u, y
+        out._dt, out._t, out._t0 = dt, t, t0
+        if t is not None:
+            t.setflags(write=False)
+        out.input_names, out.output_names = self.input_names, self.output_names
+        out.u_offset, out.y_offset = self.u_offset, self.y_offset
+        return out
+
+    def __getitem__(self, index) -> "IOData":
+        """Samples ``index`` (a slice of sample indices) as a new record."""
+        if not isinstance(index, slice):
+            raise DataError("IOData is indexed by a slice of samples, e.g. data[100:500]; "
+                            f"got {type(index).__name__}")
+        start, stop, step = index.indices(self.n_samples)
+        if step <= 0:
+            raise DataError("IOData slices must go forward in time (positive step)")
+        rows = range(start, stop, step)
+        if len(rows) == 0:
+            raise DataError(f"the slice {index} selects no samples out of {self.n_samples}")
+        sl = slice(start, stop, step)
+        if self._t is not None:
+            t = np.ascontiguousarray(self._t[sl])
+            return self._derive(self._u[sl], self._y[sl], t=t, dt=self._dt * step
+                                if self._dt is not None else None, t0=float(t[0]))
+        return self._derive(self._u[sl], self._y[sl], dt=self._dt * step,
+                            t0=self._t0 + start * self._dt)
+
+    def split(self, fraction: float = 0.7) -> tuple["IOData", "IOData"]:
+        """Split into an estimation part and a validation part.
+
+        Parameters
+        ----------
+        fraction : float
+            Share of the samples, from the start of the record, that goes into
+            the first (estimation) part; the rest is the validation part.
+        """
+        if isinstance(fraction, bool) or not isinstance(fraction, numbers.Real) \
+                or not 0 < fraction < 1:
+            raise DataError(f"split fraction must be a number strictly between 0 and 1, "
+                            f"got {fraction!r}")
+        cut = int(round(fraction * self.n_samples))
+        if cut < 1 or cut > self.n_samples - 1:
+            raise DataError(f"splitting {self.n_samples} samples at fraction {fraction} "
+                            "leaves one part empty")
+        return self[:cut], self[cut:]
+
+    def detrend(self, kind: str = "constant") -> "IOData":
+        """Remove the mean (``kind='constant'``) or a least-squares line
+        (``kind='linear'``) from every channel.
+
+        The removed offsets are kept in ``u_offset`` and ``y_offset`` (the
+        channel means for ``'constant'``; the (intercept, slope) rows for
+        ``'linear'``, as functions of the time stamps).
+        """
+        if kind == "constant":
+            u_off, y_off = self._u.mean(axis=0), self._y.mean(axis=0)
+            u, y = self._u - u_off, self._y - y_off
+        elif kind == "linear":
+            t = self.t - self.t[0]
+            basis = np.column_stack([np.ones_like(t), t])
+            coef, *_ = np.linalg.lstsq(basis, np.hstack([self._u, self._y]), rcond=None)
+            resid = np.hstack([self._u, self._y]) - basis @ coef
+            u, y = resid[:, :self.n_inputs], resid[:, self.n_inputs:]
+            u_off, y_off = coef[:, :self.n_inputs], coef[:, self.n_inputs:]
+        else:
+            raise DataError(f"detrend kind must be 'constant' or 'linear', got {kind!r}")
+        out = self._derive(u, y, t=self._t, dt=self._dt, t0=self._t0)
+        out.u_offset, out.y_offset = u_off, y_off
+        return out

@@ -1,0 +1,90 @@
+"""Exceptions raised by subid.
+
+Every exception raised on purpose by subid derives from :class:`SubidError`,
+itself a :class:`ValueError`, so ``except ValueError`` keeps working for code
+that does not know about subid. Messages say what is wrong and what to do.
+"""
+
+from __future__ import annotations
+
+__all__ = [
+    "SubidError",
+    "DataError",
+    "TooFewSamplesError",
+    "NotExcitingError",
+    "OrderError",
+    "ModelError",
+    "FileReadError",
+    "DataFileNotFoundError",
+    "ExcitationWarning",
+]
+
+
+class SubidError(ValueError):
+    """Base class of all errors raised by subid."""
+
+
+class DataError(SubidError):
+    """Input/output data are unusable: NaN or inf values, mismatched lengths,
+    wrong dtype or shape, time stamps that do not increase."""
+
+
+class TooFewSamplesError(DataError):
+    """The record is too short for the requested horizon, order or basis."""
+
+
+class NotExcitingError(DataError):
+    """The input is not persistently exciting of the order the method needs.
+
+    Attributes
+    ----------
+    required_order : int
+        Order of persistent excitation the method needs.
+    achieved_order : int
+        Largest order of excitation the data provide (0 for a zero input).
+    """
+
+    def __init__(self, message: str, *, required_order: int | None = None,
+                 achieved_order: int | None = None):
+        super().__init__(message)
+        self.required_order = required_order
+        self.achieved_order = achieved_order
+
+
+class OrderError(SubidError):
+    """The requested model order is invalid or cannot be revealed by the
+    chosen horizon and number of outputs."""
+
+
+class ModelError(SubidError):
+    """A state-space model is malformed: matrix shapes disagree, values are not
+    finite, or a model file cannot be interpreted."""
+
+
+class FileReadError(SubidError):
+    """A data or model file cannot be read.
+
+    Attributes
+    ----------
+    path : str or None
+        The file.
+    line : int or None
+        1-based line number of the problem, when it is known.
+    column : int or str or None
+        Column (0-based index or name) of the problem, when it is known.
+    """
+
+    def __init__(self, message: str, *, path=None, line=None, column=None):
+        super().__init__(message)
+        self.path = None if path is None else str(path)
+        self.line = line
+        self.column = column
+
+
+class DataFileNotFoundError(FileReadError, FileNotFoundError):
+    """The file does not exist (also a :class:`FileNotFoundError`)."""
+
+
+class ExcitationWarning(UserWarning):
+    """The input excites the system only barely (ill-conditioned data matrix);
+    the identified model may be unreliable."""

@@ -1,0 +1,773 @@
+"""Reading input/output records from files: :func:`read`.
+
+Supported formats, chosen by the file extension:
+
+``.csv``, ``.tsv``
+    Delimited text. The delimiter is detected among ``,`` ``;`` and TAB
+    unless ``delimiter`` is given.
+``.txt``, ``.dat``
+    Text with comma- or semicolon-separated fields, or fields separated by
+    runs of spaces and TABs (the DaISy / MATLAB ``save -ascii`` style, trailing
+    TABs and exponents such as ``1.0000000e+000`` included).
+``.npz``
+    NumPy archive (:func:`numpy.savez`); arrays are selected by key.
+``.mat``
+    MATLAB file up to version 7 (:func:`scipy.io.loadmat`); variables are
+    selected by name. Version 7.3 (HDF5) files are not supported.
+
+Rules for text files
+--------------------
+* A header row is recognised when the first non-empty line holds a field
+  that is not a number; columns can then be selected by header name. Without
+  a header, columns are selected by 0-based index only. A ``#`` starts a
+  comment up to the end of the line; a header written as a comment line right
+  before the data (``numpy.savetxt(..., header="t,u,y")``) is recognised too.
+* Inputs and outputs are never guessed: both must be given.
+* Column numbers in error messages are 0-based, like the indices accepted by
+  ``inputs``/``outputs``; line numbers are 1-based, like in a text editor.
+* Cells of columns that are not selected are not converted, so a file may
+  hold text columns (dates, comments) besides the numeric ones.
+
+Every problem is reported as a :mod:`subid.errors` exception naming the file
+and, for text files, the line and column at fault.
+"""
+
+from __future__ import annotations
+
+import csv
+import logging
+import numbers
+import os
+import re
+from io import StringIO
+from pathlib import Path
+
+import numpy as np
+
+from ._validation import check_dt
+from .data import IOData
+from .errors import DataError, DataFileNotFoundError, FileReadError
+
+__all__ = ["read", "SUPPORTED_EXTENSIONS"]
+
+logger = logging.getLogger(__name__)
+
+_TEXT_EXTENSIONS = (".csv", ".tsv", ".txt", ".dat")
+_ARRAY_EXTENSIONS = (".npz", ".mat")
+#: File extensions :func:`read` understands.
+SUPPORTED_EXTENSIONS = _TEXT_EXTENSIONS + _ARRAY_EXTENSIONS
+
+_WHITESPACE = None            # delimiter value meaning "runs of spaces/TABs"
+_SNIFF_LINES = 20             # lines looked at to detect the delimiter
+_MAX_LISTED = 40              # column/array names listed in an error message
+_INT_RE = re.compile(r"[+-]?\d+")
+_DECIMAL_COMMA_RE = re.compile(r"[+-]?\d*,\d+([eE][+-]?\d+)?")
+_HDF5_SIGNATURE = b"\x89HDF\r\n\x1a\n"
+
+
+# ---------------------------------------------------------------------------
+# public entry point
+# ---------------------------------------------------------------------------
+def read(path, inputs=None, outputs=None, dt=None, time=None, *, delimiter=None) -> IOData:
+    """Read one input/output record from a file.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The file. Its extension selects the format: ``.csv``, ``.tsv``,
+        ``.txt``, ``.dat`` (text), ``.npz`` (NumPy archive) or ``.mat``
+        (MATLAB up to v7).
+    inputs, outputs : str, int or sequence of str/int
+        The input and the output channels.
+
+        * Text files: header names or 0-based column indices; a single name
+          or index, a list of them, or a comma-separated string such as
+          ``"u1,u2"`` or ``"0,2"``. An integer-like string is an index unless
+          the header has a column of that name. Both are **required**.
+        * ``.npz`` / ``.mat``: names of arrays (variables), as a single name,
+          a list, or a comma-separated string. A 1-D array is one channel; a
+          2-D array has time on axis 0 and one channel per column (a MATLAB
+          1-by-N row vector is one channel). Default ``"u"`` and ``"y"``.
+    dt : float, optional
+        Sampling period. For ``.npz``/``.mat`` files, a scalar array ``dt``
+        in the file is used when neither ``dt`` nor ``time`` is given.
+    time : str or int, optional
+        Column (text files) or array (``.npz``/``.mat``) holding the time
+        stamps, which may be non-uniform. ``.npz``/``.mat`` files use an
+        array ``t`` by default when it exists and ``dt`` is not given. Give
+        ``dt`` or ``time``, not both; with neither, ``dt = 1``.
+    delimiter : str, optional
+        Field delimiter of a text file, one character. ``" "`` means runs of
+        spaces and TABs. Detected among ``,`` ``;`` and TAB when omitted.
+
+    Returns
+    -------
+    IOData
+        The record. Channel names are the header names, ``col<k>`` for
+        column ``k`` of a file without a header, or the array names (with
+        ``name[k]`` for column ``k`` of a multi-column array).
+
+    Raises
+    ------
+    DataFileNotFoundError
+        The file does not exist.
+    FileReadError
+        The file cannot be read or interpreted: empty file, unsupported
+        extension, a cell that is not a number, rows with different numbers
+        of fields, unknown or repeated column/array names, column index out
+        of range, missing ``inputs``/``outputs`` for a text file, corrupted
+        ``.npz``/``.mat`` file, MATLAB v7.3 file. The ``path``, ``line`` and
+        ``column`` attributes locate the problem when known.
+    DataError
+        The values are unusable (NaN or infinite values, time stamps that do
+        not increase, invalid ``dt``), or the arguments are inconsistent
+        (``dt`` and ``time`` both given).
+
+    Examples
+    --------
+    >>> data = subid.read("run1.csv", inputs="u1,u2", outputs="y", time="t")  # doctest: +SKIP
+    >>> data = subid.read("dryer.dat", inputs=0, outputs=1, dt=0.08)  # doctest: +SKIP
+    """
+    if isinstance(path, bytes):
+        path = os.fsdecode(path)
+    if not isinstance(path, (str, os.PathLike)):
+        raise DataError(f"path must be a file name (str or os.PathLike), got {type(path).__name__}")
+    shown = os.fspath(path)
+    p = Path(shown)
+    if dt is not None and time is not None:
+        raise DataError(f"{shown}: give either the sampling period dt or the time column/array "
+                        "time, not both")
+    if dt is not None:
+        dt = check_dt(dt)
+    ext = p.suffix.lower()
+    if ext not in SUPPORTED_EXTENSIONS:
+        hint = ""
+        if ext in (".xls", ".xlsx", ".ods"):
+            hint = " Export the spreadsheet to CSV first."
+        elif ext in (".h5", ".hdf5"):
+            hint = " Export the data to .npz or CSV first."
+        raise FileReadError(f"{shown}: unsupported file extension {ext or '(none)'!r}; "
+                            f"supported: {', '.join(SUPPORTED_EXTENSIONS)}.{hint}", path=shown)
+    if delimiter is not None:
+        if ext not in _TEXT_EXTENSIONS:
+            raise DataError(f"{shown}: delimiter applies to text files only, not to {ext} files")
+        if not isinstance(delimiter, str) or len(delimiter) != 1 or delimiter in "\r\n\"#":
+            raise DataError(f"delimiter must be one character (not a quote, '#' or a line "
+                            f"break), got {delimiter!r}")
+    _check_exists(p, shown)
+    if ext in _TEXT_EXTENSIONS:
+        return _read_text(p, shown, ext, inputs, outputs, dt, time, delimiter)
+    if ext == ".npz":
+        arrays = _load_npz(p, shown)
+    else:
+        arrays = _load_mat(p, shown)
+    return _from_arrays(arrays, shown, ext, inputs, outputs, dt, time)
+
+
+# ---------------------------------------------------------------------------
+# helpers common to all formats
+# ---------------------------------------------------------------------------
+def _check_exists(p: Path, shown: str) -> None:
+    try:
+        st = p.stat()
+    except FileNotFoundError:
+        raise DataFileNotFoundError(f"no such file: {shown}", path=shown) from None
+    except OSError as exc:
+        raise FileReadError(f"cannot access {shown}: {exc.strerror or exc}", path=shown) from None
+    if p.is_dir():
+        raise FileReadError(f"{shown} is a directory, not a data file", path=shown)
+    if st.st_size == 0:
+        raise FileReadError(f"file {shown} is empty", path=shown)
+
+
+def _read_bytes(p: Path, shown: str) -> bytes:
+    try:
+        return p.read_bytes()
+    except OSError as exc:
+        raise FileReadError(f"cannot read {shown}: {exc.strerror or exc}", path=shown) from None
+
+
+def _build(shown: str, u, y, dt, t, in_names, out_names, first_line=None) -> IOData:
+    """Construct the IOData, prefixing its validation errors with the file name."""
+    try:
+        return IOData(u, y, dt=dt, t=t, input_names=in_names, output_names=out_names)
+    except DataError as exc:
+        where = ""
+        if first_line is not None and "row" in str(exc):
+            where = f" (rows are counted from 0 at the first data row, line {first_line})"
+        raise type(exc)(f"{shown}: {exc}{where}") from None
+
+
+def _listing(items, limit: int = _MAX_LISTED) -> str:
+    items = list(items)
+    text = ", ".join(items[:limit])
+    if len(items) > limit:
+        text += f", ... ({len(items)} in all)"
+    return text
+
+
+# ---------------------------------------------------------------------------
+# text files
+# ---------------------------------------------------------------------------
+def _decode(raw: bytes, shown: str) -> str:
+    if raw.startswith((b"\xff\xfe", b"\xfe\xff")):
+        try:
+            text = raw.decode("utf-16")
+        except UnicodeDecodeError as exc:
+            raise FileReadError(f"{shown}: cannot decode UTF-16 text ({exc.reason})",
+                                path=shown) from None
+    else:
+        if b"\x00" in raw[:8192]:
+            raise FileReadError(f"{shown} looks like a binary file, not text (it holds NUL "
+                                "bytes); save the data as plain text (UTF-8) or use .npz/.mat",
+                                path=shown)
+        try:
+            text = raw.decode("utf-8-sig")
+        except UnicodeDecodeError:
+            text = raw.decode("latin-1")
+    if "\r" in text:
+        text = text.replace("\r\n", "\n").replace("\r", "\n")
+    return text
+
+
+def _content(line: str) -> str:
+    """A line without its ``#`` comment and surrounding blanks ('' if nothing is left)."""
+    k = line.find("#")
+    if k >= 0:
+        line = line[:k]
+    return line.strip()
+
+
+def _split(content: str, delim) -> list[str]:
+    if delim is _WHITESPACE:
+        return [f.strip('"') for f in content.split()] if '"' in content else content.split()
+    if '"' in content:
+        fields = next(csv.reader([content], delimiter=delim, quotechar='"'))
+    else:
+        fields = content.split(delim)
+    return [f.strip() for f in fields]
+
+
+def _is_number(s: str) -> bool:
+    if "_" in s:
+        return False
+    try:
+        float(s)
+    except ValueError:
+        return False
+    return True
+
+
+def _sniff(sample: list[str], ext: str) -> str | None:
+    """Choose the delimiter from the first non-empty lines."""
+    candidates = (";", "\t", ",") if ext in (".csv", ".tsv") else (";", ",")
+    counts = {c: [ln.count(c) for ln in sample] for c in candidates}
+    for c in candidates:
+        if counts[c][0] > 0 and all(n == counts[c][0] for n in counts[c]):
+            return c
+    # No consistent candidate: take one present on every line (rows of different
+    # lengths are then reported with their line numbers), else whitespace.
+    present = [c for c in candidates if all(counts[c])]
+    if present:
+        return max(present, key=lambda c: counts[c][0])
+    return _WHITESPACE
+
+
+class _Table:
+    """Layout of a text file: delimiter, header, column count, first data line."""
+
+    def __init__(self, shown, text, ext, delimiter):
+        self.shown = shown
+        self.text = text
+        self.lines = text.split("\n")
+        first = None                 # index of the first non-empty, non-comment line
+        sample = []
+        for k, line in enumerate(self.lines):
+            c = _content(line)
+            if c:
+                if first is None:
+                    first = k
+                sample.append(c)
+                if len(sample) >= _SNIFF_LINES:
+                    break
+        if first is None:
+            raise FileReadError(f"file {shown} is empty (it holds no data, only blank or "
+                                "comment lines)", path=shown)
+        if delimiter is None:
+            self.delim = _sniff(sample, ext)
+        else:
+            self.delim = _WHITESPACE if delimiter == " " else delimiter
+        logger.debug("%s: delimiter %r", shown, self.delim)
+        fields = _split(sample[0], self.delim)
+        self.header = None
+        self.header_line = None
+        if not all(_is_number(f) for f in fields):
+            self.header = fields
+            self.header_line = first + 1
+            self.data_start = first + 1           # 0-based index of the line after the header
+            numeric = [f for f in fields if _is_number(f)]
+            if numeric:
+                logger.warning("%s: line %d is taken as the header but has numeric fields %s",
+                               shown, first + 1, numeric[:5])
+        else:
+            self.data_start = first
+            self._comment_header(first, len(fields))
+        self.first_data = None                    # 1-based line of the first data row
+        for k in range(self.data_start, len(self.lines)):
+            if _content(self.lines[k]):
+                self.first_data = k + 1
+                break
+        if self.first_data is None:
+            raise FileReadError(f"{shown} has a header (line {self.header_line}) but no data "
+                                "rows", path=shown, line=self.header_line)
+        if self.header is not None:
+            self.ncols = len(self.header)
+        else:
+            self.ncols = len(fields)
+
+    def _comment_header(self, first: int, ncols: int) -> None:
+        """Use a comment line right before the data as header (numpy.savetxt style)."""
+        k = first - 1
+        while k >= 0 and not self.lines[k].strip():
+            k -= 1
+        if k < 0:
+            return
+        line = self.lines[k].strip()
+        if not line.startswith("#"):
+            return
+        body = line.lstrip("#").strip()
+        if not body:
+            return
+        for delim in dict.fromkeys((self.delim, ",", ";", "\t", _WHITESPACE)):
+            fields = _split(body, delim)
+            if len(fields) == ncols and not all(_is_number(f) for f in fields):
+                self.header = fields
+                self.header_line = k + 1
+                return
+
+    # -- names ---------------------------------------------------------------
+    def name(self, idx: int) -> str | None:
+        if self.header is None:
+            return None
+        return self.header[idx] or None
+
+    def describe(self, idx: int) -> str:
+        name = self.name(idx)
+        return f"column {idx} ({name!r})" if name is not None else f"column {idx}"
+
+    def channel_names(self, cols) -> list[str]:
+        names = []
+        for idx in cols:
+            name = self.name(idx)
+            if name is None or self.header.count(name) > 1:
+                name = f"col{idx}" if name is None else f"{name}_col{idx}"
+            names.append(name)
+        return names
+
+    def available(self) -> str:
+        if self.header is None:
+            return (f"the file has no header row, so columns are selected by 0-based index: "
+                    f"{self.ncols} column{'s' if self.ncols != 1 else ''}, indices 0 to "
+                    f"{self.ncols - 1}")
+        return "available columns: " + _listing(
+            f"{k} {n!r}" if n else f"{k} (no name)" for k, n in enumerate(self.header))
+
+    # -- column selection ----------------------------------------------------
+    def resolve(self, spec, role: str) -> list[int]:
+        shown = self.shown
+        tokens = _tokens(spec, role, self.header or ())
+        if not tokens:
+            raise FileReadError(f"{shown}: {role} selects no column; {self.available()}",
+                                path=shown)
+        cols = []
+        for tok in tokens:
+            if isinstance(tok, str):
+                if self.header is not None and tok in self.header:
+                    where = [k for k, n in enumerate(self.header) if n == tok]
+                    if len(where) > 1:
+                        raise FileReadError(
+                            f"{shown}: the column name {tok!r} ({role}) appears more than once "
+                            f"in the header (columns {', '.join(map(str, where))}); select it "
+                            "by 0-based index instead", path=shown, line=self.header_line,
+                            column=tok)
+                    idx = where[0]
+                elif _INT_RE.fullmatch(tok):
+                    idx = int(tok)
+                else:
+                    if self.header is None:
+                        msg = (f"{shown}: {role} names the column {tok!r}, but "
+                               f"{self.available()}")
+                    else:
+                        msg = f"{shown}: unknown column name {tok!r} in {role}; {self.available()}"
+                    raise FileReadError(msg, path=shown, column=tok)
+            else:
+                idx = tok
+            if not 0 <= idx < self.ncols:
+                raise FileReadError(
+                    f"{shown}: column index {idx} in {role} is out of range: the file has "
+                    f"{self.ncols} column{'s' if self.ncols != 1 else ''} (indices 0 to "
+                    f"{self.ncols - 1}, counted from 0)", path=shown, column=idx)
+            if idx in cols:
+                raise FileReadError(f"{shown}: {self.describe(idx)} is selected twice in {role}",
+                                    path=shown, column=idx)
+            cols.append(idx)
+        return cols
+
+    # -- values --------------------------------------------------------------
+    def data_lines(self) -> tuple[list[int], list[str]]:
+        """1-based line numbers and contents of the data rows (two parallel lists)."""
+        start = self.data_start
+        lines = self.lines[start:]
+        if "#" in self.text:
+            contents = [_content(line) for line in lines]
+        else:
+            contents = [line.strip() for line in lines]
+        keep = [k for k, c in enumerate(contents) if c]
+        if len(keep) != len(contents):
+            contents = [contents[k] for k in keep]
+        return [k + start + 1 for k in keep], contents
+
+    def parse(self, cols: list[int]) -> np.ndarray:
+        """Values of the columns ``cols``, shape (rows, len(cols))."""
+        try:
+            values = np.loadtxt(StringIO(self.text), dtype=np.float64,
+                                delimiter=self.delim, comments="#", quotechar='"',
+                                skiprows=self.data_start, ndmin=2)
+        except (ValueError, TypeError, IndexError) as exc:
+            logger.debug("%s: fast parse failed (%s); re-reading line by line", self.shown, exc)
+            return self._parse_slowly(cols)
+        if values.shape[1] != self.ncols:
+            return self._parse_slowly(cols)
+        return np.ascontiguousarray(values[:, cols])
+
+    def _parse_slowly(self, cols: list[int]) -> np.ndarray:
+        """Parse after the fast path failed: check the field count of every row, then
+        convert only the selected columns (so text in other columns is allowed), and
+        locate the first bad cell when a selected one is not a number."""
+        shown, delim, ncols = self.shown, self.delim, self.ncols
+        linenos, contents = self.data_lines()
+        if delim is _WHITESPACE:
+            counts = [len(c.split()) for c in contents]
+        else:
+            counts = [len(_split(c, delim)) if '"' in c else c.count(delim) + 1
+                      for c in contents]
+        bad = next((k for k, n in enumerate(counts) if n != ncols), None)
+        if bad is not None:
+            lineno, found = linenos[bad], counts[bad]
+            ref = (f"the header (line {self.header_line})" if self.header is not None
+                   else f"the first data row (line {self.first_data})")
+            raise FileReadError(
+                f"{shown}, line {lineno}: found {found} field{'s' if found != 1 else ''}, "
+                f"expected {ncols} like {ref}"
+                + (" (is the delimiter right? it was taken to be "
+                   f"{_delim_name(delim)})" if found == 1 or ncols == 1 else ""),
+                path=shown, line=lineno)
+        hint = None
+        try:
+            values = np.loadtxt(StringIO("\n".join(contents)), dtype=np.float64,
+                                delimiter=delim, comments=None, quotechar='"', usecols=cols,
+                                ndmin=2)
+            if values.shape == (len(contents), len(cols)):
+                return values
+        except (ValueError, TypeError, IndexError) as exc:
+            found = re.search(r"at row (\d+)", str(exc))
+            if found and int(found.group(1)) < len(contents):
+                hint = int(found.group(1))
+        order = range(len(contents)) if hint is None else \
+            [hint, *range(len(contents))]           # check the row numpy named first
+        rows = []
+        for k in order:
+            fields = _split(contents[k], delim)
+            row = []
+            for idx in cols:
+                s = fields[idx]
+                try:
+                    if "_" in s:
+                        raise ValueError
+                    row.append(float(s))
+                except ValueError:
+                    raise FileReadError(self._bad_cell(linenos[k], idx, s), path=shown,
+                                        line=linenos[k], column=idx) from None
+            rows.append(row)
+        if hint is not None:
+            rows = rows[1:]
+        return np.array(rows, dtype=np.float64).reshape(len(rows), len(cols))
+
+    def _bad_cell(self, lineno: int, idx: int, s: str) -> str:
+        msg = f"{self.shown}, line {lineno}, {self.describe(idx)}: "
+        if not s:
+            return msg + "the value is missing (empty field)"
+        msg += f"{s!r} is not a number"
+        if _DECIMAL_COMMA_RE.fullmatch(s):
+            msg += " (decimal commas are not supported: use '.' as the decimal separator)"
+        return msg
+
+    def check_finite(self, values: np.ndarray, cols: list[int]) -> None:
+        finite = np.isfinite(values)
+        if finite.all():
+            return
+        bad_rows = np.flatnonzero(~finite.all(axis=1))
+        row = int(bad_rows[0])
+        j = int(np.flatnonzero(~finite[row])[0])
+        idx = cols[j]
+        linenos, contents = self.data_lines()
+        lineno = linenos[row]
+        text = _split(contents[row], self.delim)[idx]
+        n_bad = int((~finite).sum())
+        raise DataError(
+            f"{self.shown}, line {lineno}, {self.describe(idx)}: {text!r} is not a finite "
+            f"number ({n_bad} NaN or infinite value{'s' if n_bad != 1 else ''} in "
+            f"{bad_rows.size} row{'s' if bad_rows.size != 1 else ''} of the selected columns); "
+            "remove or interpolate them before identification")
+
+
+def _delim_name(delim) -> str:
+    return {None: "runs of spaces/TABs", "\t": "TAB", ",": "','", ";": "';'"}.get(
+        delim, repr(delim))
+
+
+def _tokens(spec, role: str, names) -> list:
+    """Split a column/array specification into names (str) and indices (int)."""
+    if isinstance(spec, str):
+        if spec in names:
+            return [spec]
+        parts = [s.strip() for s in spec.split(",")]
+        if any(not s for s in parts):
+            raise DataError(f"{role}={spec!r} holds an empty name")
+        return parts
+    if isinstance(spec, numbers.Integral) and not isinstance(spec, bool):
+        return [int(spec)]
+    if isinstance(spec, (bool, bytes, dict, set, frozenset)) or not hasattr(spec, "__iter__"):
+        raise DataError(f"{role} must be a name, an index or a list of them, got {spec!r}")
+    out = []
+    for item in spec:
+        if isinstance(item, str):
+            out.append(item.strip())
+        elif isinstance(item, numbers.Integral) and not isinstance(item, bool):
+            out.append(int(item))
+        else:
+            raise DataError(f"{role} must be names or 0-based indices, got the item {item!r}")
+    return out
+
+
+def _read_text(p, shown, ext, inputs, outputs, dt, time, delimiter) -> IOData:
+    text = _decode(_read_bytes(p, shown), shown)
+    table = _Table(shown, text, ext, delimiter)
+    missing = [r for r, v in (("inputs", inputs), ("outputs", outputs)) if v is None]
+    if missing:
+        raise FileReadError(
+            f"{shown}: {' and '.join(missing)} must be given for a text file (subid does not "
+            f"guess which columns are inputs and outputs); {table.available()}", path=shown)
+    in_cols = table.resolve(inputs, "inputs")
+    out_cols = table.resolve(outputs, "outputs")
+    t_cols = []
+    if time is not None:
+        if not isinstance(time, (str, numbers.Integral)) or isinstance(time, bool):
+            raise DataError(f"time must be one column name or index, got {time!r}")
+        t_cols = table.resolve(time, "time")
+        if len(t_cols) != 1:
+            raise FileReadError(f"{shown}: time must name one column, got {time!r}", path=shown)
+    roles = [("an input", in_cols), ("an output", out_cols), ("the time", t_cols)]
+    for a in range(len(roles)):
+        for b in range(a + 1, len(roles)):
+            both = set(roles[a][1]) & set(roles[b][1])
+            if both:
+                idx = min(both)
+                raise FileReadError(f"{shown}: {table.describe(idx)} is used both as "
+                                    f"{roles[a][0]} and as {roles[b][0]}", path=shown, column=idx)
+    cols = in_cols + out_cols + t_cols
+    values = table.parse(cols)
+    table.check_finite(values, cols)
+    n_in, n_out = len(in_cols), len(out_cols)
+    u = values[:, :n_in]
+    y = values[:, n_in:n_in + n_out]
+    t = values[:, -1] if t_cols else None
+    return _build(shown, u, y, dt, t, table.channel_names(in_cols),
+                  table.channel_names(out_cols), first_line=table.first_data)
+
+
+# ---------------------------------------------------------------------------
+# .npz and .mat files
+# ---------------------------------------------------------------------------
+def _reason(exc: BaseException) -> str:
+    """Short printable description of a library exception, for messages."""
+    text = "".join(ch if ch.isprintable() else "?" for ch in str(exc))
+    if len(text) > 160:
+        text = text[:160] + "..."
+    return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
+
+
+def _load_npz(p: Path, shown: str) -> dict:
+    try:
+        with open(p, "rb") as fh:
+            magic = fh.read(6)
+    except OSError as exc:
+        raise FileReadError(f"cannot read {shown}: {exc.strerror or exc}", path=shown) from None
+    if magic == b"\x93NUMPY":
+        raise FileReadError(f"{shown} holds a single .npy array, not a .npz archive; save the "
+                            "record with numpy.savez(path, u=..., y=...)", path=shown)
+    if not magic.startswith(b"PK"):
+        raise FileReadError(f"{shown} is not a .npz archive (it is not a ZIP file); write it "
+                            "with numpy.savez(path, u=..., y=...)", path=shown)
+    try:
+        with np.load(p, allow_pickle=False) as npz:
+            return {key: npz[key] for key in npz.files}
+    except MemoryError:
+        raise
+    except Exception as exc:  # BadZipFile, zlib.error, ValueError, OSError, EOFError, ...
+        if "allow_pickle" in str(exc):
+            raise FileReadError(f"{shown} holds object (pickled) arrays, which subid does not "
+                                "load for safety; store plain numeric arrays", path=shown) from None
+        raise FileReadError(f"{shown} is not a readable .npz archive (corrupted?): "
+                            f"{_reason(exc)}", path=shown) from None
+
+
+def _load_mat(p: Path, shown: str) -> dict:
+    try:
+        with open(p, "rb") as fh:
+            head = fh.read(520)
+    except OSError as exc:
+        raise FileReadError(f"cannot read {shown}: {exc.strerror or exc}", path=shown) from None
+    if b"MATLAB 7.3" in head[:128] or head[512:520] == _HDF5_SIGNATURE:
+        raise FileReadError(
+            f"{shown} is a MATLAB v7.3 (HDF5) file, which subid cannot read; save it with "
+            "save(..., '-v7') in MATLAB, or export the data to CSV", path=shown)
+    import scipy.io
+    import scipy.sparse
+    try:
+        raw = scipy.io.loadmat(str(p), squeeze_me=False, mat_dtype=False)
+    except NotImplementedError:
+        raise FileReadError(
+            f"{shown} is a MATLAB v7.3 (HDF5) file, which subid cannot read; save it with "
+            "save(..., '-v7') in MATLAB, or export the data to CSV", path=shown) from None
+    except MemoryError:
+        raise
+    except Exception as exc:  # scipy raises ValueError, MatReadError, TypeError, OSError, ...
+        raise FileReadError(f"{shown} is not a readable MATLAB .mat file (corrupted or not a "
+                            f"MAT-file): {_reason(exc)}", path=shown) from None
+    arrays = {}
+    for key, val in raw.items():
+        if key.startswith("__"):
+            continue
+        if scipy.sparse.issparse(val):
+            val = val.toarray()
+        val = np.asarray(val)
+        if val.ndim == 2 and val.shape[0] == 1 and val.shape[1] > 1:
+            val = val.reshape(-1)          # a 1-by-N row vector is one channel
+        arrays[key] = val
+    return arrays
+
+
+def _array_names(spec, role: str, keys, shown: str) -> list[str]:
+    tokens = _tokens(spec, role, keys)
+    for tok in tokens:
+        if not isinstance(tok, str):
+            raise FileReadError(f"{shown}: {role} selects arrays of an archive by name, not by "
+                                f"index ({tok!r}); available arrays: {_listing(map(repr, keys))}",
+                                path=shown, column=tok)
+    if not tokens:
+        raise FileReadError(f"{shown}: {role} selects no array", path=shown)
+    for tok in tokens:
+        if tok not in keys:
+            raise FileReadError(f"{shown}: no array named {tok!r} ({role}); available arrays: "
+                                f"{_listing(map(repr, keys)) or '(none)'}", path=shown, column=tok)
+    seen = set()
+    for tok in tokens:
+        if tok in seen:
+            raise FileReadError(f"{shown}: the array {tok!r} is selected twice in {role}",
+                                path=shown, column=tok)
+        seen.add(tok)
+    return tokens
+
+
+def _numeric(arr: np.ndarray, key: str, shown: str, ext: str) -> np.ndarray:
+    if arr.dtype.kind not in "biufc":
+        kind = {"U": "text", "S": "text", "O": "a cell array or object array",
+                "V": "a struct / record array"}.get(arr.dtype.kind, f"of dtype {arr.dtype}")
+        raise FileReadError(f"{shown}: the {'variable' if ext == '.mat' else 'array'} {key!r} "
+                            f"is {kind}, not numeric", path=shown, column=key)
+    return arr
+
+
+def _channels(arr, key, shown, ext) -> tuple[np.ndarray, list[str]]:
+    arr = _numeric(arr, key, shown, ext)
+    if arr.ndim == 0:
+        raise FileReadError(f"{shown}: {key!r} is a scalar, not a signal", path=shown, column=key)
+    if arr.ndim == 1:
+        return arr[:, None], [key]
+    if arr.ndim != 2:
+        raise FileReadError(f"{shown}: {key!r} has {arr.ndim} dimensions (shape {arr.shape}); "
+                            "a signal is 1-D or 2-D with time on axis 0", path=shown, column=key)
+    if arr.shape[1] == 1:
+        return arr, [key]
+    return arr, [f"{key}[{k}]" for k in range(arr.shape[1])]
+
+
+def _stack(keys, arrays, shown, ext, role):
+    parts, names = [], []
+    for key in keys:
+        arr, nm = _channels(arrays[key], key, shown, ext)
+        parts.append(arr)
+        names.extend(nm)
+    lengths = {k: a.shape[0] for k, a in zip(keys, parts)}
+    if len(set(lengths.values())) > 1:
+        raise FileReadError(f"{shown}: the {role} arrays have different lengths "
+                            f"({', '.join(f'{k}: {n}' for k, n in lengths.items())}); time is "
+                            "axis 0", path=shown)
+    values = parts[0] if len(parts) == 1 else np.hstack(parts)
+    return values, names
+
+
+def _scalar(arr, key, shown, ext) -> float:
+    arr = _numeric(np.asarray(arr), key, shown, ext)
+    if arr.size != 1:
+        raise FileReadError(f"{shown}: {key!r} should be a scalar sampling period, got shape "
+                            f"{arr.shape}", path=shown, column=key)
+    return check_dt(float(arr.reshape(-1)[0].real), name=f"{shown}: {key}")
+
+
+def _from_arrays(arrays: dict, shown, ext, inputs, outputs, dt, time) -> IOData:
+    keys = list(arrays)
+    what = "variables" if ext == ".mat" else "arrays"
+    for role, spec, default in (("inputs", inputs, "u"), ("outputs", outputs, "y")):
+        if spec is None and default not in arrays:
+            raise FileReadError(f"{shown}: no {what[:-1]} named {default!r}; pass {role}= "
+                                f"to choose the {role} among the {what} in the file: "
+                                f"{_listing(map(repr, keys)) or '(none)'}", path=shown)
+    in_keys = _array_names("u" if inputs is None else inputs, "inputs", keys, shown)
+    out_keys = _array_names("y" if outputs is None else outputs, "outputs", keys, shown)
+    t_key = None
+    if time is not None:
+        if not isinstance(time, str):
+            raise FileReadError(f"{shown}: time names an array of the file, got {time!r}",
+                                path=shown)
+        t_key = _array_names(time, "time", keys, shown)[0]
+    elif dt is None and "t" in arrays and "t" not in in_keys + out_keys:
+        t_key = "t"
+    roles = [("an input", in_keys), ("an output", out_keys),
+             ("the time", [t_key] if t_key else [])]
+    for a in range(len(roles)):
+        for b in range(a + 1, len(roles)):
+            both = set(roles[a][1]) & set(roles[b][1])
+            if both:
+                key = sorted(both)[0]
+                raise FileReadError(f"{shown}: the {what[:-1]} {key!r} is used both as "
+                                    f"{roles[a][0]} and as {roles[b][0]}", path=shown, column=key)
+    u, in_names = _stack(in_keys, arrays, shown, ext, "input")
+    y, out_names = _stack(out_keys, arrays, shown, ext, "output")
+    t = None
+    if t_key is not None:
+        t = _numeric(np.asarray(arrays[t_key]), t_key, shown, ext)
+        if t.ndim == 2 and 1 in t.shape:
+            t = t.reshape(-1)
+        if dt is None and time is None and "dt" in arrays:
+            file_dt = _scalar(arrays["dt"], "dt", shown, ext)
+            steps = np.diff(np.asarray(t, dtype=np.float64))
+            if steps.size and not np.allclose(steps, file_dt, rtol=1e-9, atol=0):
+                raise FileReadError(f"{shown}: the file holds both 't' and 'dt' and they "
+                                    f"disagree (dt = {file_dt:g}, t steps from {steps.min():g} "
+                                    f"to {steps.max():g}); pass dt= or time= to choose",
+                                    path=shown)
+    elif dt is None and "dt" in arrays and "dt" not in in_keys + out_keys:
+        dt = _scalar(arrays["dt"], "dt", shown, ext)
+    return _build(shown, u, y, dt, t, in_names, out_names)

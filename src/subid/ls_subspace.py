@@ -1,0 +1,237 @@
+"""SVD-free least-squares subspace identification (seed 001).
+
+Bako, Mercère, Lecoeuche, "A least squares approach to the subspace
+identification problem". A user-chosen selector matrix Λ (``selector``,
+n x horizon*ny) fixes the state basis by the constraint ``Λ Γ̄ = I``; the
+extended observability matrix Γ̄ then follows from a linear least-squares
+problem, eq. (23) without instruments and eq. (28) with past inputs and
+outputs (29) as instruments. A and C follow by shift invariance, B, D and
+x0 by linear least squares on the output. No SVD is computed anywhere.
+
+Numerics (notation of the paper, future block rows Y = Y_{f+1,f,N},
+U = U_{f+1,f,N}; instruments Z = [U_{1,f,N}; Y_{1,f,N}]):
+
+* The LQ factorisation ``[U; Z; Y] = L Q^T`` gives ``Y Π_U^⊥ Z^T = L32 L22^T``
+  and, without instruments, ``[U; Y] = L Q^T`` gives ``Y Π_U^⊥ = L22 Q2^T``.
+  Eq. (23), ``Γ̄ = Y Π_U^⊥ (Λ Y Π_U^⊥)^†``, becomes ``Γ̄ = L22 (Λ L22)^†``
+  (``Q2`` has orthonormal columns); eq. (28) is the least-squares solution of
+  ``W = Γ̄ Λ W`` with ``W = L32 L22^T`` (the paper's instrument correlation).
+* Beyond the paper, two SVD-free refinements (both can be switched off):
+
+  - ``instrument_weighting=True`` uses ``W = L32`` instead, i.e. the
+    instrument correlation right-multiplied by ``(Z Π_U^⊥ Z^T)^{-1/2}``
+    (``L22^{-T}``, a Cholesky factor, not an SVD). This is the weighting of
+    PO-MOESP: it whitens the instruments so that no instrument direction
+    dominates the fit because of its scale.
+  - ``power_iterations=k`` re-solves the least-squares problem k times with
+    the selector taken from the previous estimate (Λ_k = orthonormal basis
+    of the previous Γ̄, by QR). Each step maps range(Γ̄) to
+    range(W W^T Λ_k^T), so this is orthogonal (power) iteration towards the
+    dominant n-dimensional left singular subspace of W, the subspace an SVD
+    would give, at the rate (σ_{n+1}/σ_n)^2 per step, while computing no SVD.
+    The result is finally expressed in the basis of the user's Λ,
+    ``Γ̄ = G (Λ G)^{-1}``; noise-free, range(G) = range(Γ_f) for every k, so
+    the basis fixed by Λ is exactly the paper's.
+
+* Order estimation (Remark 2): with a square random Λ, the pivots of the
+  Cholesky factorisation of ``Σ = Λ W W^T Λ^T`` (computed without forming Σ,
+  as the diagonal of the R factor of ``(Λ W)^T``) are the square roots of
+  ``det Σ(1:r,1:r) / det Σ(1:r-1,1:r-1)``. They drop to rounding level after
+  r = n on noise-free data; the order is taken at the largest drop.
+"""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import scipy.linalg
+
+from ._regression import fit_b_d_x0
+from ._subspace import (check_data, check_excitation, check_order_horizon, data_factor,
+                        order_from_gap, shift_invariance)
+from .errors import OrderError, SubidError
+from .model import StateSpace
+
+__all__ = ["ls_subspace", "random_selector"]
+
+
+def random_selector(horizon: int, n_outputs: int, seed=0, rows: int | None = None) -> np.ndarray:
+    """The selector Λ drawn when none is given.
+
+    Entries are uniform on [-1, 1] (Proposition 3 of seed 001: rank(ΛΓ) = n
+    with probability one). The full square matrix (horizon*ny rows) is drawn
+    and its first ``rows`` rows returned, so that a model of order n always
+    uses the same Λ whether the order was given or estimated (Remark 2).
+    """
+    size = horizon * n_outputs
+    full = np.random.default_rng(seed).uniform(-1.0, 1.0, size=(size, size))
+    return full if rows is None else full[:rows].copy()
+
+
+def _solve_gamma(W: np.ndarray, selector: np.ndarray) -> np.ndarray:
+    """Least-squares Γ̄ of ``W ≈ Γ̄ (Λ W)``: ``Γ̄ = W (Λ W)^†`` (QR, no SVD)."""
+    return scipy.linalg.lstsq((selector @ W).T, W.T, lapack_driver="gelsy",
+                              check_finite=False)[0].T
+
+
+def _condition_1norm(M: np.ndarray) -> float:
+    """1-norm condition estimate of a square matrix via LU (no SVD)."""
+    with warnings.catch_warnings():   # a singular M is the case this function reports
+        warnings.simplefilter("ignore", scipy.linalg.LinAlgWarning)
+        lu, _ = scipy.linalg.lu_factor(M, check_finite=False)
+    anorm = np.abs(M).sum(axis=0).max()
+    rcond = scipy.linalg.lapack.dgecon(lu, anorm, norm="1")[0]
+    return float(1.0 / rcond) if rcond > 0 else float("inf")
+
+
+def ls_subspace(data, order=None, horizon=None, instruments="past", selector=None, seed=0,
+                estimate_x0=True, *, feedthrough=True, instrument_weighting=True,
+                power_iterations=2) -> StateSpace:
+    """Identify a discrete-time state-space model without SVD (seed 001).
+
+    Parameters
+    ----------
+    data : IOData
+        Uniformly sampled input/output record.
+    order : int or None
+        Model order n. ``None`` (or ``'auto'``) estimates it from the
+        SVD-free rank profile of Remark 2 (see ``info['rank_profile']``).
+    horizon : int, optional
+        Future horizon f (block rows of Y); the instruments use f past block
+        rows too. Default ``max(5, ceil(n/ny) + 2)`` when the order is given,
+        10 (or the largest the record supports) when it is estimated.
+    instruments : {'past', None}
+        ``'past'``: eq. (28) with past inputs and outputs (29) as
+        instruments, consistent under process and measurement noise.
+        ``None``: eq. (23), exact on noise-free data, biased under noise.
+    selector : array_like, optional
+        The matrix Λ (n x horizon*ny; more rows are allowed, the first n are
+        used). It fixes the state basis: ``Λ Γ̄ = I``. Two records of the same
+        system identified with the same Λ give the same matrices. Default: a
+        uniform random matrix drawn from ``seed`` (:func:`random_selector`).
+    seed : int
+        Seed of the random selector (ignored when ``selector`` is given).
+    estimate_x0 : bool
+        Estimate the initial state with B and D (stored in ``info['x0']``).
+    feedthrough : bool
+        Estimate D (else D = 0).
+    instrument_weighting : bool
+        Whiten the instrument correlation (``W = L32``, PO-MOESP weighting)
+        instead of the paper's ``W = Y Π_U^⊥ Z^T`` of eq. (28).
+    power_iterations : int
+        SVD-free refinement steps with Λ taken from the previous estimate;
+        0 gives the paper's one-shot estimate.
+
+    Returns
+    -------
+    StateSpace
+        Discrete-time model with ``dt = data.dt`` in the basis fixed by Λ.
+        ``info`` holds ``selector`` (reuse it to identify other records in the
+        same basis), ``rank_profile``, ``horizon``, ``order``,
+        ``order_selection``, ``x0``, ``shift_residual``, ``selector_condition``,
+        ``input_condition``, ``residual_rms``, ``regression_condition``.
+
+    Raises
+    ------
+    subid.errors.DataError
+        Non-uniform sampling, constant output.
+    subid.errors.TooFewSamplesError, subid.errors.NotExcitingError,
+    subid.errors.OrderError
+
+    Examples
+    --------
+    >>> import subid
+    >>> true = subid.systems.seed001_system()
+    >>> data = subid.systems.simulate_data(true, 500, seed=1)
+    >>> model = subid.ls_subspace(data, order=3)
+    >>> subid.markov_error(model, true) < 1e-9
+    True
+    """
+    method = "ls_subspace"
+    data = check_data(data, method)
+    if instruments not in ("past", None):
+        raise SubidError(f"instruments must be 'past' or None, got {instruments!r}")
+    power_iterations = int(power_iterations)
+    if power_iterations < 0:
+        raise SubidError(f"power_iterations must be >= 0, got {power_iterations}")
+    ny = data.n_outputs
+    order, horizon = check_order_horizon(
+        order, horizon, data, method=method, blocks_per_horizon=2 if instruments == "past" else 1)
+    f = horizon
+    c = f * ny
+    if selector is not None:
+        selector = np.asarray(selector, dtype=float)
+        if selector.ndim != 2 or selector.shape[1] != c:
+            raise OrderError(f"selector must have horizon*n_outputs = {c} columns, got shape "
+                             f"{selector.shape}")
+        if not np.isfinite(selector).all():
+            raise OrderError("selector has non-finite entries")
+        if order is not None and selector.shape[0] < order:
+            raise OrderError(f"selector has {selector.shape[0]} rows but the order is {order}; "
+                             "it needs at least order rows")
+
+    depth = 2 * f if instruments == "past" else f
+    hf = data_factor(data, depth, method=method, horizon=horizon)
+    input_condition = check_excitation(hf, data, method=method)
+    nu = data.n_inputs
+    uf = hf.u_rows(depth - f, depth)
+    yf = hf.y_rows(depth - f, depth)
+    if instruments == "past":
+        z = np.concatenate([hf.u_rows(0, f), hf.y_rows(0, f)])
+        L = hf.retriangularize(uf, z, yf)
+        a, b = f * nu, f * (nu + ny)
+        L22 = L[a:a + b, a:a + b]
+        L32 = L[a + b:, a:a + b]
+        W = L32 if instrument_weighting else L32 @ L22.T
+    else:
+        L = hf.retriangularize(uf, yf)
+        a = f * nu
+        W = L[a:, a:]
+
+    # Order: SVD-free rank profile (Remark 2) with a square selector.
+    max_order = (f - 1) * ny
+    full = selector if selector is not None else random_selector(f, ny, seed)
+    rank_profile = np.abs(np.diag(scipy.linalg.qr((full @ W).T, mode="r",
+                                                  check_finite=False)[0]))
+    if order is None:
+        order = order_from_gap(rank_profile, min(max_order, full.shape[0] - 1))
+        order_selection = "largest gap of the SVD-free rank profile (seed 001, Remark 2)"
+    else:
+        order_selection = "given"
+    n = order
+    Lam = full[:n]
+
+    G = _solve_gamma(W, Lam)
+    for _ in range(power_iterations):
+        basis = scipy.linalg.qr(G, mode="economic", check_finite=False)[0]
+        G = _solve_gamma(W, basis.T)
+    LG = Lam @ G
+    selector_condition = _condition_1norm(LG)
+    if not np.isfinite(selector_condition) or selector_condition > 1e12:
+        raise OrderError(f"{method}: the selector Λ is (nearly) blind to the observable "
+                         f"subspace (condition of ΛΓ ~{selector_condition:.1e}); order {n} may be "
+                         "too high for these data, or choose another selector / seed")
+    gamma = scipy.linalg.solve(LG.T, G.T, check_finite=False).T   # Γ̄ = G (ΛG)^{-1}
+    A, C, shift_residual = shift_invariance(gamma, ny)
+    B, D, x0, reg = fit_b_d_x0(A, C, data.u, data.y, feedthrough=feedthrough,
+                               estimate_x0=estimate_x0)
+    info = {
+        "method": method,
+        "order": n,
+        "order_selection": order_selection,
+        "horizon": f,
+        "instruments": instruments,
+        "instrument_weighting": bool(instrument_weighting and instruments == "past"),
+        "power_iterations": power_iterations,
+        "selector": Lam,
+        "rank_profile": rank_profile,
+        "selector_condition": selector_condition,
+        "shift_residual": shift_residual,
+        "input_condition": input_condition,
+        "x0": x0,
+        "n_samples": data.n_samples,
+        **reg,
+    }
+    return StateSpace(A, B, C, D, data.dt, input_names=data.input_names,
+                      output_names=data.output_names, info=info)

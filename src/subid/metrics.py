@@ -1,0 +1,144 @@
+"""Validation metrics: Markov-parameter error, simulation fit, pole error."""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse
+import scipy.sparse.csgraph
+
+from ._validation import check_int
+from .data import IOData
+from .errors import DataError, ModelError
+from .model import StateSpace
+
+__all__ = ["markov_error", "fit_percent", "pole_error", "simulate_fit"]
+
+
+def _check_model(model, name: str) -> StateSpace:
+    if not isinstance(model, StateSpace):
+        raise ModelError(f"{name} must be a subid.StateSpace, got {type(model).__name__}")
+    return model
+
+
+def _check_pair(model, reference):
+    _check_model(model, "model")
+    _check_model(reference, "reference")
+    if (model.n_inputs, model.n_outputs) != (reference.n_inputs, reference.n_outputs):
+        raise ModelError(f"model has {model.n_inputs} inputs and {model.n_outputs} outputs but "
+                         f"the reference has {reference.n_inputs} and {reference.n_outputs}")
+    if model.dt != reference.dt and not np.isclose(model.dt, reference.dt, rtol=1e-9, atol=0):
+        raise ModelError(f"model has dt={model.dt} but the reference has dt={reference.dt}; "
+                         "convert one of them first (to_discrete / to_continuous)")
+
+
+def markov_error(model, reference, k: int = 10) -> float:
+    """Relative Frobenius error of the first ``k`` Markov parameters.
+
+    ``||M - M_ref||_F / ||M_ref||_F`` with ``M = [D, CB, CAB, ...,
+    C A^{k-2} B]``: invariant to the state basis (seed 001, Fig. 2).
+
+    Parameters
+    ----------
+    model, reference : StateSpace
+        Same numbers of inputs and outputs and the same ``dt``.
+    k : int
+        Number of Markov parameters, D included.
+    """
+    _check_pair(model, reference)
+    k = check_int(k, "k", minimum=1)
+    m_ref = reference.markov(k)
+    norm = np.linalg.norm(m_ref)
+    if norm == 0:
+        raise ModelError("the reference's first Markov parameters are all zero; the relative "
+                         "error is undefined")
+    return float(np.linalg.norm(model.markov(k) - m_ref) / norm)
+
+
+def simulate_fit(model, data, x0="estimate", hold: str = "zoh"):
+    """Simulated output of ``model`` on ``data`` and the initial state used.
+
+    ``x0='estimate'`` fits the initial state to the data by least squares
+    (the simulated output is linear in x0); ``'zero'`` or an array fixes it.
+    """
+    _check_model(model, "model")
+    if not isinstance(data, IOData):
+        raise DataError(f"data must be an IOData record, got {type(data).__name__}")
+    if (data.n_inputs, data.n_outputs) != (model.n_inputs, model.n_outputs):
+        raise DataError(f"data have {data.n_inputs} inputs and {data.n_outputs} outputs but "
+                        f"the model has {model.n_inputs} and {model.n_outputs}")
+    if model.dt > 0:
+        if not data.is_uniform or not np.isclose(data.dt, model.dt, rtol=1e-9, atol=0):
+            raise DataError(f"the model is discrete with dt={model.dt} but the data are "
+                            f"sampled with {'non-uniform t' if not data.is_uniform else data.dt}")
+        sim = lambda u, x0v: model.simulate(u, x0=x0v)  # noqa: E731
+    else:
+        sim = lambda u, x0v: model.simulate(u, t=data.t, x0=x0v, hold=hold)  # noqa: E731
+    n = model.order
+    forced = sim(data.u, None)
+    if isinstance(x0, str) and x0 == "zero":
+        return forced, np.zeros(n)
+    if isinstance(x0, str) and x0 == "estimate":
+        zeros = np.zeros_like(data.u)
+        free = np.stack([sim(zeros, e) for e in np.eye(n)], axis=-1)  # (N, ny, n)
+        x0_hat = np.linalg.lstsq(free.reshape(-1, n), (data.y - forced).reshape(-1),
+                                 rcond=None)[0]
+        return forced + free @ x0_hat, x0_hat
+    x0_arr = np.asarray(x0, dtype=float).reshape(-1)
+    if x0_arr.shape != (n,):
+        raise DataError(f"x0 must have {n} entries (the model order), got {x0_arr.size}")
+    return sim(data.u, x0_arr), x0_arr
+
+
+def fit_percent(model, data, x0="estimate", hold: str = "zoh") -> np.ndarray:
+    """NRMSE fit in percent, per output: ``100 (1 - ||y - ŷ|| / ||y - mean(y)||)``.
+
+    ``ŷ`` is the simulated output (not a prediction), from an initial state
+    estimated by least squares unless ``x0`` says otherwise. 100 is a
+    perfect fit; 0 is no better than the mean; it can be negative.
+
+    Parameters
+    ----------
+    model : StateSpace
+    data : IOData
+        Same channels; for a discrete model, the same sampling period.
+    x0 : 'estimate', 'zero' or array
+    hold : {'zoh', 'foh'}
+        Inter-sample behaviour of the input for a continuous-time model.
+
+    Returns
+    -------
+    ndarray, shape (n_outputs,)
+    """
+    y_hat, _ = simulate_fit(model, data, x0=x0, hold=hold)
+    dev = np.linalg.norm(data.y - data.y.mean(axis=0), axis=0)
+    flat = np.flatnonzero(dev == 0)
+    if flat.size:
+        names = ", ".join(data.output_names[k] for k in flat)
+        raise DataError(f"output {names} is constant; the fit percentage is undefined for it")
+    return 100.0 * (1.0 - np.linalg.norm(data.y - y_hat, axis=0) / dev)
+
+
+def pole_error(model, reference) -> float:
+    """Largest pole distance after the best one-to-one matching of poles.
+
+    The matching minimises the largest distance (a bottleneck assignment),
+    so the result is the smallest ``d`` such that every pole of ``model``
+    can be paired with a distinct pole of ``reference`` within ``d``.
+    """
+    _check_pair(model, reference)
+    p, q = model.poles(), reference.poles()
+    if p.size != q.size:
+        raise ModelError(f"model has order {p.size} but the reference has order {q.size}; "
+                         "pole errors compare models of the same order")
+    dist = np.abs(p[:, None] - q[None, :])
+    candidates = np.unique(dist)
+    lo, hi = 0, candidates.size - 1
+    while lo < hi:   # smallest threshold that admits a perfect matching
+        mid = (lo + hi) // 2
+        graph = scipy.sparse.csr_matrix((dist <= candidates[mid]).astype(np.int8))
+        match = scipy.sparse.csgraph.maximum_bipartite_matching(graph, perm_type="column")
+        if np.all(match >= 0):
+            hi = mid
+        else:
+            lo = mid + 1
+    return float(candidates[lo])

@@ -1,0 +1,121 @@
+"""Test systems and data generation: the papers' examples and random systems."""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.linalg
+
+from ._validation import check_int
+from .data import IOData
+from .errors import SubidError
+from .model import StateSpace
+
+__all__ = ["seed001_system", "random_system", "simulate_data"]
+
+
+def seed001_system(dt: float = 1.0) -> StateSpace:
+    """The 3rd-order, 2-input, 2-output system of seed 001, Section IV."""
+    A = [[-0.0398, -0.4909, -0.6115],
+         [0.4784, 0.4808, -0.4169],
+         [-0.6214, 0.4020, -0.2488]]
+    B = [[0.7433, 0.0], [0.0, -1.3193], [-0.8510, -0.0181]]
+    C = [[-0.0028, 2.3968, 0.0], [-0.0857, 0.0264, -0.6553]]
+    D = [[-1.7384, 0.0425], [0.7127, 0.0]]
+    return StateSpace(A, B, C, D, dt)
+
+
+def _hankel_singular_values(A, B, C):
+    P = scipy.linalg.solve_discrete_lyapunov(A, B @ B.T)
+    Q = scipy.linalg.solve_discrete_lyapunov(A.T, C.T @ C)
+    return np.sqrt(np.sort(np.abs(np.linalg.eigvals(P @ Q)))[::-1])
+
+
+def random_system(order: int, n_inputs: int, n_outputs: int, *, seed, dt: float = 1.0,
+                  pole_radius=(0.2, 0.9), feedthrough: bool = True,
+                  min_hsv_ratio: float = 1e-3, min_pole_distance: float = 0.05) -> StateSpace:
+    """A random stable, minimal discrete-time system.
+
+    Poles are drawn with magnitudes in ``pole_radius`` (real or in complex
+    pairs), at least ``min_pole_distance`` apart; A is made dense by a random
+    well-conditioned similarity; B, C (and D) are Gaussian. Draws are repeated
+    (deterministically from ``seed``) until the ratio of the smallest to the
+    largest Hankel singular value exceeds ``min_hsv_ratio``, i.e. the system
+    is minimal with margin.
+    """
+    n = check_int(order, "order")
+    nu = check_int(n_inputs, "n_inputs")
+    ny = check_int(n_outputs, "n_outputs")
+    rng = np.random.default_rng(seed)
+    r_lo, r_hi = pole_radius
+    for _ in range(1000):
+        blocks, poles = [], []
+        remaining = n
+        while remaining > 0:
+            r = rng.uniform(r_lo, r_hi)
+            if remaining >= 2 and rng.random() < 0.5:
+                theta = rng.uniform(0.1, np.pi - 0.1)
+                re, im = r * np.cos(theta), r * np.sin(theta)
+                blocks.append(np.array([[re, im], [-im, re]]))
+                poles += [complex(re, im), complex(re, -im)]
+                remaining -= 2
+            else:
+                p = r * rng.choice([-1.0, 1.0])
+                blocks.append(np.array([[p]]))
+                poles.append(complex(p))
+                remaining -= 1
+        poles = np.array(poles)
+        gaps = np.abs(poles[:, None] - poles[None, :]) + np.eye(n) * 10
+        if gaps.min() < min_pole_distance:
+            continue
+        Q = np.linalg.qr(rng.standard_normal((n, n)))[0]
+        T = Q @ np.diag(rng.uniform(0.5, 2.0, n))
+        A = T @ scipy.linalg.block_diag(*blocks) @ np.linalg.inv(T)
+        B = rng.standard_normal((n, nu))
+        C = rng.standard_normal((ny, n))
+        D = rng.standard_normal((ny, nu)) if feedthrough else np.zeros((ny, nu))
+        hsv = _hankel_singular_values(A, B, C)
+        if hsv[-1] / hsv[0] > min_hsv_ratio:
+            return StateSpace(A, B, C, D, dt)
+    raise SubidError("random_system found no minimal system within 1000 draws; "
+                     "relax min_hsv_ratio or min_pole_distance")
+
+
+def simulate_data(system: StateSpace, n_samples: int, *, seed, process_snr_db=None,
+                  output_snr_db=None, x0=None, input_std: float = 1.0) -> IOData:
+    """Simulate a discrete-time system driven by white Gaussian input.
+
+    Parameters
+    ----------
+    system : StateSpace
+        Discrete-time system.
+    n_samples : int
+    seed : int or numpy Generator
+        Seed of the input and noise draws.
+    process_snr_db, output_snr_db : float, optional
+        Signal-to-noise ratios in dB of white Gaussian process noise w (added
+        to the state equation) and measurement noise v (added to the output),
+        each channel relative to the power of the noise-free state or output
+        channel (seed 001, Section IV: 25 dB). None: no noise.
+    x0 : array_like, optional
+        Initial state (default zero).
+    input_std : float
+        Standard deviation of the input.
+    """
+    if system.dt <= 0:
+        raise SubidError("simulate_data needs a discrete-time system; discretise it first")
+    n_samples = check_int(n_samples, "n_samples")
+    rng = np.random.default_rng(seed)
+    u = input_std * rng.standard_normal((n_samples, system.n_inputs))
+    y, x = system.simulate(u, x0=x0, return_state=True)
+    y_clean = y
+    if process_snr_db is not None:
+        w_std = x.std(axis=0) * 10 ** (-process_snr_db / 20)
+        w = rng.standard_normal((n_samples, system.order)) * w_std
+        augmented = StateSpace(system.A, np.hstack([system.B, np.eye(system.order)]), system.C,
+                               np.hstack([system.D, np.zeros((system.n_outputs, system.order))]),
+                               system.dt)
+        y = augmented.simulate(np.hstack([u, w]), x0=x0)
+    if output_snr_db is not None:
+        v_std = y_clean.std(axis=0) * 10 ** (-output_snr_db / 20)
+        y = y + rng.standard_normal(y.shape) * v_std
+    return IOData(u, y, dt=system.dt)

@@ -1,0 +1,34 @@
+import numpy as np
+import pytest
+
+import subid
+from subid import systems
+
+
+@pytest.fixture(scope="session")
+def paper_system():
+    return systems.seed001_system()
+
+
+@pytest.fixture(scope="session")
+def paper_data(paper_system):
+    return systems.simulate_data(paper_system, 1000, seed=1)
+
+
+METHODS = {
+    "ls_iv": lambda d, n=None, **kw: subid.ls_subspace(d, n, **kw),
+    "ls_noiv": lambda d, n=None, **kw: subid.ls_subspace(d, n, instruments=None, **kw),
+    "ls_paper": lambda d, n=None, **kw: subid.ls_subspace(d, n, instrument_weighting=False,
+                                                          power_iterations=0, **kw),
+    "moesp": lambda d, n=None, **kw: subid.moesp(d, n, **kw),
+    "n4sid": lambda d, n=None, **kw: subid.n4sid(d, n, **kw),
+}
+
+
+@pytest.fixture(params=sorted(METHODS))
+def method(request):
+    return METHODS[request.param]
+
+
+def rng(seed):
+    return np.random.default_rng(seed)

@@ -1,0 +1,152 @@
+"""Bad input gets a subid.errors exception that says what is wrong."""
+
+import numpy as np
+import pytest
+
+import subid
+from subid import errors, systems
+
+from conftest import METHODS
+
+
+def _data(n=500, seed=0):
+    return systems.simulate_data(systems.seed001_system(), n, seed=seed)
+
+
+def test_errors_are_value_errors():
+    for cls in (errors.DataError, errors.NotExcitingError, errors.OrderError,
+                errors.TooFewSamplesError, errors.ModelError, errors.FileReadError):
+        assert issubclass(cls, ValueError)
+    assert issubclass(errors.DataFileNotFoundError, FileNotFoundError)
+
+
+def test_nan_rows_listed():
+    u = np.ones((50, 2))
+    u[[17, 18, 40], 1] = np.nan
+    with pytest.raises(errors.DataError, match=r"input u has 3 NaN values at rows 17, 18, 40"):
+        subid.IOData(u, np.zeros(50))
+
+
+def test_inf_rows_listed():
+    y = np.zeros(30)
+    y[5] = np.inf
+    with pytest.raises(errors.DataError, match=r"output y has 1 infinite value at row 5"):
+        subid.IOData(np.zeros(30), y)
+
+
+def test_mismatched_lengths():
+    with pytest.raises(errors.DataError, match=r"input u has 10 samples but output y has 12"):
+        subid.IOData(np.zeros(10), np.zeros(12))
+
+
+def test_transposed_hint():
+    with pytest.raises(errors.DataError, match="transposed"):
+        subid.IOData(np.zeros((2, 100)), np.zeros(100))
+
+
+def test_time_stamps_not_increasing():
+    t = np.arange(10.0)
+    t[6] = t[5]
+    with pytest.raises(errors.DataError, match=r"repeated at row 6"):
+        subid.IOData(np.zeros(10), np.zeros(10), t=t)
+    t = np.arange(10.0)
+    t[3] = 1.0
+    with pytest.raises(errors.DataError, match=r"not increasing at row 3"):
+        subid.IOData(np.zeros(10), np.zeros(10), t=t)
+
+
+@pytest.mark.parametrize("bad", [
+    dict(dt=0), dict(dt=-1.0), dict(dt=float("nan")), dict(dt="0.1"), dict(dt=0.1, t=np.arange(5.0)),
+])
+def test_bad_dt(bad):
+    with pytest.raises(errors.DataError):
+        subid.IOData(np.zeros(5), np.zeros(5), **bad)
+
+
+@pytest.mark.parametrize("values,match", [
+    (np.array(["a", "b"]), "strings"),
+    (np.array([1 + 1j, 2]), "complex"),
+    (np.array([[1, "x"], [2, 3]], dtype=object), "not numbers"),
+    (np.array([[1, None], [2, 3]], dtype=object), "missing values .None. at row 0"),
+    (np.zeros((3, 2, 2)), "3 dimensions"),
+    (np.zeros((0,)), "empty"),
+])
+def test_bad_arrays(values, match):
+    with pytest.raises(errors.DataError, match=match):
+        subid.IOData(values, np.zeros(values.shape[0]) if values.ndim else 0)
+
+
+def test_too_few_samples_for_horizon(method):
+    data = _data(35)
+    with pytest.raises(errors.TooFewSamplesError, match=r"35 samples are too few for horizon 8"):
+        method(data, 3, horizon=8)
+
+
+def test_order_not_revealable(method):
+    with pytest.raises(errors.OrderError, match=r"order 9 cannot be revealed with horizon 5 "
+                                                r"and 2 outputs.*horizon >= 6"):
+        method(_data(), 9, horizon=5)
+
+
+def test_bad_order_values(method):
+    for bad in (0, -1, 2.5, "three"):
+        with pytest.raises(errors.OrderError):
+            method(_data(), bad)
+
+
+def test_constant_input_not_exciting(method):
+    sys = systems.seed001_system()
+    u = np.ones((500, 2))
+    u[:, 1] = np.random.default_rng(0).standard_normal(500)
+    data = subid.IOData(u, sys.simulate(u))
+    with pytest.raises(errors.NotExcitingError, match=r"input u1 at lag 1") as info:
+        method(data, 3)
+    assert info.value.achieved_order == 1
+    assert "persistently exciting of order" in str(info.value)
+
+
+def test_zero_input_not_exciting(method):
+    data = subid.IOData(np.zeros((300, 2)), np.random.default_rng(1).standard_normal((300, 2)))
+    with pytest.raises(errors.NotExcitingError, match="identically zero") as info:
+        method(data, 3)
+    assert info.value.achieved_order == 0
+
+
+def test_sinusoid_exciting_order_reported():
+    """Two sinusoids are persistently exciting of order 4 exactly."""
+    sys = systems.random_system(2, 1, 1, seed=3)
+    k = np.arange(800)
+    u = np.sin(0.3 * k) + np.sin(1.1 * k)
+    data = subid.IOData(u, sys.simulate(u))
+    with pytest.raises(errors.NotExcitingError, match="exciting of order 4 only") as info:
+        subid.ls_subspace(data, 2)
+    assert info.value.required_order == 10
+
+
+def test_constant_output_rejected(method):
+    u = np.random.default_rng(0).standard_normal((300, 1))
+    data = subid.IOData(u, np.column_stack([u[:, 0], np.full(300, 2.0)]))
+    with pytest.raises(errors.DataError, match="output y2 is constant"):
+        method(data, 1)
+
+
+def test_non_uniform_data_rejected(method):
+    t = np.cumsum(np.random.default_rng(0).uniform(0.5, 1.5, 300))
+    data = subid.IOData(np.random.default_rng(1).standard_normal(300), np.zeros(300) + t, t=t)
+    with pytest.raises(errors.DataError, match="non-uniform"):
+        method(data, 2)
+
+
+def test_not_iodata(method):
+    with pytest.raises(errors.DataError, match="IOData"):
+        method(np.zeros((100, 2)), 2)
+
+
+def test_bad_selector():
+    data = _data()
+    with pytest.raises(errors.OrderError, match="10 columns"):
+        subid.ls_subspace(data, 3, selector=np.ones((3, 4)))
+    with pytest.raises(errors.OrderError, match="at least order rows"):
+        subid.ls_subspace(data, 3, selector=np.ones((2, 10)))
+    with pytest.raises(errors.OrderError, match="blind"):
+        subid.ls_subspace(data, 3, selector=np.ones((3, 10)))   # rank one selector

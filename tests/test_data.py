@@ -1,0 +1,92 @@
+"""IOData: shapes, time, slicing, split, detrend."""
+
+import numpy as np
+import pytest
+
+import subid
+from subid import errors
+
+
+def test_shapes_and_defaults():
+    d = subid.IOData(np.arange(10.0), np.ones((10, 2)))
+    assert (d.n_samples, d.n_inputs, d.n_outputs) == (10, 1, 2)
+    assert d.dt == 1.0 and d.is_uniform
+    np.testing.assert_array_equal(d.t, np.arange(10.0))
+    assert d.input_names == ("u1",) and d.output_names == ("y1", "y2")
+    assert d.u.dtype == np.float64
+    with pytest.raises(ValueError):
+        d.u[0, 0] = 5.0   # read-only
+
+
+def test_integer_and_bool_inputs_become_float():
+    d = subid.IOData(np.array([0, 1, 1, 0], dtype=bool), np.arange(4))
+    np.testing.assert_array_equal(d.u[:, 0], [0.0, 1.0, 1.0, 0.0])
+    assert d.y.dtype == np.float64
+
+
+def test_inputs_not_aliased():
+    u = np.zeros(5)
+    d = subid.IOData(u, np.zeros(5))
+    u[0] = 3.0
+    assert d.u[0, 0] == 0.0
+
+
+def test_non_uniform_time_kept():
+    t = np.array([0.0, 0.1, 0.25, 0.3, 0.5])
+    d = subid.IOData(np.zeros(5), np.zeros(5), t=t)
+    assert d.dt is None and not d.is_uniform
+    np.testing.assert_array_equal(d.t, t)
+    part = d[1:4]
+    np.testing.assert_array_equal(part.t, t[1:4])
+
+
+def test_uniform_time_stamps_give_dt():
+    d = subid.IOData(np.zeros(5), np.zeros(5), t=2.0 + 0.5 * np.arange(5))
+    assert d.dt == pytest.approx(0.5)
+    np.testing.assert_allclose(d.t, 2.0 + 0.5 * np.arange(5))
+
+
+def test_slicing_keeps_time():
+    d = subid.IOData(np.arange(20.0), np.arange(20.0) * 2, dt=0.1)
+    part = d[5:15]
+    assert part.n_samples == 10
+    np.testing.assert_allclose(part.t, 0.5 + 0.1 * np.arange(10))
+    np.testing.assert_array_equal(part.y[:, 0], 2 * np.arange(5.0, 15.0))
+    every_other = d[::2]
+    assert every_other.dt == pytest.approx(0.2)
+    with pytest.raises(errors.DataError, match="slice"):
+        d[3]
+    with pytest.raises(errors.DataError, match="no samples"):
+        d[5:5]
+
+
+def test_split():
+    d = subid.IOData(np.arange(100.0), np.arange(100.0), dt=0.5, input_names=["a"],
+                     output_names=["b"])
+    est, val = d.split(0.7)
+    assert est.n_samples == 70 and val.n_samples == 30
+    assert val.t[0] == pytest.approx(35.0)
+    assert est.input_names == ("a",)
+    for bad in (0, 1, 1.5, -0.1, "half"):
+        with pytest.raises(errors.DataError):
+            d.split(bad)
+
+
+def test_detrend():
+    t = np.arange(50.0)
+    d = subid.IOData(3 + 0 * t, np.column_stack([2 + 0.5 * t, -t]), dt=1.0)
+    c = d.detrend()
+    np.testing.assert_allclose(c.u.mean(axis=0), 0, atol=1e-12)
+    np.testing.assert_allclose(c.y_offset, [2 + 0.5 * 24.5, -24.5])
+    lin = d.detrend("linear")
+    np.testing.assert_allclose(lin.y, 0, atol=1e-10)
+    np.testing.assert_allclose(lin.y_offset[1], [0.5, -1.0])
+    with pytest.raises(errors.DataError):
+        d.detrend("quadratic")
+
+
+def test_names_validated():
+    with pytest.raises(errors.DataError, match="2 names"):
+        subid.IOData(np.zeros(3), np.zeros(3), input_names=["a", "b"])
+    with pytest.raises(errors.DataError, match="repeats"):
+        subid.IOData(np.zeros((3, 2)), np.zeros(3), input_names=["a", "a"])

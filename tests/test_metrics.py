@@ -1,0 +1,82 @@
+"""Metrics agree with independent computations."""
+
+import itertools
+
+import numpy as np
+import pytest
+
+import subid
+from subid import errors, systems
+
+
+def test_markov_error_basis_invariant(paper_system):
+    T = np.random.default_rng(0).standard_normal((3, 3)) + 3 * np.eye(3)
+    other = paper_system.transform(T)
+    assert subid.markov_error(other, paper_system) < 1e-12
+
+
+def test_markov_error_direct_formula(paper_system):
+    pert = subid.StateSpace(paper_system.A, paper_system.B * 1.01, paper_system.C,
+                            paper_system.D, 1.0)
+    M = [paper_system.D] + [paper_system.C @ np.linalg.matrix_power(paper_system.A, k)
+                            @ paper_system.B for k in range(9)]
+    Mp = [pert.D] + [pert.C @ np.linalg.matrix_power(pert.A, k) @ pert.B for k in range(9)]
+    expected = np.linalg.norm(np.array(Mp) - np.array(M)) / np.linalg.norm(np.array(M))
+    assert subid.markov_error(pert, paper_system) == pytest.approx(expected, rel=1e-12)
+
+
+def test_markov_error_requires_same_dt(paper_system):
+    other = subid.StateSpace(paper_system.A, paper_system.B, paper_system.C, paper_system.D, 0.5)
+    with pytest.raises(errors.ModelError, match="dt"):
+        subid.markov_error(other, paper_system)
+
+
+def test_pole_error_matches_brute_force():
+    r = np.random.default_rng(3)
+    for trial in range(20):
+        a = systems.random_system(5, 1, 1, seed=trial)
+        b = systems.random_system(5, 1, 1, seed=100 + trial)
+        p, q = a.poles(), b.poles()
+        brute = min(max(abs(p[i] - q[j]) for i, j in enumerate(perm))
+                    for perm in itertools.permutations(range(5)))
+        assert subid.pole_error(a, b) == pytest.approx(brute, rel=1e-12)
+    del r
+
+
+def test_pole_error_order_mismatch():
+    with pytest.raises(errors.ModelError, match="order"):
+        subid.pole_error(systems.random_system(2, 1, 1, seed=0),
+                         systems.random_system(3, 1, 1, seed=0))
+
+
+def test_fit_percent_perfect_with_unknown_x0(paper_system):
+    data = systems.simulate_data(paper_system, 400, seed=2, x0=[3.0, -1.0, 2.0])
+    fit = subid.fit_percent(paper_system, data)
+    assert fit.shape == (2,)
+    np.testing.assert_allclose(fit, 100.0, atol=1e-8)
+    assert subid.fit_percent(paper_system, data, x0="zero").min() < 100 - 1e-3
+
+
+def test_fit_percent_formula(paper_system):
+    data = systems.simulate_data(paper_system, 400, seed=2, output_snr_db=10)
+    y_hat = paper_system.simulate(data.u)
+    expected = 100 * (1 - np.linalg.norm(data.y - y_hat, axis=0)
+                      / np.linalg.norm(data.y - data.y.mean(axis=0), axis=0))
+    np.testing.assert_allclose(subid.fit_percent(paper_system, data, x0="zero"), expected)
+
+
+def test_fit_percent_continuous_model_non_uniform():
+    ct = subid.StateSpace([[-1.0, 0.5], [-0.5, -2.0]], [[1.0], [0.0]], [[1.0, 1.0]], [[0.0]], 0)
+    t = np.cumsum(np.random.default_rng(4).uniform(0.05, 0.15, 300))
+    u = np.sin(t)
+    y = ct.simulate(u, t=t, x0=[1.0, -1.0])
+    data = subid.IOData(u, y, t=t)
+    np.testing.assert_allclose(subid.fit_percent(ct, data), 100.0, atol=1e-7)
+
+
+def test_fit_percent_errors(paper_system):
+    data = systems.simulate_data(paper_system, 100, seed=0)
+    with pytest.raises(errors.DataError, match="dt"):
+        subid.fit_percent(paper_system, subid.IOData(data.u, data.y, dt=0.5))
+    with pytest.raises(errors.DataError, match="inputs"):
+        subid.fit_percent(paper_system, subid.IOData(data.u[:, 0], data.y))
