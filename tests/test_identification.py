@@ -193,3 +193,39 @@ def test_ill_conditioned_input_warns(paper_system):
         warnings.simplefilter("error", ExcitationWarning)
         subid.moesp(subid.IOData(u, paper_system.simulate(u)), 3)
 
+
+
+@pytest.mark.parametrize("fn", [subid.ls_subspace, subid.moesp])
+def test_projection_b_d_exact(fn, paper_system, paper_data):
+    model = fn(paper_data, 3, bd_method="projection")
+    assert model.info["bd_method"] == "projection"
+    assert subid.markov_error(model, paper_system) < 1e-9
+
+
+@pytest.mark.parametrize("fn", [subid.ls_subspace, subid.moesp])
+def test_unstable_plant_falls_back_to_projection(fn):
+    """Simulating an unstable model over the record leaves the output
+    regression singular; 'auto' must still return the exact model (through
+    the projected data equation)."""
+    true = subid.StateSpace([[1.1]], [[1.0]], [[1.0], [0.4]], [[0.1], [0.0]], 1.0)
+    u = np.random.default_rng(0).standard_normal(300)
+    data = subid.IOData(u, true.simulate(u))   # 1.1^300 ~ 3e12: singular output regression
+    model = fn(data, 1, horizon=5)
+    assert model.info["bd_method"] == "projection"
+    assert model.info["simulation_regression_condition"] > 1e16
+    assert model.info["spectral_radius"] == pytest.approx(1.1, rel=1e-8)
+    # the data span 12 decades; the 4 digits left are what double precision allows
+    assert subid.markov_error(model, true) < 1e-4
+    with pytest.raises(subid.errors.SubidError, match="bd_method='projection'"):
+        fn(data, 1, horizon=5, bd_method="simulation")
+
+
+def test_candidate_orders(paper_data):
+    m = subid.moesp(paper_data, range(1, 6))
+    assert m.order == 3 and m.info["horizon"] == 5
+    m = subid.ls_subspace(paper_data, [2, 3, 4], horizon=6)
+    assert m.order == 3
+    m = subid.n4sid(paper_data, [1, 2])          # restricted to what it may choose
+    assert m.order == 2
+    with pytest.raises(subid.errors.OrderError, match="empty"):
+        subid.moesp(paper_data, [])

@@ -157,3 +157,65 @@ def _kron_u_identity(u, ny):
         for i in range(ny):
             out[:, i, j * ny + i] = u[:, j]
     return out
+
+
+def fit_b_d_projection(A, C, gamma, L11, L_yu, *, feedthrough=True):
+    """B and D from the data statistic, without simulating the model.
+
+    From the data equation ``Y_f = Γ X_f + H_f U_f + E`` (seed 001, eq. (5)),
+    multiplying by an orthonormal basis ``Γ^⊥`` of the complement of range(Γ)
+    removes the state; regressing on ``U_f`` removes the noise (open loop):
+
+        Γ^⊥T Y_f U_f^T (U_f U_f^T)^{-1} = Γ^⊥T H_f(B, D),
+
+    which is linear in (B, D) given A and C. With ``[U_f; ...; Y_f] = L Q^T``,
+    ``Y_f U_f^T (U_f U_f^T)^{-1} = L_yu L11^{-1}``. Block column j of
+    ``Γ^⊥T H_f`` is ``G_j D + sum_{i>j} G_i C A^{i-j-1} B`` with ``G_i`` the
+    i-th block column of ``Γ^⊥T``. Only f-1 powers of A appear, so this also
+    works when A is unstable, where simulating the model overflows.
+
+    Parameters
+    ----------
+    A, C : ndarray
+    gamma : ndarray, shape (f*ny, n)
+        Extended observability matrix in the basis of (A, C).
+    L11 : ndarray, shape (f*nu, f*nu)
+        Lower-triangular factor of the future inputs.
+    L_yu : ndarray, shape (f*ny, f*nu)
+        Block of the factor coupling the future outputs to ``Q1``.
+
+    Returns
+    -------
+    B, D : ndarray
+    diagnostics : dict
+    """
+    n = A.shape[0]
+    ny = C.shape[0]
+    nu = L11.shape[0] * ny // gamma.shape[0]
+    f = gamma.shape[0] // ny
+    Q = scipy.linalg.qr(gamma, mode="full", check_finite=False)[0]
+    G = Q[:, n:].T                                          # (r, f*ny)
+    r = G.shape[0]
+    M = G @ scipy.linalg.solve_triangular(L11.T, L_yu.T, lower=False,
+                                          check_finite=False).T   # Γ^⊥T L_yu L11^{-1}
+    powers = [C]
+    for _ in range(f - 2):
+        powers.append(powers[-1] @ A)
+    n_par = n * nu + (ny * nu if feedthrough else 0)
+    Phi = np.zeros((f, r * nu, n_par))
+    eye_u = np.eye(nu)
+    for j in range(f):
+        GB = np.zeros((r, n))
+        for i in range(j + 1, f):
+            GB += G[:, i * ny:(i + 1) * ny] @ powers[i - j - 1]
+        Phi[j, :, :n * nu] = np.kron(eye_u, GB)
+        if feedthrough:
+            Phi[j, :, n * nu:] = np.kron(eye_u, G[:, j * ny:(j + 1) * ny])
+    rhs = np.concatenate([M[:, j * nu:(j + 1) * nu].reshape(-1, order="F") for j in range(f)])
+    Phi = Phi.reshape(f * r * nu, n_par)
+    theta, _, rank, _ = scipy.linalg.lstsq(Phi, rhs, lapack_driver="gelsy", check_finite=False)
+    B = theta[:n * nu].reshape(nu, n).T
+    D = theta[n * nu:].reshape(nu, ny).T if feedthrough else np.zeros((ny, nu))
+    resid = np.linalg.norm(Phi @ theta - rhs) / max(np.linalg.norm(rhs), 1e-300)
+    return B, D, {"projection_residual": float(resid),
+                  "regression_rank_deficient": bool(rank < n_par)}

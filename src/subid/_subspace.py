@@ -16,7 +16,8 @@ import scipy.linalg
 from ._hankel import HankelFactor, hankel_factor
 from ._validation import check_int
 from .data import IOData
-from .errors import (DataError, ExcitationWarning, NotExcitingError, OrderError,
+from ._regression import fit_b_d_projection, fit_b_d_x0
+from .errors import (DataError, ExcitationWarning, NotExcitingError, OrderError, SubidError,
                      TooFewSamplesError)
 
 # A diagonal entry of the input block of the Hankel factor below this fraction
@@ -45,14 +46,18 @@ def check_data(data, method: str) -> IOData:
     return data
 
 
+DEFAULT_MAX_ORDER = 10
+
+
 def default_horizon(order: int | None, n_outputs: int, n_inputs: int, n_samples: int,
                     blocks_per_horizon: int) -> int:
     """Horizon used when the caller gives none.
 
     Seed 001 asks for ``horizon > order`` and uses 5 for a 3rd-order model;
     shift invariance needs ``(horizon - 1) * n_outputs >= order``. With a
-    given order: ``max(5, ceil(order / n_outputs) + 2)``. With the order to
-    be estimated: 10, or the largest horizon the record supports (at least 2)
+    given order (or largest candidate order): ``max(5, ceil(order /
+    n_outputs) + 2)``. With the order to be estimated among the default
+    candidates: 10, or the largest horizon the record supports (at least 2)
     when it is too short for 10.
     """
     if order is not None:
@@ -69,24 +74,50 @@ def min_samples(depth: int, n_inputs: int, n_outputs: int) -> int:
     return depth * (n_inputs + n_outputs) + depth - 1
 
 
+def _parse_order(order):
+    """``(fixed order or None, explicit candidate orders or None)``."""
+    if order is None or (isinstance(order, str) and order == "auto"):
+        return None, None
+    if isinstance(order, (str, bytes)) or not hasattr(order, "__iter__"):
+        return check_int(order, "order", minimum=1), None
+    candidates = sorted({check_int(k, "candidate order", minimum=1) for k in order})
+    if not candidates:
+        raise OrderError("the list of candidate orders is empty")
+    return None, candidates
+
+
 def check_order_horizon(order, horizon, data: IOData, *, method: str,
                         blocks_per_horizon: int = 2):
-    """Validate ``order`` (int, None or 'auto') and ``horizon`` (int or None)."""
-    if isinstance(order, str) and order == "auto":
-        order = None
-    elif order is not None:
-        order = check_int(order, "order", minimum=1)
+    """Validate the order and the horizon.
+
+    ``order`` is an int, ``None``/``'auto'`` (candidates 1..10), or an
+    iterable of candidate orders (as MATLAB's ``n4sid(data, 1:10)``).
+
+    Returns
+    -------
+    order : int or None
+        The fixed order, or None when it is to be chosen.
+    candidates : list of int
+        Orders to choose from (``[order]`` when fixed).
+    horizon : int
+    """
+    fixed, candidates = _parse_order(order)
     n_outputs = data.n_outputs
-    horizon = default_horizon(order, n_outputs, data.n_inputs, data.n_samples,
+    largest = fixed if fixed is not None else (max(candidates) if candidates else None)
+    horizon = default_horizon(largest, n_outputs, data.n_inputs, data.n_samples,
                               blocks_per_horizon) if horizon is None else \
         check_int(horizon, "horizon", minimum=2)
     max_order = (horizon - 1) * n_outputs
-    if order is not None and order > max_order:
-        need = math.ceil(order / n_outputs) + 1
-        raise OrderError(f"{method}: order {order} cannot be revealed with horizon {horizon} "
+    if largest is not None and largest > max_order:
+        need = math.ceil(largest / n_outputs) + 1
+        raise OrderError(f"{method}: order {largest} cannot be revealed with horizon {horizon} "
                          f"and {n_outputs} output{'s' if n_outputs != 1 else ''}: the shifted "
                          f"observability matrix has only {max_order} rows; use horizon >= {need}")
-    return order, horizon
+    if fixed is not None:
+        candidates = [fixed]
+    elif candidates is None:
+        candidates = list(range(1, min(DEFAULT_MAX_ORDER, max_order) + 1))
+    return fixed, candidates, horizon
 
 
 def data_factor(data: IOData, depth: int, *, method: str, horizon: int) -> HankelFactor:
@@ -148,18 +179,21 @@ def check_excitation(hf: HankelFactor, data: IOData, *, method: str) -> float:
     return float(cond)
 
 
-def order_from_gap(values, max_order: int) -> int:
+def order_from_gap(values, candidates) -> int:
     """Order at the largest gap of a decreasing profile (log scale).
 
-    ``values`` are singular values, or pivots of an SVD-free rank profile
-    that need not be monotone; the gap after position ``k`` is
-    ``log(min(values[:k])) - log(max(values[k:]))``.
+    ``values`` are singular values, or the pivots of an SVD-free rank
+    profile; the gap after position ``k`` is
+    ``log(min(values[:k])) - log(max(values[k:]))``. The order is the
+    candidate ``k`` with the largest gap.
     """
     v = np.abs(np.asarray(values, dtype=float))
     floor = max(v.max(initial=0.0), 1e-300) * np.finfo(float).eps * v.size
     logv = np.log10(np.maximum(v, floor))
-    best, best_gap = 1, -np.inf
-    for k in range(1, min(max_order, v.size - 1) + 1):
+    best, best_gap = candidates[0], -np.inf
+    for k in candidates:
+        if k >= v.size:
+            break
         gap = logv[:k].min() - logv[k:].max()
         if gap > best_gap:
             best, best_gap = k, gap
@@ -181,3 +215,45 @@ def shift_invariance(gamma: np.ndarray, n_outputs: int):
     C = gamma[:n_outputs].copy()
     resid = np.linalg.norm(up @ A - down) / max(np.linalg.norm(down), 1e-300)
     return A, C, float(resid)
+
+
+BD_METHODS = ("auto", "simulation", "projection")
+
+
+def estimate_b_d(A, C, gamma, L11, L_yu, data: IOData, *, bd_method: str, feedthrough: bool,
+                 estimate_x0: bool):
+    """B, D (and x0) given A, C: by output regression or by projection.
+
+    ``'simulation'`` fits B, D and x0 to the raw output samples through the
+    model (most accurate; it simulates the model over the whole record, which
+    overflows for a clearly unstable A). ``'projection'`` solves the SVD-free
+    projected data equation on the statistic (:func:`fit_b_d_projection`;
+    no x0). ``'auto'`` uses simulation, and projection when simulating
+    overflows or leaves the regression numerically singular.
+
+    Returns
+    -------
+    B, D, x0 (None when not estimated), diagnostics dict (with ``bd_method``)
+    """
+    if bd_method not in BD_METHODS:
+        raise SubidError(f"bd_method must be one of {BD_METHODS}, got {bd_method!r}")
+    radius = float(np.abs(np.linalg.eigvals(A)).max())
+    diag = {}
+    if bd_method in ("auto", "simulation"):
+        with np.errstate(over="ignore", invalid="ignore"):
+            B, D, x0, diag = fit_b_d_x0(A, C, data.u, data.y, feedthrough=feedthrough,
+                                        estimate_x0=estimate_x0)
+        usable = (np.isfinite(B).all() and np.isfinite(D).all()
+                  and diag["regression_condition"] < 1.0 / np.finfo(float).eps)
+        if usable:
+            diag.update(bd_method="simulation", spectral_radius=radius)
+            return B, D, (x0 if estimate_x0 else None), diag
+        if bd_method == "simulation":
+            raise SubidError(f"the identified A has spectral radius {radius:.4g}: simulating it "
+                             f"over {data.n_samples} samples overflows or leaves the regression "
+                             "singular; use bd_method='projection' (or 'auto')")
+    B, D, proj = fit_b_d_projection(A, C, gamma, L11, L_yu, feedthrough=feedthrough)
+    if diag:
+        proj["simulation_regression_condition"] = diag["regression_condition"]
+    proj.update(bd_method="projection", spectral_radius=radius)
+    return B, D, None, proj

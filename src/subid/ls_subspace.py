@@ -47,9 +47,8 @@ import warnings
 import numpy as np
 import scipy.linalg
 
-from ._regression import fit_b_d_x0
 from ._subspace import (check_data, check_excitation, check_order_horizon, data_factor,
-                        order_from_gap, shift_invariance)
+                        estimate_b_d, order_from_gap, shift_invariance)
 from .errors import OrderError, SubidError
 from .model import StateSpace
 
@@ -87,16 +86,17 @@ def _condition_1norm(M: np.ndarray) -> float:
 
 def ls_subspace(data, order=None, horizon=None, instruments="past", selector=None, seed=0,
                 estimate_x0=True, *, feedthrough=True, instrument_weighting=True,
-                power_iterations=2) -> StateSpace:
+                power_iterations=2, bd_method="auto") -> StateSpace:
     """Identify a discrete-time state-space model without SVD (seed 001).
 
     Parameters
     ----------
     data : IOData
         Uniformly sampled input/output record.
-    order : int or None
-        Model order n. ``None`` (or ``'auto'``) estimates it from the
-        SVD-free rank profile of Remark 2 (see ``info['rank_profile']``).
+    order : int, None, 'auto' or iterable of int
+        Model order n. ``None`` (or ``'auto'``) chooses it among 1..10 (as
+        far as the horizon allows) from the SVD-free rank profile of Remark 2
+        (``info['rank_profile']``); an iterable gives the candidate orders.
     horizon : int, optional
         Future horizon f (block rows of Y); the instruments use f past block
         rows too. Default ``max(5, ceil(n/ny) + 2)`` when the order is given,
@@ -122,6 +122,13 @@ def ls_subspace(data, order=None, horizon=None, instruments="past", selector=Non
     power_iterations : int
         SVD-free refinement steps with Λ taken from the previous estimate;
         0 gives the paper's one-shot estimate.
+    bd_method : {'auto', 'simulation', 'projection'}
+        How B, D (and x0) are found given A and C: least squares on the raw
+        output samples through the model (``'simulation'``, most accurate,
+        overflows for a clearly unstable A), or the projected data equation on
+        the statistic (``'projection'``, no simulation, no x0). ``'auto'``:
+        simulation, and projection when simulating the identified model
+        overflows or leaves the regression numerically singular.
 
     Returns
     -------
@@ -156,7 +163,7 @@ def ls_subspace(data, order=None, horizon=None, instruments="past", selector=Non
     if power_iterations < 0:
         raise SubidError(f"power_iterations must be >= 0, got {power_iterations}")
     ny = data.n_outputs
-    order, horizon = check_order_horizon(
+    order, candidates, horizon = check_order_horizon(
         order, horizon, data, method=method, blocks_per_horizon=2 if instruments == "past" else 1)
     f = horizon
     c = f * ny
@@ -167,8 +174,9 @@ def ls_subspace(data, order=None, horizon=None, instruments="past", selector=Non
                              f"{selector.shape}")
         if not np.isfinite(selector).all():
             raise OrderError("selector has non-finite entries")
-        if order is not None and selector.shape[0] < order:
-            raise OrderError(f"selector has {selector.shape[0]} rows but the order is {order}; "
+        if selector.shape[0] < max(candidates):
+            raise OrderError(f"selector has {selector.shape[0]} rows but the order is "
+                             f"{'up to ' if order is None else ''}{max(candidates)}; "
                              "it needs at least order rows")
 
     depth = 2 * f if instruments == "past" else f
@@ -184,18 +192,19 @@ def ls_subspace(data, order=None, horizon=None, instruments="past", selector=Non
         L22 = L[a:a + b, a:a + b]
         L32 = L[a + b:, a:a + b]
         W = L32 if instrument_weighting else L32 @ L22.T
+        L_yu = L[a + b:, :a]
     else:
         L = hf.retriangularize(uf, yf)
         a = f * nu
         W = L[a:, a:]
+        L_yu = L[a:, :a]
 
     # Order: SVD-free rank profile (Remark 2) with a square selector.
-    max_order = (f - 1) * ny
     full = selector if selector is not None else random_selector(f, ny, seed)
     rank_profile = np.abs(np.diag(scipy.linalg.qr((full @ W).T, mode="r",
                                                   check_finite=False)[0]))
     if order is None:
-        order = order_from_gap(rank_profile, min(max_order, full.shape[0] - 1))
+        order = order_from_gap(rank_profile, candidates)
         order_selection = "largest gap of the SVD-free rank profile (seed 001, Remark 2)"
     else:
         order_selection = "given"
@@ -214,8 +223,8 @@ def ls_subspace(data, order=None, horizon=None, instruments="past", selector=Non
                          "too high for these data, or choose another selector / seed")
     gamma = scipy.linalg.solve(LG.T, G.T, check_finite=False).T   # Γ̄ = G (ΛG)^{-1}
     A, C, shift_residual = shift_invariance(gamma, ny)
-    B, D, x0, reg = fit_b_d_x0(A, C, data.u, data.y, feedthrough=feedthrough,
-                               estimate_x0=estimate_x0)
+    B, D, x0, reg = estimate_b_d(A, C, gamma, L[:a, :a], L_yu, data, bd_method=bd_method,
+                                 feedthrough=feedthrough, estimate_x0=estimate_x0)
     info = {
         "method": method,
         "order": n,

@@ -17,24 +17,25 @@ from __future__ import annotations
 import numpy as np
 import scipy.linalg
 
-from ._regression import fit_b_d_x0
 from ._subspace import (check_data, check_excitation, check_order_horizon, data_factor,
-                        order_from_gap, shift_invariance)
+                        estimate_b_d, order_from_gap, shift_invariance)
 from .model import StateSpace
 
 __all__ = ["moesp"]
 
 
-def moesp(data, order=None, horizon=None, *, feedthrough=True, estimate_x0=True) -> StateSpace:
+def moesp(data, order=None, horizon=None, *, feedthrough=True, estimate_x0=True,
+          bd_method="auto") -> StateSpace:
     """Identify a discrete-time model by PO-MOESP.
 
     Parameters
     ----------
     data : IOData
         Uniformly sampled input/output record.
-    order : int or None
+    order : int, None, 'auto' or iterable of int
         Model order; ``None`` (or ``'auto'``) takes the largest gap of the
-        singular values (``info['singular_values']``).
+        singular values (``info['singular_values']``) among orders 1..10;
+        an iterable gives the candidate orders.
     horizon : int, optional
         Past and future horizon (block rows). Default ``max(5, ceil(n/ny)+2)``
         with a given order, 10 (or the largest the record supports) otherwise.
@@ -42,6 +43,8 @@ def moesp(data, order=None, horizon=None, *, feedthrough=True, estimate_x0=True)
         Estimate D (else D = 0).
     estimate_x0 : bool
         Estimate the initial state with B and D (``info['x0']``).
+    bd_method : {'auto', 'simulation', 'projection'}
+        As in :func:`subid.ls_subspace`.
 
     Returns
     -------
@@ -51,7 +54,7 @@ def moesp(data, order=None, horizon=None, *, feedthrough=True, estimate_x0=True)
     method = "moesp"
     data = check_data(data, method)
     ny, nu = data.n_outputs, data.n_inputs
-    order, f = check_order_horizon(order, horizon, data, method=method)
+    order, candidates, f = check_order_horizon(order, horizon, data, method=method)
     hf = data_factor(data, 2 * f, method=method, horizon=f)
     input_condition = check_excitation(hf, data, method=method)
     L = hf.retriangularize(hf.u_rows(f, 2 * f), hf.u_rows(0, f), hf.y_rows(0, f),
@@ -60,15 +63,16 @@ def moesp(data, order=None, horizon=None, *, feedthrough=True, estimate_x0=True)
     L32 = L[a + b:, a:a + b]
     U, s, _ = scipy.linalg.svd(L32, full_matrices=False, check_finite=False)
     if order is None:
-        order = order_from_gap(s, (f - 1) * ny)
+        order = order_from_gap(s, candidates)
         order_selection = "largest gap of the singular values"
     else:
         order_selection = "given"
     n = order
     gamma = U[:, :n] * np.sqrt(s[:n])
     A, C, shift_residual = shift_invariance(gamma, ny)
-    B, D, x0, reg = fit_b_d_x0(A, C, data.u, data.y, feedthrough=feedthrough,
-                               estimate_x0=estimate_x0)
+    B, D, x0, reg = estimate_b_d(A, C, gamma, L[:a, :a], L[a + b:, :a], data,
+                                 bd_method=bd_method, feedthrough=feedthrough,
+                                 estimate_x0=estimate_x0)
     info = {
         "method": method,
         "order": n,

@@ -65,9 +65,10 @@ def n4sid(data, order=None, horizon=None, *, feedthrough=True) -> StateSpace:
     ----------
     data : IOData
         Uniformly sampled input/output record.
-    order : int or None
+    order : int, None, 'auto' or iterable of int
         Model order; ``None`` (or ``'auto'``) takes the largest gap of the
-        singular values of the oblique projection (``info['singular_values']``).
+        singular values of the oblique projection (``info['singular_values']``)
+        among orders 1..10; an iterable gives the candidate orders.
     horizon : int, optional
         Number of past and of future block rows i. Default
         ``max(5, ceil(n/ny)+2)`` with a given order, 10 (or the largest the record
@@ -83,7 +84,7 @@ def n4sid(data, order=None, horizon=None, *, feedthrough=True) -> StateSpace:
     method = "n4sid"
     data = check_data(data, method)
     ny, nu = data.n_outputs, data.n_inputs
-    order, i = check_order_horizon(order, horizon, data, method=method)
+    order, candidates, i = check_order_horizon(order, horizon, data, method=method)
     hf = data_factor(data, 2 * i, method=method, horizon=i)
     input_condition = check_excitation(hf, data, method=method)
     L = hf.L
@@ -97,7 +98,7 @@ def n4sid(data, order=None, horizon=None, *, feedthrough=True) -> StateSpace:
     o_im1 = _oblique(yf_minus, uf_minus, wp_plus)
     U, s, _ = scipy.linalg.svd(o_i, full_matrices=False, check_finite=False)
     if order is None:
-        order = order_from_gap(s, (i - 1) * ny)
+        order = order_from_gap(s, candidates)
         order_selection = "largest gap of the singular values"
     else:
         order_selection = "given"
