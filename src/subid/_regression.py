@@ -101,7 +101,7 @@ def fit_b_d_x0(A, C, u, y, *, feedthrough=True, estimate_x0=True, kernel=sensiti
     B, D, x0 : ndarray
     diagnostics : dict
         ``residual_rms`` (over all outputs), ``regression_condition`` (an estimate of
-        the 1-norm condition number of the triangular factor) and
+        the 1-norm condition number of the column-equilibrated regressor) and
         ``regression_rank_deficient``.
     """
     n = A.shape[0]
@@ -129,7 +129,11 @@ def fit_b_d_x0(A, C, u, y, *, feedthrough=True, estimate_x0=True, kernel=sensiti
         block[:, :, p] = y[start:stop]
         R = scipy.linalg.qr(np.vstack([R, block.reshape(T * ny, p + 1)]), mode="r",
                             check_finite=False)[0][: p + 1]
-    Rt = R[:p, :p]
+    # Equilibrate the columns so that the condition number (and the rank
+    # decision) do not depend on the state basis or the signal scaling.
+    scale = np.linalg.norm(R[:p, :p], axis=0)
+    scale[scale == 0] = 1.0
+    Rt = R[:p, :p] / scale
     rhs = R[:p, p]
     rcond = scipy.linalg.lapack.dtrcon(Rt, norm="1", uplo="U", diag="N")[0] if p else 1.0
     deficient = bool(rcond < np.finfo(float).eps * p)
@@ -137,6 +141,7 @@ def fit_b_d_x0(A, C, u, y, *, feedthrough=True, estimate_x0=True, kernel=sensiti
         theta = scipy.linalg.lstsq(Rt, rhs, lapack_driver="gelsy", check_finite=False)[0]
     else:
         theta = scipy.linalg.solve_triangular(Rt, rhs, check_finite=False)
+    theta = theta / scale
     x0 = theta[:n] if estimate_x0 else np.zeros(n)
     B = theta[nx:q].reshape(nu, n).T
     D = theta[q:p].reshape(nu, ny).T if feedthrough else np.zeros((ny, nu))

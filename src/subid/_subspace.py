@@ -244,7 +244,7 @@ def estimate_b_d(A, C, gamma, L11, L_yu, data: IOData, *, bd_method: str, feedth
             B, D, x0, diag = fit_b_d_x0(A, C, data.u, data.y, feedthrough=feedthrough,
                                         estimate_x0=estimate_x0)
         usable = (np.isfinite(B).all() and np.isfinite(D).all()
-                  and diag["regression_condition"] < 1.0 / np.finfo(float).eps)
+                  and not diag["regression_rank_deficient"])
         if usable:
             diag.update(bd_method="simulation", spectral_radius=radius)
             return B, D, (x0 if estimate_x0 else None), diag
