@@ -23,6 +23,7 @@ import numpy as np
 import scipy.linalg
 
 _CHUNK = 4096
+TINY = 1e-250
 
 
 def sensitivity_rows_reference(A, C, u, S0, n_x0_cols):
@@ -46,6 +47,7 @@ def sensitivity_rows_reference(A, C, u, S0, n_x0_cols):
     for t in range(T):
         rows[t] = C @ S
         S = A @ S
+        S[np.abs(S) < TINY] = 0.0
         for j in range(nu):
             c0 = n_x0_cols + j * n
             S[:, c0:c0 + n] += u[t, j] * np.eye(n)
@@ -74,7 +76,7 @@ def sensitivity_rows(A, C, u, S0, n_x0_cols):  # pragma: no cover - compiled
                 acc = 0.0
                 for k in range(n):
                     acc += A[i, k] * S[k, c]
-                S_next[i, c] = acc
+                S_next[i, c] = acc if abs(acc) >= TINY else 0.0
         for j in range(nu):
             c0 = n_x0_cols + j * n
             for i in range(n):
