@@ -49,14 +49,15 @@ def poles(models, reference=None, *, labels=None, ax=None, title=None, markersiz
     fig = ax.figure if ax is not None else plt.figure(figsize=(5.5, 5))
     ax = ax if ax is not None else fig.add_subplot(111)
     discrete = None
+    if reference is not None:      # drawn first: the estimates must stay visible
+        q = reference.poles()
+        discrete = reference.dt > 0
+        ax.plot(q.real, q.imag, "o", ms=16, mfc="none", mec="k", mew=1.2, zorder=1,
+                label="true")
     for label, group in groups.items():
         p = np.concatenate([m.poles() for m in group]) if group else np.array([])
         discrete = group[0].dt > 0 if group else discrete
-        ax.plot(p.real, p.imag, ".", ms=markersize, alpha=0.5, label=label)
-    if reference is not None:
-        q = reference.poles()
-        discrete = reference.dt > 0
-        ax.plot(q.real, q.imag, "kx", ms=14, mew=2.5, label="true")
+        ax.plot(p.real, p.imag, ".", ms=markersize, alpha=0.4, zorder=2, label=label)
     if discrete:
         theta = np.linspace(0, 2 * np.pi, 400)
         ax.plot(np.cos(theta), np.sin(theta), "k-", lw=0.6)
@@ -83,8 +84,8 @@ def error_histograms(errors: dict, *, bins=40, xlabel="relative error", title=No
     k = len(errors)
     fig, axes = plt.subplots(k, 1, figsize=(6, 1.9 * k + 0.6), sharex=True, squeeze=False)
     all_vals = np.concatenate([np.asarray(v, float) for v in errors.values()])
-    lo, hi = np.percentile(all_vals, 0.5), np.percentile(all_vals, 99.5)
-    edges = np.logspace(np.log10(max(lo, 1e-300)), np.log10(max(hi, lo * 1.01)), bins)
+    lo, hi = all_vals.min(), all_vals.max()
+    edges = np.logspace(np.log10(max(lo, 1e-300)), np.log10(max(hi, lo * 1.01)) + 1e-9, bins)
     for ax, (label, vals) in zip(axes[:, 0], errors.items()):
         ax.hist(vals, bins=edges, color="C0", alpha=0.8)
         ax.axvline(np.median(vals), color="C3", lw=1.5, label=f"median {np.median(vals):.3g}")

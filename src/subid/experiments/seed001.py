@@ -119,11 +119,16 @@ def main(argv=None) -> int:
                    "pole_error": {k: v.tolist() for k, v in perrs.items()}}, fh)
     try:
         from .. import plot
-        keep = ["ls_subspace, instruments (default)", "ls_subspace, no instruments (23)",
-                "n4sid"]
-        fig = plot.poles({k: models[k] for k in keep}, reference=seed001_system(),
-                         title=f"Poles over {args.runs} runs ({args.snr:g} dB)")
-        fig.savefig(os.path.join(args.out, "poles.png"), dpi=110)
+        plt = plot._pyplot()
+        fig, axes = plt.subplots(1, len(METHODS), figsize=(4.2 * len(METHODS), 4.4))
+        for ax, (name, group) in zip(axes, models.items()):
+            plot.poles({name: group}, reference=seed001_system(), ax=ax, markersize=3)
+            ax.set_xlim(-1.05, 1.05)
+            ax.set_ylim(-1.05, 1.05)
+            ax.legend(loc="lower left", fontsize="x-small")
+        fig.suptitle(f"Poles over {args.runs} runs ({args.snr:g} dB process and output noise)")
+        fig.tight_layout()
+        fig.savefig(os.path.join(args.out, "poles.png"), dpi=90)
         fig = plot.error_histograms(errs, xlabel="relative error of the first 10 Markov "
                                     "parameters")
         fig.savefig(os.path.join(args.out, "markov_errors.png"), dpi=110)
