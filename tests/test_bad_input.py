@@ -6,7 +6,7 @@ import pytest
 import subid
 from subid import errors, systems
 
-from conftest import METHODS
+
 
 
 def _data(n=500, seed=0):

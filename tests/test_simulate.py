@@ -30,19 +30,6 @@ def rel_err(a, b):
 # ---------------------------------------------------------------------------
 # kernels against the numpy references
 # ---------------------------------------------------------------------------
-def test_lti_kernel_matches_reference():
-    A, B, C, D = random_system(1)
-    rng = np.random.default_rng(2)
-    u = rng.standard_normal((300, 2))
-    x0 = rng.standard_normal(4)
-    y, x = _simulate.lti_loop(A, B, C, D, u, x0)
-    y_ref, x_ref = _simulate.lti_loop_ref(A, B, C, D, u, x0)
-    assert y.shape == (300, 3) and x.shape == (300, 4)
-    assert rel_err(y, y_ref) < 1e-12
-    assert rel_err(x, x_ref) < 1e-12
-    np.testing.assert_array_equal(x[0], x0)
-
-
 @pytest.mark.parametrize("use_g1", [False, True])
 def test_tv_kernel_matches_reference(use_g1):
     rng = np.random.default_rng(3)

@@ -1,10 +1,11 @@
 """Simulation kernels for :class:`subid.model.StateSpace`.
 
 Everything here works on clean float64 arrays: validation happens in
-:mod:`subid.model`. The per-sample recursions run in numba kernels
-(``lti_loop``, ``tv_loop``); ``lti_loop_ref`` and ``tv_loop_ref`` are plain
-numpy implementations of the same recursions, kept as the reference the tests
-compare the kernels against.
+:mod:`subid.model`. The per-sample recursion runs in one numba kernel,
+``tv_loop`` (a table of per-interval transition matrices; a discrete-time LTI
+model is the one-entry table); ``tv_loop_ref`` is a plain numpy
+implementation of the same recursion, kept as the reference the tests compare
+the kernel against.
 
 Discretisation of a continuous-time model over one interval of length ``h``
 (:func:`expm_blocks`) uses the same augmented matrices as
@@ -29,8 +30,6 @@ from scipy import linalg
 
 __all__ = [
     "expm_blocks",
-    "lti_loop",
-    "lti_loop_ref",
     "tv_loop",
     "tv_loop_ref",
     "simulate_discrete",
@@ -92,54 +91,6 @@ def expm_blocks(A: np.ndarray, B: np.ndarray, steps, hold: str):
 # ---------------------------------------------------------------------------
 # discrete LTI recursion
 # ---------------------------------------------------------------------------
-@numba.njit(cache=True)
-def lti_loop(A, B, C, D, u, x0):  # pragma: no cover - compiled
-    """x[k+1] = A x[k] + B u[k], y[k] = C x[k] + D u[k], x[0] = x0.
-
-    Returns ``(y, x)`` with shapes (N, p) and (N, n).
-    """
-    N = u.shape[0]
-    n = A.shape[0]
-    m = B.shape[1]
-    p = C.shape[0]
-    x = np.empty((N, n))
-    y = np.empty((N, p))
-    if N == 0:
-        return y, x
-    for i in range(n):
-        x[0, i] = x0[i]
-    for k in range(N):
-        for i in range(p):
-            s = 0.0
-            for j in range(n):
-                s += C[i, j] * x[k, j]
-            for j in range(m):
-                s += D[i, j] * u[k, j]
-            y[k, i] = s
-        if k + 1 < N:
-            for i in range(n):
-                s = 0.0
-                for j in range(n):
-                    s += A[i, j] * x[k, j]
-                for j in range(m):
-                    s += B[i, j] * u[k, j]
-                x[k + 1, i] = s
-    return y, x
-
-
-def lti_loop_ref(A, B, C, D, u, x0):
-    """Plain numpy reference of :func:`lti_loop`."""
-    N = u.shape[0]
-    x = np.empty((N, A.shape[0]))
-    y = np.empty((N, C.shape[0]))
-    xk = np.array(x0, dtype=np.float64)
-    for k in range(N):
-        x[k] = xk
-        y[k] = C @ xk + D @ u[k]
-        xk = A @ xk + B @ u[k]
-    return y, x
-
-
 # ---------------------------------------------------------------------------
 # time-varying recursion (continuous-time models on a grid)
 # ---------------------------------------------------------------------------
@@ -215,8 +166,12 @@ def _frozen(a, dtype=np.float64) -> np.ndarray:
 
 
 def simulate_discrete(A, B, C, D, u, x0):
-    """Run :func:`lti_loop` on clean arrays; returns ``(y, x)``."""
-    return lti_loop(_frozen(A), _frozen(B), _frozen(C), _frozen(D), _frozen(u), _frozen(x0))
+    """x[k+1] = A x[k] + B u[k], y[k] = C x[k] + D u[k]: the time-varying
+    kernel with a one-entry table. Returns ``(y, x)``."""
+    N, (n, m) = u.shape[0], B.shape
+    return tv_loop(_frozen(A[None]), _frozen(B[None]), _frozen(np.zeros((1, n, m))),
+                   _frozen(np.zeros(max(N - 1, 0)), np.int64), _frozen(C), _frozen(D),
+                   _frozen(u), _frozen(x0), False)
 
 
 def _run_tv(A, B, Cf, Df, steps, u, x0, hold):
@@ -253,9 +208,7 @@ def simulate_continuous(A, B, C, D, t, u, x0, hold):
     n, m = B.shape
     Cf, Df = _frozen(C), _frozen(D)
     if N == 1:
-        return tv_loop(_frozen(np.eye(n)[None]), _frozen(np.zeros((1, n, m))),
-                       _frozen(np.zeros((1, n, m))), _frozen(np.zeros(0), np.int64),
-                       Cf, Df, _frozen(u), _frozen(x0), False)
+        return simulate_discrete(np.eye(n), np.zeros((n, m)), C, D, u, x0)
     steps = np.diff(t)
     if is_uniform(steps):
         h = (t[-1] - t[0]) / (N - 1)

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 import warnings
+from dataclasses import dataclass
 
 import numpy as np
 import scipy.linalg
@@ -19,6 +20,7 @@ from .data import IOData
 from ._regression import fit_b_d_projection, fit_b_d_x0
 from .errors import (DataError, ExcitationWarning, NotExcitingError, OrderError, SubidError,
                      TooFewSamplesError)
+from .model import StateSpace
 
 # A diagonal entry of the input block of the Hankel factor below this fraction
 # of the largest one marks a linearly dependent Hankel row.
@@ -257,3 +259,47 @@ def estimate_b_d(A, C, gamma, L11, L_yu, data: IOData, *, bd_method: str, feedth
         proj["simulation_regression_condition"] = diag["regression_condition"]
     proj.update(bd_method="projection", spectral_radius=radius)
     return B, D, None, proj
+
+
+@dataclass(frozen=True)
+class Problem:
+    """A validated identification problem and its data statistic."""
+
+    method: str
+    data: IOData
+    order: int | None
+    candidates: list
+    horizon: int
+    factor: HankelFactor
+    input_condition: float
+
+
+def prepare(data, order, horizon, *, method: str, blocks_per_horizon: int = 2) -> Problem:
+    """Validate the arguments, build the Hankel factor and check excitation.
+
+    ``blocks_per_horizon`` is 2 when past and future block rows are used
+    (instruments), 1 for future rows only.
+    """
+    data = check_data(data, method)
+    fixed, candidates, horizon = check_order_horizon(
+        order, horizon, data, method=method, blocks_per_horizon=blocks_per_horizon)
+    hf = data_factor(data, blocks_per_horizon * horizon, method=method, horizon=horizon)
+    input_condition = check_excitation(hf, data, method=method)
+    return Problem(method, data, fixed, candidates, horizon, hf, input_condition)
+
+
+def choose_order(problem: Problem, profile, source: str):
+    """The fixed order, or the candidate at the largest gap of ``profile``."""
+    if problem.order is not None:
+        return problem.order, "given"
+    return order_from_gap(profile, problem.candidates), f"largest gap of the {source}"
+
+
+def finish(problem: Problem, A, B, C, D, n: int, order_selection: str, **info) -> StateSpace:
+    """The identified model with the diagnostics every method reports."""
+    data = problem.data
+    info = {"method": problem.method, "order": n, "order_selection": order_selection,
+            "horizon": problem.horizon, "input_condition": problem.input_condition,
+            "n_samples": data.n_samples, **info}
+    return StateSpace(A, B, C, D, data.dt, input_names=data.input_names,
+                      output_names=data.output_names, info=info)

@@ -18,7 +18,6 @@ import sys
 import time
 import warnings
 
-import numpy as np
 
 from . import datasets, fit_percent, ls_subspace, moesp, n4sid
 from .errors import SubidError

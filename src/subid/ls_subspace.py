@@ -47,8 +47,7 @@ import warnings
 import numpy as np
 import scipy.linalg
 
-from ._subspace import (check_data, check_excitation, check_order_horizon, data_factor,
-                        estimate_b_d, order_from_gap, shift_invariance)
+from ._subspace import choose_order, estimate_b_d, finish, prepare, shift_invariance
 from .errors import OrderError, SubidError
 from .model import StateSpace
 
@@ -156,16 +155,15 @@ def ls_subspace(data, order=None, horizon=None, instruments="past", selector=Non
     True
     """
     method = "ls_subspace"
-    data = check_data(data, method)
     if instruments not in ("past", None):
         raise SubidError(f"instruments must be 'past' or None, got {instruments!r}")
     power_iterations = int(power_iterations)
     if power_iterations < 0:
         raise SubidError(f"power_iterations must be >= 0, got {power_iterations}")
-    ny = data.n_outputs
-    order, candidates, horizon = check_order_horizon(
-        order, horizon, data, method=method, blocks_per_horizon=2 if instruments == "past" else 1)
-    f = horizon
+    pb = prepare(data, order, horizon, method=method,
+                 blocks_per_horizon=2 if instruments == "past" else 1)
+    data, f, hf, candidates = pb.data, pb.horizon, pb.factor, pb.candidates
+    ny, nu = data.n_outputs, data.n_inputs
     c = f * ny
     if selector is not None:
         selector = np.asarray(selector, dtype=float)
@@ -176,13 +174,10 @@ def ls_subspace(data, order=None, horizon=None, instruments="past", selector=Non
             raise OrderError("selector has non-finite entries")
         if selector.shape[0] < max(candidates):
             raise OrderError(f"selector has {selector.shape[0]} rows but the order is "
-                             f"{'up to ' if order is None else ''}{max(candidates)}; "
+                             f"{'up to ' if pb.order is None else ''}{max(candidates)}; "
                              "it needs at least order rows")
 
-    depth = 2 * f if instruments == "past" else f
-    hf = data_factor(data, depth, method=method, horizon=horizon)
-    input_condition = check_excitation(hf, data, method=method)
-    nu = data.n_inputs
+    depth = hf.depth
     uf = hf.u_rows(depth - f, depth)
     yf = hf.y_rows(depth - f, depth)
     if instruments == "past":
@@ -203,12 +198,8 @@ def ls_subspace(data, order=None, horizon=None, instruments="past", selector=Non
     full = selector if selector is not None else random_selector(f, ny, seed)
     rank_profile = np.abs(np.diag(scipy.linalg.qr((full @ W).T, mode="r",
                                                   check_finite=False)[0]))
-    if order is None:
-        order = order_from_gap(rank_profile, candidates)
-        order_selection = "largest gap of the SVD-free rank profile (seed 001, Remark 2)"
-    else:
-        order_selection = "given"
-    n = order
+    n, order_selection = choose_order(pb, rank_profile,
+                                      "SVD-free rank profile (seed 001, Remark 2)")
     Lam = full[:n]
 
     G = _solve_gamma(W, Lam)
@@ -225,22 +216,8 @@ def ls_subspace(data, order=None, horizon=None, instruments="past", selector=Non
     A, C, shift_residual = shift_invariance(gamma, ny)
     B, D, x0, reg = estimate_b_d(A, C, gamma, L[:a, :a], L_yu, data, bd_method=bd_method,
                                  feedthrough=feedthrough, estimate_x0=estimate_x0)
-    info = {
-        "method": method,
-        "order": n,
-        "order_selection": order_selection,
-        "horizon": f,
-        "instruments": instruments,
-        "instrument_weighting": bool(instrument_weighting and instruments == "past"),
-        "power_iterations": power_iterations,
-        "selector": Lam,
-        "rank_profile": rank_profile,
-        "selector_condition": selector_condition,
-        "shift_residual": shift_residual,
-        "input_condition": input_condition,
-        "x0": x0,
-        "n_samples": data.n_samples,
-        **reg,
-    }
-    return StateSpace(A, B, C, D, data.dt, input_names=data.input_names,
-                      output_names=data.output_names, info=info)
+    return finish(pb, A, B, C, D, n, order_selection, instruments=instruments,
+                  instrument_weighting=bool(instrument_weighting and instruments == "past"),
+                  power_iterations=power_iterations, selector=Lam, rank_profile=rank_profile,
+                  selector_condition=selector_condition, shift_residual=shift_residual,
+                  x0=x0, **reg)

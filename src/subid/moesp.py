@@ -17,8 +17,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.linalg
 
-from ._subspace import (check_data, check_excitation, check_order_horizon, data_factor,
-                        estimate_b_d, order_from_gap, shift_invariance)
+from ._subspace import choose_order, estimate_b_d, finish, prepare, shift_invariance
 from .model import StateSpace
 
 __all__ = ["moesp"]
@@ -51,39 +50,19 @@ def moesp(data, order=None, horizon=None, *, feedthrough=True, estimate_x0=True,
     StateSpace
         Discrete-time model with ``dt = data.dt``.
     """
-    method = "moesp"
-    data = check_data(data, method)
+    pb = prepare(data, order, horizon, method="moesp")
+    data, f, hf = pb.data, pb.horizon, pb.factor
     ny, nu = data.n_outputs, data.n_inputs
-    order, candidates, f = check_order_horizon(order, horizon, data, method=method)
-    hf = data_factor(data, 2 * f, method=method, horizon=f)
-    input_condition = check_excitation(hf, data, method=method)
     L = hf.retriangularize(hf.u_rows(f, 2 * f), hf.u_rows(0, f), hf.y_rows(0, f),
                            hf.y_rows(f, 2 * f))
     a, b = f * nu, f * (nu + ny)
     L32 = L[a + b:, a:a + b]
     U, s, _ = scipy.linalg.svd(L32, full_matrices=False, check_finite=False)
-    if order is None:
-        order = order_from_gap(s, candidates)
-        order_selection = "largest gap of the singular values"
-    else:
-        order_selection = "given"
-    n = order
+    n, order_selection = choose_order(pb, s, "singular values")
     gamma = U[:, :n] * np.sqrt(s[:n])
     A, C, shift_residual = shift_invariance(gamma, ny)
     B, D, x0, reg = estimate_b_d(A, C, gamma, L[:a, :a], L[a + b:, :a], data,
                                  bd_method=bd_method, feedthrough=feedthrough,
                                  estimate_x0=estimate_x0)
-    info = {
-        "method": method,
-        "order": n,
-        "order_selection": order_selection,
-        "horizon": f,
-        "singular_values": s,
-        "shift_residual": shift_residual,
-        "input_condition": input_condition,
-        "x0": x0,
-        "n_samples": data.n_samples,
-        **reg,
-    }
-    return StateSpace(A, B, C, D, data.dt, input_names=data.input_names,
-                      output_names=data.output_names, info=info)
+    return finish(pb, A, B, C, D, n, order_selection, singular_values=s,
+                  shift_residual=shift_residual, x0=x0, **reg)

@@ -23,8 +23,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.linalg
 
-from ._subspace import (check_data, check_excitation, check_order_horizon, data_factor,
-                        order_from_gap)
+from ._subspace import choose_order, finish, prepare
 from .model import StateSpace
 
 __all__ = ["n4sid"]
@@ -81,12 +80,9 @@ def n4sid(data, order=None, horizon=None, *, feedthrough=True) -> StateSpace:
     StateSpace
         Discrete-time model with ``dt = data.dt``.
     """
-    method = "n4sid"
-    data = check_data(data, method)
+    pb = prepare(data, order, horizon, method="n4sid")
+    data, i, hf = pb.data, pb.horizon, pb.factor
     ny, nu = data.n_outputs, data.n_inputs
-    order, candidates, i = check_order_horizon(order, horizon, data, method=method)
-    hf = data_factor(data, 2 * i, method=method, horizon=i)
-    input_condition = check_excitation(hf, data, method=method)
     L = hf.L
     wp = hf.rows(hf.u_rows(0, i), hf.y_rows(0, i))
     uf = hf.rows(hf.u_rows(i, 2 * i))
@@ -97,12 +93,7 @@ def n4sid(data, order=None, horizon=None, *, feedthrough=True) -> StateSpace:
     o_i = _oblique(yf, uf, wp)
     o_im1 = _oblique(yf_minus, uf_minus, wp_plus)
     U, s, _ = scipy.linalg.svd(o_i, full_matrices=False, check_finite=False)
-    if order is None:
-        order = order_from_gap(s, candidates)
-        order_selection = "largest gap of the singular values"
-    else:
-        order_selection = "given"
-    n = order
+    n, order_selection = choose_order(pb, s, "singular values")
     gamma = U[:, :n] * np.sqrt(s[:n])
     x_i = scipy.linalg.lstsq(gamma, o_i, lapack_driver="gelsy", check_finite=False)[0]
     x_ip1 = scipy.linalg.lstsq(gamma[:-ny], o_im1, lapack_driver="gelsy",
@@ -119,16 +110,6 @@ def n4sid(data, order=None, horizon=None, *, feedthrough=True) -> StateSpace:
         C, D = _lstsq_rows(x_i, y_ii), np.zeros((ny, nu))
     lhs = np.vstack([x_ip1, y_ii])
     resid = lhs - np.vstack([A @ x_i + B @ u_ii, C @ x_i + D @ u_ii])
-    info = {
-        "method": method,
-        "order": n,
-        "order_selection": order_selection,
-        "horizon": i,
-        "singular_values": s,
-        "state_regression_residual": float(np.linalg.norm(resid) /
-                                           max(np.linalg.norm(lhs), 1e-300)),
-        "input_condition": input_condition,
-        "n_samples": data.n_samples,
-    }
-    return StateSpace(A, B, C, D, data.dt, input_names=data.input_names,
-                      output_names=data.output_names, info=info)
+    residual = np.linalg.norm(resid) / max(np.linalg.norm(lhs), 1e-300)
+    return finish(pb, A, B, C, D, n, order_selection, singular_values=s,
+                  state_regression_residual=float(residual))
