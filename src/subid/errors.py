@@ -17,6 +17,7 @@ __all__ = [
     "FileReadError",
     "DataFileNotFoundError",
     "ExcitationWarning",
+    "CheckpointError",
 ]
 
 
@@ -88,3 +89,8 @@ class DataFileNotFoundError(FileReadError, FileNotFoundError):
 class ExcitationWarning(UserWarning):
     """The input excites the system only barely (ill-conditioned data matrix);
     the identified model may be unreliable."""
+
+
+class CheckpointError(FileReadError):
+    """A checkpoint file is truncated, corrupted, of another kind or of an
+    unsupported version."""
