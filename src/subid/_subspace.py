@@ -136,7 +136,7 @@ def data_factor(data: IOData, depth: int, *, method: str, horizon: int) -> Hanke
     return hankel_factor(data.u, data.y, depth)
 
 
-def check_excitation(hf: HankelFactor, data: IOData, *, method: str) -> float:
+def check_excitation(hf: HankelFactor, input_names, *, method: str) -> float:
     """Raise :class:`NotExcitingError` if the input Hankel rows are dependent.
 
     The leading ``depth*nu`` rows of the factor are the factor of the input
@@ -156,7 +156,7 @@ def check_excitation(hf: HankelFactor, data: IOData, *, method: str) -> float:
     if dependent.size:
         k = int(dependent[0])
         achieved = k // nu
-        channel = data.input_names[k % nu]
+        channel = input_names[k % nu]
         if scale == 0:
             what = "the input is identically zero"
         elif achieved == 0:
@@ -284,15 +284,15 @@ def prepare(data, order, horizon, *, method: str, blocks_per_horizon: int = 2) -
     fixed, candidates, horizon = check_order_horizon(
         order, horizon, data, method=method, blocks_per_horizon=blocks_per_horizon)
     hf = data_factor(data, blocks_per_horizon * horizon, method=method, horizon=horizon)
-    input_condition = check_excitation(hf, data, method=method)
+    input_condition = check_excitation(hf, data.input_names, method=method)
     return Problem(method, data, fixed, candidates, horizon, hf, input_condition)
 
 
-def choose_order(problem: Problem, profile, source: str):
+def choose_order(fixed, candidates, profile, source: str):
     """The fixed order, or the candidate at the largest gap of ``profile``."""
-    if problem.order is not None:
-        return problem.order, "given"
-    return order_from_gap(profile, problem.candidates), f"largest gap of the {source}"
+    if fixed is not None:
+        return fixed, "given"
+    return order_from_gap(profile, candidates), f"largest gap of the {source}"
 
 
 def finish(problem: Problem, A, B, C, D, n: int, order_selection: str, **info) -> StateSpace:

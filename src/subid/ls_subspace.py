@@ -42,7 +42,9 @@ U = U_{f+1,f,N}; instruments Z = [U_{1,f,N}; Y_{1,f,N}]):
 
 from __future__ import annotations
 
+import numbers
 import warnings
+from dataclasses import dataclass
 
 import numpy as np
 import scipy.linalg
@@ -155,28 +157,83 @@ def ls_subspace(data, order=None, horizon=None, instruments="past", selector=Non
     True
     """
     method = "ls_subspace"
-    if instruments not in ("past", None):
-        raise SubidError(f"instruments must be 'past' or None, got {instruments!r}")
-    power_iterations = int(power_iterations)
-    if power_iterations < 0:
-        raise SubidError(f"power_iterations must be >= 0, got {power_iterations}")
+    power_iterations = check_options(instruments, power_iterations)
     pb = prepare(data, order, horizon, method=method,
                  blocks_per_horizon=2 if instruments == "past" else 1)
-    data, f, hf, candidates = pb.data, pb.horizon, pb.factor, pb.candidates
-    ny, nu = data.n_outputs, data.n_inputs
-    c = f * ny
-    if selector is not None:
-        selector = np.asarray(selector, dtype=float)
-        if selector.ndim != 2 or selector.shape[1] != c:
-            raise OrderError(f"selector must have horizon*n_outputs = {c} columns, got shape "
-                             f"{selector.shape}")
-        if not np.isfinite(selector).all():
-            raise OrderError("selector has non-finite entries")
-        if selector.shape[0] < max(candidates):
-            raise OrderError(f"selector has {selector.shape[0]} rows but the order is "
-                             f"{'up to ' if pb.order is None else ''}{max(candidates)}; "
-                             "it needs at least order rows")
+    data = pb.data
+    selector = check_selector(selector, pb.horizon, data.n_outputs, pb.candidates, pb.order)
+    core = gamma_from_factor(pb.factor, pb.horizon, pb.order, pb.candidates,
+                             instruments=instruments, instrument_weighting=instrument_weighting,
+                             selector=selector, seed=seed, power_iterations=power_iterations,
+                             method=method)
+    B, D, x0, reg = estimate_b_d(core.A, core.C, core.gamma, core.L11, core.L_yu, data,
+                                 bd_method=bd_method, feedthrough=feedthrough,
+                                 estimate_x0=estimate_x0)
+    return finish(pb, core.A, B, core.C, D, core.order, core.order_selection,
+                  **core.info(instruments, instrument_weighting, power_iterations),
+                  x0=x0, **reg)
 
+
+def check_options(instruments, power_iterations) -> int:
+    """Validate the estimator options; returns ``power_iterations`` as int."""
+    if instruments not in ("past", None):
+        raise SubidError(f"instruments must be 'past' or None, got {instruments!r}")
+    if isinstance(power_iterations, bool) or not isinstance(power_iterations, numbers.Integral) \
+            or power_iterations < 0:
+        raise SubidError(f"power_iterations must be an integer >= 0, got {power_iterations!r}")
+    return int(power_iterations)
+
+
+def check_selector(selector, horizon: int, n_outputs: int, candidates, fixed_order):
+    """The user's selector Λ as a float array (or None), with its shape checked."""
+    if selector is None:
+        return None
+    c = horizon * n_outputs
+    selector = np.asarray(selector, dtype=float)
+    if selector.ndim != 2 or selector.shape[1] != c:
+        raise OrderError(f"selector must have horizon*n_outputs = {c} columns, got shape "
+                         f"{selector.shape}")
+    if not np.isfinite(selector).all():
+        raise OrderError("selector has non-finite entries")
+    if selector.shape[0] < max(candidates):
+        raise OrderError(f"selector has {selector.shape[0]} rows but the order is "
+                         f"{'up to ' if fixed_order is None else ''}{max(candidates)}; "
+                         "it needs at least order rows")
+    return selector
+
+
+@dataclass(frozen=True)
+class LSCore:
+    """A, C and the observability matrix identified from a data statistic."""
+
+    A: np.ndarray
+    C: np.ndarray
+    gamma: np.ndarray
+    L11: np.ndarray
+    L_yu: np.ndarray
+    order: int
+    order_selection: str
+    selector: np.ndarray
+    rank_profile: np.ndarray
+    selector_condition: float
+    shift_residual: float
+
+    def info(self, instruments, instrument_weighting, power_iterations) -> dict:
+        return dict(instruments=instruments,
+                    instrument_weighting=bool(instrument_weighting and instruments == "past"),
+                    power_iterations=power_iterations, selector=self.selector,
+                    rank_profile=self.rank_profile, selector_condition=self.selector_condition,
+                    shift_residual=self.shift_residual)
+
+
+def gamma_from_factor(hf, f, fixed_order, candidates, *, instruments, instrument_weighting,
+                      selector, seed, power_iterations, method) -> LSCore:
+    """Seed 001 on a Hankel factor: Γ̄ in the basis of Λ, then A and C.
+
+    Shared by :func:`ls_subspace` and :class:`subid.RecursiveSubspace` (which
+    updates the same factor sample by sample).
+    """
+    nu, ny = hf.n_inputs, hf.n_outputs
     depth = hf.depth
     uf = hf.u_rows(depth - f, depth)
     yf = hf.y_rows(depth - f, depth)
@@ -198,7 +255,7 @@ def ls_subspace(data, order=None, horizon=None, instruments="past", selector=Non
     full = selector if selector is not None else random_selector(f, ny, seed)
     rank_profile = np.abs(np.diag(scipy.linalg.qr((full @ W).T, mode="r",
                                                   check_finite=False)[0]))
-    n, order_selection = choose_order(pb, rank_profile,
+    n, order_selection = choose_order(fixed_order, candidates, rank_profile,
                                       "SVD-free rank profile (seed 001, Remark 2)")
     Lam = full[:n]
 
@@ -214,10 +271,6 @@ def ls_subspace(data, order=None, horizon=None, instruments="past", selector=Non
                          "too high for these data, or choose another selector / seed")
     gamma = scipy.linalg.solve(LG.T, G.T, check_finite=False).T   # Γ̄ = G (ΛG)^{-1}
     A, C, shift_residual = shift_invariance(gamma, ny)
-    B, D, x0, reg = estimate_b_d(A, C, gamma, L[:a, :a], L_yu, data, bd_method=bd_method,
-                                 feedthrough=feedthrough, estimate_x0=estimate_x0)
-    return finish(pb, A, B, C, D, n, order_selection, instruments=instruments,
-                  instrument_weighting=bool(instrument_weighting and instruments == "past"),
-                  power_iterations=power_iterations, selector=Lam, rank_profile=rank_profile,
-                  selector_condition=selector_condition, shift_residual=shift_residual,
-                  x0=x0, **reg)
+    return LSCore(A=A, C=C, gamma=gamma, L11=L[:a, :a], L_yu=L_yu, order=n,
+                  order_selection=order_selection, selector=Lam, rank_profile=rank_profile,
+                  selector_condition=selector_condition, shift_residual=shift_residual)

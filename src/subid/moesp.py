@@ -58,7 +58,7 @@ def moesp(data, order=None, horizon=None, *, feedthrough=True, estimate_x0=True,
     a, b = f * nu, f * (nu + ny)
     L32 = L[a + b:, a:a + b]
     U, s, _ = scipy.linalg.svd(L32, full_matrices=False, check_finite=False)
-    n, order_selection = choose_order(pb, s, "singular values")
+    n, order_selection = choose_order(pb.order, pb.candidates, s, "singular values")
     gamma = U[:, :n] * np.sqrt(s[:n])
     A, C, shift_residual = shift_invariance(gamma, ny)
     B, D, x0, reg = estimate_b_d(A, C, gamma, L[:a, :a], L[a + b:, :a], data,

@@ -93,7 +93,7 @@ def n4sid(data, order=None, horizon=None, *, feedthrough=True) -> StateSpace:
     o_i = _oblique(yf, uf, wp)
     o_im1 = _oblique(yf_minus, uf_minus, wp_plus)
     U, s, _ = scipy.linalg.svd(o_i, full_matrices=False, check_finite=False)
-    n, order_selection = choose_order(pb, s, "singular values")
+    n, order_selection = choose_order(pb.order, pb.candidates, s, "singular values")
     gamma = U[:, :n] * np.sqrt(s[:n])
     x_i = scipy.linalg.lstsq(gamma, o_i, lapack_driver="gelsy", check_finite=False)[0]
     x_ip1 = scipy.linalg.lstsq(gamma[:-ny], o_im1, lapack_driver="gelsy",
