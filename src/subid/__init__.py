@@ -16,6 +16,7 @@ from .metrics import fit_percent, markov_error, pole_error
 from .model import StateSpace
 from .moesp import moesp
 from .n4sid import n4sid
+from .recursive import RecursiveSubspace
 
 __all__ = [
     "IOData",
@@ -24,6 +25,7 @@ __all__ = [
     "ls_subspace",
     "moesp",
     "n4sid",
+    "RecursiveSubspace",
     "markov_error",
     "fit_percent",
     "pole_error",

@@ -1,0 +1,404 @@
+"""Recursive SVD-free subspace identification: seed 001 made recursive.
+
+Seed 001 (Bako, Mercère, Lecoeuche) turns subspace identification into a
+least-squares problem with a user-fixed state basis precisely so that it can
+run online. :class:`RecursiveSubspace` keeps the triangular factor ``R`` of
+the (exponentially weighted) block-Hankel data matrix and updates it with
+every new Hankel column by Givens rotations:
+
+    [sqrt(λ) R; h^T] = Q [R_new; 0],
+
+i.e. ``R_new^T R_new = λ R^T R + h h^T``: the square-root (information) form
+of the weighted data correlation, which never squares the condition number.
+The model is computed on demand from ``R`` through exactly the code path of
+the batch :func:`subid.ls_subspace` (eq. (23) or (28), Λ-fixed basis, A and C
+by shift invariance), with B and D from the projected data equation
+(``bd_method='projection'``, which needs the statistic only). So with
+forgetting 1 it equals the batch estimate on the same data, and the state
+basis stays the one fixed by Λ whatever the data: the property that makes the
+method usable for tracking and switched systems.
+
+No SVD is computed, memory is fixed (``R`` and the last ``2*horizon``
+samples), and the per-sample update runs in a compiled kernel.
+"""
+
+from __future__ import annotations
+
+import math
+import numbers
+
+import numba
+import numpy as np
+
+from ._checkpoint import load_state, require, save_state
+from ._hankel import HankelFactor, hankel_chunk
+from ._regression import fit_b_d_projection
+from ._subspace import check_excitation, default_horizon, min_samples
+from ._validation import as_signal, check_dt, check_int
+from .errors import CheckpointError, DataError, OrderError, SubidError, TooFewSamplesError
+from .ls_subspace import check_options, check_selector, gamma_from_factor, random_selector
+from .model import StateSpace
+
+__all__ = ["RecursiveSubspace"]
+
+_CHUNK = 8192
+
+
+@numba.njit(cache=True, nogil=True)
+def givens_update(R, rows, lam_sqrt):  # pragma: no cover - compiled
+    """Update the upper-triangular ``R`` in place with the rows of ``rows``.
+
+    For each row h: ``R <- sqrt(λ) R``, then Givens rotations zero h against
+    the diagonal of R, so that ``R'^T R' = λ R^T R + h h^T``.
+    """
+    m = R.shape[0]
+    h = np.empty(m)
+    for r in range(rows.shape[0]):
+        if lam_sqrt != 1.0:
+            for i in range(m):
+                for j in range(i, m):
+                    R[i, j] *= lam_sqrt
+        for j in range(m):
+            h[j] = rows[r, j]
+        for i in range(m):
+            b = h[i]
+            if b == 0.0:
+                continue
+            a = R[i, i]
+            rr = math.hypot(a, b)
+            c = a / rr
+            s = b / rr
+            R[i, i] = rr
+            for j in range(i + 1, m):
+                rij = R[i, j]
+                hj = h[j]
+                R[i, j] = c * rij + s * hj
+                h[j] = c * hj - s * rij
+    return R
+
+
+def givens_update_reference(R, rows, lam_sqrt):
+    """Plain-numpy reference of :func:`givens_update` (same operations)."""
+    m = R.shape[0]
+    for r in range(rows.shape[0]):
+        if lam_sqrt != 1.0:
+            R *= lam_sqrt
+        h = rows[r].astype(np.float64).copy()
+        for i in range(m):
+            b = h[i]
+            if b == 0.0:
+                continue
+            a = R[i, i]
+            rr = math.hypot(a, b)
+            c, s = a / rr, b / rr
+            R[i, i] = rr
+            rij = R[i, i + 1:].copy()
+            hj = h[i + 1:].copy()
+            R[i, i + 1:] = c * rij + s * hj
+            h[i + 1:] = c * hj - s * rij
+    return R
+
+
+class RecursiveSubspace:
+    """Online SVD-free subspace identification with a fixed state basis.
+
+    Parameters
+    ----------
+    order : int
+        Model order n.
+    n_inputs, n_outputs : int
+    horizon : int, optional
+        Future horizon f (and past horizon of the instruments). Default
+        ``max(5, ceil(n/ny) + 2)``, as :func:`subid.ls_subspace`.
+    forgetting : float
+        Exponential forgetting factor λ in (0, 1]: a Hankel column seen k
+        samples ago has weight λ^k. 1 = no forgetting (equals the batch
+        estimate); below 1 the estimate tracks changing dynamics with a memory
+        of about ``1 / (1 - λ)`` samples.
+    instruments : {'past', None}
+        As in :func:`subid.ls_subspace`.
+    selector : array_like, optional
+        The matrix Λ (order x horizon*ny) fixing the state basis. Default: a
+        random matrix drawn from ``seed`` (:func:`subid.ls_subspace.random_selector`).
+    seed : int
+    instrument_weighting, power_iterations, feedthrough
+        As in :func:`subid.ls_subspace`.
+    dt : float
+        Sampling period of the data (and of ``model``).
+    history_size : int, optional
+        Keep at most this many snapshots of the model's poles (opt-in). When
+        the buffer is full, every other snapshot is dropped and the stride
+        doubles, so memory stays bounded however long the stream.
+    history_stride : int
+        Samples between snapshots at the start (default 1000).
+
+    Attributes
+    ----------
+    n_samples : int
+        Samples received so far.
+    model : StateSpace
+        The current estimate (computed on demand).
+    state : ndarray
+        Estimate of the state at the latest sample, in the basis of Λ.
+    history : dict
+        ``{'sample': (k,), 'poles': (k, order)}`` snapshots (empty if off).
+
+    Examples
+    --------
+    >>> import subid
+    >>> true = subid.systems.seed001_system()
+    >>> data = subid.systems.simulate_data(true, 2000, seed=1)
+    >>> rs = subid.RecursiveSubspace(3, 2, 2, horizon=5)
+    >>> for k in range(0, 2000, 100):          # a stream in pieces
+    ...     rs.update(data.u[k:k + 100], data.y[k:k + 100])
+    >>> subid.markov_error(rs.model, true) < 1e-9
+    True
+    """
+
+    _KIND = "subid.RecursiveSubspace"
+    _VERSION = 1
+
+    def __init__(self, order, n_inputs, n_outputs, horizon=None, forgetting=1.0,
+                 instruments="past", selector=None, seed=0, *, instrument_weighting=True,
+                 power_iterations=2, feedthrough=True, dt=1.0, history_size=None,
+                 history_stride=1000):
+        self.order = check_int(order, "order")
+        self.n_inputs = check_int(n_inputs, "n_inputs")
+        self.n_outputs = check_int(n_outputs, "n_outputs")
+        self.horizon = default_horizon(self.order, self.n_outputs, self.n_inputs, 0, 2) \
+            if horizon is None else check_int(horizon, "horizon", minimum=2)
+        if self.order > (self.horizon - 1) * self.n_outputs:
+            need = math.ceil(self.order / self.n_outputs) + 1
+            raise OrderError(f"RecursiveSubspace: order {self.order} cannot be revealed with "
+                             f"horizon {self.horizon} and {self.n_outputs} outputs; use "
+                             f"horizon >= {need}")
+        if isinstance(forgetting, bool) or not isinstance(forgetting, numbers.Real) \
+                or not 0 < forgetting <= 1:
+            raise SubidError(f"forgetting must be a number in (0, 1], got {forgetting!r}")
+        self.forgetting = float(forgetting)
+        self.power_iterations = check_options(instruments, power_iterations)
+        self.instruments = instruments
+        self.instrument_weighting = bool(instrument_weighting)
+        self.feedthrough = bool(feedthrough)
+        self.dt = check_dt(dt)
+        self.seed = seed
+        selector = check_selector(selector, self.horizon, self.n_outputs, [self.order],
+                                  self.order)
+        self._selector = random_selector(self.horizon, self.n_outputs, seed, rows=self.order) \
+            if selector is None else selector[: self.order].copy()
+        self._depth = 2 * self.horizon if instruments == "past" else self.horizon
+        m = self._depth * (self.n_inputs + self.n_outputs)
+        self._R = np.zeros((m, m))
+        self._keep = max(self._depth - 1, self.horizon)
+        self._buf_u = np.zeros((0, self.n_inputs))
+        self._buf_y = np.zeros((0, self.n_outputs))
+        self.n_samples = 0
+        self._n_columns = 0
+        self._weight = 0.0            # sum of λ^k over the columns seen
+        if history_size is not None:
+            history_size = check_int(history_size, "history_size", minimum=2)
+        self._history_size = history_size
+        self._history_stride = check_int(history_stride, "history_stride")
+        self._hist_sample = np.zeros(0, dtype=np.int64)
+        self._hist_poles = np.zeros((0, self.order), dtype=complex)
+        self._model = None
+
+    # -- input ------------------------------------------------------------
+    def _as_chunk(self, values, name: str, channels: int) -> np.ndarray:
+        arr = np.asarray(values)
+        if arr.ndim == 0 and channels == 1:
+            arr = arr.reshape(1, 1)
+        elif arr.ndim == 1 and channels > 1:
+            if arr.shape[0] != channels:
+                raise DataError(f"{name} is one sample of {arr.shape[0]} values but the "
+                                f"identifier has {channels} channels; pass shape "
+                                f"(samples, {channels})")
+            arr = arr.reshape(1, channels)
+        arr = as_signal(arr, name)
+        if arr.shape[1] != channels:
+            raise DataError(f"{name} has {arr.shape[1]} channels but the identifier was "
+                            f"created with {channels}")
+        return arr
+
+    def update(self, u, y) -> "RecursiveSubspace":
+        """Add samples: one sample or a chunk (time on axis 0).
+
+        ``u`` is (N, n_inputs), or a 1-D array of n_inputs values (one
+        sample) when n_inputs > 1, or N samples when n_inputs == 1; likewise
+        ``y``. The result does not depend on how a stream is cut into chunks.
+        A rejected chunk leaves the identifier unchanged.
+
+        Returns
+        -------
+        self
+        """
+        u = self._as_chunk(u, "input u", self.n_inputs)
+        y = self._as_chunk(y, "output y", self.n_outputs)
+        if u.shape[0] != y.shape[0]:
+            raise DataError(f"input u has {u.shape[0]} samples but output y has {y.shape[0]}")
+        # validated: from here on the state changes
+        start = 0
+        n = u.shape[0]
+        while start < n:
+            stop = n if self._history_size is None else min(n, start + self._to_snapshot())
+            self._ingest(u[start:stop], y[start:stop])
+            start = stop
+            if self._history_size is not None and self.n_samples % self._history_stride == 0:
+                self._snapshot()
+        return self
+
+    def _to_snapshot(self) -> int:
+        return self._history_stride - self.n_samples % self._history_stride
+
+    def _ingest(self, u, y):
+        all_u = np.vstack([self._buf_u, u])
+        all_y = np.vstack([self._buf_y, y])
+        columns = all_u.shape[0] - self._depth + 1
+        lam_sqrt = math.sqrt(self.forgetting)
+        for a in range(0, max(columns, 0), _CHUNK):
+            b = min(a + _CHUNK, columns)
+            rows = hankel_chunk(all_u, all_y, self._depth, a, b)
+            givens_update(self._R, rows, lam_sqrt)
+        if columns > 0:
+            lam = self.forgetting
+            self._weight = self._weight * lam ** columns + (
+                columns if lam == 1.0 else (1 - lam ** columns) / (1 - lam))
+            self._n_columns += columns
+        self._buf_u = all_u[-self._keep:].copy()
+        self._buf_y = all_y[-self._keep:].copy()
+        self.n_samples += u.shape[0]
+        self._model = None
+
+    def _snapshot(self):
+        try:
+            poles = self.model.poles()
+        except SubidError:
+            return
+        self._hist_sample = np.append(self._hist_sample, self.n_samples)
+        self._hist_poles = np.vstack([self._hist_poles, poles[None]])
+        if self._hist_sample.size >= self._history_size:
+            self._hist_sample = self._hist_sample[1::2]
+            self._hist_poles = self._hist_poles[1::2]
+            self._history_stride *= 2
+
+    # -- output -----------------------------------------------------------
+    def factor(self) -> HankelFactor:
+        """The current (weighted, normalised) Hankel factor, as the batch path uses."""
+        L = self._R.T / math.sqrt(max(self._weight, 1e-300))
+        signs = np.sign(np.diag(L))
+        signs[signs == 0] = 1.0
+        return HankelFactor(L=L * signs, depth=self._depth, n_inputs=self.n_inputs,
+                            n_outputs=self.n_outputs, n_columns=self._n_columns)
+
+    @property
+    def model(self) -> StateSpace:
+        """The current model (discrete time, dt of the identifier).
+
+        Raises
+        ------
+        TooFewSamplesError
+            Fewer samples than one full-rank data matrix needs.
+        NotExcitingError
+            The (weighted) input data are not exciting enough.
+        """
+        if self._model is not None:
+            return self._model
+        method = "RecursiveSubspace"
+        need = min_samples(self._depth, self.n_inputs, self.n_outputs)
+        if self.n_samples < need:
+            raise TooFewSamplesError(f"{method} has received {self.n_samples} samples; a model "
+                                     f"needs at least {need} (horizon {self.horizon})")
+        hf = self.factor()
+        names = tuple(f"u{k + 1}" for k in range(self.n_inputs))
+        input_condition = check_excitation(hf, names, method=method)
+        core = gamma_from_factor(hf, self.horizon, self.order, [self.order],
+                                 instruments=self.instruments,
+                                 instrument_weighting=self.instrument_weighting,
+                                 selector=self._selector, seed=self.seed,
+                                 power_iterations=self.power_iterations, method=method)
+        B, D, reg = fit_b_d_projection(core.A, core.C, core.gamma, core.L11, core.L_yu,
+                                       feedthrough=self.feedthrough)
+        info = {"method": method, "order": self.order, "horizon": self.horizon,
+                "n_samples": self.n_samples, "forgetting": self.forgetting,
+                "effective_samples": self._weight, "input_condition": input_condition,
+                "bd_method": "projection",
+                **core.info(self.instruments, self.instrument_weighting,
+                            self.power_iterations), **reg}
+        self._model = StateSpace(core.A, B, core.C, D, self.dt, info=info)
+        return self._model
+
+    @property
+    def state(self) -> np.ndarray:
+        """State estimate at the latest sample, in the basis fixed by Λ.
+
+        From the last ``horizon`` samples, ``x̄(t-f+1) = Λ (y_f - H_f u_f)``
+        (seed 001, eq. (21)), then propagated through the model to time t.
+        """
+        model = self.model
+        f, ny, nu = self.horizon, self.n_outputs, self.n_inputs
+        u_w, y_w = self._buf_u[-f:], self._buf_y[-f:]
+        markov = model.markov(f)                       # D, CB, ..., C A^{f-2} B
+        H = np.zeros((f * ny, f * nu))
+        for i in range(f):
+            for j in range(i + 1):
+                H[i * ny:(i + 1) * ny, j * nu:(j + 1) * nu] = markov[i - j]
+        x = self._selector @ (y_w.reshape(-1) - H @ u_w.reshape(-1))
+        for k in range(f - 1):
+            x = model.A @ x + model.B @ u_w[k]
+        return x
+
+    @property
+    def history(self) -> dict:
+        """Decimated snapshots ``{'sample', 'poles'}`` (bounded in size)."""
+        return {"sample": self._hist_sample.copy(), "poles": self._hist_poles.copy()}
+
+    @property
+    def selector(self) -> np.ndarray:
+        """The matrix Λ that fixes the state basis."""
+        return self._selector.copy()
+
+    # -- checkpoints --------------------------------------------------------
+    def save(self, path) -> None:
+        """Write the whole state to ``path`` (``.npz``, atomic, no pickle)."""
+        settings = {
+            "order": self.order, "n_inputs": self.n_inputs, "n_outputs": self.n_outputs,
+            "horizon": self.horizon, "forgetting": self.forgetting,
+            "instruments": self.instruments, "instrument_weighting": self.instrument_weighting,
+            "power_iterations": self.power_iterations, "feedthrough": self.feedthrough,
+            "dt": self.dt, "seed": self.seed if isinstance(self.seed, int) else None,
+            "n_samples": self.n_samples, "n_columns": self._n_columns, "weight": self._weight,
+            "history_size": self._history_size, "history_stride": self._history_stride,
+        }
+        arrays = {"R": self._R, "buf_u": self._buf_u, "buf_y": self._buf_y,
+                  "selector": self._selector, "hist_sample": self._hist_sample,
+                  "hist_poles_re": self._hist_poles.real, "hist_poles_im": self._hist_poles.imag}
+        save_state(path, self._KIND, self._VERSION, arrays, settings)
+
+    @classmethod
+    def load(cls, path) -> "RecursiveSubspace":
+        """Restore an identifier saved by :meth:`save`."""
+        arrays, s = load_state(path, cls._KIND, cls._VERSION)
+        try:
+            obj = cls(s["order"], s["n_inputs"], s["n_outputs"], horizon=s["horizon"],
+                      forgetting=s["forgetting"], instruments=s["instruments"],
+                      selector=require(arrays, path, "selector"), seed=s["seed"] or 0,
+                      instrument_weighting=s["instrument_weighting"],
+                      power_iterations=s["power_iterations"], feedthrough=s["feedthrough"],
+                      dt=s["dt"], history_size=s["history_size"],
+                      history_stride=s["history_stride"])
+            m = obj._R.shape[0]
+            obj._R = require(arrays, path, "R", (m, m)).copy()
+            obj._buf_u = require(arrays, path, "buf_u").reshape(-1, obj.n_inputs).copy()
+            obj._buf_y = require(arrays, path, "buf_y").reshape(-1, obj.n_outputs).copy()
+            obj.n_samples = int(s["n_samples"])
+            obj._n_columns = int(s["n_columns"])
+            obj._weight = float(s["weight"])
+            obj._hist_sample = require(arrays, path, "hist_sample").astype(np.int64)
+            obj._hist_poles = (require(arrays, path, "hist_poles_re")
+                               + 1j * require(arrays, path, "hist_poles_im"))
+        except CheckpointError:
+            raise
+        except (KeyError, TypeError, ValueError) as exc:
+            raise CheckpointError(f"checkpoint {path} is inconsistent: {exc}",
+                                  path=str(path)) from None
+        return obj

@@ -1,0 +1,160 @@
+"""RecursiveSubspace: seed 001 made recursive."""
+
+import numpy as np
+import pytest
+
+import subid
+from subid import errors, systems
+from subid.recursive import givens_update, givens_update_reference
+
+
+@pytest.fixture(scope="module")
+def noisy():
+    return systems.simulate_data(systems.seed001_system(), 3000, seed=1, process_snr_db=25,
+                                 output_snr_db=25)
+
+
+@pytest.mark.parametrize("instruments", ["past", None])
+def test_equals_batch_with_forgetting_one(noisy, instruments):
+    rs = subid.RecursiveSubspace(3, 2, 2, horizon=5, instruments=instruments)
+    rs.update(noisy.u, noisy.y)
+    batch = subid.ls_subspace(noisy, 3, horizon=5, instruments=instruments,
+                              bd_method="projection")
+    for name in "ABCD":
+        np.testing.assert_allclose(getattr(rs.model, name), getattr(batch, name), atol=1e-8,
+                                   err_msg=name)
+    np.testing.assert_allclose(rs.selector, batch.info["selector"])
+
+
+def test_noise_free_exact_and_state():
+    true = systems.seed001_system()
+    data = systems.simulate_data(true, 600, seed=2, x0=[1.0, 0.0, -1.0])
+    rs = subid.RecursiveSubspace(3, 2, 2).update(data.u, data.y)
+    assert subid.markov_error(rs.model, true) < 1e-9
+    m = rs.model
+    np.testing.assert_allclose(m.C @ rs.state + m.D @ data.u[-1], data.y[-1], atol=1e-9)
+
+
+def test_chunking_does_not_matter(noisy):
+    whole = subid.RecursiveSubspace(3, 2, 2, forgetting=0.999).update(noisy.u, noisy.y)
+    for size in (1, 7, 1000):
+        rs = subid.RecursiveSubspace(3, 2, 2, forgetting=0.999)
+        for k in range(0, 1200, size):      # the first 1200 samples one piece at a time
+            rs.update(noisy.u[k:min(k + size, 1200)], noisy.y[k:min(k + size, 1200)])
+        rs.update(noisy.u[1200:], noisy.y[1200:])
+        np.testing.assert_allclose(rs._R, whole._R, rtol=1e-12, atol=1e-12)
+        np.testing.assert_allclose(rs.model.A, whole.model.A, rtol=1e-10, atol=1e-12)
+
+
+def test_single_sample_forms():
+    true = systems.random_system(2, 1, 1, seed=0)
+    data = systems.simulate_data(true, 300, seed=0)
+    a = subid.RecursiveSubspace(2, 1, 1)
+    b = subid.RecursiveSubspace(2, 1, 1)
+    for k in range(300):
+        a.update(data.u[k, 0], data.y[k, 0])          # scalars
+    b.update(data.u[:, 0], data.y[:, 0])               # 1-D = one channel, 300 samples
+    np.testing.assert_allclose(a.model.A, b.model.A, rtol=1e-12)
+    c = subid.RecursiveSubspace(3, 2, 2)
+    c.update(np.ones(2), np.zeros(2))                  # one sample of two channels
+    assert c.n_samples == 1
+
+
+def test_tracks_switch_in_same_basis():
+    """Seed 001's point for switched systems: after a switch the estimate
+    converges to the new system expressed in the same (Λ-fixed) basis."""
+    s1 = systems.random_system(3, 2, 2, seed=11)
+    s2 = systems.random_system(3, 2, 2, seed=12)
+    d1 = systems.simulate_data(s1, 3000, seed=1)
+    d2 = systems.simulate_data(s2, 4000, seed=2)
+    rs = subid.RecursiveSubspace(3, 2, 2, horizon=5, forgetting=0.995)
+    rs.update(d1.u, d1.y)
+    assert subid.markov_error(rs.model, s1) < 1e-6
+    before = rs.model
+    rs.update(d2.u, d2.y)
+    after = rs.model
+    assert subid.markov_error(after, s2) < 1e-6
+    assert subid.markov_error(after, s1) > 0.1
+    ref = subid.ls_subspace(d2, 3, horizon=5, selector=rs.selector)   # s2 in the basis of Λ
+    for name in "AC":
+        np.testing.assert_allclose(getattr(after, name), getattr(ref, name), atol=1e-6)
+    ref1 = subid.ls_subspace(d1, 3, horizon=5, selector=rs.selector)
+    np.testing.assert_allclose(before.A, ref1.A, atol=1e-6)
+
+
+def test_checkpoint_round_trip(tmp_path, noisy):
+    path = tmp_path / "rs.npz"
+    straight = subid.RecursiveSubspace(3, 2, 2, forgetting=0.998, history_size=8,
+                                       history_stride=100)
+    straight.update(noisy.u, noisy.y)
+    first = subid.RecursiveSubspace(3, 2, 2, forgetting=0.998, history_size=8,
+                                    history_stride=100)
+    first.update(noisy.u[:1234], noisy.y[:1234])
+    first.save(path)
+    resumed = subid.RecursiveSubspace.load(path)
+    resumed.update(noisy.u[1234:], noisy.y[1234:])
+    np.testing.assert_array_equal(resumed._R, straight._R)
+    np.testing.assert_array_equal(resumed.model.A, straight.model.A)
+    np.testing.assert_array_equal(resumed.history["poles"], straight.history["poles"])
+
+
+def test_corrupted_checkpoint(tmp_path, noisy):
+    path = tmp_path / "rs.npz"
+    subid.RecursiveSubspace(3, 2, 2).update(noisy.u[:100], noisy.y[:100]).save(path)
+    raw = path.read_bytes()
+    (tmp_path / "cut.npz").write_bytes(raw[: len(raw) // 2])
+    with pytest.raises(errors.CheckpointError, match="truncated or corrupted"):
+        subid.RecursiveSubspace.load(tmp_path / "cut.npz")
+    with pytest.raises(errors.DataFileNotFoundError):
+        subid.RecursiveSubspace.load(tmp_path / "missing.npz")
+    subid.StateSpace(np.eye(1) * 0.5, [[1.0]], [[1.0]], 0, 1.0).save(tmp_path / "m.json")
+    with pytest.raises(errors.CheckpointError):
+        subid.RecursiveSubspace.load(tmp_path / "m.json")
+
+
+def test_bad_samples_leave_state_unchanged(noisy):
+    rs = subid.RecursiveSubspace(3, 2, 2).update(noisy.u[:500], noisy.y[:500])
+    R = rs._R.copy()
+    bad_u = noisy.u[500:520].copy()
+    bad_u[7, 1] = np.nan
+    with pytest.raises(errors.DataError, match="NaN value at row 7"):
+        rs.update(bad_u, noisy.y[500:520])
+    with pytest.raises(errors.DataError, match="3 channels"):
+        rs.update(np.zeros((5, 3)), np.zeros((5, 2)))
+    with pytest.raises(errors.DataError, match="samples"):
+        rs.update(np.zeros((5, 2)), np.zeros((4, 2)))
+    np.testing.assert_array_equal(rs._R, R)
+    assert rs.n_samples == 500
+
+
+def test_too_few_samples_and_bad_parameters():
+    rs = subid.RecursiveSubspace(3, 2, 2).update(np.ones((10, 2)), np.ones((10, 2)))
+    with pytest.raises(errors.TooFewSamplesError, match="received 10 samples"):
+        rs.model
+    with pytest.raises(errors.SubidError, match="forgetting"):
+        subid.RecursiveSubspace(3, 2, 2, forgetting=1.5)
+    with pytest.raises(errors.OrderError, match="horizon"):
+        subid.RecursiveSubspace(9, 1, 2, horizon=4)
+
+
+def test_history_bounded():
+    true = systems.random_system(2, 1, 1, seed=3)
+    data = systems.simulate_data(true, 20_000, seed=3)
+    rs = subid.RecursiveSubspace(2, 1, 1, history_size=10, history_stride=50)
+    rs.update(data.u, data.y)
+    h = rs.history
+    assert 5 <= h["sample"].size < 10
+    assert np.all(np.diff(h["sample"]) > 0)
+    np.testing.assert_allclose(np.sort_complex(h["poles"][-1]), np.sort_complex(true.poles()),
+                               atol=1e-8)
+
+
+def test_kernel_matches_reference():
+    r = np.random.default_rng(0)
+    rows = r.standard_normal((300, 12))
+    R1 = givens_update(np.zeros((12, 12)), rows, np.sqrt(0.98))
+    R2 = givens_update_reference(np.zeros((12, 12)), rows, np.sqrt(0.98))
+    np.testing.assert_allclose(R1, R2, rtol=1e-12, atol=1e-12)
+    # the factor of the weighted correlation
+    w = 0.98 ** np.arange(299, -1, -1)
+    np.testing.assert_allclose(R1.T @ R1, (rows * w[:, None]).T @ rows, rtol=1e-10, atol=1e-10)
