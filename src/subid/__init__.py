@@ -17,6 +17,7 @@ from .model import StateSpace
 from .moesp import moesp
 from .n4sid import n4sid
 from .recursive import RecursiveSubspace
+from .statistic import HankelStatistic
 
 __all__ = [
     "IOData",
@@ -26,6 +27,7 @@ __all__ = [
     "moesp",
     "n4sid",
     "RecursiveSubspace",
+    "HankelStatistic",
     "markov_error",
     "fit_percent",
     "pole_error",

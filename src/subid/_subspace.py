@@ -14,13 +14,14 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.linalg
 
-from ._hankel import HankelFactor, hankel_factor
+from ._hankel import HankelFactor
 from ._validation import check_int
 from .data import IOData
 from ._regression import fit_b_d_projection, fit_b_d_x0
 from .errors import (DataError, ExcitationWarning, NotExcitingError, OrderError, SubidError,
                      TooFewSamplesError)
 from .model import StateSpace
+from .statistic import HankelStatistic
 
 # A diagonal entry of the input block of the Hankel factor below this fraction
 # of the largest one marks a linearly dependent Hankel row.
@@ -39,9 +40,8 @@ def check_data(data, method: str) -> IOData:
         raise DataError(f"{method} identifies a discrete-time model and needs uniformly "
                         "sampled data; these time stamps are non-uniform "
                         "(use a continuous-time method for them)")
-    std = data.y.std(axis=0)
-    flat = np.flatnonzero(std <= 1e-14 * np.maximum(np.abs(data.y).max(axis=0), 1e-300))
-    if flat.size:
+    flat = [k for k, column in enumerate(data.y.T) if column.max() == column.min()]
+    if flat:
         names = ", ".join(data.output_names[k] for k in flat)
         raise DataError(f"output {names} is constant over the whole record: it carries no "
                         "information about the dynamics; drop that channel")
@@ -88,8 +88,7 @@ def _parse_order(order):
     return None, candidates
 
 
-def check_order_horizon(order, horizon, data: IOData, *, method: str,
-                        blocks_per_horizon: int = 2):
+def check_order_horizon(order, horizon, data, *, method: str, blocks_per_horizon: int = 2):
     """Validate the order and the horizon.
 
     ``order`` is an int, ``None``/``'auto'`` (candidates 1..10), or an
@@ -122,7 +121,8 @@ def check_order_horizon(order, horizon, data: IOData, *, method: str,
     return fixed, candidates, horizon
 
 
-def data_factor(data: IOData, depth: int, *, method: str, horizon: int) -> HankelFactor:
+def data_factor(data: IOData, depth: int, *, method: str, horizon: int,
+                statistic: str = "auto") -> HankelFactor:
     """Hankel factor of ``data`` with ``depth`` block rows, after the sample check."""
     nu, ny = data.n_inputs, data.n_outputs
     rows = depth * (nu + ny)
@@ -133,7 +133,7 @@ def data_factor(data: IOData, depth: int, *, method: str, horizon: int) -> Hanke
             f"{nu} input{'s' if nu != 1 else ''} and {ny} output{'s' if ny != 1 else ''}: "
             f"the {depth}-block-row Hankel matrix has {rows} rows and needs at least "
             f"{need} samples; reduce the horizon or supply more data")
-    return hankel_factor(data.u, data.y, depth)
+    return HankelStatistic.from_data(data, depth, kind=statistic).factor()
 
 
 def check_excitation(hf: HankelFactor, input_names, *, method: str) -> float:
@@ -240,6 +240,11 @@ def estimate_b_d(A, C, gamma, L11, L_yu, data: IOData, *, bd_method: str, feedth
     if bd_method not in BD_METHODS:
         raise SubidError(f"bd_method must be one of {BD_METHODS}, got {bd_method!r}")
     radius = float(np.abs(np.linalg.eigvals(A)).max())
+    if isinstance(data, HankelStatistic):           # no raw samples: the statistic only
+        if bd_method == "simulation":
+            raise SubidError("bd_method='simulation' fits B and D to the raw output samples; "
+                             "with a statistic only, use bd_method='projection' (or 'auto')")
+        bd_method = "projection"
     diag = {}
     if bd_method in ("auto", "simulation"):
         with np.errstate(over="ignore", invalid="ignore"):
@@ -274,16 +279,43 @@ class Problem:
     input_condition: float
 
 
-def prepare(data, order, horizon, *, method: str, blocks_per_horizon: int = 2) -> Problem:
+STATISTICS = ("auto", "qr", "gram")
+
+
+def prepare(data, order, horizon, *, method: str, blocks_per_horizon: int = 2,
+            statistic: str = "auto") -> Problem:
     """Validate the arguments, build the Hankel factor and check excitation.
 
-    ``blocks_per_horizon`` is 2 when past and future block rows are used
-    (instruments), 1 for future rows only.
+    ``data`` is an :class:`IOData` record or a :class:`HankelStatistic`
+    (identification from the statistic only). ``blocks_per_horizon`` is 2
+    when past and future block rows are used (instruments), 1 for future
+    rows only. ``statistic`` chooses the kind of statistic built from a
+    record (see :mod:`subid.statistic`).
     """
-    data = check_data(data, method)
-    fixed, candidates, horizon = check_order_horizon(
-        order, horizon, data, method=method, blocks_per_horizon=blocks_per_horizon)
-    hf = data_factor(data, blocks_per_horizon * horizon, method=method, horizon=horizon)
+    if statistic not in STATISTICS:
+        raise SubidError(f"statistic must be one of {STATISTICS}, got {statistic!r}")
+    if isinstance(data, HankelStatistic):
+        if data.depth % blocks_per_horizon:
+            raise DataError(f"{method} needs a statistic whose depth is a multiple of "
+                            f"{blocks_per_horizon}; this one has depth {data.depth}")
+        implied = data.depth // blocks_per_horizon
+        if horizon is not None and check_int(horizon, "horizon", minimum=2) != implied:
+            raise DataError(f"the statistic was built with depth {data.depth}, i.e. horizon "
+                            f"{implied} for {method}; got horizon={horizon}. Build the "
+                            f"statistic with depth {blocks_per_horizon * horizon}")
+        fixed, candidates, horizon = check_order_horizon(
+            order, implied, data, method=method, blocks_per_horizon=blocks_per_horizon)
+        need = min_samples(data.depth, data.n_inputs, data.n_outputs)
+        if data.n_samples < need:
+            raise TooFewSamplesError(f"{method}: the statistic holds {data.n_samples} samples; "
+                                     f"horizon {horizon} needs at least {need}")
+        hf = data.factor()
+    else:
+        data = check_data(data, method)
+        fixed, candidates, horizon = check_order_horizon(
+            order, horizon, data, method=method, blocks_per_horizon=blocks_per_horizon)
+        hf = data_factor(data, blocks_per_horizon * horizon, method=method, horizon=horizon,
+                         statistic=statistic)
     input_condition = check_excitation(hf, data.input_names, method=method)
     return Problem(method, data, fixed, candidates, horizon, hf, input_condition)
 

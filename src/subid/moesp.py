@@ -24,13 +24,14 @@ __all__ = ["moesp"]
 
 
 def moesp(data, order=None, horizon=None, *, feedthrough=True, estimate_x0=True,
-          bd_method="auto") -> StateSpace:
+          bd_method="auto", statistic="auto") -> StateSpace:
     """Identify a discrete-time model by PO-MOESP.
 
     Parameters
     ----------
-    data : IOData
-        Uniformly sampled input/output record.
+    data : IOData or HankelStatistic
+        Uniformly sampled input/output record, or its statistic (depth
+        ``2*horizon``; :class:`subid.HankelStatistic`).
     order : int, None, 'auto' or iterable of int
         Model order; ``None`` (or ``'auto'``) takes the largest gap of the
         singular values (``info['singular_values']``) among orders 1..10;
@@ -44,13 +45,15 @@ def moesp(data, order=None, horizon=None, *, feedthrough=True, estimate_x0=True,
         Estimate the initial state with B and D (``info['x0']``).
     bd_method : {'auto', 'simulation', 'projection'}
         As in :func:`subid.ls_subspace`.
+    statistic : {'auto', 'qr', 'gram'}
+        As in :func:`subid.ls_subspace`.
 
     Returns
     -------
     StateSpace
         Discrete-time model with ``dt = data.dt``.
     """
-    pb = prepare(data, order, horizon, method="moesp")
+    pb = prepare(data, order, horizon, method="moesp", statistic=statistic)
     data, f, hf = pb.data, pb.horizon, pb.factor
     ny, nu = data.n_outputs, data.n_inputs
     L = hf.retriangularize(hf.u_rows(f, 2 * f), hf.u_rows(0, f), hf.y_rows(0, f),

@@ -57,13 +57,14 @@ def _lstsq_rows(regressors: np.ndarray, targets: np.ndarray) -> np.ndarray:
                               check_finite=False)[0].T
 
 
-def n4sid(data, order=None, horizon=None, *, feedthrough=True) -> StateSpace:
+def n4sid(data, order=None, horizon=None, *, feedthrough=True, statistic="auto") -> StateSpace:
     """Identify a discrete-time model by N4SID (unit weights, state sequences).
 
     Parameters
     ----------
-    data : IOData
-        Uniformly sampled input/output record.
+    data : IOData or HankelStatistic
+        Uniformly sampled input/output record, or its statistic (depth
+        ``2*horizon``; :class:`subid.HankelStatistic`).
     order : int, None, 'auto' or iterable of int
         Model order; ``None`` (or ``'auto'``) takes the largest gap of the
         singular values of the oblique projection (``info['singular_values']``)
@@ -74,13 +75,15 @@ def n4sid(data, order=None, horizon=None, *, feedthrough=True) -> StateSpace:
         supports) otherwise.
     feedthrough : bool
         Estimate D (else D = 0 and the state regression omits it).
+    statistic : {'auto', 'qr', 'gram'}
+        As in :func:`subid.ls_subspace`.
 
     Returns
     -------
     StateSpace
         Discrete-time model with ``dt = data.dt``.
     """
-    pb = prepare(data, order, horizon, method="n4sid")
+    pb = prepare(data, order, horizon, method="n4sid", statistic=statistic)
     data, i, hf = pb.data, pb.horizon, pb.factor
     ny, nu = data.n_outputs, data.n_inputs
     L = hf.L

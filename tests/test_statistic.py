@@ -1,0 +1,115 @@
+"""HankelStatistic: exact, chunkable, mergeable; identification from it."""
+
+import numpy as np
+import pytest
+
+import subid
+from subid import errors, systems
+from subid._hankel import hankel_chunk
+from subid.statistic import HankelStatistic, lag_sums, lag_sums_uy
+
+
+def _direct_gram(u, y, depth):
+    H = hankel_chunk(u, y, depth, 0, u.shape[0] - depth + 1)
+    return H.T @ H / H.shape[0]
+
+
+@pytest.fixture(scope="module")
+def record():
+    r = np.random.default_rng(0)
+    return r.standard_normal((20_011, 2)), r.standard_normal((20_011, 3))
+
+
+@pytest.mark.parametrize("kind", ["qr", "gram"])
+def test_chunked_equals_direct(record, kind):
+    u, y = record
+    G = _direct_gram(u, y, 6)
+    stat = HankelStatistic(2, 3, 6, kind=kind)
+    r = np.random.default_rng(1)
+    k = 0
+    while k < u.shape[0]:                      # random chunk sizes, including tiny ones
+        n = int(r.choice([1, 2, 3, 7, 500, 9000]))
+        stat.update(u[k:k + n], y[k:k + n])
+        k += n
+    assert stat.n_samples == u.shape[0]
+    np.testing.assert_allclose(stat.gram(), G, rtol=1e-12, atol=1e-12)
+    L = stat.factor().L
+    np.testing.assert_allclose(L @ L.T, G, rtol=1e-10, atol=1e-12)
+    assert np.allclose(L, np.tril(L))
+
+
+@pytest.mark.parametrize("kind", ["qr", "gram"])
+def test_merge_tree_equals_sequential(record, kind):
+    u, y = record
+    cuts = [0, 3, 4000, 4002, 11_000, 20_011]   # includes partitions shorter than depth
+    parts = [HankelStatistic(2, 3, 6, kind=kind).update(u[a:b], y[a:b])
+             for a, b in zip(cuts, cuts[1:])]
+    left = parts[0].merge(parts[1]).merge(parts[2])
+    right = parts[3].merge(parts[4])
+    tree = left.merge(right)
+    np.testing.assert_allclose(tree.gram(), _direct_gram(u, y, 6), rtol=1e-12, atol=1e-12)
+
+
+def test_lag_sums_direct():
+    z = np.random.default_rng(2).standard_normal((50, 3))
+    out = lag_sums(z, 5)
+    for lag in range(5):
+        np.testing.assert_allclose(out[lag], z[:50 - lag].T @ z[lag:], rtol=1e-13)
+    np.testing.assert_allclose(lag_sums_uy(z[:, :1], z[:, 1:], 5), out, rtol=1e-13)
+
+
+@pytest.mark.parametrize("fn,kw", [
+    (subid.ls_subspace, {"bd_method": "projection"}),
+    (subid.ls_subspace, {"bd_method": "projection", "instruments": None}),
+    (subid.moesp, {"bd_method": "projection"}),
+    (subid.n4sid, {}),
+])
+@pytest.mark.parametrize("kind", ["qr", "gram"])
+def test_identification_from_statistic_equals_in_memory(fn, kw, kind):
+    true = systems.seed001_system()
+    data = systems.simulate_data(true, 6000, seed=3, process_snr_db=20, output_snr_db=20)
+    depth = 5 if kw.get("instruments", "past") is None else 10
+    stat = HankelStatistic(2, 2, depth, kind=kind)
+    for k in range(0, 6000, 1234):
+        stat.update(data.u[k:k + 1234], data.y[k:k + 1234])
+    from_stat = fn(stat, 3, **kw)
+    in_memory = fn(data, 3, horizon=5, statistic=kind, **kw)
+    for name in "ABCD":
+        np.testing.assert_allclose(getattr(from_stat, name), getattr(in_memory, name),
+                                   rtol=1e-10, atol=1e-10, err_msg=name)
+    assert from_stat.info["horizon"] == 5
+
+
+def test_gram_and_qr_agree_on_noisy_data():
+    true = systems.seed001_system()
+    data = systems.simulate_data(true, 5000, seed=4, output_snr_db=30)
+    for fn in (subid.moesp, subid.n4sid, subid.ls_subspace):
+        a = fn(data, 3, statistic="qr")
+        b = fn(data, 3, statistic="gram")
+        assert subid.markov_error(a, b) < 1e-9
+
+
+def test_noise_free_from_gram_statistic_exact():
+    true = systems.seed001_system()
+    data = systems.simulate_data(true, 3000, seed=5)
+    for fn in (subid.moesp, subid.n4sid, subid.ls_subspace):
+        assert subid.markov_error(fn(data, 3, statistic="gram"), true) < 1e-9
+
+
+def test_statistic_errors():
+    data = systems.simulate_data(systems.seed001_system(), 500, seed=0)
+    stat = HankelStatistic.from_data(data, 10)
+    with pytest.raises(errors.DataError, match="horizon 5"):
+        subid.moesp(stat, 3, horizon=4)
+    with pytest.raises(errors.SubidError, match="statistic only"):
+        subid.moesp(stat, 3, bd_method="simulation")
+    with pytest.raises(errors.DataError, match="multiple of 2"):
+        subid.n4sid(HankelStatistic.from_data(data, 9), 3)
+    with pytest.raises(errors.DataError, match="merged"):
+        stat.merge(HankelStatistic(2, 2, 8))
+    with pytest.raises(errors.DataError, match="3 inputs"):
+        HankelStatistic(2, 2, 10).update(np.zeros((5, 3)), np.zeros((5, 2)))
+    with pytest.raises(errors.TooFewSamplesError):
+        subid.moesp(HankelStatistic(2, 2, 10).update(np.ones((20, 2)), np.ones((20, 2))), 3)
+    with pytest.raises(errors.SubidError, match="statistic must be"):
+        subid.moesp(data, 3, statistic="fast")
