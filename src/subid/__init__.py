@@ -10,7 +10,7 @@ exceptions (all ``ValueError`` subclasses).
 
 from . import datasets, errors, plot, systems
 from .data import IOData
-from .io import read
+from .io import read, read_chunks
 from .ls_subspace import ls_subspace
 from .metrics import fit_percent, markov_error, pole_error
 from .model import StateSpace
@@ -18,11 +18,15 @@ from .moesp import moesp
 from .n4sid import n4sid
 from .recursive import RecursiveSubspace
 from .statistic import HankelStatistic
+from .stream import identify_file, identify_stream
 
 __all__ = [
     "IOData",
     "StateSpace",
     "read",
+    "read_chunks",
+    "identify_file",
+    "identify_stream",
     "ls_subspace",
     "moesp",
     "n4sid",

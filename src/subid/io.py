@@ -35,6 +35,7 @@ and, for text files, the line and column at fault.
 from __future__ import annotations
 
 import csv
+import itertools
 import logging
 import numbers
 import os
@@ -276,6 +277,8 @@ def _sniff(sample: list[str], ext: str) -> str | None:
 class _Table:
     """Layout of a text file: delimiter, header, column count, first data line."""
 
+    line_offset = 0                   # lines before ``text`` in the file (chunked reading)
+
     def __init__(self, shown, text, ext, delimiter):
         self.shown = shown
         self.text = text
@@ -425,7 +428,7 @@ class _Table:
         keep = [k for k, c in enumerate(contents) if c]
         if len(keep) != len(contents):
             contents = [contents[k] for k in keep]
-        return [k + start + 1 for k in keep], contents
+        return [k + start + 1 + self.line_offset for k in keep], contents
 
     def parse(self, cols: list[int]) -> np.ndarray:
         """Values of the columns ``cols``, shape (rows, len(cols))."""
@@ -550,9 +553,8 @@ def _tokens(spec, role: str, names) -> list:
     return out
 
 
-def _read_text(p, shown, ext, inputs, outputs, dt, time, delimiter) -> IOData:
-    text = _decode(_read_bytes(p, shown), shown)
-    table = _Table(shown, text, ext, delimiter)
+def _roles(table: "_Table", shown: str, inputs, outputs, time):
+    """Column indices of the inputs, outputs and time stamps, checked."""
     missing = [r for r, v in (("inputs", inputs), ("outputs", outputs)) if v is None]
     if missing:
         raise FileReadError(
@@ -575,6 +577,13 @@ def _read_text(p, shown, ext, inputs, outputs, dt, time, delimiter) -> IOData:
                 idx = min(both)
                 raise FileReadError(f"{shown}: {table.describe(idx)} is used both as "
                                     f"{roles[a][0]} and as {roles[b][0]}", path=shown, column=idx)
+    return in_cols, out_cols, t_cols
+
+
+def _read_text(p, shown, ext, inputs, outputs, dt, time, delimiter) -> IOData:
+    text = _decode(_read_bytes(p, shown), shown)
+    table = _Table(shown, text, ext, delimiter)
+    in_cols, out_cols, t_cols = _roles(table, shown, inputs, outputs, time)
     cols = in_cols + out_cols + t_cols
     values = table.parse(cols)
     table.check_finite(values, cols)
@@ -771,3 +780,188 @@ def _from_arrays(arrays: dict, shown, ext, inputs, outputs, dt, time) -> IOData:
     elif dt is None and "dt" in arrays and "dt" not in in_keys + out_keys:
         dt = _scalar(arrays["dt"], "dt", shown, ext)
     return _build(shown, u, y, dt, t, in_names, out_names)
+
+
+# ---------------------------------------------------------------------------
+# chunked reading (files larger than memory)
+# ---------------------------------------------------------------------------
+_HEAD_BYTES = 1 << 20            # bytes read to find the layout of a text file
+STREAM_EXTENSIONS = (".csv", ".tsv", ".txt", ".dat", ".npy", ".parquet")
+
+
+def read_chunks(path, inputs=None, outputs=None, *, dt=None, chunk_size=100_000,
+                delimiter=None):
+    """Read a uniformly sampled record piece by piece, with bounded memory.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        A text file (``.csv``, ``.tsv``, ``.txt``, ``.dat``; same layout
+        rules as :func:`read`), a 2-D ``.npy`` array (memory-mapped; rows =
+        samples, columns selected by 0-based index), or a ``.parquet`` file
+        (needs ``pyarrow``; columns selected by name).
+    inputs, outputs : str, int or sequence
+        Columns of the inputs and outputs, as in :func:`read` (required).
+    dt : float, optional
+        Sampling period (default 1). Streaming assumes uniform sampling:
+        the statistic of the subspace methods needs it.
+    chunk_size : int
+        Samples per piece.
+    delimiter : str, optional
+        As in :func:`read` (text files).
+
+    Yields
+    ------
+    IOData
+        Consecutive pieces; their time stamps continue from piece to piece.
+        Errors name the file, the (global) line and the column.
+
+    Examples
+    --------
+    >>> stat = subid.HankelStatistic(2, 1, depth=20)                  # doctest: +SKIP
+    >>> for piece in subid.read_chunks("huge.csv", "u1,u2", "y", dt=0.001):
+    ...     stat.update(piece.u, piece.y)
+    """
+    if isinstance(path, bytes):
+        path = os.fsdecode(path)
+    if not isinstance(path, (str, os.PathLike)):
+        raise DataError(f"path must be a file name (str or os.PathLike), got {type(path).__name__}")
+    shown = os.fspath(path)
+    p = Path(shown)
+    dt = 1.0 if dt is None else check_dt(dt)
+    if isinstance(chunk_size, bool) or not isinstance(chunk_size, numbers.Integral) \
+            or chunk_size < 1:
+        raise DataError(f"chunk_size must be a positive integer, got {chunk_size!r}")
+    ext = p.suffix.lower()
+    if ext not in STREAM_EXTENSIONS:
+        raise FileReadError(f"{shown}: files with extension {ext or '(none)'!r} cannot be read in "
+                            f"pieces; supported: {', '.join(STREAM_EXTENSIONS)} (read .npz and "
+                            ".mat files whole with subid.read)", path=shown)
+    _check_exists(p, shown)
+    if ext == ".npy":
+        pieces = _npy_pieces(p, shown, inputs, outputs, chunk_size)
+    elif ext == ".parquet":
+        pieces = _parquet_pieces(p, shown, inputs, outputs, chunk_size)
+    else:
+        pieces = _text_pieces(p, shown, ext, inputs, outputs, chunk_size, delimiter)
+    return _as_records(pieces, dt)
+
+
+def _as_records(pieces, dt):
+    start = 0
+    for u, y, in_names, out_names in pieces:
+        piece = IOData(u, y, dt=dt, input_names=in_names, output_names=out_names)
+        if start:
+            piece = piece._derive(piece.u, piece.y, dt=dt, t0=start * dt)
+        start += piece.n_samples
+        yield piece
+
+
+def _text_pieces(p, shown, ext, inputs, outputs, chunk_size, delimiter):
+    try:
+        with open(p, "rb") as fh:
+            head = fh.read(_HEAD_BYTES)
+    except OSError as exc:
+        raise FileReadError(f"{shown}: cannot read the file ({_reason(exc)})", path=shown) from None
+    if len(head) == _HEAD_BYTES and b"\n" in head:
+        head = head[: head.rindex(b"\n") + 1]
+    layout = _Table(shown, _decode(head, shown), ext, delimiter)
+    in_cols, out_cols, _ = _roles(layout, shown, inputs, outputs, None)
+    cols = in_cols + out_cols
+    in_names, out_names = layout.channel_names(in_cols), layout.channel_names(out_cols)
+    n_in = len(in_cols)
+    try:
+        fh = open(p, encoding="utf-8-sig", newline=None)
+    except OSError as exc:
+        raise FileReadError(f"{shown}: cannot read the file ({_reason(exc)})", path=shown) from None
+    with fh:
+        consumed = 0
+        for _ in range(layout.data_start):
+            fh.readline()
+            consumed += 1
+        while True:
+            try:
+                lines = list(itertools.islice(fh, chunk_size))
+            except UnicodeDecodeError as exc:
+                raise FileReadError(f"{shown}: the file is not UTF-8 text after line {consumed} "
+                                    f"({exc.reason})", path=shown, line=consumed) from None
+            if not lines:
+                return
+            piece = _Table.__new__(_Table)
+            piece.__dict__.update(layout.__dict__)
+            piece.text = "".join(lines)
+            piece.lines = piece.text.split("\n")
+            piece.data_start = 0
+            piece.line_offset = consumed
+            consumed += len(lines)
+            if not any(line.strip() and not line.lstrip().startswith("#") for line in lines):
+                continue
+            values = piece.parse(cols)
+            piece.check_finite(values, cols)
+            yield values[:, :n_in], values[:, n_in:], in_names, out_names
+
+
+def _column_indices(spec, role: str, n_columns: int, shown: str) -> list[int]:
+    tokens = [int(t) if isinstance(t, str) and _INT_RE.fullmatch(t) else t
+              for t in _tokens(spec, role, [])]
+    out = []
+    for tok in tokens:
+        if not isinstance(tok, numbers.Integral) or not 0 <= tok < n_columns:
+            raise FileReadError(f"{shown}: {role} must be 0-based column indices of the "
+                                f"{n_columns}-column array, got {tok!r}", path=shown)
+        out.append(int(tok))
+    return out
+
+
+def _npy_pieces(p, shown, inputs, outputs, chunk_size):
+    try:
+        arr = np.load(p, mmap_mode="r", allow_pickle=False)
+    except (OSError, ValueError) as exc:
+        raise FileReadError(f"{shown}: not a readable .npy array ({_reason(exc)})",
+                            path=shown) from None
+    if arr.ndim != 2 or arr.dtype.kind not in "iuf":
+        raise FileReadError(f"{shown}: expected a 2-D numeric array (samples x columns), got "
+                            f"shape {arr.shape} and dtype {arr.dtype}", path=shown)
+    if inputs is None or outputs is None:
+        raise FileReadError(f"{shown}: inputs and outputs (column indices) must be given",
+                            path=shown)
+    in_cols = _column_indices(inputs, "inputs", arr.shape[1], shown)
+    out_cols = _column_indices(outputs, "outputs", arr.shape[1], shown)
+    in_names = [f"col{k}" for k in in_cols]
+    out_names = [f"col{k}" for k in out_cols]
+    for a in range(0, arr.shape[0], chunk_size):
+        block = np.asarray(arr[a:a + chunk_size], dtype=np.float64)
+        yield block[:, in_cols], block[:, out_cols], in_names, out_names
+
+
+def _parquet_pieces(p, shown, inputs, outputs, chunk_size):
+    try:
+        import pyarrow.parquet as pq
+    except ImportError:
+        raise FileReadError(f"{shown}: reading Parquet files needs pyarrow "
+                            "(pip install pyarrow)", path=shown) from None
+    try:
+        pf = pq.ParquetFile(p)
+    except Exception as exc:           # pyarrow raises its own error classes
+        raise FileReadError(f"{shown}: not a readable Parquet file ({_reason(exc)})",
+                            path=shown) from None
+    names = list(pf.schema_arrow.names)
+    if inputs is None or outputs is None:
+        raise FileReadError(f"{shown}: inputs and outputs must be given; columns: "
+                            f"{_listing(names)}", path=shown)
+    chosen = []
+    for spec, role in ((inputs, "inputs"), (outputs, "outputs")):
+        cols = []
+        for tok in _tokens(spec, role, names):
+            name = names[tok] if isinstance(tok, numbers.Integral) and 0 <= tok < len(names) \
+                else tok
+            if name not in names:
+                raise FileReadError(f"{shown}: no column {tok!r} for the {role}; columns: "
+                                    f"{_listing(names)}", path=shown, column=tok)
+            cols.append(name)
+        chosen.append(cols)
+    in_names, out_names = chosen
+    for batch in pf.iter_batches(batch_size=chunk_size, columns=in_names + out_names):
+        block = np.column_stack([np.asarray(batch.column(k), dtype=np.float64)
+                                 for k in range(batch.num_columns)])
+        yield block[:, :len(in_names)], block[:, len(in_names):], in_names, out_names

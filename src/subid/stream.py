@@ -1,0 +1,96 @@
+"""Identification of records larger than memory, from their statistic.
+
+A record is read piece by piece (:func:`subid.read_chunks`, or any iterable
+of :class:`IOData` pieces), reduced to its :class:`HankelStatistic` and
+identified from the statistic only: memory stays bounded by one piece plus
+a matrix of ``(2 * horizon * (nu + ny))^2`` numbers, however long the record.
+"""
+
+from __future__ import annotations
+
+import logging
+
+from ._subspace import default_horizon
+from .data import IOData
+from .errors import DataError, SubidError
+from .io import read_chunks
+from .ls_subspace import ls_subspace
+from .moesp import moesp
+from .n4sid import n4sid
+from .statistic import HankelStatistic
+
+__all__ = ["identify_stream", "identify_file", "METHODS"]
+
+log = logging.getLogger(__name__)
+
+#: Batch methods that can identify from a statistic.
+METHODS = {"ls": ls_subspace, "ls_subspace": ls_subspace, "moesp": moesp, "n4sid": n4sid}
+
+
+def statistic_depth(method: str, order, horizon, n_outputs: int, instruments="past") -> tuple:
+    """``(horizon, depth)`` of the statistic ``method`` needs."""
+    if method not in METHODS:
+        raise SubidError(f"method must be one of {sorted(METHODS)}, got {method!r}")
+    blocks = 1 if METHODS[method] is ls_subspace and instruments is None else 2
+    if horizon is None:
+        fixed = order if isinstance(order, int) else None
+        horizon = default_horizon(fixed, n_outputs, 1, 10**18, blocks)
+    return horizon, blocks * horizon
+
+
+def identify_stream(pieces, method: str = "moesp", order=None, horizon=None, *,
+                    statistic: str = "gram", progress=None, **options):
+    """Identify a model from consecutive pieces of one record.
+
+    Parameters
+    ----------
+    pieces : iterable of IOData
+        Consecutive, uniformly sampled pieces (e.g. :func:`subid.read_chunks`).
+    method : {'moesp', 'n4sid', 'ls'}
+        Batch method applied to the statistic.
+    order, horizon
+        As for the method. The horizon must be known before the data are
+        read (default: 10 with an estimated order, as the batch methods).
+    statistic : {'gram', 'qr'}
+        Kind of :class:`HankelStatistic` (``'gram'``: fast lagged products;
+        ``'qr'``: accurate to rounding, ~25x slower).
+    progress : callable, optional
+        Wraps the iterator of pieces (e.g. ``tqdm.tqdm``).
+    **options
+        Passed to the method (``bd_method='projection'`` is implied).
+
+    Returns
+    -------
+    StateSpace
+        ``info['n_samples']`` is the length of the whole record.
+    """
+    iterator = iter(pieces if progress is None else progress(pieces))
+    first = next(iterator, None)
+    if first is None:
+        raise DataError("the record is empty: no pieces to identify from")
+    if not isinstance(first, IOData):
+        raise DataError(f"pieces must be IOData records, got {type(first).__name__}")
+    horizon, depth = statistic_depth(method, order, horizon, first.n_outputs,
+                                     options.get("instruments", "past"))
+    stat = HankelStatistic(first.n_inputs, first.n_outputs, depth, kind=statistic,
+                           dt=first.dt, input_names=first.input_names,
+                           output_names=first.output_names)
+    stat.update(first.u, first.y)
+    for piece in iterator:
+        stat.update(piece.u, piece.y)
+    log.info("identifying from the statistic of %d samples", stat.n_samples)
+    return METHODS[method](stat, order, horizon, **options)
+
+
+def identify_file(path, inputs, outputs, *, dt=None, method: str = "moesp", order=None,
+                  horizon=None, chunk_size: int = 100_000, statistic: str = "gram",
+                  delimiter=None, progress=None, **options):
+    """Identify a model from a file of any size, with bounded memory.
+
+    The file is read with :func:`subid.read_chunks` and reduced to its
+    statistic on the way; see :func:`identify_stream` for the parameters.
+    """
+    pieces = read_chunks(path, inputs, outputs, dt=dt, chunk_size=chunk_size,
+                         delimiter=delimiter)
+    return identify_stream(pieces, method, order, horizon, statistic=statistic,
+                           progress=progress, **options)
