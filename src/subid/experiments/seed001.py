@@ -43,31 +43,47 @@ METHODS = {
 }
 
 
+def one_run(job):
+    """One Monte-Carlo run: ``job = (run index r, seed, n_samples, snr_db)``.
+
+    Returns ``(markov errors, pole errors, models)``, dicts keyed by method.
+    """
+    r, seed, n_samples, snr_db = job
+    true = seed001_system()
+    data = simulate_data(true, n_samples, seed=seed + r, process_snr_db=snr_db,
+                         output_snr_db=snr_db)
+    errs, perrs, models = {}, {}, {}
+    for name, fn in METHODS.items():
+        model = fn(data)
+        errs[name] = markov_error(model, true, k=10)
+        perrs[name] = pole_error(model, true)
+        models[name] = model
+    return errs, perrs, models
+
+
 def run(runs: int = 1000, n_samples: int = 1000, snr_db: float = 25.0, seed: int = 0,
-        progress=None):
+        progress=None, client=None):
     """Run the Monte-Carlo study; returns (markov errors, pole errors, models).
 
     Parameters
     ----------
     runs : int
         Number of Monte-Carlo runs; run ``r`` draws input and noise from seed
-        ``seed + r``.
+        ``seed + r``, so the results do not depend on where a run executes.
     progress : callable, optional
         Wrapper for the run iterator (e.g. ``tqdm.tqdm``).
+    client : dask.distributed.Client, optional
+        Run the runs as Dask tasks (:func:`subid.distributed.fan_out`).
     """
-    true = seed001_system()
-    errs = {k: np.empty(runs) for k in METHODS}
-    perrs = {k: np.empty(runs) for k in METHODS}
-    models = {k: [] for k in METHODS}
-    iterator = range(runs) if progress is None else progress(range(runs))
-    for r in iterator:
-        data = simulate_data(true, n_samples, seed=seed + r, process_snr_db=snr_db,
-                             output_snr_db=snr_db)
-        for name, fn in METHODS.items():
-            model = fn(data)
-            errs[name][r] = markov_error(model, true, k=10)
-            perrs[name][r] = pole_error(model, true)
-            models[name].append(model)
+    jobs = [(r, seed, n_samples, snr_db) for r in range(runs)]
+    if client is not None:
+        from ..distributed import fan_out
+        results = fan_out(one_run, jobs, client=client, progress=progress)
+    else:
+        results = [one_run(job) for job in (jobs if progress is None else progress(jobs))]
+    errs = {k: np.array([res[0][k] for res in results]) for k in METHODS}
+    perrs = {k: np.array([res[1][k] for res in results]) for k in METHODS}
+    models = {k: [res[2][k] for res in results] for k in METHODS}
     return errs, perrs, models
 
 
@@ -94,17 +110,33 @@ def main(argv=None) -> int:
     parser.add_argument("--seed", type=int, default=0, help="seed of the first run (default 0)")
     parser.add_argument("--out", default="results/seed001", help="output folder")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    parser.add_argument("--scheduler", default=None,
+                        help="address of a Dask scheduler (tcp://host:8786) to run the runs on")
+    parser.add_argument("--workers", type=int, default=0,
+                        help="run on a local Dask cluster with this many worker processes")
     args = parser.parse_args(argv)
     os.makedirs(args.out, exist_ok=True)
     progress = None
     if not args.quiet and sys.stderr.isatty():
-        try:
-            from tqdm import tqdm
-            progress = lambda it: tqdm(it, desc="Monte Carlo", unit="run")  # noqa: E731
-        except ImportError:
-            progress = None
+        from tqdm import tqdm
+        progress = lambda it, **kw: tqdm(it, desc="Monte Carlo", unit="run", **kw)  # noqa: E731
+    client = cluster = None
+    if args.scheduler or args.workers:
+        from dask.distributed import Client, LocalCluster
+        if args.scheduler:
+            client = Client(args.scheduler)
+        else:
+            cluster = LocalCluster(n_workers=args.workers, threads_per_worker=1,
+                                   dashboard_address=None)
+            client = Client(cluster)
     t0 = time.perf_counter()
-    errs, perrs, models = run(args.runs, args.samples, args.snr, args.seed, progress)
+    try:
+        errs, perrs, models = run(args.runs, args.samples, args.snr, args.seed, progress, client)
+    finally:
+        if client is not None:
+            client.close()
+        if cluster is not None:
+            cluster.close()
     elapsed = time.perf_counter() - t0
     table = summary_table(errs, perrs)
     header = (f"Seed 001 Section IV: {args.runs} runs, N = {args.samples}, horizon 5, order 3, "
