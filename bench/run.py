@@ -1,10 +1,15 @@
-"""Benchmark of the batch methods (``make bench``; never part of ``make test``).
+"""Benchmarks (``make bench``; never part of ``make test``).
 
-Runs ``ls_subspace``, ``moesp`` and ``n4sid`` in one process on the same
-generated data (a random stable 4th-order system with 2 inputs and 2
-outputs, white input, noise-free, horizon 5) for growing record lengths,
-and writes a Markdown table of median wall time over repeats, the ratio to
-``n4sid`` in the same process, throughput and Markov error.
+1. Batch methods against the peers SIPPY (``sippy-unipi``, N4SID) and
+   ``nfoursid``, on the same generated data: a random stable 4th-order system
+   with 2 inputs and 2 outputs, white input, noise-free, horizon 5, for
+   N = 1e3 ... 1e7. Each (method, N) runs in a fresh subprocess, so that its
+   peak memory (growth of the maximum resident set size during the call,
+   after the data exist and the kernels are compiled) is its own. Wall time
+   is the median over repeats inside that process. A method is skipped at a
+   size where the previous size predicts (linear scaling) more than the time
+   or memory budget, and the table says so.
+2. Online identifiers: samples per second on one core.
 
 Run with one BLAS thread (the Makefile sets ``OPENBLAS_NUM_THREADS=1``):
 threaded BLAS made timings erratic by up to 50x on the shared 2-core machines.
@@ -13,26 +18,124 @@ threaded BLAS made timings erratic by up to 50x on the shared 2-core machines.
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import platform
 import statistics
+import subprocess
+import sys
 import time
 
 import numpy as np
 
-import subid
-from subid import systems
+TIME_BUDGET_S = 120.0
+MEMORY_BUDGET_MB = 8000.0
+ONLINE_SAMPLES = 200_000
+ORDER, HORIZON = 4, 5
 
-METHODS = {"ls_subspace": subid.ls_subspace, "moesp": subid.moesp, "n4sid": subid.n4sid}
+OURS = ["subid.ls_subspace", "subid.moesp", "subid.n4sid", "subid.moesp (statistic only)"]
+PEERS = ["SIPPY N4SID", "nfoursid"]
 
 
+# ---------------------------------------------------------------------------
+# one case, in its own process
+# ---------------------------------------------------------------------------
+def _make_data(n):
+    from subid import systems
+    true = systems.random_system(ORDER, 2, 2, seed=1)
+    return true, systems.simulate_data(true, n, seed=2)
+
+
+def _runner(method):
+    import subid
+    if method == "subid.ls_subspace":
+        return lambda d: subid.ls_subspace(d, ORDER, horizon=HORIZON)
+    if method == "subid.moesp":
+        return lambda d: subid.moesp(d, ORDER, horizon=HORIZON)
+    if method == "subid.n4sid":
+        return lambda d: subid.n4sid(d, ORDER, horizon=HORIZON)
+    if method == "subid.moesp (statistic only)":
+        return lambda d: subid.moesp(d, ORDER, horizon=HORIZON, bd_method="projection")
+    if method == "SIPPY N4SID":
+        from sippy_unipi import system_identification
+
+        def sippy(d):
+            sys_id = system_identification(d.y.T, d.u.T, "N4SID", SS_fixed_order=ORDER,
+                                           SS_f=HORIZON, SS_p=HORIZON, SS_D_required=True)
+            return subid.StateSpace(sys_id.A, sys_id.B, sys_id.C, sys_id.D, 1.0)
+        return sippy
+    if method == "nfoursid":
+        import pandas as pd
+        from nfoursid.nfoursid import NFourSID
+
+        def nfour(d):
+            df = pd.DataFrame(np.hstack([d.u, d.y]), columns=["u1", "u2", "y1", "y2"])
+            n4 = NFourSID(df, output_columns=["y1", "y2"], input_columns=["u1", "u2"],
+                          num_block_rows=HORIZON)
+            n4.subspace_identification()
+            ss, _ = n4.system_identification(rank=ORDER)
+            return subid.StateSpace(ss.a, ss.b, ss.c, ss.d, 1.0)
+        return nfour
+    raise ValueError(method)
+
+
+def run_case(method, n, repeats):
+    import resource
+    import subid
+    true, data = _make_data(n)
+    fn = _runner(method)
+    fn(_make_data(2000)[1])                       # imports and compiled kernels
+    base = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        model = fn(data)
+        times.append(time.perf_counter() - t0)
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    return {"seconds": statistics.median(times), "peak_mb": (peak - base) / 1024,
+            "markov_error": subid.markov_error(model, true), "repeats": repeats}
+
+
+def _case_in_subprocess(method, n, repeats):
+    cmd = [sys.executable, __file__, "--case", method, str(n), str(repeats)]
+    out = subprocess.run(cmd, capture_output=True, text=True,
+                         timeout=TIME_BUDGET_S * (repeats + 2) + 120)
+    if out.returncode != 0:
+        return {"error": (out.stderr.strip().splitlines() or ["failed"])[-1][:160]}
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+# ---------------------------------------------------------------------------
+# online identifiers (in this process)
+# ---------------------------------------------------------------------------
 def _median_time(fn, repeats):
     times = []
     for _ in range(repeats):
         t0 = time.perf_counter()
-        result = fn()
+        fn()
         times.append(time.perf_counter() - t0)
-    return statistics.median(times), result
+    return statistics.median(times)
+
+
+def bench_recursive():
+    """Samples per second of RecursiveSubspace (update only, model not requested)."""
+    import subid
+    from subid import systems
+    data = systems.simulate_data(systems.seed001_system(), ONLINE_SAMPLES, seed=3)
+    rows = []
+    for instruments in ("past", None):
+        subid.RecursiveSubspace(3, 2, 2, horizon=5, instruments=instruments).update(
+            data.u[:100], data.y[:100])                      # compile
+
+        def run():
+            rs = subid.RecursiveSubspace(3, 2, 2, horizon=5, instruments=instruments)
+            for k in range(0, ONLINE_SAMPLES, 1000):
+                rs.update(data.u[k:k + 1000], data.y[k:k + 1000])
+
+        seconds = _median_time(run, 3)
+        rows.append(f"| RecursiveSubspace, instruments={instruments!r} | seed 001 (n=3, 2x2), "
+                    f"horizon 5 | {ONLINE_SAMPLES / seconds:,.0f} |")
+    return rows
 
 
 def machine() -> str:
@@ -50,65 +153,88 @@ def machine() -> str:
             f"numpy {np.__version__}, OPENBLAS_NUM_THREADS={threads}")
 
 
-ONLINE_SAMPLES = 200_000
-
-
-def bench_recursive():
-    """Samples per second of RecursiveSubspace (update only, model not requested)."""
-    true = systems.seed001_system()
-    data = systems.simulate_data(true, ONLINE_SAMPLES, seed=3)
-    rows = []
-    for instruments in ("past", None):
-        subid.RecursiveSubspace(3, 2, 2, horizon=5, instruments=instruments).update(
-            data.u[:100], data.y[:100])                      # compile
-
-        def run():
-            rs = subid.RecursiveSubspace(3, 2, 2, horizon=5, instruments=instruments)
-            for k in range(0, ONLINE_SAMPLES, 1000):
-                rs.update(data.u[k:k + 1000], data.y[k:k + 1000])
-            return rs
-
-        seconds, _ = _median_time(run, 3)
-        rows.append(f"| RecursiveSubspace, instruments={instruments!r} | seed 001 (n=3, 2x2), "
-                    f"horizon 5 | {ONLINE_SAMPLES / seconds:,.0f} |")
-    return rows
+def _available(method):
+    module = {"SIPPY N4SID": "sippy_unipi", "nfoursid": "nfoursid"}.get(method)
+    if module is None:
+        return True
+    try:
+        __import__(module)
+        return True
+    except ImportError:
+        return False
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description="Benchmark subid's batch methods.")
-    parser.add_argument("--sizes", default="1000,10000,100000,1000000",
-                        help="comma-separated record lengths")
-    parser.add_argument("--horizon", type=int, default=5)
+    parser = argparse.ArgumentParser(description="Benchmark subid against SIPPY and nfoursid.")
+    parser.add_argument("--sizes", default="1000,10000,100000,1000000,10000000")
     parser.add_argument("--out", default="bench/results.md")
+    parser.add_argument("--case", nargs=3, metavar=("METHOD", "N", "REPEATS"),
+                        help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
-    true = systems.random_system(4, 2, 2, seed=1)
-    warm = systems.simulate_data(true, 500, seed=0)
-    for fn in METHODS.values():          # compile kernels before timing
-        fn(warm, 4, horizon=args.horizon)
+    if args.case:
+        method, n, repeats = args.case
+        print(json.dumps(run_case(method, int(n), int(repeats))))
+        return 0
+    sizes = [int(s) for s in args.sizes.split(",")]
+    methods = OURS + [p for p in PEERS if _available(p)]
+    missing = [p for p in PEERS if not _available(p)]
+    results, last = {}, {}
+    for n in sizes:
+        repeats = 5 if n <= 10_000 else 3 if n <= 100_000 else 1
+        for method in methods:
+            prev = last.get(method)
+            if prev and "error" not in prev:
+                scale = n / prev["n"]
+                if prev["seconds"] * scale > TIME_BUDGET_S:
+                    results[(method, n)] = {"skipped": f"predicted {prev['seconds'] * scale:.0f} s "
+                                                       f"> {TIME_BUDGET_S:.0f} s budget"}
+                    continue
+                if prev["peak_mb"] * scale > MEMORY_BUDGET_MB:
+                    results[(method, n)] = {"skipped": f"predicted {prev['peak_mb'] * scale:.0f} MB"
+                                                       f" > {MEMORY_BUDGET_MB:.0f} MB budget"}
+                    continue
+            elif prev and "error" in prev:
+                results[(method, n)] = {"skipped": "failed at a smaller size"}
+                continue
+            res = _case_in_subprocess(method, n, repeats)
+            res["n"] = n
+            results[(method, n)] = res
+            last[method] = res
+            print(f"N={n:,} {method}: {res}", flush=True)
     rows = []
-    for n in (int(s) for s in args.sizes.split(",")):
-        data = systems.simulate_data(true, n, seed=2)
-        repeats = 7 if n <= 10_000 else 3 if n <= 100_000 else 1
-        res = {}
-        for name, fn in METHODS.items():
-            seconds, model = _median_time(lambda: fn(data, 4, horizon=args.horizon), repeats)
-            res[name] = (seconds, subid.markov_error(model, true))
-        base = res["n4sid"][0]
-        for name, (seconds, err) in res.items():
-            rows.append(f"| {n:,} | {name} | {seconds * 1e3:.1f} | {seconds / base:.2f} | "
-                        f"{n / seconds / 1e6:.2f} | {err:.1e} | {repeats} |")
-        print(f"N={n:,} done", flush=True)
+    for n in sizes:
+        peers = {p: results.get((p, n), {}) for p in PEERS}
+        for method in methods:
+            r = results[(method, n)]
+            if "skipped" in r or "error" in r:
+                rows.append(f"| {n:,} | {method} | — | — | — | {r.get('skipped') or r['error']} |")
+                continue
+            ratios = []
+            if method in OURS:
+                for p, pr in peers.items():
+                    if "seconds" in pr:
+                        ratios.append(f"{pr['seconds'] / r['seconds']:.1f}x faster than {p}")
+            rows.append(f"| {n:,} | {method} | {r['seconds'] * 1e3:,.1f} | {r['peak_mb']:,.0f} | "
+                        f"{r['markov_error']:.1e} | {'; '.join(ratios)} |")
     online = bench_recursive()
-    print("online done", flush=True)
-    table = "\n".join([
-        f"Machine: {machine()}. System: random stable, order 4, 2 inputs, 2 outputs, "
-        f"noise-free white input; horizon {args.horizon}. Median of the repeats.",
+    text = "\n".join([
+        f"Machine: {machine()}.",
+        f"System: random stable, order {ORDER}, 2 inputs, 2 outputs, noise-free white input; "
+        f"horizon {HORIZON} (SIPPY: SS_f = SS_p = {HORIZON}; nfoursid: num_block_rows = "
+        f"{HORIZON}). Time: median over the repeats (5 up to 1e4 samples, 3 up to 1e5, 1 "
+        "above). Peak memory: growth of the resident set during the call. Budgets: "
+        f"{TIME_BUDGET_S:.0f} s and {MEMORY_BUDGET_MB:.0f} MB per call."
+        + (f" Not installed, not run: {', '.join(missing)}." if missing else ""),
         "",
-        "| N | method | median time (ms) | time / n4sid | Msamples/s | Markov error | repeats |",
-        "|---:|---|---:|---:|---:|---:|---:|",
+        "`moesp (statistic only)` identifies from the statistic alone (B and D by the "
+        "projected data equation); the other subid rows fit B, D and x0 to the raw output "
+        "samples, the default when the raw data are at hand.",
+        "",
+        "| N | method | time (ms) | peak memory (MB) | Markov error | vs peers |",
+        "|---:|---|---:|---:|---:|---|",
         *rows,
         "",
-        "Online identifiers, samples per second on one core (median of 3 runs over "
+        f"Online identifiers, samples per second on one core (median of 3 runs over "
         f"{ONLINE_SAMPLES:,} samples, chunks of 1000):",
         "",
         "| identifier | system | samples/s |",
@@ -116,8 +242,8 @@ def main(argv=None) -> int:
         *online])
     os.makedirs(os.path.dirname(args.out) or ".", exist_ok=True)
     with open(args.out, "w") as fh:
-        fh.write(table + "\n")
-    print(table)
+        fh.write(text + "\n")
+    print(text)
     return 0
 
 

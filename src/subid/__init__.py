@@ -9,6 +9,7 @@ exceptions (all ``ValueError`` subclasses).
 """
 
 from . import datasets, errors, plot, systems
+from .config import thread_limit
 from .data import IOData
 from .io import read, read_chunks
 from .ls_subspace import ls_subspace
@@ -24,6 +25,7 @@ __all__ = [
     "IOData",
     "StateSpace",
     "read",
+    "thread_limit",
     "read_chunks",
     "identify_file",
     "identify_stream",

@@ -1,0 +1,42 @@
+"""Run-time settings: the number of threads numerical kernels may use."""
+
+from __future__ import annotations
+
+import contextlib
+
+import numba
+from threadpoolctl import threadpool_limits
+
+from ._validation import check_int
+
+__all__ = ["thread_limit"]
+
+
+@contextlib.contextmanager
+def thread_limit(n_threads: int):
+    """Limit the threads of BLAS/LAPACK, OpenMP and numba inside a ``with`` block.
+
+    subid's own per-sample kernels are serial; the thread pools that matter
+    are BLAS's (QR, matrix products of the data statistic) and numba's.
+
+    Parameters
+    ----------
+    n_threads : int
+        At most this many threads (1 for reproducible timings on shared
+        machines; see the README's benchmark notes).
+
+    Examples
+    --------
+    >>> import subid
+    >>> with subid.thread_limit(1):
+    ...     model = subid.moesp(subid.systems.simulate_data(
+    ...         subid.systems.seed001_system(), 500, seed=0), 3)
+    """
+    n_threads = check_int(n_threads, "n_threads")
+    previous = numba.get_num_threads()
+    numba.set_num_threads(min(n_threads, numba.config.NUMBA_NUM_THREADS))
+    try:
+        with threadpool_limits(limits=n_threads):
+            yield
+    finally:
+        numba.set_num_threads(previous)
