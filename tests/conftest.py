@@ -32,3 +32,16 @@ def method(request):
 
 def rng(seed):
     return np.random.default_rng(seed)
+
+
+# Hypothesis budgets: a small one for `make test`, a long one for `make test-long`
+# (SUBID_HYPOTHESIS_PROFILE=long).
+import os  # noqa: E402
+
+from hypothesis import HealthCheck, settings  # noqa: E402
+
+settings.register_profile("default", max_examples=12, deadline=None, derandomize=True,
+                          suppress_health_check=[HealthCheck.too_slow])
+settings.register_profile("long", max_examples=300, deadline=None,
+                          suppress_health_check=[HealthCheck.too_slow])
+settings.load_profile(os.environ.get("SUBID_HYPOTHESIS_PROFILE", "default"))

@@ -19,7 +19,7 @@ from ._validation import check_int
 from .data import IOData
 from ._regression import fit_b_d_projection, fit_b_d_x0
 from .errors import (DataError, ExcitationWarning, NotExcitingError, OrderError, SubidError,
-                     TooFewSamplesError)
+                     TooFewSamplesError, UnstableModelWarning)
 from .model import StateSpace
 from .statistic import HankelStatistic
 
@@ -150,9 +150,14 @@ def check_excitation(hf: HankelFactor, input_names, *, method: str) -> float:
     """
     nu, depth = hf.n_inputs, hf.depth
     Lu = hf.L[: depth * nu, : depth * nu]
-    d = np.abs(np.diag(Lu))
-    scale = d.max(initial=0.0)
-    dependent = np.flatnonzero(d <= RANK_TOL * scale) if scale > 0 else np.arange(d.size)
+    # Each diagonal entry relative to the norm of its row is the sine of the
+    # angle between that Hankel row and the span of the earlier ones: the
+    # decision does not depend on how the input channels are scaled.
+    norms = np.linalg.norm(Lu, axis=1)
+    scale = norms.max(initial=0.0)
+    d = np.abs(np.diag(Lu)) / np.where(norms > 0, norms, 1.0)
+    dependent = np.flatnonzero((d <= RANK_TOL) | (norms == 0)) if scale > 0 \
+        else np.arange(d.size)
     if dependent.size:
         k = int(dependent[0])
         achieved = k // nu
@@ -171,7 +176,8 @@ def check_excitation(hf: HankelFactor, input_names, *, method: str) -> float:
             f"exciting of order {achieved} only. Use a richer input (white noise, PRBS, "
             "multisine) or a smaller horizon",
             required_order=depth, achieved_order=achieved)
-    rcond = scipy.linalg.lapack.dtrcon(np.ascontiguousarray(Lu.T), norm="1", uplo="U",
+    Ln = Lu / norms[:, None]                      # condition of the row-normalised factor
+    rcond = scipy.linalg.lapack.dtrcon(np.ascontiguousarray(Ln.T), norm="1", uplo="U",
                                        diag="N")[0]
     cond = 1.0 / rcond if rcond > 0 else math.inf
     if cond > CONDITION_WARN:
@@ -327,11 +333,48 @@ def choose_order(fixed, candidates, profile, source: str):
     return order_from_gap(profile, candidates), f"largest gap of the {source}"
 
 
+def output_growth(y: np.ndarray) -> float:
+    """Ratio of the RMS of the last tenth of ``y`` to that of its first tenth
+    (largest over the channels, after removing each channel's mean)."""
+    k = max(y.shape[0] // 10, 1)
+    y = y - y.mean(axis=0)
+    first = np.sqrt(np.mean(y[:k] ** 2, axis=0))
+    last = np.sqrt(np.mean(y[-k:] ** 2, axis=0))
+    return float(np.max(last / np.maximum(first, 1e-300)))
+
+
+def check_stability(A, data, method: str) -> dict:
+    """Warn when the model is unstable though the data show no growth.
+
+    An unstable mode with spectral radius r would multiply the output by
+    about ``r^(0.9 N)`` between the first and the last tenth of the record;
+    when that exceeds 10 but the measured output grew by less than 3x, the
+    data do not show the instability: an over-fitted order or noise, unless
+    the plant itself is unstable and was measured in closed loop.
+    """
+    radius = float(np.abs(np.linalg.eigvals(A)).max())
+    diag = {"spectral_radius": radius}
+    if radius < 1 or not isinstance(data, IOData):
+        return diag
+    growth = output_growth(data.y)
+    diag["output_growth"] = growth
+    predicted = 0.9 * data.n_samples * math.log10(radius)
+    if predicted > 1 and growth < 3:
+        warnings.warn(f"{method}: the identified model is unstable (spectral radius "
+                      f"{radius:.4g}) although the measured output does not grow over the "
+                      f"record (last/first RMS {growth:.2g}). Unless the plant is unstable and "
+                      "was measured in closed loop, the order may be too high or the data too "
+                      "noisy: try a lower order or compare the fits of several",
+                      UnstableModelWarning, stacklevel=4)
+    return diag
+
+
 def finish(problem: Problem, A, B, C, D, n: int, order_selection: str, **info) -> StateSpace:
     """The identified model with the diagnostics every method reports."""
     data = problem.data
     info = {"method": problem.method, "order": n, "order_selection": order_selection,
             "horizon": problem.horizon, "input_condition": problem.input_condition,
-            "n_samples": data.n_samples, **info}
+            "n_samples": data.n_samples, **info,
+            **check_stability(A, data, problem.method)}
     return StateSpace(A, B, C, D, data.dt, input_names=data.input_names,
                       output_names=data.output_names, info=info)

@@ -18,6 +18,7 @@ __all__ = [
     "DataFileNotFoundError",
     "ExcitationWarning",
     "CheckpointError",
+    "UnstableModelWarning",
 ]
 
 
@@ -94,3 +95,8 @@ class ExcitationWarning(UserWarning):
 class CheckpointError(FileReadError):
     """A checkpoint file is truncated, corrupted, of another kind or of an
     unsupported version."""
+
+
+class UnstableModelWarning(UserWarning):
+    """The identified model is unstable although the measured output shows no
+    growth: the order may be too high, or the data too short or too noisy."""

@@ -643,6 +643,7 @@ def _load_mat(p: Path, shown: str) -> dict:
             "save(..., '-v7') in MATLAB, or export the data to CSV", path=shown)
     import scipy.io
     import scipy.sparse
+    _check_mat_sizes(p, shown)
     try:
         raw = scipy.io.loadmat(str(p), squeeze_me=False, mat_dtype=False)
     except NotImplementedError:
@@ -665,6 +666,70 @@ def _load_mat(p: Path, shown: str) -> dict:
             val = val.reshape(-1)          # a 1-by-N row vector is one channel
         arrays[key] = val
     return arrays
+
+
+# A MAT-file may compress its arrays (v5 uses zlib): allow this ratio of
+# declared bytes to file bytes, plus a floor, before calling it corrupted.
+_MAT_EXPANSION = 1024
+_MAT_FLOOR_BYTES = 64 * 2**20
+
+
+_MAT4_ELEMENT_BYTES = {0: 8, 1: 4, 2: 4, 3: 2, 4: 2, 5: 1}
+
+
+def _check_mat4_headers(p: Path, shown: str, size: int) -> None:
+    """Walk the variable headers of a MATLAB v4 file (uncompressed): every
+    declared name and array must fit in the file. scipy would otherwise
+    allocate what a corrupted header declares."""
+    import struct
+    with open(p, "rb") as fh:
+        offset = 0
+        while offset < size:
+            fh.seek(offset)
+            head = fh.read(20)
+            if len(head) < 20:
+                raise FileReadError(f"{shown}: MATLAB v4 variable header truncated at byte "
+                                    f"{offset}", path=shown)
+            for endian in "<>":
+                mopt, mrows, ncols, imagf, namlen = struct.unpack(endian + "5i", head)
+                if 0 <= mopt < 5000 and mopt // 1000 in (0, 1):
+                    break
+            else:
+                raise FileReadError(f"{shown}: corrupted MATLAB v4 header at byte {offset}",
+                                    path=shown)
+            elsize = _MAT4_ELEMENT_BYTES.get((mopt // 10) % 10)
+            if elsize is None or min(mrows, ncols, namlen) < 0 or imagf not in (0, 1):
+                raise FileReadError(f"{shown}: corrupted MATLAB v4 header at byte {offset}",
+                                    path=shown)
+            step = 20 + namlen + mrows * ncols * elsize * (2 if imagf else 1)
+            if offset + step > size:
+                raise FileReadError(f"{shown}: a MATLAB v4 header at byte {offset} declares more "
+                                    f"data than the {size}-byte file holds; the file is "
+                                    "corrupted", path=shown)
+            offset += step
+
+
+def _check_mat_sizes(p: Path, shown: str) -> None:
+    """Reject a MAT-file whose headers declare arrays far larger than the file
+    (a corrupted header would otherwise make scipy allocate gigabytes)."""
+    import scipy.io
+    size = p.stat().st_size
+    with open(p, "rb") as fh:
+        first = fh.read(4)
+    if len(first) == 4 and 0 in first:          # scipy's test for a v4 file
+        _check_mat4_headers(p, shown, size)
+    try:
+        entries = scipy.io.whosmat(str(p))
+    except MemoryError:
+        raise FileReadError(f"{shown} is not a readable MATLAB .mat file (corrupted header)",
+                            path=shown) from None
+    except Exception as exc:  # scipy raises many kinds on malformed headers
+        raise FileReadError(f"{shown} is not a readable MATLAB .mat file (corrupted or not a "
+                            f"MAT-file): {_reason(exc)}", path=shown) from None
+    declared = sum(8 * float(np.prod([float(d) for d in shape])) for _, shape, _ in entries)
+    if declared > max(_MAT_EXPANSION * size, _MAT_FLOOR_BYTES):
+        raise FileReadError(f"{shown}: its headers declare {declared / 2**20:.0f} MB of arrays "
+                            f"in a {size}-byte file; the file is corrupted", path=shown)
 
 
 def _array_names(spec, role: str, keys, shown: str) -> list[str]:

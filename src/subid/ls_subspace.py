@@ -173,10 +173,11 @@ def ls_subspace(data, order=None, horizon=None, instruments="past", selector=Non
                              instruments=instruments, instrument_weighting=instrument_weighting,
                              selector=selector, seed=seed, power_iterations=power_iterations,
                              method=method)
-    B, D, x0, reg = estimate_b_d(core.A, core.C, core.gamma, core.L11, core.L_yu, data,
-                                 bd_method=bd_method, feedthrough=feedthrough,
-                                 estimate_x0=estimate_x0)
-    return finish(pb, core.A, B, core.C, D, core.order, core.order_selection,
+    B_q, D, x0_q, reg = estimate_b_d(core.A_q, core.C_q, core.basis, core.L11, core.L_yu, data,
+                                     bd_method=bd_method, feedthrough=feedthrough,
+                                     estimate_x0=estimate_x0)
+    A, B, C, x0 = core.to_selector_basis(B_q, x0_q)
+    return finish(pb, A, B, C, D, core.order, core.order_selection,
                   **core.info(instruments, instrument_weighting, power_iterations),
                   x0=x0, **reg)
 
@@ -211,11 +212,17 @@ def check_selector(selector, horizon: int, n_outputs: int, candidates, fixed_ord
 
 @dataclass(frozen=True)
 class LSCore:
-    """A, C and the observability matrix identified from a data statistic."""
+    """A and C identified from a data statistic.
 
-    A: np.ndarray
-    C: np.ndarray
-    gamma: np.ndarray
+    ``A_q, C_q, basis`` are in the orthonormal basis ``Q`` of the estimated
+    range(Γ) (well conditioned); ``T = Λ Q`` maps them to the basis fixed by
+    Λ: ``A = T A_q T^{-1}``, ``C = C_q T^{-1}``, ``B = T B_q``.
+    """
+
+    A_q: np.ndarray
+    C_q: np.ndarray
+    basis: np.ndarray
+    T: np.ndarray
     L11: np.ndarray
     L_yu: np.ndarray
     order: int
@@ -224,6 +231,13 @@ class LSCore:
     rank_profile: np.ndarray
     selector_condition: float
     shift_residual: float
+
+    def to_selector_basis(self, B_q, x0_q=None):
+        """``(A, B, C, x0)`` in the basis fixed by Λ from ``B_q`` (and ``x0_q``)."""
+        T = self.T
+        A = scipy.linalg.solve(T.T, (T @ self.A_q).T, check_finite=False).T   # T A_q T^{-1}
+        C = scipy.linalg.solve(T.T, self.C_q.T, check_finite=False).T          # C_q T^{-1}
+        return A, T @ B_q, C, (None if x0_q is None else T @ x0_q)
 
     def info(self, instruments, instrument_weighting, power_iterations) -> dict:
         return dict(instruments=instruments,
@@ -276,8 +290,13 @@ def gamma_from_factor(hf, f, fixed_order, candidates, *, instruments, instrument
         raise OrderError(f"{method}: the selector Λ is (nearly) blind to the observable "
                          f"subspace (condition of ΛΓ ~{selector_condition:.1e}); order {n} may be "
                          "too high for these data, or choose another selector / seed")
-    gamma = scipy.linalg.solve(LG.T, G.T, check_finite=False).T   # Γ̄ = G (ΛG)^{-1}
-    A, C, shift_residual = shift_invariance(gamma, ny)
-    return LSCore(A=A, C=C, gamma=gamma, L11=L[:a, :a], L_yu=L_yu, order=n,
+    # Γ̄ = G (ΛG)^{-1} = Q (ΛQ)^{-1} with Q an orthonormal basis of range(G). A and C
+    # are computed in the basis Q, where the shift-invariance problem is well
+    # conditioned whatever Λ, then mapped with T = ΛQ (least squares is covariant:
+    # the result is the same matrix in exact arithmetic, far more accurate when
+    # ΛΓ is ill-conditioned).
+    Q = scipy.linalg.qr(G, mode="economic", check_finite=False)[0]
+    A_q, C_q, shift_residual = shift_invariance(Q, ny)
+    return LSCore(A_q=A_q, C_q=C_q, basis=Q, T=Lam @ Q, L11=L[:a, :a], L_yu=L_yu, order=n,
                   order_selection=order_selection, selector=Lam, rank_profile=rank_profile,
                   selector_condition=selector_condition, shift_residual=shift_residual)

@@ -30,7 +30,13 @@ __all__ = ["n4sid"]
 
 
 def _row_space_projector(M: np.ndarray) -> np.ndarray:
-    """Orthogonal projector onto the row space of ``M`` (QR with pivoting)."""
+    """Orthogonal projector onto the row space of ``M`` (QR with pivoting).
+
+    Rows are normalised first: that leaves the row space unchanged and makes
+    the rank decision independent of how the channels are scaled.
+    """
+    norms = np.linalg.norm(M, axis=1)
+    M = M[norms > 0] / norms[norms > 0, None]
     Q, R, _ = scipy.linalg.qr(M.T, mode="economic", pivoting=True, check_finite=False)
     d = np.abs(np.diag(R))
     rank = int(np.sum(d > d.max(initial=0.0) * 1e-12 * max(M.shape))) if d.size else 0

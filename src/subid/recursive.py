@@ -316,15 +316,16 @@ class RecursiveSubspace:
                                  instrument_weighting=self.instrument_weighting,
                                  selector=self._selector, seed=self.seed,
                                  power_iterations=self.power_iterations, method=method)
-        B, D, reg = fit_b_d_projection(core.A, core.C, core.gamma, core.L11, core.L_yu,
-                                       feedthrough=self.feedthrough)
+        B_q, D, reg = fit_b_d_projection(core.A_q, core.C_q, core.basis, core.L11, core.L_yu,
+                                         feedthrough=self.feedthrough)
+        A, B, C, _ = core.to_selector_basis(B_q)
         info = {"method": method, "order": self.order, "horizon": self.horizon,
                 "n_samples": self.n_samples, "forgetting": self.forgetting,
                 "effective_samples": self._weight, "input_condition": input_condition,
                 "bd_method": "projection",
                 **core.info(self.instruments, self.instrument_weighting,
                             self.power_iterations), **reg}
-        self._model = StateSpace(core.A, B, core.C, D, self.dt, info=info)
+        self._model = StateSpace(A, B, C, D, self.dt, info=info)
         return self._model
 
     @property

@@ -1,0 +1,149 @@
+"""Fuzzing of every file reader and loader.
+
+Random and mutated bytes must give a ``subid.errors`` exception or a valid
+object: never another exception, a hang or unbounded memory. ``make test``
+runs a few examples per format; ``make test-long`` (SUBID_HYPOTHESIS_PROFILE=long)
+runs many more.
+"""
+
+import io
+import os
+import tracemalloc
+
+import numpy as np
+import pytest
+import scipy.io
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+import subid
+from subid import errors, systems
+
+LONG = os.environ.get("SUBID_HYPOTHESIS_PROFILE") == "long"
+EXAMPLES = 1500 if LONG else 25
+MEMORY_LIMIT = 256 * 2**20        # bytes of traced allocations per load
+
+
+def _valid_files():
+    data = systems.simulate_data(systems.seed001_system(), 40, seed=0)
+    table = np.hstack([data.u, data.y])
+    files = {}
+    buf = io.StringIO()
+    np.savetxt(buf, table, delimiter=",", header="u1,u2,y1,y2", comments="")
+    files[".csv"] = buf.getvalue().encode()
+    buf = io.StringIO()
+    np.savetxt(buf, table, delimiter="\t")
+    files[".dat"] = buf.getvalue().encode()
+    buf = io.BytesIO()
+    np.savez(buf, u=data.u, y=data.y, dt=np.array(0.1))
+    files[".npz"] = buf.getvalue()
+    buf = io.BytesIO()
+    scipy.io.savemat(buf, {"u": data.u, "y": data.y})
+    files[".mat"] = buf.getvalue()
+    files[".json"] = __import__("json").dumps(systems.seed001_system().to_dict()).encode()
+    return files
+
+
+VALID = _valid_files()
+ARGS = {".csv": ("u1,u2", "y1,y2"), ".dat": ([0, 1], [2, 3]), ".npz": (None, None),
+        ".mat": (None, None)}
+
+
+def _mutate(raw: bytes, edits) -> bytes:
+    data = bytearray(raw)
+    for kind, pos, value in edits:
+        if not data:
+            data = bytearray(bytes([value]))
+            continue
+        pos %= len(data)
+        if kind == 0:
+            data[pos] = value
+        elif kind == 1:
+            data.insert(pos, value)
+        elif kind == 2:
+            del data[pos]
+        else:
+            data = data[:pos]
+    return bytes(data)
+
+
+edits = st.lists(st.tuples(st.integers(0, 3), st.integers(0, 10**9), st.integers(0, 255)),
+                 min_size=1, max_size=8)
+
+
+def _load(path, ext):
+    tracemalloc.start()
+    try:
+        if ext == ".json":
+            return subid.StateSpace.load(path)
+        if ext == ".ckpt.npz":
+            return subid.RecursiveSubspace.load(path)
+        return subid.read(path, *ARGS[ext])
+    except errors.SubidError:
+        return None
+    finally:
+        peak = tracemalloc.get_traced_memory()[1]
+        tracemalloc.stop()
+        assert peak < MEMORY_LIMIT, f"loading used {peak / 2**20:.0f} MB"
+
+
+@pytest.mark.parametrize("ext", sorted(VALID))
+@settings(max_examples=EXAMPLES, deadline=5000)
+@given(changes=edits)
+def test_mutated_files(tmp_path_factory, ext, changes):
+    path = tmp_path_factory.mktemp("fuzz") / f"file{ext}"
+    path.write_bytes(_mutate(VALID[ext], changes))
+    _load(path, ext)
+
+
+@pytest.mark.parametrize("ext", sorted(VALID))
+@settings(max_examples=EXAMPLES, deadline=5000)
+@given(raw=st.binary(max_size=2000))
+def test_random_bytes(tmp_path_factory, ext, raw):
+    path = tmp_path_factory.mktemp("fuzz") / f"file{ext}"
+    path.write_bytes(raw)
+    _load(path, ext)
+
+
+def _checkpoint_bytes():
+    data = systems.simulate_data(systems.seed001_system(), 200, seed=0)
+    rs = subid.RecursiveSubspace(3, 2, 2).update(data.u, data.y)
+    buf_path = os.path.join(os.environ.get("TMPDIR", "/tmp"), f"subid-fuzz-{os.getpid()}.npz")
+    rs.save(buf_path)
+    with open(buf_path, "rb") as fh:
+        raw = fh.read()
+    os.unlink(buf_path)
+    return raw
+
+
+CHECKPOINT = _checkpoint_bytes()
+
+
+@settings(max_examples=EXAMPLES, deadline=5000)
+@given(changes=edits)
+def test_mutated_checkpoints(tmp_path_factory, changes):
+    path = tmp_path_factory.mktemp("fuzz") / "state.npz"
+    path.write_bytes(_mutate(CHECKPOINT, changes))
+    _load(path, ".ckpt.npz")
+
+
+# -- regressions found by the fuzzers ---------------------------------------
+def test_mat_first_byte_zeroed_is_rejected_without_allocating(tmp_path):
+    """Found by test_mutated_files[.mat]: a zero first byte made scipy read a
+    v5 file as MATLAB v4 and allocate 1.7 GB for a garbage header."""
+    path = tmp_path / "bad.mat"
+    path.write_bytes(_mutate(VALID[".mat"], [(0, 0, 0)]))
+    tracemalloc.start()
+    with pytest.raises(errors.FileReadError, match="corrupted"):
+        subid.read(path)
+    peak = tracemalloc.get_traced_memory()[1]
+    tracemalloc.stop()
+    assert peak < 16 * 2**20
+
+
+def test_genuine_mat4_file_still_reads(tmp_path):
+    path = tmp_path / "v4.mat"
+    u, y = np.arange(10.0)[:, None], np.arange(10.0)[:, None] * 2
+    scipy.io.savemat(path, {"u": u, "y": y}, format="4")
+    data = subid.read(path)
+    np.testing.assert_array_equal(data.y[:, 0], 2 * np.arange(10.0))
