@@ -147,3 +147,41 @@ def test_genuine_mat4_file_still_reads(tmp_path):
     scipy.io.savemat(path, {"u": u, "y": y}, format="4")
     data = subid.read(path)
     np.testing.assert_array_equal(data.y[:, 0], 2 * np.arange(10.0))
+
+
+def test_mat_element_declaring_more_than_the_file_is_rejected(tmp_path):
+    """Found by the long fuzz run: a truncated v5 file whose next element tag
+    was corrupted made scipy allocate 256 MB before failing."""
+    path = tmp_path / "bad.mat"
+    path.write_bytes(_mutate(VALID[".mat"], [(3, 500000000, 0), (0, 19713303, 16)]))
+    tracemalloc.start()
+    with pytest.raises(errors.FileReadError, match="corrupted"):
+        subid.read(path)
+    peak = tracemalloc.get_traced_memory()[1]
+    tracemalloc.stop()
+    assert peak < 16 * 2**20
+
+
+def test_checkpoint_with_garbled_npy_header_is_a_checkpoint_error(tmp_path):
+    """Found by the long fuzz run: numpy's header parser raised
+    tokenize.TokenError on a mutated checkpoint."""
+    path = tmp_path / "state.npz"
+    path.write_bytes(_mutate(CHECKPOINT, [(0, 63, 1)]))
+    with pytest.raises(errors.CheckpointError):
+        subid.RecursiveSubspace.load(path)
+
+
+def test_npz_member_declaring_more_than_it_holds_is_rejected(tmp_path):
+    """A well-formed .npy header whose shape claims more data than the member
+    holds (numpy would allocate the claim before reading)."""
+    raw = io.BytesIO()
+    np.savez(raw, u=np.zeros(10), y=np.zeros(10))
+    data = raw.getvalue().replace(b"'shape': (10,)", b"'shape': (99,)", 1)
+    assert data != raw.getvalue()
+    path = tmp_path / "huge.npz"
+    path.write_bytes(data)
+    tracemalloc.start()
+    with pytest.raises(errors.FileReadError, match="declares 792 bytes"):
+        subid.read(path)
+    assert tracemalloc.get_traced_memory()[1] < 16 * 2**20
+    tracemalloc.stop()

@@ -123,14 +123,26 @@ def test_monte_carlo_25db(paper_system):
 
 
 def test_power_iterations_approach_svd_subspace(paper_system):
-    """The SVD-free refinement converges to the PO-MOESP subspace."""
+    """The SVD-free refinement converges to the dominant left singular subspace
+    of the weighted instrument correlation W = L32, the subspace an SVD gives."""
+    from subid._subspace import prepare
     data = systems.simulate_data(paper_system, 1000, seed=11, process_snr_db=20,
                                  output_snr_db=20)
-    mo = subid.moesp(data, 3)
-    errs = [subid.markov_error(subid.ls_subspace(data, 3, power_iterations=k), mo)
-            for k in (0, 1, 3, 8)]
-    assert errs[-1] < 1e-5
-    assert errs[-1] < errs[0]
+    f = 5
+    pb = prepare(data, 3, f, method="test", normalize_outputs=False)
+    hf = pb.factor
+    L = hf.retriangularize(hf.u_rows(f, 2 * f), hf.u_rows(0, f), hf.y_rows(0, f),
+                           hf.y_rows(f, 2 * f))
+    a, b = 2 * f, 4 * f
+    svd_range = scipy.linalg.svd(L[a + b:, a:a + b])[0][:, :3]
+    from subid.ls_subspace import gamma_from_factor
+    angles = []
+    for k in (0, 1, 3, 8):
+        core = gamma_from_factor(hf, f, 3, [3], instruments="past", instrument_weighting=True,
+                                 selector=None, seed=0, power_iterations=k, method="test")
+        angles.append(scipy.linalg.subspace_angles(core.basis, svd_range).max())
+    assert angles[-1] < 1e-6
+    assert angles[-1] < angles[1] < angles[0]
 
 
 def test_hankel_factor_matches_direct_qr():
@@ -216,20 +228,21 @@ def test_unstable_plant(fn):
 def test_b_d_falls_back_to_projection_when_simulation_overflows(paper_system, paper_data):
     """An identified A with spectral radius ~3 overflows when simulated over
     1000 samples; 'auto' then solves the projected data equation."""
-    from subid._subspace import estimate_b_d
+    from subid._subspace import estimate_b_d, prepare
     f = 5
+    pb = prepare(paper_data, 3, f, method="test", blocks_per_horizon=1)
     A = 3.0 * paper_system.A / np.abs(np.linalg.eigvals(paper_system.A)).max()
     C = paper_system.C
     gamma = np.vstack([C @ np.linalg.matrix_power(A, k) for k in range(f)])
-    hf = hankel_factor(paper_data.u, paper_data.y, f)
+    hf = pb.factor
     L = hf.retriangularize(hf.u_rows(0, f), hf.y_rows(0, f))
     a = 2 * f
-    B, D, x0, diag = estimate_b_d(A, C, gamma, L[:a, :a], L[a:, :a], paper_data,
+    B, D, x0, diag = estimate_b_d(A, C, gamma, L[:a, :a], L[a:, :a], pb,
                                   bd_method="auto", feedthrough=True, estimate_x0=True)
     assert diag["bd_method"] == "projection" and x0 is None
     assert np.isfinite(B).all() and np.isfinite(D).all()
     with pytest.raises(subid.errors.SubidError, match="bd_method='projection'"):
-        estimate_b_d(A, C, gamma, L[:a, :a], L[a:, :a], paper_data, bd_method="simulation",
+        estimate_b_d(A, C, gamma, L[:a, :a], L[a:, :a], pb, bd_method="simulation",
                      feedthrough=True, estimate_x0=True)
 
 

@@ -13,10 +13,10 @@ from __future__ import annotations
 import json
 import os
 import tempfile
-import zipfile
 
 import numpy as np
 
+from ._npz import NpzError, load_npz
 from .errors import CheckpointError, DataFileNotFoundError
 
 _HEADER = "__header__"
@@ -74,9 +74,8 @@ def load_state(path, kind: str, version: int):
     if not os.path.exists(path):
         raise DataFileNotFoundError(f"checkpoint {path} does not exist", path=path)
     try:
-        with np.load(path, allow_pickle=False) as npz:
-            arrays = {name: npz[name] for name in npz.files}
-    except (OSError, ValueError, zipfile.BadZipFile, EOFError, KeyError) as exc:
+        arrays = load_npz(path)
+    except NpzError as exc:
         raise CheckpointError(f"checkpoint {path} is truncated or corrupted ({exc}); "
                               "use an earlier checkpoint", path=path) from None
     if _HEADER not in arrays:

@@ -228,21 +228,27 @@ def shift_invariance(gamma: np.ndarray, n_outputs: int):
 BD_METHODS = ("auto", "simulation", "projection")
 
 
-def estimate_b_d(A, C, gamma, L11, L_yu, data: IOData, *, bd_method: str, feedthrough: bool,
-                 estimate_x0: bool):
-    """B, D (and x0) given A, C: by output regression or by projection.
+def estimate_b_d(A, C_n, gamma, L11, L_yu, problem: "Problem", *, bd_method: str,
+                 feedthrough: bool, estimate_x0: bool):
+    """B, D (and x0) given A and C: by output regression or by projection.
 
-    ``'simulation'`` fits B, D and x0 to the raw output samples through the
-    model (most accurate; it simulates the model over the whole record, which
-    overflows for a clearly unstable A). ``'projection'`` solves the SVD-free
-    projected data equation on the statistic (:func:`fit_b_d_projection`;
-    no x0). ``'auto'`` uses simulation, and projection when simulating
-    overflows or leaves the regression numerically singular.
+    ``C_n``, ``gamma``, ``L11`` and ``L_yu`` are in the units of the
+    normalised channels of ``problem``; B and D come back in the user's
+    units. ``'simulation'`` fits B, D and x0 to the raw output samples
+    through the model (most accurate; it simulates the model over the whole
+    record, which overflows for a clearly unstable A). ``'projection'``
+    solves the SVD-free projected data equation on the statistic
+    (:func:`fit_b_d_projection`; no x0). ``'auto'`` uses simulation, and
+    projection when simulating overflows or leaves the regression
+    numerically singular, or when the data are a :class:`HankelStatistic`
+    (no raw samples).
 
     Returns
     -------
     B, D, x0 (None when not estimated), diagnostics dict (with ``bd_method``)
     """
+    data = problem.data
+    C = C_n * problem.output_scale[:, None]
     if bd_method not in BD_METHODS:
         raise SubidError(f"bd_method must be one of {BD_METHODS}, got {bd_method!r}")
     radius = float(np.abs(np.linalg.eigvals(A)).max())
@@ -265,7 +271,8 @@ def estimate_b_d(A, C, gamma, L11, L_yu, data: IOData, *, bd_method: str, feedth
             raise SubidError(f"the identified A has spectral radius {radius:.4g}: simulating it "
                              f"over {data.n_samples} samples overflows or leaves the regression "
                              "singular; use bd_method='projection' (or 'auto')")
-    B, D, proj = fit_b_d_projection(A, C, gamma, L11, L_yu, feedthrough=feedthrough)
+    B_n, D_n, proj = fit_b_d_projection(A, C_n, gamma, L11, L_yu, feedthrough=feedthrough)
+    B, _, D = problem.unscale(B_n, C_n, D_n)
     if diag:
         proj["simulation_regression_condition"] = diag["regression_condition"]
     proj.update(bd_method="projection", spectral_radius=radius)
@@ -283,13 +290,42 @@ class Problem:
     horizon: int
     factor: HankelFactor
     input_condition: float
+    input_scale: np.ndarray
+    output_scale: np.ndarray
+
+    def unscale(self, B_n, C_n, D_n):
+        """B, C, D in the user's units from those of the normalised channels."""
+        su, sy = self.input_scale, self.output_scale
+        return B_n / su, C_n * sy[:, None], D_n * sy[:, None] / su
+
+
+def normalize_channels(hf: HankelFactor, outputs: bool):
+    """The factor of the data with every channel divided by its RMS.
+
+    Row ``r`` of ``L`` has norm ``sqrt(mean of the square of Hankel row r)``;
+    the first block row of each signal gives the channel RMS. Scaling rows of
+    ``H`` scales rows of ``L`` (``S H = (S L) Q^T``, still triangular), so this
+    costs nothing and makes the rank decisions of the methods independent of
+    the units of the channels. Outputs are left alone when ``outputs`` is
+    false (seed 001's selector Λ acts on the outputs in the user's units).
+    """
+    nu, ny, s = hf.n_inputs, hf.n_outputs, hf.depth
+    norms = np.linalg.norm(hf.L, axis=1)
+    su = norms[:nu].copy()
+    sy = norms[s * nu:s * nu + ny].copy() if outputs else np.ones(ny)
+    su[su == 0] = 1.0
+    sy[sy == 0] = 1.0
+    row_scale = np.concatenate([np.tile(su, s), np.tile(sy, s)])
+    scaled = HankelFactor(L=hf.L / row_scale[:, None], depth=s, n_inputs=nu, n_outputs=ny,
+                          n_columns=hf.n_columns)
+    return scaled, su, sy
 
 
 STATISTICS = ("auto", "qr", "gram")
 
 
 def prepare(data, order, horizon, *, method: str, blocks_per_horizon: int = 2,
-            statistic: str = "auto") -> Problem:
+            statistic: str = "auto", normalize_outputs: bool = True) -> Problem:
     """Validate the arguments, build the Hankel factor and check excitation.
 
     ``data`` is an :class:`IOData` record or a :class:`HankelStatistic`
@@ -323,7 +359,8 @@ def prepare(data, order, horizon, *, method: str, blocks_per_horizon: int = 2,
         hf = data_factor(data, blocks_per_horizon * horizon, method=method, horizon=horizon,
                          statistic=statistic)
     input_condition = check_excitation(hf, data.input_names, method=method)
-    return Problem(method, data, fixed, candidates, horizon, hf, input_condition)
+    hf, su, sy = normalize_channels(hf, outputs=normalize_outputs)
+    return Problem(method, data, fixed, candidates, horizon, hf, input_condition, su, sy)
 
 
 def choose_order(fixed, candidates, profile, source: str):

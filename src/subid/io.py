@@ -45,6 +45,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ._npz import NpzError, load_npz
 from ._validation import check_dt
 from .data import IOData
 from .errors import DataError, DataFileNotFoundError, FileReadError
@@ -619,16 +620,13 @@ def _load_npz(p: Path, shown: str) -> dict:
         raise FileReadError(f"{shown} is not a .npz archive (it is not a ZIP file); write it "
                             "with numpy.savez(path, u=..., y=...)", path=shown)
     try:
-        with np.load(p, allow_pickle=False) as npz:
-            return {key: npz[key] for key in npz.files}
-    except MemoryError:
-        raise
-    except Exception as exc:  # BadZipFile, zlib.error, ValueError, OSError, EOFError, ...
-        if "allow_pickle" in str(exc):
+        return load_npz(p)
+    except NpzError as exc:
+        if "pickled" in str(exc):
             raise FileReadError(f"{shown} holds object (pickled) arrays, which subid does not "
                                 "load for safety; store plain numeric arrays", path=shown) from None
-        raise FileReadError(f"{shown} is not a readable .npz archive (corrupted?): "
-                            f"{_reason(exc)}", path=shown) from None
+        raise FileReadError(f"{shown} is not a readable .npz archive (corrupted?): {exc}",
+                            path=shown) from None
 
 
 def _load_mat(p: Path, shown: str) -> dict:
@@ -709,6 +707,52 @@ def _check_mat4_headers(p: Path, shown: str, size: int) -> None:
             offset += step
 
 
+def _check_mat5_elements(p: Path, shown: str, size: int) -> None:
+    """Walk the top-level data elements of a MATLAB v5 file: each declared
+    element must fit in the file, and a compressed element's inner header
+    must fit in what it decompresses to (scipy would otherwise allocate what
+    a corrupted tag declares)."""
+    import struct
+    import zlib
+    with open(p, "rb") as fh:
+        head = fh.read(128)
+        if len(head) < 128:
+            raise FileReadError(f"{shown}: MATLAB file header truncated", path=shown)
+        endian = "<" if head[126:128] == b"IM" else ">"
+        offset = 128
+        while offset < size:
+            fh.seek(offset)
+            tag = fh.read(8)
+            if len(tag) < 8:
+                raise FileReadError(f"{shown}: data element truncated at byte {offset}",
+                                    path=shown)
+            dtype, nbytes = struct.unpack(endian + "2I", tag)
+            if dtype >> 16:                              # small data element: 8 bytes in all
+                offset += 8
+                continue
+            end = offset + 8 + nbytes
+            if end > size:
+                raise FileReadError(f"{shown}: a data element at byte {offset} declares {nbytes} "
+                                    f"bytes but the file has {size}; the file is corrupted",
+                                    path=shown)
+            if dtype == 15:                              # miCOMPRESSED
+                inflater = zlib.decompressobj()
+                try:
+                    inner = inflater.decompress(fh.read(nbytes), _MAT_EXPANSION * nbytes + 8)
+                except zlib.error as exc:
+                    raise FileReadError(f"{shown}: corrupted compressed data at byte {offset} "
+                                        f"({exc})", path=shown) from None
+                if len(inner) >= 8:
+                    inner_type, inner_bytes = struct.unpack(endian + "2I", inner[:8])
+                    if not inner_type >> 16 and inner_bytes > _MAT_EXPANSION * nbytes:
+                        raise FileReadError(f"{shown}: a compressed element at byte {offset} "
+                                            f"declares {inner_bytes} bytes from {nbytes}; the "
+                                            "file is corrupted", path=shown)
+                offset = end
+            else:
+                offset = end + (-(nbytes) % 8)           # uncompressed elements are padded
+
+
 def _check_mat_sizes(p: Path, shown: str) -> None:
     """Reject a MAT-file whose headers declare arrays far larger than the file
     (a corrupted header would otherwise make scipy allocate gigabytes)."""
@@ -718,6 +762,8 @@ def _check_mat_sizes(p: Path, shown: str) -> None:
         first = fh.read(4)
     if len(first) == 4 and 0 in first:          # scipy's test for a v4 file
         _check_mat4_headers(p, shown, size)
+    else:
+        _check_mat5_elements(p, shown, size)
     try:
         entries = scipy.io.whosmat(str(p))
     except MemoryError:

@@ -165,15 +165,18 @@ def ls_subspace(data, order=None, horizon=None, instruments="past", selector=Non
     """
     method = "ls_subspace"
     power_iterations = check_options(instruments, power_iterations)
+    # outputs keep the user's units: Λ acts on them (the basis it fixes must not
+    # depend on a record's output scale); inputs are normalised internally
     pb = prepare(data, order, horizon, method=method,
-                 blocks_per_horizon=2 if instruments == "past" else 1, statistic=statistic)
+                 blocks_per_horizon=2 if instruments == "past" else 1, statistic=statistic,
+                 normalize_outputs=False)
     data = pb.data
     selector = check_selector(selector, pb.horizon, data.n_outputs, pb.candidates, pb.order)
     core = gamma_from_factor(pb.factor, pb.horizon, pb.order, pb.candidates,
                              instruments=instruments, instrument_weighting=instrument_weighting,
                              selector=selector, seed=seed, power_iterations=power_iterations,
                              method=method)
-    B_q, D, x0_q, reg = estimate_b_d(core.A_q, core.C_q, core.basis, core.L11, core.L_yu, data,
+    B_q, D, x0_q, reg = estimate_b_d(core.A_q, core.C_q, core.basis, core.L11, core.L_yu, pb,
                                      bd_method=bd_method, feedthrough=feedthrough,
                                      estimate_x0=estimate_x0)
     A, B, C, x0 = core.to_selector_basis(B_q, x0_q)

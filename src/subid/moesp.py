@@ -64,8 +64,9 @@ def moesp(data, order=None, horizon=None, *, feedthrough=True, estimate_x0=True,
     n, order_selection = choose_order(pb.order, pb.candidates, s, "singular values")
     gamma = U[:, :n] * np.sqrt(s[:n])
     A, C, shift_residual = shift_invariance(gamma, ny)
-    B, D, x0, reg = estimate_b_d(A, C, gamma, L[:a, :a], L[a + b:, :a], data,
+    B, D, x0, reg = estimate_b_d(A, C, gamma, L[:a, :a], L[a + b:, :a], pb,
                                  bd_method=bd_method, feedthrough=feedthrough,
                                  estimate_x0=estimate_x0)
+    C = C * pb.output_scale[:, None]
     return finish(pb, A, B, C, D, n, order_selection, singular_values=s,
                   shift_residual=shift_residual, x0=x0, **reg)

@@ -119,6 +119,7 @@ def n4sid(data, order=None, horizon=None, *, feedthrough=True, statistic="auto")
         C, D = _lstsq_rows(x_i, y_ii), np.zeros((ny, nu))
     lhs = np.vstack([x_ip1, y_ii])
     resid = lhs - np.vstack([A @ x_i + B @ u_ii, C @ x_i + D @ u_ii])
+    B, C, D = pb.unscale(B, C, D)        # from the normalised channels to the user's units
     residual = np.linalg.norm(resid) / max(np.linalg.norm(lhs), 1e-300)
     return finish(pb, A, B, C, D, n, order_selection, singular_values=s,
                   state_regression_residual=float(residual))
