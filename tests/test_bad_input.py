@@ -1,5 +1,7 @@
 """Bad input gets a subid.errors exception that says what is wrong."""
 
+import warnings
+
 import numpy as np
 import pytest
 
@@ -150,3 +152,31 @@ def test_bad_selector():
         subid.ls_subspace(data, 3, selector=np.ones((2, 10)))
     with pytest.raises(errors.OrderError, match="blind"):
         subid.ls_subspace(data, 3, selector=np.ones((3, 10)))   # rank one selector
+
+
+def test_wrong_delimiter_is_named(tmp_path):
+    path = tmp_path / "semi.csv"
+    path.write_text("u;y\n1;2\n3;4\n5;6\n")
+    with pytest.raises(errors.FileReadError, match="delimiter"):
+        subid.read(path, inputs=0, outputs=1, delimiter=",")
+
+
+def test_unstable_model_from_stable_data_warns():
+    """robot_arm at N4SID's automatic order gives an unstable model (spectral
+    radius 1.004) while the measured output shows no growth."""
+    est, _ = subid.datasets.load("robot_arm").detrend().split(0.7)
+    with pytest.warns(errors.UnstableModelWarning, match="unstable"):
+        model = subid.n4sid(est)
+    assert model.info["spectral_radius"] > 1
+    assert model.info["output_growth"] < 3
+    stable = subid.moesp(est, 4)
+    assert stable.is_stable()
+
+
+def test_unstable_plant_with_growing_output_does_not_warn():
+    true = subid.StateSpace([[1.01]], [[1.0]], [[1.0]], [[0.0]], 1.0)
+    u = np.random.default_rng(0).standard_normal(1500)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", errors.UnstableModelWarning)
+        model = subid.moesp(subid.IOData(u, true.simulate(u)), 1, horizon=5)
+    assert model.info["spectral_radius"] == pytest.approx(1.01, rel=1e-6)
