@@ -3,10 +3,10 @@
 1. Batch methods against the peers SIPPY (``sippy-unipi``, N4SID) and
    ``nfoursid``, on the same generated data: a random stable 4th-order system
    with 2 inputs and 2 outputs, white input, noise-free, horizon 5, for
-   N = 1e3 ... 1e7. Each (method, N) runs in a fresh subprocess, so that its
-   peak memory (growth of the maximum resident set size during the call,
-   after the data exist and the kernels are compiled) is its own. Wall time
-   is the median over repeats inside that process. A method is skipped at a
+   N = 1e3 ... 1e7. Each (method, N) runs in a fresh subprocess. Wall time
+   is the median over repeats inside that process; peak memory is the
+   largest traced allocation (tracemalloc, which sees numpy's arrays) during
+   one more, traced, run of the call. A method is skipped at a
    size where the previous size predicts (linear scaling) more than the time
    or memory budget, and the table says so.
 2. Online identifiers: samples per second on one core.
@@ -46,16 +46,18 @@ def _make_data(n):
     return true, systems.simulate_data(true, n, seed=2)
 
 
-def _runner(method):
+def _runner(method, horizon=HORIZON):
     import subid
     if method == "subid.ls_subspace":
-        return lambda d: subid.ls_subspace(d, ORDER, horizon=HORIZON)
+        return lambda d: subid.ls_subspace(d, ORDER, horizon=horizon)
     if method == "subid.moesp":
-        return lambda d: subid.moesp(d, ORDER, horizon=HORIZON)
+        return lambda d: subid.moesp(d, ORDER, horizon=horizon)
     if method == "subid.n4sid":
-        return lambda d: subid.n4sid(d, ORDER, horizon=HORIZON)
+        return lambda d: subid.n4sid(d, ORDER, horizon=horizon)
     if method == "subid.moesp (statistic only)":
-        return lambda d: subid.moesp(d, ORDER, horizon=HORIZON, bd_method="projection")
+        return lambda d: subid.moesp(d, ORDER, horizon=horizon, bd_method="projection")
+    if method == "subid.ls_subspace (statistic only)":
+        return lambda d: subid.ls_subspace(d, ORDER, horizon=horizon, bd_method="projection")
     if method == "SIPPY N4SID":
         from sippy_unipi import system_identification
 
@@ -79,25 +81,27 @@ def _runner(method):
     raise ValueError(method)
 
 
-def run_case(method, n, repeats):
-    import resource
+def run_case(method, n, repeats, horizon=HORIZON):
+    import tracemalloc
     import subid
     true, data = _make_data(n)
-    fn = _runner(method)
+    fn = _runner(method, horizon)
     fn(_make_data(2000)[1])                       # imports and compiled kernels
-    base = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
     times = []
     for _ in range(repeats):
         t0 = time.perf_counter()
         model = fn(data)
         times.append(time.perf_counter() - t0)
-    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
-    return {"seconds": statistics.median(times), "peak_mb": (peak - base) / 1024,
+    tracemalloc.start()                           # one more run, traced, for the memory
+    fn(data)
+    peak = tracemalloc.get_traced_memory()[1]
+    tracemalloc.stop()
+    return {"seconds": statistics.median(times), "peak_mb": peak / 2**20,
             "markov_error": subid.markov_error(model, true), "repeats": repeats}
 
 
-def _case_in_subprocess(method, n, repeats):
-    cmd = [sys.executable, __file__, "--case", method, str(n), str(repeats)]
+def _case_in_subprocess(method, n, repeats, horizon=HORIZON):
+    cmd = [sys.executable, __file__, "--case", method, str(n), str(repeats), str(horizon)]
     out = subprocess.run(cmd, capture_output=True, text=True,
                          timeout=TIME_BUDGET_S * (repeats + 2) + 120)
     if out.returncode != 0:
@@ -168,12 +172,12 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description="Benchmark subid against SIPPY and nfoursid.")
     parser.add_argument("--sizes", default="1000,10000,100000,1000000,10000000")
     parser.add_argument("--out", default="bench/results.md")
-    parser.add_argument("--case", nargs=3, metavar=("METHOD", "N", "REPEATS"),
+    parser.add_argument("--case", nargs=4, metavar=("METHOD", "N", "REPEATS", "HORIZON"),
                         help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.case:
-        method, n, repeats = args.case
-        print(json.dumps(run_case(method, int(n), int(repeats))))
+        method, n, repeats, horizon = args.case
+        print(json.dumps(run_case(method, int(n), int(repeats), int(horizon))))
         return 0
     sizes = [int(s) for s in args.sizes.split(",")]
     methods = OURS + [p for p in PEERS if _available(p)]
@@ -216,13 +220,21 @@ def main(argv=None) -> int:
                         ratios.append(f"{pr['seconds'] / r['seconds']:.1f}x faster than {p}")
             rows.append(f"| {n:,} | {method} | {r['seconds'] * 1e3:,.1f} | {r['peak_mb']:,.0f} | "
                         f"{r['markov_error']:.1e} | {'; '.join(ratios)} |")
+    goal = []
+    for method in ("subid.n4sid", "subid.moesp (statistic only)",
+                   "subid.ls_subspace (statistic only)"):
+        r = _case_in_subprocess(method, 10_000_000, 3, horizon=10)
+        print(f"goal {method}: {r}", flush=True)
+        goal.append(f"| {method} | {r['seconds']:.2f} | {r['peak_mb']:,.0f} | "
+                    f"{r['markov_error']:.1e} |" if "seconds" in r else
+                    f"| {method} | — | — | {r.get('error')} |")
     online = bench_recursive()
     text = "\n".join([
         f"Machine: {machine()}.",
         f"System: random stable, order {ORDER}, 2 inputs, 2 outputs, noise-free white input; "
         f"horizon {HORIZON} (SIPPY: SS_f = SS_p = {HORIZON}; nfoursid: num_block_rows = "
         f"{HORIZON}). Time: median over the repeats (5 up to 1e4 samples, 3 up to 1e5, 1 "
-        "above). Peak memory: growth of the resident set during the call. Budgets: "
+        "above). Budgets: "
         f"{TIME_BUDGET_S:.0f} s and {MEMORY_BUDGET_MB:.0f} MB per call."
         + (f" Not installed, not run: {', '.join(missing)}." if missing else ""),
         "",
@@ -230,9 +242,18 @@ def main(argv=None) -> int:
         "projected data equation); the other subid rows fit B, D and x0 to the raw output "
         "samples, the default when the raw data are at hand.",
         "",
+        "Peak memory: the largest traced allocation (numpy arrays included) during one more "
+        "run of the call; the data themselves (N x 4 doubles) are not counted.",
+        "",
         "| N | method | time (ms) | peak memory (MB) | Markov error | vs peers |",
         "|---:|---|---:|---:|---:|---|",
         *rows,
+        "",
+        "Goal check: 10^7 samples, 2 inputs, 2 outputs, horizon 10 (median of 3 runs):",
+        "",
+        "| method | time (s) | peak memory (MB) | Markov error |",
+        "|---|---:|---:|---:|",
+        *goal,
         "",
         f"Online identifiers, samples per second on one core (median of 3 runs over "
         f"{ONLINE_SAMPLES:,} samples, chunks of 1000):",
