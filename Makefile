@@ -6,7 +6,7 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test test-long bench experiment clean
+.PHONY: demo gallery test test-long bench experiment clean
 
 $(PY):
 	$(PYTHON) -m venv $(VENV)
@@ -17,7 +17,10 @@ $(STAMP): $(PY) pyproject.toml
 	touch $(STAMP)
 
 demo: $(STAMP)
-	$(PY) -m subid.demo --out demo_out
+	OPENBLAS_NUM_THREADS=1 $(VENV)/bin/subid demo --out demo_out
+
+gallery: $(STAMP)
+	OPENBLAS_NUM_THREADS=1 $(VENV)/bin/subid gallery --out docs/gallery.md
 
 test: $(STAMP)
 	OPENBLAS_NUM_THREADS=1 $(PY) -m pytest -q -m "not long" tests

@@ -80,3 +80,11 @@ def test_fit_percent_errors(paper_system):
         subid.fit_percent(paper_system, subid.IOData(data.u, data.y, dt=0.5))
     with pytest.raises(errors.DataError, match="inputs"):
         subid.fit_percent(paper_system, subid.IOData(data.u[:, 0], data.y))
+
+
+def test_fit_of_a_diverging_model_is_a_clear_error(paper_system):
+    data = systems.simulate_data(paper_system, 2000, seed=0)
+    unstable = subid.StateSpace(paper_system.A * 2.5, paper_system.B, paper_system.C,
+                                paper_system.D, 1.0)
+    with pytest.raises(errors.ModelError, match="overflows"):
+        subid.fit_percent(unstable, data)

@@ -8,7 +8,7 @@ and :func:`pole_error` validate them. Errors are :mod:`subid.errors`
 exceptions (all ``ValueError`` subclasses).
 """
 
-from . import datasets, errors, plot, systems
+from . import datasets, errors, interop, plot, systems
 from .config import thread_limit
 from .data import IOData
 from .io import read, read_chunks
@@ -40,6 +40,7 @@ __all__ = [
     "errors",
     "systems",
     "datasets",
+    "interop",
     "plot",
 ]
 

@@ -149,6 +149,19 @@ class IOData:
         return (f"IOData(n_samples={self.n_samples}, inputs={list(self.input_names)}, "
                 f"outputs={list(self.output_names)}, {timing})")
 
+    # -- interoperability -------------------------------------------------
+    @classmethod
+    def from_pandas(cls, df, inputs, outputs, time=None, *, dt=None) -> "IOData":
+        """Record from DataFrame columns (:func:`subid.interop.iodata_from_pandas`)."""
+        from .interop import iodata_from_pandas
+        return iodata_from_pandas(df, inputs, outputs, time=time, dt=dt)
+
+    def to_pandas(self):
+        """DataFrame with one column per channel and time as the index
+        (:func:`subid.interop.iodata_to_pandas`)."""
+        from .interop import iodata_to_pandas
+        return iodata_to_pandas(self)
+
     # -- derived records --------------------------------------------------
     def _derive(self, u, y, *, t=None, dt=None, t0=0.0) -> "IOData":
         out = IOData.__new__(IOData)

@@ -74,12 +74,27 @@ def simulate_fit(model, data, x0="estimate", hold: str = "zoh"):
     else:
         sim = lambda u, x0v: model.simulate(u, t=data.t, x0=x0v, hold=hold)  # noqa: E731
     n = model.order
-    forced = sim(data.u, None)
+
+    def overflow():
+        radius = float(np.abs(model.poles()).max()) if model.dt > 0 else \
+            float(model.poles().real.max())
+        kind = "spectral radius" if model.dt > 0 else "largest real part of a pole"
+        return ModelError(f"simulating the model over {data.n_samples} samples overflows (its "
+                          f"{kind} is {radius:.4g}): the model is unstable and its simulated "
+                          "output, hence its fit, is undefined")
+
+    with np.errstate(over="ignore", invalid="ignore"):
+        forced = sim(data.u, None)
+    if not np.isfinite(forced).all():
+        raise overflow()
     if isinstance(x0, str) and x0 == "zero":
         return forced, np.zeros(n)
     if isinstance(x0, str) and x0 == "estimate":
         zeros = np.zeros_like(data.u)
-        free = np.stack([sim(zeros, e) for e in np.eye(n)], axis=-1)  # (N, ny, n)
+        with np.errstate(over="ignore", invalid="ignore"):
+            free = np.stack([sim(zeros, e) for e in np.eye(n)], axis=-1)  # (N, ny, n)
+        if not np.isfinite(free).all():
+            raise overflow()
         x0_hat = np.linalg.lstsq(free.reshape(-1, n), (data.y - forced).reshape(-1),
                                  rcond=None)[0]
         return forced + free @ x0_hat, x0_hat

@@ -1120,6 +1120,17 @@ class StateSpace:
                           np.array(self._D), self._dt, inputs=list(self.input_names),
                           outputs=list(self.output_names))
 
+    def to_mat(self, path) -> None:
+        """Write the model as MATLAB ``ss(A, B, C, D, Ts)`` fields (:func:`subid.interop.save_mat`)."""
+        from .interop import save_mat
+        save_mat(self, path)
+
+    @classmethod
+    def from_mat(cls, path, *, dt=None) -> "StateSpace":
+        """Read a model from a MATLAB ``.mat`` file (:func:`subid.interop.load_mat`)."""
+        from .interop import load_mat
+        return load_mat(path, dt=dt)
+
     @classmethod
     def from_control(cls, sys, *, dt=None) -> "StateSpace":
         """Model from a python-control system.

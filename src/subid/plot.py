@@ -1,14 +1,46 @@
-"""Plots. matplotlib is imported lazily; every function returns a Figure.
+"""Plots for identified models and data. matplotlib is imported lazily.
 
-Install with ``pip install subid[plot]``. Functions never show or save the
-figure: the caller decides (``fig.savefig(...)`` or display in a notebook).
+Install with ``pip install subid[plot]``. Every function returns a
+:class:`matplotlib.figure.Figure` and never shows or saves it: the caller
+decides (``fig.savefig(...)``, or display in a notebook). Without a display
+(no ``DISPLAY`` on Linux) the ``Agg`` backend is selected.
+
+=====================================  ==========================================
+:func:`data_overview`                  inputs and outputs against time
+:func:`compare`                        measured against simulated outputs, fit %
+:func:`bode`                           magnitude and phase, rad/s or Hz
+:func:`poles`                          pole map with unit circle / imaginary axis
+:func:`residuals`                      residual whiteness and input correlation
+:func:`convergence`                    poles and parameters of an online run
+:func:`error_histograms`               Monte-Carlo error distributions
+=====================================  ==========================================
+
+>>> import subid
+>>> data = subid.datasets.load("dryer").detrend()          # doctest: +SKIP
+>>> est, val = data.split(0.7)                              # doctest: +SKIP
+>>> model = subid.moesp(est)                                # doctest: +SKIP
+>>> subid.plot.compare(val, {"moesp": model})               # doctest: +SKIP
+>>> subid.plot.bode(model, hz=True)                         # doctest: +SKIP
 """
 
 from __future__ import annotations
 
+import logging
+import math
+import numbers
+
 import numpy as np
 
-__all__ = ["poles", "error_histograms"]
+from .errors import DataError, ModelError
+
+__all__ = ["poles", "error_histograms", "bode", "compare", "residuals",
+           "residual_correlations", "convergence", "data_overview", "frequency_grid",
+           "simulated_output"]
+
+log = logging.getLogger(__name__)
+
+# Standard normal quantile for a two-sided 99 % band (scipy.special.ndtri(0.995)).
+_Z99 = 2.5758293035489004
 
 
 def _pyplot():
@@ -24,16 +56,138 @@ def _pyplot():
     return plt
 
 
-def poles(models, reference=None, *, labels=None, ax=None, title=None, markersize=4):
+# ---------------------------------------------------------------------------
+# argument helpers
+# ---------------------------------------------------------------------------
+def _model_groups(models, labels=None) -> dict:
+    """``{label: StateSpace}`` from one model, a list or a dict."""
+    from .model import StateSpace
+    if isinstance(models, StateSpace):
+        out = {labels[0] if labels else _default_label(models, 0): models}
+    elif isinstance(models, dict):
+        out = dict(models)
+        if labels is not None:
+            out = dict(zip(labels, out.values()))
+    else:
+        try:
+            items = list(models)
+        except TypeError:
+            raise ModelError(f"expected a StateSpace, a list or a dict of them, got "
+                             f"{type(models).__name__}") from None
+        names = list(labels) if labels is not None else \
+            [_default_label(m, k) for k, m in enumerate(items)]
+        out = {}
+        for name, m in zip(names, items):
+            while name in out:
+                name += "'"
+            out[name] = m
+    if not out:
+        raise ModelError("no model to plot")
+    for label, m in out.items():
+        if not isinstance(m, StateSpace):
+            raise ModelError(f"{label!r} is a {type(m).__name__}, not a subid.StateSpace")
+    return {str(k): v for k, v in out.items()}
+
+
+def _default_label(model, k: int) -> str:
+    method = model.info.get("method") if isinstance(model.info, dict) else None
+    return str(method) if method else f"model {k + 1}"
+
+
+def _check_data(data):
+    from .data import IOData
+    if not isinstance(data, IOData):
+        raise DataError(f"data must be an IOData record, got {type(data).__name__}")
+    return data
+
+
+def _time_label(data) -> str:
+    return "time (s)" if data.dt is None or data.dt != 1.0 else "time (samples)"
+
+
+def _layout(fig, axes, *, top: float = 0.45, bottom: float = 0.55, left: float = 0.85,
+            right: float = 0.2, hgap: float = 0.45, wgap: float = 0.7) -> None:
+    """Place the axes grid with fixed margins and gaps in inches.
+
+    Much faster than ``tight_layout`` (which draws the figure once more), and
+    the margins do not depend on the data. ``hgap``/``wgap`` are the spaces
+    between rows/columns (room for the titles and tick labels).
+    """
+    from matplotlib.ticker import MaxNLocator
+    rows, cols = axes.shape
+    w, h = fig.get_size_inches()
+    if getattr(fig, "_suptitle", None) is not None:
+        top += 0.3
+    avail_h = max(h - top - bottom, 0.5)
+    avail_w = max(w - left - right, 0.5)
+    ax_h = max((avail_h - (rows - 1) * hgap) / rows, 0.1)
+    ax_w = max((avail_w - (cols - 1) * wgap) / cols, 0.1)
+    fig.subplots_adjust(left=left / w, right=1 - right / w, bottom=bottom / h, top=1 - top / h,
+                        hspace=hgap / ax_h, wspace=wgap / ax_w)
+    for ax in axes.ravel():
+        if ax.get_yscale() == "linear":
+            ax.yaxis.set_major_locator(MaxNLocator(nbins=4 if ax_h < 1.6 else 6))
+
+
+def simulated_output(model, data, x0="estimate"):
+    """``(y_hat, fit %)`` of ``model`` on ``data``; NaN where the simulation diverges.
+
+    The same simulation as :func:`subid.fit_percent` (least-squares initial
+    state by default), but a model whose simulation overflows gives NaN
+    instead of an exception, so that it can still be listed and drawn.
+    """
+    from .metrics import simulate_fit
+    with np.errstate(all="ignore"):
+        try:
+            y_hat, _ = simulate_fit(model, data, x0=x0)
+        except ModelError:                 # the simulation of an unstable model overflows
+            y_hat = np.full(data.y.shape, np.nan)
+        y_hat = np.where(np.isfinite(y_hat), y_hat, np.nan)
+        dev = np.linalg.norm(data.y - data.y.mean(axis=0), axis=0)
+        fit = 100.0 * (1.0 - np.linalg.norm(data.y - y_hat, axis=0) /
+                       np.where(dev > 0, dev, np.nan))
+    return y_hat, fit
+
+
+def _finite(values: np.ndarray) -> np.ndarray:
+    """``values`` with non-finite entries replaced by NaN (not drawn)."""
+    out = np.array(values, dtype=float)
+    out[~np.isfinite(out)] = np.nan
+    return out
+
+
+# ---------------------------------------------------------------------------
+# pole map
+# ---------------------------------------------------------------------------
+def poles(models, reference=None, *, labels=None, ax=None, title=None, markersize=4,
+          marker=".", alpha=0.4):
     """Pole map of one or several groups of models.
+
+    Discrete-time poles are drawn with the unit circle, continuous-time
+    poles with the imaginary axis; a mixture of both gets two panels.
 
     Parameters
     ----------
     models : StateSpace, list of StateSpace, or dict label -> list of StateSpace
-        Models whose poles are drawn (one colour per group).
+        Models whose poles are drawn (one colour per group; a dict value may
+        also be a single model).
     reference : StateSpace, optional
-        True system; its poles are drawn as large crosses.
+        True system; its poles are drawn as large circles.
+    labels : list of str, optional
+        Group labels replacing the dict keys.
     ax : matplotlib Axes, optional
+        Draw into this axes (all groups must then share a time base).
+    title : str, optional
+    markersize : float
+    marker : str
+        Matplotlib marker of the estimates (``'x'`` reads well for a few
+        models, ``'.'`` for Monte-Carlo clouds).
+    alpha : float
+        Opacity of the estimates.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
     """
     plt = _pyplot()
     from .model import StateSpace
@@ -46,18 +200,41 @@ def poles(models, reference=None, *, labels=None, ax=None, title=None, markersiz
         groups = {"models": list(models)}
     if labels is not None:
         groups = dict(zip(labels, groups.values()))
+    kinds = {m.dt > 0 for group in groups.values() for m in group}
+    if reference is not None:
+        kinds.add(reference.dt > 0)
+    if ax is None and len(kinds) == 2:
+        fig, axes = plt.subplots(1, 2, figsize=(10.5, 5))
+        for sub, discrete in zip(axes, (True, False)):
+            part = {k: [m for m in g if (m.dt > 0) == discrete] for k, g in groups.items()}
+            ref = reference if reference is not None and (reference.dt > 0) == discrete \
+                else None
+            _pole_axes(sub, {k: g for k, g in part.items() if g}, ref, discrete, markersize,
+                       marker, alpha)
+            sub.set_title("discrete time (z plane)" if discrete else
+                          "continuous time (s plane)", fontsize="small")
+        if title:
+            fig.suptitle(title)
+        fig.tight_layout()
+        return fig
     fig = ax.figure if ax is not None else plt.figure(figsize=(5.5, 5))
     ax = ax if ax is not None else fig.add_subplot(111)
-    discrete = None
+    discrete = True if not kinds else kinds.pop()
+    _pole_axes(ax, groups, reference, discrete, markersize, marker, alpha)
+    if title:
+        ax.set_title(title)
+    return fig
+
+
+def _pole_axes(ax, groups, reference, discrete, markersize, marker, alpha):
     if reference is not None:      # drawn first: the estimates must stay visible
         q = reference.poles()
-        discrete = reference.dt > 0
         ax.plot(q.real, q.imag, "o", ms=16, mfc="none", mec="k", mew=1.2, zorder=1,
                 label="true")
     for label, group in groups.items():
         p = np.concatenate([m.poles() for m in group]) if group else np.array([])
-        discrete = group[0].dt > 0 if group else discrete
-        ax.plot(p.real, p.imag, ".", ms=markersize, alpha=0.4, zorder=2, label=label)
+        ax.plot(p.real, p.imag, marker, ms=markersize, alpha=alpha, zorder=2, label=label,
+                mew=1.5 if marker in ("x", "+") else None)
     if discrete:
         theta = np.linspace(0, 2 * np.pi, 400)
         ax.plot(np.cos(theta), np.sin(theta), "k-", lw=0.6)
@@ -67,10 +244,8 @@ def poles(models, reference=None, *, labels=None, ax=None, title=None, markersiz
     ax.axhline(0.0, color="k", lw=0.3)
     ax.set_xlabel("real part")
     ax.set_ylabel("imaginary part")
-    ax.legend(loc="best", fontsize="small")
-    if title:
-        ax.set_title(title)
-    return fig
+    if groups or reference is not None:
+        ax.legend(loc="best", fontsize="small")
 
 
 def error_histograms(errors: dict, *, bins=40, xlabel="relative error", title=None):
@@ -79,6 +254,12 @@ def error_histograms(errors: dict, *, bins=40, xlabel="relative error", title=No
     Parameters
     ----------
     errors : dict label -> array of errors
+    bins : int
+    xlabel, title : str
+
+    Returns
+    -------
+    matplotlib.figure.Figure
     """
     plt = _pyplot()
     k = len(errors)
@@ -97,4 +278,509 @@ def error_histograms(errors: dict, *, bins=40, xlabel="relative error", title=No
     if title:
         fig.suptitle(title)
     fig.tight_layout()
+    return fig
+
+
+# ---------------------------------------------------------------------------
+# frequency response
+# ---------------------------------------------------------------------------
+def frequency_grid(models, n_points: int = 400) -> np.ndarray:
+    """A logarithmic grid of angular frequencies (rad/s) suited to ``models``.
+
+    Discrete-time models: up to the Nyquist frequency ``pi / dt`` of the
+    fastest-sampled model. Continuous-time models: a decade beyond their
+    fastest pole. The lower end is a decade below the slowest non-zero pole
+    (and at most a thousandth of the upper end).
+
+    Parameters
+    ----------
+    models : StateSpace, list or dict of StateSpace
+    n_points : int
+
+    Returns
+    -------
+    ndarray, shape (n_points,)
+    """
+    groups = _model_groups(models)
+    hi_candidates, pole_speeds = [], []
+    for m in groups.values():
+        p = m.poles()
+        if m.dt > 0:
+            hi_candidates.append(math.pi / m.dt)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                s = np.log(p.astype(complex)) / m.dt
+        else:
+            s = p
+        speed = np.abs(s)
+        speed = speed[np.isfinite(speed) & (speed > 0)]
+        pole_speeds.extend(speed.tolist())
+        if m.dt == 0:
+            hi_candidates.append(10 * (speed.max() if speed.size else 1.0))
+    hi = max(hi_candidates)
+    lo = hi * 1e-3
+    if pole_speeds:
+        lo = min(lo, 0.1 * min(pole_speeds))
+    lo = max(lo, hi * 1e-6)
+    return np.logspace(np.log10(lo), np.log10(hi), n_points)
+
+
+def bode(model_or_models, w=None, *, hz=False, labels=None, phase=True, title=None):
+    """Bode diagram: magnitude (dB) and phase (degrees) of every input/output pair.
+
+    Parameters
+    ----------
+    model_or_models : StateSpace, list of StateSpace or dict label -> StateSpace
+        Models drawn on the same axes (same numbers of inputs and outputs).
+    w : array_like, optional
+        Angular frequencies in **rad/s** (default: :func:`frequency_grid`).
+        A discrete-time model is drawn only up to its Nyquist frequency.
+    hz : bool
+        Label the frequency axis in Hz (``w / 2 pi``) instead of rad/s.
+    labels : list of str, optional
+        Legend labels (default: the dict keys or ``model.info['method']``).
+    phase : bool
+        Draw the phase panels.
+    title : str, optional
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        Rows: magnitude (and phase) per output; columns: inputs.
+
+    Examples
+    --------
+    >>> fig = subid.plot.bode({"moesp": m1, "n4sid": m2}, hz=True)   # doctest: +SKIP
+    """
+    plt = _pyplot()
+    groups = _model_groups(model_or_models, labels)
+    first = next(iter(groups.values()))
+    ny, nu = first.n_outputs, first.n_inputs
+    for label, m in groups.items():
+        if (m.n_outputs, m.n_inputs) != (ny, nu):
+            raise ModelError(f"model {label!r} has {m.n_inputs} inputs and {m.n_outputs} "
+                             f"outputs but the first has {nu} and {ny}; a Bode diagram draws "
+                             "models of the same shape")
+    if nu == 0:
+        raise ModelError("the model has no inputs: there is no frequency response to draw")
+    if w is None:
+        w = frequency_grid(groups)
+    else:
+        w = np.atleast_1d(np.asarray(w, dtype=float))
+        if w.ndim != 1 or not np.isfinite(w).all() or (w <= 0).any():
+            raise DataError("w must be a 1-D array of positive frequencies in rad/s")
+    x_scale = 1 / (2 * math.pi) if hz else 1.0
+    rows = 2 * ny if phase else ny
+    fig, axes = plt.subplots(rows, nu, figsize=(min(3.8 * nu + 1.2, 16), 1.9 * rows + 0.8),
+                             sharex=True, squeeze=False)
+    for k, (label, m) in enumerate(groups.items()):
+        wk = w if m.dt == 0 else w[w <= math.pi / m.dt * (1 + 1e-12)]
+        if wk.size == 0:
+            log.warning("bode: model %r has no frequency below its Nyquist frequency in w",
+                        label)
+            continue
+        G = m.freqresp(wk)
+        with np.errstate(divide="ignore"):
+            mag = 20 * np.log10(np.maximum(np.abs(G), 1e-300))
+        ph = np.degrees(np.unwrap(np.angle(G), axis=0))
+        for i in range(ny):
+            for j in range(nu):
+                r = 2 * i if phase else i
+                axes[r, j].semilogx(wk * x_scale, mag[:, i, j], color=f"C{k}", lw=1.2,
+                                    label=label)
+                if phase:
+                    axes[r + 1, j].semilogx(wk * x_scale, ph[:, i, j], color=f"C{k}", lw=1.2)
+    for i in range(ny):
+        for j in range(nu):
+            r = 2 * i if phase else i
+            axes[r, j].set_title(f"{first.input_names[j]} → {first.output_names[i]}",
+                                 fontsize="small")
+            axes[r, j].set_ylabel("magnitude (dB)", fontsize="small")
+            axes[r, j].grid(True, lw=0.3)
+            if phase:
+                axes[r + 1, j].set_ylabel("phase (deg)", fontsize="small")
+                axes[r + 1, j].grid(True, lw=0.3)
+    for j in range(nu):
+        axes[-1, j].set_xlabel("frequency (Hz)" if hz else "frequency (rad/s)")
+    nyquists = sorted({math.pi / m.dt for m in groups.values() if m.dt > 0})
+    for f_nyq in nyquists:
+        for ax in axes.ravel():
+            ax.axvline(f_nyq * x_scale, color="0.5", lw=0.6, ls=":")
+    if ny * nu > 4:                 # minor log ticks are slow to draw on large grids
+        from matplotlib.ticker import NullLocator
+        for ax in axes.ravel():
+            ax.xaxis.set_minor_locator(NullLocator())
+    axes[0, 0].legend(fontsize="x-small", loc="best")
+    if title:
+        fig.suptitle(title)
+    _layout(fig, axes, hgap=0.45, wgap=0.8)
+    return fig
+
+
+# ---------------------------------------------------------------------------
+# time-domain comparison
+# ---------------------------------------------------------------------------
+def compare(data, models, *, labels=None, x0="estimate", title=None, clip=True):
+    """Measured outputs against the outputs simulated by each model (as MATLAB's ``compare``).
+
+    Parameters
+    ----------
+    data : IOData
+        The record to simulate on (usually the validation part).
+    models : StateSpace, list or dict label -> StateSpace
+    labels : list of str, optional
+    x0 : 'estimate', 'zero' or array
+        Initial state, as in :func:`subid.fit_percent` (default: least
+        squares fit to the data).
+    title : str, optional
+    clip : bool
+        Keep the vertical range near the measured signal, so a diverging
+        simulation does not squash the plot.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        One panel per output; legends give the fit % of each model.
+    """
+    plt = _pyplot()
+    data = _check_data(data)
+    groups = _model_groups(models, labels)
+    ny = data.n_outputs
+    fig, axes = plt.subplots(ny, 1, figsize=(9, 2.3 * ny + 0.7), sharex=True, squeeze=False)
+    t = data.t
+    for i in range(ny):
+        axes[i, 0].plot(t, data.y[:, i], "k-", lw=1.0, label="measured")
+    for k, (label, m) in enumerate(groups.items()):
+        y_hat, fit = simulated_output(m, data, x0=x0)
+        for i in range(ny):
+            axes[i, 0].plot(t, _finite(y_hat[:, i]), color=f"C{k}", lw=0.9,
+                            label=f"{label}: fit {_fmt_fit(fit[i])} %")
+    for i in range(ny):
+        ax = axes[i, 0]
+        ax.set_ylabel(data.output_names[i], fontsize="small")
+        ax.legend(fontsize="x-small", loc="upper right")
+        if clip:
+            lo, hi = float(np.min(data.y[:, i])), float(np.max(data.y[:, i]))
+            pad = 0.5 * (hi - lo) if hi > lo else 1.0
+            ax.set_ylim(lo - pad, hi + pad)
+    axes[-1, 0].set_xlabel(_time_label(data))
+    if title:
+        fig.suptitle(title)
+    _layout(fig, axes, hgap=0.15, left=0.8)
+    return fig
+
+
+def _fmt_fit(value) -> str:
+    if not np.isfinite(value):
+        return "n/a"
+    if abs(value) >= 1e4:
+        return f"{value:.3g}"
+    return f"{value:.1f}"
+
+
+def data_overview(data, *, split=None, title=None):
+    """Inputs and outputs of a record against time.
+
+    Parameters
+    ----------
+    data : IOData
+    split : float, optional
+        Time at which the validation part starts; it is shaded and labelled.
+    title : str, optional
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        One panel per channel, inputs first.
+    """
+    plt = _pyplot()
+    data = _check_data(data)
+    channels = [(f"input\n{n}", data.u[:, k], "C0") for k, n in enumerate(data.input_names)]
+    channels += [(f"output\n{n}", data.y[:, k], "C3") for k, n in enumerate(data.output_names)]
+    rows = len(channels)
+    fig, axes = plt.subplots(rows, 1, figsize=(9, 1.25 * rows + 0.9), sharex=True,
+                             squeeze=False)
+    t = data.t
+    for ax, (name, values, color) in zip(axes[:, 0], channels):
+        ax.plot(t, values, color=color, lw=0.8)
+        ax.set_ylabel(name, fontsize="x-small", rotation=0, ha="right", va="center")
+        ax.tick_params(labelsize="x-small")
+        if split is not None:
+            ax.axvspan(split, t[-1], color="0.85", zorder=0)
+    if split is not None:
+        axes[0, 0].text(split, 1.02, " validation", transform=axes[0, 0].get_xaxis_transform(),
+                        fontsize="x-small", va="bottom")
+        axes[0, 0].text(t[0], 1.02, "estimation", transform=axes[0, 0].get_xaxis_transform(),
+                        fontsize="x-small", va="bottom")
+    axes[-1, 0].set_xlabel(_time_label(data))
+    if title:
+        fig.suptitle(title)
+    _layout(fig, axes, top=0.3, left=1.55, hgap=0.12)
+    return fig
+
+
+# ---------------------------------------------------------------------------
+# residual analysis
+# ---------------------------------------------------------------------------
+def _xcorr(a: np.ndarray, b: np.ndarray, lags: np.ndarray) -> np.ndarray:
+    """``r(tau) = sum_t a(t) b(t - tau) / N`` for each lag (a, b zero-mean)."""
+    n = a.size
+    out = np.empty(lags.size)
+    for k, tau in enumerate(lags):
+        if tau >= 0:
+            out[k] = a[tau:] @ b[:n - tau] / n if tau < n else 0.0
+        else:
+            out[k] = a[:n + tau] @ b[-tau:] / n if -tau < n else 0.0
+    return out
+
+
+def residual_correlations(model, data, *, max_lag: int = 25, confidence: float = 0.99,
+                          x0="estimate") -> dict:
+    """Correlations of the simulation residuals, with confidence bounds.
+
+    The residual is ``e = y - ŷ``, with ``ŷ`` simulated from an initial
+    state fitted by least squares (the same ``ŷ`` as :func:`subid.fit_percent`).
+    For a good model ``e`` is uncorrelated with past inputs; for a model that
+    also explains the disturbances, ``e`` is white.
+
+    Parameters
+    ----------
+    model : StateSpace
+    data : IOData
+    max_lag : int
+        Largest lag (in samples).
+    confidence : float
+        Two-sided level of the bands (0.99: 99 %).
+    x0 : 'estimate', 'zero' or array
+
+    Returns
+    -------
+    dict
+        ``lags`` (0..M), ``auto`` (ny, M+1) normalised auto-correlation of
+        each residual, ``auto_bound`` (scalar ``z / sqrt(N)``), ``cross_lags``
+        (-M..M), ``cross`` (ny, nu, 2M+1) normalised correlation between
+        ``e_i(t)`` and ``u_j(t - tau)``, ``cross_bound`` (ny, nu), the band
+        ``z sqrt(sum_k r_ee(k) r_uu(k) / N)`` (Ljung, *System Identification*,
+        sec. 16.6), ``residual`` (N, ny) and ``confidence``.
+
+    Raises
+    ------
+    DataError
+        The simulation diverges (residuals not finite), or ``max_lag`` is not
+        smaller than the record.
+    """
+    from scipy.special import ndtri
+    data = _check_data(data)
+    if isinstance(max_lag, bool) or not isinstance(max_lag, numbers.Integral) or max_lag < 1:
+        raise DataError(f"max_lag must be a positive integer, got {max_lag!r}")
+    if not 0 < confidence < 1:
+        raise DataError(f"confidence must be in (0, 1), got {confidence!r}")
+    n = data.n_samples
+    if max_lag >= n:
+        raise DataError(f"max_lag {max_lag} must be smaller than the {n} samples of the record")
+    y_hat, _ = simulated_output(model, data, x0=x0)
+    e = data.y - y_hat
+    if not np.isfinite(e).all():
+        raise DataError("the simulated output diverges (residuals are not finite): the model "
+                        "is unstable over this record")
+    z = float(ndtri(0.5 + confidence / 2))
+    e0 = e - e.mean(axis=0)
+    u0 = data.u - data.u.mean(axis=0)
+    lags = np.arange(max_lag + 1)
+    cross_lags = np.arange(-max_lag, max_lag + 1)
+    ny, nu = data.n_outputs, data.n_inputs
+    auto = np.zeros((ny, lags.size))
+    cross = np.zeros((ny, nu, cross_lags.size))
+    cross_bound = np.zeros((ny, nu))
+    ree_full = np.zeros((ny, cross_lags.size))
+    for i in range(ny):
+        r = _xcorr(e0[:, i], e0[:, i], cross_lags)
+        r0 = r[max_lag]
+        ree_full[i] = r / r0 if r0 > 0 else 0.0
+        auto[i] = ree_full[i][max_lag:]
+    for j in range(nu):
+        ru = _xcorr(u0[:, j], u0[:, j], cross_lags)
+        ru0 = ru[max_lag]
+        ruu = ru / ru0 if ru0 > 0 else np.zeros_like(ru)
+        for i in range(ny):
+            ree0 = e0[:, i] @ e0[:, i] / n
+            denom = math.sqrt(max(ree0 * ru0, 0.0))
+            c = _xcorr(e0[:, i], u0[:, j], cross_lags)
+            cross[i, j] = c / denom if denom > 0 else 0.0
+            p = float(np.sum(ree_full[i] * ruu))
+            cross_bound[i, j] = z * math.sqrt(max(p, 0.0) / n)
+    return {"lags": lags, "auto": auto, "auto_bound": z / math.sqrt(n),
+            "cross_lags": cross_lags, "cross": cross, "cross_bound": cross_bound,
+            "residual": e, "confidence": confidence}
+
+
+def residuals(model, data, *, max_lag: int = 25, confidence: float = 0.99, x0="estimate",
+              title=None):
+    """Residual analysis (as MATLAB's ``resid``): whiteness and independence of the input.
+
+    Left column: auto-correlation of each output's residual for lags
+    0..``max_lag``; other columns: cross-correlation between each input and
+    each residual for lags -``max_lag``..``max_lag`` (positive lags: the
+    residual against past inputs). Shaded (one model) or dashed (several):
+    the ``confidence`` band (99 % by default) under the hypothesis of no
+    correlation; see :func:`residual_correlations`.
+
+    Parameters
+    ----------
+    model : StateSpace, list or dict label -> StateSpace
+        One model, or several drawn over each other.
+    data : IOData
+        Usually the validation part of the record.
+    max_lag : int
+    confidence : float
+    x0 : 'estimate', 'zero' or array
+    title : str, optional
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+
+    Raises
+    ------
+    DataError
+        The simulation of every model diverges (a model whose simulation
+        diverges is left out, with a log message, when others remain).
+    """
+    plt = _pyplot()
+    data = _check_data(data)
+    groups = _model_groups(model)
+    results, failed = {}, {}
+    for label, m in groups.items():
+        try:
+            results[label] = residual_correlations(m, data, max_lag=max_lag,
+                                                   confidence=confidence, x0=x0)
+        except DataError as exc:
+            if "diverges" not in str(exc):
+                raise
+            failed[label] = str(exc)
+            log.info("residuals of %s not drawn: %s", label, exc)
+    if not results:
+        raise DataError(next(iter(failed.values())))
+    ny, nu = data.n_outputs, data.n_inputs
+    cols = 1 + nu
+    fig, axes = plt.subplots(ny, cols, figsize=(min(3.3 * cols + 0.6, 16), 2.0 * ny + 1.0),
+                             squeeze=False)
+    pct = f"{100 * confidence:g} %"
+    single = len(results) == 1
+    offsets = np.linspace(-0.2, 0.2, len(results)) if not single else [0.0]
+    for k, (label, res) in enumerate(results.items()):
+        color = f"C{k}" if not single else "C0"
+        dx = offsets[k]
+        for i in range(ny):
+            ax = axes[i, 0]
+            b = res["auto_bound"]
+            if k == 0:
+                ax.axhspan(-b, b, color="0.5", alpha=0.18, lw=0, label=f"{pct} band")
+            ax.vlines(res["lags"] + dx, 0, res["auto"][i], color=color, lw=1.1)
+            ax.plot(res["lags"] + dx, res["auto"][i], "o", color=color, ms=2.5,
+                    label=label if not single else None)
+            for j in range(nu):
+                ax = axes[i, 1 + j]
+                b = res["cross_bound"][i, j]
+                if single:
+                    ax.axhspan(-b, b, color="0.5", alpha=0.18, lw=0)
+                else:
+                    ax.axhline(b, color=color, ls="--", lw=0.7)
+                    ax.axhline(-b, color=color, ls="--", lw=0.7)
+                ax.vlines(res["cross_lags"] + dx, 0, res["cross"][i, j], color=color, lw=0.9)
+    for i in range(ny):
+        axes[i, 0].axhline(0, color="k", lw=0.4)
+        axes[i, 0].set_title(f"auto-correlation of e({data.output_names[i]})",
+                             fontsize="small")
+        for j in range(nu):
+            axes[i, 1 + j].axhline(0, color="k", lw=0.4)
+            axes[i, 1 + j].set_title(f"{data.input_names[j]} → e({data.output_names[i]})",
+                                     fontsize="small")
+    for ax in axes.ravel():
+        ax.tick_params(labelsize="x-small")
+    axes[0, 0].legend(fontsize="x-small", loc="upper right")
+    for j in range(cols):
+        axes[-1, j].set_xlabel("lag (samples)", fontsize="small")
+    heading = title or f"residual analysis ({pct} confidence bands)"
+    if failed:
+        heading += f"; not drawn (simulation diverges): {', '.join(failed)}"
+    fig.suptitle(heading, fontsize="medium")
+    _layout(fig, axes, top=0.3, hgap=0.55, wgap=0.45, left=0.55)
+    return fig
+
+
+# ---------------------------------------------------------------------------
+# online runs
+# ---------------------------------------------------------------------------
+def convergence(history, *, reference=None, title=None, max_parameters: int = 12):
+    """Poles and parameters of an online identifier against the samples seen.
+
+    Parameters
+    ----------
+    history : dict
+        ``sample`` (k,) and ``poles`` (k, n) complex, as
+        :attr:`subid.RecursiveSubspace.history`; optionally ``parameters``
+        (k, p) real (e.g. Markov parameters) and ``parameter_names`` (p,).
+    reference : StateSpace, optional
+        True system: its poles are drawn as dashed lines.
+    title : str, optional
+    max_parameters : int
+        At most this many parameter trajectories are drawn.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        Real and imaginary parts of the poles; with parameters, their
+        trajectories and their relative distance to the final estimate.
+    """
+    plt = _pyplot()
+    if not isinstance(history, dict) or "sample" not in history or "poles" not in history:
+        raise DataError("history must be a dict with the keys 'sample' and 'poles'")
+    sample = np.asarray(history["sample"], dtype=float).reshape(-1)
+    pol = np.asarray(history["poles"], dtype=complex)
+    if pol.ndim != 2 or pol.shape[0] != sample.size:
+        raise DataError(f"history['poles'] must have shape ({sample.size}, order), got "
+                        f"{pol.shape}")
+    params = history.get("parameters")
+    if params is not None:
+        params = np.asarray(params, dtype=float)
+        if params.ndim != 2 or params.shape[0] != sample.size or params.shape[1] == 0:
+            params = None
+    rows = 2 + (2 if params is not None else 0)
+    fig, axes = plt.subplots(rows, 1, figsize=(9, 2.2 * rows + 0.6), sharex=True,
+                             squeeze=False)
+    axes = axes[:, 0]
+    if sample.size == 0:
+        axes[0].text(0.5, 0.5, "no snapshot recorded", ha="center", va="center",
+                     transform=axes[0].transAxes)
+    for k in range(pol.shape[1]):
+        axes[0].plot(sample, pol[:, k].real, ".-", color=f"C{k % 10}", lw=0.8, ms=3)
+        axes[1].plot(sample, pol[:, k].imag, ".-", color=f"C{k % 10}", lw=0.8, ms=3)
+    if reference is not None:
+        for q in reference.poles():
+            axes[0].axhline(q.real, color="k", ls="--", lw=0.6)
+            axes[1].axhline(q.imag, color="k", ls="--", lw=0.6)
+    axes[0].set_ylabel("pole real part", fontsize="small")
+    axes[1].set_ylabel("pole imag. part", fontsize="small")
+    if params is not None:
+        names = list(history.get("parameter_names", [])) or \
+            [f"θ{k + 1}" for k in range(params.shape[1])]
+        shown = min(params.shape[1], max_parameters)
+        for k in range(shown):
+            axes[2].plot(sample, params[:, k], lw=0.9, label=names[k] if k < len(names) else None)
+        if shown <= 8:
+            axes[2].legend(fontsize="x-small", loc="upper right", ncol=2)
+        axes[2].set_ylabel("parameters", fontsize="small")
+        final = params[-1]
+        scale = np.linalg.norm(final)
+        with np.errstate(all="ignore"):
+            rel = np.linalg.norm(params - final, axis=1) / (scale if scale > 0 else 1.0)
+        rel[rel <= 0] = np.nan
+        axes[3].semilogy(sample, rel, "k.-", lw=0.8, ms=3)
+        axes[3].set_ylabel("‖θ − θ_final‖ / ‖θ_final‖", fontsize="small")
+    for ax in axes:
+        ax.grid(True, lw=0.3)
+        ax.tick_params(labelsize="x-small")
+    axes[-1].set_xlabel("samples processed")
+    fig.suptitle(title or "convergence of the online estimate", fontsize="medium")
+    _layout(fig, axes[:, None], top=0.2, hgap=0.15, left=0.95)
     return fig

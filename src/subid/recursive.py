@@ -131,6 +131,8 @@ class RecursiveSubspace:
         doubles, so memory stays bounded however long the stream.
     history_stride : int
         Samples between snapshots at the start (default 1000).
+    input_names, output_names : sequence of str, optional
+        Channel names carried by ``model``.
 
     Attributes
     ----------
@@ -161,7 +163,7 @@ class RecursiveSubspace:
     def __init__(self, order, n_inputs, n_outputs, horizon=None, forgetting=1.0,
                  instruments="past", selector=None, seed=0, *, instrument_weighting=True,
                  power_iterations=2, feedthrough=True, dt=1.0, history_size=None,
-                 history_stride=1000):
+                 history_stride=1000, input_names=None, output_names=None):
         self.order = check_int(order, "order")
         self.n_inputs = check_int(n_inputs, "n_inputs")
         self.n_outputs = check_int(n_outputs, "n_outputs")
@@ -184,6 +186,14 @@ class RecursiveSubspace:
         self.seed = seed
         selector = check_selector(selector, self.horizon, self.n_outputs, [self.order],
                                   self.order)
+        self.input_names = tuple(input_names) if input_names is not None else \
+            tuple(f"u{k + 1}" for k in range(self.n_inputs))
+        self.output_names = tuple(output_names) if output_names is not None else \
+            tuple(f"y{k + 1}" for k in range(self.n_outputs))
+        for names, count, what in ((self.input_names, self.n_inputs, "input_names"),
+                                   (self.output_names, self.n_outputs, "output_names")):
+            if len(names) != count:
+                raise DataError(f"{what} has {len(names)} names for {count} channels")
         self._selector = random_selector(self.horizon, self.n_outputs, seed, rows=self.order) \
             if selector is None else selector[: self.order].copy()
         self._depth = 2 * self.horizon if instruments == "past" else self.horizon
@@ -309,8 +319,7 @@ class RecursiveSubspace:
             raise TooFewSamplesError(f"{method} has received {self.n_samples} samples; a model "
                                      f"needs at least {need} (horizon {self.horizon})")
         hf = self.factor()
-        names = tuple(f"u{k + 1}" for k in range(self.n_inputs))
-        input_condition = check_excitation(hf, names, method=method)
+        input_condition = check_excitation(hf, self.input_names, method=method)
         core = gamma_from_factor(hf, self.horizon, self.order, [self.order],
                                  instruments=self.instruments,
                                  instrument_weighting=self.instrument_weighting,
@@ -325,7 +334,8 @@ class RecursiveSubspace:
                 "bd_method": "projection",
                 **core.info(self.instruments, self.instrument_weighting,
                             self.power_iterations), **reg}
-        self._model = StateSpace(A, B, C, D, self.dt, info=info)
+        self._model = StateSpace(A, B, C, D, self.dt, input_names=self.input_names,
+                                 output_names=self.output_names, info=info)
         return self._model
 
     @property
@@ -369,6 +379,7 @@ class RecursiveSubspace:
             "dt": self.dt, "seed": self.seed if isinstance(self.seed, int) else None,
             "n_samples": self.n_samples, "n_columns": self._n_columns, "weight": self._weight,
             "history_size": self._history_size, "history_stride": self._history_stride,
+            "input_names": list(self.input_names), "output_names": list(self.output_names),
         }
         arrays = {"R": self._R, "buf_u": self._buf_u, "buf_y": self._buf_y,
                   "selector": self._selector, "hist_sample": self._hist_sample,
@@ -386,7 +397,8 @@ class RecursiveSubspace:
                       instrument_weighting=s["instrument_weighting"],
                       power_iterations=s["power_iterations"], feedthrough=s["feedthrough"],
                       dt=s["dt"], history_size=s["history_size"],
-                      history_stride=s["history_stride"])
+                      history_stride=s["history_stride"],
+                      input_names=s.get("input_names"), output_names=s.get("output_names"))
             m = obj._R.shape[0]
             obj._R = require(arrays, path, "R", (m, m)).copy()
             obj._buf_u = require(arrays, path, "buf_u").reshape(-1, obj.n_inputs).copy()

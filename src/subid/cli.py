@@ -1,0 +1,1358 @@
+"""The ``subid`` command line.
+
+::
+
+    subid identify DATA --inputs u1,u2 --outputs y1 --dt 0.1 --method ls --out DIR
+    subid track DATA --inputs u --outputs y --method recursive --order 4 --out DIR
+    subid simulate MODEL --input FILE --out FILE
+    subid compare MODEL... --data FILE
+    subid convert MODEL --to dt=0.01|ct|mat|json|control|scipy
+    subid demo --out demo_out
+    subid gallery --out docs/gallery.md
+    subid methods
+
+``DATA`` is a file (CSV/TSV/TXT/DAT, ``.npz`` or ``.mat``, see
+:func:`subid.read`) or ``dataset:NAME`` for a bundled DaISy record
+(``subid methods`` lists both). User errors (bad column names, missing or
+empty files, non-numeric cells, unusable data) print one line naming the
+file and the problem and exit with status 2; ``--debug`` adds the traceback.
+Progress bars appear only on a terminal and never with ``--quiet``.
+
+Identification methods are looked up in :data:`METHODS`, a registry that
+imports each method's module only when it is used, so a method whose module
+is absent from this version is reported as "not available" instead of
+breaking the tool.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import hashlib
+import importlib
+import importlib.util
+import json
+import logging
+import math
+import os
+import shlex
+import sys
+import time
+import traceback
+import warnings
+
+import click
+import numpy as np
+
+from .errors import DataError, FileReadError, OrderError, SubidError
+
+__all__ = ["main", "METHODS", "MethodSpec", "MethodUnavailableError", "available_methods"]
+
+log = logging.getLogger("subid.cli")
+
+EXIT_USER_ERROR = 2
+
+
+# ---------------------------------------------------------------------------
+# method registry
+# ---------------------------------------------------------------------------
+class MethodUnavailableError(SubidError):
+    """The method's module is not part of this version of subid."""
+
+
+@dataclasses.dataclass(frozen=True)
+class MethodSpec:
+    """One identification method reachable from the command line.
+
+    Attributes
+    ----------
+    name : str
+        Name on the command line (``--method NAME``).
+    kind : {'batch', 'online'}
+        ``batch``: a function ``fn(data, order=..., horizon=..., **options)
+        -> StateSpace``. ``online``: a class ``Cls(order, n_inputs,
+        n_outputs, ...)`` with ``update``, ``model``, ``save`` and ``load``.
+    module, attribute : str
+        Where the function or class lives; imported on first use.
+    time : {'discrete', 'continuous'}
+        Time base of the models it produces.
+    description : str
+    """
+
+    name: str
+    kind: str
+    module: str
+    attribute: str
+    time: str
+    description: str
+
+    def available(self) -> bool:
+        """Whether the method's module is installed (without importing it)."""
+        try:
+            return importlib.util.find_spec(self.module) is not None
+        except (ImportError, ValueError):
+            return False
+
+    def load(self):
+        """The function or class; MethodUnavailableError when its module is absent."""
+        try:
+            module = importlib.import_module(self.module)
+        except ModuleNotFoundError as exc:
+            if exc.name == self.module:
+                raise MethodUnavailableError(
+                    f"method {self.name} is not available in this version of subid (module "
+                    f"{self.module} is missing); available methods: "
+                    f"{', '.join(available_methods(self.kind if self.kind == 'online' else None))}"
+                ) from None
+            raise
+        try:
+            return getattr(module, self.attribute)
+        except AttributeError:
+            raise MethodUnavailableError(
+                f"method {self.name} is not available in this version of subid "
+                f"({self.module} has no {self.attribute})") from None
+
+
+#: Every method the command line knows, by ``--method`` name.
+METHODS: dict[str, MethodSpec] = {
+    "ls": MethodSpec("ls", "batch", "subid.ls_subspace", "ls_subspace", "discrete",
+                     "SVD-free least-squares subspace identification (seed 001)"),
+    "moesp": MethodSpec("moesp", "batch", "subid.moesp", "moesp", "discrete",
+                        "PO-MOESP (Verhaegen)"),
+    "n4sid": MethodSpec("n4sid", "batch", "subid.n4sid", "n4sid", "discrete",
+                        "N4SID (Van Overschee & De Moor)"),
+    "ct": MethodSpec("ct", "batch", "subid.ct_subspace", "ct_subspace", "continuous",
+                     "continuous-time subspace identification (uniform or non-uniform "
+                     "samples)"),
+    "recursive": MethodSpec("recursive", "online", "subid.recursive", "RecursiveSubspace",
+                            "discrete", "online SVD-free subspace identification (seed 001 "
+                            "made recursive), fixed state basis"),
+    "adaptive": MethodSpec("adaptive", "online", "subid.adaptive", "AdaptiveIdentifier",
+                           "continuous", "online continuous-time identification"),
+}
+
+
+def available_methods(kind: str | None = None, time_base: str | None = None) -> list[str]:
+    """Names of the registered methods whose module is present.
+
+    Parameters
+    ----------
+    kind : {'batch', 'online'}, optional
+    time_base : {'discrete', 'continuous'}, optional
+    """
+    return [name for name, spec in METHODS.items()
+            if (kind is None or spec.kind == kind)
+            and (time_base is None or spec.time == time_base) and spec.available()]
+
+
+def _accepts(fn, name: str) -> bool:
+    import inspect
+    try:
+        params = inspect.signature(fn).parameters
+    except (TypeError, ValueError):
+        return True
+    return name in params or any(p.kind is p.VAR_KEYWORD for p in params.values())
+
+
+def run_batch(spec: MethodSpec, data, order, horizon=None, options=None):
+    """Identify ``data`` with the batch method ``spec``."""
+    fn = spec.load()
+    kwargs = dict(options or {})
+    if horizon is not None:
+        if not _accepts(fn, "horizon"):
+            raise SubidError(f"method {spec.name} has no horizon option")
+        kwargs["horizon"] = horizon
+    return fn(data, order=order, **kwargs)
+
+
+def new_online(spec: MethodSpec, order, n_inputs, n_outputs, *, horizon=None, forgetting=None,
+               dt=None, options=None):
+    """A fresh online identifier of the method ``spec``."""
+    cls = spec.load()
+    if order is None or isinstance(order, list):
+        raise OrderError(f"method {spec.name} identifies online with a fixed order: give "
+                         "--order N (an integer)")
+    kwargs = dict(options or {})
+    if horizon is not None:
+        kwargs["horizon"] = horizon
+    if forgetting is not None:
+        kwargs["forgetting"] = forgetting
+    if spec.time == "discrete" and dt is not None:
+        kwargs["dt"] = dt
+    return cls(order, n_inputs, n_outputs, **kwargs)
+
+
+def _named(model, data):
+    """``model`` with the channel names of ``data`` (online identifiers use u1, y1...)."""
+    from .model import StateSpace
+    if (tuple(model.input_names), tuple(model.output_names)) == \
+            (tuple(data.input_names), tuple(data.output_names)):
+        return model
+    return StateSpace(model.A, model.B, model.C, model.D, model.dt,
+                      input_names=data.input_names, output_names=data.output_names,
+                      info=model.info)
+
+
+def online_update(spec: MethodSpec, ident, u, y, t=None):
+    """Feed a chunk of samples to an online identifier."""
+    if spec.time == "continuous":
+        return ident.update(u, y, t=t)
+    return ident.update(u, y)
+
+
+def load_online(spec: MethodSpec, path):
+    """Restore an online identifier from a checkpoint."""
+    return spec.load().load(path)
+
+
+# ---------------------------------------------------------------------------
+# helpers
+# ---------------------------------------------------------------------------
+class _State:
+    """Options shared by every command."""
+
+    def __init__(self):
+        self.quiet = False
+        self.debug = False
+        self.verbose = False
+        self.argv: list[str] = []
+
+    @property
+    def progress(self) -> bool:
+        return not self.quiet and sys.stderr.isatty()
+
+
+def _state() -> _State:
+    return click.get_current_context().find_root().ensure_object(_State)
+
+
+def _common(fn):
+    """``--quiet``, ``--verbose``, ``--debug`` on a subcommand too."""
+    def set_flag(name):
+        def callback(ctx, param, value):
+            if value:
+                setattr(ctx.find_root().ensure_object(_State), name, True)
+                _configure_logging(ctx.find_root().ensure_object(_State))
+            return value
+        return callback
+    fn = click.option("--debug", is_flag=True, expose_value=False, callback=set_flag("debug"),
+                      help="Show tracebacks and debug messages.")(fn)
+    fn = click.option("--verbose", "-v", is_flag=True, expose_value=False,
+                      callback=set_flag("verbose"), help="Show informational messages.")(fn)
+    fn = click.option("--quiet", "-q", is_flag=True, expose_value=False,
+                      callback=set_flag("quiet"),
+                      help="No progress bar and no summary; only errors.")(fn)
+    return fn
+
+
+_HANDLER: logging.Handler | None = None
+
+
+def _configure_logging(state: _State) -> None:
+    logger = logging.getLogger("subid")
+    level = logging.DEBUG if state.debug else logging.INFO if state.verbose else \
+        logging.ERROR if state.quiet else logging.WARNING
+    if _HANDLER is not None:
+        _HANDLER.setLevel(level)
+    logger.setLevel(level)
+
+
+def _echo(text: str = "") -> None:
+    if not _state().quiet:
+        click.echo(text)
+
+
+@contextlib.contextmanager
+def _about(path):
+    """Prefix errors raised inside with the file they concern (if not named yet)."""
+    try:
+        yield
+    except SubidError as exc:
+        if getattr(exc, "subid_file", None) is None and str(path) not in str(exc):
+            exc.subid_file = str(path)
+        raise
+
+
+def _one_line(exc: BaseException) -> str:
+    if isinstance(exc, OSError) and not isinstance(exc, SubidError) and exc.strerror:
+        name = exc.filename if exc.filename is not None else ""
+        text = f"{name}: {exc.strerror}" if name else exc.strerror
+    else:
+        text = str(exc) or type(exc).__name__
+    where = getattr(exc, "subid_file", None)
+    if where:
+        text = f"{where}: {text}"
+    return " ".join(text.split())
+
+
+def _parse_order(text):
+    """'auto' -> None; '4' -> 4; '2:6' -> [2..6]; '2,3,5' -> [2, 3, 5]."""
+    if text is None:
+        return None
+    s = str(text).strip().lower()
+    if s in ("auto", ""):
+        return None
+    try:
+        if ":" in s:
+            a, b = (int(v) for v in s.split(":"))
+            if b < a:
+                raise ValueError
+            return list(range(a, b + 1))
+        if "," in s:
+            return [int(v) for v in s.split(",") if v.strip()]
+        return int(s)
+    except ValueError:
+        raise click.BadParameter(f"{text!r}: use an integer, 'auto', a range '2:8' or a list "
+                                 "'2,4,6'", param_hint="--order") from None
+
+
+def _parse_options(items) -> dict:
+    out = {}
+    for item in items or ():
+        if "=" not in item:
+            raise click.BadParameter(f"{item!r}: use KEY=VALUE", param_hint="--option")
+        key, value = item.split("=", 1)
+        key = key.strip().replace("-", "_")
+        try:
+            out[key] = json.loads(value)
+        except ValueError:
+            out[key] = value
+    return out
+
+
+def _names(spec) -> list[str] | None:
+    if spec is None:
+        return None
+    return [s.strip() for s in str(spec).split(",") if s.strip()]
+
+
+def load_data(source: str, inputs=None, outputs=None, dt=None, time_column=None,
+              delimiter=None):
+    """The record named on the command line: a file or ``dataset:NAME``.
+
+    Returns
+    -------
+    data : IOData
+    label : str
+        Short name for titles.
+    notes : list of str
+        Provenance notes for the report.
+    """
+    from . import datasets, read
+    from .data import IOData
+    if source.startswith("dataset:"):
+        name = source.split(":", 1)[1]
+        data = datasets.load(name)
+        meta = datasets.info(name)
+        if time_column is not None:
+            raise DataError(f"{source}: the bundled datasets are uniformly sampled; --time "
+                            "does not apply")
+        notes = [meta["description"], f"Sampling: {meta['dt_note']}", f"Source: {meta['source']}"]
+        if inputs is not None or outputs is not None or dt is not None:
+            u_idx = _select(data.input_names, inputs, "inputs", source)
+            y_idx = _select(data.output_names, outputs, "outputs", source)
+            data = IOData(data.u[:, u_idx], data.y[:, y_idx],
+                          dt=dt if dt is not None else data.dt,
+                          input_names=[data.input_names[k] for k in u_idx],
+                          output_names=[data.output_names[k] for k in y_idx])
+        return data, meta["name"], notes
+    data = read(source, inputs=inputs, outputs=outputs, dt=dt, time=time_column,
+                delimiter=delimiter)
+    return data, os.path.basename(source), [f"Data file: {source}"]
+
+
+def _select(names, spec, role, source) -> list[int]:
+    if spec is None:
+        return list(range(len(names)))
+    out = []
+    for token in _names(spec):
+        if token in names:
+            out.append(names.index(token))
+        elif token.isdigit() and int(token) < len(names):
+            out.append(int(token))
+        else:
+            raise DataError(f"{source}: unknown channel {token!r} in {role}; available: "
+                            f"{', '.join(names)}")
+    return out
+
+
+def load_model(path, dt=None):
+    """A model from a subid JSON file or a MATLAB ``.mat`` file."""
+    from .interop import load_mat
+    from .model import StateSpace
+    path = os.fspath(path)
+    if path.lower().endswith(".mat"):
+        return load_mat(path, dt=dt)
+    return StateSpace.load(path)
+
+
+def _fmt_fit(values) -> str:
+    if values is None:
+        return "—"
+    return " / ".join("n/a" if not np.isfinite(v) else f"{v:.2f}" for v in values)
+
+
+def _fmt_poles(poles, limit: int = 8) -> str:
+    parts = []
+    seen = 0
+    for z in poles:
+        if z.imag < -1e-12 * max(1.0, abs(z)):
+            continue                        # the conjugate is printed as ±
+        if abs(z.imag) <= 1e-12 * max(1.0, abs(z)):
+            parts.append(f"{z.real:.4g}")
+        else:
+            parts.append(f"{z.real:.4g}±{abs(z.imag):.4g}j")
+        seen += 1
+        if seen >= limit:
+            parts.append("...")
+            break
+    return ", ".join(parts)
+
+
+def _progress(total: int, desc: str, enabled: bool, initial: int = 0):
+    if not enabled:
+        return None
+    try:
+        from tqdm import tqdm
+    except ImportError:  # pragma: no cover
+        return None
+    return tqdm(total=total, initial=initial, desc=desc, unit="sample", file=sys.stderr,
+                dynamic_ncols=True, leave=False)
+
+
+@contextlib.contextmanager
+def _warnings_to_log():
+    """Show library warnings as one-line log messages."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        yield caught
+    seen = set()
+    for w in caught:
+        text = str(w.message)
+        if text not in seen:
+            seen.add(text)
+            log.warning("%s", text)
+
+
+def _detrend(data, kind: str):
+    return data if kind == "none" else data.detrend(kind)
+
+
+def _command_line() -> str:
+    return "subid " + " ".join(shlex.quote(a) for a in _state().argv)
+
+
+def _write_json(path, obj) -> None:
+    tmp = f"{path}.{os.getpid()}.tmp"
+    with open(tmp, "w", encoding="utf-8") as fh:
+        json.dump(obj, fh, indent=2, allow_nan=False, default=_json_default)
+        fh.write("\n")
+    os.replace(tmp, path)
+
+
+def _json_default(obj):
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    if isinstance(obj, np.generic):
+        return obj.item()
+    raise TypeError(type(obj).__name__)
+
+
+def _nan_to_none(values):
+    if values is None:
+        return None
+    return [None if not np.isfinite(v) else float(v) for v in values]
+
+
+def _data_options(fn):
+    """--inputs/--outputs/--dt/--time/--delimiter/--detrend."""
+    fn = click.option("--detrend", type=click.Choice(["constant", "linear", "none"]),
+                      default="constant", show_default=True,
+                      help="Remove the means (constant) or straight lines (linear) of "
+                           "every channel before identification.")(fn)
+    fn = click.option("--delimiter", default=None, metavar="CHAR",
+                      help="Field delimiter of a text file (default: detected).")(fn)
+    fn = click.option("--time", "time_column", default=None, metavar="COLUMN",
+                      help="Column holding the time stamps (may be non-uniform).")(fn)
+    fn = click.option("--dt", type=float, default=None, metavar="SECONDS",
+                      help="Sampling period (default 1: time in samples).")(fn)
+    fn = click.option("--outputs", default=None, metavar="NAMES",
+                      help="Output columns: header names or 0-based indices, comma-separated.")(fn)
+    fn = click.option("--inputs", default=None, metavar="NAMES",
+                      help="Input columns: header names or 0-based indices, comma-separated.")(fn)
+    return fn
+
+
+_FREQ = click.option("--frequency-unit", type=click.Choice(["rad/s", "Hz"], case_sensitive=False),
+                     default="rad/s", show_default=True,
+                     help="Unit of the Bode frequency axis and of the pole table.")
+
+
+# ---------------------------------------------------------------------------
+# the command group
+# ---------------------------------------------------------------------------
+@click.group(context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100},
+             epilog="\b\nExamples:\n"
+                    "  subid identify dataset:dryer --method moesp --out dryer_out\n"
+                    "  subid identify run1.csv --inputs u1,u2 --outputs y --dt 0.1 --out out\n"
+                    "  subid demo --out demo_out")
+@click.version_option(package_name="subid", prog_name="subid")
+@click.option("--quiet", "-q", is_flag=True, help="No progress bar and no summary.")
+@click.option("--verbose", "-v", is_flag=True, help="Show informational messages.")
+@click.option("--debug", is_flag=True, help="Show tracebacks and debug messages.")
+@click.pass_context
+def cli(ctx, quiet, verbose, debug):
+    """Identify linear state-space models from input/output data.
+
+    DATA arguments are files (CSV, TSV, TXT, DAT, NPZ, MAT) or dataset:NAME for
+    a bundled DaISy record (see 'subid methods'). Every command has --help.
+    """
+    state = ctx.ensure_object(_State)
+    state.quiet = state.quiet or quiet
+    state.verbose = state.verbose or verbose
+    state.debug = state.debug or debug
+    _configure_logging(state)
+
+
+# -- identify ----------------------------------------------------------------
+@cli.command(epilog="\b\nExamples:\n"
+                    "  subid identify dataset:dryer --method moesp --out dryer_out\n"
+                    "  subid identify run1.csv --inputs u1,u2 --outputs y --dt 0.1 \\\n"
+                    "      --method ls --order auto --validate 0.3 --out run1_out\n"
+                    "  subid identify log.csv --inputs u --outputs y --time t --method ct "
+                    "--order 2 --out ct_out")
+@click.argument("data", metavar="DATA")
+@_data_options
+@click.option("--method", "method_name", type=click.Choice(list(METHODS)), default="ls",
+              show_default=True, help="Identification method (see 'subid methods').")
+@click.option("--order", default="auto", show_default=True, metavar="N|auto|A:B",
+              help="Model order: an integer, 'auto' (largest gap among 1..10), a range "
+                   "'2:8' or a list '2,4,6' of candidates.")
+@click.option("--horizon", type=click.IntRange(min=2), default=None,
+              help="Block rows of the data Hankel matrix (default: chosen by the method).")
+@click.option("--validate", type=click.FloatRange(0, 1, max_open=True), default=0.3,
+              show_default=True,
+              help="Share of the record, at its end, kept for validation (0: none).")
+@click.option("--forgetting", type=click.FloatRange(0, min_open=True), default=None,
+              help="Forgetting of an online method (recursive: factor in (0, 1]; adaptive: "
+                   "rate, see its documentation).")
+@click.option("--option", "options", multiple=True, metavar="KEY=VALUE",
+              help="Extra keyword argument of the method (JSON value), e.g. "
+                   "--option instruments=null. Repeatable.")
+@_FREQ
+@click.option("--report/--no-report", "write_report", default=True, show_default=True,
+              help="Write report.html (skip it for batch jobs that need only the model).")
+@click.option("--out", required=True, type=click.Path(file_okay=False),
+              help="Output folder for model.json, report.html and summary.json.")
+@_common
+def identify(data, inputs, outputs, dt, time_column, delimiter, detrend, method_name, order,
+             horizon, validate, forgetting, options, frequency_unit, write_report, out):
+    """Identify a model from DATA; write model.json and report.html.
+
+    The record is detrended, split into an estimation part (the first 1 -
+    VALIDATE) and a validation part (the rest); the model is identified on the
+    first and checked on both. Prints the order, fit % on the estimation and
+    validation parts, the poles, stability and the time taken.
+    """
+    from . import report
+    spec = METHODS[method_name]
+    order = _parse_order(order)
+    opts = _parse_options(options)
+    if forgetting is not None and spec.kind != "online":
+        raise click.UsageError(f"--forgetting applies to online methods only, not to "
+                               f"{spec.name}")
+    spec.load()                                     # "not available" before any work
+    with _about(data):
+        record, label, notes = load_data(data, inputs, outputs, dt, time_column, delimiter)
+        work = _detrend(record, detrend)
+        if validate > 0:
+            est, val = work.split(1 - validate)
+        else:
+            est, val = work, None
+        t0 = time.perf_counter()
+        with _warnings_to_log():
+            if spec.kind == "batch":
+                model = run_batch(spec, est, order, horizon, opts)
+            else:
+                ident = new_online(spec, order, est.n_inputs, est.n_outputs, horizon=horizon,
+                                   forgetting=forgetting, dt=est.dt, options=opts)
+                _feed(spec, ident, est, 0, _state().progress, chunk=max(est.n_samples // 100, 1))
+                model = _named(ident.model, est)
+        seconds = time.perf_counter() - t0
+        result = report.evaluate(model, est, val)
+    model.info.setdefault("method", spec.attribute)
+    model.info["data"] = _provenance(data, record, work, detrend, est, validate)
+    os.makedirs(out, exist_ok=True)
+    model_path = os.path.join(out, "model.json")
+    report_path = os.path.join(out, "report.html")
+    summary_path = os.path.join(out, "summary.json")
+    model.save(model_path)
+    if write_report:
+        html = report.identification_report(
+            {spec.name: model}, est, val, title=f"{label}: {spec.attribute}",
+            frequency_unit=frequency_unit, seconds={spec.name: seconds}, notes=notes,
+            command=_command_line(), source=data, data=work)
+        report.write_html(report_path, html)
+    files = [model_path, *([report_path] if write_report else []), summary_path]
+    summary = {
+        "data": data, "method": spec.name, "function": spec.attribute, "order": model.order,
+        "horizon": model.info.get("horizon"), "dt": model.dt,
+        "outputs": list(est.output_names),
+        "fit_estimation": _nan_to_none(result["fit_estimation"]),
+        "fit_validation": _nan_to_none(result["fit_validation"]),
+        "n_estimation": est.n_samples, "n_validation": val.n_samples if val is not None else 0,
+        "stable": bool(result["stable"]),
+        "poles": [[float(z.real), float(z.imag)] for z in result["poles"]],
+        "seconds": seconds, "files": files,
+    }
+    _write_json(summary_path, summary)
+    _print_summary(data, record, spec, model, result, est, val, seconds, files)
+    return 0
+
+
+def _provenance(source, record, work, detrend, est, validate) -> dict:
+    info = {"source": str(source), "inputs": list(record.input_names),
+            "outputs": list(record.output_names), "detrend": detrend,
+            "n_estimation": est.n_samples, "validation_fraction": float(validate)}
+    if work.u_offset is not None:
+        info["u_offset"] = np.asarray(work.u_offset, dtype=float)
+        info["y_offset"] = np.asarray(work.y_offset, dtype=float)
+    return info
+
+
+def _print_summary(source, record, spec, model, result, est, val, seconds, files):
+    if _state().quiet:
+        return
+    timing = f"dt = {record.dt:g}" if record.dt is not None else "non-uniform time stamps"
+    lines = [f"data        {source}: {record.n_samples} samples, {record.n_inputs} input(s), "
+             f"{record.n_outputs} output(s), {timing}",
+             f"method      {spec.name} ({spec.attribute})",
+             f"order       {model.order}"
+             + (f" ({model.info['order_selection']})" if model.info.get("order_selection")
+                else ""),
+             f"outputs     {', '.join(est.output_names)}",
+             f"fit %       estimation {_fmt_fit(result['fit_estimation'])} "
+             f"({est.n_samples} samples)"]
+    if val is not None:
+        lines.append(f"            validation {_fmt_fit(result['fit_validation'])} "
+                     f"({val.n_samples} samples)")
+    else:
+        lines.append("            validation — (--validate 0)")
+    lines += [f"poles       {_fmt_poles(result['poles'])}",
+              f"stable      {'yes' if result['stable'] else 'NO'}"
+              + (" (continuous time)" if model.dt == 0 else ""),
+              f"time        {seconds:.2f} s",
+              f"wrote       {', '.join(files)}"]
+    click.echo("\n".join(lines))
+
+
+# -- track -------------------------------------------------------------------
+def _feed(spec, ident, data, start, progress, *, chunk, on_chunk=None):
+    """Feed ``data[start:]`` to ``ident`` in chunks; ``on_chunk(n)`` after each."""
+    n = data.n_samples
+    bar = _progress(n, f"{spec.name}", progress, initial=start)
+    try:
+        k = start
+        while k < n:
+            stop = min(n, k + chunk)
+            if on_chunk is not None:
+                stop = min(stop, on_chunk.next_stop(k))
+            t = data.t[k:stop] if spec.time == "continuous" else None
+            online_update(spec, ident, data.u[k:stop], data.y[k:stop], t)
+            if bar is not None:
+                bar.update(stop - k)
+            k = stop
+            if on_chunk is not None:
+                on_chunk(k)
+    finally:
+        if bar is not None:
+            bar.close()
+
+
+def _parameters(model, dt_hint) -> tuple[np.ndarray, list[str]]:
+    """Markov parameters h1..h6 (impulse response samples), at most 12, for convergence plots."""
+    m = model
+    if m.dt == 0:
+        m = m.to_discrete(dt_hint if dt_hint else 1.0)
+    k = 6
+    h = m.markov(k + 1)[1:]                 # skip D
+    names = [f"h{j + 1}({m.output_names[i]}←{m.input_names[q]})"
+             for j in range(k) for i in range(m.n_outputs) for q in range(m.n_inputs)]
+    values = h.reshape(-1)
+    order = np.argsort([j for j in range(k) for _ in range(m.n_outputs * m.n_inputs)],
+                       kind="stable")
+    values, names = values[order][:12], [names[i] for i in order][:12]
+    return values, names
+
+
+class _Tracker:
+    """Snapshots and checkpoints during ``subid track``."""
+
+    def __init__(self, spec, ident, raw, data, *, trace_every, checkpoint_every, checkpoint_dir,
+                 keep):
+        self.spec, self.ident, self.raw, self.data = spec, ident, raw, data
+        self.trace_every = trace_every
+        self.checkpoint_every = checkpoint_every
+        self.checkpoint_dir = checkpoint_dir
+        self.keep = keep
+        self.samples, self.poles, self.params = [], [], []
+        self.names: list[str] = []
+        self.written: list[str] = []
+        self.dt_hint = data.dt if data.dt is not None else float(np.mean(np.diff(data.t)))
+
+    def next_stop(self, k: int) -> int:
+        stops = [self.data.n_samples]
+        for every in (self.trace_every, self.checkpoint_every):
+            if every:
+                stops.append((k // every + 1) * every)
+        return min(stops)
+
+    def __call__(self, k: int) -> None:
+        n = self.data.n_samples
+        if (self.trace_every and k % self.trace_every == 0) or k == n:
+            self.snapshot(k)
+        if self.checkpoint_every and k % self.checkpoint_every == 0 and k < n:
+            self.checkpoint(k)
+
+    def snapshot(self, k: int) -> None:
+        try:
+            model = _named(self.ident.model, self.data)
+            poles = model.poles()
+            values, names = _parameters(model, self.dt_hint)
+        except SubidError as exc:
+            log.debug("no model at sample %d: %s", k, exc)
+            return
+        if self.samples and self.samples[-1] == k:
+            return
+        self.samples.append(k)
+        self.poles.append(poles)
+        self.params.append(values)
+        self.names = names
+
+    def history(self) -> dict:
+        if not self.samples:
+            return {"sample": np.zeros(0), "poles": np.zeros((0, 0), complex)}
+        return {"sample": np.array(self.samples), "poles": np.array(self.poles),
+                "parameters": np.array(self.params), "parameter_names": list(self.names)}
+
+    def fingerprint(self, k: int) -> str:
+        h = hashlib.sha256()
+        h.update(np.ascontiguousarray(self.raw.u[:k]).tobytes())
+        h.update(np.ascontiguousarray(self.raw.y[:k]).tobytes())
+        return h.hexdigest()
+
+    def save_trace(self, path, k: int) -> None:
+        hist = self.history()
+        arrays = {"sample": np.asarray(hist["sample"], dtype=np.int64),
+                  "poles_re": np.asarray(hist["poles"]).real,
+                  "poles_im": np.asarray(hist["poles"]).imag,
+                  "parameters": np.asarray(hist.get("parameters", np.zeros((0, 0)))),
+                  "parameter_names": np.array(hist.get("parameter_names", []), dtype=str),
+                  "fingerprint": np.array(self.fingerprint(k)),
+                  "method": np.array(self.spec.name)}
+        tmp = f"{path}.{os.getpid()}.tmp.npz"
+        np.savez(tmp, **arrays)
+        os.replace(tmp, path)
+
+    def load_trace(self, path, k: int) -> None:
+        if not os.path.exists(path):
+            log.warning("no convergence trace next to the checkpoint (%s); the convergence "
+                        "plot starts at sample %d", path, k)
+            return
+        try:
+            with np.load(path, allow_pickle=False) as z:
+                sample = z["sample"]
+                poles = z["poles_re"] + 1j * z["poles_im"]
+                params = z["parameters"]
+                names = [str(s) for s in z["parameter_names"]]
+                fingerprint = str(z["fingerprint"])
+        except (OSError, ValueError, KeyError) as exc:
+            log.warning("convergence trace %s unreadable (%s); starting a new one", path, exc)
+            return
+        if fingerprint != self.fingerprint(k):
+            log.warning("the checkpoint was made on other data: the first %d samples of this "
+                        "record differ from those the identifier has seen", k)
+        keep = sample <= k
+        self.samples = [int(s) for s in sample[keep]]
+        self.poles = list(poles[keep])
+        self.params = list(params[keep]) if params.ndim == 2 and params.shape[0] == keep.size \
+            else []
+        if len(self.params) != len(self.samples):
+            self.samples, self.poles, self.params = [], [], []
+        self.names = names
+
+    def checkpoint(self, k: int) -> str:
+        os.makedirs(self.checkpoint_dir, exist_ok=True)
+        path = os.path.join(self.checkpoint_dir, f"checkpoint-{k:010d}.npz")
+        self.save_trace(path[:-4] + ".trace.npz", k)
+        self.ident.save(path)
+        self.written.append(path)
+        log.info("checkpoint %s", path)
+        if self.keep:
+            existing = sorted(f for f in os.listdir(self.checkpoint_dir)
+                              if f.startswith("checkpoint-") and f.endswith(".npz")
+                              and not f.endswith(".trace.npz"))
+            for old in existing[:-self.keep]:
+                for name in (old, old[:-4] + ".trace.npz"):
+                    with contextlib.suppress(FileNotFoundError):
+                        os.unlink(os.path.join(self.checkpoint_dir, name))
+        return path
+
+
+@cli.command(epilog="\b\nExamples:\n"
+                    "  subid track dataset:dryer --method recursive --order 4 --out track_out\n"
+                    "  subid track plant.csv --inputs u --outputs y --dt 0.01 --method recursive "
+                    "\\\n      --order 3 --forgetting 0.999 --checkpoint-every 50000 --out run\n"
+                    "  subid track plant.csv --inputs u --outputs y --dt 0.01 --method recursive "
+                    "\\\n      --resume run/checkpoints/checkpoint-0000050000.npz --out run")
+@click.argument("data", metavar="DATA")
+@_data_options
+@click.option("--method", "method_name",
+              type=click.Choice([n for n, s in METHODS.items() if s.kind == "online"]),
+              default="recursive", show_default=True, help="Online identification method.")
+@click.option("--order", type=click.IntRange(min=1), default=None,
+              help="Model order (required unless resuming).")
+@click.option("--horizon", type=click.IntRange(min=2), default=None,
+              help="Horizon of the identifier (default: chosen by the method).")
+@click.option("--forgetting", type=click.FloatRange(0, min_open=True), default=None,
+              help="recursive: forgetting factor in (0, 1], 1 (default) weighs all samples "
+                   "equally; adaptive: forgetting rate (see its documentation).")
+@click.option("--option", "options", multiple=True, metavar="KEY=VALUE",
+              help="Extra keyword argument of the identifier (JSON value). Repeatable.")
+@click.option("--chunk", type=click.IntRange(min=1), default=None,
+              help="Samples fed per update (default: 1 % of the record, at most 1000).")
+@click.option("--trace-every", type=click.IntRange(min=0), default=None,
+              help="Samples between snapshots of the model for the convergence plot "
+                   "(default: 1 % of the record; 0: only at the end).")
+@click.option("--checkpoint-every", type=click.IntRange(min=0), default=10000,
+              show_default=True, help="Write a checkpoint every K samples (0: only at the end).")
+@click.option("--keep-checkpoints", type=click.IntRange(min=0), default=3, show_default=True,
+              help="Keep the last N periodic checkpoints (0: keep all).")
+@click.option("--resume", type=click.Path(dir_okay=False), default=None, metavar="CHECKPOINT",
+              help="Continue from a checkpoint written by an earlier run on the same data.")
+@_FREQ
+@click.option("--report/--no-report", "write_report", default=True, show_default=True,
+              help="Write report.html.")
+@click.option("--out", required=True, type=click.Path(file_okay=False),
+              help="Output folder: model.json, report.html, history.npz, checkpoints/.")
+@_common
+def track(data, inputs, outputs, dt, time_column, delimiter, detrend, method_name, order,
+          horizon, forgetting, options, chunk, trace_every, checkpoint_every, keep_checkpoints,
+          resume, frequency_unit, write_report, out):
+    """Run an online identifier over DATA and write the convergence report.
+
+    Samples are fed in chunks (progress bar on a terminal); the model is
+    snapshot every --trace-every samples for the convergence plot, and the
+    identifier is checkpointed every --checkpoint-every samples (and at the
+    end) so that --resume can continue. Writes model.json (final model),
+    history.npz (snapshots), report.html and checkpoints/.
+    """
+    from . import report
+    spec = METHODS[method_name]
+    spec.load()
+    opts = _parse_options(options)
+    with _about(data):
+        raw, label, notes = load_data(data, inputs, outputs, dt, time_column, delimiter)
+        work = _detrend(raw, detrend)
+        if spec.time == "discrete" and work.dt is None:
+            raise DataError(f"method {spec.name} needs uniformly sampled data; these time "
+                            "stamps are non-uniform")
+    n = work.n_samples
+    chunk = chunk or max(1, min(1000, n // 100))
+    trace_every = max(1, n // 100) if trace_every is None else trace_every
+    checkpoint_dir = os.path.join(out, "checkpoints")
+    os.makedirs(out, exist_ok=True)
+    with _about(resume or data):
+        if resume is not None:
+            ident = load_online(spec, resume)
+            for attr, want in (("n_inputs", work.n_inputs), ("n_outputs", work.n_outputs)):
+                have = getattr(ident, attr, want)
+                if have != want:
+                    raise DataError(f"the checkpoint has {have} {attr[2:]} but the data "
+                                    f"have {want}")
+            start = int(getattr(ident, "n_samples", 0))
+            if start > n:
+                raise DataError(f"the checkpoint has already seen {start} samples but the "
+                                f"record has only {n}")
+            for name, given in (("order", order), ("horizon", horizon),
+                                ("forgetting", forgetting)):
+                have = getattr(ident, name, None)
+                if given is not None and have is not None and given != have:
+                    log.warning("--%s %s ignored: the checkpoint has %s = %s", name, given,
+                                name, have)
+        else:
+            if order is None:
+                raise click.UsageError("--order is required (unless --resume is given)")
+            ident = new_online(spec, order, work.n_inputs, work.n_outputs, horizon=horizon,
+                               forgetting=forgetting, dt=work.dt, options=opts)
+            start = 0
+    tracker = _Tracker(spec, ident, raw, work, trace_every=trace_every,
+                       checkpoint_every=checkpoint_every, checkpoint_dir=checkpoint_dir,
+                       keep=keep_checkpoints)
+    if resume is not None:
+        tracker.load_trace(resume[:-4] + ".trace.npz" if resume.endswith(".npz")
+                           else resume + ".trace.npz", start)
+    t0 = time.perf_counter()
+    with _about(data), _warnings_to_log():
+        if start < n:
+            _feed(spec, ident, work, start, _state().progress, chunk=chunk, on_chunk=tracker)
+        else:
+            tracker.snapshot(n)
+        model = _named(ident.model, work)
+    seconds = time.perf_counter() - t0
+    final_ckpt = tracker.checkpoint(n) if start < n or resume is None else resume
+    model.info.setdefault("method", spec.attribute)
+    model.info["data"] = _provenance(data, raw, work, detrend, work, 0.0)
+    history = tracker.history()
+    model_path = os.path.join(out, "model.json")
+    history_path = os.path.join(out, "history.npz")
+    report_path = os.path.join(out, "report.html")
+    model.save(model_path)
+    tracker.save_trace(history_path, n)
+    result = report.evaluate(model, work)
+    if write_report:
+        html = report.identification_report(
+            {spec.name: model}, work, None, title=f"{label}: {spec.attribute} (online)",
+            frequency_unit=frequency_unit, history=history, seconds={spec.name: seconds},
+            notes=notes + [f"Samples {start}..{n} processed in this run"
+                           + (f" (resumed from {resume})" if resume else "") +
+                           f"; final checkpoint {final_ckpt}. Fit % is on the whole record."],
+            command=_command_line(), source=data)
+        report.write_html(report_path, html)
+    files = [model_path, *([report_path] if write_report else []), history_path]
+    if not _state().quiet:
+        click.echo("\n".join([
+            f"data        {data}: {n} samples ({start} already seen, {n - start} processed now)",
+            f"method      {spec.name} ({spec.attribute})",
+            f"order       {model.order}",
+            f"fit %       {_fmt_fit(result['fit_estimation'])} on the whole record "
+            f"({', '.join(work.output_names)})",
+            f"poles       {_fmt_poles(result['poles'])}",
+            f"stable      {'yes' if result['stable'] else 'NO'}",
+            f"snapshots   {len(history['sample'])}",
+            f"time        {seconds:.2f} s",
+            f"checkpoint  {final_ckpt}",
+            f"wrote       {', '.join(files)}"]))
+    return 0
+
+
+# -- simulate ----------------------------------------------------------------
+def _read_signals(path, columns, time_column, delimiter):
+    """Columns of a file that holds only inputs (subid.read needs outputs too)."""
+    from pathlib import Path
+    from . import io as sio
+    shown = os.fspath(path)
+    p = Path(shown)
+    ext = p.suffix.lower()
+    if ext not in sio.SUPPORTED_EXTENSIONS:
+        raise FileReadError(f"{shown}: unsupported file type {ext or '(no extension)'!r}; "
+                            f"supported: {', '.join(sio.SUPPORTED_EXTENSIONS)}", path=shown)
+    sio._check_exists(p, shown)
+    if ext in (".npz", ".mat"):
+        arrays = sio._load_npz(p, shown) if ext == ".npz" else sio._load_mat(p, shown)
+        keys = sio._array_names(columns, "inputs", list(arrays), shown)
+        u, names = sio._stack(keys, arrays, shown, ext, "input")
+        t = None
+        if time_column is not None:
+            key = sio._array_names(time_column, "time", list(arrays), shown)[0]
+            t = np.asarray(arrays[key], dtype=float).reshape(-1)
+        u = np.asarray(u, dtype=float)
+        if not np.isfinite(u).all():
+            raise DataError(f"{shown}: the inputs hold NaN or infinite values")
+        return u, names, t
+    text = sio._decode(sio._read_bytes(p, shown), shown)
+    table = sio._Table(shown, text, ext, delimiter)
+    cols = table.resolve(columns, "inputs")
+    t_cols = table.resolve(time_column, "time") if time_column is not None else []
+    both = set(cols) & set(t_cols)
+    if both:
+        raise FileReadError(f"{shown}: {table.describe(min(both))} is used both as an input "
+                            "and as the time", path=shown)
+    all_cols = cols + t_cols
+    values = table.parse(all_cols)
+    table.check_finite(values, all_cols)
+    t = values[:, -1] if t_cols else None
+    return values[:, :len(cols)], table.channel_names(cols), t
+
+
+def _write_signals(path, t, u, y, input_names, output_names) -> None:
+    ext = os.path.splitext(path)[1].lower()
+    if ext == ".npz":
+        tmp = f"{path}.{os.getpid()}.tmp.npz"
+        np.savez(tmp, t=t, u=u, y=y, input_names=np.array(input_names, dtype=str),
+                 output_names=np.array(output_names, dtype=str))
+        os.replace(tmp, path)
+        return
+    if ext not in (".csv", ".txt", ".tsv"):
+        raise click.UsageError(f"--out {path}: use a .csv, .tsv, .txt or .npz file name")
+    delim = "\t" if ext == ".tsv" else ","
+    header = delim.join(["time", *input_names, *output_names])
+    tmp = f"{path}.{os.getpid()}.tmp"
+    np.savetxt(tmp, np.column_stack([t, u, y]), delimiter=delim, header=header, comments="",
+               fmt="%.15g")
+    os.replace(tmp, path)
+
+
+@cli.command(epilog="\b\nExamples:\n"
+                    "  subid simulate out/model.json --input test_input.csv --out predicted.csv\n"
+                    "  subid simulate ct_model.json --input u.csv --inputs u --time t --out y.csv")
+@click.argument("model_path", metavar="MODEL")
+@click.option("--input", "input_path", required=True, metavar="FILE",
+              help="File with the input signals (CSV/TSV/TXT/DAT, NPZ or MAT).")
+@click.option("--inputs", default=None, metavar="NAMES",
+              help="Input columns (default: the model's input names).")
+@click.option("--time", "time_column", default=None, metavar="COLUMN",
+              help="Column with time stamps (needed for a continuous-time model unless --dt).")
+@click.option("--dt", type=float, default=None, metavar="SECONDS",
+              help="Sampling period of the input (default: the model's for discrete time).")
+@click.option("--delimiter", default=None, metavar="CHAR", help="Delimiter of a text file.")
+@click.option("--offsets/--no-offsets", default=True, show_default=True,
+              help="Apply the means removed from the data before identification "
+                   "(stored in the model by 'subid identify') so the output is in the "
+                   "original units.")
+@click.option("--hold", type=click.Choice(["zoh", "foh"]), default="zoh", show_default=True,
+              help="Inter-sample input of a continuous-time model.")
+@click.option("--out", required=True, metavar="FILE",
+              help="Output file: .csv/.tsv/.txt (time, inputs, outputs) or .npz.")
+@_common
+def simulate(model_path, input_path, inputs, time_column, dt, delimiter, offsets, hold, out):
+    """Simulate MODEL (JSON or .mat) with the inputs of a file, from a zero state."""
+    from ._validation import check_dt
+    with _about(model_path):
+        model = load_model(model_path)
+    columns = inputs if inputs is not None else ",".join(model.input_names)
+    if time_column is not None and dt is not None:
+        raise click.UsageError("give either --time or --dt, not both")
+    with _about(input_path):
+        u, names, t = _read_signals(input_path, columns, time_column, delimiter)
+        if u.shape[1] != model.n_inputs:
+            raise DataError(f"{u.shape[1]} input column(s) selected but the model has "
+                            f"{model.n_inputs} input(s)")
+        n = u.shape[0]
+        if t is None:
+            step = check_dt(dt) if dt is not None else (model.dt if model.dt > 0 else None)
+            if step is None:
+                raise DataError("a continuous-time model needs the time stamps: give --time "
+                                "COLUMN or --dt")
+            t = step * np.arange(n)
+        u_eff = u
+        info = model.info.get("data") if isinstance(model.info, dict) else None
+        applied = False
+        if offsets and isinstance(info, dict) and info.get("detrend") == "constant" \
+                and "u_offset" in info:
+            u_eff = u - np.asarray(info["u_offset"], dtype=float).reshape(1, -1)
+            applied = True
+        y = model.simulate(u_eff, t=t, hold=hold)
+        if applied:
+            y = y + np.asarray(info["y_offset"], dtype=float).reshape(1, -1)
+    _write_signals(out, t, u, y, list(names), list(model.output_names))
+    _echo(f"simulated {n} samples of {', '.join(model.output_names)}"
+          + (" (with the identification offsets)" if applied else "") + f"; wrote {out}")
+    return 0
+
+
+# -- compare -----------------------------------------------------------------
+@cli.command(epilog="\b\nExamples:\n"
+                    "  subid compare ls_out/model.json moesp_out/model.json --data dataset:dryer\n"
+                    "  subid compare out/model.json --data test.csv --inputs u --outputs y "
+                    "--dt 0.1 --out cmp")
+@click.argument("model_paths", metavar="MODEL...", nargs=-1, required=True)
+@click.option("--data", "data_source", required=True, metavar="DATA",
+              help="Data file or dataset:NAME to simulate on.")
+@_data_options
+@click.option("--out", default=None, type=click.Path(file_okay=False),
+              help="Folder for compare.html and compare.png (default: the first model's "
+                   "folder).")
+@_common
+def compare(model_paths, data_source, inputs, outputs, dt, time_column, delimiter, detrend,
+            out):
+    """Fit % of one or more models on DATA, with an overlay plot.
+
+    Every model is simulated from a least-squares initial state (as
+    subid.fit_percent and MATLAB's compare). Inputs and outputs default to
+    the first model's channel names; the sampling period to its dt.
+    """
+    from . import plot, report
+    models, paths = {}, {}
+    for path in model_paths:
+        with _about(path):
+            m = load_model(path)
+        label = os.path.splitext(path)[0]
+        while label in models:
+            label += "'"
+        models[label] = m
+        paths[label] = path
+    first = next(iter(models.values()))
+    if inputs is None:
+        inputs = ",".join(first.input_names)
+    if outputs is None:
+        outputs = ",".join(first.output_names)
+    if dt is None and time_column is None and first.dt > 0 \
+            and not data_source.startswith("dataset:"):
+        dt = first.dt
+    with _about(data_source):
+        record, label, notes = load_data(data_source, inputs, outputs, dt, time_column,
+                                         delimiter)
+        work = _detrend(record, detrend)
+    fits = {}
+    for name, m in models.items():
+        with _about(paths[name]):
+            fits[name] = report.evaluate(m, work)["fit_estimation"]
+    out = out or os.path.dirname(os.path.abspath(model_paths[0]))
+    os.makedirs(out, exist_ok=True)
+    png = os.path.join(out, "compare.png")
+    page = os.path.join(out, "compare.html")
+    fig = plot.compare(work, models, title=f"{label}: simulated and measured outputs")
+    fig.savefig(png, dpi=90)
+    figure = report.figure_html(fig, "simulation from a least-squares initial state; fit % in "
+                                "the legend")
+    rows = "".join(
+        f"<tr><td class=\"l\">{report._e(name)}</td>"
+        + "".join(f"<td>{report._fmt_fit([v])}</td>" for v in fits[name]) + "</tr>"
+        for name in models)
+    head = "".join(f"<th>{report._e(n)}</th>" for n in work.output_names)
+    body = [report._section("summary", "Fit %",
+                            f"<p>{report._e(data_source)}: {work.n_samples} samples.</p>"
+                            f"<table><tr><th class=\"l\">model</th>{head}</tr>{rows}</table>"
+                            f"<pre>{report._e(_command_line())}</pre>"),
+            report._section("compare", "Simulated and measured outputs", figure)]
+    report.write_html(page, report._page(f"{label}: model comparison", body))
+    if not _state().quiet:
+        width = max(len(n) for n in models) + 2
+        header = "model".ljust(width) + "  ".join(f"{n:>12}" for n in work.output_names)
+        click.echo(f"fit % on {data_source} ({work.n_samples} samples)")
+        click.echo(header)
+        for name in models:
+            click.echo(name.ljust(width) + "  ".join(
+                f"{v:12.2f}" if np.isfinite(v) else f"{'n/a':>12}" for v in fits[name]))
+        click.echo(f"wrote {png}, {page}")
+    return 0
+
+
+# -- convert -----------------------------------------------------------------
+_PY_TEMPLATE = '''"""{what} written by subid convert from {source}."""
+import numpy as np
+{import_line}
+
+A = np.array({A!r})
+B = np.array({B!r})
+C = np.array({C!r})
+D = np.array({D!r})
+{build}
+'''
+
+
+def _python_source(model, target: str, source: str) -> str:
+    mats = {k: getattr(model, k).tolist() for k in "ABCD"}
+    if target == "control":
+        dt = model.dt
+        build = (f"sys = control.ss(A, B, C, D, {dt!r}, inputs={list(model.input_names)!r}, "
+                 f"outputs={list(model.output_names)!r})")
+        return _PY_TEMPLATE.format(what="python-control model", source=source,
+                                   import_line="import control", build=build, **mats)
+    build = "sys = signal.StateSpace(A, B, C, D)" if model.dt == 0 else \
+        f"sys = signal.StateSpace(A, B, C, D, dt={model.dt!r})"
+    return _PY_TEMPLATE.format(what="scipy.signal model", source=source,
+                               import_line="from scipy import signal", build=build, **mats)
+
+
+@cli.command(epilog="\b\nExamples:\n"
+                    "  subid convert out/model.json --to dt=0.01     # resample (d2d / c2d)\n"
+                    "  subid convert out/model.json --to ct          # continuous time (d2c)\n"
+                    "  subid convert out/model.json --to mat         # MATLAB ss fields\n"
+                    "  subid convert model.mat --to json --dt 0.1    # from MATLAB\n"
+                    "  subid convert out/model.json --to control     # python-control script")
+@click.argument("model_path", metavar="MODEL")
+@click.option("--to", "target", required=True, metavar="dt=SECONDS|ct|mat|json|control|scipy",
+              help="dt=T: discrete time with period T (from continuous time, or resampled); "
+                   "ct: continuous time; mat: MATLAB ss(A,B,C,D,Ts) fields; json: subid model "
+                   "file; control / scipy: a Python script building the python-control / "
+                   "scipy.signal system.")
+@click.option("--method", "conversion", type=click.Choice(["zoh", "foh", "bilinear"]),
+              default="zoh", show_default=True, help="Discretisation method (c2d / d2c).")
+@click.option("--dt", type=float, default=None,
+              help="Sampling period for a .mat model whose Ts is -1 (unspecified).")
+@click.option("--out", default=None, metavar="FILE",
+              help="Output file (default: next to MODEL, named after the target).")
+@_common
+def convert(model_path, target, conversion, dt, out):
+    """Convert MODEL (subid JSON or MATLAB .mat) to another time base or format."""
+    from .interop import save_mat
+    with _about(model_path):
+        model = load_model(model_path, dt=dt)
+    stem = os.path.splitext(model_path)[0]
+    t = target.strip().lower()
+    with _about(model_path):
+        if t.startswith("dt="):
+            try:
+                new_dt = float(t[3:])
+            except ValueError:
+                raise click.BadParameter(f"{target!r}: use dt=SECONDS, e.g. dt=0.01",
+                                         param_hint="--to") from None
+            if not new_dt > 0 or not math.isfinite(new_dt):
+                raise click.BadParameter(f"{target!r}: the period must be positive",
+                                         param_hint="--to")
+            if model.dt == 0:
+                result = model.to_discrete(new_dt, conversion)
+            elif math.isclose(model.dt, new_dt, rel_tol=1e-12):
+                result = model
+            else:
+                result = model.to_continuous(conversion).to_discrete(new_dt, conversion)
+            path = out or f"{stem}_dt{new_dt:g}.json"
+            result.save(path)
+            what = f"discrete-time model, dt = {new_dt:g} ({conversion})"
+        elif t == "ct":
+            result = model.to_continuous(conversion)
+            path = out or f"{stem}_ct.json"
+            result.save(path)
+            what = f"continuous-time model ({conversion})"
+        elif t == "mat":
+            path = out or f"{stem}.mat"
+            save_mat(model, path)
+            what = "MATLAB ss fields A, B, C, D, Ts, InputName, OutputName"
+        elif t == "json":
+            path = out or f"{stem}.json"
+            if os.path.abspath(path) == os.path.abspath(model_path):
+                raise click.UsageError(f"{model_path} is already a JSON model; give --out")
+            model.save(path)
+            what = "subid model file"
+        elif t in ("control", "scipy"):
+            if t == "control":
+                model.to_control()          # ImportError with an install hint if missing
+            path = out or f"{stem}_{t}.py"
+            with open(path, "w", encoding="utf-8") as fh:
+                fh.write(_python_source(model, t, model_path))
+            what = "python-control script" if t == "control" else "scipy.signal script"
+        else:
+            raise click.BadParameter(f"{target!r}: use dt=SECONDS, ct, mat, json, control or "
+                                     "scipy", param_hint="--to")
+    _echo(f"wrote {path} ({what})")
+    if t == "control" and not _state().quiet:
+        click.echo(str(model.to_control()))
+    return 0
+
+
+# -- demo and gallery ----------------------------------------------------------
+@cli.command(epilog="\b\nExamples:\n"
+                    "  subid demo --out demo_out\n"
+                    "  subid demo --datasets dryer,ballbeam --methods ls,moesp --out quick")
+@click.option("--out", default="demo_out", show_default=True, type=click.Path(file_okay=False),
+              help="Output folder: one report per dataset, index.html, gallery.md.")
+@click.option("--datasets", "names", default=None, metavar="NAMES",
+              help="Comma-separated subset of the bundled datasets (default: all).")
+@click.option("--methods", default=None, metavar="NAMES",
+              help="Comma-separated batch methods (default: every available one).")
+@click.option("--jobs", type=click.IntRange(min=1), default=None,
+              help="Datasets processed in parallel processes (default: the CPUs, at most 4).")
+@_FREQ
+@_common
+def demo(out, names, methods, jobs, frequency_unit):
+    """Identify the bundled DaISy datasets with every available method.
+
+    Each record: means removed, identified on the first 70 %, fit % on the
+    last 30 %. Writes one HTML report per dataset, index.html linking them,
+    gallery.md (the table of docs/gallery.md) and summary.json.
+    """
+    from . import demo as demo_module
+    result = demo_module.run(out, datasets=_names(names), methods=_names(methods),
+                             frequency_unit=frequency_unit, progress=_state().progress,
+                             jobs=jobs)
+    if not _state().quiet:
+        for name, rows in result["by_dataset"].items():
+            click.echo(f"{name}: " + ", ".join(
+                f"{r['method']} n={r['order']} val fit {_fmt_fit(r['fit_val'])}"
+                if not r["error"] else f"{r['method']} failed" for r in rows))
+        click.echo(f"wrote {result['index']} and {len(result['reports'])} reports "
+                   f"({result['seconds']:.1f} s)")
+    return 0
+
+
+@cli.command(epilog="\b\nExample:\n  subid gallery --out docs/gallery.md")
+@click.option("--out", default="docs/gallery.md", show_default=True, metavar="FILE",
+              help="Markdown file to write.")
+@click.option("--datasets", "names", default=None, metavar="NAMES",
+              help="Comma-separated subset of the bundled datasets (default: all).")
+@_common
+def gallery(out, names):
+    """Write the gallery table: fit % of every discrete-time method on every dataset."""
+    from . import demo as demo_module
+    text, rows = demo_module.gallery(datasets=_names(names), progress=_state().progress)
+    directory = os.path.dirname(os.path.abspath(out))
+    os.makedirs(directory, exist_ok=True)
+    with open(out, "w", encoding="utf-8") as fh:
+        fh.write(text)
+    _echo(f"wrote {out} ({len(rows)} rows)")
+    return 0
+
+
+@cli.command(name="methods", epilog="\b\nExample:\n  subid methods")
+@_common
+def methods_command():
+    """List the identification methods and the bundled datasets."""
+    from . import datasets
+    click.echo("methods (--method):")
+    for name, spec in METHODS.items():
+        status = "" if spec.available() else "  [not available in this version]"
+        click.echo(f"  {name:<10} {spec.kind:<6} {spec.time:<10} {spec.description}{status}")
+    click.echo("datasets (DATA = dataset:NAME):")
+    for name in datasets.names():
+        meta = datasets.info(name)
+        click.echo(f"  {name:<14} {meta['n_samples']:>5} samples, {meta['n_inputs']} in, "
+                   f"{meta['n_outputs']} out, dt = {meta['dt']:g}"
+                   + ("" if meta["dt_known"] else " (assumed)"))
+    return 0
+
+
+# ---------------------------------------------------------------------------
+# entry point
+# ---------------------------------------------------------------------------
+def main(argv=None) -> int:
+    """Run the command line; returns the exit status (0 ok, 2 user error).
+
+    Parameters
+    ----------
+    argv : list of str, optional
+        Arguments without the program name (default ``sys.argv[1:]``).
+    """
+    global _HANDLER
+    args = list(sys.argv[1:] if argv is None else argv)
+    debug = "--debug" in args
+    handler = logging.StreamHandler(sys.stderr)
+    handler.setFormatter(logging.Formatter("subid: %(levelname)s: %(message)s"))
+    logger = logging.getLogger("subid")
+    previous = (_HANDLER, logger.level, logger.propagate)
+    _HANDLER = handler
+    handler.setLevel(logging.WARNING)
+    logger.addHandler(handler)
+    logger.setLevel(logging.WARNING)
+    logger.propagate = False
+    state = _State()
+    state.argv = args
+    try:
+        try:
+            rv = cli.main(args=args, prog_name="subid", standalone_mode=False, obj=state)
+        except click.exceptions.Exit as exc:
+            return exc.exit_code
+        except click.UsageError as exc:
+            exc.show()
+            return EXIT_USER_ERROR
+        except click.ClickException as exc:
+            exc.show()
+            return EXIT_USER_ERROR
+        except click.exceptions.Abort:
+            click.echo("Aborted!", err=True)
+            return 130
+        return rv if isinstance(rv, int) else 0
+    except KeyboardInterrupt:
+        click.echo("subid: interrupted", err=True)
+        return 130
+    except (SubidError, OSError, ImportError) as exc:
+        if debug:
+            traceback.print_exc()
+        click.echo(f"subid: error: {_one_line(exc)}", err=True)
+        return EXIT_USER_ERROR
+    finally:
+        logger.removeHandler(handler)
+        _HANDLER, level, propagate = previous
+        logger.setLevel(level)
+        logger.propagate = propagate
