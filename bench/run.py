@@ -229,6 +229,8 @@ def main(argv=None) -> int:
                     f"{r['markov_error']:.1e} |" if "seconds" in r else
                     f"| {method} | — | — | {r.get('error')} |")
     online = bench_recursive()
+    from online import bench_adaptive, table as adaptive_table   # bench/ is on sys.path
+    adaptive = adaptive_table(bench_adaptive())
     text = "\n".join([
         f"Machine: {machine()}.",
         f"System: random stable, order {ORDER}, 2 inputs, 2 outputs, noise-free white input; "
@@ -260,7 +262,9 @@ def main(argv=None) -> int:
         "",
         "| identifier | system | samples/s |",
         "|---|---|---:|",
-        *online])
+        *online,
+        "",
+        adaptive])
     os.makedirs(os.path.dirname(args.out) or ".", exist_ok=True)
     with open(args.out, "w") as fh:
         fh.write(text + "\n")

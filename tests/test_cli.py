@@ -443,3 +443,24 @@ def test_installed_program_end_to_end(tmp_path):
                           capture_output=True, text=True, env=env, timeout=300)
     assert proc.returncode == 2
     assert proc.stderr.strip() == f"subid: error: no such file: {tmp_path / 'missing.csv'}"
+
+
+def test_track_adaptive_defaults_to_no_detrending(tmp_path):
+    """Continuous-time methods model the response from rest: removing the
+    record's means biased the adaptive identifier (pole error 0.98)."""
+    import subid as sd
+    from subid.experiments.seed000 import multisine
+    true = sd.systems.seed000_system()
+    t = np.arange(0.0, 30.0, 0.001)
+    u = multisine(t, 2)
+    y = true.simulate(u, t=t, hold="foh")
+    path = tmp_path / "ct.csv"
+    np.savetxt(path, np.column_stack([t, u, y]), delimiter=",", header="t,u1,u2,y1,y2",
+               comments="")
+    out = tmp_path / "run"
+    assert cli.main(["--quiet", "track", str(path), "--inputs", "u1,u2", "--outputs", "y1,y2",
+                     "--time", "t", "--method", "adaptive", "--order", "4",
+                     "--out", str(out)]) in (0, None)
+    model = sd.StateSpace.load(out / "model.json")
+    assert sd.pole_error(model, true) < 1e-3
+    assert model.info["data"]["detrend"] == "none"

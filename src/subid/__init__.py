@@ -9,6 +9,7 @@ exceptions (all ``ValueError`` subclasses).
 """
 
 from . import datasets, errors, interop, plot, systems
+from .adaptive import AdaptiveIdentifier
 from .config import thread_limit
 from .data import IOData
 from .io import read, read_chunks
@@ -33,6 +34,7 @@ __all__ = [
     "moesp",
     "n4sid",
     "RecursiveSubspace",
+    "AdaptiveIdentifier",
     "HankelStatistic",
     "markov_error",
     "fit_percent",

@@ -434,8 +434,17 @@ def _warnings_to_log():
             log.warning("%s", text)
 
 
-def _detrend(data, kind: str):
-    return data if kind == "none" else data.detrend(kind)
+def _default_detrend(spec) -> str:
+    """--detrend's default: 'constant' for discrete-time methods (data around an
+    operating point, as MATLAB users detrend), 'none' for continuous-time ones,
+    which model the response from rest in the user's units: removing the
+    record's means biases them (measured: the adaptive identifier's pole error
+    0.98 instead of 5e-5 on the seed-000 system)."""
+    return "none" if spec.time == "continuous" else "constant"
+
+
+def _detrend(data, kind):
+    return data if kind in (None, "none") else data.detrend(kind)
 
 
 def _command_line() -> str:
@@ -467,9 +476,11 @@ def _nan_to_none(values):
 def _data_options(fn):
     """--inputs/--outputs/--dt/--time/--delimiter/--detrend."""
     fn = click.option("--detrend", type=click.Choice(["constant", "linear", "none"]),
-                      default="constant", show_default=True,
+                      default=None,
                       help="Remove the means (constant) or straight lines (linear) of "
-                           "every channel before identification.")(fn)
+                           "every channel before identification. Default: constant for "
+                           "discrete-time methods, none for continuous-time methods (ct, "
+                           "adaptive), which model the response from rest.")(fn)
     fn = click.option("--delimiter", default=None, metavar="CHAR",
                       help="Field delimiter of a text file (default: detected).")(fn)
     fn = click.option("--time", "time_column", default=None, metavar="COLUMN",
@@ -564,6 +575,7 @@ def identify(data, inputs, outputs, dt, time_column, delimiter, detrend, method_
     spec.load()                                     # "not available" before any work
     with _about(data):
         record, label, notes = load_data(data, inputs, outputs, dt, time_column, delimiter)
+        detrend = detrend or _default_detrend(spec)
         work = _detrend(record, detrend)
         if validate > 0:
             est, val = work.split(1 - validate)
@@ -853,6 +865,7 @@ def track(data, inputs, outputs, dt, time_column, delimiter, detrend, method_nam
     opts = _parse_options(options)
     with _about(data):
         raw, label, notes = load_data(data, inputs, outputs, dt, time_column, delimiter)
+        detrend = detrend or _default_detrend(spec)
         work = _detrend(raw, detrend)
         if spec.time == "discrete" and work.dt is None:
             raise DataError(f"method {spec.name} needs uniformly sampled data; these time "
@@ -1093,7 +1106,7 @@ def compare(model_paths, data_source, inputs, outputs, dt, time_column, delimite
     with _about(data_source):
         record, label, notes = load_data(data_source, inputs, outputs, dt, time_column,
                                          delimiter)
-        work = _detrend(record, detrend)
+        work = _detrend(record, detrend or "constant")
     fits = {}
     for name, m in models.items():
         with _about(paths[name]):

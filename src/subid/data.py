@@ -133,6 +133,12 @@ class IOData:
         return self._dt is not None
 
     @property
+    def has_time_stamps(self) -> bool:
+        """True when the record was given explicit time stamps ``t`` (uniform
+        or not) rather than a sampling period ``dt``."""
+        return self._t is not None
+
+    @property
     def t(self) -> np.ndarray:
         """Time stamps, shape (n_samples,)."""
         if self._t is not None:

@@ -10,7 +10,19 @@ from .data import IOData
 from .errors import SubidError
 from .model import StateSpace
 
-__all__ = ["seed001_system", "random_system", "simulate_data"]
+__all__ = ["seed000_system", "seed001_system", "random_system", "simulate_data"]
+
+
+def seed000_system() -> StateSpace:
+    """The 4-state, 2-input, 2-output continuous-time system of seed 000, Section V."""
+    A = [[-1.4, 0.3, -0.6, -0.3],
+         [0.3, -0.9, -0.9, 0.1],
+         [-0.6, -0.9, -2.6, -1.0],
+         [-0.3, 0.1, -1.0, -1.8]]
+    B = [[0.0, 0.0], [-0.4, 1.3], [0.6, 0.2], [0.0, 0.6]]
+    C = [[0.9, 0.0, 0.0, 1.3], [-1.1, -0.8, 0.9, 0.4]]
+    D = [[0.8, -1.5], [0.0, 0.0]]
+    return StateSpace(A, B, C, D, 0.0)
 
 
 def seed001_system(dt: float = 1.0) -> StateSpace:

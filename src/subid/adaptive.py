@@ -1,0 +1,763 @@
+"""Adaptive identification of continuous-time MIMO state-space models (seed 000).
+
+Afri, Bako, Andrieu, Dufour, "Adaptive identification of continuous time
+MIMO state-space models", CDC 2015. From sampled inputs and outputs,
+:class:`AdaptiveIdentifier` estimates online a continuous-time realization
+``(Ã, B̃, C̃, D)`` in the state basis fixed by a selector matrix H, and the
+filtered state ``x̃``. No SVD is computed. Details, measurements and the
+corrections to the paper: ``docs/seed000.md``.
+
+Method (equation numbers of the paper)
+--------------------------------------
+* State-variable filters (6a)-(6b) with ``F(s) = 1/d(s)``, ``deg d = f``
+  (the horizon), give ``p = F(s) [y; y'; ...; y^(f-1)]`` and ``q`` likewise
+  for u, with ``p = O_f x̄ + T_f q`` (6c), ``x̄ = F(s) x``.
+* With ``T = H O_f`` and ``x̃ = T x̄``, ``p = M φ`` (8) with
+  ``M = [Õ_f, (I - Õ_f H) T_f]`` (9) and ``φ = [H p; q]`` (10). M is the
+  exponentially weighted least-squares estimate (cost V_t, forgetting
+  rate α = ``forgetting``); ``C̃ = M11`` and ``Ã`` by shift invariance (13).
+* With ``Ψ' = Ψ (I ⊗ Ã) + u^T ⊗ C̃`` (15), ``y = Φ θ`` (16)-(18),
+  ``Φ = [Ψ, u^T ⊗ I]``, ``θ = [vec B̃; vec D]`` is a second weighted
+  least-squares estimate (forgetting rate β = ``bd_forgetting``).
+* The state is ``x̃ = H (p - T_f q)``, a filtered version of ``T x``.
+
+Sampled data
+------------
+Between samples the signals are held: linear interpolation (first-order
+hold, default) or constant (``hold='zoh'``). The filters and Ψ are
+propagated by the exact discretisation of their ODEs for the held signals
+(:func:`subid._simulate.expm_blocks`), so ``p``, ``q`` and ``Ψ`` at the
+sample instants are exact for the held signals, whatever the sampling
+period, uniform or not. The integrals of V_t are evaluated on the sample
+grid (weight ``h_k``, the interval ending at sample k).
+
+Numerics (beyond the paper)
+---------------------------
+* Time-scaled filter states. With ``ω = |d(0)|^{1/f}`` (the geometric mean
+  of the filter pole magnitudes) the filter runs on
+  ``p̂_k = ω^{-k} s^k F̂(s) y``, ``F̂ = ω^f / d(s)`` (unit DC gain), i.e. the
+  paper's method applied to the time-scaled system ``(A/ω, B/ω, C, D)``:
+  ``p̂ = O_f(A/ω, C) F̂ x + T_f(A/ω, B/ω, C, D) q̂``, and (13) returns
+  ``Ã/ω``. In the paper's coordinates (``scale_filters=False``) the normal
+  matrix of (8) has condition 3.5e9 on the paper's example with filter
+  poles at -5 (1.6e11 at -10); scaled, 3.2e6 (``info['condition']``).
+* Exact minimisers of V_t instead of an integration of (11)-(12): the
+  information form ``R_k = λ_k R_{k-1} + w_k φ_k φ_k^T`` (``λ_k =
+  e^{-α h_k}``, ``w_k = h_k / r_k^2``, ``R_0 = P0^{-1}``) with the cross
+  term held as ``G = S - M R`` (the gradient at the current estimate,
+  updated with the prediction error, so that rounding scales with the
+  residual), solved by Cholesky every ``refresh_every`` samples; the same
+  for θ. ``method='ode'`` integrates the paper's (11)-(12), (19)-(20)
+  instead (semi-implicit Euler), for comparison.
+* Normalisation ``r^2 = 1 + |φ|^2`` and ``ρ^2 = 1 + |Φ|_F^2`` (P-free: with
+  a P-dependent r, ``d/dt log det R < 1 - α dim φ`` and the information
+  cannot outgrow the prior for the paper's α; ``'ode'`` keeps ρ of (20)).
+* Windup bound: ``M <- (S + δ M̄)(R + δ I)^{-1}``, ``δ = tr(R) /
+  max_condition``, M̄ the previous estimate (proximal term): the solved
+  matrix has condition at most ``1 + max_condition``, the estimate is held
+  in directions the data no longer excite, and M̄ = M is the fixed point
+  (noise-free estimates stay exact). ``'ode'``: forgetting suspended while
+  ``tr P > ode_trace_bound`` (Ioannou & Sun, Robust Adaptive Control, 4.3.6).
+* Part 2 ((B̃, D)) starts "once the first part has converged" (Section V):
+  when the relative residual of the shift equation (13) is below
+  ``bd_gate``, or has stopped improving for one memory length ``1/α``, and
+  Ã is Hurwitz (A1). Ψ then starts from 0, and the initial-state term
+  ``C̃ e^{Ã(t - t_g)} x̃(t_g)`` of (14)/(16), which (19)-(20) drop, is kept as
+  a regressor. Ψ only uses estimates that pass the same test.
+"""
+
+from __future__ import annotations
+
+import math
+import numbers
+
+import numpy as np
+
+from . import _adaptive_kernel as _k
+from ._checkpoint import load_state, require, save_state
+from ._simulate import expm_blocks
+from ._validation import as_signal, check_int, check_time_stamps
+from .data import IOData
+from .errors import CheckpointError, DataError, OrderError, SubidError
+from .ls_subspace import random_selector
+from .model import StateSpace
+
+__all__ = ["AdaptiveIdentifier"]
+
+_KIND = "AdaptiveIdentifier"
+_VERSION = 1
+# Step lengths handled in one kernel call when the time stamps are non-uniform
+# (bounds the memory of the per-step discretisation tables).
+_BLOCK_UNIQUE = 4096
+_BLOCK_SAMPLES = 16384
+_STEP_CACHE = 64
+
+
+def _positive(value, name: str, *, exc=SubidError) -> float:
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+        raise exc(f"{name} must be a positive number, got {value!r}")
+    value = float(value)
+    if not (math.isfinite(value) and value > 0):
+        raise exc(f"{name} must be a finite positive number, got {value!r}")
+    return value
+
+
+def _filter_poles(poles, f: int) -> np.ndarray:
+    """Validate ``filter_poles``: a negative number (repeated f times) or f
+    poles with negative real parts, complex ones in conjugate pairs."""
+    if isinstance(poles, numbers.Number) and not isinstance(poles, bool):
+        poles = [poles] * f
+    try:
+        arr = np.asarray(poles, dtype=np.complex128).reshape(-1)
+    except (TypeError, ValueError):
+        raise SubidError(f"filter_poles must be a negative number or {f} poles, "
+                         f"got {poles!r}") from None
+    if arr.size != f:
+        raise SubidError(f"filter_poles has {arr.size} poles but the filter order is the "
+                         f"horizon, {f}; give {f} poles or one negative number")
+    if not np.all(np.isfinite(arr)):
+        raise SubidError("filter_poles must be finite")
+    if np.any(arr.real >= 0):
+        raise SubidError(f"filter_poles must have negative real parts (a stable filter), got "
+                         f"{np.round(arr, 6).tolist()}; e.g. filter_poles=-2.0")
+    if not np.allclose(np.sort_complex(arr), np.sort_complex(arr.conj()), rtol=1e-12, atol=0):
+        raise SubidError("complex filter_poles must come in conjugate pairs")
+    return arr
+
+
+class AdaptiveIdentifier:
+    """Online identification of a continuous-time state-space model (seed 000).
+
+    Parameters
+    ----------
+    order : int
+        Model order n.
+    n_inputs, n_outputs : int
+        Numbers of input and output channels.
+    horizon : int, optional
+        f, the number of derivatives in (2) and the order of the filter
+        ``F(s) = 1/d(s)``. Needs ``(f - 1) n_outputs >= n`` for (13), and
+        ``> n`` for the residual of (13) to measure convergence (the gate of
+        part 2). Default: the smallest ``f > n`` (the paper's condition)
+        with ``(f - 1) n_outputs > n``. The input must be sufficiently rich
+        of order ``f + n`` (Theorem 1).
+    filter_poles : float or sequence of complex
+        Poles of ``F(s)``: one negative number (repeated f times) or f poles
+        with negative real parts. Choose them a little faster than the system
+        (about 1-3 times its fastest pole of interest): much slower filters
+        hide the fast modes, much faster ones pass more noise and make the
+        regression less well conditioned. The default -5 suits systems with
+        time constants around 0.3-10 s (the paper's example).
+    forgetting : float
+        α of V_t and (12), in 1/time unit: the estimate of M averages the
+        last ``~1/α`` time units of data. The paper uses 0.4 noise-free and
+        0.01 with 50 dB noise; choose ``1/α`` of at least a few of the
+        slowest time constants, longer with noise.
+    bd_forgetting : float
+        β of (20), the same for (B̃, D). Take it smaller than α (the paper:
+        0.08 and 0.008): θ is regressed on Ψ, which depends on the past
+        estimates of (Ã, C̃).
+    selector : array_like, shape (order, horizon * n_outputs), optional
+        H, which fixes the state basis (``T = H O_f``, applied to the scaled
+        ``p̂`` when ``scale_filters``). Default: uniform random on [-1, 1]
+        from ``seed`` (:func:`subid.ls_subspace.random_selector`).
+    seed : int
+        Seed of the default selector.
+    dt : float, optional
+        Sampling period used when :meth:`update` gets no time stamps: the
+        first sample is at t = 0 (or after the last time stamp given).
+    hold : {'foh', 'zoh'}
+        Inter-sample behaviour of u and y: linear (first-order hold) or
+        constant (zero-order hold).
+    method : {'ls', 'ode'}
+        ``'ls'``: exact exponentially weighted least squares (information
+        form, Cholesky solves). ``'ode'``: Euler integration (semi-implicit:
+        the downdate in Sherman-Morrison form, so that P stays positive
+        definite) of the paper's (11)-(12) and (19)-(20), for comparison; it
+        converges much more slowly (see ``docs/seed000.md``).
+    scale_filters : bool
+        Run the filters in time-scaled coordinates (see the module notes).
+    refresh_every : int
+        Samples between solves of the normal equations, (13) and updates of
+        the Ψ model; keep ``refresh_every * dt`` small against the time
+        constants. The per-sample work is O(d^2); a refresh costs O(d^3).
+    bd_gate : float
+        Part 2 ((B̃, D) estimation) starts when the relative residual of the
+        shift equation (13) falls below ``bd_gate`` (or stops improving for
+        ``1/α``, see the module notes) and Ã is Hurwitz.
+    max_condition : float
+        Windup bound: the regularised information matrices solved at a
+        refresh have condition numbers at most ``1 + max_condition``.
+    initial_covariance, bd_initial_covariance : float, optional
+        P(0) = ``initial_covariance`` I and Q(0) = ``bd_initial_covariance``
+        I. Default 1e12 for ``'ls'`` (a negligible prior: the regression's
+        weakest direction carries ~1e-7 of the information), 1 for ``'ode'``
+        (the paper's P(0) = I). M(0) = 0, θ(0) = 0, Ψ(0) = 0.
+    ode_trace_bound : float
+        ``'ode'`` only: forgetting is suspended while tr P (tr Q) exceeds it.
+    history : int
+        Capacity of the opt-in history of estimates (0: none). One row per
+        refresh until full; then every other row is dropped and the stride
+        doubles, so the history spans the whole run in bounded memory.
+    engine : {'numba', 'numpy'}
+        ``'numpy'`` runs the plain reference loop (slow; for verification).
+    input_names, output_names : sequence of str, optional
+        Channel names of the model.
+
+    Attributes
+    ----------
+    model : StateSpace
+        Current estimate ``(Ã, B̃, C̃, D)``, continuous time (dt = 0), with
+        diagnostics in ``info``.
+    state : ndarray, shape (order,)
+        Current filtered state ``x̃ = H (p - T_f q)``.
+    history : dict of ndarray
+        ``t``, ``samples``, ``A``, ``B``, ``C``, ``D`` (time on axis 0).
+
+    Examples
+    --------
+    >>> import numpy as np, subid
+    >>> from subid.adaptive import AdaptiveIdentifier
+    >>> from subid.experiments.seed000 import paper_system, multisine
+    >>> t = np.arange(20001) * 1e-3
+    >>> u = multisine(t, 2, seed=0)
+    >>> y = paper_system().simulate(u, t=t, hold="foh")
+    >>> ident = AdaptiveIdentifier(4, 2, 2, horizon=5, dt=1e-3)
+    >>> for a in range(0, len(t), 5000):          # a stream, in pieces
+    ...     _ = ident.update(u[a:a + 5000], y[a:a + 5000])
+    >>> bool(subid.pole_error(ident.model, paper_system()) < 1e-3)
+    True
+    """
+
+    def __init__(self, order, n_inputs, n_outputs, horizon=None, filter_poles=-5.0,
+                 forgetting=0.4, bd_forgetting=0.08, selector=None, seed=0, *, dt=None,
+                 hold="foh", method="ls", scale_filters=True, refresh_every=50,
+                 bd_gate=1e-2, max_condition=1e10, initial_covariance=None,
+                 bd_initial_covariance=None, ode_trace_bound=1e8, history=0,
+                 engine="numba", input_names=None, output_names=None):
+        n = check_int(order, "order")
+        nu = check_int(n_inputs, "n_inputs")
+        ny = check_int(n_outputs, "n_outputs")
+        if horizon is None:     # smallest f > n whose shift equation (13) is overdetermined
+            f = n + 1 if ny > 1 else n + 2
+        else:
+            f = check_int(horizon, "horizon", minimum=2)
+        if (f - 1) * ny < n:
+            raise OrderError(f"horizon {f} with {ny} output{'s' if ny > 1 else ''} cannot "
+                             f"reveal order {n}: (13) needs (horizon - 1) * n_outputs >= order, "
+                             f"i.e. horizon >= {-(-n // ny) + 1}")
+        self._n, self._nu, self._ny, self._f = n, nu, ny, f
+        self._poles = _filter_poles(filter_poles, f)
+        self._alpha = _positive(forgetting, "forgetting")
+        self._beta = _positive(bd_forgetting, "bd_forgetting")
+        if hold not in ("foh", "zoh"):
+            raise SubidError(f"hold must be 'foh' or 'zoh', got {hold!r}")
+        if method not in ("ls", "ode"):
+            raise SubidError(f"method must be 'ls' or 'ode', got {method!r}")
+        if engine not in ("numba", "numpy"):
+            raise SubidError(f"engine must be 'numba' or 'numpy', got {engine!r}")
+        self._hold, self._method, self._engine = hold, method, engine
+        self._scale = bool(scale_filters)
+        self._refresh = check_int(refresh_every, "refresh_every")
+        self._max_cond = _positive(max_condition, "max_condition")
+        if self._max_cond <= 1:
+            raise SubidError(f"max_condition must exceed 1, got {max_condition!r}")
+        default_cov = 1e12 if method == "ls" else 1.0
+        self._p0 = default_cov if initial_covariance is None else \
+            _positive(initial_covariance, "initial_covariance")
+        self._q0 = default_cov if bd_initial_covariance is None else \
+            _positive(bd_initial_covariance, "bd_initial_covariance")
+        self._gate = _positive(bd_gate, "bd_gate")
+        self._trace_bound = _positive(ode_trace_bound, "ode_trace_bound")
+        self._hist_cap = check_int(history, "history", minimum=0)
+        self._dt = None if dt is None else _positive(dt, "dt", exc=DataError)
+        self._seed = seed
+        if selector is None:
+            if isinstance(seed, bool) or not isinstance(seed, numbers.Integral):
+                raise SubidError(f"seed must be an integer, got {seed!r}")
+            H = random_selector(f, ny, seed=int(seed), rows=n)
+        else:
+            H = np.asarray(selector, dtype=np.float64)
+            if H.shape != (n, f * ny):
+                raise SubidError(f"selector has shape {H.shape}; expected (order, horizon * "
+                                 f"n_outputs) = ({n}, {f * ny})")
+            if not np.isfinite(H).all():
+                raise SubidError("selector has non-finite entries")
+        self._H = np.ascontiguousarray(H)
+        self._H.setflags(write=False)
+        self._input_names = None if input_names is None else tuple(input_names)
+        self._output_names = None if output_names is None else tuple(output_names)
+        # filter: d(s) = prod(s - pole); time scale ω = |d(0)|^(1/f)
+        coeffs = np.real(np.poly(self._poles))          # [1, a_{f-1}, ..., a_0]
+        self._omega = float(np.abs(np.prod(self._poles)) ** (1.0 / f)) if self._scale else 1.0
+        scaled = coeffs[1:] / self._omega ** np.arange(1, f + 1)   # â_{f-1}, ..., â_0
+        Lc = np.zeros((f, f))
+        Lc[:-1, 1:] = np.eye(f - 1)
+        Lc[-1, :] = -scaled[::-1]                        # [-â_0, ..., -â_{f-1}]
+        self._Af = self._omega * Lc
+        self._Bf = np.zeros((f, 1))
+        self._Bf[-1, 0] = self._omega
+        self._step_cache: dict = {}
+        self._t_origin = 0.0     # time of the sample with index _k_origin when t is None
+        self._k_origin = 0
+        self._alloc()
+
+    # ------------------------------------------------------------------ state
+    def _alloc(self) -> None:
+        """Allocate the state: one float64 buffer holding every float array
+        (views, so that a snapshot is one copy), the integer counters and the
+        history."""
+        n, nu, ny, f = self._n, self._nu, self._ny, self._f
+        d, dp, dth = n + f * nu, f * ny, n + n * nu + ny * nu
+        layout = [("fst", (_k.N_FST,)), ("prev_u", (nu,)), ("prev_y", (ny,)),
+                  ("zp", (f, ny)), ("zq", (f, nu)),
+                  ("R", (d, d)),        # information matrix of (8) ('ode': P)
+                  ("G", (dp, d)),       # S - M R: residual form of the cross term
+                  ("M", (dp, d)),
+                  ("Rt", (dth, dth)),   # information matrix of (16) ('ode': Q)
+                  ("g", (1, dth)),      # s_θ - R_θ θ
+                  ("theta", (1, dth)),  # [x̃(t_g); vec B̃; vec D]
+                  ("Am", (n, n)), ("Cm", (ny, n)), ("Bm", (n, nu)), ("Dm", (ny, nu)),
+                  ("Apsi", (n, n)), ("Cpsi", (ny, n)),
+                  ("Psi", (ny, n + n * nu))]   # [Ξ, Ψ]
+        self._buf = np.zeros(sum(math.prod(shape) for _, shape in layout))
+        st = {}
+        off = 0
+        for name, shape in layout:
+            size = math.prod(shape)
+            st[name] = self._buf[off:off + size].reshape(shape)
+            off += size
+        ist = np.zeros(_k.N_IST, dtype=np.int64)
+        ist[_k.IST["hist_stride"]] = 1
+        st["ist"] = ist
+        st["fst"][_k.FST["scale_M"]] = st["fst"][_k.FST["scale_theta"]] = 1.0
+        st["fst"][_k.FST["res_ref"]] = 1e300
+        if self._method == "ls":
+            st["R"][:] = np.eye(d) / self._p0
+            st["Rt"][:] = np.eye(dth) / self._q0
+        else:
+            st["R"][:] = np.eye(d) * self._p0
+            st["Rt"][:] = np.eye(dth) * self._q0
+        st["hist"] = np.zeros((self._hist_cap, 2 + n * n + n * nu + ny * n + ny * nu))
+        self._st = st
+        self._uniform = None      # discretisation tables for the constructor's dt
+
+    _ORDER = ("ist", "fst", "prev_u", "prev_y", "zp", "zq", "R", "G", "M", "Rt", "g",
+              "theta", "Am", "Cm", "Bm", "Dm", "Apsi", "Cpsi", "Psi")
+
+    # ------------------------------------------------------------ properties
+    @property
+    def n_samples(self) -> int:
+        """Number of samples processed."""
+        return int(self._st["ist"][_k.IST["samples"]])
+
+    @property
+    def t(self) -> float | None:
+        """Time of the last sample processed (None before the first)."""
+        return float(self._st["fst"][0]) if self.n_samples else None
+
+    @property
+    def selector(self) -> np.ndarray:
+        """The selector H (read-only)."""
+        return self._H
+
+    @property
+    def time_scale(self) -> float:
+        """ω, the time scale of the filter coordinates (1 if not scaled)."""
+        return self._omega
+
+    def _sym(self, name: str) -> np.ndarray:
+        R = self._st[name]
+        if self._method == "ls":      # the kernel updates the lower triangle only
+            return np.tril(R) + np.tril(R, -1).T
+        return R
+
+    def information_condition(self) -> tuple[float, float]:
+        """Condition numbers of the two normal matrices as updated (without
+        the windup regularisation): R of (8), and the (B̃, D) block of R_θ of
+        (16) (the x̃(t_g) block is left out: its regressor decays by design).
+        In ``'ode'`` mode those of P and Q."""
+        out = []
+        for name, skip in (("R", 0), ("Rt", self._n)):
+            ev = np.linalg.eigvalsh(self._sym(name)[skip:, skip:])
+            out.append(float(ev[-1] / ev[0]) if ev[0] > 0 else math.inf)
+        return out[0], out[1]
+
+    @property
+    def model(self) -> StateSpace:
+        """The current estimate ``(Ã, B̃, C̃, D)`` as a continuous-time model.
+
+        ``info`` holds ``method`` (``'seed000_adaptive'``), ``samples``,
+        ``time``, ``refreshes``, ``horizon``, ``filter_poles``,
+        ``time_scale``, ``forgetting``, ``bd_forgetting``, ``ls_method``,
+        ``hold``, ``condition`` and ``bd_condition`` (of the normal
+        matrices, see :meth:`information_condition`), ``max_condition``,
+        ``windup_active`` / ``bd_windup_active`` (the condition exceeds the
+        bound, so the regularisation is holding the estimate),
+        ``bd_started``, ``bd_start_time`` (part 2), ``shift_residual``
+        (relative residual of (13) at the last refresh, -1 if rank
+        deficient), ``psi_rejected`` (refreshes whose estimate was not used
+        for Ψ), ``shift_failed`` (refreshes where (13) was rank deficient),
+        ``cholesky_failed``, ``bound_hits`` (``'ode'``: steps with suspended
+        forgetting) and ``selector``.
+        """
+        st = self._st
+        ist = st["ist"]
+        cond, bd_cond = self.information_condition()
+        ls = self._method == "ls"
+        info = {
+            "method": "seed000_adaptive",
+            "samples": self.n_samples,
+            "time": self.t,
+            "refreshes": int(ist[_k.IST["refreshes"]]),
+            "horizon": self._f,
+            "filter_poles": self._poles.copy(),
+            "time_scale": self._omega,
+            "forgetting": self._alpha,
+            "bd_forgetting": self._beta,
+            "ls_method": self._method,
+            "hold": self._hold,
+            "condition": cond,
+            "bd_condition": bd_cond,
+            "max_condition": self._max_cond,
+            "windup_active": bool(ls and cond > self._max_cond),
+            "bd_windup_active": bool(ls and bd_cond > self._max_cond),
+            "bd_started": bool(ist[_k.IST["started"]]),
+            "bd_start_time": float(st["fst"][_k.FST["t_start"]]) if ist[_k.IST["started"]]
+            else None,
+            "shift_residual": float(st["fst"][_k.FST["shift_residual"]]),
+            "psi_rejected": int(ist[_k.IST["psi_rejected"]]),
+            "shift_failed": int(ist[_k.IST["shift_failed"]]),
+            "cholesky_failed": int(ist[_k.IST["chol_failed"]]),
+            "bound_hits": int(ist[_k.IST["bound_hits"]]),
+            "selector": np.array(self._H),
+        }
+        return StateSpace(st["Am"], st["Bm"], st["Cm"], st["Dm"], 0.0,
+                          input_names=self._input_names, output_names=self._output_names,
+                          info=info)
+
+    def toeplitz(self) -> np.ndarray:
+        """T_f of (3) for the current estimate, in the filter coordinates
+        (``T_f(Ã/ω, B̃/ω, C̃, D)``), shape (f ny, f nu)."""
+        st = self._st
+        f, ny, nu = self._f, self._ny, self._nu
+        A = st["Am"] / self._omega
+        B = st["Bm"] / self._omega
+        blocks = [st["Dm"]]
+        X = B
+        for _ in range(f - 1):
+            blocks.append(st["Cm"] @ X)
+            X = A @ X
+        T = np.zeros((f * ny, f * nu))
+        for i in range(f):
+            for j in range(i + 1):
+                T[i * ny:(i + 1) * ny, j * nu:(j + 1) * nu] = blocks[i - j]
+        return T
+
+    @property
+    def state(self) -> np.ndarray:
+        """Filtered state ``x̃ = H (p̂ - T_f q̂)`` (paper, "Estimation of the
+        state") with the current estimate of T_f; it is ``F̂(s)`` applied to
+        the state of :attr:`model` (``F̂ = ω^f/d(s)``, unit DC gain, when the
+        filters are scaled; ``1/d(s)`` otherwise)."""
+        st = self._st
+        p = st["zp"].reshape(-1)
+        q = st["zq"].reshape(-1)
+        return self._H @ (p - self.toeplitz() @ q)
+
+    @property
+    def history(self) -> dict:
+        """Decimated history of the estimates (see ``history`` above)."""
+        n, nu, ny = self._n, self._nu, self._ny
+        rows = self._st["hist"][:self._st["ist"][_k.IST["hist_count"]]].copy()
+        c = 2
+        out = {"t": rows[:, 0], "samples": rows[:, 1].astype(np.int64)}
+        for name, shape in (("A", (n, n)), ("B", (n, nu)), ("C", (ny, n)), ("D", (ny, nu))):
+            size = shape[0] * shape[1]
+            out[name] = rows[:, c:c + size].reshape((-1,) + shape)
+            c += size
+        return out
+
+    # ---------------------------------------------------------------- update
+    def _parse(self, u, y, t):
+        """Validate one chunk; returns (U, Y, T or None) or raises."""
+        if isinstance(u, IOData):
+            if y is not None or t is not None:
+                raise DataError("pass either an IOData record or (u, y[, t]), not both")
+            data = u
+            u, y = data.u, data.y
+            t = data.t if data.has_time_stamps else None    # explicit time stamps, if any
+            if t is None:
+                if self._dt is not None and not math.isclose(data.dt, self._dt, rel_tol=1e-9):
+                    raise DataError(f"the IOData record is sampled with dt={data.dt!r} but "
+                                    f"the identifier has dt={self._dt!r}")
+                if self._dt is None:
+                    t = self._next_times(data.n_samples, data.dt)
+        if y is None:
+            raise DataError("output y is missing: call update(u, y) or update(iodata)")
+        U = self._as_chunk(u, self._nu, "input u")
+        Y = self._as_chunk(y, self._ny, "output y")
+        if U.shape[0] != Y.shape[0]:
+            raise DataError(f"input u has {U.shape[0]} samples but output y has {Y.shape[0]}; "
+                            "they must have the same length")
+        N = U.shape[0]
+        if t is None:
+            if self._dt is None:
+                raise DataError("no time stamps: pass t=... to update() or set dt=... in the "
+                                "AdaptiveIdentifier constructor")
+            return U, Y, None
+        T = np.asarray(t, dtype=np.float64) if not isinstance(t, numbers.Real) else \
+            np.array([float(t)])
+        T = check_time_stamps(T.reshape(-1) if T.ndim == 0 else T, N)
+        if self.n_samples and not T[0] > self.t:
+            raise DataError(f"time stamps t start at {T[0]!r}, not after the last sample "
+                            f"processed (t = {self.t!r}); time must increase from chunk to "
+                            "chunk")
+        return U, Y, T
+
+    @staticmethod
+    def _as_chunk(values, channels: int, name: str) -> np.ndarray:
+        if type(values) is np.ndarray and values.dtype == np.float64:   # fast path
+            arr = values.reshape(1, channels) if values.ndim == 1 and channels > 1 \
+                and values.shape[0] == channels else values
+            if arr.ndim == 1 and channels == 1:
+                arr = arr.reshape(-1, 1)
+            if arr.ndim == 2 and arr.shape[1] == channels and arr.shape[0] > 0 \
+                    and np.isfinite(arr).all():
+                return np.ascontiguousarray(arr)
+        arr = np.asarray(values) if not isinstance(values, np.ndarray) else values
+        if arr.ndim == 0 and channels == 1:
+            arr = arr.reshape(1, 1)
+        elif arr.ndim == 1 and channels > 1:
+            if arr.shape[0] != channels:
+                raise DataError(f"{name} is 1-D with {arr.shape[0]} entries; one sample of "
+                                f"{channels} channels has {channels} (time is axis 0 of a "
+                                "2-D chunk)")
+            arr = arr.reshape(1, channels)
+        out = as_signal(arr, name)
+        if out.shape[1] != channels:
+            hint = ""
+            if out.shape[0] == channels:
+                hint = " (time is axis 0: was it passed transposed?)"
+            raise DataError(f"{name} has {out.shape[1]} channel{'s' if out.shape[1] != 1 else ''}"
+                            f" but the identifier has {channels}{hint}")
+        if out.shape[0] == 0:
+            raise DataError(f"{name} has no samples")
+        return out
+
+    def _next_times(self, N: int, dt: float) -> np.ndarray:
+        k = self.n_samples + np.arange(N)
+        return self._t_origin + dt * (k - self._k_origin)
+
+    def _tables(self, steps: np.ndarray):
+        """Discretisation tables for the distinct step lengths ``steps``."""
+        f = self._f
+        K = steps.shape[0]
+        Fphi = np.empty((K, f, f))
+        Fg0 = np.empty((K, f))
+        Fg1 = np.empty((K, f))
+        missing = [i for i, h in enumerate(steps) if float(h) not in self._step_cache]
+        if missing:
+            Ph, G1, G2 = expm_blocks(self._Af, self._Bf, steps[missing], self._hold)
+            for j, i in enumerate(missing):
+                g0 = G1[j, :, 0] - G2[j, :, 0] if G2 is not None else G1[j, :, 0]
+                g1 = G2[j, :, 0] if G2 is not None else np.zeros(f)
+                entry = (Ph[j], g0, g1)
+                if len(self._step_cache) < _STEP_CACHE:
+                    self._step_cache[float(steps[i])] = entry
+                Fphi[i], Fg0[i], Fg1[i] = entry
+        for i, h in enumerate(steps):
+            entry = self._step_cache.get(float(h))
+            if entry is not None:
+                Fphi[i], Fg0[i], Fg1[i] = entry
+        lamM = np.exp(-self._alpha * steps)
+        lamT = np.exp(-self._beta * steps)
+        return Fphi, Fg0, Fg1, lamM, lamT
+
+    def update(self, u, y=None, t=None) -> "AdaptiveIdentifier":
+        """Process one sample or a chunk of samples.
+
+        Parameters
+        ----------
+        u : array_like, shape (N, n_inputs) or (n_inputs,), or IOData
+            Input samples (time on axis 0; a 1-D array of n_inputs values is
+            one sample when there are several inputs). An
+            :class:`~subid.data.IOData` record supplies u, y and, if it has
+            explicit time stamps, t (otherwise its samples continue the
+            stream with its dt).
+        y : array_like, shape (N, n_outputs) or (n_outputs,)
+            Output samples.
+        t : array_like, shape (N,), optional
+            Time stamps, strictly increasing and after the last sample
+            processed. Default: the constructor's ``dt`` after the last one.
+
+        Returns
+        -------
+        AdaptiveIdentifier
+            ``self``.
+
+        Raises
+        ------
+        subid.errors.DataError
+            NaN or inf values, wrong shapes, time stamps not increasing, no
+            time information. The identifier is left unchanged.
+
+        Notes
+        -----
+        The result does not depend on how a stream is cut into chunks.
+        """
+        U, Y, T = self._parse(u, y, t)
+        N = U.shape[0]
+        S0 = self.n_samples
+        K = self._refresh
+        st = self._st
+        # rollback state (the float buffer in one copy; the history only if
+        # this chunk can reach a refresh)
+        snap_buf, snap_ist = self._buf.copy(), st["ist"].copy()
+        hist = st["hist"]
+        snap_hist = None
+        if hist.shape[0] and (S0 + N - 1) // K > max(S0 - 1, 0) // K:
+            snap_hist = hist.copy()
+        origin = (self._t_origin, self._k_origin)
+        try:
+            if T is None:
+                T = self._t_origin + self._dt * (np.arange(N) + float(S0 - self._k_origin))
+                ok = self._run_uniform(T, U, Y)
+            else:
+                prev = T[0] if S0 == 0 else self.t
+                steps_all = np.diff(np.concatenate([[prev], T]))
+                if S0 == 0:            # no interval ends at the very first sample
+                    steps_all[0] = steps_all[1] if N > 1 else 1.0
+                uniq = np.unique(steps_all)
+                ok = True
+                if uniq.size <= _BLOCK_UNIQUE:
+                    ok = self._run(T, U, Y, steps_all, uniq)
+                else:
+                    for a in range(0, N, _BLOCK_SAMPLES):
+                        b = min(a + _BLOCK_SAMPLES, N)
+                        ok = self._run(T[a:b], U[a:b], Y[a:b], steps_all[a:b],
+                                       np.unique(steps_all[a:b])) and ok
+                self._t_origin, self._k_origin = float(T[-1]), S0 + N - 1
+            if not ok:
+                raise DataError("the chunk drove the identifier to non-finite values (are the "
+                                "signals scaled to moderate magnitudes?); it was rejected and "
+                                "the identifier is unchanged")
+        except BaseException:
+            self._buf[:] = snap_buf
+            st["ist"][:] = snap_ist
+            if snap_hist is not None:
+                hist[:] = snap_hist
+            self._t_origin, self._k_origin = origin
+            if self._uniform is not None:
+                self._uniform[-1][-1][:] = -1          # invalidate the Ψ cache
+            raise
+        return self
+
+    def _call(self, T, U, Y, idx, steps, tables, cache) -> bool:
+        Fphi, Fg0, Fg1, lamM, lamT = tables
+        st = self._st
+        par = np.array([self._omega, self._alpha, self._beta, self._max_cond,
+                        self._trace_bound, self._gate])
+        ipar = np.array([self._refresh, self._method == "ode", self._hold == "foh"],
+                        dtype=np.int64)
+        fn = _k.kernel if self._engine == "numba" else _k.reference
+        return bool(fn(T, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, self._H, par, ipar,
+                       *(st[k] for k in self._ORDER), *cache, st["hist"], self._buf))
+
+    def _psi_cache(self, K: int):
+        n, ny = self._n, self._ny
+        return (np.empty((K, n, n)), np.empty((K, ny, n)), np.empty((K, ny, n)),
+                np.full(K, -1, dtype=np.int64))
+
+    def _run_uniform(self, T, U, Y) -> bool:
+        """Samples spaced by the constructor's dt: one cached table entry."""
+        if self._uniform is None:
+            steps = np.array([self._dt])
+            self._uniform = (steps, self._tables(steps), self._psi_cache(1))
+        steps, tables, cache = self._uniform
+        idx = np.zeros(U.shape[0], dtype=np.int64)
+        return self._call(T, U, Y, idx, steps, tables, cache)
+
+    def _run(self, T, U, Y, steps_all, uniq) -> bool:
+        idx = np.searchsorted(uniq, steps_all).astype(np.int64)
+        return self._call(np.ascontiguousarray(T), U, Y, idx, np.ascontiguousarray(uniq),
+                          self._tables(uniq), self._psi_cache(uniq.shape[0]))
+
+    # ----------------------------------------------------------- checkpoints
+    def _settings(self) -> dict:
+        return {
+            "order": self._n, "n_inputs": self._nu, "n_outputs": self._ny,
+            "horizon": self._f,
+            "filter_poles": [[float(p.real), float(p.imag)] for p in self._poles],
+            "forgetting": self._alpha, "bd_forgetting": self._beta,
+            "seed": self._seed if isinstance(self._seed, int) else None,
+            "dt": self._dt, "hold": self._hold, "method": self._method,
+            "scale_filters": self._scale, "refresh_every": self._refresh,
+            "bd_gate": self._gate,
+            "max_condition": self._max_cond, "initial_covariance": self._p0,
+            "bd_initial_covariance": self._q0, "ode_trace_bound": self._trace_bound,
+            "history": self._hist_cap, "engine": self._engine,
+            "input_names": None if self._input_names is None else list(self._input_names),
+            "output_names": None if self._output_names is None else list(self._output_names),
+            "t_origin": self._t_origin, "k_origin": self._k_origin,
+        }
+
+    def save(self, path) -> None:
+        """Write the whole state to ``path`` (``.npz`` with a JSON header, no
+        pickle), atomically: a crash mid-write leaves the previous file."""
+        arrays = {k: v for k, v in self._st.items()}
+        arrays["hist"] = self._st["hist"]
+        arrays["selector"] = np.array(self._H)
+        save_state(path, _KIND, _VERSION, arrays, self._settings())
+
+    @classmethod
+    def load(cls, path) -> "AdaptiveIdentifier":
+        """Restore an identifier written by :meth:`save`; continuing it gives
+        exactly the estimates of a run that never stopped.
+
+        Raises
+        ------
+        subid.errors.CheckpointError
+            Truncated or corrupted file, another kind of checkpoint, wrong
+            shapes or non-finite values.
+        subid.errors.DataFileNotFoundError
+            The file does not exist.
+        """
+        arrays, s = load_state(path, _KIND, _VERSION)
+        try:
+            poles = [complex(re, im) for re, im in s["filter_poles"]]
+            obj = cls(s["order"], s["n_inputs"], s["n_outputs"], horizon=s["horizon"],
+                      filter_poles=poles, forgetting=s["forgetting"],
+                      bd_forgetting=s["bd_forgetting"],
+                      selector=require(arrays, path, "selector"),
+                      seed=s["seed"] if s["seed"] is not None else 0, dt=s["dt"],
+                      hold=s["hold"], method=s["method"], scale_filters=s["scale_filters"],
+                      refresh_every=s["refresh_every"], bd_gate=s["bd_gate"],
+                      max_condition=s["max_condition"],
+                      initial_covariance=s["initial_covariance"],
+                      bd_initial_covariance=s["bd_initial_covariance"],
+                      ode_trace_bound=s["ode_trace_bound"], history=s["history"],
+                      engine=s["engine"], input_names=s["input_names"],
+                      output_names=s["output_names"])
+            t_origin, k_origin = float(s["t_origin"]), int(s["k_origin"])
+        except CheckpointError:
+            raise
+        except (KeyError, TypeError, ValueError) as exc:
+            raise CheckpointError(f"checkpoint {path} has invalid settings ({exc})",
+                                  path=path) from None
+        for name, ref in obj._st.items():
+            value = require(arrays, path, name, ref.shape)
+            if value.dtype != ref.dtype:
+                raise CheckpointError(f"checkpoint {path}: array {name!r} has dtype "
+                                      f"{value.dtype}, expected {ref.dtype}", path=path)
+            ref[...] = value                 # into the state buffer (views stay valid)
+        ist = obj._st["ist"]
+        cap = obj._hist_cap
+        if (ist < 0).any() or ist[_k.IST["hist_stride"]] < 1 or ist[_k.IST["hist_count"]] > cap:
+            raise CheckpointError(f"checkpoint {path} has inconsistent counters", path=path)
+        obj._t_origin, obj._k_origin = t_origin, k_origin
+        return obj
+
+    def __repr__(self) -> str:
+        return (f"AdaptiveIdentifier(order={self._n}, n_inputs={self._nu}, "
+                f"n_outputs={self._ny}, horizon={self._f}, samples={self.n_samples})")
