@@ -78,6 +78,8 @@ def _load(path, ext):
             return subid.StateSpace.load(path)
         if ext == ".ckpt.npz":
             return subid.RecursiveSubspace.load(path)
+        if ext == ".adaptive.npz":
+            return subid.AdaptiveIdentifier.load(path)
         return subid.read(path, *ARGS[ext])
     except errors.SubidError:
         return None
@@ -119,12 +121,31 @@ def _checkpoint_bytes():
 CHECKPOINT = _checkpoint_bytes()
 
 
+def _adaptive_checkpoint_bytes():
+    from subid.experiments.seed000 import multisine
+    t = np.arange(0.0, 2.0, 0.001)
+    u = multisine(t, 2)
+    ai = subid.AdaptiveIdentifier(4, 2, 2, dt=0.001)
+    ai.update(u, subid.systems.seed000_system().simulate(u, t=t, hold="foh"))
+    buf_path = os.path.join(os.environ.get("TMPDIR", "/tmp"), f"subid-fuzz-a{os.getpid()}.npz")
+    ai.save(buf_path)
+    with open(buf_path, "rb") as fh:
+        raw = fh.read()
+    os.unlink(buf_path)
+    return raw
+
+
+ADAPTIVE_CHECKPOINT = _adaptive_checkpoint_bytes()
+
+
+@pytest.mark.parametrize("kind", [".ckpt.npz", ".adaptive.npz"])
 @settings(max_examples=EXAMPLES, deadline=5000)
 @given(changes=edits)
-def test_mutated_checkpoints(tmp_path_factory, changes):
+def test_mutated_checkpoints(tmp_path_factory, kind, changes):
     path = tmp_path_factory.mktemp("fuzz") / "state.npz"
-    path.write_bytes(_mutate(CHECKPOINT, changes))
-    _load(path, ".ckpt.npz")
+    raw = CHECKPOINT if kind == ".ckpt.npz" else ADAPTIVE_CHECKPOINT
+    path.write_bytes(_mutate(raw, changes))
+    _load(path, kind)
 
 
 # -- regressions found by the fuzzers ---------------------------------------

@@ -92,3 +92,65 @@ def test_kill_and_resume_continues_identically(tmp_path):
     straight = subid.RecursiveSubspace(3, 2, 2, forgetting=0.999).update(u, y)
     np.testing.assert_array_equal(resumed._R, straight._R)
     np.testing.assert_array_equal(resumed.model.A, straight.model.A)
+
+
+_ADAPTIVE_WORKER = textwrap.dedent("""
+    import sys, numpy as np, subid
+    path, ckpt = sys.argv[1], sys.argv[2]
+    d = np.load(path)
+    ai = subid.AdaptiveIdentifier(4, 2, 2, dt=0.001)
+    for k in range(0, d.shape[0], 20000):
+        ai.update(d[k:k + 20000, :2], d[k:k + 20000, 2:])
+        ai.save(ckpt)
+        print(k, flush=True)
+""")
+
+
+def _adaptive_stream(n, seed):
+    from subid.experiments.seed000 import multisine
+    true = systems.seed000_system()
+    t = np.arange(n) * 0.001
+    u = multisine(t, 2, seed=seed)
+    quiet = (t % 2000.0) > 1400.0                      # excitation off 30 % of every 2000 s
+    u[quiet] = 0.3
+    y = true.simulate(u, t=t, hold="foh")
+    return true, u, y
+
+
+@pytest.mark.long
+def test_adaptive_ten_million_samples_with_gaps_nan_and_kill_resume(tmp_path):
+    n = 10_000_000
+    true, u, y = _adaptive_stream(n, seed=3)
+    ai = subid.AdaptiveIdentifier(4, 2, 2, dt=0.001)
+    half = n // 2
+    for k in range(0, half, 500_000):
+        ai.update(u[k:k + 500_000], y[k:k + 500_000])
+        assert all(np.isfinite(getattr(ai.model, m)).all() for m in "ABCD")
+    bad = y[half:half + 100].copy()
+    bad[40:60] = np.nan
+    snapshot = ai.model.A.copy()
+    with pytest.raises(errors.DataError, match="NaN"):
+        ai.update(u[half:half + 100], bad)
+    np.testing.assert_array_equal(ai.model.A, snapshot)
+    # kill and resume: a worker runs the second half, is killed, and we resume
+    path = tmp_path / "rest.npy"
+    np.save(path, np.hstack([u[half:], y[half:]]))
+    ckpt = tmp_path / "adaptive.npz"
+    ai.save(ckpt)
+    proc = subprocess.Popen([sys.executable, "-c", _ADAPTIVE_WORKER.replace(
+        "ai = subid.AdaptiveIdentifier(4, 2, 2, dt=0.001)",
+        f"ai = subid.AdaptiveIdentifier.load({str(ckpt)!r})"), str(path), str(ckpt)],
+        stdout=subprocess.PIPE, text=True, env={**os.environ, "OPENBLAS_NUM_THREADS": "1"})
+    lines = 0
+    while lines < 10 and proc.stdout.readline():
+        lines += 1
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    resumed = subid.AdaptiveIdentifier.load(ckpt)
+    done = resumed.n_samples
+    assert half < done < n
+    resumed.update(u[done:], y[done:])
+    straight = subid.AdaptiveIdentifier(4, 2, 2, dt=0.001)    # never interrupted
+    straight.update(u, y)
+    np.testing.assert_array_equal(resumed.model.A, straight.model.A)
+    assert subid.pole_error(resumed.model, true) < 1e-3
