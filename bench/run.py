@@ -20,13 +20,13 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import platform
 import statistics
 import subprocess
 import sys
 import time
 
 import numpy as np
+from online import bench_adaptive, machine, table as adaptive_table   # bench/ is sys.path[0]
 
 TIME_BUDGET_S = 120.0
 MEMORY_BUDGET_MB = 8000.0
@@ -142,21 +142,6 @@ def bench_recursive():
     return rows
 
 
-def machine() -> str:
-    cpu = platform.processor() or platform.machine()
-    try:
-        with open("/proc/cpuinfo") as fh:
-            for line in fh:
-                if line.startswith("model name"):
-                    cpu = line.split(":", 1)[1].strip()
-                    break
-    except OSError:
-        pass
-    threads = os.environ.get("OPENBLAS_NUM_THREADS", "unset")
-    return (f"{cpu}, {os.cpu_count()} cores, Python {platform.python_version()}, "
-            f"numpy {np.__version__}, OPENBLAS_NUM_THREADS={threads}")
-
-
 def _available(method):
     module = {"SIPPY N4SID": "sippy_unipi", "nfoursid": "nfoursid"}.get(method)
     if module is None:
@@ -229,7 +214,6 @@ def main(argv=None) -> int:
                     f"{r['markov_error']:.1e} |" if "seconds" in r else
                     f"| {method} | — | — | {r.get('error')} |")
     online = bench_recursive()
-    from online import bench_adaptive, table as adaptive_table   # bench/ is on sys.path
     adaptive = adaptive_table(bench_adaptive())
     text = "\n".join([
         f"Machine: {machine()}.",

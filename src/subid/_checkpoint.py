@@ -12,10 +12,10 @@ from __future__ import annotations
 
 import json
 import os
-import tempfile
 
 import numpy as np
 
+from ._files import atomic_write
 from ._npz import NpzError, load_npz
 from .errors import CheckpointError, DataFileNotFoundError
 
@@ -41,18 +41,8 @@ def save_state(path, kind: str, version: int, arrays: dict, settings: dict) -> N
     header = json.dumps({"kind": kind, "version": version, "settings": settings})
     payload = {name: np.asarray(value) for name, value in arrays.items()}
     payload[_HEADER] = np.frombuffer(header.encode("utf-8"), dtype=np.uint8)
-    directory = os.path.dirname(os.path.abspath(path))
-    fd, tmp = tempfile.mkstemp(prefix=".checkpoint-", suffix=".npz.tmp", dir=directory)
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            np.savez(fh, **payload)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+    with atomic_write(path, "wb") as fh:
+        np.savez(fh, **payload)
 
 
 def load_state(path, kind: str, version: int):

@@ -39,6 +39,7 @@ import os
 import numpy as np
 
 from .data import IOData
+from ._files import atomic_write
 from .errors import DataError, DataFileNotFoundError, FileReadError, ModelError
 from .model import StateSpace
 
@@ -90,19 +91,8 @@ def save_mat(model, path) -> None:
         "InputName": names_in, "OutputName": names_out,
         "subid_format": "subid.StateSpace",
     }
-    directory = os.path.dirname(os.path.abspath(path))
-    tmp = os.path.join(directory, f".{os.path.basename(path)}.{os.getpid()}.tmp")
-    try:
-        with open(tmp, "wb") as fh:
-            scipy.io.savemat(fh, variables, format="5", do_compression=False,
-                             oned_as="row")
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+    with atomic_write(path, "wb") as fh:
+        scipy.io.savemat(fh, variables, format="5", do_compression=False, oned_as="row")
 
 
 def _cell_strings(value, key: str, path: str, count: int) -> list[str] | None:

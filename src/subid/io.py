@@ -130,12 +130,7 @@ def read(path, inputs=None, outputs=None, dt=None, time=None, *, delimiter=None)
     >>> data = subid.read("run1.csv", inputs="u1,u2", outputs="y", time="t")  # doctest: +SKIP
     >>> data = subid.read("dryer.dat", inputs=0, outputs=1, dt=0.08)  # doctest: +SKIP
     """
-    if isinstance(path, bytes):
-        path = os.fsdecode(path)
-    if not isinstance(path, (str, os.PathLike)):
-        raise DataError(f"path must be a file name (str or os.PathLike), got {type(path).__name__}")
-    shown = os.fspath(path)
-    p = Path(shown)
+    shown, p = _as_path(path)
     if dt is not None and time is not None:
         raise DataError(f"{shown}: give either the sampling period dt or the time column/array "
                         "time, not both")
@@ -169,6 +164,16 @@ def read(path, inputs=None, outputs=None, dt=None, time=None, *, delimiter=None)
 # ---------------------------------------------------------------------------
 # helpers common to all formats
 # ---------------------------------------------------------------------------
+def _as_path(path) -> tuple[str, Path]:
+    """``(name as given, Path)`` of a file argument, or a DataError."""
+    if isinstance(path, bytes):
+        path = os.fsdecode(path)
+    if not isinstance(path, (str, os.PathLike)):
+        raise DataError(f"path must be a file name (str or os.PathLike), got {type(path).__name__}")
+    shown = os.fspath(path)
+    return shown, Path(shown)
+
+
 def _check_exists(p: Path, shown: str) -> None:
     try:
         st = p.stat()
@@ -933,12 +938,7 @@ def read_chunks(path, inputs=None, outputs=None, *, dt=None, chunk_size=100_000,
     >>> for piece in subid.read_chunks("huge.csv", "u1,u2", "y", dt=0.001):
     ...     stat.update(piece.u, piece.y)
     """
-    if isinstance(path, bytes):
-        path = os.fsdecode(path)
-    if not isinstance(path, (str, os.PathLike)):
-        raise DataError(f"path must be a file name (str or os.PathLike), got {type(path).__name__}")
-    shown = os.fspath(path)
-    p = Path(shown)
+    shown, p = _as_path(path)
     dt = 1.0 if dt is None else check_dt(dt)
     if isinstance(chunk_size, bool) or not isinstance(chunk_size, numbers.Integral) \
             or chunk_size < 1:

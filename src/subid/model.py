@@ -32,7 +32,6 @@ import json
 import math
 import numbers
 import os
-import secrets
 from collections.abc import Mapping
 
 import numpy as np
@@ -41,6 +40,7 @@ from scipy import linalg
 from . import _simulate
 from ._validation import as_signal, check_dt, check_int, check_time_stamps
 from .data import IOData
+from ._files import atomic_write
 from .errors import DataError, DataFileNotFoundError, FileReadError, ModelError
 
 __all__ = ["StateSpace"]
@@ -1033,24 +1033,8 @@ class StateSpace:
             The file cannot be written.
         """
         text = _fmt_json(self.to_dict())
-        path = os.fspath(path)
-        directory = os.path.dirname(os.path.abspath(path))
-        tmp = os.path.join(directory,
-                           f".{os.path.basename(path)}.{secrets.token_hex(8)}.tmp")
-        fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
-        try:
-            with os.fdopen(fd, "w", encoding="utf-8") as f:
-                f.write(text)
-                f.flush()
-                os.fsync(f.fileno())
-            os.replace(tmp, path)
-        except BaseException:
-            try:
-                os.unlink(tmp)
-            except OSError:
-                pass
-            raise
-        _fsync_directory(directory)
+        with atomic_write(path, "w", encoding="utf-8") as fh:
+            fh.write(text)
 
     @classmethod
     def load(cls, path) -> "StateSpace":
@@ -1254,15 +1238,3 @@ def _real_logm(Ad: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(L)
 
 
-def _fsync_directory(directory: str) -> None:
-    """Make a rename durable (POSIX); ignored where directories cannot be opened."""
-    try:
-        fd = os.open(directory, os.O_RDONLY)
-    except OSError:
-        return
-    try:
-        os.fsync(fd)
-    except OSError:
-        pass
-    finally:
-        os.close(fd)

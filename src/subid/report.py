@@ -29,10 +29,10 @@ import html
 import io
 import logging
 import math
-import os
 
 import numpy as np
 
+from ._files import atomic_write
 from .errors import ModelError, SubidError
 
 __all__ = ["identification_report", "index_page", "evaluate", "figure_html", "write_html",
@@ -207,19 +207,8 @@ def _info_table(info: dict) -> str:
 
 def write_html(path, text: str) -> None:
     """Write ``text`` to ``path`` atomically (UTF-8)."""
-    path = os.fspath(path)
-    directory = os.path.dirname(os.path.abspath(path))
-    tmp = os.path.join(directory, f".{os.path.basename(path)}.{os.getpid()}.tmp")
-    try:
-        with open(tmp, "w", encoding="utf-8") as fh:
-            fh.write(text)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+    with atomic_write(path, "w", encoding="utf-8") as fh:
+        fh.write(text)
 
 
 def _page(title: str, body: list[str], nav: list[tuple[str, str]] = ()) -> str:
