@@ -35,6 +35,7 @@ bench: $(STAMP)
 experiment: $(STAMP)
 	OPENBLAS_NUM_THREADS=1 $(PY) -m subid.experiments.seed001 --runs 1000 --out results/seed001
 	OPENBLAS_NUM_THREADS=1 $(PY) -m subid.experiments.seed000 --out results/seed000
+	OPENBLAS_NUM_THREADS=1 $(PY) -m subid.experiments.seed002 --out results/seed002
 
 clean:
 	rm -rf $(VENV) demo_out results

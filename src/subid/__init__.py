@@ -1,16 +1,21 @@
 """subid: subspace identification of linear MIMO state-space models.
 
 Batch methods are functions ``method(data, order, ...) -> StateSpace``:
-:func:`ls_subspace` (SVD-free least squares, seed 001), and the classical
-baselines :func:`moesp` and :func:`n4sid`. Data live in :class:`IOData`,
+:func:`ls_subspace` (SVD-free least squares, seed 001), the classical
+baselines :func:`moesp` and :func:`n4sid`, and :func:`ct_subspace`
+(continuous time with orthonormal basis filters, seed 002, uniform or
+non-uniform sampling). Online identifiers are classes with ``update``:
+:class:`RecursiveSubspace` (seed 001) and :class:`AdaptiveIdentifier`
+(continuous time, seed 000). Data live in :class:`IOData`,
 models in :class:`StateSpace`; :func:`markov_error`, :func:`fit_percent`
 and :func:`pole_error` validate them. Errors are :mod:`subid.errors`
 exceptions (all ``ValueError`` subclasses).
 """
 
-from . import datasets, errors, interop, plot, systems
+from . import basis, datasets, errors, interop, plot, systems
 from .adaptive import AdaptiveIdentifier
 from .config import thread_limit
+from .ct_subspace import ct_subspace, ct_subspace_paper, dt_to_ct
 from .data import IOData
 from .io import read, read_chunks
 from .ls_subspace import ls_subspace
@@ -33,6 +38,9 @@ __all__ = [
     "ls_subspace",
     "moesp",
     "n4sid",
+    "ct_subspace",
+    "ct_subspace_paper",
+    "dt_to_ct",
     "RecursiveSubspace",
     "AdaptiveIdentifier",
     "HankelStatistic",
@@ -41,6 +49,7 @@ __all__ = [
     "pole_error",
     "errors",
     "systems",
+    "basis",
     "datasets",
     "interop",
     "plot",
