@@ -106,3 +106,25 @@ def test_million_samples_every_method():
     for name, res in _run_all(data, 4).items():
         assert not isinstance(res, Exception), (name, res)
         assert subid.markov_error(res, true) < 0.01, name
+
+
+def test_stiff_plant_continuous_time_methods():
+    """Time constants 1e-3 s to 1e3 s, 20 s of data at 1 ms: the slowest mode
+    cannot be seen; both continuous-time methods return a finite model (or a
+    clear error), never NaN or a crash."""
+    A = np.diag([-1e3, -1.0, -1e-3])
+    ct = subid.StateSpace(A, [[1e3], [1.0], [1e-3]], [[1.0, 1.0, 1.0]], [[0.0]], 0)
+    t = np.arange(20_000) * 1e-3
+    u = np.sin(np.outer(t, np.logspace(-1, 2.5, 12))).sum(axis=1)
+    data = subid.IOData(u, ct.simulate(u, t=t, hold="foh"), t=t)
+    for fit in (lambda d: subid.ct_subspace(d, 3), lambda d: subid.ct_subspace(d, 2)):
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                model = fit(data)
+        except errors.SubidError:
+            continue
+        assert _finite(model)
+    ai = subid.AdaptiveIdentifier(3, 1, 1, dt=1e-3)
+    ai.update(data.u, data.y)
+    assert _finite(ai.model)

@@ -101,3 +101,41 @@ def test_iodata_rejects_length_mismatch(nu, ny, n_u, n_y):
     assume(n_u != n_y)
     with pytest.raises(errors.DataError, match="samples"):
         subid.IOData(np.zeros((n_u, nu)), np.zeros((n_y, ny)))
+
+
+def _random_ct_system(order, nu, ny, seed):
+    import scipy.linalg
+    r = np.random.default_rng(seed)
+    blocks, k = [], order
+    while k > 0:
+        if k >= 2 and r.random() < 0.5:
+            re, im = -r.uniform(0.3, 3.0), r.uniform(0.3, 3.0)
+            blocks.append(np.array([[re, im], [-im, re]]))
+            k -= 2
+        else:
+            blocks.append(np.array([[-r.uniform(0.3, 3.0)]]))
+            k -= 1
+    T = np.linalg.qr(r.standard_normal((order, order)))[0] @ np.diag(r.uniform(0.5, 2, order))
+    A = T @ scipy.linalg.block_diag(*blocks) @ np.linalg.inv(T)
+    return subid.StateSpace(A, r.standard_normal((order, nu)), r.standard_normal((ny, order)),
+                            np.zeros((ny, nu)), 0)
+
+
+@given(order=st.integers(1, 4), nu=st.integers(1, 2), ny=st.integers(1, 2),
+       seed=st.integers(0, 10**6), jitter=st.booleans())
+def test_ct_subspace_recovers_frequency_response(order, nu, ny, seed, jitter):
+    """Continuous-time identification (seed 002) on noise-free FOH data, on a
+    uniform or a jittered grid: the frequency response is recovered."""
+    true = _random_ct_system(order, nu, ny, seed)
+    r = np.random.default_rng(seed + 1)
+    t = np.arange(2000) * 0.01
+    if jitter:
+        t = t + r.uniform(-0.003, 0.003, t.size)
+    w = np.logspace(-1, 1.3, 15)
+    u = np.column_stack([np.sin(np.outer(t, w) + r.uniform(0, 6.3, w.size)).sum(axis=1)
+                         for _ in range(nu)])
+    data = subid.IOData(u, true.simulate(u, t=t, hold="foh"), t=t)
+    model = subid.ct_subspace(data, order)
+    grid = np.logspace(-1, 1, 20)
+    G = true.freqresp(grid)
+    assert np.abs(model.freqresp(grid) - G).max() < 1e-6 * np.abs(G).max()
