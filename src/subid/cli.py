@@ -44,6 +44,7 @@ import warnings
 import click
 import numpy as np
 
+from ._progress import on_terminal, progress_bar
 from .errors import DataError, FileReadError, OrderError, SubidError
 
 __all__ = ["main", "METHODS", "MethodSpec", "MethodUnavailableError", "available_methods"]
@@ -219,7 +220,7 @@ class _State:
 
     @property
     def progress(self) -> bool:
-        return not self.quiet and sys.stderr.isatty()
+        return on_terminal(self.quiet)
 
 
 def _state() -> _State:
@@ -410,14 +411,7 @@ def _fmt_poles(poles, limit: int = 8) -> str:
 
 
 def _progress(total: int, desc: str, enabled: bool, initial: int = 0):
-    if not enabled:
-        return None
-    try:
-        from tqdm import tqdm
-    except ImportError:  # pragma: no cover
-        return None
-    return tqdm(total=total, initial=initial, desc=desc, unit="sample", file=sys.stderr,
-                dynamic_ncols=True, leave=False)
+    return progress_bar(total, desc, "sample", enabled=enabled, initial=initial)
 
 
 @contextlib.contextmanager

@@ -23,6 +23,7 @@ import warnings
 
 import numpy as np
 
+from ._progress import progress_bar, progress_wrapper
 from . import datasets
 from .errors import SubidError
 
@@ -222,23 +223,12 @@ def _all_names():
 
 
 def _bar(total, progress, desc):
-    if not progress:
-        return None
-    try:
-        from tqdm import tqdm
-    except ImportError:  # pragma: no cover
-        return None
-    return tqdm(total=total, desc=desc, unit="dataset", file=sys.stderr, leave=False)
+    return progress_bar(total, desc, "dataset", enabled=bool(progress))
 
 
 def _iterate(names, progress, desc):
-    if progress:
-        try:
-            from tqdm import tqdm
-            return tqdm(names, desc=desc, unit="dataset", file=sys.stderr, leave=False)
-        except ImportError:  # pragma: no cover
-            pass
-    return names
+    wrap = progress_wrapper(desc, "dataset", enabled=bool(progress))
+    return names if wrap is None else wrap(names)
 
 
 def report_dataset(name: str, out: str, methods=None, frequency_unit="rad/s") -> dict:

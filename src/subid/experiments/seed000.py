@@ -31,6 +31,7 @@ import time
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
+from .._progress import on_terminal, progress_wrapper
 from ..adaptive import AdaptiveIdentifier
 from ..metrics import pole_error
 from ..model import StateSpace
@@ -331,13 +332,7 @@ def main(argv=None) -> int:
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     args = parser.parse_args(argv)
     os.makedirs(args.out, exist_ok=True)
-    progress = None
-    if not args.quiet and sys.stderr.isatty():
-        try:
-            from tqdm import tqdm
-            progress = lambda it: tqdm(it, desc="runs", unit="run")  # noqa: E731
-        except ImportError:
-            progress = None
+    progress = progress_wrapper("runs", "run", enabled=on_terminal(args.quiet))
     t0 = time.perf_counter()
     res = run(args.clean_seconds, args.noisy_seconds, tuple(range(1, args.noise_seeds + 1)),
               progress)

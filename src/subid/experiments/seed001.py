@@ -29,6 +29,7 @@ import warnings
 
 import numpy as np
 
+from .._progress import on_terminal, progress_wrapper
 from .. import ls_subspace, markov_error, moesp, n4sid, pole_error
 from ..errors import UnstableModelWarning
 from ..systems import seed001_system, simulate_data
@@ -122,10 +123,7 @@ def main(argv=None) -> int:
                         help="run on a local Dask cluster with this many worker processes")
     args = parser.parse_args(argv)
     os.makedirs(args.out, exist_ok=True)
-    progress = None
-    if not args.quiet and sys.stderr.isatty():
-        from tqdm import tqdm
-        progress = lambda it, **kw: tqdm(it, desc="Monte Carlo", unit="run", **kw)  # noqa: E731
+    progress = progress_wrapper("Monte Carlo", "run", enabled=on_terminal(args.quiet))
     client = cluster = None
     if args.scheduler or args.workers:
         from dask.distributed import Client, LocalCluster

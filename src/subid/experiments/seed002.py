@@ -35,6 +35,7 @@ import warnings
 import numpy as np
 import scipy.signal
 
+from .._progress import on_terminal, progress_wrapper
 from ..basis import laguerre, takenaka_malmquist
 from ..ct_subspace import ct_subspace, ct_subspace_paper, dt_to_ct
 from ..data import IOData
@@ -472,13 +473,7 @@ def main(argv=None) -> int:
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     args = parser.parse_args(argv)
     os.makedirs(args.out, exist_ok=True)
-    progress = None
-    if not args.quiet and sys.stderr.isatty():
-        try:
-            from tqdm import tqdm
-            progress = lambda it: tqdm(it, desc="seed 002", unit="record")  # noqa: E731
-        except ImportError:
-            progress = None
+    progress = progress_wrapper("seed 002", "record", enabled=on_terminal(args.quiet))
     t0 = time.perf_counter()
     raw = run(tuple(args.lengths), args.runs, args.runs_large, args.seed, progress)
     abl = ablation(runs=args.runs, seed=args.seed)
