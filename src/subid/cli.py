@@ -547,11 +547,21 @@ def cli(ctx, quiet, verbose, debug):
 @_FREQ
 @click.option("--report/--no-report", "write_report", default=True, show_default=True,
               help="Write report.html (skip it for batch jobs that need only the model).")
+@click.option("--stream", is_flag=True, default=False,
+              help="Read the file in pieces with bounded memory, for files larger than memory "
+                   "(ls, moesp, n4sid; uniform sampling). Fit and report use the first "
+                   "--report-samples samples of each part.")
+@click.option("--chunk-size", type=click.IntRange(min=1), default=100_000, show_default=True,
+              help="Samples per piece with --stream.")
+@click.option("--report-samples", type=click.IntRange(min=100), default=20_000,
+              show_default=True, help="Samples of each part kept for the fit and the report "
+                                      "with --stream.")
 @click.option("--out", required=True, type=click.Path(file_okay=False),
               help="Output folder for model.json, report.html and summary.json.")
 @_common
 def identify(data, inputs, outputs, dt, time_column, delimiter, detrend, method_name, order,
-             horizon, validate, forgetting, options, frequency_unit, write_report, out):
+             horizon, validate, forgetting, options, frequency_unit, write_report, stream,
+             chunk_size, report_samples, out):
     """Identify a model from DATA; write model.json and report.html.
 
     The record is detrended, split into an estimation part (the first 1 -
@@ -567,6 +577,10 @@ def identify(data, inputs, outputs, dt, time_column, delimiter, detrend, method_
         raise click.UsageError(f"--forgetting applies to online methods only, not to "
                                f"{spec.name}")
     spec.load()                                     # "not available" before any work
+    if stream:
+        return _identify_streamed(data, inputs, outputs, dt, time_column, delimiter, detrend,
+                                  spec, order, horizon, validate, opts, frequency_unit,
+                                  write_report, chunk_size, report_samples, out)
     with _about(data):
         record, label, notes = load_data(data, inputs, outputs, dt, time_column, delimiter)
         detrend = detrend or _default_detrend(spec)
@@ -612,6 +626,120 @@ def identify(data, inputs, outputs, dt, time_column, delimiter, detrend, method_
         "seconds": seconds, "files": files,
     }
     _write_json(summary_path, summary)
+    _print_summary(data, record, spec, model, result, est, val, seconds, files)
+    return 0
+
+
+def _identify_streamed(data, inputs, outputs, dt, time_column, delimiter, detrend, spec, order,
+                       horizon, validate, opts, frequency_unit, write_report, chunk_size,
+                       report_samples, out):
+    """``identify --stream``: two passes over the file in pieces, bounded memory.
+
+    Pass 1 counts the samples and sums the channels (for the means and the
+    estimation/validation cut); pass 2 feeds the estimation part, means
+    removed, to a :class:`~subid.HankelStatistic`, keeping only the first
+    ``report_samples`` samples of each part for the fit and the report.
+    """
+    import types
+
+    from . import report
+    from .data import IOData
+    from .io import read_chunks
+    from .statistic import HankelStatistic
+    from .stream import METHODS as STREAM_METHODS
+    from .stream import statistic_depth
+    if spec.attribute not in STREAM_METHODS:
+        raise click.UsageError(f"--stream works with the batch methods ls, moesp and n4sid, not "
+                               f"with {spec.name}")
+    if data.startswith("dataset:") or time_column is not None:
+        raise click.UsageError("--stream reads a uniformly sampled file: give a file and --dt, "
+                               "not a bundled dataset or --time")
+    detrend = detrend or "constant"
+    if detrend == "linear":
+        raise click.UsageError("--stream removes means (--detrend constant) or nothing "
+                               "(--detrend none); a linear trend needs the whole record")
+    with _about(data):
+        n, total_u, total_y, first = 0, 0.0, 0.0, None
+        for piece in read_chunks(data, inputs, outputs, dt=dt, chunk_size=chunk_size,
+                                 delimiter=delimiter):
+            if first is None:
+                first = piece
+            n += piece.n_samples
+            total_u = total_u + piece.u.sum(axis=0)
+            total_y = total_y + piece.y.sum(axis=0)
+        if first is None:
+            raise DataError(f"{data} holds no samples")
+        u_mean = total_u / n if detrend == "constant" else np.zeros(first.n_inputs)
+        y_mean = total_y / n if detrend == "constant" else np.zeros(first.n_outputs)
+        cut = n - int(round(validate * n)) if validate > 0 else n
+        hor, depth = statistic_depth(spec.attribute, order if isinstance(order, int) else None,
+                                     horizon, first.n_outputs, opts.get("instruments", "past"))
+        stat = HankelStatistic(first.n_inputs, first.n_outputs, depth, kind="gram",
+                               dt=first.dt, input_names=first.input_names,
+                               output_names=first.output_names)
+        kept = {"est": ([], []), "val": ([], [])}
+        start = 0
+        t0 = time.perf_counter()
+        for piece in read_chunks(data, inputs, outputs, dt=dt, chunk_size=chunk_size,
+                                 delimiter=delimiter):
+            u, y = piece.u - u_mean, piece.y - y_mean
+            split = min(max(cut - start, 0), piece.n_samples)
+            if split:
+                stat.update(u[:split], y[:split])
+            for part, lo, hi in (("est", 0, split), ("val", split, piece.n_samples)):
+                have = sum(len(a) for a in kept[part][0])
+                take = min(hi - lo, report_samples - have)
+                if take > 0:
+                    kept[part][0].append(u[lo:lo + take])
+                    kept[part][1].append(y[lo:lo + take])
+            start += piece.n_samples
+        with _warnings_to_log():
+            model = STREAM_METHODS[spec.attribute](stat, order, hor, **opts)
+        seconds = time.perf_counter() - t0
+
+        def sample(part):
+            us, ys = kept[part]
+            if not us:
+                return None
+            return IOData(np.vstack(us), np.vstack(ys), dt=first.dt,
+                          input_names=first.input_names, output_names=first.output_names)
+        est, val = sample("est"), sample("val")
+        result = report.evaluate(model, est, val)
+    model.info.setdefault("method", spec.attribute)
+    model.info["data"] = {"source": str(data), "inputs": list(first.input_names),
+                          "outputs": list(first.output_names), "detrend": detrend,
+                          "n_estimation": stat.n_samples, "validation_fraction": float(validate),
+                          "streamed": True, "report_samples": report_samples,
+                          "u_offset": u_mean, "y_offset": y_mean}
+    os.makedirs(out, exist_ok=True)
+    model_path = os.path.join(out, "model.json")
+    report_path = os.path.join(out, "report.html")
+    summary_path = os.path.join(out, "summary.json")
+    model.save(model_path)
+    notes = [f"Streamed in pieces of {chunk_size} samples: identified from the statistic of "
+             f"{stat.n_samples} samples; fit and figures use the first {report_samples} "
+             "samples of each part."]
+    if write_report:
+        html = report.identification_report(
+            {spec.name: model}, est, val, title=f"{os.path.basename(data)}: {spec.attribute}",
+            frequency_unit=frequency_unit, seconds={spec.name: seconds}, notes=notes,
+            command=_command_line(), source=data, data=est)
+        report.write_html(report_path, html)
+    files = [model_path, *([report_path] if write_report else []), summary_path]
+    summary = {
+        "data": data, "method": spec.name, "function": spec.attribute, "order": model.order,
+        "horizon": model.info.get("horizon"), "dt": model.dt,
+        "outputs": list(first.output_names), "streamed": True,
+        "fit_estimation": _nan_to_none(result["fit_estimation"]),
+        "fit_validation": _nan_to_none(result["fit_validation"]),
+        "n_estimation": stat.n_samples, "n_validation": n - stat.n_samples,
+        "stable": bool(result["stable"]),
+        "poles": [[float(z.real), float(z.imag)] for z in result["poles"]],
+        "seconds": seconds, "files": files,
+    }
+    _write_json(summary_path, summary)
+    record = types.SimpleNamespace(dt=first.dt, n_samples=n, n_inputs=first.n_inputs,
+                                   n_outputs=first.n_outputs)
     _print_summary(data, record, spec, model, result, est, val, seconds, files)
     return 0
 
