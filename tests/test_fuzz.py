@@ -209,3 +209,14 @@ def test_npz_member_declaring_more_than_it_holds_is_rejected(tmp_path):
         subid.read(path)
     assert tracemalloc.get_traced_memory()[1] < 16 * 2**20
     tracemalloc.stop()
+
+
+@pytest.mark.parametrize("edit", [(0, 199185505, 73), (0, 501331136, 212), (0, 295214577, 187)])
+def test_mat_fields_scipy_trusts_are_validated(tmp_path, edit):
+    """Found by the long fuzz run: a complex flag without an imaginary part,
+    or an unknown data-type code, made scipy's C reader crash the interpreter
+    (segmentation fault). The structure is now validated before scipy reads."""
+    path = tmp_path / "bad.mat"
+    path.write_bytes(_mutate(VALID[".mat"], [edit]))
+    with pytest.raises(errors.FileReadError, match="corrupted MATLAB file"):
+        subid.read(path)

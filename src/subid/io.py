@@ -712,50 +712,148 @@ def _check_mat4_headers(p: Path, shown: str, size: int) -> None:
             offset += step
 
 
+# MAT v5 data types: code -> bytes per element (numeric and character data)
+_MI_SIZES = {1: 1, 2: 1, 3: 2, 4: 2, 5: 4, 6: 4, 7: 4, 9: 8, 12: 8, 13: 8, 14: 8,
+             16: 1, 17: 2, 18: 4}
+_MI_MATRIX, _MI_COMPRESSED = 14, 15
+_NUMERIC_CLASSES = range(6, 16)           # mxDOUBLE_CLASS .. mxUINT64_CLASS
+_CELL, _STRUCT, _CHAR, _SPARSE = 1, 2, 4, 5
+
+
+class _MatCorrupt(Exception):
+    """A MAT v5 structure that does not follow the format."""
+
+
+def _mat5_sub(buf: bytes, pos: int, end: int, endian: str):
+    """Next sub-element in ``buf[pos:end]``: ``(type, data start, data end, next pos)``."""
+    import struct
+    if pos + 8 > end:
+        raise _MatCorrupt("truncated element tag")
+    word, nbytes = struct.unpack(endian + "2I", buf[pos:pos + 8])
+    if word >> 16:                                   # small data element: data in the tag
+        small = word >> 16
+        if small > 4:
+            raise _MatCorrupt("small data element longer than 4 bytes")
+        return word & 0xFFFF, pos + 4, pos + 4 + small, pos + 8
+    start, stop = pos + 8, pos + 8 + nbytes
+    if stop > end:
+        raise _MatCorrupt("element longer than its parent")
+    return word, start, stop, stop + (-nbytes % 8)
+
+
+def _mat5_data(buf, pos, end, endian, count: int, what: str):
+    """A numeric or character sub-element holding exactly ``count`` values."""
+    dtype, start, stop, nxt = _mat5_sub(buf, pos, end, endian)
+    size = _MI_SIZES.get(dtype)
+    if size is None:
+        raise _MatCorrupt(f"{what} has unknown data type {dtype}")
+    if stop - start != count * size:
+        raise _MatCorrupt(f"{what} holds {stop - start} bytes, not {count} values of "
+                          f"{size} bytes")
+    return nxt
+
+
+def _mat5_matrix(buf: bytes, start: int, end: int, endian: str, depth: int = 0) -> None:
+    """Validate the content of one miMATRIX element (the fields scipy's C
+    reader trusts): flags, dimensions, name and data sizes, recursively."""
+    import struct
+    if start == end:                                 # an empty matrix element
+        return
+    if depth > 16:
+        raise _MatCorrupt("nesting too deep")
+    dtype, a, b, pos = _mat5_sub(buf, start, end, endian)
+    if dtype != 6 or b - a != 8:
+        raise _MatCorrupt("bad array flags")
+    flags, nzmax = struct.unpack(endian + "2I", buf[a:b])
+    cls, complex_ = flags & 0xFF, bool(flags & 0x800)
+    dtype, a, b, pos = _mat5_sub(buf, pos, end, endian)
+    if dtype != 5 or (b - a) % 4 or b - a < 8:
+        raise _MatCorrupt("bad dimensions")
+    dims = struct.unpack(endian + f"{(b - a) // 4}i", buf[a:b])
+    if min(dims) < 0:
+        raise _MatCorrupt("negative dimension")
+    count = 1
+    for d in dims:
+        count *= d
+    dtype, a, b, pos = _mat5_sub(buf, pos, end, endian)
+    if dtype not in (1, 2, 16):
+        raise _MatCorrupt("bad array name")
+    if cls in _NUMERIC_CLASSES or cls == _CHAR:
+        pos = _mat5_data(buf, pos, end, endian, count, "real part")
+        if complex_:
+            _mat5_data(buf, pos, end, endian, count, "imaginary part")
+    elif cls == _CELL:
+        for _ in range(count):
+            dtype, a, b, pos = _mat5_sub(buf, pos, end, endian)
+            if dtype != _MI_MATRIX:
+                raise _MatCorrupt("cell element is not a matrix")
+            _mat5_matrix(buf, a, b, endian, depth + 1)
+    elif cls == _STRUCT:
+        dtype, a, b, pos = _mat5_sub(buf, pos, end, endian)
+        if dtype != 5 or b - a != 4:
+            raise _MatCorrupt("bad field name length")
+        name_len = struct.unpack(endian + "i", buf[a:b])[0]
+        dtype, a, b, pos = _mat5_sub(buf, pos, end, endian)
+        if dtype != 1 or name_len <= 0 or (b - a) % name_len:
+            raise _MatCorrupt("bad field names")
+        for _ in range(count * ((b - a) // name_len)):
+            dtype, a, b, pos = _mat5_sub(buf, pos, end, endian)
+            if dtype != _MI_MATRIX:
+                raise _MatCorrupt("struct field is not a matrix")
+            _mat5_matrix(buf, a, b, endian, depth + 1)
+    elif cls == _SPARSE:
+        if len(dims) != 2:
+            raise _MatCorrupt("sparse matrix with more than 2 dimensions")
+        pos = _mat5_data(buf, pos, end, endian, nzmax, "sparse row indices")
+        pos = _mat5_data(buf, pos, end, endian, dims[1] + 1, "sparse column indices")
+        for part in ("real", "imaginary")[:2 if complex_ else 1]:
+            dtype, a, b, pos = _mat5_sub(buf, pos, end, endian)
+            if dtype not in _MI_SIZES or (b - a) // _MI_SIZES[dtype] > nzmax:
+                raise _MatCorrupt(f"bad sparse {part} part")
+    else:
+        raise _MatCorrupt(f"unsupported MATLAB class {cls} (objects, function handles)")
+
+
 def _check_mat5_elements(p: Path, shown: str, size: int) -> None:
-    """Walk the top-level data elements of a MATLAB v5 file: each declared
-    element must fit in the file, and a compressed element's inner header
-    must fit in what it decompresses to (scipy would otherwise allocate what
-    a corrupted tag declares)."""
+    """Validate a MATLAB v5 file before scipy reads it.
+
+    Each top-level element must fit in the file; compressed elements must
+    inflate (bounded) to what they declare; and every matrix must follow the
+    format: scipy's C reader trusts the flags, dimensions, type codes and
+    sizes, and a corrupted one made it allocate gigabytes or crash the
+    interpreter (found by the fuzzers).
+    """
     import struct
     import zlib
     with open(p, "rb") as fh:
-        head = fh.read(128)
-        if len(head) < 128:
-            raise FileReadError(f"{shown}: MATLAB file header truncated", path=shown)
-        endian = "<" if head[126:128] == b"IM" else ">"
-        offset = 128
+        raw = fh.read()
+    if len(raw) < 128:
+        raise FileReadError(f"{shown}: MATLAB file header truncated", path=shown)
+    endian = "<" if raw[126:128] == b"IM" else ">"
+    offset = 128
+    try:
         while offset < size:
-            fh.seek(offset)
-            tag = fh.read(8)
-            if len(tag) < 8:
-                raise FileReadError(f"{shown}: data element truncated at byte {offset}",
-                                    path=shown)
-            dtype, nbytes = struct.unpack(endian + "2I", tag)
-            if dtype >> 16:                              # small data element: 8 bytes in all
-                offset += 8
-                continue
-            end = offset + 8 + nbytes
-            if end > size:
-                raise FileReadError(f"{shown}: a data element at byte {offset} declares {nbytes} "
-                                    f"bytes but the file has {size}; the file is corrupted",
-                                    path=shown)
-            if dtype == 15:                              # miCOMPRESSED
+            dtype, start, stop, nxt = _mat5_sub(raw, offset, size, endian)
+            if dtype == _MI_COMPRESSED:
                 inflater = zlib.decompressobj()
                 try:
-                    inner = inflater.decompress(fh.read(nbytes), _MAT_EXPANSION * nbytes + 8)
+                    inner = inflater.decompress(raw[start:stop], _MAT_EXPANSION * (stop - start) + 8)
                 except zlib.error as exc:
-                    raise FileReadError(f"{shown}: corrupted compressed data at byte {offset} "
-                                        f"({exc})", path=shown) from None
-                if len(inner) >= 8:
-                    inner_type, inner_bytes = struct.unpack(endian + "2I", inner[:8])
-                    if not inner_type >> 16 and inner_bytes > _MAT_EXPANSION * nbytes:
-                        raise FileReadError(f"{shown}: a compressed element at byte {offset} "
-                                            f"declares {inner_bytes} bytes from {nbytes}; the "
-                                            "file is corrupted", path=shown)
-                offset = end
+                    raise _MatCorrupt(f"corrupted compressed data ({exc})") from None
+                itype, istart, istop, _ = _mat5_sub(inner, 0, len(inner), endian)
+                if itype == _MI_MATRIX:
+                    _mat5_matrix(inner, istart, istop, endian)
+                offset = stop                            # compressed elements are not padded
             else:
-                offset = end + (-(nbytes) % 8)           # uncompressed elements are padded
+                if dtype == _MI_MATRIX:
+                    _mat5_matrix(raw, start, stop, endian)
+                offset = nxt
+    except _MatCorrupt as exc:
+        raise FileReadError(f"{shown}: corrupted MATLAB file near byte {offset} ({exc})",
+                            path=shown) from None
+    except struct.error as exc:
+        raise FileReadError(f"{shown}: corrupted MATLAB file near byte {offset} ({exc})",
+                            path=shown) from None
 
 
 def _check_mat_sizes(p: Path, shown: str) -> None:
