@@ -107,18 +107,19 @@ def test_random_bytes(tmp_path_factory, ext, raw):
     _load(path, ext)
 
 
-def _checkpoint_bytes():
-    data = systems.simulate_data(systems.seed001_system(), 200, seed=0)
-    rs = subid.RecursiveSubspace(3, 2, 2).update(data.u, data.y)
-    buf_path = os.path.join(os.environ.get("TMPDIR", "/tmp"), f"subid-fuzz-{os.getpid()}.npz")
-    rs.save(buf_path)
-    with open(buf_path, "rb") as fh:
+def _saved_bytes(identifier) -> bytes:
+    """The bytes of ``identifier.save(...)``."""
+    path = os.path.join(os.environ.get("TMPDIR", "/tmp"), f"subid-fuzz-{os.getpid()}.npz")
+    identifier.save(path)
+    with open(path, "rb") as fh:
         raw = fh.read()
-    os.unlink(buf_path)
+    os.unlink(path)
     return raw
 
 
-CHECKPOINT = _checkpoint_bytes()
+def _checkpoint_bytes():
+    data = systems.simulate_data(systems.seed001_system(), 200, seed=0)
+    return _saved_bytes(subid.RecursiveSubspace(3, 2, 2).update(data.u, data.y))
 
 
 def _adaptive_checkpoint_bytes():
@@ -127,14 +128,10 @@ def _adaptive_checkpoint_bytes():
     u = multisine(t, 2)
     ai = subid.AdaptiveIdentifier(4, 2, 2, dt=0.001)
     ai.update(u, subid.systems.seed000_system().simulate(u, t=t, hold="foh"))
-    buf_path = os.path.join(os.environ.get("TMPDIR", "/tmp"), f"subid-fuzz-a{os.getpid()}.npz")
-    ai.save(buf_path)
-    with open(buf_path, "rb") as fh:
-        raw = fh.read()
-    os.unlink(buf_path)
-    return raw
+    return _saved_bytes(ai)
 
 
+CHECKPOINT = _checkpoint_bytes()
 ADAPTIVE_CHECKPOINT = _adaptive_checkpoint_bytes()
 
 

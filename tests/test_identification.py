@@ -7,7 +7,8 @@ import scipy.linalg
 
 import subid
 from subid import systems
-from subid._hankel import hankel_chunk, hankel_factor
+from subid._hankel import hankel_chunk
+from subid.statistic import HankelStatistic
 from subid._regression import fit_b_d_x0, sensitivity_rows, sensitivity_rows_reference
 from subid.errors import ExcitationWarning
 from subid.ls_subspace import random_selector
@@ -149,7 +150,7 @@ def test_hankel_factor_matches_direct_qr():
     r = np.random.default_rng(0)
     u = r.standard_normal((40_000, 2))
     y = r.standard_normal((40_000, 3))
-    hf = hankel_factor(u, y, 6)          # accumulated over several chunks
+    hf = HankelStatistic(2, 3, 6, kind="qr").update(u, y).factor()   # several QR chunks
     H = hankel_chunk(u, y, 6, 0, 40_000 - 5)
     direct = scipy.linalg.qr(H, mode="economic")[1].T / np.sqrt(H.shape[0])
     # unique up to column signs: compare L L^T and |diag|

@@ -25,10 +25,6 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.linalg
 
-# Columns of H^T processed per QR update; bounds the working memory.
-_CHUNK = 16384
-
-
 @dataclass(frozen=True)
 class HankelFactor:
     """Triangular factor of a block-Hankel data matrix.
@@ -98,30 +94,3 @@ def hankel_chunk(u: np.ndarray, y: np.ndarray, depth: int, start: int, stop: int
         out[:, i * nu:(i + 1) * nu] = u[start + i:stop + i]
         out[:, depth * nu + i * ny: depth * nu + (i + 1) * ny] = y[start + i:stop + i]
     return out
-
-
-def hankel_factor(u: np.ndarray, y: np.ndarray, depth: int) -> HankelFactor:
-    """Accumulate the triangular factor of the block-Hankel matrix of (u, y).
-
-    Parameters
-    ----------
-    u, y : ndarray, shape (N, nu), (N, ny)
-    depth : int
-        Block rows per signal (past + future horizon).
-    """
-    n = u.shape[0]
-    k_total = n - depth + 1
-    m = depth * (u.shape[1] + y.shape[1])
-    R = np.zeros((0, m))
-    for start in range(0, k_total, _CHUNK):
-        stop = min(start + _CHUNK, k_total)
-        block = np.vstack([R, hankel_chunk(u, y, depth, start, stop)])
-        R = scipy.linalg.qr(block, mode="r", check_finite=False)[0][:m]
-    if R.shape[0] < m:
-        R = np.vstack([R, np.zeros((m - R.shape[0], m))])
-    L = R.T / np.sqrt(k_total)
-    signs = np.sign(np.diag(L))
-    signs[signs == 0] = 1.0
-    L *= signs
-    return HankelFactor(L=L, depth=depth, n_inputs=u.shape[1], n_outputs=y.shape[1],
-                        n_columns=k_total)

@@ -602,6 +602,19 @@ def identify(data, inputs, outputs, dt, time_column, delimiter, detrend, method_
         result = report.evaluate(model, est, val)
     model.info.setdefault("method", spec.attribute)
     model.info["data"] = _provenance(data, record, work, detrend, est, validate)
+    _write_outputs(out, data, spec, model, result, est, val, seconds, record,
+                   title=f"{label}: {spec.attribute}", notes=notes, report_data=work,
+                   write_report=write_report, frequency_unit=frequency_unit,
+                   outputs=list(est.output_names), n_estimation=est.n_samples,
+                   n_validation=val.n_samples if val is not None else 0)
+    return 0
+
+
+def _write_outputs(out, data, spec, model, result, est, val, seconds, record, *, title, notes,
+                   report_data, write_report, frequency_unit, outputs, n_estimation,
+                   n_validation, **extra):
+    """Write model.json, report.html (optional) and summary.json; print the summary."""
+    from . import report
     os.makedirs(out, exist_ok=True)
     model_path = os.path.join(out, "model.json")
     report_path = os.path.join(out, "report.html")
@@ -609,25 +622,23 @@ def identify(data, inputs, outputs, dt, time_column, delimiter, detrend, method_
     model.save(model_path)
     if write_report:
         html = report.identification_report(
-            {spec.name: model}, est, val, title=f"{label}: {spec.attribute}",
-            frequency_unit=frequency_unit, seconds={spec.name: seconds}, notes=notes,
-            command=_command_line(), source=data, data=work)
+            {spec.name: model}, est, val, title=title, frequency_unit=frequency_unit,
+            seconds={spec.name: seconds}, notes=notes, command=_command_line(), source=data,
+            data=report_data)
         report.write_html(report_path, html)
     files = [model_path, *([report_path] if write_report else []), summary_path]
     summary = {
         "data": data, "method": spec.name, "function": spec.attribute, "order": model.order,
-        "horizon": model.info.get("horizon"), "dt": model.dt,
-        "outputs": list(est.output_names),
+        "horizon": model.info.get("horizon"), "dt": model.dt, "outputs": outputs, **extra,
         "fit_estimation": _nan_to_none(result["fit_estimation"]),
         "fit_validation": _nan_to_none(result["fit_validation"]),
-        "n_estimation": est.n_samples, "n_validation": val.n_samples if val is not None else 0,
+        "n_estimation": n_estimation, "n_validation": n_validation,
         "stable": bool(result["stable"]),
         "poles": [[float(z.real), float(z.imag)] for z in result["poles"]],
         "seconds": seconds, "files": files,
     }
     _write_json(summary_path, summary)
     _print_summary(data, record, spec, model, result, est, val, seconds, files)
-    return 0
 
 
 def _identify_streamed(data, inputs, outputs, dt, time_column, delimiter, detrend, spec, order,
@@ -711,36 +722,16 @@ def _identify_streamed(data, inputs, outputs, dt, time_column, delimiter, detren
                           "n_estimation": stat.n_samples, "validation_fraction": float(validate),
                           "streamed": True, "report_samples": report_samples,
                           "u_offset": u_mean, "y_offset": y_mean}
-    os.makedirs(out, exist_ok=True)
-    model_path = os.path.join(out, "model.json")
-    report_path = os.path.join(out, "report.html")
-    summary_path = os.path.join(out, "summary.json")
-    model.save(model_path)
     notes = [f"Streamed in pieces of {chunk_size} samples: identified from the statistic of "
              f"{stat.n_samples} samples; fit and figures use the first {report_samples} "
              "samples of each part."]
-    if write_report:
-        html = report.identification_report(
-            {spec.name: model}, est, val, title=f"{os.path.basename(data)}: {spec.attribute}",
-            frequency_unit=frequency_unit, seconds={spec.name: seconds}, notes=notes,
-            command=_command_line(), source=data, data=est)
-        report.write_html(report_path, html)
-    files = [model_path, *([report_path] if write_report else []), summary_path]
-    summary = {
-        "data": data, "method": spec.name, "function": spec.attribute, "order": model.order,
-        "horizon": model.info.get("horizon"), "dt": model.dt,
-        "outputs": list(first.output_names), "streamed": True,
-        "fit_estimation": _nan_to_none(result["fit_estimation"]),
-        "fit_validation": _nan_to_none(result["fit_validation"]),
-        "n_estimation": stat.n_samples, "n_validation": n - stat.n_samples,
-        "stable": bool(result["stable"]),
-        "poles": [[float(z.real), float(z.imag)] for z in result["poles"]],
-        "seconds": seconds, "files": files,
-    }
-    _write_json(summary_path, summary)
     record = types.SimpleNamespace(dt=first.dt, n_samples=n, n_inputs=first.n_inputs,
                                    n_outputs=first.n_outputs)
-    _print_summary(data, record, spec, model, result, est, val, seconds, files)
+    _write_outputs(out, data, spec, model, result, est, val, seconds, record,
+                   title=f"{os.path.basename(data)}: {spec.attribute}", notes=notes,
+                   report_data=est, write_report=write_report, frequency_unit=frequency_unit,
+                   outputs=list(first.output_names), n_estimation=stat.n_samples,
+                   n_validation=n - stat.n_samples, streamed=True)
     return 0
 
 

@@ -250,7 +250,8 @@ class HankelStatistic:
     def gram(self) -> np.ndarray:
         """``H H^T / K`` in the row order ``[U_0..U_{s-1}; Y_0..Y_{s-1}]``."""
         if self.kind == "qr":
-            return self.factor().L @ self.factor().L.T
+            L = self.factor().L
+            return L @ L.T
         s, K = self.depth, self.n_columns
         if K < 1:
             raise TooFewSamplesError(f"the statistic holds {self.n_samples} samples; the "
