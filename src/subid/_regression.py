@@ -85,7 +85,8 @@ def sensitivity_rows(A, C, u, S0, n_x0_cols):  # pragma: no cover - compiled
     return rows, S
 
 
-def fit_b_d_x0(A, C, u, y, *, feedthrough=True, estimate_x0=True, kernel=sensitivity_rows):
+def fit_b_d_x0(A, C, u, y, *, feedthrough=True, estimate_x0=True, output_weights=None,
+               kernel=sensitivity_rows):
     """Least-squares B, D (and x0) for given A, C on the raw output samples.
 
     Parameters
@@ -97,12 +98,16 @@ def fit_b_d_x0(A, C, u, y, *, feedthrough=True, estimate_x0=True, kernel=sensiti
         Estimate D (else D = 0).
     estimate_x0 : bool
         Estimate the initial state (else x0 = 0).
+    output_weights : ndarray, shape (ny,), optional
+        Each output's errors are multiplied by its weight in the least-squares
+        cost (e.g. the inverse of its standard deviation, so that the fit does
+        not depend on the output units). Default: all ones.
 
     Returns
     -------
     B, D, x0 : ndarray
     diagnostics : dict
-        ``residual_rms`` (over all outputs), ``regression_condition`` (an estimate of
+        ``residual_rms`` (over all weighted outputs), ``regression_condition`` (an estimate of
         the 1-norm condition number of the column-equilibrated regressor) and
         ``regression_rank_deficient``.
     """
@@ -129,6 +134,8 @@ def fit_b_d_x0(A, C, u, y, *, feedthrough=True, estimate_x0=True, kernel=sensiti
             # (u^T kron I_ny) vec(D): column j*ny + i multiplies D[i, j]
             block[:, :, q:p] = _kron_u_identity(uc, ny)
         block[:, :, p] = y[start:stop]
+        if output_weights is not None:
+            block *= output_weights[None, :, None]
         R = scipy.linalg.qr(np.vstack([R, block.reshape(T * ny, p + 1)]), mode="r",
                             check_finite=False)[0][: p + 1]
     # Equilibrate the columns so that the condition number (and the rank

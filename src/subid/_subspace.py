@@ -18,6 +18,7 @@ from ._hankel import HankelFactor
 from ._validation import check_int
 from .data import IOData
 from ._regression import fit_b_d_projection, fit_b_d_x0
+from ._selection import SELECTION_RULES, cross_validate, default_gap_horizon
 from .errors import (DataError, ExcitationWarning, NotExcitingError, OrderError, SubidError,
                      TooFewSamplesError, UnstableModelWarning)
 from .model import StateSpace
@@ -53,14 +54,11 @@ DEFAULT_MAX_ORDER = 10
 
 def default_horizon(order: int | None, n_outputs: int, n_inputs: int, n_samples: int,
                     blocks_per_horizon: int) -> int:
-    """Horizon used when the caller gives none.
+    """Horizon of the online and streamed identifiers when none is given.
 
-    Seed 001 asks for ``horizon > order`` and uses 5 for a 3rd-order model;
-    shift invariance needs ``(horizon - 1) * n_outputs >= order``. With a
-    given order (or largest candidate order): ``max(5, ceil(order /
-    n_outputs) + 2)``. With the order to be estimated among the default
-    candidates: 10, or the largest horizon the record supports (at least 2)
-    when it is too short for 10.
+    ``max(5, ceil(order / n_outputs) + 2)`` with a known order; 10 (or the
+    largest horizon the record supports) otherwise. The batch methods choose
+    their horizon from the data instead (:mod:`subid._selection`).
     """
     if order is not None:
         return max(5, math.ceil(order / n_outputs) + 2)
@@ -105,8 +103,8 @@ def check_order_horizon(order, horizon, data, *, method: str, blocks_per_horizon
     fixed, candidates = _parse_order(order)
     n_outputs = data.n_outputs
     largest = fixed if fixed is not None else (max(candidates) if candidates else None)
-    horizon = default_horizon(largest, n_outputs, data.n_inputs, data.n_samples,
-                              blocks_per_horizon) if horizon is None else \
+    horizon = default_gap_horizon(data.n_samples, data.n_inputs, n_outputs, blocks_per_horizon,
+                                  largest or DEFAULT_MAX_ORDER) if horizon is None else \
         check_int(horizon, "horizon", minimum=2)
     max_order = (horizon - 1) * n_outputs
     if largest is not None and largest > max_order:
@@ -187,25 +185,25 @@ def check_excitation(hf: HankelFactor, input_names, *, method: str) -> float:
     return float(cond)
 
 
-def order_from_gap(values, candidates) -> int:
-    """Order at the largest gap of a decreasing profile (log scale).
+def gap_scores(values, candidates) -> dict:
+    """Gap after each candidate order of a decreasing profile (log10 scale).
 
     ``values`` are singular values, or the pivots of an SVD-free rank
     profile; the gap after position ``k`` is
-    ``log(min(values[:k])) - log(max(values[k:]))``. The order is the
-    candidate ``k`` with the largest gap.
+    ``log10(min(values[:k])) - log10(max(values[k:]))``.
     """
     v = np.abs(np.asarray(values, dtype=float))
     floor = max(v.max(initial=0.0), 1e-300) * np.finfo(float).eps * v.size
     logv = np.log10(np.maximum(v, floor))
-    best, best_gap = candidates[0], -np.inf
-    for k in candidates:
-        if k >= v.size:
-            break
-        gap = logv[:k].min() - logv[k:].max()
-        if gap > best_gap:
-            best, best_gap = k, gap
-    return best
+    return {k: float(logv[:k].min() - logv[k:].max()) for k in candidates if k < v.size}
+
+
+def order_from_gap(values, candidates) -> int:
+    """Order at the largest gap of a decreasing profile (:func:`gap_scores`)."""
+    gaps = gap_scores(values, candidates)
+    if not gaps:
+        return candidates[0]
+    return max(gaps, key=lambda k: (gaps[k], -k))
 
 
 def shift_invariance(gamma: np.ndarray, n_outputs: int):
@@ -228,6 +226,18 @@ def shift_invariance(gamma: np.ndarray, n_outputs: int):
 BD_METHODS = ("auto", "simulation", "projection")
 
 
+def output_weights(y: np.ndarray) -> np.ndarray:
+    """Weights of the outputs in the B, D, x0 regression: 1 / standard deviation.
+
+    The regression then minimises the sum over the outputs of the squared
+    errors relative to each output's spread, so that no output dominates the
+    fit because of its units (a constant output cannot reach here:
+    :func:`check_data` rejects it).
+    """
+    std = y.std(axis=0)
+    return 1.0 / np.where(std > 0, std, 1.0)
+
+
 def estimate_b_d(A, C_n, gamma, L11, L_yu, problem: "Problem", *, bd_method: str,
                  feedthrough: bool, estimate_x0: bool):
     """B, D (and x0) given A and C: by output regression or by projection.
@@ -236,7 +246,8 @@ def estimate_b_d(A, C_n, gamma, L11, L_yu, problem: "Problem", *, bd_method: str
     normalised channels of ``problem``; B and D come back in the user's
     units. ``'simulation'`` fits B, D and x0 to the raw output samples
     through the model (most accurate; it simulates the model over the whole
-    record, which overflows for a clearly unstable A). ``'projection'``
+    record, which overflows for a clearly unstable A), each output weighted by
+    the inverse of its standard deviation (:func:`output_weights`). ``'projection'``
     solves the SVD-free projected data equation on the statistic
     (:func:`fit_b_d_projection`; no x0). ``'auto'`` uses simulation, and
     projection when simulating overflows or leaves the regression
@@ -261,7 +272,8 @@ def estimate_b_d(A, C_n, gamma, L11, L_yu, problem: "Problem", *, bd_method: str
     if bd_method in ("auto", "simulation"):
         with np.errstate(over="ignore", invalid="ignore"):
             B, D, x0, diag = fit_b_d_x0(A, C, data.u, data.y, feedthrough=feedthrough,
-                                        estimate_x0=estimate_x0)
+                                        estimate_x0=estimate_x0,
+                                        output_weights=output_weights(data.y))
         usable = (np.isfinite(B).all() and np.isfinite(D).all()
                   and not diag["regression_rank_deficient"])
         if usable:
@@ -277,6 +289,178 @@ def estimate_b_d(A, C_n, gamma, L11, L_yu, problem: "Problem", *, bd_method: str
         proj["simulation_regression_condition"] = diag["regression_condition"]
     proj.update(bd_method="projection", spectral_radius=radius)
     return B, D, None, proj
+
+
+WEIGHTINGS = ("moesp", "cva", "n4sid")
+
+
+def check_weighting(weighting: str) -> str:
+    if weighting not in WEIGHTINGS:
+        raise SubidError(f"weighting must be one of {WEIGHTINGS} (MATLAB's N4Weight), got "
+                         f"{weighting!r}")
+    return weighting
+
+
+def cva_factor(y_perp: np.ndarray) -> np.ndarray:
+    """Upper-triangular R with ``R^T R = Y_f Π⊥ Y_f^T`` (plus a tiny ridge).
+
+    ``y_perp`` holds the coefficient rows of ``Y_f Π⊥_{U_f}``. CVA weights
+    the oblique projection by ``W1 = (Y_f Π⊥ Y_f^T)^{-1/2}``; ``R^{-T}`` is
+    such a square root up to an orthogonal factor, which leaves the singular
+    values and the recovered range(Γ) = range(W1^{-1} U_n) unchanged. The
+    ridge (1e-10 of the mean diagonal) keeps R invertible on noise-free data,
+    where ``Y_f Π⊥`` has rank n only; any invertible W1 gives the exact range
+    there.
+    """
+    m = y_perp.shape[0]
+    ridge = 1e-10 * max(np.linalg.norm(y_perp) ** 2 / m, 1e-300)
+    stacked = np.vstack([y_perp.T, math.sqrt(ridge) * np.eye(m)])
+    return scipy.linalg.qr(stacked, mode="r", check_finite=False)[0][:m]
+
+
+STABILITY = ("auto", "enforce", "none")
+#: Spectral radius of a model whose stability was enforced, at most.
+STABLE_RADIUS = 0.9999
+#: Output growth (RMS of the last tenth over the first) above which data "grow".
+GROWTH_LIMIT = 3.0
+
+
+def stability_request(stability: str, A, data, method: str) -> bool:
+    """Whether stability must be enforced on ``A``.
+
+    ``'none'``: never. ``'enforce'``: whenever A is unstable, with a warning
+    when the data themselves grow. ``'auto'`` (default): when A is unstable
+    (spectral radius >= 1) and the estimation output does not grow
+    (:func:`output_growth` below :data:`GROWTH_LIMIT`): a diverging model of
+    non-diverging data is over-fitted noise, not the plant. Data that grow
+    (an unstable plant, e.g. measured in closed loop) keep the unstable
+    model. From a statistic alone (no raw samples) ``'auto'`` cannot see the
+    growth and does not act.
+    """
+    if stability not in STABILITY:
+        raise SubidError(f"stability must be one of {STABILITY}, got {stability!r}")
+    if stability == "none" or np.abs(np.linalg.eigvals(A)).max() < 1.0:
+        return False
+    growth = output_growth(data.y) if isinstance(data, IOData) else None
+    if stability == "enforce":
+        if growth is not None and growth >= GROWTH_LIMIT:
+            warnings.warn(f"{method}: stability='enforce' on data whose output grows "
+                          f"{growth:.3g}x over the record: the plant looks unstable, and a "
+                          "stable model cannot follow it; use stability='none' to keep the "
+                          "unstable estimate", UnstableModelWarning, stacklevel=4)
+        return True
+    return growth is not None and growth < GROWTH_LIMIT
+
+
+def stable_shift_invariance(Q: np.ndarray, n_outputs: int, radius: float = STABLE_RADIUS):
+    """A stable A from an orthonormal basis ``Q`` of the observability range.
+
+    Regularised shift invariance (Maciejowski, "Guaranteed stability with
+    subspace methods", Systems & Control Letters 26, 1995; Van Gestel et al.,
+    IEEE TAC 46(9), 2001): minimise
+    ``||Q_up A - Q_down||^2 + c ||Q_last A||^2`` with ``Q_last`` the last block
+    row. For c = 0 it is the ordinary estimate; for c = 1 the solution is
+    ``A = Q_up^T Q_down = Q^T S Q`` (``Q^T Q = I``, S the block shift, of norm
+    1), so ``||A||_2 <= 1`` and A is stable. The smallest c in [0, 1] giving a
+    spectral radius at most ``radius`` is found by bisection (40 steps); if
+    even c = 1 reaches only ``radius < rho <= 1``, A is scaled by
+    ``radius / rho``.
+
+    Returns
+    -------
+    A : ndarray
+        In the basis of ``Q``.
+    c : float
+        The regularisation weight used.
+    """
+    up, down, last = Q[:-n_outputs], Q[n_outputs:], Q[-n_outputs:]
+    n = Q.shape[1]
+
+    def solve(c):
+        lhs = np.vstack([up, math.sqrt(c) * last])
+        rhs = np.vstack([down, np.zeros((n_outputs, n))])
+        return scipy.linalg.lstsq(lhs, rhs, lapack_driver="gelsy", check_finite=False)[0]
+
+    def rho(M):
+        return float(np.abs(np.linalg.eigvals(M)).max())
+
+    A1 = solve(1.0)
+    if rho(A1) > radius:
+        return A1 * (radius / rho(A1)), 1.0
+    lo, hi, best = 0.0, 1.0, A1
+    for _ in range(40):
+        mid = 0.5 * (lo + hi)
+        A = solve(mid)
+        if rho(A) <= radius:
+            hi, best = mid, A
+        else:
+            lo = mid
+    return best, hi
+
+
+#: 'auto' keeps an unstable model only when its residual on the estimation data is
+#: below this fraction of the stabilised model's: the data demand the instability.
+KEEP_UNSTABLE_RATIO = 0.9
+
+
+def stable_choice(A_q, Q, n_outputs: int, fit, *, stability: str, data, method: str):
+    """A in the orthonormal basis ``Q``, stable when that is right, with its B, D, x0.
+
+    ``fit(A_q)`` returns ``(B, D, x0, diagnostics)`` for a given A (the
+    output regression of :func:`estimate_b_d`, in the basis of ``Q``).
+
+    * ``'none'``, a stable A, or :func:`stability_request` false: A as
+      estimated.
+    * ``'enforce'``: the stable A of :func:`stable_shift_invariance`, with B,
+      D, x0 refitted for it.
+    * ``'auto'`` when the data do not grow: both are fitted; the unstable A
+      is kept only when it explains the estimation data clearly better (its
+      residual RMS below :data:`KEEP_UNSTABLE_RATIO` times the stable one's):
+      an unstable plant in closed loop (e.g. a ball on a beam) keeps its
+      unstable model, while a spurious unstable mode, which the data do not
+      need, is removed.
+
+    Returns
+    -------
+    A_q, (B, D, x0, diagnostics), record
+        ``record`` is ``info['stability']``.
+    """
+    before = float(np.abs(np.linalg.eigvals(A_q)).max())
+    record = {"requested": stability, "action": "none", "spectral_radius_before": before}
+    if not stability_request(stability, A_q, data, method):
+        return A_q, fit(A_q), record
+    A_s, c = stable_shift_invariance(Q, n_outputs)
+    fitted_s = fit(A_s)
+    record.update(action="enforced", regularization=c,
+                  spectral_radius_after=float(np.abs(np.linalg.eigvals(A_s)).max()),
+                  how="regularised shift invariance (Maciejowski 1995); B, D, x0 refitted "
+                      "for the stable A")
+    if stability == "auto":
+        fitted_u = fit(A_q)
+        r_u = fitted_u[3].get("residual_rms") if fitted_u[3].get("bd_method") == "simulation" \
+            else None
+        r_s = fitted_s[3].get("residual_rms")
+        record.update(residual_unstable=r_u, residual_stable=r_s)
+        if r_u is not None and r_s is not None and math.isfinite(r_u) \
+                and r_u < KEEP_UNSTABLE_RATIO * r_s:
+            record.update(action="kept unstable",
+                          how=f"the unstable model fits the estimation data clearly better "
+                              f"(residual RMS {r_u:.3g} against {r_s:.3g} when stabilised)")
+            return A_q, fitted_u, record
+    return A_s, fitted_s, record
+
+
+def initial_state(A, B, C, D, data):
+    """Least-squares initial state of the model on ``data`` (None without raw samples
+    or when the simulation overflows)."""
+    if not isinstance(data, IOData):
+        return None
+    from .metrics import simulate_fit       # metrics depends on the model module only
+    try:
+        with np.errstate(all="ignore"):
+            return simulate_fit(StateSpace(A, B, C, D, data.dt), data)[1]
+    except SubidError:
+        return None
 
 
 @dataclass(frozen=True)
@@ -364,10 +548,53 @@ def prepare(data, order, horizon, *, method: str, blocks_per_horizon: int = 2,
 
 
 def choose_order(fixed, candidates, profile, source: str):
-    """The fixed order, or the candidate at the largest gap of ``profile``."""
+    """The fixed order, or the candidate at the largest gap of ``profile``.
+
+    Returns the order and the ``info['order_selection']`` record.
+    """
     if fixed is not None:
-        return fixed, "given"
-    return order_from_gap(profile, candidates), f"largest gap of the {source}"
+        return fixed, {"rule": "given"}
+    gaps = gap_scores(profile, candidates)
+    n = order_from_gap(profile, candidates)
+    return n, {"rule": "gap", "description": f"largest gap of the {source} (log10)",
+               "candidates": [{"order": k, "score": g} for k, g in gaps.items()],
+               "selected": {"order": n, "score": gaps.get(n)}}
+
+
+def identify(data, order, horizon, *, method: str, build, selection: str,
+             blocks_per_horizon: int = 2, statistic: str = "auto",
+             normalize_outputs: bool = True) -> StateSpace:
+    """Validate, choose the order and horizon, and run ``build``.
+
+    ``build(problem)`` is the method itself on a prepared problem. With
+    ``selection='cv'`` (default) and a raw record, an order or horizon not
+    given is chosen by cross-validation on the record
+    (:func:`subid._selection.cross_validate`); the model is then built on the
+    whole record with that order and horizon, exactly as an explicit call
+    would. ``'gap'``, or a statistic without raw samples, takes the largest
+    gap of the method's rank profile.
+    """
+    if selection not in SELECTION_RULES:
+        raise SubidError(f"selection must be one of {SELECTION_RULES}, got {selection!r}")
+    fixed, candidates = _parse_order(order)
+    if horizon is not None:
+        horizon = check_int(horizon, "horizon", minimum=2)
+    options = dict(method=method, blocks_per_horizon=blocks_per_horizon, statistic=statistic,
+                   normalize_outputs=normalize_outputs)
+    if selection == "cv" and isinstance(data, IOData) and (fixed is None or horizon is None):
+        check_data(data, method)
+
+        def prepare_fold(record, orders, f):
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                return prepare(record, orders, f, **options)
+        prepare_fold.blocks = blocks_per_horizon
+        n, f, record = cross_validate(data, fixed, candidates, horizon,
+                                      prepare_fold=prepare_fold, build=build)
+        model = build(prepare(data, n, f, **options))
+        model.info["order_selection"] = record
+        return model
+    return build(prepare(data, order, horizon, **options))
 
 
 def output_growth(y: np.ndarray) -> float:
@@ -406,7 +633,7 @@ def check_stability(A, data, method: str) -> dict:
     return diag
 
 
-def finish(problem: Problem, A, B, C, D, n: int, order_selection: str, **info) -> StateSpace:
+def finish(problem: Problem, A, B, C, D, n: int, order_selection: dict, **info) -> StateSpace:
     """The identified model with the diagnostics every method reports."""
     data = problem.data
     info = {"method": problem.method, "order": n, "order_selection": order_selection,

@@ -45,11 +45,13 @@ from __future__ import annotations
 import numbers
 import warnings
 from dataclasses import dataclass
+from functools import partial
 
 import numpy as np
 import scipy.linalg
 
-from ._subspace import choose_order, estimate_b_d, finish, prepare, shift_invariance
+from ._subspace import (choose_order, estimate_b_d, finish, identify, shift_invariance,
+                        stable_choice)
 from .errors import OrderError, SubidError
 from .model import StateSpace
 
@@ -87,7 +89,8 @@ def _condition_1norm(M: np.ndarray) -> float:
 
 def ls_subspace(data, order=None, horizon=None, instruments="past", selector=None, seed=0,
                 estimate_x0=True, *, feedthrough=True, instrument_weighting=True,
-                power_iterations=2, bd_method="auto", statistic="auto") -> StateSpace:
+                power_iterations=2, selection="cv", stability="auto", bd_method="auto",
+                statistic="auto") -> StateSpace:
     """Identify a discrete-time state-space model without SVD (seed 001).
 
     Parameters
@@ -98,12 +101,14 @@ def ls_subspace(data, order=None, horizon=None, instruments="past", selector=Non
         ``horizon`` without): identification then uses the statistic only.
     order : int, None, 'auto' or iterable of int
         Model order n. ``None`` (or ``'auto'``) chooses it among 1..10 (as
-        far as the horizon allows) from the SVD-free rank profile of Remark 2
-        (``info['rank_profile']``); an iterable gives the candidate orders.
+        far as the horizon allows) by ``selection``; an iterable gives the
+        candidate orders.
     horizon : int, optional
         Future horizon f (block rows of Y); the instruments use f past block
-        rows too. Default ``max(5, ceil(n/ny) + 2)`` when the order is given,
-        10 (or the largest the record supports) when it is estimated.
+        rows too. Default: implied by ``selector`` when one is given; else
+        chosen with the order among 10 and 20 (as far as the record allows)
+        by ``selection``; with ``selection='gap'``, 10 (or what the record
+        allows).
     instruments : {'past', None}
         ``'past'``: eq. (28) with past inputs and outputs (29) as
         instruments, consistent under process and measurement noise.
@@ -125,11 +130,24 @@ def ls_subspace(data, order=None, horizon=None, instruments="past", selector=Non
     power_iterations : int
         SVD-free refinement steps with Λ taken from the previous estimate;
         0 gives the paper's one-shot estimate.
+    selection : {'cv', 'gap'}
+        How an order or horizon not given is chosen: ``'cv'`` by
+        cross-validated simulation fit on the estimation data
+        (:mod:`subid._selection`); ``'gap'`` at the largest gap of the
+        SVD-free rank profile of Remark 2 (``info['rank_profile']``).
+        ``info['order_selection']`` holds every candidate with its score.
+    stability : {'auto', 'enforce', 'none'}
+        ``'auto'``: an unstable A is made stable when the data do not grow
+        (:func:`subid._subspace.stability_request`), by regularised shift
+        invariance, then B, D and x0 are refitted; ``'enforce'``: always;
+        ``'none'``: never. ``info['stability']`` says what was done.
     bd_method : {'auto', 'simulation', 'projection'}
         How B, D (and x0) are found given A and C: least squares on the raw
         output samples through the model (``'simulation'``, most accurate,
         overflows for a clearly unstable A), or the projected data equation on
-        the statistic (``'projection'``, no simulation, no x0). ``'auto'``:
+        the statistic (``'projection'``, no simulation, no x0). The output
+        regression weights each output by the inverse of its standard
+        deviation, so that the fit does not depend on the output units. ``'auto'``:
         simulation, and projection when simulating the identified model
         overflows or leaves the regression numerically singular (always
         projection when ``data`` is a statistic).
@@ -165,24 +183,52 @@ def ls_subspace(data, order=None, horizon=None, instruments="past", selector=Non
     """
     method = "ls_subspace"
     power_iterations = check_options(instruments, power_iterations)
+    if selector is not None and horizon is None:
+        horizon = selector_horizon(selector, data)
     # outputs keep the user's units: Λ acts on them (the basis it fixes must not
     # depend on a record's output scale); inputs are normalised internally
-    pb = prepare(data, order, horizon, method=method,
-                 blocks_per_horizon=2 if instruments == "past" else 1, statistic=statistic,
-                 normalize_outputs=False)
+    build = partial(_ls_subspace, instruments=instruments, selector=selector, seed=seed,
+                    estimate_x0=estimate_x0, feedthrough=feedthrough,
+                    instrument_weighting=instrument_weighting,
+                    power_iterations=power_iterations, stability=stability,
+                    bd_method=bd_method)
+    return identify(data, order, horizon, method=method, build=build, selection=selection,
+                    blocks_per_horizon=2 if instruments == "past" else 1, statistic=statistic,
+                    normalize_outputs=False)
+
+
+def selector_horizon(selector, data) -> int:
+    """The horizon a user's selector implies (its columns are horizon * n_outputs)."""
+    ny = getattr(data, "n_outputs", None)
+    cols = np.shape(selector)[-1] if np.ndim(selector) == 2 else None
+    if not ny or cols is None or cols % ny:
+        raise OrderError(f"selector must be a 2-D array with horizon*n_outputs columns; got "
+                         f"shape {np.shape(selector)} for {ny} outputs")
+    return cols // ny
+
+
+def _ls_subspace(pb, *, instruments, selector, seed, estimate_x0, feedthrough,
+                 instrument_weighting, power_iterations, stability, bd_method) -> StateSpace:
+    method = "ls_subspace"
     data = pb.data
     selector = check_selector(selector, pb.horizon, data.n_outputs, pb.candidates, pb.order)
     core = gamma_from_factor(pb.factor, pb.horizon, pb.order, pb.candidates,
                              instruments=instruments, instrument_weighting=instrument_weighting,
                              selector=selector, seed=seed, power_iterations=power_iterations,
                              method=method)
-    B_q, D, x0_q, reg = estimate_b_d(core.A_q, core.C_q, core.basis, core.L11, core.L_yu, pb,
-                                     bd_method=bd_method, feedthrough=feedthrough,
-                                     estimate_x0=estimate_x0)
-    A, B, C, x0 = core.to_selector_basis(B_q, x0_q)
+
+    def fit(A_try):
+        return estimate_b_d(A_try, core.C_q, core.basis, core.L11, core.L_yu, pb,
+                            bd_method=bd_method, feedthrough=feedthrough,
+                            estimate_x0=estimate_x0)
+
+    A_q, (B_q, D, x0_q, reg), stab = stable_choice(core.A_q, core.basis, data.n_outputs, fit,
+                                                   stability=stability, data=data,
+                                                   method=method)
+    A, B, C, x0 = core.to_selector_basis(B_q, x0_q, A_q=A_q)
     return finish(pb, A, B, C, D, core.order, core.order_selection,
                   **core.info(instruments, instrument_weighting, power_iterations),
-                  x0=x0, **reg)
+                  x0=x0, stability=stab, **reg)
 
 
 def check_options(instruments, power_iterations) -> int:
@@ -229,16 +275,18 @@ class LSCore:
     L11: np.ndarray
     L_yu: np.ndarray
     order: int
-    order_selection: str
+    order_selection: dict
     selector: np.ndarray
     rank_profile: np.ndarray
     selector_condition: float
     shift_residual: float
 
-    def to_selector_basis(self, B_q, x0_q=None):
-        """``(A, B, C, x0)`` in the basis fixed by Λ from ``B_q`` (and ``x0_q``)."""
+    def to_selector_basis(self, B_q, x0_q=None, A_q=None):
+        """``(A, B, C, x0)`` in the basis fixed by Λ from ``B_q`` (and ``x0_q``;
+        ``A_q`` replaces the estimated ``self.A_q``, e.g. when made stable)."""
         T = self.T
-        A = scipy.linalg.solve(T.T, (T @ self.A_q).T, check_finite=False).T   # T A_q T^{-1}
+        A_q = self.A_q if A_q is None else A_q
+        A = scipy.linalg.solve(T.T, (T @ A_q).T, check_finite=False).T        # T A_q T^{-1}
         C = scipy.linalg.solve(T.T, self.C_q.T, check_finite=False).T          # C_q T^{-1}
         return A, T @ B_q, C, (None if x0_q is None else T @ x0_q)
 

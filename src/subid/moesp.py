@@ -5,26 +5,41 @@ space models given in innovations form from input-output data", Automatica
 30(1); Verhaegen & Verdult, *Filtering and System Identification* (2007),
 Sec. 9.6. The classical SVD-based baseline against which seed 001 compares.
 
-With the LQ factorisation ``[U_f; Z; Y_f] = L Q^T`` (Z = past inputs and
-outputs), the column space of ``L32`` is the column space of the extended
-observability matrix (asymptotically, under process and measurement noise).
-Its leading left singular vectors give Γ = U_n S_n^{1/2}; A and C follow by
-shift invariance and B, D, x0 by least squares on the output.
+With the LQ factorisation ``[U_f; W_p; Y_f] = L Q^T`` (W_p = past inputs and
+outputs), ``Y_f Π⊥_{U_f} = L32 Q2^T + L33 Q3^T`` and the oblique projection
+``O = Y_f /_{U_f} W_p = L32 L22^{-1} W_p``. The column space of the
+weighted matrix ``W1 O W2`` is the column space of the extended
+observability matrix (asymptotically, under process and measurement
+noise), for the weightings of MATLAB's ``N4Weight`` (Van Overschee & De
+Moor 1996, Sec. 4.3.4, Theorem 12):
+
+* ``'moesp'``: ``W1 = I, W2 = Π⊥_{U_f}``: the SVD of ``L32``;
+* ``'cva'``: ``W1 = (Y_f Π⊥ Y_f^T)^{-1/2}, W2 = Π⊥_{U_f}`` (canonical
+  variate analysis, Larimore 1990): the SVD of ``R^{-T} L32``;
+* ``'n4sid'``: ``W1 = W2 = I``: the SVD of ``L32 L22^† [L21 L22]``.
+
+Γ = W1^{-1} U_n S_n^{1/2}; A and C follow by shift invariance (made stable
+when asked, :func:`subid._subspace.stable_shift_invariance`) and B, D, x0
+by least squares on the output.
 """
 
 from __future__ import annotations
 
+from functools import partial
+
 import numpy as np
 import scipy.linalg
 
-from ._subspace import choose_order, estimate_b_d, finish, prepare, shift_invariance
+from ._subspace import (check_weighting, choose_order, cva_factor, estimate_b_d, finish,
+                        identify, shift_invariance, stable_choice)
 from .model import StateSpace
 
 __all__ = ["moesp"]
 
 
-def moesp(data, order=None, horizon=None, *, feedthrough=True, estimate_x0=True,
-          bd_method="auto", statistic="auto") -> StateSpace:
+def moesp(data, order=None, horizon=None, *, weighting="moesp", selection="cv",
+          stability="auto", feedthrough=True, estimate_x0=True, bd_method="auto",
+          statistic="auto") -> StateSpace:
     """Identify a discrete-time model by PO-MOESP.
 
     Parameters
@@ -33,12 +48,24 @@ def moesp(data, order=None, horizon=None, *, feedthrough=True, estimate_x0=True,
         Uniformly sampled input/output record, or its statistic (depth
         ``2*horizon``; :class:`subid.HankelStatistic`).
     order : int, None, 'auto' or iterable of int
-        Model order; ``None`` (or ``'auto'``) takes the largest gap of the
-        singular values (``info['singular_values']``) among orders 1..10;
-        an iterable gives the candidate orders.
+        Model order; ``None`` (or ``'auto'``) chooses it among 1..10 by
+        ``selection``; an iterable gives the candidate orders.
     horizon : int, optional
-        Past and future horizon (block rows). Default ``max(5, ceil(n/ny)+2)``
-        with a given order, 10 (or the largest the record supports) otherwise.
+        Past and future horizon (block rows). Default: chosen with the order
+        among 10 and 20 (as far as the record allows) by ``selection``; with
+        ``selection='gap'``, 10 (or what the record allows).
+    weighting : {'moesp', 'cva', 'n4sid'}
+        Weighting of the projection before the SVD (MATLAB's ``N4Weight``).
+    selection : {'cv', 'gap'}
+        How an order or horizon not given is chosen: ``'cv'`` by
+        cross-validated simulation fit on the estimation data
+        (:mod:`subid._selection`); ``'gap'`` at the largest gap of the
+        singular values. ``info['order_selection']`` holds every candidate
+        with its score.
+    stability : {'auto', 'enforce', 'none'}
+        ``'auto'``: an unstable A is made stable when the data do not grow
+        (:func:`subid._subspace.stability_request`); ``'enforce'``: always;
+        ``'none'``: never. ``info['stability']`` says what was done.
     feedthrough : bool
         Estimate D (else D = 0).
     estimate_x0 : bool
@@ -53,20 +80,53 @@ def moesp(data, order=None, horizon=None, *, feedthrough=True, estimate_x0=True,
     StateSpace
         Discrete-time model with ``dt = data.dt``.
     """
-    pb = prepare(data, order, horizon, method="moesp", statistic=statistic)
+    check_weighting(weighting)
+    build = partial(_moesp, weighting=weighting, stability=stability, feedthrough=feedthrough,
+                    estimate_x0=estimate_x0, bd_method=bd_method)
+    return identify(data, order, horizon, method="moesp", build=build, selection=selection,
+                    statistic=statistic)
+
+
+def weighted_projection(L: np.ndarray, a: int, b: int, weighting: str):
+    """The matrix whose left singular vectors span range(W1 Γ), and W1^{-1}.
+
+    ``L`` is the factor of ``[U_f; W_p; Y_f]`` with ``a`` rows of U_f and
+    ``b`` rows of W_p. Returns ``(M, W1_inv)`` (``W1_inv`` None for W1 = I).
+    """
+    L32 = L[a + b:, a:a + b]
+    if weighting == "moesp":
+        return L32, None
+    if weighting == "cva":
+        R = cva_factor(L[a + b:, a:])                     # R^T R = L32 L32^T + L33 L33^T
+        return scipy.linalg.solve_triangular(R.T, L32, lower=True, check_finite=False), R.T
+    # 'n4sid': O = L32 L22^† [L21 L22] (coefficients of the oblique projection)
+    coef = scipy.linalg.lstsq(L[a:a + b, a:a + b].T, L32.T, lapack_driver="gelsy",
+                              check_finite=False)[0].T
+    return coef @ L[a:a + b, :a + b], None
+
+
+def _moesp(pb, *, weighting, stability, feedthrough, estimate_x0, bd_method) -> StateSpace:
     data, f, hf = pb.data, pb.horizon, pb.factor
     ny, nu = data.n_outputs, data.n_inputs
     L = hf.retriangularize(hf.u_rows(f, 2 * f), hf.u_rows(0, f), hf.y_rows(0, f),
                            hf.y_rows(f, 2 * f))
     a, b = f * nu, f * (nu + ny)
-    L32 = L[a + b:, a:a + b]
-    U, s, _ = scipy.linalg.svd(L32, full_matrices=False, check_finite=False)
+    M, W1_inv = weighted_projection(L, a, b, weighting)
+    U, s, _ = scipy.linalg.svd(M, full_matrices=False, check_finite=False)
     n, order_selection = choose_order(pb.order, pb.candidates, s, "singular values")
     gamma = U[:, :n] * np.sqrt(s[:n])
-    A, C, shift_residual = shift_invariance(gamma, ny)
-    B, D, x0, reg = estimate_b_d(A, C, gamma, L[:a, :a], L[a + b:, :a], pb,
-                                 bd_method=bd_method, feedthrough=feedthrough,
-                                 estimate_x0=estimate_x0)
+    if W1_inv is not None:
+        gamma = W1_inv @ gamma
+    # A and C in an orthonormal basis Q of range(Γ) (any basis is valid for MOESP)
+    Q = scipy.linalg.qr(gamma, mode="economic", check_finite=False)[0]
+    A, C, shift_residual = shift_invariance(Q, ny)
+
+    def fit(A_try):
+        return estimate_b_d(A_try, C, Q, L[:a, :a], L[a + b:, :a], pb, bd_method=bd_method,
+                            feedthrough=feedthrough, estimate_x0=estimate_x0)
+
+    A, (B, D, x0, reg), stab = stable_choice(A, Q, ny, fit, stability=stability, data=data,
+                                             method="moesp")
     C = C * pb.output_scale[:, None]
-    return finish(pb, A, B, C, D, n, order_selection, singular_values=s,
-                  shift_residual=shift_residual, x0=x0, **reg)
+    return finish(pb, A, B, C, D, n, order_selection, singular_values=s, weighting=weighting,
+                  shift_residual=shift_residual, x0=x0, stability=stab, **reg)
