@@ -108,14 +108,16 @@ def test_monte_carlo_25db(paper_system):
     for run in range(100):
         data = systems.simulate_data(paper_system, 1000, seed=5000 + run,
                                      process_snr_db=25, output_snr_db=25)
-        errors["iv"].append(subid.markov_error(subid.ls_subspace(data, 3), paper_system))
+        # the paper's horizon (5); n4sid with unit weights, the classical baseline
+        errors["iv"].append(subid.markov_error(subid.ls_subspace(data, 3, 5), paper_system))
         errors["noiv"].append(subid.markov_error(
-            subid.ls_subspace(data, 3, instruments=None), paper_system))
+            subid.ls_subspace(data, 3, 5, instruments=None), paper_system))
         errors["paper"].append(subid.markov_error(
-            subid.ls_subspace(data, 3, instrument_weighting=False, power_iterations=0),
+            subid.ls_subspace(data, 3, 5, instrument_weighting=False, power_iterations=0),
             paper_system))
-        errors["n4sid"].append(subid.markov_error(subid.n4sid(data, 3), paper_system))
-        errors["moesp"].append(subid.markov_error(subid.moesp(data, 3), paper_system))
+        errors["n4sid"].append(subid.markov_error(
+            subid.n4sid(data, 3, 5, weighting="n4sid"), paper_system))
+        errors["moesp"].append(subid.markov_error(subid.moesp(data, 3, 5), paper_system))
     med = {k: float(np.median(v)) for k, v in errors.items()}
     assert med["iv"] < med["noiv"]
     assert med["paper"] < med["noiv"]
@@ -186,11 +188,15 @@ def test_info_diagnostics(paper_data):
                 "selector_condition", "input_condition", "residual_rms",
                 "regression_condition"):
         assert key in m.info, key
-    assert m.info["rank_profile"].shape == (10,)
+    assert m.info["rank_profile"].shape == (2 * m.info["horizon"],)
     assert m.info["rank_profile"][3] < 1e-10 * m.info["rank_profile"][:3].min()
     for fn in (subid.moesp, subid.n4sid):
-        s = fn(paper_data, 3).info["singular_values"]
-        assert s[3] < 1e-10 * s[2]
+        for weighting in ("moesp", "n4sid"):
+            s = fn(paper_data, 3, weighting=weighting).info["singular_values"]
+            assert s[3] < 1e-10 * s[2]
+        # CVA: canonical correlations 1 for the n states, then the ridge level
+        s = fn(paper_data, 3, weighting="cva").info["singular_values"]
+        assert s[3] < 1e-8 * s[2]
 
 
 def test_ill_conditioned_input_warns(paper_system):
@@ -249,7 +255,8 @@ def test_b_d_falls_back_to_projection_when_simulation_overflows(paper_system, pa
 
 def test_candidate_orders(paper_data):
     m = subid.moesp(paper_data, range(1, 6))
-    assert m.order == 3 and m.info["horizon"] == 5
+    assert m.order == 3 and m.info["order_selection"]["rule"] == "cv"
+    assert {c["order"] for c in m.info["order_selection"]["candidates"]} == set(range(1, 6))
     m = subid.ls_subspace(paper_data, [2, 3, 4], horizon=6)
     assert m.order == 3
     m = subid.n4sid(paper_data, [1, 2])          # restricted to what it may choose

@@ -185,16 +185,13 @@ def ls_subspace(data, order=None, horizon=None, instruments="past", selector=Non
     power_iterations = check_options(instruments, power_iterations)
     if selector is not None and horizon is None:
         horizon = selector_horizon(selector, data)
-    # outputs keep the user's units: Λ acts on them (the basis it fixes must not
-    # depend on a record's output scale); inputs are normalised internally
     build = partial(_ls_subspace, instruments=instruments, selector=selector, seed=seed,
                     estimate_x0=estimate_x0, feedthrough=feedthrough,
                     instrument_weighting=instrument_weighting,
                     power_iterations=power_iterations, stability=stability,
                     bd_method=bd_method)
     return identify(data, order, horizon, method=method, build=build, selection=selection,
-                    blocks_per_horizon=2 if instruments == "past" else 1, statistic=statistic,
-                    normalize_outputs=False)
+                    blocks_per_horizon=2 if instruments == "past" else 1, statistic=statistic)
 
 
 def selector_horizon(selector, data) -> int:
@@ -212,10 +209,16 @@ def _ls_subspace(pb, *, instruments, selector, seed, estimate_x0, feedthrough,
     method = "ls_subspace"
     data = pb.data
     selector = check_selector(selector, pb.horizon, data.n_outputs, pb.candidates, pb.order)
+    # The outputs are normalised by their RMS s (so that the estimate does not depend on
+    # their units); Λ acts on the user's units, so on the normalised data it is
+    # Λ_n = Λ (I ⊗ S): then Λ Γ̄ = Λ_n Γ̄_n = I fixes the same basis. The default random
+    # Λ is drawn for the normalised outputs, and info['selector'] holds it in the
+    # user's units (Λ = Λ_n (I ⊗ S^{-1})), ready to be passed again.
+    column_scale = np.tile(pb.output_scale, pb.horizon)
     core = gamma_from_factor(pb.factor, pb.horizon, pb.order, pb.candidates,
                              instruments=instruments, instrument_weighting=instrument_weighting,
-                             selector=selector, seed=seed, power_iterations=power_iterations,
-                             method=method)
+                             selector=None if selector is None else selector * column_scale,
+                             seed=seed, power_iterations=power_iterations, method=method)
 
     def fit(A_try):
         return estimate_b_d(A_try, core.C_q, core.basis, core.L11, core.L_yu, pb,
@@ -226,8 +229,10 @@ def _ls_subspace(pb, *, instruments, selector, seed, estimate_x0, feedthrough,
                                                    stability=stability, data=data,
                                                    method=method)
     A, B, C, x0 = core.to_selector_basis(B_q, x0_q, A_q=A_q)
-    return finish(pb, A, B, C, D, core.order, core.order_selection,
-                  **core.info(instruments, instrument_weighting, power_iterations),
+    C = C * pb.output_scale[:, None]
+    info = core.info(instruments, instrument_weighting, power_iterations)
+    info["selector"] = core.selector / column_scale
+    return finish(pb, A, B, C, D, core.order, core.order_selection, **info,
                   x0=x0, stability=stab, **reg)
 
 

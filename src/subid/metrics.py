@@ -58,7 +58,8 @@ def simulate_fit(model, data, x0="estimate", hold: str = "zoh"):
     """Simulated output of ``model`` on ``data`` and the initial state used.
 
     ``x0='estimate'`` fits the initial state to the data by least squares
-    (the simulated output is linear in x0); ``'zero'`` or an array fixes it.
+    (the simulated output is linear in x0), each output weighted by the
+    inverse of its standard deviation; ``'zero'`` or an array fixes it.
     """
     _check_model(model, "model")
     if not isinstance(data, IOData):
@@ -95,8 +96,12 @@ def simulate_fit(model, data, x0="estimate", hold: str = "zoh"):
             free = np.stack([sim(zeros, e) for e in np.eye(n)], axis=-1)  # (N, ny, n)
         if not np.isfinite(free).all():
             raise overflow()
-        x0_hat = np.linalg.lstsq(free.reshape(-1, n), (data.y - forced).reshape(-1),
-                                 rcond=None)[0]
+        # each output weighted by 1 / its standard deviation, so that the initial state
+        # (and the fit) does not depend on the output units
+        std = data.y.std(axis=0)
+        w = 1.0 / np.where(std > 0, std, 1.0)
+        x0_hat = np.linalg.lstsq((free * w[None, :, None]).reshape(-1, n),
+                                 ((data.y - forced) * w).reshape(-1), rcond=None)[0]
         return forced + free @ x0_hat, x0_hat
     x0_arr = np.asarray(x0, dtype=float).reshape(-1)
     if x0_arr.shape != (n,):

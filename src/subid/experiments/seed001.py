@@ -42,7 +42,7 @@ METHODS = {
         d, 3, horizon=5, instrument_weighting=False, power_iterations=0),
     "ls_subspace, no instruments (23)": lambda d: ls_subspace(d, 3, horizon=5, instruments=None),
     "moesp": lambda d: moesp(d, 3, horizon=5),
-    "n4sid": lambda d: n4sid(d, 3, horizon=5),
+    "n4sid": lambda d: n4sid(d, 3, horizon=5, weighting="n4sid"),
 }
 
 
