@@ -6,7 +6,9 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: demo gallery test test-long bench experiment clean
+BENCH_VENV := .venv-bench
+
+.PHONY: demo gallery test test-long bench bench-realdata experiment clean
 
 $(PY):
 	$(PYTHON) -m venv $(VENV)
@@ -32,10 +34,18 @@ test-long: $(STAMP)
 bench: $(STAMP)
 	OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 MKL_NUM_THREADS=1 $(PY) bench/run.py --out bench/results.md
 
+# Default calls on the bundled real records against SIPPY at its best order. SIPPY
+# (sippy-unipi) is installed in the benchmark's own environment, never as a dependency.
+bench-realdata:
+	test -x $(BENCH_VENV)/bin/python || $(PYTHON) -m venv $(BENCH_VENV)
+	$(BENCH_VENV)/bin/python -m pip install --quiet --upgrade pip
+	$(BENCH_VENV)/bin/python -m pip install --quiet -e . sippy-unipi
+	OPENBLAS_NUM_THREADS=1 $(BENCH_VENV)/bin/python bench/realdata.py --out bench/realdata.md
+
 experiment: $(STAMP)
 	OPENBLAS_NUM_THREADS=1 $(PY) -m subid.experiments.seed001 --runs 1000 --out results/seed001
 	OPENBLAS_NUM_THREADS=1 $(PY) -m subid.experiments.seed000 --out results/seed000
 	OPENBLAS_NUM_THREADS=1 $(PY) -m subid.experiments.seed002 --out results/seed002
 
 clean:
-	rm -rf $(VENV) demo_out results
+	rm -rf $(VENV) $(BENCH_VENV) demo_out results

@@ -237,7 +237,7 @@ def test_progress_bar_only_on_a_terminal_and_not_with_quiet(tmp_path, capsys, mo
 def identified(dryer_csv, tmp_path_factory):
     out = tmp_path_factory.mktemp("ident")
     assert main(["identify", dryer_csv, "--inputs", "voltage", "--outputs", "temperature",
-                 "--dt", "0.08", "--method", "n4sid", "--out", str(out), "-q"]) == 0
+                 "--dt", "0.08", "--method", "n4sid", "--order", "2", "--out", str(out), "-q"]) == 0
     return out / "model.json"
 
 

@@ -235,3 +235,19 @@ def test_plot_functions_never_print(mimo, capsys):
     plot.data_overview(data)
     captured = capsys.readouterr()
     assert captured.out == "" and captured.err == ""
+
+
+def test_order_selection_chart():
+    import warnings
+    import subid
+    from subid import plot
+    est = subid.datasets.load("dryer").detrend()[:600]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        models = {"ls": subid.ls_subspace(est), "n4sid gap": subid.n4sid(est, selection="gap")}
+    fig = plot.order_selection(models)
+    assert len(fig.axes) == 4
+    labels = [t.get_text() for ax in fig.axes for t in ax.get_legend().get_texts()]
+    assert any(lab.startswith("chosen: n=") for lab in labels)
+    with pytest.raises(subid.errors.DataError, match="order was"):
+        plot.order_selection(subid.moesp(est, 2, horizon=10))

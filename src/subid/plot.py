@@ -784,3 +784,83 @@ def convergence(history, *, reference=None, title=None, max_parameters: int = 12
     fig.suptitle(title or "convergence of the online estimate", fontsize="medium")
     _layout(fig, axes[:, None], top=0.2, hgap=0.15, left=0.95)
     return fig
+
+
+# ---------------------------------------------------------------------------
+# order selection
+# ---------------------------------------------------------------------------
+def order_selection(models, *, labels=None, title=None):
+    """How each model's order was chosen, as MATLAB's order plot shows it.
+
+    Left: the rank profile the method computed (singular values, or the
+    SVD-free rank profile of ``ls_subspace``), log scale, the chosen order
+    marked. Right: the score of every candidate (cross-validated fit % for
+    ``selection='cv'``, one line per horizon; the log10 gap for
+    ``selection='gap'``), the chosen candidate circled.
+
+    Parameters
+    ----------
+    models : StateSpace, list or dict label -> StateSpace
+        Models with ``info['order_selection']`` (from the batch methods).
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    plt = _pyplot()
+    groups = _model_groups(models, labels)
+    rows = [(label, m) for label, m in groups.items()
+            if isinstance(m.info.get("order_selection"), dict)
+            and m.info["order_selection"].get("rule") in ("cv", "gap")]
+    if not rows:
+        raise DataError("none of the models carries an order selection record "
+                        "(info['order_selection'] with rule 'cv' or 'gap'): their order was "
+                        "given")
+    fig, axes = plt.subplots(len(rows), 2, figsize=(9, 2.6 * len(rows) + 0.6), squeeze=False)
+    for (label, m), (ax_p, ax_s) in zip(rows, axes):
+        record = m.info["order_selection"]
+        profile = m.info.get("singular_values", m.info.get("rank_profile"))
+        if profile is not None:
+            profile = np.abs(np.asarray(profile, dtype=float))
+            k = np.arange(1, profile.size + 1)
+            positive = profile > 0
+            ax_p.semilogy(k[positive], profile[positive], "o-", color="C0", ms=3, lw=0.8)
+            if m.order <= profile.size and profile[m.order - 1] > 0:
+                ax_p.semilogy([m.order], [profile[m.order - 1]], "o", mfc="none", mec="C3",
+                              ms=10, mew=1.5, label=f"order {m.order}")
+                ax_p.legend(fontsize="x-small", loc="upper right")
+            name = "singular values" if "singular_values" in m.info else "rank profile"
+            ax_p.set_ylabel(name, fontsize="small")
+        ax_p.set_title(f"{label}", fontsize="small")
+        ax_p.xaxis.get_major_locator().set_params(integer=True)
+        ax_p.set_xlabel("index", fontsize="small")
+        candidates = record.get("candidates", [])
+        if record["rule"] == "cv":
+            horizons = sorted({c["horizon"] for c in candidates})
+            for j, f in enumerate(horizons):
+                pts = sorted((c["order"], c["score"]) for c in candidates if c["horizon"] == f)
+                ax_s.plot([p[0] for p in pts], [p[1] for p in pts], "o-", ms=3, lw=0.8,
+                          color=f"C{j}", label=f"horizon {f}")
+            chosen = record["selected"]
+            ax_s.plot([chosen["order"]], [chosen["score"]], "o", mfc="none", mec="C3", ms=10,
+                      mew=1.5, label=f"chosen: n={chosen['order']}, f={chosen['horizon']}")
+            ax_s.set_ylabel("cross-validated fit %", fontsize="small")
+            scores = [c["score"] for c in candidates]
+            low = max(min(scores), max(scores) - 60)
+            ax_s.set_ylim(low - 2, min(max(scores) + 5, 102))
+        else:
+            pts = sorted((c["order"], c["score"]) for c in candidates)
+            ax_s.bar([p[0] for p in pts], [p[1] for p in pts], color="C0", width=0.6)
+            ax_s.bar([m.order], [dict(pts).get(m.order, 0)], color="C3", width=0.6,
+                     label=f"chosen: n={m.order}")
+            ax_s.set_ylabel("gap (log10)", fontsize="small")
+        ax_s.legend(fontsize="x-small", loc="lower right")
+        ax_s.set_xlabel("order", fontsize="small")
+        ax_s.set_title("cross-validated simulation fit (estimation data)" if record["rule"] == "cv"
+                       else "largest gap of the profile", fontsize="x-small")
+        for ax in (ax_p, ax_s):
+            ax.grid(True, lw=0.3)
+            ax.tick_params(labelsize="x-small")
+    fig.suptitle(title or "order selection", fontsize="medium")
+    _layout(fig, axes, top=0.45, hgap=0.75, wgap=0.55, left=0.75)
+    return fig

@@ -41,8 +41,8 @@ __all__ = ["identification_report", "index_page", "evaluate", "figure_html", "wr
 log = logging.getLogger(__name__)
 
 #: Section ids of an identification report, in order (``convergence`` only for online runs).
-SECTIONS = ("summary", "data", "compare", "bode", "poles", "residuals", "convergence",
-            "matrices")
+SECTIONS = ("summary", "data", "order", "compare", "bode", "poles", "residuals",
+            "convergence", "matrices")
 
 _CSS = """
 body{font-family:system-ui,-apple-system,"Segoe UI",Roboto,Helvetica,Arial,sans-serif;
@@ -373,6 +373,19 @@ def identification_report(models, estimation, validation=None, *, title="subid r
         lambda: plot.data_overview(whole, split=split),
         "inputs (blue) and outputs (red); the validation part is shaded", "data overview")))
     nav.append(("data", "data"))
+
+    # -- order selection -------------------------------------------------
+    chosen = {label: m for label, m in models.items()
+              if isinstance(m.info.get("order_selection"), dict)
+              and m.info["order_selection"].get("rule") in ("cv", "gap")}
+    if chosen:
+        body.append(_section("order", "Order selection", _plot_or_note(
+            lambda: plot.order_selection(chosen),
+            "left: the method's rank profile (singular values, or the SVD-free rank profile "
+            "of ls_subspace) with the chosen order circled; right: the score of every "
+            "candidate order and horizon (cross-validated simulation fit on the estimation "
+            "data, or the gap of the profile)", "order selection chart")))
+        nav.append(("order", "order"))
 
     # -- comparison ------------------------------------------------------
     body.append(_section("compare", f"Simulated and measured outputs ({check_name} data)",
