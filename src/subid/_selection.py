@@ -171,3 +171,18 @@ def cross_validate(data, fixed, candidates, horizon, *, prepare_fold, build):
         "samples_used": used.n_samples,
     }
     return order, chosen_h, record
+
+
+def describe(record) -> str:
+    """One line for ``info['order_selection']`` (a record, or a string from older methods)."""
+    if not isinstance(record, dict):
+        return str(record)
+    rule = record.get("rule")
+    if rule == "given":
+        return "given"
+    chosen = record.get("selected", {})
+    if rule == "cv":
+        return (f"cross-validated on the estimation data: horizon {chosen.get('horizon')}, "
+                f"fit {chosen.get('score', float('nan')):.1f} % over "
+                f"{len(record.get('candidates', []))} candidates")
+    return str(record.get("description", rule))

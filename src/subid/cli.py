@@ -44,6 +44,7 @@ import warnings
 import click
 import numpy as np
 
+from ._selection import describe as describe_selection
 from ._progress import on_terminal, progress_bar
 from .errors import DataError, FileReadError, OrderError, SubidError
 
@@ -753,8 +754,8 @@ def _print_summary(source, record, spec, model, result, est, val, seconds, files
              f"{record.n_outputs} output(s), {timing}",
              f"method      {spec.name} ({spec.attribute})",
              f"order       {model.order}"
-             + (f" ({model.info['order_selection']})" if model.info.get("order_selection")
-                else ""),
+             + (f" ({describe_selection(model.info['order_selection'])})"
+                if model.info.get("order_selection") else ""),
              f"outputs     {', '.join(est.output_names)}",
              f"fit %       estimation {_fmt_fit(result['fit_estimation'])} "
              f"({est.n_samples} samples)"]

@@ -200,6 +200,15 @@ def _info_table(info: dict) -> str:
                 and np.asarray(value).size <= 12 and np.asarray(value).dtype.kind in "biuf":
             text = ", ".join(_fmt(v, 4) for v in np.asarray(value))
             rows.append(f'<tr><th class="l">{_e(key)}</th><td class="l">{_e(text)}</td></tr>')
+        elif key == "order_selection" and isinstance(value, dict):
+            from ._selection import describe
+            rows.append(f'<tr><th class="l">{_e(key)}</th><td class="l">{_e(describe(value))}'
+                        "</td></tr>")
+        elif key == "stability" and isinstance(value, dict):
+            text = value.get("action", "")
+            if value.get("how") and text != "none":
+                text += f": {value['how']}"
+            rows.append(f'<tr><th class="l">{_e(key)}</th><td class="l">{_e(text)}</td></tr>')
     if not rows:
         return ""
     return f"<table>{''.join(rows)}</table>"
