@@ -52,6 +52,7 @@ import scipy.linalg
 from ._subspace import choose_order, estimate_b_d, finish, prepare, shift_invariance
 from .errors import OrderError, SubidError
 from .model import StateSpace
+from .noise_model import attach_noise_model
 
 __all__ = ["ls_subspace", "random_selector"]
 
@@ -87,7 +88,8 @@ def _condition_1norm(M: np.ndarray) -> float:
 
 def ls_subspace(data, order=None, horizon=None, instruments="past", selector=None, seed=0,
                 estimate_x0=True, *, feedthrough=True, instrument_weighting=True,
-                power_iterations=2, bd_method="auto", statistic="auto") -> StateSpace:
+                power_iterations=2, bd_method="auto", statistic="auto",
+                refine=None) -> StateSpace:
     """Identify a discrete-time state-space model without SVD (seed 001).
 
     Parameters
@@ -137,6 +139,9 @@ def ls_subspace(data, order=None, horizon=None, instruments="past", selector=Non
         How the data are reduced (:mod:`subid.statistic`): QR factor of the
         Hankel matrix (accurate to rounding) or lagged products (25x faster,
         squares the condition number). ``'auto'``: QR up to 200,000 samples.
+    refine : {None, 'pem'}
+        ``'pem'``: refine the subspace estimate by prediction-error
+        minimisation (:func:`subid.pem`, default options) on the record.
 
     Returns
     -------
@@ -146,6 +151,8 @@ def ls_subspace(data, order=None, horizon=None, instruments="past", selector=Non
         same basis), ``rank_profile``, ``horizon``, ``order``,
         ``order_selection``, ``x0``, ``shift_residual``, ``selector_condition``,
         ``input_condition``, ``residual_rms``, ``regression_condition``.
+        The model is in innovation form: ``K`` and ``noise_cov`` come from the
+        state and residual sequences (:mod:`subid.noise_model`, QR only).
 
     Raises
     ------
@@ -180,9 +187,10 @@ def ls_subspace(data, order=None, horizon=None, instruments="past", selector=Non
                                      bd_method=bd_method, feedthrough=feedthrough,
                                      estimate_x0=estimate_x0)
     A, B, C, x0 = core.to_selector_basis(B_q, x0_q)
-    return finish(pb, A, B, C, D, core.order, core.order_selection,
-                  **core.info(instruments, instrument_weighting, power_iterations),
-                  x0=x0, **reg)
+    model = finish(pb, A, B, C, D, core.order, core.order_selection,
+                   **core.info(instruments, instrument_weighting, power_iterations),
+                   x0=x0, **reg)
+    return attach_noise_model(model, pb, refine)
 
 
 def check_options(instruments, power_iterations) -> int:

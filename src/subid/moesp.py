@@ -19,12 +19,13 @@ import scipy.linalg
 
 from ._subspace import choose_order, estimate_b_d, finish, prepare, shift_invariance
 from .model import StateSpace
+from .noise_model import attach_noise_model
 
 __all__ = ["moesp"]
 
 
 def moesp(data, order=None, horizon=None, *, feedthrough=True, estimate_x0=True,
-          bd_method="auto", statistic="auto") -> StateSpace:
+          bd_method="auto", statistic="auto", refine=None) -> StateSpace:
     """Identify a discrete-time model by PO-MOESP.
 
     Parameters
@@ -51,7 +52,9 @@ def moesp(data, order=None, horizon=None, *, feedthrough=True, estimate_x0=True,
     Returns
     -------
     StateSpace
-        Discrete-time model with ``dt = data.dt``.
+        Discrete-time model with ``dt = data.dt``, in innovation form
+        (``K``, ``noise_cov``; :mod:`subid.noise_model`). ``refine``: as in
+        :func:`subid.ls_subspace`.
     """
     pb = prepare(data, order, horizon, method="moesp", statistic=statistic)
     data, f, hf = pb.data, pb.horizon, pb.factor
@@ -68,5 +71,5 @@ def moesp(data, order=None, horizon=None, *, feedthrough=True, estimate_x0=True,
                                  bd_method=bd_method, feedthrough=feedthrough,
                                  estimate_x0=estimate_x0)
     C = C * pb.output_scale[:, None]
-    return finish(pb, A, B, C, D, n, order_selection, singular_values=s,
-                  shift_residual=shift_residual, x0=x0, **reg)
+    return attach_noise_model(finish(pb, A, B, C, D, n, order_selection, singular_values=s,
+                                     shift_residual=shift_residual, x0=x0, **reg), pb, refine)

@@ -25,6 +25,7 @@ import scipy.linalg
 
 from ._subspace import choose_order, finish, prepare
 from .model import StateSpace
+from .noise_model import attach_noise_model
 
 __all__ = ["n4sid"]
 
@@ -63,7 +64,8 @@ def _lstsq_rows(regressors: np.ndarray, targets: np.ndarray) -> np.ndarray:
                               check_finite=False)[0].T
 
 
-def n4sid(data, order=None, horizon=None, *, feedthrough=True, statistic="auto") -> StateSpace:
+def n4sid(data, order=None, horizon=None, *, feedthrough=True, statistic="auto",
+          refine=None) -> StateSpace:
     """Identify a discrete-time model by N4SID (unit weights, state sequences).
 
     Parameters
@@ -83,11 +85,14 @@ def n4sid(data, order=None, horizon=None, *, feedthrough=True, statistic="auto")
         Estimate D (else D = 0 and the state regression omits it).
     statistic : {'auto', 'qr', 'gram'}
         As in :func:`subid.ls_subspace`.
+    refine : {None, 'pem'}
+        As in :func:`subid.ls_subspace`.
 
     Returns
     -------
     StateSpace
-        Discrete-time model with ``dt = data.dt``.
+        Discrete-time model with ``dt = data.dt``, in innovation form
+        (``K``, ``noise_cov``; :mod:`subid.noise_model`).
     """
     pb = prepare(data, order, horizon, method="n4sid", statistic=statistic)
     data, i, hf = pb.data, pb.horizon, pb.factor
@@ -121,5 +126,5 @@ def n4sid(data, order=None, horizon=None, *, feedthrough=True, statistic="auto")
     resid = lhs - np.vstack([A @ x_i + B @ u_ii, C @ x_i + D @ u_ii])
     B, C, D = pb.unscale(B, C, D)        # from the normalised channels to the user's units
     residual = np.linalg.norm(resid) / max(np.linalg.norm(lhs), 1e-300)
-    return finish(pb, A, B, C, D, n, order_selection, singular_values=s,
-                  state_regression_residual=float(residual))
+    return attach_noise_model(finish(pb, A, B, C, D, n, order_selection, singular_values=s,
+                                     state_regression_residual=float(residual)), pb, refine)
