@@ -23,6 +23,7 @@ from .metrics import fit_percent, markov_error, pole_error
 from .model import StateSpace
 from .moesp import moesp
 from .n4sid import n4sid
+from .pem import pem
 from .prediction import predict, residuals
 from .recursive import RecursiveSubspace
 from .statistic import HankelStatistic
@@ -49,6 +50,7 @@ __all__ = [
     "fit_percent",
     "pole_error",
     "predict",
+    "pem",
     "residuals",
     "errors",
     "systems",
