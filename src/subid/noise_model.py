@@ -130,6 +130,13 @@ def innovation_model(A, B, C, D, hf: HankelFactor, past: int | None = None):
     Q = 0.5 * (Q + Q.T)
     S = W @ E.T
     K = sigma = None
+    y_power = float(np.sum(y_p ** 2))
+    if float(np.trace(R)) <= 1e-20 * max(y_power, 1e-300):
+        # noise-free record: the model explains the outputs to rounding, the
+        # innovations vanish and the Kalman gain is zero (the predictor is the model)
+        return np.zeros((n, ny)), R, {"noise_model": "noise-free data: K = 0",
+                                       "predictor_spectral_radius": _spectral_radius(A),
+                                       "noise_model_past": p}
     try:
         scale = max(float(np.trace(Q)), 1e-300)
         with np.errstate(all="ignore"):

@@ -382,6 +382,8 @@ def _pem_dt(data, model, focus, max_iterations, tolerance, rounds, feedthrough):
         if h < accepted[-1]:
             accepted.append(h)
     history = accepted
+    # the same point evaluated by the kernel and by the simulation differs by rounding
+    best_cost = min(best_cost, history[-1])
     info = dict(model.info)
     info.update(refined_by="pem", focus=focus, start_cost=start_cost, final_cost=best_cost,
                 cost_history=np.array(history), stop_reason=stop_reason,
