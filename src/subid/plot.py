@@ -554,10 +554,13 @@ def _xcorr(a: np.ndarray, b: np.ndarray, lags: np.ndarray) -> np.ndarray:
 
 def residual_correlations(model, data, *, max_lag: int = 25, confidence: float = 0.99,
                           x0="estimate") -> dict:
-    """Correlations of the simulation residuals, with confidence bounds.
+    """Correlations of the residuals, with confidence bounds.
 
-    The residual is ``e = y - ŷ``, with ``ŷ`` simulated from an initial
-    state fitted by least squares (the same ``ŷ`` as :func:`subid.fit_percent`).
+    For a discrete-time model with a Kalman gain ``K`` the residuals are the
+    one-step prediction errors (:func:`subid.residuals`, as MATLAB's
+    ``resid``). Otherwise the residual is ``e = y - ŷ``, with ``ŷ``
+    simulated from an initial state fitted by least squares (the same ``ŷ``
+    as :func:`subid.fit_percent`).
     For a good model ``e`` is uncorrelated with past inputs; for a model that
     also explains the disturbances, ``e`` is white.
 

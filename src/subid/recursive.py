@@ -305,6 +305,11 @@ class RecursiveSubspace:
     def model(self) -> StateSpace:
         """The current model (discrete time, dt of the identifier).
 
+        With instruments (``'past'``), the model is in innovation form: ``K``
+        and ``noise_cov`` are estimated on the running Hankel factor by
+        :func:`subid.noise_model.with_factor` (state sequences and the
+        Kalman filter Riccati equation, no SVD).
+
         Raises
         ------
         TooFewSamplesError
