@@ -225,8 +225,9 @@ def with_factor(model, hf: HankelFactor, past: int | None = None):
     info = dict(model.info)
     K, sigma, diag = innovation_model(model.A, model.B, model.C, model.D, hf, past)
     info.update(diag)
-    if not (np.isfinite(K).all() and np.isfinite(sigma).all()) or diag[
-            "predictor_spectral_radius"] >= 1.0:
+    noise_free = diag["noise_model"].startswith("noise-free")
+    if not (np.isfinite(K).all() and np.isfinite(sigma).all()) or (
+            diag["predictor_spectral_radius"] >= 1.0 and not noise_free):
         warnings.warn(f"{model.info.get('method', 'identification')}: no stable Kalman "
                       f"predictor was found (spectral radius of A - K C "
                       f"{diag['predictor_spectral_radius']:.4g}); the model has no noise "
