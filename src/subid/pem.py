@@ -54,6 +54,8 @@ __all__ = ["pem"]
 FOCUS = ("prediction", "simulation")
 # A trial predictor with a spectral radius above this is treated as unstable.
 STABILITY_LIMIT = 1.0 - 1e-9
+# Largest Jacobian (N * ny rows, one column per free parameter) pem builds.
+JACOBIAN_BYTES_LIMIT = 2.0 * 2**30
 
 
 def _check_inputs(data, model, focus):
@@ -324,6 +326,12 @@ def _pem_dt(data, model, focus, max_iterations, tolerance, rounds, feedthrough):
     if N * ny <= 2 * n_params:
         raise DataError(f"pem: {N} samples of {ny} output(s) are too few for the "
                         f"{n_params} free parameters of an order-{n} model; supply more data")
+    jac_bytes = 8.0 * N * ny * (n_params + n)
+    if jac_bytes > JACOBIAN_BYTES_LIMIT:
+        raise DataError(f"pem: the Jacobian of {N} samples x {ny} output(s) x {n_params} "
+                        f"parameters needs {jac_bytes / 2**30:.1f} GiB (limit "
+                        f"{JACOBIAN_BYTES_LIMIT / 2**30:.0f} GiB); refine on a shorter part of "
+                        "the record (e.g. data[:200_000]) and validate on the rest")
     if focus == "prediction":
         K, k_source = _start_gain(data, model)
     else:
