@@ -35,9 +35,10 @@ from .model import StateSpace
 
 __all__ = ["predict", "prediction_errors", "residuals", "correlations"]
 
-# Beyond this many steps the k-step predictor uses the closed form
-# ŷ(t|t-k) = y_sim(t) + C A^(k-1) (x̂(t-k+1) - x_sim(t-k+1)) instead of k-1
-# propagation sweeps over the record.
+# Beyond this many steps the k-step predictor of a model with a stable A uses the
+# closed form ŷ(t|t-k) = y_sim(t) + C A^(k-1) (x̂(t-k+1) - x_sim(t-k+1)) instead of
+# k-1 propagation sweeps over the record (an unstable A keeps the sweeps: its
+# simulation would overflow).
 _LOOP_STEPS = 32
 
 
@@ -94,7 +95,7 @@ def _k_step(model, u, y, x0, k):
         return y1
     t = np.arange(N)
     start = np.maximum(t - k + 1, 0)
-    if k <= _LOOP_STEPS:
+    if k <= _LOOP_STEPS or np.abs(np.linalg.eigvals(A)).max() >= 1.0:
         Z = X[start].copy()
         for j in range(k - 1):
             idx = start + j
