@@ -23,6 +23,8 @@ from .metrics import fit_percent, markov_error, pole_error
 from .model import StateSpace
 from .moesp import moesp
 from .n4sid import n4sid
+from .pem import pem
+from .prediction import predict, residuals
 from .recursive import RecursiveSubspace
 from .statistic import HankelStatistic
 from .stream import identify_file, identify_stream
@@ -47,6 +49,9 @@ __all__ = [
     "markov_error",
     "fit_percent",
     "pole_error",
+    "predict",
+    "pem",
+    "residuals",
     "errors",
     "systems",
     "basis",

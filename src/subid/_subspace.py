@@ -595,7 +595,7 @@ def choose_order(fixed, candidates, profile, source: str):
 
 def identify(data, order, horizon, *, method: str, build, selection: str,
              blocks_per_horizon: int = 2, statistic: str = "auto",
-             normalize_outputs: bool = True) -> StateSpace:
+             normalize_outputs: bool = True, finalize=None) -> StateSpace:
     """Validate, choose the order and horizon, and run ``build``.
 
     ``build(problem)`` is the method itself on a prepared problem. With
@@ -604,7 +604,9 @@ def identify(data, order, horizon, *, method: str, build, selection: str,
     (:func:`subid._selection.cross_validate`); the model is then built on the
     whole record with that order and horizon, exactly as an explicit call
     would. ``'gap'``, or a statistic without raw samples, takes the largest
-    gap of the method's rank profile.
+    gap of the method's rank profile. ``finalize(model, problem)`` runs on
+    the final model only (not on the cross-validation candidates): the noise
+    model and the optional refinement (:func:`subid.noise_model.attach_noise_model`).
     """
     if selection not in SELECTION_RULES:
         raise SubidError(f"selection must be one of {SELECTION_RULES}, got {selection!r}")
@@ -623,10 +625,13 @@ def identify(data, order, horizon, *, method: str, build, selection: str,
         prepare_fold.blocks = blocks_per_horizon
         n, f, record = cross_validate(data, fixed, candidates, horizon,
                                       prepare_fold=prepare_fold, build=build)
-        model = build(prepare(data, n, f, **options))
+        problem = prepare(data, n, f, **options)
+        model = build(problem)
         model.info["order_selection"] = record
-        return model
-    return build(prepare(data, order, horizon, **options))
+    else:
+        problem = prepare(data, order, horizon, **options)
+        model = build(problem)
+    return model if finalize is None else finalize(model, problem)
 
 
 def output_growth(y: np.ndarray) -> float:

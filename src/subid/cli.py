@@ -156,6 +156,19 @@ def _accepts(fn, name: str) -> bool:
     return name in params or any(p.kind is p.VAR_KEYWORD for p in params.values())
 
 
+def _parse_steps(text) -> float | int:
+    """``--steps``: a positive integer or 'inf'."""
+    if str(text).strip().lower() in ("inf", "infinity"):
+        return math.inf
+    try:
+        k = int(text)
+    except ValueError:
+        k = 0
+    if k < 1:
+        raise click.BadParameter(f"--steps must be a positive integer or 'inf', got {text!r}")
+    return k
+
+
 def run_batch(spec: MethodSpec, data, order, horizon=None, options=None):
     """Identify ``data`` with the batch method ``spec``."""
     fn = spec.load()
@@ -546,6 +559,9 @@ def cli(ctx, quiet, verbose, debug):
               help="Extra keyword argument of the method (JSON value), e.g. "
                    "--option instruments=null. Repeatable.")
 @_FREQ
+@click.option("--refine", type=click.Choice(["none", "pem"]), default="none", show_default=True,
+              help="Refine the model by prediction-error minimisation (subid.pem) on the "
+                   "estimation part.")
 @click.option("--report/--no-report", "write_report", default=True, show_default=True,
               help="Write report.html (skip it for batch jobs that need only the model).")
 @click.option("--stream", is_flag=True, default=False,
@@ -561,8 +577,8 @@ def cli(ctx, quiet, verbose, debug):
               help="Output folder for model.json, report.html and summary.json.")
 @_common
 def identify(data, inputs, outputs, dt, time_column, delimiter, detrend, method_name, order,
-             horizon, validate, forgetting, options, frequency_unit, write_report, stream,
-             chunk_size, report_samples, out):
+             horizon, validate, forgetting, options, frequency_unit, refine, write_report,
+             stream, chunk_size, report_samples, out):
     """Identify a model from DATA; write model.json and report.html.
 
     The record is detrended, split into an estimation part (the first 1 -
@@ -578,6 +594,9 @@ def identify(data, inputs, outputs, dt, time_column, delimiter, detrend, method_
         raise click.UsageError(f"--forgetting applies to online methods only, not to "
                                f"{spec.name}")
     spec.load()                                     # "not available" before any work
+    if stream and refine != "none":
+        raise click.UsageError("--refine pem needs the samples in memory; it does not work "
+                               "with --stream")
     if stream:
         return _identify_streamed(data, inputs, outputs, dt, time_column, delimiter, detrend,
                                   spec, order, horizon, validate, opts, frequency_unit,
@@ -599,6 +618,9 @@ def identify(data, inputs, outputs, dt, time_column, delimiter, detrend, method_
                                    forgetting=forgetting, dt=est.dt, options=opts)
                 _feed(spec, ident, est, 0, _state().progress, chunk=max(est.n_samples // 100, 1))
                 model = _named(ident.model, est)
+            if refine == "pem":
+                from .pem import pem
+                model = pem(est, model)
         seconds = time.perf_counter() - t0
         result = report.evaluate(model, est, val)
     model.info.setdefault("method", spec.attribute)
@@ -766,7 +788,16 @@ def _print_summary(source, record, spec, model, result, est, val, seconds, files
         lines.append("            validation — (--validate 0)")
     lines += [f"poles       {_fmt_poles(result['poles'])}",
               f"stable      {'yes' if result['stable'] else 'NO'}"
-              + (" (continuous time)" if model.dt == 0 else ""),
+              + (" (continuous time)" if model.dt == 0 else "")]
+    if model.info.get("refined_by") == "pem":
+        lines.append(f"refined     pem ({model.info['focus']} focus): cost "
+                     f"{model.info['start_cost']:.4g} -> {model.info['final_cost']:.4g}; "
+                     f"{model.info['stop_reason']}")
+    if model.noise_cov is not None:
+        lines.append("noise cov   " + "; ".join(
+            " ".join(f"{v:.4g}" for v in row) for row in model.noise_cov)
+                     + (" (innovations, with Kalman gain K)" if model.K is not None else ""))
+    lines += [
               f"time        {seconds:.2f} s",
               f"wrote       {', '.join(files)}"]
     click.echo("\n".join(lines))
@@ -1190,15 +1221,21 @@ def simulate(model_path, input_path, inputs, time_column, dt, delimiter, offsets
 @click.option("--out", default=None, type=click.Path(file_okay=False),
               help="Folder for compare.html and compare.png (default: the first model's "
                    "folder).")
+@click.option("--steps", default="inf", show_default=True, metavar="K|inf",
+              help="Prediction horizon: K-step-ahead predictions (subid.predict; the Kalman "
+                   "predictor of a model with K) instead of the simulation (inf).")
 @_common
 def compare(model_paths, data_source, inputs, outputs, dt, time_column, delimiter, detrend,
-            out):
+            out, steps):
     """Fit % of one or more models on DATA, with an overlay plot.
 
-    Every model is simulated from a least-squares initial state (as
-    subid.fit_percent and MATLAB's compare). Inputs and outputs default to
-    the first model's channel names; the sampling period to its dt.
+    Every model is simulated (or, with --steps K, predicted K steps ahead)
+    from a least-squares initial state (as subid.fit_percent and MATLAB's
+    compare). Inputs and outputs default to the first model's channel names;
+    the sampling period to its dt.
     """
+    from .metrics import fit_percent
+    steps = _parse_steps(steps)
     from . import plot, report
     models, paths = {}, {}
     for path in model_paths:
@@ -1224,15 +1261,22 @@ def compare(model_paths, data_source, inputs, outputs, dt, time_column, delimite
     fits = {}
     for name, m in models.items():
         with _about(paths[name]):
-            fits[name] = report.evaluate(m, work)["fit_estimation"]
+            if steps == math.inf:
+                fits[name] = report.evaluate(m, work)["fit_estimation"]
+            else:
+                with _warnings_to_log():
+                    fits[name] = fit_percent(m, work, steps=steps)
+    what = "simulated" if steps == math.inf else f"{steps}-step predicted"
     out = out or os.path.dirname(os.path.abspath(model_paths[0]))
     os.makedirs(out, exist_ok=True)
     png = os.path.join(out, "compare.png")
     page = os.path.join(out, "compare.html")
-    fig = plot.compare(work, models, title=f"{label}: simulated and measured outputs")
+    with _warnings_to_log():
+        fig = plot.compare(work, models, title=f"{label}: {what} and measured outputs",
+                           steps=steps)
     fig.savefig(png, dpi=90)
-    figure = report.figure_html(fig, "simulation from a least-squares initial state; fit % in "
-                                "the legend")
+    figure = report.figure_html(fig, f"{what} outputs from a least-squares initial state; "
+                                "fit % in the legend")
     rows = "".join(
         f"<tr><td class=\"l\">{report._e(name)}</td>"
         + "".join(f"<td>{report._fmt_fit([v])}</td>" for v in fits[name]) + "</tr>"
@@ -1242,12 +1286,12 @@ def compare(model_paths, data_source, inputs, outputs, dt, time_column, delimite
                             f"<p>{report._e(data_source)}: {work.n_samples} samples.</p>"
                             f"<table><tr><th class=\"l\">model</th>{head}</tr>{rows}</table>"
                             f"<pre>{report._e(_command_line())}</pre>"),
-            report._section("compare", "Simulated and measured outputs", figure)]
+            report._section("compare", f"{what.capitalize()} and measured outputs", figure)]
     report.write_html(page, report._page(f"{label}: model comparison", body))
     if not _state().quiet:
         width = max(len(n) for n in models) + 2
         header = "model".ljust(width) + "  ".join(f"{n:>12}" for n in work.output_names)
-        click.echo(f"fit % on {data_source} ({work.n_samples} samples)")
+        click.echo(f"fit % on {data_source} ({work.n_samples} samples, {what})")
         click.echo(header)
         for name in models:
             click.echo(name.ljust(width) + "  ".join(

@@ -954,7 +954,7 @@ def dt_to_ct(data, order=None, method: str = "n4sid", hold: str = "zoh", **optio
         raise DataError("dt_to_ct needs uniformly sampled data (a discrete-time model has "
                         "one sampling period); use ct_subspace for non-uniform time stamps")
     dmodel = methods[method](data, order, feedthrough=True, **options)
-    cmodel = dmodel.to_continuous(hold)
+    cmodel = dmodel.with_noise_model(None, None).to_continuous(hold)   # K has no CT form
     info = dict(cmodel.info)
     info.update(method=f"dt_to_ct({method}, {hold})", discrete_model_dt=data.dt)
     return StateSpace(cmodel.A, cmodel.B, cmodel.C, cmodel.D, 0.0,

@@ -19,6 +19,7 @@ __all__ = [
     "ExcitationWarning",
     "CheckpointError",
     "UnstableModelWarning",
+    "NoiseModelWarning",
 ]
 
 
@@ -100,3 +101,9 @@ class CheckpointError(FileReadError):
 class UnstableModelWarning(UserWarning):
     """The identified model is unstable although the measured output shows no
     growth: the order may be too high, or the data too short or too noisy."""
+
+
+class NoiseModelWarning(UserWarning):
+    """A noise model (Kalman gain, innovation covariance) is missing, dropped or
+    could not be estimated, and a computation falls back to the deterministic
+    model (e.g. prediction by simulation)."""

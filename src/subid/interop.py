@@ -68,7 +68,9 @@ def save_mat(model, path) -> None:
     Variables: ``A``, ``B``, ``C``, ``D`` (double matrices), ``Ts`` (0 for
     continuous time), ``InputName``, ``OutputName`` (1-by-m cell arrays of
     char), and ``subid_format`` (the string ``'subid.StateSpace'``, ignored
-    by MATLAB). Values are stored as IEEE doubles, so a round trip is exact.
+    by MATLAB). A model in innovation form adds ``K`` and ``NoiseVariance``,
+    the names of the fields of MATLAB's ``idss`` (build it there with
+    ``idss(A, B, C, D, K, zeros(n,1), Ts, 'NoiseVariance', NoiseVariance)``). Values are stored as IEEE doubles, so a round trip is exact.
 
     Raises
     ------
@@ -91,6 +93,10 @@ def save_mat(model, path) -> None:
         "InputName": names_in, "OutputName": names_out,
         "subid_format": "subid.StateSpace",
     }
+    if model.K is not None:                      # MATLAB idss fields
+        variables["K"] = np.array(model.K)
+    if model.noise_cov is not None:
+        variables["NoiseVariance"] = np.array(model.noise_cov)
     with atomic_write(path, "wb") as fh:
         scipy.io.savemat(fh, variables, format="5", do_compression=False, oned_as="row")
 
@@ -132,7 +138,8 @@ def load_mat(path, *, dt=None) -> StateSpace:
     ----------
     path : str or os.PathLike
         MAT-file up to version 7 with the variables ``A``, ``B``, ``C``,
-        ``D`` and ``Ts`` (optional: ``InputName``, ``OutputName``), or a single
+        ``D`` and ``Ts`` (optional: ``InputName``, ``OutputName``, and the
+        ``idss`` fields ``K`` and ``NoiseVariance``), or a single
         struct variable with these fields.
     dt : float, optional
         Sampling period to use when ``Ts`` is -1 (MATLAB's "unspecified") or
@@ -216,7 +223,17 @@ def load_mat(path, *, dt=None) -> StateSpace:
             if "InputName" in fields else None
         outputs = _cell_strings(fields["OutputName"], "OutputName", path, C.shape[0]) \
             if "OutputName" in fields else None
-        return StateSpace(A, B, C, D, period, input_names=inputs, output_names=outputs)
+        noise = {}
+        for key, name in (("K", "K"), ("NoiseVariance", "noise_cov")):
+            value = fields.get(key)
+            if value is not None and np.asarray(value).size:
+                value = np.asarray(value)
+                if value.dtype.kind not in "biuf":
+                    raise ModelError(f"model file '{path}': {key} is not a real numeric "
+                                     f"matrix (dtype {value.dtype})")
+                noise[name] = value.astype(np.float64)
+        return StateSpace(A, B, C, D, period, input_names=inputs, output_names=outputs,
+                          **noise)
     except ModelError as exc:
         if str(exc).startswith(f"model file '{path}'"):
             raise

@@ -54,6 +54,7 @@ from ._subspace import (choose_order, estimate_b_d, finish, identify, shift_inva
                         stable_choice)
 from .errors import OrderError, SubidError
 from .model import StateSpace
+from .noise_model import attach_noise_model, check_refine
 
 __all__ = ["ls_subspace", "random_selector"]
 
@@ -90,7 +91,7 @@ def _condition_1norm(M: np.ndarray) -> float:
 def ls_subspace(data, order=None, horizon=None, instruments="past", selector=None, seed=0,
                 estimate_x0=True, *, feedthrough=True, instrument_weighting=True,
                 power_iterations=2, selection="cv", stability="auto", bd_method="auto",
-                statistic="auto") -> StateSpace:
+                statistic="auto", refine=None) -> StateSpace:
     """Identify a discrete-time state-space model without SVD (seed 001).
 
     Parameters
@@ -156,6 +157,10 @@ def ls_subspace(data, order=None, horizon=None, instruments="past", selector=Non
         Hankel matrix (accurate to rounding) or lagged products (25x faster,
         squares the condition number). ``'auto'``: QR up to 200,000 samples.
 
+    refine : {None, 'pem'}
+        ``'pem'``: refine the final subspace estimate by prediction-error
+        minimisation (:func:`subid.pem`, default options) on the record.
+
     Returns
     -------
     StateSpace
@@ -190,8 +195,10 @@ def ls_subspace(data, order=None, horizon=None, instruments="past", selector=Non
                     instrument_weighting=instrument_weighting,
                     power_iterations=power_iterations, stability=stability,
                     bd_method=bd_method)
+    check_refine(refine, data)
     return identify(data, order, horizon, method=method, build=build, selection=selection,
-                    blocks_per_horizon=2 if instruments == "past" else 1, statistic=statistic)
+                    blocks_per_horizon=2 if instruments == "past" else 1, statistic=statistic,
+                    finalize=partial(attach_noise_model, refine=refine))
 
 
 def selector_horizon(selector, data) -> int:

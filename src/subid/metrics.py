@@ -109,12 +109,14 @@ def simulate_fit(model, data, x0="estimate", hold: str = "zoh"):
     return sim(data.u, x0_arr), x0_arr
 
 
-def fit_percent(model, data, x0="estimate", hold: str = "zoh") -> np.ndarray:
+def fit_percent(model, data, x0="estimate", hold: str = "zoh", steps=np.inf) -> np.ndarray:
     """NRMSE fit in percent, per output: ``100 (1 - ||y - ŷ|| / ||y - mean(y)||)``.
 
-    ``ŷ`` is the simulated output (not a prediction), from an initial state
-    estimated by least squares unless ``x0`` says otherwise. 100 is a
-    perfect fit; 0 is no better than the mean; it can be negative.
+    ``ŷ`` is the simulated output (default, ``steps=inf``) or the
+    ``steps``-ahead prediction (:func:`subid.predict`, the Kalman predictor
+    of a model with ``K``), from an initial state estimated by least squares
+    unless ``x0`` says otherwise. 100 is a perfect fit; 0 is no better than
+    the mean; it can be negative.
 
     Parameters
     ----------
@@ -124,12 +126,19 @@ def fit_percent(model, data, x0="estimate", hold: str = "zoh") -> np.ndarray:
     x0 : 'estimate', 'zero' or array
     hold : {'zoh', 'foh'}
         Inter-sample behaviour of the input for a continuous-time model.
+    steps : int or numpy.inf
+        Prediction horizon (MATLAB ``compare(data, model, k)``).
 
     Returns
     -------
     ndarray, shape (n_outputs,)
     """
-    y_hat, _ = simulate_fit(model, data, x0=x0, hold=hold)
+    if steps is not None and not (isinstance(steps, float) and np.isinf(steps) and steps > 0):
+        from .prediction import predict
+        x0p = None if isinstance(x0, str) and x0 == "estimate" else x0
+        y_hat = predict(_check_model(model, "model"), data, steps, x0p)
+    else:
+        y_hat, _ = simulate_fit(model, data, x0=x0, hold=hold)
     dev = np.linalg.norm(data.y - data.y.mean(axis=0), axis=0)
     flat = np.flatnonzero(dev == 0)
     if flat.size:

@@ -8,9 +8,11 @@ signal array.
 Model files
 -----------
 :meth:`StateSpace.save` writes JSON (never pickle) with the keys ``format``
-(``"subid.StateSpace"``), ``version`` (1), ``A``, ``B``, ``C``, ``D`` (nested
-lists, one row per matrix row), ``dt``, ``input_names``, ``output_names`` and
-``info``. Values in ``info`` are encoded so that they come back unchanged:
+(``"subid.StateSpace"``), ``version`` (1, or 2 when the model has a noise
+model), ``A``, ``B``, ``C``, ``D`` (nested lists, one row per matrix row),
+``dt``, ``input_names``, ``output_names``, ``info`` and, for a model in
+innovation form, ``K`` (Kalman gain) and ``noise_cov`` (innovation
+covariance). Values in ``info`` are encoded so that they come back unchanged:
 
 * ``bool``, ``int``, ``str``, ``None`` and finite floats are plain JSON values;
   numpy scalars become the matching Python scalar;
@@ -46,7 +48,7 @@ from .errors import DataError, DataFileNotFoundError, FileReadError, ModelError
 __all__ = ["StateSpace"]
 
 FORMAT_NAME = "subid.StateSpace"
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
 
 _EPS = np.finfo(np.float64).eps
 # Relative tolerance for time stamps that must match the model's period.
@@ -139,6 +141,31 @@ def _names(names, count: int, prefix: str, which: str) -> tuple[str, ...]:
         dup = sorted({nm for nm in names if names.count(nm) > 1})
         raise ModelError(f"{which} names repeat {dup}; names must be unique")
     return names
+
+
+def _noise_matrices(K, noise_cov, n: int, p: int):
+    """Validated read-only ``(K, noise_cov)``; each may be None."""
+    if K is not None:
+        K = _as_matrix(K, "K")
+        if K.shape != (n, p):
+            raise ModelError(f"K has shape {K.shape[0]}x{K.shape[1]} but the model has order "
+                             f"{n} and {_plural(p, 'output')}: K must be {n} x {p} "
+                             "(order x n_outputs)")
+    if noise_cov is not None:
+        S = _as_matrix(noise_cov, "noise_cov")
+        if S.shape != (p, p):
+            raise ModelError(f"noise_cov has shape {S.shape[0]}x{S.shape[1]} but the model has "
+                             f"{_plural(p, 'output')}: it must be {p} x {p}")
+        scale = max(float(np.abs(S).max()), 1e-300)
+        if np.abs(S - S.T).max() > 1e-8 * scale:
+            raise ModelError("noise_cov is not symmetric; it must be a covariance matrix")
+        S = 0.5 * (S + S.T)
+        if np.linalg.eigvalsh(S).min() < -1e-8 * scale:
+            raise ModelError("noise_cov has a negative eigenvalue; it must be positive "
+                             "semi-definite (a covariance matrix)")
+        S.setflags(write=False)
+        noise_cov = S
+    return K, noise_cov
 
 
 def _method(method) -> str:
@@ -338,7 +365,7 @@ def _fmt_json(d: dict) -> str:
     """Strict JSON text of a model dictionary, one matrix row per line."""
     parts = []
     for key, value in d.items():
-        if key in ("A", "B", "C", "D"):
+        if key in ("A", "B", "C", "D", "K", "noise_cov"):
             rows = [json.dumps(row, allow_nan=False) for row in value]
             text = "[\n    " + ",\n    ".join(rows) + "\n  ]" if rows else "[]"
         elif key == "info":
@@ -407,6 +434,11 @@ class StateSpace:
         Diagnostics set by the identification methods (singular values,
         fit, horizon, ...). Kept as given; stored in model files (see the
         module docstring for the values that can be stored).
+    K : array_like, shape (n, n_outputs), optional
+        Kalman gain of the innovation form ``x[k+1] = A x + B u + K e``,
+        ``y = C x + D u + e`` (discrete time; :func:`subid.predict` uses it).
+    noise_cov : array_like, shape (n_outputs, n_outputs), optional
+        Covariance of the innovations ``e`` (MATLAB's ``NoiseVariance``).
 
     Attributes
     ----------
@@ -439,7 +471,8 @@ class StateSpace:
     [0.0, 0.0, 0.1, 0.14]
     """
 
-    def __init__(self, A, B, C, D, dt, *, input_names=None, output_names=None, info=None):
+    def __init__(self, A, B, C, D, dt, *, input_names=None, output_names=None, info=None,
+                 K=None, noise_cov=None):
         A = _as_matrix(A, "A")
         B = _as_matrix(B, "B")
         C = _as_matrix(C, "C")
@@ -481,8 +514,44 @@ class StateSpace:
         elif not isinstance(info, Mapping):
             raise ModelError(f"info must be a dict, got {type(info).__name__}")
         self.info = dict(info)
+        self._K, self._noise_cov = _noise_matrices(K, noise_cov, n, p)
 
     # -- properties ------------------------------------------------------
+    @property
+    def K(self):
+        """Kalman gain of the innovation form, shape (n, n_outputs), read-only; None
+        when the model has no noise model."""
+        return self._K
+
+    @property
+    def noise_cov(self):
+        """Covariance of the innovations ``e`` (n_outputs x n_outputs), read-only;
+        None when unknown."""
+        return self._noise_cov
+
+    @property
+    def has_noise_model(self) -> bool:
+        """True when the model carries a Kalman gain ``K``."""
+        return self._K is not None
+
+    def with_noise_model(self, K=None, noise_cov=None, *, info=None) -> "StateSpace":
+        """The same model with another (or no) Kalman gain and innovation covariance.
+
+        Parameters
+        ----------
+        K : array_like, shape (n, n_outputs), optional
+        noise_cov : array_like, shape (n_outputs, n_outputs), optional
+        info : dict, optional
+            Replaces ``info`` (default: a copy of this model's).
+
+        Returns
+        -------
+        StateSpace
+        """
+        return StateSpace(self._A, self._B, self._C, self._D, self._dt,
+                          input_names=self.input_names, output_names=self.output_names,
+                          info=dict(self.info) if info is None else info, K=K,
+                          noise_cov=noise_cov)
     @property
     def A(self) -> np.ndarray:
         """State matrix, shape (n, n), read-only."""
@@ -534,9 +603,20 @@ class StateSpace:
                 f"n_outputs={self.n_outputs}, {timing}, inputs={list(self.input_names)}, "
                 f"outputs={list(self.output_names)})")
 
-    def _like(self, A, B, C, D, dt) -> "StateSpace":
+    def _like(self, A, B, C, D, dt, K=None, noise_cov=None) -> "StateSpace":
         return StateSpace(A, B, C, D, dt, input_names=self.input_names,
-                          output_names=self.output_names, info=dict(self.info))
+                          output_names=self.output_names, info=dict(self.info), K=K,
+                          noise_cov=noise_cov)
+
+    def _drop_noise_model(self, what: str) -> None:
+        if self._K is not None or self._noise_cov is not None:
+            import warnings
+            from .errors import NoiseModelWarning
+            warnings.warn(f"{what}: the Kalman gain K and the innovation covariance are "
+                          "dropped (an innovation model is tied to its sampling period and "
+                          "has no exact counterpart under this conversion); re-estimate "
+                          "them on data (subid.pem) if needed", NoiseModelWarning,
+                          stacklevel=3)
 
     # -- simulation ------------------------------------------------------
     def simulate(self, u, t=None, x0=None, *, hold="zoh", return_state=False):
@@ -773,6 +853,10 @@ class StateSpace:
         -------
         StateSpace
             Discrete-time model with the same names and a copy of ``info``.
+            A Kalman gain ``K`` and ``noise_cov`` are not carried over (with a
+            :class:`~subid.errors.NoiseModelWarning`): a continuous-time
+            innovation model has no exact sampled counterpart without the
+            noise intensity.
 
         Raises
         ------
@@ -787,6 +871,7 @@ class StateSpace:
                              "convert it with to_continuous() first to resample it")
         dt = check_dt(dt)
         method = _method(method)
+        self._drop_noise_model("to_discrete")
         A, B, C, D = self._A, self._B, self._C, self._D
         if method == "bilinear":
             ima = np.eye(self.order) - 0.5 * dt * A
@@ -821,7 +906,10 @@ class StateSpace:
         -------
         StateSpace
             Continuous-time model (``dt == 0``) with the same names and a copy
-            of ``info``.
+            of ``info``. ``K`` and ``noise_cov`` are dropped (with a
+            :class:`~subid.errors.NoiseModelWarning`): a sampled innovation
+            model (white innovations at the sampling instants) has no
+            continuous-time counterpart.
 
         Raises
         ------
@@ -834,6 +922,7 @@ class StateSpace:
         if self.is_continuous:
             raise ModelError("the model is already continuous-time (dt=0)")
         method = _method(method)
+        self._drop_noise_model("to_continuous")
         h = self._dt
         n = self.order
         Ad, Bd, Cd, Dd = self._A, self._B, self._C, self._D
@@ -873,8 +962,9 @@ class StateSpace:
         Returns
         -------
         StateSpace
-            ``(T A T^-1, T B, C T^-1, D)``, same dt, names and a copy of
-            ``info``. Markov parameters and frequency response are unchanged.
+            ``(T A T^-1, T B, C T^-1, D)`` and ``T K``, same dt, names,
+            ``noise_cov`` and a copy of ``info``. Markov parameters, frequency
+            response and predictions are unchanged.
 
         Raises
         ------
@@ -891,7 +981,8 @@ class StateSpace:
         # X T^-1 = (T^-T X^T)^T
         A = linalg.lu_solve(lu, (T @ self._A).T, trans=1, check_finite=False).T
         C = linalg.lu_solve(lu, self._C.T, trans=1, check_finite=False).T
-        return self._like(A, T @ self._B, C, self._D, self._dt)
+        return self._like(A, T @ self._B, C, self._D, self._dt,
+                          None if self._K is None else T @ self._K, self._noise_cov)
 
     def allclose(self, other: "StateSpace", rtol: float = 1e-5, atol: float = 1e-8) -> bool:
         """Whether two models have the same shapes, time base and (to the given
@@ -938,9 +1029,9 @@ class StateSpace:
             ``info`` holds a value that cannot be stored (the message gives
             its location).
         """
-        return {
+        d = {
             "format": FORMAT_NAME,
-            "version": FORMAT_VERSION,
+            "version": 1,
             "A": self._A.tolist(),
             "B": self._B.tolist(),
             "C": self._C.tolist(),
@@ -950,6 +1041,15 @@ class StateSpace:
             "output_names": list(self.output_names),
             "info": _encode(self.info, "info"),
         }
+        # version 2 adds the optional noise model; a model without one is still
+        # written as version 1, readable by older subid releases
+        if self._K is not None:
+            d["K"] = self._K.tolist()
+            d["version"] = FORMAT_VERSION
+        if self._noise_cov is not None:
+            d["noise_cov"] = self._noise_cov.tolist()
+            d["version"] = FORMAT_VERSION
+        return d
 
     @classmethod
     def from_dict(cls, d) -> "StateSpace":
@@ -975,7 +1075,7 @@ class StateSpace:
             raise ModelError(f"a model description must be a JSON object (dict), got "
                              f"{type(d).__name__}")
         required = ("format", "version", "A", "B", "C", "D", "dt")
-        allowed = set(required) | {"input_names", "output_names", "info"}
+        allowed = set(required) | {"input_names", "output_names", "info", "K", "noise_cov"}
         missing = [k for k in required if k not in d]
         if missing:
             raise ModelError(f"the model description is missing the key"
@@ -1011,7 +1111,9 @@ class StateSpace:
         elif not isinstance(info, Mapping):
             raise ModelError(f"key 'info' must be an object (dict), got {type(info).__name__}")
         info = _decode(info, "info")
-        return cls(*mats, dt, info=info, **names)
+        noise = {k: (_matrix_from_json(d[k], k) if d.get(k) is not None else None)
+                 for k in ("K", "noise_cov")}
+        return cls(*mats, dt, info=info, **names, **noise)
 
     def save(self, path) -> None:
         """Write the model to a JSON file, atomically.
@@ -1098,6 +1200,13 @@ class StateSpace:
         ------
         ImportError
             python-control is not installed (``pip install control``).
+
+        Notes
+        -----
+        ``control.StateSpace`` has no slot for a Kalman gain or a noise
+        covariance: ``K`` and ``noise_cov`` are not exported. To keep them,
+        export the predictor or the noise channels yourself, e.g.
+        ``ss(A, [B K], C, [D I], dt)`` with the innovations as extra inputs.
         """
         control = _require_control()
         return control.ss(np.array(self._A), np.array(self._B), np.array(self._C),
@@ -1161,6 +1270,11 @@ class StateSpace:
         -------
         scipy.signal.StateSpace
             Continuous (``dt=None``) or discrete with the sampling period.
+
+        Notes
+        -----
+        ``scipy.signal.StateSpace`` has no slot for a Kalman gain or a noise
+        covariance: ``K`` and ``noise_cov`` are not exported.
         """
         from scipy import signal
         mats = [np.array(M) for M in (self._A, self._B, self._C, self._D)]

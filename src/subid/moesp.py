@@ -33,13 +33,14 @@ import scipy.linalg
 from ._subspace import (check_weighting, choose_order, cva_factor, estimate_b_d, finish,
                         identify, shift_invariance, stable_choice)
 from .model import StateSpace
+from .noise_model import attach_noise_model, check_refine
 
 __all__ = ["moesp"]
 
 
 def moesp(data, order=None, horizon=None, *, weighting="moesp", selection="cv",
           stability="auto", feedthrough=True, estimate_x0=True, bd_method="auto",
-          statistic="auto") -> StateSpace:
+          statistic="auto", refine=None) -> StateSpace:
     """Identify a discrete-time model by PO-MOESP.
 
     Parameters
@@ -75,6 +76,10 @@ def moesp(data, order=None, horizon=None, *, weighting="moesp", selection="cv",
     statistic : {'auto', 'qr', 'gram'}
         As in :func:`subid.ls_subspace`.
 
+    refine : {None, 'pem'}
+        ``'pem'``: refine the final subspace estimate by prediction-error
+        minimisation (:func:`subid.pem`, default options) on the record.
+
     Returns
     -------
     StateSpace
@@ -83,8 +88,10 @@ def moesp(data, order=None, horizon=None, *, weighting="moesp", selection="cv",
     check_weighting(weighting)
     build = partial(_moesp, weighting=weighting, stability=stability, feedthrough=feedthrough,
                     estimate_x0=estimate_x0, bd_method=bd_method)
+    check_refine(refine, data)
     return identify(data, order, horizon, method="moesp", build=build, selection=selection,
-                    statistic=statistic)
+                    statistic=statistic,
+                    finalize=partial(attach_noise_model, refine=refine))
 
 
 def weighted_projection(L: np.ndarray, a: int, b: int, weighting: str):

@@ -27,6 +27,7 @@ import scipy.linalg
 from ._subspace import (check_weighting, choose_order, cva_factor, estimate_b_d, finish,
                         identify, initial_state, stability_request, stable_choice)
 from .model import StateSpace
+from .noise_model import attach_noise_model, check_refine
 
 __all__ = ["n4sid"]
 
@@ -66,7 +67,7 @@ def _lstsq_rows(regressors: np.ndarray, targets: np.ndarray) -> np.ndarray:
 
 def n4sid(data, order=None, horizon=None, *, weighting="cva", selection="cv",
           stability="auto", feedthrough=True, estimate_x0=True,
-          statistic="auto") -> StateSpace:
+          statistic="auto", refine=None) -> StateSpace:
     """Identify a discrete-time model by N4SID (state sequences).
 
     Parameters
@@ -102,6 +103,10 @@ def n4sid(data, order=None, horizon=None, *, weighting="cva", selection="cv",
     statistic : {'auto', 'qr', 'gram'}
         As in :func:`subid.ls_subspace`.
 
+    refine : {None, 'pem'}
+        ``'pem'``: refine the final subspace estimate by prediction-error
+        minimisation (:func:`subid.pem`, default options) on the record.
+
     Returns
     -------
     StateSpace
@@ -110,8 +115,10 @@ def n4sid(data, order=None, horizon=None, *, weighting="cva", selection="cv",
     check_weighting(weighting)
     build = partial(_n4sid, weighting=weighting, stability=stability, feedthrough=feedthrough,
                     estimate_x0=estimate_x0)
+    check_refine(refine, data)
     return identify(data, order, horizon, method="n4sid", build=build, selection=selection,
-                    statistic=statistic)
+                    statistic=statistic,
+                    finalize=partial(attach_noise_model, refine=refine))
 
 
 def _n4sid(pb, *, weighting, stability, feedthrough, estimate_x0) -> StateSpace:

@@ -149,6 +149,20 @@ def simulated_output(model, data, x0="estimate"):
     return y_hat, fit
 
 
+def predicted_output(model, data, steps):
+    """``(y_hat, fit %)`` of the ``steps``-ahead prediction; NaN where it diverges."""
+    from .prediction import predict
+    try:
+        y_hat = predict(model, data, steps)
+    except DataError:
+        y_hat = np.full(data.y.shape, np.nan)
+    dev = np.linalg.norm(data.y - data.y.mean(axis=0), axis=0)
+    with np.errstate(all="ignore"):
+        fit = 100.0 * (1.0 - np.linalg.norm(data.y - y_hat, axis=0) /
+                       np.where(dev > 0, dev, np.nan))
+    return y_hat, fit
+
+
 def _finite(values: np.ndarray) -> np.ndarray:
     """``values`` with non-finite entries replaced by NaN (not drawn)."""
     out = np.array(values, dtype=float)
@@ -419,7 +433,8 @@ def bode(model_or_models, w=None, *, hz=False, labels=None, phase=True, title=No
 # ---------------------------------------------------------------------------
 # time-domain comparison
 # ---------------------------------------------------------------------------
-def compare(data, models, *, labels=None, x0="estimate", title=None, clip=True):
+def compare(data, models, *, labels=None, x0="estimate", title=None, clip=True,
+            steps=math.inf):
     """Measured outputs against the outputs simulated by each model (as MATLAB's ``compare``).
 
     Parameters
@@ -435,6 +450,9 @@ def compare(data, models, *, labels=None, x0="estimate", title=None, clip=True):
     clip : bool
         Keep the vertical range near the measured signal, so a diverging
         simulation does not squash the plot.
+    steps : int or math.inf
+        Draw ``steps``-ahead predictions (:func:`subid.predict`) instead of
+        the simulation.
 
     Returns
     -------
@@ -450,7 +468,8 @@ def compare(data, models, *, labels=None, x0="estimate", title=None, clip=True):
     for i in range(ny):
         axes[i, 0].plot(t, data.y[:, i], "k-", lw=1.0, label="measured")
     for k, (label, m) in enumerate(groups.items()):
-        y_hat, fit = simulated_output(m, data, x0=x0)
+        y_hat, fit = simulated_output(m, data, x0=x0) if steps == math.inf else \
+            predicted_output(m, data, steps)
         for i in range(ny):
             axes[i, 0].plot(t, _finite(y_hat[:, i]), color=f"C{k}", lw=0.9,
                             label=f"{label}: fit {_fmt_fit(fit[i])} %")
@@ -535,10 +554,13 @@ def _xcorr(a: np.ndarray, b: np.ndarray, lags: np.ndarray) -> np.ndarray:
 
 def residual_correlations(model, data, *, max_lag: int = 25, confidence: float = 0.99,
                           x0="estimate") -> dict:
-    """Correlations of the simulation residuals, with confidence bounds.
+    """Correlations of the residuals, with confidence bounds.
 
-    The residual is ``e = y - ŷ``, with ``ŷ`` simulated from an initial
-    state fitted by least squares (the same ``ŷ`` as :func:`subid.fit_percent`).
+    For a discrete-time model with a Kalman gain ``K`` the residuals are the
+    one-step prediction errors (:func:`subid.residuals`, as MATLAB's
+    ``resid``). Otherwise the residual is ``e = y - ŷ``, with ``ŷ``
+    simulated from an initial state fitted by least squares (the same ``ŷ``
+    as :func:`subid.fit_percent`).
     For a good model ``e`` is uncorrelated with past inputs; for a model that
     also explains the disturbances, ``e`` is white.
 
@@ -577,6 +599,15 @@ def residual_correlations(model, data, *, max_lag: int = 25, confidence: float =
     n = data.n_samples
     if max_lag >= n:
         raise DataError(f"max_lag {max_lag} must be smaller than the {n} samples of the record")
+    if getattr(model, "K", None) is not None and model.dt > 0:
+        # MATLAB's resid: one-step prediction errors of the innovation form
+        from .prediction import residuals as _prediction_residuals
+        mode = None if isinstance(x0, str) and x0 == "estimate" else x0
+        try:
+            return _prediction_residuals(model, data, max_lag=max_lag, confidence=confidence,
+                                         x0=mode)
+        except DataError as exc:
+            raise DataError(f"the one-step prediction diverges: {exc}") from None
     y_hat, _ = simulated_output(model, data, x0=x0)
     e = data.y - y_hat
     if not np.isfinite(e).all():
@@ -610,7 +641,7 @@ def residual_correlations(model, data, *, max_lag: int = 25, confidence: float =
             cross_bound[i, j] = z * math.sqrt(max(p, 0.0) / n)
     return {"lags": lags, "auto": auto, "auto_bound": z / math.sqrt(n),
             "cross_lags": cross_lags, "cross": cross, "cross_bound": cross_bound,
-            "residual": e, "confidence": confidence}
+            "residual": e, "confidence": confidence, "kind": "simulation"}
 
 
 def residuals(model, data, *, max_lag: int = 25, confidence: float = 0.99, x0="estimate",

@@ -36,6 +36,7 @@ from ._regression import fit_b_d_projection
 from ._subspace import check_excitation, default_horizon, min_samples
 from ._validation import as_signal, check_dt, check_int
 from .errors import CheckpointError, DataError, OrderError, SubidError, TooFewSamplesError
+from . import noise_model
 from .ls_subspace import check_options, check_selector, gamma_from_factor, random_selector
 from .model import StateSpace
 
@@ -304,6 +305,11 @@ class RecursiveSubspace:
     def model(self) -> StateSpace:
         """The current model (discrete time, dt of the identifier).
 
+        With instruments (``'past'``), the model is in innovation form: ``K``
+        and ``noise_cov`` are estimated on the running Hankel factor by
+        :func:`subid.noise_model.with_factor` (state sequences and the
+        Kalman filter Riccati equation, no SVD).
+
         Raises
         ------
         TooFewSamplesError
@@ -336,6 +342,8 @@ class RecursiveSubspace:
                             self.power_iterations), **reg}
         self._model = StateSpace(A, B, C, D, self.dt, input_names=self.input_names,
                                  output_names=self.output_names, info=info)
+        if self.instruments == "past":   # K, noise_cov from the running factor
+            self._model = noise_model.with_factor(self._model, hf)
         return self._model
 
     @property

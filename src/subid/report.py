@@ -161,7 +161,20 @@ def _matlab_code(model) -> str:
     return (f"A = {_matlab_matrix(model.A)};\nB = {_matlab_matrix(model.B)};\n"
             f"C = {_matlab_matrix(model.C)};\nD = {_matlab_matrix(model.D)};\n"
             f"sys = ss(A, B, C, D, {model.dt!r}, 'InputName', {{{names_in}}}, "
-            f"'OutputName', {{{names_out}}});")
+            f"'OutputName', {{{names_out}}});" + _matlab_noise(model))
+
+
+def _matlab_noise(model) -> str:
+    """The innovation form as MATLAB's idss (System Identification Toolbox)."""
+    if model.K is None or model.is_continuous:
+        return ""
+    text = f"\nK = {_matlab_matrix(model.K)};"
+    extra = ""
+    if model.noise_cov is not None:
+        text += f"\nNoiseVariance = {_matlab_matrix(model.noise_cov)};"
+        extra = ", 'NoiseVariance', NoiseVariance"
+    return text + (f"\nmodel = idss(A, B, C, D, K, zeros({model.order}, 1), {model.dt!r}"
+                   f"{extra});")
 
 
 def _pole_table(model, hz: bool) -> str:
@@ -426,8 +439,9 @@ def identification_report(models, estimation, validation=None, *, title="subid r
     body.append(_section("residuals", "Residual analysis", _plot_or_note(
         lambda: plot.residuals(models, check, max_lag=max_lag,
                                title=f"residuals on the {check_name} data (99 % bands)"),
-        "left: auto-correlation of the residuals e = y − ŷ (white residuals stay inside the "
-        f"band); right: correlation of each input with the residuals at lags −{max_lag}..{max_lag} "
+        "left: auto-correlation of the residuals e = y − ŷ, the one-step prediction errors for a "
+        "model with a Kalman gain K (as MATLAB's resid), the simulation errors otherwise (white "
+        f"residuals stay inside the band); right: correlation of each input with the residuals at lags −{max_lag}..{max_lag} "
         "(a good "
         "model leaves none at positive lags); bands: 99 % confidence under no correlation",
         "residual analysis")))
@@ -452,6 +466,12 @@ def identification_report(models, estimation, validation=None, *, title="subid r
                  "<p>B</p>", _matrix_table(m.B, states, m.input_names),
                  "<p>C</p>", _matrix_table(m.C, m.output_names, states),
                  "<p>D</p>", _matrix_table(m.D, m.output_names, m.input_names)]
+        if m.K is not None:
+            block += ["<p>K (Kalman gain of the innovation form x⁺ = A x + B u + K e, "
+                      "y = C x + D u + e)</p>", _matrix_table(m.K, states, m.output_names)]
+        if m.noise_cov is not None:
+            block += ["<p>noise covariance (of the innovations e)</p>",
+                      _matrix_table(m.noise_cov, m.output_names, m.output_names)]
         x0 = m.info.get("x0")
         if x0 is not None and np.asarray(x0).size == m.order:
             block += ["<p>initial state x0 (estimation data)</p>",

@@ -10,7 +10,8 @@ from .data import IOData
 from .errors import SubidError
 from .model import StateSpace
 
-__all__ = ["seed000_system", "seed001_system", "random_system", "simulate_data"]
+__all__ = ["seed000_system", "seed001_system", "random_system", "simulate_data",
+           "seed001_innovation_system", "simulate_innovation_data"]
 
 
 def seed000_system() -> StateSpace:
@@ -34,6 +35,28 @@ def seed001_system(dt: float = 1.0) -> StateSpace:
     C = [[-0.0028, 2.3968, 0.0], [-0.0857, 0.0264, -0.6553]]
     D = [[-1.7384, 0.0425], [0.7127, 0.0]]
     return StateSpace(A, B, C, D, dt)
+
+
+def seed001_innovation_system(process_std: float = 0.3, measurement_std: float = 0.3,
+                              dt: float = 1.0, feedthrough: bool = True) -> StateSpace:
+    """Seed 001's system in innovation form.
+
+    ``K`` and ``noise_cov`` are those of the steady-state Kalman filter for
+    white process noise (covariance ``process_std**2 I``) on the state and
+    white measurement noise (``measurement_std**2 I``) on the output, so
+    ``A - K C`` is stable. ``feedthrough=False`` sets ``D = 0`` (closed-loop
+    experiments).
+    """
+    base = seed001_system(dt)
+    A, C = base.A, base.C
+    n, ny = A.shape[0], C.shape[0]
+    Q = process_std ** 2 * np.eye(n)
+    R = measurement_std ** 2 * np.eye(ny)
+    P = scipy.linalg.solve_discrete_are(A.T, C.T, Q, R)
+    sigma = C @ P @ C.T + R
+    K = np.linalg.solve(sigma, (A @ P @ C.T).T).T
+    D = base.D if feedthrough else 0
+    return StateSpace(A, base.B, C, D, dt, K=K, noise_cov=sigma)
 
 
 def _hankel_singular_values(A, B, C):
@@ -130,4 +153,58 @@ def simulate_data(system: StateSpace, n_samples: int, *, seed, process_snr_db=No
     if output_snr_db is not None:
         v_std = y_clean.std(axis=0) * 10 ** (-output_snr_db / 20)
         y = y + rng.standard_normal(y.shape) * v_std
+    return IOData(u, y, dt=system.dt)
+
+
+def simulate_innovation_data(system: StateSpace, n_samples: int, *, seed, noise_cov=None,
+                             feedback=None, input_std: float = 1.0, x0=None) -> IOData:
+    """Simulate a system in innovation form, in open or closed loop.
+
+    ``x[k+1] = A x + B u + K e``, ``y = C x + D u + e`` with white Gaussian
+    innovations ``e`` of covariance ``noise_cov`` (default ``system.noise_cov``)
+    and ``K = system.K``. In open loop ``u = r``; with ``feedback`` F
+    (n_inputs x n_outputs) the loop is closed by ``u = r - F y`` (requires
+    ``D = 0``); ``r`` is white Gaussian with standard deviation ``input_std``.
+
+    Parameters
+    ----------
+    system : StateSpace
+        Discrete-time model with ``K``.
+    n_samples : int
+    seed : int or numpy Generator
+    noise_cov : array_like, optional
+    feedback : array_like, optional
+    input_std : float
+    x0 : array_like, optional
+
+    Returns
+    -------
+    IOData
+        ``u`` is the plant input (not the reference).
+    """
+    if system.dt <= 0 or system.K is None:
+        raise SubidError("simulate_innovation_data needs a discrete-time system with a "
+                         "Kalman gain K")
+    n_samples = check_int(n_samples, "n_samples")
+    sigma = system.noise_cov if noise_cov is None else np.asarray(noise_cov, dtype=float)
+    if sigma is None:
+        raise SubidError("give noise_cov (the system has none)")
+    rng = np.random.default_rng(seed)
+    ny, nu = system.n_outputs, system.n_inputs
+    r = input_std * rng.standard_normal((n_samples, nu))
+    e = rng.standard_normal((n_samples, ny)) @ np.linalg.cholesky(sigma).T
+    A, B, C, D, K = system.A, system.B, system.C, system.D, system.K
+    if feedback is None:
+        aug = StateSpace(A, np.hstack([B, K]), C, np.hstack([D, np.eye(ny)]), system.dt)
+        y = aug.simulate(np.hstack([r, e]), x0=x0)
+        return IOData(r, y, dt=system.dt)
+    F = np.asarray(feedback, dtype=float).reshape(nu, ny)
+    if np.abs(D).max() > 0:
+        raise SubidError("closed-loop simulation needs D = 0 (no algebraic loop)")
+    # closed loop: x+ = (A - B F C) x + B r + (K - B F) e, y = C x + e, u = r - F y
+    Acl = A - B @ F @ C
+    aug = StateSpace(Acl, np.hstack([B, K - B @ F]), C, np.hstack([np.zeros((ny, nu)),
+                                                                   np.eye(ny)]), system.dt)
+    y = aug.simulate(np.hstack([r, e]), x0=x0)
+    u = r - y @ F.T
     return IOData(u, y, dt=system.dt)
