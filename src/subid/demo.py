@@ -135,8 +135,9 @@ def gallery_markdown(rows, *, command: str = GALLERY_COMMAND, seconds=None) -> s
         "# Gallery: the bundled DaISy datasets",
         "",
         f"Each record has its means removed, is identified on the first {FRACTION:.0%} of its "
-        "samples with the order chosen automatically (largest gap of the singular values, or "
-        "of the SVD-free rank profile for `ls_subspace`, among orders 1..10), and is "
+        "samples with the order and horizon chosen automatically (cross-validated simulation "
+        "fit on the estimation part, among orders 1..10 and horizons 10 and 20; "
+        "`selection='cv'`; continuous-time methods: their own rule), and is "
         f"validated on the last {1 - FRACTION:.0%}: the model is simulated from a "
         "least-squares initial state and compared with the measured output.",
         "Fit % = 100 (1 − ‖y − ŷ‖ / ‖y − mean y‖) per output (`subid.fit_percent`); 100 is "
