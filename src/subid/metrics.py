@@ -31,6 +31,21 @@ def _check_pair(model, reference):
                          "convert one of them first (to_discrete / to_continuous)")
 
 
+def check_model_data(model, data) -> None:
+    """Raise unless ``data`` is an IOData record with the model's channels and sampling."""
+    _check_model(model, "model")
+    if not isinstance(data, IOData):
+        raise DataError(f"data must be an IOData record, got {type(data).__name__}; wrap "
+                        "arrays as subid.IOData(u, y, dt=...)")
+    if (data.n_inputs, data.n_outputs) != (model.n_inputs, model.n_outputs):
+        raise DataError(f"data have {data.n_inputs} inputs and {data.n_outputs} outputs but "
+                        f"the model has {model.n_inputs} and {model.n_outputs}")
+    if model.dt > 0:
+        if not data.is_uniform or not np.isclose(data.dt, model.dt, rtol=1e-9, atol=0):
+            raise DataError(f"the model is discrete with dt={model.dt} but the data are "
+                            f"sampled with {'non-uniform t' if not data.is_uniform else data.dt}")
+
+
 def markov_error(model, reference, k: int = 10) -> float:
     """Relative Frobenius error of the first ``k`` Markov parameters.
 
@@ -61,16 +76,8 @@ def simulate_fit(model, data, x0="estimate", hold: str = "zoh"):
     (the simulated output is linear in x0), each output weighted by the
     inverse of its standard deviation; ``'zero'`` or an array fixes it.
     """
-    _check_model(model, "model")
-    if not isinstance(data, IOData):
-        raise DataError(f"data must be an IOData record, got {type(data).__name__}")
-    if (data.n_inputs, data.n_outputs) != (model.n_inputs, model.n_outputs):
-        raise DataError(f"data have {data.n_inputs} inputs and {data.n_outputs} outputs but "
-                        f"the model has {model.n_inputs} and {model.n_outputs}")
+    check_model_data(model, data)
     if model.dt > 0:
-        if not data.is_uniform or not np.isclose(data.dt, model.dt, rtol=1e-9, atol=0):
-            raise DataError(f"the model is discrete with dt={model.dt} but the data are "
-                            f"sampled with {'non-uniform t' if not data.is_uniform else data.dt}")
         sim = lambda u, x0v: model.simulate(u, x0=x0v)  # noqa: E731
     else:
         sim = lambda u, x0v: model.simulate(u, t=data.t, x0=x0v, hold=hold)  # noqa: E731

@@ -540,18 +540,6 @@ def data_overview(data, *, split=None, title=None):
 # ---------------------------------------------------------------------------
 # residual analysis
 # ---------------------------------------------------------------------------
-def _xcorr(a: np.ndarray, b: np.ndarray, lags: np.ndarray) -> np.ndarray:
-    """``r(tau) = sum_t a(t) b(t - tau) / N`` for each lag (a, b zero-mean)."""
-    n = a.size
-    out = np.empty(lags.size)
-    for k, tau in enumerate(lags):
-        if tau >= 0:
-            out[k] = a[tau:] @ b[:n - tau] / n if tau < n else 0.0
-        else:
-            out[k] = a[:n + tau] @ b[-tau:] / n if -tau < n else 0.0
-    return out
-
-
 def residual_correlations(model, data, *, max_lag: int = 25, confidence: float = 0.99,
                           x0="estimate") -> dict:
     """Correlations of the residuals, with confidence bounds.
@@ -590,7 +578,6 @@ def residual_correlations(model, data, *, max_lag: int = 25, confidence: float =
         The simulation diverges (residuals not finite), or ``max_lag`` is not
         smaller than the record.
     """
-    from scipy.special import ndtri
     data = _check_data(data)
     if isinstance(max_lag, bool) or not isinstance(max_lag, numbers.Integral) or max_lag < 1:
         raise DataError(f"max_lag must be a positive integer, got {max_lag!r}")
@@ -613,35 +600,9 @@ def residual_correlations(model, data, *, max_lag: int = 25, confidence: float =
     if not np.isfinite(e).all():
         raise DataError("the simulated output diverges (residuals are not finite): the model "
                         "is unstable over this record")
-    z = float(ndtri(0.5 + confidence / 2))
-    e0 = e - e.mean(axis=0)
-    u0 = data.u - data.u.mean(axis=0)
-    lags = np.arange(max_lag + 1)
-    cross_lags = np.arange(-max_lag, max_lag + 1)
-    ny, nu = data.n_outputs, data.n_inputs
-    auto = np.zeros((ny, lags.size))
-    cross = np.zeros((ny, nu, cross_lags.size))
-    cross_bound = np.zeros((ny, nu))
-    ree_full = np.zeros((ny, cross_lags.size))
-    for i in range(ny):
-        r = _xcorr(e0[:, i], e0[:, i], cross_lags)
-        r0 = r[max_lag]
-        ree_full[i] = r / r0 if r0 > 0 else 0.0
-        auto[i] = ree_full[i][max_lag:]
-    for j in range(nu):
-        ru = _xcorr(u0[:, j], u0[:, j], cross_lags)
-        ru0 = ru[max_lag]
-        ruu = ru / ru0 if ru0 > 0 else np.zeros_like(ru)
-        for i in range(ny):
-            ree0 = e0[:, i] @ e0[:, i] / n
-            denom = math.sqrt(max(ree0 * ru0, 0.0))
-            c = _xcorr(e0[:, i], u0[:, j], cross_lags)
-            cross[i, j] = c / denom if denom > 0 else 0.0
-            p = float(np.sum(ree_full[i] * ruu))
-            cross_bound[i, j] = z * math.sqrt(max(p, 0.0) / n)
-    return {"lags": lags, "auto": auto, "auto_bound": z / math.sqrt(n),
-            "cross_lags": cross_lags, "cross": cross, "cross_bound": cross_bound,
-            "residual": e, "confidence": confidence, "kind": "simulation"}
+    from .prediction import correlations
+    return {**correlations(e, data.u, max_lag=max_lag, confidence=confidence),
+            "kind": "simulation"}
 
 
 def residuals(model, data, *, max_lag: int = 25, confidence: float = 0.99, x0="estimate",

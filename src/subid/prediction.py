@@ -30,7 +30,7 @@ import scipy.linalg
 
 from . import _simulate
 from .data import IOData
-from .errors import DataError, ModelError, NoiseModelWarning
+from .errors import DataError, NoiseModelWarning
 from .model import StateSpace
 
 __all__ = ["predict", "prediction_errors", "residuals", "correlations"]
@@ -43,18 +43,8 @@ _LOOP_STEPS = 32
 
 
 def _check(model, data) -> tuple[StateSpace, IOData]:
-    if not isinstance(model, StateSpace):
-        raise ModelError(f"model must be a subid.StateSpace, got {type(model).__name__}")
-    if not isinstance(data, IOData):
-        raise DataError(f"data must be an IOData record, got {type(data).__name__}; wrap "
-                        "arrays as subid.IOData(u, y, dt=...)")
-    if (data.n_inputs, data.n_outputs) != (model.n_inputs, model.n_outputs):
-        raise DataError(f"data have {data.n_inputs} inputs and {data.n_outputs} outputs but "
-                        f"the model has {model.n_inputs} and {model.n_outputs}")
-    if model.dt > 0:
-        if not data.is_uniform or not np.isclose(data.dt, model.dt, rtol=1e-9, atol=0):
-            raise DataError(f"the model is discrete with dt={model.dt} but the data are "
-                            f"sampled with {'non-uniform t' if not data.is_uniform else data.dt}")
+    from .metrics import check_model_data
+    check_model_data(model, data)
     return model, data
 
 
