@@ -90,7 +90,8 @@ def _condition_1norm(M: np.ndarray) -> float:
 
 def ls_subspace(data, order=None, horizon=None, instruments="past", selector=None, seed=0,
                 estimate_x0=True, *, feedthrough=True, instrument_weighting=True,
-                power_iterations=2, selection="cv", stability="auto", bd_method="auto",
+                power_iterations=8, normalize_outputs=True, selection="cv",
+                stability="auto", bd_method="auto",
                 statistic="auto", refine=None) -> StateSpace:
     """Identify a discrete-time state-space model without SVD (seed 001).
 
@@ -131,6 +132,12 @@ def ls_subspace(data, order=None, horizon=None, instruments="past", selector=Non
     power_iterations : int
         SVD-free refinement steps with Λ taken from the previous estimate;
         0 gives the paper's one-shot estimate.
+    normalize_outputs : bool
+        Divide each output by its RMS before the least-squares problems (the
+        selector then acts as ``Λ (I ⊗ S)`` on the normalised outputs, so the
+        basis it fixes is unchanged), so that the estimate does not depend
+        on the output units. ``False`` solves eq. (23)/(28) in the user's
+        units, as printed in the paper.
     selection : {'cv', 'gap'}
         How an order or horizon not given is chosen: ``'cv'`` by
         cross-validated simulation fit on the estimation data
@@ -198,6 +205,7 @@ def ls_subspace(data, order=None, horizon=None, instruments="past", selector=Non
     check_refine(refine, data)
     return identify(data, order, horizon, method=method, build=build, selection=selection,
                     blocks_per_horizon=2 if instruments == "past" else 1, statistic=statistic,
+                    normalize_outputs=bool(normalize_outputs),
                     finalize=partial(attach_noise_model, refine=refine))
 
 
@@ -216,8 +224,8 @@ def _ls_subspace(pb, *, instruments, selector, seed, estimate_x0, feedthrough,
     method = "ls_subspace"
     data = pb.data
     selector = check_selector(selector, pb.horizon, data.n_outputs, pb.candidates, pb.order)
-    # The outputs are normalised by their RMS s (so that the estimate does not depend on
-    # their units); Λ acts on the user's units, so on the normalised data it is
+    # The outputs are normalised by their RMS s (unless normalize_outputs=False), so that
+    # the estimate does not depend on their units; Λ acts on the user's units, so on the normalised data it is
     # Λ_n = Λ (I ⊗ S): then Λ Γ̄ = Λ_n Γ̄_n = I fixes the same basis. The default random
     # Λ is drawn for the normalised outputs, and info['selector'] holds it in the
     # user's units (Λ = Λ_n (I ⊗ S^{-1})), ready to be passed again.

@@ -38,9 +38,13 @@ log = logging.getLogger(__name__)
 
 METHODS = {
     "ls_subspace, instruments (default)": lambda d: ls_subspace(d, 3, horizon=5),
+    # the paper's estimators as printed: in the user's output units, one-shot (28) and
+    # (23) with the two power iterations of the first release
     "ls_subspace, instruments, paper (28)": lambda d: ls_subspace(
-        d, 3, horizon=5, instrument_weighting=False, power_iterations=0),
-    "ls_subspace, no instruments (23)": lambda d: ls_subspace(d, 3, horizon=5, instruments=None),
+        d, 3, horizon=5, instrument_weighting=False, power_iterations=0,
+        normalize_outputs=False),
+    "ls_subspace, no instruments (23)": lambda d: ls_subspace(
+        d, 3, horizon=5, instruments=None, power_iterations=2, normalize_outputs=False),
     "moesp": lambda d: moesp(d, 3, horizon=5),
     "n4sid": lambda d: n4sid(d, 3, horizon=5, weighting="n4sid"),
 }
