@@ -534,6 +534,11 @@ class StateSpace:
                 f"n_outputs={self.n_outputs}, {timing}, inputs={list(self.input_names)}, "
                 f"outputs={list(self.output_names)})")
 
+    def _repr_html_(self) -> str:
+        """Summary for Jupyter: order, channels, dt, stability, poles (see :mod:`subid._repr`)."""
+        from ._repr import statespace_html
+        return statespace_html(self)
+
     def _like(self, A, B, C, D, dt) -> "StateSpace":
         return StateSpace(A, B, C, D, dt, input_names=self.input_names,
                           output_names=self.output_names, info=dict(self.info))
