@@ -51,6 +51,7 @@ import scipy.linalg
 
 from ._subspace import choose_order, estimate_b_d, finish, prepare, shift_invariance
 from .errors import OrderError, SubidError
+from .delay import record_delay, shift_for_method
 from .model import StateSpace
 
 __all__ = ["ls_subspace", "random_selector"]
@@ -87,7 +88,8 @@ def _condition_1norm(M: np.ndarray) -> float:
 
 def ls_subspace(data, order=None, horizon=None, instruments="past", selector=None, seed=0,
                 estimate_x0=True, *, feedthrough=True, instrument_weighting=True,
-                power_iterations=2, bd_method="auto", statistic="auto") -> StateSpace:
+                power_iterations=2, bd_method="auto", statistic="auto",
+                input_delay=0) -> StateSpace:
     """Identify a discrete-time state-space model without SVD (seed 001).
 
     Parameters
@@ -137,6 +139,12 @@ def ls_subspace(data, order=None, horizon=None, instruments="past", selector=Non
         How the data are reduced (:mod:`subid.statistic`): QR factor of the
         Hankel matrix (accurate to rounding) or lagged products (25x faster,
         squares the condition number). ``'auto'``: QR up to 200,000 samples.
+    input_delay : int or sequence of int
+        Delay of every input in samples (one integer: all inputs): the model
+        is identified from ``u_j[k - d_j]`` to ``y[k]`` (the first ``max(d)``
+        output samples are left out, so ``info['x0']`` is the state at sample
+        ``max(d)``) and the delays are kept in ``info['input_delay']``, which
+        ``simulate`` and ``freqresp`` honour (:mod:`subid.delay`). IOData only.
 
     Returns
     -------
@@ -164,6 +172,7 @@ def ls_subspace(data, order=None, horizon=None, instruments="past", selector=Non
     True
     """
     method = "ls_subspace"
+    data, delays = shift_for_method(data, input_delay)
     power_iterations = check_options(instruments, power_iterations)
     # outputs keep the user's units: Λ acts on them (the basis it fixes must not
     # depend on a record's output scale); inputs are normalised internally
@@ -180,9 +189,9 @@ def ls_subspace(data, order=None, horizon=None, instruments="past", selector=Non
                                      bd_method=bd_method, feedthrough=feedthrough,
                                      estimate_x0=estimate_x0)
     A, B, C, x0 = core.to_selector_basis(B_q, x0_q)
-    return finish(pb, A, B, C, D, core.order, core.order_selection,
-                  **core.info(instruments, instrument_weighting, power_iterations),
-                  x0=x0, **reg)
+    return record_delay(finish(pb, A, B, C, D, core.order, core.order_selection,
+                               **core.info(instruments, instrument_weighting, power_iterations),
+                               x0=x0, **reg), delays)
 
 
 def check_options(instruments, power_iterations) -> int:

@@ -18,13 +18,14 @@ import numpy as np
 import scipy.linalg
 
 from ._subspace import choose_order, estimate_b_d, finish, prepare, shift_invariance
+from .delay import record_delay, shift_for_method
 from .model import StateSpace
 
 __all__ = ["moesp"]
 
 
 def moesp(data, order=None, horizon=None, *, feedthrough=True, estimate_x0=True,
-          bd_method="auto", statistic="auto") -> StateSpace:
+          bd_method="auto", statistic="auto", input_delay=0) -> StateSpace:
     """Identify a discrete-time model by PO-MOESP.
 
     Parameters
@@ -47,12 +48,19 @@ def moesp(data, order=None, horizon=None, *, feedthrough=True, estimate_x0=True,
         As in :func:`subid.ls_subspace`.
     statistic : {'auto', 'qr', 'gram'}
         As in :func:`subid.ls_subspace`.
+    input_delay : int or sequence of int
+        Delay of every input in samples (one integer: all inputs): the model
+        is identified from ``u_j[k - d_j]`` to ``y[k]`` (the first ``max(d)``
+        output samples are left out, so ``info['x0']`` is the state at sample
+        ``max(d)``) and the delays are kept in ``info['input_delay']``, which
+        ``simulate`` and ``freqresp`` honour (:mod:`subid.delay`). IOData only.
 
     Returns
     -------
     StateSpace
         Discrete-time model with ``dt = data.dt``.
     """
+    data, delays = shift_for_method(data, input_delay)
     pb = prepare(data, order, horizon, method="moesp", statistic=statistic)
     data, f, hf = pb.data, pb.horizon, pb.factor
     ny, nu = data.n_outputs, data.n_inputs
@@ -68,5 +76,5 @@ def moesp(data, order=None, horizon=None, *, feedthrough=True, estimate_x0=True,
                                  bd_method=bd_method, feedthrough=feedthrough,
                                  estimate_x0=estimate_x0)
     C = C * pb.output_scale[:, None]
-    return finish(pb, A, B, C, D, n, order_selection, singular_values=s,
-                  shift_residual=shift_residual, x0=x0, **reg)
+    return record_delay(finish(pb, A, B, C, D, n, order_selection, singular_values=s,
+                               shift_residual=shift_residual, x0=x0, **reg), delays)

@@ -24,6 +24,7 @@ import numpy as np
 import scipy.linalg
 
 from ._subspace import choose_order, finish, prepare
+from .delay import record_delay, shift_for_method
 from .model import StateSpace
 
 __all__ = ["n4sid"]
@@ -63,7 +64,8 @@ def _lstsq_rows(regressors: np.ndarray, targets: np.ndarray) -> np.ndarray:
                               check_finite=False)[0].T
 
 
-def n4sid(data, order=None, horizon=None, *, feedthrough=True, statistic="auto") -> StateSpace:
+def n4sid(data, order=None, horizon=None, *, feedthrough=True, statistic="auto",
+          input_delay=0) -> StateSpace:
     """Identify a discrete-time model by N4SID (unit weights, state sequences).
 
     Parameters
@@ -83,12 +85,19 @@ def n4sid(data, order=None, horizon=None, *, feedthrough=True, statistic="auto")
         Estimate D (else D = 0 and the state regression omits it).
     statistic : {'auto', 'qr', 'gram'}
         As in :func:`subid.ls_subspace`.
+    input_delay : int or sequence of int
+        Delay of every input in samples (one integer: all inputs): the model
+        is identified from ``u_j[k - d_j]`` to ``y[k]`` (the first ``max(d)``
+        output samples are left out, so ``info['x0']`` is the state at sample
+        ``max(d)``) and the delays are kept in ``info['input_delay']``, which
+        ``simulate`` and ``freqresp`` honour (:mod:`subid.delay`). IOData only.
 
     Returns
     -------
     StateSpace
         Discrete-time model with ``dt = data.dt``.
     """
+    data, delays = shift_for_method(data, input_delay)
     pb = prepare(data, order, horizon, method="n4sid", statistic=statistic)
     data, i, hf = pb.data, pb.horizon, pb.factor
     ny, nu = data.n_outputs, data.n_inputs
@@ -121,5 +130,5 @@ def n4sid(data, order=None, horizon=None, *, feedthrough=True, statistic="auto")
     resid = lhs - np.vstack([A @ x_i + B @ u_ii, C @ x_i + D @ u_ii])
     B, C, D = pb.unscale(B, C, D)        # from the normalised channels to the user's units
     residual = np.linalg.norm(resid) / max(np.linalg.norm(lhs), 1e-300)
-    return finish(pb, A, B, C, D, n, order_selection, singular_values=s,
-                  state_regression_residual=float(residual))
+    return record_delay(finish(pb, A, B, C, D, n, order_selection, singular_values=s,
+                               state_regression_residual=float(residual)), delays)
