@@ -73,7 +73,8 @@ def test_bode_hz_axis_and_nyquist_cut(mimo):
     assert x.max() <= math.pi / 0.1 / (2 * math.pi) * (1 + 1e-9)
     np.testing.assert_allclose(x, w[w <= math.pi / 0.1] / (2 * math.pi))
     assert "Hz" in fig.axes[-1].get_xlabel()
-    assert [t.get_text() for t in ax.get_legend().get_texts()] == ["a", "b"]
+    (legend,) = [a.get_legend() for a in fig.axes if a.get_legend() is not None]
+    assert [t.get_text() for t in legend.get_texts()] == ["a", "b"]
 
 
 def test_bode_rejects_models_of_different_shapes(mimo):
