@@ -41,8 +41,8 @@ __all__ = ["identification_report", "index_page", "evaluate", "figure_html", "wr
 log = logging.getLogger(__name__)
 
 #: Section ids of an identification report, in order (``convergence`` only for online runs).
-SECTIONS = ("summary", "data", "compare", "bode", "poles", "residuals", "convergence",
-            "matrices")
+SECTIONS = ("summary", "data", "compare", "bode", "poles", "order", "residuals",
+            "convergence", "matrices")
 
 _CSS = """
 body{font-family:system-ui,-apple-system,"Segoe UI",Roboto,Helvetica,Arial,sans-serif;
@@ -449,6 +449,13 @@ def identification_report(models, estimation, validation=None, *, title="subid r
         "poles of each model with the unit circle (discrete time) or the imaginary axis "
         "(continuous time)", "pole map") + pole_tables))
     nav.append(("poles", "poles"))
+
+    # -- order selection -------------------------------------------------
+    body.append(_section("order", "Order selection", _plot_or_note(
+        lambda: plot.order_selection(models),
+        "singular values (MOESP, N4SID, ct) or SVD-free rank profile (ls) relative to the "
+        "first; ring and dotted line: the order of each model", "order-selection chart")))
+    nav.append(("order", "order"))
 
     # -- residuals -------------------------------------------------------
     body.append(_section("residuals", "Residual analysis", _plot_or_note(
