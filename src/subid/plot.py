@@ -611,8 +611,10 @@ def data_overview(data, *, split=None, title=None):
     """
     plt = _pyplot()
     data = _check_data(data)
-    channels = [(f"input\n{n}", data.u[:, k], "C0") for k, n in enumerate(data.input_names)]
-    channels += [(f"output\n{n}", data.y[:, k], "C3") for k, n in enumerate(data.output_names)]
+    # measured data in neutral tones (outputs black as in compare): the palette colours
+    # belong to the methods (METHOD_COLORS)
+    channels = [(f"input\n{n}", data.u[:, k], "0.45") for k, n in enumerate(data.input_names)]
+    channels += [(f"output\n{n}", data.y[:, k], "k") for k, n in enumerate(data.output_names)]
     rows = len(channels)
     fig, axes = plt.subplots(rows, 1, figsize=(9, 1.25 * rows + 0.9), sharex=True,
                              squeeze=False)

@@ -421,7 +421,7 @@ def identification_report(models, estimation, validation=None, *, title="subid r
         split = float(validation.t[0])
     body.append(_section("data", "Data", _plot_or_note(
         lambda: plot.data_overview(whole, split=split),
-        "inputs (blue) and outputs (red); the validation part is shaded", "data overview")))
+        "inputs (grey) and outputs (black); the validation part is shaded", "data overview")))
     nav.append(("data", "data"))
 
     # -- comparison ------------------------------------------------------
