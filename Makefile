@@ -1,14 +1,19 @@
 # Two set-up commands work on a fresh machine with Python 3.11, make and pip:
 #   make demo   creates .venv, installs, identifies the bundled datasets, writes demo_out/
 #   make test   creates .venv if missing, installs, runs the tests
+#   make docs   creates .venv-docs, builds the documentation site into site/ (warnings are errors)
 PYTHON ?= python3
 VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
+# The demo needs only the plotting extra; the tests need the test extras.
+DEMO_STAMP := $(VENV)/.installed-plot
+DOCS_VENV := .venv-docs
+DOCS_STAMP := $(DOCS_VENV)/.installed
 
 BENCH_VENV := .venv-bench
 
-.PHONY: demo gallery test test-long bench bench-realdata experiment clean
+.PHONY: demo gallery test test-long bench bench-realdata experiment docs clean
 
 $(PY):
 	$(PYTHON) -m venv $(VENV)
@@ -18,7 +23,22 @@ $(STAMP): $(PY) pyproject.toml
 	$(PY) -m pip install --quiet -e ".[test]"
 	touch $(STAMP)
 
-demo: $(STAMP)
+$(DEMO_STAMP): $(PY) pyproject.toml
+	$(PY) -m pip install --quiet --upgrade pip
+	$(PY) -m pip install --quiet -e ".[plot]"
+	touch $(DEMO_STAMP)
+
+$(DOCS_VENV)/bin/python:
+	$(PYTHON) -m venv $(DOCS_VENV)
+
+$(DOCS_STAMP): $(DOCS_VENV)/bin/python pyproject.toml
+	$(DOCS_VENV)/bin/python -m pip install --quiet --upgrade pip
+	# the docs extra only: mkdocstrings reads src/ statically, so numpy & co. are not needed
+	$(DOCS_VENV)/bin/python -m pip install --quiet $$($(DOCS_VENV)/bin/python -c \
+	  "import tomllib; print(' '.join(tomllib.load(open('pyproject.toml', 'rb'))['project']['optional-dependencies']['docs']))")
+	touch $(DOCS_STAMP)
+
+demo: $(DEMO_STAMP)
 	OPENBLAS_NUM_THREADS=1 $(VENV)/bin/subid demo --out demo_out
 
 gallery: $(STAMP)
@@ -47,5 +67,11 @@ experiment: $(STAMP)
 	OPENBLAS_NUM_THREADS=1 $(PY) -m subid.experiments.seed000 --out results/seed000
 	OPENBLAS_NUM_THREADS=1 $(PY) -m subid.experiments.seed002 --out results/seed002
 
+# HTML documentation from docs/ and the docstrings; --strict turns every warning into an error,
+# then every name in subid.__all__ must appear in the API reference.
+docs: $(DOCS_STAMP)
+	NO_MKDOCS_2_WARNING=1 $(DOCS_VENV)/bin/mkdocs build --strict --site-dir site
+	$(DOCS_VENV)/bin/python docs/check_api.py site
+
 clean:
-	rm -rf $(VENV) $(BENCH_VENV) demo_out results
+	rm -rf $(VENV) $(BENCH_VENV) $(DOCS_VENV) demo_out results site

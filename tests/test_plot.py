@@ -73,7 +73,8 @@ def test_bode_hz_axis_and_nyquist_cut(mimo):
     assert x.max() <= math.pi / 0.1 / (2 * math.pi) * (1 + 1e-9)
     np.testing.assert_allclose(x, w[w <= math.pi / 0.1] / (2 * math.pi))
     assert "Hz" in fig.axes[-1].get_xlabel()
-    assert [t.get_text() for t in ax.get_legend().get_texts()] == ["a", "b"]
+    (legend,) = [a.get_legend() for a in fig.axes if a.get_legend() is not None]
+    assert [t.get_text() for t in legend.get_texts()] == ["a", "b"]
 
 
 def test_bode_rejects_models_of_different_shapes(mimo):
@@ -237,7 +238,7 @@ def test_plot_functions_never_print(mimo, capsys):
     assert captured.out == "" and captured.err == ""
 
 
-def test_order_selection_chart():
+def test_order_scores_chart():
     import warnings
     import subid
     from subid import plot
@@ -245,9 +246,10 @@ def test_order_selection_chart():
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         models = {"ls": subid.ls_subspace(est), "n4sid gap": subid.n4sid(est, selection="gap")}
-    fig = plot.order_selection(models)
-    assert len(fig.axes) == 4
+    fig = plot.order_scores(models)
+    assert len(fig.axes) == 2
     labels = [t.get_text() for ax in fig.axes for t in ax.get_legend().get_texts()]
-    assert any(lab.startswith("chosen: n=") for lab in labels)
+    assert "chosen: n=%d, f=%d" % (models["ls"].order, models["ls"].info["horizon"]) in labels
+    assert "chosen: n=%d" % models["n4sid gap"].order in labels
     with pytest.raises(subid.errors.DataError, match="order was"):
-        plot.order_selection(subid.moesp(est, 2, horizon=10))
+        plot.order_scores(subid.moesp(est, 2, horizon=10))

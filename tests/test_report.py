@@ -94,6 +94,8 @@ def test_report_has_every_section_with_embedded_images(dryer_report):
     assert p.external == []
     assert not p.tags & {"script", "link", "iframe", "object", "embed"}
     assert "dryer &lt;test&gt;" in dryer_report and "a note &amp; more" in dryer_report
+    (order_chart,) = p.images["order"]          # both models carry a profile
+    check_png(order_chart)
 
 
 def test_report_numbers_are_those_of_the_library(dryer_models, dryer_report):

@@ -12,11 +12,12 @@ and :func:`pole_error` validate them. Errors are :mod:`subid.errors`
 exceptions (all ``ValueError`` subclasses).
 """
 
-from . import basis, datasets, errors, interop, plot, systems
+from . import basis, datasets, delay, errors, interop, plot, systems
 from .adaptive import AdaptiveIdentifier
 from .config import thread_limit
 from .ct_subspace import ct_subspace, ct_subspace_paper, dt_to_ct
 from .data import IOData
+from .delay import absorb_delay, delay_inputs, estimate_delay
 from .io import read, read_chunks
 from .ls_subspace import ls_subspace
 from .metrics import fit_percent, markov_error, pole_error
@@ -52,12 +53,16 @@ __all__ = [
     "predict",
     "pem",
     "residuals",
+    "estimate_delay",
+    "delay_inputs",
+    "absorb_delay",
     "errors",
     "systems",
     "basis",
     "datasets",
     "interop",
     "plot",
+    "delay",
 ]
 
 __version__ = "0.1.0"

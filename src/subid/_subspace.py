@@ -15,12 +15,19 @@ import numpy as np
 import scipy.linalg
 
 from ._hankel import HankelFactor
-from ._validation import check_int
-from .data import IOData
 from ._regression import fit_b_d_projection, fit_b_d_x0
 from ._selection import SELECTION_RULES, cross_validate, default_gap_horizon
-from .errors import (DataError, ExcitationWarning, NotExcitingError, OrderError, SubidError,
-                     TooFewSamplesError, UnstableModelWarning)
+from ._validation import check_int
+from .data import IOData
+from .errors import (
+    DataError,
+    ExcitationWarning,
+    NotExcitingError,
+    OrderError,
+    SubidError,
+    TooFewSamplesError,
+    UnstableModelWarning,
+)
 from .model import StateSpace
 from .statistic import HankelStatistic
 
@@ -487,7 +494,7 @@ def initial_state(A, B, C, D, data):
     or when the simulation overflows)."""
     if not isinstance(data, IOData):
         return None
-    from .metrics import simulate_fit       # metrics depends on the model module only
+    from .metrics import simulate_fit  # metrics depends on the model module only
     try:
         with np.errstate(all="ignore"):
             return simulate_fit(StateSpace(A, B, C, D, data.dt), data)[1]
@@ -632,6 +639,15 @@ def identify(data, order, horizon, *, method: str, build, selection: str,
         problem = prepare(data, order, horizon, **options)
         model = build(problem)
     return model if finalize is None else finalize(model, problem)
+
+
+def finalize(model: StateSpace, problem: Problem, *, refine, delays) -> StateSpace:
+    """The final model of a DT batch method: its noise model (K and the innovation
+    covariance, then ``refine``; :func:`subid.noise_model.attach_noise_model`) and its
+    input delays (:func:`subid.delay.record_delay`). Run once, on the final model."""
+    from .delay import record_delay
+    from .noise_model import attach_noise_model
+    return record_delay(attach_noise_model(model, problem, refine), delays)
 
 
 def output_growth(y: np.ndarray) -> float:

@@ -761,3 +761,8 @@ class AdaptiveIdentifier:
     def __repr__(self) -> str:
         return (f"AdaptiveIdentifier(order={self._n}, n_inputs={self._nu}, "
                 f"n_outputs={self._ny}, horizon={self._f}, samples={self.n_samples})")
+
+    def _repr_html_(self) -> str:
+        """Summary for Jupyter: settings, samples seen and the current model."""
+        from ._repr import adaptive_settings, online_html
+        return online_html(self, adaptive_settings(self))

@@ -373,7 +373,12 @@ def load_data(source: str, inputs=None, outputs=None, dt=None, time_column=None,
         return data, meta["name"], notes
     data = read(source, inputs=inputs, outputs=outputs, dt=dt, time=time_column,
                 delimiter=delimiter)
-    return data, os.path.basename(source), [f"Data file: {source}"]
+    notes = [f"Data file: {source}"]
+    if dt is None and time_column is None and data.dt == 1.0 and not data.has_time_stamps:
+        notes.append("No sampling period given (--dt) and no time column (--time): time is "
+                     "counted in samples (dt = 1), frequencies in rad/sample.")
+        log.warning("%s: %s", source, notes[-1])
+    return data, os.path.basename(source), notes
 
 
 def _select(names, spec, role, source) -> list[int]:
@@ -772,6 +777,8 @@ def _print_summary(source, record, spec, model, result, est, val, seconds, files
     if _state().quiet:
         return
     timing = f"dt = {record.dt:g}" if record.dt is not None else "non-uniform time stamps"
+    if record.dt == 1.0 and not getattr(record, "has_time_stamps", False):
+        timing += " (time in samples)"
     lines = [f"data        {source}: {record.n_samples} samples, {record.n_inputs} input(s), "
              f"{record.n_outputs} output(s), {timing}",
              f"method      {spec.name} ({spec.attribute})",
@@ -1313,6 +1320,19 @@ D = np.array({D!r})
 '''
 
 
+def _operating_point_source(model) -> str:
+    """Python lines stating the operating point (the means removed by --detrend)."""
+    from .report import operating_point
+    point = operating_point(model)
+    if point is None:
+        return ""
+    u0, y0 = point
+    return ("# The model relates deviations from the operating point, the channel means\n"
+            "# removed before identification: in the data's units y = G(u - u0) + y0.\n"
+            f"u0 = np.array({u0.tolist()!r})  # {', '.join(model.input_names)}\n"
+            f"y0 = np.array({y0.tolist()!r})  # {', '.join(model.output_names)}\n")
+
+
 def _python_source(model, target: str, source: str) -> str:
     mats = {k: getattr(model, k).tolist() for k in "ABCD"}
     if target == "control":
@@ -1320,11 +1340,13 @@ def _python_source(model, target: str, source: str) -> str:
         build = (f"sys = control.ss(A, B, C, D, {dt!r}, inputs={list(model.input_names)!r}, "
                  f"outputs={list(model.output_names)!r})")
         return _PY_TEMPLATE.format(what="python-control model", source=source,
-                                   import_line="import control", build=build, **mats)
+                                   import_line="import control", build=build, **mats) \
+            + _operating_point_source(model)
     build = "sys = signal.StateSpace(A, B, C, D)" if model.dt == 0 else \
         f"sys = signal.StateSpace(A, B, C, D, dt={model.dt!r})"
     return _PY_TEMPLATE.format(what="scipy.signal model", source=source,
-                               import_line="from scipy import signal", build=build, **mats)
+                               import_line="from scipy import signal", build=build, **mats) \
+        + _operating_point_source(model)
 
 
 @cli.command(epilog="\b\nExamples:\n"
@@ -1381,6 +1403,11 @@ def convert(model_path, target, conversion, dt, out):
             path = out or f"{stem}.mat"
             save_mat(model, path)
             what = "MATLAB ss fields A, B, C, D, Ts, InputName, OutputName"
+            from .report import operating_point
+            if (point := operating_point(model)) is not None:
+                what += ("; the model is around the operating point u0 = "
+                         f"{np.round(point[0], 6).tolist()}, y0 = "
+                         f"{np.round(point[1], 6).tolist()} (not stored in the .mat file)")
         elif t == "json":
             path = out or f"{stem}.json"
             if os.path.abspath(path) == os.path.abspath(model_path):

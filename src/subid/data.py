@@ -155,6 +155,11 @@ class IOData:
         return (f"IOData(n_samples={self.n_samples}, inputs={list(self.input_names)}, "
                 f"outputs={list(self.output_names)}, {timing})")
 
+    def _repr_html_(self) -> str:
+        """Summary for Jupyter: samples, timing, per-channel statistics and sparklines."""
+        from ._repr import iodata_html
+        return iodata_html(self)
+
     # -- interoperability -------------------------------------------------
     @classmethod
     def from_pandas(cls, df, inputs, outputs, time=None, *, dt=None) -> "IOData":

@@ -50,11 +50,19 @@ from functools import partial
 import numpy as np
 import scipy.linalg
 
-from ._subspace import (choose_order, estimate_b_d, finish, identify, shift_invariance,
-                        stable_choice)
+from ._subspace import (
+    choose_order,
+    estimate_b_d,
+    finalize,
+    finish,
+    identify,
+    shift_invariance,
+    stable_choice,
+)
+from .delay import shift_for_method
 from .errors import OrderError, SubidError
 from .model import StateSpace
-from .noise_model import attach_noise_model, check_refine
+from .noise_model import check_refine
 
 __all__ = ["ls_subspace", "random_selector"]
 
@@ -92,7 +100,7 @@ def ls_subspace(data, order=None, horizon=None, instruments="past", selector=Non
                 estimate_x0=True, *, feedthrough=True, instrument_weighting=True,
                 power_iterations=8, normalize_outputs=True, selection="cv",
                 stability="auto", bd_method="auto",
-                statistic="auto", refine=None) -> StateSpace:
+                statistic="auto", refine=None, input_delay=0) -> StateSpace:
     """Identify a discrete-time state-space model without SVD (seed 001).
 
     Parameters
@@ -167,6 +175,11 @@ def ls_subspace(data, order=None, horizon=None, instruments="past", selector=Non
     refine : {None, 'pem'}
         ``'pem'``: refine the final subspace estimate by prediction-error
         minimisation (:func:`subid.pem`, default options) on the record.
+    input_delay : int or sequence of int
+        Dead time of each input in samples (:func:`subid.estimate_delay`):
+        the model is identified from the delayed inputs and records the
+        delays in ``info['input_delay']``; ``simulate`` and ``freqresp``
+        honour them.
 
     Returns
     -------
@@ -203,10 +216,11 @@ def ls_subspace(data, order=None, horizon=None, instruments="past", selector=Non
                     power_iterations=power_iterations, stability=stability,
                     bd_method=bd_method)
     check_refine(refine, data)
+    data, delays = shift_for_method(data, input_delay)
     return identify(data, order, horizon, method=method, build=build, selection=selection,
                     blocks_per_horizon=2 if instruments == "past" else 1, statistic=statistic,
                     normalize_outputs=bool(normalize_outputs),
-                    finalize=partial(attach_noise_model, refine=refine))
+                    finalize=partial(finalize, refine=refine, delays=delays))
 
 
 def selector_horizon(selector, data) -> int:

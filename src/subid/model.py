@@ -40,6 +40,7 @@ import numpy as np
 from scipy import linalg
 
 from . import _simulate
+from .delay import apply_to_inputs, frequency_factor, input_delay_of
 from ._validation import as_signal, check_dt, check_int, check_time_stamps
 from .data import IOData
 from ._files import atomic_write
@@ -603,6 +604,11 @@ class StateSpace:
                 f"n_outputs={self.n_outputs}, {timing}, inputs={list(self.input_names)}, "
                 f"outputs={list(self.output_names)})")
 
+    def _repr_html_(self) -> str:
+        """Summary for Jupyter: order, channels, dt, stability, poles (see :mod:`subid._repr`)."""
+        from ._repr import statespace_html
+        return statespace_html(self)
+
     def _like(self, A, B, C, D, dt, K=None, noise_cov=None) -> "StateSpace":
         return StateSpace(A, B, C, D, dt, input_names=self.input_names,
                           output_names=self.output_names, info=dict(self.info), K=K,
@@ -702,6 +708,8 @@ class StateSpace:
                                     f"{float(steps.max())!r} but the model is discrete-time with "
                                     f"period dt={self._dt!r}; t must be uniform with that "
                                     "period (or omit t)")
+            if (delays := input_delay_of(self)) is not None:    # info['input_delay']
+                u = apply_to_inputs(u, delays)
             y, x = _simulate.simulate_discrete(self._A, self._B, self._C, self._D, u, x0)
         return (y, x) if return_state else y
 
@@ -826,6 +834,8 @@ class StateSpace:
             if X is None or not np.isfinite(X).all():
                 self._raise_pole_hit(w[a:a + chunk], sc)
             G[a:a + chunk] = self._C @ X + self._D
+        if not self.is_continuous and (delays := input_delay_of(self)) is not None:
+            G *= frequency_factor(delays, w, self._dt)       # info['input_delay']
         return G
 
     def _raise_pole_hit(self, w, s):

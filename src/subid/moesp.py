@@ -30,17 +30,27 @@ from functools import partial
 import numpy as np
 import scipy.linalg
 
-from ._subspace import (check_weighting, choose_order, cva_factor, estimate_b_d, finish,
-                        identify, shift_invariance, stable_choice)
+from ._subspace import (
+    check_weighting,
+    choose_order,
+    cva_factor,
+    estimate_b_d,
+    finalize,
+    finish,
+    identify,
+    shift_invariance,
+    stable_choice,
+)
+from .delay import shift_for_method
 from .model import StateSpace
-from .noise_model import attach_noise_model, check_refine
+from .noise_model import check_refine
 
 __all__ = ["moesp"]
 
 
 def moesp(data, order=None, horizon=None, *, weighting="moesp", selection="cv",
           stability="auto", feedthrough=True, estimate_x0=True, bd_method="auto",
-          statistic="auto", refine=None) -> StateSpace:
+          statistic="auto", refine=None, input_delay=0) -> StateSpace:
     """Identify a discrete-time model by PO-MOESP.
 
     Parameters
@@ -79,6 +89,11 @@ def moesp(data, order=None, horizon=None, *, weighting="moesp", selection="cv",
     refine : {None, 'pem'}
         ``'pem'``: refine the final subspace estimate by prediction-error
         minimisation (:func:`subid.pem`, default options) on the record.
+    input_delay : int or sequence of int
+        Dead time of each input in samples (:func:`subid.estimate_delay`):
+        the model is identified from the delayed inputs and records the
+        delays in ``info['input_delay']``; ``simulate`` and ``freqresp``
+        honour them.
 
     Returns
     -------
@@ -89,9 +104,10 @@ def moesp(data, order=None, horizon=None, *, weighting="moesp", selection="cv",
     build = partial(_moesp, weighting=weighting, stability=stability, feedthrough=feedthrough,
                     estimate_x0=estimate_x0, bd_method=bd_method)
     check_refine(refine, data)
+    data, delays = shift_for_method(data, input_delay)
     return identify(data, order, horizon, method="moesp", build=build, selection=selection,
                     statistic=statistic,
-                    finalize=partial(attach_noise_model, refine=refine))
+                    finalize=partial(finalize, refine=refine, delays=delays))
 
 
 def weighted_projection(L: np.ndarray, a: int, b: int, weighting: str):

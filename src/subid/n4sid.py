@@ -24,10 +24,21 @@ from functools import partial
 import numpy as np
 import scipy.linalg
 
-from ._subspace import (check_weighting, choose_order, cva_factor, estimate_b_d, finish,
-                        identify, initial_state, stability_request, stable_choice)
+from ._subspace import (
+    check_weighting,
+    choose_order,
+    cva_factor,
+    estimate_b_d,
+    finalize,
+    finish,
+    identify,
+    initial_state,
+    stability_request,
+    stable_choice,
+)
+from .delay import shift_for_method
 from .model import StateSpace
-from .noise_model import attach_noise_model, check_refine
+from .noise_model import check_refine
 
 __all__ = ["n4sid"]
 
@@ -67,7 +78,7 @@ def _lstsq_rows(regressors: np.ndarray, targets: np.ndarray) -> np.ndarray:
 
 def n4sid(data, order=None, horizon=None, *, weighting="cva", selection="cv",
           stability="auto", feedthrough=True, estimate_x0=True,
-          statistic="auto", refine=None) -> StateSpace:
+          statistic="auto", refine=None, input_delay=0) -> StateSpace:
     """Identify a discrete-time model by N4SID (state sequences).
 
     Parameters
@@ -106,6 +117,11 @@ def n4sid(data, order=None, horizon=None, *, weighting="cva", selection="cv",
     refine : {None, 'pem'}
         ``'pem'``: refine the final subspace estimate by prediction-error
         minimisation (:func:`subid.pem`, default options) on the record.
+    input_delay : int or sequence of int
+        Dead time of each input in samples (:func:`subid.estimate_delay`):
+        the model is identified from the delayed inputs and records the
+        delays in ``info['input_delay']``; ``simulate`` and ``freqresp``
+        honour them.
 
     Returns
     -------
@@ -116,9 +132,10 @@ def n4sid(data, order=None, horizon=None, *, weighting="cva", selection="cv",
     build = partial(_n4sid, weighting=weighting, stability=stability, feedthrough=feedthrough,
                     estimate_x0=estimate_x0)
     check_refine(refine, data)
+    data, delays = shift_for_method(data, input_delay)
     return identify(data, order, horizon, method="n4sid", build=build, selection=selection,
                     statistic=statistic,
-                    finalize=partial(attach_noise_model, refine=refine))
+                    finalize=partial(finalize, refine=refine, delays=delays))
 
 
 def _n4sid(pb, *, weighting, stability, feedthrough, estimate_x0) -> StateSpace:

@@ -12,8 +12,14 @@ decides (``fig.savefig(...)``, or display in a notebook). Without a display
 :func:`poles`                          pole map with unit circle / imaginary axis
 :func:`residuals`                      residual whiteness and input correlation
 :func:`convergence`                    poles and parameters of an online run
+:func:`order_selection`                singular values / rank profile, chosen order
 :func:`error_histograms`               Monte-Carlo error distributions
 =====================================  ==========================================
+
+Every figure is drawn at 150 dpi with 10 pt text (:data:`STYLE`); a method has
+the same colour in every figure (:data:`METHOD_COLORS`, by
+``model.info['method']``); legends sit beside the axes, never over the data;
+unstable models are dashed and marked "(unstable)" in the Bode diagram.
 
 >>> import subid
 >>> data = subid.datasets.load("dryer").detrend()          # doctest: +SKIP
@@ -35,12 +41,83 @@ from .errors import DataError, ModelError
 
 __all__ = ["poles", "error_histograms", "bode", "compare", "residuals",
            "residual_correlations", "convergence", "data_overview", "frequency_grid",
-           "simulated_output"]
+           "simulated_output", "order_selection", "STYLE", "METHOD_COLORS"]
 
 log = logging.getLogger(__name__)
 
 # Standard normal quantile for a two-sided 99 % band (scipy.special.ndtri(0.995)).
 _Z99 = 2.5758293035489004
+
+#: matplotlib settings of every figure: 150 dpi, 10 pt text (9 pt ticks and legends).
+STYLE = {"figure.dpi": 150, "savefig.dpi": "figure", "font.size": 10,
+         "axes.titlesize": 10, "axes.labelsize": 10, "xtick.labelsize": 9,
+         "ytick.labelsize": 9, "legend.fontsize": 9, "figure.titlesize": 11}
+
+#: Colour of each method (``model.info['method']``) in every figure; a second model
+#: of the same method in one figure takes the next free colour.
+METHOD_COLORS = {"ls_subspace": "C0", "moesp": "C1", "n4sid": "C2", "ct_subspace": "C3",
+                 "ct_subspace_paper": "C4", "RecursiveSubspace": "C5",
+                 "seed000_adaptive": "C6", "dt_to_ct": "C7", "true": "k"}
+_PALETTE = [f"C{k}" for k in range(10)]
+# Width of one legend character at 9 pt, inches (for the room beside the axes).
+_LEGEND_CHAR_IN = 0.068
+
+
+def _styled(fn):
+    """Draw ``fn``'s figure under :data:`STYLE` (fonts are fixed when text is created)."""
+    import functools
+
+    @functools.wraps(fn)
+    def wrapper(*args, **kwargs):
+        _pyplot()
+        import matplotlib
+        with matplotlib.rc_context(STYLE):
+            return fn(*args, **kwargs)
+    return wrapper
+
+
+def _method_of(model) -> str | None:
+    info = getattr(model, "info", None)
+    method = info.get("method") if isinstance(info, dict) else None
+    return str(method) if method else None
+
+
+def colors_for(entries) -> list[str]:
+    """One distinct colour per entry: the method's colour (:data:`METHOD_COLORS`)
+    when free, else the first unused one. ``entries``: (label, model or None)."""
+    used, out = set(), []
+    for label, model in entries:
+        method = _method_of(model) if model is not None else None
+        want = METHOD_COLORS.get(method) or METHOD_COLORS.get(str(label))
+        if want is None or want in used:
+            want = next((c for c in _PALETTE if c not in used and
+                         c not in METHOD_COLORS.values()), None) or \
+                next((c for c in _PALETTE if c not in used), _PALETTE[len(out) % 10])
+        used.add(want)
+        out.append(want)
+    return out
+
+
+def _legend_room(labels, ncol: int = 1) -> float:
+    """Inches needed beside the axes for a legend with these labels."""
+    longest = max((len(str(t)) for t in labels), default=0)
+    return 0.25 + ncol * (0.45 + _LEGEND_CHAR_IN * longest)
+
+
+def _legend_beside(ax, handles=None, labels=None, ncol: int = 1):
+    """Legend to the right of ``ax``, top aligned: it never covers the data."""
+    kwargs = dict(loc="upper left", bbox_to_anchor=(1.02, 1.0), borderaxespad=0.0,
+                  ncol=ncol, frameon=False)
+    if handles is not None:
+        return ax.legend(handles, labels, **kwargs)
+    return ax.legend(**kwargs)
+
+
+def is_unstable(model) -> bool:
+    """True when a pole lies outside the unit circle (discrete time) or in the
+    right half plane (continuous time); marginal poles count as unstable."""
+    p = model.poles()
+    return bool(np.any(np.abs(p) >= 1.0)) if model.dt > 0 else bool(np.any(p.real >= 0.0))
 
 
 def _pyplot():
@@ -173,6 +250,7 @@ def _finite(values: np.ndarray) -> np.ndarray:
 # ---------------------------------------------------------------------------
 # pole map
 # ---------------------------------------------------------------------------
+@_styled
 def poles(models, reference=None, *, labels=None, ax=None, title=None, markersize=4,
           marker=".", alpha=0.4):
     """Pole map of one or several groups of models.
@@ -217,30 +295,49 @@ def poles(models, reference=None, *, labels=None, ax=None, title=None, markersiz
     kinds = {m.dt > 0 for group in groups.values() for m in group}
     if reference is not None:
         kinds.add(reference.dt > 0)
+    colors = dict(zip(groups, colors_for((k, g[0] if g else None)
+                                         for k, g in groups.items())))
+    legend_labels = list(groups) + (["true"] if reference is not None else [])
+    room = _legend_room(legend_labels)
     if ax is None and len(kinds) == 2:
-        fig, axes = plt.subplots(1, 2, figsize=(10.5, 5))
+        fig, axes = plt.subplots(1, 2, figsize=(10.5 + room, 5))
         for sub, discrete in zip(axes, (True, False)):
             part = {k: [m for m in g if (m.dt > 0) == discrete] for k, g in groups.items()}
             ref = reference if reference is not None and (reference.dt > 0) == discrete \
                 else None
             _pole_axes(sub, {k: g for k, g in part.items() if g}, ref, discrete, markersize,
-                       marker, alpha)
+                       marker, alpha, colors, legend=False)
             sub.set_title("discrete time (z plane)" if discrete else
-                          "continuous time (s plane)", fontsize="small")
+                          "continuous time (s plane)")
+        handles = [h for a in axes for h in a.get_legend_handles_labels()[0]]
+        names = [n for a in axes for n in a.get_legend_handles_labels()[1]]
+        seen = {}
+        for h, n in zip(handles, names):
+            seen.setdefault(n, h)
+        _legend_beside(axes[-1], list(seen.values()), list(seen))
         if title:
             fig.suptitle(title)
-        fig.tight_layout()
+        fig.tight_layout(rect=(0, 0, 1 - room / fig.get_figwidth(), 1))
         return fig
-    fig = ax.figure if ax is not None else plt.figure(figsize=(5.5, 5))
+    own = ax is None
+    fig = ax.figure if ax is not None else plt.figure(figsize=(5.0 + room, 5))
     ax = ax if ax is not None else fig.add_subplot(111)
     discrete = True if not kinds else kinds.pop()
-    _pole_axes(ax, groups, reference, discrete, markersize, marker, alpha)
+    _pole_axes(ax, groups, reference, discrete, markersize, marker, alpha, colors,
+               legend=not own)
+    if own and (groups or reference is not None):
+        _legend_beside(ax)
+        fig.subplots_adjust(left=0.85 / fig.get_figwidth(),
+                            right=1 - (room + 0.1) / fig.get_figwidth(),
+                            bottom=0.6 / 5, top=1 - (0.5 if title else 0.25) / 5)
     if title:
         ax.set_title(title)
     return fig
 
 
-def _pole_axes(ax, groups, reference, discrete, markersize, marker, alpha):
+def _pole_axes(ax, groups, reference, discrete, markersize, marker, alpha, colors=None,
+               legend=True):
+    colors = colors or {}
     if reference is not None:      # drawn first: the estimates must stay visible
         q = reference.poles()
         ax.plot(q.real, q.imag, "o", ms=16, mfc="none", mec="k", mew=1.2, zorder=1,
@@ -248,7 +345,7 @@ def _pole_axes(ax, groups, reference, discrete, markersize, marker, alpha):
     for label, group in groups.items():
         p = np.concatenate([m.poles() for m in group]) if group else np.array([])
         ax.plot(p.real, p.imag, marker, ms=markersize, alpha=alpha, zorder=2, label=label,
-                mew=1.5 if marker in ("x", "+") else None)
+                color=colors.get(label), mew=1.5 if marker in ("x", "+") else None)
     if discrete:
         theta = np.linspace(0, 2 * np.pi, 400)
         ax.plot(np.cos(theta), np.sin(theta), "k-", lw=0.6)
@@ -258,10 +355,11 @@ def _pole_axes(ax, groups, reference, discrete, markersize, marker, alpha):
     ax.axhline(0.0, color="k", lw=0.3)
     ax.set_xlabel("real part")
     ax.set_ylabel("imaginary part")
-    if groups or reference is not None:
-        ax.legend(loc="best", fontsize="small")
+    if legend and (groups or reference is not None):
+        ax.legend(loc="best")
 
 
+@_styled
 def error_histograms(errors: dict, *, bins=40, xlabel="relative error", title=None):
     """One histogram panel per method of a Monte-Carlo error sample.
 
@@ -277,17 +375,20 @@ def error_histograms(errors: dict, *, bins=40, xlabel="relative error", title=No
     """
     plt = _pyplot()
     k = len(errors)
-    fig, axes = plt.subplots(k, 1, figsize=(6, 1.9 * k + 0.6), sharex=True, squeeze=False)
+    fig, axes = plt.subplots(k, 1, figsize=(8, 1.9 * k + 0.6), sharex=True, squeeze=False)
     all_vals = np.concatenate([np.asarray(v, float) for v in errors.values()])
     lo, hi = all_vals.min(), all_vals.max()
     edges = np.logspace(np.log10(max(lo, 1e-300)), np.log10(max(hi, lo * 1.01)) + 1e-9, bins)
-    for ax, (label, vals) in zip(axes[:, 0], errors.items()):
-        ax.hist(vals, bins=edges, color="C0", alpha=0.8)
-        ax.axvline(np.median(vals), color="C3", lw=1.5, label=f"median {np.median(vals):.3g}")
+    colors = colors_for((label, None) for label in errors)
+    for ax, (label, vals), color in zip(axes[:, 0], errors.items(), colors):
+        ax.hist(vals, bins=edges, color=color, alpha=0.8)
+        ax.axvline(np.median(vals), color="k", lw=1.5, ls="--",
+                   label=f"median {np.median(vals):.3g}")
         ax.set_xscale("log")
         ax.set_ylabel("runs")
-        ax.set_title(label, fontsize="small", loc="left")
-        ax.legend(fontsize="small")
+        ax.set_title(label, loc="left")
+        ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0,
+                  frameon=False)
     axes[-1, 0].set_xlabel(xlabel)
     if title:
         fig.suptitle(title)
@@ -338,6 +439,7 @@ def frequency_grid(models, n_points: int = 400) -> np.ndarray:
     return np.logspace(np.log10(lo), np.log10(hi), n_points)
 
 
+@_styled
 def bode(model_or_models, w=None, *, hz=False, labels=None, phase=True, title=None):
     """Bode diagram: magnitude (dB) and phase (degrees) of every input/output pair.
 
@@ -384,9 +486,15 @@ def bode(model_or_models, w=None, *, hz=False, labels=None, phase=True, title=No
             raise DataError("w must be a 1-D array of positive frequencies in rad/s")
     x_scale = 1 / (2 * math.pi) if hz else 1.0
     rows = 2 * ny if phase else ny
-    fig, axes = plt.subplots(rows, nu, figsize=(min(3.8 * nu + 1.2, 16), 1.9 * rows + 0.8),
+    colors = colors_for(groups.items())
+    unstable = {label: is_unstable(m) for label, m in groups.items()}
+    shown = [label + (" (unstable)" if unstable[label] else "") for label in groups]
+    room = _legend_room(shown)
+    fig, axes = plt.subplots(rows, nu, figsize=(min(3.8 * nu + 1.2, 16) + room,
+                                                1.9 * rows + 0.8),
                              sharex=True, squeeze=False)
     for k, (label, m) in enumerate(groups.items()):
+        style = dict(color=colors[k], lw=1.2, ls="--" if unstable[label] else "-")
         wk = w if m.dt == 0 else w[w <= math.pi / m.dt * (1 + 1e-12)]
         if wk.size == 0:
             log.warning("bode: model %r has no frequency below its Nyquist frequency in w",
@@ -399,22 +507,24 @@ def bode(model_or_models, w=None, *, hz=False, labels=None, phase=True, title=No
         for i in range(ny):
             for j in range(nu):
                 r = 2 * i if phase else i
-                axes[r, j].semilogx(wk * x_scale, mag[:, i, j], color=f"C{k}", lw=1.2,
-                                    label=label)
+                axes[r, j].semilogx(wk * x_scale, mag[:, i, j], label=shown[k], **style)
                 if phase:
-                    axes[r + 1, j].semilogx(wk * x_scale, ph[:, i, j], color=f"C{k}", lw=1.2)
+                    axes[r + 1, j].semilogx(wk * x_scale, ph[:, i, j], **style)
     for i in range(ny):
         for j in range(nu):
             r = 2 * i if phase else i
-            axes[r, j].set_title(f"{first.input_names[j]} → {first.output_names[i]}",
-                                 fontsize="small")
-            axes[r, j].set_ylabel("magnitude (dB)", fontsize="small")
+            axes[r, j].set_title(f"{first.input_names[j]} → {first.output_names[i]}")
+            axes[r, j].set_ylabel("magnitude (dB)")
             axes[r, j].grid(True, lw=0.3)
             if phase:
-                axes[r + 1, j].set_ylabel("phase (deg)", fontsize="small")
+                axes[r + 1, j].set_ylabel("phase (deg)")
                 axes[r + 1, j].grid(True, lw=0.3)
+    # dt = 1 is the period of a record without time information (IOData's default):
+    # frequencies per sample then (numerically the same as per second with dt = 1 s)
+    per_sample = all(m.dt == 1.0 for m in groups.values())
+    unit = ("cycles/sample" if hz else "rad/sample") if per_sample else ("Hz" if hz else "rad/s")
     for j in range(nu):
-        axes[-1, j].set_xlabel("frequency (Hz)" if hz else "frequency (rad/s)")
+        axes[-1, j].set_xlabel(f"frequency ({unit})")
     nyquists = sorted({math.pi / m.dt for m in groups.values() if m.dt > 0})
     for f_nyq in nyquists:
         for ax in axes.ravel():
@@ -423,16 +533,17 @@ def bode(model_or_models, w=None, *, hz=False, labels=None, phase=True, title=No
         from matplotlib.ticker import NullLocator
         for ax in axes.ravel():
             ax.xaxis.set_minor_locator(NullLocator())
-    axes[0, 0].legend(fontsize="x-small", loc="best")
+    _legend_beside(axes[0, -1])
     if title:
         fig.suptitle(title)
-    _layout(fig, axes, hgap=0.45, wgap=0.8)
+    _layout(fig, axes, hgap=0.5, wgap=0.85, right=room + 0.1)
     return fig
 
 
 # ---------------------------------------------------------------------------
 # time-domain comparison
 # ---------------------------------------------------------------------------
+@_styled
 def compare(data, models, *, labels=None, x0="estimate", title=None, clip=True,
             steps=math.inf):
     """Measured outputs against the outputs simulated by each model (as MATLAB's ``compare``).
@@ -463,20 +574,25 @@ def compare(data, models, *, labels=None, x0="estimate", title=None, clip=True,
     data = _check_data(data)
     groups = _model_groups(models, labels)
     ny = data.n_outputs
-    fig, axes = plt.subplots(ny, 1, figsize=(9, 2.3 * ny + 0.7), sharex=True, squeeze=False)
+    colors = colors_for(groups.items())
+    fits = {label: simulated_output(m, data, x0=x0) if steps == math.inf else
+            predicted_output(m, data, steps) for label, m in groups.items()}
+    texts = [f"{label}: fit {_fmt_fit(f[1][i])} %" for label, f in fits.items()
+             for i in range(ny)]
+    room = _legend_room(texts + ["measured"])
+    fig, axes = plt.subplots(ny, 1, figsize=(9 + room, 2.3 * ny + 0.7), sharex=True,
+                             squeeze=False)
     t = data.t
     for i in range(ny):
         axes[i, 0].plot(t, data.y[:, i], "k-", lw=1.0, label="measured")
-    for k, (label, m) in enumerate(groups.items()):
-        y_hat, fit = simulated_output(m, data, x0=x0) if steps == math.inf else \
-            predicted_output(m, data, steps)
+    for k, (label, (y_hat, fit)) in enumerate(fits.items()):
         for i in range(ny):
-            axes[i, 0].plot(t, _finite(y_hat[:, i]), color=f"C{k}", lw=0.9,
+            axes[i, 0].plot(t, _finite(y_hat[:, i]), color=colors[k], lw=0.9,
                             label=f"{label}: fit {_fmt_fit(fit[i])} %")
     for i in range(ny):
         ax = axes[i, 0]
-        ax.set_ylabel(data.output_names[i], fontsize="small")
-        ax.legend(fontsize="x-small", loc="upper right")
+        ax.set_ylabel(data.output_names[i])
+        _legend_beside(ax)
         if clip:
             lo, hi = float(np.min(data.y[:, i])), float(np.max(data.y[:, i]))
             pad = 0.5 * (hi - lo) if hi > lo else 1.0
@@ -484,7 +600,7 @@ def compare(data, models, *, labels=None, x0="estimate", title=None, clip=True,
     axes[-1, 0].set_xlabel(_time_label(data))
     if title:
         fig.suptitle(title)
-    _layout(fig, axes, hgap=0.15, left=0.8)
+    _layout(fig, axes, hgap=0.2, left=0.85, right=room + 0.1)
     return fig
 
 
@@ -496,6 +612,7 @@ def _fmt_fit(value) -> str:
     return f"{value:.1f}"
 
 
+@_styled
 def data_overview(data, *, split=None, title=None):
     """Inputs and outputs of a record against time.
 
@@ -513,27 +630,28 @@ def data_overview(data, *, split=None, title=None):
     """
     plt = _pyplot()
     data = _check_data(data)
-    channels = [(f"input\n{n}", data.u[:, k], "C0") for k, n in enumerate(data.input_names)]
-    channels += [(f"output\n{n}", data.y[:, k], "C3") for k, n in enumerate(data.output_names)]
+    # measured data in neutral tones (outputs black as in compare): the palette colours
+    # belong to the methods (METHOD_COLORS)
+    channels = [(f"input\n{n}", data.u[:, k], "0.45") for k, n in enumerate(data.input_names)]
+    channels += [(f"output\n{n}", data.y[:, k], "k") for k, n in enumerate(data.output_names)]
     rows = len(channels)
     fig, axes = plt.subplots(rows, 1, figsize=(9, 1.25 * rows + 0.9), sharex=True,
                              squeeze=False)
     t = data.t
     for ax, (name, values, color) in zip(axes[:, 0], channels):
         ax.plot(t, values, color=color, lw=0.8)
-        ax.set_ylabel(name, fontsize="x-small", rotation=0, ha="right", va="center")
-        ax.tick_params(labelsize="x-small")
+        ax.set_ylabel(name, fontsize=9, rotation=0, ha="right", va="center")
         if split is not None:
             ax.axvspan(split, t[-1], color="0.85", zorder=0)
     if split is not None:
         axes[0, 0].text(split, 1.02, " validation", transform=axes[0, 0].get_xaxis_transform(),
-                        fontsize="x-small", va="bottom")
+                        fontsize=9, va="bottom")
         axes[0, 0].text(t[0], 1.02, "estimation", transform=axes[0, 0].get_xaxis_transform(),
-                        fontsize="x-small", va="bottom")
+                        fontsize=9, va="bottom")
     axes[-1, 0].set_xlabel(_time_label(data))
     if title:
         fig.suptitle(title)
-    _layout(fig, axes, top=0.3, left=1.55, hgap=0.12)
+    _layout(fig, axes, top=0.35, left=1.6, hgap=0.15)
     return fig
 
 
@@ -600,11 +718,19 @@ def residual_correlations(model, data, *, max_lag: int = 25, confidence: float =
     if not np.isfinite(e).all():
         raise DataError("the simulated output diverges (residuals are not finite): the model "
                         "is unstable over this record")
+    # every correlation is normalised per residual channel, so scale each channel to
+    # a maximum of 1 first: a diverging simulation's huge (finite) residual cannot overflow
+    peak = np.abs(e).max(axis=0)
     from .prediction import correlations
-    return {**correlations(e, data.u, max_lag=max_lag, confidence=confidence),
-            "kind": "simulation"}
+    out = correlations(e / np.where(peak > 0, peak, 1.0), data.u, max_lag=max_lag,
+                       confidence=confidence)
+    if not (np.isfinite(out["auto"]).all() and np.isfinite(out["cross"]).all()):
+        raise DataError("the simulated output diverges (its residual correlations overflow): "
+                        "the model is unstable over this record")
+    return {**out, "residual": e, "kind": "simulation"}
 
 
+@_styled
 def residuals(model, data, *, max_lag: int = 25, confidence: float = 0.99, x0="estimate",
               title=None):
     """Residual analysis (as MATLAB's ``resid``): whiteness and independence of the input.
@@ -654,13 +780,16 @@ def residuals(model, data, *, max_lag: int = 25, confidence: float = 0.99, x0="e
         raise DataError(next(iter(failed.values())))
     ny, nu = data.n_outputs, data.n_inputs
     cols = 1 + nu
-    fig, axes = plt.subplots(ny, cols, figsize=(min(3.3 * cols + 0.6, 16), 2.0 * ny + 1.0),
-                             squeeze=False)
     pct = f"{100 * confidence:g} %"
+    room = _legend_room(list(results) + [f"{pct} band"])
+    fig, axes = plt.subplots(ny, cols, figsize=(min(3.3 * cols + 0.6, 16) + room,
+                                                2.0 * ny + 1.0),
+                             squeeze=False)
     single = len(results) == 1
     offsets = np.linspace(-0.2, 0.2, len(results)) if not single else [0.0]
+    colors = colors_for((label, groups[label]) for label in results)
     for k, (label, res) in enumerate(results.items()):
-        color = f"C{k}" if not single else "C0"
+        color = colors[k]
         dx = offsets[k]
         for i in range(ny):
             ax = axes[i, 0]
@@ -669,7 +798,7 @@ def residuals(model, data, *, max_lag: int = 25, confidence: float = 0.99, x0="e
                 ax.axhspan(-b, b, color="0.5", alpha=0.18, lw=0, label=f"{pct} band")
             ax.vlines(res["lags"] + dx, 0, res["auto"][i], color=color, lw=1.1)
             ax.plot(res["lags"] + dx, res["auto"][i], "o", color=color, ms=2.5,
-                    label=label if not single else None)
+                    label=label)
             for j in range(nu):
                 ax = axes[i, 1 + j]
                 b = res["cross_bound"][i, j]
@@ -681,28 +810,26 @@ def residuals(model, data, *, max_lag: int = 25, confidence: float = 0.99, x0="e
                 ax.vlines(res["cross_lags"] + dx, 0, res["cross"][i, j], color=color, lw=0.9)
     for i in range(ny):
         axes[i, 0].axhline(0, color="k", lw=0.4)
-        axes[i, 0].set_title(f"auto-correlation of e({data.output_names[i]})",
-                             fontsize="small")
+        axes[i, 0].set_title(f"auto-correlation of e({data.output_names[i]})")
         for j in range(nu):
             axes[i, 1 + j].axhline(0, color="k", lw=0.4)
-            axes[i, 1 + j].set_title(f"{data.input_names[j]} → e({data.output_names[i]})",
-                                     fontsize="small")
-    for ax in axes.ravel():
-        ax.tick_params(labelsize="x-small")
-    axes[0, 0].legend(fontsize="x-small", loc="upper right")
+            axes[i, 1 + j].set_title(f"{data.input_names[j]} → e({data.output_names[i]})")
+    handles, names = axes[0, 0].get_legend_handles_labels()
+    _legend_beside(axes[0, -1], handles, names)
     for j in range(cols):
-        axes[-1, j].set_xlabel("lag (samples)", fontsize="small")
+        axes[-1, j].set_xlabel("lag (samples)")
     heading = title or f"residual analysis ({pct} confidence bands)"
     if failed:
         heading += f"; not drawn (simulation diverges): {', '.join(failed)}"
-    fig.suptitle(heading, fontsize="medium")
-    _layout(fig, axes, top=0.3, hgap=0.55, wgap=0.45, left=0.55)
+    fig.suptitle(heading)
+    _layout(fig, axes, top=0.35, hgap=0.6, wgap=0.5, left=0.6, right=room + 0.1)
     return fig
 
 
 # ---------------------------------------------------------------------------
 # online runs
 # ---------------------------------------------------------------------------
+@_styled
 def convergence(history, *, reference=None, title=None, max_parameters: int = 12):
     """Poles and parameters of an online identifier against the samples seen.
 
@@ -738,66 +865,156 @@ def convergence(history, *, reference=None, title=None, max_parameters: int = 12
         if params.ndim != 2 or params.shape[0] != sample.size or params.shape[1] == 0:
             params = None
     rows = 2 + (2 if params is not None else 0)
-    fig, axes = plt.subplots(rows, 1, figsize=(9, 2.2 * rows + 0.6), sharex=True,
+    names = None
+    shown = 0
+    if params is not None:
+        names = list(history.get("parameter_names", [])) or \
+            [f"θ{k + 1}" for k in range(params.shape[1])]
+        shown = min(params.shape[1], max_parameters)
+    legend_texts = [f"pole {k + 1}" for k in range(pol.shape[1])] + ["true poles"] + \
+        [str(n) for n in (names or [])[:shown]]
+    room = _legend_room(legend_texts)
+    fig, axes = plt.subplots(rows, 1, figsize=(9 + room, 2.2 * rows + 0.6), sharex=True,
                              squeeze=False)
     axes = axes[:, 0]
     if sample.size == 0:
         axes[0].text(0.5, 0.5, "no snapshot recorded", ha="center", va="center",
                      transform=axes[0].transAxes)
     for k in range(pol.shape[1]):
-        axes[0].plot(sample, pol[:, k].real, ".-", color=f"C{k % 10}", lw=0.8, ms=3)
+        axes[0].plot(sample, pol[:, k].real, ".-", color=f"C{k % 10}", lw=0.8, ms=3,
+                     label=f"pole {k + 1}")
         axes[1].plot(sample, pol[:, k].imag, ".-", color=f"C{k % 10}", lw=0.8, ms=3)
     if reference is not None:
-        for q in reference.poles():
-            axes[0].axhline(q.real, color="k", ls="--", lw=0.6)
+        for r, q in enumerate(reference.poles()):
+            axes[0].axhline(q.real, color="k", ls="--", lw=0.6,
+                            label="true poles" if r == 0 else None)
             axes[1].axhline(q.imag, color="k", ls="--", lw=0.6)
-    axes[0].set_ylabel("pole real part", fontsize="small")
-    axes[1].set_ylabel("pole imag. part", fontsize="small")
+    if pol.shape[1] or reference is not None:
+        _legend_beside(axes[0])
+    axes[0].set_ylabel("pole real part")
+    axes[1].set_ylabel("pole imag. part")
     if params is not None:
-        names = list(history.get("parameter_names", [])) or \
-            [f"θ{k + 1}" for k in range(params.shape[1])]
-        shown = min(params.shape[1], max_parameters)
         for k in range(shown):
             axes[2].plot(sample, params[:, k], lw=0.9, label=names[k] if k < len(names) else None)
-        if shown <= 8:
-            axes[2].legend(fontsize="x-small", loc="upper right", ncol=2)
-        axes[2].set_ylabel("parameters", fontsize="small")
+        _legend_beside(axes[2], ncol=1 if shown <= 8 else 2)
+        axes[2].set_ylabel("parameters")
         final = params[-1]
         scale = np.linalg.norm(final)
         with np.errstate(all="ignore"):
             rel = np.linalg.norm(params - final, axis=1) / (scale if scale > 0 else 1.0)
         rel[rel <= 0] = np.nan
         axes[3].semilogy(sample, rel, "k.-", lw=0.8, ms=3)
-        axes[3].set_ylabel("‖θ − θ_final‖ / ‖θ_final‖", fontsize="small")
+        axes[3].set_ylabel("‖θ − θ_final‖ / ‖θ_final‖")
     for ax in axes:
         ax.grid(True, lw=0.3)
-        ax.tick_params(labelsize="x-small")
     axes[-1].set_xlabel("samples processed")
-    fig.suptitle(title or "convergence of the online estimate", fontsize="medium")
-    _layout(fig, axes[:, None], top=0.2, hgap=0.15, left=0.95)
+    fig.suptitle(title or "convergence of the online estimate")
+    _layout(fig, axes[:, None], top=0.25, hgap=0.2, left=1.0, right=room + 0.1)
     return fig
 
 
 # ---------------------------------------------------------------------------
 # order selection
 # ---------------------------------------------------------------------------
-def order_selection(models, *, labels=None, title=None):
-    """How each model's order was chosen, as MATLAB's order plot shows it.
+_PROFILE_KEYS = (("singular_values", "singular value"),
+                 ("rank_profile", "rank profile (Cholesky pivot)"))
 
-    Left: the rank profile the method computed (singular values, or the
-    SVD-free rank profile of ``ls_subspace``), log scale, the chosen order
-    marked. Right: the score of every candidate (cross-validated fit % for
-    ``selection='cv'``, one line per horizon; the log10 gap for
-    ``selection='gap'``), the chosen candidate circled.
+
+@_styled
+def order_selection(models, *, labels=None, title=None):
+    """The order-selection chart: the values whose largest gap picks the order.
+
+    ``info['singular_values']`` (MOESP, N4SID, ct_subspace) or
+    ``info['rank_profile']`` (ls_subspace, SVD-free, seed 001 Remark 2) of each
+    model, normalised by the first value, on a log scale against their index;
+    the order of each model is marked (a ring on its last kept value and a
+    vertical line), with the ratio across the gap in the legend.
 
     Parameters
     ----------
     models : StateSpace, list or dict label -> StateSpace
-        Models with ``info['order_selection']`` (from the batch methods).
+        Models from the batch methods (their ``info`` holds the profile).
+    labels : list of str, optional
+    title : str, optional
 
     Returns
     -------
     matplotlib.figure.Figure
+
+    Raises
+    ------
+    ModelError
+        No model carries a profile (e.g. only online models, or models built
+        by hand).
+    """
+    plt = _pyplot()
+    groups = _model_groups(models, labels)
+    profiles = {}
+    for label, m in groups.items():
+        for key, what in _PROFILE_KEYS:
+            values = m.info.get(key)
+            if values is not None and np.size(values) > 0:
+                profiles[label] = (np.abs(np.asarray(values, dtype=float).reshape(-1)), what, m)
+                break
+    if not profiles:
+        raise ModelError("no model has info['singular_values'] or info['rank_profile']: the "
+                         "order-selection chart needs models from the batch methods")
+    texts = []
+    for label, (v, _, m) in profiles.items():
+        n = m.order
+        gap = v[n - 1] / v[n] if n < v.size and v[n] > 0 else math.inf
+        texts.append(f"{label}: order {n} (gap ×{gap:.3g})" if math.isfinite(gap)
+                     else f"{label}: order {n}")
+    room = _legend_room(texts)
+    fig, ax = plt.subplots(figsize=(6.5 + room, 3.6))
+    colors = colors_for((label, m) for label, (_, _, m) in profiles.items())
+    kinds = set()
+    for (label, (v, what, m)), color, text in zip(profiles.items(), colors, texts):
+        kinds.add(what)
+        scaled = v / v[0] if v[0] > 0 else v
+        idx = np.arange(1, v.size + 1)
+        with np.errstate(divide="ignore"):
+            ax.semilogy(idx, np.where(scaled > 0, scaled, np.nan), "o-", color=color, lw=1.0,
+                        ms=4, label=text)
+        n = m.order
+        if n <= v.size:
+            ax.plot([n], [scaled[n - 1]], "o", ms=11, mfc="none", mec=color, mew=1.5)
+        ax.axvline(n + 0.5, color=color, ls=":", lw=1.0)
+    ax.set_xlabel("index (order)")
+    ax.set_ylabel(" / ".join(sorted(kinds)) + "\n(relative to the first)")
+    from matplotlib.ticker import MaxNLocator
+    ax.xaxis.set_major_locator(MaxNLocator(integer=True))
+    ax.grid(True, lw=0.3)
+    _legend_beside(ax)
+    if title:
+        ax.set_title(title)
+    _layout(fig, np.array([[ax]]), left=1.0, right=room + 0.1, top=0.35 if title else 0.2)
+    return fig
+
+
+@_styled
+def order_scores(models, *, labels=None, title=None):
+    """The score of every candidate order (and horizon) a model was chosen from.
+
+    For ``selection='cv'`` (the default of the DT batch methods): the
+    cross-validated simulation fit % of each candidate order, one line per
+    horizon, the chosen candidate ringed; for ``selection='gap'``: the gap
+    (log10) after each candidate order. One panel per model; see
+    :func:`order_selection` for the singular values / rank profile.
+
+    Parameters
+    ----------
+    models : StateSpace, list or dict label -> StateSpace
+        Models with ``info['order_selection']`` (rule ``'cv'`` or ``'gap'``).
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+
+    Raises
+    ------
+    DataError
+        No model carries a selection record (their orders were given).
     """
     plt = _pyplot()
     groups = _model_groups(models, labels)
@@ -808,51 +1025,36 @@ def order_selection(models, *, labels=None, title=None):
         raise DataError("none of the models carries an order selection record "
                         "(info['order_selection'] with rule 'cv' or 'gap'): their order was "
                         "given")
-    fig, axes = plt.subplots(len(rows), 2, figsize=(9, 2.6 * len(rows) + 0.6), squeeze=False)
-    for (label, m), (ax_p, ax_s) in zip(rows, axes):
+    fig, axes = plt.subplots(len(rows), 1, figsize=(6.5, 2.4 * len(rows) + 0.6),
+                             squeeze=False)
+    for (label, m), ax in zip(rows, axes[:, 0]):
         record = m.info["order_selection"]
-        profile = m.info.get("singular_values", m.info.get("rank_profile"))
-        if profile is not None:
-            profile = np.abs(np.asarray(profile, dtype=float))
-            k = np.arange(1, profile.size + 1)
-            positive = profile > 0
-            ax_p.semilogy(k[positive], profile[positive], "o-", color="C0", ms=3, lw=0.8)
-            if m.order <= profile.size and profile[m.order - 1] > 0:
-                ax_p.semilogy([m.order], [profile[m.order - 1]], "o", mfc="none", mec="C3",
-                              ms=10, mew=1.5, label=f"order {m.order}")
-                ax_p.legend(fontsize="x-small", loc="upper right")
-            name = "singular values" if "singular_values" in m.info else "rank profile"
-            ax_p.set_ylabel(name, fontsize="small")
-        ax_p.set_title(f"{label}", fontsize="small")
-        ax_p.xaxis.get_major_locator().set_params(integer=True)
-        ax_p.set_xlabel("index", fontsize="small")
         candidates = record.get("candidates", [])
         if record["rule"] == "cv":
             horizons = sorted({c["horizon"] for c in candidates})
             for j, f in enumerate(horizons):
                 pts = sorted((c["order"], c["score"]) for c in candidates if c["horizon"] == f)
-                ax_s.plot([p[0] for p in pts], [p[1] for p in pts], "o-", ms=3, lw=0.8,
-                          color=f"C{j}", label=f"horizon {f}")
+                ax.plot([p[0] for p in pts], [p[1] for p in pts], "o-", ms=3, lw=0.9,
+                        color=f"C{j}", label=f"horizon {f}")
             chosen = record["selected"]
-            ax_s.plot([chosen["order"]], [chosen["score"]], "o", mfc="none", mec="C3", ms=10,
-                      mew=1.5, label=f"chosen: n={chosen['order']}, f={chosen['horizon']}")
-            ax_s.set_ylabel("cross-validated fit %", fontsize="small")
+            ax.plot([chosen["order"]], [chosen["score"]], "o", mfc="none", mec="C3", ms=11,
+                    mew=1.5, label=f"chosen: n={chosen['order']}, f={chosen['horizon']}")
+            ax.set_ylabel("CV fit %")
             scores = [c["score"] for c in candidates]
-            low = max(min(scores), max(scores) - 60)
-            ax_s.set_ylim(low - 2, min(max(scores) + 5, 102))
+            ax.set_ylim(max(min(scores), max(scores) - 60) - 2, min(max(scores) + 5, 102))
         else:
             pts = sorted((c["order"], c["score"]) for c in candidates)
-            ax_s.bar([p[0] for p in pts], [p[1] for p in pts], color="C0", width=0.6)
-            ax_s.bar([m.order], [dict(pts).get(m.order, 0)], color="C3", width=0.6,
-                     label=f"chosen: n={m.order}")
-            ax_s.set_ylabel("gap (log10)", fontsize="small")
-        ax_s.legend(fontsize="x-small", loc="lower right")
-        ax_s.set_xlabel("order", fontsize="small")
-        ax_s.set_title("cross-validated simulation fit (estimation data)" if record["rule"] == "cv"
-                       else "largest gap of the profile", fontsize="x-small")
-        for ax in (ax_p, ax_s):
-            ax.grid(True, lw=0.3)
-            ax.tick_params(labelsize="x-small")
-    fig.suptitle(title or "order selection", fontsize="medium")
-    _layout(fig, axes, top=0.45, hgap=0.75, wgap=0.55, left=0.75)
+            ax.bar([p[0] for p in pts], [p[1] for p in pts], color="C0", width=0.6)
+            ax.bar([m.order], [dict(pts).get(m.order, 0)], color="C3", width=0.6,
+                   label=f"chosen: n={m.order}")
+            ax.set_ylabel("gap (log10)")
+        ax.set_title(f"{label}: " + ("cross-validated simulation fit (estimation data)"
+                                     if record["rule"] == "cv" else "largest gap of the profile"))
+        ax.legend(loc="lower right")
+        ax.xaxis.get_major_locator().set_params(integer=True)
+        ax.grid(True, lw=0.3)
+    axes[-1, 0].set_xlabel("order")
+    if title:
+        fig.suptitle(title)
+    _layout(fig, axes, top=0.45, hgap=0.75, left=0.95)
     return fig

@@ -215,6 +215,15 @@ class RecursiveSubspace:
         self._model = None
 
     # -- input ------------------------------------------------------------
+    def __repr__(self) -> str:
+        from ._repr import recursive_repr
+        return recursive_repr(self)
+
+    def _repr_html_(self) -> str:
+        """Summary for Jupyter: settings, samples seen and the current model."""
+        from ._repr import online_html, recursive_settings
+        return online_html(self, recursive_settings(self))
+
     def _as_chunk(self, values, name: str, channels: int) -> np.ndarray:
         arr = np.asarray(values)
         if arr.ndim == 0 and channels == 1:

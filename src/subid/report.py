@@ -67,14 +67,17 @@ def _e(text) -> str:
     return html.escape(str(text), quote=True)
 
 
-def figure_html(fig, caption: str = "", *, dpi: int = 80, alt: str = "") -> str:
+def figure_html(fig, caption: str = "", *, dpi: int | None = None, alt: str = "") -> str:
     """A ``<figure>`` holding ``fig`` as an embedded PNG; the figure is closed.
 
     Parameters
     ----------
     fig : matplotlib.figure.Figure
     caption : str
-    dpi : int
+    dpi : int, optional
+        Resolution of the PNG (default: the figure's, 150 for :mod:`subid.plot`).
+        The image is shown at the figure's size in inches (96 CSS px per inch),
+        so its 10 pt text reads as 10 pt and stays sharp on high-density screens.
     alt : str
         Alternative text (default: the caption).
 
@@ -83,7 +86,8 @@ def figure_html(fig, caption: str = "", *, dpi: int = 80, alt: str = "") -> str:
     str
     """
     buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=dpi)
+    width = int(round(fig.get_figwidth() * 96))
+    fig.savefig(buf, format="png", dpi=dpi or fig.dpi)
     try:
         import matplotlib.pyplot as plt
         plt.close(fig)
@@ -91,7 +95,7 @@ def figure_html(fig, caption: str = "", *, dpi: int = 80, alt: str = "") -> str:
         pass
     data = base64.b64encode(buf.getvalue()).decode("ascii")
     cap = f"<figcaption>{_e(caption)}</figcaption>" if caption else ""
-    return (f'<figure><img alt="{_e(alt or caption or "figure")}" '
+    return (f'<figure><img alt="{_e(alt or caption or "figure")}" width="{width}" '
             f'src="data:image/png;base64,{data}">{cap}</figure>')
 
 
@@ -155,13 +159,41 @@ def _matlab_matrix(M) -> str:
     return "[" + "; ".join(" ".join(repr(float(v)) for v in row) for row in M) + "]"
 
 
-def _matlab_code(model) -> str:
+def operating_point(model, estimation=None):
+    """``(u0, y0)``: the channel means removed before identification, from
+    ``model.info['data']`` (the command line records them) or the estimation
+    record's ``u_offset``/``y_offset``; None when no constant was removed
+    (no detrending, or a linear trend, which is no fixed operating point)."""
+    info = model.info.get("data") if isinstance(model.info, dict) else None
+    if isinstance(info, dict) and info.get("u_offset") is not None:
+        if info.get("detrend", "constant") != "constant":
+            return None
+        u0, y0 = info.get("u_offset"), info.get("y_offset")
+    elif estimation is not None and getattr(estimation, "u_offset", None) is not None:
+        u0, y0 = estimation.u_offset, estimation.y_offset
+    else:
+        return None
+    u0 = np.asarray(u0, dtype=float)
+    y0 = np.asarray(y0, dtype=float)
+    if u0.ndim != 1 or y0.ndim != 1 or u0.size != model.n_inputs or y0.size != model.n_outputs:
+        return None                      # linear trends: (intercept, slope) rows
+    return u0, y0
+
+
+def _matlab_code(model, point=None) -> str:
     names_in = ", ".join(f"'{n}'" for n in model.input_names)
     names_out = ", ".join(f"'{n}'" for n in model.output_names)
-    return (f"A = {_matlab_matrix(model.A)};\nB = {_matlab_matrix(model.B)};\n"
+    code = (f"A = {_matlab_matrix(model.A)};\nB = {_matlab_matrix(model.B)};\n"
             f"C = {_matlab_matrix(model.C)};\nD = {_matlab_matrix(model.D)};\n"
             f"sys = ss(A, B, C, D, {model.dt!r}, 'InputName', {{{names_in}}}, "
             f"'OutputName', {{{names_out}}});" + _matlab_noise(model))
+    if point is not None:
+        u0, y0 = point
+        code += ("\n% the model relates deviations from the operating point (the means removed "
+                 "before identification):\n"
+                 f"u0 = {_matlab_matrix(u0[None, :])};\ny0 = {_matlab_matrix(y0[None, :])};\n"
+                 "% in the data's units: y = lsim(sys, u - u0, t) + y0")
+    return code
 
 
 def _matlab_noise(model) -> str:
@@ -179,7 +211,12 @@ def _matlab_noise(model) -> str:
 
 def _pole_table(model, hz: bool) -> str:
     p = model.poles()
-    unit = "Hz" if hz else "rad/s"
+    # dt = 1: the period of a record without time information (IOData's default), so
+    # frequencies per sample and time constants in samples (the same numbers as per
+    # second with dt = 1 s)
+    per_sample = model.dt == 1.0
+    unit = ("cycles/sample" if hz else "rad/sample") if per_sample else ("Hz" if hz else "rad/s")
+    time_unit = "samples" if per_sample else "s"
     rows = []
     for z in p:
         if model.dt > 0:
@@ -198,7 +235,7 @@ def _pole_table(model, hz: bool) -> str:
         cells += [_fmt(freq, 4), _fmt(zeta, 3), _fmt(tau, 4)]
         rows.append("<tr>" + "".join(f"<td>{c}</td>" for c in cells) + "</tr>")
     head = "<th>pole</th>" + ("<th>|pole|</th>" if model.dt > 0 else "") + \
-        f"<th>natural frequency ({unit})</th><th>damping</th><th>time constant (s)</th>"
+        f"<th>natural frequency ({unit})</th><th>damping</th><th>time constant ({time_unit})</th>"
     return f"<table><tr>{head}</tr>{''.join(rows)}</table>"
 
 
@@ -369,6 +406,8 @@ def identification_report(models, estimation, validation=None, *, title="subid r
     n_val = validation.n_samples if validation is not None else 0
     timing = f"dt = {_fmt(estimation.dt)}" if estimation.dt is not None else \
         "non-uniform time stamps"
+    if estimation.dt == 1.0 and not estimation.has_time_stamps:
+        timing += " (time in samples, frequencies per sample)"
     facts = (f"<p>{_e(source) + ': ' if source else ''}{n_est + n_val} samples "
              f"({n_est} for estimation, {n_val} for validation), "
              f"{estimation.n_inputs} input{'s' if estimation.n_inputs != 1 else ''} "
@@ -378,6 +417,17 @@ def identification_report(models, estimation, validation=None, *, title="subid r
                 "simulated from a least-squares initial state (subid.fit_percent); 100 is "
                 "perfect, 0 no better than the mean.</p>")
     extra = "".join(f"<p class=\"note\">{_e(n)}</p>" for n in notes)
+    first_model = next(iter(models.values()), None)
+    point = operating_point(first_model, estimation) if first_model is not None else None
+    if point is not None:
+        u0, y0 = point
+        extra += ("<p class=\"note\">Operating point: the models relate deviations from the "
+                  "channel means removed before identification, "
+                  + _e(", ".join(f"{n} = {_fmt(v)}" for n, v in zip(estimation.input_names, u0))
+                       + "; " + ", ".join(f"{n} = {_fmt(v)}"
+                                          for n, v in zip(estimation.output_names, y0)))
+                  + ". In the data's units: y = G(u − u0) + y0 (the MATLAB code below "
+                    "includes u0 and y0).</p>")
     cmd = f"<p>Reproduce with:</p><pre>{_e(command)}</pre>" if command else ""
     body.append(_section("summary", "Summary", facts + table + fit_note + extra + cmd))
     nav.append(("summary", "summary"))
@@ -393,20 +443,27 @@ def identification_report(models, estimation, validation=None, *, title="subid r
         split = float(validation.t[0])
     body.append(_section("data", "Data", _plot_or_note(
         lambda: plot.data_overview(whole, split=split),
-        "inputs (blue) and outputs (red); the validation part is shaded", "data overview")))
+        "inputs (grey) and outputs (black); the validation part is shaded", "data overview")))
     nav.append(("data", "data"))
 
     # -- order selection -------------------------------------------------
+    profiled = {label: m for label, m in models.items()
+                if m.info.get("singular_values") is not None
+                or m.info.get("rank_profile") is not None}
     chosen = {label: m for label, m in models.items()
               if isinstance(m.info.get("order_selection"), dict)
               and m.info["order_selection"].get("rule") in ("cv", "gap")}
-    if chosen:
+    if profiled:
+        scores = _plot_or_note(
+            lambda: plot.order_scores(chosen),
+            "the score of every candidate order and horizon: cross-validated simulation fit "
+            "on the estimation data (selection='cv'), or the gap of the profile "
+            "(selection='gap'); ring: the chosen candidate", "order scores") if chosen else ""
         body.append(_section("order", "Order selection", _plot_or_note(
-            lambda: plot.order_selection(chosen),
-            "left: the method's rank profile (singular values, or the SVD-free rank profile "
-            "of ls_subspace) with the chosen order circled; right: the score of every "
-            "candidate order and horizon (cross-validated simulation fit on the estimation "
-            "data, or the gap of the profile)", "order selection chart")))
+            lambda: plot.order_selection(profiled),
+            "singular values (MOESP, N4SID, ct) or SVD-free rank profile (ls) relative to the "
+            "first; ring and dotted line: the order of each model", "order-selection chart")
+            + scores))
         nav.append(("order", "order"))
 
     # -- comparison ------------------------------------------------------
@@ -434,6 +491,7 @@ def identification_report(models, estimation, validation=None, *, title="subid r
         "poles of each model with the unit circle (discrete time) or the imaginary axis "
         "(continuous time)", "pole map") + pole_tables))
     nav.append(("poles", "poles"))
+
 
     # -- residuals -------------------------------------------------------
     body.append(_section("residuals", "Residual analysis", _plot_or_note(
@@ -479,7 +537,7 @@ def identification_report(models, estimation, validation=None, *, title="subid r
         info = _info_table(m.info)
         if info:
             block += ["<p>diagnostics (model.info)</p>", info]
-        block += ["<p>MATLAB</p>", f"<pre>{_e(_matlab_code(m))}</pre>"]
+        block += ["<p>MATLAB</p>", f"<pre>{_e(_matlab_code(m, operating_point(m, estimation)))}</pre>"]
         parts.append("".join(block))
     body.append(_section("matrices", "Model matrices", "".join(parts)))
     nav.append(("matrices", "matrices"))

@@ -1,0 +1,303 @@
+"""Input delays: estimate them, remove them from data, and keep them on models.
+
+A discrete-time model with input delays ``d_j`` (in samples) is
+
+    x[k+1] = A x[k] + sum_j B[:, j] u_j[k - d_j],
+    y[k]   = C x[k] + sum_j D[:, j] u_j[k - d_j].
+
+:func:`estimate_delay` finds ``nk_j``, the lag of the first input sample that
+reaches the output, as MATLAB's ``delayest`` counts it: ``nk = 1`` for a
+strictly proper model (``D = 0``) without extra delay, ``nk = 0`` with a
+direct feedthrough. So the extra dead time of a strictly proper model is
+``nk - 1``; of a model with feedthrough, ``nk``.
+
+The discrete-time batch methods take ``input_delay`` (one integer per input,
+or one for all): the record is shifted with :func:`delay_inputs` so that the
+method sees ``u_j[k - d_j]`` as its input, and the delays are recorded in
+``model.info['input_delay']``, which :meth:`subid.StateSpace.simulate` and
+:meth:`subid.StateSpace.freqresp` honour (see :func:`apply_to_inputs` and
+:func:`frequency_factor`). :func:`absorb_delay` turns the delays into states
+(shift registers) for tools that know no delays (exports, ``markov``).
+"""
+
+from __future__ import annotations
+
+import numbers
+
+import numpy as np
+import scipy.linalg
+
+from ._validation import check_int
+from .data import IOData
+from .errors import DataError, ModelError, TooFewSamplesError
+
+__all__ = ["estimate_delay", "delay_inputs", "apply_to_inputs", "frequency_factor",
+           "absorb_delay", "input_delay_of"]
+
+INFO_KEY = "input_delay"
+
+
+# ---------------------------------------------------------------------------
+# validation
+# ---------------------------------------------------------------------------
+def _check_delays(input_delay, n_inputs: int, error=DataError) -> np.ndarray:
+    """``input_delay`` as an int array of length ``n_inputs`` (>= 0)."""
+    if isinstance(input_delay, (bool, np.bool_)):
+        raise error(f"input_delay must be a non-negative integer or one per input, "
+                    f"got {input_delay!r}")
+    if isinstance(input_delay, (numbers.Integral, np.integer)):
+        values = np.full(n_inputs, int(input_delay))
+    else:
+        try:
+            arr = np.asarray(input_delay)
+        except (TypeError, ValueError):
+            arr = np.asarray([object()])
+        if arr.ndim != 1 or arr.dtype.kind not in "iu" and not (
+                arr.dtype.kind == "f" and np.all(np.isfinite(arr))
+                and np.all(arr == np.round(arr))):
+            raise error(f"input_delay must be a non-negative integer or a list of "
+                        f"{n_inputs} of them (one per input, in samples), got {input_delay!r}")
+        if arr.size != n_inputs:
+            raise error(f"input_delay has {arr.size} entries but there "
+                        f"{'is' if n_inputs == 1 else 'are'} {n_inputs} input"
+                        f"{'' if n_inputs == 1 else 's'}: give one delay per input "
+                        "(or one integer for all)")
+        values = arr.astype(np.int64)
+    if (values < 0).any():
+        raise error(f"input_delay must be >= 0 samples, got {values.tolist()}")
+    return values
+
+
+# ---------------------------------------------------------------------------
+# estimation
+# ---------------------------------------------------------------------------
+def estimate_delay(data, max_delay: int = 10, *, na: int = 2, nb: int = 2,
+                   return_loss: bool = False):
+    """Estimate the delay of every input, in samples (MATLAB ``delayest``).
+
+    For each input ``j`` and each candidate ``nk`` in ``0..max_delay`` an ARX
+    model is fitted by least squares,
+
+        y[k] = - sum_{i=1..na} A_i y[k-i] + sum_{l=nk..nk+nb-1} b_l u_j[k-l]
+               + (every other input at lags 0..max_delay+nb-1) + e[k],
+
+    all outputs together (each normalised to unit variance), and the ``nk``
+    with the smallest residual sum of squares wins. Every candidate has the
+    same number of parameters, so the losses compare directly (as in
+    ``arxstruc``/``selstruc`` with a fixed ``na``, ``nb``). The regression is
+    factored once (QR of the full regressor, every lag of every input); each
+    candidate is then a small least-squares problem on columns of the
+    triangular factor, which gives exactly the candidate's residual.
+
+    Parameters
+    ----------
+    data : IOData
+        Uniformly sampled record with at least one input. Means are removed.
+    max_delay : int
+        Largest delay tried, in samples.
+    na : int
+        Autoregressive order (past outputs, every output).
+    nb : int
+        Number of input coefficients from lag ``nk`` on.
+    return_loss : bool
+        Also return the losses, shape ``(n_inputs, max_delay + 1)``: the
+        residual sum of squares for each candidate.
+
+    Returns
+    -------
+    ndarray of int, shape (n_inputs,)
+        ``nk`` per input: 1 for a strictly proper model without extra dead
+        time, 0 with direct feedthrough, ``1 + d`` for ``d`` extra samples
+        of dead time before a strictly proper response.
+
+    Raises
+    ------
+    DataError
+        Not an IOData record, no inputs, non-uniform sampling, bad options.
+    TooFewSamplesError
+        Fewer samples than the regression needs.
+    """
+    if not isinstance(data, IOData):
+        raise DataError(f"estimate_delay needs an IOData record, got {type(data).__name__}")
+    if data.n_inputs == 0:
+        raise DataError("estimate_delay needs a record with at least one input")
+    if data.dt is None:
+        raise DataError("estimate_delay needs uniformly sampled data (delays are counted in "
+                        "samples); this record has non-uniform time stamps")
+    max_delay = check_int(max_delay, "max_delay", minimum=0)
+    na = check_int(na, "na", minimum=0)
+    nb = check_int(nb, "nb", minimum=1)
+    u = data.u - data.u.mean(axis=0)
+    y = data.y - data.y.mean(axis=0)
+    scale = y.std(axis=0)
+    if (scale == 0).any():
+        raise DataError("an output is constant: there is no response to find a delay in")
+    y = y / scale
+    N, nu = u.shape
+    ny = y.shape[1]
+    lags = max_delay + nb                   # input lags 0..lags-1
+    start = max(na, lags - 1)
+    rows = N - start
+    n_cols = ny * na + nu * lags
+    if rows < 2 * n_cols + 10:
+        raise TooFewSamplesError(f"estimate_delay with max_delay={max_delay}, na={na}, "
+                                 f"nb={nb} regresses on {n_cols} columns and needs at least "
+                                 f"{2 * n_cols + 10 + start} samples; the record has {N}")
+    cols = [y[start - i:N - i] for i in range(1, na + 1)]        # (rows, ny) each
+    cols += [u[start - lag:N - lag] for lag in range(lags)]      # (rows, nu) each
+    M = np.hstack(cols + [y[start:]])
+    R = scipy.linalg.qr(M, mode="r", check_finite=False)[0][:M.shape[1]]
+    # column index of output/input channels in M
+    past_y = list(range(ny * na))
+
+    def u_col(j, lag):
+        return ny * na + lag * nu + j
+
+    Ry = R[:, n_cols:]
+    losses = np.empty((nu, max_delay + 1))
+    for j in range(nu):
+        others = [u_col(i, lag) for i in range(nu) if i != j for lag in range(lags)]
+        for nk in range(max_delay + 1):
+            S = past_y + others + [u_col(j, lag) for lag in range(nk, nk + nb)]
+            RS = R[:, S]
+            coef = scipy.linalg.lstsq(RS, Ry, check_finite=False, lapack_driver="gelsy")[0]
+            losses[j, nk] = float(np.sum((Ry - RS @ coef) ** 2))
+    delays = np.argmin(losses, axis=1).astype(np.int64)
+    return (delays, losses) if return_loss else delays
+
+
+# ---------------------------------------------------------------------------
+# delays on data and models
+# ---------------------------------------------------------------------------
+def delay_inputs(data, input_delay):
+    """The record with input ``j`` shifted by ``d_j`` samples.
+
+    Sample ``k`` of the result holds ``u_j[k + D - d_j]`` and ``y[k + D]``,
+    ``D = max(d)``: the first ``D`` output samples, whose delayed inputs lie
+    before the record, are left out (no input value is invented). A method
+    run on the result identifies the model from ``u_j[k - d_j]`` to
+    ``y[k]``.
+
+    Parameters
+    ----------
+    data : IOData
+        Uniformly sampled record.
+    input_delay : int or sequence of int
+        Delay of every input in samples (one integer: the same for all).
+
+    Returns
+    -------
+    data : IOData
+        The shifted record (the same object when every delay is 0).
+    delays : ndarray of int, shape (n_inputs,)
+    """
+    if not isinstance(data, IOData):
+        raise DataError("input_delay shifts the samples of an IOData record; a "
+                        f"{type(data).__name__} cannot be shifted: build the statistic from "
+                        "the shifted record (subid.delay.delay_inputs)")
+    if data.dt is None:
+        raise DataError("input_delay counts samples and needs uniformly sampled data; this "
+                        "record has non-uniform time stamps")
+    delays = _check_delays(input_delay, data.n_inputs)
+    D = int(delays.max()) if delays.size else 0
+    if D == 0:
+        return data, delays
+    N = data.n_samples
+    if N - D < 2:
+        raise TooFewSamplesError(f"input_delay {delays.tolist()} leaves {max(N - D, 0)} "
+                                 f"samples of a {N}-sample record")
+    u = np.column_stack([data.u[D - d:N - d, j] for j, d in enumerate(delays)])
+    out = data[D:]
+    shifted = out._derive(u, out.y, t=None if not data.has_time_stamps else out.t,
+                          dt=out.dt, t0=float(out.t[0]))
+    return shifted, delays
+
+
+def shift_for_method(data, input_delay):
+    """What a batch method does with its ``input_delay`` argument: ``(data, None)``
+    when it is 0 or None (the data may then be a HankelStatistic), else
+    :func:`delay_inputs`."""
+    if input_delay is None or (isinstance(input_delay, (numbers.Integral, np.integer))
+                               and not isinstance(input_delay, bool) and input_delay == 0):
+        return data, None
+    shifted, delays = delay_inputs(data, input_delay)
+    return shifted, (delays if delays.any() else None)
+
+
+def input_delay_of(model) -> np.ndarray | None:
+    """The input delays recorded on ``model`` (``info['input_delay']``), or
+    None when there are none (or all are 0)."""
+    value = model.info.get(INFO_KEY)
+    if value is None:
+        return None
+    delays = _check_delays(value, model.n_inputs, error=ModelError)
+    return delays if delays.any() else None
+
+
+def record_delay(model, delays):
+    """Store ``delays`` in ``model.info['input_delay']`` (a list of int); returns
+    ``model`` (unchanged when ``delays`` is None)."""
+    if delays is None:
+        return model
+    model.info[INFO_KEY] = [int(d) for d in np.asarray(delays).reshape(-1)]
+    return model
+
+
+def apply_to_inputs(u: np.ndarray, delays: np.ndarray) -> np.ndarray:
+    """``u_j[k - d_j]`` for every sample, zero before the first sample (the
+    input before the record is taken as zero, as the initial state is by
+    default)."""
+    out = np.zeros_like(u)
+    N = u.shape[0]
+    for j, d in enumerate(delays):
+        if d < N:
+            out[d:, j] = u[:N - d, j]
+    return out
+
+
+def frequency_factor(delays: np.ndarray, w: np.ndarray, dt: float) -> np.ndarray:
+    """``exp(-1j w dt d_j)``, shape (len(w), 1, n_inputs): the delays' factor on
+    the columns of the frequency response."""
+    return np.exp(-1j * np.outer(np.asarray(w, dtype=float) * dt, delays))[:, None, :]
+
+
+def absorb_delay(model):
+    """An equivalent model without input delays: each delayed input passes
+    through ``d_j`` extra states (a shift register), so the order grows by
+    ``sum(d)``. Use it for tools that know no delays (``.mat``, control,
+    scipy exports; Markov parameters).
+
+    Returns the model itself when it has no delays.
+    """
+    from .model import StateSpace
+    delays = input_delay_of(model)
+    if delays is None:
+        return model
+    if model.is_continuous:
+        raise ModelError("input delays in samples are defined for discrete-time models only")
+    n, m, p = model.order, model.n_inputs, model.n_outputs
+    extra = int(delays.sum())
+    N = n + extra
+    A = np.zeros((N, N))
+    B = np.zeros((N, m))
+    C = np.zeros((p, N))
+    D = np.zeros((p, m))
+    A[:n, :n] = model.A
+    C[:, :n] = model.C
+    pos = n
+    for j, d in enumerate(delays):
+        if d == 0:
+            B[:n, j] = model.B[:, j]
+            D[:, j] = model.D[:, j]
+            continue
+        first, last = pos, pos + d - 1      # register: first holds u[k-1], last u[k-d]
+        B[first, j] = 1.0
+        for r in range(first + 1, last + 1):
+            A[r, r - 1] = 1.0
+        A[:n, last] = model.B[:, j]
+        C[:, last] = model.D[:, j]
+        pos += d
+    info = {k: v for k, v in model.info.items() if k != INFO_KEY}
+    info["absorbed_input_delay"] = delays.tolist()
+    return StateSpace(A, B, C, D, model.dt, input_names=model.input_names,
+                      output_names=model.output_names, info=info)
