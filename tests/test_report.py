@@ -94,7 +94,8 @@ def test_report_has_every_section_with_embedded_images(dryer_report):
     assert p.external == []
     assert not p.tags & {"script", "link", "iframe", "object", "embed"}
     assert "dryer &lt;test&gt;" in dryer_report and "a note &amp; more" in dryer_report
-    (order_chart,) = p.images["order"]          # both models carry a profile
+    order_chart, scores_chart = p.images["order"]   # profiles, then the CV candidate scores
+    check_png(scores_chart)
     check_png(order_chart)
 
 
@@ -125,7 +126,8 @@ def test_online_report_adds_convergence():
     rs.update(data.u, data.y)
     text = report.identification_report({"recursive": rs.model}, data, history=rs.history)
     p = parse(text)
-    assert list(p.images) == [s for s in report.SECTIONS if s != "order"]   # order given
+    assert list(p.images) == list(report.SECTIONS)   # the rank profile; no candidate scores
+    assert len(p.images["order"]) == 1
     check_png(p.images["convergence"][0])
 
 
