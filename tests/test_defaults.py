@@ -158,3 +158,11 @@ def test_random_systems_20db_coloured_input():
             fits[method.__name__].append(subid.fit_percent(model, val).mean())
     medians = {k: float(np.median(v)) for k, v in fits.items()}
     assert min(medians.values()) >= max(medians.values()) - 1.0, medians
+
+
+def test_order_beyond_every_default_horizon_is_named():
+    data = systems.simulate_data(systems.random_system(2, 1, 1, seed=1), 3000, seed=1)
+    with pytest.raises(errors.OrderError, match="horizon >= 26"):
+        subid.moesp(data, 25)
+    model = subid.moesp(data, 25, horizon=26, selection="gap", stability="none")
+    assert model.order == 25 and model.info["horizon"] == 26

@@ -36,7 +36,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from .errors import SubidError
+from .errors import OrderError, SubidError
 
 #: Horizons tried when none is given (kept when the data allow them).
 HORIZON_CANDIDATES = (10, 20)
@@ -156,7 +156,12 @@ def cross_validate(data, fixed, candidates, horizon, *, prepare_fold, build):
             fold_scores[(n, f)] = per_fold[n]
             scores[(n, f)] = float(np.mean(per_fold[n]))
     if not scores:
-        raise SubidError("no candidate order fits the horizons these data allow")
+        need = math.ceil(max(wanted) / data.n_outputs) + 1
+        raise OrderError(f"order {min(wanted)}{'..' + str(max(wanted)) if len(wanted) > 1 else ''}"
+                         f" cannot be revealed with the horizons these data allow "
+                         f"({', '.join(map(str, horizons))}) and {data.n_outputs} output"
+                         f"{'s' if data.n_outputs != 1 else ''}; give horizon >= {need} "
+                         "(with enough samples) or a lower order")
     limit = (100.0 - max(scores.values())) * (1.0 + RELATIVE_TOLERANCE) + ABSOLUTE_TOLERANCE
     order, chosen_h = min(key for key, value in scores.items() if 100.0 - value <= limit)
     record = {
