@@ -42,14 +42,28 @@ def _random_cases():
     return cases
 
 
-@pytest.mark.parametrize("case", _random_cases(), ids=lambda c: f"sys{c[0]}-n{c[1]}-{c[2]}x{c[3]}")
+def _case_id(c):
+    return f"sys{c[0]}-n{c[1]}-{c[2]}x{c[3]}"
+
+
+@pytest.mark.parametrize("case", _random_cases(), ids=_case_id)
 def test_random_systems_noise_free(case):
     k, order, nu, ny = case
     true = systems.random_system(order, nu, ny, seed=k)
     data = systems.simulate_data(true, 1200, seed=10_000 + k)
     for name, fn in METHODS.items():
-        model = fn(data, order)
+        model = fn(data, order, horizon=10)
         assert subid.markov_error(model, true) < 1e-8, name
+
+
+# the order chosen by cross-validation: every 5th system in the default tier, all 50 in `long`
+@pytest.mark.parametrize("case", [c if c[0] % 5 == 0 else pytest.param(c, marks=pytest.mark.long)
+                                  for c in _random_cases()], ids=_case_id)
+def test_random_systems_order_chosen(case):
+    k, order, nu, ny = case
+    true = systems.random_system(order, nu, ny, seed=k)
+    data = systems.simulate_data(true, 1200, seed=10_000 + k)
+    for name, fn in METHODS.items():
         auto = fn(data)
         assert auto.order == order, f"{name} chose order {auto.order}"
         assert subid.markov_error(auto, true) < 1e-8, name
