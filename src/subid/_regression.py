@@ -140,19 +140,36 @@ def fit_b_d_x0_qr(A, C, u, y, *, feedthrough=True, estimate_x0=True, output_weig
     n = A.shape[0]
     N, nu = u.shape
     ny = y.shape[1]
-    nx = n if estimate_x0 else 0
-    q = nx + n * nu
-    p = q + (ny * nu if feedthrough else 0)
+    nx, q, p = parameter_count(n, nu, ny, estimate_x0, feedthrough)
     S = np.zeros((n, q))
     if estimate_x0:
         S[:, :n] = np.eye(n)
-    R = np.zeros((0, p + 1))
+    R, _ = qr_factor(A, C, u, y, S, n_x0=nx, feedthrough=feedthrough,
+                     output_weights=output_weights, kernel=kernel)
+    return solve_qr_factor(R, n, nu, ny, estimate_x0=estimate_x0, feedthrough=feedthrough,
+                           n_samples=N)
+
+
+def qr_factor(A, C, u, y, S, *, n_x0, feedthrough, output_weights=None,
+              kernel=sensitivity_rows, R=None):
+    """Triangular factor of the weighted rows ``[Phi(t), y(t)]`` of one piece.
+
+    ``S`` is the sensitivity at the piece's first sample (``[I, 0]`` at the
+    start of the record with x0 estimated). Returns ``(R, S_end)``, ``R`` of
+    shape (at most p + 1, p + 1); factors of consecutive pieces merge by a QR
+    factorisation of their stack (``R`` continues a previous one).
+    """
+    N, nu = u.shape
+    ny = y.shape[1]
+    q = S.shape[1]
+    p = q + (ny * nu if feedthrough else 0)
+    R = np.zeros((0, p + 1)) if R is None else R
     A = np.ascontiguousarray(A)
     C = np.ascontiguousarray(C)
     for start in range(0, N, _CHUNK):
         stop = min(start + _CHUNK, N)
         uc = np.ascontiguousarray(u[start:stop])
-        rows, S = kernel(A, C, uc, S, nx)
+        rows, S = kernel(A, C, uc, S, n_x0)
         T = stop - start
         block = np.empty((T, ny, p + 1))
         block[:, :, :q] = rows
@@ -164,6 +181,15 @@ def fit_b_d_x0_qr(A, C, u, y, *, feedthrough=True, estimate_x0=True, output_weig
             block *= output_weights[None, :, None]
         R = scipy.linalg.qr(np.vstack([R, block.reshape(T * ny, p + 1)]), mode="r",
                             check_finite=False)[0][: p + 1]
+    return R, S
+
+
+def solve_qr_factor(R, n, nu, ny, *, estimate_x0, feedthrough, n_samples):
+    """B, D, x0 and diagnostics from the triangular factor of the weighted rows."""
+    N = n_samples
+    nx, q, p = parameter_count(n, nu, ny, estimate_x0, feedthrough)
+    if R.shape[0] < p + 1:
+        R = np.vstack([R, np.zeros((p + 1 - R.shape[0], p + 1))])
     # Equilibrate the columns so that the condition number (and the rank
     # decision) do not depend on the state basis or the signal scaling.
     scale = np.linalg.norm(R[:p, :p], axis=0)
