@@ -107,3 +107,49 @@ def test_fallbacks_to_qr():
     assert ModalForm.of(A, C) is not None
     assert fit_b_d_x0_modal(A, C, u, y) is None
     assert fit_b_d_x0(A, C, u, y)[3]["regression_path"] == "qr"
+
+
+def _list_map(u, y, borders):
+    def map_pieces(function, arguments):
+        return [function([(u[a:b], y[a:b])], *args)
+                for (a, b), args in zip(zip(borders[:-1], borders[1:]), arguments)]
+    return map_pieces
+
+
+@pytest.mark.parametrize("defective", [False, True])
+def test_second_pass_over_pieces_equals_in_memory(defective):
+    """The distributed regression (modal, or its QR fall-back for a nearly defective A)
+    equals the in-memory one."""
+    from subid._bd_pass import OutputRegression
+    r = np.random.default_rng(11)
+    if defective:
+        A = np.array([[0.8, 1.0, 0.0], [0.0, 0.8 + 1e-10, 0.3], [0.0, 0.0, -0.5]])
+    else:
+        A = systems.random_system(3, 2, 2, seed=12).A
+    C = r.standard_normal((2, 3))
+    u = r.standard_normal((5_000, 2))
+    y = r.standard_normal((5_000, 2)) * [1.0, 30.0]
+    weights = 1.0 / y.std(axis=0)
+    borders = [0, 3, 400, 4_000, 5_000]
+    second = OutputRegression(_list_map(u, y, borders), len(borders) - 1, 2, 2)
+    for kw in (dict(estimate_x0=True, feedthrough=True), dict(estimate_x0=False,
+                                                              feedthrough=False)):
+        whole = fit_b_d_x0(A, C, u, y, output_weights=weights, **kw)
+        pieces = second(A, C, **kw)
+        assert pieces[3]["regression_path"] == whole[3]["regression_path"] == \
+            ("qr" if defective else "modal")
+        for a, b in zip(pieces[:3], whole[:3]):
+            np.testing.assert_allclose(a, b, rtol=1e-10, atol=1e-10 * np.abs(b).max())
+        assert pieces[3]["residual_rms"] == pytest.approx(whole[3]["residual_rms"], rel=1e-9)
+
+
+def test_second_pass_initial_state_equals_simulate_fit():
+    import subid
+    from subid._bd_pass import OutputRegression
+    from subid.metrics import simulate_fit
+    true = systems.random_system(3, 2, 2, seed=13)
+    data = systems.simulate_data(true, 6_000, seed=14, output_snr_db=20, x0=[1.0, -2.0, 0.5])
+    model = subid.StateSpace(true.A, true.B * 1.01, true.C, true.D, 1.0)
+    second = OutputRegression(_list_map(data.u, data.y, [0, 100, 6_000]), 2, 2, 2)
+    np.testing.assert_allclose(second.initial_state(model.A, model.B, model.C, model.D),
+                               simulate_fit(model, data)[1], rtol=1e-10, atol=1e-10)
