@@ -89,10 +89,10 @@ def modal_piece(chunks, form, n_inputs, n_outputs):
                                     np.ascontiguousarray(y[start:stop]), r, e, tau0,
                                     form.n_free)
             if tau0 < form.n_free:
-                moments += w @ w.T
+                moments += w.T @ w
             else:
-                tail = w[n:]
-                moments[n:, n:] += tail @ tail.T
+                tail = w[:, n:]
+                moments[n:, n:] += tail.T @ tail
         length += len(u)
     return {"moments": moments, "r_end": r, "length": length, "count": spread.count,
             "mean": spread.mean, "m2": spread.m2}

@@ -394,31 +394,31 @@ def modal_signals_reference(lam, is_real, u, y, r, e, tau0, n_free):
 
     Returns
     -------
-    w : (n (1 + nu) + nu + ny, T) the real signals (rows), r and e after the block.
+    w : (T, n (1 + nu) + nu + ny) the real signals (columns), r and e after the block.
     """
     T, nu = u.shape
     ny = y.shape[1]
     widths = np.where(is_real, 1, 2)
     n = int(widths.sum())
-    w = np.zeros((n * (1 + nu) + nu + ny, T))
+    w = np.zeros((T, n * (1 + nu) + nu + ny))
     r = r.copy()
     e = e.copy()
     for t in range(T):
         row = 0
         for l in range(lam.size):
             if tau0 + t < n_free:
-                w[row, t] = e[l].real
+                w[t, row] = e[l].real
                 if not is_real[l]:
-                    w[row + 1, t] = e[l].imag
+                    w[t, row + 1] = e[l].imag
             row += widths[l]
         for j in range(nu):
             for l in range(lam.size):
-                w[row, t] = r[l, j].real
+                w[t, row] = r[l, j].real
                 if not is_real[l]:
-                    w[row + 1, t] = r[l, j].imag
+                    w[t, row + 1] = r[l, j].imag
                 row += widths[l]
-        w[row:row + nu, t] = u[t]
-        w[row + nu:, t] = y[t]
+        w[t, row:row + nu] = u[t]
+        w[t, row + nu:] = y[t]
         if tau0 + t < n_free:
             e = lam * e
         r = lam[:, None] * r + u[t][None, :]
@@ -434,7 +434,7 @@ def modal_signals(lam, is_real, u, y, r, e, tau0, n_free):  # pragma: no cover -
     n = 0
     for l in range(m):
         n += 1 if is_real[l] else 2
-    w = np.zeros((n * (1 + nu) + nu + ny, T))
+    w = np.zeros((T, n * (1 + nu) + nu + ny))
     r = r.copy()
     e = e.copy()
     lr = lam.real.copy()
@@ -447,13 +447,13 @@ def modal_signals(lam, is_real, u, y, r, e, tau0, n_free):  # pragma: no cover -
     for t in range(free_stop):
         row = 0
         for l in range(m):
-            w[row, t] = er[l]
+            w[t, row] = er[l]
             a = lr[l] * er[l] - li[l] * ei[l]
             b = lr[l] * ei[l] + li[l] * er[l]
             if is_real[l]:
                 row += 1
             else:
-                w[row + 1, t] = ei[l]
+                w[t, row + 1] = ei[l]
                 row += 2
             er[l] = a
             ei[l] = b
@@ -465,19 +465,19 @@ def modal_signals(lam, is_real, u, y, r, e, tau0, n_free):  # pragma: no cover -
             for l in range(m):
                 a = rr[l, j]
                 b = ri[l, j]
-                w[row, t] = a
+                w[t, row] = a
                 if is_real[l]:
                     rr[l, j] = lr[l] * a + ut
                     row += 1
                 else:
-                    w[row + 1, t] = b
+                    w[t, row + 1] = b
                     rr[l, j] = lr[l] * a - li[l] * b + ut
                     ri[l, j] = lr[l] * b + li[l] * a
                     row += 2
         for j in range(nu):
-            w[row + j, t] = u[t, j]
+            w[t, row + j] = u[t, j]
         for k in range(ny):
-            w[row + nu + k, t] = y[t, k]
+            w[t, row + nu + k] = y[t, k]
     for l in range(m):
         r[l, :] = rr[l, :] + 1j * ri[l, :]
         e[l] = er[l] + 1j * ei[l]
@@ -511,10 +511,10 @@ def piece_moments(form, u, y, *, block=_MODAL_BLOCK, kernel=modal_signals):
     r_end = np.zeros((form.lam.size, nu), dtype=complex)
     for start, w, r_end in _blocks(form, u, y, block, kernel):
         if start < form.n_free:
-            moments += w @ w.T
+            moments += w.T @ w
         else:
-            tail = w[n:]
-            moments[n:, n:] += tail @ tail.T
+            tail = w[:, n:]
+            moments[n:, n:] += tail.T @ tail
     return moments, r_end
 
 
@@ -662,6 +662,6 @@ def fit_b_d_x0_modal(A, C, u, y, *, feedthrough=True, estimate_x0=True, output_w
         g = np.stack([weights[i] * (P[i, -1] - theta @ P[i, :-1]) for i in range(ny)])
         total = 0.0
         for _, w, _ in _blocks(form, u, y, block, kernel):
-            total += float(np.sum((g @ w) ** 2))
+            total += float(np.sum((w @ g.T) ** 2))
         diagnostics["residual_rms"] = float(np.sqrt(total / (N_samples * ny)))
     return B, D, x0, diagnostics
