@@ -189,3 +189,13 @@ def test_cli_identify_stream_equals_library(tmp_path, record):
     reference = subid.n4sid(est, 3, horizon=5, statistic="gram")
     np.testing.assert_allclose(model.A, reference.A, rtol=1e-9, atol=1e-10)
     assert model.info["data"]["streamed"] and model.info["data"]["n_estimation"] == 22_500
+    # moesp: B, D, x0 by the second pass, as the in-memory default
+    assert cli.main(["--quiet", "identify", str(path), "--inputs", "u1,u2", "--outputs",
+                     "y1,y2", "--dt", "1", "--method", "moesp", "--order", "3", "--horizon",
+                     "5", "--validate", "0.25", "--stream", "--chunk-size", "7000",
+                     "--out", str(out)]) == 0
+    model = subid.StateSpace.load(out / "model.json")
+    reference = subid.moesp(est, 3, horizon=5, statistic="gram")
+    for name in "ABCD":
+        np.testing.assert_allclose(getattr(model, name), getattr(reference, name), rtol=1e-9,
+                                   atol=1e-10, err_msg=name)
