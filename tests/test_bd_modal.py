@@ -153,3 +153,16 @@ def test_second_pass_initial_state_equals_simulate_fit():
     second = OutputRegression(_list_map(data.u, data.y, [0, 100, 6_000]), 2, 2, 2)
     np.testing.assert_allclose(second.initial_state(model.A, model.B, model.C, model.D),
                                simulate_fit(model, data)[1], rtol=1e-10, atol=1e-10)
+
+
+def test_second_pass_residual_on_noise_free_pieces():
+    from subid._bd_pass import OutputRegression
+    true = systems.random_system(3, 2, 2, seed=15)
+    data = systems.simulate_data(true, 8_000, seed=16, x0=np.ones(3))
+    second = OutputRegression(_list_map(data.u, data.y, [0, 50, 3_000, 8_000]), 3, 2, 2)
+    B, D, x0, diag = second(true.A, true.C)
+    whole = fit_b_d_x0(true.A, true.C, data.u, data.y, output_weights=1 / data.y.std(axis=0))
+    assert diag["regression_passes"] == 2 and diag["residual_rms"] < 1e-12
+    assert whole[3]["residual_rms"] < 1e-12
+    np.testing.assert_allclose(B, true.B, atol=1e-10)
+    np.testing.assert_allclose(x0, np.ones(3), atol=1e-9)

@@ -11,7 +11,9 @@ state, maps its moments to the global regressors
 (:func:`subid._regression.regressor_maps`) and sums the normal equations: the
 same normal equations as the in-memory record, to rounding. So the second pass
 is one more pass over the data, in parallel over the pieces, with memory
-bounded by a piece's chunk.
+bounded by a piece's chunk. (When the fit is nearly exact, the residual RMS
+of the normal equations is rounding; one more pass then computes it sample
+by sample, as the in-memory path does.)
 
 Where the in-memory path would fall back to the QR factorisation (A
 unstable or nearly defective, the normal equations ill-conditioned), so does
@@ -31,7 +33,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.linalg
 
-from ._regression import (_MODAL_BLOCK, ModalForm, modal_signals, next_filter_state,
+from ._regression import (_MODAL_BLOCK, RESIDUAL_RECOMPUTE, ModalForm, modal_signals, next_filter_state,
                           normal_equations, parameter_count, qr_factor, regressor_maps,
                           sensitivity_rows, solve_normal_equations, solve_qr_factor)
 
@@ -135,21 +137,47 @@ def _spread_of(parts, ny):
 def combine_modal(form, parts, n_inputs, n_outputs, *, estimate_x0, feedthrough):
     """Normal equations of the whole record from the pieces' reductions (time order).
 
-    Returns ``(N, n_samples)``.
+    Returns ``(N, n_samples, maps, weights)`` with ``maps`` the per-piece
+    :func:`subid._regression.regressor_maps` (None for an empty piece).
     """
     weights = _spread_of(parts, n_outputs).weights()
     r = np.zeros((form.lam.size, n_inputs), dtype=complex)
     t0 = 0
     N = 0.0
+    maps = []
     for part in parts:
         if part["length"] == 0:
+            maps.append(None)
             continue
         P = regressor_maps(form, n_inputs, n_outputs, estimate_x0=estimate_x0,
                            feedthrough=feedthrough, t0=t0, r_start=r)
+        maps.append(P)
         N = N + normal_equations(P, part["moments"], weights)
         r = next_filter_state(form, r, part["r_end"], part["length"])
         t0 += part["length"]
-    return N, t0
+    return N, t0, maps, weights
+
+
+def residual_piece(chunks, form, g):
+    """Sum over one piece of the squared weighted residuals ``(w(t) g^T)``, one column
+    per output (``g`` maps the piece's zero-start signals to the residuals)."""
+    total = 0.0
+    r = np.zeros((form.lam.size, 0), dtype=complex)
+    e = np.ones(form.lam.size, dtype=complex)
+    length = 0
+    for u, y in chunks:
+        u = np.asarray(u, dtype=float)
+        y = np.asarray(y, dtype=float)
+        if r.shape[1] != u.shape[1]:
+            r = np.zeros((form.lam.size, u.shape[1]), dtype=complex)
+        for start in range(0, len(u), _MODAL_BLOCK):
+            stop = min(start + _MODAL_BLOCK, len(u))
+            w, r, e = modal_signals(form.lam, form.is_real, np.ascontiguousarray(u[start:stop]),
+                                    np.ascontiguousarray(y[start:stop]), r, e, length + start,
+                                    form.n_free)
+            total += float(np.sum((w @ g.T) ** 2))
+        length += len(u)
+    return total
 
 
 class OutputRegression:
@@ -186,13 +214,23 @@ class OutputRegression:
         form = ModalForm.of(A, C)
         if form is not None:
             parts = self._map(modal_piece, [(form, nu, ny)] * self.n_pieces)
-            N, n_samples = combine_modal(form, parts, nu, ny, estimate_x0=estimate_x0,
-                                         feedthrough=feedthrough)
+            N, n_samples, maps, weights = combine_modal(form, parts, nu, ny,
+                                                        estimate_x0=estimate_x0,
+                                                        feedthrough=feedthrough)
             solved = solve_normal_equations(N, n, nu, ny, estimate_x0=estimate_x0,
                                             feedthrough=feedthrough, n_samples=n_samples)
             if solved is not None:
-                B, D, x0, _, diagnostics = solved
+                B, D, x0, theta, diagnostics = solved
                 diagnostics["regression_passes"] = 1
+                if diagnostics["residual_rms"] ** 2 * n_samples * ny < \
+                        RESIDUAL_RECOMPUTE * N[-1, -1]:
+                    # nearly exact fit: the residual sample by sample, as in memory
+                    gs = [np.zeros((ny, form.signal_count(nu, ny))) if P is None else
+                          np.stack([weights[i] * (P[i, -1] - theta @ P[i, :-1])
+                                    for i in range(ny)]) for P in maps]
+                    total = sum(self._map(residual_piece, [(form, g) for g in gs]))
+                    diagnostics["residual_rms"] = float(np.sqrt(total / (n_samples * ny)))
+                    diagnostics["regression_passes"] = 2
                 return B, D, x0, diagnostics
         return self._qr(A, C, feedthrough=feedthrough, estimate_x0=estimate_x0)
 
@@ -208,7 +246,7 @@ class OutputRegression:
         if form is None:
             return None
         parts = self._map(modal_piece, [(form, nu, ny)] * self.n_pieces)
-        N, _ = combine_modal(form, parts, nu, ny, estimate_x0=True, feedthrough=True)
+        N = combine_modal(form, parts, nu, ny, estimate_x0=True, feedthrough=True)[0]
         p = N.shape[0] - 1
         theta = np.concatenate([np.asarray(B, float).T.ravel(), np.asarray(D, float).T.ravel()])
         rhs = N[:n, p] - N[:n, n:p] @ theta
