@@ -39,12 +39,42 @@ def test_dask_arrays_equal_single_machine(client, record, method, fn, kw):
     u = da.from_array(data.u, chunks=(6_007, 2))      # borders fall anywhere
     y = da.from_array(data.y, chunks=(6_007, 2))
     model = sd.identify(u, y, method, dt=1.0, order=3, horizon=5, client=client, **kw)
-    single = fn(data, 3, horizon=5, statistic="gram",
-                **({} if method == "n4sid" else {"bd_method": "projection"}), **kw)
+    single = fn(data, 3, horizon=5, statistic="gram", **kw)    # the in-memory default
+    for name in "ABCDK":
+        np.testing.assert_allclose(getattr(model, name), getattr(single, name), rtol=1e-10,
+                                   atol=1e-10, err_msg=name)
+    np.testing.assert_allclose(model.info["x0"], single.info["x0"], rtol=1e-10, atol=1e-10)
+    assert model.info.get("bd_method") == single.info.get("bd_method")
+    assert model.info["n_samples"] == 40_000
+
+
+def test_dask_projection_kept(client, record):
+    """bd_method='projection': the statistic only, one pass, as before."""
+    _, data = record
+    u = da.from_array(data.u, chunks=(6_007, 2))
+    y = da.from_array(data.y, chunks=(6_007, 2))
+    model = sd.identify(u, y, "moesp", order=3, horizon=5, client=client,
+                        bd_method="projection")
+    single = subid.moesp(data, 3, horizon=5, statistic="gram", bd_method="projection")
+    assert model.info["bd_method"] == "projection"
     for name in "ABCD":
         np.testing.assert_allclose(getattr(model, name), getattr(single, name), rtol=1e-10,
                                    atol=1e-10, err_msg=name)
-    assert model.info["n_samples"] == 40_000
+
+
+def test_dask_second_pass_differs_from_projection(client):
+    """On a short noisy record the projection and the regression differ clearly, and
+    the distributed model is the regression's (guards against a silent projection)."""
+    true = systems.random_system(4, 2, 2, seed=3)
+    data = systems.simulate_data(true, 20_000, seed=4, output_snr_db=10)
+    u = da.from_array(data.u, chunks=(3_001, 2))
+    y = da.from_array(data.y, chunks=(3_001, 2))
+    model = sd.identify(u, y, "ls", order=4, horizon=6, client=client)
+    single = subid.ls_subspace(data, 4, horizon=6, statistic="gram")
+    projection = subid.ls_subspace(data, 4, horizon=6, statistic="gram", bd_method="projection")
+    assert np.abs(single.B - projection.B).max() > 1e-6
+    np.testing.assert_allclose(model.B, single.B, rtol=1e-10, atol=1e-10)
+    np.testing.assert_allclose(model.D, single.D, rtol=1e-10, atol=1e-10)
 
 
 def test_dask_qr_statistic_and_uneven_chunks(client, record):
@@ -69,6 +99,13 @@ def test_identify_files(client, record, tmp_path):
     single = subid.n4sid(data, 3, horizon=5, statistic="gram")
     np.testing.assert_allclose(model.A, single.A, rtol=1e-10, atol=1e-10)
     assert model.input_names == ("u1", "u2")
+    model = sd.identify_files(paths, "u1,u2", "y1,y2", "moesp", order=3, horizon=5,
+                              client=client, chunk_size=5000)
+    single = subid.moesp(data, 3, horizon=5, statistic="gram")
+    for name in "ABCDK":
+        np.testing.assert_allclose(getattr(model, name), getattr(single, name), rtol=1e-10,
+                                   atol=1e-10, err_msg=name)
+    np.testing.assert_allclose(model.info["x0"], single.info["x0"], rtol=1e-10, atol=1e-10)
 
 
 def test_identify_many(client):
@@ -88,8 +125,10 @@ def test_threads_scheduler_without_client(record):
     u = da.from_array(data.u, chunks=(10_000, 2))
     y = da.from_array(data.y, chunks=(10_000, 2))
     model = sd.identify(u, y, "moesp", order=3, horizon=5)
-    single = subid.moesp(data, 3, horizon=5, statistic="gram", bd_method="projection")
-    np.testing.assert_allclose(model.A, single.A, rtol=1e-10, atol=1e-10)
+    single = subid.moesp(data, 3, horizon=5, statistic="gram")
+    for name in "ABCD":
+        np.testing.assert_allclose(getattr(model, name), getattr(single, name), rtol=1e-10,
+                                   atol=1e-10, err_msg=name)
 
 
 def test_seed001_monte_carlo_through_dask_is_reproducible(client):

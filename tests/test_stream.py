@@ -41,12 +41,47 @@ def test_identify_file_equals_in_memory(tmp_path, record):
     _write_csv(path, data)
     streamed = subid.identify_file(path, "u1,u2", "y1,y2", method="moesp", order=3, horizon=5,
                                    chunk_size=4096)
+    in_memory = subid.moesp(data, 3, horizon=5, statistic="gram")     # the default
+    for name in "ABCDK":
+        np.testing.assert_allclose(getattr(streamed, name), getattr(in_memory, name),
+                                   rtol=1e-10, atol=1e-10)
+    np.testing.assert_allclose(streamed.info["x0"], in_memory.info["x0"], rtol=1e-10,
+                               atol=1e-10)
+    assert streamed.info["bd_method"] == "simulation"
+    assert streamed.info["n_samples"] == 30_000
+    assert subid.markov_error(streamed, true) < 0.01
+    # the statistic-only path stays available
+    streamed = subid.identify_file(path, "u1,u2", "y1,y2", method="moesp", order=3, horizon=5,
+                                   chunk_size=4096, bd_method="projection")
     in_memory = subid.moesp(data, 3, horizon=5, statistic="gram", bd_method="projection")
+    assert streamed.info["bd_method"] == "projection"
     for name in "ABCD":
         np.testing.assert_allclose(getattr(streamed, name), getattr(in_memory, name),
                                    rtol=1e-10, atol=1e-10)
-    assert streamed.info["n_samples"] == 30_000
-    assert subid.markov_error(streamed, true) < 0.01
+
+
+@pytest.mark.parametrize("method,fn,kw", [
+    ("ls", subid.ls_subspace, {}), ("n4sid", subid.n4sid, {}),
+    ("moesp", subid.moesp, {"statistic": "qr"}),
+])
+def test_identify_stream_pieces_equal_in_memory(record, method, fn, kw):
+    _, data = record
+    pieces = [data[a:a + 4001] for a in range(0, 30_000, 4001)]
+    streamed = subid.identify_stream(pieces, method, 3, 5, **kw)
+    in_memory = fn(data, 3, horizon=5, **{"statistic": "gram", **kw})
+    for name in "ABCDK":
+        np.testing.assert_allclose(getattr(streamed, name), getattr(in_memory, name),
+                                   rtol=1e-10, atol=1e-10, err_msg=name)
+    np.testing.assert_allclose(streamed.info["x0"], in_memory.info["x0"], rtol=1e-10,
+                               atol=1e-10)
+
+
+def test_identify_stream_one_shot_iterator_warns(record):
+    _, data = record
+    pieces = (data[a:a + 10_000] for a in range(0, 30_000, 10_000))
+    with pytest.warns(UserWarning, match="one-shot iterator"):
+        model = subid.identify_stream(pieces, "moesp", 3, 5)
+    assert model.info["bd_method"] == "projection"
 
 
 def test_npy_memory_mapped(tmp_path, record):
@@ -154,3 +189,13 @@ def test_cli_identify_stream_equals_library(tmp_path, record):
     reference = subid.n4sid(est, 3, horizon=5, statistic="gram")
     np.testing.assert_allclose(model.A, reference.A, rtol=1e-9, atol=1e-10)
     assert model.info["data"]["streamed"] and model.info["data"]["n_estimation"] == 22_500
+    # moesp: B, D, x0 by the second pass, as the in-memory default
+    assert cli.main(["--quiet", "identify", str(path), "--inputs", "u1,u2", "--outputs",
+                     "y1,y2", "--dt", "1", "--method", "moesp", "--order", "3", "--horizon",
+                     "5", "--validate", "0.25", "--stream", "--chunk-size", "7000",
+                     "--out", str(out)]) == 0
+    model = subid.StateSpace.load(out / "model.json")
+    reference = subid.moesp(est, 3, horizon=5, statistic="gram")
+    for name in "ABCD":
+        np.testing.assert_allclose(getattr(model, name), getattr(reference, name), rtol=1e-9,
+                                   atol=1e-10, err_msg=name)

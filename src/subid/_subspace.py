@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import math
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.linalg
@@ -270,7 +270,9 @@ def estimate_b_d(A, C_n, gamma, L11, L_yu, problem: "Problem", *, bd_method: str
     if bd_method not in BD_METHODS:
         raise SubidError(f"bd_method must be one of {BD_METHODS}, got {bd_method!r}")
     radius = float(np.abs(np.linalg.eigvals(A)).max())
-    if isinstance(data, HankelStatistic):           # no raw samples: the statistic only
+    # a statistic whose record can be read again (subid.stream, subid.distributed)
+    second_pass = getattr(data, "output_regression", None)
+    if isinstance(data, HankelStatistic) and second_pass is None:  # the statistic only
         if bd_method == "simulation":
             raise SubidError("bd_method='simulation' fits B and D to the raw output samples; "
                              "with a statistic only, use bd_method='projection' (or 'auto')")
@@ -278,9 +280,13 @@ def estimate_b_d(A, C_n, gamma, L11, L_yu, problem: "Problem", *, bd_method: str
     diag = {}
     if bd_method in ("auto", "simulation"):
         with np.errstate(over="ignore", invalid="ignore"):
-            B, D, x0, diag = fit_b_d_x0(A, C, data.u, data.y, feedthrough=feedthrough,
-                                        estimate_x0=estimate_x0,
-                                        output_weights=output_weights(data.y))
+            if second_pass is not None:
+                B, D, x0, diag = second_pass(A, C, feedthrough=feedthrough,
+                                             estimate_x0=estimate_x0)
+            else:
+                B, D, x0, diag = fit_b_d_x0(A, C, data.u, data.y, feedthrough=feedthrough,
+                                            estimate_x0=estimate_x0,
+                                            output_weights=problem.weights())
         usable = (np.isfinite(B).all() and np.isfinite(D).all()
                   and not diag["regression_rank_deficient"])
         if usable:
@@ -493,8 +499,9 @@ def initial_state(A, B, C, D, data):
     """Least-squares initial state of the model on ``data`` (None without raw samples
     or when the simulation overflows)."""
     if not isinstance(data, IOData):
-        return None
-    from .metrics import simulate_fit  # metrics depends on the model module only
+        second_pass = getattr(data, "output_regression", None)   # subid._bd_pass
+        return None if second_pass is None else second_pass.initial_state(A, B, C, D)
+    from .metrics import simulate_fit       # metrics depends on the model module only
     try:
         with np.errstate(all="ignore"):
             return simulate_fit(StateSpace(A, B, C, D, data.dt), data)[1]
@@ -515,6 +522,14 @@ class Problem:
     input_condition: float
     input_scale: np.ndarray
     output_scale: np.ndarray
+    _cache: dict = field(default_factory=dict, repr=False, compare=False)
+
+    def weights(self) -> np.ndarray:
+        """:func:`output_weights` of the record, computed once per problem."""
+        cached = self._cache.get("weights")
+        if cached is None:
+            cached = self._cache["weights"] = output_weights(self.data.y)
+        return cached
 
     def unscale(self, B_n, C_n, D_n):
         """B, C, D in the user's units from those of the normalised channels."""

@@ -672,12 +672,15 @@ def _write_outputs(out, data, spec, model, result, est, val, seconds, record, *,
 def _identify_streamed(data, inputs, outputs, dt, time_column, delimiter, detrend, spec, order,
                        horizon, validate, opts, frequency_unit, write_report, chunk_size,
                        report_samples, out):
-    """``identify --stream``: two passes over the file in pieces, bounded memory.
+    """``identify --stream``: passes over the file in pieces, bounded memory.
 
     Pass 1 counts the samples and sums the channels (for the means and the
     estimation/validation cut); pass 2 feeds the estimation part, means
     removed, to a :class:`~subid.HankelStatistic`, keeping only the first
-    ``report_samples`` samples of each part for the fit and the report.
+    ``report_samples`` samples of each part for the fit and the report; the
+    method then reads the estimation part once more for the B, D, x0
+    regression (:mod:`subid._bd_pass`; not with ``bd_method='projection'``),
+    so the model is the in-memory one.
     """
     import types
 
@@ -732,6 +735,19 @@ def _identify_streamed(data, inputs, outputs, dt, time_column, delimiter, detren
                     kept[part][0].append(u[lo:lo + take])
                     kept[part][1].append(y[lo:lo + take])
             start += piece.n_samples
+        if opts.get("bd_method", "auto") != "projection":
+            # pass 3 (issue 14): B, D, x0 by the output regression of the in-memory default
+            from .stream import attach_second_pass
+
+            def estimation_chunks():
+                begin = 0
+                for chunk in read_chunks(data, inputs, outputs, dt=dt, chunk_size=chunk_size,
+                                         delimiter=delimiter):
+                    end = min(max(cut - begin, 0), chunk.n_samples)
+                    if end:
+                        yield chunk.u[:end] - u_mean, chunk.y[:end] - y_mean
+                    begin += chunk.n_samples
+            attach_second_pass(stat, estimation_chunks)
         with _warnings_to_log():
             model = STREAM_METHODS[spec.attribute](stat, order, hor, **opts)
         seconds = time.perf_counter() - t0

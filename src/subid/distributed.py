@@ -20,7 +20,9 @@ Without a client, Dask's default scheduler of the current process is used
 
 * :func:`identify` — one record held as dask arrays chunked along time:
   per-chunk statistics on the workers, merged in time order on the workers
-  (a tree of merges), then the identification on the small statistic.
+  (a tree of merges), then the identification on the small statistic; B, D
+  and x0 by the output regression of the in-memory default, as a second
+  pass whose per-chunk normal equations merge exactly (:mod:`subid._bd_pass`).
 * :func:`identify_files` — one record stored as consecutive files (say one
   file per day of a plant historian); each worker reads its files in pieces.
 * :func:`fan_out` / :func:`identify_many` — many independent records (a
@@ -32,6 +34,7 @@ from __future__ import annotations
 
 import time
 
+from ._bd_pass import OutputRegression
 from .errors import DataError, SubidError
 from .io import read_chunks
 from .statistic import HankelStatistic
@@ -78,6 +81,34 @@ def _tree_merge(dask, parts):
         parts = [dask.delayed(_merge)(parts[k], parts[k + 1]) if k + 1 < len(parts)
                  else parts[k] for k in range(0, len(parts), 2)]
     return parts[0]
+
+
+def _apply_block(function, u_block, y_block, *arguments):
+    return function([(u_block, y_block)], *arguments)
+
+
+def _apply_file(function, path, inputs, outputs, chunk_size, delimiter, *arguments):
+    chunks = ((p.u, p.y) for p in read_chunks(path, inputs, outputs, chunk_size=chunk_size,
+                                               delimiter=delimiter))
+    return function(chunks, *arguments)
+
+
+def _compute_all(dask, tasks, client):
+    if client is not None:
+        return client.gather(client.compute(tasks))
+    return list(dask.compute(*tasks))
+
+
+def _second_pass(stat, dask, client, make_task, n_pieces, options):
+    """Attach the distributed B, D, x0 regression to ``stat`` (unless projection)."""
+    if options.get("bd_method", "auto") == "projection":
+        return
+
+    def map_pieces(function, arguments):
+        return _compute_all(dask, [make_task(k, function, arguments[k])
+                                   for k in range(n_pieces)], client)
+    stat.output_regression = OutputRegression(map_pieces, n_pieces, stat.n_inputs,
+                                              stat.n_outputs)
 
 
 def _compute(dask, value, client):
@@ -132,8 +163,10 @@ def identify(u, y, method: str = "moesp", *, dt: float = 1.0, order=None, horizo
     Returns
     -------
     StateSpace
-        Equal to the single-machine identification from the same statistic
-        (``method(data, ..., statistic=statistic, bd_method='projection')``).
+        Equal to the in-memory identification with the same statistic
+        (``method(data, ..., statistic=statistic)``): B, D and x0 by the output
+        regression, as a second pass over the chunks (``bd_method='projection'``
+        keeps the statistic-only B and D and one pass).
     """
     dask = _dask()
     u, y = _as_dask_pair(u, y)
@@ -144,6 +177,10 @@ def identify(u, y, method: str = "moesp", *, dt: float = 1.0, order=None, horizo
     parts = [dask.delayed(_block_statistic)(ub, yb, depth, statistic)
              for ub, yb in zip(u_blocks, y_blocks)]
     stat = _compute(dask, _tree_merge(dask, parts), client)
+    _second_pass(stat, dask, client,
+                 lambda k, function, args: dask.delayed(_apply_block)(function, u_blocks[k],
+                                                                      y_blocks[k], *args),
+                 len(u_blocks), method_options)
     return _finish(stat, method, order, horizon, dt, input_names, output_names,
                    method_options)
 
@@ -175,6 +212,10 @@ def identify_files(paths, inputs, outputs, method: str = "moesp", *, dt: float =
     parts = [dask.delayed(_file_statistic)(p, inputs, outputs, depth, statistic, chunk_size,
                                            delimiter) for p in paths]
     stat = _compute(dask, _tree_merge(dask, parts), client)
+    _second_pass(stat, dask, client,
+                 lambda k, function, args: dask.delayed(_apply_file)(
+                     function, paths[k], inputs, outputs, chunk_size, delimiter, *args),
+                 len(paths), method_options)
     return _finish(stat, method, order, horizon, dt, first.input_names, first.output_names,
                    method_options)
 

@@ -2,14 +2,20 @@
 
 A record is read piece by piece (:func:`subid.read_chunks`, or any iterable
 of :class:`IOData` pieces), reduced to its :class:`HankelStatistic` and
-identified from the statistic only: memory stays bounded by one piece plus
+identified from the statistic: memory stays bounded by one piece plus
 a matrix of ``(2 * horizon * (nu + ny))^2`` numbers, however long the record.
+When the pieces can be read again (a file, a list of pieces, or ``reread``),
+B, D and x0 come from the output regression of the in-memory default, done as
+a second pass over the pieces (:mod:`subid._bd_pass`), so the model is the
+in-memory one; a one-shot iterator leaves the statistic-only projection.
 """
 
 from __future__ import annotations
 
 import logging
+import warnings
 
+from ._bd_pass import OutputRegression, sequential
 from ._subspace import default_horizon
 from .data import IOData
 from .errors import DataError, SubidError
@@ -39,7 +45,7 @@ def statistic_depth(method: str, order, horizon, n_outputs: int, instruments="pa
 
 
 def identify_stream(pieces, method: str = "moesp", order=None, horizon=None, *,
-                    statistic: str = "gram", progress=None, **options):
+                    statistic: str = "gram", progress=None, reread=None, **options):
     """Identify a model from consecutive pieces of one record.
 
     Parameters
@@ -55,9 +61,16 @@ def identify_stream(pieces, method: str = "moesp", order=None, horizon=None, *,
         Kind of :class:`HankelStatistic` (``'gram'``: fast lagged products;
         ``'qr'``: accurate to rounding, ~25x slower).
     progress : callable, optional
-        Wraps the iterator of pieces (e.g. ``tqdm.tqdm``).
+        Wraps the iterator of pieces of the first pass (e.g. ``tqdm.tqdm``).
+    reread : callable, optional
+        Returns a fresh iterable of the same pieces, for the second pass (the
+        B, D, x0 regression). Default: iterate ``pieces`` again when it is a
+        re-iterable collection (a list, ...). For a one-shot iterator without
+        ``reread``, B and D come from the statistic only (the projection),
+        with a warning.
     **options
-        Passed to the method (``bd_method='projection'`` is implied).
+        Passed to the method. ``bd_method='projection'`` skips the second
+        pass (B and D from the statistic only, no x0).
 
     Returns
     -------
@@ -78,8 +91,29 @@ def identify_stream(pieces, method: str = "moesp", order=None, horizon=None, *,
     stat.update(first.u, first.y)
     for piece in iterator:
         stat.update(piece.u, piece.y)
+    if options.get("bd_method", "auto") != "projection":
+        if reread is None and iter(pieces) is not pieces:
+            reread = lambda: pieces       # noqa: E731 - a collection iterates again
+        if reread is None:
+            warnings.warn("identify_stream: the pieces come from a one-shot iterator, so B and "
+                          "D come from the statistic only (bd_method='projection'), not from "
+                          "the output regression of the in-memory default; pass a list of "
+                          "pieces or reread= (a function returning them again)", stacklevel=2)
+        else:
+            attach_second_pass(stat, lambda: ((p.u, p.y) for p in reread()))
     log.info("identifying from the statistic of %d samples", stat.n_samples)
     return METHODS[method](stat, order, horizon, **options)
+
+
+def attach_second_pass(stat: HankelStatistic, make_chunks) -> HankelStatistic:
+    """Let the methods fit B, D, x0 on the record behind ``stat`` by a second pass.
+
+    ``make_chunks()`` returns a fresh iterable of the record's consecutive
+    ``(u, y)`` arrays (as fed to the statistic).
+    """
+    stat.output_regression = OutputRegression(sequential(make_chunks), 1, stat.n_inputs,
+                                              stat.n_outputs)
+    return stat
 
 
 def identify_file(path, inputs, outputs, *, dt=None, method: str = "moesp", order=None,
@@ -88,9 +122,12 @@ def identify_file(path, inputs, outputs, *, dt=None, method: str = "moesp", orde
     """Identify a model from a file of any size, with bounded memory.
 
     The file is read with :func:`subid.read_chunks` and reduced to its
-    statistic on the way; see :func:`identify_stream` for the parameters.
+    statistic on the way, then read once more for the B, D, x0 regression
+    (unless ``bd_method='projection'``); see :func:`identify_stream` for the
+    parameters.
     """
-    pieces = read_chunks(path, inputs, outputs, dt=dt, chunk_size=chunk_size,
-                         delimiter=delimiter)
-    return identify_stream(pieces, method, order, horizon, statistic=statistic,
-                           progress=progress, **options)
+    def pieces():
+        return read_chunks(path, inputs, outputs, dt=dt, chunk_size=chunk_size,
+                           delimiter=delimiter)
+    return identify_stream(pieces(), method, order, horizon, statistic=statistic,
+                           progress=progress, reread=pieces, **options)
