@@ -63,8 +63,7 @@ def open_regular(path, *, what: str = "file", max_bytes: int | None = MAX_FILE_B
         fd = os.open(shown, os.O_RDONLY | os.O_NONBLOCK | getattr(os, "O_NOCTTY", 0)
                      | getattr(os, "O_CLOEXEC", 0))
     except FileNotFoundError:
-        raise DataFileNotFoundError(f"no such file: {shown} (the {what} does not exist)",
-                                    path=shown) from None
+        raise DataFileNotFoundError(f"no such file: {shown}", path=shown) from None
     except IsADirectoryError:
         raise error(f"{shown} is a directory, not a {what}", path=shown) from None
     except OSError as exc:
