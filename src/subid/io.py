@@ -300,10 +300,40 @@ def _split(content: str, delim) -> list[str]:
     if delim is _WHITESPACE:
         return [f.strip('"') for f in content.split()] if '"' in content else content.split()
     if '"' in content:
-        fields = next(csv.reader([content], delimiter=delim, quotechar='"'))
+        try:
+            fields = next(csv.reader([content], delimiter=delim, quotechar='"'))
+        except csv.Error:        # e.g. a quoted field beyond csv's 131,072-character limit
+            fields = _split_quoted(content, delim)
     else:
         fields = content.split(delim)
     return [f.strip() for f in fields]
+
+
+def _split_quoted(content: str, delim: str) -> list[str]:
+    """Split a delimited line with ``"``-quoted fields (``""`` is a quote), without
+    the csv module's field-size limit; the fields are checked as numbers later."""
+    fields, field, quoted, k = [], [], False, 0
+    while k < len(content):
+        ch = content[k]
+        if quoted:
+            if ch == '"':
+                if content.startswith('""', k):
+                    field.append('"')
+                    k += 1
+                else:
+                    quoted = False
+            else:
+                field.append(ch)
+        elif ch == '"':
+            quoted = True
+        elif ch == delim:
+            fields.append("".join(field))
+            field = []
+        else:
+            field.append(ch)
+        k += 1
+    fields.append("".join(field))
+    return fields
 
 
 def _is_number(s: str) -> bool:
@@ -557,7 +587,8 @@ class _Table:
         msg = f"{self.shown}, line {lineno}, {self.describe(idx)}: "
         if not s:
             return msg + "the value is missing (empty field)"
-        msg += f"{s!r} is not a number"
+        msg += (f"{s!r} is not a number" if len(s) <= 60 else
+                f"{s[:40]!r}... ({len(s)} characters) is not a number")
         if _DECIMAL_COMMA_RE.fullmatch(s):
             msg += " (decimal commas are not supported: use '.' as the decimal separator)"
         return msg
