@@ -308,6 +308,12 @@ def atomic_directory(path, *, owned=None, what: str = "output folder"):
             shutil.rmtree(old, ignore_errors=True)
     except BaseException as exc:
         shutil.rmtree(staging, ignore_errors=True)
+        if isinstance(exc, FileWriteError) and staging in str(exc):
+            # name the file the user asked for, never the hidden staging folder
+            err = FileWriteError(str(exc).replace(staging, path) + " (the folder is "
+                                 "unchanged)", path=(exc.path or "").replace(staging, path))
+            err.errno, err.strerror = exc.errno, exc.strerror
+            raise err from None
         if isinstance(exc, OSError) and not isinstance(exc, FileWriteError):
             raise _write_error(exc, path, what) from None
         raise
