@@ -232,7 +232,8 @@ def simulate_continuous(A, B, C, D, t, u, x0, hold):
 
     Returns ``(y, x)``; ModelError when the simulation overflows.
     """
-    y, x = _simulate_continuous(A, B, C, D, t, u, x0, hold)
+    with np.errstate(over="ignore", invalid="ignore"):     # overflow is reported below
+        y, x = _simulate_continuous(A, B, C, D, t, u, x0, hold)
     return check_overflow(y, x, A, continuous=True)
 
 
