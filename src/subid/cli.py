@@ -929,14 +929,18 @@ class _Tracker:
             log.warning("no convergence trace next to the checkpoint (%s); the convergence "
                         "plot starts at sample %d", path, k)
             return
+        from ._files import open_regular
+        from ._npz import load_npz
         try:
-            with np.load(path, allow_pickle=False) as z:
-                sample = z["sample"]
-                poles = z["poles_re"] + 1j * z["poles_im"]
-                params = z["parameters"]
-                names = [str(s) for s in z["parameter_names"]]
-                fingerprint = str(z["fingerprint"])
-        except (OSError, ValueError, KeyError) as exc:
+            fh, size = open_regular(path, what="convergence trace")
+            with fh:
+                z = load_npz(fh, size=size)
+            sample = z["sample"]
+            poles = z["poles_re"] + 1j * z["poles_im"]
+            params = z["parameters"]
+            names = [str(s) for s in z["parameter_names"]]
+            fingerprint = str(z["fingerprint"])
+        except Exception as exc:     # SubidError, NpzError, KeyError, dtype errors: a new trace
             log.warning("convergence trace %s unreadable (%s); starting a new one", path, exc)
             return
         if fingerprint != self.fingerprint(k):
@@ -1434,9 +1438,27 @@ def demo(out, names, methods, jobs, frequency_unit):
     gallery.md (the table of docs/gallery.md) and summary.json.
     """
     from . import demo as demo_module
-    result = demo_module.run(out, datasets=_names(names), methods=_names(methods),
-                             frequency_unit=frequency_unit, progress=_state().progress,
-                             jobs=jobs)
+    # The folder is replaced as a whole when the run completes (a previous demo's
+    # folder, or an empty one): an interrupted run leaves the previous one.
+    owned = lambda path: not os.listdir(path) or os.path.exists(  # noqa: E731
+        os.path.join(path, "summary.json"))
+    with atomic_directory(out, owned=owned) as stage:
+        result = demo_module.run(stage, datasets=_names(names), methods=_names(methods),
+                                 frequency_unit=frequency_unit, progress=_state().progress,
+                                 jobs=jobs)
+        final = os.path.abspath(out)
+        for name in os.listdir(stage):          # the pages quote their folder: the final one
+            if name.endswith((".html", ".md", ".json")):
+                page = os.path.join(stage, name)
+                with open(page, encoding="utf-8") as fh:
+                    text = fh.read()
+                if stage in text:
+                    write_bytes(page, text.replace(stage, final))
+    for key, value in list(result.items()):       # paths name the final folder
+        if isinstance(value, str):
+            result[key] = value.replace(stage, final)
+        elif isinstance(value, list) and all(isinstance(v, str) for v in value):
+            result[key] = [v.replace(stage, final) for v in value]
     if not _state().quiet:
         for name, rows in result["by_dataset"].items():
             click.echo(f"{name}: " + ", ".join(
