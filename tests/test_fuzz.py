@@ -609,3 +609,14 @@ def test_recursive_update_under_limits(rows, scale):
     ident = subid.RecursiveSubspace(2, 2, 2, horizon=3)
     guarded(lambda: ident.update(table[:, :2], table[:, 2:]), memory=64 * 2**20)
     guarded(lambda: ident.model, memory=64 * 2**20)
+
+
+@settings(max_examples=max(5, EXAMPLES // 5), deadline=None)
+@given(rows=samples, scale=st.sampled_from([1.0, 1e-150, 1e150]))
+def test_adaptive_update_under_limits(rows, scale):
+    """The adaptive identifier's update under the same limits (uniform
+    sampling; gaps and extreme settings are issue 15's class 5)."""
+    table = np.array(rows) * scale
+    ident = subid.AdaptiveIdentifier(2, 2, 2, dt=0.01)
+    guarded(lambda: ident.update(table[:, :2], table[:, 2:]), memory=64 * 2**20)
+    guarded(lambda: ident.model, memory=64 * 2**20)
