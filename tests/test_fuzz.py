@@ -89,8 +89,9 @@ def guarded(fn, *, memory=MEMORY_LIMIT, seconds=TIME_LIMIT, swallow=True):
     """Run ``fn()`` under a wall-clock timeout and a limit on traced allocations.
 
     Returns its result, or None when it raised a ``subid.errors`` exception
-    (re-raised when ``swallow`` is false); any other exception, a timeout (e.g. a FIFO blocking forever) or a peak
-    allocation above ``memory`` fails the test.
+    (re-raised when ``swallow`` is false); any other exception, a timeout
+    (e.g. a FIFO blocking forever) or a peak allocation above ``memory``
+    fails the test.
     """
     previous = signal.signal(signal.SIGALRM, _on_alarm)
     signal.setitimer(signal.ITIMER_REAL, seconds)

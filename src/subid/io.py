@@ -1163,10 +1163,11 @@ def _as_records(pieces, dt):
 
 
 def _text_lines(fh, shown: str, consumed: int, chunk_size: int):
-    """Lists of up to ``chunk_size`` lines of the text file ``fh``, read in
-    bounded blocks: a line longer than MAX_LINE_CHARS is refused before it is
-    held whole, so memory is bounded by the chunk size, whatever the file."""
-    block = max(1 << 16, min(1 << 22, MAX_LINE_CHARS))
+    """Lists of up to ``chunk_size`` lines (without their line break) of the
+    text file ``fh``, read in bounded blocks: a line longer than
+    MAX_LINE_CHARS is refused before it is held whole, so memory is bounded
+    by the chunk size, whatever the file."""
+    block = 1 << 18                  # characters read at a time
     pending, lines = "", []
     while True:
         try:
@@ -1198,7 +1199,7 @@ def _text_lines(fh, shown: str, consumed: int, chunk_size: int):
                 raise ResourceLimitError(f"{shown}, line {number}: the line is longer than "
                                          f"the {MAX_LINE_CHARS} characters subid reads "
                                          "(subid.io.MAX_LINE_CHARS)", path=shown, line=number)
-            lines.append(line + "\n")
+            lines.append(line)
             if len(lines) == chunk_size:
                 yield lines
                 consumed += len(lines)
@@ -1245,7 +1246,7 @@ def _text_pieces(p, shown, ext, inputs, outputs, chunk_size, delimiter):
             for lines in _text_lines(text, shown, consumed, chunk_size):
                 piece = _Table.__new__(_Table)
                 piece.__dict__.update(layout.__dict__)
-                piece.text = "".join(lines)
+                piece.text = "\n".join(lines) + "\n"
                 piece.lines = piece.text.split("\n")
                 piece.data_start = 0
                 piece.line_offset = consumed
