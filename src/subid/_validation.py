@@ -157,14 +157,18 @@ MAX_DIMENSION = 100_000
 MAX_COUNT = 2**40
 _DIMENSION_NAMES = {"order", "candidate order", "horizon", "depth", "n_inputs",
                     "n_outputs", "k", "poly_order"}
+#: Largest history an online identifier keeps (snapshots of the model; the
+#: adaptive identifier allocates it up front).
+MAX_HISTORY = 10_000_000
+_HISTORY_NAMES = {"history", "history_size"}
 
 
 def check_int(value, name: str, *, minimum: int = 1, maximum: int | None = None) -> int:
     """Validate an integer parameter (order, horizon, ...).
 
     ``maximum`` defaults to :data:`MAX_DIMENSION` for integers that size a
-    matrix (orders, horizons, channel counts) and :data:`MAX_COUNT` for the
-    others, so that an absurd value is an :class:`OrderError` naming it, not
+    matrix (orders, horizons, channel counts), :data:`MAX_HISTORY` for
+    history lengths and :data:`MAX_COUNT` for the others, so that an absurd value is an :class:`OrderError` naming it, not
     a ``MemoryError`` or ``OverflowError`` deep inside numpy.
     """
     if isinstance(value, bool) or not isinstance(value, numbers.Integral):
@@ -173,7 +177,8 @@ def check_int(value, name: str, *, minimum: int = 1, maximum: int | None = None)
     if value < minimum:
         raise OrderError(f"{name} must be at least {minimum}, got {value}"[:300])
     if maximum is None:
-        maximum = MAX_DIMENSION if name in _DIMENSION_NAMES else MAX_COUNT
+        maximum = MAX_DIMENSION if name in _DIMENSION_NAMES else \
+            MAX_HISTORY if name in _HISTORY_NAMES else MAX_COUNT
     if value > maximum:
         shown = str(value) if value < 10**30 else f"an integer of {len(str(value))} digits"
         raise OrderError(f"{name} must be at most {maximum}, got {shown}: a larger value needs "
