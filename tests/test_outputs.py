@@ -187,3 +187,20 @@ def test_atomic_directory_swaps_whole_folders(tmp_path):
         (open(os.path.join(stage, "b"), "w")).write("2")
     assert os.listdir(out) == ["b"]
     assert _hidden(out) == []
+
+
+def test_writers_replace_regular_files_only_and_keep_links(tmp_path):
+    """Writing over a device or a folder is refused (os.replace would have
+    replaced /dev/null itself when run as root); a symbolic link keeps
+    naming the file, whose content is replaced."""
+    model = systems.seed001_system()
+    for target in ("/dev/null", str(tmp_path)):
+        with pytest.raises(errors.FileWriteError, match="regular files only"):
+            model.save(target)
+    real = tmp_path / "real.json"
+    model.save(real)
+    link = tmp_path / "link.json"
+    os.symlink(real, link)
+    subid.StateSpace(np.eye(1) * 0.5, [[1.0]], [[1.0]], [[0.0]], 1.0).save(link)
+    assert os.path.islink(link)
+    assert subid.StateSpace.load(real).order == 1

@@ -204,6 +204,18 @@ def atomic_write(path, mode: str = "wb", encoding: str | None = None, *, what: s
     if "\x00" in path:
         raise FileWriteError(f"the file name {path!r} holds a NUL byte",
                              path=path.replace("\x00", "\\0"))
+    if os.path.islink(path):
+        path = os.path.realpath(path)       # replace the file the link names, keep the link
+    try:
+        existing = os.stat(path).st_mode
+    except FileNotFoundError:
+        existing = None
+    except OSError as exc:
+        raise _write_error(exc, path, what) from None
+    if existing is not None and not stat.S_ISREG(existing):
+        kind = next((k for test, k in _KINDS if test(existing)), "not a regular file")
+        raise FileWriteError(f"cannot write the {what} {path}: it is {kind}, and subid "
+                             "replaces regular files only", path=path)
     remove_stale_temporaries(path)
     directory = os.path.dirname(os.path.abspath(path))
     tmp = _temp_name(path)
