@@ -14,7 +14,6 @@ import contextlib
 import ctypes
 import ctypes.util
 import errno
-import fcntl
 import os
 import re
 import secrets
@@ -22,6 +21,11 @@ import shutil
 import stat
 
 from .errors import DataFileNotFoundError, FileReadError, FileWriteError
+
+try:
+    import fcntl
+except ImportError:                  # Windows: no FIFOs to guard against
+    fcntl = None
 
 #: Default largest file a loader reads whole (model JSON, checkpoints, MAT files).
 MAX_FILE_BYTES = 4 * 2**30
@@ -60,8 +64,9 @@ def open_regular(path, *, what: str = "file", max_bytes: int | None = MAX_FILE_B
                     "contain", path=shown.replace("\x00", "\\0"))
     try:
         # O_NONBLOCK: opening a FIFO without a writer would otherwise block forever.
-        fd = os.open(shown, os.O_RDONLY | os.O_NONBLOCK | getattr(os, "O_NOCTTY", 0)
-                     | getattr(os, "O_CLOEXEC", 0))
+        fd = os.open(shown, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0)
+                     | getattr(os, "O_NOCTTY", 0) | getattr(os, "O_CLOEXEC", 0)
+                     | getattr(os, "O_BINARY", 0))
     except FileNotFoundError:
         raise DataFileNotFoundError(f"no such file: {shown}", path=shown) from None
     except IsADirectoryError:
@@ -81,8 +86,9 @@ def open_regular(path, *, what: str = "file", max_bytes: int | None = MAX_FILE_B
             raise error(f"{shown} is {st.st_size} bytes, more than the {max_bytes} bytes "
                         f"allowed for a {what} (max_bytes); pass a larger max_bytes if the "
                         "file is genuine", path=shown)
-        flags = fcntl.fcntl(fd, fcntl.F_GETFL)
-        fcntl.fcntl(fd, fcntl.F_SETFL, flags & ~os.O_NONBLOCK)
+        if fcntl is not None:
+            flags = fcntl.fcntl(fd, fcntl.F_GETFL)
+            fcntl.fcntl(fd, fcntl.F_SETFL, flags & ~os.O_NONBLOCK)
         fh = os.fdopen(fd, "rb")
     except BaseException:
         os.close(fd)
@@ -99,7 +105,7 @@ def read_regular(path, *, what: str = "file", max_bytes: int | None = MAX_FILE_B
     """
     fh, size = open_regular(path, what=what, max_bytes=max_bytes, error=error)
     shown = _shown(path)
-    limit = size if max_bytes is None else max(size, 0)
+    limit = size                       # never more than the size found on opening
     with fh:
         try:
             raw = fh.read(limit + 1)
