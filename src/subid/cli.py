@@ -453,8 +453,12 @@ def _write_json(path, obj) -> None:
 
 #: What each command writes in its --out folder: an existing folder is
 #: replaced as a whole only when it is empty or holds nothing else.
-_IDENTIFY_FILES = frozenset({"model.json", "report.html", "summary.json"})
-_TRACK_FILES = frozenset({"model.json", "report.html", "history.npz", "checkpoints"})
+#: (``subid compare`` writes compare.png/.html next to the model by default: they
+#: belong to the previous run and are replaced with it.)
+_COMPARE_FILES = frozenset({"compare.png", "compare.html"})
+_IDENTIFY_FILES = frozenset({"model.json", "report.html", "summary.json"}) | _COMPARE_FILES
+_TRACK_FILES = frozenset({"model.json", "report.html", "history.npz", "checkpoints"}) \
+    | _COMPARE_FILES
 
 
 def _only(names):
