@@ -621,3 +621,17 @@ def test_adaptive_update_under_limits(rows, scale):
     ident = subid.AdaptiveIdentifier(2, 2, 2, dt=0.01)
     guarded(lambda: ident.update(table[:, :2], table[:, 2:]), memory=64 * 2**20)
     guarded(lambda: ident.model, memory=64 * 2**20)
+
+
+@pytest.mark.parametrize("ext", [".csv", ".dat"])
+@settings(max_examples=EXAMPLES, deadline=None)
+@given(changes=edits, chunk=st.integers(1, 30))
+def test_mutated_text_files_streamed(tmp_path_factory, ext, changes, chunk):
+    """read_chunks on mutated text files: pieces or a subid error, within the
+    limits, and the pieces hold the same values as read() when both succeed."""
+    path = tmp_path_factory.mktemp("fuzz") / f"file{ext}"
+    path.write_bytes(_mutate(VALID[ext], changes))
+    pieces = guarded(lambda: list(subid.read_chunks(path, *ARGS[ext], chunk_size=chunk)))
+    whole = guarded(lambda: subid.read(path, *ARGS[ext]))
+    if pieces and whole is not None:
+        np.testing.assert_array_equal(np.vstack([p.y for p in pieces]), whole.y)

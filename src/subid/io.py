@@ -1232,12 +1232,25 @@ def _text_pieces(p, shown, ext, inputs, outputs, chunk_size, delimiter):
         in_names, out_names = layout.channel_names(in_cols), layout.channel_names(out_cols)
         n_in = len(in_cols)
         fh.seek(0)
-        encoding = "utf-16" if utf16 else "utf-8-sig"
+        if utf16:
+            encoding = "utf-16"
+        else:                        # like read(): UTF-8, else Latin-1 (decided on the head)
+            try:
+                head.decode("utf-8-sig")
+                encoding = "utf-8-sig"
+            except UnicodeDecodeError:
+                encoding = "latin-1"
         text = _io.TextIOWrapper(fh, encoding=encoding, newline=None)
         try:
             consumed = 0
             for _ in range(layout.data_start):
-                if len(text.readline(MAX_LINE_CHARS + 1)) > MAX_LINE_CHARS:
+                try:
+                    line = text.readline(MAX_LINE_CHARS + 1)
+                except UnicodeDecodeError as exc:
+                    raise FileReadError(f"{shown}: the file is not {encoding} text at line "
+                                        f"{consumed + 1} ({exc.reason})", path=shown,
+                                        line=consumed + 1) from None
+                if len(line) > MAX_LINE_CHARS:
                     raise ResourceLimitError(f"{shown}, line {consumed + 1}: the line is "
                                              f"longer than the {MAX_LINE_CHARS} characters "
                                              "subid reads (subid.io.MAX_LINE_CHARS)",
