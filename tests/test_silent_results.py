@@ -2,8 +2,6 @@
 loading/validation layer): each case is a clear subid.errors exception or a
 correct result."""
 
-import os
-
 import numpy as np
 import pytest
 import scipy.io

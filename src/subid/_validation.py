@@ -168,8 +168,9 @@ def check_int(value, name: str, *, minimum: int = 1, maximum: int | None = None)
 
     ``maximum`` defaults to :data:`MAX_DIMENSION` for integers that size a
     matrix (orders, horizons, channel counts), :data:`MAX_HISTORY` for
-    history lengths and :data:`MAX_COUNT` for the others, so that an absurd value is an :class:`OrderError` naming it, not
-    a ``MemoryError`` or ``OverflowError`` deep inside numpy.
+    history lengths and :data:`MAX_COUNT` for the others, so that an absurd
+    value is an :class:`OrderError` naming it, not a ``MemoryError`` or
+    ``OverflowError`` deep inside numpy.
     """
     if isinstance(value, bool) or not isinstance(value, numbers.Integral):
         raise OrderError(f"{name} must be an integer, got {value!r}"[:300])

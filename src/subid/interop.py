@@ -40,7 +40,7 @@ import numpy as np
 
 from .data import IOData
 from ._files import atomic_write
-from .errors import DataError, DataFileNotFoundError, FileReadError, ModelError
+from .errors import DataError, ModelError
 from .model import StateSpace
 
 __all__ = ["save_mat", "load_mat", "iodata_from_pandas", "iodata_to_pandas"]

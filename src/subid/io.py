@@ -35,7 +35,6 @@ and, for text files, the line and column at fault.
 from __future__ import annotations
 
 import csv
-import itertools
 import logging
 import numbers
 import os
