@@ -635,3 +635,21 @@ def test_mutated_text_files_streamed(tmp_path_factory, ext, changes, chunk):
     whole = guarded(lambda: subid.read(path, *ARGS[ext]))
     if pieces and whole is not None:
         np.testing.assert_array_equal(np.vstack([p.y for p in pieces]), whole.y)
+
+
+def test_compressed_checkpoint_bomb_is_refused_without_allocating(tmp_path):
+    """Checkpoints are written uncompressed, so their arrays may not take more
+    than the file: a recompressed checkpoint declaring 48 MB is refused."""
+    def change(arrays):
+        arrays["R"] = np.zeros(6 * 2**20)
+    raw = _rewrite_checkpoint(CHECKPOINT, change)
+    with zipfile.ZipFile(io.BytesIO(raw)) as src:
+        buf = io.BytesIO()
+        with zipfile.ZipFile(buf, "w", compression=zipfile.ZIP_DEFLATED) as dst:
+            for name in src.namelist():
+                dst.writestr(name, src.read(name))
+    path = tmp_path / "bomb.npz"
+    path.write_bytes(buf.getvalue())
+    assert path.stat().st_size < 2**20
+    with pytest.raises(errors.CheckpointError):
+        guarded(lambda: subid.RecursiveSubspace.load(path), memory=16 * 2**20, swallow=False)

@@ -78,7 +78,9 @@ def load_state(path, kind: str, version: int, *, max_bytes: int = MAX_FILE_BYTES
     fh, size = open_regular(path, what="checkpoint", max_bytes=max_bytes, error=CheckpointError)
     with fh:
         try:
-            arrays = load_npz(fh, size=size, max_expanded=max_bytes)
+            # subid writes checkpoints uncompressed: their arrays never take more
+            # than the file itself, so nothing may expand (a compressed bomb cannot).
+            arrays = load_npz(fh, size=size, max_expanded=0)
         except NpzError as exc:
             raise error(f"checkpoint {path} is truncated or corrupted ({exc}); "
                         "use an earlier checkpoint") from None
