@@ -655,3 +655,23 @@ def test_compressed_checkpoint_bomb_is_refused_without_allocating(tmp_path):
     assert path.stat().st_size < 2**20
     with pytest.raises(errors.CheckpointError):
         guarded(lambda: subid.RecursiveSubspace.load(path), memory=16 * 2**20, swallow=False)
+
+
+def _npy_bytes() -> bytes:
+    data = systems.simulate_data(systems.seed001_system(), 40, seed=0)
+    buf = io.BytesIO()
+    np.save(buf, np.hstack([data.u, data.y]))
+    return buf.getvalue()
+
+
+NPY = _npy_bytes()
+
+
+@settings(max_examples=EXAMPLES, deadline=None)
+@given(changes=edits, chunk=st.integers(1, 30))
+def test_mutated_npy_streamed(tmp_path_factory, changes, chunk):
+    """read_chunks on mutated .npy arrays (memory-mapped): pieces or a subid
+    error, within the limits."""
+    path = tmp_path_factory.mktemp("fuzz") / "file.npy"
+    path.write_bytes(_mutate(NPY, changes))
+    guarded(lambda: list(subid.read_chunks(path, [0, 1], [2, 3], chunk_size=chunk)))

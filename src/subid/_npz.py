@@ -86,6 +86,17 @@ def _header(member, name: str):
     return shape, fortran, dtype, 8 + size_bytes + length
 
 
+def npy_header(fh, name: str):
+    """``(shape, fortran_order, dtype, header bytes)`` of the ``.npy`` file ``fh``,
+    validated (bounded header, literal parsing, numeric or text dtype), or NpzError."""
+    try:
+        return _header(fh, name)
+    except NpzError:
+        raise
+    except Exception as exc:
+        raise NpzError(f"{type(exc).__name__}: {exc}"[:200]) from None
+
+
 def load_npz(source, *, max_expanded: int = MAX_EXPANDED_BYTES, size: int | None = None) -> dict:
     """All arrays of an ``.npz`` archive, or :class:`NpzError`.
 

@@ -1285,9 +1285,24 @@ def _column_indices(spec, role: str, n_columns: int, shown: str) -> list[int]:
 
 
 def _npy_pieces(p, shown, inputs, outputs, chunk_size):
+    from ._npz import npy_header
+    fh, size = open_regular(shown, what="data file", max_bytes=None)
+    with fh:
+        try:                         # the header is validated before numpy parses it
+            shape, _, dtype, head = npy_header(fh, os.path.basename(shown))
+        except NpzError as exc:
+            raise FileReadError(f"{shown}: not a readable .npy array ({exc})",
+                                path=shown) from None
+    count = 1
+    for d in shape:
+        count *= d
+    if head + count * dtype.itemsize != size:
+        raise FileReadError(f"{shown}: the .npy header declares {count * dtype.itemsize} "
+                            f"bytes of data but the file holds {size - head}; it is "
+                            "truncated or corrupted", path=shown)
     try:
         arr = np.load(p, mmap_mode="r", allow_pickle=False)
-    except (OSError, ValueError) as exc:
+    except Exception as exc:         # numpy's header parser: ValueError, SyntaxError, ...
         raise FileReadError(f"{shown}: not a readable .npy array ({_reason(exc)})",
                             path=shown) from None
     if arr.ndim != 2 or arr.dtype.kind not in "iuf":
