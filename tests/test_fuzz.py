@@ -675,3 +675,24 @@ def test_mutated_npy_streamed(tmp_path_factory, changes, chunk):
     path = tmp_path_factory.mktemp("fuzz") / "file.npy"
     path.write_bytes(_mutate(NPY, changes))
     guarded(lambda: list(subid.read_chunks(path, [0, 1], [2, 3], chunk_size=chunk)))
+
+
+def _parquet_bytes():
+    pa = pytest.importorskip("pyarrow")
+    import pyarrow.parquet as pq
+    data = systems.simulate_data(systems.seed001_system(), 40, seed=0)
+    table = pa.table({"u1": data.u[:, 0], "u2": data.u[:, 1], "y1": data.y[:, 0],
+                      "y2": data.y[:, 1]})
+    buf = io.BytesIO()
+    pq.write_table(table, buf)
+    return buf.getvalue()
+
+
+@settings(max_examples=EXAMPLES, deadline=None)
+@given(changes=edits)
+def test_mutated_parquet_streamed(tmp_path_factory, changes):
+    """read_chunks on mutated Parquet files: pieces or a subid error."""
+    raw = _parquet_bytes()
+    path = tmp_path_factory.mktemp("fuzz") / "file.parquet"
+    path.write_bytes(_mutate(raw, changes))
+    guarded(lambda: list(subid.read_chunks(path, "u1,u2", "y1,y2", chunk_size=16)))

@@ -1347,7 +1347,17 @@ def _parquet_pieces(p, shown, inputs, outputs, chunk_size):
             cols.append(name)
         chosen.append(cols)
     in_names, out_names = chosen
-    for batch in pf.iter_batches(batch_size=chunk_size, columns=in_names + out_names):
-        block = np.column_stack([np.asarray(batch.column(k), dtype=np.float64)
-                                 for k in range(batch.num_columns)])
+    batches = pf.iter_batches(batch_size=chunk_size, columns=in_names + out_names)
+    start = 0
+    while True:
+        try:
+            batch = next(batches, None)
+            if batch is None:
+                return
+            block = np.column_stack([np.asarray(batch.column(k), dtype=np.float64)
+                                     for k in range(batch.num_columns)])
+        except Exception as exc:       # pyarrow's own errors (OSError, ArrowInvalid...)
+            raise FileReadError(f"{shown}: cannot read the Parquet data after row {start} "
+                                f"({_reason(exc)})", path=shown) from None
+        start += block.shape[0]
         yield block[:, :len(in_names)], block[:, len(in_names):], in_names, out_names
