@@ -166,7 +166,7 @@ def statespace_html(model) -> str:
                      "u₀ = " + _esc(np.round(np.asarray(data["u_offset"], float), 6).tolist())
                      + ", y₀ = "
                      + _esc(np.round(np.asarray(data["y_offset"], float), 6).tolist())))
-    out = [f"<div><b>StateSpace</b>",
+    out = ["<div><b>StateSpace</b>",
            "<div style='display:flex;gap:16px;align-items:flex-start'>",
            _table(rows), _pole_svg(poles, model.is_continuous), "</div>"]
     if model.order <= MAX_MATRIX_ORDER and model.n_inputs <= 6 and model.n_outputs <= 6:

@@ -28,6 +28,8 @@ import numba
 import numpy as np
 from scipy import linalg
 
+from .errors import ModelError
+
 __all__ = [
     "expm_blocks",
     "tv_loop",
@@ -165,9 +167,35 @@ def _frozen(a, dtype=np.float64) -> np.ndarray:
     return a
 
 
+def check_overflow(y, x, A, continuous: bool):
+    """``(y, x)``, or :class:`~subid.errors.ModelError` when the simulation
+    overflowed (the inputs are finite, so a non-finite output means the
+    model is unstable and its response left the floating-point range):
+    inf/NaN rows are never returned as a result."""
+    if np.isfinite(y).all() and np.isfinite(x).all():
+        return y, x
+    bad = ~(np.isfinite(y).all(axis=1) & np.isfinite(x).all(axis=1))
+    first = int(np.argmax(bad))
+    with np.errstate(all="ignore"):
+        poles = np.linalg.eigvals(A) if A.size and np.isfinite(A).all() else np.zeros(0)
+    if continuous:
+        what = f"largest real part of a pole {poles.real.max():.4g}" if poles.size else ""
+    else:
+        what = f"spectral radius {np.abs(poles).max():.4g}" if poles.size else ""
+    raise ModelError(f"simulating the model over {y.shape[0]} samples overflows at sample "
+                     f"{first}{f' ({what})' if what else ''}: the model is unstable and its "
+                     "output leaves the floating-point range; simulate fewer samples or "
+                     "use a stable model")
+
+
 def simulate_discrete(A, B, C, D, u, x0):
     """x[k+1] = A x[k] + B u[k], y[k] = C x[k] + D u[k]: the time-varying
-    kernel with a one-entry table. Returns ``(y, x)``."""
+    kernel with a one-entry table. Returns ``(y, x)``; ModelError on overflow."""
+    y, x = _simulate_discrete(A, B, C, D, u, x0)
+    return check_overflow(y, x, A, continuous=False)
+
+
+def _simulate_discrete(A, B, C, D, u, x0):
     N, (n, m) = u.shape[0], B.shape
     return tv_loop(_frozen(A[None]), _frozen(B[None]), _frozen(np.zeros((1, n, m))),
                    _frozen(np.zeros(max(N - 1, 0)), np.int64), _frozen(C), _frozen(D),
@@ -202,13 +230,19 @@ def simulate_continuous(A, B, C, D, t, u, x0, hold):
     float equality) is discretised once, processing long records in chunks so
     that the stack of matrix exponentials stays bounded in memory.
 
-    Returns ``(y, x)``.
+    Returns ``(y, x)``; ModelError when the simulation overflows.
     """
+    with np.errstate(over="ignore", invalid="ignore"):     # overflow is reported below
+        y, x = _simulate_continuous(A, B, C, D, t, u, x0, hold)
+    return check_overflow(y, x, A, continuous=True)
+
+
+def _simulate_continuous(A, B, C, D, t, u, x0, hold):
     N = u.shape[0]
     n, m = B.shape
     Cf, Df = _frozen(C), _frozen(D)
     if N == 1:
-        return simulate_discrete(np.eye(n), np.zeros((n, m)), C, D, u, x0)
+        return _simulate_discrete(np.eye(n), np.zeros((n, m)), C, D, u, x0)
     steps = np.diff(t)
     if is_uniform(steps):
         h = (t[-1] - t[0]) / (N - 1)

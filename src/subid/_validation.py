@@ -34,7 +34,17 @@ def as_signal(values, name: str, *, allow_empty_columns: bool = False) -> np.nda
     """
     if values is None:
         raise DataError(f"{name} is missing: pass an array with time on axis 0")
-    arr = np.asarray(values)
+    try:
+        arr = np.asarray(values)
+    except ValueError as exc:
+        if "inhomogeneous" in str(exc) or "sequence" in str(exc):
+            raise DataError(f"{name} is ragged: its rows have different lengths (or mix "
+                            "numbers and lists); pass a rectangular array with time on "
+                            "axis 0") from None
+        raise DataError(f"{name} cannot be read as an array ({exc})") from None
+    except OverflowError:
+        raise DataError(f"{name} holds an integer too large to be a float (beyond "
+                        "1.8e308); rescale the data") from None
     if arr.dtype == object:
         missing = np.flatnonzero(np.vectorize(lambda v: v is None, otypes=[bool])(arr)
                                  .reshape(arr.shape[0], -1).any(axis=1)) if arr.ndim else []
@@ -44,6 +54,9 @@ def as_signal(values, name: str, *, allow_empty_columns: bool = False) -> np.nda
                             "fill or remove them before identification")
         try:
             arr = arr.astype(np.float64)
+        except OverflowError:
+            raise DataError(f"{name} holds an integer too large to be a float (beyond "
+                            "1.8e308); rescale the data") from None
         except (TypeError, ValueError) as exc:
             raise DataError(f"{name} holds values that are not numbers ({exc}); "
                             "convert it to a numeric array first") from None
@@ -88,7 +101,18 @@ def check_finite(arr: np.ndarray, name: str) -> None:
 
 def check_time_stamps(t, n_samples: int, name: str = "time stamps t") -> np.ndarray:
     """Validate strictly increasing, finite time stamps of length ``n_samples``."""
-    arr = np.asarray(t)
+    try:
+        arr = np.asarray(t)
+    except (ValueError, OverflowError) as exc:
+        raise DataError(f"{name} cannot be read as a one-dimensional array of numbers "
+                        f"({type(exc).__name__}: ragged, or integers beyond the float "
+                        "range)") from None
+    if arr.dtype == object:
+        try:
+            arr = arr.astype(np.float64)
+        except (TypeError, ValueError, OverflowError):
+            raise DataError(f"{name} must be numeric, got values that are not numbers "
+                            "(or integers beyond the float range)") from None
     if arr.dtype.kind not in "iuf":
         raise DataError(f"{name} must be numeric, got dtype {arr.dtype}")
     arr = np.ascontiguousarray(arr, dtype=np.float64)
@@ -113,8 +137,12 @@ def check_time_stamps(t, n_samples: int, name: str = "time stamps t") -> np.ndar
 def check_dt(dt, *, allow_zero: bool = False, name: str = "dt") -> float:
     """Validate a sampling period: a finite positive number (or 0 if allowed)."""
     if isinstance(dt, bool) or not isinstance(dt, numbers.Real):
-        raise DataError(f"{name} must be a number, got {dt!r}")
-    dt = float(dt)
+        raise DataError(f"{name} must be a number, got {dt!r}"[:300])
+    try:
+        dt = float(dt)
+    except OverflowError:
+        raise DataError(f"{name} must be a finite number, got an integer beyond the float "
+                        "range") from None
     if not np.isfinite(dt) or dt < 0 or (dt == 0 and not allow_zero):
         need = "a finite number >= 0 (0 = continuous time)" if allow_zero else \
             "a finite positive number"
@@ -122,11 +150,38 @@ def check_dt(dt, *, allow_zero: bool = False, name: str = "dt") -> float:
     return dt
 
 
-def check_int(value, name: str, *, minimum: int = 1) -> int:
-    """Validate an integer parameter (order, horizon, ...)."""
+#: Largest value of an integer that sizes a matrix (order, horizon, channels):
+#: a state-space or Hankel matrix of this dimension already takes ~80 GB.
+MAX_DIMENSION = 100_000
+#: Largest value of any other integer setting (counts, sizes of histories).
+MAX_COUNT = 2**40
+_DIMENSION_NAMES = {"order", "candidate order", "horizon", "depth", "n_inputs",
+                    "n_outputs", "k", "poly_order"}
+#: Largest history an online identifier keeps (snapshots of the model; the
+#: adaptive identifier allocates it up front).
+MAX_HISTORY = 10_000_000
+_HISTORY_NAMES = {"history", "history_size"}
+
+
+def check_int(value, name: str, *, minimum: int = 1, maximum: int | None = None) -> int:
+    """Validate an integer parameter (order, horizon, ...).
+
+    ``maximum`` defaults to :data:`MAX_DIMENSION` for integers that size a
+    matrix (orders, horizons, channel counts), :data:`MAX_HISTORY` for
+    history lengths and :data:`MAX_COUNT` for the others, so that an absurd
+    value is an :class:`OrderError` naming it, not a ``MemoryError`` or
+    ``OverflowError`` deep inside numpy.
+    """
     if isinstance(value, bool) or not isinstance(value, numbers.Integral):
-        raise OrderError(f"{name} must be an integer, got {value!r}")
+        raise OrderError(f"{name} must be an integer, got {value!r}"[:300])
     value = int(value)
     if value < minimum:
-        raise OrderError(f"{name} must be at least {minimum}, got {value}")
+        raise OrderError(f"{name} must be at least {minimum}, got {value}"[:300])
+    if maximum is None:
+        maximum = MAX_DIMENSION if name in _DIMENSION_NAMES else \
+            MAX_HISTORY if name in _HISTORY_NAMES else MAX_COUNT
+    if value > maximum:
+        shown = str(value) if value < 10**30 else f"an integer of {len(str(value))} digits"
+        raise OrderError(f"{name} must be at most {maximum}, got {shown}: a larger value needs "
+                         "arrays beyond any computer's memory")
     return value

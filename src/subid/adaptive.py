@@ -746,7 +746,7 @@ class AdaptiveIdentifier:
             raise CheckpointError(f"checkpoint {path} has invalid settings ({exc})",
                                   path=path) from None
         for name, ref in obj._st.items():
-            value = require(arrays, path, name, ref.shape)
+            value = require(arrays, path, name, ref.shape, dtype=ref.dtype)
             if value.dtype != ref.dtype:
                 raise CheckpointError(f"checkpoint {path}: array {name!r} has dtype "
                                       f"{value.dtype}, expected {ref.dtype}", path=path)

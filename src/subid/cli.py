@@ -45,6 +45,7 @@ import click
 import numpy as np
 
 from ._selection import describe as describe_selection
+from ._files import atomic_directory, atomic_write, write_bytes
 from ._progress import on_terminal, progress_bar
 from .errors import DataError, FileReadError, OrderError, SubidError
 
@@ -465,11 +466,55 @@ def _command_line() -> str:
 
 
 def _write_json(path, obj) -> None:
-    tmp = f"{path}.{os.getpid()}.tmp"
-    with open(tmp, "w", encoding="utf-8") as fh:
-        json.dump(obj, fh, indent=2, allow_nan=False, default=_json_default)
-        fh.write("\n")
-    os.replace(tmp, path)
+    text = json.dumps(obj, indent=2, allow_nan=False, default=_json_default) + "\n"
+    write_bytes(path, text)
+
+
+#: What each command writes in its --out folder: an existing folder is
+#: replaced as a whole only when it is empty or holds nothing else.
+#: (``subid compare`` writes compare.png/.html next to the model by default: they
+#: belong to the previous run and are replaced with it.)
+_COMPARE_FILES = frozenset({"compare.png", "compare.html"})
+_IDENTIFY_FILES = frozenset({"model.json", "report.html", "summary.json"}) | _COMPARE_FILES
+_TRACK_FILES = frozenset({"model.json", "report.html", "history.npz", "checkpoints"}) \
+    | _COMPARE_FILES
+
+
+def _only(names):
+    """Predicate for atomic_directory: the folder holds only ``names``."""
+    return lambda path: set(os.listdir(path)) <= names
+
+
+def _check_out(out, names) -> None:
+    """Refuse, before any work, an --out folder holding files subid did not write."""
+    from .errors import FileWriteError
+    if os.path.lexists(out):
+        if not os.path.isdir(out) or os.path.islink(out):
+            raise FileWriteError(f"--out {out} exists and is not a folder", path=out)
+        extra = sorted(set(os.listdir(out)) - names)
+        if extra:
+            raise FileWriteError(f"--out {out} holds files subid did not write "
+                                 f"({', '.join(extra[:5])}{', ...' if len(extra) > 5 else ''}); "
+                                 "the folder is replaced as a whole, so choose a new or empty "
+                                 "folder", path=out)
+
+
+def _carry_over(src: str, dst: str) -> None:
+    """Hard-link (or copy) the files of the folder ``src`` into ``dst``."""
+    import shutil
+    if not os.path.isdir(src):
+        return
+    os.makedirs(dst, exist_ok=True)
+    for name in os.listdir(src):
+        if name.startswith("."):
+            continue                       # temporary files of killed saves
+        a, b = os.path.join(src, name), os.path.join(dst, name)
+        if not os.path.isfile(a):
+            continue
+        try:
+            os.link(a, b)
+        except OSError:
+            shutil.copy2(a, b)
 
 
 def _json_default(obj):
@@ -593,6 +638,7 @@ def identify(data, inputs, outputs, dt, time_column, delimiter, detrend, method_
     """
     from . import report
     spec = METHODS[method_name]
+    _check_out(out, _IDENTIFY_FILES)
     order = _parse_order(order)
     opts = _parse_options(options)
     if forgetting is not None and spec.kind != "online":
@@ -643,18 +689,16 @@ def _write_outputs(out, data, spec, model, result, est, val, seconds, record, *,
                    n_validation, **extra):
     """Write model.json, report.html (optional) and summary.json; print the summary."""
     from . import report
-    os.makedirs(out, exist_ok=True)
     model_path = os.path.join(out, "model.json")
     report_path = os.path.join(out, "report.html")
     summary_path = os.path.join(out, "summary.json")
-    model.save(model_path)
+    files = [model_path, *([report_path] if write_report else []), summary_path]
+    html = None
     if write_report:
         html = report.identification_report(
             {spec.name: model}, est, val, title=title, frequency_unit=frequency_unit,
             seconds={spec.name: seconds}, notes=notes, command=_command_line(), source=data,
             data=report_data)
-        report.write_html(report_path, html)
-    files = [model_path, *([report_path] if write_report else []), summary_path]
     summary = {
         "data": data, "method": spec.name, "function": spec.attribute, "order": model.order,
         "horizon": model.info.get("horizon"), "dt": model.dt, "outputs": outputs, **extra,
@@ -665,7 +709,13 @@ def _write_outputs(out, data, spec, model, result, est, val, seconds, record, *,
         "poles": [[float(z.real), float(z.imag)] for z in result["poles"]],
         "seconds": seconds, "files": files,
     }
-    _write_json(summary_path, summary)
+    # The folder is replaced as a whole: it holds the previous run's outputs or
+    # this run's, never a mix (Ctrl-C or a full disk leave the previous run's).
+    with atomic_directory(out, owned=_only(_IDENTIFY_FILES)) as stage:
+        model.save(os.path.join(stage, "model.json"))
+        if html is not None:
+            report.write_html(os.path.join(stage, "report.html"), html)
+        _write_json(os.path.join(stage, "summary.json"), summary)
     _print_summary(data, record, spec, model, result, est, val, seconds, files)
 
 
@@ -930,23 +980,26 @@ class _Tracker:
                   "parameter_names": np.array(hist.get("parameter_names", []), dtype=str),
                   "fingerprint": np.array(self.fingerprint(k)),
                   "method": np.array(self.spec.name)}
-        tmp = f"{path}.{os.getpid()}.tmp.npz"
-        np.savez(tmp, **arrays)
-        os.replace(tmp, path)
+        with atomic_write(path, "wb", what="convergence trace") as fh:
+            np.savez(fh, **arrays)
 
     def load_trace(self, path, k: int) -> None:
         if not os.path.exists(path):
             log.warning("no convergence trace next to the checkpoint (%s); the convergence "
                         "plot starts at sample %d", path, k)
             return
+        from ._files import open_regular
+        from ._npz import load_npz
         try:
-            with np.load(path, allow_pickle=False) as z:
-                sample = z["sample"]
-                poles = z["poles_re"] + 1j * z["poles_im"]
-                params = z["parameters"]
-                names = [str(s) for s in z["parameter_names"]]
-                fingerprint = str(z["fingerprint"])
-        except (OSError, ValueError, KeyError) as exc:
+            fh, size = open_regular(path, what="convergence trace")
+            with fh:
+                z = load_npz(fh, size=size)
+            sample = z["sample"]
+            poles = z["poles_re"] + 1j * z["poles_im"]
+            params = z["parameters"]
+            names = [str(s) for s in z["parameter_names"]]
+            fingerprint = str(z["fingerprint"])
+        except Exception as exc:     # SubidError, NpzError, KeyError, dtype errors: a new trace
             log.warning("convergence trace %s unreadable (%s); starting a new one", path, exc)
             return
         if fingerprint != self.fingerprint(k):
@@ -969,13 +1022,17 @@ class _Tracker:
         self.written.append(path)
         log.info("checkpoint %s", path)
         if self.keep:
-            existing = sorted(f for f in os.listdir(self.checkpoint_dir)
-                              if f.startswith("checkpoint-") and f.endswith(".npz")
-                              and not f.endswith(".trace.npz"))
-            for old in existing[:-self.keep]:
+            # Prune only the checkpoints this run wrote, oldest first (never by
+            # sorting the names in the folder: those of an earlier run on a
+            # longer record would sort after this run's and survive, and this
+            # run's newest would be deleted).
+            while len(self.written) > self.keep:
+                old = self.written.pop(0)
+                if old == path:
+                    continue
                 for name in (old, old[:-4] + ".trace.npz"):
                     with contextlib.suppress(FileNotFoundError):
-                        os.unlink(os.path.join(self.checkpoint_dir, name))
+                        os.unlink(name)
         return path
 
 
@@ -1042,6 +1099,7 @@ def track(data, inputs, outputs, dt, time_column, delimiter, detrend, method_nam
     chunk = chunk or max(1, min(1000, n // 100))
     trace_every = max(1, n // 100) if trace_every is None else trace_every
     checkpoint_dir = os.path.join(out, "checkpoints")
+    _check_out(out, _TRACK_FILES)
     os.makedirs(out, exist_ok=True)
     with _about(resume or data):
         if resume is not None:
@@ -1088,9 +1146,8 @@ def track(data, inputs, outputs, dt, time_column, delimiter, detrend, method_nam
     model_path = os.path.join(out, "model.json")
     history_path = os.path.join(out, "history.npz")
     report_path = os.path.join(out, "report.html")
-    model.save(model_path)
-    tracker.save_trace(history_path, n)
     result = report.evaluate(model, work)
+    html = None
     if write_report:
         html = report.identification_report(
             {spec.name: model}, work, None, title=f"{label}: {spec.attribute} (online)",
@@ -1099,7 +1156,14 @@ def track(data, inputs, outputs, dt, time_column, delimiter, detrend, method_nam
                            + (f" (resumed from {resume})" if resume else "") +
                            f"; final checkpoint {final_ckpt}. Fit % is on the whole record."],
             command=_command_line(), source=data)
-        report.write_html(report_path, html)
+    # The final outputs replace the folder as a whole (old run's or new run's,
+    # never a mix); the checkpoints written during the run are carried over.
+    with atomic_directory(out, owned=_only(_TRACK_FILES)) as stage:
+        _carry_over(checkpoint_dir, os.path.join(stage, "checkpoints"))
+        model.save(os.path.join(stage, "model.json"))
+        tracker.save_trace(os.path.join(stage, "history.npz"), n)
+        if html is not None:
+            report.write_html(os.path.join(stage, "report.html"), html)
     files = [model_path, *([report_path] if write_report else []), history_path]
     if not _state().quiet:
         click.echo("\n".join([
@@ -1159,19 +1223,17 @@ def _read_signals(path, columns, time_column, delimiter):
 def _write_signals(path, t, u, y, input_names, output_names) -> None:
     ext = os.path.splitext(path)[1].lower()
     if ext == ".npz":
-        tmp = f"{path}.{os.getpid()}.tmp.npz"
-        np.savez(tmp, t=t, u=u, y=y, input_names=np.array(input_names, dtype=str),
-                 output_names=np.array(output_names, dtype=str))
-        os.replace(tmp, path)
+        with atomic_write(path, "wb", what="output file") as fh:
+            np.savez(fh, t=t, u=u, y=y, input_names=np.array(input_names, dtype=str),
+                     output_names=np.array(output_names, dtype=str))
         return
     if ext not in (".csv", ".txt", ".tsv"):
         raise click.UsageError(f"--out {path}: use a .csv, .tsv, .txt or .npz file name")
     delim = "\t" if ext == ".tsv" else ","
     header = delim.join(["time", *input_names, *output_names])
-    tmp = f"{path}.{os.getpid()}.tmp"
-    np.savetxt(tmp, np.column_stack([t, u, y]), delimiter=delim, header=header, comments="",
-               fmt="%.15g")
-    os.replace(tmp, path)
+    with atomic_write(path, "wb", what="output file") as fh:
+        np.savetxt(fh, np.column_stack([t, u, y]), delimiter=delim, header=header,
+                   comments="", fmt="%.15g")
 
 
 @cli.command(epilog="\b\nExamples:\n"
@@ -1297,7 +1359,8 @@ def compare(model_paths, data_source, inputs, outputs, dt, time_column, delimite
     with _warnings_to_log():
         fig = plot.compare(work, models, title=f"{label}: {what} and measured outputs",
                            steps=steps)
-    fig.savefig(png, dpi=90)
+    with atomic_write(png, "wb", what="figure") as fh:
+        fig.savefig(fh, format="png", dpi=90)
     figure = report.figure_html(fig, f"{what} outputs from a least-squares initial state; "
                                 "fit % in the legend")
     rows = "".join(
@@ -1434,8 +1497,7 @@ def convert(model_path, target, conversion, dt, out):
             if t == "control":
                 model.to_control()          # ImportError with an install hint if missing
             path = out or f"{stem}_{t}.py"
-            with open(path, "w", encoding="utf-8") as fh:
-                fh.write(_python_source(model, t, model_path))
+            write_bytes(path, _python_source(model, t, model_path), what="script")
             what = "python-control script" if t == "control" else "scipy.signal script"
         else:
             raise click.BadParameter(f"{target!r}: use dt=SECONDS, ct, mat, json, control or "
@@ -1468,9 +1530,27 @@ def demo(out, names, methods, jobs, frequency_unit):
     gallery.md (the table of docs/gallery.md) and summary.json.
     """
     from . import demo as demo_module
-    result = demo_module.run(out, datasets=_names(names), methods=_names(methods),
-                             frequency_unit=frequency_unit, progress=_state().progress,
-                             jobs=jobs)
+    # The folder is replaced as a whole when the run completes (a previous demo's
+    # folder, or an empty one): an interrupted run leaves the previous one.
+    owned = lambda path: not os.listdir(path) or os.path.exists(  # noqa: E731
+        os.path.join(path, "summary.json"))
+    with atomic_directory(out, owned=owned) as stage:
+        result = demo_module.run(stage, datasets=_names(names), methods=_names(methods),
+                                 frequency_unit=frequency_unit, progress=_state().progress,
+                                 jobs=jobs)
+        final = os.path.abspath(out)
+        for name in os.listdir(stage):          # the pages quote their folder: the final one
+            if name.endswith((".html", ".md", ".json")):
+                page = os.path.join(stage, name)
+                with open(page, encoding="utf-8") as fh:
+                    text = fh.read()
+                if stage in text:
+                    write_bytes(page, text.replace(stage, final))
+    for key, value in list(result.items()):       # paths name the final folder
+        if isinstance(value, str):
+            result[key] = value.replace(stage, final)
+        elif isinstance(value, list) and all(isinstance(v, str) for v in value):
+            result[key] = [v.replace(stage, final) for v in value]
     if not _state().quiet:
         for name, rows in result["by_dataset"].items():
             click.echo(f"{name}: " + ", ".join(
@@ -1493,8 +1573,7 @@ def gallery(out, names):
     text, rows = demo_module.gallery(datasets=_names(names), progress=_state().progress)
     directory = os.path.dirname(os.path.abspath(out))
     os.makedirs(directory, exist_ok=True)
-    with open(out, "w", encoding="utf-8") as fh:
-        fh.write(text)
+    write_bytes(out, text, what="gallery")
     _echo(f"wrote {out} ({len(rows)} rows)")
     return 0
 

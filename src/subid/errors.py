@@ -20,6 +20,8 @@ __all__ = [
     "CheckpointError",
     "UnstableModelWarning",
     "NoiseModelWarning",
+    "FileWriteError",
+    "ResourceLimitError",
 ]
 
 
@@ -82,6 +84,28 @@ class FileReadError(SubidError):
         self.path = None if path is None else str(path)
         self.line = line
         self.column = column
+
+
+class ResourceLimitError(FileReadError):
+    """A file (or a request) declares more data than the caller allowed: a
+    compressed archive that would expand beyond ``max_bytes``, a text line
+    longer than the limit, a size that does not fit in memory. The message
+    names the limit and how to raise it."""
+
+
+class FileWriteError(SubidError, OSError):
+    """A file or folder cannot be written (disk full, permissions, a name
+    holding a NUL byte). Also an :class:`OSError`; ``path`` and ``filename``
+    name the file the user asked for, never a temporary file. The previous
+    content, if any, is unchanged."""
+
+    def __init__(self, message: str, *, path=None):
+        super().__init__(message)
+        self.path = None if path is None else str(path)
+        self.filename = self.path
+
+    def __str__(self) -> str:
+        return self.args[0] if self.args else ""
 
 
 class DataFileNotFoundError(FileReadError, FileNotFoundError):

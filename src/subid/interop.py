@@ -40,7 +40,7 @@ import numpy as np
 
 from .data import IOData
 from ._files import atomic_write
-from .errors import DataError, DataFileNotFoundError, FileReadError, ModelError
+from .errors import DataError, ModelError
 from .model import StateSpace
 
 __all__ = ["save_mat", "load_mat", "iodata_from_pandas", "iodata_to_pandas"]
@@ -160,22 +160,13 @@ def load_mat(path, *, dt=None) -> StateSpace:
         A variable is missing or malformed, or ``Ts`` is -1 and ``dt`` is not
         given.
     """
-    import scipy.io
-    path = os.fspath(path)
-    if not os.path.exists(path):
-        raise DataFileNotFoundError(f"model file '{path}' does not exist", path=path)
-    if os.path.isdir(path):
-        raise FileReadError(f"{path} is a directory, not a model file", path=path)
-    try:
-        raw = scipy.io.loadmat(path, squeeze_me=False, mat_dtype=True)
-    except NotImplementedError:
-        raise FileReadError(f"{path} is a MATLAB v7.3 (HDF5) file, which subid cannot read; "
-                            "save it with save(..., '-v7')", path=path) from None
-    except MemoryError:
-        raise
-    except Exception as exc:  # scipy raises ValueError, MatReadError, TypeError, ...
-        raise FileReadError(f"{path} is not a readable MATLAB .mat file "
-                            f"({type(exc).__name__}: {exc})", path=path) from None
+    from .io import mat_variables
+    path = os.fsdecode(path) if isinstance(path, bytes) else os.fspath(path)
+    # The same validated path as subid.read: regular files only, every MAT
+    # structure checked before scipy's C reader sees it, bounded decompression.
+    # mat_dtype=False: scipy's mat_dtype=True casts complex matrices to real,
+    # silently dropping the imaginary part; complex values are refused below.
+    raw = mat_variables(path, mat_dtype=False, what="model file")
     fields = {k: v for k, v in raw.items() if not k.startswith("__")}
     if not all(k in fields for k in ("A", "B", "C")):
         structs = [k for k, v in fields.items()
@@ -191,6 +182,10 @@ def load_mat(path, *, dt=None) -> StateSpace:
     mats = []
     for key in ("A", "B", "C", "D"):
         value = np.asarray(fields[key])
+        if value.dtype.kind == "c":
+            raise ModelError(f"model file '{path}': {key} is complex; subid models are "
+                             "real-valued (a complex matrix is not the realization of a "
+                             "real system)")
         if value.dtype.kind not in "biuf":
             raise ModelError(f"model file '{path}': {key} is not a real numeric matrix "
                              f"(dtype {value.dtype})")
@@ -207,6 +202,8 @@ def load_mat(path, *, dt=None) -> StateSpace:
     else:
         ts = np.asarray(ts)
         if ts.size != 1 or ts.dtype.kind not in "biuf":
+            if ts.dtype.kind == "c":
+                raise ModelError(f"model file '{path}': Ts is complex")
             raise ModelError(f"model file '{path}': Ts must be a scalar, got shape {ts.shape}")
         period = float(ts.reshape(-1)[0])
     if period == -1.0:

@@ -35,20 +35,20 @@ and, for text files, the line and column at fault.
 from __future__ import annotations
 
 import csv
-import itertools
 import logging
 import numbers
 import os
 import re
-from io import StringIO
+from io import BytesIO, StringIO
 from pathlib import Path
 
 import numpy as np
 
-from ._npz import NpzError, load_npz
+from ._files import MAX_EXPANDED_BYTES, open_regular, read_regular
+from ._npz import NpzError, NpzLimitError, load_npz
 from ._validation import check_dt
 from .data import IOData
-from .errors import DataError, DataFileNotFoundError, FileReadError
+from .errors import DataError, FileReadError, ResourceLimitError
 
 __all__ = ["read", "SUPPORTED_EXTENSIONS"]
 
@@ -65,12 +65,16 @@ _MAX_LISTED = 40              # column/array names listed in an error message
 _INT_RE = re.compile(r"[+-]?\d+")
 _DECIMAL_COMMA_RE = re.compile(r"[+-]?\d*,\d+([eE][+-]?\d+)?")
 _HDF5_SIGNATURE = b"\x89HDF\r\n\x1a\n"
+#: Longest line of a text file, in characters: a longer one is refused
+#: (ResourceLimitError) before it is split, so memory stays bounded.
+MAX_LINE_CHARS = 4 * 2**20
 
 
 # ---------------------------------------------------------------------------
 # public entry point
 # ---------------------------------------------------------------------------
-def read(path, inputs=None, outputs=None, dt=None, time=None, *, delimiter=None) -> IOData:
+def read(path, inputs=None, outputs=None, dt=None, time=None, *, delimiter=None,
+         max_bytes=None) -> IOData:
     """Read one input/output record from a file.
 
     Parameters
@@ -101,6 +105,12 @@ def read(path, inputs=None, outputs=None, dt=None, time=None, *, delimiter=None)
     delimiter : str, optional
         Field delimiter of a text file, one character. ``" "`` means runs of
         spaces and TABs. Detected among ``,`` ``;`` and TAB when omitted.
+    max_bytes : int, optional
+        Bytes the arrays of a compressed ``.npz``/``.mat`` file may take
+        beyond the file's own size (default 1 GiB). A file that would expand
+        further is refused with :class:`~subid.errors.ResourceLimitError`
+        before it is decompressed: a few megabytes of compressed zeros can
+        otherwise declare gigabytes.
 
     Returns
     -------
@@ -113,8 +123,12 @@ def read(path, inputs=None, outputs=None, dt=None, time=None, *, delimiter=None)
     ------
     DataFileNotFoundError
         The file does not exist.
+    ResourceLimitError
+        A compressed file expands beyond ``max_bytes``, or a text line is
+        longer than ``MAX_LINE_CHARS``.
     FileReadError
-        The file cannot be read or interpreted: empty file, unsupported
+        The file cannot be read or interpreted: not a regular file (a FIFO,
+        a device, a directory), empty file, unsupported
         extension, a cell that is not a number, rows with different numbers
         of fields, unknown or repeated column/array names, column index out
         of range, missing ``inputs``/``outputs`` for a text file, corrupted
@@ -151,13 +165,14 @@ def read(path, inputs=None, outputs=None, dt=None, time=None, *, delimiter=None)
         if not isinstance(delimiter, str) or len(delimiter) != 1 or delimiter in "\r\n\"#":
             raise DataError(f"delimiter must be one character (not a quote, '#' or a line "
                             f"break), got {delimiter!r}")
-    _check_exists(p, shown)
+    max_bytes = _max_bytes(max_bytes)
+    raw = _read_bytes(p, shown)
     if ext in _TEXT_EXTENSIONS:
-        return _read_text(p, shown, ext, inputs, outputs, dt, time, delimiter)
+        return _read_text(p, shown, ext, inputs, outputs, dt, time, delimiter, raw=raw)
     if ext == ".npz":
-        arrays = _load_npz(p, shown)
+        arrays = _load_npz(p, shown, raw=raw, max_bytes=max_bytes)
     else:
-        arrays = _load_mat(p, shown)
+        arrays = _load_mat(p, shown, raw=raw, max_bytes=max_bytes)
     return _from_arrays(arrays, shown, ext, inputs, outputs, dt, time)
 
 
@@ -174,24 +189,57 @@ def _as_path(path) -> tuple[str, Path]:
     return shown, Path(shown)
 
 
-def _check_exists(p: Path, shown: str) -> None:
-    try:
-        st = p.stat()
-    except FileNotFoundError:
-        raise DataFileNotFoundError(f"no such file: {shown}", path=shown) from None
-    except OSError as exc:
-        raise FileReadError(f"cannot access {shown}: {exc.strerror or exc}", path=shown) from None
-    if p.is_dir():
-        raise FileReadError(f"{shown} is a directory, not a data file", path=shown)
-    if st.st_size == 0:
+def _max_bytes(max_bytes) -> int:
+    if max_bytes is None:
+        return MAX_EXPANDED_BYTES
+    if isinstance(max_bytes, bool) or not isinstance(max_bytes, numbers.Integral) \
+            or max_bytes < 0:
+        raise DataError(f"max_bytes must be a non-negative integer, got {max_bytes!r}")
+    return int(max_bytes)
+
+
+def _check_exists(p: Path, shown: str) -> int:
+    """Size of the regular, non-empty file ``p`` (FileReadError otherwise)."""
+    fh, size = open_regular(shown, what="data file", max_bytes=None)
+    fh.close()
+    if size == 0:
         raise FileReadError(f"file {shown} is empty", path=shown)
+    return size
 
 
 def _read_bytes(p: Path, shown: str) -> bytes:
-    try:
-        return p.read_bytes()
-    except OSError as exc:
-        raise FileReadError(f"cannot read {shown}: {exc.strerror or exc}", path=shown) from None
+    """The bytes of a regular, non-empty file, read once (FileReadError otherwise)."""
+    raw = read_regular(shown, what="data file", max_bytes=None)
+    if not raw:
+        raise FileReadError(f"file {shown} is empty", path=shown)
+    return raw
+
+
+def _check_line_lengths(raw: bytes, shown: str) -> None:
+    """ResourceLimitError when a line of ``raw`` is longer than MAX_LINE_CHARS
+    (scanned in blocks, so the check itself needs little memory)."""
+    if len(raw) <= MAX_LINE_CHARS:
+        return
+    view = np.frombuffer(raw, dtype=np.uint8)
+    block = 1 << 24
+    last, lines = -1, 0                  # position of the previous newline, lines before it
+    for a in range(0, len(raw), block):
+        ends = np.flatnonzero(view[a:a + block] == 10) + a
+        if ends.size:
+            gaps = np.diff(ends, prepend=last) - 1
+            k = int(np.argmax(gaps))
+            if gaps[k] > MAX_LINE_CHARS:
+                lines += k
+                break
+            lines += ends.size
+            last = int(ends[-1])
+    else:
+        if len(raw) - 1 - last <= MAX_LINE_CHARS:
+            return
+    raise ResourceLimitError(f"{shown}, line {lines + 1}: the line is longer than the "
+                             f"{MAX_LINE_CHARS} characters subid reads "
+                             "(subid.io.MAX_LINE_CHARS); is this a text data file?",
+                             path=shown, line=lines + 1)
 
 
 def _build(shown: str, u, y, dt, t, in_names, out_names, first_line=None) -> IOData:
@@ -223,7 +271,9 @@ def _decode(raw: bytes, shown: str) -> str:
         except UnicodeDecodeError as exc:
             raise FileReadError(f"{shown}: cannot decode UTF-16 text ({exc.reason})",
                                 path=shown) from None
+        _check_line_lengths(text.encode("utf-8", "replace"), shown)
     else:
+        _check_line_lengths(raw, shown)
         if b"\x00" in raw[:8192]:
             raise FileReadError(f"{shown} looks like a binary file, not text (it holds NUL "
                                 "bytes); save the data as plain text (UTF-8) or use .npz/.mat",
@@ -249,10 +299,40 @@ def _split(content: str, delim) -> list[str]:
     if delim is _WHITESPACE:
         return [f.strip('"') for f in content.split()] if '"' in content else content.split()
     if '"' in content:
-        fields = next(csv.reader([content], delimiter=delim, quotechar='"'))
+        try:
+            fields = next(csv.reader([content], delimiter=delim, quotechar='"'))
+        except csv.Error:        # e.g. a quoted field beyond csv's 131,072-character limit
+            fields = _split_quoted(content, delim)
     else:
         fields = content.split(delim)
     return [f.strip() for f in fields]
+
+
+def _split_quoted(content: str, delim: str) -> list[str]:
+    """Split a delimited line with ``"``-quoted fields (``""`` is a quote), without
+    the csv module's field-size limit; the fields are checked as numbers later."""
+    fields, field, quoted, k = [], [], False, 0
+    while k < len(content):
+        ch = content[k]
+        if quoted:
+            if ch == '"':
+                if content.startswith('""', k):
+                    field.append('"')
+                    k += 1
+                else:
+                    quoted = False
+            else:
+                field.append(ch)
+        elif ch == '"':
+            quoted = True
+        elif ch == delim:
+            fields.append("".join(field))
+            field = []
+        else:
+            field.append(ch)
+        k += 1
+    fields.append("".join(field))
+    return fields
 
 
 def _is_number(s: str) -> bool:
@@ -506,7 +586,8 @@ class _Table:
         msg = f"{self.shown}, line {lineno}, {self.describe(idx)}: "
         if not s:
             return msg + "the value is missing (empty field)"
-        msg += f"{s!r} is not a number"
+        msg += (f"{s!r} is not a number" if len(s) <= 60 else
+                f"{s[:40]!r}... ({len(s)} characters) is not a number")
         if _DECIMAL_COMMA_RE.fullmatch(s):
             msg += " (decimal commas are not supported: use '.' as the decimal separator)"
         return msg
@@ -586,8 +667,8 @@ def _roles(table: "_Table", shown: str, inputs, outputs, time):
     return in_cols, out_cols, t_cols
 
 
-def _read_text(p, shown, ext, inputs, outputs, dt, time, delimiter) -> IOData:
-    text = _decode(_read_bytes(p, shown), shown)
+def _read_text(p, shown, ext, inputs, outputs, dt, time, delimiter, *, raw=None) -> IOData:
+    text = _decode(_read_bytes(p, shown) if raw is None else raw, shown)
     table = _Table(shown, text, ext, delimiter)
     in_cols, out_cols, t_cols = _roles(table, shown, inputs, outputs, time)
     cols = in_cols + out_cols + t_cols
@@ -612,12 +693,9 @@ def _reason(exc: BaseException) -> str:
     return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
 
 
-def _load_npz(p: Path, shown: str) -> dict:
-    try:
-        with open(p, "rb") as fh:
-            magic = fh.read(6)
-    except OSError as exc:
-        raise FileReadError(f"cannot read {shown}: {exc.strerror or exc}", path=shown) from None
+def _load_npz(p: Path, shown: str, *, raw=None, max_bytes=None) -> dict:
+    raw = _read_bytes(p, shown) if raw is None else raw
+    magic = raw[:6]
     if magic == b"\x93NUMPY":
         raise FileReadError(f"{shown} holds a single .npy array, not a .npz archive; save the "
                             "record with numpy.savez(path, u=..., y=...)", path=shown)
@@ -625,7 +703,9 @@ def _load_npz(p: Path, shown: str) -> dict:
         raise FileReadError(f"{shown} is not a .npz archive (it is not a ZIP file); write it "
                             "with numpy.savez(path, u=..., y=...)", path=shown)
     try:
-        return load_npz(p)
+        return load_npz(BytesIO(raw), size=len(raw), max_expanded=_max_bytes(max_bytes))
+    except NpzLimitError as exc:
+        raise ResourceLimitError(f"{shown}: {exc}", path=shown) from None
     except NpzError as exc:
         if "pickled" in str(exc):
             raise FileReadError(f"{shown} holds object (pickled) arrays, which subid does not "
@@ -634,21 +714,30 @@ def _load_npz(p: Path, shown: str) -> dict:
                             path=shown) from None
 
 
-def _load_mat(p: Path, shown: str) -> dict:
-    try:
-        with open(p, "rb") as fh:
-            head = fh.read(520)
-    except OSError as exc:
-        raise FileReadError(f"cannot read {shown}: {exc.strerror or exc}", path=shown) from None
+def mat_variables(path, *, raw=None, max_bytes=None, mat_dtype=False, what="data file"
+                  ) -> dict:
+    """The variables of a MATLAB file, read through the validated path.
+
+    The file is opened once as a regular file (:func:`subid._files.read_regular`),
+    its structure is validated (v4 headers, every v5 matrix, compressed
+    elements inflated within ``max_bytes``) and only then given to
+    :func:`scipy.io.loadmat`, from memory. Used by :func:`read` and by
+    :func:`subid.interop.load_mat`.
+    """
+    shown = os.fspath(path)
+    if raw is None:
+        raw = read_regular(shown, what=what, max_bytes=None)
+        if not raw:
+            raise FileReadError(f"file {shown} is empty", path=shown)
+    head = raw[:520]
     if b"MATLAB 7.3" in head[:128] or head[512:520] == _HDF5_SIGNATURE:
         raise FileReadError(
             f"{shown} is a MATLAB v7.3 (HDF5) file, which subid cannot read; save it with "
             "save(..., '-v7') in MATLAB, or export the data to CSV", path=shown)
     import scipy.io
-    import scipy.sparse
-    _check_mat_sizes(p, shown)
+    _check_mat_sizes(raw, shown, _max_bytes(max_bytes))
     try:
-        raw = scipy.io.loadmat(str(p), squeeze_me=False, mat_dtype=False)
+        return scipy.io.loadmat(BytesIO(raw), squeeze_me=False, mat_dtype=mat_dtype)
     except NotImplementedError:
         raise FileReadError(
             f"{shown} is a MATLAB v7.3 (HDF5) file, which subid cannot read; save it with "
@@ -658,6 +747,11 @@ def _load_mat(p: Path, shown: str) -> dict:
     except Exception as exc:  # scipy raises ValueError, MatReadError, TypeError, OSError, ...
         raise FileReadError(f"{shown} is not a readable MATLAB .mat file (corrupted or not a "
                             f"MAT-file): {_reason(exc)}", path=shown) from None
+
+
+def _load_mat(p: Path, shown: str, *, raw=None, max_bytes=None) -> dict:
+    import scipy.sparse
+    raw = mat_variables(shown, raw=raw, max_bytes=max_bytes)
     arrays = {}
     for key, val in raw.items():
         if key.startswith("__"):
@@ -671,21 +765,15 @@ def _load_mat(p: Path, shown: str) -> dict:
     return arrays
 
 
-# A MAT-file may compress its arrays (v5 uses zlib): allow this ratio of
-# declared bytes to file bytes, plus a floor, before calling it corrupted.
-_MAT_EXPANSION = 1024
-_MAT_FLOOR_BYTES = 64 * 2**20
-
-
 _MAT4_ELEMENT_BYTES = {0: 8, 1: 4, 2: 4, 3: 2, 4: 2, 5: 1}
 
 
-def _check_mat4_headers(p: Path, shown: str, size: int) -> None:
+def _check_mat4_headers(raw: bytes, shown: str, size: int) -> None:
     """Walk the variable headers of a MATLAB v4 file (uncompressed): every
     declared name and array must fit in the file. scipy would otherwise
     allocate what a corrupted header declares."""
     import struct
-    with open(p, "rb") as fh:
+    with BytesIO(raw) as fh:
         offset = 0
         while offset < size:
             fh.seek(offset)
@@ -814,7 +902,7 @@ def _mat5_matrix(buf: bytes, start: int, end: int, endian: str, depth: int = 0) 
         raise _MatCorrupt(f"unsupported MATLAB class {cls} (objects, function handles)")
 
 
-def _check_mat5_elements(p: Path, shown: str, size: int) -> None:
+def _check_mat5_elements(raw: bytes, shown: str, size: int, max_bytes: int) -> None:
     """Validate a MATLAB v5 file before scipy reads it.
 
     Each top-level element must fit in the file; compressed elements must
@@ -825,8 +913,7 @@ def _check_mat5_elements(p: Path, shown: str, size: int) -> None:
     """
     import struct
     import zlib
-    with open(p, "rb") as fh:
-        raw = fh.read()
+    budget = max_bytes                   # decompressed bytes allowed in all
     if len(raw) < 128:
         raise FileReadError(f"{shown}: MATLAB file header truncated", path=shown)
     endian = "<" if raw[126:128] == b"IM" else ">"
@@ -837,9 +924,15 @@ def _check_mat5_elements(p: Path, shown: str, size: int) -> None:
             if dtype == _MI_COMPRESSED:
                 inflater = zlib.decompressobj()
                 try:
-                    inner = inflater.decompress(raw[start:stop], _MAT_EXPANSION * (stop - start) + 8)
+                    inner = inflater.decompress(raw[start:stop], budget + 1)
                 except zlib.error as exc:
                     raise _MatCorrupt(f"corrupted compressed data ({exc})") from None
+                if len(inner) > budget or inflater.unconsumed_tail:
+                    raise ResourceLimitError(
+                        f"{shown}: its compressed variables expand to more than "
+                        f"{max_bytes} bytes (max_bytes), from a {size}-byte file; pass a "
+                        "larger max_bytes if the file is genuine", path=shown)
+                budget -= len(inner)
                 itype, istart, istop, _ = _mat5_sub(inner, 0, len(inner), endian)
                 if itype == _MI_MATRIX:
                     _mat5_matrix(inner, istart, istop, endian)
@@ -856,19 +949,19 @@ def _check_mat5_elements(p: Path, shown: str, size: int) -> None:
                             path=shown) from None
 
 
-def _check_mat_sizes(p: Path, shown: str) -> None:
-    """Reject a MAT-file whose headers declare arrays far larger than the file
-    (a corrupted header would otherwise make scipy allocate gigabytes)."""
+def _check_mat_sizes(raw: bytes, shown: str, max_bytes: int) -> None:
+    """Reject a MAT-file whose structure is corrupted or whose arrays would
+    take more than the file plus ``max_bytes`` (a corrupted header would
+    otherwise make scipy allocate gigabytes, or crash)."""
     import scipy.io
-    size = p.stat().st_size
-    with open(p, "rb") as fh:
-        first = fh.read(4)
+    size = len(raw)
+    first = raw[:4]
     if len(first) == 4 and 0 in first:          # scipy's test for a v4 file
-        _check_mat4_headers(p, shown, size)
+        _check_mat4_headers(raw, shown, size)
     else:
-        _check_mat5_elements(p, shown, size)
+        _check_mat5_elements(raw, shown, size, max_bytes)
     try:
-        entries = scipy.io.whosmat(str(p))
+        entries = scipy.io.whosmat(BytesIO(raw))
     except MemoryError:
         raise FileReadError(f"{shown} is not a readable MATLAB .mat file (corrupted header)",
                             path=shown) from None
@@ -876,9 +969,11 @@ def _check_mat_sizes(p: Path, shown: str) -> None:
         raise FileReadError(f"{shown} is not a readable MATLAB .mat file (corrupted or not a "
                             f"MAT-file): {_reason(exc)}", path=shown) from None
     declared = sum(8 * float(np.prod([float(d) for d in shape])) for _, shape, _ in entries)
-    if declared > max(_MAT_EXPANSION * size, _MAT_FLOOR_BYTES):
-        raise FileReadError(f"{shown}: its headers declare {declared / 2**20:.0f} MB of arrays "
-                            f"in a {size}-byte file; the file is corrupted", path=shown)
+    if declared > 8 * size + max_bytes:      # as float64 (what IOData holds)
+        raise ResourceLimitError(f"{shown}: its variables take {declared / 2**20:.0f} MB as "
+                                 f"float64, from a {size}-byte file: more than max_bytes = "
+                                 f"{max_bytes} beyond the file's size; pass a larger "
+                                 "max_bytes if the file is genuine", path=shown)
 
 
 def _array_names(spec, role: str, keys, shown: str) -> list[str]:
@@ -1066,48 +1161,115 @@ def _as_records(pieces, dt):
         yield piece
 
 
+def _text_lines(fh, shown: str, consumed: int, chunk_size: int):
+    """Lists of up to ``chunk_size`` lines (without their line break) of the
+    text file ``fh``, read in bounded blocks: a line longer than
+    MAX_LINE_CHARS is refused before it is held whole, so memory is bounded
+    by the chunk size, whatever the file."""
+    block = 1 << 18                  # characters read at a time
+    pending, lines = "", []
+    while True:
+        try:
+            text = fh.read(block)
+        except UnicodeDecodeError as exc:
+            raise FileReadError(f"{shown}: the file is not UTF-8 text after line "
+                                f"{consumed + len(lines)} ({exc.reason})", path=shown,
+                                line=consumed + len(lines)) from None
+        except OSError as exc:
+            raise FileReadError(f"{shown}: cannot read the file ({_reason(exc)})",
+                                path=shown) from None
+        if not text:
+            if pending:
+                lines.append(pending)
+            if lines:
+                yield lines
+            return
+        parts = (pending + text).split("\n")
+        pending = parts.pop()
+        if len(pending) > MAX_LINE_CHARS:
+            line = consumed + len(lines) + 1
+            raise ResourceLimitError(f"{shown}, line {line}: the line is longer than the "
+                                     f"{MAX_LINE_CHARS} characters subid reads "
+                                     "(subid.io.MAX_LINE_CHARS); is this a text data file?",
+                                     path=shown, line=line)
+        for line in parts:
+            if len(line) > MAX_LINE_CHARS:
+                number = consumed + len(lines) + 1
+                raise ResourceLimitError(f"{shown}, line {number}: the line is longer than "
+                                         f"the {MAX_LINE_CHARS} characters subid reads "
+                                         "(subid.io.MAX_LINE_CHARS)", path=shown, line=number)
+            lines.append(line)
+            if len(lines) == chunk_size:
+                yield lines
+                consumed += len(lines)
+                lines = []
+
+
 def _text_pieces(p, shown, ext, inputs, outputs, chunk_size, delimiter):
-    try:
-        with open(p, "rb") as fh:
-            head = fh.read(_HEAD_BYTES)
-    except OSError as exc:
-        raise FileReadError(f"{shown}: cannot read the file ({_reason(exc)})", path=shown) from None
-    if len(head) == _HEAD_BYTES and b"\n" in head:
-        head = head[: head.rindex(b"\n") + 1]
-    layout = _Table(shown, _decode(head, shown), ext, delimiter)
-    in_cols, out_cols, _ = _roles(layout, shown, inputs, outputs, None)
-    cols = in_cols + out_cols
-    in_names, out_names = layout.channel_names(in_cols), layout.channel_names(out_cols)
-    n_in = len(in_cols)
-    try:
-        fh = open(p, encoding="utf-8-sig", newline=None)
-    except OSError as exc:
-        raise FileReadError(f"{shown}: cannot read the file ({_reason(exc)})", path=shown) from None
+    import io as _io
+    fh, _ = open_regular(shown, what="data file", max_bytes=None)
     with fh:
-        consumed = 0
-        for _ in range(layout.data_start):
-            fh.readline()
-            consumed += 1
-        while True:
+        try:
+            head = fh.read(_HEAD_BYTES)
+        except OSError as exc:
+            raise FileReadError(f"{shown}: cannot read the file ({_reason(exc)})",
+                                path=shown) from None
+        if not head:
+            raise FileReadError(f"file {shown} is empty", path=shown)
+        utf16 = head.startswith((b"\xff\xfe", b"\xfe\xff"))
+        if len(head) == _HEAD_BYTES:
+            newline = "\n".encode("utf-16-le" if head.startswith(b"\xff\xfe") else "utf-16-be") \
+                if utf16 else b"\n"
+            cut = head.rfind(newline)
+            while utf16 and cut > 0 and (cut - 2) % 2:     # a UTF-16 code unit boundary
+                cut = head.rfind(newline, 0, cut)
+            if cut > 0:
+                head = head[: cut + len(newline)]
+        layout = _Table(shown, _decode(head, shown), ext, delimiter)
+        in_cols, out_cols, _ = _roles(layout, shown, inputs, outputs, None)
+        cols = in_cols + out_cols
+        in_names, out_names = layout.channel_names(in_cols), layout.channel_names(out_cols)
+        n_in = len(in_cols)
+        fh.seek(0)
+        if utf16:
+            encoding = "utf-16"
+        else:                        # like read(): UTF-8, else Latin-1 (decided on the head)
             try:
-                lines = list(itertools.islice(fh, chunk_size))
-            except UnicodeDecodeError as exc:
-                raise FileReadError(f"{shown}: the file is not UTF-8 text after line {consumed} "
-                                    f"({exc.reason})", path=shown, line=consumed) from None
-            if not lines:
-                return
-            piece = _Table.__new__(_Table)
-            piece.__dict__.update(layout.__dict__)
-            piece.text = "".join(lines)
-            piece.lines = piece.text.split("\n")
-            piece.data_start = 0
-            piece.line_offset = consumed
-            consumed += len(lines)
-            if not any(line.strip() and not line.lstrip().startswith("#") for line in lines):
-                continue
-            values = piece.parse(cols)
-            piece.check_finite(values, cols)
-            yield values[:, :n_in], values[:, n_in:], in_names, out_names
+                head.decode("utf-8-sig")
+                encoding = "utf-8-sig"
+            except UnicodeDecodeError:
+                encoding = "latin-1"
+        text = _io.TextIOWrapper(fh, encoding=encoding, newline=None)
+        try:
+            consumed = 0
+            for _ in range(layout.data_start):
+                try:
+                    line = text.readline(MAX_LINE_CHARS + 1)
+                except UnicodeDecodeError as exc:
+                    raise FileReadError(f"{shown}: the file is not {encoding} text at line "
+                                        f"{consumed + 1} ({exc.reason})", path=shown,
+                                        line=consumed + 1) from None
+                if len(line) > MAX_LINE_CHARS:
+                    raise ResourceLimitError(f"{shown}, line {consumed + 1}: the line is "
+                                             f"longer than the {MAX_LINE_CHARS} characters "
+                                             "subid reads (subid.io.MAX_LINE_CHARS)",
+                                             path=shown, line=consumed + 1)
+                consumed += 1
+            for lines in _text_lines(text, shown, consumed, chunk_size):
+                piece = _Table.__new__(_Table)
+                piece.__dict__.update(layout.__dict__)
+                piece.text = "\n".join(lines) + "\n"
+                piece.lines = piece.text.split("\n")
+                piece.data_start = 0
+                piece.line_offset = consumed
+                consumed += len(lines)
+                if not any(line.strip() and not line.lstrip().startswith("#") for line in lines):
+                    continue
+                values = piece.parse(cols)
+                piece.check_finite(values, cols)
+                yield values[:, :n_in], values[:, n_in:], in_names, out_names
+        finally:
+            text.detach()
 
 
 def _column_indices(spec, role: str, n_columns: int, shown: str) -> list[int]:
@@ -1123,9 +1285,24 @@ def _column_indices(spec, role: str, n_columns: int, shown: str) -> list[int]:
 
 
 def _npy_pieces(p, shown, inputs, outputs, chunk_size):
+    from ._npz import npy_header
+    fh, size = open_regular(shown, what="data file", max_bytes=None)
+    with fh:
+        try:                         # the header is validated before numpy parses it
+            shape, _, dtype, head = npy_header(fh, os.path.basename(shown))
+        except NpzError as exc:
+            raise FileReadError(f"{shown}: not a readable .npy array ({exc})",
+                                path=shown) from None
+    count = 1
+    for d in shape:
+        count *= d
+    if head + count * dtype.itemsize != size:
+        raise FileReadError(f"{shown}: the .npy header declares {count * dtype.itemsize} "
+                            f"bytes of data but the file holds {size - head}; it is "
+                            "truncated or corrupted", path=shown)
     try:
         arr = np.load(p, mmap_mode="r", allow_pickle=False)
-    except (OSError, ValueError) as exc:
+    except Exception as exc:         # numpy's header parser: ValueError, SyntaxError, ...
         raise FileReadError(f"{shown}: not a readable .npy array ({_reason(exc)})",
                             path=shown) from None
     if arr.ndim != 2 or arr.dtype.kind not in "iuf":
@@ -1170,7 +1347,17 @@ def _parquet_pieces(p, shown, inputs, outputs, chunk_size):
             cols.append(name)
         chosen.append(cols)
     in_names, out_names = chosen
-    for batch in pf.iter_batches(batch_size=chunk_size, columns=in_names + out_names):
-        block = np.column_stack([np.asarray(batch.column(k), dtype=np.float64)
-                                 for k in range(batch.num_columns)])
+    batches = pf.iter_batches(batch_size=chunk_size, columns=in_names + out_names)
+    start = 0
+    while True:
+        try:
+            batch = next(batches, None)
+            if batch is None:
+                return
+            block = np.column_stack([np.asarray(batch.column(k), dtype=np.float64)
+                                     for k in range(batch.num_columns)])
+        except Exception as exc:       # pyarrow's own errors (OSError, ArrowInvalid...)
+            raise FileReadError(f"{shown}: cannot read the Parquet data after row {start} "
+                                f"({_reason(exc)})", path=shown) from None
+        start += block.shape[0]
         yield block[:, :len(in_names)], block[:, len(in_names):], in_names, out_names

@@ -146,12 +146,18 @@ def fit_percent(model, data, x0="estimate", hold: str = "zoh", steps=np.inf) -> 
         y_hat = predict(_check_model(model, "model"), data, steps, x0p)
     else:
         y_hat, _ = simulate_fit(model, data, x0=x0, hold=hold)
-    dev = np.linalg.norm(data.y - data.y.mean(axis=0), axis=0)
+    # Each output is divided by its largest magnitude first: the ratio is
+    # scale-invariant, and squaring values near 1e300 would overflow to inf
+    # (inf / inf = NaN) where the fit is perfectly defined.
+    scale = np.abs(data.y).max(axis=0)
+    scale[scale == 0] = 1.0
+    y, y_hat = data.y / scale, y_hat / scale
+    dev = np.linalg.norm(y - y.mean(axis=0), axis=0)
     flat = np.flatnonzero(dev == 0)
     if flat.size:
         names = ", ".join(data.output_names[k] for k in flat)
         raise DataError(f"output {names} is constant; the fit percentage is undefined for it")
-    return 100.0 * (1.0 - np.linalg.norm(data.y - y_hat, axis=0) / dev)
+    return 100.0 * (1.0 - np.linalg.norm(y - y_hat, axis=0) / dev)
 
 
 def pole_error(model, reference) -> float:

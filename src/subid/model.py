@@ -44,7 +44,7 @@ from .delay import apply_to_inputs, frequency_factor, input_delay_of
 from ._validation import as_signal, check_dt, check_int, check_time_stamps
 from .data import IOData
 from ._files import atomic_write
-from .errors import DataError, DataFileNotFoundError, FileReadError, ModelError
+from .errors import DataError, ModelError
 
 __all__ = ["StateSpace"]
 
@@ -62,6 +62,8 @@ _TAG_COMPLEX = "__complex__"
 _TAG_FLOAT = "__float__"
 _RESERVED_KEYS = (_TAG_ARRAY, _TAG_COMPLEX, _TAG_FLOAT)
 _NONFINITE_NAMES = {"nan": math.nan, "inf": math.inf, "-inf": -math.inf}
+#: Largest model file :meth:`StateSpace.load` reads (a model is a few matrices).
+_MAX_MODEL_BYTES = 256 * 2**20
 
 _CONVERSION_METHODS = {"zoh": "zoh", "foh": "foh", "bilinear": "bilinear",
                        "tustin": "bilinear"}
@@ -263,7 +265,8 @@ def _encode(obj, where: str):
 
 def _dec_float(value, where: str) -> float:
     if isinstance(value, Mapping):
-        if set(value) == {_TAG_FLOAT} and value[_TAG_FLOAT] in _NONFINITE_NAMES:
+        if set(value) == {_TAG_FLOAT} and isinstance(value[_TAG_FLOAT], str) \
+                and value[_TAG_FLOAT] in _NONFINITE_NAMES:
             return _NONFINITE_NAMES[value[_TAG_FLOAT]]
         raise ModelError(f"{where} is not a valid encoded float: {value!r}")
     if isinstance(value, bool) or not isinstance(value, numbers.Real):
@@ -1145,7 +1148,7 @@ class StateSpace:
             The file cannot be written.
         """
         text = _fmt_json(self.to_dict())
-        with atomic_write(path, "w", encoding="utf-8") as fh:
+        with atomic_write(path, "w", encoding="utf-8", what="model file") as fh:
             fh.write(text)
 
     @classmethod
@@ -1165,32 +1168,20 @@ class StateSpace:
         DataFileNotFoundError
             The file does not exist.
         FileReadError
-            The file exists but cannot be read (e.g. a directory).
+            The file exists but cannot be read: not a regular file (a
+            directory, a FIFO, a device), or larger than 256 MB.
         ModelError
-            The file is not valid JSON (truncated, corrupted) or does not
+            The file is not valid JSON (truncated, corrupted, nested too
+            deeply, numbers beyond 64 bits or overflowing) or does not
             describe a valid model; the message names the file.
         """
-        path = os.fspath(path)
-        try:
-            with open(path, "r", encoding="utf-8") as f:
-                text = f.read()
-        except FileNotFoundError:
-            raise DataFileNotFoundError(f"model file '{path}' does not exist",
-                                        path=path) from None
-        except UnicodeDecodeError:
-            raise ModelError(f"model file '{path}' is not UTF-8 text: it is not a subid "
-                             "model file, or it is corrupted") from None
-        except OSError as exc:
-            raise FileReadError(f"cannot read model file '{path}': "
-                                f"{exc.strerror or exc}", path=path) from None
-        if not text.strip():
+        from ._files import read_regular
+        from ._schema import parse_json
+        path = os.fsdecode(path) if isinstance(path, bytes) else os.fspath(path)
+        raw = read_regular(path, what="model file", max_bytes=_MAX_MODEL_BYTES)
+        if not raw.strip():
             raise ModelError(f"model file '{path}' is empty")
-        try:
-            d = json.loads(text)
-        except json.JSONDecodeError as exc:
-            raise ModelError(f"model file '{path}' is not valid JSON ({exc.msg} at line "
-                             f"{exc.lineno}, column {exc.colno}); the file may be truncated "
-                             "or corrupted") from None
+        d = parse_json(raw, f"model file '{path}'", ModelError)
         try:
             return cls.from_dict(d)
         except ModelError as exc:

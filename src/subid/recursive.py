@@ -423,7 +423,7 @@ class RecursiveSubspace:
             obj.n_samples = int(s["n_samples"])
             obj._n_columns = int(s["n_columns"])
             obj._weight = float(s["weight"])
-            obj._hist_sample = require(arrays, path, "hist_sample").astype(np.int64)
+            obj._hist_sample = require(arrays, path, "hist_sample", dtype=np.int64)
             obj._hist_poles = (require(arrays, path, "hist_poles_re")
                                + 1j * require(arrays, path, "hist_poles_im"))
         except CheckpointError:

@@ -15,6 +15,8 @@ from __future__ import annotations
 import logging
 import warnings
 
+import numpy as np
+
 from ._bd_pass import OutputRegression, sequential
 from ._subspace import default_horizon
 from .data import IOData
@@ -89,7 +91,8 @@ def identify_stream(pieces, method: str = "moesp", order=None, horizon=None, *,
                            dt=first.dt, input_names=first.input_names,
                            output_names=first.output_names)
     stat.update(first.u, first.y)
-    for piece in iterator:
+    for k, piece in enumerate(iterator, start=1):
+        _check_piece(piece, first, k)
         stat.update(piece.u, piece.y)
     if options.get("bd_method", "auto") != "projection":
         if reread is None and iter(pieces) is not pieces:
@@ -103,6 +106,20 @@ def identify_stream(pieces, method: str = "moesp", order=None, horizon=None, *,
             attach_second_pass(stat, lambda: ((p.u, p.y) for p in reread()))
     log.info("identifying from the statistic of %d samples", stat.n_samples)
     return METHODS[method](stat, order, horizon, **options)
+
+
+def _check_piece(piece, first, k: int) -> None:
+    """Every piece must continue the first one: same channels, same sampling."""
+    if not isinstance(piece, IOData):
+        raise DataError(f"piece {k} is a {type(piece).__name__}, not an IOData record")
+    if (piece.n_inputs, piece.n_outputs) != (first.n_inputs, first.n_outputs):
+        raise DataError(f"piece {k} has {piece.n_inputs} inputs and {piece.n_outputs} outputs "
+                        f"but the first piece has {first.n_inputs} and {first.n_outputs}")
+    if first.dt is None or piece.dt is None or not np.isclose(piece.dt, first.dt, rtol=1e-9,
+                                                              atol=0):
+        raise DataError(f"piece {k} is sampled with dt = {piece.dt} but the first piece with "
+                        f"dt = {first.dt}: the pieces of one record must share one uniform "
+                        "sampling period (resample them first)")
 
 
 def attach_second_pass(stat: HankelStatistic, make_chunks) -> HankelStatistic:

@@ -17,7 +17,6 @@ import os
 import sys
 import warnings
 
-import numpy as np
 
 
 def make(out: str) -> list[str]:

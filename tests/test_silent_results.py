@@ -1,0 +1,105 @@
+"""No silent wrong results (issue 15, classes 4 and 7, the parts in the
+loading/validation layer): each case is a clear subid.errors exception or a
+correct result."""
+
+import numpy as np
+import pytest
+import scipy.io
+from hypothesis import given
+from hypothesis import strategies as st
+
+import subid
+from subid import cli, errors, systems
+
+
+@given(row=st.integers(0, 2), col=st.integers(0, 2), imag=st.floats(1e-12, 1e3),
+       key=st.sampled_from(["A", "B", "C", "D"]), struct=st.booleans())
+def test_complex_mat_model_is_refused(tmp_path_factory, row, col, imag, key, struct):
+    """A .mat model with complex matrices lost the imaginary part (scipy's
+    mat_dtype cast); now a ModelError naming the matrix."""
+    m = systems.seed001_system()
+    mats = {"A": m.A, "B": m.B, "C": m.C, "D": m.D}
+    value = mats[key].astype(complex)
+    value[row % value.shape[0], col % value.shape[1]] += 1j * imag
+    mats[key] = value
+    mats["Ts"] = 1.0
+    path = tmp_path_factory.mktemp("mat") / "model.mat"
+    scipy.io.savemat(path, {"sys": mats} if struct else mats)
+    with pytest.raises(errors.ModelError, match=f"{key} is complex"):
+        subid.StateSpace.from_mat(path)
+
+
+@pytest.mark.parametrize("dt", [1.0, 0.0])
+def test_simulating_an_unstable_model_past_overflow_is_an_error(dt):
+    A = np.array([[1e3]]) if dt else np.array([[800.0]])
+    model = subid.StateSpace(A, [[1.0]], [[1.0]], [[0.0]], dt)
+    t = np.arange(200.0)
+    with pytest.raises(errors.ModelError, match="overflows at sample"):
+        model.simulate(np.ones(200), t=None if dt else t)
+    assert np.isfinite(model.simulate(np.ones(20), t=None if dt else t[:20] / 1e3)).all()
+
+
+def test_subid_simulate_does_not_write_overflowed_rows(tmp_path, capsys):
+    """subid simulate wrote inf/NaN rows of an unstable model with exit 0."""
+    model = tmp_path / "unstable.json"
+    subid.StateSpace([[1e3]], [[1.0]], [[1.0]], [[0.0]], 1.0).save(model)
+    inputs = tmp_path / "u.csv"
+    inputs.write_text("u1\n" + "1\n" * 300)
+    out = tmp_path / "y.csv"
+    assert cli.main(["--quiet", "simulate", str(model), "--input", str(inputs),
+                     "--out", str(out)]) == 2
+    assert "overflows" in capsys.readouterr().err
+    assert not out.exists()
+
+
+@given(exponent=st.integers(-300, 300))
+def test_fit_percent_is_scale_invariant(exponent):
+    """fit_percent returned NaN for outputs near 1e300 (inf / inf)."""
+    m = systems.seed001_system()
+    data = systems.simulate_data(m, 200, seed=0, output_snr_db=20)
+    ref = subid.metrics.fit_percent(m, data, x0="zero")
+    scale = 10.0 ** exponent
+    scaled = subid.IOData(data.u, data.y * scale, dt=data.dt)
+    model = subid.StateSpace(m.A, m.B, m.C * scale, m.D * scale, m.dt)
+    got = subid.metrics.fit_percent(model, scaled, x0="zero")
+    np.testing.assert_allclose(got, ref, rtol=1e-9, atol=1e-9)
+
+
+def test_stream_pieces_with_another_period_are_not_merged():
+    data = systems.simulate_data(systems.seed001_system(), 600, seed=0)
+    other = subid.IOData(data.u[300:], data.y[300:], dt=2 * data.dt)
+    with pytest.raises(errors.DataError, match="piece 1 is sampled with dt"):
+        subid.identify_stream([data[:300], other], order=3, horizon=5)
+
+
+@given(rows=st.lists(st.lists(st.floats(-1, 1), min_size=1, max_size=3), min_size=2,
+                     max_size=6),
+       big=st.integers(2**1024, 2**1100))
+def test_iodata_ragged_and_huge_ints_are_data_errors(rows, big):
+    """Ragged lists and Python integers beyond the float range raised numpy's
+    ValueError/OverflowError."""
+    y = np.zeros(len(rows))
+    if len({len(r) for r in rows}) > 1:
+        with pytest.raises(errors.DataError, match="ragged"):
+            subid.IOData(rows, y, dt=1.0)
+    else:
+        subid.IOData(rows, y, dt=1.0)
+    with pytest.raises(errors.DataError, match="too large"):
+        subid.IOData([big] + [0] * (len(rows) - 1), y, dt=1.0)
+    with pytest.raises(errors.DataError):
+        subid.IOData(y, y, dt=big)
+
+
+@pytest.mark.parametrize("call", [
+    lambda d: subid.moesp(d, 10**9),
+    lambda d: subid.n4sid(d, 3, horizon=10**12),
+    lambda d: subid.ls_subspace(d, 2**80),
+    lambda d: subid.RecursiveSubspace(10**7, 2, 2),
+    lambda d: subid.HankelStatistic(2, 2, depth=10**10),
+    lambda d: subid.AdaptiveIdentifier(2, 2, 2, dt=0.01, history=10**9),
+    lambda d: subid.RecursiveSubspace(2, 2, 2, history_size=2**50),
+])
+def test_absurd_sizes_are_order_errors_not_memory_errors(call):
+    data = systems.simulate_data(systems.seed001_system(), 300, seed=0)
+    with pytest.raises(errors.OrderError, match="at most"):
+        call(data)
