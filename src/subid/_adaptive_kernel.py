@@ -264,6 +264,88 @@ def _solve_normal(R, G, X, max_cond, L, B):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True, fastmath=_FASTMATH)
+def _solve_iv(C, G, X, max_cond, Q, B):  # pragma: no cover - compiled
+    """One refresh of an instrumental-variable estimate in residual form.
+
+    ``C`` (dz, d), dz >= d, is the cross matrix ``sum w ζ φ^T`` of the
+    instruments and the regressors, ``G = S - X C^T`` (rows, dz) the residual
+    of the (extended) IV equations ``X C^T = S`` at the current estimate X.
+    Computes the regularised least-squares step
+    ``Δ = argmin |Δ C^T - G|_F^2 + δ |Δ|_F^2``, ``δ = |C|_F^2 / max_cond``,
+    by Householder QR of ``[C; sqrt(δ) I]`` (never forming C^T C), then
+    ``X <- X + Δ`` and ``G <- G - Δ C^T``. As for :func:`_solve_normal`:
+    ``cond([C; sqrt(δ) I])^2 <= 1 + max_cond`` and X is kept in directions
+    the data do not inform. Q: scratch (dz + d, d), B: scratch (dz + d,
+    rows). Returns False (nothing changed) when C = 0 or the triangular
+    factor is singular.
+    """
+    dz, d = C.shape
+    rows = G.shape[0]
+    m = dz + d
+    tr = 0.0
+    for i in range(dz):
+        for j in range(d):
+            tr += C[i, j] * C[i, j]
+    if not tr > 0.0:
+        return False
+    sd = np.sqrt(tr / max_cond)
+    for i in range(m):
+        for j in range(d):
+            if i < dz:
+                Q[i, j] = C[i, j]
+            else:
+                Q[i, j] = sd if i - dz == j else 0.0
+        for r in range(rows):
+            B[i, r] = G[r, i] if i < dz else 0.0
+    v = np.empty(m)
+    diag = np.empty(d)
+    for k in range(d):
+        norm2 = 0.0
+        for i in range(k, m):
+            norm2 += Q[i, k] * Q[i, k]
+        nrm = np.sqrt(norm2)
+        if not nrm > 0.0:
+            return False
+        alpha = -nrm if Q[k, k] >= 0.0 else nrm
+        for i in range(k, m):
+            v[i] = Q[i, k]
+        v[k] -= alpha
+        vnorm2 = norm2 - Q[k, k] * Q[k, k] + v[k] * v[k]
+        diag[k] = alpha
+        if vnorm2 > 0.0:
+            for j in range(k + 1, d):
+                s = 0.0
+                for i in range(k, m):
+                    s += v[i] * Q[i, j]
+                s = 2.0 * s / vnorm2
+                for i in range(k, m):
+                    Q[i, j] -= s * v[i]
+            for r in range(rows):
+                s = 0.0
+                for i in range(k, m):
+                    s += v[i] * B[i, r]
+                s = 2.0 * s / vnorm2
+                for i in range(k, m):
+                    B[i, r] -= s * v[i]
+    for r in range(rows):                   # R Δ^T = (Q^T [G^T; 0])[:d]
+        for i in range(d - 1, -1, -1):
+            s = B[i, r]
+            for k in range(i + 1, d):
+                s -= Q[i, k] * B[k, r]
+            B[i, r] = s / diag[i]
+    for r in range(rows):
+        for i in range(d):
+            X[r, i] += B[i, r]
+    for r in range(rows):                   # G <- G - Δ C^T
+        for i in range(dz):
+            s = 0.0
+            for j in range(d):
+                s += B[j, r] * C[i, j]
+            G[r, i] -= s
+    return True
+
+
+@numba.njit(cache=True, fastmath=_FASTMATH)
 def _hurwitz(A):  # pragma: no cover - compiled
     """True if every eigenvalue of A has a negative real part.
 
@@ -412,12 +494,16 @@ def _shift_solve(M, n, ny, omega, Aout):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True, fastmath=_FASTMATH)
-def _refresh(n, nu, ny, omega, alpha, max_cond, gate, ode, T_now, ist, fst,
+def _refresh(n, nu, ny, omega, alpha, max_cond, gate, ode, iv, T_now, ist, fst,
              R, G, M, Rt, gt, theta, Am, Cm, Bm, Dm, Apsi, Cpsi, Psi, hist,
-             Ld, Bd, Lt, Bt, Anew):  # pragma: no cover - compiled
-    """Model refresh: solve both LS problems, (13), B̃, D, Ψ model, history."""
+             Ld, Bd, Lt, Bt, Anew, Cz, Gz, Qz, Bz):  # pragma: no cover - compiled
+    """Model refresh: solve both LS problems (the first by instrumental
+    variables when ``iv``), (13), B̃, D, Ψ model, history."""
     if not ode:
-        if not _solve_normal(R, G, M, max_cond, Ld, Bd):
+        if iv:
+            if not _solve_iv(Cz, Gz, M, max_cond, Qz, Bz):
+                ist[7] += 1
+        elif not _solve_normal(R, G, M, max_cond, Ld, Bd):
             ist[7] += 1
         if ist[9]:
             if not _solve_normal(Rt, gt, theta, max_cond, Lt, Bt):
@@ -509,9 +595,9 @@ def _refresh(n, nu, ny, omega, alpha, max_cond, gate, ode, T_now, ist, fst,
 # the compiled loop
 # ---------------------------------------------------------------------------
 @numba.njit(cache=True, fastmath=_FASTMATH)
-def kernel(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Hsel, par, ipar,
-           ist, fst, prev_u, prev_y, zp, zq, R, G, M, Rt, gt, theta,
-           Am, Cm, Bm, Dm, Apsi, Cpsi, Psi,
+def kernel(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, Hsel, par,
+           ipar, ist, fst, prev_u, prev_y, zp, zq, R, G, M, Rt, gt, theta,
+           Am, Cm, Bm, Dm, Apsi, Cpsi, Psi, zr, xi, Cz, Gz,
            PsiPhi, PsiG0, PsiG1, pstamp, hist, buf):  # pragma: no cover - compiled
     """Process the samples ``(Tm, U, Y)`` in place (see the module docstring).
 
@@ -519,7 +605,10 @@ def kernel(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Hsel, par, ipar,
     is finite at the end (False: the caller rolls the chunk back).
 
     ``par = [ω, α, β, max_condition, ode_trace_bound, gate]``,
-    ``ipar = [refresh_every, ode, foh]``. ``idx[k]`` is the table entry of
+    ``ipar = [refresh_every, ode, foh, iv]``. ``Iphi, Ig0, Ig1``: tables of
+    the instrument filter (state ``zr``); with ``iv`` the regression (8) is
+    solved by instrumental variables ``ζ = [q̂; r̂]`` (cross matrix ``Cz``,
+    residual ``Gz = S_ζ - M Cz^T``) instead of least squares (R, G unused). ``idx[k]`` is the table entry of
     the interval ending at sample k (unused for the very first sample).
     ``PsiPhi, PsiG0, PsiG1, pstamp`` cache the Ψ discretisation per entry.
 
@@ -535,12 +624,20 @@ def kernel(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Hsel, par, ipar,
     """
     omega, alpha, beta, max_cond, trace_bound, gate = (par[0], par[1], par[2], par[3],
                                                        par[4], par[5])
-    K, ode, foh = ipar[0], ipar[1] != 0, ipar[2] != 0
+    K, ode, foh, iv = ipar[0], ipar[1] != 0, ipar[2] != 0, ipar[3] != 0
     N = U.shape[0]
     f, ny = zp.shape
     nu = zq.shape[1]
     n = Am.shape[0]
     dp, d = M.shape
+    mi = zr.shape[0]
+    dz = Cz.shape[0]
+    zeta = np.empty(dz)
+    ez = np.empty(dp)
+    zi = np.empty(mi)
+    zi2 = np.empty(n)
+    Qz = np.empty((dz + d, d))
+    Bz = np.empty((dz + d, dp))
     dth = theta.shape[1]
     nX = Psi.shape[1]          # n + n nu: columns of [Ξ, Ψ]
     p = np.empty(dp)
@@ -591,6 +688,16 @@ def kernel(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Hsel, par, ipar,
                 znew[i] = s
             for i in range(f):
                 zq[i, c] = znew[i]
+        if iv:
+            # instrument filter: the inputs only, through a second filter bank
+            for c in range(nu):
+                for i in range(mi):
+                    s = Ig0[q, i] * prev_u[c] + Ig1[q, i] * U[k, c]
+                    for j in range(mi):
+                        s += Iphi[q, i, j] * zr[j, c]
+                    zi[i] = s
+                for i in range(mi):
+                    zr[i, c] = zi[i]
         # 2. regression (8): p̂ = M φ̂, φ̂ = [H p̂; q̂] (10), r^2 = 1 + |φ̂|^2.
         # (11)-(12) leave r open; an r depending on P (like ρ of (20)) gives
         # d/dt log det P^{-1} < 1 - α dim φ, so that the data could never
@@ -609,9 +716,58 @@ def kernel(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Hsel, par, ipar,
         r2 = 1.0
         for i in range(d):
             r2 += phi[i] * phi[i]
-        if not ode:
-            # R <- λ R + w φ φ^T, S <- λ S + w p φ^T (w = h / r^2), deferred λ
-            fst[3] *= lamM[q]
+        if iv:
+            # instrumental variables: Cz <- λ Cz + w ζ φ^T, S_ζ <- λ S_ζ + w p ζ^T,
+            # held as Gz = S_ζ - M Cz^T; ζ = [q̂; r̂] (inputs only). Deferred λ;
+            # a factor below _RESCALE_BELOW (a long gap) is folded in first,
+            # so that the divisor stays 1 (a gap forgets exactly, never /0).
+            c2 = fst[3] * lamM[q]
+            if c2 < _RESCALE_BELOW:
+                for i in range(dz):
+                    for j in range(d):
+                        Cz[i, j] *= c2
+                for i in range(dp):
+                    for j in range(dz):
+                        Gz[i, j] *= c2
+                fst[3] = 1.0
+            else:
+                fst[3] = c2
+            w = h / (r2 * fst[3])
+            for i in range(f):
+                for c in range(nu):
+                    zeta[i * nu + c] = zq[i, c]
+            for i in range(mi):
+                for c in range(nu):
+                    zeta[f * nu + i * nu + c] = zr[i, c]
+            for i in range(n):
+                zeta[(f + mi) * nu + i] = xi[0, i]
+            for i in range(dz):
+                wi = w * zeta[i]
+                for j in range(d):
+                    Cz[i, j] += wi * phi[j]
+            for i in range(dp):
+                s = p[i]
+                for j in range(d):
+                    s -= M[i, j] * phi[j]
+                ez[i] = w * s
+            for i in range(dp):
+                wi = ez[i]
+                for j in range(dz):
+                    Gz[i, j] += wi * zeta[j]
+        elif not ode:
+            # R <- λ R + w φ φ^T, S <- λ S + w p φ^T (w = h / r^2), deferred λ;
+            # a factor below _RESCALE_BELOW (a long gap) is folded in first
+            c2 = fst[3] * lamM[q]
+            if c2 < _RESCALE_BELOW:
+                for i in range(d):
+                    for j in range(i + 1):
+                        R[i, j] *= c2
+                for i in range(dp):
+                    for j in range(d):
+                        G[i, j] *= c2
+                fst[3] = 1.0
+            else:
+                fst[3] = c2
             w = h / (r2 * fst[3])
             for i in range(d):
                 wphi[i] = w * phi[i]
@@ -628,15 +784,6 @@ def kernel(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Hsel, par, ipar,
                 wi = ep[i]
                 for j in range(d):
                     G[i, j] += wi * phi[j]
-            if fst[3] < _RESCALE_BELOW:
-                c2 = fst[3]
-                for i in range(d):
-                    for j in range(i + 1):
-                        R[i, j] *= c2
-                for i in range(dp):
-                    for j in range(d):
-                        G[i, j] *= c2
-                fst[3] = 1.0
         else:
             # (11)-(12), semi-implicit Euler step; R holds P. The gain
             # h / (r^2 + h φ^T P φ) (Sherman-Morrison form of the downdate)
@@ -702,6 +849,20 @@ def kernel(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Hsel, par, ipar,
                 for i in range(ny):
                     for j in range(n):
                         Psi[i, off + j] = Pn[i, j]
+            if iv:
+                # auxiliary-model instrument: x_i <- e^{Ã h} x_i + h B̃ q̂_0 (the
+                # accepted Ã, the current B̃, the filtered input F̂ u; any
+                # function of the input is a valid instrument, so the simple
+                # quadrature is enough); the next sample uses it
+                for i in range(n):
+                    s = 0.0
+                    for j in range(nu):
+                        s += Bm[i, j] * zq[0, j]
+                    zi2[i] = h * s
+                    for j in range(n):
+                        zi2[i] += PsiPhi[q, i, j] * xi[0, j]
+                for i in range(n):
+                    xi[0, i] = zi2[i]
             # regression (16): y = Φ θ, Φ = [Ξ, Ψ, u^T ⊗ I], ρ^2 = 1 + |Φ|_F^2
             # (P-free for the same reason as r; 'ode' keeps ρ of (20))
             rho2 = 1.0
@@ -711,7 +872,15 @@ def kernel(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Hsel, par, ipar,
             for jj in range(nu):
                 rho2 += ny * (U[k, jj] * U[k, jj])
             if not ode:
-                fst[4] *= lamT[q]
+                c2 = fst[4] * lamT[q]
+                if c2 < _RESCALE_BELOW:
+                    for a in range(dth):
+                        for b in range(a + 1):
+                            Rt[a, b] *= c2
+                        gt[0, a] *= c2
+                    fst[4] = 1.0
+                else:
+                    fst[4] = c2
                 w = h / (rho2 * fst[4])
                 # prediction error y - Φ θ
                 for r in range(ny):
@@ -738,13 +907,6 @@ def kernel(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Hsel, par, ipar,
                         for j2 in range(jj + 1):
                             Rt[a, nX + i + ny * j2] += w * (uj * U[k, j2])
                         gt[0, a] += ey[i] * uj
-                if fst[4] < _RESCALE_BELOW:
-                    c2 = fst[4]
-                    for a in range(dth):
-                        for b in range(a + 1):
-                            Rt[a, b] *= c2
-                        gt[0, a] *= c2
-                    fst[4] = 1.0
             else:
                 # (19)-(20), semi-implicit Euler step (gain h / (ρ^2 + h tr(Φ Q Φ^T)),
                 # Q stays positive definite); Rt holds Q; ρ^2 = 1 + tr(Φ Q Φ^T)
@@ -794,9 +956,9 @@ def kernel(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Hsel, par, ipar,
         fst[0] = Tm[k]
         ist[0] += 1
         if (ist[0] - 1) % K == 0:
-            _refresh(n, nu, ny, omega, alpha, max_cond, gate, ode, Tm[k], ist, fst, R, G, M,
-                     Rt, gt,
-                     theta, Am, Cm, Bm, Dm, Apsi, Cpsi, Psi, hist, Ld, Bd, Lt, Bt, Anew)
+            _refresh(n, nu, ny, omega, alpha, max_cond, gate, ode, iv, Tm[k], ist, fst, R, G,
+                     M, Rt, gt, theta, Am, Cm, Bm, Dm, Apsi, Cpsi, Psi, hist, Ld, Bd, Lt, Bt,
+                     Anew, Cz, Gz, Qz, Bz)
     for i in range(buf.shape[0]):
         if not np.isfinite(buf[i]):
             return False
@@ -823,10 +985,28 @@ def _ref_solve(R, G, X, max_cond):
     return True
 
 
-def _ref_refresh(n, nu, ny, omega, alpha, max_cond, gate, ode, T_now, ist, fst,
-                 R, G, M, Rt, gt, theta, Am, Cm, Bm, Dm, Apsi, Cpsi, Psi, hist):
+def _ref_solve_iv(C, G, X, max_cond):
+    """Reference of :func:`_solve_iv`: numpy least squares on the stacked
+    system ``[C; sqrt(δ) I] Δ^T = [G^T; 0]``."""
+    tr = float(np.sum(C * C))
+    if not tr > 0:
+        return False
+    d = C.shape[1]
+    A = np.vstack([C, np.sqrt(tr / max_cond) * np.eye(d)])
+    rhs = np.vstack([G.T, np.zeros((d, G.shape[0]))])
+    step = np.linalg.lstsq(A, rhs, rcond=None)[0].T
+    X += step
+    G -= step @ C.T
+    return True
+
+
+def _ref_refresh(n, nu, ny, omega, alpha, max_cond, gate, ode, iv, T_now, ist, fst,
+                 R, G, M, Rt, gt, theta, Am, Cm, Bm, Dm, Apsi, Cpsi, Psi, hist, Cz, Gz):
     if not ode:
-        if not _ref_solve(R, G, M, max_cond):
+        if iv:
+            if not _ref_solve_iv(Cz, Gz, M, max_cond):
+                ist[7] += 1
+        elif not _ref_solve(R, G, M, max_cond):
             ist[7] += 1
         if ist[9] and not _ref_solve(Rt, gt, theta, max_cond):
             ist[7] += 1
@@ -881,9 +1061,9 @@ def _ref_refresh(n, nu, ny, omega, alpha, max_cond, gate, ode, T_now, ist, fst,
             ist[2] += 1
 
 
-def reference(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Hsel, par, ipar,
-              ist, fst, prev_u, prev_y, zp, zq, R, G, M, Rt, gt, theta,
-              Am, Cm, Bm, Dm, Apsi, Cpsi, Psi,
+def reference(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, Hsel, par,
+              ipar, ist, fst, prev_u, prev_y, zp, zq, R, G, M, Rt, gt, theta,
+              Am, Cm, Bm, Dm, Apsi, Cpsi, Psi, zr, xi, Cz, Gz,
               PsiPhi, PsiG0, PsiG1, pstamp, hist, buf):
     """Plain numpy implementation of :func:`kernel` (same arguments).
 
@@ -894,7 +1074,7 @@ def reference(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Hsel, par, ipar,
     updated (the kernel updates lower triangles).
     """
     omega, alpha, beta, max_cond, trace_bound, gate = (float(v) for v in par)
-    K, ode, foh = int(ipar[0]), bool(ipar[1]), bool(ipar[2])
+    K, ode, foh, iv = int(ipar[0]), bool(ipar[1]), bool(ipar[2]), bool(ipar[3])
     n = Am.shape[0]
     ny = zp.shape[1]
     nu = zq.shape[1]
@@ -908,19 +1088,32 @@ def reference(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Hsel, par, ipar,
         # 1. filters (6a)-(6b)
         zp[:] = Fphi[q] @ zp + np.outer(Fg0[q], prev_y) + np.outer(Fg1[q], y)
         zq[:] = Fphi[q] @ zq + np.outer(Fg0[q], prev_u) + np.outer(Fg1[q], u)
+        if iv:
+            zr[:] = Iphi[q] @ zr + np.outer(Ig0[q], prev_u) + np.outer(Ig1[q], u)
         # 2. regression (8)
         p = zp.reshape(-1)
         phi = np.concatenate([Hsel @ p, zq.reshape(-1)])
         r2 = 1.0 + phi @ phi
         if not ode:
-            fst[3] *= lamM[q]
-            w = h / (r2 * fst[3])
-            R += np.outer(w * phi, phi)
-            G += np.outer(w * (p - M @ phi), phi)
-            if fst[3] < _RESCALE_BELOW:
-                R *= fst[3]
-                G *= fst[3]
+            c2 = fst[3] * lamM[q]
+            if c2 < _RESCALE_BELOW:        # fold the factor in first (long gaps)
+                if iv:
+                    Cz *= c2
+                    Gz *= c2
+                else:
+                    R *= c2
+                    G *= c2
                 fst[3] = 1.0
+            else:
+                fst[3] = c2
+            w = h / (r2 * fst[3])
+            if iv:
+                zeta = np.concatenate([zq.reshape(-1), zr.reshape(-1), xi[0]])
+                Cz += np.outer(w * zeta, phi)
+                Gz += np.outer(w * (p - M @ phi), zeta)
+            else:
+                R += np.outer(w * phi, phi)
+                G += np.outer(w * (p - M @ phi), phi)
         else:
             g = R @ phi
             c = h / (r2 + h * (phi @ g))
@@ -946,17 +1139,21 @@ def reference(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Hsel, par, ipar,
                 blk = slice(n + jj * n, n + (jj + 1) * n)
                 Psi[:, blk] = (Psi[:, blk] @ PsiPhi[q] + prev_u[jj] * PsiG0[q]
                                + u[jj] * PsiG1[q])
+            if iv:      # auxiliary-model instrument (see the kernel)
+                xi[0] = PsiPhi[q] @ xi[0] + h * (Bm @ zq[0])
             # regression (16)
             Phi = np.hstack([Psi, np.kron(u[None, :], np.eye(ny))])
             if not ode:
-                fst[4] *= lamT[q]
+                c2 = fst[4] * lamT[q]
+                if c2 < _RESCALE_BELOW:
+                    Rt *= c2
+                    gt *= c2
+                    fst[4] = 1.0
+                else:
+                    fst[4] = c2
                 w = h / ((1.0 + np.sum(Phi * Phi)) * fst[4])
                 Rt += w * (Phi.T @ Phi)
                 gt += (Phi.T @ (w * (y - Phi @ theta[0])))[None, :]
-                if fst[4] < _RESCALE_BELOW:
-                    Rt *= fst[4]
-                    gt *= fst[4]
-                    fst[4] = 1.0
             else:
                 Gq = Rt @ Phi.T
                 tq = np.trace(Phi @ Gq)
@@ -969,6 +1166,6 @@ def reference(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Hsel, par, ipar,
         prev_u[:], prev_y[:], fst[0] = u, y, Tm[k]
         ist[0] += 1
         if (ist[0] - 1) % K == 0:
-            _ref_refresh(n, nu, ny, omega, alpha, max_cond, gate, ode, Tm[k], ist, fst, R, G,
-                         M, Rt, gt, theta, Am, Cm, Bm, Dm, Apsi, Cpsi, Psi, hist)
+            _ref_refresh(n, nu, ny, omega, alpha, max_cond, gate, ode, iv, Tm[k], ist, fst, R,
+                         G, M, Rt, gt, theta, Am, Cm, Bm, Dm, Apsi, Cpsi, Psi, hist, Cz, Gz)
     return bool(np.isfinite(buf).all())

@@ -85,12 +85,20 @@ from .model import StateSpace
 __all__ = ["AdaptiveIdentifier"]
 
 _KIND = "AdaptiveIdentifier"
-_VERSION = 1
+_VERSION = 2      # 2: instrumental variables (zr, Cz, Gz)
 # Step lengths handled in one kernel call when the time stamps are non-uniform
 # (bounds the memory of the per-step discretisation tables).
 _BLOCK_UNIQUE = 4096
 _BLOCK_SAMPLES = 16384
 _STEP_CACHE = 64
+# Default instrument filter of method 'iv': the filter poles times this ratio
+# (slower: instruments that remember more of the input's past).
+_INSTRUMENT_POLE_RATIO = 0.25
+# Default (forgetting, bd_forgetting) per method. 'ls' and 'ode': the paper's
+# noise-free values. 'iv': a long memory for M (the IV estimate is unbiased
+# under noise, so averaging pays: measured in docs/seed000.md) and a shorter
+# one for θ, whose regressor Ψ is built from the past estimates of (Ã, C̃).
+_DEFAULT_FORGETTING = {"iv": (0.002, 0.02), "ls": (0.4, 0.08), "ode": (0.4, 0.08)}
 
 
 def _positive(value, name: str, *, exc=SubidError) -> float:
@@ -102,27 +110,46 @@ def _positive(value, name: str, *, exc=SubidError) -> float:
     return value
 
 
-def _filter_poles(poles, f: int) -> np.ndarray:
+def _filter_poles(poles, f, name: str = "filter_poles") -> np.ndarray:
     """Validate ``filter_poles``: a negative number (repeated f times) or f
-    poles with negative real parts, complex ones in conjugate pairs."""
+    poles with negative real parts, complex ones in conjugate pairs
+    (``f=None``: any number of poles)."""
     if isinstance(poles, numbers.Number) and not isinstance(poles, bool):
         poles = [poles] * f
     try:
         arr = np.asarray(poles, dtype=np.complex128).reshape(-1)
     except (TypeError, ValueError):
-        raise SubidError(f"filter_poles must be a negative number or {f} poles, "
+        raise SubidError(f"{name} must be a negative number or {f} poles, "
                          f"got {poles!r}") from None
-    if arr.size != f:
-        raise SubidError(f"filter_poles has {arr.size} poles but the filter order is the "
+    if f is not None and arr.size != f:
+        raise SubidError(f"{name} has {arr.size} poles but the filter order is the "
                          f"horizon, {f}; give {f} poles or one negative number")
+    if arr.size == 0:
+        raise SubidError(f"{name} is empty")
     if not np.all(np.isfinite(arr)):
-        raise SubidError("filter_poles must be finite")
+        raise SubidError(f"{name} must be finite")
     if np.any(arr.real >= 0):
-        raise SubidError(f"filter_poles must have negative real parts (a stable filter), got "
-                         f"{np.round(arr, 6).tolist()}; e.g. filter_poles=-2.0")
+        raise SubidError(f"{name} must have negative real parts (a stable filter), got "
+                         f"{np.round(arr, 6).tolist()}; e.g. {name}=-2.0")
     if not np.allclose(np.sort_complex(arr), np.sort_complex(arr.conj()), rtol=1e-12, atol=0):
-        raise SubidError("complex filter_poles must come in conjugate pairs")
+        raise SubidError(f"complex {name} must come in conjugate pairs")
     return arr
+
+
+def _companion(poles: np.ndarray, scale: bool):
+    """State-variable filter ``F̂(s) = ω^m / d(s)`` in time-scaled companion
+    form: ``ż = ω (Λ_c(â) z + l w)``, ``z_k = ω^{-k} s^k F̂(s) w``, with
+    ``ω = |d(0)|^{1/m}`` (1 when not ``scale``). Returns (Af, Bf, ω)."""
+    m = poles.size
+    coeffs = np.real(np.poly(poles))                 # [1, a_{m-1}, ..., a_0]
+    omega = float(np.abs(np.prod(poles)) ** (1.0 / m)) if scale else 1.0
+    scaled = coeffs[1:] / omega ** np.arange(1, m + 1)   # â_{m-1}, ..., â_0
+    Lc = np.zeros((m, m))
+    Lc[:-1, 1:] = np.eye(m - 1)
+    Lc[-1, :] = -scaled[::-1]                        # [-â_0, ..., -â_{m-1}]
+    Bf = np.zeros((m, 1))
+    Bf[-1, 0] = omega
+    return omega * Lc, Bf, omega
 
 
 class AdaptiveIdentifier:
@@ -230,11 +257,12 @@ class AdaptiveIdentifier:
     """
 
     def __init__(self, order, n_inputs, n_outputs, horizon=None, filter_poles=-5.0,
-                 forgetting=0.4, bd_forgetting=0.08, selector=None, seed=0, *, dt=None,
-                 hold="foh", method="ls", scale_filters=True, refresh_every=50,
+                 forgetting=None, bd_forgetting=None, selector=None, seed=0, *, dt=None,
+                 hold="foh", method="iv", scale_filters=True, refresh_every=50,
                  bd_gate=1e-2, max_condition=1e10, initial_covariance=None,
                  bd_initial_covariance=None, ode_trace_bound=1e8, history=0,
-                 engine="numba", input_names=None, output_names=None):
+                 engine="numba", input_names=None, output_names=None,
+                 instrument_poles=None):
         n = check_int(order, "order")
         nu = check_int(n_inputs, "n_inputs")
         ny = check_int(n_outputs, "n_outputs")
@@ -248,12 +276,23 @@ class AdaptiveIdentifier:
                              f"i.e. horizon >= {-(-n // ny) + 1}")
         self._n, self._nu, self._ny, self._f = n, nu, ny, f
         self._poles = _filter_poles(filter_poles, f)
-        self._alpha = _positive(forgetting, "forgetting")
-        self._beta = _positive(bd_forgetting, "bd_forgetting")
+        if instrument_poles is None:
+            self._ipoles = self._poles * _INSTRUMENT_POLE_RATIO
+        else:
+            self._ipoles = _filter_poles(instrument_poles, f if isinstance(
+                instrument_poles, numbers.Number) else None, "instrument_poles")
+        if self._ipoles.size * nu < n:
+            raise SubidError(f"instrument_poles: {self._ipoles.size} poles give "
+                             f"{self._ipoles.size * nu} instruments beyond the filtered "
+                             f"inputs; the order {n} needs at least {-(-n // nu)} poles")
+        alpha0, beta0 = _DEFAULT_FORGETTING.get(method, (0.4, 0.08))
+        self._alpha = alpha0 if forgetting is None else _positive(forgetting, "forgetting")
+        self._beta = beta0 if bd_forgetting is None else _positive(bd_forgetting,
+                                                                     "bd_forgetting")
         if hold not in ("foh", "zoh"):
             raise SubidError(f"hold must be 'foh' or 'zoh', got {hold!r}")
-        if method not in ("ls", "ode"):
-            raise SubidError(f"method must be 'ls' or 'ode', got {method!r}")
+        if method not in ("iv", "ls", "ode"):
+            raise SubidError(f"method must be 'iv', 'ls' or 'ode', got {method!r}")
         if engine not in ("numba", "numpy"):
             raise SubidError(f"engine must be 'numba' or 'numpy', got {engine!r}")
         self._hold, self._method, self._engine = hold, method, engine
@@ -262,7 +301,7 @@ class AdaptiveIdentifier:
         self._max_cond = _positive(max_condition, "max_condition")
         if self._max_cond <= 1:
             raise SubidError(f"max_condition must exceed 1, got {max_condition!r}")
-        default_cov = 1e12 if method == "ls" else 1.0
+        default_cov = 1.0 if method == "ode" else 1e12
         self._p0 = default_cov if initial_covariance is None else \
             _positive(initial_covariance, "initial_covariance")
         self._q0 = default_cov if bd_initial_covariance is None else \
@@ -288,15 +327,9 @@ class AdaptiveIdentifier:
         self._input_names = None if input_names is None else tuple(input_names)
         self._output_names = None if output_names is None else tuple(output_names)
         # filter: d(s) = prod(s - pole); time scale ω = |d(0)|^(1/f)
-        coeffs = np.real(np.poly(self._poles))          # [1, a_{f-1}, ..., a_0]
-        self._omega = float(np.abs(np.prod(self._poles)) ** (1.0 / f)) if self._scale else 1.0
-        scaled = coeffs[1:] / self._omega ** np.arange(1, f + 1)   # â_{f-1}, ..., â_0
-        Lc = np.zeros((f, f))
-        Lc[:-1, 1:] = np.eye(f - 1)
-        Lc[-1, :] = -scaled[::-1]                        # [-â_0, ..., -â_{f-1}]
-        self._Af = self._omega * Lc
-        self._Bf = np.zeros((f, 1))
-        self._Bf[-1, 0] = self._omega
+        self._Af, self._Bf, self._omega = _companion(self._poles, self._scale)
+        # instrument filter (method 'iv'): inputs only, its own poles
+        self._Ai, self._Bi, _ = _companion(self._ipoles, True)
         self._step_cache: dict = {}
         self._t_origin = 0.0     # time of the sample with index _k_origin when t is None
         self._k_origin = 0
@@ -309,6 +342,8 @@ class AdaptiveIdentifier:
         history."""
         n, nu, ny, f = self._n, self._nu, self._ny, self._f
         d, dp, dth = n + f * nu, f * ny, n + n * nu + ny * nu
+        mi = self._ipoles.size
+        dz = (f + mi) * nu + n
         layout = [("fst", (_k.N_FST,)), ("prev_u", (nu,)), ("prev_y", (ny,)),
                   ("zp", (f, ny)), ("zq", (f, nu)),
                   ("R", (d, d)),        # information matrix of (8) ('ode': P)
@@ -319,7 +354,11 @@ class AdaptiveIdentifier:
                   ("theta", (1, dth)),  # [x̃(t_g); vec B̃; vec D]
                   ("Am", (n, n)), ("Cm", (ny, n)), ("Bm", (n, nu)), ("Dm", (ny, nu)),
                   ("Apsi", (n, n)), ("Cpsi", (ny, n)),
-                  ("Psi", (ny, n + n * nu))]   # [Ξ, Ψ]
+                  ("Psi", (ny, n + n * nu)),   # [Ξ, Ψ]
+                  ("zr", (mi, nu)),     # instrument filter ('iv')
+                  ("xi", (1, n)),       # auxiliary-model instrument ('iv')
+                  ("Cz", (dz, d)),      # IV cross matrix sum w ζ φ^T ('iv')
+                  ("Gz", (dp, dz))]     # S_ζ - M Cz^T ('iv')
         self._buf = np.zeros(sum(math.prod(shape) for _, shape in layout))
         st = {}
         off = 0
@@ -332,9 +371,10 @@ class AdaptiveIdentifier:
         st["ist"] = ist
         st["fst"][_k.FST["scale_M"]] = st["fst"][_k.FST["scale_theta"]] = 1.0
         st["fst"][_k.FST["res_ref"]] = 1e300
-        if self._method == "ls":
+        if self._method != "ode":
             st["R"][:] = np.eye(d) / self._p0
             st["Rt"][:] = np.eye(dth) / self._q0
+            st["Cz"][:d] = np.eye(d) / self._p0
         else:
             st["R"][:] = np.eye(d) * self._p0
             st["Rt"][:] = np.eye(dth) * self._q0
@@ -343,7 +383,7 @@ class AdaptiveIdentifier:
         self._uniform = None      # discretisation tables for the constructor's dt
 
     _ORDER = ("ist", "fst", "prev_u", "prev_y", "zp", "zq", "R", "G", "M", "Rt", "g",
-              "theta", "Am", "Cm", "Bm", "Dm", "Apsi", "Cpsi", "Psi")
+              "theta", "Am", "Cm", "Bm", "Dm", "Apsi", "Cpsi", "Psi", "zr", "xi", "Cz", "Gz")
 
     # ------------------------------------------------------------ properties
     @property
@@ -368,7 +408,7 @@ class AdaptiveIdentifier:
 
     def _sym(self, name: str) -> np.ndarray:
         R = self._st[name]
-        if self._method == "ls":      # the kernel updates the lower triangle only
+        if self._method != "ode":     # the kernel updates the lower triangle only
             return np.tril(R) + np.tril(R, -1).T
         return R
 
@@ -379,6 +419,11 @@ class AdaptiveIdentifier:
         In ``'ode'`` mode those of P and Q."""
         out = []
         for name, skip in (("R", 0), ("Rt", self._n)):
+            if name == "R" and self._method == "iv":
+                # the IV equations: condition of Cz^T Cz (the square of Cz's)
+                sv = np.linalg.svd(self._st["Cz"], compute_uv=False)
+                out.append(float((sv[0] / sv[-1]) ** 2) if sv[-1] > 0 else math.inf)
+                continue
             ev = np.linalg.eigvalsh(self._sym(name)[skip:, skip:])
             out.append(float(ev[-1] / ev[0]) if ev[0] > 0 else math.inf)
         return out[0], out[1]
@@ -404,7 +449,7 @@ class AdaptiveIdentifier:
         st = self._st
         ist = st["ist"]
         cond, bd_cond = self.information_condition()
-        ls = self._method == "ls"
+        ls = self._method != "ode"
         info = {
             "method": "seed000_adaptive",
             "samples": self.n_samples,
@@ -551,28 +596,39 @@ class AdaptiveIdentifier:
 
     def _tables(self, steps: np.ndarray):
         """Discretisation tables for the distinct step lengths ``steps``."""
-        f = self._f
+        f, mi = self._f, self._ipoles.size
         K = steps.shape[0]
         Fphi = np.empty((K, f, f))
         Fg0 = np.empty((K, f))
         Fg1 = np.empty((K, f))
+        Iphi = np.zeros((K, mi, mi))
+        Ig0 = np.zeros((K, mi))
+        Ig1 = np.zeros((K, mi))
+        iv = self._method == "iv"
+
+        def blocks(A, B, hs):
+            Ph, G1, G2 = expm_blocks(A, B, hs, self._hold)
+            g0 = G1[:, :, 0] - G2[:, :, 0] if G2 is not None else G1[:, :, 0]
+            g1 = G2[:, :, 0] if G2 is not None else np.zeros_like(g0)
+            return Ph, g0, g1
+
         missing = [i for i, h in enumerate(steps) if float(h) not in self._step_cache]
         if missing:
-            Ph, G1, G2 = expm_blocks(self._Af, self._Bf, steps[missing], self._hold)
+            F = blocks(self._Af, self._Bf, steps[missing])
+            I = blocks(self._Ai, self._Bi, steps[missing]) if iv else None
             for j, i in enumerate(missing):
-                g0 = G1[j, :, 0] - G2[j, :, 0] if G2 is not None else G1[j, :, 0]
-                g1 = G2[j, :, 0] if G2 is not None else np.zeros(f)
-                entry = (Ph[j], g0, g1)
+                entry = (F[0][j], F[1][j], F[2][j]) + (
+                    (I[0][j], I[1][j], I[2][j]) if iv else (Iphi[i], Ig0[i], Ig1[i]))
                 if len(self._step_cache) < _STEP_CACHE:
                     self._step_cache[float(steps[i])] = entry
-                Fphi[i], Fg0[i], Fg1[i] = entry
+                Fphi[i], Fg0[i], Fg1[i], Iphi[i], Ig0[i], Ig1[i] = entry
         for i, h in enumerate(steps):
             entry = self._step_cache.get(float(h))
             if entry is not None:
-                Fphi[i], Fg0[i], Fg1[i] = entry
+                Fphi[i], Fg0[i], Fg1[i], Iphi[i], Ig0[i], Ig1[i] = entry
         lamM = np.exp(-self._alpha * steps)
         lamT = np.exp(-self._beta * steps)
-        return Fphi, Fg0, Fg1, lamM, lamT
+        return Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, lamM, lamT
 
     def update(self, u, y=None, t=None) -> "AdaptiveIdentifier":
         """Process one sample or a chunk of samples.
@@ -654,14 +710,15 @@ class AdaptiveIdentifier:
         return self
 
     def _call(self, T, U, Y, idx, steps, tables, cache) -> bool:
-        Fphi, Fg0, Fg1, lamM, lamT = tables
+        Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, lamM, lamT = tables
         st = self._st
         par = np.array([self._omega, self._alpha, self._beta, self._max_cond,
                         self._trace_bound, self._gate])
-        ipar = np.array([self._refresh, self._method == "ode", self._hold == "foh"],
-                        dtype=np.int64)
+        ipar = np.array([self._refresh, self._method == "ode", self._hold == "foh",
+                         self._method == "iv"], dtype=np.int64)
         fn = _k.kernel if self._engine == "numba" else _k.reference
-        return bool(fn(T, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, self._H, par, ipar,
+        return bool(fn(T, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1,
+                       self._H, par, ipar,
                        *(st[k] for k in self._ORDER), *cache, st["hist"], self._buf))
 
     def _psi_cache(self, K: int):
@@ -697,6 +754,7 @@ class AdaptiveIdentifier:
             "max_condition": self._max_cond, "initial_covariance": self._p0,
             "bd_initial_covariance": self._q0, "ode_trace_bound": self._trace_bound,
             "history": self._hist_cap, "engine": self._engine,
+            "instrument_poles": [[float(p.real), float(p.imag)] for p in self._ipoles],
             "input_names": None if self._input_names is None else list(self._input_names),
             "output_names": None if self._output_names is None else list(self._output_names),
             "t_origin": self._t_origin, "k_origin": self._k_origin,
@@ -738,7 +796,8 @@ class AdaptiveIdentifier:
                       bd_initial_covariance=s["bd_initial_covariance"],
                       ode_trace_bound=s["ode_trace_bound"], history=s["history"],
                       engine=s["engine"], input_names=s["input_names"],
-                      output_names=s["output_names"])
+                      output_names=s["output_names"],
+                      instrument_poles=[complex(re, im) for re, im in s["instrument_poles"]])
             t_origin, k_origin = float(s["t_origin"]), int(s["k_origin"])
         except CheckpointError:
             raise
