@@ -55,8 +55,10 @@ IST = {
     "bound_hits": 8,    # ode mode: steps where the trace bound suspended forgetting
     "started": 9,       # 1 once part 2 ((B̃, D) estimation) has started
     "stalled": 10,      # 1 once the residual of (13) has stopped improving
+    "rejected": 11,     # 1 if the last refresh's (Ã, C̃) failed the gate / Hurwitz test
+    "gaps": 12,         # intervals longer than max_gap (filters re-initialised)
 }
-N_IST = 11
+N_IST = 13
 # Float state ``fst`` slots.
 FST = {
     "t_last": 0,          # time of the last sample
@@ -66,8 +68,9 @@ FST = {
     "scale_theta": 4,     # the same for (R_θ, s_θ)
     "res_ref": 5,         # best residual of (13), updated when it halves
     "t_ref": 6,           # time of the last halving
+    "t_resume": 7,        # after a gap: (8) gets no weight before this time
 }
-N_FST = 7
+N_FST = 8
 
 # Part 2 also starts when the residual of (13) is below this value and has
 # not halved during one memory length 1/α of the estimate of M (converged to
@@ -271,11 +274,13 @@ def _solve_iv(C, G, X, max_cond, Q, B):  # pragma: no cover - compiled
     instruments and the regressors, ``G = S - X C^T`` (rows, dz) the residual
     of the (extended) IV equations ``X C^T = S`` at the current estimate X.
     Computes the regularised least-squares step
-    ``Δ = argmin |Δ C^T - G|_F^2 + δ |Δ|_F^2``, ``δ = |C|_F^2 / max_cond``,
+    ``Δ = argmin |Δ C^T - G|_F^2 + δ |Δ|_F^2``, ``δ = |C|_F^2 / max_cond^2``,
     by Householder QR of ``[C; sqrt(δ) I]`` (never forming C^T C), then
-    ``X <- X + Δ`` and ``G <- G - Δ C^T``. As for :func:`_solve_normal`:
-    ``cond([C; sqrt(δ) I])^2 <= 1 + max_cond`` and X is kept in directions
-    the data do not inform. Q: scratch (dz + d, d), B: scratch (dz + d,
+    ``X <- X + Δ`` and ``G <- G - Δ C^T``. As for :func:`_solve_normal`, the
+    solved matrix has condition at most ``sqrt(1 + max_cond^2)`` and X is
+    kept in directions the data do not inform; the bound applies to C
+    itself, not to C^T C as for R (C is a cross matrix of the signals, like
+    R's square root, and the QR does not square its condition number). Q: scratch (dz + d, d), B: scratch (dz + d,
     rows). Returns False (nothing changed) when C = 0 or the triangular
     factor is singular.
     """
@@ -288,7 +293,7 @@ def _solve_iv(C, G, X, max_cond, Q, B):  # pragma: no cover - compiled
             tr += C[i, j] * C[i, j]
     if not tr > 0.0:
         return False
-    sd = np.sqrt(tr / max_cond)
+    sd = np.sqrt(tr) / max_cond
     for i in range(m):
         for j in range(d):
             if i < dz:
@@ -543,6 +548,7 @@ def _refresh(n, nu, ny, omega, alpha, max_cond, gate, ode, iv, T_now, ist, fst,
             for j in range(n):
                 Cpsi[i, j] = Cm[i, j]
         ist[6] += 1
+        ist[11] = 0
         if not ist[9]:
             # part 2 starts: Ψ(t_g) = 0, Ξ(t_g) = C̃. Ξ is the regressor of the
             # initial-state term C̃ e^{Ã(t - t_g)} x̃(t_g) of (14)/(16), which
@@ -554,6 +560,7 @@ def _refresh(n, nu, ny, omega, alpha, max_cond, gate, ode, iv, T_now, ist, fst,
             fst[1] = T_now
     else:
         ist[4] += 1
+        ist[11] = 1
     ist[1] += 1
     cap = hist.shape[0]
     if cap > 0:
@@ -624,6 +631,7 @@ def kernel(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, Hse
     """
     omega, alpha, beta, max_cond, trace_bound, gate = (par[0], par[1], par[2], par[3],
                                                        par[4], par[5])
+    max_gap, dcF, dcI, settle = par[6], par[7], par[8], par[9]
     K, ode, foh, iv = ipar[0], ipar[1] != 0, ipar[2] != 0, ipar[3] != 0
     N = U.shape[0]
     f, ny = zp.shape
@@ -671,8 +679,23 @@ def kernel(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, Hse
             continue
         q = idx[k]
         h = steps[q]
-        # 1. state-variable filters (6a)-(6b), one channel at a time
-        for c in range(ny):
+        gap = h > max_gap
+        # 1. state-variable filters (6a)-(6b), one channel at a time; after a
+        # gap longer than max_gap, re-initialised at the steady state of the
+        # current sample held constant (as if at rest: the held signals over
+        # a long gap are not data), and the interval gets no weight
+        if gap:
+            ist[12] += 1
+            fst[7] = Tm[k] + settle
+            for i in range(f):
+                for c in range(ny):
+                    zp[i, c] = dcF * Y[k, c] if i == 0 else 0.0
+                for c in range(nu):
+                    zq[i, c] = dcF * U[k, c] if i == 0 else 0.0
+            for i in range(mi):
+                for c in range(nu):
+                    zr[i, c] = dcI * U[k, c] if i == 0 else 0.0
+        for c in range(ny if not gap else 0):
             for i in range(f):
                 s = Fg0[q, i] * prev_y[c] + Fg1[q, i] * Y[k, c]
                 for j in range(f):
@@ -680,7 +703,7 @@ def kernel(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, Hse
                 znew[i] = s
             for i in range(f):
                 zp[i, c] = znew[i]
-        for c in range(nu):
+        for c in range(nu if not gap else 0):
             for i in range(f):
                 s = Fg0[q, i] * prev_u[c] + Fg1[q, i] * U[k, c]
                 for j in range(f):
@@ -688,7 +711,7 @@ def kernel(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, Hse
                 znew[i] = s
             for i in range(f):
                 zq[i, c] = znew[i]
-        if iv:
+        if iv and not gap:
             # instrument filter: the inputs only, through a second filter bank
             for c in range(nu):
                 for i in range(mi):
@@ -732,7 +755,7 @@ def kernel(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, Hse
                 fst[3] = 1.0
             else:
                 fst[3] = c2
-            w = h / (r2 * fst[3])
+            w = 0.0 if Tm[k] <= fst[7] else h / (r2 * fst[3])
             for i in range(f):
                 for c in range(nu):
                     zeta[i * nu + c] = zq[i, c]
@@ -768,7 +791,7 @@ def kernel(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, Hse
                 fst[3] = 1.0
             else:
                 fst[3] = c2
-            w = h / (r2 * fst[3])
+            w = 0.0 if Tm[k] <= fst[7] else h / (r2 * fst[3])
             for i in range(d):
                 wphi[i] = w * phi[i]
             for i in range(d):
@@ -784,7 +807,7 @@ def kernel(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, Hse
                 wi = ep[i]
                 for j in range(d):
                     G[i, j] += wi * phi[j]
-        else:
+        elif Tm[k] > fst[7]:
             # (11)-(12), semi-implicit Euler step; R holds P. The gain
             # h / (r^2 + h φ^T P φ) (Sherman-Morrison form of the downdate)
             # keeps P positive definite for any step; it is forward Euler's
@@ -849,6 +872,19 @@ def kernel(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, Hse
                 for i in range(ny):
                     for j in range(n):
                         Psi[i, off + j] = Pn[i, j]
+            if gap:
+                # restart (14) at this sample: Ψ = 0, Ξ = C̃, and the unknown
+                # state x̃ now replaces x̃(t_g) in θ (its information dropped)
+                for i in range(ny):
+                    for j in range(nX):
+                        Psi[i, j] = Cpsi[i, j] if j < n else 0.0
+                if not ode:
+                    for a in range(dth):
+                        for b in range(a + 1):
+                            if b < n:
+                                Rt[a, b] = 0.0
+                    for a in range(n):
+                        gt[0, a] = 0.0
             if iv:
                 # auxiliary-model instrument: x_i <- e^{Ã h} x_i + h B̃ q̂_0 (the
                 # accepted Ã, the current B̃, the filtered input F̂ u; any
@@ -881,7 +917,7 @@ def kernel(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, Hse
                     fst[4] = 1.0
                 else:
                     fst[4] = c2
-                w = h / (rho2 * fst[4])
+                w = 0.0 if gap else h / (rho2 * fst[4])
                 # prediction error y - Φ θ
                 for r in range(ny):
                     s = Y[k, r]
@@ -907,7 +943,7 @@ def kernel(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, Hse
                         for j2 in range(jj + 1):
                             Rt[a, nX + i + ny * j2] += w * (uj * U[k, j2])
                         gt[0, a] += ey[i] * uj
-            else:
+            elif not gap:
                 # (19)-(20), semi-implicit Euler step (gain h / (ρ^2 + h tr(Φ Q Φ^T)),
                 # Q stays positive definite); Rt holds Q; ρ^2 = 1 + tr(Φ Q Φ^T)
                 for i in range(ny):
@@ -992,7 +1028,7 @@ def _ref_solve_iv(C, G, X, max_cond):
     if not tr > 0:
         return False
     d = C.shape[1]
-    A = np.vstack([C, np.sqrt(tr / max_cond) * np.eye(d)])
+    A = np.vstack([C, np.sqrt(tr) / max_cond * np.eye(d)])
     rhs = np.vstack([G.T, np.zeros((d, G.shape[0]))])
     step = np.linalg.lstsq(A, rhs, rcond=None)[0].T
     X += step
@@ -1039,6 +1075,7 @@ def _ref_refresh(n, nu, ny, omega, alpha, max_cond, gate, ode, iv, T_now, ist, f
         Apsi[:] = Am
         Cpsi[:] = Cm
         ist[6] += 1
+        ist[11] = 0
         if not ist[9]:
             Psi[:] = 0.0
             Psi[:, :n] = Cm
@@ -1046,6 +1083,7 @@ def _ref_refresh(n, nu, ny, omega, alpha, max_cond, gate, ode, iv, T_now, ist, f
             fst[1] = T_now
     else:
         ist[4] += 1
+        ist[11] = 1
     ist[1] += 1
     cap = hist.shape[0]
     r = ist[1]
@@ -1073,7 +1111,8 @@ def reference(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, 
     the stability test eigenvalues, and the whole symmetric matrices are
     updated (the kernel updates lower triangles).
     """
-    omega, alpha, beta, max_cond, trace_bound, gate = (float(v) for v in par)
+    omega, alpha, beta, max_cond, trace_bound, gate, max_gap, dcF, dcI, settle = (
+        float(v) for v in par)
     K, ode, foh, iv = int(ipar[0]), bool(ipar[1]), bool(ipar[2]), bool(ipar[3])
     n = Am.shape[0]
     ny = zp.shape[1]
@@ -1085,11 +1124,18 @@ def reference(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, 
             continue
         q = idx[k]
         h = steps[q]
-        # 1. filters (6a)-(6b)
-        zp[:] = Fphi[q] @ zp + np.outer(Fg0[q], prev_y) + np.outer(Fg1[q], y)
-        zq[:] = Fphi[q] @ zq + np.outer(Fg0[q], prev_u) + np.outer(Fg1[q], u)
-        if iv:
-            zr[:] = Iphi[q] @ zr + np.outer(Ig0[q], prev_u) + np.outer(Ig1[q], u)
+        gap = h > max_gap
+        # 1. filters (6a)-(6b); re-initialised at the steady state after a gap
+        if gap:
+            ist[12] += 1
+            fst[7] = Tm[k] + settle
+            zp[:], zq[:], zr[:] = 0.0, 0.0, 0.0
+            zp[0], zq[0], zr[0] = dcF * y, dcF * u, dcI * u
+        else:
+            zp[:] = Fphi[q] @ zp + np.outer(Fg0[q], prev_y) + np.outer(Fg1[q], y)
+            zq[:] = Fphi[q] @ zq + np.outer(Fg0[q], prev_u) + np.outer(Fg1[q], u)
+            if iv:
+                zr[:] = Iphi[q] @ zr + np.outer(Ig0[q], prev_u) + np.outer(Ig1[q], u)
         # 2. regression (8)
         p = zp.reshape(-1)
         phi = np.concatenate([Hsel @ p, zq.reshape(-1)])
@@ -1106,7 +1152,7 @@ def reference(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, 
                 fst[3] = 1.0
             else:
                 fst[3] = c2
-            w = h / (r2 * fst[3])
+            w = 0.0 if Tm[k] <= fst[7] else h / (r2 * fst[3])
             if iv:
                 zeta = np.concatenate([zq.reshape(-1), zr.reshape(-1), xi[0]])
                 Cz += np.outer(w * zeta, phi)
@@ -1114,7 +1160,7 @@ def reference(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, 
             else:
                 R += np.outer(w * phi, phi)
                 G += np.outer(w * (p - M @ phi), phi)
-        else:
+        elif Tm[k] > fst[7]:
             g = R @ phi
             c = h / (r2 + h * (phi @ g))
             M += np.outer((p - M @ phi) * c, g)
@@ -1139,6 +1185,13 @@ def reference(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, 
                 blk = slice(n + jj * n, n + (jj + 1) * n)
                 Psi[:, blk] = (Psi[:, blk] @ PsiPhi[q] + prev_u[jj] * PsiG0[q]
                                + u[jj] * PsiG1[q])
+            if gap:     # restart (14): Ψ = 0, Ξ = C̃, x̃(t_g) information dropped
+                Psi[:] = 0.0
+                Psi[:, :n] = Cpsi
+                if not ode:
+                    Rt[:n, :] = 0.0
+                    Rt[:, :n] = 0.0
+                    gt[0, :n] = 0.0
             if iv:      # auxiliary-model instrument (see the kernel)
                 xi[0] = PsiPhi[q] @ xi[0] + h * (Bm @ zq[0])
             # regression (16)
@@ -1151,10 +1204,10 @@ def reference(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, 
                     fst[4] = 1.0
                 else:
                     fst[4] = c2
-                w = h / ((1.0 + np.sum(Phi * Phi)) * fst[4])
+                w = 0.0 if gap else h / ((1.0 + np.sum(Phi * Phi)) * fst[4])
                 Rt += w * (Phi.T @ Phi)
                 gt += (Phi.T @ (w * (y - Phi @ theta[0])))[None, :]
-            else:
+            elif not gap:
                 Gq = Rt @ Phi.T
                 tq = np.trace(Phi @ Gq)
                 c = h / (1.0 + tq + h * tq)

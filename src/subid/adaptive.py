@@ -70,6 +70,7 @@ from __future__ import annotations
 
 import math
 import numbers
+import warnings
 
 import numpy as np
 
@@ -78,7 +79,7 @@ from ._checkpoint import load_state, require, save_state
 from ._simulate import expm_blocks
 from ._validation import as_signal, check_int, check_time_stamps
 from .data import IOData
-from .errors import CheckpointError, DataError, OrderError, SubidError
+from .errors import CheckpointError, DataError, NotConvergedWarning, OrderError, SubidError
 from .ls_subspace import random_selector
 from .model import StateSpace
 
@@ -262,7 +263,7 @@ class AdaptiveIdentifier:
                  bd_gate=1e-2, max_condition=1e10, initial_covariance=None,
                  bd_initial_covariance=None, ode_trace_bound=1e8, history=0,
                  engine="numba", input_names=None, output_names=None,
-                 instrument_poles=None):
+                 instrument_poles=None, max_gap=None):
         n = check_int(order, "order")
         nu = check_int(n_inputs, "n_inputs")
         ny = check_int(n_outputs, "n_outputs")
@@ -330,6 +331,14 @@ class AdaptiveIdentifier:
         self._Af, self._Bf, self._omega = _companion(self._poles, self._scale)
         # instrument filter (method 'iv'): inputs only, its own poles
         self._Ai, self._Bi, _ = _companion(self._ipoles, True)
+        # steady states for a constant input (first state only, e_1 * dc)
+        self._dcF = float(-np.linalg.solve(self._Af, self._Bf)[0, 0])
+        self._dcI = float(-np.linalg.solve(self._Ai, self._Bi)[0, 0])
+        wf = float(np.abs(np.prod(self._poles)) ** (1.0 / f))
+        self._max_gap = 10.0 / wf if max_gap is None else _positive(max_gap, "max_gap")
+        # after a gap the filters' initial-condition transient (~ t^(f-1) e^{-wf t})
+        # is below 1e-9 of its start after max(30, 6 f) / wf
+        self._settle = max(30.0, 6.0 * f) / wf
         self._step_cache: dict = {}
         self._t_origin = 0.0     # time of the sample with index _k_origin when t is None
         self._k_origin = 0
@@ -371,6 +380,7 @@ class AdaptiveIdentifier:
         st["ist"] = ist
         st["fst"][_k.FST["scale_M"]] = st["fst"][_k.FST["scale_theta"]] = 1.0
         st["fst"][_k.FST["res_ref"]] = 1e300
+        st["fst"][_k.FST["t_resume"]] = -1e300     # no gap yet
         if self._method != "ode":
             st["R"][:] = np.eye(d) / self._p0
             st["Rt"][:] = np.eye(dth) / self._q0
@@ -420,9 +430,10 @@ class AdaptiveIdentifier:
         out = []
         for name, skip in (("R", 0), ("Rt", self._n)):
             if name == "R" and self._method == "iv":
-                # the IV equations: condition of Cz^T Cz (the square of Cz's)
+                # the IV equations: condition of the cross matrix Cz (the
+                # windup bound applies to it, see _adaptive_kernel._solve_iv)
                 sv = np.linalg.svd(self._st["Cz"], compute_uv=False)
-                out.append(float((sv[0] / sv[-1]) ** 2) if sv[-1] > 0 else math.inf)
+                out.append(float(sv[0] / sv[-1]) if sv[-1] > 0 else math.inf)
                 continue
             ev = np.linalg.eigvalsh(self._sym(name)[skip:, skip:])
             out.append(float(ev[-1] / ev[0]) if ev[0] > 0 else math.inf)
@@ -475,11 +486,43 @@ class AdaptiveIdentifier:
             "shift_failed": int(ist[_k.IST["shift_failed"]]),
             "cholesky_failed": int(ist[_k.IST["chol_failed"]]),
             "bound_hits": int(ist[_k.IST["bound_hits"]]),
+            "gaps": int(ist[_k.IST["gaps"]]),
+            "max_gap": self._max_gap,
             "selector": np.array(self._H),
         }
+        reason = self._convergence(info)
+        info["converged"] = reason is None
+        info["convergence"] = "converged" if reason is None else reason
+        if reason is not None:
+            warnings.warn(f"AdaptiveIdentifier: the model is not converged: {reason}",
+                          NotConvergedWarning, stacklevel=2)
         return StateSpace(st["Am"], st["Bm"], st["Cm"], st["Dm"], 0.0,
                           input_names=self._input_names, output_names=self._output_names,
                           info=info)
+
+    def _convergence(self, info: dict):
+        """None if the current model passes the convergence criteria, else
+        the reason (a sentence). Criteria: (B̃, D) estimation has started;
+        the latest (Ã, C̃) passed the test that starts it (shift residual of
+        (13) below the gate or at its noise floor, Ã Hurwitz); and (B̃, D)
+        have been estimated for at least one memory length 1/bd_forgetting."""
+        if not self.n_samples:
+            return "no samples processed yet"
+        res = info["shift_residual"]
+        if not info["bd_started"]:
+            return ("the (B, D) stage has not started, so B and D are not estimated (zero): "
+                    f"the relative residual of the shift equation (13) is {res:.3g} "
+                    f"(gate {self._gate:g}) or the estimated A is not Hurwitz. Give it more "
+                    "data, a richer input, or (with noise) method='iv' and a longer memory "
+                    "(smaller forgetting)")
+        if self._st["ist"][_k.IST["rejected"]]:
+            return (f"the latest (A, C) estimate failed the convergence test (shift residual "
+                    f"{res:.3g}, or A not Hurwitz); B and D come from earlier estimates")
+        elapsed = self.t - info["bd_start_time"]
+        if elapsed * self._beta < 1.0:
+            return (f"(B, D) have been estimated for {elapsed:.3g} time units, less than one "
+                    f"memory length 1/bd_forgetting = {1.0 / self._beta:.3g}")
+        return None
 
     def toeplitz(self) -> np.ndarray:
         """T_f of (3) for the current estimate, in the filter coordinates
@@ -713,7 +756,8 @@ class AdaptiveIdentifier:
         Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, lamM, lamT = tables
         st = self._st
         par = np.array([self._omega, self._alpha, self._beta, self._max_cond,
-                        self._trace_bound, self._gate])
+                        self._trace_bound, self._gate, self._max_gap, self._dcF, self._dcI,
+                        self._settle])
         ipar = np.array([self._refresh, self._method == "ode", self._hold == "foh",
                          self._method == "iv"], dtype=np.int64)
         fn = _k.kernel if self._engine == "numba" else _k.reference
@@ -755,6 +799,7 @@ class AdaptiveIdentifier:
             "bd_initial_covariance": self._q0, "ode_trace_bound": self._trace_bound,
             "history": self._hist_cap, "engine": self._engine,
             "instrument_poles": [[float(p.real), float(p.imag)] for p in self._ipoles],
+            "max_gap": self._max_gap,
             "input_names": None if self._input_names is None else list(self._input_names),
             "output_names": None if self._output_names is None else list(self._output_names),
             "t_origin": self._t_origin, "k_origin": self._k_origin,
@@ -797,7 +842,8 @@ class AdaptiveIdentifier:
                       ode_trace_bound=s["ode_trace_bound"], history=s["history"],
                       engine=s["engine"], input_names=s["input_names"],
                       output_names=s["output_names"],
-                      instrument_poles=[complex(re, im) for re, im in s["instrument_poles"]])
+                      instrument_poles=[complex(re, im) for re, im in s["instrument_poles"]],
+                      max_gap=s["max_gap"])
             t_origin, k_origin = float(s["t_origin"]), int(s["k_origin"])
         except CheckpointError:
             raise

@@ -19,6 +19,7 @@ __all__ = [
     "ExcitationWarning",
     "CheckpointError",
     "UnstableModelWarning",
+    "NotConvergedWarning",
 ]
 
 
@@ -100,3 +101,9 @@ class CheckpointError(FileReadError):
 class UnstableModelWarning(UserWarning):
     """The identified model is unstable although the measured output shows no
     growth: the order may be too high, or the data too short or too noisy."""
+
+
+class NotConvergedWarning(UserWarning):
+    """An online identifier's current model is not (yet) a converged estimate:
+    a stage has not started, or its convergence test fails. ``model.info``
+    says which (``converged``, ``convergence``)."""
