@@ -60,6 +60,7 @@ from .model import StateSpace
 __all__ = ["RecursiveSubspace"]
 
 _CHUNK = 8192
+_FIRST_REFRESH = 50     # first refresh of the B, D regression's (A, C), then doubling
 
 
 @numba.njit(cache=True, nogil=True)
@@ -145,9 +146,12 @@ class RecursiveSubspace:
         How B, D (and the state) are estimated: the recursive output-error
         regression (default; see the module notes) or the projected data
         equation on the statistic.
-    refresh_every : int
+    refresh_every : int, optional
         ``'regression'``: samples between refreshes of the (A, C) that
-        propagate the regression's sensitivity.
+        propagate the regression's sensitivity (after refreshes at 50, 100,
+        200, ... samples below it, so that the regression starts early). A
+        refresh costs about one model computation. Default: a quarter of the
+        memory ``1 / (1 - forgetting)``, within [50, 2000].
     restart_tolerance : float
         ``'regression'``: relative change of (A, C) between two refreshes
         above which the regression restarts (start-up, switches).
@@ -192,7 +196,7 @@ class RecursiveSubspace:
                  instruments="past", selector=None, seed=0, *, instrument_weighting=True,
                  power_iterations=2, feedthrough=True, dt=1.0, history_size=None,
                  history_stride=1000, input_names=None, output_names=None,
-                 bd_method="regression", refresh_every=50, restart_tolerance=1.0):
+                 bd_method="regression", refresh_every=None, restart_tolerance=1.0):
         self.order = check_int(order, "order")
         self.n_inputs = check_int(n_inputs, "n_inputs")
         self.n_outputs = check_int(n_outputs, "n_outputs")
@@ -245,6 +249,9 @@ class RecursiveSubspace:
             raise SubidError(f"bd_method must be 'regression' or 'projection', got "
                              f"{bd_method!r}")
         self.bd_method = bd_method
+        if refresh_every is None:      # a quarter of the memory, within [50, 2000]
+            memory = math.inf if self.forgetting == 1.0 else 1.0 / (1.0 - self.forgetting)
+            refresh_every = int(min(2000, max(_FIRST_REFRESH, memory / 4)))
         self.refresh_every = check_int(refresh_every, "refresh_every")
         if isinstance(restart_tolerance, bool) or not isinstance(restart_tolerance,
                                                                  numbers.Real) \
@@ -304,12 +311,11 @@ class RecursiveSubspace:
         while start < n:
             stop = n if self._history_size is None else min(n, start + self._to_snapshot())
             if regression:
-                stop = min(stop, start + self.refresh_every
-                           - self.n_samples % self.refresh_every)
+                stop = min(stop, start + self._to_refresh())
             self._ingest(u[start:stop], y[start:stop])
             if regression:
                 self._bd_feed(u[start:stop], y[start:stop])
-                if self.n_samples % self.refresh_every == 0:
+                if self._is_refresh_point():
                     self._bd_refresh()
             start = stop
             if self._history_size is not None and self.n_samples % self._history_stride == 0:
@@ -317,6 +323,29 @@ class RecursiveSubspace:
         return self
 
     # -- the recursive output-error regression of B, D, x0 -------------------
+    def _is_refresh_point(self) -> bool:
+        """Refresh points: _FIRST_REFRESH * 2^j below ``refresh_every`` (so
+        that the regression starts early), then the multiples of
+        ``refresh_every``."""
+        k, K = self.n_samples, self.refresh_every
+        if k <= 0:
+            return False
+        if k % K == 0:
+            return True
+        j = k // _FIRST_REFRESH
+        return k < K and k % _FIRST_REFRESH == 0 and j & (j - 1) == 0
+
+    def _to_refresh(self) -> int:
+        """Samples to the next refresh point (points: _FIRST_REFRESH * 2^j
+        below ``refresh_every``, then the multiples of ``refresh_every``)."""
+        k = self.n_samples
+        step = _FIRST_REFRESH
+        while step <= k and step < self.refresh_every:
+            step *= 2
+        nxt = step if step < self.refresh_every else (k // self.refresh_every + 1) \
+            * self.refresh_every
+        return nxt - k
+
     def _bd_feed(self, u, y):
         """Regression rows of the chunk (model (A, C) of the last refresh),
         reduced into the factor by Givens rotations with the forgetting
