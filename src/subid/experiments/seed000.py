@@ -350,7 +350,7 @@ def figures(res, out_dir: str) -> list[str]:
     written.append(_save(fig, out_dir, "fig2_bode.png"))
     # Fig. 3: ε_r noise-free, LS and the paper's ODE form
     fig, ax = plt.subplots(figsize=(7, 4.2))
-    for key, label in [("clean", "exact LS (default)"),
+    for key, label in [("clean", "exact LS (method='ls')"),
                        ("clean_ode", "paper's ODE form (11)-(12), (19)-(20)")]:
         r = res[key]
         ax.semilogy(r["times"], r["eps_r"], label=label)
