@@ -176,15 +176,17 @@ class AdaptiveIdentifier:
         hide the fast modes, much faster ones pass more noise and make the
         regression less well conditioned. The default -5 suits systems with
         time constants around 0.3-10 s (the paper's example).
-    forgetting : float
+    forgetting : float, optional
         α of V_t and (12), in 1/time unit: the estimate of M averages the
         last ``~1/α`` time units of data. The paper uses 0.4 noise-free and
         0.01 with 50 dB noise; choose ``1/α`` of at least a few of the
-        slowest time constants, longer with noise.
-    bd_forgetting : float
-        β of (20), the same for (B̃, D). Take it smaller than α (the paper:
-        0.08 and 0.008): θ is regressed on Ψ, which depends on the past
-        estimates of (Ã, C̃).
+        slowest time constants, longer with noise. Default 0.002 for
+        ``'iv'`` (unbiased, so a long memory pays), 0.4 otherwise.
+    bd_forgetting : float, optional
+        β of (20), the same for (B̃, D). The paper takes it smaller than α
+        (0.08 and 0.008). Default 0.02 for ``'iv'`` (θ is regressed on Ψ,
+        built from the past estimates of (Ã, C̃), which a longer memory
+        would mix in), 0.08 otherwise.
     selector : array_like, shape (order, horizon * n_outputs), optional
         H, which fixes the state basis (``T = H O_f``, applied to the scaled
         ``p̂`` when ``scale_filters``). Default: uniform random on [-1, 1]
@@ -197,9 +199,13 @@ class AdaptiveIdentifier:
     hold : {'foh', 'zoh'}
         Inter-sample behaviour of u and y: linear (first-order hold) or
         constant (zero-order hold).
-    method : {'ls', 'ode'}
-        ``'ls'``: exact exponentially weighted least squares (information
-        form, Cholesky solves). ``'ode'``: Euler integration (semi-implicit:
+    method : {'iv', 'ls', 'ode'}
+        ``'iv'`` (default): the regression (8) by instrumental variables built
+        from the input only (consistent under output noise; see
+        ``docs/seed000.md``), (16) by least squares. ``'ls'``: the paper's
+        estimator, exact exponentially weighted least squares (information
+        form, Cholesky solves; biased under output noise). ``'ode'``: Euler
+        integration (semi-implicit:
         the downdate in Sherman-Morrison form, so that P stays positive
         definite) of the paper's (11)-(12) and (19)-(20), for comparison; it
         converges much more slowly (see ``docs/seed000.md``).
@@ -231,6 +237,17 @@ class AdaptiveIdentifier:
         ``'numpy'`` runs the plain reference loop (slow; for verification).
     input_names, output_names : sequence of str, optional
         Channel names of the model.
+    instrument_poles : float or sequence of complex, optional
+        ``'iv'``: poles of the second state-variable filter that makes
+        instruments from the input (one negative number repeated ``horizon``
+        times, or any number ``m`` of poles with ``m * n_inputs >= order``).
+        Default 0.25 times ``filter_poles``. Must differ from the filter
+        poles.
+    max_gap : float, optional
+        An interval between samples longer than this is a gap: the filters
+        restart at the new sample (held signals over a gap are not data) and
+        (14) restarts; the information decays by ``e^{-α h}``. Default ten
+        filter time constants, ``10 / |d(0)|^{1/f}`` (2 s for poles at -5).
 
     Attributes
     ----------
@@ -455,7 +472,12 @@ class AdaptiveIdentifier:
         deficient), ``psi_rejected`` (refreshes whose estimate was not used
         for Ψ), ``shift_failed`` (refreshes where (13) was rank deficient),
         ``cholesky_failed``, ``bound_hits`` (``'ode'``: steps with suspended
-        forgetting) and ``selector``.
+        forgetting), ``gaps`` and ``max_gap``, ``selector``, ``bd_elapsed``
+        (time since part 2 started), ``converged`` and ``convergence``
+        (``'converged'`` or the reason it is not: part 2 has not started, or
+        the latest (Ã, C̃) failed the gate or the Hurwitz test). A model that
+        is not converged also issues a
+        :class:`~subid.errors.NotConvergedWarning`.
         """
         st = self._st
         ist = st["ist"]
