@@ -269,7 +269,7 @@ def summary(res) -> tuple[str, dict]:
     noisy = [v for k, v in res.items() if k.startswith("noisy_")]
     rows = []
     record = {"condition": res["condition"], "runs": {}}
-    for name, r in [("noise-free, exact LS (method="ls")", clean),
+    for name, r in [("noise-free, exact LS (method='ls')", clean),
                      ("noise-free, paper's ODE form (11)-(12), (19)-(20)", ode)]:
         tp = settle_time(r["times"], r["pole_error"], 1e-3)
         te = settle_time(r["times"], r["eps_r"], 1e-3)
