@@ -351,6 +351,50 @@ def _solve_iv(C, G, X, max_cond, Q, B):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True, fastmath=_FASTMATH)
+def _solve_iv_weighted(C, G, Z, X, max_cond, Q, B, L, Ct, Gt):  # pragma: no cover
+    """The IV step with the instruments whitened by ``Z = sum w ζ ζ^T``
+    (lower triangle): :func:`_solve_iv` on ``L^{-1} C`` and ``G L^{-T}``
+    (``Z + ε I = L L^T``, ``ε = tr Z / max_cond``, so that the whitening
+    cannot amplify directions the instruments no longer excite by more than
+    ``sqrt(max_cond)``): the two-stage least-squares
+    weighting of the extended IV equations, ``M = S Z^{-1} C (C^T Z^{-1}
+    C)^{-1}``. The residual G of the unweighted equations is re-centred
+    with the step. Returns False (nothing changed) if Z is not positive
+    definite or the step fails."""
+    dz, d = C.shape
+    rows = G.shape[0]
+    tr = 0.0
+    for i in range(dz):
+        tr += Z[i, i]
+    if not tr > 0.0:
+        return False
+    if not _chol(Z, tr / max_cond, L):
+        return False
+    for j in range(d):                       # Ct = L^{-1} C
+        for i in range(dz):
+            s = C[i, j]
+            for k in range(i):
+                s -= L[i, k] * Ct[k, j]
+            Ct[i, j] = s / L[i, i]
+    for r in range(rows):                    # Gt = G L^{-T}
+        for i in range(dz):
+            s = G[r, i]
+            for k in range(i):
+                s -= L[i, k] * Gt[r, k]
+            Gt[r, i] = s / L[i, i]
+    Xold = X.copy()
+    if not _solve_iv(Ct, Gt, X, max_cond, Q, B):
+        return False
+    for r in range(rows):                    # G <- G - Δ C^T
+        for i in range(dz):
+            s = 0.0
+            for j in range(d):
+                s += (X[r, j] - Xold[r, j]) * C[i, j]
+            G[r, i] -= s
+    return True
+
+
+@numba.njit(cache=True, fastmath=_FASTMATH)
 def _hurwitz(A):  # pragma: no cover - compiled
     """True if every eigenvalue of A has a negative real part.
 
@@ -501,12 +545,12 @@ def _shift_solve(M, n, ny, omega, Aout):  # pragma: no cover - compiled
 @numba.njit(cache=True, fastmath=_FASTMATH)
 def _refresh(n, nu, ny, omega, alpha, max_cond, gate, ode, iv, T_now, ist, fst,
              R, G, M, Rt, gt, theta, Am, Cm, Bm, Dm, Apsi, Cpsi, Psi, hist,
-             Ld, Bd, Lt, Bt, Anew, Cz, Gz, Qz, Bz):  # pragma: no cover - compiled
+             Ld, Bd, Lt, Bt, Anew, Cz, Gz, Qz, Bz, Zz, Lz, Ct, Gt):  # pragma: no cover
     """Model refresh: solve both LS problems (the first by instrumental
     variables when ``iv``), (13), B̃, D, Ψ model, history."""
     if not ode:
         if iv:
-            if not _solve_iv(Cz, Gz, M, max_cond, Qz, Bz):
+            if not _solve_iv_weighted(Cz, Gz, Zz, M, max_cond, Qz, Bz, Lz, Ct, Gt):
                 ist[7] += 1
         elif not _solve_normal(R, G, M, max_cond, Ld, Bd):
             ist[7] += 1
@@ -604,7 +648,7 @@ def _refresh(n, nu, ny, omega, alpha, max_cond, gate, ode, iv, T_now, ist, fst,
 @numba.njit(cache=True, fastmath=_FASTMATH)
 def kernel(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, Hsel, par,
            ipar, ist, fst, prev_u, prev_y, zp, zq, R, G, M, Rt, gt, theta,
-           Am, Cm, Bm, Dm, Apsi, Cpsi, Psi, zr, xi, Cz, Gz,
+           Am, Cm, Bm, Dm, Apsi, Cpsi, Psi, zr, xi, Cz, Gz, Zz,
            PsiPhi, PsiG0, PsiG1, pstamp, hist, buf):  # pragma: no cover - compiled
     """Process the samples ``(Tm, U, Y)`` in place (see the module docstring).
 
@@ -646,6 +690,9 @@ def kernel(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, Hse
     zi2 = np.empty(n)
     Qz = np.empty((dz + d, d))
     Bz = np.empty((dz + d, dp))
+    Lz = np.zeros((dz, dz))
+    Ct = np.empty((dz, d))
+    Gt = np.empty((dp, dz))
     dth = theta.shape[1]
     nX = Psi.shape[1]          # n + n nu: columns of [Ξ, Ψ]
     p = np.empty(dp)
@@ -752,6 +799,9 @@ def kernel(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, Hse
                 for i in range(dp):
                     for j in range(dz):
                         Gz[i, j] *= c2
+                for i in range(dz):
+                    for j in range(i + 1):
+                        Zz[i, j] *= c2
                 fst[3] = 1.0
             else:
                 fst[3] = c2
@@ -768,6 +818,8 @@ def kernel(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, Hse
                 wi = w * zeta[i]
                 for j in range(d):
                     Cz[i, j] += wi * phi[j]
+                for j in range(i + 1):
+                    Zz[i, j] += wi * zeta[j]
             for i in range(dp):
                 s = p[i]
                 for j in range(d):
@@ -994,7 +1046,7 @@ def kernel(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, Hse
         if (ist[0] - 1) % K == 0:
             _refresh(n, nu, ny, omega, alpha, max_cond, gate, ode, iv, Tm[k], ist, fst, R, G,
                      M, Rt, gt, theta, Am, Cm, Bm, Dm, Apsi, Cpsi, Psi, hist, Ld, Bd, Lt, Bt,
-                     Anew, Cz, Gz, Qz, Bz)
+                     Anew, Cz, Gz, Qz, Bz, Zz, Lz, Ct, Gt)
     for i in range(buf.shape[0]):
         if not np.isfinite(buf[i]):
             return False
@@ -1036,11 +1088,30 @@ def _ref_solve_iv(C, G, X, max_cond):
     return True
 
 
+def _ref_solve_iv_weighted(C, G, Z, X, max_cond):
+    """Reference of :func:`_solve_iv_weighted`."""
+    Zs = np.tril(Z) + np.tril(Z, -1).T
+    tr = np.trace(Zs)
+    if not tr > 0:
+        return False
+    try:
+        L = np.linalg.cholesky(Zs + tr / max_cond * np.eye(Zs.shape[0]))
+    except np.linalg.LinAlgError:
+        return False
+    Ct = scipy.linalg.solve_triangular(L, C, lower=True)
+    Gt = scipy.linalg.solve_triangular(L, G.T, lower=True).T
+    Xold = X.copy()
+    if not _ref_solve_iv(Ct, Gt, X, max_cond):
+        return False
+    G -= (X - Xold) @ C.T
+    return True
+
+
 def _ref_refresh(n, nu, ny, omega, alpha, max_cond, gate, ode, iv, T_now, ist, fst,
-                 R, G, M, Rt, gt, theta, Am, Cm, Bm, Dm, Apsi, Cpsi, Psi, hist, Cz, Gz):
+                 R, G, M, Rt, gt, theta, Am, Cm, Bm, Dm, Apsi, Cpsi, Psi, hist, Cz, Gz, Zz):
     if not ode:
         if iv:
-            if not _ref_solve_iv(Cz, Gz, M, max_cond):
+            if not _ref_solve_iv_weighted(Cz, Gz, Zz, M, max_cond):
                 ist[7] += 1
         elif not _ref_solve(R, G, M, max_cond):
             ist[7] += 1
@@ -1101,7 +1172,7 @@ def _ref_refresh(n, nu, ny, omega, alpha, max_cond, gate, ode, iv, T_now, ist, f
 
 def reference(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, Hsel, par,
               ipar, ist, fst, prev_u, prev_y, zp, zq, R, G, M, Rt, gt, theta,
-              Am, Cm, Bm, Dm, Apsi, Cpsi, Psi, zr, xi, Cz, Gz,
+              Am, Cm, Bm, Dm, Apsi, Cpsi, Psi, zr, xi, Cz, Gz, Zz,
               PsiPhi, PsiG0, PsiG1, pstamp, hist, buf):
     """Plain numpy implementation of :func:`kernel` (same arguments).
 
@@ -1146,6 +1217,7 @@ def reference(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, 
                 if iv:
                     Cz *= c2
                     Gz *= c2
+                    Zz *= c2
                 else:
                     R *= c2
                     G *= c2
@@ -1156,6 +1228,7 @@ def reference(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, 
             if iv:
                 zeta = np.concatenate([zq.reshape(-1), zr.reshape(-1), xi[0]])
                 Cz += np.outer(w * zeta, phi)
+                Zz += np.outer(w * zeta, zeta)
                 Gz += np.outer(w * (p - M @ phi), zeta)
             else:
                 R += np.outer(w * phi, phi)
@@ -1220,5 +1293,5 @@ def reference(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, 
         ist[0] += 1
         if (ist[0] - 1) % K == 0:
             _ref_refresh(n, nu, ny, omega, alpha, max_cond, gate, ode, iv, Tm[k], ist, fst, R,
-                         G, M, Rt, gt, theta, Am, Cm, Bm, Dm, Apsi, Cpsi, Psi, hist, Cz, Gz)
+                         G, M, Rt, gt, theta, Am, Cm, Bm, Dm, Apsi, Cpsi, Psi, hist, Cz, Gz, Zz)
     return bool(np.isfinite(buf).all())

@@ -384,7 +384,8 @@ class AdaptiveIdentifier:
                   ("zr", (mi, nu)),     # instrument filter ('iv')
                   ("xi", (1, n)),       # auxiliary-model instrument ('iv')
                   ("Cz", (dz, d)),      # IV cross matrix sum w ζ φ^T ('iv')
-                  ("Gz", (dp, dz))]     # S_ζ - M Cz^T ('iv')
+                  ("Gz", (dp, dz)),     # S_ζ - M Cz^T ('iv')
+                  ("Zz", (dz, dz))]     # sum w ζ ζ^T, the IV weighting ('iv')
         self._buf = np.zeros(sum(math.prod(shape) for _, shape in layout))
         st = {}
         off = 0
@@ -410,7 +411,7 @@ class AdaptiveIdentifier:
         self._uniform = None      # discretisation tables for the constructor's dt
 
     _ORDER = ("ist", "fst", "prev_u", "prev_y", "zp", "zq", "R", "G", "M", "Rt", "g",
-              "theta", "Am", "Cm", "Bm", "Dm", "Apsi", "Cpsi", "Psi", "zr", "xi", "Cz", "Gz")
+              "theta", "Am", "Cm", "Bm", "Dm", "Apsi", "Cpsi", "Psi", "zr", "xi", "Cz", "Gz", "Zz")
 
     # ------------------------------------------------------------ properties
     @property
