@@ -545,12 +545,22 @@ def _shift_solve(M, n, ny, omega, Aout):  # pragma: no cover - compiled
 @numba.njit(cache=True, fastmath=_FASTMATH)
 def _refresh(n, nu, ny, omega, alpha, max_cond, gate, ode, iv, T_now, ist, fst,
              R, G, M, Rt, gt, theta, Am, Cm, Bm, Dm, Apsi, Cpsi, Psi, hist,
-             Ld, Bd, Lt, Bt, Anew, Cz, Gz, Qz, Bz, Zz, Lz, Ct, Gt):  # pragma: no cover
+             Ld, Bd, Lt, Bt, Anew, Cz, Gz, Qz, Bz, Zz, Lz, Ct, Gt, Cf):  # pragma: no cover
     """Model refresh: solve both LS problems (the first by instrumental
     variables when ``iv``), (13), B̃, D, Ψ model, history."""
     if not ode:
         if iv:
-            if not _solve_iv_weighted(Cz, Gz, Zz, M, max_cond, Qz, Bz, Lz, Ct, Gt):
+            # the cross matrix Σ w ζ φ^T: its first n columns are kept (Cz), the
+            # rest are the q̂ columns of Z (φ = [H p̂; q̂], ζ = [q̂; r̂; x_i])
+            nz = Cz.shape[1]
+            for i in range(Cf.shape[0]):
+                for j in range(Cf.shape[1]):
+                    if j < nz:
+                        Cf[i, j] = Cz[i, j]
+                    else:
+                        jj = j - nz
+                        Cf[i, j] = Zz[i, jj] if jj <= i else Zz[jj, i]
+            if not _solve_iv_weighted(Cf, Gz, Zz, M, max_cond, Qz, Bz, Lz, Ct, Gt):
                 ist[7] += 1
         elif not _solve_normal(R, G, M, max_cond, Ld, Bd):
             ist[7] += 1
@@ -692,6 +702,7 @@ def kernel(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, Hse
     Bz = np.empty((dz + d, dp))
     Lz = np.zeros((dz, dz))
     Ct = np.empty((dz, d))
+    Cf = np.empty((dz, d))
     Gt = np.empty((dp, dz))
     dth = theta.shape[1]
     nX = Psi.shape[1]          # n + n nu: columns of [Ξ, Ψ]
@@ -794,7 +805,7 @@ def kernel(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, Hse
             c2 = fst[3] * lamM[q]
             if c2 < _RESCALE_BELOW:
                 for i in range(dz):
-                    for j in range(d):
+                    for j in range(n):
                         Cz[i, j] *= c2
                 for i in range(dp):
                     for j in range(dz):
@@ -816,7 +827,7 @@ def kernel(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, Hse
                 zeta[(f + mi) * nu + i] = xi[0, i]
             for i in range(dz):
                 wi = w * zeta[i]
-                for j in range(d):
+                for j in range(n):          # the q̂ columns of Σ w ζ φ^T are in Z
                     Cz[i, j] += wi * phi[j]
                 for j in range(i + 1):
                     Zz[i, j] += wi * zeta[j]
@@ -1046,7 +1057,7 @@ def kernel(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, Hse
         if (ist[0] - 1) % K == 0:
             _refresh(n, nu, ny, omega, alpha, max_cond, gate, ode, iv, Tm[k], ist, fst, R, G,
                      M, Rt, gt, theta, Am, Cm, Bm, Dm, Apsi, Cpsi, Psi, hist, Ld, Bd, Lt, Bt,
-                     Anew, Cz, Gz, Qz, Bz, Zz, Lz, Ct, Gt)
+                     Anew, Cz, Gz, Qz, Bz, Zz, Lz, Ct, Gt, Cf)
     for i in range(buf.shape[0]):
         if not np.isfinite(buf[i]):
             return False
@@ -1111,7 +1122,9 @@ def _ref_refresh(n, nu, ny, omega, alpha, max_cond, gate, ode, iv, T_now, ist, f
                  R, G, M, Rt, gt, theta, Am, Cm, Bm, Dm, Apsi, Cpsi, Psi, hist, Cz, Gz, Zz):
     if not ode:
         if iv:
-            if not _ref_solve_iv_weighted(Cz, Gz, Zz, M, max_cond):
+            Zs = np.tril(Zz) + np.tril(Zz, -1).T
+            Cf = np.hstack([Cz, Zs[:, :M.shape[1] - n]])
+            if not _ref_solve_iv_weighted(Cf, Gz, Zz, M, max_cond):
                 ist[7] += 1
         elif not _ref_solve(R, G, M, max_cond):
             ist[7] += 1
@@ -1227,7 +1240,7 @@ def reference(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, 
             w = 0.0 if Tm[k] <= fst[7] else h / (r2 * fst[3])
             if iv:
                 zeta = np.concatenate([zq.reshape(-1), zr.reshape(-1), xi[0]])
-                Cz += np.outer(w * zeta, phi)
+                Cz += np.outer(w * zeta, phi[:n])
                 Zz += np.outer(w * zeta, zeta)
                 Gz += np.outer(w * (p - M @ phi), zeta)
             else:

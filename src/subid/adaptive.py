@@ -383,7 +383,8 @@ class AdaptiveIdentifier:
                   ("Psi", (ny, n + n * nu)),   # [Ξ, Ψ]
                   ("zr", (mi, nu)),     # instrument filter ('iv')
                   ("xi", (1, n)),       # auxiliary-model instrument ('iv')
-                  ("Cz", (dz, d)),      # IV cross matrix sum w ζ φ^T ('iv')
+                  ("Cz", (dz, n)),      # IV cross matrix sum w ζ φ^T, first n columns
+                                        # (the others are columns of Zz) ('iv')
                   ("Gz", (dp, dz)),     # S_ζ - M Cz^T ('iv')
                   ("Zz", (dz, dz))]     # sum w ζ ζ^T, the IV weighting ('iv')
         self._buf = np.zeros(sum(math.prod(shape) for _, shape in layout))
@@ -402,7 +403,8 @@ class AdaptiveIdentifier:
         if self._method != "ode":
             st["R"][:] = np.eye(d) / self._p0
             st["Rt"][:] = np.eye(dth) / self._q0
-            st["Cz"][:d] = np.eye(d) / self._p0
+            st["Cz"][:n] = np.eye(n) / self._p0
+            st["Zz"][:] = np.eye(dz) / self._p0
         else:
             st["R"][:] = np.eye(d) * self._p0
             st["Rt"][:] = np.eye(dth) * self._q0
@@ -440,6 +442,12 @@ class AdaptiveIdentifier:
             return np.tril(R) + np.tril(R, -1).T
         return R
 
+    def _iv_cross(self) -> np.ndarray:
+        """The IV cross matrix ``Σ w ζ φ^T`` (up to the deferred factor): the
+        stored first n columns, then the q̂ columns of Z."""
+        Z = self._sym("Zz")
+        return np.hstack([self._st["Cz"], Z[:, :self._f * self._nu]])
+
     def information_condition(self) -> tuple[float, float]:
         """Condition numbers of the two normal matrices as updated (without
         the windup regularisation): R of (8), and the (B̃, D) block of R_θ of
@@ -450,7 +458,7 @@ class AdaptiveIdentifier:
             if name == "R" and self._method == "iv":
                 # the IV equations: condition of the cross matrix Cz (the
                 # windup bound applies to it, see _adaptive_kernel._solve_iv)
-                sv = np.linalg.svd(self._st["Cz"], compute_uv=False)
+                sv = np.linalg.svd(self._iv_cross(), compute_uv=False)
                 out.append(float(sv[0] / sv[-1]) if sv[-1] > 0 else math.inf)
                 continue
             ev = np.linalg.eigvalsh(self._sym(name)[skip:, skip:])
