@@ -96,6 +96,10 @@ _LYAP_MAX_ORDER = 6
 # The deferred forgetting factor is folded back into the accumulators when it
 # falls below this value (keeps them bounded).
 _RESCALE_BELOW = 1e-100
+# A folded forgetting factor below this (a gap of hundreds of memory lengths)
+# is total forgetting: the matrices are zeroed rather than scaled into
+# subnormal numbers, whose lost precision would leave garbage behind.
+_FORGOTTEN = 1e-250
 
 
 # ---------------------------------------------------------------------------
@@ -804,6 +808,7 @@ def kernel(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, Hse
             # so that the divisor stays 1 (a gap forgets exactly, never /0).
             c2 = fst[3] * lamM[q]
             if c2 < _RESCALE_BELOW:
+                c2 = c2 if c2 > _FORGOTTEN else 0.0
                 for i in range(dz):
                     for j in range(n):
                         Cz[i, j] *= c2
@@ -845,6 +850,7 @@ def kernel(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, Hse
             # a factor below _RESCALE_BELOW (a long gap) is folded in first
             c2 = fst[3] * lamM[q]
             if c2 < _RESCALE_BELOW:
+                c2 = c2 if c2 > _FORGOTTEN else 0.0
                 for i in range(d):
                     for j in range(i + 1):
                         R[i, j] *= c2
@@ -973,6 +979,7 @@ def kernel(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, Hse
             if not ode:
                 c2 = fst[4] * lamT[q]
                 if c2 < _RESCALE_BELOW:
+                    c2 = c2 if c2 > _FORGOTTEN else 0.0
                     for a in range(dth):
                         for b in range(a + 1):
                             Rt[a, b] *= c2
@@ -1227,6 +1234,7 @@ def reference(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, 
         if not ode:
             c2 = fst[3] * lamM[q]
             if c2 < _RESCALE_BELOW:        # fold the factor in first (long gaps)
+                c2 = c2 if c2 > _FORGOTTEN else 0.0
                 if iv:
                     Cz *= c2
                     Gz *= c2
@@ -1285,6 +1293,7 @@ def reference(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, 
             if not ode:
                 c2 = fst[4] * lamT[q]
                 if c2 < _RESCALE_BELOW:
+                    c2 = c2 if c2 > _FORGOTTEN else 0.0
                     Rt *= c2
                     gt *= c2
                     fst[4] = 1.0
