@@ -16,9 +16,12 @@ One step from sample ``k-1`` to sample ``k`` (interval ``h``, table entry
 ``q = idx[k]``):
 
 1. state-variable filters (6a)-(6b), exact discretisation for the held
-   signals: ``z_k = Fphi z_{k-1} + Fg0 w_{k-1} + Fg1 w_k`` per channel;
+   signals: ``z_k = Fphi z_{k-1} + Fg0 w_{k-1} + Fg1 w_k`` per channel (and
+   the instrument filter on the input, ``iv`` mode); after a gap longer than
+   ``max_gap`` the filters restart at the steady state of the new sample;
 2. regression (8) ``p̂ = M φ̂``: information-form update of the weighted
-   normal equations (or an Euler step of (11)-(12) in ``ode`` mode);
+   normal equations (``iv`` mode: of the instrumental-variable equations
+   with the whitening matrix Z; an Euler step of (11)-(12) in ``ode`` mode);
 3. once part 2 has started: Ξ = C̃ e^{Ã(t - t_g)} and Ψ of (15), exact
    discretisation for the held input with the accepted ``(Apsi, Cpsi)``:
    ``Ξ <- Ξ e^{Ã h}``, ``Ψ_j <- Ψ_j e^{Ã h} + u_j[k-1] C̃ G0 + u_j[k] C̃ G1``;
@@ -284,9 +287,9 @@ def _solve_iv(C, G, X, max_cond, Q, B):  # pragma: no cover - compiled
     solved matrix has condition at most ``sqrt(1 + max_cond^2)`` and X is
     kept in directions the data do not inform; the bound applies to C
     itself, not to C^T C as for R (C is a cross matrix of the signals, like
-    R's square root, and the QR does not square its condition number). Q: scratch (dz + d, d), B: scratch (dz + d,
-    rows). Returns False (nothing changed) when C = 0 or the triangular
-    factor is singular.
+    R's square root, and the QR does not square its condition number).
+    Q: scratch (dz + d, d), B: scratch (dz + d, rows). Returns False
+    (nothing changed) when C = 0 or the triangular factor is singular.
     """
     dz, d = C.shape
     rows = G.shape[0]
@@ -672,9 +675,11 @@ def kernel(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, Hse
     ``par = [ω, α, β, max_condition, ode_trace_bound, gate]``,
     ``ipar = [refresh_every, ode, foh, iv]``. ``Iphi, Ig0, Ig1``: tables of
     the instrument filter (state ``zr``); with ``iv`` the regression (8) is
-    solved by instrumental variables ``ζ = [q̂; r̂]`` (cross matrix ``Cz``,
-    residual ``Gz = S_ζ - M Cz^T``) instead of least squares (R, G unused). ``idx[k]`` is the table entry of
-    the interval ending at sample k (unused for the very first sample).
+    solved by instrumental variables ``ζ = [q̂; r̂; x_i]`` (the first n
+    columns of the cross matrix in ``Cz``, the others are columns of ``Zz =
+    Σ w ζ ζ^T``; residual ``Gz = S_ζ - M C^T``) instead of least squares (R,
+    G unused). ``idx[k]`` is the table entry of the interval ending at
+    sample k (unused for the very first sample).
     ``PsiPhi, PsiG0, PsiG1, pstamp`` cache the Ψ discretisation per entry.
 
     In ``'ls'`` mode the normal equations are held in residual form: R and
@@ -802,10 +807,11 @@ def kernel(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, Hse
         for i in range(d):
             r2 += phi[i] * phi[i]
         if iv:
-            # instrumental variables: Cz <- λ Cz + w ζ φ^T, S_ζ <- λ S_ζ + w p ζ^T,
-            # held as Gz = S_ζ - M Cz^T; ζ = [q̂; r̂] (inputs only). Deferred λ;
-            # a factor below _RESCALE_BELOW (a long gap) is folded in first,
-            # so that the divisor stays 1 (a gap forgets exactly, never /0).
+            # instrumental variables, ζ = [q̂; r̂; x_i] (from the input only):
+            # C <- λ C + w ζ φ^T (first n columns kept in Cz, the rest are
+            # columns of Zz), Zz <- λ Zz + w ζ ζ^T, S_ζ <- λ S_ζ + w p ζ^T held
+            # as Gz = S_ζ - M C^T. Deferred λ; a factor below _RESCALE_BELOW (a
+            # long gap) is folded in first, so that the divisor stays 1.
             c2 = fst[3] * lamM[q]
             if c2 < _RESCALE_BELOW:
                 c2 = c2 if c2 > _FORGOTTEN else 0.0
