@@ -546,8 +546,10 @@ class AdaptiveIdentifier:
             return ("the (B, D) stage has not started, so B and D are not estimated (zero): "
                     f"the relative residual of the shift equation (13) is {res:.3g} "
                     f"(gate {self._gate:g}) or the estimated A is not Hurwitz. Give it more "
-                    "data, a richer input, or (with noise) method='iv' and a longer memory "
-                    "(smaller forgetting)")
+                    "data or a richer input" + (
+                        "; with output noise use method='iv' (the default), which is "
+                        "consistent" if self._method != "iv" else
+                        "; with output noise, a longer memory (smaller forgetting)"))
         if self._st["ist"][_k.IST["rejected"]]:
             return (f"the latest (A, C) estimate failed the convergence test (shift residual "
                     f"{res:.3g}, or A not Hurwitz); B and D come from earlier estimates")
