@@ -221,7 +221,7 @@ def regression_condition(t, u, y, scale: bool) -> float:
     forgetting to speak of, negligible prior), unscaled or scaled states."""
     ident = AdaptiveIdentifier(4, 2, 2, horizon=HORIZON, filter_poles=FILTER_POLE,
                                forgetting=1e-9, bd_forgetting=1e-9, dt=t[1] - t[0],
-                               scale_filters=scale, initial_covariance=1e14)
+                               scale_filters=scale, initial_covariance=1e14, method="ls")
     ident.update(u, y)
     return ident.information_condition()[0]
 
