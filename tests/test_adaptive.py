@@ -789,3 +789,5 @@ def test_instrument_poles_validation():
         AdaptiveIdentifier(4, 2, 2, dt=DT, instrument_poles=1.0)
     with pytest.raises(SubidError, match="method"):
         AdaptiveIdentifier(4, 2, 2, dt=DT, method="bias")
+    with pytest.raises(SubidError, match="equal the filter poles"):
+        AdaptiveIdentifier(4, 2, 2, dt=DT, instrument_poles=-5.0)

@@ -299,6 +299,11 @@ class AdaptiveIdentifier:
         else:
             self._ipoles = _filter_poles(instrument_poles, f if isinstance(
                 instrument_poles, numbers.Number) else None, "instrument_poles")
+        if self._ipoles.size == f and np.allclose(np.sort_complex(self._ipoles),
+                                                  np.sort_complex(self._poles)):
+            raise SubidError("instrument_poles equal the filter poles: the instruments "
+                             "would repeat the filtered inputs; choose slower poles, e.g. "
+                             f"{float(np.real(self._poles[0])) * _INSTRUMENT_POLE_RATIO:g}")
         if self._ipoles.size * nu < n:
             raise SubidError(f"instrument_poles: {self._ipoles.size} poles give "
                              f"{self._ipoles.size * nu} instruments beyond the filtered "
