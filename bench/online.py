@@ -27,8 +27,9 @@ from subid.adaptive import AdaptiveIdentifier
 from subid.experiments.seed000 import simulate
 
 
-def _new(engine="numba"):
-    return AdaptiveIdentifier(4, 2, 2, horizon=5, filter_poles=-5.0, dt=1e-3, engine=engine)
+def _new(engine="numba", method="iv"):
+    return AdaptiveIdentifier(4, 2, 2, horizon=5, filter_poles=-5.0, dt=1e-3, engine=engine,
+                              method=method)
 
 
 def _median_rate(run, n, repeats):
@@ -78,6 +79,13 @@ def bench_adaptive(n_samples: int = 1_000_000, repeats: int = 5, reference_sampl
     out = {"n_samples": n_samples, "repeats": repeats, "reference_samples": nr,
            "single_samples": ns, "machine": machine()}
     out["numba"], _ = _median_rate(whole, n_samples, repeats)
+
+    def whole_ls():
+        _new(method="ls").update(u, y)
+
+    _new(method="ls").update(u[:5000], y[:5000])
+    # the paper's least squares (the default before issue 12), same process
+    out["numba_ls"], _ = _median_rate(whole_ls, n_samples, repeats)
     out["numba_chunks_1000"], _ = _median_rate(chunks, n_samples, repeats)
     out["numba_single_sample"], _ = _median_rate(single, ns, max(1, repeats // 2))
     out["numpy"], _ = _median_rate(reference, nr, max(1, repeats // 2))
@@ -106,7 +114,9 @@ def machine() -> str:
 
 def table(res: dict) -> str:
     rows = [
-        ("numba kernel, one update call", res["numba"], res["n_samples"]),
+        ("numba kernel, one update call (default method='iv')", res["numba"],
+         res["n_samples"]),
+        ("numba kernel, one update call, method='ls'", res["numba_ls"], res["n_samples"]),
         ("numba kernel, chunks of 1000 samples", res["numba_chunks_1000"], res["n_samples"]),
         ("numba kernel, one sample per update call", res["numba_single_sample"],
          res["single_samples"]),

@@ -465,3 +465,29 @@ def test_track_adaptive_defaults_to_no_detrending(tmp_path):
     model = sd.StateSpace.load(out / "model.json")
     assert sd.pole_error(model, true) < 1e-3
     assert model.info["data"]["detrend"] == "none"
+
+
+def test_track_reports_convergence_and_warns(tmp_path, capsys):
+    """Issue 12: an online model that has not converged says so (warning on
+    stderr, 'converged NO: ...' in the summary); the converged fit is the
+    final model's on the last third of the record."""
+    from subid.experiments.seed000 import multisine
+    true = subid.systems.seed000_system()
+    t = np.arange(0.0, 2.0, 0.001)                   # too short for the (B, D) stage
+    u = multisine(t, 2)
+    y = true.simulate(u, t=t, hold="foh")
+    path = tmp_path / "short.csv"
+    np.savetxt(path, np.column_stack([t, u, y]), delimiter=",", header="t,u1,u2,y1,y2",
+               comments="")
+    code, stdout, stderr = run(capsys, "track", path, "--inputs", "u1,u2", "--outputs",
+                               "y1,y2", "--time", "t", "--method", "adaptive", "--order", "4",
+                               "--no-report", "--out", tmp_path / "run")
+    assert code == 0, stderr
+    assert "converged   NO: the (B, D) stage has not started" in stdout
+    assert "not converged" in stderr
+    code, stdout, stderr = run(capsys, "track", "dataset:dryer", "--order", "4",
+                               "--checkpoint-every", "0", "--no-report", "--out",
+                               tmp_path / "dryer")
+    assert code == 0 and "converged   yes" in stdout and "on its last third" in stdout
+    model = subid.StateSpace.load(tmp_path / "dryer" / "model.json")
+    assert model.info["bd_method"] == "regression" and len(model.info["fit_last_third"]) == 1

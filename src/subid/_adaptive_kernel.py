@@ -16,9 +16,12 @@ One step from sample ``k-1`` to sample ``k`` (interval ``h``, table entry
 ``q = idx[k]``):
 
 1. state-variable filters (6a)-(6b), exact discretisation for the held
-   signals: ``z_k = Fphi z_{k-1} + Fg0 w_{k-1} + Fg1 w_k`` per channel;
+   signals: ``z_k = Fphi z_{k-1} + Fg0 w_{k-1} + Fg1 w_k`` per channel (and
+   the instrument filter on the input, ``iv`` mode); after a gap longer than
+   ``max_gap`` the filters restart at the steady state of the new sample;
 2. regression (8) ``p̂ = M φ̂``: information-form update of the weighted
-   normal equations (or an Euler step of (11)-(12) in ``ode`` mode);
+   normal equations (``iv`` mode: of the instrumental-variable equations
+   with the whitening matrix Z; an Euler step of (11)-(12) in ``ode`` mode);
 3. once part 2 has started: Ξ = C̃ e^{Ã(t - t_g)} and Ψ of (15), exact
    discretisation for the held input with the accepted ``(Apsi, Cpsi)``:
    ``Ξ <- Ξ e^{Ã h}``, ``Ψ_j <- Ψ_j e^{Ã h} + u_j[k-1] C̃ G0 + u_j[k] C̃ G1``;
@@ -55,8 +58,10 @@ IST = {
     "bound_hits": 8,    # ode mode: steps where the trace bound suspended forgetting
     "started": 9,       # 1 once part 2 ((B̃, D) estimation) has started
     "stalled": 10,      # 1 once the residual of (13) has stopped improving
+    "rejected": 11,     # 1 if the last refresh's (Ã, C̃) failed the gate / Hurwitz test
+    "gaps": 12,         # intervals longer than max_gap (filters re-initialised)
 }
-N_IST = 11
+N_IST = 13
 # Float state ``fst`` slots.
 FST = {
     "t_last": 0,          # time of the last sample
@@ -66,8 +71,9 @@ FST = {
     "scale_theta": 4,     # the same for (R_θ, s_θ)
     "res_ref": 5,         # best residual of (13), updated when it halves
     "t_ref": 6,           # time of the last halving
+    "t_resume": 7,        # after a gap: (8) gets no weight before this time
 }
-N_FST = 7
+N_FST = 8
 
 # Part 2 also starts when the residual of (13) is below this value and has
 # not halved during one memory length 1/α of the estimate of M (converged to
@@ -93,6 +99,10 @@ _LYAP_MAX_ORDER = 6
 # The deferred forgetting factor is folded back into the accumulators when it
 # falls below this value (keeps them bounded).
 _RESCALE_BELOW = 1e-100
+# A folded forgetting factor below this (a gap of hundreds of memory lengths)
+# is total forgetting: the matrices are zeroed rather than scaled into
+# subnormal numbers, whose lost precision would leave garbage behind.
+_FORGOTTEN = 1e-250
 
 
 # ---------------------------------------------------------------------------
@@ -264,6 +274,134 @@ def _solve_normal(R, G, X, max_cond, L, B):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True, fastmath=_FASTMATH)
+def _solve_iv(C, G, X, max_cond, Q, B):  # pragma: no cover - compiled
+    """One refresh of an instrumental-variable estimate in residual form.
+
+    ``C`` (dz, d), dz >= d, is the cross matrix ``sum w ζ φ^T`` of the
+    instruments and the regressors, ``G = S - X C^T`` (rows, dz) the residual
+    of the (extended) IV equations ``X C^T = S`` at the current estimate X.
+    Computes the regularised least-squares step
+    ``Δ = argmin |Δ C^T - G|_F^2 + δ |Δ|_F^2``, ``δ = |C|_F^2 / max_cond^2``,
+    by Householder QR of ``[C; sqrt(δ) I]`` (never forming C^T C), then
+    ``X <- X + Δ`` and ``G <- G - Δ C^T``. As for :func:`_solve_normal`, the
+    solved matrix has condition at most ``sqrt(1 + max_cond^2)`` and X is
+    kept in directions the data do not inform; the bound applies to C
+    itself, not to C^T C as for R (C is a cross matrix of the signals, like
+    R's square root, and the QR does not square its condition number).
+    Q: scratch (dz + d, d), B: scratch (dz + d, rows). Returns False
+    (nothing changed) when C = 0 or the triangular factor is singular.
+    """
+    dz, d = C.shape
+    rows = G.shape[0]
+    m = dz + d
+    tr = 0.0
+    for i in range(dz):
+        for j in range(d):
+            tr += C[i, j] * C[i, j]
+    if not tr > 0.0:
+        return False
+    sd = np.sqrt(tr) / max_cond
+    for i in range(m):
+        for j in range(d):
+            if i < dz:
+                Q[i, j] = C[i, j]
+            else:
+                Q[i, j] = sd if i - dz == j else 0.0
+        for r in range(rows):
+            B[i, r] = G[r, i] if i < dz else 0.0
+    v = np.empty(m)
+    diag = np.empty(d)
+    for k in range(d):
+        norm2 = 0.0
+        for i in range(k, m):
+            norm2 += Q[i, k] * Q[i, k]
+        nrm = np.sqrt(norm2)
+        if not nrm > 0.0:
+            return False
+        alpha = -nrm if Q[k, k] >= 0.0 else nrm
+        for i in range(k, m):
+            v[i] = Q[i, k]
+        v[k] -= alpha
+        vnorm2 = norm2 - Q[k, k] * Q[k, k] + v[k] * v[k]
+        diag[k] = alpha
+        if vnorm2 > 0.0:
+            for j in range(k + 1, d):
+                s = 0.0
+                for i in range(k, m):
+                    s += v[i] * Q[i, j]
+                s = 2.0 * s / vnorm2
+                for i in range(k, m):
+                    Q[i, j] -= s * v[i]
+            for r in range(rows):
+                s = 0.0
+                for i in range(k, m):
+                    s += v[i] * B[i, r]
+                s = 2.0 * s / vnorm2
+                for i in range(k, m):
+                    B[i, r] -= s * v[i]
+    for r in range(rows):                   # R Δ^T = (Q^T [G^T; 0])[:d]
+        for i in range(d - 1, -1, -1):
+            s = B[i, r]
+            for k in range(i + 1, d):
+                s -= Q[i, k] * B[k, r]
+            B[i, r] = s / diag[i]
+    for r in range(rows):
+        for i in range(d):
+            X[r, i] += B[i, r]
+    for r in range(rows):                   # G <- G - Δ C^T
+        for i in range(dz):
+            s = 0.0
+            for j in range(d):
+                s += B[j, r] * C[i, j]
+            G[r, i] -= s
+    return True
+
+
+@numba.njit(cache=True, fastmath=_FASTMATH)
+def _solve_iv_weighted(C, G, Z, X, max_cond, Q, B, L, Ct, Gt):  # pragma: no cover
+    """The IV step with the instruments whitened by ``Z = sum w ζ ζ^T``
+    (lower triangle): :func:`_solve_iv` on ``L^{-1} C`` and ``G L^{-T}``
+    (``Z + ε I = L L^T``, ``ε = tr Z / max_cond``, so that the whitening
+    cannot amplify directions the instruments no longer excite by more than
+    ``sqrt(max_cond)``): the two-stage least-squares
+    weighting of the extended IV equations, ``M = S Z^{-1} C (C^T Z^{-1}
+    C)^{-1}``. The residual G of the unweighted equations is re-centred
+    with the step. Returns False (nothing changed) if Z is not positive
+    definite or the step fails."""
+    dz, d = C.shape
+    rows = G.shape[0]
+    tr = 0.0
+    for i in range(dz):
+        tr += Z[i, i]
+    if not tr > 0.0:
+        return False
+    if not _chol(Z, tr / max_cond, L):
+        return False
+    for j in range(d):                       # Ct = L^{-1} C
+        for i in range(dz):
+            s = C[i, j]
+            for k in range(i):
+                s -= L[i, k] * Ct[k, j]
+            Ct[i, j] = s / L[i, i]
+    for r in range(rows):                    # Gt = G L^{-T}
+        for i in range(dz):
+            s = G[r, i]
+            for k in range(i):
+                s -= L[i, k] * Gt[r, k]
+            Gt[r, i] = s / L[i, i]
+    Xold = X.copy()
+    if not _solve_iv(Ct, Gt, X, max_cond, Q, B):
+        return False
+    for r in range(rows):                    # G <- G - Δ C^T
+        for i in range(dz):
+            s = 0.0
+            for j in range(d):
+                s += (X[r, j] - Xold[r, j]) * C[i, j]
+            G[r, i] -= s
+    return True
+
+
+@numba.njit(cache=True, fastmath=_FASTMATH)
 def _hurwitz(A):  # pragma: no cover - compiled
     """True if every eigenvalue of A has a negative real part.
 
@@ -412,12 +550,26 @@ def _shift_solve(M, n, ny, omega, Aout):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True, fastmath=_FASTMATH)
-def _refresh(n, nu, ny, omega, alpha, max_cond, gate, ode, T_now, ist, fst,
+def _refresh(n, nu, ny, omega, alpha, max_cond, gate, ode, iv, T_now, ist, fst,
              R, G, M, Rt, gt, theta, Am, Cm, Bm, Dm, Apsi, Cpsi, Psi, hist,
-             Ld, Bd, Lt, Bt, Anew):  # pragma: no cover - compiled
-    """Model refresh: solve both LS problems, (13), B̃, D, Ψ model, history."""
+             Ld, Bd, Lt, Bt, Anew, Cz, Gz, Qz, Bz, Zz, Lz, Ct, Gt, Cf):  # pragma: no cover
+    """Model refresh: solve both LS problems (the first by instrumental
+    variables when ``iv``), (13), B̃, D, Ψ model, history."""
     if not ode:
-        if not _solve_normal(R, G, M, max_cond, Ld, Bd):
+        if iv:
+            # the cross matrix Σ w ζ φ^T: its first n columns are kept (Cz), the
+            # rest are the q̂ columns of Z (φ = [H p̂; q̂], ζ = [q̂; r̂; x_i])
+            nz = Cz.shape[1]
+            for i in range(Cf.shape[0]):
+                for j in range(Cf.shape[1]):
+                    if j < nz:
+                        Cf[i, j] = Cz[i, j]
+                    else:
+                        jj = j - nz
+                        Cf[i, j] = Zz[i, jj] if jj <= i else Zz[jj, i]
+            if not _solve_iv_weighted(Cf, Gz, Zz, M, max_cond, Qz, Bz, Lz, Ct, Gt):
+                ist[7] += 1
+        elif not _solve_normal(R, G, M, max_cond, Ld, Bd):
             ist[7] += 1
         if ist[9]:
             if not _solve_normal(Rt, gt, theta, max_cond, Lt, Bt):
@@ -457,6 +609,7 @@ def _refresh(n, nu, ny, omega, alpha, max_cond, gate, ode, T_now, ist, fst,
             for j in range(n):
                 Cpsi[i, j] = Cm[i, j]
         ist[6] += 1
+        ist[11] = 0
         if not ist[9]:
             # part 2 starts: Ψ(t_g) = 0, Ξ(t_g) = C̃. Ξ is the regressor of the
             # initial-state term C̃ e^{Ã(t - t_g)} x̃(t_g) of (14)/(16), which
@@ -468,6 +621,7 @@ def _refresh(n, nu, ny, omega, alpha, max_cond, gate, ode, T_now, ist, fst,
             fst[1] = T_now
     else:
         ist[4] += 1
+        ist[11] = 1
     ist[1] += 1
     cap = hist.shape[0]
     if cap > 0:
@@ -509,9 +663,9 @@ def _refresh(n, nu, ny, omega, alpha, max_cond, gate, ode, T_now, ist, fst,
 # the compiled loop
 # ---------------------------------------------------------------------------
 @numba.njit(cache=True, fastmath=_FASTMATH)
-def kernel(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Hsel, par, ipar,
-           ist, fst, prev_u, prev_y, zp, zq, R, G, M, Rt, gt, theta,
-           Am, Cm, Bm, Dm, Apsi, Cpsi, Psi,
+def kernel(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, Hsel, par,
+           ipar, ist, fst, prev_u, prev_y, zp, zq, R, G, M, Rt, gt, theta,
+           Am, Cm, Bm, Dm, Apsi, Cpsi, Psi, zr, xi, Cz, Gz, Zz,
            PsiPhi, PsiG0, PsiG1, pstamp, hist, buf):  # pragma: no cover - compiled
     """Process the samples ``(Tm, U, Y)`` in place (see the module docstring).
 
@@ -519,8 +673,13 @@ def kernel(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Hsel, par, ipar,
     is finite at the end (False: the caller rolls the chunk back).
 
     ``par = [ω, α, β, max_condition, ode_trace_bound, gate]``,
-    ``ipar = [refresh_every, ode, foh]``. ``idx[k]`` is the table entry of
-    the interval ending at sample k (unused for the very first sample).
+    ``ipar = [refresh_every, ode, foh, iv]``. ``Iphi, Ig0, Ig1``: tables of
+    the instrument filter (state ``zr``); with ``iv`` the regression (8) is
+    solved by instrumental variables ``ζ = [q̂; r̂; x_i]`` (the first n
+    columns of the cross matrix in ``Cz``, the others are columns of ``Zz =
+    Σ w ζ ζ^T``; residual ``Gz = S_ζ - M C^T``) instead of least squares (R,
+    G unused). ``idx[k]`` is the table entry of the interval ending at
+    sample k (unused for the very first sample).
     ``PsiPhi, PsiG0, PsiG1, pstamp`` cache the Ψ discretisation per entry.
 
     In ``'ls'`` mode the normal equations are held in residual form: R and
@@ -535,12 +694,25 @@ def kernel(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Hsel, par, ipar,
     """
     omega, alpha, beta, max_cond, trace_bound, gate = (par[0], par[1], par[2], par[3],
                                                        par[4], par[5])
-    K, ode, foh = ipar[0], ipar[1] != 0, ipar[2] != 0
+    max_gap, dcF, dcI, settle = par[6], par[7], par[8], par[9]
+    K, ode, foh, iv = ipar[0], ipar[1] != 0, ipar[2] != 0, ipar[3] != 0
     N = U.shape[0]
     f, ny = zp.shape
     nu = zq.shape[1]
     n = Am.shape[0]
     dp, d = M.shape
+    mi = zr.shape[0]
+    dz = Cz.shape[0]
+    zeta = np.empty(dz)
+    ez = np.empty(dp)
+    zi = np.empty(mi)
+    zi2 = np.empty(n)
+    Qz = np.empty((dz + d, d))
+    Bz = np.empty((dz + d, dp))
+    Lz = np.zeros((dz, dz))
+    Ct = np.empty((dz, d))
+    Cf = np.empty((dz, d))
+    Gt = np.empty((dp, dz))
     dth = theta.shape[1]
     nX = Psi.shape[1]          # n + n nu: columns of [Ξ, Ψ]
     p = np.empty(dp)
@@ -574,8 +746,23 @@ def kernel(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Hsel, par, ipar,
             continue
         q = idx[k]
         h = steps[q]
-        # 1. state-variable filters (6a)-(6b), one channel at a time
-        for c in range(ny):
+        gap = h > max_gap
+        # 1. state-variable filters (6a)-(6b), one channel at a time; after a
+        # gap longer than max_gap, re-initialised at the steady state of the
+        # current sample held constant (as if at rest: the held signals over
+        # a long gap are not data), and the interval gets no weight
+        if gap:
+            ist[12] += 1
+            fst[7] = Tm[k] + settle
+            for i in range(f):
+                for c in range(ny):
+                    zp[i, c] = dcF * Y[k, c] if i == 0 else 0.0
+                for c in range(nu):
+                    zq[i, c] = dcF * U[k, c] if i == 0 else 0.0
+            for i in range(mi):
+                for c in range(nu):
+                    zr[i, c] = dcI * U[k, c] if i == 0 else 0.0
+        for c in range(ny if not gap else 0):
             for i in range(f):
                 s = Fg0[q, i] * prev_y[c] + Fg1[q, i] * Y[k, c]
                 for j in range(f):
@@ -583,7 +770,7 @@ def kernel(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Hsel, par, ipar,
                 znew[i] = s
             for i in range(f):
                 zp[i, c] = znew[i]
-        for c in range(nu):
+        for c in range(nu if not gap else 0):
             for i in range(f):
                 s = Fg0[q, i] * prev_u[c] + Fg1[q, i] * U[k, c]
                 for j in range(f):
@@ -591,6 +778,16 @@ def kernel(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Hsel, par, ipar,
                 znew[i] = s
             for i in range(f):
                 zq[i, c] = znew[i]
+        if iv and not gap:
+            # instrument filter: the inputs only, through a second filter bank
+            for c in range(nu):
+                for i in range(mi):
+                    s = Ig0[q, i] * prev_u[c] + Ig1[q, i] * U[k, c]
+                    for j in range(mi):
+                        s += Iphi[q, i, j] * zr[j, c]
+                    zi[i] = s
+                for i in range(mi):
+                    zr[i, c] = zi[i]
         # 2. regression (8): p̂ = M φ̂, φ̂ = [H p̂; q̂] (10), r^2 = 1 + |φ̂|^2.
         # (11)-(12) leave r open; an r depending on P (like ρ of (20)) gives
         # d/dt log det P^{-1} < 1 - α dim φ, so that the data could never
@@ -609,10 +806,67 @@ def kernel(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Hsel, par, ipar,
         r2 = 1.0
         for i in range(d):
             r2 += phi[i] * phi[i]
-        if not ode:
-            # R <- λ R + w φ φ^T, S <- λ S + w p φ^T (w = h / r^2), deferred λ
-            fst[3] *= lamM[q]
-            w = h / (r2 * fst[3])
+        if iv:
+            # instrumental variables, ζ = [q̂; r̂; x_i] (from the input only):
+            # C <- λ C + w ζ φ^T (first n columns kept in Cz, the rest are
+            # columns of Zz), Zz <- λ Zz + w ζ ζ^T, S_ζ <- λ S_ζ + w p ζ^T held
+            # as Gz = S_ζ - M C^T. Deferred λ; a factor below _RESCALE_BELOW (a
+            # long gap) is folded in first, so that the divisor stays 1.
+            c2 = fst[3] * lamM[q]
+            if c2 < _RESCALE_BELOW:
+                c2 = c2 if c2 > _FORGOTTEN else 0.0
+                for i in range(dz):
+                    for j in range(n):
+                        Cz[i, j] *= c2
+                for i in range(dp):
+                    for j in range(dz):
+                        Gz[i, j] *= c2
+                for i in range(dz):
+                    for j in range(i + 1):
+                        Zz[i, j] *= c2
+                fst[3] = 1.0
+            else:
+                fst[3] = c2
+            w = 0.0 if Tm[k] <= fst[7] else h / (r2 * fst[3])
+            for i in range(f):
+                for c in range(nu):
+                    zeta[i * nu + c] = zq[i, c]
+            for i in range(mi):
+                for c in range(nu):
+                    zeta[f * nu + i * nu + c] = zr[i, c]
+            for i in range(n):
+                zeta[(f + mi) * nu + i] = xi[0, i]
+            for i in range(dz):
+                wi = w * zeta[i]
+                for j in range(n):          # the q̂ columns of Σ w ζ φ^T are in Z
+                    Cz[i, j] += wi * phi[j]
+                for j in range(i + 1):
+                    Zz[i, j] += wi * zeta[j]
+            for i in range(dp):
+                s = p[i]
+                for j in range(d):
+                    s -= M[i, j] * phi[j]
+                ez[i] = w * s
+            for i in range(dp):
+                wi = ez[i]
+                for j in range(dz):
+                    Gz[i, j] += wi * zeta[j]
+        elif not ode:
+            # R <- λ R + w φ φ^T, S <- λ S + w p φ^T (w = h / r^2), deferred λ;
+            # a factor below _RESCALE_BELOW (a long gap) is folded in first
+            c2 = fst[3] * lamM[q]
+            if c2 < _RESCALE_BELOW:
+                c2 = c2 if c2 > _FORGOTTEN else 0.0
+                for i in range(d):
+                    for j in range(i + 1):
+                        R[i, j] *= c2
+                for i in range(dp):
+                    for j in range(d):
+                        G[i, j] *= c2
+                fst[3] = 1.0
+            else:
+                fst[3] = c2
+            w = 0.0 if Tm[k] <= fst[7] else h / (r2 * fst[3])
             for i in range(d):
                 wphi[i] = w * phi[i]
             for i in range(d):
@@ -628,16 +882,7 @@ def kernel(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Hsel, par, ipar,
                 wi = ep[i]
                 for j in range(d):
                     G[i, j] += wi * phi[j]
-            if fst[3] < _RESCALE_BELOW:
-                c2 = fst[3]
-                for i in range(d):
-                    for j in range(i + 1):
-                        R[i, j] *= c2
-                for i in range(dp):
-                    for j in range(d):
-                        G[i, j] *= c2
-                fst[3] = 1.0
-        else:
+        elif Tm[k] > fst[7]:
             # (11)-(12), semi-implicit Euler step; R holds P. The gain
             # h / (r^2 + h φ^T P φ) (Sherman-Morrison form of the downdate)
             # keeps P positive definite for any step; it is forward Euler's
@@ -702,6 +947,33 @@ def kernel(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Hsel, par, ipar,
                 for i in range(ny):
                     for j in range(n):
                         Psi[i, off + j] = Pn[i, j]
+            if gap:
+                # restart (14) at this sample: Ψ = 0, Ξ = C̃, and the unknown
+                # state x̃ now replaces x̃(t_g) in θ (its information dropped)
+                for i in range(ny):
+                    for j in range(nX):
+                        Psi[i, j] = Cpsi[i, j] if j < n else 0.0
+                if not ode:
+                    for a in range(dth):
+                        for b in range(a + 1):
+                            if b < n:
+                                Rt[a, b] = 0.0
+                    for a in range(n):
+                        gt[0, a] = 0.0
+            if iv:
+                # auxiliary-model instrument: x_i <- e^{Ã h} x_i + h B̃ q̂_0 (the
+                # accepted Ã, the current B̃, the filtered input F̂ u; any
+                # function of the input is a valid instrument, so the simple
+                # quadrature is enough); the next sample uses it
+                for i in range(n):
+                    s = 0.0
+                    for j in range(nu):
+                        s += Bm[i, j] * zq[0, j]
+                    zi2[i] = h * s
+                    for j in range(n):
+                        zi2[i] += PsiPhi[q, i, j] * xi[0, j]
+                for i in range(n):
+                    xi[0, i] = zi2[i]
             # regression (16): y = Φ θ, Φ = [Ξ, Ψ, u^T ⊗ I], ρ^2 = 1 + |Φ|_F^2
             # (P-free for the same reason as r; 'ode' keeps ρ of (20))
             rho2 = 1.0
@@ -711,8 +983,17 @@ def kernel(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Hsel, par, ipar,
             for jj in range(nu):
                 rho2 += ny * (U[k, jj] * U[k, jj])
             if not ode:
-                fst[4] *= lamT[q]
-                w = h / (rho2 * fst[4])
+                c2 = fst[4] * lamT[q]
+                if c2 < _RESCALE_BELOW:
+                    c2 = c2 if c2 > _FORGOTTEN else 0.0
+                    for a in range(dth):
+                        for b in range(a + 1):
+                            Rt[a, b] *= c2
+                        gt[0, a] *= c2
+                    fst[4] = 1.0
+                else:
+                    fst[4] = c2
+                w = 0.0 if gap else h / (rho2 * fst[4])
                 # prediction error y - Φ θ
                 for r in range(ny):
                     s = Y[k, r]
@@ -738,14 +1019,7 @@ def kernel(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Hsel, par, ipar,
                         for j2 in range(jj + 1):
                             Rt[a, nX + i + ny * j2] += w * (uj * U[k, j2])
                         gt[0, a] += ey[i] * uj
-                if fst[4] < _RESCALE_BELOW:
-                    c2 = fst[4]
-                    for a in range(dth):
-                        for b in range(a + 1):
-                            Rt[a, b] *= c2
-                        gt[0, a] *= c2
-                    fst[4] = 1.0
-            else:
+            elif not gap:
                 # (19)-(20), semi-implicit Euler step (gain h / (ρ^2 + h tr(Φ Q Φ^T)),
                 # Q stays positive definite); Rt holds Q; ρ^2 = 1 + tr(Φ Q Φ^T)
                 for i in range(ny):
@@ -794,9 +1068,9 @@ def kernel(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Hsel, par, ipar,
         fst[0] = Tm[k]
         ist[0] += 1
         if (ist[0] - 1) % K == 0:
-            _refresh(n, nu, ny, omega, alpha, max_cond, gate, ode, Tm[k], ist, fst, R, G, M,
-                     Rt, gt,
-                     theta, Am, Cm, Bm, Dm, Apsi, Cpsi, Psi, hist, Ld, Bd, Lt, Bt, Anew)
+            _refresh(n, nu, ny, omega, alpha, max_cond, gate, ode, iv, Tm[k], ist, fst, R, G,
+                     M, Rt, gt, theta, Am, Cm, Bm, Dm, Apsi, Cpsi, Psi, hist, Ld, Bd, Lt, Bt,
+                     Anew, Cz, Gz, Qz, Bz, Zz, Lz, Ct, Gt, Cf)
     for i in range(buf.shape[0]):
         if not np.isfinite(buf[i]):
             return False
@@ -823,10 +1097,49 @@ def _ref_solve(R, G, X, max_cond):
     return True
 
 
-def _ref_refresh(n, nu, ny, omega, alpha, max_cond, gate, ode, T_now, ist, fst,
-                 R, G, M, Rt, gt, theta, Am, Cm, Bm, Dm, Apsi, Cpsi, Psi, hist):
+def _ref_solve_iv(C, G, X, max_cond):
+    """Reference of :func:`_solve_iv`: numpy least squares on the stacked
+    system ``[C; sqrt(δ) I] Δ^T = [G^T; 0]``."""
+    tr = float(np.sum(C * C))
+    if not tr > 0:
+        return False
+    d = C.shape[1]
+    A = np.vstack([C, np.sqrt(tr) / max_cond * np.eye(d)])
+    rhs = np.vstack([G.T, np.zeros((d, G.shape[0]))])
+    step = np.linalg.lstsq(A, rhs, rcond=None)[0].T
+    X += step
+    G -= step @ C.T
+    return True
+
+
+def _ref_solve_iv_weighted(C, G, Z, X, max_cond):
+    """Reference of :func:`_solve_iv_weighted`."""
+    Zs = np.tril(Z) + np.tril(Z, -1).T
+    tr = np.trace(Zs)
+    if not tr > 0:
+        return False
+    try:
+        L = np.linalg.cholesky(Zs + tr / max_cond * np.eye(Zs.shape[0]))
+    except np.linalg.LinAlgError:
+        return False
+    Ct = scipy.linalg.solve_triangular(L, C, lower=True)
+    Gt = scipy.linalg.solve_triangular(L, G.T, lower=True).T
+    Xold = X.copy()
+    if not _ref_solve_iv(Ct, Gt, X, max_cond):
+        return False
+    G -= (X - Xold) @ C.T
+    return True
+
+
+def _ref_refresh(n, nu, ny, omega, alpha, max_cond, gate, ode, iv, T_now, ist, fst,
+                 R, G, M, Rt, gt, theta, Am, Cm, Bm, Dm, Apsi, Cpsi, Psi, hist, Cz, Gz, Zz):
     if not ode:
-        if not _ref_solve(R, G, M, max_cond):
+        if iv:
+            Zs = np.tril(Zz) + np.tril(Zz, -1).T
+            Cf = np.hstack([Cz, Zs[:, :M.shape[1] - n]])
+            if not _ref_solve_iv_weighted(Cf, Gz, Zz, M, max_cond):
+                ist[7] += 1
+        elif not _ref_solve(R, G, M, max_cond):
             ist[7] += 1
         if ist[9] and not _ref_solve(Rt, gt, theta, max_cond):
             ist[7] += 1
@@ -859,6 +1172,7 @@ def _ref_refresh(n, nu, ny, omega, alpha, max_cond, gate, ode, T_now, ist, fst,
         Apsi[:] = Am
         Cpsi[:] = Cm
         ist[6] += 1
+        ist[11] = 0
         if not ist[9]:
             Psi[:] = 0.0
             Psi[:, :n] = Cm
@@ -866,6 +1180,7 @@ def _ref_refresh(n, nu, ny, omega, alpha, max_cond, gate, ode, T_now, ist, fst,
             fst[1] = T_now
     else:
         ist[4] += 1
+        ist[11] = 1
     ist[1] += 1
     cap = hist.shape[0]
     r = ist[1]
@@ -881,9 +1196,9 @@ def _ref_refresh(n, nu, ny, omega, alpha, max_cond, gate, ode, T_now, ist, fst,
             ist[2] += 1
 
 
-def reference(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Hsel, par, ipar,
-              ist, fst, prev_u, prev_y, zp, zq, R, G, M, Rt, gt, theta,
-              Am, Cm, Bm, Dm, Apsi, Cpsi, Psi,
+def reference(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, Hsel, par,
+              ipar, ist, fst, prev_u, prev_y, zp, zq, R, G, M, Rt, gt, theta,
+              Am, Cm, Bm, Dm, Apsi, Cpsi, Psi, zr, xi, Cz, Gz, Zz,
               PsiPhi, PsiG0, PsiG1, pstamp, hist, buf):
     """Plain numpy implementation of :func:`kernel` (same arguments).
 
@@ -893,8 +1208,9 @@ def reference(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Hsel, par, ipar,
     the stability test eigenvalues, and the whole symmetric matrices are
     updated (the kernel updates lower triangles).
     """
-    omega, alpha, beta, max_cond, trace_bound, gate = (float(v) for v in par)
-    K, ode, foh = int(ipar[0]), bool(ipar[1]), bool(ipar[2])
+    omega, alpha, beta, max_cond, trace_bound, gate, max_gap, dcF, dcI, settle = (
+        float(v) for v in par)
+    K, ode, foh, iv = int(ipar[0]), bool(ipar[1]), bool(ipar[2]), bool(ipar[3])
     n = Am.shape[0]
     ny = zp.shape[1]
     nu = zq.shape[1]
@@ -905,23 +1221,46 @@ def reference(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Hsel, par, ipar,
             continue
         q = idx[k]
         h = steps[q]
-        # 1. filters (6a)-(6b)
-        zp[:] = Fphi[q] @ zp + np.outer(Fg0[q], prev_y) + np.outer(Fg1[q], y)
-        zq[:] = Fphi[q] @ zq + np.outer(Fg0[q], prev_u) + np.outer(Fg1[q], u)
+        gap = h > max_gap
+        # 1. filters (6a)-(6b); re-initialised at the steady state after a gap
+        if gap:
+            ist[12] += 1
+            fst[7] = Tm[k] + settle
+            zp[:], zq[:], zr[:] = 0.0, 0.0, 0.0
+            zp[0], zq[0], zr[0] = dcF * y, dcF * u, dcI * u
+        else:
+            zp[:] = Fphi[q] @ zp + np.outer(Fg0[q], prev_y) + np.outer(Fg1[q], y)
+            zq[:] = Fphi[q] @ zq + np.outer(Fg0[q], prev_u) + np.outer(Fg1[q], u)
+            if iv:
+                zr[:] = Iphi[q] @ zr + np.outer(Ig0[q], prev_u) + np.outer(Ig1[q], u)
         # 2. regression (8)
         p = zp.reshape(-1)
         phi = np.concatenate([Hsel @ p, zq.reshape(-1)])
         r2 = 1.0 + phi @ phi
         if not ode:
-            fst[3] *= lamM[q]
-            w = h / (r2 * fst[3])
-            R += np.outer(w * phi, phi)
-            G += np.outer(w * (p - M @ phi), phi)
-            if fst[3] < _RESCALE_BELOW:
-                R *= fst[3]
-                G *= fst[3]
+            c2 = fst[3] * lamM[q]
+            if c2 < _RESCALE_BELOW:        # fold the factor in first (long gaps)
+                c2 = c2 if c2 > _FORGOTTEN else 0.0
+                if iv:
+                    Cz *= c2
+                    Gz *= c2
+                    Zz *= c2
+                else:
+                    R *= c2
+                    G *= c2
                 fst[3] = 1.0
-        else:
+            else:
+                fst[3] = c2
+            w = 0.0 if Tm[k] <= fst[7] else h / (r2 * fst[3])
+            if iv:
+                zeta = np.concatenate([zq.reshape(-1), zr.reshape(-1), xi[0]])
+                Cz += np.outer(w * zeta, phi[:n])
+                Zz += np.outer(w * zeta, zeta)
+                Gz += np.outer(w * (p - M @ phi), zeta)
+            else:
+                R += np.outer(w * phi, phi)
+                G += np.outer(w * (p - M @ phi), phi)
+        elif Tm[k] > fst[7]:
             g = R @ phi
             c = h / (r2 + h * (phi @ g))
             M += np.outer((p - M @ phi) * c, g)
@@ -946,18 +1285,30 @@ def reference(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Hsel, par, ipar,
                 blk = slice(n + jj * n, n + (jj + 1) * n)
                 Psi[:, blk] = (Psi[:, blk] @ PsiPhi[q] + prev_u[jj] * PsiG0[q]
                                + u[jj] * PsiG1[q])
+            if gap:     # restart (14): Ψ = 0, Ξ = C̃, x̃(t_g) information dropped
+                Psi[:] = 0.0
+                Psi[:, :n] = Cpsi
+                if not ode:
+                    Rt[:n, :] = 0.0
+                    Rt[:, :n] = 0.0
+                    gt[0, :n] = 0.0
+            if iv:      # auxiliary-model instrument (see the kernel)
+                xi[0] = PsiPhi[q] @ xi[0] + h * (Bm @ zq[0])
             # regression (16)
             Phi = np.hstack([Psi, np.kron(u[None, :], np.eye(ny))])
             if not ode:
-                fst[4] *= lamT[q]
-                w = h / ((1.0 + np.sum(Phi * Phi)) * fst[4])
+                c2 = fst[4] * lamT[q]
+                if c2 < _RESCALE_BELOW:
+                    c2 = c2 if c2 > _FORGOTTEN else 0.0
+                    Rt *= c2
+                    gt *= c2
+                    fst[4] = 1.0
+                else:
+                    fst[4] = c2
+                w = 0.0 if gap else h / ((1.0 + np.sum(Phi * Phi)) * fst[4])
                 Rt += w * (Phi.T @ Phi)
                 gt += (Phi.T @ (w * (y - Phi @ theta[0])))[None, :]
-                if fst[4] < _RESCALE_BELOW:
-                    Rt *= fst[4]
-                    gt *= fst[4]
-                    fst[4] = 1.0
-            else:
+            elif not gap:
                 Gq = Rt @ Phi.T
                 tq = np.trace(Phi @ Gq)
                 c = h / (1.0 + tq + h * tq)
@@ -969,6 +1320,6 @@ def reference(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Hsel, par, ipar,
         prev_u[:], prev_y[:], fst[0] = u, y, Tm[k]
         ist[0] += 1
         if (ist[0] - 1) % K == 0:
-            _ref_refresh(n, nu, ny, omega, alpha, max_cond, gate, ode, Tm[k], ist, fst, R, G,
-                         M, Rt, gt, theta, Am, Cm, Bm, Dm, Apsi, Cpsi, Psi, hist)
+            _ref_refresh(n, nu, ny, omega, alpha, max_cond, gate, ode, iv, Tm[k], ist, fst, R,
+                         G, M, Rt, gt, theta, Am, Cm, Bm, Dm, Apsi, Cpsi, Psi, hist, Cz, Gz, Zz)
     return bool(np.isfinite(buf).all())

@@ -70,6 +70,7 @@ from __future__ import annotations
 
 import math
 import numbers
+import warnings
 
 import numpy as np
 
@@ -78,19 +79,27 @@ from ._checkpoint import load_state, require, save_state
 from ._simulate import expm_blocks
 from ._validation import as_signal, check_int, check_time_stamps
 from .data import IOData
-from .errors import CheckpointError, DataError, OrderError, SubidError
+from .errors import CheckpointError, DataError, NotConvergedWarning, OrderError, SubidError
 from .ls_subspace import random_selector
 from .model import StateSpace
 
 __all__ = ["AdaptiveIdentifier"]
 
 _KIND = "AdaptiveIdentifier"
-_VERSION = 1
+_VERSION = 2      # 2: instrumental variables (zr, Cz, Gz)
 # Step lengths handled in one kernel call when the time stamps are non-uniform
 # (bounds the memory of the per-step discretisation tables).
 _BLOCK_UNIQUE = 4096
 _BLOCK_SAMPLES = 16384
 _STEP_CACHE = 64
+# Default instrument filter of method 'iv': the filter poles times this ratio
+# (slower: instruments that remember more of the input's past).
+_INSTRUMENT_POLE_RATIO = 0.25
+# Default (forgetting, bd_forgetting) per method. 'ls' and 'ode': the paper's
+# noise-free values. 'iv': a long memory for M (the IV estimate is unbiased
+# under noise, so averaging pays: measured in docs/seed000.md) and a shorter
+# one for θ, whose regressor Ψ is built from the past estimates of (Ã, C̃).
+_DEFAULT_FORGETTING = {"iv": (0.002, 0.02), "ls": (0.4, 0.08), "ode": (0.4, 0.08)}
 
 
 def _positive(value, name: str, *, exc=SubidError) -> float:
@@ -102,27 +111,46 @@ def _positive(value, name: str, *, exc=SubidError) -> float:
     return value
 
 
-def _filter_poles(poles, f: int) -> np.ndarray:
+def _filter_poles(poles, f, name: str = "filter_poles") -> np.ndarray:
     """Validate ``filter_poles``: a negative number (repeated f times) or f
-    poles with negative real parts, complex ones in conjugate pairs."""
+    poles with negative real parts, complex ones in conjugate pairs
+    (``f=None``: any number of poles)."""
     if isinstance(poles, numbers.Number) and not isinstance(poles, bool):
         poles = [poles] * f
     try:
         arr = np.asarray(poles, dtype=np.complex128).reshape(-1)
     except (TypeError, ValueError):
-        raise SubidError(f"filter_poles must be a negative number or {f} poles, "
+        raise SubidError(f"{name} must be a negative number or {f} poles, "
                          f"got {poles!r}") from None
-    if arr.size != f:
-        raise SubidError(f"filter_poles has {arr.size} poles but the filter order is the "
+    if f is not None and arr.size != f:
+        raise SubidError(f"{name} has {arr.size} poles but the filter order is the "
                          f"horizon, {f}; give {f} poles or one negative number")
+    if arr.size == 0:
+        raise SubidError(f"{name} is empty")
     if not np.all(np.isfinite(arr)):
-        raise SubidError("filter_poles must be finite")
+        raise SubidError(f"{name} must be finite")
     if np.any(arr.real >= 0):
-        raise SubidError(f"filter_poles must have negative real parts (a stable filter), got "
-                         f"{np.round(arr, 6).tolist()}; e.g. filter_poles=-2.0")
+        raise SubidError(f"{name} must have negative real parts (a stable filter), got "
+                         f"{np.round(arr, 6).tolist()}; e.g. {name}=-2.0")
     if not np.allclose(np.sort_complex(arr), np.sort_complex(arr.conj()), rtol=1e-12, atol=0):
-        raise SubidError("complex filter_poles must come in conjugate pairs")
+        raise SubidError(f"complex {name} must come in conjugate pairs")
     return arr
+
+
+def _companion(poles: np.ndarray, scale: bool):
+    """State-variable filter ``F̂(s) = ω^m / d(s)`` in time-scaled companion
+    form: ``ż = ω (Λ_c(â) z + l w)``, ``z_k = ω^{-k} s^k F̂(s) w``, with
+    ``ω = |d(0)|^{1/m}`` (1 when not ``scale``). Returns (Af, Bf, ω)."""
+    m = poles.size
+    coeffs = np.real(np.poly(poles))                 # [1, a_{m-1}, ..., a_0]
+    omega = float(np.abs(np.prod(poles)) ** (1.0 / m)) if scale else 1.0
+    scaled = coeffs[1:] / omega ** np.arange(1, m + 1)   # â_{m-1}, ..., â_0
+    Lc = np.zeros((m, m))
+    Lc[:-1, 1:] = np.eye(m - 1)
+    Lc[-1, :] = -scaled[::-1]                        # [-â_0, ..., -â_{m-1}]
+    Bf = np.zeros((m, 1))
+    Bf[-1, 0] = omega
+    return omega * Lc, Bf, omega
 
 
 class AdaptiveIdentifier:
@@ -148,15 +176,17 @@ class AdaptiveIdentifier:
         hide the fast modes, much faster ones pass more noise and make the
         regression less well conditioned. The default -5 suits systems with
         time constants around 0.3-10 s (the paper's example).
-    forgetting : float
+    forgetting : float, optional
         α of V_t and (12), in 1/time unit: the estimate of M averages the
         last ``~1/α`` time units of data. The paper uses 0.4 noise-free and
         0.01 with 50 dB noise; choose ``1/α`` of at least a few of the
-        slowest time constants, longer with noise.
-    bd_forgetting : float
-        β of (20), the same for (B̃, D). Take it smaller than α (the paper:
-        0.08 and 0.008): θ is regressed on Ψ, which depends on the past
-        estimates of (Ã, C̃).
+        slowest time constants, longer with noise. Default 0.002 for
+        ``'iv'`` (unbiased, so a long memory pays), 0.4 otherwise.
+    bd_forgetting : float, optional
+        β of (20), the same for (B̃, D). The paper takes it smaller than α
+        (0.08 and 0.008). Default 0.02 for ``'iv'`` (θ is regressed on Ψ,
+        built from the past estimates of (Ã, C̃), which a longer memory
+        would mix in), 0.08 otherwise.
     selector : array_like, shape (order, horizon * n_outputs), optional
         H, which fixes the state basis (``T = H O_f``, applied to the scaled
         ``p̂`` when ``scale_filters``). Default: uniform random on [-1, 1]
@@ -169,9 +199,13 @@ class AdaptiveIdentifier:
     hold : {'foh', 'zoh'}
         Inter-sample behaviour of u and y: linear (first-order hold) or
         constant (zero-order hold).
-    method : {'ls', 'ode'}
-        ``'ls'``: exact exponentially weighted least squares (information
-        form, Cholesky solves). ``'ode'``: Euler integration (semi-implicit:
+    method : {'iv', 'ls', 'ode'}
+        ``'iv'`` (default): the regression (8) by instrumental variables built
+        from the input only (consistent under output noise; see
+        ``docs/seed000.md``), (16) by least squares. ``'ls'``: the paper's
+        estimator, exact exponentially weighted least squares (information
+        form, Cholesky solves; biased under output noise). ``'ode'``: Euler
+        integration (semi-implicit:
         the downdate in Sherman-Morrison form, so that P stays positive
         definite) of the paper's (11)-(12) and (19)-(20), for comparison; it
         converges much more slowly (see ``docs/seed000.md``).
@@ -203,6 +237,17 @@ class AdaptiveIdentifier:
         ``'numpy'`` runs the plain reference loop (slow; for verification).
     input_names, output_names : sequence of str, optional
         Channel names of the model.
+    instrument_poles : float or sequence of complex, optional
+        ``'iv'``: poles of the second state-variable filter that makes
+        instruments from the input (one negative number repeated ``horizon``
+        times, or any number ``m`` of poles with ``m * n_inputs >= order``).
+        Default 0.25 times ``filter_poles``. Must differ from the filter
+        poles.
+    max_gap : float, optional
+        An interval between samples longer than this is a gap: the filters
+        restart at the new sample (held signals over a gap are not data) and
+        (14) restarts; the information decays by ``e^{-α h}``. Default ten
+        filter time constants, ``10 / |d(0)|^{1/f}`` (2 s for poles at -5).
 
     Attributes
     ----------
@@ -230,11 +275,12 @@ class AdaptiveIdentifier:
     """
 
     def __init__(self, order, n_inputs, n_outputs, horizon=None, filter_poles=-5.0,
-                 forgetting=0.4, bd_forgetting=0.08, selector=None, seed=0, *, dt=None,
-                 hold="foh", method="ls", scale_filters=True, refresh_every=50,
+                 forgetting=None, bd_forgetting=None, selector=None, seed=0, *, dt=None,
+                 hold="foh", method="iv", scale_filters=True, refresh_every=50,
                  bd_gate=1e-2, max_condition=1e10, initial_covariance=None,
                  bd_initial_covariance=None, ode_trace_bound=1e8, history=0,
-                 engine="numba", input_names=None, output_names=None):
+                 engine="numba", input_names=None, output_names=None,
+                 instrument_poles=None, max_gap=None):
         n = check_int(order, "order")
         nu = check_int(n_inputs, "n_inputs")
         ny = check_int(n_outputs, "n_outputs")
@@ -248,12 +294,28 @@ class AdaptiveIdentifier:
                              f"i.e. horizon >= {-(-n // ny) + 1}")
         self._n, self._nu, self._ny, self._f = n, nu, ny, f
         self._poles = _filter_poles(filter_poles, f)
-        self._alpha = _positive(forgetting, "forgetting")
-        self._beta = _positive(bd_forgetting, "bd_forgetting")
+        if instrument_poles is None:
+            self._ipoles = self._poles * _INSTRUMENT_POLE_RATIO
+        else:
+            self._ipoles = _filter_poles(instrument_poles, f if isinstance(
+                instrument_poles, numbers.Number) else None, "instrument_poles")
+        if self._ipoles.size == f and np.allclose(np.sort_complex(self._ipoles),
+                                                  np.sort_complex(self._poles)):
+            raise SubidError("instrument_poles equal the filter poles: the instruments "
+                             "would repeat the filtered inputs; choose slower poles, e.g. "
+                             f"{float(np.real(self._poles[0])) * _INSTRUMENT_POLE_RATIO:g}")
+        if self._ipoles.size * nu < n:
+            raise SubidError(f"instrument_poles: {self._ipoles.size} poles give "
+                             f"{self._ipoles.size * nu} instruments beyond the filtered "
+                             f"inputs; the order {n} needs at least {-(-n // nu)} poles")
+        alpha0, beta0 = _DEFAULT_FORGETTING.get(method, (0.4, 0.08))
+        self._alpha = alpha0 if forgetting is None else _positive(forgetting, "forgetting")
+        self._beta = beta0 if bd_forgetting is None else _positive(bd_forgetting,
+                                                                     "bd_forgetting")
         if hold not in ("foh", "zoh"):
             raise SubidError(f"hold must be 'foh' or 'zoh', got {hold!r}")
-        if method not in ("ls", "ode"):
-            raise SubidError(f"method must be 'ls' or 'ode', got {method!r}")
+        if method not in ("iv", "ls", "ode"):
+            raise SubidError(f"method must be 'iv', 'ls' or 'ode', got {method!r}")
         if engine not in ("numba", "numpy"):
             raise SubidError(f"engine must be 'numba' or 'numpy', got {engine!r}")
         self._hold, self._method, self._engine = hold, method, engine
@@ -262,7 +324,7 @@ class AdaptiveIdentifier:
         self._max_cond = _positive(max_condition, "max_condition")
         if self._max_cond <= 1:
             raise SubidError(f"max_condition must exceed 1, got {max_condition!r}")
-        default_cov = 1e12 if method == "ls" else 1.0
+        default_cov = 1.0 if method == "ode" else 1e12
         self._p0 = default_cov if initial_covariance is None else \
             _positive(initial_covariance, "initial_covariance")
         self._q0 = default_cov if bd_initial_covariance is None else \
@@ -288,15 +350,17 @@ class AdaptiveIdentifier:
         self._input_names = None if input_names is None else tuple(input_names)
         self._output_names = None if output_names is None else tuple(output_names)
         # filter: d(s) = prod(s - pole); time scale ω = |d(0)|^(1/f)
-        coeffs = np.real(np.poly(self._poles))          # [1, a_{f-1}, ..., a_0]
-        self._omega = float(np.abs(np.prod(self._poles)) ** (1.0 / f)) if self._scale else 1.0
-        scaled = coeffs[1:] / self._omega ** np.arange(1, f + 1)   # â_{f-1}, ..., â_0
-        Lc = np.zeros((f, f))
-        Lc[:-1, 1:] = np.eye(f - 1)
-        Lc[-1, :] = -scaled[::-1]                        # [-â_0, ..., -â_{f-1}]
-        self._Af = self._omega * Lc
-        self._Bf = np.zeros((f, 1))
-        self._Bf[-1, 0] = self._omega
+        self._Af, self._Bf, self._omega = _companion(self._poles, self._scale)
+        # instrument filter (method 'iv'): inputs only, its own poles
+        self._Ai, self._Bi, _ = _companion(self._ipoles, True)
+        # steady states for a constant input (first state only, e_1 * dc)
+        self._dcF = float(-np.linalg.solve(self._Af, self._Bf)[0, 0])
+        self._dcI = float(-np.linalg.solve(self._Ai, self._Bi)[0, 0])
+        wf = float(np.abs(np.prod(self._poles)) ** (1.0 / f))
+        self._max_gap = 10.0 / wf if max_gap is None else _positive(max_gap, "max_gap")
+        # after a gap the filters' initial-condition transient (~ t^(f-1) e^{-wf t})
+        # is below 1e-9 of its start after max(30, 6 f) / wf
+        self._settle = max(30.0, 6.0 * f) / wf
         self._step_cache: dict = {}
         self._t_origin = 0.0     # time of the sample with index _k_origin when t is None
         self._k_origin = 0
@@ -309,6 +373,8 @@ class AdaptiveIdentifier:
         history."""
         n, nu, ny, f = self._n, self._nu, self._ny, self._f
         d, dp, dth = n + f * nu, f * ny, n + n * nu + ny * nu
+        mi = self._ipoles.size
+        dz = (f + mi) * nu + n
         layout = [("fst", (_k.N_FST,)), ("prev_u", (nu,)), ("prev_y", (ny,)),
                   ("zp", (f, ny)), ("zq", (f, nu)),
                   ("R", (d, d)),        # information matrix of (8) ('ode': P)
@@ -319,7 +385,13 @@ class AdaptiveIdentifier:
                   ("theta", (1, dth)),  # [x̃(t_g); vec B̃; vec D]
                   ("Am", (n, n)), ("Cm", (ny, n)), ("Bm", (n, nu)), ("Dm", (ny, nu)),
                   ("Apsi", (n, n)), ("Cpsi", (ny, n)),
-                  ("Psi", (ny, n + n * nu))]   # [Ξ, Ψ]
+                  ("Psi", (ny, n + n * nu)),   # [Ξ, Ψ]
+                  ("zr", (mi, nu)),     # instrument filter ('iv')
+                  ("xi", (1, n)),       # auxiliary-model instrument ('iv')
+                  ("Cz", (dz, n)),      # IV cross matrix sum w ζ φ^T, first n columns
+                                        # (the others are columns of Zz) ('iv')
+                  ("Gz", (dp, dz)),     # S_ζ - M Cz^T ('iv')
+                  ("Zz", (dz, dz))]     # sum w ζ ζ^T, the IV weighting ('iv')
         self._buf = np.zeros(sum(math.prod(shape) for _, shape in layout))
         st = {}
         off = 0
@@ -332,9 +404,12 @@ class AdaptiveIdentifier:
         st["ist"] = ist
         st["fst"][_k.FST["scale_M"]] = st["fst"][_k.FST["scale_theta"]] = 1.0
         st["fst"][_k.FST["res_ref"]] = 1e300
-        if self._method == "ls":
+        st["fst"][_k.FST["t_resume"]] = -1e300     # no gap yet
+        if self._method != "ode":
             st["R"][:] = np.eye(d) / self._p0
             st["Rt"][:] = np.eye(dth) / self._q0
+            st["Cz"][:n] = np.eye(n) / self._p0
+            st["Zz"][:] = np.eye(dz) / self._p0
         else:
             st["R"][:] = np.eye(d) * self._p0
             st["Rt"][:] = np.eye(dth) * self._q0
@@ -343,7 +418,7 @@ class AdaptiveIdentifier:
         self._uniform = None      # discretisation tables for the constructor's dt
 
     _ORDER = ("ist", "fst", "prev_u", "prev_y", "zp", "zq", "R", "G", "M", "Rt", "g",
-              "theta", "Am", "Cm", "Bm", "Dm", "Apsi", "Cpsi", "Psi")
+              "theta", "Am", "Cm", "Bm", "Dm", "Apsi", "Cpsi", "Psi", "zr", "xi", "Cz", "Gz", "Zz")
 
     # ------------------------------------------------------------ properties
     @property
@@ -368,9 +443,15 @@ class AdaptiveIdentifier:
 
     def _sym(self, name: str) -> np.ndarray:
         R = self._st[name]
-        if self._method == "ls":      # the kernel updates the lower triangle only
+        if self._method != "ode":     # the kernel updates the lower triangle only
             return np.tril(R) + np.tril(R, -1).T
         return R
+
+    def _iv_cross(self) -> np.ndarray:
+        """The IV cross matrix ``Σ w ζ φ^T`` (up to the deferred factor): the
+        stored first n columns, then the q̂ columns of Z."""
+        Z = self._sym("Zz")
+        return np.hstack([self._st["Cz"], Z[:, :self._f * self._nu]])
 
     def information_condition(self) -> tuple[float, float]:
         """Condition numbers of the two normal matrices as updated (without
@@ -379,6 +460,12 @@ class AdaptiveIdentifier:
         In ``'ode'`` mode those of P and Q."""
         out = []
         for name, skip in (("R", 0), ("Rt", self._n)):
+            if name == "R" and self._method == "iv":
+                # the IV equations: condition of the cross matrix Cz (the
+                # windup bound applies to it, see _adaptive_kernel._solve_iv)
+                sv = np.linalg.svd(self._iv_cross(), compute_uv=False)
+                out.append(float(sv[0] / sv[-1]) if sv[-1] > 0 else math.inf)
+                continue
             ev = np.linalg.eigvalsh(self._sym(name)[skip:, skip:])
             out.append(float(ev[-1] / ev[0]) if ev[0] > 0 else math.inf)
         return out[0], out[1]
@@ -399,12 +486,17 @@ class AdaptiveIdentifier:
         deficient), ``psi_rejected`` (refreshes whose estimate was not used
         for Ψ), ``shift_failed`` (refreshes where (13) was rank deficient),
         ``cholesky_failed``, ``bound_hits`` (``'ode'``: steps with suspended
-        forgetting) and ``selector``.
+        forgetting), ``gaps`` and ``max_gap``, ``selector``, ``bd_elapsed``
+        (time since part 2 started), ``converged`` and ``convergence``
+        (``'converged'`` or the reason it is not: part 2 has not started, or
+        the latest (Ã, C̃) failed the gate or the Hurwitz test). A model that
+        is not converged also issues a
+        :class:`~subid.errors.NotConvergedWarning`.
         """
         st = self._st
         ist = st["ist"]
         cond, bd_cond = self.information_condition()
-        ls = self._method == "ls"
+        ls = self._method != "ode"
         info = {
             "method": "seed000_adaptive",
             "samples": self.n_samples,
@@ -430,11 +522,43 @@ class AdaptiveIdentifier:
             "shift_failed": int(ist[_k.IST["shift_failed"]]),
             "cholesky_failed": int(ist[_k.IST["chol_failed"]]),
             "bound_hits": int(ist[_k.IST["bound_hits"]]),
+            "gaps": int(ist[_k.IST["gaps"]]),
+            "max_gap": self._max_gap,
             "selector": np.array(self._H),
         }
+        info["bd_elapsed"] = (self.t - info["bd_start_time"]) if info["bd_started"] else 0.0
+        reason = self._convergence(info)
+        info["converged"] = reason is None
+        info["convergence"] = "converged" if reason is None else reason
+        if reason is not None:
+            warnings.warn(f"AdaptiveIdentifier: the model is not converged: {reason}",
+                          NotConvergedWarning, stacklevel=2)
         return StateSpace(st["Am"], st["Bm"], st["Cm"], st["Dm"], 0.0,
                           input_names=self._input_names, output_names=self._output_names,
                           info=info)
+
+    def _convergence(self, info: dict):
+        """None if the current model passes the convergence criteria, else
+        the reason (a sentence). Criteria: (B̃, D) estimation has started;
+        the latest (Ã, C̃) passed the test that starts it (shift residual of
+        (13) below the gate or at its noise floor, Ã Hurwitz). How long
+        (B̃, D) have been estimated is reported (``bd_elapsed``), to compare
+        with their memory ``1/bd_forgetting``."""
+        if not self.n_samples:
+            return "no samples processed yet"
+        res = info["shift_residual"]
+        if not info["bd_started"]:
+            return ("the (B, D) stage has not started, so B and D are not estimated (zero): "
+                    f"the relative residual of the shift equation (13) is {res:.3g} "
+                    f"(gate {self._gate:g}) or the estimated A is not Hurwitz. Give it more "
+                    "data or a richer input" + (
+                        "; with output noise use method='iv' (the default), which is "
+                        "consistent" if self._method != "iv" else
+                        "; with output noise, a longer memory (smaller forgetting)"))
+        if self._st["ist"][_k.IST["rejected"]]:
+            return (f"the latest (A, C) estimate failed the convergence test (shift residual "
+                    f"{res:.3g}, or A not Hurwitz); B and D come from earlier estimates")
+        return None
 
     def toeplitz(self) -> np.ndarray:
         """T_f of (3) for the current estimate, in the filter coordinates
@@ -551,28 +675,39 @@ class AdaptiveIdentifier:
 
     def _tables(self, steps: np.ndarray):
         """Discretisation tables for the distinct step lengths ``steps``."""
-        f = self._f
+        f, mi = self._f, self._ipoles.size
         K = steps.shape[0]
         Fphi = np.empty((K, f, f))
         Fg0 = np.empty((K, f))
         Fg1 = np.empty((K, f))
+        Iphi = np.zeros((K, mi, mi))
+        Ig0 = np.zeros((K, mi))
+        Ig1 = np.zeros((K, mi))
+        iv = self._method == "iv"
+
+        def blocks(A, B, hs):
+            Ph, G1, G2 = expm_blocks(A, B, hs, self._hold)
+            g0 = G1[:, :, 0] - G2[:, :, 0] if G2 is not None else G1[:, :, 0]
+            g1 = G2[:, :, 0] if G2 is not None else np.zeros_like(g0)
+            return Ph, g0, g1
+
         missing = [i for i, h in enumerate(steps) if float(h) not in self._step_cache]
         if missing:
-            Ph, G1, G2 = expm_blocks(self._Af, self._Bf, steps[missing], self._hold)
+            F = blocks(self._Af, self._Bf, steps[missing])
+            I = blocks(self._Ai, self._Bi, steps[missing]) if iv else None
             for j, i in enumerate(missing):
-                g0 = G1[j, :, 0] - G2[j, :, 0] if G2 is not None else G1[j, :, 0]
-                g1 = G2[j, :, 0] if G2 is not None else np.zeros(f)
-                entry = (Ph[j], g0, g1)
+                entry = (F[0][j], F[1][j], F[2][j]) + (
+                    (I[0][j], I[1][j], I[2][j]) if iv else (Iphi[i], Ig0[i], Ig1[i]))
                 if len(self._step_cache) < _STEP_CACHE:
                     self._step_cache[float(steps[i])] = entry
-                Fphi[i], Fg0[i], Fg1[i] = entry
+                Fphi[i], Fg0[i], Fg1[i], Iphi[i], Ig0[i], Ig1[i] = entry
         for i, h in enumerate(steps):
             entry = self._step_cache.get(float(h))
             if entry is not None:
-                Fphi[i], Fg0[i], Fg1[i] = entry
+                Fphi[i], Fg0[i], Fg1[i], Iphi[i], Ig0[i], Ig1[i] = entry
         lamM = np.exp(-self._alpha * steps)
         lamT = np.exp(-self._beta * steps)
-        return Fphi, Fg0, Fg1, lamM, lamT
+        return Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, lamM, lamT
 
     def update(self, u, y=None, t=None) -> "AdaptiveIdentifier":
         """Process one sample or a chunk of samples.
@@ -654,14 +789,16 @@ class AdaptiveIdentifier:
         return self
 
     def _call(self, T, U, Y, idx, steps, tables, cache) -> bool:
-        Fphi, Fg0, Fg1, lamM, lamT = tables
+        Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, lamM, lamT = tables
         st = self._st
         par = np.array([self._omega, self._alpha, self._beta, self._max_cond,
-                        self._trace_bound, self._gate])
-        ipar = np.array([self._refresh, self._method == "ode", self._hold == "foh"],
-                        dtype=np.int64)
+                        self._trace_bound, self._gate, self._max_gap, self._dcF, self._dcI,
+                        self._settle])
+        ipar = np.array([self._refresh, self._method == "ode", self._hold == "foh",
+                         self._method == "iv"], dtype=np.int64)
         fn = _k.kernel if self._engine == "numba" else _k.reference
-        return bool(fn(T, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, self._H, par, ipar,
+        return bool(fn(T, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1,
+                       self._H, par, ipar,
                        *(st[k] for k in self._ORDER), *cache, st["hist"], self._buf))
 
     def _psi_cache(self, K: int):
@@ -697,6 +834,8 @@ class AdaptiveIdentifier:
             "max_condition": self._max_cond, "initial_covariance": self._p0,
             "bd_initial_covariance": self._q0, "ode_trace_bound": self._trace_bound,
             "history": self._hist_cap, "engine": self._engine,
+            "instrument_poles": [[float(p.real), float(p.imag)] for p in self._ipoles],
+            "max_gap": self._max_gap,
             "input_names": None if self._input_names is None else list(self._input_names),
             "output_names": None if self._output_names is None else list(self._output_names),
             "t_origin": self._t_origin, "k_origin": self._k_origin,
@@ -738,7 +877,9 @@ class AdaptiveIdentifier:
                       bd_initial_covariance=s["bd_initial_covariance"],
                       ode_trace_bound=s["ode_trace_bound"], history=s["history"],
                       engine=s["engine"], input_names=s["input_names"],
-                      output_names=s["output_names"])
+                      output_names=s["output_names"],
+                      instrument_poles=[complex(re, im) for re, im in s["instrument_poles"]],
+                      max_gap=s["max_gap"])
             t_origin, k_origin = float(s["t_origin"]), int(s["k_origin"])
         except CheckpointError:
             raise

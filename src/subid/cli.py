@@ -47,7 +47,7 @@ import numpy as np
 from ._selection import describe as describe_selection
 from ._files import atomic_directory, atomic_write, write_bytes
 from ._progress import on_terminal, progress_bar
-from .errors import DataError, FileReadError, OrderError, SubidError
+from .errors import DataError, FileReadError, NotConvergedWarning, OrderError, SubidError
 
 __all__ = ["main", "METHODS", "MethodSpec", "MethodUnavailableError", "available_methods"]
 
@@ -446,6 +446,18 @@ def _warnings_to_log():
         if text not in seen:
             seen.add(text)
             log.warning("%s", text)
+
+
+def _convergence_status(model) -> str:
+    """'yes' or 'NO: why' from an online model's info (``converged`` /
+    ``convergence`` of the adaptive identifier, ``bd_fallback`` of the
+    recursive one)."""
+    info = model.info
+    if info.get("converged") is False:
+        return f"NO: {info.get('convergence')}"
+    if info.get("bd_fallback"):
+        return f"NO: {info['bd_fallback']} (B, D from the projected data equation)"
+    return "yes"
 
 
 def _default_detrend(spec) -> str:
@@ -946,7 +958,9 @@ class _Tracker:
 
     def snapshot(self, k: int) -> None:
         try:
-            model = _named(self.ident.model, self.data)
+            with warnings.catch_warnings():       # intermediate models: the final one warns
+                warnings.simplefilter("ignore", NotConvergedWarning)
+                model = _named(self.ident.model, self.data)
             poles = model.poles()
             values, names = _parameters(model, self.dt_hint)
         except SubidError as exc:
@@ -1146,6 +1160,12 @@ def track(data, inputs, outputs, dt, time_column, delimiter, detrend, method_nam
     model_path = os.path.join(out, "model.json")
     history_path = os.path.join(out, "history.npz")
     report_path = os.path.join(out, "report.html")
+    # the converged fit: the final model on the last third of the record (the
+    # part an online estimate that has converged should explain)
+    tail = work[2 * n // 3:] if n >= 3 else work
+    fit_tail = report.evaluate(model, tail)["fit_estimation"]
+    status = _convergence_status(model)
+    model.info["fit_last_third"] = None if fit_tail is None else [float(v) for v in fit_tail]
     result = report.evaluate(model, work)
     html = None
     if write_report:
@@ -1154,7 +1174,9 @@ def track(data, inputs, outputs, dt, time_column, delimiter, detrend, method_nam
             frequency_unit=frequency_unit, history=history, seconds={spec.name: seconds},
             notes=notes + [f"Samples {start}..{n} processed in this run"
                            + (f" (resumed from {resume})" if resume else "") +
-                           f"; final checkpoint {final_ckpt}. Fit % is on the whole record."],
+                           f"; final checkpoint {final_ckpt}. Fit % is on the whole record; "
+                           f"on its last third (the converged fit): {_fmt_fit(fit_tail)}. "
+                           f"Convergence: {status}."],
             command=_command_line(), source=data)
     # The final outputs replace the folder as a whole (old run's or new run's,
     # never a mix); the checkpoints written during the run are carried over.
@@ -1170,8 +1192,9 @@ def track(data, inputs, outputs, dt, time_column, delimiter, detrend, method_nam
             f"data        {data}: {n} samples ({start} already seen, {n - start} processed now)",
             f"method      {spec.name} ({spec.attribute})",
             f"order       {model.order}",
-            f"fit %       {_fmt_fit(result['fit_estimation'])} on the whole record "
-            f"({', '.join(work.output_names)})",
+            f"fit %       {_fmt_fit(result['fit_estimation'])} on the whole record, "
+            f"{_fmt_fit(fit_tail)} on its last third ({', '.join(work.output_names)})",
+            f"converged   {status}",
             f"poles       {_fmt_poles(result['poles'])}",
             f"stable      {'yes' if result['stable'] else 'NO'}",
             f"snapshots   {len(history['sample'])}",

@@ -22,6 +22,7 @@ __all__ = [
     "NoiseModelWarning",
     "FileWriteError",
     "ResourceLimitError",
+    "NotConvergedWarning",
 ]
 
 
@@ -131,3 +132,9 @@ class NoiseModelWarning(UserWarning):
     """A noise model (Kalman gain, innovation covariance) is missing, dropped or
     could not be estimated, and a computation falls back to the deterministic
     model (e.g. prediction by simulation)."""
+
+
+class NotConvergedWarning(UserWarning):
+    """An online identifier's current model is not (yet) a converged estimate:
+    a stage has not started, or its convergence test fails. ``model.info``
+    says which (``converged``, ``convergence``)."""

@@ -12,11 +12,27 @@ i.e. ``R_new^T R_new = λ R^T R + h h^T``: the square-root (information) form
 of the weighted data correlation, which never squares the condition number.
 The model is computed on demand from ``R`` through exactly the code path of
 the batch :func:`subid.ls_subspace` (eq. (23) or (28), Λ-fixed basis, A and C
-by shift invariance), with B and D from the projected data equation
-(``bd_method='projection'``, which needs the statistic only). So with
-forgetting 1 it equals the batch estimate on the same data, and the state
-basis stays the one fixed by Λ whatever the data: the property that makes the
-method usable for tracking and switched systems.
+by shift invariance). So with forgetting 1, A and C equal the batch estimate
+on the same data, and the state basis stays the one fixed by Λ whatever the
+data: the property that makes the method usable for tracking and switched
+systems.
+
+B, D and the current state come, by default (``bd_method='regression'``),
+from the output-error regression of the batch method
+(:func:`subid._regression.fit_b_d_x0`: ``y(t) = C S(t) [x0; vec B] +
+(u(t)^T ⊗ I) vec D``, ``S(t+1) = A S(t) + [0, u(t)^T ⊗ I]``) made recursive:
+its rows are reduced into a triangular factor by the same Givens rotations
+and forgetting as the Hankel data. The sensitivity S is propagated with the
+model's (A, C), refreshed every ``refresh_every`` samples; when they change
+by more than ``restart_tolerance`` (relative) since the last refresh (start
+up, a switch) the regression restarts with ``S = [I, 0]``, a new x0. Exact
+on noise-free data (equal to the batch model to rounding); with noise the
+batch regression uses the final (A, C) over the whole record, which no
+bounded-memory recursion can, so they differ by the drift of (A, C) over the
+regression's memory. ``bd_method='projection'`` uses the projected data
+equation on the statistic instead (the former default; it equals the batch
+``bd_method='projection'`` exactly, but is much less accurate on some real
+data: CD_player_arm, docs/seed000.md).
 
 No SVD is computed, memory is fixed (``R`` and the last ``2*horizon``
 samples), and the per-sample update runs in a compiled kernel.
@@ -26,16 +42,18 @@ from __future__ import annotations
 
 import math
 import numbers
+import warnings
 
 import numba
 import numpy as np
 
 from ._checkpoint import load_state, require, save_state
 from ._hankel import HankelFactor, hankel_chunk
-from ._regression import fit_b_d_projection
-from ._subspace import check_excitation, default_horizon, min_samples
+from ._regression import b_d_x0_rows, fit_b_d_projection, solve_b_d_x0
+from ._subspace import check_excitation, default_horizon, min_samples, normalize_channels
 from ._validation import as_signal, check_dt, check_int
-from .errors import CheckpointError, DataError, OrderError, SubidError, TooFewSamplesError
+from .errors import (CheckpointError, DataError, NotConvergedWarning, OrderError, SubidError,
+                     TooFewSamplesError)
 from . import noise_model
 from .ls_subspace import check_options, check_selector, gamma_from_factor, random_selector
 from .model import StateSpace
@@ -43,6 +61,7 @@ from .model import StateSpace
 __all__ = ["RecursiveSubspace"]
 
 _CHUNK = 8192
+_FIRST_REFRESH = 50     # first refresh of the B, D regression's (A, C), then doubling
 
 
 @numba.njit(cache=True, nogil=True)
@@ -124,6 +143,19 @@ class RecursiveSubspace:
     seed : int
     instrument_weighting, power_iterations, feedthrough
         As in :func:`subid.ls_subspace`.
+    bd_method : {'regression', 'projection'}
+        How B, D (and the state) are estimated: the recursive output-error
+        regression (default; see the module notes) or the projected data
+        equation on the statistic.
+    refresh_every : int, optional
+        ``'regression'``: samples between refreshes of the (A, C) that
+        propagate the regression's sensitivity (after refreshes at 50, 100,
+        200, ... samples below it, so that the regression starts early). A
+        refresh costs about one model computation. Default: a quarter of the
+        memory ``1 / (1 - forgetting)``, within [50, 2000].
+    restart_tolerance : float
+        ``'regression'``: relative change of (A, C) between two refreshes
+        above which the regression restarts (start-up, switches).
     dt : float
         Sampling period of the data (and of ``model``).
     history_size : int, optional
@@ -159,12 +191,13 @@ class RecursiveSubspace:
     """
 
     _KIND = "subid.RecursiveSubspace"
-    _VERSION = 1
+    _VERSION = 2      # 2: the recursive B, D regression
 
     def __init__(self, order, n_inputs, n_outputs, horizon=None, forgetting=1.0,
                  instruments="past", selector=None, seed=0, *, instrument_weighting=True,
-                 power_iterations=2, feedthrough=True, dt=1.0, history_size=None,
-                 history_stride=1000, input_names=None, output_names=None):
+                 power_iterations=8, feedthrough=True, dt=1.0, history_size=None,
+                 history_stride=1000, input_names=None, output_names=None,
+                 bd_method="regression", refresh_every=None, restart_tolerance=1.0):
         self.order = check_int(order, "order")
         self.n_inputs = check_int(n_inputs, "n_inputs")
         self.n_outputs = check_int(n_outputs, "n_outputs")
@@ -213,6 +246,31 @@ class RecursiveSubspace:
         self._hist_sample = np.zeros(0, dtype=np.int64)
         self._hist_poles = np.zeros((0, self.order), dtype=complex)
         self._model = None
+        if bd_method not in ("regression", "projection"):
+            raise SubidError(f"bd_method must be 'regression' or 'projection', got "
+                             f"{bd_method!r}")
+        self.bd_method = bd_method
+        if refresh_every is None:      # a quarter of the memory, within [50, 2000]
+            memory = math.inf if self.forgetting == 1.0 else 1.0 / (1.0 - self.forgetting)
+            refresh_every = int(min(2000, max(_FIRST_REFRESH, memory / 4)))
+        self.refresh_every = check_int(refresh_every, "refresh_every")
+        if isinstance(restart_tolerance, bool) or not isinstance(restart_tolerance,
+                                                                 numbers.Real) \
+                or not (math.isfinite(restart_tolerance) and restart_tolerance > 0):
+            raise SubidError(f"restart_tolerance must be a positive number, got "
+                             f"{restart_tolerance!r}")
+        self.restart_tolerance = float(restart_tolerance)
+        n, nu, ny = self.order, self.n_inputs, self.n_outputs
+        self._nbd = n + n * nu + (ny * nu if self.feedthrough else 0)   # x0, B, D
+        self._bd_R = np.zeros((self._nbd + 1, self._nbd + 1))
+        self._bd_S = np.zeros((n, n + n * nu))
+        self._bd_S_last = np.zeros((n, n + n * nu))
+        self._bd_A = np.zeros((n, n))
+        self._bd_C = np.zeros((ny, n))
+        self._bd_started = False
+        self._bd_start = 0            # sample index of x0 of the regression
+        self._bd_rows = 0.0           # effective number of samples in the regression
+        self._bd_restarts = 0
 
     # -- input ------------------------------------------------------------
     def __repr__(self) -> str:
@@ -259,13 +317,118 @@ class RecursiveSubspace:
         # validated: from here on the state changes
         start = 0
         n = u.shape[0]
+        regression = self.bd_method == "regression"
         while start < n:
             stop = n if self._history_size is None else min(n, start + self._to_snapshot())
+            if regression:
+                stop = min(stop, start + self._to_refresh())
             self._ingest(u[start:stop], y[start:stop])
+            if regression:
+                self._bd_feed(u[start:stop], y[start:stop])
+                if self._is_refresh_point():
+                    self._bd_refresh()
             start = stop
             if self._history_size is not None and self.n_samples % self._history_stride == 0:
                 self._snapshot()
         return self
+
+    # -- the recursive output-error regression of B, D, x0 -------------------
+    def _is_refresh_point(self) -> bool:
+        """Refresh points: _FIRST_REFRESH * 2^j below ``refresh_every`` (so
+        that the regression starts early), then the multiples of
+        ``refresh_every``."""
+        k, K = self.n_samples, self.refresh_every
+        if k <= 0:
+            return False
+        if k % K == 0:
+            return True
+        j = k // _FIRST_REFRESH
+        return k < K and k % _FIRST_REFRESH == 0 and j & (j - 1) == 0
+
+    def _to_refresh(self) -> int:
+        """Samples to the next refresh point (points: _FIRST_REFRESH * 2^j
+        below ``refresh_every``, then the multiples of ``refresh_every``)."""
+        k = self.n_samples
+        step = _FIRST_REFRESH
+        while step <= k and step < self.refresh_every:
+            step *= 2
+        nxt = step if step < self.refresh_every else (k // self.refresh_every + 1) \
+            * self.refresh_every
+        return nxt - k
+
+    def _bd_feed(self, u, y):
+        """Regression rows of the chunk (model (A, C) of the last refresh),
+        reduced into the factor by Givens rotations with the forgetting
+        (λ per sample: λ^(1/ny) per row)."""
+        if not self._bd_started:
+            return
+        A, C = self._bd_A, self._bd_C
+        T = u.shape[0]
+        if T > 1:
+            rows0, S = b_d_x0_rows(A, C, u[:-1], y[:-1], self._bd_S,
+                                   feedthrough=self.feedthrough)
+            givens_update(self._bd_R, rows0, self.forgetting ** (0.5 / self.n_outputs))
+        else:
+            S = self._bd_S
+        self._bd_S_last = S
+        rows1, S = b_d_x0_rows(A, C, u[-1:], y[-1:], S, feedthrough=self.feedthrough)
+        givens_update(self._bd_R, rows1, self.forgetting ** (0.5 / self.n_outputs))
+        self._bd_S = S
+        lam = self.forgetting
+        self._bd_rows = self._bd_rows * lam ** T + (
+            T if lam == 1.0 else (1 - lam ** T) / (1 - lam))
+
+    def _a_c(self):
+        """(A, C) of the current factor in the basis of Λ (raises SubidError
+        when the data do not yet determine them)."""
+        need = min_samples(self._depth, self.n_inputs, self.n_outputs)
+        if self.n_samples < need:
+            raise TooFewSamplesError("too few samples")
+        hf = self.factor()
+        check_excitation(hf, self.input_names, method="RecursiveSubspace")
+        core, su, sy = self._core(hf, "RecursiveSubspace")
+        A, _, C, _ = core.to_selector_basis(np.zeros((self.order, self.n_inputs)))
+        return A, C * sy[:, None]
+
+    def _core(self, hf, method):
+        """Seed 001 on the current factor as the batch method computes it: channels
+        normalised by their RMS, Λ acting on the user's units (``Λ (I ⊗ S)`` on the
+        normalised outputs). Returns ``(core, input_scale, output_scale)``."""
+        hf_n, su, sy = normalize_channels(hf, outputs=True)
+        core = gamma_from_factor(hf_n, self.horizon, self.order, [self.order],
+                                 instruments=self.instruments,
+                                 instrument_weighting=self.instrument_weighting,
+                                 selector=self._selector * np.tile(sy, self.horizon),
+                                 seed=self.seed, power_iterations=self.power_iterations,
+                                 method=method)
+        return core, su, sy
+
+    def _bd_refresh(self):
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                A, C = self._a_c()
+        except SubidError:
+            return
+        if not (np.isfinite(A).all() and np.isfinite(C).all()):
+            return
+        if self._bd_started:
+            change = (np.linalg.norm(A - self._bd_A) / max(np.linalg.norm(self._bd_A), 1e-300)
+                      + np.linalg.norm(C - self._bd_C) / max(np.linalg.norm(self._bd_C),
+                                                             1e-300))
+            if change <= self.restart_tolerance:
+                self._bd_A, self._bd_C = A, C
+                return
+        n = self.order
+        self._bd_A, self._bd_C = A, C
+        self._bd_R[:] = 0.0
+        self._bd_S = np.zeros((n, n + n * self.n_inputs))
+        self._bd_S[:, :n] = np.eye(n)
+        self._bd_S_last = self._bd_S.copy()
+        self._bd_started = True
+        self._bd_start = self.n_samples
+        self._bd_rows = 0.0
+        self._bd_restarts += 1
 
     def _to_snapshot(self) -> int:
         return self._history_stride - self.n_samples % self._history_stride
@@ -291,7 +454,9 @@ class RecursiveSubspace:
 
     def _snapshot(self):
         try:
-            poles = self.model.poles()
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", NotConvergedWarning)
+                poles = self.model.poles()
         except SubidError:
             return
         self._hist_sample = np.append(self._hist_sample, self.n_samples)
@@ -335,20 +500,45 @@ class RecursiveSubspace:
                                      f"needs at least {need} (horizon {self.horizon})")
         hf = self.factor()
         input_condition = check_excitation(hf, self.input_names, method=method)
-        core = gamma_from_factor(hf, self.horizon, self.order, [self.order],
-                                 instruments=self.instruments,
-                                 instrument_weighting=self.instrument_weighting,
-                                 selector=self._selector, seed=self.seed,
-                                 power_iterations=self.power_iterations, method=method)
-        B_q, D, reg = fit_b_d_projection(core.A_q, core.C_q, core.basis, core.L11, core.L_yu,
-                                         feedthrough=self.feedthrough)
-        A, B, C, _ = core.to_selector_basis(B_q)
+        core, su, sy = self._core(hf, method)
+        bd_method, reg, self._theta = "projection", {}, None
+        A, _, C, _ = core.to_selector_basis(np.zeros((self.order, self.n_inputs)))
+        C = C * sy[:, None]
+        reason = None
+        if self.bd_method == "regression":
+            if not self._bd_started:
+                reason = ("the B, D regression has not started (no refresh with a usable "
+                          "model yet)")
+            elif self._bd_rows * self.n_outputs < self._nbd:
+                reason = (f"the B, D regression has {self._bd_rows:.0f} samples, fewer than "
+                          f"its {self._nbd} unknowns")
+            else:
+                B, D, x0, theta, reg = solve_b_d_x0(
+                    self._bd_R, self.order, self.n_inputs, self.n_outputs,
+                    n_rows=self._bd_rows * self.n_outputs, feedthrough=self.feedthrough)
+                if reg["regression_rank_deficient"] or not np.isfinite(theta).all():
+                    reason = "the B, D regression is rank deficient"
+                else:
+                    bd_method, self._theta = "regression", theta
+                    reg.update(x0=x0, bd_start_sample=self._bd_start,
+                               bd_restarts=self._bd_restarts)
+            if reason is not None:
+                warnings.warn(f"{method}: {reason}; B and D come from the projected data "
+                              "equation (less accurate)", NotConvergedWarning, stacklevel=2)
+        if bd_method == "projection":
+            B_q, D, reg2 = fit_b_d_projection(core.A_q, core.C_q, core.basis, core.L11,
+                                              core.L_yu, feedthrough=self.feedthrough)
+            A, B, C, _ = core.to_selector_basis(B_q)
+            # from the normalised channels to the user's units
+            B, C, D = B / su, C * sy[:, None], D * sy[:, None] / su
+            reg = {**reg, **reg2}
         info = {"method": method, "order": self.order, "horizon": self.horizon,
                 "n_samples": self.n_samples, "forgetting": self.forgetting,
                 "effective_samples": self._weight, "input_condition": input_condition,
-                "bd_method": "projection",
+                "bd_method": bd_method, "bd_fallback": reason,
                 **core.info(self.instruments, self.instrument_weighting,
-                            self.power_iterations), **reg}
+                            self.power_iterations), **reg,
+                "selector": self._selector.copy()}
         self._model = StateSpace(A, B, C, D, self.dt, input_names=self.input_names,
                                  output_names=self.output_names, info=info)
         if self.instruments == "past":   # K, noise_cov from the running factor
@@ -359,10 +549,15 @@ class RecursiveSubspace:
     def state(self) -> np.ndarray:
         """State estimate at the latest sample, in the basis fixed by Λ.
 
-        From the last ``horizon`` samples, ``x̄(t-f+1) = Λ (y_f - H_f u_f)``
+        With the B, D regression: ``x(t) = S(t) [x0; vec B]``, the state of
+        the regression's output-error model at the latest sample. Otherwise
+        from the last ``horizon`` samples, ``x̄(t-f+1) = Λ (y_f - H_f u_f)``
         (seed 001, eq. (21)), then propagated through the model to time t.
         """
         model = self.model
+        if model.info["bd_method"] == "regression":
+            k = self.order + self.order * self.n_inputs
+            return self._bd_S_last @ self._theta[:k]
         f, ny, nu = self.horizon, self.n_outputs, self.n_inputs
         u_w, y_w = self._buf_u[-f:], self._buf_y[-f:]
         markov = model.markov(f)                       # D, CB, ..., C A^{f-2} B
@@ -397,8 +592,14 @@ class RecursiveSubspace:
             "n_samples": self.n_samples, "n_columns": self._n_columns, "weight": self._weight,
             "history_size": self._history_size, "history_stride": self._history_stride,
             "input_names": list(self.input_names), "output_names": list(self.output_names),
+            "bd_method": self.bd_method, "refresh_every": self.refresh_every,
+            "restart_tolerance": self.restart_tolerance, "bd_started": self._bd_started,
+            "bd_start": self._bd_start, "bd_rows": self._bd_rows,
+            "bd_restarts": self._bd_restarts,
         }
         arrays = {"R": self._R, "buf_u": self._buf_u, "buf_y": self._buf_y,
+                  "bd_R": self._bd_R, "bd_S": self._bd_S, "bd_S_last": self._bd_S_last,
+                  "bd_A": self._bd_A, "bd_C": self._bd_C,
                   "selector": self._selector, "hist_sample": self._hist_sample,
                   "hist_poles_re": self._hist_poles.real, "hist_poles_im": self._hist_poles.imag}
         save_state(path, self._KIND, self._VERSION, arrays, settings)
@@ -415,7 +616,16 @@ class RecursiveSubspace:
                       power_iterations=s["power_iterations"], feedthrough=s["feedthrough"],
                       dt=s["dt"], history_size=s["history_size"],
                       history_stride=s["history_stride"],
-                      input_names=s.get("input_names"), output_names=s.get("output_names"))
+                      input_names=s.get("input_names"), output_names=s.get("output_names"),
+                      bd_method=s["bd_method"], refresh_every=s["refresh_every"],
+                      restart_tolerance=s["restart_tolerance"])
+            for name in ("bd_R", "bd_S", "bd_S_last", "bd_A", "bd_C"):
+                ref = getattr(obj, "_" + name)
+                setattr(obj, "_" + name, require(arrays, path, name, ref.shape).copy())
+            obj._bd_started = bool(s["bd_started"])
+            obj._bd_start = int(s["bd_start"])
+            obj._bd_rows = float(s["bd_rows"])
+            obj._bd_restarts = int(s["bd_restarts"])
             m = obj._R.shape[0]
             obj._R = require(arrays, path, "R", (m, m)).copy()
             obj._buf_u = require(arrays, path, "buf_u").reshape(-1, obj.n_inputs).copy()
