@@ -5,7 +5,6 @@ import numpy as np
 import pytest
 
 import subid
-from subid import delay
 from subid.errors import DataError, ModelError, TooFewSamplesError
 
 

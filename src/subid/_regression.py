@@ -168,24 +168,54 @@ def qr_factor(A, C, u, y, S, *, n_x0, feedthrough, output_weights=None,
     C = np.ascontiguousarray(C)
     for start in range(0, N, _CHUNK):
         stop = min(start + _CHUNK, N)
-        uc = np.ascontiguousarray(u[start:stop])
-        rows, S = kernel(A, C, uc, S, n_x0)
-        T = stop - start
-        block = np.empty((T, ny, p + 1))
-        block[:, :, :q] = rows
-        if feedthrough:
-            # (u^T kron I_ny) vec(D): column j*ny + i multiplies D[i, j]
-            block[:, :, q:p] = _kron_u_identity(uc, ny)
-        block[:, :, p] = y[start:stop]
-        if output_weights is not None:
-            block *= output_weights[None, :, None]
-        R = scipy.linalg.qr(np.vstack([R, block.reshape(T * ny, p + 1)]), mode="r",
-                            check_finite=False)[0][: p + 1]
+        rows, S = regression_rows(A, C, u[start:stop], y[start:stop], S, n_x0=n_x0,
+                                  feedthrough=feedthrough, output_weights=output_weights,
+                                  kernel=kernel)
+        R = scipy.linalg.qr(np.vstack([R, rows]), mode="r", check_finite=False)[0][: p + 1]
     return R, S
+
+
+def regression_rows(A, C, u, y, S, *, n_x0, feedthrough, output_weights=None,
+                    kernel=sensitivity_rows):
+    """Rows ``[Phi(t), y(t)]`` of the regression for the samples of ``u, y``.
+
+    ``S`` is the sensitivity at the first sample. Row ``t * ny + i`` belongs to
+    output ``i`` at sample ``t`` (multiplied by ``output_weights[i]`` when given).
+    Shared by the QR path (:func:`qr_factor`) and the recursive regression of
+    :class:`subid.RecursiveSubspace`.
+
+    Returns
+    -------
+    rows : (T * ny, p + 1), S_end : sensitivity after the samples
+    """
+    T, nu = u.shape
+    ny = y.shape[1]
+    q = S.shape[1]
+    p = q + (ny * nu if feedthrough else 0)
+    uc = np.ascontiguousarray(u)
+    rows, S = kernel(np.ascontiguousarray(A), np.ascontiguousarray(C), uc, S, n_x0)
+    block = np.empty((T, ny, p + 1))
+    block[:, :, :q] = rows
+    if feedthrough:
+        # (u^T kron I_ny) vec(D): column j*ny + i multiplies D[i, j]
+        block[:, :, q:p] = _kron_u_identity(uc, ny)
+    block[:, :, p] = y
+    if output_weights is not None:
+        block *= output_weights[None, :, None]
+    return block.reshape(T * ny, p + 1), S
 
 
 def solve_qr_factor(R, n, nu, ny, *, estimate_x0, feedthrough, n_samples):
     """B, D, x0 and diagnostics from the triangular factor of the weighted rows."""
+    B, D, x0, _, diagnostics = solve_factor(R, n, nu, ny, estimate_x0=estimate_x0,
+                                            feedthrough=feedthrough, n_samples=n_samples)
+    return B, D, x0, diagnostics
+
+
+def solve_factor(R, n, nu, ny, *, estimate_x0, feedthrough, n_samples):
+    """:func:`solve_qr_factor` that also returns the parameter vector
+    ``theta = [x0; vec B; vec D]`` (``n_samples`` may be an effective count
+    under forgetting): ``(B, D, x0, theta, diagnostics)``."""
     N = n_samples
     nx, q, p = parameter_count(n, nu, ny, estimate_x0, feedthrough)
     if R.shape[0] < p + 1:
@@ -213,7 +243,7 @@ def solve_qr_factor(R, n, nu, ny, *, estimate_x0, feedthrough, n_samples):
         "regression_rank_deficient": deficient,
         "regression_path": "qr",
     }
-    return B, D, x0, diagnostics
+    return B, D, x0, theta, diagnostics
 
 
 def _kron_u_identity(u, ny):
@@ -665,64 +695,3 @@ def fit_b_d_x0_modal(A, C, u, y, *, feedthrough=True, estimate_x0=True, output_w
             total += float(np.sum((w @ g.T) ** 2))
         diagnostics["residual_rms"] = float(np.sqrt(total / (N_samples * ny)))
     return B, D, x0, diagnostics
-
-
-# ---------------------------------------------------------------------------
-# the same regression, recursively (subid.RecursiveSubspace)
-# ---------------------------------------------------------------------------
-def b_d_x0_rows(A, C, u, y, S, *, feedthrough=True, n_x0_cols=None, kernel=sensitivity_rows):
-    """Rows ``[C S(t), u(t)^T kron I_ny, y(t)]`` of the regression of
-    :func:`fit_b_d_x0` for one chunk, and the sensitivity after it.
-
-    The building block of the recursive form of :func:`fit_b_d_x0` (the rows
-    are reduced into a triangular factor sample by sample instead of all at
-    once); ``S`` is the sensitivity at the first sample of the chunk
-    (``[I_n, 0]`` at the start of the regression). Returns ``rows`` of shape
-    (T * ny, p + 1) and the sensitivity after the chunk.
-    """
-    n = A.shape[0]
-    T, nu = u.shape
-    ny = y.shape[1]
-    nx = n if n_x0_cols is None else n_x0_cols
-    q = nx + n * nu
-    p = q + (ny * nu if feedthrough else 0)
-    rows, S = kernel(np.ascontiguousarray(A), np.ascontiguousarray(C),
-                     np.ascontiguousarray(u), S, nx)
-    block = np.empty((T, ny, p + 1))
-    block[:, :, :q] = rows
-    if feedthrough:
-        block[:, :, q:p] = _kron_u_identity(u, ny)
-    block[:, :, p] = y
-    return block.reshape(T * ny, p + 1), S
-
-
-def solve_b_d_x0(R, n, nu, ny, *, n_rows, feedthrough=True, estimate_x0=True):
-    """B, D, x0 from the upper-triangular factor ``R`` of the rows of
-    :func:`b_d_x0_rows` (reduced by QR or Givens rotations): the solve of
-    :func:`fit_b_d_x0`, with the same column equilibration, rank decision and
-    diagnostics. ``n_rows``: the (effective) number of rows, for
-    ``residual_rms``."""
-    nx = n if estimate_x0 else 0
-    q = nx + n * nu
-    p = q + (ny * nu if feedthrough else 0)
-    scale = np.linalg.norm(R[:p, :p], axis=0)
-    scale[scale == 0] = 1.0
-    Rt = R[:p, :p] / scale
-    rhs = R[:p, p]
-    rcond = scipy.linalg.lapack.dtrcon(Rt, norm="1", uplo="U", diag="N")[0] if p else 1.0
-    deficient = bool(rcond < np.finfo(float).eps * p)
-    if deficient:
-        theta = scipy.linalg.lstsq(Rt, rhs, lapack_driver="gelsy", check_finite=False)[0]
-    else:
-        theta = scipy.linalg.solve_triangular(Rt, rhs, check_finite=False)
-    theta = theta / scale
-    x0 = theta[:n] if estimate_x0 else np.zeros(n)
-    B = theta[nx:q].reshape(nu, n).T
-    D = theta[q:p].reshape(nu, ny).T if feedthrough else np.zeros((ny, nu))
-    resid_norm = abs(R[p, p]) if R.shape[0] > p else 0.0
-    diagnostics = {
-        "residual_rms": float(resid_norm / np.sqrt(max(n_rows, 1.0))),
-        "regression_condition": float(1.0 / rcond) if rcond > 0 else float("inf"),
-        "regression_rank_deficient": deficient,
-    }
-    return B, D, x0, theta, diagnostics

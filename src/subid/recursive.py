@@ -49,7 +49,7 @@ import numpy as np
 
 from ._checkpoint import load_state, require, save_state
 from ._hankel import HankelFactor, hankel_chunk
-from ._regression import b_d_x0_rows, fit_b_d_projection, solve_b_d_x0
+from ._regression import fit_b_d_projection, regression_rows, solve_factor
 from ._subspace import check_excitation, default_horizon, min_samples, normalize_channels
 from ._validation import as_signal, check_dt, check_int
 from .errors import (CheckpointError, DataError, NotConvergedWarning, OrderError, SubidError,
@@ -365,13 +365,14 @@ class RecursiveSubspace:
         A, C = self._bd_A, self._bd_C
         T = u.shape[0]
         if T > 1:
-            rows0, S = b_d_x0_rows(A, C, u[:-1], y[:-1], self._bd_S,
-                                   feedthrough=self.feedthrough)
+            rows0, S = regression_rows(A, C, u[:-1], y[:-1], self._bd_S, n_x0=self.order,
+                                       feedthrough=self.feedthrough)
             givens_update(self._bd_R, rows0, self.forgetting ** (0.5 / self.n_outputs))
         else:
             S = self._bd_S
         self._bd_S_last = S
-        rows1, S = b_d_x0_rows(A, C, u[-1:], y[-1:], S, feedthrough=self.feedthrough)
+        rows1, S = regression_rows(A, C, u[-1:], y[-1:], S, n_x0=self.order,
+                                   feedthrough=self.feedthrough)
         givens_update(self._bd_R, rows1, self.forgetting ** (0.5 / self.n_outputs))
         self._bd_S = S
         lam = self.forgetting
@@ -513,9 +514,9 @@ class RecursiveSubspace:
                 reason = (f"the B, D regression has {self._bd_rows:.0f} samples, fewer than "
                           f"its {self._nbd} unknowns")
             else:
-                B, D, x0, theta, reg = solve_b_d_x0(
-                    self._bd_R, self.order, self.n_inputs, self.n_outputs,
-                    n_rows=self._bd_rows * self.n_outputs, feedthrough=self.feedthrough)
+                B, D, x0, theta, reg = solve_factor(
+                    self._bd_R, self.order, self.n_inputs, self.n_outputs, estimate_x0=True,
+                    n_samples=max(self._bd_rows, 1.0), feedthrough=self.feedthrough)
                 if reg["regression_rank_deficient"] or not np.isfinite(theta).all():
                     reason = "the B, D regression is rank deficient"
                 else:
