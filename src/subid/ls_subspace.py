@@ -171,7 +171,6 @@ def ls_subspace(data, order=None, horizon=None, instruments="past", selector=Non
         How the data are reduced (:mod:`subid.statistic`): QR factor of the
         Hankel matrix (accurate to rounding) or lagged products (25x faster,
         squares the condition number). ``'auto'``: QR up to 200,000 samples.
-
     refine : {None, 'pem'}
         ``'pem'``: refine the final subspace estimate by prediction-error
         minimisation (:func:`subid.pem`, default options) on the record.

@@ -113,15 +113,10 @@ def n4sid(data, order=None, horizon=None, *, weighting="cva", selection="cv",
         output, given the identified model.
     statistic : {'auto', 'qr', 'gram'}
         As in :func:`subid.ls_subspace`.
-
     refine : {None, 'pem'}
-        ``'pem'``: refine the final subspace estimate by prediction-error
-        minimisation (:func:`subid.pem`, default options) on the record.
+        As in :func:`subid.ls_subspace`.
     input_delay : int or sequence of int
-        Dead time of each input in samples (:func:`subid.estimate_delay`):
-        the model is identified from the delayed inputs and records the
-        delays in ``info['input_delay']``; ``simulate`` and ``freqresp``
-        honour them.
+        As in :func:`subid.ls_subspace`.
 
     Returns
     -------
