@@ -103,3 +103,31 @@ def test_absurd_sizes_are_order_errors_not_memory_errors(call):
     data = systems.simulate_data(systems.seed001_system(), 300, seed=0)
     with pytest.raises(errors.OrderError, match="at most"):
         call(data)
+
+
+def test_adaptive_model_before_any_data_is_an_error():
+    import subid
+    with pytest.raises(subid.errors.TooFewSamplesError, match="no samples yet"):
+        subid.AdaptiveIdentifier(2, 1, 1).model
+
+
+@pytest.mark.parametrize("method", ["ls_subspace", "moesp", "n4sid"])
+def test_data_whose_squares_overflow_are_named(method):
+    import subid
+    true = subid.systems.seed001_system()
+    d = subid.systems.simulate_data(true, 600, seed=1)
+    with pytest.raises(subid.errors.DataError, match="output y1 reaches .*overflow"):
+        getattr(subid, method)(subid.IOData(d.u, d.y * 1e155), 3, horizon=5)
+    big = getattr(subid, method)(subid.IOData(d.u, d.y * 1e17), 3, horizon=5)
+    assert subid.pole_error(big, true) < 1e-9          # large but representable: exact
+
+
+def test_ct_spacing_below_time_stamp_resolution_is_named():
+    import subid
+    ct = subid.StateSpace([[-1.0, 2.0], [-2.0, -1.0]], [[1.0], [0.5]], [[1.0, 0.0]], 0, dt=0)
+    t = 1e6 + np.arange(400) * 0.05
+    t[200] = t[199] + 1e-4
+    u = np.random.default_rng(0).standard_normal(400)
+    data = subid.IOData(u, ct.simulate(u, t=t - t[0]), t=t)
+    with pytest.raises(subid.errors.DataError, match="rows 199, 200.*Subtract the start time"):
+        subid.ct_subspace(data, 2)

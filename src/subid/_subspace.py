@@ -39,6 +39,10 @@ CONDITION_WARN = 1e7
 DEFAULT_HORIZON_UNKNOWN_ORDER = 10
 
 
+#: Largest magnitude of a channel the methods accept: its square must not overflow.
+HUGE_VALUE = 1e150
+
+
 def check_data(data, method: str) -> IOData:
     """The record a discrete-time method may use, or a clear error."""
     if not isinstance(data, IOData):
@@ -48,6 +52,16 @@ def check_data(data, method: str) -> IOData:
         raise DataError(f"{method} identifies a discrete-time model and needs uniformly "
                         "sampled data; these time stamps are non-uniform "
                         "(use a continuous-time method for them)")
+    for name, signal, names in (("input", data.u, data.input_names),
+                                ("output", data.y, data.output_names)):
+        peak = np.abs(signal).max(axis=0)
+        huge = np.flatnonzero(peak > HUGE_VALUE)
+        if huge.size:
+            k = int(huge[0])
+            raise DataError(f"{name} {names[k]} reaches {peak[k]:.3g}: squares and products "
+                            "of such values overflow double precision in the identification; "
+                            "express the channel in other units (divide it by a constant) "
+                            "and scale the model back")
     flat = [k for k, column in enumerate(data.y.T) if column.max() == column.min()]
     if flat:
         names = ", ".join(data.output_names[k] for k in flat)

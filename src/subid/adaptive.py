@@ -79,7 +79,8 @@ from ._checkpoint import load_state, require, save_state
 from ._simulate import expm_blocks
 from ._validation import as_signal, check_int, check_time_stamps
 from .data import IOData
-from .errors import CheckpointError, DataError, NotConvergedWarning, OrderError, SubidError
+from .errors import (CheckpointError, DataError, NotConvergedWarning, OrderError, SubidError,
+                     TooFewSamplesError)
 from .ls_subspace import random_selector
 from .model import StateSpace
 
@@ -492,7 +493,15 @@ class AdaptiveIdentifier:
         the latest (Ã, C̃) failed the gate or the Hurwitz test). A model that
         is not converged also issues a
         :class:`~subid.errors.NotConvergedWarning`.
+
+        Raises
+        ------
+        TooFewSamplesError
+            Before the first sample (there is no estimate, not a zero model).
         """
+        if self.n_samples == 0:
+            raise TooFewSamplesError("AdaptiveIdentifier has received no samples yet: there is "
+                                     "no estimate (call update(u, y, t) first)")
         st = self._st
         ist = st["ist"]
         cond, bd_cond = self.information_condition()

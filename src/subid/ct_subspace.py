@@ -216,6 +216,18 @@ def _check_data(data, method: str) -> IOData:
         names = ", ".join(data.output_names[k] for k in flat)
         raise DataError(f"output {names} is constant over the whole record: it carries no "
                         "information about the dynamics; drop that channel")
+    if data.n_samples > 1:
+        # a spacing near the rounding of the time stamps themselves is known to few digits,
+        # and every exact discretisation over it is wrong: say so instead of fitting noise
+        h = np.diff(data.t)
+        resolution = 1e-9 * float(np.abs(data.t).max())
+        k = int(np.argmin(h))
+        if h[k] <= resolution:
+            raise DataError(f"{method}: the time stamps {data.t[k]!r} and {data.t[k + 1]!r} "
+                            f"(rows {k}, {k + 1}) are {h[k]:.3g} apart, below the resolution "
+                            f"of time stamps of magnitude {np.abs(data.t).max():.3g} (about "
+                            "1e-9 of it): the interval is known to few digits. Subtract the "
+                            "start time, merge the two samples, or resample")
     return data
 
 
