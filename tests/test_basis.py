@@ -233,6 +233,7 @@ def test_sensitivity_rows_reproduce_a_simulation():
 
 def test_nonuniform_path_agrees_with_uniform_path_across_chunks(monkeypatch):
     monkeypatch.setattr(_ct_kernels, "_CHUNK", 37)
+    monkeypatch.setattr(_ct_kernels, "_MODAL_CHUNK", 41)
     bank = takenaka_malmquist([4.0, 9.0, 3 + 2j, 3 - 2j])
     F, g = bank.realization()
     t = np.arange(300) * 0.01

@@ -471,6 +471,8 @@ _CLUSTER_TOL = 1e-3
 _CLUSTER_Z_MAX = 2.0
 # Largest number of Taylor terms in N_c h before falling back.
 _TAYLOR_MAX = 40
+# Intervals per chunk of the modal filter bank (bounds its complex work space).
+_MODAL_CHUNK = 16384
 
 
 class ModalForm:
@@ -604,10 +606,12 @@ def modal_form(F: np.ndarray, h_max: float, *, clusters: bool = True):
 
 
 @numba.njit(cache=True)
-def _lagrange_coef(r, coef):  # pragma: no cover - compiled
-    """``coef[j, q]``: monomial coefficients of the Lagrange polynomials of nodes ``r``."""
+def _lagrange_coef(r, coef, poly):  # pragma: no cover - compiled
+    """``coef[j, q]``: monomial coefficients of the Lagrange polynomials of nodes ``r``.
+
+    ``poly`` is work space of length ``len(r)``.
+    """
     P = r.shape[0]
-    poly = np.empty(P)
     for q in range(P):
         poly[:] = 0.0
         poly[0] = 1.0
@@ -667,19 +671,20 @@ def _jtable(z, K, P, J):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True)
-def modal_loop(t, starts, order, lam, bounds, npow, terms, mirror, drive, xi0,
-               out):  # pragma: no cover - compiled
+def modal_loop(t, starts, order, lam, bounds, npow, terms, mirror, drive, d0, xi0,
+               out, a0):  # pragma: no cover - compiled
     """Fused non-uniform-grid recursion in the block-modal basis.
 
-    ``drive`` (L, N, c) complex is ``X^{-1} G v`` at every sample, ``xi0``
-    (N, c) the modal state at ``t[0]``; fills ``out`` (L, N, c) with the modal
-    state at every sample. One pass: per interval the Lagrange coefficients,
+    Runs the intervals ``a0 .. a0 + len(out) - 2`` of the grid ``t``
+    (stencil starts ``starts``): ``drive`` (rows, N, c) complex is
+    ``X^{-1} G v`` at the samples ``d0, d0 + 1, ...``, ``xi0`` (N, c) the
+    modal state at ``t[a0]``; fills ``out`` with the modal state at
+    ``t[a0], t[a0 + 1], ...``. One pass: per interval the Lagrange coefficients,
     per cluster ``J_{k,j}(lam_c h)``, the transition and drive of the
     cluster, and the update. A singleton cluster flagged in ``mirror`` is
     the complex conjugate of the previous one (conjugate eigenvalue,
     eigenvectors and drive): its state is the conjugate, not recomputed.
     """
-    L = t.shape[0]
     N = xi0.shape[0]
     c = xi0.shape[1]
     P = order + 1
@@ -687,6 +692,7 @@ def modal_loop(t, starts, order, lam, bounds, npow, terms, mirror, drive, xi0,
     Kmax = npow.shape[0]
     r = np.empty(P)
     coef = np.empty((P, P))
+    poly = np.empty(P)
     J = np.empty((Kmax, P), dtype=np.complex128)
     wq = np.empty(P, dtype=np.complex128)
     E = np.empty((N, N), dtype=np.complex128)
@@ -695,18 +701,18 @@ def modal_loop(t, starts, order, lam, bounds, npow, terms, mirror, drive, xi0,
     for i in range(N):
         for col in range(c):
             out[0, i, col] = xi0[i, col]
-    for a in range(L - 1):
+    for a in range(a0, a0 + out.shape[0] - 1):
         h = t[a + 1] - t[a]
         s = starts[a]
         for q in range(P):
             r[q] = (t[s + q] - t[a]) / h
-        _lagrange_coef(r, coef)
+        _lagrange_coef(r, coef, poly)
         for cl in range(ncl):
             b0 = bounds[cl]
             b1 = bounds[cl + 1]
             if mirror[cl]:                  # conjugate of the previous mode
                 for col in range(c):
-                    out[a + 1, b0, col] = np.conj(out[a + 1, b0 - 1, col])
+                    out[a + 1 - a0, b0, col] = np.conj(out[a + 1 - a0, b0 - 1, col])
                 continue
             K = terms[cl]
             z = lam[cl] * h
@@ -719,10 +725,10 @@ def modal_loop(t, starts, order, lam, bounds, npow, terms, mirror, drive, xi0,
                         acc += J[0, j] * coef[j, q]
                     wq[q] = acc * h
                 for col in range(c):
-                    x = ez * out[a, b0, col]
+                    x = ez * out[a - a0, b0, col]
                     for q in range(P):
-                        x += wq[q] * drive[s + q, b0, col]
-                    out[a + 1, b0, col] = x
+                        x += wq[q] * drive[s + q - d0, b0, col]
+                    out[a + 1 - a0, b0, col] = x
                 continue
             hp[0] = 1.0
             for k in range(1, K):
@@ -745,10 +751,10 @@ def modal_loop(t, starts, order, lam, bounds, npow, terms, mirror, drive, xi0,
                 for i in range(b0, b1):
                     x = 0.0j
                     for l in range(b0, b1):
-                        x += E[i, l] * out[a, l, col]
+                        x += E[i, l] * out[a - a0, l, col]
                         for q in range(P):
-                            x += Wm[q, i, l] * drive[s + q, l, col]
-                    out[a + 1, i, col] = x
+                            x += Wm[q, i, l] * drive[s + q - d0, l, col]
+                    out[a + 1 - a0, i, col] = x
     return out
 
 
@@ -763,13 +769,21 @@ def modal_bank(F, G, t, v3, order, start):
     if form is None:
         return None
     XG = form.Xi @ G                                        # (N, r)
-    drive = np.ascontiguousarray(np.einsum("nr,lrc->lnc", XG, v3))
-    xi0 = np.ascontiguousarray((form.Xi @ start).astype(complex))
+    xi = (form.Xi @ start).astype(complex)
     starts = stencil_starts(L, order)
-    xi = np.empty((L, F.shape[0], v3.shape[2]), dtype=complex)
-    modal_loop(t, starts, order, form.lam, form.bounds, form.npow, form.terms, form.mirror,
-               drive, xi0, xi)
-    return np.ascontiguousarray(np.einsum("in,lnc->lic", form.X, xi).real)
+    out = np.empty((L, F.shape[0], v3.shape[2]))
+    out[0] = start
+    P = order + 1
+    for a in range(0, L - 1, _MODAL_CHUNK):             # bounded complex work space
+        b = min(a + _MODAL_CHUNK, L - 1)
+        d0, d1 = int(starts[a]), int(starts[b - 1]) + P
+        drive = np.ascontiguousarray(np.einsum("nr,lrc->lnc", XG, v3[d0:d1]))
+        part = np.empty((b - a + 1,) + xi.shape, dtype=complex)
+        modal_loop(t, starts, order, form.lam, form.bounds, form.npow, form.terms,
+                   form.mirror, drive, d0, np.ascontiguousarray(xi), part, a)
+        out[a + 1:b + 1] = np.einsum("in,lnc->lic", form.X, part[1:]).real
+        xi = part[-1]
+    return out
 
 
 def modal_sensitivity(A, C, t, u, order):
@@ -789,10 +803,19 @@ def modal_sensitivity(A, C, t, u, order):
     starts = stencil_starts(L, order)
     zeta = np.empty((L, n, m), dtype=complex)
     modal_loop(t, starts, order, form.lam, form.bounds, form.npow, form.terms, form.mirror,
-               drive,
-               np.zeros((n, m), dtype=complex), zeta)
-    CV = C @ form.X
-    rows_b = np.einsum("il,klj,lm->kimj", CV, zeta, form.Xi, optimize=True).real
-    ex = np.exp(np.outer(t - t[0], form.lam))
-    rows_x = np.einsum("il,kl,lm->kim", CV, ex, form.Xi, optimize=True).real
-    return np.ascontiguousarray(rows_b), np.ascontiguousarray(rows_x)
+               drive, 0, np.zeros((n, m), dtype=complex), zeta, 0)
+    # Re(sum_l Q_l w_l) with Q_l = (C V)[:, l] (V^{-1})[l, :] as one real product; a
+    # mode mirroring its predecessor adds the conjugate: 2 Re(Q_l w_l) for the pair
+    keep = ~form.mirror
+    twice = np.append(form.mirror[1:], False)[keep]
+    Q = ((C @ form.X)[:, None, :] * form.Xi.T[None, :, :]).reshape(-1, n)[:, keep]
+    Q = Q * np.where(twice, 2.0, 1.0)
+    Qr = np.concatenate([Q.real.T, -Q.imag.T])                              # (2k, ny n)
+    ny, k = C.shape[0], int(keep.sum())
+
+    def real_part(w):                    # w (K, k) complex -> Re(Q w) (K, ny n)
+        return np.concatenate([w.real, w.imag], axis=1) @ Qr
+    zt = zeta[:, keep, :].transpose(0, 2, 1).reshape(L * m, k)
+    rows_b = real_part(zt).reshape(L, m, ny, n).transpose(0, 2, 3, 1)
+    rows_x = real_part(np.exp(np.outer(t - t[0], form.lam[keep]))).reshape(L, ny, n)
+    return np.ascontiguousarray(rows_b), rows_x
