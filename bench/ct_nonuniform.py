@@ -35,7 +35,7 @@ import time
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from online import machine  # noqa: E402  (bench/ helpers)
+from online import machine  # bench/ helpers
 
 
 def _cpu(fn):
@@ -70,7 +70,8 @@ def main(argv=None):
 
     true = paper_system()
     w = np.logspace(-2, 2, 200)
-    print(f"# ct_subspace, non-uniform vs uniform grid\n\n{machine()}; CPU seconds, median of {args.repeats}; noise "
+    print(f"# ct_subspace, non-uniform vs uniform grid\n\n{machine()}; CPU seconds, "
+          f"median of {args.repeats}; noise "
           f"{'none' if args.snr is None else f'{args.snr:g} dB'}\n")
     # warm-up: compile every kernel
     for jitter in (0.0, 0.4):
@@ -89,7 +90,7 @@ def main(argv=None):
             for name, (data, ref) in cases.items():
                 tables(ref)
                 try:
-                    dt, models[name] = _cpu(lambda: ct_subspace(data, 4))
+                    dt, models[name] = _cpu(lambda data=data: ct_subspace(data, 4))
                 finally:
                     tables(False)
                 times[name].append(dt)
@@ -103,10 +104,10 @@ def main(argv=None):
             try:
                 ts, tb = [], []
                 for _ in range(args.repeats):
-                    ts.append(_cpu(lambda: _ct_kernels.run_sensitivity(
-                        true.A, true.C, data.t, data.u, 1, uniform=uniform))[0])
-                    tb.append(_cpu(lambda: _ct_kernels.run_bank(
-                        F, g, data.t, data.y, 3, uniform=uniform))[0])
+                    ts.append(_cpu(lambda d=data, un=uniform: _ct_kernels.run_sensitivity(
+                        true.A, true.C, d.t, d.u, 1, uniform=un))[0])
+                    tb.append(_cpu(lambda d=data, un=uniform, F=F, g=g: _ct_kernels.run_bank(
+                        F, g, d.t, d.y, 3, uniform=un))[0])
             finally:
                 tables(False)
             kern[name] = (statistics.median(ts) / (L - 1) * 1e6,

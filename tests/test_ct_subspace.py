@@ -273,8 +273,8 @@ def test_jittered_fast_kernels_give_the_reference_model(true, monkeypatch):
 
     Noise-free, so the model is determined to rounding (under noise the
     refinement's stopping point moves by more than 1e-10 even for a 1e-14
-    perturbation of the data; docs in the kernels' module). Compared as
-    transfer functions and simulated outputs: the state basis is not unique.
+    perturbation of the data: see "Accuracy" in subid._ct_kernels). Compared
+    as transfer functions and simulated outputs: the state basis is not unique.
     """
     from subid import _ct_kernels
     data, _ = simulate(600, 5, jitter=0.4)

@@ -35,6 +35,24 @@ is ``N x channels``); ``sens_loop`` runs it for the sensitivities of a model
 output to ``B`` and ``x0`` (the regressors of the raw-sample fit of B).
 ``bank_loop_ref`` and ``sens_loop_ref`` are plain numpy references that the
 tests compare the compiled kernels against.
+
+On non-uniform grids the default is the fused block-modal kernel
+``modal_loop`` (see the notes above :class:`ModalForm`): no per-interval
+tables, one pass over the record, about 5x (bank) to 7x (sensitivities)
+faster than the tables. The tables (``fast=False``) remain the reference and
+the fallback when the block-modal form is ill-conditioned.
+
+Accuracy. Both eigen routes (tables and kernel) carry errors of order
+``cond(X) eps`` relative to the largest state. For the correction
+regressors of :mod:`subid.ct_subspace` (defective Poisson-chain system,
+matrix exponentials before) the kernel's errors are about 1e-13 instead of
+2e-14, and those regressors are differences of nearly equal filtered
+signals, so the difference grows to 1e-7 of their size (1e-8 with the
+tables). Noise-free, the identified model agrees with the table path to
+1e-12; under output noise the least-squares steps amplify such rounding
+differences (the final model of either path moves by 1e-5 at L = 1500,
+20 dB, when the data are perturbed by 1e-14), far below the statistical
+error.
 """
 
 from __future__ import annotations
