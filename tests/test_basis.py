@@ -287,6 +287,7 @@ MODAL_CASES = {
                                               40]).realization(),
     "laguerre": lambda: laguerre(5.0, 6).realization(),
     "kautz": lambda: laguerre(2 + 3j, 6).realization(),
+    "kautz8": lambda: laguerre(5 + 5j, 8).realization(),   # clusters move ~1e-3 in zgees
     "poisson-chain": lambda: poisson_chain_bank(default_basis(np.arange(400) * 0.01)),
 }
 

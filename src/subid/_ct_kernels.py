@@ -575,7 +575,11 @@ def modal_form(F: np.ndarray, h_max: float, *, clusters: bool = True):
         lc = complex(lam[members].mean())
         if np.all(np.abs(lam[members].imag) <= _CLUSTER_TOL * abs(lc) + 1e-12 * scale):
             lc = complex(lc.real, 0.0)
-        radius = max(float(np.abs(lam[members] - lc).max()), 1e-12 * scale) * 2.0
+        # a defective cluster's eigenvalues move by ~(eps |F|)^(1/m_c) between
+        # algorithms: select by half the distance to the other eigenvalues
+        others = np.delete(lam, members)
+        radius = max(float(np.abs(lam[members] - lc).max()) * 2.0, 1e-12 * scale,
+                     0.5 * float(np.abs(others - lc).min()) if others.size else np.inf)
         # invariant subspace of the cluster: leading Schur vectors with the
         # cluster's eigenvalues ordered first (backward stable, no powers of F)
         _, Zs, sdim = scipy.linalg.schur(F.astype(complex), output="complex",
