@@ -526,10 +526,6 @@ class ModalForm:
                 self.mirror[c] = True
                 Xi[bounds[c]] = np.conj(Xi[bounds[c - 1]])
 
-    @property
-    def diagonal(self) -> bool:
-        return bool(np.all(self.terms == 1) and np.all(np.diff(self.bounds) == 1))
-
 
 def modal_form(F: np.ndarray, h_max: float, *, clusters: bool = True):
     """:class:`ModalForm` of ``F`` for steps up to ``h_max``, or None.
@@ -716,6 +712,7 @@ def modal_loop(t, starts, order, lam, bounds, npow, terms, mirror, drive, d0, xi
     coef = np.empty((P, P))
     poly = np.empty(P)
     J = np.empty((Kmax, P), dtype=np.complex128)
+    JC = np.empty((Kmax, P), dtype=np.complex128)
     wq = np.empty(P, dtype=np.complex128)
     E = np.empty((N, N), dtype=np.complex128)
     Wm = np.empty((P, N, N), dtype=np.complex128)
@@ -755,6 +752,12 @@ def modal_loop(t, starts, order, lam, bounds, npow, terms, mirror, drive, d0, xi
             hp[0] = 1.0
             for k in range(1, K):
                 hp[k] = hp[k - 1] * h
+            for k in range(K):                  # JC[k, q] = h^k sum_j J[k, j] coef[j, q]
+                for q in range(P):
+                    jk = 0.0j
+                    for j in range(P):
+                        jk += J[k, j] * coef[j, q]
+                    JC[k, q] = jk * hp[k]
             for i in range(b0, b1):
                 for l in range(b0, b1):
                     e = 0.0j
@@ -764,10 +767,7 @@ def modal_loop(t, starts, order, lam, bounds, npow, terms, mirror, drive, d0, xi
                     for q in range(P):
                         w = 0.0j
                         for k in range(K):
-                            jk = 0.0j
-                            for j in range(P):
-                                jk += J[k, j] * coef[j, q]
-                            w += npow[k, i, l] * hp[k] * jk
+                            w += npow[k, i, l] * JC[k, q]
                         Wm[q, i, l] = w * h
             for col in range(c):
                 for i in range(b0, b1):
