@@ -72,6 +72,11 @@ __all__ = [
     "sens_loop_ref",
     "run_bank",
     "run_sensitivity",
+    "ModalForm",
+    "modal_form",
+    "modal_loop",
+    "modal_bank",
+    "modal_sensitivity",
 ]
 
 # Intervals processed per table chunk on non-uniform grids (bounds the memory
@@ -532,15 +537,17 @@ def modal_form(F: np.ndarray, h_max: float, *, clusters: bool = True):
 
     The eigen-decomposition is used when its eigenvector matrix has condition
     at most ``_EIG_COND_MAX`` (as :func:`_eig_tables`). Otherwise, with
-    ``clusters``, eigenvalues closer than ``_CLUSTER_TOL`` (relative to the
-    spectral radius) are grouped, each group's invariant subspace is the null
-    space spanned by the leading Schur vectors with the group's eigenvalues
-    ordered first, and the form is accepted when those
-    bases are well conditioned together, decouple ``F`` to rounding and the
-    Taylor sums converge within ``_TAYLOR_MAX`` terms with ``|lam_c h| <= 2``.
-    None means: use the matrix exponentials.
+    ``clusters``, eigenvalues closer than ``_CLUSTER_TOL`` (relative to their
+    size) are grouped, each group's invariant subspace is spanned by the
+    leading vectors of a complex Schur form with the group's eigenvalues
+    ordered first, and the form is accepted when those bases are well
+    conditioned together, decouple ``F`` to rounding and the Taylor sums
+    converge within ``_TAYLOR_MAX`` terms with ``|lam_c h| <= 2``. None
+    means: use the per-interval tables.
     """
     F = np.asarray(F, dtype=float)
+    if not np.isfinite(F).all():
+        return None
     Nn = F.shape[0]
     lam, V = np.linalg.eig(F)
     if np.isfinite(V).all() and np.linalg.cond(V) <= _EIG_COND_MAX:
