@@ -516,6 +516,8 @@ class ModalForm:
     """
 
     def __init__(self, X, Xi, lam, bounds, npow, terms):
+        # complex even when every eigenvalue is real: one compiled kernel signature
+        X, Xi = np.asarray(X, dtype=complex), np.array(Xi, dtype=complex)
         self.X, self.Xi, self.lam = X, Xi, lam
         self.bounds, self.npow, self.terms = bounds, npow, terms
         # singleton clusters that are the exact conjugate of the previous one
@@ -800,6 +802,7 @@ def modal_bank(F, G, t, v3, order, start):
     XG = form.Xi @ G                                        # (N, r)
     xi = (form.Xi @ start).astype(complex)
     starts = stencil_starts(L, order)
+    t = np.array(t, dtype=float)                # writable: one compiled kernel signature
     out = np.empty((L, F.shape[0], v3.shape[2]))
     out[0] = start
     P = order + 1
@@ -829,6 +832,7 @@ def modal_sensitivity(A, C, t, u, order):
     if form is None:
         return None
     drive = np.ascontiguousarray(np.broadcast_to(u.astype(complex)[:, None, :], (L, n, m)))
+    t = np.array(t, dtype=float)                # writable: one compiled kernel signature
     starts = stencil_starts(L, order)
     zeta = np.empty((L, n, m), dtype=complex)
     modal_loop(t, starts, order, form.lam, form.bounds, form.npow, form.terms, form.mirror,
