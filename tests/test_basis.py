@@ -233,13 +233,14 @@ def test_sensitivity_rows_reproduce_a_simulation():
 
 def test_nonuniform_path_agrees_with_uniform_path_across_chunks(monkeypatch):
     monkeypatch.setattr(_ct_kernels, "_CHUNK", 37)
+    monkeypatch.setattr(_ct_kernels, "_MODAL_CHUNK", 41)
     bank = takenaka_malmquist([4.0, 9.0, 3 + 2j, 3 - 2j])
     F, g = bank.realization()
     t = np.arange(300) * 0.01
     v = np.random.default_rng(9).standard_normal((300, 2))
-    for use_eig in (False, True):
-        a = _ct_kernels.run_bank(F, g, t, v, 3, uniform=True)
-        b = _ct_kernels.run_bank(F, g, t, v, 3, uniform=False, use_eig=use_eig)
+    a = _ct_kernels.run_bank(F, g, t, v, 3, uniform=True)
+    for use_eig, fast in ((False, False), (True, False), (True, True)):
+        b = _ct_kernels.run_bank(F, g, t, v, 3, uniform=False, use_eig=use_eig, fast=fast)
         np.testing.assert_allclose(a, b, atol=1e-11)
 
 
@@ -256,6 +257,115 @@ def test_eigen_tables_agree_with_matrix_exponentials():
     # a defective matrix is refused
     assert _ct_kernels._eig_tables(np.array([[-1.0, 1.0], [0.0, -1.0]]), G[:2], steps,
                                    nodes) is None
+
+
+def poisson_chain_bank(bank, k=2):
+    """The correction regressors' system: a Poisson chain of the slowest pole feeding banks.
+
+    Its matrix is defective (Jordan chain at the slowest pole, shared with the
+    banks) with every bank pole repeated: the block-modal form needs clusters.
+    """
+    F, g = bank.realization()
+    N = F.shape[0]
+    a = min(abs(z.real) for z in bank.poles)
+    size = k + k * N
+    Fa, Ga = np.zeros((size, size)), np.zeros(size)
+    Ga[0] = a
+    for i in range(k):
+        Fa[i, i] = -a
+        if i:
+            Fa[i, i - 1] = a
+        blk = slice(k + i * N, k + (i + 1) * N)
+        Fa[blk, i] = g
+        Fa[blk, blk] = F
+    return Fa, Ga
+
+
+MODAL_CASES = {
+    "tm-real": lambda: takenaka_malmquist([4, 12, 20, 28, 36, 44, 52, 60]).realization(),
+    "tm-complex": lambda: takenaka_malmquist([3 + 4j, 3 - 4j, 10, 20 + 5j, 20 - 5j,
+                                              40]).realization(),
+    "laguerre": lambda: laguerre(5.0, 6).realization(),
+    "kautz": lambda: laguerre(2 + 3j, 6).realization(),
+    "kautz8": lambda: laguerre(5 + 5j, 8).realization(),   # clusters move ~1e-3 in zgees
+    "poisson-chain": lambda: poisson_chain_bank(default_basis(np.arange(400) * 0.01)),
+}
+
+
+@pytest.mark.parametrize("name", sorted(MODAL_CASES))
+@pytest.mark.parametrize("order", [0, 1, 3])
+def test_modal_bank_matches_the_table_reference(name, order):
+    """The fused block-modal kernel against per-interval tables (expm / eig), jittered grid.
+
+    The real TM bank's eigenvectors have condition 8e4: both eigen routes
+    (tables and kernel) sit 1e-12 from the matrix exponentials there.
+    """
+    F, g = MODAL_CASES[name]()
+    t = grids(400, 0.01, 21)["jittered"]
+    rng = np.random.default_rng(22)
+    v = rng.standard_normal((400, 2))
+    x0 = rng.standard_normal((F.shape[0], 2))
+    assert _ct_kernels.modal_form(F, np.diff(t).max()) is not None
+    a = _ct_kernels.run_bank(F, g, t, v, order, uniform=False, x0=x0)
+    b = _ct_kernels.run_bank(F, g, t, v, order, uniform=False, x0=x0, fast=False)
+    np.testing.assert_allclose(a, b, rtol=0, atol=1e-11 * np.abs(b).max())
+
+
+def test_modal_bank_large_steps_use_the_recursion():
+    """|lam h| up to 12: the J_{0,j} recursion branch of the kernel, matrix input."""
+    F, _ = takenaka_malmquist([4, 20 + 30j, 20 - 30j, 150]).realization()
+    G = np.random.default_rng(23).standard_normal((4, 2))
+    t = grids(300, 0.05, 24)["jittered"]
+    v = np.random.default_rng(25).standard_normal((300, 2))
+    a = _ct_kernels.run_bank(F, G, t, v, 3, uniform=False)
+    b = _ct_kernels.run_bank(F, G, t, v, 3, uniform=False, fast=False)
+    np.testing.assert_allclose(a, b, rtol=0, atol=1e-12 * np.abs(b).max())
+
+
+@pytest.mark.parametrize("order", [0, 1, 3])
+def test_modal_sensitivity_matches_the_table_reference(order):
+    rng = np.random.default_rng(26)
+    A = np.array([[-1.0, 2.0, 0.0, 0.0], [-2.0, -0.5, 0.0, 0.0], [0.0, 0.0, -3.0, 1.0],
+                  [0.3, 0.0, 0.0, -8.0]])
+    C = rng.standard_normal((2, 4))
+    t = grids(500, 0.02, 27)["jittered"]
+    u = rng.standard_normal((500, 3))
+    form = _ct_kernels.modal_form(A, np.diff(t).max(), clusters=False)
+    assert form is not None and form.mirror.sum() == 1           # one conjugate pair
+    a = _ct_kernels.run_sensitivity(A, C, t, u, order, uniform=False)
+    b = _ct_kernels.run_sensitivity(A, C, t, u, order, uniform=False, fast=False)
+    for x, y in zip(a, b):
+        np.testing.assert_allclose(x, y, rtol=0, atol=1e-12 * np.abs(y).max())
+
+
+def test_modal_form_refuses_what_it_cannot_do_and_the_tables_take_over():
+    h = 0.01
+    # defective A: no modal sensitivity (the table path runs, and is exact)
+    A = np.array([[-1.0, 1.0], [0.0, -1.0]])
+    assert _ct_kernels.modal_form(A, h, clusters=False) is None
+    assert _ct_kernels.modal_form(A, h) is not None                # one Jordan cluster
+    # nearly parallel invariant subspaces of separate eigenvalues
+    assert _ct_kernels.modal_form(np.array([[-1.0, 1e8], [0.0, -1.1]]), h) is None
+    # close eigenvalues with a huge coupling form one cluster, filtered exactly
+    Fc, g = np.array([[-1.0, 1e3], [0.0, -1.0005]]), np.array([0.0, 1.0])
+    form = _ct_kernels.modal_form(Fc, h)
+    assert form is not None and list(form.terms) == [form.npow.shape[0]]
+    t = grids(200, h, 30)["jittered"]
+    v = np.random.default_rng(31).standard_normal((200, 1))
+    a = _ct_kernels.run_bank(Fc, g, t, v, 1, uniform=False)
+    b = _ct_kernels.run_bank(Fc, g, t, v, 1, uniform=False, fast=False)
+    np.testing.assert_allclose(a, b, rtol=0, atol=1e-12 * np.abs(b).max())
+    # a cluster too fast for the series (|lam h| > 2)
+    assert _ct_kernels.modal_form(np.array([[-300.0, 1.0], [0.0, -300.0]]), h) is None
+    C = np.array([[1.0, 0.5]])
+    t = grids(200, h, 28)["jittered"]
+    u = np.random.default_rng(29).standard_normal((200, 1))
+    from subid.model import StateSpace
+    rb, rx = _ct_kernels.run_sensitivity(A, C, t, u, 1, uniform=False)
+    B, x0 = np.array([[0.3], [1.0]]), np.array([1.0, -2.0])
+    y = np.einsum("lpnm,nm->lp", rb, B) + rx @ x0
+    ref = StateSpace(A, B, C, 0, 0.0).simulate(u, t=t, x0=x0, hold="foh")
+    np.testing.assert_allclose(y, ref, atol=1e-12)
 
 
 # ---------------------------------------------------------------------------

@@ -268,6 +268,26 @@ def test_jittered_sampling_L4000(true, g_true):
     assert max_error(subspace, g_true) < 1e-2
 
 
+def test_jittered_fast_kernels_give_the_reference_model(true, monkeypatch):
+    """Non-uniform grid: the fused modal kernels against the per-interval tables.
+
+    Noise-free, so the model is determined to rounding (under noise the
+    refinement's stopping point moves by more than 1e-10 even for a 1e-14
+    perturbation of the data: see "Accuracy" in subid._ct_kernels). Compared
+    as transfer functions and simulated outputs: the state basis is not unique.
+    """
+    from subid import _ct_kernels
+    data, _ = simulate(600, 5, jitter=0.4)
+    fast = ct_subspace(data, 4)
+    monkeypatch.setattr(_ct_kernels, "modal_bank", lambda *a, **k: None)
+    monkeypatch.setattr(_ct_kernels, "modal_sensitivity", lambda *a, **k: None)
+    ref = ct_subspace(data, 4)
+    assert max_relative_error(fast, ref) < 1e-10
+    sims = [StateSpace(m.A, m.B, m.C, m.D, 0.0).simulate(data.u, t=data.t, x0=m.info["x0"],
+                                                         hold="foh") for m in (fast, ref)]
+    np.testing.assert_allclose(sims[0], sims[1], rtol=0, atol=1e-10 * np.abs(sims[1]).max())
+
+
 BIAS_W = np.array([0.1, 0.5, 1.0, 2.0, 5.0])
 
 
@@ -401,3 +421,20 @@ def test_bad_input_raises_clear_errors(true):
                     data_equation="paper")
     with pytest.raises(errors.ModelError, match="feedthrough"):
         ct_subspace(data, 4, takenaka_malmquist(TM), data_equation="paper", feedthrough=True)
+
+
+@pytest.mark.parametrize("hold", ["foh", "zoh"])
+def test_jittered_mimo_fast_kernels_give_the_reference_model(hold, monkeypatch):
+    """MIMO with feedthrough on a jittered grid: modal kernels vs per-interval tables."""
+    from subid import _ct_kernels
+    system = mimo_system()
+    rng = np.random.default_rng(7)
+    t = np.arange(800) * 0.01 + rng.uniform(-0.4, 0.4, 800) * 0.01
+    u = rng.standard_normal((800, 2))
+    data = IOData(u, system.simulate(u, t=t, hold=hold), t=t)
+    fast = ct_subspace(data, 3, input_hold=hold, feedthrough=True)
+    monkeypatch.setattr(_ct_kernels, "modal_bank", lambda *a, **k: None)
+    monkeypatch.setattr(_ct_kernels, "modal_sensitivity", lambda *a, **k: None)
+    ref = ct_subspace(data, 3, input_hold=hold, feedthrough=True)
+    assert max_relative_error(fast, ref) < 1e-10
+    assert max_relative_error(fast, system) < 1e-5          # the estimator on 800 samples
