@@ -13,7 +13,7 @@ DOCS_STAMP := $(DOCS_VENV)/.installed
 
 BENCH_VENV := .venv-bench
 
-.PHONY: demo gallery test test-long bench bench-bd bench-realdata experiment docs clean
+.PHONY: demo gallery test test-long bench bench-bd bench-ct bench-realdata experiment docs clean
 
 $(PY):
 	$(PYTHON) -m venv $(VENV)
@@ -57,6 +57,10 @@ bench: $(STAMP)
 # The default B, D, x0 regression against the statistic-only path at 1e7 samples (issue 14).
 bench-bd: $(STAMP)
 	OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 MKL_NUM_THREADS=1 $(PY) bench/bd_pass.py --samples 10000000 --qr | tee bench/bd_pass.md
+
+# ct_subspace on jittered grids against the uniform grid (issue 14).
+bench-ct: $(STAMP)
+	OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 MKL_NUM_THREADS=1 $(PY) bench/ct_nonuniform.py | tee bench/ct_nonuniform.md
 
 # Default calls on the bundled real records against SIPPY at its best order. SIPPY
 # (sippy-unipi) is installed in the benchmark's own environment, never as a dependency.
