@@ -47,7 +47,7 @@ def test_order_selection_record(method, noisy):
     assert record["rule"] == "cv"
     orders = {c["order"] for c in record["candidates"]}
     assert orders == set(range(1, 11))
-    assert all(np.isfinite(c["score"]) and len(c["folds"]) == 2 for c in record["candidates"])
+    assert all(np.isfinite(c["score"]) and len(c["folds"]) == 4 for c in record["candidates"])
     assert record["selected"]["order"] == model.order == 4
     gap = method(data, selection="gap")
     assert gap.info["order_selection"]["rule"] == "gap"
