@@ -516,9 +516,20 @@ def initial_state(A, B, C, D, data):
         second_pass = getattr(data, "output_regression", None)   # subid._bd_pass
         return None if second_pass is None else second_pass.initial_state(A, B, C, D)
     from .metrics import simulate_fit       # metrics depends on the model module only
+    # The free response C A^t x0 of a stable A falls below 1e-18 of its start after
+    # `decay` samples: beyond them the samples carry no information on x0 (to rounding),
+    # so the regression runs on that prefix only (bounded time and memory).
+    radius = float(np.abs(np.linalg.eigvals(A)).max()) if A.size else 0.0
+    used = data
+    if radius < 1.0:
+        decay = A.shape[0] + 1 if radius == 0.0 else \
+            A.shape[0] + 1 + int(math.ceil(math.log(1e-18) / math.log(radius)))
+        if decay < data.n_samples:
+            used = data[:decay]
     try:
         with np.errstate(all="ignore"):
-            return simulate_fit(StateSpace(A, B, C, D, data.dt), data)[1]
+            return simulate_fit(StateSpace(A, B, C, D, data.dt), used,
+                                output_std=data.y.std(axis=0))[1]
     except SubidError:
         return None
 

@@ -69,8 +69,12 @@ def markov_error(model, reference, k: int = 10) -> float:
     return float(np.linalg.norm(model.markov(k) - m_ref) / norm)
 
 
-def simulate_fit(model, data, x0="estimate", hold: str = "zoh"):
+def simulate_fit(model, data, x0="estimate", hold: str = "zoh", *, output_std=None):
     """Simulated output of ``model`` on ``data`` and the initial state used.
+
+    ``output_std`` (per output) replaces the spread of ``data.y`` in the
+    weights of the initial-state regression (used when ``data`` is the
+    prefix of a longer record whose weights apply).
 
     ``x0='estimate'`` fits the initial state to the data by least squares
     (the simulated output is linear in x0), each output weighted by the
@@ -105,7 +109,7 @@ def simulate_fit(model, data, x0="estimate", hold: str = "zoh"):
             raise overflow()
         # each output weighted by 1 / its standard deviation, so that the initial state
         # (and the fit) does not depend on the output units
-        std = data.y.std(axis=0)
+        std = data.y.std(axis=0) if output_std is None else np.asarray(output_std, float)
         w = 1.0 / np.where(std > 0, std, 1.0)
         x0_hat = np.linalg.lstsq((free * w[None, :, None]).reshape(-1, n),
                                  ((data.y - forced) * w).reshape(-1), rcond=None)[0]
