@@ -57,7 +57,7 @@ def test_batch_methods_recover_a_delayed_system_exactly(method):
     true, data = _delayed_record([1, 3])
     model = getattr(subid, method)(data, 3, input_delay=[1, 3])
     assert model.order == 3 and model.info["input_delay"] == [1, 3]
-    assert subid.markov_error(model, _strictly_proper()) < 1e-8
+    assert subid.markov_error(model, true) < 1e-8      # Markov parameters honour the delays
     # simulate honours the delay: the whole record reproduced from rest
     np.testing.assert_allclose(model.simulate(data.u), data.y, atol=1e-6)
     # ... and a model saved and loaded keeps it
@@ -133,3 +133,22 @@ def test_models_with_bad_recorded_delay_are_an_error():
     m = _with_delay(subid.systems.seed001_system(), [1])
     with pytest.raises(ModelError, match="2 inputs"):
         m.simulate(np.zeros((10, 2)))
+
+
+def test_delays_in_markov_exports_and_conversions():
+    """Markov parameters, control/scipy exports honour the delays (as states); a change of
+    sampling drops them with a warning instead of keeping a wrong count of samples."""
+    import warnings
+    true = subid.systems.seed001_system()
+    d = subid.systems.simulate_data(true, 800, seed=3)
+    m = subid.moesp(d, 3, horizon=5, input_delay=[1, 3])
+    a = subid.absorb_delay(m)
+    np.testing.assert_allclose(m.markov(12), a.markov(12), atol=1e-12)
+    assert m.to_scipy().A.shape == (a.order, a.order)
+    with pytest.warns(UserWarning, match="input delays .* dropped"):
+        c = m.to_continuous("bilinear")
+    assert "input_delay" not in c.info
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        same = m.transform(np.eye(3) * 2.0)          # same sampling: the delays stay
+    assert same.info["input_delay"] == [1, 3]

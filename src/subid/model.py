@@ -613,8 +613,16 @@ class StateSpace:
         return statespace_html(self)
 
     def _like(self, A, B, C, D, dt, K=None, noise_cov=None) -> "StateSpace":
+        info = dict(self.info)
+        if dt != self._dt and "input_delay" in info:
+            import warnings
+            from .errors import NoiseModelWarning
+            info.pop("input_delay")
+            warnings.warn("the input delays (counted in samples) are dropped by this change "
+                          f"of sampling (dt {self._dt} -> {dt}); call subid.absorb_delay(model) "
+                          "first to keep them as states", NoiseModelWarning, stacklevel=3)
         return StateSpace(A, B, C, D, dt, input_names=self.input_names,
-                          output_names=self.output_names, info=dict(self.info), K=K,
+                          output_names=self.output_names, info=info, K=K,
                           noise_cov=noise_cov)
 
     def _drop_noise_model(self, what: str) -> None:
@@ -745,7 +753,9 @@ class StateSpace:
         Returns
         -------
         ndarray, shape (k, n_outputs, n_inputs)
-            ``[D, C B, C A B, ..., C A^(k-2) B]``.
+            ``[D, C B, C A B, ..., C A^(k-2) B]``; with input delays
+        (``info['input_delay']``, discrete time) input j's column is shifted
+        by its delay.
 
         Raises
         ------
@@ -759,6 +769,12 @@ class StateSpace:
         for i in range(1, k):
             out[i] = row @ self._B
             row = row @ self._A
+        if not self.is_continuous and (delays := input_delay_of(self)) is not None:
+            shifted = np.zeros_like(out)       # input j delayed by d_j samples
+            for col, d in enumerate(delays):
+                if d < k:
+                    shifted[d:, :, col] = out[:k - d, :, col]
+            out = shifted
         return out
 
     def poles(self) -> np.ndarray:
@@ -1208,16 +1224,20 @@ class StateSpace:
         covariance: ``K`` and ``noise_cov`` are not exported. To keep them,
         export the predictor or the noise channels yourself, e.g.
         ``ss(A, [B K], C, [D I], dt)`` with the innovations as extra inputs.
+        Input delays (``info['input_delay']``) are exported as extra states
+        (:func:`subid.absorb_delay`).
         """
         control = _require_control()
-        return control.ss(np.array(self._A), np.array(self._B), np.array(self._C),
-                          np.array(self._D), self._dt, inputs=list(self.input_names),
-                          outputs=list(self.output_names))
+        m = _without_delay(self)
+        return control.ss(np.array(m._A), np.array(m._B), np.array(m._C),
+                          np.array(m._D), m._dt, inputs=list(m.input_names),
+                          outputs=list(m.output_names))
 
     def to_mat(self, path) -> None:
-        """Write the model as MATLAB ``ss(A, B, C, D, Ts)`` fields (:func:`subid.interop.save_mat`)."""
+        """Write the model as MATLAB ``ss(A, B, C, D, Ts)`` fields (:func:`subid.interop.save_mat`);
+        input delays become extra states (:func:`subid.absorb_delay`)."""
         from .interop import save_mat
-        save_mat(self, path)
+        save_mat(_without_delay(self), path)
 
     @classmethod
     def from_mat(cls, path, *, dt=None) -> "StateSpace":
@@ -1275,13 +1295,15 @@ class StateSpace:
         Notes
         -----
         ``scipy.signal.StateSpace`` has no slot for a Kalman gain or a noise
-        covariance: ``K`` and ``noise_cov`` are not exported.
+        covariance: ``K`` and ``noise_cov`` are not exported. Input delays are
+        exported as extra states (:func:`subid.absorb_delay`).
         """
         from scipy import signal
-        mats = [np.array(M) for M in (self._A, self._B, self._C, self._D)]
-        if self.is_continuous:
+        m = _without_delay(self)
+        mats = [np.array(M) for M in (m._A, m._B, m._C, m._D)]
+        if m.is_continuous:
             return signal.StateSpace(*mats)
-        return signal.StateSpace(*mats, dt=self._dt)
+        return signal.StateSpace(*mats, dt=m._dt)
 
     @classmethod
     def from_scipy(cls, sys, *, dt=None) -> "StateSpace":
@@ -1353,3 +1375,9 @@ def _real_logm(Ad: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(L)
 
 
+def _without_delay(model):
+    """``model`` with its input delays as states, for exports that know no delays."""
+    if input_delay_of(model) is None:
+        return model
+    from .delay import absorb_delay
+    return absorb_delay(model)
