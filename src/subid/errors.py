@@ -23,6 +23,7 @@ __all__ = [
     "FileWriteError",
     "ResourceLimitError",
     "NotConvergedWarning",
+    "DelayWarning",
 ]
 
 
@@ -138,3 +139,8 @@ class NotConvergedWarning(UserWarning):
     """An online identifier's current model is not (yet) a converged estimate:
     a stage has not started, or its convergence test fails. ``model.info``
     says which (``converged``, ``convergence``)."""
+
+
+class DelayWarning(UserWarning):
+    """Input delays counted in samples (``info['input_delay']``) are dropped by an
+    operation that changes the sampling; :func:`subid.absorb_delay` keeps them as states."""

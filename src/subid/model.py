@@ -616,11 +616,11 @@ class StateSpace:
         info = dict(self.info)
         if dt != self._dt and "input_delay" in info:
             import warnings
-            from .errors import NoiseModelWarning
+            from .errors import DelayWarning
             info.pop("input_delay")
             warnings.warn("the input delays (counted in samples) are dropped by this change "
                           f"of sampling (dt {self._dt} -> {dt}); call subid.absorb_delay(model) "
-                          "first to keep them as states", NoiseModelWarning, stacklevel=3)
+                          "first to keep them as states", DelayWarning, stacklevel=3)
         return StateSpace(A, B, C, D, dt, input_names=self.input_names,
                           output_names=self.output_names, info=info, K=K,
                           noise_cov=noise_cov)
