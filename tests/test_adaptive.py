@@ -566,18 +566,19 @@ def test_siso_one_dimensional_arrays_are_samples():
     y = sys1.simulate(u, t=t, hold="foh")[:, 0]
     ident = AdaptiveIdentifier(1, 1, 1, filter_poles=-2.0, forgetting=0.5, bd_forgetting=0.2,
                                dt=0.01)
-    assert ident.model.info["horizon"] == 3          # smallest f > n with (f-1) ny > n
+    assert ident.horizon == 3          # smallest f > n with (f-1) ny > n
     ident.update(u, y)
     assert ident.n_samples == u.size
     assert subid.markov_error(ident.model, sys1, k=5) < 1e-3
 
 
-def test_model_before_data_is_finite():
+def test_model_before_data_is_an_error():
+    """Before any sample there is no estimate: a clear error, not an all-zero model."""
     ident = paper_ident()
-    model = ident.model
+    with pytest.raises(subid.errors.TooFewSamplesError, match="no samples yet"):
+        ident.model
     assert ident.n_samples == 0 and ident.t is None
-    assert np.all(model.A == 0) and np.all(np.isfinite(ident.state))
-    assert model.info["bd_started"] is False
+    assert np.all(np.isfinite(ident.state))
     assert ident.history["A"].shape == (0, 4, 4)
 
 
