@@ -566,7 +566,7 @@ def test_siso_one_dimensional_arrays_are_samples():
     y = sys1.simulate(u, t=t, hold="foh")[:, 0]
     ident = AdaptiveIdentifier(1, 1, 1, filter_poles=-2.0, forgetting=0.5, bd_forgetting=0.2,
                                dt=0.01)
-    assert ident.horizon == 3          # smallest f > n with (f-1) ny > n
+    assert ident._f == 3          # smallest f > n with (f-1) ny > n (the default horizon)
     ident.update(u, y)
     assert ident.n_samples == u.size
     assert subid.markov_error(ident.model, sys1, k=5) < 1e-3
