@@ -668,6 +668,8 @@ def identify(data, inputs, outputs, dt, time_column, delimiter, detrend, method_
         record, label, notes = load_data(data, inputs, outputs, dt, time_column, delimiter)
         detrend = detrend or _default_detrend(spec)
         work = _detrend(record, detrend)
+        if work is not record:
+            record = _RecordFacts(record)  # the raw samples are not needed any more: free them
         if validate > 0:
             est, val = work.split(1 - validate)
         else:
@@ -839,6 +841,17 @@ def _identify_streamed(data, inputs, outputs, dt, time_column, delimiter, detren
                    outputs=list(first.output_names), n_estimation=stat.n_samples,
                    n_validation=n - stat.n_samples, streamed=True)
     return 0
+
+
+class _RecordFacts:
+    """What the summary and the provenance need of a record, without its samples
+    (so the in-memory ``identify`` holds one copy of the data, the detrended one)."""
+
+    def __init__(self, record):
+        self.input_names, self.output_names = record.input_names, record.output_names
+        self.dt, self.has_time_stamps = record.dt, record.has_time_stamps
+        self.n_samples, self.n_inputs, self.n_outputs = (record.n_samples, record.n_inputs,
+                                                         record.n_outputs)
 
 
 def _provenance(source, record, work, detrend, est, validate) -> dict:
