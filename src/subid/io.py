@@ -13,7 +13,8 @@ Supported formats, chosen by the file extension:
     NumPy archive (:func:`numpy.savez`); arrays are selected by key.
 ``.mat``
     MATLAB file up to version 7 (:func:`scipy.io.loadmat`); variables are
-    selected by name. Version 7.3 (HDF5) files are not supported.
+    selected by name. Version 7.3 (HDF5) files are read with h5py when it is
+    installed (``pip install 'subid[hdf5]'``).
 
 Rules for text files
 --------------------
@@ -82,7 +83,7 @@ def read(path, inputs=None, outputs=None, dt=None, time=None, *, delimiter=None,
     path : str or os.PathLike
         The file. Its extension selects the format: ``.csv``, ``.tsv``,
         ``.txt``, ``.dat`` (text), ``.npz`` (NumPy archive) or ``.mat``
-        (MATLAB up to v7).
+        (MATLAB v4 to v7.3; v7.3 needs h5py).
     inputs, outputs : str, int or sequence of str/int
         The input and the output channels.
 
@@ -132,7 +133,7 @@ def read(path, inputs=None, outputs=None, dt=None, time=None, *, delimiter=None,
         extension, a cell that is not a number, rows with different numbers
         of fields, unknown or repeated column/array names, column index out
         of range, missing ``inputs``/``outputs`` for a text file, corrupted
-        ``.npz``/``.mat`` file, MATLAB v7.3 file. The ``path``, ``line`` and
+        ``.npz``/``.mat`` file, MATLAB v7.3 file without h5py installed. The ``path``, ``line`` and
         ``column`` attributes locate the problem when known.
     DataError
         The values are unusable (NaN or infinite values, time stamps that do
@@ -968,10 +969,9 @@ def mat_variables(path, *, raw=None, max_bytes=None, mat_dtype=False, what="data
         if not raw:
             raise FileReadError(f"file {shown} is empty", path=shown)
     head = raw[:520]
-    if b"MATLAB 7.3" in head[:128] or head[512:520] == _HDF5_SIGNATURE:
-        raise FileReadError(
-            f"{shown} is a MATLAB v7.3 (HDF5) file, which subid cannot read; save it with "
-            "save(..., '-v7') in MATLAB, or export the data to CSV", path=shown)
+    if b"MATLAB 7.3" in head[:128] or head[512:520] == _HDF5_SIGNATURE \
+            or head[:8] == _HDF5_SIGNATURE:
+        return _mat73_variables(raw, shown, _max_bytes(max_bytes))
     import scipy.io
     _check_mat_sizes(raw, shown, _max_bytes(max_bytes))
     try:
@@ -985,6 +985,125 @@ def mat_variables(path, *, raw=None, max_bytes=None, mat_dtype=False, what="data
     except Exception as exc:  # scipy raises ValueError, MatReadError, TypeError, OSError, ...
         raise FileReadError(f"{shown} is not a readable MATLAB .mat file (corrupted or not a "
                             f"MAT-file): {_reason(exc)}", path=shown) from None
+
+
+_MAT73_NUMERIC = {"double": np.float64, "single": np.float32, "int8": np.int8,
+                  "uint8": np.uint8, "int16": np.int16, "uint16": np.uint16,
+                  "int32": np.int32, "uint32": np.uint32, "int64": np.int64,
+                  "uint64": np.uint64, "logical": np.uint8}
+_MAT73_MAX_OBJECTS = 10_000
+
+
+def _mat73_variables(raw: bytes, shown: str, max_bytes: int) -> dict:
+    """The variables of a MATLAB v7.3 (HDF5) file, as :func:`scipy.io.loadmat`
+    gives those of a v5 file (2-D arrays in MATLAB's orientation, a struct as a
+    1-by-1 record array), read with h5py from memory.
+
+    Every dataset's declared size is checked (as float64, like v5 files:
+    at most the file's size plus ``max_bytes``) before any is read, so a
+    small file declaring huge (compressed) arrays is refused without
+    allocating them. Cell arrays, sparse matrices and objects become object
+    arrays, which :func:`read` and :meth:`StateSpace.from_mat` refuse by name.
+    """
+    try:
+        import h5py
+    except ImportError:
+        raise FileReadError(f"{shown} is a MATLAB v7.3 (HDF5) file; reading it needs h5py: "
+                            "pip install 'subid[hdf5]' (or save it with save(..., '-v7') in "
+                            "MATLAB)", path=shown) from None
+
+    def corrupt(exc):
+        return FileReadError(f"{shown} is not a readable MATLAB v7.3 (HDF5) file (corrupted?): "
+                             f"{_reason(exc)}", path=shown)
+
+    try:
+        fh = h5py.File(BytesIO(raw), "r")
+    except Exception as exc:           # h5py raises OSError, ValueError, KeyError, ...
+        raise corrupt(exc) from None
+    try:
+        with fh:
+            plan, budget, count = [], 8 * len(raw) + max_bytes, 0
+
+            def declare(name, obj, depth):
+                nonlocal budget, count
+                count += 1
+                if count > _MAT73_MAX_OBJECTS or depth > 8:
+                    raise FileReadError(f"{shown}: the MATLAB v7.3 file holds more than "
+                                        f"{_MAT73_MAX_OBJECTS} objects or nests them more than "
+                                        "8 deep; subid reads numeric variables", path=shown)
+                if isinstance(obj, h5py.Group):
+                    if _attr(obj, "MATLAB_class") != "struct":
+                        return ("unsupported", name, None)
+                    return ("struct", name, [declare(k, obj[k], depth + 1) for k in obj])
+                cls = _attr(obj, "MATLAB_class")
+                if not isinstance(obj, h5py.Dataset) or obj.dtype.kind == "O" \
+                        or cls in ("cell", "function_handle") or "MATLAB_sparse" in obj.attrs:
+                    return ("unsupported", name, None)
+                elements = 1
+                for d in obj.shape:
+                    elements *= int(d)
+                budget -= 8 * elements * (2 if obj.dtype.names else 1)
+                if budget < 0:
+                    raise ResourceLimitError(
+                        f"{shown}: its variables take more than max_bytes = {max_bytes} bytes "
+                        "beyond the file's size as float64; pass a larger max_bytes if the "
+                        "file is genuine", path=shown)
+                return ("dataset", name, obj)
+
+            for key in fh:
+                if key.startswith("#"):
+                    continue           # MATLAB's #refs# and #subsystem# groups
+                plan.append(declare(key, fh[key], 0))
+            return {name: _mat73_value(kind, item, shown) for kind, name, item in plan}
+    except (FileReadError, ResourceLimitError):
+        raise
+    except MemoryError:
+        raise
+    except Exception as exc:
+        raise corrupt(exc) from None
+
+
+def _attr(obj, key):
+    value = obj.attrs.get(key)
+    if isinstance(value, bytes):
+        return value.decode("ascii", "replace")
+    if isinstance(value, np.ndarray) and value.dtype.kind == "S":
+        return value.reshape(-1)[0].decode("ascii", "replace")
+    return None if value is None else str(value)
+
+
+def _mat73_value(kind, item, shown):
+    if kind == "unsupported":
+        return np.empty((1, 1), dtype=object)
+    if kind == "struct":
+        names = [name for _, name, _ in item]
+        record = np.empty((1, 1), dtype=[(name, object) for name in names])
+        for sub_kind, name, sub in item:
+            record[0, 0][name] = _mat73_value(sub_kind, sub, shown)
+        return record
+    cls = _attr(item, "MATLAB_class")
+    if int(np.asarray(item.attrs.get("MATLAB_empty", 0)).reshape(-1)[0]):
+        dims = [int(d) for d in np.asarray(item[()]).reshape(-1)]
+        return np.zeros(tuple(dims) if len(dims) >= 2 else (0, 0))
+    data = item[()]
+    if item.dtype.names:                       # complex: a compound of real and imag
+        if set(item.dtype.names) != {"real", "imag"}:
+            return np.empty((1, 1), dtype=object)
+        data = data["real"] + 1j * data["imag"]
+    data = np.asarray(data)
+    if cls == "char":
+        text = "".join(chr(c) for c in data.T.reshape(-1))
+        return np.array([text])
+    if cls not in _MAT73_NUMERIC and data.dtype.kind not in "biuf":
+        return np.empty((1, 1), dtype=object)
+    if cls == "logical":
+        data = data.astype(bool)
+    data = data.T                               # HDF5 holds MATLAB's column-major order
+    if data.ndim == 1:
+        data = data[None, :]
+    elif data.ndim == 0:
+        data = data.reshape(1, 1)
+    return np.ascontiguousarray(data)
 
 
 def _load_mat(p: Path, shown: str, *, raw=None, max_bytes=None) -> dict:
