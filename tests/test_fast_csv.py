@@ -162,23 +162,40 @@ def test_long_lines_still_refused_by_the_fast_path(tmp_path, monkeypatch):
             fn()
 
 
-def test_streaming_parses_each_byte_once_per_pass(tmp_path, monkeypatch):
-    """identify_file makes two passes; each hands every data byte to the parser once."""
+def test_streaming_parses_the_file_once(tmp_path, monkeypatch):
+    """identify_file and `subid identify --stream` hand every data byte to the parser
+    once: the later passes read the parsed doubles back; the spool is deleted."""
     clean = subid.systems.simulate_data(subid.systems.seed001_system(), 20_000, seed=1)
     noise = np.random.default_rng(2).standard_normal(clean.y.shape) * 0.1 * clean.y.std(0)
-    data = subid.IOData(clean.u, clean.y + noise)   # noisy: no third, residual pass
+    data = subid.IOData(clean.u, clean.y + noise)
     f = tmp_path / "rec.csv"
     np.savetxt(f, np.column_stack([data.u, data.y]), delimiter=",", fmt="%.17g",
                header="u1,u2,y1,y2", comments="")
     body = f.stat().st_size - len("u1,u2,y1,y2\n")
-    seen = []
+    seen, spools = [], []
     original = sio._fast_values
     monkeypatch.setattr(sio, "_fast_values",
                         lambda buf, *a: seen.append(len(buf)) or original(buf, *a))
+    real_close = subid.stream.ParsedOnce.close
+
+    def close(self):
+        spools.append(self.spool)
+        real_close(self)
+    monkeypatch.setattr(subid.stream.ParsedOnce, "close", close)
     model = subid.identify_file(f, "u1,u2", "y1,y2", order=3, horizon=5, chunk_size=3000)
-    assert sum(seen) == 2 * body, model.info.get("bd_diagnostics")
+    assert sum(seen) == body
+    assert model.info["bd_method"] != "projection"
     reference = subid.moesp(data, 3, horizon=5, statistic="gram")
     np.testing.assert_allclose(model.A, reference.A, rtol=1e-8, atol=1e-10)
+    np.testing.assert_allclose(model.B, reference.B, rtol=1e-7, atol=1e-9)
+    assert all(s is None or not Path(s).exists() for s in spools)
+    seen.clear()
+    from subid import cli
+    assert cli.main(["--quiet", "identify", str(f), "--inputs", "u1,u2", "--outputs", "y1,y2",
+                     "--method", "moesp", "--order", "3", "--horizon", "5", "--stream",
+                     "--chunk-size", "3000", "--no-report", "--out", str(tmp_path / "o")]) == 0
+    assert sum(seen) == body
+    assert all(s is None or not Path(s).exists() for s in spools)
 
 
 def test_read_peak_memory_is_below_three_times_the_doubles(tmp_path):
