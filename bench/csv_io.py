@@ -126,11 +126,18 @@ def main():
     rows["read_chunks, one pass"] = _median(
         lambda: sum(p.n_samples for p in subid.read_chunks(path, "u1,u2", "y1,y2")),
         args.repeat)
-    rows["identify_file (moesp, 2 passes)"] = _median(
+    rows["identify_file (moesp: parse once, B/D pass from the spool)"] = _median(
         lambda: subid.identify_file(path, "u1,u2", "y1,y2", method="moesp", order=3,
                                     horizon=10), args.repeat)
+    from subid import cli
+
+    def stream_cli():
+        assert cli.main(["--quiet", "identify", path, "--inputs", "u1,u2", "--outputs",
+                         "y1,y2", "--method", "moesp", "--order", "3", "--horizon", "10",
+                         "--no-report", "--stream", "--out", os.path.join(folder, "s")]) == 0
+    rows["subid identify --stream (moesp, --no-report)"] = _median(stream_cli, args.repeat)
     data = subid.read(path, "u1,u2", "y1,y2")
-    rows["  of which moesp in memory"] = _median(
+    rows["moesp on the record in memory (no I/O)"] = _median(
         lambda: subid.moesp(data, 3, horizon=10), args.repeat)
     del data
     print("| step | seconds | / fastest single-thread parse |")
