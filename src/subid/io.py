@@ -782,11 +782,13 @@ def _first_long_line(buf: bytes, encoding: str):
     return None
 
 
-def _blocks(fh, shown: str, encoding: str, lines_before: int, limit=None):
+def _blocks(fh, shown: str, encoding: str, lines_before: int, limit=None, count=True):
     """``(bytes, number of lines)`` of whole lines of ``fh``, about
     _BLOCK_BYTES at a time (at most ``limit`` bytes in all). A line longer
     than MAX_LINE_CHARS is refused (ResourceLimitError) before it is held
-    whole, so memory is bounded by the block size, whatever the file."""
+    whole, so memory is bounded by the block size, whatever the file.
+    ``count=False``: the line numbers are not needed (the number of lines is
+    then 0, and a long line is reported without its number being exact)."""
     pending = b""
     left = limit
     while True:
@@ -817,9 +819,9 @@ def _blocks(fh, shown: str, encoding: str, lines_before: int, limit=None):
             bad = _first_long_line(buf, encoding)
             if bad is not None:
                 raise _long_line_error(shown, lines_before + bad + 1)
-        count = buf.count(b"\n")
-        yield buf, count
-        lines_before += count
+        lines = buf.count(b"\n") if count else 0
+        yield buf, lines
+        lines_before += lines
 
 
 def _long_line_error(shown: str, line: int) -> ResourceLimitError:
@@ -899,7 +901,7 @@ def _read_text_fast(shown, ext, inputs, outputs, dt, time, delimiter):
         fh.seek(offset)
         parts = []
         try:
-            for buf, _ in _blocks(fh, shown, "utf-8", 0, limit=size - offset):
+            for buf, _ in _blocks(fh, shown, "utf-8", 0, limit=size - offset, count=False):
                 values = _fast_values(buf, layout.delim, layout.ncols) \
                     if len(buf) <= 2 * _BLOCK_BYTES else None
                 if values is None:
