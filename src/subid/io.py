@@ -761,7 +761,7 @@ def _fast_values(buf: bytes, delim, ncols: int):
         else:
             values = np.loadtxt(StringIO(buf.decode("ascii")), dtype=np.float64,
                                 delimiter=delim, comments=None, ndmin=2)
-    except Exception:                  # any failure: the careful parser decides
+    except Exception:  # noqa: BLE001 - any failure: the careful parser decides
         return None
     if values.ndim != 2 or values.shape[1] != ncols or not np.isfinite(values).all():
         return None
@@ -1020,7 +1020,7 @@ def _mat73_variables(raw: bytes, shown: str, max_bytes: int) -> dict:
 
     try:
         fh = h5py.File(BytesIO(raw), "r")
-    except Exception as exc:           # h5py raises OSError, ValueError, KeyError, ...
+    except Exception as exc:  # noqa: BLE001 - h5py raises OSError, ValueError, KeyError, ...
         raise corrupt(exc) from None
     try:
         with fh:
@@ -1061,7 +1061,7 @@ def _mat73_variables(raw: bytes, shown: str, max_bytes: int) -> dict:
         raise
     except MemoryError:
         raise
-    except Exception as exc:
+    except Exception as exc:  # noqa: BLE001 - h5py errors of any class
         raise corrupt(exc) from None
 
 
