@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import shutil
 import statistics
 import subprocess
 import sys
@@ -151,7 +152,7 @@ def main():
     print(f"peak RSS beyond a warmed-up child ({base:.0f} MiB): in-memory CLI "
           f"{whole - base:.0f} MiB = {(whole - base) / mb:.2f}x the doubles; --stream CLI "
           f"{stream - base:.0f} MiB = {(stream - base) / mb:.2f}x")
-    os.remove(path)
+    shutil.rmtree(folder, ignore_errors=True)
 
 
 if __name__ == "__main__":
