@@ -136,6 +136,12 @@ _MEMORY_SCRIPT = textwrap.dedent("""
     warm = subid.systems.simulate_data(subid.systems.seed001_system(), 500, seed=0)
     subid.moesp(warm, 3, horizon=5)                       # compile and import everything
     subid.identify_stream([warm[:250], warm[250:]], order=3, horizon=5)
+    import os, tempfile                                   # import the CSV parser too
+    small = os.path.join(tempfile.mkdtemp(), "small.csv")
+    with open(small, "w") as fh:
+        fh.write("u1,u2,y1,y2\n" + "1,2,3,4\n" * 10)
+    subid.read(small, "u1,u2", "y1,y2")
+    list(subid.read_chunks(small, "u1,u2", "y1,y2"))
     tracemalloc.start()                                   # numpy reports to tracemalloc
     if mode == "stream":
         subid.identify_file(path, "u1,u2", "y1,y2", order=3, horizon=5, chunk_size=20000)
@@ -169,8 +175,11 @@ def test_streaming_memory_is_bounded(tmp_path):
     assert peak["stream"] < cap, peak
     # `subid identify --stream`: also draws the report from its fixed 20,000 kept
     # samples (matplotlib), which does not grow with the file (measured 46 MB)
-    assert peak["cli"] < 2 * cap and peak["cli"] < peak["whole"] / 2, peak
-    assert peak["whole"] > 3 * cap, peak
+    assert peak["cli"] < 2 * cap, peak
+    # reading whole holds the record (19.2 MB of doubles) and moesp's work arrays;
+    # the fast parser keeps it under 3x the doubles plus moesp (measured 44 MB,
+    # 206 MB with the line-by-line parser)
+    assert 2 * peak["stream"] < peak["whole"] < 4 * 19.2, peak
     assert (tmp_path / "cli_out" / "report.html").exists()
 
 

@@ -25,8 +25,13 @@ def format_rows(rows) -> str:
     return head
 
 
-def as_signal(values, name: str, *, allow_empty_columns: bool = False) -> np.ndarray:
+def as_signal(values, name: str, *, allow_empty_columns: bool = False,
+              copy: bool = True) -> np.ndarray:
     """Return ``values`` as a C-contiguous float64 array of shape (N, channels).
+
+    With ``copy=False`` an array that is already float64 and C-contiguous is
+    returned as a new view of the same memory (not copied); anything else is
+    converted (copied) as with ``copy=True``.
 
     A 1-D array is one channel. Time is axis 0; the orientation is never
     guessed. Raises :class:`DataError` on complex, non-numeric, >2-D or
@@ -75,7 +80,11 @@ def as_signal(values, name: str, *, allow_empty_columns: bool = False) -> np.nda
                         "expected (samples, channels) with time on axis 0")
     if arr.shape[1] == 0 and not allow_empty_columns:
         raise DataError(f"{name} has no channels (shape {arr.shape})")
-    arr = np.array(arr, dtype=np.float64, order="C", copy=True)
+    if copy or arr.dtype != np.float64 or not arr.flags.c_contiguous \
+            or arr.dtype.byteorder not in "=|":
+        arr = np.array(arr, dtype=np.float64, order="C", copy=True)
+    else:
+        arr = arr.view()                 # a new view: its flags are ours to set
     check_finite(arr, name)
     return arr
 

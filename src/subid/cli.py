@@ -668,6 +668,8 @@ def identify(data, inputs, outputs, dt, time_column, delimiter, detrend, method_
         record, label, notes = load_data(data, inputs, outputs, dt, time_column, delimiter)
         detrend = detrend or _default_detrend(spec)
         work = _detrend(record, detrend)
+        if work is not record:
+            record = _RecordFacts(record)  # the raw samples are not needed any more: free them
         if validate > 0:
             est, val = work.split(1 - validate)
         else:
@@ -742,16 +744,12 @@ def _identify_streamed(data, inputs, outputs, dt, time_column, delimiter, detren
     ``report_samples`` samples of each part for the fit and the report; the
     method then reads the estimation part once more for the B, D, x0
     regression (:mod:`subid._bd_pass`; not with ``bd_method='projection'``),
-    so the model is the in-memory one.
+    so the model is the in-memory one. The file is parsed in pass 1 only:
+    passes 2 and 3 read the parsed values back from a temporary file of
+    doubles (:class:`subid.stream.ParsedOnce`), deleted at the end.
     """
-    import types
-
-    from . import report
-    from .data import IOData
     from .io import read_chunks
-    from .statistic import HankelStatistic
     from .stream import METHODS as STREAM_METHODS
-    from .stream import statistic_depth
     if spec.attribute not in STREAM_METHODS:
         raise click.UsageError(f"--stream works with the batch methods ls, moesp and n4sid, not "
                                f"with {spec.name}")
@@ -762,10 +760,29 @@ def _identify_streamed(data, inputs, outputs, dt, time_column, delimiter, detren
     if detrend == "linear":
         raise click.UsageError("--stream removes means (--detrend constant) or nothing "
                                "(--detrend none); a linear trend needs the whole record")
+    from .stream import ParsedOnce
+    # the file is parsed once; the later passes read the parsed doubles back
+    pieces = ParsedOnce(lambda: read_chunks(data, inputs, outputs, dt=dt,
+                                            chunk_size=chunk_size, delimiter=delimiter))
+    try:
+        return _identify_pieces(pieces, data, detrend, spec, order, horizon, validate, opts,
+                                frequency_unit, write_report, chunk_size, report_samples, out)
+    finally:
+        pieces.close()
+
+
+def _identify_pieces(pieces, data, detrend, spec, order, horizon, validate, opts,
+                     frequency_unit, write_report, chunk_size, report_samples, out):
+    import types
+
+    from . import report
+    from .data import IOData
+    from .statistic import HankelStatistic
+    from .stream import METHODS as STREAM_METHODS
+    from .stream import statistic_depth
     with _about(data):
         n, total_u, total_y, first = 0, 0.0, 0.0, None
-        for piece in read_chunks(data, inputs, outputs, dt=dt, chunk_size=chunk_size,
-                                 delimiter=delimiter):
+        for piece in pieces:
             if first is None:
                 first = piece
             n += piece.n_samples
@@ -784,8 +801,7 @@ def _identify_streamed(data, inputs, outputs, dt, time_column, delimiter, detren
         kept = {"est": ([], []), "val": ([], [])}
         start = 0
         t0 = time.perf_counter()
-        for piece in read_chunks(data, inputs, outputs, dt=dt, chunk_size=chunk_size,
-                                 delimiter=delimiter):
+        for piece in pieces:
             u, y = piece.u - u_mean, piece.y - y_mean
             split = min(max(cut - start, 0), piece.n_samples)
             if split:
@@ -803,8 +819,7 @@ def _identify_streamed(data, inputs, outputs, dt, time_column, delimiter, detren
 
             def estimation_chunks():
                 begin = 0
-                for chunk in read_chunks(data, inputs, outputs, dt=dt, chunk_size=chunk_size,
-                                         delimiter=delimiter):
+                for chunk in pieces:
                     end = min(max(cut - begin, 0), chunk.n_samples)
                     if end:
                         yield chunk.u[:end] - u_mean, chunk.y[:end] - y_mean
@@ -839,6 +854,17 @@ def _identify_streamed(data, inputs, outputs, dt, time_column, delimiter, detren
                    outputs=list(first.output_names), n_estimation=stat.n_samples,
                    n_validation=n - stat.n_samples, streamed=True)
     return 0
+
+
+class _RecordFacts:
+    """What the summary and the provenance need of a record, without its samples
+    (so the in-memory ``identify`` holds one copy of the data, the detrended one)."""
+
+    def __init__(self, record):
+        self.input_names, self.output_names = record.input_names, record.output_names
+        self.dt, self.has_time_stamps = record.dt, record.has_time_stamps
+        self.n_samples, self.n_inputs, self.n_outputs = (record.n_samples, record.n_inputs,
+                                                         record.n_outputs)
 
 
 def _provenance(source, record, work, detrend, est, validate) -> dict:

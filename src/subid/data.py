@@ -30,6 +30,11 @@ def _channel_names(names, count: int, prefix: str, which: str) -> tuple[str, ...
     return names
 
 
+def _writeable(values) -> bool:
+    """False for a read-only numpy array (kept without a copy by IOData)."""
+    return not isinstance(values, np.ndarray) or values.flags.writeable
+
+
 class IOData:
     """A record of sampled inputs and outputs.
 
@@ -47,11 +52,20 @@ class IOData:
         stamps are kept as given.
     input_names, output_names : sequence of str, optional
         Channel names (default ``u1, u2, ...`` and ``y1, y2, ...``).
+    copy : bool
+        Copy writable arrays (default). ``False`` keeps read-only views of
+        float64 C-contiguous arrays instead (see Notes).
 
     Notes
     -----
-    Arrays are copied to read-only float64 arrays; an ``IOData`` never
-    changes after construction. Methods that transform data (``detrend``,
+    Arrays are converted to read-only float64 arrays. A float64, C-contiguous
+    array that is already read-only (``arr.flags.writeable`` False: the
+    arrays of another record, of :func:`subid.read`, a read-only memory map)
+    is not copied: the record keeps a read-only view of it, so a 1e7-sample
+    record costs no second copy. Writable arrays are copied unless
+    ``copy=False`` is given, which keeps a read-only view of them too (then
+    do not change them afterwards). An ``IOData`` never changes after
+    construction. Methods that transform data (``detrend``,
     slicing) return new objects.
 
     Examples
@@ -62,9 +76,10 @@ class IOData:
     (100, 2, 1)
     """
 
-    def __init__(self, u, y, dt=None, t=None, input_names=None, output_names=None):
-        u = as_signal(u, "input u")
-        y = as_signal(y, "output y")
+    def __init__(self, u, y, dt=None, t=None, input_names=None, output_names=None, *,
+                 copy=True):
+        u = as_signal(u, "input u", copy=copy and _writeable(u))
+        y = as_signal(y, "output y", copy=copy and _writeable(y))
         if u.shape[0] != y.shape[0]:
             hint = ""
             if u.shape[1] == y.shape[0] or y.shape[1] == u.shape[0]:
@@ -77,7 +92,7 @@ class IOData:
         if dt is not None and t is not None:
             raise DataError("give either the sampling period dt or the time stamps t, not both")
         if t is not None:
-            t = check_time_stamps(t, n)
+            t = check_time_stamps(t, n).view()      # never the caller's array's flags
             steps = np.diff(t)
             if n > 1 and np.ptp(steps) <= _UNIFORM_RTOL * np.abs(steps).max():
                 self._dt = float(np.mean(steps))

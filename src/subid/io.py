@@ -13,7 +13,8 @@ Supported formats, chosen by the file extension:
     NumPy archive (:func:`numpy.savez`); arrays are selected by key.
 ``.mat``
     MATLAB file up to version 7 (:func:`scipy.io.loadmat`); variables are
-    selected by name. Version 7.3 (HDF5) files are not supported.
+    selected by name. Version 7.3 (HDF5) files are read with h5py when it is
+    installed (``pip install 'subid[hdf5]'``).
 
 Rules for text files
 --------------------
@@ -82,7 +83,7 @@ def read(path, inputs=None, outputs=None, dt=None, time=None, *, delimiter=None,
     path : str or os.PathLike
         The file. Its extension selects the format: ``.csv``, ``.tsv``,
         ``.txt``, ``.dat`` (text), ``.npz`` (NumPy archive) or ``.mat``
-        (MATLAB up to v7).
+        (MATLAB v4 to v7.3; v7.3 needs h5py).
     inputs, outputs : str, int or sequence of str/int
         The input and the output channels.
 
@@ -132,7 +133,7 @@ def read(path, inputs=None, outputs=None, dt=None, time=None, *, delimiter=None,
         extension, a cell that is not a number, rows with different numbers
         of fields, unknown or repeated column/array names, column index out
         of range, missing ``inputs``/``outputs`` for a text file, corrupted
-        ``.npz``/``.mat`` file, MATLAB v7.3 file. The ``path``, ``line`` and
+        ``.npz``/``.mat`` file, MATLAB v7.3 file without h5py installed. The ``path``, ``line`` and
         ``column`` attributes locate the problem when known.
     DataError
         The values are unusable (NaN or infinite values, time stamps that do
@@ -166,9 +167,12 @@ def read(path, inputs=None, outputs=None, dt=None, time=None, *, delimiter=None,
             raise DataError(f"delimiter must be one character (not a quote, '#' or a line "
                             f"break), got {delimiter!r}")
     max_bytes = _max_bytes(max_bytes)
-    raw = _read_bytes(p, shown)
     if ext in _TEXT_EXTENSIONS:
-        return _read_text(p, shown, ext, inputs, outputs, dt, time, delimiter, raw=raw)
+        fast = _read_text_fast(shown, ext, inputs, outputs, dt, time, delimiter)
+        if fast is not None:
+            return fast
+        return _read_text(p, shown, ext, inputs, outputs, dt, time, delimiter)
+    raw = _read_bytes(p, shown)
     if ext == ".npz":
         arrays = _load_npz(p, shown, raw=raw, max_bytes=max_bytes)
     else:
@@ -245,7 +249,8 @@ def _check_line_lengths(raw: bytes, shown: str) -> None:
 def _build(shown: str, u, y, dt, t, in_names, out_names, first_line=None) -> IOData:
     """Construct the IOData, prefixing its validation errors with the file name."""
     try:
-        return IOData(u, y, dt=dt, t=t, input_names=in_names, output_names=out_names)
+        return IOData(u, y, dt=dt, t=t, input_names=in_names, output_names=out_names,
+                      copy=False)          # arrays of our own, never seen by the caller
     except DataError as exc:
         where = ""
         if first_line is not None and "row" in str(exc):
@@ -382,6 +387,7 @@ class _Table:
         if first is None:
             raise FileReadError(f"file {shown} is empty (it holds no data, only blank or "
                                 "comment lines)", path=shown)
+        self.n_sampled = len(sample)
         if delimiter is None:
             self.delim = _sniff(sample, ext)
         else:
@@ -683,6 +689,241 @@ def _read_text(p, shown, ext, inputs, outputs, dt, time, delimiter, *, raw=None)
 
 
 # ---------------------------------------------------------------------------
+# fast parsing of well-formed text (pandas' C parser, pyarrow.csv or numpy)
+# ---------------------------------------------------------------------------
+#: Bytes handed to the fast parser at a time (whole lines; memory stays bounded).
+_BLOCK_BYTES = 1 << 20
+#: Fast parser in use: "pandas", "pyarrow" or "numpy" (None: choose on first use).
+_ENGINE = None
+
+
+def fast_engine() -> str:
+    """The parser used for well-formed text: pandas' C parser when pandas is
+    installed, else ``pyarrow.csv``, else :func:`numpy.loadtxt`."""
+    global _ENGINE
+    if _ENGINE is None:
+        try:
+            import pandas  # noqa: F401
+            _ENGINE = "pandas"
+        except ImportError:
+            try:
+                import pyarrow.csv  # noqa: F401
+                _ENGINE = "pyarrow"
+            except ImportError:
+                _ENGINE = "numpy"
+    return _ENGINE
+
+
+def _lone_cr(buf: bytes) -> bool:
+    """True when ``buf`` holds a carriage return that is not part of CRLF."""
+    return b"\r" in buf and buf.count(b"\r") != buf.count(b"\r\n")
+
+
+def _fast_values(buf: bytes, delim, ncols: int):
+    """All ``ncols`` columns of the complete lines ``buf`` as float64, or None.
+
+    None whenever anything is unusual (quotes, comments, non-ASCII bytes, a
+    lone CR, a parse error, another number of fields, a NaN, an infinity or
+    an empty cell): the careful parser then reads these lines and names the
+    line and column at fault. Every engine accepts only what Python's
+    ``float`` accepts and rounds as it does, so values equal the careful
+    parser's.
+    """
+    if b'"' in buf or b"#" in buf or not buf.isascii() or _lone_cr(buf):
+        return None
+    engine = fast_engine()
+    try:
+        if engine == "pandas":
+            import pandas as pd
+            frame = pd.read_csv(BytesIO(buf), sep=r"\s+" if delim is None else delim,
+                                header=None, dtype=np.float64, engine="c", na_filter=False,
+                                quoting=csv.QUOTE_NONE, skip_blank_lines=True,
+                                index_col=False)
+            values = frame.to_numpy(dtype=np.float64)
+        elif engine == "pyarrow" and delim is not None:
+            import pyarrow as pa
+            import pyarrow.csv as pcsv
+            table = pcsv.read_csv(
+                BytesIO(buf),
+                read_options=pcsv.ReadOptions(autogenerate_column_names=True,
+                                              use_threads=False),
+                parse_options=pcsv.ParseOptions(delimiter=delim, quote_char=False),
+                convert_options=pcsv.ConvertOptions(
+                    column_types={f"f{k}": pa.float64() for k in range(ncols)},
+                    strings_can_be_null=False))
+            if table.num_columns != ncols:
+                return None
+            values = np.empty((table.num_rows, ncols))
+            for k, column in enumerate(table.columns):
+                if column.null_count:
+                    return None
+                values[:, k] = column.to_numpy()
+        else:
+            values = np.loadtxt(StringIO(buf.decode("ascii")), dtype=np.float64,
+                                delimiter=delim, comments=None, ndmin=2)
+    except Exception:  # noqa: BLE001 - any failure: the careful parser decides
+        return None
+    if values.ndim != 2 or values.shape[1] != ncols or not np.isfinite(values).all():
+        return None
+    return values
+
+
+def _first_long_line(buf: bytes, encoding: str):
+    """0-based index of the first line of ``buf`` longer than MAX_LINE_CHARS
+    characters (line breaks excluded), or None."""
+    ends = np.flatnonzero(np.frombuffer(buf, dtype=np.uint8) == 10)
+    if not buf.endswith(b"\n"):
+        ends = np.append(ends, len(buf))
+    starts = np.concatenate(([0], ends[:-1] + 1))
+    for k in np.flatnonzero(ends - starts > MAX_LINE_CHARS):
+        text = buf[starts[k]:ends[k]].decode(encoding, "replace").rstrip("\r")
+        if len(text) > MAX_LINE_CHARS:
+            return int(k)
+    return None
+
+
+def _blocks(fh, shown: str, encoding: str, lines_before: int, limit=None, count=True):
+    """``(bytes, number of lines)`` of whole lines of ``fh``, about
+    _BLOCK_BYTES at a time (at most ``limit`` bytes in all). A line longer
+    than MAX_LINE_CHARS is refused (ResourceLimitError) before it is held
+    whole, so memory is bounded by the block size, whatever the file.
+    ``count=False``: the line numbers are not needed (the number of lines is
+    then 0, and a long line is reported without its number being exact)."""
+    pending = b""
+    left = limit
+    while True:
+        size = _BLOCK_BYTES if left is None else min(_BLOCK_BYTES, left)
+        try:
+            data = fh.read(size) if size else b""
+        except OSError as exc:
+            raise FileReadError(f"{shown}: cannot read the file ({_reason(exc)})",
+                                path=shown) from None
+        if left is not None:
+            left -= len(data)
+        if not data:
+            if pending:
+                if len(pending) > MAX_LINE_CHARS and _first_long_line(pending, encoding) \
+                        is not None:
+                    raise _long_line_error(shown, lines_before + 1)
+                yield pending, pending.count(b"\n") + 1
+            return
+        cut = data.rfind(b"\n")
+        if cut < 0:
+            pending += data
+            if len(pending) > MAX_LINE_CHARS and \
+                    len(pending.decode(encoding, "replace")) > MAX_LINE_CHARS:
+                raise _long_line_error(shown, lines_before + 1)
+            continue
+        buf, pending = pending + data[:cut + 1], data[cut + 1:]
+        if len(buf) > MAX_LINE_CHARS:
+            bad = _first_long_line(buf, encoding)
+            if bad is not None:
+                raise _long_line_error(shown, lines_before + bad + 1)
+        lines = buf.count(b"\n") if count else 0
+        yield buf, lines
+        lines_before += lines
+
+
+def _long_line_error(shown: str, line: int) -> ResourceLimitError:
+    return ResourceLimitError(f"{shown}, line {line}: the line is longer than the "
+                              f"{MAX_LINE_CHARS} characters subid reads "
+                              "(subid.io.MAX_LINE_CHARS); is this a text data file?",
+                              path=shown, line=line)
+
+
+def _line_start(head: bytes, index: int):
+    """Byte offset where line ``index`` (0-based) of ``head`` starts, or None."""
+    pos = 0
+    for _ in range(index):
+        pos = head.find(b"\n", pos) + 1
+        if pos == 0:
+            return None
+    return pos
+
+
+def _head_layout(fh, shown, ext, delimiter):
+    """``(layout, head bytes)`` of a text file from its first _HEAD_BYTES, or None
+    when the head alone cannot settle the layout as the whole text would
+    (UTF-16, a lone CR, too few lines sampled) or shows a problem (the
+    careful path then reports it)."""
+    try:
+        head = fh.read(_HEAD_BYTES)
+        size = os.fstat(fh.fileno()).st_size
+    except OSError:
+        return None
+    if not head or head.startswith((b"\xff\xfe", b"\xfe\xff")) or b"\x00" in head[:8192]:
+        return None
+    whole = len(head) >= size
+    if not whole:
+        cut = head.rfind(b"\n")
+        if cut < 0:
+            return None
+        head = head[:cut + 1]
+    if _lone_cr(head):
+        return None
+    try:
+        text = head.decode("utf-8-sig")
+    except UnicodeDecodeError:
+        return None
+    try:
+        layout = _Table(shown, text.replace("\r\n", "\n"), ext, delimiter)
+    except (FileReadError, DataError):
+        return None
+    if not whole and layout.n_sampled < _SNIFF_LINES:
+        return None
+    return layout, head, size
+
+
+def _read_text_fast(shown, ext, inputs, outputs, dt, time, delimiter):
+    """:func:`read` of a well-formed text file by the fast parser, or None
+    (then the careful parser reads the file and reports what is wrong).
+
+    The file is parsed in blocks of whole lines and only the selected
+    columns are kept, so the peak memory is about twice the selected data
+    in doubles (the blocks, then the joined arrays).
+    """
+    fh, _ = open_regular(shown, what="data file", max_bytes=None)
+    with fh:
+        found = _head_layout(fh, shown, ext, delimiter)
+        if found is None:
+            return None
+        layout, head, size = found
+        try:
+            in_cols, out_cols, t_cols = _roles(layout, shown, inputs, outputs, time)
+        except (FileReadError, DataError):
+            return None
+        offset = _line_start(head, layout.data_start)
+        if offset is None:
+            return None
+        if layout.data_start == 0 and head.startswith(b"\xef\xbb\xbf"):
+            offset = 3
+        cols = in_cols + out_cols + t_cols
+        fh.seek(offset)
+        parts = []
+        try:
+            for buf, _ in _blocks(fh, shown, "utf-8", 0, limit=size - offset, count=False):
+                values = _fast_values(buf, layout.delim, layout.ncols) \
+                    if len(buf) <= 2 * _BLOCK_BYTES else None
+                if values is None:
+                    return None
+                if values.shape[0]:
+                    parts.append(values[:, cols])
+            if fh.read(1):                 # the file grew: the careful path says so
+                return None
+        except (ResourceLimitError, FileReadError):
+            return None
+    if not parts:
+        return None
+    n_in, n_out = len(in_cols), len(out_cols)
+    u = np.concatenate([v[:, :n_in] for v in parts])
+    y = np.concatenate([v[:, n_in:n_in + n_out] for v in parts])
+    t = np.concatenate([v[:, -1] for v in parts]) if t_cols else None
+    del parts
+    return _build(shown, u, y, dt, t, layout.channel_names(in_cols),
+                  layout.channel_names(out_cols), first_line=layout.first_data)
+
+
+# ---------------------------------------------------------------------------
 # .npz and .mat files
 # ---------------------------------------------------------------------------
 def _reason(exc: BaseException) -> str:
@@ -730,10 +971,9 @@ def mat_variables(path, *, raw=None, max_bytes=None, mat_dtype=False, what="data
         if not raw:
             raise FileReadError(f"file {shown} is empty", path=shown)
     head = raw[:520]
-    if b"MATLAB 7.3" in head[:128] or head[512:520] == _HDF5_SIGNATURE:
-        raise FileReadError(
-            f"{shown} is a MATLAB v7.3 (HDF5) file, which subid cannot read; save it with "
-            "save(..., '-v7') in MATLAB, or export the data to CSV", path=shown)
+    if b"MATLAB 7.3" in head[:128] or head[512:520] == _HDF5_SIGNATURE \
+            or head[:8] == _HDF5_SIGNATURE:
+        return _mat73_variables(raw, shown, _max_bytes(max_bytes))
     import scipy.io
     _check_mat_sizes(raw, shown, _max_bytes(max_bytes))
     try:
@@ -747,6 +987,125 @@ def mat_variables(path, *, raw=None, max_bytes=None, mat_dtype=False, what="data
     except Exception as exc:  # scipy raises ValueError, MatReadError, TypeError, OSError, ...
         raise FileReadError(f"{shown} is not a readable MATLAB .mat file (corrupted or not a "
                             f"MAT-file): {_reason(exc)}", path=shown) from None
+
+
+_MAT73_NUMERIC = {"double": np.float64, "single": np.float32, "int8": np.int8,
+                  "uint8": np.uint8, "int16": np.int16, "uint16": np.uint16,
+                  "int32": np.int32, "uint32": np.uint32, "int64": np.int64,
+                  "uint64": np.uint64, "logical": np.uint8}
+_MAT73_MAX_OBJECTS = 10_000
+
+
+def _mat73_variables(raw: bytes, shown: str, max_bytes: int) -> dict:
+    """The variables of a MATLAB v7.3 (HDF5) file, as :func:`scipy.io.loadmat`
+    gives those of a v5 file (2-D arrays in MATLAB's orientation, a struct as a
+    1-by-1 record array), read with h5py from memory.
+
+    Every dataset's declared size is checked (as float64, like v5 files:
+    at most the file's size plus ``max_bytes``) before any is read, so a
+    small file declaring huge (compressed) arrays is refused without
+    allocating them. Cell arrays, sparse matrices and objects become object
+    arrays, which :func:`read` and :meth:`StateSpace.from_mat` refuse by name.
+    """
+    try:
+        import h5py
+    except ImportError:
+        raise FileReadError(f"{shown} is a MATLAB v7.3 (HDF5) file; reading it needs h5py: "
+                            "pip install 'subid[hdf5]' (or save it with save(..., '-v7') in "
+                            "MATLAB)", path=shown) from None
+
+    def corrupt(exc):
+        return FileReadError(f"{shown} is not a readable MATLAB v7.3 (HDF5) file (corrupted?): "
+                             f"{_reason(exc)}", path=shown)
+
+    try:
+        fh = h5py.File(BytesIO(raw), "r")
+    except Exception as exc:  # noqa: BLE001 - h5py raises OSError, ValueError, KeyError, ...
+        raise corrupt(exc) from None
+    try:
+        with fh:
+            plan, budget, count = [], 8 * len(raw) + max_bytes, 0
+
+            def declare(name, obj, depth):
+                nonlocal budget, count
+                count += 1
+                if count > _MAT73_MAX_OBJECTS or depth > 8:
+                    raise FileReadError(f"{shown}: the MATLAB v7.3 file holds more than "
+                                        f"{_MAT73_MAX_OBJECTS} objects or nests them more than "
+                                        "8 deep; subid reads numeric variables", path=shown)
+                if isinstance(obj, h5py.Group):
+                    if _attr(obj, "MATLAB_class") != "struct":
+                        return ("unsupported", name, None)
+                    return ("struct", name, [declare(k, obj[k], depth + 1) for k in obj])
+                cls = _attr(obj, "MATLAB_class")
+                if not isinstance(obj, h5py.Dataset) or obj.dtype.kind == "O" \
+                        or cls in ("cell", "function_handle") or "MATLAB_sparse" in obj.attrs:
+                    return ("unsupported", name, None)
+                elements = 1
+                for d in obj.shape:
+                    elements *= int(d)
+                budget -= 8 * elements * (2 if obj.dtype.names else 1)
+                if budget < 0:
+                    raise ResourceLimitError(
+                        f"{shown}: its variables take more than max_bytes = {max_bytes} bytes "
+                        "beyond the file's size as float64; pass a larger max_bytes if the "
+                        "file is genuine", path=shown)
+                return ("dataset", name, obj)
+
+            for key in fh:
+                if key.startswith("#"):
+                    continue           # MATLAB's #refs# and #subsystem# groups
+                plan.append(declare(key, fh[key], 0))
+            return {name: _mat73_value(kind, item, shown) for kind, name, item in plan}
+    except (FileReadError, ResourceLimitError):
+        raise
+    except MemoryError:
+        raise
+    except Exception as exc:  # noqa: BLE001 - h5py errors of any class
+        raise corrupt(exc) from None
+
+
+def _attr(obj, key):
+    value = obj.attrs.get(key)
+    if isinstance(value, bytes):
+        return value.decode("ascii", "replace")
+    if isinstance(value, np.ndarray) and value.dtype.kind == "S":
+        return value.reshape(-1)[0].decode("ascii", "replace")
+    return None if value is None else str(value)
+
+
+def _mat73_value(kind, item, shown):
+    if kind == "unsupported":
+        return np.empty((1, 1), dtype=object)
+    if kind == "struct":
+        names = [name for _, name, _ in item]
+        record = np.empty((1, 1), dtype=[(name, object) for name in names])
+        for sub_kind, name, sub in item:
+            record[0, 0][name] = _mat73_value(sub_kind, sub, shown)
+        return record
+    cls = _attr(item, "MATLAB_class")
+    if int(np.asarray(item.attrs.get("MATLAB_empty", 0)).reshape(-1)[0]):
+        dims = [int(d) for d in np.asarray(item[()]).reshape(-1)]
+        return np.zeros(tuple(dims) if len(dims) >= 2 else (0, 0))
+    data = item[()]
+    if item.dtype.names:                       # complex: a compound of real and imag
+        if set(item.dtype.names) != {"real", "imag"}:
+            return np.empty((1, 1), dtype=object)
+        data = data["real"] + 1j * data["imag"]
+    data = np.asarray(data)
+    if cls == "char":
+        text = "".join(chr(c) for c in data.T.reshape(-1))
+        return np.array([text])
+    if cls not in _MAT73_NUMERIC and data.dtype.kind not in "biuf":
+        return np.empty((1, 1), dtype=object)
+    if cls == "logical":
+        data = data.astype(bool)
+    data = data.T                               # HDF5 holds MATLAB's column-major order
+    if data.ndim == 1:
+        data = data[None, :]
+    elif data.ndim == 0:
+        data = data.reshape(1, 1)
+    return np.ascontiguousarray(data)
 
 
 def _load_mat(p: Path, shown: str, *, raw=None, max_bytes=None) -> dict:
@@ -1239,6 +1598,12 @@ def _text_pieces(p, shown, ext, inputs, outputs, chunk_size, delimiter):
                 encoding = "utf-8-sig"
             except UnicodeDecodeError:
                 encoding = "latin-1"
+        offset = None if utf16 or _lone_cr(head) else _line_start(head, layout.data_start)
+        if offset is not None:
+            fh.seek(offset)
+            yield from _fast_pieces(fh, shown, layout, cols, n_in, in_names, out_names,
+                                    chunk_size, encoding)
+            return
         text = _io.TextIOWrapper(fh, encoding=encoding, newline=None)
         try:
             consumed = 0
@@ -1270,6 +1635,60 @@ def _text_pieces(p, shown, ext, inputs, outputs, chunk_size, delimiter):
                 yield values[:, :n_in], values[:, n_in:], in_names, out_names
         finally:
             text.detach()
+
+
+def _careful_block(layout, buf: bytes, encoding: str, consumed: int, cols, shown):
+    """Values of the lines ``buf`` (line ``consumed + 1`` on) by the careful
+    parser, and their number of lines: used where the fast parser declined,
+    so that a bad row is reported with its file, line and column."""
+    try:
+        text = buf.decode(encoding)
+    except UnicodeDecodeError as exc:
+        raise FileReadError(f"{shown}: the file is not UTF-8 text after line {consumed} "
+                            f"({exc.reason})", path=shown, line=consumed) from None
+    if "\r" in text:
+        text = text.replace("\r\n", "\n").replace("\r", "\n")
+    lines = text.split("\n")
+    if lines and lines[-1] == "":
+        lines.pop()
+    if not any(line.strip() and not line.lstrip().startswith("#") for line in lines):
+        return np.empty((0, len(cols))), len(lines)
+    piece = _Table.__new__(_Table)
+    piece.__dict__.update(layout.__dict__)
+    piece.text = "\n".join(lines) + "\n"
+    piece.lines = piece.text.split("\n")
+    piece.data_start = 0
+    piece.line_offset = consumed
+    values = piece.parse(cols)
+    piece.check_finite(values, cols)
+    return values, len(lines)
+
+
+def _fast_pieces(fh, shown, layout, cols, n_in, in_names, out_names, chunk_size, encoding):
+    """Pieces of ``chunk_size`` rows of a text file read once, block by block,
+    by the fast parser (the careful one for blocks it declines)."""
+    consumed = layout.data_start          # lines before the current block
+    held, count = [], 0
+    for buf, n_lines in _blocks(fh, shown, encoding, consumed):
+        values = _fast_values(buf, layout.delim, layout.ncols) \
+            if len(buf) <= 2 * _BLOCK_BYTES else None
+        if values is None:
+            values, n_lines = _careful_block(layout, buf, encoding, consumed, cols, shown)
+        else:
+            values = values[:, cols]
+        consumed += n_lines
+        if values.shape[0]:
+            held.append(values)
+            count += values.shape[0]
+        while count >= chunk_size:
+            block = held[0] if len(held) == 1 else np.concatenate(held)
+            out = block[:chunk_size]
+            yield out[:, :n_in], out[:, n_in:], in_names, out_names
+            rest = block[chunk_size:]
+            held, count = ([rest] if rest.shape[0] else []), rest.shape[0]
+    if count:
+        block = held[0] if len(held) == 1 else np.concatenate(held)
+        yield block[:, :n_in], block[:, n_in:], in_names, out_names
 
 
 def _column_indices(spec, role: str, n_columns: int, shown: str) -> list[int]:

@@ -13,6 +13,8 @@ in-memory one; a one-shot iterator leaves the statistic-only projection.
 from __future__ import annotations
 
 import logging
+import os
+import tempfile
 import warnings
 
 import numpy as np
@@ -138,13 +140,96 @@ def identify_file(path, inputs, outputs, *, dt=None, method: str = "moesp", orde
                   delimiter=None, progress=None, **options):
     """Identify a model from a file of any size, with bounded memory.
 
-    The file is read with :func:`subid.read_chunks` and reduced to its
-    statistic on the way, then read once more for the B, D, x0 regression
-    (unless ``bd_method='projection'``); see :func:`identify_stream` for the
-    parameters.
+    The file is parsed once with :func:`subid.read_chunks` and reduced to its
+    statistic on the way; the B, D, x0 regression (unless
+    ``bd_method='projection'``) reads the parsed values back from a temporary
+    file of doubles (:class:`ParsedOnce`) instead of parsing the file again.
+    See :func:`identify_stream` for the parameters.
     """
-    def pieces():
-        return read_chunks(path, inputs, outputs, dt=dt, chunk_size=chunk_size,
-                           delimiter=delimiter)
-    return identify_stream(pieces(), method, order, horizon, statistic=statistic,
-                           progress=progress, reread=pieces, **options)
+    pieces = ParsedOnce(lambda: read_chunks(path, inputs, outputs, dt=dt,
+                                            chunk_size=chunk_size, delimiter=delimiter))
+    try:
+        return identify_stream(pieces, method, order, horizon, statistic=statistic,
+                               progress=progress, reread=lambda: pieces, **options)
+    finally:
+        pieces.close()
+
+
+class ParsedOnce:
+    """The pieces of a file, parsed once: iterable any number of times.
+
+    The first complete iteration parses the file (``make()``, e.g.
+    :func:`subid.read_chunks`) and spools the values of each piece, as
+    float64, to a temporary file; later iterations read them back piece by
+    piece, without parsing. Memory stays bounded by one piece; the disk
+    holds the selected columns in doubles (8 bytes a value) until
+    :meth:`close`. When the temporary file cannot be written (no space),
+    later iterations parse the file again.
+    """
+
+    def __init__(self, make):
+        self.make = make
+        self.spool = None
+        self.sizes = None              # rows of each piece, once spooled whole
+        self.layout = None
+
+    def __iter__(self):
+        return self._replay() if self.sizes is not None else self._first()
+
+    def _first(self):
+        self.close()
+        try:
+            fd, name = tempfile.mkstemp(prefix="subid-stream-", suffix=".f8")
+            fh = os.fdopen(fd, "wb")
+            self.spool = name
+        except OSError:
+            fh = None
+        sizes = []
+        try:
+            for piece in self.make():
+                if self.layout is None:
+                    self.layout = (piece.n_inputs, piece.dt, piece.input_names,
+                                   piece.output_names)
+                if fh is not None:
+                    try:
+                        fh.write(np.hstack([piece.u, piece.y]).tobytes())
+                    except OSError:
+                        fh.close()
+                        fh = None
+                        self.close()
+                sizes.append(piece.n_samples)
+                yield piece
+            if fh is not None:
+                fh.close()
+                fh = None
+                self.sizes = sizes
+        finally:
+            if fh is not None:         # abandoned or failed midway: parse again next time
+                fh.close()
+                self.close()
+
+    def _replay(self):
+        n_in, dt, in_names, out_names = self.layout
+        width = None
+        start = 0
+        with open(self.spool, "rb") as fh:
+            for rows in self.sizes:
+                if width is None:
+                    width = os.path.getsize(self.spool) // (8 * sum(self.sizes))
+                block = np.fromfile(fh, dtype=np.float64, count=rows * width)
+                block = block.reshape(rows, width)
+                piece = IOData(block[:, :n_in], block[:, n_in:], dt=dt,
+                               input_names=in_names, output_names=out_names, copy=False)
+                if start:
+                    piece = piece._derive(piece.u, piece.y, dt=dt, t0=start * dt)
+                start += rows
+                yield piece
+
+    def close(self):
+        """Delete the temporary file."""
+        if self.spool is not None:
+            try:
+                os.unlink(self.spool)
+            except OSError:
+                pass
+        self.spool, self.sizes = None, None
