@@ -841,10 +841,20 @@ class AdaptiveIdentifier:
         if self._uniform is None:
             steps = np.array([self._dt])
             self._uniform = (steps, self._tables(steps), self._psi_cache(1))
+            self._uniform_tail = None
         steps, tables, cache = self._uniform
         N = U.shape[0]
         idx = self._idx1 if N == 1 else np.zeros(N, dtype=np.int64)
-        return self._call(T, U, Y, idx, steps, tables, cache)
+        if self._engine != "numba":
+            return self._call(T, U, Y, idx, steps, tables, cache)
+        tail = self._uniform_tail
+        if tail is None:    # the arguments after idx never change: built once
+            Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, lamM, lamT = tables
+            par, ipar = self._parameters()
+            tail = self._uniform_tail = (steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1,
+                                         self._H, par, ipar, self._st["ist"], self._lay,
+                                         *cache, self._st["hist"], self._buf)
+        return bool(_k.kernel_packed(T, U, Y, idx, *tail))
 
     def _run(self, T, U, Y, steps_all, uniq) -> bool:
         idx = np.searchsorted(uniq, steps_all).astype(np.int64)
