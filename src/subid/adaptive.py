@@ -103,6 +103,21 @@ _INSTRUMENT_POLE_RATIO = 0.25
 _DEFAULT_FORGETTING = {"iv": (0.002, 0.02), "ls": (0.4, 0.08), "ode": (0.4, 0.08)}
 
 
+def _pack_tables(arrays):
+    """``(cbuf, clay)`` of :func:`subid._adaptive_kernel.kernel_packed`: the float
+    arrays copied into one buffer and their (offset, d0, d1, d2)."""
+    sizes = [a.size for a in arrays]
+    cbuf = np.empty(sum(sizes))
+    clay = np.ones((len(arrays), 4), dtype=np.int64)
+    off = 0
+    for i, (a, size) in enumerate(zip(arrays, sizes)):
+        cbuf[off:off + size] = a.reshape(-1)
+        clay[i, 0] = off
+        clay[i, 1:1 + a.ndim] = a.shape
+        off += size
+    return cbuf, clay
+
+
 def _positive(value, name: str, *, exc=SubidError) -> float:
     if isinstance(value, bool) or not isinstance(value, numbers.Real):
         raise exc(f"{name} must be a positive number, got {value!r}")
@@ -811,9 +826,10 @@ class AdaptiveIdentifier:
         Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, lamM, lamT = tables
         st = self._st
         par, ipar = self._parameters()
-        if self._engine == "numba":     # the float state as one buffer (cheaper call)
-            return bool(_k.kernel_packed(T, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi,
-                                         Ig0, Ig1, self._H, par, ipar, st["ist"], self._lay,
+        if self._engine == "numba":     # the float arrays as two buffers (cheaper call)
+            cbuf, clay = _pack_tables((steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1,
+                                       self._H, par))
+            return bool(_k.kernel_packed(T, U, Y, idx, cbuf, clay, ipar, st["ist"], self._lay,
                                          *cache, st["hist"], self._buf))
         return bool(_k.reference(T, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0,
                                  Ig1, self._H, par, ipar,
@@ -851,8 +867,9 @@ class AdaptiveIdentifier:
         if tail is None:    # the arguments after idx never change: built once
             Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, lamM, lamT = tables
             par, ipar = self._parameters()
-            tail = self._uniform_tail = (steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1,
-                                         self._H, par, ipar, self._st["ist"], self._lay,
+            cbuf, clay = _pack_tables((steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1,
+                                       self._H, par))
+            tail = self._uniform_tail = (cbuf, clay, ipar, self._st["ist"], self._lay,
                                          *cache, self._st["hist"], self._buf)
         return bool(_k.kernel_packed(T, U, Y, idx, *tail))
 
