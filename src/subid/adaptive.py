@@ -436,6 +436,7 @@ class AdaptiveIdentifier:
         self._st = st
         self._uniform = None      # discretisation tables for the constructor's dt
         self._idx1 = np.zeros(1, dtype=np.int64)    # table entries of a one-sample chunk
+        self._T1 = np.zeros(1)                      # time stamp of a one-sample chunk
 
     _ORDER = ("ist", "fst", "prev_u", "prev_y", "zp", "zq", "R", "G", "M", "Rt", "g",
               "theta", "Am", "Cm", "Bm", "Dm", "Apsi", "Cpsi", "Psi", "zr", "xi", "Cz", "Gz", "Zz")
@@ -774,9 +775,9 @@ class AdaptiveIdentifier:
         """
         U, Y, T = self._parse(u, y, t)
         N = U.shape[0]
-        S0 = self.n_samples
-        K = self._refresh
         st = self._st
+        S0 = int(st["ist"][0])          # self.n_samples
+        K = self._refresh
         # rollback state (the float buffer in one copy; the history only if
         # this chunk can reach a refresh)
         snap_buf, snap_ist = self._buf.copy(), st["ist"].copy()
@@ -788,7 +789,8 @@ class AdaptiveIdentifier:
         try:
             if T is None:
                 if N == 1:      # the same double operations as below (0.0 + x == x)
-                    T = np.array([self._t_origin + self._dt * float(S0 - self._k_origin)])
+                    T = self._T1      # the kernel only reads it
+                    T[0] = self._t_origin + self._dt * float(S0 - self._k_origin)
                 else:
                     T = self._t_origin + self._dt * (np.arange(N) + float(S0 - self._k_origin))
                 ok = self._run_uniform(T, U, Y)
