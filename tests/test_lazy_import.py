@@ -33,8 +33,9 @@ def test_from_import_star_and_dir_list_the_public_names():
     exec("from subid import *", namespace)
     assert set(subid.__all__) <= set(namespace)
     assert set(subid.__all__) <= set(dir(subid))
-    from subid import AdaptiveIdentifier, ls_subspace  # noqa: F401
+    from subid import AdaptiveIdentifier, ls_subspace
     assert AdaptiveIdentifier is subid.adaptive.AdaptiveIdentifier
+    assert ls_subspace is sys.modules["subid.ls_subspace"].ls_subspace
 
 
 def test_function_named_like_its_module_stays_the_function():
@@ -47,7 +48,7 @@ def test_function_named_like_its_module_stays_the_function():
 
 def test_unknown_name_raises_attribute_error():
     try:
-        subid.no_such_name
+        getattr(subid, "no_such_name")
     except AttributeError as exc:
         assert "no_such_name" in str(exc)
     else:
