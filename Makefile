@@ -13,7 +13,7 @@ DOCS_STAMP := $(DOCS_VENV)/.installed
 
 BENCH_VENV := .venv-bench
 
-.PHONY: demo gallery test test-long bench bench-bd bench-ct bench-realdata experiment docs clean
+.PHONY: demo gallery test test-long bench bench-bd bench-ct bench-startup bench-realdata experiment docs clean
 
 $(PY):
 	$(PYTHON) -m venv $(VENV)
@@ -53,6 +53,11 @@ test-long: $(STAMP)
 
 bench: $(STAMP)
 	OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 MKL_NUM_THREADS=1 $(PY) bench/run.py --out bench/results.md
+
+# Start-up, first-call compile, one-sample update and report/identification ratio (issue 14).
+bench-startup: $(STAMP)
+	OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 MKL_NUM_THREADS=1 $(PY) bench/startup.py --repeat 5
+	OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 MKL_NUM_THREADS=1 $(PY) bench/demo_ratio.py
 
 # The default B, D, x0 regression against the statistic-only path at 1e7 samples (issue 14).
 bench-bd: $(STAMP)

@@ -518,14 +518,14 @@ def test_non_finite_result_rolls_the_chunk_back(short_record, monkeypatch):
     ident = paper_ident(history=4)
     ident.update(u[:4000], y[:4000])
     before = state_arrays(ident)
-    real = K.kernel
+    real = K.kernel_packed
 
     def overflowing(*args):
         real(*args)
         args[-1][7] = np.inf          # a state entry overflows
         return False
 
-    monkeypatch.setattr(K, "kernel", overflowing)
+    monkeypatch.setattr(K, "kernel_packed", overflowing)
     with pytest.raises(DataError, match="non-finite"):
         ident.update(u[4000:4100], y[4000:4100])
     monkeypatch.undo()

@@ -1196,6 +1196,77 @@ def _ref_refresh(n, nu, ny, omega, alpha, max_cond, gate, ode, iv, T_now, ist, f
             ist[2] += 1
 
 
+
+@numba.njit(cache=True, fastmath=_FASTMATH)
+def kernel_packed(Tm, U, Y, idx, cbuf, clay, ipar, ist, lay, PsiPhi, PsiG0, PsiG1, pstamp, hist,
+                  buf):  # pragma: no cover - compiled
+    """:func:`kernel` with its float arrays passed as two buffers.
+
+    ``buf`` holds the float state: ``lay[i] = (offset, rows, cols)`` locates
+    the i-th float state array of :func:`kernel` (``fst`` ... ``Zz``, in its
+    argument order; the first three are 1-D). ``cbuf`` holds the constant
+    tables ``steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, Hsel, par``
+    (that order): ``clay[i] = (offset, d0, d1, d2)``. The views are cut here,
+    in compiled code: calling from Python costs two array arguments instead
+    of 34 (unboxing arrays is most of the cost of a one-sample call). Same
+    arithmetic as :func:`kernel`, which it calls.
+    """
+    steps = cbuf[clay[0, 0]:clay[0, 0] + clay[0, 1]]
+    lamM = cbuf[clay[1, 0]:clay[1, 0] + clay[1, 1]]
+    lamT = cbuf[clay[2, 0]:clay[2, 0] + clay[2, 1]]
+    Fphi = _view3(cbuf, clay, 3)
+    Fg0 = _view2(cbuf, clay, 4)
+    Fg1 = _view2(cbuf, clay, 5)
+    Iphi = _view3(cbuf, clay, 6)
+    Ig0 = _view2(cbuf, clay, 7)
+    Ig1 = _view2(cbuf, clay, 8)
+    Hsel = _view2(cbuf, clay, 9)
+    par = cbuf[clay[10, 0]:clay[10, 0] + clay[10, 1]]
+    fst = buf[lay[0, 0]:lay[0, 0] + lay[0, 1]]
+    prev_u = buf[lay[1, 0]:lay[1, 0] + lay[1, 1]]
+    prev_y = buf[lay[2, 0]:lay[2, 0] + lay[2, 1]]
+    zp = _view2(buf, lay, 3)
+    zq = _view2(buf, lay, 4)
+    R = _view2(buf, lay, 5)
+    G = _view2(buf, lay, 6)
+    M = _view2(buf, lay, 7)
+    Rt = _view2(buf, lay, 8)
+    gt = _view2(buf, lay, 9)
+    theta = _view2(buf, lay, 10)
+    Am = _view2(buf, lay, 11)
+    Cm = _view2(buf, lay, 12)
+    Bm = _view2(buf, lay, 13)
+    Dm = _view2(buf, lay, 14)
+    Apsi = _view2(buf, lay, 15)
+    Cpsi = _view2(buf, lay, 16)
+    Psi = _view2(buf, lay, 17)
+    zr = _view2(buf, lay, 18)
+    xi = _view2(buf, lay, 19)
+    Cz = _view2(buf, lay, 20)
+    Gz = _view2(buf, lay, 21)
+    Zz = _view2(buf, lay, 22)
+    return kernel(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, Hsel,
+                  par, ipar, ist, fst, prev_u, prev_y, zp, zq, R, G, M, Rt, gt, theta,
+                  Am, Cm, Bm, Dm, Apsi, Cpsi, Psi, zr, xi, Cz, Gz, Zz,
+                  PsiPhi, PsiG0, PsiG1, pstamp, hist, buf)
+
+
+@numba.njit(cache=True)
+def _view3(buf, lay, i):  # pragma: no cover - compiled
+    """The 3-D array ``i`` of :func:`kernel_packed`'s constant tables, a view of ``buf``."""
+    o = lay[i, 0]
+    return buf[o:o + lay[i, 1] * lay[i, 2] * lay[i, 3]].reshape((lay[i, 1], lay[i, 2],
+                                                                  lay[i, 3]))
+
+
+@numba.njit(cache=True)
+def _view2(buf, lay, i):  # pragma: no cover - compiled
+    """The 2-D array ``i`` (rows ``lay[i, 1]``, columns ``lay[i, 2]``) of
+    :func:`kernel_packed`, a view of ``buf``."""
+    o = lay[i, 0]
+    return buf[o:o + lay[i, 1] * lay[i, 2]].reshape((lay[i, 1], lay[i, 2]))
+
+
 def reference(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, Hsel, par,
               ipar, ist, fst, prev_u, prev_y, zp, zq, R, G, M, Rt, gt, theta,
               Am, Cm, Bm, Dm, Apsi, Cpsi, Psi, zr, xi, Cz, Gz, Zz,

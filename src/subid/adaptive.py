@@ -103,6 +103,21 @@ _INSTRUMENT_POLE_RATIO = 0.25
 _DEFAULT_FORGETTING = {"iv": (0.002, 0.02), "ls": (0.4, 0.08), "ode": (0.4, 0.08)}
 
 
+def _pack_tables(arrays):
+    """``(cbuf, clay)`` of :func:`subid._adaptive_kernel.kernel_packed`: the float
+    arrays copied into one buffer and their (offset, d0, d1, d2)."""
+    sizes = [a.size for a in arrays]
+    cbuf = np.empty(sum(sizes))
+    clay = np.ones((len(arrays), 4), dtype=np.int64)
+    off = 0
+    for i, (a, size) in enumerate(zip(arrays, sizes)):
+        cbuf[off:off + size] = a.reshape(-1)
+        clay[i, 0] = off
+        clay[i, 1:1 + a.ndim] = a.shape
+        off += size
+    return cbuf, clay
+
+
 def _positive(value, name: str, *, exc=SubidError) -> float:
     if isinstance(value, bool) or not isinstance(value, numbers.Real):
         raise exc(f"{name} must be a positive number, got {value!r}")
@@ -396,10 +411,13 @@ class AdaptiveIdentifier:
         self._buf = np.zeros(sum(math.prod(shape) for _, shape in layout))
         st = {}
         off = 0
+        lay = []                    # (offset, rows, cols): the views for kernel_packed
         for name, shape in layout:
             size = math.prod(shape)
             st[name] = self._buf[off:off + size].reshape(shape)
+            lay.append((off, shape[0], shape[1] if len(shape) > 1 else 1))
             off += size
+        self._lay = np.array(lay, dtype=np.int64)
         ist = np.zeros(_k.N_IST, dtype=np.int64)
         ist[_k.IST["hist_stride"]] = 1
         st["ist"] = ist
@@ -417,6 +435,8 @@ class AdaptiveIdentifier:
         st["hist"] = np.zeros((self._hist_cap, 2 + n * n + n * nu + ny * n + ny * nu))
         self._st = st
         self._uniform = None      # discretisation tables for the constructor's dt
+        self._idx1 = np.zeros(1, dtype=np.int64)    # table entries of a one-sample chunk
+        self._T1 = np.zeros(1)                      # time stamp of a one-sample chunk
 
     _ORDER = ("ist", "fst", "prev_u", "prev_y", "zp", "zq", "R", "G", "M", "Rt", "g",
               "theta", "Am", "Cm", "Bm", "Dm", "Apsi", "Cpsi", "Psi", "zr", "xi", "Cz", "Gz", "Zz")
@@ -651,8 +671,11 @@ class AdaptiveIdentifier:
     @staticmethod
     def _as_chunk(values, channels: int, name: str) -> np.ndarray:
         if type(values) is np.ndarray and values.dtype == np.float64:   # fast path
-            arr = values.reshape(1, channels) if values.ndim == 1 and channels > 1 \
-                and values.shape[0] == channels else values
+            if values.ndim == 1 and values.shape[0] == channels and channels > 1 \
+                    and all(map(math.isfinite, values.tolist())):
+                # one sample: testing a few Python floats is cheaper than two ufunc calls
+                return np.ascontiguousarray(values.reshape(1, channels))
+            arr = values
             if arr.ndim == 1 and channels == 1:
                 arr = arr.reshape(-1, 1)
             if arr.ndim == 2 and arr.shape[1] == channels and arr.shape[0] > 0 \
@@ -752,9 +775,9 @@ class AdaptiveIdentifier:
         """
         U, Y, T = self._parse(u, y, t)
         N = U.shape[0]
-        S0 = self.n_samples
-        K = self._refresh
         st = self._st
+        S0 = int(st["ist"][0])          # self.n_samples
+        K = self._refresh
         # rollback state (the float buffer in one copy; the history only if
         # this chunk can reach a refresh)
         snap_buf, snap_ist = self._buf.copy(), st["ist"].copy()
@@ -765,7 +788,11 @@ class AdaptiveIdentifier:
         origin = (self._t_origin, self._k_origin)
         try:
             if T is None:
-                T = self._t_origin + self._dt * (np.arange(N) + float(S0 - self._k_origin))
+                if N == 1:      # the same double operations as below (0.0 + x == x)
+                    T = self._T1      # the kernel only reads it
+                    T[0] = self._t_origin + self._dt * float(S0 - self._k_origin)
+                else:
+                    T = self._t_origin + self._dt * (np.arange(N) + float(S0 - self._k_origin))
                 ok = self._run_uniform(T, U, Y)
             else:
                 prev = T[0] if S0 == 0 else self.t
@@ -800,15 +827,27 @@ class AdaptiveIdentifier:
     def _call(self, T, U, Y, idx, steps, tables, cache) -> bool:
         Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, lamM, lamT = tables
         st = self._st
-        par = np.array([self._omega, self._alpha, self._beta, self._max_cond,
-                        self._trace_bound, self._gate, self._max_gap, self._dcF, self._dcI,
-                        self._settle])
-        ipar = np.array([self._refresh, self._method == "ode", self._hold == "foh",
-                         self._method == "iv"], dtype=np.int64)
-        fn = _k.kernel if self._engine == "numba" else _k.reference
-        return bool(fn(T, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1,
-                       self._H, par, ipar,
-                       *(st[k] for k in self._ORDER), *cache, st["hist"], self._buf))
+        par, ipar = self._parameters()
+        if self._engine == "numba":     # the float arrays as two buffers (cheaper call)
+            cbuf, clay = _pack_tables((steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1,
+                                       self._H, par))
+            return bool(_k.kernel_packed(T, U, Y, idx, cbuf, clay, ipar, st["ist"], self._lay,
+                                         *cache, st["hist"], self._buf))
+        return bool(_k.reference(T, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0,
+                                 Ig1, self._H, par, ipar,
+                                 *(st[k] for k in self._ORDER), *cache, st["hist"], self._buf))
+
+    def _parameters(self):
+        """``(par, ipar)`` of the kernel (settings fixed at construction; built once)."""
+        cached = self.__dict__.get("_par_ipar")
+        if cached is None:
+            par = np.array([self._omega, self._alpha, self._beta, self._max_cond,
+                            self._trace_bound, self._gate, self._max_gap, self._dcF,
+                            self._dcI, self._settle])
+            ipar = np.array([self._refresh, self._method == "ode", self._hold == "foh",
+                             self._method == "iv"], dtype=np.int64)
+            cached = self._par_ipar = (par, ipar)
+        return cached
 
     def _psi_cache(self, K: int):
         n, ny = self._n, self._ny
@@ -820,9 +859,21 @@ class AdaptiveIdentifier:
         if self._uniform is None:
             steps = np.array([self._dt])
             self._uniform = (steps, self._tables(steps), self._psi_cache(1))
+            self._uniform_tail = None
         steps, tables, cache = self._uniform
-        idx = np.zeros(U.shape[0], dtype=np.int64)
-        return self._call(T, U, Y, idx, steps, tables, cache)
+        N = U.shape[0]
+        idx = self._idx1 if N == 1 else np.zeros(N, dtype=np.int64)
+        if self._engine != "numba":
+            return self._call(T, U, Y, idx, steps, tables, cache)
+        tail = self._uniform_tail
+        if tail is None:    # the arguments after idx never change: built once
+            Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, lamM, lamT = tables
+            par, ipar = self._parameters()
+            cbuf, clay = _pack_tables((steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1,
+                                       self._H, par))
+            tail = self._uniform_tail = (cbuf, clay, ipar, self._st["ist"], self._lay,
+                                         *cache, self._st["hist"], self._buf)
+        return bool(_k.kernel_packed(T, U, Y, idx, *tail))
 
     def _run(self, T, U, Y, steps_all, uniq) -> bool:
         idx = np.searchsorted(uniq, steps_all).astype(np.int64)

@@ -301,6 +301,15 @@ def _one_line(exc: BaseException) -> str:
     return " ".join(text.split())
 
 
+def _usage_line(exc: click.UsageError) -> str:
+    """A usage error as one line: the problem and where to read the usage."""
+    text = " ".join(exc.format_message().split())
+    ctx = exc.ctx
+    if ctx is not None:
+        text += f" (see '{ctx.command_path} --help')"
+    return text
+
+
 def _parse_order(text):
     """'auto' -> None; '4' -> 4; '2:6' -> [2..6]; '2,3,5' -> [2, 3, 5]."""
     if text is None:
@@ -323,17 +332,70 @@ def _parse_order(text):
 
 
 def _parse_options(items) -> dict:
+    """``--option KEY=VALUE`` items -> keyword arguments (VALUE parsed as JSON if it is).
+
+    A missing ``=``, an empty key or a key given twice is a usage error.
+    """
     out = {}
     for item in items or ():
         if "=" not in item:
             raise click.BadParameter(f"{item!r}: use KEY=VALUE", param_hint="--option")
         key, value = item.split("=", 1)
         key = key.strip().replace("-", "_")
+        if not key.isidentifier():
+            raise click.BadParameter(f"{item!r}: KEY must be an option name, as in "
+                                     "instruments=null", param_hint="--option")
+        if key in out:
+            raise click.BadParameter(f"{key} given twice; give each KEY once",
+                                     param_hint="--option")
         try:
             out[key] = json.loads(value)
         except ValueError:
             out[key] = value
     return out
+
+
+def _check_method_options(spec: MethodSpec, options: dict, *, reserved=()) -> None:
+    """Reject ``--option`` keys the method does not take (a usage error, exit 2).
+
+    ``reserved`` are keyword arguments the command passes itself (``order``,
+    and ``horizon`` when ``--horizon`` is given...): giving them again through
+    ``--option`` is a usage error too, not a ``TypeError`` from the call.
+    """
+    import inspect
+    if not options:
+        return
+    target = spec.load()
+    try:
+        params = inspect.signature(target).parameters
+    except (TypeError, ValueError):
+        return
+    skip = 1 if spec.kind == "batch" else 0       # the data argument / self is not an option
+    names = [name for name, p in list(params.items())[skip:]
+             if p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)]
+    open_ended = any(p.kind is p.VAR_KEYWORD for p in params.values())
+    for key in options:
+        if key in reserved:
+            raise click.BadParameter(f"{key} is set by its own command-line option "
+                                     f"(--{key.replace('_', '-')}), not by --option",
+                                     param_hint="--option")
+        if key not in names and not open_ended:
+            accepted = [n for n in names if n not in reserved]
+            raise click.BadParameter(
+                f"method {spec.name} has no option {key!r}; its options are: "
+                f"{', '.join(accepted) or '(none)'}", param_hint="--option")
+
+
+def _reserved_options(spec: MethodSpec, *, horizon=None, forgetting=None) -> set:
+    """Keyword arguments a command passes to ``spec`` itself."""
+    reserved = {"order"}
+    if horizon is not None:
+        reserved.add("horizon")
+    if forgetting is not None:
+        reserved.add("forgetting")
+    if spec.kind == "online":
+        reserved |= {"n_inputs", "n_outputs", "dt"}
+    return reserved
 
 
 def _names(spec) -> list[str] | None:
@@ -653,6 +715,8 @@ def identify(data, inputs, outputs, dt, time_column, delimiter, detrend, method_
     _check_out(out, _IDENTIFY_FILES)
     order = _parse_order(order)
     opts = _parse_options(options)
+    _check_method_options(spec, opts, reserved=_reserved_options(spec, horizon=horizon,
+                                                                 forgetting=forgetting))
     if forgetting is not None and spec.kind != "online":
         raise click.UsageError(f"--forgetting applies to online methods only, not to "
                                f"{spec.name}")
@@ -1128,6 +1192,8 @@ def track(data, inputs, outputs, dt, time_column, delimiter, detrend, method_nam
     spec = METHODS[method_name]
     spec.load()
     opts = _parse_options(options)
+    _check_method_options(spec, opts, reserved=_reserved_options(spec, horizon=horizon,
+                                                                 forgetting=forgetting))
     with _about(data):
         raw, label, notes = load_data(data, inputs, outputs, dt, time_column, delimiter)
         detrend = detrend or _default_detrend(spec)
@@ -1676,7 +1742,7 @@ def main(argv=None) -> int:
         except click.exceptions.Exit as exc:
             return exc.exit_code
         except click.UsageError as exc:
-            exc.show()
+            click.echo(f"subid: error: {_usage_line(exc)}", err=True)
             return EXIT_USER_ERROR
         except click.ClickException as exc:
             exc.show()

@@ -1,0 +1,73 @@
+"""``import subid`` is lazy (PEP 562): every public name still works."""
+
+import importlib
+import subprocess
+import sys
+import types
+
+import subid
+
+HEAVY = ("numba", "scipy.optimize", "matplotlib", "dask", "pandas")
+
+
+def _fresh(code):
+    """Run ``code`` in a new interpreter (same sys.path) and return its stdout."""
+    env_path = ":".join(p for p in sys.path if p)
+    out = subprocess.run(
+        [sys.executable, "-c", f"import sys; sys.path[:0] = {env_path.split(':')!r}\n" + code],
+        capture_output=True, text=True, check=True,
+    )
+    return out.stdout
+
+
+def test_every_public_name_resolves_to_the_object_in_its_module():
+    for name in subid.__all__:
+        module_name, attribute = subid._LAZY[name]
+        module = importlib.import_module(f"subid.{module_name}")
+        expected = module if attribute is None else getattr(module, attribute)
+        assert getattr(subid, name) is expected, name
+
+
+def test_from_import_star_and_dir_list_the_public_names():
+    namespace = {}
+    exec("from subid import *", namespace)
+    assert set(subid.__all__) <= set(namespace)
+    assert set(subid.__all__) <= set(dir(subid))
+    from subid import AdaptiveIdentifier, ls_subspace
+    assert AdaptiveIdentifier is subid.adaptive.AdaptiveIdentifier
+    assert ls_subspace is sys.modules["subid.ls_subspace"].ls_subspace
+
+
+def test_function_named_like_its_module_stays_the_function():
+    import subid.ls_subspace  # noqa: F401  (binds the submodule, eagerly overwritten)
+    import subid.n4sid as n4sid_name
+    assert isinstance(subid.ls_subspace, types.FunctionType)
+    assert isinstance(n4sid_name, types.FunctionType)
+    assert isinstance(sys.modules["subid.ls_subspace"], types.ModuleType)
+
+
+def test_unknown_name_raises_attribute_error():
+    try:
+        getattr(subid, "no_such_name")
+    except AttributeError as exc:
+        assert "no_such_name" in str(exc)
+    else:
+        raise AssertionError("expected AttributeError")
+
+
+def test_import_subid_and_the_cli_load_no_heavy_module():
+    out = _fresh(
+        "import subid, subid.cli\n"
+        f"print(','.join(m for m in {HEAVY!r} if m in sys.modules))\n"
+    )
+    assert out.strip() == ""
+
+
+def test_fresh_interpreter_public_names_are_the_module_objects():
+    out = _fresh(
+        "import subid\n"
+        "from subid import ct_subspace\n"
+        "import subid.ct_subspace as m\n"
+        "print(ct_subspace is m is sys.modules['subid.ct_subspace'].ct_subspace)\n"
+    )
+    assert out.strip() == "True"
