@@ -19,7 +19,7 @@ def exported_names() -> dict[str, str]:
     """``{name: canonical path}`` for ``subid.__all__``, read from ``subid/__init__.py``
     without importing it (the docs environment has only the documentation tools):
     ``from . import mod`` gives ``subid.mod``, ``from .mod import name`` gives
-    ``subid.mod.name``."""
+    ``subid.mod.name``, and so do the entries of the lazy-import table ``_LAZY``."""
     tree = ast.parse((ROOT / "src" / "subid" / "__init__.py").read_text())
     where, names = {}, None
     for node in tree.body:
@@ -31,6 +31,11 @@ def exported_names() -> dict[str, str]:
         elif isinstance(node, ast.Assign) and any(
                 isinstance(t, ast.Name) and t.id == "__all__" for t in node.targets):
             names = [ast.literal_eval(elt) for elt in node.value.elts]
+        elif isinstance(node, ast.Assign) and any(
+                isinstance(t, ast.Name) and t.id == "_LAZY" for t in node.targets):
+            # lazy public names (PEP 562): {name: (module, attribute or None)}
+            for name, (module, attr) in ast.literal_eval(node.value).items():
+                where[name] = f"subid.{module}.{attr}" if attr else f"subid.{module}"
     if names is None:
         raise SystemExit("subid/__init__.py has no __all__")
     unknown = [n for n in names if n not in where]
