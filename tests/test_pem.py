@@ -7,7 +7,6 @@ behaviour; the compiled Jacobian against its reference and finite differences.
 
 from __future__ import annotations
 
-import sys
 import warnings
 
 import numpy as np
@@ -19,7 +18,9 @@ from subid import systems
 from subid._pem_kernel import jacobian, jacobian_ref
 from subid.errors import DataError, ModelError, SubidError
 
-pem_module = sys.modules["subid.pem"]
+import importlib  # noqa: E402
+
+pem_module = importlib.import_module("subid.pem")   # the module (subid.pem is the function)
 
 
 def _random_directions(rng, d, n, ny, m):
