@@ -139,7 +139,7 @@ _MEMORY_SCRIPT = textwrap.dedent("""
     import os, tempfile                                   # import the CSV parser too
     small = os.path.join(tempfile.mkdtemp(), "small.csv")
     with open(small, "w") as fh:
-        fh.write("u1,u2,y1,y2\n" + "1,2,3,4\n" * 10)
+        fh.write("u1,u2,y1,y2\\n" + "1,2,3,4\\n" * 10)
     subid.read(small, "u1,u2", "y1,y2")
     list(subid.read_chunks(small, "u1,u2", "y1,y2"))
     tracemalloc.start()                                   # numpy reports to tracemalloc
