@@ -12,6 +12,7 @@ import pytest
 
 import subid
 import subid.io as sio
+import subid.stream  # noqa: E402  (a submodule: the package imports it lazily)
 from subid import errors
 
 RNG = np.random.default_rng(16)

@@ -1621,12 +1621,7 @@ def _text_pieces(p, shown, ext, inputs, outputs, chunk_size, delimiter):
                                              path=shown, line=consumed + 1)
                 consumed += 1
             for lines in _text_lines(text, shown, consumed, chunk_size):
-                piece = _Table.__new__(_Table)
-                piece.__dict__.update(layout.__dict__)
-                piece.text = "\n".join(lines) + "\n"
-                piece.lines = piece.text.split("\n")
-                piece.data_start = 0
-                piece.line_offset = consumed
+                piece = _piece(layout, lines, consumed)
                 consumed += len(lines)
                 if not any(line.strip() and not line.lstrip().startswith("#") for line in lines):
                     continue
@@ -1635,6 +1630,18 @@ def _text_pieces(p, shown, ext, inputs, outputs, chunk_size, delimiter):
                 yield values[:, :n_in], values[:, n_in:], in_names, out_names
         finally:
             text.detach()
+
+
+def _piece(layout, lines, consumed: int):
+    """A table of ``lines`` (line ``consumed + 1`` of the file on) with the layout
+    (delimiter, columns, names) of ``layout``, for the careful parser."""
+    piece = _Table.__new__(_Table)
+    piece.__dict__.update(layout.__dict__)
+    piece.text = "\n".join(lines) + "\n"
+    piece.lines = piece.text.split("\n")
+    piece.data_start = 0
+    piece.line_offset = consumed
+    return piece
 
 
 def _careful_block(layout, buf: bytes, encoding: str, consumed: int, cols, shown):
@@ -1653,12 +1660,7 @@ def _careful_block(layout, buf: bytes, encoding: str, consumed: int, cols, shown
         lines.pop()
     if not any(line.strip() and not line.lstrip().startswith("#") for line in lines):
         return np.empty((0, len(cols))), len(lines)
-    piece = _Table.__new__(_Table)
-    piece.__dict__.update(layout.__dict__)
-    piece.text = "\n".join(lines) + "\n"
-    piece.lines = piece.text.split("\n")
-    piece.data_start = 0
-    piece.line_offset = consumed
+    piece = _piece(layout, lines, consumed)
     values = piece.parse(cols)
     piece.check_finite(values, cols)
     return values, len(lines)
