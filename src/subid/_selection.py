@@ -110,7 +110,7 @@ def cross_validate(data, fixed, candidates, horizon, *, prepare_fold, build):
     Parameters
     ----------
     data : IOData
-        The estimation record.
+        The estimation record, already validated (:func:`subid._subspace.check_data`).
     fixed : int or None
         The order when given (only the horizon is chosen).
     candidates : list of int or None
@@ -125,9 +125,7 @@ def cross_validate(data, fixed, candidates, horizon, *, prepare_fold, build):
     order, horizon, record : int, int, dict
         ``record`` is stored as ``info['order_selection']``.
     """
-    from ._subspace import check_data
-    data = check_data(data, "order selection")
-    used = data
+    used = data                       # validated by the caller (subid._subspace.identify)
     if data.n_samples > MAX_SELECTION_SAMPLES:
         used = data[data.n_samples - MAX_SELECTION_SAMPLES:]
     parts = folds(used.n_samples)
