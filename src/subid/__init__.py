@@ -24,6 +24,7 @@ import types
 # public name -> (submodule, attribute); attribute None: the submodule itself
 _LAZY = {
     "IOData": ("data", "IOData"),
+    "merge": ("data", "merge"),
     "StateSpace": ("model", "StateSpace"),
     "read": ("io", "read"),
     "thread_limit": ("config", "thread_limit"),
@@ -59,6 +60,7 @@ _LAZY = {
 
 __all__ = [
     "IOData",
+    "merge",
     "StateSpace",
     "read",
     "thread_limit",

@@ -35,8 +35,8 @@ import scipy.linalg
 
 from ._regression import (_MODAL_BLOCK, RESIDUAL_RECOMPUTE, ModalForm, modal_signals,
                           next_filter_state, normal_equations, parameter_count, qr_factor,
-                          regressor_maps, sensitivity_rows, solve_normal_equations,
-                          solve_qr_factor)
+                          regressor_maps, sensitivity_rows, solve_factor,
+                          solve_normal_equations)
 
 __all__ = ["OutputRegression"]
 
@@ -135,28 +135,55 @@ def _spread_of(parts, ny):
     return spread
 
 
-def combine_modal(form, parts, n_inputs, n_outputs, *, estimate_x0, feedthrough):
+def _embed_maps(P, experiment, n_experiments, n_x0):
+    """Regressor maps of one experiment's piece in the layout ``[x0_1..x0_E; B; D; y]``
+    (one x0 per experiment, :func:`subid.merge`)."""
+    if n_experiments == 1 or not n_x0:
+        return P
+    ny, rows, d = P.shape
+    out = np.zeros((ny, rows + (n_experiments - 1) * n_x0, d))
+    out[:, experiment * n_x0:(experiment + 1) * n_x0] = P[:, :n_x0]
+    out[:, n_experiments * n_x0:] = P[:, n_x0:]
+    return out
+
+
+def combine_modal(form, parts, n_inputs, n_outputs, *, estimate_x0, feedthrough,
+                  experiments=None):
     """Normal equations of the whole record from the pieces' reductions (time order).
+
+    ``experiments`` (the experiment of every piece, non-decreasing; default all
+    0): at the first piece of an experiment the filters restart from zero and
+    the free signals from ``λ^0``, and its x0 has its own columns.
 
     Returns ``(N, n_samples, maps, weights)`` with ``maps`` the per-piece
     :func:`subid._regression.regressor_maps` (None for an empty piece).
     """
     weights = _spread_of(parts, n_outputs).weights()
+    experiments = [0] * len(parts) if experiments is None else list(experiments)
+    n_exp = (max(experiments) + 1) if experiments else 1
+    n_x0 = form.n_state if estimate_x0 else 0
     r = np.zeros((form.lam.size, n_inputs), dtype=complex)
     t0 = 0
+    total = 0
     N = 0.0
     maps = []
-    for part in parts:
+    current = 0
+    for part, e in zip(parts, experiments):
+        if e != current:                    # a new experiment: its own start
+            r = np.zeros((form.lam.size, n_inputs), dtype=complex)
+            t0, current = 0, e
         if part["length"] == 0:
             maps.append(None)
             continue
         P = regressor_maps(form, n_inputs, n_outputs, estimate_x0=estimate_x0,
                            feedthrough=feedthrough, t0=t0, r_start=r)
+        P = _embed_maps(P, e, n_exp, n_x0)
         maps.append(P)
         N = N + normal_equations(P, part["moments"], weights)
         r = next_filter_state(form, r, part["r_end"], part["length"])
         t0 += part["length"]
-    return N, t0, maps, weights
+        total += part["length"]
+    return N, total, maps, weights
 
 
 def residual_piece(chunks, form, g):
@@ -196,11 +223,19 @@ class OutputRegression:
     n_inputs, n_outputs : int
     """
 
-    def __init__(self, map_pieces, n_pieces, n_inputs, n_outputs):
+    def __init__(self, map_pieces, n_pieces, n_inputs, n_outputs, experiments=None):
         self.map_pieces = map_pieces
         self.n_pieces = n_pieces
         self.n_inputs, self.n_outputs = n_inputs, n_outputs
         self.passes = 0
+        #: the experiment of every piece (non-decreasing; :func:`subid.merge`)
+        self.experiments = [0] * n_pieces if experiments is None else list(experiments)
+        self.n_experiments = max(self.experiments) + 1 if self.experiments else 1
+
+    def _shape_x0(self, x0, n):
+        if self.n_experiments == 1 or x0 is None:
+            return x0
+        return np.asarray(x0).reshape(self.n_experiments, n)
 
     def _map(self, function, arguments):
         self.passes += 1
@@ -217,11 +252,14 @@ class OutputRegression:
             parts = self._map(modal_piece, [(form, nu, ny)] * self.n_pieces)
             N, n_samples, maps, weights = combine_modal(form, parts, nu, ny,
                                                         estimate_x0=estimate_x0,
-                                                        feedthrough=feedthrough)
+                                                        feedthrough=feedthrough,
+                                                        experiments=self.experiments)
             solved = solve_normal_equations(N, n, nu, ny, estimate_x0=estimate_x0,
-                                            feedthrough=feedthrough, n_samples=n_samples)
+                                            feedthrough=feedthrough, n_samples=n_samples,
+                                            n_x0=self.n_experiments * n)
             if solved is not None:
                 B, D, x0, theta, diagnostics = solved
+                x0 = self._shape_x0(x0, n) if estimate_x0 else x0
                 diagnostics["regression_passes"] = 1
                 if diagnostics["residual_rms"] ** 2 * n_samples * ny < \
                         RESIDUAL_RECOMPUTE * N[-1, -1]:
@@ -247,26 +285,35 @@ class OutputRegression:
         if form is None:
             return None
         parts = self._map(modal_piece, [(form, nu, ny)] * self.n_pieces)
-        N = combine_modal(form, parts, nu, ny, estimate_x0=True, feedthrough=True)[0]
+        N = combine_modal(form, parts, nu, ny, estimate_x0=True, feedthrough=True,
+                          experiments=self.experiments)[0]
         p = N.shape[0] - 1
+        nx = self.n_experiments * n
         theta = np.concatenate([np.asarray(B, float).T.ravel(), np.asarray(D, float).T.ravel()])
-        rhs = N[:n, p] - N[:n, n:p] @ theta
-        try:
-            return scipy.linalg.solve(N[:n, :n], rhs, assume_a="pos", check_finite=False)
+        rhs = N[:nx, p] - N[:nx, nx:p] @ theta
+        try:   # the x0 blocks of different experiments do not couple: block diagonal
+            x0 = np.concatenate([scipy.linalg.solve(N[k:k + n, k:k + n], rhs[k:k + n],
+                                                    assume_a="pos", check_finite=False)
+                                 for k in range(0, nx, n)]) if n else np.zeros(0)
         except (np.linalg.LinAlgError, ValueError):
             return None
+        return self._shape_x0(x0, n)
 
     def _qr(self, A, C, *, feedthrough, estimate_x0):
         n, nu, ny = A.shape[0], self.n_inputs, self.n_outputs
-        nx, q, _ = parameter_count(n, nu, ny, estimate_x0, feedthrough)
+        nx, q, _ = parameter_count(n, nu, ny, estimate_x0, feedthrough,
+                                   self.n_experiments * n)
         parts = self._map(sensitivity_piece, [(A, C, q, nx)] * self.n_pieces)
         weights = _spread_of(parts, ny).weights()
-        S = np.zeros((n, q))
-        if estimate_x0:
-            S[:, :n] = np.eye(n)
         starts = []
+        current = -1
         with np.errstate(over="ignore", invalid="ignore"):
-            for part in parts:
+            for part, e in zip(parts, self.experiments):
+                if e != current:      # an experiment starts: its own x0 columns, B at rest
+                    S = np.zeros((n, q))
+                    if estimate_x0:
+                        S[:, e * n:(e + 1) * n] = np.eye(n)
+                    current = e
                 starts.append(S)
                 S = np.linalg.matrix_power(A, part["length"]) @ S + part["S_end"]
         factors = self._map(qr_piece, [(A, C, s, nx, feedthrough, weights) for s in starts])
@@ -278,10 +325,11 @@ class OutputRegression:
             else:
                 R = np.full((stacked.shape[1], stacked.shape[1]), np.nan)
         n_samples = sum(part["length"] for part in parts)
-        B, D, x0, diagnostics = solve_qr_factor(R, n, nu, ny, estimate_x0=estimate_x0,
-                                                feedthrough=feedthrough, n_samples=n_samples)
+        B, D, x0, _, diagnostics = solve_factor(R, n, nu, ny, estimate_x0=estimate_x0,
+                                                feedthrough=feedthrough, n_samples=n_samples,
+                                                n_x0=self.n_experiments * n)
         diagnostics["regression_passes"] = 2
-        return B, D, x0, diagnostics
+        return B, D, (self._shape_x0(x0, n) if estimate_x0 else x0), diagnostics
 
 
 def sequential(make_chunks):

@@ -86,7 +86,7 @@ def sensitivity_rows(A, C, u, S0, n_x0_cols):  # pragma: no cover - compiled
 
 
 def fit_b_d_x0(A, C, u, y, *, feedthrough=True, estimate_x0=True, output_weights=None,
-               kernel=sensitivity_rows, path="auto"):
+               kernel=sensitivity_rows, path="auto", starts=None):
     """Least-squares B, D (and x0) for given A, C on the raw output samples.
 
     ``path='auto'`` (default) solves the problem by the modal normal equations
@@ -96,9 +96,17 @@ def fit_b_d_x0(A, C, u, y, *, feedthrough=True, estimate_x0=True, output_weights
     equilibrated normal matrix is; ``'qr'`` and ``'modal'`` force one path
     (``'modal'`` raises :class:`ValueError` where it does not apply).
     ``diagnostics['regression_path']`` says which path ran.
+
+    ``starts`` (the first sample of every experiment, :func:`subid.merge`):
+    one initial state per experiment, B and D shared
+    (:func:`fit_b_d_x0_experiments`); x0 then has shape (n_experiments, n).
     """
     if path not in ("auto", "qr", "modal"):
         raise ValueError(f"path must be 'auto', 'qr' or 'modal', got {path!r}")
+    if starts is not None and len(starts) > 1:
+        return fit_b_d_x0_experiments(A, C, u, y, starts, feedthrough=feedthrough,
+                                      estimate_x0=estimate_x0, output_weights=output_weights,
+                                      kernel=kernel, path=path)
     if path != "qr":
         fitted = fit_b_d_x0_modal(A, C, u, y, feedthrough=feedthrough,
                                   estimate_x0=estimate_x0, output_weights=output_weights)
@@ -212,12 +220,13 @@ def solve_qr_factor(R, n, nu, ny, *, estimate_x0, feedthrough, n_samples):
     return B, D, x0, diagnostics
 
 
-def solve_factor(R, n, nu, ny, *, estimate_x0, feedthrough, n_samples):
+def solve_factor(R, n, nu, ny, *, estimate_x0, feedthrough, n_samples, n_x0=None):
     """:func:`solve_qr_factor` that also returns the parameter vector
     ``theta = [x0; vec B; vec D]`` (``n_samples`` may be an effective count
-    under forgetting): ``(B, D, x0, theta, diagnostics)``."""
+    under forgetting): ``(B, D, x0, theta, diagnostics)``. ``n_x0`` overrides
+    the number of x0 columns (one x0 per experiment: ``n_experiments * n``)."""
     N = n_samples
-    nx, q, p = parameter_count(n, nu, ny, estimate_x0, feedthrough)
+    nx, q, p = parameter_count(n, nu, ny, estimate_x0, feedthrough, n_x0)
     if R.shape[0] < p + 1:
         R = np.vstack([R, np.zeros((p + 1 - R.shape[0], p + 1))])
     # Equilibrate the columns so that the condition number (and the rank
@@ -233,7 +242,7 @@ def solve_factor(R, n, nu, ny, *, estimate_x0, feedthrough, n_samples):
     else:
         theta = scipy.linalg.solve_triangular(Rt, rhs, check_finite=False)
     theta = theta / scale
-    x0 = theta[:n] if estimate_x0 else np.zeros(n)
+    x0 = theta[:nx] if estimate_x0 else np.zeros(n)
     B = theta[nx:q].reshape(nu, n).T
     D = theta[q:p].reshape(nu, ny).T if feedthrough else np.zeros((ny, nu))
     resid_norm = abs(R[p, p]) if R.shape[0] > p else 0.0
@@ -548,9 +557,10 @@ def piece_moments(form, u, y, *, block=_MODAL_BLOCK, kernel=modal_signals):
     return moments, r_end
 
 
-def parameter_count(n, nu, ny, estimate_x0, feedthrough):
-    """``(n_x0, q, p)``: x0 columns, x0 + B columns, all columns."""
-    nx = n if estimate_x0 else 0
+def parameter_count(n, nu, ny, estimate_x0, feedthrough, n_x0=None):
+    """``(n_x0, q, p)``: x0 columns, x0 + B columns, all columns (``n_x0``
+    overrides the x0 columns, e.g. one x0 per experiment)."""
+    nx = (n if n_x0 is None else n_x0) if estimate_x0 else 0
     q = nx + n * nu
     return nx, q, q + (ny * nu if feedthrough else 0)
 
@@ -617,11 +627,12 @@ def normal_equations(P, moments, weights):
 
 
 def solve_normal_equations(N, n, nu, ny, *, estimate_x0, feedthrough, n_samples,
-                           max_condition=MODAL_MAX_NORMAL_CONDITION):
+                           max_condition=MODAL_MAX_NORMAL_CONDITION, n_x0=None):
     """B, D, x0 and diagnostics from the (p + 1)-square augmented normal matrix,
     or None when its equilibrated p-square part has a condition number above
-    ``max_condition`` (then the QR path must decide)."""
-    nx, q, p = parameter_count(n, nu, ny, estimate_x0, feedthrough)
+    ``max_condition`` (then the QR path must decide). ``n_x0`` as in
+    :func:`solve_factor`."""
+    nx, q, p = parameter_count(n, nu, ny, estimate_x0, feedthrough, n_x0)
     if not np.isfinite(N).all():
         return None
     G, b, yy = N[:p, :p], N[:p, p], N[p, p]
@@ -633,7 +644,7 @@ def solve_normal_equations(N, n, nu, ny, *, estimate_x0, feedthrough, n_samples,
         return None
     theta = scipy.linalg.cho_solve(scipy.linalg.cho_factor(Ge, check_finite=False),
                                    b / scale, check_finite=False) / scale if p else np.zeros(0)
-    x0 = theta[:n] if estimate_x0 else np.zeros(n)
+    x0 = theta[:nx] if estimate_x0 else np.zeros(n)
     B = theta[nx:q].reshape(nu, n).T
     D = theta[q:p].reshape(nu, ny).T if feedthrough else np.zeros((ny, nu))
     resid2 = max(yy - theta @ b, 0.0)
@@ -694,4 +705,89 @@ def fit_b_d_x0_modal(A, C, u, y, *, feedthrough=True, estimate_x0=True, output_w
         for _, w, _ in _blocks(form, u, y, block, kernel):
             total += float(np.sum((w @ g.T) ** 2))
         diagnostics["residual_rms"] = float(np.sqrt(total / (N_samples * ny)))
+    return B, D, x0, diagnostics
+
+
+def fit_b_d_x0_experiments(A, C, u, y, starts, *, feedthrough=True, estimate_x0=True,
+                           output_weights=None, kernel=sensitivity_rows, path="auto"):
+    """:func:`fit_b_d_x0` on several experiments: one x0 each, B and D shared.
+
+    The output of experiment e (samples ``starts[e]`` to the next start) is
+    ``y(t) = C A^(t - t_e) x0_e + sum_{t_e <= k < t} C A^(t-1-k) B u(k) + D u(t)``:
+    the sensitivity restarts at every experiment, so the rows of experiment e
+    are those of a record of its own, with its x0 columns placed in the
+    block e of ``[x0_1; ...; x0_E; vec B; vec D]``. Its normal equations (modal
+    path) or triangular factor (QR path) are computed alone and embedded in
+    that parameter vector, then summed (stacked and factorised again).
+
+    Returns
+    -------
+    B, D, x0 (shape (n_experiments, n)), diagnostics
+    """
+    u = np.asarray(u, dtype=float)
+    y = np.asarray(y, dtype=float)
+    n = A.shape[0]
+    N_samples, nu = u.shape
+    ny = y.shape[1]
+    E = len(starts)
+    ranges = list(zip(starts, list(starts[1:]) + [N_samples]))
+    nx_e, q_e, p_e = parameter_count(n, nu, ny, estimate_x0, feedthrough)
+    nx = E * nx_e
+    p = nx + p_e - nx_e
+    shared = np.arange(nx, p + 1)
+
+    def columns(e):
+        return np.concatenate([e * nx_e + np.arange(nx_e), shared]).astype(np.int64)
+
+    def finish(solved, path_name):
+        B, D, x0, theta, diagnostics = solved
+        x0 = x0.reshape(E, n) if estimate_x0 else np.zeros((E, n))
+        diagnostics["regression_path"] = path_name
+        diagnostics["experiments"] = E
+        return B, D, x0, theta, diagnostics
+
+    weights = np.ones(ny) if output_weights is None else np.asarray(output_weights, float)
+    if path != "qr":
+        form = ModalForm.of(A, C)
+        if form is not None:
+            P = regressor_maps(form, nu, ny, estimate_x0=estimate_x0, feedthrough=feedthrough)
+            Nbig = np.zeros((p + 1, p + 1))
+            for e, (a, b) in enumerate(ranges):
+                moments, _ = piece_moments(form, u[a:b], y[a:b])
+                c = columns(e)
+                Nbig[np.ix_(c, c)] += normal_equations(P, moments, weights)
+            solved = solve_normal_equations(Nbig, n, nu, ny, estimate_x0=estimate_x0,
+                                            feedthrough=feedthrough, n_samples=N_samples,
+                                            n_x0=nx)
+            if solved is not None:
+                B, D, x0, theta, diagnostics = finish(solved, "modal")
+                if diagnostics["residual_rms"] ** 2 * N_samples * ny < \
+                        RESIDUAL_RECOMPUTE * Nbig[-1, -1]:
+                    total = 0.0
+                    for e, (a, b) in enumerate(ranges):
+                        th = theta[columns(e)[:-1]]
+                        g = np.stack([weights[i] * (P[i, -1] - th @ P[i, :-1])
+                                      for i in range(ny)])
+                        for _, w, _ in _blocks(form, u[a:b], y[a:b], _MODAL_BLOCK,
+                                               modal_signals):
+                            total += float(np.sum((w @ g.T) ** 2))
+                    diagnostics["residual_rms"] = float(np.sqrt(total / (N_samples * ny)))
+                return B, D, x0, diagnostics
+        if path == "modal":
+            raise ValueError("the modal path does not apply: A is unstable or its eigenvector "
+                             "matrix or the normal equations are ill-conditioned")
+    blocks = []
+    for e, (a, b) in enumerate(ranges):
+        S = np.zeros((n, q_e))
+        if estimate_x0:
+            S[:, :n] = np.eye(n)
+        R_e, _ = qr_factor(A, C, u[a:b], y[a:b], S, n_x0=nx_e, feedthrough=feedthrough,
+                           output_weights=output_weights, kernel=kernel)
+        rows = np.zeros((R_e.shape[0], p + 1))
+        rows[:, columns(e)] = R_e
+        blocks.append(rows)
+    R = scipy.linalg.qr(np.vstack(blocks), mode="r", check_finite=False)[0][: p + 1]
+    B, D, x0, _, diagnostics = finish(
+        solve_factor(R, n, nu, ny, estimate_x0=estimate_x0, feedthrough=feedthrough,
+                     n_samples=N_samples, n_x0=nx), "qr")
     return B, D, x0, diagnostics

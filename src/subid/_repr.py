@@ -216,6 +216,10 @@ def iodata_html(data) -> str:
         timing += " (the default: time counted in samples)"
     rows = [("samples", data.n_samples), ("time", timing),
             ("span", f"{_fmt(t[0])} to {_fmt(t[-1])} ({_fmt(span)})")]
+    if data.n_experiments > 1:
+        rows.append(("experiments", _esc(", ".join(
+            f"{name} ({b - a})" for name, (a, b) in zip(data.experiment_names,
+                                                         data.experiment_ranges)))))
     if data.u_offset is not None:
         rows.append(("removed offsets", "u: " + _esc(np.round(np.asarray(data.u_offset), 6)
                                                      .tolist())

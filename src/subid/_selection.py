@@ -11,7 +11,9 @@ estimation record only:
   halves (contiguous blocks keep the Hankel columns and the simulated
   trajectories intact; four folds instead of two halved the number of
   DaISy records where the choice missed the best order, e.g. N4SID on
-  robot_arm, at twice the cost);
+  robot_arm, at twice the cost); a record of several experiments
+  (:func:`subid.merge`) has every experiment cut so, and the pieces of all
+  experiments merged: no fold joins two experiments;
 * on each validation block, the model is simulated from an initial state
   fitted by least squares, and the fit (NRMSE %, per output, which does not
   depend on the output units) is averaged over the outputs; a simulation
@@ -56,6 +58,27 @@ MAX_SELECTION_SAMPLES = 100_000
 SELECTION_RULES = ("cv", "gap")
 
 
+def experiment_folds(data):
+    """``(train, validation)`` records of the four folds of a record of several
+    experiments: every experiment is cut as :func:`folds` cuts one record, and
+    the training (validation) pieces of all the experiments are merged, so that
+    no fold joins two experiments or two pieces of one."""
+    from .data import merge
+    cut = [folds(e.n_samples) for e in data.experiments]
+    out = []
+    for k in range(4):
+        train = [e[cut[j][k][0]] for j, e in enumerate(data.experiments)
+                 if _length(cut[j][k][0]) > 0]
+        validation = [e[cut[j][k][1]] for j, e in enumerate(data.experiments)
+                      if _length(cut[j][k][1]) > 0]
+        out.append((merge(train), merge(validation)))
+    return out
+
+
+def _length(part: slice) -> int:
+    return part.stop - part.start
+
+
 def folds(n_samples: int):
     """``(train, validation)`` slices of the four contiguous folds."""
     third = n_samples // 3
@@ -67,16 +90,17 @@ def folds(n_samples: int):
 
 
 def feasible_horizons(n_train: int, n_inputs: int, n_outputs: int, blocks: int,
-                      largest_order: int, candidates=HORIZON_CANDIDATES):
+                      largest_order: int, candidates=HORIZON_CANDIDATES, n_experiments=1):
     """Horizons of ``candidates`` a training fold of ``n_train`` samples supports.
 
     A horizon is kept when its Hankel matrix has at least twice as many
     columns as rows and it can reveal ``largest_order`` (``(f-1) ny >= n``).
     When none is, the largest horizon (at least 2) with at least as many
-    columns as rows is returned alone.
+    columns as rows is returned alone. ``n_experiments`` experiments lose
+    ``blocks * f - 1`` columns each.
     """
     rows = lambda f: blocks * f * (n_inputs + n_outputs)   # noqa: E731
-    cols = lambda f: n_train - blocks * f + 1              # noqa: E731
+    cols = lambda f: n_train - n_experiments * (blocks * f - 1)   # noqa: E731
     kept = [f for f in candidates if cols(f) >= 2 * rows(f)
             and (f - 1) * n_outputs >= min(largest_order, MAX_ORDER)]
     if kept:
@@ -87,9 +111,10 @@ def feasible_horizons(n_train: int, n_inputs: int, n_outputs: int, blocks: int,
     return [f]
 
 
-def default_gap_horizon(n_samples, n_inputs, n_outputs, blocks, largest_order):
+def default_gap_horizon(n_samples, n_inputs, n_outputs, blocks, largest_order, n_experiments=1):
     """Horizon of the gap rule when none is given: the smallest feasible candidate."""
-    return feasible_horizons(n_samples, n_inputs, n_outputs, blocks, largest_order)[0]
+    return feasible_horizons(n_samples, n_inputs, n_outputs, blocks, largest_order,
+                             n_experiments=n_experiments)[0]
 
 
 def _fit_score(model, validation) -> float:
@@ -128,8 +153,14 @@ def cross_validate(data, fixed, candidates, horizon, *, prepare_fold, build):
     used = data                       # validated by the caller (subid._subspace.identify)
     if data.n_samples > MAX_SELECTION_SAMPLES:
         used = data[data.n_samples - MAX_SELECTION_SAMPLES:]
-    parts = folds(used.n_samples)
-    n_train = min(train.stop - train.start for train, _ in parts)
+    if used.n_experiments > 1:        # folds per experiment (none across a border)
+        parts = experiment_folds(used)
+        n_train = min(train.n_samples for train, _ in parts)
+        n_exp_train = max(train.n_experiments for train, _ in parts)
+    else:
+        parts = [(used[train], used[validation]) for train, validation in folds(used.n_samples)]
+        n_train = min(train.n_samples for train, _ in parts)
+        n_exp_train = 1
     if fixed is not None:
         wanted = [fixed]
     elif candidates is not None:
@@ -138,7 +169,8 @@ def cross_validate(data, fixed, candidates, horizon, *, prepare_fold, build):
         wanted = list(range(1, MAX_ORDER + 1))
     blocks = prepare_fold.blocks
     horizons = [horizon] if horizon is not None else feasible_horizons(
-        n_train, data.n_inputs, data.n_outputs, blocks, max(wanted))
+        n_train, data.n_inputs, data.n_outputs, blocks, max(wanted),
+        n_experiments=n_exp_train)
     scores, fold_scores = {}, {}
     for f in horizons:
         orders = [n for n in wanted if n <= (f - 1) * data.n_outputs]
@@ -146,13 +178,13 @@ def cross_validate(data, fixed, candidates, horizon, *, prepare_fold, build):
             continue
         per_fold = {n: [] for n in orders}
         for train, validation in parts:
-            problem = prepare_fold(used[train], orders, f)
+            problem = prepare_fold(train, orders, f)
             for n in orders:
                 try:
                     with warnings.catch_warnings():
                         warnings.simplefilter("ignore")
                         model = build(replace(problem, order=n, candidates=[n]))
-                    value = _fit_score(model, used[validation])
+                    value = _fit_score(model, validation)
                 except SubidError:
                     value = FLOOR
                 per_fold[n].append(value)

@@ -128,7 +128,9 @@ def check_order_horizon(order, horizon, data, *, method: str, blocks_per_horizon
     n_outputs = data.n_outputs
     largest = fixed if fixed is not None else (max(candidates) if candidates else None)
     horizon = default_gap_horizon(data.n_samples, data.n_inputs, n_outputs, blocks_per_horizon,
-                                  largest or DEFAULT_MAX_ORDER) if horizon is None else \
+                                  largest or DEFAULT_MAX_ORDER,
+                                  n_experiments=getattr(data, "n_experiments", 1)) \
+        if horizon is None else \
         check_int(horizon, "horizon", minimum=2)
     max_order = (horizon - 1) * n_outputs
     if largest is not None and largest > max_order:
@@ -149,7 +151,14 @@ def data_factor(data: IOData, depth: int, *, method: str, horizon: int,
     nu, ny = data.n_inputs, data.n_outputs
     rows = depth * (nu + ny)
     need = min_samples(depth, nu, ny)
-    if data.n_samples < need:
+    if data.n_experiments > 1:
+        columns = sum(max(b - a - depth + 1, 0) for a, b in data.experiment_ranges)
+        if columns < rows:
+            raise TooFewSamplesError(
+                f"{method}: the {data.n_experiments} experiments give {columns} Hankel columns "
+                f"of {depth} block rows (each experiment N_e - {depth - 1}) but horizon "
+                f"{horizon} needs at least {rows}; reduce the horizon or supply more data")
+    elif data.n_samples < need:
         raise TooFewSamplesError(
             f"{method}: {data.n_samples} samples are too few for horizon {horizon} with "
             f"{nu} input{'s' if nu != 1 else ''} and {ny} output{'s' if ny != 1 else ''}: "
@@ -314,7 +323,8 @@ def estimate_b_d(A, C_n, gamma, L11, L_yu, problem: "Problem", *, bd_method: str
             else:
                 B, D, x0, diag = fit_b_d_x0(A, C, data.u, data.y, feedthrough=feedthrough,
                                             estimate_x0=estimate_x0,
-                                            output_weights=problem.weights())
+                                            output_weights=problem.weights(),
+                                            starts=experiment_starts(data))
         usable = (np.isfinite(B).all() and np.isfinite(D).all()
                   and not diag["regression_rank_deficient"])
         if usable:
@@ -382,7 +392,7 @@ def stability_request(stability: str, A, data, method: str) -> bool:
         raise SubidError(f"stability must be one of {STABILITY}, got {stability!r}")
     if stability == "none" or np.abs(np.linalg.eigvals(A)).max() < 1.0:
         return False
-    growth = output_growth(data.y) if isinstance(data, IOData) else None
+    growth = record_growth(data) if isinstance(data, IOData) else None
     if stability == "enforce":
         if growth is not None and growth >= GROWTH_LIMIT:
             warnings.warn(f"{method}: stability='enforce' on data whose output grows "
@@ -523,12 +533,27 @@ def stable_choice(A_q, Q, n_outputs: int, fit, *, stability: str, data, method: 
     return A_s, fitted_s, record
 
 
+def experiment_starts(data):
+    """The first sample of every experiment of a record of several (None otherwise)."""
+    if isinstance(data, IOData) and data.n_experiments > 1:
+        return [a for a, _ in data.experiment_ranges]
+    return None
+
+
 def initial_state(A, B, C, D, data):
     """Least-squares initial state of the model on ``data`` (None without raw samples
-    or when the simulation overflows)."""
+    or when the simulation overflows); one row per experiment for a record of
+    several (:func:`subid.merge`)."""
     if not isinstance(data, IOData):
         second_pass = getattr(data, "output_regression", None)   # subid._bd_pass
         return None if second_pass is None else second_pass.initial_state(A, B, C, D)
+    if data.n_experiments > 1:
+        rows = [_initial_state_one(A, B, C, D, e, column_std(data.y)) for e in data.experiments]
+        return None if any(r is None for r in rows) else np.stack(rows)
+    return _initial_state_one(A, B, C, D, data, column_std(data.y))
+
+
+def _initial_state_one(A, B, C, D, data, output_std):
     from .metrics import simulate_fit       # metrics depends on the model module only
     # The free response C A^t x0 of a stable A falls below 1e-18 of its start after
     # `decay` samples: beyond them the samples carry no information on x0 (to rounding),
@@ -543,7 +568,7 @@ def initial_state(A, B, C, D, data):
     try:
         with np.errstate(all="ignore"):
             return simulate_fit(StateSpace(A, B, C, D, data.dt), used,
-                                output_std=column_std(data.y))[1]
+                                output_std=output_std)[1]
     except SubidError:
         return None
 
@@ -704,6 +729,11 @@ def finalize(model: StateSpace, problem: Problem, *, refine, delays) -> StateSpa
     return record_delay(attach_noise_model(model, problem, refine), delays)
 
 
+def record_growth(data) -> float:
+    """:func:`output_growth` of a record: the largest over its experiments."""
+    return max(output_growth(e.y) for e in data.experiments)
+
+
 def output_growth(y: np.ndarray) -> float:
     """Ratio of the RMS of the last tenth of ``y`` to that of its first tenth
     (largest over the channels, after removing each channel's mean)."""
@@ -727,9 +757,10 @@ def check_stability(A, data, method: str) -> dict:
     diag = {"spectral_radius": radius}
     if radius < 1 or not isinstance(data, IOData):
         return diag
-    growth = output_growth(data.y)
+    growth = record_growth(data)
     diag["output_growth"] = growth
-    predicted = 0.9 * data.n_samples * math.log10(radius)
+    longest = max(b - a for a, b in data.experiment_ranges)
+    predicted = 0.9 * longest * math.log10(radius)
     if predicted > 1 and growth < 3:
         warnings.warn(f"{method}: the identified model is unstable (spectral radius "
                       f"{radius:.4g}) although the measured output does not grow over the "
@@ -747,5 +778,8 @@ def finish(problem: Problem, A, B, C, D, n: int, order_selection: dict, **info) 
             "horizon": problem.horizon, "input_condition": problem.input_condition,
             "n_samples": data.n_samples, **info,
             **check_stability(A, data, problem.method)}
+    if isinstance(data, IOData) and data.n_experiments > 1:
+        info["n_experiments"] = data.n_experiments
+        info["experiment_names"] = list(data.experiment_names)
     return StateSpace(A, B, C, D, data.dt, input_names=data.input_names,
                       output_names=data.output_names, info=info)

@@ -78,7 +78,7 @@ from . import _adaptive_kernel as _k
 from ._checkpoint import load_state, require, save_state
 from ._simulate import expm_blocks
 from ._validation import as_signal, check_int, check_time_stamps
-from .data import IOData
+from .data import IOData, require_single_experiment
 from .errors import (CheckpointError, DataError, NotConvergedWarning, OrderError, SubidError,
                      TooFewSamplesError)
 from .ls_subspace import random_selector
@@ -637,6 +637,7 @@ class AdaptiveIdentifier:
         if isinstance(u, IOData):
             if y is not None or t is not None:
                 raise DataError("pass either an IOData record or (u, y[, t]), not both")
+            require_single_experiment(u, type(self).__name__)
             data = u
             u, y = data.u, data.y
             t = data.t if data.has_time_stamps else None    # explicit time stamps, if any

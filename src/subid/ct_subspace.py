@@ -89,7 +89,7 @@ from ._hankel import lq_lower
 from ._subspace import order_from_gap
 from ._validation import check_int
 from .basis import MAX_POLY_ORDER, FilterBank, default_basis
-from .data import IOData
+from .data import IOData, require_single_experiment
 from .errors import (DataError, ModelError, NotExcitingError, OrderError, SubidError,
                      TooFewSamplesError)
 from .model import StateSpace
@@ -210,6 +210,7 @@ def _check_data(data, method: str) -> IOData:
     if not isinstance(data, IOData):
         raise DataError(f"{method} expects an IOData record, got {type(data).__name__}; "
                         "wrap arrays as subid.IOData(u, y, t=...) or IOData(u, y, dt=...)")
+    require_single_experiment(data, method)
     std = data.y.std(axis=0)
     flat = np.flatnonzero(std <= 1e-14 * np.maximum(np.abs(data.y).max(axis=0), 1e-300))
     if flat.size:

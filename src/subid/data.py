@@ -9,7 +9,7 @@ import numpy as np
 from ._validation import as_signal, check_dt, check_time_stamps
 from .errors import DataError
 
-__all__ = ["IOData"]
+__all__ = ["IOData", "merge"]
 
 # Relative tolerance under which explicitly given time stamps count as uniform.
 _UNIFORM_RTOL = 1e-9
@@ -114,6 +114,10 @@ class IOData:
         self.output_names = _channel_names(output_names, y.shape[1], "y", "output y")
         self.u_offset = None
         self.y_offset = None
+        self._starts = (0,)
+        self._t0s = (self._t0,)
+        self._offsets_per_experiment = False
+        self.experiment_names = ("exp1",)
 
     # -- basic properties -------------------------------------------------
     @property
@@ -155,9 +159,16 @@ class IOData:
 
     @property
     def t(self) -> np.ndarray:
-        """Time stamps, shape (n_samples,)."""
+        """Time stamps, shape (n_samples,). For several experiments
+        (:func:`subid.merge`), each experiment's own time stamps in turn (they
+        restart at every experiment's start time, so they need not increase)."""
         if self._t is not None:
             return self._t
+        if self.n_experiments > 1:
+            t = np.concatenate([t0 + self._dt * np.arange(b - a) for t0, (a, b)
+                                in zip(self._t0s, self.experiment_ranges)])
+            t.setflags(write=False)
+            return t
         t = self._t0 + self._dt * np.arange(self.n_samples)
         t.setflags(write=False)
         return t
@@ -165,10 +176,52 @@ class IOData:
     def __len__(self) -> int:
         return self.n_samples
 
+    # -- several experiments (subid.merge) ---------------------------------
+    @property
+    def n_experiments(self) -> int:
+        """Number of experiments (1 unless the record comes from :func:`subid.merge`)."""
+        return len(self._starts)
+
+    @property
+    def experiment_ranges(self) -> tuple[tuple[int, int], ...]:
+        """``(start, stop)`` sample indices of every experiment in ``u`` and ``y``."""
+        stops = self._starts[1:] + (self.n_samples,)
+        return tuple((int(a), int(b)) for a, b in zip(self._starts, stops))
+
+    def experiment(self, index) -> "IOData":
+        """Experiment ``index`` (an int, or its name) as a single-experiment record
+        (MATLAB ``getexp``). Its offsets are that experiment's row of ``u_offset``
+        and ``y_offset`` when the merged record was detrended per experiment."""
+        if isinstance(index, str):
+            if index not in self.experiment_names:
+                raise DataError(f"no experiment named {index!r}; the experiments are "
+                                f"{list(self.experiment_names)}")
+            index = self.experiment_names.index(index)
+        if isinstance(index, bool) or not isinstance(index, numbers.Integral) \
+                or not -self.n_experiments <= index < self.n_experiments:
+            raise DataError(f"experiment index must be an integer in 0..{self.n_experiments - 1}"
+                            f" (or a name), got {index!r}")
+        index = int(index) % self.n_experiments
+        if self.n_experiments == 1:
+            return self
+        a, b = self.experiment_ranges[index]
+        out = self._derive(self._u[a:b], self._y[a:b], dt=self._dt, t0=self._t0s[index])
+        out.experiment_names = (self.experiment_names[index],)
+        if self._offsets_per_experiment:
+            out.u_offset, out.y_offset = self.u_offset[index], self.y_offset[index]
+        out._offsets_per_experiment = False
+        return out
+
+    @property
+    def experiments(self) -> tuple["IOData", ...]:
+        """Every experiment as a single-experiment record."""
+        return tuple(self.experiment(k) for k in range(self.n_experiments))
+
     def __repr__(self) -> str:
         timing = f"dt={self._dt:g}" if self._dt is not None else "non-uniform t"
+        exps = f", experiments={self.n_experiments}" if self.n_experiments > 1 else ""
         return (f"IOData(n_samples={self.n_samples}, inputs={list(self.input_names)}, "
-                f"outputs={list(self.output_names)}, {timing})")
+                f"outputs={list(self.output_names)}, {timing}{exps})")
 
     def _repr_html_(self) -> str:
         """Summary for Jupyter: samples, timing, per-channel statistics and sparklines."""
@@ -189,7 +242,8 @@ class IOData:
         return iodata_to_pandas(self)
 
     # -- derived records --------------------------------------------------
-    def _derive(self, u, y, *, t=None, dt=None, t0=0.0) -> "IOData":
+    def _derive(self, u, y, *, t=None, dt=None, t0=0.0, starts=(0,), t0s=None,
+                names=None) -> "IOData":
         out = IOData.__new__(IOData)
         u = np.ascontiguousarray(u)
         y = np.ascontiguousarray(y)
@@ -201,6 +255,10 @@ class IOData:
             t.setflags(write=False)
         out.input_names, out.output_names = self.input_names, self.output_names
         out.u_offset, out.y_offset = self.u_offset, self.y_offset
+        out._starts = tuple(int(k) for k in starts)
+        out._t0s = (t0,) if t0s is None else tuple(float(v) for v in t0s)
+        out.experiment_names = ("exp1",) if names is None else tuple(names)
+        out._offsets_per_experiment = self._offsets_per_experiment and len(out._starts) > 1
         return out
 
     def __getitem__(self, index) -> "IOData":
@@ -215,12 +273,38 @@ class IOData:
         if len(rows) == 0:
             raise DataError(f"the slice {index} selects no samples out of {self.n_samples}")
         sl = slice(start, stop, step)
+        if self.n_experiments > 1:
+            return self._slice_experiments(start, stop, step)
         if self._t is not None:
             t = np.ascontiguousarray(self._t[sl])
             return self._derive(self._u[sl], self._y[sl], t=t, dt=self._dt * step
                                 if self._dt is not None else None, t0=float(t[0]))
         return self._derive(self._u[sl], self._y[sl], dt=self._dt * step,
                             t0=self._t0 + start * self._dt)
+
+    def _slice_experiments(self, start: int, stop: int, step: int) -> "IOData":
+        """Samples ``start:stop`` of a record of several experiments: the borders
+        inside the slice are kept; experiments left out are dropped."""
+        kept = [(k, max(a, start), min(b, stop)) for k, (a, b)
+                in enumerate(self.experiment_ranges) if max(a, start) < min(b, stop)]
+        if step != 1 and len(kept) > 1:
+            raise DataError("a slice with a step over several experiments would mix their "
+                            "samples; slice each experiment (data.experiment(k)[::step]) and "
+                            "merge them again")
+        if len(kept) == 1:
+            k, a, b = kept[0]
+            return self.experiment(k)[a - self.experiment_ranges[k][0]:
+                                      b - self.experiment_ranges[k][0]:step]
+        ks = [k for k, _, _ in kept]
+        starts = np.cumsum([0] + [b - a for _, a, b in kept[:-1]])
+        t0s = [self._t0s[k] + (a - self.experiment_ranges[k][0]) * self._dt for k, a, _ in kept]
+        out = self._derive(self._u[start:stop], self._y[start:stop], dt=self._dt,
+                           t0=t0s[0], starts=starts, t0s=t0s,
+                           names=[self.experiment_names[k] for k in ks])
+        if self._offsets_per_experiment:
+            out.u_offset = np.asarray(self.u_offset)[ks]
+            out.y_offset = np.asarray(self.y_offset)[ks]
+        return out
 
     def split(self, fraction: float = 0.7) -> tuple["IOData", "IOData"]:
         """Split into an estimation part and a validation part.
@@ -241,14 +325,42 @@ class IOData:
                             "leaves one part empty")
         return self[:cut], self[cut:]
 
-    def detrend(self, kind: str = "constant") -> "IOData":
+    def detrend(self, kind: str = "constant", *, per_experiment: bool = True) -> "IOData":
         """Remove the mean (``kind='constant'``) or a least-squares line
         (``kind='linear'``) from every channel.
 
         The removed offsets are kept in ``u_offset`` and ``y_offset`` (the
         channel means for ``'constant'``; the (intercept, slope) rows for
         ``'linear'``, as functions of the time stamps).
+
+        A record of several experiments (:func:`subid.merge`) is detrended
+        experiment by experiment, as MATLAB's ``detrend`` does: each
+        experiment loses its own mean (or line), and ``u_offset``/``y_offset``
+        get one leading row per experiment (shape ``(n_experiments,
+        n_channels)`` for ``'constant'``), i.e. the model relates the
+        deviations from each experiment's own operating point.
+        ``per_experiment=False`` (``'constant'`` only) removes one mean over
+        all the samples instead: one operating point for every experiment,
+        with offsets of shape ``(n_channels,)``.
         """
+        if self.n_experiments > 1 and per_experiment:
+            if kind not in ("constant", "linear"):
+                raise DataError(f"detrend kind must be 'constant' or 'linear', got {kind!r}")
+            if self.u_offset is not None:
+                raise DataError("this record was detrended already; detrend the original "
+                                "records (or their merge) once")
+            parts = [e.detrend(kind) for e in self.experiments]
+            out = self._derive(np.vstack([p.u for p in parts]), np.vstack([p.y for p in parts]),
+                               dt=self._dt, t0=self._t0, starts=self._starts, t0s=self._t0s,
+                               names=self.experiment_names)
+            out.u_offset = np.stack([p.u_offset for p in parts])
+            out.y_offset = np.stack([p.y_offset for p in parts])
+            out._offsets_per_experiment = True
+            return out
+        if self.n_experiments > 1 and kind != "constant":
+            raise DataError("per_experiment=False removes one constant from all the "
+                            "experiments; a linear trend is fitted per experiment "
+                            "(per_experiment=True)")
         if kind == "constant":
             u_off, y_off = self._u.mean(axis=0), self._y.mean(axis=0)
             u, y = self._u - u_off, self._y - y_off
@@ -261,6 +373,137 @@ class IOData:
             u_off, y_off = coef[:, :self.n_inputs], coef[:, self.n_inputs:]
         else:
             raise DataError(f"detrend kind must be 'constant' or 'linear', got {kind!r}")
-        out = self._derive(u, y, t=self._t, dt=self._dt, t0=self._t0)
+        out = self._derive(u, y, t=self._t, dt=self._dt, t0=self._t0, starts=self._starts,
+                           t0s=self._t0s, names=self.experiment_names)
         out.u_offset, out.y_offset = u_off, y_off
+        out._offsets_per_experiment = False
         return out
+
+
+def require_single_experiment(data, method: str) -> None:
+    """Raise a clear :class:`DataError` when ``method`` gets a record of several
+    experiments it cannot use apart."""
+    if isinstance(data, IOData) and data.n_experiments > 1:
+        raise DataError(f"{method} does not support several experiments (this record merges "
+                        f"{data.n_experiments}); it would join them as if contiguous. Use a "
+                        "discrete-time subspace method (ls_subspace, moesp, n4sid), or pass "
+                        "one experiment: data.experiment(k)")
+
+
+def _offset_kind(record):
+    """``None`` (not detrended), ``'constant'`` or ``'linear'`` for a single experiment."""
+    if record.u_offset is None:
+        return None
+    return "constant" if np.ndim(record.u_offset) == 1 else "linear"
+
+
+def merge(records, names=None) -> IOData:
+    """One record of several experiments (MATLAB ``merge`` of iddata objects).
+
+    The experiments are kept apart: the batch methods build no Hankel column
+    and no simulated trajectory across the border between two experiments,
+    and the initial state is estimated once per experiment
+    (``model.info['x0']`` has one row per experiment). Without ``merge``,
+    concatenating the arrays of two experiments joins them as if the second
+    had started where the first ended, which leaves a jump that no linear
+    model explains.
+
+    Parameters
+    ----------
+    records : sequence of IOData
+        Uniformly sampled records with the same sampling period and the same
+        input and output channels (names included). A record that is itself a
+        merge contributes all its experiments.
+    names : sequence of str, optional
+        Experiment names (default ``exp1, exp2, ...``; a merged record keeps
+        its own).
+
+    Returns
+    -------
+    IOData
+        ``n_experiments`` experiments; ``experiment_ranges`` gives their
+        samples and ``experiment(k)`` returns one of them.
+
+    Raises
+    ------
+    DataError
+        Fewer than one record, a non-IOData item, non-uniform time stamps,
+        different sampling periods, channel counts or names, or records of
+        which only some were detrended (or detrended differently).
+
+    Examples
+    --------
+    >>> import subid
+    >>> true = subid.systems.seed001_system()
+    >>> a = subid.systems.simulate_data(true, 400, seed=1)
+    >>> b = subid.systems.simulate_data(true, 300, seed=2)
+    >>> data = subid.merge([a, b])
+    >>> data.n_experiments, data.experiment_ranges
+    (2, ((0, 400), (400, 700)))
+    """
+    if isinstance(records, IOData):
+        raise DataError("merge takes a list of IOData records, e.g. subid.merge([data1, "
+                        "data2]); got a single record")
+    try:
+        records = list(records)
+    except TypeError:
+        raise DataError(f"merge takes a list of IOData records, got "
+                        f"{type(records).__name__}") from None
+    if not records:
+        raise DataError("merge needs at least one record")
+    for k, rec in enumerate(records):
+        if not isinstance(rec, IOData):
+            raise DataError(f"merge: item {k} is a {type(rec).__name__}, not an IOData "
+                            "record; wrap arrays as subid.IOData(u, y, dt=...)")
+        if not rec.is_uniform:
+            raise DataError(f"merge: record {k} has non-uniform time stamps; experiments are "
+                            "merged for the discrete-time methods and must be uniformly "
+                            "sampled")
+    first = records[0]
+    for k, rec in enumerate(records[1:], start=1):
+        if not np.isclose(rec.dt, first.dt, rtol=1e-9, atol=0):
+            raise DataError(f"merge: record {k} is sampled with dt={rec.dt:g} but record 0 "
+                            f"with dt={first.dt:g}; resample one of them first")
+        if (rec.n_inputs, rec.n_outputs) != (first.n_inputs, first.n_outputs):
+            raise DataError(f"merge: record {k} has {rec.n_inputs} inputs and {rec.n_outputs} "
+                            f"outputs but record 0 has {first.n_inputs} and "
+                            f"{first.n_outputs}")
+        if rec.input_names != first.input_names or rec.output_names != first.output_names:
+            raise DataError(f"merge: record {k} has channels {list(rec.input_names)} -> "
+                            f"{list(rec.output_names)} but record 0 has "
+                            f"{list(first.input_names)} -> {list(first.output_names)}; "
+                            "rename or reorder the channels so that they match")
+    experiments = [e for rec in records for e in rec.experiments]
+    kinds = {_offset_kind(e) for e in experiments}
+    if len(kinds) > 1:
+        raise DataError("merge: some records were detrended and others not (or with "
+                        "different kinds); detrend all of them the same way, or detrend "
+                        "the merged record")
+    if names is None:
+        # a merged record keeps its experiments' names when they stay unique
+        kept = [n for r in records for n in (r.experiment_names if r.n_experiments > 1
+                                             else [None])]
+        names = [n if n is not None else f"exp{k + 1}" for k, n in enumerate(kept)]
+        if len(set(names)) != len(names):
+            names = [f"exp{k + 1}" for k in range(len(experiments))]
+    else:
+        names = [str(n) for n in names]
+        if len(names) != len(experiments):
+            raise DataError(f"merge: {len(names)} names for {len(experiments)} experiments")
+    if len(set(names)) != len(names):
+        raise DataError(f"merge: the experiment names repeat: {names}")
+    lengths = [e.n_samples for e in experiments]
+    out = first._derive(np.vstack([e.u for e in experiments]),
+                        np.vstack([e.y for e in experiments]), dt=first.dt,
+                        t0=experiments[0]._t0s[0], starts=np.cumsum([0] + lengths[:-1]),
+                        t0s=[e.t[0] for e in experiments], names=names)
+    if kinds != {None}:
+        out.u_offset = np.stack([np.asarray(e.u_offset) for e in experiments])
+        out.y_offset = np.stack([np.asarray(e.y_offset) for e in experiments])
+        out._offsets_per_experiment = True
+        if len(experiments) == 1:
+            out.u_offset, out.y_offset = out.u_offset[0], out.y_offset[0]
+            out._offsets_per_experiment = False
+    else:
+        out.u_offset = out.y_offset = None
+    return out

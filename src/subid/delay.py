@@ -137,15 +137,22 @@ def estimate_delay(data, max_delay: int = 10, *, na: int = 2, nb: int = 2,
     ny = y.shape[1]
     lags = max_delay + nb                   # input lags 0..lags-1
     start = max(na, lags - 1)
-    rows = N - start
+    # one block of regression rows per experiment (no lag reaches into another one)
+    ranges = [(a, b) for a, b in data.experiment_ranges if b - a > start]
+    rows = sum(b - a - start for a, b in ranges)
     n_cols = ny * na + nu * lags
     if rows < 2 * n_cols + 10:
         raise TooFewSamplesError(f"estimate_delay with max_delay={max_delay}, na={na}, "
                                  f"nb={nb} regresses on {n_cols} columns and needs at least "
                                  f"{2 * n_cols + 10 + start} samples; the record has {N}")
-    cols = [y[start - i:N - i] for i in range(1, na + 1)]        # (rows, ny) each
-    cols += [u[start - lag:N - lag] for lag in range(lags)]      # (rows, nu) each
-    M = np.hstack(cols + [y[start:]])
+
+    def block(ue, ye):
+        n_e = ue.shape[0]
+        cols = [ye[start - i:n_e - i] for i in range(1, na + 1)]      # (rows, ny) each
+        cols += [ue[start - lag:n_e - lag] for lag in range(lags)]    # (rows, nu) each
+        return np.hstack(cols + [ye[start:]])
+
+    M = np.vstack([block(u[a:b], y[a:b]) for a, b in ranges])
     R = scipy.linalg.qr(M, mode="r", check_finite=False)[0][:M.shape[1]]
     # column index of output/input channels in M
     past_y = list(range(ny * na))
@@ -176,7 +183,8 @@ def delay_inputs(data, input_delay):
     ``D = max(d)``: the first ``D`` output samples, whose delayed inputs lie
     before the record, are left out (no input value is invented). A method
     run on the result identifies the model from ``u_j[k - d_j]`` to
-    ``y[k]``.
+    ``y[k]``. A record of several experiments (:func:`subid.merge`) is
+    shifted experiment by experiment (each loses its first ``D`` samples).
 
     Parameters
     ----------
@@ -202,6 +210,10 @@ def delay_inputs(data, input_delay):
     D = int(delays.max()) if delays.size else 0
     if D == 0:
         return data, delays
+    if data.n_experiments > 1:          # each experiment loses its own first D samples
+        from .data import merge
+        return merge([delay_inputs(e, delays)[0] for e in data.experiments],
+                     names=data.experiment_names), delays
     N = data.n_samples
     if N - D < 2:
         raise TooFewSamplesError(f"input_delay {delays.tolist()} leaves {max(N - D, 0)} "

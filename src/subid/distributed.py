@@ -71,15 +71,16 @@ def _file_statistic(path, inputs, outputs, depth, kind, chunk_size, delimiter):
     return stat
 
 
-def _merge(first, second):
-    return first.merge(second)
+def _merge(first, second, new_experiment=False):
+    return first.merge(second, new_experiment=new_experiment)
 
 
-def _tree_merge(dask, parts):
-    """Merge delayed statistics pairwise, keeping time order."""
+def _tree_merge(dask, parts, new_experiment=False):
+    """Merge delayed statistics pairwise, keeping time order (``new_experiment``:
+    every part is an experiment of its own, :func:`subid.merge`)."""
     while len(parts) > 1:
-        parts = [dask.delayed(_merge)(parts[k], parts[k + 1]) if k + 1 < len(parts)
-                 else parts[k] for k in range(0, len(parts), 2)]
+        parts = [dask.delayed(_merge)(parts[k], parts[k + 1], new_experiment)
+                 if k + 1 < len(parts) else parts[k] for k in range(0, len(parts), 2)]
     return parts[0]
 
 
@@ -99,8 +100,9 @@ def _compute_all(dask, tasks, client):
     return list(dask.compute(*tasks))
 
 
-def _second_pass(stat, dask, client, make_task, n_pieces, options):
-    """Attach the distributed B, D, x0 regression to ``stat`` (unless projection)."""
+def _second_pass(stat, dask, client, make_task, n_pieces, options, experiments=None):
+    """Attach the distributed B, D, x0 regression to ``stat`` (unless projection);
+    ``experiments``: the experiment of every piece."""
     if options.get("bd_method", "auto") == "projection":
         return
 
@@ -108,7 +110,7 @@ def _second_pass(stat, dask, client, make_task, n_pieces, options):
         return _compute_all(dask, [make_task(k, function, arguments[k])
                                    for k in range(n_pieces)], client)
     stat.output_regression = OutputRegression(map_pieces, n_pieces, stat.n_inputs,
-                                              stat.n_outputs)
+                                              stat.n_outputs, experiments=experiments)
 
 
 def _compute(dask, value, client):
@@ -187,7 +189,8 @@ def identify(u, y, method: str = "moesp", *, dt: float = 1.0, order=None, horizo
 
 def identify_files(paths, inputs, outputs, method: str = "moesp", *, dt: float = 1.0,
                    order=None, horizon=None, statistic: str = "gram", chunk_size=100_000,
-                   delimiter=None, client=None, **method_options):
+                   delimiter=None, client=None, experiments: bool = False,
+                   **method_options):
     """Identify one record stored as consecutive files, read on the workers.
 
     Parameters
@@ -196,6 +199,10 @@ def identify_files(paths, inputs, outputs, method: str = "moesp", *, dt: float =
         Files in time order (each any format :func:`subid.read_chunks`
         reads). The record continues from one file to the next: samples at
         the borders form Hankel columns with the neighbouring file.
+    experiments : bool
+        ``True``: every file is an experiment of its own (:func:`subid.merge`):
+        no Hankel column crosses from one file to the next, and x0 is
+        estimated once per file (``info['x0']`` one row per file).
     inputs, outputs
         Columns, as in :func:`subid.read_chunks`.
     Other parameters as in :func:`identify`.
@@ -211,11 +218,12 @@ def identify_files(paths, inputs, outputs, method: str = "moesp", *, dt: float =
                                      method_options.get("instruments", "past"))
     parts = [dask.delayed(_file_statistic)(p, inputs, outputs, depth, statistic, chunk_size,
                                            delimiter) for p in paths]
-    stat = _compute(dask, _tree_merge(dask, parts), client)
+    stat = _compute(dask, _tree_merge(dask, parts, bool(experiments)), client)
     _second_pass(stat, dask, client,
                  lambda k, function, args: dask.delayed(_apply_file)(
                      function, paths[k], inputs, outputs, chunk_size, delimiter, *args),
-                 len(paths), method_options)
+                 len(paths), method_options,
+                 experiments=list(range(len(paths))) if experiments else None)
     return _finish(stat, method, order, horizon, dt, first.input_names, first.output_names,
                    method_options)
 

@@ -321,7 +321,7 @@ class LSCore:
         A_q = self.A_q if A_q is None else A_q
         A = scipy.linalg.solve(T.T, (T @ A_q).T, check_finite=False).T        # T A_q T^{-1}
         C = scipy.linalg.solve(T.T, self.C_q.T, check_finite=False).T          # C_q T^{-1}
-        return A, T @ B_q, C, (None if x0_q is None else T @ x0_q)
+        return A, T @ B_q, C, (None if x0_q is None else x0_q @ T.T)   # rows: experiments
 
     def info(self, instruments, instrument_weighting, power_iterations) -> dict:
         return dict(instruments=instruments,

@@ -79,8 +79,19 @@ def simulate_fit(model, data, x0="estimate", hold: str = "zoh", *, output_std=No
     ``x0='estimate'`` fits the initial state to the data by least squares
     (the simulated output is linear in x0), each output weighted by the
     inverse of its standard deviation; ``'zero'`` or an array fixes it.
+
+    A record of several experiments (:func:`subid.merge`) is simulated
+    experiment by experiment, each from its own initial state: the returned
+    x0 then has shape (n_experiments, n), and an array given as ``x0`` must
+    have that shape.
     """
     check_model_data(model, data)
+    if data.n_experiments > 1:
+        std = data.y.std(axis=0) if output_std is None else output_std
+        parts = [simulate_fit(model, e, x0=x0_e, hold=hold, output_std=std)
+                 for e, x0_e in zip(data.experiments,
+                                    experiment_x0(x0, data.n_experiments, model.order))]
+        return np.vstack([p[0] for p in parts]), np.stack([p[1] for p in parts])
     if model.dt > 0:
         sim = lambda u, x0v: model.simulate(u, x0=x0v)  # noqa: E731
     else:
@@ -120,7 +131,22 @@ def simulate_fit(model, data, x0="estimate", hold: str = "zoh", *, output_std=No
     return sim(data.u, x0_arr), x0_arr
 
 
-def fit_percent(model, data, x0="estimate", hold: str = "zoh", steps=np.inf) -> np.ndarray:
+def experiment_x0(x0, n_experiments: int, order: int) -> list:
+    """``x0`` of :func:`simulate_fit` split per experiment: a string or ``0`` for
+    every experiment, or an array of shape (n_experiments, order)."""
+    if isinstance(x0, str) or (isinstance(x0, (int, float)) and not isinstance(x0, bool)
+                               and x0 == 0) or x0 is None:
+        return [x0] * n_experiments
+    arr = np.asarray(x0, dtype=float)
+    if arr.shape != (n_experiments, order):
+        raise DataError(f"the record has {n_experiments} experiments: x0 must have shape "
+                        f"({n_experiments}, {order}), one initial state per experiment, "
+                        f"got shape {arr.shape}")
+    return list(arr)
+
+
+def fit_percent(model, data, x0="estimate", hold: str = "zoh", steps=np.inf, *,
+                per_experiment: bool = False) -> np.ndarray:
     """NRMSE fit in percent, per output: ``100 (1 - ||y - ŷ|| / ||y - mean(y)||)``.
 
     ``ŷ`` is the simulated output (default, ``steps=inf``) or the
@@ -139,10 +165,18 @@ def fit_percent(model, data, x0="estimate", hold: str = "zoh", steps=np.inf) -> 
         Inter-sample behaviour of the input for a continuous-time model.
     steps : int or numpy.inf
         Prediction horizon (MATLAB ``compare(data, model, k)``).
+    per_experiment : bool
+        For a record of several experiments (:func:`subid.merge`; each is
+        simulated from its own initial state): ``False`` (default) gives one
+        pooled fit per output, ``100 (1 - ||y - ŷ|| / ||y - ȳ_e||)`` over all
+        samples with each experiment's own mean ``ȳ_e`` as the reference;
+        ``True`` gives one fit per experiment and output (as MATLAB's
+        ``compare``).
 
     Returns
     -------
-    ndarray, shape (n_outputs,)
+    ndarray, shape (n_outputs,), or (n_experiments, n_outputs) with
+    ``per_experiment=True``
     """
     if steps is not None and not (isinstance(steps, float) and np.isinf(steps) and steps > 0):
         from .prediction import predict
@@ -156,12 +190,20 @@ def fit_percent(model, data, x0="estimate", hold: str = "zoh", steps=np.inf) -> 
     scale = np.abs(data.y).max(axis=0)
     scale[scale == 0] = 1.0
     y, y_hat = data.y / scale, y_hat / scale
-    dev = np.linalg.norm(y - y.mean(axis=0), axis=0)
-    flat = np.flatnonzero(dev == 0)
+    ranges = data.experiment_ranges
+    dev2 = np.array([((y[a:b] - y[a:b].mean(axis=0)) ** 2).sum(axis=0) for a, b in ranges])
+    err2 = np.array([((y[a:b] - y_hat[a:b]) ** 2).sum(axis=0) for a, b in ranges])
+    if per_experiment:
+        dev2_used, err2_used = dev2, err2
+    else:
+        dev2_used, err2_used = dev2.sum(axis=0), err2.sum(axis=0)
+    flat = np.flatnonzero(np.atleast_2d(dev2_used).min(axis=0) == 0)
     if flat.size:
         names = ", ".join(data.output_names[k] for k in flat)
-        raise DataError(f"output {names} is constant; the fit percentage is undefined for it")
-    return 100.0 * (1.0 - np.linalg.norm(y - y_hat, axis=0) / dev)
+        where = " in an experiment" if per_experiment and data.n_experiments > 1 else ""
+        raise DataError(f"output {names} is constant{where}; the fit percentage is undefined "
+                        "for it")
+    return 100.0 * (1.0 - np.sqrt(err2_used) / np.sqrt(dev2_used))
 
 
 def pole_error(model, reference) -> float:

@@ -45,7 +45,7 @@ import scipy.optimize
 
 from . import _simulate
 from ._pem_kernel import jacobian
-from .data import IOData
+from .data import IOData, require_single_experiment
 from .errors import DataError, ModelError, NoiseModelWarning, SubidError
 from .model import StateSpace
 
@@ -64,6 +64,7 @@ def _check_inputs(data, model, focus):
     if not isinstance(data, IOData):
         raise DataError(f"pem expects an IOData record, got {type(data).__name__}; wrap "
                         "arrays as subid.IOData(u, y, dt=...)")
+    require_single_experiment(data, "pem")
     if focus not in FOCUS:
         raise SubidError(f"focus must be 'prediction' or 'simulation', got {focus!r}")
     if (data.n_inputs, data.n_outputs) != (model.n_inputs, model.n_outputs):

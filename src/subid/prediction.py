@@ -131,7 +131,10 @@ def predict(model, data, steps=1, x0=None, *, return_x0=False):
         ``numpy.inf`` the simulation.
     x0 : None, 'estimate', 'zero', 0 or array_like of shape (n,)
         Initial state ``x̂[0]``; None/'estimate' fits it by least squares to
-        the prediction errors (the predictions are affine in it).
+        the prediction errors (the predictions are affine in it). A record of
+        several experiments (:func:`subid.merge`) is predicted experiment by
+        experiment, each from its own initial state (an array: shape
+        (n_experiments, n); the returned x0 has that shape).
     return_x0 : bool
         Also return the initial state used.
 
@@ -151,6 +154,13 @@ def predict(model, data, steps=1, x0=None, *, return_x0=False):
     """
     model, data = _check(model, data)
     k = _check_steps(steps)
+    if data.n_experiments > 1:          # each experiment from its own initial state
+        from .metrics import experiment_x0
+        parts = [predict(model, e, steps, x0_e, return_x0=True)
+                 for e, x0_e in zip(data.experiments,
+                                    experiment_x0(x0, data.n_experiments, model.order))]
+        y_hat = np.vstack([p[0] for p in parts])
+        return (y_hat, np.stack([p[1] for p in parts])) if return_x0 else y_hat
     if model.is_continuous or model.K is None:
         if k != math.inf:
             why = "a continuous-time model" if model.is_continuous else \
@@ -193,8 +203,14 @@ def prediction_errors(model, data, steps=1, x0=None) -> np.ndarray:
     return data.y - predict(model, data, steps, x0)
 
 
-def _xcorr(a: np.ndarray, b: np.ndarray, lags: np.ndarray) -> np.ndarray:
-    """``r(tau) = sum_t a(t) b(t - tau) / N`` for each lag (a, b zero-mean)."""
+def _xcorr(a: np.ndarray, b: np.ndarray, lags: np.ndarray, ranges=None) -> np.ndarray:
+    """``r(tau) = sum_t a(t) b(t - tau) / N`` for each lag (a, b zero-mean).
+
+    ``ranges`` (the experiments' ``(start, stop)``): only pairs inside one
+    experiment count, still divided by the total N."""
+    if ranges is not None and len(ranges) > 1:
+        total = sum(_xcorr(a[s:t], b[s:t], lags) * (t - s) for s, t in ranges)
+        return total / a.size
     n = a.size
     out = np.empty(lags.size)
     for k, tau in enumerate(lags):
@@ -205,7 +221,7 @@ def _xcorr(a: np.ndarray, b: np.ndarray, lags: np.ndarray) -> np.ndarray:
     return out
 
 
-def correlations(e, u, *, max_lag: int = 25, confidence: float = 0.99) -> dict:
+def correlations(e, u, *, max_lag: int = 25, confidence: float = 0.99, ranges=None) -> dict:
     """Auto-correlation of residuals and their cross-correlation with inputs.
 
     Parameters
@@ -216,6 +232,9 @@ def correlations(e, u, *, max_lag: int = 25, confidence: float = 0.99) -> dict:
     max_lag : int
     confidence : float
         Two-sided level of the bands.
+    ranges : sequence of (start, stop), optional
+        The experiments of a record of several (:attr:`subid.IOData.experiment_ranges`):
+        lagged products never pair samples of two experiments.
 
     Returns
     -------
@@ -246,18 +265,18 @@ def correlations(e, u, *, max_lag: int = 25, confidence: float = 0.99) -> dict:
     cross_bound = np.zeros((ny, nu))
     ree_full = np.zeros((ny, cross_lags.size))
     for i in range(ny):
-        r = _xcorr(e0[:, i], e0[:, i], cross_lags)
+        r = _xcorr(e0[:, i], e0[:, i], cross_lags, ranges)
         r0 = r[max_lag]
         ree_full[i] = r / r0 if r0 > 0 else 0.0
         auto[i] = ree_full[i][max_lag:]
     for j in range(nu):
-        ru = _xcorr(u0[:, j], u0[:, j], cross_lags)
+        ru = _xcorr(u0[:, j], u0[:, j], cross_lags, ranges)
         ru0 = ru[max_lag]
         ruu = ru / ru0 if ru0 > 0 else np.zeros_like(ru)
         for i in range(ny):
             ree0 = e0[:, i] @ e0[:, i] / n
             denom = math.sqrt(max(ree0 * ru0, 0.0))
-            c = _xcorr(e0[:, i], u0[:, j], cross_lags)
+            c = _xcorr(e0[:, i], u0[:, j], cross_lags, ranges)
             cross[i, j] = c / denom if denom > 0 else 0.0
             p = float(np.sum(ree_full[i] * ruu))
             cross_bound[i, j] = z * math.sqrt(max(p, 0.0) / n)
@@ -302,7 +321,8 @@ def residuals(model, data, *, max_lag: int = 25, confidence: float = 0.99, x0=No
         warnings.warn("residuals: the model has no Kalman gain K; these are simulation "
                       "errors, white only for white measurement noise", NoiseModelWarning,
                       stacklevel=2)
-    out = correlations(e, data.u, max_lag=max_lag, confidence=confidence)
+    out = correlations(e, data.u, max_lag=max_lag, confidence=confidence,
+                       ranges=data.experiment_ranges)
     out["kind"] = kind
     out["whiteness_ok"] = bool(np.all(np.abs(out["auto"][:, 1:]) <= out["auto_bound"]))
     out["independence_ok"] = bool(np.all(np.abs(out["cross"]) <=

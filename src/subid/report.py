@@ -534,6 +534,11 @@ def identification_report(models, estimation, validation=None, *, title="subid r
         if x0 is not None and np.asarray(x0).size == m.order:
             block += ["<p>initial state x0 (estimation data)</p>",
                       _matrix_table(np.asarray(x0, dtype=float)[None, :], ["x0"], states)]
+        elif x0 is not None and np.ndim(x0) == 2 and np.shape(x0)[1] == m.order:
+            names = m.info.get("experiment_names") or [f"exp{k + 1}"
+                                                       for k in range(np.shape(x0)[0])]
+            block += ["<p>initial state x0 of every experiment (estimation data)</p>",
+                      _matrix_table(np.asarray(x0, dtype=float), list(names), states)]
         info = _info_table(m.info)
         if info:
             block += ["<p>diagnostics (model.info)</p>", info]

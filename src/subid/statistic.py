@@ -42,6 +42,14 @@ So the statistic comes in two kinds:
 
 The batch methods choose ``'qr'`` up to :data:`QR_MAX_SAMPLES` samples and
 ``'gram'`` beyond (``statistic=`` overrides).
+
+Several experiments (:func:`subid.merge`): the Hankel matrix of a record of
+E experiments is ``H = [H_1, ..., H_E]``, the columns of each experiment's
+own Hankel matrix side by side, with no column whose window straddles a
+border. So ``H H^T = sum_e H_e H_e^T``: :meth:`HankelStatistic.new_experiment`
+closes the current experiment (its products are kept, its edge samples
+dropped: nothing straddles the next border), and ``merge(later,
+new_experiment=True)`` joins two statistics without the straddling products.
 """
 
 from __future__ import annotations
@@ -160,13 +168,22 @@ class HankelStatistic:
         self.head = np.zeros((0, q))
         self.tail = np.zeros((0, q))
         self.n_samples = 0
+        self._reset_experiments()
+
+    def _reset_experiments(self):
+        """One open experiment holding all the samples (the state of a new statistic)."""
+        self.n_experiments = 1
+        self._open_samples = self.n_samples
+        self._closed_columns = 0
+        self._closed_gram = None          # kind 'gram': sum of H_e H_e^T of closed experiments
 
     @classmethod
     def from_data(cls, data: IOData, depth: int, kind: str = "auto") -> "HankelStatistic":
         """The statistic of a whole (uniformly sampled) record.
 
         ``kind='auto'``: ``'qr'`` up to :data:`QR_MAX_SAMPLES` samples,
-        ``'gram'`` beyond.
+        ``'gram'`` beyond. A record of several experiments (:func:`subid.merge`)
+        gives the statistic of their Hankel columns only (none across a border).
         """
         if not data.is_uniform:
             raise DataError("HankelStatistic needs uniformly sampled data")
@@ -174,10 +191,39 @@ class HankelStatistic:
             kind = "qr" if data.n_samples <= QR_MAX_SAMPLES else "gram"
         stat = cls(data.n_inputs, data.n_outputs, depth, kind=kind, dt=data.dt,
                    input_names=data.input_names, output_names=data.output_names)
-        for a in range(0, data.n_samples, _PIECE):
-            b = min(a + _PIECE, data.n_samples)
-            stat._absorb(data.u[a:b], data.y[a:b])
+        for k, (start, stop) in enumerate(data.experiment_ranges):
+            if k:
+                stat.new_experiment()
+            for a in range(start, stop, _PIECE):
+                b = min(a + _PIECE, stop)
+                stat._absorb(data.u[a:b], data.y[a:b])
         return stat
+
+    # -- experiments ----------------------------------------------------------
+    def _open_columns(self) -> int:
+        return max(self._open_samples - self.depth + 1, 0)
+
+    def new_experiment(self) -> "HankelStatistic":
+        """Start a new experiment: the next samples do not continue the previous ones.
+
+        The Hankel columns of the experiment so far are kept; no column will
+        straddle this border (:func:`subid.merge`).
+        """
+        if self._open_samples == 0:
+            return self                   # nothing to close (a new or just-closed statistic)
+        if self.kind == "gram" and self._open_columns():
+            closed = self._open_gram_sum()
+            self._closed_gram = closed if self._closed_gram is None else \
+                self._closed_gram + closed
+        self._closed_columns += self._open_columns()
+        q = self.n_inputs + self.n_outputs
+        if self.kind == "gram":
+            self.lagged = np.zeros_like(self.lagged)
+        self.head = np.zeros((0, q))
+        self.tail = np.zeros((0, q))
+        self._open_samples = 0
+        self.n_experiments += 1
+        return self
 
     # -- accumulation -------------------------------------------------------
     def update(self, u, y) -> "HankelStatistic":
@@ -203,24 +249,38 @@ class HankelStatistic:
         chunk.tail = np.hstack([u[u.shape[0] - min(keep, u.shape[0]):],
                                 y[y.shape[0] - min(keep, y.shape[0]):]])
         chunk.n_samples = u.shape[0]
+        chunk._reset_experiments()
         merged = self.merge(chunk)
         self.lagged, self.R = merged.lagged, merged.R
         self.head, self.tail = merged.head, merged.tail
         self.n_samples = merged.n_samples
+        self._open_samples = merged._open_samples
         return self
 
-    def merge(self, later: "HankelStatistic") -> "HankelStatistic":
+    def merge(self, later: "HankelStatistic", *, new_experiment: bool = False
+              ) -> "HankelStatistic":
         """The statistic of this record followed immediately by ``later``.
 
         Exact: the lagged products add, plus the products of the pairs that
         straddle the border (the tail of this record with the head of the
         next). Merging is associative, so partitions can be combined in any
         tree as long as their time order is kept.
+
+        ``new_experiment=True``: ``later`` is another experiment (or starts
+        one), not the continuation of this record: no products straddle the
+        border (:func:`subid.merge`).
         """
         if (later.n_inputs, later.n_outputs, later.depth, later.kind) != \
                 (self.n_inputs, self.n_outputs, self.depth, self.kind):
             raise DataError("statistics with different channels, depth or kind cannot be "
                             "merged")
+        if new_experiment:
+            return self._merge_experiments(later)
+        if later.n_experiments > 1:
+            raise DataError("the later statistic holds several experiments, so its first "
+                            "experiment was closed without these samples: merge the pieces "
+                            "of each experiment first, then the experiments with "
+                            "merge(..., new_experiment=True)")
         out = HankelStatistic.__new__(HankelStatistic)
         out.__dict__.update(self.__dict__)
         keep = self.depth - 1
@@ -239,13 +299,36 @@ class HankelStatistic:
         both_tails = np.vstack([self.tail, later.tail])
         out.tail = both_tails[both_tails.shape[0] - min(keep, both_tails.shape[0]):].copy()
         out.n_samples = self.n_samples + later.n_samples
+        out._open_samples = self._open_samples + later._open_samples
+        return out
+
+    def _merge_experiments(self, later: "HankelStatistic") -> "HankelStatistic":
+        out = HankelStatistic.__new__(HankelStatistic)
+        out.__dict__.update(self.__dict__)
+        if self._open_samples:
+            out.new_experiment()
+            out.n_experiments -= 1           # counted once below
+        if self.kind == "gram":
+            grams = [g for g in (out._closed_gram, later._closed_gram) if g is not None]
+            out._closed_gram = sum(grams) if grams else None
+            out.lagged = later.lagged.copy()
+        else:
+            out.R = _triangle(np.vstack([self.R, later.R]), self.R.shape[0])
+        out._closed_columns = out._closed_columns + later._closed_columns
+        out.head, out.tail = later.head.copy(), later.tail.copy()
+        out._open_samples = later._open_samples
+        out.n_samples = self.n_samples + later.n_samples
+        out.n_experiments = (self.n_experiments if self.n_samples else 0) + later.n_experiments
         return out
 
     # -- results ------------------------------------------------------------
     @property
     def n_columns(self) -> int:
-        """Columns of the Hankel matrix, ``N - depth + 1``."""
-        return self.n_samples - self.depth + 1
+        """Columns of the Hankel matrix, ``N - depth + 1`` (summed over the
+        experiments: ``N_e - depth + 1`` each)."""
+        if self.n_experiments == 1 and not self._closed_columns:
+            return self.n_samples - self.depth + 1
+        return self._closed_columns + self._open_columns()
 
     def gram(self) -> np.ndarray:
         """``H H^T / K`` in the row order ``[U_0..U_{s-1}; Y_0..Y_{s-1}]``."""
@@ -255,7 +338,16 @@ class HankelStatistic:
         s, K = self.depth, self.n_columns
         if K < 1:
             raise TooFewSamplesError(f"the statistic holds {self.n_samples} samples; the "
-                                     f"Hankel matrix with {s} block rows needs at least {s}")
+                                     f"Hankel matrix with {s} block rows needs at least {s}"
+                                     + (" in one experiment" if self.n_experiments > 1 else ""))
+        G = self._open_gram_sum() if self._open_columns() else 0.0
+        if self._closed_gram is not None:
+            G = G + self._closed_gram
+        return G / K
+
+    def _open_gram_sum(self) -> np.ndarray:
+        """``H H^T`` (not normalised) of the open experiment's Hankel columns."""
+        s = self.depth
         q = self.n_inputs + self.n_outputs
         head, tail = self.head, self.tail
         Gz = np.zeros((s, q, s, q))      # blocks by (block row, channel of z)
@@ -275,8 +367,7 @@ class HankelStatistic:
         order = [(i, a) for i in range(s) for a in range(nu)] + \
                 [(i, nu + b) for i in range(s) for b in range(self.n_outputs)]
         idx = np.array([i * q + a for i, a in order])
-        G = Gz.reshape(s * q, s * q)[np.ix_(idx, idx)]
-        return G / K
+        return Gz.reshape(s * q, s * q)[np.ix_(idx, idx)]
 
     def factor(self) -> HankelFactor:
         """The lower-triangular factor ``L`` with ``L L^T = H H^T / K``.

@@ -8,10 +8,20 @@ When the pieces can be read again (a file, a list of pieces, or ``reread``),
 B, D and x0 come from the output regression of the in-memory default, done as
 a second pass over the pieces (:mod:`subid._bd_pass`), so the model is the
 in-memory one; a one-shot iterator leaves the statistic-only projection.
+
+Several experiments: the pieces are consecutive pieces of one record unless
+the caller says otherwise, in one of two ways: a piece that holds several
+experiments (made by :func:`subid.merge`) contributes its own borders (its
+first experiment continues the previous piece, the others are new), and the
+marker :data:`NEW_EXPERIMENT` between two pieces starts a new experiment.
+:func:`identify_file` with a list of files takes every file as one experiment.
+No Hankel column and no simulated trajectory then crosses a border, and x0 is
+estimated once per experiment, exactly as for the merged record in memory.
 """
 
 from __future__ import annotations
 
+import itertools
 import logging
 import os
 import tempfile
@@ -29,12 +39,49 @@ from .moesp import moesp
 from .n4sid import n4sid
 from .statistic import HankelStatistic
 
-__all__ = ["identify_stream", "identify_file", "METHODS"]
+__all__ = ["identify_stream", "identify_file", "METHODS", "NEW_EXPERIMENT"]
 
 log = logging.getLogger(__name__)
 
 #: Batch methods that can identify from a statistic.
 METHODS = {"ls": ls_subspace, "ls_subspace": ls_subspace, "moesp": moesp, "n4sid": n4sid}
+
+
+class _NewExperiment:
+    """The marker type of :data:`NEW_EXPERIMENT`."""
+
+    def __repr__(self) -> str:
+        return "subid.stream.NEW_EXPERIMENT"
+
+    def __reduce__(self):
+        return "NEW_EXPERIMENT"
+
+
+#: Put between two pieces given to :func:`identify_stream`: the next piece
+#: starts a new experiment instead of continuing the record.
+NEW_EXPERIMENT = _NewExperiment()
+
+
+def _segments(pieces):
+    """``(experiment index, single-experiment IOData)`` for every piece in order.
+
+    :data:`NEW_EXPERIMENT` and the borders inside a merged piece start a new
+    experiment (markers before any sample, or repeated, change nothing)."""
+    experiment, started = 0, False
+    for k, piece in enumerate(pieces):
+        if piece is NEW_EXPERIMENT:
+            if started:
+                experiment += 1
+                started = False
+            continue
+        if not isinstance(piece, IOData):
+            raise DataError(f"piece {k} is a {type(piece).__name__}, not an IOData record "
+                            "(or subid.stream.NEW_EXPERIMENT)")
+        for j, part in enumerate(piece.experiments):
+            if j:
+                experiment += 1
+            yield experiment, part
+            started = True
 
 
 def statistic_depth(method: str, order, horizon, n_outputs: int, instruments="past") -> tuple:
@@ -55,7 +102,13 @@ def identify_stream(pieces, method: str = "moesp", order=None, horizon=None, *,
     Parameters
     ----------
     pieces : iterable of IOData
-        Consecutive, uniformly sampled pieces (e.g. :func:`subid.read_chunks`).
+        Consecutive, uniformly sampled pieces (e.g. :func:`subid.read_chunks`)
+        of one record. To give several experiments, put
+        :data:`NEW_EXPERIMENT` between the pieces of two experiments, or pass
+        pieces made by :func:`subid.merge` (their internal borders are kept;
+        the first experiment of a piece continues the previous piece). Two
+        pieces are never taken for different experiments otherwise: they are
+        joined as one record.
     method : {'moesp', 'n4sid', 'ls'}
         Batch method applied to the statistic.
     order, horizon
@@ -79,23 +132,26 @@ def identify_stream(pieces, method: str = "moesp", order=None, horizon=None, *,
     Returns
     -------
     StateSpace
-        ``info['n_samples']`` is the length of the whole record.
+        ``info['n_samples']`` is the length of the whole record; with several
+        experiments ``info['x0']`` has one row per experiment.
     """
-    iterator = iter(pieces if progress is None else progress(pieces))
-    first = next(iterator, None)
-    if first is None:
-        raise DataError("the record is empty: no pieces to identify from")
-    if not isinstance(first, IOData):
-        raise DataError(f"pieces must be IOData records, got {type(first).__name__}")
-    horizon, depth = statistic_depth(method, order, horizon, first.n_outputs,
-                                     options.get("instruments", "past"))
-    stat = HankelStatistic(first.n_inputs, first.n_outputs, depth, kind=statistic,
-                           dt=first.dt, input_names=first.input_names,
-                           output_names=first.output_names)
-    stat.update(first.u, first.y)
-    for k, piece in enumerate(iterator, start=1):
-        _check_piece(piece, first, k)
+    stat, first, experiment = None, None, 0
+    for k, (e, piece) in enumerate(_segments(pieces if progress is None else progress(pieces))):
+        if first is None:
+            first = piece
+            horizon, depth = statistic_depth(method, order, horizon, first.n_outputs,
+                                             options.get("instruments", "past"))
+            stat = HankelStatistic(first.n_inputs, first.n_outputs, depth, kind=statistic,
+                                   dt=first.dt, input_names=first.input_names,
+                                   output_names=first.output_names)
+        else:
+            _check_piece(piece, first, k)
+        if e != experiment:
+            stat.new_experiment()
+            experiment = e
         stat.update(piece.u, piece.y)
+    if stat is None:
+        raise DataError("the record is empty: no pieces to identify from")
     if options.get("bd_method", "auto") != "projection":
         if reread is None and iter(pieces) is not pieces:
             reread = lambda: pieces       # noqa: E731 - a collection iterates again
@@ -104,8 +160,16 @@ def identify_stream(pieces, method: str = "moesp", order=None, horizon=None, *,
                           "D come from the statistic only (bd_method='projection'), not from "
                           "the output regression of the in-memory default; pass a list of "
                           "pieces or reread= (a function returning them again)", stacklevel=2)
+        elif stat.n_experiments == 1:
+            attach_second_pass(stat, lambda: ((p.u, p.y) for _, p in _segments(reread())))
         else:
-            attach_second_pass(stat, lambda: ((p.u, p.y) for p in reread()))
+            def map_pieces(function, arguments):
+                groups = itertools.groupby(_segments(reread()), key=lambda item: item[0])
+                return [function(((p.u, p.y) for _, p in group), *arguments[e])
+                        for e, group in groups]
+            stat.output_regression = OutputRegression(
+                map_pieces, stat.n_experiments, stat.n_inputs, stat.n_outputs,
+                experiments=list(range(stat.n_experiments)))
     log.info("identifying from the statistic of %d samples", stat.n_samples)
     return METHODS[method](stat, order, horizon, **options)
 
@@ -144,15 +208,37 @@ def identify_file(path, inputs, outputs, *, dt=None, method: str = "moesp", orde
     statistic on the way; the B, D, x0 regression (unless
     ``bd_method='projection'``) reads the parsed values back from a temporary
     file of doubles (:class:`ParsedOnce`) instead of parsing the file again.
-    See :func:`identify_stream` for the parameters.
+    ``path`` may be a list of files: each is one experiment (no Hankel column
+    crosses from one file to the next; one x0 per file), as
+    ``subid.merge([subid.read(p, ...) for p in paths])`` in memory. See
+    :func:`identify_stream` for the parameters.
     """
-    pieces = ParsedOnce(lambda: read_chunks(path, inputs, outputs, dt=dt,
-                                            chunk_size=chunk_size, delimiter=delimiter))
+    paths = [path] if isinstance(path, (str, os.PathLike)) else list(path)
+    if not paths:
+        raise DataError("identify_file needs a file (or a list of files, one per experiment)")
+    files = [ParsedOnce(lambda p=p: read_chunks(p, inputs, outputs, dt=dt,
+                                                chunk_size=chunk_size, delimiter=delimiter))
+             for p in paths]
+    pieces = files[0] if len(files) == 1 else _Experiments(files)
     try:
         return identify_stream(pieces, method, order, horizon, statistic=statistic,
                                progress=progress, reread=lambda: pieces, **options)
     finally:
-        pieces.close()
+        for f in files:
+            f.close()
+
+
+class _Experiments:
+    """The pieces of several re-iterable records, :data:`NEW_EXPERIMENT` between them."""
+
+    def __init__(self, records):
+        self.records = records
+
+    def __iter__(self):
+        for k, record in enumerate(self.records):
+            if k:
+                yield NEW_EXPERIMENT
+            yield from record
 
 
 class ParsedOnce:
