@@ -551,7 +551,9 @@ def identification_report(models, estimation, validation=None, *, title="subid r
 
 def _concat(a, b):
     """The record ``a`` followed by ``b`` (halves of a split)."""
-    from .data import IOData
+    from .data import IOData, merge
+    if a.n_experiments > 1 or b.n_experiments > 1:    # for the figures only
+        return merge([a, b])
     u = np.vstack([a.u, b.u])
     y = np.vstack([a.y, b.y])
     if a.dt is not None and b.dt is not None and np.isclose(a.dt, b.dt):
