@@ -248,12 +248,6 @@ def test_merge_refuses_what_does_not_match(two_records):
 
 def test_methods_that_cannot_use_experiments_apart_say_so(two_records):
     a, b, _, _ = two_records
-    data = subid.merge([a, b])
-    model = subid.moesp(data, N_STATE)
-    with pytest.raises(DataError, match="pem does not support several experiments"):
-        subid.pem(data, model)
-    with pytest.raises(DataError, match="does not support several experiments"):
-        subid.moesp(data, N_STATE, refine="pem")
     ct = subid.IOData(a.u, a.y, dt=0.1)
     ct_data = subid.merge([ct, subid.IOData(b.u, b.y, dt=0.1)])
     with pytest.raises(DataError, match="does not support several experiments"):
@@ -268,6 +262,38 @@ def test_too_short_experiments_are_reported(two_records):
     short = subid.merge([a[:30], a[30:60], a[60:90]])
     with pytest.raises(subid.errors.TooFewSamplesError, match="3 experiments"):
         subid.moesp(short, N_STATE, horizon=10)
+
+
+# ---------------------------------------------------------------------------
+# prediction-error refinement
+# ---------------------------------------------------------------------------
+def test_pem_with_one_x0_per_experiment_converges_exactly():
+    """From a perturbed start on noise-free data, pem reaches the true model to rounding
+    only when each experiment has its own initial state (its x0 Jacobian columns)."""
+    a, b = _record(400, 41)[0], _record(300, 42)[0]
+    start = subid.StateSpace(TRUE.A * 0.97, TRUE.B * 1.05, TRUE.C, TRUE.D, TRUE.dt)
+    merged = subid.pem(subid.merge([a, b]), start, focus="simulation", max_iterations=200)
+    naive = subid.pem(_naive(a, b), start, focus="simulation", max_iterations=200)
+    assert merged.info["x0"].shape == (2, N_STATE)
+    assert markov_error(merged, TRUE) < 1e-8
+    assert markov_error(naive, TRUE) > 1e-3
+    for k, exp in enumerate((a, b)):
+        y = merged.simulate(exp.u, x0=merged.info["x0"][k])
+        assert np.abs(y - exp.y).max() < 1e-6 * np.abs(exp.y).max()
+
+
+def test_pem_on_one_merged_experiment_is_pem_on_the_record():
+    a = _record(300, 43)[0]
+    noisy = subid.IOData(a.u, a.y + 0.1 * np.random.default_rng(0).standard_normal(a.y.shape),
+                         dt=a.dt)
+    start = subid.moesp(noisy, N_STATE)
+    one = subid.pem(noisy, start)
+    merged = subid.pem(subid.merge([noisy]), start)
+    np.testing.assert_array_equal(one.A, merged.A)
+    assert merged.info["x0"].shape == (N_STATE,)
+    refined = subid.moesp(subid.merge([noisy, _record(200, 44)[0]]), N_STATE, refine="pem")
+    assert refined.info["refined_by"] == "pem" and refined.info["x0"].shape == (2, N_STATE)
+    assert refined.info["final_cost"] <= refined.info["start_cost"]
 
 
 # ---------------------------------------------------------------------------

@@ -44,7 +44,7 @@ import numpy as np
 import scipy.linalg
 
 from ._hankel import HankelFactor
-from .data import IOData, require_single_experiment
+from .data import IOData
 from .errors import NoiseModelWarning, SubidError
 
 __all__ = ["innovation_model", "attach_noise_model", "check_refine", "REFINE_OPTIONS"]
@@ -194,8 +194,6 @@ def check_refine(refine, data) -> None:
     if refine == "pem" and not isinstance(data, IOData):
         raise SubidError("refine='pem' needs the raw record (IOData): a statistic holds no "
                          "samples to predict")
-    if refine == "pem":
-        require_single_experiment(data, "refine='pem'")
 
 
 def attach_noise_model(model, problem, refine=None, **pem_options):

@@ -45,7 +45,7 @@ import scipy.optimize
 
 from . import _simulate
 from ._pem_kernel import jacobian
-from .data import IOData, require_single_experiment
+from .data import IOData
 from .errors import DataError, ModelError, NoiseModelWarning, SubidError
 from .model import StateSpace
 
@@ -64,7 +64,6 @@ def _check_inputs(data, model, focus):
     if not isinstance(data, IOData):
         raise DataError(f"pem expects an IOData record, got {type(data).__name__}; wrap "
                         "arrays as subid.IOData(u, y, dt=...)")
-    require_single_experiment(data, "pem")
     if focus not in FOCUS:
         raise SubidError(f"focus must be 'prediction' or 'simulation', got {focus!r}")
     if (data.n_inputs, data.n_outputs) != (model.n_inputs, model.n_outputs):
@@ -166,15 +165,26 @@ def _start_x0(Ap, Bp, C, Dp, v, y):
     return x0
 
 
+def _simulate_experiments(Ap, Bp, C, Dp, v, x0s, ranges):
+    """The predictor (or simulation) of every experiment from its own initial state
+    (row ``e`` of ``x0s``): ``(ŷ, X)`` stacked in time order."""
+    parts = [_simulate.simulate_discrete(Ap, Bp, C, Dp, v[a:b], x0s[e])
+             for e, (a, b) in enumerate(ranges)]
+    return np.vstack([p[0] for p in parts]), np.vstack([p[1] for p in parts])
+
+
 def _radius(M) -> float:
     return float(np.abs(np.linalg.eigvals(M)).max())
 
 
 def _round(model_mats, x0, data, focus, W, layout, max_nfev, tolerance, history, penalty):
-    """One least-squares run in local coordinates at ``model_mats``."""
+    """One least-squares run in local coordinates at ``model_mats``; ``x0`` has one
+    row per experiment (each experiment is predicted from its own initial state)."""
     A0, B0, C0, D0, K0 = model_mats
     u, y = data.u, data.y
     N, ny = y.shape
+    ranges = data.experiment_ranges
+    n_exp, n = x0.shape
     v = np.hstack([u, y]) if focus == "prediction" else u
     theta0 = layout.pack(A0, B0, C0, D0, K0)
     basis = _local_coordinates(layout, A0, B0, C0, D0, K0)
@@ -190,7 +200,8 @@ def _round(model_mats, x0, data, focus, W, layout, max_nfev, tolerance, history,
         if not np.isfinite(Ap).all() or _radius(Ap) >= STABILITY_LIMIT:
             return np.full(N * ny, penalty)
         with np.errstate(all="ignore"):
-            yhat = _simulate.simulate_discrete(Ap, Bp, Cp, Dp, v, x0 + z[dm:])[0]
+            yhat = _simulate_experiments(Ap, Bp, Cp, Dp, v, x0 + z[dm:].reshape(n_exp, n),
+                                         ranges)[0]
         if not np.isfinite(yhat).all():
             return np.full(N * ny, penalty)
         return (((y - yhat) @ W.T) * scale).ravel()
@@ -198,23 +209,30 @@ def _round(model_mats, x0, data, focus, W, layout, max_nfev, tolerance, history,
     def jac(z):
         A, B, C, D, K = mats(z)
         Ap, Bp, Cp, Dp = _predictor(A, B, C, D, K, focus)
-        dirs = _directions(layout, basis, A, B, C, D, K, focus)
-        yhat, J = jacobian(*(np.ascontiguousarray(a) for a in (Ap, Bp, Cp, Dp, v)),
-                           np.ascontiguousarray(x0 + z[dm:]),
-                           *(np.ascontiguousarray(a) for a in dirs))
+        dirs = [np.ascontiguousarray(a) for a in
+                _directions(layout, basis, A, B, C, D, K, focus)]
+        mats_c = [np.ascontiguousarray(a) for a in (Ap, Bp, Cp, Dp)]
+        x0s = x0 + z[dm:].reshape(n_exp, n)
+        yhat = np.empty((N, ny))
+        J = np.zeros((N, ny, dm + n_exp * n))
+        for e, (a, b) in enumerate(ranges):     # the x0 columns of experiment e only
+            yhat[a:b], Je = jacobian(*mats_c, np.ascontiguousarray(v[a:b]),
+                                     np.ascontiguousarray(x0s[e]), *dirs)
+            J[a:b, :, :dm] = Je[:, :, :dm]
+            J[a:b, :, dm + e * n:dm + (e + 1) * n] = Je[:, :, dm:]
         history.append(0.5 * float(np.sum((((y - yhat) @ W.T) * scale) ** 2)))
         Jw = -np.einsum("ik,tkd->tid", W, J) * scale
         if not np.isfinite(Jw).all():
             Jw = np.nan_to_num(Jw, nan=0.0, posinf=0.0, neginf=0.0)
         return Jw.reshape(N * ny, -1)
 
-    z0 = np.zeros(dm + layout.n)
+    z0 = np.zeros(dm + n_exp * n)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
         res = scipy.optimize.least_squares(fun, z0, jac=jac, method="trf", x_scale="jac",
                                            ftol=tolerance, xtol=tolerance, gtol=tolerance,
                                            max_nfev=max_nfev)
-    return mats(res.x), x0 + res.x[dm:], res
+    return mats(res.x), x0 + res.x[dm:].reshape(n_exp, n), res
 
 
 def pem(data, model, *, focus="prediction", max_iterations=100, tolerance=1e-8, rounds=3,
@@ -225,7 +243,9 @@ def pem(data, model, *, focus="prediction", max_iterations=100, tolerance=1e-8, 
     ----------
     data : IOData
         Uniformly sampled estimation record (the same data the start was
-        identified on, usually).
+        identified on, usually). A record of several experiments
+        (:func:`subid.merge`) is predicted experiment by experiment, each from
+        its own initial state (``info['x0']`` one row per experiment).
     model : StateSpace
         Starting model, e.g. from :func:`subid.n4sid`. Discrete time with the
         data's ``dt``; a continuous-time model is refined through its
@@ -345,8 +365,9 @@ def _pem_dt(data, model, focus, max_iterations, tolerance, rounds, feedthrough):
     u, y = data.u, data.y
     v = np.hstack([u, y]) if focus == "prediction" else u
     Ap, Bp, Cp, Dp = _predictor(*mats, focus)
-    x0 = _start_x0(Ap, Bp, Cp, Dp, v, y)
-    yhat, X = _simulate.simulate_discrete(Ap, Bp, Cp, Dp, v, x0)
+    ranges = data.experiment_ranges       # one initial state per experiment (subid.merge)
+    x0 = np.stack([_start_x0(Ap, Bp, Cp, Dp, v[a:b], y[a:b]) for a, b in ranges])
+    yhat, X = _simulate_experiments(Ap, Bp, Cp, Dp, v, x0, ranges)
     err = y - yhat
     sigma0 = err.T @ err / N
     try:
@@ -368,7 +389,7 @@ def _pem_dt(data, model, focus, max_iterations, tolerance, rounds, feedthrough):
         pass
     Tinv = np.linalg.solve(T, np.eye(n))
     cur = (T @ mats[0] @ Tinv, T @ mats[1], mats[2] @ Tinv, mats[3], T @ mats[4])
-    cur_x0 = T @ x0
+    cur_x0 = x0 @ T.T
     history = [start_cost]
     penalty = math.sqrt(2.0 * (10.0 * start_cost + 1.0) / (N * ny))
     stop_reason = "the start fits the data to rounding (noise-free): kept unchanged"
@@ -402,20 +423,20 @@ def _pem_dt(data, model, focus, max_iterations, tolerance, rounds, feedthrough):
     if not best_cost < start_cost:
         info["stop_reason"] = stop_reason if exact else \
             f"no improvement on the start ({stop_reason}); start kept"
-        info["x0"] = x0
+        info["x0"] = x0[0] if len(ranges) == 1 else x0
         out_K = K if focus == "prediction" else model.K
         out_S = sigma0 if focus == "prediction" else model.noise_cov
         if out_K is not None and not np.any(out_K) and focus == "prediction":
             out_K = K
         return model.with_noise_model(out_K, out_S, info=info)
     A, B, C, D, Kn = cur
-    A, B, C, Kn, x0n = Tinv @ A @ T, Tinv @ B, C @ T, Tinv @ Kn, Tinv @ cur_x0
-    info["x0"] = x0n
+    A, B, C, Kn, x0n = Tinv @ A @ T, Tinv @ B, C @ T, Tinv @ Kn, cur_x0 @ Tinv.T
+    info["x0"] = x0n[0] if len(ranges) == 1 else x0n
     refined = StateSpace(A, B, C, D, model.dt, input_names=model.input_names,
                          output_names=model.output_names, info=info)
     if focus == "prediction":
         Ap, Bp, Cp, Dp = _predictor(A, B, C, D, Kn, focus)
-        e = y - _simulate.simulate_discrete(Ap, Bp, Cp, Dp, v, x0n)[0]
+        e = y - _simulate_experiments(Ap, Bp, Cp, Dp, v, x0n, ranges)[0]
         info["predictor_spectral_radius"] = _radius(Ap)
         return refined.with_noise_model(Kn, e.T @ e / N, info=info)
     from .noise_model import with_factor
