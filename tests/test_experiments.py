@@ -414,3 +414,44 @@ def test_distributed_files_as_experiments(tmp_path, two_records):
     assert model.info["x0"].shape == (2, N_STATE)
     joined = identify_files(paths, ["u1", "u2"], ["y1", "y2"], order=N_STATE, horizon=10)
     assert markov_error(joined, TRUE) > 1e-4
+
+
+# ---------------------------------------------------------------------------
+# command line: several DATA files are experiments
+# ---------------------------------------------------------------------------
+def _write_csv(path, rec):
+    np.savetxt(path, np.hstack([rec.u, rec.y]), delimiter=",", header="u1,u2,y1,y2",
+               comments="")
+    return str(path)
+
+
+def test_cli_identify_merges_several_files(tmp_path, two_records, capsys):
+    pytest.importorskip("click")
+    pytest.importorskip("matplotlib")
+    import json
+
+    from subid.cli import main
+    a, b, _, _ = two_records
+    paths = [_write_csv(tmp_path / "a.csv", a), _write_csv(tmp_path / "b.csv", b)]
+    out = tmp_path / "out"
+    channels = ["--inputs", "u1,u2", "--outputs", "y1,y2"]
+    code = main(["identify", *paths, *channels, "--method", "moesp", "--order", "3",
+                 "--no-report", "--out", str(out)])
+    capsys.readouterr()
+    assert code == 0
+    model = subid.StateSpace.load(out / "model.json")
+    assert np.shape(model.info["x0"]) == (2, N_STATE)
+    assert [e["name"] for e in model.info["data"]["experiments"]] == ["a.csv", "b.csv"]
+    assert np.shape(model.info["data"]["u_offset"]) == (2, 2)
+    summary = json.loads((out / "summary.json").read_text())
+    assert min(summary["fit_estimation"]) > 99   # means removed per file: not exact
+    # an online method would join the files: refused
+    code = main(["identify", *paths, *channels, "--method", "recursive", "--order", "3",
+                 "--out", str(tmp_path / "bad")])
+    captured = capsys.readouterr()
+    assert code != 0 and "experiments" in captured.err
+    # a missing file is named alone, not as the list
+    code = main(["identify", paths[0], str(tmp_path / "missing.csv"), *channels, "--out",
+                 str(tmp_path / "bad2")])
+    captured = capsys.readouterr()
+    assert code != 0 and "missing.csv" in captured.err and " + " not in captured.err

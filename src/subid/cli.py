@@ -444,6 +444,30 @@ def load_data(source: str, inputs=None, outputs=None, dt=None, time_column=None,
     return data, os.path.basename(source), notes
 
 
+def _load_experiments(sources, inputs, outputs, dt, time_column, delimiter):
+    """Several DATA arguments as one record of several experiments (:func:`subid.merge`)."""
+    from .data import merge
+    loaded = []
+    for source in sources:
+        try:
+            loaded.append(load_data(source, inputs, outputs, dt, time_column, delimiter))
+        except SubidError as exc:          # name this file, not the list
+            if getattr(exc, "subid_file", None) is None:
+                exc.subid_file = "" if source in str(exc) else source
+            raise
+    labels = [label for _, label, _ in loaded]
+    names = labels if len(set(labels)) == len(labels) else list(sources)
+    if len(set(names)) != len(names):
+        raise DataError(f"the same DATA is given twice: {', '.join(sources)}")
+    record = merge([r for r, _, _ in loaded], names=names)
+    notes = [note for _, _, ns in loaded for note in ns]
+    notes.append(f"{len(sources)} experiments merged (subid.merge): "
+                 + ", ".join(f"{n} ({b - a} samples)" for n, (a, b)
+                             in zip(record.experiment_names, record.experiment_ranges))
+                 + "; no Hankel column crosses from one to the next, one x0 each.")
+    return record, " + ".join(labels), notes
+
+
 def _select(names, spec, role, source) -> list[int]:
     if spec is None:
         return list(range(len(names)))
@@ -663,8 +687,10 @@ def cli(ctx, quiet, verbose, debug):
                     "  subid identify run1.csv --inputs u1,u2 --outputs y --dt 0.1 \\\n"
                     "      --method ls --order auto --validate 0.3 --out run1_out\n"
                     "  subid identify log.csv --inputs u --outputs y --time t --method ct "
-                    "--order 2 --out ct_out")
-@click.argument("data", metavar="DATA")
+                    "--order 2 --out ct_out\n"
+                    "  subid identify run1.csv run2.csv --inputs u --outputs y --dt 0.1 "
+                    "--method moesp --out runs_out")
+@click.argument("data", metavar="DATA...", nargs=-1, required=True)
 @_data_options
 @click.option("--method", "method_name", type=click.Choice(list(METHODS)), default="ls",
               show_default=True, help="Identification method (see 'subid methods').")
@@ -709,6 +735,11 @@ def identify(data, inputs, outputs, dt, time_column, delimiter, detrend, method_
     VALIDATE) and a validation part (the rest); the model is identified on the
     first and checked on both. Prints the order, fit % on the estimation and
     validation parts, the poles, stability and the time taken.
+
+    Several DATA files are several experiments of one plant (subid.merge):
+    no Hankel column crosses from one file to the next, each file has its own
+    initial state and loses its own mean (--detrend constant); the validation
+    part is the end of the last file. Discrete-time batch methods only.
     """
     from . import report
     spec = METHODS[method_name]
@@ -724,12 +755,26 @@ def identify(data, inputs, outputs, dt, time_column, delimiter, detrend, method_
     if stream and refine != "none":
         raise click.UsageError("--refine pem needs the samples in memory; it does not work "
                                "with --stream")
+    sources = list(data)
+    if len(sources) > 1:
+        if stream:
+            raise click.UsageError("--stream reads one file; several DATA files are merged as "
+                                   "experiments in memory (drop --stream)")
+        if spec.kind != "batch" or spec.time != "discrete":
+            raise click.UsageError(f"several DATA files are merged as experiments for the "
+                                   f"discrete-time batch methods, not for {spec.name}: it "
+                                   "would join them as if contiguous")
+    data = sources[0] if len(sources) == 1 else " + ".join(sources)
     if stream:
         return _identify_streamed(data, inputs, outputs, dt, time_column, delimiter, detrend,
                                   spec, order, horizon, validate, opts, frequency_unit,
                                   write_report, chunk_size, report_samples, out)
     with _about(data):
-        record, label, notes = load_data(data, inputs, outputs, dt, time_column, delimiter)
+        if len(sources) == 1:
+            record, label, notes = load_data(data, inputs, outputs, dt, time_column, delimiter)
+        else:
+            record, label, notes = _load_experiments(sources, inputs, outputs, dt, time_column,
+                                                     delimiter)
         detrend = detrend or _default_detrend(spec)
         work = _detrend(record, detrend)
         if work is not record:
@@ -935,6 +980,9 @@ def _provenance(source, record, work, detrend, est, validate) -> dict:
     info = {"source": str(source), "inputs": list(record.input_names),
             "outputs": list(record.output_names), "detrend": detrend,
             "n_estimation": est.n_samples, "validation_fraction": float(validate)}
+    if getattr(work, "n_experiments", 1) > 1:
+        info["experiments"] = [{"name": name, "samples": b - a} for name, (a, b)
+                               in zip(work.experiment_names, work.experiment_ranges)]
     if work.u_offset is not None:
         info["u_offset"] = np.asarray(work.u_offset, dtype=float)
         info["y_offset"] = np.asarray(work.y_offset, dtype=float)
@@ -1396,6 +1444,12 @@ def simulate(model_path, input_path, inputs, time_column, dt, delimiter, offsets
         u_eff = u
         info = model.info.get("data") if isinstance(model.info, dict) else None
         applied = False
+        if offsets and isinstance(info, dict) and info.get("detrend") == "constant" \
+                and "u_offset" in info and np.ndim(info["u_offset"]) == 2:
+            raise DataError("the model was identified on several experiments, each around its "
+                            "own operating point (one row of offsets per experiment): there is "
+                            "no single offset to add; use --no-offsets (deviations) or "
+                            "subtract the operating point you want yourself")
         if offsets and isinstance(info, dict) and info.get("detrend") == "constant" \
                 and "u_offset" in info:
             u_eff = u - np.asarray(info["u_offset"], dtype=float).reshape(1, -1)
