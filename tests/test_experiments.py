@@ -375,6 +375,7 @@ def test_identify_stream_with_new_experiment_marker(two_records):
     model = identify_stream(pieces, "moesp", N_STATE, horizon=10)
     assert markov_error(model, TRUE) < 1e-8
     assert model.info["x0"].shape == (2, N_STATE)
+    assert model.info["n_experiments"] == 2
     in_memory = subid.moesp(subid.merge([a, b]), N_STATE, horizon=10, statistic="gram")
     np.testing.assert_allclose(model.info["x0"], in_memory.info["x0"], rtol=1e-6, atol=1e-8)
     # a merged piece carries its border; joined pieces are one record

@@ -778,8 +778,9 @@ def finish(problem: Problem, A, B, C, D, n: int, order_selection: dict, **info) 
             "horizon": problem.horizon, "input_condition": problem.input_condition,
             "n_samples": data.n_samples, **info,
             **check_stability(A, data, problem.method)}
-    if isinstance(data, IOData) and data.n_experiments > 1:
+    if getattr(data, "n_experiments", 1) > 1:
         info["n_experiments"] = data.n_experiments
-        info["experiment_names"] = list(data.experiment_names)
+        if isinstance(data, IOData):
+            info["experiment_names"] = list(data.experiment_names)
     return StateSpace(A, B, C, D, data.dt, input_names=data.input_names,
                       output_names=data.output_names, info=info)

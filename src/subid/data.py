@@ -68,6 +68,11 @@ class IOData:
     construction. Methods that transform data (``detrend``,
     slicing) return new objects.
 
+    A record may hold several experiments (:func:`subid.merge`):
+    ``n_experiments``, ``experiment_ranges`` (their rows), ``experiment(k)``
+    and ``experiments`` give them; slicing keeps the borders inside the
+    slice, and the methods never join two experiments.
+
     Examples
     --------
     >>> import numpy as np, subid
@@ -313,7 +318,9 @@ class IOData:
         ----------
         fraction : float
             Share of the samples, from the start of the record, that goes into
-            the first (estimation) part; the rest is the validation part.
+            the first (estimation) part; the rest is the validation part. With
+            several experiments the cut is at that share of all the samples
+            (the borders on each side are kept).
         """
         if isinstance(fraction, bool) or not isinstance(fraction, numbers.Real) \
                 or not 0 < fraction < 1:
