@@ -690,7 +690,7 @@ def cli(ctx, quiet, verbose, debug):
                     "--order 2 --out ct_out\n"
                     "  subid identify run1.csv run2.csv --inputs u --outputs y --dt 0.1 "
                     "--method moesp --out runs_out")
-@click.argument("data", metavar="DATA...", nargs=-1, required=True)
+@click.argument("data", metavar="DATA", nargs=-1, required=True)
 @_data_options
 @click.option("--method", "method_name", type=click.Choice(list(METHODS)), default="ls",
               show_default=True, help="Identification method (see 'subid methods').")
