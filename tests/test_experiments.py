@@ -314,8 +314,19 @@ def test_prediction_and_residuals_per_experiment(two_records):
     e = data.y - subid.predict(model, data, np.inf, x0="zero")
     from subid.prediction import correlations
     joint = correlations(e, data.u, max_lag=5, ranges=data.experiment_ranges)
-    parts = [correlations(e[s:t], data.u[s:t], max_lag=5) for s, t in data.experiment_ranges]
-    assert joint["auto"].shape == parts[0]["auto"].shape
+    # lagged products summed inside each experiment only, by hand
+    e0 = e - e.mean(axis=0)
+    u0 = data.u - data.u.mean(axis=0)
+    ranges = data.experiment_ranges
+    for lag in (1, 3):
+        auto = sum(e0[s + lag:t, 0] @ e0[s:t - lag, 0] for s, t in ranges)
+        np.testing.assert_allclose(joint["auto"][0, lag], auto / (e0[:, 0] @ e0[:, 0]),
+                                   rtol=1e-12)
+    cross = sum(e0[s + 2:t, 1] @ u0[s:t - 2, 0] for s, t in ranges) / len(e0)
+    scale = np.sqrt((e0[:, 1] @ e0[:, 1]) * (u0[:, 0] @ u0[:, 0])) / len(e0)
+    np.testing.assert_allclose(joint["cross"][1, 0, 5 + 2], cross / scale, rtol=1e-10)
+    whole = correlations(e, data.u, max_lag=5)       # joins the experiments
+    assert abs(whole["auto"][0, 1] - joint["auto"][0, 1]) > 1e-6
 
 
 def test_fit_is_pooled_with_each_experiments_mean():
