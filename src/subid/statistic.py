@@ -318,7 +318,10 @@ class HankelStatistic:
         out.head, out.tail = later.head.copy(), later.tail.copy()
         out._open_samples = later._open_samples
         out.n_samples = self.n_samples + later.n_samples
-        out.n_experiments = (self.n_experiments if self.n_samples else 0) + later.n_experiments
+        # an experiment just opened by new_experiment() and still empty is not counted twice
+        pending = 1 if (self.n_samples and not self._open_samples) else 0
+        out.n_experiments = (self.n_experiments - pending if self.n_samples else 0) \
+            + later.n_experiments
         return out
 
     # -- results ------------------------------------------------------------
