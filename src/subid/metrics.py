@@ -69,7 +69,7 @@ def markov_error(model, reference, k: int = 10) -> float:
     return float(np.linalg.norm(model.markov(k) - m_ref) / norm)
 
 
-def simulate_fit(model, data, x0="estimate", hold: str = "zoh", *, output_std=None):
+def simulate_fit(model, data, x0="estimate", hold=None, *, output_std=None):
     """Simulated output of ``model`` on ``data`` and the initial state used.
 
     ``output_std`` (per output) replaces the spread of ``data.y`` in the
@@ -79,6 +79,7 @@ def simulate_fit(model, data, x0="estimate", hold: str = "zoh", *, output_std=No
     ``x0='estimate'`` fits the initial state to the data by least squares
     (the simulated output is linear in x0), each output weighted by the
     inverse of its standard deviation; ``'zero'`` or an array fixes it.
+    ``hold`` (continuous-time models) defaults to the model's :attr:`~subid.StateSpace.hold`.
     """
     check_model_data(model, data)
     if model.dt > 0:
@@ -120,7 +121,7 @@ def simulate_fit(model, data, x0="estimate", hold: str = "zoh", *, output_std=No
     return sim(data.u, x0_arr), x0_arr
 
 
-def fit_percent(model, data, x0="estimate", hold: str = "zoh", steps=np.inf) -> np.ndarray:
+def fit_percent(model, data, x0="estimate", hold=None, steps=np.inf) -> np.ndarray:
     """NRMSE fit in percent, per output: ``100 (1 - ||y - ŷ|| / ||y - mean(y)||)``.
 
     ``ŷ`` is the simulated output (default, ``steps=inf``) or the
@@ -135,8 +136,10 @@ def fit_percent(model, data, x0="estimate", hold: str = "zoh", steps=np.inf) -> 
     data : IOData
         Same channels; for a discrete model, the same sampling period.
     x0 : 'estimate', 'zero' or array
-    hold : {'zoh', 'foh'}
+    hold : {'zoh', 'foh'}, optional
         Inter-sample behaviour of the input for a continuous-time model.
+        Default: the model's :attr:`~subid.StateSpace.hold` (``'foh'`` for a
+        ``ct_subspace`` model).
     steps : int or numpy.inf
         Prediction horizon (MATLAB ``compare(data, model, k)``).
 
