@@ -280,3 +280,20 @@ def test_warnings_issued_while_identifying_are_in_info(monkeypatch, dt_record, c
     monkeypatch.undo()
     assert "probe warning" in clean.info["warnings"]
     assert subid.moesp(dt_record, 3).info["warnings"] == []
+
+
+def test_collect_warnings_lists_each_warning_once_and_reissues_it():
+    from subid._info import collect_warnings
+
+    with pytest.warns(Warning) as record:
+        with collect_warnings() as issued:
+            for _ in range(3):
+                warnings.warn("same", UserWarning, stacklevel=1)
+            warnings.warn("other", RuntimeWarning, stacklevel=1)
+    assert issued == ["same", "other"]
+    assert [str(w.message) for w in record] == ["same", "other"]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        with pytest.raises(RuntimeWarning, match="raised after the block"):
+            with collect_warnings():
+                warnings.warn("raised after the block", RuntimeWarning, stacklevel=1)

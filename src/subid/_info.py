@@ -125,8 +125,17 @@ def collect_warnings():
         yield messages
     finally:
         recorder.__exit__(None, None, None)
-        messages.extend(str(w.message) for w in caught)
+        # one record per distinct warning (message, category, place), as the default
+        # filter shows them, so a warning repeated in a loop is neither listed nor
+        # re-issued once per repetition
+        seen = set()
         for w in caught:
+            key = (str(w.message), w.category, w.filename, w.lineno)
+            if key in seen:
+                continue
+            seen.add(key)
+            if str(w.message) not in messages:
+                messages.append(str(w.message))
             _warnings.warn_explicit(w.message, w.category, w.filename, w.lineno,
                                     module=_module_of(w.filename), source=w.source)
 
