@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 
 import subid
-from subid import systems
+from subid import registry, systems
 
 
 @pytest.fixture(scope="session")
@@ -15,14 +15,21 @@ def paper_data(paper_system):
     return systems.simulate_data(paper_system, 1000, seed=1)
 
 
-METHODS = {
-    "ls_iv": lambda d, n=None, **kw: subid.ls_subspace(d, n, **kw),
+def _registered(spec):
+    return lambda d, n=None, **kw: spec.load()(d, n, **kw)
+
+
+# The discrete-time batch methods of the registry (subid.registry.METHODS),
+# under the names of the functions, plus two configurations of ls_subspace
+# (without instruments; the paper's one-shot estimate).
+METHODS = {spec.attribute if spec.name != "ls" else "ls_iv": _registered(spec)
+           for spec in registry.METHODS.values() if spec.kind == "batch"
+           and spec.time == "discrete"}
+METHODS.update({
     "ls_noiv": lambda d, n=None, **kw: subid.ls_subspace(d, n, instruments=None, **kw),
     "ls_paper": lambda d, n=None, **kw: subid.ls_subspace(d, n, instrument_weighting=False,
                                                           power_iterations=0, **kw),
-    "moesp": lambda d, n=None, **kw: subid.moesp(d, n, **kw),
-    "n4sid": lambda d, n=None, **kw: subid.n4sid(d, n, **kw),
-}
+})
 
 
 @pytest.fixture(params=sorted(METHODS))

@@ -29,6 +29,12 @@ def _one_line_error(code, stdout, stderr):
     (["--option", "=3"], "KEY must be an option name"),
     (["--option", "horizon=abc"], "horizon must be an integer, got 'abc'"),
     (["--option", "instruments=maybe"], "instruments must be 'past' or None"),
+    (["--option", "stability=maybe"], "stability must be one of ('auto', 'enforce', 'none')"),
+    (["--option", "feedthrough=yes"], "feedthrough must be True or False; got 'yes'"),
+    (["--option", "estimate_x0=3"], "estimate_x0 must be True or False; got 3"),
+    (["--option", "selection=[1]"], "selection must be one of"),
+    (["--option", "bd_method=guess"], "bd_method must be one of"),
+    (["--option", "power_iterations=-1"], "power_iterations must be an integer >= 0"),
     (["--frobnicate"], "No such option '--frobnicate'"),
     (["--order", "x"], "use an integer, 'auto'"),
 ])
@@ -64,3 +70,26 @@ def test_option_accepted_by_the_method_still_works(capsys, tmp_path):
                                tmp_path / "o", "--option", "instruments=null",
                                "--option", "horizon=6")
     assert code == 0, stderr
+
+
+@pytest.mark.parametrize("method, option, message", [
+    ("ct", "hold=cubic", "hold must be one of 'foh', 'zoh', None; got 'cubic'"),
+    ("ct", "bd_method=guess", "bd_method must be one of 'simulation', 'filtered'"),
+    ("ct", "refine=maybe", "refine must be True or False"),
+    ("moesp", "weighting=7", "weighting must be one of"),
+    ("n4sid", "refine=newton", "refine must be None or 'pem'"),
+])
+def test_bad_option_values_exit_2_with_one_line(capsys, tmp_path, method, option, message):
+    """OptionError (a bad option value) is a user error like the others."""
+    line = _one_line_error(*run(capsys, "identify", "dataset:dryer", "--method", method,
+                                "--order", "2", "--no-report", "--out", tmp_path / "o",
+                                "--option", option))
+    assert message in line
+    assert not (tmp_path / "o").exists()
+
+
+def test_bad_online_option_value_exits_2(capsys, tmp_path):
+    line = _one_line_error(*run(capsys, "track", "dataset:dryer", "--method", "recursive",
+                                "--order", "2", "--out", tmp_path / "o", "--option",
+                                "bd_method=guess"))
+    assert "bd_method" in line

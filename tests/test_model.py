@@ -375,7 +375,7 @@ def good_dict():
     (lambda d: d.pop("dt"), r"missing the key 'dt'"),
     (lambda d: d.update(extra=1), r"unknown key.*extra"),
     (lambda d: d.update(format="other"), r"'format'"),
-    (lambda d: d.update(version=3), r"newer subid"),
+    (lambda d: d.update(version=4), r"newer subid"),
     (lambda d: d.update(version="1"), r"'version'"),
     (lambda d: d.update(A="eye"), r"key 'A' must be a list"),
     (lambda d: d.update(C=[[1, 2], [3]]), r"key 'C'"),

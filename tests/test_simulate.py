@@ -6,7 +6,7 @@ from scipy import integrate, linalg, signal
 
 from subid import _simulate
 from subid.data import IOData
-from subid.errors import DataError
+from subid.errors import DataError, OptionError
 from subid.model import StateSpace
 
 
@@ -123,7 +123,7 @@ def test_simulate_input_errors():
         sys.simulate(np.array([[1.0, np.nan]] * 3))
     with pytest.raises(DataError, match=r"x0 has shape \(3,\).*order is 4"):
         sys.simulate(np.ones((5, 2)), x0=np.zeros(3))
-    with pytest.raises(DataError, match="hold"):
+    with pytest.raises(OptionError, match="hold"):
         sys.simulate(np.ones((5, 2)), hold="cubic")
     with pytest.raises(DataError, match="no samples"):
         sys.simulate(np.ones((0, 2)))

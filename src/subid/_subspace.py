@@ -23,11 +23,13 @@ from .errors import (
     DataError,
     ExcitationWarning,
     NotExcitingError,
+    OptionError,
     OrderError,
     SubidError,
     TooFewSamplesError,
     UnstableModelWarning,
 )
+from ._info import collect_warnings, model_info
 from .model import StateSpace
 from .statistic import HankelStatistic
 
@@ -305,7 +307,7 @@ def estimate_b_d(A, C_n, gamma, L11, L_yu, problem: "Problem", *, bd_method: str
     data = problem.data
     C = C_n * problem.output_scale[:, None]
     if bd_method not in BD_METHODS:
-        raise SubidError(f"bd_method must be one of {BD_METHODS}, got {bd_method!r}")
+        raise OptionError(f"bd_method must be one of {BD_METHODS}, got {bd_method!r}")
     radius = float(np.abs(np.linalg.eigvals(A)).max())
     # a statistic whose record can be read again (subid.stream, subid.distributed)
     second_pass = getattr(data, "output_regression", None)
@@ -347,7 +349,7 @@ WEIGHTINGS = ("moesp", "cva", "n4sid")
 
 def check_weighting(weighting: str) -> str:
     if weighting not in WEIGHTINGS:
-        raise SubidError(f"weighting must be one of {WEIGHTINGS} (MATLAB's N4Weight), got "
+        raise OptionError(f"weighting must be one of {WEIGHTINGS} (MATLAB's N4Weight), got "
                          f"{weighting!r}")
     return weighting
 
@@ -389,7 +391,7 @@ def stability_request(stability: str, A, data, method: str) -> bool:
     growth and does not act.
     """
     if stability not in STABILITY:
-        raise SubidError(f"stability must be one of {STABILITY}, got {stability!r}")
+        raise OptionError(f"stability must be one of {STABILITY}, got {stability!r}")
     if stability == "none" or np.abs(np.linalg.eigvals(A)).max() < 1.0:
         return False
     growth = record_growth(data) if isinstance(data, IOData) else None
@@ -637,7 +639,7 @@ def prepare(data, order, horizon, *, method: str, blocks_per_horizon: int = 2,
     record (see :mod:`subid.statistic`).
     """
     if statistic not in STATISTICS:
-        raise SubidError(f"statistic must be one of {STATISTICS}, got {statistic!r}")
+        raise OptionError(f"statistic must be one of {STATISTICS}, got {statistic!r}")
     if isinstance(data, HankelStatistic):
         if data.depth % blocks_per_horizon:
             raise DataError(f"{method} needs a statistic whose depth is a multiple of "
@@ -695,29 +697,33 @@ def identify(data, order, horizon, *, method: str, build, selection: str,
     model and the optional refinement (:func:`subid.noise_model.attach_noise_model`).
     """
     if selection not in SELECTION_RULES:
-        raise SubidError(f"selection must be one of {SELECTION_RULES}, got {selection!r}")
+        raise OptionError(f"selection must be one of {SELECTION_RULES}, got {selection!r}")
     fixed, candidates = _parse_order(order)
     if horizon is not None:
         horizon = check_int(horizon, "horizon", minimum=2)
     options = dict(method=method, blocks_per_horizon=blocks_per_horizon, statistic=statistic,
                    normalize_outputs=normalize_outputs)
-    if selection == "cv" and isinstance(data, IOData) and (fixed is None or horizon is None):
-        check_data(data, method)
+    with collect_warnings() as issued:
+        if selection == "cv" and isinstance(data, IOData) and (fixed is None or horizon is None):
+            check_data(data, method)
 
-        def prepare_fold(record, orders, f):
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")
-                return prepare(record, orders, f, **options)
-        prepare_fold.blocks = blocks_per_horizon
-        n, f, record = cross_validate(data, fixed, candidates, horizon,
-                                      prepare_fold=prepare_fold, build=build)
-        problem = prepare(data, n, f, **options)
-        model = build(problem)
-        model.info["order_selection"] = record
-    else:
-        problem = prepare(data, order, horizon, **options)
-        model = build(problem)
-    return model if finalize is None else finalize(model, problem)
+            def prepare_fold(record, orders, f):
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore")
+                    return prepare(record, orders, f, **options)
+            prepare_fold.blocks = blocks_per_horizon
+            n, f, record = cross_validate(data, fixed, candidates, horizon,
+                                          prepare_fold=prepare_fold, build=build)
+            problem = prepare(data, n, f, **options)
+            model = build(problem)
+            model.info["order_selection"] = record
+        else:
+            problem = prepare(data, order, horizon, **options)
+            model = build(problem)
+        if finalize is not None:
+            model = finalize(model, problem)
+    model.info["warnings"] = list(issued)
+    return model
 
 
 def finalize(model: StateSpace, problem: Problem, *, refine, delays) -> StateSpace:
@@ -774,13 +780,32 @@ def check_stability(A, data, method: str) -> dict:
 def finish(problem: Problem, A, B, C, D, n: int, order_selection: dict, **info) -> StateSpace:
     """The identified model with the diagnostics every method reports."""
     data = problem.data
-    info = {"method": problem.method, "order": n, "order_selection": order_selection,
-            "horizon": problem.horizon, "input_condition": problem.input_condition,
-            "n_samples": data.n_samples, **info,
-            **check_stability(A, data, problem.method)}
+    x0 = info.pop("x0", None)
+    info = model_info(problem.method, order=n, order_selection=order_selection,
+                      horizon=problem.horizon, n_samples=data.n_samples, x0=x0, hold="zoh",
+                      conditions=conditions_of(info, input=problem.input_condition),
+                      **{"input_condition": problem.input_condition, **info,
+                         **check_stability(A, data, problem.method)})
+    if "rank_profile" not in info and "singular_values" in info:
+        info["rank_profile"] = info["singular_values"]     # one name across methods
     if getattr(data, "n_experiments", 1) > 1:
         info["n_experiments"] = data.n_experiments
         if isinstance(data, IOData):
             info["experiment_names"] = list(data.experiment_names)
     return StateSpace(A, B, C, D, data.dt, input_names=data.input_names,
                       output_names=data.output_names, info=info)
+
+
+#: Flat ``info`` keys of condition numbers -> their name in ``info['conditions']``.
+CONDITION_KEYS = {"input_condition": "input", "selector_condition": "selector",
+                  "regression_condition": "bd", "b_regression_condition": "bd",
+                  "condition": "ac", "bd_condition": "bd"}
+
+
+def conditions_of(info: dict, **given) -> dict:
+    """``info['conditions']`` from the flat condition keys of ``info`` (and ``given``)."""
+    out = dict(given)
+    for key, name in CONDITION_KEYS.items():
+        if info.get(key) is not None:
+            out.setdefault(name, info[key])
+    return out

@@ -11,7 +11,7 @@ import numbers
 
 import numpy as np
 
-from .errors import DataError, OrderError
+from .errors import DataError, OptionError, OrderError
 
 _MAX_ROWS_LISTED = 8
 
@@ -194,3 +194,73 @@ def check_int(value, name: str, *, minimum: int = 1, maximum: int | None = None)
         raise OrderError(f"{name} must be at most {maximum}, got {shown}: a larger value needs "
                          "arrays beyond any computer's memory")
     return value
+
+
+def check_choice(value, name: str, choices) -> object:
+    """``value`` if it is one of ``choices``; else :class:`OptionError` listing them.
+
+    The comparison is by equality for hashable values (strings, None, bools);
+    an unhashable value (a list, an array) is never a choice.
+    """
+    try:
+        ok = any(value is c or (type(value) is type(c) and value == c) for c in choices)
+    except (TypeError, ValueError):
+        ok = False
+    if not ok:
+        allowed = ", ".join(repr(c) for c in choices)
+        raise OptionError(f"{name} must be one of {allowed}; got {value!r}"[:300])
+    return value
+
+
+def check_bool(value, name: str) -> bool:
+    """``value`` as a bool if it is one (numpy bools too); else :class:`OptionError`."""
+    if isinstance(value, (bool, np.bool_)):
+        return bool(value)
+    raise OptionError(f"{name} must be True or False; got {value!r}"[:300])
+
+
+def legacy_arguments(positional=(), renamed=None):
+    """Decorator: keep old call forms of a method working, with a DeprecationWarning.
+
+    The methods take ``(data, order=None, *, option=...)``: every option is
+    keyword-only, with one name per concept across methods. ``positional``
+    names the options that older releases accepted positionally after
+    ``order`` (in that order); ``renamed`` maps old keyword names to the
+    current ones. Either form still works but warns
+    (``DeprecationWarning``, message starting with ``subid:``). The wrapped
+    function keeps its signature (``inspect.signature`` follows ``__wrapped__``).
+    """
+    import functools
+    import warnings
+    renamed = dict(renamed or {})
+    positional = tuple(positional)
+
+    def decorate(fn):
+        @functools.wraps(fn)
+        def wrapper(data, order=None, *args, **kwargs):
+            name = fn.__name__
+            if args:
+                if len(args) > len(positional):
+                    raise TypeError(f"{name}() takes 2 positional arguments (data, order); "
+                                    "pass the options by keyword")
+                given = positional[:len(args)]
+                warnings.warn(f"subid: passing {', '.join(given)} of {name}() by position is "
+                              f"deprecated; pass them by keyword ({given[0]}=...)",
+                              DeprecationWarning, stacklevel=2)
+                for key, value in zip(given, args):
+                    if key in kwargs:
+                        raise TypeError(f"{name}() got multiple values for argument {key!r}")
+                    kwargs[key] = value
+            for old, new in renamed.items():
+                if old in kwargs:
+                    if new in kwargs:
+                        raise TypeError(f"{name}() got both {old!r} and {new!r}; {old!r} is "
+                                        f"the old name of {new!r}")
+                    warnings.warn(f"subid: the option {old!r} of {name}() is now called "
+                                  f"{new!r}", DeprecationWarning, stacklevel=2)
+                    kwargs[new] = kwargs.pop(old)
+            return fn(data, order, **kwargs)
+        wrapper.legacy_positional = positional
+        wrapper.legacy_renamed = renamed
+        return wrapper
+    return decorate

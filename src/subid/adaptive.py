@@ -82,6 +82,8 @@ from .data import IOData, require_single_experiment
 from .errors import (CheckpointError, DataError, NotConvergedWarning, OrderError, SubidError,
                      TooFewSamplesError)
 from .ls_subspace import random_selector
+from ._info import model_info
+from ._subspace import conditions_of
 from .model import StateSpace
 
 __all__ = ["AdaptiveIdentifier"]
@@ -527,7 +529,6 @@ class AdaptiveIdentifier:
         cond, bd_cond = self.information_condition()
         ls = self._method != "ode"
         info = {
-            "method": "seed000_adaptive",
             "samples": self.n_samples,
             "time": self.t,
             "refreshes": int(ist[_k.IST["refreshes"]]),
@@ -559,12 +560,18 @@ class AdaptiveIdentifier:
         reason = self._convergence(info)
         info["converged"] = reason is None
         info["convergence"] = "converged" if reason is None else reason
+        issued = []
         if reason is not None:
-            warnings.warn(f"AdaptiveIdentifier: the model is not converged: {reason}",
-                          NotConvergedWarning, stacklevel=2)
+            issued.append(f"AdaptiveIdentifier: the model is not converged: {reason}")
+            warnings.warn(issued[0], NotConvergedWarning, stacklevel=2)
+        hold = info.pop("hold")
+        horizon = info.pop("horizon")
+        info = model_info("seed000_adaptive", order=self._n, horizon=horizon,
+                          n_samples=self.n_samples, x0=None, hold=hold,
+                          conditions=conditions_of(info), warnings=issued, **info)
         return StateSpace(st["Am"], st["Bm"], st["Cm"], st["Dm"], 0.0,
                           input_names=self._input_names, output_names=self._output_names,
-                          info=info)
+                          info=info, hold=hold)
 
     def _convergence(self, info: dict):
         """None if the current model passes the convergence criteria, else

@@ -18,19 +18,18 @@ empty files, non-numeric cells, unusable data) print one line naming the
 file and the problem and exit with status 2; ``--debug`` adds the traceback.
 Progress bars appear only on a terminal and never with ``--quiet``.
 
-Identification methods are looked up in :data:`METHODS`, a registry that
-imports each method's module only when it is used, so a method whose module
-is absent from this version is reported as "not available" instead of
-breaking the tool.
+Identification methods are looked up in :data:`subid.registry.METHODS`
+(:data:`METHODS` here: those the command line offers), which imports each
+method's module only when it is used, so a method whose module is absent
+from this version is reported as "not available" instead of breaking the
+tool. The options ``--option KEY=VALUE`` accepts are the registry's
+``MethodSpec.options``.
 """
 
 from __future__ import annotations
 
 import contextlib
-import dataclasses
 import hashlib
-import importlib
-import importlib.util
 import json
 import logging
 import math
@@ -48,6 +47,8 @@ from ._selection import describe as describe_selection
 from ._files import atomic_directory, atomic_write, write_bytes
 from ._progress import on_terminal, progress_bar
 from .errors import DataError, FileReadError, NotConvergedWarning, OrderError, SubidError
+from .registry import METHODS as _REGISTRY
+from .registry import MethodSpec, MethodUnavailableError
 
 __all__ = ["main", "METHODS", "MethodSpec", "MethodUnavailableError", "available_methods"]
 
@@ -57,86 +58,16 @@ EXIT_USER_ERROR = 2
 
 
 # ---------------------------------------------------------------------------
-# method registry
+# method registry (subid.registry; the command line offers the methods marked
+# command_line)
 # ---------------------------------------------------------------------------
-class MethodUnavailableError(SubidError):
-    """The method's module is not part of this version of subid."""
-
-
-@dataclasses.dataclass(frozen=True)
-class MethodSpec:
-    """One identification method reachable from the command line.
-
-    Attributes
-    ----------
-    name : str
-        Name on the command line (``--method NAME``).
-    kind : {'batch', 'online'}
-        ``batch``: a function ``fn(data, order=..., horizon=..., **options)
-        -> StateSpace``. ``online``: a class ``Cls(order, n_inputs,
-        n_outputs, ...)`` with ``update``, ``model``, ``save`` and ``load``.
-    module, attribute : str
-        Where the function or class lives; imported on first use.
-    time : {'discrete', 'continuous'}
-        Time base of the models it produces.
-    description : str
-    """
-
-    name: str
-    kind: str
-    module: str
-    attribute: str
-    time: str
-    description: str
-
-    def available(self) -> bool:
-        """Whether the method's module is installed (without importing it)."""
-        try:
-            return importlib.util.find_spec(self.module) is not None
-        except (ImportError, ValueError):
-            return False
-
-    def load(self):
-        """The function or class; MethodUnavailableError when its module is absent."""
-        try:
-            module = importlib.import_module(self.module)
-        except ModuleNotFoundError as exc:
-            if exc.name == self.module:
-                raise MethodUnavailableError(
-                    f"method {self.name} is not available in this version of subid (module "
-                    f"{self.module} is missing); available methods: "
-                    f"{', '.join(available_methods(self.kind if self.kind == 'online' else None))}"
-                ) from None
-            raise
-        try:
-            return getattr(module, self.attribute)
-        except AttributeError:
-            raise MethodUnavailableError(
-                f"method {self.name} is not available in this version of subid "
-                f"({self.module} has no {self.attribute})") from None
-
-
-#: Every method the command line knows, by ``--method`` name.
-METHODS: dict[str, MethodSpec] = {
-    "ls": MethodSpec("ls", "batch", "subid.ls_subspace", "ls_subspace", "discrete",
-                     "SVD-free least-squares subspace identification (seed 001)"),
-    "moesp": MethodSpec("moesp", "batch", "subid.moesp", "moesp", "discrete",
-                        "PO-MOESP (Verhaegen)"),
-    "n4sid": MethodSpec("n4sid", "batch", "subid.n4sid", "n4sid", "discrete",
-                        "N4SID (Van Overschee & De Moor)"),
-    "ct": MethodSpec("ct", "batch", "subid.ct_subspace", "ct_subspace", "continuous",
-                     "continuous-time subspace identification (uniform or non-uniform "
-                     "samples)"),
-    "recursive": MethodSpec("recursive", "online", "subid.recursive", "RecursiveSubspace",
-                            "discrete", "online SVD-free subspace identification (seed 001 "
-                            "made recursive), fixed state basis"),
-    "adaptive": MethodSpec("adaptive", "online", "subid.adaptive", "AdaptiveIdentifier",
-                           "continuous", "online continuous-time identification"),
-}
+#: The methods ``--method`` offers, by name (a view of :data:`subid.registry.METHODS`).
+METHODS: dict[str, MethodSpec] = {name: spec for name, spec in _REGISTRY.items()
+                                  if spec.command_line}
 
 
 def available_methods(kind: str | None = None, time_base: str | None = None) -> list[str]:
-    """Names of the registered methods whose module is present.
+    """Names of the command-line methods whose module is present.
 
     Parameters
     ----------
@@ -146,15 +77,6 @@ def available_methods(kind: str | None = None, time_base: str | None = None) -> 
     return [name for name, spec in METHODS.items()
             if (kind is None or spec.kind == kind)
             and (time_base is None or spec.time == time_base) and spec.available()]
-
-
-def _accepts(fn, name: str) -> bool:
-    import inspect
-    try:
-        params = inspect.signature(fn).parameters
-    except (TypeError, ValueError):
-        return True
-    return name in params or any(p.kind is p.VAR_KEYWORD for p in params.values())
 
 
 def _parse_steps(text) -> float | int:
@@ -175,7 +97,7 @@ def run_batch(spec: MethodSpec, data, order, horizon=None, options=None):
     fn = spec.load()
     kwargs = dict(options or {})
     if horizon is not None:
-        if not _accepts(fn, "horizon"):
+        if not spec.accepts("horizon"):
             raise SubidError(f"method {spec.name} has no horizon option")
         kwargs["horizon"] = horizon
     return fn(data, order=order, **kwargs)
@@ -206,7 +128,7 @@ def _named(model, data):
         return model
     return StateSpace(model.A, model.B, model.C, model.D, model.dt,
                       input_names=data.input_names, output_names=data.output_names,
-                      info=model.info)
+                      info=model.info, hold=model.hold)
 
 
 def online_update(spec: MethodSpec, ident, u, y, t=None):
@@ -362,24 +284,15 @@ def _check_method_options(spec: MethodSpec, options: dict, *, reserved=()) -> No
     and ``horizon`` when ``--horizon`` is given...): giving them again through
     ``--option`` is a usage error too, not a ``TypeError`` from the call.
     """
-    import inspect
     if not options:
         return
-    target = spec.load()
-    try:
-        params = inspect.signature(target).parameters
-    except (TypeError, ValueError):
-        return
-    skip = 1 if spec.kind == "batch" else 0       # the data argument / self is not an option
-    names = [name for name, p in list(params.items())[skip:]
-             if p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)]
-    open_ended = any(p.kind is p.VAR_KEYWORD for p in params.values())
+    names = list(spec.options)
     for key in options:
         if key in reserved:
             raise click.BadParameter(f"{key} is set by its own command-line option "
                                      f"(--{key.replace('_', '-')}), not by --option",
                                      param_hint="--option")
-        if key not in names and not open_ended:
+        if key not in names:
             accepted = [n for n in names if n not in reserved]
             raise click.BadParameter(
                 f"method {spec.name} has no option {key!r}; its options are: "
@@ -858,10 +771,10 @@ def _identify_streamed(data, inputs, outputs, dt, time_column, delimiter, detren
     doubles (:class:`subid.stream.ParsedOnce`), deleted at the end.
     """
     from .io import read_chunks
-    from .stream import METHODS as STREAM_METHODS
-    if spec.attribute not in STREAM_METHODS:
-        raise click.UsageError(f"--stream works with the batch methods ls, moesp and n4sid, not "
-                               f"with {spec.name}")
+    if not spec.supports("streaming"):
+        streaming = [n for n, s in METHODS.items() if s.supports("streaming")]
+        raise click.UsageError(f"--stream works with the batch methods {', '.join(streaming)}, "
+                               f"not with {spec.name}")
     if data.startswith("dataset:") or time_column is not None:
         raise click.UsageError("--stream reads a uniformly sampled file: give a file and --dt, "
                                "not a bundled dataset or --time")
@@ -887,7 +800,6 @@ def _identify_pieces(pieces, data, detrend, spec, order, horizon, validate, opts
     from . import report
     from .data import IOData
     from .statistic import HankelStatistic
-    from .stream import METHODS as STREAM_METHODS
     from .stream import statistic_depth
     with _about(data):
         n, total_u, total_y, first = 0, 0.0, 0.0, None
@@ -902,7 +814,7 @@ def _identify_pieces(pieces, data, detrend, spec, order, horizon, validate, opts
         u_mean = total_u / n if detrend == "constant" else np.zeros(first.n_inputs)
         y_mean = total_y / n if detrend == "constant" else np.zeros(first.n_outputs)
         cut = n - int(round(validate * n)) if validate > 0 else n
-        hor, depth = statistic_depth(spec.attribute, order if isinstance(order, int) else None,
+        hor, depth = statistic_depth(spec.name, order if isinstance(order, int) else None,
                                      horizon, first.n_outputs, opts.get("instruments", "past"))
         stat = HankelStatistic(first.n_inputs, first.n_outputs, depth, kind="gram",
                                dt=first.dt, input_names=first.input_names,
@@ -935,7 +847,7 @@ def _identify_pieces(pieces, data, detrend, spec, order, horizon, validate, opts
                     begin += chunk.n_samples
             attach_second_pass(stat, estimation_chunks)
         with _warnings_to_log():
-            model = STREAM_METHODS[spec.attribute](stat, order, hor, **opts)
+            model = spec.load()(stat, order, horizon=hor, **opts)
         seconds = time.perf_counter() - t0
 
         def sample(part):
@@ -1416,8 +1328,9 @@ def _write_signals(path, t, u, y, input_names, output_names) -> None:
               help="Apply the means removed from the data before identification "
                    "(stored in the model by 'subid identify') so the output is in the "
                    "original units.")
-@click.option("--hold", type=click.Choice(["zoh", "foh"]), default="zoh", show_default=True,
-              help="Inter-sample input of a continuous-time model.")
+@click.option("--hold", type=click.Choice(["zoh", "foh"]), default=None,
+              help="Inter-sample input of a continuous-time model (default: the hold the "
+                   "model assumes, e.g. foh for a ct model).")
 @click.option("--out", required=True, metavar="FILE",
               help="Output file: .csv/.tsv/.txt (time, inputs, outputs) or .npz.")
 @_common

@@ -48,7 +48,7 @@ Estimation
    ``g_k``, which for real poles is exactly the paper's ``M A = R`` (11)-(12)
    solved as ``A = M^+ R`` ((13) as printed reads ``L_A^+ R_A``), and takes
    ``C = O_0 (A + sigma_0 I) / sqrt(2 sigma_0)`` ((14) prints ``2 sigma_0``).
-3. ``B`` (and ``D``, ``x0``): ``b_method='simulation'`` fits them to the raw
+3. ``B`` (and ``D``, ``x0``): ``bd_method='simulation'`` fits them to the raw
    output samples through the exactly discretised model (the output is
    linear in them); ``'filtered'`` solves (15) on the filtered data equation.
 
@@ -86,12 +86,13 @@ import scipy.optimize
 
 from . import _ct_kernels
 from ._hankel import lq_lower
-from ._subspace import order_from_gap
-from ._validation import check_int
+from ._subspace import choose_order
+from ._validation import check_bool, check_choice, check_int, legacy_arguments
 from .basis import MAX_POLY_ORDER, FilterBank, default_basis
 from .data import IOData, require_single_experiment
-from .errors import (DataError, ModelError, NotExcitingError, OrderError, SubidError,
+from .errors import (DataError, ModelError, NotExcitingError, OptionError, OrderError,
                      TooFewSamplesError)
+from ._info import model_info, records_warnings
 from .model import StateSpace
 
 __all__ = [
@@ -200,12 +201,6 @@ def tm_convolution_matrix(A, B, C, poles):
 # ---------------------------------------------------------------------------
 # validation
 # ---------------------------------------------------------------------------
-def _check_choice(value, name, options):
-    if not any(value is o or (isinstance(value, str) and value == o) for o in options):
-        raise SubidError(f"{name} must be one of {options}, got {value!r}")
-    return value
-
-
 def _check_data(data, method: str) -> IOData:
     if not isinstance(data, IOData):
         raise DataError(f"{method} expects an IOData record, got {type(data).__name__}; "
@@ -451,7 +446,7 @@ def _fit_b_raw(A, C, t, u, y, input_order, feedthrough, estimate_x0, uniform):
     R = _raw_regressors(A, C, t, u, input_order, feedthrough, estimate_x0, uniform)
     if R is None:
         raise ModelError("the identified A is unstable enough that simulating it over the "
-                         "record overflows; use b_method='filtered'")
+                         "record overflows; use bd_method='filtered'")
     theta, resid, cond = _solve_raw(R, y)
     B = theta[:n * m].reshape(n, m)
     pos = n * m
@@ -619,11 +614,14 @@ def _refine_output_error(A, C, t, u, y, input_order, feedthrough, estimate_x0, u
 # ---------------------------------------------------------------------------
 # the method
 # ---------------------------------------------------------------------------
-def ct_subspace(data, order=None, basis=None, poly_order: int = 3, estimate_x0: bool = True,
-                feedthrough: bool = False, *, input_hold="foh", instruments="model",
+@legacy_arguments(positional=("basis", "poly_order", "estimate_x0", "feedthrough"),
+                  renamed={"input_hold": "hold", "b_method": "bd_method"})
+@records_warnings
+def ct_subspace(data, order=None, *, basis=None, poly_order: int = 3, estimate_x0: bool = True,
+                feedthrough: bool = False, hold="foh", instruments="model",
                 iterations: int = 10, tolerance: float = 1e-4, refine: bool = True,
                 refine_iterations: int = 50, startup: bool = True, correction: bool = True,
-                ac_method: str = "joint", b_method: str = "simulation",
+                ac_method: str = "joint", bd_method: str = "simulation",
                 filtering: str = "exact", data_equation: str = "compact",
                 filtered=None) -> StateSpace:
     """Identify a continuous-time state-space model from sampled data (seed 002).
@@ -647,11 +645,14 @@ def ct_subspace(data, order=None, basis=None, poly_order: int = 3, estimate_x0: 
         Estimate the initial state ``x(t_0)`` with B (``info['x0']``).
     feedthrough : bool
         Estimate D (else D = 0, as in the paper's model (1)).
-    input_hold : {'foh', 'zoh', None}
+    hold : {'foh', 'zoh', None}
         The input between samples: linear (first-order hold, the paper's
         Section V), constant (zero-order hold), or None when unknown: then it
         is interpolated like the output (degree ``poly_order``). The input is
-        filtered and simulated exactly under this assumption.
+        filtered and simulated exactly under this assumption, and the model
+        records it (:attr:`StateSpace.hold`; ``'foh'`` for None), so that
+        ``simulate``, ``fit_percent`` and the reports use it by default.
+        (Formerly ``input_hold``, still accepted with a DeprecationWarning.)
     instruments : {'model', 'past', None}
         ``'model'``: after a first estimate, the SVD uses the correlation of
         the filtered outputs with the states of the model simulated from the
@@ -678,11 +679,12 @@ def ct_subspace(data, order=None, basis=None, poly_order: int = 3, estimate_x0: 
     ac_method : {'joint', 'paper'}
         A and C by least squares on all block equations jointly, or as in the
         paper, (12)-(14) corrected.
-    b_method : {'simulation', 'filtered'}
+    bd_method : {'simulation', 'filtered'}
         B (D, x0) by least squares on the raw output samples through the
         exactly discretised model, or from the filtered data equation (15).
         'simulation' falls back to 'filtered' if simulating A overflows
-        (``info['b_method_used']``).
+        (``info['bd_method_used']``). (Formerly ``b_method``, still accepted
+        with a DeprecationWarning.)
     filtering : {'exact', 'sections'}
         Interpolate each signal once and propagate the whole filter chain
         exactly, or re-interpolate after every section (the paper's S1-S4).
@@ -738,17 +740,20 @@ def ct_subspace(data, order=None, basis=None, poly_order: int = 3, estimate_x0: 
     poly_order = check_int(poly_order, "poly_order", minimum=0)
     if poly_order > MAX_POLY_ORDER:
         raise OrderError(f"poly_order must be at most {MAX_POLY_ORDER}, got {poly_order}")
-    _check_choice(input_hold, "input_hold", ("foh", "zoh", None))
-    _check_choice(instruments, "instruments", ("model", "past", None))
-    _check_choice(ac_method, "ac_method", ("joint", "paper"))
-    _check_choice(b_method, "b_method", ("simulation", "filtered"))
-    _check_choice(filtering, "filtering", ("exact", "sections"))
-    _check_choice(data_equation, "data_equation", ("compact", "paper"))
+    for name, flag in (("estimate_x0", estimate_x0), ("feedthrough", feedthrough),
+                       ("refine", refine), ("startup", startup), ("correction", correction)):
+        check_bool(flag, name)
+    check_choice(hold, "hold", ("foh", "zoh", None))
+    check_choice(instruments, "instruments", ("model", "past", None))
+    check_choice(ac_method, "ac_method", ("joint", "paper"))
+    check_choice(bd_method, "bd_method", ("simulation", "filtered"))
+    check_choice(filtering, "filtering", ("exact", "sections"))
+    check_choice(data_equation, "data_equation", ("compact", "paper"))
     iterations = check_int(iterations, "iterations", minimum=0)
     refine_iterations = check_int(refine_iterations, "refine_iterations", minimum=1)
     if isinstance(tolerance, bool) or not isinstance(tolerance, numbers.Real) \
             or not tolerance > 0:
-        raise SubidError(f"tolerance must be a positive number, got {tolerance!r}")
+        raise OptionError(f"tolerance must be a positive number, got {tolerance!r}")
     if data_equation == "paper":
         if not basis.is_real:
             raise ModelError("data_equation='paper' needs real basis poles (the paper's "
@@ -763,7 +768,7 @@ def ct_subspace(data, order=None, basis=None, poly_order: int = 3, estimate_x0: 
     L, m = u.shape
     p = y.shape[1]
     N = basis.n_functions
-    input_order = poly_order if input_hold is None else HOLD_ORDERS[input_hold]
+    input_order = poly_order if hold is None else HOLD_ORDERS[hold]
     max_order = min(DEFAULT_MAX_ORDER, N * p - p)
     if max_order < 1:
         raise OrderError(f"a basis of {N} function(s) with {p} output(s) reveals no state: "
@@ -823,10 +828,11 @@ def ct_subspace(data, order=None, basis=None, poly_order: int = 3, estimate_x0: 
                                "input (white noise, multisine)")
     Uo, sv, _ = np.linalg.svd(W, full_matrices=False)
     if fixed is None:
-        n = order_from_gap(sv, [k for k in candidates if k < sv.size] or [candidates[0]])
-        order_selection = "largest gap of the singular values"
+        n, order_selection = choose_order(
+            None, [k for k in candidates if k < sv.size] or [candidates[0]], sv,
+            "singular values")
     else:
-        n, order_selection = fixed, "given"
+        n, order_selection = fixed, None
     if n > sv.size:
         raise OrderError(f"order {n} exceeds the {sv.size} directions the instruments reveal")
     Theta = Uo[:, :n] * sv[:n]
@@ -835,11 +841,11 @@ def ct_subspace(data, order=None, basis=None, poly_order: int = 3, estimate_x0: 
         """A, C from Theta; then B, D, x0."""
         A, C, ac_resid = _estimate_a_c(basis, Theta, p, ac_method)
         diag = {"ac_residual": ac_resid}
-        if b_method == "simulation":
+        if bd_method == "simulation":
             try:
                 B, D, x0, bd = _fit_b_raw(A, C, t, u, y, input_order, feedthrough,
                                           estimate_x0, uniform)
-                diag.update(bd, b_method_used="simulation")
+                diag.update(bd, bd_method_used="simulation")
                 return A, B, C, D, x0, diag
             except ModelError:          # A too unstable to simulate over the record
                 pass
@@ -851,7 +857,7 @@ def ct_subspace(data, order=None, basis=None, poly_order: int = 3, estimate_x0: 
                 return data_equation_matrices(basis, A, Bm, C, Dm)[1]
         B, D, bd = _fit_b_filtered(Tfun, Theta, Lf, iU, n, m, p, feedthrough)
         x0 = _fit_x0(A, B, C, D, t, u, y, input_order, uniform) if estimate_x0 else None
-        diag.update(bd, b_method_used="filtered")
+        diag.update(bd, bd_method_used="filtered")
         return A, B, C, D, x0, diag
 
     A, B, C, D, x0, diag = complete(Theta, Lf)
@@ -882,40 +888,41 @@ def ct_subspace(data, order=None, basis=None, poly_order: int = 3, estimate_x0: 
             A, C = Ar, Cr
             B, D, x0, bd = _fit_b_raw(A, C, t, u, y, input_order, feedthrough, estimate_x0,
                                       uniform)
-            diag.update(bd, b_method_used="simulation")
+            diag.update(bd, bd_method_used="simulation")
 
-    info = {
-        "method": method,
-        "order": n,
-        "order_selection": order_selection,
-        "singular_values": sv,
-        "basis": basis.name,
-        "basis_poles": list(basis.poles),
-        "n_basis_functions": N,
-        "poly_order": poly_order,
-        "input_hold": input_hold,
-        "input_order": input_order,
-        "startup": startup,
-        "n_correction_regressors": n_corr,
-        "instruments": instruments,
-        "instrument_lag": lag if instruments == "past" else None,
-        "iterations": len(changes),
-        "iteration_changes": changes,
-        "ac_method": ac_method,
-        "b_method": b_method,
-        "filtering": filtering if filtered is None else "given",
-        "data_equation": data_equation,
-        "n_samples": L,
-        "x0": x0,
-        "subspace_model": subspace_model,
+    conditions = {"bd": diag.get("b_regression_condition")}
+    info = model_info(
+        method, order=n, order_selection=order_selection, horizon=N, n_samples=L, x0=x0,
+        hold="foh" if hold is None else hold,      # None: interpolated, closest to 'foh'
+        conditions=conditions,
+        rank_profile=sv,
+        singular_values=sv,
+        basis=basis.name,
+        basis_poles=list(basis.poles),
+        n_basis_functions=N,
+        poly_order=poly_order,
+        input_order=input_order,
+        interpolated_input=hold is None,
+        startup=startup,
+        n_correction_regressors=n_corr,
+        instruments=instruments,
+        instrument_lag=lag if instruments == "past" else None,
+        iterations=len(changes),
+        iteration_changes=changes,
+        ac_method=ac_method,
+        bd_method=bd_method,
+        filtering=filtering if filtered is None else "given",
+        data_equation=data_equation,
+        subspace_model=subspace_model,
         **diag,
         **refine_diag,
-    }
+    )
     return StateSpace(A, B, C, D, 0.0, input_names=data.input_names,
-                      output_names=data.output_names, info=info)
+                      output_names=data.output_names, info=info, hold=info["hold"])
 
 
-def ct_subspace_paper(data, order=None, basis=None, poly_order: int = 3) -> StateSpace:
+@legacy_arguments(positional=("basis", "poly_order"))
+def ct_subspace_paper(data, order=None, *, basis=None, poly_order: int = 3) -> StateSpace:
     """The paper's printed algorithm, with its typos corrected (seed 002).
 
     Data equation (6) with the stacked input and the corrected ``T``
@@ -924,13 +931,15 @@ def ct_subspace_paper(data, order=None, basis=None, poly_order: int = 3) -> Stat
     correction regressors, no instruments, A and C by (12)-(14), B by (15),
     no refinement. For comparison with :func:`ct_subspace`; real poles only.
     """
-    return ct_subspace(data, order, basis, poly_order, estimate_x0=False, feedthrough=False,
-                       input_hold=None, instruments=None, startup=False, correction=False,
-                       refine=False, ac_method="paper", b_method="filtered",
+    return ct_subspace(data, order, basis=basis, poly_order=poly_order, estimate_x0=False,
+                       feedthrough=False, hold=None, instruments=None, startup=False,
+                       correction=False, refine=False, ac_method="paper", bd_method="filtered",
                        filtering="sections", data_equation="paper")
 
 
-def dt_to_ct(data, order=None, method: str = "n4sid", hold: str = "zoh", **options):
+@legacy_arguments(positional=("method", "hold"))
+@records_warnings
+def dt_to_ct(data, order=None, *, method: str = "n4sid", hold: str = "zoh", **options):
     """Baseline: discrete-time subspace identification, then conversion to continuous time.
 
     Only possible on a uniform grid. The discrete-time model is identified
@@ -943,9 +952,12 @@ def dt_to_ct(data, order=None, method: str = "n4sid", hold: str = "zoh", **optio
     data : IOData
         Uniformly sampled record.
     order : int or None
-    method : {'n4sid', 'moesp', 'ls_subspace'}
+    method : {'n4sid', 'moesp', 'ls'}
+        A discrete-time batch method of :data:`subid.registry.METHODS`
+        (``'ls_subspace'`` is accepted for ``'ls'``).
     hold : {'zoh', 'foh'}
-        Inter-sample behaviour of the input.
+        Inter-sample behaviour of the input; the model records it
+        (:attr:`StateSpace.hold`).
     **options
         Passed to the discrete-time method (e.g. ``horizon``).
 
@@ -955,20 +967,19 @@ def dt_to_ct(data, order=None, method: str = "n4sid", hold: str = "zoh", **optio
         Continuous-time model; ``info`` is the discrete method's, plus
         ``method`` and ``discrete_model_dt``.
     """
-    from .ls_subspace import ls_subspace
-    from .moesp import moesp
-    from .n4sid import n4sid
-    methods = {"n4sid": n4sid, "moesp": moesp, "ls_subspace": ls_subspace}
-    _check_choice(method, "method", tuple(methods))
-    _check_choice(hold, "hold", ("zoh", "foh"))
+    from .registry import find
+    spec = find(method, kind="batch", time="discrete")
+    check_choice(hold, "hold", ("zoh", "foh"))
     if not isinstance(data, IOData):
         raise DataError(f"dt_to_ct expects an IOData record, got {type(data).__name__}")
     if not data.is_uniform:
         raise DataError("dt_to_ct needs uniformly sampled data (a discrete-time model has "
                         "one sampling period); use ct_subspace for non-uniform time stamps")
-    dmodel = methods[method](data, order, feedthrough=True, **options)
+    dmodel = spec.load()(data, order, feedthrough=True, **options)
     cmodel = dmodel.with_noise_model(None, None).to_continuous(hold)   # K has no CT form
     info = dict(cmodel.info)
-    info.update(method=f"dt_to_ct({method}, {hold})", discrete_model_dt=data.dt)
+    info.update(method=f"dt_to_ct({spec.attribute}, {hold})", discrete_model_dt=data.dt,
+                hold=hold)
     return StateSpace(cmodel.A, cmodel.B, cmodel.C, cmodel.D, 0.0,
-                      input_names=data.input_names, output_names=data.output_names, info=info)
+                      input_names=data.input_names, output_names=data.output_names, info=info,
+                      hold=hold)

@@ -311,5 +311,5 @@ def absorb_delay(model):
         pos += d
     info = {k: v for k, v in model.info.items() if k != INFO_KEY}
     info["absorbed_input_delay"] = delays.tolist()
-    return StateSpace(A, B, C, D, model.dt, input_names=model.input_names,
+    return StateSpace(A, B, C, D, model.dt, hold=model.hold, input_names=model.input_names,
                       output_names=model.output_names, info=info)

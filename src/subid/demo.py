@@ -25,7 +25,7 @@ import numpy as np
 
 from ._progress import progress_bar, progress_wrapper
 from . import datasets
-from .errors import SubidError
+from .errors import OptionError, SubidError
 
 __all__ = ["evaluate", "report_dataset", "run", "gallery", "gallery_markdown", "GALLERY_COMMAND",
            "FRACTION"]
@@ -39,13 +39,13 @@ GALLERY_COMMAND = "subid gallery --out docs/gallery.md"
 
 
 def _methods(methods=None, time_base=None):
-    from .cli import METHODS, available_methods
+    from .registry import METHODS, available_methods
     names = available_methods("batch", time_base) if methods is None else list(methods)
     out = {}
     for name in names:
         if name not in METHODS or METHODS[name].kind != "batch":
-            raise SubidError(f"unknown batch method {name!r}; available: "
-                             f"{', '.join(available_methods('batch'))}")
+            raise OptionError(f"unknown batch method {name!r}; available: "
+                              f"{', '.join(available_methods('batch'))}")
         out[name] = METHODS[name]
     return out
 
@@ -58,7 +58,7 @@ def evaluate(name: str, methods=None, fraction: float = FRACTION):
     name : str
         A bundled dataset (:func:`subid.datasets.names`).
     methods : list of str, optional
-        Registry names (:data:`subid.cli.METHODS`) of batch methods; default
+        Registry names (:data:`subid.registry.METHODS`) of batch methods; default
         every available one.
     fraction : float
         Share of the record used for identification.
@@ -73,7 +73,6 @@ def evaluate(name: str, methods=None, fraction: float = FRACTION):
     models : dict method -> StateSpace
     est, val : IOData
     """
-    from .cli import run_batch
     from .report import evaluate as fits
     specs = _methods(methods)
     data = datasets.load(name).detrend()
@@ -84,7 +83,7 @@ def evaluate(name: str, methods=None, fraction: float = FRACTION):
         try:
             with warnings.catch_warnings(record=True) as caught:
                 warnings.simplefilter("always")
-                model = run_batch(spec, est, None)
+                model = spec.load()(est, order=None)
             seconds = time.perf_counter() - t0
             r = fits(model, est, val)
             rows.append(dict(dataset=name, method=method, function=spec.attribute,
@@ -242,7 +241,7 @@ def report_dataset(name: str, out: str, methods=None, frequency_unit="rad/s") ->
         ``entry`` (the row of the index page) and ``seconds``.
     """
     from . import report
-    from .cli import METHODS
+    from .registry import METHODS
     t0 = time.perf_counter()
     rows, models, est, val = evaluate(name, methods)
     meta = datasets.info(name)
@@ -322,7 +321,7 @@ def run(out, datasets=None, methods=None, *, frequency_unit="rad/s", progress=Fa
         (paths), ``index``, ``gallery``, ``summary``, ``seconds``.
     """
     from . import report
-    from .cli import METHODS
+    from .registry import METHODS
     names = list(datasets or _all_names())
     unknown = [n for n in names if n not in _all_names()]
     if unknown:

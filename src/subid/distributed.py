@@ -38,7 +38,8 @@ from ._bd_pass import OutputRegression
 from .errors import DataError, SubidError
 from .io import read_chunks
 from .statistic import HankelStatistic
-from .stream import METHODS, statistic_depth
+from .registry import find
+from .stream import statistic_depth, streaming_method
 
 __all__ = ["identify", "identify_files", "fan_out", "identify_many", "summary_markdown"]
 
@@ -235,7 +236,7 @@ def _finish(stat, method, order, horizon, dt, input_names, output_names, options
         stat.input_names = tuple(input_names)
     if output_names is not None:
         stat.output_names = tuple(output_names)
-    return METHODS[method](stat, order, horizon, **options)
+    return streaming_method(method).load()(stat, order, horizon=horizon, **options)
 
 
 def fan_out(function, items, *, client=None, progress=None):
@@ -277,7 +278,7 @@ def _identify_one(job):
     record, method, order, options = job
     start = time.perf_counter()
     try:
-        model = METHODS[method](record, order, **options)
+        model = find(method, kind="batch").load()(record, order, **options)
         error = None
     except SubidError as exc:
         model, error = None, str(exc)
@@ -291,7 +292,10 @@ def identify_many(records, method: str = "moesp", order=None, *, names=None, cli
     Parameters
     ----------
     records : sequence of IOData (or HankelStatistic)
-    method : {'moesp', 'n4sid', 'ls'}
+    method : str
+        A batch method of :data:`subid.registry.METHODS` (``'moesp'``,
+        ``'n4sid'``, ``'ls'``, ``'ct'``, ...); a statistic needs one with the
+        ``streaming`` capability.
     order : int, None or candidates
     names : sequence of str, optional
         Labels of the records in the summary (default ``record0``, ...).
@@ -307,8 +311,7 @@ def identify_many(records, method: str = "moesp", order=None, *, names=None, cli
     summary : list of dict
         Per record: ``name``, ``order``, ``stable``, ``seconds``, ``error``.
     """
-    if method not in METHODS:
-        raise SubidError(f"method must be one of {sorted(METHODS)}, got {method!r}")
+    find(method, kind="batch")                 # OptionError naming the methods
     records = list(records)
     names = [f"record{k}" for k in range(len(records))] if names is None else list(names)
     if len(names) != len(records):

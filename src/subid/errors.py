@@ -24,6 +24,7 @@ __all__ = [
     "ResourceLimitError",
     "NotConvergedWarning",
     "DelayWarning",
+    "OptionError",
 ]
 
 
@@ -61,6 +62,12 @@ class NotExcitingError(DataError):
 class OrderError(SubidError):
     """The requested model order is invalid or cannot be revealed by the
     chosen horizon and number of outputs."""
+
+
+class OptionError(SubidError):
+    """An option of a method or function has a bad value: an unknown choice,
+    the wrong type, or a value out of range. The message names the option,
+    the value given and what is allowed."""
 
 
 class ModelError(SubidError):

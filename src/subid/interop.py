@@ -68,7 +68,8 @@ def save_mat(model, path) -> None:
     Variables: ``A``, ``B``, ``C``, ``D`` (double matrices), ``Ts`` (0 for
     continuous time), ``InputName``, ``OutputName`` (1-by-m cell arrays of
     char), and ``subid_format`` (the string ``'subid.StateSpace'``, ignored
-    by MATLAB). A model in innovation form adds ``K`` and ``NoiseVariance``,
+    by MATLAB), ``subid_hold`` for a model that assumes a first-order hold
+    (:attr:`StateSpace.hold`; ignored by MATLAB). A model in innovation form adds ``K`` and ``NoiseVariance``,
     the names of the fields of MATLAB's ``idss`` (build it there with
     ``idss(A, B, C, D, K, zeros(n,1), Ts, 'NoiseVariance', NoiseVariance)``). Values are stored as IEEE doubles, so a round trip is exact.
 
@@ -93,6 +94,8 @@ def save_mat(model, path) -> None:
         "InputName": names_in, "OutputName": names_out,
         "subid_format": "subid.StateSpace",
     }
+    if model.hold != "zoh":                      # the input hold it assumes (subid only)
+        variables["subid_hold"] = model.hold
     if model.K is not None:                      # MATLAB idss fields
         variables["K"] = np.array(model.K)
     if model.noise_cov is not None:
@@ -229,8 +232,14 @@ def load_mat(path, *, dt=None) -> StateSpace:
                     raise ModelError(f"model file '{path}': {key} is not a real numeric "
                                      f"matrix (dtype {value.dtype})")
                 noise[name] = value.astype(np.float64)
+        hold = fields.get("subid_hold")
+        if hold is not None:
+            hold = "".join(str(v) for v in np.asarray(hold).reshape(-1)).strip()
+            if hold not in ("zoh", "foh"):
+                raise ModelError(f"model file '{path}': subid_hold must be 'zoh' or 'foh', "
+                                 f"got {hold[:40]!r}")
         return StateSpace(A, B, C, D, period, input_names=inputs, output_names=outputs,
-                          **noise)
+                          hold=hold or "zoh", **noise)
     except ModelError as exc:
         if str(exc).startswith(f"model file '{path}'"):
             raise

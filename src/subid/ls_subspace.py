@@ -60,8 +60,9 @@ from ._subspace import (
     stable_choice,
 )
 from .delay import shift_for_method
-from .errors import OrderError, SubidError
+from .errors import OptionError, OrderError
 from .model import StateSpace
+from ._validation import check_bool, legacy_arguments
 from .noise_model import check_refine
 
 __all__ = ["ls_subspace", "random_selector"]
@@ -96,8 +97,9 @@ def _condition_1norm(M: np.ndarray) -> float:
     return float(1.0 / rcond) if rcond > 0 else float("inf")
 
 
-def ls_subspace(data, order=None, horizon=None, instruments="past", selector=None, seed=0,
-                estimate_x0=True, *, feedthrough=True, instrument_weighting=True,
+@legacy_arguments(positional=("horizon", "instruments", "selector", "seed", "estimate_x0"))
+def ls_subspace(data, order=None, *, horizon=None, instruments="past", selector=None, seed=0,
+                estimate_x0=True, feedthrough=True, instrument_weighting=True,
                 power_iterations=8, normalize_outputs=True, selection="cv",
                 stability="auto", bd_method="auto",
                 statistic="auto", refine=None, input_delay=0) -> StateSpace:
@@ -207,6 +209,10 @@ def ls_subspace(data, order=None, horizon=None, instruments="past", selector=Non
     """
     method = "ls_subspace"
     power_iterations = check_options(instruments, power_iterations)
+    for name, flag in (("estimate_x0", estimate_x0), ("feedthrough", feedthrough),
+                       ("instrument_weighting", instrument_weighting),
+                       ("normalize_outputs", normalize_outputs)):
+        check_bool(flag, name)
     if selector is not None and horizon is None:
         horizon = selector_horizon(selector, data)
     build = partial(_ls_subspace, instruments=instruments, selector=selector, seed=seed,
@@ -267,10 +273,10 @@ def _ls_subspace(pb, *, instruments, selector, seed, estimate_x0, feedthrough,
 def check_options(instruments, power_iterations) -> int:
     """Validate the estimator options; returns ``power_iterations`` as int."""
     if instruments not in ("past", None):
-        raise SubidError(f"instruments must be 'past' or None, got {instruments!r}")
+        raise OptionError(f"instruments must be 'past' or None, got {instruments!r}")
     if isinstance(power_iterations, bool) or not isinstance(power_iterations, numbers.Integral) \
             or power_iterations < 0:
-        raise SubidError(f"power_iterations must be an integer >= 0, got {power_iterations!r}")
+        raise OptionError(f"power_iterations must be an integer >= 0, got {power_iterations!r}")
     return int(power_iterations)
 
 

@@ -69,7 +69,7 @@ def markov_error(model, reference, k: int = 10) -> float:
     return float(np.linalg.norm(model.markov(k) - m_ref) / norm)
 
 
-def simulate_fit(model, data, x0="estimate", hold: str = "zoh", *, output_std=None):
+def simulate_fit(model, data, x0="estimate", hold=None, *, output_std=None):
     """Simulated output of ``model`` on ``data`` and the initial state used.
 
     ``output_std`` (per output) replaces the spread of ``data.y`` in the
@@ -84,6 +84,7 @@ def simulate_fit(model, data, x0="estimate", hold: str = "zoh", *, output_std=No
     experiment by experiment, each from its own initial state: the returned
     x0 then has shape (n_experiments, n), and an array given as ``x0`` must
     have that shape.
+    ``hold`` (continuous-time models) defaults to the model's :attr:`~subid.StateSpace.hold`.
     """
     check_model_data(model, data)
     if data.n_experiments > 1:
@@ -145,7 +146,7 @@ def experiment_x0(x0, n_experiments: int, order: int) -> list:
     return list(arr)
 
 
-def fit_percent(model, data, x0="estimate", hold: str = "zoh", steps=np.inf, *,
+def fit_percent(model, data, x0="estimate", hold=None, steps=np.inf, *,
                 per_experiment: bool = False) -> np.ndarray:
     """NRMSE fit in percent, per output: ``100 (1 - ||y - ŷ|| / ||y - mean(y)||)``.
 
@@ -161,8 +162,10 @@ def fit_percent(model, data, x0="estimate", hold: str = "zoh", steps=np.inf, *,
     data : IOData
         Same channels; for a discrete model, the same sampling period.
     x0 : 'estimate', 'zero' or array
-    hold : {'zoh', 'foh'}
+    hold : {'zoh', 'foh'}, optional
         Inter-sample behaviour of the input for a continuous-time model.
+        Default: the model's :attr:`~subid.StateSpace.hold` (``'foh'`` for a
+        ``ct_subspace`` model).
     steps : int or numpy.inf
         Prediction horizon (MATLAB ``compare(data, model, k)``).
     per_experiment : bool

@@ -8,11 +8,12 @@ signal array.
 Model files
 -----------
 :meth:`StateSpace.save` writes JSON (never pickle) with the keys ``format``
-(``"subid.StateSpace"``), ``version`` (1, or 2 when the model has a noise
-model), ``A``, ``B``, ``C``, ``D`` (nested lists, one row per matrix row),
-``dt``, ``input_names``, ``output_names``, ``info`` and, for a model in
-innovation form, ``K`` (Kalman gain) and ``noise_cov`` (innovation
-covariance). Values in ``info`` are encoded so that they come back unchanged:
+(``"subid.StateSpace"``), ``version`` (1; 2 when the model has a noise
+model; 3 when it assumes a first-order hold), ``A``, ``B``, ``C``, ``D``
+(nested lists, one row per matrix row), ``dt``, ``input_names``,
+``output_names``, ``info``, for a model in innovation form ``K`` (Kalman
+gain) and ``noise_cov`` (innovation covariance), and ``hold`` when it is
+``'foh'`` (:attr:`StateSpace.hold`; absent means ``'zoh'``). Values in ``info`` are encoded so that they come back unchanged:
 
 * ``bool``, ``int``, ``str``, ``None`` and finite floats are plain JSON values;
   numpy scalars become the matching Python scalar;
@@ -44,12 +45,12 @@ from .delay import apply_to_inputs, frequency_factor, input_delay_of
 from ._validation import as_signal, check_dt, check_int, check_time_stamps
 from .data import IOData
 from ._files import atomic_write
-from .errors import DataError, ModelError
+from .errors import DataError, ModelError, OptionError
 
 __all__ = ["StateSpace"]
 
 FORMAT_NAME = "subid.StateSpace"
-FORMAT_VERSION = 2
+FORMAT_VERSION = 3
 
 _EPS = np.finfo(np.float64).eps
 # Relative tolerance for time stamps that must match the model's period.
@@ -64,6 +65,9 @@ _RESERVED_KEYS = (_TAG_ARRAY, _TAG_COMPLEX, _TAG_FLOAT)
 _NONFINITE_NAMES = {"nan": math.nan, "inf": math.inf, "-inf": -math.inf}
 #: Largest model file :meth:`StateSpace.load` reads (a model is a few matrices).
 _MAX_MODEL_BYTES = 256 * 2**20
+
+#: Input holds a model may assume (:attr:`StateSpace.hold`).
+HOLDS = ("zoh", "foh")
 
 _CONVERSION_METHODS = {"zoh": "zoh", "foh": "foh", "bilinear": "bilinear",
                        "tustin": "bilinear"}
@@ -443,6 +447,15 @@ class StateSpace:
         ``y = C x + D u + e`` (discrete time; :func:`subid.predict` uses it).
     noise_cov : array_like, shape (n_outputs, n_outputs), optional
         Covariance of the innovations ``e`` (MATLAB's ``NoiseVariance``).
+    hold : {'zoh', 'foh'}
+        The input between samples that the model assumes: constant
+        (zero-order hold, default) or linear (first-order hold).
+        :meth:`simulate`, :func:`subid.fit_percent`, :func:`subid.predict`,
+        the residuals and the reports use it unless told otherwise; it is
+        set by the method that identified the model (``ct_subspace``
+        assumes ``'foh'``), kept by copies, :meth:`transform`, model files
+        and ``.mat`` files, and set by :meth:`to_continuous` /
+        :meth:`to_discrete` to the hold of the conversion.
 
     Attributes
     ----------
@@ -452,6 +465,7 @@ class StateSpace:
         Sampling period (0 = continuous time).
     input_names, output_names : tuple of str
     info : dict
+    hold : str
 
     Raises
     ------
@@ -476,7 +490,7 @@ class StateSpace:
     """
 
     def __init__(self, A, B, C, D, dt, *, input_names=None, output_names=None, info=None,
-                 K=None, noise_cov=None):
+                 K=None, noise_cov=None, hold="zoh"):
         A = _as_matrix(A, "A")
         B = _as_matrix(B, "B")
         C = _as_matrix(C, "C")
@@ -519,6 +533,10 @@ class StateSpace:
             raise ModelError(f"info must be a dict, got {type(info).__name__}")
         self.info = dict(info)
         self._K, self._noise_cov = _noise_matrices(K, noise_cov, n, p)
+        if not isinstance(hold, str) or hold not in HOLDS:
+            raise ModelError(f"hold must be one of {', '.join(map(repr, HOLDS))}; got "
+                             f"{hold!r}"[:300])
+        self._hold = hold
 
     # -- properties ------------------------------------------------------
     @property
@@ -532,6 +550,12 @@ class StateSpace:
         """Covariance of the innovations ``e`` (n_outputs x n_outputs), read-only;
         None when unknown."""
         return self._noise_cov
+
+    @property
+    def hold(self) -> str:
+        """The input between samples the model assumes: ``'zoh'`` or ``'foh'``
+        (the default of :meth:`simulate` and of the fit and prediction functions)."""
+        return self._hold
 
     @property
     def has_noise_model(self) -> bool:
@@ -555,7 +579,7 @@ class StateSpace:
         return StateSpace(self._A, self._B, self._C, self._D, self._dt,
                           input_names=self.input_names, output_names=self.output_names,
                           info=dict(self.info) if info is None else info, K=K,
-                          noise_cov=noise_cov)
+                          noise_cov=noise_cov, hold=self._hold)
     @property
     def A(self) -> np.ndarray:
         """State matrix, shape (n, n), read-only."""
@@ -612,7 +636,7 @@ class StateSpace:
         from ._repr import statespace_html
         return statespace_html(self)
 
-    def _like(self, A, B, C, D, dt, K=None, noise_cov=None) -> "StateSpace":
+    def _like(self, A, B, C, D, dt, K=None, noise_cov=None, hold=None) -> "StateSpace":
         info = dict(self.info)
         if dt != self._dt and "input_delay" in info:
             import warnings
@@ -621,9 +645,12 @@ class StateSpace:
             warnings.warn("the input delays (counted in samples) are dropped by this change "
                           f"of sampling (dt {self._dt} -> {dt}); call subid.absorb_delay(model) "
                           "first to keep them as states", DelayWarning, stacklevel=3)
+        hold = self._hold if hold is None else hold
+        if "hold" in info:
+            info["hold"] = hold
         return StateSpace(A, B, C, D, dt, input_names=self.input_names,
                           output_names=self.output_names, info=info, K=K,
-                          noise_cov=noise_cov)
+                          noise_cov=noise_cov, hold=hold)
 
     def _drop_noise_model(self, what: str) -> None:
         if self._K is not None or self._noise_cov is not None:
@@ -636,7 +663,7 @@ class StateSpace:
                           stacklevel=3)
 
     # -- simulation ------------------------------------------------------
-    def simulate(self, u, t=None, x0=None, *, hold="zoh", return_state=False):
+    def simulate(self, u, t=None, x0=None, *, hold=None, return_state=False):
         """Response of the model to an input signal.
 
         Parameters
@@ -652,12 +679,13 @@ class StateSpace:
             period ``dt``.
         x0 : array_like, shape (n,), optional
             State at the first sample (default zeros).
-        hold : {'zoh', 'foh'}
+        hold : {'zoh', 'foh'}, optional
             Continuous time only: the input is constant on ``[t_k, t_{k+1})``
             (``'zoh'``) or linear between ``u[k]`` and ``u[k+1]``
-            (``'foh'``). The state is propagated by the exact discretisation
-            of every interval (one matrix exponential per distinct interval
-            length). Ignored for discrete-time models.
+            (``'foh'``). Default: the model's :attr:`hold`. The state is
+            propagated by the exact discretisation of every interval (one
+            matrix exponential per distinct interval length). Ignored for
+            discrete-time models.
         return_state : bool
             Also return the state at every sample.
 
@@ -675,8 +703,10 @@ class StateSpace:
             has the wrong shape, ``t`` is missing (continuous time), not
             increasing, or not uniform with period ``dt`` (discrete time).
         """
-        if hold not in ("zoh", "foh"):
-            raise DataError(f"hold must be 'zoh' or 'foh', got {hold!r}")
+        if hold is None:
+            hold = self._hold
+        elif not isinstance(hold, str) or hold not in HOLDS:
+            raise OptionError(f"hold must be 'zoh' or 'foh', got {hold!r}"[:300])
         if isinstance(u, IOData):
             if t is not None:
                 raise DataError("pass either an IOData record or time stamps t, not both: "
@@ -917,7 +947,7 @@ class StateSpace:
             if method == "foh":
                 Bd = G1[0] - G2[0] + Phi[0] @ G2[0]
                 Dd = D + C @ G2[0]
-        return self._like(Ad, Bd, Cd, Dd, dt)
+        return self._like(Ad, Bd, Cd, Dd, dt, hold=method if method in HOLDS else None)
 
     def to_continuous(self, method="zoh") -> "StateSpace":
         """Continuous-time model whose discretisation is this model.
@@ -972,13 +1002,13 @@ class StateSpace:
             _check_nonsingular(W1[0], "the hold integral of exp(A t)",
                                "B cannot be recovered from A_d and B_d")
             B = np.linalg.solve(W1[0], Bd)
-            return self._like(A, B, Cd, Dd, 0.0)
+            return self._like(A, B, Cd, Dd, 0.0, hold="zoh")
         K = W1[0] - W2[0] + Phi[0] @ W2[0]
         _check_nonsingular(K, "the first-order-hold input map",
                            "B cannot be recovered from A_d and B_d")
         B = np.linalg.solve(K, Bd)
         D = Dd - Cd @ (W2[0] @ B)
-        return self._like(A, B, Cd, D, 0.0)
+        return self._like(A, B, Cd, D, 0.0, hold="foh")
 
     def transform(self, T) -> "StateSpace":
         """Similarity transformation to the state ``z = T x``.
@@ -1074,10 +1104,14 @@ class StateSpace:
         # written as version 1, readable by older subid releases
         if self._K is not None:
             d["K"] = self._K.tolist()
-            d["version"] = FORMAT_VERSION
+            d["version"] = 2
         if self._noise_cov is not None:
             d["noise_cov"] = self._noise_cov.tolist()
-            d["version"] = FORMAT_VERSION
+            d["version"] = 2
+        # version 3 adds the input hold; a zero-order-hold model omits it
+        if self._hold != "zoh":
+            d["hold"] = self._hold
+            d["version"] = 3
         return d
 
     @classmethod
@@ -1088,7 +1122,8 @@ class StateSpace:
         ----------
         d : dict
             Required keys ``format``, ``version``, ``A``, ``B``, ``C``, ``D``,
-            ``dt``; optional ``input_names``, ``output_names``, ``info``.
+            ``dt``; optional ``input_names``, ``output_names``, ``info``,
+            ``K``, ``noise_cov``, ``hold``.
 
         Returns
         -------
@@ -1104,7 +1139,8 @@ class StateSpace:
             raise ModelError(f"a model description must be a JSON object (dict), got "
                              f"{type(d).__name__}")
         required = ("format", "version", "A", "B", "C", "D", "dt")
-        allowed = set(required) | {"input_names", "output_names", "info", "K", "noise_cov"}
+        allowed = set(required) | {"input_names", "output_names", "info", "K", "noise_cov",
+                                   "hold"}
         missing = [k for k in required if k not in d]
         if missing:
             raise ModelError(f"the model description is missing the key"
@@ -1142,7 +1178,11 @@ class StateSpace:
         info = _decode(info, "info")
         noise = {k: (_matrix_from_json(d[k], k) if d.get(k) is not None else None)
                  for k in ("K", "noise_cov")}
-        return cls(*mats, dt, info=info, **names, **noise)
+        hold = d.get("hold", "zoh")
+        if hold not in HOLDS:
+            raise ModelError(f"key 'hold' must be one of {', '.join(map(repr, HOLDS))}, got "
+                             f"{hold!r}"[:300])
+        return cls(*mats, dt, info=info, **names, **noise, hold=hold)
 
     def save(self, path) -> None:
         """Write the model to a JSON file, atomically.

@@ -43,12 +43,14 @@ from ._subspace import (
 )
 from .delay import shift_for_method
 from .model import StateSpace
+from ._validation import check_bool, legacy_arguments
 from .noise_model import check_refine
 
 __all__ = ["moesp"]
 
 
-def moesp(data, order=None, horizon=None, *, weighting="moesp", selection="cv",
+@legacy_arguments(positional=("horizon",))
+def moesp(data, order=None, *, horizon=None, weighting="moesp", selection="cv",
           stability="auto", feedthrough=True, estimate_x0=True, bd_method="auto",
           statistic="auto", refine=None, input_delay=0) -> StateSpace:
     """Identify a discrete-time model by PO-MOESP.
@@ -96,6 +98,8 @@ def moesp(data, order=None, horizon=None, *, weighting="moesp", selection="cv",
         Discrete-time model with ``dt = data.dt``.
     """
     check_weighting(weighting)
+    check_bool(feedthrough, "feedthrough")
+    check_bool(estimate_x0, "estimate_x0")
     build = partial(_moesp, weighting=weighting, stability=stability, feedthrough=feedthrough,
                     estimate_x0=estimate_x0, bd_method=bd_method)
     check_refine(refine, data)

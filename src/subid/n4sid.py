@@ -38,6 +38,7 @@ from ._subspace import (
 )
 from .delay import shift_for_method
 from .model import StateSpace
+from ._validation import check_bool, legacy_arguments
 from .noise_model import check_refine
 
 __all__ = ["n4sid"]
@@ -76,7 +77,8 @@ def _lstsq_rows(regressors: np.ndarray, targets: np.ndarray) -> np.ndarray:
                               check_finite=False)[0].T
 
 
-def n4sid(data, order=None, horizon=None, *, weighting="cva", selection="cv",
+@legacy_arguments(positional=("horizon",))
+def n4sid(data, order=None, *, horizon=None, weighting="cva", selection="cv",
           stability="auto", feedthrough=True, estimate_x0=True,
           statistic="auto", refine=None, input_delay=0) -> StateSpace:
     """Identify a discrete-time model by N4SID (state sequences).
@@ -124,6 +126,8 @@ def n4sid(data, order=None, horizon=None, *, weighting="cva", selection="cv",
         Discrete-time model with ``dt = data.dt``.
     """
     check_weighting(weighting)
+    check_bool(feedthrough, "feedthrough")
+    check_bool(estimate_x0, "estimate_x0")
     build = partial(_n4sid, weighting=weighting, stability=stability, feedthrough=feedthrough,
                     estimate_x0=estimate_x0)
     check_refine(refine, data)

@@ -45,7 +45,7 @@ import scipy.linalg
 
 from ._hankel import HankelFactor
 from .data import IOData
-from .errors import NoiseModelWarning, SubidError
+from .errors import NoiseModelWarning, OptionError, SubidError
 
 __all__ = ["innovation_model", "attach_noise_model", "check_refine", "REFINE_OPTIONS"]
 
@@ -190,7 +190,7 @@ def _factor_for(model, problem) -> HankelFactor | None:
 def check_refine(refine, data) -> None:
     """Raise unless ``refine`` is a valid option for ``data`` (checked before any work)."""
     if refine not in REFINE_OPTIONS:
-        raise SubidError(f"refine must be None or 'pem', got {refine!r}")
+        raise OptionError(f"refine must be None or 'pem', got {refine!r}")
     if refine == "pem" and not isinstance(data, IOData):
         raise SubidError("refine='pem' needs the raw record (IOData): a statistic holds no "
                          "samples to predict")

@@ -46,7 +46,8 @@ import scipy.optimize
 from . import _simulate
 from ._pem_kernel import jacobian
 from .data import IOData
-from .errors import DataError, ModelError, NoiseModelWarning, SubidError
+from .errors import DataError, ModelError, NoiseModelWarning, OptionError
+from ._info import records_warnings
 from .model import StateSpace
 
 __all__ = ["pem"]
@@ -65,7 +66,7 @@ def _check_inputs(data, model, focus):
         raise DataError(f"pem expects an IOData record, got {type(data).__name__}; wrap "
                         "arrays as subid.IOData(u, y, dt=...)")
     if focus not in FOCUS:
-        raise SubidError(f"focus must be 'prediction' or 'simulation', got {focus!r}")
+        raise OptionError(f"focus must be 'prediction' or 'simulation', got {focus!r}")
     if (data.n_inputs, data.n_outputs) != (model.n_inputs, model.n_outputs):
         raise DataError(f"data have {data.n_inputs} inputs and {data.n_outputs} outputs but "
                         f"the model has {model.n_inputs} and {model.n_outputs}")
@@ -235,6 +236,7 @@ def _round(model_mats, x0, data, focus, W, layout, max_nfev, tolerance, history,
     return mats(res.x), x0 + res.x[dm:].reshape(n_exp, n), res
 
 
+@records_warnings
 def pem(data, model, *, focus="prediction", max_iterations=100, tolerance=1e-8, rounds=3,
         feedthrough=None):
     """Refine a model by prediction-error minimisation (MATLAB ``ssest``/``pem``).
@@ -249,8 +251,8 @@ def pem(data, model, *, focus="prediction", max_iterations=100, tolerance=1e-8, 
     model : StateSpace
         Starting model, e.g. from :func:`subid.n4sid`. Discrete time with the
         data's ``dt``; a continuous-time model is refined through its
-        zero-order-hold discretisation and converted back (its noise model
-        is then dropped). Without ``K`` the gain is first estimated
+        discretisation with its own input hold (:attr:`StateSpace.hold`) and
+        converted back (its noise model is then dropped). Without ``K`` the gain is first estimated
         (:mod:`subid.noise_model`), or taken as zero when that fails.
     focus : {'prediction', 'simulation'}
         Minimise one-step prediction errors of the innovation form (A, B, C,
@@ -299,20 +301,21 @@ def pem(data, model, *, focus="prediction", max_iterations=100, tolerance=1e-8, 
     _check_inputs(data, model, focus)
     if isinstance(max_iterations, bool) or not isinstance(max_iterations, int) \
             or max_iterations < 1:
-        raise SubidError(f"max_iterations must be a positive integer, got {max_iterations!r}")
+        raise OptionError(f"max_iterations must be a positive integer, got {max_iterations!r}")
     if not (isinstance(tolerance, (int, float)) and 0 < tolerance < 1):
-        raise SubidError(f"tolerance must be in (0, 1), got {tolerance!r}")
+        raise OptionError(f"tolerance must be in (0, 1), got {tolerance!r}")
     if isinstance(rounds, bool) or not isinstance(rounds, int) or rounds < 1:
-        raise SubidError(f"rounds must be a positive integer, got {rounds!r}")
+        raise OptionError(f"rounds must be a positive integer, got {rounds!r}")
     if model.is_continuous:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", NoiseModelWarning)
-            refined = pem(data, model.to_discrete(data.dt, "zoh"), focus=focus,
+            refined = pem(data, model.to_discrete(data.dt, model.hold), focus=focus,
                           max_iterations=max_iterations, tolerance=tolerance, rounds=rounds,
                           feedthrough=feedthrough)
-            ct = refined.to_continuous("zoh")
+            ct = refined.to_continuous(model.hold)
         info = dict(ct.info)
-        info["pem_through"] = f"zero-order-hold discretisation with dt={data.dt}"
+        kind = "zero" if model.hold == "zoh" else "first"
+        info["pem_through"] = f"{kind}-order-hold discretisation with dt={data.dt}"
         return ct.with_noise_model(None, None, info=info)
     return _pem_dt(data, model, focus, max_iterations, tolerance, rounds, feedthrough)
 
@@ -433,7 +436,7 @@ def _pem_dt(data, model, focus, max_iterations, tolerance, rounds, feedthrough):
     A, B, C, Kn, x0n = Tinv @ A @ T, Tinv @ B, C @ T, Tinv @ Kn, cur_x0 @ Tinv.T
     info["x0"] = x0n[0] if len(ranges) == 1 else x0n
     refined = StateSpace(A, B, C, D, model.dt, input_names=model.input_names,
-                         output_names=model.output_names, info=info)
+                         output_names=model.output_names, info=info, hold=model.hold)
     if focus == "prediction":
         Ap, Bp, Cp, Dp = _predictor(A, B, C, D, Kn, focus)
         e = y - _simulate_experiments(Ap, Bp, Cp, Dp, v, x0n, ranges)[0]

@@ -56,6 +56,8 @@ from .errors import (CheckpointError, DataError, NotConvergedWarning, OrderError
                      TooFewSamplesError)
 from . import noise_model
 from .ls_subspace import check_options, check_selector, gamma_from_factor, random_selector
+from ._info import model_info
+from ._subspace import conditions_of
 from .model import StateSpace
 
 __all__ = ["RecursiveSubspace"]
@@ -524,8 +526,9 @@ class RecursiveSubspace:
                     reg.update(x0=x0, bd_start_sample=self._bd_start,
                                bd_restarts=self._bd_restarts)
             if reason is not None:
-                warnings.warn(f"{method}: {reason}; B and D come from the projected data "
-                              "equation (less accurate)", NotConvergedWarning, stacklevel=2)
+                issued = (f"{method}: {reason}; B and D come from the projected data "
+                          "equation (less accurate)")
+                warnings.warn(issued, NotConvergedWarning, stacklevel=2)
         if bd_method == "projection":
             B_q, D, reg2 = fit_b_d_projection(core.A_q, core.C_q, core.basis, core.L11,
                                               core.L_yu, feedthrough=self.feedthrough)
@@ -533,13 +536,20 @@ class RecursiveSubspace:
             # from the normalised channels to the user's units
             B, C, D = B / su, C * sy[:, None], D * sy[:, None] / su
             reg = {**reg, **reg2}
-        info = {"method": method, "order": self.order, "horizon": self.horizon,
-                "n_samples": self.n_samples, "forgetting": self.forgetting,
-                "effective_samples": self._weight, "input_condition": input_condition,
-                "bd_method": bd_method, "bd_fallback": reason,
-                **core.info(self.instruments, self.instrument_weighting,
-                            self.power_iterations), **reg,
-                "selector": self._selector.copy()}
+        extra = {"forgetting": self.forgetting,
+                 "effective_samples": self._weight, "input_condition": input_condition,
+                 "bd_method": bd_method, "bd_fallback": reason,
+                 **core.info(self.instruments, self.instrument_weighting,
+                             self.power_iterations), **reg,
+                 "selector": self._selector.copy()}
+        x0 = extra.pop("x0", None)
+        extra.pop("order", None)
+        extra.pop("order_selection", None)
+        extra.pop("horizon", None)
+        info = model_info(method, order=self.order, horizon=self.horizon,
+                          n_samples=self.n_samples, x0=x0, hold="zoh",
+                          conditions=conditions_of(extra), warnings=[issued] if reason else [],
+                          **extra)
         self._model = StateSpace(A, B, C, D, self.dt, input_names=self.input_names,
                                  output_names=self.output_names, info=info)
         if self.instruments == "past":   # K, noise_cov from the running factor

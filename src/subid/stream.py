@@ -32,19 +32,20 @@ import numpy as np
 from ._bd_pass import OutputRegression, sequential
 from ._subspace import default_horizon
 from .data import IOData
-from .errors import DataError, SubidError
+from .errors import DataError
 from .io import read_chunks
-from .ls_subspace import ls_subspace
-from .moesp import moesp
-from .n4sid import n4sid
+from .registry import find
 from .statistic import HankelStatistic
 
-__all__ = ["identify_stream", "identify_file", "METHODS", "NEW_EXPERIMENT"]
+__all__ = ["identify_stream", "identify_file", "streaming_method", "NEW_EXPERIMENT"]
 
 log = logging.getLogger(__name__)
 
-#: Batch methods that can identify from a statistic.
-METHODS = {"ls": ls_subspace, "ls_subspace": ls_subspace, "moesp": moesp, "n4sid": n4sid}
+
+def streaming_method(method: str):
+    """The :class:`~subid.registry.MethodSpec` of a method that identifies from a
+    statistic (capability ``streaming``); :class:`~subid.errors.OptionError` otherwise."""
+    return find(method, kind="batch", capability="streaming")
 
 
 class _NewExperiment:
@@ -86,9 +87,8 @@ def _segments(pieces):
 
 def statistic_depth(method: str, order, horizon, n_outputs: int, instruments="past") -> tuple:
     """``(horizon, depth)`` of the statistic ``method`` needs."""
-    if method not in METHODS:
-        raise SubidError(f"method must be one of {sorted(METHODS)}, got {method!r}")
-    blocks = 1 if METHODS[method] is ls_subspace and instruments is None else 2
+    spec = streaming_method(method)
+    blocks = 1 if spec.name == "ls" and instruments is None else 2
     if horizon is None:
         fixed = order if isinstance(order, int) else None
         horizon = default_horizon(fixed, n_outputs, 1, 10**18, blocks)
@@ -110,7 +110,8 @@ def identify_stream(pieces, method: str = "moesp", order=None, horizon=None, *,
         pieces are never taken for different experiments otherwise: they are
         joined as one record.
     method : {'moesp', 'n4sid', 'ls'}
-        Batch method applied to the statistic.
+        Batch method applied to the statistic: a method of
+        :data:`subid.registry.METHODS` with the ``streaming`` capability.
     order, horizon
         As for the method. The horizon must be known before the data are
         read (default: 10 with an estimated order, as the batch methods).
@@ -171,7 +172,7 @@ def identify_stream(pieces, method: str = "moesp", order=None, horizon=None, *,
                 map_pieces, stat.n_experiments, stat.n_inputs, stat.n_outputs,
                 experiments=list(range(stat.n_experiments)))
     log.info("identifying from the statistic of %d samples", stat.n_samples)
-    return METHODS[method](stat, order, horizon, **options)
+    return streaming_method(method).load()(stat, order, horizon=horizon, **options)
 
 
 def _check_piece(piece, first, k: int) -> None:

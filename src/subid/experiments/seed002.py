@@ -127,16 +127,18 @@ def methods():
         "ours, default (default basis, refined)": (lambda d: ct_subspace(d, ORDER), True),
         "ours, default basis, subspace only": (
             lambda d: ct_subspace(d, ORDER, refine=False), True),
-        "ours, TM {4..60}": (lambda d: ct_subspace(d, ORDER, tm_basis(), refine=False), True),
+        "ours, TM {4..60}": (lambda d: ct_subspace(d, ORDER, basis=tm_basis(), refine=False), True),
     }
     for pole in LAGUERRE_POLES:
         out[f"ours, Laguerre {pole:g}"] = (
-            lambda d, pole=pole: ct_subspace(d, ORDER, laguerre_basis(pole), refine=False), True)
-    out["paper (6)-(15), TM {4..60}"] = (lambda d: ct_subspace_paper(d, ORDER, tm_basis()), True)
+            lambda d, pole=pole: ct_subspace(d, ORDER, basis=laguerre_basis(pole),
+                                             refine=False), True)
+    out["paper (6)-(15), TM {4..60}"] = (
+        lambda d: ct_subspace_paper(d, ORDER, basis=tm_basis()), True)
     for pole in LAGUERRE_POLES:
         out[f"paper (6)-(15), Laguerre {pole:g}"] = (
-            lambda d, pole=pole: ct_subspace_paper(d, ORDER, laguerre_basis(pole)), True)
-    out["n4sid -> CT (foh)"] = (lambda d: dt_to_ct(d, ORDER, "n4sid", hold="foh"), False)
+            lambda d, pole=pole: ct_subspace_paper(d, ORDER, basis=laguerre_basis(pole)), True)
+    out["n4sid -> CT (foh)"] = (lambda d: dt_to_ct(d, ORDER, method="n4sid", hold="foh"), False)
     return out
 
 
@@ -203,11 +205,11 @@ ABLATIONS = {
     "ours (all corrections; subspace only)": {},
     "- without interpolation-correction regressors": {"correction": False},
     "- without start-up regressors": {"startup": False},
-    "- B by (15) instead of the raw-sample fit": {"b_method": "filtered"},
+    "- B by (15) instead of the raw-sample fit": {"bd_method": "filtered"},
     "- filtering by S1-S4 (re-interpolating each section)": {"filtering": "sections"},
     "- the paper's stacked input (6)": {"data_equation": "paper"},
     "- A, C by (12)-(14)": {"ac_method": "paper"},
-    "- input interpolated like the output (hold unknown)": {"input_hold": None},
+    "- input interpolated like the output (hold unknown)": {"hold": None},
     "- no instruments": {"instruments": None},
     "paper's printed method (all of the above)": None,
 }
@@ -233,9 +235,9 @@ def ablation(cases=((400, None, "tm"), (4000, 20.0, "default")), runs: int = 20,
             for name, options in ABLATIONS.items():
                 try:
                     if options is None:
-                        model = ct_subspace_paper(data, ORDER, bank)
+                        model = ct_subspace_paper(data, ORDER, basis=bank)
                     else:
-                        model = ct_subspace(data, ORDER, bank, refine=False, **options)
+                        model = ct_subspace(data, ORDER, basis=bank, refine=False, **options)
                     err = float(np.abs(response_error(model, g_true)).max())
                 except SubidError:
                     err = float("nan")
@@ -283,7 +285,7 @@ def basis_study(cases=((400, None), (4000, 20.0)), runs: int = 20, seed: int = 0
             data, _ = simulate(L, seed + r, snr_db=snr)
             for name, bank in basis_choices(data).items():
                 try:
-                    model = ct_subspace(data, ORDER, bank, refine=False)
+                    model = ct_subspace(data, ORDER, basis=bank, refine=False)
                     err = float(np.abs(response_error(model, g_true)).max())
                 except SubidError:
                     err = float("nan")
@@ -398,13 +400,13 @@ def figures(out_dir, seed: int = 0, n_samples: int = 400):
     data, _ = simulate(n_samples, seed)
     w = FREQUENCIES
     g = true.freqresp(w)[:, 0, 0]
-    models = {"TM {4..60}": ct_subspace(data, ORDER, tm_basis(), refine=False)}
+    models = {"TM {4..60}": ct_subspace(data, ORDER, basis=tm_basis(), refine=False)}
     for pole in LAGUERRE_POLES:
-        models[f"Laguerre {pole:g}"] = ct_subspace(data, ORDER, laguerre_basis(pole),
+        models[f"Laguerre {pole:g}"] = ct_subspace(data, ORDER, basis=laguerre_basis(pole),
                                                    refine=False)
-    paper = {"TM {4..60}": ct_subspace_paper(data, ORDER, tm_basis())}
+    paper = {"TM {4..60}": ct_subspace_paper(data, ORDER, basis=tm_basis())}
     for pole in LAGUERRE_POLES:
-        paper[f"Laguerre {pole:g}"] = ct_subspace_paper(data, ORDER, laguerre_basis(pole))
+        paper[f"Laguerre {pole:g}"] = ct_subspace_paper(data, ORDER, basis=laguerre_basis(pole))
     fig, axes = plt.subplots(2, 2, figsize=(12, 7), sharex=True)
     for col, (title, group) in enumerate((("ours (corrected, start-up and correction "
                                             "regressors)", models),
