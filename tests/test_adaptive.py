@@ -11,8 +11,7 @@ from subid import _adaptive_kernel as K
 from subid._simulate import expm_blocks
 from subid.adaptive import AdaptiveIdentifier
 from subid.data import IOData
-from subid.errors import (CheckpointError, DataError, DataFileNotFoundError, OrderError,
-                          SubidError)
+from subid.errors import CheckpointError, DataError, DataFileNotFoundError, OrderError, SubidError
 from subid.experiments.seed000 import multisine, paper_system, relative_error, simulate
 from subid.model import StateSpace
 

@@ -4,10 +4,19 @@ import numpy as np
 import pytest
 
 from subid import systems
-from subid._regression import (ModalForm, fit_b_d_x0, fit_b_d_x0_modal, fit_b_d_x0_qr,
-                               modal_signals, modal_signals_reference, next_filter_state,
-                               normal_equations, piece_moments, regressor_maps,
-                               solve_normal_equations)
+from subid._regression import (
+    ModalForm,
+    fit_b_d_x0,
+    fit_b_d_x0_modal,
+    fit_b_d_x0_qr,
+    modal_signals,
+    modal_signals_reference,
+    next_filter_state,
+    normal_equations,
+    piece_moments,
+    regressor_maps,
+    solve_normal_equations,
+)
 
 
 def _relative(a, b):

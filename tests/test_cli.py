@@ -10,6 +10,7 @@ import runpy
 import shutil
 import subprocess
 import sys
+import warnings
 
 import numpy as np
 import pytest
@@ -21,7 +22,6 @@ import subid  # noqa: E402
 from subid import cli, datasets, demo  # noqa: E402
 from subid.cli import main  # noqa: E402
 from subid.interop import load_mat  # noqa: E402
-
 from test_report import PLOT_SECTIONS, check_png, parse  # noqa: E402
 
 
@@ -314,10 +314,16 @@ def test_convert_to_every_target(identified, tmp_path, capsys):
 # ---------------------------------------------------------------------------
 # demo and gallery
 # ---------------------------------------------------------------------------
-def test_demo_alias_writes_reports_and_an_index_linking_them(tmp_path, capsys):
+def test_demo_alias_writes_reports_and_an_index_linking_them(tmp_path, capsys, monkeypatch):
     out = tmp_path / "demo"
-    code = demo.main(["--datasets", "dryer,robot_arm", "--methods", "ls,n4sid", "--jobs", "2",
-                      "--out", str(out)])
+    # ``python -m subid.demo ARGS`` is ``subid demo ARGS``
+    monkeypatch.setattr(sys, "argv", ["subid.demo", "--datasets", "dryer,robot_arm", "--methods",
+                                      "ls,n4sid", "--jobs", "2", "--out", str(out)])
+    with pytest.raises(SystemExit) as exit_info, warnings.catch_warnings():
+        # runpy notes that subid.demo is already imported: harmless here
+        warnings.simplefilter("ignore", RuntimeWarning)
+        runpy.run_module("subid.demo", run_name="__main__", alter_sys=False)
+    code = exit_info.value.code
     stdout = capsys.readouterr().out
     assert code == 0
     assert "dryer: ls n=" in stdout and "wrote" in stdout

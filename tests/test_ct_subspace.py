@@ -10,9 +10,17 @@ import pytest
 
 from subid import IOData, StateSpace, errors
 from subid.basis import default_basis, laguerre, legendre, takenaka_malmquist
-from subid.ct_subspace import (_estimate_a_c, _fit_b_filtered, _subspace_factor, ct_subspace,
-                               ct_subspace_paper, data_equation_matrices, dt_to_ct,
-                               observability_matrix, tm_convolution_matrix)
+from subid.ct_subspace import (
+    _estimate_a_c,
+    _fit_b_filtered,
+    _subspace_factor,
+    ct_subspace,
+    ct_subspace_paper,
+    data_equation_matrices,
+    dt_to_ct,
+    observability_matrix,
+    tm_convolution_matrix,
+)
 from subid.experiments.seed002 import paper_system, simulate
 
 W = np.logspace(-2, 2, 200)

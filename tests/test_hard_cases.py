@@ -7,9 +7,8 @@ import pytest
 import scipy.linalg
 
 import subid
-from subid import errors, systems
-
 from conftest import METHODS
+from subid import errors, systems
 
 
 def _finite(model):

@@ -1,19 +1,19 @@
 """Batch identification: exact recovery, order choice, basis fixedness, noise."""
 
 import warnings
+
 import numpy as np
 import pytest
 import scipy.linalg
 
 import subid
+from conftest import METHODS
 from subid import systems
 from subid._hankel import hankel_chunk
-from subid.statistic import HankelStatistic
 from subid._regression import fit_b_d_x0, sensitivity_rows, sensitivity_rows_reference
 from subid.errors import ExcitationWarning
 from subid.ls_subspace import random_selector
-
-from conftest import METHODS
+from subid.statistic import HankelStatistic
 
 
 def test_paper_system_noise_free_exact(method, paper_system, paper_data):

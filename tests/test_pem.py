@@ -7,18 +7,18 @@ behaviour; the compiled Jacobian against its reference and finite differences.
 
 from __future__ import annotations
 
+import importlib  # noqa: E402
 import warnings
 
 import numpy as np
 import pytest
-from hypothesis import given, strategies as st
+from hypothesis import given
+from hypothesis import strategies as st
 
 import subid
 from subid import systems
 from subid._pem_kernel import jacobian, jacobian_ref
 from subid.errors import DataError, ModelError, SubidError
-
-import importlib  # noqa: E402
 
 pem_module = importlib.import_module("subid.pem")   # the module (subid.pem is the function)
 

@@ -6,9 +6,8 @@ from hypothesis import assume, given
 from hypothesis import strategies as st
 
 import subid
-from subid import errors, systems
-
 from conftest import METHODS
+from subid import errors, systems
 
 system_specs = st.tuples(st.integers(1, 5), st.integers(1, 3), st.integers(1, 3),
                          st.integers(0, 10**6))

@@ -101,7 +101,7 @@ def test_report_has_every_section_with_embedded_images(dryer_report):
 
 def test_report_numbers_are_those_of_the_library(dryer_models, dryer_report):
     models, est, val = dryer_models
-    for label, m in models.items():
+    for m in models.values():
         fit = subid.fit_percent(m, val)[0]
         assert f"<td>{fit:.1f}</td>" in dryer_report
         assert f"{m.A[0, 0]:.6g}" in dryer_report

@@ -33,10 +33,20 @@ from __future__ import annotations
 import numpy as np
 import scipy.linalg
 
-from ._regression import (_MODAL_BLOCK, RESIDUAL_RECOMPUTE, ModalForm, modal_signals,
-                          next_filter_state, normal_equations, parameter_count, qr_factor,
-                          regressor_maps, sensitivity_rows, solve_normal_equations,
-                          solve_qr_factor)
+from ._regression import (
+    _MODAL_BLOCK,
+    RESIDUAL_RECOMPUTE,
+    ModalForm,
+    modal_signals,
+    next_filter_state,
+    normal_equations,
+    parameter_count,
+    qr_factor,
+    regressor_maps,
+    sensitivity_rows,
+    solve_normal_equations,
+    solve_qr_factor,
+)
 
 __all__ = ["OutputRegression"]
 

@@ -529,7 +529,7 @@ def initial_state(A, B, C, D, data):
     if not isinstance(data, IOData):
         second_pass = getattr(data, "output_regression", None)   # subid._bd_pass
         return None if second_pass is None else second_pass.initial_state(A, B, C, D)
-    from .metrics import simulate_fit       # metrics depends on the model module only
+    from .metrics import simulate_fit  # metrics depends on the model module only
     # The free response C A^t x0 of a stable A falls below 1e-18 of its start after
     # `decay` samples: beyond them the samples carry no information on x0 (to rounding),
     # so the regression runs on that prefix only (bounded time and memory).
@@ -697,11 +697,17 @@ def identify(data, order, horizon, *, method: str, build, selection: str,
 
 def finalize(model: StateSpace, problem: Problem, *, refine, delays) -> StateSpace:
     """The final model of a DT batch method: its noise model (K and the innovation
-    covariance, then ``refine``; :func:`subid.noise_model.attach_noise_model`) and its
-    input delays (:func:`subid.delay.record_delay`). Run once, on the final model."""
+    covariance, :func:`subid.noise_model.attach_noise_model`, then ``refine='pem'``,
+    :func:`subid.pem`) and its input delays (:func:`subid.delay.record_delay`). Run
+    once, on the final model."""
     from .delay import record_delay
-    from .noise_model import attach_noise_model
-    return record_delay(attach_noise_model(model, problem, refine), delays)
+    from .noise_model import attach_noise_model, check_refine
+    check_refine(refine, problem.data)
+    model = attach_noise_model(model, problem)
+    if refine == "pem":
+        from .pem import pem
+        model = pem(problem.data, model)
+    return record_delay(model, delays)
 
 
 def output_growth(y: np.ndarray) -> float:

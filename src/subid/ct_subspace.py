@@ -90,8 +90,14 @@ from ._subspace import order_from_gap
 from ._validation import check_int
 from .basis import MAX_POLY_ORDER, FilterBank, default_basis
 from .data import IOData
-from .errors import (DataError, ModelError, NotExcitingError, OrderError, SubidError,
-                     TooFewSamplesError)
+from .errors import (
+    DataError,
+    ModelError,
+    NotExcitingError,
+    OrderError,
+    SubidError,
+    TooFewSamplesError,
+)
 from .model import StateSpace
 
 __all__ = [

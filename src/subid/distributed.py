@@ -154,6 +154,8 @@ def identify(u, y, method: str = "moesp", *, dt: float = 1.0, order=None, horizo
         reduced).
     statistic : {'gram', 'qr'}
         Kind of per-partition statistic (see :mod:`subid.statistic`).
+    input_names, output_names : sequence of str, optional
+        Channel names of the model.
     client : dask.distributed.Client, optional
         Default: Dask's current default scheduler (a connected client, or
         threads).
@@ -198,7 +200,14 @@ def identify_files(paths, inputs, outputs, method: str = "moesp", *, dt: float =
         the borders form Hankel columns with the neighbouring file.
     inputs, outputs
         Columns, as in :func:`subid.read_chunks`.
-    Other parameters as in :func:`identify`.
+    method, dt, order, horizon, statistic
+        As in :func:`identify`.
+    chunk_size : int
+        Samples per piece read from a file (:func:`subid.read_chunks`).
+    delimiter : str, optional
+        Column separator of text files, as in :func:`subid.read_chunks`.
+    client, **method_options
+        As in :func:`identify`.
     """
     dask = _dask()
     paths = [str(p) for p in paths]
