@@ -243,6 +243,15 @@ def ablation(cases=((400, None, "tm"), (4000, 20.0, "default")), runs: int = 20,
     return out
 
 
+def _error_row(results, cases, name) -> str:
+    """Table row: median [90th percentile] of ``name``'s errors in each case (NaN: inf)."""
+    cells = []
+    for case in cases:
+        v = np.nan_to_num(np.array(results[case][name]), nan=np.inf)
+        cells.append(f"{np.median(v):.2e} [{np.percentile(v, 90, method='higher'):.2e}]")
+    return f"| {name} | " + " | ".join(cells) + " |"
+
+
 def ablation_table(abl) -> str:
     cases = list(abl)
     lines = ["\n**Ablation** (subspace estimate, no refinement): median [90th percentile] of "
@@ -251,12 +260,7 @@ def ablation_table(abl) -> str:
                  f"L = {L}, {'noise-free' if snr is None else f'{snr:g} dB'}, "
                  f"{'TM {4..60}' if which == 'tm' else 'default basis'}"
                  for L, snr, which in cases) + " |", "|---|" + "---:|" * len(cases)]
-    for name in ABLATIONS:
-        cells = []
-        for case in cases:
-            v = np.nan_to_num(np.array(abl[case][name]), nan=np.inf)
-            cells.append(f"{np.median(v):.2e} [{np.percentile(v, 90, method='higher'):.2e}]")
-        lines.append(f"| {name} | " + " | ".join(cells) + " |")
+    lines += [_error_row(abl, cases, name) for name in ABLATIONS]
     return "\n".join(lines)
 
 
@@ -298,12 +302,7 @@ def basis_table(study) -> str:
              "| basis | " + " | ".join(f"L = {L}, {'noise-free' if snr is None else f'{snr:g} dB'}"
                                        for L, snr in cases) + " |",
              "|---|" + "---:|" * len(cases)]
-    for name in study[cases[0]]:
-        cells = []
-        for case in cases:
-            v = np.nan_to_num(np.array(study[case][name]), nan=np.inf)
-            cells.append(f"{np.median(v):.2e} [{np.percentile(v, 90, method='higher'):.2e}]")
-        lines.append(f"| {name} | " + " | ".join(cells) + " |")
+    lines += [_error_row(study, cases, name) for name in study[cases[0]]]
     return "\n".join(lines)
 
 
