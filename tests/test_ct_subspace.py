@@ -306,6 +306,7 @@ def bias_z_scores(errors_):
     return np.abs(E.mean(axis=0)) / se
 
 
+@pytest.mark.slow
 def test_output_noise_monte_carlo_no_bias(true):
     """20 dB output noise, L = 4000, 50 runs (seeds 0-49): the default estimate is unbiased.
 
@@ -326,6 +327,7 @@ def test_output_noise_monte_carlo_no_bias(true):
     assert np.all(z < 2.0), z
 
 
+@pytest.mark.slow
 def test_the_printed_method_is_biased_under_noise(true):
     gb = true.freqresp(BIAS_W)[:, 0, 0]
     err = [ct_subspace_paper(simulate(4000, r, snr_db=20)[0], 4, takenaka_malmquist(TM))
@@ -432,6 +434,7 @@ def test_bad_input_raises_clear_errors(true):
 
 
 @pytest.mark.parametrize("hold", ["foh", "zoh"])
+@pytest.mark.slow
 def test_jittered_mimo_fast_kernels_give_the_reference_model(hold, monkeypatch):
     """MIMO with feedthrough on a jittered grid: modal kernels vs per-interval tables."""
     from subid import _ct_kernels

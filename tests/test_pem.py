@@ -134,12 +134,14 @@ def _closed_loop_runs(runs=10):
     return np.median(subspace), np.median(refined)
 
 
+@pytest.mark.slow
 def test_closed_loop_pem_halves_the_n4sid_error():
     # measured: n4sid 0.0837, pem 0.0157 (0.19x)
     e_n4sid, e_pem = _closed_loop_runs()
     assert e_pem <= 0.5 * e_n4sid, (e_n4sid, e_pem)
 
 
+@pytest.mark.slow
 def test_open_loop_25db_pem_is_not_worse_than_its_start(paper_system):
     start_err, pem_err, start_pred, pem_pred = [], [], [], []
     with warnings.catch_warnings():

@@ -122,6 +122,7 @@ def _random_ct_system(order, nu, ny, seed):
 
 @given(order=st.integers(1, 4), nu=st.integers(1, 2), ny=st.integers(1, 2),
        seed=st.integers(0, 10**6), jitter=st.booleans())
+@pytest.mark.slow
 def test_ct_subspace_recovers_frequency_response(order, nu, ny, seed, jitter):
     """Continuous-time identification (seed 002) on noise-free FOH data, on a
     uniform or a jittered grid: the frequency response is recovered."""
