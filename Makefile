@@ -1,6 +1,6 @@
 # Two set-up commands work on a fresh machine with Python 3.11, make and pip:
 #   make demo   creates .venv, installs, identifies the bundled datasets, writes demo_out/
-#   make test   creates .venv if missing, installs, runs the tests
+#   make test   creates .venv if missing, installs, runs the tests (make test-fast: the quick tier)
 #   make docs   creates .venv-docs, builds the documentation site into site/ (warnings are errors)
 PYTHON ?= python3
 VENV := .venv
@@ -13,7 +13,7 @@ DOCS_STAMP := $(DOCS_VENV)/.installed
 
 BENCH_VENV := .venv-bench
 
-.PHONY: demo gallery test test-long bench bench-bd bench-ct bench-startup bench-realdata experiment docs clean
+.PHONY: demo gallery test test-fast test-long bench bench-bd bench-ct bench-startup bench-realdata experiment docs clean
 
 $(PY):
 	$(PYTHON) -m venv $(VENV)
@@ -44,12 +44,17 @@ demo: $(DEMO_STAMP)
 gallery: $(STAMP)
 	OPENBLAS_NUM_THREADS=1 $(VENV)/bin/subid gallery --out docs/gallery.md
 
+# The default tier (what CI runs): every test but the long ones, and the docstring examples.
 test: $(STAMP)
-	OPENBLAS_NUM_THREADS=1 $(PY) -m pytest -q -m "not long" tests
+	OPENBLAS_NUM_THREADS=1 $(PY) -m pytest -q -m "not long" --doctest-modules src tests
+
+# While working: the default tier without the tests marked slow (under 2 minutes on 2 cores).
+test-fast: $(STAMP)
+	OPENBLAS_NUM_THREADS=1 $(PY) -m pytest -q -m "not long and not slow" --doctest-modules src tests
 
 # Long profile: every test, hypothesis/fuzzers with large budgets, long runs.
 test-long: $(STAMP)
-	OPENBLAS_NUM_THREADS=1 SUBID_HYPOTHESIS_PROFILE=long $(PY) -m pytest -q tests
+	OPENBLAS_NUM_THREADS=1 SUBID_HYPOTHESIS_PROFILE=long $(PY) -m pytest -q --doctest-modules src tests
 
 bench: $(STAMP)
 	OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 MKL_NUM_THREADS=1 $(PY) bench/run.py --out bench/results.md

@@ -51,8 +51,8 @@ def main(argv=None) -> int:
     print("| method | default (s) | statistic only (s) | ratio |")
     print("|---|---:|---:|---:|")
     for name, fn in (("moesp", subid.moesp), ("ls_subspace", subid.ls_subspace)):
-        default = _median(lambda: fn(data, 4, horizon=10), args.repeats)
-        proj = _median(lambda: fn(data, 4, horizon=10, bd_method="projection"), args.repeats)
+        default = _median(lambda fn=fn: fn(data, 4, horizon=10), args.repeats)
+        proj = _median(lambda fn=fn: fn(data, 4, horizon=10, bd_method="projection"), args.repeats)
         print(f"| {name} | {default:.2f} | {proj:.2f} | {default / proj:.2f} |")
     w = output_weights(data.y)
     modal = _median(lambda: fit_b_d_x0_modal(true.A, true.C, data.u, data.y,

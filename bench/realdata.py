@@ -65,8 +65,9 @@ def score(model, val) -> float:
 
 def sippy_grid(name, est, val) -> dict:
     """SIPPY's fit for every (method, order, horizon); None where it failed."""
-    import subid
     from sippy_unipi import system_identification
+
+    import subid
     out = {}
     for method in SIPPY_METHODS:
         for f in HORIZONS:

@@ -26,7 +26,9 @@ import sys
 import time
 
 import numpy as np
-from online import bench_adaptive, machine, table as adaptive_table   # bench/ is sys.path[0]
+
+from online import bench_adaptive, machine  # bench/ is sys.path[0]
+from online import table as adaptive_table
 
 TIME_BUDGET_S = 120.0
 MEMORY_BUDGET_MB = 8000.0
@@ -83,6 +85,7 @@ def _runner(method, horizon=HORIZON):
 
 def run_case(method, n, repeats, horizon=HORIZON):
     import tracemalloc
+
     import subid
     true, data = _make_data(n)
     fn = _runner(method, horizon)
@@ -131,7 +134,7 @@ def bench_recursive():
         subid.RecursiveSubspace(3, 2, 2, horizon=5, instruments=instruments).update(
             data.u[:100], data.y[:100])                      # compile
 
-        def run():
+        def run(instruments=instruments):
             rs = subid.RecursiveSubspace(3, 2, 2, horizon=5, instruments=instruments)
             for k in range(0, ONLINE_SAMPLES, 1000):
                 rs.update(data.u[k:k + 1000], data.y[k:k + 1000])

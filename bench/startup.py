@@ -64,6 +64,7 @@ t0 = time.perf_counter(); fn(data, 4); print(time.perf_counter() - t0)
 
 def single_update(repeat):
     import numpy as np
+
     from subid import AdaptiveIdentifier
     rng = np.random.default_rng(0)
     u = rng.standard_normal((20_000, 2))

@@ -11,8 +11,7 @@ from subid import _adaptive_kernel as K
 from subid._simulate import expm_blocks
 from subid.adaptive import AdaptiveIdentifier
 from subid.data import IOData
-from subid.errors import (CheckpointError, DataError, DataFileNotFoundError, OrderError,
-                          SubidError)
+from subid.errors import CheckpointError, DataError, DataFileNotFoundError, OrderError, SubidError
 from subid.experiments.seed000 import multisine, paper_system, relative_error, simulate
 from subid.model import StateSpace
 
@@ -58,6 +57,7 @@ def short_record():
 # ---------------------------------------------------------------------------
 # acceptance on the paper's system (Section V)
 # ---------------------------------------------------------------------------
+@pytest.mark.slow
 def test_noise_free_paper_system_within_200s(clean200):
     t, u, y = clean200
     true = paper_system()
@@ -81,6 +81,7 @@ def test_noise_free_paper_system_within_200s(clean200):
         assert subid.pole_error(m, true) < 1e-3 and relative_error(m, true) < 1e-3
 
 
+@pytest.mark.slow
 def test_output_noise_50db_after_400s():
     t, u, y = simulate(400.0, snr_db=50.0, noise_seed=7)
     true = paper_system()
@@ -102,6 +103,7 @@ def test_part2_starts_when_the_residual_stops_improving():
     assert relative_error(ident.model, paper_system()) < 0.1
 
 
+@pytest.mark.slow
 def test_windup_constant_input_then_excitation_returns():
     """10^6 samples, input constant from half-way; then excitation returns."""
     true = paper_system()
@@ -132,6 +134,7 @@ def test_windup_constant_input_then_excitation_returns():
     assert relative_error(model, true) < 1e-3
 
 
+@pytest.mark.slow
 def test_ode_form_stays_finite_under_windup():
     true = paper_system()
     t = np.arange(300_000) * DT
@@ -190,6 +193,7 @@ def test_error_floor_is_inter_sample_interpolation():
     assert 2.5 < errs[0] / errs[1] < 6      # ~4: second order in h
 
 
+@pytest.mark.slow
 def test_nonuniform_time_stamps_converge():
     true = paper_system()
     rng = np.random.default_rng(5)
@@ -299,12 +303,14 @@ def _compare(a, b, rtol):
 
 @pytest.mark.parametrize("kw", [{}, {"hold": "zoh"}, {"history": 8}],
                          ids=["foh", "zoh", "history"])
+@pytest.mark.slow
 def test_kernel_matches_reference(kw):
     a, b = _small_pair(4000, **kw)
     assert a.model.info["bd_started"]
     _compare(a, b, 1e-12)
 
 
+@pytest.mark.slow
 def test_kernel_matches_reference_nonuniform_steps():
     rng = np.random.default_rng(3)
     t = np.concatenate([[0.0], np.cumsum(rng.choice([0.008, 0.01, 0.013], 2999))])
@@ -319,6 +325,7 @@ def test_kernel_matches_reference_ode_form():
     _compare(a, b, 1e-12)
 
 
+@pytest.mark.slow
 def test_kernel_matches_reference_paper_system(short_record):
     """On the paper's system the regression (8) has condition ~1e7, which
     amplifies the last-bit differences of the two implementations (BLAS vs
@@ -652,6 +659,7 @@ def _white_record(duration, snr_db, noise_seed, input_seed=0):
     return t, u, y + np.random.default_rng(noise_seed).standard_normal(y.shape) * std
 
 
+@pytest.mark.slow
 def test_iv_default_is_consistent_where_least_squares_is_biased():
     """White-noise input, 50 dB, 400 s, default settings (method='iv'): the
     paper's least squares never starts (B, D) (errors in variables); IV does
@@ -755,6 +763,7 @@ def test_long_gap_reinitialises_cleanly(method):
         assert model.info["converged"]
 
 
+@pytest.mark.slow
 def test_gap_handling_kernel_matches_reference():
     h = 0.01
     t = np.concatenate([np.arange(1500) * h, 15.0 + 20.0 + np.arange(1500) * h])
@@ -772,6 +781,7 @@ def test_gap_handling_kernel_matches_reference():
     _compare(pair[0], pair[1], 1e-9)
 
 
+@pytest.mark.slow
 def test_iv_noise_free_exact_and_kernel_matches_reference_ls_too():
     a, b = _small_pair(4000, method="ls")
     _compare(a, b, 1e-12)

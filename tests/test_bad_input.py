@@ -9,8 +9,6 @@ import subid
 from subid import errors, systems
 
 
-
-
 def _data(n=500, seed=0):
     return systems.simulate_data(systems.seed001_system(), n, seed=seed)
 

@@ -4,10 +4,19 @@ import numpy as np
 import pytest
 
 from subid import systems
-from subid._regression import (ModalForm, fit_b_d_x0, fit_b_d_x0_modal, fit_b_d_x0_qr,
-                               modal_signals, modal_signals_reference, next_filter_state,
-                               normal_equations, piece_moments, regressor_maps,
-                               solve_normal_equations)
+from subid._regression import (
+    ModalForm,
+    fit_b_d_x0,
+    fit_b_d_x0_modal,
+    fit_b_d_x0_qr,
+    modal_signals,
+    modal_signals_reference,
+    next_filter_state,
+    normal_equations,
+    piece_moments,
+    regressor_maps,
+    solve_normal_equations,
+)
 
 
 def _relative(a, b):
@@ -33,6 +42,7 @@ def test_modal_kernel_matches_reference():
 
 @pytest.mark.parametrize("seed", [1, 2, 3])
 @pytest.mark.parametrize("estimate_x0,feedthrough", [(True, True), (False, True), (True, False)])
+@pytest.mark.slow
 def test_modal_path_equals_qr_path(seed, estimate_x0, feedthrough):
     true = systems.random_system(4, 2, 2, seed=seed)
     data = systems.simulate_data(true, 30_000, seed=seed, output_snr_db=30,

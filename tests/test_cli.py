@@ -10,6 +10,7 @@ import runpy
 import shutil
 import subprocess
 import sys
+import warnings
 
 import numpy as np
 import pytest
@@ -21,7 +22,6 @@ import subid  # noqa: E402
 from subid import cli, datasets, demo  # noqa: E402
 from subid.cli import main  # noqa: E402
 from subid.interop import load_mat  # noqa: E402
-
 from test_report import PLOT_SECTIONS, check_png, parse  # noqa: E402
 
 
@@ -69,6 +69,7 @@ def _check_report(path, sections=PLOT_SECTIONS):
 # ---------------------------------------------------------------------------
 # identify
 # ---------------------------------------------------------------------------
+@pytest.mark.slow
 def test_identify_end_to_end_from_a_csv_file(dryer_csv, tmp_path, capsys):
     out = tmp_path / "out"
     code, stdout, stderr = run(capsys, "identify", dryer_csv, "--inputs", "voltage",
@@ -99,6 +100,7 @@ def test_identify_end_to_end_from_a_csv_file(dryer_csv, tmp_path, capsys):
     np.testing.assert_allclose(info["y_offset"], data.y_offset)
 
 
+@pytest.mark.slow
 def test_identify_dataset_without_validation_in_hz(tmp_path, capsys):
     out = tmp_path / "ls"
     code, stdout, stderr = run(capsys, "identify", "dataset:ballbeam", "--method", "ls",
@@ -136,6 +138,7 @@ def small_csv(tmp_path_factory):
 
 
 @pytest.mark.parametrize("name", list(cli.METHODS))
+@pytest.mark.slow
 def test_every_registered_method_is_reachable(name, small_csv, tmp_path, capsys):
     spec = cli.METHODS[name]
     command = "identify" if spec.kind == "batch" else "track"
@@ -169,6 +172,7 @@ def test_a_missing_method_module_is_a_clear_error(monkeypatch, tmp_path, capsys)
 # ---------------------------------------------------------------------------
 # track
 # ---------------------------------------------------------------------------
+@pytest.mark.slow
 def test_track_checkpoints_resume_and_convergence_report(tmp_path, capsys):
     out = tmp_path / "run"
     code, stdout, stderr = run(capsys, "track", "dataset:dryer", "--method", "recursive",
@@ -219,6 +223,7 @@ def test_track_resume_errors(tmp_path, capsys):
     assert code == 2 and "--order is required" in stderr
 
 
+@pytest.mark.slow
 def test_progress_bar_only_on_a_terminal_and_not_with_quiet(tmp_path, capsys, monkeypatch):
     args = ["track", "dataset:dryer", "--order", "2", "--checkpoint-every", "0", "--no-report"]
     code, _, stderr = run(capsys, *args, "--out", tmp_path / "a")
@@ -241,6 +246,7 @@ def identified(dryer_csv, tmp_path_factory):
     return out / "model.json"
 
 
+@pytest.mark.slow
 def test_simulate_writes_the_model_output_in_original_units(identified, dryer_inputs_csv,
                                                              tmp_path, capsys):
     target = tmp_path / "y.csv"
@@ -261,6 +267,7 @@ def test_simulate_writes_the_model_output_in_original_units(identified, dryer_in
         np.testing.assert_allclose(z["y"], model.simulate(raw.u), rtol=1e-13, atol=1e-13)
 
 
+@pytest.mark.slow
 def test_compare_prints_the_fit_table_and_writes_the_overlay(identified, tmp_path, capsys):
     other = tmp_path / "moesp"
     assert main(["identify", "dataset:dryer", "--method", "moesp", "--out", str(other),
@@ -314,10 +321,17 @@ def test_convert_to_every_target(identified, tmp_path, capsys):
 # ---------------------------------------------------------------------------
 # demo and gallery
 # ---------------------------------------------------------------------------
-def test_demo_alias_writes_reports_and_an_index_linking_them(tmp_path, capsys):
+@pytest.mark.slow
+def test_demo_alias_writes_reports_and_an_index_linking_them(tmp_path, capsys, monkeypatch):
     out = tmp_path / "demo"
-    code = demo.main(["--datasets", "dryer,robot_arm", "--methods", "ls,n4sid", "--jobs", "2",
-                      "--out", str(out)])
+    # ``python -m subid.demo ARGS`` is ``subid demo ARGS``
+    monkeypatch.setattr(sys, "argv", ["subid.demo", "--datasets", "dryer,robot_arm", "--methods",
+                                      "ls,n4sid", "--jobs", "2", "--out", str(out)])
+    with pytest.raises(SystemExit) as exit_info, warnings.catch_warnings():
+        # runpy notes that subid.demo is already imported: harmless here
+        warnings.simplefilter("ignore", RuntimeWarning)
+        runpy.run_module("subid.demo", run_name="__main__", alter_sys=False)
+    code = exit_info.value.code
     stdout = capsys.readouterr().out
     assert code == 0
     assert "dryer: ls n=" in stdout and "wrote" in stdout
@@ -338,6 +352,7 @@ def test_demo_alias_writes_reports_and_an_index_linking_them(tmp_path, capsys):
     assert row["fit_val"][0] == pytest.approx(subid.fit_percent(m, val)[0], abs=1e-12)
 
 
+@pytest.mark.slow
 def test_demo_run_in_process_is_silent_and_checks_names(tmp_path, capsys):
     result = demo.run(str(tmp_path / "d"), datasets=["dryer"], methods=["moesp"])
     out = capsys.readouterr()
@@ -350,6 +365,7 @@ def test_demo_run_in_process_is_silent_and_checks_names(tmp_path, capsys):
     assert code == 2 and "unknown batch method 'svd'" in stderr
 
 
+@pytest.mark.slow
 def test_gallery_command_writes_the_table(tmp_path, capsys):
     target = tmp_path / "docs" / "gallery.md"
     code, stdout, stderr = run(capsys, "gallery", "--datasets", "dryer", "--out", target)
@@ -429,6 +445,7 @@ def _program():
     return [exe] if exe else [sys.executable, "-m", "subid"]
 
 
+@pytest.mark.slow
 def test_installed_program_end_to_end(tmp_path):
     env = {**os.environ, "OPENBLAS_NUM_THREADS": "1"}
     proc = subprocess.run([*_program(), "identify", "dataset:dryer", "--method", "ls",
@@ -446,6 +463,7 @@ def test_installed_program_end_to_end(tmp_path):
     assert proc.stderr.strip() == f"subid: error: no such file: {tmp_path / 'missing.csv'}"
 
 
+@pytest.mark.slow
 def test_track_adaptive_defaults_to_no_detrending(tmp_path):
     """Continuous-time methods model the response from rest: removing the
     record's means biased the adaptive identifier (pole error 0.98)."""

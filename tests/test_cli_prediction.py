@@ -29,6 +29,7 @@ def refined_dir(tmp_path_factory):
     return out
 
 
+@pytest.mark.slow
 def test_identify_refine_pem_writes_a_refined_model(refined_dir):
     model = subid.StateSpace.load(refined_dir / "model.json")
     assert model.info["refined_by"] == "pem" and model.K is not None

@@ -10,9 +10,17 @@ import pytest
 
 from subid import IOData, StateSpace, errors
 from subid.basis import default_basis, laguerre, legendre, takenaka_malmquist
-from subid.ct_subspace import (_estimate_a_c, _fit_b_filtered, _subspace_factor, ct_subspace,
-                               ct_subspace_paper, data_equation_matrices, dt_to_ct,
-                               observability_matrix, tm_convolution_matrix)
+from subid.ct_subspace import (
+    _estimate_a_c,
+    _fit_b_filtered,
+    _subspace_factor,
+    ct_subspace,
+    ct_subspace_paper,
+    data_equation_matrices,
+    dt_to_ct,
+    observability_matrix,
+    tm_convolution_matrix,
+)
 from subid.experiments.seed002 import paper_system, simulate
 
 W = np.logspace(-2, 2, 200)
@@ -298,6 +306,7 @@ def bias_z_scores(errors_):
     return np.abs(E.mean(axis=0)) / se
 
 
+@pytest.mark.slow
 def test_output_noise_monte_carlo_no_bias(true):
     """20 dB output noise, L = 4000, 50 runs (seeds 0-49): the default estimate is unbiased.
 
@@ -318,6 +327,7 @@ def test_output_noise_monte_carlo_no_bias(true):
     assert np.all(z < 2.0), z
 
 
+@pytest.mark.slow
 def test_the_printed_method_is_biased_under_noise(true):
     gb = true.freqresp(BIAS_W)[:, 0, 0]
     err = [ct_subspace_paper(simulate(4000, r, snr_db=20)[0], 4, basis=takenaka_malmquist(TM))
@@ -425,6 +435,7 @@ def test_bad_input_raises_clear_errors(true):
 
 
 @pytest.mark.parametrize("hold", ["foh", "zoh"])
+@pytest.mark.slow
 def test_jittered_mimo_fast_kernels_give_the_reference_model(hold, monkeypatch):
     """MIMO with feedthrough on a jittered grid: modal kernels vs per-interval tables."""
     from subid import _ct_kernels

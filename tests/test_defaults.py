@@ -27,6 +27,7 @@ def noisy():
 
 
 @pytest.mark.parametrize("method", METHODS, ids=lambda m: m.__name__)
+@pytest.mark.slow
 def test_chosen_model_is_reproduced_by_an_explicit_call(method, noisy):
     """method(data, order=model.order, horizon=model.info['horizon']) is the same model."""
     _, data = noisy
@@ -40,6 +41,7 @@ def test_chosen_model_is_reproduced_by_an_explicit_call(method, noisy):
 
 
 @pytest.mark.parametrize("method", METHODS, ids=lambda m: m.__name__)
+@pytest.mark.slow
 def test_order_selection_record(method, noisy):
     _, data = noisy
     model = method(data)

@@ -34,6 +34,7 @@ def record():
     ("moesp", subid.moesp, {}), ("n4sid", subid.n4sid, {}), ("ls", subid.ls_subspace, {}),
     ("ls", subid.ls_subspace, {"instruments": None}),
 ])
+@pytest.mark.slow
 def test_dask_arrays_equal_single_machine(client, record, method, fn, kw):
     true, data = record
     u = da.from_array(data.u, chunks=(6_007, 2))      # borders fall anywhere
@@ -77,6 +78,7 @@ def test_dask_second_pass_differs_from_projection(client):
     np.testing.assert_allclose(model.D, single.D, rtol=1e-10, atol=1e-10)
 
 
+@pytest.mark.slow
 def test_dask_qr_statistic_and_uneven_chunks(client, record):
     _, data = record
     u = da.from_array(data.u, chunks=((5, 20_000, 19_995), (2,)))   # a tiny partition
@@ -86,6 +88,7 @@ def test_dask_qr_statistic_and_uneven_chunks(client, record):
     np.testing.assert_allclose(model.A, single.A, rtol=1e-10, atol=1e-10)
 
 
+@pytest.mark.slow
 def test_identify_files(client, record, tmp_path):
     _, data = record
     paths = []

@@ -99,6 +99,7 @@ def _cases(tmp_path):
 
 
 @pytest.mark.parametrize("blocks", ["default", "small"])
+@pytest.mark.slow
 def test_fast_read_equals_the_careful_parser(tmp_path, engine, blocks, request):
     if blocks == "small":
         request.getfixturevalue("small_blocks")
@@ -199,6 +200,7 @@ def test_streaming_parses_the_file_once(tmp_path, monkeypatch):
     assert all(s is None or not Path(s).exists() for s in spools)
 
 
+@pytest.mark.slow
 def test_read_peak_memory_is_below_three_times_the_doubles(tmp_path):
     n = 200_000
     m = RNG.standard_normal((n, 5))

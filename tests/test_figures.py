@@ -54,6 +54,7 @@ def figures(case):
         plt.close(fig)
 
 
+@pytest.mark.slow
 def test_every_figure_renders_at_150_dpi_with_10_pt_text(figures, tmp_path):
     from PIL import Image
     for name, fig in figures.items():
@@ -75,6 +76,7 @@ def _overlaps(a, b) -> bool:
     return a.x0 < b.x1 and b.x0 < a.x1 and a.y0 < b.y1 and b.y0 < a.y1
 
 
+@pytest.mark.slow
 def test_legends_sit_beside_the_data(figures):
     for name, fig in figures.items():
         fig.canvas.draw()

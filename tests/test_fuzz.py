@@ -127,6 +127,7 @@ def _load(path, ext):
 @pytest.mark.parametrize("ext", sorted(VALID))
 @settings(max_examples=EXAMPLES, deadline=5000)
 @given(changes=edits)
+@pytest.mark.slow
 def test_mutated_files(tmp_path_factory, ext, changes):
     path = tmp_path_factory.mktemp("fuzz") / f"file{ext}"
     path.write_bytes(_mutate(VALID[ext], changes))
@@ -366,6 +367,7 @@ def _bomb(path, name, size, *, npy=True):
 
 
 @pytest.mark.parametrize("member, npy", [("u.npy", True), ("u", False), ("y.bin", False)])
+@pytest.mark.slow
 def test_npz_bombs_are_refused_without_allocating(tmp_path, member, npy):
     """Class 2: 3 MB of compressed zeros made read allocate gigabytes (members
     not named *.npy bypassed the header check)."""
@@ -431,6 +433,7 @@ def test_long_lines_are_refused_with_bounded_memory(tmp_path, reader):
 @settings(max_examples=max(10, EXAMPLES // 10), deadline=None)     # files of up to 12 MB
 @given(lengths=st.lists(st.integers(0, 3 * 2**20), min_size=1, max_size=4),
        chunk=st.integers(1, 50))
+@pytest.mark.slow
 def test_streaming_memory_is_bounded_by_the_chunk_whatever_the_lines(tmp_path_factory,
                                                                       lengths, chunk):
     """Class 2 (property): read_chunks' peak allocation stays bounded however
@@ -540,6 +543,7 @@ CHECKPOINT_DTYPES = ["<i8", "<i4", "<f4", ">f8", "<c16", "|b1", "<U3", "|u1", ">
 
 @pytest.mark.parametrize("dtype", CHECKPOINT_DTYPES)
 @pytest.mark.parametrize("kind", ["recursive", "adaptive"])
+@pytest.mark.slow
 def test_checkpoint_arrays_of_every_dtype_and_byte_order(tmp_path, kind, dtype):
     """Class 3: a checkpoint with integer, big-endian or complex arrays loaded
     and then failed in numba or gave a wrong model. Each array is checked
@@ -580,6 +584,7 @@ settings_values = st.one_of(json_values, st.just(10**30), st.just(-10**30), st.j
 @pytest.mark.parametrize("kind", ["recursive", "adaptive"])
 @settings(max_examples=EXAMPLES, deadline=None)
 @given(key=st.integers(0, 100), value=settings_values, depth=st.sampled_from([0, 0, 50, 3000]))
+@pytest.mark.slow
 def test_checkpoint_header_fields(tmp_path_factory, kind, key, value, depth):
     """Class 3: huge integers (OverflowError), deep nesting (RecursionError) and
     values of the wrong type in the JSON header of a checkpoint."""

@@ -7,9 +7,8 @@ import pytest
 import scipy.linalg
 
 import subid
-from subid import errors, systems
-
 from conftest import METHODS
+from subid import errors, systems
 
 
 def _finite(model):
@@ -56,6 +55,7 @@ def test_lightly_damped_modes():
         assert subid.pole_error(res, true) < 1e-6, name
 
 
+@pytest.mark.slow
 def test_high_order_twenty():
     true = systems.random_system(20, 2, 2, seed=4, min_hsv_ratio=1e-5)
     data = systems.simulate_data(true, 20_000, seed=5)
@@ -87,6 +87,7 @@ def test_nearly_uncontrollable_mode():
         assert subid.markov_error(res, true) < 1e-7, name
 
 
+@pytest.mark.slow
 def test_tiny_and_huge_signal_scales():
     true = systems.seed001_system()
     data = systems.simulate_data(true, 2000, seed=8)
@@ -108,6 +109,7 @@ def test_million_samples_every_method():
         assert subid.markov_error(res, true) < 0.01, name
 
 
+@pytest.mark.slow
 def test_stiff_plant_continuous_time_methods():
     """Time constants 1e-3 s to 1e3 s, 20 s of data at 1 ms: the slowest mode
     cannot be seen; both continuous-time methods return a finite model (or a

@@ -1,19 +1,19 @@
 """Batch identification: exact recovery, order choice, basis fixedness, noise."""
 
 import warnings
+
 import numpy as np
 import pytest
 import scipy.linalg
 
 import subid
+from conftest import METHODS
 from subid import systems
 from subid._hankel import hankel_chunk
-from subid.statistic import HankelStatistic
 from subid._regression import fit_b_d_x0, sensitivity_rows, sensitivity_rows_reference
 from subid.errors import ExcitationWarning
 from subid.ls_subspace import random_selector
-
-from conftest import METHODS
+from subid.statistic import HankelStatistic
 
 
 def test_paper_system_noise_free_exact(method, paper_system, paper_data):
@@ -24,6 +24,7 @@ def test_paper_system_noise_free_exact(method, paper_system, paper_data):
     assert subid.pole_error(model, paper_system) < 1e-9
 
 
+@pytest.mark.slow
 def test_paper_system_order_estimated(method, paper_system, paper_data):
     model = method(paper_data)
     assert model.order == 3
@@ -47,6 +48,7 @@ def _case_id(c):
 
 
 @pytest.mark.parametrize("case", _random_cases(), ids=_case_id)
+@pytest.mark.slow
 def test_random_systems_noise_free(case):
     k, order, nu, ny = case
     true = systems.random_system(order, nu, ny, seed=k)
@@ -59,6 +61,7 @@ def test_random_systems_noise_free(case):
 # the order chosen by cross-validation: every 5th system in the default tier, all 50 in `long`
 @pytest.mark.parametrize("case", [c if c[0] % 5 == 0 else pytest.param(c, marks=pytest.mark.long)
                                   for c in _random_cases()], ids=_case_id)
+@pytest.mark.slow
 def test_random_systems_order_chosen(case):
     k, order, nu, ny = case
     true = systems.random_system(order, nu, ny, seed=k)
@@ -116,6 +119,7 @@ def test_initial_state_estimated(paper_system):
     assert subid.fit_percent(model, data).min() > 100 - 1e-6
 
 
+@pytest.mark.slow
 def test_monte_carlo_25db(paper_system):
     """Seed 001, Section IV set-up with 100 runs: instruments remove the bias."""
     errors = {"iv": [], "noiv": [], "paper": [], "n4sid": [], "moesp": []}

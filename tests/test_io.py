@@ -8,7 +8,7 @@ import zipfile
 import numpy as np
 import pytest
 import scipy.io
-from hypothesis import given, settings, HealthCheck
+from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from subid.errors import DataError, DataFileNotFoundError, FileReadError

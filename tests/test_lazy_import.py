@@ -48,7 +48,7 @@ def test_function_named_like_its_module_stays_the_function():
 
 def test_unknown_name_raises_attribute_error():
     try:
-        getattr(subid, "no_such_name")
+        subid.no_such_name
     except AttributeError as exc:
         assert "no_such_name" in str(exc)
     else:

@@ -70,6 +70,7 @@ _WORKER = textwrap.dedent("""
 """)
 
 
+@pytest.mark.slow
 def test_kill_and_resume_continues_identically(tmp_path):
     _, u, y = _stream(400_000, seed=2)
     path = tmp_path / "rec.npy"

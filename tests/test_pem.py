@@ -7,18 +7,18 @@ behaviour; the compiled Jacobian against its reference and finite differences.
 
 from __future__ import annotations
 
+import importlib  # noqa: E402
 import warnings
 
 import numpy as np
 import pytest
-from hypothesis import given, strategies as st
+from hypothesis import given
+from hypothesis import strategies as st
 
 import subid
 from subid import systems
 from subid._pem_kernel import jacobian, jacobian_ref
 from subid.errors import DataError, ModelError, SubidError
-
-import importlib  # noqa: E402
 
 pem_module = importlib.import_module("subid.pem")   # the module (subid.pem is the function)
 
@@ -134,12 +134,14 @@ def _closed_loop_runs(runs=10):
     return np.median(subspace), np.median(refined)
 
 
+@pytest.mark.slow
 def test_closed_loop_pem_halves_the_n4sid_error():
     # measured: n4sid 0.0837, pem 0.0157 (0.19x)
     e_n4sid, e_pem = _closed_loop_runs()
     assert e_pem <= 0.5 * e_n4sid, (e_n4sid, e_pem)
 
 
+@pytest.mark.slow
 def test_open_loop_25db_pem_is_not_worse_than_its_start(paper_system):
     start_err, pem_err, start_pred, pem_pred = [], [], [], []
     with warnings.catch_warnings():

@@ -240,6 +240,7 @@ def test_plot_functions_never_print(mimo, capsys):
 
 def test_order_scores_chart():
     import warnings
+
     import subid
     from subid import plot
     est = subid.datasets.load("dryer").detrend()[:600]

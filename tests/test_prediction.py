@@ -3,7 +3,6 @@ method, k-step prediction and residual analysis on one-step prediction errors.""
 
 from __future__ import annotations
 
-
 import numpy as np
 import pytest
 

@@ -6,9 +6,8 @@ from hypothesis import assume, given
 from hypothesis import strategies as st
 
 import subid
-from subid import errors, systems
-
 from conftest import METHODS
+from subid import errors, systems
 
 system_specs = st.tuples(st.integers(1, 5), st.integers(1, 3), st.integers(1, 3),
                          st.integers(0, 10**6))
@@ -123,6 +122,7 @@ def _random_ct_system(order, nu, ny, seed):
 
 @given(order=st.integers(1, 4), nu=st.integers(1, 2), ny=st.integers(1, 2),
        seed=st.integers(0, 10**6), jitter=st.booleans())
+@pytest.mark.slow
 def test_ct_subspace_recovers_frequency_response(order, nu, ny, seed, jitter):
     """Continuous-time identification (seed 002) on noise-free FOH data, on a
     uniform or a jittered grid: the frequency response is recovered."""

@@ -82,6 +82,7 @@ def dryer_report(dryer_models):
                                         source="dataset:dryer")
 
 
+@pytest.mark.slow
 def test_report_has_every_section_with_embedded_images(dryer_report):
     p = parse(dryer_report)
     expected = [s for s in report.SECTIONS if s != "convergence"]
@@ -101,7 +102,7 @@ def test_report_has_every_section_with_embedded_images(dryer_report):
 
 def test_report_numbers_are_those_of_the_library(dryer_models, dryer_report):
     models, est, val = dryer_models
-    for label, m in models.items():
+    for m in models.values():
         fit = subid.fit_percent(m, val)[0]
         assert f"<td>{fit:.1f}</td>" in dryer_report
         assert f"{m.A[0, 0]:.6g}" in dryer_report
@@ -119,6 +120,7 @@ def test_report_matlab_code_rebuilds_the_model(dryer_models, dryer_report):
     np.testing.assert_array_equal(np.array(rows), m.A)
 
 
+@pytest.mark.slow
 def test_online_report_adds_convergence():
     true = systems.seed001_system()
     data = systems.simulate_data(true, 1200, seed=4)
@@ -192,6 +194,7 @@ def _chromium(page, png, size="1200,3000"):
 
 @pytest.mark.skipif(CHROMIUM is None, reason="headless check needs Debian's `chromium` on PATH "
                     "(apt-get install chromium); make test never installs it")
+@pytest.mark.slow
 def test_report_renders_in_headless_chromium_without_console_errors(dryer_report, tmp_path):
     from PIL import Image
     # the check itself must be able to fail: a page with a script error is caught

@@ -202,7 +202,7 @@ def test_ct_nonuniform_zoh_matches_ode_solver():
     y = sys.simulate(u, t, hold="zoh")
     x = np.zeros(3)
     for k in range(24):   # integrate interval by interval, input held
-        sol = integrate.solve_ivp(lambda _, z: A @ z + B[:, 0] * u[k, 0], (t[k], t[k + 1]), x,
+        sol = integrate.solve_ivp(lambda _, z, k=k: A @ z + B[:, 0] * u[k, 0], (t[k], t[k + 1]), x,
                                   rtol=1e-11, atol=1e-13, method="DOP853")
         x = sol.y[:, -1]
     np.testing.assert_allclose(y[-1], C @ x + D @ u[-1], rtol=1e-7, atol=1e-10)

@@ -80,6 +80,7 @@ def test_identification_from_statistic_equals_in_memory(fn, kw, kind):
     assert from_stat.info["horizon"] == 5
 
 
+@pytest.mark.slow
 def test_gram_and_qr_agree_on_noisy_data():
     true = systems.seed001_system()
     data = systems.simulate_data(true, 5000, seed=4, output_snr_db=30)
@@ -89,6 +90,7 @@ def test_gram_and_qr_agree_on_noisy_data():
         assert subid.markov_error(a, b) < 1e-9
 
 
+@pytest.mark.slow
 def test_noise_free_from_gram_statistic_exact():
     true = systems.seed001_system()
     data = systems.simulate_data(true, 3000, seed=5)

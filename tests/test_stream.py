@@ -156,6 +156,7 @@ _MEMORY_SCRIPT = textwrap.dedent("""
 """)
 
 
+@pytest.mark.slow
 def test_streaming_memory_is_bounded(tmp_path):
     """A 600,000-row CSV: reading it whole costs far more memory than the
     cap that the streamed identification stays under (peak of the traced
@@ -183,6 +184,7 @@ def test_streaming_memory_is_bounded(tmp_path):
     assert (tmp_path / "cli_out" / "report.html").exists()
 
 
+@pytest.mark.slow
 def test_cli_identify_stream_equals_library(tmp_path, record):
     from subid import cli
     _, data = record

@@ -96,7 +96,7 @@ __all__ = [
     "delay",
 ]
 
-__version__ = "0.1.0"
+from ._version import __version__ as __version__  # the one place the version is written
 
 
 def __getattr__(name):

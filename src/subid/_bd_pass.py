@@ -33,10 +33,20 @@ from __future__ import annotations
 import numpy as np
 import scipy.linalg
 
-from ._regression import (_MODAL_BLOCK, RESIDUAL_RECOMPUTE, ModalForm, modal_signals,
-                          next_filter_state, normal_equations, parameter_count, qr_factor,
-                          regressor_maps, sensitivity_rows, solve_factor,
-                          solve_normal_equations)
+from ._regression import (
+    _MODAL_BLOCK,
+    RESIDUAL_RECOMPUTE,
+    ModalForm,
+    modal_signals,
+    next_filter_state,
+    normal_equations,
+    parameter_count,
+    qr_factor,
+    regressor_maps,
+    sensitivity_rows,
+    solve_factor,
+    solve_normal_equations,
+)
 
 __all__ = ["OutputRegression"]
 

@@ -254,6 +254,21 @@ def write_bytes(path, data, *, what: str = "file") -> None:
             fh.write(data)
 
 
+def write_json(path, obj, *, what: str = "file", **options) -> None:
+    """``json.dump(obj)`` to ``path`` atomically (UTF-8); ``options`` go to json.dump."""
+    import json
+    with atomic_write(path, "w", encoding="utf-8", what=what) as fh:
+        json.dump(obj, fh, **options)
+
+
+def save_figure(fig, path, *, what: str = "figure", **options) -> None:
+    """``fig.savefig`` to ``path`` atomically; the format is the file's extension
+    (PNG without one), ``options`` go to savefig (``dpi=...``)."""
+    ext = os.path.splitext(os.fspath(path))[1].lower().lstrip(".")
+    with atomic_write(path, "wb", what=what) as fh:
+        fig.savefig(fh, format=ext or "png", **options)
+
+
 # -- whole folders ---------------------------------------------------------------
 def _exchange(a: str, b: str) -> bool:
     """Swap two paths atomically (Linux renameat2 RENAME_EXCHANGE); False if unsupported."""

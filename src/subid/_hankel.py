@@ -25,6 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.linalg
 
+
 @dataclass(frozen=True)
 class HankelFactor:
     """Triangular factor of a block-Hankel data matrix.

@@ -548,7 +548,7 @@ def piece_moments(form, u, y, *, block=_MODAL_BLOCK, kernel=modal_signals):
     n = form.n_state
     moments = np.zeros((d, d))
     r_end = np.zeros((form.lam.size, nu), dtype=complex)
-    for start, w, r_end in _blocks(form, u, y, block, kernel):
+    for start, w, r_end in _blocks(form, u, y, block, kernel):   # noqa: B007 (returned)
         if start < form.n_free:
             moments += w.T @ w
         else:

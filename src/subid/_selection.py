@@ -118,7 +118,7 @@ def default_gap_horizon(n_samples, n_inputs, n_outputs, blocks, largest_order, n
 
 
 def _fit_score(model, validation) -> float:
-    from .metrics import fit_percent          # metrics imports the model module
+    from .metrics import fit_percent  # metrics imports the model module
     try:
         with warnings.catch_warnings(), np.errstate(all="ignore"):
             warnings.simplefilter("ignore")

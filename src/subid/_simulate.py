@@ -28,6 +28,7 @@ import numba
 import numpy as np
 from scipy import linalg
 
+from ._validation import is_uniform
 from .errors import ModelError
 
 __all__ = [
@@ -40,7 +41,6 @@ __all__ = [
 
 # Step sizes whose spread is below this fraction of the largest step count as
 # one uniform step (same tolerance as IOData).
-UNIFORM_RTOL = 1e-9
 
 # Upper bound on the number of floats in one stack of augmented matrices passed
 # to scipy.linalg.expm when a non-uniform grid is processed chunk by chunk.
@@ -216,16 +216,11 @@ def _run_tv(A, B, Cf, Df, steps, u, x0, hold):
                    _frozen(u), _frozen(x0), use_g1)
 
 
-def is_uniform(steps: np.ndarray) -> bool:
-    """True when all steps agree to :data:`UNIFORM_RTOL` of the largest."""
-    return steps.size > 0 and float(np.ptp(steps)) <= UNIFORM_RTOL * float(np.abs(steps).max())
-
-
 def simulate_continuous(A, B, C, D, t, u, x0, hold):
     """Exact simulation of a continuous-time model on the grid ``t``.
 
     The input is held constant (``'zoh'``) or linear (``'foh'``) between
-    samples. On a uniform grid (to :data:`UNIFORM_RTOL`) one discretisation
+    samples. On a uniform grid (:func:`subid._validation.is_uniform`) one discretisation
     with the mean step is used; otherwise each distinct step length (exact
     float equality) is discretised once, processing long records in chunks so
     that the stack of matrix exponentials stays bounded in memory.

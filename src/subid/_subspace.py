@@ -15,6 +15,7 @@ import numpy as np
 import scipy.linalg
 
 from ._hankel import HankelFactor
+from ._info import collect_warnings, model_info
 from ._regression import fit_b_d_projection, fit_b_d_x0
 from ._selection import SELECTION_RULES, cross_validate, default_gap_horizon
 from ._validation import check_int
@@ -29,7 +30,6 @@ from .errors import (
     TooFewSamplesError,
     UnstableModelWarning,
 )
-from ._info import collect_warnings, model_info
 from .model import StateSpace
 from .statistic import HankelStatistic
 
@@ -556,7 +556,7 @@ def initial_state(A, B, C, D, data):
 
 
 def _initial_state_one(A, B, C, D, data, output_std):
-    from .metrics import simulate_fit       # metrics depends on the model module only
+    from .metrics import simulate_fit  # metrics depends on the model module only
     # The free response C A^t x0 of a stable A falls below 1e-18 of its start after
     # `decay` samples: beyond them the samples carry no information on x0 (to rounding),
     # so the regression runs on that prefix only (bounded time and memory).
@@ -728,11 +728,17 @@ def identify(data, order, horizon, *, method: str, build, selection: str,
 
 def finalize(model: StateSpace, problem: Problem, *, refine, delays) -> StateSpace:
     """The final model of a DT batch method: its noise model (K and the innovation
-    covariance, then ``refine``; :func:`subid.noise_model.attach_noise_model`) and its
-    input delays (:func:`subid.delay.record_delay`). Run once, on the final model."""
+    covariance, :func:`subid.noise_model.attach_noise_model`, then ``refine='pem'``,
+    :func:`subid.pem`) and its input delays (:func:`subid.delay.record_delay`). Run
+    once, on the final model."""
     from .delay import record_delay
-    from .noise_model import attach_noise_model
-    return record_delay(attach_noise_model(model, problem, refine), delays)
+    from .noise_model import attach_noise_model, check_refine
+    check_refine(refine, problem.data)
+    model = attach_noise_model(model, problem)
+    if refine == "pem":
+        from .pem import pem
+        model = pem(problem.data, model)
+    return record_delay(model, delays)
 
 
 def record_growth(data) -> float:

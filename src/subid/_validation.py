@@ -7,6 +7,7 @@ fault. Code behind the boundary trusts its inputs.
 
 from __future__ import annotations
 
+import math
 import numbers
 
 import numpy as np
@@ -89,6 +90,73 @@ def as_signal(values, name: str, *, allow_empty_columns: bool = False,
     return arr
 
 
+def as_chunk(values, channels: int, name: str, *, allow_empty: bool = False,
+             copy: bool = False) -> np.ndarray:
+    """A chunk of samples for an online identifier, as a float64 (N, channels) array.
+
+    ``values`` is (N, channels), or a 1-D array of ``channels`` values (one
+    sample) when ``channels > 1``, or N samples when ``channels == 1``, or a
+    scalar when ``channels == 1``. A float64 array that needs no conversion is
+    checked without a copy (the one-sample path of a stream).
+
+    Parameters
+    ----------
+    values : array_like
+        The samples, time on axis 0.
+    channels : int
+        Channels the identifier was created with.
+    name : str
+        Name of the argument in messages (``'input u'``).
+    allow_empty : bool
+        Accept a chunk of 0 samples (else a :class:`DataError`).
+    copy : bool
+        Return memory the caller does not share.
+
+    Returns
+    -------
+    ndarray, shape (N, channels)
+        C-contiguous float64, finite.
+
+    Raises
+    ------
+    DataError
+        Wrong number of channels (with a hint when the chunk looks transposed),
+        non-finite or non-numeric values, no samples.
+    """
+    if type(values) is np.ndarray and values.dtype == np.float64:   # fast path
+        out = None
+        if values.ndim == 1 and values.shape[0] == channels and channels > 1 \
+                and all(map(math.isfinite, values.tolist())):
+            # one sample: testing a few Python floats is cheaper than two ufunc calls
+            out = np.ascontiguousarray(values.reshape(1, channels))
+        else:
+            arr = values.reshape(-1, 1) if values.ndim == 1 and channels == 1 else values
+            if arr.ndim == 2 and arr.shape[1] == channels and arr.shape[0] > 0 \
+                    and np.isfinite(arr).all():
+                out = np.ascontiguousarray(arr)
+        if out is not None:
+            return out.copy() if copy and np.shares_memory(out, values) else out
+    arr = np.asarray(values) if not isinstance(values, np.ndarray) else values
+    if arr.ndim == 0 and channels == 1:
+        arr = arr.reshape(1, 1)
+    elif arr.ndim == 1 and channels > 1:
+        if arr.shape[0] != channels:
+            raise DataError(f"{name} is 1-D with {arr.shape[0]} entries; one sample of "
+                            f"{channels} channels has {channels} (time is axis 0 of a "
+                            "2-D chunk)")
+        arr = arr.reshape(1, channels)
+    out = as_signal(arr, name)
+    if out.shape[1] != channels:
+        hint = ""
+        if out.shape[0] == channels:
+            hint = " (time is axis 0: was it passed transposed?)"
+        raise DataError(f"{name} has {out.shape[1]} channel{'s' if out.shape[1] != 1 else ''}"
+                        f" but the identifier has {channels}{hint}")
+    if out.shape[0] == 0 and not allow_empty:
+        raise DataError(f"{name} has no samples")
+    return out
+
+
 def check_finite(arr: np.ndarray, name: str) -> None:
     """Raise :class:`DataError` listing the rows of ``arr`` holding NaN or inf."""
     if np.isfinite(arr).all():
@@ -143,6 +211,59 @@ def check_time_stamps(t, n_samples: int, name: str = "time stamps t") -> np.ndar
     return arr
 
 
+def check_selector(selector, horizon: int, n_outputs: int, candidates, fixed_order, *,
+                   exact: bool = False):
+    """The user's selector Λ (seed 001, eq. (13)) as a float array, or None.
+
+    Shared by :func:`subid.ls_subspace`, :class:`subid.RecursiveSubspace` and
+    :class:`subid.AdaptiveIdentifier`.
+
+    Parameters
+    ----------
+    selector : array_like or None
+        Λ, shape (rows, horizon * n_outputs).
+    horizon : int
+        Future horizon f.
+    n_outputs : int
+        Output channels ny.
+    candidates : sequence of int
+        The candidate orders; Λ needs at least ``max(candidates)`` rows.
+    fixed_order : int or None
+        The order when it is fixed (None: chosen among the candidates).
+    exact : bool
+        Require exactly ``max(candidates)`` rows (an online identifier with
+        a fixed order).
+
+    Returns
+    -------
+    ndarray or None
+        A new float64 array (the caller's is never shared).
+
+    Raises
+    ------
+    OrderError
+        Wrong shape, non-numeric or non-finite entries.
+    """
+    if selector is None:
+        return None
+    c = horizon * n_outputs
+    try:
+        selector = np.array(selector, dtype=float)      # a copy: never the caller's array
+    except (TypeError, ValueError):
+        raise OrderError("selector must be a numeric matrix of horizon*n_outputs = "
+                         f"{c} columns") from None
+    if selector.ndim != 2 or selector.shape[1] != c:
+        raise OrderError(f"selector must have horizon*n_outputs = {c} columns, got shape "
+                         f"{selector.shape}")
+    if not np.isfinite(selector).all():
+        raise OrderError("selector has non-finite entries")
+    if selector.shape[0] < max(candidates) or (exact and selector.shape[0] != max(candidates)):
+        raise OrderError(f"selector has {selector.shape[0]} rows but the order is "
+                         f"{'up to ' if fixed_order is None else ''}{max(candidates)}; "
+                         f"it needs {'exactly' if exact else 'at least'} order rows")
+    return selector
+
+
 def check_dt(dt, *, allow_zero: bool = False, name: str = "dt") -> float:
     """Validate a sampling period: a finite positive number (or 0 if allowed)."""
     if isinstance(dt, bool) or not isinstance(dt, numbers.Real):
@@ -157,6 +278,50 @@ def check_dt(dt, *, allow_zero: bool = False, name: str = "dt") -> float:
             "a finite positive number"
         raise DataError(f"{name} must be {need}, got {dt!r}")
     return dt
+
+
+#: Relative tolerance of every sampling-period comparison: steps that agree to this
+#: fraction of the largest make a uniform grid, and two periods that agree to it
+#: are one period. The one value for the whole package (records, models,
+#: simulation, basis filters, streams, files, online identifiers).
+UNIFORM_RTOL = 1e-9
+
+
+def is_uniform(steps) -> bool:
+    """True when the sampling steps (``np.diff(t)``, at least one) agree to
+    :data:`UNIFORM_RTOL` of the largest.
+
+    Parameters
+    ----------
+    steps : ndarray, shape (N - 1,)
+        Positive time steps.
+
+    Returns
+    -------
+    bool
+    """
+    steps = np.asarray(steps)
+    return steps.size > 0 and float(np.ptp(steps)) <= UNIFORM_RTOL * float(np.abs(steps).max())
+
+
+def same_period(value, period) -> bool:
+    """True when ``value`` (a period, or an array of steps) equals ``period``
+    to :data:`UNIFORM_RTOL` of ``period`` (``numpy.isclose(value, period,
+    rtol=UNIFORM_RTOL, atol=0)`` for every entry).
+
+    Parameters
+    ----------
+    value : float or ndarray
+        Sampling period(s) or time steps to compare.
+    period : float
+        The reference period.
+
+    Returns
+    -------
+    bool
+    """
+    return bool(np.all(np.abs(np.asarray(value, dtype=np.float64) - period)
+                       <= UNIFORM_RTOL * abs(period)))
 
 
 #: Largest value of an integer that sizes a matrix (order, horizon, channels):

@@ -76,14 +76,26 @@ import numpy as np
 
 from . import _adaptive_kernel as _k
 from ._checkpoint import load_state, require, save_state
-from ._simulate import expm_blocks
-from ._validation import as_signal, check_int, check_time_stamps
-from .data import IOData, require_single_experiment
-from .errors import (CheckpointError, DataError, NotConvergedWarning, OrderError, SubidError,
-                     TooFewSamplesError)
-from .ls_subspace import random_selector
 from ._info import model_info
+from ._simulate import expm_blocks
 from ._subspace import conditions_of
+from ._validation import (
+    as_chunk,
+    check_int,
+    check_selector,
+    check_time_stamps,
+    same_period,
+)
+from .data import IOData, require_single_experiment
+from .errors import (
+    CheckpointError,
+    DataError,
+    NotConvergedWarning,
+    OrderError,
+    SubidError,
+    TooFewSamplesError,
+)
+from .ls_subspace import random_selector
 from .model import StateSpace
 
 __all__ = ["AdaptiveIdentifier"]
@@ -357,12 +369,7 @@ class AdaptiveIdentifier:
                 raise SubidError(f"seed must be an integer, got {seed!r}")
             H = random_selector(f, ny, seed=int(seed), rows=n)
         else:
-            H = np.asarray(selector, dtype=np.float64)
-            if H.shape != (n, f * ny):
-                raise SubidError(f"selector has shape {H.shape}; expected (order, horizon * "
-                                 f"n_outputs) = ({n}, {f * ny})")
-            if not np.isfinite(H).all():
-                raise SubidError("selector has non-finite entries")
+            H = check_selector(selector, f, ny, [n], n, exact=True)
         self._H = np.ascontiguousarray(H)
         self._H.setflags(write=False)
         self._input_names = None if input_names is None else tuple(input_names)
@@ -649,15 +656,15 @@ class AdaptiveIdentifier:
             u, y = data.u, data.y
             t = data.t if data.has_time_stamps else None    # explicit time stamps, if any
             if t is None:
-                if self._dt is not None and not math.isclose(data.dt, self._dt, rel_tol=1e-9):
+                if self._dt is not None and not same_period(data.dt, self._dt):
                     raise DataError(f"the IOData record is sampled with dt={data.dt!r} but "
                                     f"the identifier has dt={self._dt!r}")
                 if self._dt is None:
                     t = self._next_times(data.n_samples, data.dt)
         if y is None:
             raise DataError("output y is missing: call update(u, y) or update(iodata)")
-        U = self._as_chunk(u, self._nu, "input u")
-        Y = self._as_chunk(y, self._ny, "output y")
+        U = as_chunk(u, self._nu, "input u")
+        Y = as_chunk(y, self._ny, "output y")
         if U.shape[0] != Y.shape[0]:
             raise DataError(f"input u has {U.shape[0]} samples but output y has {Y.shape[0]}; "
                             "they must have the same length")
@@ -675,39 +682,6 @@ class AdaptiveIdentifier:
                             f"processed (t = {self.t!r}); time must increase from chunk to "
                             "chunk")
         return U, Y, T
-
-    @staticmethod
-    def _as_chunk(values, channels: int, name: str) -> np.ndarray:
-        if type(values) is np.ndarray and values.dtype == np.float64:   # fast path
-            if values.ndim == 1 and values.shape[0] == channels and channels > 1 \
-                    and all(map(math.isfinite, values.tolist())):
-                # one sample: testing a few Python floats is cheaper than two ufunc calls
-                return np.ascontiguousarray(values.reshape(1, channels))
-            arr = values
-            if arr.ndim == 1 and channels == 1:
-                arr = arr.reshape(-1, 1)
-            if arr.ndim == 2 and arr.shape[1] == channels and arr.shape[0] > 0 \
-                    and np.isfinite(arr).all():
-                return np.ascontiguousarray(arr)
-        arr = np.asarray(values) if not isinstance(values, np.ndarray) else values
-        if arr.ndim == 0 and channels == 1:
-            arr = arr.reshape(1, 1)
-        elif arr.ndim == 1 and channels > 1:
-            if arr.shape[0] != channels:
-                raise DataError(f"{name} is 1-D with {arr.shape[0]} entries; one sample of "
-                                f"{channels} channels has {channels} (time is axis 0 of a "
-                                "2-D chunk)")
-            arr = arr.reshape(1, channels)
-        out = as_signal(arr, name)
-        if out.shape[1] != channels:
-            hint = ""
-            if out.shape[0] == channels:
-                hint = " (time is axis 0: was it passed transposed?)"
-            raise DataError(f"{name} has {out.shape[1]} channel{'s' if out.shape[1] != 1 else ''}"
-                            f" but the identifier has {channels}{hint}")
-        if out.shape[0] == 0:
-            raise DataError(f"{name} has no samples")
-        return out
 
     def _next_times(self, N: int, dt: float) -> np.ndarray:
         k = self.n_samples + np.arange(N)

@@ -54,7 +54,7 @@ import numbers
 import numpy as np
 
 from . import _ct_kernels
-from ._validation import as_signal, check_time_stamps
+from ._validation import as_signal, check_time_stamps, is_uniform
 from .errors import DataError, ModelError, OrderError, TooFewSamplesError
 from .model import StateSpace
 
@@ -244,7 +244,7 @@ class FilterBank:
         else:
             zero = np.zeros((grid.size, 1))
             vals = _ct_kernels.run_bank(self._F, self._g, grid, zero, 0,
-                                        uniform=_is_uniform(grid), x0=self._g)[:, :, 0]
+                                        uniform=is_uniform(np.diff(grid)), x0=self._g)[:, :, 0]
         if lead:
             vals = vals[1:]
         return vals[inverse.reshape(-1)]
@@ -305,7 +305,7 @@ class FilterBank:
             raise TooFewSamplesError(f"{v.shape[0]} samples are too few for interpolating "
                                      f"polynomials of degree {poly_order} (they need "
                                      f"{poly_order + 1} samples)")
-        return v, t, int(poly_order), _is_uniform(t)
+        return v, t, int(poly_order), is_uniform(np.diff(t))
 
     def _filter_sections(self, v, t, order, uniform):
         L, c = v.shape
@@ -328,6 +328,8 @@ class FilterBank:
 
         Parameters
         ----------
+        signal, t, poly_order
+            As in :meth:`filter`.
         chain : {'sections', 'exact'}
             ``'sections'`` re-interpolates after every section (S1-S4);
             ``'exact'`` propagates each chain exactly.
@@ -377,11 +379,6 @@ class FilterBank:
                 xs = _ct_kernels.run_bank(Fs, gs, t, v, order, uniform=uniform)
                 out.extend(np.einsum("ra,lac->rlc", Hs, xs))
         return np.stack(out, axis=1)
-
-
-def _is_uniform(t: np.ndarray) -> bool:
-    steps = np.diff(t)
-    return steps.size > 0 and float(np.ptp(steps)) <= 1e-9 * float(np.abs(steps).max())
 
 
 # ---------------------------------------------------------------------------

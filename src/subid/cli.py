@@ -43,10 +43,12 @@ import warnings
 import click
 import numpy as np
 
-from ._selection import describe as describe_selection
 from ._files import atomic_directory, atomic_write, write_bytes
 from ._progress import on_terminal, progress_bar
-from .errors import DataError, FileReadError, NotConvergedWarning, OrderError, SubidError
+from ._selection import describe as describe_selection
+from ._validation import same_period
+from ._version import __version__
+from .errors import DataError, NotConvergedWarning, OrderError, SubidError
 from .registry import METHODS as _REGISTRY
 from .registry import MethodSpec, MethodUnavailableError
 
@@ -576,7 +578,7 @@ _FREQ = click.option("--frequency-unit", type=click.Choice(["rad/s", "Hz"], case
                     "  subid identify dataset:dryer --method moesp --out dryer_out\n"
                     "  subid identify run1.csv --inputs u1,u2 --outputs y --dt 0.1 --out out\n"
                     "  subid demo --out demo_out")
-@click.version_option(package_name="subid", prog_name="subid")
+@click.version_option(version=__version__, prog_name="subid")
 @click.option("--quiet", "-q", is_flag=True, help="No progress bar and no summary.")
 @click.option("--verbose", "-v", is_flag=True, help="Show informational messages.")
 @click.option("--debug", is_flag=True, help="Show tracebacks and debug messages.")
@@ -1259,40 +1261,8 @@ def track(data, inputs, outputs, dt, time_column, delimiter, detrend, method_nam
 # -- simulate ----------------------------------------------------------------
 def _read_signals(path, columns, time_column, delimiter):
     """Columns of a file that holds only inputs (subid.read needs outputs too)."""
-    from pathlib import Path
-    from . import io as sio
-    shown = os.fspath(path)
-    p = Path(shown)
-    ext = p.suffix.lower()
-    if ext not in sio.SUPPORTED_EXTENSIONS:
-        raise FileReadError(f"{shown}: unsupported file type {ext or '(no extension)'!r}; "
-                            f"supported: {', '.join(sio.SUPPORTED_EXTENSIONS)}", path=shown)
-    sio._check_exists(p, shown)
-    if ext in (".npz", ".mat"):
-        arrays = sio._load_npz(p, shown) if ext == ".npz" else sio._load_mat(p, shown)
-        keys = sio._array_names(columns, "inputs", list(arrays), shown)
-        u, names = sio._stack(keys, arrays, shown, ext, "input")
-        t = None
-        if time_column is not None:
-            key = sio._array_names(time_column, "time", list(arrays), shown)[0]
-            t = np.asarray(arrays[key], dtype=float).reshape(-1)
-        u = np.asarray(u, dtype=float)
-        if not np.isfinite(u).all():
-            raise DataError(f"{shown}: the inputs hold NaN or infinite values")
-        return u, names, t
-    text = sio._decode(sio._read_bytes(p, shown), shown)
-    table = sio._Table(shown, text, ext, delimiter)
-    cols = table.resolve(columns, "inputs")
-    t_cols = table.resolve(time_column, "time") if time_column is not None else []
-    both = set(cols) & set(t_cols)
-    if both:
-        raise FileReadError(f"{shown}: {table.describe(min(both))} is used both as an input "
-                            "and as the time", path=shown)
-    all_cols = cols + t_cols
-    values = table.parse(all_cols)
-    table.check_finite(values, all_cols)
-    t = values[:, -1] if t_cols else None
-    return values[:, :len(cols)], table.channel_names(cols), t
+    from .io import read_inputs
+    return read_inputs(path, columns, time=time_column, delimiter=delimiter)
 
 
 def _write_signals(path, t, u, y, input_names, output_names) -> None:
@@ -1445,17 +1415,10 @@ def compare(model_paths, data_source, inputs, outputs, dt, time_column, delimite
         fig.savefig(fh, format="png", dpi=90)
     figure = report.figure_html(fig, f"{what} outputs from a least-squares initial state; "
                                 "fit % in the legend")
-    rows = "".join(
-        f"<tr><td class=\"l\">{report._e(name)}</td>"
-        + "".join(f"<td>{report._fmt_fit([v])}</td>" for v in fits[name]) + "</tr>"
-        for name in models)
-    head = "".join(f"<th>{report._e(n)}</th>" for n in work.output_names)
-    body = [report._section("summary", "Fit %",
-                            f"<p>{report._e(data_source)}: {work.n_samples} samples.</p>"
-                            f"<table><tr><th class=\"l\">model</th>{head}</tr>{rows}</table>"
-                            f"<pre>{report._e(_command_line())}</pre>"),
-            report._section("compare", f"{what.capitalize()} and measured outputs", figure)]
-    report.write_html(page, report._page(f"{label}: model comparison", body))
+    report.write_html(page, report.comparison_page(
+        {name: fits[name] for name in models}, work.output_names,
+        title=f"{label}: model comparison", source=data_source, n_samples=work.n_samples,
+        what=what, figure=figure, command=_command_line()))
     if not _state().quiet:
         width = max(len(n) for n in models) + 2
         header = "model".ljust(width) + "  ".join(f"{n:>12}" for n in work.output_names)
@@ -1548,7 +1511,7 @@ def convert(model_path, target, conversion, dt, out):
                                          param_hint="--to")
             if model.dt == 0:
                 result = model.to_discrete(new_dt, conversion)
-            elif math.isclose(model.dt, new_dt, rel_tol=1e-12):
+            elif same_period(new_dt, model.dt):
                 result = model
             else:
                 result = model.to_continuous(conversion).to_discrete(new_dt, conversion)

@@ -86,13 +86,19 @@ import scipy.optimize
 
 from . import _ct_kernels
 from ._hankel import lq_lower
+from ._info import model_info, records_warnings
 from ._subspace import choose_order
 from ._validation import check_bool, check_choice, check_int, legacy_arguments
 from .basis import MAX_POLY_ORDER, FilterBank, default_basis
 from .data import IOData, require_single_experiment
-from .errors import (DataError, ModelError, NotExcitingError, OptionError, OrderError,
-                     TooFewSamplesError)
-from ._info import model_info, records_warnings
+from .errors import (
+    DataError,
+    ModelError,
+    NotExcitingError,
+    OptionError,
+    OrderError,
+    TooFewSamplesError,
+)
 from .model import StateSpace
 
 __all__ = [

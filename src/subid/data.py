@@ -6,13 +6,10 @@ import numbers
 
 import numpy as np
 
-from ._validation import as_signal, check_dt, check_time_stamps
+from ._validation import as_signal, check_dt, check_time_stamps, is_uniform
 from .errors import DataError
 
 __all__ = ["IOData", "merge"]
-
-# Relative tolerance under which explicitly given time stamps count as uniform.
-_UNIFORM_RTOL = 1e-9
 
 
 def _channel_names(names, count: int, prefix: str, which: str) -> tuple[str, ...]:
@@ -99,7 +96,7 @@ class IOData:
         if t is not None:
             t = check_time_stamps(t, n).view()      # never the caller's array's flags
             steps = np.diff(t)
-            if n > 1 and np.ptp(steps) <= _UNIFORM_RTOL * np.abs(steps).max():
+            if n > 1 and is_uniform(steps):
                 self._dt = float(np.mean(steps))
             else:
                 self._dt = None
@@ -237,13 +234,11 @@ class IOData:
     @classmethod
     def from_pandas(cls, df, inputs, outputs, time=None, *, dt=None) -> "IOData":
         """Record from DataFrame columns (:func:`subid.interop.iodata_from_pandas`)."""
-        from .interop import iodata_from_pandas
         return iodata_from_pandas(df, inputs, outputs, time=time, dt=dt)
 
     def to_pandas(self):
         """DataFrame with one column per channel and time as the index
         (:func:`subid.interop.iodata_to_pandas`)."""
-        from .interop import iodata_to_pandas
         return iodata_to_pandas(self)
 
     # -- derived records --------------------------------------------------
@@ -514,3 +509,165 @@ def merge(records, names=None) -> IOData:
     else:
         out.u_offset = out.y_offset = None
     return out
+
+
+# ---------------------------------------------------------------------------
+# pandas
+# ---------------------------------------------------------------------------
+def _require_pandas():
+    try:
+        import pandas
+    except ImportError:
+        raise ImportError("pandas is not installed: pip install pandas") from None
+    return pandas
+
+
+def _as_names(spec, role: str) -> list:
+    if isinstance(spec, str):
+        return [s.strip() for s in spec.split(",")] if "," in spec else [spec]
+    if spec is None:
+        raise DataError(f"{role} must be given (a column name or a list of them)")
+    try:
+        names = list(spec)
+    except TypeError:
+        return [spec]
+    if not names:
+        raise DataError(f"{role} selects no column")
+    return names
+
+
+def _seconds(values, pd, what: str) -> np.ndarray:
+    """Time stamps as float seconds (datetimes: from the first stamp)."""
+    if pd.api.types.is_datetime64_any_dtype(values):
+        stamps = pd.to_datetime(values)
+        delta = stamps - stamps[0] if isinstance(stamps, pd.Index) else stamps - stamps.iloc[0]
+        return np.asarray(delta / pd.Timedelta(seconds=1), dtype=float)
+    if pd.api.types.is_timedelta64_dtype(values):
+        return np.asarray(pd.to_timedelta(values) / pd.Timedelta(seconds=1), dtype=float)
+    if pd.api.types.is_numeric_dtype(values) and not pd.api.types.is_bool_dtype(values):
+        return np.asarray(values, dtype=float)
+    raise DataError(f"{what} must hold numbers, datetimes or timedeltas, not "
+                    f"{getattr(values, 'dtype', type(values))}")
+
+
+def iodata_from_pandas(df, inputs, outputs, time=None, *, dt=None) -> IOData:
+    """An :class:`~subid.IOData` record from the columns of a DataFrame.
+
+    Parameters
+    ----------
+    df : pandas.DataFrame
+    inputs, outputs : str or list of str
+        Column labels of the input and output channels (a comma-separated
+        string is split). They become the channel names.
+    time : str, optional
+        Column holding the time stamps (numbers in seconds, datetimes or
+        timedeltas; may be non-uniform). Without ``time`` and ``dt``, the
+        index is used when it holds times: a DatetimeIndex or TimedeltaIndex
+        (seconds from the first stamp) or a numeric index other than the
+        default 0, 1, 2, ... range; otherwise ``dt = 1``.
+    dt : float, optional
+        Uniform sampling period (instead of time stamps).
+
+    Returns
+    -------
+    IOData
+
+    Raises
+    ------
+    ImportError
+        pandas is not installed.
+    DataError
+        Unknown or repeated column, non-numeric or missing (NaN) values
+        (the message names the column and the row label), both ``time`` and
+        ``dt`` given, time stamps that do not increase.
+    """
+    pd = _require_pandas()
+    if not isinstance(df, pd.DataFrame):
+        raise DataError(f"expected a pandas DataFrame, got {type(df).__name__}")
+    if len(df) == 0:
+        raise DataError("the DataFrame has no rows")
+    if time is not None and dt is not None:
+        raise DataError("give either time (a column) or dt, not both")
+    in_cols = _as_names(inputs, "inputs")
+    out_cols = _as_names(outputs, "outputs")
+    cols = in_cols + out_cols + ([time] if time is not None else [])
+    available = list(df.columns)
+    for c in cols:
+        if c not in df.columns:
+            raise DataError(f"the DataFrame has no column {c!r}; columns: "
+                            f"{', '.join(map(repr, available[:40]))}")
+    seen = set()
+    for c in cols:
+        if c in seen:
+            raise DataError(f"column {c!r} is selected twice (as input, output or time)")
+        seen.add(c)
+    if not df.columns.is_unique:
+        dup = [c for c in cols if (df.columns == c).sum() > 1]
+        if dup:
+            raise DataError(f"the DataFrame has several columns labelled {dup[0]!r}")
+
+    def numeric(c):
+        col = df[c]
+        if pd.api.types.is_bool_dtype(col) or not pd.api.types.is_numeric_dtype(col):
+            bad = pd.to_numeric(col, errors="coerce")
+            rows = col.index[bad.isna() & col.notna()]
+            where = f" (first at row {rows[0]!r}: {col.loc[rows[0]]!r})" if len(rows) else ""
+            raise DataError(f"column {c!r} is not numeric (dtype {col.dtype}){where}")
+        values = col.to_numpy(dtype=float, na_value=np.nan)
+        bad = ~np.isfinite(values)
+        if bad.any():
+            k = int(np.flatnonzero(bad)[0])
+            raise DataError(f"column {c!r} has {int(bad.sum())} NaN or infinite value"
+                            f"{'s' if bad.sum() != 1 else ''}, the first at row "
+                            f"{df.index[k]!r}; remove or interpolate them")
+        return values
+
+    u = np.column_stack([numeric(c) for c in in_cols])
+    y = np.column_stack([numeric(c) for c in out_cols])
+    t = None
+    if time is not None:
+        t = _seconds(df[time], pd, f"time column {time!r}")
+    elif dt is None:
+        index = df.index
+        if isinstance(index, (pd.DatetimeIndex, pd.TimedeltaIndex)):
+            t = _seconds(index, pd, "the index")
+        elif not isinstance(index, pd.RangeIndex) and pd.api.types.is_numeric_dtype(index) \
+                and not pd.api.types.is_bool_dtype(index):
+            t = np.asarray(index, dtype=float)
+    return IOData(u, y, dt=dt, t=t, input_names=[str(c) for c in in_cols],
+                  output_names=[str(c) for c in out_cols])
+
+
+def iodata_to_pandas(data):
+    """A DataFrame with one column per channel and the time stamps as index.
+
+    Parameters
+    ----------
+    data : IOData
+
+    Returns
+    -------
+    pandas.DataFrame
+        Columns: the input names then the output names; index: ``data.t``
+        named ``'time'``. :func:`iodata_from_pandas` reads it back (the index
+        is taken as the time stamps).
+
+    Raises
+    ------
+    ImportError
+        pandas is not installed.
+    DataError
+        An input and an output share a name (a DataFrame needs distinct
+        column labels).
+    """
+    pd = _require_pandas()
+    if not isinstance(data, IOData):
+        raise DataError(f"expected an IOData record, got {type(data).__name__}")
+    both = set(data.input_names) & set(data.output_names)
+    if both:
+        raise DataError(f"the channel name(s) {sorted(both)} are used by an input and an "
+                        "output; rename the channels first")
+    columns = {name: data.u[:, k] for k, name in enumerate(data.input_names)}
+    columns.update({name: data.y[:, k] for k, name in enumerate(data.output_names)})
+    index = pd.Index(np.array(data.t, dtype=float), name="time")
+    return pd.DataFrame(columns, index=index)

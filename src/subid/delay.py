@@ -281,7 +281,6 @@ def absorb_delay(model):
 
     Returns the model itself when it has no delays.
     """
-    from .model import StateSpace
     delays = input_delay_of(model)
     if delays is None:
         return model
@@ -311,5 +310,7 @@ def absorb_delay(model):
         pos += d
     info = {k: v for k, v in model.info.items() if k != INFO_KEY}
     info["absorbed_input_delay"] = delays.tolist()
-    return StateSpace(A, B, C, D, model.dt, hold=model.hold, input_names=model.input_names,
-                      output_names=model.output_names, info=info)
+    # type(model): the model's own class (StateSpace), without importing the model
+    # module, which builds on this one
+    return type(model)(A, B, C, D, model.dt, hold=model.hold, input_names=model.input_names,
+                       output_names=model.output_names, info=info)

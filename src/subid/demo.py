@@ -14,7 +14,6 @@ docs/gallery.md``; ``python -m subid.demo --out demo_out`` is an alias of
 
 from __future__ import annotations
 
-import json
 import logging
 import os
 import sys
@@ -23,8 +22,9 @@ import warnings
 
 import numpy as np
 
-from ._progress import progress_bar, progress_wrapper
 from . import datasets
+from ._files import write_bytes, write_json
+from ._progress import progress_bar, progress_wrapper
 from .errors import OptionError, SubidError
 
 __all__ = ["evaluate", "report_dataset", "run", "gallery", "gallery_markdown", "GALLERY_COMMAND",
@@ -259,10 +259,8 @@ def report_dataset(name: str, out: str, methods=None, frequency_unit="rad/s") ->
             frequency_unit=frequency_unit, seconds=seconds, errors=errors, notes=notes,
             command=f"subid demo --datasets {name} --out {out}", source=f"dataset:{name}")
     else:
-        html = report._page(f"{name}: DaISy dataset", [report._section(
-            "summary", "Summary", "<p>every method failed:</p><ul>" + "".join(
-                f"<li>{report._e(r['method'])}: {report._e(r['error'])}</li>" for r in rows)
-            + "</ul>")])
+        html = report.failure_page(f"{name}: DaISy dataset",
+                                   {r["method"]: r["error"] for r in rows})
     path = os.path.join(out, f"{name}.html")
     report.write_html(path, html)
     entry = {"name": name, "href": f"{name}.html", "samples": meta["n_samples"],
@@ -381,11 +379,10 @@ def run(out, datasets=None, methods=None, *, frequency_unit="rad/s", progress=Fa
     discrete = set(_discrete_methods(methods))
     gallery_rows = [r for r in all_rows if r["method"] in discrete]
     gallery_path = os.path.join(out, "gallery.md")
-    with open(gallery_path, "w", encoding="utf-8") as fh:
-        fh.write(gallery_markdown(gallery_rows))
+    write_bytes(gallery_path, gallery_markdown(gallery_rows), what="gallery")
     summary_path = os.path.join(out, "summary.json")
-    with open(summary_path, "w", encoding="utf-8") as fh:
-        json.dump({"seconds": seconds, "rows": [_jsonable(r) for r in all_rows]}, fh, indent=1)
+    write_json(summary_path, {"seconds": seconds, "rows": [_jsonable(r) for r in all_rows]},
+               what="summary", indent=1)
     return {"rows": all_rows, "by_dataset": by_dataset, "reports": reports, "index": index,
             "gallery": gallery_path, "summary": summary_path, "seconds": seconds}
 
@@ -401,11 +398,8 @@ def _jsonable(row: dict) -> dict:
     return out
 
 
-def main(argv=None) -> int:
-    """``python -m subid.demo [options]``: the same as ``subid demo [options]``."""
-    from .cli import main as cli_main
-    return cli_main(["demo", *(sys.argv[1:] if argv is None else argv)])
-
-
 if __name__ == "__main__":
-    sys.exit(main())
+    # ``python -m subid.demo [options]``: the same as ``subid demo [options]``. The
+    # command line sits above this module, which never imports it as a library.
+    from subid.cli import main
+    sys.exit(main(["demo", *sys.argv[1:]]))

@@ -37,8 +37,8 @@ import time
 from ._bd_pass import OutputRegression
 from .errors import DataError, SubidError
 from .io import read_chunks
-from .statistic import HankelStatistic
 from .registry import find
+from .statistic import HankelStatistic
 from .stream import statistic_depth, streaming_method
 
 __all__ = ["identify", "identify_files", "fan_out", "identify_many", "summary_markdown"]
@@ -157,6 +157,8 @@ def identify(u, y, method: str = "moesp", *, dt: float = 1.0, order=None, horizo
         reduced).
     statistic : {'gram', 'qr'}
         Kind of per-partition statistic (see :mod:`subid.statistic`).
+    input_names, output_names : sequence of str, optional
+        Channel names of the model.
     client : dask.distributed.Client, optional
         Default: Dask's current default scheduler (a connected client, or
         threads).
@@ -200,13 +202,22 @@ def identify_files(paths, inputs, outputs, method: str = "moesp", *, dt: float =
         Files in time order (each any format :func:`subid.read_chunks`
         reads). The record continues from one file to the next: samples at
         the borders form Hankel columns with the neighbouring file.
+    inputs, outputs
+        Columns, as in :func:`subid.read_chunks`.
+    method, dt, order, horizon, statistic
+        As in :func:`identify`.
+    chunk_size : int
+        Samples per piece read from a file (:func:`subid.read_chunks`).
+    delimiter : str, optional
+        Column separator of text files, as in :func:`subid.read_chunks`.
+    client
+        As in :func:`identify`.
     experiments : bool
         ``True``: every file is an experiment of its own (:func:`subid.merge`):
         no Hankel column crosses from one file to the next, and x0 is
         estimated once per file (``info['x0']`` one row per file).
-    inputs, outputs
-        Columns, as in :func:`subid.read_chunks`.
-    Other parameters as in :func:`identify`.
+    **method_options
+        As in :func:`identify`.
     """
     dask = _dask()
     paths = [str(p) for p in paths]

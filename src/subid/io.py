@@ -45,13 +45,13 @@ from pathlib import Path
 
 import numpy as np
 
-from ._files import MAX_EXPANDED_BYTES, open_regular, read_regular
+from ._files import MAX_EXPANDED_BYTES, atomic_write, open_regular, read_regular
 from ._npz import NpzError, NpzLimitError, load_npz
-from ._validation import check_dt
+from ._validation import check_dt, same_period
 from .data import IOData
-from .errors import DataError, FileReadError, ResourceLimitError
+from .errors import DataError, FileReadError, ModelError, ResourceLimitError
 
-__all__ = ["read", "SUPPORTED_EXTENSIONS"]
+__all__ = ["read", "read_inputs", "SUPPORTED_EXTENSIONS"]
 
 logger = logging.getLogger(__name__)
 
@@ -989,6 +989,179 @@ def mat_variables(path, *, raw=None, max_bytes=None, mat_dtype=False, what="data
                             f"MAT-file): {_reason(exc)}", path=shown) from None
 
 
+_MAT_FIELDS = ("A", "B", "C", "D", "Ts")
+
+
+def write_mat_model(model, path) -> None:
+    """Write ``model`` as the fields of MATLAB's ``ss(A, B, C, D, Ts)`` (atomically).
+
+    The writer behind :func:`subid.interop.save_mat` and
+    :meth:`subid.StateSpace.to_mat` (which documents the variables).
+
+    Parameters
+    ----------
+    model : StateSpace
+        The model (read through its public attributes).
+    path : str or os.PathLike
+        The ``.mat`` file.
+    """
+    import scipy.io
+    path = os.fspath(path)
+    names_in = np.empty((1, model.n_inputs), dtype=object)
+    names_in[0, :] = list(model.input_names)
+    names_out = np.empty((1, model.n_outputs), dtype=object)
+    names_out[0, :] = list(model.output_names)
+    variables = {
+        "A": np.array(model.A), "B": np.array(model.B), "C": np.array(model.C),
+        "D": np.array(model.D), "Ts": np.array([[float(model.dt)]]),
+        "InputName": names_in, "OutputName": names_out,
+        "subid_format": "subid.StateSpace",
+    }
+    if model.hold != "zoh":                      # the input hold it assumes (subid only)
+        variables["subid_hold"] = model.hold
+    if model.K is not None:                      # MATLAB idss fields
+        variables["K"] = np.array(model.K)
+    if model.noise_cov is not None:
+        variables["NoiseVariance"] = np.array(model.noise_cov)
+    with atomic_write(path, "wb") as fh:
+        scipy.io.savemat(fh, variables, format="5", do_compression=False, oned_as="row")
+
+
+def _cell_strings(value, key: str, path: str, count: int) -> list[str] | None:
+    """Channel names from a MATLAB cell array (or char matrix); None when absent/empty."""
+    arr = np.asarray(value)
+    if arr.size == 0:
+        return None
+    if arr.dtype.kind in "US":
+        items = [str(s).strip() for s in arr.reshape(-1)] if arr.ndim else [str(arr)]
+    elif arr.dtype == object:
+        items = []
+        for item in arr.reshape(-1):
+            item = np.asarray(item)
+            if item.size == 0:
+                items.append("")
+            elif item.dtype.kind in "US":
+                items.append("".join(str(s) for s in item.reshape(-1)).strip())
+            else:
+                raise ModelError(f"model file '{path}': {key} must hold strings, got "
+                                 f"{item.dtype}")
+    else:
+        raise ModelError(f"model file '{path}': {key} must be a cell array of strings, got "
+                         f"{arr.dtype}")
+    if len(items) != count:
+        raise ModelError(f"model file '{path}': {key} has {len(items)} names but the model "
+                         f"has {count} channels")
+    if not any(items):
+        return None                      # MATLAB's default: all names empty
+    prefix = "u" if key == "InputName" else "y"
+    return [s if s else f"{prefix}{k + 1}" for k, s in enumerate(items)]
+
+
+def read_mat_model(path, build, *, dt=None):
+    """A model from a MAT-file: the one reader behind :func:`subid.interop.load_mat`
+    and :meth:`subid.StateSpace.from_mat` (which document the variables).
+
+    The file goes through :func:`mat_variables`, the validated path of
+    :func:`read`. ``build(A, B, C, D, dt, input_names=, output_names=, hold=,
+    K=, noise_cov=)`` makes the model (the StateSpace class: this module sits
+    below the model module and does not import it).
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The ``.mat`` file.
+    build : callable
+        Model constructor.
+    dt : float, optional
+        Sampling period when ``Ts`` is -1 or missing.
+
+    Returns
+    -------
+    StateSpace
+        What ``build`` returns.
+    """
+    path = os.fsdecode(path) if isinstance(path, bytes) else os.fspath(path)
+    # The same validated path as subid.read: regular files only, every MAT
+    # structure checked before scipy's C reader sees it, bounded decompression.
+    # mat_dtype=False: scipy's mat_dtype=True casts complex matrices to real,
+    # silently dropping the imaginary part; complex values are refused below.
+    raw = mat_variables(path, mat_dtype=False, what="model file")
+    fields = {k: v for k, v in raw.items() if not k.startswith("__")}
+    if not all(k in fields for k in ("A", "B", "C")):
+        structs = [k for k, v in fields.items()
+                   if isinstance(v, np.ndarray) and v.dtype.names and "A" in v.dtype.names]
+        if len(structs) == 1:
+            s = fields[structs[0]]
+            fields = {name: s[name].reshape(-1)[0] for name in s.dtype.names}
+    missing = [k for k in ("A", "B", "C", "D") if k not in fields]
+    if missing:
+        raise ModelError(f"model file '{path}' lacks the variable{'s' if len(missing) > 1 else ''}"
+                         f" {', '.join(missing)}; expected the fields of MATLAB's "
+                         f"ss(A, B, C, D, Ts): {', '.join(_MAT_FIELDS)}")
+    mats = []
+    for key in ("A", "B", "C", "D"):
+        value = np.asarray(fields[key])
+        if value.dtype.kind == "c":
+            raise ModelError(f"model file '{path}': {key} is complex; subid models are "
+                             "real-valued (a complex matrix is not the realization of a "
+                             "real system)")
+        if value.dtype.kind not in "biuf":
+            raise ModelError(f"model file '{path}': {key} is not a real numeric matrix "
+                             f"(dtype {value.dtype})")
+        mats.append(value.astype(np.float64))
+    A, B, C, D = mats
+    n = A.shape[0]
+    if B.size == 0 and A.size:
+        B = np.zeros((n, D.shape[1] if D.ndim == 2 else 0))
+    if D.size == 0:
+        D = np.zeros((C.shape[0], B.shape[1]))
+    ts = fields.get("Ts")
+    if ts is None:
+        period = -1.0
+    else:
+        ts = np.asarray(ts)
+        if ts.size != 1 or ts.dtype.kind not in "biuf":
+            if ts.dtype.kind == "c":
+                raise ModelError(f"model file '{path}': Ts is complex")
+            raise ModelError(f"model file '{path}': Ts must be a scalar, got shape {ts.shape}")
+        period = float(ts.reshape(-1)[0])
+    if period == -1.0:
+        if dt is None:
+            raise ModelError(f"model file '{path}': the sampling period is unspecified "
+                             "(Ts = -1 or missing); pass dt=")
+        period = dt
+    elif dt is not None and not same_period(dt, period):
+        raise ModelError(f"model file '{path}' has Ts = {period:g} but dt={dt!r} was given")
+    if isinstance(period, bool) or not isinstance(period, numbers.Real) or period < 0:
+        raise ModelError(f"model file '{path}': Ts must be >= 0 or -1, got {period!r}")
+    try:
+        inputs = _cell_strings(fields["InputName"], "InputName", path, B.shape[1]) \
+            if "InputName" in fields else None
+        outputs = _cell_strings(fields["OutputName"], "OutputName", path, C.shape[0]) \
+            if "OutputName" in fields else None
+        noise = {}
+        for key, name in (("K", "K"), ("NoiseVariance", "noise_cov")):
+            value = fields.get(key)
+            if value is not None and np.asarray(value).size:
+                value = np.asarray(value)
+                if value.dtype.kind not in "biuf":
+                    raise ModelError(f"model file '{path}': {key} is not a real numeric "
+                                     f"matrix (dtype {value.dtype})")
+                noise[name] = value.astype(np.float64)
+        hold = fields.get("subid_hold")
+        if hold is not None:
+            hold = "".join(str(v) for v in np.asarray(hold).reshape(-1)).strip()
+            if hold not in ("zoh", "foh"):
+                raise ModelError(f"model file '{path}': subid_hold must be 'zoh' or 'foh', "
+                                 f"got {hold[:40]!r}")
+        return build(A, B, C, D, period, input_names=inputs, output_names=outputs,
+                     hold=hold or "zoh", **noise)
+    except ModelError as exc:
+        if str(exc).startswith(f"model file '{path}'"):
+            raise
+        raise ModelError(f"model file '{path}': {exc}") from None
+
+
 _MAT73_NUMERIC = {"double": np.float64, "single": np.float32, "int8": np.int8,
                   "uint8": np.uint8, "int16": np.int16, "uint16": np.uint16,
                   "int32": np.int32, "uint32": np.uint32, "int64": np.int64,
@@ -1440,7 +1613,7 @@ def _from_arrays(arrays: dict, shown, ext, inputs, outputs, dt, time) -> IOData:
         if dt is None and time is None and "dt" in arrays:
             file_dt = _scalar(arrays["dt"], "dt", shown, ext)
             steps = np.diff(np.asarray(t, dtype=np.float64))
-            if steps.size and not np.allclose(steps, file_dt, rtol=1e-9, atol=0):
+            if steps.size and not same_period(steps, file_dt):
                 raise FileReadError(f"{shown}: the file holds both 't' and 'dt' and they "
                                     f"disagree (dt = {file_dt:g}, t steps from {steps.min():g} "
                                     f"to {steps.max():g}); pass dt= or time= to choose",
@@ -1455,6 +1628,72 @@ def _from_arrays(arrays: dict, shown, ext, inputs, outputs, dt, time) -> IOData:
 # ---------------------------------------------------------------------------
 _HEAD_BYTES = 1 << 20            # bytes read to find the layout of a text file
 STREAM_EXTENSIONS = (".csv", ".tsv", ".txt", ".dat", ".npy", ".parquet")
+
+
+def read_inputs(path, inputs, *, time=None, delimiter=None):
+    """Input columns of a file that holds no outputs (:func:`read` needs both).
+
+    Used to simulate a model on a file of inputs (``subid simulate``). The
+    file goes through the same validated readers as :func:`read`.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        CSV/TXT/TSV, ``.npz`` or ``.mat`` file.
+    inputs : str or list
+        Columns (names or 0-based indices) or array names of the inputs.
+    time : str or int, optional
+        Column (or array) holding the time stamps.
+    delimiter : str, optional
+        Column separator of a text file; detected when omitted.
+
+    Returns
+    -------
+    u : ndarray, shape (N, n_inputs)
+    names : list of str
+        The input channel names.
+    t : ndarray, shape (N,), or None
+        The time stamps, when ``time`` is given.
+
+    Raises
+    ------
+    FileReadError
+        Unsupported or unreadable file, unknown column.
+    DataError
+        NaN or infinite values.
+    """
+    shown = os.fspath(path)
+    p = Path(shown)
+    ext = p.suffix.lower()
+    if ext not in SUPPORTED_EXTENSIONS:
+        raise FileReadError(f"{shown}: unsupported file type {ext or '(no extension)'!r}; "
+                            f"supported: {', '.join(SUPPORTED_EXTENSIONS)}", path=shown)
+    _check_exists(p, shown)
+    if ext in (".npz", ".mat"):
+        arrays = _load_npz(p, shown) if ext == ".npz" else _load_mat(p, shown)
+        keys = _array_names(inputs, "inputs", list(arrays), shown)
+        u, names = _stack(keys, arrays, shown, ext, "input")
+        t = None
+        if time is not None:
+            key = _array_names(time, "time", list(arrays), shown)[0]
+            t = np.asarray(arrays[key], dtype=float).reshape(-1)
+        u = np.asarray(u, dtype=float)
+        if not np.isfinite(u).all():
+            raise DataError(f"{shown}: the inputs hold NaN or infinite values")
+        return u, names, t
+    text = _decode(_read_bytes(p, shown), shown)
+    table = _Table(shown, text, ext, delimiter)
+    cols = table.resolve(inputs, "inputs")
+    t_cols = table.resolve(time, "time") if time is not None else []
+    both = set(cols) & set(t_cols)
+    if both:
+        raise FileReadError(f"{shown}: {table.describe(min(both))} is used both as an input "
+                            "and as the time", path=shown)
+    all_cols = cols + t_cols
+    values = table.parse(all_cols)
+    table.check_finite(values, all_cols)
+    t = values[:, -1] if t_cols else None
+    return values[:, :len(cols)], table.channel_names(cols), t
 
 
 def read_chunks(path, inputs=None, outputs=None, *, dt=None, chunk_size=100_000,
@@ -1486,9 +1725,19 @@ def read_chunks(path, inputs=None, outputs=None, *, dt=None, chunk_size=100_000,
 
     Examples
     --------
-    >>> stat = subid.HankelStatistic(2, 1, depth=20)                  # doctest: +SKIP
-    >>> for piece in subid.read_chunks("huge.csv", "u1,u2", "y", dt=0.001):
-    ...     stat.update(piece.u, piece.y)
+    >>> import os, tempfile
+    >>> import numpy as np
+    >>> import subid
+    >>> data = subid.systems.simulate_data(subid.systems.seed001_system(), 3000, seed=0)
+    >>> path = os.path.join(tempfile.mkdtemp(), "record.csv")      # a stand-in for a huge file
+    >>> np.savetxt(path, np.column_stack([data.u, data.y]), delimiter=",",
+    ...            header="u1,u2,y1,y2", comments="")
+    >>> stat = subid.HankelStatistic(2, 2, depth=20)
+    >>> for piece in subid.read_chunks(path, "u1,u2", "y1,y2", dt=1.0, chunk_size=1000):
+    ...     _ = stat.update(piece.u, piece.y)
+    >>> stat.n_samples
+    3000
+    >>> import shutil; shutil.rmtree(os.path.dirname(path))
     """
     shown, p = _as_path(path)
     dt = 1.0 if dt is None else check_dt(dt)

@@ -59,10 +59,10 @@ from ._subspace import (
     shift_invariance,
     stable_choice,
 )
+from ._validation import check_bool, check_selector, legacy_arguments
 from .delay import shift_for_method
 from .errors import OptionError, OrderError
 from .model import StateSpace
-from ._validation import check_bool, legacy_arguments
 from .noise_model import check_refine
 
 __all__ = ["ls_subspace", "random_selector"]
@@ -278,24 +278,6 @@ def check_options(instruments, power_iterations) -> int:
             or power_iterations < 0:
         raise OptionError(f"power_iterations must be an integer >= 0, got {power_iterations!r}")
     return int(power_iterations)
-
-
-def check_selector(selector, horizon: int, n_outputs: int, candidates, fixed_order):
-    """The user's selector Λ as a float array (or None), with its shape checked."""
-    if selector is None:
-        return None
-    c = horizon * n_outputs
-    selector = np.asarray(selector, dtype=float)
-    if selector.ndim != 2 or selector.shape[1] != c:
-        raise OrderError(f"selector must have horizon*n_outputs = {c} columns, got shape "
-                         f"{selector.shape}")
-    if not np.isfinite(selector).all():
-        raise OrderError("selector has non-finite entries")
-    if selector.shape[0] < max(candidates):
-        raise OrderError(f"selector has {selector.shape[0]} rows but the order is "
-                         f"{'up to ' if fixed_order is None else ''}{max(candidates)}; "
-                         "it needs at least order rows")
-    return selector
 
 
 @dataclass(frozen=True)

@@ -6,44 +6,22 @@ import numpy as np
 import scipy.sparse
 import scipy.sparse.csgraph
 
-from ._validation import check_int
-from .data import IOData
+from ._validation import check_int, same_period
 from .errors import DataError, ModelError
-from .model import StateSpace
+from .prediction import check_model, predict, simulate_fit
 
 __all__ = ["markov_error", "fit_percent", "pole_error", "simulate_fit"]
 
 
-def _check_model(model, name: str) -> StateSpace:
-    if not isinstance(model, StateSpace):
-        raise ModelError(f"{name} must be a subid.StateSpace, got {type(model).__name__}")
-    return model
-
-
 def _check_pair(model, reference):
-    _check_model(model, "model")
-    _check_model(reference, "reference")
+    check_model(model, "model")
+    check_model(reference, "reference")
     if (model.n_inputs, model.n_outputs) != (reference.n_inputs, reference.n_outputs):
         raise ModelError(f"model has {model.n_inputs} inputs and {model.n_outputs} outputs but "
                          f"the reference has {reference.n_inputs} and {reference.n_outputs}")
-    if model.dt != reference.dt and not np.isclose(model.dt, reference.dt, rtol=1e-9, atol=0):
+    if model.dt != reference.dt and not same_period(model.dt, reference.dt):
         raise ModelError(f"model has dt={model.dt} but the reference has dt={reference.dt}; "
                          "convert one of them first (to_discrete / to_continuous)")
-
-
-def check_model_data(model, data) -> None:
-    """Raise unless ``data`` is an IOData record with the model's channels and sampling."""
-    _check_model(model, "model")
-    if not isinstance(data, IOData):
-        raise DataError(f"data must be an IOData record, got {type(data).__name__}; wrap "
-                        "arrays as subid.IOData(u, y, dt=...)")
-    if (data.n_inputs, data.n_outputs) != (model.n_inputs, model.n_outputs):
-        raise DataError(f"data have {data.n_inputs} inputs and {data.n_outputs} outputs but "
-                        f"the model has {model.n_inputs} and {model.n_outputs}")
-    if model.dt > 0:
-        if not data.is_uniform or not np.isclose(data.dt, model.dt, rtol=1e-9, atol=0):
-            raise DataError(f"the model is discrete with dt={model.dt} but the data are "
-                            f"sampled with {'non-uniform t' if not data.is_uniform else data.dt}")
 
 
 def markov_error(model, reference, k: int = 10) -> float:
@@ -67,83 +45,6 @@ def markov_error(model, reference, k: int = 10) -> float:
         raise ModelError("the reference's first Markov parameters are all zero; the relative "
                          "error is undefined")
     return float(np.linalg.norm(model.markov(k) - m_ref) / norm)
-
-
-def simulate_fit(model, data, x0="estimate", hold=None, *, output_std=None):
-    """Simulated output of ``model`` on ``data`` and the initial state used.
-
-    ``output_std`` (per output) replaces the spread of ``data.y`` in the
-    weights of the initial-state regression (used when ``data`` is the
-    prefix of a longer record whose weights apply).
-
-    ``x0='estimate'`` fits the initial state to the data by least squares
-    (the simulated output is linear in x0), each output weighted by the
-    inverse of its standard deviation; ``'zero'`` or an array fixes it.
-
-    A record of several experiments (:func:`subid.merge`) is simulated
-    experiment by experiment, each from its own initial state: the returned
-    x0 then has shape (n_experiments, n), and an array given as ``x0`` must
-    have that shape.
-    ``hold`` (continuous-time models) defaults to the model's :attr:`~subid.StateSpace.hold`.
-    """
-    check_model_data(model, data)
-    if data.n_experiments > 1:
-        std = data.y.std(axis=0) if output_std is None else output_std
-        parts = [simulate_fit(model, e, x0=x0_e, hold=hold, output_std=std)
-                 for e, x0_e in zip(data.experiments,
-                                    experiment_x0(x0, data.n_experiments, model.order))]
-        return np.vstack([p[0] for p in parts]), np.stack([p[1] for p in parts])
-    if model.dt > 0:
-        sim = lambda u, x0v: model.simulate(u, x0=x0v)  # noqa: E731
-    else:
-        sim = lambda u, x0v: model.simulate(u, t=data.t, x0=x0v, hold=hold)  # noqa: E731
-    n = model.order
-
-    def overflow():
-        radius = float(np.abs(model.poles()).max()) if model.dt > 0 else \
-            float(model.poles().real.max())
-        kind = "spectral radius" if model.dt > 0 else "largest real part of a pole"
-        return ModelError(f"simulating the model over {data.n_samples} samples overflows (its "
-                          f"{kind} is {radius:.4g}): the model is unstable and its simulated "
-                          "output, hence its fit, is undefined")
-
-    with np.errstate(over="ignore", invalid="ignore"):
-        forced = sim(data.u, None)
-    if not np.isfinite(forced).all():
-        raise overflow()
-    if isinstance(x0, str) and x0 == "zero":
-        return forced, np.zeros(n)
-    if isinstance(x0, str) and x0 == "estimate":
-        zeros = np.zeros_like(data.u)
-        with np.errstate(over="ignore", invalid="ignore"):
-            free = np.stack([sim(zeros, e) for e in np.eye(n)], axis=-1)  # (N, ny, n)
-        if not np.isfinite(free).all():
-            raise overflow()
-        # each output weighted by 1 / its standard deviation, so that the initial state
-        # (and the fit) does not depend on the output units
-        std = data.y.std(axis=0) if output_std is None else np.asarray(output_std, float)
-        w = 1.0 / np.where(std > 0, std, 1.0)
-        x0_hat = np.linalg.lstsq((free * w[None, :, None]).reshape(-1, n),
-                                 ((data.y - forced) * w).reshape(-1), rcond=None)[0]
-        return forced + free @ x0_hat, x0_hat
-    x0_arr = np.asarray(x0, dtype=float).reshape(-1)
-    if x0_arr.shape != (n,):
-        raise DataError(f"x0 must have {n} entries (the model order), got {x0_arr.size}")
-    return sim(data.u, x0_arr), x0_arr
-
-
-def experiment_x0(x0, n_experiments: int, order: int) -> list:
-    """``x0`` of :func:`simulate_fit` split per experiment: a string or ``0`` for
-    every experiment, or an array of shape (n_experiments, order)."""
-    if isinstance(x0, str) or (isinstance(x0, (int, float)) and not isinstance(x0, bool)
-                               and x0 == 0) or x0 is None:
-        return [x0] * n_experiments
-    arr = np.asarray(x0, dtype=float)
-    if arr.shape != (n_experiments, order):
-        raise DataError(f"the record has {n_experiments} experiments: x0 must have shape "
-                        f"({n_experiments}, {order}), one initial state per experiment, "
-                        f"got shape {arr.shape}")
-    return list(arr)
 
 
 def fit_percent(model, data, x0="estimate", hold=None, steps=np.inf, *,
@@ -182,9 +83,8 @@ def fit_percent(model, data, x0="estimate", hold=None, steps=np.inf, *,
     ``per_experiment=True``
     """
     if steps is not None and not (isinstance(steps, float) and np.isinf(steps) and steps > 0):
-        from .prediction import predict
         x0p = None if isinstance(x0, str) and x0 == "estimate" else x0
-        y_hat = predict(_check_model(model, "model"), data, steps, x0p)
+        y_hat = predict(check_model(model, "model"), data, steps, x0p)
     else:
         y_hat, _ = simulate_fit(model, data, x0=x0, hold=hold)
     # Each output is divided by its largest magnitude first: the ratio is

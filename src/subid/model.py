@@ -41,10 +41,11 @@ import numpy as np
 from scipy import linalg
 
 from . import _simulate
-from .delay import apply_to_inputs, frequency_factor, input_delay_of
-from ._validation import as_signal, check_dt, check_int, check_time_stamps
-from .data import IOData
 from ._files import atomic_write
+from ._validation import as_signal, check_dt, check_int, check_time_stamps, same_period
+from ._version import __version__
+from .data import IOData
+from .delay import apply_to_inputs, frequency_factor, input_delay_of
 from .errors import DataError, ModelError, OptionError
 
 __all__ = ["StateSpace"]
@@ -54,7 +55,6 @@ FORMAT_VERSION = 3
 
 _EPS = np.finfo(np.float64).eps
 # Relative tolerance for time stamps that must match the model's period.
-_DT_RTOL = 1e-9
 # Bound on the number of complex entries handled at once by freqresp.
 _FREQ_CHUNK_ENTRIES = 4_000_000
 
@@ -640,6 +640,7 @@ class StateSpace:
         info = dict(self.info)
         if dt != self._dt and "input_delay" in info:
             import warnings
+
             from .errors import DelayWarning
             info.pop("input_delay")
             warnings.warn("the input delays (counted in samples) are dropped by this change "
@@ -655,6 +656,7 @@ class StateSpace:
     def _drop_noise_model(self, what: str) -> None:
         if self._K is not None or self._noise_cov is not None:
             import warnings
+
             from .errors import NoiseModelWarning
             warnings.warn(f"{what}: the Kalman gain K and the innovation covariance are "
                           "dropped (an innovation model is tied to its sampling period and "
@@ -718,7 +720,7 @@ class StateSpace:
             elif data.dt is None:
                 raise DataError("the IOData record has non-uniform time stamps but the model "
                                 f"is discrete-time with period dt={self._dt!r}")
-            elif abs(data.dt - self._dt) > _DT_RTOL * self._dt:
+            elif not same_period(data.dt, self._dt):
                 raise DataError(f"the IOData record is sampled with dt={data.dt!r} but the "
                                 f"model's sampling period is dt={self._dt!r}; pass data.u "
                                 "to simulate sample by sample")
@@ -744,7 +746,7 @@ class StateSpace:
             if t is not None:
                 t = check_time_stamps(t, N)
                 steps = np.diff(t)
-                if steps.size and np.abs(steps - self._dt).max() > _DT_RTOL * self._dt:
+                if steps.size and not same_period(steps, self._dt):
                     raise DataError(f"time stamps t have steps from {float(steps.min())!r} to "
                                     f"{float(steps.max())!r} but the model is discrete-time with "
                                     f"period dt={self._dt!r}; t must be uniform with that "
@@ -1078,8 +1080,9 @@ class StateSpace:
         Returns
         -------
         dict
-            Keys ``format``, ``version``, ``A``, ``B``, ``C``, ``D``, ``dt``,
-            ``input_names``, ``output_names``, ``info``; only plain Python
+            Keys ``format``, ``version`` (of the format), ``subid_version``
+            (of the writer, :data:`subid.__version__`), ``A``, ``B``, ``C``,
+            ``D``, ``dt``, ``input_names``, ``output_names``, ``info``; only plain Python
             values, serialisable with ``json.dumps(d, allow_nan=False)``.
 
         Raises
@@ -1091,6 +1094,7 @@ class StateSpace:
         d = {
             "format": FORMAT_NAME,
             "version": 1,
+            "subid_version": __version__,
             "A": self._A.tolist(),
             "B": self._B.tolist(),
             "C": self._C.tolist(),
@@ -1123,7 +1127,7 @@ class StateSpace:
         d : dict
             Required keys ``format``, ``version``, ``A``, ``B``, ``C``, ``D``,
             ``dt``; optional ``input_names``, ``output_names``, ``info``,
-            ``K``, ``noise_cov``, ``hold``.
+            ``subid_version`` (ignored), ``K``, ``noise_cov``, ``hold``.
 
         Returns
         -------
@@ -1140,7 +1144,7 @@ class StateSpace:
                              f"{type(d).__name__}")
         required = ("format", "version", "A", "B", "C", "D", "dt")
         allowed = set(required) | {"input_names", "output_names", "info", "K", "noise_cov",
-                                   "hold"}
+                                   "hold", "subid_version"}
         missing = [k for k in required if k not in d]
         if missing:
             raise ModelError(f"the model description is missing the key"
@@ -1276,14 +1280,18 @@ class StateSpace:
     def to_mat(self, path) -> None:
         """Write the model as MATLAB ``ss(A, B, C, D, Ts)`` fields (:func:`subid.interop.save_mat`);
         input delays become extra states (:func:`subid.absorb_delay`)."""
-        from .interop import save_mat
-        save_mat(_without_delay(self), path)
+        from .io import write_mat_model
+        write_mat_model(_without_delay(self), path)
 
     @classmethod
     def from_mat(cls, path, *, dt=None) -> "StateSpace":
-        """Read a model from a MATLAB ``.mat`` file (:func:`subid.interop.load_mat`)."""
-        from .interop import load_mat
-        return load_mat(path, dt=dt)
+        """Read a model from a MATLAB ``.mat`` file (:func:`subid.interop.load_mat`).
+
+        The file is read by :func:`subid.io.mat_variables`, the validated MAT
+        loader of :func:`subid.read`.
+        """
+        from .io import read_mat_model
+        return read_mat_model(path, cls, dt=dt)
 
     @classmethod
     def from_control(cls, sys, *, dt=None) -> "StateSpace":

@@ -41,9 +41,9 @@ from ._subspace import (
     shift_invariance,
     stable_choice,
 )
+from ._validation import check_bool, legacy_arguments
 from .delay import shift_for_method
 from .model import StateSpace
-from ._validation import check_bool, legacy_arguments
 from .noise_model import check_refine
 
 __all__ = ["moesp"]

@@ -196,19 +196,25 @@ def check_refine(refine, data) -> None:
                          "samples to predict")
 
 
-def attach_noise_model(model, problem, refine=None, **pem_options):
-    """The model of a batch method with ``K`` and ``noise_cov`` added, then refined.
+def attach_noise_model(model, problem):
+    """The model of a batch method with ``K`` and ``noise_cov`` added.
 
     Called at the end of :func:`subid.ls_subspace`, :func:`subid.moesp` and
-    :func:`subid.n4sid`. ``refine='pem'`` runs :func:`subid.pem` on the raw
-    record from the completed model.
+    :func:`subid.n4sid` (by ``_subspace.finalize``, which then runs
+    ``refine='pem'``: :func:`subid.pem` builds on this module, not the reverse).
+
+    Parameters
+    ----------
+    model : StateSpace
+        The model of the batch method, without a noise model.
+    problem : Problem
+        The prepared problem it was identified from (its Hankel factor).
 
     Returns
     -------
     StateSpace
         ``info['noise_model']`` says how K was found (or why not).
     """
-    check_refine(refine, problem.data)
     hf = _factor_for(model, problem)
     info = dict(model.info)
     if hf is None:
@@ -218,9 +224,6 @@ def attach_noise_model(model, problem, refine=None, **pem_options):
         model = model.with_noise_model(None, None, info=info)
     else:
         model = with_factor(model, hf)
-    if refine == "pem":
-        from .pem import pem
-        model = pem(problem.data, model, **pem_options)
     return model
 
 

@@ -44,10 +44,11 @@ import scipy.linalg
 import scipy.optimize
 
 from . import _simulate
+from ._info import records_warnings
 from ._pem_kernel import jacobian
+from ._validation import same_period
 from .data import IOData
 from .errors import DataError, ModelError, NoiseModelWarning, OptionError
-from ._info import records_warnings
 from .model import StateSpace
 
 __all__ = ["pem"]
@@ -72,7 +73,7 @@ def _check_inputs(data, model, focus):
                         f"the model has {model.n_inputs} and {model.n_outputs}")
     if not data.is_uniform:
         raise DataError("pem refines discrete-time models and needs uniformly sampled data")
-    if not model.is_continuous and not np.isclose(data.dt, model.dt, rtol=1e-9, atol=0):
+    if not model.is_continuous and not same_period(data.dt, model.dt):
         raise DataError(f"the model has dt={model.dt} but the data are sampled with "
                         f"dt={data.dt}")
 

@@ -969,7 +969,7 @@ def order_selection(models, *, labels=None, title=None):
     fig, ax = plt.subplots(figsize=(6.5 + room, 3.6))
     colors = colors_for((label, m) for label, (_, _, m) in profiles.items())
     kinds = set()
-    for (label, (v, what, m)), color, text in zip(profiles.items(), colors, texts):
+    for (_label, (v, what, m)), color, text in zip(profiles.items(), colors, texts):
         kinds.add(what)
         scaled = v / v[0] if v[0] > 0 else v
         idx = np.arange(1, v.size + 1)
@@ -1006,6 +1006,10 @@ def order_scores(models, *, labels=None, title=None):
     ----------
     models : StateSpace, list or dict label -> StateSpace
         Models with ``info['order_selection']`` (rule ``'cv'`` or ``'gap'``).
+    labels : list of str, optional
+        Labels replacing the dict keys (default: the keys or ``model.info['method']``).
+    title : str, optional
+        Figure title.
 
     Returns
     -------

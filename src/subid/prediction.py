@@ -29,8 +29,9 @@ import numpy as np
 import scipy.linalg
 
 from . import _simulate
+from ._validation import same_period
 from .data import IOData
-from .errors import DataError, NoiseModelWarning
+from .errors import DataError, ModelError, NoiseModelWarning
 from .model import StateSpace
 
 __all__ = ["predict", "prediction_errors", "residuals", "correlations"]
@@ -42,8 +43,108 @@ __all__ = ["predict", "prediction_errors", "residuals", "correlations"]
 _LOOP_STEPS = 32
 
 
+# The checks and the simulation fit live here, below subid.metrics (which imports
+# them): fit_percent(steps=k) predicts, and predict simulates.
+def check_model(model, name: str) -> StateSpace:
+    """``model``, or ModelError unless it is a :class:`~subid.StateSpace`."""
+    if not isinstance(model, StateSpace):
+        raise ModelError(f"{name} must be a subid.StateSpace, got {type(model).__name__}")
+    return model
+
+
+def check_model_data(model, data) -> None:
+    """Raise unless ``data`` is an IOData record with the model's channels and sampling."""
+    check_model(model, "model")
+    if not isinstance(data, IOData):
+        raise DataError(f"data must be an IOData record, got {type(data).__name__}; wrap "
+                        "arrays as subid.IOData(u, y, dt=...)")
+    if (data.n_inputs, data.n_outputs) != (model.n_inputs, model.n_outputs):
+        raise DataError(f"data have {data.n_inputs} inputs and {data.n_outputs} outputs but "
+                        f"the model has {model.n_inputs} and {model.n_outputs}")
+    if model.dt > 0:
+        if not data.is_uniform or not same_period(data.dt, model.dt):
+            raise DataError(f"the model is discrete with dt={model.dt} but the data are "
+                            f"sampled with {'non-uniform t' if not data.is_uniform else data.dt}")
+
+
+def simulate_fit(model, data, x0="estimate", hold=None, *, output_std=None):
+    """Simulated output of ``model`` on ``data`` and the initial state used.
+
+    ``output_std`` (per output) replaces the spread of ``data.y`` in the
+    weights of the initial-state regression (used when ``data`` is the
+    prefix of a longer record whose weights apply).
+
+    ``x0='estimate'`` fits the initial state to the data by least squares
+    (the simulated output is linear in x0), each output weighted by the
+    inverse of its standard deviation; ``'zero'`` or an array fixes it.
+
+    A record of several experiments (:func:`subid.merge`) is simulated
+    experiment by experiment, each from its own initial state: the returned
+    x0 then has shape (n_experiments, n), and an array given as ``x0`` must
+    have that shape.
+    ``hold`` (continuous-time models) defaults to the model's :attr:`~subid.StateSpace.hold`.
+    """
+    check_model_data(model, data)
+    if data.n_experiments > 1:
+        std = data.y.std(axis=0) if output_std is None else output_std
+        parts = [simulate_fit(model, e, x0=x0_e, hold=hold, output_std=std)
+                 for e, x0_e in zip(data.experiments,
+                                    experiment_x0(x0, data.n_experiments, model.order))]
+        return np.vstack([p[0] for p in parts]), np.stack([p[1] for p in parts])
+    if model.dt > 0:
+        sim = lambda u, x0v: model.simulate(u, x0=x0v)  # noqa: E731
+    else:
+        sim = lambda u, x0v: model.simulate(u, t=data.t, x0=x0v, hold=hold)  # noqa: E731
+    n = model.order
+
+    def overflow():
+        radius = float(np.abs(model.poles()).max()) if model.dt > 0 else \
+            float(model.poles().real.max())
+        kind = "spectral radius" if model.dt > 0 else "largest real part of a pole"
+        return ModelError(f"simulating the model over {data.n_samples} samples overflows (its "
+                          f"{kind} is {radius:.4g}): the model is unstable and its simulated "
+                          "output, hence its fit, is undefined")
+
+    with np.errstate(over="ignore", invalid="ignore"):
+        forced = sim(data.u, None)
+    if not np.isfinite(forced).all():
+        raise overflow()
+    if isinstance(x0, str) and x0 == "zero":
+        return forced, np.zeros(n)
+    if isinstance(x0, str) and x0 == "estimate":
+        zeros = np.zeros_like(data.u)
+        with np.errstate(over="ignore", invalid="ignore"):
+            free = np.stack([sim(zeros, e) for e in np.eye(n)], axis=-1)  # (N, ny, n)
+        if not np.isfinite(free).all():
+            raise overflow()
+        # each output weighted by 1 / its standard deviation, so that the initial state
+        # (and the fit) does not depend on the output units
+        std = data.y.std(axis=0) if output_std is None else np.asarray(output_std, float)
+        w = 1.0 / np.where(std > 0, std, 1.0)
+        x0_hat = np.linalg.lstsq((free * w[None, :, None]).reshape(-1, n),
+                                 ((data.y - forced) * w).reshape(-1), rcond=None)[0]
+        return forced + free @ x0_hat, x0_hat
+    x0_arr = np.asarray(x0, dtype=float).reshape(-1)
+    if x0_arr.shape != (n,):
+        raise DataError(f"x0 must have {n} entries (the model order), got {x0_arr.size}")
+    return sim(data.u, x0_arr), x0_arr
+
+
+def experiment_x0(x0, n_experiments: int, order: int) -> list:
+    """``x0`` of :func:`simulate_fit` split per experiment: a string or ``0`` for
+    every experiment, or an array of shape (n_experiments, order)."""
+    if isinstance(x0, str) or (isinstance(x0, (int, float)) and not isinstance(x0, bool)
+                               and x0 == 0) or x0 is None:
+        return [x0] * n_experiments
+    arr = np.asarray(x0, dtype=float)
+    if arr.shape != (n_experiments, order):
+        raise DataError(f"the record has {n_experiments} experiments: x0 must have shape "
+                        f"({n_experiments}, {order}), one initial state per experiment, "
+                        f"got shape {arr.shape}")
+    return list(arr)
+
+
 def _check(model, data) -> tuple[StateSpace, IOData]:
-    from .metrics import check_model_data
     check_model_data(model, data)
     return model, data
 
@@ -155,7 +256,6 @@ def predict(model, data, steps=1, x0=None, *, return_x0=False):
     model, data = _check(model, data)
     k = _check_steps(steps)
     if data.n_experiments > 1:          # each experiment from its own initial state
-        from .metrics import experiment_x0
         parts = [predict(model, e, steps, x0_e, return_x0=True)
                  for e, x0_e in zip(data.experiments,
                                     experiment_x0(x0, data.n_experiments, model.order))]
@@ -168,7 +268,6 @@ def predict(model, data, steps=1, x0=None, *, return_x0=False):
             warnings.warn(f"predict(steps={steps}): {why}, so the prediction is the "
                           "simulation (steps=inf); identify with a discrete-time method "
                           "(or subid.pem) for a noise model", NoiseModelWarning, stacklevel=2)
-        from .metrics import simulate_fit
         mode = "estimate" if x0 is None or (isinstance(x0, str) and x0 == "estimate") else x0
         if _is_zero(mode):
             mode = "zero"

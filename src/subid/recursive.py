@@ -47,17 +47,28 @@ import warnings
 import numba
 import numpy as np
 
+from . import noise_model
 from ._checkpoint import load_state, require, save_state
 from ._hankel import HankelFactor, hankel_chunk
-from ._regression import fit_b_d_projection, regression_rows, solve_factor
-from ._subspace import check_excitation, default_horizon, min_samples, normalize_channels
-from ._validation import as_signal, check_dt, check_int
-from .errors import (CheckpointError, DataError, NotConvergedWarning, OrderError, SubidError,
-                     TooFewSamplesError)
-from . import noise_model
-from .ls_subspace import check_options, check_selector, gamma_from_factor, random_selector
 from ._info import model_info
-from ._subspace import conditions_of
+from ._regression import fit_b_d_projection, regression_rows, solve_factor
+from ._subspace import (
+    check_excitation,
+    conditions_of,
+    default_horizon,
+    min_samples,
+    normalize_channels,
+)
+from ._validation import as_chunk, check_dt, check_int, check_selector
+from .errors import (
+    CheckpointError,
+    DataError,
+    NotConvergedWarning,
+    OrderError,
+    SubidError,
+    TooFewSamplesError,
+)
+from .ls_subspace import check_options, gamma_from_factor, random_selector
 from .model import StateSpace
 
 __all__ = ["RecursiveSubspace"]
@@ -145,6 +156,16 @@ class RecursiveSubspace:
     seed : int
     instrument_weighting, power_iterations, feedthrough
         As in :func:`subid.ls_subspace`.
+    dt : float
+        Sampling period of the data (and of ``model``).
+    history_size : int, optional
+        Keep at most this many snapshots of the model's poles (opt-in). When
+        the buffer is full, every other snapshot is dropped and the stride
+        doubles, so memory stays bounded however long the stream.
+    history_stride : int
+        Samples between snapshots at the start (default 1000).
+    input_names, output_names : sequence of str, optional
+        Channel names carried by ``model``.
     bd_method : {'regression', 'projection'}
         How B, D (and the state) are estimated: the recursive output-error
         regression (default; see the module notes) or the projected data
@@ -158,16 +179,6 @@ class RecursiveSubspace:
     restart_tolerance : float
         ``'regression'``: relative change of (A, C) between two refreshes
         above which the regression restarts (start-up, switches).
-    dt : float
-        Sampling period of the data (and of ``model``).
-    history_size : int, optional
-        Keep at most this many snapshots of the model's poles (opt-in). When
-        the buffer is full, every other snapshot is dropped and the stride
-        doubles, so memory stays bounded however long the stream.
-    history_stride : int
-        Samples between snapshots at the start (default 1000).
-    input_names, output_names : sequence of str, optional
-        Channel names carried by ``model``.
 
     Attributes
     ----------
@@ -187,7 +198,7 @@ class RecursiveSubspace:
     >>> data = subid.systems.simulate_data(true, 2000, seed=1)
     >>> rs = subid.RecursiveSubspace(3, 2, 2, horizon=5)
     >>> for k in range(0, 2000, 100):          # a stream in pieces
-    ...     rs.update(data.u[k:k + 100], data.y[k:k + 100])
+    ...     _ = rs.update(data.u[k:k + 100], data.y[k:k + 100])
     >>> subid.markov_error(rs.model, true) < 1e-9
     True
     """
@@ -284,22 +295,6 @@ class RecursiveSubspace:
         from ._repr import online_html, recursive_settings
         return online_html(self, recursive_settings(self))
 
-    def _as_chunk(self, values, name: str, channels: int) -> np.ndarray:
-        arr = np.asarray(values)
-        if arr.ndim == 0 and channels == 1:
-            arr = arr.reshape(1, 1)
-        elif arr.ndim == 1 and channels > 1:
-            if arr.shape[0] != channels:
-                raise DataError(f"{name} is one sample of {arr.shape[0]} values but the "
-                                f"identifier has {channels} channels; pass shape "
-                                f"(samples, {channels})")
-            arr = arr.reshape(1, channels)
-        arr = as_signal(arr, name)
-        if arr.shape[1] != channels:
-            raise DataError(f"{name} has {arr.shape[1]} channels but the identifier was "
-                            f"created with {channels}")
-        return arr
-
     def update(self, u, y) -> "RecursiveSubspace":
         """Add samples: one sample or a chunk (time on axis 0).
 
@@ -312,8 +307,8 @@ class RecursiveSubspace:
         -------
         self
         """
-        u = self._as_chunk(u, "input u", self.n_inputs)
-        y = self._as_chunk(y, "output y", self.n_outputs)
+        u = as_chunk(u, self.n_inputs, "input u", allow_empty=True, copy=True)
+        y = as_chunk(y, self.n_outputs, "output y", allow_empty=True, copy=True)
         if u.shape[0] != y.shape[0]:
             raise DataError(f"input u has {u.shape[0]} samples but output y has {y.shape[0]}")
         # validated: from here on the state changes

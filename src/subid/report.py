@@ -35,8 +35,8 @@ import numpy as np
 from ._files import atomic_write
 from .errors import ModelError, SubidError
 
-__all__ = ["identification_report", "index_page", "evaluate", "figure_html", "write_html",
-           "SECTIONS"]
+__all__ = ["identification_report", "index_page", "comparison_page", "failure_page", "evaluate",
+           "figure_html", "write_html", "SECTIONS"]
 
 log = logging.getLogger(__name__)
 
@@ -284,6 +284,68 @@ def _page(title: str, body: list[str], nav: list[tuple[str, str]] = ()) -> str:
 
 def _section(sid: str, heading: str, content: str) -> str:
     return f'<section id="{_e(sid)}">\n<h2>{_e(heading)}</h2>\n{content}\n</section>'
+
+
+def comparison_page(fits, output_names, *, title: str, source: str, n_samples: int,
+                    what: str, figure: str = "", command: str = "") -> str:
+    """The page of ``subid compare``: one row of fit % per model, then the figure.
+
+    Parameters
+    ----------
+    fits : dict
+        Model label -> fit % per output.
+    output_names : sequence of str
+        Column headings.
+    title : str
+        Page title.
+    source : str
+        Where the data come from (shown above the table).
+    n_samples : int
+        Length of the record the fits were computed on.
+    what : str
+        ``'simulated'`` or ``'K-step predicted'``: the heading of the figure.
+    figure : str
+        HTML of the figure (:func:`figure_html`).
+    command : str
+        Command line that made the page.
+
+    Returns
+    -------
+    str
+        A complete HTML document (write it with :func:`write_html`).
+    """
+    rows = "".join(
+        f"<tr><td class=\"l\">{_e(name)}</td>"
+        + "".join(f"<td>{_fmt_fit([v])}</td>" for v in values) + "</tr>"
+        for name, values in fits.items())
+    head = "".join(f"<th>{_e(n)}</th>" for n in output_names)
+    body = [_section("summary", "Fit %",
+                     f"<p>{_e(source)}: {n_samples} samples.</p>"
+                     f"<table><tr><th class=\"l\">model</th>{head}</tr>{rows}</table>"
+                     f"<pre>{_e(command)}</pre>"),
+            _section("compare", f"{what.capitalize()} and measured outputs", figure)]
+    return _page(title, body)
+
+
+def failure_page(title: str, errors) -> str:
+    """A page saying that every method failed, with each one's error.
+
+    Parameters
+    ----------
+    title : str
+        Page title.
+    errors : dict
+        Method name -> error message.
+
+    Returns
+    -------
+    str
+        A complete HTML document.
+    """
+    return _page(title, [_section(
+        "summary", "Summary", "<p>every method failed:</p><ul>" + "".join(
+            f"<li>{_e(name)}: {_e(message)}</li>" for name, message in errors.items())
+        + "</ul>")])
 
 
 # ---------------------------------------------------------------------------
@@ -572,9 +634,10 @@ def index_page(entries, *, title="subid reports", intro="", columns=(), footer="
     entries : list of dict
         Each with ``name``, ``href`` (relative link to the report) and one
         value per column name in ``columns`` (HTML-escaped text).
-    title, intro, footer : str
+    title, intro : str
     columns : sequence of str
         Extra table columns.
+    footer : str
 
     Returns
     -------

@@ -144,8 +144,10 @@ class HankelStatistic:
     >>> data = subid.systems.simulate_data(true, 5000, seed=0, output_snr_db=30)
     >>> stat = subid.HankelStatistic(2, 2, depth=10)
     >>> for k in range(0, 5000, 1000):                 # chunk by chunk
-    ...     stat.update(data.u[k:k + 1000], data.y[k:k + 1000])
+    ...     _ = stat.update(data.u[k:k + 1000], data.y[k:k + 1000])
     >>> model = subid.moesp(stat, 3)                   # from the statistic only
+    >>> model.order
+    3
     """
 
     def __init__(self, n_inputs, n_outputs, depth, *, kind="gram", dt=1.0, input_names=None,

@@ -31,6 +31,7 @@ import numpy as np
 
 from ._bd_pass import OutputRegression, sequential
 from ._subspace import default_horizon
+from ._validation import same_period
 from .data import IOData
 from .errors import DataError
 from .io import read_chunks
@@ -182,8 +183,7 @@ def _check_piece(piece, first, k: int) -> None:
     if (piece.n_inputs, piece.n_outputs) != (first.n_inputs, first.n_outputs):
         raise DataError(f"piece {k} has {piece.n_inputs} inputs and {piece.n_outputs} outputs "
                         f"but the first piece has {first.n_inputs} and {first.n_outputs}")
-    if first.dt is None or piece.dt is None or not np.isclose(piece.dt, first.dt, rtol=1e-9,
-                                                              atol=0):
+    if first.dt is None or piece.dt is None or not same_period(piece.dt, first.dt):
         raise DataError(f"piece {k} is sampled with dt = {piece.dt} but the first piece with "
                         f"dt = {first.dt}: the pieces of one record must share one uniform "
                         "sampling period (resample them first)")

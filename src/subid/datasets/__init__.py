@@ -7,8 +7,11 @@ Electrical Engineering, ESAT/SISTA, K.U.Leuven, Belgium, plus the references
 of each set (see :func:`info`).
 
 >>> from subid import datasets
->>> data = datasets.load("dryer")          # doctest: +SKIP
->>> datasets.info("dryer")["dt_note"]      # doctest: +SKIP
+>>> data = datasets.load("dryer")
+>>> data.n_samples, data.dt
+(1000, 0.08)
+>>> datasets.info("dryer")["dt_known"]
+False
 
 Where DaISy gives no sampling time, ``dt`` is 1 (time counted in samples)
 and ``info(name)["dt_known"]`` is False. Index columns and DaISy's ``Yr``

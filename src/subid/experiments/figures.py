@@ -18,11 +18,11 @@ import sys
 import warnings
 
 
-
 def make(out: str) -> list[str]:
     """Draw the figures into folder ``out``; returns the paths written."""
     import subid
     from subid import plot
+    from subid._files import save_figure
     os.makedirs(out, exist_ok=True)
     data = subid.datasets.load("dryer").detrend()
     est, val = data.split(2 / 3)
@@ -50,7 +50,7 @@ def make(out: str) -> list[str]:
     paths = []
     for name, fig in figures.items():
         path = os.path.join(out, name)
-        fig.savefig(path)
+        save_figure(fig, path)
         paths.append(path)
     import matplotlib.pyplot as plt
     plt.close("all")

@@ -21,7 +21,6 @@ Run ``python -m subid.experiments.seed000 --out results/seed000``.
 from __future__ import annotations
 
 import argparse
-import json
 import logging
 import math
 import os
@@ -32,6 +31,7 @@ import warnings
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
+from .._files import save_figure, write_bytes, write_json
 from .._progress import on_terminal, progress_wrapper
 from ..adaptive import AdaptiveIdentifier
 from ..metrics import pole_error
@@ -380,7 +380,7 @@ def figures(res, out_dir: str) -> list[str]:
 
 def _save(fig, out_dir, name):
     path = os.path.join(out_dir, name)
-    fig.savefig(path, dpi=100)
+    save_figure(fig, path, dpi=100)
     return name
 
 
@@ -410,8 +410,7 @@ def main(argv=None) -> int:
         t0 = time.perf_counter()
         text = noise_table_markdown(noise_table(seeds=seeds, progress=progress), seeds)
         text += f" Run time {time.perf_counter() - t0:.0f} s."
-        with open(os.path.join(args.out, "noise_table.md"), "w") as fh:
-            fh.write(text + "\n")
+        write_bytes(os.path.join(args.out, "noise_table.md"), text + "\n")
         print(text)
         return 0
     t0 = time.perf_counter()
@@ -423,12 +422,10 @@ def main(argv=None) -> int:
               f"(0.5-20 rad/s), horizon {HORIZON}, filter poles at {FILTER_POLE:g}, "
               f"first-order hold. Noise-free: α = 0.4, β = 0.08; 50 dB: α = 0.01, "
               f"β = 0.008. Run time {elapsed:.1f} s in all.\n\n")
-    with open(os.path.join(args.out, "table.md"), "w") as fh:
-        fh.write(header + table + "\n")
+    write_bytes(os.path.join(args.out, "table.md"), header + table + "\n")
     record.update({"seconds": elapsed, "clean_seconds": args.clean_seconds,
                    "noisy_seconds": args.noisy_seconds})
-    with open(os.path.join(args.out, "results.json"), "w") as fh:
-        json.dump(record, fh, indent=1)
+    write_json(os.path.join(args.out, "results.json"), record, indent=1)
     names = ["table.md", "results.json"]
     try:
         names += figures(res, args.out)

@@ -20,7 +20,6 @@ Run ``python -m subid.experiments.seed001 --runs 1000 --out results/seed001``.
 from __future__ import annotations
 
 import argparse
-import json
 import logging
 import os
 import sys
@@ -29,8 +28,9 @@ import warnings
 
 import numpy as np
 
-from .._progress import on_terminal, progress_wrapper
 from .. import ls_subspace, markov_error, moesp, n4sid, pole_error
+from .._files import save_figure, write_bytes, write_json
+from .._progress import on_terminal, progress_wrapper
 from ..errors import UnstableModelWarning
 from ..systems import seed001_system, simulate_data
 
@@ -79,6 +79,12 @@ def run(runs: int = 1000, n_samples: int = 1000, snr_db: float = 25.0, seed: int
     runs : int
         Number of Monte-Carlo runs; run ``r`` draws input and noise from seed
         ``seed + r``, so the results do not depend on where a run executes.
+    n_samples : int
+        Samples per record.
+    snr_db : float
+        Output signal-to-noise ratio in dB.
+    seed : int
+        Seed of the first run.
     progress : callable, optional
         Wrapper for the run iterator (e.g. ``tqdm.tqdm``).
     client : dask.distributed.Client, optional
@@ -150,13 +156,12 @@ def main(argv=None) -> int:
     header = (f"Seed 001 Section IV: {args.runs} runs, N = {args.samples}, horizon 5, order 3, "
               f"{args.snr:g} dB process and output noise. Run time {elapsed:.1f} s "
               f"(all five methods, one process).\n\n")
-    with open(os.path.join(args.out, "table.md"), "w") as fh:
-        fh.write(header + table + "\n")
-    with open(os.path.join(args.out, "results.json"), "w") as fh:
-        json.dump({"runs": args.runs, "samples": args.samples, "snr_db": args.snr,
-                   "seconds": elapsed,
-                   "markov_error": {k: v.tolist() for k, v in errs.items()},
-                   "pole_error": {k: v.tolist() for k, v in perrs.items()}}, fh)
+    write_bytes(os.path.join(args.out, "table.md"), header + table + "\n")
+    write_json(os.path.join(args.out, "results.json"),
+               {"runs": args.runs, "samples": args.samples, "snr_db": args.snr,
+                "seconds": elapsed,
+                "markov_error": {k: v.tolist() for k, v in errs.items()},
+                "pole_error": {k: v.tolist() for k, v in perrs.items()}})
     try:
         from .. import plot
         plt = plot._pyplot()
@@ -168,10 +173,10 @@ def main(argv=None) -> int:
             ax.legend(loc="lower left", fontsize="x-small")
         fig.suptitle(f"Poles over {args.runs} runs ({args.snr:g} dB process and output noise)")
         fig.tight_layout()
-        fig.savefig(os.path.join(args.out, "poles.png"), dpi=90)
+        save_figure(fig, os.path.join(args.out, "poles.png"), dpi=90)
         fig = plot.error_histograms(errs, xlabel="relative error of the first 10 Markov "
                                     "parameters")
-        fig.savefig(os.path.join(args.out, "markov_errors.png"), dpi=110)
+        save_figure(fig, os.path.join(args.out, "markov_errors.png"), dpi=110)
     except ImportError as exc:
         log.warning("figures skipped: %s", exc)
     print(header + table)

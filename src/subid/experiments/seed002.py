@@ -25,7 +25,6 @@ Run ``python -m subid.experiments.seed002 --out results/seed002``.
 from __future__ import annotations
 
 import argparse
-import json
 import logging
 import os
 import sys
@@ -35,6 +34,7 @@ import warnings
 import numpy as np
 import scipy.signal
 
+from .._files import save_figure, write_bytes, write_json
 from .._progress import on_terminal, progress_wrapper
 from ..basis import laguerre, takenaka_malmquist
 from ..ct_subspace import ct_subspace, ct_subspace_paper, dt_to_ct
@@ -245,6 +245,15 @@ def ablation(cases=((400, None, "tm"), (4000, 20.0, "default")), runs: int = 20,
     return out
 
 
+def _error_row(results, cases, name) -> str:
+    """Table row: median [90th percentile] of ``name``'s errors in each case (NaN: inf)."""
+    cells = []
+    for case in cases:
+        v = np.nan_to_num(np.array(results[case][name]), nan=np.inf)
+        cells.append(f"{np.median(v):.2e} [{np.percentile(v, 90, method='higher'):.2e}]")
+    return f"| {name} | " + " | ".join(cells) + " |"
+
+
 def ablation_table(abl) -> str:
     cases = list(abl)
     lines = ["\n**Ablation** (subspace estimate, no refinement): median [90th percentile] of "
@@ -253,12 +262,7 @@ def ablation_table(abl) -> str:
                  f"L = {L}, {'noise-free' if snr is None else f'{snr:g} dB'}, "
                  f"{'TM {4..60}' if which == 'tm' else 'default basis'}"
                  for L, snr, which in cases) + " |", "|---|" + "---:|" * len(cases)]
-    for name in ABLATIONS:
-        cells = []
-        for case in cases:
-            v = np.nan_to_num(np.array(abl[case][name]), nan=np.inf)
-            cells.append(f"{np.median(v):.2e} [{np.percentile(v, 90, method='higher'):.2e}]")
-        lines.append(f"| {name} | " + " | ".join(cells) + " |")
+    lines += [_error_row(abl, cases, name) for name in ABLATIONS]
     return "\n".join(lines)
 
 
@@ -300,12 +304,7 @@ def basis_table(study) -> str:
              "| basis | " + " | ".join(f"L = {L}, {'noise-free' if snr is None else f'{snr:g} dB'}"
                                        for L, snr in cases) + " |",
              "|---|" + "---:|" * len(cases)]
-    for name in study[cases[0]]:
-        cells = []
-        for case in cases:
-            v = np.nan_to_num(np.array(study[case][name]), nan=np.inf)
-            cells.append(f"{np.median(v):.2e} [{np.percentile(v, 90, method='higher'):.2e}]")
-        lines.append(f"| {name} | " + " | ".join(cells) + " |")
+    lines += [_error_row(study, cases, name) for name in study[cases[0]]]
     return "\n".join(lines)
 
 
@@ -425,7 +424,7 @@ def figures(out_dir, seed: int = 0, n_samples: int = 400):
         ax_m.legend(fontsize="small")
     fig.suptitle(f"Fig. 3: Bode plots, L = {n_samples}, Ts = {TS} s, p = 3")
     fig.tight_layout()
-    fig.savefig(os.path.join(out_dir, "fig3_bode.png"), dpi=100)
+    save_figure(fig, os.path.join(out_dir, "fig3_bode.png"), dpi=100)
     fig2, axes2 = plt.subplots(1, 2, figsize=(12, 4.2), sharey=True)
     for ax, (title, group) in zip(axes2, (("ours", models), ("paper's printed method", paper))):
         for i, (name, model) in enumerate(group.items()):
@@ -436,7 +435,7 @@ def figures(out_dir, seed: int = 0, n_samples: int = 400):
     axes2[0].set_ylabel("|G(jw) - G_hat(jw)|")
     fig2.suptitle(f"Fig. 4: frequency-response error, L = {n_samples}")
     fig2.tight_layout()
-    fig2.savefig(os.path.join(out_dir, "fig4_error.png"), dpi=100)
+    save_figure(fig2, os.path.join(out_dir, "fig4_error.png"), dpi=100)
     plt.close(fig)
     plt.close(fig2)
 
@@ -486,10 +485,8 @@ def main(argv=None) -> int:
               f"w = logspace(-2, 2, {FREQUENCIES.size}). Run time {elapsed:.0f} s.\n")
     text = (header + summary_table(raw) + "\n" + wins_table(raw) + "\n" + bias_table(raw)
             + "\n" + ablation_table(abl) + "\n" + basis_table(study) + "\n")
-    with open(os.path.join(args.out, "table.md"), "w") as fh:
-        fh.write(text)
-    with open(os.path.join(args.out, "results.json"), "w") as fh:
-        json.dump({"lengths": args.lengths, "runs": args.runs, "runs_large": args.runs_large,
+    write_bytes(os.path.join(args.out, "table.md"), text)
+    write_json(os.path.join(args.out, "results.json"), {"lengths": args.lengths, "runs": args.runs, "runs_large": args.runs_large,
                    "seed": args.seed, "seconds": elapsed, "frequencies": FREQUENCIES.tolist(),
                    "bias_frequencies": BIAS_FREQUENCIES.tolist(),
                    "results": _jsonable(raw),
@@ -498,7 +495,7 @@ def main(argv=None) -> int:
                        for k, v in res.items()} for (L, snr, which), res in abl.items()},
                    "basis_study": {f"L={L}, snr={snr}": {
                        k: [None if not np.isfinite(x) else x for x in v]
-                       for k, v in res.items()} for (L, snr), res in study.items()}}, fh)
+                       for k, v in res.items()} for (L, snr), res in study.items()}})
     try:
         figures(args.out, args.seed, min(args.lengths))
         figs = ", fig3_bode.png, fig4_error.png"
