@@ -6,7 +6,7 @@ import numbers
 
 import numpy as np
 
-from ._validation import as_signal, check_dt, check_time_stamps, is_uniform
+from ._validation import as_signal, check_dt, check_time_stamps, is_uniform, same_period
 from .errors import DataError
 
 __all__ = ["IOData", "merge"]
@@ -463,7 +463,7 @@ def merge(records, names=None) -> IOData:
                             "sampled")
     first = records[0]
     for k, rec in enumerate(records[1:], start=1):
-        if not np.isclose(rec.dt, first.dt, rtol=1e-9, atol=0):
+        if not same_period(rec.dt, first.dt):
             raise DataError(f"merge: record {k} is sampled with dt={rec.dt:g} but record 0 "
                             f"with dt={first.dt:g}; resample one of them first")
         if (rec.n_inputs, rec.n_outputs) != (first.n_inputs, first.n_outputs):
