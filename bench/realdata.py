@@ -100,6 +100,7 @@ def subid_defaults(est, val) -> dict:
         seconds = time.perf_counter() - start
         rows[label] = {"fit": score(model, val), "order": model.order,
                        "horizon": model.info.get("horizon"), "seconds": seconds,
+                       "system_matrices": model.info.get("system_matrices"),
                        "stable": bool(model.is_stable()),
                        "stability": model.info.get("stability", {}).get("action")
                        if isinstance(model.info.get("stability"), dict) else None,
@@ -143,7 +144,8 @@ def main(argv=None) -> int:
         "subid: the default call `method(estimation_data)`, no options. SIPPY (sippy-unipi): "
         "best of N4SID, MOESP and CVA at orders 1..10 and horizons 10 and 20, chosen on the "
         "validation data (an oracle no user has). A subid entry is bold when it is within "
-        f"{TOLERANCE:g} points of that oracle.",
+        f"{TOLERANCE:g} points of that oracle; `shift`/`states` is the estimate of the "
+        "system matrices the cross-validation chose (`system_matrices='auto'`).",
         "",
         "| record | SIPPY best (method/order/horizon) | ls_subspace | moesp | n4sid |",
         "|---|---|---|---|---|",
@@ -155,7 +157,8 @@ def main(argv=None) -> int:
         best = grid[best_key] if best_key else None
         cells = []
         for label, row in results[name].items():
-            text = f"{row['fit']:.1f} (n={row['order']}, f={row['horizon']})"
+            how = f", {row['system_matrices']}" if row.get("system_matrices") else ""
+            text = f"{row['fit']:.1f} (n={row['order']}, f={row['horizon']}{how})"
             if best is not None and row["fit"] >= best - TOLERANCE:
                 text = f"**{text}**"
                 met[label] += 1

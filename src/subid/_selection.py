@@ -27,6 +27,15 @@ estimation record only:
   where every order from the true one up fits to rounding): a higher order
   must earn its parameters.
 
+Horizons that cannot reveal every candidate order compete at the orders
+they can reveal (horizon 10 on a single output: orders 1..9). Where a
+method offers two estimators of the system matrices from the same subspace
+(``system_matrices='auto'`` of MOESP and ``ls_subspace``: shift invariance
+with the output regression, or the state sequence), each is a candidate
+too. When the chosen candidate's model refitted to the whole record has to
+be stabilised although not all of its fold models had, the next candidates
+by score are tried (:func:`subid._subspace._unrepaired_choice`).
+
 The final model is then fitted to the whole record with the chosen order
 and horizon, by the same code path as an explicit call, so that
 ``method(data, order=model.order, horizon=model.info['horizon'])``
@@ -90,19 +99,25 @@ def folds(n_samples: int):
 
 
 def feasible_horizons(n_train: int, n_inputs: int, n_outputs: int, blocks: int,
-                      largest_order: int, candidates=HORIZON_CANDIDATES, n_experiments=1):
+                      largest_order: int, candidates=HORIZON_CANDIDATES, n_experiments=1, *,
+                      reveal_all: bool = True):
     """Horizons of ``candidates`` a training fold of ``n_train`` samples supports.
 
     A horizon is kept when its Hankel matrix has at least twice as many
-    columns as rows and it can reveal ``largest_order`` (``(f-1) ny >= n``).
-    When none is, the largest horizon (at least 2) with at least as many
-    columns as rows is returned alone. ``n_experiments`` experiments lose
+    columns as rows and, with ``reveal_all``, it can reveal ``largest_order``
+    (``(f-1) ny >= n``). Without ``reveal_all`` (the cross-validation), a
+    horizon that reveals only the lower orders is kept too and competes at
+    those orders: on a single-output record horizon 10 reveals orders 1..9,
+    and excluding it left horizon 20 alone (on the DaISy ballbeam record the
+    shorter horizon gives the better models at every order). When none is
+    kept, the largest horizon (at least 2) with at least as many columns as
+    rows is returned alone. ``n_experiments`` experiments lose
     ``blocks * f - 1`` columns each.
     """
     rows = lambda f: blocks * f * (n_inputs + n_outputs)   # noqa: E731
     cols = lambda f: n_train - n_experiments * (blocks * f - 1)   # noqa: E731
-    kept = [f for f in candidates if cols(f) >= 2 * rows(f)
-            and (f - 1) * n_outputs >= min(largest_order, MAX_ORDER)]
+    need = min(largest_order, MAX_ORDER) if reveal_all else 1
+    kept = [f for f in candidates if cols(f) >= 2 * rows(f) and (f - 1) * n_outputs >= need]
     if kept:
         return kept
     f = max(candidates)
@@ -129,7 +144,7 @@ def _fit_score(model, validation) -> float:
     return max(value, FLOOR) if math.isfinite(value) else FLOOR
 
 
-def cross_validate(data, fixed, candidates, horizon, *, prepare_fold, build):
+def cross_validate(data, fixed, candidates, horizon, *, prepare_fold, builds):
     """Choose ``(order, horizon)`` by contiguous cross-validation (:func:`folds`).
 
     Parameters
@@ -143,11 +158,13 @@ def cross_validate(data, fixed, candidates, horizon, *, prepare_fold, build):
     horizon : int or None
         The horizon when given (only the order is chosen).
     prepare_fold : callable ``(record, candidates, horizon) -> Problem``
-    build : callable ``(Problem with a fixed order) -> StateSpace``
+    builds : dict ``name -> callable (Problem with a fixed order) -> StateSpace``
+        The estimators to choose among (one, named None, when there is no
+        choice); on ties the first is preferred.
 
     Returns
     -------
-    order, horizon, record : int, int, dict
+    order, horizon, variant, record : int, int, str or None, dict
         ``record`` is stored as ``info['order_selection']``.
     """
     used = data                       # validated by the caller (subid._subspace.identify)
@@ -170,27 +187,32 @@ def cross_validate(data, fixed, candidates, horizon, *, prepare_fold, build):
     blocks = prepare_fold.blocks
     horizons = [horizon] if horizon is not None else feasible_horizons(
         n_train, data.n_inputs, data.n_outputs, blocks, max(wanted),
-        n_experiments=n_exp_train)
-    scores, fold_scores = {}, {}
+        n_experiments=n_exp_train, reveal_all=fixed is not None)
+    names = list(builds)
+    scores, fold_scores, stabilised_folds = {}, {}, {}
     for f in horizons:
         orders = [n for n in wanted if n <= (f - 1) * data.n_outputs]
         if not orders:
             continue
-        per_fold = {n: [] for n in orders}
+        per_fold = {(n, v): [] for n in orders for v in range(len(names))}
+        repaired = {(n, v): 0 for n in orders for v in range(len(names))}
         for train, validation in parts:
             problem = prepare_fold(train, orders, f)
             for n in orders:
-                try:
-                    with warnings.catch_warnings():
-                        warnings.simplefilter("ignore")
-                        model = build(replace(problem, order=n, candidates=[n]))
-                    value = _fit_score(model, validation)
-                except SubidError:
-                    value = FLOOR
-                per_fold[n].append(value)
-        for n in orders:
-            fold_scores[(n, f)] = per_fold[n]
-            scores[(n, f)] = float(np.mean(per_fold[n]))
+                for v, name in enumerate(names):
+                    try:
+                        with warnings.catch_warnings():
+                            warnings.simplefilter("ignore")
+                            model = builds[name](replace(problem, order=n, candidates=[n]))
+                        value = _fit_score(model, validation)
+                        repaired[(n, v)] += stabilised(model)
+                    except SubidError:
+                        value = FLOOR
+                    per_fold[(n, v)].append(value)
+        for (n, v), values in per_fold.items():
+            fold_scores[(n, f, v)] = values
+            scores[(n, f, v)] = float(np.mean(values))
+            stabilised_folds[(n, f, v)] = repaired[(n, v)]
     if not scores:
         need = math.ceil(max(wanted) / data.n_outputs) + 1
         raise OrderError(f"order {min(wanted)}{'..' + str(max(wanted)) if len(wanted) > 1 else ''}"
@@ -199,19 +221,47 @@ def cross_validate(data, fixed, candidates, horizon, *, prepare_fold, build):
                          f"{'s' if data.n_outputs != 1 else ''}; give horizon >= {need} "
                          "(with enough samples) or a lower order")
     limit = (100.0 - max(scores.values())) * (1.0 + RELATIVE_TOLERANCE) + ABSOLUTE_TOLERANCE
-    order, chosen_h = min(key for key, value in scores.items() if 100.0 - value <= limit)
+    order, chosen_h, chosen_v = min(key for key, value in scores.items()
+                                    if 100.0 - value <= limit)
+
+    def entry(n, f, v):
+        out = {"order": n, "horizon": f, "score": scores[(n, f, v)]}
+        if names[v] is not None:
+            out["system_matrices"] = names[v]
+        return out
+
     record = {
         "rule": "cv",
         "description": ("four-fold contiguous cross-validation on the estimation data: "
                         "simulation fit (%, mean over outputs, x0 by least squares) on the "
                         "held-out third, mean over the folds; smallest order whose misfit "
-                        f"is within {100 * RELATIVE_TOLERANCE:g} % of the best"),
-        "candidates": [{"order": n, "horizon": f, "score": s, "folds": fold_scores[(n, f)]}
-                       for (n, f), s in sorted(scores.items())],
-        "selected": {"order": order, "horizon": chosen_h, "score": scores[(order, chosen_h)]},
+                        f"is within {100 * RELATIVE_TOLERANCE:g} % of the best"
+                        + ("" if len(names) == 1 else
+                           f" (then the first of the estimators {', '.join(names)})")),
+        "candidates": [dict(entry(n, f, v), folds=fold_scores[(n, f, v)],
+                            stabilised_folds=stabilised_folds[(n, f, v)])
+                       for (n, f, v) in sorted(scores)],
+        "selected": entry(order, chosen_h, chosen_v),
         "samples_used": used.n_samples,
     }
-    return order, chosen_h, record
+    # the other candidates, best score first: the fallbacks of :func:`final_model`
+    ranked = sorted((key for key in scores if key != (order, chosen_h, chosen_v)),
+                    key=lambda key: (-scores[key], key))
+    record["ranking"] = [entry(*key) for key in ranked]
+    return order, chosen_h, names[chosen_v], record
+
+
+def stabilised(model) -> bool:
+    """Whether ``model``'s A was made stable after its estimation (``stability='auto'``
+    found it unstable on data that do not grow and reflected its unstable poles)."""
+    stab = model.info.get("stability")
+    return isinstance(stab, dict) and stab.get("action") == "enforced" \
+        and stab.get("requested") == "auto"
+
+
+#: Candidates tried, best first, when the final model of the chosen one had to be
+#: stabilised although not all of its fold models had (:func:`subid._subspace.identify`).
+MAX_FALLBACKS = 4
 
 
 def describe(record) -> str:
@@ -223,7 +273,9 @@ def describe(record) -> str:
         return "given"
     chosen = record.get("selected", {})
     if rule == "cv":
-        return (f"cross-validated on the estimation data: horizon {chosen.get('horizon')}, "
-                f"fit {chosen.get('score', float('nan')):.1f} % over "
+        how = chosen.get("system_matrices")
+        return (f"cross-validated on the estimation data: horizon {chosen.get('horizon')}"
+                + (f", system matrices by {how}" if how else "")
+                + f", fit {chosen.get('score', float('nan')):.1f} % over "
                 f"{len(record.get('candidates', []))} candidates")
     return str(record.get("description", rule))

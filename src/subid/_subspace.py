@@ -344,6 +344,65 @@ def estimate_b_d(A, C_n, gamma, L11, L_yu, problem: "Problem", *, bd_method: str
     return B, D, None, proj
 
 
+def predictor_b_d(A, C, B, D, problem, *, feedthrough: bool, estimate_x0: bool):
+    """B, D (and x0) of an unstable A by the prediction-error form, or None.
+
+    For an unstable A the output-error regression of :func:`estimate_b_d` is
+    ill-posed over a long record: the sensitivities ``C A^t`` grow without
+    bound, the regression fits the growth of the last samples and the
+    initial state rather than the input-output behaviour (on the DaISy
+    ballbeam record, MOESP at order 2: validation fit 79.8 %; the same A and
+    C with B, D from the state regression of N4SID: 88.9 %). The innovation
+    form ``x(k+1) = A x(k) + B u(k) + K e(k)``, ``y(k) = C x(k) + D u(k) +
+    e(k)`` has the one-step predictor (Ljung, *System Identification*, 2nd
+    ed., 1999, eq. 4.86, with ``Ā = A - K C``, stable)
+
+        x̂(k+1) = Ā x̂(k) + (B - K D) u(k) + K y(k),   ŷ(k) = C x̂(k) + D u(k),
+
+    which, given A, C and K, is linear in ``B̃ = B - K D``, D and ``x̂(0) = x0``:
+    ``y(k) - y_K(k) = C Ā^k x0 + sum_j C Ā^(k-1-j) B̃ u(j) + D u(k) + e(k)``
+    with ``y_K`` the output of ``(Ā, K, C, 0)`` driven by y. Its regression
+    (the same weighted least squares as :func:`subid._regression.fit_b_d_x0`,
+    on ``(Ā, C)``) is well posed because Ā is stable. K comes from the noise
+    model of the output-error estimate ``(A, B, C, D)``
+    (:func:`subid.noise_model.innovation_model`), and ``B = B̃ + K D``.
+
+    Returns
+    -------
+    (B, D, x0, diagnostics) or None
+        None when there are no raw samples, the factor is too shallow for the
+        noise model, or it gives no stable predictor.
+    """
+    from ._simulate import _simulate_discrete
+    from .noise_model import innovation_model, user_factor
+    data = problem.data
+    if not isinstance(data, IOData):
+        return None
+    try:
+        with np.errstate(all="ignore"):
+            K, _, diag = innovation_model(A, B, C, D, user_factor(problem))
+    except (SubidError, np.linalg.LinAlgError, ValueError):
+        return None
+    if not np.isfinite(K).all() or diag["predictor_spectral_radius"] >= 1.0:
+        return None
+    A_bar = A - K @ C
+    ny = C.shape[0]
+    y_k = _simulate_discrete(A_bar, K, C, np.zeros((ny, ny)), data.y,
+                             np.zeros(A.shape[0]))[0]
+    with np.errstate(all="ignore"):
+        B_t, D_p, x0, reg = fit_b_d_x0(A_bar, C, data.u, data.y - y_k, feedthrough=feedthrough,
+                                       estimate_x0=estimate_x0,
+                                       output_weights=problem.weights())
+    B_p = B_t + K @ D_p
+    if not (np.isfinite(B_p).all() and np.isfinite(D_p).all()) \
+            or reg["regression_rank_deficient"]:
+        return None
+    reg.update(bd_method="prediction", spectral_radius=float(np.abs(np.linalg.eigvals(A)).max()),
+               predictor_spectral_radius=diag["predictor_spectral_radius"],
+               prediction_residual_rms=reg.pop("residual_rms"))
+    return B_p, D_p, (x0 if estimate_x0 else None), reg
+
+
 WEIGHTINGS = ("moesp", "cva", "n4sid")
 
 
@@ -476,7 +535,8 @@ def reflect_unstable_poles(A, radius: float = STABLE_RADIUS, max_condition: floa
 KEEP_UNSTABLE_RATIO = 0.9
 
 
-def stable_choice(A_q, Q, n_outputs: int, fit, *, stability: str, data, method: str):
+def stable_choice(A_q, Q, n_outputs: int, fit, *, stability: str, data, method: str,
+                  refit_unstable=None):
     """A in the orthonormal basis ``Q``, stable when that is right, with its B, D, x0.
 
     ``fit(A_q)`` returns ``(B, D, x0, diagnostics)`` for a given A (the
@@ -499,6 +559,11 @@ def stable_choice(A_q, Q, n_outputs: int, fit, *, stability: str, data, method: 
       unstable model, while a spurious unstable mode, which the data do not
       need, is removed.
 
+    When the A returned is unstable and ``refit_unstable(A_q, fitted)`` is
+    given, B, D, x0 come from it instead (:func:`predictor_b_d`: the
+    output-error regression is ill-posed for an unstable A), unless it
+    returns None.
+
     Returns
     -------
     A_q, (B, D, x0, diagnostics), record
@@ -506,8 +571,15 @@ def stable_choice(A_q, Q, n_outputs: int, fit, *, stability: str, data, method: 
     """
     before = float(np.abs(np.linalg.eigvals(A_q)).max())
     record = {"requested": stability, "action": "none", "spectral_radius_before": before}
+
+    def unstable(fitted):
+        if refit_unstable is None:
+            return fitted
+        refitted = refit_unstable(A_q, fitted)
+        return fitted if refitted is None else refitted
+
     if not stability_request(stability, A_q, data, method):
-        return A_q, fit(A_q), record
+        return A_q, (unstable(fit(A_q)) if before >= 1.0 else fit(A_q)), record
     # the unstable poles reflected; where the eigenvectors are unreliable (a nearly
     # defective A), the regularised shift invariance
     A_s = reflect_unstable_poles(A_q)
@@ -531,7 +603,7 @@ def stable_choice(A_q, Q, n_outputs: int, fit, *, stability: str, data, method: 
             record.update(action="kept unstable",
                           how=f"the unstable model fits the estimation data clearly better "
                               f"(residual RMS {r_u:.3g} against {r_s:.3g} when stabilised)")
-            return A_q, fitted_u, record
+            return A_q, unstable(fitted_u), record
     return A_s, fitted_s, record
 
 
@@ -681,9 +753,19 @@ def choose_order(fixed, candidates, profile, source: str):
                "selected": {"order": n, "score": gaps.get(n)}}
 
 
+SYSTEM_MATRICES = ("auto", "shift", "states")
+
+
+def check_system_matrices(system_matrices: str) -> str:
+    if system_matrices not in SYSTEM_MATRICES:
+        raise OptionError(f"system_matrices must be one of {SYSTEM_MATRICES}, got "
+                         f"{system_matrices!r}")
+    return system_matrices
+
+
 def identify(data, order, horizon, *, method: str, build, selection: str,
              blocks_per_horizon: int = 2, statistic: str = "auto",
-             normalize_outputs: bool = True, finalize=None) -> StateSpace:
+             normalize_outputs: bool = True, finalize=None, variants=None) -> StateSpace:
     """Validate, choose the order and horizon, and run ``build``.
 
     ``build(problem)`` is the method itself on a prepared problem. With
@@ -695,6 +777,15 @@ def identify(data, order, horizon, *, method: str, build, selection: str,
     gap of the method's rank profile. ``finalize(model, problem)`` runs on
     the final model only (not on the cross-validation candidates): the noise
     model and the optional refinement (:func:`subid.noise_model.attach_noise_model`).
+
+    ``variants`` (a dict name -> build, the first the default), when given,
+    are alternative estimators of the system matrices from the same
+    subspace (``system_matrices='auto'`` of :func:`subid.moesp` and
+    :func:`subid.ls_subspace`): with ``selection='cv'`` on a raw record the
+    cross-validation chooses among them too, even when the order and the
+    horizon are given (so that a given order and horizon reproduce the
+    model); otherwise the first one is used. ``info['system_matrices']``
+    names the one used.
     """
     if selection not in SELECTION_RULES:
         raise OptionError(f"selection must be one of {SELECTION_RULES}, got {selection!r}")
@@ -704,7 +795,9 @@ def identify(data, order, horizon, *, method: str, build, selection: str,
     options = dict(method=method, blocks_per_horizon=blocks_per_horizon, statistic=statistic,
                    normalize_outputs=normalize_outputs)
     with collect_warnings() as issued:
-        if selection == "cv" and isinstance(data, IOData) and (fixed is None or horizon is None):
+        builds = variants if variants else {None: build}
+        choose = fixed is None or horizon is None or len(builds) > 1
+        if selection == "cv" and isinstance(data, IOData) and choose:
             check_data(data, method)
 
             def prepare_fold(record, orders, f):
@@ -712,18 +805,80 @@ def identify(data, order, horizon, *, method: str, build, selection: str,
                     warnings.simplefilter("ignore")
                     return prepare(record, orders, f, **options)
             prepare_fold.blocks = blocks_per_horizon
-            n, f, record = cross_validate(data, fixed, candidates, horizon,
-                                          prepare_fold=prepare_fold, build=build)
+            try:
+                n, f, variant, record = cross_validate(data, fixed, candidates, horizon,
+                                                       prepare_fold=prepare_fold, builds=builds)
+            except SubidError:
+                if fixed is None or horizon is None:
+                    raise
+                # order and horizon given, the folds too short for them: the default estimator
+                n, f, variant, record = fixed, horizon, next(iter(builds)), None
             problem = prepare(data, n, f, **options)
-            model = build(problem)
-            model.info["order_selection"] = record
+            model = builds[variant](problem)
+            if record is not None:
+                n, f, variant, problem, model = _unrepaired_choice(
+                    record, data, options, builds, (n, f, variant, problem, model))
+            if record is not None and (fixed is None or horizon is None):
+                model.info["order_selection"] = record
+            elif record is not None:
+                model.info["system_matrices_selection"] = record
         else:
             problem = prepare(data, order, horizon, **options)
-            model = build(problem)
+            variant = next(iter(builds))
+            model = builds[variant](problem)
+        if variant is not None:
+            model.info["system_matrices"] = variant
         if finalize is not None:
             model = finalize(model, problem)
     model.info["warnings"] = list(issued)
     return model
+
+
+def _unrepaired_choice(record, data, options, builds, chosen):
+    """The cross-validated choice, or a runner-up when only the choice had to be repaired.
+
+    The cross-validation scores the models fitted to its folds. When the
+    model of the chosen candidate refitted to the whole record comes out
+    unstable and ``stability='auto'`` reflects its poles
+    (:func:`stable_choice`) while not all of its fold models needed that,
+    the final model is not the kind of model that was scored (on the DaISy
+    evaporator record, MOESP at order 10, horizon 20: two of four fold
+    models stable, the final one with a slow unstable pole, 56 % validation
+    fit once stabilised). The candidates are then tried in the order of their
+    scores (at most :data:`subid._selection.MAX_FALLBACKS`), and the first
+    whose final model needs no repair the folds did not need is taken; if
+    none, the original choice stands. ``record['repaired_choice']`` tells.
+    """
+    from ._selection import MAX_FALLBACKS, stabilised
+    n, f, variant, _, model = chosen
+    by_key = {(c["order"], c["horizon"], c.get("system_matrices")): c
+              for c in record["candidates"]}
+
+    def needs_repair(key, m):
+        c = by_key.get(key, {})
+        return stabilised(m) and c.get("stabilised_folds", 0) < len(c.get("folds", ()))
+
+    if not needs_repair((n, f, variant), model):
+        return chosen
+    skipped = [{"order": n, "horizon": f, "system_matrices": variant}]
+    for entry in record.get("ranking", [])[:MAX_FALLBACKS]:
+        key = (entry["order"], entry["horizon"], entry.get("system_matrices"))
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                pb = prepare(data, key[0], key[1], **options)
+                m = builds[key[2]](pb)
+        except SubidError:
+            continue
+        if not needs_repair(key, m):
+            record["repaired_choice"] = {"skipped": skipped, "taken": entry}
+            record["selected"] = dict(entry, fallback=True)
+            # the warnings of the model returned, as a direct call gives them
+            pb = prepare(data, key[0], key[1], **options)
+            return key[0], key[1], key[2], pb, builds[key[2]](pb)
+        skipped.append(entry)
+    record["repaired_choice"] = {"skipped": skipped, "taken": None}
+    return chosen
 
 
 def finalize(model: StateSpace, problem: Problem, *, refine, delays) -> StateSpace:

@@ -51,18 +51,22 @@ import numpy as np
 import scipy.linalg
 
 from ._subspace import (
+    BD_METHODS,
+    check_system_matrices,
     choose_order,
     estimate_b_d,
     finalize,
     finish,
     identify,
+    predictor_b_d,
     shift_invariance,
     stable_choice,
 )
-from ._validation import check_bool, check_selector, legacy_arguments
+from ._validation import check_bool, check_choice, check_selector, legacy_arguments
 from .delay import shift_for_method
 from .errors import OptionError, OrderError
 from .model import StateSpace
+from .n4sid import state_model
 from .noise_model import check_refine
 
 __all__ = ["ls_subspace", "random_selector"]
@@ -101,7 +105,7 @@ def _condition_1norm(M: np.ndarray) -> float:
 def ls_subspace(data, order=None, *, horizon=None, instruments="past", selector=None, seed=0,
                 estimate_x0=True, feedthrough=True, instrument_weighting=True,
                 power_iterations=8, normalize_outputs=True, selection="cv",
-                stability="auto", bd_method="auto",
+                stability="auto", system_matrices="auto", bd_method="auto",
                 statistic="auto", refine=None, input_delay=0) -> StateSpace:
     """Identify a discrete-time state-space model without SVD (seed 001).
 
@@ -159,6 +163,16 @@ def ls_subspace(data, order=None, *, horizon=None, instruments="past", selector=
         (:func:`subid._subspace.stability_request`), by regularised shift
         invariance, then B, D and x0 are refitted; ``'enforce'``: always;
         ``'none'``: never. ``info['stability']`` says what was done.
+    system_matrices : {'auto', 'shift', 'states'}
+        How A, B, C, D follow from the estimated Γ̄. ``'shift'``: A and C by
+        shift invariance (the paper), B, D, x0 by ``bd_method``. ``'states'``
+        (with instruments only): the state sequence ``X = Γ̄^† O`` with ``O``
+        the oblique projection of the future outputs on the past data, and
+        ``[A B; C D]`` by least squares on it (:func:`subid.n4sid`'s step,
+        QR-based, still SVD-free; the basis is still the one Λ fixes).
+        ``'auto'`` (default): with ``selection='cv'`` on a record the
+        cross-validation chooses between them, as in :func:`subid.moesp`;
+        otherwise ``'shift'``. ``info['system_matrices']`` names the one used.
     bd_method : {'auto', 'simulation', 'projection'}
         How B, D (and x0) are found given A and C: least squares on the raw
         output samples through the model (``'simulation'``, most accurate,
@@ -168,7 +182,10 @@ def ls_subspace(data, order=None, *, horizon=None, instruments="past", selector=
         deviation, so that the fit does not depend on the output units. ``'auto'``:
         simulation, and projection when simulating the identified model
         overflows or leaves the regression numerically singular (always
-        projection when ``data`` is a statistic).
+        projection when ``data`` is a statistic); for an unstable A that is
+        kept, the prediction-error form of the regression with the Kalman
+        gain of the noise model (:func:`subid._subspace.predictor_b_d`),
+        which stays well posed where simulating the model does not.
     statistic : {'auto', 'qr', 'gram'}
         How the data are reduced (:mod:`subid.statistic`): QR factor of the
         Hankel matrix (accurate to rounding) or lagged products (25x faster,
@@ -215,14 +232,24 @@ def ls_subspace(data, order=None, *, horizon=None, instruments="past", selector=
         check_bool(flag, name)
     if selector is not None and horizon is None:
         horizon = selector_horizon(selector, data)
-    build = partial(_ls_subspace, instruments=instruments, selector=selector, seed=seed,
-                    estimate_x0=estimate_x0, feedthrough=feedthrough,
-                    instrument_weighting=instrument_weighting,
-                    power_iterations=power_iterations, stability=stability,
-                    bd_method=bd_method)
+    check_choice(bd_method, "bd_method", BD_METHODS)
+    check_system_matrices(system_matrices)
+    if system_matrices == "states" and instruments != "past":
+        raise OptionError("system_matrices='states' needs the past data (instruments='past'): "
+                          "the state sequence is the projection of the future outputs on them")
+    options = {"instruments": instruments, "selector": selector, "seed": seed,
+               "estimate_x0": estimate_x0, "feedthrough": feedthrough,
+               "instrument_weighting": instrument_weighting,
+               "power_iterations": power_iterations, "stability": stability,
+               "bd_method": bd_method}
+    names = ("shift", "states") if system_matrices == "auto" and instruments == "past" else \
+        ("shift" if system_matrices == "auto" else system_matrices,)
+    variants = {name: partial(_ls_subspace, system_matrices=name, **options) for name in names}
+    build = next(iter(variants.values()))
     check_refine(refine, data)
     data, delays = shift_for_method(data, input_delay)
-    return identify(data, order, horizon, method=method, build=build, selection=selection,
+    return identify(data, order, horizon, method=method, build=build, variants=variants,
+                    selection=selection,
                     blocks_per_horizon=2 if instruments == "past" else 1, statistic=statistic,
                     normalize_outputs=bool(normalize_outputs),
                     finalize=partial(finalize, refine=refine, delays=delays))
@@ -239,7 +266,8 @@ def selector_horizon(selector, data) -> int:
 
 
 def _ls_subspace(pb, *, instruments, selector, seed, estimate_x0, feedthrough,
-                 instrument_weighting, power_iterations, stability, bd_method) -> StateSpace:
+                 instrument_weighting, power_iterations, stability, bd_method,
+                 system_matrices="shift") -> StateSpace:
     method = "ls_subspace"
     data = pb.data
     selector = check_selector(selector, pb.horizon, data.n_outputs, pb.candidates, pb.order)
@@ -254,14 +282,34 @@ def _ls_subspace(pb, *, instruments, selector, seed, estimate_x0, feedthrough,
                              selector=None if selector is None else selector * column_scale,
                              seed=seed, power_iterations=power_iterations, method=method)
 
+    if system_matrices == "states":
+        # the state step of N4SID on Γ̄ (in the basis Q), then the basis of Λ (T = Λ Q)
+        A_q, B_q, C_q, D, x0_q, extra = state_model(pb, core.basis, stability=stability,
+                                                    feedthrough=feedthrough,
+                                                    estimate_x0=estimate_x0)
+        T = core.T
+        A = scipy.linalg.solve(T.T, (T @ A_q).T, check_finite=False).T        # T A_q T^{-1}
+        C = scipy.linalg.solve(T.T, C_q.T, check_finite=False).T              # C_q T^{-1}
+        x0 = None if x0_q is None else x0_q @ T.T          # T x0_q (one row per experiment)
+        extra["x0"] = x0
+        info = core.info(instruments, instrument_weighting, power_iterations)
+        info["selector"] = core.selector / column_scale
+        return finish(pb, A, T @ B_q, C, D, core.order, core.order_selection, **info, **extra)
+
     def fit(A_try):
         return estimate_b_d(A_try, core.C_q, core.basis, core.L11, core.L_yu, pb,
                             bd_method=bd_method, feedthrough=feedthrough,
                             estimate_x0=estimate_x0)
 
+    def refit(A_try, fitted):       # an unstable A: B, D, x0 by the prediction-error form
+        return predictor_b_d(A_try, core.C_q * pb.output_scale[:, None], fitted[0], fitted[1],
+                             pb, feedthrough=feedthrough, estimate_x0=estimate_x0)
+
     A_q, (B_q, D, x0_q, reg), stab = stable_choice(core.A_q, core.basis, data.n_outputs, fit,
                                                    stability=stability, data=data,
-                                                   method=method)
+                                                   method=method,
+                                                   refit_unstable=refit if bd_method == "auto"
+                                                   else None)
     A, B, C, x0 = core.to_selector_basis(B_q, x0_q, A_q=A_q)
     C = C * pb.output_scale[:, None]
     info = core.info(instruments, instrument_weighting, power_iterations)

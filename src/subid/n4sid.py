@@ -138,11 +138,9 @@ def n4sid(data, order=None, *, horizon=None, weighting="cva", selection="cv",
 
 
 def _n4sid(pb, *, weighting, stability, feedthrough, estimate_x0) -> StateSpace:
-    data, i, hf = pb.data, pb.horizon, pb.factor
-    ny, nu = data.n_outputs, data.n_inputs
+    i, hf = pb.horizon, pb.factor
     L = hf.L
     wp = hf.rows(hf.u_rows(0, i), hf.y_rows(0, i))
-    wp_next = hf.rows(hf.u_rows(1, i + 1), hf.y_rows(1, i + 1))
     uf = hf.rows(hf.u_rows(i, 2 * i))
     yf = hf.rows(hf.y_rows(i, 2 * i))
     perp = np.eye(L.shape[1]) - _row_space_projector(uf)
@@ -162,6 +160,44 @@ def _n4sid(pb, *, weighting, stability, feedthrough, estimate_x0) -> StateSpace:
     gamma = U[:, :n] * np.sqrt(s[:n])
     if W1_inv is not None:
         gamma = W1_inv @ gamma
+    A, B, C, D, _, extra = state_model(pb, gamma, stability=stability,
+                                       feedthrough=feedthrough, estimate_x0=estimate_x0,
+                                       coefficients=coef)
+    return finish(pb, A, B, C, D, n, order_selection, singular_values=s, weighting=weighting,
+                  **extra)
+
+
+def state_model(pb, gamma, *, stability, feedthrough, estimate_x0, coefficients=None):
+    """A, B, C, D (and x0) from the state sequence that Γ and the data determine.
+
+    ``gamma`` is an estimate of the extended observability matrix (``horizon``
+    block rows) in the units of the normalised channels of ``pb``, from any
+    method (N4SID, MOESP, seed 001's least squares). The states are
+    ``X_i = Γ^† O_i = K W_p`` with ``O_i = Y_f /_{U_f} W_p = coef W_p``
+    (VODM 1996, Sec. 4.3, eq. 4.24 ff.), the next states ``X_{i+1} = K W_p^+``
+    (the past window one sample later), and ``[X_{i+1}; Y_{i|i}] = [A B; C D]
+    [X_i; U_{i|i}]`` by least squares (VODM 1996, Sec. 4.3.2, eq. 4.29). With
+    ``stability`` asking for it, a stable A (:func:`subid._subspace.stable_choice`).
+
+    Returns
+    -------
+    A, B, C, D, x0, info
+        In the state basis of ``gamma`` (B, C, D in the user's units);
+        ``info`` holds ``state_regression_residual``, ``x0``, ``stability``
+        and the B, D regression's diagnostics when stability was enforced.
+    """
+    data, i, hf = pb.data, pb.horizon, pb.factor
+    ny, nu = data.n_outputs, data.n_inputs
+    n = gamma.shape[1]
+    L = hf.L
+    wp = hf.rows(hf.u_rows(0, i), hf.y_rows(0, i))
+    wp_next = hf.rows(hf.u_rows(1, i + 1), hf.y_rows(1, i + 1))
+    if coefficients is None:
+        uf = hf.rows(hf.u_rows(i, 2 * i))
+        yf = hf.rows(hf.y_rows(i, 2 * i))
+        perp = np.eye(L.shape[1]) - _row_space_projector(uf)
+        coefficients = _oblique_coefficients(yf, uf, wp, perp)      # O_i = coef W_p
+    coef = coefficients
     # States X_i = Γ^† O_i = K W_p with K = Γ^† coef: x(k) is a fixed linear function
     # of the past window w_p(k), so the next state is the same function of the window
     # one sample later, x(k+1) = K w_p(k+1): the state sequence shifted by one sample
@@ -186,7 +222,7 @@ def _n4sid(pb, *, weighting, stability, feedthrough, estimate_x0) -> StateSpace:
     stab = {"requested": stability, "action": "none",
             "spectral_radius_before": float(np.abs(np.linalg.eigvals(A)).max())}
     extra, x0 = {}, None
-    if stability_request(stability, A, data, "n4sid"):
+    if stability_request(stability, A, data, pb.method):
         # A stable A from Γ by regularised shift invariance (in an orthonormal basis Q
         # of range(Γ), where the states above are R x for gamma = Q R), B, D, x0 by the
         # output regression; the classical model is kept when the estimation data demand
@@ -204,14 +240,17 @@ def _n4sid(pb, *, weighting, stability, feedthrough, estimate_x0) -> StateSpace:
                                 estimate_x0=estimate_x0)
 
         A_q, fitted, stab = stable_choice(A_unstable, Q, ny, fit, stability=stability,
-                                          data=data, method="n4sid")
+                                          data=data, method=pb.method)
         if stab["action"] == "enforced":
-            A, C = A_q, C_q * pb.output_scale[:, None]
-            B, D, x0, extra = fitted
-            return finish(pb, A, B, C, D, n, order_selection, singular_values=s,
-                          weighting=weighting, state_regression_residual=float(residual),
-                          x0=x0, stability=stab, **extra)
+            # back from the basis Q to that of gamma (x = Rg^{-1} x_q)
+            B_q, D, x0_q, extra = fitted
+            A = scipy.linalg.solve(Rg, A_q @ Rg, check_finite=False)
+            B = scipy.linalg.solve(Rg, B_q, check_finite=False)
+            C = (C_q @ Rg) * pb.output_scale[:, None]
+            x0 = None if x0_q is None else scipy.linalg.solve(Rg, x0_q, check_finite=False)
+            return A, B, C, D, x0, {"state_regression_residual": float(residual), "x0": x0,
+                                    "stability": stab, **extra}
     B, C, D = pb.unscale(B, C, D)    # from the normalised channels to the user's units
     x0 = initial_state(A, B, C, D, data) if estimate_x0 else None
-    return finish(pb, A, B, C, D, n, order_selection, singular_values=s, weighting=weighting,
-                  state_regression_residual=float(residual), x0=x0, stability=stab)
+    return A, B, C, D, x0, {"state_regression_residual": float(residual), "x0": x0,
+                            "stability": stab}

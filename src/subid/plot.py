@@ -1035,11 +1035,15 @@ def order_scores(models, *, labels=None, title=None):
         record = m.info["order_selection"]
         candidates = record.get("candidates", [])
         if record["rule"] == "cv":
-            horizons = sorted({c["horizon"] for c in candidates})
-            for j, f in enumerate(horizons):
-                pts = sorted((c["order"], c["score"]) for c in candidates if c["horizon"] == f)
+            # one line per horizon (and per estimator of the system matrices, when the
+            # cross-validation chose that too: system_matrices='auto')
+            groups = sorted({(c["horizon"], c.get("system_matrices") or "")
+                             for c in candidates})
+            for j, (f, how) in enumerate(groups):
+                pts = sorted((c["order"], c["score"]) for c in candidates
+                             if (c["horizon"], c.get("system_matrices") or "") == (f, how))
                 ax.plot([p[0] for p in pts], [p[1] for p in pts], "o-", ms=3, lw=0.9,
-                        color=f"C{j}", label=f"horizon {f}")
+                        color=f"C{j}", label=f"horizon {f}" + (f", {how}" if how else ""))
             chosen = record["selected"]
             ax.plot([chosen["order"]], [chosen["score"]], "o", mfc="none", mec="C3", ms=11,
                     mew=1.5, label=f"chosen: n={chosen['order']}, f={chosen['horizon']}")

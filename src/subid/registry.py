@@ -153,11 +153,12 @@ METHODS: dict[str, MethodSpec] = {
         "ls", "batch", "subid.ls_subspace", "ls_subspace", "discrete",
         "SVD-free least-squares subspace identification (seed 001)",
         options=_DT_COMMON + ("instruments", "selector", "seed", "instrument_weighting",
-                              "power_iterations", "normalize_outputs"),
+                              "power_iterations", "normalize_outputs", "system_matrices"),
         capabilities=_DT_CAPS | {"seeded"}, aliases=("ls_subspace",)),
     "moesp": MethodSpec(
         "moesp", "batch", "subid.moesp", "moesp", "discrete", "PO-MOESP (Verhaegen)",
-        options=_DT_COMMON + ("weighting",), capabilities=_DT_CAPS | {"weighting"}),
+        options=_DT_COMMON + ("weighting", "system_matrices"),
+        capabilities=_DT_CAPS | {"weighting"}),
     "n4sid": MethodSpec(
         "n4sid", "batch", "subid.n4sid", "n4sid", "discrete",
         "N4SID (Van Overschee & De Moor)",
