@@ -253,15 +253,25 @@ def fit_percent(model, data, x0="estimate", hold: str = "zoh", steps=np.inf) -> 
     # Each output is divided by its largest magnitude first: the ratio is
     # scale-invariant, and squaring values near 1e300 would overflow to inf
     # (inf / inf = NaN) where the fit is perfectly defined.
-    scale = np.abs(data.y).max(axis=0)
+    # In blocks of rows, so that no N x outputs temporary is allocated.
+    N, block = data.n_samples, _SIM_BLOCK
+    scale = np.zeros(data.n_outputs)
+    for a in range(0, N, block):
+        scale = np.maximum(scale, np.abs(data.y[a:a + block]).max(axis=0))
     scale[scale == 0] = 1.0
-    y, y_hat = data.y / scale, y_hat / scale
-    dev = np.linalg.norm(y - y.mean(axis=0), axis=0)
+    mean = sum(np.sum(data.y[a:a + block] / scale, axis=0) for a in range(0, N, block)) / N
+    dev2 = np.zeros(data.n_outputs)
+    err2 = np.zeros(data.n_outputs)
+    for a in range(0, N, block):
+        y = data.y[a:a + block] / scale
+        dev2 += np.sum((y - mean) ** 2, axis=0)
+        err2 += np.sum((y - y_hat[a:a + block] / scale) ** 2, axis=0)
+    dev = np.sqrt(dev2)
     flat = np.flatnonzero(dev == 0)
     if flat.size:
         names = ", ".join(data.output_names[k] for k in flat)
         raise DataError(f"output {names} is constant; the fit percentage is undefined for it")
-    return 100.0 * (1.0 - np.linalg.norm(y - y_hat, axis=0) / dev)
+    return 100.0 * (1.0 - np.sqrt(err2) / dev)
 
 
 def pole_error(model, reference) -> float:
