@@ -182,8 +182,8 @@ class HankelStatistic:
     # -- accumulation -------------------------------------------------------
     def update(self, u, y) -> "HankelStatistic":
         """Append a chunk of samples (time on axis 0) to the record."""
-        u = as_signal(u, "input u")
-        y = as_signal(y, "output y")
+        u = as_signal(u, "input u", copy=False)     # read only; nothing of it is kept
+        y = as_signal(y, "output y", copy=False)
         if u.shape[1] != self.n_inputs or y.shape[1] != self.n_outputs:
             raise DataError(f"the chunk has {u.shape[1]} inputs and {y.shape[1]} outputs; the "
                             f"statistic was created for {self.n_inputs} and {self.n_outputs}")
