@@ -88,3 +88,62 @@ def test_fit_of_a_diverging_model_is_a_clear_error(paper_system):
                                 paper_system.D, 1.0)
     with pytest.raises(errors.ModelError, match="overflows"):
         subid.fit_percent(unstable, data)
+
+
+def _simulate_fit_dense(model, data):
+    """Reference: all n free responses over the whole record, one lstsq."""
+    t = None if model.dt > 0 else data.t
+    forced = model.simulate(data.u, t=t)
+    free = np.stack([model.simulate(np.zeros_like(data.u), t=t, x0=e)
+                     for e in np.eye(model.order)], axis=-1)
+    w = 1.0 / data.y.std(axis=0)
+    x0 = np.linalg.lstsq((free * w[None, :, None]).reshape(-1, model.order),
+                         ((data.y - forced) * w).reshape(-1), rcond=None)[0]
+    return forced + free @ x0, x0
+
+
+def _models_for_blocks():
+    A = np.diag([0.999, 0.97, 0.5, -0.3])
+    B = np.ones((4, 2))
+    C = np.arange(8.0).reshape(2, 4) + 1
+    D = np.zeros((2, 2))
+    hidden = C.copy()
+    hidden[:, 3] = 0.0                                  # one unobservable state
+    ct = subid.StateSpace([[-1.0, 2, 0], [-2, -1, 0], [0, 0, -0.5]], [[1.0], [0], [1]],
+                          [[1.0, 0, 1], [0, 1, 1]], [[0.0], [0]], 0)
+    return {"stable": subid.StateSpace(A, B, C, D, 1.0),
+            "integrator": subid.StateSpace(np.diag([1.0, 0.9, 0.5, -0.3]), B, C, D, 1.0),
+            "unobservable": subid.StateSpace(A, B, hidden, D, 1.0),
+            "delay": subid.StateSpace(A, B, C, D, 1.0, info={"input_delay": [2, 0]}),
+            "ct": ct}
+
+
+@pytest.mark.parametrize("name", ["stable", "integrator", "unobservable", "delay", "ct"])
+@pytest.mark.parametrize("kept", [10**9, 500])
+def test_blocked_simulate_fit_equals_one_dense_least_squares(monkeypatch, name, kept):
+    """simulate_fit in blocks (small blocks here, and with the free response kept or
+    simulated again) gives the x0 and fitted output of one dense lstsq over the
+    whole record, and fit_percent in blocks the direct NRMSE formula."""
+    from subid import metrics, prediction    # simulate_fit lives in prediction
+    monkeypatch.setattr(metrics, "_SIM_BLOCK", 97)
+    monkeypatch.setattr(prediction, "_SIM_BLOCK", 97)
+    monkeypatch.setattr(prediction, "_FREE_KEPT", kept)
+    model = _models_for_blocks()[name]
+    rng = np.random.default_rng(5)
+    N = 1500
+    u = rng.standard_normal((N, model.n_inputs))
+    if model.dt > 0:
+        y = model.simulate(u, x0=rng.standard_normal(model.order))
+        data = subid.IOData(u, y + 0.05 * rng.standard_normal(y.shape), dt=1.0)
+    else:
+        t = np.cumsum(0.01 * (1 + 0.4 * rng.uniform(-1, 1, N)))
+        y = model.simulate(u, t=t, x0=rng.standard_normal(model.order))
+        data = subid.IOData(u, y + 0.05 * rng.standard_normal(y.shape), t=t)
+    y_fit, x0 = metrics.simulate_fit(model, data)
+    y_ref, x0_ref = _simulate_fit_dense(model, data)
+    assert np.abs(x0 - x0_ref).max() <= 1e-9 * max(np.abs(x0_ref).max(), 1.0)
+    assert np.abs(y_fit - y_ref).max() <= 1e-10 * np.abs(y_ref).max()
+    yn, yh = data.y / np.abs(data.y).max(axis=0), y_ref / np.abs(data.y).max(axis=0)
+    direct = 100 * (1 - np.linalg.norm(yn - yh, axis=0)
+                    / np.linalg.norm(yn - yn.mean(axis=0), axis=0))
+    np.testing.assert_allclose(subid.fit_percent(model, data), direct, rtol=1e-9, atol=1e-9)

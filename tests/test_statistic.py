@@ -115,3 +115,35 @@ def test_statistic_errors():
         subid.moesp(HankelStatistic(2, 2, 10).update(np.ones((20, 2)), np.ones((20, 2))), 3)
     with pytest.raises(errors.SubidError, match="statistic must be"):
         subid.moesp(data, 3, statistic="fast")
+
+
+def _qr_rows_reference(R, z, depth, n_inputs, block):
+    """The plain path: stack [R; Hankel rows], scipy.linalg.qr(mode='r'), keep m rows."""
+    import scipy.linalg
+    m = depth * z.shape[1]
+    u, y = z[:, :n_inputs], z[:, n_inputs:]
+    R = np.zeros((0, m)) if R is None else R
+
+    def triangle(stacked):
+        out = scipy.linalg.qr(stacked, mode="r", check_finite=False)[0][:m]
+        return np.vstack([out, np.zeros((m - out.shape[0], m))]) if out.shape[0] < m else out
+    for start in range(0, max(z.shape[0] - depth + 1, 0), block):
+        stop = min(start + block, z.shape[0] - depth + 1)
+        R = triangle(np.vstack([R, hankel_chunk(u, y, depth, start, stop)]))
+    return triangle(R) if R.shape[0] != m else R
+
+
+@pytest.mark.parametrize("rows, q, nu, depth, with_r", [
+    (3 * 8192 + 17, 4, 2, 10, False), (30, 4, 2, 10, False), (8, 3, 1, 10, False),
+    (9000, 3, 1, 6, True), (20, 4, 2, 10, True), (5, 4, 2, 10, True)])
+def test_in_place_qr_statistic_is_the_stacked_qr_bit_for_bit(rows, q, nu, depth, with_r):
+    """_qr_rows factorises each block in place by geqrf: the same R as stacking
+    the blocks and calling scipy.linalg.qr, to the last bit."""
+    from subid import statistic
+    rng = np.random.default_rng(rows)
+    z = rng.standard_normal((rows, q))
+    R0 = np.triu(rng.standard_normal((2 * depth * q, depth * q))) if with_r else None
+    got = statistic._qr_rows(R0, z, depth, nu)
+    want = _qr_rows_reference(R0, z, depth, nu, statistic._BLOCK)
+    assert got.shape == want.shape
+    assert np.array_equal(got, want)

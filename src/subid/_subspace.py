@@ -19,7 +19,7 @@ from ._info import collect_warnings, model_info
 from ._regression import fit_b_d_projection, fit_b_d_x0
 from ._selection import SELECTION_RULES, cross_validate, default_gap_horizon
 from ._validation import check_int
-from .data import IOData
+from .data import IOData, column_std
 from .errors import (
     DataError,
     ExcitationWarning,
@@ -271,17 +271,6 @@ def output_weights(y: np.ndarray) -> np.ndarray:
     """
     std = column_std(y)
     return 1.0 / np.where(std > 0, std, 1.0)
-
-
-def column_std(y: np.ndarray, block: int = 65536) -> np.ndarray:
-    """``y.std(axis=0)`` computed in blocks of rows (two passes), without the N x
-    channels temporary numpy's ``std`` allocates (160 MB for 10^7 samples of 2 outputs)."""
-    n = y.shape[0]
-    if n <= block:
-        return y.std(axis=0)
-    mean = sum(y[k:k + block].sum(axis=0) for k in range(0, n, block)) / n
-    ss = sum(((y[k:k + block] - mean) ** 2).sum(axis=0) for k in range(0, n, block))
-    return np.sqrt(ss / n)
 
 
 def estimate_b_d(A, C_n, gamma, L11, L_yu, problem: "Problem", *, bd_method: str,

@@ -915,10 +915,23 @@ def _read_text_fast(shown, ext, inputs, outputs, dt, time, delimiter):
     if not parts:
         return None
     n_in, n_out = len(in_cols), len(out_cols)
-    u = np.concatenate([v[:, :n_in] for v in parts])
-    y = np.concatenate([v[:, n_in:n_in + n_out] for v in parts])
-    t = np.concatenate([v[:, -1] for v in parts]) if t_cols else None
-    del parts
+    # C-ordered arrays of our own (IOData keeps them without a copy), filled block by
+    # block while each parsed block is released: the resident peak stays about one
+    # copy of the selected data plus a block
+    total = sum(v.shape[0] for v in parts)
+    u, y = np.empty((total, n_in)), np.empty((total, n_out))
+    t = np.empty(total) if t_cols else None
+    parts.reverse()
+    start = 0
+    while parts:
+        v = parts.pop()
+        stop = start + v.shape[0]
+        u[start:stop] = v[:, :n_in]
+        y[start:stop] = v[:, n_in:n_in + n_out]
+        if t is not None:
+            t[start:stop] = v[:, -1]
+        start = stop
+        del v
     return _build(shown, u, y, dt, t, layout.channel_names(in_cols),
                   layout.channel_names(out_cols), first_line=layout.first_data)
 

@@ -3,12 +3,13 @@
 from __future__ import annotations
 
 import numpy as np
+import scipy.linalg
 import scipy.sparse
 import scipy.sparse.csgraph
 
 from ._validation import check_int, same_period
 from .errors import DataError, ModelError
-from .prediction import check_model, predict, simulate_fit
+from .prediction import _SIM_BLOCK, check_model, predict, simulate_fit
 
 __all__ = ["markov_error", "fit_percent", "pole_error", "simulate_fit"]
 
@@ -90,12 +91,23 @@ def fit_percent(model, data, x0="estimate", hold=None, steps=np.inf, *,
     # Each output is divided by its largest magnitude first: the ratio is
     # scale-invariant, and squaring values near 1e300 would overflow to inf
     # (inf / inf = NaN) where the fit is perfectly defined.
-    scale = np.abs(data.y).max(axis=0)
+    # In blocks of rows, so that no N x outputs temporary is allocated.
+    N, block = data.n_samples, _SIM_BLOCK
+    scale = np.zeros(data.n_outputs)
+    for a in range(0, N, block):
+        scale = np.maximum(scale, np.abs(data.y[a:a + block]).max(axis=0))
     scale[scale == 0] = 1.0
-    y, y_hat = data.y / scale, y_hat / scale
     ranges = data.experiment_ranges
-    dev2 = np.array([((y[a:b] - y[a:b].mean(axis=0)) ** 2).sum(axis=0) for a, b in ranges])
-    err2 = np.array([((y[a:b] - y_hat[a:b]) ** 2).sum(axis=0) for a, b in ranges])
+    dev2 = np.zeros((len(ranges), data.n_outputs))
+    err2 = np.zeros((len(ranges), data.n_outputs))
+    for e, (a0, b0) in enumerate(ranges):       # each experiment against its own mean
+        mean = sum(np.sum(data.y[a:min(a + block, b0)] / scale, axis=0)
+                   for a in range(a0, b0, block)) / (b0 - a0)
+        for a in range(a0, b0, block):
+            b = min(a + block, b0)
+            y = data.y[a:b] / scale
+            dev2[e] += np.sum((y - mean) ** 2, axis=0)
+            err2[e] += np.sum((y - y_hat[a:b] / scale) ** 2, axis=0)
     if per_experiment:
         dev2_used, err2_used = dev2, err2
     else:

@@ -724,7 +724,8 @@ class StateSpace:
                 raise DataError(f"the IOData record is sampled with dt={data.dt!r} but the "
                                 f"model's sampling period is dt={self._dt!r}; pass data.u "
                                 "to simulate sample by sample")
-        u = as_signal(u, "input u", allow_empty_columns=self.n_inputs == 0)
+        # read only (the simulation keeps nothing of it): no copy of a float64 C array
+        u = as_signal(u, "input u", allow_empty_columns=self.n_inputs == 0, copy=False)
         N, m = u.shape
         if m != self.n_inputs:
             hint = ""

