@@ -49,6 +49,8 @@ import numpy as np
 
 from ._checkpoint import load_state, require, save_state
 from ._hankel import HankelFactor, hankel_chunk
+from ._lagged import LaggedStatistic, end_sensitivity
+from ._lagged import solve as solve_lagged
 from ._regression import fit_b_d_projection, regression_rows, solve_factor
 from ._subspace import check_excitation, default_horizon, min_samples, normalize_channels
 from ._validation import as_signal, check_dt, check_int
@@ -62,6 +64,7 @@ __all__ = ["RecursiveSubspace"]
 
 _CHUNK = 8192
 _FIRST_REFRESH = 50     # first refresh of the B, D regression's (A, C), then doubling
+_TRUNCATION_WARN = 1e-8    # |A^(lags+1)| above this: the exact regression is approximate
 
 
 @numba.njit(cache=True, nogil=True)
@@ -191,13 +194,15 @@ class RecursiveSubspace:
     """
 
     _KIND = "subid.RecursiveSubspace"
-    _VERSION = 2      # 2: the recursive B, D regression
+    _VERSION = 3      # 2: the recursive B, D regression; 3: lagged statistics (forgetting 1)
+    _READS = (2, 3)
 
     def __init__(self, order, n_inputs, n_outputs, horizon=None, forgetting=1.0,
                  instruments="past", selector=None, seed=0, *, instrument_weighting=True,
                  power_iterations=8, feedthrough=True, dt=1.0, history_size=None,
                  history_stride=1000, input_names=None, output_names=None,
-                 bd_method="regression", refresh_every=None, restart_tolerance=1.0):
+                 bd_method="regression", refresh_every=None, restart_tolerance=1.0,
+                 lags=1000):
         self.order = check_int(order, "order")
         self.n_inputs = check_int(n_inputs, "n_inputs")
         self.n_outputs = check_int(n_outputs, "n_outputs")
@@ -271,6 +276,10 @@ class RecursiveSubspace:
         self._bd_start = 0            # sample index of x0 of the regression
         self._bd_rows = 0.0           # effective number of samples in the regression
         self._bd_restarts = 0
+        self.lags = check_int(lags, "lags")
+        # forgetting 1: the exact batch regression from lagged statistics
+        self._exact = self.bd_method == "regression" and self.forgetting == 1.0
+        self._lag = LaggedStatistic(nu, ny, self.lags) if self._exact else None
 
     # -- input ------------------------------------------------------------
     def __repr__(self) -> str:
@@ -317,7 +326,9 @@ class RecursiveSubspace:
         # validated: from here on the state changes
         start = 0
         n = u.shape[0]
-        regression = self.bd_method == "regression"
+        regression = self.bd_method == "regression" and not self._exact
+        if self._lag is not None:
+            self._lag.update(u, y)
         while start < n:
             stop = n if self._history_size is None else min(n, start + self._to_snapshot())
             if regression:
@@ -437,12 +448,17 @@ class RecursiveSubspace:
     def _ingest(self, u, y):
         all_u = np.vstack([self._buf_u, u])
         all_y = np.vstack([self._buf_y, y])
+        # the buffer may hold more than depth - 1 samples (the last horizon, for
+        # the state): the columns that start before its last depth - 1 samples
+        # were counted by the previous chunk
+        first = max(self._buf_u.shape[0] - self._depth + 1, 0)
         columns = all_u.shape[0] - self._depth + 1
         lam_sqrt = math.sqrt(self.forgetting)
-        for a in range(0, max(columns, 0), _CHUNK):
+        for a in range(first, max(columns, first), _CHUNK):
             b = min(a + _CHUNK, columns)
             rows = hankel_chunk(all_u, all_y, self._depth, a, b)
             givens_update(self._R, rows, lam_sqrt)
+        columns -= first
         if columns > 0:
             lam = self.forgetting
             self._weight = self._weight * lam ** columns + (
@@ -506,7 +522,21 @@ class RecursiveSubspace:
         A, _, C, _ = core.to_selector_basis(np.zeros((self.order, self.n_inputs)))
         C = C * sy[:, None]
         reason = None
-        if self.bd_method == "regression":
+        if self._exact:
+            reason, solved = self._exact_b_d(core, sy)
+            if solved is not None:
+                B_q, D, x0_q, theta, reg = solved
+                A, B, C, x0 = core.to_selector_basis(B_q, x0_q)
+                C = C * sy[:, None]
+                bd_method, self._theta = "regression", theta
+                self._exact_basis = (core.A_q, core.T)
+                reg["x0"] = x0
+            if reason is not None:
+                warnings.warn(f"{method}: {reason}" + (
+                    "" if solved is not None else
+                    "; B and D come from the projected data equation (less accurate)"),
+                    NotConvergedWarning, stacklevel=2)
+        elif self.bd_method == "regression":
             if not self._bd_started:
                 reason = ("the B, D regression has not started (no refresh with a usable "
                           "model yet)")
@@ -546,6 +576,38 @@ class RecursiveSubspace:
             self._model = noise_model.with_factor(self._model, hf)
         return self._model
 
+    def _exact_b_d(self, core, sy):
+        """Forgetting 1: B, D, x0 of the batch output-error regression for the
+        current (A, C), from the lagged statistics (:mod:`subid._lagged`),
+        solved in the orthonormal basis of the estimate (``core.A_q``, as the
+        batch method; the basis of Λ can be badly conditioned) and returned
+        in it. Returns ``(reason, solved)``: ``solved`` is None when the
+        regression cannot be evaluated (unstable A, singular), ``reason`` a
+        warning text or None."""
+        n, nu, ny = self.order, self.n_inputs, self.n_outputs
+        A, C = core.A_q, core.C_q * sy[:, None]
+        if not (np.isfinite(A).all() and np.isfinite(C).all()):
+            return "the estimated (A, C) are not finite", None
+        radius = float(np.abs(np.linalg.eigvals(A)).max())
+        if radius >= 1.0:
+            return (f"the estimated A is not stable (spectral radius {radius:.4g}), so the "
+                    "B, D regression is not evaluated"), None
+        stat = self._lag
+        weights = stat.output_weights()
+        Nmat, truncation = stat.normal_equations(A, C, weights, feedthrough=self.feedthrough)
+        solved = solve_lagged(Nmat, n, nu, ny, feedthrough=self.feedthrough,
+                              n_samples=self.n_samples)
+        if solved is None:
+            return "the B, D regression is rank deficient", None
+        solved[4].update(bd_truncation=truncation, spectral_radius=radius)
+        reason = None
+        if truncation > _TRUNCATION_WARN:
+            reason = (f"the B, D regression resolves {self.lags} lags but A^{self.lags + 1} "
+                      f"still has norm {truncation:.1e} (spectral radius {radius:.4g}): B "
+                      f"and D are approximate; use lags >= "
+                      f"{int(math.ceil(math.log(1e-16) / math.log(radius)))}")
+        return reason, solved
+
     @property
     def state(self) -> np.ndarray:
         """State estimate at the latest sample, in the basis fixed by Λ.
@@ -556,6 +618,16 @@ class RecursiveSubspace:
         (seed 001, eq. (21)), then propagated through the model to time t.
         """
         model = self.model
+        if model.info["bd_method"] == "regression" and self._exact:
+            A, T = self._exact_basis
+            stat = self._lag
+            t_end = self.n_samples - 1
+            powers = np.empty((min(t_end, self.lags + 1) + 1, self.order, self.order))
+            powers[0] = np.eye(self.order)
+            for d in range(1, powers.shape[0]):
+                powers[d] = powers[d - 1] @ A
+            S = end_sensitivity(stat, A, powers, t_end)
+            return T @ (S @ self._theta[:self.order + self.order * self.n_inputs])
         if model.info["bd_method"] == "regression":
             k = self.order + self.order * self.n_inputs
             return self._bd_S_last @ self._theta[:k]
@@ -596,19 +668,21 @@ class RecursiveSubspace:
             "bd_method": self.bd_method, "refresh_every": self.refresh_every,
             "restart_tolerance": self.restart_tolerance, "bd_started": self._bd_started,
             "bd_start": self._bd_start, "bd_rows": self._bd_rows,
-            "bd_restarts": self._bd_restarts,
+            "bd_restarts": self._bd_restarts, "lags": self.lags, "exact": self._exact,
         }
         arrays = {"R": self._R, "buf_u": self._buf_u, "buf_y": self._buf_y,
                   "bd_R": self._bd_R, "bd_S": self._bd_S, "bd_S_last": self._bd_S_last,
                   "bd_A": self._bd_A, "bd_C": self._bd_C,
                   "selector": self._selector, "hist_sample": self._hist_sample,
                   "hist_poles_re": self._hist_poles.real, "hist_poles_im": self._hist_poles.imag}
+        if self._lag is not None:
+            arrays.update(self._lag.arrays())
         save_state(path, self._KIND, self._VERSION, arrays, settings)
 
     @classmethod
     def load(cls, path) -> "RecursiveSubspace":
         """Restore an identifier saved by :meth:`save`."""
-        arrays, s = load_state(path, cls._KIND, cls._VERSION)
+        arrays, s = load_state(path, cls._KIND, cls._READS)
         try:
             obj = cls(s["order"], s["n_inputs"], s["n_outputs"], horizon=s["horizon"],
                       forgetting=s["forgetting"], instruments=s["instruments"],
@@ -619,7 +693,15 @@ class RecursiveSubspace:
                       history_stride=s["history_stride"],
                       input_names=s.get("input_names"), output_names=s.get("output_names"),
                       bd_method=s["bd_method"], refresh_every=s["refresh_every"],
-                      restart_tolerance=s["restart_tolerance"])
+                      restart_tolerance=s["restart_tolerance"], lags=s.get("lags", 1000))
+            if not s.get("exact", False):
+                # version 2 (or forgetting < 1): the propagated regression
+                obj._exact, obj._lag = False, None
+            else:
+                lag = obj._lag
+                for name, ref in lag.arrays().items():
+                    ref[...] = require(arrays, path, name, ref.shape)
+                lag.count = int(s["n_samples"])
             for name in ("bd_R", "bd_S", "bd_S_last", "bd_A", "bd_C"):
                 ref = getattr(obj, "_" + name)
                 setattr(obj, "_" + name, require(arrays, path, name, ref.shape).copy())
