@@ -78,15 +78,15 @@ from . import _adaptive_kernel as _k
 from ._checkpoint import load_state, require, save_state
 from ._simulate import expm_blocks
 from ._validation import as_signal, check_int, check_time_stamps
-from .data import IOData
 from .errors import (CheckpointError, DataError, NotConvergedWarning, OrderError, SubidError,
                      TooFewSamplesError)
 from .ls_subspace import random_selector
 from .model import StateSpace
+from .online import OnlineIdentifier, history_dict
 
 __all__ = ["AdaptiveIdentifier"]
 
-_KIND = "AdaptiveIdentifier"
+_OLD_KIND = "AdaptiveIdentifier"     # the kind of checkpoints before subid.<Class>
 _VERSION = 2      # 2: instrumental variables (zr, Cz, Gz)
 # Step lengths handled in one kernel call when the time stamps are non-uniform
 # (bounds the memory of the per-step discretisation tables).
@@ -169,8 +169,11 @@ def _companion(poles: np.ndarray, scale: bool):
     return omega * Lc, Bf, omega
 
 
-class AdaptiveIdentifier:
+class AdaptiveIdentifier(OnlineIdentifier):
     """Online identification of a continuous-time state-space model (seed 000).
+
+    An :class:`~subid.online.OnlineIdentifier`: the settings below are
+    stored unchanged as attributes of the same names (:meth:`get_params`).
 
     Parameters
     ----------
@@ -245,7 +248,7 @@ class AdaptiveIdentifier:
         (the paper's P(0) = I). M(0) = 0, θ(0) = 0, Ψ(0) = 0.
     ode_trace_bound : float
         ``'ode'`` only: forgetting is suspended while tr P (tr Q) exceeds it.
-    history : int
+    history_size : int
         Capacity of the opt-in history of estimates (0: none). One row per
         refresh until full; then every other row is dropped and the stride
         doubles, so the history spans the whole run in bounded memory.
@@ -273,7 +276,8 @@ class AdaptiveIdentifier:
     state : ndarray, shape (order,)
         Current filtered state ``x̃ = H (p - T_f q)``.
     history : dict of ndarray
-        ``t``, ``samples``, ``A``, ``B``, ``C``, ``D`` (time on axis 0).
+        ``sample``, ``t``, ``poles``, ``A``, ``B``, ``C``, ``D`` (time on
+        axis 0; the common format of :mod:`subid.online`).
 
     Examples
     --------
@@ -290,13 +294,30 @@ class AdaptiveIdentifier:
     True
     """
 
+    _VERSION = _VERSION
+    _READS = (_VERSION,)
+    _OLD_KINDS = (_OLD_KIND,)
+
     def __init__(self, order, n_inputs, n_outputs, horizon=None, filter_poles=-5.0,
                  forgetting=None, bd_forgetting=None, selector=None, seed=0, *, dt=None,
                  hold="foh", method="iv", scale_filters=True, refresh_every=50,
                  bd_gate=1e-2, max_condition=1e10, initial_covariance=None,
-                 bd_initial_covariance=None, ode_trace_bound=1e8, history=0,
+                 bd_initial_covariance=None, ode_trace_bound=1e8, history_size=0,
                  engine="numba", input_names=None, output_names=None,
                  instrument_poles=None, max_gap=None):
+        # the settings, stored unchanged (validated below)
+        self.order, self.n_inputs, self.n_outputs = order, n_inputs, n_outputs
+        self.horizon, self.filter_poles = horizon, filter_poles
+        self.forgetting, self.bd_forgetting, self.seed = forgetting, bd_forgetting, seed
+        self.dt, self.hold, self.method, self.scale_filters = dt, hold, method, scale_filters
+        self.refresh_every, self.bd_gate, self.max_condition = refresh_every, bd_gate, \
+            max_condition
+        self.initial_covariance, self.bd_initial_covariance = initial_covariance, \
+            bd_initial_covariance
+        self.ode_trace_bound, self.history_size, self.engine = ode_trace_bound, history_size, \
+            engine
+        self.input_names, self.output_names = input_names, output_names
+        self.instrument_poles, self.max_gap = instrument_poles, max_gap
         n = check_int(order, "order")
         nu = check_int(n_inputs, "n_inputs")
         ny = check_int(n_outputs, "n_outputs")
@@ -347,7 +368,7 @@ class AdaptiveIdentifier:
             _positive(bd_initial_covariance, "bd_initial_covariance")
         self._gate = _positive(bd_gate, "bd_gate")
         self._trace_bound = _positive(ode_trace_bound, "ode_trace_bound")
-        self._hist_cap = check_int(history, "history", minimum=0)
+        self._hist_cap = check_int(history_size, "history_size", minimum=0)
         self._dt = None if dt is None else _positive(dt, "dt", exc=DataError)
         self._seed = seed
         if selector is None:
@@ -624,30 +645,24 @@ class AdaptiveIdentifier:
         n, nu, ny = self._n, self._nu, self._ny
         rows = self._st["hist"][:self._st["ist"][_k.IST["hist_count"]]].copy()
         c = 2
-        out = {"t": rows[:, 0], "samples": rows[:, 1].astype(np.int64)}
+        mats = {}
         for name, shape in (("A", (n, n)), ("B", (n, nu)), ("C", (ny, n)), ("D", (ny, nu))):
             size = shape[0] * shape[1]
-            out[name] = rows[:, c:c + size].reshape((-1,) + shape)
+            mats[name] = rows[:, c:c + size].reshape((-1,) + shape)
             c += size
-        return out
+        return history_dict(rows[:, 1], rows[:, 0], dt=0.0, **mats)
 
     # ---------------------------------------------------------------- update
     def _parse(self, u, y, t):
         """Validate one chunk; returns (U, Y, T or None) or raises."""
-        if isinstance(u, IOData):
-            if y is not None or t is not None:
-                raise DataError("pass either an IOData record or (u, y[, t]), not both")
-            data = u
-            u, y = data.u, data.y
-            t = data.t if data.has_time_stamps else None    # explicit time stamps, if any
-            if t is None:
+        if y is None or type(u) is not np.ndarray:
+            u, y, t, data = self._unpack(u, y, t)
+            if data is not None and t is None:
                 if self._dt is not None and not math.isclose(data.dt, self._dt, rel_tol=1e-9):
                     raise DataError(f"the IOData record is sampled with dt={data.dt!r} but "
                                     f"the identifier has dt={self._dt!r}")
                 if self._dt is None:
                     t = self._next_times(data.n_samples, data.dt)
-        if y is None:
-            raise DataError("output y is missing: call update(u, y) or update(iodata)")
         U = self._as_chunk(u, self._nu, "input u")
         Y = self._as_chunk(y, self._ny, "output y")
         if U.shape[0] != Y.shape[0]:
@@ -667,39 +682,6 @@ class AdaptiveIdentifier:
                             f"processed (t = {self.t!r}); time must increase from chunk to "
                             "chunk")
         return U, Y, T
-
-    @staticmethod
-    def _as_chunk(values, channels: int, name: str) -> np.ndarray:
-        if type(values) is np.ndarray and values.dtype == np.float64:   # fast path
-            if values.ndim == 1 and values.shape[0] == channels and channels > 1 \
-                    and all(map(math.isfinite, values.tolist())):
-                # one sample: testing a few Python floats is cheaper than two ufunc calls
-                return np.ascontiguousarray(values.reshape(1, channels))
-            arr = values
-            if arr.ndim == 1 and channels == 1:
-                arr = arr.reshape(-1, 1)
-            if arr.ndim == 2 and arr.shape[1] == channels and arr.shape[0] > 0 \
-                    and np.isfinite(arr).all():
-                return np.ascontiguousarray(arr)
-        arr = np.asarray(values) if not isinstance(values, np.ndarray) else values
-        if arr.ndim == 0 and channels == 1:
-            arr = arr.reshape(1, 1)
-        elif arr.ndim == 1 and channels > 1:
-            if arr.shape[0] != channels:
-                raise DataError(f"{name} is 1-D with {arr.shape[0]} entries; one sample of "
-                                f"{channels} channels has {channels} (time is axis 0 of a "
-                                "2-D chunk)")
-            arr = arr.reshape(1, channels)
-        out = as_signal(arr, name)
-        if out.shape[1] != channels:
-            hint = ""
-            if out.shape[0] == channels:
-                hint = " (time is axis 0: was it passed transposed?)"
-            raise DataError(f"{name} has {out.shape[1]} channel{'s' if out.shape[1] != 1 else ''}"
-                            f" but the identifier has {channels}{hint}")
-        if out.shape[0] == 0:
-            raise DataError(f"{name} has no samples")
-        return out
 
     def _next_times(self, N: int, dt: float) -> np.ndarray:
         k = self.n_samples + np.arange(N)
@@ -893,7 +875,7 @@ class AdaptiveIdentifier:
             "bd_gate": self._gate,
             "max_condition": self._max_cond, "initial_covariance": self._p0,
             "bd_initial_covariance": self._q0, "ode_trace_bound": self._trace_bound,
-            "history": self._hist_cap, "engine": self._engine,
+            "history_size": self._hist_cap, "engine": self._engine,
             "instrument_poles": [[float(p.real), float(p.imag)] for p in self._ipoles],
             "max_gap": self._max_gap,
             "input_names": None if self._input_names is None else list(self._input_names),
@@ -907,7 +889,7 @@ class AdaptiveIdentifier:
         arrays = {k: v for k, v in self._st.items()}
         arrays["hist"] = self._st["hist"]
         arrays["selector"] = np.array(self._H)
-        save_state(path, _KIND, _VERSION, arrays, self._settings())
+        save_state(path, self.checkpoint_kind(), _VERSION, arrays, self._settings())
 
     @classmethod
     def load(cls, path) -> "AdaptiveIdentifier":
@@ -922,7 +904,7 @@ class AdaptiveIdentifier:
         subid.errors.DataFileNotFoundError
             The file does not exist.
         """
-        arrays, s = load_state(path, _KIND, _VERSION)
+        arrays, s = load_state(path, cls._kinds(), cls._READS)
         try:
             poles = [complex(re, im) for re, im in s["filter_poles"]]
             obj = cls(s["order"], s["n_inputs"], s["n_outputs"], horizon=s["horizon"],
@@ -935,7 +917,8 @@ class AdaptiveIdentifier:
                       max_condition=s["max_condition"],
                       initial_covariance=s["initial_covariance"],
                       bd_initial_covariance=s["bd_initial_covariance"],
-                      ode_trace_bound=s["ode_trace_bound"], history=s["history"],
+                      ode_trace_bound=s["ode_trace_bound"],
+                      history_size=s["history_size"] if "history_size" in s else s["history"],
                       engine=s["engine"], input_names=s["input_names"],
                       output_names=s["output_names"],
                       instrument_poles=[complex(re, im) for re, im in s["instrument_poles"]],

@@ -53,17 +53,19 @@ from ._lagged import LaggedStatistic, end_sensitivity
 from ._lagged import solve as solve_lagged
 from ._regression import fit_b_d_projection, regression_rows, solve_factor
 from ._subspace import check_excitation, default_horizon, min_samples, normalize_channels
-from ._validation import as_signal, check_dt, check_int
+from ._validation import check_dt, check_int, check_time_stamps
 from .errors import (CheckpointError, DataError, NotConvergedWarning, OrderError, SubidError,
                      TooFewSamplesError)
 from . import noise_model
 from .ls_subspace import check_options, check_selector, gamma_from_factor, random_selector
 from .model import StateSpace
+from .online import OnlineIdentifier, history_dict
 
 __all__ = ["RecursiveSubspace"]
 
 _CHUNK = 8192
 _FIRST_REFRESH = 50     # first refresh of the B, D regression's (A, C), then doubling
+_UNIFORM_RTOL = 1e-9      # time stamps on the dt grid to this relative tolerance
 _TRUNCATION_WARN = 1e-8    # |A^(lags+1)| above this: the exact regression is approximate
 
 
@@ -122,8 +124,11 @@ def givens_update_reference(R, rows, lam_sqrt):
     return R
 
 
-class RecursiveSubspace:
+class RecursiveSubspace(OnlineIdentifier):
     """Online SVD-free subspace identification with a fixed state basis.
+
+    An :class:`~subid.online.OnlineIdentifier`: the settings below are
+    stored unchanged as attributes of the same names (:meth:`get_params`).
 
     Parameters
     ----------
@@ -193,7 +198,6 @@ class RecursiveSubspace:
     True
     """
 
-    _KIND = "subid.RecursiveSubspace"
     _VERSION = 3      # 2: the recursive B, D regression; 3: lagged statistics (forgetting 1)
     _READS = (2, 3)
 
@@ -203,45 +207,54 @@ class RecursiveSubspace:
                  history_stride=1000, input_names=None, output_names=None,
                  bd_method="regression", refresh_every=None, restart_tolerance=1.0,
                  lags=1000):
-        self.order = check_int(order, "order")
-        self.n_inputs = check_int(n_inputs, "n_inputs")
-        self.n_outputs = check_int(n_outputs, "n_outputs")
-        self.horizon = default_horizon(self.order, self.n_outputs, self.n_inputs, 0, 2) \
+        # the settings, stored unchanged (validated below; the values in use
+        # are private: e.g. the default horizon)
+        self.order, self.n_inputs, self.n_outputs = order, n_inputs, n_outputs
+        self.horizon, self.forgetting, self.instruments = horizon, forgetting, instruments
+        self.seed, self.instrument_weighting = seed, instrument_weighting
+        self.power_iterations, self.feedthrough, self.dt = power_iterations, feedthrough, dt
+        self.history_size, self.history_stride = history_size, history_stride
+        self.input_names, self.output_names = input_names, output_names
+        self.bd_method, self.refresh_every = bd_method, refresh_every
+        self.restart_tolerance, self.lags = restart_tolerance, lags
+        check_int(order, "order")
+        check_int(n_inputs, "n_inputs")
+        check_int(n_outputs, "n_outputs")
+        self._f = default_horizon(self.order, self.n_outputs, self.n_inputs, 0, 2) \
             if horizon is None else check_int(horizon, "horizon", minimum=2)
-        if self.order > (self.horizon - 1) * self.n_outputs:
+        if self.order > (self._f - 1) * self.n_outputs:
             need = math.ceil(self.order / self.n_outputs) + 1
             raise OrderError(f"RecursiveSubspace: order {self.order} cannot be revealed with "
-                             f"horizon {self.horizon} and {self.n_outputs} outputs; use "
+                             f"horizon {self._f} and {self.n_outputs} outputs; use "
                              f"horizon >= {need}")
         if isinstance(forgetting, bool) or not isinstance(forgetting, numbers.Real) \
                 or not 0 < forgetting <= 1:
             raise SubidError(f"forgetting must be a number in (0, 1], got {forgetting!r}")
-        self.forgetting = float(forgetting)
-        self.power_iterations = check_options(instruments, power_iterations)
-        self.instruments = instruments
-        self.instrument_weighting = bool(instrument_weighting)
-        self.feedthrough = bool(feedthrough)
-        self.dt = check_dt(dt)
-        self.seed = seed
-        selector = check_selector(selector, self.horizon, self.n_outputs, [self.order],
+        self._lam = float(forgetting)
+        self._power_iterations = check_options(instruments, power_iterations)
+        self._instrument_weighting = bool(instrument_weighting)
+        self._feedthrough = bool(feedthrough)
+        self._dt = check_dt(dt)
+        self._t_origin, self._k_origin = 0.0, 0     # time of sample k: t0 + (k - k0) dt
+        selector = check_selector(selector, self._f, self.n_outputs, [self.order],
                                   self.order)
-        self.input_names = tuple(input_names) if input_names is not None else \
+        self._input_names = tuple(input_names) if input_names is not None else \
             tuple(f"u{k + 1}" for k in range(self.n_inputs))
-        self.output_names = tuple(output_names) if output_names is not None else \
+        self._output_names = tuple(output_names) if output_names is not None else \
             tuple(f"y{k + 1}" for k in range(self.n_outputs))
-        for names, count, what in ((self.input_names, self.n_inputs, "input_names"),
-                                   (self.output_names, self.n_outputs, "output_names")):
+        for names, count, what in ((self._input_names, self.n_inputs, "input_names"),
+                                   (self._output_names, self.n_outputs, "output_names")):
             if len(names) != count:
                 raise DataError(f"{what} has {len(names)} names for {count} channels")
-        self._selector = random_selector(self.horizon, self.n_outputs, seed, rows=self.order) \
+        self._selector = random_selector(self._f, self.n_outputs, seed, rows=self.order) \
             if selector is None else selector[: self.order].copy()
-        self._depth = 2 * self.horizon if instruments == "past" else self.horizon
+        self._depth = 2 * self._f if instruments == "past" else self._f
         m = self._depth * (self.n_inputs + self.n_outputs)
         self._R = np.zeros((m, m))
-        self._keep = max(self._depth - 1, self.horizon)
+        self._keep = max(self._depth - 1, self._f)
         self._buf_u = np.zeros((0, self.n_inputs))
         self._buf_y = np.zeros((0, self.n_outputs))
-        self.n_samples = 0
+        self._n_samples = 0
         self._n_columns = 0
         self._weight = 0.0            # sum of λ^k over the columns seen
         if history_size is not None:
@@ -250,23 +263,24 @@ class RecursiveSubspace:
         self._history_stride = check_int(history_stride, "history_stride")
         self._hist_sample = np.zeros(0, dtype=np.int64)
         self._hist_poles = np.zeros((0, self.order), dtype=complex)
+        self._hist_abcd = np.zeros((0, self._abcd_size()))
+        self._hist_t = np.zeros(0)
         self._model = None
         if bd_method not in ("regression", "projection"):
             raise SubidError(f"bd_method must be 'regression' or 'projection', got "
                              f"{bd_method!r}")
-        self.bd_method = bd_method
         if refresh_every is None:      # a quarter of the memory, within [50, 2000]
-            memory = math.inf if self.forgetting == 1.0 else 1.0 / (1.0 - self.forgetting)
+            memory = math.inf if self._lam == 1.0 else 1.0 / (1.0 - self._lam)
             refresh_every = int(min(2000, max(_FIRST_REFRESH, memory / 4)))
-        self.refresh_every = check_int(refresh_every, "refresh_every")
+        self._refresh_every = check_int(refresh_every, "refresh_every")
         if isinstance(restart_tolerance, bool) or not isinstance(restart_tolerance,
                                                                  numbers.Real) \
                 or not (math.isfinite(restart_tolerance) and restart_tolerance > 0):
             raise SubidError(f"restart_tolerance must be a positive number, got "
                              f"{restart_tolerance!r}")
-        self.restart_tolerance = float(restart_tolerance)
+        self._restart_tolerance = float(restart_tolerance)
         n, nu, ny = self.order, self.n_inputs, self.n_outputs
-        self._nbd = n + n * nu + (ny * nu if self.feedthrough else 0)   # x0, B, D
+        self._nbd = n + n * nu + (ny * nu if self._feedthrough else 0)   # x0, B, D
         self._bd_R = np.zeros((self._nbd + 1, self._nbd + 1))
         self._bd_S = np.zeros((n, n + n * nu))
         self._bd_S_last = np.zeros((n, n + n * nu))
@@ -276,10 +290,10 @@ class RecursiveSubspace:
         self._bd_start = 0            # sample index of x0 of the regression
         self._bd_rows = 0.0           # effective number of samples in the regression
         self._bd_restarts = 0
-        self.lags = check_int(lags, "lags")
+        self._lags = check_int(lags, "lags")
         # forgetting 1: the exact batch regression from lagged statistics
-        self._exact = self.bd_method == "regression" and self.forgetting == 1.0
-        self._lag = LaggedStatistic(nu, ny, self.lags) if self._exact else None
+        self._exact = self.bd_method == "regression" and self._lam == 1.0
+        self._lag = LaggedStatistic(nu, ny, self._lags) if self._exact else None
 
     # -- input ------------------------------------------------------------
     def __repr__(self) -> str:
@@ -291,38 +305,85 @@ class RecursiveSubspace:
         from ._repr import online_html, recursive_settings
         return online_html(self, recursive_settings(self))
 
-    def _as_chunk(self, values, name: str, channels: int) -> np.ndarray:
-        arr = np.asarray(values)
-        if arr.ndim == 0 and channels == 1:
-            arr = arr.reshape(1, 1)
-        elif arr.ndim == 1 and channels > 1:
-            if arr.shape[0] != channels:
-                raise DataError(f"{name} is one sample of {arr.shape[0]} values but the "
-                                f"identifier has {channels} channels; pass shape "
-                                f"(samples, {channels})")
-            arr = arr.reshape(1, channels)
-        arr = as_signal(arr, name)
-        if arr.shape[1] != channels:
-            raise DataError(f"{name} has {arr.shape[1]} channels but the identifier was "
-                            f"created with {channels}")
-        return arr
+    def _abcd_size(self) -> int:
+        n, nu, ny = self.order, self.n_inputs, self.n_outputs
+        return n * n + n * nu + ny * n + ny * nu
 
-    def update(self, u, y) -> "RecursiveSubspace":
+    @property
+    def n_samples(self) -> int:
+        """Samples received so far."""
+        return self._n_samples
+
+    @property
+    def t(self) -> float | None:
+        """Time of the latest sample (None before the first): ``dt`` times its
+        index, or continuing the time stamps given to :meth:`update`."""
+        if not self._n_samples:
+            return None
+        return self._t_origin + (self._n_samples - 1 - self._k_origin) * self._dt
+
+    def _times(self, t, N: int):
+        """Validate time stamps of a chunk of N samples: a uniform grid of step
+        dt that continues the stream. Returns the time of its first sample."""
+        T = np.asarray(t, dtype=np.float64).reshape(-1)
+        T = check_time_stamps(T, N)
+        tol = _UNIFORM_RTOL * self._dt
+        if N > 1 and np.abs(np.diff(T) - self._dt).max() > tol * max(1.0, N):
+            raise DataError(f"RecursiveSubspace is discrete-time with dt={self._dt!r}: the time "
+                            f"stamps t are not a uniform grid of step dt (steps "
+                            f"{float(np.diff(T).min())!r} to {float(np.diff(T).max())!r}); "
+                            "resample the data or create the identifier with their dt")
+        if self._n_samples:
+            expect = self.t + self._dt
+            if abs(T[0] - expect) > tol * max(1.0, abs(expect) / self._dt):
+                raise DataError(f"time stamps t start at {T[0]!r}, but the next sample of the "
+                                f"stream is due at t = {expect!r} (dt={self._dt!r}); "
+                                "RecursiveSubspace needs gap-free, uniformly sampled data")
+        return float(T[0])
+
+    def update(self, u, y=None, t=None) -> "RecursiveSubspace":
         """Add samples: one sample or a chunk (time on axis 0).
 
-        ``u`` is (N, n_inputs), or a 1-D array of n_inputs values (one
-        sample) when n_inputs > 1, or N samples when n_inputs == 1; likewise
-        ``y``. The result does not depend on how a stream is cut into chunks.
-        A rejected chunk leaves the identifier unchanged.
+        Parameters
+        ----------
+        u : array_like or IOData
+            (N, n_inputs), or a 1-D array of n_inputs values (one sample)
+            when n_inputs > 1, or N samples when n_inputs == 1. An
+            :class:`~subid.data.IOData` record supplies u, y (and its time
+            stamps, if explicit); its dt must be the identifier's.
+        y : array_like
+            Outputs, likewise.
+        t : array_like, optional
+            Time stamps: a uniform grid of step ``dt`` continuing the stream
+            (checked; the identifier is discrete-time).
 
         Returns
         -------
         self
+
+        Raises
+        ------
+        subid.errors.DataError
+            NaN or inf, wrong shapes, time stamps off the grid. A rejected
+            chunk leaves the identifier unchanged.
+
+        Notes
+        -----
+        The result does not depend on how a stream is cut into chunks (to
+        rounding).
         """
-        u = self._as_chunk(u, "input u", self.n_inputs)
-        y = self._as_chunk(y, "output y", self.n_outputs)
+        u, y, t, record = self._unpack(u, y, t)
+        if record is not None and t is None and not math.isclose(record.dt, self._dt,
+                                                                 rel_tol=_UNIFORM_RTOL):
+            raise DataError(f"the IOData record is sampled with dt={record.dt!r} but the "
+                            f"identifier has dt={self._dt!r}")
+        u = self._as_chunk(u, self.n_inputs, "input u")
+        y = self._as_chunk(y, self.n_outputs, "output y")
         if u.shape[0] != y.shape[0]:
             raise DataError(f"input u has {u.shape[0]} samples but output y has {y.shape[0]}")
+        t0 = None if t is None else self._times(t, u.shape[0])
+        if t0 is not None:
+            self._t_origin, self._k_origin = t0, self._n_samples
         # validated: from here on the state changes
         start = 0
         n = u.shape[0]
@@ -339,7 +400,7 @@ class RecursiveSubspace:
                 if self._is_refresh_point():
                     self._bd_refresh()
             start = stop
-            if self._history_size is not None and self.n_samples % self._history_stride == 0:
+            if self._history_size is not None and self._n_samples % self._history_stride == 0:
                 self._snapshot()
         return self
 
@@ -348,7 +409,7 @@ class RecursiveSubspace:
         """Refresh points: _FIRST_REFRESH * 2^j below ``refresh_every`` (so
         that the regression starts early), then the multiples of
         ``refresh_every``."""
-        k, K = self.n_samples, self.refresh_every
+        k, K = self._n_samples, self._refresh_every
         if k <= 0:
             return False
         if k % K == 0:
@@ -359,12 +420,12 @@ class RecursiveSubspace:
     def _to_refresh(self) -> int:
         """Samples to the next refresh point (points: _FIRST_REFRESH * 2^j
         below ``refresh_every``, then the multiples of ``refresh_every``)."""
-        k = self.n_samples
+        k = self._n_samples
         step = _FIRST_REFRESH
-        while step <= k and step < self.refresh_every:
+        while step <= k and step < self._refresh_every:
             step *= 2
-        nxt = step if step < self.refresh_every else (k // self.refresh_every + 1) \
-            * self.refresh_every
+        nxt = step if step < self._refresh_every else (k // self._refresh_every + 1) \
+            * self._refresh_every
         return nxt - k
 
     def _bd_feed(self, u, y):
@@ -377,16 +438,16 @@ class RecursiveSubspace:
         T = u.shape[0]
         if T > 1:
             rows0, S = regression_rows(A, C, u[:-1], y[:-1], self._bd_S, n_x0=self.order,
-                                       feedthrough=self.feedthrough)
-            givens_update(self._bd_R, rows0, self.forgetting ** (0.5 / self.n_outputs))
+                                       feedthrough=self._feedthrough)
+            givens_update(self._bd_R, rows0, self._lam ** (0.5 / self.n_outputs))
         else:
             S = self._bd_S
         self._bd_S_last = S
         rows1, S = regression_rows(A, C, u[-1:], y[-1:], S, n_x0=self.order,
-                                   feedthrough=self.feedthrough)
-        givens_update(self._bd_R, rows1, self.forgetting ** (0.5 / self.n_outputs))
+                                   feedthrough=self._feedthrough)
+        givens_update(self._bd_R, rows1, self._lam ** (0.5 / self.n_outputs))
         self._bd_S = S
-        lam = self.forgetting
+        lam = self._lam
         self._bd_rows = self._bd_rows * lam ** T + (
             T if lam == 1.0 else (1 - lam ** T) / (1 - lam))
 
@@ -394,10 +455,10 @@ class RecursiveSubspace:
         """(A, C) of the current factor in the basis of Λ (raises SubidError
         when the data do not yet determine them)."""
         need = min_samples(self._depth, self.n_inputs, self.n_outputs)
-        if self.n_samples < need:
+        if self._n_samples < need:
             raise TooFewSamplesError("too few samples")
         hf = self.factor()
-        check_excitation(hf, self.input_names, method="RecursiveSubspace")
+        check_excitation(hf, self._input_names, method="RecursiveSubspace")
         core, su, sy = self._core(hf, "RecursiveSubspace")
         A, _, C, _ = core.to_selector_basis(np.zeros((self.order, self.n_inputs)))
         return A, C * sy[:, None]
@@ -407,11 +468,11 @@ class RecursiveSubspace:
         normalised by their RMS, Λ acting on the user's units (``Λ (I ⊗ S)`` on the
         normalised outputs). Returns ``(core, input_scale, output_scale)``."""
         hf_n, su, sy = normalize_channels(hf, outputs=True)
-        core = gamma_from_factor(hf_n, self.horizon, self.order, [self.order],
+        core = gamma_from_factor(hf_n, self._f, self.order, [self.order],
                                  instruments=self.instruments,
-                                 instrument_weighting=self.instrument_weighting,
-                                 selector=self._selector * np.tile(sy, self.horizon),
-                                 seed=self.seed, power_iterations=self.power_iterations,
+                                 instrument_weighting=self._instrument_weighting,
+                                 selector=self._selector * np.tile(sy, self._f),
+                                 seed=self.seed, power_iterations=self._power_iterations,
                                  method=method)
         return core, su, sy
 
@@ -428,7 +489,7 @@ class RecursiveSubspace:
             change = (np.linalg.norm(A - self._bd_A) / max(np.linalg.norm(self._bd_A), 1e-300)
                       + np.linalg.norm(C - self._bd_C) / max(np.linalg.norm(self._bd_C),
                                                              1e-300))
-            if change <= self.restart_tolerance:
+            if change <= self._restart_tolerance:
                 self._bd_A, self._bd_C = A, C
                 return
         n = self.order
@@ -438,12 +499,12 @@ class RecursiveSubspace:
         self._bd_S[:, :n] = np.eye(n)
         self._bd_S_last = self._bd_S.copy()
         self._bd_started = True
-        self._bd_start = self.n_samples
+        self._bd_start = self._n_samples
         self._bd_rows = 0.0
         self._bd_restarts += 1
 
     def _to_snapshot(self) -> int:
-        return self._history_stride - self.n_samples % self._history_stride
+        return self._history_stride - self._n_samples % self._history_stride
 
     def _ingest(self, u, y):
         all_u = np.vstack([self._buf_u, u])
@@ -453,20 +514,20 @@ class RecursiveSubspace:
         # were counted by the previous chunk
         first = max(self._buf_u.shape[0] - self._depth + 1, 0)
         columns = all_u.shape[0] - self._depth + 1
-        lam_sqrt = math.sqrt(self.forgetting)
+        lam_sqrt = math.sqrt(self._lam)
         for a in range(first, max(columns, first), _CHUNK):
             b = min(a + _CHUNK, columns)
             rows = hankel_chunk(all_u, all_y, self._depth, a, b)
             givens_update(self._R, rows, lam_sqrt)
         columns -= first
         if columns > 0:
-            lam = self.forgetting
+            lam = self._lam
             self._weight = self._weight * lam ** columns + (
                 columns if lam == 1.0 else (1 - lam ** columns) / (1 - lam))
             self._n_columns += columns
         self._buf_u = all_u[-self._keep:].copy()
         self._buf_y = all_y[-self._keep:].copy()
-        self.n_samples += u.shape[0]
+        self._n_samples += u.shape[0]
         self._model = None
 
     def _snapshot(self):
@@ -476,11 +537,17 @@ class RecursiveSubspace:
                 poles = self.model.poles()
         except SubidError:
             return
-        self._hist_sample = np.append(self._hist_sample, self.n_samples)
+        m = self._model
+        abcd = np.concatenate([m.A.ravel(), m.B.ravel(), m.C.ravel(), m.D.ravel()])
+        self._hist_sample = np.append(self._hist_sample, self._n_samples)
+        self._hist_t = np.append(self._hist_t, self.t)
         self._hist_poles = np.vstack([self._hist_poles, poles[None]])
+        self._hist_abcd = np.vstack([self._hist_abcd, abcd[None]])
         if self._hist_sample.size >= self._history_size:
             self._hist_sample = self._hist_sample[1::2]
+            self._hist_t = self._hist_t[1::2]
             self._hist_poles = self._hist_poles[1::2]
+            self._hist_abcd = self._hist_abcd[1::2]
             self._history_stride *= 2
 
     # -- output -----------------------------------------------------------
@@ -512,11 +579,11 @@ class RecursiveSubspace:
             return self._model
         method = "RecursiveSubspace"
         need = min_samples(self._depth, self.n_inputs, self.n_outputs)
-        if self.n_samples < need:
-            raise TooFewSamplesError(f"{method} has received {self.n_samples} samples; a model "
-                                     f"needs at least {need} (horizon {self.horizon})")
+        if self._n_samples < need:
+            raise TooFewSamplesError(f"{method} has received {self._n_samples} samples; a model "
+                                     f"needs at least {need} (horizon {self._f})")
         hf = self.factor()
-        input_condition = check_excitation(hf, self.input_names, method=method)
+        input_condition = check_excitation(hf, self._input_names, method=method)
         core, su, sy = self._core(hf, method)
         bd_method, reg, self._theta = "projection", {}, None
         A, _, C, _ = core.to_selector_basis(np.zeros((self.order, self.n_inputs)))
@@ -546,7 +613,7 @@ class RecursiveSubspace:
             else:
                 B, D, x0, theta, reg = solve_factor(
                     self._bd_R, self.order, self.n_inputs, self.n_outputs, estimate_x0=True,
-                    n_samples=max(self._bd_rows, 1.0), feedthrough=self.feedthrough)
+                    n_samples=max(self._bd_rows, 1.0), feedthrough=self._feedthrough)
                 if reg["regression_rank_deficient"] or not np.isfinite(theta).all():
                     reason = "the B, D regression is rank deficient"
                 else:
@@ -558,20 +625,20 @@ class RecursiveSubspace:
                               "equation (less accurate)", NotConvergedWarning, stacklevel=2)
         if bd_method == "projection":
             B_q, D, reg2 = fit_b_d_projection(core.A_q, core.C_q, core.basis, core.L11,
-                                              core.L_yu, feedthrough=self.feedthrough)
+                                              core.L_yu, feedthrough=self._feedthrough)
             A, B, C, _ = core.to_selector_basis(B_q)
             # from the normalised channels to the user's units
             B, C, D = B / su, C * sy[:, None], D * sy[:, None] / su
             reg = {**reg, **reg2}
-        info = {"method": method, "order": self.order, "horizon": self.horizon,
-                "n_samples": self.n_samples, "forgetting": self.forgetting,
+        info = {"method": method, "order": self.order, "horizon": self._f,
+                "n_samples": self._n_samples, "forgetting": self._lam,
                 "effective_samples": self._weight, "input_condition": input_condition,
                 "bd_method": bd_method, "bd_fallback": reason,
-                **core.info(self.instruments, self.instrument_weighting,
-                            self.power_iterations), **reg,
+                **core.info(self.instruments, self._instrument_weighting,
+                            self._power_iterations), **reg,
                 "selector": self._selector.copy()}
-        self._model = StateSpace(A, B, C, D, self.dt, input_names=self.input_names,
-                                 output_names=self.output_names, info=info)
+        self._model = StateSpace(A, B, C, D, self._dt, input_names=self._input_names,
+                                 output_names=self._output_names, info=info)
         if self.instruments == "past":   # K, noise_cov from the running factor
             self._model = noise_model.with_factor(self._model, hf)
         return self._model
@@ -594,15 +661,15 @@ class RecursiveSubspace:
                     "B, D regression is not evaluated"), None
         stat = self._lag
         weights = stat.output_weights()
-        Nmat, truncation = stat.normal_equations(A, C, weights, feedthrough=self.feedthrough)
-        solved = solve_lagged(Nmat, n, nu, ny, feedthrough=self.feedthrough,
-                              n_samples=self.n_samples)
+        Nmat, truncation = stat.normal_equations(A, C, weights, feedthrough=self._feedthrough)
+        solved = solve_lagged(Nmat, n, nu, ny, feedthrough=self._feedthrough,
+                              n_samples=self._n_samples)
         if solved is None:
             return "the B, D regression is rank deficient", None
         solved[4].update(bd_truncation=truncation, spectral_radius=radius)
         reason = None
         if truncation > _TRUNCATION_WARN:
-            reason = (f"the B, D regression resolves {self.lags} lags but A^{self.lags + 1} "
+            reason = (f"the B, D regression resolves {self._lags} lags but A^{self._lags + 1} "
                       f"still has norm {truncation:.1e} (spectral radius {radius:.4g}): B "
                       f"and D are approximate; use lags >= "
                       f"{int(math.ceil(math.log(1e-16) / math.log(radius)))}")
@@ -621,8 +688,8 @@ class RecursiveSubspace:
         if model.info["bd_method"] == "regression" and self._exact:
             A, T = self._exact_basis
             stat = self._lag
-            t_end = self.n_samples - 1
-            powers = np.empty((min(t_end, self.lags + 1) + 1, self.order, self.order))
+            t_end = self._n_samples - 1
+            powers = np.empty((min(t_end, self._lags + 1) + 1, self.order, self.order))
             powers[0] = np.eye(self.order)
             for d in range(1, powers.shape[0]):
                 powers[d] = powers[d - 1] @ A
@@ -631,7 +698,7 @@ class RecursiveSubspace:
         if model.info["bd_method"] == "regression":
             k = self.order + self.order * self.n_inputs
             return self._bd_S_last @ self._theta[:k]
-        f, ny, nu = self.horizon, self.n_outputs, self.n_inputs
+        f, ny, nu = self._f, self.n_outputs, self.n_inputs
         u_w, y_w = self._buf_u[-f:], self._buf_y[-f:]
         markov = model.markov(f)                       # D, CB, ..., C A^{f-2} B
         H = np.zeros((f * ny, f * nu))
@@ -646,7 +713,15 @@ class RecursiveSubspace:
     @property
     def history(self) -> dict:
         """Decimated snapshots ``{'sample', 'poles'}`` (bounded in size)."""
-        return {"sample": self._hist_sample.copy(), "poles": self._hist_poles.copy()}
+        n, nu, ny = self.order, self.n_inputs, self.n_outputs
+        rows = self._hist_abcd
+        mats, c = {}, 0
+        for name, shape in (("A", (n, n)), ("B", (n, nu)), ("C", (ny, n)), ("D", (ny, nu))):
+            mats[name] = rows[:, c:c + shape[0] * shape[1]].reshape((-1,) + shape)
+            c += shape[0] * shape[1]
+        out = history_dict(self._hist_sample, self._hist_t, dt=self._dt, **mats)
+        out["poles"] = self._hist_poles.copy()     # those of the models (as computed then)
+        return out
 
     @property
     def selector(self) -> np.ndarray:
@@ -658,31 +733,35 @@ class RecursiveSubspace:
         """Write the whole state to ``path`` (``.npz``, atomic, no pickle)."""
         settings = {
             "order": self.order, "n_inputs": self.n_inputs, "n_outputs": self.n_outputs,
-            "horizon": self.horizon, "forgetting": self.forgetting,
-            "instruments": self.instruments, "instrument_weighting": self.instrument_weighting,
-            "power_iterations": self.power_iterations, "feedthrough": self.feedthrough,
-            "dt": self.dt, "seed": self.seed if isinstance(self.seed, int) else None,
-            "n_samples": self.n_samples, "n_columns": self._n_columns, "weight": self._weight,
-            "history_size": self._history_size, "history_stride": self._history_stride,
-            "input_names": list(self.input_names), "output_names": list(self.output_names),
+            "horizon": self.horizon, "forgetting": self._lam,
+            "instruments": self.instruments, "instrument_weighting": self._instrument_weighting,
+            "power_iterations": self._power_iterations, "feedthrough": self._feedthrough,
+            "dt": self._dt, "seed": self.seed if isinstance(self.seed, int) else None,
+            "n_samples": self._n_samples, "n_columns": self._n_columns, "weight": self._weight,
+            "history_size": self._history_size, "history_stride": self.history_stride,
+            "history_stride_now": self._history_stride,
+            "input_names": None if self.input_names is None else list(self.input_names),
+            "output_names": None if self.output_names is None else list(self.output_names),
             "bd_method": self.bd_method, "refresh_every": self.refresh_every,
-            "restart_tolerance": self.restart_tolerance, "bd_started": self._bd_started,
+            "restart_tolerance": self._restart_tolerance, "bd_started": self._bd_started,
             "bd_start": self._bd_start, "bd_rows": self._bd_rows,
-            "bd_restarts": self._bd_restarts, "lags": self.lags, "exact": self._exact,
+            "bd_restarts": self._bd_restarts, "lags": self._lags, "exact": self._exact,
+            "t_origin": self._t_origin, "k_origin": self._k_origin,
         }
         arrays = {"R": self._R, "buf_u": self._buf_u, "buf_y": self._buf_y,
                   "bd_R": self._bd_R, "bd_S": self._bd_S, "bd_S_last": self._bd_S_last,
                   "bd_A": self._bd_A, "bd_C": self._bd_C,
                   "selector": self._selector, "hist_sample": self._hist_sample,
-                  "hist_poles_re": self._hist_poles.real, "hist_poles_im": self._hist_poles.imag}
+                  "hist_poles_re": self._hist_poles.real, "hist_poles_im": self._hist_poles.imag,
+                  "hist_t": self._hist_t, "hist_abcd": self._hist_abcd}
         if self._lag is not None:
             arrays.update(self._lag.arrays())
-        save_state(path, self._KIND, self._VERSION, arrays, settings)
+        save_state(path, self.checkpoint_kind(), self._VERSION, arrays, settings)
 
     @classmethod
     def load(cls, path) -> "RecursiveSubspace":
         """Restore an identifier saved by :meth:`save`."""
-        arrays, s = load_state(path, cls._KIND, cls._READS)
+        arrays, s = load_state(path, cls._kinds(), cls._READS)
         try:
             obj = cls(s["order"], s["n_inputs"], s["n_outputs"], horizon=s["horizon"],
                       forgetting=s["forgetting"], instruments=s["instruments"],
@@ -713,12 +792,23 @@ class RecursiveSubspace:
             obj._R = require(arrays, path, "R", (m, m)).copy()
             obj._buf_u = require(arrays, path, "buf_u").reshape(-1, obj.n_inputs).copy()
             obj._buf_y = require(arrays, path, "buf_y").reshape(-1, obj.n_outputs).copy()
-            obj.n_samples = int(s["n_samples"])
+            obj._n_samples = int(s["n_samples"])
+            obj._history_stride = int(s.get("history_stride_now", s["history_stride"]))
             obj._n_columns = int(s["n_columns"])
             obj._weight = float(s["weight"])
             obj._hist_sample = require(arrays, path, "hist_sample", dtype=np.int64)
             obj._hist_poles = (require(arrays, path, "hist_poles_re")
                                + 1j * require(arrays, path, "hist_poles_im"))
+            k = obj._hist_sample.size
+            if s["_version"] >= 3:
+                obj._hist_t = require(arrays, path, "hist_t", (k,)).copy()
+                obj._hist_abcd = require(arrays, path, "hist_abcd",
+                                         (k, obj._abcd_size())).copy()
+            else:        # version 2 kept the poles only: times from dt, no matrices
+                obj._hist_t = (obj._hist_sample - 1) * obj._dt
+                obj._hist_abcd = np.full((k, obj._abcd_size()), np.nan)
+            obj._t_origin = float(s.get("t_origin", 0.0))
+            obj._k_origin = int(s.get("k_origin", 0))
         except CheckpointError:
             raise
         except (KeyError, TypeError, ValueError) as exc:
