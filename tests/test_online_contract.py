@@ -83,7 +83,7 @@ def test_is_an_online_identifier(case):
     assert (ident.order, ident.n_inputs, ident.n_outputs) in ((3, 2, 2), (2, 2, 2))
     assert ident.n_samples == 0 and ident.t is None
     with pytest.raises(errors.TooFewSamplesError):
-        ident.model
+        _ = ident.model
     # settings stored unchanged: a fresh identifier with the same settings
     params = ident.get_params()
     assert params["history_size"] == 16 and params["horizon"] in (3, 5)

@@ -77,7 +77,7 @@ import numpy as np
 from . import _adaptive_kernel as _k
 from ._checkpoint import load_state, require, save_state
 from ._simulate import expm_blocks
-from ._validation import as_signal, check_int, check_time_stamps
+from ._validation import check_int, check_time_stamps
 from .errors import (CheckpointError, DataError, NotConvergedWarning, OrderError, SubidError,
                      TooFewSamplesError)
 from .ls_subspace import random_selector

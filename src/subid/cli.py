@@ -28,7 +28,6 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
-import hashlib
 import importlib
 import importlib.util
 import json
@@ -47,7 +46,7 @@ import numpy as np
 from ._selection import describe as describe_selection
 from ._files import atomic_directory, atomic_write, write_bytes
 from ._progress import on_terminal, progress_bar
-from .errors import DataError, FileReadError, NotConvergedWarning, OrderError, SubidError
+from .errors import DataError, FileReadError, OrderError, SubidError
 
 __all__ = ["main", "METHODS", "MethodSpec", "MethodUnavailableError", "available_methods"]
 
