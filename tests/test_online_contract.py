@@ -242,3 +242,31 @@ def test_tracker_runs_any_online_identifier(case, tmp_path):
     again.run(ident.n_samples, chunk=128)
     np.testing.assert_array_equal(again.history()["sample"], hist["sample"])
     np.testing.assert_allclose(again.history()["poles"], hist["poles"], rtol=1e-8, atol=1e-10)
+
+
+OLD = os.path.join(os.path.dirname(__file__), "data", "old_checkpoints")
+
+
+@pytest.mark.parametrize("name", ["recursive_v2", "recursive_v2_forgetting",
+                                  "adaptive_kind_AdaptiveIdentifier"])
+def test_checkpoints_of_the_previous_format_still_load(name):
+    """Checkpoints written before the common contract (RecursiveSubspace format
+    2, AdaptiveIdentifier kind 'AdaptiveIdentifier'; files made with the
+    previous release's code) load, and continuing them gives what that code
+    gave (continued.json, written by it)."""
+    import json
+    import warnings
+    data = systems.simulate_data(systems.seed001_system(), 1200, seed=5, process_snr_db=30,
+                                 output_snr_db=30)
+    cls = subid.AdaptiveIdentifier if name.startswith("adaptive") else subid.RecursiveSubspace
+    ident = cls.load(os.path.join(OLD, name + ".npz"))
+    assert ident.n_samples == 600
+    ident.update(data.u[600:], data.y[600:])
+    with open(os.path.join(OLD, "continued.json")) as fh:
+        want = json.load(fh)[name]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", errors.NotConvergedWarning)
+        model = ident.model
+    for key in "ABCD":
+        np.testing.assert_allclose(getattr(model, key), want[key], rtol=1e-9, atol=1e-10,
+                                   err_msg=key)

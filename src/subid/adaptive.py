@@ -516,7 +516,8 @@ class AdaptiveIdentifier(OnlineIdentifier):
     def model(self) -> StateSpace:
         """The current estimate ``(Ã, B̃, C̃, D)`` as a continuous-time model.
 
-        ``info`` holds ``method`` (``'seed000_adaptive'``), ``samples``,
+        ``info`` holds ``method`` (``'seed000_adaptive'``), ``samples`` (also
+        as ``n_samples``, the key of every model),
         ``time``, ``refreshes``, ``horizon``, ``filter_poles``,
         ``time_scale``, ``forgetting``, ``bd_forgetting``, ``ls_method``,
         ``hold``, ``condition`` and ``bd_condition`` (of the normal
@@ -550,6 +551,7 @@ class AdaptiveIdentifier(OnlineIdentifier):
         info = {
             "method": "seed000_adaptive",
             "samples": self.n_samples,
+            "n_samples": self.n_samples,
             "time": self.t,
             "refreshes": int(ist[_k.IST["refreshes"]]),
             "horizon": self._f,

@@ -192,7 +192,7 @@ def new_online(spec: MethodSpec, order, n_inputs, n_outputs, *, horizon=None, fo
         kwargs["horizon"] = horizon
     if forgetting is not None:
         kwargs["forgetting"] = forgetting
-    if spec.time == "discrete" and dt is not None:
+    if dt is not None:
         kwargs["dt"] = dt
     return cls(order, n_inputs, n_outputs, **kwargs)
 
@@ -499,13 +499,11 @@ def _warnings_to_log():
 
 def _convergence_status(model) -> str:
     """'yes' or 'NO: why' from an online model's info (``converged`` /
-    ``convergence`` of the adaptive identifier, ``bd_fallback`` of the
-    recursive one)."""
+    ``convergence``, which both online identifiers set)."""
     info = model.info
     if info.get("converged") is False:
-        return f"NO: {info.get('convergence')}"
-    if info.get("bd_fallback"):
-        return f"NO: {info['bd_fallback']} (B, D from the projected data equation)"
+        return f"NO: {info.get('convergence')}" + (
+            " (B, D from the projected data equation)" if info.get("bd_fallback") else "")
     return "yes"
 
 

@@ -633,7 +633,10 @@ class RecursiveSubspace(OnlineIdentifier):
         info = {"method": method, "order": self.order, "horizon": self._f,
                 "n_samples": self._n_samples, "forgetting": self._lam,
                 "effective_samples": self._weight, "input_condition": input_condition,
-                "bd_method": bd_method, "bd_fallback": reason,
+                "bd_method": bd_method,
+                "bd_fallback": reason if bd_method == "projection" else None,
+                "converged": reason is None,
+                "convergence": "converged" if reason is None else reason,
                 **core.info(self.instruments, self._instrument_weighting,
                             self._power_iterations), **reg,
                 "selector": self._selector.copy()}
