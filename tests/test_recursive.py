@@ -231,20 +231,24 @@ def test_regression_equals_batch_noisy(instruments, samples, lags):
 
 def test_lagged_statistic_matches_direct_sums():
     """The lagged products by the compiled kernel, the numpy reference and the
-    FFT path (long chunks) equal the direct sums; the ring and head buffers
+    FFT path (blocks) equal the direct sums; the ring and head buffers
     hold the last and first samples whatever the chunking."""
     from subid._lagged import LaggedStatistic, lag_update_reference
     z = np.random.default_rng(0).standard_normal((900, 3))
     for lags in (5, 64, 400, 2000):
-        direct = np.array([z[:900 - d].T @ z[d:] if d < 900 else np.zeros((3, 3))
+        direct = np.array([z[:900 - d, :1].T @ z[d:] if d < 900 else np.zeros((1, 3))
                            for d in range(lags + 1)])
         ref = LaggedStatistic(1, 2, lags)
         ref.update(z[:, :1], z[:, 1:], kernel=lag_update_reference)
         np.testing.assert_allclose(ref.G, direct, atol=1e-11)
+        np.testing.assert_allclose(ref.G0, z.T @ z, atol=1e-11)
         pieces = LaggedStatistic(1, 2, lags)
         for a, b in ((0, 70), (70, 73), (73, 200), (200, 201), (201, 900)):
             pieces.update(z[a:b, :1], z[a:b, 1:])
+        assert pieces.n_samples == 900
+        pieces.flush()                      # blocks of 256 by FFT, then the rest
         np.testing.assert_allclose(pieces.G, direct, atol=1e-11)
+        np.testing.assert_allclose(pieces.G0, z.T @ z, atol=1e-11)
         for name in ("ring", "head"):
             np.testing.assert_array_equal(getattr(pieces, name), getattr(ref, name))
         assert pieces.count == ref.count == 900
@@ -255,9 +259,10 @@ def test_lagged_kernel_matches_reference():
     z = np.random.default_rng(1).standard_normal((50, 4))
     a, b = LaggedStatistic(2, 2, 20), LaggedStatistic(2, 2, 20)
     for k in range(0, 50, 7):
-        a.count = lag_update(a.G, a.ring, a.head, z[k:k + 7], a.count)
-        b.count = lag_update_reference(b.G, b.ring, b.head, z[k:k + 7], b.count)
+        a.count = lag_update(a.G0, a.G, a.ring, a.head, z[k:k + 7], a.count)
+        b.count = lag_update_reference(b.G0, b.G, b.ring, b.head, z[k:k + 7], b.count)
     np.testing.assert_allclose(a.G, b.G, rtol=1e-14, atol=1e-14)
+    np.testing.assert_allclose(a.G0, b.G0, rtol=1e-14, atol=1e-14)
 
 
 def test_regression_truncation_warns():

@@ -14,7 +14,8 @@ products of ``z = [u; y]`` for lags 0..L,
     G(d) = sum_{s=0}^{N-1-d} z(s) z(s+d)^T,
 
 the first L + 1 samples and the last L + 1 samples (ring buffer): a size that
-does not grow with N. :func:`normal_equations` evaluates the normal equations
+does not grow with N. (Beyond lag 0 only the rows of u are used, so only
+those are kept.) :func:`normal_equations` evaluates the normal equations
 of the regression exactly from them, for any stable A given later, up to the
 terms in ``A^k`` with k > L (below rounding once ``|A^L|`` is; exact for any
 stable A while N <= L + 1).
@@ -56,22 +57,28 @@ import scipy.linalg
 
 from ._regression import parameter_count
 
-#: Chunks of at least this many samples add their lagged products by FFT
-#: (O(p^2 log) per sample instead of O(L p^2)).
+#: Samples are buffered and added in blocks of this many by FFT (O(p^2 log L)
+#: per sample instead of O(L p^2)); a model request adds the rest.
+BLOCK = 256
+#: A remainder of at least this many samples is added by FFT too, a shorter
+#: one sample by sample (:func:`lag_update`).
 FFT_MIN_SAMPLES = 64
 
 
 @numba.njit(cache=True, nogil=True)
-def lag_update(G, ring, head, z, count):  # pragma: no cover - compiled
-    """Add the samples ``z`` (T, p) to the lagged products ``G`` (L + 1, p, p).
+def lag_update(G0, G, ring, head, z, count):  # pragma: no cover - compiled
+    """Add the samples ``z`` (T, p) to the lagged products.
 
-    ``ring`` (L + 1, p) holds the last L + 1 samples (sample k in row
-    ``k % (L + 1)``), ``head`` (L + 1, p) the first L + 1; ``count`` is the
-    number of samples before ``z``. Returns the new count. The sums are
-    accumulated sample by sample, so the result does not depend on how the
-    stream is cut into chunks (bit for bit).
+    ``G0`` (p, p) is ``sum z z^T``; ``G`` (L + 1, nu, p) holds the input rows
+    of the lagged products, ``G[d] = sum_s u(s) z(s+d)^T`` (the only ones
+    the regression needs beyond lag 0). ``ring`` (L + 1, p) holds the last
+    L + 1 samples (sample k in row ``k % (L + 1)``), ``head`` (L + 1, p) the
+    first L + 1; ``count`` is the number of samples before ``z``. Returns the
+    new count. The sums are accumulated sample by sample, so the result does
+    not depend on how the stream is cut into chunks (bit for bit).
     """
     size = G.shape[0]
+    nu = G.shape[1]
     p = z.shape[1]
     for t in range(z.shape[0]):
         pos = count % size
@@ -80,12 +87,16 @@ def lag_update(G, ring, head, z, count):  # pragma: no cover - compiled
         if count < size:
             for a in range(p):
                 head[count, a] = z[t, a]
+        for a in range(p):
+            za = z[t, a]
+            for b in range(p):
+                G0[a, b] += za * z[t, b]
         top = min(count, size - 1)
         for d in range(top + 1):
             r = pos - d
             if r < 0:
                 r += size
-            for a in range(p):
+            for a in range(nu):
                 za = ring[r, a]
                 for b in range(p):
                     G[d, a, b] += za * z[t, b]
@@ -93,16 +104,17 @@ def lag_update(G, ring, head, z, count):  # pragma: no cover - compiled
     return count
 
 
-def lag_update_reference(G, ring, head, z, count):
+def lag_update_reference(G0, G, ring, head, z, count):
     """Plain-numpy reference of :func:`lag_update` (same operations)."""
-    size = G.shape[0]
+    size, nu = G.shape[0], G.shape[1]
     for t in range(z.shape[0]):
         pos = count % size
         ring[pos] = z[t]
         if count < size:
             head[count] = z[t]
+        G0 += np.outer(z[t], z[t])
         for d in range(min(count, size - 1) + 1):
-            G[d] += np.outer(ring[(pos - d) % size], z[t])
+            G[d] += np.outer(ring[(pos - d) % size][:nu], z[t])
         count += 1
     return count
 
@@ -112,7 +124,10 @@ class LaggedStatistic:
 
     Attributes
     ----------
-    G : ndarray (lags + 1, p, p)
+    G0 : ndarray (p, p)
+        ``sum z z^T``.
+    G : ndarray (lags + 1, n_inputs, p)
+        The input rows of the lagged products, ``sum_s u(s) z(s+d)^T``.
     ring, head : ndarray (lags + 1, p)
     count : int
     """
@@ -120,20 +135,52 @@ class LaggedStatistic:
     def __init__(self, n_inputs: int, n_outputs: int, lags: int):
         p = n_inputs + n_outputs
         self.n_inputs, self.n_outputs, self.lags = n_inputs, n_outputs, lags
-        self.G = np.zeros((lags + 1, p, p))
+        self.G0 = np.zeros((p, p))
+        self.G = np.zeros((lags + 1, n_inputs, p))
         self.ring = np.zeros((lags + 1, p))
         self.head = np.zeros((lags + 1, p))
-        self.count = 0
+        self.count = 0                  # samples added to the sums
         self.sum_y = np.zeros(n_outputs)
+        self.pending = np.zeros((BLOCK, p))     # samples not yet added
+        self.n_pending = 0
+
+    @property
+    def n_samples(self) -> int:
+        return self.count + self.n_pending
 
     def update(self, u, y, kernel=lag_update) -> None:
-        z = np.ascontiguousarray(np.hstack([u, y]))
+        """Add samples: buffered, and added to the sums in blocks of
+        :data:`BLOCK` samples (at fixed sample indices, so that the sums do
+        not depend on how the stream is cut into chunks); ``kernel`` other
+        than the compiled one adds every sample at once (for the tests)."""
+        z = np.hstack([u, y])
+        if kernel is not lag_update:
+            self.flush(kernel)
+            self._add(np.ascontiguousarray(z), kernel)
+            return
+        k = 0
+        T = z.shape[0]
+        while k < T:
+            take = min(BLOCK - self.n_pending, T - k)
+            self.pending[self.n_pending:self.n_pending + take] = z[k:k + take]
+            self.n_pending += take
+            k += take
+            if self.n_pending == BLOCK:
+                self.flush()
+
+    def flush(self, kernel=lag_update) -> None:
+        """Add the buffered samples to the sums."""
+        if self.n_pending:
+            z = self.pending[:self.n_pending].copy()
+            self.n_pending = 0
+            self._add(z, kernel)
+
+    def _add(self, z, kernel) -> None:
         if z.shape[0] >= FFT_MIN_SAMPLES and kernel is lag_update:
             self._update_fft(z)
         else:
-            self.count = int(kernel(self.G, self.ring, self.head, z, self.count))
-        # running sum of y in the same order for every chunking
-        for row in y:
+            self.count = int(kernel(self.G0, self.G, self.ring, self.head, z, self.count))
+        for row in z[:, self.n_inputs:]:     # the same order for every chunking
             self.sum_y += row
 
     def _update_fft(self, z) -> None:
@@ -151,10 +198,12 @@ class LaggedStatistic:
             E[L - prev:L] = self.last(prev)
         E[L:] = z
         nfft = scipy.fft.next_fast_len(L + T, real=True)
-        FE = scipy.fft.rfft(E, nfft, axis=0)
+        nu = self.n_inputs
+        FE = scipy.fft.rfft(E[:, :nu], nfft, axis=0)
         FZ = scipy.fft.rfft(z, nfft, axis=0)
         X = scipy.fft.irfft(FE[:, :, None] * FZ[:, None, :].conj(), nfft, axis=0)
         self.G += X[L::-1]
+        self.G0 += z.T @ z
         if self.count < size:
             k = min(size - self.count, T)
             self.head[self.count:self.count + k] = z[:k]
@@ -164,16 +213,17 @@ class LaggedStatistic:
         self.count += T
 
     def arrays(self) -> dict:
-        return {"lag_G": self.G, "lag_ring": self.ring, "lag_head": self.head,
-                "lag_sum_y": self.sum_y}
+        return {"lag_G0": self.G0, "lag_G": self.G, "lag_ring": self.ring,
+                "lag_head": self.head, "lag_sum_y": self.sum_y, "lag_pending": self.pending}
 
     def output_weights(self) -> np.ndarray:
         """1 / standard deviation of each output (population), as
         :func:`subid._subspace.output_weights` on the whole record."""
+        self.flush()
         N = self.count
         nu = self.n_inputs
         mean = self.sum_y / N
-        var = np.diag(self.G[0])[nu:] / N - mean ** 2
+        var = np.diag(self.G0)[nu:] / N - mean ** 2
         std = np.sqrt(np.maximum(var, 0.0))
         return 1.0 / np.where(std > 0, std, 1.0)
 
@@ -185,17 +235,21 @@ class LaggedStatistic:
 
     def normal_equations(self, A, C, weights, *, feedthrough=True):
         """See :func:`normal_equations`."""
+        self.flush()
         return normal_equations(self, A, C, weights, feedthrough=feedthrough)
 
 
 def _impulse_augmented(stat: LaggedStatistic):
     """``cz (L + 1, 1 + p, 1 + p)``: lagged products of ``[e; u; y]`` (e the
-    impulse at s = -1) for lags 0..L."""
+    impulse at s = -1) for lags 0..L (rows of y beyond lag 0 left zero: the
+    regression does not use them)."""
     L = stat.lags
-    p = stat.G.shape[1]
+    p = stat.n_inputs + stat.n_outputs
     N = stat.count
     cz = np.zeros((L + 1, 1 + p, 1 + p))
-    cz[:, 1:, 1:] = stat.G
+    nu = stat.n_inputs
+    cz[:, 1:1 + nu, 1:] = stat.G          # the output rows beyond lag 0 are not needed
+    cz[0, 1:, 1:] = stat.G0
     cz[0, 0, 0] = 1.0
     k = min(L, N)               # c_{e,z}(d) = z(d - 1), d = 1..L
     cz[1:k + 1, 0, 1:] = stat.head[:k]
@@ -249,11 +303,11 @@ def normal_equations(stat: LaggedStatistic, A, C, weights, *, feedthrough=True):
         # S-D: [(j, m), (k, i)] = w_i^2 sum_l H[l][i, m] c_{j, u_k}(l + 1)
         SD = np.einsum("lim,ljk->jmki", Hw, cnext[:, :ju, 1:1 + nu]).reshape(q, nu * ny)
         out[:q, q:p] = SD
-        G0 = stat.G[0]
+        G0 = stat.G0
         DD = np.kron(G0[:nu, :nu], np.diag(w2))            # [(k, i), (k', i')]
         out[q:p, q:p] = DD
         out[q:p, p] = (G0[:nu, nu:] * w2[None, :]).reshape(-1)      # [(k, i)]
-    out[p, p] = float(np.sum(w2 * np.diag(stat.G[0])[nu:]))
+    out[p, p] = float(np.sum(w2 * np.diag(stat.G0)[nu:]))
     out = np.triu(out) + np.triu(out, 1).T
     return out, truncation
 

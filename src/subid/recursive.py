@@ -750,6 +750,7 @@ class RecursiveSubspace(OnlineIdentifier):
             "bd_start": self._bd_start, "bd_rows": self._bd_rows,
             "bd_restarts": self._bd_restarts, "lags": self._lags, "exact": self._exact,
             "t_origin": self._t_origin, "k_origin": self._k_origin,
+            "lag_pending_count": 0 if self._lag is None else self._lag.n_pending,
         }
         arrays = {"R": self._R, "buf_u": self._buf_u, "buf_y": self._buf_y,
                   "bd_R": self._bd_R, "bd_S": self._bd_S, "bd_S_last": self._bd_S_last,
@@ -783,7 +784,9 @@ class RecursiveSubspace(OnlineIdentifier):
                 lag = obj._lag
                 for name, ref in lag.arrays().items():
                     ref[...] = require(arrays, path, name, ref.shape)
-                lag.count = int(s["n_samples"])
+                n_pending = int(s.get("lag_pending_count", 0))
+                lag.count = int(s["n_samples"]) - n_pending
+                lag.n_pending = n_pending
             for name in ("bd_R", "bd_S", "bd_S_last", "bd_A", "bd_C"):
                 ref = getattr(obj, "_" + name)
                 setattr(obj, "_" + name, require(arrays, path, name, ref.shape).copy())
