@@ -20,16 +20,19 @@ systems.
 B, D and the current state come, by default (``bd_method='regression'``),
 from the output-error regression of the batch method
 (:func:`subid._regression.fit_b_d_x0`: ``y(t) = C S(t) [x0; vec B] +
-(u(t)^T ⊗ I) vec D``, ``S(t+1) = A S(t) + [0, u(t)^T ⊗ I]``) made recursive:
-its rows are reduced into a triangular factor by the same Givens rotations
-and forgetting as the Hankel data. The sensitivity S is propagated with the
-model's (A, C), refreshed every ``refresh_every`` samples; when they change
-by more than ``restart_tolerance`` (relative) since the last refresh (start
-up, a switch) the regression restarts with ``S = [I, 0]``, a new x0. Exact
-on noise-free data (equal to the batch model to rounding); with noise the
-batch regression uses the final (A, C) over the whole record, which no
-bounded-memory recursion can, so they differ by the drift of (A, C) over the
-regression's memory. ``bd_method='projection'`` uses the projected data
+(u(t)^T ⊗ I) vec D``, ``S(t+1) = A S(t) + [0, u(t)^T ⊗ I]``, outputs weighted
+by 1 / their standard deviation). With forgetting 1 it is evaluated exactly,
+for the current (A, C), from fixed-size lagged statistics of the data
+(:mod:`subid._lagged`: lags 0..``lags``, the first and the last samples), so
+the model equals the batch :func:`subid.ls_subspace` model on noisy data too
+(up to terms in ``A^(lags+1)``, reported in ``info['bd_truncation']``). With
+forgetting below 1 the regression is made recursive: its rows are reduced
+into a triangular factor by the same Givens rotations and forgetting as the
+Hankel data. The sensitivity S is propagated with the model's (A, C),
+refreshed every ``refresh_every`` samples; when they change by more than
+``restart_tolerance`` (relative) since the last refresh (start up, a switch)
+the regression restarts with ``S = [I, 0]``, a new x0 (close to the batch
+model, not equal: (A, C) as they were when each sample came). ``bd_method='projection'`` uses the projected data
 equation on the statistic instead (the former default; it equals the batch
 ``bd_method='projection'`` exactly, but is much less accurate on some real
 data: CD_player_arm, docs/seed000.md).
@@ -53,7 +56,7 @@ from ._lagged import LaggedStatistic, end_sensitivity
 from ._lagged import solve as solve_lagged
 from ._regression import fit_b_d_projection, regression_rows, solve_factor
 from ._subspace import check_excitation, default_horizon, min_samples, normalize_channels
-from ._validation import check_dt, check_int, check_time_stamps
+from ._validation import MAX_DIMENSION, check_dt, check_int, check_time_stamps
 from .errors import (CheckpointError, DataError, NotConvergedWarning, OrderError, SubidError,
                      TooFewSamplesError)
 from . import noise_model
@@ -166,6 +169,12 @@ class RecursiveSubspace(OnlineIdentifier):
         above which the regression restarts (start-up, switches).
     dt : float
         Sampling period of the data (and of ``model``).
+    lags : int
+        ``'regression'`` with forgetting 1: lags of the statistics of the
+        exact regression (memory and work per sample grow with it). Exact
+        for any stable A while at most ``lags + 1`` samples have come, else
+        up to ``|A^(lags+1)|`` (1e-16 for a spectral radius of 0.965 at the
+        default 1000; above 1e-8 the model warns).
     history_size : int, optional
         Keep at most this many snapshots of the model's poles (opt-in). When
         the buffer is full, every other snapshot is dropped and the stride
@@ -179,12 +188,15 @@ class RecursiveSubspace(OnlineIdentifier):
     ----------
     n_samples : int
         Samples received so far.
+    t : float or None
+        Time of the latest sample.
     model : StateSpace
         The current estimate (computed on demand).
     state : ndarray
         Estimate of the state at the latest sample, in the basis of Λ.
     history : dict
-        ``{'sample': (k,), 'poles': (k, order)}`` snapshots (empty if off).
+        ``sample``, ``t``, ``poles``, ``A``, ``B``, ``C``, ``D`` snapshots (the
+        common format of :mod:`subid.online`; empty if off).
 
     Examples
     --------
@@ -290,7 +302,7 @@ class RecursiveSubspace(OnlineIdentifier):
         self._bd_start = 0            # sample index of x0 of the regression
         self._bd_rows = 0.0           # effective number of samples in the regression
         self._bd_restarts = 0
-        self._lags = check_int(lags, "lags")
+        self._lags = check_int(lags, "lags", maximum=MAX_DIMENSION)
         # forgetting 1: the exact batch regression from lagged statistics
         self._exact = self.bd_method == "regression" and self._lam == 1.0
         self._lag = LaggedStatistic(nu, ny, self._lags) if self._exact else None
