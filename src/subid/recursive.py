@@ -205,7 +205,7 @@ class RecursiveSubspace(OnlineIdentifier):
     >>> data = subid.systems.simulate_data(true, 2000, seed=1)
     >>> rs = subid.RecursiveSubspace(3, 2, 2, horizon=5)
     >>> for k in range(0, 2000, 100):          # a stream in pieces
-    ...     rs.update(data.u[k:k + 100], data.y[k:k + 100])
+    ...     _ = rs.update(data.u[k:k + 100], data.y[k:k + 100])
     >>> subid.markov_error(rs.model, true) < 1e-9
     True
     """
