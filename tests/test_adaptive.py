@@ -61,7 +61,7 @@ def short_record():
 def test_noise_free_paper_system_within_200s(clean200):
     t, u, y = clean200
     true = paper_system()
-    ident = paper_ident(forgetting=0.4, bd_forgetting=0.08, history=256)
+    ident = paper_ident(forgetting=0.4, bd_forgetting=0.08, history_size=256)
     ident.update(u, y)
     model = ident.model
     assert model.dt == 0 and model.info["samples"] == t.size
@@ -113,7 +113,7 @@ def test_windup_constant_input_then_excitation_returns():
     y = true.simulate(u, t=t, hold="foh")
     # the paper's noise-free memory (1/α = 2.5 s): 500 s of constant input
     # decay the unexcited directions far beyond the windup bound
-    ident = paper_ident(history=512, forgetting=0.4, bd_forgetting=0.08)
+    ident = paper_ident(history_size=512, forgetting=0.4, bd_forgetting=0.08)
     ident.update(u[:500_000], y[:500_000])
     assert subid.pole_error(ident.model, true) < 1e-3
     ident.update(u[500_000:1_000_000], y[500_000:1_000_000])
@@ -301,7 +301,7 @@ def _compare(a, b, rtol):
             assert np.abs(x - z).max() <= rtol * np.abs(z).max(), name
 
 
-@pytest.mark.parametrize("kw", [{}, {"hold": "zoh"}, {"history": 8}],
+@pytest.mark.parametrize("kw", [{}, {"hold": "zoh"}, {"history_size": 8}],
                          ids=["foh", "zoh", "history"])
 @pytest.mark.slow
 def test_kernel_matches_reference(kw):
@@ -348,10 +348,10 @@ def test_kernel_matches_reference_paper_system(short_record):
 def test_chunking_does_not_change_the_result(short_record, size):
     t, u, y = short_record
     n = 6000
-    whole = paper_ident(history=8, refresh_every=20)
+    whole = paper_ident(history_size=8, refresh_every=20)
     whole.update(u[:n], y[:n])
     assert whole.model.info["bd_started"]
-    parts = paper_ident(history=8, refresh_every=20)
+    parts = paper_ident(history_size=8, refresh_every=20)
     for a in range(0, n, size):
         b = min(a + size, n)
         parts.update(u[a:b], y[a:b])
@@ -361,9 +361,9 @@ def test_chunking_does_not_change_the_result(short_record, size):
 def test_chunking_with_time_stamps(short_record):
     t, u, y = short_record
     n = 3000
-    whole = AdaptiveIdentifier(4, 2, 2, horizon=5, filter_poles=-5.0, history=8)
+    whole = AdaptiveIdentifier(4, 2, 2, horizon=5, filter_poles=-5.0, history_size=8)
     whole.update(u[:n], y[:n], t=t[:n])
-    parts = AdaptiveIdentifier(4, 2, 2, horizon=5, filter_poles=-5.0, history=8)
+    parts = AdaptiveIdentifier(4, 2, 2, horizon=5, filter_poles=-5.0, history_size=8)
     for a, b in ((0, 1), (1, 700), (700, 701), (701, n)):
         parts.update(u[a:b], y[a:b], t=t[a:b])
     assert_same_state(whole, parts)
@@ -371,9 +371,9 @@ def test_chunking_with_time_stamps(short_record):
 
 def test_checkpoint_round_trip_continues_identically(tmp_path, short_record):
     t, u, y = short_record
-    ref = paper_ident(history=16)
+    ref = paper_ident(history_size=16)
     ref.update(u, y)
-    first = paper_ident(history=16)
+    first = paper_ident(history_size=16)
     first.update(u[:4321], y[:4321])
     path = tmp_path / "ident.npz"
     first.save(path)
@@ -436,7 +436,7 @@ def test_checkpoint_with_inconsistent_content_raises(tmp_path):
     path = tmp_path / "ident.npz"
     ident.save(path)
     from subid.adaptive import _VERSION
-    arrays, settings = load_state(path, "AdaptiveIdentifier", _VERSION)
+    arrays, settings = load_state(path, "subid.AdaptiveIdentifier", _VERSION)
     arrays["R"] = arrays["R"].copy()
     arrays["R"][0, 0] = np.nan
     save_state(path, "AdaptiveIdentifier", _VERSION, arrays, settings)
@@ -447,7 +447,7 @@ def test_checkpoint_with_inconsistent_content_raises(tmp_path):
     with pytest.raises(CheckpointError, match="shape"):
         AdaptiveIdentifier.load(path)
     save_state(path, "RecursiveSubspace", 1, arrays, settings)
-    with pytest.raises(CheckpointError, match="not of AdaptiveIdentifier"):
+    with pytest.raises(CheckpointError, match="not of subid.AdaptiveIdentifier"):
         AdaptiveIdentifier.load(path)
 
 
@@ -477,7 +477,7 @@ def _bad_calls(u, y, t):
                                                  np.arange(10.0))))
 def test_bad_samples_raise_and_leave_state_unchanged(short_record, case):
     t, u, y = short_record
-    ident = AdaptiveIdentifier(4, 2, 2, horizon=5, filter_poles=-5.0, history=8)
+    ident = AdaptiveIdentifier(4, 2, 2, horizon=5, filter_poles=-5.0, history_size=8)
     ident.update(u[:2500], y[:2500], t=t[:2500])
     before = state_arrays(ident)
     n = 10
@@ -489,7 +489,7 @@ def test_bad_samples_raise_and_leave_state_unchanged(short_record, case):
         np.testing.assert_array_equal(x, z)
     # and it continues exactly as if the bad call never happened
     ident.update(u[2500:4000], y[2500:4000], t=t[2500:4000])
-    ref = AdaptiveIdentifier(4, 2, 2, horizon=5, filter_poles=-5.0, history=8)
+    ref = AdaptiveIdentifier(4, 2, 2, horizon=5, filter_poles=-5.0, history_size=8)
     ref.update(u[:4000], y[:4000], t=t[:4000])
     assert_same_state(ident, ref)
 
@@ -511,7 +511,7 @@ def test_no_time_information_raises():
 
 def test_overflowing_chunk_is_rejected_and_rolled_back(short_record):
     t, u, y = short_record
-    ident = paper_ident(history=4)
+    ident = paper_ident(history_size=4)
     ident.update(u[:4000], y[:4000])
     before = state_arrays(ident)
     with pytest.raises(DataError, match="non-finite"):
@@ -522,7 +522,7 @@ def test_overflowing_chunk_is_rejected_and_rolled_back(short_record):
 
 def test_non_finite_result_rolls_the_chunk_back(short_record, monkeypatch):
     t, u, y = short_record
-    ident = paper_ident(history=4)
+    ident = paper_ident(history_size=4)
     ident.update(u[:4000], y[:4000])
     before = state_arrays(ident)
     real = K.kernel_packed
@@ -539,7 +539,7 @@ def test_non_finite_result_rolls_the_chunk_back(short_record, monkeypatch):
     for x, z in zip(before, state_arrays(ident)):
         np.testing.assert_array_equal(x, z)
     ident.update(u[4000:5000], y[4000:5000])
-    ref = paper_ident(history=4)
+    ref = paper_ident(history_size=4)
     ref.update(u[:5000], y[:5000])
     assert_same_state(ident, ref)
 
@@ -591,12 +591,12 @@ def test_model_before_data_is_an_error():
 
 def test_history_is_bounded_and_decimated(clean200):
     t, u, y = clean200
-    ident = paper_ident(history=16, refresh_every=10)
+    ident = paper_ident(history_size=16, refresh_every=10)
     n = 100_001
     ident.update(u[:n], y[:n])
     hist = ident.history
     assert 8 <= hist["t"].size <= 16
-    steps = np.diff(hist["samples"])
+    steps = np.diff(hist["sample"])
     assert np.all(steps == steps[0]) and steps[0] >= 10 * 16 // 2
     assert hist["t"][-1] > t[n - 1] - steps[0] * DT - 1e-9
     assert ident._st["hist"].shape[0] == 16
@@ -628,7 +628,7 @@ def test_basis_fixed_by_selector():
     ({"hold": "cubic"}, SubidError),
     ({"method": "euler"}, SubidError),
     ({"max_condition": 1.0}, SubidError),
-    ({"history": -1}, OrderError),
+    ({"history_size": -1}, OrderError),
     ({"dt": -1.0}, DataError),
 ])
 def test_constructor_validation(kw, exc):

@@ -20,9 +20,9 @@ def _state(ident):
 
 def test_sample_by_sample_equals_one_chunk_bit_for_bit():
     u, y = _record()
-    chunk = AdaptiveIdentifier(4, 2, 2, horizon=5, dt=1e-2, history=8)
+    chunk = AdaptiveIdentifier(4, 2, 2, horizon=5, dt=1e-2, history_size=8)
     chunk.update(u, y)
-    single = AdaptiveIdentifier(4, 2, 2, horizon=5, dt=1e-2, history=8)
+    single = AdaptiveIdentifier(4, 2, 2, horizon=5, dt=1e-2, history_size=8)
     for k in range(u.shape[0]):
         single.update(u[k], y[k])
     for a, b in zip(_state(chunk), _state(single)):

@@ -101,7 +101,7 @@ def test_sparkline_keeps_extremes_of_long_signals():
 def test_online_identifiers_repr_and_html(data):
     rec = subid.RecursiveSubspace(3, 2, 2)
     assert repr(rec) == ("RecursiveSubspace(order=3, n_inputs=2, n_outputs=2, horizon="
-                         f"{rec.horizon}, forgetting=1, dt=1, samples=0)")
+                         "5, forgetting=1, dt=1, samples=0)")
     assert "no model yet: no samples yet" in _parse(rec._repr_html_())
     rec.update(data.u[:8], data.y[:8])
     assert "no model yet" in _parse(rec._repr_html_())    # too few samples, said why

@@ -96,7 +96,8 @@ def test_iodata_ragged_and_huge_ints_are_data_errors(rows, big):
     lambda d: subid.ls_subspace(d, 2**80),
     lambda d: subid.RecursiveSubspace(10**7, 2, 2),
     lambda d: subid.HankelStatistic(2, 2, depth=10**10),
-    lambda d: subid.AdaptiveIdentifier(2, 2, 2, dt=0.01, history=10**9),
+    lambda d: subid.AdaptiveIdentifier(2, 2, 2, dt=0.01, history_size=10**9),
+    lambda d: subid.RecursiveSubspace(2, 2, 2, lags=10**9),
     lambda d: subid.RecursiveSubspace(2, 2, 2, history_size=2**50),
 ])
 def test_absurd_sizes_are_order_errors_not_memory_errors(call):

@@ -6,7 +6,9 @@ baselines :func:`moesp` and :func:`n4sid`, and :func:`ct_subspace`
 (continuous time with orthonormal basis filters, seed 002, uniform or
 non-uniform sampling). Online identifiers are classes with ``update``:
 :class:`RecursiveSubspace` (seed 001) and :class:`AdaptiveIdentifier`
-(continuous time, seed 000). Data live in :class:`IOData`,
+(continuous time, seed 000), both :class:`OnlineIdentifier` s (one
+contract: ``update``, ``model``, ``state``, ``history``, ``save``/``load``).
+Data live in :class:`IOData`,
 models in :class:`StateSpace`; :func:`markov_error`, :func:`fit_percent`
 and :func:`pole_error` validate them. Errors are :mod:`subid.errors`
 exceptions (all ``ValueError`` subclasses).
@@ -39,6 +41,7 @@ _LAZY = {
     "dt_to_ct": ("ct_subspace", "dt_to_ct"),
     "RecursiveSubspace": ("recursive", "RecursiveSubspace"),
     "AdaptiveIdentifier": ("adaptive", "AdaptiveIdentifier"),
+    "OnlineIdentifier": ("online", "OnlineIdentifier"),
     "HankelStatistic": ("statistic", "HankelStatistic"),
     "markov_error": ("metrics", "markov_error"),
     "fit_percent": ("metrics", "fit_percent"),
@@ -76,6 +79,7 @@ __all__ = [
     "dt_to_ct",
     "RecursiveSubspace",
     "AdaptiveIdentifier",
+    "OnlineIdentifier",
     "HankelStatistic",
     "markov_error",
     "fit_percent",

@@ -59,6 +59,10 @@ def load_state(path, kind: str, version: int, *, max_bytes: int = MAX_FILE_BYTES
     other dtype is refused), the header is a JSON object of bounded depth
     whose numbers fit in 64 bits and are finite.
 
+    ``kind`` and ``version`` may be tuples of the accepted kinds and
+    versions (older formats a class still reads); the version found is
+    ``settings['_version']``.
+
     Returns
     -------
     arrays : dict of str -> ndarray
@@ -101,16 +105,19 @@ def load_state(path, kind: str, version: int, *, max_bytes: int = MAX_FILE_BYTES
             or not isinstance(found_version, int) or not isinstance(settings, dict):
         raise error(f"checkpoint {path} has a corrupted header (kind, version or settings "
                     "of the wrong type)")
-    if found_kind != kind:
-        raise error(f"{path} is a checkpoint of {found_kind[:80]!r}, not of {kind}")
-    if found_version != version:
+    kinds = (kind,) if isinstance(kind, str) else tuple(kind)
+    versions = (version,) if isinstance(version, int) else tuple(version)
+    if found_kind not in kinds:
+        raise error(f"{path} is a checkpoint of {found_kind[:80]!r}, not of {kinds[0]}")
+    if found_version not in versions:
         raise error(f"{path} has checkpoint format version {found_version}; this "
-                    f"version of subid reads version {version}")
+                    f"version of subid reads version {' or '.join(map(str, versions))}")
     for name in list(arrays):
         value = arrays[name]
         want = np.int64 if value.dtype.kind in "iu" else np.float64
         arrays[name] = check_array(value, f"checkpoint {path}: array {name!r}", error,
                                    dtype=want, finite=False)
+    settings = dict(settings, _version=found_version)
     return arrays, settings
 
 

@@ -268,16 +268,16 @@ def online_html(ident, settings) -> str:
 
 def recursive_repr(ident) -> str:
     return (f"RecursiveSubspace(order={ident.order}, n_inputs={ident.n_inputs}, "
-            f"n_outputs={ident.n_outputs}, horizon={ident.horizon}, "
-            f"forgetting={ident.forgetting:g}, dt={ident.dt:g}, samples={ident.n_samples})")
+            f"n_outputs={ident.n_outputs}, horizon={ident._f}, "
+            f"forgetting={ident._lam:g}, dt={ident._dt:g}, samples={ident.n_samples})")
 
 
 def recursive_settings(ident) -> list[tuple[str, object]]:
     return [("order", ident.order),
-            ("inputs", f"{ident.n_inputs}: {_names(ident.input_names)}"),
-            ("outputs", f"{ident.n_outputs}: {_names(ident.output_names)}"),
-            ("time", _timing(ident.dt)), ("horizon", ident.horizon),
-            ("forgetting", ident.forgetting), ("instruments", ident.instruments),
+            ("inputs", f"{ident.n_inputs}: {_names(ident._input_names)}"),
+            ("outputs", f"{ident.n_outputs}: {_names(ident._output_names)}"),
+            ("time", _timing(ident._dt)), ("horizon", ident._f),
+            ("forgetting", ident._lam), ("instruments", ident.instruments),
             ("samples", ident.n_samples)]
 
 

@@ -86,7 +86,6 @@ from ._validation import (
     check_time_stamps,
     same_period,
 )
-from .data import IOData, require_single_experiment
 from .errors import (
     CheckpointError,
     DataError,
@@ -97,10 +96,11 @@ from .errors import (
 )
 from .ls_subspace import random_selector
 from .model import StateSpace
+from .online import OnlineIdentifier, history_dict
 
 __all__ = ["AdaptiveIdentifier"]
 
-_KIND = "AdaptiveIdentifier"
+_OLD_KIND = "AdaptiveIdentifier"     # the kind of checkpoints before subid.<Class>
 _VERSION = 2      # 2: instrumental variables (zr, Cz, Gz)
 # Step lengths handled in one kernel call when the time stamps are non-uniform
 # (bounds the memory of the per-step discretisation tables).
@@ -183,8 +183,11 @@ def _companion(poles: np.ndarray, scale: bool):
     return omega * Lc, Bf, omega
 
 
-class AdaptiveIdentifier:
+class AdaptiveIdentifier(OnlineIdentifier):
     """Online identification of a continuous-time state-space model (seed 000).
+
+    An :class:`~subid.online.OnlineIdentifier`: the settings below are
+    stored unchanged as attributes of the same names (:meth:`get_params`).
 
     Parameters
     ----------
@@ -259,7 +262,7 @@ class AdaptiveIdentifier:
         (the paper's P(0) = I). M(0) = 0, θ(0) = 0, Ψ(0) = 0.
     ode_trace_bound : float
         ``'ode'`` only: forgetting is suspended while tr P (tr Q) exceeds it.
-    history : int
+    history_size : int
         Capacity of the opt-in history of estimates (0: none). One row per
         refresh until full; then every other row is dropped and the stride
         doubles, so the history spans the whole run in bounded memory.
@@ -287,7 +290,8 @@ class AdaptiveIdentifier:
     state : ndarray, shape (order,)
         Current filtered state ``x̃ = H (p - T_f q)``.
     history : dict of ndarray
-        ``t``, ``samples``, ``A``, ``B``, ``C``, ``D`` (time on axis 0).
+        ``sample``, ``t``, ``poles``, ``A``, ``B``, ``C``, ``D`` (time on
+        axis 0; the common format of :mod:`subid.online`).
 
     Examples
     --------
@@ -304,13 +308,30 @@ class AdaptiveIdentifier:
     True
     """
 
+    _VERSION = _VERSION
+    _READS = (_VERSION,)
+    _OLD_KINDS = (_OLD_KIND,)
+
     def __init__(self, order, n_inputs, n_outputs, horizon=None, filter_poles=-5.0,
                  forgetting=None, bd_forgetting=None, selector=None, seed=0, *, dt=None,
                  hold="foh", method="iv", scale_filters=True, refresh_every=50,
                  bd_gate=1e-2, max_condition=1e10, initial_covariance=None,
-                 bd_initial_covariance=None, ode_trace_bound=1e8, history=0,
+                 bd_initial_covariance=None, ode_trace_bound=1e8, history_size=0,
                  engine="numba", input_names=None, output_names=None,
                  instrument_poles=None, max_gap=None):
+        # the settings, stored unchanged (validated below)
+        self.order, self.n_inputs, self.n_outputs = order, n_inputs, n_outputs
+        self.horizon, self.filter_poles = horizon, filter_poles
+        self.forgetting, self.bd_forgetting, self.seed = forgetting, bd_forgetting, seed
+        self.dt, self.hold, self.method, self.scale_filters = dt, hold, method, scale_filters
+        self.refresh_every, self.bd_gate, self.max_condition = refresh_every, bd_gate, \
+            max_condition
+        self.initial_covariance, self.bd_initial_covariance = initial_covariance, \
+            bd_initial_covariance
+        self.ode_trace_bound, self.history_size, self.engine = ode_trace_bound, history_size, \
+            engine
+        self.input_names, self.output_names = input_names, output_names
+        self.instrument_poles, self.max_gap = instrument_poles, max_gap
         n = check_int(order, "order")
         nu = check_int(n_inputs, "n_inputs")
         ny = check_int(n_outputs, "n_outputs")
@@ -361,7 +382,7 @@ class AdaptiveIdentifier:
             _positive(bd_initial_covariance, "bd_initial_covariance")
         self._gate = _positive(bd_gate, "bd_gate")
         self._trace_bound = _positive(ode_trace_bound, "ode_trace_bound")
-        self._hist_cap = check_int(history, "history", minimum=0)
+        self._hist_cap = check_int(history_size, "history_size", minimum=0)
         self._dt = None if dt is None else _positive(dt, "dt", exc=DataError)
         self._seed = seed
         if selector is None:
@@ -504,7 +525,8 @@ class AdaptiveIdentifier:
     def model(self) -> StateSpace:
         """The current estimate ``(Ã, B̃, C̃, D)`` as a continuous-time model.
 
-        ``info`` holds ``method`` (``'seed000_adaptive'``), ``samples``,
+        ``info`` holds ``method`` (``'seed000_adaptive'``), ``samples`` (also
+        as ``n_samples``, the key of every model),
         ``time``, ``refreshes``, ``horizon``, ``filter_poles``,
         ``time_scale``, ``forgetting``, ``bd_forgetting``, ``ls_method``,
         ``hold``, ``condition`` and ``bd_condition`` (of the normal
@@ -537,6 +559,7 @@ class AdaptiveIdentifier:
         ls = self._method != "ode"
         info = {
             "samples": self.n_samples,
+            "n_samples": self.n_samples,
             "time": self.t,
             "refreshes": int(ist[_k.IST["refreshes"]]),
             "horizon": self._f,
@@ -573,6 +596,8 @@ class AdaptiveIdentifier:
             warnings.warn(issued[0], NotConvergedWarning, stacklevel=2)
         hold = info.pop("hold")
         horizon = info.pop("horizon")
+        for key in ("method", "order", "n_samples"):
+            info.pop(key, None)
         info = model_info("seed000_adaptive", order=self._n, horizon=horizon,
                           n_samples=self.n_samples, x0=None, hold=hold,
                           conditions=conditions_of(info), warnings=issued, **info)
@@ -638,31 +663,24 @@ class AdaptiveIdentifier:
         n, nu, ny = self._n, self._nu, self._ny
         rows = self._st["hist"][:self._st["ist"][_k.IST["hist_count"]]].copy()
         c = 2
-        out = {"t": rows[:, 0], "samples": rows[:, 1].astype(np.int64)}
+        mats = {}
         for name, shape in (("A", (n, n)), ("B", (n, nu)), ("C", (ny, n)), ("D", (ny, nu))):
             size = shape[0] * shape[1]
-            out[name] = rows[:, c:c + size].reshape((-1,) + shape)
+            mats[name] = rows[:, c:c + size].reshape((-1,) + shape)
             c += size
-        return out
+        return history_dict(rows[:, 1], rows[:, 0], dt=0.0, **mats)
 
     # ---------------------------------------------------------------- update
     def _parse(self, u, y, t):
         """Validate one chunk; returns (U, Y, T or None) or raises."""
-        if isinstance(u, IOData):
-            if y is not None or t is not None:
-                raise DataError("pass either an IOData record or (u, y[, t]), not both")
-            require_single_experiment(u, type(self).__name__)
-            data = u
-            u, y = data.u, data.y
-            t = data.t if data.has_time_stamps else None    # explicit time stamps, if any
-            if t is None:
+        if y is None or type(u) is not np.ndarray:
+            u, y, t, data = self._unpack(u, y, t)
+            if data is not None and t is None:
                 if self._dt is not None and not same_period(data.dt, self._dt):
                     raise DataError(f"the IOData record is sampled with dt={data.dt!r} but "
                                     f"the identifier has dt={self._dt!r}")
                 if self._dt is None:
                     t = self._next_times(data.n_samples, data.dt)
-        if y is None:
-            raise DataError("output y is missing: call update(u, y) or update(iodata)")
         U = as_chunk(u, self._nu, "input u")
         Y = as_chunk(y, self._ny, "output y")
         if U.shape[0] != Y.shape[0]:
@@ -875,7 +893,7 @@ class AdaptiveIdentifier:
             "bd_gate": self._gate,
             "max_condition": self._max_cond, "initial_covariance": self._p0,
             "bd_initial_covariance": self._q0, "ode_trace_bound": self._trace_bound,
-            "history": self._hist_cap, "engine": self._engine,
+            "history_size": self._hist_cap, "engine": self._engine,
             "instrument_poles": [[float(p.real), float(p.imag)] for p in self._ipoles],
             "max_gap": self._max_gap,
             "input_names": None if self._input_names is None else list(self._input_names),
@@ -889,7 +907,7 @@ class AdaptiveIdentifier:
         arrays = {k: v for k, v in self._st.items()}
         arrays["hist"] = self._st["hist"]
         arrays["selector"] = np.array(self._H)
-        save_state(path, _KIND, _VERSION, arrays, self._settings())
+        save_state(path, self.checkpoint_kind(), _VERSION, arrays, self._settings())
 
     @classmethod
     def load(cls, path) -> "AdaptiveIdentifier":
@@ -904,7 +922,7 @@ class AdaptiveIdentifier:
         subid.errors.DataFileNotFoundError
             The file does not exist.
         """
-        arrays, s = load_state(path, _KIND, _VERSION)
+        arrays, s = load_state(path, cls._kinds(), cls._READS)
         try:
             poles = [complex(re, im) for re, im in s["filter_poles"]]
             obj = cls(s["order"], s["n_inputs"], s["n_outputs"], horizon=s["horizon"],
@@ -917,7 +935,8 @@ class AdaptiveIdentifier:
                       max_condition=s["max_condition"],
                       initial_covariance=s["initial_covariance"],
                       bd_initial_covariance=s["bd_initial_covariance"],
-                      ode_trace_bound=s["ode_trace_bound"], history=s["history"],
+                      ode_trace_bound=s["ode_trace_bound"],
+                      history_size=s["history_size"] if "history_size" in s else s["history"],
                       engine=s["engine"], input_names=s["input_names"],
                       output_names=s["output_names"],
                       instrument_poles=[complex(re, im) for re, im in s["instrument_poles"]],

@@ -29,7 +29,6 @@ tool. The options ``--option KEY=VALUE`` accepts are the registry's
 from __future__ import annotations
 
 import contextlib
-import hashlib
 import json
 import logging
 import math
@@ -48,7 +47,7 @@ from ._progress import on_terminal, progress_bar
 from ._selection import describe as describe_selection
 from ._validation import same_period
 from ._version import __version__
-from .errors import DataError, NotConvergedWarning, OrderError, SubidError
+from .errors import DataError, OrderError, SubidError
 from .registry import METHODS as _REGISTRY
 from .registry import MethodSpec, MethodUnavailableError
 
@@ -117,27 +116,15 @@ def new_online(spec: MethodSpec, order, n_inputs, n_outputs, *, horizon=None, fo
         kwargs["horizon"] = horizon
     if forgetting is not None:
         kwargs["forgetting"] = forgetting
-    if spec.time == "discrete" and dt is not None:
+    if dt is not None:
         kwargs["dt"] = dt
     return cls(order, n_inputs, n_outputs, **kwargs)
 
 
 def _named(model, data):
     """``model`` with the channel names of ``data`` (online identifiers use u1, y1...)."""
-    from .model import StateSpace
-    if (tuple(model.input_names), tuple(model.output_names)) == \
-            (tuple(data.input_names), tuple(data.output_names)):
-        return model
-    return StateSpace(model.A, model.B, model.C, model.D, model.dt,
-                      input_names=data.input_names, output_names=data.output_names,
-                      info=model.info, hold=model.hold)
-
-
-def online_update(spec: MethodSpec, ident, u, y, t=None):
-    """Feed a chunk of samples to an online identifier."""
-    if spec.time == "continuous":
-        return ident.update(u, y, t=t)
-    return ident.update(u, y)
+    from .online import with_names
+    return with_names(model, data)
 
 
 def load_online(spec: MethodSpec, path):
@@ -451,13 +438,11 @@ def _warnings_to_log():
 
 def _convergence_status(model) -> str:
     """'yes' or 'NO: why' from an online model's info (``converged`` /
-    ``convergence`` of the adaptive identifier, ``bd_fallback`` of the
-    recursive one)."""
+    ``convergence``, which both online identifiers set)."""
     info = model.info
     if info.get("converged") is False:
-        return f"NO: {info.get('convergence')}"
-    if info.get("bd_fallback"):
-        return f"NO: {info['bd_fallback']} (B, D from the projected data equation)"
+        return f"NO: {info.get('convergence')}" + (
+            " (B, D from the projected data equation)" if info.get("bd_fallback") else "")
     return "yes"
 
 
@@ -705,7 +690,9 @@ def identify(data, inputs, outputs, dt, time_column, delimiter, detrend, method_
             else:
                 ident = new_online(spec, order, est.n_inputs, est.n_outputs, horizon=horizon,
                                    forgetting=forgetting, dt=est.dt, options=opts)
-                _feed(spec, ident, est, 0, _state().progress, chunk=max(est.n_samples // 100, 1))
+                from .online import Tracker
+                _run_online(spec, Tracker(ident, est), 0, _state().progress,
+                            chunk=max(est.n_samples // 100, 1))
                 model = _named(ident.model, est)
             if refine == "pem":
                 from .pem import pem
@@ -941,165 +928,14 @@ def _print_summary(source, record, spec, model, result, est, val, seconds, files
 
 
 # -- track -------------------------------------------------------------------
-def _feed(spec, ident, data, start, progress, *, chunk, on_chunk=None):
-    """Feed ``data[start:]`` to ``ident`` in chunks; ``on_chunk(n)`` after each."""
-    n = data.n_samples
-    bar = _progress(n, f"{spec.name}", progress, initial=start)
+def _run_online(spec, tracker, start, progress, *, chunk):
+    """``tracker.run`` from sample ``start`` with a progress bar on a terminal."""
+    bar = _progress(tracker.data.n_samples, f"{spec.name}", progress, initial=start)
     try:
-        k = start
-        while k < n:
-            stop = min(n, k + chunk)
-            if on_chunk is not None:
-                stop = min(stop, on_chunk.next_stop(k))
-            t = data.t[k:stop] if spec.time == "continuous" else None
-            online_update(spec, ident, data.u[k:stop], data.y[k:stop], t)
-            if bar is not None:
-                bar.update(stop - k)
-            k = stop
-            if on_chunk is not None:
-                on_chunk(k)
+        tracker.run(start, chunk=chunk, progress=None if bar is None else bar.update)
     finally:
         if bar is not None:
             bar.close()
-
-
-def _parameters(model, dt_hint) -> tuple[np.ndarray, list[str]]:
-    """Markov parameters h1..h6 (impulse response samples), at most 12, for convergence plots."""
-    m = model
-    if m.dt == 0:
-        m = m.to_discrete(dt_hint if dt_hint else 1.0)
-    k = 6
-    h = m.markov(k + 1)[1:]                 # skip D
-    names = [f"h{j + 1}({m.output_names[i]}←{m.input_names[q]})"
-             for j in range(k) for i in range(m.n_outputs) for q in range(m.n_inputs)]
-    values = h.reshape(-1)
-    order = np.argsort([j for j in range(k) for _ in range(m.n_outputs * m.n_inputs)],
-                       kind="stable")
-    values, names = values[order][:12], [names[i] for i in order][:12]
-    return values, names
-
-
-class _Tracker:
-    """Snapshots and checkpoints during ``subid track``."""
-
-    def __init__(self, spec, ident, raw, data, *, trace_every, checkpoint_every, checkpoint_dir,
-                 keep):
-        self.spec, self.ident, self.raw, self.data = spec, ident, raw, data
-        self.trace_every = trace_every
-        self.checkpoint_every = checkpoint_every
-        self.checkpoint_dir = checkpoint_dir
-        self.keep = keep
-        self.samples, self.poles, self.params = [], [], []
-        self.names: list[str] = []
-        self.written: list[str] = []
-        self.dt_hint = data.dt if data.dt is not None else float(np.mean(np.diff(data.t)))
-
-    def next_stop(self, k: int) -> int:
-        stops = [self.data.n_samples]
-        for every in (self.trace_every, self.checkpoint_every):
-            if every:
-                stops.append((k // every + 1) * every)
-        return min(stops)
-
-    def __call__(self, k: int) -> None:
-        n = self.data.n_samples
-        if (self.trace_every and k % self.trace_every == 0) or k == n:
-            self.snapshot(k)
-        if self.checkpoint_every and k % self.checkpoint_every == 0 and k < n:
-            self.checkpoint(k)
-
-    def snapshot(self, k: int) -> None:
-        try:
-            with warnings.catch_warnings():       # intermediate models: the final one warns
-                warnings.simplefilter("ignore", NotConvergedWarning)
-                model = _named(self.ident.model, self.data)
-            poles = model.poles()
-            values, names = _parameters(model, self.dt_hint)
-        except SubidError as exc:
-            log.debug("no model at sample %d: %s", k, exc)
-            return
-        if self.samples and self.samples[-1] == k:
-            return
-        self.samples.append(k)
-        self.poles.append(poles)
-        self.params.append(values)
-        self.names = names
-
-    def history(self) -> dict:
-        if not self.samples:
-            return {"sample": np.zeros(0), "poles": np.zeros((0, 0), complex)}
-        return {"sample": np.array(self.samples), "poles": np.array(self.poles),
-                "parameters": np.array(self.params), "parameter_names": list(self.names)}
-
-    def fingerprint(self, k: int) -> str:
-        h = hashlib.sha256()
-        h.update(np.ascontiguousarray(self.raw.u[:k]).tobytes())
-        h.update(np.ascontiguousarray(self.raw.y[:k]).tobytes())
-        return h.hexdigest()
-
-    def save_trace(self, path, k: int) -> None:
-        hist = self.history()
-        arrays = {"sample": np.asarray(hist["sample"], dtype=np.int64),
-                  "poles_re": np.asarray(hist["poles"]).real,
-                  "poles_im": np.asarray(hist["poles"]).imag,
-                  "parameters": np.asarray(hist.get("parameters", np.zeros((0, 0)))),
-                  "parameter_names": np.array(hist.get("parameter_names", []), dtype=str),
-                  "fingerprint": np.array(self.fingerprint(k)),
-                  "method": np.array(self.spec.name)}
-        with atomic_write(path, "wb", what="convergence trace") as fh:
-            np.savez(fh, **arrays)
-
-    def load_trace(self, path, k: int) -> None:
-        if not os.path.exists(path):
-            log.warning("no convergence trace next to the checkpoint (%s); the convergence "
-                        "plot starts at sample %d", path, k)
-            return
-        from ._files import open_regular
-        from ._npz import load_npz
-        try:
-            fh, size = open_regular(path, what="convergence trace")
-            with fh:
-                z = load_npz(fh, size=size)
-            sample = z["sample"]
-            poles = z["poles_re"] + 1j * z["poles_im"]
-            params = z["parameters"]
-            names = [str(s) for s in z["parameter_names"]]
-            fingerprint = str(z["fingerprint"])
-        except Exception as exc:     # SubidError, NpzError, KeyError, dtype errors: a new trace
-            log.warning("convergence trace %s unreadable (%s); starting a new one", path, exc)
-            return
-        if fingerprint != self.fingerprint(k):
-            log.warning("the checkpoint was made on other data: the first %d samples of this "
-                        "record differ from those the identifier has seen", k)
-        keep = sample <= k
-        self.samples = [int(s) for s in sample[keep]]
-        self.poles = list(poles[keep])
-        self.params = list(params[keep]) if params.ndim == 2 and params.shape[0] == keep.size \
-            else []
-        if len(self.params) != len(self.samples):
-            self.samples, self.poles, self.params = [], [], []
-        self.names = names
-
-    def checkpoint(self, k: int) -> str:
-        os.makedirs(self.checkpoint_dir, exist_ok=True)
-        path = os.path.join(self.checkpoint_dir, f"checkpoint-{k:010d}.npz")
-        self.save_trace(path[:-4] + ".trace.npz", k)
-        self.ident.save(path)
-        self.written.append(path)
-        log.info("checkpoint %s", path)
-        if self.keep:
-            # Prune only the checkpoints this run wrote, oldest first (never by
-            # sorting the names in the folder: those of an earlier run on a
-            # longer record would sort after this run's and survive, and this
-            # run's newest would be deleted).
-            while len(self.written) > self.keep:
-                old = self.written.pop(0)
-                if old == path:
-                    continue
-                for name in (old, old[:-4] + ".trace.npz"):
-                    with contextlib.suppress(FileNotFoundError):
-                        os.unlink(name)
-        return path
 
 
 @cli.command(epilog="\b\nExamples:\n"
@@ -1193,18 +1029,17 @@ def track(data, inputs, outputs, dt, time_column, delimiter, detrend, method_nam
             ident = new_online(spec, order, work.n_inputs, work.n_outputs, horizon=horizon,
                                forgetting=forgetting, dt=work.dt, options=opts)
             start = 0
-    tracker = _Tracker(spec, ident, raw, work, trace_every=trace_every,
-                       checkpoint_every=checkpoint_every, checkpoint_dir=checkpoint_dir,
-                       keep=keep_checkpoints)
+    from .online import Tracker
+    tracker = Tracker(ident, work, fingerprint_data=raw, trace_every=trace_every,
+                      checkpoint_every=checkpoint_every, checkpoint_dir=checkpoint_dir,
+                      keep=keep_checkpoints)
     if resume is not None:
-        tracker.load_trace(resume[:-4] + ".trace.npz" if resume.endswith(".npz")
-                           else resume + ".trace.npz", start)
+        with _warnings_to_log():
+            tracker.load_trace(resume[:-4] + ".trace.npz" if resume.endswith(".npz")
+                               else resume + ".trace.npz", start)
     t0 = time.perf_counter()
     with _about(data), _warnings_to_log():
-        if start < n:
-            _feed(spec, ident, work, start, _state().progress, chunk=chunk, on_chunk=tracker)
-        else:
-            tracker.snapshot(n)
+        _run_online(spec, tracker, start, _state().progress, chunk=chunk)
         model = _named(ident.model, work)
     seconds = time.perf_counter() - t0
     final_ckpt = tracker.checkpoint(n) if start < n or resume is None else resume

@@ -20,16 +20,19 @@ systems.
 B, D and the current state come, by default (``bd_method='regression'``),
 from the output-error regression of the batch method
 (:func:`subid._regression.fit_b_d_x0`: ``y(t) = C S(t) [x0; vec B] +
-(u(t)^T ⊗ I) vec D``, ``S(t+1) = A S(t) + [0, u(t)^T ⊗ I]``) made recursive:
-its rows are reduced into a triangular factor by the same Givens rotations
-and forgetting as the Hankel data. The sensitivity S is propagated with the
-model's (A, C), refreshed every ``refresh_every`` samples; when they change
-by more than ``restart_tolerance`` (relative) since the last refresh (start
-up, a switch) the regression restarts with ``S = [I, 0]``, a new x0. Exact
-on noise-free data (equal to the batch model to rounding); with noise the
-batch regression uses the final (A, C) over the whole record, which no
-bounded-memory recursion can, so they differ by the drift of (A, C) over the
-regression's memory. ``bd_method='projection'`` uses the projected data
+(u(t)^T ⊗ I) vec D``, ``S(t+1) = A S(t) + [0, u(t)^T ⊗ I]``, outputs weighted
+by 1 / their standard deviation). With forgetting 1 it is evaluated exactly,
+for the current (A, C), from fixed-size lagged statistics of the data
+(:mod:`subid._lagged`: lags 0..``lags``, the first and the last samples), so
+the model equals the batch :func:`subid.ls_subspace` model on noisy data too
+(up to terms in ``A^(lags+1)``, reported in ``info['bd_truncation']``). With
+forgetting below 1 the regression is made recursive: its rows are reduced
+into a triangular factor by the same Givens rotations and forgetting as the
+Hankel data. The sensitivity S is propagated with the model's (A, C),
+refreshed every ``refresh_every`` samples; when they change by more than
+``restart_tolerance`` (relative) since the last refresh (start up, a switch)
+the regression restarts with ``S = [I, 0]``, a new x0 (close to the batch
+model, not equal: (A, C) as they were when each sample came). ``bd_method='projection'`` uses the projected data
 equation on the statistic instead (the former default; it equals the batch
 ``bd_method='projection'`` exactly, but is much less accurate on some real
 data: CD_player_arm, docs/seed000.md).
@@ -51,6 +54,8 @@ from . import noise_model
 from ._checkpoint import load_state, require, save_state
 from ._hankel import HankelFactor, hankel_chunk
 from ._info import model_info
+from ._lagged import LaggedStatistic, end_sensitivity
+from ._lagged import solve as solve_lagged
 from ._regression import fit_b_d_projection, regression_rows, solve_factor
 from ._subspace import (
     check_excitation,
@@ -59,7 +64,16 @@ from ._subspace import (
     min_samples,
     normalize_channels,
 )
-from ._validation import as_chunk, check_dt, check_int, check_selector
+from ._validation import (
+    MAX_DIMENSION,
+    UNIFORM_RTOL,
+    as_chunk,
+    check_dt,
+    check_int,
+    check_selector,
+    check_time_stamps,
+    same_period,
+)
 from .errors import (
     CheckpointError,
     DataError,
@@ -70,11 +84,13 @@ from .errors import (
 )
 from .ls_subspace import check_options, gamma_from_factor, random_selector
 from .model import StateSpace
+from .online import OnlineIdentifier, history_dict
 
 __all__ = ["RecursiveSubspace"]
 
 _CHUNK = 8192
 _FIRST_REFRESH = 50     # first refresh of the B, D regression's (A, C), then doubling
+_TRUNCATION_WARN = 1e-8    # |A^(lags+1)| above this: the exact regression is approximate
 
 
 @numba.njit(cache=True, nogil=True)
@@ -132,8 +148,11 @@ def givens_update_reference(R, rows, lam_sqrt):
     return R
 
 
-class RecursiveSubspace:
+class RecursiveSubspace(OnlineIdentifier):
     """Online SVD-free subspace identification with a fixed state basis.
+
+    An :class:`~subid.online.OnlineIdentifier`: the settings below are
+    stored unchanged as attributes of the same names (:meth:`get_params`).
 
     Parameters
     ----------
@@ -179,17 +198,26 @@ class RecursiveSubspace:
     restart_tolerance : float
         ``'regression'``: relative change of (A, C) between two refreshes
         above which the regression restarts (start-up, switches).
+    lags : int
+        ``'regression'`` with forgetting 1: lags of the statistics of the
+        exact regression (memory and work per sample grow with it). Exact
+        for any stable A while at most ``lags + 1`` samples have come, else
+        up to ``|A^(lags+1)|`` (1e-16 for a spectral radius of 0.965 at the
+        default 1000; above 1e-8 the model warns).
 
     Attributes
     ----------
     n_samples : int
         Samples received so far.
+    t : float or None
+        Time of the latest sample.
     model : StateSpace
         The current estimate (computed on demand).
     state : ndarray
         Estimate of the state at the latest sample, in the basis of Λ.
     history : dict
-        ``{'sample': (k,), 'poles': (k, order)}`` snapshots (empty if off).
+        ``sample``, ``t``, ``poles``, ``A``, ``B``, ``C``, ``D`` snapshots (the
+        common format of :mod:`subid.online`; empty if off).
 
     Examples
     --------
@@ -203,53 +231,63 @@ class RecursiveSubspace:
     True
     """
 
-    _KIND = "subid.RecursiveSubspace"
-    _VERSION = 2      # 2: the recursive B, D regression
+    _VERSION = 3      # 2: the recursive B, D regression; 3: lagged statistics (forgetting 1)
+    _READS = (2, 3)
 
     def __init__(self, order, n_inputs, n_outputs, horizon=None, forgetting=1.0,
                  instruments="past", selector=None, seed=0, *, instrument_weighting=True,
                  power_iterations=8, feedthrough=True, dt=1.0, history_size=None,
                  history_stride=1000, input_names=None, output_names=None,
-                 bd_method="regression", refresh_every=None, restart_tolerance=1.0):
-        self.order = check_int(order, "order")
-        self.n_inputs = check_int(n_inputs, "n_inputs")
-        self.n_outputs = check_int(n_outputs, "n_outputs")
-        self.horizon = default_horizon(self.order, self.n_outputs, self.n_inputs, 0, 2) \
+                 bd_method="regression", refresh_every=None, restart_tolerance=1.0,
+                 lags=1000):
+        # the settings, stored unchanged (validated below; the values in use
+        # are private: e.g. the default horizon)
+        self.order, self.n_inputs, self.n_outputs = order, n_inputs, n_outputs
+        self.horizon, self.forgetting, self.instruments = horizon, forgetting, instruments
+        self.seed, self.instrument_weighting = seed, instrument_weighting
+        self.power_iterations, self.feedthrough, self.dt = power_iterations, feedthrough, dt
+        self.history_size, self.history_stride = history_size, history_stride
+        self.input_names, self.output_names = input_names, output_names
+        self.bd_method, self.refresh_every = bd_method, refresh_every
+        self.restart_tolerance, self.lags = restart_tolerance, lags
+        check_int(order, "order")
+        check_int(n_inputs, "n_inputs")
+        check_int(n_outputs, "n_outputs")
+        self._f = default_horizon(self.order, self.n_outputs, self.n_inputs, 0, 2) \
             if horizon is None else check_int(horizon, "horizon", minimum=2)
-        if self.order > (self.horizon - 1) * self.n_outputs:
+        if self.order > (self._f - 1) * self.n_outputs:
             need = math.ceil(self.order / self.n_outputs) + 1
             raise OrderError(f"RecursiveSubspace: order {self.order} cannot be revealed with "
-                             f"horizon {self.horizon} and {self.n_outputs} outputs; use "
+                             f"horizon {self._f} and {self.n_outputs} outputs; use "
                              f"horizon >= {need}")
         if isinstance(forgetting, bool) or not isinstance(forgetting, numbers.Real) \
                 or not 0 < forgetting <= 1:
             raise SubidError(f"forgetting must be a number in (0, 1], got {forgetting!r}")
-        self.forgetting = float(forgetting)
-        self.power_iterations = check_options(instruments, power_iterations)
-        self.instruments = instruments
-        self.instrument_weighting = bool(instrument_weighting)
-        self.feedthrough = bool(feedthrough)
-        self.dt = check_dt(dt)
-        self.seed = seed
-        selector = check_selector(selector, self.horizon, self.n_outputs, [self.order],
+        self._lam = float(forgetting)
+        self._power_iterations = check_options(instruments, power_iterations)
+        self._instrument_weighting = bool(instrument_weighting)
+        self._feedthrough = bool(feedthrough)
+        self._dt = check_dt(dt)
+        self._t_origin, self._k_origin = 0.0, 0     # time of sample k: t0 + (k - k0) dt
+        selector = check_selector(selector, self._f, self.n_outputs, [self.order],
                                   self.order)
-        self.input_names = tuple(input_names) if input_names is not None else \
+        self._input_names = tuple(input_names) if input_names is not None else \
             tuple(f"u{k + 1}" for k in range(self.n_inputs))
-        self.output_names = tuple(output_names) if output_names is not None else \
+        self._output_names = tuple(output_names) if output_names is not None else \
             tuple(f"y{k + 1}" for k in range(self.n_outputs))
-        for names, count, what in ((self.input_names, self.n_inputs, "input_names"),
-                                   (self.output_names, self.n_outputs, "output_names")):
+        for names, count, what in ((self._input_names, self.n_inputs, "input_names"),
+                                   (self._output_names, self.n_outputs, "output_names")):
             if len(names) != count:
                 raise DataError(f"{what} has {len(names)} names for {count} channels")
-        self._selector = random_selector(self.horizon, self.n_outputs, seed, rows=self.order) \
+        self._selector = random_selector(self._f, self.n_outputs, seed, rows=self.order) \
             if selector is None else selector[: self.order].copy()
-        self._depth = 2 * self.horizon if instruments == "past" else self.horizon
+        self._depth = 2 * self._f if instruments == "past" else self._f
         m = self._depth * (self.n_inputs + self.n_outputs)
         self._R = np.zeros((m, m))
-        self._keep = max(self._depth - 1, self.horizon)
+        self._keep = max(self._depth - 1, self._f)
         self._buf_u = np.zeros((0, self.n_inputs))
         self._buf_y = np.zeros((0, self.n_outputs))
-        self.n_samples = 0
+        self._n_samples = 0
         self._n_columns = 0
         self._weight = 0.0            # sum of λ^k over the columns seen
         if history_size is not None:
@@ -258,23 +296,24 @@ class RecursiveSubspace:
         self._history_stride = check_int(history_stride, "history_stride")
         self._hist_sample = np.zeros(0, dtype=np.int64)
         self._hist_poles = np.zeros((0, self.order), dtype=complex)
+        self._hist_abcd = np.zeros((0, self._abcd_size()))
+        self._hist_t = np.zeros(0)
         self._model = None
         if bd_method not in ("regression", "projection"):
             raise SubidError(f"bd_method must be 'regression' or 'projection', got "
                              f"{bd_method!r}")
-        self.bd_method = bd_method
         if refresh_every is None:      # a quarter of the memory, within [50, 2000]
-            memory = math.inf if self.forgetting == 1.0 else 1.0 / (1.0 - self.forgetting)
+            memory = math.inf if self._lam == 1.0 else 1.0 / (1.0 - self._lam)
             refresh_every = int(min(2000, max(_FIRST_REFRESH, memory / 4)))
-        self.refresh_every = check_int(refresh_every, "refresh_every")
+        self._refresh_every = check_int(refresh_every, "refresh_every")
         if isinstance(restart_tolerance, bool) or not isinstance(restart_tolerance,
                                                                  numbers.Real) \
                 or not (math.isfinite(restart_tolerance) and restart_tolerance > 0):
             raise SubidError(f"restart_tolerance must be a positive number, got "
                              f"{restart_tolerance!r}")
-        self.restart_tolerance = float(restart_tolerance)
+        self._restart_tolerance = float(restart_tolerance)
         n, nu, ny = self.order, self.n_inputs, self.n_outputs
-        self._nbd = n + n * nu + (ny * nu if self.feedthrough else 0)   # x0, B, D
+        self._nbd = n + n * nu + (ny * nu if self._feedthrough else 0)   # x0, B, D
         self._bd_R = np.zeros((self._nbd + 1, self._nbd + 1))
         self._bd_S = np.zeros((n, n + n * nu))
         self._bd_S_last = np.zeros((n, n + n * nu))
@@ -284,6 +323,10 @@ class RecursiveSubspace:
         self._bd_start = 0            # sample index of x0 of the regression
         self._bd_rows = 0.0           # effective number of samples in the regression
         self._bd_restarts = 0
+        self._lags = check_int(lags, "lags", maximum=MAX_DIMENSION)
+        # forgetting 1: the exact batch regression from lagged statistics
+        self._exact = self.bd_method == "regression" and self._lam == 1.0
+        self._lag = LaggedStatistic(nu, ny, self._lags) if self._exact else None
 
     # -- input ------------------------------------------------------------
     def __repr__(self) -> str:
@@ -295,26 +338,90 @@ class RecursiveSubspace:
         from ._repr import online_html, recursive_settings
         return online_html(self, recursive_settings(self))
 
-    def update(self, u, y) -> "RecursiveSubspace":
+    def _abcd_size(self) -> int:
+        n, nu, ny = self.order, self.n_inputs, self.n_outputs
+        return n * n + n * nu + ny * n + ny * nu
+
+    @property
+    def n_samples(self) -> int:
+        """Samples received so far."""
+        return self._n_samples
+
+    @property
+    def t(self) -> float | None:
+        """Time of the latest sample (None before the first): ``dt`` times its
+        index, or continuing the time stamps given to :meth:`update`."""
+        if not self._n_samples:
+            return None
+        return self._t_origin + (self._n_samples - 1 - self._k_origin) * self._dt
+
+    def _times(self, t, N: int):
+        """Validate time stamps of a chunk of N samples: a uniform grid of step
+        dt that continues the stream. Returns the time of its first sample."""
+        T = np.asarray(t, dtype=np.float64).reshape(-1)
+        T = check_time_stamps(T, N)
+        tol = UNIFORM_RTOL * self._dt
+        if N > 1 and np.abs(np.diff(T) - self._dt).max() > tol * max(1.0, N):
+            raise DataError(f"RecursiveSubspace is discrete-time with dt={self._dt!r}: the time "
+                            f"stamps t are not a uniform grid of step dt (steps "
+                            f"{float(np.diff(T).min())!r} to {float(np.diff(T).max())!r}); "
+                            "resample the data or create the identifier with their dt")
+        if self._n_samples:
+            expect = self.t + self._dt
+            if abs(T[0] - expect) > tol * max(1.0, abs(expect) / self._dt):
+                raise DataError(f"time stamps t start at {T[0]!r}, but the next sample of the "
+                                f"stream is due at t = {expect!r} (dt={self._dt!r}); "
+                                "RecursiveSubspace needs gap-free, uniformly sampled data")
+        return float(T[0])
+
+    def update(self, u, y=None, t=None) -> "RecursiveSubspace":
         """Add samples: one sample or a chunk (time on axis 0).
 
-        ``u`` is (N, n_inputs), or a 1-D array of n_inputs values (one
-        sample) when n_inputs > 1, or N samples when n_inputs == 1; likewise
-        ``y``. The result does not depend on how a stream is cut into chunks.
-        A rejected chunk leaves the identifier unchanged.
+        Parameters
+        ----------
+        u : array_like or IOData
+            (N, n_inputs), or a 1-D array of n_inputs values (one sample)
+            when n_inputs > 1, or N samples when n_inputs == 1. An
+            :class:`~subid.data.IOData` record supplies u, y (and its time
+            stamps, if explicit); its dt must be the identifier's.
+        y : array_like
+            Outputs, likewise.
+        t : array_like, optional
+            Time stamps: a uniform grid of step ``dt`` continuing the stream
+            (checked; the identifier is discrete-time).
 
         Returns
         -------
         self
+
+        Raises
+        ------
+        subid.errors.DataError
+            NaN or inf, wrong shapes, time stamps off the grid. A rejected
+            chunk leaves the identifier unchanged.
+
+        Notes
+        -----
+        The result does not depend on how a stream is cut into chunks (to
+        rounding).
         """
+        u, y, t, record = self._unpack(u, y, t)
+        if record is not None and t is None and not same_period(record.dt, self._dt):
+            raise DataError(f"the IOData record is sampled with dt={record.dt!r} but the "
+                            f"identifier has dt={self._dt!r}")
         u = as_chunk(u, self.n_inputs, "input u", allow_empty=True, copy=True)
         y = as_chunk(y, self.n_outputs, "output y", allow_empty=True, copy=True)
         if u.shape[0] != y.shape[0]:
             raise DataError(f"input u has {u.shape[0]} samples but output y has {y.shape[0]}")
+        t0 = None if t is None else self._times(t, u.shape[0])
+        if t0 is not None:
+            self._t_origin, self._k_origin = t0, self._n_samples
         # validated: from here on the state changes
         start = 0
         n = u.shape[0]
-        regression = self.bd_method == "regression"
+        regression = self.bd_method == "regression" and not self._exact
+        if self._lag is not None:
+            self._lag.update(u, y)
         while start < n:
             stop = n if self._history_size is None else min(n, start + self._to_snapshot())
             if regression:
@@ -325,7 +432,7 @@ class RecursiveSubspace:
                 if self._is_refresh_point():
                     self._bd_refresh()
             start = stop
-            if self._history_size is not None and self.n_samples % self._history_stride == 0:
+            if self._history_size is not None and self._n_samples % self._history_stride == 0:
                 self._snapshot()
         return self
 
@@ -334,7 +441,7 @@ class RecursiveSubspace:
         """Refresh points: _FIRST_REFRESH * 2^j below ``refresh_every`` (so
         that the regression starts early), then the multiples of
         ``refresh_every``."""
-        k, K = self.n_samples, self.refresh_every
+        k, K = self._n_samples, self._refresh_every
         if k <= 0:
             return False
         if k % K == 0:
@@ -345,12 +452,12 @@ class RecursiveSubspace:
     def _to_refresh(self) -> int:
         """Samples to the next refresh point (points: _FIRST_REFRESH * 2^j
         below ``refresh_every``, then the multiples of ``refresh_every``)."""
-        k = self.n_samples
+        k = self._n_samples
         step = _FIRST_REFRESH
-        while step <= k and step < self.refresh_every:
+        while step <= k and step < self._refresh_every:
             step *= 2
-        nxt = step if step < self.refresh_every else (k // self.refresh_every + 1) \
-            * self.refresh_every
+        nxt = step if step < self._refresh_every else (k // self._refresh_every + 1) \
+            * self._refresh_every
         return nxt - k
 
     def _bd_feed(self, u, y):
@@ -363,16 +470,16 @@ class RecursiveSubspace:
         T = u.shape[0]
         if T > 1:
             rows0, S = regression_rows(A, C, u[:-1], y[:-1], self._bd_S, n_x0=self.order,
-                                       feedthrough=self.feedthrough)
-            givens_update(self._bd_R, rows0, self.forgetting ** (0.5 / self.n_outputs))
+                                       feedthrough=self._feedthrough)
+            givens_update(self._bd_R, rows0, self._lam ** (0.5 / self.n_outputs))
         else:
             S = self._bd_S
         self._bd_S_last = S
         rows1, S = regression_rows(A, C, u[-1:], y[-1:], S, n_x0=self.order,
-                                   feedthrough=self.feedthrough)
-        givens_update(self._bd_R, rows1, self.forgetting ** (0.5 / self.n_outputs))
+                                   feedthrough=self._feedthrough)
+        givens_update(self._bd_R, rows1, self._lam ** (0.5 / self.n_outputs))
         self._bd_S = S
-        lam = self.forgetting
+        lam = self._lam
         self._bd_rows = self._bd_rows * lam ** T + (
             T if lam == 1.0 else (1 - lam ** T) / (1 - lam))
 
@@ -380,10 +487,10 @@ class RecursiveSubspace:
         """(A, C) of the current factor in the basis of Λ (raises SubidError
         when the data do not yet determine them)."""
         need = min_samples(self._depth, self.n_inputs, self.n_outputs)
-        if self.n_samples < need:
+        if self._n_samples < need:
             raise TooFewSamplesError("too few samples")
         hf = self.factor()
-        check_excitation(hf, self.input_names, method="RecursiveSubspace")
+        check_excitation(hf, self._input_names, method="RecursiveSubspace")
         core, su, sy = self._core(hf, "RecursiveSubspace")
         A, _, C, _ = core.to_selector_basis(np.zeros((self.order, self.n_inputs)))
         return A, C * sy[:, None]
@@ -393,11 +500,11 @@ class RecursiveSubspace:
         normalised by their RMS, Λ acting on the user's units (``Λ (I ⊗ S)`` on the
         normalised outputs). Returns ``(core, input_scale, output_scale)``."""
         hf_n, su, sy = normalize_channels(hf, outputs=True)
-        core = gamma_from_factor(hf_n, self.horizon, self.order, [self.order],
+        core = gamma_from_factor(hf_n, self._f, self.order, [self.order],
                                  instruments=self.instruments,
-                                 instrument_weighting=self.instrument_weighting,
-                                 selector=self._selector * np.tile(sy, self.horizon),
-                                 seed=self.seed, power_iterations=self.power_iterations,
+                                 instrument_weighting=self._instrument_weighting,
+                                 selector=self._selector * np.tile(sy, self._f),
+                                 seed=self.seed, power_iterations=self._power_iterations,
                                  method=method)
         return core, su, sy
 
@@ -414,7 +521,7 @@ class RecursiveSubspace:
             change = (np.linalg.norm(A - self._bd_A) / max(np.linalg.norm(self._bd_A), 1e-300)
                       + np.linalg.norm(C - self._bd_C) / max(np.linalg.norm(self._bd_C),
                                                              1e-300))
-            if change <= self.restart_tolerance:
+            if change <= self._restart_tolerance:
                 self._bd_A, self._bd_C = A, C
                 return
         n = self.order
@@ -424,30 +531,35 @@ class RecursiveSubspace:
         self._bd_S[:, :n] = np.eye(n)
         self._bd_S_last = self._bd_S.copy()
         self._bd_started = True
-        self._bd_start = self.n_samples
+        self._bd_start = self._n_samples
         self._bd_rows = 0.0
         self._bd_restarts += 1
 
     def _to_snapshot(self) -> int:
-        return self._history_stride - self.n_samples % self._history_stride
+        return self._history_stride - self._n_samples % self._history_stride
 
     def _ingest(self, u, y):
         all_u = np.vstack([self._buf_u, u])
         all_y = np.vstack([self._buf_y, y])
+        # the buffer may hold more than depth - 1 samples (the last horizon, for
+        # the state): the columns that start before its last depth - 1 samples
+        # were counted by the previous chunk
+        first = max(self._buf_u.shape[0] - self._depth + 1, 0)
         columns = all_u.shape[0] - self._depth + 1
-        lam_sqrt = math.sqrt(self.forgetting)
-        for a in range(0, max(columns, 0), _CHUNK):
+        lam_sqrt = math.sqrt(self._lam)
+        for a in range(first, max(columns, first), _CHUNK):
             b = min(a + _CHUNK, columns)
             rows = hankel_chunk(all_u, all_y, self._depth, a, b)
             givens_update(self._R, rows, lam_sqrt)
+        columns -= first
         if columns > 0:
-            lam = self.forgetting
+            lam = self._lam
             self._weight = self._weight * lam ** columns + (
                 columns if lam == 1.0 else (1 - lam ** columns) / (1 - lam))
             self._n_columns += columns
         self._buf_u = all_u[-self._keep:].copy()
         self._buf_y = all_y[-self._keep:].copy()
-        self.n_samples += u.shape[0]
+        self._n_samples += u.shape[0]
         self._model = None
 
     def _snapshot(self):
@@ -457,11 +569,17 @@ class RecursiveSubspace:
                 poles = self.model.poles()
         except SubidError:
             return
-        self._hist_sample = np.append(self._hist_sample, self.n_samples)
+        m = self._model
+        abcd = np.concatenate([m.A.ravel(), m.B.ravel(), m.C.ravel(), m.D.ravel()])
+        self._hist_sample = np.append(self._hist_sample, self._n_samples)
+        self._hist_t = np.append(self._hist_t, self.t)
         self._hist_poles = np.vstack([self._hist_poles, poles[None]])
+        self._hist_abcd = np.vstack([self._hist_abcd, abcd[None]])
         if self._hist_sample.size >= self._history_size:
             self._hist_sample = self._hist_sample[1::2]
+            self._hist_t = self._hist_t[1::2]
             self._hist_poles = self._hist_poles[1::2]
+            self._hist_abcd = self._hist_abcd[1::2]
             self._history_stride *= 2
 
     # -- output -----------------------------------------------------------
@@ -493,17 +611,31 @@ class RecursiveSubspace:
             return self._model
         method = "RecursiveSubspace"
         need = min_samples(self._depth, self.n_inputs, self.n_outputs)
-        if self.n_samples < need:
-            raise TooFewSamplesError(f"{method} has received {self.n_samples} samples; a model "
-                                     f"needs at least {need} (horizon {self.horizon})")
+        if self._n_samples < need:
+            raise TooFewSamplesError(f"{method} has received {self._n_samples} samples; a model "
+                                     f"needs at least {need} (horizon {self._f})")
         hf = self.factor()
-        input_condition = check_excitation(hf, self.input_names, method=method)
+        input_condition = check_excitation(hf, self._input_names, method=method)
         core, su, sy = self._core(hf, method)
         bd_method, reg, self._theta = "projection", {}, None
         A, _, C, _ = core.to_selector_basis(np.zeros((self.order, self.n_inputs)))
         C = C * sy[:, None]
-        reason = None
-        if self.bd_method == "regression":
+        reason = issued = None
+        if self._exact:
+            reason, solved = self._exact_b_d(core, sy)
+            if solved is not None:
+                B_q, D, x0_q, theta, reg = solved
+                A, B, C, x0 = core.to_selector_basis(B_q, x0_q)
+                C = C * sy[:, None]
+                bd_method, self._theta = "regression", theta
+                self._exact_basis = (core.A_q, core.T)
+                reg["x0"] = x0
+            if reason is not None:
+                issued = f"{method}: {reason}" + (
+                    "" if solved is not None else
+                    "; B and D come from the projected data equation (less accurate)")
+                warnings.warn(issued, NotConvergedWarning, stacklevel=2)
+        elif self.bd_method == "regression":
             if not self._bd_started:
                 reason = ("the B, D regression has not started (no refresh with a usable "
                           "model yet)")
@@ -513,7 +645,7 @@ class RecursiveSubspace:
             else:
                 B, D, x0, theta, reg = solve_factor(
                     self._bd_R, self.order, self.n_inputs, self.n_outputs, estimate_x0=True,
-                    n_samples=max(self._bd_rows, 1.0), feedthrough=self.feedthrough)
+                    n_samples=max(self._bd_rows, 1.0), feedthrough=self._feedthrough)
                 if reg["regression_rank_deficient"] or not np.isfinite(theta).all():
                     reason = "the B, D regression is rank deficient"
                 else:
@@ -526,30 +658,64 @@ class RecursiveSubspace:
                 warnings.warn(issued, NotConvergedWarning, stacklevel=2)
         if bd_method == "projection":
             B_q, D, reg2 = fit_b_d_projection(core.A_q, core.C_q, core.basis, core.L11,
-                                              core.L_yu, feedthrough=self.feedthrough)
+                                              core.L_yu, feedthrough=self._feedthrough)
             A, B, C, _ = core.to_selector_basis(B_q)
             # from the normalised channels to the user's units
             B, C, D = B / su, C * sy[:, None], D * sy[:, None] / su
             reg = {**reg, **reg2}
-        extra = {"forgetting": self.forgetting,
+        extra = {"forgetting": self._lam,
                  "effective_samples": self._weight, "input_condition": input_condition,
-                 "bd_method": bd_method, "bd_fallback": reason,
-                 **core.info(self.instruments, self.instrument_weighting,
-                             self.power_iterations), **reg,
+                 "bd_method": bd_method,
+                 "bd_fallback": reason if bd_method == "projection" else None,
+                 "converged": reason is None,
+                 "convergence": "converged" if reason is None else reason,
+                 **core.info(self.instruments, self._instrument_weighting,
+                             self._power_iterations), **reg,
                  "selector": self._selector.copy()}
         x0 = extra.pop("x0", None)
-        extra.pop("order", None)
-        extra.pop("order_selection", None)
-        extra.pop("horizon", None)
-        info = model_info(method, order=self.order, horizon=self.horizon,
-                          n_samples=self.n_samples, x0=x0, hold="zoh",
-                          conditions=conditions_of(extra), warnings=[issued] if reason else [],
-                          **extra)
-        self._model = StateSpace(A, B, C, D, self.dt, input_names=self.input_names,
-                                 output_names=self.output_names, info=info)
+        for key in ("order", "order_selection", "horizon"):
+            extra.pop(key, None)
+        info = model_info(method, order=self.order, horizon=self._f,
+                          n_samples=self._n_samples, x0=x0, hold="zoh",
+                          conditions=conditions_of(extra),
+                          warnings=[issued] if issued else [], **extra)
+        self._model = StateSpace(A, B, C, D, self._dt, input_names=self._input_names,
+                                 output_names=self._output_names, info=info)
         if self.instruments == "past":   # K, noise_cov from the running factor
             self._model = noise_model.with_factor(self._model, hf)
         return self._model
+
+    def _exact_b_d(self, core, sy):
+        """Forgetting 1: B, D, x0 of the batch output-error regression for the
+        current (A, C), from the lagged statistics (:mod:`subid._lagged`),
+        solved in the orthonormal basis of the estimate (``core.A_q``, as the
+        batch method; the basis of Λ can be badly conditioned) and returned
+        in it. Returns ``(reason, solved)``: ``solved`` is None when the
+        regression cannot be evaluated (unstable A, singular), ``reason`` a
+        warning text or None."""
+        n, nu, ny = self.order, self.n_inputs, self.n_outputs
+        A, C = core.A_q, core.C_q * sy[:, None]
+        if not (np.isfinite(A).all() and np.isfinite(C).all()):
+            return "the estimated (A, C) are not finite", None
+        radius = float(np.abs(np.linalg.eigvals(A)).max())
+        if radius >= 1.0:
+            return (f"the estimated A is not stable (spectral radius {radius:.4g}), so the "
+                    "B, D regression is not evaluated"), None
+        stat = self._lag
+        weights = stat.output_weights()
+        Nmat, truncation = stat.normal_equations(A, C, weights, feedthrough=self._feedthrough)
+        solved = solve_lagged(Nmat, n, nu, ny, feedthrough=self._feedthrough,
+                              n_samples=self._n_samples)
+        if solved is None:
+            return "the B, D regression is rank deficient", None
+        solved[4].update(bd_truncation=truncation, spectral_radius=radius)
+        reason = None
+        if truncation > _TRUNCATION_WARN:
+            reason = (f"the B, D regression resolves {self._lags} lags but A^{self._lags + 1} "
+                      f"still has norm {truncation:.1e} (spectral radius {radius:.4g}): B "
+                      f"and D are approximate; use lags >= "
+                      f"{int(math.ceil(math.log(1e-16) / math.log(radius)))}")
+        return reason, solved
 
     @property
     def state(self) -> np.ndarray:
@@ -561,10 +727,20 @@ class RecursiveSubspace:
         (seed 001, eq. (21)), then propagated through the model to time t.
         """
         model = self.model
+        if model.info["bd_method"] == "regression" and self._exact:
+            A, T = self._exact_basis
+            stat = self._lag
+            t_end = self._n_samples - 1
+            powers = np.empty((min(t_end, self._lags + 1) + 1, self.order, self.order))
+            powers[0] = np.eye(self.order)
+            for d in range(1, powers.shape[0]):
+                powers[d] = powers[d - 1] @ A
+            S = end_sensitivity(stat, A, powers, t_end)
+            return T @ (S @ self._theta[:self.order + self.order * self.n_inputs])
         if model.info["bd_method"] == "regression":
             k = self.order + self.order * self.n_inputs
             return self._bd_S_last @ self._theta[:k]
-        f, ny, nu = self.horizon, self.n_outputs, self.n_inputs
+        f, ny, nu = self._f, self.n_outputs, self.n_inputs
         u_w, y_w = self._buf_u[-f:], self._buf_y[-f:]
         markov = model.markov(f)                       # D, CB, ..., C A^{f-2} B
         H = np.zeros((f * ny, f * nu))
@@ -579,7 +755,15 @@ class RecursiveSubspace:
     @property
     def history(self) -> dict:
         """Decimated snapshots ``{'sample', 'poles'}`` (bounded in size)."""
-        return {"sample": self._hist_sample.copy(), "poles": self._hist_poles.copy()}
+        n, nu, ny = self.order, self.n_inputs, self.n_outputs
+        rows = self._hist_abcd
+        mats, c = {}, 0
+        for name, shape in (("A", (n, n)), ("B", (n, nu)), ("C", (ny, n)), ("D", (ny, nu))):
+            mats[name] = rows[:, c:c + shape[0] * shape[1]].reshape((-1,) + shape)
+            c += shape[0] * shape[1]
+        out = history_dict(self._hist_sample, self._hist_t, dt=self._dt, **mats)
+        out["poles"] = self._hist_poles.copy()     # those of the models (as computed then)
+        return out
 
     @property
     def selector(self) -> np.ndarray:
@@ -591,29 +775,36 @@ class RecursiveSubspace:
         """Write the whole state to ``path`` (``.npz``, atomic, no pickle)."""
         settings = {
             "order": self.order, "n_inputs": self.n_inputs, "n_outputs": self.n_outputs,
-            "horizon": self.horizon, "forgetting": self.forgetting,
-            "instruments": self.instruments, "instrument_weighting": self.instrument_weighting,
-            "power_iterations": self.power_iterations, "feedthrough": self.feedthrough,
-            "dt": self.dt, "seed": self.seed if isinstance(self.seed, int) else None,
-            "n_samples": self.n_samples, "n_columns": self._n_columns, "weight": self._weight,
-            "history_size": self._history_size, "history_stride": self._history_stride,
-            "input_names": list(self.input_names), "output_names": list(self.output_names),
+            "horizon": self.horizon, "forgetting": self._lam,
+            "instruments": self.instruments, "instrument_weighting": self._instrument_weighting,
+            "power_iterations": self._power_iterations, "feedthrough": self._feedthrough,
+            "dt": self._dt, "seed": self.seed if isinstance(self.seed, int) else None,
+            "n_samples": self._n_samples, "n_columns": self._n_columns, "weight": self._weight,
+            "history_size": self._history_size, "history_stride": self.history_stride,
+            "history_stride_now": self._history_stride,
+            "input_names": None if self.input_names is None else list(self.input_names),
+            "output_names": None if self.output_names is None else list(self.output_names),
             "bd_method": self.bd_method, "refresh_every": self.refresh_every,
-            "restart_tolerance": self.restart_tolerance, "bd_started": self._bd_started,
+            "restart_tolerance": self._restart_tolerance, "bd_started": self._bd_started,
             "bd_start": self._bd_start, "bd_rows": self._bd_rows,
-            "bd_restarts": self._bd_restarts,
+            "bd_restarts": self._bd_restarts, "lags": self._lags, "exact": self._exact,
+            "t_origin": self._t_origin, "k_origin": self._k_origin,
+            "lag_pending_count": 0 if self._lag is None else self._lag.n_pending,
         }
         arrays = {"R": self._R, "buf_u": self._buf_u, "buf_y": self._buf_y,
                   "bd_R": self._bd_R, "bd_S": self._bd_S, "bd_S_last": self._bd_S_last,
                   "bd_A": self._bd_A, "bd_C": self._bd_C,
                   "selector": self._selector, "hist_sample": self._hist_sample,
-                  "hist_poles_re": self._hist_poles.real, "hist_poles_im": self._hist_poles.imag}
-        save_state(path, self._KIND, self._VERSION, arrays, settings)
+                  "hist_poles_re": self._hist_poles.real, "hist_poles_im": self._hist_poles.imag,
+                  "hist_t": self._hist_t, "hist_abcd": self._hist_abcd}
+        if self._lag is not None:
+            arrays.update(self._lag.arrays())
+        save_state(path, self.checkpoint_kind(), self._VERSION, arrays, settings)
 
     @classmethod
     def load(cls, path) -> "RecursiveSubspace":
         """Restore an identifier saved by :meth:`save`."""
-        arrays, s = load_state(path, cls._KIND, cls._VERSION)
+        arrays, s = load_state(path, cls._kinds(), cls._READS)
         try:
             obj = cls(s["order"], s["n_inputs"], s["n_outputs"], horizon=s["horizon"],
                       forgetting=s["forgetting"], instruments=s["instruments"],
@@ -624,7 +815,17 @@ class RecursiveSubspace:
                       history_stride=s["history_stride"],
                       input_names=s.get("input_names"), output_names=s.get("output_names"),
                       bd_method=s["bd_method"], refresh_every=s["refresh_every"],
-                      restart_tolerance=s["restart_tolerance"])
+                      restart_tolerance=s["restart_tolerance"], lags=s.get("lags", 1000))
+            if not s.get("exact", False):
+                # version 2 (or forgetting < 1): the propagated regression
+                obj._exact, obj._lag = False, None
+            else:
+                lag = obj._lag
+                for name, ref in lag.arrays().items():
+                    ref[...] = require(arrays, path, name, ref.shape)
+                n_pending = int(s.get("lag_pending_count", 0))
+                lag.count = int(s["n_samples"]) - n_pending
+                lag.n_pending = n_pending
             for name in ("bd_R", "bd_S", "bd_S_last", "bd_A", "bd_C"):
                 ref = getattr(obj, "_" + name)
                 setattr(obj, "_" + name, require(arrays, path, name, ref.shape).copy())
@@ -636,12 +837,23 @@ class RecursiveSubspace:
             obj._R = require(arrays, path, "R", (m, m)).copy()
             obj._buf_u = require(arrays, path, "buf_u").reshape(-1, obj.n_inputs).copy()
             obj._buf_y = require(arrays, path, "buf_y").reshape(-1, obj.n_outputs).copy()
-            obj.n_samples = int(s["n_samples"])
+            obj._n_samples = int(s["n_samples"])
+            obj._history_stride = int(s.get("history_stride_now", s["history_stride"]))
             obj._n_columns = int(s["n_columns"])
             obj._weight = float(s["weight"])
             obj._hist_sample = require(arrays, path, "hist_sample", dtype=np.int64)
             obj._hist_poles = (require(arrays, path, "hist_poles_re")
                                + 1j * require(arrays, path, "hist_poles_im"))
+            k = obj._hist_sample.size
+            if s["_version"] >= 3:
+                obj._hist_t = require(arrays, path, "hist_t", (k,)).copy()
+                obj._hist_abcd = require(arrays, path, "hist_abcd",
+                                         (k, obj._abcd_size())).copy()
+            else:        # version 2 kept the poles only: times from dt, no matrices
+                obj._hist_t = (obj._hist_sample - 1) * obj._dt
+                obj._hist_abcd = np.full((k, obj._abcd_size()), np.nan)
+            obj._t_origin = float(s.get("t_origin", 0.0))
+            obj._k_origin = int(s.get("k_origin", 0))
         except CheckpointError:
             raise
         except (KeyError, TypeError, ValueError) as exc:

@@ -187,7 +187,7 @@ METHODS: dict[str, MethodSpec] = {
         options=("horizon", "forgetting", "instruments", "selector", "seed",
                  "instrument_weighting", "power_iterations", "feedthrough", "dt",
                  "history_size", "history_stride", "input_names", "output_names",
-                 "bd_method", "refresh_every", "restart_tolerance"),
+                 "bd_method", "refresh_every", "restart_tolerance", "lags"),
         capabilities=frozenset({"horizon", "seeded"}), aliases=("RecursiveSubspace",)),
     "adaptive": MethodSpec(
         "adaptive", "online", "subid.adaptive", "AdaptiveIdentifier", "continuous",
@@ -195,7 +195,7 @@ METHODS: dict[str, MethodSpec] = {
         options=("horizon", "filter_poles", "forgetting", "bd_forgetting", "selector", "seed",
                  "dt", "hold", "method", "scale_filters", "refresh_every", "bd_gate",
                  "max_condition", "initial_covariance", "bd_initial_covariance",
-                 "ode_trace_bound", "history", "engine", "input_names", "output_names",
+                 "ode_trace_bound", "history_size", "engine", "input_names", "output_names",
                  "instrument_poles", "max_gap"),
         capabilities=frozenset({"horizon", "hold", "nonuniform", "seeded"}),
         aliases=("AdaptiveIdentifier",)),

@@ -178,7 +178,7 @@ def identify(t, u, y, forgetting, bd_forgetting, *, history=4096, **kw):
     """Run the identifier over the record; returns (identifier, seconds)."""
     ident = AdaptiveIdentifier(4, 2, 2, horizon=HORIZON, filter_poles=FILTER_POLE,
                                forgetting=forgetting, bd_forgetting=bd_forgetting,
-                               dt=t[1] - t[0], history=history, **kw)
+                               dt=t[1] - t[0], history_size=history, **kw)
     t0 = time.perf_counter()
     ident.update(u, y)
     return ident, time.perf_counter() - t0
