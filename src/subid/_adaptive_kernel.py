@@ -284,12 +284,14 @@ def _solve_iv_weighted(C, G, Z, X, max_cond, L, Ct, Gt, N, Gn, Ln, Bn):  # pragm
     With ``Z + ε I = L L^T`` (``ε = tr Z / max_cond``, so that the whitening
     cannot amplify directions the instruments no longer excite by more than
     ``sqrt(max_cond)``), ``C̃ = L^{-1} C`` and ``G̃ = G L^{-T}``, the step
-    ``Δ`` minimises ``|Δ C̃^T - G̃|_F^2``: the two-stage least-squares
-    weighting of the extended IV equations, ``M = S Z^{-1} C (C^T Z^{-1}
-    C)^{-1}``. It is solved by :func:`_solve_normal` on the normal
-    equations ``N = C̃^T C̃``, ``G_N = G̃ C̃`` (the gradient at X), with the
-    same windup bound as the least-squares path, ``cond(N + δ I) <= 1 +
-    max_cond``, ``δ = tr N / max_cond``; then ``G <- G - Δ C^T``. Solving
+    ``Δ = argmin |Δ C̃^T - G̃|_F^2 + δ |Δ|_F^2``, ``δ = |C̃|_F^2 /
+    max_cond^2`` (the windup bound on C̃ itself): without δ the two-stage
+    least-squares weighting of the extended IV equations, ``M = S Z^{-1} C
+    (C^T Z^{-1} C)^{-1}``. It is solved by :func:`_solve_normal` on the
+    normal equations ``(N + δ I) Δ^T = G_N^T``, ``N = C̃^T C̃``, ``G_N = G̃
+    C̃`` (the gradient at X); if their Cholesky factorisation fails (cond(C̃)
+    near 1e8, at start-up), with the least-squares path's bound ``δ = tr N /
+    max_cond`` instead. Then ``G <- G - Δ C^T``. Solving
     the normal equations squares the condition number of C̃, but in residual
     form the error of a step is only a fraction of the step, and the next
     refresh starts from the exactly re-centred residual G (iterative
@@ -340,7 +342,12 @@ def _solve_iv_weighted(C, G, Z, X, max_cond, L, Ct, Gt, N, Gn, Ln, Bn):  # pragm
             g = Gt[r, k]
             for j in range(d):
                 Gn[r, j] += g * Ct[k, j]
-    if not _solve_normal(N, Gn, X, max_cond, Ln, Bn):
+    # δ = tr N / max_cond^2 = |C̃|_F^2 / max_cond^2: the windup bound on C̃
+    # itself (cond(C̃) <= max_cond), the same step as a QR of [C̃; sqrt(δ) I];
+    # if N + δ I is numerically singular for Cholesky (start-up, cond(C̃) near
+    # 1e8), the LS path's bound cond(N + δ I) <= 1 + max_cond instead
+    if not (_solve_normal(N, Gn, X, max_cond * max_cond, Ln, Bn)
+            or _solve_normal(N, Gn, X, max_cond, Ln, Bn)):
         return False
     for r in range(rows):                    # G <- G - Δ C^T (Bn holds Δ^T)
         for i in range(dz):
@@ -653,38 +660,73 @@ def kernel(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, Hse
     dp, d = M.shape
     mi = zr.shape[0]
     dz = Cz.shape[0]
-    zeta = np.empty(dz)
-    ez = np.empty(dp)
-    zi = np.empty(mi)
-    zi2 = np.empty(n)
-    Lz = np.zeros((dz, dz))
-    Ct = np.empty((dz, d))
-    Gt = np.empty((dp, dz))
-    Nz = np.empty((d, d))
-    Gn = np.empty((dp, d))
-    Cf = np.empty((dz, d))
     dth = theta.shape[1]
     nX = Psi.shape[1]          # n + n nu: columns of [Ξ, Ψ]
-    p = np.empty(dp)
-    phi = np.empty(d)
-    wphi = np.empty(d)
-    znew = np.empty(f)
-    Phi = np.zeros((ny, dth))
-    Pn = np.empty((ny, n))
-    g = np.empty(d)
-    e = np.empty(dp)
-    Gq = np.empty((dth, ny))
-    ey = np.empty(ny)
-    Ph = np.empty((n, n))
-    G1h = np.empty((n, n))
-    G2h = np.empty((n, n))
-    ep = np.empty(dp)
-    Ld = np.zeros((d, d))
-    Bd = np.empty((d, dp))
-    Lt = np.zeros((dth, dth))
-    Bt = np.empty((dth, 1))
-    Anew = np.empty((n, n))
-    work = np.empty((5, n, n))
+    # scratch: one allocation per call (a one-sample call pays for one, not 30)
+    sc = np.empty(2 * dz * d + dz * dz + dp * dz + 2 * d * d + 2 * dp * d + dz + 4 * dp
+                  + mi + n + 3 * d + f + 2 * ny * dth + ny * n + ny + 9 * n * n
+                  + dth * dth + dth)
+    o = 0
+    zeta = sc[o:o + dz]
+    o += dz
+    ez = sc[o:o + dp]
+    o += dp
+    zi = sc[o:o + mi]
+    o += mi
+    zi2 = sc[o:o + n]
+    o += n
+    Lz = sc[o:o + dz * dz].reshape((dz, dz))
+    o += dz * dz
+    Ct = sc[o:o + dz * d].reshape((dz, d))
+    o += dz * d
+    Gt = sc[o:o + dp * dz].reshape((dp, dz))
+    o += dp * dz
+    Nz = sc[o:o + d * d].reshape((d, d))
+    o += d * d
+    Gn = sc[o:o + dp * d].reshape((dp, d))
+    o += dp * d
+    Cf = sc[o:o + dz * d].reshape((dz, d))
+    o += dz * d
+    p = sc[o:o + dp]
+    o += dp
+    phi = sc[o:o + d]
+    o += d
+    wphi = sc[o:o + d]
+    o += d
+    znew = sc[o:o + f]
+    o += f
+    Phi = sc[o:o + ny * dth].reshape((ny, dth))
+    o += ny * dth
+    Phi[:, :] = 0.0
+    Pn = sc[o:o + ny * n].reshape((ny, n))
+    o += ny * n
+    g = sc[o:o + d]
+    o += d
+    e = sc[o:o + dp]
+    o += dp
+    Gq = sc[o:o + dth * ny].reshape((dth, ny))
+    o += dth * ny
+    ey = sc[o:o + ny]
+    o += ny
+    Ph = sc[o:o + n * n].reshape((n, n))
+    o += n * n
+    G1h = sc[o:o + n * n].reshape((n, n))
+    o += n * n
+    G2h = sc[o:o + n * n].reshape((n, n))
+    o += n * n
+    ep = sc[o:o + dp]
+    o += dp
+    Ld = sc[o:o + d * d].reshape((d, d))      # Cholesky factors: _chol writes every entry
+    o += d * d
+    Bd = sc[o:o + d * dp].reshape((d, dp))
+    o += d * dp
+    Lt = sc[o:o + dth * dth].reshape((dth, dth))
+    o += dth * dth
+    Bt = sc[o:o + dth].reshape((dth, 1))
+    o += dth
+    Anew = sc[o:o + n * n].reshape((n, n))
+    o += n * n
+    work = sc[o:o + 5 * n * n].reshape((5, n, n))
     for k in range(N):
         if ist[0] == 0:
             for j in range(nu):
@@ -1062,7 +1104,8 @@ def _ref_solve_iv_weighted(C, G, Z, X, max_cond):
     Ct = scipy.linalg.solve_triangular(L, C, lower=True)
     Gt = scipy.linalg.solve_triangular(L, G.T, lower=True).T
     Xold = X.copy()
-    if not _ref_solve(Ct.T @ Ct, Gt @ Ct, X, max_cond):
+    N, Gn = Ct.T @ Ct, Gt @ Ct
+    if not _ref_solve(N, Gn, X, max_cond * max_cond) and not _ref_solve(N, Gn, X, max_cond):
         return False
     G -= (X - Xold) @ C.T
     return True
