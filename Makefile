@@ -21,11 +21,14 @@ $(PY):
 $(STAMP): $(PY) pyproject.toml
 	$(PY) -m pip install --quiet --upgrade pip
 	$(PY) -m pip install --quiet -e ".[test]"
+	# compile the numba kernels into their cache now, not on a user's first call
+	OPENBLAS_NUM_THREADS=1 $(PY) -m subid.warmup --quiet
 	touch $(STAMP)
 
 $(DEMO_STAMP): $(PY) pyproject.toml
 	$(PY) -m pip install --quiet --upgrade pip
 	$(PY) -m pip install --quiet -e ".[plot]"
+	OPENBLAS_NUM_THREADS=1 $(PY) -m subid.warmup --quiet
 	touch $(DEMO_STAMP)
 
 $(DOCS_VENV)/bin/python:

@@ -5,7 +5,9 @@ Run: OPENBLAS_NUM_THREADS=1 PYTHONPATH=src python bench/startup.py [--repeat 7]
 Every figure is a median over fresh interpreters (subprocesses) or repeated
 calls in this process; ratios are formed from figures measured in this run.
 Cold numba compilation uses an empty NUMBA_CACHE_DIR (a fresh install has no
-cache unless it ships one); warm uses the same directory again.
+cache unless it ships one); warm uses the same directory again; "after
+warm-up" runs ``python -m subid.warmup`` (what ``make test``/``make demo`` run
+after installing) on an empty directory, then the first update.
 """
 
 import argparse
@@ -112,6 +114,16 @@ def main():
             warm = inner(FIRST_UPDATE, env, rep)
             print(f"first AdaptiveIdentifier.update cold cache {cold:8.2f} s, "
                   f"warm cache {warm:6.3f} s")
+        with tempfile.TemporaryDirectory() as cache:
+            # a fresh install that ran `python -m subid.warmup` (make test / make demo do)
+            env = dict(ENV, NUMBA_CACHE_DIR=cache)
+            t0 = time.perf_counter()
+            subprocess.run([PY, "-m", "subid.warmup", "--quiet", "--only", "adaptive"],
+                           env=env, check=True)
+            pre = time.perf_counter() - t0
+            after = inner(FIRST_UPDATE, env, rep)
+            print(f"python -m subid.warmup --only adaptive {pre:8.2f} s; then the first "
+                  f"AdaptiveIdentifier.update {after:6.3f} s")
         with tempfile.TemporaryDirectory() as cache:
             env = dict(ENV, NUMBA_CACHE_DIR=cache)
             cold = inner(FIRST_CT, env, 1)

@@ -267,6 +267,43 @@ def test_shift_solve_matches_least_squares():
     assert K._shift_solve(M, 4, 2, 3.0, A) == -1.0
 
 
+def _iv_problem(seed, cond_scale=1.0):
+    rng = np.random.default_rng(seed)
+    dz, d, rows = 24, 14, 10
+    zeta = rng.standard_normal((400, dz))
+    phi = zeta[:, :d] @ np.diag(np.logspace(0, -np.log10(cond_scale) if cond_scale > 1 else 0, d)) \
+        + 0.1 * rng.standard_normal((400, d))
+    Z = zeta.T @ zeta
+    C = zeta.T @ phi
+    S = rng.standard_normal((rows, dz))
+    return C, S, Z
+
+
+@pytest.mark.parametrize("cond_scale", [1.0, 1e4])
+def test_iv_step_is_two_stage_least_squares(cond_scale):
+    """The refresh step of the IV estimate (normal equations of the whitened
+    problem, residual form) against the closed form M = S Z^-1 C (C^T Z^-1 C)^-1
+    and against the numpy reference, from X = 0 and after one refinement."""
+    C, S, Z = _iv_problem(3, cond_scale)
+    dz, d = C.shape
+    rows = S.shape[0]
+    Zi = np.linalg.inv(Z)
+    expected = S @ Zi @ C @ np.linalg.inv(C.T @ Zi @ C)
+    X = np.zeros((rows, d))
+    G = S.copy()                                   # G = S - X C^T at X = 0
+    Xr, Gr = X.copy(), G.copy()
+    scratch = (np.zeros((dz, dz)), np.empty((dz, d)), np.empty((rows, dz)), np.empty((d, d)),
+               np.empty((rows, d)), np.zeros((d, d)), np.empty((d, rows)))
+    for _ in range(2):                             # second pass: refinement of the first
+        assert K._solve_iv_weighted(C, G, np.tril(Z), X, 1e10, *scratch)
+        assert K._ref_solve_iv_weighted(C, Gr, np.tril(Z), Xr, 1e10)
+    scale = np.abs(expected).max()
+    np.testing.assert_allclose(X, expected, atol=1e-6 * scale)
+    np.testing.assert_allclose(X, Xr, atol=1e-9 * scale)
+    np.testing.assert_allclose(G, S - X @ C.T, atol=1e-9 * np.abs(S).max())
+    assert not K._solve_iv_weighted(C, G, np.zeros_like(Z), X, 1e10, *scratch)
+
+
 # ---------------------------------------------------------------------------
 # kernel against the plain numpy reference
 # ---------------------------------------------------------------------------

@@ -274,100 +274,34 @@ def _solve_normal(R, G, X, max_cond, L, B):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True, fastmath=_FASTMATH)
-def _solve_iv(C, G, X, max_cond, Q, B):  # pragma: no cover - compiled
-    """One refresh of an instrumental-variable estimate in residual form.
+def _solve_iv_weighted(C, G, Z, X, max_cond, L, Ct, Gt, N, Gn, Ln, Bn):  # pragma: no cover
+    """One refresh of an instrumental-variable estimate in residual form,
+    with the instruments whitened by ``Z = sum w ζ ζ^T`` (lower triangle).
 
     ``C`` (dz, d), dz >= d, is the cross matrix ``sum w ζ φ^T`` of the
     instruments and the regressors, ``G = S - X C^T`` (rows, dz) the residual
     of the (extended) IV equations ``X C^T = S`` at the current estimate X.
-    Computes the regularised least-squares step
-    ``Δ = argmin |Δ C^T - G|_F^2 + δ |Δ|_F^2``, ``δ = |C|_F^2 / max_cond^2``,
-    by Householder QR of ``[C; sqrt(δ) I]`` (never forming C^T C), then
-    ``X <- X + Δ`` and ``G <- G - Δ C^T``. As for :func:`_solve_normal`, the
-    solved matrix has condition at most ``sqrt(1 + max_cond^2)`` and X is
-    kept in directions the data do not inform; the bound applies to C
-    itself, not to C^T C as for R (C is a cross matrix of the signals, like
-    R's square root, and the QR does not square its condition number).
-    Q: scratch (dz + d, d), B: scratch (dz + d, rows). Returns False
-    (nothing changed) when C = 0 or the triangular factor is singular.
-    """
-    dz, d = C.shape
-    rows = G.shape[0]
-    m = dz + d
-    tr = 0.0
-    for i in range(dz):
-        for j in range(d):
-            tr += C[i, j] * C[i, j]
-    if not tr > 0.0:
-        return False
-    sd = np.sqrt(tr) / max_cond
-    for i in range(m):
-        for j in range(d):
-            if i < dz:
-                Q[i, j] = C[i, j]
-            else:
-                Q[i, j] = sd if i - dz == j else 0.0
-        for r in range(rows):
-            B[i, r] = G[r, i] if i < dz else 0.0
-    v = np.empty(m)
-    diag = np.empty(d)
-    for k in range(d):
-        norm2 = 0.0
-        for i in range(k, m):
-            norm2 += Q[i, k] * Q[i, k]
-        nrm = np.sqrt(norm2)
-        if not nrm > 0.0:
-            return False
-        alpha = -nrm if Q[k, k] >= 0.0 else nrm
-        for i in range(k, m):
-            v[i] = Q[i, k]
-        v[k] -= alpha
-        vnorm2 = norm2 - Q[k, k] * Q[k, k] + v[k] * v[k]
-        diag[k] = alpha
-        if vnorm2 > 0.0:
-            for j in range(k + 1, d):
-                s = 0.0
-                for i in range(k, m):
-                    s += v[i] * Q[i, j]
-                s = 2.0 * s / vnorm2
-                for i in range(k, m):
-                    Q[i, j] -= s * v[i]
-            for r in range(rows):
-                s = 0.0
-                for i in range(k, m):
-                    s += v[i] * B[i, r]
-                s = 2.0 * s / vnorm2
-                for i in range(k, m):
-                    B[i, r] -= s * v[i]
-    for r in range(rows):                   # R Δ^T = (Q^T [G^T; 0])[:d]
-        for i in range(d - 1, -1, -1):
-            s = B[i, r]
-            for k in range(i + 1, d):
-                s -= Q[i, k] * B[k, r]
-            B[i, r] = s / diag[i]
-    for r in range(rows):
-        for i in range(d):
-            X[r, i] += B[i, r]
-    for r in range(rows):                   # G <- G - Δ C^T
-        for i in range(dz):
-            s = 0.0
-            for j in range(d):
-                s += B[j, r] * C[i, j]
-            G[r, i] -= s
-    return True
-
-
-@numba.njit(cache=True, fastmath=_FASTMATH)
-def _solve_iv_weighted(C, G, Z, X, max_cond, Q, B, L, Ct, Gt):  # pragma: no cover
-    """The IV step with the instruments whitened by ``Z = sum w ζ ζ^T``
-    (lower triangle): :func:`_solve_iv` on ``L^{-1} C`` and ``G L^{-T}``
-    (``Z + ε I = L L^T``, ``ε = tr Z / max_cond``, so that the whitening
+    With ``Z + ε I = L L^T`` (``ε = tr Z / max_cond``, so that the whitening
     cannot amplify directions the instruments no longer excite by more than
-    ``sqrt(max_cond)``): the two-stage least-squares
-    weighting of the extended IV equations, ``M = S Z^{-1} C (C^T Z^{-1}
-    C)^{-1}``. The residual G of the unweighted equations is re-centred
-    with the step. Returns False (nothing changed) if Z is not positive
-    definite or the step fails."""
+    ``sqrt(max_cond)``), ``C̃ = L^{-1} C`` and ``G̃ = G L^{-T}``, the step
+    ``Δ = argmin |Δ C̃^T - G̃|_F^2 + δ |Δ|_F^2``, ``δ = |C̃|_F^2 /
+    max_cond^2`` (the windup bound on C̃ itself): without δ the two-stage
+    least-squares weighting of the extended IV equations, ``M = S Z^{-1} C
+    (C^T Z^{-1} C)^{-1}``. It is solved by :func:`_solve_normal` on the
+    normal equations ``(N + δ I) Δ^T = G_N^T``, ``N = C̃^T C̃``, ``G_N = G̃
+    C̃`` (the gradient at X); if their Cholesky factorisation fails (cond(C̃)
+    near 1e8, at start-up), with the least-squares path's bound ``δ = tr N /
+    max_cond`` instead. Then ``G <- G - Δ C^T``. Solving
+    the normal equations squares the condition number of C̃, but in residual
+    form the error of a step is only a fraction of the step, and the next
+    refresh starts from the exactly re-centred residual G (iterative
+    refinement), so the estimate converges to the solution of the IV
+    equations to rounding of the residual.
+
+    Scratch: L (dz, dz), Ct (dz, d), Gt (rows, dz), N, Ln (d, d), Gn (rows,
+    d), Bn (d, rows). Returns False (nothing changed) if Z or N is not
+    positive definite.
+    """
     dz, d = C.shape
     rows = G.shape[0]
     tr = 0.0
@@ -377,26 +311,49 @@ def _solve_iv_weighted(C, G, Z, X, max_cond, Q, B, L, Ct, Gt):  # pragma: no cov
         return False
     if not _chol(Z, tr / max_cond, L):
         return False
-    for j in range(d):                       # Ct = L^{-1} C
-        for i in range(dz):
-            s = C[i, j]
-            for k in range(i):
-                s -= L[i, k] * Ct[k, j]
-            Ct[i, j] = s / L[i, i]
+    for i in range(dz):                      # Ct = L^{-1} C (row by row)
+        for j in range(d):
+            Ct[i, j] = C[i, j]
+        for k in range(i):
+            lik = L[i, k]
+            for j in range(d):
+                Ct[i, j] -= lik * Ct[k, j]
+        inv = 1.0 / L[i, i]
+        for j in range(d):
+            Ct[i, j] *= inv
     for r in range(rows):                    # Gt = G L^{-T}
         for i in range(dz):
             s = G[r, i]
             for k in range(i):
                 s -= L[i, k] * Gt[r, k]
             Gt[r, i] = s / L[i, i]
-    Xold = X.copy()
-    if not _solve_iv(Ct, Gt, X, max_cond, Q, B):
+    for i in range(d):                       # N = Ct^T Ct (lower), Gn = Gt Ct
+        for j in range(i + 1):
+            N[i, j] = 0.0
+    for r in range(rows):
+        for j in range(d):
+            Gn[r, j] = 0.0
+    for k in range(dz):
+        for i in range(d):
+            cki = Ct[k, i]
+            for j in range(i + 1):
+                N[i, j] += cki * Ct[k, j]
+        for r in range(rows):
+            g = Gt[r, k]
+            for j in range(d):
+                Gn[r, j] += g * Ct[k, j]
+    # δ = tr N / max_cond^2 = |C̃|_F^2 / max_cond^2: the windup bound on C̃
+    # itself (cond(C̃) <= max_cond), the same step as a QR of [C̃; sqrt(δ) I];
+    # if N + δ I is numerically singular for Cholesky (start-up, cond(C̃) near
+    # 1e8), the LS path's bound cond(N + δ I) <= 1 + max_cond instead
+    if not (_solve_normal(N, Gn, X, max_cond * max_cond, Ln, Bn)
+            or _solve_normal(N, Gn, X, max_cond, Ln, Bn)):
         return False
-    for r in range(rows):                    # G <- G - Δ C^T
+    for r in range(rows):                    # G <- G - Δ C^T (Bn holds Δ^T)
         for i in range(dz):
             s = 0.0
             for j in range(d):
-                s += (X[r, j] - Xold[r, j]) * C[i, j]
+                s += Bn[j, r] * C[i, j]
             G[r, i] -= s
     return True
 
@@ -552,7 +509,7 @@ def _shift_solve(M, n, ny, omega, Aout):  # pragma: no cover - compiled
 @numba.njit(cache=True, fastmath=_FASTMATH)
 def _refresh(n, nu, ny, omega, alpha, max_cond, gate, ode, iv, T_now, ist, fst,
              R, G, M, Rt, gt, theta, Am, Cm, Bm, Dm, Apsi, Cpsi, Psi, hist,
-             Ld, Bd, Lt, Bt, Anew, Cz, Gz, Qz, Bz, Zz, Lz, Ct, Gt, Cf):  # pragma: no cover
+             Ld, Bd, Lt, Bt, Anew, Cz, Gz, Zz, Lz, Ct, Gt, Nz, Gn, Cf):  # pragma: no cover
     """Model refresh: solve both LS problems (the first by instrumental
     variables when ``iv``), (13), B̃, D, Ψ model, history."""
     if not ode:
@@ -567,7 +524,7 @@ def _refresh(n, nu, ny, omega, alpha, max_cond, gate, ode, iv, T_now, ist, fst,
                     else:
                         jj = j - nz
                         Cf[i, j] = Zz[i, jj] if jj <= i else Zz[jj, i]
-            if not _solve_iv_weighted(Cf, Gz, Zz, M, max_cond, Qz, Bz, Lz, Ct, Gt):
+            if not _solve_iv_weighted(Cf, Gz, Zz, M, max_cond, Lz, Ct, Gt, Nz, Gn, Ld, Bd):
                 ist[7] += 1
         elif not _solve_normal(R, G, M, max_cond, Ld, Bd):
             ist[7] += 1
@@ -703,38 +660,73 @@ def kernel(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, Hse
     dp, d = M.shape
     mi = zr.shape[0]
     dz = Cz.shape[0]
-    zeta = np.empty(dz)
-    ez = np.empty(dp)
-    zi = np.empty(mi)
-    zi2 = np.empty(n)
-    Qz = np.empty((dz + d, d))
-    Bz = np.empty((dz + d, dp))
-    Lz = np.zeros((dz, dz))
-    Ct = np.empty((dz, d))
-    Cf = np.empty((dz, d))
-    Gt = np.empty((dp, dz))
     dth = theta.shape[1]
     nX = Psi.shape[1]          # n + n nu: columns of [Ξ, Ψ]
-    p = np.empty(dp)
-    phi = np.empty(d)
-    wphi = np.empty(d)
-    znew = np.empty(f)
-    Phi = np.zeros((ny, dth))
-    Pn = np.empty((ny, n))
-    g = np.empty(d)
-    e = np.empty(dp)
-    Gq = np.empty((dth, ny))
-    ey = np.empty(ny)
-    Ph = np.empty((n, n))
-    G1h = np.empty((n, n))
-    G2h = np.empty((n, n))
-    ep = np.empty(dp)
-    Ld = np.zeros((d, d))
-    Bd = np.empty((d, dp))
-    Lt = np.zeros((dth, dth))
-    Bt = np.empty((dth, 1))
-    Anew = np.empty((n, n))
-    work = np.empty((5, n, n))
+    # scratch: one allocation per call (a one-sample call pays for one, not 30)
+    sc = np.empty(2 * dz * d + dz * dz + dp * dz + 2 * d * d + 2 * dp * d + dz + 4 * dp
+                  + mi + n + 3 * d + f + 2 * ny * dth + ny * n + ny + 9 * n * n
+                  + dth * dth + dth)
+    o = 0
+    zeta = sc[o:o + dz]
+    o += dz
+    ez = sc[o:o + dp]
+    o += dp
+    zi = sc[o:o + mi]
+    o += mi
+    zi2 = sc[o:o + n]
+    o += n
+    Lz = sc[o:o + dz * dz].reshape((dz, dz))
+    o += dz * dz
+    Ct = sc[o:o + dz * d].reshape((dz, d))
+    o += dz * d
+    Gt = sc[o:o + dp * dz].reshape((dp, dz))
+    o += dp * dz
+    Nz = sc[o:o + d * d].reshape((d, d))
+    o += d * d
+    Gn = sc[o:o + dp * d].reshape((dp, d))
+    o += dp * d
+    Cf = sc[o:o + dz * d].reshape((dz, d))
+    o += dz * d
+    p = sc[o:o + dp]
+    o += dp
+    phi = sc[o:o + d]
+    o += d
+    wphi = sc[o:o + d]
+    o += d
+    znew = sc[o:o + f]
+    o += f
+    Phi = sc[o:o + ny * dth].reshape((ny, dth))
+    o += ny * dth
+    Phi[:, :] = 0.0
+    Pn = sc[o:o + ny * n].reshape((ny, n))
+    o += ny * n
+    g = sc[o:o + d]
+    o += d
+    e = sc[o:o + dp]
+    o += dp
+    Gq = sc[o:o + dth * ny].reshape((dth, ny))
+    o += dth * ny
+    ey = sc[o:o + ny]
+    o += ny
+    Ph = sc[o:o + n * n].reshape((n, n))
+    o += n * n
+    G1h = sc[o:o + n * n].reshape((n, n))
+    o += n * n
+    G2h = sc[o:o + n * n].reshape((n, n))
+    o += n * n
+    ep = sc[o:o + dp]
+    o += dp
+    Ld = sc[o:o + d * d].reshape((d, d))      # Cholesky factors: _chol writes every entry
+    o += d * d
+    Bd = sc[o:o + d * dp].reshape((d, dp))
+    o += d * dp
+    Lt = sc[o:o + dth * dth].reshape((dth, dth))
+    o += dth * dth
+    Bt = sc[o:o + dth].reshape((dth, 1))
+    o += dth
+    Anew = sc[o:o + n * n].reshape((n, n))
+    o += n * n
+    work = sc[o:o + 5 * n * n].reshape((5, n, n))
     for k in range(N):
         if ist[0] == 0:
             for j in range(nu):
@@ -1070,7 +1062,7 @@ def kernel(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, Hse
         if (ist[0] - 1) % K == 0:
             _refresh(n, nu, ny, omega, alpha, max_cond, gate, ode, iv, Tm[k], ist, fst, R, G,
                      M, Rt, gt, theta, Am, Cm, Bm, Dm, Apsi, Cpsi, Psi, hist, Ld, Bd, Lt, Bt,
-                     Anew, Cz, Gz, Qz, Bz, Zz, Lz, Ct, Gt, Cf)
+                     Anew, Cz, Gz, Zz, Lz, Ct, Gt, Nz, Gn, Cf)
     for i in range(buf.shape[0]):
         if not np.isfinite(buf[i]):
             return False
@@ -1097,23 +1089,10 @@ def _ref_solve(R, G, X, max_cond):
     return True
 
 
-def _ref_solve_iv(C, G, X, max_cond):
-    """Reference of :func:`_solve_iv`: numpy least squares on the stacked
-    system ``[C; sqrt(δ) I] Δ^T = [G^T; 0]``."""
-    tr = float(np.sum(C * C))
-    if not tr > 0:
-        return False
-    d = C.shape[1]
-    A = np.vstack([C, np.sqrt(tr) / max_cond * np.eye(d)])
-    rhs = np.vstack([G.T, np.zeros((d, G.shape[0]))])
-    step = np.linalg.lstsq(A, rhs, rcond=None)[0].T
-    X += step
-    G -= step @ C.T
-    return True
-
-
 def _ref_solve_iv_weighted(C, G, Z, X, max_cond):
-    """Reference of :func:`_solve_iv_weighted`."""
+    """Reference of :func:`_solve_iv_weighted`: numpy Cholesky of Z, scipy
+    triangular solves, the normal equations of the whitened problem solved by
+    :func:`_ref_solve`."""
     Zs = np.tril(Z) + np.tril(Z, -1).T
     tr = np.trace(Zs)
     if not tr > 0:
@@ -1125,7 +1104,8 @@ def _ref_solve_iv_weighted(C, G, Z, X, max_cond):
     Ct = scipy.linalg.solve_triangular(L, C, lower=True)
     Gt = scipy.linalg.solve_triangular(L, G.T, lower=True).T
     Xold = X.copy()
-    if not _ref_solve_iv(Ct, Gt, X, max_cond):
+    N, Gn = Ct.T @ Ct, Gt @ Ct
+    if not _ref_solve(N, Gn, X, max_cond * max_cond) and not _ref_solve(N, Gn, X, max_cond):
         return False
     G -= (X - Xold) @ C.T
     return True

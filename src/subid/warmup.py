@@ -1,0 +1,140 @@
+"""Compile subid's numba kernels ahead of their first use.
+
+numba compiles a kernel the first time it is called with a new combination of
+argument types and, with ``cache=True`` (every subid kernel), stores the
+machine code in its cache (``__pycache__`` next to the module, or
+``NUMBA_CACHE_DIR``). Without a cache the first ``AdaptiveIdentifier.update``
+waits for the compiler (tens of seconds); with it, it loads in a fraction of
+a second. This module fills the cache for the argument types subid's public
+calls use (every array is C-contiguous float64 or int64 after validation, so
+one specialisation per kernel serves all data):
+
+* :class:`subid.AdaptiveIdentifier` (one kernel for every ``method``; the
+  uniform and the time-stamped paths share it),
+* :class:`subid.RecursiveSubspace`,
+* the default batch call (:func:`subid.ls_subspace`: the B, D, x0 pass),
+* :func:`subid.ct_subspace` on a uniform and on a non-uniform grid.
+
+Run it once after installing (``make test`` / ``make demo`` do)::
+
+    python -m subid.warmup
+
+It never prints from :func:`warmup`; the command line prints the seconds per
+kernel group.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+import warnings
+
+import numpy as np
+
+__all__ = ["main", "warmup"]
+
+
+def _adaptive():
+    from .adaptive import AdaptiveIdentifier
+    from .systems import seed000_system
+
+    rng = np.random.default_rng(0)
+    t = np.arange(400) * 1e-2
+    u = rng.standard_normal((t.size, 2))
+    y = seed000_system().simulate(u, t=t, hold="foh")
+    AdaptiveIdentifier(4, 2, 2, dt=1e-2).update(u, y)           # uniform path
+    AdaptiveIdentifier(4, 2, 2).update(u, y, t=t)               # time-stamped path
+    AdaptiveIdentifier(4, 2, 2, dt=1e-2).update(u[0], y[0])     # one sample
+
+
+def _recursive():
+    from .recursive import RecursiveSubspace
+    from .systems import seed001_system
+
+    rng = np.random.default_rng(0)
+    u = rng.standard_normal((300, 2))
+    y = seed001_system().simulate(u)
+    RecursiveSubspace(4, 2, 2).update(u, y)
+
+
+def _batch():
+    from .data import IOData
+    from .ls_subspace import ls_subspace
+    from .systems import seed001_system
+
+    rng = np.random.default_rng(0)
+    u = rng.standard_normal((400, 2))
+    y = seed001_system().simulate(u)
+    ls_subspace(IOData(u, y), 4)
+
+
+def _ct():
+    from .ct_subspace import ct_subspace
+    from .data import IOData
+    from .systems import seed000_system
+
+    rng = np.random.default_rng(0)
+    true = seed000_system()
+    t = np.arange(400) * 1e-2
+    u = rng.standard_normal((t.size, 2))
+    ct_subspace(IOData(u, true.simulate(u, t=t, hold="foh"), t=t), 4)
+    tj = np.cumsum(1e-2 * (1.0 + 0.4 * rng.uniform(-1.0, 1.0, t.size)))
+    ct_subspace(IOData(u, true.simulate(u, t=tj, hold="foh"), t=tj), 4)
+
+
+_GROUPS = {"adaptive": _adaptive, "recursive": _recursive, "batch": _batch, "ct": _ct}
+
+
+def warmup(groups=None) -> dict:
+    """Compile (or load from numba's cache) the kernels of subid's common calls.
+
+    Parameters
+    ----------
+    groups : iterable of str, optional
+        Any of ``'adaptive'``, ``'recursive'``, ``'batch'``, ``'ct'``
+        (default: all).
+
+    Returns
+    -------
+    dict
+        Seconds spent per group (compilation on an empty cache, loading on a
+        filled one).
+
+    Raises
+    ------
+    subid.errors.SubidError
+        An unknown group name.
+    """
+    from .errors import SubidError
+
+    names = list(_GROUPS) if groups is None else list(groups)
+    unknown = [g for g in names if g not in _GROUPS]
+    if unknown:
+        raise SubidError(f"unknown warm-up group(s) {unknown}; choose from {list(_GROUPS)}")
+    out = {}
+    for name in names:
+        t0 = time.perf_counter()
+        with warnings.catch_warnings():     # tiny records: convergence warnings expected
+            warnings.simplefilter("ignore")
+            _GROUPS[name]()
+        out[name] = time.perf_counter() - t0
+    return out
+
+
+def main(argv=None) -> int:
+    """``python -m subid.warmup [--only GROUP ...] [--quiet]``."""
+    ap = argparse.ArgumentParser(prog="python -m subid.warmup",
+                                 description="Compile subid's numba kernels into numba's "
+                                             "cache ahead of their first use.")
+    ap.add_argument("--only", nargs="+", choices=list(_GROUPS), help="kernel groups to compile")
+    ap.add_argument("--quiet", action="store_true", help="print nothing")
+    a = ap.parse_args(argv)
+    times = warmup(a.only)
+    if not a.quiet:
+        for name, sec in times.items():
+            print(f"{name:10s} {sec:7.2f} s")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
