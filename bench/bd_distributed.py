@@ -2,7 +2,7 @@
 
 A random stable 4th-order 2x2 system, 2e5 samples at 30 dB output SNR, on a
 2-worker Dask LocalCluster (chunks of 25,013 samples): the largest relative
-difference of A, B, C, D between ``subid.distributed.identify`` and the
+difference of A, B, C, D between ``subid.methods.dt.distributed.identify`` and the
 in-memory default with the same statistic, and the Markov errors of both and
 of the statistic-only projection; then robot_arm (DaISy) streamed in pieces
 through ``identify_stream`` against in memory, with validation fits.
@@ -25,7 +25,7 @@ def main() -> int:
 
     import subid
     from subid import datasets, systems
-    from subid import distributed as sd
+    from subid.methods.dt import distributed as sd
 
     true = systems.random_system(4, 2, 2, seed=1)
     data = systems.simulate_data(true, 200_000, seed=2, output_snr_db=30)

@@ -38,8 +38,8 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     import subid
     from subid import systems
-    from subid._regression import fit_b_d_x0_modal, fit_b_d_x0_qr
-    from subid._subspace import output_weights
+    from subid.methods.dt._regression import fit_b_d_x0_modal, fit_b_d_x0_qr
+    from subid.methods.dt._subspace import output_weights
 
     if os.environ.get("OPENBLAS_NUM_THREADS") != "1":
         print("warning: OPENBLAS_NUM_THREADS is not 1")

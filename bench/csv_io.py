@@ -27,7 +27,7 @@ import time
 import numpy as np
 
 import subid
-import subid.io as sio
+import subid.io.formats as sio
 
 
 def _median(fn, repeat):
@@ -54,7 +54,7 @@ def _make(path, rows):
 
 _CHILD = """
 import sys, subid
-from subid import cli
+from subid.cli import commands as cli
 warm = subid.systems.simulate_data(subid.systems.seed001_system(), 500, seed=0)
 subid.moesp(warm, 3, horizon=5)
 mode, path, out = sys.argv[1:4]
@@ -129,7 +129,7 @@ def main():
     rows["identify_file (moesp: parse once, B/D pass from the spool)"] = _median(
         lambda: subid.identify_file(path, "u1,u2", "y1,y2", method="moesp", order=3,
                                     horizon=10), args.repeat)
-    from subid import cli
+    from subid.cli import commands as cli
 
     def stream_cli():
         assert cli.main(["--quiet", "identify", path, "--inputs", "u1,u2", "--outputs",

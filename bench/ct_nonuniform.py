@@ -7,7 +7,7 @@ interleaved in one process (ratios taken inside the process):
 
 * ``uniform``: the default call on the uniform grid;
 * ``jittered``: the default call on the jittered grid (fused block-modal
-  kernels of :mod:`subid._ct_kernels`);
+  kernels of :mod:`subid.methods.ct._ct_kernels`);
 * ``jittered, tables``: the same with the modal kernels disabled (the
   per-interval tables: eigen-decomposition or matrix exponentials per
   interval), the code before issue 14 (``--no-reference`` skips it).
@@ -54,10 +54,10 @@ def main(argv=None):
                         help="skip the per-interval-table reference")
     args = parser.parse_args(argv)
 
-    from subid import _ct_kernels
-    from subid.basis import default_basis
-    from subid.ct_subspace import ct_subspace
     from subid.experiments.seed002 import paper_system, simulate
+    from subid.methods.ct import _ct_kernels
+    from subid.methods.ct.basis import default_basis
+    from subid.methods.ct.ct_subspace import ct_subspace
 
     modal = (_ct_kernels.modal_bank, _ct_kernels.modal_sensitivity)
 

@@ -2,7 +2,7 @@
 
 Run: OPENBLAS_NUM_THREADS=1 PYTHONPATH=src python bench/demo_ratio.py [DATASET ...]
 
-For each bundled dataset: wall time of :func:`subid.demo.report_dataset`
+For each bundled dataset: wall time of :func:`subid.cli.demo.report_dataset`
 (identification with every batch method + the HTML report with its figures)
 against the sum of the identification times it records; target ratio <= 2.
 """
@@ -15,7 +15,8 @@ import warnings
 
 def main(names):
     warnings.simplefilter("ignore")
-    from subid import datasets, demo
+    from subid import datasets
+    from subid.cli import demo
     names = names or datasets.names()
     out = tempfile.mkdtemp()
     print(f"{'dataset':14s} {'total s':>8s} {'ident s':>8s} {'ratio':>6s}")

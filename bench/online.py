@@ -23,8 +23,8 @@ import time
 
 import numpy as np
 
-from subid.adaptive import AdaptiveIdentifier
 from subid.experiments.seed000 import simulate
+from subid.methods.online.adaptive import AdaptiveIdentifier
 
 
 def _new(engine="numba", method="iv"):

@@ -99,7 +99,7 @@ def main():
     print(f"python {sys.version.split()[0]}, repeat {rep} (medians)")
     base = wall("import numpy, scipy.linalg", repeat=rep)
     imp = wall("import subid", repeat=rep)
-    cli_help = wall("import sys; from subid.cli import main; sys.exit(main(['--help']))",
+    cli_help = wall("import sys; from subid.cli.commands import main; sys.exit(main(['--help']))",
                     repeat=rep)
     module_help = wall("import runpy, sys; sys.argv = ['subid', '--help']; "
                        "runpy.run_module('subid', run_name='__main__')", repeat=rep)

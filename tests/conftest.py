@@ -2,7 +2,8 @@ import numpy as np
 import pytest
 
 import subid
-from subid import registry, systems
+from subid import systems
+from subid.methods import registry
 
 
 @pytest.fixture(scope="session")

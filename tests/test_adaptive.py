@@ -7,13 +7,13 @@ import numpy as np
 import pytest
 
 import subid
-from subid import _adaptive_kernel as K
-from subid._simulate import expm_blocks
-from subid.adaptive import AdaptiveIdentifier
 from subid.data import IOData
 from subid.errors import CheckpointError, DataError, DataFileNotFoundError, OrderError, SubidError
 from subid.experiments.seed000 import multisine, paper_system, relative_error, simulate
-from subid.model import StateSpace
+from subid.methods.online import _adaptive_kernel as K
+from subid.methods.online.adaptive import AdaptiveIdentifier
+from subid.model._simulate import expm_blocks
+from subid.model.statespace import StateSpace
 
 DT = 1e-3
 
@@ -468,11 +468,11 @@ def test_truncated_or_corrupted_checkpoint_raises(tmp_path, short_record):
 
 
 def test_checkpoint_with_inconsistent_content_raises(tmp_path):
-    from subid._checkpoint import load_state, save_state
+    from subid.io._checkpoint import load_state, save_state
     ident = paper_ident()
     path = tmp_path / "ident.npz"
     ident.save(path)
-    from subid.adaptive import _VERSION
+    from subid.methods.online.adaptive import _VERSION
     arrays, settings = load_state(path, "subid.AdaptiveIdentifier", _VERSION)
     arrays["R"] = arrays["R"].copy()
     arrays["R"][0, 0] = np.nan

@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 
 from subid import AdaptiveIdentifier
-from subid import _adaptive_kernel as K
 from subid.errors import DataError
+from subid.methods.online import _adaptive_kernel as K
 
 
 def _record(n=700, seed=3):

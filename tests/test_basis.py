@@ -4,8 +4,9 @@ import numpy as np
 import pytest
 import scipy.linalg
 
-from subid import _ct_kernels, errors
-from subid.basis import FilterBank, default_basis, laguerre, legendre, takenaka_malmquist
+from subid import errors
+from subid.methods.ct import _ct_kernels
+from subid.methods.ct.basis import FilterBank, default_basis, laguerre, legendre, takenaka_malmquist
 
 BANKS = {
     "tm-real": lambda: takenaka_malmquist([4, 12, 20, 28, 36, 44, 52, 60]),
@@ -167,7 +168,7 @@ def test_paper_input_stack_exact_chain_matches_its_definition():
     assert stack.shape == (150, 6)
     # (j, l) = (1, 2): u through M_1, then through the all-pass W_2 -- simulated exactly
     s1, s2 = 12.0, 20.0
-    from subid.model import StateSpace
+    from subid.model.statespace import StateSpace
     chain = StateSpace([[-s1, 0], [np.sqrt(2 * s2), -s2]],
                        [[np.sqrt(2 * s1)], [0.0]], [[1.0, -np.sqrt(2 * s2)]], 0, 0.0)
     np.testing.assert_allclose(stack[:, 4], chain.simulate(u, t=t, hold="foh")[:, 0],
@@ -217,7 +218,7 @@ def test_sensitivity_kernel_matches_reference():
 
 
 def test_sensitivity_rows_reproduce_a_simulation():
-    from subid.model import StateSpace
+    from subid.model.statespace import StateSpace
     rng = np.random.default_rng(7)
     A = np.array([[-1.0, 2.0], [-2.0, -0.5]])
     B = rng.standard_normal((2, 2))
@@ -360,7 +361,7 @@ def test_modal_form_refuses_what_it_cannot_do_and_the_tables_take_over():
     C = np.array([[1.0, 0.5]])
     t = grids(200, h, 28)["jittered"]
     u = np.random.default_rng(29).standard_normal((200, 1))
-    from subid.model import StateSpace
+    from subid.model.statespace import StateSpace
     rb, rx = _ct_kernels.run_sensitivity(A, C, t, u, 1, uniform=False)
     B, x0 = np.array([[0.3], [1.0]]), np.array([1.0, -2.0])
     y = np.einsum("lpnm,nm->lp", rb, B) + rx @ x0

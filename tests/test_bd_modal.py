@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from subid import systems
-from subid._regression import (
+from subid.methods.dt._regression import (
     ModalForm,
     fit_b_d_x0,
     fit_b_d_x0_modal,
@@ -130,7 +130,7 @@ def _list_map(u, y, borders):
 def test_second_pass_over_pieces_equals_in_memory(defective):
     """The distributed regression (modal, or its QR fall-back for a nearly defective A)
     equals the in-memory one."""
-    from subid._bd_pass import OutputRegression
+    from subid.methods.dt._bd_pass import OutputRegression
     r = np.random.default_rng(11)
     if defective:
         A = np.array([[0.8, 1.0, 0.0], [0.0, 0.8 + 1e-10, 0.3], [0.0, 0.0, -0.5]])
@@ -155,8 +155,8 @@ def test_second_pass_over_pieces_equals_in_memory(defective):
 
 def test_second_pass_initial_state_equals_simulate_fit():
     import subid
-    from subid._bd_pass import OutputRegression
-    from subid.metrics import simulate_fit
+    from subid.evaluation.metrics import simulate_fit
+    from subid.methods.dt._bd_pass import OutputRegression
     true = systems.random_system(3, 2, 2, seed=13)
     data = systems.simulate_data(true, 6_000, seed=14, output_snr_db=20, x0=[1.0, -2.0, 0.5])
     model = subid.StateSpace(true.A, true.B * 1.01, true.C, true.D, 1.0)
@@ -166,7 +166,7 @@ def test_second_pass_initial_state_equals_simulate_fit():
 
 
 def test_second_pass_residual_on_noise_free_pieces():
-    from subid._bd_pass import OutputRegression
+    from subid.methods.dt._bd_pass import OutputRegression
     true = systems.random_system(3, 2, 2, seed=15)
     data = systems.simulate_data(true, 8_000, seed=16, x0=np.ones(3))
     second = OutputRegression(_list_map(data.u, data.y, [0, 50, 3_000, 8_000]), 3, 2, 2)

@@ -19,9 +19,11 @@ pytest.importorskip("matplotlib")
 pytest.importorskip("click")
 
 import subid  # noqa: E402
-from subid import cli, datasets, demo  # noqa: E402
-from subid.cli import main  # noqa: E402
-from subid.interop import load_mat  # noqa: E402
+from subid import datasets
+from subid.cli import commands as cli
+from subid.cli import demo  # noqa: E402
+from subid.cli.commands import main  # noqa: E402
+from subid.io.interop import load_mat  # noqa: E402
 from test_report import PLOT_SECTIONS, check_png, parse  # noqa: E402
 
 
@@ -324,13 +326,13 @@ def test_convert_to_every_target(identified, tmp_path, capsys):
 @pytest.mark.slow
 def test_demo_alias_writes_reports_and_an_index_linking_them(tmp_path, capsys, monkeypatch):
     out = tmp_path / "demo"
-    # ``python -m subid.demo ARGS`` is ``subid demo ARGS``
-    monkeypatch.setattr(sys, "argv", ["subid.demo", "--datasets", "dryer,robot_arm", "--methods",
+    # ``python -m subid.cli.demo ARGS`` is ``subid demo ARGS``
+    monkeypatch.setattr(sys, "argv", ["subid.cli.demo", "--datasets", "dryer,robot_arm", "--methods",
                                       "ls,n4sid", "--jobs", "2", "--out", str(out)])
     with pytest.raises(SystemExit) as exit_info, warnings.catch_warnings():
-        # runpy notes that subid.demo is already imported: harmless here
+        # runpy notes that subid.cli.demo is already imported: harmless here
         warnings.simplefilter("ignore", RuntimeWarning)
-        runpy.run_module("subid.demo", run_name="__main__", alter_sys=False)
+        runpy.run_module("subid.cli.demo", run_name="__main__", alter_sys=False)
     code = exit_info.value.code
     stdout = capsys.readouterr().out
     assert code == 0

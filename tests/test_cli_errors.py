@@ -2,7 +2,7 @@
 
 import pytest
 
-from subid.cli import main
+from subid.cli.commands import main
 
 
 def run(capsys, *args):

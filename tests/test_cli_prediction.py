@@ -11,7 +11,7 @@ pytest.importorskip("matplotlib")
 pytest.importorskip("click")
 
 import subid  # noqa: E402
-from subid.cli import main  # noqa: E402
+from subid.cli.commands import main  # noqa: E402
 
 
 def run(capsys, *args):

@@ -9,8 +9,9 @@ import numpy as np
 import pytest
 
 from subid import IOData, StateSpace, errors
-from subid.basis import default_basis, laguerre, legendre, takenaka_malmquist
-from subid.ct_subspace import (
+from subid.experiments.seed002 import paper_system, simulate
+from subid.methods.ct.basis import default_basis, laguerre, legendre, takenaka_malmquist
+from subid.methods.ct.ct_subspace import (
     _estimate_a_c,
     _fit_b_filtered,
     _subspace_factor,
@@ -21,7 +22,6 @@ from subid.ct_subspace import (
     observability_matrix,
     tm_convolution_matrix,
 )
-from subid.experiments.seed002 import paper_system, simulate
 
 W = np.logspace(-2, 2, 200)
 TM = [4.0, 12.0, 20.0, 28.0, 36.0, 44.0, 52.0, 60.0]
@@ -281,10 +281,10 @@ def test_jittered_fast_kernels_give_the_reference_model(true, monkeypatch):
 
     Noise-free, so the model is determined to rounding (under noise the
     refinement's stopping point moves by more than 1e-10 even for a 1e-14
-    perturbation of the data: see "Accuracy" in subid._ct_kernels). Compared
+    perturbation of the data: see "Accuracy" in subid.methods.ct._ct_kernels). Compared
     as transfer functions and simulated outputs: the state basis is not unique.
     """
-    from subid import _ct_kernels
+    from subid.methods.ct import _ct_kernels
     data, _ = simulate(600, 5, jitter=0.4)
     fast = ct_subspace(data, 4)
     monkeypatch.setattr(_ct_kernels, "modal_bank", lambda *a, **k: None)
@@ -438,7 +438,7 @@ def test_bad_input_raises_clear_errors(true):
 @pytest.mark.slow
 def test_jittered_mimo_fast_kernels_give_the_reference_model(hold, monkeypatch):
     """MIMO with feedthrough on a jittered grid: modal kernels vs per-interval tables."""
-    from subid import _ct_kernels
+    from subid.methods.ct import _ct_kernels
     system = mimo_system()
     rng = np.random.default_rng(7)
     t = np.arange(800) * 0.01 + rng.uniform(-0.4, 0.4, 800) * 0.01

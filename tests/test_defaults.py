@@ -192,8 +192,8 @@ def _unstable_closed_loop(seed=3, n_samples=1500):
 def test_prediction_form_b_d_agrees_with_a_direct_regression():
     """predictor_b_d solves the predictor regression; checked against regressors built
     column by column by simulating the predictor (an independent computation)."""
-    from subid._subspace import predictor_b_d, prepare
-    from subid.noise_model import innovation_model, user_factor
+    from subid.methods.dt._subspace import predictor_b_d, prepare
+    from subid.methods.dt.noise_model import innovation_model, user_factor
     data = _unstable_closed_loop()
     pb = prepare(data, 2, 10, method="moesp")
     model = subid.moesp(data, 2, horizon=10, stability="none", system_matrices="shift")

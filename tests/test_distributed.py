@@ -10,7 +10,7 @@ dask = pytest.importorskip("dask", reason="dask is not installed")
 da = pytest.importorskip("dask.array")
 distributed = pytest.importorskip("dask.distributed", reason="dask.distributed is not installed")
 
-from subid import distributed as sd  # noqa: E402
+from subid.methods.dt import distributed as sd  # noqa: E402
 
 
 @pytest.fixture(scope="module")

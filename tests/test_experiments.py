@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 
 import subid
-from subid._hankel import hankel_chunk
-from subid._regression import fit_b_d_x0
 from subid.errors import DataError
-from subid.metrics import markov_error
+from subid.evaluation.metrics import markov_error
+from subid.methods.dt._regression import fit_b_d_x0
+from subid.statistic._hankel import hankel_chunk
 
 TRUE = subid.systems.seed001_system()
 N_STATE = TRUE.order
@@ -312,7 +312,7 @@ def test_prediction_and_residuals_per_experiment(two_records):
     # model simulated without x0 are the free responses; with the pairs across the
     # border removed the lag-1 correlation is that of the two pieces alone
     e = data.y - subid.predict(model, data, np.inf, x0="zero")
-    from subid.prediction import correlations
+    from subid.evaluation.prediction import correlations
     joint = correlations(e, data.u, max_lag=5, ranges=data.experiment_ranges)
     # lagged products summed inside each experiment only, by hand
     e0 = e - e.mean(axis=0)
@@ -381,7 +381,7 @@ def test_estimate_delay_uses_every_experiment():
 # ---------------------------------------------------------------------------
 def test_identify_stream_with_new_experiment_marker(two_records):
     a, b, _, _ = two_records
-    from subid.stream import NEW_EXPERIMENT, identify_stream
+    from subid.methods.dt.stream import NEW_EXPERIMENT, identify_stream
     pieces = [a[:250], a[250:], NEW_EXPERIMENT, b[:100], b[100:]]
     model = identify_stream(pieces, "moesp", N_STATE, horizon=10)
     assert markov_error(model, TRUE) < 1e-8
@@ -412,7 +412,7 @@ def test_identify_file_with_several_files(tmp_path, two_records):
 
 def test_distributed_files_as_experiments(tmp_path, two_records):
     pytest.importorskip("dask")
-    from subid.distributed import identify_files
+    from subid.methods.dt.distributed import identify_files
     a, b, _, _ = two_records
     paths = []
     for k, rec in enumerate((a, b)):
@@ -442,7 +442,7 @@ def test_cli_identify_merges_several_files(tmp_path, two_records, capsys):
     pytest.importorskip("matplotlib")
     import json
 
-    from subid.cli import main
+    from subid.cli.commands import main
     a, b, _, _ = two_records
     paths = [_write_csv(tmp_path / "a.csv", a), _write_csv(tmp_path / "b.csv", b)]
     out = tmp_path / "out"

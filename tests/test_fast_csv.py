@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 import subid
-import subid.io as sio
-import subid.stream  # noqa: E402  (a submodule: the package imports it lazily)
+import subid.io.formats as sio
+import subid.methods.dt.stream  # noqa: E402  (a submodule: the package imports it lazily)
 from subid import errors
 
 RNG = np.random.default_rng(16)
@@ -178,12 +178,12 @@ def test_streaming_parses_the_file_once(tmp_path, monkeypatch):
     original = sio._fast_values
     monkeypatch.setattr(sio, "_fast_values",
                         lambda buf, *a: seen.append(len(buf)) or original(buf, *a))
-    real_close = subid.stream.ParsedOnce.close
+    real_close = subid.methods.dt.stream.ParsedOnce.close
 
     def close(self):
         spools.append(self.spool)
         real_close(self)
-    monkeypatch.setattr(subid.stream.ParsedOnce, "close", close)
+    monkeypatch.setattr(subid.methods.dt.stream.ParsedOnce, "close", close)
     model = subid.identify_file(f, "u1,u2", "y1,y2", order=3, horizon=5, chunk_size=3000)
     assert sum(seen) == body
     assert model.info["bd_method"] != "projection"
@@ -192,7 +192,7 @@ def test_streaming_parses_the_file_once(tmp_path, monkeypatch):
     np.testing.assert_allclose(model.B, reference.B, rtol=1e-7, atol=1e-9)
     assert all(s is None or not Path(s).exists() for s in spools)
     seen.clear()
-    from subid import cli
+    from subid.cli import commands as cli
     assert cli.main(["--quiet", "identify", str(f), "--inputs", "u1,u2", "--outputs", "y1,y2",
                      "--method", "moesp", "--order", "3", "--horizon", "5", "--stream",
                      "--chunk-size", "3000", "--no-report", "--out", str(tmp_path / "o")]) == 0

@@ -10,8 +10,8 @@ import matplotlib.pyplot as plt  # noqa: E402
 from matplotlib.colors import to_hex  # noqa: E402
 
 import subid  # noqa: E402
-from subid import plot  # noqa: E402
 from subid.errors import ModelError  # noqa: E402
+from subid.evaluation import plot  # noqa: E402
 
 
 @pytest.fixture(autouse=True)

@@ -257,7 +257,7 @@ def test_mat_fields_scipy_trusts_are_validated(tmp_path, edit):
 
 # -- round two (issue 15): every loader, every class of hostile input --------
 def _model_mat_bytes() -> bytes:
-    from subid.interop import save_mat
+    from subid.io.interop import save_mat
     path = os.path.join(os.environ.get("TMPDIR", "/tmp"), f"subid-fuzz-{os.getpid()}.mat")
     save_mat(systems.seed001_system(), path)
     with open(path, "rb") as fh:
@@ -292,7 +292,7 @@ def test_model_mat_with_corrupted_matrix_is_refused_not_a_crash(tmp_path, edit):
 
 
 def _simulate_cli(model_path, input_path):
-    from subid import cli
+    from subid.cli import commands as cli
     out = os.path.join(os.path.dirname(str(input_path)), "sim-out.csv")
     code = cli.main(["--quiet", "simulate", str(model_path), "--input", str(input_path),
                      "--out", out])

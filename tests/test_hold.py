@@ -12,9 +12,9 @@ import pytest
 
 import subid
 from subid import errors
-from subid.cli import main
+from subid.cli.commands import main
+from subid.evaluation.metrics import simulate_fit
 from subid.experiments.seed002 import simulate as seed002_record
-from subid.metrics import simulate_fit
 
 
 @pytest.fixture(scope="module")
@@ -40,7 +40,7 @@ def test_ct_subspace_model_is_scored_with_its_hold(model, record):
 
 
 def test_report_and_residual_use_the_hold(model, record):
-    from subid import report
+    from subid.evaluation import report
     r = report.evaluate(model, *record.split(2 / 3))
     assert min(r["fit_estimation"].min(), r["fit_validation"].min()) > 99.99
 

@@ -9,11 +9,11 @@ import scipy.linalg
 import subid
 from conftest import METHODS
 from subid import systems
-from subid._hankel import hankel_chunk
-from subid._regression import fit_b_d_x0, sensitivity_rows, sensitivity_rows_reference
 from subid.errors import ExcitationWarning
-from subid.ls_subspace import random_selector
-from subid.statistic import HankelStatistic
+from subid.methods.dt._regression import fit_b_d_x0, sensitivity_rows, sensitivity_rows_reference
+from subid.methods.dt.ls_subspace import random_selector
+from subid.statistic._hankel import hankel_chunk
+from subid.statistic.hankel import HankelStatistic
 
 
 def test_paper_system_noise_free_exact(method, paper_system, paper_data):
@@ -150,7 +150,7 @@ def test_monte_carlo_25db(paper_system):
 def test_power_iterations_approach_svd_subspace(paper_system):
     """The SVD-free refinement converges to the dominant left singular subspace
     of the weighted instrument correlation W = L32, the subspace an SVD gives."""
-    from subid._subspace import prepare
+    from subid.methods.dt._subspace import prepare
     data = systems.simulate_data(paper_system, 1000, seed=11, process_snr_db=20,
                                  output_snr_db=20)
     f = 5
@@ -160,7 +160,7 @@ def test_power_iterations_approach_svd_subspace(paper_system):
                            hf.y_rows(f, 2 * f))
     a, b = 2 * f, 4 * f
     svd_range = scipy.linalg.svd(L[a + b:, a:a + b])[0][:, :3]
-    from subid.ls_subspace import gamma_from_factor
+    from subid.methods.dt.ls_subspace import gamma_from_factor
     angles = []
     for k in (0, 1, 3, 8):
         core = gamma_from_factor(hf, f, 3, [3], instruments="past", instrument_weighting=True,
@@ -257,7 +257,7 @@ def test_unstable_plant(fn):
 def test_b_d_falls_back_to_projection_when_simulation_overflows(paper_system, paper_data):
     """An identified A with spectral radius ~3 overflows when simulated over
     1000 samples; 'auto' then solves the projected data equation."""
-    from subid._subspace import estimate_b_d, prepare
+    from subid.methods.dt._subspace import estimate_b_d, prepare
     f = 5
     pb = prepare(paper_data, 3, f, method="test", blocks_per_horizon=1)
     A = 3.0 * paper_system.A / np.abs(np.linalg.eigvals(paper_system.A)).max()

@@ -9,7 +9,7 @@ import scipy.io
 import subid
 from subid import systems
 from subid.errors import DataError, DataFileNotFoundError, FileReadError, ModelError
-from subid.interop import iodata_from_pandas, iodata_to_pandas, load_mat, save_mat
+from subid.io.interop import iodata_from_pandas, iodata_to_pandas, load_mat, save_mat
 
 TOL = 1e-12
 

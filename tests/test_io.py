@@ -12,7 +12,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from subid.errors import DataError, DataFileNotFoundError, FileReadError
-from subid.io import read
+from subid.io.formats import read
 
 RNG = np.random.default_rng(1234)
 

@@ -34,16 +34,17 @@ def test_from_import_star_and_dir_list_the_public_names():
     assert set(subid.__all__) <= set(namespace)
     assert set(subid.__all__) <= set(dir(subid))
     from subid import AdaptiveIdentifier, ls_subspace
-    assert AdaptiveIdentifier is subid.adaptive.AdaptiveIdentifier
-    assert ls_subspace is sys.modules["subid.ls_subspace"].ls_subspace
+    assert AdaptiveIdentifier is subid.methods.online.adaptive.AdaptiveIdentifier
+    assert ls_subspace is sys.modules["subid.methods.dt.ls_subspace"].ls_subspace
 
 
-def test_function_named_like_its_module_stays_the_function():
-    import subid.ls_subspace  # noqa: F401  (binds the submodule, eagerly overwritten)
-    import subid.n4sid as n4sid_name
+def test_importing_an_implementation_module_keeps_the_public_function():
+    import subid.methods.dt.ls_subspace  # noqa: F401  (binds subid.methods, not subid.ls_subspace)
+    import subid.methods.dt.n4sid as n4sid_name
     assert isinstance(subid.ls_subspace, types.FunctionType)
-    assert isinstance(n4sid_name, types.FunctionType)
-    assert isinstance(sys.modules["subid.ls_subspace"], types.ModuleType)
+    assert isinstance(n4sid_name, types.ModuleType)
+    assert isinstance(subid.n4sid, types.FunctionType)
+    assert isinstance(sys.modules["subid.methods.dt.ls_subspace"], types.ModuleType)
 
 
 def test_unknown_name_raises_attribute_error():
@@ -57,7 +58,7 @@ def test_unknown_name_raises_attribute_error():
 
 def test_import_subid_and_the_cli_load_no_heavy_module():
     out = _fresh(
-        "import subid, subid.cli\n"
+        "import subid, subid.cli.commands\n"
         f"print(','.join(m for m in {HEAVY!r} if m in sys.modules))\n"
     )
     assert out.strip() == ""
@@ -67,7 +68,7 @@ def test_fresh_interpreter_public_names_are_the_module_objects():
     out = _fresh(
         "import subid\n"
         "from subid import ct_subspace\n"
-        "import subid.ct_subspace as m\n"
-        "print(ct_subspace is m is sys.modules['subid.ct_subspace'].ct_subspace)\n"
+        "import subid.methods.ct.ct_subspace as m\n"
+        "print(ct_subspace is m.ct_subspace is sys.modules['subid.methods.ct.ct_subspace'].ct_subspace)\n"
     )
     assert out.strip() == "True"

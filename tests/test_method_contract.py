@@ -2,7 +2,7 @@
 ``check_estimator``): signature ``method(data, order=None, *, option=...)`` with the
 registry's options, exact on noise-free data, the same call gives the same model,
 bad input raises a ``subid.errors`` exception, bad option values an ``OptionError``,
-and ``info`` carries the core keys (:data:`subid._info.CORE_KEYS`).
+and ``info`` carries the core keys (:data:`subid.methods._info.CORE_KEYS`).
 """
 
 import inspect
@@ -13,9 +13,10 @@ import numpy as np
 import pytest
 
 import subid
-from subid import errors, registry
-from subid._info import CORE_KEYS, missing_core_keys
+from subid import errors
 from subid.experiments.seed002 import simulate as seed002_record
+from subid.methods import registry
+from subid.methods._info import CORE_KEYS, missing_core_keys
 
 BATCH = [name for name, spec in registry.METHODS.items() if spec.kind == "batch"]
 ONLINE = [name for name, spec in registry.METHODS.items() if spec.kind == "online"]
@@ -106,7 +107,9 @@ def test_find_names_what_is_allowed():
 
 
 def test_the_consumers_read_the_registry():
-    from subid import cli, demo, stream
+    from subid.cli import commands as cli
+    from subid.cli import demo
+    from subid.methods.dt import stream
     assert set(cli.METHODS) == {n for n, s in registry.METHODS.items() if s.command_line}
     assert all(cli.METHODS[n] is registry.METHODS[n] for n in cli.METHODS)
     assert not hasattr(cli, "_accepts") and not hasattr(stream, "METHODS")
@@ -235,7 +238,7 @@ def test_pem_stream_and_distributed_models_have_the_core_keys(dt_record):
     assert missing_core_keys(subid.pem(dt_record, start).info) == []
     pieces = [dt_record.split(0.5)[0], dt_record.split(0.5)[1]]
     assert missing_core_keys(subid.identify_stream(pieces, "moesp", 3).info) == []
-    from subid import distributed
+    from subid.methods.dt import distributed
     models, summary = distributed.identify_many([dt_record], "n4sid", 3)
     assert missing_core_keys(models[0].info) == []
 
@@ -259,8 +262,8 @@ def test_online_models_have_the_core_keys(dt_record, ct_record):
 def test_warnings_issued_while_identifying_are_in_info(monkeypatch, dt_record, ct_record):
     import importlib
 
-    from subid import _subspace
-    ct_module = importlib.import_module("subid.ct_subspace")
+    from subid.methods.dt import _subspace
+    ct_module = importlib.import_module("subid.methods.ct.ct_subspace")
 
     def probe(original):
         def wrapped(*args, **kwargs):
@@ -283,7 +286,7 @@ def test_warnings_issued_while_identifying_are_in_info(monkeypatch, dt_record, c
 
 
 def test_collect_warnings_lists_each_warning_once_and_reissues_it():
-    from subid._info import collect_warnings
+    from subid.methods._info import collect_warnings
 
     with pytest.warns(Warning) as record:
         with collect_warnings() as issued:

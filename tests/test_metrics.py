@@ -124,7 +124,10 @@ def test_blocked_simulate_fit_equals_one_dense_least_squares(monkeypatch, name, 
     """simulate_fit in blocks (small blocks here, and with the free response kept or
     simulated again) gives the x0 and fitted output of one dense lstsq over the
     whole record, and fit_percent in blocks the direct NRMSE formula."""
-    from subid import metrics, prediction  # simulate_fit lives in prediction
+    from subid.evaluation import (
+        metrics,
+        prediction,  # simulate_fit lives in prediction
+    )
     monkeypatch.setattr(metrics, "_SIM_BLOCK", 97)
     monkeypatch.setattr(prediction, "_SIM_BLOCK", 97)
     monkeypatch.setattr(prediction, "_FREE_KEPT", kept)

@@ -11,9 +11,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy import signal
 
-from subid import model as model_module
 from subid.errors import DataError, DataFileNotFoundError, ModelError, OrderError
-from subid.model import StateSpace
+from subid.model import statespace as model_module
+from subid.model.statespace import StateSpace
 
 
 def random_ct(seed, n=4, m=2, p=3):

@@ -16,7 +16,7 @@ import pytest
 
 import subid
 from subid import errors, systems
-from subid.online import OnlineIdentifier, Tracker
+from subid.methods.online.base import OnlineIdentifier, Tracker
 
 
 def _adaptive_record(n=3000, dt=0.01):
@@ -216,7 +216,7 @@ def test_history_format_and_convergence_plot(case):
     np.testing.assert_allclose(np.sort_complex(hist["poles"][-1]),
                                np.sort_complex(np.linalg.eigvals(hist["A"][-1])), rtol=1e-8)
     pytest.importorskip("matplotlib")
-    from subid import plot
+    from subid.evaluation import plot
     fig = plot.convergence(hist)
     assert len(fig.axes) >= 2
     import matplotlib.pyplot as plt

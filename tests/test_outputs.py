@@ -13,7 +13,9 @@ import numpy as np
 import pytest
 
 import subid
-from subid import _files, cli, errors, systems
+from subid import errors, systems
+from subid.cli import commands as cli
+from subid.io import _files
 
 
 @pytest.fixture(scope="module")
@@ -122,7 +124,7 @@ def test_convert_failed_write_keeps_the_previous_file(tmp_path, monkeypatch, cap
 
 
 def test_gallery_writes_atomically(tmp_path, monkeypatch):
-    from subid import demo
+    from subid.cli import demo
     monkeypatch.setattr(demo, "gallery", lambda datasets=None, progress=False:
                         ("| new |\n", [1]))
     dest = tmp_path / "gallery.md"

@@ -17,10 +17,10 @@ from hypothesis import strategies as st
 
 import subid
 from subid import systems
-from subid._pem_kernel import jacobian, jacobian_ref
 from subid.errors import DataError, ModelError, SubidError
+from subid.methods.dt._pem_kernel import jacobian, jacobian_ref
 
-pem_module = importlib.import_module("subid.pem")   # the module (subid.pem is the function)
+pem_module = importlib.import_module("subid.methods.dt.pem")   # the module (subid.pem is the function)
 
 
 def _random_directions(rng, d, n, ny, m):

@@ -15,8 +15,9 @@ import matplotlib.pyplot as plt  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
 
 import subid  # noqa: E402
-from subid import plot, systems  # noqa: E402
+from subid import systems
 from subid.errors import DataError, ModelError  # noqa: E402
+from subid.evaluation import plot  # noqa: E402
 
 
 @pytest.fixture(autouse=True)
@@ -242,7 +243,7 @@ def test_order_scores_chart():
     import warnings
 
     import subid
-    from subid import plot
+    from subid.evaluation import plot
     est = subid.datasets.load("dryer").detrend()[:600]
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")

@@ -5,7 +5,7 @@ import pytest
 
 import subid
 from subid import errors, systems
-from subid.recursive import givens_update, givens_update_reference
+from subid.methods.online.recursive import givens_update, givens_update_reference
 
 
 @pytest.fixture(scope="module")
@@ -233,7 +233,7 @@ def test_lagged_statistic_matches_direct_sums():
     """The lagged products by the compiled kernel, the numpy reference and the
     FFT path (blocks) equal the direct sums; the ring and head buffers
     hold the last and first samples whatever the chunking."""
-    from subid._lagged import LaggedStatistic, lag_update_reference
+    from subid.methods.online._lagged import LaggedStatistic, lag_update_reference
     z = np.random.default_rng(0).standard_normal((900, 3))
     for lags in (5, 64, 400, 2000):
         direct = np.array([z[:900 - d, :1].T @ z[d:] if d < 900 else np.zeros((1, 3))
@@ -255,7 +255,7 @@ def test_lagged_statistic_matches_direct_sums():
 
 
 def test_lagged_kernel_matches_reference():
-    from subid._lagged import LaggedStatistic, lag_update, lag_update_reference
+    from subid.methods.online._lagged import LaggedStatistic, lag_update, lag_update_reference
     z = np.random.default_rng(1).standard_normal((50, 4))
     a, b = LaggedStatistic(2, 2, 20), LaggedStatistic(2, 2, 20)
     for k in range(0, 50, 7):

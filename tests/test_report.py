@@ -1,4 +1,4 @@
-"""Tests of subid.report: self-contained HTML with every section and embedded figures."""
+"""Tests of subid.evaluation.report: self-contained HTML with every section and embedded figures."""
 
 from __future__ import annotations
 
@@ -16,7 +16,8 @@ import pytest
 pytest.importorskip("matplotlib")
 
 import subid  # noqa: E402
-from subid import report, systems  # noqa: E402
+from subid import systems
+from subid.evaluation import report  # noqa: E402
 
 PNG = b"\x89PNG\r\n\x1a\n"
 PLOT_SECTIONS = ("data", "compare", "bode", "poles", "residuals")

@@ -9,7 +9,8 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 import subid
-from subid import cli, errors, systems
+from subid import errors, systems
+from subid.cli import commands as cli
 
 
 @given(row=st.integers(0, 2), col=st.integers(0, 2), imag=st.floats(1e-12, 1e3),
@@ -57,11 +58,11 @@ def test_fit_percent_is_scale_invariant(exponent):
     """fit_percent returned NaN for outputs near 1e300 (inf / inf)."""
     m = systems.seed001_system()
     data = systems.simulate_data(m, 200, seed=0, output_snr_db=20)
-    ref = subid.metrics.fit_percent(m, data, x0="zero")
+    ref = subid.evaluation.metrics.fit_percent(m, data, x0="zero")
     scale = 10.0 ** exponent
     scaled = subid.IOData(data.u, data.y * scale, dt=data.dt)
     model = subid.StateSpace(m.A, m.B, m.C * scale, m.D * scale, m.dt)
-    got = subid.metrics.fit_percent(model, scaled, x0="zero")
+    got = subid.evaluation.metrics.fit_percent(model, scaled, x0="zero")
     np.testing.assert_allclose(got, ref, rtol=1e-9, atol=1e-9)
 
 

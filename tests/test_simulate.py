@@ -4,10 +4,10 @@ import numpy as np
 import pytest
 from scipy import integrate, linalg, signal
 
-from subid import _simulate
 from subid.data import IOData
 from subid.errors import DataError, OptionError
-from subid.model import StateSpace
+from subid.model import _simulate
+from subid.model.statespace import StateSpace
 
 
 def random_system(seed, n=4, m=2, p=3, continuous=False):

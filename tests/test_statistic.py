@@ -5,8 +5,8 @@ import pytest
 
 import subid
 from subid import errors, systems
-from subid._hankel import hankel_chunk
-from subid.statistic import HankelStatistic, lag_sums, lag_sums_uy
+from subid.statistic._hankel import hankel_chunk
+from subid.statistic.hankel import HankelStatistic, lag_sums, lag_sums_uy
 
 
 def _direct_gram(u, y, depth):
@@ -139,7 +139,7 @@ def _qr_rows_reference(R, z, depth, n_inputs, block):
 def test_in_place_qr_statistic_is_the_stacked_qr_bit_for_bit(rows, q, nu, depth, with_r):
     """_qr_rows factorises each block in place by geqrf: the same R as stacking
     the blocks and calling scipy.linalg.qr, to the last bit."""
-    from subid import statistic
+    from subid.statistic import hankel as statistic
     rng = np.random.default_rng(rows)
     z = rng.standard_normal((rows, q))
     R0 = np.triu(rng.standard_normal((2 * depth * q, depth * q))) if with_r else None

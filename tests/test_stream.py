@@ -146,7 +146,7 @@ _MEMORY_SCRIPT = textwrap.dedent("""
     if mode == "stream":
         subid.identify_file(path, "u1,u2", "y1,y2", order=3, horizon=5, chunk_size=20000)
     elif mode == "cli":
-        from subid import cli
+        from subid.cli import commands as cli
         assert cli.main(["--quiet", "identify", path, "--inputs", "u1,u2", "--outputs",
                          "y1,y2", "--method", "moesp", "--order", "3", "--horizon", "5",
                          "--stream", "--chunk-size", "20000", "--out", sys.argv[3]]) == 0
@@ -186,7 +186,7 @@ def test_streaming_memory_is_bounded(tmp_path):
 
 @pytest.mark.slow
 def test_cli_identify_stream_equals_library(tmp_path, record):
-    from subid import cli
+    from subid.cli import commands as cli
     _, data = record
     path = tmp_path / "rec.csv"
     _write_csv(path, data)

@@ -128,10 +128,10 @@ def test_cycle_finder_finds_a_cycle():
 
 def test_import_graph_has_the_known_edges():
     graph = import_graph()
-    assert "subid.data" in graph["subid.io"]             # from .data import IOData
-    assert "subid.model" in graph["subid.interop"]
-    assert "subid._adaptive_kernel" in graph["subid.adaptive"]   # from . import x
-    assert "subid.model" in graph["subid.experiments.seed001"] or \
+    assert "subid.data" in graph["subid.io.formats"]             # from .data import IOData
+    assert "subid.model.statespace" in graph["subid.io.interop"]
+    assert "subid.methods.online._adaptive_kernel" in graph["subid.methods.online.adaptive"]   # from . import x
+    assert "subid.model.statespace" in graph["subid.experiments.seed001"] or \
         "subid.systems" in graph["subid.experiments.seed001"]    # relative level 2
 
 
@@ -149,8 +149,11 @@ def test_command_line_uses_no_private_helper_of_other_modules():
     """The CLI calls the library's public functions (``io.read_inputs``,
     ``report.comparison_page``), not ``sio._Table`` or ``report._page``."""
     private = re.compile(r"\b(?:sio|io|report|plot|demo|metrics|model|data)\._[a-z]\w*")
-    for module in ("cli.py", "demo.py"):
-        text = (SRC / module).read_text(encoding="utf-8")
+    for module in ("cli/commands.py", "cli/demo.py"):
+        # private attributes used in code (a private module's public names, imported
+        # with ``from subid.io._files import atomic_write``, are fine)
+        text = "\n".join(line for line in (SRC / module).read_text(encoding="utf-8").splitlines()
+                          if not line.lstrip().startswith(("from ", "import ")))
         assert not private.findall(text), (module, private.findall(text))
 
 
@@ -252,7 +255,7 @@ def test_documented_parameters_match_signatures():
 
 
 # ---------------------------------------------------------------------------
-# every file writer goes through the atomic writer (subid._files)
+# every file writer goes through the atomic writer (subid.io._files)
 # ---------------------------------------------------------------------------
 _WRITERS = {"savefig", "savez", "savez_compressed", "save", "savetxt", "savemat", "dump",
             "write_text", "write_bytes", "to_csv", "to_parquet", "to_json"}
@@ -261,9 +264,9 @@ _WRITERS = {"savefig", "savez", "savez_compressed", "save", "savetxt", "savemat"
 _RECEIVERS = {"dump": "json", "save": "np", "savez": "np", "savez_compressed": "np",
               "savetxt": "np"}
 # in-memory or temporary targets, not user files: (module, function)
-_NOT_FILES = {("report.py", "figure_html"),        # PNG into a BytesIO
-              ("_files.py", "write_json"), ("_files.py", "save_figure"),
-              ("_files.py", "write_bytes")}
+_NOT_FILES = {("evaluation/report.py", "figure_html"),        # PNG into a BytesIO
+              ("io/_files.py", "write_json"), ("io/_files.py", "save_figure"),
+              ("io/_files.py", "write_bytes")}
 
 
 def unsafe_writes() -> list[str]:

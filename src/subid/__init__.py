@@ -20,46 +20,45 @@ everything had been imported eagerly.
 """
 
 import importlib
-import sys
-import types
 
 # public name -> (submodule, attribute); attribute None: the submodule itself
 _LAZY = {
     "IOData": ("data", "IOData"),
     "merge": ("data", "merge"),
-    "StateSpace": ("model", "StateSpace"),
-    "read": ("io", "read"),
+    "StateSpace": ("model.statespace", "StateSpace"),
+    "read": ("io.formats", "read"),
     "thread_limit": ("config", "thread_limit"),
-    "read_chunks": ("io", "read_chunks"),
-    "identify_file": ("stream", "identify_file"),
-    "identify_stream": ("stream", "identify_stream"),
-    "ls_subspace": ("ls_subspace", "ls_subspace"),
-    "moesp": ("moesp", "moesp"),
-    "n4sid": ("n4sid", "n4sid"),
-    "ct_subspace": ("ct_subspace", "ct_subspace"),
-    "ct_subspace_paper": ("ct_subspace", "ct_subspace_paper"),
-    "dt_to_ct": ("ct_subspace", "dt_to_ct"),
-    "RecursiveSubspace": ("recursive", "RecursiveSubspace"),
-    "AdaptiveIdentifier": ("adaptive", "AdaptiveIdentifier"),
-    "OnlineIdentifier": ("online", "OnlineIdentifier"),
-    "HankelStatistic": ("statistic", "HankelStatistic"),
-    "markov_error": ("metrics", "markov_error"),
-    "fit_percent": ("metrics", "fit_percent"),
-    "pole_error": ("metrics", "pole_error"),
-    "predict": ("prediction", "predict"),
-    "pem": ("pem", "pem"),
-    "residuals": ("prediction", "residuals"),
+    "read_chunks": ("io.formats", "read_chunks"),
+    "identify_file": ("methods.dt.stream", "identify_file"),
+    "identify_stream": ("methods.dt.stream", "identify_stream"),
+    "ls_subspace": ("methods.dt.ls_subspace", "ls_subspace"),
+    "moesp": ("methods.dt.moesp", "moesp"),
+    "n4sid": ("methods.dt.n4sid", "n4sid"),
+    "ct_subspace": ("methods.ct.ct_subspace", "ct_subspace"),
+    "ct_subspace_paper": ("methods.ct.ct_subspace", "ct_subspace_paper"),
+    "dt_to_ct": ("methods.ct.ct_subspace", "dt_to_ct"),
+    "RecursiveSubspace": ("methods.online.recursive", "RecursiveSubspace"),
+    "AdaptiveIdentifier": ("methods.online.adaptive", "AdaptiveIdentifier"),
+    "OnlineIdentifier": ("methods.online.base", "OnlineIdentifier"),
+    "HankelStatistic": ("statistic.hankel", "HankelStatistic"),
+    "markov_error": ("evaluation.metrics", "markov_error"),
+    "fit_percent": ("evaluation.metrics", "fit_percent"),
+    "pole_error": ("evaluation.metrics", "pole_error"),
+    "predict": ("evaluation.prediction", "predict"),
+    "pem": ("methods.dt.pem", "pem"),
+    "residuals": ("evaluation.prediction", "residuals"),
     "estimate_delay": ("delay", "estimate_delay"),
     "delay_inputs": ("delay", "delay_inputs"),
     "absorb_delay": ("delay", "absorb_delay"),
     "errors": ("errors", None),
-    "registry": ("registry", None),
+    "registry": ("methods.registry", None),
     "systems": ("systems", None),
-    "basis": ("basis", None),
+    "basis": ("methods.ct.basis", None),
     "datasets": ("datasets", None),
-    "interop": ("interop", None),
-    "plot": ("plot", None),
+    "interop": ("io.interop", None),
+    "plot": ("evaluation.plot", None),
     "delay": ("delay", None),
+    "distributed": ("methods.dt.distributed", None),
 }
 
 __all__ = [
@@ -100,7 +99,7 @@ __all__ = [
     "delay",
 ]
 
-from ._version import __version__ as __version__  # the one place the version is written
+from subid._version import __version__ as __version__  # the one place the version is written
 
 
 def __getattr__(name):
@@ -120,24 +119,3 @@ def __getattr__(name):
 
 def __dir__():
     return sorted(set(globals()) | set(__all__))
-
-
-# Public functions that share their module's name (``subid.ls_subspace`` is
-# the function, defined in the module ``subid.ls_subspace``).  Importing such a
-# submodule binds the module on the package; eagerly, the function imported
-# afterwards overwrote it.  Lazily the submodule may be imported later (by the
-# CLI registry, a stream, a test), so the package refuses that binding and the
-# public function stays what ``subid.<name>`` means.
-_SHADOWED = frozenset(
-    name for name, (module_name, attribute) in _LAZY.items() if attribute is not None and name == module_name
-)
-
-
-class _Package(types.ModuleType):
-    def __setattr__(self, name, value):
-        if name in _SHADOWED and isinstance(value, types.ModuleType):
-            return
-        super().__setattr__(name, value)
-
-
-sys.modules[__name__].__class__ = _Package

@@ -1,8 +1,8 @@
-"""``python -m subid``: the ``subid`` command line (see :mod:`subid.cli`)."""
+"""``python -m subid``: the ``subid`` command line (see :mod:`subid.cli.commands`)."""
 
 import sys
 
-from .cli import main
+from subid.cli.commands import main
 
 if __name__ == "__main__":
     sys.exit(main())

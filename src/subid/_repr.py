@@ -2,8 +2,8 @@
 
 Jupyter shows an object through its ``_repr_html_`` method; the classes
 (:class:`~subid.model.StateSpace`, :class:`~subid.data.IOData`,
-:class:`~subid.recursive.RecursiveSubspace`,
-:class:`~subid.adaptive.AdaptiveIdentifier`) delegate to the functions here so
+:class:`~subid.methods.online.recursive.RecursiveSubspace`,
+:class:`~subid.methods.online.adaptive.AdaptiveIdentifier`) delegate to the functions here so
 that presentation stays out of the numerics. Everything is computed from
 quantities the object already holds, plus at most one eigenvalue problem of
 the model order: the summaries are cheap on any record size (signals are
@@ -249,7 +249,7 @@ def online_html(ident, settings) -> str:
     and, once it has one, its current model."""
     name = type(ident).__name__
     rows = [(k, _esc(v)) for k, v in settings]
-    from .errors import SubidError
+    from subid.errors import SubidError
     try:
         model = ident.model if ident.n_samples else None
         why = "no samples yet" if model is None else ""

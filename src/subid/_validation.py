@@ -12,7 +12,7 @@ import numbers
 
 import numpy as np
 
-from .errors import DataError, OptionError, OrderError
+from subid.errors import DataError, OptionError, OrderError
 
 _MAX_ROWS_LISTED = 8
 

@@ -7,7 +7,7 @@ import contextlib
 import numba
 from threadpoolctl import threadpool_limits
 
-from ._validation import check_int
+from subid._validation import check_int
 
 __all__ = ["thread_limit"]
 

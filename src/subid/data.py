@@ -6,8 +6,8 @@ import numbers
 
 import numpy as np
 
-from ._validation import as_signal, check_dt, check_time_stamps, is_uniform, same_period
-from .errors import DataError
+from subid._validation import as_signal, check_dt, check_time_stamps, is_uniform, same_period
+from subid.errors import DataError
 
 __all__ = ["IOData", "merge"]
 
@@ -238,7 +238,7 @@ class IOData:
 
     def _repr_html_(self) -> str:
         """Summary for Jupyter: samples, timing, per-channel statistics and sparklines."""
-        from ._repr import iodata_html
+        from subid._repr import iodata_html
         return iodata_html(self)
 
     # -- interoperability -------------------------------------------------

@@ -27,9 +27,9 @@ import numbers
 import numpy as np
 import scipy.linalg
 
-from ._validation import check_int
-from .data import IOData
-from .errors import DataError, ModelError, TooFewSamplesError
+from subid._validation import check_int
+from subid.data import IOData
+from subid.errors import DataError, ModelError, TooFewSamplesError
 
 __all__ = ["estimate_delay", "delay_inputs", "apply_to_inputs", "frequency_factor",
            "absorb_delay", "input_delay_of"]
@@ -211,7 +211,7 @@ def delay_inputs(data, input_delay):
     if D == 0:
         return data, delays
     if data.n_experiments > 1:          # each experiment loses its own first D samples
-        from .data import merge
+        from subid.data import merge
         return merge([delay_inputs(e, delays)[0] for e in data.experiments],
                      names=data.experiment_names), delays
     N = data.n_samples

@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import scipy.linalg
 
-from ._validation import check_int
-from .data import IOData
-from .errors import SubidError
-from .model import StateSpace
+from subid._validation import check_int
+from subid.data import IOData
+from subid.errors import SubidError
+from subid.model.statespace import StateSpace
 
 __all__ = ["seed000_system", "seed001_system", "random_system", "simulate_data",
            "seed001_innovation_system", "simulate_innovation_data"]

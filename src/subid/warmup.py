@@ -35,8 +35,8 @@ __all__ = ["main", "warmup"]
 
 
 def _adaptive():
-    from .adaptive import AdaptiveIdentifier
-    from .systems import seed000_system
+    from subid.methods.online.adaptive import AdaptiveIdentifier
+    from subid.systems import seed000_system
 
     rng = np.random.default_rng(0)
     t = np.arange(400) * 1e-2
@@ -48,8 +48,8 @@ def _adaptive():
 
 
 def _recursive():
-    from .recursive import RecursiveSubspace
-    from .systems import seed001_system
+    from subid.methods.online.recursive import RecursiveSubspace
+    from subid.systems import seed001_system
 
     rng = np.random.default_rng(0)
     u = rng.standard_normal((300, 2))
@@ -58,9 +58,9 @@ def _recursive():
 
 
 def _batch():
-    from .data import IOData
-    from .ls_subspace import ls_subspace
-    from .systems import seed001_system
+    from subid.data import IOData
+    from subid.methods.dt.ls_subspace import ls_subspace
+    from subid.systems import seed001_system
 
     rng = np.random.default_rng(0)
     u = rng.standard_normal((400, 2))
@@ -69,9 +69,9 @@ def _batch():
 
 
 def _ct():
-    from .ct_subspace import ct_subspace
-    from .data import IOData
-    from .systems import seed000_system
+    from subid.data import IOData
+    from subid.methods.ct.ct_subspace import ct_subspace
+    from subid.systems import seed000_system
 
     rng = np.random.default_rng(0)
     true = seed000_system()
@@ -105,7 +105,7 @@ def warmup(groups=None) -> dict:
     subid.errors.SubidError
         An unknown group name.
     """
-    from .errors import SubidError
+    from subid.errors import SubidError
 
     names = list(_GROUPS) if groups is None else list(groups)
     unknown = [g for g in names if g not in _GROUPS]

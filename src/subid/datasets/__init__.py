@@ -28,8 +28,8 @@ from io import StringIO
 
 import numpy as np
 
-from ..data import IOData
-from ..errors import DataError, FileReadError
+from subid.data import IOData
+from subid.errors import DataError, FileReadError
 
 __all__ = ["names", "load", "info"]
 

@@ -21,8 +21,8 @@ import warnings
 def make(out: str) -> list[str]:
     """Draw the figures into folder ``out``; returns the paths written."""
     import subid
-    from subid import plot
-    from subid._files import save_figure
+    from subid.evaluation import plot
+    from subid.io._files import save_figure
     os.makedirs(out, exist_ok=True)
     data = subid.datasets.load("dryer").detrend()
     est, val = data.split(2 / 3)

@@ -2,7 +2,7 @@
 
 The paper's 4-state, 2-input, 2-output continuous-time system, sampled every
 1 ms, driven by a smooth multisine (:func:`multisine`), identified online by
-:class:`subid.adaptive.AdaptiveIdentifier` (horizon 5, filter poles at -5,
+:class:`subid.methods.online.adaptive.AdaptiveIdentifier` (horizon 5, filter poles at -5,
 random selector H). As in the paper: α = 0.4, β = 0.08 without noise
 (Figs. 1-3) and α = 0.01, β = 0.008 with output noise at 50 dB (Fig. 4).
 Writes to the output folder:
@@ -31,12 +31,12 @@ import warnings
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from .._files import save_figure, write_bytes, write_json
-from .._progress import on_terminal, progress_wrapper
-from ..adaptive import AdaptiveIdentifier
-from ..metrics import pole_error
-from ..model import StateSpace
-from ..systems import seed000_system
+from subid._progress import on_terminal, progress_wrapper
+from subid.evaluation.metrics import pole_error
+from subid.io._files import save_figure, write_bytes, write_json
+from subid.methods.online.adaptive import AdaptiveIdentifier
+from subid.model.statespace import StateSpace
+from subid.systems import seed000_system
 
 log = logging.getLogger(__name__)
 
@@ -310,7 +310,7 @@ def summary(res) -> tuple[str, dict]:
 
 
 def figures(res, out_dir: str) -> list[str]:
-    from .. import plot
+    from subid.evaluation import plot
     plt = plot._pyplot()
     true = paper_system()
     written = []

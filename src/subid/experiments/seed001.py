@@ -28,11 +28,11 @@ import warnings
 
 import numpy as np
 
-from .. import ls_subspace, markov_error, moesp, n4sid, pole_error
-from .._files import save_figure, write_bytes, write_json
-from .._progress import on_terminal, progress_wrapper
-from ..errors import UnstableModelWarning
-from ..systems import seed001_system, simulate_data
+from subid import ls_subspace, markov_error, moesp, n4sid, pole_error
+from subid._progress import on_terminal, progress_wrapper
+from subid.errors import UnstableModelWarning
+from subid.io._files import save_figure, write_bytes, write_json
+from subid.systems import seed001_system, simulate_data
 
 log = logging.getLogger(__name__)
 
@@ -91,11 +91,11 @@ def run(runs: int = 1000, n_samples: int = 1000, snr_db: float = 25.0, seed: int
     progress : callable, optional
         Wrapper for the run iterator (e.g. ``tqdm.tqdm``).
     client : dask.distributed.Client, optional
-        Run the runs as Dask tasks (:func:`subid.distributed.fan_out`).
+        Run the runs as Dask tasks (:func:`subid.methods.dt.distributed.fan_out`).
     """
     jobs = [(r, seed, n_samples, snr_db) for r in range(runs)]
     if client is not None:
-        from ..distributed import fan_out
+        from subid.methods.dt.distributed import fan_out
         results = fan_out(one_run, jobs, client=client, progress=progress)
     else:
         results = [one_run(job) for job in (jobs if progress is None else progress(jobs))]
@@ -166,7 +166,7 @@ def main(argv=None) -> int:
                 "markov_error": {k: v.tolist() for k, v in errs.items()},
                 "pole_error": {k: v.tolist() for k, v in perrs.items()}})
     try:
-        from .. import plot
+        from subid.evaluation import plot
         plt = plot._pyplot()
         fig, axes = plt.subplots(1, len(METHODS), figsize=(4.2 * len(METHODS), 4.4))
         for ax, (name, group) in zip(axes, models.items()):

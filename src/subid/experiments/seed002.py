@@ -34,13 +34,13 @@ import warnings
 import numpy as np
 import scipy.signal
 
-from .._files import save_figure, write_bytes, write_json
-from .._progress import on_terminal, progress_wrapper
-from ..basis import laguerre, takenaka_malmquist
-from ..ct_subspace import ct_subspace, ct_subspace_paper, dt_to_ct
-from ..data import IOData
-from ..errors import SubidError
-from ..model import StateSpace
+from subid._progress import on_terminal, progress_wrapper
+from subid.data import IOData
+from subid.errors import SubidError
+from subid.io._files import save_figure, write_bytes, write_json
+from subid.methods.ct.basis import laguerre, takenaka_malmquist
+from subid.methods.ct.ct_subspace import ct_subspace, ct_subspace_paper, dt_to_ct
+from subid.model.statespace import StateSpace
 
 log = logging.getLogger(__name__)
 
@@ -222,7 +222,7 @@ def ablation(cases=((400, None, "tm"), (4000, 20.0, "default")), runs: int = 20,
     ``cases`` are (L, snr_db or None, 'tm' or 'default' basis). Returns
     ``{case: {variant: [max errors]}}``.
     """
-    from ..basis import default_basis
+    from subid.methods.ct.basis import default_basis
     true = paper_system()
     g_true = true.freqresp(FREQUENCIES)[:, 0, 0]
     out = {}
@@ -268,7 +268,7 @@ def ablation_table(abl) -> str:
 
 def basis_choices(data):
     """Bases compared for the default: ours, the paper's suggestion, the TM example."""
-    from ..basis import default_basis, legendre
+    from subid.methods.ct.basis import default_basis, legendre
     h = float(np.mean(np.diff(data.t)))
     return {
         "default (log-spaced, 4 pi/T .. w_N/4)": default_basis(data.t),
@@ -393,7 +393,7 @@ def wins_table(raw) -> str:
 
 def figures(out_dir, seed: int = 0, n_samples: int = 400):
     """Fig. 3 (Bode) and Fig. 4 (|G - G_hat|) for one record of length ``n_samples``."""
-    from ..plot import _pyplot
+    from subid.evaluation.plot import _pyplot
     plt = _pyplot()
     true = paper_system()
     data, _ = simulate(n_samples, seed)

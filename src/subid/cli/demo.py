@@ -1,0 +1,405 @@
+"""The job behind ``subid demo`` (and ``make demo``): the bundled DaISy datasets.
+
+For each bundled dataset: remove the means, identify on the first 70 % of
+the record with every available batch method (order chosen automatically),
+and measure the simulation fit on the last 30 %. :func:`run` writes one HTML
+report per dataset (:mod:`subid.evaluation.report`), ``index.html`` linking them all,
+``gallery.md`` (the table of ``docs/gallery.md``) and ``summary.json``.
+:func:`gallery` computes only the table.
+
+Command line: ``subid demo --out demo_out`` or ``subid gallery --out
+docs/gallery.md``; ``python -m subid.cli.demo --out demo_out`` is an alias of
+``subid demo``. Library functions here never print; they log.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import sys
+import time
+import warnings
+
+import numpy as np
+
+from subid import datasets
+from subid._progress import progress_bar, progress_wrapper
+from subid.errors import OptionError, SubidError
+from subid.io._files import write_bytes, write_json
+
+__all__ = ["evaluate", "report_dataset", "run", "gallery", "gallery_markdown", "GALLERY_COMMAND",
+           "FRACTION"]
+
+log = logging.getLogger(__name__)
+
+#: Share of each record used for identification (the rest validates).
+FRACTION = 0.7
+#: The command that regenerates docs/gallery.md.
+GALLERY_COMMAND = "subid gallery --out docs/gallery.md"
+
+
+def _methods(methods=None, time_base=None):
+    from subid.methods.registry import METHODS, available_methods
+    names = available_methods("batch", time_base) if methods is None else list(methods)
+    out = {}
+    for name in names:
+        if name not in METHODS or METHODS[name].kind != "batch":
+            raise OptionError(f"unknown batch method {name!r}; available: "
+                              f"{', '.join(available_methods('batch'))}")
+        out[name] = METHODS[name]
+    return out
+
+
+def evaluate(name: str, methods=None, fraction: float = FRACTION):
+    """Identify dataset ``name`` with each method.
+
+    Parameters
+    ----------
+    name : str
+        A bundled dataset (:func:`subid.datasets.names`).
+    methods : list of str, optional
+        Registry names (:data:`subid.registry.METHODS`) of batch methods; default
+        every available one.
+    fraction : float
+        Share of the record used for identification.
+
+    Returns
+    -------
+    rows : list of dict
+        One per method: ``dataset``, ``method``, ``function``, ``order``,
+        ``horizon``, ``fit_est``, ``fit_val`` (arrays per output, from
+        :func:`subid.fit_percent`), ``stable``, ``seconds``, ``warnings``,
+        ``error`` (message, or None).
+    models : dict method -> StateSpace
+    est, val : IOData
+    """
+    from subid.evaluation.report import evaluate as fits
+    specs = _methods(methods)
+    data = datasets.load(name).detrend()
+    est, val = data.split(fraction)
+    rows, models = [], {}
+    for method, spec in specs.items():
+        t0 = time.perf_counter()
+        try:
+            with warnings.catch_warnings(record=True) as caught:
+                warnings.simplefilter("always")
+                model = spec.load()(est, order=None)
+            seconds = time.perf_counter() - t0
+            r = fits(model, est, val)
+            rows.append(dict(dataset=name, method=method, function=spec.attribute,
+                             order=model.order, horizon=model.info.get("horizon"),
+                             fit_est=r["fit_estimation"], fit_val=r["fit_validation"],
+                             stable=r["stable"], seconds=seconds,
+                             warnings=sorted({str(w.message) for w in caught}), error=None))
+            models[method] = model
+        except SubidError as exc:
+            log.info("%s: %s failed: %s", name, method, exc)
+            rows.append(dict(dataset=name, method=method, function=spec.attribute, order=None,
+                             horizon=None, fit_est=None, fit_val=None, stable=None,
+                             seconds=time.perf_counter() - t0, warnings=[], error=str(exc)))
+    return rows, models, est, val
+
+
+def _fit_text(values) -> str:
+    if values is None:
+        return "—"
+    return " / ".join("n/a" if not np.isfinite(v) else
+                      (f"{v:.3g}" if abs(v) >= 1e4 else f"{v:.1f}") for v in values)
+
+
+def _mean_fit(values):
+    if values is None:
+        return None
+    v = np.asarray(values, dtype=float)
+    return float(np.mean(v)) if np.isfinite(v).all() else float("nan")
+
+
+def _cell(row) -> str:
+    if row["error"]:
+        return "failed"
+    mean = _mean_fit(row["fit_val"])
+    text = "n/a" if not np.isfinite(mean) else (f"{mean:.3g}" if abs(mean) >= 1e4
+                                                else f"{mean:.1f}")
+    return f"{text} ({row['order']}{'' if row['stable'] else ', unstable'})"
+
+
+def gallery_markdown(rows, *, command: str = GALLERY_COMMAND, seconds=None) -> str:
+    """The gallery page (Markdown) from the rows of :func:`evaluate`."""
+    by_ds: dict[str, dict] = {}
+    for r in rows:
+        by_ds.setdefault(r["dataset"], {})[r["method"]] = r
+    methods = list(dict.fromkeys(r["method"] for r in rows))
+    labels = {r["method"]: r["function"] for r in rows}
+    lines = [
+        "# Gallery: the bundled DaISy datasets",
+        "",
+        f"Each record has its means removed, is identified on the first {FRACTION:.0%} of its "
+        "samples with the order and horizon chosen automatically (cross-validated simulation "
+        "fit on the estimation part, among orders 1..10 and horizons 10 and 20; "
+        "`selection='cv'`; continuous-time methods: their own rule), and is "
+        f"validated on the last {1 - FRACTION:.0%}: the model is simulated from a "
+        "least-squares initial state and compared with the measured output.",
+        "Fit % = 100 (1 − ‖y − ŷ‖ / ‖y − mean y‖) per output (`subid.fit_percent`); 100 is "
+        "perfect, 0 is no better than the mean, and it can be negative.",
+        "",
+        "Reproduce this page with",
+        "",
+        "```sh",
+        command,
+        "```",
+        "",
+        "(`subid demo --out demo_out` computes the same numbers and also writes an HTML "
+        "report per dataset.)",
+        "",
+        "## Validation fit % (mean over the outputs) and chosen order",
+        "",
+        "| dataset | samples | inputs × outputs | "
+        + " | ".join(f"`{labels[m]}`" for m in methods) + " |",
+        "|---|---:|---:|" + "---:|" * len(methods),
+    ]
+    for name, per in by_ds.items():
+        meta = datasets.info(name)
+        lines.append(f"| {name} | {meta['n_samples']} | {meta['n_inputs']} × "
+                     f"{meta['n_outputs']} | "
+                     + " | ".join(_cell(per[m]) if m in per else "—" for m in methods) + " |")
+    lines += ["", "Cells: mean validation fit % (order); \"unstable\" marks a model with a pole "
+              "outside the unit circle.", "",
+              "## Per output", "",
+              "| dataset | method | order | horizon | fit % estimation | fit % validation "
+              "| stable |",
+              "|---|---|---:|---:|---|---|---|"]
+    for name, per in by_ds.items():
+        for m in methods:
+            r = per.get(m)
+            if r is None:
+                continue
+            if r["error"]:
+                lines.append(f"| {name} | `{labels[m]}` | — | — | failed: {r['error']} | | |")
+                continue
+            lines.append(f"| {name} | `{labels[m]}` | {r['order']} | {r['horizon']} | "
+                         f"{_fit_text(r['fit_est'])} | {_fit_text(r['fit_val'])} | "
+                         f"{'yes' if r['stable'] else 'NO'} |")
+    lines += ["", "Outputs are listed in the order of `subid.datasets.info(name)['output_names']`."
+              " The automatic order is a heuristic: on records without a clear gap it can pick "
+              "a low order or one that gives an unstable model; pass candidate orders "
+              "(`--order 2:8`) and compare the fits.", ""]
+    if seconds is not None:
+        lines += [f"Computed in {seconds:.1f} s.", ""]
+    return "\n".join(lines)
+
+
+def _discrete_methods(methods):
+    return [name for name, spec in _methods(methods).items() if spec.time == "discrete"]
+
+
+def gallery(datasets=None, methods=None, progress=False):
+    """Markdown of the gallery table (discrete-time methods only) and its rows.
+
+    Parameters
+    ----------
+    datasets : list of str, optional
+        Default: every bundled dataset.
+    methods : list of str, optional
+        Default: every available discrete-time batch method.
+    progress : bool
+        Show a progress bar (tqdm) over the datasets.
+
+    Returns
+    -------
+    text : str
+    rows : list of dict
+    """
+    names = datasets or _all_names()
+    methods = _discrete_methods(methods)
+    rows = []
+    for name in _iterate(names, progress, "gallery"):
+        r, _, _, _ = evaluate(name, methods)
+        rows += r
+    return gallery_markdown(rows), rows
+
+
+def _all_names():
+    return list(datasets.names())
+
+
+def _bar(total, progress, desc):
+    return progress_bar(total, desc, "dataset", enabled=bool(progress))
+
+
+def _iterate(names, progress, desc):
+    wrap = progress_wrapper(desc, "dataset", enabled=bool(progress))
+    return names if wrap is None else wrap(names)
+
+
+def report_dataset(name: str, out: str, methods=None, frequency_unit="rad/s") -> dict:
+    """Identify one dataset and write its report ``out/NAME.html``.
+
+    Returns
+    -------
+    dict
+        ``name``, ``rows`` (of :func:`evaluate`), ``path`` of the report,
+        ``entry`` (the row of the index page) and ``seconds``.
+    """
+    from subid.evaluation import report
+    from subid.methods.registry import METHODS
+    t0 = time.perf_counter()
+    rows, models, est, val = evaluate(name, methods)
+    meta = datasets.info(name)
+    notes = [meta["description"], f"Sampling: {meta['dt_note']}", f"Source: {meta['source']}"]
+    if meta["notes"]:
+        notes.append(meta["notes"])
+    for r in rows:
+        if r["warnings"]:
+            notes.append(f"{r['method']}: " + "; ".join(r["warnings"]))
+    if models:
+        seconds = {r["method"]: r["seconds"] for r in rows if not r["error"]}
+        errors = {r["method"]: r["error"] for r in rows if r["error"]}
+        html = report.identification_report(
+            models, est, val, title=f"{name}: DaISy dataset",
+            frequency_unit=frequency_unit, seconds=seconds, errors=errors, notes=notes,
+            command=f"subid demo --datasets {name} --out {out}", source=f"dataset:{name}")
+    else:
+        html = report.failure_page(f"{name}: DaISy dataset",
+                                   {r["method"]: r["error"] for r in rows})
+    path = os.path.join(out, f"{name}.html")
+    report.write_html(path, html)
+    entry = {"name": name, "href": f"{name}.html", "samples": meta["n_samples"],
+             "inputs × outputs": f"{meta['n_inputs']} × {meta['n_outputs']}"}
+    for r in rows:
+        entry[METHODS[r["method"]].attribute] = _cell(r)
+    return {"name": name, "rows": rows, "path": path, "entry": entry,
+            "seconds": time.perf_counter() - t0}
+
+
+def _worker_init():
+    """Worker processes stay silent: the parent reports what they return."""
+    logging.getLogger("subid").addHandler(logging.NullHandler())
+    logging.getLogger("subid").propagate = False
+    warnings.simplefilter("ignore")
+
+
+def default_jobs(count: int) -> int:
+    """Parallel jobs for ``count`` datasets: the CPUs available, at most 4."""
+    return _default_jobs(count)
+
+
+def _default_jobs(count: int) -> int:
+    try:
+        cpus = len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):  # pragma: no cover - not Linux
+        cpus = os.cpu_count() or 1
+    return max(1, min(cpus, count, 4))
+
+
+def run(out, datasets=None, methods=None, *, frequency_unit="rad/s", progress=False,
+        jobs=1) -> dict:
+    """Identify every dataset, write one report each, the index and the gallery.
+
+    Parameters
+    ----------
+    out : str
+        Output folder (created).
+    datasets : list of str, optional
+        Default: every bundled dataset.
+    methods : list of str, optional
+        Batch methods of the registry; default every available one.
+    frequency_unit : {'rad/s', 'Hz'}
+    progress : bool
+        Progress bar over the datasets.
+    jobs : int or None
+        Datasets processed at the same time, in separate (spawned) processes;
+        1 (default) runs everything in this process, None uses the CPUs
+        available (at most 4). With more than 1, a script calling this
+        function needs the usual ``if __name__ == "__main__":`` guard.
+
+    Returns
+    -------
+    dict
+        ``rows`` (all rows of :func:`evaluate`), ``by_dataset``, ``reports``
+        (paths), ``index``, ``gallery``, ``summary``, ``seconds``.
+    """
+    from subid.evaluation import report
+    from subid.methods.registry import METHODS
+    names = list(datasets or _all_names())
+    unknown = [n for n in names if n not in _all_names()]
+    if unknown:
+        from subid.errors import DataError
+        raise DataError(f"unknown dataset(s) {', '.join(unknown)}; bundled: "
+                        f"{', '.join(_all_names())}")
+    _methods(methods)                                  # unknown names fail before any work
+    os.makedirs(out, exist_ok=True)
+    jobs = _default_jobs(len(names)) if jobs is None else max(1, int(jobs))
+    t0 = time.perf_counter()
+    results = {}
+    bar = _bar(len(names), progress, "demo")
+    try:
+        if jobs == 1:
+            for name in names:
+                results[name] = report_dataset(name, out, methods, frequency_unit)
+                if bar is not None:
+                    bar.update(1)
+        else:
+            import concurrent.futures
+            import multiprocessing
+            context = multiprocessing.get_context("spawn")     # safe with BLAS threads
+            with concurrent.futures.ProcessPoolExecutor(jobs, mp_context=context,
+                                                        initializer=_worker_init) as pool:
+                futures = {pool.submit(report_dataset, name, out, methods, frequency_unit): name
+                           for name in names}
+                for future in concurrent.futures.as_completed(futures):
+                    results[futures[future]] = future.result()
+                    if bar is not None:
+                        bar.update(1)
+    finally:
+        if bar is not None:
+            bar.close()
+    all_rows, by_dataset, reports, entries = [], {}, [], []
+    for name in names:                                 # the order asked for
+        res = results[name]
+        all_rows += res["rows"]
+        by_dataset[name] = res["rows"]
+        reports.append(res["path"])
+        entries.append(res["entry"])
+        for r in res["rows"]:
+            if r["error"]:
+                log.warning("%s: %s failed: %s", name, r["method"], r["error"])
+        log.info("%s done in %.1f s", name, res["seconds"])
+    seconds = time.perf_counter() - t0
+    method_cols = list(dict.fromkeys(METHODS[r["method"]].attribute for r in all_rows))
+    index = os.path.join(out, "index.html")
+    report.write_html(index, report.index_page(
+        entries, title="subid demo: bundled DaISy datasets",
+        intro=(f"Each record: means removed, identified on the first {FRACTION:.0%} with the "
+               f"order chosen automatically, validated on the last {1 - FRACTION:.0%}. "
+               "Cells: mean validation fit % over the outputs (order). Click a dataset for "
+               "its report."),
+        columns=["samples", "inputs × outputs", *method_cols],
+        footer=f"{len(names)} datasets in {seconds:.1f} s. Reproduce with: subid demo "
+               f"--out {out}"))
+    discrete = set(_discrete_methods(methods))
+    gallery_rows = [r for r in all_rows if r["method"] in discrete]
+    gallery_path = os.path.join(out, "gallery.md")
+    write_bytes(gallery_path, gallery_markdown(gallery_rows), what="gallery")
+    summary_path = os.path.join(out, "summary.json")
+    write_json(summary_path, {"seconds": seconds, "rows": [_jsonable(r) for r in all_rows]},
+               what="summary", indent=1)
+    return {"rows": all_rows, "by_dataset": by_dataset, "reports": reports, "index": index,
+            "gallery": gallery_path, "summary": summary_path, "seconds": seconds}
+
+
+def _jsonable(row: dict) -> dict:
+    out = {}
+    for k, v in row.items():
+        if isinstance(v, np.ndarray):
+            v = [None if not np.isfinite(x) else float(x) for x in v]
+        elif isinstance(v, (np.bool_, np.generic)):
+            v = v.item()
+        out[k] = v
+    return out
+
+
+if __name__ == "__main__":
+    # ``python -m subid.cli.demo [options]``: the same as ``subid demo [options]``. The
+    # command line sits above this module, which never imports it as a library.
+    from subid.cli.commands import main
+    sys.exit(main(["demo", *sys.argv[1:]]))

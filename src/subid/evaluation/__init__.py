@@ -1,0 +1,1 @@
+"""Evaluation: validation metrics, prediction and residuals, plots and the HTML report."""

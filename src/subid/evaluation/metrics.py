@@ -1,0 +1,147 @@
+"""Validation metrics: Markov-parameter error, simulation fit, pole error."""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.linalg
+import scipy.sparse
+import scipy.sparse.csgraph
+
+from subid._validation import check_int, same_period
+from subid.errors import DataError, ModelError
+from subid.evaluation.prediction import _SIM_BLOCK, check_model, predict, simulate_fit
+
+__all__ = ["markov_error", "fit_percent", "pole_error", "simulate_fit"]
+
+
+def _check_pair(model, reference):
+    check_model(model, "model")
+    check_model(reference, "reference")
+    if (model.n_inputs, model.n_outputs) != (reference.n_inputs, reference.n_outputs):
+        raise ModelError(f"model has {model.n_inputs} inputs and {model.n_outputs} outputs but "
+                         f"the reference has {reference.n_inputs} and {reference.n_outputs}")
+    if model.dt != reference.dt and not same_period(model.dt, reference.dt):
+        raise ModelError(f"model has dt={model.dt} but the reference has dt={reference.dt}; "
+                         "convert one of them first (to_discrete / to_continuous)")
+
+
+def markov_error(model, reference, k: int = 10) -> float:
+    """Relative Frobenius error of the first ``k`` Markov parameters.
+
+    ``||M - M_ref||_F / ||M_ref||_F`` with ``M = [D, CB, CAB, ...,
+    C A^{k-2} B]``: invariant to the state basis (seed 001, Fig. 2).
+
+    Parameters
+    ----------
+    model, reference : StateSpace
+        Same numbers of inputs and outputs and the same ``dt``.
+    k : int
+        Number of Markov parameters, D included.
+    """
+    _check_pair(model, reference)
+    k = check_int(k, "k", minimum=1)
+    m_ref = reference.markov(k)
+    norm = np.linalg.norm(m_ref)
+    if norm == 0:
+        raise ModelError("the reference's first Markov parameters are all zero; the relative "
+                         "error is undefined")
+    return float(np.linalg.norm(model.markov(k) - m_ref) / norm)
+
+
+def fit_percent(model, data, x0="estimate", hold=None, steps=np.inf, *,
+                per_experiment: bool = False) -> np.ndarray:
+    """NRMSE fit in percent, per output: ``100 (1 - ||y - ŷ|| / ||y - mean(y)||)``.
+
+    ``ŷ`` is the simulated output (default, ``steps=inf``) or the
+    ``steps``-ahead prediction (:func:`subid.predict`, the Kalman predictor
+    of a model with ``K``), from an initial state estimated by least squares
+    unless ``x0`` says otherwise. 100 is a perfect fit; 0 is no better than
+    the mean; it can be negative.
+
+    Parameters
+    ----------
+    model : StateSpace
+    data : IOData
+        Same channels; for a discrete model, the same sampling period.
+    x0 : 'estimate', 'zero' or array
+    hold : {'zoh', 'foh'}, optional
+        Inter-sample behaviour of the input for a continuous-time model.
+        Default: the model's :attr:`~subid.StateSpace.hold` (``'foh'`` for a
+        ``ct_subspace`` model).
+    steps : int or numpy.inf
+        Prediction horizon (MATLAB ``compare(data, model, k)``).
+    per_experiment : bool
+        For a record of several experiments (:func:`subid.merge`; each is
+        simulated from its own initial state): ``False`` (default) gives one
+        pooled fit per output, ``100 (1 - ||y - ŷ|| / ||y - ȳ_e||)`` over all
+        samples with each experiment's own mean ``ȳ_e`` as the reference;
+        ``True`` gives one fit per experiment and output (as MATLAB's
+        ``compare``).
+
+    Returns
+    -------
+    ndarray, shape (n_outputs,), or (n_experiments, n_outputs) with
+    ``per_experiment=True``
+    """
+    if steps is not None and not (isinstance(steps, float) and np.isinf(steps) and steps > 0):
+        x0p = None if isinstance(x0, str) and x0 == "estimate" else x0
+        y_hat = predict(check_model(model, "model"), data, steps, x0p)
+    else:
+        y_hat, _ = simulate_fit(model, data, x0=x0, hold=hold)
+    # Each output is divided by its largest magnitude first: the ratio is
+    # scale-invariant, and squaring values near 1e300 would overflow to inf
+    # (inf / inf = NaN) where the fit is perfectly defined.
+    # In blocks of rows, so that no N x outputs temporary is allocated.
+    N, block = data.n_samples, _SIM_BLOCK
+    scale = np.zeros(data.n_outputs)
+    for a in range(0, N, block):
+        scale = np.maximum(scale, np.abs(data.y[a:a + block]).max(axis=0))
+    scale[scale == 0] = 1.0
+    ranges = data.experiment_ranges
+    dev2 = np.zeros((len(ranges), data.n_outputs))
+    err2 = np.zeros((len(ranges), data.n_outputs))
+    for e, (a0, b0) in enumerate(ranges):       # each experiment against its own mean
+        mean = sum(np.sum(data.y[a:min(a + block, b0)] / scale, axis=0)
+                   for a in range(a0, b0, block)) / (b0 - a0)
+        for a in range(a0, b0, block):
+            b = min(a + block, b0)
+            y = data.y[a:b] / scale
+            dev2[e] += np.sum((y - mean) ** 2, axis=0)
+            err2[e] += np.sum((y - y_hat[a:b] / scale) ** 2, axis=0)
+    if per_experiment:
+        dev2_used, err2_used = dev2, err2
+    else:
+        dev2_used, err2_used = dev2.sum(axis=0), err2.sum(axis=0)
+    flat = np.flatnonzero(np.atleast_2d(dev2_used).min(axis=0) == 0)
+    if flat.size:
+        names = ", ".join(data.output_names[k] for k in flat)
+        where = " in an experiment" if per_experiment and data.n_experiments > 1 else ""
+        raise DataError(f"output {names} is constant{where}; the fit percentage is undefined "
+                        "for it")
+    return 100.0 * (1.0 - np.sqrt(err2_used) / np.sqrt(dev2_used))
+
+
+def pole_error(model, reference) -> float:
+    """Largest pole distance after the best one-to-one matching of poles.
+
+    The matching minimises the largest distance (a bottleneck assignment),
+    so the result is the smallest ``d`` such that every pole of ``model``
+    can be paired with a distinct pole of ``reference`` within ``d``.
+    """
+    _check_pair(model, reference)
+    p, q = model.poles(), reference.poles()
+    if p.size != q.size:
+        raise ModelError(f"model has order {p.size} but the reference has order {q.size}; "
+                         "pole errors compare models of the same order")
+    dist = np.abs(p[:, None] - q[None, :])
+    candidates = np.unique(dist)
+    lo, hi = 0, candidates.size - 1
+    while lo < hi:   # smallest threshold that admits a perfect matching
+        mid = (lo + hi) // 2
+        graph = scipy.sparse.csr_matrix((dist <= candidates[mid]).astype(np.int8))
+        match = scipy.sparse.csgraph.maximum_bipartite_matching(graph, perm_type="column")
+        if np.all(match >= 0):
+            hi = mid
+        else:
+            lo = mid + 1
+    return float(candidates[lo])

@@ -1,0 +1,527 @@
+"""k-step-ahead prediction and residual analysis of models in innovation form.
+
+A discrete-time model with a Kalman gain ``K``,
+
+    x[t+1] = A x[t] + B u[t] + K e[t],    y[t] = C x[t] + D u[t] + e[t],
+
+has the one-step predictor (the steady-state Kalman filter)
+
+    x̂[t+1|t] = (A - K C) x̂[t|t-1] + (B - K D) u[t] + K y[t],
+    ŷ[t|t-1] = C x̂[t|t-1] + D u[t]
+
+(Ljung, *System Identification*, 2nd ed., 1999, eq. (4.86)), and the
+k-step-ahead predictor ``ŷ[t|t-k]`` starts from ``x̂[t-k+1|t-k]`` and
+propagates the deterministic part with the known inputs over the remaining
+``k - 1`` steps (ibid., eq. (3.31): future innovations are predicted by
+zero). ``k = inf`` (or any ``k`` beyond the record) is the simulation from
+the initial state. The predicted output is affine in the initial state
+``x̂[0]``, which is therefore estimated by linear least squares on the
+prediction errors when not given.
+"""
+
+from __future__ import annotations
+
+import math
+import numbers
+import warnings
+
+import numpy as np
+import scipy.linalg
+
+from subid._validation import same_period
+from subid.data import IOData, column_std
+from subid.delay import input_delay_of
+from subid.errors import DataError, ModelError, NoiseModelWarning
+from subid.model import _simulate
+from subid.model.statespace import StateSpace
+
+__all__ = ["predict", "prediction_errors", "residuals", "correlations"]
+
+# Beyond this many steps the k-step predictor of a model with a stable A uses the
+# closed form ŷ(t|t-k) = y_sim(t) + C A^(k-1) (x̂(t-k+1) - x_sim(t-k+1)) instead of
+# k-1 propagation sweeps over the record (an unstable A keeps the sweeps: its
+# simulation would overflow).
+_LOOP_STEPS = 32
+
+
+# The checks and the simulation fit live here, below subid.evaluation.metrics (which imports
+# them): fit_percent(steps=k) predicts, and predict simulates.
+def check_model(model, name: str) -> StateSpace:
+    """``model``, or ModelError unless it is a :class:`~subid.StateSpace`."""
+    if not isinstance(model, StateSpace):
+        raise ModelError(f"{name} must be a subid.StateSpace, got {type(model).__name__}")
+    return model
+
+
+def check_model_data(model, data) -> None:
+    """Raise unless ``data`` is an IOData record with the model's channels and sampling."""
+    check_model(model, "model")
+    if not isinstance(data, IOData):
+        raise DataError(f"data must be an IOData record, got {type(data).__name__}; wrap "
+                        "arrays as subid.IOData(u, y, dt=...)")
+    if (data.n_inputs, data.n_outputs) != (model.n_inputs, model.n_outputs):
+        raise DataError(f"data have {data.n_inputs} inputs and {data.n_outputs} outputs but "
+                        f"the model has {model.n_inputs} and {model.n_outputs}")
+    if model.dt > 0:
+        if not data.is_uniform or not same_period(data.dt, model.dt):
+            raise DataError(f"the model is discrete with dt={model.dt} but the data are "
+                            f"sampled with {'non-uniform t' if not data.is_uniform else data.dt}")
+
+
+#: Samples per block of the simulations in :func:`simulate_fit` (bounds its memory).
+_SIM_BLOCK = 65536
+#: The free response counts as decayed when the state-transition matrix has fallen
+#: below this, relative to its start (the identity): later rows change x0 by less.
+_FREE_DECAYED = 1e-20
+#: Free-response values kept for the fitted output (beyond, it is simulated again).
+_FREE_KEPT = 1 << 22
+
+
+def _simulate_blocks(model, data, x0, hold, out, stop=None, block=_SIM_BLOCK):
+    """Simulated output of ``model`` on ``data`` from ``x0``, written to ``out``
+    block by block (samples ``0 .. stop-1``), without the state history.
+
+    Blocks overlap by one sample: the state at a block's last sample (as the
+    one-record simulation computes it) starts the next block, so a
+    discrete-time model gives the one-record simulation bit for bit.
+    Yields ``(a, b, state at b)`` after each block ``[a, b)``.
+    """
+    N = data.n_samples if stop is None else stop
+    if input_delay_of(model) is not None:       # delays shift inputs across block borders
+        block = max(N, 1)
+    u, t = data.u, (data.t if model.dt == 0 else None)
+    x = np.asarray(x0, dtype=float)
+    for a in range(0, N, block):
+        b = min(a + block, N)
+        c = min(b + 1, data.n_samples)
+        with np.errstate(over="ignore", invalid="ignore"):
+            y, xs = model.simulate(u[a:c], t=None if t is None else t[a:c], x0=x, hold=hold,
+                                   return_state=True)
+        out[a:b] = y[:b - a]
+        x = xs[b - a] if c > b else xs[-1]
+        yield a, b, x
+
+
+def _free_blocks(model, data, hold, block=_SIM_BLOCK):
+    """Free responses ``(a, b, F)`` with ``F[t - a, i, j]`` the output ``i`` at
+    sample ``t`` from the initial state ``e_j`` (zero input), block by block,
+    until the state-transition matrix of a stable model has decayed below
+    :data:`_FREE_DECAYED` (the rest contributes nothing at rounding level)."""
+    N, n, ny = data.n_samples, model.order, model.n_outputs
+    if model.dt > 0:
+        stable = bool(np.abs(model.poles()).max(initial=0.0) < 1.0)
+    else:
+        stable = bool(model.poles().real.max(initial=-1.0) < 0.0)
+    zeros = np.zeros((min(block, N) + 1, model.n_inputs))
+    X = np.eye(n)
+    for a in range(0, N, block):
+        b = min(a + block, N)
+        c = min(b + 1, N)
+        F = np.empty((b - a, ny, n))
+        Xn = np.empty((n, n))
+        for j in range(n):
+            with np.errstate(over="ignore", invalid="ignore"):
+                y, xs = model.simulate(zeros[:c - a], t=None if model.dt > 0 else data.t[a:c],
+                                       x0=X[:, j], hold=hold, return_state=True)
+            F[:, :, j] = y[:b - a]
+            Xn[:, j] = xs[b - a] if c > b else xs[-1]
+        yield a, b, F
+        X = Xn
+        if stable and np.abs(X).max(initial=0.0) < _FREE_DECAYED:
+            return
+
+
+def simulate_fit(model, data, x0="estimate", hold=None, *, output_std=None):
+    """Simulated output of ``model`` on ``data`` and the initial state used.
+
+    ``output_std`` (per output) replaces the spread of ``data.y`` in the
+    weights of the initial-state regression (used when ``data`` is the
+    prefix of a longer record whose weights apply).
+
+    ``x0='estimate'`` fits the initial state to the data by least squares
+    (the simulated output is linear in x0), each output weighted by the
+    inverse of its standard deviation; ``'zero'`` or an array fixes it.
+
+    Memory stays bounded by a block of :data:`_SIM_BLOCK` samples beyond the
+    returned output: the simulations run block by block without the state
+    history, and the least-squares problem for x0 (``N n_outputs`` rows,
+    ``n`` columns) is reduced block by block to the triangular factor of
+    ``[regressors | residual]`` (QR), from which the same minimum-norm
+    solution as ``lstsq`` of the whole problem follows (same singular
+    values and vectors, same cut-off ``eps * max(rows, n)``). The free
+    response of a stable model is only computed until it has decayed below
+    rounding.
+
+    A record of several experiments (:func:`subid.merge`) is simulated
+    experiment by experiment, each from its own initial state: the returned
+    x0 then has shape (n_experiments, n), and an array given as ``x0`` must
+    have that shape. ``hold`` (continuous-time models) defaults to the
+    model's :attr:`~subid.StateSpace.hold`.
+    """
+    check_model_data(model, data)
+    if data.n_experiments > 1:
+        std = column_std(data.y) if output_std is None else output_std
+        parts = [simulate_fit(model, e, x0=x0_e, hold=hold, output_std=std)
+                 for e, x0_e in zip(data.experiments,
+                                    experiment_x0(x0, data.n_experiments, model.order))]
+        return np.vstack([p[0] for p in parts]), np.stack([p[1] for p in parts])
+    n, N, ny = model.order, data.n_samples, model.n_outputs
+
+    def overflow():
+        radius = float(np.abs(model.poles()).max()) if model.dt > 0 else \
+            float(model.poles().real.max())
+        kind = "spectral radius" if model.dt > 0 else "largest real part of a pole"
+        return ModelError(f"simulating the model over {data.n_samples} samples overflows (its "
+                          f"{kind} is {radius:.4g}): the model is unstable and its simulated "
+                          "output, hence its fit, is undefined")
+
+    def simulate(x0v):
+        out = np.empty((N, ny))
+        try:
+            for _ in _simulate_blocks(model, data, x0v, hold, out):
+                pass
+        except ModelError:
+            raise overflow() from None
+        if not np.isfinite(out).all():
+            raise overflow()
+        return out
+
+    if isinstance(x0, str) and x0 == "zero":
+        return simulate(np.zeros(n)), np.zeros(n)
+    if isinstance(x0, str) and x0 == "estimate":
+        forced = simulate(np.zeros(n))
+        # each output weighted by 1 / its standard deviation, so that the initial state
+        # (and the fit) does not depend on the output units
+        if output_std is None:
+            std = column_std(data.y)
+        else:
+            std = np.asarray(output_std, float)
+        w = 1.0 / np.where(std > 0, std, 1.0)
+        R = np.zeros((0, n + 1))
+        kept, size = [], 0                # free-response blocks, while they stay small
+        try:
+            for a, b, F in _free_blocks(model, data, hold):
+                if not np.isfinite(F).all():
+                    raise overflow()
+                rows = np.empty((b - a, ny, n + 1))
+                rows[:, :, :n] = F * w[None, :, None]
+                rows[:, :, n] = (data.y[a:b] - forced[a:b]) * w
+                R = scipy.linalg.qr(np.vstack([R, rows.reshape(-1, n + 1)]), mode="r",
+                                    check_finite=False)[0][:n + 1]
+                size += F.size
+                kept = kept + [(a, b, F)] if kept is not None and size <= _FREE_KEPT else None
+        except ModelError:
+            raise overflow() from None
+        # lstsq of the whole (N ny) x n problem, through its triangular factor
+        cut = np.finfo(float).eps * max(N * ny, n)
+        Rn = np.zeros((n, n + 1))
+        Rn[:R.shape[0]] = R[:n]
+        x0_hat = np.linalg.lstsq(Rn[:, :n], Rn[:, n], rcond=cut)[0]
+        if kept is None:                  # a long free response: simulate from x0_hat
+            return simulate(x0_hat), x0_hat
+        for a, b, F in kept:              # forced + free response from x0_hat
+            forced[a:b] += F @ x0_hat
+        return forced, x0_hat
+    x0_arr = np.asarray(x0, dtype=float).reshape(-1)
+    if x0_arr.shape != (n,):
+        raise DataError(f"x0 must have {n} entries (the model order), got {x0_arr.size}")
+    return simulate(x0_arr), x0_arr
+
+
+def experiment_x0(x0, n_experiments: int, order: int) -> list:
+    """``x0`` of :func:`simulate_fit` split per experiment: a string or ``0`` for
+    every experiment, or an array of shape (n_experiments, order)."""
+    if isinstance(x0, str) or (isinstance(x0, (int, float)) and not isinstance(x0, bool)
+                               and x0 == 0) or x0 is None:
+        return [x0] * n_experiments
+    arr = np.asarray(x0, dtype=float)
+    if arr.shape != (n_experiments, order):
+        raise DataError(f"the record has {n_experiments} experiments: x0 must have shape "
+                        f"({n_experiments}, {order}), one initial state per experiment, "
+                        f"got shape {arr.shape}")
+    return list(arr)
+
+
+def _check(model, data) -> tuple[StateSpace, IOData]:
+    check_model_data(model, data)
+    return model, data
+
+
+def _check_steps(steps):
+    if isinstance(steps, (bool, np.bool_)):
+        raise DataError(f"steps must be a positive integer or numpy.inf, got {steps!r}")
+    if isinstance(steps, numbers.Real) and math.isinf(steps) and steps > 0:
+        return math.inf
+    if isinstance(steps, numbers.Integral) and steps >= 1:
+        return int(steps)
+    if isinstance(steps, numbers.Real) and float(steps).is_integer() and steps >= 1:
+        return int(steps)
+    raise DataError(f"steps must be a positive integer or numpy.inf, got {steps!r}")
+
+
+def _predictor_matrices(model):
+    A, B, C, D, K = model.A, model.B, model.C, model.D, model.K
+    Ap = A - K @ C
+    Bp = np.hstack([B - K @ D, K])
+    Dp = np.hstack([D, np.zeros((model.n_outputs, model.n_outputs))])
+    return Ap, Bp, C, Dp
+
+
+def _one_step_states(model, u, y, x0):
+    """``(ŷ[t|t-1], x̂[t|t-1])`` of the Kalman predictor from ``x̂[0] = x0``."""
+    Ap, Bp, C, Dp = _predictor_matrices(model)
+    return _simulate.simulate_discrete(Ap, Bp, C, Dp, np.hstack([u, y]), x0)
+
+
+def _k_step(model, u, y, x0, k):
+    """k-step-ahead predictions (k finite, >= 1) from the initial state x0."""
+    N = u.shape[0]
+    A, B, C, D = model.A, model.B, model.C, model.D
+    if k >= N or model.K is None:
+        return _simulate.simulate_discrete(A, B, C, D, u, x0)[0]
+    y1, X = _one_step_states(model, u, y, x0)
+    if k == 1:
+        return y1
+    t = np.arange(N)
+    start = np.maximum(t - k + 1, 0)
+    if k <= _LOOP_STEPS or np.abs(np.linalg.eigvals(A)).max() >= 1.0:
+        Z = X[start].copy()
+        for j in range(k - 1):
+            idx = start + j
+            active = idx < t
+            Z[active] = Z[active] @ A.T + u[idx[active]] @ B.T
+        return Z @ C.T + u @ D.T
+    ysim, xsim = _simulate.simulate_discrete(A, B, C, D, u, x0)
+    CAk = C @ np.linalg.matrix_power(A, k - 1)
+    late = t - k + 1 >= 0
+    out = ysim.copy()
+    out[late] += (X[start[late]] - xsim[start[late]]) @ CAk.T
+    return out
+
+
+def _estimate_x0(model, u, y, k):
+    """Least-squares initial state of the k-step predictor."""
+    n = model.order
+    forced = _k_step(model, u, y, np.zeros(n), k)
+    zu, zy = np.zeros_like(u), np.zeros_like(y)
+    free = np.stack([_k_step(model, zu, zy, e, k) for e in np.eye(n)], axis=-1)
+    if not (np.isfinite(forced).all() and np.isfinite(free).all()):
+        return None, forced
+    x0 = scipy.linalg.lstsq(free.reshape(-1, n), (y - forced).reshape(-1),
+                            lapack_driver="gelsy", check_finite=False)[0]
+    return x0, forced + free @ x0
+
+
+def predict(model, data, steps=1, x0=None, *, return_x0=False):
+    """k-step-ahead predicted outputs of a model on a record.
+
+    Parameters
+    ----------
+    model : StateSpace
+        Discrete-time model; with a Kalman gain ``K`` the predictor is the
+        Kalman filter (module docstring). Without ``K`` (or for a
+        continuous-time model) the prediction is the simulation, with a
+        :class:`~subid.errors.NoiseModelWarning` unless ``steps=inf``.
+    data : IOData
+        Same channels and sampling period as the model.
+    steps : int or numpy.inf
+        Prediction horizon k >= 1: ``ŷ[t|t-k]`` uses outputs up to ``t-k``
+        and inputs up to ``t``. 1 is the one-step (Kalman) predictor,
+        ``numpy.inf`` the simulation.
+    x0 : None, 'estimate', 'zero', 0 or array_like of shape (n,)
+        Initial state ``x̂[0]``; None/'estimate' fits it by least squares to
+        the prediction errors (the predictions are affine in it). A record of
+        several experiments (:func:`subid.merge`) is predicted experiment by
+        experiment, each from its own initial state (an array: shape
+        (n_experiments, n); the returned x0 has that shape).
+    return_x0 : bool
+        Also return the initial state used.
+
+    Returns
+    -------
+    y_hat : ndarray, shape (N, n_outputs)
+    x0 : ndarray, shape (n,)
+        Only with ``return_x0=True``.
+
+    Raises
+    ------
+    DataError
+        Channels or sampling period do not match, ``steps`` or ``x0`` is
+        malformed, or the prediction diverges (not finite).
+    ModelError
+        ``model`` is not a StateSpace.
+    """
+    model, data = _check(model, data)
+    k = _check_steps(steps)
+    if data.n_experiments > 1:          # each experiment from its own initial state
+        parts = [predict(model, e, steps, x0_e, return_x0=True)
+                 for e, x0_e in zip(data.experiments,
+                                    experiment_x0(x0, data.n_experiments, model.order))]
+        y_hat = np.vstack([p[0] for p in parts])
+        return (y_hat, np.stack([p[1] for p in parts])) if return_x0 else y_hat
+    if model.is_continuous or model.K is None:
+        if k != math.inf:
+            why = "a continuous-time model" if model.is_continuous else \
+                "the model has no Kalman gain K"
+            warnings.warn(f"predict(steps={steps}): {why}, so the prediction is the "
+                          "simulation (steps=inf); identify with a discrete-time method "
+                          "(or subid.pem) for a noise model", NoiseModelWarning, stacklevel=2)
+        mode = "estimate" if x0 is None or (isinstance(x0, str) and x0 == "estimate") else x0
+        if _is_zero(mode):
+            mode = "zero"
+        y_hat, x0v = simulate_fit(model, data, x0=mode)
+        return (y_hat, x0v) if return_x0 else y_hat
+    u, y = data.u, data.y
+    with np.errstate(over="ignore", invalid="ignore"):
+        if x0 is None or (isinstance(x0, str) and x0 == "estimate"):
+            x0v, y_hat = _estimate_x0(model, u, y, k)
+        else:
+            x0v = np.zeros(model.order) if _is_zero(x0) else model._check_x0(x0)
+            y_hat = _k_step(model, u, y, x0v, k)
+    if x0v is None or not np.isfinite(y_hat).all():
+        raise DataError(f"the {k}-step prediction diverges over {data.n_samples} samples (the "
+                        "predictor or, for long horizons, the model is unstable)")
+    return (y_hat, x0v) if return_x0 else y_hat
+
+
+def _is_zero(x0) -> bool:
+    if isinstance(x0, str):
+        if x0 == "zero":
+            return True
+        if x0 == "estimate":
+            return False
+        raise DataError(f"x0 must be None, 'estimate', 'zero' or an array, got {x0!r}")
+    return isinstance(x0, numbers.Number) and not isinstance(x0, bool) and x0 == 0
+
+
+def prediction_errors(model, data, steps=1, x0=None) -> np.ndarray:
+    """``y - predict(model, data, steps, x0)``, shape (N, n_outputs)."""
+    model, data = _check(model, data)
+    return data.y - predict(model, data, steps, x0)
+
+
+def _xcorr(a: np.ndarray, b: np.ndarray, lags: np.ndarray, ranges=None) -> np.ndarray:
+    """``r(tau) = sum_t a(t) b(t - tau) / N`` for each lag (a, b zero-mean).
+
+    ``ranges`` (the experiments' ``(start, stop)``): only pairs inside one
+    experiment count, still divided by the total N."""
+    if ranges is not None and len(ranges) > 1:
+        total = sum(_xcorr(a[s:t], b[s:t], lags) * (t - s) for s, t in ranges)
+        return total / a.size
+    n = a.size
+    out = np.empty(lags.size)
+    for k, tau in enumerate(lags):
+        if tau >= 0:
+            out[k] = a[tau:] @ b[:n - tau] / n if tau < n else 0.0
+        else:
+            out[k] = a[:n + tau] @ b[-tau:] / n if -tau < n else 0.0
+    return out
+
+
+def correlations(e, u, *, max_lag: int = 25, confidence: float = 0.99, ranges=None) -> dict:
+    """Auto-correlation of residuals and their cross-correlation with inputs.
+
+    Parameters
+    ----------
+    e : ndarray, shape (N, ny)
+        Residuals.
+    u : ndarray, shape (N, nu)
+    max_lag : int
+    confidence : float
+        Two-sided level of the bands.
+    ranges : sequence of (start, stop), optional
+        The experiments of a record of several (:attr:`subid.IOData.experiment_ranges`):
+        lagged products never pair samples of two experiments.
+
+    Returns
+    -------
+    dict
+        ``lags`` (0..M), ``auto`` (ny, M+1) normalised auto-correlation,
+        ``auto_bound`` (``z / sqrt(N)``), ``cross_lags`` (-M..M), ``cross``
+        (ny, nu, 2M+1) normalised correlation of ``e_i(t)`` and
+        ``u_j(t - tau)``, ``cross_bound`` (ny, nu) the band
+        ``z sqrt(sum_k r_ee(k) r_uu(k) / N)`` (Ljung, *System Identification*,
+        Sec. 16.6), ``residual`` and ``confidence``.
+    """
+    from scipy.special import ndtri
+    if isinstance(max_lag, bool) or not isinstance(max_lag, numbers.Integral) or max_lag < 1:
+        raise DataError(f"max_lag must be a positive integer, got {max_lag!r}")
+    if not 0 < confidence < 1:
+        raise DataError(f"confidence must be in (0, 1), got {confidence!r}")
+    n = e.shape[0]
+    if max_lag >= n:
+        raise DataError(f"max_lag {max_lag} must be smaller than the {n} samples of the record")
+    z = float(ndtri(0.5 + confidence / 2))
+    e0 = e - e.mean(axis=0)
+    u0 = u - u.mean(axis=0)
+    lags = np.arange(max_lag + 1)
+    cross_lags = np.arange(-max_lag, max_lag + 1)
+    ny, nu = e.shape[1], u.shape[1]
+    auto = np.zeros((ny, lags.size))
+    cross = np.zeros((ny, nu, cross_lags.size))
+    cross_bound = np.zeros((ny, nu))
+    ree_full = np.zeros((ny, cross_lags.size))
+    for i in range(ny):
+        r = _xcorr(e0[:, i], e0[:, i], cross_lags, ranges)
+        r0 = r[max_lag]
+        ree_full[i] = r / r0 if r0 > 0 else 0.0
+        auto[i] = ree_full[i][max_lag:]
+    for j in range(nu):
+        ru = _xcorr(u0[:, j], u0[:, j], cross_lags, ranges)
+        ru0 = ru[max_lag]
+        ruu = ru / ru0 if ru0 > 0 else np.zeros_like(ru)
+        for i in range(ny):
+            ree0 = e0[:, i] @ e0[:, i] / n
+            denom = math.sqrt(max(ree0 * ru0, 0.0))
+            c = _xcorr(e0[:, i], u0[:, j], cross_lags, ranges)
+            cross[i, j] = c / denom if denom > 0 else 0.0
+            p = float(np.sum(ree_full[i] * ruu))
+            cross_bound[i, j] = z * math.sqrt(max(p, 0.0) / n)
+    return {"lags": lags, "auto": auto, "auto_bound": z / math.sqrt(n),
+            "cross_lags": cross_lags, "cross": cross, "cross_bound": cross_bound,
+            "residual": e, "confidence": confidence}
+
+
+def residuals(model, data, *, max_lag: int = 25, confidence: float = 0.99, x0=None) -> dict:
+    """Residual analysis on the one-step prediction errors (MATLAB's ``resid``).
+
+    The residuals are ``e = y - ŷ[t|t-1]`` of the Kalman predictor
+    (:func:`predict` with ``steps=1``): for a correct model in innovation form
+    they are white and uncorrelated with past inputs. A model without ``K``
+    uses its simulation errors (with a :class:`~subid.errors.NoiseModelWarning`):
+    those are white only if the disturbances are white measurement noise.
+
+    Parameters
+    ----------
+    model : StateSpace
+    data : IOData
+    max_lag : int
+        Largest lag in samples.
+    confidence : float
+        Level of the bands (0.99: 99 %).
+    x0 : None or array_like
+        As in :func:`predict`.
+
+    Returns
+    -------
+    dict
+        As :func:`correlations`, plus ``kind`` (``'one-step prediction'`` or
+        ``'simulation'``), ``whiteness_ok`` (every auto-correlation at lags
+        1..M inside the band) and ``independence_ok`` (every
+        cross-correlation inside its band).
+    """
+    model, data = _check(model, data)
+    kind = "one-step prediction" if (model.K is not None and not model.is_continuous) \
+        else "simulation"
+    e = data.y - predict(model, data, 1 if kind != "simulation" else math.inf, x0)
+    if kind == "simulation":
+        warnings.warn("residuals: the model has no Kalman gain K; these are simulation "
+                      "errors, white only for white measurement noise", NoiseModelWarning,
+                      stacklevel=2)
+    out = correlations(e, data.u, max_lag=max_lag, confidence=confidence,
+                       ranges=data.experiment_ranges)
+    out["kind"] = kind
+    out["whiteness_ok"] = bool(np.all(np.abs(out["auto"][:, 1:]) <= out["auto_bound"]))
+    out["independence_ok"] = bool(np.all(np.abs(out["cross"]) <=
+                                         out["cross_bound"][:, :, None]))
+    return out

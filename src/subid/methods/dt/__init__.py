@@ -1,0 +1,1 @@
+"""Discrete-time batch identification: the SVD-free least-squares subspace method (seed 001), MOESP, N4SID, the shared B/D/x0 regression, order selection, noise model, PEM, delays, and streamed / distributed drivers."""

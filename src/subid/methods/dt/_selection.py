@@ -1,0 +1,281 @@
+"""Order and horizon chosen from the estimation data by cross-validation.
+
+Real records rarely show a gap in their singular values: they decay
+smoothly, and the largest-gap rule then often picks order 1. The default
+rule here scores every candidate (order, horizon) by what a user looks at,
+the simulation fit on data the model was not fitted to, using the
+estimation record only:
+
+* four contiguous folds: fit on the first 2/3 and validate on the last
+  1/3, fit on the last 2/3 and validate on the first 1/3, and the same with
+  halves (contiguous blocks keep the Hankel columns and the simulated
+  trajectories intact; four folds instead of two halved the number of
+  DaISy records where the choice missed the best order, e.g. N4SID on
+  robot_arm, at twice the cost); a record of several experiments
+  (:func:`subid.merge`) has every experiment cut so, and the pieces of all
+  experiments merged: no fold joins two experiments;
+* on each validation block, the model is simulated from an initial state
+  fitted by least squares, and the fit (NRMSE %, per output, which does not
+  depend on the output units) is averaged over the outputs; a simulation
+  that overflows scores :data:`FLOOR`;
+* the score of a candidate is the mean over the folds, each fit first
+  clipped below at :data:`FLOOR` so that one diverging fold cannot hide
+  the other;
+* the selected candidate is the smallest order (then the smallest horizon)
+  whose misfit ``100 - score`` is within :data:`RELATIVE_TOLERANCE` (1 %)
+  of the best candidate's misfit (plus 1e-6 points, for noise-free data
+  where every order from the true one up fits to rounding): a higher order
+  must earn its parameters.
+
+Horizons that cannot reveal every candidate order compete at the orders
+they can reveal (horizon 10 on a single output: orders 1..9). Where a
+method offers two estimators of the system matrices from the same subspace
+(``system_matrices='auto'`` of MOESP and ``ls_subspace``: shift invariance
+with the output regression, or the state sequence), each is a candidate
+too. When the chosen candidate's model refitted to the whole record has to
+be stabilised although not all of its fold models had, the next candidates
+by score are tried (:func:`subid.methods.dt._subspace._unrepaired_choice`).
+
+The final model is then fitted to the whole record with the chosen order
+and horizon, by the same code path as an explicit call, so that
+``method(data, order=model.order, horizon=model.info['horizon'])``
+reproduces it exactly.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from dataclasses import replace
+
+import numpy as np
+
+from subid.errors import OrderError, SubidError
+
+#: Horizons tried when none is given (kept when the data allow them).
+HORIZON_CANDIDATES = (10, 20)
+#: Largest order tried when the order is to be chosen.
+MAX_ORDER = 10
+#: A candidate whose misfit (100 - fit) is within this fraction of the best one's is as good.
+RELATIVE_TOLERANCE = 0.01
+#: ... plus this many fit points (rounding level on noise-free data).
+ABSOLUTE_TOLERANCE = 1e-6
+#: Fit (%) below which a candidate's fold scores are clipped.
+FLOOR = -100.0
+#: Samples above which the cross-validation uses only the last part of the record.
+MAX_SELECTION_SAMPLES = 100_000
+SELECTION_RULES = ("cv", "gap")
+
+
+def experiment_folds(data):
+    """``(train, validation)`` records of the four folds of a record of several
+    experiments: every experiment is cut as :func:`folds` cuts one record, and
+    the training (validation) pieces of all the experiments are merged, so that
+    no fold joins two experiments or two pieces of one."""
+    from subid.data import merge
+    cut = [folds(e.n_samples) for e in data.experiments]
+    out = []
+    for k in range(4):
+        train = [e[cut[j][k][0]] for j, e in enumerate(data.experiments)
+                 if _length(cut[j][k][0]) > 0]
+        validation = [e[cut[j][k][1]] for j, e in enumerate(data.experiments)
+                      if _length(cut[j][k][1]) > 0]
+        out.append((merge(train), merge(validation)))
+    return out
+
+
+def _length(part: slice) -> int:
+    return part.stop - part.start
+
+
+def folds(n_samples: int):
+    """``(train, validation)`` slices of the four contiguous folds."""
+    third = n_samples // 3
+    half = n_samples // 2
+    return [(slice(0, n_samples - third), slice(n_samples - third, n_samples)),
+            (slice(third, n_samples), slice(0, third)),
+            (slice(0, half), slice(half, n_samples)),
+            (slice(half, n_samples), slice(0, half))]
+
+
+def feasible_horizons(n_train: int, n_inputs: int, n_outputs: int, blocks: int,
+                      largest_order: int, candidates=HORIZON_CANDIDATES, n_experiments=1, *,
+                      reveal_all: bool = True):
+    """Horizons of ``candidates`` a training fold of ``n_train`` samples supports.
+
+    A horizon is kept when its Hankel matrix has at least twice as many
+    columns as rows and, with ``reveal_all``, it can reveal ``largest_order``
+    (``(f-1) ny >= n``). Without ``reveal_all`` (the cross-validation), a
+    horizon that reveals only the lower orders is kept too and competes at
+    those orders: on a single-output record horizon 10 reveals orders 1..9,
+    and excluding it left horizon 20 alone (on the DaISy ballbeam record the
+    shorter horizon gives the better models at every order). When none is
+    kept, the largest horizon (at least 2) with at least as many columns as
+    rows is returned alone. ``n_experiments`` experiments lose
+    ``blocks * f - 1`` columns each.
+    """
+    rows = lambda f: blocks * f * (n_inputs + n_outputs)   # noqa: E731
+    cols = lambda f: n_train - n_experiments * (blocks * f - 1)   # noqa: E731
+    need = min(largest_order, MAX_ORDER) if reveal_all else 1
+    kept = [f for f in candidates if cols(f) >= 2 * rows(f) and (f - 1) * n_outputs >= need]
+    if kept:
+        return kept
+    f = max(candidates)
+    while f > 2 and cols(f) < rows(f):
+        f -= 1
+    return [f]
+
+
+def default_gap_horizon(n_samples, n_inputs, n_outputs, blocks, largest_order, n_experiments=1):
+    """Horizon of the gap rule when none is given: the smallest feasible candidate."""
+    return feasible_horizons(n_samples, n_inputs, n_outputs, blocks, largest_order,
+                             n_experiments=n_experiments)[0]
+
+
+def _fit_score(model, validation) -> float:
+    from subid.evaluation.metrics import fit_percent  # metrics imports the model module
+    try:
+        with warnings.catch_warnings(), np.errstate(all="ignore"):
+            warnings.simplefilter("ignore")
+            fits = fit_percent(model, validation)
+    except SubidError:
+        return FLOOR
+    value = float(np.mean(fits))
+    return max(value, FLOOR) if math.isfinite(value) else FLOOR
+
+
+def cross_validate(data, fixed, candidates, horizon, *, prepare_fold, builds):
+    """Choose ``(order, horizon)`` by contiguous cross-validation (:func:`folds`).
+
+    Parameters
+    ----------
+    data : IOData
+        The estimation record, already validated (:func:`subid.methods.dt._subspace.check_data`).
+    fixed : int or None
+        The order when given (only the horizon is chosen).
+    candidates : list of int or None
+        Candidate orders (``None``: 1..MAX_ORDER as the horizon allows).
+    horizon : int or None
+        The horizon when given (only the order is chosen).
+    prepare_fold : callable ``(record, candidates, horizon) -> Problem``
+    builds : dict ``name -> callable (Problem with a fixed order) -> StateSpace``
+        The estimators to choose among (one, named None, when there is no
+        choice); on ties the first is preferred.
+
+    Returns
+    -------
+    order, horizon, variant, record : int, int, str or None, dict
+        ``record`` is stored as ``info['order_selection']``.
+    """
+    used = data                       # validated by the caller (subid.methods.dt._subspace.identify)
+    if data.n_samples > MAX_SELECTION_SAMPLES:
+        used = data[data.n_samples - MAX_SELECTION_SAMPLES:]
+    if used.n_experiments > 1:        # folds per experiment (none across a border)
+        parts = experiment_folds(used)
+        n_train = min(train.n_samples for train, _ in parts)
+        n_exp_train = max(train.n_experiments for train, _ in parts)
+    else:
+        parts = [(used[train], used[validation]) for train, validation in folds(used.n_samples)]
+        n_train = min(train.n_samples for train, _ in parts)
+        n_exp_train = 1
+    if fixed is not None:
+        wanted = [fixed]
+    elif candidates is not None:
+        wanted = list(candidates)
+    else:
+        wanted = list(range(1, MAX_ORDER + 1))
+    blocks = prepare_fold.blocks
+    horizons = [horizon] if horizon is not None else feasible_horizons(
+        n_train, data.n_inputs, data.n_outputs, blocks, max(wanted),
+        n_experiments=n_exp_train, reveal_all=fixed is not None)
+    names = list(builds)
+    scores, fold_scores, stabilised_folds = {}, {}, {}
+    for f in horizons:
+        orders = [n for n in wanted if n <= (f - 1) * data.n_outputs]
+        if not orders:
+            continue
+        per_fold = {(n, v): [] for n in orders for v in range(len(names))}
+        repaired = {(n, v): 0 for n in orders for v in range(len(names))}
+        for train, validation in parts:
+            problem = prepare_fold(train, orders, f)
+            for n in orders:
+                for v, name in enumerate(names):
+                    try:
+                        with warnings.catch_warnings():
+                            warnings.simplefilter("ignore")
+                            model = builds[name](replace(problem, order=n, candidates=[n]))
+                        value = _fit_score(model, validation)
+                        repaired[(n, v)] += stabilised(model)
+                    except SubidError:
+                        value = FLOOR
+                    per_fold[(n, v)].append(value)
+        for (n, v), values in per_fold.items():
+            fold_scores[(n, f, v)] = values
+            scores[(n, f, v)] = float(np.mean(values))
+            stabilised_folds[(n, f, v)] = repaired[(n, v)]
+    if not scores:
+        need = math.ceil(max(wanted) / data.n_outputs) + 1
+        raise OrderError(f"order {min(wanted)}{'..' + str(max(wanted)) if len(wanted) > 1 else ''}"
+                         f" cannot be revealed with the horizons these data allow "
+                         f"({', '.join(map(str, horizons))}) and {data.n_outputs} output"
+                         f"{'s' if data.n_outputs != 1 else ''}; give horizon >= {need} "
+                         "(with enough samples) or a lower order")
+    limit = (100.0 - max(scores.values())) * (1.0 + RELATIVE_TOLERANCE) + ABSOLUTE_TOLERANCE
+    order, chosen_h, chosen_v = min(key for key, value in scores.items()
+                                    if 100.0 - value <= limit)
+
+    def entry(n, f, v):
+        out = {"order": n, "horizon": f, "score": scores[(n, f, v)]}
+        if names[v] is not None:
+            out["system_matrices"] = names[v]
+        return out
+
+    record = {
+        "rule": "cv",
+        "description": ("four-fold contiguous cross-validation on the estimation data: "
+                        "simulation fit (%, mean over outputs, x0 by least squares) on the "
+                        "held-out third, mean over the folds; smallest order whose misfit "
+                        f"is within {100 * RELATIVE_TOLERANCE:g} % of the best"
+                        + ("" if len(names) == 1 else
+                           f" (then the first of the estimators {', '.join(names)})")),
+        "candidates": [dict(entry(n, f, v), folds=fold_scores[(n, f, v)],
+                            stabilised_folds=stabilised_folds[(n, f, v)])
+                       for (n, f, v) in sorted(scores)],
+        "selected": entry(order, chosen_h, chosen_v),
+        "samples_used": used.n_samples,
+    }
+    # the other candidates, best score first: the fallbacks of :func:`final_model`
+    ranked = sorted((key for key in scores if key != (order, chosen_h, chosen_v)),
+                    key=lambda key: (-scores[key], key))
+    record["ranking"] = [entry(*key) for key in ranked]
+    return order, chosen_h, names[chosen_v], record
+
+
+def stabilised(model) -> bool:
+    """Whether ``model``'s A was made stable after its estimation (``stability='auto'``
+    found it unstable on data that do not grow and reflected its unstable poles)."""
+    stab = model.info.get("stability")
+    return isinstance(stab, dict) and stab.get("action") == "enforced" \
+        and stab.get("requested") == "auto"
+
+
+#: Candidates tried, best first, when the final model of the chosen one had to be
+#: stabilised although not all of its fold models had (:func:`subid.methods.dt._subspace.identify`).
+MAX_FALLBACKS = 4
+
+
+def describe(record) -> str:
+    """One line for ``info['order_selection']`` (a record, or a string from older methods)."""
+    if not isinstance(record, dict):
+        return str(record)
+    rule = record.get("rule")
+    if rule == "given":
+        return "given"
+    chosen = record.get("selected", {})
+    if rule == "cv":
+        how = chosen.get("system_matrices")
+        return (f"cross-validated on the estimation data: horizon {chosen.get('horizon')}"
+                + (f", system matrices by {how}" if how else "")
+                + f", fit {chosen.get('score', float('nan')):.1f} % over "
+                f"{len(record.get('candidates', []))} candidates")
+    return str(record.get("description", rule))

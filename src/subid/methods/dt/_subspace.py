@@ -1,0 +1,961 @@
+"""Steps shared by the discrete-time subspace methods.
+
+Argument checks at the public boundary, the data statistic, the excitation
+check, the order choice from a gap, and the shift-invariance step that gives
+A and C from an extended observability matrix.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.linalg
+
+from subid._validation import check_int
+from subid.data import IOData, column_std
+from subid.errors import (
+    DataError,
+    ExcitationWarning,
+    NotExcitingError,
+    OptionError,
+    OrderError,
+    SubidError,
+    TooFewSamplesError,
+    UnstableModelWarning,
+)
+from subid.methods._info import collect_warnings, model_info
+from subid.methods.dt._regression import fit_b_d_projection, fit_b_d_x0
+from subid.methods.dt._selection import SELECTION_RULES, cross_validate, default_gap_horizon
+from subid.model.statespace import StateSpace
+from subid.statistic._hankel import HankelFactor
+from subid.statistic.hankel import HankelStatistic
+
+# A diagonal entry of the input block of the Hankel factor below this fraction
+# of the largest one marks a linearly dependent Hankel row.
+RANK_TOL = 1e-10
+# Input-Hankel condition number above which identification warns.
+CONDITION_WARN = 1e7
+DEFAULT_HORIZON_UNKNOWN_ORDER = 10
+
+
+#: Largest magnitude of a channel the methods accept: its square must not overflow.
+HUGE_VALUE = 1e150
+
+
+def check_data(data, method: str) -> IOData:
+    """The record a discrete-time method may use, or a clear error."""
+    if not isinstance(data, IOData):
+        raise DataError(f"{method} expects an IOData record, got {type(data).__name__}; "
+                        "wrap arrays as subid.IOData(u, y, dt=...)")
+    if not data.is_uniform:
+        raise DataError(f"{method} identifies a discrete-time model and needs uniformly "
+                        "sampled data; these time stamps are non-uniform "
+                        "(use a continuous-time method for them)")
+    for name, signal, names in (("input", data.u, data.input_names),
+                                ("output", data.y, data.output_names)):
+        if not signal.size or max(abs(float(signal.max())), abs(float(signal.min()))) \
+                <= HUGE_VALUE:       # whole-array reductions: cheap on long records
+            continue
+        peak = np.abs(signal).max(axis=0)
+        huge = np.flatnonzero(peak > HUGE_VALUE)
+        if huge.size:
+            k = int(huge[0])
+            raise DataError(f"{name} {names[k]} reaches {peak[k]:.3g}: squares and products "
+                            "of such values overflow double precision in the identification; "
+                            "express the channel in other units (divide it by a constant) "
+                            "and scale the model back")
+    flat = [k for k, column in enumerate(data.y.T) if column.max() == column.min()]
+    if flat:
+        names = ", ".join(data.output_names[k] for k in flat)
+        raise DataError(f"output {names} is constant over the whole record: it carries no "
+                        "information about the dynamics; drop that channel")
+    return data
+
+
+DEFAULT_MAX_ORDER = 10
+
+
+def default_horizon(order: int | None, n_outputs: int, n_inputs: int, n_samples: int,
+                    blocks_per_horizon: int) -> int:
+    """Horizon of the online and streamed identifiers when none is given.
+
+    ``max(5, ceil(order / n_outputs) + 2)`` with a known order; 10 (or the
+    largest horizon the record supports) otherwise. The batch methods choose
+    their horizon from the data instead (:mod:`subid.methods.dt._selection`).
+    """
+    if order is not None:
+        return max(5, math.ceil(order / n_outputs) + 2)
+    horizon = DEFAULT_HORIZON_UNKNOWN_ORDER
+    while horizon > 2 and n_samples < min_samples(horizon * blocks_per_horizon, n_inputs,
+                                                   n_outputs):
+        horizon -= 1
+    return horizon
+
+
+def min_samples(depth: int, n_inputs: int, n_outputs: int) -> int:
+    """Samples needed for a full-rank Hankel factor with ``depth`` block rows."""
+    return depth * (n_inputs + n_outputs) + depth - 1
+
+
+def _parse_order(order):
+    """``(fixed order or None, explicit candidate orders or None)``."""
+    if order is None or (isinstance(order, str) and order == "auto"):
+        return None, None
+    if isinstance(order, (str, bytes)) or not hasattr(order, "__iter__"):
+        return check_int(order, "order", minimum=1), None
+    candidates = sorted({check_int(k, "candidate order", minimum=1) for k in order})
+    if not candidates:
+        raise OrderError("the list of candidate orders is empty")
+    return None, candidates
+
+
+def check_order_horizon(order, horizon, data, *, method: str, blocks_per_horizon: int = 2):
+    """Validate the order and the horizon.
+
+    ``order`` is an int, ``None``/``'auto'`` (candidates 1..10), or an
+    iterable of candidate orders (as MATLAB's ``n4sid(data, 1:10)``).
+
+    Returns
+    -------
+    order : int or None
+        The fixed order, or None when it is to be chosen.
+    candidates : list of int
+        Orders to choose from (``[order]`` when fixed).
+    horizon : int
+    """
+    fixed, candidates = _parse_order(order)
+    n_outputs = data.n_outputs
+    largest = fixed if fixed is not None else (max(candidates) if candidates else None)
+    horizon = default_gap_horizon(data.n_samples, data.n_inputs, n_outputs, blocks_per_horizon,
+                                  largest or DEFAULT_MAX_ORDER,
+                                  n_experiments=getattr(data, "n_experiments", 1)) \
+        if horizon is None else \
+        check_int(horizon, "horizon", minimum=2)
+    max_order = (horizon - 1) * n_outputs
+    if largest is not None and largest > max_order:
+        need = math.ceil(largest / n_outputs) + 1
+        raise OrderError(f"{method}: order {largest} cannot be revealed with horizon {horizon} "
+                         f"and {n_outputs} output{'s' if n_outputs != 1 else ''}: the shifted "
+                         f"observability matrix has only {max_order} rows; use horizon >= {need}")
+    if fixed is not None:
+        candidates = [fixed]
+    elif candidates is None:
+        candidates = list(range(1, min(DEFAULT_MAX_ORDER, max_order) + 1))
+    return fixed, candidates, horizon
+
+
+def data_factor(data: IOData, depth: int, *, method: str, horizon: int,
+                statistic: str = "auto") -> HankelFactor:
+    """Hankel factor of ``data`` with ``depth`` block rows, after the sample check."""
+    nu, ny = data.n_inputs, data.n_outputs
+    rows = depth * (nu + ny)
+    need = min_samples(depth, nu, ny)
+    if data.n_experiments > 1:
+        columns = sum(max(b - a - depth + 1, 0) for a, b in data.experiment_ranges)
+        if columns < rows:
+            raise TooFewSamplesError(
+                f"{method}: the {data.n_experiments} experiments give {columns} Hankel columns "
+                f"of {depth} block rows (each experiment N_e - {depth - 1}) but horizon "
+                f"{horizon} needs at least {rows}; reduce the horizon or supply more data")
+    elif data.n_samples < need:
+        raise TooFewSamplesError(
+            f"{method}: {data.n_samples} samples are too few for horizon {horizon} with "
+            f"{nu} input{'s' if nu != 1 else ''} and {ny} output{'s' if ny != 1 else ''}: "
+            f"the {depth}-block-row Hankel matrix has {rows} rows and needs at least "
+            f"{need} samples; reduce the horizon or supply more data")
+    return HankelStatistic.from_data(data, depth, kind=statistic).factor()
+
+
+def check_excitation(hf: HankelFactor, input_names, *, method: str) -> float:
+    """Raise :class:`NotExcitingError` if the input Hankel rows are dependent.
+
+    The leading ``depth*nu`` rows of the factor are the factor of the input
+    block-Hankel matrix alone; a negligible diagonal entry marks the first
+    input row that is a combination of the earlier ones.
+
+    Returns
+    -------
+    float
+        Estimated 1-norm condition number of the input block-Hankel factor.
+    """
+    nu, depth = hf.n_inputs, hf.depth
+    Lu = hf.L[: depth * nu, : depth * nu]
+    # Each diagonal entry relative to the norm of its row is the sine of the
+    # angle between that Hankel row and the span of the earlier ones: the
+    # decision does not depend on how the input channels are scaled.
+    norms = np.linalg.norm(Lu, axis=1)
+    scale = norms.max(initial=0.0)
+    d = np.abs(np.diag(Lu)) / np.where(norms > 0, norms, 1.0)
+    dependent = np.flatnonzero((d <= RANK_TOL) | (norms == 0)) if scale > 0 \
+        else np.arange(d.size)
+    if dependent.size:
+        k = int(dependent[0])
+        achieved = k // nu
+        channel = input_names[k % nu]
+        if scale == 0:
+            what = "the input is identically zero"
+        elif achieved == 0:
+            what = f"input {channel} is a combination of the other inputs"
+        else:
+            what = (f"input {channel} at lag {achieved} is a linear combination of earlier "
+                    "input samples")
+        raise NotExcitingError(
+            f"{method}: the input is not sufficiently exciting: {what}. The method needs an "
+            f"input persistently exciting of order {depth} (its block-Hankel matrix with "
+            f"{depth} block rows must have full row rank {depth * nu}); these data are "
+            f"exciting of order {achieved} only. Use a richer input (white noise, PRBS, "
+            "multisine) or a smaller horizon",
+            required_order=depth, achieved_order=achieved)
+    Ln = Lu / norms[:, None]                      # condition of the row-normalised factor
+    rcond = scipy.linalg.lapack.dtrcon(np.ascontiguousarray(Ln.T), norm="1", uplo="U",
+                                       diag="N")[0]
+    cond = 1.0 / rcond if rcond > 0 else math.inf
+    if cond > CONDITION_WARN:
+        warnings.warn(f"{method}: the input block-Hankel matrix is ill-conditioned "
+                      f"(condition ~{cond:.1e}); the input barely excites order {depth} and "
+                      "the model may be unreliable", ExcitationWarning, stacklevel=3)
+    return float(cond)
+
+
+def gap_scores(values, candidates) -> dict:
+    """Gap after each candidate order of a decreasing profile (log10 scale).
+
+    ``values`` are singular values, or the pivots of an SVD-free rank
+    profile; the gap after position ``k`` is
+    ``log10(min(values[:k])) - log10(max(values[k:]))``.
+    """
+    v = np.abs(np.asarray(values, dtype=float))
+    floor = max(v.max(initial=0.0), 1e-300) * np.finfo(float).eps * v.size
+    logv = np.log10(np.maximum(v, floor))
+    return {k: float(logv[:k].min() - logv[k:].max()) for k in candidates if k < v.size}
+
+
+def order_from_gap(values, candidates) -> int:
+    """Order at the largest gap of a decreasing profile (:func:`gap_scores`)."""
+    gaps = gap_scores(values, candidates)
+    if not gaps:
+        return candidates[0]
+    return max(gaps, key=lambda k: (gaps[k], -k))
+
+
+def shift_invariance(gamma: np.ndarray, n_outputs: int):
+    """A and C from an extended observability matrix by shift invariance.
+
+    ``C = Gamma[0:ny]`` and ``A`` solves ``Gamma[:-ny] A = Gamma[ny:]`` in the
+    least-squares sense (QR with column pivoting; no SVD).
+
+    Returns
+    -------
+    A, C, relative_residual
+    """
+    up, down = gamma[:-n_outputs], gamma[n_outputs:]
+    A = scipy.linalg.lstsq(up, down, lapack_driver="gelsy", check_finite=False)[0]
+    C = gamma[:n_outputs].copy()
+    resid = np.linalg.norm(up @ A - down) / max(np.linalg.norm(down), 1e-300)
+    return A, C, float(resid)
+
+
+BD_METHODS = ("auto", "simulation", "projection")
+
+
+def output_weights(y: np.ndarray) -> np.ndarray:
+    """Weights of the outputs in the B, D, x0 regression: 1 / standard deviation.
+
+    The regression then minimises the sum over the outputs of the squared
+    errors relative to each output's spread, so that no output dominates the
+    fit because of its units (a constant output cannot reach here:
+    :func:`check_data` rejects it).
+    """
+    std = column_std(y)
+    return 1.0 / np.where(std > 0, std, 1.0)
+
+
+def estimate_b_d(A, C_n, gamma, L11, L_yu, problem: "Problem", *, bd_method: str,
+                 feedthrough: bool, estimate_x0: bool):
+    """B, D (and x0) given A and C: by output regression or by projection.
+
+    ``C_n``, ``gamma``, ``L11`` and ``L_yu`` are in the units of the
+    normalised channels of ``problem``; B and D come back in the user's
+    units. ``'simulation'`` fits B, D and x0 to the raw output samples
+    through the model (most accurate; it simulates the model over the whole
+    record, which overflows for a clearly unstable A), each output weighted by
+    the inverse of its standard deviation (:func:`output_weights`). ``'projection'``
+    solves the SVD-free projected data equation on the statistic
+    (:func:`fit_b_d_projection`; no x0). ``'auto'`` uses simulation, and
+    projection when simulating overflows or leaves the regression
+    numerically singular, or when the data are a :class:`HankelStatistic`
+    (no raw samples).
+
+    Returns
+    -------
+    B, D, x0 (None when not estimated), diagnostics dict (with ``bd_method``)
+    """
+    data = problem.data
+    C = C_n * problem.output_scale[:, None]
+    if bd_method not in BD_METHODS:
+        raise OptionError(f"bd_method must be one of {BD_METHODS}, got {bd_method!r}")
+    radius = float(np.abs(np.linalg.eigvals(A)).max())
+    # a statistic whose record can be read again (subid.methods.dt.stream, subid.methods.dt.distributed)
+    second_pass = getattr(data, "output_regression", None)
+    if isinstance(data, HankelStatistic) and second_pass is None:  # the statistic only
+        if bd_method == "simulation":
+            raise SubidError("bd_method='simulation' fits B and D to the raw output samples; "
+                             "with a statistic only, use bd_method='projection' (or 'auto')")
+        bd_method = "projection"
+    diag = {}
+    if bd_method in ("auto", "simulation"):
+        with np.errstate(over="ignore", invalid="ignore"):
+            if second_pass is not None:
+                B, D, x0, diag = second_pass(A, C, feedthrough=feedthrough,
+                                             estimate_x0=estimate_x0)
+            else:
+                B, D, x0, diag = fit_b_d_x0(A, C, data.u, data.y, feedthrough=feedthrough,
+                                            estimate_x0=estimate_x0,
+                                            output_weights=problem.weights(),
+                                            starts=experiment_starts(data))
+        usable = (np.isfinite(B).all() and np.isfinite(D).all()
+                  and not diag["regression_rank_deficient"])
+        if usable:
+            diag.update(bd_method="simulation", spectral_radius=radius)
+            return B, D, (x0 if estimate_x0 else None), diag
+        if bd_method == "simulation":
+            raise SubidError(f"the identified A has spectral radius {radius:.4g}: simulating it "
+                             f"over {data.n_samples} samples overflows or leaves the regression "
+                             "singular; use bd_method='projection' (or 'auto')")
+    B_n, D_n, proj = fit_b_d_projection(A, C_n, gamma, L11, L_yu, feedthrough=feedthrough)
+    B, _, D = problem.unscale(B_n, C_n, D_n)
+    if diag:
+        proj["simulation_regression_condition"] = diag["regression_condition"]
+    proj.update(bd_method="projection", spectral_radius=radius)
+    return B, D, None, proj
+
+
+def predictor_b_d(A, C, B, D, problem, *, feedthrough: bool, estimate_x0: bool):
+    """B, D (and x0) of an unstable A by the prediction-error form, or None.
+
+    For an unstable A the output-error regression of :func:`estimate_b_d` is
+    ill-posed over a long record: the sensitivities ``C A^t`` grow without
+    bound, the regression fits the growth of the last samples and the
+    initial state rather than the input-output behaviour (on the DaISy
+    ballbeam record, MOESP at order 2: validation fit 79.8 %; the same A and
+    C with B, D from the state regression of N4SID: 88.9 %). The innovation
+    form ``x(k+1) = A x(k) + B u(k) + K e(k)``, ``y(k) = C x(k) + D u(k) +
+    e(k)`` has the one-step predictor (Ljung, *System Identification*, 2nd
+    ed., 1999, eq. 4.86, with ``Ā = A - K C``, stable)
+
+        x̂(k+1) = Ā x̂(k) + (B - K D) u(k) + K y(k),   ŷ(k) = C x̂(k) + D u(k),
+
+    which, given A, C and K, is linear in ``B̃ = B - K D``, D and ``x̂(0) = x0``:
+    ``y(k) - y_K(k) = C Ā^k x0 + sum_j C Ā^(k-1-j) B̃ u(j) + D u(k) + e(k)``
+    with ``y_K`` the output of ``(Ā, K, C, 0)`` driven by y. Its regression
+    (the same weighted least squares as :func:`subid.methods.dt._regression.fit_b_d_x0`,
+    on ``(Ā, C)``) is well posed because Ā is stable. K comes from the noise
+    model of the output-error estimate ``(A, B, C, D)``
+    (:func:`subid.methods.dt.noise_model.innovation_model`), and ``B = B̃ + K D``.
+
+    Returns
+    -------
+    (B, D, x0, diagnostics) or None
+        None when there are no raw samples, the factor is too shallow for the
+        noise model, or it gives no stable predictor.
+    """
+    from subid.methods.dt.noise_model import innovation_model, user_factor
+    from subid.model._simulate import _simulate_discrete
+    data = problem.data
+    if not isinstance(data, IOData):
+        return None
+    try:
+        with np.errstate(all="ignore"):
+            K, _, diag = innovation_model(A, B, C, D, user_factor(problem))
+    except (SubidError, np.linalg.LinAlgError, ValueError):
+        return None
+    if not np.isfinite(K).all() or diag["predictor_spectral_radius"] >= 1.0:
+        return None
+    A_bar = A - K @ C
+    ny = C.shape[0]
+    y_k = _simulate_discrete(A_bar, K, C, np.zeros((ny, ny)), data.y,
+                             np.zeros(A.shape[0]))[0]
+    with np.errstate(all="ignore"):
+        B_t, D_p, x0, reg = fit_b_d_x0(A_bar, C, data.u, data.y - y_k, feedthrough=feedthrough,
+                                       estimate_x0=estimate_x0,
+                                       output_weights=problem.weights())
+    B_p = B_t + K @ D_p
+    if not (np.isfinite(B_p).all() and np.isfinite(D_p).all()) \
+            or reg["regression_rank_deficient"]:
+        return None
+    reg.update(bd_method="prediction", spectral_radius=float(np.abs(np.linalg.eigvals(A)).max()),
+               predictor_spectral_radius=diag["predictor_spectral_radius"],
+               prediction_residual_rms=reg.pop("residual_rms"))
+    return B_p, D_p, (x0 if estimate_x0 else None), reg
+
+
+WEIGHTINGS = ("moesp", "cva", "n4sid")
+
+
+def check_weighting(weighting: str) -> str:
+    if weighting not in WEIGHTINGS:
+        raise OptionError(f"weighting must be one of {WEIGHTINGS} (MATLAB's N4Weight), got "
+                         f"{weighting!r}")
+    return weighting
+
+
+def cva_factor(y_perp: np.ndarray) -> np.ndarray:
+    """Upper-triangular R with ``R^T R = Y_f Π⊥ Y_f^T`` (plus a tiny ridge).
+
+    ``y_perp`` holds the coefficient rows of ``Y_f Π⊥_{U_f}``. CVA weights
+    the oblique projection by ``W1 = (Y_f Π⊥ Y_f^T)^{-1/2}``; ``R^{-T}`` is
+    such a square root up to an orthogonal factor, which leaves the singular
+    values and the recovered range(Γ) = range(W1^{-1} U_n) unchanged. The
+    ridge (1e-10 of the mean diagonal) keeps R invertible on noise-free data,
+    where ``Y_f Π⊥`` has rank n only; any invertible W1 gives the exact range
+    there.
+    """
+    m = y_perp.shape[0]
+    ridge = 1e-10 * max(np.linalg.norm(y_perp) ** 2 / m, 1e-300)
+    stacked = np.vstack([y_perp.T, math.sqrt(ridge) * np.eye(m)])
+    return scipy.linalg.qr(stacked, mode="r", check_finite=False)[0][:m]
+
+
+STABILITY = ("auto", "enforce", "none")
+#: Spectral radius of a model whose stability was enforced, at most.
+STABLE_RADIUS = 0.9999
+#: Output growth (RMS of the last tenth over the first) above which data "grow".
+GROWTH_LIMIT = 3.0
+
+
+def stability_request(stability: str, A, data, method: str) -> bool:
+    """Whether stability must be enforced on ``A``.
+
+    ``'none'``: never. ``'enforce'``: whenever A is unstable, with a warning
+    when the data themselves grow. ``'auto'`` (default): when A is unstable
+    (spectral radius >= 1) and the estimation output does not grow
+    (:func:`output_growth` below :data:`GROWTH_LIMIT`): a diverging model of
+    non-diverging data is over-fitted noise, not the plant. Data that grow
+    (an unstable plant, e.g. measured in closed loop) keep the unstable
+    model. From a statistic alone (no raw samples) ``'auto'`` cannot see the
+    growth and does not act.
+    """
+    if stability not in STABILITY:
+        raise OptionError(f"stability must be one of {STABILITY}, got {stability!r}")
+    if stability == "none" or np.abs(np.linalg.eigvals(A)).max() < 1.0:
+        return False
+    growth = record_growth(data) if isinstance(data, IOData) else None
+    if stability == "enforce":
+        if growth is not None and growth >= GROWTH_LIMIT:
+            warnings.warn(f"{method}: stability='enforce' on data whose output grows "
+                          f"{growth:.3g}x over the record: the plant looks unstable, and a "
+                          "stable model cannot follow it; use stability='none' to keep the "
+                          "unstable estimate", UnstableModelWarning, stacklevel=4)
+        return True
+    return growth is not None and growth < GROWTH_LIMIT
+
+
+def stable_shift_invariance(Q: np.ndarray, n_outputs: int, radius: float = STABLE_RADIUS):
+    """A stable A from an orthonormal basis ``Q`` of the observability range.
+
+    Regularised shift invariance (Maciejowski, "Guaranteed stability with
+    subspace methods", Systems & Control Letters 26, 1995; Van Gestel et al.,
+    IEEE TAC 46(9), 2001): minimise
+    ``||Q_up A - Q_down||^2 + c ||Q_last A||^2`` with ``Q_last`` the last block
+    row. For c = 0 it is the ordinary estimate; for c = 1 the solution is
+    ``A = Q_up^T Q_down = Q^T S Q`` (``Q^T Q = I``, S the block shift, of norm
+    1), so ``||A||_2 <= 1`` and A is stable. The smallest c in [0, 1] giving a
+    spectral radius at most ``radius`` is found by bisection (40 steps); if
+    even c = 1 reaches only ``radius < rho <= 1``, A is scaled by
+    ``radius / rho``.
+
+    Returns
+    -------
+    A : ndarray
+        In the basis of ``Q``.
+    c : float
+        The regularisation weight used.
+    """
+    up, down, last = Q[:-n_outputs], Q[n_outputs:], Q[-n_outputs:]
+    n = Q.shape[1]
+
+    def solve(c):
+        lhs = np.vstack([up, math.sqrt(c) * last])
+        rhs = np.vstack([down, np.zeros((n_outputs, n))])
+        return scipy.linalg.lstsq(lhs, rhs, lapack_driver="gelsy", check_finite=False)[0]
+
+    def rho(M):
+        return float(np.abs(np.linalg.eigvals(M)).max())
+
+    A1 = solve(1.0)
+    if rho(A1) > radius:
+        return A1 * (radius / rho(A1)), 1.0
+    lo, hi, best = 0.0, 1.0, A1
+    for _ in range(40):
+        mid = 0.5 * (lo + hi)
+        A = solve(mid)
+        if rho(A) <= radius:
+            hi, best = mid, A
+        else:
+            lo = mid
+    return best, hi
+
+
+def reflect_unstable_poles(A, radius: float = STABLE_RADIUS, max_condition: float = 1e8):
+    """A with every pole p outside the unit circle replaced by ``1/conj(p)``.
+
+    The reflected pole has the same frequency and the reciprocal radius (the
+    stable spectral factor of the same amplitude response); a pole on the
+    unit circle or reflected above ``radius`` is pulled in to ``radius``.
+    Computed through the eigendecomposition ``A = V Λ V^{-1}`` (basis
+    invariant); None when V is ill-conditioned (a nearly defective A), where
+    the eigenvector basis is unreliable.
+    """
+    lam, V = np.linalg.eig(A)
+    if np.linalg.cond(V) > max_condition:
+        return None
+    mag = np.abs(lam)
+    new = np.where(mag >= 1.0, lam / np.maximum(mag, 1e-300) ** 2, lam)
+    new_mag = np.abs(new)
+    new = np.where(new_mag > radius, new / np.maximum(new_mag, 1e-300) * radius, new)
+    return np.linalg.solve(V.T, (V * new).T).T.real      # V diag(new) V^{-1}
+
+
+#: 'auto' keeps an unstable model only when its residual on the estimation data is
+#: below this fraction of the stabilised model's: the data demand the instability.
+KEEP_UNSTABLE_RATIO = 0.9
+
+
+def stable_choice(A_q, Q, n_outputs: int, fit, *, stability: str, data, method: str,
+                  refit_unstable=None):
+    """A in the orthonormal basis ``Q``, stable when that is right, with its B, D, x0.
+
+    ``fit(A_q)`` returns ``(B, D, x0, diagnostics)`` for a given A (the
+    output regression of :func:`estimate_b_d`, in the basis of ``Q``).
+
+    * ``'none'``, a stable A, or :func:`stability_request` false: A as
+      estimated.
+    * ``'enforce'``: a stable A, with B, D, x0 refitted for it: the unstable
+      poles reflected into the unit circle (:func:`reflect_unstable_poles`),
+      or, for a nearly defective A, the regularised shift invariance
+      (:func:`stable_shift_invariance`). On the bundled records reflection
+      kept the validation fit (robot_arm, classical N4SID at order 7:
+      57.9 % unstable, 96.7 % reflected, 7.0 % regularised), because the
+      regularisation moves every pole and parks the unstable ones at the
+      unit circle, where they drift.
+    * ``'auto'`` when the data do not grow: both are fitted; the unstable A
+      is kept only when it explains the estimation data clearly better (its
+      residual RMS below :data:`KEEP_UNSTABLE_RATIO` times the stable one's):
+      an unstable plant in closed loop (e.g. a ball on a beam) keeps its
+      unstable model, while a spurious unstable mode, which the data do not
+      need, is removed.
+
+    When the A returned is unstable and ``refit_unstable(A_q, fitted)`` is
+    given, B, D, x0 come from it instead (:func:`predictor_b_d`: the
+    output-error regression is ill-posed for an unstable A), unless it
+    returns None.
+
+    Returns
+    -------
+    A_q, (B, D, x0, diagnostics), record
+        ``record`` is ``info['stability']``.
+    """
+    before = float(np.abs(np.linalg.eigvals(A_q)).max())
+    record = {"requested": stability, "action": "none", "spectral_radius_before": before}
+
+    def unstable(fitted):
+        if refit_unstable is None:
+            return fitted
+        refitted = refit_unstable(A_q, fitted)
+        return fitted if refitted is None else refitted
+
+    if not stability_request(stability, A_q, data, method):
+        return A_q, (unstable(fit(A_q)) if before >= 1.0 else fit(A_q)), record
+    # the unstable poles reflected; where the eigenvectors are unreliable (a nearly
+    # defective A), the regularised shift invariance
+    A_s = reflect_unstable_poles(A_q)
+    if A_s is not None:
+        how = {"how": "unstable poles reflected into the unit circle (1/conj(p))"}
+    else:
+        A_s, c = stable_shift_invariance(Q, n_outputs)
+        how = {"how": "regularised shift invariance (Maciejowski 1995)", "regularization": c}
+    fitted_s = fit(A_s)
+    record.update(action="enforced", **how,
+                  spectral_radius_after=float(np.abs(np.linalg.eigvals(A_s)).max()))
+    record["how"] += "; B, D, x0 refitted for the stable A"
+    if stability == "auto":
+        fitted_u = fit(A_q)
+        r_u = fitted_u[3].get("residual_rms") if fitted_u[3].get("bd_method") == "simulation" \
+            else None
+        r_s = fitted_s[3].get("residual_rms")
+        record.update(residual_unstable=r_u, residual_stable=r_s)
+        if r_u is not None and r_s is not None and math.isfinite(r_u) \
+                and r_u < KEEP_UNSTABLE_RATIO * r_s:
+            record.update(action="kept unstable",
+                          how=f"the unstable model fits the estimation data clearly better "
+                              f"(residual RMS {r_u:.3g} against {r_s:.3g} when stabilised)")
+            return A_q, unstable(fitted_u), record
+    return A_s, fitted_s, record
+
+
+def experiment_starts(data):
+    """The first sample of every experiment of a record of several (None otherwise)."""
+    if isinstance(data, IOData) and data.n_experiments > 1:
+        return [a for a, _ in data.experiment_ranges]
+    return None
+
+
+def initial_state(A, B, C, D, data):
+    """Least-squares initial state of the model on ``data`` (None without raw samples
+    or when the simulation overflows); one row per experiment for a record of
+    several (:func:`subid.merge`)."""
+    if not isinstance(data, IOData):
+        second_pass = getattr(data, "output_regression", None)   # subid.methods.dt._bd_pass
+        return None if second_pass is None else second_pass.initial_state(A, B, C, D)
+    if data.n_experiments > 1:
+        rows = [_initial_state_one(A, B, C, D, e, column_std(data.y)) for e in data.experiments]
+        return None if any(r is None for r in rows) else np.stack(rows)
+    return _initial_state_one(A, B, C, D, data, column_std(data.y))
+
+
+def _initial_state_one(A, B, C, D, data, output_std):
+    from subid.evaluation.metrics import simulate_fit  # metrics depends on the model module only
+    # The free response C A^t x0 of a stable A falls below 1e-18 of its start after
+    # `decay` samples: beyond them the samples carry no information on x0 (to rounding),
+    # so the regression runs on that prefix only (bounded time and memory).
+    radius = float(np.abs(np.linalg.eigvals(A)).max()) if A.size else 0.0
+    used = data
+    if radius < 1.0:
+        decay = A.shape[0] + 1 if radius == 0.0 else \
+            A.shape[0] + 1 + int(math.ceil(math.log(1e-18) / math.log(radius)))
+        if decay < data.n_samples:
+            used = data[:decay]
+    try:
+        with np.errstate(all="ignore"):
+            return simulate_fit(StateSpace(A, B, C, D, data.dt), used,
+                                output_std=output_std)[1]
+    except SubidError:
+        return None
+
+
+@dataclass(frozen=True)
+class Problem:
+    """A validated identification problem and its data statistic."""
+
+    method: str
+    data: IOData
+    order: int | None
+    candidates: list
+    horizon: int
+    factor: HankelFactor
+    input_condition: float
+    input_scale: np.ndarray
+    output_scale: np.ndarray
+    _cache: dict = field(default_factory=dict, repr=False, compare=False)
+
+    def weights(self) -> np.ndarray:
+        """:func:`output_weights` of the record, computed once per problem."""
+        cached = self._cache.get("weights")
+        if cached is None:
+            cached = self._cache["weights"] = output_weights(self.data.y)
+        return cached
+
+    def unscale(self, B_n, C_n, D_n):
+        """B, C, D in the user's units from those of the normalised channels."""
+        su, sy = self.input_scale, self.output_scale
+        return B_n / su, C_n * sy[:, None], D_n * sy[:, None] / su
+
+
+def normalize_channels(hf: HankelFactor, outputs: bool):
+    """The factor of the data with every channel divided by its RMS.
+
+    Row ``r`` of ``L`` has norm ``sqrt(mean of the square of Hankel row r)``;
+    the first block row of each signal gives the channel RMS. Scaling rows of
+    ``H`` scales rows of ``L`` (``S H = (S L) Q^T``, still triangular), so this
+    costs nothing and makes the rank decisions of the methods independent of
+    the units of the channels. Outputs are left alone when ``outputs`` is
+    false (seed 001's selector Λ acts on the outputs in the user's units).
+    """
+    nu, ny, s = hf.n_inputs, hf.n_outputs, hf.depth
+    norms = np.linalg.norm(hf.L, axis=1)
+    su = norms[:nu].copy()
+    sy = norms[s * nu:s * nu + ny].copy() if outputs else np.ones(ny)
+    su[su == 0] = 1.0
+    sy[sy == 0] = 1.0
+    row_scale = np.concatenate([np.tile(su, s), np.tile(sy, s)])
+    scaled = HankelFactor(L=hf.L / row_scale[:, None], depth=s, n_inputs=nu, n_outputs=ny,
+                          n_columns=hf.n_columns)
+    return scaled, su, sy
+
+
+STATISTICS = ("auto", "qr", "gram")
+
+
+def prepare(data, order, horizon, *, method: str, blocks_per_horizon: int = 2,
+            statistic: str = "auto", normalize_outputs: bool = True) -> Problem:
+    """Validate the arguments, build the Hankel factor and check excitation.
+
+    ``data`` is an :class:`IOData` record or a :class:`HankelStatistic`
+    (identification from the statistic only). ``blocks_per_horizon`` is 2
+    when past and future block rows are used (instruments), 1 for future
+    rows only. ``statistic`` chooses the kind of statistic built from a
+    record (see :mod:`subid.statistic.hankel`).
+    """
+    if statistic not in STATISTICS:
+        raise OptionError(f"statistic must be one of {STATISTICS}, got {statistic!r}")
+    if isinstance(data, HankelStatistic):
+        if data.depth % blocks_per_horizon:
+            raise DataError(f"{method} needs a statistic whose depth is a multiple of "
+                            f"{blocks_per_horizon}; this one has depth {data.depth}")
+        implied = data.depth // blocks_per_horizon
+        if horizon is not None and check_int(horizon, "horizon", minimum=2) != implied:
+            raise DataError(f"the statistic was built with depth {data.depth}, i.e. horizon "
+                            f"{implied} for {method}; got horizon={horizon}. Build the "
+                            f"statistic with depth {blocks_per_horizon * horizon}")
+        fixed, candidates, horizon = check_order_horizon(
+            order, implied, data, method=method, blocks_per_horizon=blocks_per_horizon)
+        need = min_samples(data.depth, data.n_inputs, data.n_outputs)
+        if data.n_samples < need:
+            raise TooFewSamplesError(f"{method}: the statistic holds {data.n_samples} samples; "
+                                     f"horizon {horizon} needs at least {need}")
+        hf = data.factor()
+    else:
+        data = check_data(data, method)
+        fixed, candidates, horizon = check_order_horizon(
+            order, horizon, data, method=method, blocks_per_horizon=blocks_per_horizon)
+        hf = data_factor(data, blocks_per_horizon * horizon, method=method, horizon=horizon,
+                         statistic=statistic)
+    input_condition = check_excitation(hf, data.input_names, method=method)
+    hf, su, sy = normalize_channels(hf, outputs=normalize_outputs)
+    return Problem(method, data, fixed, candidates, horizon, hf, input_condition, su, sy)
+
+
+def choose_order(fixed, candidates, profile, source: str):
+    """The fixed order, or the candidate at the largest gap of ``profile``.
+
+    Returns the order and the ``info['order_selection']`` record.
+    """
+    if fixed is not None:
+        return fixed, {"rule": "given"}
+    gaps = gap_scores(profile, candidates)
+    n = order_from_gap(profile, candidates)
+    return n, {"rule": "gap", "description": f"largest gap of the {source} (log10)",
+               "candidates": [{"order": k, "score": g} for k, g in gaps.items()],
+               "selected": {"order": n, "score": gaps.get(n)}}
+
+
+SYSTEM_MATRICES = ("auto", "shift", "states")
+
+
+def check_system_matrices(system_matrices: str) -> str:
+    if system_matrices not in SYSTEM_MATRICES:
+        raise OptionError(f"system_matrices must be one of {SYSTEM_MATRICES}, got "
+                         f"{system_matrices!r}")
+    return system_matrices
+
+
+def identify(data, order, horizon, *, method: str, build, selection: str,
+             blocks_per_horizon: int = 2, statistic: str = "auto",
+             normalize_outputs: bool = True, finalize=None, variants=None) -> StateSpace:
+    """Validate, choose the order and horizon, and run ``build``.
+
+    ``build(problem)`` is the method itself on a prepared problem. With
+    ``selection='cv'`` (default) and a raw record, an order or horizon not
+    given is chosen by cross-validation on the record
+    (:func:`subid.methods.dt._selection.cross_validate`); the model is then built on the
+    whole record with that order and horizon, exactly as an explicit call
+    would. ``'gap'``, or a statistic without raw samples, takes the largest
+    gap of the method's rank profile. ``finalize(model, problem)`` runs on
+    the final model only (not on the cross-validation candidates): the noise
+    model and the optional refinement (:func:`subid.methods.dt.noise_model.attach_noise_model`).
+
+    ``variants`` (a dict name -> build, the first the default), when given,
+    are alternative estimators of the system matrices from the same
+    subspace (``system_matrices='auto'`` of :func:`subid.moesp` and
+    :func:`subid.ls_subspace`): with ``selection='cv'`` on a raw record the
+    cross-validation chooses among them too, even when the order and the
+    horizon are given (so that a given order and horizon reproduce the
+    model); otherwise the first one is used. ``info['system_matrices']``
+    names the one used.
+    """
+    if selection not in SELECTION_RULES:
+        raise OptionError(f"selection must be one of {SELECTION_RULES}, got {selection!r}")
+    fixed, candidates = _parse_order(order)
+    if horizon is not None:
+        horizon = check_int(horizon, "horizon", minimum=2)
+    options = dict(method=method, blocks_per_horizon=blocks_per_horizon, statistic=statistic,
+                   normalize_outputs=normalize_outputs)
+    with collect_warnings() as issued:
+        builds = variants if variants else {None: build}
+        choose = fixed is None or horizon is None or len(builds) > 1
+        if selection == "cv" and isinstance(data, IOData) and choose:
+            check_data(data, method)
+
+            def prepare_fold(record, orders, f):
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore")
+                    return prepare(record, orders, f, **options)
+            prepare_fold.blocks = blocks_per_horizon
+            try:
+                n, f, variant, record = cross_validate(data, fixed, candidates, horizon,
+                                                       prepare_fold=prepare_fold, builds=builds)
+            except SubidError:
+                if fixed is None or horizon is None:
+                    raise
+                # order and horizon given, the folds too short for them: the default estimator
+                n, f, variant, record = fixed, horizon, next(iter(builds)), None
+            problem = prepare(data, n, f, **options)
+            model = builds[variant](problem)
+            if record is not None:
+                n, f, variant, problem, model = _unrepaired_choice(
+                    record, data, options, builds, (n, f, variant, problem, model))
+            if record is not None and (fixed is None or horizon is None):
+                model.info["order_selection"] = record
+            elif record is not None:
+                model.info["system_matrices_selection"] = record
+        else:
+            problem = prepare(data, order, horizon, **options)
+            variant = next(iter(builds))
+            model = builds[variant](problem)
+        if variant is not None:
+            model.info["system_matrices"] = variant
+        if finalize is not None:
+            model = finalize(model, problem)
+    model.info["warnings"] = list(issued)
+    return model
+
+
+def _unrepaired_choice(record, data, options, builds, chosen):
+    """The cross-validated choice, or a runner-up when only the choice had to be repaired.
+
+    The cross-validation scores the models fitted to its folds. When the
+    model of the chosen candidate refitted to the whole record comes out
+    unstable and ``stability='auto'`` reflects its poles
+    (:func:`stable_choice`) while not all of its fold models needed that,
+    the final model is not the kind of model that was scored (on the DaISy
+    evaporator record, MOESP at order 10, horizon 20: two of four fold
+    models stable, the final one with a slow unstable pole, 56 % validation
+    fit once stabilised). The candidates are then tried in the order of their
+    scores (at most :data:`subid.methods.dt._selection.MAX_FALLBACKS`), and the first
+    whose final model needs no repair the folds did not need is taken; if
+    none, the original choice stands. ``record['repaired_choice']`` tells.
+    """
+    from subid.methods.dt._selection import MAX_FALLBACKS, stabilised
+    n, f, variant, _, model = chosen
+    by_key = {(c["order"], c["horizon"], c.get("system_matrices")): c
+              for c in record["candidates"]}
+
+    def needs_repair(key, m):
+        c = by_key.get(key, {})
+        return stabilised(m) and c.get("stabilised_folds", 0) < len(c.get("folds", ()))
+
+    if not needs_repair((n, f, variant), model):
+        return chosen
+    skipped = [{"order": n, "horizon": f, "system_matrices": variant}]
+    for entry in record.get("ranking", [])[:MAX_FALLBACKS]:
+        key = (entry["order"], entry["horizon"], entry.get("system_matrices"))
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                pb = prepare(data, key[0], key[1], **options)
+                m = builds[key[2]](pb)
+        except SubidError:
+            continue
+        if not needs_repair(key, m):
+            record["repaired_choice"] = {"skipped": skipped, "taken": entry}
+            record["selected"] = dict(entry, fallback=True)
+            # the warnings of the model returned, as a direct call gives them
+            pb = prepare(data, key[0], key[1], **options)
+            return key[0], key[1], key[2], pb, builds[key[2]](pb)
+        skipped.append(entry)
+    record["repaired_choice"] = {"skipped": skipped, "taken": None}
+    return chosen
+
+
+def finalize(model: StateSpace, problem: Problem, *, refine, delays) -> StateSpace:
+    """The final model of a DT batch method: its noise model (K and the innovation
+    covariance, :func:`subid.methods.dt.noise_model.attach_noise_model`, then ``refine='pem'``,
+    :func:`subid.pem`) and its input delays (:func:`subid.delay.record_delay`). Run
+    once, on the final model."""
+    from subid.delay import record_delay
+    from subid.methods.dt.noise_model import attach_noise_model, check_refine
+    check_refine(refine, problem.data)
+    model = attach_noise_model(model, problem)
+    if refine == "pem":
+        from subid.methods.dt.pem import pem
+        model = pem(problem.data, model)
+    return record_delay(model, delays)
+
+
+def record_growth(data) -> float:
+    """:func:`output_growth` of a record: the largest over its experiments."""
+    return max(output_growth(e.y) for e in data.experiments)
+
+
+def output_growth(y: np.ndarray) -> float:
+    """Ratio of the RMS of the last tenth of ``y`` to that of its first tenth
+    (largest over the channels, after removing each channel's mean)."""
+    k = max(y.shape[0] // 10, 1)
+    y = y - y.mean(axis=0)
+    first = np.sqrt(np.mean(y[:k] ** 2, axis=0))
+    last = np.sqrt(np.mean(y[-k:] ** 2, axis=0))
+    return float(np.max(last / np.maximum(first, 1e-300)))
+
+
+def check_stability(A, data, method: str) -> dict:
+    """Warn when the model is unstable though the data show no growth.
+
+    An unstable mode with spectral radius r would multiply the output by
+    about ``r^(0.9 N)`` between the first and the last tenth of the record;
+    when that exceeds 10 but the measured output grew by less than 3x, the
+    data do not show the instability: an over-fitted order or noise, unless
+    the plant itself is unstable and was measured in closed loop.
+    """
+    radius = float(np.abs(np.linalg.eigvals(A)).max())
+    diag = {"spectral_radius": radius}
+    if radius < 1 or not isinstance(data, IOData):
+        return diag
+    growth = record_growth(data)
+    diag["output_growth"] = growth
+    longest = max(b - a for a, b in data.experiment_ranges)
+    predicted = 0.9 * longest * math.log10(radius)
+    if predicted > 1 and growth < 3:
+        warnings.warn(f"{method}: the identified model is unstable (spectral radius "
+                      f"{radius:.4g}) although the measured output does not grow over the "
+                      f"record (last/first RMS {growth:.2g}). Unless the plant is unstable and "
+                      "was measured in closed loop, the order may be too high or the data too "
+                      "noisy: try a lower order or compare the fits of several",
+                      UnstableModelWarning, stacklevel=4)
+    return diag
+
+
+def finish(problem: Problem, A, B, C, D, n: int, order_selection: dict, **info) -> StateSpace:
+    """The identified model with the diagnostics every method reports."""
+    data = problem.data
+    x0 = info.pop("x0", None)
+    info = model_info(problem.method, order=n, order_selection=order_selection,
+                      horizon=problem.horizon, n_samples=data.n_samples, x0=x0, hold="zoh",
+                      conditions=conditions_of(info, input=problem.input_condition),
+                      **{"input_condition": problem.input_condition, **info,
+                         **check_stability(A, data, problem.method)})
+    if "rank_profile" not in info and "singular_values" in info:
+        info["rank_profile"] = info["singular_values"]     # one name across methods
+    if getattr(data, "n_experiments", 1) > 1:
+        info["n_experiments"] = data.n_experiments
+        if isinstance(data, IOData):
+            info["experiment_names"] = list(data.experiment_names)
+    return StateSpace(A, B, C, D, data.dt, input_names=data.input_names,
+                      output_names=data.output_names, info=info)
+
+
+#: Flat ``info`` keys of condition numbers -> their name in ``info['conditions']``.
+CONDITION_KEYS = {"input_condition": "input", "selector_condition": "selector",
+                  "regression_condition": "bd", "b_regression_condition": "bd",
+                  "condition": "ac", "bd_condition": "bd"}
+
+
+def conditions_of(info: dict, **given) -> dict:
+    """``info['conditions']`` from the flat condition keys of ``info`` (and ``given``)."""
+    out = dict(given)
+    for key, name in CONDITION_KEYS.items():
+        if info.get(key) is not None:
+            out.setdefault(name, info[key])
+    return out

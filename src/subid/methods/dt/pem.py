@@ -1,0 +1,451 @@
+"""Prediction-error refinement of a state-space model in innovation form.
+
+:func:`pem` minimises the weighted prediction-error criterion
+
+    V(θ) = 1/(2N) Σ_t ||W (y[t] - ŷ[t|θ])||^2
+
+(Ljung, *System Identification*, 2nd ed., 1999, Ch. 7; MATLAB ``ssest``,
+ControlSystemIdentification.jl ``newpem``), where ``ŷ`` is the one-step
+Kalman predictor of the innovation form ``(A, B, C, D, K)`` (focus
+``'prediction'``) or the simulated output of ``(A, B, C, D)`` (focus
+``'simulation'``), and θ holds the model matrices and the initial state.
+``W`` is fixed at the inverse Cholesky factor of the covariance of the
+starting model's errors, so the criterion is the Gaussian log-likelihood for
+that covariance (the trace criterion ``tr(Σ^-1 E E^T)``).
+
+Parametrisation: data-driven local coordinates (DDLC; McKelvey, Helmersson
+& Ribarits, "Data driven local coordinates for multivariable linear
+systems and their application to system identification", Automatica 40,
+2004). The full matrices are redundant by the n^2 directions of similarity
+transformations ``T = I + δT`` (``δA = δT A - A δT``, ``δB = δT B``,
+``δC = -C δT``, ``δK = δT K``); the search moves only in the orthogonal
+complement of that tangent space, so the Jacobian has full rank for a
+minimal model and every step changes the input/output (and noise) behaviour.
+Before each round the state is scaled so that the predicted state has unit
+sample covariance (a well-conditioned, data-driven basis), and the local
+coordinates are rebuilt at the current model for up to ``rounds`` rounds.
+
+The Jacobian is analytic: the sensitivity equations of the predictor are
+run in a compiled loop (:mod:`subid.methods.dt._pem_kernel`). The optimiser is
+:func:`scipy.optimize.least_squares` (trust-region reflective). A trial
+model whose predictor (``A - K C``; for focus ``'simulation'``, ``A``) is not
+stable gets a cost larger than the start, so the trust region rejects it:
+the result always has a stable predictor, and its cost is never above the
+start (the start is returned unchanged when nothing improves).
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+
+import numpy as np
+import scipy.linalg
+import scipy.optimize
+
+from subid._validation import same_period
+from subid.data import IOData
+from subid.errors import DataError, ModelError, NoiseModelWarning, OptionError
+from subid.methods._info import records_warnings
+from subid.methods.dt._pem_kernel import jacobian
+from subid.model import _simulate
+from subid.model.statespace import StateSpace
+
+__all__ = ["pem"]
+
+FOCUS = ("prediction", "simulation")
+# A trial predictor with a spectral radius above this is treated as unstable.
+STABILITY_LIMIT = 1.0 - 1e-9
+# Largest Jacobian (N * ny rows, one column per free parameter) pem builds.
+JACOBIAN_BYTES_LIMIT = 2.0 * 2**30
+
+
+def _check_inputs(data, model, focus):
+    if not isinstance(model, StateSpace):
+        raise ModelError(f"pem needs a starting subid.StateSpace, got {type(model).__name__}")
+    if not isinstance(data, IOData):
+        raise DataError(f"pem expects an IOData record, got {type(data).__name__}; wrap "
+                        "arrays as subid.IOData(u, y, dt=...)")
+    if focus not in FOCUS:
+        raise OptionError(f"focus must be 'prediction' or 'simulation', got {focus!r}")
+    if (data.n_inputs, data.n_outputs) != (model.n_inputs, model.n_outputs):
+        raise DataError(f"data have {data.n_inputs} inputs and {data.n_outputs} outputs but "
+                        f"the model has {model.n_inputs} and {model.n_outputs}")
+    if not data.is_uniform:
+        raise DataError("pem refines discrete-time models and needs uniformly sampled data")
+    if not model.is_continuous and not same_period(data.dt, model.dt):
+        raise DataError(f"the model has dt={model.dt} but the data are sampled with "
+                        f"dt={data.dt}")
+
+
+class _Layout:
+    """Positions of the model matrices in the full parameter vector."""
+
+    def __init__(self, n, nu, ny, with_d, with_k):
+        self.n, self.nu, self.ny = n, nu, ny
+        self.with_d, self.with_k = with_d, with_k
+        sizes = [n * n, n * nu, ny * n, ny * nu if with_d else 0, n * ny if with_k else 0]
+        self.offsets = np.concatenate([[0], np.cumsum(sizes)])
+        self.size = int(self.offsets[-1])
+
+    def pack(self, A, B, C, D, K):
+        parts = [A.ravel(), B.ravel(), C.ravel()]
+        if self.with_d:
+            parts.append(D.ravel())
+        if self.with_k:
+            parts.append(K.ravel())
+        return np.concatenate(parts)
+
+    def unpack(self, theta, D0=None):
+        n, nu, ny = self.n, self.nu, self.ny
+        o = self.offsets
+        A = theta[o[0]:o[1]].reshape(n, n)
+        B = theta[o[1]:o[2]].reshape(n, nu)
+        C = theta[o[2]:o[3]].reshape(ny, n)
+        D = theta[o[3]:o[4]].reshape(ny, nu) if self.with_d else \
+            (np.zeros((ny, nu)) if D0 is None else D0)
+        K = theta[o[4]:o[5]].reshape(n, ny) if self.with_k else np.zeros((n, ny))
+        return A, B, C, D, K
+
+
+def _local_coordinates(layout, A, B, C, D, K):
+    """Orthonormal basis of the complement of the similarity tangent space."""
+    n = layout.n
+    cols = []
+    for a in range(n):
+        for b in range(n):
+            E = np.zeros((n, n))
+            E[a, b] = 1.0
+            cols.append(layout.pack(E @ A - A @ E, E @ B, -C @ E, np.zeros_like(D), E @ K))
+    M = np.array(cols).T                       # (P, n^2)
+    Q, R, _ = scipy.linalg.qr(M, mode="full", pivoting=True, check_finite=False)
+    d = np.abs(np.diag(R))
+    rank = int(np.sum(d > max(d.max(initial=0.0), 1e-300) * 1e-10)) if d.size else 0
+    return Q[:, rank:]
+
+
+def _predictor(A, B, C, D, K, focus):
+    if focus == "prediction":
+        return (A - K @ C, np.hstack([B - K @ D, K]), C,
+                np.hstack([D, np.zeros((C.shape[0], C.shape[0]))]))
+    return A, B, C, D
+
+
+def _directions(layout, basis, A, B, C, D, K, focus):
+    """Kernel direction arrays for the model columns of ``basis`` and for x0."""
+    n, nu, ny = layout.n, layout.nu, layout.ny
+    m = nu + ny if focus == "prediction" else nu
+    dm = basis.shape[1]
+    d = dm + n
+    dAp = np.zeros((d, n, n))
+    dBp = np.zeros((d, n, m))
+    dC = np.zeros((d, ny, n))
+    dDp = np.zeros((d, ny, m))
+    dx0 = np.zeros((d, n))
+    for j in range(dm):
+        a, b, c, dd, k = layout.unpack(basis[:, j], np.zeros((ny, nu)))
+        dC[j] = c
+        if focus == "prediction":
+            dAp[j] = a - k @ C - K @ c
+            dBp[j, :, :nu] = b - k @ D - K @ dd
+            dBp[j, :, nu:] = k
+            dDp[j, :, :nu] = dd
+        else:
+            dAp[j], dBp[j], dDp[j] = a, b, dd
+    dx0[dm:] = np.eye(n)
+    return dAp, dBp, dC, dDp, dx0
+
+
+def _start_x0(Ap, Bp, C, Dp, v, y):
+    """Least-squares initial state of the predictor (affine in x0)."""
+    n = Ap.shape[0]
+    forced = _simulate.simulate_discrete(Ap, Bp, C, Dp, v, np.zeros(n))[0]
+    free = np.stack([_simulate.simulate_discrete(Ap, np.zeros_like(Bp), C, np.zeros_like(Dp),
+                                                 v, e)[0] for e in np.eye(n)], axis=-1)
+    x0 = scipy.linalg.lstsq(free.reshape(-1, n), (y - forced).reshape(-1),
+                            lapack_driver="gelsy", check_finite=False)[0]
+    return x0
+
+
+def _simulate_experiments(Ap, Bp, C, Dp, v, x0s, ranges):
+    """The predictor (or simulation) of every experiment from its own initial state
+    (row ``e`` of ``x0s``): ``(ŷ, X)`` stacked in time order."""
+    parts = [_simulate.simulate_discrete(Ap, Bp, C, Dp, v[a:b], x0s[e])
+             for e, (a, b) in enumerate(ranges)]
+    return np.vstack([p[0] for p in parts]), np.vstack([p[1] for p in parts])
+
+
+def _radius(M) -> float:
+    return float(np.abs(np.linalg.eigvals(M)).max())
+
+
+def _round(model_mats, x0, data, focus, W, layout, max_nfev, tolerance, history, penalty):
+    """One least-squares run in local coordinates at ``model_mats``; ``x0`` has one
+    row per experiment (each experiment is predicted from its own initial state)."""
+    A0, B0, C0, D0, K0 = model_mats
+    u, y = data.u, data.y
+    N, ny = y.shape
+    ranges = data.experiment_ranges
+    n_exp, n = x0.shape
+    v = np.hstack([u, y]) if focus == "prediction" else u
+    theta0 = layout.pack(A0, B0, C0, D0, K0)
+    basis = _local_coordinates(layout, A0, B0, C0, D0, K0)
+    dm = basis.shape[1]
+    scale = 1.0 / math.sqrt(N)
+
+    def mats(z):
+        return layout.unpack(theta0 + basis @ z[:dm], D0)
+
+    def fun(z):
+        A, B, C, D, K = mats(z)
+        Ap, Bp, Cp, Dp = _predictor(A, B, C, D, K, focus)
+        if not np.isfinite(Ap).all() or _radius(Ap) >= STABILITY_LIMIT:
+            return np.full(N * ny, penalty)
+        with np.errstate(all="ignore"):
+            yhat = _simulate_experiments(Ap, Bp, Cp, Dp, v, x0 + z[dm:].reshape(n_exp, n),
+                                         ranges)[0]
+        if not np.isfinite(yhat).all():
+            return np.full(N * ny, penalty)
+        return (((y - yhat) @ W.T) * scale).ravel()
+
+    def jac(z):
+        A, B, C, D, K = mats(z)
+        Ap, Bp, Cp, Dp = _predictor(A, B, C, D, K, focus)
+        dirs = [np.ascontiguousarray(a) for a in
+                _directions(layout, basis, A, B, C, D, K, focus)]
+        mats_c = [np.ascontiguousarray(a) for a in (Ap, Bp, Cp, Dp)]
+        x0s = x0 + z[dm:].reshape(n_exp, n)
+        yhat = np.empty((N, ny))
+        J = np.zeros((N, ny, dm + n_exp * n))
+        for e, (a, b) in enumerate(ranges):     # the x0 columns of experiment e only
+            yhat[a:b], Je = jacobian(*mats_c, np.ascontiguousarray(v[a:b]),
+                                     np.ascontiguousarray(x0s[e]), *dirs)
+            J[a:b, :, :dm] = Je[:, :, :dm]
+            J[a:b, :, dm + e * n:dm + (e + 1) * n] = Je[:, :, dm:]
+        history.append(0.5 * float(np.sum((((y - yhat) @ W.T) * scale) ** 2)))
+        Jw = -np.einsum("ik,tkd->tid", W, J) * scale
+        if not np.isfinite(Jw).all():
+            Jw = np.nan_to_num(Jw, nan=0.0, posinf=0.0, neginf=0.0)
+        return Jw.reshape(N * ny, -1)
+
+    z0 = np.zeros(dm + n_exp * n)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        res = scipy.optimize.least_squares(fun, z0, jac=jac, method="trf", x_scale="jac",
+                                           ftol=tolerance, xtol=tolerance, gtol=tolerance,
+                                           max_nfev=max_nfev)
+    return mats(res.x), x0 + res.x[dm:].reshape(n_exp, n), res
+
+
+@records_warnings
+def pem(data, model, *, focus="prediction", max_iterations=100, tolerance=1e-8, rounds=3,
+        feedthrough=None):
+    """Refine a model by prediction-error minimisation (MATLAB ``ssest``/``pem``).
+
+    Parameters
+    ----------
+    data : IOData
+        Uniformly sampled estimation record (the same data the start was
+        identified on, usually). A record of several experiments
+        (:func:`subid.merge`) is predicted experiment by experiment, each from
+        its own initial state (``info['x0']`` one row per experiment).
+    model : StateSpace
+        Starting model, e.g. from :func:`subid.n4sid`. Discrete time with the
+        data's ``dt``; a continuous-time model is refined through its
+        discretisation with its own input hold (:attr:`StateSpace.hold`) and
+        converted back (its noise model is then dropped). Without ``K`` the gain is first estimated
+        (:mod:`subid.methods.dt.noise_model`), or taken as zero when that fails.
+    focus : {'prediction', 'simulation'}
+        Minimise one-step prediction errors of the innovation form (A, B, C,
+        D, K estimated; statistically efficient for Gaussian innovations), or
+        simulation errors (output-error model; K is re-estimated afterwards).
+    max_iterations : int
+        Bound on the criterion evaluations per round (``max_nfev``).
+    tolerance : float
+        ``ftol = xtol = gtol`` of :func:`scipy.optimize.least_squares`.
+    rounds : int
+        Rounds of local coordinates rebuilt at the current model.
+    feedthrough : bool, optional
+        Estimate D. Default: when the starting D is not identically zero.
+
+    Returns
+    -------
+    StateSpace
+        The refined model (in the starting model's state basis) with ``K``
+        and ``noise_cov`` (the sample covariance of its one-step prediction
+        errors). ``info`` adds ``refined_by`` ('pem'), ``focus``,
+        ``cost_history`` (criterion at every accepted iterate, first entry the
+        start), ``start_cost``, ``final_cost``, ``stop_reason`` (the
+        optimiser's message, or why the start was kept), ``n_evaluations``,
+        ``x0`` and ``parametrisation``.
+
+    Raises
+    ------
+    DataError
+        Not an IOData record, non-uniform sampling, channels or ``dt`` differ,
+        too few samples for the number of parameters.
+    ModelError
+        ``model`` is not a StateSpace, or its predictor is unstable and no
+        stable start can be found.
+    SubidError
+        Bad option values.
+
+    Examples
+    --------
+    >>> import subid
+    >>> true = subid.systems.seed001_innovation_system()
+    >>> data = subid.systems.simulate_innovation_data(true, 2000, seed=1)
+    >>> refined = subid.pem(data, subid.n4sid(data, 3))
+    >>> refined.info["final_cost"] <= refined.info["start_cost"]
+    True
+    """
+    _check_inputs(data, model, focus)
+    if isinstance(max_iterations, bool) or not isinstance(max_iterations, int) \
+            or max_iterations < 1:
+        raise OptionError(f"max_iterations must be a positive integer, got {max_iterations!r}")
+    if not (isinstance(tolerance, (int, float)) and 0 < tolerance < 1):
+        raise OptionError(f"tolerance must be in (0, 1), got {tolerance!r}")
+    if isinstance(rounds, bool) or not isinstance(rounds, int) or rounds < 1:
+        raise OptionError(f"rounds must be a positive integer, got {rounds!r}")
+    if model.is_continuous:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", NoiseModelWarning)
+            refined = pem(data, model.to_discrete(data.dt, model.hold), focus=focus,
+                          max_iterations=max_iterations, tolerance=tolerance, rounds=rounds,
+                          feedthrough=feedthrough)
+            ct = refined.to_continuous(model.hold)
+        info = dict(ct.info)
+        kind = "zero" if model.hold == "zoh" else "first"
+        info["pem_through"] = f"{kind}-order-hold discretisation with dt={data.dt}"
+        return ct.with_noise_model(None, None, info=info)
+    return _pem_dt(data, model, focus, max_iterations, tolerance, rounds, feedthrough)
+
+
+def _start_gain(data, model):
+    """K of the starting model: its own, the state-sequence estimate, or zero."""
+    if model.K is not None and _radius(model.A - model.K @ model.C) < STABILITY_LIMIT:
+        return model.K, "the starting model's K"
+    from subid.methods.dt.noise_model import with_factor
+    from subid.statistic.hankel import HankelStatistic
+    n, ny, nu = model.order, model.n_outputs, model.n_inputs
+    h = max(5, -(-n // ny) + 2)
+    if data.n_samples >= 2 * h * (nu + ny + 1):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", NoiseModelWarning)
+            m = with_factor(model, HankelStatistic.from_data(data, 2 * h).factor())
+        if m.K is not None:
+            return m.K, "state-sequence estimate (subid.methods.dt.noise_model)"
+    if _radius(model.A) < STABILITY_LIMIT:
+        return np.zeros((n, ny)), "zero (output-error start)"
+    raise ModelError("pem: the starting model is unstable and no stable Kalman predictor "
+                     "was found for it; start from another model")
+
+
+def _pem_dt(data, model, focus, max_iterations, tolerance, rounds, feedthrough):
+    n, nu, ny = model.order, model.n_inputs, model.n_outputs
+    N = data.n_samples
+    with_d = bool(np.any(model.D != 0)) if feedthrough is None else bool(feedthrough)
+    with_k = focus == "prediction"
+    layout = _Layout(n, nu, ny, with_d, with_k)
+    n_params = layout.size - n * n + n
+    if N * ny <= 2 * n_params:
+        raise DataError(f"pem: {N} samples of {ny} output(s) are too few for the "
+                        f"{n_params} free parameters of an order-{n} model; supply more data")
+    jac_bytes = 8.0 * N * ny * (n_params + n)
+    if jac_bytes > JACOBIAN_BYTES_LIMIT:
+        raise DataError(f"pem: the Jacobian of {N} samples x {ny} output(s) x {n_params} "
+                        f"parameters needs {jac_bytes / 2**30:.1f} GiB (limit "
+                        f"{JACOBIAN_BYTES_LIMIT / 2**30:.0f} GiB); refine on a shorter part of "
+                        "the record (e.g. data[:200_000]) and validate on the rest")
+    if focus == "prediction":
+        K, k_source = _start_gain(data, model)
+    else:
+        if _radius(model.A) >= STABILITY_LIMIT:
+            raise ModelError("pem(focus='simulation'): the starting model is unstable; its "
+                             "simulation error is undefined. Use focus='prediction'")
+        K, k_source = np.zeros((n, ny)), "not used (simulation focus)"
+    D = np.array(model.D) if with_d else np.zeros((ny, nu))
+    mats = (np.array(model.A), np.array(model.B), np.array(model.C), D, K)
+    u, y = data.u, data.y
+    v = np.hstack([u, y]) if focus == "prediction" else u
+    Ap, Bp, Cp, Dp = _predictor(*mats, focus)
+    ranges = data.experiment_ranges       # one initial state per experiment (subid.merge)
+    x0 = np.stack([_start_x0(Ap, Bp, Cp, Dp, v[a:b], y[a:b]) for a, b in ranges])
+    yhat, X = _simulate_experiments(Ap, Bp, Cp, Dp, v, x0, ranges)
+    err = y - yhat
+    sigma0 = err.T @ err / N
+    try:
+        W = scipy.linalg.solve_triangular(np.linalg.cholesky(sigma0 + 1e-300 * np.eye(ny)),
+                                          np.eye(ny), lower=True)
+    except np.linalg.LinAlgError:
+        W = np.diag(1.0 / np.maximum(y.std(axis=0), 1e-300))
+    start_cost = 0.5 * float(np.sum((err @ W.T) ** 2)) / N
+    # a noise-free record fitted to rounding: nothing to refine
+    exact = float(np.sum(err ** 2)) <= (1e-24 * max(float(np.sum(y ** 2)), 1e-300))
+    # data-driven state basis: unit sample covariance of the predicted state
+    T = np.eye(n)
+    Sx = X.T @ X / N
+    try:
+        Lx = np.linalg.cholesky(Sx)
+        if np.linalg.cond(Lx) < 1e10:
+            T = scipy.linalg.solve_triangular(Lx, np.eye(n), lower=True)
+    except np.linalg.LinAlgError:
+        pass
+    Tinv = np.linalg.solve(T, np.eye(n))
+    cur = (T @ mats[0] @ Tinv, T @ mats[1], mats[2] @ Tinv, mats[3], T @ mats[4])
+    cur_x0 = x0 @ T.T
+    history = [start_cost]
+    penalty = math.sqrt(2.0 * (10.0 * start_cost + 1.0) / (N * ny))
+    stop_reason = "the start fits the data to rounding (noise-free): kept unchanged"
+    n_eval = 0
+    best_cost = start_cost
+    if not exact:
+        for _ in range(rounds):
+            new, new_x0, res = _round(cur, cur_x0, data, focus, W, layout, max_iterations,
+                                      tolerance, history, penalty)
+            n_eval += int(res.nfev)
+            stop_reason = str(res.message)
+            if not (res.cost < best_cost):
+                break
+            gain = (best_cost - res.cost) / max(best_cost, 1e-300)
+            cur, cur_x0, best_cost = new, new_x0, float(res.cost)
+            if gain < tolerance or res.status == 0:
+                break
+    accepted = [start_cost]                  # strictly decreasing costs of accepted iterates
+    for h in history[1:] + [best_cost]:
+        if h < accepted[-1]:
+            accepted.append(h)
+    history = accepted
+    # the same point evaluated by the kernel and by the simulation differs by rounding
+    best_cost = min(best_cost, history[-1])
+    info = dict(model.info)
+    info.update(refined_by="pem", focus=focus, start_cost=start_cost, final_cost=best_cost,
+                cost_history=np.array(history), stop_reason=stop_reason,
+                n_evaluations=n_eval, start_gain=k_source,
+                parametrisation="data-driven local coordinates (McKelvey et al. 2004) in a "
+                                "basis with unit predicted-state covariance")
+    if not best_cost < start_cost:
+        info["stop_reason"] = stop_reason if exact else \
+            f"no improvement on the start ({stop_reason}); start kept"
+        info["x0"] = x0[0] if len(ranges) == 1 else x0
+        out_K = K if focus == "prediction" else model.K
+        out_S = sigma0 if focus == "prediction" else model.noise_cov
+        if out_K is not None and not np.any(out_K) and focus == "prediction":
+            out_K = K
+        return model.with_noise_model(out_K, out_S, info=info)
+    A, B, C, D, Kn = cur
+    A, B, C, Kn, x0n = Tinv @ A @ T, Tinv @ B, C @ T, Tinv @ Kn, cur_x0 @ Tinv.T
+    info["x0"] = x0n[0] if len(ranges) == 1 else x0n
+    refined = StateSpace(A, B, C, D, model.dt, input_names=model.input_names,
+                         output_names=model.output_names, info=info, hold=model.hold)
+    if focus == "prediction":
+        Ap, Bp, Cp, Dp = _predictor(A, B, C, D, Kn, focus)
+        e = y - _simulate_experiments(Ap, Bp, Cp, Dp, v, x0n, ranges)[0]
+        info["predictor_spectral_radius"] = _radius(Ap)
+        return refined.with_noise_model(Kn, e.T @ e / N, info=info)
+    from subid.methods.dt.noise_model import with_factor
+    from subid.statistic.hankel import HankelStatistic
+    h = max(5, -(-n // ny) + 2)
+    if N >= 2 * h * (nu + ny + 1):
+        return with_factor(refined, HankelStatistic.from_data(data, 2 * h).factor())
+    return refined

@@ -1,0 +1,322 @@
+"""Identification of records larger than memory, from their statistic.
+
+A record is read piece by piece (:func:`subid.read_chunks`, or any iterable
+of :class:`IOData` pieces), reduced to its :class:`HankelStatistic` and
+identified from the statistic: memory stays bounded by one piece plus
+a matrix of ``(2 * horizon * (nu + ny))^2`` numbers, however long the record.
+When the pieces can be read again (a file, a list of pieces, or ``reread``),
+B, D and x0 come from the output regression of the in-memory default, done as
+a second pass over the pieces (:mod:`subid.methods.dt._bd_pass`), so the model is the
+in-memory one; a one-shot iterator leaves the statistic-only projection.
+
+Several experiments: the pieces are consecutive pieces of one record unless
+the caller says otherwise, in one of two ways: a piece that holds several
+experiments (made by :func:`subid.merge`) contributes its own borders (its
+first experiment continues the previous piece, the others are new), and the
+marker :data:`NEW_EXPERIMENT` between two pieces starts a new experiment.
+:func:`identify_file` with a list of files takes every file as one experiment.
+No Hankel column and no simulated trajectory then crosses a border, and x0 is
+estimated once per experiment, exactly as for the merged record in memory.
+"""
+
+from __future__ import annotations
+
+import itertools
+import logging
+import os
+import tempfile
+import warnings
+
+import numpy as np
+
+from subid._validation import same_period
+from subid.data import IOData
+from subid.errors import DataError
+from subid.io.formats import read_chunks
+from subid.methods.dt._bd_pass import OutputRegression, sequential
+from subid.methods.dt._subspace import default_horizon
+from subid.methods.registry import find
+from subid.statistic.hankel import HankelStatistic
+
+__all__ = ["identify_stream", "identify_file", "streaming_method", "NEW_EXPERIMENT"]
+
+log = logging.getLogger(__name__)
+
+
+def streaming_method(method: str):
+    """The :class:`~subid.registry.MethodSpec` of a method that identifies from a
+    statistic (capability ``streaming``); :class:`~subid.errors.OptionError` otherwise."""
+    return find(method, kind="batch", capability="streaming")
+
+
+class _NewExperiment:
+    """The marker type of :data:`NEW_EXPERIMENT`."""
+
+    def __repr__(self) -> str:
+        return "subid.methods.dt.stream.NEW_EXPERIMENT"
+
+    def __reduce__(self):
+        return "NEW_EXPERIMENT"
+
+
+#: Put between two pieces given to :func:`identify_stream`: the next piece
+#: starts a new experiment instead of continuing the record.
+NEW_EXPERIMENT = _NewExperiment()
+
+
+def _segments(pieces):
+    """``(experiment index, single-experiment IOData)`` for every piece in order.
+
+    :data:`NEW_EXPERIMENT` and the borders inside a merged piece start a new
+    experiment (markers before any sample, or repeated, change nothing)."""
+    experiment, started = 0, False
+    for k, piece in enumerate(pieces):
+        if piece is NEW_EXPERIMENT:
+            if started:
+                experiment += 1
+                started = False
+            continue
+        if not isinstance(piece, IOData):
+            raise DataError(f"piece {k} is a {type(piece).__name__}, not an IOData record "
+                            "(or subid.methods.dt.stream.NEW_EXPERIMENT)")
+        for j, part in enumerate(piece.experiments):
+            if j:
+                experiment += 1
+            yield experiment, part
+            started = True
+
+
+def statistic_depth(method: str, order, horizon, n_outputs: int, instruments="past") -> tuple:
+    """``(horizon, depth)`` of the statistic ``method`` needs."""
+    spec = streaming_method(method)
+    blocks = 1 if spec.name == "ls" and instruments is None else 2
+    if horizon is None:
+        fixed = order if isinstance(order, int) else None
+        horizon = default_horizon(fixed, n_outputs, 1, 10**18, blocks)
+    return horizon, blocks * horizon
+
+
+def identify_stream(pieces, method: str = "moesp", order=None, horizon=None, *,
+                    statistic: str = "gram", progress=None, reread=None, **options):
+    """Identify a model from consecutive pieces of one record.
+
+    Parameters
+    ----------
+    pieces : iterable of IOData
+        Consecutive, uniformly sampled pieces (e.g. :func:`subid.read_chunks`)
+        of one record. To give several experiments, put
+        :data:`NEW_EXPERIMENT` between the pieces of two experiments, or pass
+        pieces made by :func:`subid.merge` (their internal borders are kept;
+        the first experiment of a piece continues the previous piece). Two
+        pieces are never taken for different experiments otherwise: they are
+        joined as one record.
+    method : {'moesp', 'n4sid', 'ls'}
+        Batch method applied to the statistic: a method of
+        :data:`subid.registry.METHODS` with the ``streaming`` capability.
+    order, horizon
+        As for the method. The horizon must be known before the data are
+        read (default: 10 with an estimated order, as the batch methods).
+    statistic : {'gram', 'qr'}
+        Kind of :class:`HankelStatistic` (``'gram'``: fast lagged products;
+        ``'qr'``: accurate to rounding, ~25x slower).
+    progress : callable, optional
+        Wraps the iterator of pieces of the first pass (e.g. ``tqdm.tqdm``).
+    reread : callable, optional
+        Returns a fresh iterable of the same pieces, for the second pass (the
+        B, D, x0 regression). Default: iterate ``pieces`` again when it is a
+        re-iterable collection (a list, ...). For a one-shot iterator without
+        ``reread``, B and D come from the statistic only (the projection),
+        with a warning.
+    **options
+        Passed to the method. ``bd_method='projection'`` skips the second
+        pass (B and D from the statistic only, no x0).
+
+    Returns
+    -------
+    StateSpace
+        ``info['n_samples']`` is the length of the whole record; with several
+        experiments ``info['x0']`` has one row per experiment.
+    """
+    stat, first, experiment = None, None, 0
+    for k, (e, piece) in enumerate(_segments(pieces if progress is None else progress(pieces))):
+        if first is None:
+            first = piece
+            horizon, depth = statistic_depth(method, order, horizon, first.n_outputs,
+                                             options.get("instruments", "past"))
+            stat = HankelStatistic(first.n_inputs, first.n_outputs, depth, kind=statistic,
+                                   dt=first.dt, input_names=first.input_names,
+                                   output_names=first.output_names)
+        else:
+            _check_piece(piece, first, k)
+        if e != experiment:
+            stat.new_experiment()
+            experiment = e
+        stat.update(piece.u, piece.y)
+    if stat is None:
+        raise DataError("the record is empty: no pieces to identify from")
+    if options.get("bd_method", "auto") != "projection":
+        if reread is None and iter(pieces) is not pieces:
+            reread = lambda: pieces       # noqa: E731 - a collection iterates again
+        if reread is None:
+            warnings.warn("identify_stream: the pieces come from a one-shot iterator, so B and "
+                          "D come from the statistic only (bd_method='projection'), not from "
+                          "the output regression of the in-memory default; pass a list of "
+                          "pieces or reread= (a function returning them again)", stacklevel=2)
+        elif stat.n_experiments == 1:
+            attach_second_pass(stat, lambda: ((p.u, p.y) for _, p in _segments(reread())))
+        else:
+            def map_pieces(function, arguments):
+                groups = itertools.groupby(_segments(reread()), key=lambda item: item[0])
+                return [function(((p.u, p.y) for _, p in group), *arguments[e])
+                        for e, group in groups]
+            stat.output_regression = OutputRegression(
+                map_pieces, stat.n_experiments, stat.n_inputs, stat.n_outputs,
+                experiments=list(range(stat.n_experiments)))
+    log.info("identifying from the statistic of %d samples", stat.n_samples)
+    return streaming_method(method).load()(stat, order, horizon=horizon, **options)
+
+
+def _check_piece(piece, first, k: int) -> None:
+    """Every piece must continue the first one: same channels, same sampling."""
+    if not isinstance(piece, IOData):
+        raise DataError(f"piece {k} is a {type(piece).__name__}, not an IOData record")
+    if (piece.n_inputs, piece.n_outputs) != (first.n_inputs, first.n_outputs):
+        raise DataError(f"piece {k} has {piece.n_inputs} inputs and {piece.n_outputs} outputs "
+                        f"but the first piece has {first.n_inputs} and {first.n_outputs}")
+    if first.dt is None or piece.dt is None or not same_period(piece.dt, first.dt):
+        raise DataError(f"piece {k} is sampled with dt = {piece.dt} but the first piece with "
+                        f"dt = {first.dt}: the pieces of one record must share one uniform "
+                        "sampling period (resample them first)")
+
+
+def attach_second_pass(stat: HankelStatistic, make_chunks) -> HankelStatistic:
+    """Let the methods fit B, D, x0 on the record behind ``stat`` by a second pass.
+
+    ``make_chunks()`` returns a fresh iterable of the record's consecutive
+    ``(u, y)`` arrays (as fed to the statistic).
+    """
+    stat.output_regression = OutputRegression(sequential(make_chunks), 1, stat.n_inputs,
+                                              stat.n_outputs)
+    return stat
+
+
+def identify_file(path, inputs, outputs, *, dt=None, method: str = "moesp", order=None,
+                  horizon=None, chunk_size: int = 100_000, statistic: str = "gram",
+                  delimiter=None, progress=None, **options):
+    """Identify a model from a file of any size, with bounded memory.
+
+    The file is parsed once with :func:`subid.read_chunks` and reduced to its
+    statistic on the way; the B, D, x0 regression (unless
+    ``bd_method='projection'``) reads the parsed values back from a temporary
+    file of doubles (:class:`ParsedOnce`) instead of parsing the file again.
+    ``path`` may be a list of files: each is one experiment (no Hankel column
+    crosses from one file to the next; one x0 per file), as
+    ``subid.merge([subid.read(p, ...) for p in paths])`` in memory. See
+    :func:`identify_stream` for the parameters.
+    """
+    paths = [path] if isinstance(path, (str, os.PathLike)) else list(path)
+    if not paths:
+        raise DataError("identify_file needs a file (or a list of files, one per experiment)")
+    files = [ParsedOnce(lambda p=p: read_chunks(p, inputs, outputs, dt=dt,
+                                                chunk_size=chunk_size, delimiter=delimiter))
+             for p in paths]
+    pieces = files[0] if len(files) == 1 else _Experiments(files)
+    try:
+        return identify_stream(pieces, method, order, horizon, statistic=statistic,
+                               progress=progress, reread=lambda: pieces, **options)
+    finally:
+        for f in files:
+            f.close()
+
+
+class _Experiments:
+    """The pieces of several re-iterable records, :data:`NEW_EXPERIMENT` between them."""
+
+    def __init__(self, records):
+        self.records = records
+
+    def __iter__(self):
+        for k, record in enumerate(self.records):
+            if k:
+                yield NEW_EXPERIMENT
+            yield from record
+
+
+class ParsedOnce:
+    """The pieces of a file, parsed once: iterable any number of times.
+
+    The first complete iteration parses the file (``make()``, e.g.
+    :func:`subid.read_chunks`) and spools the values of each piece, as
+    float64, to a temporary file; later iterations read them back piece by
+    piece, without parsing. Memory stays bounded by one piece; the disk
+    holds the selected columns in doubles (8 bytes a value) until
+    :meth:`close`. When the temporary file cannot be written (no space),
+    later iterations parse the file again.
+    """
+
+    def __init__(self, make):
+        self.make = make
+        self.spool = None
+        self.sizes = None              # rows of each piece, once spooled whole
+        self.layout = None
+
+    def __iter__(self):
+        return self._replay() if self.sizes is not None else self._first()
+
+    def _first(self):
+        self.close()
+        try:
+            fd, name = tempfile.mkstemp(prefix="subid-stream-", suffix=".f8")
+            fh = os.fdopen(fd, "wb")
+            self.spool = name
+        except OSError:
+            fh = None
+        sizes = []
+        try:
+            for piece in self.make():
+                if self.layout is None:
+                    self.layout = (piece.n_inputs, piece.dt, piece.input_names,
+                                   piece.output_names)
+                if fh is not None:
+                    try:
+                        fh.write(np.hstack([piece.u, piece.y]).data)   # no bytes copy
+                    except OSError:
+                        fh.close()
+                        fh = None
+                        self.close()
+                sizes.append(piece.n_samples)
+                yield piece
+            if fh is not None:
+                fh.close()
+                fh = None
+                self.sizes = sizes
+        finally:
+            if fh is not None:         # abandoned or failed midway: parse again next time
+                fh.close()
+                self.close()
+
+    def _replay(self):
+        n_in, dt, in_names, out_names = self.layout
+        width = None
+        start = 0
+        with open(self.spool, "rb") as fh:
+            for rows in self.sizes:
+                if width is None:
+                    width = os.path.getsize(self.spool) // (8 * sum(self.sizes))
+                block = np.fromfile(fh, dtype=np.float64, count=rows * width)
+                block = block.reshape(rows, width)
+                piece = IOData(block[:, :n_in], block[:, n_in:], dt=dt,
+                               input_names=in_names, output_names=out_names, copy=False)
+                if start:
+                    piece = piece._derive(piece.u, piece.y, dt=dt, t0=start * dt)
+                start += rows
+                yield piece
+
+    def close(self):
+        """Delete the temporary file."""
+        if self.spool is not None:
+            try:
+                os.unlink(self.spool)
+            except OSError:
+                pass
+        self.spool, self.sizes = None, None

@@ -1,0 +1,251 @@
+"""The registry of identification methods: one contract for every method.
+
+Every batch method is a function ``method(data, order=None, *, option=...)
+-> StateSpace``: the data, the order, then keyword-only options with one
+vocabulary across methods (``horizon``, ``hold``, ``bd_method``,
+``estimate_x0``, ``feedthrough``, ``stability``, ``selection``,
+``weighting``, ``refine``, ``input_delay``, ...). Every online identifier is
+a class ``Cls(order, n_inputs, n_outputs, *, option=...)`` with ``update``,
+``model``, ``save`` and ``load``. Every model's ``info`` has the core keys
+of :data:`subid.methods._info.CORE_KEYS`.
+
+:data:`METHODS` maps a method's name to its :class:`MethodSpec`: where it
+lives (imported on first use), its kind, its time base, the keyword options
+it takes and its capabilities. The command line (``--method``, ``--option``),
+:func:`subid.identify_stream`, :mod:`subid.methods.dt.distributed`,
+:func:`subid.dt_to_ct`, :mod:`subid.cli.demo` and the conformance tests all read
+this one table; adding a method means adding one entry here (see
+CONTRIBUTING.md).
+
+Examples
+--------
+>>> from subid.methods.registry import METHODS, find
+>>> find("moesp").time
+'discrete'
+>>> "statistic" in find("n4sid").capabilities
+True
+>>> sorted(name for name, spec in METHODS.items() if spec.kind == "online")
+['adaptive', 'recursive']
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import importlib
+import importlib.util
+
+from subid.errors import OptionError, SubidError
+
+__all__ = ["MethodSpec", "MethodUnavailableError", "METHODS", "CAPABILITIES", "find",
+           "available_methods"]
+
+#: Capabilities a method may declare (``MethodSpec.capabilities``):
+#:
+#: ``statistic``        identifies from a :class:`subid.HankelStatistic` too
+#: ``streaming``        usable by :func:`subid.identify_stream` / :mod:`subid.methods.dt.distributed`
+#: ``order_selection``  chooses the order when ``order`` is None
+#: ``horizon``          takes a ``horizon`` option
+#: ``stability``        takes a ``stability`` option
+#: ``input_delay``      takes an ``input_delay`` option
+#: ``weighting``        takes a ``weighting`` option
+#: ``x0``               estimates the initial state (``estimate_x0``)
+#: ``refine``           takes ``refine='pem'``
+#: ``hold``             takes a ``hold`` option (the input between samples)
+#: ``nonuniform``       accepts non-uniformly sampled records
+#: ``seeded``           has a ``seed`` option (a random draw)
+CAPABILITIES = frozenset({"statistic", "streaming", "order_selection", "horizon", "stability",
+                          "input_delay", "weighting", "x0", "refine", "hold", "nonuniform",
+                          "seeded"})
+
+
+class MethodUnavailableError(SubidError):
+    """The method's module is not part of this version of subid."""
+
+
+@dataclasses.dataclass(frozen=True)
+class MethodSpec:
+    """One identification method.
+
+    Attributes
+    ----------
+    name : str
+        Registry name (``--method NAME`` on the command line).
+    kind : {'batch', 'online'}
+        ``batch``: a function ``fn(data, order=None, *, **options) ->
+        StateSpace``. ``online``: a class ``Cls(order, n_inputs, n_outputs,
+        *, **options)`` with ``update``, ``model``, ``save`` and ``load``.
+    module, attribute : str
+        Where the function or class lives; imported on first use.
+    time : {'discrete', 'continuous'}
+        Time base of the models it produces.
+    description : str
+        One line for ``subid methods``.
+    options : tuple of str
+        The keyword options it takes (after ``data, order`` for a batch
+        method, after ``order, n_inputs, n_outputs`` for an online one).
+    capabilities : frozenset of str
+        Subset of :data:`CAPABILITIES`.
+    aliases : tuple of str
+        Other names :func:`find` accepts (e.g. the function's name).
+    command_line : bool
+        Offered by ``subid identify``/``subid track`` and the demo.
+    """
+
+    name: str
+    kind: str
+    module: str
+    attribute: str
+    time: str
+    description: str
+    options: tuple = ()
+    capabilities: frozenset = frozenset()
+    aliases: tuple = ()
+    command_line: bool = True
+
+    def available(self) -> bool:
+        """Whether the method's module is installed (without importing it)."""
+        try:
+            return importlib.util.find_spec(self.module) is not None
+        except (ImportError, ValueError):
+            return False
+
+    def load(self):
+        """The function or class; :class:`MethodUnavailableError` when its module is absent."""
+        try:
+            module = importlib.import_module(self.module)
+        except ModuleNotFoundError as exc:
+            if exc.name == self.module:
+                raise MethodUnavailableError(
+                    f"method {self.name} is not available in this version of subid (module "
+                    f"{self.module} is missing); available methods: "
+                    f"{', '.join(available_methods(self.kind if self.kind == 'online' else None))}"
+                ) from None
+            raise
+        try:
+            return getattr(module, self.attribute)
+        except AttributeError:
+            raise MethodUnavailableError(
+                f"method {self.name} is not available in this version of subid "
+                f"({self.module} has no {self.attribute})") from None
+
+    @property
+    def function(self):
+        """Alias of :meth:`load` as a property (the function or class)."""
+        return self.load()
+
+    def accepts(self, option: str) -> bool:
+        """Whether ``option`` is one of the method's keyword options."""
+        return option in self.options
+
+    def supports(self, capability: str) -> bool:
+        """Whether the method declares ``capability`` (see :data:`CAPABILITIES`)."""
+        return capability in self.capabilities
+
+
+_DT_COMMON = ("horizon", "selection", "stability", "feedthrough", "estimate_x0", "bd_method",
+              "statistic", "refine", "input_delay")
+_DT_CAPS = frozenset({"statistic", "streaming", "order_selection", "horizon", "stability",
+                      "input_delay", "x0", "refine"})
+
+#: Every registered method, by name.
+METHODS: dict[str, MethodSpec] = {
+    "ls": MethodSpec(
+        "ls", "batch", "subid.methods.dt.ls_subspace", "ls_subspace", "discrete",
+        "SVD-free least-squares subspace identification (seed 001)",
+        options=_DT_COMMON + ("instruments", "selector", "seed", "instrument_weighting",
+                              "power_iterations", "normalize_outputs", "system_matrices"),
+        capabilities=_DT_CAPS | {"seeded"}, aliases=("ls_subspace",)),
+    "moesp": MethodSpec(
+        "moesp", "batch", "subid.methods.dt.moesp", "moesp", "discrete", "PO-MOESP (Verhaegen)",
+        options=_DT_COMMON + ("weighting", "system_matrices"),
+        capabilities=_DT_CAPS | {"weighting"}),
+    "n4sid": MethodSpec(
+        "n4sid", "batch", "subid.methods.dt.n4sid", "n4sid", "discrete",
+        "N4SID (Van Overschee & De Moor)",
+        options=tuple(o for o in _DT_COMMON if o != "bd_method") + ("weighting",),
+        capabilities=_DT_CAPS | {"weighting"}),
+    "ct": MethodSpec(
+        "ct", "batch", "subid.methods.ct.ct_subspace", "ct_subspace", "continuous",
+        "continuous-time subspace identification (uniform or non-uniform samples)",
+        options=("basis", "poly_order", "estimate_x0", "feedthrough", "hold", "instruments",
+                 "iterations", "tolerance", "refine", "refine_iterations", "startup",
+                 "correction", "ac_method", "bd_method", "filtering", "data_equation",
+                 "filtered"),
+        capabilities=frozenset({"order_selection", "x0", "hold", "nonuniform"}),
+        aliases=("ct_subspace",)),
+    "dt_to_ct": MethodSpec(
+        "dt_to_ct", "batch", "subid.methods.ct.ct_subspace", "dt_to_ct", "continuous",
+        "discrete-time subspace identification converted to continuous time (baseline)",
+        options=("method", "hold") + tuple(o for o in _DT_COMMON
+                                           if o not in ("feedthrough", "bd_method")),
+        capabilities=frozenset({"order_selection", "horizon", "hold", "x0"}),
+        command_line=False),
+    "recursive": MethodSpec(
+        "recursive", "online", "subid.methods.online.recursive", "RecursiveSubspace", "discrete",
+        "online SVD-free subspace identification (seed 001 made recursive), fixed state "
+        "basis",
+        options=("horizon", "forgetting", "instruments", "selector", "seed",
+                 "instrument_weighting", "power_iterations", "feedthrough", "dt",
+                 "history_size", "history_stride", "input_names", "output_names",
+                 "bd_method", "refresh_every", "restart_tolerance", "lags"),
+        capabilities=frozenset({"horizon", "seeded"}), aliases=("RecursiveSubspace",)),
+    "adaptive": MethodSpec(
+        "adaptive", "online", "subid.methods.online.adaptive", "AdaptiveIdentifier", "continuous",
+        "online continuous-time identification",
+        options=("horizon", "filter_poles", "forgetting", "bd_forgetting", "selector", "seed",
+                 "dt", "hold", "method", "scale_filters", "refresh_every", "bd_gate",
+                 "max_condition", "initial_covariance", "bd_initial_covariance",
+                 "ode_trace_bound", "history_size", "engine", "input_names", "output_names",
+                 "instrument_poles", "max_gap"),
+        capabilities=frozenset({"horizon", "hold", "nonuniform", "seeded"}),
+        aliases=("AdaptiveIdentifier",)),
+}
+
+
+def find(name: str, *, kind: str | None = None, time: str | None = None,
+         capability: str | None = None) -> MethodSpec:
+    """The :class:`MethodSpec` registered as ``name`` (or one of its aliases).
+
+    Parameters
+    ----------
+    name : str
+    kind : {'batch', 'online'}, optional
+        Required kind.
+    time : {'discrete', 'continuous'}, optional
+        Required time base.
+    capability : str, optional
+        Required capability.
+
+    Raises
+    ------
+    OptionError
+        No method of that name (and kind, time base, capability); the
+        message lists those that qualify.
+    """
+    def qualifies(spec):
+        return ((kind is None or spec.kind == kind) and (time is None or spec.time == time)
+                and (capability is None or capability in spec.capabilities))
+
+    for spec in METHODS.values():
+        if (name == spec.name or name in spec.aliases) and qualifies(spec):
+            return spec
+    names = [s.name for s in METHODS.values() if qualifies(s)]
+    raise OptionError(f"method must be one of {', '.join(repr(n) for n in names)}; "
+                      f"got {name!r}"[:300])
+
+
+def available_methods(kind: str | None = None, time_base: str | None = None, *,
+                      command_line: bool = True) -> list[str]:
+    """Names of the registered methods whose module is present.
+
+    Parameters
+    ----------
+    kind : {'batch', 'online'}, optional
+    time_base : {'discrete', 'continuous'}, optional
+    command_line : bool
+        Only those offered by the command line (default).
+    """
+    return [name for name, spec in METHODS.items()
+            if (kind is None or spec.kind == kind)
+            and (time_base is None or spec.time == time_base)
+            and (spec.command_line or not command_line) and spec.available()]

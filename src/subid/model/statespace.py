@@ -1,0 +1,1432 @@
+"""Linear state-space models: :class:`StateSpace`.
+
+A model is ``x' = A x + B u, y = C x + D u`` in continuous time (``dt == 0``,
+``x'`` the derivative) or ``x[k+1] = A x[k] + B u[k], y[k] = C x[k] + D u[k]``
+in discrete time (``dt > 0``, the sampling period). Time is axis 0 of every
+signal array.
+
+Model files
+-----------
+:meth:`StateSpace.save` writes JSON (never pickle) with the keys ``format``
+(``"subid.StateSpace"``), ``version`` (1; 2 when the model has a noise
+model; 3 when it assumes a first-order hold), ``A``, ``B``, ``C``, ``D``
+(nested lists, one row per matrix row), ``dt``, ``input_names``,
+``output_names``, ``info``, for a model in innovation form ``K`` (Kalman
+gain) and ``noise_cov`` (innovation covariance), and ``hold`` when it is
+``'foh'`` (:attr:`StateSpace.hold`; absent means ``'zoh'``). Values in ``info`` are encoded so that they come back unchanged:
+
+* ``bool``, ``int``, ``str``, ``None`` and finite floats are plain JSON values;
+  numpy scalars become the matching Python scalar;
+* a non-finite float is ``{"__float__": "nan"}`` (or ``"inf"``, ``"-inf"``);
+* a complex number is ``{"__complex__": [re, im]}``;
+* a numpy array is ``{"__ndarray__": nested list, "dtype": "float64",
+  "shape": [...]}``; inside a float array a non-finite entry is the string
+  ``"nan"``, ``"inf"`` or ``"-inf"``; a complex array stores ``[re, im]``
+  pairs (one extra trailing axis in the nested list);
+* lists and tuples become JSON lists (tuples come back as lists); dicts must
+  have string keys, and the three tag names above are reserved.
+
+The file is strict JSON (no ``NaN`` literals), readable by any JSON parser.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import numbers
+import os
+from collections.abc import Mapping
+
+import numpy as np
+from scipy import linalg
+
+import subid.model._simulate as _simulate
+from subid._validation import as_signal, check_dt, check_int, check_time_stamps, same_period
+from subid._version import __version__
+from subid.data import IOData
+from subid.delay import apply_to_inputs, frequency_factor, input_delay_of
+from subid.errors import DataError, ModelError, OptionError
+from subid.io._files import atomic_write
+
+__all__ = ["StateSpace"]
+
+FORMAT_NAME = "subid.StateSpace"
+FORMAT_VERSION = 3
+
+_EPS = np.finfo(np.float64).eps
+# Relative tolerance for time stamps that must match the model's period.
+# Bound on the number of complex entries handled at once by freqresp.
+_FREQ_CHUNK_ENTRIES = 4_000_000
+
+_TAG_ARRAY = "__ndarray__"
+_TAG_COMPLEX = "__complex__"
+_TAG_FLOAT = "__float__"
+_RESERVED_KEYS = (_TAG_ARRAY, _TAG_COMPLEX, _TAG_FLOAT)
+_NONFINITE_NAMES = {"nan": math.nan, "inf": math.inf, "-inf": -math.inf}
+#: Largest model file :meth:`StateSpace.load` reads (a model is a few matrices).
+_MAX_MODEL_BYTES = 256 * 2**20
+
+#: Input holds a model may assume (:attr:`StateSpace.hold`).
+HOLDS = ("zoh", "foh")
+
+_CONVERSION_METHODS = {"zoh": "zoh", "foh": "foh", "bilinear": "bilinear",
+                       "tustin": "bilinear"}
+
+
+# ---------------------------------------------------------------------------
+# validation helpers
+# ---------------------------------------------------------------------------
+def _plural(count: int, word: str, plural: str | None = None) -> str:
+    return f"{count} {word if count == 1 else (plural or word + 's')}"
+
+
+def _as_matrix(value, name: str) -> np.ndarray:
+    """``value`` as a finite float64 2-D read-only copy, or ModelError."""
+    if value is None:
+        raise ModelError(f"{name} is missing (None); pass a 2-D array")
+    try:
+        arr = np.asarray(value)
+    except (TypeError, ValueError) as exc:
+        raise ModelError(f"{name} cannot be read as an array ({exc}); "
+                         "pass a rectangular 2-D array of numbers") from None
+    if arr.dtype == object:
+        try:
+            arr = arr.astype(np.float64)
+        except (TypeError, ValueError):
+            raise ModelError(f"{name} holds values that are not numbers") from None
+    if arr.dtype.kind == "c":
+        raise ModelError(f"{name} is complex; state-space matrices must be real")
+    if arr.dtype.kind not in "biuf":
+        raise ModelError(f"{name} has dtype {arr.dtype}, which is not numeric")
+    if arr.ndim != 2:
+        hint = ""
+        if arr.ndim == 1 and name == "B":
+            hint = " (a single-input B is a column: pass B.reshape(-1, 1))"
+        elif arr.ndim == 1 and name == "C":
+            hint = " (a single-output C is a row: pass C.reshape(1, -1))"
+        elif arr.ndim == 0:
+            hint = " (a 1 x 1 matrix is written [[value]])"
+        raise ModelError(f"{name} must be a 2-D array, got {arr.ndim}-D with shape "
+                         f"{arr.shape}{hint}")
+    arr = np.array(arr, dtype=np.float64, order="C", copy=True)
+    bad = ~np.isfinite(arr)
+    if bad.any():
+        i, j = np.argwhere(bad)[0]
+        count = int(bad.sum())
+        raise ModelError(f"{name} has {count} non-finite entr{'y' if count == 1 else 'ies'} "
+                         f"(NaN or inf), the first at row {i}, column {j}; all "
+                         "matrix entries must be finite")
+    arr.setflags(write=False)
+    return arr
+
+
+def _model_dt(dt, name: str = "dt") -> float:
+    if isinstance(dt, (bool, np.bool_)) or not isinstance(dt, numbers.Real):
+        raise ModelError(f"{name} must be a number (0 for continuous time, the sampling "
+                         f"period for discrete time), got {dt!r}")
+    dt = float(dt)
+    if not math.isfinite(dt) or dt < 0:
+        raise ModelError(f"{name} must be finite and >= 0 (0 = continuous time), got {dt!r}")
+    return dt
+
+
+def _names(names, count: int, prefix: str, which: str) -> tuple[str, ...]:
+    if names is None:
+        return tuple(f"{prefix}{k + 1}" for k in range(count))
+    if isinstance(names, str):
+        names = [names]
+    try:
+        names = tuple(names)
+    except TypeError:
+        raise ModelError(f"{which} names must be a sequence of strings, got {names!r}") from None
+    if not all(isinstance(nm, str) for nm in names):
+        raise ModelError(f"{which} names must be strings, got {list(names)!r}")
+    if len(names) != count:
+        raise ModelError(f"{_plural(len(names), which + ' name')} {list(names)} given but the "
+                         f"model has {_plural(count, which)}")
+    if len(set(names)) != len(names):
+        dup = sorted({nm for nm in names if names.count(nm) > 1})
+        raise ModelError(f"{which} names repeat {dup}; names must be unique")
+    return names
+
+
+def _noise_matrices(K, noise_cov, n: int, p: int):
+    """Validated read-only ``(K, noise_cov)``; each may be None."""
+    if K is not None:
+        K = _as_matrix(K, "K")
+        if K.shape != (n, p):
+            raise ModelError(f"K has shape {K.shape[0]}x{K.shape[1]} but the model has order "
+                             f"{n} and {_plural(p, 'output')}: K must be {n} x {p} "
+                             "(order x n_outputs)")
+    if noise_cov is not None:
+        S = _as_matrix(noise_cov, "noise_cov")
+        if S.shape != (p, p):
+            raise ModelError(f"noise_cov has shape {S.shape[0]}x{S.shape[1]} but the model has "
+                             f"{_plural(p, 'output')}: it must be {p} x {p}")
+        scale = max(float(np.abs(S).max()), 1e-300)
+        if np.abs(S - S.T).max() > 1e-8 * scale:
+            raise ModelError("noise_cov is not symmetric; it must be a covariance matrix")
+        S = 0.5 * (S + S.T)
+        if np.linalg.eigvalsh(S).min() < -1e-8 * scale:
+            raise ModelError("noise_cov has a negative eigenvalue; it must be positive "
+                             "semi-definite (a covariance matrix)")
+        S.setflags(write=False)
+        noise_cov = S
+    return K, noise_cov
+
+
+def _method(method) -> str:
+    if not isinstance(method, str) or method.lower() not in _CONVERSION_METHODS:
+        raise ModelError(f"method must be 'zoh', 'foh' or 'bilinear' (alias 'tustin'), "
+                         f"got {method!r}")
+    return _CONVERSION_METHODS[method.lower()]
+
+
+def _check_nonsingular(M: np.ndarray, what: str, why: str) -> None:
+    """ModelError if ``M`` is singular to working precision."""
+    sv = np.linalg.svd(M, compute_uv=False)
+    if sv.size and not (sv[-1] > M.shape[0] * _EPS * sv[0]):
+        cond = math.inf if sv[-1] == 0 else float(sv[0] / sv[-1])
+        raise ModelError(f"{what} is singular (condition number {cond:.3g}); {why}")
+
+
+# ---------------------------------------------------------------------------
+# info <-> JSON
+# ---------------------------------------------------------------------------
+def _enc_float(x: float):
+    if math.isfinite(x):
+        return x
+    return {_TAG_FLOAT: "nan" if math.isnan(x) else ("inf" if x > 0 else "-inf")}
+
+
+def _nonfinite_to_str(obj):
+    if isinstance(obj, list):
+        return [_nonfinite_to_str(v) for v in obj]
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return "nan" if math.isnan(obj) else ("inf" if obj > 0 else "-inf")
+    return obj
+
+
+def _enc_array(arr: np.ndarray, where: str) -> dict:
+    kind = arr.dtype.kind
+    if kind == "b":
+        data, dtype = arr.tolist(), "bool"
+    elif kind in "iu":
+        data, dtype = arr.tolist(), str(arr.dtype)
+    elif kind in "fc":
+        if kind == "c":
+            dtype = str(arr.dtype)
+            real = np.stack([arr.real, arr.imag], axis=-1).astype(np.float64)
+        else:
+            dtype = str(arr.dtype)
+            real = arr.astype(np.float64)
+        data = real.tolist()
+        if not np.isfinite(real).all():
+            data = _nonfinite_to_str(data)
+    elif kind == "U":
+        data, dtype = arr.tolist(), "str"
+    else:
+        raise ModelError(f"{where} is a numpy array of dtype {arr.dtype}, which cannot be "
+                         "stored in a model file; use numeric, bool or string arrays")
+    return {_TAG_ARRAY: data, "dtype": dtype, "shape": list(arr.shape)}
+
+
+def _encode(obj, where: str):
+    """JSON-ready copy of ``obj`` (see the module docstring for the encoding)."""
+    if obj is None or isinstance(obj, (bool, str)):
+        return obj
+    if isinstance(obj, np.ndarray):
+        return _enc_array(obj, where)
+    if isinstance(obj, np.generic):
+        if obj.dtype.kind not in "biufcU":
+            raise ModelError(f"{where} is a numpy {obj.dtype} scalar, which cannot be "
+                             "stored in a model file")
+        obj = obj.item()
+        if isinstance(obj, (bool, str)):
+            return obj
+    if isinstance(obj, numbers.Integral):
+        return int(obj)
+    if isinstance(obj, numbers.Real):
+        return _enc_float(float(obj))
+    if isinstance(obj, numbers.Complex):
+        c = complex(obj)
+        return {_TAG_COMPLEX: [_enc_float(c.real), _enc_float(c.imag)]}
+    if isinstance(obj, Mapping):
+        out = {}
+        for key, value in obj.items():
+            if not isinstance(key, str):
+                raise ModelError(f"{where} has the key {key!r} of type {type(key).__name__}; "
+                                 "dictionaries stored in a model file need string keys")
+            if key in _RESERVED_KEYS:
+                raise ModelError(f"{where} uses the reserved key {key!r}; rename it")
+            out[key] = _encode(value, f"{where}[{key!r}]")
+        return out
+    if isinstance(obj, (list, tuple)):
+        return [_encode(v, f"{where}[{i}]") for i, v in enumerate(obj)]
+    raise ModelError(f"{where} is a {type(obj).__name__}, which cannot be stored in a model "
+                     "file; use numbers, strings, bools, None, lists, dicts or numpy arrays")
+
+
+def _dec_float(value, where: str) -> float:
+    if isinstance(value, Mapping):
+        if set(value) == {_TAG_FLOAT} and isinstance(value[_TAG_FLOAT], str) \
+                and value[_TAG_FLOAT] in _NONFINITE_NAMES:
+            return _NONFINITE_NAMES[value[_TAG_FLOAT]]
+        raise ModelError(f"{where} is not a valid encoded float: {value!r}")
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+        raise ModelError(f"{where} must be a number, got {value!r}")
+    return float(value)
+
+
+def _dec_array(obj: Mapping, where: str) -> np.ndarray:
+    if set(obj) != {_TAG_ARRAY, "dtype", "shape"}:
+        raise ModelError(f"{where} is an encoded array but has the keys {sorted(obj)}; "
+                         f"expected {_TAG_ARRAY!r}, 'dtype' and 'shape'")
+    dtype, shape, data = obj["dtype"], obj["shape"], obj[_TAG_ARRAY]
+    if not isinstance(shape, list) or not all(
+            isinstance(s, int) and not isinstance(s, bool) and s >= 0 for s in shape):
+        raise ModelError(f"{where}: 'shape' must be a list of non-negative integers, "
+                         f"got {shape!r}")
+    try:
+        if dtype == "str":
+            arr = np.array(data, dtype=str)
+        else:
+            dt = np.dtype(dtype)
+            if dt.kind not in "biufc":
+                raise TypeError(f"unsupported dtype {dtype!r}")
+            if dt.kind == "c":
+                pairs = np.array(data, dtype=np.float64)
+                if pairs.ndim == 0 or pairs.shape[-1] != 2:
+                    raise ValueError("complex entries must be [re, im] pairs")
+                arr = np.empty(pairs.shape[:-1], dtype=dt)
+                arr.real = pairs[..., 0]
+                arr.imag = pairs[..., 1]
+            elif dt.kind == "f":
+                arr = np.array(data, dtype=np.float64).astype(dt)
+            else:
+                if not _all_ints(data, bool_ok=dt.kind == "b"):
+                    raise ValueError("entries are not all integers" if dt.kind != "b"
+                                     else "entries are not all booleans")
+                arr = np.array(data, dtype=dt)
+        arr = arr.reshape(shape)
+    except (TypeError, ValueError, OverflowError) as exc:
+        raise ModelError(f"{where} is not a valid encoded {dtype} array of shape {shape} "
+                         f"({exc})") from None
+    return arr
+
+
+def _all_ints(data, *, bool_ok: bool) -> bool:
+    if isinstance(data, list):
+        return all(_all_ints(v, bool_ok=bool_ok) for v in data)
+    if bool_ok:
+        return isinstance(data, bool)
+    return isinstance(data, int) and not isinstance(data, bool)
+
+
+def _decode(obj, where: str):
+    """Inverse of :func:`_encode`."""
+    if obj is None or isinstance(obj, (bool, str, int, float)):
+        return obj
+    if isinstance(obj, Mapping):
+        keys = set(obj)
+        if _TAG_ARRAY in keys:
+            return _dec_array(obj, where)
+        if _TAG_FLOAT in keys:
+            return _dec_float(obj, where)
+        if _TAG_COMPLEX in keys:
+            pair = obj[_TAG_COMPLEX]
+            if keys != {_TAG_COMPLEX} or not isinstance(pair, (list, tuple)) or len(pair) != 2:
+                raise ModelError(f"{where} is not a valid encoded complex number: {obj!r}")
+            return complex(_dec_float(pair[0], where), _dec_float(pair[1], where))
+        out = {}
+        for key, value in obj.items():
+            if not isinstance(key, str):
+                raise ModelError(f"{where} has the non-string key {key!r}")
+            out[key] = _decode(value, f"{where}[{key!r}]")
+        return out
+    if isinstance(obj, (list, tuple)):
+        return [_decode(v, f"{where}[{i}]") for i, v in enumerate(obj)]
+    raise ModelError(f"{where} is a {type(obj).__name__}, which is not a JSON value")
+
+
+def _matrix_from_json(value, key: str) -> np.ndarray:
+    if isinstance(value, np.ndarray):
+        arr = value
+    elif isinstance(value, list):
+        try:
+            arr = np.array(value)
+        except (TypeError, ValueError):
+            raise ModelError(f"key {key!r} is not a rectangular 2-D array of numbers") from None
+    else:
+        raise ModelError(f"key {key!r} must be a list of rows (a 2-D array), got "
+                         f"{type(value).__name__}")
+    if arr.dtype.kind not in "iuf":
+        raise ModelError(f"key {key!r} must hold numbers only, got entries of type "
+                         f"{arr.dtype}")
+    if arr.ndim != 2:
+        raise ModelError(f"key {key!r} must be a list of rows (a 2-D array), got an array "
+                         f"of shape {arr.shape}")
+    return arr
+
+
+def _fmt_json(d: dict) -> str:
+    """Strict JSON text of a model dictionary, one matrix row per line."""
+    parts = []
+    for key, value in d.items():
+        if key in ("A", "B", "C", "D", "K", "noise_cov"):
+            rows = [json.dumps(row, allow_nan=False) for row in value]
+            text = "[\n    " + ",\n    ".join(rows) + "\n  ]" if rows else "[]"
+        elif key == "info":
+            text = json.dumps(value, indent=2, allow_nan=False).replace("\n", "\n  ")
+        else:
+            text = json.dumps(value, allow_nan=False)
+        parts.append(f"  {json.dumps(key)}: {text}")
+    return "{\n" + ",\n".join(parts) + "\n}\n"
+
+
+def _require_control():
+    try:
+        import control
+    except ImportError:
+        raise ImportError("python-control is not installed: pip install control "
+                          "(or pip install subid[control])") from None
+    return control
+
+
+def _resolve_dt(sys_dt, dt, source: str) -> float:
+    """Sampling period of a foreign system whose dt may be True/None."""
+    if sys_dt is True:
+        if dt is None:
+            raise ModelError(f"the {source} system is discrete-time with an unspecified "
+                             "sampling period (dt=True); pass the period, e.g. dt=0.1")
+        return _model_dt(dt)
+    if sys_dt is None or sys_dt is False:
+        return 0.0 if dt is None else _model_dt(dt)
+    value = _model_dt(sys_dt, name=f"the {source} system's dt")
+    if dt is not None and _model_dt(dt) != value:
+        raise ModelError(f"dt={dt!r} contradicts the {source} system's sampling "
+                         f"period {value!r}")
+    return value
+
+
+# ---------------------------------------------------------------------------
+# the model
+# ---------------------------------------------------------------------------
+class StateSpace:
+    """A linear time-invariant state-space model.
+
+    Continuous time (``dt == 0``)::
+
+        x'(t) = A x(t) + B u(t),    y(t) = C x(t) + D u(t)
+
+    Discrete time (``dt > 0``, the sampling period)::
+
+        x[k+1] = A x[k] + B u[k],   y[k] = C x[k] + D u[k]
+
+    Parameters
+    ----------
+    A : array_like, shape (n, n)
+        State matrix, ``n >= 1``.
+    B : array_like, shape (n, n_inputs)
+        Input matrix. Always 2-D: a single-input ``B`` is a column.
+        ``n_inputs`` may be 0 (a model without inputs).
+    C : array_like, shape (n_outputs, n)
+        Output matrix, ``n_outputs >= 1``.
+    D : array_like, shape (n_outputs, n_inputs), or 0 or None
+        Feedthrough matrix; the scalar 0 (or None) means zeros.
+    dt : float
+        Sampling period; 0 for a continuous-time model.
+    input_names, output_names : sequence of str, optional
+        Channel names (default ``u1, u2, ...`` and ``y1, y2, ...``).
+    info : dict, optional
+        Diagnostics set by the identification methods (singular values,
+        fit, horizon, ...). Kept as given; stored in model files (see the
+        module docstring for the values that can be stored).
+    K : array_like, shape (n, n_outputs), optional
+        Kalman gain of the innovation form ``x[k+1] = A x + B u + K e``,
+        ``y = C x + D u + e`` (discrete time; :func:`subid.predict` uses it).
+    noise_cov : array_like, shape (n_outputs, n_outputs), optional
+        Covariance of the innovations ``e`` (MATLAB's ``NoiseVariance``).
+    hold : {'zoh', 'foh'}
+        The input between samples that the model assumes: constant
+        (zero-order hold, default) or linear (first-order hold).
+        :meth:`simulate`, :func:`subid.fit_percent`, :func:`subid.predict`,
+        the residuals and the reports use it unless told otherwise; it is
+        set by the method that identified the model (``ct_subspace``
+        assumes ``'foh'``), kept by copies, :meth:`transform`, model files
+        and ``.mat`` files, and set by :meth:`to_continuous` /
+        :meth:`to_discrete` to the hold of the conversion.
+
+    Attributes
+    ----------
+    A, B, C, D : ndarray
+        Read-only float64 copies of the matrices.
+    dt : float
+        Sampling period (0 = continuous time).
+    input_names, output_names : tuple of str
+    info : dict
+    hold : str
+
+    Raises
+    ------
+    ModelError
+        Shapes disagree (the message names the matrix), values are not
+        finite or not numbers, ``dt`` is negative, names do not match.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from subid.model.statespace import StateSpace
+    >>> sys = StateSpace([[0.9, 0.1], [0.0, 0.5]], [[0.0], [1.0]], [[1.0, 0.0]], 0, dt=0.1)
+    >>> sys
+    StateSpace(order=2, n_inputs=1, n_outputs=1, dt=0.1, inputs=['u1'], outputs=['y1'])
+    >>> y = sys.simulate(np.ones(50))
+    >>> y.shape
+    (50, 1)
+    >>> sys.is_stable()
+    True
+    >>> sys.markov(4)[:, 0, 0].round(3).tolist()
+    [0.0, 0.0, 0.1, 0.14]
+    """
+
+    def __init__(self, A, B, C, D, dt, *, input_names=None, output_names=None, info=None,
+                 K=None, noise_cov=None, hold="zoh"):
+        A = _as_matrix(A, "A")
+        B = _as_matrix(B, "B")
+        C = _as_matrix(C, "C")
+        if A.shape[0] != A.shape[1]:
+            raise ModelError(f"A has shape {A.shape[0]}x{A.shape[1]}; it must be square "
+                             "(n x n, n = model order)")
+        n = A.shape[0]
+        if n == 0:
+            raise ModelError("A is 0x0: the model order must be at least 1")
+        if B.shape[0] != n:
+            raise ModelError(f"B has {_plural(B.shape[0], 'row')} but A is {n}x{n}: "
+                             f"B must be {n} x n_inputs")
+        if C.shape[1] != n:
+            raise ModelError(f"C has {_plural(C.shape[1], 'column')} but A is {n}x{n}: "
+                             f"C must be n_outputs x {n}")
+        if C.shape[0] == 0:
+            raise ModelError("C has no rows: a model needs at least one output")
+        p, m = C.shape[0], B.shape[1]
+        if D is None or _is_scalar_zero(D):
+            D = np.zeros((p, m))
+            D.setflags(write=False)
+        else:
+            if isinstance(D, (numbers.Number, np.generic)) or \
+                    (isinstance(D, np.ndarray) and D.ndim == 0):
+                raise ModelError(f"D is the scalar {D!r}; only the scalar 0 is accepted as "
+                                 "shorthand for zeros, pass a 2-D array "
+                                 f"({p} x {m}) otherwise")
+            D = _as_matrix(D, "D")
+            if D.shape != (p, m):
+                raise ModelError(f"D has shape {D.shape[0]}x{D.shape[1]} but C has "
+                                 f"{_plural(p, 'row')} and B has {_plural(m, 'column')}: "
+                                 f"D must be {p} x {m} (n_outputs x n_inputs)")
+        self._A, self._B, self._C, self._D = A, B, C, D
+        self._dt = _model_dt(dt)
+        self.input_names = _names(input_names, m, "u", "input")
+        self.output_names = _names(output_names, p, "y", "output")
+        if info is None:
+            info = {}
+        elif not isinstance(info, Mapping):
+            raise ModelError(f"info must be a dict, got {type(info).__name__}")
+        self.info = dict(info)
+        self._K, self._noise_cov = _noise_matrices(K, noise_cov, n, p)
+        if not isinstance(hold, str) or hold not in HOLDS:
+            raise ModelError(f"hold must be one of {', '.join(map(repr, HOLDS))}; got "
+                             f"{hold!r}"[:300])
+        self._hold = hold
+
+    # -- properties ------------------------------------------------------
+    @property
+    def K(self):
+        """Kalman gain of the innovation form, shape (n, n_outputs), read-only; None
+        when the model has no noise model."""
+        return self._K
+
+    @property
+    def noise_cov(self):
+        """Covariance of the innovations ``e`` (n_outputs x n_outputs), read-only;
+        None when unknown."""
+        return self._noise_cov
+
+    @property
+    def hold(self) -> str:
+        """The input between samples the model assumes: ``'zoh'`` or ``'foh'``
+        (the default of :meth:`simulate` and of the fit and prediction functions)."""
+        return self._hold
+
+    @property
+    def has_noise_model(self) -> bool:
+        """True when the model carries a Kalman gain ``K``."""
+        return self._K is not None
+
+    def with_noise_model(self, K=None, noise_cov=None, *, info=None) -> "StateSpace":
+        """The same model with another (or no) Kalman gain and innovation covariance.
+
+        Parameters
+        ----------
+        K : array_like, shape (n, n_outputs), optional
+        noise_cov : array_like, shape (n_outputs, n_outputs), optional
+        info : dict, optional
+            Replaces ``info`` (default: a copy of this model's).
+
+        Returns
+        -------
+        StateSpace
+        """
+        return StateSpace(self._A, self._B, self._C, self._D, self._dt,
+                          input_names=self.input_names, output_names=self.output_names,
+                          info=dict(self.info) if info is None else info, K=K,
+                          noise_cov=noise_cov, hold=self._hold)
+    @property
+    def A(self) -> np.ndarray:
+        """State matrix, shape (n, n), read-only."""
+        return self._A
+
+    @property
+    def B(self) -> np.ndarray:
+        """Input matrix, shape (n, n_inputs), read-only."""
+        return self._B
+
+    @property
+    def C(self) -> np.ndarray:
+        """Output matrix, shape (n_outputs, n), read-only."""
+        return self._C
+
+    @property
+    def D(self) -> np.ndarray:
+        """Feedthrough matrix, shape (n_outputs, n_inputs), read-only."""
+        return self._D
+
+    @property
+    def dt(self) -> float:
+        """Sampling period; 0 for continuous time."""
+        return self._dt
+
+    @property
+    def order(self) -> int:
+        """Number of states ``n``."""
+        return self._A.shape[0]
+
+    @property
+    def n_inputs(self) -> int:
+        """Number of inputs."""
+        return self._B.shape[1]
+
+    @property
+    def n_outputs(self) -> int:
+        """Number of outputs."""
+        return self._C.shape[0]
+
+    @property
+    def is_continuous(self) -> bool:
+        """True for a continuous-time model (``dt == 0``)."""
+        return self._dt == 0.0
+
+    def __repr__(self) -> str:
+        timing = "dt=0 (continuous)" if self.is_continuous else f"dt={self._dt!r}"
+        return (f"StateSpace(order={self.order}, n_inputs={self.n_inputs}, "
+                f"n_outputs={self.n_outputs}, {timing}, inputs={list(self.input_names)}, "
+                f"outputs={list(self.output_names)})")
+
+    def _repr_html_(self) -> str:
+        """Summary for Jupyter: order, channels, dt, stability, poles (see :mod:`subid._repr`)."""
+        from subid._repr import statespace_html
+        return statespace_html(self)
+
+    def _like(self, A, B, C, D, dt, K=None, noise_cov=None, hold=None) -> "StateSpace":
+        info = dict(self.info)
+        if dt != self._dt and "input_delay" in info:
+            import warnings
+
+            from subid.errors import DelayWarning
+            info.pop("input_delay")
+            warnings.warn("the input delays (counted in samples) are dropped by this change "
+                          f"of sampling (dt {self._dt} -> {dt}); call subid.absorb_delay(model) "
+                          "first to keep them as states", DelayWarning, stacklevel=3)
+        hold = self._hold if hold is None else hold
+        if "hold" in info:
+            info["hold"] = hold
+        return StateSpace(A, B, C, D, dt, input_names=self.input_names,
+                          output_names=self.output_names, info=info, K=K,
+                          noise_cov=noise_cov, hold=hold)
+
+    def _drop_noise_model(self, what: str) -> None:
+        if self._K is not None or self._noise_cov is not None:
+            import warnings
+
+            from subid.errors import NoiseModelWarning
+            warnings.warn(f"{what}: the Kalman gain K and the innovation covariance are "
+                          "dropped (an innovation model is tied to its sampling period and "
+                          "has no exact counterpart under this conversion); re-estimate "
+                          "them on data (subid.pem) if needed", NoiseModelWarning,
+                          stacklevel=3)
+
+    # -- simulation ------------------------------------------------------
+    def simulate(self, u, t=None, x0=None, *, hold=None, return_state=False):
+        """Response of the model to an input signal.
+
+        Parameters
+        ----------
+        u : array_like, shape (N, n_inputs) or (N,), or IOData
+            Input samples, time on axis 0 (1-D for a single input). With an
+            :class:`~subid.data.IOData` record its inputs ``u`` and time
+            stamps ``t`` are used.
+        t : array_like, shape (N,), optional
+            Time stamps of the samples. Required for a continuous-time model
+            (strictly increasing, uniform or not). For a discrete-time model
+            it may be omitted; if given it must be uniform with the model's
+            period ``dt``.
+        x0 : array_like, shape (n,), optional
+            State at the first sample (default zeros).
+        hold : {'zoh', 'foh'}, optional
+            Continuous time only: the input is constant on ``[t_k, t_{k+1})``
+            (``'zoh'``) or linear between ``u[k]`` and ``u[k+1]``
+            (``'foh'``). Default: the model's :attr:`hold`. The state is
+            propagated by the exact discretisation of every interval (one
+            matrix exponential per distinct interval length). Ignored for
+            discrete-time models.
+        return_state : bool
+            Also return the state at every sample.
+
+        Returns
+        -------
+        y : ndarray, shape (N, n_outputs)
+            Output at every sample.
+        x : ndarray, shape (N, n)
+            State at every sample (only with ``return_state=True``).
+
+        Raises
+        ------
+        DataError
+            ``u`` is not finite or has the wrong number of channels, ``x0``
+            has the wrong shape, ``t`` is missing (continuous time), not
+            increasing, or not uniform with period ``dt`` (discrete time).
+        """
+        if hold is None:
+            hold = self._hold
+        elif not isinstance(hold, str) or hold not in HOLDS:
+            raise OptionError(f"hold must be 'zoh' or 'foh', got {hold!r}"[:300])
+        if isinstance(u, IOData):
+            if t is not None:
+                raise DataError("pass either an IOData record or time stamps t, not both: "
+                                "the record carries its own time stamps")
+            data = u
+            u = data.u
+            if self.is_continuous:
+                t = data.t
+            elif data.dt is None:
+                raise DataError("the IOData record has non-uniform time stamps but the model "
+                                f"is discrete-time with period dt={self._dt!r}")
+            elif not same_period(data.dt, self._dt):
+                raise DataError(f"the IOData record is sampled with dt={data.dt!r} but the "
+                                f"model's sampling period is dt={self._dt!r}; pass data.u "
+                                "to simulate sample by sample")
+        # read only (the simulation keeps nothing of it): no copy of a float64 C array
+        u = as_signal(u, "input u", allow_empty_columns=self.n_inputs == 0, copy=False)
+        N, m = u.shape
+        if m != self.n_inputs:
+            hint = ""
+            if N == self.n_inputs and m != N:
+                hint = " (time is axis 0: was u passed transposed?)"
+            raise DataError(f"input u has {_plural(m, 'channel')} but the model has "
+                            f"{_plural(self.n_inputs, 'input')}{hint}")
+        if N == 0:
+            raise DataError("input u has no samples")
+        x0 = self._check_x0(x0)
+        if self.is_continuous:
+            if t is None:
+                raise DataError("a continuous-time model (dt=0) needs the time stamps t of "
+                                "the input samples: pass t=... or an IOData record")
+            t = check_time_stamps(t, N)
+            y, x = _simulate.simulate_continuous(self._A, self._B, self._C, self._D,
+                                                 t, u, x0, hold)
+        else:
+            if t is not None:
+                t = check_time_stamps(t, N)
+                steps = np.diff(t)
+                if steps.size and not same_period(steps, self._dt):
+                    raise DataError(f"time stamps t have steps from {float(steps.min())!r} to "
+                                    f"{float(steps.max())!r} but the model is discrete-time with "
+                                    f"period dt={self._dt!r}; t must be uniform with that "
+                                    "period (or omit t)")
+            if (delays := input_delay_of(self)) is not None:    # info['input_delay']
+                u = apply_to_inputs(u, delays)
+            y, x = _simulate.simulate_discrete(self._A, self._B, self._C, self._D, u, x0)
+        return (y, x) if return_state else y
+
+    def _check_x0(self, x0) -> np.ndarray:
+        n = self.order
+        if x0 is None:
+            return np.zeros(n)
+        arr = np.asarray(x0)
+        if arr.dtype.kind not in "biuf":
+            raise DataError(f"initial state x0 must be real numbers, got dtype {arr.dtype}")
+        if arr.ndim == 2 and 1 in arr.shape:
+            arr = arr.reshape(-1)
+        if arr.shape != (n,):
+            raise DataError(f"initial state x0 has shape {arr.shape} but the model order is "
+                            f"{n}: x0 must have shape ({n},)")
+        arr = np.asarray(arr, dtype=np.float64)
+        if not np.isfinite(arr).all():
+            raise DataError("initial state x0 has NaN or infinite entries")
+        return arr
+
+    # -- analysis --------------------------------------------------------
+    def markov(self, k: int) -> np.ndarray:
+        """Markov parameters (impulse response coefficients).
+
+        Parameters
+        ----------
+        k : int
+            Number of parameters, ``k >= 1``.
+
+        Returns
+        -------
+        ndarray, shape (k, n_outputs, n_inputs)
+            ``[D, C B, C A B, ..., C A^(k-2) B]``; with input delays
+        (``info['input_delay']``, discrete time) input j's column is shifted
+        by its delay.
+
+        Raises
+        ------
+        OrderError
+            ``k`` is not an integer >= 1.
+        """
+        k = check_int(k, "k", minimum=1)
+        out = np.empty((k, self.n_outputs, self.n_inputs))
+        out[0] = self._D
+        row = self._C
+        for i in range(1, k):
+            out[i] = row @ self._B
+            row = row @ self._A
+        if not self.is_continuous and (delays := input_delay_of(self)) is not None:
+            shifted = np.zeros_like(out)       # input j delayed by d_j samples
+            for col, d in enumerate(delays):
+                if d < k:
+                    shifted[d:, :, col] = out[:k - d, :, col]
+            out = shifted
+        return out
+
+    def poles(self) -> np.ndarray:
+        """Eigenvalues of ``A``.
+
+        Returns
+        -------
+        ndarray of complex, shape (n,)
+            Sorted by descending magnitude (discrete time) or descending real
+            part (continuous time); ties by descending imaginary part.
+        """
+        ev = np.linalg.eigvals(self._A).astype(complex)
+        primary = np.abs(ev) if not self.is_continuous else ev.real
+        order = np.lexsort((-ev.imag, -primary))
+        return ev[order]
+
+    def is_stable(self) -> bool:
+        """Asymptotic stability.
+
+        Returns
+        -------
+        bool
+            ``max |eig(A)| < 1`` for discrete time, ``max Re eig(A) < 0`` for
+            continuous time.
+        """
+        ev = np.linalg.eigvals(self._A)
+        if self.is_continuous:
+            return bool(ev.real.max() < 0)
+        return bool(np.abs(ev).max() < 1)
+
+    def freqresp(self, w) -> np.ndarray:
+        """Frequency response.
+
+        Parameters
+        ----------
+        w : array_like, shape (K,)
+            Angular frequencies in rad/s (a scalar counts as one frequency).
+
+        Returns
+        -------
+        ndarray of complex, shape (K, n_outputs, n_inputs)
+            ``G(j w) = C (j w I - A)^-1 B + D`` for continuous time,
+            ``G(exp(j w dt))`` for discrete time.
+
+        Raises
+        ------
+        DataError
+            ``w`` is not a finite real 1-D array.
+        ModelError
+            A frequency falls exactly on a pole (the response is infinite).
+        """
+        w = np.asarray(w)
+        if w.dtype.kind not in "biuf":
+            raise DataError(f"frequencies w must be real numbers (rad/s), got dtype {w.dtype}")
+        w = np.atleast_1d(w.astype(np.float64))
+        if w.ndim != 1:
+            raise DataError(f"frequencies w must be a 1-D array, got shape {w.shape}")
+        if not np.isfinite(w).all():
+            raise DataError("frequencies w contain NaN or infinite values")
+        s = 1j * w if self.is_continuous else np.exp(1j * w * self._dt)
+        n, m, p = self.order, self.n_inputs, self.n_outputs
+        G = np.empty((w.size, p, m), dtype=complex)
+        if m == 0 or w.size == 0:
+            return G
+        A = self._A.astype(complex)
+        Bc = self._B.astype(complex)
+        eye = np.eye(n)
+        chunk = max(1, _FREQ_CHUNK_ENTRIES // (n * (n + m)))
+        for a in range(0, w.size, chunk):
+            sc = s[a:a + chunk]
+            M = sc[:, None, None] * eye - A
+            try:
+                X = np.linalg.solve(M, np.broadcast_to(Bc, (sc.size, n, m)))
+            except np.linalg.LinAlgError:
+                X = None
+            if X is None or not np.isfinite(X).all():
+                self._raise_pole_hit(w[a:a + chunk], sc)
+            G[a:a + chunk] = self._C @ X + self._D
+        if not self.is_continuous and (delays := input_delay_of(self)) is not None:
+            G *= frequency_factor(delays, w, self._dt)       # info['input_delay']
+        return G
+
+    def _raise_pole_hit(self, w, s):
+        poles = np.linalg.eigvals(self._A)
+        dist = np.abs(s[:, None] - poles[None, :])
+        i, j = np.unravel_index(np.argmin(dist), dist.shape)
+        where = "s = j w" if self.is_continuous else "z = exp(j w dt)"
+        raise ModelError(f"the frequency w={float(w[i])!r} rad/s falls on the pole {poles[j]:.6g} "
+                         f"({where}): the frequency response is infinite there")
+
+    # -- conversions -----------------------------------------------------
+    def to_discrete(self, dt, method="zoh") -> "StateSpace":
+        """Discretise a continuous-time model.
+
+        Parameters
+        ----------
+        dt : float
+            Sampling period, > 0.
+        method : {'zoh', 'foh', 'bilinear'}
+            Zero-order hold, first-order hold (triangle hold) or the bilinear
+            (Tustin) transform (alias ``'tustin'``); the same formulas as
+            :func:`scipy.signal.cont2discrete`.
+
+        Returns
+        -------
+        StateSpace
+            Discrete-time model with the same names and a copy of ``info``.
+            A Kalman gain ``K`` and ``noise_cov`` are not carried over (with a
+            :class:`~subid.errors.NoiseModelWarning`): a continuous-time
+            innovation model has no exact sampled counterpart without the
+            noise intensity.
+
+        Raises
+        ------
+        ModelError
+            The model is already discrete-time, the method is unknown, or
+            (bilinear) ``I - dt/2 A`` is singular.
+        DataError
+            ``dt`` is not a positive number.
+        """
+        if not self.is_continuous:
+            raise ModelError(f"the model is already discrete-time (dt={self._dt!r}); "
+                             "convert it with to_continuous() first to resample it")
+        dt = check_dt(dt)
+        method = _method(method)
+        self._drop_noise_model("to_discrete")
+        A, B, C, D = self._A, self._B, self._C, self._D
+        if method == "bilinear":
+            ima = np.eye(self.order) - 0.5 * dt * A
+            _check_nonsingular(ima, "I - dt/2 A",
+                               f"A has an eigenvalue at 2/dt = {2 / dt:g}, where the "
+                               "bilinear transform is undefined")
+            Ad = np.linalg.solve(ima, np.eye(self.order) + 0.5 * dt * A)
+            Bd = np.linalg.solve(ima, dt * B)
+            Cd = np.linalg.solve(ima.T, C.T).T
+            Dd = D + 0.5 * C @ Bd
+        else:
+            Phi, G1, G2 = _simulate.expm_blocks(A, B, [dt], method)
+            Ad, Bd, Cd, Dd = Phi[0], G1[0], C, D
+            if method == "foh":
+                Bd = G1[0] - G2[0] + Phi[0] @ G2[0]
+                Dd = D + C @ G2[0]
+        return self._like(Ad, Bd, Cd, Dd, dt, hold=method if method in HOLDS else None)
+
+    def to_continuous(self, method="zoh") -> "StateSpace":
+        """Continuous-time model whose discretisation is this model.
+
+        Exact inverse of :meth:`to_discrete` with the same ``method``: the
+        matrix logarithm ``A = logm(A_d) / dt`` for ``'zoh'`` and ``'foh'``
+        (``B`` and ``D`` from the linear relations of the hold), the inverse
+        bilinear transform for ``'bilinear'``.
+
+        Parameters
+        ----------
+        method : {'zoh', 'foh', 'bilinear'}
+
+        Returns
+        -------
+        StateSpace
+            Continuous-time model (``dt == 0``) with the same names and a copy
+            of ``info``. ``K`` and ``noise_cov`` are dropped (with a
+            :class:`~subid.errors.NoiseModelWarning`): a sampled innovation
+            model (white innovations at the sampling instants) has no
+            continuous-time counterpart.
+
+        Raises
+        ------
+        ModelError
+            The model is already continuous-time; ``A_d`` is singular or has an
+            eigenvalue on the negative real axis (no real matrix logarithm,
+            ``'zoh'``/``'foh'``); ``A_d`` has an eigenvalue at -1
+            (``'bilinear'``).
+        """
+        if self.is_continuous:
+            raise ModelError("the model is already continuous-time (dt=0)")
+        method = _method(method)
+        self._drop_noise_model("to_continuous")
+        h = self._dt
+        n = self.order
+        Ad, Bd, Cd, Dd = self._A, self._B, self._C, self._D
+        eye = np.eye(n)
+        if method == "bilinear":
+            E = eye + Ad
+            _check_nonsingular(E, "I + A_d", "A_d has an eigenvalue at -1, which the "
+                               "bilinear transform maps to infinity")
+            M = np.linalg.solve(E, 2.0 * eye)          # M = I - h/2 A
+            A = (2.0 / h) * (eye - M)
+            B = M @ Bd / h
+            C = Cd @ M
+            D = Dd - 0.5 * C @ Bd
+            return self._like(A, B, C, D, 0.0)
+        A = _real_logm(Ad) / h
+        Phi, W1, W2 = _simulate.expm_blocks(A, eye, [h], method)
+        if method == "zoh":
+            _check_nonsingular(W1[0], "the hold integral of exp(A t)",
+                               "B cannot be recovered from A_d and B_d")
+            B = np.linalg.solve(W1[0], Bd)
+            return self._like(A, B, Cd, Dd, 0.0, hold="zoh")
+        K = W1[0] - W2[0] + Phi[0] @ W2[0]
+        _check_nonsingular(K, "the first-order-hold input map",
+                           "B cannot be recovered from A_d and B_d")
+        B = np.linalg.solve(K, Bd)
+        D = Dd - Cd @ (W2[0] @ B)
+        return self._like(A, B, Cd, D, 0.0, hold="foh")
+
+    def transform(self, T) -> "StateSpace":
+        """Similarity transformation to the state ``z = T x``.
+
+        Parameters
+        ----------
+        T : array_like, shape (n, n)
+            Nonsingular transformation.
+
+        Returns
+        -------
+        StateSpace
+            ``(T A T^-1, T B, C T^-1, D)`` and ``T K``, same dt, names,
+            ``noise_cov`` and a copy of ``info``. Markov parameters, frequency
+            response and predictions are unchanged.
+
+        Raises
+        ------
+        ModelError
+            ``T`` has the wrong shape, is not finite, or is singular.
+        """
+        T = _as_matrix(T, "T")
+        n = self.order
+        if T.shape != (n, n):
+            raise ModelError(f"T has shape {T.shape[0]}x{T.shape[1]} but the model order is "
+                             f"{n}: T must be {n} x {n}")
+        _check_nonsingular(T, "T", "a similarity transformation must be invertible")
+        lu = linalg.lu_factor(T, check_finite=False)
+        # X T^-1 = (T^-T X^T)^T
+        A = linalg.lu_solve(lu, (T @ self._A).T, trans=1, check_finite=False).T
+        C = linalg.lu_solve(lu, self._C.T, trans=1, check_finite=False).T
+        return self._like(A, T @ self._B, C, self._D, self._dt,
+                          None if self._K is None else T @ self._K, self._noise_cov)
+
+    def allclose(self, other: "StateSpace", rtol: float = 1e-5, atol: float = 1e-8) -> bool:
+        """Whether two models have the same shapes, time base and (to the given
+        tolerances, as in :func:`numpy.allclose`) the same matrices.
+
+        Parameters
+        ----------
+        other : StateSpace
+        rtol, atol : float
+
+        Returns
+        -------
+        bool
+            Note that this compares realisations, not input/output behaviour:
+            a similarity-transformed model is generally not ``allclose``.
+        """
+        if not isinstance(other, StateSpace):
+            return False
+        if (self._A.shape, self._B.shape, self._C.shape) != (
+                other._A.shape, other._B.shape, other._C.shape):
+            return False
+        if self.is_continuous != other.is_continuous:
+            return False
+        if not np.isclose(self._dt, other._dt, rtol=rtol, atol=atol):
+            return False
+        return all(np.allclose(a, b, rtol=rtol, atol=atol) for a, b in
+                   zip((self._A, self._B, self._C, self._D),
+                       (other._A, other._B, other._C, other._D)))
+
+    # -- serialisation ---------------------------------------------------
+    def to_dict(self) -> dict:
+        """JSON-ready dictionary of the model (see the module docstring).
+
+        Returns
+        -------
+        dict
+            Keys ``format``, ``version`` (of the format), ``subid_version``
+            (of the writer, :data:`subid.__version__`), ``A``, ``B``, ``C``,
+            ``D``, ``dt``, ``input_names``, ``output_names``, ``info``; only plain Python
+            values, serialisable with ``json.dumps(d, allow_nan=False)``.
+
+        Raises
+        ------
+        ModelError
+            ``info`` holds a value that cannot be stored (the message gives
+            its location).
+        """
+        d = {
+            "format": FORMAT_NAME,
+            "version": 1,
+            "subid_version": __version__,
+            "A": self._A.tolist(),
+            "B": self._B.tolist(),
+            "C": self._C.tolist(),
+            "D": self._D.tolist(),
+            "dt": self._dt,
+            "input_names": list(self.input_names),
+            "output_names": list(self.output_names),
+            "info": _encode(self.info, "info"),
+        }
+        # version 2 adds the optional noise model; a model without one is still
+        # written as version 1, readable by older subid releases
+        if self._K is not None:
+            d["K"] = self._K.tolist()
+            d["version"] = 2
+        if self._noise_cov is not None:
+            d["noise_cov"] = self._noise_cov.tolist()
+            d["version"] = 2
+        # version 3 adds the input hold; a zero-order-hold model omits it
+        if self._hold != "zoh":
+            d["hold"] = self._hold
+            d["version"] = 3
+        return d
+
+    @classmethod
+    def from_dict(cls, d) -> "StateSpace":
+        """Model from a dictionary written by :meth:`to_dict`.
+
+        Parameters
+        ----------
+        d : dict
+            Required keys ``format``, ``version``, ``A``, ``B``, ``C``, ``D``,
+            ``dt``; optional ``input_names``, ``output_names``, ``info``,
+            ``subid_version`` (ignored), ``K``, ``noise_cov``, ``hold``.
+
+        Returns
+        -------
+        StateSpace
+
+        Raises
+        ------
+        ModelError
+            A key is missing, unknown or holds a bad value (the message names
+            it), or the matrices are inconsistent.
+        """
+        if not isinstance(d, Mapping):
+            raise ModelError(f"a model description must be a JSON object (dict), got "
+                             f"{type(d).__name__}")
+        required = ("format", "version", "A", "B", "C", "D", "dt")
+        allowed = set(required) | {"input_names", "output_names", "info", "K", "noise_cov",
+                                   "hold", "subid_version"}
+        missing = [k for k in required if k not in d]
+        if missing:
+            raise ModelError(f"the model description is missing the key"
+                             f"{'s' if len(missing) > 1 else ''} "
+                             f"{', '.join(repr(k) for k in missing)}")
+        unknown = sorted(str(k) for k in d if k not in allowed)
+        if unknown:
+            raise ModelError(f"the model description has unknown key"
+                             f"{'s' if len(unknown) > 1 else ''} {unknown}")
+        if d["format"] != FORMAT_NAME:
+            raise ModelError(f"key 'format' is {d['format']!r}; expected {FORMAT_NAME!r}")
+        version = d["version"]
+        if isinstance(version, bool) or not isinstance(version, int) or version < 1:
+            raise ModelError(f"key 'version' must be a positive integer, got {version!r}")
+        if version > FORMAT_VERSION:
+            raise ModelError(f"key 'version' is {version}: the model was written by a newer "
+                             f"subid (this one reads version {FORMAT_VERSION}); upgrade subid")
+        mats = [_matrix_from_json(d[k], k) for k in ("A", "B", "C", "D")]
+        dt = d["dt"]
+        if isinstance(dt, bool) or not isinstance(dt, numbers.Real) \
+                or not math.isfinite(dt) or dt < 0:
+            raise ModelError(f"key 'dt' must be a finite number >= 0, got {dt!r}")
+        names = {}
+        for key in ("input_names", "output_names"):
+            value = d.get(key)
+            if value is not None and (not isinstance(value, (list, tuple)) or
+                                      not all(isinstance(v, str) for v in value)):
+                raise ModelError(f"key {key!r} must be a list of strings, got {value!r}")
+            names[key] = value
+        info = d.get("info")
+        if info is None:
+            info = {}
+        elif not isinstance(info, Mapping):
+            raise ModelError(f"key 'info' must be an object (dict), got {type(info).__name__}")
+        info = _decode(info, "info")
+        noise = {k: (_matrix_from_json(d[k], k) if d.get(k) is not None else None)
+                 for k in ("K", "noise_cov")}
+        hold = d.get("hold", "zoh")
+        if hold not in HOLDS:
+            raise ModelError(f"key 'hold' must be one of {', '.join(map(repr, HOLDS))}, got "
+                             f"{hold!r}"[:300])
+        return cls(*mats, dt, info=info, **names, **noise, hold=hold)
+
+    def save(self, path) -> None:
+        """Write the model to a JSON file, atomically.
+
+        The text goes to a temporary file in the same directory, which is
+        flushed, synced to disk and then renamed over ``path``: a reader (or
+        a crash) never sees a partly written file, and an existing file is
+        left untouched if writing fails.
+
+        Parameters
+        ----------
+        path : str or os.PathLike
+
+        Raises
+        ------
+        ModelError
+            ``info`` holds a value that cannot be stored (nothing is written).
+        OSError
+            The file cannot be written.
+        """
+        text = _fmt_json(self.to_dict())
+        with atomic_write(path, "w", encoding="utf-8", what="model file") as fh:
+            fh.write(text)
+
+    @classmethod
+    def load(cls, path) -> "StateSpace":
+        """Read a model written by :meth:`save`.
+
+        Parameters
+        ----------
+        path : str or os.PathLike
+
+        Returns
+        -------
+        StateSpace
+
+        Raises
+        ------
+        DataFileNotFoundError
+            The file does not exist.
+        FileReadError
+            The file exists but cannot be read: not a regular file (a
+            directory, a FIFO, a device), or larger than 256 MB.
+        ModelError
+            The file is not valid JSON (truncated, corrupted, nested too
+            deeply, numbers beyond 64 bits or overflowing) or does not
+            describe a valid model; the message names the file.
+        """
+        from subid.io._files import read_regular
+        from subid.io._schema import parse_json
+        path = os.fsdecode(path) if isinstance(path, bytes) else os.fspath(path)
+        raw = read_regular(path, what="model file", max_bytes=_MAX_MODEL_BYTES)
+        if not raw.strip():
+            raise ModelError(f"model file '{path}' is empty")
+        d = parse_json(raw, f"model file '{path}'", ModelError)
+        try:
+            return cls.from_dict(d)
+        except ModelError as exc:
+            raise ModelError(f"model file '{path}': {exc}") from None
+
+    # -- other libraries -------------------------------------------------
+    def to_control(self):
+        """Convert to a python-control state-space system.
+
+        Returns
+        -------
+        control.StateSpace
+            ``dt`` 0 for continuous time, the sampling period otherwise;
+            input and output labels are the channel names.
+
+        Raises
+        ------
+        ImportError
+            python-control is not installed (``pip install control``).
+
+        Notes
+        -----
+        ``control.StateSpace`` has no slot for a Kalman gain or a noise
+        covariance: ``K`` and ``noise_cov`` are not exported. To keep them,
+        export the predictor or the noise channels yourself, e.g.
+        ``ss(A, [B K], C, [D I], dt)`` with the innovations as extra inputs.
+        Input delays (``info['input_delay']``) are exported as extra states
+        (:func:`subid.absorb_delay`).
+        """
+        control = _require_control()
+        m = _without_delay(self)
+        return control.ss(np.array(m._A), np.array(m._B), np.array(m._C),
+                          np.array(m._D), m._dt, inputs=list(m.input_names),
+                          outputs=list(m.output_names))
+
+    def to_mat(self, path) -> None:
+        """Write the model as MATLAB ``ss(A, B, C, D, Ts)`` fields (:func:`subid.interop.save_mat`);
+        input delays become extra states (:func:`subid.absorb_delay`)."""
+        from subid.io.formats import write_mat_model
+        write_mat_model(_without_delay(self), path)
+
+    @classmethod
+    def from_mat(cls, path, *, dt=None) -> "StateSpace":
+        """Read a model from a MATLAB ``.mat`` file (:func:`subid.interop.load_mat`).
+
+        The file is read by :func:`subid.io.formats.mat_variables`, the validated MAT
+        loader of :func:`subid.read`.
+        """
+        from subid.io.formats import read_mat_model
+        return read_mat_model(path, cls, dt=dt)
+
+    @classmethod
+    def from_control(cls, sys, *, dt=None) -> "StateSpace":
+        """Model from a python-control system.
+
+        Parameters
+        ----------
+        sys : control.StateSpace or other control LTI system
+            Transfer functions are converted with ``control.ss``.
+        dt : float, optional
+            Sampling period to use when ``sys.dt`` does not give one:
+            python-control's ``dt=True`` (discrete time, unspecified period)
+            requires it. ``dt=None`` (unspecified time base) is read as
+            continuous time unless ``dt`` is given here.
+
+        Returns
+        -------
+        StateSpace
+            With the system's input and output labels as channel names.
+
+        Raises
+        ------
+        ImportError
+            python-control is not installed.
+        ModelError
+            ``sys`` is not a python-control LTI system, has no states, or its
+            sampling period is unspecified and ``dt`` is not given.
+        """
+        control = _require_control()
+        if not isinstance(sys, control.StateSpace):
+            if isinstance(sys, control.LTI):
+                sys = control.ss(sys)
+            else:
+                raise ModelError(f"expected a python-control system, got "
+                                 f"{type(sys).__name__}")
+        period = _resolve_dt(sys.dt, dt, "python-control")
+        return cls(np.asarray(sys.A), np.asarray(sys.B), np.asarray(sys.C),
+                   np.asarray(sys.D), period, input_names=list(sys.input_labels),
+                   output_names=list(sys.output_labels))
+
+    def to_scipy(self):
+        """Convert to :class:`scipy.signal.StateSpace`.
+
+        Returns
+        -------
+        scipy.signal.StateSpace
+            Continuous (``dt=None``) or discrete with the sampling period.
+
+        Notes
+        -----
+        ``scipy.signal.StateSpace`` has no slot for a Kalman gain or a noise
+        covariance: ``K`` and ``noise_cov`` are not exported. Input delays are
+        exported as extra states (:func:`subid.absorb_delay`).
+        """
+        from scipy import signal
+        m = _without_delay(self)
+        mats = [np.array(M) for M in (m._A, m._B, m._C, m._D)]
+        if m.is_continuous:
+            return signal.StateSpace(*mats)
+        return signal.StateSpace(*mats, dt=m._dt)
+
+    @classmethod
+    def from_scipy(cls, sys, *, dt=None) -> "StateSpace":
+        """Model from a :mod:`scipy.signal` LTI system.
+
+        Parameters
+        ----------
+        sys : scipy.signal.lti or scipy.signal.dlti
+            Transfer-function and zero-pole-gain systems are converted with
+            ``sys.to_ss()``.
+        dt : float, optional
+            Sampling period for a discrete system created with scipy's
+            default ``dt=True`` (unspecified period).
+
+        Returns
+        -------
+        StateSpace
+
+        Raises
+        ------
+        ModelError
+            ``sys`` is not a scipy LTI system, has no states, or its sampling
+            period is unspecified and ``dt`` is not given.
+        """
+        from scipy import signal
+        if not isinstance(sys, (signal.lti, signal.dlti)):
+            raise ModelError(f"expected a scipy.signal lti or dlti system, got "
+                             f"{type(sys).__name__}")
+        if not isinstance(sys, signal.StateSpace):
+            sys = sys.to_ss()
+        period = _resolve_dt(sys.dt, dt, "scipy")
+        return cls(sys.A, sys.B, sys.C, sys.D, period)
+
+
+def _is_scalar_zero(value) -> bool:
+    if isinstance(value, (bool, np.bool_)):
+        return False
+    if isinstance(value, np.ndarray):
+        return value.ndim == 0 and value.dtype.kind in "iuf" and value == 0
+    return isinstance(value, (numbers.Number, np.generic)) and value == 0
+
+
+def _real_logm(Ad: np.ndarray) -> np.ndarray:
+    """Principal real logarithm of ``Ad``, or ModelError when none exists."""
+    ev = np.linalg.eigvals(Ad)
+    scale = max(1.0, float(np.abs(ev).max()))
+    tiny = np.abs(ev) <= Ad.shape[0] * _EPS * scale
+    if tiny.any():
+        raise ModelError("A_d is singular (eigenvalue 0): no continuous-time model "
+                         "discretises to it (a pole at z = 0 is an infinitely fast "
+                         "continuous pole); use method='bilinear' instead")
+    negative = (ev.real < 0) & (np.abs(ev.imag) <= 1e-8 * np.abs(ev))
+    if negative.any():
+        raise ModelError(f"A_d has the eigenvalue {ev[negative][0].real:.6g} on the "
+                         "negative real axis, which has no real matrix logarithm: no "
+                         "continuous-time model with this sampling period has this "
+                         "discretisation; use method='bilinear' instead")
+    with np.errstate(all="ignore"):
+        L = linalg.logm(Ad)
+    L = np.asarray(L)
+    if not np.isfinite(L).all():
+        raise ModelError("the matrix logarithm of A_d is not finite; A_d is too close "
+                         "to singular")
+    if np.iscomplexobj(L):
+        if np.abs(L.imag).max() > 1e-8 * max(1.0, float(np.abs(L.real).max())):
+            raise ModelError("A_d has no real matrix logarithm (the principal "
+                             "logarithm is complex)")
+        L = L.real
+    return np.ascontiguousarray(L)
+
+
+def _without_delay(model):
+    """``model`` with its input delays as states, for exports that know no delays."""
+    if input_delay_of(model) is None:
+        return model
+    from subid.delay import absorb_delay
+    return absorb_delay(model)
