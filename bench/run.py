@@ -35,7 +35,7 @@ MEMORY_BUDGET_MB = 8000.0
 ONLINE_SAMPLES = 200_000
 ORDER, HORIZON = 4, 5
 
-OURS = ["subid.methods.dt.ls_subspace", "subid.methods.dt.moesp", "subid.methods.dt.n4sid", "subid.moesp (statistic only)"]
+OURS = ["subid.ls_subspace", "subid.moesp", "subid.n4sid", "subid.moesp (statistic only)"]
 PEERS = ["SIPPY N4SID", "nfoursid"]
 
 
@@ -50,11 +50,11 @@ def _make_data(n):
 
 def _runner(method, horizon=HORIZON):
     import subid
-    if method == "subid.methods.dt.ls_subspace":
+    if method == "subid.ls_subspace":
         return lambda d: subid.ls_subspace(d, ORDER, horizon=horizon)
-    if method == "subid.methods.dt.moesp":
+    if method == "subid.moesp":
         return lambda d: subid.moesp(d, ORDER, horizon=horizon)
-    if method == "subid.methods.dt.n4sid":
+    if method == "subid.n4sid":
         return lambda d: subid.n4sid(d, ORDER, horizon=horizon)
     if method == "subid.moesp (statistic only)":
         return lambda d: subid.moesp(d, ORDER, horizon=horizon, bd_method="projection")
@@ -209,7 +209,7 @@ def main(argv=None) -> int:
             rows.append(f"| {n:,} | {method} | {r['seconds'] * 1e3:,.1f} | {r['peak_mb']:,.0f} | "
                         f"{r['markov_error']:.1e} | {'; '.join(ratios)} |")
     goal = []
-    for method in ("subid.methods.dt.n4sid", "subid.moesp (statistic only)",
+    for method in ("subid.n4sid", "subid.moesp (statistic only)",
                    "subid.ls_subspace (statistic only)"):
         r = _case_in_subprocess(method, 10_000_000, 3, horizon=10)
         print(f"goal {method}: {r}", flush=True)
