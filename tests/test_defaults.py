@@ -282,3 +282,20 @@ def test_evaporator_default_skips_a_choice_only_the_final_refit_destabilised():
     assert model.info["stability"]["action"] != "enforced"
     np.testing.assert_array_equal(model.A, again.A)
     assert np.mean(subid.fit_percent(model, val)) > 61.4
+
+
+def test_long_records_skip_the_system_matrix_choice():
+    """``system_matrices='auto'`` cross-validates its two estimators on short records
+    only: beyond AUTO_VARIANT_MAX_SAMPLES it is 'shift', with no fold fits (an explicit
+    order and horizon cost one fit), and a given order still reproduces the model."""
+    from subid.methods.dt._subspace import AUTO_VARIANT_MAX_SAMPLES
+    data = subid.systems.simulate_data(subid.systems.seed001_system(),
+                                       AUTO_VARIANT_MAX_SAMPLES + 500, seed=3,
+                                       output_snr_db=30)
+    for method in (subid.moesp, subid.ls_subspace):
+        auto = method(data, 3, horizon=8)
+        shift = method(data, 3, horizon=8, system_matrices="shift")
+        assert auto.info["system_matrices"] == "shift"
+        assert "system_matrices_selection" not in auto.info
+        np.testing.assert_array_equal(auto.A, shift.A)
+        np.testing.assert_array_equal(auto.B, shift.B)

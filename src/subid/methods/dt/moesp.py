@@ -90,10 +90,11 @@ def moesp(data, order=None, *, horizon=None, weighting="moesp", selection="cv",
         form, :func:`subid.methods.dt._subspace.predictor_b_d`). ``'states'``: the
         state sequence ``X = Γ^† O`` and ``[A B; C D]`` by least squares on
         it, as :func:`subid.n4sid` does (VODM 1996, Sec. 4.3.2).
-        ``'auto'`` (default): with ``selection='cv'`` on a record, the
-        cross-validation chooses between them (with the order and horizon,
-        or alone when both are given; ``'shift'`` on ties, so noise-free
-        data give the classical model); otherwise ``'shift'``.
+        ``'auto'`` (default): with ``selection='cv'`` on a record of up to
+        20,000 samples, the cross-validation chooses between them (with the
+        order and horizon, or alone when both are given; ``'shift'`` on
+        ties, so noise-free data give the classical model); otherwise
+        (longer records, statistics) ``'shift'``.
         ``info['system_matrices']`` names the one used. Neither is better on
         every record: on the DaISy evaporator record ``'states'`` reaches
         64 % validation fit against 61 %; on exchanger ``'shift'`` 65 %
