@@ -48,14 +48,12 @@ impulse are ``c_ee(d) = [d = 0]``, ``c_{e,z}(d) = z(d-1)`` (the first samples),
 
 from __future__ import annotations
 
-import math
-
 import numba
 import numpy as np
 import scipy.fft
 import scipy.linalg
 
-from subid.methods.dt._regression import parameter_count
+from subid.methods.dt._regression import parameter_count, solve_normal_equations
 
 #: Samples are buffered and added in blocks of this many by FFT (O(p^2 log L)
 #: per sample instead of O(L p^2)); a model request adds the rest.
@@ -336,27 +334,10 @@ def end_sensitivity(stat: LaggedStatistic, A, powers, t_end: int) -> np.ndarray:
 def solve(Nmat, n, nu, ny, *, feedthrough, n_samples, max_condition=1e12):
     """``(B, D, x0, theta, diagnostics)`` from the augmented normal matrix, or
     None when its equilibrated part has a condition number above
-    ``max_condition`` (the regression does not determine the parameters)."""
-    nx, q, p = parameter_count(n, nu, ny, True, feedthrough)
-    if not np.isfinite(Nmat).all():
-        return None
-    G, b, yy = Nmat[:p, :p], Nmat[:p, p], Nmat[p, p]
-    scale = np.sqrt(np.diag(G)).copy()
-    scale[scale == 0] = 1.0
-    Ge = G / scale[:, None] / scale[None, :]
-    ev = np.linalg.eigvalsh(Ge)
-    if ev[0] <= 0 or ev[-1] / ev[0] > max_condition:
-        return None
-    theta = scipy.linalg.cho_solve(scipy.linalg.cho_factor(Ge, check_finite=False),
-                                   b / scale, check_finite=False) / scale
-    x0 = theta[:n]
-    B = theta[nx:q].reshape(nu, n).T
-    D = theta[q:p].reshape(nu, ny).T if feedthrough else np.zeros((ny, nu))
-    resid2 = max(yy - theta @ b, 0.0)
-    diagnostics = {
-        "residual_rms": float(math.sqrt(resid2 / (n_samples * ny))),
-        "regression_condition": float(math.sqrt(ev[-1] / ev[0])),
-        "regression_rank_deficient": False,
-        "regression_path": "lagged",
-    }
-    return B, D, x0, theta, diagnostics
+    ``max_condition`` (the regression does not determine the parameters): the
+    batch solve of the modal path (:func:`subid.methods.dt._regression.solve_normal_equations`)."""
+    solved = solve_normal_equations(Nmat, n, nu, ny, estimate_x0=True, feedthrough=feedthrough,
+                                    n_samples=n_samples, max_condition=max_condition)
+    if solved is not None:
+        solved[4]["regression_path"] = "lagged"
+    return solved
