@@ -112,9 +112,15 @@ _STEP_CACHE = 64
 _INSTRUMENT_POLE_RATIO = 0.25
 # Default (forgetting, bd_forgetting) per method. 'ls' and 'ode': the paper's
 # noise-free values. 'iv': a long memory for M (the IV estimate is unbiased
-# under noise, so averaging pays: measured in docs/seed000.md) and a shorter
-# one for θ, whose regressor Ψ is built from the past estimates of (Ã, C̃).
-_DEFAULT_FORGETTING = {"iv": (0.002, 0.02), "ls": (0.4, 0.08), "ode": (0.4, 0.08)}
+# under noise, so averaging pays: measured in docs/seed000.md); bd_forgetting
+# None = tied to the forgetting actually used (ratio _IV_BD_RATIO): θ is
+# regressed on Ψ, built from the current (Ã, C̃), so a memory for θ shorter
+# than that of M buys tracking that (Ã, C̃) cannot follow, at a variance of θ
+# proportional to bd_forgetting (exponentially weighted LS: covariance ≈
+# β/2 · noise variance · inverse regressor covariance); a longer one would
+# mix in rows built from (Ã, C̃) that M itself has forgotten.
+_DEFAULT_FORGETTING = {"iv": (0.002, None), "ls": (0.4, 0.08), "ode": (0.4, 0.08)}
+_IV_BD_RATIO = 1.0
 
 
 def _pack_tables(arrays):
@@ -217,9 +223,12 @@ class AdaptiveIdentifier(OnlineIdentifier):
         ``'iv'`` (unbiased, so a long memory pays), 0.4 otherwise.
     bd_forgetting : float, optional
         β of (20), the same for (B̃, D). The paper takes it smaller than α
-        (0.08 and 0.008). Default 0.02 for ``'iv'`` (θ is regressed on Ψ,
-        built from the past estimates of (Ã, C̃), which a longer memory
-        would mix in), 0.08 otherwise.
+        (0.08 and 0.008). Default for ``'iv'``: equal to the forgetting used
+        (0.002 with the default forgetting), i.e. θ and M have the same
+        memory: θ is regressed on Ψ, built from the current (Ã, C̃), so a
+        shorter memory only buys tracking that (Ã, C̃) cannot follow, at a
+        variance of θ proportional to β (measured in ``docs/seed000.md``).
+        0.08 for ``'ls'`` and ``'ode'`` (the paper's noise-free value).
     selector : array_like, shape (order, horizon * n_outputs), optional
         H, which fixes the state basis (``T = H O_f``, applied to the scaled
         ``p̂`` when ``scale_filters``). Default: uniform random on [-1, 1]
@@ -361,8 +370,10 @@ class AdaptiveIdentifier(OnlineIdentifier):
                              f"inputs; the order {n} needs at least {-(-n // nu)} poles")
         alpha0, beta0 = _DEFAULT_FORGETTING.get(method, (0.4, 0.08))
         self._alpha = alpha0 if forgetting is None else _positive(forgetting, "forgetting")
-        self._beta = beta0 if bd_forgetting is None else _positive(bd_forgetting,
-                                                                     "bd_forgetting")
+        if bd_forgetting is not None:
+            self._beta = _positive(bd_forgetting, "bd_forgetting")
+        else:
+            self._beta = self._alpha * _IV_BD_RATIO if beta0 is None else beta0
         if hold not in ("foh", "zoh"):
             raise SubidError(f"hold must be 'foh' or 'zoh', got {hold!r}")
         if method not in ("iv", "ls", "ode"):
