@@ -241,3 +241,35 @@ def test_iodata_keeps_read_only_float64_arrays_without_a_copy():
         bad[3] = np.nan
         bad.setflags(write=False)
         subid.IOData(u, bad)
+
+
+def test_pieces_grow_past_the_first_allocation_and_replay_bit_for_bit(tmp_path, monkeypatch):
+    """read_chunks fills each piece block by block (growing it past _PIECE_ROWS, across a
+    block the careful parser reads), and ParsedOnce replays the same pieces from its
+    spool: the same doubles, names and time stamps as subid.read."""
+    monkeypatch.setattr(sio, "_BLOCK_BYTES", 4096)
+    monkeypatch.setattr(sio, "_PIECE_ROWS", 100)
+    m = RNG.standard_normal((3000, 3))
+    f = tmp_path / "rec.csv"
+    lines = [",".join(repr(v) for v in row) for row in m.tolist()]
+    lines.insert(1700, "# a comment: this block goes to the careful parser")
+    f.write_text("a,b,c\n" + "\n".join(lines) + "\n")
+    whole = subid.read(f, "c,a", "b")
+    for chunk in (1, 99, 450, 3000, 5000):
+        once = subid.methods.dt.stream.ParsedOnce(
+            lambda chunk=chunk: subid.read_chunks(f, "c,a", "b", chunk_size=chunk))
+        try:
+            first = list(once)
+            assert once.sizes is not None
+            again = list(once)
+        finally:
+            once.close()
+        assert [p.n_samples for p in first] == [p.n_samples for p in again]
+        assert max(p.n_samples for p in first) == min(chunk, 3000)
+        for pieces in (first, again):
+            np.testing.assert_array_equal(np.vstack([p.u for p in pieces]), whole.u)
+            np.testing.assert_array_equal(np.vstack([p.y for p in pieces]), whole.y)
+            assert [p.t[0] for p in pieces] == [p.t[0] for p in first]
+            assert pieces[-1].t[-1] == 2999
+            assert all(list(p.input_names) == ["c", "a"] and list(p.output_names) == ["b"]
+                       for p in pieces)

@@ -58,7 +58,8 @@ class _Spread:
         self.count, self.mean, self.m2 = 0, np.zeros(ny), np.zeros(ny)
 
     def add(self, y):
-        self.merge(len(y), y.mean(axis=0), ((y - y.mean(axis=0)) ** 2).sum(axis=0))
+        mean = y.mean(axis=0)
+        self.merge(len(y), mean, ((y - mean) ** 2).sum(axis=0))
 
     def merge(self, count, mean, m2):
         if count == 0:
