@@ -79,7 +79,6 @@ from subid._validation import (
     check_int,
     check_selector,
     check_time_stamps,
-    same_period,
 )
 from subid.errors import (
     CheckpointError,
@@ -686,12 +685,8 @@ class AdaptiveIdentifier(OnlineIdentifier):
         """Validate one chunk; returns (U, Y, T or None) or raises."""
         if y is None or type(u) is not np.ndarray:
             u, y, t, data = self._unpack(u, y, t)
-            if data is not None and t is None:
-                if self._dt is not None and not same_period(data.dt, self._dt):
-                    raise DataError(f"the IOData record is sampled with dt={data.dt!r} but "
-                                    f"the identifier has dt={self._dt!r}")
-                if self._dt is None:
-                    t = self._next_times(data.n_samples, data.dt)
+            if data is not None and t is None and self._dt is None:
+                t = self._next_times(data.n_samples, data.dt)
         U = as_chunk(u, self._nu, "input u")
         Y = as_chunk(y, self._ny, "output y")
         if U.shape[0] != Y.shape[0]:

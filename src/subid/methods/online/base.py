@@ -41,6 +41,7 @@ import warnings
 
 import numpy as np
 
+from subid._validation import same_period
 from subid.errors import DataError, NotConvergedWarning, SubidError
 
 __all__ = ["OnlineIdentifier", "Tracker", "history_dict", "markov_parameters", "with_names"]
@@ -131,17 +132,21 @@ class OnlineIdentifier(abc.ABC):
         """Restore an identifier written by :meth:`save`."""
 
     # -- shared input validation -------------------------------------------
-    @staticmethod
-    def _unpack(u, y, t):
+    def _unpack(self, u, y, t):
         """``(u, y, t, record)``: an IOData record unpacked (its explicit time
-        stamps as t, if any; ``record`` is the IOData or None)."""
+        stamps as t, if any; ``record`` is the IOData or None). A record without
+        time stamps must be sampled with the identifier's ``dt`` (when it has one)."""
         from subid.data import IOData, require_single_experiment
         if isinstance(u, IOData):
             if y is not None or t is not None:
                 raise DataError("pass either an IOData record or (u, y[, t]), not both")
             require_single_experiment(u, "an online identifier")
             record = u
-            return record.u, record.y, (record.t if record.has_time_stamps else None), record
+            t = record.t if record.has_time_stamps else None
+            if t is None and self._dt is not None and not same_period(record.dt, self._dt):
+                raise DataError(f"the IOData record is sampled with dt={record.dt!r} but "
+                                f"the identifier has dt={self._dt!r}")
+            return record.u, record.y, t, record
         if y is None:
             raise DataError("output y is missing: call update(u, y) or update(iodata)")
         return u, y, t, None

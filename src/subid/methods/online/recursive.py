@@ -58,7 +58,6 @@ from subid._validation import (
     check_int,
     check_selector,
     check_time_stamps,
-    same_period,
 )
 from subid.errors import (
     CheckpointError,
@@ -405,10 +404,7 @@ class RecursiveSubspace(OnlineIdentifier):
         The result does not depend on how a stream is cut into chunks (to
         rounding).
         """
-        u, y, t, record = self._unpack(u, y, t)
-        if record is not None and t is None and not same_period(record.dt, self._dt):
-            raise DataError(f"the IOData record is sampled with dt={record.dt!r} but the "
-                            f"identifier has dt={self._dt!r}")
+        u, y, t, _ = self._unpack(u, y, t)
         u = as_chunk(u, self.n_inputs, "input u", allow_empty=True, copy=True)
         y = as_chunk(y, self.n_outputs, "output y", allow_empty=True, copy=True)
         if u.shape[0] != y.shape[0]:
