@@ -569,16 +569,13 @@ class AdaptiveIdentifier(OnlineIdentifier):
         ls = self._method != "ode"
         info = {
             "samples": self.n_samples,
-            "n_samples": self.n_samples,
             "time": self.t,
             "refreshes": int(ist[_k.IST["refreshes"]]),
-            "horizon": self._f,
             "filter_poles": self._poles.copy(),
             "time_scale": self._omega,
             "forgetting": self._alpha,
             "bd_forgetting": self._beta,
             "ls_method": self._method,
-            "hold": self._hold,
             "condition": cond,
             "bd_condition": bd_cond,
             "max_condition": self._max_cond,
@@ -604,16 +601,12 @@ class AdaptiveIdentifier(OnlineIdentifier):
         if reason is not None:
             issued.append(f"AdaptiveIdentifier: the model is not converged: {reason}")
             warnings.warn(issued[0], NotConvergedWarning, stacklevel=2)
-        hold = info.pop("hold")
-        horizon = info.pop("horizon")
-        for key in ("method", "order", "n_samples"):
-            info.pop(key, None)
-        info = model_info("seed000_adaptive", order=self._n, horizon=horizon,
-                          n_samples=self.n_samples, x0=None, hold=hold,
+        info = model_info("seed000_adaptive", order=self._n, horizon=self._f,
+                          n_samples=self.n_samples, x0=None, hold=self._hold,
                           conditions=conditions_of(info), warnings=issued, **info)
         return StateSpace(st["Am"], st["Bm"], st["Cm"], st["Dm"], 0.0,
                           input_names=self._input_names, output_names=self._output_names,
-                          info=info, hold=hold)
+                          info=info, hold=self._hold)
 
     def _convergence(self, info: dict):
         """None if the current model passes the convergence criteria, else
