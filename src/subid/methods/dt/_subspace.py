@@ -295,8 +295,6 @@ def estimate_b_d(A, C_n, gamma, L11, L_yu, problem: "Problem", *, bd_method: str
     """
     data = problem.data
     C = C_n * problem.output_scale[:, None]
-    if bd_method not in BD_METHODS:
-        raise OptionError(f"bd_method must be one of {BD_METHODS}, got {bd_method!r}")
     radius = float(np.abs(np.linalg.eigvals(A)).max())
     # a statistic whose record can be read again (subid.methods.dt.stream, subid.methods.dt.distributed)
     second_pass = getattr(data, "output_regression", None)
