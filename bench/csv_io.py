@@ -6,7 +6,9 @@ Run from the repository root:
     OPENBLAS_NUM_THREADS=1 PYTHONPATH=src python bench/csv_io.py --rows 1000000 --repeat 3
 
 Wall times (one BLAS thread; pyarrow with use_threads=False unless marked),
-medians of ``--repeat`` runs, ratios taken in this one process. Peak memory
+medians of ``--repeat`` runs taken round-robin, ratios taken in this one
+process; also the CPU time of the process (all threads: subid's parser and
+pass threads), which does not depend on whether the other cores are free. Peak memory
 is the maximum resident set of a child process (``/usr/bin/time -v``) minus
 that of a child that only imports subid and warms up, against the size of
 the record's selected columns in doubles. The file is generated (4 columns,
@@ -30,13 +32,22 @@ import subid
 import subid.io.formats as sio
 
 
-def _median(fn, repeat):
-    times = []
-    for _ in range(repeat):
-        start = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - start)
-    return statistics.median(times)
+def _interleaved(steps, repeat):
+    """``{name: (median wall s, median CPU s)}`` of the callables ``steps``
+    (``{name: (function, repeat or None)}``), timed round-robin: repeat ``k``
+    of every step runs before repeat ``k + 1`` of any, so a change of load on
+    this shared machine hits every step alike. CPU time is the process's (all
+    its threads), which does not depend on whether other cores are free."""
+    times = {name: [] for name in steps}
+    for k in range(repeat):
+        for name, (fn, reps) in steps.items():
+            if k >= (reps or repeat):
+                continue
+            start, start_cpu = time.perf_counter(), time.process_time()
+            fn()
+            times[name].append((time.perf_counter() - start, time.process_time() - start_cpu))
+    return {name: (statistics.median(w for w, _ in t), statistics.median(c for _, c in t))
+            for name, t in times.items()}
 
 
 def _make(path, rows):
@@ -94,7 +105,7 @@ def main():
     print(f"# {args.rows} rows, {size / 2**20:.0f} MiB of CSV, {doubles / 2**20:.0f} MiB of "
           f"doubles; engine {sio.fast_engine()}; pandas {pd.__version__}; numpy "
           f"{np.__version__}; median of {args.repeat}")
-    rows = {}
+    steps = {}
 
     def pandas_once():
         return pd.read_csv(path, engine="c", dtype=np.float64).to_numpy()
@@ -103,47 +114,56 @@ def main():
         table = pcsv.read_csv(path, read_options=pcsv.ReadOptions(use_threads=threads))
         return np.column_stack([c.to_numpy() for c in table.columns])
 
-    rows["pandas.read_csv (C engine)"] = _median(pandas_once, args.repeat)
-    rows["pyarrow.csv.read_csv (1 thread)"] = _median(arrow_once, args.repeat)
-    rows["pyarrow.csv.read_csv (threads)"] = _median(lambda: arrow_once(True), args.repeat)
-    if args.loadtxt:
-        rows["numpy.loadtxt"] = _median(lambda: np.loadtxt(path, delimiter=",", skiprows=1),
-                                        1)
-    fastest = min(v for k, v in rows.items() if "threads)" not in k)
-    rows["subid.read"] = _median(lambda: subid.read(path, "u1,u2", "y1,y2"), args.repeat)
-    saved = sio._ENGINE
-    for engine in ("pyarrow", "numpy"):
-        sio._ENGINE = engine
-        reps = 1 if engine == "numpy" else args.repeat
-        rows[f"subid.read (engine {engine})"] = _median(
-            lambda: subid.read(path, "u1,u2", "y1,y2"), reps)
-    sio._ENGINE = saved
-    if args.careful:
-        from pathlib import Path
-        rows["subid.read, careful parser (before)"] = _median(
-            lambda: sio._read_text(Path(path), path, ".csv", "u1,u2", "y1,y2", None, None,
-                                   None), 1)
-    rows["read_chunks, one pass"] = _median(
-        lambda: sum(p.n_samples for p in subid.read_chunks(path, "u1,u2", "y1,y2")),
-        args.repeat)
-    rows["identify_file (moesp: parse once, B/D pass from the spool)"] = _median(
-        lambda: subid.identify_file(path, "u1,u2", "y1,y2", method="moesp", order=3,
-                                    horizon=10), args.repeat)
+    def with_engine(engine):
+        def read():
+            saved = sio._ENGINE
+            sio._ENGINE = engine
+            try:
+                subid.read(path, "u1,u2", "y1,y2")
+            finally:
+                sio._ENGINE = saved
+        return read
+
     from subid.cli import commands as cli
 
     def stream_cli():
         assert cli.main(["--quiet", "identify", path, "--inputs", "u1,u2", "--outputs",
                          "y1,y2", "--method", "moesp", "--order", "3", "--horizon", "10",
                          "--no-report", "--stream", "--out", os.path.join(folder, "s")]) == 0
-    rows["subid identify --stream (moesp, --no-report)"] = _median(stream_cli, args.repeat)
+
+    steps["pandas.read_csv (C engine)"] = (pandas_once, None)
+    steps["pyarrow.csv.read_csv (1 thread)"] = (arrow_once, None)
+    steps["pyarrow.csv.read_csv (threads)"] = (lambda: arrow_once(True), None)
+    if args.loadtxt:
+        steps["numpy.loadtxt"] = (lambda: np.loadtxt(path, delimiter=",", skiprows=1), 1)
+    steps["subid.read"] = (lambda: subid.read(path, "u1,u2", "y1,y2"), None)
+    steps["subid.read (engine pyarrow)"] = (with_engine("pyarrow"), None)
+    steps["subid.read (engine numpy)"] = (with_engine("numpy"), 1)
+    if args.careful:
+        from pathlib import Path
+        steps["subid.read, careful parser (before)"] = (
+            lambda: sio._read_text(Path(path), path, ".csv", "u1,u2", "y1,y2", None, None,
+                                   None), 1)
+    steps["read_chunks, one pass"] = (
+        lambda: sum(p.n_samples for p in subid.read_chunks(path, "u1,u2", "y1,y2")), None)
+    steps["identify_file (moesp: parse once, B/D pass from the spool)"] = (
+        lambda: subid.identify_file(path, "u1,u2", "y1,y2", method="moesp", order=3,
+                                    horizon=10), None)
+    steps["subid identify --stream (moesp, --no-report)"] = (stream_cli, None)
     data = subid.read(path, "u1,u2", "y1,y2")
-    rows["moesp on the record in memory (no I/O)"] = _median(
-        lambda: subid.moesp(data, 3, horizon=10), args.repeat)
-    data = None                       # free the record before the memory children
-    print("| step | seconds | / fastest single-thread parse |")
-    print("|---|---:|---:|")
-    for name, seconds in rows.items():
-        print(f"| {name} | {seconds:.3f} | {seconds / fastest:.2f} |")
+    steps["moesp on the record in memory (no I/O)"] = (
+        lambda: subid.moesp(data, 3, horizon=10), None)
+    rows = _interleaved(steps, args.repeat)
+    steps = data = None               # free the record before the memory children
+    parsers = [k for k in rows if not k.startswith(("subid", "read_chunks", "identify_file",
+                                                    "moesp")) and "threads)" not in k]
+    wall, cpu = rows[min(parsers, key=lambda k: rows[k][0])]
+    print(f"| step | seconds | / fastest single-thread parse | CPU s (all threads) "
+          f"| CPU / its CPU ({subid._threads.available()} subid threads) |")
+    print("|---|---:|---:|---:|---:|")
+    for name, (seconds, seconds_cpu) in rows.items():
+        print(f"| {name} | {seconds:.3f} | {seconds / wall:.2f} | {seconds_cpu:.3f} "
+              f"| {seconds_cpu / cpu:.2f} |")
     base = _peak_rss_mb("base", path, os.path.join(folder, "o0"))
     whole = _peak_rss_mb("whole", path, os.path.join(folder, "o1"))
     stream = _peak_rss_mb("stream", path, os.path.join(folder, "o2"))

@@ -273,3 +273,85 @@ def test_pieces_grow_past_the_first_allocation_and_replay_bit_for_bit(tmp_path, 
             assert pieces[-1].t[-1] == 2999
             assert all(list(p.input_names) == ["c", "a"] and list(p.output_names) == ["b"]
                        for p in pieces)
+
+
+def test_stretches_of_the_spool_equal_slices_of_the_record(tmp_path, monkeypatch):
+    """ParsedOnce.ranges reads any stretch of samples straight from the spool (or, with
+    no spool, by parsing again); groups cut the record at piece borders into
+    consecutive stretches that cover it exactly."""
+    monkeypatch.setattr(sio, "_BLOCK_BYTES", 4096)
+    m = RNG.standard_normal((3000, 3))
+    f = tmp_path / "rec.csv"
+    f.write_text("a,b,c\n" + "".join(",".join(repr(v) for v in row) + "\n"
+                                     for row in m.tolist()))
+    once = subid.methods.dt.stream.ParsedOnce(
+        lambda: subid.read_chunks(f, "c,a", "b", chunk_size=450))
+    u, y = m[:, [2, 0]], m[:, [1]]
+    bounds = [(0, 3000), (0, 1), (449, 451), (450, 900), (1234, 2999), (2999, 3000), (7, 7)]
+
+    def check():
+        for (a, b), read in zip(bounds, once.ranges(bounds)):
+            chunks = list(read())
+            assert all(len(cu) for cu, _ in chunks)
+            got_u = np.vstack([cu for cu, _ in chunks]) if chunks else np.zeros((0, 2))
+            got_y = np.vstack([cy for _, cy in chunks]) if chunks else np.zeros((0, 1))
+            np.testing.assert_array_equal(got_u, u[a:b])
+            np.testing.assert_array_equal(got_y, y[a:b])
+    try:
+        check()                                  # before any pass: parses as it goes
+        assert once.n_samples is None and len(once.groups(4)) == 1
+        list(once)
+        assert once.n_samples == 3000
+        check()
+        for stop in (None, 1000, 2000, 10):
+            groups = once.groups(4, stop=stop)
+            chunks = [c for read in groups for c in read()]
+            end = 3000 if stop is None else stop
+            np.testing.assert_array_equal(np.vstack([c[0] for c in chunks]), u[:end])
+            assert 1 <= len(groups) <= 4
+        assert len(once.groups(4)) == 4
+    finally:
+        once.close()
+
+
+@pytest.mark.parametrize("threads", [1, 3])
+def test_parse_threads_give_the_values_of_one_thread(tmp_path, monkeypatch, threads):
+    """The blocks parsed ahead on several threads come back in order, bit for bit,
+    blocks the fast parser declines included; closing the reader early stops the
+    threads."""
+    monkeypatch.setattr(sio, "_BLOCK_BYTES", 4096)
+    m = RNG.standard_normal((5000, 3))
+    lines = [",".join(repr(v) for v in row) for row in m.tolist()]
+    lines.insert(2500, "# a comment: this block goes to the careful parser")
+    f = tmp_path / "rec.csv"
+    f.write_text("a,b,c\n" + "\n".join(lines) + "\n")
+    reference = _careful(f, "c,a", "b")
+    with subid.thread_limit(threads):
+        assert subid._threads.available() <= threads
+        pieces = list(subid.read_chunks(f, "c,a", "b", chunk_size=700))
+        whole = subid.read(f, "c,a", "b")
+        reader = subid.read_chunks(f, "c,a", "b", chunk_size=100)
+        next(reader)
+        reader.close()
+    np.testing.assert_array_equal(np.vstack([p.u for p in pieces]), reference.u)
+    np.testing.assert_array_equal(np.vstack([p.y for p in pieces]), reference.y)
+    _same(whole, _careful(f, "c,a", "b"))
+    assert subid._threads.limit is None
+
+
+def test_streamed_model_does_not_depend_on_the_number_of_threads(tmp_path):
+    """The passes after the parse run in a fixed number of stretches, whatever the
+    threads: the same model bit for bit with one thread and with several."""
+    data = subid.systems.simulate_data(subid.systems.seed001_system(), 12_000, seed=4,
+                                       output_snr_db=20)
+    f = tmp_path / "rec.csv"
+    np.savetxt(f, np.column_stack([data.u, data.y]), delimiter=",", fmt="%.17g",
+               header="u1,u2,y1,y2", comments="")
+    models = []
+    for threads in (1, 2):
+        with subid.thread_limit(threads):
+            models.append(subid.identify_file(f, "u1,u2", "y1,y2", order=3, horizon=5,
+                                              chunk_size=1000))
+    for name in "ABCD":
+        np.testing.assert_array_equal(getattr(models[0], name), getattr(models[1], name))
+    np.testing.assert_array_equal(models[0].info["x0"], models[1].info["x0"])

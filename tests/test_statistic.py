@@ -58,6 +58,22 @@ def test_lag_sums_direct():
     np.testing.assert_allclose(lag_sums_uy(z[:, :1], z[:, 1:], 5), out, rtol=1e-13)
 
 
+@pytest.mark.parametrize("n_samples", [1, 7, 19, 20, 21, 4095, 4096, 4097, 4115, 4116, 4117,
+                                       9000])
+@pytest.mark.parametrize("nu,ny,depth", [(1, 1, 20), (2, 2, 20), (2, 3, 6), (1, 2, 1)])
+def test_compiled_lag_sums_equal_the_matrix_products(n_samples, nu, ny, depth):
+    """The kernel (blocks of 4096 samples) against the reference, around every
+    border: record shorter than the depth, block ends, last rows."""
+    rng = np.random.default_rng(n_samples)
+    u, y = rng.standard_normal((n_samples, nu)), rng.standard_normal((n_samples, ny))
+    expected = lag_sums(np.hstack([u, y]), depth)
+    np.testing.assert_allclose(lag_sums_uy(u, y, depth), expected, rtol=1e-12, atol=1e-12)
+    # strided views (a column selection) give the same sums
+    wide = np.hstack([y, u])
+    np.testing.assert_allclose(lag_sums_uy(wide[:, ny:], wide[:, :ny], depth), expected,
+                               rtol=1e-12, atol=1e-12)
+
+
 @pytest.mark.parametrize("fn,kw", [
     (subid.ls_subspace, {"bd_method": "projection"}),
     (subid.ls_subspace, {"bd_method": "projection", "instruments": None}),

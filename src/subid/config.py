@@ -7,6 +7,7 @@ import contextlib
 import numba
 from threadpoolctl import threadpool_limits
 
+from subid import _threads
 from subid._validation import check_int
 
 __all__ = ["thread_limit"]
@@ -14,10 +15,11 @@ __all__ = ["thread_limit"]
 
 @contextlib.contextmanager
 def thread_limit(n_threads: int):
-    """Limit the threads of BLAS/LAPACK, OpenMP and numba inside a ``with`` block.
+    """Limit the threads of BLAS/LAPACK, OpenMP, numba and subid inside a ``with`` block.
 
     subid's own per-sample kernels are serial; the thread pools that matter
-    are BLAS's (QR, matrix products of the data statistic) and numba's.
+    are BLAS's (QR, matrix products of the data statistic), numba's, and
+    subid's own (the CSV parser, the passes over a streamed record).
 
     Parameters
     ----------
@@ -34,9 +36,12 @@ def thread_limit(n_threads: int):
     """
     n_threads = check_int(n_threads, "n_threads")
     previous = numba.get_num_threads()
+    own = _threads.limit
     numba.set_num_threads(min(n_threads, numba.config.NUMBA_NUM_THREADS))
+    _threads.limit = n_threads
     try:
         with threadpool_limits(limits=n_threads):
             yield
     finally:
         numba.set_num_threads(previous)
+        _threads.limit = own

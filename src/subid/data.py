@@ -32,14 +32,32 @@ def _writeable(values) -> bool:
     return not isinstance(values, np.ndarray) or values.flags.writeable
 
 
+def column_sums(a: np.ndarray) -> np.ndarray:
+    """``a.sum(axis=0)`` of a (samples x channels) array, channel by channel: numpy's
+    axis-0 reduction of a C-ordered array with few columns is ~25x slower."""
+    return np.array([column.sum() for column in a.T])
+
+
+def minus_columns(a: np.ndarray, offsets, out=None) -> np.ndarray:
+    """``a - offsets`` (one offset per column of a (samples x channels) array) into
+    ``out`` (default: a new array; ``a`` itself is allowed), channel by channel:
+    numpy's broadcast over few columns is ~5x slower."""
+    out = np.empty(a.shape) if out is None else out
+    for k, offset in enumerate(np.broadcast_to(offsets, a.shape[1:])):
+        np.subtract(a[:, k], offset, out=out[:, k])
+    return out
+
+
 def column_std(y: np.ndarray, block: int = 65536) -> np.ndarray:
     """``y.std(axis=0)`` computed in blocks of rows (two passes), without the N x
-    channels temporary numpy's ``std`` allocates (160 MB for 10^7 samples of 2 outputs)."""
+    channels temporary numpy's ``std`` allocates (160 MB for 10^7 samples of 2 outputs),
+    and channel by channel (numpy's axis-0 reductions were 0.38 s of a 1.6 s call)."""
     n = y.shape[0]
     if n <= block:
         return y.std(axis=0)
-    mean = sum(y[k:k + block].sum(axis=0) for k in range(0, n, block)) / n
-    ss = sum(((y[k:k + block] - mean) ** 2).sum(axis=0) for k in range(0, n, block))
+    mean = column_sums(y) / n            # channel by channel: see column_sums
+    ss = sum(np.array([d @ d for d in minus_columns(y[k:k + block], mean).T])
+             for k in range(0, n, block))
     return np.sqrt(ss / n)
 
 

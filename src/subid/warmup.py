@@ -12,7 +12,8 @@ one specialisation per kernel serves all data):
 * :class:`subid.AdaptiveIdentifier` (one kernel for every ``method``; the
   uniform and the time-stamped paths share it),
 * :class:`subid.RecursiveSubspace`,
-* the default batch call (:func:`subid.ls_subspace`: the B, D, x0 pass),
+* the default batch call (:func:`subid.ls_subspace`: the B, D, x0 pass) and the
+  lagged products of long records and streams (:class:`subid.HankelStatistic`),
 * :func:`subid.ct_subspace` on a uniform and on a non-uniform grid.
 
 Run it once after installing (``make test`` / ``make demo`` do)::
@@ -60,12 +61,14 @@ def _recursive():
 def _batch():
     from subid.data import IOData
     from subid.methods.dt.ls_subspace import ls_subspace
+    from subid.statistic.hankel import HankelStatistic
     from subid.systems import seed001_system
 
     rng = np.random.default_rng(0)
     u = rng.standard_normal((400, 2))
     y = seed001_system().simulate(u)
     ls_subspace(IOData(u, y), 4)
+    HankelStatistic(2, 2, 4, kind="gram").update(u, y)     # long records, streams
 
 
 def _ct():

@@ -749,15 +749,17 @@ def _identify_streamed(data, inputs, outputs, dt, time_column, delimiter, detren
                        report_samples, out):
     """``identify --stream``: passes over the file in pieces, bounded memory.
 
-    Pass 1 counts the samples and sums the channels (for the means and the
-    estimation/validation cut); pass 2 feeds the estimation part, means
-    removed, to a :class:`~subid.HankelStatistic`, keeping only the first
-    ``report_samples`` samples of each part for the fit and the report; the
-    method then reads the estimation part once more for the B, D, x0
-    regression (:mod:`subid.methods.dt._bd_pass`; not with ``bd_method='projection'``),
-    so the model is the in-memory one. The file is parsed in pass 1 only:
-    passes 2 and 3 read the parsed values back from a temporary file of
-    doubles (:class:`subid.methods.dt.stream.ParsedOnce`), deleted at the end.
+    Pass 1 parses the file (on subid's threads), counts the samples and sums
+    the channels (for the means and the estimation/validation cut); pass 2
+    feeds the estimation part, means removed, to a
+    :class:`~subid.HankelStatistic`; the method then reads the estimation part
+    once more for the B, D, x0 regression (:mod:`subid.methods.dt._bd_pass`;
+    not with ``bd_method='projection'``), so the model is the in-memory one.
+    Passes 2 and 3 read the parsed values back from a temporary file of
+    doubles (:class:`subid.methods.dt.stream.ParsedOnce`, deleted at the
+    end), in consecutive stretches reduced on subid's threads and merged
+    exactly; only the first ``report_samples`` samples of each part are read
+    once more, for the fit and the report.
     """
     from subid.io.formats import read_chunks
     if not spec.supports("streaming"):
@@ -784,11 +786,13 @@ def _identify_streamed(data, inputs, outputs, dt, time_column, delimiter, detren
 
 def _identify_pieces(pieces, data, detrend, spec, order, horizon, validate, opts,
                      frequency_unit, write_report, chunk_size, report_samples, out):
+    import functools
     import types
 
-    from subid.data import IOData
+    from subid._threads import ordered_map
+    from subid.data import IOData, column_sums
     from subid.evaluation import report
-    from subid.methods.dt.stream import statistic_depth
+    from subid.methods.dt.stream import SPOOL_GROUPS, attach_second_pass, statistic_depth
     from subid.statistic.hankel import HankelStatistic
     with _about(data):
         n, total_u, total_y, first = 0, 0.0, 0.0, None
@@ -796,8 +800,8 @@ def _identify_pieces(pieces, data, detrend, spec, order, horizon, validate, opts
             if first is None:
                 first = piece
             n += piece.n_samples
-            total_u = total_u + piece.u.sum(axis=0)
-            total_y = total_y + piece.y.sum(axis=0)
+            total_u = total_u + column_sums(piece.u)
+            total_y = total_y + column_sums(piece.y)
         if first is None:
             raise DataError(f"{data} holds no samples")
         u_mean = total_u / n if detrend == "constant" else np.zeros(first.n_inputs)
@@ -805,47 +809,37 @@ def _identify_pieces(pieces, data, detrend, spec, order, horizon, validate, opts
         cut = n - int(round(validate * n)) if validate > 0 else n
         hor, depth = statistic_depth(spec.name, order if isinstance(order, int) else None,
                                      horizon, first.n_outputs, opts.get("instruments", "past"))
-        stat = HankelStatistic(first.n_inputs, first.n_outputs, depth, kind="gram",
-                               dt=first.dt, input_names=first.input_names,
-                               output_names=first.output_names)
-        kept = {"est": ([], []), "val": ([], [])}
-        start = 0
+
+        def statistic(read):
+            part = HankelStatistic(first.n_inputs, first.n_outputs, depth, kind="gram",
+                                   dt=first.dt, input_names=first.input_names,
+                                   output_names=first.output_names)
+            for u, y in read():
+                part.update(u, y)
+            return part
+
         t0 = time.perf_counter()
-        for piece in pieces:
-            u, y = piece.u - u_mean, piece.y - y_mean
-            split = min(max(cut - start, 0), piece.n_samples)
-            if split:
-                stat.update(u[:split], y[:split])
-            for part, lo, hi in (("est", 0, split), ("val", split, piece.n_samples)):
-                have = sum(len(a) for a in kept[part][0])
-                take = min(hi - lo, report_samples - have)
-                if take > 0:
-                    kept[part][0].append(u[lo:lo + take])
-                    kept[part][1].append(y[lo:lo + take])
-            start += piece.n_samples
+        # pass 2: the statistic of the estimation part, means removed, from the spooled
+        # doubles in consecutive stretches on subid's threads (merged exactly)
+        stretches = pieces.groups(SPOOL_GROUPS, stop=cut, offsets=(u_mean, y_mean))
+        stat = functools.reduce(HankelStatistic.merge, ordered_map(statistic, stretches))
         if opts.get("bd_method", "auto") != "projection":
             # pass 3 (issue 14): B, D, x0 by the output regression of the in-memory default
-            from subid.methods.dt.stream import attach_second_pass
-
-            def estimation_chunks():
-                begin = 0
-                for chunk in pieces:
-                    end = min(max(cut - begin, 0), chunk.n_samples)
-                    if end:
-                        yield chunk.u[:end] - u_mean, chunk.y[:end] - y_mean
-                    begin += chunk.n_samples
-            attach_second_pass(stat, estimation_chunks)
+            attach_second_pass(stat, groups=stretches)
         with _warnings_to_log():
             model = spec.load()(stat, order, horizon=hor, **opts)
         seconds = time.perf_counter() - t0
 
-        def sample(part):
-            us, ys = kept[part]
-            if not us:
+        def sample(start, stop):
+            """The first ``report_samples`` samples of a part, for the fit and the report."""
+            stop = min(stop, start + report_samples)
+            if stop <= start:
                 return None
-            return IOData(np.vstack(us), np.vstack(ys), dt=first.dt,
-                          input_names=first.input_names, output_names=first.output_names)
-        est, val = sample("est"), sample("val")
+            chunks = list(pieces.ranges([(start, stop)], offsets=(u_mean, y_mean))[0]())
+            return IOData(np.vstack([u for u, _ in chunks]), np.vstack([y for _, y in chunks]),
+                          dt=first.dt, input_names=first.input_names,
+                          output_names=first.output_names)
+        est, val = sample(0, cut), sample(cut, n)
         result = report.evaluate(model, est, val)
     model.info.setdefault("method", spec.attribute)
     model.info["data"] = {"source": str(data), "inputs": list(first.input_names),

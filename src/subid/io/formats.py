@@ -35,6 +35,7 @@ and, for text files, the line and column at fault.
 
 from __future__ import annotations
 
+import collections
 import csv
 import logging
 import numbers
@@ -45,6 +46,7 @@ from pathlib import Path
 
 import numpy as np
 
+from subid import _threads
 from subid._validation import check_dt, same_period
 from subid.data import IOData
 from subid.errors import DataError, FileReadError, ModelError, ResourceLimitError
@@ -768,6 +770,42 @@ def _fast_values(buf: bytes, delim, ncols: int):
     return values
 
 
+def _parsed_blocks(blocks, delim, ncols: int):
+    """``(bytes, number of lines, values or None)`` for each block of ``blocks``
+    (see :func:`_blocks`), in order: :func:`_fast_values` of each block,
+    computed by :func:`subid._threads.available` threads while the caller uses
+    the blocks before (pandas' and pyarrow's parsers release the GIL, so two
+    threads parse about twice as fast). At most one block per thread is
+    parsed ahead, so memory stays bounded by a few blocks; the values are
+    those of one thread, bit for bit.
+    """
+    def parse(buf):
+        return _fast_values(buf, delim, ncols) if len(buf) <= 2 * _BLOCK_BYTES else None
+
+    threads = _threads.available()
+    fast_engine()                   # its imports happen here, not in the threads
+    if threads == 1:
+        for buf, n_lines in blocks:
+            yield buf, n_lines, parse(buf)
+        return
+    from concurrent.futures import ThreadPoolExecutor
+
+    pending = collections.deque()
+    with ThreadPoolExecutor(threads, thread_name_prefix="subid-parse") as pool:
+        try:
+            for buf, n_lines in blocks:
+                pending.append((buf, n_lines, pool.submit(parse, buf)))
+                if len(pending) > threads:
+                    buf, n_lines, values = pending.popleft()
+                    yield buf, n_lines, values.result()
+            while pending:
+                buf, n_lines, values = pending.popleft()
+                yield buf, n_lines, values.result()
+        finally:                    # stopped early (an error, a closed generator)
+            for _, _, values in pending:
+                values.cancel()
+
+
 def _first_long_line(buf: bytes, encoding: str):
     """0-based index of the first line of ``buf`` longer than MAX_LINE_CHARS
     characters (line breaks excluded), or None."""
@@ -906,9 +944,8 @@ def _read_text_fast(shown, ext, inputs, outputs, dt, time, delimiter):
         fh.seek(offset)
         parts = []
         try:
-            for buf, _ in _blocks(fh, shown, "utf-8", 0, limit=size - offset, count=False):
-                values = _fast_values(buf, layout.delim, layout.ncols) \
-                    if len(buf) <= 2 * _BLOCK_BYTES else None
+            blocks = _blocks(fh, shown, "utf-8", 0, limit=size - offset, count=False)
+            for _, _, values in _parsed_blocks(blocks, layout.delim, layout.ncols):
                 if values is None:
                     return None
                 if values.shape[0]:
@@ -1948,9 +1985,8 @@ def _fast_pieces(fh, shown, layout, cols, n_in, in_names, out_names, chunk_size,
     n_out = len(cols) - n_in
     u = y = None
     filled = 0
-    for buf, n_lines in _blocks(fh, shown, encoding, consumed):
-        values = _fast_values(buf, layout.delim, layout.ncols) \
-            if len(buf) <= 2 * _BLOCK_BYTES else None
+    blocks = _blocks(fh, shown, encoding, consumed)
+    for buf, n_lines, values in _parsed_blocks(blocks, layout.delim, layout.ncols):
         if values is None:
             values, n_lines = _careful_block(layout, buf, encoding, consumed, cols, shown)
             picked = range(len(cols))

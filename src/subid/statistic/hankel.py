@@ -22,8 +22,9 @@ that straddle the border, which involve only the tail of the first record
 and the head of the second. That is what makes streaming from files and
 distributed (Dask) identification equal to the in-memory computation.
 
-Cost: one pass over the data with ``2 s q^2`` flops per sample, done as
-blocked matrix products (about 30x cheaper than a QR factorisation of ``H``).
+Cost: one pass over the data with ``2 s q^2`` flops per sample, done by a
+compiled kernel (:mod:`subid.statistic._lag_kernel`; far cheaper than a QR
+factorisation of ``H``).
 The price: ``G`` squares the condition number of ``H``. Directions of ``H``
 weaker than about 1e-8 of the strongest are lost: a model of fixed order is
 still accurate to rounding on noise-free data (measured: Markov errors
@@ -75,9 +76,11 @@ KINDS = ("qr", "gram")
 def lag_sums(z: np.ndarray, depth: int) -> np.ndarray:
     """``out[l] = sum_{t=0}^{T-1-l} z(t) z(t+l)^T`` for ``l = 0 .. depth-1``.
 
-    Blocks of :data:`_BLOCK` samples stay in cache while the ``depth``
-    small matrix products of each block run (measured fastest here: one
-    product per lag beat one wide product over a shifted copy by 20x).
+    By matrix products: used on the few samples around a merge border, and
+    as the reference of the compiled :func:`lag_sums_uy`. Blocks of
+    :data:`_BLOCK` samples stay in cache while the ``depth`` small matrix
+    products of each block run (one product per lag beat one wide product
+    over a shifted copy by 20x).
     """
     T, q = z.shape
     out = np.zeros((depth, q, q))
@@ -95,28 +98,13 @@ def lag_sums(z: np.ndarray, depth: int) -> np.ndarray:
 
 
 def lag_sums_uy(u: np.ndarray, y: np.ndarray, depth: int) -> np.ndarray:
-    """:func:`lag_sums` of ``z = [u, y]`` without forming ``z`` in full:
-    each cache-sized block of ``z`` is assembled on the fly."""
-    T = u.shape[0]
-    q = u.shape[1] + y.shape[1]
-    out = np.zeros((depth, q, q))
-    main = T - depth + 1
-    for b0 in range(0, max(main, 0), _BLOCK):
-        b1 = min(b0 + _BLOCK, main)
-        last = b1 == main
-        stop = T if last else b1 + depth - 1
-        z = np.hstack([u[b0:stop], y[b0:stop]])
-        n = b1 - b0
-        head = z[:n].T
-        for lag in range(depth):
-            out[lag] += head @ z[lag:lag + n]
-        if last:                          # the rows where long lags run out
-            for lag in range(depth):
-                if n < z.shape[0] - lag:
-                    out[lag] += z[n:z.shape[0] - lag].T @ z[n + lag:]
-    if main <= 0:
-        out = lag_sums(np.hstack([u, y]), depth)
-    return out
+    """:func:`lag_sums` of ``z = [u, y]`` without forming ``z``: the compiled
+    :func:`subid.statistic._lag_kernel.lag_sums_kernel` (same sums, to rounding;
+    it releases the GIL)."""
+    from subid.statistic._lag_kernel import lag_sums_kernel
+
+    return lag_sums_kernel(np.ascontiguousarray(u, dtype=np.float64),
+                           np.ascontiguousarray(y, dtype=np.float64), depth)
 
 
 class HankelStatistic:
@@ -357,18 +345,21 @@ class HankelStatistic:
         q = self.n_inputs + self.n_outputs
         head, tail = self.head, self.tail
         Gz = np.zeros((s, q, s, q))      # blocks by (block row, channel of z)
-        for i in range(s):
-            for lag in range(s - i):
-                window = self.lagged[lag].copy()
-                # products z(t) z(t+lag)^T with t < i: all inside the first s-1 samples
-                for t in range(i):
-                    window -= np.outer(head[t], head[t + lag])
-                # products with t >= i + K = N - s + 1 + i: the tail holds samples
-                # N-s+1 .. N-1, so these are tail[i + k], k < s - 1 - lag - i
-                for k in range(i, s - 1 - lag):
-                    window -= np.outer(tail[k], tail[k + lag])
-                Gz[i, :, i + lag, :] = window
-                Gz[i + lag, :, i, :] = window.T
+        for lag in range(s):
+            n = s - 1 - lag              # block rows i = 0 .. n take this lag
+            # products z(t) z(t+lag)^T with t < i: all inside the first s-1 samples
+            early = np.zeros((n + 1, q, q))
+            np.cumsum(np.einsum("ta,tb->tab", head[:n], head[lag:lag + n]), axis=0,
+                      out=early[1:])
+            # products with t >= i + K = N - s + 1 + i: the tail holds samples
+            # N-s+1 .. N-1, so these are tail[i + k], k < s - 1 - lag - i
+            late = np.zeros((n + 1, q, q))
+            np.cumsum(np.einsum("ta,tb->tab", tail[:n], tail[lag:lag + n])[::-1], axis=0,
+                      out=late[n - 1::-1] if n else late[:0])
+            window = self.lagged[lag] - early - late
+            rows = np.arange(n + 1)
+            Gz[rows, :, rows + lag, :] = window
+            Gz[rows + lag, :, rows, :] = window.transpose(0, 2, 1)
         nu = self.n_inputs
         order = [(i, a) for i in range(s) for a in range(nu)] + \
                 [(i, nu + b) for i in range(s) for b in range(self.n_outputs)]

@@ -33,6 +33,8 @@ from __future__ import annotations
 import numpy as np
 import scipy.linalg
 
+from subid._threads import ordered_map
+from subid.data import column_sums, minus_columns
 from subid.methods.dt._regression import (
     _MODAL_BLOCK,
     RESIDUAL_RECOMPUTE,
@@ -58,8 +60,11 @@ class _Spread:
         self.count, self.mean, self.m2 = 0, np.zeros(ny), np.zeros(ny)
 
     def add(self, y):
-        mean = y.mean(axis=0)
-        self.merge(len(y), mean, ((y - mean) ** 2).sum(axis=0))
+        if not len(y):
+            return
+        mean = column_sums(y) / len(y)
+        deviation = minus_columns(y, mean)
+        self.merge(len(y), mean, np.array([column @ column for column in deviation.T]))
 
     def merge(self, count, mean, m2):
         if count == 0:
@@ -341,6 +346,17 @@ class OutputRegression:
                                                 n_x0=self.n_experiments * n)
         diagnostics["regression_passes"] = 2
         return B, D, (self._shape_x0(x0, n) if estimate_x0 else x0), diagnostics
+
+
+def threaded(groups):
+    """``map_pieces`` of a record in contiguous groups of samples: ``groups[k]()``
+    returns a fresh iterable of the consecutive ``(u, y)`` arrays of group k
+    (each group is one piece). The groups are reduced on subid's threads
+    (:func:`subid._threads.ordered_map`; the kernels release the GIL)."""
+
+    def map_pieces(function, arguments):
+        return ordered_map(lambda k: function(groups[k](), *arguments[k]), range(len(groups)))
+    return map_pieces
 
 
 def sequential(make_chunks):

@@ -24,16 +24,17 @@ from __future__ import annotations
 import itertools
 import logging
 import os
+import sys
 import tempfile
 import warnings
 
 import numpy as np
 
 from subid._validation import same_period
-from subid.data import IOData
+from subid.data import IOData, minus_columns
 from subid.errors import DataError
 from subid.io.formats import read_chunks
-from subid.methods.dt._bd_pass import OutputRegression, sequential
+from subid.methods.dt._bd_pass import OutputRegression, sequential, threaded
 from subid.methods.dt._subspace import default_horizon
 from subid.methods.registry import find
 from subid.statistic.hankel import HankelStatistic
@@ -41,6 +42,11 @@ from subid.statistic.hankel import HankelStatistic
 __all__ = ["identify_stream", "identify_file", "streaming_method", "NEW_EXPERIMENT"]
 
 log = logging.getLogger(__name__)
+
+#: Consecutive stretches a spooled record is cut into for the passes after the
+#: parse, reduced on subid's threads: fixed, so the model does not depend on
+#: the number of threads.
+SPOOL_GROUPS = 4
 
 
 def streaming_method(method: str):
@@ -162,6 +168,8 @@ def identify_stream(pieces, method: str = "moesp", order=None, horizon=None, *,
                           "D come from the statistic only (bd_method='projection'), not from "
                           "the output regression of the in-memory default; pass a list of "
                           "pieces or reread= (a function returning them again)", stacklevel=2)
+        elif stat.n_experiments == 1 and isinstance(pieces, ParsedOnce):
+            attach_second_pass(stat, groups=pieces.groups(SPOOL_GROUPS))
         elif stat.n_experiments == 1:
             attach_second_pass(stat, lambda: ((p.u, p.y) for _, p in _segments(reread())))
         else:
@@ -189,14 +197,22 @@ def _check_piece(piece, first, k: int) -> None:
                         "sampling period (resample them first)")
 
 
-def attach_second_pass(stat: HankelStatistic, make_chunks) -> HankelStatistic:
+def attach_second_pass(stat: HankelStatistic, make_chunks=None, *, groups=None
+                       ) -> HankelStatistic:
     """Let the methods fit B, D, x0 on the record behind ``stat`` by a second pass.
 
     ``make_chunks()`` returns a fresh iterable of the record's consecutive
-    ``(u, y)`` arrays (as fed to the statistic).
+    ``(u, y)`` arrays (as fed to the statistic). Or ``groups``: such callables
+    for consecutive stretches of the record (e.g. :meth:`ParsedOnce.groups`),
+    reduced on subid's threads and merged exactly.
     """
-    stat.output_regression = OutputRegression(sequential(make_chunks), 1, stat.n_inputs,
-                                              stat.n_outputs)
+    if groups is not None:
+        regression = OutputRegression(threaded(groups), len(groups), stat.n_inputs,
+                                      stat.n_outputs)
+    else:
+        regression = OutputRegression(sequential(make_chunks), 1, stat.n_inputs,
+                                      stat.n_outputs)
+    stat.output_regression = regression
     return stat
 
 
@@ -248,10 +264,11 @@ class ParsedOnce:
     The first complete iteration parses the file (``make()``, e.g.
     :func:`subid.read_chunks`) and spools the values of each piece, as
     float64, to a temporary file; later iterations read them back piece by
-    piece, without parsing. Memory stays bounded by one piece; the disk
-    holds the selected columns in doubles (8 bytes a value) until
-    :meth:`close`. When the temporary file cannot be written (no space),
-    later iterations parse the file again.
+    piece, without parsing, and :meth:`ranges` reads any stretch of samples
+    directly. Memory stays bounded by one piece; the disk holds the selected
+    columns in doubles (8 bytes a value) until :meth:`close`. When the
+    temporary file cannot be written (no space), later iterations parse the
+    file again.
     """
 
     def __init__(self, make):
@@ -275,8 +292,8 @@ class ParsedOnce:
         try:
             for piece in self.make():
                 if self.layout is None:
-                    self.layout = (piece.n_inputs, piece.dt, piece.input_names,
-                                   piece.output_names)
+                    self.layout = (piece.n_inputs, piece.n_outputs, piece.dt,
+                                   piece.input_names, piece.output_names)
                 if fh is not None:
                     try:
                         fh.write(piece.u.data)     # u then y: no copy, no bytes
@@ -297,16 +314,13 @@ class ParsedOnce:
                 self.close()
 
     def _replay(self):
-        n_in, dt, in_names, out_names = self.layout
-        width = first = None
+        n_in, n_out, dt, in_names, out_names = self.layout
+        first = None
         start = 0
         with open(self.spool, "rb") as fh:
             for rows in self.sizes:
-                if width is None:
-                    width = os.path.getsize(self.spool) // (8 * sum(self.sizes))
                 u = np.fromfile(fh, dtype=np.float64, count=rows * n_in).reshape(rows, n_in)
-                y = np.fromfile(fh, dtype=np.float64, count=rows * (width - n_in))
-                y = y.reshape(rows, width - n_in)
+                y = np.fromfile(fh, dtype=np.float64, count=rows * n_out).reshape(rows, n_out)
                 if first is None:
                     piece = first = IOData(u, y, dt=dt, input_names=in_names,
                                            output_names=out_names, copy=False)
@@ -314,6 +328,75 @@ class ParsedOnce:
                     piece = first._derive(u, y, dt=dt, t0=start * dt)
                 start += rows
                 yield piece
+
+    @property
+    def n_samples(self):
+        """Samples of the record, once parsed whole (None before)."""
+        return None if self.sizes is None else sum(self.sizes)
+
+    def ranges(self, bounds, offsets=None):
+        """Readers of stretches of the record: one callable per ``(start, stop)``
+        of ``bounds`` (sample indices), returning a fresh iterable of the
+        consecutive ``(u, y)`` arrays of samples ``start .. stop - 1``, minus
+        ``offsets = (u offset, y offset)`` (one value per channel) if given.
+
+        They read the spooled doubles directly (each its own file handle, so
+        they may run in threads at once); without a spool they parse the file
+        again.
+        """
+        return [lambda a=int(a), b=int(b): self._stretch(a, b, offsets) for a, b in bounds]
+
+    def groups(self, count: int, stop=None, offsets=None):
+        """:meth:`ranges` of ``count`` consecutive stretches of about equal
+        length covering samples ``0 .. stop - 1`` (default: all), cut at piece
+        borders; a single stretch when the record is not spooled."""
+        if self.sizes is None:
+            return self.ranges([(0, sys.maxsize if stop is None else stop)], offsets)
+        total = self.n_samples if stop is None else stop
+        borders = np.cumsum([0] + self.sizes)
+        cuts = [0]
+        for k in range(1, count):
+            at = int(borders[np.searchsorted(borders, k * total / count)])
+            if cuts[-1] < at < total:
+                cuts.append(at)
+        cuts.append(total)
+        return self.ranges(zip(cuts[:-1], cuts[1:]), offsets)
+
+    def _stretch(self, start: int, stop: int, offsets):
+        if self.sizes is None:          # no spool: parse again, keep the stretch
+            begin = 0
+            for piece in self:
+                end = begin + piece.n_samples
+                a, b = max(start - begin, 0), min(stop, end) - begin
+                if b > a and offsets is not None:
+                    yield (minus_columns(piece.u[a:b], offsets[0]),
+                           minus_columns(piece.y[a:b], offsets[1]))
+                elif b > a:
+                    yield piece.u[a:b], piece.y[a:b]
+                begin = end
+                if begin >= stop:
+                    return
+            return
+        n_in, n_out = self.layout[:2]
+        offset = begin = 0                # bytes and samples before the piece
+        with open(self.spool, "rb") as fh:
+            for rows in self.sizes:
+                end = begin + rows
+                a, b = max(start - begin, 0), min(stop, end) - begin
+                if b > a:
+                    fh.seek(offset + 8 * n_in * a)
+                    u = np.fromfile(fh, dtype=np.float64, count=(b - a) * n_in)
+                    fh.seek(offset + 8 * (n_in * rows + n_out * a))
+                    y = np.fromfile(fh, dtype=np.float64, count=(b - a) * n_out)
+                    u, y = u.reshape(b - a, n_in), y.reshape(b - a, n_out)
+                    if offsets is not None:           # fresh arrays: in place
+                        minus_columns(u, offsets[0], out=u)
+                        minus_columns(y, offsets[1], out=y)
+                    yield u, y
+                offset += 8 * (n_in + n_out) * rows
+                begin = end
+                if begin >= stop:
+                    return
 
     def close(self):
         """Delete the temporary file."""
