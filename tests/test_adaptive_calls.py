@@ -164,3 +164,24 @@ def test_all_finite_agrees_with_numpy():
             x[pos] = value
             assert K._all_finite(x) == bool(np.isfinite(x).all()), (value, pos)
     assert K._all_finite(np.zeros(0))
+
+
+def test_one_sample_helper_accepts_exactly_the_cheap_forms():
+    """``one_sample``: a (1, channels) view of a contiguous finite float64
+    sample (any float64 descriptor object), None for anything else (left to
+    the general validation)."""
+    import pickle
+
+    from subid.methods.online.base import one_sample
+
+    plain = np.array([1.0, -2.0])
+    other_descr = np.array([1.0, -2.0]).view(pickle.loads(pickle.dumps(np.dtype(np.float64))))
+    assert other_descr.dtype is not np.dtype(np.float64)
+    for values in (plain, other_descr, np.array([1e308, 1e308])):
+        out = one_sample(values, 2)
+        assert out.shape == (1, 2) and out.flags.c_contiguous and np.shares_memory(out, values)
+    assert one_sample(np.array([3.0]), 1).shape == (1, 1)
+    for values in (plain.astype(">f8"), plain.astype(np.float32), np.zeros(3),
+                   np.zeros((1, 2)), np.zeros(4)[::2], np.array([np.nan, 0.0]),
+                   np.array([0.0, -np.inf]), np.array([np.inf, -np.inf])):
+        assert one_sample(values, 2) is None

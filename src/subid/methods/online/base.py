@@ -58,11 +58,15 @@ def one_sample(values, channels: int):
     (:func:`subid._validation.as_chunk`, which returns the same array for
     such a sample and raises the errors).
 
-    The caller checks ``type(values) is np.ndarray``. Finiteness is tested
+    The caller checks ``type(values) is np.ndarray``. The dtype is compared
+    by identity first (the usual float64 descriptor), then by equality (an
+    equal descriptor object made elsewhere, e.g. by scipy). Finiteness is tested
     on the sum of the values (NaN and inf propagate into it), entry by entry
     only if the sum is not finite (an overflow).
     """
-    if values.dtype is _FLOAT64 and values.shape == (channels,) and values.flags.c_contiguous:
+    dtype = values.dtype
+    if (dtype is _FLOAT64 or dtype == _FLOAT64) and values.shape == (channels,) \
+            and values.flags.c_contiguous:
         entries = values.tolist()
         if math.isfinite(sum(entries)) or all(map(math.isfinite, entries)):
             return values[None]
