@@ -1262,19 +1262,31 @@ def _ref_refresh(n, nu, ny, omega, alpha, max_cond, gate, ode, iv, T_now, ist, f
 
 
 @numba.njit(cache=True, fastmath=_FASTMATH)
-def kernel_packed(Tm, U, Y, idx, cbuf, clay, ipar, ist, lay, PsiPhi, PsiG0, PsiG1, pstamp, hist,
-                  buf):  # pragma: no cover - compiled
-    """:func:`kernel` with its float arrays passed as two buffers.
+def kernel_packed(Tm, U, Y, idx, cbuf, ibuf, ist, hist, buf):  # pragma: no cover - compiled
+    """:func:`kernel` with its arrays passed as a few buffers.
 
     ``buf`` holds the float state: ``lay[i] = (offset, rows, cols)`` locates
     the i-th float state array of :func:`kernel` (``fst`` ... ``Zz``, in its
-    argument order; the first three are 1-D). ``cbuf`` holds the constant
-    tables ``steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, Hsel, par``
-    (that order): ``clay[i] = (offset, d0, d1, d2)``. The views are cut here,
-    in compiled code: calling from Python costs two array arguments instead
-    of 34 (unboxing arrays is most of the cost of a one-sample call). Same
-    arithmetic as :func:`kernel`: the same body (:func:`_kernel_body`).
+    argument order; the first three are 1-D). ``cbuf`` holds the tables
+    ``steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, Hsel, par`` and the
+    Ψ cache ``PsiPhi, PsiG0, PsiG1`` (that order): ``clay[i] = (offset, d0,
+    d1, d2)``. ``ibuf`` holds ``[len(clay), len(lay), len(ipar)]``, then
+    ``clay``, ``lay``, ``ipar`` and the cache stamps ``pstamp`` (one per table
+    entry). The views are cut here, in compiled code: calling from Python
+    costs nine array arguments instead of 46 (each costs its unboxing, a
+    one-sample call pays it every time). Same arithmetic as :func:`kernel`:
+    the same body (:func:`_kernel_body`).
     """
+    n_c, n_lay, n_ipar = ibuf[0], ibuf[1], ibuf[2]
+    clay = _borrowed_view(ibuf, 3, (n_c, 4))
+    o = 3 + 4 * n_c
+    lay = _borrowed_view(ibuf, o, (n_lay, 3))
+    o += 3 * n_lay
+    ipar = _borrowed_view(ibuf, o, n_ipar)
+    pstamp = _borrowed_view(ibuf, o + n_ipar, clay[0, 1])
+    PsiPhi = _view3(cbuf, clay, 11)
+    PsiG0 = _view3(cbuf, clay, 12)
+    PsiG1 = _view3(cbuf, clay, 13)
     steps = _borrowed_view(cbuf, clay[0, 0], clay[0, 1])
     lamM = _borrowed_view(cbuf, clay[1, 0], clay[1, 1])
     lamT = _borrowed_view(cbuf, clay[2, 0], clay[2, 1])

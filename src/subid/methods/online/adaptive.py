@@ -124,19 +124,31 @@ _NON_FINITE = ("the chunk drove the identifier to non-finite values (are the sig
                "to moderate magnitudes?); it was rejected and the identifier is unchanged")
 
 
-def _pack_tables(arrays):
-    """``(cbuf, clay)`` of :func:`subid.methods.online._adaptive_kernel.kernel_packed`: the float
-    arrays copied into one buffer and their (offset, d0, d1, d2)."""
-    sizes = [a.size for a in arrays]
+def _pack_tables(arrays, cache, lay, ipar):
+    """``(cbuf, ibuf, cache)`` of :func:`subid.methods.online._adaptive_kernel.kernel_packed`.
+
+    ``cbuf``: the float ``arrays`` then the Ψ cache (``PsiPhi, PsiG0,
+    PsiG1``) copied into one buffer; ``ibuf``: the counts ``[tables, state
+    arrays, ipar]``, their layout ``clay`` (offset, d0, d1, d2 per array of
+    cbuf), the state layout ``lay``, ``ipar`` and the cache stamps, copied into
+    one int64 buffer. The returned ``cache`` are views of the buffers (the
+    kernel updates the cache there)."""
+    floats = list(arrays) + list(cache[:3])
+    sizes = [a.size for a in floats]
     cbuf = np.empty(sum(sizes))
-    clay = np.ones((len(arrays), 4), dtype=np.int64)
+    clay = np.ones((len(floats), 4), dtype=np.int64)
+    views = []
     off = 0
-    for i, (a, size) in enumerate(zip(arrays, sizes)):
+    for i, (a, size) in enumerate(zip(floats, sizes)):
         cbuf[off:off + size] = a.reshape(-1)
         clay[i, 0] = off
         clay[i, 1:1 + a.ndim] = a.shape
+        views.append(cbuf[off:off + size].reshape(a.shape))
         off += size
-    return cbuf, clay
+    stamps = cache[3]
+    ibuf = np.concatenate([[len(floats), lay.shape[0], ipar.size], clay.reshape(-1),
+                           lay.reshape(-1), ipar, stamps]).astype(np.int64)
+    return cbuf, ibuf, (views[-3], views[-2], views[-1], ibuf[ibuf.size - stamps.size:])
 
 
 def _positive(value, name: str, *, exc=SubidError) -> float:
@@ -477,7 +489,8 @@ class AdaptiveIdentifier(OnlineIdentifier):
         st["hist"] = np.zeros((self._hist_cap, 2 + n * n + n * nu + ny * n + ny * nu))
         self._st = st
         self._uniform = None      # discretisation tables for the constructor's dt
-        self._uniform_tail = None     # kernel_packed's arguments after idx (dt samples)
+        self._uniform_tail = None     # kernel_packed's arguments after idx (dt samples):
+        # (cbuf, ibuf, ist, hist, buf)
         self._idx1 = np.zeros(1, dtype=np.int64)    # table entries of a one-sample chunk
         self._T1 = np.zeros(1)                      # time stamp of a one-sample chunk
 
@@ -834,7 +847,7 @@ class AdaptiveIdentifier(OnlineIdentifier):
         at the next point of the dt grid, once the uniform tables are built
         (numba engine): the path of ``update`` for ``T is None, N == 1``."""
         tail = self._uniform_tail
-        ist = tail[3]                   # self._st["ist"]
+        ist = tail[-3]                  # self._st["ist"]
         S0 = int(ist[0])
         snap_buf, snap_ist = self._buf.tobytes(), ist.tolist()     # cheaper than copies
         hist = tail[-2]                 # self._st["hist"]
@@ -862,11 +875,11 @@ class AdaptiveIdentifier(OnlineIdentifier):
         Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, lamM, lamT = tables
         st = self._st
         par, ipar = self._parameters()
-        if self._engine == "numba":     # the float arrays as two buffers (cheaper call)
-            cbuf, clay = _pack_tables((steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1,
-                                       self._H, par))
-            return bool(_k.kernel_packed(T, U, Y, idx, cbuf, clay, ipar, st["ist"], self._lay,
-                                         *cache, st["hist"], self._buf))
+        if self._engine == "numba":     # the arrays as a few buffers (cheaper call)
+            cbuf, ibuf, _ = _pack_tables((steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1,
+                                          self._H, par), cache, self._lay, ipar)
+            return bool(_k.kernel_packed(T, U, Y, idx, cbuf, ibuf, st["ist"], st["hist"],
+                                         self._buf))
         return bool(_k.reference(T, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0,
                                  Ig1, self._H, par, ipar,
                                  *(st[k] for k in self._ORDER), *cache, st["hist"], self._buf))
@@ -902,10 +915,11 @@ class AdaptiveIdentifier(OnlineIdentifier):
         if tail is None:    # the arguments after idx never change: built once
             Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, lamM, lamT = tables
             par, ipar = self._parameters()
-            cbuf, clay = _pack_tables((steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1,
-                                       self._H, par))
-            tail = self._uniform_tail = (cbuf, clay, ipar, self._st["ist"], self._lay,
-                                         *cache, self._st["hist"], self._buf)
+            cbuf, ibuf, cache = _pack_tables((steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0,
+                                              Ig1, self._H, par), cache, self._lay, ipar)
+            self._uniform = (steps, tables, cache)      # the Ψ cache in the buffers now
+            tail = self._uniform_tail = (cbuf, ibuf, self._st["ist"], self._st["hist"],
+                                         self._buf)
         return bool(_k.kernel_packed(T, U, Y, idx, *tail))
 
     def _run(self, T, U, Y, steps_all, uniq) -> bool:
