@@ -1,5 +1,8 @@
 """Start-up, first-call compile and single-sample update cost (issue 14 items 5, 6).
 
+The single-sample figures are AdaptiveIdentifier's (the target) and, for
+comparison, RecursiveSubspace's.
+
 Run: OPENBLAS_NUM_THREADS=1 PYTHONPATH=src python bench/startup.py [--repeat 7]
 
 Every figure is a median over fresh interpreters (subprocesses) or repeated
@@ -90,6 +93,26 @@ def single_update(repeat):
     return statistics.median(per), statistics.median(per_chunk)
 
 
+def single_update_recursive(repeat, **settings):
+    """Median cost of one ``RecursiveSubspace.update(u_k, y_k)`` (seconds)."""
+    import numpy as np
+
+    from subid import RecursiveSubspace
+    rng = np.random.default_rng(0)
+    u = rng.standard_normal((2000 * repeat + 1000, 2))
+    y = rng.standard_normal((2000 * repeat + 1000, 2))
+    ident = RecursiveSubspace(4, 2, 2, horizon=5, **settings)
+    ident.update(u[:1000], y[:1000])                       # compile, settle
+    per = []
+    for r in range(repeat):
+        a = 1000 + r * 2000
+        t0 = time.perf_counter()
+        for k in range(a, a + 2000):
+            ident.update(u[k], y[k])
+        per.append((time.perf_counter() - t0) / 2000)
+    return statistics.median(per)
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--repeat", type=int, default=5)
@@ -133,6 +156,10 @@ def main():
     one, chunk = single_update(rep)
     print(f"single-sample update            {one * 1e6:8.1f} us   (target < 15 us); "
           f"per sample in a 2000-sample chunk {chunk * 1e6:6.2f} us")
+    rs = single_update_recursive(rep)
+    rs_forget = single_update_recursive(rep, forgetting=0.99)
+    print(f"RecursiveSubspace single-sample update {rs * 1e6:6.1f} us (forgetting 1), "
+          f"{rs_forget * 1e6:6.1f} us (forgetting 0.99)")
 
 
 if __name__ == "__main__":

@@ -74,3 +74,114 @@ def test_strided_one_sample_views_are_accepted():
         b.update(u[k], y[k])
     for x, z in zip(_state(a), _state(b)):
         np.testing.assert_array_equal(x, z)
+
+
+def test_one_sample_forms_take_the_general_path_with_the_same_result():
+    """Samples the cheap path does not take (byte order, lists, other dtypes,
+    shapes) give the state of plain float64 samples."""
+    u, y = _record(120)
+    ref = AdaptiveIdentifier(4, 2, 2, horizon=5, dt=1e-2)
+    other = AdaptiveIdentifier(4, 2, 2, horizon=5, dt=1e-2)
+    for k in range(120):
+        ref.update(u[k], y[k])
+        form = k % 4
+        if form == 0:
+            other.update(u[k].astype(">f8"), y[k])              # byte-swapped
+        elif form == 1:
+            other.update(list(u[k]), y[k].tolist())             # lists
+        elif form == 2:
+            other.update(u[k:k + 1], y[k:k + 1])                # a (1, 2) chunk
+        else:
+            other.update(u[k].astype(np.longdouble), y[k])      # another float dtype
+    for x, z in zip(_state(ref), _state(other)):
+        np.testing.assert_array_equal(x, z)
+
+
+def test_huge_finite_one_sample_is_treated_as_by_the_general_path():
+    """Entries whose sum overflows are finite: the cheap path's test of the sum
+    falls back to the entries, and the outcome is that of a (1, 2) chunk."""
+    u, y = _record(60)
+    outcomes = []
+    for shape in ((2,), (1, 2)):
+        ident = AdaptiveIdentifier(4, 2, 2, horizon=5, dt=1e-2)
+        ident.update(u[:50], y[:50])
+        try:
+            ident.update(np.full(shape, 1e308), y[50].reshape(shape))
+            outcomes.append(("ok",) + _state(ident))
+        except DataError as exc:
+            outcomes.append((str(exc),) + _state(ident))
+    assert outcomes[0][0] == outcomes[1][0]
+    assert "input u" not in outcomes[0][0]          # not rejected as non-finite input
+    for x, z in zip(outcomes[0][1:], outcomes[1][1:]):
+        np.testing.assert_array_equal(x, z)
+
+
+@pytest.mark.parametrize("at_refresh", [False, True])
+def test_one_sample_rejected_by_the_kernel_is_rolled_back(monkeypatch, at_refresh):
+    """A one-sample call whose kernel run ends non-finite (or raises) leaves
+    the state as it was, history included when the sample is a refresh."""
+    u, y = _record(400)
+    ident = AdaptiveIdentifier(4, 2, 2, horizon=5, dt=1e-2, history_size=4, refresh_every=10)
+    start = 300 if at_refresh else 303      # n_samples 300: this sample is a refresh
+    ident.update(u[:start], y[:start])
+    before = _state(ident)
+    real = K.kernel_packed
+
+    def overflowing(*args):
+        real(*args)
+        args[-1][5] = np.inf
+        if at_refresh:
+            args[-2][:] = -1.0          # the history, written at a refresh
+        return False
+
+    def raising(*args):
+        real(*args)
+        args[-1][:] = 7.0
+        raise ZeroDivisionError("mid-run")
+
+    for fake, err in ((overflowing, DataError), (raising, ZeroDivisionError)):
+        monkeypatch.setattr(K, "kernel_packed", fake)
+        with pytest.raises(err):
+            ident.update(u[start], y[start])
+        monkeypatch.undo()
+        for x, z in zip(before, _state(ident)):
+            np.testing.assert_array_equal(x, z)
+    for k in range(start, 400):
+        ident.update(u[k], y[k])
+    ref = AdaptiveIdentifier(4, 2, 2, horizon=5, dt=1e-2, history_size=4, refresh_every=10)
+    ref.update(u, y)
+    for x, z in zip(_state(ref), _state(ident)):
+        np.testing.assert_array_equal(x, z)
+
+
+def test_all_finite_agrees_with_numpy():
+    rng = np.random.default_rng(5)
+    base = rng.standard_normal(1806) * 10.0 ** rng.integers(-300, 300, 1806)
+    assert K._all_finite(base)
+    for value in (np.nan, np.inf, -np.inf, 1.7e308, -0.0, 5e-324, -np.nan):
+        for pos in (0, 1, 3, 4, 7, 1024, 1805):
+            x = base.copy()
+            x[pos] = value
+            assert K._all_finite(x) == bool(np.isfinite(x).all()), (value, pos)
+    assert K._all_finite(np.zeros(0))
+
+
+def test_one_sample_helper_accepts_exactly_the_cheap_forms():
+    """``one_sample``: a (1, channels) view of a contiguous finite float64
+    sample (any float64 descriptor object), None for anything else (left to
+    the general validation)."""
+    import pickle
+
+    from subid.methods.online.base import one_sample
+
+    plain = np.array([1.0, -2.0])
+    other_descr = np.array([1.0, -2.0]).view(pickle.loads(pickle.dumps(np.dtype(np.float64))))
+    assert other_descr.dtype is not np.dtype(np.float64)
+    for values in (plain, other_descr, np.array([1e308, 1e308])):
+        out = one_sample(values, 2)
+        assert out.shape == (1, 2) and out.flags.c_contiguous and np.shares_memory(out, values)
+    assert one_sample(np.array([3.0]), 1).shape == (1, 1)
+    for values in (plain.astype(">f8"), plain.astype(np.float32), np.zeros(3),
+                   np.zeros((1, 2)), np.zeros(4)[::2], np.array([np.nan, 0.0]),
+                   np.array([0.0, -np.inf]), np.array([np.inf, -np.inf])):
+        assert one_sample(values, 2) is None

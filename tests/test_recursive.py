@@ -361,3 +361,42 @@ def test_regression_not_started_warns():
     assert model.info["bd_method"] == "projection" and model.info["bd_fallback"]
     with pytest.raises(errors.SubidError, match="bd_method"):
         subid.RecursiveSubspace(3, 2, 2, bd_method="simulation")
+
+
+@pytest.mark.parametrize("kw", [{}, {"forgetting": 0.99, "refresh_every": 50}])
+def test_one_sample_arrays_equal_one_sample_chunks_bit_for_bit(noisy, kw):
+    """The cheap path of 1-D samples gives exactly the state of (1, channels)
+    chunks (the general path), and rejects a non-finite sample like it."""
+    a = subid.RecursiveSubspace(3, 2, 2, **kw)
+    b = subid.RecursiveSubspace(3, 2, 2, **kw)
+    for k in range(700):
+        a.update(noisy.u[k], noisy.y[k])
+        b.update(noisy.u[k:k + 1], noisy.y[k:k + 1])
+    bad = noisy.u[700].copy()
+    bad[0] = np.nan
+    with pytest.raises(errors.DataError, match="input u"):
+        a.update(bad, noisy.y[700])
+    with pytest.raises(errors.DataError, match="output y"):
+        a.update(noisy.u[700], np.array([0.0, np.inf]))
+    for name in ("_R", "_bd_R", "_buf_u", "_buf_y"):
+        np.testing.assert_array_equal(getattr(a, name), getattr(b, name), err_msg=name)
+    if a._lag is not None:
+        for name, value in a._lag.arrays().items():
+            np.testing.assert_array_equal(value, b._lag.arrays()[name], err_msg=name)
+    assert a.n_samples == b.n_samples == 700
+    for name in "ABCD":
+        np.testing.assert_array_equal(getattr(a.model, name), getattr(b.model, name))
+
+
+def test_lagged_statistic_one_sample_updates_equal_chunks():
+    from subid.methods.online._lagged import BLOCK, LaggedStatistic
+    rng = np.random.default_rng(6)
+    n = 2 * BLOCK + 37
+    u, y = rng.standard_normal((n, 2)), rng.standard_normal((n, 1))
+    one, whole = LaggedStatistic(2, 1, 40), LaggedStatistic(2, 1, 40)
+    for k in range(n):
+        one.update(u[k:k + 1], y[k:k + 1])
+    whole.update(u, y)
+    assert one.n_samples == whole.n_samples == n
+    for name, value in one.arrays().items():
+        np.testing.assert_array_equal(value, whole.arrays()[name], err_msg=name)

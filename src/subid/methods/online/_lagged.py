@@ -151,6 +151,14 @@ class LaggedStatistic:
         :data:`BLOCK` samples (at fixed sample indices, so that the sums do
         not depend on how the stream is cut into chunks); ``kernel`` other
         than the compiled one adds every sample at once (for the tests)."""
+        if u.shape[0] == 1 and kernel is lag_update:    # one sample: no stacked copy
+            row = self.pending[self.n_pending]
+            row[:self.n_inputs] = u[0]
+            row[self.n_inputs:] = y[0]
+            self.n_pending += 1
+            if self.n_pending == BLOCK:
+                self.flush()
+            return
         z = np.hstack([u, y])
         if kernel is not lag_update:
             self.flush(kernel)

@@ -93,7 +93,7 @@ from subid.methods._info import model_info
 from subid.methods.dt._subspace import conditions_of
 from subid.methods.dt.ls_subspace import random_selector
 from subid.methods.online import _adaptive_kernel as _k
-from subid.methods.online.base import OnlineIdentifier, history_dict
+from subid.methods.online.base import OnlineIdentifier, history_dict, one_sample
 from subid.model._simulate import expm_blocks
 from subid.model.statespace import StateSpace
 
@@ -120,21 +120,35 @@ _INSTRUMENT_POLE_RATIO = 0.25
 # mix in rows built from (Ã, C̃) that M itself has forgotten.
 _DEFAULT_FORGETTING = {"iv": (0.002, None), "ls": (0.4, 0.08), "ode": (0.4, 0.08)}
 _IV_BD_RATIO = 1.0
+_NON_FINITE = ("the chunk drove the identifier to non-finite values (are the signals scaled "
+               "to moderate magnitudes?); it was rejected and the identifier is unchanged")
 
 
-def _pack_tables(arrays):
-    """``(cbuf, clay)`` of :func:`subid.methods.online._adaptive_kernel.kernel_packed`: the float
-    arrays copied into one buffer and their (offset, d0, d1, d2)."""
-    sizes = [a.size for a in arrays]
+def _pack_tables(arrays, cache, lay, ipar):
+    """``(cbuf, ibuf, cache)`` of :func:`subid.methods.online._adaptive_kernel.kernel_packed`.
+
+    ``cbuf``: the float ``arrays`` then the Ψ cache (``PsiPhi, PsiG0,
+    PsiG1``) copied into one buffer; ``ibuf``: the counts ``[tables, state
+    arrays, ipar]``, their layout ``clay`` (offset, d0, d1, d2 per array of
+    cbuf), the state layout ``lay``, ``ipar`` and the cache stamps, copied into
+    one int64 buffer. The returned ``cache`` are views of the buffers (the
+    kernel updates the cache there)."""
+    floats = list(arrays) + list(cache[:3])
+    sizes = [a.size for a in floats]
     cbuf = np.empty(sum(sizes))
-    clay = np.ones((len(arrays), 4), dtype=np.int64)
+    clay = np.ones((len(floats), 4), dtype=np.int64)
+    views = []
     off = 0
-    for i, (a, size) in enumerate(zip(arrays, sizes)):
+    for i, (a, size) in enumerate(zip(floats, sizes)):
         cbuf[off:off + size] = a.reshape(-1)
         clay[i, 0] = off
         clay[i, 1:1 + a.ndim] = a.shape
+        views.append(cbuf[off:off + size].reshape(a.shape))
         off += size
-    return cbuf, clay
+    stamps = cache[3]
+    ibuf = np.concatenate([[len(floats), lay.shape[0], ipar.size], clay.reshape(-1),
+                           lay.reshape(-1), ipar, stamps]).astype(np.int64)
+    return cbuf, ibuf, (views[-3], views[-2], views[-1], ibuf[ibuf.size - stamps.size:])
 
 
 def _positive(value, name: str, *, exc=SubidError) -> float:
@@ -475,6 +489,8 @@ class AdaptiveIdentifier(OnlineIdentifier):
         st["hist"] = np.zeros((self._hist_cap, 2 + n * n + n * nu + ny * n + ny * nu))
         self._st = st
         self._uniform = None      # discretisation tables for the constructor's dt
+        self._uniform_tail = None     # kernel_packed's arguments after idx (dt samples):
+        # (cbuf, ibuf, ist, hist, buf)
         self._idx1 = np.zeros(1, dtype=np.int64)    # table entries of a one-sample chunk
         self._T1 = np.zeros(1)                      # time stamp of a one-sample chunk
 
@@ -772,6 +788,16 @@ class AdaptiveIdentifier(OnlineIdentifier):
         -----
         The result does not depend on how a stream is cut into chunks.
         """
+        if t is None and self._uniform_tail is not None and type(u) is np.ndarray \
+                and type(y) is np.ndarray:
+            # one sample on the constructor's dt grid, as 1-D float64 arrays (a
+            # stream's usual call): validated and processed without the
+            # general bookkeeping; the same kernel call as below
+            U = one_sample(u, self._nu)
+            Y = None if U is None else one_sample(y, self._ny)
+            if Y is not None:
+                self._update_one(U, Y)
+                return self
         U, Y, T = self._parse(u, y, t)
         N = U.shape[0]
         st = self._st
@@ -809,29 +835,51 @@ class AdaptiveIdentifier(OnlineIdentifier):
                                        np.unique(steps_all[a:b])) and ok
                 self._t_origin, self._k_origin = float(T[-1]), S0 + N - 1
             if not ok:
-                raise DataError("the chunk drove the identifier to non-finite values (are the "
-                                "signals scaled to moderate magnitudes?); it was rejected and "
-                                "the identifier is unchanged")
+                raise DataError(_NON_FINITE)
         except BaseException:
-            self._buf[:] = snap_buf
-            st["ist"][:] = snap_ist
-            if snap_hist is not None:
-                hist[:] = snap_hist
+            self._rollback(snap_buf, snap_ist, snap_hist)
             self._t_origin, self._k_origin = origin
-            if self._uniform is not None:
-                self._uniform[-1][-1][:] = -1          # invalidate the Ψ cache
             raise
         return self
+
+    def _update_one(self, U, Y) -> None:
+        """:meth:`update` of one validated sample (U, Y of shape (1, channels))
+        at the next point of the dt grid, once the uniform tables are built
+        (numba engine): the path of ``update`` for ``T is None, N == 1``."""
+        tail = self._uniform_tail
+        ist = tail[-3]                  # self._st["ist"]
+        S0 = int(ist[0])
+        snap_buf, snap_ist = self._buf.tobytes(), ist.tolist()     # cheaper than copies
+        hist = tail[-2]                 # self._st["hist"]
+        # the history only if this sample is a refresh
+        snap_hist = hist.copy() if hist.shape[0] and S0 and S0 % self._refresh == 0 else None
+        T = self._T1                    # the kernel only reads it
+        T[0] = self._t_origin + self._dt * float(S0 - self._k_origin)
+        try:
+            if not _k.kernel_packed(T, U, Y, self._idx1, *tail):
+                raise DataError(_NON_FINITE)
+        except BaseException:
+            self._rollback(np.frombuffer(snap_buf), snap_ist, snap_hist)
+            raise
+
+    def _rollback(self, snap_buf, snap_ist, snap_hist) -> None:
+        """Restore the state saved before a chunk that was rejected."""
+        self._buf[:] = snap_buf
+        self._st["ist"][:] = snap_ist
+        if snap_hist is not None:
+            self._st["hist"][:] = snap_hist
+        if self._uniform is not None:
+            self._uniform[-1][-1][:] = -1          # invalidate the Ψ cache
 
     def _call(self, T, U, Y, idx, steps, tables, cache) -> bool:
         Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, lamM, lamT = tables
         st = self._st
         par, ipar = self._parameters()
-        if self._engine == "numba":     # the float arrays as two buffers (cheaper call)
-            cbuf, clay = _pack_tables((steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1,
-                                       self._H, par))
-            return bool(_k.kernel_packed(T, U, Y, idx, cbuf, clay, ipar, st["ist"], self._lay,
-                                         *cache, st["hist"], self._buf))
+        if self._engine == "numba":     # the arrays as a few buffers (cheaper call)
+            cbuf, ibuf, _ = _pack_tables((steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1,
+                                          self._H, par), cache, self._lay, ipar)
+            return bool(_k.kernel_packed(T, U, Y, idx, cbuf, ibuf, st["ist"], st["hist"],
+                                         self._buf))
         return bool(_k.reference(T, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0,
                                  Ig1, self._H, par, ipar,
                                  *(st[k] for k in self._ORDER), *cache, st["hist"], self._buf))
@@ -858,7 +906,6 @@ class AdaptiveIdentifier(OnlineIdentifier):
         if self._uniform is None:
             steps = np.array([self._dt])
             self._uniform = (steps, self._tables(steps), self._psi_cache(1))
-            self._uniform_tail = None
         steps, tables, cache = self._uniform
         N = U.shape[0]
         idx = self._idx1 if N == 1 else np.zeros(N, dtype=np.int64)
@@ -868,10 +915,11 @@ class AdaptiveIdentifier(OnlineIdentifier):
         if tail is None:    # the arguments after idx never change: built once
             Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, lamM, lamT = tables
             par, ipar = self._parameters()
-            cbuf, clay = _pack_tables((steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1,
-                                       self._H, par))
-            tail = self._uniform_tail = (cbuf, clay, ipar, self._st["ist"], self._lay,
-                                         *cache, self._st["hist"], self._buf)
+            cbuf, ibuf, cache = _pack_tables((steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0,
+                                              Ig1, self._H, par), cache, self._lay, ipar)
+            self._uniform = (steps, tables, cache)      # the Ψ cache in the buffers now
+            tail = self._uniform_tail = (cbuf, ibuf, self._st["ist"], self._st["hist"],
+                                         self._buf)
         return bool(_k.kernel_packed(T, U, Y, idx, *tail))
 
     def _run(self, T, U, Y, steps_all, uniq) -> bool:

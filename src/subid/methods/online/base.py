@@ -36,6 +36,7 @@ import abc
 import contextlib
 import hashlib
 import inspect
+import math
 import os
 import warnings
 
@@ -45,6 +46,31 @@ from subid._validation import same_period
 from subid.errors import DataError, NotConvergedWarning, SubidError
 
 __all__ = ["OnlineIdentifier", "Tracker", "history_dict", "markov_parameters", "with_names"]
+
+_FLOAT64 = np.dtype(np.float64)
+
+
+def one_sample(values, channels: int):
+    """``values`` as a (1, ``channels``) C-contiguous float64 view when it is
+    one finite sample given as a contiguous 1-D float64 ndarray of
+    ``channels`` entries (the common call of a stream); otherwise None, and
+    the caller validates ``values`` the general way
+    (:func:`subid._validation.as_chunk`, which returns the same array for
+    such a sample and raises the errors).
+
+    The caller checks ``type(values) is np.ndarray``. The dtype is compared
+    by identity first (the usual float64 descriptor), then by equality (an
+    equal descriptor object made elsewhere, e.g. by scipy). Finiteness is tested
+    on the sum of the values (NaN and inf propagate into it), entry by entry
+    only if the sum is not finite (an overflow).
+    """
+    dtype = values.dtype
+    if (dtype is _FLOAT64 or dtype == _FLOAT64) and values.shape == (channels,) \
+            and values.flags.c_contiguous:
+        entries = values.tolist()
+        if math.isfinite(sum(entries)) or all(map(math.isfinite, entries)):
+            return values[None]
+    return None
 
 
 def history_dict(sample, t, A, B, C, D, dt: float) -> dict:

@@ -81,7 +81,7 @@ from subid.methods.dt._subspace import (
 from subid.methods.dt.ls_subspace import check_options, gamma_from_factor, random_selector
 from subid.methods.online._lagged import LaggedStatistic, end_sensitivity
 from subid.methods.online._lagged import solve as solve_lagged
-from subid.methods.online.base import OnlineIdentifier, history_dict
+from subid.methods.online.base import OnlineIdentifier, history_dict, one_sample
 from subid.model.statespace import StateSpace
 from subid.statistic._hankel import HankelFactor, hankel_chunk
 
@@ -404,9 +404,18 @@ class RecursiveSubspace(OnlineIdentifier):
         The result does not depend on how a stream is cut into chunks (to
         rounding).
         """
-        u, y, t, _ = self._unpack(u, y, t)
-        u = as_chunk(u, self.n_inputs, "input u", allow_empty=True, copy=True)
-        y = as_chunk(y, self.n_outputs, "output y", allow_empty=True, copy=True)
+        U = Y = None
+        if t is None and type(u) is np.ndarray and type(y) is np.ndarray:
+            # one sample as 1-D float64 arrays (a stream's usual call): views,
+            # only read during this call (the buffers below copy them)
+            U = one_sample(u, self.n_inputs)
+            Y = None if U is None else one_sample(y, self.n_outputs)
+        if Y is not None:
+            u, y = U, Y
+        else:
+            u, y, t, _ = self._unpack(u, y, t)
+            u = as_chunk(u, self.n_inputs, "input u", allow_empty=True, copy=True)
+            y = as_chunk(y, self.n_outputs, "output y", allow_empty=True, copy=True)
         if u.shape[0] != y.shape[0]:
             raise DataError(f"input u has {u.shape[0]} samples but output y has {y.shape[0]}")
         t0 = None if t is None else self._times(t, u.shape[0])
@@ -535,8 +544,24 @@ class RecursiveSubspace(OnlineIdentifier):
         return self._history_stride - self._n_samples % self._history_stride
 
     def _ingest(self, u, y):
-        all_u = np.vstack([self._buf_u, u])
-        all_y = np.vstack([self._buf_y, y])
+        keep = self._keep
+        if u.shape[0] == 1 and self._buf_u.shape[0] == keep:
+            # one sample with a full buffer (keep >= depth - 1): the one new
+            # Hankel column is the last depth samples; the same values and
+            # operations as below, without stacking the buffers twice
+            bu, by = self._buf_u, self._buf_y
+            first = keep - self._depth + 1
+            row = np.concatenate((bu[first:].reshape(-1), u.reshape(-1),
+                                  by[first:].reshape(-1), y.reshape(-1)))[None]
+            givens_update(self._R, row, math.sqrt(self._lam))
+            self._add_columns(1)
+            self._buf_u = np.concatenate((bu[1:], u))
+            self._buf_y = np.concatenate((by[1:], y))
+            self._n_samples += 1
+            self._model = None
+            return
+        all_u = np.concatenate((self._buf_u, u))
+        all_y = np.concatenate((self._buf_y, y))
         # the buffer may hold more than depth - 1 samples (the last horizon, for
         # the state): the columns that start before its last depth - 1 samples
         # were counted by the previous chunk
@@ -549,14 +574,18 @@ class RecursiveSubspace(OnlineIdentifier):
             givens_update(self._R, rows, lam_sqrt)
         columns -= first
         if columns > 0:
-            lam = self._lam
-            self._weight = self._weight * lam ** columns + (
-                columns if lam == 1.0 else (1 - lam ** columns) / (1 - lam))
-            self._n_columns += columns
+            self._add_columns(columns)
         self._buf_u = all_u[-self._keep:].copy()
         self._buf_y = all_y[-self._keep:].copy()
         self._n_samples += u.shape[0]
         self._model = None
+
+    def _add_columns(self, columns: int) -> None:
+        """Count ``columns`` new Hankel columns (and their weight)."""
+        lam = self._lam
+        self._weight = self._weight * lam ** columns + (
+            columns if lam == 1.0 else (1 - lam ** columns) / (1 - lam))
+        self._n_columns += columns
 
     def _snapshot(self):
         try:
