@@ -1251,8 +1251,7 @@ def kernel_packed(Tm, U, Y, idx, cbuf, ibuf, ist, hist, buf):  # pragma: no cove
     ``clay``, ``lay``, ``ipar`` and the cache stamps ``pstamp`` (one per table
     entry). The views are cut here, in compiled code: calling from Python
     costs nine array arguments instead of 46 (each costs its unboxing, a
-    one-sample call pays it every time). Same arithmetic as :func:`kernel`:
-    the same body (:func:`_kernel_body`).
+    one-sample call pays it every time). Then it calls :func:`kernel`.
     """
     n_c, n_lay, n_ipar = ibuf[0], ibuf[1], ibuf[2]
     clay = _flat_view(ibuf, 3, (n_c, 4))
@@ -1298,11 +1297,10 @@ def kernel_packed(Tm, U, Y, idx, cbuf, ibuf, ist, hist, buf):  # pragma: no cove
     Cz = _view2(buf, lay, 20)
     Gz = _view2(buf, lay, 21)
     Zz = _view2(buf, lay, 22)
-    sc = _scratch(zp, Am, M, zr, Cz, theta)
-    return _kernel_body(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1,
-                        Hsel, par, ipar, ist, fst, prev_u, prev_y, zp, zq, R, G, M, Rt, gt,
-                        theta, Am, Cm, Bm, Dm, Apsi, Cpsi, Psi, zr, xi, Cz, Gz, Zz,
-                        PsiPhi, PsiG0, PsiG1, pstamp, hist, buf, sc)
+    return kernel(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, Hsel,
+                  par, ipar, ist, fst, prev_u, prev_y, zp, zq, R, G, M, Rt, gt, theta, Am, Cm,
+                  Bm, Dm, Apsi, Cpsi, Psi, zr, xi, Cz, Gz, Zz, PsiPhi, PsiG0, PsiG1, pstamp,
+                  hist, buf)
 
 
 @numba.njit(cache=True)
