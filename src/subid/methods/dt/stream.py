@@ -221,10 +221,13 @@ def identify_file(path, inputs, outputs, *, dt=None, method: str = "moesp", orde
                   delimiter=None, progress=None, **options):
     """Identify a model from a file of any size, with bounded memory.
 
-    The file is parsed once with :func:`subid.read_chunks` and reduced to its
-    statistic on the way; the B, D, x0 regression (unless
-    ``bd_method='projection'``) reads the parsed values back from a temporary
-    file of doubles (:class:`ParsedOnce`) instead of parsing the file again.
+    The file is parsed once with :func:`subid.read_chunks` (on subid's
+    threads) and reduced to its statistic on the way; the B, D, x0 regression
+    (unless ``bd_method='projection'``) reads the parsed values back from a
+    temporary file of doubles (:class:`ParsedOnce`) instead of parsing the
+    file again, in :data:`SPOOL_GROUPS` consecutive stretches reduced on
+    subid's threads and merged exactly (the model does not depend on the
+    number of threads).
     ``path`` may be a list of files: each is one experiment (no Hankel column
     crosses from one file to the next; one x0 per file), as
     ``subid.merge([subid.read(p, ...) for p in paths])`` in memory. See
