@@ -40,8 +40,6 @@ from __future__ import annotations
 import numba
 import numpy as np
 import scipy.linalg
-from numba.core import types
-from numba.extending import overload
 
 from subid.model._simulate import expm_blocks
 
@@ -110,28 +108,6 @@ _FORGOTTEN = 1e-250
 # ---------------------------------------------------------------------------
 # small dense helpers (compiled; the reference uses numpy/scipy instead)
 # ---------------------------------------------------------------------------
-def _flat_view(buf, offset, shape):
-    """``buf[offset:offset + prod(shape)].reshape(shape)`` for a 1-D C-contiguous
-    ``buf`` and ``shape`` an integer or a tuple of 2 or 3 integers, in compiled
-    code only (:func:`_view_overload` gives its implementation): the kernels cut
-    their work arrays out of one scratch buffer and their tables out of packed
-    buffers with it."""
-    raise NotImplementedError("compiled code only")
-
-
-@overload(_flat_view, inline="always")
-def _view_overload(buf, offset, shape):
-    """numba implementation of :func:`_flat_view`: an ordinary slice and reshape."""
-    if isinstance(shape, types.Integer):
-        return lambda buf, offset, shape: buf[offset:offset + shape]
-    if isinstance(shape, types.UniTuple) and shape.count == 2:
-        return lambda buf, offset, shape: buf[offset:offset + shape[0] * shape[1]].reshape(shape)
-    if isinstance(shape, types.UniTuple) and shape.count == 3:
-        return lambda buf, offset, shape: \
-            buf[offset:offset + shape[0] * shape[1] * shape[2]].reshape(shape)
-    return None
-
-
 @numba.njit(cache=True, fastmath=_FASTMATH)
 def phi_blocks(A, h, Phi, G1, G2, work):  # pragma: no cover - compiled
     """Exact discretisation blocks of ``x' = A x + v`` over ``h``.
@@ -673,34 +649,6 @@ def kernel(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, Hse
     without rescaling the whole matrices; the solve is invariant to the
     common factor. The same holds for ``(R_θ, g_θ)`` with ``fst[4]``.
     """
-    sc = _scratch(zp, Am, M, zr, Cz, theta)
-    return _kernel_body(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1,
-                        Hsel, par, ipar, ist, fst, prev_u, prev_y, zp, zq, R, G, M, Rt, gt,
-                        theta, Am, Cm, Bm, Dm, Apsi, Cpsi, Psi, zr, xi, Cz, Gz, Zz,
-                        PsiPhi, PsiG0, PsiG1, pstamp, hist, buf, sc)
-
-
-@numba.njit(cache=True)
-def _scratch(zp, Am, M, zr, Cz, theta):  # pragma: no cover - compiled
-    """The scratch of :func:`_kernel_body`: one allocation per call (a
-    one-sample call pays for one, not 30)."""
-    f, ny = zp.shape
-    n = Am.shape[0]
-    dp, d = M.shape
-    mi = zr.shape[0]
-    dz = Cz.shape[0]
-    dth = theta.shape[1]
-    return np.empty(2 * dz * d + dz * dz + dp * dz + 2 * d * d + 2 * dp * d + dz + 4 * dp
-                    + mi + n + 3 * d + f + 2 * ny * dth + ny * n + ny + 9 * n * n
-                    + dth * dth + dth)
-
-
-@numba.njit(cache=True, fastmath=_FASTMATH)
-def _kernel_body(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, Hsel, par,
-                 ipar, ist, fst, prev_u, prev_y, zp, zq, R, G, M, Rt, gt, theta,
-                 Am, Cm, Bm, Dm, Apsi, Cpsi, Psi, zr, xi, Cz, Gz, Zz,
-                 PsiPhi, PsiG0, PsiG1, pstamp, hist, buf, sc):  # pragma: no cover - compiled
-    """:func:`kernel` with its scratch ``sc`` (the work arrays are views of it)."""
     omega, alpha, beta, max_cond, trace_bound, gate = (par[0], par[1], par[2], par[3],
                                                        par[4], par[5])
     max_gap, dcF, dcI, settle = par[6], par[7], par[8], par[9]
@@ -714,67 +662,71 @@ def _kernel_body(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig
     dz = Cz.shape[0]
     dth = theta.shape[1]
     nX = Psi.shape[1]          # n + n nu: columns of [Ξ, Ψ]
+    # scratch: one allocation per call (a one-sample call pays for one, not 30)
+    sc = np.empty(2 * dz * d + dz * dz + dp * dz + 2 * d * d + 2 * dp * d + dz + 4 * dp
+                  + mi + n + 3 * d + f + 2 * ny * dth + ny * n + ny + 9 * n * n
+                  + dth * dth + dth)
     o = 0
-    zeta = _flat_view(sc, o, dz)
+    zeta = sc[o:o + dz]
     o += dz
-    ez = _flat_view(sc, o, dp)
+    ez = sc[o:o + dp]
     o += dp
-    zi = _flat_view(sc, o, mi)
+    zi = sc[o:o + mi]
     o += mi
-    zi2 = _flat_view(sc, o, n)
+    zi2 = sc[o:o + n]
     o += n
-    Lz = _flat_view(sc, o, (dz, dz))
+    Lz = sc[o:o + dz * dz].reshape((dz, dz))
     o += dz * dz
-    Ct = _flat_view(sc, o, (dz, d))
+    Ct = sc[o:o + dz * d].reshape((dz, d))
     o += dz * d
-    Gt = _flat_view(sc, o, (dp, dz))
+    Gt = sc[o:o + dp * dz].reshape((dp, dz))
     o += dp * dz
-    Nz = _flat_view(sc, o, (d, d))
+    Nz = sc[o:o + d * d].reshape((d, d))
     o += d * d
-    Gn = _flat_view(sc, o, (dp, d))
+    Gn = sc[o:o + dp * d].reshape((dp, d))
     o += dp * d
-    Cf = _flat_view(sc, o, (dz, d))
+    Cf = sc[o:o + dz * d].reshape((dz, d))
     o += dz * d
-    p = _flat_view(sc, o, dp)
+    p = sc[o:o + dp]
     o += dp
-    phi = _flat_view(sc, o, d)
+    phi = sc[o:o + d]
     o += d
-    wphi = _flat_view(sc, o, d)
+    wphi = sc[o:o + d]
     o += d
-    znew = _flat_view(sc, o, f)
+    znew = sc[o:o + f]
     o += f
-    Phi = _flat_view(sc, o, (ny, dth))
+    Phi = sc[o:o + ny * dth].reshape((ny, dth))
     o += ny * dth
     Phi[:, :] = 0.0
-    Pn = _flat_view(sc, o, (ny, n))
+    Pn = sc[o:o + ny * n].reshape((ny, n))
     o += ny * n
-    g = _flat_view(sc, o, d)
+    g = sc[o:o + d]
     o += d
-    e = _flat_view(sc, o, dp)
+    e = sc[o:o + dp]
     o += dp
-    Gq = _flat_view(sc, o, (dth, ny))
+    Gq = sc[o:o + dth * ny].reshape((dth, ny))
     o += dth * ny
-    ey = _flat_view(sc, o, ny)
+    ey = sc[o:o + ny]
     o += ny
-    Ph = _flat_view(sc, o, (n, n))
+    Ph = sc[o:o + n * n].reshape((n, n))
     o += n * n
-    G1h = _flat_view(sc, o, (n, n))
+    G1h = sc[o:o + n * n].reshape((n, n))
     o += n * n
-    G2h = _flat_view(sc, o, (n, n))
+    G2h = sc[o:o + n * n].reshape((n, n))
     o += n * n
-    ep = _flat_view(sc, o, dp)
+    ep = sc[o:o + dp]
     o += dp
-    Ld = _flat_view(sc, o, (d, d))      # Cholesky factors: _chol writes every entry
+    Ld = sc[o:o + d * d].reshape((d, d))      # Cholesky factors: _chol writes every entry
     o += d * d
-    Bd = _flat_view(sc, o, (d, dp))
+    Bd = sc[o:o + d * dp].reshape((d, dp))
     o += d * dp
-    Lt = _flat_view(sc, o, (dth, dth))
+    Lt = sc[o:o + dth * dth].reshape((dth, dth))
     o += dth * dth
-    Bt = _flat_view(sc, o, (dth, 1))
+    Bt = sc[o:o + dth].reshape((dth, 1))
     o += dth
-    Anew = _flat_view(sc, o, (n, n))
+    Anew = sc[o:o + n * n].reshape((n, n))
     o += n * n
-    work = _flat_view(sc, o, (5, n, n))
+    work = sc[o:o + 5 * n * n].reshape((5, n, n))
     for k in range(N):
         if ist[0] == 0:
             for j in range(nu):
@@ -1254,18 +1206,18 @@ def kernel_packed(Tm, U, Y, idx, cbuf, ibuf, ist, hist, buf):  # pragma: no cove
     one-sample call pays it every time). Then it calls :func:`kernel`.
     """
     n_c, n_lay, n_ipar = ibuf[0], ibuf[1], ibuf[2]
-    clay = _flat_view(ibuf, 3, (n_c, 4))
+    clay = ibuf[3:3 + 4 * n_c].reshape((n_c, 4))
     o = 3 + 4 * n_c
-    lay = _flat_view(ibuf, o, (n_lay, 3))
+    lay = ibuf[o:o + 3 * n_lay].reshape((n_lay, 3))
     o += 3 * n_lay
-    ipar = _flat_view(ibuf, o, n_ipar)
-    pstamp = _flat_view(ibuf, o + n_ipar, clay[0, 1])
+    ipar = ibuf[o:o + n_ipar]
+    pstamp = ibuf[o + n_ipar:o + n_ipar + clay[0, 1]]
     PsiPhi = _view3(cbuf, clay, 11)
     PsiG0 = _view3(cbuf, clay, 12)
     PsiG1 = _view3(cbuf, clay, 13)
-    steps = _flat_view(cbuf, clay[0, 0], clay[0, 1])
-    lamM = _flat_view(cbuf, clay[1, 0], clay[1, 1])
-    lamT = _flat_view(cbuf, clay[2, 0], clay[2, 1])
+    steps = cbuf[clay[0, 0]:clay[0, 0] + clay[0, 1]]
+    lamM = cbuf[clay[1, 0]:clay[1, 0] + clay[1, 1]]
+    lamT = cbuf[clay[2, 0]:clay[2, 0] + clay[2, 1]]
     Fphi = _view3(cbuf, clay, 3)
     Fg0 = _view2(cbuf, clay, 4)
     Fg1 = _view2(cbuf, clay, 5)
@@ -1273,10 +1225,10 @@ def kernel_packed(Tm, U, Y, idx, cbuf, ibuf, ist, hist, buf):  # pragma: no cove
     Ig0 = _view2(cbuf, clay, 7)
     Ig1 = _view2(cbuf, clay, 8)
     Hsel = _view2(cbuf, clay, 9)
-    par = _flat_view(cbuf, clay[10, 0], clay[10, 1])
-    fst = _flat_view(buf, lay[0, 0], lay[0, 1])
-    prev_u = _flat_view(buf, lay[1, 0], lay[1, 1])
-    prev_y = _flat_view(buf, lay[2, 0], lay[2, 1])
+    par = cbuf[clay[10, 0]:clay[10, 0] + clay[10, 1]]
+    fst = buf[lay[0, 0]:lay[0, 0] + lay[0, 1]]
+    prev_u = buf[lay[1, 0]:lay[1, 0] + lay[1, 1]]
+    prev_y = buf[lay[2, 0]:lay[2, 0] + lay[2, 1]]
     zp = _view2(buf, lay, 3)
     zq = _view2(buf, lay, 4)
     R = _view2(buf, lay, 5)
@@ -1298,23 +1250,25 @@ def kernel_packed(Tm, U, Y, idx, cbuf, ibuf, ist, hist, buf):  # pragma: no cove
     Gz = _view2(buf, lay, 21)
     Zz = _view2(buf, lay, 22)
     return kernel(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, Hsel,
-                  par, ipar, ist, fst, prev_u, prev_y, zp, zq, R, G, M, Rt, gt, theta, Am, Cm,
-                  Bm, Dm, Apsi, Cpsi, Psi, zr, xi, Cz, Gz, Zz, PsiPhi, PsiG0, PsiG1, pstamp,
-                  hist, buf)
+                  par, ipar, ist, fst, prev_u, prev_y, zp, zq, R, G, M, Rt, gt, theta,
+                  Am, Cm, Bm, Dm, Apsi, Cpsi, Psi, zr, xi, Cz, Gz, Zz,
+                  PsiPhi, PsiG0, PsiG1, pstamp, hist, buf)
 
 
 @numba.njit(cache=True)
 def _view3(buf, lay, i):  # pragma: no cover - compiled
-    """The 3-D array ``i`` of :func:`kernel_packed`'s constant tables, a view of
-    ``buf`` (:func:`_flat_view`)."""
-    return _flat_view(buf, lay[i, 0], (lay[i, 1], lay[i, 2], lay[i, 3]))
+    """The 3-D array ``i`` of :func:`kernel_packed`'s constant tables, a view of ``buf``."""
+    o = lay[i, 0]
+    return buf[o:o + lay[i, 1] * lay[i, 2] * lay[i, 3]].reshape((lay[i, 1], lay[i, 2],
+                                                                  lay[i, 3]))
 
 
 @numba.njit(cache=True)
 def _view2(buf, lay, i):  # pragma: no cover - compiled
     """The 2-D array ``i`` (rows ``lay[i, 1]``, columns ``lay[i, 2]``) of
-    :func:`kernel_packed`, a view of ``buf`` (:func:`_flat_view`)."""
-    return _flat_view(buf, lay[i, 0], (lay[i, 1], lay[i, 2]))
+    :func:`kernel_packed`, a view of ``buf``."""
+    o = lay[i, 0]
+    return buf[o:o + lay[i, 1] * lay[i, 2]].reshape((lay[i, 1], lay[i, 2]))
 
 
 def reference(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, Hsel, par,
