@@ -7,6 +7,7 @@ import scipy.linalg
 from subid import errors
 from subid.methods.ct import _ct_kernels
 from subid.methods.ct.basis import FilterBank, default_basis, laguerre, legendre, takenaka_malmquist
+from subid.methods.ct.ct_subspace import _poisson_chain_bank
 
 BANKS = {
     "tm-real": lambda: takenaka_malmquist([4, 12, 20, 28, 36, 44, 52, 60]),
@@ -260,28 +261,6 @@ def test_eigen_tables_agree_with_matrix_exponentials():
                                    nodes) is None
 
 
-def poisson_chain_bank(bank, k=2):
-    """The correction regressors' system: a Poisson chain of the slowest pole feeding banks.
-
-    Its matrix is defective (Jordan chain at the slowest pole, shared with the
-    banks) with every bank pole repeated: the block-modal form needs clusters.
-    """
-    F, g = bank.realization()
-    N = F.shape[0]
-    a = min(abs(z.real) for z in bank.poles)
-    size = k + k * N
-    Fa, Ga = np.zeros((size, size)), np.zeros(size)
-    Ga[0] = a
-    for i in range(k):
-        Fa[i, i] = -a
-        if i:
-            Fa[i, i - 1] = a
-        blk = slice(k + i * N, k + (i + 1) * N)
-        Fa[blk, i] = g
-        Fa[blk, blk] = F
-    return Fa, Ga
-
-
 MODAL_CASES = {
     "tm-real": lambda: takenaka_malmquist([4, 12, 20, 28, 36, 44, 52, 60]).realization(),
     "tm-complex": lambda: takenaka_malmquist([3 + 4j, 3 - 4j, 10, 20 + 5j, 20 - 5j,
@@ -289,7 +268,7 @@ MODAL_CASES = {
     "laguerre": lambda: laguerre(5.0, 6).realization(),
     "kautz": lambda: laguerre(2 + 3j, 6).realization(),
     "kautz8": lambda: laguerre(5 + 5j, 8).realization(),   # clusters move ~1e-3 in zgees
-    "poisson-chain": lambda: poisson_chain_bank(default_basis(np.arange(400) * 0.01)),
+    "poisson-chain": lambda: _poisson_chain_bank(default_basis(np.arange(400) * 0.01), 2),
 }
 
 

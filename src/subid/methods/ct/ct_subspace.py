@@ -331,24 +331,38 @@ def _correction_regressors(bank: FilterBank, t, u, poly_order, input_order, feed
         cols.append((exact - approx).reshape(L, -1))
     k = j
     if k >= 1:
-        a = min(abs(z.real) for z in bank.poles)
-        size = k + k * N
-        Fa = np.zeros((size, size))
-        Ga = np.zeros(size)
-        Ga[0] = a
-        for i in range(k):                  # Poisson chain h_1..h_k, each feeding a bank
-            Fa[i, i] = -a
-            if i:
-                Fa[i, i - 1] = a
-            blk = slice(k + i * N, k + (i + 1) * N)
-            Fa[blk, i] = g
-            Fa[blk, blk] = F
+        Fa, Ga = _poisson_chain_bank(bank, k)
         Z = _ct_kernels.run_bank(Fa, Ga, t, u, input_order, uniform=uniform)   # (L, size, m)
         for i in range(k):
             exact = Z[:, k + i * N:k + (i + 1) * N, :]
             approx = bank.filter(Z[:, i, :], t, poly_order=poly_order, chain=filtering)
             cols.append((exact - approx).reshape(L, -1))
     return np.hstack(cols)
+
+
+def _poisson_chain_bank(bank, k: int):
+    """``(Fa, Ga)``: the system of the correction regressors of
+    :func:`_correction_regressors`, a Poisson chain ``h_1 .. h_k`` of the
+    slowest basis pole ``a``, each stage feeding a copy of the bank.
+
+    State ``[h_1 .. h_k, bank_1 .. bank_k]``; its matrix is defective (a
+    Jordan chain at ``a``) with every bank pole repeated ``k`` times.
+    """
+    F, g = bank.realization()
+    N = F.shape[0]
+    a = min(abs(z.real) for z in bank.poles)
+    size = k + k * N
+    Fa = np.zeros((size, size))
+    Ga = np.zeros(size)
+    Ga[0] = a
+    for i in range(k):
+        Fa[i, i] = -a
+        if i:
+            Fa[i, i - 1] = a
+        blk = slice(k + i * N, k + (i + 1) * N)
+        Fa[blk, i] = g
+        Fa[blk, blk] = F
+    return Fa, Ga
 
 
 def _subspace_factor(R, Z, Y):
