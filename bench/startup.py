@@ -76,13 +76,7 @@ def single_update(repeat):
     y = rng.standard_normal((20_000, 2))
     ident = AdaptiveIdentifier(4, 2, 2, horizon=5, dt=1e-3)
     ident.update(u[:1000], y[:1000])                       # compile, settle
-    per = []
-    for r in range(repeat):
-        a = 1000 + r * 2000
-        t0 = time.perf_counter()
-        for k in range(a, a + 2000):
-            ident.update(u[k], y[k])
-        per.append((time.perf_counter() - t0) / 2000)
+    one = _one_sample_cost(ident, u, y, repeat)
     # the kernel alone on the same single samples: a chunk of 2000 samples
     per_chunk = []
     for r in range(repeat):
@@ -90,7 +84,7 @@ def single_update(repeat):
         t0 = time.perf_counter()
         ident.update(u[a:a + 2000], y[a:a + 2000])
         per_chunk.append((time.perf_counter() - t0) / 2000)
-    return statistics.median(per), statistics.median(per_chunk)
+    return one, statistics.median(per_chunk)
 
 
 def single_update_recursive(repeat, **settings):
@@ -103,6 +97,12 @@ def single_update_recursive(repeat, **settings):
     y = rng.standard_normal((2000 * repeat + 1000, 2))
     ident = RecursiveSubspace(4, 2, 2, horizon=5, **settings)
     ident.update(u[:1000], y[:1000])                       # compile, settle
+    return _one_sample_cost(ident, u, y, repeat)
+
+
+def _one_sample_cost(ident, u, y, repeat):
+    """Median cost (seconds) of ``ident.update(u[k], y[k])``, one sample a call, over
+    ``repeat`` runs of 2000 samples from sample 1000 on."""
     per = []
     for r in range(repeat):
         a = 1000 + r * 2000
