@@ -348,14 +348,13 @@ class HankelStatistic:
         for lag in range(s):
             n = s - 1 - lag              # block rows i = 0 .. n take this lag
             # products z(t) z(t+lag)^T with t < i: all inside the first s-1 samples
-            early = np.zeros((n + 1, q, q))
-            np.cumsum(np.einsum("ta,tb->tab", head[:n], head[lag:lag + n]), axis=0,
-                      out=early[1:])
+            early = np.zeros((n + 1, q, q))     # early[i]: the sum over t < i
+            early[1:] = np.cumsum(np.einsum("ta,tb->tab", head[:n], head[lag:lag + n]), axis=0)
             # products with t >= i + K = N - s + 1 + i: the tail holds samples
-            # N-s+1 .. N-1, so these are tail[i + k], k < s - 1 - lag - i
-            late = np.zeros((n + 1, q, q))
-            np.cumsum(np.einsum("ta,tb->tab", tail[:n], tail[lag:lag + n])[::-1], axis=0,
-                      out=late[n - 1::-1] if n else late[:0])
+            # N-s+1 .. N-1, so these are tail[k], i <= k < s - 1 - lag
+            late = np.zeros((n + 1, q, q))      # late[i]: the sum over k >= i
+            products = np.einsum("ta,tb->tab", tail[:n], tail[lag:lag + n])
+            late[:n] = np.cumsum(products[::-1], axis=0)[::-1]
             window = self.lagged[lag] - early - late
             rows = np.arange(n + 1)
             Gz[rows, :, rows + lag, :] = window
