@@ -144,6 +144,45 @@ def _fit_score(model, validation) -> float:
     return max(value, FLOOR) if math.isfinite(value) else FLOOR
 
 
+def score_horizon(parts, orders, horizon, *, prepare_fold, builds):
+    """Fold scores of every candidate order at one horizon.
+
+    Parameters
+    ----------
+    parts : list of (IOData, IOData)
+        The ``(train, validation)`` records of the folds.
+    orders : list of int
+        Candidate orders (all revealable at ``horizon``).
+    horizon : int
+    prepare_fold : callable ``(record, candidates, horizon) -> Problem``
+    builds : dict ``name -> callable (Problem with a fixed order) -> StateSpace``
+
+    Returns
+    -------
+    per_fold : dict ``(order, estimator index) -> list of float``
+        The simulation fit (%) of each fold (:func:`_fit_score`), in fold order.
+    repaired : dict ``(order, estimator index) -> int``
+        How many of the fold models had to be stabilised (:func:`stabilised`).
+    """
+    names = list(builds)
+    per_fold = {(n, v): [] for n in orders for v in range(len(names))}
+    repaired = {(n, v): 0 for n in orders for v in range(len(names))}
+    for train, validation in parts:
+        problem = prepare_fold(train, orders, horizon)
+        for n in orders:
+            for v, name in enumerate(names):
+                try:
+                    with warnings.catch_warnings():
+                        warnings.simplefilter("ignore")
+                        model = builds[name](replace(problem, order=n, candidates=[n]))
+                    value = _fit_score(model, validation)
+                    repaired[(n, v)] += stabilised(model)
+                except SubidError:
+                    value = FLOOR
+                per_fold[(n, v)].append(value)
+    return per_fold, repaired
+
+
 def cross_validate(data, fixed, candidates, horizon, *, prepare_fold, builds):
     """Choose ``(order, horizon)`` by contiguous cross-validation (:func:`folds`).
 
@@ -194,21 +233,8 @@ def cross_validate(data, fixed, candidates, horizon, *, prepare_fold, builds):
         orders = [n for n in wanted if n <= (f - 1) * data.n_outputs]
         if not orders:
             continue
-        per_fold = {(n, v): [] for n in orders for v in range(len(names))}
-        repaired = {(n, v): 0 for n in orders for v in range(len(names))}
-        for train, validation in parts:
-            problem = prepare_fold(train, orders, f)
-            for n in orders:
-                for v, name in enumerate(names):
-                    try:
-                        with warnings.catch_warnings():
-                            warnings.simplefilter("ignore")
-                            model = builds[name](replace(problem, order=n, candidates=[n]))
-                        value = _fit_score(model, validation)
-                        repaired[(n, v)] += stabilised(model)
-                    except SubidError:
-                        value = FLOOR
-                    per_fold[(n, v)].append(value)
+        per_fold, repaired = score_horizon(parts, orders, f, prepare_fold=prepare_fold,
+                                           builds=builds)
         for (n, v), values in per_fold.items():
             fold_scores[(n, f, v)] = values
             scores[(n, f, v)] = float(np.mean(values))
