@@ -183,23 +183,54 @@ def _round(model_mats, x0, data, focus, W, layout, max_nfev, tolerance, history,
     """One least-squares run in local coordinates at ``model_mats``; ``x0`` has one
     row per experiment (each experiment is predicted from its own initial state)."""
     A0, B0, C0, D0, K0 = model_mats
-    u, y = data.u, data.y
-    N, ny = y.shape
-    ranges = data.experiment_ranges
-    n_exp, n = x0.shape
-    v = np.hstack([u, y]) if focus == "prediction" else u
+    v = np.hstack([data.u, data.y]) if focus == "prediction" else data.u
     theta0 = layout.pack(A0, B0, C0, D0, K0)
     basis = _local_coordinates(layout, A0, B0, C0, D0, K0)
     dm = basis.shape[1]
-    scale = 1.0 / math.sqrt(N)
 
     def mats(z):
-        return layout.unpack(theta0 + basis @ z[:dm], D0)
+        return layout.unpack(theta0 + basis @ z, D0)
+
+    def predictor(z):
+        return _predictor(*mats(z), focus)
+
+    def directions(z):
+        return _directions(layout, basis, *mats(z), focus)
+
+    z, res = minimise_prediction_error(predictor, directions, dm, x0, v, data.y,
+                                       data.experiment_ranges, W, max_nfev, tolerance,
+                                       history, penalty)
+    return mats(z[:dm]), x0 + z[dm:].reshape(x0.shape), res
+
+
+def minimise_prediction_error(predictor, directions, dm, x0, v, y, ranges, W, max_nfev,
+                              tolerance, history, penalty):
+    """Minimise ``1/(2N) sum ||W (y - ŷ)||^2`` over ``dm`` model coordinates and the
+    initial states.
+
+    The optimiser shared by :func:`pem` and the polynomial methods
+    (:mod:`subid.methods.dt.pem_poly`). ``predictor(z)`` gives the predictor
+    ``(Ap, Bp, C, Dp)`` driven by ``v`` at the model coordinates ``z``;
+    ``directions(z)`` its derivatives ``(dAp, dBp, dC, dDp, dx0)`` along the
+    ``dm`` coordinates followed by ``n`` rows for the initial state (the
+    arrays of :func:`subid.methods.dt._pem_kernel.jacobian`). ``x0`` holds one
+    initial state per experiment (row), each experiment predicted from its
+    own. A trial whose predictor is unstable or overflows costs ``penalty``
+    per residual, more than the start, so the trust region rejects it.
+
+    Returns
+    -------
+    z, result
+        The coordinates reached (``dm`` model coordinates, then the changes of
+        the initial states) and :func:`scipy.optimize.least_squares`'s result.
+    """
+    N, ny = y.shape
+    n_exp, n = x0.shape
+    scale = 1.0 / math.sqrt(N)
 
     def fun(z):
-        A, B, C, D, K = mats(z)
-        Ap, Bp, Cp, Dp = _predictor(A, B, C, D, K, focus)
-        if not np.isfinite(Ap).all() or _radius(Ap) >= STABILITY_LIMIT:
+        Ap, Bp, Cp, Dp = predictor(z[:dm])
+        if not np.isfinite(Ap).all() or (n and _radius(Ap) >= STABILITY_LIMIT):
             return np.full(N * ny, penalty)
         with np.errstate(all="ignore"):
             yhat = _simulate_experiments(Ap, Bp, Cp, Dp, v, x0 + z[dm:].reshape(n_exp, n),
@@ -209,11 +240,8 @@ def _round(model_mats, x0, data, focus, W, layout, max_nfev, tolerance, history,
         return (((y - yhat) @ W.T) * scale).ravel()
 
     def jac(z):
-        A, B, C, D, K = mats(z)
-        Ap, Bp, Cp, Dp = _predictor(A, B, C, D, K, focus)
-        dirs = [np.ascontiguousarray(a) for a in
-                _directions(layout, basis, A, B, C, D, K, focus)]
-        mats_c = [np.ascontiguousarray(a) for a in (Ap, Bp, Cp, Dp)]
+        mats_c = [np.ascontiguousarray(a) for a in predictor(z[:dm])]
+        dirs = [np.ascontiguousarray(a) for a in directions(z[:dm])]
         x0s = x0 + z[dm:].reshape(n_exp, n)
         yhat = np.empty((N, ny))
         J = np.zeros((N, ny, dm + n_exp * n))
@@ -234,7 +262,7 @@ def _round(model_mats, x0, data, focus, W, layout, max_nfev, tolerance, history,
         res = scipy.optimize.least_squares(fun, z0, jac=jac, method="trf", x_scale="jac",
                                            ftol=tolerance, xtol=tolerance, gtol=tolerance,
                                            max_nfev=max_nfev)
-    return mats(res.x), x0 + res.x[dm:].reshape(n_exp, n), res
+    return res.x, res
 
 
 @records_warnings
