@@ -204,7 +204,7 @@ def _round(model_mats, x0, data, focus, W, layout, max_nfev, tolerance, history,
 
 
 def minimise_prediction_error(predictor, directions, dm, x0, v, y, ranges, W, max_nfev,
-                              tolerance, history, penalty):
+                              tolerance, history, penalty, fit_x0=True):
     """Minimise ``1/(2N) sum ||W (y - ŷ)||^2`` over ``dm`` model coordinates and the
     initial states.
 
@@ -215,8 +215,10 @@ def minimise_prediction_error(predictor, directions, dm, x0, v, y, ranges, W, ma
     ``dm`` coordinates followed by ``n`` rows for the initial state (the
     arrays of :func:`subid.methods.dt._pem_kernel.jacobian`). ``x0`` holds one
     initial state per experiment (row), each experiment predicted from its
-    own. A trial whose predictor is unstable or overflows costs ``penalty``
-    per residual, more than the start, so the trust region rejects it.
+    own (fixed at ``x0`` when ``fit_x0`` is false: then ``directions`` gives
+    the ``dm`` model rows only). A trial whose predictor is unstable or
+    overflows costs ``penalty`` per residual, more than the start, so the
+    trust region rejects it.
 
     Returns
     -------
@@ -227,14 +229,17 @@ def minimise_prediction_error(predictor, directions, dm, x0, v, y, ranges, W, ma
     N, ny = y.shape
     n_exp, n = x0.shape
     scale = 1.0 / math.sqrt(N)
+    n_x0 = n_exp * n if fit_x0 else 0
+
+    def initial(z):
+        return x0 + z[dm:].reshape(n_exp, n) if fit_x0 else x0
 
     def fun(z):
         Ap, Bp, Cp, Dp = predictor(z[:dm])
         if not np.isfinite(Ap).all() or (n and _radius(Ap) >= STABILITY_LIMIT):
             return np.full(N * ny, penalty)
         with np.errstate(all="ignore"):
-            yhat = _simulate_experiments(Ap, Bp, Cp, Dp, v, x0 + z[dm:].reshape(n_exp, n),
-                                         ranges)[0]
+            yhat = _simulate_experiments(Ap, Bp, Cp, Dp, v, initial(z), ranges)[0]
         if not np.isfinite(yhat).all():
             return np.full(N * ny, penalty)
         return (((y - yhat) @ W.T) * scale).ravel()
@@ -242,21 +247,24 @@ def minimise_prediction_error(predictor, directions, dm, x0, v, y, ranges, W, ma
     def jac(z):
         mats_c = [np.ascontiguousarray(a) for a in predictor(z[:dm])]
         dirs = [np.ascontiguousarray(a) for a in directions(z[:dm])]
-        x0s = x0 + z[dm:].reshape(n_exp, n)
+        x0s = initial(z)
+        if not fit_x0:             # the model directions only
+            dirs = [np.ascontiguousarray(a[:dm]) for a in dirs]
         yhat = np.empty((N, ny))
-        J = np.zeros((N, ny, dm + n_exp * n))
+        J = np.zeros((N, ny, dm + n_x0))
         for e, (a, b) in enumerate(ranges):     # the x0 columns of experiment e only
             yhat[a:b], Je = jacobian(*mats_c, np.ascontiguousarray(v[a:b]),
                                      np.ascontiguousarray(x0s[e]), *dirs)
             J[a:b, :, :dm] = Je[:, :, :dm]
-            J[a:b, :, dm + e * n:dm + (e + 1) * n] = Je[:, :, dm:]
+            if fit_x0:
+                J[a:b, :, dm + e * n:dm + (e + 1) * n] = Je[:, :, dm:]
         history.append(0.5 * float(np.sum((((y - yhat) @ W.T) * scale) ** 2)))
         Jw = -np.einsum("ik,tkd->tid", W, J) * scale
         if not np.isfinite(Jw).all():
             Jw = np.nan_to_num(Jw, nan=0.0, posinf=0.0, neginf=0.0)
         return Jw.reshape(N * ny, -1)
 
-    z0 = np.zeros(dm + n_exp * n)
+    z0 = np.zeros(dm + n_x0)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
         res = scipy.optimize.least_squares(fun, z0, jac=jac, method="trf", x_scale="jac",
