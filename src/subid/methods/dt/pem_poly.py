@@ -308,7 +308,8 @@ def _fit_output(sub, u, y, ranges, *, estimate_x0, max_iterations, tolerance):
     W = np.array([[1.0 / sigma]])
     history = []
     penalty = math.sqrt(2.0 * (10.0 * 0.5 + 1.0) / y.size)    # cost 10x the start's + 1
-    z, res = minimise_prediction_error(sub.predictor, sub.directions, sub.size, x00, v,
+    z, res = minimise_prediction_error(lambda dz: sub.predictor(theta0 + dz),
+                                       lambda dz: sub.directions(theta0 + dz), sub.size, x00, v,
                                        y[:, None], ranges, W, max_iterations, tolerance,
                                        history, penalty, fit_x0=estimate_x0)
     record["n_evaluations"] = int(res.nfev)
