@@ -49,8 +49,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["STRUCTURES", "realise", "polynomials_of", "polynomial_record", "describe",
-           "idpoly_fields", "from_idpoly_fields"]
+__all__ = ["STRUCTURES", "realise", "polynomials_of", "polynomial_record", "describe"]
 
 STRUCTURES = ("arx", "armax", "oe", "bj")
 
@@ -235,64 +234,3 @@ def describe(poly: dict, input_names=None, output_names=None) -> list[str]:
     return lines
 
 
-def _cell(rows, cols, get):
-    out = np.empty((rows, cols), dtype=object)
-    for i in range(rows):
-        for j in range(cols):
-            out[i, j] = np.atleast_2d(_trim(get(i, j)))
-    return out
-
-
-def idpoly_fields(poly: dict) -> dict:
-    """MAT-file variables of MATLAB's ``idpoly``: ``A``, ``B``, ``C``, ``D``, ``F`` as
-    cell arrays of row vectors (``A`` ny x ny, ``B``, ``F`` ny x nu, ``C``, ``D`` ny x 1;
-    ``B`` with its ``nk`` leading zeros), and ``nk`` (ny x nu)."""
-    A, B, C, D, F = (np.asarray(poly[k], float) for k in ("A", "B", "C", "D", "F"))
-    ny, nu = B.shape[0], B.shape[1]
-
-    def b_row(i, j):
-        b = _trim(B[i, j])
-        nk = int(np.asarray(poly["nk"])[i, j])
-        return b if b.size > nk else np.zeros(nk + 1)
-    return {"A": _cell(ny, ny, lambda i, k: A[i, k]), "B": _cell(ny, nu, b_row),
-            "C": _cell(ny, 1, lambda i, _: C[i]), "D": _cell(ny, 1, lambda i, _: D[i]),
-            "F": _cell(ny, nu, lambda i, j: F[i, j]),
-            "nk": np.asarray(poly["nk"], dtype=float), "structure": str(poly["structure"])}
-
-
-def _stack(cells, shape):
-    rows = [[np.atleast_1d(np.asarray(c, float).ravel()) for c in row] for row in cells]
-    length = max(len(c) for row in rows for c in row)
-    out = np.zeros(shape + (length,))
-    for i, row in enumerate(rows):
-        for j, c in enumerate(row):
-            out[i, j, :len(c)] = c
-    return out
-
-
-def _degree(coef, monic=True) -> int:
-    return len(_trim(coef)) - 1
-
-
-def from_idpoly_fields(variables: dict, ny: int, nu: int) -> dict:
-    """The :func:`polynomial_record` of the ``idpoly`` fields :func:`idpoly_fields` wrote
-    (``A``, ``B``, ``C``, ``D``, ``F`` cell arrays, ``nk``)."""
-    def cells(key, rows, cols):
-        v = np.asarray(variables[key], dtype=object)
-        if v.dtype != object:
-            v = np.array([[variables[key]]], dtype=object)
-        return [[v.reshape(rows, cols)[i, j] for j in range(cols)] for i in range(rows)]
-    A = _stack(cells("A", ny, ny), (ny, ny))
-    B = _stack(cells("B", ny, nu), (ny, nu))
-    F = _stack(cells("F", ny, nu), (ny, nu))
-    C = _stack(cells("C", ny, 1), (ny, 1))[:, 0]
-    D = _stack(cells("D", ny, 1), (ny, 1))[:, 0]
-    nk = np.rint(np.asarray(variables["nk"], float)).astype(np.int64).reshape(ny, nu)
-    structure = str(np.asarray(variables.get("structure", "arx")).ravel()[0]).strip()
-    na = np.array([[_degree(A[i, k]) for k in range(ny)] for i in range(ny)])
-    nb = np.array([[max(len(_trim(B[i, j])) - nk[i, j], 0) for j in range(nu)]
-                   for i in range(ny)])
-    nf = np.array([[_degree(F[i, j]) for j in range(nu)] for i in range(ny)])
-    return polynomial_record(structure, A=A, B=B, C=C, D=D, F=F, na=na, nb=nb,
-                             nc=[_degree(c) for c in C], nd=[_degree(d) for d in D], nf=nf,
-                             nk=nk)
