@@ -429,8 +429,26 @@ def _identify(structure, data, order, selection, estimate_x0, max_iterations, to
     return model
 
 
-_COMMON_DOC = """
-    selection : {{'cv'}}
+
+
+def armax(data, order=None, *, selection="cv", estimate_x0=True, max_iterations=100,
+          tolerance=1e-8):
+    """Identify an ARMAX model ``A y = B u + C e`` by prediction-error minimisation.
+
+    MATLAB ``armax``; one multi-input single-output model per output (module
+    docstring), started from the better of the ARX estimate and the
+    Hannan-Rissanen estimate.
+
+    Parameters
+    ----------
+    data : IOData
+        Uniformly sampled record with at least one input.
+    order : tuple, int, 'auto' or None
+        MATLAB's ``(na, nb, nc, nk)``: ``na``, ``nc`` scalars or one per
+        output, ``nb``, ``nk`` scalars or (ny, nu) arrays. An integer ``n``:
+        ``na = nc = n``, ``nk`` from :func:`subid.estimate_delay`, ``nb = n``
+        (``n + 1`` where ``nk = 0``). None/'auto': see ``selection``.
+    selection : {'cv'}
         How a structure not given is chosen: the degrees of the ARX
         structure :func:`subid.arx` chooses by cross-validation.
     estimate_x0 : bool
@@ -461,26 +479,7 @@ _COMMON_DOC = """
         Fewer samples than the coefficients need.
     OptionError
         Bad option values.
-"""
 
-
-def armax(data, order=None, *, selection="cv", estimate_x0=True, max_iterations=100,
-          tolerance=1e-8):
-    """Identify an ARMAX model ``A y = B u + C e`` by prediction-error minimisation.
-
-    MATLAB ``armax``; one multi-input single-output model per output (module
-    docstring), started from the better of the ARX estimate and the
-    Hannan-Rissanen estimate.
-
-    Parameters
-    ----------
-    data : IOData
-        Uniformly sampled record with at least one input.
-    order : tuple, int, 'auto' or None
-        MATLAB's ``(na, nb, nc, nk)``: ``na``, ``nc`` scalars or one per
-        output, ``nb``, ``nk`` scalars or (ny, nu) arrays. An integer ``n``:
-        ``na = nc = n``, ``nk`` from :func:`subid.estimate_delay`, ``nb = n``
-        (``n + 1`` where ``nk = 0``). None/'auto': see ``selection``.{common}
     Examples
     --------
     >>> import subid
@@ -508,7 +507,39 @@ def oe(data, order=None, *, selection="cv", estimate_x0=True, max_iterations=100
         MATLAB's ``(nb, nf, nk)``, each a scalar or a (ny, nu) array. An
         integer ``n``: ``nf = n``, ``nk`` from :func:`subid.estimate_delay`,
         ``nb = n`` (``n + 1`` where ``nk = 0``). None/'auto': see
-        ``selection``.{common}
+        ``selection``.
+    selection : {'cv'}
+        How a structure not given is chosen: the degrees of the ARX
+        structure :func:`subid.arx` chooses by cross-validation.
+    estimate_x0 : bool
+        Estimate the initial state of each output's predictor with the
+        coefficients (else it is zero).
+    max_iterations : int
+        Bound on the criterion evaluations of the search, per output.
+    tolerance : float
+        ``ftol = xtol = gtol`` of :func:`scipy.optimize.least_squares`.
+
+    Returns
+    -------
+    StateSpace
+        Innovation form of the model (``K``, ``noise_cov``: the covariance
+        of the one-step prediction errors) with ``info['polynomials']``
+        (:mod:`subid.model.polynomial`), ``start_cost``, ``final_cost``,
+        ``n_evaluations`` and ``stop_reason`` (one entry per output).
+
+    Raises
+    ------
+    DataError
+        Not a uniformly sampled IOData record, or no input.
+    OrderError
+        Orders that are not non-negative integers of the right shapes.
+    NotExcitingError
+        An input lag of the regression is a combination of the others.
+    TooFewSamplesError
+        Fewer samples than the coefficients need.
+    OptionError
+        Bad option values.
+
     Examples
     --------
     >>> import subid
@@ -537,7 +568,39 @@ def bj(data, order=None, *, selection="cv", estimate_x0=True, max_iterations=100
         output, ``nb``, ``nf``, ``nk`` scalars or (ny, nu) arrays. An integer
         ``n``: ``nc = nd = nf = n``, ``nk`` from :func:`subid.estimate_delay`,
         ``nb = n`` (``n + 1`` where ``nk = 0``). None/'auto': see
-        ``selection``.{common}
+        ``selection``.
+    selection : {'cv'}
+        How a structure not given is chosen: the degrees of the ARX
+        structure :func:`subid.arx` chooses by cross-validation.
+    estimate_x0 : bool
+        Estimate the initial state of each output's predictor with the
+        coefficients (else it is zero).
+    max_iterations : int
+        Bound on the criterion evaluations of the search, per output.
+    tolerance : float
+        ``ftol = xtol = gtol`` of :func:`scipy.optimize.least_squares`.
+
+    Returns
+    -------
+    StateSpace
+        Innovation form of the model (``K``, ``noise_cov``: the covariance
+        of the one-step prediction errors) with ``info['polynomials']``
+        (:mod:`subid.model.polynomial`), ``start_cost``, ``final_cost``,
+        ``n_evaluations`` and ``stop_reason`` (one entry per output).
+
+    Raises
+    ------
+    DataError
+        Not a uniformly sampled IOData record, or no input.
+    OrderError
+        Orders that are not non-negative integers of the right shapes.
+    NotExcitingError
+        An input lag of the regression is a combination of the others.
+    TooFewSamplesError
+        Fewer samples than the coefficients need.
+    OptionError
+        Bad option values.
+
     Examples
     --------
     >>> import subid
@@ -548,7 +611,3 @@ def bj(data, order=None, *, selection="cv", estimate_x0=True, max_iterations=100
     """
     return _identify("bj", data, order, selection, estimate_x0, max_iterations, tolerance)
 
-
-for _fn in (armax, oe, bj):
-    _fn.__doc__ = _fn.__doc__.format(common=_COMMON_DOC.format().rstrip("\n") + "\n")
-del _fn
