@@ -166,7 +166,7 @@ def _pbsid(pb, *, stability, feedthrough, estimate_x0) -> StateSpace:
         C, D = _lstsq_rows(x, y_t), np.zeros((ny, nu))
     e = y_t - C @ x - D @ u_t
     ABK = _lstsq_rows(np.vstack([x, u_t, e]), x_next)
-    A, B, K = ABK[:, :n], ABK[:, n:n + nu], ABK[:, n + nu:]
+    A = ABK[:, :n]          # B (and K) again in fit(A), for the A finally kept
     resid = x_next - ABK @ np.vstack([x, u_t, e])
     residual = float(np.linalg.norm(resid) / max(np.linalg.norm(x_next), 1e-300))
 
@@ -182,5 +182,4 @@ def _pbsid(pb, *, stability, feedthrough, estimate_x0) -> StateSpace:
     _, C, _ = pb.unscale(np.zeros((n, nu)), C, np.zeros((ny, nu)))
     x0 = initial_state(A, B, C, D, data) if estimate_x0 else None
     return finish(pb, A, B, C, D, n, order_selection, singular_values=s, x0=x0,
-                  state_regression_residual=residual, stability=stab,
-                  predictor_gain_estimate=K)
+                  state_regression_residual=residual, stability=stab)

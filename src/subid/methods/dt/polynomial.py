@@ -25,6 +25,8 @@ whose misfit is within 1 % of the best is chosen.
 
 from __future__ import annotations
 
+import numbers
+
 import numpy as np
 import scipy.linalg
 
@@ -71,17 +73,16 @@ def check_polynomial_data(data, method: str) -> IOData:
 
 
 def _order_array(value, shape, name: str, minimum: int, method: str) -> np.ndarray:
+    """``value`` (a scalar or an array of integers) as an int array of ``shape``."""
     arr = np.asarray(value, dtype=object)
-    try:
-        flat = [int(v) for v in arr.ravel()]
-        if any(isinstance(v, (bool, np.bool_, str, bytes, float, np.floating)) and
-               not (isinstance(v, (float, np.floating)) and float(v).is_integer())
-               for v in arr.ravel()) or any(isinstance(v, (bool, str, bytes))
-                                            for v in arr.ravel()):
-            raise TypeError
-    except (TypeError, ValueError):
-        raise OrderError(f"{method}: {name} must be a non-negative integer or an array of "
-                         f"them, got {value!r}") from None
+    flat = []
+    for v in arr.ravel():
+        integral = isinstance(v, numbers.Integral) or (
+            isinstance(v, numbers.Real) and float(v).is_integer())
+        if isinstance(v, (bool, np.bool_)) or not integral:
+            raise OrderError(f"{method}: {name} must be a non-negative integer or an array "
+                             f"of them, got {value!r}")
+        flat.append(int(v))
     out = np.array(flat, dtype=np.int64).reshape(arr.shape)
     if out.ndim == 0:
         out = np.full(shape, int(out))
