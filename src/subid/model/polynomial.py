@@ -198,38 +198,41 @@ def polynomials_of(model) -> dict | None:
     return poly if isinstance(poly, dict) and "structure" in poly else None
 
 
-def _poly_text(coef, var="q^-1") -> str:
+def _poly_text(coef) -> str:
     coef = _trim(coef)
-    terms = []
-    for k, c in enumerate(coef):
-        if c == 0 and k:
-            continue
-        power = "" if k == 0 else (f" {var}" if k == 1 else f" q^-{k}")
-        terms.append(f"{c:+.4g}{power}")
+    terms = [f"{c:+.4g}" + ("" if k == 0 else " q^-1" if k == 1 else f" q^-{k}")
+             for k, c in enumerate(coef) if c != 0]
     text = " ".join(terms) if terms else "0"
     return text[1:] if text.startswith("+") else text
 
 
+#: The model equation of each structure (MATLAB's ``present``).
+EQUATIONS = {"arx": "A(q) y(t) = B(q) u(t) + e(t)", "armax": "A(q) y(t) = B(q) u(t) + C(q) e(t)",
+             "oe": "y(t) = B(q)/F(q) u(t) + e(t)", "bj": "y(t) = B(q)/F(q) u(t) + C(q)/D(q) e(t)"}
+
+
 def describe(poly: dict, input_names=None, output_names=None) -> list[str]:
-    """Lines giving every polynomial of ``poly`` (for reports), MATLAB's ``present``."""
+    """Lines giving every polynomial of ``poly`` (for reports), as MATLAB's ``present``."""
     A, B, C, D, F = (np.asarray(poly[k]) for k in ("A", "B", "C", "D", "F"))
     ny, nu = B.shape[0], B.shape[1]
+    structure = str(poly["structure"])
     inputs = list(input_names or [f"u{j + 1}" for j in range(nu)])
     outputs = list(output_names or [f"y{i + 1}" for i in range(ny)])
-    lines = [f"{poly['structure'].upper()} model, A(q) y = B(q)/F(q) u + C(q)/D(q) e"]
+    lines = [f"{structure.upper()} model: {EQUATIONS.get(structure, structure)}"]
     for i in range(ny):
         y = outputs[i]
-        for k in range(ny):
-            if np.any(A[i, k]) and not (k != i and not np.any(A[i, k])):
-                lines.append(f"A[{y},{outputs[k]}] = {_poly_text(A[i, k])}")
+        if structure in ("arx", "armax"):
+            for k in range(ny):
+                if k == i or np.any(A[i, k]):
+                    lines.append(f"A[{y},{outputs[k]}] = {_poly_text(A[i, k])}")
         for j in range(nu):
             lines.append(f"B[{y},{inputs[j]}] = {_poly_text(B[i, j])}  (nk = "
                          f"{int(np.asarray(poly['nk'])[i, j])})")
-            if len(_trim(F[i, j])) > 1:
+            if structure in ("oe", "bj"):
                 lines.append(f"F[{y},{inputs[j]}] = {_poly_text(F[i, j])}")
-        if len(_trim(C[i])) > 1:
+        if structure in ("armax", "bj"):
             lines.append(f"C[{y}] = {_poly_text(C[i])}")
-        if len(_trim(D[i])) > 1:
+        if structure == "bj":
             lines.append(f"D[{y}] = {_poly_text(D[i])}")
     return lines
 

@@ -179,7 +179,10 @@ def regress(target: np.ndarray, blocks, ranges, first: int):
     R = scipy.linalg.qr(np.column_stack([Phi, T]), mode="r", check_finite=False)[0]
     m = Phi.shape[1]
     R = R[:m + 1, :m + 1]
-    theta = scipy.linalg.lstsq(R[:m, :m], R[:m, m], lapack_driver="gelsy",
+    # columns that repeat the others to RANK_TOL (e.g. past outputs of noise-free data
+    # that the past inputs and fewer past outputs already determine) get no weight:
+    # the minimum-norm solution, not one that cancels huge coefficients
+    theta = scipy.linalg.lstsq(R[:m, :m], R[:m, m], lapack_driver="gelsy", cond=RANK_TOL,
                                check_finite=False)[0] if m else np.zeros(0)
     resid = np.full(target.shape[0], np.nan)
     at = 0
