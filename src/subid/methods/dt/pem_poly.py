@@ -65,10 +65,9 @@ from subid.methods.dt.polynomial import (
     ORDER_NAMES,
     SELECTIONS,
     check_polynomial_data,
-    parse_orders,
     polynomial_model,
     regress,
-    select_structure,
+    structure_orders,
 )
 from subid.model.polynomial import polynomial_record, realise
 
@@ -368,27 +367,7 @@ def _identify(structure, data, order, selection, estimate_x0, max_iterations, to
     data = check_polynomial_data(data, structure)
     ny, nu = data.n_outputs, data.n_inputs
     with collect_warnings() as issued:
-        selection_record = None
-        if order is None or (isinstance(order, str) and order == "auto"):
-            arx_orders, selection_record = select_structure(data)
-            n = int(arx_orders["na"].max())
-            nb, nk = arx_orders["nb"], arx_orders["nk"]
-            order = {"armax": (n, nb, n, nk), "oe": (nb, n, nk),
-                     "bj": (nb, n, n, n, nk)}[structure]
-            selection_record = dict(selection_record, description=(
-                f"the degrees of the cross-validated ARX structure ({n}, nb, nk): "
-                + selection_record["description"]))
-            orders = parse_orders(order, structure, ny, nu)
-        else:
-            nk = None
-            if isinstance(order, (int, np.integer)) and not isinstance(order, bool):
-                from subid.delay import estimate_delay
-                try:
-                    nk = estimate_delay(data, max_delay=int(min(10, max(
-                        data.n_samples // (20 * (nu + ny + 1)) - 3, 0))))
-                except SubidError:
-                    nk = None
-            orders = parse_orders(order, structure, ny, nu, nk_default=nk)
+        orders, selection_record = structure_orders(order, structure, data)
         from subid.methods.dt.polynomial import _check_input_columns, _check_samples
         ranges = data.experiment_ranges
         records, fits, resid = [], [], np.empty_like(data.y)

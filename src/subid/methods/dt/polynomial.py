@@ -52,8 +52,8 @@ from subid.methods.dt._selection import (
 from subid.model.polynomial import polynomial_record, realise
 from subid.model.statespace import StateSpace
 
-__all__ = ["arx", "parse_orders", "fit_arx", "ORDER_NAMES", "polynomial_model",
-           "check_polynomial_data", "regress"]
+__all__ = ["arx", "parse_orders", "structure_orders", "fit_arx", "ORDER_NAMES",
+           "polynomial_model", "check_polynomial_data", "regress", "select_structure"]
 
 #: The orders of each structure, in MATLAB's order.
 ORDER_NAMES = {"arx": ("na", "nb", "nk"), "armax": ("na", "nb", "nc", "nk"),
@@ -324,12 +324,9 @@ def _arx_record(A, B, orders) -> dict:
 
 def select_structure(data: IOData, max_order: int = MAX_ORDER):
     """``(orders, record)``: ``(na, nb, nk)`` chosen by cross-validation (module docstring)."""
-    from subid.delay import estimate_delay
     ny, nu = data.n_outputs, data.n_inputs
-    max_delay = int(min(10, max(data.n_samples // (20 * (nu + ny + 1)) - 3, 0)))
-    try:
-        nk = np.asarray(estimate_delay(data, max_delay=max_delay), np.int64)
-    except SubidError:
+    nk = _delays(data)
+    if nk is None:
         nk = np.ones(nu, np.int64)
     if data.n_experiments > 1:
         parts = experiment_folds(data)
@@ -382,6 +379,41 @@ def select_structure(data: IOData, max_order: int = MAX_ORDER):
                              for k, v in sorted(scores.items())],
               "selected": {"na": na, "nb": nb, "nk": nk.tolist(), "score": scores[(na, nb)]}}
     return parse_orders((na, nb, np.tile(nk, (ny, 1))), "arx", ny, nu), record
+
+
+def _delays(data) -> np.ndarray | None:
+    """``nk`` per input by :func:`subid.estimate_delay` (None when the record is too short)."""
+    from subid.delay import estimate_delay
+    ny, nu = data.n_outputs, data.n_inputs
+    max_delay = int(min(10, max(data.n_samples // (20 * (nu + ny + 1)) - 3, 0)))
+    try:
+        return np.asarray(estimate_delay(data, max_delay=max_delay), np.int64)
+    except SubidError:
+        return None
+
+
+def structure_orders(order, structure: str, data: IOData):
+    """``(orders, order_selection)`` of a polynomial method's ``order`` argument.
+
+    None/'auto': the ARX structure chosen by :func:`select_structure`, its
+    degrees ``n = max(na)``, ``nb`` and ``nk`` used for the other structures
+    (``(n, nb, n, nk)``, ``(nb, n, nk)``, ``(nb, n, n, n, nk)``). An integer:
+    :func:`parse_orders` with the delays of :func:`subid.estimate_delay`.
+    A tuple: :func:`parse_orders`.
+    """
+    ny, nu = data.n_outputs, data.n_inputs
+    if order is None or (isinstance(order, str) and order == "auto"):
+        orders, record = select_structure(data)
+        if structure == "arx":
+            return orders, record
+        n, nb, nk = int(orders["na"].max()), orders["nb"], orders["nk"]
+        given = {"armax": (n, nb, n, nk), "oe": (nb, n, nk), "bj": (nb, n, n, n, nk)}[structure]
+        record = dict(record, description=f"the degrees of the cross-validated ARX structure "
+                                          f"(n = {n}, nb, nk): " + record["description"])
+        return parse_orders(given, structure, ny, nu), record
+    integer = isinstance(order, (int, np.integer)) and not isinstance(order, bool)
+    nk = _delays(data) if integer and order >= 1 else None
+    return parse_orders(order, structure, ny, nu, nk_default=nk), None
 
 
 def arx(data, order=None, *, selection="cv", estimate_x0=True):
@@ -442,21 +474,8 @@ def arx(data, order=None, *, selection="cv", estimate_x0=True):
     check_choice(selection, "selection", SELECTIONS)
     check_bool(estimate_x0, "estimate_x0")
     data = check_polynomial_data(data, "arx")
-    ny, nu = data.n_outputs, data.n_inputs
     with collect_warnings() as issued:
-        record = None
-        if order is None or (isinstance(order, str) and order == "auto"):
-            orders, record = select_structure(data)
-        else:
-            nk = None
-            if isinstance(order, (int, np.integer)) and not isinstance(order, bool):
-                from subid.delay import estimate_delay
-                try:
-                    nk = estimate_delay(data, max_delay=int(min(10, max(
-                        data.n_samples // (20 * (nu + ny + 1)) - 3, 0))))
-                except SubidError:
-                    nk = None
-            orders = parse_orders(order, "arx", ny, nu, nk_default=nk)
+        orders, record = structure_orders(order, "arx", data)
         A, B, resid, reg = fit_arx(data, orders)
         poly = _arx_record(A, B, orders)
         model = polynomial_model(data, poly, method="arx", order_selection=record,
