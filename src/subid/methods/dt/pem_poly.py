@@ -64,6 +64,8 @@ from subid.methods.dt.pem import (
 from subid.methods.dt.polynomial import (
     ORDER_NAMES,
     SELECTIONS,
+    _check_input_columns,
+    _check_samples,
     check_polynomial_data,
     polynomial_model,
     regress,
@@ -336,11 +338,11 @@ def _stack(records, structure, orders):
     ny = len(records)
     nu = records[0]["B"].shape[1]
 
-    def cat(key, shape_tail):
+    def cat(key):                      # (1, nu, l) per output -> (ny, nu, max l)
         length = max(r[key].shape[-1] for r in records)
-        out = np.zeros((ny,) + shape_tail + (length,))
+        out = np.zeros((ny, nu, length))
         for i, r in enumerate(records):
-            out[i, ..., :r[key].shape[-1]] = r[key][0] if key != "A" else r[key][0, 0]
+            out[i, :, :r[key].shape[-1]] = r[key][0]
         return out
     A = np.zeros((ny, ny, max(r["A"].shape[-1] for r in records)))
     for i, r in enumerate(records):
@@ -350,7 +352,7 @@ def _stack(records, structure, orders):
     for i, r in enumerate(records):
         C[i, :r["C"].shape[-1]] = r["C"][0]
         D[i, :r["D"].shape[-1]] = r["D"][0]
-    return polynomial_record(structure, A=A, B=cat("B", (nu,)), C=C, D=D, F=cat("F", (nu,)),
+    return polynomial_record(structure, A=A, B=cat("B"), C=C, D=D, F=cat("F"),
                              na=orders["na"], nb=orders["nb"], nc=orders["nc"],
                              nd=orders["nd"], nf=orders["nf"], nk=orders["nk"])
 
@@ -368,7 +370,6 @@ def _identify(structure, data, order, selection, estimate_x0, max_iterations, to
     ny, nu = data.n_outputs, data.n_inputs
     with collect_warnings() as issued:
         orders, selection_record = structure_orders(order, structure, data)
-        from subid.methods.dt.polynomial import _check_input_columns, _check_samples
         ranges = data.experiment_ranges
         records, fits, resid = [], [], np.empty_like(data.y)
         for i in range(ny):
