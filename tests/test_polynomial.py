@@ -241,3 +241,21 @@ def test_pbsid_noise_free_and_from_a_statistic():
     assert subid.markov_error(subid.pbsid(data, 3), true) < 1e-8
     stat = subid.HankelStatistic.from_data(data, 12)
     assert subid.markov_error(subid.pbsid(stat, 3), true) < 1e-8
+
+
+def test_describe_prints_the_polynomials():
+    from subid.model.polynomial import describe
+    data, _ = _record("arx", 300, 0)
+    lines = describe(polynomials_of(subid.arx(data, (2, 2, 1))), ["u"], ["y"])
+    assert lines == ["ARX model: A(q) y(t) = B(q) u(t) + e(t)",
+                     "A[y,y] = 1 -1.5 q^-1 +0.7 q^-2", "B[y,u] = 1 q^-1 +0.5 q^-2  (nk = 1)"]
+
+
+@pytest.mark.long
+def test_the_report_shows_the_polynomials():
+    from subid.evaluation import report
+    data, _ = _record("bj", 600, 7)
+    est, val = data.split(2 / 3)
+    text = report.identification_report({"bj": subid.bj(est, (2, 2, 1, 2, 1))}, est, val)
+    assert "BJ model: y(t) = B(q)/F(q) u(t) + C(q)/D(q) e(t)" in text
+    assert "F[y1,u1] = 1 " in text and "D[y1] = 1 " in text
