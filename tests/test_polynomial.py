@@ -259,3 +259,22 @@ def test_the_report_shows_the_polynomials():
     text = report.identification_report({"bj": subid.bj(est, (2, 2, 1, 2, 1))}, est, val)
     assert "BJ model: y(t) = B(q)/F(q) u(t) + C(q)/D(q) e(t)" in text
     assert "F[y1,u1] = 1 " in text and "D[y1] = 1 " in text
+
+
+def test_block_jacobian_of_an_output_error_model_equals_the_dense_one():
+    from subid.methods.dt._pem_kernel import jacobian
+    from subid.methods.dt.pem import block_jacobian
+    from subid.methods.dt.pem_poly import _Output
+    from subid.methods.dt.polynomial import parse_orders
+    orders = parse_orders(([[2, 3, 1]], [[2, 1, 3]], [[1, 0, 2]]), "oe", 1, 3)
+    sub = _Output("oe", orders, 0, 3)
+    rng = np.random.default_rng(3)
+    theta = rng.standard_normal(sub.size) * 0.2
+    mats = [np.ascontiguousarray(a) for a in sub.predictor(theta)]
+    dirs = [np.ascontiguousarray(a) for a in sub.directions(theta)]
+    v = rng.standard_normal((80, 4))
+    x0 = rng.standard_normal(mats[0].shape[0])
+    y_dense, J_dense = jacobian(*mats, v, x0, *dirs)
+    y_block, J_block = block_jacobian(mats, v, x0, dirs, sub.blocks(), sub.size)
+    np.testing.assert_allclose(y_block, y_dense, atol=1e-12)
+    np.testing.assert_allclose(J_block, J_dense, atol=1e-12)

@@ -142,6 +142,23 @@ class _Output:
         parts += [np.asarray(fj, float)[:n] for fj, n in zip(f, self.nf)]
         return np.concatenate(parts)
 
+    def blocks(self):
+        """``(states, coordinates)`` of each input's block for an output-error model
+        (whose predictor is block diagonal, :func:`block_jacobian`); None otherwise."""
+        if self.structure != "oe":
+            return None
+        out, at_state = [], 0
+        b_at = self.na
+        f_at = self.na + sum(self.nb) + self.nc + self.nd
+        for j in range(self.nu):
+            p = max(self.nf[j], self.nk[j] + self.nb[j] - 1, 0)
+            coords = list(range(b_at, b_at + self.nb[j])) + list(range(f_at, f_at + self.nf[j]))
+            out.append((np.arange(at_state, at_state + p), np.array(coords, dtype=np.int64)))
+            at_state += p
+            b_at += self.nb[j]
+            f_at += self.nf[j]
+        return out
+
     def predictor(self, theta):
         A, B, C, D, K = realise(self.record(theta))
         return _predictor(A, B, C, D, K, "prediction")
@@ -312,7 +329,8 @@ def _fit_output(sub, u, y, ranges, *, estimate_x0, max_iterations, tolerance):
     z, res = minimise_prediction_error(lambda dz: sub.predictor(theta0 + dz),
                                        lambda dz: sub.directions(theta0 + dz), sub.size, x00, v,
                                        y[:, None], ranges, W, max_iterations, tolerance,
-                                       history, penalty, fit_x0=estimate_x0)
+                                       history, penalty, fit_x0=estimate_x0,
+                                       blocks=sub.blocks())
     record["n_evaluations"] = int(res.nfev)
     new_cost = float(res.cost) * sigma ** 2
     if new_cost < cost0:
