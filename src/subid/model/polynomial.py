@@ -64,13 +64,10 @@ def observer_form(den: np.ndarray, num: np.ndarray):
     ny, m = num.shape[1], num.shape[2]
     n = ny * p
     A = np.zeros((n, n))
-    B = np.zeros((n, m))
-    for k in range(1, p + 1):
-        rows = slice((k - 1) * ny, k * ny)
-        A[rows, :ny] = -den[k]
-        if k < p:
-            A[rows, k * ny:(k + 1) * ny] = np.eye(ny)
-        B[rows] = num[k] - den[k] @ num[0]
+    if p:
+        A[:, :ny] = -den[1:].reshape(n, ny)          # block k: -den[k] in the first column
+        A[:n - ny, ny:] = np.eye(n - ny)             # identities on the block superdiagonal
+    B = (num[1:] - den[1:] @ num[0]).reshape(n, m)   # block k: num[k] - den[k] num[0]
     C = np.zeros((ny, n))
     if p:
         C[:, :ny] = np.eye(ny)
