@@ -55,16 +55,11 @@ from subid.methods.dt._subspace import (
     initial_state,
     stable_choice,
 )
+from subid.methods.dt.n4sid import _lstsq_rows
 from subid.methods.dt.noise_model import check_refine
 from subid.model.statespace import StateSpace
 
 __all__ = ["pbsid"]
-
-
-def _lstsq_rows(regressors: np.ndarray, targets: np.ndarray) -> np.ndarray:
-    """Theta minimising ``||targets - Theta regressors||_F`` (rows = variables)."""
-    return scipy.linalg.lstsq(regressors.T, targets.T, lapack_driver="gelsy",
-                              check_finite=False)[0].T
 
 
 def pbsid(data, order=None, *, horizon=None, selection="cv", stability="auto",
