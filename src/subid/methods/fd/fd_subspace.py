@@ -1,0 +1,341 @@
+"""Subspace identification from frequency-response data.
+
+McKelvey, Akçay & Ljung, "Subspace-based multivariable system identification
+from frequency response data", IEEE TAC 41(7), 1996, Algorithm 2 (arbitrary
+frequency spacing). With ``z_k`` the points on the unit circle and ``G_k`` the
+measured ``p x m`` responses, the block rows ``z_k^r G_k`` (r = 0..q-1) obey
+(eq. (22)-(25))
+
+    Y = O_q X + Γ_q W,   Y = [W_1 ⊗ G_1 ... W_M ⊗ G_M],
+                         W = [W_1 ⊗ I_m ... W_M ⊗ I_m],   W_k = [1, z_k, ..., z_k^{q-1}]^T,
+
+with ``X = [(z_1 I - A)^{-1} B ... (z_M I - A)^{-1} B]``, ``O_q`` the extended
+observability matrix and ``Γ_q`` the lower block-triangular Toeplitz matrix of
+the Markov parameters. Real and imaginary parts are stacked side by side (eq.
+(31): a real system's response at ``-w`` is the conjugate of that at ``w``),
+``W`` is projected out by an LQ factorisation of ``[W; Y]`` (eq. (32)), and the
+``n`` leading left singular vectors of the projected ``Y`` span ``O_q``
+(eq. (33)). A and C follow by shift invariance (eq. (34)), B and D by linear
+least squares on the response (eq. (35)). Noise-free, the model is exact to
+rounding for every set of at least ``n`` distinct frequencies that excites it.
+
+Continuous time. The points ``i w`` make ``W`` a Vandermonde matrix with
+entries up to ``w_max^{q-1}``, useless on wide ranges (``[0.01, 100]`` rad/s and
+q = 6: a condition number beyond 1e20). Instead the frequency-scaled bilinear
+map ``z = (α + i w)/(α - i w)`` (the continuous-time variant of McKelvey et
+al., Section V) sends the frequencies onto the unit circle, ``w -> 2
+arctan(w/α)``, with α the geometric mean of the smallest and largest positive
+frequency (sent to pi/2), so that a range of decades spreads over (0, pi); the
+discrete-time subspace step runs there, ``(A, C)`` are mapped back exactly
+(:func:`subid.methods.fd._frequency.bilinear_to_ct`), and B, D are estimated by
+least squares on the continuous-time response itself. Stability is preserved
+by the map (``|z| < 1`` iff ``Re s < 0``).
+
+Weights. Per-frequency weights scale the columns of ``Y`` and ``W`` (which
+keeps eq. (25) exact); weights per channel pair enter the B, D regression in
+full and the subspace step through their root mean square per frequency.
+Outputs and inputs are scaled to unit RMS response before the SVD (balanced
+units) and unscaled after.
+
+The order is chosen, when not given, by the cross-validation idea of the
+time-domain methods (:mod:`subid.methods.dt._selection`) with frequency folds:
+four folds, each holding out every fourth frequency (interleaved, so that no
+fold has to extrapolate beyond the measured band); each candidate order's fold
+models are scored by :func:`subid.fit_percent` on the held-out frequencies,
+clipped below at ``FLOOR`` and averaged, and the same rule as the time-domain
+methods (:func:`subid.methods.dt._selection.select_candidate`) picks the order.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+
+import numpy as np
+import scipy.linalg
+
+from subid._validation import check_bool, check_choice, check_int
+from subid.errors import DataError, OrderError, SubidError, UnstableModelWarning
+from subid.frdata import FRData
+from subid.methods._info import model_info, records_warnings
+from subid.methods.dt._selection import FLOOR, MAX_ORDER, SELECTION_RULES, select_candidate
+from subid.methods.dt._subspace import (
+    KEEP_UNSTABLE_RATIO,
+    STABILITY,
+    STABLE_RADIUS,
+    choose_order,
+    reflect_unstable_poles,
+)
+from subid.methods.fd import _frequency as fq
+from subid.model.statespace import StateSpace
+
+__all__ = ["fd_subspace"]
+
+#: Folds of the cross-validated order choice (every ``FOLDS``-th frequency held out).
+FOLDS = 4
+
+
+def _parse_order(order):
+    if order is None or (isinstance(order, str) and order == "auto"):
+        return None, None
+    if isinstance(order, (str, bytes)) or not hasattr(order, "__iter__"):
+        return check_int(order, "order", minimum=1), None
+    candidates = sorted({check_int(k, "candidate order", minimum=1) for k in order})
+    if not candidates:
+        raise OrderError("fd_subspace: the list of candidate orders is empty")
+    return None, candidates
+
+
+def default_horizon(largest_order: int, n_outputs: int) -> int:
+    """Block rows q: twice what ``largest_order`` needs (``(q - 1) p >= n``), at least 2."""
+    return max(2, 2 * math.ceil(largest_order / n_outputs) + 1)
+
+
+class _Problem:
+    """The data of one fit in the domain of the subspace step (DT points ``z``)."""
+
+    def __init__(self, data: FRData, alpha):
+        self.data = data
+        self.alpha = alpha
+        self.z = fq.points(data.w, data.dt) if alpha is None \
+            else fq.bilinear_points(data.w, alpha)
+        self.s = fq.points(data.w, data.dt)          # where the final model is evaluated
+        self.weights = data.fit_weights()
+        self.G = data.response
+
+
+def _subspace(problem: _Problem, q: int):
+    """Orthonormal basis of the observability range (all q p columns) and singular values."""
+    G, z, W = problem.G, problem.z, problem.weights
+    M, p, m = G.shape
+    out_scale = np.sqrt(np.mean(np.abs(G) ** 2, axis=(0, 2)))
+    out_scale[out_scale == 0] = 1.0
+    in_scale = np.sqrt(np.mean(np.abs(G) ** 2, axis=(0, 1)))
+    in_scale[in_scale == 0] = 1.0
+    Gs = G / out_scale[None, :, None] / in_scale[None, None, :]
+    col = np.sqrt(np.mean(W ** 2, axis=(1, 2)))                 # per-frequency weight
+    powers = z[None, :] ** np.arange(q)[:, None]                 # (q, M)
+    # Y[r p + i, k m + j] = z_k^r G_k[i, j];  U[r m + i, k m + j] = z_k^r delta_ij
+    scaled = powers[:, :, None, None] * col[None, :, None, None]     # (q, M, 1, 1)
+    Y = (scaled * Gs[None]).transpose(0, 2, 1, 3).reshape(q * p, M * m)
+    U = (scaled * np.eye(m)).transpose(0, 2, 1, 3).reshape(q * m, M * m)
+    stacked = np.vstack([np.hstack([U.real, U.imag]), np.hstack([Y.real, Y.imag])])
+    if stacked.shape[1] < stacked.shape[0]:
+        raise DataError(f"fd_subspace: {M} frequencies give {2 * M * m} real columns but "
+                        f"horizon {q} needs at least {q * (p + m)}; give more frequencies "
+                        "or a smaller horizon")
+    R = scipy.linalg.qr(stacked.T, mode="r", check_finite=False)[0]
+    L22 = R[q * m:q * (m + p), q * m:q * (m + p)].T               # projected Y (eq. (32))
+    Us, sv, _ = scipy.linalg.svd(L22, check_finite=False, lapack_driver="gesvd")
+    return Us, sv, out_scale, in_scale
+
+
+def _model(problem: _Problem, basis, n: int, *, feedthrough: bool, stability: str):
+    """The order-n model from the subspace basis; ``(A, B, C, D, diagnostics)``."""
+    Us, _, out_scale, _ = basis
+    p = problem.G.shape[1]
+    O = Us[:, :n]
+    up, down = O[:-p], O[p:]
+    A_d, _, _, sv = scipy.linalg.lstsq(up, down, lapack_driver="gelsd", check_finite=False)
+    cond_ac = float(sv[0] / sv[-1]) if sv[-1] > 0 else math.inf
+    C_d = O[:p] * out_scale[:, None]                              # undo the output scaling
+    radius = float(np.abs(np.linalg.eigvals(A_d)).max())
+    record = {"requested": stability, "action": "none", "spectral_radius_before": radius}
+    fit_plain = _finish(problem, A_d, C_d, feedthrough)
+    if stability == "none" or radius < 1.0:
+        return fit_plain + ({"ac": cond_ac}, record)
+    reflected = reflect_unstable_poles(A_d, STABLE_RADIUS)
+    if reflected is None:
+        record["action"] = "failed (nearly defective A)"
+        warnings.warn(f"fd_subspace: the order-{n} model is unstable (spectral radius "
+                      f"{radius:.4g} in the discrete domain of the fit) and its poles could "
+                      "not be reflected; try a lower order", UnstableModelWarning, stacklevel=4)
+        return fit_plain + ({"ac": cond_ac}, record)
+    fit_stable = _finish(problem, reflected, C_d, feedthrough)
+    if stability == "auto" and fit_plain[4] < KEEP_UNSTABLE_RATIO * fit_stable[4]:
+        record["action"] = "kept unstable (the data demand it)"
+        return fit_plain + ({"ac": cond_ac}, record)
+    record["action"] = "enforced"
+    return fit_stable + ({"ac": cond_ac}, record)
+
+
+def _finish(problem: _Problem, A_d, C_d, feedthrough: bool):
+    """A, C in the data's domain, B and D by least squares; ``(A, B, C, D, error, cond)``."""
+    if problem.alpha is not None:
+        try:
+            A, C = fq.bilinear_to_ct(A_d, C_d, problem.alpha)
+        except (np.linalg.LinAlgError, ValueError):
+            raise OrderError("fd_subspace: the discrete-domain model has a pole at z = -1 "
+                             "(infinitely fast in continuous time); try a lower order") from None
+    else:
+        A, C = A_d, C_d
+    with np.errstate(all="ignore"):
+        B, D, cond = fq.estimate_b_d(A, C, problem.s, problem.G, problem.weights,
+                                     feedthrough=feedthrough)
+        err = fq.weighted_error(problem.G, fq.response(A, B, C, D, problem.s), problem.weights)
+    if not (np.isfinite(A).all() and np.isfinite(B).all() and np.isfinite(C).all()
+            and math.isfinite(err)):
+        raise OrderError("fd_subspace: the model is not finite (a pole on a measured "
+                         "frequency?); try another order")
+    return A, B, C, D, err, cond
+
+
+def _fold_score(model, validation: FRData) -> float:
+    from subid.evaluation.metrics import fit_percent   # evaluation sits above methods
+    try:
+        with warnings.catch_warnings(), np.errstate(all="ignore"):
+            warnings.simplefilter("ignore")
+            value = float(np.mean(fit_percent(model, validation)))
+    except SubidError:
+        return FLOOR
+    return max(value, FLOOR) if math.isfinite(value) else FLOOR
+
+
+def _build(data: FRData, problem, basis, n, q, *, feedthrough, stability):
+    A, B, C, D, err, cond, conditions, record = _model(problem, basis, n,
+                                                        feedthrough=feedthrough,
+                                                        stability=stability)
+    conditions = dict(conditions, bd=cond)
+    return StateSpace(A, B, C, D, data.dt, input_names=data.input_names,
+                      output_names=data.output_names), conditions, record, err
+
+
+def _cross_validate(data: FRData, alpha, candidates, q, *, feedthrough, stability):
+    index = np.arange(data.n_frequencies)
+    per_fold = {n: [] for n in candidates}
+    for k in range(FOLDS):
+        held = index % FOLDS == k
+        train, validation = data[~held], data[held]
+        problem = _Problem(train, alpha)
+        try:
+            basis = _subspace(problem, q)
+        except SubidError:
+            for n in candidates:
+                per_fold[n].append(FLOOR)
+            continue
+        for n in candidates:
+            try:
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore")
+                    model = _build(train, problem, basis, n, q, feedthrough=feedthrough,
+                                   stability=stability)[0]
+                per_fold[n].append(_fold_score(model, validation))
+            except SubidError:
+                per_fold[n].append(FLOOR)
+    scores = {(n,): float(np.mean(v)) for n, v in per_fold.items()}
+    (order,) = select_candidate(scores)
+    record = {
+        "rule": "cv",
+        "description": (f"{FOLDS}-fold cross-validation over frequencies (every {FOLDS}th "
+                        "frequency held out): frequency-domain fit (%, mean over outputs) on "
+                        "the held-out frequencies, mean over the folds; smallest order whose "
+                        "misfit is within the tolerance of the best (the time-domain rule)"),
+        "candidates": [{"order": n, "horizon": q, "score": scores[(n,)], "folds": per_fold[n]}
+                       for n in candidates],
+        "selected": {"order": order, "horizon": q, "score": scores[(order,)]},
+    }
+    return order, record
+
+
+@records_warnings
+def fd_subspace(frdata, order=None, *, horizon=None, feedthrough=True, stability="auto",
+                selection="cv") -> StateSpace:
+    """Identify a state-space model from frequency-response data (McKelvey et al. 1996).
+
+    Parameters
+    ----------
+    frdata : FRData
+        The measured response. Continuous time (``dt = 0``) gives a
+        continuous-time model, discrete time one with the data's ``dt``.
+    order : int, iterable of int, 'auto' or None
+        Model order, or candidate orders to choose from (None/'auto': 1..10,
+        as many as the data allow).
+    horizon : int, optional
+        Block rows q of the data matrices (McKelvey's q); needs
+        ``(q - 1) ny >= order``. Default :func:`default_horizon` of the largest
+        candidate order.
+    feedthrough : bool
+        Estimate D (else D = 0).
+    stability : {'auto', 'enforce', 'none'}
+        What to do with an unstable estimate: ``'enforce'`` reflects its
+        unstable poles (in the discrete domain of the fit) and refits B and D;
+        ``'auto'`` does the same unless the unstable model fits the data
+        clearly better (its weighted error below 0.9 times the stabilised
+        model's); ``'none'`` keeps it.
+    selection : {'cv', 'gap'}
+        How the order is chosen when not given: cross-validation over
+        frequency folds (default) or the largest gap of the singular values.
+
+    Returns
+    -------
+    StateSpace
+        ``info`` has the core keys (``method`` 'fd_subspace', ``order``,
+        ``order_selection``, ``horizon``, ``n_samples`` None, ``x0`` None,
+        ``hold``, ``conditions``, ``warnings``) and ``rank_profile`` (the
+        singular values of the projected data), ``n_frequencies``,
+        ``frequency_scale`` (the bilinear map's α, None in discrete time),
+        ``stability`` and ``feedthrough``.
+
+    Raises
+    ------
+    DataError
+        ``frdata`` is not an FRData, or holds too few frequencies for the
+        horizon.
+    OrderError
+        The order cannot be revealed with the horizon.
+    OptionError
+        A bad option value.
+
+    Examples
+    --------
+    >>> import numpy as np, subid
+    >>> true = subid.systems.seed000_system()
+    >>> w = np.logspace(-2, 2, 200)
+    >>> data = subid.FRData(w, true.freqresp(w))
+    >>> model = subid.fd_subspace(data, 4)
+    >>> bool(np.abs(model.freqresp(w) - data.response).max() < 1e-8)
+    True
+    """
+    if not isinstance(frdata, FRData):
+        raise DataError(f"fd_subspace expects a subid.FRData, got {type(frdata).__name__}; "
+                        "wrap a measured response as subid.FRData(w, response, dt)")
+    check_bool(feedthrough, "feedthrough")
+    check_choice(stability, "stability", STABILITY)
+    check_choice(selection, "selection", SELECTION_RULES)
+    fixed, candidates = _parse_order(order)
+    p, m, M = frdata.n_outputs, frdata.n_inputs, frdata.n_frequencies
+    largest = fixed if fixed is not None else max(candidates) if candidates else MAX_ORDER
+    q = default_horizon(largest, p) if horizon is None else check_int(horizon, "horizon",
+                                                                      minimum=2)
+    if horizon is None:            # as many block rows as the frequencies allow
+        while q > 2 and 2 * M * m < q * (p + m):
+            q -= 1
+    max_order = (q - 1) * p
+    if fixed is not None and fixed > max_order:
+        raise OrderError(f"fd_subspace: order {fixed} cannot be revealed with horizon {q} "
+                         f"and {p} output{'s' if p != 1 else ''}: use horizon >= "
+                         f"{math.ceil(fixed / p) + 1}")
+    if fixed is None:
+        candidates = [n for n in (candidates or range(1, MAX_ORDER + 1)) if n <= max_order]
+        if not candidates:
+            raise OrderError(f"fd_subspace: no candidate order can be revealed with horizon "
+                             f"{q}; give a larger horizon")
+    alpha = None if frdata.dt > 0 else fq.frequency_scale(frdata.w)
+    problem = _Problem(frdata, alpha)
+    basis = _subspace(problem, q)
+    if fixed is not None:
+        n, record = fixed, {"rule": "given"}
+    elif selection == "gap" or len(candidates) == 1 or M < 2 * FOLDS:
+        n, record = choose_order(None, candidates, basis[1], "singular values of the "
+                                 "projected frequency data")
+    else:
+        n, record = _cross_validate(frdata, alpha, candidates, q, feedthrough=feedthrough,
+                                    stability=stability)
+    model, conditions, stab, _ = _build(frdata, problem, basis, n, q, feedthrough=feedthrough,
+                                        stability=stability)
+    info = model_info("fd_subspace", order=n, order_selection=record, horizon=q,
+                      n_samples=None, x0=None, hold="zoh", conditions=conditions,
+                      rank_profile=basis[1], n_frequencies=M, frequency_scale=alpha,
+                      stability=stab, feedthrough=feedthrough)
+    model.info = info
+    return model
