@@ -299,6 +299,11 @@ def pem(data, model, *, focus="prediction", max_iterations=100, tolerance=1e-8, 
     >>> refined.info["final_cost"] <= refined.info["start_cost"]
     True
     """
+    from subid.frdata import FRData
+    if isinstance(data, FRData):     # frequency-response data: subid.methods.fd.fd_pem
+        from subid.methods.fd.fd_pem import fd_pem
+        return fd_pem(data, model, max_iterations=max_iterations, tolerance=tolerance,
+                      rounds=rounds, feedthrough=feedthrough)
     _check_inputs(data, model, focus)
     if isinstance(max_iterations, bool) or not isinstance(max_iterations, int) \
             or max_iterations < 1:

@@ -126,8 +126,34 @@ def _subspace(problem: _Problem, q: int):
                         "or a smaller horizon")
     R = scipy.linalg.qr(stacked.T, mode="r", check_finite=False)[0]
     L22 = R[q * m:q * (m + p), q * m:q * (m + p)].T               # projected Y (eq. (32))
-    Us, sv, _ = scipy.linalg.svd(L22, check_finite=False, lapack_driver="gesvd")
-    return Us, sv, out_scale, in_scale
+    noise = _noise_factor(problem, powers, col, out_scale, in_scale)
+    Us, sv, _ = scipy.linalg.svd(scipy.linalg.solve_triangular(noise, L22, lower=True),
+                                 check_finite=False, lapack_driver="gesvd")
+    return noise @ Us, sv, out_scale, in_scale
+
+
+def _noise_factor(problem, powers, col, out_scale, in_scale):
+    """Cholesky factor of the noise covariance of the rows of Y (McKelvey et al., eq. (38)).
+
+    Noise uncorrelated between channels and frequencies, of variance
+    ``std**2`` where the data give ``std``, else ``1 / weights**2`` (the
+    weights are inverse standard deviations) : block ``(r, i), (r', i)`` is
+    ``Re sum_k col_k^2 z_k^(r - r') sum_j var_kij`` in the scaled units.
+    """
+    q = powers.shape[0]
+    p = out_scale.size
+    data = problem.data
+    var = data.std ** 2 if data.std is not None else 1.0 / problem.weights ** 2
+    var = var / out_scale[None, :, None] ** 2 / in_scale[None, None, :] ** 2
+    v = var.sum(axis=2) * col[:, None] ** 2                           # (M, p)
+    # T[r, r', i] = Re sum_k v_ki z_k^r conj(z_k^r')
+    T = np.einsum("rk,sk,ki->rsi", powers, powers.conj(), v).real
+    K = np.zeros((q, p, q, p))
+    for i in range(p):
+        K[:, i, :, i] = T[:, :, i]
+    K = K.reshape(q * p, q * p)
+    K += 1e-12 * np.trace(K) / K.shape[0] * np.eye(K.shape[0])
+    return np.linalg.cholesky(K)
 
 
 def _model(problem: _Problem, basis, n: int, *, feedthrough: bool, stability: str):
