@@ -87,7 +87,7 @@ def _parse_order(order):
 
 
 def default_horizon(largest_order: int, n_outputs: int) -> int:
-    """Block rows q: twice what ``largest_order`` needs (``(q - 1) p >= n``), at least 2."""
+    """Block rows q of order ``largest_order``: twice what it needs (``(q - 1) p >= n``) plus one."""
     return max(2, 2 * math.ceil(largest_order / n_outputs) + 1)
 
 
@@ -226,24 +226,24 @@ def _build(data: FRData, problem, basis, n, q, *, feedthrough, stability):
                       output_names=data.output_names), conditions, record, err
 
 
-def _cross_validate(data: FRData, alpha, candidates, q, *, feedthrough, stability):
+def _cross_validate(data: FRData, alpha, candidates, horizons, *, feedthrough, stability):
+    """Order by cross-validation over interleaved frequency folds; each candidate order
+    at its own horizon (``horizons[n]``, as an explicit call with that order uses)."""
     index = np.arange(data.n_frequencies)
     per_fold = {n: [] for n in candidates}
     for k in range(FOLDS):
         held = index % FOLDS == k
         train, validation = data[~held], data[held]
         problem = _Problem(train, alpha)
-        try:
-            basis = _subspace(problem, q)
-        except SubidError:
-            for n in candidates:
-                per_fold[n].append(FLOOR)
-            continue
+        bases = {}
         for n in candidates:
+            q = horizons[n]
             try:
+                if q not in bases:
+                    bases[q] = _subspace(problem, q)
                 with warnings.catch_warnings():
                     warnings.simplefilter("ignore")
-                    model = _build(train, problem, basis, n, q, feedthrough=feedthrough,
+                    model = _build(train, problem, bases[q], n, q, feedthrough=feedthrough,
                                    stability=stability)[0]
                 per_fold[n].append(_fold_score(model, validation))
             except SubidError:
@@ -256,9 +256,9 @@ def _cross_validate(data: FRData, alpha, candidates, q, *, feedthrough, stabilit
                         "frequency held out): frequency-domain fit (%, mean over outputs) on "
                         "the held-out frequencies, mean over the folds; smallest order whose "
                         "misfit is within the tolerance of the best (the time-domain rule)"),
-        "candidates": [{"order": n, "horizon": q, "score": scores[(n,)], "folds": per_fold[n]}
-                       for n in candidates],
-        "selected": {"order": order, "horizon": q, "score": scores[(order,)]},
+        "candidates": [{"order": n, "horizon": horizons[n], "score": scores[(n,)],
+                        "folds": per_fold[n]} for n in candidates],
+        "selected": {"order": order, "horizon": horizons[order], "score": scores[(order,)]},
     }
     return order, record
 
@@ -330,33 +330,46 @@ def fd_subspace(frdata, order=None, *, horizon=None, feedthrough=True, stability
     check_choice(selection, "selection", SELECTION_RULES)
     fixed, candidates = _parse_order(order)
     p, m, M = frdata.n_outputs, frdata.n_inputs, frdata.n_frequencies
-    largest = fixed if fixed is not None else max(candidates) if candidates else MAX_ORDER
-    q = default_horizon(largest, p) if horizon is None else check_int(horizon, "horizon",
-                                                                      minimum=2)
-    if horizon is None:            # as many block rows as the frequencies allow
+    if horizon is not None:
+        horizon = check_int(horizon, "horizon", minimum=2)
+
+    def block_rows(n):
+        """The horizon of order n: given, or the default that the frequencies allow."""
+        if horizon is not None:
+            return horizon
+        q = default_horizon(n, p)
         while q > 2 and 2 * M * m < q * (p + m):
             q -= 1
-    max_order = (q - 1) * p
-    if fixed is not None and fixed > max_order:
-        raise OrderError(f"fd_subspace: order {fixed} cannot be revealed with horizon {q} "
-                         f"and {p} output{'s' if p != 1 else ''}: use horizon >= "
-                         f"{math.ceil(fixed / p) + 1}")
+        return q
+
+    def revealable(n):
+        return n <= (block_rows(n) - 1) * p
+
+    if fixed is not None and not revealable(fixed):
+        raise OrderError(f"fd_subspace: order {fixed} cannot be revealed with horizon "
+                         f"{block_rows(fixed)} and {p} output{'s' if p != 1 else ''}: use "
+                         f"horizon >= {math.ceil(fixed / p) + 1}"
+                         + ("" if horizon is not None else " and more frequencies"))
     if fixed is None:
-        candidates = [n for n in (candidates or range(1, MAX_ORDER + 1)) if n <= max_order]
+        candidates = [n for n in (candidates or range(1, MAX_ORDER + 1)) if revealable(n)]
         if not candidates:
-            raise OrderError(f"fd_subspace: no candidate order can be revealed with horizon "
-                             f"{q}; give a larger horizon")
+            raise OrderError("fd_subspace: no candidate order can be revealed with the "
+                             f"horizon{' given' if horizon is not None else 's the data allow'}"
+                             "; give a larger horizon, more frequencies or lower orders")
     alpha = None if frdata.dt > 0 else fq.frequency_scale(frdata.w)
     problem = _Problem(frdata, alpha)
-    basis = _subspace(problem, q)
     if fixed is not None:
         n, record = fixed, {"rule": "given"}
     elif selection == "gap" or len(candidates) == 1 or M < 2 * FOLDS:
-        n, record = choose_order(None, candidates, basis[1], "singular values of the "
+        profile = _subspace(problem, block_rows(max(candidates)))[1]
+        n, record = choose_order(None, candidates, profile, "singular values of the "
                                  "projected frequency data")
     else:
-        n, record = _cross_validate(frdata, alpha, candidates, q, feedthrough=feedthrough,
-                                    stability=stability)
+        n, record = _cross_validate(frdata, alpha, candidates,
+                                    {k: block_rows(k) for k in candidates},
+                                    feedthrough=feedthrough, stability=stability)
+    q = block_rows(n)
+    basis = _subspace(problem, q)
     model, conditions, stab, _ = _build(frdata, problem, basis, n, q, feedthrough=feedthrough,
                                         stability=stability)
     info = model_info("fd_subspace", order=n, order_selection=record, horizon=q,
