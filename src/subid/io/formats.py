@@ -77,7 +77,7 @@ MAX_LINE_CHARS = 4 * 2**20
 # public entry point
 # ---------------------------------------------------------------------------
 def read(path, inputs=None, outputs=None, dt=None, time=None, *, delimiter=None,
-         max_bytes=None, kind="time") -> IOData:
+         max_bytes=None) -> IOData:
     """Read one input/output record from a file.
 
     Parameters
@@ -114,10 +114,6 @@ def read(path, inputs=None, outputs=None, dt=None, time=None, *, delimiter=None,
         further is refused with :class:`~subid.errors.ResourceLimitError`
         before it is decompressed: a few megabytes of compressed zeros can
         otherwise declare gigabytes.
-    kind : {'time', 'frequency'}
-        ``'frequency'`` reads frequency-response data instead and returns an
-        :class:`~subid.FRData` (:func:`subid.read_frd`, which documents the
-        layouts; ``inputs``, ``outputs`` and ``time`` do not apply).
 
     Returns
     -------
@@ -151,11 +147,6 @@ def read(path, inputs=None, outputs=None, dt=None, time=None, *, delimiter=None,
     >>> data = subid.read("run1.csv", inputs="u1,u2", outputs="y", time="t")  # doctest: +SKIP
     >>> data = subid.read("dryer.dat", inputs=0, outputs=1, dt=0.08)  # doctest: +SKIP
     """
-    if kind != "time":
-        if kind != "frequency":
-            raise DataError(f"read: kind must be 'time' or 'frequency', got {kind!r}"[:300])
-        from subid.io.frequency import read_frd   # frequency-response files
-        return read_frd(path, dt=dt, delimiter=delimiter, max_bytes=max_bytes)
     shown, p = _as_path(path)
     if dt is not None and time is not None:
         raise DataError(f"{shown}: give either the sampling period dt or the time column/array "

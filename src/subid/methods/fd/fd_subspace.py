@@ -207,7 +207,7 @@ def _finish(problem: _Problem, A_d, C_d, feedthrough: bool):
 
 
 def _fold_score(model, validation: FRData) -> float:
-    from subid.evaluation.metrics import fit_percent   # evaluation sits above methods
+    from subid.evaluation.metrics import fit_percent  # evaluation sits above methods
     try:
         with warnings.catch_warnings(), np.errstate(all="ignore"):
             warnings.simplefilter("ignore")
