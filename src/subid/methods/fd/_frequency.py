@@ -6,8 +6,8 @@
   into a discrete-time one on the unit circle (points spread over (0, pi)
   instead of a Vandermonde matrix in ``i w`` with entries up to ``w_max**q``);
 * :func:`estimate_b_d`: B and D by weighted linear least squares on the
-  response for given A and C (McKelvey, Akçay & Ljung 1996, step 5 of
-  Algorithm 2, eq. (35)), one input column at a time;
+  response for given A and C (the last step of McKelvey, Akçay & Ljung 1996,
+  Algorithm 2), one input column at a time;
 * :func:`weighted_error`: the weighted residual and its norm.
 """
 

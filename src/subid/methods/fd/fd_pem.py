@@ -39,6 +39,7 @@ import numpy as np
 import scipy.linalg
 import scipy.optimize
 
+from subid._validation import same_period
 from subid.delay import frequency_factor, input_delay_of
 from subid.errors import DataError, ModelError, NoiseModelWarning, OptionError
 from subid.frdata import FRData
@@ -55,8 +56,8 @@ def _check(data, model, max_iterations, tolerance, rounds, feedthrough):
         raise DataError(f"the frequency data have {data.n_inputs} inputs and "
                         f"{data.n_outputs} outputs but the model has {model.n_inputs} and "
                         f"{model.n_outputs}")
-    if (model.dt == 0) != (data.dt == 0) or (data.dt > 0 and not math.isclose(
-            model.dt, data.dt, rel_tol=1e-9)):
+    if (model.dt == 0) != (data.dt == 0) or (data.dt > 0 and not same_period(model.dt,
+                                                                              data.dt)):
         raise DataError(f"the model has dt={model.dt} but the frequency data have "
                         f"dt={data.dt} (0 = continuous time); convert the model first "
                         "(to_discrete / to_continuous)")
