@@ -114,6 +114,32 @@ def test_fd_subspace_exact_discrete_time_seed001():
             assert _max_rel(model, system, w) < 1e-8
 
 
+def test_fd_subspace_wide_band_lightly_damped_modes():
+    # three modes at 1, 30 and 900 rad/s, damping 0.5-2 %, five decades of frequency
+    A = np.zeros((6, 6))
+    for k, (wn, zeta) in enumerate([(1, 0.01), (30, 0.02), (900, 0.005)]):
+        A[2 * k:2 * k + 2, 2 * k:2 * k + 2] = [[0, 1], [-wn ** 2, -2 * zeta * wn]]
+    system = subid.StateSpace(A, np.ones((6, 1)), np.ones((1, 6)), 0, 0)
+    w = np.logspace(-1, 4, 400)
+    model = subid.fd_subspace(subid.FRData(w, system.freqresp(w)))
+    assert model.order == 6 and _max_rel(model, system, w) < 1e-10
+
+
+def test_weights_shape_the_fit():
+    # order 2 for a 4-state response: the weighted band is fitted better
+    data = _ct_data()
+    low = W_CT < 0.3
+    weights = np.where(low, 100.0, 1.0)
+    plain = subid.fd_subspace(data, 2)
+    weighted = subid.fd_subspace(subid.FRData(W_CT, data.response, weights=weights), 2)
+    def err(m):     # RMS error on the weighted band
+        return np.sqrt(np.mean(np.abs(m.freqresp(W_CT[low]) - data.response[low]) ** 2))
+    assert err(weighted) < 0.5 * err(plain)
+    # pem minimises the weighted criterion: it fits the band better than unweighted pem
+    refined = subid.pem(subid.FRData(W_CT, data.response, weights=weights), plain)
+    assert err(refined) < 0.5 * err(subid.pem(data, plain))
+
+
 def test_fd_subspace_options_and_reproducibility():
     data = _ct_data(0.05, seed=3)
     model = subid.fd_subspace(data)

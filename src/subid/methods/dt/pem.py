@@ -244,11 +244,14 @@ def pem(data, model, *, focus="prediction", max_iterations=100, tolerance=1e-8, 
 
     Parameters
     ----------
-    data : IOData
+    data : IOData or FRData
         Uniformly sampled estimation record (the same data the start was
         identified on, usually). A record of several experiments
         (:func:`subid.merge`) is predicted experiment by experiment, each from
         its own initial state (``info['x0']`` one row per experiment).
+        Frequency-response data (:class:`subid.FRData`) are fitted by weighted
+        least squares on the response instead
+        (:func:`subid.methods.fd.fd_pem.fd_pem`; ``focus`` does not apply).
     model : StateSpace
         Starting model, e.g. from :func:`subid.n4sid`. Discrete time with the
         data's ``dt``; a continuous-time model is refined through its

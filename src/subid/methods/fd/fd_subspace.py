@@ -66,6 +66,7 @@ from subid.methods.dt._subspace import (
     KEEP_UNSTABLE_RATIO,
     STABILITY,
     STABLE_RADIUS,
+    _parse_order,
     choose_order,
     reflect_unstable_poles,
 )
@@ -76,17 +77,6 @@ __all__ = ["fd_subspace"]
 
 #: Folds of the cross-validated order choice (every ``FOLDS``-th frequency held out).
 FOLDS = 4
-
-
-def _parse_order(order):
-    if order is None or (isinstance(order, str) and order == "auto"):
-        return None, None
-    if isinstance(order, (str, bytes)) or not hasattr(order, "__iter__"):
-        return check_int(order, "order", minimum=1), None
-    candidates = sorted({check_int(k, "candidate order", minimum=1) for k in order})
-    if not candidates:
-        raise OrderError("fd_subspace: the list of candidate orders is empty")
-    return None, candidates
 
 
 def default_horizon(largest_order: int, n_outputs: int) -> int:
