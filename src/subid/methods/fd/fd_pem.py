@@ -24,10 +24,11 @@ directions, so the Jacobian has full rank for a minimal model. The Jacobian is
 analytic and exact: ``∂G_k = C R_k ∂A R_k B + C R_k ∂B + ∂C R_k B + ∂D`` with
 ``R_k = (z_k I - A)^{-1}``.
 
-The optimiser is :func:`scipy.optimize.least_squares` (trust-region
-reflective); a trial model that is unstable where the start is stable gets a
-cost above the start's, so the trust region rejects it. The result never has a
-cost above the start's: the start is returned unchanged when nothing improves.
+The optimiser is :func:`scipy.optimize.least_squares` (Levenberg-Marquardt;
+trust-region reflective when there are fewer residuals than parameters); a
+trial model that is unstable where the start is stable gets a cost above the
+start's, so the step is rejected. The result never has a cost above the
+start's: the start is returned unchanged when nothing improves.
 """
 
 from __future__ import annotations
@@ -183,8 +184,10 @@ def _round(crit: _Criterion, A, B, C, D, max_nfev, tolerance, start_residual, hi
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
+        # Levenberg-Marquardt (MINPACK) needs at least as many residuals as parameters
+        method = "lm" if 2 * crit.M * crit.p * crit.m >= basis.shape[1] else "trf"
         res = scipy.optimize.least_squares(fun, np.zeros(basis.shape[1]), jac=jac,
-                                           method="lm", x_scale="jac", ftol=tolerance,
+                                           method=method, x_scale="jac", ftol=tolerance,
                                            xtol=tolerance, gtol=tolerance, max_nfev=max_nfev)
     return crit.unpack(theta0 + basis @ res.x, n), res
 
