@@ -288,6 +288,7 @@ def test_read_frd_layouts_and_errors(tmp_path):
     assert np.array_equal(subid.read_frd(tmp_path / "idfrd.mat").response, G)
 
 
+@pytest.mark.slow
 def test_bode_overlays_data_and_models():
     matplotlib = pytest.importorskip("matplotlib")
     matplotlib.use("Agg")
