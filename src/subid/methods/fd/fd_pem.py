@@ -17,7 +17,7 @@ mean of the smallest and largest positive frequency,
 that the points straddle 1 and the parameters are of order one. The state
 basis is then made data-driven: the frequency-domain controllability Gramian
 on the measured grid, ``P = Re Σ_k (z_k I - A)^{-1} B B^T (z_k I - A)^{-H}``,
-is brought to the identity. The search moves in data-driven local coordinates
+is brought to the identity, again at the start of every round. The search moves in data-driven local coordinates
 (McKelvey, Helmersson & Ribarits, Automatica 40, 2004; as :func:`subid.pem` in
 the time domain): the orthogonal complement of the ``n^2`` similarity
 directions, so the Jacobian has full rank for a minimal model. The Jacobian is
@@ -258,6 +258,11 @@ def fd_pem(data, model, *, max_iterations=100, tolerance=1e-8, rounds=3, feedthr
     stop_reason = "the start fits the data to rounding (noise-free): kept unchanged"
     if not exact:
         for _ in range(rounds):
+            # each round in the Gramian-balanced basis of the current model
+            Tr = _gramian_basis(cur[0], cur[1], z)
+            Tr_inv = np.linalg.solve(Tr, np.eye(Tr.shape[0]))
+            cur = (Tr @ cur[0] @ Tr_inv, Tr @ cur[1], cur[2] @ Tr_inv, cur[3])
+            T, Tinv = Tr @ T, Tinv @ Tr_inv
             new, res = _round(crit, *cur, max_iterations, tolerance, r_start, history,
                               require_stable)
             n_eval += int(res.nfev)
