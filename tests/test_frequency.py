@@ -206,6 +206,25 @@ def test_pem_lowers_the_error_few_runs():
     assert _pem_runs(range(4), rounds=1, max_iterations=30) >= 3
 
 
+def test_pem_never_ends_above_its_start():
+    rng = np.random.default_rng(11)
+    data = _ct_data(0.05, seed=7)
+    true = subid.systems.seed000_system()
+    for k in range(4):
+        scale = 0.3 if k < 3 else 3.0          # the last start is unstable
+        A = true.A + scale * rng.standard_normal((4, 4))
+        start = subid.StateSpace(A, true.B, true.C, true.D, 0)
+        refined = subid.pem(data, start, rounds=1, max_iterations=20)
+        assert refined.info["final_cost"] <= refined.info["start_cost"]
+        history = refined.info["cost_history"]
+        assert history[0] == refined.info["start_cost"] and np.all(np.diff(history) < 0)
+        # the reported cost is the criterion of the returned model (independent evaluation)
+        cost = 0.5 * np.sum(np.abs(data.response - refined.freqresp(W_CT)) ** 2)
+        assert refined.info["final_cost"] == pytest.approx(cost, rel=1e-8)
+        if start.is_stable():
+            assert refined.is_stable()
+
+
 def test_pem_on_frequency_data_keeps_an_exact_start_and_checks_inputs():
     data = _ct_data()
     exact = subid.fd_subspace(data, 4)
