@@ -9,7 +9,11 @@ minimises the weighted nonlinear least-squares criterion
 2nd ed., 2012, Ch. 9; McKelvey, "Frequency domain identification methods",
 Circuits Systems Signal Process. 21(1), 2002; MATLAB ``ssest`` on ``idfrd``
 data), with ``z_k = exp(i w_k dt)`` in discrete time and ``z_k = i w_k`` in
-continuous time, and ``W`` the data's weights (ones when none).
+continuous time. ``W`` is the data's ``weights``; without them ``1 / std``;
+without either, the inverse of the noise level estimated as
+:func:`subid.fd_subspace` estimates it (smoothed residuals of a preliminary
+fit), so that the criterion is the Gaussian likelihood of the noise; pass
+``weights=np.ones(n_freq)`` for the unweighted fit.
 
 Parametrisation. Continuous time is scaled in frequency: with α the geometric
 mean of the smallest and largest positive frequency,
@@ -44,7 +48,9 @@ from subid._validation import same_period
 from subid.delay import frequency_factor, input_delay_of
 from subid.errors import DataError, ModelError, NoiseModelWarning, OptionError
 from subid.frdata import FRData
+from subid.methods.dt._selection import MAX_ORDER
 from subid.methods.fd import _frequency as fq
+from subid.methods.fd.fd_subspace import noise_variance
 from subid.model.statespace import StateSpace
 
 __all__ = ["fd_pem"]
@@ -192,13 +198,34 @@ def _round(crit: _Criterion, A, B, C, D, max_nfev, tolerance, start_residual, hi
     return crit.unpack(theta0 + basis @ res.x, n), res
 
 
+def _criterion_weights(data: FRData):
+    """The weights of the criterion and what they are: the data's ``weights``;
+    else ``1 / std``; else the inverse of the noise level that
+    :func:`subid.methods.fd.fd_subspace.noise_variance` estimates (the same
+    noise model as :func:`subid.fd_subspace`): with weights proportional to
+    the inverse noise standard deviation the criterion is the Gaussian
+    likelihood (Pintelon & Schoukens 2012, Ch. 9)."""
+    if data.weights is not None:
+        return data.fit_weights(), "the data's weights"
+    if data.std is not None:
+        std = np.maximum(data.std, 1e-12 * max(float(data.std.max()), 1e-300))
+        return 1.0 / std, "1 / std of the data"
+    alpha = fq.frequency_scale(data.w) if data.dt == 0 else None
+    var, record = noise_variance(data, alpha, MAX_ORDER)
+    if record["source"].startswith("constant"):
+        return np.ones(data.response.shape), "none (" + record["source"] + ")"
+    return 1.0 / np.sqrt(var), "1 / the noise level " + record["source"]
+
+
 def fd_pem(data, model, *, max_iterations=100, tolerance=1e-8, rounds=3, feedthrough=None):
     """Refine ``model`` on frequency-response data by weighted nonlinear least squares.
 
     Parameters
     ----------
     data : FRData
-        The measured response (its ``weights`` weight the fit).
+        The measured response. Its ``weights`` weight the fit; without them
+        ``1 / std``, else the inverse of the estimated noise level (see the
+        module documentation).
     model : StateSpace
         Starting model with the data's time base (``dt``), e.g. from
         :func:`subid.fd_subspace`.
@@ -217,7 +244,8 @@ def fd_pem(data, model, *, max_iterations=100, tolerance=1e-8, rounds=3, feedthr
         The refined model in the starting model's state basis, without a noise
         model (frequency-response data say nothing about it). ``info`` is the
         start's, updated with ``refined_by`` ('pem'), ``criterion``
-        ('frequency response'), ``start_cost``, ``final_cost``,
+        ('frequency response'), ``weighting`` (which weights), ``start_cost``,
+        ``final_cost`` (the weighted criterion),
         ``cost_history``, ``stop_reason``, ``n_evaluations``,
         ``parametrisation`` and ``frequency_scale``.
 
@@ -241,7 +269,8 @@ def fd_pem(data, model, *, max_iterations=100, tolerance=1e-8, rounds=3, feedthr
     factor = np.ones((1, 1, data.n_inputs)) if delays is None or continuous \
         else frequency_factor(delays, data.w, data.dt)
     D0 = np.zeros_like(model.D) if not with_d else model.D
-    crit = _Criterion(data.response, z, data.fit_weights(), factor, with_d, D0, continuous)
+    weights, weighting = _criterion_weights(data)
+    crit = _Criterion(data.response, z, weights, factor, with_d, D0, continuous)
     s = math.sqrt(alpha)
     A, B, C = model.A / alpha, model.B / s, model.C / s
     T = _gramian_basis(A, B, z)
@@ -278,7 +307,8 @@ def fd_pem(data, model, *, max_iterations=100, tolerance=1e-8, rounds=3, feedthr
         if h < accepted[-1]:
             accepted.append(h)
     info = dict(model.info)
-    info.update(refined_by="pem", criterion="frequency response", start_cost=start_cost,
+    info.update(refined_by="pem", criterion="frequency response", weighting=weighting,
+                start_cost=start_cost,
                 final_cost=min(best_cost, accepted[-1]), cost_history=np.array(accepted),
                 stop_reason=stop_reason, n_evaluations=n_eval,
                 frequency_scale=alpha if continuous else None,
