@@ -50,7 +50,7 @@ from subid.errors import DataError, ModelError, NoiseModelWarning, OptionError
 from subid.frdata import FRData
 from subid.methods.dt._selection import MAX_ORDER
 from subid.methods.fd import _frequency as fq
-from subid.methods.fd.fd_subspace import noise_variance
+from subid.methods.fd._core import noise_variance
 from subid.model.statespace import StateSpace
 
 __all__ = ["fd_pem"]
@@ -201,7 +201,7 @@ def _round(crit: _Criterion, A, B, C, D, max_nfev, tolerance, start_residual, hi
 def _criterion_weights(data: FRData):
     """The weights of the criterion and what they are: the data's ``weights``;
     else ``1 / std``; else the inverse of the noise level that
-    :func:`subid.methods.fd.fd_subspace.noise_variance` estimates (the same
+    :func:`subid.methods.fd._core.noise_variance` estimates (the same
     noise model as :func:`subid.fd_subspace`): with weights proportional to
     the inverse noise standard deviation the criterion is the Gaussian
     likelihood (Pintelon & Schoukens 2012, Ch. 9)."""
