@@ -377,6 +377,26 @@ def check_choice(value, name: str, choices) -> object:
     return value
 
 
+def check_seed(value, name: str = "seed") -> int:
+    """A seed: a non-negative integer (numpy integers too); else
+    :class:`OptionError` (not numpy's ``TypeError``/``ValueError`` from inside
+    the draw). Integers only, so that the same call always draws the same
+    numbers (a ``Generator`` would advance between calls)."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Integral) \
+            or value < 0:
+        raise OptionError(f"{name} must be a non-negative integer; got {value!r}"[:300])
+    return int(value)
+
+
+def check_probability(value, name: str) -> float:
+    """A level strictly between 0 and 1 (confidence levels); else :class:`OptionError`."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real) \
+            or not 0.0 < float(value) < 1.0:
+        raise OptionError(f"{name} must be a number strictly between 0 and 1 (e.g. 0.99); "
+                          f"got {value!r}"[:300])
+    return float(value)
+
+
 def check_bool(value, name: str) -> bool:
     """``value`` as a bool if it is one (numpy bools too); else :class:`OptionError`."""
     if isinstance(value, (bool, np.bool_)):

@@ -255,6 +255,21 @@ def record_delay(model, delays):
     return model
 
 
+def effective_input(model, u: np.ndarray) -> np.ndarray:
+    """The input samples as ``model``'s state equations see them.
+
+    The one place where a model's input delays (``info['input_delay']``, in
+    samples) are applied to a record's inputs: :meth:`StateSpace.simulate`,
+    :func:`subid.predict`, :func:`subid.residuals`, :func:`subid.fit_percent`
+    (simulation and k-step prediction) and :func:`subid.pem` all obtain the
+    input through it, so that nothing derived from a model ignores its delays.
+    ``u`` is one experiment's input, shape (N, n_inputs); the input before
+    the first sample is taken as zero.
+    """
+    delays = input_delay_of(model)
+    return u if delays is None else apply_to_inputs(u, delays)
+
+
 def apply_to_inputs(u: np.ndarray, delays: np.ndarray) -> np.ndarray:
     """``u_j[k - d_j]`` for every sample, zero before the first sample (the
     input before the record is taken as zero, as the initial state is by

@@ -28,9 +28,9 @@ import warnings
 import numpy as np
 import scipy.linalg
 
-from subid._validation import same_period
+from subid._validation import check_int, check_probability, same_period
 from subid.data import IOData, column_std
-from subid.delay import input_delay_of
+from subid.delay import effective_input, input_delay_of
 from subid.errors import DataError, ModelError, NoiseModelWarning
 from subid.model import _simulate
 from subid.model.statespace import StateSpace
@@ -371,7 +371,7 @@ def predict(model, data, steps=1, x0=None, *, return_x0=False):
             mode = "zero"
         y_hat, x0v = simulate_fit(model, data, x0=mode)
         return (y_hat, x0v) if return_x0 else y_hat
-    u, y = data.u, data.y
+    u, y = effective_input(model, data.u), data.y        # the model's input delays
     with np.errstate(over="ignore", invalid="ignore"):
         if x0 is None or (isinstance(x0, str) and x0 == "estimate"):
             x0v, y_hat = _estimate_x0(model, u, y, k)
@@ -444,10 +444,8 @@ def correlations(e, u, *, max_lag: int = 25, confidence: float = 0.99, ranges=No
         Sec. 16.6), ``residual`` and ``confidence``.
     """
     from scipy.special import ndtri
-    if isinstance(max_lag, bool) or not isinstance(max_lag, numbers.Integral) or max_lag < 1:
-        raise DataError(f"max_lag must be a positive integer, got {max_lag!r}")
-    if not 0 < confidence < 1:
-        raise DataError(f"confidence must be in (0, 1), got {confidence!r}")
+    max_lag = check_int(max_lag, "max_lag", minimum=1)
+    confidence = check_probability(confidence, "confidence")
     n = e.shape[0]
     if max_lag >= n:
         raise DataError(f"max_lag {max_lag} must be smaller than the {n} samples of the record")
