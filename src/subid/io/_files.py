@@ -14,6 +14,7 @@ import contextlib
 import ctypes
 import ctypes.util
 import errno
+import io
 import os
 import re
 import secrets
@@ -46,6 +47,44 @@ def _shown(path) -> str:
     except TypeError:
         raise FileReadError(f"a file name must be a str or os.PathLike, got "
                             f"{type(path).__name__}") from None
+
+
+class _SizedFile(io.FileIO):
+    """A regular file that must end where it ended when it was opened.
+
+    Every reader of subid reads through it (:func:`open_regular`): a read
+    that meets the end of the file before the size found on opening raises
+    ``error`` (the file was truncated, or replaced by a shorter one, while it
+    was read), so no reader can return a silently shorter record.
+    """
+
+    def __init__(self, fd: int, size: int, shown: str, what: str, error):
+        super().__init__(fd, "rb", closefd=True)
+        self._size, self._shown, self._what, self._error = size, shown, what, error
+
+    def _check_end(self) -> None:
+        if self.tell() < self._size:
+            raise self._error(f"{self._shown} was truncated while it was read: it ended at "
+                              f"byte {self.tell()} of the {self._size} it had when opened; "
+                              f"read the {self._what} again when nothing writes to it",
+                              path=self._shown)
+
+    def readinto(self, buffer):
+        count = super().readinto(buffer)
+        if count == 0 and len(buffer):
+            self._check_end()
+        return count
+
+    def read(self, size=-1):
+        data = super().read(size)
+        if not data and size != 0:
+            self._check_end()
+        return data
+
+    def readall(self):
+        data = super().readall()
+        self._check_end()
+        return data
 
 
 def open_regular(path, *, what: str = "file", max_bytes: int | None = MAX_FILE_BYTES,
@@ -89,7 +128,7 @@ def open_regular(path, *, what: str = "file", max_bytes: int | None = MAX_FILE_B
         if fcntl is not None:
             flags = fcntl.fcntl(fd, fcntl.F_GETFL)
             fcntl.fcntl(fd, fcntl.F_SETFL, flags & ~os.O_NONBLOCK)
-        fh = os.fdopen(fd, "rb")
+        fh = io.BufferedReader(_SizedFile(fd, st.st_size, shown, what, error))
     except BaseException:
         os.close(fd)
         raise
