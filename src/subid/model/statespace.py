@@ -41,7 +41,14 @@ import numpy as np
 from scipy import linalg
 
 import subid.model._simulate as _simulate
-from subid._validation import as_signal, check_dt, check_int, check_time_stamps, same_period
+from subid._validation import (
+    as_signal,
+    check_dt,
+    check_int,
+    check_time_stamps,
+    same_period,
+    stamp_resolution,
+)
 from subid._version import __version__
 from subid.data import IOData
 from subid.delay import effective_input, frequency_factor, input_delay_of
@@ -747,7 +754,8 @@ class StateSpace:
             if t is not None:
                 t = check_time_stamps(t, N)
                 steps = np.diff(t)
-                if steps.size and not same_period(steps, self._dt):
+                if steps.size and not same_period(steps, self._dt,
+                                                  resolution=stamp_resolution(t)):
                     raise DataError(f"time stamps t have steps from {float(steps.min())!r} to "
                                     f"{float(steps.max())!r} but the model is discrete-time with "
                                     f"period dt={self._dt!r}; t must be uniform with that "
