@@ -372,16 +372,35 @@ def predict(model, data, steps=1, x0=None, *, return_x0=False):
         y_hat, x0v = simulate_fit(model, data, x0=mode)
         return (y_hat, x0v) if return_x0 else y_hat
     u, y = effective_input(model, data.u), data.y        # the model's input delays
-    with np.errstate(over="ignore", invalid="ignore"):
-        if x0 is None or (isinstance(x0, str) and x0 == "estimate"):
-            x0v, y_hat = _estimate_x0(model, u, y, k)
-        else:
-            x0v = np.zeros(model.order) if _is_zero(x0) else model._check_x0(x0)
-            y_hat = _k_step(model, u, y, x0v, k)
+    try:
+        with np.errstate(over="ignore", invalid="ignore"):
+            if x0 is None or (isinstance(x0, str) and x0 == "estimate"):
+                x0v, y_hat = _estimate_x0(model, u, y, k)
+            else:
+                x0v = np.zeros(model.order) if _is_zero(x0) else model._check_x0(x0)
+                y_hat = _k_step(model, u, y, x0v, k)
+    except ModelError:                   # a simulation inside overflowed
+        x0v = y_hat = None
     if x0v is None or not np.isfinite(y_hat).all():
-        raise DataError(f"the {k}-step prediction diverges over {data.n_samples} samples (the "
-                        "predictor or, for long horizons, the model is unstable)")
+        raise DataError(f"the {k}-step prediction diverges over {data.n_samples} samples: "
+                        f"{_divergence_cause(model, k)}")
     return (y_hat, x0v) if return_x0 else y_hat
+
+
+def _divergence_cause(model, k) -> str:
+    """Which part of a model with K makes its k-step prediction diverge, and what to do."""
+    radius = lambda M: float(np.abs(np.linalg.eigvals(M)).max(initial=0.0))   # noqa: E731
+    with np.errstate(all="ignore"):
+        rho = radius(model.A) if np.isfinite(model.A).all() else math.inf
+        Ap = model.A - model.K @ model.C
+        rho_p = radius(Ap) if np.isfinite(Ap).all() else math.inf
+    if rho_p >= 1.0:
+        state = "stable" if rho < 1.0 else f"unstable too (spectral radius {rho:.4g})"
+        return (f"its Kalman predictor A - K C is unstable (spectral radius {rho_p:.4g}); A "
+                f"itself is {state}. The noise model (K) does not give a stable predictor: "
+                "re-estimate it (subid.pem(data, model)) or compare by simulation (steps=inf)")
+    return (f"A is unstable (spectral radius {rho:.4g}) and the {k}-step prediction "
+            "propagates it over the horizon; use a shorter horizon (steps) or a stable model")
 
 
 def _is_zero(x0) -> bool:

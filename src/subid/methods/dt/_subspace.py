@@ -334,6 +334,8 @@ def estimate_b_d(A, C_n, gamma, L11, L_yu, problem: "Problem", *, bd_method: str
                              "with a statistic only, use bd_method='projection' (or 'auto')")
         bd_method = "projection"
     diag = {}
+    if estimate_x0 and isinstance(data, IOData) and data.n_experiments > 1:
+        check_experiment_lengths(data, A.shape[0])
     if bd_method in ("auto", "simulation"):
         with np.errstate(over="ignore", invalid="ignore"):
             if second_pass is not None:
@@ -624,6 +626,26 @@ def stable_choice(A_q, Q, n_outputs: int, fit, *, stability: str, data, method: 
     return A_s, fitted_s, record
 
 
+def check_experiment_lengths(data, order: int) -> None:
+    """:class:`TooFewSamplesError` naming every experiment of ``data`` too short to
+    determine its own initial state (``n_samples * n_outputs < order``
+    equations for ``order`` unknowns), instead of a regression that would be
+    rank deficient and send B, D to another route without x0."""
+    short = [(name, b - a) for name, (a, b) in zip(data.experiment_names,
+                                                     data.experiment_ranges)
+             if (b - a) * data.n_outputs < order]
+    if short:
+        need = -(-order // data.n_outputs)
+        listed = ", ".join(f"{name!r} ({length} sample{'s' if length != 1 else ''})"
+                           for name, length in short[:5])
+        more = f" and {len(short) - 5} more" if len(short) > 5 else ""
+        raise TooFewSamplesError(
+            f"experiment{'s' if len(short) > 1 else ''} {listed}{more} of the merged record "
+            f"{'are' if len(short) > 1 else 'is'} too short to determine an initial state of "
+            f"order {order}: each experiment needs at least {need} samples. Drop "
+            f"{'them' if len(short) > 1 else 'it'} from the merge, or pass estimate_x0=False")
+
+
 def experiment_starts(data):
     """The first sample of every experiment of a record of several (None otherwise)."""
     if isinstance(data, IOData) and data.n_experiments > 1:
@@ -639,6 +661,7 @@ def initial_state(A, B, C, D, data):
         second_pass = getattr(data, "output_regression", None)   # subid.methods.dt._bd_pass
         return None if second_pass is None else second_pass.initial_state(A, B, C, D)
     if data.n_experiments > 1:
+        check_experiment_lengths(data, A.shape[0])
         rows = [_initial_state_one(A, B, C, D, e, column_std(data.y)) for e in data.experiments]
         return None if any(r is None for r in rows) else np.stack(rows)
     return _initial_state_one(A, B, C, D, data, column_std(data.y))
