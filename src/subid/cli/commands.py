@@ -487,7 +487,11 @@ def _check_out(out, names) -> None:
     """Refuse, before any work, an --out folder holding files subid did not write."""
     from subid.errors import FileWriteError
     if os.path.lexists(out):
-        if not os.path.isdir(out) or os.path.islink(out):
+        if os.path.islink(out):          # the one output-path policy (io._files.refuse_link)
+            raise FileWriteError(f"--out {out} is a symbolic link (to {os.readlink(out)}); "
+                                 "subid does not write through links: give the target "
+                                 "folder itself", path=out)
+        if not os.path.isdir(out):
             raise FileWriteError(f"--out {out} exists and is not a folder", path=out)
         extra = sorted(set(os.listdir(out)) - names)
         if extra:

@@ -233,6 +233,46 @@ def _write_error(exc: OSError, path: str, what: str) -> FileWriteError:
     return err
 
 
+def refuse_link(path: str, what: str) -> None:
+    """The one output-path policy of every writer (:func:`atomic_write`,
+    :func:`atomic_directory`, the command line's ``--out``): an output path that
+    is a symbolic link is refused with :class:`~subid.errors.FileWriteError`
+    naming where it points. subid never writes through a link, to a file or
+    a folder alike, so an output can never land outside the place named."""
+    if os.path.islink(path):
+        raise FileWriteError(f"cannot write the {what} {path}: it is a symbolic link (to "
+                             f"{os.readlink(path)}); subid does not write through links: "
+                             "give the path of the target itself, or another name",
+                             path=path)
+
+
+@contextlib.contextmanager
+def made_folders(path):
+    """Create the folder ``path`` (and missing parents) for the writes of the
+    ``with`` block; when the block fails, the folders this call created are
+    removed again if they are still empty: a failed write (a full disk, a
+    refused file) leaves nothing behind, not even an empty folder."""
+    path = os.path.abspath(os.fspath(path))
+    created, probe = [], path
+    while probe and not os.path.lexists(probe):
+        created.append(probe)
+        parent = os.path.dirname(probe)
+        if parent == probe:
+            break
+        probe = parent
+    try:
+        os.makedirs(path, exist_ok=True)
+    except OSError as exc:
+        raise _write_error(exc, path, "folder") from None
+    try:
+        yield path
+    except BaseException:
+        for folder in created:                 # deepest first
+            with contextlib.suppress(OSError):
+                os.rmdir(folder)
+        raise
+
+
 @contextlib.contextmanager
 def atomic_write(path, mode: str = "wb", encoding: str | None = None, *, what: str = "file"):
     """Yield a file handle whose content replaces ``path`` only when complete.
@@ -249,8 +289,7 @@ def atomic_write(path, mode: str = "wb", encoding: str | None = None, *, what: s
     if "\x00" in path:
         raise FileWriteError(f"the file name {path!r} holds a NUL byte",
                              path=path.replace("\x00", "\\0"))
-    if os.path.islink(path):
-        path = os.path.realpath(path)       # replace the file the link names, keep the link
+    refuse_link(path, what)
     try:
         existing = os.stat(path).st_mode
     except FileNotFoundError:
@@ -348,8 +387,9 @@ def atomic_directory(path, *, owned=None, what: str = "output folder"):
     if "\x00" in path:
         raise FileWriteError(f"the folder name {path!r} holds a NUL byte",
                              path=path.replace("\x00", "\\0"))
+    refuse_link(path, what)
     if os.path.exists(path):
-        if not os.path.isdir(path) or os.path.islink(path):
+        if not os.path.isdir(path):
             raise FileWriteError(f"{path} exists and is not a folder; choose another "
                                  f"{what}", path=path)
         if owned is not None and not owned(path):

@@ -398,10 +398,16 @@ class Tracker:
     def checkpoint(self, k: int) -> str:
         """Save the identifier and its trace as ``checkpoint-<k>.npz``; prune
         this tracker's older checkpoints beyond ``keep``. Returns the path."""
-        os.makedirs(self.checkpoint_dir, exist_ok=True)
+        from subid.io._files import made_folders
         path = os.path.join(self.checkpoint_dir, f"checkpoint-{k:010d}.npz")
-        self.save_trace(path[:-4] + ".trace.npz", k)
-        self.ident.save(path)
+        with made_folders(self.checkpoint_dir):          # no empty folder after a failure
+            self.save_trace(path[:-4] + ".trace.npz", k)
+            try:
+                self.ident.save(path)
+            except BaseException:
+                with contextlib.suppress(OSError):
+                    os.unlink(path[:-4] + ".trace.npz")
+                raise
         self.written.append(path)
         if self.keep:
             # Prune only the checkpoints this run wrote, oldest first (never by
