@@ -1517,6 +1517,12 @@ def main(argv=None) -> int:
     except KeyboardInterrupt:
         click.echo("subid: interrupted", err=True)
         return 130
+    except MemoryError:
+        click.echo("subid: error: out of memory: the record (or a step of the method on it) "
+                   "does not fit in this machine's memory; for a large file use "
+                   "'subid identify FILE --stream' (bounded memory), or identify a part of "
+                   "the record", err=True)
+        return EXIT_USER_ERROR
     except (SubidError, OSError, ImportError) as exc:
         if debug:
             traceback.print_exc()
