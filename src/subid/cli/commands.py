@@ -487,7 +487,7 @@ def _check_out(out, names) -> None:
     """Refuse, before any work, an --out folder holding files subid did not write."""
     from subid.errors import FileWriteError
     if os.path.lexists(out):
-        if os.path.islink(out):          # the one output-path policy (io._files.refuse_link)
+        if os.path.islink(out):          # the one output-path policy (refuse_link of the io package)
             raise FileWriteError(f"--out {out} is a symbolic link (to {os.readlink(out)}); "
                                  "subid does not write through links: give the target "
                                  "folder itself", path=out)

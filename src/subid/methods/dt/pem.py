@@ -48,8 +48,8 @@ from subid.data import IOData
 from subid.delay import delay_inputs, input_delay_of, record_delay
 from subid.errors import DataError, ModelError, NoiseModelWarning, OptionError
 from subid.methods._info import records_warnings
+from subid.methods.dt._checks import check_data
 from subid.methods.dt._pem_kernel import jacobian
-from subid.methods.dt._subspace import check_data
 from subid.model import _simulate
 from subid.model.statespace import StateSpace
 
