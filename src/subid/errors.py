@@ -28,8 +28,32 @@ __all__ = [
 ]
 
 
+#: Longest message an error keeps; beyond, its middle is cut (an echoed cell, name
+#: or value of millions of characters must not become a megabyte line on stderr).
+MAX_MESSAGE_CHARS = 2000
+
+
+def shorten(text: str, limit: int = MAX_MESSAGE_CHARS) -> str:
+    """``text`` itself, or its beginning and end around a note of how much was cut."""
+    text = str(text)
+    if len(text) <= limit:
+        return text
+    head, tail = (2 * limit) // 3, limit // 4
+    return f"{text[:head]} ... [{len(text) - head - tail} characters cut] ... {text[-tail:]}"
+
+
 class SubidError(ValueError):
-    """Base class of all errors raised by subid."""
+    """Base class of all errors raised by subid.
+
+    A message longer than :data:`MAX_MESSAGE_CHARS` is shortened in its middle
+    (:func:`shorten`): whatever a message echoes (a cell, a name, a value), it
+    stays a readable line.
+    """
+
+    def __init__(self, *args):
+        if args and isinstance(args[0], str) and len(args[0]) > MAX_MESSAGE_CHARS:
+            args = (shorten(args[0]),) + args[1:]
+        super().__init__(*args)
 
 
 class DataError(SubidError):

@@ -41,10 +41,17 @@ import numpy as np
 from scipy import linalg
 
 import subid.model._simulate as _simulate
-from subid._validation import as_signal, check_dt, check_int, check_time_stamps, same_period
+from subid._validation import (
+    as_signal,
+    check_dt,
+    check_int,
+    check_time_stamps,
+    same_period,
+    stamp_resolution,
+)
 from subid._version import __version__
 from subid.data import IOData
-from subid.delay import apply_to_inputs, frequency_factor, input_delay_of
+from subid.delay import effective_input, frequency_factor, input_delay_of
 from subid.errors import DataError, ModelError, OptionError
 from subid.io._files import atomic_write
 
@@ -747,13 +754,13 @@ class StateSpace:
             if t is not None:
                 t = check_time_stamps(t, N)
                 steps = np.diff(t)
-                if steps.size and not same_period(steps, self._dt):
+                if steps.size and not same_period(steps, self._dt,
+                                                  resolution=stamp_resolution(t)):
                     raise DataError(f"time stamps t have steps from {float(steps.min())!r} to "
                                     f"{float(steps.max())!r} but the model is discrete-time with "
                                     f"period dt={self._dt!r}; t must be uniform with that "
                                     "period (or omit t)")
-            if (delays := input_delay_of(self)) is not None:    # info['input_delay']
-                u = apply_to_inputs(u, delays)
+            u = effective_input(self, u)                         # info['input_delay']
             y, x = _simulate.simulate_discrete(self._A, self._B, self._C, self._D, u, x0)
         return (y, x) if return_state else y
 

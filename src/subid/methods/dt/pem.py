@@ -45,8 +45,10 @@ import scipy.optimize
 
 from subid._validation import same_period
 from subid.data import IOData
+from subid.delay import delay_inputs, input_delay_of, record_delay
 from subid.errors import DataError, ModelError, NoiseModelWarning, OptionError
 from subid.methods._info import records_warnings
+from subid.methods.dt._checks import check_data
 from subid.methods.dt._pem_kernel import jacobian
 from subid.model import _simulate
 from subid.model.statespace import StateSpace
@@ -54,6 +56,8 @@ from subid.model.statespace import StateSpace
 __all__ = ["pem"]
 
 FOCUS = ("prediction", "simulation")
+# Smallest tolerance: scipy's least_squares needs one above machine precision.
+_EPS = float(np.finfo(float).eps)
 # A trial predictor with a spectral radius above this is treated as unstable.
 STABILITY_LIMIT = 1.0 - 1e-9
 # Largest Jacobian (N * ny rows, one column per free parameter) pem builds.
@@ -73,6 +77,7 @@ def _check_inputs(data, model, focus):
                         f"the model has {model.n_inputs} and {model.n_outputs}")
     if not data.is_uniform:
         raise DataError("pem refines discrete-time models and needs uniformly sampled data")
+    check_data(data, "pem")               # magnitudes whose squares overflow, constant outputs
     if not model.is_continuous and not same_period(data.dt, model.dt):
         raise DataError(f"the model has dt={model.dt} but the data are sampled with "
                         f"dt={data.dt}")
@@ -303,10 +308,23 @@ def pem(data, model, *, focus="prediction", max_iterations=100, tolerance=1e-8, 
     if isinstance(max_iterations, bool) or not isinstance(max_iterations, int) \
             or max_iterations < 1:
         raise OptionError(f"max_iterations must be a positive integer, got {max_iterations!r}")
-    if not (isinstance(tolerance, (int, float)) and 0 < tolerance < 1):
-        raise OptionError(f"tolerance must be in (0, 1), got {tolerance!r}")
+    if isinstance(tolerance, bool) or not isinstance(tolerance, (int, float)) \
+            or not _EPS <= tolerance < 1:
+        raise OptionError(f"tolerance must be in [{_EPS:.3g}, 1) (below machine precision no "
+                          f"step can meet it), got {tolerance!r}")
     if isinstance(rounds, bool) or not isinstance(rounds, int) or rounds < 1:
         raise OptionError(f"rounds must be a positive integer, got {rounds!r}")
+    if (delays := input_delay_of(model)) is not None:
+        # the model's dynamics see u_j[k - d_j]: refine on the record shifted so (the
+        # first max(d) samples, whose delayed inputs precede the record, left out, as
+        # the methods' input_delay= does), then record the delays on the result
+        shifted, _ = delay_inputs(data, delays)
+        inner = model.with_noise_model(model.K, model.noise_cov,
+                                       info={k: v for k, v in model.info.items()
+                                             if k != "input_delay"})
+        return record_delay(pem(shifted, inner, focus=focus, max_iterations=max_iterations,
+                                tolerance=tolerance, rounds=rounds, feedthrough=feedthrough),
+                            delays)
     if model.is_continuous:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", NoiseModelWarning)
