@@ -25,6 +25,7 @@ import importlib
 _LAZY = {
     "IOData": ("data", "IOData"),
     "merge": ("data", "merge"),
+    "FRData": ("frdata", "FRData"),
     "StateSpace": ("model.statespace", "StateSpace"),
     "read": ("io.formats", "read"),
     "thread_limit": ("config", "thread_limit"),
@@ -64,6 +65,7 @@ _LAZY = {
 __all__ = [
     "IOData",
     "merge",
+    "FRData",
     "StateSpace",
     "read",
     "thread_limit",
