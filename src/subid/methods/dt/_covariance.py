@@ -64,7 +64,7 @@ def covariance_factor(J, residuals, n_nuisance):
     scale = np.sqrt(np.einsum("ij,ij->j", Jw, Jw))
     if not (np.isfinite(scale).all() and scale.min() > 0):
         return None, lam
-    R = scipy.linalg.qr(Jw / scale, mode="r", check_finite=False)[0][:d, :d]
+    R = np.linalg.qr(Jw / scale, mode="r")
     R22 = R[n_nuisance:, n_nuisance:]
     diag = np.abs(np.diag(R22))
     if diag.size == 0 or diag.min() <= RANK_TOLERANCE * diag.max():
