@@ -106,15 +106,15 @@ class ParameterCovariance:
         return np.sqrt(np.einsum("ij,ij->i", self.factor, self.factor))
 
     def matrices(self, theta):
-        """``(A, B, C, D, K)`` of a parameter vector (``D``, ``K`` of the model when
-        they are not parameters; ``K`` None then)."""
+        """``(A, B, C, D, K)`` of a parameter vector (``D`` and ``K`` those of the
+        model when they are not parameters; ``K`` may be None)."""
         theta = np.asarray(theta, dtype=float)
         out, pos = {}, 0
         for name, rows, cols in self._shapes:
             out[name] = theta[pos:pos + rows * cols].reshape(rows, cols)
             pos += rows * cols
         D = out.get("D", np.array(self._model.D))
-        return out["A"], out["B"], out["C"], D, out.get("K")
+        return out["A"], out["B"], out["C"], D, out.get("K", self._model.K)
 
     def model(self, theta) -> StateSpace:
         """The model with parameters ``theta`` (same dt, names, hold and ``info``
@@ -135,10 +135,9 @@ class ParameterCovariance:
         A, B, C, D, K = self.matrices(theta)
         m = self._model
         info = {k: v for k, v in m.info.items() if k != "parameter_covariance"}
-        noise = (K, m.noise_cov) if K is not None and m.noise_cov is not None else (None, None)
         return StateSpace(A, B, C, D, m.dt, input_names=m.input_names,
-                          output_names=m.output_names, info=info, K=noise[0],
-                          noise_cov=noise[1], hold=m.hold)
+                          output_names=m.output_names, info=info, K=K,
+                          noise_cov=None if K is None else m.noise_cov, hold=m.hold)
 
     def sample(self, n_samples, *, seed):
         """Models drawn from the Gaussian ``N(θ, F F^T)``.

@@ -278,7 +278,10 @@ def pem(data, model, *, focus="prediction", max_iterations=100, tolerance=1e-8, 
         ``cost_history`` (criterion at every accepted iterate, first entry the
         start), ``start_cost``, ``final_cost``, ``stop_reason`` (the
         optimiser's message, or why the start was kept), ``n_evaluations``,
-        ``x0`` and ``parametrisation``.
+        ``x0``, ``parametrisation`` and ``parameter_covariance`` (the
+        asymptotic covariance of the parameters at the result, for
+        :func:`subid.freqresp_bounds`; with ``focus='simulation'`` it assumes
+        white output errors; dropped for continuous-time models).
 
     Raises
     ------
