@@ -44,7 +44,8 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.special
 
-from subid._validation import as_signal, check_int
+from subid._validation import as_signal, check_int, same_period
+from subid.data import IOData
 from subid.delay import apply_to_inputs, input_delay_of
 from subid.errors import DataError, ModelError, OptionError
 from subid.model.statespace import StateSpace
@@ -423,7 +424,11 @@ def simulation_bounds(model, u, level=0.95, *, x0=None, method="delta", n_sample
     cov = parameter_covariance(model)
     z = _z(level)
     n_samples = _check_method(method, n_samples)
-    u = getattr(u, "u", u)
+    if isinstance(u, IOData):
+        if not same_period(u.dt or 0.0, model.dt):
+            raise DataError(f"the record is sampled with dt={u.dt!r} but the model's period "
+                            f"is dt={model.dt!r}")
+        u = u.u
     u = as_signal(u, "input u", allow_empty_columns=model.n_inputs == 0)
     if u.shape[1] != model.n_inputs:
         raise DataError(f"input u has {u.shape[1]} channels but the model has "

@@ -899,7 +899,6 @@ class StateSpace:
         raise ModelError(f"the frequency w={float(w[i])!r} rad/s falls on the pole {poles[j]:.6g} "
                          f"({where}): the frequency response is infinite there")
 
-    # -- conversions -----------------------------------------------------
     def step(self, t=None):
         """Step response (MATLAB ``step``): every input in turn held at 1 from
         ``t = 0``, zero initial state.
@@ -959,6 +958,7 @@ class StateSpace:
         """
         return _responses.impulse_response(self, t)
 
+    # -- conversions -----------------------------------------------------
     def to_discrete(self, dt, method="zoh") -> "StateSpace":
         """Discretise a continuous-time model.
 

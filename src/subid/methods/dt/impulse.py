@@ -313,7 +313,7 @@ def impulseest(data, n, *, kernel="tc"):
         r = R[:m, m + i]
         rho2 = float(np.sum(R[m:, m + i] ** 2))    # least-squares residual of output i
         sigma2[i] = max(rho2 / (rows - m), 1e-300)
-        g_ls = R1inv @ r
+        g_ls = scipy.linalg.solve_triangular(R1, r, check_finite=False)
         if kernel is None:
             coef[:, i] = g_ls
             std[:, i] = math.sqrt(sigma2[i]) * np.sqrt(np.sum(R1inv ** 2, axis=1))

@@ -515,4 +515,3 @@ def _with_covariance(refined, start, data, focus, feedthrough):
                   "(Ljung 1999, Theorem 9.1) in data-driven local coordinates",
     }
     return refined
-
