@@ -8,8 +8,7 @@ decides (``fig.savefig(...)``, or display in a notebook). Without a display
 =====================================  ==========================================
 :func:`data_overview`                  inputs and outputs against time
 :func:`compare`                        measured against simulated outputs, fit %
-:func:`bode`                           magnitude and phase, bands, estimates
-:func:`step`                           step responses (with confidence bands)
+:func:`bode`                           magnitude and phase, rad/s or Hz
 :func:`poles`                          pole map with unit circle / imaginary axis
 :func:`residuals`                      residual whiteness and input correlation
 :func:`convergence`                    poles and parameters of an online run
@@ -40,7 +39,7 @@ import numpy as np
 
 from subid.errors import DataError, ModelError
 
-__all__ = ["poles", "error_histograms", "bode", "step", "compare", "residuals",
+__all__ = ["poles", "error_histograms", "bode", "compare", "residuals",
            "residual_correlations", "convergence", "data_overview", "frequency_grid",
            "simulated_output", "order_selection", "STYLE", "METHOD_COLORS"]
 
@@ -441,8 +440,7 @@ def frequency_grid(models, n_points: int = 400) -> np.ndarray:
 
 
 @_styled
-def bode(model_or_models, w=None, *, hz=False, labels=None, phase=True, title=None,
-         confidence=None, estimate=None):
+def bode(model_or_models, w=None, *, hz=False, labels=None, phase=True, title=None):
     """Bode diagram: magnitude (dB) and phase (degrees) of every input/output pair.
 
     Parameters
@@ -459,13 +457,6 @@ def bode(model_or_models, w=None, *, hz=False, labels=None, phase=True, title=No
     phase : bool
         Draw the phase panels.
     title : str, optional
-    confidence : float, optional
-        Draw the band of this level (e.g. 0.95) around the magnitude of every
-        model that has a parameter covariance (:func:`subid.freqresp_bounds`,
-        :func:`subid.pem`); a ``ModelError`` when none has one.
-    estimate : FRData, optional
-        A model-free estimate (:func:`subid.spa`, :func:`subid.etfe`) drawn
-        as grey points, with a shaded ± 2 std band when it has ``std``.
 
     Returns
     -------
@@ -487,8 +478,6 @@ def bode(model_or_models, w=None, *, hz=False, labels=None, phase=True, title=No
                              "models of the same shape")
     if nu == 0:
         raise ModelError("the model has no inputs: there is no frequency response to draw")
-    if confidence is not None:
-        _require_covariance(groups)
     if w is None:
         w = frequency_grid(groups)
     else:
@@ -515,24 +504,12 @@ def bode(model_or_models, w=None, *, hz=False, labels=None, phase=True, title=No
         with np.errstate(divide="ignore"):
             mag = 20 * np.log10(np.maximum(np.abs(G), 1e-300))
         ph = np.degrees(np.unwrap(np.angle(G), axis=0))
-        band = None
-        if confidence is not None and _has_covariance(m):
-            from subid.evaluation.uncertainty import freqresp_bounds
-            band = freqresp_bounds(m, wk, confidence)
         for i in range(ny):
             for j in range(nu):
                 r = 2 * i if phase else i
                 axes[r, j].semilogx(wk * x_scale, mag[:, i, j], label=shown[k], **style)
-                if band is not None:
-                    axes[r, j].fill_between(wk * x_scale,
-                                            _db(np.maximum(band.lower[:, i, j],
-                                                           1e-3 * band.value[:, i, j])),
-                                            _db(band.upper[:, i, j]), color=colors[k],
-                                            alpha=0.2, lw=0)
                 if phase:
                     axes[r + 1, j].semilogx(wk * x_scale, ph[:, i, j], **style)
-    if estimate is not None:
-        _draw_estimate(axes, estimate, x_scale, phase, (ny, nu))
     for i in range(ny):
         for j in range(nu):
             r = 2 * i if phase else i
@@ -556,111 +533,6 @@ def bode(model_or_models, w=None, *, hz=False, labels=None, phase=True, title=No
         from matplotlib.ticker import NullLocator
         for ax in axes.ravel():
             ax.xaxis.set_minor_locator(NullLocator())
-    _legend_beside(axes[0, -1])
-    if title:
-        fig.suptitle(title)
-    _layout(fig, axes, hgap=0.5, wgap=0.85, right=room + 0.1)
-    return fig
-
-
-def _has_covariance(model) -> bool:
-    return isinstance(model.info.get("parameter_covariance"), dict)
-
-
-def _require_covariance(groups) -> None:
-    if not any(_has_covariance(m) for m in groups.values()):
-        raise ModelError("confidence bands need a model with a parameter covariance; none of "
-                         f"{list(groups)} has one: refine a model with subid.pem(data, model)")
-
-
-def _db(values):
-    return 20 * np.log10(np.maximum(values, 1e-300))
-
-
-def _draw_estimate(axes, estimate, x_scale, phase, shape):
-    """An FRData estimate on Bode axes: points, ± 2 std band (magnitude)."""
-    if (estimate.n_outputs, estimate.n_inputs) != shape:
-        raise DataError(f"estimate has {estimate.n_inputs} inputs and {estimate.n_outputs} "
-                        f"outputs but the models have {shape[1]} and {shape[0]}")
-    keep = estimate.w > 0                     # a log axis has no zero frequency
-    w, G = estimate.w[keep] * x_scale, estimate.response[keep]
-    ph = np.degrees(np.unwrap(np.angle(G), axis=0))
-    for i in range(shape[0]):
-        for j in range(shape[1]):
-            r = 2 * i if phase else i
-            mag = np.abs(G[:, i, j])
-            axes[r, j].semilogx(w, _db(mag), ".", color="0.45", ms=2.5, label="estimate",
-                                zorder=1)
-            if estimate.std is not None:
-                sd = 2 * estimate.std[keep, i, j]
-                axes[r, j].fill_between(w, _db(np.maximum(mag - sd, mag * 1e-3)),
-                                        _db(mag + sd), color="0.6", alpha=0.2, lw=0)
-            if phase:
-                axes[r + 1, j].semilogx(w, ph[:, i, j], ".", color="0.45", ms=2.5, zorder=1)
-
-
-@_styled
-def step(model_or_models, t=None, *, labels=None, confidence=None, title=None):
-    """Step responses of every input/output pair (MATLAB ``step``).
-
-    Parameters
-    ----------
-    model_or_models : StateSpace, list of StateSpace or dict label -> StateSpace
-        Models of the same shape (:meth:`StateSpace.step`).
-    t : float or array_like, optional
-        Final time or time stamps (default: the slowest model's settling time).
-    labels : list of str, optional
-        Legend labels.
-    confidence : float, optional
-        Draw the band of this level (e.g. 0.95) around the response of every
-        model that has a parameter covariance (:func:`subid.step_bounds`); a
-        ``ModelError`` when none has one.
-    title : str, optional
-
-    Returns
-    -------
-    matplotlib.figure.Figure
-        One panel per output (rows) and input (columns).
-    """
-    plt = _pyplot()
-    groups = _model_groups(model_or_models, labels)
-    first = next(iter(groups.values()))
-    ny, nu = first.n_outputs, first.n_inputs
-    if nu == 0:
-        raise ModelError("the model has no inputs: there is no step response to draw")
-    if any((m.n_outputs, m.n_inputs) != (ny, nu) for m in groups.values()):
-        raise ModelError("step: the models differ in their numbers of inputs and outputs")
-    if confidence is not None:
-        _require_covariance(groups)
-    if t is None:
-        t = max(float(m.step()[0][-1]) for m in groups.values())
-    colors = colors_for(groups.items())
-    room = _legend_room(list(groups))
-    fig, axes = plt.subplots(ny, nu, figsize=(min(3.8 * nu + 1.2, 16) + room, 2.2 * ny + 0.8),
-                             sharex=True, squeeze=False)
-    for k, (label, m) in enumerate(groups.items()):
-        if confidence is not None and _has_covariance(m):
-            from subid.evaluation.uncertainty import step_bounds
-            band = step_bounds(m, t, confidence)
-            tk, y = band.x, band.value
-        else:
-            band = None
-            tk, y = m.step(t)
-        for i in range(ny):
-            for j in range(nu):
-                draw = axes[i, j].step if m.dt > 0 else axes[i, j].plot
-                kwargs = {"where": "post"} if m.dt > 0 else {}
-                draw(tk, y[:, i, j], color=colors[k], lw=1.2, label=label, **kwargs)
-                if band is not None:
-                    axes[i, j].fill_between(tk, band.lower[:, i, j], band.upper[:, i, j],
-                                            color=colors[k], alpha=0.2, lw=0,
-                                            step="post" if m.dt > 0 else None)
-    for i in range(ny):
-        for j in range(nu):
-            axes[i, j].set_title(f"{first.input_names[j]} → {first.output_names[i]}")
-            axes[i, j].grid(True, lw=0.3)
-    for j in range(nu):
-        axes[-1, j].set_xlabel("time")
     _legend_beside(axes[0, -1])
     if title:
         fig.suptitle(title)
