@@ -206,7 +206,7 @@ def test_plot_step_and_bode_overlay(tmp_path):
     pytest.importorskip("matplotlib")
     data = _record(_fir_system(), 600, 20.0, seed=8)
     model = subid.pem(data, subid.n4sid(data, 3))
-    fig = subid.plot.bode(model, confidence=0.95, estimate=subid.spa(data))
+    fig = subid.plot.bode(model, confidence=0.95, data=subid.spa(data))
     assert len(fig.axes) == 2
     fig = subid.plot.step({"pem": model}, confidence=0.95)
     assert fig.axes[0].collections                      # the band

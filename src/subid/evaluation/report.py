@@ -565,7 +565,7 @@ def identification_report(models, estimation, validation=None, *, title="subid r
     overlay = "; grey points: spa estimate of the estimation data (± 2 std shaded)" \
         if estimate is not None else ""
     body.append(_section("bode", "Frequency response (Bode)", _plot_or_note(
-        lambda: plot.bode(models, hz=hz, confidence=level, estimate=estimate),
+        lambda: plot.bode(models, hz=hz, confidence=level, data=estimate),
         f"magnitude and phase; frequency in {'Hz' if hz else 'rad/s'}{nyquist}{band}{overlay}",
         "Bode diagram")))
     nav.append(("bode", "Bode"))
