@@ -17,7 +17,11 @@ Fourier transformed,
 with the asymptotic variance ``Var Ĝ_ij ≈ (1/N) Σ_τ W(τ)^2 Φ_v,ii [Φ_u^-1]_jj``
 (Ljung 1999, Section 6.4, the variance of the smoothed estimate; the MIMO form
 as in MATLAB). The default window size is MATLAB's ``γ = min(N/10, 30)`` and
-the default frequencies ``(1..128)/128 π/dt``.
+the default frequencies ``(1..128)/128 π/dt``. The standard deviation is the
+variance part only: the bias of a window too short for a sharp resonance
+(resolution about ``2π/γ`` rad per sample) is not in it, so compare windows
+(measured: ``E|Ĝ - G|^2 / std^2`` is 1.08 for a first-order system with
+``γ = 60``, but 48 for resonances of damping 0.03 with the default ``γ = 30``).
 
 :func:`etfe` is the empirical transfer-function estimate from the discrete
 Fourier transforms ``Y_k, U_k`` of the record (Ljung 1999, Section 6.3):
