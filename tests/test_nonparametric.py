@@ -111,6 +111,30 @@ def test_etfe_std_is_calibrated():
     assert 0.85 < np.mean(z2) < 1.25
 
 
+def test_etfe_smoothed_mimo_against_the_neighbourhood_fit():
+    # Ĝ_k: weighted least squares over bins k-M..k+M; std from the same fit
+    rng = np.random.default_rng(4)
+    u = rng.standard_normal((256, 2))
+    y = u @ [[1.0, 0.3], [0.2, -0.5]] + 0.1 * rng.standard_normal((256, 2))
+    y[1:] += 0.4 * u[:-1]
+    M = 3
+    est = subid.etfe(subid.IOData(u, y), smoothing=M)
+    U, Y = np.fft.fft(u, axis=0), np.fft.fft(y, axis=0)
+    lw = 0.5 * (1 + np.cos(np.pi * np.arange(-M, M + 1) / (M + 1)))
+    lw /= lw.sum()
+    for k in (1, 2, 40, 128):
+        idx = (k + np.arange(-M, M + 1)) % 256
+        Su = (lw[:, None, None] * U[idx][:, :, None] * np.conj(U[idx])[:, None, :]).sum(0)
+        Syu = (lw[:, None, None] * Y[idx][:, :, None] * np.conj(U[idx])[:, None, :]).sum(0)
+        G = Syu @ np.linalg.inv(Su)
+        np.testing.assert_allclose(est.response[k - 1], G, rtol=1e-10, atol=1e-12)
+        res = (lw[:, None] * np.abs(Y[idx] - U[idx] @ G.T) ** 2).sum(0)
+        Su2 = (lw[:, None, None] ** 2 * U[idx][:, :, None] * np.conj(U[idx])[:, None, :]).sum(0)
+        Si = np.linalg.inv(Su)
+        var = np.outer(res / (1 - np.real(np.trace(Si @ Su2))), np.real(np.diag(Si @ Su2 @ Si)))
+        np.testing.assert_allclose(est.std[k - 1], np.sqrt(var), rtol=1e-8)
+
+
 def test_etfe_raw_is_the_dft_ratio():
     rng = np.random.default_rng(3)
     u = rng.standard_normal(64)

@@ -93,8 +93,8 @@ def _covariances(data, lags):
         z = np.hstack([data.y[a:b], data.u[a:b]])
         n_fft = 1 << int(math.ceil(math.log2(2 * (b - a) + 1)))
         Z = np.fft.rfft(z, n_fft, axis=0)
-        cross = np.fft.irfft(Z[:, :, None] * np.conj(Z[:, None, :]), n_fft, axis=0)
-        R += cross[:lags + 1]
+        for i in range(nz):          # one channel at a time: memory n_fft x nz
+            R[:, i, :] += np.fft.irfft(Z[:, i:i + 1] * np.conj(Z), n_fft, axis=0)[:lags + 1]
     return R / data.n_samples
 
 
@@ -213,6 +213,15 @@ def _spectra(data):
     return Y, U
 
 
+def _smooth(P, weights):
+    """``Σ_l weights[l] P[(k + l - M) mod L]`` for every bin ``k`` (axis 0)."""
+    M = (weights.size - 1) // 2
+    out = np.zeros_like(P)
+    for l, weight in enumerate(weights):
+        out += weight * np.roll(P, M - l, axis=0)
+    return out
+
+
 def etfe(data, smoothing=None):
     """Empirical transfer-function estimate (MATLAB ``etfe``), optionally smoothed.
 
@@ -279,21 +288,25 @@ def etfe(data, smoothing=None):
     offsets = np.arange(-M, M + 1)
     weights = 0.5 * (1 + np.cos(math.pi * offsets / (M + 1)))
     weights /= weights.sum()
-    idx = (k[:, None] + offsets[None, :]) % L                        # (K, 2M+1)
-    Uw, Yw = U[:, idx], Y[:, idx]                                    # (E, K, 2M+1, .)
-    S_u = np.einsum("l,ekla,eklb->kab", weights, Uw, np.conj(Uw))
-    S_u2 = np.einsum("l,ekla,eklb->kab", weights ** 2, Uw, np.conj(Uw))
-    S_yu = np.einsum("l,ekli,eklb->kib", weights, Yw, np.conj(Uw))
+    ny = data.n_outputs
+    Z = np.concatenate([Y, U], axis=2)                               # (E, L, ny + nu)
+    # per-bin cross-periodograms summed over experiments, smoothed over bins k + l
+    # (circularly: bin -k is the conjugate of bin k)
+    P = np.einsum("eka,ekb->kab", Z, np.conj(Z))
+    S = _smooth(P, weights)[k]
+    S_u, S_yu, S_y = S[:, ny:, ny:], S[:, :ny, ny:], S[:, :ny, :ny]
+    S_u2 = _smooth(P[:, ny:, ny:], weights ** 2)[k]
     _check_input_spectrum(S_u, w, "etfe")
     G = _solve_right(S_yu, S_u)
-    V = Yw - np.einsum("kij,eklj->ekli", G, Uw)
-    resid = np.einsum("l,ekli->ki", weights, np.abs(V) ** 2)
-    power = np.einsum("l,ekli->ki", weights, np.abs(Yw) ** 2)
+    # Σ_l w_l |Y - G_k U|^2 = diag(S_y - G_k S_uy), with G_k = S_yu S_u^-1
+    power = np.maximum(np.real(np.diagonal(S_y, axis1=1, axis2=2)), 1e-300)
+    resid = np.clip(np.real(np.diagonal(S_y - G @ np.conj(S_yu).transpose(0, 2, 1),
+                                        axis1=1, axis2=2)), 0.0, None)
     Su_inv_Su2 = np.linalg.solve(S_u, S_u2)
     dof = np.real(np.trace(Su_inv_Su2, axis1=1, axis2=2))
     phi_v = resid / np.maximum(1.0 - dof, 1e-12)[:, None]
     spread = np.real(np.diagonal(np.linalg.solve(S_u, Su_inv_Su2.conj().transpose(0, 2, 1))
                                  .conj().transpose(0, 2, 1), axis1=1, axis2=2))
     std = np.sqrt(phi_v[:, :, None] * np.maximum(spread, 0.0)[:, None, :])
-    coherence = np.clip(1.0 - resid / np.maximum(power, 1e-300), 0.0, 1.0)
+    coherence = np.clip(1.0 - resid / power, 0.0, 1.0)
     return FRData(w, G, dt, std=std, coherence=coherence, **names)
