@@ -247,3 +247,18 @@ def test_plot_step_and_bode_overlay(tmp_path):
     assert len(fig.axes) == 2
     fig = subid.plot.step({"pem": model}, confidence=0.95)
     assert fig.axes[0].collections                      # the band
+
+
+def test_blocked_factor_equals_the_whole_qr(monkeypatch):
+    # [Φ, Y] factored block by block (two experiments, blocks crossing their border)
+    from subid.methods.dt import impulse
+    rng = np.random.default_rng(9)
+    data = subid.merge([subid.IOData(rng.standard_normal((300, 2)), rng.standard_normal(300)),
+                        subid.IOData(rng.standard_normal((200, 2)), rng.standard_normal(200))])
+    Phi, Y = impulse._regressors(data, 10)
+    assert Phi.shape == (300 - 9 + 200 - 9, 20)
+    whole = np.linalg.qr(np.hstack([Phi, Y]), mode="r")
+    monkeypatch.setattr(impulse, "QR_BLOCK_ENTRIES", 500)
+    rows, blocked = impulse._factor(data, 10)
+    assert rows == Phi.shape[0]
+    np.testing.assert_allclose(np.abs(blocked), np.abs(whole), atol=1e-10)

@@ -63,6 +63,8 @@ MIN_EXTRA_ROWS = 10
 DECAY_GRID = (0.3, 0.6, 0.8, 0.9, 0.95, 0.98, 0.995)
 # Bounds of the decay rate λ and of |ρ| during the search.
 DECAY_BOUNDS = (1e-4, 1.0 - 1e-6)
+# Entries of one block of regressor rows factored at a time.
+QR_BLOCK_ENTRIES = 4_000_000
 
 
 def kernel_matrix(kernel, n, scale, decay, correlation=0.0):
@@ -156,20 +158,39 @@ class ImpulseEstimate:
                           output_names=self.output_names, info=info)
 
 
-def _regressors(data, n):
-    """``(Φ, Y)`` over every experiment, the rows whose ``n`` lags are all measured."""
+def _regressors(data, n, start=0, stop=None):
+    """``(Φ, Y)`` over every experiment: the rows whose ``n`` lags are all measured
+    (rows ``start:stop`` of that stack, counted over the experiments in order)."""
     phis, ys = [], []
     nu = data.n_inputs
+    offset = 0
+    stop = math.inf if stop is None else stop
     for a, b in data.experiment_ranges:
-        u, y = data.u[a:b], data.y[a:b]
-        if b - a < n:
+        rows = max(b - a - n + 1, 0)
+        lo, hi = max(start - offset, 0), min(stop - offset, rows)
+        offset += rows
+        if hi <= lo:
             continue
+        u = data.u[a + lo:a + hi + n - 1]
         win = np.lib.stride_tricks.sliding_window_view(u, n, axis=0)   # (rows, nu, n)
         phis.append(win[:, :, ::-1].reshape(-1, nu * n))               # lag 0 first
-        ys.append(y[n - 1:])
+        ys.append(data.y[a + lo + n - 1:a + hi + n - 1])
     if not phis:
         return np.empty((0, nu * n)), np.empty((0, data.n_outputs))
     return np.vstack(phis), np.vstack(ys)
+
+
+def _factor(data, n):
+    """Row count and the triangular factor ``R`` of ``[Φ, Y]``, by QR over blocks of
+    rows (``[R; next block]`` refactored), so that ``Φ`` is never held whole."""
+    m = n * data.n_inputs
+    total = sum(max(b - a - n + 1, 0) for a, b in data.experiment_ranges)
+    block = max(QR_BLOCK_ENTRIES // (m + data.n_outputs), 4 * (m + data.n_outputs))
+    R = np.empty((0, m + data.n_outputs))
+    for start in range(0, total, block):
+        Phi, Y = _regressors(data, n, start, start + block)
+        R = np.linalg.qr(np.vstack([R, np.hstack([Phi, Y])]), mode="r")
+    return total, R
 
 
 def _unpack(kernel, eta, nu):
@@ -289,15 +310,14 @@ def impulseest(data, n, *, kernel="tc"):
         kernel = check_choice(kernel, "kernel", KERNELS)
     nu, ny = data.n_inputs, data.n_outputs
     m = n * nu
-    Phi, Y = _regressors(data, n)
-    rows = Phi.shape[0]
+    rows = sum(max(b - a - n + 1, 0) for a, b in data.experiment_ranges)
     if rows < m + MIN_EXTRA_ROWS:
         raise TooFewSamplesError(
             f"impulseest: {data.n_samples} samples give {rows} rows with all {n} lags "
             f"measured, but {n} coefficients x {nu} input(s) need at least "
             f"{m + MIN_EXTRA_ROWS}; use fewer coefficients (n <= "
             f"{max((data.n_samples - MIN_EXTRA_ROWS + 1) // (nu + 1), 0)}) or more data")
-    R = np.linalg.qr(np.hstack([Phi, Y]), mode="r")
+    rows, R = _factor(data, n)
     R1 = R[:m, :m]
     d = np.abs(np.diag(R1))
     if d.min() <= 1e-10 * d.max():
