@@ -8,7 +8,13 @@ import pytest
 import scipy.signal
 
 import subid
-from subid.errors import DataError, OptionError, ResolutionWarning, TooFewSamplesError
+from subid.errors import (
+    DataError,
+    NotExcitingError,
+    OptionError,
+    ResolutionWarning,
+    TooFewSamplesError,
+)
 from subid.methods.dt.impulse import kernel_matrix
 from subid.model.statespace import StateSpace
 
@@ -203,6 +209,9 @@ def test_impulseest_noise_free_least_squares_is_exact_and_model_matches():
     est = subid.impulseest(subid.IOData(u, y), 8, kernel=None)
     np.testing.assert_allclose(est.coefficients, g, atol=1e-10)
     np.testing.assert_allclose(est.model().markov(8), g, atol=1e-10)
+    for kernel in ("tc", "dc", "ss"):
+        exact = subid.impulseest(subid.IOData(u, y), 8, kernel=kernel)
+        np.testing.assert_allclose(exact.coefficients, g, atol=1e-8)
     tc = subid.impulseest(subid.IOData(u, y + 1e-3 * rng.standard_normal(y.shape)), 8)
     np.testing.assert_allclose(tc.coefficients, g, atol=5e-3)
     assert tc.std.shape == (8, 2, 2) and np.all(tc.std > 0)
@@ -216,6 +225,8 @@ def test_impulseest_bad_input():
         subid.impulseest(data, 10, kernel="gauss")
     with pytest.raises(DataError, match="IOData"):
         subid.impulseest(np.ones((60, 2)), 10)
+    with pytest.raises(NotExcitingError, match="does not excite"):
+        subid.impulseest(subid.IOData(np.ones(60), data.y), 10)
 
 
 def test_step_and_impulse_discrete_and_continuous():

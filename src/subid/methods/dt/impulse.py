@@ -51,7 +51,7 @@ import scipy.optimize
 
 from subid._validation import check_choice, check_int
 from subid.data import IOData
-from subid.errors import DataError, TooFewSamplesError
+from subid.errors import DataError, NotExcitingError, TooFewSamplesError
 from subid.model.statespace import StateSpace
 
 __all__ = ["impulseest", "ImpulseEstimate", "kernel_matrix"]
@@ -282,6 +282,8 @@ def impulseest(data, n, *, kernel="tc"):
     TooFewSamplesError
         Fewer than ``n nu + 10`` usable rows (the noise variance is estimated
         from the least-squares fit).
+    NotExcitingError
+        The input does not excite all ``n`` lags (rank-deficient regressor).
     OptionError
         Unknown kernel.
 
@@ -321,7 +323,7 @@ def impulseest(data, n, *, kernel="tc"):
     R1 = R[:m, :m]
     d = np.abs(np.diag(R1))
     if d.min() <= 1e-10 * d.max():
-        raise DataError("impulseest: the input does not excite all "
+        raise NotExcitingError("impulseest: the input does not excite all "
                         f"{n} lags (rank-deficient regressor); use fewer coefficients or a "
                         "richer input")
     coef = np.empty((m, ny))
