@@ -354,8 +354,9 @@ def freqresp_bounds(model, w, level=0.95, *, method="delta", n_samples=1000, see
                         np.broadcast_to(C.T.astype(complex), (w.size, n, C.shape[0])))
     Y = Y.transpose(0, 2, 1)                               # C (sI - A)^-1
     G0 = C @ X + np.asarray(model.D)                       # without input delays
-    dG = (np.einsum("jin,knm->kjim", dC, X) + np.einsum("kin,jnp,kpm->kjim", Y, dA, X)
-          + np.einsum("kin,jnm->kjim", Y, dB) + dD[None])
+    dG = (np.einsum("jin,knm->kjim", dC, X, optimize=True)
+          + np.einsum("kin,jnp,kpm->kjim", Y, dA, X, optimize=True)
+          + np.einsum("kin,jnm->kjim", Y, dB, optimize=True) + dD[None])
     with np.errstate(divide="ignore", invalid="ignore"):
         dmag = np.real(np.conj(G0)[:, None] * dG) / np.maximum(np.abs(G0), 1e-300)[:, None]
     std = np.sqrt(np.sum(dmag ** 2, axis=1))
