@@ -20,6 +20,7 @@ __all__ = [
     "CheckpointError",
     "UnstableModelWarning",
     "NoiseModelWarning",
+    "ResolutionWarning",
     "FileWriteError",
     "ResourceLimitError",
     "NotConvergedWarning",
@@ -175,3 +176,9 @@ class NotConvergedWarning(UserWarning):
 class DelayWarning(UserWarning):
     """Input delays counted in samples (``info['input_delay']``) are dropped by an
     operation that changes the sampling; :func:`subid.absorb_delay` keeps them as states."""
+
+
+class ResolutionWarning(UserWarning):
+    """A spectral estimate (:func:`subid.spa`) cannot resolve the response at some
+    frequencies with its lag window: the estimated noise spectrum is not positive
+    there. Use a larger window."""

@@ -40,6 +40,7 @@ from collections.abc import Mapping
 import numpy as np
 from scipy import linalg
 
+import subid.model._responses as _responses
 import subid.model._simulate as _simulate
 from subid._validation import (
     as_signal,
@@ -904,6 +905,65 @@ class StateSpace:
         where = "s = j w" if self.is_continuous else "z = exp(j w dt)"
         raise ModelError(f"the frequency w={float(w[i])!r} rad/s falls on the pole {poles[j]:.6g} "
                          f"({where}): the frequency response is infinite there")
+
+    def step(self, t=None):
+        """Step response (MATLAB ``step``): every input in turn held at 1 from
+        ``t = 0``, zero initial state.
+
+        Parameters
+        ----------
+        t : float or array_like, optional
+            Final time, or the time stamps (from 0; discrete time: ``0, dt,
+            2 dt, ...``). Default: about the 0.1 % settling time of the
+            slowest mode (:mod:`subid.model._responses`).
+
+        Returns
+        -------
+        t : ndarray, shape (N,)
+            Time stamps.
+        y : ndarray, shape (N, n_outputs, n_inputs)
+            ``y[k, i, j]``: output ``i`` at ``t[k]`` for a unit step on input ``j``.
+
+        Raises
+        ------
+        DataError
+            ``t`` is not a positive final time or valid time stamps.
+
+        Examples
+        --------
+        >>> from subid.model.statespace import StateSpace
+        >>> t, y = StateSpace([[0.5]], [[1.0]], [[1.0]], 0, dt=1.0).step(4.0)
+        >>> y[:, 0, 0].tolist()
+        [0.0, 1.0, 1.5, 1.75, 1.875]
+        """
+        return _responses.step_response(self, t)
+
+    def impulse(self, t=None):
+        """Impulse response (MATLAB ``impulse``, without its ``1/dt`` scaling in
+        discrete time).
+
+        Discrete time: the response to the unit pulse ``u_j[0] = 1`` (the
+        Markov parameters, :meth:`markov`). Continuous time: ``C exp(A t) B``
+        (the Dirac part ``D delta(t)`` is not drawn).
+
+        Parameters
+        ----------
+        t : float or array_like, optional
+            Final time or time stamps, as for :meth:`step`.
+
+        Returns
+        -------
+        t : ndarray, shape (N,)
+            Time stamps.
+        y : ndarray, shape (N, n_outputs, n_inputs)
+            ``y[k, i, j]``: output ``i`` at ``t[k]`` for an impulse on input ``j``.
+
+        Raises
+        ------
+        DataError
+            ``t`` is not a positive final time or valid time stamps.
+        """
+        return _responses.impulse_response(self, t)
 
     # -- conversions -----------------------------------------------------
     def to_discrete(self, dt, method="zoh") -> "StateSpace":
