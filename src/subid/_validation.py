@@ -473,3 +473,41 @@ def legacy_arguments(positional=(), renamed=None):
         wrapper.legacy_renamed = renamed
         return wrapper
     return decorate
+
+
+def checked_call(fn):
+    """Decorator of a public function (or a class's ``__init__``): a call that does
+    not fit its signature raises :class:`OptionError` naming the options it
+    takes, instead of Python's ``TypeError``.
+
+    Only the binding of the call is concerned: the ``TypeError`` is converted
+    when it was raised by the call itself (its traceback has no frame inside
+    ``fn``), never when ``fn`` raised it. An unknown keyword gets the closest
+    option names as a suggestion (``horizn`` -> ``horizon``).
+    """
+    import difflib
+    import functools
+    import inspect
+
+    parameters = inspect.signature(fn).parameters
+    options = [p.name for p in parameters.values()
+               if p.kind in (p.KEYWORD_ONLY, p.POSITIONAL_OR_KEYWORD) and p.name != "self"]
+    name = fn.__qualname__.replace(".__init__", "")
+
+    @functools.wraps(fn)
+    def wrapper(*args, **kwargs):
+        try:
+            return fn(*args, **kwargs)
+        except TypeError as exc:
+            tb = exc.__traceback__
+            if tb is None or tb.tb_next is not None:     # raised inside fn: not the call
+                raise
+            unknown = [k for k in kwargs if k not in parameters]
+            if unknown:
+                close = difflib.get_close_matches(unknown[0], options, n=1)
+                hint = f" (did you mean {close[0]!r}?)" if close else ""
+                raise OptionError(f"{name}() has no option {unknown[0]!r}{hint}; its options "
+                                  f"are {', '.join(options)}"[:600]) from None
+            raise OptionError(f"{name}(): {exc}; its arguments are "
+                              f"{', '.join(options)}"[:600]) from None
+    return wrapper
