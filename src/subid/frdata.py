@@ -177,8 +177,8 @@ class FRData:
         ``sum |weights * (G - G_hat)|**2`` and :func:`subid.fit_percent`
         weights its norms with them.
     std : array_like, shape (n_freq, ny, nu), optional
-        Non-negative standard deviation of each response value (as a spectral
-        estimate gives it). Without ``weights``, :func:`subid.fd_subspace` and
+        Non-negative standard deviation of each response value (as
+        :func:`subid.spa` returns it). Without ``weights``, :func:`subid.fd_subspace` and
         :func:`subid.pem` weight by it (``1 / std``); ``fit_percent`` does not.
     coherence : array_like, shape (n_freq, ny), optional
         Squared multiple coherence of each output with all inputs, in [0, 1].

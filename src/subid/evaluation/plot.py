@@ -8,7 +8,8 @@ decides (``fig.savefig(...)``, or display in a notebook). Without a display
 =====================================  ==========================================
 :func:`data_overview`                  inputs and outputs against time
 :func:`compare`                        measured against simulated outputs, fit %
-:func:`bode`                           magnitude and phase, rad/s or Hz
+:func:`bode`                           magnitude and phase, bands, measured data
+:func:`step`                           step responses (with confidence bands)
 :func:`poles`                          pole map with unit circle / imaginary axis
 :func:`residuals`                      residual whiteness and input correlation
 :func:`convergence`                    poles and parameters of an online run
@@ -39,7 +40,7 @@ import numpy as np
 
 from subid.errors import DataError, ModelError
 
-__all__ = ["poles", "error_histograms", "bode", "compare", "residuals",
+__all__ = ["poles", "error_histograms", "bode", "step", "compare", "residuals",
            "residual_correlations", "convergence", "data_overview", "frequency_grid",
            "simulated_output", "order_selection", "STYLE", "METHOD_COLORS"]
 
@@ -441,7 +442,7 @@ def frequency_grid(models, n_points: int = 400) -> np.ndarray:
 
 @_styled
 def bode(model_or_models=None, w=None, *, data=None, hz=False, labels=None, phase=True,
-         title=None):
+         title=None, confidence=None):
     """Bode diagram: magnitude (dB) and phase (degrees) of every input/output pair.
 
     Parameters
@@ -464,6 +465,10 @@ def bode(model_or_models=None, w=None, *, data=None, hz=False, labels=None, phas
     phase : bool
         Draw the phase panels.
     title : str, optional
+    confidence : float, optional
+        Draw the band of this level (e.g. 0.95) around the magnitude of every
+        model that has a parameter covariance (:func:`subid.freqresp_bounds`,
+        :func:`subid.pem`); a ``ModelError`` when none has one.
 
     Returns
     -------
@@ -498,6 +503,8 @@ def bode(model_or_models=None, w=None, *, data=None, hz=False, labels=None, phas
                         f"{data.n_outputs} outputs but the models have {nu} and {ny}")
     if nu == 0:
         raise ModelError("the model has no inputs: there is no frequency response to draw")
+    if confidence is not None:
+        _require_covariance(groups)
     if w is None:
         w = frequency_grid(groups) if data is None else _data_grid(data)
     else:
@@ -527,10 +534,19 @@ def bode(model_or_models=None, w=None, *, data=None, hz=False, labels=None, phas
         ph = np.degrees(np.unwrap(np.angle(G), axis=0))
         if reference is None:
             reference = (wk, ph)
+        band = None
+        if confidence is not None and _has_covariance(m):
+            from subid.evaluation.uncertainty import freqresp_bounds
+            band = freqresp_bounds(m, wk, confidence)
         for i in range(ny):
             for j in range(nu):
                 r = 2 * i if phase else i
                 axes[r, j].semilogx(wk * x_scale, mag[:, i, j], label=shown[k], **style)
+                if band is not None:
+                    lo = np.maximum(band.lower[:, i, j], 1e-3 * band.value[:, i, j])
+                    axes[r, j].fill_between(wk * x_scale, 20 * np.log10(lo),
+                                            20 * np.log10(band.upper[:, i, j]),
+                                            color=colors[k], alpha=0.2, lw=0)
                 if phase:
                     axes[r + 1, j].semilogx(wk * x_scale, ph[:, i, j], **style)
     if data is not None:
@@ -605,6 +621,85 @@ def _bode_data(axes, data, x_scale, phase, reference=None):
                 axes[r, j].fill_between(w, lo, hi, color="0.8", lw=0, zorder=0)
             if phase:
                 axes[r + 1, j].semilogx(w, ph[:, i, j], ".", color="0.35", ms=3, zorder=1)
+
+
+def _has_covariance(model) -> bool:
+    return isinstance(model.info.get("parameter_covariance"), dict)
+
+
+def _require_covariance(groups) -> None:
+    if not any(_has_covariance(m) for m in groups.values()):
+        raise ModelError("confidence bands need a model with a parameter covariance; none of "
+                         f"{list(groups)} has one: refine a model with subid.pem(data, model)")
+
+
+@_styled
+def step(model_or_models, t=None, *, labels=None, confidence=None, title=None):
+    """Step responses of every input/output pair (MATLAB ``step``).
+
+    Parameters
+    ----------
+    model_or_models : StateSpace, list of StateSpace or dict label -> StateSpace
+        Models of the same shape (:meth:`StateSpace.step`).
+    t : float or array_like, optional
+        Final time or time stamps (default: the slowest model's settling time).
+    labels : list of str, optional
+        Legend labels.
+    confidence : float, optional
+        Draw the band of this level (e.g. 0.95) around the response of every
+        model that has a parameter covariance (:func:`subid.step_bounds`); a
+        ``ModelError`` when none has one.
+    title : str, optional
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        One panel per output (rows) and input (columns).
+    """
+    plt = _pyplot()
+    groups = _model_groups(model_or_models, labels)
+    first = next(iter(groups.values()))
+    ny, nu = first.n_outputs, first.n_inputs
+    if nu == 0:
+        raise ModelError("the model has no inputs: there is no step response to draw")
+    if any((m.n_outputs, m.n_inputs) != (ny, nu) for m in groups.values()):
+        raise ModelError("step: the models differ in their numbers of inputs and outputs")
+    if confidence is not None:
+        _require_covariance(groups)
+    if t is None:
+        t = max(float(m.step()[0][-1]) for m in groups.values())
+    colors = colors_for(groups.items())
+    room = _legend_room(list(groups))
+    fig, axes = plt.subplots(ny, nu, figsize=(min(3.8 * nu + 1.2, 16) + room, 2.2 * ny + 0.8),
+                             sharex=True, squeeze=False)
+    for k, (label, m) in enumerate(groups.items()):
+        if confidence is not None and _has_covariance(m):
+            from subid.evaluation.uncertainty import step_bounds
+            band = step_bounds(m, t, confidence)
+            tk, y = band.x, band.value
+        else:
+            band = None
+            tk, y = m.step(t)
+        for i in range(ny):
+            for j in range(nu):
+                draw = axes[i, j].step if m.dt > 0 else axes[i, j].plot
+                kwargs = {"where": "post"} if m.dt > 0 else {}
+                draw(tk, y[:, i, j], color=colors[k], lw=1.2, label=label, **kwargs)
+                if band is not None:
+                    axes[i, j].fill_between(tk, band.lower[:, i, j], band.upper[:, i, j],
+                                            color=colors[k], alpha=0.2, lw=0,
+                                            step="post" if m.dt > 0 else None)
+    for i in range(ny):
+        for j in range(nu):
+            axes[i, j].set_title(f"{first.input_names[j]} → {first.output_names[i]}")
+            axes[i, j].grid(True, lw=0.3)
+    for j in range(nu):
+        axes[-1, j].set_xlabel("time")
+    _legend_beside(axes[0, -1])
+    if title:
+        fig.suptitle(title)
+    _layout(fig, axes, hgap=0.5, wgap=0.85, right=room + 0.1)
+    return fig
 
 
 # ---------------------------------------------------------------------------
