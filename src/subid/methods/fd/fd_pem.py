@@ -247,7 +247,9 @@ def fd_pem(data, model, *, max_iterations=100, tolerance=1e-8, rounds=3, feedthr
         ('frequency response'), ``weighting`` (which weights), ``start_cost``,
         ``final_cost`` (the weighted criterion),
         ``cost_history``, ``stop_reason``, ``n_evaluations``,
-        ``parametrisation`` and ``frequency_scale``.
+        ``parametrisation``, ``frequency_scale`` and, in discrete time,
+        ``parameter_covariance`` (the asymptotic covariance that
+        :func:`subid.parameter_covariance` and the confidence bounds read).
 
     Raises
     ------
@@ -328,5 +330,44 @@ def fd_pem(data, model, *, max_iterations=100, tolerance=1e-8, rounds=3, feedthr
                           info=info, hold=model.hold)
     A, B, C, D = cur
     A, B, C = Tinv @ A @ T * alpha, Tinv @ B * s, C @ T * s
+    if not continuous:
+        _attach_covariance(info, crit, A, B, C, D)
     return StateSpace(A, B, C, D, model.dt, input_names=model.input_names,
                       output_names=model.output_names, info=info, hold=model.hold)
+
+
+def _attach_covariance(info, crit: "_Criterion", A, B, C, D) -> None:
+    """``info['parameter_covariance']`` of a discrete-time estimate, in the format of
+    :func:`subid.parameter_covariance`: the asymptotic covariance of weighted least
+    squares, ``σ² (J^T J)^-1`` in the local coordinates of the estimate (``J`` the
+    Jacobian of the weighted residuals, real and imaginary parts; ``σ²`` the
+    residual variance ``r^T r / (2 M p m - d)``), mapped to θ = (A, B, C[, D])
+    (Pintelon & Schoukens 2012, Sec. 9.4). From QR of the column-scaled Jacobian;
+    a rank-deficient one (a non-minimal model) gives a note instead."""
+    basis = _tangent_complement(A, B, C, crit.with_d)
+    J = crit.jacobian(A, B, C) @ basis
+    r = crit.residual(A, B, C, D)
+    dof = r.size - basis.shape[1]
+    scale = np.linalg.norm(J, axis=0)
+    if dof <= 0 or not (np.isfinite(scale).all() and scale.min() > 0):
+        info["parameter_covariance_note"] = "no parameter covariance: too few frequencies"
+        return
+    R = np.linalg.qr(J / scale, mode="r")
+    diag = np.abs(np.diag(R))
+    if diag.min() <= 1e-9 * diag.max():
+        info["parameter_covariance_note"] = (
+            "no parameter covariance: the Jacobian at the estimate is rank deficient "
+            "(a non-minimal model or frequencies that do not excite it)")
+        return
+    sigma = math.sqrt(float(r @ r) / dof)
+    inv = scipy.linalg.solve_triangular(R, np.eye(R.shape[0]), check_finite=False)
+    info["parameter_covariance"] = {
+        "parameters": crit.pack(A, B, C, D),
+        "factor": basis @ (inv / scale[:, None]) * sigma,
+        "with_feedthrough": crit.with_d,
+        "with_gain": False,
+        "noise_cov": None,
+        "n_frequencies": crit.M,
+        "method": "asymptotic covariance of weighted least squares on the frequency "
+                  "response, sigma^2 (J^T J)^-1 in data-driven local coordinates",
+    }
