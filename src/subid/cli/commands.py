@@ -807,8 +807,9 @@ def _identify_frequency(data, dt, delimiter, order, horizon, validate, options, 
                  f"poles       {_fmt_poles(result['poles'])}",
                  f"stable      {'yes' if result['stable'] else 'NO'}"]
         if model.info.get("refined_by") == "pem":
-            lines.append(f"refined     pem (frequency response): cost "
-                         f"{model.info['start_cost']:.4g} -> {model.info['final_cost']:.4g}")
+            lines.append(f"refined     pem (frequency response, weights: "
+                         f"{model.info['weighting']}): cost {model.info['start_cost']:.4g} "
+                         f"-> {model.info['final_cost']:.4g}")
         lines += [f"time        {seconds:.2f} s", f"wrote       {', '.join(files)}"]
         click.echo("\n".join(lines))
     return 0

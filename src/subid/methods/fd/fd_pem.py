@@ -209,12 +209,12 @@ def _criterion_weights(data: FRData):
         return data.fit_weights(), "the data's weights"
     if data.std is not None:
         std = np.maximum(data.std, 1e-12 * max(float(data.std.max()), 1e-300))
-        return 1.0 / std, "1 / std of the data"
+        return 1.0 / std, "1 / std"
     alpha = fq.frequency_scale(data.w) if data.dt == 0 else None
     var, record = noise_variance(data, alpha, MAX_ORDER)
     if record["source"].startswith("constant"):
-        return np.ones(data.response.shape), "none (" + record["source"] + ")"
-    return 1.0 / np.sqrt(var), "1 / the noise level " + record["source"]
+        return np.ones(data.response.shape), "none"
+    return 1.0 / np.sqrt(var), "1 / estimated noise level"
 
 
 def fd_pem(data, model, *, max_iterations=100, tolerance=1e-8, rounds=3, feedthrough=None):
