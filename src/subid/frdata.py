@@ -172,12 +172,14 @@ class FRData:
         Sampling period; 0 (the default) means continuous time.
     weights : array_like, optional
         Positive weights of the fit, shape (n_freq,) (per frequency) or
-        (n_freq, ny, nu) (per frequency and channel pair). Identification
-        minimises ``sum |weights * (G - G_hat)|**2``.
+        (n_freq, ny, nu) (per frequency and channel pair), read as inverse
+        standard deviations of the noise. :func:`subid.pem` minimises
+        ``sum |weights * (G - G_hat)|**2`` and :func:`subid.fit_percent`
+        weights its norms with them.
     std : array_like, shape (n_freq, ny, nu), optional
         Non-negative standard deviation of each response value (as
-        :func:`subid.spa` returns it). Not used as a weight unless passed as
-        ``weights``.
+        :func:`subid.spa` returns it). Without ``weights``, :func:`subid.fd_subspace` and
+        :func:`subid.pem` weight by it (``1 / std``); ``fit_percent`` does not.
     coherence : array_like, shape (n_freq, ny), optional
         Squared multiple coherence of each output with all inputs, in [0, 1].
     input_names, output_names : sequence of str, optional

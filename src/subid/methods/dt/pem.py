@@ -250,11 +250,14 @@ def pem(data, model, *, focus="prediction", max_iterations=100, tolerance=1e-8, 
 
     Parameters
     ----------
-    data : IOData
+    data : IOData or FRData
         Uniformly sampled estimation record (the same data the start was
         identified on, usually). A record of several experiments
         (:func:`subid.merge`) is predicted experiment by experiment, each from
         its own initial state (``info['x0']`` one row per experiment).
+        Frequency-response data (:class:`subid.FRData`) are fitted by weighted
+        least squares on the response instead
+        (:func:`subid.methods.fd.fd_pem.fd_pem`; ``focus`` does not apply).
     model : StateSpace
         Starting model, e.g. from :func:`subid.n4sid`. Discrete time with the
         data's ``dt``; a continuous-time model is refined through its
@@ -308,6 +311,11 @@ def pem(data, model, *, focus="prediction", max_iterations=100, tolerance=1e-8, 
     >>> refined.info["final_cost"] <= refined.info["start_cost"]
     True
     """
+    from subid.frdata import FRData
+    if isinstance(data, FRData):     # frequency-response data: subid.methods.fd.fd_pem
+        from subid.methods.fd.fd_pem import fd_pem
+        return fd_pem(data, model, max_iterations=max_iterations, tolerance=tolerance,
+                      rounds=rounds, feedthrough=feedthrough)
     _check_inputs(data, model, focus)
     if isinstance(max_iterations, bool) or not isinstance(max_iterations, int) \
             or max_iterations < 1:
