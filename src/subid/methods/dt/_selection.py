@@ -183,6 +183,18 @@ def score_horizon(parts, orders, horizon, *, prepare_fold, builds):
     return per_fold, repaired
 
 
+def select_candidate(scores):
+    """The selection rule: the chosen key of ``scores`` (key -> fit %, higher is better).
+
+    The smallest key (keys sort by complexity: order first) whose misfit
+    ``100 - fit`` is within :data:`RELATIVE_TOLERANCE` of the best candidate's
+    misfit, plus :data:`ABSOLUTE_TOLERANCE` points. Shared by every method that
+    chooses its order by cross-validation (time and frequency domain).
+    """
+    limit = (100.0 - max(scores.values())) * (1.0 + RELATIVE_TOLERANCE) + ABSOLUTE_TOLERANCE
+    return min(key for key, value in scores.items() if 100.0 - value <= limit)
+
+
 def cross_validate(data, fixed, candidates, horizon, *, prepare_fold, builds):
     """Choose ``(order, horizon)`` by contiguous cross-validation (:func:`folds`).
 
@@ -246,9 +258,7 @@ def cross_validate(data, fixed, candidates, horizon, *, prepare_fold, builds):
                          f"({', '.join(map(str, horizons))}) and {data.n_outputs} output"
                          f"{'s' if data.n_outputs != 1 else ''}; give horizon >= {need} "
                          "(with enough samples) or a lower order")
-    limit = (100.0 - max(scores.values())) * (1.0 + RELATIVE_TOLERANCE) + ABSOLUTE_TOLERANCE
-    order, chosen_h, chosen_v = min(key for key, value in scores.items()
-                                    if 100.0 - value <= limit)
+    order, chosen_h, chosen_v = select_candidate(scores)
 
     def entry(n, f, v):
         out = {"order": n, "horizon": f, "score": scores[(n, f, v)]}

@@ -27,6 +27,7 @@ from subid.errors import (
     UnstableModelWarning,
 )
 from subid.methods._info import collect_warnings, model_info
+from subid.methods.dt._checks import check_data
 from subid.methods.dt._regression import fit_b_d_projection, fit_b_d_x0
 from subid.methods.dt._selection import SELECTION_RULES, cross_validate, default_gap_horizon
 from subid.model.statespace import StateSpace
@@ -39,40 +40,6 @@ RANK_TOL = 1e-10
 # Input-Hankel condition number above which identification warns.
 CONDITION_WARN = 1e7
 DEFAULT_HORIZON_UNKNOWN_ORDER = 10
-
-
-#: Largest magnitude of a channel the methods accept: its square must not overflow.
-HUGE_VALUE = 1e150
-
-
-def check_data(data, method: str) -> IOData:
-    """The record a discrete-time method may use, or a clear error."""
-    if not isinstance(data, IOData):
-        raise DataError(f"{method} expects an IOData record, got {type(data).__name__}; "
-                        "wrap arrays as subid.IOData(u, y, dt=...)")
-    if not data.is_uniform:
-        raise DataError(f"{method} identifies a discrete-time model and needs uniformly "
-                        "sampled data; these time stamps are non-uniform "
-                        "(use a continuous-time method for them)")
-    for name, signal, names in (("input", data.u, data.input_names),
-                                ("output", data.y, data.output_names)):
-        if not signal.size or max(abs(float(signal.max())), abs(float(signal.min()))) \
-                <= HUGE_VALUE:       # whole-array reductions: cheap on long records
-            continue
-        peak = np.abs(signal).max(axis=0)
-        huge = np.flatnonzero(peak > HUGE_VALUE)
-        if huge.size:
-            k = int(huge[0])
-            raise DataError(f"{name} {names[k]} reaches {peak[k]:.3g}: squares and products "
-                            "of such values overflow double precision in the identification; "
-                            "express the channel in other units (divide it by a constant) "
-                            "and scale the model back")
-    flat = [k for k, column in enumerate(data.y.T) if column.max() == column.min()]
-    if flat:
-        names = ", ".join(data.output_names[k] for k in flat)
-        raise DataError(f"output {names} is constant over the whole record: it carries no "
-                        "information about the dynamics; drop that channel")
-    return data
 
 
 DEFAULT_MAX_ORDER = 10
@@ -304,6 +271,8 @@ def estimate_b_d(A, C_n, gamma, L11, L_yu, problem: "Problem", *, bd_method: str
                              "with a statistic only, use bd_method='projection' (or 'auto')")
         bd_method = "projection"
     diag = {}
+    if estimate_x0 and isinstance(data, IOData) and data.n_experiments > 1:
+        check_experiment_lengths(data, A.shape[0])
     if bd_method in ("auto", "simulation"):
         with np.errstate(over="ignore", invalid="ignore"):
             if second_pass is not None:
@@ -594,6 +563,26 @@ def stable_choice(A_q, Q, n_outputs: int, fit, *, stability: str, data, method: 
     return A_s, fitted_s, record
 
 
+def check_experiment_lengths(data, order: int) -> None:
+    """:class:`TooFewSamplesError` naming every experiment of ``data`` too short to
+    determine its own initial state (``n_samples * n_outputs < order``
+    equations for ``order`` unknowns), instead of a regression that would be
+    rank deficient and send B, D to another route without x0."""
+    short = [(name, b - a) for name, (a, b) in zip(data.experiment_names,
+                                                     data.experiment_ranges)
+             if (b - a) * data.n_outputs < order]
+    if short:
+        need = -(-order // data.n_outputs)
+        listed = ", ".join(f"{name!r} ({length} sample{'s' if length != 1 else ''})"
+                           for name, length in short[:5])
+        more = f" and {len(short) - 5} more" if len(short) > 5 else ""
+        raise TooFewSamplesError(
+            f"experiment{'s' if len(short) > 1 else ''} {listed}{more} of the merged record "
+            f"{'are' if len(short) > 1 else 'is'} too short to determine an initial state of "
+            f"order {order}: each experiment needs at least {need} samples. Drop "
+            f"{'them' if len(short) > 1 else 'it'} from the merge, or pass estimate_x0=False")
+
+
 def experiment_starts(data):
     """The first sample of every experiment of a record of several (None otherwise)."""
     if isinstance(data, IOData) and data.n_experiments > 1:
@@ -609,6 +598,7 @@ def initial_state(A, B, C, D, data):
         second_pass = getattr(data, "output_regression", None)   # subid.methods.dt._bd_pass
         return None if second_pass is None else second_pass.initial_state(A, B, C, D)
     if data.n_experiments > 1:
+        check_experiment_lengths(data, A.shape[0])
         rows = [_initial_state_one(A, B, C, D, e, column_std(data.y)) for e in data.experiments]
         return None if any(r is None for r in rows) else np.stack(rows)
     return _initial_state_one(A, B, C, D, data, column_std(data.y))
