@@ -41,6 +41,7 @@ from subid.errors import (
 )
 from subid.methods._info import collect_warnings, model_info
 from subid.methods.dt import _subspace
+from subid.methods.dt._checks import check_data
 from subid.methods.dt._selection import (
     ABSOLUTE_TOLERANCE,
     MAX_ORDER,
@@ -66,7 +67,7 @@ RANK_TOL = 1e-10
 
 def check_polynomial_data(data, method: str) -> IOData:
     """The record a polynomial method may use (IOData, uniform, at least one input)."""
-    data = _subspace.check_data(data, method)
+    data = check_data(data, method)
     if data.n_inputs == 0:
         raise DataError(f"{method} needs a record with at least one input")
     return data
