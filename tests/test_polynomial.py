@@ -156,13 +156,18 @@ def test_bad_options_and_a_non_exciting_input():
 # ---------------------------------------------------------------------------
 # Monte Carlo acceptance (small in the default tier, the issue's sizes as long)
 # ---------------------------------------------------------------------------
-def _oe_against_arx(runs):
-    e_arx, e_oe = [], []
+def _against_arx(kind, fit, runs, first_seed):
+    """Median Markov errors of ``arx(data, (2, 2, 1))`` and of ``fit(data)`` over runs."""
+    e_arx, e_fit = [], []
     for r in range(runs):
-        data, _ = _record("oe", 2000, 100 + r)
+        data, _ = _record(kind, 2000, first_seed + r)
         e_arx.append(subid.markov_error(subid.arx(data, (2, 2, 1)), _truth()))
-        e_oe.append(subid.markov_error(subid.oe(data, (2, 2, 1)), _truth()))
-    return np.median(e_arx), np.median(e_oe)
+        e_fit.append(subid.markov_error(fit(data), _truth()))
+    return np.median(e_arx), np.median(e_fit)
+
+
+def _oe_against_arx(runs):
+    return _against_arx("oe", lambda d: subid.oe(d, (2, 2, 1)), runs, 100)
 
 
 @pytest.mark.slow
@@ -179,12 +184,7 @@ def test_oe_beats_biased_arx_on_output_error_data():
 
 
 def _bj_against_arx(runs):
-    e_arx, e_bj = [], []
-    for r in range(runs):
-        data, _ = _record("bj", 2000, 200 + r)
-        e_arx.append(subid.markov_error(subid.arx(data, (2, 2, 1)), _truth()))
-        e_bj.append(subid.markov_error(subid.bj(data, (2, 2, 1, 2, 1)), _truth()))
-    return np.median(e_arx), np.median(e_bj)
+    return _against_arx("bj", lambda d: subid.bj(d, (2, 2, 1, 2, 1)), runs, 200)
 
 
 @pytest.mark.slow
