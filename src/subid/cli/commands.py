@@ -600,7 +600,8 @@ def cli(ctx, quiet, verbose, debug):
               show_default=True, help="Identification method (see 'subid methods').")
 @click.option("--order", default="auto", show_default=True, metavar="N|auto|A:B",
               help="Model order: an integer, 'auto' (largest gap among 1..10), a range "
-                   "'2:8' or a list '2,4,6' of candidates.")
+                   "'2:8' or a list '2,4,6' of candidates; for arx, armax, oe, bj a list is "
+                   "MATLAB's structure, e.g. '2,2,1' = (na, nb, nk) for arx.")
 @click.option("--horizon", type=click.IntRange(min=2), default=None,
               help="Block rows of the data Hankel matrix (default: chosen by the method).")
 @click.option("--validate", type=click.FloatRange(0, 1, max_open=True), default=0.3,

@@ -36,6 +36,8 @@ import numpy as np
 
 from subid.errors import ModelError, SubidError
 from subid.io._files import atomic_write
+from subid.model.polynomial import describe as describe_polynomials
+from subid.model.polynomial import polynomials_of
 
 __all__ = ["identification_report", "index_page", "comparison_page", "failure_page", "evaluate",
            "figure_html", "write_html", "SECTIONS"]
@@ -242,6 +244,7 @@ def _pole_table(model, hz: bool) -> str:
 
 
 def _info_table(info: dict) -> str:
+    info = {k: v for k, v in info.items() if k != "polynomials"}   # shown as polynomials
     rows = []
     for key in sorted(info):
         value = info[key]
@@ -611,8 +614,13 @@ def identification_report(models, estimation, validation=None, *, title="subid r
         states = [f"x{k + 1}" for k in range(m.order)]
         block = [f"<h3>{_e(label)}</h3>",
                  f"<p>{'continuous time (dt = 0)' if m.dt == 0 else f'discrete time, dt = {_fmt(m.dt)}'}"
-                 f", order {m.order}</p>",
-                 "<p>A</p>", _matrix_table(m.A, states, states),
+                 f", order {m.order}</p>"]
+        poly = polynomials_of(m)
+        if poly is not None:       # a polynomial model: its polynomials, then the realisation
+            block += ["<p>polynomials (in q<sup>-1</sup>; the state-space matrices below "
+                      "are their realisation)</p>",
+                      f"<pre>{_e(chr(10).join(describe_polynomials(poly, m.input_names, m.output_names)))}</pre>"]
+        block += ["<p>A</p>", _matrix_table(m.A, states, states),
                  "<p>B</p>", _matrix_table(m.B, states, m.input_names),
                  "<p>C</p>", _matrix_table(m.C, m.output_names, states),
                  "<p>D</p>", _matrix_table(m.D, m.output_names, m.input_names)]

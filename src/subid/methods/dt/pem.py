@@ -189,58 +189,133 @@ def _round(model_mats, x0, data, focus, W, layout, max_nfev, tolerance, history,
     """One least-squares run in local coordinates at ``model_mats``; ``x0`` has one
     row per experiment (each experiment is predicted from its own initial state)."""
     A0, B0, C0, D0, K0 = model_mats
-    u, y = data.u, data.y
-    N, ny = y.shape
-    ranges = data.experiment_ranges
-    n_exp, n = x0.shape
-    v = np.hstack([u, y]) if focus == "prediction" else u
+    v = np.hstack([data.u, data.y]) if focus == "prediction" else data.u
     theta0 = layout.pack(A0, B0, C0, D0, K0)
     basis = _local_coordinates(layout, A0, B0, C0, D0, K0)
     dm = basis.shape[1]
-    scale = 1.0 / math.sqrt(N)
 
     def mats(z):
-        return layout.unpack(theta0 + basis @ z[:dm], D0)
+        return layout.unpack(theta0 + basis @ z, D0)
+
+    def predictor(z):
+        return _predictor(*mats(z), focus)
+
+    def directions(z):
+        return _directions(layout, basis, *mats(z), focus)
+
+    z, res = minimise_prediction_error(predictor, directions, dm, x0, v, data.y,
+                                       data.experiment_ranges, W, max_nfev, tolerance,
+                                       history, penalty)
+    return mats(z[:dm]), x0 + z[dm:].reshape(x0.shape), res
+
+
+def block_jacobian(mats, v, x0, dirs, blocks, dm):
+    """``(ŷ, J)`` of :func:`subid.methods.dt._pem_kernel.jacobian` for a block-diagonal
+    predictor, the kernel run on each block with its own coordinates and states.
+
+    ``mats = (Ap, Bp, C, Dp)``, ``dirs`` the direction arrays of every
+    coordinate (``dm`` model coordinates, then one per state for x0),
+    ``blocks`` the ``(states, coordinates)`` index arrays (see
+    :func:`minimise_prediction_error`). Each block's output is
+    ``C[:, s] x_s``; ``ŷ`` adds them and ``Dp v`` once.
+    """
+    Ap, Bp, C, Dp = mats
+    dAp, dBp, dC, dDp, dx0 = dirs
+    N, n = v.shape[0], Ap.shape[0]
+    ny = C.shape[0]
+    J = np.zeros((N, ny, dm + n))
+    yhat = v @ Dp.T
+    zero_dp = np.zeros_like(Dp)
+    for states, coords in blocks:
+        s = np.asarray(states, dtype=np.int64)
+        rows = np.concatenate([np.asarray(coords, dtype=np.int64), dm + s])
+        sub = [np.ascontiguousarray(a) for a in (
+            Ap[np.ix_(s, s)], Bp[s], C[:, s], zero_dp, v, x0[s],
+            dAp[np.ix_(rows, s, s)], dBp[rows][:, s], dC[rows][:, :, s], dDp[rows],
+            dx0[np.ix_(rows, s)])]
+        yb, Jb = jacobian(*sub)
+        yhat += yb
+        J[:, :, rows] = Jb
+    return yhat, J
+
+
+def minimise_prediction_error(predictor, directions, dm, x0, v, y, ranges, W, max_nfev,
+                              tolerance, history, penalty, fit_x0=True, blocks=None):
+    """Minimise ``1/(2N) sum ||W (y - ŷ)||^2`` over ``dm`` model coordinates and the
+    initial states.
+
+    The optimiser shared by :func:`pem` and the polynomial methods
+    (:mod:`subid.methods.dt.pem_poly`). ``predictor(z)`` gives the predictor
+    ``(Ap, Bp, C, Dp)`` driven by ``v`` at the model coordinates ``z``;
+    ``directions(z)`` its derivatives ``(dAp, dBp, dC, dDp, dx0)`` along the
+    ``dm`` coordinates followed by ``n`` rows for the initial state (the
+    arrays of :func:`subid.methods.dt._pem_kernel.jacobian`). ``x0`` holds one
+    initial state per experiment (row), each experiment predicted from its
+    own (fixed at ``x0`` when ``fit_x0`` is false: then ``directions`` gives
+    the ``dm`` model rows only). A trial whose predictor is unstable or
+    overflows costs ``penalty`` per residual, more than the start, so the
+    trust region rejects it. ``blocks`` (optional) declares a block-diagonal
+    predictor: a list of ``(states, coordinates)`` index arrays such that the
+    coordinates of a block move only its own rows and columns of ``Ap``, rows
+    of ``Bp`` and columns of ``C`` (an output-error model, one block per
+    input); the sensitivities are then run block by block
+    (:func:`block_jacobian`), which gives the same Jacobian at a fraction of
+    the cost.
+
+    Returns
+    -------
+    z, result
+        The coordinates reached (``dm`` model coordinates, then the changes of
+        the initial states) and :func:`scipy.optimize.least_squares`'s result.
+    """
+    N, ny = y.shape
+    n_exp, n = x0.shape
+    scale = 1.0 / math.sqrt(N)
+    n_x0 = n_exp * n if fit_x0 else 0
+
+    def initial(z):
+        return x0 + z[dm:].reshape(n_exp, n) if fit_x0 else x0
 
     def fun(z):
-        A, B, C, D, K = mats(z)
-        Ap, Bp, Cp, Dp = _predictor(A, B, C, D, K, focus)
-        if not np.isfinite(Ap).all() or _radius(Ap) >= STABILITY_LIMIT:
+        Ap, Bp, Cp, Dp = predictor(z[:dm])
+        if not np.isfinite(Ap).all() or (n and _radius(Ap) >= STABILITY_LIMIT):
             return np.full(N * ny, penalty)
         with np.errstate(all="ignore"):
-            yhat = _simulate_experiments(Ap, Bp, Cp, Dp, v, x0 + z[dm:].reshape(n_exp, n),
-                                         ranges)[0]
+            yhat = _simulate_experiments(Ap, Bp, Cp, Dp, v, initial(z), ranges)[0]
         if not np.isfinite(yhat).all():
             return np.full(N * ny, penalty)
         return (((y - yhat) @ W.T) * scale).ravel()
 
     def jac(z):
-        A, B, C, D, K = mats(z)
-        Ap, Bp, Cp, Dp = _predictor(A, B, C, D, K, focus)
-        dirs = [np.ascontiguousarray(a) for a in
-                _directions(layout, basis, A, B, C, D, K, focus)]
-        mats_c = [np.ascontiguousarray(a) for a in (Ap, Bp, Cp, Dp)]
-        x0s = x0 + z[dm:].reshape(n_exp, n)
+        mats_c = [np.ascontiguousarray(a) for a in predictor(z[:dm])]
+        dirs = [np.ascontiguousarray(a) for a in directions(z[:dm])]
+        x0s = initial(z)
+        if not fit_x0:             # the model directions only
+            dirs = [np.ascontiguousarray(a[:dm]) for a in dirs]
         yhat = np.empty((N, ny))
-        J = np.zeros((N, ny, dm + n_exp * n))
+        J = np.zeros((N, ny, dm + n_x0))
         for e, (a, b) in enumerate(ranges):     # the x0 columns of experiment e only
-            yhat[a:b], Je = jacobian(*mats_c, np.ascontiguousarray(v[a:b]),
-                                     np.ascontiguousarray(x0s[e]), *dirs)
+            ve, xe = np.ascontiguousarray(v[a:b]), np.ascontiguousarray(x0s[e])
+            if blocks is None:
+                yhat[a:b], Je = jacobian(*mats_c, ve, xe, *dirs)
+            else:
+                yhat[a:b], Je = block_jacobian(mats_c, ve, xe, dirs, blocks, dm)
             J[a:b, :, :dm] = Je[:, :, :dm]
-            J[a:b, :, dm + e * n:dm + (e + 1) * n] = Je[:, :, dm:]
+            if fit_x0:
+                J[a:b, :, dm + e * n:dm + (e + 1) * n] = Je[:, :, dm:]
         history.append(0.5 * float(np.sum((((y - yhat) @ W.T) * scale) ** 2)))
         Jw = -np.einsum("ik,tkd->tid", W, J) * scale
         if not np.isfinite(Jw).all():
             Jw = np.nan_to_num(Jw, nan=0.0, posinf=0.0, neginf=0.0)
         return Jw.reshape(N * ny, -1)
 
-    z0 = np.zeros(dm + n_exp * n)
+    z0 = np.zeros(dm + n_x0)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
         res = scipy.optimize.least_squares(fun, z0, jac=jac, method="trf", x_scale="jac",
                                            ftol=tolerance, xtol=tolerance, gtol=tolerance,
                                            max_nfev=max_nfev)
-    return mats(res.x), x0 + res.x[dm:].reshape(n_exp, n), res
+    return res.x, res
 
 
 @records_warnings
