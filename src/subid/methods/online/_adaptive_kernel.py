@@ -72,13 +72,19 @@ FST = {
     "res_ref": 5,         # best residual of (13), updated when it halves
     "t_ref": 6,           # time of the last halving
     "t_resume": 7,        # after a gap: (8) gets no weight before this time
+    "t_first": 8,         # time of the first sample (the stall rule's clock)
 }
-N_FST = 8
+N_FST = 9
 
 # Part 2 also starts when the residual of (13) is below this value and has
-# not halved during one memory length 1/α of the estimate of M (converged to
-# its noise floor); from then on Ψ accepts models within a factor
-# _STALL_FACTOR of the best residual.
+# stopped halving (converged to its noise floor): no halving during
+# min(1/α, max(t_ref - t_first, settle)) since the last one at t_ref. A
+# consistent estimate whose memory still grows (t < 1/α) has a noise floor
+# falling like t^{-1/2}: it halves at 4 t_ref, so the window of one elapsed
+# time (t_ref - t_first) detects the stall at ~2 t_ref, whatever the memory;
+# one memory length 1/α (issue 12) never fired within a record shorter than
+# 1/α. From then on Ψ accepts models within a factor _STALL_FACTOR of the
+# best residual.
 _STALL_MAX = 0.25
 _STALL_FACTOR = 2.0
 
@@ -507,7 +513,7 @@ def _shift_solve(M, n, ny, omega, Aout):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True, fastmath=_FASTMATH)
-def _refresh(n, nu, ny, omega, alpha, max_cond, gate, ode, iv, T_now, ist, fst,
+def _refresh(n, nu, ny, omega, alpha, max_cond, gate, settle, ode, iv, T_now, ist, fst,
              R, G, M, Rt, gt, theta, Am, Cm, Bm, Dm, Apsi, Cpsi, Psi, hist,
              Ld, Bd, Lt, Bt, Anew, Cz, Gz, Zz, Lz, Ct, Gt, Nz, Gn, Cf):  # pragma: no cover
     """Model refresh: solve both LS problems (the first by instrumental
@@ -554,7 +560,7 @@ def _refresh(n, nu, ny, omega, alpha, max_cond, gate, ode, iv, T_now, ist, fst,
             fst[5] = res
             fst[6] = T_now
         elif (not ist[10] and fst[5] <= _STALL_MAX
-              and (T_now - fst[6]) * alpha >= 1.0):
+              and T_now - fst[6] >= min(1.0 / alpha, max(fst[6] - fst[8], settle))):
             ist[10] = 1
         if ist[10]:
             level = max(gate, _STALL_FACTOR * fst[5])
@@ -651,7 +657,7 @@ def kernel(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, Hse
     """
     omega, alpha, beta, max_cond, trace_bound, gate = (par[0], par[1], par[2], par[3],
                                                        par[4], par[5])
-    max_gap, dcF, dcI, settle = par[6], par[7], par[8], par[9]
+    max_gap, dcF, dcI, settle, startup = par[6], par[7], par[8], par[9], par[10]
     K, ode, foh, iv = ipar[0], ipar[1] != 0, ipar[2] != 0, ipar[3] != 0
     N = U.shape[0]
     f, ny = zp.shape
@@ -734,6 +740,7 @@ def kernel(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, Hse
             for j in range(ny):
                 prev_y[j] = Y[k, j]
             fst[0] = Tm[k]
+            fst[8] = Tm[k]
             ist[0] = 1
             continue
         q = idx[k]
@@ -975,7 +982,13 @@ def kernel(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, Hse
             for jj in range(nu):
                 rho2 += ny * (U[k, jj] * U[k, jj])
             if not ode:
-                c2 = fst[4] * lamT[q]
+                # start-up schedule of β: the memory of θ grows with the age
+                # of part 2 (β_eff = max(β, startup / age), see the module notes)
+                lam = lamT[q]
+                age = Tm[k] - fst[1]
+                if startup > beta * age:
+                    lam = np.exp(-startup * h / age)
+                c2 = fst[4] * lam
                 if c2 < _RESCALE_BELOW:
                     c2 = c2 if c2 > _FORGOTTEN else 0.0
                     for a in range(dth):
@@ -1060,9 +1073,9 @@ def kernel(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, Hse
         fst[0] = Tm[k]
         ist[0] += 1
         if (ist[0] - 1) % K == 0:
-            _refresh(n, nu, ny, omega, alpha, max_cond, gate, ode, iv, Tm[k], ist, fst, R, G,
-                     M, Rt, gt, theta, Am, Cm, Bm, Dm, Apsi, Cpsi, Psi, hist, Ld, Bd, Lt, Bt,
-                     Anew, Cz, Gz, Zz, Lz, Ct, Gt, Nz, Gn, Cf)
+            _refresh(n, nu, ny, omega, alpha, max_cond, gate, settle, ode, iv, Tm[k], ist, fst,
+                     R, G, M, Rt, gt, theta, Am, Cm, Bm, Dm, Apsi, Cpsi, Psi, hist, Ld, Bd, Lt,
+                     Bt, Anew, Cz, Gz, Zz, Lz, Ct, Gt, Nz, Gn, Cf)
     return _all_finite(buf)
 
 
@@ -1124,7 +1137,7 @@ def _ref_solve_iv_weighted(C, G, Z, X, max_cond):
     return True
 
 
-def _ref_refresh(n, nu, ny, omega, alpha, max_cond, gate, ode, iv, T_now, ist, fst,
+def _ref_refresh(n, nu, ny, omega, alpha, max_cond, gate, settle, ode, iv, T_now, ist, fst,
                  R, G, M, Rt, gt, theta, Am, Cm, Bm, Dm, Apsi, Cpsi, Psi, hist, Cz, Gz, Zz):
     if not ode:
         if iv:
@@ -1157,7 +1170,8 @@ def _ref_refresh(n, nu, ny, omega, alpha, max_cond, gate, ode, iv, T_now, ist, f
     if res >= 0:
         if res < 0.5 * fst[5]:
             fst[5], fst[6] = res, T_now
-        elif not ist[10] and fst[5] <= _STALL_MAX and (T_now - fst[6]) * alpha >= 1.0:
+        elif (not ist[10] and fst[5] <= _STALL_MAX
+              and T_now - fst[6] >= min(1.0 / alpha, max(fst[6] - fst[8], settle))):
             ist[10] = 1
         if ist[10]:
             level = max(gate, _STALL_FACTOR * fst[5])
@@ -1283,8 +1297,8 @@ def reference(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, 
     the stability test eigenvalues, and the whole symmetric matrices are
     updated (the kernel updates lower triangles).
     """
-    omega, alpha, beta, max_cond, trace_bound, gate, max_gap, dcF, dcI, settle = (
-        float(v) for v in par)
+    (omega, alpha, beta, max_cond, trace_bound, gate, max_gap, dcF, dcI, settle,
+     startup) = (float(v) for v in par)
     K, ode, foh, iv = int(ipar[0]), bool(ipar[1]), bool(ipar[2]), bool(ipar[3])
     n = Am.shape[0]
     ny = zp.shape[1]
@@ -1292,7 +1306,7 @@ def reference(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, 
     for k in range(U.shape[0]):
         u, y = U[k], Y[k]
         if ist[0] == 0:
-            prev_u[:], prev_y[:], fst[0], ist[0] = u, y, Tm[k], 1
+            prev_u[:], prev_y[:], fst[0], fst[8], ist[0] = u, y, Tm[k], Tm[k], 1
             continue
         q = idx[k]
         h = steps[q]
@@ -1372,7 +1386,10 @@ def reference(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, 
             # regression (16)
             Phi = np.hstack([Psi, np.kron(u[None, :], np.eye(ny))])
             if not ode:
-                c2 = fst[4] * lamT[q]
+                lam, age = lamT[q], Tm[k] - fst[1]
+                if startup > beta * age:        # start-up schedule of β
+                    lam = np.exp(-startup * h / age)
+                c2 = fst[4] * lam
                 if c2 < _RESCALE_BELOW:
                     c2 = c2 if c2 > _FORGOTTEN else 0.0
                     Rt *= c2
@@ -1395,6 +1412,7 @@ def reference(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, 
         prev_u[:], prev_y[:], fst[0] = u, y, Tm[k]
         ist[0] += 1
         if (ist[0] - 1) % K == 0:
-            _ref_refresh(n, nu, ny, omega, alpha, max_cond, gate, ode, iv, Tm[k], ist, fst, R,
-                         G, M, Rt, gt, theta, Am, Cm, Bm, Dm, Apsi, Cpsi, Psi, hist, Cz, Gz, Zz)
+            _ref_refresh(n, nu, ny, omega, alpha, max_cond, gate, settle, ode, iv, Tm[k], ist,
+                         fst, R, G, M, Rt, gt, theta, Am, Cm, Bm, Dm, Apsi, Cpsi, Psi, hist, Cz,
+                         Gz, Zz)
     return bool(np.isfinite(buf).all())

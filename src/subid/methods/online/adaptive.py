@@ -100,7 +100,7 @@ from subid.model.statespace import StateSpace
 __all__ = ["AdaptiveIdentifier"]
 
 _OLD_KIND = "AdaptiveIdentifier"     # the kind of checkpoints before subid.<Class>
-_VERSION = 2      # 2: instrumental variables (zr, Cz, Gz)
+_VERSION = 3      # 2: instrumental variables (zr, Cz, Gz); 3: t_first, bd_startup
 # Step lengths handled in one kernel call when the time stamps are non-uniform
 # (bounds the memory of the per-step discretisation tables).
 _BLOCK_UNIQUE = 4096
@@ -120,6 +120,9 @@ _INSTRUMENT_POLE_RATIO = 0.25
 # mix in rows built from (Ã, C̃) that M itself has forgotten.
 _DEFAULT_FORGETTING = {"iv": (0.002, None), "ls": (0.4, 0.08), "ode": (0.4, 0.08)}
 _IV_BD_RATIO = 1.0
+# Start-up schedule of the (B̃, D) memory ('iv'): β_eff = max(β, κ / age), age =
+# time since part 2 started (measured in docs/seed000.md).
+_DEFAULT_BD_STARTUP = 2.0
 _NON_FINITE = ("the chunk drove the identifier to non-finite values (are the signals scaled "
                "to moderate magnitudes?); it was rejected and the identifier is unchanged")
 
@@ -331,7 +334,7 @@ class AdaptiveIdentifier(OnlineIdentifier):
     """
 
     _VERSION = _VERSION
-    _READS = (_VERSION,)
+    _READS = (2, _VERSION)
     _OLD_KINDS = (_OLD_KIND,)
 
     def __init__(self, order, n_inputs, n_outputs, horizon=None, filter_poles=-5.0,
@@ -340,7 +343,7 @@ class AdaptiveIdentifier(OnlineIdentifier):
                  bd_gate=1e-2, max_condition=1e10, initial_covariance=None,
                  bd_initial_covariance=None, ode_trace_bound=1e8, history_size=0,
                  engine="numba", input_names=None, output_names=None,
-                 instrument_poles=None, max_gap=None):
+                 instrument_poles=None, max_gap=None, bd_startup=None):
         # the settings, stored unchanged (validated below)
         self.order, self.n_inputs, self.n_outputs = order, n_inputs, n_outputs
         self.horizon, self.filter_poles = horizon, filter_poles
@@ -354,6 +357,7 @@ class AdaptiveIdentifier(OnlineIdentifier):
             engine
         self.input_names, self.output_names = input_names, output_names
         self.instrument_poles, self.max_gap = instrument_poles, max_gap
+        self.bd_startup = bd_startup
         n = check_int(order, "order")
         nu = check_int(n_inputs, "n_inputs")
         ny = check_int(n_outputs, "n_outputs")
@@ -387,6 +391,11 @@ class AdaptiveIdentifier(OnlineIdentifier):
             self._beta = _positive(bd_forgetting, "bd_forgetting")
         else:
             self._beta = self._alpha * _IV_BD_RATIO if beta0 is None else beta0
+        if bd_startup is None:
+            self._startup = _DEFAULT_BD_STARTUP if method == "iv" else 0.0
+        else:
+            self._startup = 0.0 if (bd_startup == 0 and not isinstance(bd_startup, bool)) \
+                else _positive(bd_startup, "bd_startup")
         if hold not in ("foh", "zoh"):
             raise SubidError(f"hold must be 'foh' or 'zoh', got {hold!r}")
         if method not in ("iv", "ls", "ode"):
@@ -890,7 +899,7 @@ class AdaptiveIdentifier(OnlineIdentifier):
         if cached is None:
             par = np.array([self._omega, self._alpha, self._beta, self._max_cond,
                             self._trace_bound, self._gate, self._max_gap, self._dcF,
-                            self._dcI, self._settle])
+                            self._dcI, self._settle, self._startup])
             ipar = np.array([self._refresh, self._method == "ode", self._hold == "foh",
                              self._method == "iv"], dtype=np.int64)
             cached = self._par_ipar = (par, ipar)
@@ -942,7 +951,7 @@ class AdaptiveIdentifier(OnlineIdentifier):
             "bd_initial_covariance": self._q0, "ode_trace_bound": self._trace_bound,
             "history_size": self._hist_cap, "engine": self._engine,
             "instrument_poles": [[float(p.real), float(p.imag)] for p in self._ipoles],
-            "max_gap": self._max_gap,
+            "max_gap": self._max_gap, "bd_startup": self._startup,
             "input_names": None if self._input_names is None else list(self._input_names),
             "output_names": None if self._output_names is None else list(self._output_names),
             "t_origin": self._t_origin, "k_origin": self._k_origin,
@@ -987,13 +996,20 @@ class AdaptiveIdentifier(OnlineIdentifier):
                       engine=s["engine"], input_names=s["input_names"],
                       output_names=s["output_names"],
                       instrument_poles=[complex(re, im) for re, im in s["instrument_poles"]],
-                      max_gap=s["max_gap"])
+                      max_gap=s["max_gap"],
+                      # version 2 had no start-up schedule
+                      bd_startup=s.get("bd_startup", 0.0))
+            version = s.get("_version", _VERSION)
             t_origin, k_origin = float(s["t_origin"]), int(s["k_origin"])
         except CheckpointError:
             raise
         except (KeyError, TypeError, ValueError) as exc:
             raise CheckpointError(f"checkpoint {path} has invalid settings ({exc})",
                                   path=path) from None
+        if version == 2 and "fst" in arrays and arrays["fst"].shape == (_k.N_FST - 1,):
+            # version 2 had no t_first: the stall rule's clock starts at the
+            # time of the last halving of the residual (as if the data began then)
+            arrays = dict(arrays, fst=np.append(arrays["fst"], arrays["fst"][6]))
         for name, ref in obj._st.items():
             value = require(arrays, path, name, ref.shape, dtype=ref.dtype)
             if value.dtype != ref.dtype:
