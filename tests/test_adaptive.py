@@ -294,15 +294,36 @@ def test_iv_step_is_two_stage_least_squares(cond_scale):
     G = S.copy()                                   # G = S - X C^T at X = 0
     Xr, Gr = X.copy(), G.copy()
     scratch = (np.zeros((dz, dz)), np.empty((dz, d)), np.empty((rows, dz)), np.empty((d, d)),
-               np.empty((rows, d)), np.zeros((d, d)), np.empty((d, rows)))
+               np.empty((rows, d)), np.zeros((d, d)), np.empty((d, rows)), np.zeros(1 + 2 * d))
     for _ in range(2):                             # second pass: refinement of the first
         assert K._solve_iv_weighted(C, G, np.tril(Z), X, 1e10, *scratch)
-        assert K._ref_solve_iv_weighted(C, Gr, np.tril(Z), Xr, 1e10)
+        excitation = K._ref_solve_iv_weighted(C, Gr, np.tril(Z), Xr, 1e10)
+        # the excitation test (issue 23): kernel and reference agree
+        assert excitation is not None
+        assert abs(scratch[-1][0] - excitation) <= 1e-6 * abs(excitation)
     scale = np.abs(expected).max()
     np.testing.assert_allclose(X, expected, atol=1e-6 * scale)
     np.testing.assert_allclose(X, Xr, atol=1e-9 * scale)
     np.testing.assert_allclose(G, S - X @ C.T, atol=1e-9 * np.abs(S).max())
     assert not K._solve_iv_weighted(C, G, np.zeros_like(Z), X, 1e10, *scratch)
+
+
+def test_excitation_is_the_weakest_eigenvalue_share():
+    """Issue 23: the persistent-excitation test of (8) estimates λ_min / tr
+    by inverse iteration with the factor of the solve; kernel = reference,
+    close to the exact eigenvalue (an upper bound of it)."""
+    rng = np.random.default_rng(5)
+    for cond in (1e2, 1e6, 1e12):
+        Q = np.linalg.qr(rng.standard_normal((14, 14)))[0]
+        X = Q @ np.diag(np.geomspace(1.0, 1.0 / cond, 14)) @ Q.T
+        delta = np.trace(X) / 1e10
+        L = np.linalg.cholesky(X + delta * np.eye(14))
+        got = K._weakest(np.tril(X), L, delta, np.empty(14), np.empty(14))
+        exact = 1.0 / cond / np.trace(X)
+        floor = delta / np.trace(X)            # the regularisation's share: resolution
+        assert abs(got - K._ref_weakest(np.tril(X), delta)) <= 1e-6 * (abs(got) + floor)
+        assert exact - 1e-3 * floor <= got <= 1.5 * exact + 10 * floor
+        assert (got * 1e10 >= 1.0) == (cond < 1e9)      # the test's verdict
 
 
 # ---------------------------------------------------------------------------

@@ -60,8 +60,9 @@ IST = {
     "stalled": 10,      # 1 once the residual of (13) has stopped improving
     "rejected": 11,     # 1 if the last refresh's (Ã, C̃) failed the gate / Hurwitz test
     "gaps": 12,         # intervals longer than max_gap (filters re-initialised)
+    "not_excited": 13,  # 1 if the last refresh found (8) not persistently exciting
 }
-N_IST = 13
+N_IST = 14
 # Float state ``fst`` slots.
 FST = {
     "t_last": 0,          # time of the last sample
@@ -91,6 +92,9 @@ _STALL_FACTOR = 2.0
 # Floating-point contraction of a*b + c into fused multiply-adds only (no
 # reassociation; NaN and inf keep their IEEE semantics): 10-20% faster.
 _FASTMATH = {"contract"}
+
+# Inverse iterations of the excitation test (:func:`_weakest`).
+_EXCITATION_ITERATIONS = 8
 
 # Relative pivot threshold of the QR factor in (13): below it the shift
 # equation is rank deficient and the previous (Ã, C̃) are kept.
@@ -280,7 +284,45 @@ def _solve_normal(R, G, X, max_cond, L, B):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True, fastmath=_FASTMATH)
-def _solve_iv_weighted(C, G, Z, X, max_cond, L, Ct, Gt, N, Gn, Ln, Bn):  # pragma: no cover
+def _weakest(X, L, delta, v, w):  # pragma: no cover - compiled
+    """Excitation of the information matrix X (lower triangle read):
+    ``λ_min(X) / tr(X)``, by inverse iteration with the Cholesky factor L of
+    ``X + δ I`` (from the solve just done): ``_EXCITATION_ITERATIONS`` steps
+    from a fixed start, then ``λ_min(X + δ I) ≈ 1 / |(L L^T)^{-1} v|`` (an
+    upper bound of λ_min for a unit v), minus δ. v, w: scratch of length d."""
+    d = X.shape[0]
+    tr = 0.0
+    for i in range(d):
+        tr += X[i, i]
+        v[i] = 1.0 + 0.5 * np.sin(i + 1.0)
+    nrm = 0.0
+    for i in range(d):
+        nrm += v[i] * v[i]
+    nrm = np.sqrt(nrm)
+    for i in range(d):
+        v[i] /= nrm
+    for _ in range(_EXCITATION_ITERATIONS):
+        for i in range(d):                   # L w = v
+            s = v[i]
+            for k in range(i):
+                s -= L[i, k] * w[k]
+            w[i] = s / L[i, i]
+        for i in range(d - 1, -1, -1):       # L^T v = w
+            s = w[i]
+            for k in range(i + 1, d):
+                s -= L[k, i] * v[k]
+            v[i] = s / L[i, i]
+        nrm = 0.0
+        for i in range(d):
+            nrm += v[i] * v[i]
+        nrm = np.sqrt(nrm)
+        for i in range(d):
+            v[i] /= nrm
+    return (1.0 / nrm - delta) / tr
+
+
+@numba.njit(cache=True, fastmath=_FASTMATH)
+def _solve_iv_weighted(C, G, Z, X, max_cond, L, Ct, Gt, N, Gn, Ln, Bn, ex):  # pragma: no cover
     """One refresh of an instrumental-variable estimate in residual form,
     with the instruments whitened by ``Z = sum w ζ ζ^T`` (lower triangle).
 
@@ -306,7 +348,8 @@ def _solve_iv_weighted(C, G, Z, X, max_cond, L, Ct, Gt, N, Gn, Ln, Bn):  # pragm
 
     Scratch: L (dz, dz), Ct (dz, d), Gt (rows, dz), N, Ln (d, d), Gn (rows,
     d), Bn (d, rows). Returns False (nothing changed) if Z or N is not
-    positive definite.
+    positive definite; ``ex[0]`` receives the excitation ``λ_min(N) / tr N``
+    (:func:`_weakest`; ``ex`` has length >= 2 d, the rest scratch).
     """
     dz, d = C.shape
     rows = G.shape[0]
@@ -352,9 +395,15 @@ def _solve_iv_weighted(C, G, Z, X, max_cond, L, Ct, Gt, N, Gn, Ln, Bn):  # pragm
     # itself (cond(C̃) <= max_cond), the same step as a QR of [C̃; sqrt(δ) I];
     # if N + δ I is numerically singular for Cholesky (start-up, cond(C̃) near
     # 1e8), the LS path's bound cond(N + δ I) <= 1 + max_cond instead
-    if not (_solve_normal(N, Gn, X, max_cond * max_cond, Ln, Bn)
-            or _solve_normal(N, Gn, X, max_cond, Ln, Bn)):
-        return False
+    scale = max_cond * max_cond
+    if not _solve_normal(N, Gn, X, scale, Ln, Bn):
+        scale = max_cond
+        if not _solve_normal(N, Gn, X, scale, Ln, Bn):
+            return False
+    trn = 0.0
+    for i in range(d):
+        trn += N[i, i]
+    ex[0] = _weakest(N, Ln, trn / scale, ex[1:1 + d], ex[1 + d:1 + 2 * d])
     for r in range(rows):                    # G <- G - Δ C^T (Bn holds Δ^T)
         for i in range(dz):
             s = 0.0
@@ -515,7 +564,7 @@ def _shift_solve(M, n, ny, omega, Aout):  # pragma: no cover - compiled
 @numba.njit(cache=True, fastmath=_FASTMATH)
 def _refresh(n, nu, ny, omega, alpha, max_cond, gate, settle, ode, iv, T_now, ist, fst,
              R, G, M, Rt, gt, theta, Am, Cm, Bm, Dm, Apsi, Cpsi, Psi, hist,
-             Ld, Bd, Lt, Bt, Anew, Cz, Gz, Zz, Lz, Ct, Gt, Nz, Gn, Cf):  # pragma: no cover
+             Ld, Bd, Lt, Bt, Anew, Cz, Gz, Zz, Lz, Ct, Gt, Nz, Gn, Cf, ex):  # pragma: no cover
     """Model refresh: solve both LS problems (the first by instrumental
     variables when ``iv``), (13), B̃, D, Ψ model, history."""
     if not ode:
@@ -530,10 +579,21 @@ def _refresh(n, nu, ny, omega, alpha, max_cond, gate, settle, ode, iv, T_now, is
                     else:
                         jj = j - nz
                         Cf[i, j] = Zz[i, jj] if jj <= i else Zz[jj, i]
-            if not _solve_iv_weighted(Cf, Gz, Zz, M, max_cond, Lz, Ct, Gt, Nz, Gn, Ld, Bd):
+            if not _solve_iv_weighted(Cf, Gz, Zz, M, max_cond, Lz, Ct, Gt, Nz, Gn, Ld, Bd, ex):
                 ist[7] += 1
+                ex[0] = 0.0
         elif not _solve_normal(R, G, M, max_cond, Ld, Bd):
             ist[7] += 1
+            ex[0] = 0.0
+        else:
+            trr = 0.0
+            for i in range(R.shape[0]):
+                trr += R[i, i]
+            ex[0] = _weakest(R, Ld, trr / max_cond, ex[1:1 + R.shape[0]],
+                             ex[1 + R.shape[0]:1 + 2 * R.shape[0]])
+        # persistent excitation of (8): its weakest direction carries at least
+        # the share 1/max_condition of the information (issue 23)
+        ist[13] = 0 if ex[0] * max_cond >= 1.0 else 1
         if ist[9]:
             if not _solve_normal(Rt, gt, theta, max_cond, Lt, Bt):
                 ist[7] += 1
@@ -564,7 +624,7 @@ def _refresh(n, nu, ny, omega, alpha, max_cond, gate, settle, ode, iv, T_now, is
             ist[10] = 1
         if ist[10]:
             level = max(gate, _STALL_FACTOR * fst[5])
-    if res >= 0.0 and res <= level and _hurwitz(Am):
+    if res >= 0.0 and res <= level and ist[13] == 0 and _hurwitz(Am):
         for i in range(n):
             for j in range(n):
                 Apsi[i, j] = Am[i, j]
@@ -671,7 +731,7 @@ def kernel(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, Hse
     # scratch: one allocation per call (a one-sample call pays for one, not 30)
     sc = np.empty(2 * dz * d + dz * dz + dp * dz + 2 * d * d + 2 * dp * d + dz + 4 * dp
                   + mi + n + 3 * d + f + 2 * ny * dth + ny * n + ny + 9 * n * n
-                  + dth * dth + dth)
+                  + dth * dth + dth + 1 + 2 * d)
     o = 0
     zeta = sc[o:o + dz]
     o += dz
@@ -733,6 +793,8 @@ def kernel(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, Hse
     Anew = sc[o:o + n * n].reshape((n, n))
     o += n * n
     work = sc[o:o + 5 * n * n].reshape((5, n, n))
+    o += 5 * n * n
+    ex = sc[o:o + 1 + 2 * d]        # excitation of (8) and its scratch
     for k in range(N):
         if ist[0] == 0:
             for j in range(nu):
@@ -1075,7 +1137,7 @@ def kernel(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, Hse
         if (ist[0] - 1) % K == 0:
             _refresh(n, nu, ny, omega, alpha, max_cond, gate, settle, ode, iv, Tm[k], ist, fst,
                      R, G, M, Rt, gt, theta, Am, Cm, Bm, Dm, Apsi, Cpsi, Psi, hist, Ld, Bd, Lt,
-                     Bt, Anew, Cz, Gz, Zz, Lz, Ct, Gt, Nz, Gn, Cf)
+                     Bt, Anew, Cz, Gz, Zz, Lz, Ct, Gt, Nz, Gn, Cf, ex)
     return _all_finite(buf)
 
 
@@ -1118,23 +1180,43 @@ def _ref_solve(R, G, X, max_cond):
 def _ref_solve_iv_weighted(C, G, Z, X, max_cond):
     """Reference of :func:`_solve_iv_weighted`: numpy Cholesky of Z, scipy
     triangular solves, the normal equations of the whitened problem solved by
-    :func:`_ref_solve`."""
+    :func:`_ref_solve`. Returns the excitation of the whitened normal matrix
+    (:func:`_ref_weakest`), None where the kernel returns False."""
     Zs = np.tril(Z) + np.tril(Z, -1).T
     tr = np.trace(Zs)
     if not tr > 0:
-        return False
+        return None
     try:
         L = np.linalg.cholesky(Zs + tr / max_cond * np.eye(Zs.shape[0]))
     except np.linalg.LinAlgError:
-        return False
+        return None
     Ct = scipy.linalg.solve_triangular(L, C, lower=True)
     Gt = scipy.linalg.solve_triangular(L, G.T, lower=True).T
     Xold = X.copy()
     N, Gn = Ct.T @ Ct, Gt @ Ct
-    if not _ref_solve(N, Gn, X, max_cond * max_cond) and not _ref_solve(N, Gn, X, max_cond):
-        return False
+    scale = max_cond * max_cond
+    if not _ref_solve(N, Gn, X, scale):
+        scale = max_cond
+        if not _ref_solve(N, Gn, X, scale):
+            return None
     G -= (X - Xold) @ C.T
-    return True
+    return _ref_weakest(N, np.trace(N) / scale)
+
+
+def _ref_weakest(X, delta):
+    """Reference of :func:`_weakest`: the same inverse iteration, scipy's
+    Cholesky solves."""
+    Xs = np.tril(X) + np.tril(X, -1).T
+    d = Xs.shape[0]
+    factor = scipy.linalg.cho_factor(Xs + delta * np.eye(d), lower=True)
+    v = 1.0 + 0.5 * np.sin(np.arange(1.0, d + 1.0))
+    v /= np.linalg.norm(v)
+    nrm = 1.0
+    for _ in range(_EXCITATION_ITERATIONS):
+        v = scipy.linalg.cho_solve(factor, v)
+        nrm = np.linalg.norm(v)
+        v /= nrm
+    return (1.0 / nrm - delta) / np.trace(Xs)
 
 
 def _ref_refresh(n, nu, ny, omega, alpha, max_cond, gate, settle, ode, iv, T_now, ist, fst,
@@ -1143,10 +1225,16 @@ def _ref_refresh(n, nu, ny, omega, alpha, max_cond, gate, settle, ode, iv, T_now
         if iv:
             Zs = np.tril(Zz) + np.tril(Zz, -1).T
             Cf = np.hstack([Cz, Zs[:, :M.shape[1] - n]])
-            if not _ref_solve_iv_weighted(Cf, Gz, Zz, M, max_cond):
+            excitation = _ref_solve_iv_weighted(Cf, Gz, Zz, M, max_cond)
+            if excitation is None:
                 ist[7] += 1
+                excitation = 0.0
         elif not _ref_solve(R, G, M, max_cond):
             ist[7] += 1
+            excitation = 0.0
+        else:
+            excitation = _ref_weakest(R, np.trace(R) / max_cond)
+        ist[13] = 0 if excitation * max_cond >= 1.0 else 1
         if ist[9] and not _ref_solve(Rt, gt, theta, max_cond):
             ist[7] += 1
     dp = M.shape[0]
@@ -1175,7 +1263,7 @@ def _ref_refresh(n, nu, ny, omega, alpha, max_cond, gate, settle, ode, iv, T_now
             ist[10] = 1
         if ist[10]:
             level = max(gate, _STALL_FACTOR * fst[5])
-    if 0 <= res <= level and np.all(np.linalg.eigvals(Am).real < 0):
+    if 0 <= res <= level and ist[13] == 0 and np.all(np.linalg.eigvals(Am).real < 0):
         Apsi[:] = Am
         Cpsi[:] = Cm
         ist[6] += 1

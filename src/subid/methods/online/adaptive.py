@@ -615,6 +615,7 @@ class AdaptiveIdentifier(OnlineIdentifier):
             "cholesky_failed": int(ist[_k.IST["chol_failed"]]),
             "bound_hits": int(ist[_k.IST["bound_hits"]]),
             "gaps": int(ist[_k.IST["gaps"]]),
+            "excited": not ist[_k.IST["not_excited"]],
             "max_gap": self._max_gap,
             "selector": np.array(self._H),
         }
@@ -643,6 +644,14 @@ class AdaptiveIdentifier(OnlineIdentifier):
         if not self.n_samples:
             return "no samples processed yet"
         res = info["shift_residual"]
+        if not info["bd_started"] and not info["excited"]:
+            return ("the (B, D) stage has not started, so B and D are not estimated (zero): "
+                    "the input is not persistently exciting (the weakest direction of the "
+                    "regression (8) carries less than 1/max_condition = "
+                    f"{1 / self._max_cond:.3g} of its information; condition "
+                    f"{info['condition']:.3g}), so the data do not determine (A, C). Give an input sufficiently rich of order "
+                    f"horizon + order = {self._f + self._n} (Theorem 1 of the paper), e.g. "
+                    "white noise or a multisine with enough frequencies in the system's band")
         if not info["bd_started"]:
             return ("the (B, D) stage has not started, so B and D are not estimated (zero): "
                     f"the relative residual of the shift equation (13) is {res:.3g} "
@@ -652,8 +661,10 @@ class AdaptiveIdentifier(OnlineIdentifier):
                         "consistent" if self._method != "iv" else
                         "; with output noise, a longer memory (smaller forgetting)"))
         if self._st["ist"][_k.IST["rejected"]]:
-            return (f"the latest (A, C) estimate failed the convergence test (shift residual "
-                    f"{res:.3g}, or A not Hurwitz); B and D come from earlier estimates")
+            why = (f"shift residual {res:.3g}, or A not Hurwitz" if info["excited"] else
+                   "the data are no longer persistently exciting")
+            return (f"the latest (A, C) estimate failed the convergence test ({why}); B and D "
+                    "come from earlier estimates")
         return None
 
     def toeplitz(self) -> np.ndarray:
@@ -1006,10 +1017,13 @@ class AdaptiveIdentifier(OnlineIdentifier):
         except (KeyError, TypeError, ValueError) as exc:
             raise CheckpointError(f"checkpoint {path} has invalid settings ({exc})",
                                   path=path) from None
-        if version == 2 and "fst" in arrays and arrays["fst"].shape == (_k.N_FST - 1,):
-            # version 2 had no t_first: the stall rule's clock starts at the
-            # time of the last halving of the residual (as if the data began then)
-            arrays = dict(arrays, fst=np.append(arrays["fst"], arrays["fst"][6]))
+        if version == 2 and arrays.get("fst", np.empty(0)).shape == (_k.N_FST - 1,) \
+                and arrays.get("ist", np.empty(0)).shape == (_k.N_IST - 1,):
+            # version 2 had no t_first (the stall rule's clock starts at the
+            # time of the last halving of the residual, as if the data began
+            # then) and no excitation flag (excited until the next refresh)
+            arrays = dict(arrays, fst=np.append(arrays["fst"], arrays["fst"][6]),
+                          ist=np.append(arrays["ist"], 0))
         for name, ref in obj._st.items():
             value = require(arrays, path, name, ref.shape, dtype=ref.dtype)
             if value.dtype != ref.dtype:
