@@ -59,11 +59,22 @@ Numerics (beyond the paper)
   (noise-free estimates stay exact). ``'ode'``: forgetting suspended while
   ``tr P > ode_trace_bound`` (Ioannou & Sun, Robust Adaptive Control, 4.3.6).
 * Part 2 ((B̃, D)) starts "once the first part has converged" (Section V):
-  when the relative residual of the shift equation (13) is below
-  ``bd_gate``, or has stopped improving for one memory length ``1/α``, and
-  Ã is Hurwitz (A1). Ψ then starts from 0, and the initial-state term
-  ``C̃ e^{Ã(t - t_g)} x̃(t_g)`` of (14)/(16), which (19)-(20) drop, is kept as
-  a regressor. Ψ only uses estimates that pass the same test.
+  when the regression (8) is persistently exciting (its weakest direction
+  carries at least ``1/max_condition`` of the information, by inverse
+  iteration on the factor of the solve; issue 23), Ã is Hurwitz (A1), and
+  the relative residual of the shift equation (13) is below ``bd_gate`` or
+  has stopped halving (no halving for as long as it took to reach its last
+  halving, at most ``1/α``: a consistent estimate's noise floor falls like
+  ``t^{-1/2}``, so it halves at four times the elapsed time; issue 23). Ψ
+  then starts from 0, and the initial-state term ``C̃ e^{Ã(t - t_g)} x̃(t_g)``
+  of (14)/(16), which (19)-(20) drop, is kept as a regressor. Ψ only uses
+  estimates that pass the same test.
+* Start-up schedule of β (``bd_startup`` κ, issue 23): the rows of (16) are
+  built from the (Ã, C̃) of their time, whose error falls as part 1's memory
+  fills; θ weighs them by ``e^{-∫ β_eff}``, ``β_eff = max(β, κ / (t - t_g))``,
+  i.e. ``((τ - t_g) / (t - t_g))^κ`` while ``t - t_g < κ / β``: the memory of θ
+  grows in proportion to the age of part 2, so that the rows of the first
+  seconds do not stay in θ for ``1/β``.
 """
 
 from __future__ import annotations
@@ -306,6 +317,13 @@ class AdaptiveIdentifier(OnlineIdentifier):
         restart at the new sample (held signals over a gap are not data) and
         (14) restarts; the information decays by ``e^{-α h}``. Default ten
         filter time constants, ``10 / |d(0)|^{1/f}`` (2 s for poles at -5).
+    bd_startup : float, optional
+        κ of the start-up schedule of the (B̃, D) memory:
+        ``β_eff = max(bd_forgetting, κ / age)``, age = time since part 2
+        started, so that θ forgets the rows built from the early, poorer
+        (Ã, C̃) (see the module notes). 0 turns it off (the issue-12
+        estimator). Default 2 for ``'iv'``, 0 for ``'ls'`` and ``'ode'`` (the
+        paper's; ``'ode'`` ignores it).
 
     Attributes
     ----------
@@ -563,7 +581,8 @@ class AdaptiveIdentifier(OnlineIdentifier):
         ``info`` holds ``method`` (``'seed000_adaptive'``), ``samples`` (also
         as ``n_samples``, the key of every model),
         ``time``, ``refreshes``, ``horizon``, ``filter_poles``,
-        ``time_scale``, ``forgetting``, ``bd_forgetting``, ``ls_method``,
+        ``time_scale``, ``forgetting``, ``bd_forgetting``, ``bd_startup``,
+        ``ls_method``,
         ``hold``, ``condition`` and ``bd_condition`` (of the normal
         matrices, see :meth:`information_condition`), ``max_condition``,
         ``windup_active`` / ``bd_windup_active`` (the condition exceeds the
@@ -573,7 +592,8 @@ class AdaptiveIdentifier(OnlineIdentifier):
         deficient), ``psi_rejected`` (refreshes whose estimate was not used
         for Ψ), ``shift_failed`` (refreshes where (13) was rank deficient),
         ``cholesky_failed``, ``bound_hits`` (``'ode'``: steps with suspended
-        forgetting), ``gaps`` and ``max_gap``, ``selector``, ``bd_elapsed``
+        forgetting), ``gaps`` and ``max_gap``, ``selector``, ``excited``
+        (the last refresh found (8) persistently exciting), ``bd_elapsed``
         (time since part 2 started), ``converged`` and ``convergence``
         (``'converged'`` or the reason it is not: part 2 has not started, or
         the latest (Ã, C̃) failed the gate or the Hurwitz test). A model that
@@ -600,6 +620,7 @@ class AdaptiveIdentifier(OnlineIdentifier):
             "time_scale": self._omega,
             "forgetting": self._alpha,
             "bd_forgetting": self._beta,
+            "bd_startup": self._startup,
             "ls_method": self._method,
             "condition": cond,
             "bd_condition": bd_cond,
