@@ -295,12 +295,7 @@ def _weakest(X, L, delta, v, w):  # pragma: no cover - compiled
     for i in range(d):
         tr += X[i, i]
         v[i] = 1.0 + 0.5 * np.sin(i + 1.0)
-    nrm = 0.0
-    for i in range(d):
-        nrm += v[i] * v[i]
-    nrm = np.sqrt(nrm)
-    for i in range(d):
-        v[i] /= nrm
+    nrm = _normalise(v)
     for _ in range(_EXCITATION_ITERATIONS):
         for i in range(d):                   # L w = v
             s = v[i]
@@ -312,13 +307,20 @@ def _weakest(X, L, delta, v, w):  # pragma: no cover - compiled
             for k in range(i + 1, d):
                 s -= L[k, i] * v[k]
             v[i] = s / L[i, i]
-        nrm = 0.0
-        for i in range(d):
-            nrm += v[i] * v[i]
-        nrm = np.sqrt(nrm)
-        for i in range(d):
-            v[i] /= nrm
+        nrm = _normalise(v)
     return (1.0 / nrm - delta) / tr
+
+
+@numba.njit(cache=True, fastmath=_FASTMATH)
+def _normalise(v):  # pragma: no cover - compiled
+    """Scale v to unit 2-norm in place; returns the norm it had."""
+    nrm = 0.0
+    for i in range(v.shape[0]):
+        nrm += v[i] * v[i]
+    nrm = np.sqrt(nrm)
+    for i in range(v.shape[0]):
+        v[i] /= nrm
+    return nrm
 
 
 @numba.njit(cache=True, fastmath=_FASTMATH)
