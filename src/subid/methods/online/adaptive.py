@@ -133,7 +133,7 @@ _DEFAULT_FORGETTING = {"iv": (0.002, None), "ls": (0.4, 0.08), "ode": (0.4, 0.08
 _IV_BD_RATIO = 1.0
 # Start-up schedule of the (B̃, D) memory ('iv'): β_eff = max(β, κ / age), age =
 # time since part 2 started (measured in docs/seed000.md).
-_DEFAULT_BD_STARTUP = 2.0
+_DEFAULT_BD_STARTUP = 4.0
 _NON_FINITE = ("the chunk drove the identifier to non-finite values (are the signals scaled "
                "to moderate magnitudes?); it was rejected and the identifier is unchanged")
 
@@ -322,7 +322,7 @@ class AdaptiveIdentifier(OnlineIdentifier):
         ``β_eff = max(bd_forgetting, κ / age)``, age = time since part 2
         started, so that θ forgets the rows built from the early, poorer
         (Ã, C̃) (see the module notes). 0 turns it off (the issue-12
-        estimator). Default 2 for ``'iv'``, 0 for ``'ls'`` and ``'ode'`` (the
+        estimator). Default 4 for ``'iv'``, 0 for ``'ls'`` and ``'ode'`` (the
         paper's; ``'ode'`` ignores it).
 
     Attributes
