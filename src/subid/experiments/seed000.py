@@ -15,7 +15,13 @@ Writes to the output folder:
 * ``table.md`` and ``results.json`` — time to convergence, final errors,
   condition numbers of the regression with unscaled and scaled filter states.
 
-Run ``python -m subid.experiments.seed000 --out results/seed000``.
+Run ``python -m subid.experiments.seed000 --out results/seed000``. Issue 12
+and 23 studies (each instead of the above): ``--noise-table`` (ε_r over SNR,
+paper's LS against the default), ``--noise-free-table`` (convergence of the
+default without noise), ``--memory-study`` (consistency: ε_r as memory and
+record grow together, bias against its standard error), ``--startup-study``
+(ε_r along 400 s at 40 dB with and without the start-up schedule of the
+(B, D) memory).
 """
 
 from __future__ import annotations
