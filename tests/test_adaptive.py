@@ -118,7 +118,10 @@ def test_windup_constant_input_then_excitation_returns():
     ident.update(u[:500_000], y[:500_000])
     assert subid.pole_error(ident.model, true) < 1e-3
     ident.update(u[500_000:1_000_000], y[500_000:1_000_000])
-    model = ident.model
+    # issue 23: the constant input is not persistently exciting, and the model says so
+    with pytest.warns(subid.errors.NotConvergedWarning, match="no longer persistently"):
+        model = ident.model
+    assert not model.info["excited"]
     assert model.info["windup_active"] and model.info["bd_windup_active"]
     assert np.isfinite(ident._buf).all()
     # held where the data stopped informing: bounded and still accurate
@@ -972,7 +975,8 @@ def test_bd_stage_starts_at_40db_white_noise():
         t, u, y = _issue_record(60.0, "white", 40.0, noise_seed=seed)
         ident = paper_ident()
         ident.update(u, y)
-        info = ident.model.info
+        with warnings_ignored():        # the latest (A, C) may miss the stalled level
+            info = ident.model.info
         assert info["bd_started"] and info["shift_residual"] > 1e-2, info["convergence"]
         assert info["bd_start_time"] < 40.0
 
