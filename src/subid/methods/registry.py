@@ -223,7 +223,7 @@ METHODS: dict[str, MethodSpec] = {
                  "dt", "hold", "method", "scale_filters", "refresh_every", "bd_gate",
                  "max_condition", "initial_covariance", "bd_initial_covariance",
                  "ode_trace_bound", "history_size", "engine", "input_names", "output_names",
-                 "instrument_poles", "max_gap"),
+                 "instrument_poles", "max_gap", "bd_startup"),
         capabilities=frozenset({"horizon", "hold", "nonuniform", "seeded"}),
         aliases=("AdaptiveIdentifier",)),
 }
