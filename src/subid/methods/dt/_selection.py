@@ -133,12 +133,13 @@ def default_gap_horizon(n_samples, n_inputs, n_outputs, blocks, largest_order, n
 
 
 def _fit_score(model, validation) -> float:
-    from subid.evaluation.metrics import fit_percent  # metrics imports the model module
-    try:
-        with warnings.catch_warnings(), np.errstate(all="ignore"):
-            warnings.simplefilter("ignore")
-            fits = fit_percent(model, validation)
-    except SubidError:
+    """Mean over the outputs of the simulation fit (%) of ``model`` on ``validation``
+    (x0 by least squares), clipped below at :data:`FLOOR`; :data:`FLOOR` when the
+    simulation overflows. ``mean(fit_percent(model, validation))`` to rounding, by
+    one compiled pass (:func:`subid.methods.dt._scoring.simulation_fit`)."""
+    from subid.methods.dt._scoring import simulation_fit
+    fits = simulation_fit(model.A, model.B, model.C, model.D, validation)
+    if fits is None:
         return FLOOR
     value = float(np.mean(fits))
     return max(value, FLOOR) if math.isfinite(value) else FLOOR

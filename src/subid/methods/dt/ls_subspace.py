@@ -189,7 +189,10 @@ def ls_subspace(data, order=None, *, horizon=None, instruments="past", selector=
     statistic : {'auto', 'qr', 'gram'}
         How the data are reduced (:mod:`subid.statistic.hankel`): QR factor of the
         Hankel matrix (accurate to rounding) or lagged products (25x faster,
-        squares the condition number). ``'auto'``: QR up to 200,000 samples.
+        squares the condition number). ``'auto'``: the lagged products where
+        they are exact to rounding (a Hankel matrix of condition number up to
+        1e4, e.g. noisy data), else QR up to 200,000 samples
+        (:meth:`subid.HankelStatistic.from_data`).
     refine : {None, 'pem'}
         ``'pem'``: refine the final subspace estimate by prediction-error
         minimisation (:func:`subid.pem`, default options) on the record.
