@@ -656,10 +656,27 @@ class Problem:
             cached = self._cache["weights"] = output_weights(self.data.y)
         return cached
 
+    def cached(self, key, compute):
+        """``compute()``, once per problem and ``key``: the steps that do not depend
+        on the order (the problems of one fold's candidate orders share this cache,
+        :func:`subid.methods.dt._selection.score_horizon`, so that every order comes
+        from one factorisation and one SVD). The result must be treated as read-only."""
+        if key not in self._cache:
+            self._cache[key] = compute()
+        return self._cache[key]
+
     def unscale(self, B_n, C_n, D_n):
         """B, C, D in the user's units from those of the normalised channels."""
         su, sy = self.input_scale, self.output_scale
         return B_n / su, C_n * sy[:, None], D_n * sy[:, None] / su
+
+
+def future_past_factor(pb) -> np.ndarray:
+    """The factor of ``[U_f; U_p; Y_p; Y_f]`` (once per problem, :meth:`Problem.cached`; MOESP's and the state
+    model's stability step))."""
+    hf, f = pb.factor, pb.horizon
+    return pb.cached("future-past factor", lambda: hf.retriangularize(
+        hf.u_rows(f, 2 * f), hf.u_rows(0, f), hf.y_rows(0, f), hf.y_rows(f, 2 * f)))
 
 
 def normalize_channels(hf: HankelFactor, outputs: bool):
@@ -741,13 +758,13 @@ def choose_order(fixed, candidates, profile, source: str):
 
 
 SYSTEM_MATRICES = ("auto", "shift", "states")
-#: ``system_matrices='auto'`` chooses between its estimators by cross-validation on
-#: records up to this many samples; longer records use the first ('shift'). The choice
-#: costs about four fold fits per estimator, which on short records (where the two
-#: differ most: DaISy sets of 1,000 to 10,000 samples) is a fraction of a second but
-#: would make an explicit ``method(data, order, horizon=...)`` call on 10^5 samples
-#: five times slower; on long records both estimators are consistent and their models
-#: close. Depends on the record only, so a given order reproduces a chosen one.
+#: ``system_matrices='auto'`` lets the cross-validation of the order and horizon choose
+#: between its estimators on records up to this many samples; longer records use the
+#: first ('shift'): there both estimators are consistent and their models close, and
+#: the estimators double the candidates. With the order and the horizon both given,
+#: 'auto' is the first estimator with no fold fits at all (one fit: an explicit call
+#: costs what the model costs); the cross-validated choice at a given order is asked
+#: for by a one-element candidate list (``order=[4]``). Depends on the record only.
 AUTO_VARIANT_MAX_SAMPLES = 20_000
 
 
@@ -776,11 +793,16 @@ def identify(data, order, horizon, *, method: str, build, selection: str,
     ``variants`` (a dict name -> build, the first the default), when given,
     are alternative estimators of the system matrices from the same
     subspace (``system_matrices='auto'`` of :func:`subid.moesp` and
-    :func:`subid.ls_subspace`): with ``selection='cv'`` on a raw record the
-    cross-validation chooses among them too, even when the order and the
-    horizon are given (so that a given order and horizon reproduce the
-    model); otherwise the first one is used. ``info['system_matrices']``
-    names the one used.
+    :func:`subid.ls_subspace`): with ``selection='cv'`` on a raw record of
+    up to :data:`AUTO_VARIANT_MAX_SAMPLES` samples, the cross-validation of
+    the order or horizon chooses among them too; otherwise, and whenever the
+    order and the horizon are both given (no fold fits: an explicit call
+    costs one fit), the first one is used. ``info['system_matrices']`` names
+    the one used, and ``info['system_matrices_selection']`` says why when
+    there was a choice; ``method(data, order=model.order,
+    horizon=model.info['horizon'], system_matrices=model.info['system_matrices'])``
+    reproduces a model (without ``system_matrices`` too, whenever the first
+    estimator was chosen).
     """
     if selection not in SELECTION_RULES:
         raise OptionError(f"selection must be one of {SELECTION_RULES}, got {selection!r}")
@@ -791,10 +813,20 @@ def identify(data, order, horizon, *, method: str, build, selection: str,
                    normalize_outputs=normalize_outputs)
     with collect_warnings() as issued:
         builds = variants if variants else {None: build}
-        if len(builds) > 1 and getattr(data, "n_samples", 0) > AUTO_VARIANT_MAX_SAMPLES:
-            first = next(iter(builds))
+        pinned = fixed is not None and horizon is not None
+        first = next(iter(builds))
+        variant_rule = None
+        if len(builds) > 1 and pinned:
+            variant_rule = {"rule": "given", "description": (
+                f"order and horizon given: {first!r}, with no fold fits (cross-validated "
+                "between the estimators when the order is a candidate list, e.g. [n])")}
+        elif len(builds) > 1 and getattr(data, "n_samples", 0) > AUTO_VARIANT_MAX_SAMPLES:
+            variant_rule = {"rule": "long record", "description": (
+                f"{first!r} beyond {AUTO_VARIANT_MAX_SAMPLES} samples, where both "
+                "estimators are consistent")}
+        if variant_rule is not None:
             builds = {first: builds[first]}
-        choose = fixed is None or horizon is None or len(builds) > 1
+        choose = not pinned
         if selection == "cv" and isinstance(data, IOData) and choose:
             check_data(data, method)
 
@@ -803,29 +835,24 @@ def identify(data, order, horizon, *, method: str, build, selection: str,
                     warnings.simplefilter("ignore")
                     return prepare(record, orders, f, **options)
             prepare_fold.blocks = blocks_per_horizon
-            try:
-                n, f, variant, record = cross_validate(data, fixed, candidates, horizon,
-                                                       prepare_fold=prepare_fold, builds=builds)
-            except SubidError:
-                if fixed is None or horizon is None:
-                    raise
-                # order and horizon given, the folds too short for them: the default estimator
-                n, f, variant, record = fixed, horizon, next(iter(builds)), None
+            n, f, variant, record = cross_validate(data, fixed, candidates, horizon,
+                                                   prepare_fold=prepare_fold, builds=builds)
             problem = prepare(data, n, f, **options)
             model = builds[variant](problem)
-            if record is not None:
-                n, f, variant, problem, model = _unrepaired_choice(
-                    record, data, options, builds, (n, f, variant, problem, model))
-            if record is not None and (fixed is None or horizon is None):
-                model.info["order_selection"] = record
-            elif record is not None:
-                model.info["system_matrices_selection"] = record
+            n, f, variant, problem, model = _unrepaired_choice(
+                record, data, options, builds, (n, f, variant, problem, model))
+            model.info["order_selection"] = record
+            if len(builds) > 1:
+                variant_rule = {"rule": "cv", "description": (
+                    "cross-validated with the order and horizon (info['order_selection'])")}
         else:
             problem = prepare(data, order, horizon, **options)
             variant = next(iter(builds))
             model = builds[variant](problem)
         if variant is not None:
             model.info["system_matrices"] = variant
+        if variant_rule is not None:
+            model.info["system_matrices_selection"] = variant_rule
         if finalize is not None:
             model = finalize(model, problem)
     model.info["warnings"] = list(issued)
