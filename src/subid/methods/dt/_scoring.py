@@ -167,8 +167,10 @@ def simulation_fit(A, B, C, D, validation, *, kernel=forced_and_free):
         if y_hat is None:
             return None
         ys = y / scale
-        dev2 += np.sum((ys - ys.mean(axis=0)) ** 2, axis=0)
-        err2 += np.sum((ys - y_hat / scale) ** 2, axis=0)
+        with np.errstate(all="ignore"):         # a huge error gives an infinite misfit
+            dev2 += np.sum((ys - ys.mean(axis=0)) ** 2, axis=0)
+            err2 += np.sum((ys - y_hat / scale) ** 2, axis=0)
     if np.any(dev2 == 0):
         return None
-    return 100.0 * (1.0 - np.sqrt(err2) / np.sqrt(dev2))
+    with np.errstate(all="ignore"):
+        return 100.0 * (1.0 - np.sqrt(err2) / np.sqrt(dev2))
