@@ -42,11 +42,19 @@ from subid.data import column_std
 FREE_DECAYED = 1e-20
 
 
+#: Records up to this many samples keep their whole free response (cheaper than
+#: finding where it decays).
+SHORT_RECORD = 2048
+
+
 def free_length(A: np.ndarray, n_samples: int) -> int:
     """Samples of the free response to keep: the smallest power of two ``T`` with
-    ``max |A^T| < FREE_DECAYED`` (by repeated squaring), at most ``n_samples``."""
+    ``max |A^T| < FREE_DECAYED`` (by repeated squaring), at most ``n_samples``
+    (all of them up to :data:`SHORT_RECORD`)."""
     if A.shape[0] == 0:
         return 0
+    if n_samples <= SHORT_RECORD:
+        return n_samples
     P = np.array(A, dtype=float)
     T = 1
     with np.errstate(all="ignore"):

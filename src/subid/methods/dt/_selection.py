@@ -175,7 +175,8 @@ def score_horizon(parts, orders, horizon, *, prepare_fold, builds):
                 try:
                     with warnings.catch_warnings():
                         warnings.simplefilter("ignore")
-                        model = builds[name](replace(problem, order=n, candidates=[n]))
+                        model = builds[name](replace(problem, order=n, candidates=[n],
+                                                     fold=True))
                     value = _fit_score(model, validation)
                     repaired[(n, v)] += stabilised(model)
                 except SubidError:

@@ -647,6 +647,10 @@ class Problem:
     input_condition: float
     input_scale: np.ndarray
     output_scale: np.ndarray
+    #: A cross-validation fold model (:func:`subid.methods.dt._selection.score_horizon`):
+    #: it is scored with an x0 fitted on the held-out data, so the estimation x0 that
+    #: costs a simulation of its own (the state-sequence estimate's) is skipped.
+    fold: bool = False
     _cache: dict = field(default_factory=dict, repr=False, compare=False)
 
     def weights(self) -> np.ndarray:

@@ -260,6 +260,6 @@ def state_model(pb, gamma, *, stability, feedthrough, estimate_x0, coefficients=
             return A, B, C, D, x0, {"state_regression_residual": float(residual), "x0": x0,
                                     "stability": stab, **extra}
     B, C, D = pb.unscale(B, C, D)    # from the normalised channels to the user's units
-    x0 = initial_state(A, B, C, D, data) if estimate_x0 else None
+    x0 = initial_state(A, B, C, D, data) if estimate_x0 and not pb.fold else None
     return A, B, C, D, x0, {"state_regression_residual": float(residual), "x0": x0,
                             "stability": stab}
