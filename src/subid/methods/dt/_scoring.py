@@ -138,7 +138,7 @@ def _simulated(A, B, C, D, u, y, weights, kernel):
     n = A.shape[0]
     n_free = free_length(A, N)
     with np.errstate(all="ignore"):
-        forced, F = kernel(A, B, C, D, np.ascontiguousarray(u, dtype=float), n_free)
+        forced, F = kernel(A, B, C, D, u, n_free)
         if not (np.isfinite(forced).all() and np.isfinite(F).all()):
             return None
         if n == 0:
@@ -157,28 +157,41 @@ def _simulated(A, B, C, D, u, y, weights, kernel):
     return out if np.isfinite(out).all() else None
 
 
+class Held:
+    """What the score of every candidate needs from one validation record, once:
+    its pieces (one per experiment), the x0 weights (inverse standard deviation
+    over the whole record, as ``fit_percent`` weighs them), the scale of each
+    output and the spread ``sum (y - ȳ_e)^2`` the fit divides by."""
+
+    def __init__(self, validation):
+        y_all = validation.y
+        std = column_std(y_all)
+        self.weights = 1.0 / np.where(std > 0, std, 1.0)
+        self.scale = np.abs(y_all).max(axis=0)
+        self.scale[self.scale == 0] = 1.0
+        self.pieces = [(np.ascontiguousarray(validation.u[a:b], dtype=float), y_all[a:b],
+                        y_all[a:b] / self.scale) for a, b in validation.experiment_ranges]
+        self.dev2 = np.zeros(y_all.shape[1])
+        for _, _, ys in self.pieces:
+            self.dev2 += np.sum((ys - ys.mean(axis=0)) ** 2, axis=0)
+
+
 def simulation_fit(A, B, C, D, validation, *, kernel=forced_and_free):
     """Simulation fit (%) per output of the discrete model ``(A, B, C, D)`` on
-    ``validation`` with x0 by least squares: ``fit_percent(model, validation)``
-    to rounding (see the module documentation), or None when the simulation
-    overflows. ``kernel``: :func:`forced_and_free` or its reference."""
+    ``validation`` (an IOData record or its :class:`Held`) with x0 by least
+    squares: ``fit_percent(model, validation)`` to rounding (see the module
+    documentation), or None when the simulation overflows or an output is
+    constant. ``kernel``: :func:`forced_and_free` or its reference."""
+    held = validation if isinstance(validation, Held) else Held(validation)
+    if np.any(held.dev2 == 0):
+        return None
     A, B, C, D = (np.ascontiguousarray(M, dtype=float) for M in (A, B, C, D))
-    y_all = validation.y
-    weights = 1.0 / np.where((std := column_std(y_all)) > 0, std, 1.0)
-    scale = np.abs(y_all).max(axis=0)
-    scale[scale == 0] = 1.0
-    ny = y_all.shape[1]
-    err2, dev2 = np.zeros(ny), np.zeros(ny)
-    for a, b in validation.experiment_ranges:
-        y = y_all[a:b]
-        y_hat = _simulated(A, B, C, D, validation.u[a:b], y, weights, kernel)
+    err2 = np.zeros(held.dev2.shape)
+    for u, y, ys in held.pieces:
+        y_hat = _simulated(A, B, C, D, u, y, held.weights, kernel)
         if y_hat is None:
             return None
-        ys = y / scale
         with np.errstate(all="ignore"):         # a huge error gives an infinite misfit
-            dev2 += np.sum((ys - ys.mean(axis=0)) ** 2, axis=0)
-            err2 += np.sum((ys - y_hat / scale) ** 2, axis=0)
-    if np.any(dev2 == 0):
-        return None
+            err2 += np.sum((ys - y_hat / held.scale) ** 2, axis=0)
     with np.errstate(all="ignore"):
-        return 100.0 * (1.0 - np.sqrt(err2) / np.sqrt(dev2))
+        return 100.0 * (1.0 - np.sqrt(err2) / np.sqrt(held.dev2))

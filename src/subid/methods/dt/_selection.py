@@ -134,9 +134,10 @@ def default_gap_horizon(n_samples, n_inputs, n_outputs, blocks, largest_order, n
 
 def _fit_score(model, validation) -> float:
     """Mean over the outputs of the simulation fit (%) of ``model`` on ``validation``
-    (x0 by least squares), clipped below at :data:`FLOOR`; :data:`FLOOR` when the
-    simulation overflows. ``mean(fit_percent(model, validation))`` to rounding, by
-    one compiled pass (:func:`subid.methods.dt._scoring.simulation_fit`)."""
+    (a record, or its :class:`subid.methods.dt._scoring.Held`; x0 by least
+    squares), clipped below at :data:`FLOOR`; :data:`FLOOR` when the simulation
+    overflows. ``mean(fit_percent(model, validation))`` to rounding, by one
+    compiled pass (:func:`subid.methods.dt._scoring.simulation_fit`)."""
     from subid.methods.dt._scoring import simulation_fit
     fits = simulation_fit(model.A, model.B, model.C, model.D, validation)
     if fits is None:
@@ -147,6 +148,16 @@ def _fit_score(model, validation) -> float:
 
 def score_horizon(parts, orders, horizon, *, prepare_fold, builds):
     """Fold scores of every candidate order at one horizon.
+
+    Per fold, one problem (one statistic, by cost: :meth:`subid.HankelStatistic.from_data`)
+    whose order-independent steps (the factorisation, the SVD) every candidate
+    order shares (:meth:`subid.methods.dt._subspace.Problem.cached`); the fold
+    models skip the estimation x0 (``Problem.fold``), and each is scored by one
+    compiled simulation with the x0 regression on the validation block
+    (:mod:`subid.methods.dt._scoring`), whose record-dependent parts are computed
+    once per fold. The scores equal those of the straightforward computation (a
+    fresh problem per order, ``fit_percent``) to rounding
+    (``tests/test_selection_speed.py``).
 
     Parameters
     ----------
@@ -165,11 +176,13 @@ def score_horizon(parts, orders, horizon, *, prepare_fold, builds):
     repaired : dict ``(order, estimator index) -> int``
         How many of the fold models had to be stabilised (:func:`stabilised`).
     """
+    from subid.methods.dt._scoring import Held
     names = list(builds)
     per_fold = {(n, v): [] for n in orders for v in range(len(names))}
     repaired = {(n, v): 0 for n in orders for v in range(len(names))}
     for train, validation in parts:
         problem = prepare_fold(train, orders, horizon)
+        held = Held(validation)           # what every candidate's score needs, once
         for n in orders:
             for v, name in enumerate(names):
                 try:
@@ -177,7 +190,7 @@ def score_horizon(parts, orders, horizon, *, prepare_fold, builds):
                         warnings.simplefilter("ignore")
                         model = builds[name](replace(problem, order=n, candidates=[n],
                                                      fold=True))
-                    value = _fit_score(model, validation)
+                    value = _fit_score(model, held)
                     repaired[(n, v)] += stabilised(model)
                 except SubidError:
                     value = FLOOR
