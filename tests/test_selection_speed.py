@@ -168,13 +168,35 @@ def _moesp_builds():
             for name in ("shift", "states")}
 
 
-def _prepare_fold(statistic="auto"):
-    def prepare_fold(record, orders, f):
+def _prepare_fold(statistic="auto", merged=True):
+    """prepare_fold as identify builds it; ``merged=False``: without the attributes
+    that let score_horizon merge the folds' statistics (one statistic per fold)."""
+    def prepare_fold(record, orders, f, factor=None):
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            return subspace.prepare(record, orders, f, method="moesp", statistic=statistic)
-    prepare_fold.blocks = 2
+            return subspace.prepare(record, orders, f, method="moesp", statistic=statistic,
+                                    factor=factor)
+    if merged:
+        prepare_fold.blocks = 2
+        prepare_fold.statistic = statistic
     return prepare_fold
+
+
+def test_fold_statistics_merged_from_blocks():
+    """The folds' factors merged from the statistics of four blocks equal the factors
+    of the folds' own statistics; records that are not the four folds of one
+    experiment (merged experiments, other cuts) build their own."""
+    _, data = _noisy(n=1500, seed=3)
+    parts = [(data[a], data[b]) for a, b in selection.folds(data.n_samples)]
+    factors = selection.fold_factors(parts, 8, _prepare_fold())
+    for (train, _), factor in zip(parts, factors):
+        own = HankelStatistic.from_data(train, 16).factor().L
+        np.testing.assert_allclose(factor.L, own, rtol=0, atol=1e-12 * np.abs(own).max())
+    assert selection.fold_factors(parts, 8, _prepare_fold("qr")) == [None] * 4
+    assert selection.fold_factors(parts[::-1], 8, _prepare_fold()) == [None] * 4
+    merged = _records()[2][0]
+    assert selection.fold_factors(selection.experiment_folds(merged), 8,
+                                  _prepare_fold()) == [None] * 4
 
 
 @pytest.mark.slow
@@ -196,12 +218,17 @@ def test_score_horizon_equals_the_straightforward_computation():
                     with warnings.catch_warnings():
                         warnings.simplefilter("ignore")
                         model = build(subspace.prepare(train, n, 8, method="moesp"))
+                    # (the fold's own statistic, not the one merged from the blocks)
                     assert per_fold[(n, v)][k] == pytest.approx(
                         _reference_score(model, validation), abs=1e-8)
         by_qr, _ = selection.score_horizon(parts, orders, 8,
                                            prepare_fold=_prepare_fold("qr"), builds=builds)
+        unmerged, _ = selection.score_horizon(parts, orders, 8,
+                                              prepare_fold=_prepare_fold(merged=False),
+                                              builds=builds)
         for key, values in per_fold.items():
             np.testing.assert_allclose(values, by_qr[key], atol=1e-7)
+            np.testing.assert_allclose(values, unmerged[key], atol=1e-8)
 
 
 def test_pinned_calls_make_no_fold_fits(monkeypatch):

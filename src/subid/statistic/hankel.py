@@ -196,11 +196,10 @@ class HankelStatistic:
             if data.n_samples > QR_MAX_SAMPLES:
                 return stat
             try:
-                factor = stat.factor()
+                factor = stat.exact_factor()
             except TooFewSamplesError:
                 return stat                   # the caller reports it
-            if factor_condition(factor.L) <= GRAM_MAX_CONDITION:
-                stat._cached_factor = factor
+            if factor is not None:
                 return stat
             kind = "qr"
         stat = cls(data.n_inputs, data.n_outputs, depth, kind=kind, dt=data.dt,
@@ -392,6 +391,16 @@ class HankelStatistic:
                 [(i, nu + b) for i in range(s) for b in range(self.n_outputs)]
         idx = np.array([i * q + a for i, a in order])
         return Gz.reshape(s * q, s * q)[np.ix_(idx, idx)]
+
+    def exact_factor(self) -> HankelFactor | None:
+        """:meth:`factor`, or None when it is that of lagged products that are not
+        exact to rounding (kind ``'gram'``, :func:`factor_condition` above
+        :data:`GRAM_MAX_CONDITION`): then the QR statistic is needed."""
+        factor = self.factor()
+        if self.kind == "qr" or factor_condition(factor.L) <= GRAM_MAX_CONDITION:
+            self._cached_factor = factor
+            return factor
+        return None
 
     def factor(self) -> HankelFactor:
         """The lower-triangular factor ``L`` with ``L L^T = H H^T / K``.

@@ -148,8 +148,10 @@ def check_order_horizon(order, horizon, data, *, method: str, blocks_per_horizon
 
 
 def data_factor(data: IOData, depth: int, *, method: str, horizon: int,
-                statistic: str = "auto") -> HankelFactor:
-    """Hankel factor of ``data`` with ``depth`` block rows, after the sample check."""
+                statistic: str = "auto", factor: HankelFactor | None = None) -> HankelFactor:
+    """Hankel factor of ``data`` with ``depth`` block rows, after the sample check
+    (``factor``: that factor, already computed, e.g. merged from the statistics of
+    the blocks of the cross-validation folds)."""
     nu, ny = data.n_inputs, data.n_outputs
     rows = depth * (nu + ny)
     need = min_samples(depth, nu, ny)
@@ -166,6 +168,8 @@ def data_factor(data: IOData, depth: int, *, method: str, horizon: int,
             f"{nu} input{'s' if nu != 1 else ''} and {ny} output{'s' if ny != 1 else ''}: "
             f"the {depth}-block-row Hankel matrix has {rows} rows and needs at least "
             f"{need} samples; reduce the horizon or supply more data")
+    if factor is not None:
+        return factor
     return HankelStatistic.from_data(data, depth, kind=statistic).factor()
 
 
@@ -709,8 +713,13 @@ STATISTICS = ("auto", "qr", "gram")
 
 
 def prepare(data, order, horizon, *, method: str, blocks_per_horizon: int = 2,
-            statistic: str = "auto", normalize_outputs: bool = True) -> Problem:
+            statistic: str = "auto", normalize_outputs: bool = True,
+            factor: HankelFactor | None = None) -> Problem:
     """Validate the arguments, build the Hankel factor and check excitation.
+
+    ``factor``: the Hankel factor of the record (depth ``blocks_per_horizon *
+    horizon``), when already computed (:func:`subid.methods.dt._selection.score_horizon`
+    merges the folds' statistics from those of their blocks).
 
     ``data`` is an :class:`IOData` record or a :class:`HankelStatistic`
     (identification from the statistic only). ``blocks_per_horizon`` is 2
@@ -741,7 +750,7 @@ def prepare(data, order, horizon, *, method: str, blocks_per_horizon: int = 2,
         fixed, candidates, horizon = check_order_horizon(
             order, horizon, data, method=method, blocks_per_horizon=blocks_per_horizon)
         hf = data_factor(data, blocks_per_horizon * horizon, method=method, horizon=horizon,
-                         statistic=statistic)
+                         statistic=statistic, factor=factor)
     input_condition = check_excitation(hf, data.input_names, method=method)
     hf, su, sy = normalize_channels(hf, outputs=normalize_outputs)
     return Problem(method, data, fixed, candidates, horizon, hf, input_condition, su, sy)
@@ -834,11 +843,12 @@ def identify(data, order, horizon, *, method: str, build, selection: str,
         if selection == "cv" and isinstance(data, IOData) and choose:
             check_data(data, method)
 
-            def prepare_fold(record, orders, f):
+            def prepare_fold(record, orders, f, factor=None):
                 with warnings.catch_warnings():
                     warnings.simplefilter("ignore")
-                    return prepare(record, orders, f, **options)
+                    return prepare(record, orders, f, factor=factor, **options)
             prepare_fold.blocks = blocks_per_horizon
+            prepare_fold.statistic = statistic
             n, f, variant, record = cross_validate(data, fixed, candidates, horizon,
                                                    prepare_fold=prepare_fold, builds=builds)
             problem = prepare(data, n, f, **options)
