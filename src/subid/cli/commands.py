@@ -487,7 +487,11 @@ def _check_out(out, names) -> None:
     """Refuse, before any work, an --out folder holding files subid did not write."""
     from subid.errors import FileWriteError
     if os.path.lexists(out):
-        if not os.path.isdir(out) or os.path.islink(out):
+        if os.path.islink(out):          # the one output-path policy (refuse_link of the io package)
+            raise FileWriteError(f"--out {out} is a symbolic link (to {os.readlink(out)}); "
+                                 "subid does not write through links: give the target "
+                                 "folder itself", path=out)
+        if not os.path.isdir(out):
             raise FileWriteError(f"--out {out} exists and is not a folder", path=out)
         extra = sorted(set(os.listdir(out)) - names)
         if extra:
@@ -1513,6 +1517,12 @@ def main(argv=None) -> int:
     except KeyboardInterrupt:
         click.echo("subid: interrupted", err=True)
         return 130
+    except MemoryError:
+        click.echo("subid: error: out of memory: the record (or a step of the method on it) "
+                   "does not fit in this machine's memory; for a large file use "
+                   "'subid identify FILE --stream' (bounded memory), or identify a part of "
+                   "the record", err=True)
+        return EXIT_USER_ERROR
     except (SubidError, OSError, ImportError) as exc:
         if debug:
             traceback.print_exc()

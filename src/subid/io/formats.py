@@ -47,7 +47,7 @@ from pathlib import Path
 import numpy as np
 
 from subid import _threads
-from subid._validation import check_dt, same_period
+from subid._validation import check_dt, same_period, stamp_resolution
 from subid.data import IOData
 from subid.errors import DataError, FileReadError, ModelError, ResourceLimitError
 from subid.io._files import MAX_EXPANDED_BYTES, atomic_write, open_regular, read_regular
@@ -1668,7 +1668,7 @@ def _from_arrays(arrays: dict, shown, ext, inputs, outputs, dt, time) -> IOData:
         if dt is None and time is None and "dt" in arrays:
             file_dt = _scalar(arrays["dt"], "dt", shown, ext)
             steps = np.diff(np.asarray(t, dtype=np.float64))
-            if steps.size and not same_period(steps, file_dt):
+            if steps.size and not same_period(steps, file_dt, resolution=stamp_resolution(t)):
                 raise FileReadError(f"{shown}: the file holds both 't' and 'dt' and they "
                                     f"disagree (dt = {file_dt:g}, t steps from {steps.min():g} "
                                     f"to {steps.max():g}); pass dt= or time= to choose",

@@ -27,6 +27,7 @@ from subid.errors import (
     UnstableModelWarning,
 )
 from subid.methods._info import collect_warnings, model_info
+from subid.methods.dt._checks import check_data
 from subid.methods.dt._regression import fit_b_d_projection, fit_b_d_x0
 from subid.methods.dt._selection import SELECTION_RULES, cross_validate, default_gap_horizon
 from subid.model.statespace import StateSpace
@@ -39,40 +40,6 @@ RANK_TOL = 1e-10
 # Input-Hankel condition number above which identification warns.
 CONDITION_WARN = 1e7
 DEFAULT_HORIZON_UNKNOWN_ORDER = 10
-
-
-#: Largest magnitude of a channel the methods accept: its square must not overflow.
-HUGE_VALUE = 1e150
-
-
-def check_data(data, method: str) -> IOData:
-    """The record a discrete-time method may use, or a clear error."""
-    if not isinstance(data, IOData):
-        raise DataError(f"{method} expects an IOData record, got {type(data).__name__}; "
-                        "wrap arrays as subid.IOData(u, y, dt=...)")
-    if not data.is_uniform:
-        raise DataError(f"{method} identifies a discrete-time model and needs uniformly "
-                        "sampled data; these time stamps are non-uniform "
-                        "(use a continuous-time method for them)")
-    for name, signal, names in (("input", data.u, data.input_names),
-                                ("output", data.y, data.output_names)):
-        if not signal.size or max(abs(float(signal.max())), abs(float(signal.min()))) \
-                <= HUGE_VALUE:       # whole-array reductions: cheap on long records
-            continue
-        peak = np.abs(signal).max(axis=0)
-        huge = np.flatnonzero(peak > HUGE_VALUE)
-        if huge.size:
-            k = int(huge[0])
-            raise DataError(f"{name} {names[k]} reaches {peak[k]:.3g}: squares and products "
-                            "of such values overflow double precision in the identification; "
-                            "express the channel in other units (divide it by a constant) "
-                            "and scale the model back")
-    flat = [k for k, column in enumerate(data.y.T) if column.max() == column.min()]
-    if flat:
-        names = ", ".join(data.output_names[k] for k in flat)
-        raise DataError(f"output {names} is constant over the whole record: it carries no "
-                        "information about the dynamics; drop that channel")
-    return data
 
 
 DEFAULT_MAX_ORDER = 10
@@ -150,8 +117,7 @@ def check_order_horizon(order, horizon, data, *, method: str, blocks_per_horizon
 def data_factor(data: IOData, depth: int, *, method: str, horizon: int,
                 statistic: str = "auto", factor: HankelFactor | None = None) -> HankelFactor:
     """Hankel factor of ``data`` with ``depth`` block rows, after the sample check
-    (``factor``: that factor, already computed, e.g. merged from the statistics of
-    the blocks of the cross-validation folds)."""
+    (``factor``: that factor, already computed)."""
     nu, ny = data.n_inputs, data.n_outputs
     rows = depth * (nu + ny)
     need = min_samples(depth, nu, ny)
@@ -308,6 +274,8 @@ def estimate_b_d(A, C_n, gamma, L11, L_yu, problem: "Problem", *, bd_method: str
                              "with a statistic only, use bd_method='projection' (or 'auto')")
         bd_method = "projection"
     diag = {}
+    if estimate_x0 and isinstance(data, IOData) and data.n_experiments > 1:
+        check_experiment_lengths(data, A.shape[0])
     if bd_method in ("auto", "simulation"):
         with np.errstate(over="ignore", invalid="ignore"):
             if second_pass is not None:
@@ -598,6 +566,26 @@ def stable_choice(A_q, Q, n_outputs: int, fit, *, stability: str, data, method: 
     return A_s, fitted_s, record
 
 
+def check_experiment_lengths(data, order: int) -> None:
+    """:class:`TooFewSamplesError` naming every experiment of ``data`` too short to
+    determine its own initial state (``n_samples * n_outputs < order``
+    equations for ``order`` unknowns), instead of a regression that would be
+    rank deficient and send B, D to another route without x0."""
+    short = [(name, b - a) for name, (a, b) in zip(data.experiment_names,
+                                                     data.experiment_ranges)
+             if (b - a) * data.n_outputs < order]
+    if short:
+        need = -(-order // data.n_outputs)
+        listed = ", ".join(f"{name!r} ({length} sample{'s' if length != 1 else ''})"
+                           for name, length in short[:5])
+        more = f" and {len(short) - 5} more" if len(short) > 5 else ""
+        raise TooFewSamplesError(
+            f"experiment{'s' if len(short) > 1 else ''} {listed}{more} of the merged record "
+            f"{'are' if len(short) > 1 else 'is'} too short to determine an initial state of "
+            f"order {order}: each experiment needs at least {need} samples. Drop "
+            f"{'them' if len(short) > 1 else 'it'} from the merge, or pass estimate_x0=False")
+
+
 def experiment_starts(data):
     """The first sample of every experiment of a record of several (None otherwise)."""
     if isinstance(data, IOData) and data.n_experiments > 1:
@@ -613,6 +601,7 @@ def initial_state(A, B, C, D, data):
         second_pass = getattr(data, "output_regression", None)   # subid.methods.dt._bd_pass
         return None if second_pass is None else second_pass.initial_state(A, B, C, D)
     if data.n_experiments > 1:
+        check_experiment_lengths(data, A.shape[0])
         rows = [_initial_state_one(A, B, C, D, e, column_std(data.y)) for e in data.experiments]
         return None if any(r is None for r in rows) else np.stack(rows)
     return _initial_state_one(A, B, C, D, data, column_std(data.y))
@@ -680,8 +669,7 @@ class Problem:
 
 
 def future_past_factor(pb) -> np.ndarray:
-    """The factor of ``[U_f; U_p; Y_p; Y_f]`` (once per problem, :meth:`Problem.cached`; MOESP's and the state
-    model's stability step))."""
+    """The factor of ``[U_f; U_p; Y_p; Y_f]``, once per problem (:meth:`Problem.cached`)."""
     hf, f = pb.factor, pb.horizon
     return pb.cached("future-past factor", lambda: hf.retriangularize(
         hf.u_rows(f, 2 * f), hf.u_rows(0, f), hf.y_rows(0, f), hf.y_rows(f, 2 * f)))
@@ -773,11 +761,9 @@ def choose_order(fixed, candidates, profile, source: str):
 SYSTEM_MATRICES = ("auto", "shift", "states")
 #: ``system_matrices='auto'`` lets the cross-validation of the order and horizon choose
 #: between its estimators on records up to this many samples; longer records use the
-#: first ('shift'): there both estimators are consistent and their models close, and
-#: the estimators double the candidates. With the order and the horizon both given,
-#: 'auto' is the first estimator with no fold fits at all (one fit: an explicit call
-#: costs what the model costs); the cross-validated choice at a given order is asked
-#: for by a one-element candidate list (``order=[4]``). Depends on the record only.
+#: first ('shift'), where both are consistent and their models close. With the order
+#: and horizon both given, 'auto' is the first with no fold fits (one fit); a
+#: one-element candidate list (``order=[4]``) asks for the cross-validated choice.
 AUTO_VARIANT_MAX_SAMPLES = 20_000
 
 

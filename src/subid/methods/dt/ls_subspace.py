@@ -50,7 +50,13 @@ from functools import partial
 import numpy as np
 import scipy.linalg
 
-from subid._validation import check_bool, check_choice, check_selector, legacy_arguments
+from subid._validation import (
+    check_bool,
+    check_choice,
+    check_seed,
+    check_selector,
+    legacy_arguments,
+)
 from subid.delay import shift_for_method
 from subid.errors import OptionError, OrderError
 from subid.methods.dt._subspace import (
@@ -81,7 +87,7 @@ def random_selector(horizon: int, n_outputs: int, seed=0, rows: int | None = Non
     uses the same Λ whether the order was given or estimated (Remark 2).
     """
     size = horizon * n_outputs
-    full = np.random.default_rng(seed).uniform(-1.0, 1.0, size=(size, size))
+    full = np.random.default_rng(check_seed(seed)).uniform(-1.0, 1.0, size=(size, size))
     return full if rows is None else full[:rows].copy()
 
 
@@ -237,6 +243,7 @@ def ls_subspace(data, order=None, *, horizon=None, instruments="past", selector=
     if selector is not None and horizon is None:
         horizon = selector_horizon(selector, data)
     check_choice(bd_method, "bd_method", BD_METHODS)
+    check_seed(seed)
     check_system_matrices(system_matrices)
     if system_matrices == "states" and instruments != "past":
         raise OptionError("system_matrices='states' needs the past data (instruments='past'): "

@@ -25,8 +25,10 @@ import numpy as np
 import scipy.linalg
 
 from subid._validation import check_bool, legacy_arguments
+from subid.data import IOData
 from subid.delay import shift_for_method
 from subid.methods.dt._subspace import (
+    check_experiment_lengths,
     check_weighting,
     choose_order,
     cva_factor,
@@ -260,6 +262,8 @@ def state_model(pb, gamma, *, stability, feedthrough, estimate_x0, coefficients=
             return A, B, C, D, x0, {"state_regression_residual": float(residual), "x0": x0,
                                     "stability": stab, **extra}
     B, C, D = pb.unscale(B, C, D)    # from the normalised channels to the user's units
+    if estimate_x0 and pb.fold and isinstance(data, IOData) and data.n_experiments > 1:
+        check_experiment_lengths(data, n)     # what initial_state would raise
     x0 = initial_state(A, B, C, D, data) if estimate_x0 and not pb.fold else None
     return A, B, C, D, x0, {"state_regression_residual": float(residual), "x0": x0,
                             "stability": stab}

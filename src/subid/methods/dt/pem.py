@@ -45,8 +45,11 @@ import scipy.optimize
 
 from subid._validation import same_period
 from subid.data import IOData
+from subid.delay import delay_inputs, input_delay_of, record_delay
 from subid.errors import DataError, ModelError, NoiseModelWarning, OptionError
 from subid.methods._info import records_warnings
+from subid.methods.dt._checks import check_data
+from subid.methods.dt._covariance import covariance_factor
 from subid.methods.dt._pem_kernel import jacobian
 from subid.model import _simulate
 from subid.model.statespace import StateSpace
@@ -54,6 +57,8 @@ from subid.model.statespace import StateSpace
 __all__ = ["pem"]
 
 FOCUS = ("prediction", "simulation")
+# Smallest tolerance: scipy's least_squares needs one above machine precision.
+_EPS = float(np.finfo(float).eps)
 # A trial predictor with a spectral radius above this is treated as unstable.
 STABILITY_LIMIT = 1.0 - 1e-9
 # Largest Jacobian (N * ny rows, one column per free parameter) pem builds.
@@ -73,6 +78,7 @@ def _check_inputs(data, model, focus):
                         f"the model has {model.n_inputs} and {model.n_outputs}")
     if not data.is_uniform:
         raise DataError("pem refines discrete-time models and needs uniformly sampled data")
+    check_data(data, "pem")               # magnitudes whose squares overflow, constant outputs
     if not model.is_continuous and not same_period(data.dt, model.dt):
         raise DataError(f"the model has dt={model.dt} but the data are sampled with "
                         f"dt={data.dt}")
@@ -277,7 +283,10 @@ def pem(data, model, *, focus="prediction", max_iterations=100, tolerance=1e-8, 
         ``cost_history`` (criterion at every accepted iterate, first entry the
         start), ``start_cost``, ``final_cost``, ``stop_reason`` (the
         optimiser's message, or why the start was kept), ``n_evaluations``,
-        ``x0`` and ``parametrisation``.
+        ``x0``, ``parametrisation`` and ``parameter_covariance`` (the
+        asymptotic covariance of the parameters at the result, for
+        :func:`subid.freqresp_bounds`; with ``focus='simulation'`` it assumes
+        white output errors; dropped for continuous-time models).
 
     Raises
     ------
@@ -303,10 +312,23 @@ def pem(data, model, *, focus="prediction", max_iterations=100, tolerance=1e-8, 
     if isinstance(max_iterations, bool) or not isinstance(max_iterations, int) \
             or max_iterations < 1:
         raise OptionError(f"max_iterations must be a positive integer, got {max_iterations!r}")
-    if not (isinstance(tolerance, (int, float)) and 0 < tolerance < 1):
-        raise OptionError(f"tolerance must be in (0, 1), got {tolerance!r}")
+    if isinstance(tolerance, bool) or not isinstance(tolerance, (int, float)) \
+            or not _EPS <= tolerance < 1:
+        raise OptionError(f"tolerance must be in [{_EPS:.3g}, 1) (below machine precision no "
+                          f"step can meet it), got {tolerance!r}")
     if isinstance(rounds, bool) or not isinstance(rounds, int) or rounds < 1:
         raise OptionError(f"rounds must be a positive integer, got {rounds!r}")
+    if (delays := input_delay_of(model)) is not None:
+        # the model's dynamics see u_j[k - d_j]: refine on the record shifted so (the
+        # first max(d) samples, whose delayed inputs precede the record, left out, as
+        # the methods' input_delay= does), then record the delays on the result
+        shifted, _ = delay_inputs(data, delays)
+        inner = model.with_noise_model(model.K, model.noise_cov,
+                                       info={k: v for k, v in model.info.items()
+                                             if k != "input_delay"})
+        return record_delay(pem(shifted, inner, focus=focus, max_iterations=max_iterations,
+                                tolerance=tolerance, rounds=rounds, feedthrough=feedthrough),
+                            delays)
     if model.is_continuous:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", NoiseModelWarning)
@@ -317,8 +339,11 @@ def pem(data, model, *, focus="prediction", max_iterations=100, tolerance=1e-8, 
         info = dict(ct.info)
         kind = "zero" if model.hold == "zoh" else "first"
         info["pem_through"] = f"{kind}-order-hold discretisation with dt={data.dt}"
+        # the covariance belongs to the discrete-time parameters
+        info.pop("parameter_covariance", None)
         return ct.with_noise_model(None, None, info=info)
-    return _pem_dt(data, model, focus, max_iterations, tolerance, rounds, feedthrough)
+    refined = _pem_dt(data, model, focus, max_iterations, tolerance, rounds, feedthrough)
+    return _with_covariance(refined, model, data, focus, feedthrough)
 
 
 def _start_gain(data, model):
@@ -448,4 +473,63 @@ def _pem_dt(data, model, focus, max_iterations, tolerance, rounds, feedthrough):
     h = max(5, -(-n // ny) + 2)
     if N >= 2 * h * (nu + ny + 1):
         return with_factor(refined, HankelStatistic.from_data(data, 2 * h).factor())
+    return refined
+
+
+def _with_covariance(refined, start, data, focus, feedthrough):
+    """``refined`` with ``info['parameter_covariance']``: the asymptotic covariance of
+    its parameters (:mod:`subid.methods.dt._covariance`) from the Jacobian at the
+    estimate, in the local coordinates of the estimate (the initial states are
+    eliminated as nuisance parameters).
+
+    Stored as ``parameters`` (θ, the stacked row-major ``A, B, C`` and, when
+    estimated, ``D`` and ``K``), ``factor`` (``F``, shape (len(θ), d), with
+    ``Cov(θ) = F F^T``: rank d, the DDLC directions, no similarity
+    directions), ``with_feedthrough``, ``with_gain``, ``noise_cov`` (the
+    residual covariance used) and ``method``. The factor is tied to this
+    realisation (:func:`subid.parameter_covariance` checks it).
+    """
+    n, nu, ny = refined.order, refined.n_inputs, refined.n_outputs
+    with_d = bool(np.any(start.D != 0)) if feedthrough is None else bool(feedthrough)
+    with_k = focus == "prediction"
+    if with_k and refined.K is None:
+        return refined
+    A, B, C, D = (np.array(m) for m in (refined.A, refined.B, refined.C, refined.D))
+    K = np.array(refined.K) if with_k else np.zeros((n, ny))
+    layout = _Layout(n, nu, ny, with_d, with_k)
+    basis = _local_coordinates(layout, A, B, C, D, K)
+    dirs = _directions(layout, basis, A, B, C, D, K, focus)
+    dm = basis.shape[1]
+    ranges = data.experiment_ranges
+    x0 = np.asarray(refined.info.get("x0", np.zeros(n)), dtype=float).reshape(-1, n)
+    if x0.shape[0] != len(ranges):
+        return refined
+    v = np.hstack([data.u, data.y]) if with_k else data.u
+    mats = [np.ascontiguousarray(a) for a in _predictor(A, B, C, D, K, focus)]
+    dirs = [np.ascontiguousarray(a) for a in dirs]
+    N = data.n_samples
+    J = np.zeros((N, ny, len(ranges) * n + dm))
+    yhat = np.empty((N, ny))
+    for e, (a, b) in enumerate(ranges):       # nuisance x0 columns first
+        yhat[a:b], Je = jacobian(*mats, np.ascontiguousarray(v[a:b]),
+                                 np.ascontiguousarray(x0[e]), *dirs)
+        J[a:b, :, e * n:(e + 1) * n] = Je[:, :, dm:]
+        J[a:b, :, len(ranges) * n:] = Je[:, :, :dm]
+    factor, lam = covariance_factor(J, data.y - yhat, len(ranges) * n)
+    info = refined.info            # a fresh dict of the model pem just built
+    if factor is None:
+        info["parameter_covariance_note"] = (
+            "no parameter covariance: the Jacobian at the estimate is rank deficient "
+            "(a non-minimal model or data that do not excite it)")
+        return refined
+    info["parameter_covariance"] = {
+        "parameters": layout.pack(A, B, C, D, K),
+        "factor": basis @ factor,
+        "with_feedthrough": with_d,
+        "with_gain": with_k,
+        "noise_cov": lam,
+        "n_samples": N,
+        "method": "asymptotic prediction-error covariance [sum psi Lambda^-1 psi^T]^-1 "
+                  "(Ljung 1999, Theorem 9.1) in data-driven local coordinates",
+    }
     return refined

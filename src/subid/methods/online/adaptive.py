@@ -77,6 +77,7 @@ import numpy as np
 from subid._validation import (
     as_chunk,
     check_int,
+    check_seed,
     check_selector,
     check_time_stamps,
 )
@@ -344,6 +345,7 @@ class AdaptiveIdentifier(OnlineIdentifier):
         # the settings, stored unchanged (validated below)
         self.order, self.n_inputs, self.n_outputs = order, n_inputs, n_outputs
         self.horizon, self.filter_poles = horizon, filter_poles
+        check_seed(seed)
         self.forgetting, self.bd_forgetting, self.seed = forgetting, bd_forgetting, seed
         self.dt, self.hold, self.method, self.scale_filters = dt, hold, method, scale_filters
         self.refresh_every, self.bd_gate, self.max_condition = refresh_every, bd_gate, \
