@@ -151,8 +151,9 @@ def score_horizon(parts, orders, horizon, *, prepare_fold, builds):
 
     Per fold, one problem (one statistic, by cost: the lagged products merged from
     those of the four blocks of the record where they are exact, :func:`fold_factors`;
-    :meth:`subid.HankelStatistic.from_data` otherwise) whose order-independent steps (the factorisation, the SVD) every candidate
-    order shares (:meth:`subid.methods.dt._subspace.Problem.cached`); the fold
+    :meth:`subid.HankelStatistic.from_data` otherwise) whose order-independent
+    steps (the factorisation, the SVD) every candidate order shares
+    (:meth:`subid.methods.dt._subspace.Problem.cached`); the fold
     models skip the estimation x0 (``Problem.fold``), and each is scored by one
     compiled simulation with the x0 regression on the validation block
     (:mod:`subid.methods.dt._scoring`), whose record-dependent parts are computed
