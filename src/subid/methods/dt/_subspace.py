@@ -115,8 +115,9 @@ def check_order_horizon(order, horizon, data, *, method: str, blocks_per_horizon
 
 
 def data_factor(data: IOData, depth: int, *, method: str, horizon: int,
-                statistic: str = "auto") -> HankelFactor:
-    """Hankel factor of ``data`` with ``depth`` block rows, after the sample check."""
+                statistic: str = "auto", factor: HankelFactor | None = None) -> HankelFactor:
+    """Hankel factor of ``data`` with ``depth`` block rows, after the sample check
+    (``factor``: that factor, already computed)."""
     nu, ny = data.n_inputs, data.n_outputs
     rows = depth * (nu + ny)
     need = min_samples(depth, nu, ny)
@@ -133,6 +134,8 @@ def data_factor(data: IOData, depth: int, *, method: str, horizon: int,
             f"{nu} input{'s' if nu != 1 else ''} and {ny} output{'s' if ny != 1 else ''}: "
             f"the {depth}-block-row Hankel matrix has {rows} rows and needs at least "
             f"{need} samples; reduce the horizon or supply more data")
+    if factor is not None:
+        return factor
     return HankelStatistic.from_data(data, depth, kind=statistic).factor()
 
 
@@ -637,6 +640,10 @@ class Problem:
     input_condition: float
     input_scale: np.ndarray
     output_scale: np.ndarray
+    #: A cross-validation fold model (:func:`subid.methods.dt._selection.score_horizon`):
+    #: it is scored with an x0 fitted on the held-out data, so the estimation x0 that
+    #: costs a simulation of its own (the state-sequence estimate's) is skipped.
+    fold: bool = False
     _cache: dict = field(default_factory=dict, repr=False, compare=False)
 
     def weights(self) -> np.ndarray:
@@ -646,10 +653,26 @@ class Problem:
             cached = self._cache["weights"] = output_weights(self.data.y)
         return cached
 
+    def cached(self, key, compute):
+        """``compute()``, once per problem and ``key``: the steps that do not depend
+        on the order (the problems of one fold's candidate orders share this cache,
+        :func:`subid.methods.dt._selection.score_horizon`, so that every order comes
+        from one factorisation and one SVD). The result must be treated as read-only."""
+        if key not in self._cache:
+            self._cache[key] = compute()
+        return self._cache[key]
+
     def unscale(self, B_n, C_n, D_n):
         """B, C, D in the user's units from those of the normalised channels."""
         su, sy = self.input_scale, self.output_scale
         return B_n / su, C_n * sy[:, None], D_n * sy[:, None] / su
+
+
+def future_past_factor(pb) -> np.ndarray:
+    """The factor of ``[U_f; U_p; Y_p; Y_f]``, once per problem (:meth:`Problem.cached`)."""
+    hf, f = pb.factor, pb.horizon
+    return pb.cached("future-past factor", lambda: hf.retriangularize(
+        hf.u_rows(f, 2 * f), hf.u_rows(0, f), hf.y_rows(0, f), hf.y_rows(f, 2 * f)))
 
 
 def normalize_channels(hf: HankelFactor, outputs: bool):
@@ -678,8 +701,13 @@ STATISTICS = ("auto", "qr", "gram")
 
 
 def prepare(data, order, horizon, *, method: str, blocks_per_horizon: int = 2,
-            statistic: str = "auto", normalize_outputs: bool = True) -> Problem:
+            statistic: str = "auto", normalize_outputs: bool = True,
+            factor: HankelFactor | None = None) -> Problem:
     """Validate the arguments, build the Hankel factor and check excitation.
+
+    ``factor``: the Hankel factor of the record (depth ``blocks_per_horizon *
+    horizon``), when already computed (:func:`subid.methods.dt._selection.score_horizon`
+    merges the folds' statistics from those of their blocks).
 
     ``data`` is an :class:`IOData` record or a :class:`HankelStatistic`
     (identification from the statistic only). ``blocks_per_horizon`` is 2
@@ -710,7 +738,7 @@ def prepare(data, order, horizon, *, method: str, blocks_per_horizon: int = 2,
         fixed, candidates, horizon = check_order_horizon(
             order, horizon, data, method=method, blocks_per_horizon=blocks_per_horizon)
         hf = data_factor(data, blocks_per_horizon * horizon, method=method, horizon=horizon,
-                         statistic=statistic)
+                         statistic=statistic, factor=factor)
     input_condition = check_excitation(hf, data.input_names, method=method)
     hf, su, sy = normalize_channels(hf, outputs=normalize_outputs)
     return Problem(method, data, fixed, candidates, horizon, hf, input_condition, su, sy)
@@ -731,13 +759,11 @@ def choose_order(fixed, candidates, profile, source: str):
 
 
 SYSTEM_MATRICES = ("auto", "shift", "states")
-#: ``system_matrices='auto'`` chooses between its estimators by cross-validation on
-#: records up to this many samples; longer records use the first ('shift'). The choice
-#: costs about four fold fits per estimator, which on short records (where the two
-#: differ most: DaISy sets of 1,000 to 10,000 samples) is a fraction of a second but
-#: would make an explicit ``method(data, order, horizon=...)`` call on 10^5 samples
-#: five times slower; on long records both estimators are consistent and their models
-#: close. Depends on the record only, so a given order reproduces a chosen one.
+#: ``system_matrices='auto'`` lets the cross-validation of the order and horizon choose
+#: between its estimators on records up to this many samples; longer records use the
+#: first ('shift'), where both are consistent and their models close. With the order
+#: and horizon both given, 'auto' is the first with no fold fits (one fit); a
+#: one-element candidate list (``order=[4]``) asks for the cross-validated choice.
 AUTO_VARIANT_MAX_SAMPLES = 20_000
 
 
@@ -766,11 +792,16 @@ def identify(data, order, horizon, *, method: str, build, selection: str,
     ``variants`` (a dict name -> build, the first the default), when given,
     are alternative estimators of the system matrices from the same
     subspace (``system_matrices='auto'`` of :func:`subid.moesp` and
-    :func:`subid.ls_subspace`): with ``selection='cv'`` on a raw record the
-    cross-validation chooses among them too, even when the order and the
-    horizon are given (so that a given order and horizon reproduce the
-    model); otherwise the first one is used. ``info['system_matrices']``
-    names the one used.
+    :func:`subid.ls_subspace`): with ``selection='cv'`` on a raw record of
+    up to :data:`AUTO_VARIANT_MAX_SAMPLES` samples, the cross-validation of
+    the order or horizon chooses among them too, and with the order and the
+    horizon both given the estimators alone are cross-validated at them (eight
+    fold fits; with one estimator, or ``system_matrices`` given, or beyond
+    :data:`AUTO_VARIANT_MAX_SAMPLES`, an explicit call costs one fit and no
+    fold fit); otherwise the first one is used. ``info['system_matrices']``
+    names the one used, and ``info['system_matrices_selection']`` says why
+    when there was a choice; ``method(data, order=model.order,
+    horizon=model.info['horizon'])`` reproduces a default model.
     """
     if selection not in SELECTION_RULES:
         raise OptionError(f"selection must be one of {SELECTION_RULES}, got {selection!r}")
@@ -781,41 +812,64 @@ def identify(data, order, horizon, *, method: str, build, selection: str,
                    normalize_outputs=normalize_outputs)
     with collect_warnings() as issued:
         builds = variants if variants else {None: build}
+        pinned = fixed is not None and horizon is not None
+        first = next(iter(builds))
+        variant_rule = None
         if len(builds) > 1 and getattr(data, "n_samples", 0) > AUTO_VARIANT_MAX_SAMPLES:
-            first = next(iter(builds))
+            variant_rule = {"rule": "long record", "description": (
+                f"{first!r} beyond {AUTO_VARIANT_MAX_SAMPLES} samples, where both "
+                "estimators are consistent")}
+        if variant_rule is not None:
             builds = {first: builds[first]}
-        choose = fixed is None or horizon is None or len(builds) > 1
+        # order and horizon given: no fold fits, except the choice between two
+        # estimators (system_matrices='auto' on a record of at most
+        # AUTO_VARIANT_MAX_SAMPLES), cross-validated at that order and horizon as the
+        # default call cross-validates it, so that method(data, order=m.order,
+        # horizon=m.info['horizon']) reproduces the default model m (issue 21)
+        choose = not pinned or len(builds) > 1
         if selection == "cv" and isinstance(data, IOData) and choose:
             check_data(data, method)
 
-            def prepare_fold(record, orders, f):
+            def prepare_fold(record, orders, f, factor=None):
                 with warnings.catch_warnings():
                     warnings.simplefilter("ignore")
-                    return prepare(record, orders, f, **options)
+                    return prepare(record, orders, f, factor=factor, **options)
             prepare_fold.blocks = blocks_per_horizon
+            prepare_fold.statistic = statistic
             try:
                 n, f, variant, record = cross_validate(data, fixed, candidates, horizon,
-                                                       prepare_fold=prepare_fold, builds=builds)
+                                                       prepare_fold=prepare_fold,
+                                                       builds=builds)
             except SubidError:
-                if fixed is None or horizon is None:
+                if not pinned:
                     raise
-                # order and horizon given, the folds too short for them: the default estimator
-                n, f, variant, record = fixed, horizon, next(iter(builds)), None
+                # order and horizon given, the folds too short for them: the first estimator
+                n, f, variant, record = fixed, horizon, first, None
             problem = prepare(data, n, f, **options)
             model = builds[variant](problem)
             if record is not None:
                 n, f, variant, problem, model = _unrepaired_choice(
                     record, data, options, builds, (n, f, variant, problem, model))
-            if record is not None and (fixed is None or horizon is None):
+            if record is not None and not pinned:
                 model.info["order_selection"] = record
-            elif record is not None:
-                model.info["system_matrices_selection"] = record
+            if len(builds) > 1:
+                variant_rule = {"rule": "cv", "description": (
+                    "cross-validated at the given order and horizon "
+                    "(info['system_matrices_cv'])" if pinned else
+                    "cross-validated with the order and horizon (info['order_selection'])")}
+                if pinned and record is not None:
+                    model.info["system_matrices_cv"] = record
+                elif record is None:
+                    variant_rule = {"rule": "folds too short", "description": (
+                        f"{first!r}: the folds are too short for the given order and horizon")}
         else:
             problem = prepare(data, order, horizon, **options)
             variant = next(iter(builds))
             model = builds[variant](problem)
         if variant is not None:
             model.info["system_matrices"] = variant
+        if variant_rule is not None:
+            model.info["system_matrices_selection"] = variant_rule
         if finalize is not None:
             model = finalize(model, problem)
     model.info["warnings"] = list(issued)

@@ -176,9 +176,10 @@ def ls_subspace(data, order=None, *, horizon=None, instruments="past", selector=
         the oblique projection of the future outputs on the past data, and
         ``[A B; C D]`` by least squares on it (:func:`subid.n4sid`'s step,
         QR-based, still SVD-free; the basis is still the one Λ fixes).
-        ``'auto'`` (default): with ``selection='cv'`` on a record of up to
-        20,000 samples the cross-validation chooses between them, as in
-        :func:`subid.moesp`; otherwise (longer records, statistics) ``'shift'``. ``info['system_matrices']`` names the one used.
+        ``'auto'`` (default): as in :func:`subid.moesp` (the cross-validation
+        of the order or horizon chooses between them on records of up to
+        20,000 samples; ``'shift'`` otherwise, and with the order and horizon
+        both given). ``info['system_matrices']`` names the one used.
     bd_method : {'auto', 'simulation', 'projection'}
         How B, D (and x0) are found given A and C: least squares on the raw
         output samples through the model (``'simulation'``, most accurate,
@@ -195,7 +196,10 @@ def ls_subspace(data, order=None, *, horizon=None, instruments="past", selector=
     statistic : {'auto', 'qr', 'gram'}
         How the data are reduced (:mod:`subid.statistic.hankel`): QR factor of the
         Hankel matrix (accurate to rounding) or lagged products (25x faster,
-        squares the condition number). ``'auto'``: QR up to 200,000 samples.
+        squares the condition number). ``'auto'``: the lagged products where
+        they are exact to rounding (a Hankel matrix of condition number up to
+        1e4, e.g. noisy data), else QR up to 200,000 samples
+        (:meth:`subid.HankelStatistic.from_data`).
     refine : {None, 'pem'}
         ``'pem'``: refine the final subspace estimate by prediction-error
         minimisation (:func:`subid.pem`, default options) on the record.
