@@ -166,7 +166,7 @@ def ls_subspace(data, order=None, *, horizon=None, instruments="past", selector=
         ``info['order_selection']`` holds every candidate with its score.
     stability : {'auto', 'enforce', 'none'}
         ``'auto'``: an unstable A is made stable when the data do not grow
-        (:func:`subid.methods.dt._subspace.stability_request`), by regularised shift
+        (:func:`subid.methods.dt._stability.stability_request`), by regularised shift
         invariance, then B, D and x0 are refitted; ``'enforce'``: always;
         ``'none'``: never. ``info['stability']`` says what was done.
     system_matrices : {'auto', 'shift', 'states'}

@@ -82,7 +82,7 @@ def moesp(data, order=None, *, horizon=None, weighting="moesp", selection="cv",
         with its score.
     stability : {'auto', 'enforce', 'none'}
         ``'auto'``: an unstable A is made stable when the data do not grow
-        (:func:`subid.methods.dt._subspace.stability_request`); ``'enforce'``: always;
+        (:func:`subid.methods.dt._stability.stability_request`); ``'enforce'``: always;
         ``'none'``: never. ``info['stability']`` says what was done.
     system_matrices : {'auto', 'shift', 'states'}
         How A, B, C, D follow from the estimated Γ. ``'shift'``: A and C by
