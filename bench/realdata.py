@@ -203,7 +203,8 @@ def main(argv=None) -> int:
         arx = arx_grid(est, val)
         results[name] = subid_defaults(est, val)
         results[name]["_arx"] = arx
-        print(name, {k: round(v["fit"], 1) for k, v in results[name].items()}, file=sys.stderr)
+        print(name, {k: round(v["fit"], 1) for k, v in results[name].items()
+                     if not k.startswith("_")}, file=sys.stderr)
     lines = [
         "# Default calls on real data against SIPPY's best order",
         "",

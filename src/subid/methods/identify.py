@@ -27,9 +27,14 @@ choice is made on the estimation record and recorded in
    innovation form). The refinement of the whole record is kept only when the
    refined fold models score better on average than the subspace fold models
    (``info['identify']['refinement']`` holds both sets of fold scores, the
-   decision and the cost history of the final refinement). An unstable
-   subspace model (an unstable plant under feedback) cannot be refined by
-   simulation; it is kept as it is.
+   decision and the cost history of the final refinement). Where the data
+   show feedback (the test of ``feedthrough='auto'``), the output-error
+   criterion is biased (the input is correlated with the noise), so the
+   refinement minimises and is judged by one-step prediction errors, the
+   criterion that stays consistent in closed loop (Ljung 1999, Sec. 13.4,
+   the direct approach); ``info['identify']['refinement']['focus_reason']``
+   says so. An unstable subspace model (an unstable plant under feedback)
+   cannot be refined by simulation; it is kept as it is.
 
 The choices cost the subspace cross-validations of two estimators plus four
 fold refinements and one final refinement; the fold refinements use the same
@@ -122,6 +127,23 @@ def _refine(data, model, focus):
             return pem(data, model, focus=focus)
     except (ModelError, DataError):
         return None
+
+
+def _feedback(data, model) -> bool:
+    """Whether the data show feedback from the outputs to the inputs: the test of
+    ``feedthrough='auto'`` (:func:`subid.methods.dt._feedthrough.decide`), from the
+    model's own record when it ran, else on the record's statistic at its horizon."""
+    ran = model.info.get("feedthrough", {}).get("feedback")
+    if isinstance(ran, dict):
+        return bool(ran["detected"])
+    from subid.methods.dt._feedthrough import decide
+    from subid.statistic.hankel import HankelStatistic
+    depth = 2 * int(model.info["horizon"])
+    try:
+        factor = HankelStatistic.from_data(data, depth).factor()
+    except SubidError:
+        return False
+    return bool(decide(factor)[1]["feedback"]["detected"])
 
 
 def _fold_refinement(data, method, config, focus):
@@ -288,6 +310,16 @@ def _discrete(data, order, horizon, feedthrough, focus, refine):
         refinement["kept"] = False
         refinement["reason"] = "refine=False"
         return model, record
+    record["feedback"] = _feedback(data, model)
+    if record["feedback"] and focus == "simulation":
+        # under feedback the output-error criterion is biased (the input is correlated
+        # with the noise); the prediction-error criterion of the innovation form stays
+        # consistent (Ljung 1999, Sec. 13.4, the direct approach)
+        focus = "prediction"
+        refinement.update(focus=focus, requested_focus="simulation",
+                          focus_reason="feedback detected in the data: the simulation "
+                                       "(output-error) criterion is biased in closed loop; "
+                                       "refined and judged by one-step prediction instead")
     if focus == "simulation" and not model.is_stable():
         refinement.update(kept=False, reason="the subspace model is unstable (the data demand "
                                              "it): no simulation error to minimise")
