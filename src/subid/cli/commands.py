@@ -605,7 +605,7 @@ def cli(ctx, quiet, verbose, debug):
 @click.option("--method", "method_name", type=click.Choice(list(METHODS)), default=None,
               help="Identification method (see 'subid methods'). Default: subid.identify, "
                    "which chooses the subspace estimator, order, feedthrough and horizon "
-                   "and refines by PEM where that validates better.")
+                   "and refines by PEM where that validates better (with --stream: ls).")
 @click.option("--order", default="auto", show_default=True, metavar="N|auto|A:B",
               help="Model order: an integer, 'auto' (chosen from the data), a range "
                    "'2:8' or a list '2,4,6' of candidates.")
@@ -656,7 +656,10 @@ def identify(data, inputs, outputs, dt, time_column, delimiter, detrend, method_
     part is the end of the last file. Discrete-time batch methods only.
     """
     from subid.evaluation import report
-    spec = IDENTIFY if method_name is None else METHODS[method_name]
+    # without --method: subid.identify, or with --stream (a statistic of the file, which
+    # identify cannot refine) the SVD-free ls_subspace, the default before identify
+    spec = METHODS[method_name] if method_name is not None else \
+        (METHODS["ls"] if stream else IDENTIFY)
     _check_out(out, _IDENTIFY_FILES)
     order = _parse_order(order)
     opts = _parse_options(options)
@@ -666,9 +669,6 @@ def identify(data, inputs, outputs, dt, time_column, delimiter, detrend, method_
         raise click.UsageError(f"--forgetting applies to online methods only, not to "
                                f"{spec.name}")
     spec.load()                                     # "not available" before any work
-    if stream and spec is IDENTIFY:
-        raise click.UsageError("--stream identifies from a statistic of the file: choose a "
-                               "method that can (--method ls, moesp or n4sid)")
     if stream and refine != "none":
         raise click.UsageError(f"--refine {refine} needs the samples in memory; it does not "
                                "work with --stream")

@@ -35,8 +35,9 @@ choice is made on the estimation record and recorded in
    the direct approach); with ``focus='simulation'`` that refinement is kept
    only when it also raises the simulation misfit on the folds by at most
    :data:`SIMULATION_LOSS` (10 %): the price of consistency the simulation
-   criterion accepts (``info['identify']['refinement']['focus_reason']``). An unstable subspace model (an unstable plant under feedback)
-   cannot be refined by simulation; it is kept as it is.
+   criterion accepts (``info['identify']['refinement']['focus_reason']``).
+   An unstable subspace model (an unstable plant under feedback) cannot be
+   refined by simulation; it is kept as it is.
 
 The choices cost the subspace cross-validations of two estimators plus four
 fold refinements and one final refinement; the fold refinements use the same

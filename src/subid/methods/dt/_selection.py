@@ -61,7 +61,8 @@ method offers two estimators of the system matrices from the same subspace
 with the output regression, or the state sequence), each is a candidate
 too. When the chosen candidate's model refitted to the whole record has to
 be stabilised although not all of its fold models had, the next candidates
-by criterion are tried (:func:`subid.methods.dt._subspace._unrepaired_choice`).
+are tried (:func:`subid.methods.dt._subspace._unrepaired_choice`): first
+those none of whose fold models needed it, by criterion, then the others.
 
 The final model is then fitted to the whole record with the chosen order
 and horizon, by the same code path as an explicit call, so that
@@ -322,10 +323,11 @@ def cross_validate(data, fixed, candidates, horizon, *, prepare_fold, builds):
     }
     if ceiling is not None:
         record["order_ceiling"] = ceiling
-    # the other candidates, least criterion first: the fallbacks of
-    # subid.methods.dt._subspace._unrepaired_choice
+    # the other candidates, the fallbacks of subid.methods.dt._subspace._unrepaired_choice:
+    # first those none of whose fold models had to be stabilised (the kind of model the
+    # final one must be), then the rest, each by least criterion
     ranked = sorted((key for key in scores if key != (order, chosen_h, chosen_v)),
-                    key=lambda key: (crit[key], key))
+                    key=lambda key: (stabilised_folds[key] > 0, crit[key], key))
     record["ranking"] = [entry(*key) for key in ranked]
     return order, chosen_h, names[chosen_v], record
 
@@ -339,9 +341,10 @@ def criterion(score: float, order: int, n_samples: int, n_inputs: int,
     :data:`ABSOLUTE_TOLERANCE` (rounding level: every order from the true one
     up fits noise-free data to rounding); ``p = n (nu + ny) + nu ny`` the
     free parameters of an order-n model (B, C and D; A adds none beyond
-    what a similarity transformation absorbs), ``N`` the samples. Schwarz's criterion (Ann. Statist. 6,
-    1978; Ljung 1999, Sec. 16.4, eq. 16.33) for a Gaussian error whose
-    variance is estimated on held-out data instead of the estimation data.
+    what a similarity transformation absorbs), ``N`` the samples. Schwarz's
+    criterion (Ann. Statist. 6, 1978; Ljung 1999, Sec. 16.4, eq. 16.33) for a
+    Gaussian error whose variance is estimated on held-out data instead of the
+    estimation data.
     """
     misfit = max(100.0 - score, ABSOLUTE_TOLERANCE)
     params = order * (n_inputs + n_outputs) + n_inputs * n_outputs
