@@ -55,9 +55,11 @@ def test_feedthrough_decision_from_a_statistic_equals_the_record(paper_data):
     assert decide(stat.factor())[0] == a.info["feedthrough"]["estimated"]
 
 
-@pytest.mark.slow
+@pytest.mark.long
 def test_closed_loop_default_start_is_as_good_as_no_feedthrough():
-    """Issue 21 acceptance (5 of its 10 runs here; bench/closed_loop.py runs all 10)."""
+    """Issue 21 acceptance (5 of its 10 runs here; bench/closed_loop.py runs all 10). The
+    cheap siblings: test_feedthrough_auto_sees_feedback_and_direct_terms and
+    test_identify_closed_loop_is_consistent."""
     true = systems.seed001_innovation_system(feedthrough=False)
     default, reference = [], []
     with warnings.catch_warnings():
@@ -144,9 +146,10 @@ def test_next_block_and_its_ceiling():
     assert not orders or ceiling["limited_by"] is not None
 
 
-@pytest.mark.slow
+@pytest.mark.long
 def test_order_search_goes_past_10():
-    """Seven modes (order 14), 2 inputs, 4 outputs: the search passes 10."""
+    """Seven modes (order 14), 2 inputs, 4 outputs: the search passes 10 (the cheap
+    sibling: test_next_block_and_its_ceiling)."""
     true = _structure(7, seed=3)
     data = systems.simulate_data(true, 3000, seed=1, output_snr_db=30)
     est, val = data[:2000], data[2000:]
