@@ -141,9 +141,9 @@ def _feedback(data, model) -> bool:
     """Whether the data show feedback from the outputs to the inputs: the test of
     ``feedthrough='auto'`` (:func:`subid.methods.dt._feedthrough.decide`), from the
     model's own record when it ran, else on the record's statistic at its horizon."""
-    ran = model.info.get("feedthrough", {}).get("feedback")
-    if isinstance(ran, dict):
-        return bool(ran["detected"])
+    ran = model.info.get("feedthrough", {})
+    if ran.get("requested") == "auto":           # the test ran (None: a noise-free record)
+        return bool(isinstance(ran.get("feedback"), dict) and ran["feedback"]["detected"])
     from subid.methods.dt._feedthrough import decide
     from subid.statistic.hankel import HankelStatistic
     depth = 2 * int(model.info["horizon"])
@@ -151,7 +151,8 @@ def _feedback(data, model) -> bool:
         factor = HankelStatistic.from_data(data, depth).factor()
     except SubidError:
         return False
-    return bool(decide(factor)[1]["feedback"]["detected"])
+    feedback = decide(factor)[1].get("feedback")
+    return bool(isinstance(feedback, dict) and feedback["detected"])
 
 
 def _fold_scores(data, method, config):

@@ -12,6 +12,10 @@ F-tests on the rows of the block-Hankel factor the method already holds
 ``H = L Q^T``; no extra pass over the record, so it works on a
 :class:`subid.HankelStatistic` too):
 
+0. **Noise-free records**: when the past and u(k) explain y(k) to rounding
+   (:data:`NOISE_FREE`), there is no noise for a free D to absorb and its
+   estimate is exact: D is estimated (a random test must not decide
+   noise-free exactness).
 1. **Feedback** (Ljung, *System Identification*, 2nd ed., 1999, Sec. 13.4;
    MATLAB's ``feedback``): each input u_j(k) is regressed on the past inputs
    ``u(k-1..k-p)``, then also on the past outputs ``y(k-1..k-p)``. In open
@@ -52,6 +56,12 @@ LEVEL = 0.01
 #: A residual below this fraction of the regressand's power means an exact fit
 #: (noise-free or deterministic signal): the F-test is undefined.
 EXACT = 1e-20
+#: Regressor directions below this fraction of the largest are rounding, not data (the
+#: rows are first scaled to unit norm, so that the units of the channels do not matter).
+RANK_TOLERANCE = 1e-8
+#: Relative residual power of y(k) on the past and u(k) below which a record is noise-free
+#: (1e-6 relative RMS: rounding of a Gram statistic, far below any measurement noise).
+NOISE_FREE = 1e-12
 
 
 def check_feedthrough(value) -> object:
@@ -61,29 +71,36 @@ def check_feedthrough(value) -> object:
     return check_choice(value, "feedthrough", FEEDTHROUGH)
 
 
-def _residual_power(L, target, regressors) -> float:
+def _residual_power(L, target, regressors):
     """Sum of squares (per Hankel column) of ``target`` minus its least-squares fit on
-    ``regressors`` (rows of ``L``)."""
+    ``regressors`` (rows of ``L``), and the numerical rank of the regressors.
+
+    Directions of the regressors below :data:`RANK_TOLERANCE` of the largest are
+    dropped (QR with column pivoting): on noise-free records the past outputs add only
+    n directions to the past inputs, the rest are rounding, and fitted they would make a
+    test "significant" by fitting rounding errors.
+    """
     t = L[target]
     if regressors.size == 0:
-        return float(t @ t)
+        return float(t @ t), 0
     R = L[regressors]
-    theta = scipy.linalg.lstsq(R.T, t, lapack_driver="gelsy", check_finite=False)[0]
+    theta, _, rank, _ = scipy.linalg.lstsq(R.T, t, cond=RANK_TOLERANCE, lapack_driver="gelsy",
+                                           check_finite=False)
     r = t - theta @ R
-    return float(r @ r)
+    return float(r @ r), int(rank)
 
 
 def _f_test(L, target, restricted, extra, n_columns):
-    """p-value of the F-test that the ``extra`` rows add nothing to ``restricted``
-    (None when the restricted fit is exact)."""
-    rss0 = _residual_power(L, target, restricted)
+    """p-value and F of the test that the ``extra`` rows add nothing to ``restricted``
+    (None when the restricted fit is exact or the extra rows add no direction)."""
+    rss0, rank0 = _residual_power(L, target, restricted)
     power = float(L[target] @ L[target])
     if rss0 <= EXACT * max(power, 1e-300):
         return None, 0.0
-    rss1 = _residual_power(L, target, np.concatenate([restricted, extra]))
-    q = extra.size
-    dof = n_columns - restricted.size - q
-    if dof <= 0:
+    rss1, rank1 = _residual_power(L, target, np.concatenate([restricted, extra]))
+    q = rank1 - rank0
+    dof = n_columns - rank1
+    if q <= 0 or dof <= 0:
         return None, 0.0
     F = max(rss0 - rss1, 0.0) / q / max(rss1 / dof, 1e-300 * rss0)
     return float(scipy.stats.f.sf(F, q, dof)), float(F)
@@ -107,7 +124,9 @@ def decide(factor, *, level: float = LEVEL):
         ``feedback`` (per-input p-values, detected or not), ``direct_term``
         (per-output p-values, or why not tested), ``rule``.
     """
-    L, nu, ny, s = factor.L, factor.n_inputs, factor.n_outputs, factor.depth
+    nu, ny, s = factor.n_inputs, factor.n_outputs, factor.depth
+    norms = np.linalg.norm(factor.L, axis=1)
+    L = factor.L / np.where(norms > 0, norms, 1.0)[:, None]     # unit rows: unit-free ranks
     p = s - 1
     K = factor.n_columns
     past_u = factor.u_rows(0, p)
@@ -119,10 +138,24 @@ def decide(factor, *, level: float = LEVEL):
         record.update(estimated=False, feedback=None,
                       direct_term="not tested: no input or no lag")
         return False, record
+    current_u = factor.u_rows(p, p + 1)
+    past = np.concatenate([past_u, past_y])
+    # noise-free: the past and u(k) explain y(k) to rounding; there is no noise for a free D
+    # to absorb and its estimate is exact, so D is estimated (whatever the input)
+    exact = True
+    for i in range(ny):
+        target = factor.y_rows(p, p + 1)[i]
+        rss, _ = _residual_power(L, target, np.concatenate([past, current_u]))
+        exact = exact and rss <= NOISE_FREE * max(float(L[target] @ L[target]), 1e-300)
+    if exact:
+        record.update(estimated=True, feedback=None,
+                      direct_term="noise-free record: the past and u(k) explain y(k) to "
+                                  "rounding; D estimated (exactly)")
+        return True, record
     feedback = []
     for j in range(nu):
         target = factor.u_rows(p, p + 1)[j]
-        pval, F = _f_test(L, target, past_u, past_y, K)
+        pval, _ = _f_test(L, target, past_u, past_y, K)
         feedback.append(pval)
     detected = any(v is not None and v < level / nu for v in feedback)
     record["feedback"] = {"p_values": feedback, "detected": bool(detected)}
@@ -132,11 +165,9 @@ def decide(factor, *, level: float = LEVEL):
                                   "y cannot be told from a direct term (D = 0, as MATLAB)")
         return False, record
     direct = []
-    current_u = factor.u_rows(p, p + 1)
-    past = np.concatenate([past_u, past_y])
     for i in range(ny):
         target = factor.y_rows(p, p + 1)[i]
-        pval, F = _f_test(L, target, past, current_u, K)
+        pval, _ = _f_test(L, target, past, current_u, K)
         direct.append(pval)
     exact = all(v is None for v in direct)
     significant = any(v is not None and v < level / ny for v in direct)

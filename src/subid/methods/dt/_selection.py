@@ -61,8 +61,10 @@ method offers two estimators of the system matrices from the same subspace
 with the output regression, or the state sequence), each is a candidate
 too. When the chosen candidate's model refitted to the whole record has to
 be stabilised although not all of its fold models had, the next candidates
-are tried (:func:`subid.methods.dt._subspace._unrepaired_choice`): first
-those none of whose fold models needed it, by criterion, then the others.
+are tried (:func:`subid.methods.dt._subspace._unrepaired_choice`): among
+the candidates whose mean score is within the fold-to-fold standard
+deviation of the choice's, first those none of whose fold models needed it,
+then the others, each by criterion.
 
 The final model is then fitted to the whole record with the chosen order
 and horizon, by the same code path as an explicit call, so that
@@ -324,10 +326,15 @@ def cross_validate(data, fixed, candidates, horizon, *, prepare_fold, builds):
     if ceiling is not None:
         record["order_ceiling"] = ceiling
     # the other candidates, the fallbacks of subid.methods.dt._subspace._unrepaired_choice:
-    # first those none of whose fold models had to be stabilised (the kind of model the
-    # final one must be), then the rest, each by least criterion
-    ranked = sorted((key for key in scores if key != (order, chosen_h, chosen_v)),
-                    key=lambda key: (stabilised_folds[key] > 0, crit[key], key))
+    # among those whose mean fold score is within the fold-to-fold spread (standard
+    # deviation) of the choice's, first those none of whose fold models had to be
+    # stabilised (the kind of model the final one must be); then the rest; each by
+    # least criterion
+    chosen = (order, chosen_h, chosen_v)
+    spread = float(np.std(fold_scores[chosen], ddof=1)) if len(fold_scores[chosen]) > 1 else 0.0
+    ranked = sorted((key for key in scores if key != chosen),
+                    key=lambda key: (scores[key] < scores[chosen] - spread,
+                                     stabilised_folds[key] > 0, crit[key], key))
     record["ranking"] = [entry(*key) for key in ranked]
     return order, chosen_h, names[chosen_v], record
 
