@@ -25,7 +25,11 @@ choice is made on the estimation record and recorded in
    simulation fit for ``focus='simulation'`` (output error; K re-estimated
    afterwards), one-step prediction fit for ``focus='prediction'`` (the
    innovation form). The refinement of the whole record is kept only when the
-   refined fold models score better on average than the subspace fold models
+   refined fold models score better than the subspace fold models by more
+   than one standard error of the paired fold differences (on the DaISy
+   evaporator record a mean gain of 0.6 points over fold gains of -7.8 to
+   +8.2 would have been kept by the mean alone, and lost 26 points of
+   validation fit)
    (``info['identify']['refinement']`` holds both sets of fold scores, the
    decision and the cost history of the final refinement). Where the data
    show feedback (the test of ``feedthrough='auto'``), the output-error
@@ -359,12 +363,17 @@ def _discrete(data, order, horizon, feedthrough, focus, refine):
     folds = _fold_refinement(data, chosen, config, focus,
                              scores=(focus,) if guard is None else (focus, guard))
     base, refined = folds[focus]
-    gain = float(np.mean(np.subtract(refined, base)))
+    diff = np.subtract(refined, base)
+    gain = float(np.mean(diff))
+    error = float(np.std(diff, ddof=1)) / math.sqrt(diff.size) if diff.size > 1 else 0.0
     refinement.update(subspace_folds=base, refined_folds=refined, mean_gain=gain,
+                      standard_error=error,
                       score=("simulation fit (%)" if focus == "simulation"
                              else "one-step prediction fit (%)") + " on the held-out folds")
-    if not gain > 0:
-        refinement.update(kept=False, reason="the refined fold models do not validate better")
+    if not gain > error:
+        refinement.update(kept=False, reason="the refined fold models do not validate better "
+                                             "by more than one standard error of the paired "
+                                             "fold differences")
         return model, record
     if guard is not None:
         base_s, refined_s = folds[guard]
