@@ -152,11 +152,7 @@ def decide(factor, *, level: float = LEVEL):
                       direct_term="noise-free record: the past and u(k) explain y(k) to "
                                   "rounding; D estimated (exactly)")
         return True, record
-    feedback = []
-    for j in range(nu):
-        target = factor.u_rows(p, p + 1)[j]
-        pval, _ = _f_test(L, target, past_u, past_y, K)
-        feedback.append(pval)
+    feedback = [_f_test(L, target, past_u, past_y, K)[0] for target in current_u]
     detected = any(v is not None and v < level / nu for v in feedback)
     record["feedback"] = {"p_values": feedback, "detected": bool(detected)}
     if detected:
@@ -164,11 +160,7 @@ def decide(factor, *, level: float = LEVEL):
                       direct_term="not tested: under feedback the lag-0 correlation of u and "
                                   "y cannot be told from a direct term (D = 0, as MATLAB)")
         return False, record
-    direct = []
-    for i in range(ny):
-        target = factor.y_rows(p, p + 1)[i]
-        pval, _ = _f_test(L, target, past, current_u, K)
-        direct.append(pval)
+    direct = [_f_test(L, target, past, current_u, K)[0] for target in factor.y_rows(p, p + 1)]
     exact = all(v is None for v in direct)
     significant = any(v is not None and v < level / ny for v in direct)
     # a record the past explains exactly (noise-free): keep D free, its estimate is exact
