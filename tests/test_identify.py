@@ -167,7 +167,7 @@ def test_order_search_goes_past_10():
 @pytest.mark.long
 def test_order_30_structure():
     """Issue 21: 15 lightly damped modes (order 30), 2 inputs, 4 outputs: the default
-    finds an order near 30 with a good fit (measured: order 32, 96.9 % validation fit)."""
+    finds an order near 30 with a good fit."""
     true = _structure(15)
     data = systems.simulate_data(true, 6000, seed=1, output_snr_db=30)
     est, val = data[:4000], data[4000:]
