@@ -30,7 +30,7 @@ def _one_line_error(code, stdout, stderr):
     (["--option", "horizon=abc"], "horizon must be an integer, got 'abc'"),
     (["--option", "instruments=maybe"], "instruments must be 'past' or None"),
     (["--option", "stability=maybe"], "stability must be one of ('auto', 'enforce', 'none')"),
-    (["--option", "feedthrough=yes"], "feedthrough must be True or False; got 'yes'"),
+    (["--option", "feedthrough=yes"], "feedthrough must be one of 'auto', True, False; got 'yes'"),
     (["--option", "estimate_x0=3"], "estimate_x0 must be True or False; got 3"),
     (["--option", "selection=[1]"], "selection must be one of"),
     (["--option", "bd_method=guess"], "bd_method must be one of"),
@@ -77,7 +77,7 @@ def test_option_accepted_by_the_method_still_works(capsys, tmp_path):
     ("ct", "bd_method=guess", "bd_method must be one of 'simulation', 'filtered'"),
     ("ct", "refine=maybe", "refine must be True or False"),
     ("moesp", "weighting=7", "weighting must be one of"),
-    ("n4sid", "refine=newton", "refine must be None or 'pem'"),
+    ("n4sid", "refine=newton", "refine must be None, 'simulation' or 'prediction'"),
 ])
 def test_bad_option_values_exit_2_with_one_line(capsys, tmp_path, method, option, message):
     """OptionError (a bad option value) is a user error like the others."""

@@ -66,6 +66,16 @@ EXIT_USER_ERROR = 2
 METHODS: dict[str, MethodSpec] = {name: spec for name, spec in _REGISTRY.items()
                                   if spec.command_line}
 
+#: ``subid identify`` without ``--method``: :func:`subid.identify` (estimator, order,
+#: feedthrough, horizon and refinement chosen from the data). Not a registry entry: it
+#: chooses among the registered discrete-time methods (and routes continuous time).
+IDENTIFY = MethodSpec(
+    "identify", "batch", "subid.methods.identify", "identify", "discrete",
+    "the best model the data support: subspace estimator, order and feedthrough chosen, "
+    "refined by PEM where that validates better (subid.identify)",
+    options=("focus", "time_base", "horizon", "feedthrough", "refine"),
+    capabilities=frozenset({"order_selection", "horizon", "x0", "refine", "nonuniform"}))
+
 
 def available_methods(kind: str | None = None, time_base: str | None = None) -> list[str]:
     """Names of the command-line methods whose module is present.
@@ -596,10 +606,12 @@ def cli(ctx, quiet, verbose, debug):
                     "--method moesp --out runs_out")
 @click.argument("data", metavar="DATA", nargs=-1, required=True)
 @_data_options
-@click.option("--method", "method_name", type=click.Choice(list(METHODS)), default="ls",
-              show_default=True, help="Identification method (see 'subid methods').")
+@click.option("--method", "method_name", type=click.Choice(list(METHODS)), default=None,
+              help="Identification method (see 'subid methods'). Default: subid.identify, "
+                   "which chooses the subspace estimator, order, feedthrough and horizon "
+                   "and refines by PEM where that validates better (with --stream: ls).")
 @click.option("--order", default="auto", show_default=True, metavar="N|auto|A:B",
-              help="Model order: an integer, 'auto' (largest gap among 1..10), a range "
+              help="Model order: an integer, 'auto' (chosen from the data), a range "
                    "'2:8' or a list '2,4,6' of candidates; for arx, armax, oe, bj a list is "
                    "MATLAB's structure, e.g. '2,2,1' = (na, nb, nk) for arx.")
 @click.option("--horizon", type=click.IntRange(min=2), default=None,
@@ -614,9 +626,11 @@ def cli(ctx, quiet, verbose, debug):
               help="Extra keyword argument of the method (JSON value), e.g. "
                    "--option instruments=null. Repeatable.")
 @_FREQ
-@click.option("--refine", type=click.Choice(["none", "pem"]), default="none", show_default=True,
+@click.option("--refine", type=click.Choice(["none", "simulation", "prediction", "pem"]),
+              default="none", show_default=True,
               help="Refine the model by prediction-error minimisation (subid.pem) on the "
-                   "estimation part.")
+                   "estimation part with this focus ('pem': 'prediction', deprecated). "
+                   "Without --method, subid.identify already decides on its own refinement.")
 @click.option("--report/--no-report", "write_report", default=True, show_default=True,
               help="Write report.html (skip it for batch jobs that need only the model).")
 @click.option("--stream", is_flag=True, default=False,
@@ -658,7 +672,10 @@ def identify(data, inputs, outputs, dt, time_column, delimiter, detrend, method_
                                    ignored=dict(inputs=inputs, outputs=outputs,
                                                 time=time_column, detrend=detrend,
                                                 forgetting=forgetting, stream=stream or None))
-    spec = METHODS[method_name]
+    # without --method: subid.identify, or with --stream (a statistic of the file, which
+    # identify cannot refine) the SVD-free ls_subspace, the default before identify
+    spec = METHODS[method_name] if method_name is not None else \
+        (METHODS["ls"] if stream else IDENTIFY)
     _check_out(out, _IDENTIFY_FILES)
     order = _parse_order(order)
     opts = _parse_options(options)
@@ -669,8 +686,8 @@ def identify(data, inputs, outputs, dt, time_column, delimiter, detrend, method_
                                f"{spec.name}")
     spec.load()                                     # "not available" before any work
     if stream and refine != "none":
-        raise click.UsageError("--refine pem needs the samples in memory; it does not work "
-                               "with --stream")
+        raise click.UsageError(f"--refine {refine} needs the samples in memory; it does not "
+                               "work with --stream")
     sources = list(data)
     if len(sources) > 1:
         if stream:
@@ -710,9 +727,9 @@ def identify(data, inputs, outputs, dt, time_column, delimiter, detrend, method_
                 _run_online(spec, Tracker(ident, est), 0, _state().progress,
                             chunk=max(est.n_samples // 100, 1))
                 model = _named(ident.model, est)
-            if refine == "pem":
+            if refine != "none":
                 from subid.methods.dt.pem import pem
-                model = pem(est, model)
+                model = pem(est, model, focus="prediction" if refine == "pem" else refine)
         seconds = time.perf_counter() - t0
         result = report.evaluate(model, est, val)
     model.info.setdefault("method", spec.attribute)

@@ -49,7 +49,7 @@ __all__ = ["MethodSpec", "MethodUnavailableError", "METHODS", "CAPABILITIES", "f
 #: ``input_delay``      takes an ``input_delay`` option
 #: ``weighting``        takes a ``weighting`` option
 #: ``x0``               estimates the initial state (``estimate_x0``)
-#: ``refine``           takes ``refine='pem'``
+#: ``refine``           takes ``refine='simulation'`` or ``'prediction'`` (PEM)
 #: ``hold``             takes a ``hold`` option (the input between samples)
 #: ``nonuniform``       accepts non-uniformly sampled records
 #: ``seeded``           has a ``seed`` option (a random draw)

@@ -835,17 +835,35 @@ def _unrepaired_choice(record, data, options, builds, chosen):
 
 def finalize(model: StateSpace, problem: Problem, *, refine, delays) -> StateSpace:
     """The final model of a DT batch method: its noise model (K and the innovation
-    covariance, :func:`subid.methods.dt.noise_model.attach_noise_model`, then ``refine='pem'``,
-    :func:`subid.pem`) and its input delays (:func:`subid.delay.record_delay`). Run
+    covariance, :func:`subid.methods.dt.noise_model.attach_noise_model`, then the optional
+    refinement, :func:`refined`) and its input delays (:func:`subid.delay.record_delay`). Run
     once, on the final model."""
     from subid.delay import record_delay
-    from subid.methods.dt.noise_model import attach_noise_model, check_refine
-    check_refine(refine, problem.data)
+    from subid.methods.dt.noise_model import attach_noise_model
     model = attach_noise_model(model, problem)
-    if refine == "pem":
-        from subid.methods.dt.pem import pem
-        model = pem(problem.data, model)
+    if refine is not None:
+        model = refined(problem.data, model, refine)
     return record_delay(model, delays)
+
+
+def refined(data, model: StateSpace, focus: str) -> StateSpace:
+    """``model`` refined by :func:`subid.pem` with ``focus`` ('simulation' or 'prediction').
+
+    An unstable model has no simulation error to minimise: with focus
+    'simulation' it is returned unrefined, with a warning and
+    ``info['refinement']`` saying why (a silent fallback to the other
+    criterion would not be what was asked).
+    """
+    from subid.errors import ModelError
+    from subid.methods.dt.pem import pem
+    try:
+        return pem(data, model, focus=focus)
+    except ModelError as exc:
+        warnings.warn(f"{model.info.get('method', 'identification')}: refine={focus!r} not "
+                      f"done: {exc}", UnstableModelWarning, stacklevel=4)
+        info = dict(model.info)
+        info["refinement"] = f"not done: {exc}"
+        return model.with_noise_model(model.K, model.noise_cov, info=info)
 
 
 def check_stability(A, data, method: str) -> dict:

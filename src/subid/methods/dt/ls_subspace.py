@@ -59,6 +59,8 @@ from subid._validation import (
 )
 from subid.delay import shift_for_method
 from subid.errors import OptionError, OrderError
+from subid.methods.dt._feedthrough import check_feedthrough
+from subid.methods.dt._feedthrough import resolve as resolve_feedthrough
 from subid.methods.dt._subspace import (
     BD_METHODS,
     check_system_matrices,
@@ -109,7 +111,7 @@ def _condition_1norm(M: np.ndarray) -> float:
 
 @legacy_arguments(positional=("horizon", "instruments", "selector", "seed", "estimate_x0"))
 def ls_subspace(data, order=None, *, horizon=None, instruments="past", selector=None, seed=0,
-                estimate_x0=True, feedthrough=True, instrument_weighting=True,
+                estimate_x0=True, feedthrough="auto", instrument_weighting=True,
                 power_iterations=8, normalize_outputs=True, selection="cv",
                 stability="auto", system_matrices="auto", bd_method="auto",
                 statistic="auto", refine=None, input_delay=0) -> StateSpace:
@@ -144,8 +146,14 @@ def ls_subspace(data, order=None, *, horizon=None, instruments="past", selector=
         Seed of the random selector (ignored when ``selector`` is given).
     estimate_x0 : bool
         Estimate the initial state with B and D (stored in ``info['x0']``).
-    feedthrough : bool
-        Estimate D (else D = 0).
+    feedthrough : {'auto', True, False}
+        Estimate D (``False``: D = 0). ``'auto'`` (default): D only when the
+        data show a direct term (an F-test of u(k) in a high-order ARX
+        regression on the Hankel rows) and no feedback (past outputs do not
+        help predict the input), as MATLAB estimates no feedthrough unless
+        asked: a free D absorbs the correlation of u(k) and the noise in
+        closed loop (:mod:`subid.methods.dt._feedthrough`;
+        ``info['feedthrough']`` records the tests).
     instrument_weighting : bool
         Whiten the instrument correlation (``W = L32``, PO-MOESP weighting)
         instead of the paper's ``W = Y Π_U^⊥ Z^T`` of eq. (28).
@@ -200,9 +208,15 @@ def ls_subspace(data, order=None, *, horizon=None, instruments="past", selector=
         they are exact to rounding (a Hankel matrix of condition number up to
         1e4, e.g. noisy data), else QR up to 200,000 samples
         (:meth:`subid.HankelStatistic.from_data`).
-    refine : {None, 'pem'}
-        ``'pem'``: refine the final subspace estimate by prediction-error
-        minimisation (:func:`subid.pem`, default options) on the record.
+    refine : {None, 'simulation', 'prediction'}
+        Refine the final subspace estimate by prediction-error minimisation
+        (:func:`subid.pem`) on the record with that ``focus``:
+        ``'simulation'`` (output error, K re-estimated afterwards: the better
+        simulator), ``'prediction'`` (the innovation form: the better one-step
+        predictor). ``'pem'`` is a deprecated alias of ``'prediction'``. An
+        unstable start cannot be refined by simulation: the model is then
+        returned unrefined with a warning. :func:`subid.identify` keeps a
+        refinement only where it validates better.
     input_delay : int or sequence of int
         Dead time of each input in samples (:func:`subid.estimate_delay`):
         the model is identified from the delayed inputs and records the
@@ -236,7 +250,8 @@ def ls_subspace(data, order=None, *, horizon=None, instruments="past", selector=
     """
     method = "ls_subspace"
     power_iterations = check_options(instruments, power_iterations)
-    for name, flag in (("estimate_x0", estimate_x0), ("feedthrough", feedthrough),
+    feedthrough = check_feedthrough(feedthrough)
+    for name, flag in (("estimate_x0", estimate_x0),
                        ("instrument_weighting", instrument_weighting),
                        ("normalize_outputs", normalize_outputs)):
         check_bool(flag, name)
@@ -257,7 +272,7 @@ def ls_subspace(data, order=None, *, horizon=None, instruments="past", selector=
         ("shift" if system_matrices == "auto" else system_matrices,)
     variants = {name: partial(_ls_subspace, system_matrices=name, **options) for name in names}
     build = next(iter(variants.values()))
-    check_refine(refine, data)
+    refine = check_refine(refine, data)
     data, delays = shift_for_method(data, input_delay)
     return identify(data, order, horizon, method=method, build=build, variants=variants,
                     selection=selection,
@@ -281,6 +296,7 @@ def _ls_subspace(pb, *, instruments, selector, seed, estimate_x0, feedthrough,
                  system_matrices="shift") -> StateSpace:
     method = "ls_subspace"
     data = pb.data
+    feedthrough, ft_record = resolve_feedthrough(feedthrough, pb)
     selector = check_selector(selector, pb.horizon, data.n_outputs, pb.candidates, pb.order)
     # The outputs are normalised by their RMS s (unless normalize_outputs=False), so that
     # the estimate does not depend on their units; Λ acts on the user's units, so on the normalised data it is
@@ -305,7 +321,8 @@ def _ls_subspace(pb, *, instruments, selector, seed, estimate_x0, feedthrough,
         extra["x0"] = x0
         info = core.info(instruments, instrument_weighting, power_iterations)
         info["selector"] = core.selector / column_scale
-        return finish(pb, A, T @ B_q, C, D, core.order, core.order_selection, **info, **extra)
+        return finish(pb, A, T @ B_q, C, D, core.order, core.order_selection, **info, **extra,
+                      feedthrough=ft_record)
 
     def fit(A_try):
         return estimate_b_d(A_try, core.C_q, core.basis, core.L11, core.L_yu, pb,
@@ -326,7 +343,7 @@ def _ls_subspace(pb, *, instruments, selector, seed, estimate_x0, feedthrough,
     info = core.info(instruments, instrument_weighting, power_iterations)
     info["selector"] = core.selector / column_scale
     return finish(pb, A, B, C, D, core.order, core.order_selection, **info,
-                  x0=x0, stability=stab, **reg)
+                  x0=x0, stability=stab, feedthrough=ft_record, **reg)
 
 
 def check_options(instruments, power_iterations) -> int:

@@ -32,6 +32,8 @@ import scipy.linalg
 
 from subid._validation import check_bool, check_choice, legacy_arguments
 from subid.delay import shift_for_method
+from subid.methods.dt._feedthrough import check_feedthrough
+from subid.methods.dt._feedthrough import resolve as resolve_feedthrough
 from subid.methods.dt._subspace import (
     BD_METHODS,
     check_system_matrices,
@@ -56,7 +58,7 @@ __all__ = ["moesp"]
 
 @legacy_arguments(positional=("horizon",))
 def moesp(data, order=None, *, horizon=None, weighting="moesp", selection="cv",
-          stability="auto", system_matrices="auto", feedthrough=True, estimate_x0=True,
+          stability="auto", system_matrices="auto", feedthrough="auto", estimate_x0=True,
           bd_method="auto", statistic="auto", refine=None, input_delay=0) -> StateSpace:
     """Identify a discrete-time model by PO-MOESP.
 
@@ -106,15 +108,17 @@ def moesp(data, order=None, *, horizon=None, weighting="moesp", selection="cv",
         every record: on the DaISy evaporator record ``'states'`` reaches
         64 % validation fit against 61 %; on exchanger ``'shift'`` 65 %
         against 58 % (bench/realdata.md).
-    feedthrough : bool
-        Estimate D (else D = 0).
+    feedthrough : {'auto', True, False}
+        Estimate D (``False``: D = 0). ``'auto'`` (default): D only when the
+        data show a direct term and no feedback
+        (:mod:`subid.methods.dt._feedthrough`; ``info['feedthrough']``).
     estimate_x0 : bool
         Estimate the initial state with B and D (``info['x0']``).
     bd_method : {'auto', 'simulation', 'projection'}
         As in :func:`subid.ls_subspace`.
     statistic : {'auto', 'qr', 'gram'}
         As in :func:`subid.ls_subspace`.
-    refine : {None, 'pem'}
+    refine : {None, 'simulation', 'prediction'}
         As in :func:`subid.ls_subspace`.
     input_delay : int or sequence of int
         As in :func:`subid.ls_subspace`.
@@ -125,7 +129,7 @@ def moesp(data, order=None, *, horizon=None, weighting="moesp", selection="cv",
         Discrete-time model with ``dt = data.dt``.
     """
     check_weighting(weighting)
-    check_bool(feedthrough, "feedthrough")
+    feedthrough = check_feedthrough(feedthrough)
     check_bool(estimate_x0, "estimate_x0")
     check_choice(bd_method, "bd_method", BD_METHODS)
     check_system_matrices(system_matrices)
@@ -134,7 +138,7 @@ def moesp(data, order=None, *, horizon=None, weighting="moesp", selection="cv",
     variants = {name: partial(_moesp, system_matrices=name, **options)
                 for name in (("shift", "states") if system_matrices == "auto"
                              else (system_matrices,))}
-    check_refine(refine, data)
+    refine = check_refine(refine, data)
     data, delays = shift_for_method(data, input_delay)
     return identify(data, order, horizon, method="moesp", build=next(iter(variants.values())),
                     variants=variants, selection=selection, statistic=statistic,
@@ -163,6 +167,7 @@ def _moesp(pb, *, weighting, stability, feedthrough, estimate_x0, bd_method,
            system_matrices="shift") -> StateSpace:
     data, f = pb.data, pb.horizon
     ny, nu = data.n_outputs, data.n_inputs
+    feedthrough, ft_record = resolve_feedthrough(feedthrough, pb)
     a, b = f * nu, f * (nu + ny)
     L = future_past_factor(pb)
 
@@ -180,7 +185,7 @@ def _moesp(pb, *, weighting, stability, feedthrough, estimate_x0, bd_method,
         A, B, C, D, x0, extra = state_model(pb, gamma, stability=stability,
                                             feedthrough=feedthrough, estimate_x0=estimate_x0)
         return finish(pb, A, B, C, D, n, order_selection, singular_values=s,
-                      weighting=weighting, **extra)
+                      weighting=weighting, feedthrough=ft_record, **extra)
     # A and C in an orthonormal basis Q of range(Γ) (any basis is valid for MOESP)
     Q = scipy.linalg.qr(gamma, mode="economic", check_finite=False)[0]
     A, C, shift_residual = shift_invariance(Q, ny)
@@ -199,4 +204,5 @@ def _moesp(pb, *, weighting, stability, feedthrough, estimate_x0, bd_method,
                                              else None)
     C = C * pb.output_scale[:, None]
     return finish(pb, A, B, C, D, n, order_selection, singular_values=s, weighting=weighting,
-                  shift_residual=shift_residual, x0=x0, stability=stab, **reg)
+                  shift_residual=shift_residual, x0=x0, stability=stab,
+                  feedthrough=ft_record, **reg)

@@ -27,6 +27,8 @@ import scipy.linalg
 from subid._validation import check_bool, legacy_arguments
 from subid.data import IOData
 from subid.delay import shift_for_method
+from subid.methods.dt._feedthrough import check_feedthrough
+from subid.methods.dt._feedthrough import resolve as resolve_feedthrough
 from subid.methods.dt._subspace import (
     check_experiment_lengths,
     check_weighting,
@@ -82,7 +84,7 @@ def _lstsq_rows(regressors: np.ndarray, targets: np.ndarray) -> np.ndarray:
 
 @legacy_arguments(positional=("horizon",))
 def n4sid(data, order=None, *, horizon=None, weighting="cva", selection="cv",
-          stability="auto", feedthrough=True, estimate_x0=True,
+          stability="auto", feedthrough="auto", estimate_x0=True,
           statistic="auto", refine=None, input_delay=0) -> StateSpace:
     """Identify a discrete-time model by N4SID (state sequences).
 
@@ -111,14 +113,16 @@ def n4sid(data, order=None, *, horizon=None, weighting="cva", selection="cv",
         As in :func:`subid.moesp`. When it acts, A and C come from the
         stabilised shift invariance of Γ and B, D, x0 from the output
         regression (:func:`subid.methods.dt._subspace.estimate_b_d`).
-    feedthrough : bool
-        Estimate D (else D = 0 and the state regression omits it).
+    feedthrough : {'auto', True, False}
+        Estimate D (``False``: D = 0 and the state regression omits it).
+        ``'auto'`` (default): D only when the data show a direct term and no
+        feedback (:mod:`subid.methods.dt._feedthrough`; ``info['feedthrough']``).
     estimate_x0 : bool
         Estimate the initial state (``info['x0']``) by least squares on the
         output, given the identified model.
     statistic : {'auto', 'qr', 'gram'}
         As in :func:`subid.ls_subspace`.
-    refine : {None, 'pem'}
+    refine : {None, 'simulation', 'prediction'}
         As in :func:`subid.ls_subspace`.
     input_delay : int or sequence of int
         As in :func:`subid.ls_subspace`.
@@ -129,11 +133,11 @@ def n4sid(data, order=None, *, horizon=None, weighting="cva", selection="cv",
         Discrete-time model with ``dt = data.dt``.
     """
     check_weighting(weighting)
-    check_bool(feedthrough, "feedthrough")
+    feedthrough = check_feedthrough(feedthrough)
     check_bool(estimate_x0, "estimate_x0")
     build = partial(_n4sid, weighting=weighting, stability=stability, feedthrough=feedthrough,
                     estimate_x0=estimate_x0)
-    check_refine(refine, data)
+    refine = check_refine(refine, data)
     data, delays = shift_for_method(data, input_delay)
     return identify(data, order, horizon, method="n4sid", build=build, selection=selection,
                     statistic=statistic,
@@ -142,6 +146,7 @@ def n4sid(data, order=None, *, horizon=None, weighting="cva", selection="cv",
 
 def _n4sid(pb, *, weighting, stability, feedthrough, estimate_x0) -> StateSpace:
     i, hf = pb.horizon, pb.factor
+    feedthrough, ft_record = resolve_feedthrough(feedthrough, pb)
     wp = hf.rows(hf.u_rows(0, i), hf.y_rows(0, i))
     coef, perp = _projection(pb)
 
@@ -168,7 +173,7 @@ def _n4sid(pb, *, weighting, stability, feedthrough, estimate_x0) -> StateSpace:
                                        feedthrough=feedthrough, estimate_x0=estimate_x0,
                                        coefficients=coef)
     return finish(pb, A, B, C, D, n, order_selection, singular_values=s, weighting=weighting,
-                  **extra)
+                  feedthrough=ft_record, **extra)
 
 
 def _projection(pb):

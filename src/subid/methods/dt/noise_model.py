@@ -49,7 +49,7 @@ from subid.statistic._hankel import HankelFactor
 
 __all__ = ["innovation_model", "attach_noise_model", "check_refine", "REFINE_OPTIONS"]
 
-REFINE_OPTIONS = (None, "pem")
+REFINE_OPTIONS = (None, "simulation", "prediction")
 
 
 def _lstsq(M, rhs):
@@ -187,13 +187,23 @@ def _factor_for(model, problem) -> HankelFactor | None:
     return HankelStatistic.from_data(problem.data, 2 * h).factor()
 
 
-def check_refine(refine, data) -> None:
-    """Raise unless ``refine`` is a valid option for ``data`` (checked before any work)."""
-    if refine not in REFINE_OPTIONS:
-        raise OptionError(f"refine must be None or 'pem', got {refine!r}")
-    if refine == "pem" and not isinstance(data, IOData):
-        raise SubidError("refine='pem' needs the raw record (IOData): a statistic holds no "
-                         "samples to predict")
+def check_refine(refine, data):
+    """``refine`` as the focus of the refinement (None, 'simulation' or 'prediction'),
+    or an error; checked before any work. ``'pem'`` is the deprecated spelling of
+    ``'prediction'`` (DeprecationWarning)."""
+    if isinstance(refine, str) and refine == "pem":
+        warnings.warn("subid: refine='pem' is deprecated; say which criterion the refinement "
+                      "minimises: refine='prediction' (what 'pem' meant) or "
+                      "refine='simulation'", DeprecationWarning, stacklevel=3)
+        refine = "prediction"
+    if not any(refine is c or (isinstance(refine, str) and refine == c)
+               for c in REFINE_OPTIONS):
+        raise OptionError(f"refine must be None, 'simulation' or 'prediction', got "
+                          f"{refine!r}"[:300])
+    if refine is not None and not isinstance(data, IOData):
+        raise SubidError(f"refine={refine!r} needs the raw record (IOData): a statistic holds "
+                         "no samples to predict")
+    return refine
 
 
 def attach_noise_model(model, problem):
@@ -201,7 +211,7 @@ def attach_noise_model(model, problem):
 
     Called at the end of :func:`subid.ls_subspace`, :func:`subid.moesp` and
     :func:`subid.n4sid` (by ``_subspace.finalize``, which then runs
-    ``refine='pem'``: :func:`subid.pem` builds on this module, not the reverse).
+    the optional refinement: :func:`subid.pem` builds on this module, not the reverse).
 
     Parameters
     ----------

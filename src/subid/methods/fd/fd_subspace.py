@@ -57,7 +57,10 @@ four folds, each holding out every fourth frequency (interleaved, so that no
 fold has to extrapolate beyond the measured band); each candidate order's fold
 models are scored by :func:`subid.fit_percent` on the held-out frequencies,
 clipped below at ``FLOOR`` and averaged, and the same rule as the time-domain
-methods (:func:`subid.methods.dt._selection.select_candidate`) picks the order.
+methods picks the order: the least cross-validated BIC
+(:func:`subid.methods.dt._selection.select`), with ``2 n_freq n_inputs``
+"samples" (each frequency holds ``n_outputs x n_inputs`` complex values: the
+real observations of ``2 n_freq n_inputs`` samples of ``n_outputs`` outputs).
 """
 
 from __future__ import annotations
@@ -71,7 +74,7 @@ from subid._validation import check_bool, check_choice, check_int
 from subid.errors import DataError, OrderError, SubidError, UnstableModelWarning
 from subid.frdata import FRData
 from subid.methods._info import model_info, records_warnings
-from subid.methods.dt._selection import FLOOR, MAX_ORDER, SELECTION_RULES, select_candidate
+from subid.methods.dt._selection import FLOOR, MAX_ORDER, SELECTION_RULES, select
 from subid.methods.dt._subspace import (
     KEEP_UNSTABLE_RATIO,
     STABILITY,
@@ -164,15 +167,17 @@ def _cross_validate(data: FRData, alpha, noise_var, candidates, horizons, *, fee
             except SubidError:
                 per_fold[n].append(FLOOR)
     scores = {(n,): float(np.mean(v)) for n, v in per_fold.items()}
-    (order,) = select_candidate(scores)
+    (order,), crit = select({(n,): v for n, v in per_fold.items()},
+                            2 * data.n_frequencies * data.n_inputs, data.n_inputs,
+                            data.n_outputs)
     record = {
         "rule": "cv",
         "description": (f"{FOLDS}-fold cross-validation over frequencies (every {FOLDS}th "
                         "frequency held out): frequency-domain fit (%, mean over outputs) on "
-                        "the held-out frequencies, mean over the folds; smallest order whose "
-                        "misfit is within the tolerance of the best (the time-domain rule)"),
+                        "the held-out frequencies, mean over the folds; the order of the "
+                        "least cross-validated BIC (the time-domain rule)"),
         "candidates": [{"order": n, "horizon": horizons[n], "score": scores[(n,)],
-                        "folds": per_fold[n]} for n in candidates],
+                        "criterion": crit[(n,)], "folds": per_fold[n]} for n in candidates],
         "selected": {"order": order, "horizon": horizons[order], "score": scores[(order,)]},
     }
     return order, record

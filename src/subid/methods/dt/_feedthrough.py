@@ -1,0 +1,184 @@
+"""``feedthrough='auto'``: estimate a direct term D only when the data show one.
+
+MATLAB's ``n4sid`` and ``ssest`` estimate no feedthrough unless asked. A free
+D is harmless in open loop (its estimate converges to the true D, zero or
+not), but under output feedback ``u(k) = r(k) - F y(k)`` the input at time k
+is correlated with the innovation e(k) at time k, and a free D absorbs that
+correlation: on the seed-001 plant (D = 0) in closed loop with F = -0.5 I,
+PEM started from a model with a free D converged to a Markov error 16x that
+of the start with D = 0 (issue 21). The decision is made from the data in two
+F-tests on the rows of the block-Hankel factor the method already holds
+(least squares on the rows of ``L`` equals least squares on the Hankel rows,
+``H = L Q^T``; no extra pass over the record, so it works on a
+:class:`subid.HankelStatistic` too):
+
+0. **Noise-free records**: when the past and u(k) explain y(k) to rounding
+   (:data:`NOISE_FREE`), there is no noise for a free D to absorb and its
+   estimate is exact: D is estimated (a random test must not decide
+   noise-free exactness).
+1. **Feedback** (Ljung, *System Identification*, 2nd ed., 1999, Sec. 13.4;
+   MATLAB's ``feedback``): each input u_j(k) is regressed on the past inputs
+   ``u(k-1..k-p)``, then also on the past outputs ``y(k-1..k-p)``. In open
+   loop the past outputs add nothing once the past inputs are known (the
+   noise is independent of the input), so an F-test of their coefficients
+   significant at :data:`LEVEL` (Bonferroni over the inputs) shows feedback.
+   Under feedback the lag-zero correlation between u(k) and y(k) cannot be
+   told apart from a direct term: D = 0, as MATLAB does.
+2. **Direct term**, in open loop: each output y_i(k) is regressed on
+   ``u(k-1..k-p), y(k-1..k-p)`` (a high-order ARX model, which approximates
+   the one-step predictor of any innovation model, Ljung 1999, Sec. 4.3
+   and 16.4) with and without ``u(k)``; the coefficients of u(k) are those
+   of D in the predictor ``ŷ(k) = C x̂(k) + D u(k)``. D is estimated when the
+   F-test of the u(k) coefficients is significant at :data:`LEVEL`
+   (Bonferroni over the outputs).
+
+The number of lags is ``p = depth - 1`` of the method's factor (19 for
+horizon 10 with past and future rows), so the decision depends only on the
+record and the horizon: ``method(data, order=model.order,
+horizon=model.info['horizon'])`` makes the same decision. An input that
+its own past predicts exactly (a periodic signal) shows no feedback: the
+F-test is then undefined and the direct-term test decides. ``info['feedthrough']``
+records both tests.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.linalg
+import scipy.stats
+
+from subid._validation import check_choice
+
+#: The values ``feedthrough`` accepts.
+FEEDTHROUGH = ("auto", True, False)
+#: Significance level of each test (Bonferroni-corrected over the channels).
+LEVEL = 0.01
+#: A residual below this fraction of the regressand's power means an exact fit
+#: (noise-free or deterministic signal): the F-test is undefined.
+EXACT = 1e-20
+#: Regressor directions below this fraction of the largest are rounding, not data (the
+#: rows are first scaled to unit norm, so that the units of the channels do not matter).
+RANK_TOLERANCE = 1e-8
+#: Relative residual power of y(k) on the past and u(k) below which a record is noise-free
+#: (1e-6 relative RMS: rounding of a Gram statistic, far below any measurement noise).
+NOISE_FREE = 1e-12
+
+
+def check_feedthrough(value) -> object:
+    """``value`` ('auto', True or False; numpy bools accepted) or :class:`OptionError`."""
+    if isinstance(value, np.bool_):
+        value = bool(value)
+    return check_choice(value, "feedthrough", FEEDTHROUGH)
+
+
+def _residual_power(L, target, regressors):
+    """Sum of squares (per Hankel column) of ``target`` minus its least-squares fit on
+    ``regressors`` (rows of ``L``), and the numerical rank of the regressors.
+
+    Directions of the regressors below :data:`RANK_TOLERANCE` of the largest are
+    dropped (QR with column pivoting): on noise-free records the past outputs add only
+    n directions to the past inputs, the rest are rounding, and fitted they would make a
+    test "significant" by fitting rounding errors.
+    """
+    t = L[target]
+    if regressors.size == 0:
+        return float(t @ t), 0
+    R = L[regressors]
+    theta, _, rank, _ = scipy.linalg.lstsq(R.T, t, cond=RANK_TOLERANCE, lapack_driver="gelsy",
+                                           check_finite=False)
+    r = t - theta @ R
+    return float(r @ r), int(rank)
+
+
+def _f_test(L, target, restricted, extra, n_columns):
+    """p-value and F of the test that the ``extra`` rows add nothing to ``restricted``
+    (None when the restricted fit is exact or the extra rows add no direction)."""
+    rss0, rank0 = _residual_power(L, target, restricted)
+    power = float(L[target] @ L[target])
+    if rss0 <= EXACT * max(power, 1e-300):
+        return None, 0.0
+    rss1, rank1 = _residual_power(L, target, np.concatenate([restricted, extra]))
+    q = rank1 - rank0
+    dof = n_columns - rank1
+    if q <= 0 or dof <= 0:
+        return None, 0.0
+    F = max(rss0 - rss1, 0.0) / q / max(rss1 / dof, 1e-300 * rss0)
+    return float(scipy.stats.f.sf(F, q, dof)), float(F)
+
+
+def decide(factor, *, level: float = LEVEL):
+    """Whether to estimate D, from a Hankel factor (:mod:`subid.statistic._hankel`).
+
+    Parameters
+    ----------
+    factor : HankelFactor
+        The factor of the record (any channel scaling).
+    level : float
+        Significance level of each test.
+
+    Returns
+    -------
+    estimate : bool
+    record : dict
+        ``info['feedthrough']``: ``requested``, ``estimated``, ``lags``,
+        ``feedback`` (per-input p-values, detected or not), ``direct_term``
+        (per-output p-values, or why not tested), ``rule``.
+    """
+    nu, ny, s = factor.n_inputs, factor.n_outputs, factor.depth
+    norms = np.linalg.norm(factor.L, axis=1)
+    L = factor.L / np.where(norms > 0, norms, 1.0)[:, None]     # unit rows: unit-free ranks
+    p = s - 1
+    K = factor.n_columns
+    past_u = factor.u_rows(0, p)
+    past_y = factor.y_rows(0, p)
+    record = {"requested": "auto", "lags": p, "level": level,
+              "rule": "D estimated when the data show a direct term and no feedback "
+                      "(F-tests on the Hankel rows, subid.methods.dt._feedthrough)"}
+    if nu == 0 or p < 1:
+        record.update(estimated=False, feedback=None,
+                      direct_term="not tested: no input or no lag")
+        return False, record
+    current_u = factor.u_rows(p, p + 1)
+    past = np.concatenate([past_u, past_y])
+    # noise-free: the past and u(k) explain y(k) to rounding; there is no noise for a free D
+    # to absorb and its estimate is exact, so D is estimated (whatever the input)
+    exact = True
+    for i in range(ny):
+        target = factor.y_rows(p, p + 1)[i]
+        rss, _ = _residual_power(L, target, np.concatenate([past, current_u]))
+        exact = exact and rss <= NOISE_FREE * max(float(L[target] @ L[target]), 1e-300)
+    if exact:
+        record.update(estimated=True, feedback=None,
+                      direct_term="noise-free record: the past and u(k) explain y(k) to "
+                                  "rounding; D estimated (exactly)")
+        return True, record
+    feedback = [_f_test(L, target, past_u, past_y, K)[0] for target in current_u]
+    detected = any(v is not None and v < level / nu for v in feedback)
+    record["feedback"] = {"p_values": feedback, "detected": bool(detected)}
+    if detected:
+        record.update(estimated=False,
+                      direct_term="not tested: under feedback the lag-0 correlation of u and "
+                                  "y cannot be told from a direct term (D = 0, as MATLAB)")
+        return False, record
+    direct = [_f_test(L, target, past, current_u, K)[0] for target in factor.y_rows(p, p + 1)]
+    exact = all(v is None for v in direct)
+    significant = any(v is not None and v < level / ny for v in direct)
+    # a record the past explains exactly (noise-free): keep D free, its estimate is exact
+    estimate = bool(significant or exact)
+    record.update(estimated=estimate, direct_term={"p_values": direct,
+                                                   "significant": bool(significant),
+                                                   "exact_fit": bool(exact)})
+    return estimate, record
+
+
+def resolve(feedthrough, problem):
+    """The feedthrough a build uses on ``problem`` and its ``info['feedthrough']`` record
+    (the decision cached on the problem, shared by the candidate orders)."""
+    if feedthrough != "auto":
+        return bool(feedthrough), {"requested": bool(feedthrough),
+                                   "estimated": bool(feedthrough)}
+    cache = problem._cache
+    if "feedthrough" not in cache:
+        cache["feedthrough"] = decide(problem.factor)
+    estimate, record = cache["feedthrough"]
+    return estimate, dict(record)

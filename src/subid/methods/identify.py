@@ -1,0 +1,396 @@
+"""``subid.identify``: the best model the data support, in one call.
+
+MATLAB's pattern (``n4sid`` then ``ssest``/``pem``; Ljung, *System
+Identification*, 2nd ed., 1999, Sec. 10.6 and 16.4): a subspace model gives
+the structure and a start, prediction-error minimisation refines it. Every
+choice is made on the estimation record and recorded in
+``model.info['identify']``:
+
+1. **Time base.** A non-uniformly sampled record, or ``time_base='ct'``, goes
+   to :func:`subid.ct_subspace` (continuous time, its own defaults); the rest
+   of this page is the discrete-time path.
+2. **Subspace estimator, order, horizon, feedthrough.** :func:`subid.moesp`
+   (with its two estimators of the system matrices, ``system_matrices='auto'``)
+   and :func:`subid.n4sid` (CVA weighting) each choose their order and
+   horizon by cross-validation on the estimation record
+   (:mod:`subid.methods.dt._selection`: four contiguous folds, simulation fit,
+   the rule aware of the fold-to-fold spread, orders past 10 while the
+   criterion improves) and their feedthrough from the data
+   (``feedthrough='auto'``, :mod:`subid.methods.dt._feedthrough`). The
+   estimator with the better mean fold score of its chosen candidate is taken
+   (the two are scored on the same folds by the same fit).
+3. **Refinement.** The chosen configuration (estimator, order, horizon,
+   feedthrough) is fitted on the training part of every fold, refined there by
+   :func:`subid.pem` with ``focus``, and both are scored on the held-out part:
+   simulation fit for ``focus='simulation'`` (output error; K re-estimated
+   afterwards), one-step prediction fit for ``focus='prediction'`` (the
+   innovation form). The refinement of the whole record is kept only when the
+   refined fold models score better than the subspace fold models by more
+   than one standard error of the paired fold differences (on the DaISy
+   evaporator record a mean gain of 0.6 points over fold gains of -7.8 to
+   +8.2 would have been kept by the mean alone, and lost 26 points of
+   validation fit)
+   (``info['identify']['refinement']`` holds both sets of fold scores, the
+   decision and the cost history of the final refinement). Where the data
+   show feedback (the test of ``feedthrough='auto'``), the output-error
+   criterion is biased (the input is correlated with the noise), so the
+   refinement minimises and is judged by one-step prediction errors, the
+   criterion that stays consistent in closed loop (Ljung 1999, Sec. 13.4,
+   the direct approach); with ``focus='simulation'`` that refinement is kept
+   only when it also raises the simulation misfit on the folds by at most
+   :data:`SIMULATION_LOSS` (10 %): the price of consistency the simulation
+   criterion accepts (``info['identify']['refinement']['focus_reason']``).
+   An unstable subspace model (an unstable plant under feedback) cannot be
+   refined by simulation; it is kept as it is.
+
+The choices cost the subspace cross-validations of two estimators plus four
+fold refinements and one final refinement; the fold refinements use the same
+part of a long record as the cross-validation (its last
+:data:`subid.methods.dt._selection.MAX_SELECTION_SAMPLES` samples).
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+
+import numpy as np
+
+from subid._validation import check_choice
+from subid.data import IOData
+from subid.errors import DataError, ModelError, OptionError, SubidError
+from subid.methods._info import collect_warnings
+from subid.model.statespace import StateSpace
+
+__all__ = ["identify"]
+
+FOCUS = ("simulation", "prediction")
+TIME_BASES = ("auto", "dt", "ct")
+#: The discrete-time estimators compared, by name, with their fixed options.
+ESTIMATORS = ("moesp", "n4sid")
+#: Fit (%) below which a fold score is clipped (one diverging fold cannot hide the others).
+FLOOR = -100.0
+#: Under feedback with ``focus='simulation'``: the (consistent) prediction-error refinement
+#: is kept only when it raises the mean simulation misfit on the folds by at most this
+#: fraction (measured: 3 % on the closed-loop seed-001 runs of issue 21, 32 % on the DaISy
+#: CD_player_arm record, whose simulation fit it lowered from 75.5 % to 67.5 %).
+SIMULATION_LOSS = 0.10
+
+
+def _estimator(name):
+    if name == "moesp":
+        from subid.methods.dt.moesp import moesp
+        return moesp
+    from subid.methods.dt.n4sid import n4sid
+    return n4sid
+
+
+def _configuration(model) -> dict:
+    """The options that make ``method(data, **options)`` rebuild ``model`` (pinned)."""
+    out = {"order": model.order, "horizon": model.info["horizon"],
+           "feedthrough": bool(model.info.get("feedthrough", {}).get("estimated",
+                                                                     np.any(model.D != 0)))}
+    if model.info.get("system_matrices") is not None:
+        out["system_matrices"] = model.info["system_matrices"]
+    return out
+
+
+def _selected_folds(model):
+    """The fold scores the cross-validation gave the model's own candidate, or None."""
+    record = model.info.get("order_selection")
+    if not isinstance(record, dict) or record.get("rule") != "cv":
+        return None
+    chosen = record.get("selected", {})
+    for c in record.get("candidates", []):
+        if (c["order"], c["horizon"], c.get("system_matrices")) == \
+                (chosen.get("order"), chosen.get("horizon"), chosen.get("system_matrices")):
+            return list(c["folds"])
+    return None
+
+
+def _fold_parts(data):
+    from subid.methods.dt._selection import MAX_SELECTION_SAMPLES, experiment_folds, folds
+    used = data
+    if data.n_samples > MAX_SELECTION_SAMPLES:
+        used = data[data.n_samples - MAX_SELECTION_SAMPLES:]
+    if used.n_experiments > 1:
+        return experiment_folds(used)
+    return [(used[a], used[b]) for a, b in folds(used.n_samples)]
+
+
+def _score(model, validation, focus) -> float:
+    from subid.evaluation.metrics import fit_percent
+    steps = np.inf if focus == "simulation" else 1
+    try:
+        with warnings.catch_warnings(), np.errstate(all="ignore"):
+            warnings.simplefilter("ignore")
+            value = float(np.mean(fit_percent(model, validation, steps=steps)))
+    except SubidError:
+        return FLOOR
+    return max(value, FLOOR) if math.isfinite(value) else FLOOR
+
+
+def _refine(data, model, focus):
+    """``pem(data, model, focus=focus)``, or None when the start cannot be refined so."""
+    from subid.methods.dt.pem import pem
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            return pem(data, model, focus=focus)
+    except (ModelError, DataError):
+        return None
+
+
+def _feedback(data, model) -> bool:
+    """Whether the data show feedback from the outputs to the inputs: the test of
+    ``feedthrough='auto'`` (:func:`subid.methods.dt._feedthrough.decide`), from the
+    model's own record when it ran, else on the record's statistic at its horizon."""
+    ran = model.info.get("feedthrough", {})
+    if ran.get("requested") == "auto":           # the test ran (None: a noise-free record)
+        return bool(isinstance(ran.get("feedback"), dict) and ran["feedback"]["detected"])
+    from subid.methods.dt._feedthrough import decide
+    from subid.statistic.hankel import HankelStatistic
+    depth = 2 * int(model.info["horizon"])
+    try:
+        factor = HankelStatistic.from_data(data, depth).factor()
+    except SubidError:
+        return False
+    feedback = decide(factor)[1].get("feedback")
+    return bool(isinstance(feedback, dict) and feedback["detected"])
+
+
+def _fold_scores(data, method, config):
+    """Simulation fit of the pinned configuration on the held-out part of every fold."""
+    fn = _estimator(method)
+    options = dict(config)
+    order = options.pop("order")
+    out = []
+    for train, validation in _fold_parts(data):
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                out.append(_score(fn(train, order, **options), validation, "simulation"))
+        except SubidError:
+            out.append(FLOOR)
+    return out
+
+
+def _fold_refinement(data, method, config, focus, scores=None):
+    """Fold scores of the pinned subspace configuration and of its refinement by
+    ``pem(focus=focus)``: ``{score focus: (subspace scores, refined scores)}`` for each
+    focus of ``scores`` (default: ``focus`` alone)."""
+    fn = _estimator(method)
+    options = dict(config)
+    order = options.pop("order")
+    scores = (focus,) if scores is None else tuple(scores)
+    out = {s: ([], []) for s in scores}
+    for train, validation in _fold_parts(data):
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                start = fn(train, order, **options)
+        except SubidError:
+            for s in scores:
+                out[s][0].append(FLOOR)
+                out[s][1].append(FLOOR)
+            continue
+        better = _refine(train, start, focus)
+        for s in scores:
+            out[s][0].append(_score(start, validation, s))
+            out[s][1].append(out[s][0][-1] if better is None else _score(better, validation, s))
+    return out
+
+
+def identify(data, order=None, *, focus="simulation", time_base="auto", horizon=None,
+             feedthrough="auto", refine=True) -> StateSpace:
+    """Identify the best model the data support: subspace start, order, refinement.
+
+    Parameters
+    ----------
+    data : IOData
+        The estimation record (uniformly sampled for discrete time; a record of
+        several experiments, :func:`subid.merge`, is handled experiment by
+        experiment). Remove the means (or trends) first, as for every method.
+    order : int, None, 'auto' or iterable of int
+        Model order; ``None`` (default) lets the cross-validation choose it
+        (orders past 10 while the criterion improves); an iterable gives the
+        candidates.
+    focus : {'simulation', 'prediction'}
+        What the model is for, and what the refinement minimises and is
+        judged by: ``'simulation'`` (default) the simulation error (output
+        error; K re-estimated afterwards), ``'prediction'`` the one-step
+        prediction error of the innovation form.
+    time_base : {'auto', 'dt', 'ct'}
+        ``'auto'``: discrete time for uniformly sampled data, continuous time
+        (:func:`subid.ct_subspace`) for non-uniform time stamps; ``'ct'``:
+        continuous time always; ``'dt'``: discrete time (non-uniform data are
+        then an error).
+    horizon : int, optional
+        The subspace horizon (default: chosen with the order).
+    feedthrough : {'auto', True, False}
+        Direct term D (discrete time): ``'auto'`` estimates it only when the
+        data show one and no feedback (:mod:`subid.methods.dt._feedthrough`).
+        Continuous time: passed to :func:`subid.ct_subspace` when a bool.
+    refine : bool
+        Try the prediction-error refinement (kept only when it validates
+        better on the folds); ``False``: the subspace model.
+
+    Returns
+    -------
+    StateSpace
+        With ``K`` and ``noise_cov``; ``info['method']`` is ``'identify'``,
+        ``info['identify']`` records every decision: ``time_base``,
+        ``estimators`` (each estimator's chosen order, horizon, feedthrough,
+        system matrices and fold scores), ``estimator`` (the one taken),
+        ``refinement`` (``focus``, fold scores of the subspace and refined
+        fold models, ``kept``, and for the final refinement ``cost_history``,
+        ``start_cost``, ``final_cost``, ``n_evaluations``).
+
+    Raises
+    ------
+    DataError
+        Not an IOData record; non-uniform data with ``time_base='dt'``.
+    OptionError
+        Bad option values.
+
+    Examples
+    --------
+    >>> import subid
+    >>> true = subid.systems.seed001_system()
+    >>> data = subid.systems.simulate_data(true, 600, seed=1, output_snr_db=30)
+    >>> model = subid.identify(data)
+    >>> model.order, model.info["identify"]["estimator"] in ("moesp", "n4sid")
+    (3, True)
+    """
+    check_choice(focus, "focus", FOCUS)
+    check_choice(time_base, "time_base", TIME_BASES)
+    if not isinstance(refine, (bool, np.bool_)):
+        raise OptionError(f"refine must be True or False; got {refine!r}"[:300])
+    if not isinstance(data, IOData):
+        raise DataError(f"identify expects an IOData record, got {type(data).__name__}; wrap "
+                        "arrays as subid.IOData(u, y, dt=...)")
+    if time_base == "ct" or (time_base == "auto" and not data.is_uniform):
+        return _continuous(data, order, feedthrough, reason=(
+            "time_base='ct' requested" if time_base == "ct" else
+            "non-uniform time stamps"))
+    from subid.methods.dt._feedthrough import check_feedthrough
+    from subid.methods.dt._subspace import check_data
+    feedthrough = check_feedthrough(feedthrough)
+    check_data(data, "identify")
+    with collect_warnings() as issued:
+        model, record = _discrete(data, order, horizon, feedthrough, focus, bool(refine))
+    info = dict(model.info)
+    info["subspace_method"] = info.get("method")
+    info["method"] = "identify"
+    info["identify"] = record
+    info["warnings"] = list(dict.fromkeys(list(info.get("warnings", [])) + list(issued)))
+    return model.with_noise_model(model.K, model.noise_cov, info=info)
+
+
+def _continuous(data, order, feedthrough, *, reason):
+    from subid.methods.ct.ct_subspace import ct_subspace
+    options = {} if feedthrough == "auto" else {"feedthrough": bool(feedthrough)}
+    model = ct_subspace(data, order, **options)
+    info = dict(model.info)
+    info["subspace_method"] = info.get("method")
+    info["method"] = "identify"
+    info["identify"] = {"time_base": "continuous", "reason": reason,
+                        "estimator": "ct_subspace",
+                        "description": "continuous-time path: subid.ct_subspace with its "
+                                       "own defaults"}
+    return StateSpace(model.A, model.B, model.C, model.D, model.dt, K=model.K,
+                      noise_cov=model.noise_cov, input_names=model.input_names,
+                      output_names=model.output_names, info=info, hold=model.hold)
+
+
+def _discrete(data, order, horizon, feedthrough, focus, refine):
+    record = {"time_base": "discrete", "focus": focus, "estimators": []}
+    fits = {}
+    errors = {}
+    for name in ESTIMATORS:
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                fits[name] = _estimator(name)(data, order, horizon=horizon,
+                                              feedthrough=feedthrough)
+        except SubidError as exc:
+            errors[name] = f"{type(exc).__name__}: {exc}"
+    if not fits:
+        # every estimator failed: raise the first estimator's error again, with its warnings
+        _estimator(ESTIMATORS[0])(data, order, horizon=horizon, feedthrough=feedthrough)
+    scores = {}
+    for name, model in fits.items():
+        config = _configuration(model)
+        folds = _selected_folds(model)
+        if folds is None:                      # order and horizon given: score them here
+            folds = _fold_scores(data, name, config) if len(fits) > 1 else []
+        scores[name] = float(np.mean(folds)) if folds else math.nan
+        record["estimators"].append({"estimator": name, **config, "folds": folds,
+                                     "score": scores[name]})
+    for name, message in errors.items():
+        record["estimators"].append({"estimator": name, "error": message})
+    # the better mean fold score; on ties (or no scores) the first estimator
+    chosen = max(fits, key=lambda k: (scores[k] if math.isfinite(scores[k]) else -math.inf,
+                                      -ESTIMATORS.index(k)))
+    record["estimator"] = chosen
+    record["rule"] = ("the estimator whose chosen candidate has the better mean simulation fit "
+                      "over the four cross-validation folds")
+    model = fits[chosen]
+    config = _configuration(model)
+    refinement = {"focus": focus, "tried": refine}
+    record["refinement"] = refinement
+    if not refine:
+        refinement["kept"] = False
+        refinement["reason"] = "refine=False"
+        return model, record
+    record["feedback"] = _feedback(data, model)
+    guard = None
+    if record["feedback"] and focus == "simulation":
+        # under feedback the output-error criterion is biased (the input is correlated
+        # with the noise); the prediction-error criterion of the innovation form stays
+        # consistent (Ljung 1999, Sec. 13.4, the direct approach)
+        focus, guard = "prediction", "simulation"
+        refinement.update(focus=focus, requested_focus="simulation",
+                          focus_reason="feedback detected in the data: the simulation "
+                                       "(output-error) criterion is biased in closed loop; "
+                                       "refined and judged by one-step prediction, kept "
+                                       "unless it raises the simulation misfit on the folds "
+                                       f"by more than {100 * SIMULATION_LOSS:g} %")
+    if focus == "simulation" and not model.is_stable():
+        refinement.update(kept=False, reason="the subspace model is unstable (the data demand "
+                                             "it): no simulation error to minimise")
+        return model, record
+    folds = _fold_refinement(data, chosen, config, focus,
+                             scores=(focus,) if guard is None else (focus, guard))
+    base, refined = folds[focus]
+    diff = np.subtract(refined, base)
+    gain = float(np.mean(diff))
+    error = float(np.std(diff, ddof=1)) / math.sqrt(diff.size) if diff.size > 1 else 0.0
+    refinement.update(subspace_folds=base, refined_folds=refined, mean_gain=gain,
+                      standard_error=error,
+                      score=("simulation fit (%)" if focus == "simulation"
+                             else "one-step prediction fit (%)") + " on the held-out folds")
+    if not gain > error:
+        refinement.update(kept=False, reason="the refined fold models do not validate better "
+                                             "by more than one standard error of the paired "
+                                             "fold differences")
+        return model, record
+    if guard is not None:
+        base_s, refined_s = folds[guard]
+        refinement.update(subspace_simulation_folds=base_s, refined_simulation_folds=refined_s)
+        before, after = 100.0 - float(np.mean(base_s)), 100.0 - float(np.mean(refined_s))
+        if after > (1.0 + SIMULATION_LOSS) * before:
+            refinement.update(kept=False, reason=(
+                f"the refinement raises the simulation misfit on the folds from "
+                f"{before:.3g} to {after:.3g} (more than {100 * SIMULATION_LOSS:g} %): "
+                "the subspace model is kept as the simulator asked for"))
+            return model, record
+    final = _refine(data, model, focus)
+    if final is None:
+        refinement.update(kept=False, reason="the refinement of the whole record failed")
+        return model, record
+    refinement.update(kept=True, cost_history=[float(c) for c in final.info["cost_history"]],
+                      start_cost=final.info["start_cost"], final_cost=final.info["final_cost"],
+                      n_evaluations=final.info["n_evaluations"],
+                      stop_reason=final.info["stop_reason"])
+    return final, record

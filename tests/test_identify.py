@@ -1,0 +1,263 @@
+"""subid.identify, feedthrough='auto', the cross-validated BIC and orders past 10 (issue 21)."""
+
+import warnings
+
+import numpy as np
+import pytest
+import scipy.linalg
+
+import subid
+from subid import systems
+from subid.errors import DataError, OptionError
+from subid.methods.dt import _selection
+from subid.methods.dt._feedthrough import decide
+
+
+def _closed_loop(seed, n=3000):
+    true = systems.seed001_innovation_system(feedthrough=False)
+    return true, systems.simulate_innovation_data(true, n, seed=seed, feedback=-0.5 * np.eye(2))
+
+
+# -- feedthrough='auto' -----------------------------------------------------------------
+
+def test_feedthrough_auto_sees_feedback_and_direct_terms():
+    """Closed loop: feedback detected, D = 0; open loop: D estimated exactly when the
+    plant has one (a test that fails if either F-test is wrong)."""
+    for seed in (1, 2):
+        _, closed = _closed_loop(seed)
+        model = subid.n4sid(closed, 3, horizon=10)
+        record = model.info["feedthrough"]
+        assert record["feedback"]["detected"] and not record["estimated"]
+        assert np.all(model.D == 0)
+        for with_d in (False, True):
+            plant = systems.seed001_innovation_system(feedthrough=with_d)
+            opened = systems.simulate_innovation_data(plant, 3000, seed=seed)
+            model = subid.moesp(opened, 3, horizon=10)
+            assert not model.info["feedthrough"]["feedback"]["detected"]
+            assert model.info["feedthrough"]["estimated"] is with_d
+            assert bool(np.any(model.D != 0)) is with_d
+
+
+def test_feedthrough_explicit_values_are_honoured(paper_data):
+    for method in (subid.ls_subspace, subid.moesp, subid.n4sid):
+        assert np.all(method(paper_data, 3, feedthrough=False).D == 0)
+        forced = method(paper_data, 3, feedthrough=True)
+        assert forced.info["feedthrough"] == {"requested": True, "estimated": True}
+        with pytest.raises(OptionError, match="feedthrough"):
+            method(paper_data, 3, feedthrough="yes")
+
+
+def test_feedthrough_decision_from_a_statistic_equals_the_record(paper_data):
+    stat = subid.HankelStatistic.from_data(paper_data, 20)
+    a = subid.moesp(paper_data, 3, horizon=10, system_matrices="shift")
+    b = subid.moesp(stat, 3, bd_method="projection")
+    assert a.info["feedthrough"]["estimated"] == b.info["feedthrough"]["estimated"]
+    assert decide(stat.factor())[0] == a.info["feedthrough"]["estimated"]
+
+
+@pytest.mark.long
+def test_closed_loop_default_start_is_as_good_as_no_feedthrough():
+    """Issue 21 acceptance (5 of its 10 runs here; bench/closed_loop.py runs all 10). The
+    cheap siblings: test_feedthrough_auto_sees_feedback_and_direct_terms and
+    test_identify_closed_loop_is_consistent."""
+    true = systems.seed001_innovation_system(feedthrough=False)
+    default, reference = [], []
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        for r in range(5):
+            _, data = _closed_loop(100 + r)
+            default.append(subid.markov_error(subid.pem(data, subid.n4sid(data, 3)), true))
+            reference.append(subid.markov_error(
+                subid.pem(data, subid.n4sid(data, 3, feedthrough=False)), true))
+    assert np.median(default) <= 1.5 * np.median(reference), (default, reference)
+
+
+# -- the selection rule -------------------------------------------------------------------
+
+def test_criterion_prices_parameters_and_ignores_rounding():
+    """The cheap sibling of the Monte Carlo below (bench/selection.py runs all 40)."""
+    c = _selection.criterion
+    # noise-free: every order from the true one up fits to rounding -> the smallest wins
+    scores = {(3, 10, 0): [100.0] * 4, (4, 10, 0): [100.0 - 1e-12] * 4,
+              (2, 10, 0): [90.0] * 4}
+    assert _selection.select(scores, 1000, 2, 2)[0] == (3, 10, 0)
+    # a higher order must buy its n (nu + ny) parameters: ln N / (2 N ny) of the misfit each
+    n_samples, nu, ny = 2000, 2, 2
+    price = 4 * np.log(n_samples) / (2 * n_samples * ny)          # one more order
+    low = c(80.0, 3, n_samples, nu, ny)
+    assert c(100 - 20.0 * np.exp(-0.5 * price), 4, n_samples, nu, ny) > low
+    assert c(100 - 20.0 * np.exp(-2.0 * price), 4, n_samples, nu, ny) < low
+
+
+@pytest.mark.long
+def test_random_systems_true_order_as_often_as_bic():
+    """Seeded Monte Carlo (12 of the 40 systems of the issue's acceptance; the whole run
+    measured 30/40 for the default against 31/40 for BIC): the default finds the true
+    order at least as often as BIC on the fitted innovation models, minus one, and its
+    validation fit is not below BIC's model's."""
+    hits_cv, hits_bic, fit_cv, fit_bic = 0, 0, [], []
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        for k in range(12):
+            order = 2 + k % 5
+            true = systems.random_system(order, 2, 2, seed=k)
+            data = systems.simulate_data(true, 4000, seed=1000 + k, process_snr_db=20,
+                                         output_snr_db=20)
+            est, val = data[:2000], data[2000:]
+            model = subid.moesp(est)
+            bic = {}
+            for n in range(1, 9):
+                m = subid.n4sid(est, n, horizon=10)
+                e = est.y - subid.predict(m, est, 1)
+                bic[n] = (2000 * np.log(np.linalg.det(e.T @ e / 2000))
+                          + (6 * n + 4) * np.log(2000), m)
+            best = min(bic, key=lambda n: bic[n][0])
+            hits_cv += model.order == order
+            hits_bic += best == order
+            fit_cv.append(np.mean(subid.fit_percent(model, val)))
+            fit_bic.append(np.mean(subid.fit_percent(bic[best][1], val)))
+    assert hits_cv >= hits_bic - 1, (hits_cv, hits_bic)
+    assert np.median(fit_cv) >= np.median(fit_bic) - 0.5, (np.median(fit_cv),
+                                                            np.median(fit_bic))
+
+
+# -- orders past 10 ------------------------------------------------------------------------
+
+def _structure(modes, seed=0):
+    """A lightly damped structure: ``modes`` modes (damping 1-3 %), 2 inputs, 4 outputs."""
+    rng = np.random.default_rng(seed)
+    w = np.sort(rng.uniform(0.05, 2.5, modes))
+    z = rng.uniform(0.01, 0.03, modes)
+    A = scipy.linalg.block_diag(*[scipy.linalg.expm(np.array([[0, 1], [-wk ** 2, -2 * zk * wk]]))
+                                  for wk, zk in zip(w, z)])
+    return subid.StateSpace(A, rng.standard_normal((2 * modes, 2)),
+                            rng.standard_normal((4, 2 * modes)), np.zeros((4, 2)), 1.0)
+
+
+def test_next_block_and_its_ceiling():
+    orders, horizons, ceiling = _selection.next_block(10, 4000, 2, 4, 2, 1)
+    assert orders == list(range(11, 21)) and horizons == [10, 20]
+    orders, _, _ = _selection.next_block(20, 4000, 2, 4, 2, 1)
+    assert orders == list(range(22, 41, 2))
+    # one output: the horizon grows with the orders; a short record caps them
+    orders, horizons, ceiling = _selection.next_block(20, 3000, 1, 1, 2, 1)
+    assert horizons == [50] and orders == list(range(22, 41, 2))
+    orders, _, ceiling = _selection.next_block(20, 300, 1, 1, 2, 1)
+    assert not orders or ceiling["limited_by"] is not None
+
+
+@pytest.mark.long
+def test_order_search_goes_past_10():
+    """Seven modes (order 14), 2 inputs, 4 outputs: the search passes 10 (the cheap
+    sibling: test_next_block_and_its_ceiling)."""
+    true = _structure(7, seed=3)
+    data = systems.simulate_data(true, 3000, seed=1, output_snr_db=30)
+    est, val = data[:2000], data[2000:]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        model = subid.moesp(est, system_matrices="shift")
+    record = model.info["order_selection"]
+    assert len(record["searched"]) >= 2 and 12 <= model.order <= 20, model.order
+    assert np.mean(subid.fit_percent(model, val)) > 90
+    again = subid.moesp(est, model.order, horizon=model.info["horizon"],
+                        system_matrices="shift")
+    np.testing.assert_array_equal(again.A, model.A)
+
+
+@pytest.mark.long
+def test_order_30_structure():
+    """Issue 21: 15 lightly damped modes (order 30), 2 inputs, 4 outputs: the default
+    finds an order near 30 with a good fit."""
+    true = _structure(15)
+    data = systems.simulate_data(true, 6000, seed=1, output_snr_db=30)
+    est, val = data[:4000], data[4000:]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        model = subid.moesp(est)
+    assert 26 <= model.order <= 36, model.order
+    assert np.mean(subid.fit_percent(model, val)) > 90
+
+
+# -- identify ------------------------------------------------------------------------------
+
+def test_identify_records_every_decision():
+    true = systems.seed001_system()
+    data = systems.simulate_data(true, 600, seed=1, output_snr_db=30)
+    model = subid.identify(data)
+    record = model.info["identify"]
+    assert model.info["method"] == "identify" and model.order == 3
+    assert {e["estimator"] for e in record["estimators"]} == {"moesp", "n4sid"}
+    assert record["estimator"] in ("moesp", "n4sid")
+    chosen = next(e for e in record["estimators"] if e["estimator"] == record["estimator"])
+    assert chosen["score"] == max(e["score"] for e in record["estimators"])
+    ref = record["refinement"]
+    assert len(ref["subspace_folds"]) == len(ref["refined_folds"]) == 4
+    diff = np.subtract(ref["refined_folds"], ref["subspace_folds"])
+    assert ref["kept"] == (diff.mean() > diff.std(ddof=1) / 2)
+    if ref["kept"]:
+        assert ref["cost_history"][0] == ref["start_cost"] >= ref["final_cost"]
+        assert model.info["refined_by"] == "pem" and model.info["focus"] == "simulation"
+    assert model.K is not None and "order_selection" in model.info
+
+
+def test_identify_keeps_refinement_only_when_it_validates_better(monkeypatch):
+    """A refinement that makes the fold models worse is dropped."""
+    from subid.methods import identify as module
+    true = systems.seed001_system()
+    data = systems.simulate_data(true, 600, seed=2, output_snr_db=30)
+
+    def worse(train, start, focus):
+        bad = subid.StateSpace(0.5 * start.A, start.B, start.C, start.D, start.dt)
+        return bad.with_noise_model(None, None, info=dict(start.info, cost_history=[1.0],
+                                                         start_cost=1.0, final_cost=1.0,
+                                                         n_evaluations=1, stop_reason=""))
+    monkeypatch.setattr(module, "_refine", worse)
+    model = subid.identify(data, 3, horizon=10)
+    ref = model.info["identify"]["refinement"]
+    assert not ref["kept"] and ref["mean_gain"] < 0 and "refined_by" not in model.info
+
+
+def test_identify_closed_loop_is_consistent():
+    true, data = _closed_loop(101)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        model = subid.identify(data, 3)
+    assert np.all(model.D == 0)
+    # feedback seen: refined (if at all) by the prediction-error criterion, consistent
+    assert model.info["identify"]["feedback"]
+    assert model.info["identify"]["refinement"]["focus"] == "prediction"
+    assert subid.markov_error(model, true) < 0.05
+
+
+@pytest.mark.slow
+def test_identify_routes_continuous_time():
+    ct = subid.StateSpace(np.array([[-1.0, 2.0], [-2.0, -1.0]]), np.array([[1.0], [0.0]]),
+                          np.array([[1.0, 0.5]]), np.zeros((1, 1)), 0)
+    t = np.sort(np.random.default_rng(0).uniform(0, 20, 300))
+    t[0] = 0.0
+    u = np.sin(0.7 * t) + np.sign(np.sin(0.23 * t))
+    y = ct.simulate(u, t=t)
+    data = subid.IOData(u, y, t=t)
+    model = subid.identify(data, 2)
+    assert model.is_continuous and model.info["identify"]["estimator"] == "ct_subspace"
+    uniform = subid.IOData(u[:200], y[:200], dt=0.1)
+    assert subid.identify(uniform, 2, time_base="ct").is_continuous
+
+
+def test_identify_bad_options(paper_data):
+    with pytest.raises(OptionError, match="focus"):
+        subid.identify(paper_data, focus="fit")
+    with pytest.raises(OptionError, match="time_base"):
+        subid.identify(paper_data, time_base="discrete")
+    with pytest.raises(DataError):
+        subid.identify(np.zeros((10, 2)))
+
+
+def test_refine_names_its_focus(paper_data):
+    model = subid.moesp(paper_data, 3, refine="simulation")
+    assert model.info["focus"] == "simulation" and model.K is not None
+    with pytest.warns(DeprecationWarning, match="refine='pem'"):
+        old = subid.n4sid(paper_data, 3, refine="pem")
+    assert old.info["focus"] == "prediction"
+    with pytest.raises(OptionError, match="refine"):
+        subid.ls_subspace(paper_data, 3, refine="pem2")
