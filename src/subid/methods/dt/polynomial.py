@@ -19,8 +19,10 @@ input from :func:`subid.estimate_delay`, then every ``na, nb`` in 1..10 is
 fitted on the training part of the four contiguous folds and scored by its
 simulation fit on the held-out part (searched along ``na = nb``, then ``nb``
 at the best ``na``, then ``na`` at the best ``nb``: 28 structures, not the
-100 of the full grid); the smallest ``na + nb`` (then ``na``)
-whose misfit is within 1 % of the best is chosen.
+100 of the full grid); the structure of the least cross-validated BIC is
+chosen, ``2 N ny ln(100 - fit) + p ln N`` with ``p = ny (na ny + nb nu)``
+parameters (the criterion of the subspace defaults,
+:func:`subid.methods.dt._selection.criterion`, for an ARX parametrisation).
 """
 
 from __future__ import annotations
@@ -45,7 +47,6 @@ from subid.methods.dt._checks import check_data
 from subid.methods.dt._selection import (
     ABSOLUTE_TOLERANCE,
     MAX_ORDER,
-    RELATIVE_TOLERANCE,
     _fit_score,
     experiment_folds,
     folds,
@@ -366,17 +367,20 @@ def select_structure(data: IOData, max_order: int = MAX_ORDER):
     if not scores:
         raise TooFewSamplesError("arx: the record is too short to compare ARX structures "
                                  "by cross-validation; give the orders (na, nb, nk)")
-    limit = (100.0 - max(scores.values())) * (1.0 + RELATIVE_TOLERANCE) + ABSOLUTE_TOLERANCE
-    na, nb = min((key for key, value in scores.items() if 100.0 - value <= limit),
-                 key=lambda k: (k[0] + k[1], k[0]))
+    N = data.n_samples
+
+    def bic(key):            # the cross-validated BIC of the subspace defaults, ARX parameters
+        misfit = max(100.0 - scores[key], ABSOLUTE_TOLERANCE)
+        params = ny * (key[0] * ny + key[1] * nu)
+        return 2.0 * N * ny * np.log(misfit) + params * np.log(N)
+    na, nb = min(scores, key=lambda k: (bic(k), k[0] + k[1], k[0]))
     record = {"rule": "cv",
               "description": ("ARX structures (na, nb in 1.."f"{max_order} along na = nb, "
                               "then nb, then na; nk from estimate_delay) scored by four-fold "
                               "contiguous "
                               "cross-validation (simulation fit % on the held-out part); "
-                              "smallest na + nb whose misfit is within "
-                              f"{100 * RELATIVE_TOLERANCE:g} % of the best"),
-              "candidates": [{"na": k[0], "nb": k[1], "score": v}
+                              "the structure of the least cross-validated BIC"),
+              "candidates": [{"na": k[0], "nb": k[1], "score": v, "criterion": bic(k)}
                              for k, v in sorted(scores.items())],
               "selected": {"na": na, "nb": nb, "nk": nk.tolist(), "score": scores[(na, nb)]}}
     return parse_orders((na, nb, np.tile(nk, (ny, 1))), "arx", ny, nu), record
