@@ -365,7 +365,7 @@ def test_order_selection_and_initial_state(true):
     data, x = record(true, 400, seed=5)
     model = ct_subspace(data)
     assert model.order == 4
-    assert model.info["order_selection"]["description"].startswith("largest gap")
+    assert model.info["order_selection"]["rule"] == "cv"
     x0 = model.info["x0"]
     y_hat = model.simulate(data.u, t=data.t, x0=x0, hold="foh")
     assert np.abs(y_hat - data.y).max() < 1e-8 * np.abs(data.y).max()

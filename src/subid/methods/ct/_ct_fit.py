@@ -201,7 +201,7 @@ def reflected(A, limit: float):
 def stable_choice(A, C, fit, rec: Record, stability: str):
     """A stable (and not marginal) ``A`` unless the data show otherwise.
 
-    ``fit(A) -> (B, D, x0, y0, diag) or None``. ``'none'``: A as estimated.
+    ``fit(A, C) -> (B, D, x0, y0, diag) or None``. ``'none'``: A as estimated.
     ``'enforce'``: poles above :func:`marginal_limit` reflected
     (:func:`reflected`), B, D, x0 refitted. ``'auto'``: the same when the
     output does not grow (:func:`growth` below :data:`GROWTH_LIMIT`), and the
@@ -219,7 +219,7 @@ def stable_choice(A, C, fit, rec: Record, stability: str):
     record = {"requested": stability, "action": "none",
               "largest_real_part_before": float(lam.real.max()),
               "marginal_limit": limit}
-    fitted = fit(A)
+    fitted = fit(A, C)
     if stability == "none" or lam.real.max() <= limit:
         if fitted is None:
             raise_overflow()
@@ -232,7 +232,7 @@ def stable_choice(A, C, fit, rec: Record, stability: str):
         record["action"] = "kept unstable: the output grows over the record"
         return A, fitted, record
     A_s = reflected(A, limit)
-    fitted_s = fit(A_s)
+    fitted_s = fit(A_s, C)
     record.update(action="enforced",
                   how="poles with real part above the marginal limit reflected into the "
                       "left half-plane; B, D, x0 refitted",

@@ -124,6 +124,8 @@ __all__ = [
 ]
 
 DEFAULT_MAX_ORDER = 10
+#: Instrument iterations of the models fitted to the cross-validation folds.
+FOLD_ITERATIONS = 3
 HOLD_ORDERS = {"zoh": 0, "foh": 1}
 # Relative size of a diagonal entry of the filtered-input factor below which
 # the filtered inputs count as linearly dependent.
@@ -252,7 +254,7 @@ def _experiment_regressors(basis, e: IOData, s: dict, uniform: bool):
     corr = np.zeros((L, 0))
     if s["n_corr"]:
         corr = _correction_regressors(basis, t, u, poly_order, input_order,
-                                      s["feedthrough"] is not False, filtering, uniform)
+                                      s["feedthrough"] is True, filtering, uniform)
     Z = None
     if s["instruments"] == "past":
         ufl = uf.reshape(L, -1)
@@ -485,7 +487,7 @@ def _model(problem: Problem, n, A, B, C, D, x0, y0, diag, feedthrough) -> StateS
         ac_method=s["ac_method"], bd_method=s["bd_method"],
         filtering=s["filtering"] if s["filtered"] is None else "given",
         data_equation=s["data_equation"], feedthrough=bool(feedthrough),
-        offset=s["offset"], y_offset=y0, largest_real_part=float(lam.real.max()),
+        offset=s["offset"], y_offset=y0, largest_real_part=float(lam.real.max()), refined=False,
         subspace_model={"A": A, "B": B, "C": C, "D": D}, **diag)
     if data.n_experiments > 1:
         info["n_experiments"] = data.n_experiments
@@ -571,7 +573,7 @@ def _simulated_states(A, B, x0, rec: _ct_fit.Record):
 @records_warnings
 def ct_subspace(data, order=None, *, basis=None, poly_order: int = 3, estimate_x0: bool = True,
                 feedthrough="auto", hold="foh", selection: str = "cv", start: str = "auto",
-                offset: bool = True, stability: str = "auto", noise_model="ar",
+                offset="auto", stability: str = "auto", noise_model="ar",
                 instruments="model", iterations: int = 10, tolerance: float = 1e-4,
                 refine: bool = True, refine_iterations: int = 20, startup: bool = True,
                 correction: bool = True, ac_method: str = "joint",
@@ -625,11 +627,15 @@ def ct_subspace(data, order=None, *, basis=None, poly_order: int = 3, estimate_x
         only). ``'auto'``: both on a uniform grid, the one with the smaller
         output residual kept (``info['start']``); the subspace estimate on a
         non-uniform grid.
-    offset : bool
+    offset : {'auto', True, False}
         Estimate a constant output offset per experiment (``info['y_offset']``)
         with x0, and project a constant out of the filtered data: the model
-        relates the deviations from it, and an offset in the data never
-        becomes a pole at the origin.
+        relates the deviations from it, and an offset in the data does not
+        become a pole at the origin. ``'auto'``: when the record sits at an
+        operating point, i.e. some output's mean exceeds its standard
+        deviation in some experiment (``info['offset']``). On a record a few
+        time constants long an offset trades with the slow dynamics (seed-002
+        system, 10 s records: fit 87 % without, 67 % with), hence not always.
     stability : {'auto', 'enforce', 'none'}
         Poles with real part above ``-1 / (100 T)`` (T the record length:
         unstable, or an integrator to these data) are reflected into the left
@@ -734,8 +740,12 @@ def ct_subspace(data, order=None, *, basis=None, poly_order: int = 3, estimate_x
     if poly_order > MAX_POLY_ORDER:
         raise OrderError(f"poly_order must be at most {MAX_POLY_ORDER}, got {poly_order}")
     for name, flag in (("estimate_x0", estimate_x0), ("refine", refine), ("startup", startup),
-                       ("correction", correction), ("offset", offset)):
+                       ("correction", correction)):
         check_bool(flag, name)
+    check_choice(offset, "offset", ("auto", True, False))
+    if offset == "auto":
+        offset = any(bool(np.any(np.abs(e.y.mean(axis=0)) > e.y.std(axis=0)))
+                     for e in data.experiments)
     check_choice(feedthrough, "feedthrough", ("auto", True, False))
     check_choice(hold, "hold", ("foh", "zoh", None))
     check_choice(selection, "selection", ("cv", "gap"))
@@ -776,7 +786,7 @@ def ct_subspace(data, order=None, *, basis=None, poly_order: int = 3, estimate_x
     fixed, candidates = _parse_order(order, max_order)
     n_corr = 0
     if correction and filtered is None:
-        i0, j = _correction_count(poly_order, input_order, feedthrough is not False)
+        i0, j = _correction_count(poly_order, input_order, feedthrough is True)
         n_corr = max(0, j - i0 + 1) * N * m
     settings = dict(method=method, basis=basis, poly_order=poly_order, input_order=input_order,
                     hold=hold, estimate_x0=estimate_x0, feedthrough=feedthrough, offset=offset,
@@ -788,10 +798,13 @@ def ct_subspace(data, order=None, *, basis=None, poly_order: int = 3, estimate_x
                     lag=_lag_for(basis, data.experiments[0].t) if instruments == "past" else 0)
     cv = selection == "cv" and filtered is None
 
+    # the fold models iterate the instruments at most FOLD_ITERATIONS times (cost)
+    fold_settings = dict(settings, iterations=min(iterations, FOLD_ITERATIONS))
+
     def prepare_fold(record, orders, horizon):
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            return _prepare(record, orders, settings)
+            return _prepare(record, orders, fold_settings)
     prepare_fold.blocks = 1
 
     if fixed is None and cv:
