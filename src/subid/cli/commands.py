@@ -447,12 +447,12 @@ def _convergence_status(model) -> str:
 
 
 def _default_detrend(spec) -> str:
-    """--detrend's default: 'constant' for discrete-time methods (data around an
-    operating point, as MATLAB users detrend), 'none' for continuous-time ones,
-    which model the response from rest in the user's units: removing the
-    record's means biases them (measured: the adaptive identifier's pole error
-    0.98 instead of 5e-5 on the seed-000 system)."""
-    return "none" if spec.time == "continuous" else "constant"
+    """--detrend's default: 'constant' (data around an operating point, as MATLAB users
+    detrend), for the discrete-time and the continuous-time batch methods alike; 'none'
+    for the online continuous-time identifiers, which model the response from rest in
+    the user's units: removing the record's means biases them (measured: the adaptive
+    identifier's pole error 0.98 instead of 5e-5 on the seed-000 system)."""
+    return "none" if spec.time == "continuous" and spec.kind != "batch" else "constant"
 
 
 def _detrend(data, kind):
@@ -639,7 +639,7 @@ def identify(data, inputs, outputs, dt, time_column, delimiter, detrend, method_
     Several DATA files are several experiments of one plant (subid.merge):
     no Hankel column crosses from one file to the next, each file has its own
     initial state and loses its own mean (--detrend constant); the validation
-    part is the end of the last file. Discrete-time batch methods only.
+    part is the end of the last file. Discrete-time batch methods and ct.
     """
     from subid.evaluation import report
     spec = METHODS[method_name]
@@ -660,10 +660,10 @@ def identify(data, inputs, outputs, dt, time_column, delimiter, detrend, method_
         if stream:
             raise click.UsageError("--stream reads one file; several DATA files are merged as "
                                    "experiments in memory (drop --stream)")
-        if spec.kind != "batch" or spec.time != "discrete":
+        if spec.kind != "batch" or (spec.time != "discrete" and spec.name != "ct"):
             raise click.UsageError(f"several DATA files are merged as experiments for the "
-                                   f"discrete-time batch methods, not for {spec.name}: it "
-                                   "would join them as if contiguous")
+                                   f"discrete-time batch methods and ct, not for {spec.name}: "
+                                   "it would join them as if contiguous")
     data = sources[0] if len(sources) == 1 else " + ".join(sources)
     if stream:
         return _identify_streamed(data, inputs, outputs, dt, time_column, delimiter, detrend,

@@ -39,6 +39,10 @@ import scipy.optimize
 
 from subid.methods.ct import _ct_kernels
 
+#: Work (samples x simulated state trajectories x outputs) one refinement may spend on
+#: its residual evaluations (about 20 s at 4e6 per second): the Jacobian is evaluated
+#: by finite differences, each evaluation simulating n (n m + 1) trajectories.
+REFINE_BUDGET = 1e8
 #: Largest order of the AR noise model fitted to the output error.
 MAX_AR_ORDER = 10
 #: A pole whose time constant exceeds this many record lengths is an integrator to the data.
@@ -389,11 +393,15 @@ def refine_output_error(A, C, rec: Record, *, feedthrough, estimate_x0, offset, 
 
     zero = np.zeros(Q.shape[1])
     rms0 = float(np.sqrt(np.mean(residual(zero) ** 2)))
+    per_evaluation = y.shape[0] * p * (n * (n * rec.n_inputs + 1))
+    budget = max(Q.shape[1] + 2, int(REFINE_BUDGET // max(per_evaluation, 1)))
+    max_nfev = min(max_iterations * (Q.shape[1] + 1), budget)
     sol = scipy.optimize.least_squares(residual, zero, method="lm", x_scale="jac",
-                                       xtol=1e-10, ftol=1e-10, gtol=1e-10,
-                                       max_nfev=max_iterations * (Q.shape[1] + 1))
+                                       xtol=1e-10, ftol=1e-10, gtol=1e-10, max_nfev=max_nfev)
     rms1 = float(np.sqrt(np.mean(sol.fun ** 2)))
-    diag = {"refine_rms_before": rms0, "refine_evaluations": int(sol.nfev)}
+    diag = {"refine_rms_before": rms0, "refine_evaluations": int(sol.nfev),
+            "refine_budget_limited": bool(budget < max_iterations * (Q.shape[1] + 1)
+                                          and sol.nfev >= budget)}
     if not rms1 < rms0:
         diag.update(refined=False, refine_rms_after=rms0)
         return A, C, diag

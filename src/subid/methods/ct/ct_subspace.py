@@ -397,25 +397,32 @@ def _subspace_estimate(problem: Problem, n: int, feedthrough: bool):
     return A, B, C, D, x0, y0, diag
 
 
-def _discrete_start(problem: Problem, n: int):
-    """``(A, C)`` of the discrete-time N4SID model of order ``n`` converted with the hold
-    (MATLAB's route for continuous-time subspace models), or None where it cannot be."""
+def _discrete_starts(problem: Problem, n: int):
+    """``(A, C)`` of the discrete-time N4SID models of order ``n`` (every horizon of
+    :func:`subid.methods.dt._selection.feasible_horizons`) converted with the hold
+    (MATLAB's route for continuous-time subspace models); none on a non-uniform grid
+    or where the conversion has no real logarithm (a pole on the negative real axis)."""
+    from subid.methods.dt._selection import feasible_horizons
     from subid.methods.dt.n4sid import n4sid
     data = problem.data
     if not data.is_uniform:
-        return None
+        return []
     hold = "zoh" if problem.settings["input_order"] == 0 else "foh"
-    try:
-        with warnings.catch_warnings(), np.errstate(all="ignore"):
-            warnings.simplefilter("ignore")
-            work = data.detrend() if problem.settings["offset"] else data
-            dm = n4sid(work, n, selection="gap", feedthrough=True)
-            cm = dm.with_noise_model(None, None).to_continuous(hold)
-    except SubidError:
-        return None
-    if not (np.isfinite(cm.A).all() and np.isfinite(cm.C).all()):
-        return None
-    return cm.A, cm.C
+    work = data.detrend() if problem.settings["offset"] else data
+    horizons = feasible_horizons(data.n_samples, data.n_inputs, data.n_outputs, 2, n,
+                                 n_experiments=data.n_experiments)
+    out = []
+    for f in horizons:
+        try:
+            with warnings.catch_warnings(), np.errstate(all="ignore"):
+                warnings.simplefilter("ignore")
+                dm = n4sid(work, n, horizon=f, feedthrough=True)
+                cm = dm.with_noise_model(None, None).to_continuous(hold)
+        except SubidError:
+            continue
+        if np.isfinite(cm.A).all() and np.isfinite(cm.C).all():
+            out.append((f"discrete (N4SID, horizon {f})", cm.A, cm.C))
+    return out
 
 
 def _build(problem: Problem, feedthrough=None) -> StateSpace:
@@ -433,16 +440,14 @@ def _build(problem: Problem, feedthrough=None) -> StateSpace:
     if s["start"] in ("auto", "subspace"):
         options.append(("subspace", lambda: _subspace_estimate(problem, n, feedthrough)))
     if s["start"] in ("auto", "discrete") and s["bd_method"] == "simulation":
-        def converted():
-            AC = _discrete_start(problem, n)
-            if AC is None:
-                return None
-            A, fitted, stab = _ct_fit.stable_choice(*AC, _linear_fit(problem, feedthrough),
-                                                    problem.record, s["stability"])
-            B, D, x0, y0, bd = fitted
-            return A, B, AC[1], D, x0, y0, dict(bd, bd_method_used="simulation",
-                                                stability=stab, iterations=0)
-        options.append(("discrete", converted))
+        for label, A0, C0 in _discrete_starts(problem, n):
+            def converted(A0=A0, C0=C0):
+                A, fitted, stab = _ct_fit.stable_choice(A0, C0, _linear_fit(problem, feedthrough),
+                                                        problem.record, s["stability"])
+                B, D, x0, y0, bd = fitted
+                return A, B, C0, D, x0, y0, dict(bd, bd_method_used="simulation",
+                                                 stability=stab, iterations=0)
+            options.append((label, converted))
     best = None
     for name, run in options:
         try:
