@@ -110,7 +110,7 @@ from subid.methods.ct._ct_estimate import (
     tm_convolution_matrix,
 )
 from subid.methods.ct.basis import MAX_POLY_ORDER, FilterBank, default_basis
-from subid.methods.dt._selection import cross_validate
+from subid.methods.dt._selection import HORIZON_CANDIDATES, cross_validate
 from subid.methods.dt._subspace import choose_order
 from subid.model.statespace import StateSpace
 
@@ -397,11 +397,11 @@ def _subspace_estimate(problem: Problem, n: int, feedthrough: bool):
     return A, B, C, D, x0, y0, diag
 
 
-def _discrete_starts(problem: Problem, n: int):
-    """``(A, C)`` of the discrete-time N4SID models of order ``n`` (every horizon of
-    :func:`subid.methods.dt._selection.feasible_horizons`) converted with the hold
-    (MATLAB's route for continuous-time subspace models); none on a non-uniform grid
-    or where the conversion has no real logarithm (a pole on the negative real axis)."""
+def _discrete_starts(problem: Problem, n: int, horizons=None):
+    """``(A, C)`` of the discrete-time N4SID models of order ``n`` (at ``horizons``, default
+    every horizon of :func:`subid.methods.dt._selection.feasible_horizons`) converted with
+    the hold (MATLAB's route for continuous-time subspace models); none on a non-uniform
+    grid or where the conversion has no real logarithm (a pole on the negative real axis)."""
     from subid.methods.dt._selection import feasible_horizons
     from subid.methods.dt.n4sid import n4sid
     data = problem.data
@@ -409,8 +409,9 @@ def _discrete_starts(problem: Problem, n: int):
         return []
     hold = "zoh" if problem.settings["input_order"] == 0 else "foh"
     work = data.detrend() if problem.settings["offset"] else data
-    horizons = feasible_horizons(data.n_samples, data.n_inputs, data.n_outputs, 2, n,
-                                 n_experiments=data.n_experiments)
+    if horizons is None:
+        horizons = feasible_horizons(data.n_samples, data.n_inputs, data.n_outputs, 2, n,
+                                     n_experiments=data.n_experiments)
     out = []
     for f in horizons:
         try:
@@ -425,22 +426,32 @@ def _discrete_starts(problem: Problem, n: int):
     return out
 
 
-def _build(problem: Problem, feedthrough=None) -> StateSpace:
-    """The model of order ``problem.order`` (no refinement): the subspace estimate, or on a
-    uniform grid with ``start='auto'`` the better (estimation residual) of it and the
-    converted discrete-time estimate."""
+#: The starts the cross-validation chooses among with ``start='auto'``: the subspace
+#: estimate and the converted N4SID models at the discrete-time horizon candidates.
+START_VARIANTS = ("subspace",) + tuple(f"N4SID, horizon {f}" for f in HORIZON_CANDIDATES)
+
+
+def _build(problem: Problem, feedthrough=None, start=None) -> StateSpace:
+    """The model of order ``problem.order`` (no refinement) from ``start`` (a
+    :data:`START_VARIANTS` name, or the ``start`` option): the subspace estimate, the
+    converted discrete-time estimates, or for 'auto' the best of them by the estimation
+    residual."""
     s = problem.settings
     if feedthrough is None:
         feedthrough = s["feedthrough"] is True
+    start = s["start"] if start is None else start
+    horizons = None
+    if start.startswith("N4SID"):
+        horizons, start = [int(start.rsplit(" ", 1)[1])], "discrete"
     n = problem.order
     if n > problem.sv.size:
         raise OrderError(f"order {n} exceeds the {problem.sv.size} directions the "
                          "instruments reveal")
     options = []
-    if s["start"] in ("auto", "subspace"):
+    if start in ("auto", "subspace"):
         options.append(("subspace", lambda: _subspace_estimate(problem, n, feedthrough)))
-    if s["start"] in ("auto", "discrete") and s["bd_method"] == "simulation":
-        for label, A0, C0 in _discrete_starts(problem, n):
+    if start in ("auto", "discrete") and s["bd_method"] == "simulation":
+        for label, A0, C0 in _discrete_starts(problem, n, horizons):
             def converted(A0=A0, C0=C0):
                 A, fitted, stab = _ct_fit.stable_choice(A0, C0, _linear_fit(problem, feedthrough),
                                                         problem.record, s["stability"])
@@ -453,7 +464,7 @@ def _build(problem: Problem, feedthrough=None) -> StateSpace:
         try:
             got = run()
         except ModelError:
-            if s["start"] != "auto":
+            if start != "auto":
                 raise
             continue
         if got is None:
@@ -462,7 +473,7 @@ def _build(problem: Problem, feedthrough=None) -> StateSpace:
         if best is None or score < best[1]:
             best = (name, score, got)
     if best is None:
-        if s["start"] == "discrete":
+        if start == "discrete":
             raise DataError(f"{s['method']}: start='discrete' needs a uniformly sampled "
                             "record whose N4SID model converts to continuous time; use "
                             "start='subspace'")
@@ -629,9 +640,12 @@ def ct_subspace(data, order=None, *, basis=None, poly_order: int = 3, estimate_x
         basis-filter estimate (the paper's, corrected, with model
         instruments). ``'discrete'``: the discrete-time N4SID model of the
         same order converted with the hold (MATLAB's route; uniform grids
-        only). ``'auto'``: both on a uniform grid, the one with the smaller
-        output residual kept (``info['start']``); the subspace estimate on a
-        non-uniform grid.
+        only). ``'auto'``: on a uniform grid the subspace estimate and the
+        N4SID models at horizons 10 and 20 compete in the cross-validation
+        with the orders (as the estimators of ``system_matrices='auto'`` do
+        in discrete time; by the estimation residual with
+        ``selection='gap'``); the subspace estimate on a non-uniform grid
+        (``info['start']``).
     offset : {'auto', True, False}
         Estimate a constant output offset per experiment (``info['y_offset']``)
         with x0, and project a constant out of the filtered data: the model
@@ -812,35 +826,58 @@ def ct_subspace(data, order=None, *, basis=None, poly_order: int = 3, estimate_x
             return _prepare(record, orders, fold_settings)
     prepare_fold.blocks = 1
 
-    if fixed is None and cv:
-        n, _, _, order_selection = cross_validate(data, None, candidates, N,
-                                                  prepare_fold=prepare_fold,
-                                                  builds={None: _build})
+    # the folds are scored by fit_percent, which knows no offset: with offsets the
+    # cross-validation runs on the record with each experiment's means removed
+    cv_data = data.detrend() if offset else data
+    if start == "auto" and data.is_uniform and bd_method == "simulation":
+        starts = list(START_VARIANTS)
+    else:
+        starts = [start]
+    start_selection = None
+    if cv and (fixed is None or len(starts) > 1):
+        # the order and the start, by the discrete-time methods' cross-validation (the
+        # starts compete as its estimators do); D = 0 unless 'auto' finds it below
+        builds = {name: partial(_build, feedthrough=feedthrough is True, start=name)
+                  for name in starts}
+        n, _, chosen, record = cross_validate(cv_data, fixed, None if fixed else candidates, N,
+                                              prepare_fold=prepare_fold, builds=builds)
+        if fixed is None:
+            order_selection = record
+        else:
+            order_selection, start_selection = None, record
         problem = _prepare(data, [n], settings)
     else:
         problem = _prepare(data, candidates, settings)
         usable = [k for k in candidates if k < problem.sv.size] or [candidates[0]]
         n, order_selection = (fixed, None) if fixed is not None else choose_order(
             None, usable, problem.sv, "singular values")
+        chosen = starts[0]
     problem = replace(problem, order=n, candidates=[n])
     feedthrough_selection = None
     if feedthrough == "auto":
         use_d = False
         if cv:
-            builds = {"D = 0": partial(_build, feedthrough=False),
-                      "D estimated": partial(_build, feedthrough=True)}
+            builds = {"D = 0": partial(_build, feedthrough=False, start=chosen),
+                      "D estimated": partial(_build, feedthrough=True, start=chosen)}
             _, _, variant, feedthrough_selection = cross_validate(
-                data, n, None, N, prepare_fold=prepare_fold, builds=builds)
+                cv_data, n, None, N, prepare_fold=prepare_fold, builds=builds)
             use_d = variant == "D estimated"
-        model = _build(problem, use_d)
     else:
-        model = _build(problem, feedthrough)
+        use_d = feedthrough
+    try:
+        model = _build(problem, use_d, chosen)
+    except (ModelError, DataError):
+        if chosen == start:
+            raise
+        model = _build(problem, use_d, start)  # the chosen start fails on the whole record
     if refine:
         model = _refined(problem, model)
     model.info["order_selection"] = order_selection if order_selection is not None \
         else {"rule": "given"}
     if feedthrough_selection is not None:
         model.info["feedthrough_selection"] = feedthrough_selection
+    if start_selection is not None:
+        model.info["start_selection"] = start_selection
     return model
 
 
