@@ -520,8 +520,29 @@ def _refined(problem: Problem, model: StateSpace) -> StateSpace:
     kw = dict(feedthrough=feedthrough, estimate_x0=s["estimate_x0"], offset=s["offset"])
     A, C = model.A, model.C
     info = dict(model.info)
+    limit = _ct_fit.marginal_limit(rec)
+    unstable = bool(np.linalg.eigvals(A).real.max() > limit)
+    # an unstable estimate kept by stability='auto' (it fit clearly better than its
+    # reflection) is refined from its reflection, stable; the stable refined model
+    # replaces it unless the unstable one still fits clearly better
+    retry = unstable and s["stability"] != "none" and _ct_fit.growth(rec) < _ct_fit.GROWTH_LIMIT
+    keep = retry or not unstable
+    if retry:
+        A = _ct_fit.reflected(A, limit)
     A, C, diag = _ct_fit.refine_output_error(A, C, rec, max_iterations=s["refine_iterations"],
-                                             **kw)
+                                             keep_stable=keep, **kw)
+    if retry:
+        fitted = _ct_fit.fit_linear(A, C, rec, **kw)
+        r_u = info.get("b_residual_rms", math.inf)
+        if fitted is None or r_u < _ct_fit.KEEP_UNSTABLE_RATIO * fitted[4]["b_residual_rms"]:
+            A, C = model.A, model.C          # the data demand the instability
+            A, C, diag = _ct_fit.refine_output_error(
+                A, C, rec, max_iterations=s["refine_iterations"], keep_stable=False, **kw)
+            keep = False
+        else:
+            info["stability"] = dict(info.get("stability") or {}, action="enforced",
+                                     how="refined from the reflected poles: the stable "
+                                         "model fits as well")
     noise = None
     if s["noise_model"] == "ar":
         if not rec.uniform:
@@ -537,7 +558,8 @@ def _refined(problem: Problem, model: StateSpace) -> StateSpace:
                                                rec.n_outputs)
             if noise is not None:
                 A, C, d2 = _ct_fit.refine_output_error(
-                    A, C, rec, max_iterations=s["refine_iterations"], whiten=noise.apply, **kw)
+                    A, C, rec, max_iterations=s["refine_iterations"], whiten=noise.apply,
+                    keep_stable=keep, **kw)
                 diag.update({f"whitened_{k}": v for k, v in d2.items()})
             diag["noise_model"] = None if noise is None else {
                 "kind": "AR (per output, in sample steps, order by BIC)",
