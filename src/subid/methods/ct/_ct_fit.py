@@ -394,14 +394,14 @@ def refine_output_error(A, C, rec: Record, *, feedthrough, estimate_x0, offset, 
     zero = np.zeros(Q.shape[1])
     rms0 = float(np.sqrt(np.mean(residual(zero) ** 2)))
     per_evaluation = y.shape[0] * p * (n * (n * rec.n_inputs + 1))
-    budget = max(Q.shape[1] + 2, int(REFINE_BUDGET // max(per_evaluation, 1)))
-    max_nfev = min(max_iterations * (Q.shape[1] + 1), budget)
+    # 'lm' counts the steps, not the k + 1 evaluations of each finite-difference Jacobian
+    budget = max(2, int(REFINE_BUDGET // max(per_evaluation * (Q.shape[1] + 1), 1)))
+    max_nfev = min(max_iterations, budget)
     sol = scipy.optimize.least_squares(residual, zero, method="lm", x_scale="jac",
                                        xtol=1e-10, ftol=1e-10, gtol=1e-10, max_nfev=max_nfev)
     rms1 = float(np.sqrt(np.mean(sol.fun ** 2)))
     diag = {"refine_rms_before": rms0, "refine_evaluations": int(sol.nfev),
-            "refine_budget_limited": bool(budget < max_iterations * (Q.shape[1] + 1)
-                                          and sol.nfev >= budget)}
+            "refine_budget_limited": bool(budget < max_iterations and sol.nfev >= budget)}
     if not rms1 < rms0:
         diag.update(refined=False, refine_rms_after=rms0)
         return A, C, diag

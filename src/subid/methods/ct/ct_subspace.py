@@ -613,7 +613,7 @@ def ct_subspace(data, order=None, *, basis=None, poly_order: int = 3, estimate_x
                 feedthrough="auto", hold="foh", selection: str = "cv", start: str = "auto",
                 offset="auto", stability: str = "auto", noise_model="ar",
                 instruments="model", iterations: int = 10, tolerance: float = 1e-4,
-                refine: bool = True, refine_iterations: int = 20, startup: bool = True,
+                refine="auto", refine_iterations: int = 20, startup: bool = True,
                 correction: bool = True, ac_method: str = "joint",
                 bd_method: str = "simulation", filtering: str = "exact",
                 data_equation: str = "compact", filtered=None) -> StateSpace:
@@ -662,12 +662,14 @@ def ct_subspace(data, order=None, *, basis=None, poly_order: int = 3, estimate_x
         basis-filter estimate (the paper's, corrected, with model
         instruments). ``'discrete'``: the discrete-time N4SID model of the
         same order converted with the hold (MATLAB's route; uniform grids
-        only). ``'auto'``: on a uniform grid the subspace estimate and the
+        only). ``'auto'``: with the default basis on a uniform grid the
+        subspace estimate and the
         N4SID models at horizons 10 and 20 compete in the cross-validation
         with the orders (as the estimators of ``system_matrices='auto'`` do
         in discrete time; by the estimation residual with
         ``selection='gap'``); the subspace estimate on a non-uniform grid
-        (``info['start']``).
+        (``info['start']``); the subspace estimate alone on a non-uniform grid
+        or with a basis or filtered signals given.
     offset : {'auto', True, False}
         Estimate a constant output offset per experiment (``info['y_offset']``)
         with x0, and project a constant out of the filtered data: the model
@@ -700,14 +702,19 @@ def ct_subspace(data, order=None, *, basis=None, poly_order: int = 3, estimate_x
     tolerance : float
         The instrument iterations stop when the Markov parameters change by
         less than this (relative).
-    refine : bool
+    refine : {'auto', True, False}
         Refine (A, C) of the final model by output-error least squares on the
         raw samples (B, D, x0, offsets eliminated by variable projection),
         then with the noise model. ``info['subspace_model']`` keeps the
-        estimate before it.
+        estimate before it. ``'auto'``: when the model comes from the
+        subspace start (the converted N4SID model is kept as the discrete-time
+        default gives it: on the DaISy evaporator record the output-error fit
+        moved a pole to a time constant of half the record and lowered the
+        validation fit from 60.3 to 34.1 %).
     refine_iterations : int
-        Bound on Levenberg-Marquardt iterations (Jacobian evaluations) per
-        refinement.
+        Bound on Levenberg-Marquardt steps (Jacobian evaluations) per
+        refinement; a work budget (:data:`subid.methods.ct._ct_fit.REFINE_BUDGET`)
+        lowers it on large problems (``info['refine_budget_limited']``).
     startup : bool
         Use the basis functions ``phi(t - t_0)`` as regressors: they absorb
         the filters' start-up transients and the initial-state response.
@@ -772,6 +779,7 @@ def ct_subspace(data, order=None, *, basis=None, poly_order: int = 3, estimate_x
     method = "ct_subspace"
     data = _check_data(data, method)
     p = data.n_outputs
+    default_bank = basis is None and filtered is None
     if basis is None:
         basis = default_basis(data.experiments[0].t, max(8, -(-DEFAULT_MAX_ORDER // p) + 1))
     elif not isinstance(basis, FilterBank):
@@ -780,7 +788,8 @@ def ct_subspace(data, order=None, *, basis=None, poly_order: int = 3, estimate_x
     poly_order = check_int(poly_order, "poly_order", minimum=0)
     if poly_order > MAX_POLY_ORDER:
         raise OrderError(f"poly_order must be at most {MAX_POLY_ORDER}, got {poly_order}")
-    for name, flag in (("estimate_x0", estimate_x0), ("refine", refine), ("startup", startup),
+    check_choice(refine, "refine", ("auto", True, False))
+    for name, flag in (("estimate_x0", estimate_x0), ("startup", startup),
                        ("correction", correction)):
         check_bool(flag, name)
     check_choice(offset, "offset", ("auto", True, False))
@@ -839,8 +848,11 @@ def ct_subspace(data, order=None, *, basis=None, poly_order: int = 3, estimate_x
                     lag=_lag_for(basis, data.experiments[0].t) if instruments == "past" else 0)
     cv = selection == "cv" and filtered is None
 
-    # the fold models iterate the instruments at most FOLD_ITERATIONS times (cost)
-    fold_settings = dict(settings, iterations=min(iterations, FOLD_ITERATIONS))
+    # the fold models iterate the instruments at most FOLD_ITERATIONS times (cost); they
+    # are scored by fit_percent, which fits x0 but knows no offset: with offsets the
+    # cross-validation runs on the record with each experiment's means removed, and its
+    # models estimate none
+    fold_settings = dict(settings, iterations=min(iterations, FOLD_ITERATIONS), offset=False)
 
     def prepare_fold(record, orders, horizon):
         with warnings.catch_warnings():
@@ -848,10 +860,8 @@ def ct_subspace(data, order=None, *, basis=None, poly_order: int = 3, estimate_x
             return _prepare(record, orders, fold_settings)
     prepare_fold.blocks = 1
 
-    # the folds are scored by fit_percent, which knows no offset: with offsets the
-    # cross-validation runs on the record with each experiment's means removed
     cv_data = data.detrend() if offset else data
-    if start == "auto" and data.is_uniform and bd_method == "simulation":
+    if start == "auto" and data.is_uniform and bd_method == "simulation" and default_bank:
         starts = list(START_VARIANTS)
     else:
         starts = [start]
@@ -892,7 +902,7 @@ def ct_subspace(data, order=None, *, basis=None, poly_order: int = 3, estimate_x
         if chosen == start:
             raise
         model = _build(problem, use_d, start)  # the chosen start fails on the whole record
-    if refine:
+    if refine is True or (refine == "auto" and model.info["start"] == "subspace"):
         model = _refined(problem, model)
     model.info["order_selection"] = order_selection if order_selection is not None \
         else {"rule": "given"}
