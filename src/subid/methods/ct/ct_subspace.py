@@ -422,7 +422,7 @@ def _discrete_starts(problem: Problem, n: int, horizons=None):
         except SubidError:
             continue
         if np.isfinite(cm.A).all() and np.isfinite(cm.C).all():
-            out.append((f"discrete (N4SID, horizon {f})", cm.A, cm.C))
+            out.append((f"discrete (N4SID, horizon {f})", cm))
     return out
 
 
@@ -451,13 +451,25 @@ def _build(problem: Problem, feedthrough=None, start=None) -> StateSpace:
     if start in ("auto", "subspace"):
         options.append(("subspace", lambda: _subspace_estimate(problem, n, feedthrough)))
     if start in ("auto", "discrete") and s["bd_method"] == "simulation":
-        for label, A0, C0 in _discrete_starts(problem, n, horizons):
-            def converted(A0=A0, C0=C0):
-                A, fitted, stab = _ct_fit.stable_choice(A0, C0, _linear_fit(problem, feedthrough),
+        for label, cm in _discrete_starts(problem, n, horizons):
+            def converted(cm=cm):
+                limit = _ct_fit.marginal_limit(problem.record)
+                if feedthrough and np.linalg.eigvals(cm.A).real.max() <= limit:
+                    # with a feedthrough the converted model is the discrete-time one
+                    # exactly (B and D of the hold); x0 (and offsets) refitted
+                    x0, y0 = _given_bd(problem, cm.A, cm.B, cm.C, cm.D)
+                    y_hat = _predicted(cm.A, cm.B, cm.C, cm.D, x0, y0, problem.record)
+                    rms = float(np.sqrt(np.mean((problem.record.y - y_hat) ** 2)))
+                    return cm.A, cm.B, cm.C, cm.D, x0, y0, {
+                        "b_residual_rms": rms, "bd_method_used": "converted",
+                        "stability": {"requested": s["stability"], "action": "none"},
+                        "iterations": 0}
+                A, fitted, stab = _ct_fit.stable_choice(cm.A, cm.C,
+                                                        _linear_fit(problem, feedthrough),
                                                         problem.record, s["stability"])
                 B, D, x0, y0, bd = fitted
-                return A, B, C0, D, x0, y0, dict(bd, bd_method_used="simulation",
-                                                 stability=stab, iterations=0)
+                return A, B, cm.C, D, x0, y0, dict(bd, bd_method_used="simulation",
+                                                   stability=stab, iterations=0)
             options.append((label, converted))
     best = None
     for name, run in options:
