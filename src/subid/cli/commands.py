@@ -535,8 +535,9 @@ def _data_options(fn):
                       default=None,
                       help="Remove the means (constant) or straight lines (linear) of "
                            "every channel before identification. Default: constant for "
-                           "discrete-time methods, none for continuous-time methods (ct, "
-                           "adaptive), which model the response from rest.")(fn)
+                           "the batch methods (discrete and continuous time), none for the "
+                           "online continuous-time ones (adaptive), which model the "
+                           "response from rest.")(fn)
     fn = click.option("--delimiter", default=None, metavar="CHAR",
                       help="Field delimiter of a text file (default: detected).")(fn)
     fn = click.option("--time", "time_column", default=None, metavar="COLUMN",
