@@ -62,7 +62,7 @@ def test_offsets_with_a_given_order_give_no_pole_at_the_origin():
     assert max_relative_error(model, true) < 0.05
 
 
-@pytest.mark.slow
+@pytest.mark.long
 def test_offsets_never_become_a_pole_at_the_origin():
     true, data = offset_record()
     model = ct_subspace(data, hold="zoh")
@@ -94,7 +94,7 @@ def test_stable_choice_reflects_a_pole_the_data_do_not_show():
 
 @pytest.mark.slow
 def test_default_order_is_cross_validated_with_the_hold():
-    true, data = offset_record(2, n_samples=800)
+    true, data = offset_record(2, n_samples=500)
     model = ct_subspace(data.detrend(), hold="zoh")
     sel = model.info["order_selection"]
     assert sel["rule"] == "cv" and model.order >= 2
@@ -121,12 +121,13 @@ def coloured_runs(runs, n_samples, pole, **options):
 
 @pytest.mark.slow
 def test_coloured_noise_small_monte_carlo():
-    """AR(1) output noise (pole 0.9, 20 dB), 5 runs: the AR noise model is found and
+    """AR(1) output noise (pole 0.9, 20 dB), 4 runs: the AR noise model is found and
     the prewhitened refinement is unbiased and beats the subspace estimate."""
-    z, med, models = coloured_runs(5, 4000, 0.9, feedthrough=False, start="subspace")
+    z, med, models = coloured_runs(4, 4000, 0.9, feedthrough=False, start="subspace",
+                                   refine=True)
     assert all(m.info["noise_model"] is not None and m.info["refined"] for m in models)
     assert np.all(z < 3.0), z
-    _, med_subspace, _ = coloured_runs(5, 4000, 0.9, feedthrough=False, start="subspace",
+    _, med_subspace, _ = coloured_runs(4, 4000, 0.9, feedthrough=False, start="subspace",
                                        refine=False)
     assert med < 0.5 * med_subspace, (med, med_subspace)
 
