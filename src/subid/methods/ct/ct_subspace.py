@@ -200,6 +200,24 @@ def _check_filtered(filtered, L, N, m, p):
     return uf, yf
 
 
+def _default_size(data: IOData, poly_order, hold, feedthrough, startup, correction,
+                  instruments, selection) -> int:
+    """Number of functions of the default basis: ``max(8, ceil(10 / p) + 1)`` (enough to
+    reveal order 10), fewer when the record (with ``selection='cv'``: its shortest fold,
+    half of it) has too few samples for the data matrix (at least 2)."""
+    m, p, E = data.n_inputs, data.n_outputs, data.n_experiments
+    wanted = max(8, -(-DEFAULT_MAX_ORDER // p) + 1)
+    input_order = poly_order if hold is None or isinstance(hold, str) and hold not in \
+        HOLD_ORDERS else HOLD_ORDERS[hold]
+    corr = 0
+    if correction:
+        i0, j = _correction_count(poly_order, input_order, feedthrough is True)
+        corr = max(0, j - i0 + 1)
+    per = (E if startup else 0) + m + corr * m + p + (m if instruments == "past" else 0)
+    samples = data.n_samples // 2 if selection == "cv" else data.n_samples
+    return int(max(2, min(wanted, (samples - 2 - E) // max(per, 1))))
+
+
 def _lag_for(bank: FilterBank, t: np.ndarray) -> int:
     """Lag of the 'past' instruments: about two time constants of the slowest filter."""
     slow = min(abs(z.real) for z in bank.poles)
@@ -802,7 +820,9 @@ def ct_subspace(data, order=None, *, basis=None, poly_order: int = 3, estimate_x
     p = data.n_outputs
     default_bank = basis is None and filtered is None
     if basis is None:
-        basis = default_basis(data.experiments[0].t, max(8, -(-DEFAULT_MAX_ORDER // p) + 1))
+        basis = default_basis(data.experiments[0].t,
+                              _default_size(data, poly_order, hold, feedthrough, startup,
+                                            correction, instruments, selection))
     elif not isinstance(basis, FilterBank):
         raise ModelError(f"basis must be a subid.basis.FilterBank (takenaka_malmquist, "
                          f"laguerre, legendre), got {type(basis).__name__}")
