@@ -97,7 +97,7 @@ from subid.errors import (
     TooFewSamplesError,
 )
 from subid.methods._info import model_info, records_warnings
-from subid.methods.ct import _ct_fit, _ct_kernels
+from subid.methods.ct import _ct_fit
 from subid.methods.ct._ct_estimate import (
     _correction_count,
     _correction_regressors,
@@ -401,7 +401,7 @@ def _subspace_estimate(problem: Problem, n: int, feedthrough: bool):
     changes = []
     if s["instruments"] == "model":
         for _ in range(s["iterations"]):
-            Xs = _simulated_states(A, B, x0, problem.record)
+            Xs = _ct_fit.simulated_states(A, B, x0, problem.record)
             if Xs is None:
                 break
             Lf, W = _subspace_factor(problem.R, Xs, problem.Y)
@@ -476,7 +476,7 @@ def _build(problem: Problem, feedthrough=None, start=None) -> StateSpace:
                     # with a feedthrough the converted model is the discrete-time one
                     # exactly (B and D of the hold); x0 (and offsets) refitted
                     x0, y0 = _given_bd(problem, cm.A, cm.B, cm.C, cm.D)
-                    y_hat = _predicted(cm.A, cm.B, cm.C, cm.D, x0, y0, problem.record)
+                    y_hat = _ct_fit.predicted(cm.A, cm.B, cm.C, cm.D, x0, y0, problem.record)
                     rms = float(np.sqrt(np.mean((problem.record.y - y_hat) ** 2)))
                     return cm.A, cm.B, cm.C, cm.D, x0, y0, {
                         "b_residual_rms": rms, "bd_method_used": "converted",
@@ -542,100 +542,20 @@ def _model(problem: Problem, n, A, B, C, D, x0, y0, diag, feedthrough) -> StateS
                       output_names=data.output_names, info=info, hold=info["hold"])
 
 
-def _refined(problem: Problem, model: StateSpace) -> StateSpace:
-    """Output-error refinement of the final model, prewhitened by an AR noise model of
-    the output error when ``noise_model='ar'`` (Box-Jenkins / RIVC, see _ct_fit)."""
-    s, rec = problem.settings, problem.record
-    feedthrough = model.info["feedthrough"]
-    kw = dict(feedthrough=feedthrough, estimate_x0=s["estimate_x0"], offset=s["offset"])
-    A, C = model.A, model.C
-    info = dict(model.info)
-    limit = _ct_fit.marginal_limit(rec)
-    unstable = bool(np.linalg.eigvals(A).real.max() > limit)
-    # an unstable estimate kept by stability='auto' (it fit clearly better than its
-    # reflection) is refined from its reflection, stable; the stable refined model
-    # replaces it unless the unstable one still fits clearly better
-    retry = unstable and s["stability"] != "none" and _ct_fit.growth(rec) < _ct_fit.GROWTH_LIMIT
-    keep = retry or not unstable
-    if retry:
-        A = _ct_fit.reflected(A, limit)
-    A, C, diag = _ct_fit.refine_output_error(A, C, rec, max_iterations=s["refine_iterations"],
-                                             keep_stable=keep, **kw)
-    if retry:
-        fitted = _ct_fit.fit_linear(A, C, rec, **kw)
-        r_u = info.get("b_residual_rms", math.inf)
-        if fitted is None or r_u < _ct_fit.KEEP_UNSTABLE_RATIO * fitted[4]["b_residual_rms"]:
-            A, C = model.A, model.C          # the data demand the instability
-            A, C, diag = _ct_fit.refine_output_error(
-                A, C, rec, max_iterations=s["refine_iterations"], keep_stable=False, **kw)
-            keep = False
-        else:
-            info["stability"] = dict(info.get("stability") or {}, action="enforced",
-                                     how="refined from the reflected poles: the stable "
-                                         "model fits as well")
-    noise = None
-    if s["noise_model"] == "ar":
-        if not rec.uniform:
-            diag["noise_model"] = None
-            diag["noise_model_note"] = ("not used: an AR model in sample steps needs a "
-                                        "uniform grid")
-        else:
-            fitted = _ct_fit.fit_linear(A, C, rec, **kw)
-            if fitted is not None:
-                B, D, x0, y0, _ = fitted
-                resid = rec.y - _predicted(A, B, C, D, x0, y0, rec)
-                noise = _ct_fit.ar_noise_model(resid, [t.size for t, *_ in rec.parts],
-                                               rec.n_outputs)
-            if noise is not None:
-                A, C, d2 = _ct_fit.refine_output_error(
-                    A, C, rec, max_iterations=s["refine_iterations"], whiten=noise.apply,
-                    keep_stable=keep, **kw)
-                diag.update({f"whitened_{k}": v for k, v in d2.items()})
-            diag["noise_model"] = None if noise is None else {
-                "kind": "AR (per output, in sample steps, order by BIC)",
-                "coefficients": [list(map(float, a)) for a in noise.coefficients]}
-    fitted = _ct_fit.fit_linear(A, C, rec, whiten=None if noise is None else noise.apply, **kw)
-    if fitted is None:
-        return model
-    B, D, x0, y0, bd = fitted
-    info.update(diag, x0=x0, y_offset=y0, largest_real_part=float(
-        np.linalg.eigvals(A).real.max()), **bd)
-    info["conditions"] = dict(info.get("conditions") or {}, bd=bd["b_regression_condition"])
-    return StateSpace(A, B, C, D, 0.0, input_names=model.input_names,
-                      output_names=model.output_names, info=info, hold=model.hold)
+def _second_wins(data, order, n_functions, prepare_fold, first, second):
+    """Whether the cross-validation at ``order`` prefers the build ``second`` to ``first``
+    (``(name, build)`` pairs; ties go to ``first``), and its record."""
+    builds = dict([first, second])
+    _, _, variant, record = cross_validate(data, order, None, n_functions,
+                                           prepare_fold=prepare_fold, builds=builds)
+    return variant == second[0], record
 
 
 def _build_refined(problem: Problem, feedthrough=None, start=None) -> StateSpace:
-    """:func:`_build`, then :func:`_refined` (a candidate of the refinement's choice)."""
-    return _refined(problem, _build(problem, feedthrough, start))
-
-
-def _predicted(A, B, C, D, x0, y0, rec):
-    R = _ct_fit.regressors(A, C, rec, feedthrough=True, estimate_x0=x0 is not None,
-                           offset=y0 is not None)
-    E, n, p = rec.n_experiments, A.shape[0], rec.n_outputs
-    theta = [B.reshape(-1)]
-    if x0 is not None:
-        theta.append(np.reshape(x0, (E, n)).reshape(-1))
-    if y0 is not None:
-        theta.append(np.reshape(y0, (E, p)).reshape(-1))
-    theta.append(D.reshape(-1))
-    return (R @ np.concatenate(theta)).reshape(-1, p)
-
-
-def _simulated_states(A, B, x0, rec: _ct_fit.Record):
-    """States of the (stabilised) model along every experiment, or None on overflow."""
-    n = A.shape[0]
-    A_s = _ct_fit.reflected(A, _ct_fit.marginal_limit(rec))
-    x0s = np.zeros((rec.n_experiments, n)) if x0 is None else np.reshape(x0, (-1, n))
-    out = []
-    with np.errstate(over="ignore", invalid="ignore"):
-        for e, (t, u, _, uniform) in enumerate(rec.parts):
-            out.append(_ct_kernels.run_bank(A_s, B, t, u, rec.input_order, uniform=uniform,
-                                            x0=x0s[e])[:, :, 0])
-    X = np.vstack(out)
-    return X if np.isfinite(X).all() else None
-
+    """:func:`_build`, then :func:`subid.methods.ct._ct_fit.refine_model` (a candidate of the
+    refinement's choice)."""
+    return _ct_fit.refine_model(_build(problem, feedthrough, start), problem.record,
+                                problem.settings)
 
 
 # ---------------------------------------------------------------------------
@@ -930,11 +850,10 @@ def ct_subspace(data, order=None, *, basis=None, poly_order: int = 3, estimate_x
     if feedthrough == "auto":
         use_d = False
         if cv:
-            builds = {"D = 0": partial(_build, feedthrough=False, start=chosen),
-                      "D estimated": partial(_build, feedthrough=True, start=chosen)}
-            _, _, variant, feedthrough_selection = cross_validate(
-                cv_data, n, None, N, prepare_fold=prepare_fold, builds=builds)
-            use_d = variant == "D estimated"
+            use_d, feedthrough_selection = _second_wins(
+                cv_data, n, N, prepare_fold, ("D = 0", partial(_build, feedthrough=False,
+                                                               start=chosen)),
+                ("D estimated", partial(_build, feedthrough=True, start=chosen)))
     else:
         use_d = feedthrough
     try:
@@ -946,15 +865,14 @@ def ct_subspace(data, order=None, *, basis=None, poly_order: int = 3, estimate_x
     refine_selection = None
     if refine == "auto" and cv:
         # kept only where it scores better on the held-out folds (ties: not refined)
-        builds = {"as estimated": partial(_build, feedthrough=use_d, start=chosen),
-                  "refined": partial(_build_refined, feedthrough=use_d, start=chosen)}
-        _, _, variant, refine_selection = cross_validate(
-            cv_data, n, None, N, prepare_fold=prepare_fold, builds=builds)
-        do_refine = variant == "refined"
+        do_refine, refine_selection = _second_wins(
+            cv_data, n, N, prepare_fold,
+            ("as estimated", partial(_build, feedthrough=use_d, start=chosen)),
+            ("refined", partial(_build_refined, feedthrough=use_d, start=chosen)))
     else:
         do_refine = refine is True or (refine == "auto" and model.info["start"] == "subspace")
     if do_refine:
-        model = _refined(problem, model)
+        model = _ct_fit.refine_model(model, problem.record, problem.settings)
     if refine_selection is not None:
         model.info["refine_selection"] = refine_selection
     model.info["order_selection"] = order_selection if order_selection is not None \
