@@ -893,12 +893,15 @@ def ct_subspace_paper(data, order=None, *, basis=None, poly_order: int = 3) -> S
     (:func:`tm_convolution_matrix`), both signals interpolated by degree-p
     polynomials and filtered section by section (S1-S4), no start-up or
     correction regressors, no instruments, A and C by (12)-(14), B by (15),
-    no refinement. For comparison with :func:`ct_subspace`; real poles only.
+    no refinement, no offset, no stability handling, the order (when not given)
+    at the largest singular-value gap. For comparison with :func:`ct_subspace`;
+    real poles only.
     """
     return ct_subspace(data, order, basis=basis, poly_order=poly_order, estimate_x0=False,
                        feedthrough=False, hold=None, instruments=None, startup=False,
                        correction=False, refine=False, ac_method="paper", bd_method="filtered",
-                       filtering="sections", data_equation="paper")
+                       filtering="sections", data_equation="paper", selection="gap",
+                       start="subspace", offset=False, stability="none", noise_model=None)
 
 
 @legacy_arguments(positional=("method", "hold"))
