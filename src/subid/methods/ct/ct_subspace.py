@@ -825,7 +825,7 @@ def ct_subspace(data, order=None, *, basis=None, poly_order: int = 3, estimate_x
     if start == "auto" and data.is_uniform and bd_method == "simulation" and default_bank:
         starts = list(START_VARIANTS)
     else:
-        starts = [start]
+        starts = ["subspace" if start == "auto" else start]
     start_selection = None
     if cv and (fixed is None or len(starts) > 1):
         # the order and the start, by the discrete-time methods' cross-validation (the
