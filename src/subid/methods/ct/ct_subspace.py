@@ -844,7 +844,7 @@ def ct_subspace(data, order=None, *, basis=None, poly_order: int = 3, estimate_x
         usable = [k for k in candidates if k < problem.sv.size] or [candidates[0]]
         n, order_selection = (fixed, None) if fixed is not None else choose_order(
             None, usable, problem.sv, "singular values")
-        chosen = starts[0]
+        chosen = starts[0] if len(starts) == 1 else "auto"   # by the estimation residual
     problem = replace(problem, order=n, candidates=[n])
     feedthrough_selection = None
     if feedthrough == "auto":
