@@ -124,6 +124,8 @@ __all__ = [
 ]
 
 DEFAULT_MAX_ORDER = 10
+#: Folds up to this many samples are filtered once per call and reused by the choices.
+FOLD_CACHE_SAMPLES = 50_000
 #: Instrument iterations of the models fitted to the cross-validation folds.
 FOLD_ITERATIONS = 3
 HOLD_ORDERS = {"zoh": 0, "foh": 1}
@@ -815,10 +817,21 @@ def ct_subspace(data, order=None, *, basis=None, poly_order: int = 3, estimate_x
     # models estimate none
     fold_settings = dict(settings, iterations=min(iterations, FOLD_ITERATIONS), offset=False)
 
+    fold_cache = {}
+
     def prepare_fold(record, orders, horizon):
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            return _prepare(record, orders, fold_settings)
+        # the order, feedthrough and refinement choices use the same folds: each fold is
+        # filtered and factored once per call (on records up to FOLD_CACHE_SAMPLES)
+        key = (record.n_samples, record.n_experiments, float(record.experiments[0].t[0]),
+               float(record.experiments[-1].t[-1]))
+        if key not in fold_cache:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                problem = _prepare(record, orders, fold_settings)
+            if record.n_samples > FOLD_CACHE_SAMPLES:
+                return problem
+            fold_cache[key] = problem
+        return replace(fold_cache[key], candidates=list(orders))
     prepare_fold.blocks = 1
 
     cv_data = data.detrend() if offset else data
