@@ -92,7 +92,7 @@ def subid_defaults(est, val) -> dict:
     import subid
     rows = {}
     for label, method in (("ls_subspace", subid.ls_subspace), ("moesp", subid.moesp),
-                          ("n4sid", subid.n4sid)):
+                          ("n4sid", subid.n4sid), ("arx", subid.arx), ("oe", subid.oe)):
         start = time.perf_counter()
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
@@ -147,10 +147,11 @@ def main(argv=None) -> int:
         f"{TOLERANCE:g} points of that oracle; `shift`/`states` is the estimate of the "
         "system matrices the cross-validation chose (`system_matrices='auto'`).",
         "",
-        "| record | SIPPY best (method/order/horizon) | ls_subspace | moesp | n4sid |",
-        "|---|---|---|---|---|",
+        "| record | SIPPY best (method/order/horizon) | ls_subspace | moesp | n4sid | arx | "
+        "oe |",
+        "|---|---|---|---|---|---|---|",
     ]
-    met = {k: 0 for k in ("ls_subspace", "moesp", "n4sid")}
+    met = {k: 0 for k in ("ls_subspace", "moesp", "n4sid", "arx", "oe")}
     for name in sets:
         grid = {k: v for k, v in peers.get(name, {}).items() if v is not None}
         best_key = max(grid, key=grid.get) if grid else None

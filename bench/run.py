@@ -9,7 +9,11 @@
    one more, traced, run of the call. A method is skipped at a
    size where the previous size predicts (linear scaling) more than the time
    or memory budget, and the table says so.
-2. Online identifiers: samples per second on one core.
+2. The cost of choosing the order and horizon (issue 21): ``moesp(data)``
+   against the same call with the order and horizon given, the lag-product
+   floor and SIPPY's own order search, in one process, calls interleaved,
+   CPU time (``--selection-only`` runs this table alone).
+3. Online identifiers: samples per second on one core.
 
 Run with one BLAS thread (the Makefile sets ``OPENBLAS_NUM_THREADS=1``):
 threaded BLAS made timings erratic by up to 50x on the shared 2-core machines.
@@ -113,6 +117,91 @@ def _case_in_subprocess(method, n, repeats, horizon=HORIZON):
 
 
 # ---------------------------------------------------------------------------
+# the cost of choosing (issue 21.6), in this process, calls interleaved
+# ---------------------------------------------------------------------------
+SELECTION_SIZES = (1_000, 10_000, 100_000, 1_000_000)
+SELECTION_SIPPY_MAX = 10_000         # SIPPY's own order search only up to this size
+SELECTION_SNR_DB = 20
+
+
+def _selection_calls(n):
+    """The calls of the selection table: name -> function of the record."""
+    import subid
+    calls = {
+        "default": lambda d: subid.moesp(d),
+        "pinned": lambda d: subid.moesp(d, ORDER, horizon=10),
+        # the lag-product floor: one fit on the lagged products, the first estimator
+        "floor": lambda d: subid.moesp(d, ORDER, horizon=10, statistic="gram",
+                                       system_matrices="shift"),
+    }
+    if n <= SELECTION_SIPPY_MAX and _available("SIPPY N4SID"):
+        from sippy_unipi import system_identification
+
+        def sippy_aic(d):
+            sys_id = system_identification(d.y.T, d.u.T, "N4SID", IC="AIC", SS_orders=[1, 10],
+                                           SS_f=10, SS_p=10, SS_D_required=True)
+            return subid.StateSpace(sys_id.A, sys_id.B, sys_id.C, sys_id.D, 1.0)
+        calls["SIPPY N4SID, AIC 1..10"] = sippy_aic
+    return calls
+
+
+def bench_selection(sizes=SELECTION_SIZES):
+    """CPU seconds (median over interleaved rounds, one process) of ``moesp(data)``,
+    of the call with the order and horizon given, of the lag-product floor and of
+    SIPPY's own order search; 2x2 order-4 random system, 20 dB output noise."""
+    import warnings
+
+    from subid import systems
+    true = systems.random_system(ORDER, 2, 2, seed=1)
+    warm = systems.simulate_data(true, 2000, seed=3, output_snr_db=SELECTION_SNR_DB)
+    rows = []
+    for n in sizes:
+        data = systems.simulate_data(true, n, seed=2, output_snr_db=SELECTION_SNR_DB)
+        calls = _selection_calls(n)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            for fn in calls.values():                   # imports and compiled kernels
+                fn(warm)
+            rounds = 5 if n <= 10_000 else 3
+            times = {name: [] for name in calls}
+            orders = {}
+            for _ in range(rounds):
+                for name, fn in calls.items():          # interleaved
+                    t0 = time.process_time()
+                    model = fn(data)
+                    times[name].append(time.process_time() - t0)
+                    orders[name] = (model.order, model.info.get("horizon"))
+        t = {name: statistics.median(v) for name, v in times.items()}
+        sippy = t.get("SIPPY N4SID, AIC 1..10")
+        rows.append(
+            f"| {n:,} | {t['default']:.3f} | {t['pinned']:.4f} | {t['floor']:.4f} | "
+            + (f"{sippy:.3f}" if sippy else "—") + " | "
+            f"{t['default'] / t['pinned']:.1f} | "
+            + (f"{t['default'] / sippy:.2f}" if sippy else "—") + " | "
+            f"{t['pinned'] / t['floor']:.2f} | n={orders['default'][0]}, "
+            f"f={orders['default'][1]} |")
+        print(rows[-1], flush=True)
+    return rows
+
+
+def selection_table(rows):
+    return "\n".join([
+        f"The cost of choosing (issue 21): CPU seconds, median of interleaved rounds in one "
+        f"process (5 up to 1e4 samples, 3 above); random stable 2x2 system of order {ORDER}, "
+        f"white input, {SELECTION_SNR_DB} dB output noise. `default` = `moesp(data)` (order "
+        f"and horizon cross-validated); `pinned` = `moesp(data, {ORDER}, horizon=10)`; `floor` "
+        "= the same on the lag-product statistic with the first estimator "
+        "(`statistic='gram', system_matrices='shift'`); SIPPY = N4SID with its own order "
+        "search (`IC='AIC'`, orders 1..10, f = p = 10). Goals: default/pinned <= 5, "
+        "default/SIPPY <= 1, pinned/floor <= 2.",
+        "",
+        "| N | default (s) | pinned (s) | floor (s) | SIPPY AIC (s) | default / pinned | "
+        "default / SIPPY | pinned / floor | chosen |",
+        "|---:|---:|---:|---:|---:|---:|---:|---:|---|",
+        *rows])
+
+
+# ---------------------------------------------------------------------------
 # online identifiers (in this process)
 # ---------------------------------------------------------------------------
 def _median_time(fn, repeats):
@@ -160,12 +249,17 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description="Benchmark subid against SIPPY and nfoursid.")
     parser.add_argument("--sizes", default="1000,10000,100000,1000000,10000000")
     parser.add_argument("--out", default="bench/results.md")
+    parser.add_argument("--selection-only", action="store_true",
+                        help="only the table of the cost of choosing (printed)")
     parser.add_argument("--case", nargs=4, metavar=("METHOD", "N", "REPEATS", "HORIZON"),
                         help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.case:
         method, n, repeats, horizon = args.case
         print(json.dumps(run_case(method, int(n), int(repeats), int(horizon))))
+        return 0
+    if args.selection_only:
+        print(selection_table(bench_selection()))
         return 0
     sizes = [int(s) for s in args.sizes.split(",")]
     methods = OURS + [p for p in PEERS if _available(p)]
@@ -223,6 +317,7 @@ def main(argv=None) -> int:
                 goal[-1] += f" default {default / r['seconds']:.2f}x this |"
                 continue
         goal[-1] += " |"
+    selection = selection_table(bench_selection())
     online = bench_recursive()
     adaptive = adaptive_table(bench_adaptive())
     text = "\n".join([
@@ -250,6 +345,8 @@ def main(argv=None) -> int:
         "| method | time (s) | peak memory (MB) | Markov error | default / statistic only |",
         "|---|---:|---:|---:|---|",
         *goal,
+        "",
+        selection,
         "",
         f"Online identifiers, samples per second on one core (median of 3 runs over "
         f"{ONLINE_SAMPLES:,} samples, chunks of 1000):",

@@ -20,12 +20,13 @@ def _registered(spec):
     return lambda d, n=None, **kw: spec.load()(d, n, **kw)
 
 
-# The discrete-time batch methods of the registry (subid.registry.METHODS),
+# The discrete-time batch state-space methods of the registry (subid.registry.METHODS;
+# the polynomial ones take structures, not state orders: tests/test_polynomial.py),
 # under the names of the functions, plus two configurations of ls_subspace
 # (without instruments; the paper's one-shot estimate).
 METHODS = {spec.attribute if spec.name != "ls" else "ls_iv": _registered(spec)
            for spec in registry.METHODS.values() if spec.kind == "batch"
-           and spec.time == "discrete"}
+           and spec.time == "discrete" and not spec.supports("polynomial")}
 METHODS.update({
     "ls_noiv": lambda d, n=None, **kw: subid.ls_subspace(d, n, instruments=None, **kw),
     "ls_paper": lambda d, n=None, **kw: subid.ls_subspace(d, n, instrument_weighting=False,

@@ -296,6 +296,6 @@ def test_long_records_skip_the_system_matrix_choice():
         auto = method(data, 3, horizon=8)
         shift = method(data, 3, horizon=8, system_matrices="shift")
         assert auto.info["system_matrices"] == "shift"
-        assert "system_matrices_selection" not in auto.info
+        assert auto.info["system_matrices_selection"]["rule"] == "given"
         np.testing.assert_array_equal(auto.A, shift.A)
         np.testing.assert_array_equal(auto.B, shift.B)

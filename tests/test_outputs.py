@@ -193,8 +193,8 @@ def test_atomic_directory_swaps_whole_folders(tmp_path):
 
 def test_writers_replace_regular_files_only_and_keep_links(tmp_path):
     """Writing over a device or a folder is refused (os.replace would have
-    replaced /dev/null itself when run as root); a symbolic link keeps
-    naming the file, whose content is replaced."""
+    replaced /dev/null itself when run as root); a symbolic link is refused
+    (one output-path policy: nothing is written through a link)."""
     model = systems.seed001_system()
     for target in ("/dev/null", str(tmp_path)):
         with pytest.raises(errors.FileWriteError, match="regular files only"):
@@ -203,6 +203,7 @@ def test_writers_replace_regular_files_only_and_keep_links(tmp_path):
     model.save(real)
     link = tmp_path / "link.json"
     os.symlink(real, link)
-    subid.StateSpace(np.eye(1) * 0.5, [[1.0]], [[1.0]], [[0.0]], 1.0).save(link)
+    with pytest.raises(errors.FileWriteError, match="symbolic link"):
+        subid.StateSpace(np.eye(1) * 0.5, [[1.0]], [[1.0]], [[0.0]], 1.0).save(link)
     assert os.path.islink(link)
-    assert subid.StateSpace.load(real).order == 1
+    assert subid.StateSpace.load(real).order == 3

@@ -287,27 +287,48 @@ def check_dt(dt, *, allow_zero: bool = False, name: str = "dt") -> float:
 UNIFORM_RTOL = 1e-9
 
 
-def is_uniform(steps) -> bool:
+def stamp_resolution(t) -> float:
+    """How far apart two steps of the time stamps ``t`` can be through rounding alone.
+
+    A stamp ``t_k`` is a double: it carries a rounding error of up to half a
+    unit in the last place of ``|t_k|`` (from the decimal text of a file, or
+    from arithmetic), so a step carries up to one unit, and two steps differ
+    by up to two. Epoch seconds (``|t|`` ~ 1.7e9, unit 2.4e-7 s) sampled at
+    1 kHz have steps that differ by ~2e-7 s, 2e-4 of the period: uniform
+    sampling all the same. Four units of the largest ``|t|`` (a margin of 2).
+    """
+    t = np.asarray(t, dtype=np.float64)
+    if not t.size:
+        return 0.0
+    return 4.0 * float(np.spacing(max(abs(float(t[0])), abs(float(t[-1])))))
+
+
+def is_uniform(steps, *, resolution: float = 0.0) -> bool:
     """True when the sampling steps (``np.diff(t)``, at least one) agree to
-    :data:`UNIFORM_RTOL` of the largest.
+    :data:`UNIFORM_RTOL` of the largest, plus ``resolution``.
 
     Parameters
     ----------
     steps : ndarray, shape (N - 1,)
         Positive time steps.
+    resolution : float
+        The rounding of the stamps the steps come from
+        (:func:`stamp_resolution`); 0 for steps known exactly.
 
     Returns
     -------
     bool
     """
     steps = np.asarray(steps)
-    return steps.size > 0 and float(np.ptp(steps)) <= UNIFORM_RTOL * float(np.abs(steps).max())
+    return steps.size > 0 and float(np.ptp(steps)) <= \
+        UNIFORM_RTOL * float(np.abs(steps).max()) + resolution
 
 
-def same_period(value, period) -> bool:
+def same_period(value, period, *, resolution: float = 0.0) -> bool:
     """True when ``value`` (a period, or an array of steps) equals ``period``
-    to :data:`UNIFORM_RTOL` of ``period`` (``numpy.isclose(value, period,
-    rtol=UNIFORM_RTOL, atol=0)`` for every entry).
+    to :data:`UNIFORM_RTOL` of ``period`` plus ``resolution``
+    (``numpy.isclose(value, period, rtol=UNIFORM_RTOL, atol=resolution)`` for
+    every entry).
 
     Parameters
     ----------
@@ -315,13 +336,16 @@ def same_period(value, period) -> bool:
         Sampling period(s) or time steps to compare.
     period : float
         The reference period.
+    resolution : float
+        The rounding of the stamps ``value`` comes from
+        (:func:`stamp_resolution`); 0 for periods known exactly.
 
     Returns
     -------
     bool
     """
     return bool(np.all(np.abs(np.asarray(value, dtype=np.float64) - period)
-                       <= UNIFORM_RTOL * abs(period)))
+                       <= UNIFORM_RTOL * abs(period) + resolution))
 
 
 #: Largest value of an integer that sizes a matrix (order, horizon, channels):
@@ -377,6 +401,26 @@ def check_choice(value, name: str, choices) -> object:
     return value
 
 
+def check_seed(value, name: str = "seed") -> int:
+    """A seed: a non-negative integer (numpy integers too); else
+    :class:`OptionError` (not numpy's ``TypeError``/``ValueError`` from inside
+    the draw). Integers only, so that the same call always draws the same
+    numbers (a ``Generator`` would advance between calls)."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Integral) \
+            or value < 0:
+        raise OptionError(f"{name} must be a non-negative integer; got {value!r}"[:300])
+    return int(value)
+
+
+def check_probability(value, name: str) -> float:
+    """A level strictly between 0 and 1 (confidence levels); else :class:`OptionError`."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real) \
+            or not 0.0 < float(value) < 1.0:
+        raise OptionError(f"{name} must be a number strictly between 0 and 1 (e.g. 0.99); "
+                          f"got {value!r}"[:300])
+    return float(value)
+
+
 def check_bool(value, name: str) -> bool:
     """``value`` as a bool if it is one (numpy bools too); else :class:`OptionError`."""
     if isinstance(value, (bool, np.bool_)):
@@ -429,3 +473,41 @@ def legacy_arguments(positional=(), renamed=None):
         wrapper.legacy_renamed = renamed
         return wrapper
     return decorate
+
+
+def checked_call(fn):
+    """Decorator of a public function (or a class's ``__init__``): a call that does
+    not fit its signature raises :class:`OptionError` naming the options it
+    takes, instead of Python's ``TypeError``.
+
+    Only the binding of the call is concerned: the ``TypeError`` is converted
+    when it was raised by the call itself (its traceback has no frame inside
+    ``fn``), never when ``fn`` raised it. An unknown keyword gets the closest
+    option names as a suggestion (``horizn`` -> ``horizon``).
+    """
+    import difflib
+    import functools
+    import inspect
+
+    parameters = inspect.signature(fn).parameters
+    options = [p.name for p in parameters.values()
+               if p.kind in (p.KEYWORD_ONLY, p.POSITIONAL_OR_KEYWORD) and p.name != "self"]
+    name = fn.__qualname__.replace(".__init__", "")
+
+    @functools.wraps(fn)
+    def wrapper(*args, **kwargs):
+        try:
+            return fn(*args, **kwargs)
+        except TypeError as exc:
+            tb = exc.__traceback__
+            if tb is None or tb.tb_next is not None:     # raised inside fn: not the call
+                raise
+            unknown = [k for k in kwargs if k not in parameters]
+            if unknown:
+                close = difflib.get_close_matches(unknown[0], options, n=1)
+                hint = f" (did you mean {close[0]!r}?)" if close else ""
+                raise OptionError(f"{name}() has no option {unknown[0]!r}{hint}; its options "
+                                  f"are {', '.join(options)}"[:600]) from None
+            raise OptionError(f"{name}(): {exc}; its arguments are "
+                              f"{', '.join(options)}"[:600]) from None
+    return wrapper

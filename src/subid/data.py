@@ -6,7 +6,14 @@ import numbers
 
 import numpy as np
 
-from subid._validation import as_signal, check_dt, check_time_stamps, is_uniform, same_period
+from subid._validation import (
+    as_signal,
+    check_dt,
+    check_time_stamps,
+    is_uniform,
+    same_period,
+    stamp_resolution,
+)
 from subid.errors import DataError
 
 __all__ = ["IOData", "merge"]
@@ -125,7 +132,7 @@ class IOData:
         if t is not None:
             t = check_time_stamps(t, n).view()      # never the caller's array's flags
             steps = np.diff(t)
-            if n > 1 and is_uniform(steps):
+            if n > 1 and is_uniform(steps, resolution=stamp_resolution(t)):
                 self._dt = float(np.mean(steps))
             else:
                 self._dt = None

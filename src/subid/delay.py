@@ -29,7 +29,7 @@ import scipy.linalg
 
 from subid._validation import check_int
 from subid.data import IOData
-from subid.errors import DataError, ModelError, TooFewSamplesError
+from subid.errors import DataError, ModelError, ResourceLimitError, TooFewSamplesError
 
 __all__ = ["estimate_delay", "delay_inputs", "apply_to_inputs", "frequency_factor",
            "absorb_delay", "input_delay_of"]
@@ -255,6 +255,25 @@ def record_delay(model, delays):
     return model
 
 
+#: Largest size of the matrices :func:`absorb_delay` builds (A, B, C, D; bytes).
+ABSORB_BYTES_LIMIT = 2.0**30
+
+
+def effective_input(model, u: np.ndarray) -> np.ndarray:
+    """The input samples as ``model``'s state equations see them.
+
+    The one place where a model's input delays (``info['input_delay']``, in
+    samples) are applied to a record's inputs: :meth:`StateSpace.simulate`,
+    :func:`subid.predict`, :func:`subid.residuals`, :func:`subid.fit_percent`
+    (simulation and k-step prediction) and :func:`subid.pem` all obtain the
+    input through it, so that nothing derived from a model ignores its delays.
+    ``u`` is one experiment's input, shape (N, n_inputs); the input before
+    the first sample is taken as zero.
+    """
+    delays = input_delay_of(model)
+    return u if delays is None else apply_to_inputs(u, delays)
+
+
 def apply_to_inputs(u: np.ndarray, delays: np.ndarray) -> np.ndarray:
     """``u_j[k - d_j]`` for every sample, zero before the first sample (the
     input before the record is taken as zero, as the initial state is by
@@ -280,6 +299,14 @@ def absorb_delay(model):
     scipy exports; Markov parameters).
 
     Returns the model itself when it has no delays.
+
+    Raises
+    ------
+    ResourceLimitError
+        The absorbed model's dense matrices would take more than
+        :data:`ABSORB_BYTES_LIMIT` (a delay of 1e5 samples: 75 GiB), checked
+        before anything is allocated; the delayed model itself simulates,
+        predicts and gives its frequency response without absorbing.
     """
     delays = input_delay_of(model)
     if delays is None:
@@ -289,6 +316,14 @@ def absorb_delay(model):
     n, m, p = model.order, model.n_inputs, model.n_outputs
     extra = int(delays.sum())
     N = n + extra
+    need = 8.0 * N * (N + m + p)
+    if need > ABSORB_BYTES_LIMIT:
+        raise ResourceLimitError(
+            f"absorbing input delays {delays.tolist()[:8]}{'...' if m > 8 else ''} adds "
+            f"{extra} states: the order-{N} matrices need {need / 2**30:.3g} GiB (limit "
+            f"{ABSORB_BYTES_LIMIT / 2**30:g} GiB). Keep the delay in the model "
+            "(info['input_delay'] is honoured by simulate, predict and freqresp) or export "
+            "it as a delay (e.g. MATLAB's InputDelay) instead of as states")
     A = np.zeros((N, N))
     B = np.zeros((N, m))
     C = np.zeros((p, N))

@@ -20,6 +20,7 @@ __all__ = [
     "CheckpointError",
     "UnstableModelWarning",
     "NoiseModelWarning",
+    "ResolutionWarning",
     "FileWriteError",
     "ResourceLimitError",
     "NotConvergedWarning",
@@ -28,8 +29,32 @@ __all__ = [
 ]
 
 
+#: Longest message an error keeps; beyond, its middle is cut (an echoed cell, name
+#: or value of millions of characters must not become a megabyte line on stderr).
+MAX_MESSAGE_CHARS = 2000
+
+
+def shorten(text: str, limit: int = MAX_MESSAGE_CHARS) -> str:
+    """``text`` itself, or its beginning and end around a note of how much was cut."""
+    text = str(text)
+    if len(text) <= limit:
+        return text
+    head, tail = (2 * limit) // 3, limit // 4
+    return f"{text[:head]} ... [{len(text) - head - tail} characters cut] ... {text[-tail:]}"
+
+
 class SubidError(ValueError):
-    """Base class of all errors raised by subid."""
+    """Base class of all errors raised by subid.
+
+    A message longer than :data:`MAX_MESSAGE_CHARS` is shortened in its middle
+    (:func:`shorten`): whatever a message echoes (a cell, a name, a value), it
+    stays a readable line.
+    """
+
+    def __init__(self, *args):
+        if args and isinstance(args[0], str) and len(args[0]) > MAX_MESSAGE_CHARS:
+            args = (shorten(args[0]),) + args[1:]
+        super().__init__(*args)
 
 
 class DataError(SubidError):
@@ -151,3 +176,9 @@ class NotConvergedWarning(UserWarning):
 class DelayWarning(UserWarning):
     """Input delays counted in samples (``info['input_delay']``) are dropped by an
     operation that changes the sampling; :func:`subid.absorb_delay` keeps them as states."""
+
+
+class ResolutionWarning(UserWarning):
+    """A spectral estimate (:func:`subid.spa`) cannot resolve the response at some
+    frequencies with its lag window: the estimated noise spectrum is not positive
+    there. Use a larger window."""

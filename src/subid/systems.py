@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.linalg
 
-from subid._validation import check_int
+from subid._validation import check_int, check_seed
 from subid.data import IOData
 from subid.errors import SubidError
 from subid.model.statespace import StateSpace
@@ -80,7 +80,7 @@ def random_system(order: int, n_inputs: int, n_outputs: int, *, seed, dt: float 
     n = check_int(order, "order")
     nu = check_int(n_inputs, "n_inputs")
     ny = check_int(n_outputs, "n_outputs")
-    rng = np.random.default_rng(seed)
+    rng = np.random.default_rng(check_seed(seed))
     r_lo, r_hi = pole_radius
     for _ in range(1000):
         blocks, poles = [], []
@@ -139,7 +139,7 @@ def simulate_data(system: StateSpace, n_samples: int, *, seed, process_snr_db=No
     if system.dt <= 0:
         raise SubidError("simulate_data needs a discrete-time system; discretise it first")
     n_samples = check_int(n_samples, "n_samples")
-    rng = np.random.default_rng(seed)
+    rng = np.random.default_rng(check_seed(seed))
     u = input_std * rng.standard_normal((n_samples, system.n_inputs))
     y, x = system.simulate(u, x0=x0, return_state=True)
     y_clean = y
@@ -189,7 +189,7 @@ def simulate_innovation_data(system: StateSpace, n_samples: int, *, seed, noise_
     sigma = system.noise_cov if noise_cov is None else np.asarray(noise_cov, dtype=float)
     if sigma is None:
         raise SubidError("give noise_cov (the system has none)")
-    rng = np.random.default_rng(seed)
+    rng = np.random.default_rng(check_seed(seed))
     ny, nu = system.n_outputs, system.n_inputs
     r = input_std * rng.standard_normal((n_samples, nu))
     e = rng.standard_normal((n_samples, ny)) @ np.linalg.cholesky(sigma).T

@@ -487,7 +487,11 @@ def _check_out(out, names) -> None:
     """Refuse, before any work, an --out folder holding files subid did not write."""
     from subid.errors import FileWriteError
     if os.path.lexists(out):
-        if not os.path.isdir(out) or os.path.islink(out):
+        if os.path.islink(out):          # the one output-path policy (refuse_link of the io package)
+            raise FileWriteError(f"--out {out} is a symbolic link (to {os.readlink(out)}); "
+                                 "subid does not write through links: give the target "
+                                 "folder itself", path=out)
+        if not os.path.isdir(out):
             raise FileWriteError(f"--out {out} exists and is not a folder", path=out)
         extra = sorted(set(os.listdir(out)) - names)
         if extra:
@@ -597,7 +601,8 @@ def cli(ctx, quiet, verbose, debug):
               show_default=True, help="Identification method (see 'subid methods').")
 @click.option("--order", default="auto", show_default=True, metavar="N|auto|A:B",
               help="Model order: an integer, 'auto' (largest gap among 1..10), a range "
-                   "'2:8' or a list '2,4,6' of candidates.")
+                   "'2:8' or a list '2,4,6' of candidates; for arx, armax, oe, bj a list is "
+                   "MATLAB's structure, e.g. '2,2,1' = (na, nb, nk) for arx.")
 @click.option("--horizon", type=click.IntRange(min=2), default=None,
               help="Block rows of the data Hankel matrix (default: chosen by the method).")
 @click.option("--validate", type=click.FloatRange(0, 1, max_open=True), default=0.3,
@@ -626,10 +631,15 @@ def cli(ctx, quiet, verbose, debug):
                                       "with --stream.")
 @click.option("--out", required=True, type=click.Path(file_okay=False),
               help="Output folder for model.json, report.html and summary.json.")
+@click.option("--frequency-response", "frequency_response", is_flag=True, default=False,
+              help="DATA is a frequency response (subid.read_frd: columns w or f [Hz] and "
+                   "<output>/<input>:re,:im or :db/:mag,:phase; or .mat/.npz); identify it "
+                   "with subid.fd_subspace (--dt: its sampling period, default 0 = continuous "
+                   "time; --validate: share of the frequencies held out, interleaved).")
 @_common
 def identify(data, inputs, outputs, dt, time_column, delimiter, detrend, method_name, order,
              horizon, validate, forgetting, options, frequency_unit, refine, write_report,
-             stream, chunk_size, report_samples, out):
+             stream, chunk_size, report_samples, out, frequency_response=False):
     """Identify a model from DATA; write model.json and report.html.
 
     The record is detrended, split into an estimation part (the first 1 -
@@ -643,6 +653,12 @@ def identify(data, inputs, outputs, dt, time_column, delimiter, detrend, method_
     part is the end of the last file. Discrete-time batch methods and ct.
     """
     from subid.evaluation import report
+    if frequency_response:
+        return _identify_frequency(data, dt, delimiter, order, horizon, validate, options,
+                                   frequency_unit, refine, write_report, out,
+                                   ignored=dict(inputs=inputs, outputs=outputs,
+                                                time=time_column, detrend=detrend,
+                                                forgetting=forgetting, stream=stream or None))
     spec = METHODS[method_name]
     _check_out(out, _IDENTIFY_FILES)
     order = _parse_order(order)
@@ -707,6 +723,97 @@ def identify(data, inputs, outputs, dt, time_column, delimiter, detrend, method_
                    write_report=write_report, frequency_unit=frequency_unit,
                    outputs=list(est.output_names), n_estimation=est.n_samples,
                    n_validation=val.n_samples if val is not None else 0)
+    return 0
+
+
+def _identify_frequency(data, dt, delimiter, order, horizon, validate, options, frequency_unit,
+                        refine, write_report, out, *, ignored):
+    """``identify --frequency-response``: subid.fd_subspace (and pem) on an FRData file."""
+    import subid
+    from subid.evaluation.frequency_report import evaluate_frequency, frequency_report
+    ctx = click.get_current_context()
+    if ctx.get_parameter_source("method_name") is not click.core.ParameterSource.DEFAULT:
+        raise click.UsageError("--frequency-response identifies with fd_subspace; drop "
+                               "--method")
+    given = [k for k, v in ignored.items() if v]
+    if given:
+        raise click.UsageError(f"--frequency-response does not take --{given[0]} (the file "
+                               "holds a frequency response, not input/output samples)")
+    if len(data) != 1:
+        raise click.UsageError("--frequency-response reads one DATA file")
+    source = data[0]
+    _check_out(out, _IDENTIFY_FILES)
+    order = _parse_order(order)
+    opts = _parse_options(options)
+    with _about(source):
+        frd = subid.read_frd(source, dt=dt, delimiter=delimiter)
+        est, val = frd, None
+        if validate > 0:
+            every = max(2, round(1 / validate))
+            held = np.arange(frd.n_frequencies) % every == every - 1
+            if 0 < held.sum() < frd.n_frequencies:
+                est, val = frd[~held], frd[held]
+        t0 = time.perf_counter()
+        with _warnings_to_log():
+            kwargs = dict(opts)
+            if horizon is not None:
+                kwargs["horizon"] = horizon
+            model = subid.fd_subspace(est, order, **kwargs)
+            if refine == "pem":
+                model = subid.pem(est, model)
+        seconds = time.perf_counter() - t0
+        result = evaluate_frequency(model, est, val)
+    model.info["data"] = {"source": source, "n_frequencies": frd.n_frequencies,
+                          "n_estimation": est.n_frequencies,
+                          "n_validation": 0 if val is None else val.n_frequencies}
+    model_path = os.path.join(out, "model.json")
+    report_path = os.path.join(out, "report.html")
+    summary_path = os.path.join(out, "summary.json")
+    files = [model_path, *([report_path] if write_report else []), summary_path]
+    html = frequency_report({"fd_subspace": model}, est, val, title=f"{source}: fd_subspace",
+                            frequency_unit=frequency_unit, seconds={"fd_subspace": seconds},
+                            command=_command_line(), source=source) if write_report else None
+    summary = {
+        "data": source, "method": "fd_subspace", "function": "fd_subspace",
+        "order": model.order, "horizon": model.info.get("horizon"), "dt": model.dt,
+        "outputs": list(frd.output_names),
+        "fit_estimation": _nan_to_none(result["fit_estimation"]),
+        "fit_validation": _nan_to_none(result["fit_validation"]),
+        "n_estimation": est.n_frequencies,
+        "n_validation": 0 if val is None else val.n_frequencies,
+        "stable": bool(result["stable"]),
+        "poles": [[float(z.real), float(z.imag)] for z in result["poles"]],
+        "seconds": seconds, "files": files,
+    }
+    with atomic_directory(out, owned=_only(_IDENTIFY_FILES)) as stage:
+        model.save(os.path.join(stage, "model.json"))
+        if html is not None:
+            with atomic_write(os.path.join(stage, "report.html"), "w",
+                              encoding="utf-8") as fh:
+                fh.write(html)
+        _write_json(os.path.join(stage, "summary.json"), summary)
+    if not _state().quiet:
+        timing = "continuous time" if frd.dt == 0 else f"dt = {frd.dt:g}"
+        lines = [f"data        {source}: {frd.n_frequencies} frequencies "
+                 f"({frd.w[0]:.4g} to {frd.w[-1]:.4g} rad per time unit), {frd.n_inputs} "
+                 f"input(s), {frd.n_outputs} output(s), {timing}",
+                 "method      fd_subspace (frequency-domain subspace)",
+                 f"order       {model.order}"
+                 + (f" ({describe_selection(model.info['order_selection'])})"
+                    if model.info.get("order_selection") else ""),
+                 f"fit %       estimation {_fmt_fit(result['fit_estimation'])} "
+                 f"({est.n_frequencies} frequencies)",
+                 "            validation " + (f"{_fmt_fit(result['fit_validation'])} "
+                                              f"({val.n_frequencies} frequencies)"
+                                              if val is not None else "— (--validate 0)"),
+                 f"poles       {_fmt_poles(result['poles'])}",
+                 f"stable      {'yes' if result['stable'] else 'NO'}"]
+        if model.info.get("refined_by") == "pem":
+            lines.append(f"refined     pem (frequency response, weights: "
+                         f"{model.info['weighting']}): cost {model.info['start_cost']:.4g} "
+                         f"-> {model.info['final_cost']:.4g}")
+        lines += [f"time        {seconds:.2f} s", f"wrote       {', '.join(files)}"]
+        click.echo("\n".join(lines))
     return 0
 
 
@@ -1514,6 +1621,12 @@ def main(argv=None) -> int:
     except KeyboardInterrupt:
         click.echo("subid: interrupted", err=True)
         return 130
+    except MemoryError:
+        click.echo("subid: error: out of memory: the record (or a step of the method on it) "
+                   "does not fit in this machine's memory; for a large file use "
+                   "'subid identify FILE --stream' (bounded memory), or identify a part of "
+                   "the record", err=True)
+        return EXIT_USER_ERROR
     except (SubidError, OSError, ImportError) as exc:
         if debug:
             traceback.print_exc()

@@ -10,7 +10,7 @@ from subid._validation import check_int, same_period
 from subid.errors import DataError, ModelError
 from subid.evaluation.prediction import _SIM_BLOCK, check_model, predict, simulate_fit
 
-__all__ = ["markov_error", "fit_percent", "pole_error", "simulate_fit"]
+__all__ = ["markov_error", "fit_percent", "frequency_fit", "pole_error", "simulate_fit"]
 
 
 def _check_pair(model, reference):
@@ -81,7 +81,20 @@ def fit_percent(model, data, x0="estimate", hold=None, steps=np.inf, *,
     -------
     ndarray, shape (n_outputs,), or (n_experiments, n_outputs) with
     ``per_experiment=True``
+
+    Notes
+    -----
+    For frequency-response data (``data`` an :class:`subid.FRData`) the fit
+    is the frequency-domain analogue, per output i:
+    ``100 (1 - ||W (G_i - Ĝ_i)|| / ||W (G_i - Ḡ_i)||)``, the norms over all
+    frequencies and inputs, ``W`` the data's weights (ones when none),
+    ``Ĝ`` the model's response at the data's frequencies and ``Ḡ_i`` the
+    weighted mean over frequencies of each channel pair (the best constant
+    response). ``x0``, ``hold``, ``steps`` and ``per_experiment`` do not apply.
     """
+    from subid.frdata import FRData
+    if isinstance(data, FRData):
+        return frequency_fit(model, data)
     if steps is not None and not (isinstance(steps, float) and np.isinf(steps) and steps > 0):
         x0p = None if isinstance(x0, str) and x0 == "estimate" else x0
         y_hat = predict(check_model(model, "model"), data, steps, x0p)
@@ -118,6 +131,31 @@ def fit_percent(model, data, x0="estimate", hold=None, steps=np.inf, *,
         raise DataError(f"output {names} is constant{where}; the fit percentage is undefined "
                         "for it")
     return 100.0 * (1.0 - np.sqrt(err2_used) / np.sqrt(dev2_used))
+
+
+def frequency_fit(model, data) -> np.ndarray:
+    """Frequency-domain fit (%) per output of ``model`` on :class:`subid.FRData`
+    ``data`` (see :func:`fit_percent`, Notes)."""
+    check_model(model, "model")
+    if (model.n_inputs, model.n_outputs) != (data.n_inputs, data.n_outputs):
+        raise DataError(f"the data have {data.n_inputs} inputs and {data.n_outputs} outputs "
+                        f"but the model has {model.n_inputs} and {model.n_outputs}")
+    if model.dt != data.dt and not same_period(model.dt, data.dt):
+        raise DataError(f"the model has dt={model.dt} but the frequency data have "
+                        f"dt={data.dt} (0 = continuous time); convert the model "
+                        "(to_discrete / to_continuous)")
+    G = data.response
+    W2 = data.fit_weights() ** 2
+    G_hat = model.freqresp(data.w)
+    mean = (W2 * G).sum(axis=0) / W2.sum(axis=0)
+    err = np.sqrt((W2 * np.abs(G - G_hat) ** 2).sum(axis=(0, 2)))
+    dev = np.sqrt((W2 * np.abs(G - mean) ** 2).sum(axis=(0, 2)))
+    flat = np.flatnonzero(dev == 0)
+    if flat.size:
+        names = ", ".join(data.output_names[k] for k in flat)
+        raise DataError(f"the response of output {names} does not vary with frequency; the "
+                        "fit percentage is undefined for it")
+    return 100.0 * (1.0 - err / dev)
 
 
 def pole_error(model, reference) -> float:

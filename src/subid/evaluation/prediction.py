@@ -28,9 +28,9 @@ import warnings
 import numpy as np
 import scipy.linalg
 
-from subid._validation import same_period
+from subid._validation import check_int, check_probability, same_period
 from subid.data import IOData, column_std
-from subid.delay import input_delay_of
+from subid.delay import effective_input, input_delay_of
 from subid.errors import DataError, ModelError, NoiseModelWarning
 from subid.model import _simulate
 from subid.model.statespace import StateSpace
@@ -371,17 +371,36 @@ def predict(model, data, steps=1, x0=None, *, return_x0=False):
             mode = "zero"
         y_hat, x0v = simulate_fit(model, data, x0=mode)
         return (y_hat, x0v) if return_x0 else y_hat
-    u, y = data.u, data.y
-    with np.errstate(over="ignore", invalid="ignore"):
-        if x0 is None or (isinstance(x0, str) and x0 == "estimate"):
-            x0v, y_hat = _estimate_x0(model, u, y, k)
-        else:
-            x0v = np.zeros(model.order) if _is_zero(x0) else model._check_x0(x0)
-            y_hat = _k_step(model, u, y, x0v, k)
+    u, y = effective_input(model, data.u), data.y        # the model's input delays
+    try:
+        with np.errstate(over="ignore", invalid="ignore"):
+            if x0 is None or (isinstance(x0, str) and x0 == "estimate"):
+                x0v, y_hat = _estimate_x0(model, u, y, k)
+            else:
+                x0v = np.zeros(model.order) if _is_zero(x0) else model._check_x0(x0)
+                y_hat = _k_step(model, u, y, x0v, k)
+    except ModelError:                   # a simulation inside overflowed
+        x0v = y_hat = None
     if x0v is None or not np.isfinite(y_hat).all():
-        raise DataError(f"the {k}-step prediction diverges over {data.n_samples} samples (the "
-                        "predictor or, for long horizons, the model is unstable)")
+        raise DataError(f"the {k}-step prediction diverges over {data.n_samples} samples: "
+                        f"{_divergence_cause(model, k)}")
     return (y_hat, x0v) if return_x0 else y_hat
+
+
+def _divergence_cause(model, k) -> str:
+    """Which part of a model with K makes its k-step prediction diverge, and what to do."""
+    radius = lambda M: float(np.abs(np.linalg.eigvals(M)).max(initial=0.0))   # noqa: E731
+    with np.errstate(all="ignore"):
+        rho = radius(model.A) if np.isfinite(model.A).all() else math.inf
+        Ap = model.A - model.K @ model.C
+        rho_p = radius(Ap) if np.isfinite(Ap).all() else math.inf
+    if rho_p >= 1.0:
+        state = "stable" if rho < 1.0 else f"unstable too (spectral radius {rho:.4g})"
+        return (f"its Kalman predictor A - K C is unstable (spectral radius {rho_p:.4g}); A "
+                f"itself is {state}. The noise model (K) does not give a stable predictor: "
+                "re-estimate it (subid.pem(data, model)) or compare by simulation (steps=inf)")
+    return (f"A is unstable (spectral radius {rho:.4g}) and the {k}-step prediction "
+            "propagates it over the horizon; use a shorter horizon (steps) or a stable model")
 
 
 def _is_zero(x0) -> bool:
@@ -444,10 +463,8 @@ def correlations(e, u, *, max_lag: int = 25, confidence: float = 0.99, ranges=No
         Sec. 16.6), ``residual`` and ``confidence``.
     """
     from scipy.special import ndtri
-    if isinstance(max_lag, bool) or not isinstance(max_lag, numbers.Integral) or max_lag < 1:
-        raise DataError(f"max_lag must be a positive integer, got {max_lag!r}")
-    if not 0 < confidence < 1:
-        raise DataError(f"confidence must be in (0, 1), got {confidence!r}")
+    max_lag = check_int(max_lag, "max_lag", minimum=1)
+    confidence = check_probability(confidence, "confidence")
     n = e.shape[0]
     if max_lag >= n:
         raise DataError(f"max_lag {max_lag} must be smaller than the {n} samples of the record")

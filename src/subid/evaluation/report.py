@@ -9,7 +9,9 @@ fetch, so it opens anywhere without a network. Sections carry stable ids:
                    stability, time; notes and the command that made it
 ``data``           overview of the record (validation part shaded)
 ``compare``        measured against simulated outputs, fit % per model
-``bode``           magnitude and phase (rad/s or Hz)
+``bode``           magnitude and phase (rad/s or Hz), 95 % bands of the models
+                   refined by pem, the spa estimate of the estimation data
+``step``           step responses, 95 % bands of the models refined by pem
 ``poles``          pole map (unit circle or imaginary axis) and pole table
 ``residuals``      residual auto-correlation and input/residual
                    cross-correlation with 99 % bands
@@ -34,6 +36,8 @@ import numpy as np
 
 from subid.errors import ModelError, SubidError
 from subid.io._files import atomic_write
+from subid.model.polynomial import describe as describe_polynomials
+from subid.model.polynomial import polynomials_of
 
 __all__ = ["identification_report", "index_page", "comparison_page", "failure_page", "evaluate",
            "figure_html", "write_html", "SECTIONS"]
@@ -41,7 +45,7 @@ __all__ = ["identification_report", "index_page", "comparison_page", "failure_pa
 log = logging.getLogger(__name__)
 
 #: Section ids of an identification report, in order (``convergence`` only for online runs).
-SECTIONS = ("summary", "data", "order", "compare", "bode", "poles", "residuals",
+SECTIONS = ("summary", "data", "order", "compare", "bode", "step", "poles", "residuals",
             "convergence", "matrices")
 
 _CSS = """
@@ -240,6 +244,7 @@ def _pole_table(model, hz: bool) -> str:
 
 
 def _info_table(info: dict) -> str:
+    info = {k: v for k, v in info.items() if k != "polynomials"}   # shown as polynomials
     rows = []
     for key in sorted(info):
         value = info[key]
@@ -388,6 +393,24 @@ def evaluate(model, estimation, validation=None) -> dict:
 # ---------------------------------------------------------------------------
 # the report
 # ---------------------------------------------------------------------------
+def _spa_estimate(estimation, models):
+    """The spa estimate of the estimation record for the Bode overlay, or None when
+    it does not apply (non-uniform or input-free data, other channels, too short)."""
+    from subid.evaluation.nonparametric import spa
+    first = next(iter(models.values()), None)
+    if first is None or estimation.dt is None or estimation.n_inputs == 0 or \
+            (first.n_inputs, first.n_outputs) != (estimation.n_inputs, estimation.n_outputs):
+        return None
+    import warnings
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            return spa(estimation)
+    except SubidError as exc:
+        log.info("report: no spa overlay (%s)", exc)
+        return None
+
+
 def identification_report(models, estimation, validation=None, *, title="subid report",
                           frequency_unit="rad/s", history=None, seconds=None, notes=(),
                           command=None, source=None, errors=None, data=None,
@@ -538,11 +561,21 @@ def identification_report(models, estimation, validation=None, *, title="subid r
 
     # -- Bode ------------------------------------------------------------
     nyquist = "; dotted: Nyquist frequency" if any(m.dt > 0 for m in models.values()) else ""
+    level = 0.95 if any(isinstance(m.info.get("parameter_covariance"), dict)
+                        for m in models.values()) else None
+    band = "; shaded: 95 % confidence band (models refined by pem)" if level else ""
+    estimate = _spa_estimate(estimation, models)
+    overlay = "; grey points: spa estimate of the estimation data (± 2 std shaded)" \
+        if estimate is not None else ""
     body.append(_section("bode", "Frequency response (Bode)", _plot_or_note(
-        lambda: plot.bode(models, hz=hz),
-        f"magnitude and phase; frequency in {'Hz' if hz else 'rad/s'}{nyquist}",
+        lambda: plot.bode(models, hz=hz, confidence=level, data=estimate),
+        f"magnitude and phase; frequency in {'Hz' if hz else 'rad/s'}{nyquist}{band}{overlay}",
         "Bode diagram")))
     nav.append(("bode", "Bode"))
+    body.append(_section("step", "Step response", _plot_or_note(
+        lambda: plot.step(models, confidence=level),
+        f"response to a unit step on each input{band}", "step response")))
+    nav.append(("step", "step"))
 
     # -- poles -----------------------------------------------------------
     pole_tables = "".join(f"<h3>{_e(label)}</h3>{_pole_table(m, hz)}"
@@ -581,8 +614,13 @@ def identification_report(models, estimation, validation=None, *, title="subid r
         states = [f"x{k + 1}" for k in range(m.order)]
         block = [f"<h3>{_e(label)}</h3>",
                  f"<p>{'continuous time (dt = 0)' if m.dt == 0 else f'discrete time, dt = {_fmt(m.dt)}'}"
-                 f", order {m.order}</p>",
-                 "<p>A</p>", _matrix_table(m.A, states, states),
+                 f", order {m.order}</p>"]
+        poly = polynomials_of(m)
+        if poly is not None:       # a polynomial model: its polynomials, then the realisation
+            block += ["<p>polynomials (in q<sup>-1</sup>; the state-space matrices below "
+                      "are their realisation)</p>",
+                      f"<pre>{_e(chr(10).join(describe_polynomials(poly, m.input_names, m.output_names)))}</pre>"]
+        block += ["<p>A</p>", _matrix_table(m.A, states, states),
                  "<p>B</p>", _matrix_table(m.B, states, m.input_names),
                  "<p>C</p>", _matrix_table(m.C, m.output_names, states),
                  "<p>D</p>", _matrix_table(m.D, m.output_names, m.input_names)]

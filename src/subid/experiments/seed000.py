@@ -15,7 +15,13 @@ Writes to the output folder:
 * ``table.md`` and ``results.json`` — time to convergence, final errors,
   condition numbers of the regression with unscaled and scaled filter states.
 
-Run ``python -m subid.experiments.seed000 --out results/seed000``.
+Run ``python -m subid.experiments.seed000 --out results/seed000``. Issue 12
+and 23 studies (each instead of the above): ``--noise-table`` (ε_r over SNR,
+paper's LS against the default), ``--noise-free-table`` (convergence of the
+default without noise), ``--memory-study`` (consistency: ε_r as memory and
+record grow together, bias against its standard error), ``--startup-study``
+(ε_r along 400 s at 40 dB with and without the start-up schedule of the
+(B, D) memory).
 """
 
 from __future__ import annotations
@@ -117,8 +123,7 @@ def noise_table(snrs=(30, 40, 50, 60, 70, 80), seeds=(1, 2, 3), duration=400.0,
         y0 = true.simulate(u, t=t, hold="foh")
         cell = {"ls": [], "iv": []}
         for seed in seeds:
-            y = y0 + np.random.default_rng(seed).standard_normal(y0.shape) \
-                * y0.std(axis=0) * 10 ** (-snr / 20)
+            y = _noisy(y0, snr, seed)
             for method, kw in (("ls", {"forgetting": 0.01, "bd_forgetting": 0.008}),
                                ("iv", {})):
                 ident = AdaptiveIdentifier(4, 2, 2, dt=DT, method=method, **kw)
@@ -128,6 +133,150 @@ def noise_table(snrs=(30, 40, 50, 60, 70, 80), seeds=(1, 2, 3), duration=400.0,
                     cell[method].append(relative_error(ident.model, true))
         out[name, snr] = cell
     return out
+
+
+def _noisy(y0, snr, seed):
+    """``y0`` plus white Gaussian noise at ``snr`` dB per channel (noise ``seed``)."""
+    return y0 + np.random.default_rng(seed).standard_normal(y0.shape) \
+        * y0.std(axis=0) * 10 ** (-snr / 20)
+
+
+def noise_free_table(duration=200.0, inputs=("multisine-issue12", "white"), progress=None):
+    """Issue 23, item 1: noise-free runs of the default (``method='iv'``) and
+    the paper's estimator (``method='ls'``, its noise-free α = 0.4, β = 0.08)
+    on the issue's inputs: final pole error and ε_r, and the times from which
+    each stays below 1e-3. Returns a list of dicts (one per input and method)."""
+    true = paper_system()
+    t = np.arange(int(round(duration / DT)) + 1) * DT
+    jobs = [(name, method) for name in inputs for method in ("iv", "ls")]
+    rows = []
+    for name, method in (jobs if progress is None else progress(jobs)):
+        u = INPUTS[name](t, 2, seed=0)
+        y = true.simulate(u, t=t, hold="foh")
+        ident = AdaptiveIdentifier(4, 2, 2, horizon=HORIZON, dt=DT, method=method,
+                                   history_size=4096)
+        ident.update(u, y)
+        times, _, perr, eps = trajectories(ident, true)
+        model = ident.model
+        rows.append({"input": name, "method": method,
+                     "final_pole_error": pole_error(model, true),
+                     "final_eps_r": relative_error(model, true),
+                     "time_pole_error_below_1e-3": settle_time(times, perr, 1e-3),
+                     "time_eps_r_below_1e-3": settle_time(times, eps, 1e-3),
+                     "bd_start_time": model.info["bd_start_time"]})
+    return rows
+
+
+def noise_free_markdown(rows) -> str:
+    out = ["| input | method | pole error < 1e-3 | ε_r < 1e-3 | final pole error | final ε_r |",
+           "|---|---|---|---|---:|---:|"]
+    for r in rows:
+        label = "default ('iv')" if r["method"] == "iv" else "paper's 'ls' (α = 0.4)"
+        out.append(f"| {r['input']} | {label} | {_fmt_time(r['time_pole_error_below_1e-3'])} "
+                   f"| {_fmt_time(r['time_eps_r_below_1e-3'])} | {r['final_pole_error']:.1e} "
+                   f"| {r['final_eps_r']:.1e} |")
+    return "\n".join(out)
+
+
+def memory_study(snr=40.0, pairs=((0.008, 200.0), (0.002, 800.0), (0.0005, 3200.0)),
+                 seeds=(1, 2, 3, 4, 5), name="white", progress=None):
+    """Issue 23, item 2: consistency. For each ``(forgetting, record)`` pair
+    (record = 1.6 memory lengths, so that the memory has filled), ε_r and the
+    pole error of the default over noise realisations, and the bias check:
+    the mean over realisations of ``Õ_f B̃ - O_f B`` against its standard
+    error. Returns a list of dicts, one per pair."""
+    true = paper_system()
+    ref = obsv_b(true)
+    longest = max(d for _, d in pairs)
+    t = np.arange(int(round(longest / DT)) + 1) * DT
+    u = INPUTS[name](t, 2, seed=0)
+    y0 = true.simulate(u, t=t, hold="foh")
+    out = []
+    for alpha, duration in (pairs if progress is None else progress(pairs)):
+        k = int(round(duration / DT)) + 1
+        eps, perr, diffs, started = [], [], [], 0
+        for seed in seeds:
+            ident = AdaptiveIdentifier(4, 2, 2, horizon=HORIZON, dt=DT, forgetting=alpha)
+            ident.update(u[:k], _noisy(y0[:k], snr, seed))
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                model = ident.model
+            started += bool(model.info["bd_started"])
+            eps.append(relative_error(model, true))
+            perr.append(pole_error(model, true))
+            diffs.append(obsv_b(model) - ref)
+        diffs = np.array(diffs)
+        mean = diffs.mean(axis=0)
+        se = diffs.std(axis=0, ddof=1) / math.sqrt(len(seeds))
+        out.append({"forgetting": alpha, "record": duration, "eps_r": eps,
+                    "pole_error": perr, "started": started,
+                    "bias_over_se": float(np.max(np.abs(mean) / se)),
+                    "bias_norm": float(np.linalg.norm(mean) / np.linalg.norm(ref)),
+                    "se_norm": float(np.linalg.norm(se) / np.linalg.norm(ref))})
+    return out
+
+
+def memory_markdown(rows, snr, seeds) -> str:
+    out = ["| forgetting (memory) | record | (B, D) started | ε_r median (max) | pole error median "
+           "| bias / standard error of Õ_f B̃ | largest entry's bias / its standard error |",
+           "|---|---:|---:|---:|---:|---:|---:|"]
+    for r in rows:
+        e = np.array(r["eps_r"])
+        out.append(f"| {r['forgetting']:g} ({1 / r['forgetting']:.0f} s) | {r['record']:.0f} s "
+                   f"| {r['started']} of {len(e)} | {np.median(e):.3f} ({e.max():.3f}) "
+                   f"| {np.median(r['pole_error']):.3f} "
+                   f"| {r['bias_norm']:.3f} / {r['se_norm']:.3f} | {r['bias_over_se']:.1f} |")
+    return "\n".join(out) + (
+        f"\n\n{snr:g} dB, white input, noise seeds {', '.join(map(str, seeds))}; bias: "
+        "|mean over realisations of Õ_f B̃ - O_f B|_F and its standard error, relative to "
+        "|O_f B|_F; last column: the largest ratio over the entries of |mean| to its "
+        "standard error (about 2 or less: no bias beyond the standard error).")
+
+
+def startup_study(snr=40.0, duration=400.0, seeds=tuple(range(1, 11)), name="white",
+                  checkpoints=(50.0, 100.0, 200.0, 400.0), settings=None, progress=None):
+    """Issue 23: ε_r along the record for several settings (default: the
+    start-up schedule ``bd_startup`` off and default), the same records.
+    Returns ``{label: {"eps_r": {time: [...]}, "started": [...]}}``."""
+    settings = settings or {"bd_startup=0 (issue 12)": {"bd_startup": 0},
+                            "default": {}}
+    true = paper_system()
+    t = np.arange(int(round(duration / DT)) + 1) * DT
+    u = INPUTS[name](t, 2, seed=0)
+    y0 = true.simulate(u, t=t, hold="foh")
+    out = {label: {"eps_r": {c: [] for c in checkpoints}, "started": []}
+           for label in settings}
+    for seed in (seeds if progress is None else progress(seeds)):
+        y = _noisy(y0, snr, seed)
+        for label, kw in settings.items():
+            ident = AdaptiveIdentifier(4, 2, 2, horizon=HORIZON, dt=DT, **kw)
+            a = 0
+            for c in checkpoints:
+                b = int(round(c / DT)) + 1
+                ident.update(u[a:b], y[a:b])
+                a = b
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore")
+                    out[label]["eps_r"][c].append(relative_error(ident.model, true))
+            out[label]["started"].append(ident.model.info["bd_start_time"])
+    return out
+
+
+def startup_markdown(res, snr) -> str:
+    labels = list(res)
+    cps = list(next(iter(res.values()))["eps_r"])
+    out = ["| setting | started | " + " | ".join(f"ε_r at {c:g} s, median (max)" for c in cps)
+           + " |", "|---|---:|" + "---:|" * len(cps)]
+    for label in labels:
+        r = res[label]
+        n_started = sum(s is not None for s in r["started"])
+        cells = []
+        for c in cps:
+            e = np.array(r["eps_r"][c])
+            cells.append(f"{np.median(e):.3f} ({e.max():.3f})")
+        out.append(f"| {label} | {n_started} of {len(r['started'])} | " + " | ".join(cells)
+                   + " |")
+    return "\n".join(out) + f"\n\n{snr:g} dB, white input; ε_r = 1 where (B, D) had not started."
 
 
 def noise_table_markdown(res, seeds) -> str:
@@ -402,9 +551,35 @@ def main(argv=None) -> int:
                         help="instead: the table of ε_r over SNR 30-80 dB, white-noise and "
                              "issue-12 multisine inputs, paper's LS against IV (3 noise "
                              "realisations; writes noise_table.md)")
+    parser.add_argument("--noise-free-table", action="store_true",
+                        help="instead: noise-free convergence of the default and the paper's "
+                             "'ls' on the issue-12 multisine and white noise, 200 s "
+                             "(writes noise_free.md)")
+    parser.add_argument("--memory-study", action="store_true",
+                        help="instead: consistency at 40 dB, white input: ε_r as memory and "
+                             "record grow together, 5 realisations (writes memory.md)")
+    parser.add_argument("--startup-study", action="store_true",
+                        help="instead: ε_r along 400 s at 40 dB, white input, 10 "
+                             "realisations, with and without the start-up schedule "
+                             "bd_startup (writes startup.md)")
     args = parser.parse_args(argv)
     os.makedirs(args.out, exist_ok=True)
     progress = progress_wrapper("runs", "run", enabled=on_terminal(args.quiet))
+    studies = [(args.noise_free_table, "noise_free.md",
+                lambda: noise_free_markdown(noise_free_table(progress=progress))),
+               (args.memory_study, "memory.md",
+                lambda: memory_markdown(memory_study(progress=progress), 40.0,
+                                        (1, 2, 3, 4, 5))),
+               (args.startup_study, "startup.md",
+                lambda: startup_markdown(startup_study(progress=progress), 40.0))]
+    for wanted, name, build in studies:
+        if wanted:
+            t0 = time.perf_counter()
+            text = build() + f"\n\nRun time {time.perf_counter() - t0:.0f} s."
+            write_bytes(os.path.join(args.out, name), text + "\n")
+            print(text)
+    if any(wanted for wanted, _, _ in studies):
+        return 0
     if args.noise_table:
         seeds = tuple(range(1, 4))
         t0 = time.perf_counter()

@@ -61,7 +61,9 @@ def load_state(path, kind: str, version: int, *, max_bytes: int = MAX_FILE_BYTES
 
     ``kind`` and ``version`` may be tuples of the accepted kinds and
     versions (older formats a class still reads); the version found is
-    ``settings['_version']``.
+    ``settings['_version']``. ``kind=None`` accepts any kind and any version
+    (the kind found is then ``settings['_kind']``): how
+    :meth:`subid.OnlineIdentifier.load` finds the class to restore.
 
     Returns
     -------
@@ -105,6 +107,8 @@ def load_state(path, kind: str, version: int, *, max_bytes: int = MAX_FILE_BYTES
             or not isinstance(found_version, int) or not isinstance(settings, dict):
         raise error(f"checkpoint {path} has a corrupted header (kind, version or settings "
                     "of the wrong type)")
+    if kind is None:
+        return arrays, dict(settings, _version=found_version, _kind=found_kind)
     kinds = (kind,) if isinstance(kind, str) else tuple(kind)
     versions = (version,) if isinstance(version, int) else tuple(version)
     if found_kind not in kinds:

@@ -14,6 +14,7 @@ import contextlib
 import ctypes
 import ctypes.util
 import errno
+import io
 import os
 import re
 import secrets
@@ -46,6 +47,44 @@ def _shown(path) -> str:
     except TypeError:
         raise FileReadError(f"a file name must be a str or os.PathLike, got "
                             f"{type(path).__name__}") from None
+
+
+class _SizedFile(io.FileIO):
+    """A regular file that must end where it ended when it was opened.
+
+    Every reader of subid reads through it (:func:`open_regular`): a read
+    that meets the end of the file before the size found on opening raises
+    ``error`` (the file was truncated, or replaced by a shorter one, while it
+    was read), so no reader can return a silently shorter record.
+    """
+
+    def __init__(self, fd: int, size: int, shown: str, what: str, error):
+        super().__init__(fd, "rb", closefd=True)
+        self._size, self._shown, self._what, self._error = size, shown, what, error
+
+    def _check_end(self) -> None:
+        if self.tell() < self._size:
+            raise self._error(f"{self._shown} was truncated while it was read: it ended at "
+                              f"byte {self.tell()} of the {self._size} it had when opened; "
+                              f"read the {self._what} again when nothing writes to it",
+                              path=self._shown)
+
+    def readinto(self, buffer):
+        count = super().readinto(buffer)
+        if count == 0 and len(buffer):
+            self._check_end()
+        return count
+
+    def read(self, size=-1):
+        data = super().read(size)
+        if not data and size != 0:
+            self._check_end()
+        return data
+
+    def readall(self):
+        data = super().readall()
+        self._check_end()
+        return data
 
 
 def open_regular(path, *, what: str = "file", max_bytes: int | None = MAX_FILE_BYTES,
@@ -89,7 +128,7 @@ def open_regular(path, *, what: str = "file", max_bytes: int | None = MAX_FILE_B
         if fcntl is not None:
             flags = fcntl.fcntl(fd, fcntl.F_GETFL)
             fcntl.fcntl(fd, fcntl.F_SETFL, flags & ~os.O_NONBLOCK)
-        fh = os.fdopen(fd, "rb")
+        fh = io.BufferedReader(_SizedFile(fd, st.st_size, shown, what, error))
     except BaseException:
         os.close(fd)
         raise
@@ -194,6 +233,46 @@ def _write_error(exc: OSError, path: str, what: str) -> FileWriteError:
     return err
 
 
+def refuse_link(path: str, what: str) -> None:
+    """The one output-path policy of every writer (:func:`atomic_write`,
+    :func:`atomic_directory`, the command line's ``--out``): an output path that
+    is a symbolic link is refused with :class:`~subid.errors.FileWriteError`
+    naming where it points. subid never writes through a link, to a file or
+    a folder alike, so an output can never land outside the place named."""
+    if os.path.islink(path):
+        raise FileWriteError(f"cannot write the {what} {path}: it is a symbolic link (to "
+                             f"{os.readlink(path)}); subid does not write through links: "
+                             "give the path of the target itself, or another name",
+                             path=path)
+
+
+@contextlib.contextmanager
+def made_folders(path):
+    """Create the folder ``path`` (and missing parents) for the writes of the
+    ``with`` block; when the block fails, the folders this call created are
+    removed again if they are still empty: a failed write (a full disk, a
+    refused file) leaves nothing behind, not even an empty folder."""
+    path = os.path.abspath(os.fspath(path))
+    created, probe = [], path
+    while probe and not os.path.lexists(probe):
+        created.append(probe)
+        parent = os.path.dirname(probe)
+        if parent == probe:
+            break
+        probe = parent
+    try:
+        os.makedirs(path, exist_ok=True)
+    except OSError as exc:
+        raise _write_error(exc, path, "folder") from None
+    try:
+        yield path
+    except BaseException:
+        for folder in created:                 # deepest first
+            with contextlib.suppress(OSError):
+                os.rmdir(folder)
+        raise
+
+
 @contextlib.contextmanager
 def atomic_write(path, mode: str = "wb", encoding: str | None = None, *, what: str = "file"):
     """Yield a file handle whose content replaces ``path`` only when complete.
@@ -210,8 +289,7 @@ def atomic_write(path, mode: str = "wb", encoding: str | None = None, *, what: s
     if "\x00" in path:
         raise FileWriteError(f"the file name {path!r} holds a NUL byte",
                              path=path.replace("\x00", "\\0"))
-    if os.path.islink(path):
-        path = os.path.realpath(path)       # replace the file the link names, keep the link
+    refuse_link(path, what)
     try:
         existing = os.stat(path).st_mode
     except FileNotFoundError:
@@ -309,8 +387,9 @@ def atomic_directory(path, *, owned=None, what: str = "output folder"):
     if "\x00" in path:
         raise FileWriteError(f"the folder name {path!r} holds a NUL byte",
                              path=path.replace("\x00", "\\0"))
+    refuse_link(path, what)
     if os.path.exists(path):
-        if not os.path.isdir(path) or os.path.islink(path):
+        if not os.path.isdir(path):
             raise FileWriteError(f"{path} exists and is not a folder; choose another "
                                  f"{what}", path=path)
         if owned is not None and not owned(path):

@@ -47,7 +47,7 @@ from pathlib import Path
 import numpy as np
 
 from subid import _threads
-from subid._validation import check_dt, same_period
+from subid._validation import check_dt, same_period, stamp_resolution
 from subid.data import IOData
 from subid.errors import DataError, FileReadError, ModelError, ResourceLimitError
 from subid.io._files import MAX_EXPANDED_BYTES, atomic_write, open_regular, read_regular
@@ -1074,12 +1074,80 @@ def write_mat_model(model, path) -> None:
     }
     if model.hold != "zoh":                      # the input hold it assumes (subid only)
         variables["subid_hold"] = model.hold
+    poly = (model.info or {}).get("polynomials")
+    if isinstance(poly, dict) and "structure" in poly:    # MATLAB idpoly fields
+        for key in ("A", "B", "C", "D"):          # the realisation under subid's names
+            variables[f"subid_ss_{key}"] = variables.pop(key)
+        variables.update(_idpoly_fields(poly))
+        variables["subid_format"] = "subid.idpoly"
     if model.K is not None:                      # MATLAB idss fields
         variables["K"] = np.array(model.K)
     if model.noise_cov is not None:
         variables["NoiseVariance"] = np.array(model.noise_cov)
     with atomic_write(path, "wb") as fh:
         scipy.io.savemat(fh, variables, format="5", do_compression=False, oned_as="row")
+
+
+def _trimmed(coef) -> np.ndarray:
+    coef = np.asarray(coef, dtype=float).ravel()
+    nz = np.flatnonzero(coef)
+    return coef[:int(nz[-1]) + 1 if nz.size else 1]
+
+
+def _idpoly_fields(poly: dict) -> dict:
+    """MATLAB ``idpoly`` variables of a polynomial model's ``info['polynomials']``
+    (:mod:`subid.model.polynomial`): ``A`` (ny x ny), ``B``, ``F`` (ny x nu), ``C``,
+    ``D`` (ny x 1) cell arrays of row vectors in ``q^-1`` (``B`` with its ``nk``
+    leading zeros), ``nk`` (ny x nu) and ``structure``."""
+    A, B, C, D, F = (np.asarray(poly[k], dtype=float) for k in ("A", "B", "C", "D", "F"))
+    ny, nu = B.shape[0], B.shape[1]
+    nk = np.asarray(poly["nk"], dtype=float).reshape(ny, nu)
+
+    def cells(rows, cols, get):
+        out = np.empty((rows, cols), dtype=object)
+        for i in range(rows):
+            for j in range(cols):
+                out[i, j] = np.atleast_2d(get(i, j))
+        return out
+
+    def b_row(i, j):
+        b = _trimmed(B[i, j])
+        return b if b.size > nk[i, j] else np.zeros(int(nk[i, j]) + 1)
+    return {"A": cells(ny, ny, lambda i, k: _trimmed(A[i, k])), "B": cells(ny, nu, b_row),
+            "C": cells(ny, 1, lambda i, _: _trimmed(C[i])),
+            "D": cells(ny, 1, lambda i, _: _trimmed(D[i])),
+            "F": cells(ny, nu, lambda i, j: _trimmed(F[i, j])), "nk": nk,
+            "subid_structure": str(poly["structure"]),
+            **{f"subid_{k}": np.asarray(poly[k], dtype=float)
+               for k in ("na", "nb", "nc", "nd", "nf")}}
+
+
+def _from_idpoly_fields(fields: dict, ny: int, nu: int, path: str) -> dict:
+    """``info['polynomials']`` from the variables :func:`_idpoly_fields` wrote."""
+    def stack(key, rows, cols):
+        v = np.asarray(fields[key], dtype=object).reshape(rows, cols)
+        items = [[np.asarray(v[i, j], dtype=float).ravel() for j in range(cols)]
+                 for i in range(rows)]
+        length = max(1, max(len(c) for row in items for c in row))
+        out = np.zeros((rows, cols, length))
+        for i, row in enumerate(items):
+            for j, c in enumerate(row):
+                out[i, j, :len(c)] = c
+        return out
+    try:
+        poly = {"structure": "".join(str(c) for c in np.asarray(
+                    fields["subid_structure"]).reshape(-1)).strip(),
+                "A": stack("A", ny, ny), "B": stack("B", ny, nu), "C": stack("C", ny, 1)[:, 0],
+                "D": stack("D", ny, 1)[:, 0], "F": stack("F", ny, nu)}
+        for k, shape in (("na", (ny, ny)), ("nb", (ny, nu)), ("nc", (ny,)), ("nd", (ny,)),
+                         ("nf", (ny, nu))):
+            poly[k] = np.rint(np.asarray(fields[f"subid_{k}"], float)).astype(
+                np.int64).reshape(shape)
+        poly["nk"] = np.rint(np.asarray(fields["nk"], float)).astype(np.int64).reshape(ny, nu)
+    except (KeyError, ValueError, TypeError) as exc:
+        raise ModelError(f"model file '{path}': the idpoly fields written by subid are "
+                         f"incomplete or malformed ({exc})") from None
+    return poly
 
 
 def _cell_strings(value, key: str, path: str, count: int) -> list[str] | None:
@@ -1142,6 +1210,13 @@ def read_mat_model(path, build, *, dt=None):
     # silently dropping the imaginary part; complex values are refused below.
     raw = mat_variables(path, mat_dtype=False, what="model file")
     fields = {k: v for k, v in raw.items() if not k.startswith("__")}
+    idpoly = None
+    if "subid_ss_A" in fields:        # a polynomial model: idpoly fields and its realisation
+        idpoly = {k: fields.pop(k) for k in ("A", "B", "C", "D", "F") if k in fields}
+        idpoly.update({k: fields[k] for k in fields if k.startswith("subid_") or k == "nk"})
+        for key in ("A", "B", "C", "D"):
+            if f"subid_ss_{key}" in fields:
+                fields[key] = fields[f"subid_ss_{key}"]
     if not all(k in fields for k in ("A", "B", "C")):
         structs = [k for k, v in fields.items()
                    if isinstance(v, np.ndarray) and v.dtype.names and "A" in v.dtype.names]
@@ -1209,8 +1284,12 @@ def read_mat_model(path, build, *, dt=None):
             if hold not in ("zoh", "foh"):
                 raise ModelError(f"model file '{path}': subid_hold must be 'zoh' or 'foh', "
                                  f"got {hold[:40]!r}")
+        extra = {}
+        if idpoly is not None:
+            extra["info"] = {"polynomials": _from_idpoly_fields(idpoly, C.shape[0], B.shape[1],
+                                                                path)}
         return build(A, B, C, D, period, input_names=inputs, output_names=outputs,
-                     hold=hold or "zoh", **noise)
+                     hold=hold or "zoh", **noise, **extra)
     except ModelError as exc:
         if str(exc).startswith(f"model file '{path}'"):
             raise
@@ -1668,7 +1747,7 @@ def _from_arrays(arrays: dict, shown, ext, inputs, outputs, dt, time) -> IOData:
         if dt is None and time is None and "dt" in arrays:
             file_dt = _scalar(arrays["dt"], "dt", shown, ext)
             steps = np.diff(np.asarray(t, dtype=np.float64))
-            if steps.size and not same_period(steps, file_dt):
+            if steps.size and not same_period(steps, file_dt, resolution=stamp_resolution(t)):
                 raise FileReadError(f"{shown}: the file holds both 't' and 'dt' and they "
                                     f"disagree (dt = {file_dt:g}, t steps from {steps.min():g} "
                                     f"to {steps.max():g}); pass dt= or time= to choose",

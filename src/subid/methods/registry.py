@@ -53,9 +53,12 @@ __all__ = ["MethodSpec", "MethodUnavailableError", "METHODS", "CAPABILITIES", "f
 #: ``hold``             takes a ``hold`` option (the input between samples)
 #: ``nonuniform``       accepts non-uniformly sampled records
 #: ``seeded``           has a ``seed`` option (a random draw)
+#: ``polynomial``       ``order`` is a polynomial structure (MATLAB's ``(na, nb, nk)``, ...;
+#:                      an integer n sets every degree to n), and the model's state dimension
+#:                      follows from it: ``method(data, n).order`` need not be n
 CAPABILITIES = frozenset({"statistic", "streaming", "order_selection", "horizon", "stability",
                           "input_delay", "weighting", "x0", "refine", "hold", "nonuniform",
-                          "seeded"})
+                          "seeded", "polynomial"})
 
 
 class MethodUnavailableError(SubidError):
@@ -146,6 +149,9 @@ _DT_COMMON = ("horizon", "selection", "stability", "feedthrough", "estimate_x0",
               "statistic", "refine", "input_delay")
 _DT_CAPS = frozenset({"statistic", "streaming", "order_selection", "horizon", "stability",
                       "input_delay", "x0", "refine"})
+_POLY_COMMON = ("selection", "estimate_x0")
+_POLY_PEM = ("max_iterations", "tolerance")
+_POLY_CAPS = frozenset({"polynomial", "order_selection", "x0"})
 
 #: Every registered method, by name.
 METHODS: dict[str, MethodSpec] = {
@@ -164,6 +170,27 @@ METHODS: dict[str, MethodSpec] = {
         "N4SID (Van Overschee & De Moor)",
         options=tuple(o for o in _DT_COMMON if o != "bd_method") + ("weighting",),
         capabilities=_DT_CAPS | {"weighting"}),
+    "pbsid": MethodSpec(
+        "pbsid", "batch", "subid.methods.dt.pbsid", "pbsid", "discrete",
+        "predictor-based subspace identification, PBSID-opt (Chiuso 2007; closed loop)",
+        options=tuple(o for o in _DT_COMMON if o != "bd_method"),
+        capabilities=_DT_CAPS),
+    "arx": MethodSpec(
+        "arx", "batch", "subid.methods.dt.polynomial", "arx", "discrete",
+        "ARX polynomial model by least squares (MATLAB arx; structure by cross-validation)",
+        options=_POLY_COMMON, capabilities=_POLY_CAPS),
+    "armax": MethodSpec(
+        "armax", "batch", "subid.methods.dt.pem_poly", "armax", "discrete",
+        "ARMAX polynomial model by prediction-error minimisation (MATLAB armax)",
+        options=_POLY_COMMON + _POLY_PEM, capabilities=_POLY_CAPS),
+    "oe": MethodSpec(
+        "oe", "batch", "subid.methods.dt.pem_poly", "oe", "discrete",
+        "output-error polynomial model by prediction-error minimisation (MATLAB oe)",
+        options=_POLY_COMMON + _POLY_PEM, capabilities=_POLY_CAPS),
+    "bj": MethodSpec(
+        "bj", "batch", "subid.methods.dt.pem_poly", "bj", "discrete",
+        "Box-Jenkins polynomial model by prediction-error minimisation (MATLAB bj)",
+        options=_POLY_COMMON + _POLY_PEM, capabilities=_POLY_CAPS),
     "ct": MethodSpec(
         "ct", "batch", "subid.methods.ct.ct_subspace", "ct_subspace", "continuous",
         "continuous-time subspace identification (uniform or non-uniform samples)",
@@ -197,7 +224,7 @@ METHODS: dict[str, MethodSpec] = {
                  "dt", "hold", "method", "scale_filters", "refresh_every", "bd_gate",
                  "max_condition", "initial_covariance", "bd_initial_covariance",
                  "ode_trace_bound", "history_size", "engine", "input_names", "output_names",
-                 "instrument_poles", "max_gap"),
+                 "instrument_poles", "max_gap", "bd_startup"),
         capabilities=frozenset({"horizon", "hold", "nonuniform", "seeded"}),
         aliases=("AdaptiveIdentifier",)),
 }

@@ -28,7 +28,7 @@ import numba
 import numpy as np
 from scipy import linalg
 
-from subid._validation import is_uniform
+from subid._validation import is_uniform, stamp_resolution
 from subid.errors import ModelError
 
 __all__ = [
@@ -239,7 +239,7 @@ def _simulate_continuous(A, B, C, D, t, u, x0, hold):
     if N == 1:
         return _simulate_discrete(np.eye(n), np.zeros((n, m)), C, D, u, x0)
     steps = np.diff(t)
-    if is_uniform(steps):
+    if is_uniform(steps, resolution=stamp_resolution(t)):
         h = (t[-1] - t[0]) / (N - 1)
         return _run_tv(A, B, Cf, Df, np.full(N - 1, h), u, x0, hold)
     size = n + (2 * m if hold == "foh" else m)

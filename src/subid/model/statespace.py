@@ -40,11 +40,19 @@ from collections.abc import Mapping
 import numpy as np
 from scipy import linalg
 
+import subid.model._responses as _responses
 import subid.model._simulate as _simulate
-from subid._validation import as_signal, check_dt, check_int, check_time_stamps, same_period
+from subid._validation import (
+    as_signal,
+    check_dt,
+    check_int,
+    check_time_stamps,
+    same_period,
+    stamp_resolution,
+)
 from subid._version import __version__
 from subid.data import IOData
-from subid.delay import apply_to_inputs, frequency_factor, input_delay_of
+from subid.delay import effective_input, frequency_factor, input_delay_of
 from subid.errors import DataError, ModelError, OptionError
 from subid.io._files import atomic_write
 
@@ -747,13 +755,13 @@ class StateSpace:
             if t is not None:
                 t = check_time_stamps(t, N)
                 steps = np.diff(t)
-                if steps.size and not same_period(steps, self._dt):
+                if steps.size and not same_period(steps, self._dt,
+                                                  resolution=stamp_resolution(t)):
                     raise DataError(f"time stamps t have steps from {float(steps.min())!r} to "
                                     f"{float(steps.max())!r} but the model is discrete-time with "
                                     f"period dt={self._dt!r}; t must be uniform with that "
                                     "period (or omit t)")
-            if (delays := input_delay_of(self)) is not None:    # info['input_delay']
-                u = apply_to_inputs(u, delays)
+            u = effective_input(self, u)                         # info['input_delay']
             y, x = _simulate.simulate_discrete(self._A, self._B, self._C, self._D, u, x0)
         return (y, x) if return_state else y
 
@@ -897,6 +905,65 @@ class StateSpace:
         where = "s = j w" if self.is_continuous else "z = exp(j w dt)"
         raise ModelError(f"the frequency w={float(w[i])!r} rad/s falls on the pole {poles[j]:.6g} "
                          f"({where}): the frequency response is infinite there")
+
+    def step(self, t=None):
+        """Step response (MATLAB ``step``): every input in turn held at 1 from
+        ``t = 0``, zero initial state.
+
+        Parameters
+        ----------
+        t : float or array_like, optional
+            Final time, or the time stamps (from 0; discrete time: ``0, dt,
+            2 dt, ...``). Default: about the 0.1 % settling time of the
+            slowest mode (:mod:`subid.model._responses`).
+
+        Returns
+        -------
+        t : ndarray, shape (N,)
+            Time stamps.
+        y : ndarray, shape (N, n_outputs, n_inputs)
+            ``y[k, i, j]``: output ``i`` at ``t[k]`` for a unit step on input ``j``.
+
+        Raises
+        ------
+        DataError
+            ``t`` is not a positive final time or valid time stamps.
+
+        Examples
+        --------
+        >>> from subid.model.statespace import StateSpace
+        >>> t, y = StateSpace([[0.5]], [[1.0]], [[1.0]], 0, dt=1.0).step(4.0)
+        >>> y[:, 0, 0].tolist()
+        [0.0, 1.0, 1.5, 1.75, 1.875]
+        """
+        return _responses.step_response(self, t)
+
+    def impulse(self, t=None):
+        """Impulse response (MATLAB ``impulse``, without its ``1/dt`` scaling in
+        discrete time).
+
+        Discrete time: the response to the unit pulse ``u_j[0] = 1`` (the
+        Markov parameters, :meth:`markov`). Continuous time: ``C exp(A t) B``
+        (the Dirac part ``D delta(t)`` is not drawn).
+
+        Parameters
+        ----------
+        t : float or array_like, optional
+            Final time or time stamps, as for :meth:`step`.
+
+        Returns
+        -------
+        t : ndarray, shape (N,)
+            Time stamps.
+        y : ndarray, shape (N, n_outputs, n_inputs)
+            ``y[k, i, j]``: output ``i`` at ``t[k]`` for an impulse on input ``j``.
+
+        Raises
+        ------
+        DataError
+            ``t`` is not a positive final time or valid time stamps.
+        """
+        return _responses.impulse_response(self, t)
 
     # -- conversions -----------------------------------------------------
     def to_discrete(self, dt, method="zoh") -> "StateSpace":

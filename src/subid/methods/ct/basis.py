@@ -53,7 +53,7 @@ import numbers
 
 import numpy as np
 
-from subid._validation import as_signal, check_time_stamps, is_uniform
+from subid._validation import as_signal, check_time_stamps, is_uniform, stamp_resolution
 from subid.errors import DataError, ModelError, OrderError, TooFewSamplesError
 from subid.methods.ct import _ct_kernels
 from subid.model.statespace import StateSpace
@@ -244,7 +244,9 @@ class FilterBank:
         else:
             zero = np.zeros((grid.size, 1))
             vals = _ct_kernels.run_bank(self._F, self._g, grid, zero, 0,
-                                        uniform=is_uniform(np.diff(grid)), x0=self._g)[:, :, 0]
+                                        uniform=is_uniform(np.diff(grid),
+                                                                   resolution=stamp_resolution(grid)),
+                                        x0=self._g)[:, :, 0]
         if lead:
             vals = vals[1:]
         return vals[inverse.reshape(-1)]
@@ -305,7 +307,7 @@ class FilterBank:
             raise TooFewSamplesError(f"{v.shape[0]} samples are too few for interpolating "
                                      f"polynomials of degree {poly_order} (they need "
                                      f"{poly_order + 1} samples)")
-        return v, t, int(poly_order), is_uniform(np.diff(t))
+        return v, t, int(poly_order), is_uniform(np.diff(t), resolution=stamp_resolution(t))
 
     def _filter_sections(self, v, t, order, uniform):
         L, c = v.shape

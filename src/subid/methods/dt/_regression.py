@@ -85,8 +85,83 @@ def sensitivity_rows(A, C, u, S0, n_x0_cols):  # pragma: no cover - compiled
     return rows, S
 
 
+def dual_rows_reference(A, C, u, V0, M0, n_x0):
+    """Plain-numpy reference of :func:`dual_rows`.
+
+    The rows ``C S(t)`` of :func:`sensitivity_rows_reference` from a zero-input
+    start, by the dual recursions: for output i and input j, the B columns
+    ``(C S_B(t))[i, j*n + m] = sum_{k<t} (C A^(t-1-k))[i, m] u_j(k)`` are the state
+    ``v_ij(t)`` of ``v(t+1) = A^T v(t) + C[i]^T u_j(t)``, and the x0 columns are
+    ``M(t) = C A^t`` (``M(t+1) = M(t) A``): ``n^2 ny (nu + 1)`` flops a sample
+    instead of ``n^3 (1 + nu)``.
+
+    Parameters
+    ----------
+    A : (n, n), C : (ny, n), u : (T, nu)
+    V0 : (ny, nu, n) the states ``v_ij`` at the first sample.
+    M0 : (ny, n) ``C A^t`` at the first sample (unused when ``n_x0`` is 0).
+    n_x0 : int, 0 or n.
+
+    Returns
+    -------
+    rows : (T, ny, n_x0 + n*nu); V, M after the chunk.
+    """
+    T, nu = u.shape
+    n = A.shape[0]
+    ny = C.shape[0]
+    V, M = V0.copy(), M0.copy()
+    rows = np.empty((T, ny, n_x0 + n * nu))
+    for t in range(T):
+        if n_x0:
+            rows[t, :, :n] = M
+        rows[t, :, n_x0:] = V.reshape(ny, nu * n)
+        V = V @ A + C[:, None, :] * u[t][None, :, None]
+        M = M @ A
+        M[np.abs(M) < TINY] = 0.0
+    return rows, V, M
+
+
+@numba.njit(cache=True, nogil=True)
+def dual_rows(A, C, u, V0, M0, n_x0):  # pragma: no cover - compiled
+    """Compiled kernel: same contract as :func:`dual_rows_reference`."""
+    T, nu = u.shape
+    n = A.shape[0]
+    ny = C.shape[0]
+    V = V0.copy()
+    M = M0.copy()
+    Vn = np.empty_like(V)
+    Mn = np.empty_like(M)
+    rows = np.empty((T, ny, n_x0 + n * nu))
+    for t in range(T):
+        for i in range(ny):
+            if n_x0:
+                for m in range(n):
+                    rows[t, i, m] = M[i, m]
+            for j in range(nu):
+                for m in range(n):
+                    rows[t, i, n_x0 + j * n + m] = V[i, j, m]
+        for i in range(ny):
+            for j in range(nu):
+                ut = u[t, j]
+                for m in range(n):
+                    acc = C[i, m] * ut
+                    for k in range(n):
+                        acc += V[i, j, k] * A[k, m]
+                    Vn[i, j, m] = acc
+        V, Vn = Vn, V
+        if n_x0:
+            for i in range(ny):
+                for m in range(n):
+                    acc = 0.0
+                    for k in range(n):
+                        acc += M[i, k] * A[k, m]
+                    Mn[i, m] = acc if abs(acc) >= TINY else 0.0
+            M, Mn = Mn, M
+    return rows, V, M
+
+
 def fit_b_d_x0(A, C, u, y, *, feedthrough=True, estimate_x0=True, output_weights=None,
-               kernel=sensitivity_rows, path="auto", starts=None):
+               kernel=None, path="auto", starts=None):
     """Least-squares B, D (and x0) for given A, C on the raw output samples.
 
     ``path='auto'`` (default) solves the problem by the modal normal equations
@@ -120,7 +195,7 @@ def fit_b_d_x0(A, C, u, y, *, feedthrough=True, estimate_x0=True, output_weights
 
 
 def fit_b_d_x0_qr(A, C, u, y, *, feedthrough=True, estimate_x0=True, output_weights=None,
-                  kernel=sensitivity_rows):
+                  kernel=None):
     """Least-squares B, D (and x0) by a sequential QR factorisation of the regressor.
 
     Parameters
@@ -136,6 +211,12 @@ def fit_b_d_x0_qr(A, C, u, y, *, feedthrough=True, estimate_x0=True, output_weig
         Each output's errors are multiplied by its weight in the least-squares
         cost (e.g. the inverse of its standard deviation, so that the fit does
         not depend on the output units). Default: all ones.
+    kernel : callable, optional
+        A sensitivity kernel (:func:`sensitivity_rows` or its reference) to
+        build the rows from the sensitivity recursion of the module
+        documentation; default: the dual recursions of :func:`dual_rows`
+        (the same rows to rounding, 9x fewer flops at n = 10 with two inputs
+        and outputs).
 
     Returns
     -------
@@ -149,13 +230,72 @@ def fit_b_d_x0_qr(A, C, u, y, *, feedthrough=True, estimate_x0=True, output_weig
     N, nu = u.shape
     ny = y.shape[1]
     nx, q, p = parameter_count(n, nu, ny, estimate_x0, feedthrough)
-    S = np.zeros((n, q))
-    if estimate_x0:
-        S[:, :n] = np.eye(n)
-    R, _ = qr_factor(A, C, u, y, S, n_x0=nx, feedthrough=feedthrough,
-                     output_weights=output_weights, kernel=kernel)
+    if kernel is None:
+        R = _dual_qr_factor(A, C, u, y, n_x0=nx, feedthrough=feedthrough,
+                            output_weights=output_weights)
+    else:
+        S = np.zeros((n, q))
+        if estimate_x0:
+            S[:, :n] = np.eye(n)
+        R, _ = qr_factor(A, C, u, y, S, n_x0=nx, feedthrough=feedthrough,
+                         output_weights=output_weights, kernel=kernel)
     return solve_qr_factor(R, n, nu, ny, estimate_x0=estimate_x0, feedthrough=feedthrough,
                            n_samples=N)
+
+
+def _dual_qr_factor(A, C, u, y, *, n_x0, feedthrough, output_weights=None,
+                    kernel=dual_rows):
+    """:func:`qr_factor` of a whole record from a zero-input start, its rows by the
+    dual recursions (:func:`dual_rows`)."""
+    N, nu = u.shape
+    n, ny = A.shape[0], y.shape[1]
+    q = n_x0 + n * nu
+    p = q + (ny * nu if feedthrough else 0)
+    A = np.ascontiguousarray(A, dtype=float)
+    C = np.ascontiguousarray(C, dtype=float)
+    V = np.zeros((ny, nu, n))
+    M = C.copy()
+    R = np.zeros((0, p + 1))
+    flat = np.empty((p + 1 + min(_CHUNK, max(N, 1)) * ny) * (p + 1))
+    for start in range(0, N, _CHUNK):
+        stop = min(start + _CHUNK, N)
+        uc = np.ascontiguousarray(u[start:stop], dtype=float)
+        rows, V, M = kernel(A, C, uc, V, M, n_x0)
+        block = _with_d_and_y(rows, uc, y[start:stop], p, feedthrough, output_weights)
+        if not np.isfinite(block).all():    # overflowed (an unstable A): the factor would
+            return np.full((p + 1, p + 1), np.nan)     # be NaN; LAPACK is slow on NaN
+        R = _qr_append(R, block, flat)
+    return R
+
+
+def _with_d_and_y(rows, u, y, p, feedthrough, output_weights):
+    """Rows ``[C S(t), u(t)^T kron I, y(t)]`` (weighted) from the ``C S(t)`` part."""
+    T, ny, q = rows.shape
+    block = np.empty((T, ny, p + 1))
+    block[:, :, :q] = rows
+    if feedthrough:
+        block[:, :, q:p] = _kron_u_identity(u, ny)
+    block[:, :, p] = y
+    if output_weights is not None:
+        block *= output_weights[None, :, None]
+    return block.reshape(T * ny, p + 1)
+
+
+def _qr_append(R, rows, flat):
+    """Triangular factor of ``[R; rows]``: the two written into one column-major
+    work array (from the buffer ``flat``) and factorised in place by LAPACK
+    ``geqrf``, the factorisation ``scipy.linalg.qr(mode='r')`` runs without its
+    copies (as :func:`subid.statistic.hankel._qr_rows`)."""
+    top, width = R.shape[0], rows.shape[1]
+    work = flat[:(top + rows.shape[0]) * width].reshape((top + rows.shape[0], width), order="F")
+    work[:top] = R
+    work[top:] = rows
+    geqrf = scipy.linalg.lapack.dgeqrf
+    lwork = int(geqrf(work, lwork=-1)[2][0].real)        # the blocked algorithm's workspace
+    qr, _, _, info = geqrf(work, lwork=lwork, overwrite_a=1)
+    if info < 0:
+        raise ValueError(f"QR factorisation failed (LAPACK info {info})")
+    return np.triu(qr[:min(width, qr.shape[0])])
 
 
 def qr_factor(A, C, u, y, S, *, n_x0, feedthrough, output_weights=None,
@@ -174,12 +314,15 @@ def qr_factor(A, C, u, y, S, *, n_x0, feedthrough, output_weights=None,
     R = np.zeros((0, p + 1)) if R is None else R
     A = np.ascontiguousarray(A)
     C = np.ascontiguousarray(C)
+    flat = np.empty((max(R.shape[0], p + 1) + min(_CHUNK, max(N, 1)) * ny) * (p + 1))
     for start in range(0, N, _CHUNK):
         stop = min(start + _CHUNK, N)
         rows, S = regression_rows(A, C, u[start:stop], y[start:stop], S, n_x0=n_x0,
                                   feedthrough=feedthrough, output_weights=output_weights,
                                   kernel=kernel)
-        R = scipy.linalg.qr(np.vstack([R, rows]), mode="r", check_finite=False)[0][: p + 1]
+        if not np.isfinite(rows).all():     # overflowed (an unstable A): the factor would
+            return np.full((p + 1, p + 1), np.nan), S  # be NaN; LAPACK is slow on NaN
+        R = _qr_append(R, rows, flat)
     return R, S
 
 
@@ -202,15 +345,7 @@ def regression_rows(A, C, u, y, S, *, n_x0, feedthrough, output_weights=None,
     p = q + (ny * nu if feedthrough else 0)
     uc = np.ascontiguousarray(u)
     rows, S = kernel(np.ascontiguousarray(A), np.ascontiguousarray(C), uc, S, n_x0)
-    block = np.empty((T, ny, p + 1))
-    block[:, :, :q] = rows
-    if feedthrough:
-        # (u^T kron I_ny) vec(D): column j*ny + i multiplies D[i, j]
-        block[:, :, q:p] = _kron_u_identity(uc, ny)
-    block[:, :, p] = y
-    if output_weights is not None:
-        block *= output_weights[None, :, None]
-    return block.reshape(T * ny, p + 1), S
+    return _with_d_and_y(rows, uc, y, p, feedthrough, output_weights), S
 
 
 def solve_qr_factor(R, n, nu, ny, *, estimate_x0, feedthrough, n_samples):
@@ -256,7 +391,8 @@ def solve_factor(R, n, nu, ny, *, estimate_x0, feedthrough, n_samples, n_x0=None
 
 
 def _kron_u_identity(u, ny):
-    """Rows of ``u(t)^T kron I_ny`` for every t: shape (T, ny, nu*ny)."""
+    """Rows of ``u(t)^T kron I_ny`` for every t: shape (T, ny, nu*ny) (column
+    ``j*ny + i`` multiplies ``D[i, j]``: ``(u^T kron I_ny) vec(D)``)."""
     T, nu = u.shape
     out = np.zeros((T, ny, nu * ny))
     for j in range(nu):
@@ -709,7 +845,7 @@ def fit_b_d_x0_modal(A, C, u, y, *, feedthrough=True, estimate_x0=True, output_w
 
 
 def fit_b_d_x0_experiments(A, C, u, y, starts, *, feedthrough=True, estimate_x0=True,
-                           output_weights=None, kernel=sensitivity_rows, path="auto"):
+                           output_weights=None, kernel=None, path="auto"):
     """:func:`fit_b_d_x0` on several experiments: one x0 each, B and D shared.
 
     The output of experiment e (samples ``starts[e]`` to the next start) is
@@ -782,7 +918,8 @@ def fit_b_d_x0_experiments(A, C, u, y, starts, *, feedthrough=True, estimate_x0=
         if estimate_x0:
             S[:, :n] = np.eye(n)
         R_e, _ = qr_factor(A, C, u[a:b], y[a:b], S, n_x0=nx_e, feedthrough=feedthrough,
-                           output_weights=output_weights, kernel=kernel)
+                           output_weights=output_weights,
+                           kernel=sensitivity_rows if kernel is None else kernel)
         rows = np.zeros((R_e.shape[0], p + 1))
         rows[:, columns(e)] = R_e
         blocks.append(rows)

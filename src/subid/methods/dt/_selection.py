@@ -133,12 +133,14 @@ def default_gap_horizon(n_samples, n_inputs, n_outputs, blocks, largest_order, n
 
 
 def _fit_score(model, validation) -> float:
-    from subid.evaluation.metrics import fit_percent  # metrics imports the model module
-    try:
-        with warnings.catch_warnings(), np.errstate(all="ignore"):
-            warnings.simplefilter("ignore")
-            fits = fit_percent(model, validation)
-    except SubidError:
+    """Mean over the outputs of the simulation fit (%) of ``model`` on ``validation``
+    (a record, or its :class:`subid.methods.dt._scoring.Held`; x0 by least
+    squares), clipped below at :data:`FLOOR`; :data:`FLOOR` when the simulation
+    overflows. ``mean(fit_percent(model, validation))`` to rounding, by one
+    compiled pass (:func:`subid.methods.dt._scoring.simulation_fit`)."""
+    from subid.methods.dt._scoring import simulation_fit
+    fits = simulation_fit(model.A, model.B, model.C, model.D, validation)
+    if fits is None:
         return FLOOR
     value = float(np.mean(fits))
     return max(value, FLOOR) if math.isfinite(value) else FLOOR
@@ -147,6 +149,18 @@ def _fit_score(model, validation) -> float:
 def score_horizon(parts, orders, horizon, *, prepare_fold, builds):
     """Fold scores of every candidate order at one horizon.
 
+    Per fold, one problem (one statistic, by cost: the lagged products merged from
+    those of the four blocks of the record where they are exact, :func:`fold_factors`;
+    :meth:`subid.HankelStatistic.from_data` otherwise) whose order-independent
+    steps (the factorisation, the SVD) every candidate order shares
+    (:meth:`subid.methods.dt._subspace.Problem.cached`); the fold
+    models skip the estimation x0 (``Problem.fold``), and each is scored by one
+    compiled simulation with the x0 regression on the validation block
+    (:mod:`subid.methods.dt._scoring`), whose record-dependent parts are computed
+    once per fold. The scores equal those of the straightforward computation (a
+    fresh problem per order, ``fit_percent``) to rounding
+    (``tests/test_selection_speed.py``).
+
     Parameters
     ----------
     parts : list of (IOData, IOData)
@@ -154,7 +168,10 @@ def score_horizon(parts, orders, horizon, *, prepare_fold, builds):
     orders : list of int
         Candidate orders (all revealable at ``horizon``).
     horizon : int
-    prepare_fold : callable ``(record, candidates, horizon) -> Problem``
+    prepare_fold : callable ``(record, candidates, horizon, factor=None) -> Problem``
+        With attributes ``blocks`` (block rows per horizon) and ``statistic`` (the
+        option), the folds' factors are merged from the blocks' statistics and passed
+        as ``factor`` (:func:`fold_factors`); without them, each fold builds its own.
     builds : dict ``name -> callable (Problem with a fixed order) -> StateSpace``
 
     Returns
@@ -164,23 +181,94 @@ def score_horizon(parts, orders, horizon, *, prepare_fold, builds):
     repaired : dict ``(order, estimator index) -> int``
         How many of the fold models had to be stabilised (:func:`stabilised`).
     """
+    from subid.methods.dt._scoring import Held
     names = list(builds)
     per_fold = {(n, v): [] for n in orders for v in range(len(names))}
     repaired = {(n, v): 0 for n in orders for v in range(len(names))}
-    for train, validation in parts:
-        problem = prepare_fold(train, orders, horizon)
+    factors = fold_factors(parts, horizon, prepare_fold)
+    for (train, validation), factor in zip(parts, factors):
+        problem = prepare_fold(train, orders, horizon, factor=factor) if factor is not None \
+            else prepare_fold(train, orders, horizon)
+        held = Held(validation)           # what every candidate's score needs, once
         for n in orders:
             for v, name in enumerate(names):
                 try:
                     with warnings.catch_warnings():
                         warnings.simplefilter("ignore")
-                        model = builds[name](replace(problem, order=n, candidates=[n]))
-                    value = _fit_score(model, validation)
+                        model = builds[name](replace(problem, order=n, candidates=[n],
+                                                     fold=True))
+                    value = _fit_score(model, held)
                     repaired[(n, v)] += stabilised(model)
                 except SubidError:
                     value = FLOOR
                 per_fold[(n, v)].append(value)
     return per_fold, repaired
+
+
+def select_candidate(scores):
+    """The selection rule: the chosen key of ``scores`` (key -> fit %, higher is better).
+
+    The smallest key (keys sort by complexity: order first) whose misfit
+    ``100 - fit`` is within :data:`RELATIVE_TOLERANCE` of the best candidate's
+    misfit, plus :data:`ABSOLUTE_TOLERANCE` points. Shared by every method that
+    chooses its order by cross-validation (time and frequency domain).
+    """
+    limit = (100.0 - max(scores.values())) * (1.0 + RELATIVE_TOLERANCE) + ABSOLUTE_TOLERANCE
+    return min(key for key, value in scores.items() if 100.0 - value <= limit)
+
+
+def _blocks_of_folds(parts):
+    """The four blocks ``[0, N/3), [N/3, N/2), [N/2, N - N/3), [N - N/3, N)`` whose
+    unions are the training records of :func:`folds`, or None when ``parts`` are not
+    the four folds of one experiment (checked on the samples themselves)."""
+    if len(parts) != 4 or any(r.n_experiments > 1 for part in parts for r in part):
+        return None
+    (t0, v0), (t1, v1), (t2, v2), (t3, v3) = parts
+    N = t0.n_samples + v0.n_samples
+    third, half = N // 3, N // 2
+    lengths = [(N - third, third), (N - third, third), (half, N - half), (N - half, half)]
+    if [(t.n_samples, v.n_samples) for t, v in parts] != lengths:
+        return None
+
+    def same(a, b):
+        return np.array_equal(a.u, b.u) and np.array_equal(a.y, b.y)
+
+    if not (same(v1, t0[:third]) and same(v0, t1[N - 2 * third:])
+            and same(t2, t0[:half]) and same(t3, t1[half - third:])
+            and same(v2, t3) and same(v3, t2)):
+        return None
+    return [v1, t0[third:half], t0[half:N - third], v0]
+
+
+def fold_factors(parts, horizon, prepare_fold):
+    """Hankel factors of the training records of the folds, each merged from the
+    lagged-product statistics of the blocks of :func:`_blocks_of_folds` (one pass
+    over the record instead of one per fold: 2.3 records), where that statistic is
+    the one the fold would use (:meth:`subid.HankelStatistic.exact_factor`); None
+    for a fold (or all) where it is not, or when ``parts`` are not the four folds of
+    one experiment: ``prepare_fold`` then builds the factor from the record."""
+    from subid.statistic.hankel import QR_MAX_SAMPLES, HankelStatistic
+    none = [None] * len(parts)
+    blocks_per_horizon = getattr(prepare_fold, "blocks", None)
+    kind = getattr(prepare_fold, "statistic", None)
+    if blocks_per_horizon is None or kind not in ("auto", "gram"):
+        return none
+    depth = blocks_per_horizon * horizon
+    blocks = _blocks_of_folds(parts)
+    if blocks is None or min(b.n_samples for b in blocks) < depth:
+        return none
+    stats = [HankelStatistic.from_data(b, depth, kind="gram") for b in blocks]
+    s12, s34 = stats[0].merge(stats[1]), stats[2].merge(stats[3])
+    merged = [s12.merge(stats[2]), stats[1].merge(stats[2]).merge(stats[3]), s12, s34]
+    out = []
+    for stat, (train, _) in zip(merged, parts):
+        if stat.n_columns < depth * (train.n_inputs + train.n_outputs):
+            out.append(None)             # too few columns: prepare_fold reports it
+        elif kind == "gram" or train.n_samples > QR_MAX_SAMPLES:
+            out.append(stat.factor())
+        else:
+            out.append(stat.exact_factor())
+    return out
 
 
 def cross_validate(data, fixed, candidates, horizon, *, prepare_fold, builds):
@@ -246,9 +334,7 @@ def cross_validate(data, fixed, candidates, horizon, *, prepare_fold, builds):
                          f"({', '.join(map(str, horizons))}) and {data.n_outputs} output"
                          f"{'s' if data.n_outputs != 1 else ''}; give horizon >= {need} "
                          "(with enough samples) or a lower order")
-    limit = (100.0 - max(scores.values())) * (1.0 + RELATIVE_TOLERANCE) + ABSOLUTE_TOLERANCE
-    order, chosen_h, chosen_v = min(key for key, value in scores.items()
-                                    if 100.0 - value <= limit)
+    order, chosen_h, chosen_v = select_candidate(scores)
 
     def entry(n, f, v):
         out = {"order": n, "horizon": f, "score": scores[(n, f, v)]}

@@ -27,8 +27,19 @@ from subid.errors import (
     UnstableModelWarning,
 )
 from subid.methods._info import collect_warnings, model_info
+from subid.methods.dt._checks import check_data
 from subid.methods.dt._regression import fit_b_d_projection, fit_b_d_x0
 from subid.methods.dt._selection import SELECTION_RULES, cross_validate, default_gap_horizon
+from subid.methods.dt._stability import (  # noqa: F401 (names of this module's API)
+    GROWTH_LIMIT,
+    STABILITY,
+    STABLE_RADIUS,
+    output_growth,
+    record_growth,
+    reflect_unstable_poles,
+    stability_request,
+    stable_shift_invariance,
+)
 from subid.model.statespace import StateSpace
 from subid.statistic._hankel import HankelFactor
 from subid.statistic.hankel import HankelStatistic
@@ -39,40 +50,6 @@ RANK_TOL = 1e-10
 # Input-Hankel condition number above which identification warns.
 CONDITION_WARN = 1e7
 DEFAULT_HORIZON_UNKNOWN_ORDER = 10
-
-
-#: Largest magnitude of a channel the methods accept: its square must not overflow.
-HUGE_VALUE = 1e150
-
-
-def check_data(data, method: str) -> IOData:
-    """The record a discrete-time method may use, or a clear error."""
-    if not isinstance(data, IOData):
-        raise DataError(f"{method} expects an IOData record, got {type(data).__name__}; "
-                        "wrap arrays as subid.IOData(u, y, dt=...)")
-    if not data.is_uniform:
-        raise DataError(f"{method} identifies a discrete-time model and needs uniformly "
-                        "sampled data; these time stamps are non-uniform "
-                        "(use a continuous-time method for them)")
-    for name, signal, names in (("input", data.u, data.input_names),
-                                ("output", data.y, data.output_names)):
-        if not signal.size or max(abs(float(signal.max())), abs(float(signal.min()))) \
-                <= HUGE_VALUE:       # whole-array reductions: cheap on long records
-            continue
-        peak = np.abs(signal).max(axis=0)
-        huge = np.flatnonzero(peak > HUGE_VALUE)
-        if huge.size:
-            k = int(huge[0])
-            raise DataError(f"{name} {names[k]} reaches {peak[k]:.3g}: squares and products "
-                            "of such values overflow double precision in the identification; "
-                            "express the channel in other units (divide it by a constant) "
-                            "and scale the model back")
-    flat = [k for k, column in enumerate(data.y.T) if column.max() == column.min()]
-    if flat:
-        names = ", ".join(data.output_names[k] for k in flat)
-        raise DataError(f"output {names} is constant over the whole record: it carries no "
-                        "information about the dynamics; drop that channel")
-    return data
 
 
 DEFAULT_MAX_ORDER = 10
@@ -148,8 +125,9 @@ def check_order_horizon(order, horizon, data, *, method: str, blocks_per_horizon
 
 
 def data_factor(data: IOData, depth: int, *, method: str, horizon: int,
-                statistic: str = "auto") -> HankelFactor:
-    """Hankel factor of ``data`` with ``depth`` block rows, after the sample check."""
+                statistic: str = "auto", factor: HankelFactor | None = None) -> HankelFactor:
+    """Hankel factor of ``data`` with ``depth`` block rows, after the sample check
+    (``factor``: that factor, already computed)."""
     nu, ny = data.n_inputs, data.n_outputs
     rows = depth * (nu + ny)
     need = min_samples(depth, nu, ny)
@@ -166,6 +144,8 @@ def data_factor(data: IOData, depth: int, *, method: str, horizon: int,
             f"{nu} input{'s' if nu != 1 else ''} and {ny} output{'s' if ny != 1 else ''}: "
             f"the {depth}-block-row Hankel matrix has {rows} rows and needs at least "
             f"{need} samples; reduce the horizon or supply more data")
+    if factor is not None:
+        return factor
     return HankelStatistic.from_data(data, depth, kind=statistic).factor()
 
 
@@ -304,6 +284,8 @@ def estimate_b_d(A, C_n, gamma, L11, L_yu, problem: "Problem", *, bd_method: str
                              "with a statistic only, use bd_method='projection' (or 'auto')")
         bd_method = "projection"
     diag = {}
+    if estimate_x0 and isinstance(data, IOData) and data.n_experiments > 1:
+        check_experiment_lengths(data, A.shape[0])
     if bd_method in ("auto", "simulation"):
         with np.errstate(over="ignore", invalid="ignore"):
             if second_pass is not None:
@@ -417,106 +399,6 @@ def cva_factor(y_perp: np.ndarray) -> np.ndarray:
     return scipy.linalg.qr(stacked, mode="r", check_finite=False)[0][:m]
 
 
-STABILITY = ("auto", "enforce", "none")
-#: Spectral radius of a model whose stability was enforced, at most.
-STABLE_RADIUS = 0.9999
-#: Output growth (RMS of the last tenth over the first) above which data "grow".
-GROWTH_LIMIT = 3.0
-
-
-def stability_request(stability: str, A, data, method: str) -> bool:
-    """Whether stability must be enforced on ``A``.
-
-    ``'none'``: never. ``'enforce'``: whenever A is unstable, with a warning
-    when the data themselves grow. ``'auto'`` (default): when A is unstable
-    (spectral radius >= 1) and the estimation output does not grow
-    (:func:`output_growth` below :data:`GROWTH_LIMIT`): a diverging model of
-    non-diverging data is over-fitted noise, not the plant. Data that grow
-    (an unstable plant, e.g. measured in closed loop) keep the unstable
-    model. From a statistic alone (no raw samples) ``'auto'`` cannot see the
-    growth and does not act.
-    """
-    if stability not in STABILITY:
-        raise OptionError(f"stability must be one of {STABILITY}, got {stability!r}")
-    if stability == "none" or np.abs(np.linalg.eigvals(A)).max() < 1.0:
-        return False
-    growth = record_growth(data) if isinstance(data, IOData) else None
-    if stability == "enforce":
-        if growth is not None and growth >= GROWTH_LIMIT:
-            warnings.warn(f"{method}: stability='enforce' on data whose output grows "
-                          f"{growth:.3g}x over the record: the plant looks unstable, and a "
-                          "stable model cannot follow it; use stability='none' to keep the "
-                          "unstable estimate", UnstableModelWarning, stacklevel=4)
-        return True
-    return growth is not None and growth < GROWTH_LIMIT
-
-
-def stable_shift_invariance(Q: np.ndarray, n_outputs: int, radius: float = STABLE_RADIUS):
-    """A stable A from an orthonormal basis ``Q`` of the observability range.
-
-    Regularised shift invariance (Maciejowski, "Guaranteed stability with
-    subspace methods", Systems & Control Letters 26, 1995; Van Gestel et al.,
-    IEEE TAC 46(9), 2001): minimise
-    ``||Q_up A - Q_down||^2 + c ||Q_last A||^2`` with ``Q_last`` the last block
-    row. For c = 0 it is the ordinary estimate; for c = 1 the solution is
-    ``A = Q_up^T Q_down = Q^T S Q`` (``Q^T Q = I``, S the block shift, of norm
-    1), so ``||A||_2 <= 1`` and A is stable. The smallest c in [0, 1] giving a
-    spectral radius at most ``radius`` is found by bisection (40 steps); if
-    even c = 1 reaches only ``radius < rho <= 1``, A is scaled by
-    ``radius / rho``.
-
-    Returns
-    -------
-    A : ndarray
-        In the basis of ``Q``.
-    c : float
-        The regularisation weight used.
-    """
-    up, down, last = Q[:-n_outputs], Q[n_outputs:], Q[-n_outputs:]
-    n = Q.shape[1]
-
-    def solve(c):
-        lhs = np.vstack([up, math.sqrt(c) * last])
-        rhs = np.vstack([down, np.zeros((n_outputs, n))])
-        return scipy.linalg.lstsq(lhs, rhs, lapack_driver="gelsy", check_finite=False)[0]
-
-    def rho(M):
-        return float(np.abs(np.linalg.eigvals(M)).max())
-
-    A1 = solve(1.0)
-    if rho(A1) > radius:
-        return A1 * (radius / rho(A1)), 1.0
-    lo, hi, best = 0.0, 1.0, A1
-    for _ in range(40):
-        mid = 0.5 * (lo + hi)
-        A = solve(mid)
-        if rho(A) <= radius:
-            hi, best = mid, A
-        else:
-            lo = mid
-    return best, hi
-
-
-def reflect_unstable_poles(A, radius: float = STABLE_RADIUS, max_condition: float = 1e8):
-    """A with every pole p outside the unit circle replaced by ``1/conj(p)``.
-
-    The reflected pole has the same frequency and the reciprocal radius (the
-    stable spectral factor of the same amplitude response); a pole on the
-    unit circle or reflected above ``radius`` is pulled in to ``radius``.
-    Computed through the eigendecomposition ``A = V Λ V^{-1}`` (basis
-    invariant); None when V is ill-conditioned (a nearly defective A), where
-    the eigenvector basis is unreliable.
-    """
-    lam, V = np.linalg.eig(A)
-    if np.linalg.cond(V) > max_condition:
-        return None
-    mag = np.abs(lam)
-    new = np.where(mag >= 1.0, lam / np.maximum(mag, 1e-300) ** 2, lam)
-    new_mag = np.abs(new)
-    new = np.where(new_mag > radius, new / np.maximum(new_mag, 1e-300) * radius, new)
-    return np.linalg.solve(V.T, (V * new).T).T.real      # V diag(new) V^{-1}
-
-
 #: 'auto' keeps an unstable model only when its residual on the estimation data is
 #: below this fraction of the stabilised model's: the data demand the instability.
 KEEP_UNSTABLE_RATIO = 0.9
@@ -594,6 +476,26 @@ def stable_choice(A_q, Q, n_outputs: int, fit, *, stability: str, data, method: 
     return A_s, fitted_s, record
 
 
+def check_experiment_lengths(data, order: int) -> None:
+    """:class:`TooFewSamplesError` naming every experiment of ``data`` too short to
+    determine its own initial state (``n_samples * n_outputs < order``
+    equations for ``order`` unknowns), instead of a regression that would be
+    rank deficient and send B, D to another route without x0."""
+    short = [(name, b - a) for name, (a, b) in zip(data.experiment_names,
+                                                     data.experiment_ranges)
+             if (b - a) * data.n_outputs < order]
+    if short:
+        need = -(-order // data.n_outputs)
+        listed = ", ".join(f"{name!r} ({length} sample{'s' if length != 1 else ''})"
+                           for name, length in short[:5])
+        more = f" and {len(short) - 5} more" if len(short) > 5 else ""
+        raise TooFewSamplesError(
+            f"experiment{'s' if len(short) > 1 else ''} {listed}{more} of the merged record "
+            f"{'are' if len(short) > 1 else 'is'} too short to determine an initial state of "
+            f"order {order}: each experiment needs at least {need} samples. Drop "
+            f"{'them' if len(short) > 1 else 'it'} from the merge, or pass estimate_x0=False")
+
+
 def experiment_starts(data):
     """The first sample of every experiment of a record of several (None otherwise)."""
     if isinstance(data, IOData) and data.n_experiments > 1:
@@ -609,6 +511,7 @@ def initial_state(A, B, C, D, data):
         second_pass = getattr(data, "output_regression", None)   # subid.methods.dt._bd_pass
         return None if second_pass is None else second_pass.initial_state(A, B, C, D)
     if data.n_experiments > 1:
+        check_experiment_lengths(data, A.shape[0])
         rows = [_initial_state_one(A, B, C, D, e, column_std(data.y)) for e in data.experiments]
         return None if any(r is None for r in rows) else np.stack(rows)
     return _initial_state_one(A, B, C, D, data, column_std(data.y))
@@ -647,6 +550,10 @@ class Problem:
     input_condition: float
     input_scale: np.ndarray
     output_scale: np.ndarray
+    #: A cross-validation fold model (:func:`subid.methods.dt._selection.score_horizon`):
+    #: it is scored with an x0 fitted on the held-out data, so the estimation x0 that
+    #: costs a simulation of its own (the state-sequence estimate's) is skipped.
+    fold: bool = False
     _cache: dict = field(default_factory=dict, repr=False, compare=False)
 
     def weights(self) -> np.ndarray:
@@ -656,10 +563,26 @@ class Problem:
             cached = self._cache["weights"] = output_weights(self.data.y)
         return cached
 
+    def cached(self, key, compute):
+        """``compute()``, once per problem and ``key``: the steps that do not depend
+        on the order (the problems of one fold's candidate orders share this cache,
+        :func:`subid.methods.dt._selection.score_horizon`, so that every order comes
+        from one factorisation and one SVD). The result must be treated as read-only."""
+        if key not in self._cache:
+            self._cache[key] = compute()
+        return self._cache[key]
+
     def unscale(self, B_n, C_n, D_n):
         """B, C, D in the user's units from those of the normalised channels."""
         su, sy = self.input_scale, self.output_scale
         return B_n / su, C_n * sy[:, None], D_n * sy[:, None] / su
+
+
+def future_past_factor(pb) -> np.ndarray:
+    """The factor of ``[U_f; U_p; Y_p; Y_f]``, once per problem (:meth:`Problem.cached`)."""
+    hf, f = pb.factor, pb.horizon
+    return pb.cached("future-past factor", lambda: hf.retriangularize(
+        hf.u_rows(f, 2 * f), hf.u_rows(0, f), hf.y_rows(0, f), hf.y_rows(f, 2 * f)))
 
 
 def normalize_channels(hf: HankelFactor, outputs: bool):
@@ -688,8 +611,13 @@ STATISTICS = ("auto", "qr", "gram")
 
 
 def prepare(data, order, horizon, *, method: str, blocks_per_horizon: int = 2,
-            statistic: str = "auto", normalize_outputs: bool = True) -> Problem:
+            statistic: str = "auto", normalize_outputs: bool = True,
+            factor: HankelFactor | None = None) -> Problem:
     """Validate the arguments, build the Hankel factor and check excitation.
+
+    ``factor``: the Hankel factor of the record (depth ``blocks_per_horizon *
+    horizon``), when already computed (:func:`subid.methods.dt._selection.score_horizon`
+    merges the folds' statistics from those of their blocks).
 
     ``data`` is an :class:`IOData` record or a :class:`HankelStatistic`
     (identification from the statistic only). ``blocks_per_horizon`` is 2
@@ -720,7 +648,7 @@ def prepare(data, order, horizon, *, method: str, blocks_per_horizon: int = 2,
         fixed, candidates, horizon = check_order_horizon(
             order, horizon, data, method=method, blocks_per_horizon=blocks_per_horizon)
         hf = data_factor(data, blocks_per_horizon * horizon, method=method, horizon=horizon,
-                         statistic=statistic)
+                         statistic=statistic, factor=factor)
     input_condition = check_excitation(hf, data.input_names, method=method)
     hf, su, sy = normalize_channels(hf, outputs=normalize_outputs)
     return Problem(method, data, fixed, candidates, horizon, hf, input_condition, su, sy)
@@ -741,13 +669,11 @@ def choose_order(fixed, candidates, profile, source: str):
 
 
 SYSTEM_MATRICES = ("auto", "shift", "states")
-#: ``system_matrices='auto'`` chooses between its estimators by cross-validation on
-#: records up to this many samples; longer records use the first ('shift'). The choice
-#: costs about four fold fits per estimator, which on short records (where the two
-#: differ most: DaISy sets of 1,000 to 10,000 samples) is a fraction of a second but
-#: would make an explicit ``method(data, order, horizon=...)`` call on 10^5 samples
-#: five times slower; on long records both estimators are consistent and their models
-#: close. Depends on the record only, so a given order reproduces a chosen one.
+#: ``system_matrices='auto'`` lets the cross-validation of the order and horizon choose
+#: between its estimators on records up to this many samples; longer records use the
+#: first ('shift'), where both are consistent and their models close. With the order
+#: and horizon both given, 'auto' is the first with no fold fits (one fit); a
+#: one-element candidate list (``order=[4]``) asks for the cross-validated choice.
 AUTO_VARIANT_MAX_SAMPLES = 20_000
 
 
@@ -776,11 +702,16 @@ def identify(data, order, horizon, *, method: str, build, selection: str,
     ``variants`` (a dict name -> build, the first the default), when given,
     are alternative estimators of the system matrices from the same
     subspace (``system_matrices='auto'`` of :func:`subid.moesp` and
-    :func:`subid.ls_subspace`): with ``selection='cv'`` on a raw record the
-    cross-validation chooses among them too, even when the order and the
-    horizon are given (so that a given order and horizon reproduce the
-    model); otherwise the first one is used. ``info['system_matrices']``
-    names the one used.
+    :func:`subid.ls_subspace`): with ``selection='cv'`` on a raw record of
+    up to :data:`AUTO_VARIANT_MAX_SAMPLES` samples, the cross-validation of
+    the order or horizon chooses among them too, and with the order and the
+    horizon both given the estimators alone are cross-validated at them (eight
+    fold fits; with one estimator, or ``system_matrices`` given, or beyond
+    :data:`AUTO_VARIANT_MAX_SAMPLES`, an explicit call costs one fit and no
+    fold fit); otherwise the first one is used. ``info['system_matrices']``
+    names the one used, and ``info['system_matrices_selection']`` says why
+    when there was a choice; ``method(data, order=model.order,
+    horizon=model.info['horizon'])`` reproduces a default model.
     """
     if selection not in SELECTION_RULES:
         raise OptionError(f"selection must be one of {SELECTION_RULES}, got {selection!r}")
@@ -791,41 +722,64 @@ def identify(data, order, horizon, *, method: str, build, selection: str,
                    normalize_outputs=normalize_outputs)
     with collect_warnings() as issued:
         builds = variants if variants else {None: build}
+        pinned = fixed is not None and horizon is not None
+        first = next(iter(builds))
+        variant_rule = None
         if len(builds) > 1 and getattr(data, "n_samples", 0) > AUTO_VARIANT_MAX_SAMPLES:
-            first = next(iter(builds))
+            variant_rule = {"rule": "long record", "description": (
+                f"{first!r} beyond {AUTO_VARIANT_MAX_SAMPLES} samples, where both "
+                "estimators are consistent")}
+        if variant_rule is not None:
             builds = {first: builds[first]}
-        choose = fixed is None or horizon is None or len(builds) > 1
+        # order and horizon given: no fold fits, except the choice between two
+        # estimators (system_matrices='auto' on a record of at most
+        # AUTO_VARIANT_MAX_SAMPLES), cross-validated at that order and horizon as the
+        # default call cross-validates it, so that method(data, order=m.order,
+        # horizon=m.info['horizon']) reproduces the default model m (issue 21)
+        choose = not pinned or len(builds) > 1
         if selection == "cv" and isinstance(data, IOData) and choose:
             check_data(data, method)
 
-            def prepare_fold(record, orders, f):
+            def prepare_fold(record, orders, f, factor=None):
                 with warnings.catch_warnings():
                     warnings.simplefilter("ignore")
-                    return prepare(record, orders, f, **options)
+                    return prepare(record, orders, f, factor=factor, **options)
             prepare_fold.blocks = blocks_per_horizon
+            prepare_fold.statistic = statistic
             try:
                 n, f, variant, record = cross_validate(data, fixed, candidates, horizon,
-                                                       prepare_fold=prepare_fold, builds=builds)
+                                                       prepare_fold=prepare_fold,
+                                                       builds=builds)
             except SubidError:
-                if fixed is None or horizon is None:
+                if not pinned:
                     raise
-                # order and horizon given, the folds too short for them: the default estimator
-                n, f, variant, record = fixed, horizon, next(iter(builds)), None
+                # order and horizon given, the folds too short for them: the first estimator
+                n, f, variant, record = fixed, horizon, first, None
             problem = prepare(data, n, f, **options)
             model = builds[variant](problem)
             if record is not None:
                 n, f, variant, problem, model = _unrepaired_choice(
                     record, data, options, builds, (n, f, variant, problem, model))
-            if record is not None and (fixed is None or horizon is None):
+            if record is not None and not pinned:
                 model.info["order_selection"] = record
-            elif record is not None:
-                model.info["system_matrices_selection"] = record
+            if len(builds) > 1:
+                variant_rule = {"rule": "cv", "description": (
+                    "cross-validated at the given order and horizon "
+                    "(info['system_matrices_cv'])" if pinned else
+                    "cross-validated with the order and horizon (info['order_selection'])")}
+                if pinned and record is not None:
+                    model.info["system_matrices_cv"] = record
+                elif record is None:
+                    variant_rule = {"rule": "folds too short", "description": (
+                        f"{first!r}: the folds are too short for the given order and horizon")}
         else:
             problem = prepare(data, order, horizon, **options)
             variant = next(iter(builds))
             model = builds[variant](problem)
         if variant is not None:
             model.info["system_matrices"] = variant
+        if variant_rule is not None:
+            model.info["system_matrices_selection"] = variant_rule
         if finalize is not None:
             model = finalize(model, problem)
     model.info["warnings"] = list(issued)
@@ -892,21 +846,6 @@ def finalize(model: StateSpace, problem: Problem, *, refine, delays) -> StateSpa
         from subid.methods.dt.pem import pem
         model = pem(problem.data, model)
     return record_delay(model, delays)
-
-
-def record_growth(data) -> float:
-    """:func:`output_growth` of a record: the largest over its experiments."""
-    return max(output_growth(e.y) for e in data.experiments)
-
-
-def output_growth(y: np.ndarray) -> float:
-    """Ratio of the RMS of the last tenth of ``y`` to that of its first tenth
-    (largest over the channels, after removing each channel's mean)."""
-    k = max(y.shape[0] // 10, 1)
-    y = y - y.mean(axis=0)
-    first = np.sqrt(np.mean(y[:k] ** 2, axis=0))
-    last = np.sqrt(np.mean(y[-k:] ** 2, axis=0))
-    return float(np.max(last / np.maximum(first, 1e-300)))
 
 
 def check_stability(A, data, method: str) -> dict:

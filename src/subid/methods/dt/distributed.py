@@ -32,7 +32,10 @@ Without a client, Dask's default scheduler of the current process is used
 
 from __future__ import annotations
 
+import math
 import time
+
+import numpy as np
 
 from subid.errors import DataError, SubidError
 from subid.io.formats import read_chunks
@@ -54,7 +57,18 @@ def _dask():
     return dask
 
 
-def _block_statistic(u_block, y_block, depth, kind):
+def _block_statistic(u_block, y_block, depth, kind, start=0):
+    for name, block in (("input u", u_block), ("output y", y_block)):
+        block = np.asarray(block)
+        finite = np.isfinite(block).all(axis=1) if block.ndim == 2 else np.isfinite(block)
+        if not finite.all():                 # rows of the whole record, not of the block
+            bad = np.flatnonzero(~finite)
+            rows = ", ".join(str(start + int(r)) for r in bad[:5])
+            raise DataError(f"{name} has {bad.size} row{'s' if bad.size != 1 else ''} with "
+                            f"NaN or infinite values in the partition starting at sample "
+                            f"{start} (row{'s' if bad.size != 1 else ''} {rows}"
+                            f"{', ...' if bad.size > 5 else ''} of the "
+                            "record); remove or interpolate them before identification")
     stat = HankelStatistic(u_block.shape[1], y_block.shape[1], depth, kind=kind)
     return stat.update(u_block, y_block)
 
@@ -131,6 +145,12 @@ def _as_dask_pair(u, y):
     if u.ndim != 2 or y.ndim != 2:
         raise DataError(f"u and y must be 1-D or 2-D with time on axis 0, got shapes "
                         f"{u.shape} and {y.shape}")
+    for name, arr in (("u", u), ("y", y)):
+        if any(math.isnan(c) for c in arr.chunks[0]):
+            raise DataError(f"the chunk sizes of {name} along time are unknown (a Dask array "
+                            "made from a dataframe's .values, or after boolean indexing); "
+                            f"call {name}.compute_chunk_sizes() first, or build it with "
+                            "dataframe.to_dask_array(lengths=True)")
     if u.shape[0] != y.shape[0]:
         raise DataError(f"input u has {u.shape[0]} samples but output y has {y.shape[0]}")
     u = u.rechunk({1: -1})
@@ -179,8 +199,9 @@ def identify(u, y, method: str = "moesp", *, dt: float = 1.0, order=None, horizo
                                      method_options.get("instruments", "past"))
     u_blocks = u.to_delayed().ravel()
     y_blocks = y.to_delayed().ravel()
-    parts = [dask.delayed(_block_statistic)(ub, yb, depth, statistic)
-             for ub, yb in zip(u_blocks, y_blocks)]
+    starts = np.concatenate([[0], np.cumsum(u.chunks[0])[:-1]]).astype(int)
+    parts = [dask.delayed(_block_statistic)(ub, yb, depth, statistic, int(a))
+             for ub, yb, a in zip(u_blocks, y_blocks, starts)]
     stat = _compute(dask, _tree_merge(dask, parts), client)
     _second_pass(stat, dask, client,
                  lambda k, function, args: dask.delayed(_apply_block)(function, u_blocks[k],

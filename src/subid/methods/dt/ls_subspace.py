@@ -50,7 +50,13 @@ from functools import partial
 import numpy as np
 import scipy.linalg
 
-from subid._validation import check_bool, check_choice, check_selector, legacy_arguments
+from subid._validation import (
+    check_bool,
+    check_choice,
+    check_seed,
+    check_selector,
+    legacy_arguments,
+)
 from subid.delay import shift_for_method
 from subid.errors import OptionError, OrderError
 from subid.methods.dt._subspace import (
@@ -81,7 +87,7 @@ def random_selector(horizon: int, n_outputs: int, seed=0, rows: int | None = Non
     uses the same Λ whether the order was given or estimated (Remark 2).
     """
     size = horizon * n_outputs
-    full = np.random.default_rng(seed).uniform(-1.0, 1.0, size=(size, size))
+    full = np.random.default_rng(check_seed(seed)).uniform(-1.0, 1.0, size=(size, size))
     return full if rows is None else full[:rows].copy()
 
 
@@ -160,7 +166,7 @@ def ls_subspace(data, order=None, *, horizon=None, instruments="past", selector=
         ``info['order_selection']`` holds every candidate with its score.
     stability : {'auto', 'enforce', 'none'}
         ``'auto'``: an unstable A is made stable when the data do not grow
-        (:func:`subid.methods.dt._subspace.stability_request`), by regularised shift
+        (:func:`subid.methods.dt._stability.stability_request`), by regularised shift
         invariance, then B, D and x0 are refitted; ``'enforce'``: always;
         ``'none'``: never. ``info['stability']`` says what was done.
     system_matrices : {'auto', 'shift', 'states'}
@@ -170,9 +176,10 @@ def ls_subspace(data, order=None, *, horizon=None, instruments="past", selector=
         the oblique projection of the future outputs on the past data, and
         ``[A B; C D]`` by least squares on it (:func:`subid.n4sid`'s step,
         QR-based, still SVD-free; the basis is still the one Λ fixes).
-        ``'auto'`` (default): with ``selection='cv'`` on a record of up to
-        20,000 samples the cross-validation chooses between them, as in
-        :func:`subid.moesp`; otherwise (longer records, statistics) ``'shift'``. ``info['system_matrices']`` names the one used.
+        ``'auto'`` (default): as in :func:`subid.moesp` (the cross-validation
+        of the order or horizon chooses between them on records of up to
+        20,000 samples; ``'shift'`` otherwise, and with the order and horizon
+        both given). ``info['system_matrices']`` names the one used.
     bd_method : {'auto', 'simulation', 'projection'}
         How B, D (and x0) are found given A and C: least squares on the raw
         output samples through the model (``'simulation'``, most accurate,
@@ -189,7 +196,10 @@ def ls_subspace(data, order=None, *, horizon=None, instruments="past", selector=
     statistic : {'auto', 'qr', 'gram'}
         How the data are reduced (:mod:`subid.statistic.hankel`): QR factor of the
         Hankel matrix (accurate to rounding) or lagged products (25x faster,
-        squares the condition number). ``'auto'``: QR up to 200,000 samples.
+        squares the condition number). ``'auto'``: the lagged products where
+        they are exact to rounding (a Hankel matrix of condition number up to
+        1e4, e.g. noisy data), else QR up to 200,000 samples
+        (:meth:`subid.HankelStatistic.from_data`).
     refine : {None, 'pem'}
         ``'pem'``: refine the final subspace estimate by prediction-error
         minimisation (:func:`subid.pem`, default options) on the record.
@@ -233,6 +243,7 @@ def ls_subspace(data, order=None, *, horizon=None, instruments="past", selector=
     if selector is not None and horizon is None:
         horizon = selector_horizon(selector, data)
     check_choice(bd_method, "bd_method", BD_METHODS)
+    check_seed(seed)
     check_system_matrices(system_matrices)
     if system_matrices == "states" and instruments != "past":
         raise OptionError("system_matrices='states' needs the past data (instruments='past'): "

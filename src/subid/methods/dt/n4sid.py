@@ -25,14 +25,17 @@ import numpy as np
 import scipy.linalg
 
 from subid._validation import check_bool, legacy_arguments
+from subid.data import IOData
 from subid.delay import shift_for_method
 from subid.methods.dt._subspace import (
+    check_experiment_lengths,
     check_weighting,
     choose_order,
     cva_factor,
     estimate_b_d,
     finalize,
     finish,
+    future_past_factor,
     identify,
     initial_state,
     stability_request,
@@ -139,23 +142,24 @@ def n4sid(data, order=None, *, horizon=None, weighting="cva", selection="cv",
 
 def _n4sid(pb, *, weighting, stability, feedthrough, estimate_x0) -> StateSpace:
     i, hf = pb.horizon, pb.factor
-    L = hf.L
     wp = hf.rows(hf.u_rows(0, i), hf.y_rows(0, i))
-    uf = hf.rows(hf.u_rows(i, 2 * i))
-    yf = hf.rows(hf.y_rows(i, 2 * i))
-    perp = np.eye(L.shape[1]) - _row_space_projector(uf)
-    coef = _oblique_coefficients(yf, uf, wp, perp)          # O_i = coef W_p
-    o_i = coef @ wp
-    W1_inv = None
-    if weighting == "n4sid":
-        M = o_i
-    elif weighting == "moesp":
-        M = o_i @ perp
-    else:
-        R = cva_factor(yf @ perp)
-        M = scipy.linalg.solve_triangular(R.T, o_i @ perp, lower=True, check_finite=False)
-        W1_inv = R.T
-    U, s, _ = scipy.linalg.svd(M, full_matrices=False, check_finite=False)
+    coef, perp = _projection(pb)
+
+    def decompose():                 # shared by every candidate order of the problem
+        o_i = coef @ wp
+        W1_inv = None
+        if weighting == "n4sid":
+            M = o_i
+        elif weighting == "moesp":
+            M = o_i @ perp
+        else:
+            R = cva_factor(hf.rows(hf.y_rows(i, 2 * i)) @ perp)
+            M = scipy.linalg.solve_triangular(R.T, o_i @ perp, lower=True, check_finite=False)
+            W1_inv = R.T
+        U, s, _ = scipy.linalg.svd(M, full_matrices=False, check_finite=False)
+        return W1_inv, U, s
+
+    W1_inv, U, s = pb.cached(("n4sid svd", weighting), decompose)
     n, order_selection = choose_order(pb.order, pb.candidates, s, "singular values")
     gamma = U[:, :n] * np.sqrt(s[:n])
     if W1_inv is not None:
@@ -165,6 +169,19 @@ def _n4sid(pb, *, weighting, stability, feedthrough, estimate_x0) -> StateSpace:
                                        coefficients=coef)
     return finish(pb, A, B, C, D, n, order_selection, singular_values=s, weighting=weighting,
                   **extra)
+
+
+def _projection(pb):
+    """``(coef, perp)``: the oblique projection ``O_i = coef W_p`` and the projector
+    on the complement of the future inputs' row space, once per problem."""
+    def compute():
+        i, hf = pb.horizon, pb.factor
+        wp = hf.rows(hf.u_rows(0, i), hf.y_rows(0, i))
+        uf = hf.rows(hf.u_rows(i, 2 * i))
+        yf = hf.rows(hf.y_rows(i, 2 * i))
+        perp = np.eye(hf.L.shape[1]) - _row_space_projector(uf)
+        return _oblique_coefficients(yf, uf, wp, perp), perp
+    return pb.cached("oblique projection", compute)
 
 
 def state_model(pb, gamma, *, stability, feedthrough, estimate_x0, coefficients=None):
@@ -192,12 +209,7 @@ def state_model(pb, gamma, *, stability, feedthrough, estimate_x0, coefficients=
     L = hf.L
     wp = hf.rows(hf.u_rows(0, i), hf.y_rows(0, i))
     wp_next = hf.rows(hf.u_rows(1, i + 1), hf.y_rows(1, i + 1))
-    if coefficients is None:
-        uf = hf.rows(hf.u_rows(i, 2 * i))
-        yf = hf.rows(hf.y_rows(i, 2 * i))
-        perp = np.eye(L.shape[1]) - _row_space_projector(uf)
-        coefficients = _oblique_coefficients(yf, uf, wp, perp)      # O_i = coef W_p
-    coef = coefficients
+    coef = _projection(pb)[0] if coefficients is None else coefficients   # O_i = coef W_p
     # States X_i = Γ^† O_i = K W_p with K = Γ^† coef: x(k) is a fixed linear function
     # of the past window w_p(k), so the next state is the same function of the window
     # one sample later, x(k+1) = K w_p(k+1): the state sequence shifted by one sample
@@ -230,8 +242,7 @@ def state_model(pb, gamma, *, stability, feedthrough, estimate_x0, coefficients=
         Q, Rg = scipy.linalg.qr(gamma, mode="economic", check_finite=False)
         A_unstable = scipy.linalg.solve(Rg.T, (Rg @ A).T, check_finite=False).T
         C_q = Q[:ny]
-        Lr = hf.retriangularize(hf.u_rows(i, 2 * i), hf.u_rows(0, i), hf.y_rows(0, i),
-                                hf.y_rows(i, 2 * i))
+        Lr = future_past_factor(pb)
         a, b = i * nu, i * (nu + ny)
 
         def fit(A_try):
@@ -251,6 +262,8 @@ def state_model(pb, gamma, *, stability, feedthrough, estimate_x0, coefficients=
             return A, B, C, D, x0, {"state_regression_residual": float(residual), "x0": x0,
                                     "stability": stab, **extra}
     B, C, D = pb.unscale(B, C, D)    # from the normalised channels to the user's units
-    x0 = initial_state(A, B, C, D, data) if estimate_x0 else None
+    if estimate_x0 and pb.fold and isinstance(data, IOData) and data.n_experiments > 1:
+        check_experiment_lengths(data, n)     # what initial_state would raise
+    x0 = initial_state(A, B, C, D, data) if estimate_x0 and not pb.fold else None
     return A, B, C, D, x0, {"state_regression_residual": float(residual), "x0": x0,
                             "stability": stab}

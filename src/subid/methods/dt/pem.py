@@ -45,8 +45,11 @@ import scipy.optimize
 
 from subid._validation import same_period
 from subid.data import IOData
+from subid.delay import delay_inputs, input_delay_of, record_delay
 from subid.errors import DataError, ModelError, NoiseModelWarning, OptionError
 from subid.methods._info import records_warnings
+from subid.methods.dt._checks import check_data
+from subid.methods.dt._covariance import covariance_factor
 from subid.methods.dt._pem_kernel import jacobian
 from subid.model import _simulate
 from subid.model.statespace import StateSpace
@@ -54,6 +57,8 @@ from subid.model.statespace import StateSpace
 __all__ = ["pem"]
 
 FOCUS = ("prediction", "simulation")
+# Smallest tolerance: scipy's least_squares needs one above machine precision.
+_EPS = float(np.finfo(float).eps)
 # A trial predictor with a spectral radius above this is treated as unstable.
 STABILITY_LIMIT = 1.0 - 1e-9
 # Largest Jacobian (N * ny rows, one column per free parameter) pem builds.
@@ -73,6 +78,7 @@ def _check_inputs(data, model, focus):
                         f"the model has {model.n_inputs} and {model.n_outputs}")
     if not data.is_uniform:
         raise DataError("pem refines discrete-time models and needs uniformly sampled data")
+    check_data(data, "pem")               # magnitudes whose squares overflow, constant outputs
     if not model.is_continuous and not same_period(data.dt, model.dt):
         raise DataError(f"the model has dt={model.dt} but the data are sampled with "
                         f"dt={data.dt}")
@@ -183,58 +189,133 @@ def _round(model_mats, x0, data, focus, W, layout, max_nfev, tolerance, history,
     """One least-squares run in local coordinates at ``model_mats``; ``x0`` has one
     row per experiment (each experiment is predicted from its own initial state)."""
     A0, B0, C0, D0, K0 = model_mats
-    u, y = data.u, data.y
-    N, ny = y.shape
-    ranges = data.experiment_ranges
-    n_exp, n = x0.shape
-    v = np.hstack([u, y]) if focus == "prediction" else u
+    v = np.hstack([data.u, data.y]) if focus == "prediction" else data.u
     theta0 = layout.pack(A0, B0, C0, D0, K0)
     basis = _local_coordinates(layout, A0, B0, C0, D0, K0)
     dm = basis.shape[1]
-    scale = 1.0 / math.sqrt(N)
 
     def mats(z):
-        return layout.unpack(theta0 + basis @ z[:dm], D0)
+        return layout.unpack(theta0 + basis @ z, D0)
+
+    def predictor(z):
+        return _predictor(*mats(z), focus)
+
+    def directions(z):
+        return _directions(layout, basis, *mats(z), focus)
+
+    z, res = minimise_prediction_error(predictor, directions, dm, x0, v, data.y,
+                                       data.experiment_ranges, W, max_nfev, tolerance,
+                                       history, penalty)
+    return mats(z[:dm]), x0 + z[dm:].reshape(x0.shape), res
+
+
+def block_jacobian(mats, v, x0, dirs, blocks, dm):
+    """``(ŷ, J)`` of :func:`subid.methods.dt._pem_kernel.jacobian` for a block-diagonal
+    predictor, the kernel run on each block with its own coordinates and states.
+
+    ``mats = (Ap, Bp, C, Dp)``, ``dirs`` the direction arrays of every
+    coordinate (``dm`` model coordinates, then one per state for x0),
+    ``blocks`` the ``(states, coordinates)`` index arrays (see
+    :func:`minimise_prediction_error`). Each block's output is
+    ``C[:, s] x_s``; ``ŷ`` adds them and ``Dp v`` once.
+    """
+    Ap, Bp, C, Dp = mats
+    dAp, dBp, dC, dDp, dx0 = dirs
+    N, n = v.shape[0], Ap.shape[0]
+    ny = C.shape[0]
+    J = np.zeros((N, ny, dm + n))
+    yhat = v @ Dp.T
+    zero_dp = np.zeros_like(Dp)
+    for states, coords in blocks:
+        s = np.asarray(states, dtype=np.int64)
+        rows = np.concatenate([np.asarray(coords, dtype=np.int64), dm + s])
+        sub = [np.ascontiguousarray(a) for a in (
+            Ap[np.ix_(s, s)], Bp[s], C[:, s], zero_dp, v, x0[s],
+            dAp[np.ix_(rows, s, s)], dBp[rows][:, s], dC[rows][:, :, s], dDp[rows],
+            dx0[np.ix_(rows, s)])]
+        yb, Jb = jacobian(*sub)
+        yhat += yb
+        J[:, :, rows] = Jb
+    return yhat, J
+
+
+def minimise_prediction_error(predictor, directions, dm, x0, v, y, ranges, W, max_nfev,
+                              tolerance, history, penalty, fit_x0=True, blocks=None):
+    """Minimise ``1/(2N) sum ||W (y - ŷ)||^2`` over ``dm`` model coordinates and the
+    initial states.
+
+    The optimiser shared by :func:`pem` and the polynomial methods
+    (:mod:`subid.methods.dt.pem_poly`). ``predictor(z)`` gives the predictor
+    ``(Ap, Bp, C, Dp)`` driven by ``v`` at the model coordinates ``z``;
+    ``directions(z)`` its derivatives ``(dAp, dBp, dC, dDp, dx0)`` along the
+    ``dm`` coordinates followed by ``n`` rows for the initial state (the
+    arrays of :func:`subid.methods.dt._pem_kernel.jacobian`). ``x0`` holds one
+    initial state per experiment (row), each experiment predicted from its
+    own (fixed at ``x0`` when ``fit_x0`` is false: then ``directions`` gives
+    the ``dm`` model rows only). A trial whose predictor is unstable or
+    overflows costs ``penalty`` per residual, more than the start, so the
+    trust region rejects it. ``blocks`` (optional) declares a block-diagonal
+    predictor: a list of ``(states, coordinates)`` index arrays such that the
+    coordinates of a block move only its own rows and columns of ``Ap``, rows
+    of ``Bp`` and columns of ``C`` (an output-error model, one block per
+    input); the sensitivities are then run block by block
+    (:func:`block_jacobian`), which gives the same Jacobian at a fraction of
+    the cost.
+
+    Returns
+    -------
+    z, result
+        The coordinates reached (``dm`` model coordinates, then the changes of
+        the initial states) and :func:`scipy.optimize.least_squares`'s result.
+    """
+    N, ny = y.shape
+    n_exp, n = x0.shape
+    scale = 1.0 / math.sqrt(N)
+    n_x0 = n_exp * n if fit_x0 else 0
+
+    def initial(z):
+        return x0 + z[dm:].reshape(n_exp, n) if fit_x0 else x0
 
     def fun(z):
-        A, B, C, D, K = mats(z)
-        Ap, Bp, Cp, Dp = _predictor(A, B, C, D, K, focus)
-        if not np.isfinite(Ap).all() or _radius(Ap) >= STABILITY_LIMIT:
+        Ap, Bp, Cp, Dp = predictor(z[:dm])
+        if not np.isfinite(Ap).all() or (n and _radius(Ap) >= STABILITY_LIMIT):
             return np.full(N * ny, penalty)
         with np.errstate(all="ignore"):
-            yhat = _simulate_experiments(Ap, Bp, Cp, Dp, v, x0 + z[dm:].reshape(n_exp, n),
-                                         ranges)[0]
+            yhat = _simulate_experiments(Ap, Bp, Cp, Dp, v, initial(z), ranges)[0]
         if not np.isfinite(yhat).all():
             return np.full(N * ny, penalty)
         return (((y - yhat) @ W.T) * scale).ravel()
 
     def jac(z):
-        A, B, C, D, K = mats(z)
-        Ap, Bp, Cp, Dp = _predictor(A, B, C, D, K, focus)
-        dirs = [np.ascontiguousarray(a) for a in
-                _directions(layout, basis, A, B, C, D, K, focus)]
-        mats_c = [np.ascontiguousarray(a) for a in (Ap, Bp, Cp, Dp)]
-        x0s = x0 + z[dm:].reshape(n_exp, n)
+        mats_c = [np.ascontiguousarray(a) for a in predictor(z[:dm])]
+        dirs = [np.ascontiguousarray(a) for a in directions(z[:dm])]
+        x0s = initial(z)
+        if not fit_x0:             # the model directions only
+            dirs = [np.ascontiguousarray(a[:dm]) for a in dirs]
         yhat = np.empty((N, ny))
-        J = np.zeros((N, ny, dm + n_exp * n))
+        J = np.zeros((N, ny, dm + n_x0))
         for e, (a, b) in enumerate(ranges):     # the x0 columns of experiment e only
-            yhat[a:b], Je = jacobian(*mats_c, np.ascontiguousarray(v[a:b]),
-                                     np.ascontiguousarray(x0s[e]), *dirs)
+            ve, xe = np.ascontiguousarray(v[a:b]), np.ascontiguousarray(x0s[e])
+            if blocks is None:
+                yhat[a:b], Je = jacobian(*mats_c, ve, xe, *dirs)
+            else:
+                yhat[a:b], Je = block_jacobian(mats_c, ve, xe, dirs, blocks, dm)
             J[a:b, :, :dm] = Je[:, :, :dm]
-            J[a:b, :, dm + e * n:dm + (e + 1) * n] = Je[:, :, dm:]
+            if fit_x0:
+                J[a:b, :, dm + e * n:dm + (e + 1) * n] = Je[:, :, dm:]
         history.append(0.5 * float(np.sum((((y - yhat) @ W.T) * scale) ** 2)))
         Jw = -np.einsum("ik,tkd->tid", W, J) * scale
         if not np.isfinite(Jw).all():
             Jw = np.nan_to_num(Jw, nan=0.0, posinf=0.0, neginf=0.0)
         return Jw.reshape(N * ny, -1)
 
-    z0 = np.zeros(dm + n_exp * n)
+    z0 = np.zeros(dm + n_x0)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
         res = scipy.optimize.least_squares(fun, z0, jac=jac, method="trf", x_scale="jac",
                                            ftol=tolerance, xtol=tolerance, gtol=tolerance,
                                            max_nfev=max_nfev)
-    return mats(res.x), x0 + res.x[dm:].reshape(n_exp, n), res
+    return res.x, res
 
 
 @records_warnings
@@ -244,11 +325,14 @@ def pem(data, model, *, focus="prediction", max_iterations=100, tolerance=1e-8, 
 
     Parameters
     ----------
-    data : IOData
+    data : IOData or FRData
         Uniformly sampled estimation record (the same data the start was
         identified on, usually). A record of several experiments
         (:func:`subid.merge`) is predicted experiment by experiment, each from
         its own initial state (``info['x0']`` one row per experiment).
+        Frequency-response data (:class:`subid.FRData`) are fitted by weighted
+        least squares on the response instead
+        (:func:`subid.methods.fd.fd_pem.fd_pem`; ``focus`` does not apply).
     model : StateSpace
         Starting model, e.g. from :func:`subid.n4sid`. Discrete time with the
         data's ``dt``; a continuous-time model is refined through its
@@ -277,7 +361,10 @@ def pem(data, model, *, focus="prediction", max_iterations=100, tolerance=1e-8, 
         ``cost_history`` (criterion at every accepted iterate, first entry the
         start), ``start_cost``, ``final_cost``, ``stop_reason`` (the
         optimiser's message, or why the start was kept), ``n_evaluations``,
-        ``x0`` and ``parametrisation``.
+        ``x0``, ``parametrisation`` and ``parameter_covariance`` (the
+        asymptotic covariance of the parameters at the result, for
+        :func:`subid.freqresp_bounds`; with ``focus='simulation'`` it assumes
+        white output errors; dropped for continuous-time models).
 
     Raises
     ------
@@ -299,14 +386,32 @@ def pem(data, model, *, focus="prediction", max_iterations=100, tolerance=1e-8, 
     >>> refined.info["final_cost"] <= refined.info["start_cost"]
     True
     """
+    from subid.frdata import FRData
+    if isinstance(data, FRData):     # frequency-response data: subid.methods.fd.fd_pem
+        from subid.methods.fd.fd_pem import fd_pem
+        return fd_pem(data, model, max_iterations=max_iterations, tolerance=tolerance,
+                      rounds=rounds, feedthrough=feedthrough)
     _check_inputs(data, model, focus)
     if isinstance(max_iterations, bool) or not isinstance(max_iterations, int) \
             or max_iterations < 1:
         raise OptionError(f"max_iterations must be a positive integer, got {max_iterations!r}")
-    if not (isinstance(tolerance, (int, float)) and 0 < tolerance < 1):
-        raise OptionError(f"tolerance must be in (0, 1), got {tolerance!r}")
+    if isinstance(tolerance, bool) or not isinstance(tolerance, (int, float)) \
+            or not _EPS <= tolerance < 1:
+        raise OptionError(f"tolerance must be in [{_EPS:.3g}, 1) (below machine precision no "
+                          f"step can meet it), got {tolerance!r}")
     if isinstance(rounds, bool) or not isinstance(rounds, int) or rounds < 1:
         raise OptionError(f"rounds must be a positive integer, got {rounds!r}")
+    if (delays := input_delay_of(model)) is not None:
+        # the model's dynamics see u_j[k - d_j]: refine on the record shifted so (the
+        # first max(d) samples, whose delayed inputs precede the record, left out, as
+        # the methods' input_delay= does), then record the delays on the result
+        shifted, _ = delay_inputs(data, delays)
+        inner = model.with_noise_model(model.K, model.noise_cov,
+                                       info={k: v for k, v in model.info.items()
+                                             if k != "input_delay"})
+        return record_delay(pem(shifted, inner, focus=focus, max_iterations=max_iterations,
+                                tolerance=tolerance, rounds=rounds, feedthrough=feedthrough),
+                            delays)
     if model.is_continuous:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", NoiseModelWarning)
@@ -317,8 +422,11 @@ def pem(data, model, *, focus="prediction", max_iterations=100, tolerance=1e-8, 
         info = dict(ct.info)
         kind = "zero" if model.hold == "zoh" else "first"
         info["pem_through"] = f"{kind}-order-hold discretisation with dt={data.dt}"
+        # the covariance belongs to the discrete-time parameters
+        info.pop("parameter_covariance", None)
         return ct.with_noise_model(None, None, info=info)
-    return _pem_dt(data, model, focus, max_iterations, tolerance, rounds, feedthrough)
+    refined = _pem_dt(data, model, focus, max_iterations, tolerance, rounds, feedthrough)
+    return _with_covariance(refined, model, data, focus, feedthrough)
 
 
 def _start_gain(data, model):
@@ -448,4 +556,63 @@ def _pem_dt(data, model, focus, max_iterations, tolerance, rounds, feedthrough):
     h = max(5, -(-n // ny) + 2)
     if N >= 2 * h * (nu + ny + 1):
         return with_factor(refined, HankelStatistic.from_data(data, 2 * h).factor())
+    return refined
+
+
+def _with_covariance(refined, start, data, focus, feedthrough):
+    """``refined`` with ``info['parameter_covariance']``: the asymptotic covariance of
+    its parameters (:mod:`subid.methods.dt._covariance`) from the Jacobian at the
+    estimate, in the local coordinates of the estimate (the initial states are
+    eliminated as nuisance parameters).
+
+    Stored as ``parameters`` (θ, the stacked row-major ``A, B, C`` and, when
+    estimated, ``D`` and ``K``), ``factor`` (``F``, shape (len(θ), d), with
+    ``Cov(θ) = F F^T``: rank d, the DDLC directions, no similarity
+    directions), ``with_feedthrough``, ``with_gain``, ``noise_cov`` (the
+    residual covariance used) and ``method``. The factor is tied to this
+    realisation (:func:`subid.parameter_covariance` checks it).
+    """
+    n, nu, ny = refined.order, refined.n_inputs, refined.n_outputs
+    with_d = bool(np.any(start.D != 0)) if feedthrough is None else bool(feedthrough)
+    with_k = focus == "prediction"
+    if with_k and refined.K is None:
+        return refined
+    A, B, C, D = (np.array(m) for m in (refined.A, refined.B, refined.C, refined.D))
+    K = np.array(refined.K) if with_k else np.zeros((n, ny))
+    layout = _Layout(n, nu, ny, with_d, with_k)
+    basis = _local_coordinates(layout, A, B, C, D, K)
+    dirs = _directions(layout, basis, A, B, C, D, K, focus)
+    dm = basis.shape[1]
+    ranges = data.experiment_ranges
+    x0 = np.asarray(refined.info.get("x0", np.zeros(n)), dtype=float).reshape(-1, n)
+    if x0.shape[0] != len(ranges):
+        return refined
+    v = np.hstack([data.u, data.y]) if with_k else data.u
+    mats = [np.ascontiguousarray(a) for a in _predictor(A, B, C, D, K, focus)]
+    dirs = [np.ascontiguousarray(a) for a in dirs]
+    N = data.n_samples
+    J = np.zeros((N, ny, len(ranges) * n + dm))
+    yhat = np.empty((N, ny))
+    for e, (a, b) in enumerate(ranges):       # nuisance x0 columns first
+        yhat[a:b], Je = jacobian(*mats, np.ascontiguousarray(v[a:b]),
+                                 np.ascontiguousarray(x0[e]), *dirs)
+        J[a:b, :, e * n:(e + 1) * n] = Je[:, :, dm:]
+        J[a:b, :, len(ranges) * n:] = Je[:, :, :dm]
+    factor, lam = covariance_factor(J, data.y - yhat, len(ranges) * n)
+    info = refined.info            # a fresh dict of the model pem just built
+    if factor is None:
+        info["parameter_covariance_note"] = (
+            "no parameter covariance: the Jacobian at the estimate is rank deficient "
+            "(a non-minimal model or data that do not excite it)")
+        return refined
+    info["parameter_covariance"] = {
+        "parameters": layout.pack(A, B, C, D, K),
+        "factor": basis @ factor,
+        "with_feedthrough": with_d,
+        "with_gain": with_k,
+        "noise_cov": lam,
+        "n_samples": N,
+        "method": "asymptotic prediction-error covariance [sum psi Lambda^-1 psi^T]^-1 "
+                  "(Ljung 1999, Theorem 9.1) in data-driven local coordinates",
+    }
     return refined

@@ -60,8 +60,9 @@ IST = {
     "stalled": 10,      # 1 once the residual of (13) has stopped improving
     "rejected": 11,     # 1 if the last refresh's (Ã, C̃) failed the gate / Hurwitz test
     "gaps": 12,         # intervals longer than max_gap (filters re-initialised)
+    "not_excited": 13,  # 1 if the last refresh found (8) not persistently exciting
 }
-N_IST = 13
+N_IST = 14
 # Float state ``fst`` slots.
 FST = {
     "t_last": 0,          # time of the last sample
@@ -72,19 +73,28 @@ FST = {
     "res_ref": 5,         # best residual of (13), updated when it halves
     "t_ref": 6,           # time of the last halving
     "t_resume": 7,        # after a gap: (8) gets no weight before this time
+    "t_first": 8,         # time of the first sample (the stall rule's clock)
 }
-N_FST = 8
+N_FST = 9
 
 # Part 2 also starts when the residual of (13) is below this value and has
-# not halved during one memory length 1/α of the estimate of M (converged to
-# its noise floor); from then on Ψ accepts models within a factor
-# _STALL_FACTOR of the best residual.
+# stopped halving (converged to its noise floor): no halving during
+# min(1/α, max(t_ref - t_first, settle)) since the last one at t_ref. A
+# consistent estimate whose memory still grows (t < 1/α) has a noise floor
+# falling like t^{-1/2}: it halves at 4 t_ref, so the window of one elapsed
+# time (t_ref - t_first) detects the stall at ~2 t_ref, whatever the memory;
+# one memory length 1/α (issue 12) never fired within a record shorter than
+# 1/α. From then on Ψ accepts models within a factor _STALL_FACTOR of the
+# best residual.
 _STALL_MAX = 0.25
 _STALL_FACTOR = 2.0
 
 # Floating-point contraction of a*b + c into fused multiply-adds only (no
 # reassociation; NaN and inf keep their IEEE semantics): 10-20% faster.
 _FASTMATH = {"contract"}
+
+# Inverse iterations of the excitation test (:func:`_weakest`).
+_EXCITATION_ITERATIONS = 8
 
 # Relative pivot threshold of the QR factor in (13): below it the shift
 # equation is rank deficient and the previous (Ã, C̃) are kept.
@@ -274,7 +284,47 @@ def _solve_normal(R, G, X, max_cond, L, B):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True, fastmath=_FASTMATH)
-def _solve_iv_weighted(C, G, Z, X, max_cond, L, Ct, Gt, N, Gn, Ln, Bn):  # pragma: no cover
+def _weakest(X, L, delta, v, w):  # pragma: no cover - compiled
+    """Excitation of the information matrix X (lower triangle read):
+    ``λ_min(X) / tr(X)``, by inverse iteration with the Cholesky factor L of
+    ``X + δ I`` (from the solve just done): ``_EXCITATION_ITERATIONS`` steps
+    from a fixed start, then ``λ_min(X + δ I) ≈ 1 / |(L L^T)^{-1} v|`` (an
+    upper bound of λ_min for a unit v), minus δ. v, w: scratch of length d."""
+    d = X.shape[0]
+    tr = 0.0
+    for i in range(d):
+        tr += X[i, i]
+        v[i] = 1.0 + 0.5 * np.sin(i + 1.0)
+    nrm = _normalise(v)
+    for _ in range(_EXCITATION_ITERATIONS):
+        for i in range(d):                   # L w = v
+            s = v[i]
+            for k in range(i):
+                s -= L[i, k] * w[k]
+            w[i] = s / L[i, i]
+        for i in range(d - 1, -1, -1):       # L^T v = w
+            s = w[i]
+            for k in range(i + 1, d):
+                s -= L[k, i] * v[k]
+            v[i] = s / L[i, i]
+        nrm = _normalise(v)
+    return (1.0 / nrm - delta) / tr
+
+
+@numba.njit(cache=True, fastmath=_FASTMATH)
+def _normalise(v):  # pragma: no cover - compiled
+    """Scale v to unit 2-norm in place; returns the norm it had."""
+    nrm = 0.0
+    for i in range(v.shape[0]):
+        nrm += v[i] * v[i]
+    nrm = np.sqrt(nrm)
+    for i in range(v.shape[0]):
+        v[i] /= nrm
+    return nrm
+
+
+@numba.njit(cache=True, fastmath=_FASTMATH)
+def _solve_iv_weighted(C, G, Z, X, max_cond, L, Ct, Gt, N, Gn, Ln, Bn, ex):  # pragma: no cover
     """One refresh of an instrumental-variable estimate in residual form,
     with the instruments whitened by ``Z = sum w ζ ζ^T`` (lower triangle).
 
@@ -300,7 +350,8 @@ def _solve_iv_weighted(C, G, Z, X, max_cond, L, Ct, Gt, N, Gn, Ln, Bn):  # pragm
 
     Scratch: L (dz, dz), Ct (dz, d), Gt (rows, dz), N, Ln (d, d), Gn (rows,
     d), Bn (d, rows). Returns False (nothing changed) if Z or N is not
-    positive definite.
+    positive definite; ``ex[0]`` receives the excitation ``λ_min(N) / tr N``
+    (:func:`_weakest`; ``ex`` has length >= 2 d, the rest scratch).
     """
     dz, d = C.shape
     rows = G.shape[0]
@@ -346,9 +397,15 @@ def _solve_iv_weighted(C, G, Z, X, max_cond, L, Ct, Gt, N, Gn, Ln, Bn):  # pragm
     # itself (cond(C̃) <= max_cond), the same step as a QR of [C̃; sqrt(δ) I];
     # if N + δ I is numerically singular for Cholesky (start-up, cond(C̃) near
     # 1e8), the LS path's bound cond(N + δ I) <= 1 + max_cond instead
-    if not (_solve_normal(N, Gn, X, max_cond * max_cond, Ln, Bn)
-            or _solve_normal(N, Gn, X, max_cond, Ln, Bn)):
-        return False
+    scale = max_cond * max_cond
+    if not _solve_normal(N, Gn, X, scale, Ln, Bn):
+        scale = max_cond
+        if not _solve_normal(N, Gn, X, scale, Ln, Bn):
+            return False
+    trn = 0.0
+    for i in range(d):
+        trn += N[i, i]
+    ex[0] = _weakest(N, Ln, trn / scale, ex[1:1 + d], ex[1 + d:1 + 2 * d])
     for r in range(rows):                    # G <- G - Δ C^T (Bn holds Δ^T)
         for i in range(dz):
             s = 0.0
@@ -507,9 +564,9 @@ def _shift_solve(M, n, ny, omega, Aout):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True, fastmath=_FASTMATH)
-def _refresh(n, nu, ny, omega, alpha, max_cond, gate, ode, iv, T_now, ist, fst,
+def _refresh(n, nu, ny, omega, alpha, max_cond, gate, settle, ode, iv, T_now, ist, fst,
              R, G, M, Rt, gt, theta, Am, Cm, Bm, Dm, Apsi, Cpsi, Psi, hist,
-             Ld, Bd, Lt, Bt, Anew, Cz, Gz, Zz, Lz, Ct, Gt, Nz, Gn, Cf):  # pragma: no cover
+             Ld, Bd, Lt, Bt, Anew, Cz, Gz, Zz, Lz, Ct, Gt, Nz, Gn, Cf, ex):  # pragma: no cover
     """Model refresh: solve both LS problems (the first by instrumental
     variables when ``iv``), (13), B̃, D, Ψ model, history."""
     if not ode:
@@ -524,10 +581,21 @@ def _refresh(n, nu, ny, omega, alpha, max_cond, gate, ode, iv, T_now, ist, fst,
                     else:
                         jj = j - nz
                         Cf[i, j] = Zz[i, jj] if jj <= i else Zz[jj, i]
-            if not _solve_iv_weighted(Cf, Gz, Zz, M, max_cond, Lz, Ct, Gt, Nz, Gn, Ld, Bd):
+            if not _solve_iv_weighted(Cf, Gz, Zz, M, max_cond, Lz, Ct, Gt, Nz, Gn, Ld, Bd, ex):
                 ist[7] += 1
+                ex[0] = 0.0
         elif not _solve_normal(R, G, M, max_cond, Ld, Bd):
             ist[7] += 1
+            ex[0] = 0.0
+        else:
+            trr = 0.0
+            for i in range(R.shape[0]):
+                trr += R[i, i]
+            ex[0] = _weakest(R, Ld, trr / max_cond, ex[1:1 + R.shape[0]],
+                             ex[1 + R.shape[0]:1 + 2 * R.shape[0]])
+        # persistent excitation of (8): its weakest direction carries at least
+        # the share 1/max_condition of the information (issue 23)
+        ist[13] = 0 if ex[0] * max_cond >= 1.0 else 1
         if ist[9]:
             if not _solve_normal(Rt, gt, theta, max_cond, Lt, Bt):
                 ist[7] += 1
@@ -554,11 +622,11 @@ def _refresh(n, nu, ny, omega, alpha, max_cond, gate, ode, iv, T_now, ist, fst,
             fst[5] = res
             fst[6] = T_now
         elif (not ist[10] and fst[5] <= _STALL_MAX
-              and (T_now - fst[6]) * alpha >= 1.0):
+              and T_now - fst[6] >= min(1.0 / alpha, max(fst[6] - fst[8], settle))):
             ist[10] = 1
         if ist[10]:
             level = max(gate, _STALL_FACTOR * fst[5])
-    if res >= 0.0 and res <= level and _hurwitz(Am):
+    if res >= 0.0 and res <= level and ist[13] == 0 and _hurwitz(Am):
         for i in range(n):
             for j in range(n):
                 Apsi[i, j] = Am[i, j]
@@ -651,7 +719,7 @@ def kernel(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, Hse
     """
     omega, alpha, beta, max_cond, trace_bound, gate = (par[0], par[1], par[2], par[3],
                                                        par[4], par[5])
-    max_gap, dcF, dcI, settle = par[6], par[7], par[8], par[9]
+    max_gap, dcF, dcI, settle, startup = par[6], par[7], par[8], par[9], par[10]
     K, ode, foh, iv = ipar[0], ipar[1] != 0, ipar[2] != 0, ipar[3] != 0
     N = U.shape[0]
     f, ny = zp.shape
@@ -665,7 +733,7 @@ def kernel(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, Hse
     # scratch: one allocation per call (a one-sample call pays for one, not 30)
     sc = np.empty(2 * dz * d + dz * dz + dp * dz + 2 * d * d + 2 * dp * d + dz + 4 * dp
                   + mi + n + 3 * d + f + 2 * ny * dth + ny * n + ny + 9 * n * n
-                  + dth * dth + dth)
+                  + dth * dth + dth + 1 + 2 * d)
     o = 0
     zeta = sc[o:o + dz]
     o += dz
@@ -727,6 +795,8 @@ def kernel(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, Hse
     Anew = sc[o:o + n * n].reshape((n, n))
     o += n * n
     work = sc[o:o + 5 * n * n].reshape((5, n, n))
+    o += 5 * n * n
+    ex = sc[o:o + 1 + 2 * d]        # excitation of (8) and its scratch
     for k in range(N):
         if ist[0] == 0:
             for j in range(nu):
@@ -734,6 +804,7 @@ def kernel(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, Hse
             for j in range(ny):
                 prev_y[j] = Y[k, j]
             fst[0] = Tm[k]
+            fst[8] = Tm[k]
             ist[0] = 1
             continue
         q = idx[k]
@@ -975,7 +1046,13 @@ def kernel(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, Hse
             for jj in range(nu):
                 rho2 += ny * (U[k, jj] * U[k, jj])
             if not ode:
-                c2 = fst[4] * lamT[q]
+                # start-up schedule of β: the memory of θ grows with the age
+                # of part 2 (β_eff = max(β, startup / age), see the module notes)
+                lam = lamT[q]
+                age = Tm[k] - fst[1]
+                if startup > beta * age:
+                    lam = np.exp(-startup * h / age)
+                c2 = fst[4] * lam
                 if c2 < _RESCALE_BELOW:
                     c2 = c2 if c2 > _FORGOTTEN else 0.0
                     for a in range(dth):
@@ -1060,9 +1137,9 @@ def kernel(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, Hse
         fst[0] = Tm[k]
         ist[0] += 1
         if (ist[0] - 1) % K == 0:
-            _refresh(n, nu, ny, omega, alpha, max_cond, gate, ode, iv, Tm[k], ist, fst, R, G,
-                     M, Rt, gt, theta, Am, Cm, Bm, Dm, Apsi, Cpsi, Psi, hist, Ld, Bd, Lt, Bt,
-                     Anew, Cz, Gz, Zz, Lz, Ct, Gt, Nz, Gn, Cf)
+            _refresh(n, nu, ny, omega, alpha, max_cond, gate, settle, ode, iv, Tm[k], ist, fst,
+                     R, G, M, Rt, gt, theta, Am, Cm, Bm, Dm, Apsi, Cpsi, Psi, hist, Ld, Bd, Lt,
+                     Bt, Anew, Cz, Gz, Zz, Lz, Ct, Gt, Nz, Gn, Cf, ex)
     return _all_finite(buf)
 
 
@@ -1105,35 +1182,61 @@ def _ref_solve(R, G, X, max_cond):
 def _ref_solve_iv_weighted(C, G, Z, X, max_cond):
     """Reference of :func:`_solve_iv_weighted`: numpy Cholesky of Z, scipy
     triangular solves, the normal equations of the whitened problem solved by
-    :func:`_ref_solve`."""
+    :func:`_ref_solve`. Returns the excitation of the whitened normal matrix
+    (:func:`_ref_weakest`), None where the kernel returns False."""
     Zs = np.tril(Z) + np.tril(Z, -1).T
     tr = np.trace(Zs)
     if not tr > 0:
-        return False
+        return None
     try:
         L = np.linalg.cholesky(Zs + tr / max_cond * np.eye(Zs.shape[0]))
     except np.linalg.LinAlgError:
-        return False
+        return None
     Ct = scipy.linalg.solve_triangular(L, C, lower=True)
     Gt = scipy.linalg.solve_triangular(L, G.T, lower=True).T
     Xold = X.copy()
     N, Gn = Ct.T @ Ct, Gt @ Ct
-    if not _ref_solve(N, Gn, X, max_cond * max_cond) and not _ref_solve(N, Gn, X, max_cond):
-        return False
+    scale = max_cond * max_cond
+    if not _ref_solve(N, Gn, X, scale):
+        scale = max_cond
+        if not _ref_solve(N, Gn, X, scale):
+            return None
     G -= (X - Xold) @ C.T
-    return True
+    return _ref_weakest(N, np.trace(N) / scale)
 
 
-def _ref_refresh(n, nu, ny, omega, alpha, max_cond, gate, ode, iv, T_now, ist, fst,
+def _ref_weakest(X, delta):
+    """Reference of :func:`_weakest`: the same inverse iteration, scipy's
+    Cholesky solves."""
+    Xs = np.tril(X) + np.tril(X, -1).T
+    d = Xs.shape[0]
+    factor = scipy.linalg.cho_factor(Xs + delta * np.eye(d), lower=True)
+    v = 1.0 + 0.5 * np.sin(np.arange(1.0, d + 1.0))
+    v /= np.linalg.norm(v)
+    nrm = 1.0
+    for _ in range(_EXCITATION_ITERATIONS):
+        v = scipy.linalg.cho_solve(factor, v)
+        nrm = np.linalg.norm(v)
+        v /= nrm
+    return (1.0 / nrm - delta) / np.trace(Xs)
+
+
+def _ref_refresh(n, nu, ny, omega, alpha, max_cond, gate, settle, ode, iv, T_now, ist, fst,
                  R, G, M, Rt, gt, theta, Am, Cm, Bm, Dm, Apsi, Cpsi, Psi, hist, Cz, Gz, Zz):
     if not ode:
         if iv:
             Zs = np.tril(Zz) + np.tril(Zz, -1).T
             Cf = np.hstack([Cz, Zs[:, :M.shape[1] - n]])
-            if not _ref_solve_iv_weighted(Cf, Gz, Zz, M, max_cond):
+            excitation = _ref_solve_iv_weighted(Cf, Gz, Zz, M, max_cond)
+            if excitation is None:
                 ist[7] += 1
+                excitation = 0.0
         elif not _ref_solve(R, G, M, max_cond):
             ist[7] += 1
+            excitation = 0.0
+        else:
+            excitation = _ref_weakest(R, np.trace(R) / max_cond)
+        ist[13] = 0 if excitation * max_cond >= 1.0 else 1
         if ist[9] and not _ref_solve(Rt, gt, theta, max_cond):
             ist[7] += 1
     dp = M.shape[0]
@@ -1157,11 +1260,12 @@ def _ref_refresh(n, nu, ny, omega, alpha, max_cond, gate, ode, iv, T_now, ist, f
     if res >= 0:
         if res < 0.5 * fst[5]:
             fst[5], fst[6] = res, T_now
-        elif not ist[10] and fst[5] <= _STALL_MAX and (T_now - fst[6]) * alpha >= 1.0:
+        elif (not ist[10] and fst[5] <= _STALL_MAX
+              and T_now - fst[6] >= min(1.0 / alpha, max(fst[6] - fst[8], settle))):
             ist[10] = 1
         if ist[10]:
             level = max(gate, _STALL_FACTOR * fst[5])
-    if 0 <= res <= level and np.all(np.linalg.eigvals(Am).real < 0):
+    if 0 <= res <= level and ist[13] == 0 and np.all(np.linalg.eigvals(Am).real < 0):
         Apsi[:] = Am
         Cpsi[:] = Cm
         ist[6] += 1
@@ -1283,8 +1387,8 @@ def reference(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, 
     the stability test eigenvalues, and the whole symmetric matrices are
     updated (the kernel updates lower triangles).
     """
-    omega, alpha, beta, max_cond, trace_bound, gate, max_gap, dcF, dcI, settle = (
-        float(v) for v in par)
+    (omega, alpha, beta, max_cond, trace_bound, gate, max_gap, dcF, dcI, settle,
+     startup) = (float(v) for v in par)
     K, ode, foh, iv = int(ipar[0]), bool(ipar[1]), bool(ipar[2]), bool(ipar[3])
     n = Am.shape[0]
     ny = zp.shape[1]
@@ -1292,7 +1396,7 @@ def reference(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, 
     for k in range(U.shape[0]):
         u, y = U[k], Y[k]
         if ist[0] == 0:
-            prev_u[:], prev_y[:], fst[0], ist[0] = u, y, Tm[k], 1
+            prev_u[:], prev_y[:], fst[0], fst[8], ist[0] = u, y, Tm[k], Tm[k], 1
             continue
         q = idx[k]
         h = steps[q]
@@ -1372,7 +1476,10 @@ def reference(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, 
             # regression (16)
             Phi = np.hstack([Psi, np.kron(u[None, :], np.eye(ny))])
             if not ode:
-                c2 = fst[4] * lamT[q]
+                lam, age = lamT[q], Tm[k] - fst[1]
+                if startup > beta * age:        # start-up schedule of β
+                    lam = np.exp(-startup * h / age)
+                c2 = fst[4] * lam
                 if c2 < _RESCALE_BELOW:
                     c2 = c2 if c2 > _FORGOTTEN else 0.0
                     Rt *= c2
@@ -1395,6 +1502,7 @@ def reference(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, 
         prev_u[:], prev_y[:], fst[0] = u, y, Tm[k]
         ist[0] += 1
         if (ist[0] - 1) % K == 0:
-            _ref_refresh(n, nu, ny, omega, alpha, max_cond, gate, ode, iv, Tm[k], ist, fst, R,
-                         G, M, Rt, gt, theta, Am, Cm, Bm, Dm, Apsi, Cpsi, Psi, hist, Cz, Gz, Zz)
+            _ref_refresh(n, nu, ny, omega, alpha, max_cond, gate, settle, ode, iv, Tm[k], ist,
+                         fst, R, G, M, Rt, gt, theta, Am, Cm, Bm, Dm, Apsi, Cpsi, Psi, hist, Cz,
+                         Gz, Zz)
     return bool(np.isfinite(buf).all())

@@ -59,11 +59,22 @@ Numerics (beyond the paper)
   (noise-free estimates stay exact). ``'ode'``: forgetting suspended while
   ``tr P > ode_trace_bound`` (Ioannou & Sun, Robust Adaptive Control, 4.3.6).
 * Part 2 ((B̃, D)) starts "once the first part has converged" (Section V):
-  when the relative residual of the shift equation (13) is below
-  ``bd_gate``, or has stopped improving for one memory length ``1/α``, and
-  Ã is Hurwitz (A1). Ψ then starts from 0, and the initial-state term
-  ``C̃ e^{Ã(t - t_g)} x̃(t_g)`` of (14)/(16), which (19)-(20) drop, is kept as
-  a regressor. Ψ only uses estimates that pass the same test.
+  when the regression (8) is persistently exciting (its weakest direction
+  carries at least ``1/max_condition`` of the information, by inverse
+  iteration on the factor of the solve; issue 23), Ã is Hurwitz (A1), and
+  the relative residual of the shift equation (13) is below ``bd_gate`` or
+  has stopped halving (no halving for as long as it took to reach its last
+  halving, at most ``1/α``: a consistent estimate's noise floor falls like
+  ``t^{-1/2}``, so it halves at four times the elapsed time; issue 23). Ψ
+  then starts from 0, and the initial-state term ``C̃ e^{Ã(t - t_g)} x̃(t_g)``
+  of (14)/(16), which (19)-(20) drop, is kept as a regressor. Ψ only uses
+  estimates that pass the same test.
+* Start-up schedule of β (``bd_startup`` κ, issue 23): the rows of (16) are
+  built from the (Ã, C̃) of their time, whose error falls as part 1's memory
+  fills; θ weighs them by ``e^{-∫ β_eff}``, ``β_eff = max(β, κ / (t - t_g))``,
+  i.e. ``((τ - t_g) / (t - t_g))^κ`` while ``t - t_g < κ / β``: the memory of θ
+  grows in proportion to the age of part 2, so that the rows of the first
+  seconds do not stay in θ for ``1/β``.
 """
 
 from __future__ import annotations
@@ -77,6 +88,7 @@ import numpy as np
 from subid._validation import (
     as_chunk,
     check_int,
+    check_seed,
     check_selector,
     check_time_stamps,
 )
@@ -100,7 +112,7 @@ from subid.model.statespace import StateSpace
 __all__ = ["AdaptiveIdentifier"]
 
 _OLD_KIND = "AdaptiveIdentifier"     # the kind of checkpoints before subid.<Class>
-_VERSION = 2      # 2: instrumental variables (zr, Cz, Gz)
+_VERSION = 3      # 2: instrumental variables (zr, Cz, Gz); 3: t_first, bd_startup
 # Step lengths handled in one kernel call when the time stamps are non-uniform
 # (bounds the memory of the per-step discretisation tables).
 _BLOCK_UNIQUE = 4096
@@ -120,6 +132,9 @@ _INSTRUMENT_POLE_RATIO = 0.25
 # mix in rows built from (Ã, C̃) that M itself has forgotten.
 _DEFAULT_FORGETTING = {"iv": (0.002, None), "ls": (0.4, 0.08), "ode": (0.4, 0.08)}
 _IV_BD_RATIO = 1.0
+# Start-up schedule of the (B̃, D) memory ('iv'): β_eff = max(β, κ / age), age =
+# time since part 2 started (measured in docs/seed000.md).
+_DEFAULT_BD_STARTUP = 4.0
 _NON_FINITE = ("the chunk drove the identifier to non-finite values (are the signals scaled "
                "to moderate magnitudes?); it was rejected and the identifier is unchanged")
 
@@ -303,6 +318,13 @@ class AdaptiveIdentifier(OnlineIdentifier):
         restart at the new sample (held signals over a gap are not data) and
         (14) restarts; the information decays by ``e^{-α h}``. Default ten
         filter time constants, ``10 / |d(0)|^{1/f}`` (2 s for poles at -5).
+    bd_startup : float, optional
+        κ of the start-up schedule of the (B̃, D) memory:
+        ``β_eff = max(bd_forgetting, κ / age)``, age = time since part 2
+        started, so that θ forgets the rows built from the early, poorer
+        (Ã, C̃) (see the module notes). 0 turns it off (the issue-12
+        estimator). Default 4 for ``'iv'``, 0 for ``'ls'`` and ``'ode'`` (the
+        paper's; ``'ode'`` ignores it).
 
     Attributes
     ----------
@@ -331,7 +353,7 @@ class AdaptiveIdentifier(OnlineIdentifier):
     """
 
     _VERSION = _VERSION
-    _READS = (_VERSION,)
+    _READS = (2, _VERSION)
     _OLD_KINDS = (_OLD_KIND,)
 
     def __init__(self, order, n_inputs, n_outputs, horizon=None, filter_poles=-5.0,
@@ -340,10 +362,11 @@ class AdaptiveIdentifier(OnlineIdentifier):
                  bd_gate=1e-2, max_condition=1e10, initial_covariance=None,
                  bd_initial_covariance=None, ode_trace_bound=1e8, history_size=0,
                  engine="numba", input_names=None, output_names=None,
-                 instrument_poles=None, max_gap=None):
+                 instrument_poles=None, max_gap=None, bd_startup=None):
         # the settings, stored unchanged (validated below)
         self.order, self.n_inputs, self.n_outputs = order, n_inputs, n_outputs
         self.horizon, self.filter_poles = horizon, filter_poles
+        check_seed(seed)
         self.forgetting, self.bd_forgetting, self.seed = forgetting, bd_forgetting, seed
         self.dt, self.hold, self.method, self.scale_filters = dt, hold, method, scale_filters
         self.refresh_every, self.bd_gate, self.max_condition = refresh_every, bd_gate, \
@@ -354,6 +377,7 @@ class AdaptiveIdentifier(OnlineIdentifier):
             engine
         self.input_names, self.output_names = input_names, output_names
         self.instrument_poles, self.max_gap = instrument_poles, max_gap
+        self.bd_startup = bd_startup
         n = check_int(order, "order")
         nu = check_int(n_inputs, "n_inputs")
         ny = check_int(n_outputs, "n_outputs")
@@ -387,6 +411,11 @@ class AdaptiveIdentifier(OnlineIdentifier):
             self._beta = _positive(bd_forgetting, "bd_forgetting")
         else:
             self._beta = self._alpha * _IV_BD_RATIO if beta0 is None else beta0
+        if bd_startup is None:
+            self._startup = _DEFAULT_BD_STARTUP if method == "iv" else 0.0
+        else:
+            self._startup = 0.0 if (bd_startup == 0 and not isinstance(bd_startup, bool)) \
+                else _positive(bd_startup, "bd_startup")
         if hold not in ("foh", "zoh"):
             raise SubidError(f"hold must be 'foh' or 'zoh', got {hold!r}")
         if method not in ("iv", "ls", "ode"):
@@ -554,7 +583,8 @@ class AdaptiveIdentifier(OnlineIdentifier):
         ``info`` holds ``method`` (``'seed000_adaptive'``), ``samples`` (also
         as ``n_samples``, the key of every model),
         ``time``, ``refreshes``, ``horizon``, ``filter_poles``,
-        ``time_scale``, ``forgetting``, ``bd_forgetting``, ``ls_method``,
+        ``time_scale``, ``forgetting``, ``bd_forgetting``, ``bd_startup``,
+        ``ls_method``,
         ``hold``, ``condition`` and ``bd_condition`` (of the normal
         matrices, see :meth:`information_condition`), ``max_condition``,
         ``windup_active`` / ``bd_windup_active`` (the condition exceeds the
@@ -564,7 +594,8 @@ class AdaptiveIdentifier(OnlineIdentifier):
         deficient), ``psi_rejected`` (refreshes whose estimate was not used
         for Ψ), ``shift_failed`` (refreshes where (13) was rank deficient),
         ``cholesky_failed``, ``bound_hits`` (``'ode'``: steps with suspended
-        forgetting), ``gaps`` and ``max_gap``, ``selector``, ``bd_elapsed``
+        forgetting), ``gaps`` and ``max_gap``, ``selector``, ``excited``
+        (the last refresh found (8) persistently exciting), ``bd_elapsed``
         (time since part 2 started), ``converged`` and ``convergence``
         (``'converged'`` or the reason it is not: part 2 has not started, or
         the latest (Ã, C̃) failed the gate or the Hurwitz test). A model that
@@ -591,6 +622,7 @@ class AdaptiveIdentifier(OnlineIdentifier):
             "time_scale": self._omega,
             "forgetting": self._alpha,
             "bd_forgetting": self._beta,
+            "bd_startup": self._startup,
             "ls_method": self._method,
             "condition": cond,
             "bd_condition": bd_cond,
@@ -606,6 +638,7 @@ class AdaptiveIdentifier(OnlineIdentifier):
             "cholesky_failed": int(ist[_k.IST["chol_failed"]]),
             "bound_hits": int(ist[_k.IST["bound_hits"]]),
             "gaps": int(ist[_k.IST["gaps"]]),
+            "excited": not ist[_k.IST["not_excited"]],
             "max_gap": self._max_gap,
             "selector": np.array(self._H),
         }
@@ -634,6 +667,14 @@ class AdaptiveIdentifier(OnlineIdentifier):
         if not self.n_samples:
             return "no samples processed yet"
         res = info["shift_residual"]
+        if not info["bd_started"] and not info["excited"]:
+            return ("the (B, D) stage has not started, so B and D are not estimated (zero): "
+                    "the input is not persistently exciting (the weakest direction of the "
+                    "regression (8) carries less than 1/max_condition = "
+                    f"{1 / self._max_cond:.3g} of its information; condition "
+                    f"{info['condition']:.3g}), so the data do not determine (A, C). Give an input sufficiently rich of order "
+                    f"horizon + order = {self._f + self._n} (Theorem 1 of the paper), e.g. "
+                    "white noise or a multisine with enough frequencies in the system's band")
         if not info["bd_started"]:
             return ("the (B, D) stage has not started, so B and D are not estimated (zero): "
                     f"the relative residual of the shift equation (13) is {res:.3g} "
@@ -643,8 +684,10 @@ class AdaptiveIdentifier(OnlineIdentifier):
                         "consistent" if self._method != "iv" else
                         "; with output noise, a longer memory (smaller forgetting)"))
         if self._st["ist"][_k.IST["rejected"]]:
-            return (f"the latest (A, C) estimate failed the convergence test (shift residual "
-                    f"{res:.3g}, or A not Hurwitz); B and D come from earlier estimates")
+            why = (f"shift residual {res:.3g}, or A not Hurwitz" if info["excited"] else
+                   "the data are no longer persistently exciting")
+            return (f"the latest (A, C) estimate failed the convergence test ({why}); B and D "
+                    "come from earlier estimates")
         return None
 
     def toeplitz(self) -> np.ndarray:
@@ -890,7 +933,7 @@ class AdaptiveIdentifier(OnlineIdentifier):
         if cached is None:
             par = np.array([self._omega, self._alpha, self._beta, self._max_cond,
                             self._trace_bound, self._gate, self._max_gap, self._dcF,
-                            self._dcI, self._settle])
+                            self._dcI, self._settle, self._startup])
             ipar = np.array([self._refresh, self._method == "ode", self._hold == "foh",
                              self._method == "iv"], dtype=np.int64)
             cached = self._par_ipar = (par, ipar)
@@ -942,7 +985,7 @@ class AdaptiveIdentifier(OnlineIdentifier):
             "bd_initial_covariance": self._q0, "ode_trace_bound": self._trace_bound,
             "history_size": self._hist_cap, "engine": self._engine,
             "instrument_poles": [[float(p.real), float(p.imag)] for p in self._ipoles],
-            "max_gap": self._max_gap,
+            "max_gap": self._max_gap, "bd_startup": self._startup,
             "input_names": None if self._input_names is None else list(self._input_names),
             "output_names": None if self._output_names is None else list(self._output_names),
             "t_origin": self._t_origin, "k_origin": self._k_origin,
@@ -987,13 +1030,23 @@ class AdaptiveIdentifier(OnlineIdentifier):
                       engine=s["engine"], input_names=s["input_names"],
                       output_names=s["output_names"],
                       instrument_poles=[complex(re, im) for re, im in s["instrument_poles"]],
-                      max_gap=s["max_gap"])
+                      max_gap=s["max_gap"],
+                      # version 2 had no start-up schedule
+                      bd_startup=s.get("bd_startup", 0.0))
+            version = s.get("_version", _VERSION)
             t_origin, k_origin = float(s["t_origin"]), int(s["k_origin"])
         except CheckpointError:
             raise
         except (KeyError, TypeError, ValueError) as exc:
             raise CheckpointError(f"checkpoint {path} has invalid settings ({exc})",
                                   path=path) from None
+        if version == 2 and arrays.get("fst", np.empty(0)).shape == (_k.N_FST - 1,) \
+                and arrays.get("ist", np.empty(0)).shape == (_k.N_IST - 1,):
+            # version 2 had no t_first (the stall rule's clock starts at the
+            # time of the last halving of the residual, as if the data began
+            # then) and no excitation flag (excited until the next refresh)
+            arrays = dict(arrays, fst=np.append(arrays["fst"], arrays["fst"][6]),
+                          ist=np.append(arrays["ist"], 0))
         for name, ref in obj._st.items():
             value = require(arrays, path, name, ref.shape, dtype=ref.dtype)
             if value.dtype != ref.dtype:

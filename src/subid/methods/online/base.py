@@ -43,7 +43,7 @@ import warnings
 import numpy as np
 
 from subid._validation import same_period
-from subid.errors import DataError, NotConvergedWarning, SubidError
+from subid.errors import CheckpointError, DataError, NotConvergedWarning, SubidError
 
 __all__ = ["OnlineIdentifier", "Tracker", "history_dict", "markov_parameters", "with_names"]
 
@@ -153,9 +153,35 @@ class OnlineIdentifier(abc.ABC):
         """Write the whole state to ``path`` (atomic, no pickle)."""
 
     @classmethod
-    @abc.abstractmethod
     def load(cls, path) -> "OnlineIdentifier":
-        """Restore an identifier written by :meth:`save`."""
+        """Restore an identifier written by :meth:`save`.
+
+        Each identifier class implements its own ``load``; called on
+        :class:`OnlineIdentifier` itself, the class is the one the checkpoint
+        names (any subclass whose :meth:`checkpoint_kind`, or an older kind it
+        still reads, matches), so ``subid.OnlineIdentifier.load(path)``
+        restores whatever identifier was saved there.
+
+        Raises
+        ------
+        CheckpointError
+            Not a checkpoint, or a checkpoint of no identifier class of this
+            version of subid.
+        """
+        from subid.io._checkpoint import load_state
+        _, settings = load_state(path, None, None)
+        found = settings["_kind"]
+        pending, seen = list(cls.__subclasses__()), set()
+        while pending:
+            sub = pending.pop()
+            if sub in seen:
+                continue
+            seen.add(sub)
+            pending.extend(sub.__subclasses__())
+            if "load" in vars(sub) and found in sub._kinds():
+                return sub.load(path)
+        raise CheckpointError(f"{path} is a checkpoint of {found[:80]!r}, which no online "
+                              f"identifier of this version of subid reads", path=path)
 
     # -- shared input validation -------------------------------------------
     def _unpack(self, u, y, t):
@@ -372,10 +398,16 @@ class Tracker:
     def checkpoint(self, k: int) -> str:
         """Save the identifier and its trace as ``checkpoint-<k>.npz``; prune
         this tracker's older checkpoints beyond ``keep``. Returns the path."""
-        os.makedirs(self.checkpoint_dir, exist_ok=True)
+        from subid.io._files import made_folders
         path = os.path.join(self.checkpoint_dir, f"checkpoint-{k:010d}.npz")
-        self.save_trace(path[:-4] + ".trace.npz", k)
-        self.ident.save(path)
+        with made_folders(self.checkpoint_dir):          # no empty folder after a failure
+            self.save_trace(path[:-4] + ".trace.npz", k)
+            try:
+                self.ident.save(path)
+            except BaseException:
+                with contextlib.suppress(OSError):
+                    os.unlink(path[:-4] + ".trace.npz")
+                raise
         self.written.append(path)
         if self.keep:
             # Prune only the checkpoints this run wrote, oldest first (never by

@@ -56,6 +56,7 @@ from subid._validation import (
     as_chunk,
     check_dt,
     check_int,
+    check_seed,
     check_selector,
     check_time_stamps,
 )
@@ -243,6 +244,7 @@ class RecursiveSubspace(OnlineIdentifier):
         # are private: e.g. the default horizon)
         self.order, self.n_inputs, self.n_outputs = order, n_inputs, n_outputs
         self.horizon, self.forgetting, self.instruments = horizon, forgetting, instruments
+        check_seed(seed)
         self.seed, self.instrument_weighting = seed, instrument_weighting
         self.power_iterations, self.feedthrough, self.dt = power_iterations, feedthrough, dt
         self.history_size, self.history_stride = history_size, history_stride

@@ -1,0 +1,497 @@
+"""Parameter covariance of a model and confidence bounds of its responses.
+
+A model refined by :func:`subid.pem` carries the asymptotic covariance of its
+parameters (``info['parameter_covariance']``, written by
+:mod:`subid.methods.dt._covariance`; it survives :meth:`StateSpace.save` /
+:meth:`~StateSpace.load`). The parametrisation is
+
+    θ = [vec(A), vec(B), vec(C), vec(D)?, vec(K)?]      (row-major, ``?``: when
+                                                          estimated)
+
+and ``Cov(θ) = F F^T`` with a factor ``F`` of rank ``d`` whose columns span the
+data-driven local coordinates of :func:`subid.pem` (McKelvey, Helmersson and
+Ribarits 2004): the ``n^2`` similarity directions, which do not change the
+input/output behaviour, carry no variance. :func:`parameter_covariance`
+returns it as a :class:`ParameterCovariance`, whose :meth:`~ParameterCovariance.model`
+maps a parameter vector back to a model and :meth:`~ParameterCovariance.sample`
+draws models from the Gaussian.
+
+Bounds (:func:`freqresp_bounds`, :func:`step_bounds`,
+:func:`simulation_bounds`):
+
+* ``method='delta'`` (default): first-order propagation (the delta method;
+  Ljung 1999, Section 9.4): for a response ``r(θ)`` with sensitivity
+  ``S = dr/dθ F`` the standard deviation is ``||S||`` (row norm), and the
+  band is ``r ± z std`` with ``z`` the two-sided normal quantile of
+  ``level``. The magnitude ``|G|`` has the sensitivity
+  ``Re(conj(G) dG) / |G|``. The sensitivities of a simulated output are
+  exact (the sensitivity equations of the state recursion, run by the
+  model's own simulation).
+* ``method='sampling'``: ``n_samples`` parameter vectors ``θ + F ξ``,
+  ``ξ ~ N(0, I)`` (seeded), and the empirical ``(1 - level)/2`` and
+  ``(1 + level)/2`` quantiles of the response.
+
+Subspace models (:func:`subid.n4sid`, :func:`subid.moesp`, ...) and
+continuous-time models carry no covariance: asking for bounds raises
+:class:`subid.errors.ModelError` that says to refine the model with
+:func:`subid.pem` first.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.special
+
+from subid._validation import as_signal, check_int, same_period
+from subid.data import IOData
+from subid.delay import apply_to_inputs, input_delay_of
+from subid.errors import DataError, ModelError, OptionError
+from subid.model.statespace import StateSpace
+
+__all__ = ["ParameterCovariance", "Bounds", "parameter_covariance", "freqresp_bounds",
+           "step_bounds", "simulation_bounds"]
+
+METHODS = ("delta", "sampling")
+# Relative tolerance of the check that the covariance belongs to the model's matrices.
+REALISATION_RTOL = 1e-8
+
+
+class ParameterCovariance:
+    """Covariance of the parameters of a model (see the module docstring).
+
+    Parameters
+    ----------
+    model : StateSpace
+        The model the covariance belongs to.
+    parameters : ndarray, shape (P,)
+        θ, the stacked row-major ``A, B, C`` (and ``D``, ``K`` when estimated).
+    factor : ndarray, shape (P, d)
+        ``F`` with ``Cov(θ) = F F^T``.
+    with_feedthrough, with_gain : bool
+        Whether ``D`` and ``K`` are parameters.
+
+    Attributes
+    ----------
+    parameters, factor : ndarray
+    with_feedthrough, with_gain : bool
+    names : list of str
+        ``'A[0,1]'``-style name of every entry of θ.
+    """
+
+    def __init__(self, model, parameters, factor, with_feedthrough, with_gain):
+        self._model = model
+        self.parameters = np.asarray(parameters, dtype=float)
+        self.factor = np.asarray(factor, dtype=float)
+        self.with_feedthrough = bool(with_feedthrough)
+        self.with_gain = bool(with_gain)
+        n, nu, ny = model.order, model.n_inputs, model.n_outputs
+        shapes = [("A", n, n), ("B", n, nu), ("C", ny, n)]
+        if self.with_feedthrough:
+            shapes.append(("D", ny, nu))
+        if self.with_gain:
+            shapes.append(("K", n, ny))
+        self._shapes = shapes
+        self.names = [f"{name}[{i},{j}]" for name, rows, cols in shapes
+                      for i in range(rows) for j in range(cols)]
+
+    @property
+    def covariance(self) -> np.ndarray:
+        """``Cov(θ) = F F^T``, shape (P, P) (singular along the similarity directions)."""
+        return self.factor @ self.factor.T
+
+    @property
+    def std(self) -> np.ndarray:
+        """Standard deviation of every entry of θ (in the model's state basis)."""
+        return np.sqrt(np.einsum("ij,ij->i", self.factor, self.factor))
+
+    def matrices(self, theta):
+        """``(A, B, C, D, K)`` of a parameter vector (``D`` and ``K`` those of the
+        model when they are not parameters; ``K`` may be None)."""
+        theta = np.asarray(theta, dtype=float)
+        out, pos = {}, 0
+        for name, rows, cols in self._shapes:
+            out[name] = theta[pos:pos + rows * cols].reshape(rows, cols)
+            pos += rows * cols
+        D = out.get("D", np.array(self._model.D))
+        return out["A"], out["B"], out["C"], D, out.get("K", self._model.K)
+
+    def model(self, theta) -> StateSpace:
+        """The model with parameters ``theta`` (same dt, names, hold and ``info``
+        without the covariance).
+
+        Parameters
+        ----------
+        theta : array_like, shape (P,)
+
+        Returns
+        -------
+        StateSpace
+        """
+        theta = np.asarray(theta, dtype=float)
+        if theta.shape != self.parameters.shape:
+            raise DataError(f"theta has shape {theta.shape}; this model has "
+                            f"{self.parameters.size} parameters")
+        A, B, C, D, K = self.matrices(theta)
+        m = self._model
+        info = {k: v for k, v in m.info.items() if k != "parameter_covariance"}
+        return StateSpace(A, B, C, D, m.dt, input_names=m.input_names,
+                          output_names=m.output_names, info=info, K=K,
+                          noise_cov=None if K is None else m.noise_cov, hold=m.hold)
+
+    def sample(self, n_samples, *, seed):
+        """Models drawn from the Gaussian ``N(θ, F F^T)``.
+
+        Parameters
+        ----------
+        n_samples : int
+        seed : int or numpy.random.Generator
+
+        Returns
+        -------
+        list of StateSpace
+        """
+        n_samples = check_int(n_samples, "n_samples", minimum=1)
+        rng = np.random.default_rng(seed)
+        xi = rng.standard_normal((self.factor.shape[1], n_samples))
+        thetas = self.parameters[:, None] + self.factor @ xi
+        return [self.model(thetas[:, k]) for k in range(n_samples)]
+
+
+@dataclass(frozen=True)
+class Bounds:
+    """A response with its confidence band.
+
+    Attributes
+    ----------
+    x : ndarray
+        Frequencies (rad per time unit) or time stamps.
+    value : ndarray
+        The model's response: ``|G|`` (n_freq, ny, nu) for
+        :func:`freqresp_bounds`, the step response (N, ny, nu) or the
+        simulated output (N, ny).
+    lower, upper : ndarray
+        The band, same shape as ``value``.
+    std : ndarray or None
+        Standard deviation of ``value`` (delta method; None when sampled).
+    level : float
+        Confidence level of the band.
+    method : str
+        ``'delta'`` or ``'sampling'``.
+    response : ndarray or None
+        The complex frequency response (:func:`freqresp_bounds` only).
+    """
+
+    x: np.ndarray
+    value: np.ndarray
+    lower: np.ndarray
+    upper: np.ndarray
+    std: np.ndarray | None
+    level: float
+    method: str
+    response: np.ndarray | None = None
+
+
+def parameter_covariance(model) -> ParameterCovariance:
+    """The parameter covariance a model carries (MATLAB ``getcov``).
+
+    Parameters
+    ----------
+    model : StateSpace
+        A model returned by :func:`subid.pem` (or loaded from its file).
+
+    Returns
+    -------
+    ParameterCovariance
+
+    Raises
+    ------
+    ModelError
+        The model has no covariance (a subspace or continuous-time model:
+        refine it with :func:`subid.pem`), or its matrices are not those the
+        covariance was computed for (transformed or converted after ``pem``).
+    """
+    if not isinstance(model, StateSpace):
+        raise ModelError(f"expected a subid.StateSpace, got {type(model).__name__}")
+    entry = model.info.get("parameter_covariance")
+    if not isinstance(entry, dict):
+        note = model.info.get("parameter_covariance_note")
+        method = model.info.get("method", "this method")
+        why = note if note else (
+            f"models estimated by {method} carry no parameter covariance"
+            if "refined_by" not in model.info else
+            "the model was converted or edited after pem and its covariance was dropped")
+        raise ModelError(f"the model has no parameter covariance ({why}); refine it with "
+                         "subid.pem(data, model) on its discrete-time form, which attaches "
+                         "the asymptotic covariance, and ask for bounds on that model")
+    if model.is_continuous:
+        raise ModelError("a continuous-time model carries no parameter covariance; ask for "
+                         "bounds on the discrete-time model subid.pem returns")
+    try:
+        cov = ParameterCovariance(model, entry["parameters"], entry["factor"],
+                                  entry["with_feedthrough"], entry["with_gain"])
+    except (KeyError, TypeError, ValueError) as exc:
+        raise ModelError(f"info['parameter_covariance'] is malformed ({exc!r}); it must hold "
+                         "'parameters', 'factor', 'with_feedthrough' and 'with_gain'") from None
+    expected = len(cov.names)
+    if cov.parameters.shape != (expected,) or cov.factor.ndim != 2 \
+            or cov.factor.shape[0] != expected:
+        raise ModelError(f"info['parameter_covariance'] has {cov.parameters.size} parameters "
+                         f"(factor {cov.factor.shape}) but the model has {expected}")
+    own = [np.asarray(model.A), np.asarray(model.B), np.asarray(model.C)]
+    if cov.with_feedthrough:
+        own.append(np.asarray(model.D))
+    if cov.with_gain:
+        if model.K is None:
+            raise ModelError("the covariance includes K but the model has no Kalman gain")
+        own.append(np.asarray(model.K))
+    own = np.concatenate([m.ravel() for m in own])
+    if not np.allclose(own, cov.parameters, rtol=REALISATION_RTOL,
+                       atol=REALISATION_RTOL * max(np.abs(own).max(), 1e-300)):
+        raise ModelError("info['parameter_covariance'] belongs to other matrices than the "
+                         "model's (it was transformed, converted or edited after pem); "
+                         "ask for bounds on the model pem returned")
+    return cov
+
+
+def _z(level) -> float:
+    if isinstance(level, bool) or not isinstance(level, (int, float)) \
+            or not 0 < level < 1:
+        raise OptionError(f"level must be a probability in (0, 1), e.g. 0.95, got {level!r}")
+    return float(scipy.special.ndtri(0.5 + level / 2))
+
+
+def _check_method(method, n_samples):
+    if method not in METHODS:
+        raise OptionError(f"method must be 'delta' or 'sampling', got {method!r}")
+    return check_int(n_samples, "n_samples", minimum=10)
+
+
+def _quantile_band(values, level):
+    """Empirical band of sampled responses (axis 0: samples)."""
+    lo, hi = np.quantile(values, [0.5 - level / 2, 0.5 + level / 2], axis=0)
+    return lo, hi
+
+
+def _sampled(cov, n_samples, seed, response):
+    rng = np.random.default_rng(seed)
+    xi = rng.standard_normal((cov.factor.shape[1], n_samples))
+    thetas = cov.parameters[:, None] + cov.factor @ xi
+    return np.stack([response(cov.model(thetas[:, k])) for k in range(n_samples)])
+
+
+def _directions(cov):
+    """``(dA, dB, dC, dD)`` of every column of the factor, each (d, rows, cols)."""
+    parts = [cov.matrices(cov.factor[:, j]) for j in range(cov.factor.shape[1])]
+    dA = np.array([p[0] for p in parts])
+    dB = np.array([p[1] for p in parts])
+    dC = np.array([p[2] for p in parts])
+    dD = np.array([p[3] for p in parts]) if cov.with_feedthrough else \
+        np.zeros((len(parts),) + np.shape(cov.matrices(cov.parameters)[3]))
+    return dA, dB, dC, dD
+
+
+def freqresp_bounds(model, w, level=0.95, *, method="delta", n_samples=1000, seed=0):
+    """Confidence bounds of the magnitude of the frequency response (MATLAB
+    ``showConfidence`` on a Bode plot).
+
+    Parameters
+    ----------
+    model : StateSpace
+        A model with a parameter covariance (:func:`subid.pem`).
+    w : array_like, shape (K,)
+        Frequencies in rad per time unit.
+    level : float
+        Confidence level, e.g. 0.95.
+    method : {'delta', 'sampling'}
+        First-order propagation, or quantiles over sampled parameter vectors.
+    n_samples : int
+        Number of draws (``method='sampling'``).
+    seed : int
+        Seed of the draws (``method='sampling'``).
+
+    Returns
+    -------
+    Bounds
+        ``value`` = ``|G|`` (K, ny, nu), ``lower``/``upper`` (the lower one
+        clipped at 0), ``std`` of ``|G|`` (delta method), ``response`` = G.
+
+    Raises
+    ------
+    ModelError
+        The model has no parameter covariance (refine it with :func:`subid.pem`).
+    OptionError
+        Bad ``level``, ``method`` or ``n_samples``.
+
+    Examples
+    --------
+    >>> import numpy as np, subid
+    >>> true = subid.systems.seed001_innovation_system()
+    >>> data = subid.systems.simulate_innovation_data(true, 1000, seed=1)
+    >>> model = subid.pem(data, subid.n4sid(data, 3))
+    >>> band = subid.freqresp_bounds(model, np.linspace(0.1, 3.0, 5))
+    >>> bool(np.all(band.lower <= band.value) and np.all(band.value <= band.upper))
+    True
+    """
+    cov = parameter_covariance(model)
+    z = _z(level)
+    n_samples = _check_method(method, n_samples)
+    G = model.freqresp(w)
+    w = np.atleast_1d(np.asarray(w, dtype=float))
+    mag = np.abs(G)
+    if method == "sampling":
+        lo, hi = _quantile_band(_sampled(cov, n_samples, seed,
+                                         lambda m: np.abs(m.freqresp(w))), level)
+        return Bounds(w, mag, lo, hi, None, float(level), method, G)
+    dA, dB, dC, dD = _directions(cov)
+    A, B, C = np.asarray(model.A), np.asarray(model.B), np.asarray(model.C)
+    n = A.shape[0]
+    s = np.exp(1j * w * model.dt)
+    M = s[:, None, None] * np.eye(n) - A
+    X = np.linalg.solve(M, np.broadcast_to(B.astype(complex), (w.size, n, B.shape[1])))
+    Y = np.linalg.solve(M.transpose(0, 2, 1),
+                        np.broadcast_to(C.T.astype(complex), (w.size, n, C.shape[0])))
+    Y = Y.transpose(0, 2, 1)                               # C (sI - A)^-1
+    G0 = C @ X + np.asarray(model.D)                       # without input delays
+    dG = (np.einsum("jin,knm->kjim", dC, X, optimize=True)
+          + np.einsum("kin,jnp,kpm->kjim", Y, dA, X, optimize=True)
+          + np.einsum("kin,jnm->kjim", Y, dB, optimize=True) + dD[None])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        dmag = np.real(np.conj(G0)[:, None] * dG) / np.maximum(np.abs(G0), 1e-300)[:, None]
+    std = np.sqrt(np.sum(dmag ** 2, axis=1))
+    return Bounds(w, mag, np.maximum(mag - z * std, 0.0), mag + z * std, std, float(level),
+                  method, G)
+
+
+def _forced(model, u, x0):
+    """Output, state and (delayed) input of a discrete-time simulation."""
+    y, x = model.simulate(u, x0=x0, return_state=True)
+    delays = input_delay_of(model)
+    return y, x, (apply_to_inputs(u, delays) if delays is not None else u)
+
+
+def _output_sensitivities(model, cov, u, x0):
+    """``(y, dy)``: simulated output (N, ny) and its sensitivities to the columns of
+    the factor, (N, ny, d): ``s_j[t+1] = A s_j[t] + dA_j x[t] + dB_j u[t]``,
+    ``s_j[0] = 0``, ``dy_j = C s_j + dC_j x + dD_j u``."""
+    y, x, ud = _forced(model, u, x0)
+    dA, dB, dC, dD = _directions(cov)
+    n = model.order
+    state = StateSpace(model.A, np.eye(n), np.eye(n), 0, model.dt)
+    C = np.asarray(model.C)
+    dy = np.empty(y.shape + (dA.shape[0],))
+    for j in range(dA.shape[0]):
+        s = state.simulate(x @ dA[j].T + ud @ dB[j].T)
+        dy[:, :, j] = s @ C.T + x @ dC[j].T + ud @ dD[j].T
+    return y, dy
+
+
+def simulation_bounds(model, u, level=0.95, *, x0=None, method="delta", n_samples=1000,
+                      seed=0):
+    """Confidence bounds of the simulated output (MATLAB ``sim`` with ``SD``).
+
+    Parameters
+    ----------
+    model : StateSpace
+        A discrete-time model with a parameter covariance (:func:`subid.pem`).
+    u : array_like, shape (N, n_inputs), or IOData
+        Input samples (an IOData record: its inputs).
+    level : float
+        Confidence level, e.g. 0.95.
+    x0 : array_like, shape (n,), optional
+        Initial state (default zeros; treated as known).
+    method : {'delta', 'sampling'}
+        First-order propagation, or quantiles over sampled parameter vectors.
+    n_samples : int
+        Number of draws (``method='sampling'``).
+    seed : int
+        Seed of the draws (``method='sampling'``).
+
+    Returns
+    -------
+    Bounds
+        ``x`` = time stamps ``k dt``, ``value`` the simulated output (N, ny).
+
+    Raises
+    ------
+    ModelError
+        The model has no parameter covariance.
+    DataError
+        Bad input samples.
+    OptionError
+        Bad ``level``, ``method`` or ``n_samples``.
+    """
+    cov = parameter_covariance(model)
+    z = _z(level)
+    n_samples = _check_method(method, n_samples)
+    if isinstance(u, IOData):
+        if not same_period(u.dt or 0.0, model.dt):
+            raise DataError(f"the record is sampled with dt={u.dt!r} but the model's period "
+                            f"is dt={model.dt!r}")
+        u = u.u
+    u = as_signal(u, "input u", allow_empty_columns=model.n_inputs == 0)
+    if u.shape[1] != model.n_inputs:
+        raise DataError(f"input u has {u.shape[1]} channels but the model has "
+                        f"{model.n_inputs} inputs")
+    t = np.arange(u.shape[0]) * model.dt
+    return _band(model, cov, u, x0, z, level, method, n_samples, seed, t)
+
+
+def _band(model, cov, u, x0, z, level, method, n_samples, seed, t):
+    if method == "sampling":
+        y = model.simulate(u, x0=x0)
+        lo, hi = _quantile_band(_sampled(cov, n_samples, seed,
+                                         lambda m: m.simulate(u, x0=x0)), level)
+        return Bounds(t, y, lo, hi, None, float(level), method)
+    y, dy = _output_sensitivities(model, cov, u, x0)
+    std = np.sqrt(np.sum(dy ** 2, axis=-1))
+    return Bounds(t, y, y - z * std, y + z * std, std, float(level), method)
+
+
+def step_bounds(model, t=None, level=0.95, *, method="delta", n_samples=1000, seed=0):
+    """Confidence bounds of the step response (MATLAB ``step`` with
+    ``showConfidence``).
+
+    Parameters
+    ----------
+    model : StateSpace
+        A discrete-time model with a parameter covariance (:func:`subid.pem`).
+    t : float or array_like, optional
+        Final time or time stamps (:meth:`StateSpace.step`).
+    level : float
+        Confidence level, e.g. 0.95.
+    method : {'delta', 'sampling'}
+        First-order propagation, or quantiles over sampled parameter vectors.
+    n_samples : int
+        Number of draws (``method='sampling'``).
+    seed : int
+        Seed of the draws (``method='sampling'``).
+
+    Returns
+    -------
+    Bounds
+        ``x`` = time stamps, ``value`` the step response (N, ny, nu).
+
+    Raises
+    ------
+    ModelError
+        The model has no parameter covariance.
+    OptionError
+        Bad ``level``, ``method`` or ``n_samples``.
+    """
+    cov = parameter_covariance(model)
+    z = _z(level)
+    n_samples = _check_method(method, n_samples)
+    t, _ = model.step(t)
+    nu = model.n_inputs
+    parts = []
+    for j in range(nu):
+        u = np.zeros((t.size, nu))
+        u[:, j] = 1.0
+        parts.append(_band(model, cov, u, None, z, level, method, n_samples, seed, t))
+    stack = [np.stack([getattr(p, f) for p in parts], axis=-1)
+             for f in ("value", "lower", "upper")]
+    std = None if method == "sampling" else np.stack([p.std for p in parts], axis=-1)
+    return Bounds(t, stack[0], stack[1], stack[2], std, float(level), method)
+

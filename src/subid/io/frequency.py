@@ -1,0 +1,400 @@
+"""Frequency-response files: :func:`read_frd` and :func:`write_frd`.
+
+Text (``.csv``, ``.tsv``, ``.txt``): one row per frequency, a header naming
+the columns. One frequency column, named ``w`` (also ``omega``, ``rad/s``:
+radians per time unit) or ``f``/``freq``/``frequency``/``hz`` (Hz, converted
+with ``w = 2 pi f``), and for each channel pair two columns
+``<output>/<input>:<quantity>`` (for one input and one output the prefix may
+be left out), with the quantities
+
+* ``re`` and ``im`` (also ``real``, ``imag``): real and imaginary parts, or
+* ``mag`` (also ``abs``, ``magnitude``, ``gain``: absolute value) or
+  ``db`` (also ``mag_db``: 20 log10 of it), and ``phase`` (also
+  ``phase_deg``: degrees) or ``phase_rad`` (radians).
+
+A unit in brackets is understood: ``Magnitude [dB]``, ``Phase (deg)``,
+``Frequency [Hz]``. Optional ``<output>/<input>:std`` columns are the
+standard deviations and ``<output>:coherence`` the squared coherences.
+
+MATLAB ``.mat`` and NumPy ``.npz``: the variables of MATLAB's ``idfrd``,
+``ResponseData`` (ny x nu x n_freq) and ``Frequency`` (rad per time unit,
+unless ``FrequencyUnit`` says ``Hz``) with ``Ts`` (0 = continuous time), or
+subid's own ``w``, ``response`` (n_freq x ny x nu) and ``dt``.
+:func:`write_frd` writes both layouts (and ``std``/``coherence``) into a
+``.mat``/``.npz`` file, and real/imaginary columns (or ``db``/``phase`` with
+``polar=True``) into a text file.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import math
+import os
+import re
+from pathlib import Path
+
+import numpy as np
+
+from subid._validation import check_dt
+from subid.errors import DataError, FileReadError, OptionError
+from subid.frdata import FRData
+from subid.io._files import MAX_EXPANDED_BYTES, atomic_write, read_regular
+from subid.io._npz import NpzError, load_npz
+from subid.io.formats import mat_variables
+
+__all__ = ["read_frd", "write_frd"]
+
+_TEXT = (".csv", ".tsv", ".txt", ".dat")
+_ARRAYS = (".mat", ".npz")
+_W_NAMES = {"w", "omega", "rad/s", "w_rad", "frequency_rad", "w [rad/s]"}
+_HZ_NAMES = {"f", "freq", "frequency", "hz", "f_hz", "frequency_hz"}
+_QUANTITIES = {
+    "re": "re", "real": "re", "im": "im", "imag": "im", "imaginary": "im",
+    "mag": "mag", "abs": "mag", "magnitude": "mag", "gain": "mag",
+    "db": "db", "mag_db": "db", "magnitude_db": "db", "gain_db": "db",
+    "phase": "deg", "phase_deg": "deg", "phase_rad": "rad",
+    "std": "std", "coherence": "coh",
+}
+_UNIT_RE = re.compile(r"^(?P<name>.*?)\s*[\[(](?P<unit>[^\])]*)[\])]\s*$")
+
+
+def _normalise(name: str) -> tuple[str, str | None]:
+    """``(base name, unit)`` of a header cell, lower case: ``'Phase (deg)' -> ('phase', 'deg')``."""
+    text = name.strip().lower()
+    match = _UNIT_RE.match(text)
+    if match:
+        return match.group("name").strip(), match.group("unit").strip()
+    return text, None
+
+
+def _frequency_column(header, shown):
+    for k, cell in enumerate(header):
+        base, unit = _normalise(cell)
+        if base in _W_NAMES or (base in _HZ_NAMES and unit in ("rad/s", "rad")):
+            return k, 1.0
+        if base in _HZ_NAMES or base == "hz":
+            if unit in (None, "hz"):
+                return k, 2 * math.pi
+        if base in ("w", "omega") and unit is None:
+            return k, 1.0
+    raise FileReadError(f"{shown}: no frequency column; name one 'w' (rad per time unit) or "
+                        f"'f' (Hz). Header: {', '.join(header)[:300]}", path=shown, line=1)
+
+
+def _quantity(cell: str):
+    """``(pair or None, quantity)`` of a response column, or None."""
+    text = cell.strip()
+    pair, _, qty = text.rpartition(":")
+    base, unit = _normalise(qty)
+    if unit is not None:
+        base = {"db": "db", "deg": "phase_deg", "degrees": "phase_deg", "rad": "phase_rad",
+                "radians": "phase_rad"}.get(unit, base) if base in ("mag", "magnitude", "gain",
+                                                                    "phase") else base
+    kind = _QUANTITIES.get(base)
+    if kind is None:
+        return None
+    return (pair.strip() or None), kind
+
+
+def _parse_pair(pair: str, shown: str):
+    out, sep, inp = pair.partition("/")
+    if not sep or not out.strip() or not inp.strip():
+        raise FileReadError(f"{shown}: column prefix {pair!r} is not '<output>/<input>'",
+                            path=shown, line=1)
+    return out.strip(), inp.strip()
+
+
+def _read_text(shown: str, raw: bytes, ext: str, delimiter, dt) -> FRData:
+    try:
+        text = raw.decode("utf-8-sig")
+    except UnicodeDecodeError:
+        text = raw.decode("latin-1")
+    lines = [ln for ln in text.splitlines()]
+    body = [(k + 1, ln) for k, ln in enumerate(lines) if ln.strip() and not ln.lstrip()
+            .startswith("#")]
+    if len(body) < 2:
+        raise FileReadError(f"{shown}: a frequency-response file needs a header line and at "
+                            "least one row", path=shown)
+    if delimiter is None:
+        head = body[0][1]
+        delimiter = "\t" if ext == ".tsv" or ("\t" in head and "," not in head) else \
+            ";" if head.count(";") > head.count(",") else ","
+    rows = list(csv.reader(io.StringIO("\n".join(ln for _, ln in body)), delimiter=delimiter))
+    header = [c.strip() for c in rows[0]]
+    k_w, w_factor = _frequency_column(header, shown)
+    columns: dict = {}
+    for k, cell in enumerate(header):
+        if k == k_w:
+            continue
+        found = _quantity(cell)
+        if found is None:
+            raise FileReadError(f"{shown}: column {cell!r} is neither the frequency nor a "
+                                "response column ('<output>/<input>:re', ':im', ':mag', ':db', "
+                                "':phase', ':phase_rad', ':std', '<output>:coherence')",
+                                path=shown, line=1, column=cell)
+        pair, kind = found
+        if (pair, kind) in columns:
+            raise FileReadError(f"{shown}: column {cell!r} repeats a quantity", path=shown,
+                                line=1, column=cell)
+        columns[(pair, kind)] = k
+    values = np.empty((len(rows) - 1, len(header)))
+    for r, row in enumerate(rows[1:]):
+        line = body[r + 1][0]
+        if len(row) != len(header):
+            raise FileReadError(f"{shown}: line {line} has {len(row)} fields but the header has "
+                                f"{len(header)}", path=shown, line=line)
+        for c, cell in enumerate(row):
+            try:
+                values[r, c] = float(cell)
+            except ValueError:
+                raise FileReadError(f"{shown}: line {line}, column {header[c]!r}: {cell!r} is "
+                                    "not a number", path=shown, line=line,
+                                    column=header[c]) from None
+    return _assemble(shown, values[:, k_w] * w_factor, values, columns, dt)
+
+
+def _assemble(shown, w, values, columns, dt) -> FRData:
+    pairs = {}
+    coherence = {}
+    for (pair, kind), k in columns.items():
+        if kind == "coh":
+            coherence[pair] = k
+            continue
+        out, inp = ("y1", "u1") if pair is None else _parse_pair(pair, shown)
+        pairs.setdefault((out, inp), {})[kind] = k
+    outputs = list(dict.fromkeys(o for o, _ in pairs))
+    inputs = list(dict.fromkeys(i for _, i in pairs))
+    missing = [f"{o}/{i}" for o in outputs for i in inputs if (o, i) not in pairs]
+    if missing:
+        raise FileReadError(f"{shown}: no response columns for {', '.join(missing)}; every "
+                            "output/input pair needs its own", path=shown, line=1)
+    n = values.shape[0]
+    G = np.empty((n, len(outputs), len(inputs)), dtype=complex)
+    std = None
+    for (o, i), kinds in pairs.items():
+        a, b = outputs.index(o), inputs.index(i)
+        if "re" in kinds and "im" in kinds:
+            G[:, a, b] = values[:, kinds["re"]] + 1j * values[:, kinds["im"]]
+        elif ("mag" in kinds or "db" in kinds) and ("deg" in kinds or "rad" in kinds):
+            mag = values[:, kinds["mag"]] if "mag" in kinds else \
+                10.0 ** (values[:, kinds["db"]] / 20.0)
+            phase = np.deg2rad(values[:, kinds["deg"]]) if "deg" in kinds else \
+                values[:, kinds["rad"]]
+            G[:, a, b] = mag * np.exp(1j * phase)
+        else:
+            raise FileReadError(f"{shown}: {o}/{i} needs re and im, or a magnitude (mag or db) "
+                                f"and a phase; found {sorted(kinds)}", path=shown, line=1)
+        if "std" in kinds:
+            if std is None:
+                std = np.zeros(G.shape)
+            std[:, a, b] = values[:, kinds["std"]]
+    coh = None
+    if coherence:
+        coh = np.ones((n, len(outputs)))
+        for pair, k in coherence.items():
+            name = outputs[0] if pair is None else pair
+            if name not in outputs:
+                raise FileReadError(f"{shown}: coherence of unknown output {name!r}", path=shown)
+            coh[:, outputs.index(name)] = values[:, k]
+    return FRData(w, G, dt, std=std, coherence=coh, input_names=inputs, output_names=outputs)
+
+
+def _read_arrays(shown: str, raw: bytes, ext: str, dt, max_bytes) -> FRData:
+    if ext == ".mat":
+        variables = mat_variables(shown, raw=raw, max_bytes=max_bytes)
+    else:
+        try:
+            variables = load_npz(io.BytesIO(raw), size=len(raw),
+                                 max_expanded=MAX_EXPANDED_BYTES if max_bytes is None
+                                 else int(max_bytes))
+        except NpzError as exc:
+            raise FileReadError(f"{shown}: not a readable .npz archive ({exc})",
+                                path=shown) from None
+    names = {k: v for k, v in variables.items() if not k.startswith("__")}
+
+    def get(*keys):
+        for key in keys:
+            if key in names:
+                return np.asarray(names[key])
+        return None
+
+    G = get("response")
+    w = get("w")
+    if G is not None and w is not None:
+        G = np.asarray(G)
+        file_dt = get("dt")
+    else:
+        G, w = get("ResponseData"), get("Frequency")
+        if G is None or w is None:
+            raise FileReadError(f"{shown}: needs the variables w and response (subid) or "
+                                "Frequency and ResponseData (MATLAB idfrd); found "
+                                f"{', '.join(sorted(names))[:300] or 'none'}", path=shown)
+        G = np.asarray(G)
+        if G.ndim == 3:
+            G = np.moveaxis(G, 2, 0)                    # ny x nu x n_freq -> n_freq x ny x nu
+        elif G.ndim == 1 or 1 in G.shape:
+            G = G.reshape(-1)
+        unit = get("FrequencyUnit")
+        if unit is not None and "hz" in str(unit.reshape(-1)[0] if unit.size else "").lower():
+            w = 2 * math.pi * np.asarray(w, dtype=float)
+        file_dt = get("Ts")
+    w = np.asarray(w).reshape(-1)
+    if dt is None:
+        dt = 0.0 if file_dt is None else float(np.asarray(file_dt).reshape(-1)[0])
+        dt = max(dt, 0.0)           # MATLAB's Ts = -1 (unspecified) is not a period
+    std = get("std")
+    coherence = get("coherence")
+    return FRData(w, G, dt, std=std, coherence=coherence,
+                  input_names=_strings(get("input_names", "InputName")),
+                  output_names=_strings(get("output_names", "OutputName")))
+
+
+def _strings(value):
+    if value is None:
+        return None
+    flat = value.reshape(-1)
+    out = []
+    for item in flat:
+        item = np.asarray(item).reshape(-1)
+        out.append(str(item[0]) if item.size else "")
+    return out or None
+
+
+def read_frd(path, *, dt=None, delimiter=None, max_bytes=None) -> FRData:
+    """Read frequency-response data (see the module documentation for the layouts).
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        ``.csv``, ``.tsv``, ``.txt``, ``.dat`` (text with a header), ``.mat``
+        or ``.npz``.
+    dt : float, optional
+        Sampling period of a discrete-time response (0: continuous time).
+        Default: the file's ``Ts``/``dt`` variable, else 0.
+    delimiter : str, optional
+        Field delimiter of a text file (detected among ``,`` ``;`` TAB).
+    max_bytes : int, optional
+        Bytes a compressed ``.mat``/``.npz`` may expand to (see :func:`subid.read`).
+
+    Returns
+    -------
+    FRData
+
+    Raises
+    ------
+    DataFileNotFoundError
+        No such file.
+    FileReadError
+        Unsupported extension, no frequency column, an unknown column, a
+        missing channel pair, a cell that is not a number.
+    DataError
+        The values are not valid frequency-response data (see :class:`subid.FRData`).
+    """
+    shown = os.fspath(path)
+    ext = Path(shown).suffix.lower()
+    if ext not in _TEXT + _ARRAYS:
+        raise FileReadError(f"{shown}: unsupported extension {ext or '(none)'!r} for "
+                            f"frequency-response data; use one of {', '.join(_TEXT + _ARRAYS)}",
+                            path=shown)
+    if dt is not None:
+        dt = check_dt(dt, allow_zero=True)
+    raw = read_regular(shown, what="frequency-response file")
+    if not raw:
+        raise FileReadError(f"file {shown} is empty", path=shown)
+    if ext in _TEXT:
+        return _read_text(shown, raw, ext, delimiter, 0.0 if dt is None else dt)
+    return _read_arrays(shown, raw, ext, dt, max_bytes)
+
+
+def write_frd(frdata, path, *, polar: bool = False) -> None:
+    """Write frequency-response data to a file that :func:`read_frd` reads back.
+
+    Parameters
+    ----------
+    frdata : FRData
+    path : str or os.PathLike
+        ``.csv``/``.tsv``/``.txt`` (columns ``w``, ``<output>/<input>:re``,
+        ``:im``, or ``:db`` and ``:phase`` in degrees with ``polar=True``,
+        then ``:std`` and ``<output>:coherence`` when present; 17 significant
+        digits), or ``.mat``/``.npz`` (``w``, ``response``, ``dt`` and
+        MATLAB's ``Frequency``, ``ResponseData``, ``Ts``, names, ``std``,
+        ``coherence``).
+    polar : bool
+        Text files: magnitude in dB and phase in degrees instead of real and
+        imaginary parts (rounding then loses the last digits).
+
+    Raises
+    ------
+    DataError
+        ``frdata`` is not an FRData.
+    OptionError
+        Unsupported extension.
+    FileWriteError
+        The file cannot be written (the previous content is kept).
+    """
+    if not isinstance(frdata, FRData):
+        raise DataError(f"write_frd expects a subid.FRData, got {type(frdata).__name__}")
+    shown = os.fspath(path)
+    ext = Path(shown).suffix.lower()
+    if ext in (".csv", ".tsv", ".txt"):
+        _write_text(frdata, shown, "\t" if ext == ".tsv" else ",", polar)
+    elif ext in _ARRAYS:
+        _write_arrays(frdata, shown, ext)
+    else:
+        raise OptionError(f"write_frd: unsupported extension {ext or '(none)'!r}; use .csv, "
+                          ".tsv, .txt, .mat or .npz")
+
+
+def _write_text(d: FRData, path: str, delim: str, polar: bool) -> None:
+    header = ["w"]
+    cols = [d.w]
+    for i, out in enumerate(d.output_names):
+        for j, inp in enumerate(d.input_names):
+            g = d.response[:, i, j]
+            if polar:
+                with np.errstate(divide="ignore"):
+                    header += [f"{out}/{inp}:db", f"{out}/{inp}:phase"]
+                    cols += [20 * np.log10(np.abs(g)), np.rad2deg(np.angle(g))]
+            else:
+                header += [f"{out}/{inp}:re", f"{out}/{inp}:im"]
+                cols += [g.real, g.imag]
+            if d.std is not None:
+                header.append(f"{out}/{inp}:std")
+                cols.append(d.std[:, i, j])
+    if d.coherence is not None:
+        for i, out in enumerate(d.output_names):
+            header.append(f"{out}:coherence")
+            cols.append(d.coherence[:, i])
+    table = np.column_stack(cols)
+    if polar and not np.isfinite(table).all():
+        raise DataError("write_frd: a zero response has no finite level in dB; write "
+                        "real and imaginary parts (polar=False)")
+    with atomic_write(path, "w", encoding="utf-8", what="frequency-response file") as fh:
+        fh.write(delim.join(header) + "\n")
+        for row in table:
+            fh.write(delim.join(repr(float(v)) for v in row) + "\n")
+
+
+def _write_arrays(d: FRData, path: str, ext: str) -> None:
+    names_in = np.empty((1, d.n_inputs), dtype=object)
+    names_in[0, :] = list(d.input_names)
+    names_out = np.empty((1, d.n_outputs), dtype=object)
+    names_out[0, :] = list(d.output_names)
+    variables = {"w": d.w, "response": d.response, "dt": np.array(d.dt),
+                 "Frequency": d.w.reshape(-1, 1), "ResponseData": np.moveaxis(d.response, 0, 2),
+                 "Ts": np.array(d.dt)}
+    if d.std is not None:
+        variables["std"] = d.std
+    if d.coherence is not None:
+        variables["coherence"] = d.coherence
+    if ext == ".mat":
+        import scipy.io
+        variables.update(InputName=names_in, OutputName=names_out)
+        with atomic_write(path, "wb", what="frequency-response file") as fh:
+            scipy.io.savemat(fh, variables, format="5", do_compression=False, oned_as="column")
+    else:
+        variables.update(input_names=np.array(d.input_names),
+                         output_names=np.array(d.output_names))
+        with atomic_write(path, "wb", what="frequency-response file") as fh:
+            np.savez(fh, **variables)

@@ -1,0 +1,73 @@
+"""Asymptotic covariance of prediction-error estimates (used by :func:`subid.pem`).
+
+For the prediction-error estimate with Gaussian innovations of covariance
+``Λ``, the parameter covariance is asymptotically
+
+    Cov(θ̂) = [Σ_t ψ_t Λ^-1 ψ_t^T]^-1,     ψ_t = dŷ[t|θ]/dθ  (n_θ x ny)
+
+(Ljung, *System Identification*, 2nd ed., 1999, Ch. 9, Theorem 9.1; in the
+scalar case ``λ [Σ ψ ψ^T]^-1``, for several outputs the maximum-likelihood
+form weighted by ``Λ^-1``). With the Jacobian ``J`` whose rows
+are the whitened sensitivities ``L^-1 ψ_t^T`` (``Λ = L L^T``), this is
+``(J^T J)^-1``; it is computed from the QR factor of ``J`` (never forming
+``J^T J`` or an explicit inverse): ``J = Q R`` gives ``Cov = R^-1 R^-T``.
+
+Nuisance parameters (the initial states) are eliminated exactly: with their
+columns first, the trailing block ``R22`` of ``R`` is the factor of the
+Schur complement, so ``R22^-1 R22^-T`` is the marginal covariance of the
+model parameters.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.linalg
+
+__all__ = ["covariance_factor", "RANK_TOLERANCE"]
+
+# A diagonal entry of the (column-scaled) R factor below this times the largest
+# one marks a direction the data do not determine: no covariance is returned.
+RANK_TOLERANCE = 1e-9
+
+
+def covariance_factor(J, residuals, n_nuisance):
+    """Square-root factor of the covariance of the non-nuisance parameters.
+
+    Parameters
+    ----------
+    J : ndarray, shape (N, ny, d)
+        Sensitivities ``dŷ[t]/dθ`` (not weighted); the first ``n_nuisance``
+        columns are nuisance parameters (eliminated).
+    residuals : ndarray, shape (N, ny)
+        Prediction errors at the estimate.
+    n_nuisance : int
+        Number of leading nuisance columns.
+
+    Returns
+    -------
+    factor : ndarray, shape (d - n_nuisance, d - n_nuisance) or None
+        ``F`` with ``Cov = F F^T``; None when the Jacobian is rank deficient
+        (a non-minimal model or unexciting data).
+    noise_cov : ndarray, shape (ny, ny)
+        The residual covariance ``Λ`` used, ``E^T E / (N - d / ny)``.
+    """
+    N, ny, d = J.shape
+    dof = max(N - d / ny, 1.0)
+    lam = residuals.T @ residuals / dof
+    try:
+        L = np.linalg.cholesky(lam)
+    except np.linalg.LinAlgError:
+        return None, lam
+    Jw = scipy.linalg.solve_triangular(L, J.transpose(1, 0, 2).reshape(ny, -1), lower=True,
+                                       check_finite=False)      # L^-1 ψ_t for every t
+    Jw = Jw.reshape(ny, N, d).transpose(1, 0, 2).reshape(N * ny, d)
+    scale = np.sqrt(np.einsum("ij,ij->j", Jw, Jw))
+    if not (np.isfinite(scale).all() and scale.min() > 0):
+        return None, lam
+    R = np.linalg.qr(Jw / scale, mode="r")
+    R22 = R[n_nuisance:, n_nuisance:]
+    diag = np.abs(np.diag(R22))
+    if diag.size == 0 or diag.min() <= RANK_TOLERANCE * diag.max():
+        return None, lam
+    inv = scipy.linalg.solve_triangular(R22, np.eye(R22.shape[0]), check_finite=False)
+    return inv / scale[n_nuisance:, None], lam

@@ -1,0 +1,197 @@
+"""The cross-validation score of a candidate model, computed directly.
+
+:func:`subid.methods.dt._selection.score_horizon` scores every fold model by
+its simulation fit on the held-out block with the initial state fitted by
+least squares: the quantity ``mean(fit_percent(model, validation))`` of
+:func:`subid.evaluation.metrics.fit_percent` (x0 ``'estimate'``). That
+general function simulates the model once for the forced response, then once
+per state for the free responses ``C A^t e_j`` over the whole block (it stops
+only after blocks of 65,536 samples), and reduces the x0 regression by a QR
+factorisation of ``N ny`` rows, so its cost grew with ``n`` simulations of
+the block per candidate (55 % of the default call at 10^5 samples; minutes
+when a stabilised candidate has a pole at radius 0.9999).
+
+Here the same quantity comes from one compiled pass (:func:`forced_and_free`):
+the forced response ``y_f`` and the free response ``F(t) = C A^t`` propagated
+as ``F(t+1) = F(t) A`` (``ny n^2`` flops a sample instead of ``n`` state
+simulations), the latter only while ``A^t`` has not decayed below
+:data:`FREE_DECAYED` (:func:`free_length`, by repeated squaring: beyond it
+the rows change x0 by less than rounding, as :func:`subid.evaluation.prediction.simulate_fit`
+argues). The x0 regression is the same weighted least-squares problem (each
+output weighted by the inverse of its standard deviation over the validation
+record), solved through the triangular factor of ``[F w, (y - y_f) w]`` by
+the same minimum-norm ``lstsq`` with the same cut-off; the fit is then
+``100 (1 - ||y - ŷ|| / ||y - ȳ||)`` per output, pooled over the experiments
+of a merged record (each with its own x0 and mean), as ``fit_percent`` pools
+them. The scores equal ``fit_percent``'s to rounding
+(``tests/test_selection_speed.py`` compares both on several records).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+import scipy.linalg
+
+from subid.data import column_std
+
+#: ``A^t`` counts as decayed below this (relative to the identity): later free rows
+#: change x0 by less than rounding (:data:`subid.evaluation.prediction._FREE_DECAYED`).
+FREE_DECAYED = 1e-20
+
+
+#: Records up to this many samples keep their whole free response (cheaper than
+#: finding where it decays).
+SHORT_RECORD = 2048
+
+
+def free_length(A: np.ndarray, n_samples: int) -> int:
+    """Samples of the free response to keep: the smallest power of two ``T`` with
+    ``max |A^T| < FREE_DECAYED`` (by repeated squaring), at most ``n_samples``
+    (all of them up to :data:`SHORT_RECORD`)."""
+    if A.shape[0] == 0:
+        return 0
+    if n_samples <= SHORT_RECORD:
+        return n_samples
+    P = np.array(A, dtype=float)
+    T = 1
+    with np.errstate(all="ignore"):
+        while T < n_samples:
+            size = np.abs(P).max()
+            if not math.isfinite(size):
+                return n_samples
+            if size < FREE_DECAYED:
+                return T
+            P = P @ P
+            T *= 2
+    return n_samples
+
+
+def forced_and_free_reference(A, B, C, D, u, n_free):
+    """Plain-numpy reference of :func:`forced_and_free`."""
+    N = u.shape[0]
+    n, ny = A.shape[0], C.shape[0]
+    y = np.empty((N, ny))
+    F = np.empty((n_free, ny, n))
+    x = np.zeros(n)
+    for t in range(N):
+        y[t] = C @ x + D @ u[t]
+        x = A @ x + B @ u[t]
+    M = C.copy()
+    for t in range(n_free):
+        F[t] = M
+        M = M @ A
+    return y, F
+
+
+@numba.njit(cache=True, nogil=True)
+def forced_and_free(A, B, C, D, u, n_free):  # pragma: no cover - compiled
+    """Forced response ``y`` (zero initial state) of ``(A, B, C, D)`` to ``u`` and
+    free response ``F[t] = C A^t`` for ``t < n_free``. Returns ``(y, F)``."""
+    N, nu = u.shape
+    n = A.shape[0]
+    ny = C.shape[0]
+    y = np.empty((N, ny))
+    F = np.empty((n_free, ny, n))
+    x = np.zeros(n)
+    xn = np.empty(n)
+    for t in range(N):
+        for i in range(ny):
+            s = 0.0
+            for j in range(n):
+                s += C[i, j] * x[j]
+            for j in range(nu):
+                s += D[i, j] * u[t, j]
+            y[t, i] = s
+        for i in range(n):
+            s = 0.0
+            for j in range(n):
+                s += A[i, j] * x[j]
+            for j in range(nu):
+                s += B[i, j] * u[t, j]
+            xn[i] = s
+        for i in range(n):
+            x[i] = xn[i]
+    M = C.copy()
+    Mn = np.empty_like(M)
+    for t in range(n_free):
+        for i in range(ny):
+            for j in range(n):
+                F[t, i, j] = M[i, j]
+        for i in range(ny):
+            for j in range(n):
+                s = 0.0
+                for k in range(n):
+                    s += M[i, k] * A[k, j]
+                Mn[i, j] = s
+        for i in range(ny):
+            for j in range(n):
+                M[i, j] = Mn[i, j]
+    return y, F
+
+
+def _simulated(A, B, C, D, u, y, weights, kernel):
+    """``ŷ`` of one experiment, from the least-squares x0; None on overflow."""
+    N, ny = y.shape
+    n = A.shape[0]
+    n_free = free_length(A, N)
+    with np.errstate(all="ignore"):
+        forced, F = kernel(A, B, C, D, u, n_free)
+        if not (np.isfinite(forced).all() and np.isfinite(F).all()):
+            return None
+        if n == 0:
+            return forced
+        rows = np.empty((n_free, ny, n + 1))
+        rows[:, :, :n] = F * weights[None, :, None]
+        rows[:, :, n] = (y[:n_free] - forced[:n_free]) * weights
+        R = scipy.linalg.qr(rows.reshape(-1, n + 1), mode="r", check_finite=False)[0]
+    # the minimum-norm lstsq of simulate_fit, with its cut-off
+    cut = np.finfo(float).eps * max(N * ny, n)
+    Rn = np.zeros((n, n + 1))
+    Rn[:min(R.shape[0], n)] = R[:n]
+    x0 = np.linalg.lstsq(Rn[:, :n], Rn[:, n], rcond=cut)[0]
+    out = forced.copy()
+    out[:n_free] += F @ x0
+    return out if np.isfinite(out).all() else None
+
+
+class Held:
+    """What the score of every candidate needs from one validation record, once:
+    its pieces (one per experiment), the x0 weights (inverse standard deviation
+    over the whole record, as ``fit_percent`` weighs them), the scale of each
+    output and the spread ``sum (y - ȳ_e)^2`` the fit divides by."""
+
+    def __init__(self, validation):
+        y_all = validation.y
+        std = column_std(y_all)
+        self.weights = 1.0 / np.where(std > 0, std, 1.0)
+        self.scale = np.abs(y_all).max(axis=0)
+        self.scale[self.scale == 0] = 1.0
+        self.pieces = [(np.ascontiguousarray(validation.u[a:b], dtype=float), y_all[a:b],
+                        y_all[a:b] / self.scale) for a, b in validation.experiment_ranges]
+        self.dev2 = np.zeros(y_all.shape[1])
+        for _, _, ys in self.pieces:
+            self.dev2 += np.sum((ys - ys.mean(axis=0)) ** 2, axis=0)
+
+
+def simulation_fit(A, B, C, D, validation, *, kernel=forced_and_free):
+    """Simulation fit (%) per output of the discrete model ``(A, B, C, D)`` on
+    ``validation`` (an IOData record or its :class:`Held`) with x0 by least
+    squares: ``fit_percent(model, validation)`` to rounding (see the module
+    documentation), or None when the simulation overflows or an output is
+    constant. ``kernel``: :func:`forced_and_free` or its reference."""
+    held = validation if isinstance(validation, Held) else Held(validation)
+    if np.any(held.dev2 == 0):
+        return None
+    A, B, C, D = (np.ascontiguousarray(M, dtype=float) for M in (A, B, C, D))
+    err2 = np.zeros(held.dev2.shape)
+    for u, y, ys in held.pieces:
+        y_hat = _simulated(A, B, C, D, u, y, held.weights, kernel)
+        if y_hat is None:
+            return None
+        with np.errstate(all="ignore"):         # a huge error gives an infinite misfit
+            err2 += np.sum((ys - y_hat / held.scale) ** 2, axis=0)
+    with np.errstate(all="ignore"):
+        return 100.0 * (1.0 - np.sqrt(err2) / np.sqrt(held.dev2))

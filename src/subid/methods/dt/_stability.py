@@ -1,0 +1,129 @@
+"""Stability of a discrete-time subspace estimate: when it must be enforced
+(``stability='auto' | 'enforce' | 'none'``, from the growth of the data) and
+how (regularised shift invariance, or reflection of the unstable poles).
+:func:`subid.methods.dt._subspace.stable_choice` applies them to an estimate."""
+
+from __future__ import annotations
+
+import math
+import warnings
+
+import numpy as np
+import scipy.linalg
+
+from subid.data import IOData
+from subid.errors import OptionError, UnstableModelWarning
+
+STABILITY = ("auto", "enforce", "none")
+#: Spectral radius of a model whose stability was enforced, at most.
+STABLE_RADIUS = 0.9999
+#: Output growth (RMS of the last tenth over the first) above which data "grow".
+GROWTH_LIMIT = 3.0
+
+
+def stability_request(stability: str, A, data, method: str) -> bool:
+    """Whether stability must be enforced on ``A``.
+
+    ``'none'``: never. ``'enforce'``: whenever A is unstable, with a warning
+    when the data themselves grow. ``'auto'`` (default): when A is unstable
+    (spectral radius >= 1) and the estimation output does not grow
+    (:func:`output_growth` below :data:`GROWTH_LIMIT`): a diverging model of
+    non-diverging data is over-fitted noise, not the plant. Data that grow
+    (an unstable plant, e.g. measured in closed loop) keep the unstable
+    model. From a statistic alone (no raw samples) ``'auto'`` cannot see the
+    growth and does not act.
+    """
+    if stability not in STABILITY:
+        raise OptionError(f"stability must be one of {STABILITY}, got {stability!r}")
+    if stability == "none" or np.abs(np.linalg.eigvals(A)).max() < 1.0:
+        return False
+    growth = record_growth(data) if isinstance(data, IOData) else None
+    if stability == "enforce":
+        if growth is not None and growth >= GROWTH_LIMIT:
+            warnings.warn(f"{method}: stability='enforce' on data whose output grows "
+                          f"{growth:.3g}x over the record: the plant looks unstable, and a "
+                          "stable model cannot follow it; use stability='none' to keep the "
+                          "unstable estimate", UnstableModelWarning, stacklevel=4)
+        return True
+    return growth is not None and growth < GROWTH_LIMIT
+
+
+def stable_shift_invariance(Q: np.ndarray, n_outputs: int, radius: float = STABLE_RADIUS):
+    """A stable A from an orthonormal basis ``Q`` of the observability range.
+
+    Regularised shift invariance (Maciejowski, "Guaranteed stability with
+    subspace methods", Systems & Control Letters 26, 1995; Van Gestel et al.,
+    IEEE TAC 46(9), 2001): minimise
+    ``||Q_up A - Q_down||^2 + c ||Q_last A||^2`` with ``Q_last`` the last block
+    row. For c = 0 it is the ordinary estimate; for c = 1 the solution is
+    ``A = Q_up^T Q_down = Q^T S Q`` (``Q^T Q = I``, S the block shift, of norm
+    1), so ``||A||_2 <= 1`` and A is stable. The smallest c in [0, 1] giving a
+    spectral radius at most ``radius`` is found by bisection (40 steps); if
+    even c = 1 reaches only ``radius < rho <= 1``, A is scaled by
+    ``radius / rho``.
+
+    Returns
+    -------
+    A : ndarray
+        In the basis of ``Q``.
+    c : float
+        The regularisation weight used.
+    """
+    up, down, last = Q[:-n_outputs], Q[n_outputs:], Q[-n_outputs:]
+    n = Q.shape[1]
+
+    def solve(c):
+        lhs = np.vstack([up, math.sqrt(c) * last])
+        rhs = np.vstack([down, np.zeros((n_outputs, n))])
+        return scipy.linalg.lstsq(lhs, rhs, lapack_driver="gelsy", check_finite=False)[0]
+
+    def rho(M):
+        return float(np.abs(np.linalg.eigvals(M)).max())
+
+    A1 = solve(1.0)
+    if rho(A1) > radius:
+        return A1 * (radius / rho(A1)), 1.0
+    lo, hi, best = 0.0, 1.0, A1
+    for _ in range(40):
+        mid = 0.5 * (lo + hi)
+        A = solve(mid)
+        if rho(A) <= radius:
+            hi, best = mid, A
+        else:
+            lo = mid
+    return best, hi
+
+
+def reflect_unstable_poles(A, radius: float = STABLE_RADIUS, max_condition: float = 1e8):
+    """A with every pole p outside the unit circle replaced by ``1/conj(p)``.
+
+    The reflected pole has the same frequency and the reciprocal radius (the
+    stable spectral factor of the same amplitude response); a pole on the
+    unit circle or reflected above ``radius`` is pulled in to ``radius``.
+    Computed through the eigendecomposition ``A = V Λ V^{-1}`` (basis
+    invariant); None when V is ill-conditioned (a nearly defective A), where
+    the eigenvector basis is unreliable.
+    """
+    lam, V = np.linalg.eig(A)
+    if np.linalg.cond(V) > max_condition:
+        return None
+    mag = np.abs(lam)
+    new = np.where(mag >= 1.0, lam / np.maximum(mag, 1e-300) ** 2, lam)
+    new_mag = np.abs(new)
+    new = np.where(new_mag > radius, new / np.maximum(new_mag, 1e-300) * radius, new)
+    return np.linalg.solve(V.T, (V * new).T).T.real      # V diag(new) V^{-1}
+
+
+def record_growth(data) -> float:
+    """:func:`output_growth` of a record: the largest over its experiments."""
+    return max(output_growth(e.y) for e in data.experiments)
+
+
+def output_growth(y: np.ndarray) -> float:
+    """Ratio of the RMS of the last tenth of ``y`` to that of its first tenth
+    (largest over the channels, after removing each channel's mean)."""
+    k = max(y.shape[0] // 10, 1)
+    y = y - y.mean(axis=0)
+    first = np.sqrt(np.mean(y[:k] ** 2, axis=0))
+    last = np.sqrt(np.mean(y[-k:] ** 2, axis=0))
+    return float(np.max(last / np.maximum(first, 1e-300)))

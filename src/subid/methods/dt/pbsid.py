@@ -1,0 +1,180 @@
+"""Predictor-based subspace identification (PBSID-opt), consistent in closed loop.
+
+Chiuso, "The role of vector autoregressive modeling in predictor-based
+subspace identification", Automatica 43(6), 2007 (the PBSID-opt algorithm,
+Sec. 5); the SSARX of Jansson (2003) and MATLAB's ``n4sid`` with
+``N4Weight='SSARX'`` are of the same family. The innovation form
+``x(t+1) = A x + B u + K e``, ``y = C x + D u + e`` has the predictor form
+(``Ā = A - K C``, ``B̄ = [B - K D, K]``, ``z = [u; y]``)
+
+    x(t+1) = Ā x(t) + B̄ z(t),   y(t) = C x(t) + D u(t) + e(t),
+
+so with the past window ``z_p(t) = [z(t-p); ...; z(t-1)]`` the state is
+``x(t) = K_p z_p(t) + Ā^p x(t-p)``, ``K_p = [Ā^(p-1) B̄, ..., B̄]``, and the
+last term vanishes as ``p`` grows (exactly, for noise-free data, once p
+reaches the observability index: a dead-beat predictor exists). Steps, on
+the triangular factor of the block-Hankel data matrix (``p = f =
+horizon``; all products of data rows are products of the factor's rows):
+
+1. For every future step ``k = 0..f-1``, regress ``y(t+k)`` on
+   ``[z_p(t); z(t); ...; z(t+k-1); u(t+k)]`` (``u(t+k)`` only with
+   feedthrough): ``y(t+k) = C Ā^k x(t) + sum_l C Ā^(k-1-l) B̄ z(t+l) + D
+   u(t+k) + e(t+k)`` (Chiuso 2007, eq. 21), whose regressors are all in the
+   past of ``e(t+k)``: no correlation between input and noise enters, so
+   the estimate stays consistent under feedback. The coefficient on
+   ``z_p`` estimates row block ``k`` of ``Γ_f K_p``.
+2. SVD of ``Γ_f K_p Z_p``: the order from its singular values and the state
+   sequence ``X = U_n^T (Γ_f K_p) Z_p``, and one sample later ``X^+`` from
+   the window shifted by one sample (as :func:`subid.n4sid` does).
+3. ``[C D]`` by least squares from ``y(t) = C x(t) + D u(t) + e(t)``, the
+   innovations ``ê = y - C x - D u``, then ``[A B K]`` from ``x(t+1) = A
+   x(t) + B u(t) + K ê(t)`` (with ``ê`` as a regressor, which keeps the
+   regression consistent in closed loop, where ``u(t)`` depends on
+   ``e(t)``).
+
+With ``stability`` asking for it, an unstable A is stabilised
+(:func:`subid.methods.dt._subspace.stable_choice`) and B, K refitted from
+the same state equation. Order and horizon selection, the noise model and
+the delays come from the shared pipeline (:func:`_subspace.identify`).
+"""
+
+from __future__ import annotations
+
+from functools import partial
+
+import numpy as np
+import scipy.linalg
+
+from subid._validation import check_bool
+from subid.delay import shift_for_method
+from subid.methods.dt._subspace import (
+    choose_order,
+    finalize,
+    finish,
+    identify,
+    initial_state,
+    stable_choice,
+)
+from subid.methods.dt.n4sid import _lstsq_rows
+from subid.methods.dt.noise_model import check_refine
+from subid.model.statespace import StateSpace
+
+__all__ = ["pbsid"]
+
+
+def pbsid(data, order=None, *, horizon=None, selection="cv", stability="auto",
+          feedthrough=True, estimate_x0=True, statistic="auto", refine=None,
+          input_delay=0) -> StateSpace:
+    """Identify a discrete-time model by predictor-based subspace identification.
+
+    PBSID-opt (Chiuso 2007; module docstring): consistent with data measured
+    in closed loop (the input depends on past outputs), where
+    :func:`subid.moesp`, :func:`subid.n4sid` and :func:`subid.ls_subspace`
+    are biased.
+
+    Parameters
+    ----------
+    data : IOData or HankelStatistic
+        Uniformly sampled input/output record, or its statistic (depth
+        ``2*horizon``; :class:`subid.HankelStatistic`).
+    order : int, None, 'auto' or iterable of int
+        Model order; ``None`` (or ``'auto'``) chooses it among 1..10 by
+        ``selection``; an iterable gives the candidate orders.
+    horizon : int, optional
+        Past window ``p`` and future window ``f`` (``p = f``). Default: chosen
+        with the order among 10 and 20 (as far as the record allows) by
+        ``selection``; with ``selection='gap'``, 10 (or what the record
+        allows). The bias ``Ā^p`` falls with ``p``.
+    selection : {'cv', 'gap'}
+        As in :func:`subid.moesp`.
+    stability : {'auto', 'enforce', 'none'}
+        As in :func:`subid.moesp`; B and K are then refitted from the state
+        equation.
+    feedthrough : bool
+        Estimate D. In closed loop with a direct feedback ``u(t) = r(t) -
+        F y(t)`` the plant must be strictly proper (D = 0) for any method to
+        be consistent: use ``feedthrough=False`` there.
+    estimate_x0 : bool
+        Estimate the initial state (``info['x0']``) by least squares on the
+        output, given the identified model.
+    statistic : {'auto', 'qr', 'gram'}
+        As in :func:`subid.ls_subspace`.
+    refine : {None, 'pem'}
+        As in :func:`subid.ls_subspace`.
+    input_delay : int or sequence of int
+        As in :func:`subid.ls_subspace`.
+
+    Returns
+    -------
+    StateSpace
+        Discrete-time model with ``dt = data.dt``; ``info['singular_values']``
+        of ``Γ_f K_p Z_p``, ``info['state_regression_residual']``.
+
+    Examples
+    --------
+    >>> import subid
+    >>> data = subid.systems.simulate_data(subid.systems.seed001_system(), 600, seed=3)
+    >>> model = subid.pbsid(data, 3)
+    >>> float(subid.markov_error(model, subid.systems.seed001_system())) < 1e-8
+    True
+    """
+    check_bool(feedthrough, "feedthrough")
+    check_bool(estimate_x0, "estimate_x0")
+    build = partial(_pbsid, stability=stability, feedthrough=feedthrough,
+                    estimate_x0=estimate_x0)
+    check_refine(refine, data)
+    data, delays = shift_for_method(data, input_delay)
+    return identify(data, order, horizon, method="pbsid", build=build, selection=selection,
+                    statistic=statistic,
+                    finalize=partial(finalize, refine=refine, delays=delays))
+
+
+def _pbsid(pb, *, stability, feedthrough, estimate_x0) -> StateSpace:
+    i, hf = pb.horizon, pb.factor
+    data = pb.data
+    ny, nu = hf.n_outputs, hf.n_inputs
+    wp = hf.rows(hf.u_rows(0, i), hf.y_rows(0, i))
+    wp_next = hf.rows(hf.u_rows(1, i + 1), hf.y_rows(1, i + 1))
+    n_wp = wp.shape[0]
+    rows = []
+    for k in range(i):                        # step 1: one regression per future step
+        parts = [wp]
+        if k:
+            parts += [hf.rows(hf.u_rows(i, i + k)), hf.rows(hf.y_rows(i, i + k))]
+        if feedthrough:
+            parts.append(hf.rows(hf.u_rows(i + k, i + k + 1)))
+        theta = _lstsq_rows(np.vstack(parts), hf.rows(hf.y_rows(i + k, i + k + 1)))
+        rows.append(theta[:, :n_wp])
+    coef = np.vstack(rows)                    # Γ_f K_p (in the factor's coordinates)
+    U, s, _ = scipy.linalg.svd(coef @ wp, full_matrices=False, check_finite=False)
+    n, order_selection = choose_order(pb.order, pb.candidates, s, "singular values")
+    Q = U[:, :n]                              # orthonormal basis of range(Γ_f)
+    M = Q.T @ coef                            # x(t) = M z_p(t)
+    x, x_next = M @ wp, M @ wp_next
+    u_t = hf.rows(hf.u_rows(i, i + 1))
+    y_t = hf.rows(hf.y_rows(i, i + 1))
+    # step 3: C, D from the output equation, then A, B, K with the innovations as regressors
+    if feedthrough:
+        CD = _lstsq_rows(np.vstack([x, u_t]), y_t)
+        C, D = CD[:, :n], CD[:, n:]
+    else:
+        C, D = _lstsq_rows(x, y_t), np.zeros((ny, nu))
+    e = y_t - C @ x - D @ u_t
+    ABK = _lstsq_rows(np.vstack([x, u_t, e]), x_next)
+    A = ABK[:, :n]          # B (and K) again in fit(A), for the A finally kept
+    resid = x_next - ABK @ np.vstack([x, u_t, e])
+    residual = float(np.linalg.norm(resid) / max(np.linalg.norm(x_next), 1e-300))
+
+    def fit(A_try):
+        """B (and D, x0) for a given A from the state equation (K refitted with it)."""
+        BK = _lstsq_rows(np.vstack([u_t, e]), x_next - A_try @ x)
+        B_n, _, D_n = pb.unscale(BK[:, :nu], C, D)
+        return B_n, D_n, None, {"bd_method": "state regression"}
+
+    A, fitted, stab = stable_choice(A, Q, ny, fit, stability=stability, data=data,
+                                    method=pb.method)
+    B, D = fitted[0], fitted[1]
+    _, C, _ = pb.unscale(np.zeros((n, nu)), C, np.zeros((ny, nu)))
+    x0 = initial_state(A, B, C, D, data) if estimate_x0 else None
+    return finish(pb, A, B, C, D, n, order_selection, singular_values=s, x0=x0,
+                  state_regression_residual=residual, stability=stab)

@@ -1,0 +1,611 @@
+"""ARMAX, output-error and Box-Jenkins models by prediction-error minimisation.
+
+:func:`armax`, :func:`oe` and :func:`bj` (MATLAB ``armax``, ``oe``, ``bj``)
+minimise the one-step prediction-error criterion (Ljung, *System
+Identification*, 2nd ed., 1999, Ch. 7, eq. 7.12) of the polynomial models
+
+    ARMAX  A y = B u + C e           OE  y = B/F u + e
+    BJ     y = B/F u + C/D e
+
+output by output: multi-output ARMAX/OE/BJ models are not defined here
+(MATLAB's multi-output ``armax``, ``oe`` and ``bj`` are also fitted as one
+multi-input single-output model per output), so each output ``y_i`` gets
+its own ``A_i``, ``C_i``, ``D_i`` and, for each input ``j``, ``B_ij`` and
+``F_ij``; the outputs' models are stacked into one StateSpace
+(:func:`subid.model.polynomial.realise`).
+
+Start: a consistent estimate, the best (lowest criterion) of
+
+* the ARX model of the same orders (:func:`subid.arx`; ``F = A`` for OE and
+  BJ when every ``nf`` of the output is the same), which is exact on
+  noise-free data;
+* ARMAX: the Hannan-Rissanen estimate (Hannan & Rissanen, Biometrika 69,
+  1982): a high-order ARX model gives the innovations ``ê``, then
+  ``A, B, C`` by least squares with ``ê``'s lags as regressors;
+* OE and BJ: each ``B_ij / F_ij`` fitted by least squares to the response
+  ``x̂_ij`` of the high-order ARX model's ``B_ij / A_i`` to ``u_j`` (a model
+  reduction of a consistent estimate; the high-order ARX is consistent for
+  any noise model, Ljung 1999, Sec. 10.4), and for BJ ``C/D`` by
+  Hannan-Rissanen on the output-error residual.
+
+Unstable ``C``, ``D`` and ``F`` roots of the start are reflected into the
+unit circle (``1/conj(p)``), so the start's predictor is stable.
+
+Search: the coefficients are the parameters; the predictor of the
+innovation form (:func:`subid.model.polynomial.realise`) is driven by
+``[u, y_i]``, and its matrices are polynomials of degree at most two in the
+coefficients (the observer form has the entries ``-a_k``, ``c_k - a_k``
+and ``b_k - a_k b_0``), so their derivatives are the central differences
+with unit step, exact to rounding. The Jacobian is then run by the compiled
+sensitivity loop of :func:`subid.pem` and the same trust-region search
+(:func:`subid.methods.dt.pem.minimise_prediction_error`), with the
+predictor's initial state among the parameters. A trial with an unstable
+predictor is rejected; the result never has a larger criterion than its
+start (the start is kept when nothing improves).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import scipy.signal
+
+from subid._validation import check_bool, check_choice
+from subid.errors import OptionError, SubidError
+from subid.methods._info import collect_warnings
+from subid.methods.dt.pem import (
+    _predictor,
+    _radius,
+    _simulate_experiments,
+    _start_x0,
+    minimise_prediction_error,
+)
+from subid.methods.dt.polynomial import (
+    ORDER_NAMES,
+    SELECTIONS,
+    _check_input_columns,
+    _check_samples,
+    check_polynomial_data,
+    polynomial_model,
+    regress,
+    structure_orders,
+)
+from subid.model.polynomial import polynomial_record, realise
+
+__all__ = ["armax", "oe", "bj"]
+
+#: Largest order of the high-order ARX model behind the starts.
+HIGH_ORDER = 50
+#: Root radius the start's C, D, F are pulled within.
+START_RADIUS = 0.99
+
+
+def _stable(coef) -> np.ndarray:
+    """Monic polynomial (in q^-1) with its roots outside the unit circle reflected in."""
+    coef = np.asarray(coef, dtype=float)
+    if coef.size <= 1:
+        return coef
+    roots = np.roots(coef)
+    mag = np.abs(roots)
+    if mag.size == 0 or mag.max() < START_RADIUS:
+        return coef
+    roots = np.where(mag > 1.0, 1.0 / np.conj(roots), roots)
+    mag = np.abs(roots)
+    roots = np.where(mag > START_RADIUS, roots / np.maximum(mag, 1e-300) * START_RADIUS, roots)
+    return np.real(np.poly(roots))
+
+
+class _Output:
+    """The single-output sub-problem of output ``i``: orders, packing, predictor."""
+
+    def __init__(self, structure, orders, i, nu):
+        self.structure, self.nu = structure, nu
+        self.na = int(orders["na"][i, i])
+        self.nb = [int(v) for v in orders["nb"][i]]
+        self.nk = [int(v) for v in orders["nk"][i]]
+        self.nf = [int(v) for v in orders["nf"][i]]
+        self.nc, self.nd = int(orders["nc"][i]), int(orders["nd"][i])
+        self.lb = max(k + b for k, b in zip(self.nk, self.nb))
+        self.size = self.na + sum(self.nb) + self.nc + self.nd + sum(self.nf)
+
+    def record(self, theta):
+        """The single-output polynomial record of the coefficients ``theta``."""
+        nu = self.nu
+        at = 0
+        A = np.zeros((1, 1, self.na + 1))
+        A[0, 0, 0] = 1.0
+        A[0, 0, 1:] = theta[at:at + self.na]
+        at += self.na
+        B = np.zeros((1, nu, self.lb))
+        for j in range(nu):
+            B[0, j, self.nk[j]:self.nk[j] + self.nb[j]] = theta[at:at + self.nb[j]]
+            at += self.nb[j]
+        C = np.concatenate([[1.0], theta[at:at + self.nc]])[None]
+        at += self.nc
+        D = np.concatenate([[1.0], theta[at:at + self.nd]])[None]
+        at += self.nd
+        F = np.zeros((1, nu, max(self.nf) + 1))
+        F[0, :, 0] = 1.0
+        for j in range(nu):
+            F[0, j, 1:self.nf[j] + 1] = theta[at:at + self.nf[j]]
+            at += self.nf[j]
+        return polynomial_record(self.structure, A=A, B=B, C=C, D=D, F=F, na=[[self.na]],
+                                 nb=[self.nb], nc=[self.nc], nd=[self.nd], nf=[self.nf],
+                                 nk=[self.nk])
+
+    def pack(self, a, b, c, d, f):
+        """``theta`` from ``a`` (1..na), ``b`` (list of nb_j), ``c``, ``d``, ``f`` (list)."""
+        parts = [np.asarray(a, float)[:self.na]]
+        parts += [np.asarray(bj, float)[:n] for bj, n in zip(b, self.nb)]
+        parts += [np.asarray(c, float)[:self.nc], np.asarray(d, float)[:self.nd]]
+        parts += [np.asarray(fj, float)[:n] for fj, n in zip(f, self.nf)]
+        return np.concatenate(parts)
+
+    def blocks(self):
+        """``(states, coordinates)`` of each input's block for an output-error model
+        (whose predictor is block diagonal, :func:`block_jacobian`); None otherwise."""
+        if self.structure != "oe":
+            return None
+        out, at_state = [], 0
+        b_at = self.na
+        f_at = self.na + sum(self.nb) + self.nc + self.nd
+        for j in range(self.nu):
+            p = max(self.nf[j], self.nk[j] + self.nb[j] - 1, 0)
+            coords = list(range(b_at, b_at + self.nb[j])) + list(range(f_at, f_at + self.nf[j]))
+            out.append((np.arange(at_state, at_state + p), np.array(coords, dtype=np.int64)))
+            at_state += p
+            b_at += self.nb[j]
+            f_at += self.nf[j]
+        return out
+
+    def predictor(self, theta):
+        A, B, C, D, K = realise(self.record(theta))
+        return _predictor(A, B, C, D, K, "prediction")
+
+    def directions(self, theta):
+        """Derivatives of the predictor along every coefficient, then the x0 rows.
+
+        The predictor's matrices are polynomials of degree <= 2 in ``theta``
+        (module docstring): the unit-step central difference is exact.
+        """
+        base = self.predictor(theta)
+        n = base[0].shape[0]
+        d = self.size
+        out = [np.zeros((d + n,) + m.shape) for m in base]
+        for j in range(d):
+            e = np.zeros(d)
+            e[j] = 1.0
+            plus, minus = self.predictor(theta + e), self.predictor(theta - e)
+            for k in range(4):
+                out[k][j] = 0.5 * (plus[k] - minus[k])
+        dx0 = np.zeros((d + n, n))
+        dx0[d:] = np.eye(n)
+        return (*out, dx0)
+
+
+def _cost(sub, theta, v, y, ranges):
+    """``(cost, x0s)`` of the predictor of ``theta`` with least-squares initial states;
+    inf for an unstable predictor."""
+    Ap, Bp, Cp, Dp = sub.predictor(theta)
+    n = Ap.shape[0]
+    y = y[:, None]
+    if not np.isfinite(theta).all() or (n and _radius(Ap) >= 1.0 - 1e-9):
+        return math.inf, None
+    with np.errstate(all="ignore"):
+        x0 = np.stack([_start_x0(Ap, Bp, Cp, Dp, v[a:b], y[a:b]) if n else np.zeros(0)
+                       for a, b in ranges])
+        yhat = _simulate_experiments(Ap, Bp, Cp, Dp, v, x0, ranges)[0]
+    cost = 0.5 * float(np.mean((y - yhat) ** 2))
+    return (cost if math.isfinite(cost) else math.inf), x0
+
+
+def _high_order(n_samples, nu, needed):
+    return int(max(min(HIGH_ORDER, n_samples // (10 * (nu + 1))), needed + 2))
+
+
+def _filter(b, a, x):
+    with np.errstate(all="ignore"):
+        return scipy.signal.lfilter(b, a, x)
+
+
+def _arx_start(sub, u, y, ranges, na):
+    """ARX of the output's orders with autoregression degree ``na``: ``(a, b)``."""
+    blocks = [(u[:, j], range(sub.nk[j], sub.nk[j] + sub.nb[j])) for j in range(sub.nu)]
+    blocks.append((y, range(1, na + 1)))
+    first = max(na, sub.lb - 1)
+    theta, resid, _ = regress(y, blocks, ranges, first)
+    at, b = 0, []
+    for j in range(sub.nu):
+        b.append(theta[at:at + sub.nb[j]])
+        at += sub.nb[j]
+    return -theta[at:at + na], b
+
+
+def _high_order_arx(sub, u, y, ranges):
+    """A high-order ARX model of the output: ``(a, b_list, residual, h)``."""
+    h = _high_order(y.size, sub.nu, max([sub.na, sub.nc, sub.nd] + sub.nf + [sub.lb]))
+    k0 = min(sub.nk)
+    blocks = [(u[:, j], range(k0, k0 + h)) for j in range(sub.nu)] + [(y, range(1, h + 1))]
+    theta, resid, _ = regress(y, blocks, ranges, h + k0)
+    b = [np.concatenate([np.zeros(k0), theta[j * h:(j + 1) * h]]) for j in range(sub.nu)]
+    a = np.concatenate([[1.0], -theta[sub.nu * h:]])
+    return a, b, np.nan_to_num(resid), h
+
+
+def _hannan_rissanen(target, ehat, lags_ar, nc, extra_blocks, ranges, first):
+    """Least squares of ``target - ehat`` on ``lags_ar`` of ``target``, ``ehat``'s lags
+    1..nc and ``extra_blocks``: ``(ar_coefficients, c, extra_theta)``."""
+    blocks = list(extra_blocks) + [(target, range(1, lags_ar + 1)), (ehat, range(1, nc + 1))]
+    theta, _, _ = regress(target - ehat, blocks, ranges, first)
+    m = sum(len(lags) for _, lags in extra_blocks)
+    return -theta[m:m + lags_ar], theta[m + lags_ar:], theta[:m]
+
+
+def _starts(sub, u, y, ranges):
+    """Candidate start coefficient vectors (module docstring)."""
+    out = []
+    structure = sub.structure
+    if structure == "armax":
+        a, b = _arx_start(sub, u, y, ranges, sub.na)
+        out.append(sub.pack(a, b, np.zeros(sub.nc), [], [[]] * sub.nu))
+        if sub.nc:
+            _, _, ehat, h = _high_order_arx(sub, u, y, ranges)
+            first = h + max(sub.na, sub.lb - 1, sub.nc)
+            blocks = [(u[:, j], range(sub.nk[j], sub.nk[j] + sub.nb[j])) for j in range(sub.nu)]
+            a2, c2, bt = _hannan_rissanen(y, ehat, sub.na, sub.nc, blocks, ranges, first)
+            # HR regresses y - ê on ê's lags: the ê(t) term has coefficient one (monic C)
+            b2, at = [], 0
+            for j in range(sub.nu):
+                b2.append(bt[at:at + sub.nb[j]])
+                at += sub.nb[j]
+            out.append(sub.pack(a2, b2, _stable(np.concatenate([[1.0], c2]))[1:], [],
+                                [[]] * sub.nu))
+        return out
+    # OE and BJ: the plant's starts
+    plants = []
+    if len(set(sub.nf)) == 1:
+        a, b = _arx_start(sub, u, y, ranges, sub.nf[0])
+        f = _stable(np.concatenate([[1.0], a]))[1:]
+        plants.append((b, [f] * sub.nu))
+    a_h, b_h, _, _ = _high_order_arx(sub, u, y, ranges)
+    b_red, f_red = [], []
+    for j in range(sub.nu):
+        x = _filter(b_h[j], a_h, u[:, j])
+        if not np.isfinite(x).all():
+            break
+        blocks = [(u[:, j], range(sub.nk[j], sub.nk[j] + sub.nb[j])), (x, range(1, sub.nf[j] + 1))]
+        theta, _, _ = regress(x, blocks, ranges, max(sub.nf[j], sub.nk[j] + sub.nb[j] - 1))
+        b_red.append(theta[:sub.nb[j]])
+        f_red.append(_stable(np.concatenate([[1.0], -theta[sub.nb[j]:]]))[1:])
+    else:
+        plants.append((b_red, f_red))
+    for b, f in plants:
+        if structure == "oe":
+            out.append(sub.pack([], b, [], [], f))
+            continue
+        out.append(sub.pack([], b, np.zeros(sub.nc), np.zeros(sub.nd), f))
+        if sub.nc or sub.nd:
+            v = y.copy()
+            for j in range(sub.nu):
+                bj = np.zeros(sub.nk[j] + sub.nb[j])
+                bj[sub.nk[j]:] = b[j]
+                v -= _filter(bj, np.concatenate([[1.0], f[j]]), u[:, j])
+            if not np.isfinite(v).all():
+                continue
+            h = _high_order(y.size, 0, max(sub.nc, sub.nd))
+            _, ehat, _ = regress(v, [(v, range(1, h + 1))], ranges, h)
+            ehat = np.nan_to_num(ehat)
+            d, c, _ = _hannan_rissanen(v, ehat, sub.nd, sub.nc, [], ranges,
+                                       h + max(sub.nc, sub.nd))
+            out.append(sub.pack([], b, _stable(np.concatenate([[1.0], c]))[1:],
+                                _stable(np.concatenate([[1.0], d]))[1:], f))
+    return out
+
+
+def _fit_output(sub, u, y, ranges, *, estimate_x0, max_iterations, tolerance):
+    """The coefficients of one output: start, then prediction-error search."""
+    v = np.hstack([u, y[:, None]])
+    costs = []
+    for theta in _starts(sub, u, y, ranges):
+        cost, x0 = _cost(sub, theta, v, y, ranges)
+        if not estimate_x0 and x0 is not None:
+            x0 = np.zeros_like(x0)
+            cost = _cost_fixed(sub, theta, v, y, ranges, x0)
+        costs.append((cost, len(costs), theta, x0))
+    cost0, _, theta0, x00 = min(costs, key=lambda c: (c[0], c[1]))
+    if not math.isfinite(cost0):
+        raise SubidError(f"{sub.structure}: no start with a stable predictor was found; "
+                         "try lower orders")
+    record = {"start_cost": cost0, "final_cost": cost0, "n_evaluations": 0,
+              "stop_reason": "start kept"}
+    if cost0 <= 1e-24 * max(0.5 * float(np.mean(y ** 2)), 1e-300):
+        record["stop_reason"] = "the start fits the data to rounding (noise-free): kept"
+        return theta0, x00, record
+    sigma = math.sqrt(2.0 * cost0)
+    W = np.array([[1.0 / sigma]])
+    history = []
+    penalty = math.sqrt(2.0 * (10.0 * 0.5 + 1.0) / y.size)    # cost 10x the start's + 1
+    z, res = minimise_prediction_error(lambda dz: sub.predictor(theta0 + dz),
+                                       lambda dz: sub.directions(theta0 + dz), sub.size, x00, v,
+                                       y[:, None], ranges, W, max_iterations, tolerance,
+                                       history, penalty, fit_x0=estimate_x0,
+                                       blocks=sub.blocks())
+    record["n_evaluations"] = int(res.nfev)
+    new_cost = float(res.cost) * sigma ** 2
+    if new_cost < cost0:
+        theta = theta0 + z[:sub.size]
+        x0 = x00 + z[sub.size:].reshape(x00.shape) if estimate_x0 else x00
+        record.update(final_cost=new_cost, stop_reason=str(res.message))
+        return theta, x0, record
+    record["stop_reason"] = f"no improvement on the start ({res.message}); start kept"
+    return theta0, x00, record
+
+
+def _cost_fixed(sub, theta, v, y, ranges, x0):
+    Ap, Bp, Cp, Dp = sub.predictor(theta)
+    y = y[:, None]
+    with np.errstate(all="ignore"):
+        yhat = _simulate_experiments(Ap, Bp, Cp, Dp, v, x0, ranges)[0]
+    cost = 0.5 * float(np.mean((y - yhat) ** 2))
+    return cost if math.isfinite(cost) else math.inf
+
+
+def _stack(records, structure, orders):
+    """The multi-output record from the single-output ones."""
+    ny = len(records)
+    nu = records[0]["B"].shape[1]
+
+    def cat(key):                      # (1, nu, l) per output -> (ny, nu, max l)
+        length = max(r[key].shape[-1] for r in records)
+        out = np.zeros((ny, nu, length))
+        for i, r in enumerate(records):
+            out[i, :, :r[key].shape[-1]] = r[key][0]
+        return out
+    A = np.zeros((ny, ny, max(r["A"].shape[-1] for r in records)))
+    for i, r in enumerate(records):
+        A[i, i, :r["A"].shape[-1]] = r["A"][0, 0]
+    C = np.zeros((ny, max(r["C"].shape[-1] for r in records)))
+    D = np.zeros((ny, max(r["D"].shape[-1] for r in records)))
+    for i, r in enumerate(records):
+        C[i, :r["C"].shape[-1]] = r["C"][0]
+        D[i, :r["D"].shape[-1]] = r["D"][0]
+    return polynomial_record(structure, A=A, B=cat("B"), C=C, D=D, F=cat("F"),
+                             na=orders["na"], nb=orders["nb"], nc=orders["nc"],
+                             nd=orders["nd"], nf=orders["nf"], nk=orders["nk"])
+
+
+def _identify(structure, data, order, selection, estimate_x0, max_iterations, tolerance):
+    check_choice(selection, "selection", SELECTIONS)
+    check_bool(estimate_x0, "estimate_x0")
+    if isinstance(max_iterations, bool) or not isinstance(max_iterations, int) \
+            or max_iterations < 1:
+        raise OptionError(f"max_iterations must be a positive integer, got {max_iterations!r}")
+    if isinstance(tolerance, bool) or not (isinstance(tolerance, (int, float))
+                                           and 0 < tolerance < 1):
+        raise OptionError(f"tolerance must be in (0, 1), got {tolerance!r}")
+    data = check_polynomial_data(data, structure)
+    ny, nu = data.n_outputs, data.n_inputs
+    with collect_warnings() as issued:
+        orders, selection_record = structure_orders(order, structure, data)
+        ranges = data.experiment_ranges
+        records, fits, resid = [], [], np.empty_like(data.y)
+        for i in range(ny):
+            sub = _Output(structure, orders, i, nu)
+            first = max(sub.na, sub.lb - 1, max(sub.nf), sub.nc, sub.nd)
+            _check_samples(data, sub.size, first, structure)
+            blocks = [(data.u[:, j], range(sub.nk[j], sub.nk[j] + sub.nb[j]))
+                      for j in range(nu)]
+            _, _, R = regress(data.y[:, i], blocks, ranges, first)
+            _check_input_columns(R, [f"input {data.input_names[j]} at lag {lag}"
+                                     for j in range(nu)
+                                     for lag in range(sub.nk[j], sub.nk[j] + sub.nb[j])],
+                                 structure)
+            theta, x0, fit = _fit_output(sub, data.u, data.y[:, i], ranges,
+                                         estimate_x0=estimate_x0,
+                                         max_iterations=max_iterations, tolerance=tolerance)
+            records.append(sub.record(theta))
+            fits.append(fit)
+            Ap, Bp, Cp, Dp = sub.predictor(theta)
+            v = np.hstack([data.u, data.y[:, i:i + 1]])
+            resid[:, i] = data.y[:, i] - _simulate_experiments(Ap, Bp, Cp, Dp, v, x0,
+                                                               ranges)[0][:, 0]
+        poly = _stack(records, structure, orders)
+        model = polynomial_model(
+            data, poly, method=structure, order_selection=selection_record, residuals=resid,
+            conditions={}, rank_profile=np.sort(np.abs(np.diag(R)))[::-1],
+            orders={k: orders[k] for k in ORDER_NAMES[structure]},
+            start_cost=[f["start_cost"] for f in fits],
+            final_cost=[f["final_cost"] for f in fits],
+            n_evaluations=[f["n_evaluations"] for f in fits],
+            stop_reason=[f["stop_reason"] for f in fits],
+            multi_output="one multi-input single-output model per output" if ny > 1
+            else None)
+        if not estimate_x0:
+            model.info["x0"] = None
+    model.info["warnings"] = list(issued)
+    return model
+
+
+
+
+def armax(data, order=None, *, selection="cv", estimate_x0=True, max_iterations=100,
+          tolerance=1e-8):
+    """Identify an ARMAX model ``A y = B u + C e`` by prediction-error minimisation.
+
+    MATLAB ``armax``; one multi-input single-output model per output (module
+    docstring), started from the better of the ARX estimate and the
+    Hannan-Rissanen estimate.
+
+    Parameters
+    ----------
+    data : IOData
+        Uniformly sampled record with at least one input.
+    order : tuple, int, 'auto' or None
+        MATLAB's ``(na, nb, nc, nk)``: ``na``, ``nc`` scalars or one per
+        output, ``nb``, ``nk`` scalars or (ny, nu) arrays. An integer ``n``:
+        ``na = nc = n``, ``nk`` from :func:`subid.estimate_delay`, ``nb = n``
+        (``n + 1`` where ``nk = 0``). None/'auto': see ``selection``.
+    selection : {'cv'}
+        How a structure not given is chosen: the degrees of the ARX
+        structure :func:`subid.arx` chooses by cross-validation.
+    estimate_x0 : bool
+        Estimate the initial state of each output's predictor with the
+        coefficients (else it is zero).
+    max_iterations : int
+        Bound on the criterion evaluations of the search, per output.
+    tolerance : float
+        ``ftol = xtol = gtol`` of :func:`scipy.optimize.least_squares`.
+
+    Returns
+    -------
+    StateSpace
+        Innovation form of the model (``K``, ``noise_cov``: the covariance
+        of the one-step prediction errors) with ``info['polynomials']``
+        (:mod:`subid.model.polynomial`), ``start_cost``, ``final_cost``,
+        ``n_evaluations`` and ``stop_reason`` (one entry per output).
+
+    Raises
+    ------
+    DataError
+        Not a uniformly sampled IOData record, or no input.
+    OrderError
+        Orders that are not non-negative integers of the right shapes.
+    NotExcitingError
+        An input lag of the regression is a combination of the others.
+    TooFewSamplesError
+        Fewer samples than the coefficients need.
+    OptionError
+        Bad option values.
+
+    Examples
+    --------
+    >>> import subid
+    >>> data = subid.systems.simulate_data(subid.systems.seed001_system(), 400, seed=1)
+    >>> model = subid.armax(data, (3, 4, 1, 0))
+    >>> model.info["polynomials"]["structure"]
+    'armax'
+    """
+    return _identify("armax", data, order, selection, estimate_x0, max_iterations, tolerance)
+
+
+def oe(data, order=None, *, selection="cv", estimate_x0=True, max_iterations=100,
+       tolerance=1e-8):
+    """Identify an output-error model ``y = B/F u + e`` by prediction-error minimisation.
+
+    MATLAB ``oe``; one multi-input single-output model per output with one
+    ``F`` per input (module docstring), started from the better of the ARX
+    estimate and the reduction of a high-order ARX model.
+
+    Parameters
+    ----------
+    data : IOData
+        Uniformly sampled record with at least one input.
+    order : tuple, int, 'auto' or None
+        MATLAB's ``(nb, nf, nk)``, each a scalar or a (ny, nu) array. An
+        integer ``n``: ``nf = n``, ``nk`` from :func:`subid.estimate_delay`,
+        ``nb = n`` (``n + 1`` where ``nk = 0``). None/'auto': see
+        ``selection``.
+    selection : {'cv'}
+        How a structure not given is chosen: the degrees of the ARX
+        structure :func:`subid.arx` chooses by cross-validation.
+    estimate_x0 : bool
+        Estimate the initial state of each output's predictor with the
+        coefficients (else it is zero).
+    max_iterations : int
+        Bound on the criterion evaluations of the search, per output.
+    tolerance : float
+        ``ftol = xtol = gtol`` of :func:`scipy.optimize.least_squares`.
+
+    Returns
+    -------
+    StateSpace
+        Innovation form of the model (``K``, ``noise_cov``: the covariance
+        of the one-step prediction errors) with ``info['polynomials']``
+        (:mod:`subid.model.polynomial`), ``start_cost``, ``final_cost``,
+        ``n_evaluations`` and ``stop_reason`` (one entry per output).
+
+    Raises
+    ------
+    DataError
+        Not a uniformly sampled IOData record, or no input.
+    OrderError
+        Orders that are not non-negative integers of the right shapes.
+    NotExcitingError
+        An input lag of the regression is a combination of the others.
+    TooFewSamplesError
+        Fewer samples than the coefficients need.
+    OptionError
+        Bad option values.
+
+    Examples
+    --------
+    >>> import subid
+    >>> data = subid.systems.simulate_data(subid.systems.seed001_system(), 400, seed=1)
+    >>> model = subid.oe(data, (4, 3, 0))
+    >>> round(float(subid.markov_error(model, subid.systems.seed001_system())), 6)
+    0.0
+    """
+    return _identify("oe", data, order, selection, estimate_x0, max_iterations, tolerance)
+
+
+def bj(data, order=None, *, selection="cv", estimate_x0=True, max_iterations=100,
+       tolerance=1e-8):
+    """Identify a Box-Jenkins model ``y = B/F u + C/D e`` by prediction-error minimisation.
+
+    MATLAB ``bj``; one multi-input single-output model per output (module
+    docstring), the plant started as in :func:`subid.oe` and the noise model
+    by Hannan-Rissanen on the output-error residual.
+
+    Parameters
+    ----------
+    data : IOData
+        Uniformly sampled record with at least one input.
+    order : tuple, int, 'auto' or None
+        MATLAB's ``(nb, nc, nd, nf, nk)``: ``nc``, ``nd`` scalars or one per
+        output, ``nb``, ``nf``, ``nk`` scalars or (ny, nu) arrays. An integer
+        ``n``: ``nc = nd = nf = n``, ``nk`` from :func:`subid.estimate_delay`,
+        ``nb = n`` (``n + 1`` where ``nk = 0``). None/'auto': see
+        ``selection``.
+    selection : {'cv'}
+        How a structure not given is chosen: the degrees of the ARX
+        structure :func:`subid.arx` chooses by cross-validation.
+    estimate_x0 : bool
+        Estimate the initial state of each output's predictor with the
+        coefficients (else it is zero).
+    max_iterations : int
+        Bound on the criterion evaluations of the search, per output.
+    tolerance : float
+        ``ftol = xtol = gtol`` of :func:`scipy.optimize.least_squares`.
+
+    Returns
+    -------
+    StateSpace
+        Innovation form of the model (``K``, ``noise_cov``: the covariance
+        of the one-step prediction errors) with ``info['polynomials']``
+        (:mod:`subid.model.polynomial`), ``start_cost``, ``final_cost``,
+        ``n_evaluations`` and ``stop_reason`` (one entry per output).
+
+    Raises
+    ------
+    DataError
+        Not a uniformly sampled IOData record, or no input.
+    OrderError
+        Orders that are not non-negative integers of the right shapes.
+    NotExcitingError
+        An input lag of the regression is a combination of the others.
+    TooFewSamplesError
+        Fewer samples than the coefficients need.
+    OptionError
+        Bad option values.
+
+    Examples
+    --------
+    >>> import subid
+    >>> data = subid.systems.simulate_data(subid.systems.seed001_system(), 400, seed=1)
+    >>> model = subid.bj(data, (4, 1, 1, 3, 0))
+    >>> sorted(model.info["polynomials"])[:3]
+    ['A', 'B', 'C']
+    """
+    return _identify("bj", data, order, selection, estimate_x0, max_iterations, tolerance)
+

@@ -1,0 +1,492 @@
+"""ARX models by QR least squares, and the orders of every polynomial method.
+
+:func:`arx` fits the multi-output ARX model (Ljung, *System
+Identification*, 2nd ed., 1999, Sec. 4.2 and 10.1, eq. 10.5)
+
+    y(t) + A_1 y(t-1) + ... + A_na y(t-na) = B_0 u(t-nk) + ... + e(t)
+
+by linear least squares: the regressors of every lag of every channel
+(each channel divided by its RMS) are factored once by QR, and each output's
+coefficients solve a small triangular problem on the columns of the factor
+it uses (as :func:`subid.estimate_delay` does). The regression runs from
+the first sample at which every lag exists (the samples before it are the
+initial conditions), experiment by experiment for a record of several.
+
+``orders='auto'`` (or None) chooses ``(na, nb, nk)`` from the estimation
+record, MATLAB's ``arxstruc``/``selstruc`` idea with the selection rule of
+the subspace defaults (:mod:`subid.methods.dt._selection`): ``nk`` per
+input from :func:`subid.estimate_delay`, then every ``na, nb`` in 1..10 is
+fitted on the training part of the four contiguous folds and scored by its
+simulation fit on the held-out part (searched along ``na = nb``, then ``nb``
+at the best ``na``, then ``na`` at the best ``nb``: 28 structures, not the
+100 of the full grid); the smallest ``na + nb`` (then ``na``)
+whose misfit is within 1 % of the best is chosen.
+"""
+
+from __future__ import annotations
+
+import numbers
+
+import numpy as np
+import scipy.linalg
+
+from subid._validation import check_bool, check_choice
+from subid.data import IOData
+from subid.errors import (
+    DataError,
+    NotExcitingError,
+    OrderError,
+    SubidError,
+    TooFewSamplesError,
+)
+from subid.methods._info import collect_warnings, model_info
+from subid.methods.dt import _subspace
+from subid.methods.dt._checks import check_data
+from subid.methods.dt._selection import (
+    ABSOLUTE_TOLERANCE,
+    MAX_ORDER,
+    RELATIVE_TOLERANCE,
+    _fit_score,
+    experiment_folds,
+    folds,
+)
+from subid.model.polynomial import polynomial_record, realise
+from subid.model.statespace import StateSpace
+
+__all__ = ["arx", "parse_orders", "structure_orders", "fit_arx", "ORDER_NAMES",
+           "polynomial_model", "check_polynomial_data", "regress", "select_structure"]
+
+#: The orders of each structure, in MATLAB's order.
+ORDER_NAMES = {"arx": ("na", "nb", "nk"), "armax": ("na", "nb", "nc", "nk"),
+               "oe": ("nb", "nf", "nk"), "bj": ("nb", "nc", "nd", "nf", "nk")}
+SELECTIONS = ("cv",)
+#: A diagonal entry of the input columns of the regression factor below this
+#: fraction of its column's norm marks an input lag that repeats earlier ones.
+RANK_TOL = 1e-10
+
+
+def check_polynomial_data(data, method: str) -> IOData:
+    """The record a polynomial method may use (IOData, uniform, at least one input)."""
+    data = check_data(data, method)
+    if data.n_inputs == 0:
+        raise DataError(f"{method} needs a record with at least one input")
+    return data
+
+
+def _order_array(value, shape, name: str, minimum: int, method: str) -> np.ndarray:
+    """``value`` (a scalar or an array of integers) as an int array of ``shape``."""
+    arr = np.asarray(value, dtype=object)
+    flat = []
+    for v in arr.ravel():
+        integral = isinstance(v, numbers.Integral) or (
+            isinstance(v, numbers.Real) and float(v).is_integer())
+        if isinstance(v, (bool, np.bool_)) or not integral:
+            raise OrderError(f"{method}: {name} must be a non-negative integer or an array "
+                             f"of them, got {value!r}")
+        flat.append(int(v))
+    out = np.array(flat, dtype=np.int64).reshape(arr.shape)
+    if out.ndim == 0:
+        out = np.full(shape, int(out))
+    elif out.size == np.prod(shape):
+        out = out.reshape(shape)
+    else:
+        raise OrderError(f"{method}: {name} must be a scalar or have shape {shape} (one per "
+                         f"{'output' if len(shape) == 1 else 'channel pair'}), got "
+                         f"{np.shape(value)}")
+    if (out < minimum).any():
+        raise OrderError(f"{method}: {name} must be >= {minimum}, got {value!r}")
+    return out
+
+
+def parse_orders(order, structure: str, ny: int, nu: int, nk_default=None) -> dict:
+    """The orders of a polynomial structure from MATLAB's tuple or an integer.
+
+    ``order`` is the tuple of :data:`ORDER_NAMES` (each a scalar or an array:
+    ``na`` (ny, ny) for ARX, per output otherwise; ``nb``, ``nf``, ``nk``
+    (ny, nu); ``nc``, ``nd`` per output), or an integer ``n``: every
+    denominator (and ``C``, ``D``) of degree ``n``, ``nk = nk_default``
+    (estimated delays) and ``nb = n``, plus one where ``nk = 0`` (a proper
+    numerator), with a diagonal ``A`` for ARX (one autoregression per output).
+
+    Returns
+    -------
+    dict of int arrays ``na`` (ny, ny), ``nb``, ``nk``, ``nf`` (ny, nu), ``nc``, ``nd`` (ny,)
+    """
+    names = ORDER_NAMES[structure]
+    out = {"na": np.zeros((ny, ny), np.int64), "nb": np.zeros((ny, nu), np.int64),
+           "nk": np.ones((ny, nu), np.int64), "nf": np.zeros((ny, nu), np.int64),
+           "nc": np.zeros(ny, np.int64), "nd": np.zeros(ny, np.int64)}
+    if isinstance(order, (bool, np.bool_, str, bytes, float)):
+        raise OrderError(f"{structure}: order must be an integer or the tuple "
+                         f"({', '.join(names)}), got {order!r}")
+    if isinstance(order, (int, np.integer)):
+        n = int(order)
+        if n < 1:
+            raise OrderError(f"{structure}: order must be >= 1, got {n}")
+        nk = np.ones((ny, nu), np.int64) if nk_default is None else \
+            np.broadcast_to(np.asarray(nk_default, np.int64), (ny, nu)).copy()
+        out["nk"] = nk
+        out["nb"] = n + (nk == 0).astype(np.int64)
+        for key in names:
+            if key in ("nc", "nd"):
+                out[key] = np.full(ny, n, np.int64)
+            elif key == "nf":
+                out[key] = np.full((ny, nu), n, np.int64)
+            elif key == "na":
+                out[key] = n * np.eye(ny, dtype=np.int64) if structure == "arx" else \
+                    np.diag(np.full(ny, n, np.int64))
+        return out
+    try:
+        items = list(order)
+    except TypeError:
+        raise OrderError(f"{structure}: order must be an integer or the tuple "
+                         f"({', '.join(names)}), got {order!r}") from None
+    if len(items) != len(names):
+        raise OrderError(f"{structure}: the orders are ({', '.join(names)}): {len(names)} "
+                         f"values, got {len(items)} ({order!r})")
+    for key, value in zip(names, items):
+        if key == "na":
+            if structure == "arx":
+                out["na"] = _order_array(value, (ny, ny), key, 0, structure)
+            else:
+                out["na"] = np.diag(_order_array(value, (ny,), key, 0, structure))
+        elif key in ("nc", "nd"):
+            out[key] = _order_array(value, (ny,), key, 0, structure)
+        else:
+            out[key] = _order_array(value, (ny, nu), key, 1 if key == "nb" and
+                                    structure in ("oe", "bj") else 0, structure)
+    return out
+
+
+def regress(target: np.ndarray, blocks, ranges, first: int):
+    """Least squares of ``target[t]`` on lagged signals, experiment by experiment.
+
+    ``blocks`` is a list of ``(signal, lags)`` (1-D signal, iterable of lags
+    >= 0); rows ``t = a + first .. b - 1`` of every experiment ``(a, b)`` of
+    ``ranges``. Returns ``theta, residual (full length, NaN before first),
+    R`` (the triangular factor of the regressors, for rank decisions).
+    """
+    cols = [(s, lag) for s, lags in blocks for lag in lags]
+    rows, tgt = [], []
+    for a, b in ranges:
+        if b - a <= first:
+            continue
+        t = np.arange(a + first, b)
+        rows.append(np.column_stack([s[t - lag] for s, lag in cols]) if cols
+                    else np.zeros((t.size, 0)))
+        tgt.append(target[t])
+    Phi = np.vstack(rows)
+    T = np.concatenate(tgt)
+    R = scipy.linalg.qr(np.column_stack([Phi, T]), mode="r", check_finite=False)[0]
+    m = Phi.shape[1]
+    R = R[:m + 1, :m + 1]
+    # columns that repeat the others to RANK_TOL (e.g. past outputs of noise-free data
+    # that the past inputs and fewer past outputs already determine) get no weight:
+    # the minimum-norm solution, not one that cancels huge coefficients
+    theta = scipy.linalg.lstsq(R[:m, :m], R[:m, m], lapack_driver="gelsy", cond=RANK_TOL,
+                               check_finite=False)[0] if m else np.zeros(0)
+    resid = np.full(target.shape[0], np.nan)
+    at = 0
+    for a, b in ranges:
+        if b - a <= first:
+            continue
+        t = np.arange(a + first, b)
+        resid[t] = T[at:at + t.size] - Phi[at:at + t.size] @ theta
+        at += t.size
+    return theta, resid, R[:m, :m]
+
+
+def _first(orders) -> int:
+    return int(max(orders["na"].max(initial=0), (orders["nk"] + orders["nb"] - 1).max(initial=0),
+                   0))
+
+
+def _check_samples(data, n_params: int, first: int, method: str) -> None:
+    rows = sum(max(b - a - first, 0) for a, b in data.experiment_ranges)
+    if rows < 2 * n_params + 10:
+        raise TooFewSamplesError(f"{method}: these orders need {n_params} coefficients per "
+                                 f"output and at least {2 * n_params + 10 + first} samples; "
+                                 f"the record has {data.n_samples}; use lower orders")
+
+
+def _check_input_columns(R, labels, method: str):
+    """NotExcitingError when an input lag of the regression repeats the earlier ones."""
+    norms = np.linalg.norm(R, axis=0)
+    for k, label in enumerate(labels):
+        if norms[k] == 0 or abs(R[k, k]) <= RANK_TOL * norms[k]:
+            raise NotExcitingError(
+                f"{method}: the input is not sufficiently exciting: {label} is a linear "
+                "combination of the earlier input samples (or zero), so the input "
+                "coefficients are not determined. Use a richer input (white noise, PRBS, "
+                "multisine) or fewer input coefficients (nb)",
+                required_order=len(labels), achieved_order=k)
+
+
+def fit_arx(data: IOData, orders: dict, *, method: str = "arx", check: bool = True):
+    """The ARX polynomials of ``orders`` (a :func:`parse_orders` dict) by least squares.
+
+    Every channel is divided by its RMS for the regression and the
+    coefficients scaled back. Returns ``(A, B, residuals, info)`` with ``A``
+    (ny, ny, na+1), ``B`` (ny, nu, max(nk+nb)), the one-step residuals (NaN
+    over the initial conditions) and the regression's rank profile and
+    condition number.
+    """
+    u, y = data.u, data.y
+    ny, nu = y.shape[1], u.shape[1]
+    su = np.sqrt(np.mean(u ** 2, axis=0))
+    sy = np.sqrt(np.mean(y ** 2, axis=0))
+    su = np.where(su > 0, su, 1.0)
+    sy = np.where(sy > 0, sy, 1.0)
+    un, yn = u / su, y / sy
+    na, nb, nk = orders["na"], orders["nb"], orders["nk"]
+    first = _first(orders)
+    n_params = int(na.sum(axis=1).max() + nb.sum(axis=1).max())
+    _check_samples(data, n_params, first, method)
+    A = np.zeros((ny, ny, int(na.max(initial=0)) + 1))
+    A[:, :, 0] = np.eye(ny)
+    B = np.zeros((ny, nu, int((nk + nb).max(initial=1))))
+    resid = np.empty_like(y)
+    profile, conds = [], []
+    ranges = data.experiment_ranges
+    for i in range(ny):
+        blocks = [(un[:, j], range(nk[i, j], nk[i, j] + nb[i, j])) for j in range(nu)]
+        labels = [f"input {data.input_names[j]} at lag {lag}" for j in range(nu)
+                  for lag in range(nk[i, j], nk[i, j] + nb[i, j])]
+        blocks += [(yn[:, k], range(1, na[i, k] + 1)) for k in range(ny)]
+        theta, r, R = regress(yn[:, i], blocks, ranges, first)
+        if check:
+            _check_input_columns(R[:len(labels), :len(labels)], labels, method)
+        profile.append(np.abs(np.diag(R)))
+        conds.append(float(np.max(np.abs(np.diag(R))) / max(np.min(np.abs(np.diag(R))),
+                                                              1e-300)) if R.size else 1.0)
+        at = 0
+        for j in range(nu):
+            B[i, j, nk[i, j]:nk[i, j] + nb[i, j]] = theta[at:at + nb[i, j]] * sy[i] / su[j]
+            at += nb[i, j]
+        for k in range(ny):
+            A[i, k, 1:na[i, k] + 1] = -theta[at:at + na[i, k]] * sy[i] / sy[k]
+            at += na[i, k]
+        resid[:, i] = r * sy[i]
+    return A, B, resid, {"rank_profile": np.sort(np.concatenate(profile))[::-1],
+                         "regression_condition": max(conds)}
+
+
+def predictor_x0(model: StateSpace, data: IOData):
+    """Least-squares initial state(s) of the one-step predictor of ``model`` on ``data``
+    (one row per experiment; a vector for a single experiment)."""
+    from subid.methods.dt.pem import _predictor, _start_x0
+    K = model.K if model.K is not None else np.zeros((model.order, model.n_outputs))
+    Ap, Bp, Cp, Dp = _predictor(model.A, model.B, model.C, model.D, K, "prediction")
+    v = np.hstack([data.u, data.y])
+    if model.order == 0:
+        return np.zeros(0)
+    rows = [_start_x0(Ap, Bp, Cp, Dp, v[a:b], data.y[a:b]) for a, b in data.experiment_ranges]
+    return rows[0] if len(rows) == 1 else np.stack(rows)
+
+
+def polynomial_model(data: IOData, poly: dict, *, method: str, order_selection=None,
+                     residuals=None, conditions=None, **extra) -> StateSpace:
+    """The StateSpace of the polynomials ``poly`` with the core ``info`` keys.
+
+    ``residuals`` (N, ny) give ``noise_cov`` (samples with NaN, the initial
+    conditions, left out); ``info['x0']`` is the predictor's initial state
+    by least squares.
+    """
+    A, B, C, D, K = realise(poly)
+    ny = data.n_outputs
+    if residuals is not None:
+        r = residuals[np.isfinite(residuals).all(axis=1)]
+        noise_cov = r.T @ r / max(r.shape[0], 1)
+    else:
+        noise_cov = np.eye(ny)
+    with np.errstate(all="ignore"):
+        base = StateSpace(A, B, C, D, data.dt, input_names=data.input_names,
+                          output_names=data.output_names, K=K, noise_cov=noise_cov)
+        x0 = predictor_x0(base, data) if A.shape[0] else np.zeros(0)
+    info = model_info(method, order=A.shape[0], order_selection=order_selection, horizon=None,
+                      n_samples=data.n_samples, x0=x0, hold="zoh", conditions=conditions,
+                      **extra)
+    info["polynomials"] = poly
+    info.update(_subspace.check_stability(A, data, method) if A.shape[0] else {})
+    predictor = A - K @ C
+    info["predictor_spectral_radius"] = float(np.abs(np.linalg.eigvals(predictor)).max()) \
+        if A.shape[0] else 0.0
+    info["noise_model"] = "the polynomial model's own (C/(A D))"
+    return base.with_noise_model(K, noise_cov, info=info)
+
+
+def _arx_record(A, B, orders) -> dict:
+    ny, nu = B.shape[:2]
+    return polynomial_record("arx", A=A, B=B, C=np.ones((ny, 1)), D=np.ones((ny, 1)),
+                             F=np.ones((ny, nu, 1)), na=orders["na"], nb=orders["nb"],
+                             nc=np.zeros(ny), nd=np.zeros(ny), nf=np.zeros((ny, nu)),
+                             nk=orders["nk"])
+
+
+def select_structure(data: IOData, max_order: int = MAX_ORDER):
+    """``(orders, record)``: ``(na, nb, nk)`` chosen by cross-validation (module docstring)."""
+    ny, nu = data.n_outputs, data.n_inputs
+    nk = _delays(data)
+    if nk is None:
+        nk = np.ones(nu, np.int64)
+    if data.n_experiments > 1:
+        parts = experiment_folds(data)
+    else:
+        parts = [(data[a], data[b]) for a, b in folds(data.n_samples)]
+    scores = {}
+
+    def score(na, nb):
+        if (na, nb) in scores:
+            return
+        orders = parse_orders((na, nb, np.tile(nk, (ny, 1))), "arx", ny, nu)
+        values = []
+        try:
+            for train, validation in parts:
+                A, B, _, _ = fit_arx(train, orders, check=False)
+                Ass, Bss, Css, Dss, _ = realise(_arx_record(A, B, orders))
+                values.append(_fit_score(StateSpace(Ass, Bss, Css, Dss, data.dt), validation))
+        except SubidError:
+            return
+        scores[(na, nb)] = float(np.mean(values))
+
+    def best(keys):
+        keys = [k for k in keys if k in scores]
+        return max(keys, key=lambda k: (scores[k], -k[0] - k[1])) if keys else None
+
+    grid = range(1, max_order + 1)
+    for k in grid:                        # na = nb, then nb at the best na, na at the best nb
+        score(k, k)
+    top = best([(k, k) for k in grid])
+    if top is not None:
+        for nb in grid:
+            score(top[0], nb)
+        top = best([(top[0], nb) for nb in grid])
+        for na in grid:
+            score(na, top[1])
+    if not scores:
+        raise TooFewSamplesError("arx: the record is too short to compare ARX structures "
+                                 "by cross-validation; give the orders (na, nb, nk)")
+    limit = (100.0 - max(scores.values())) * (1.0 + RELATIVE_TOLERANCE) + ABSOLUTE_TOLERANCE
+    na, nb = min((key for key, value in scores.items() if 100.0 - value <= limit),
+                 key=lambda k: (k[0] + k[1], k[0]))
+    record = {"rule": "cv",
+              "description": ("ARX structures (na, nb in 1.."f"{max_order} along na = nb, "
+                              "then nb, then na; nk from estimate_delay) scored by four-fold "
+                              "contiguous "
+                              "cross-validation (simulation fit % on the held-out part); "
+                              "smallest na + nb whose misfit is within "
+                              f"{100 * RELATIVE_TOLERANCE:g} % of the best"),
+              "candidates": [{"na": k[0], "nb": k[1], "score": v}
+                             for k, v in sorted(scores.items())],
+              "selected": {"na": na, "nb": nb, "nk": nk.tolist(), "score": scores[(na, nb)]}}
+    return parse_orders((na, nb, np.tile(nk, (ny, 1))), "arx", ny, nu), record
+
+
+def _delays(data) -> np.ndarray | None:
+    """``nk`` per input by :func:`subid.estimate_delay` (None when the record is too short)."""
+    from subid.delay import estimate_delay
+    ny, nu = data.n_outputs, data.n_inputs
+    max_delay = int(min(10, max(data.n_samples // (20 * (nu + ny + 1)) - 3, 0)))
+    try:
+        return np.asarray(estimate_delay(data, max_delay=max_delay), np.int64)
+    except SubidError:
+        return None
+
+
+def structure_orders(order, structure: str, data: IOData):
+    """``(orders, order_selection)`` of a polynomial method's ``order`` argument.
+
+    None/'auto': the ARX structure chosen by :func:`select_structure`, its
+    degrees ``n = max(na)``, ``nb`` and ``nk`` used for the other structures
+    (``(n, nb, n, nk)``, ``(nb, n, nk)``, ``(nb, n, n, n, nk)``). An integer:
+    :func:`parse_orders` with the delays of :func:`subid.estimate_delay`.
+    A tuple: :func:`parse_orders`.
+    """
+    ny, nu = data.n_outputs, data.n_inputs
+    if order is None or (isinstance(order, str) and order == "auto"):
+        orders, record = select_structure(data)
+        if structure == "arx":
+            return orders, record
+        n, nb, nk = int(orders["na"].max()), orders["nb"], orders["nk"]
+        given = {"armax": (n, nb, n, nk), "oe": (nb, n, nk), "bj": (nb, n, n, n, nk)}[structure]
+        record = dict(record, description=f"the degrees of the cross-validated ARX structure "
+                                          f"(n = {n}, nb, nk): " + record["description"])
+        return parse_orders(given, structure, ny, nu), record
+    integer = isinstance(order, (int, np.integer)) and not isinstance(order, bool)
+    nk = _delays(data) if integer and order >= 1 else None
+    return parse_orders(order, structure, ny, nu, nk_default=nk), None
+
+
+def arx(data, order=None, *, selection="cv", estimate_x0=True):
+    """Identify an ARX model by least squares (MATLAB ``arx``).
+
+    Parameters
+    ----------
+    data : IOData
+        Uniformly sampled record with at least one input (several
+        experiments: :func:`subid.merge`; no regression row spans two).
+    order : tuple, int, 'auto' or None
+        MATLAB's ``(na, nb, nk)``: ``na`` a scalar or a (ny, ny) array of the
+        degrees of the entries of the matrix polynomial ``A(q)`` (a scalar
+        means every entry, as in MATLAB), ``nb`` the number of coefficients
+        and ``nk`` the delay of each input (scalars or (ny, nu) arrays; nk=0
+        for direct feedthrough). An integer ``n``: ``na = n`` on the diagonal
+        (one autoregression per output), ``nk`` from
+        :func:`subid.estimate_delay`, ``nb = n`` (``n + 1`` where ``nk = 0``).
+        ``None``/``'auto'``: chosen by cross-validation (module docstring).
+    selection : {'cv'}
+        The rule of the structure choice (cross-validation, the rule of the
+        subspace defaults).
+    estimate_x0 : bool
+        Estimate the initial state of the model's one-step predictor
+        (``info['x0']``); the regression itself starts at the first sample
+        where every lag exists.
+
+    Returns
+    -------
+    StateSpace
+        The innovation form of the ARX model (noise model ``1/A``: ``K``
+        and ``noise_cov``, the residual covariance) with
+        ``info['polynomials']`` (:mod:`subid.model.polynomial`).
+
+    Raises
+    ------
+    DataError
+        Not a uniformly sampled IOData record, or no input.
+    OrderError
+        Orders that are not non-negative integers of the right shapes.
+    NotExcitingError
+        An input lag of the regression is a combination of the others.
+    TooFewSamplesError
+        Fewer samples than the coefficients need.
+
+    Examples
+    --------
+    >>> import numpy as np, subid
+    >>> rng = np.random.default_rng(0)
+    >>> u = rng.standard_normal(500)
+    >>> y = np.zeros(500)
+    >>> for t in range(2, 500):
+    ...     y[t] = 1.5 * y[t - 1] - 0.7 * y[t - 2] + u[t - 1] + 0.5 * u[t - 2]
+    >>> model = subid.arx(subid.IOData(u, y, dt=1.0), (2, 2, 1))
+    >>> np.round(model.info["polynomials"]["A"][0, 0], 6)
+    array([ 1. , -1.5,  0.7])
+    """
+    check_choice(selection, "selection", SELECTIONS)
+    check_bool(estimate_x0, "estimate_x0")
+    data = check_polynomial_data(data, "arx")
+    with collect_warnings() as issued:
+        orders, record = structure_orders(order, "arx", data)
+        A, B, resid, reg = fit_arx(data, orders)
+        poly = _arx_record(A, B, orders)
+        model = polynomial_model(data, poly, method="arx", order_selection=record,
+                                 residuals=resid,
+                                 conditions={"regression": reg["regression_condition"]},
+                                 rank_profile=reg["rank_profile"],
+                                 orders={"na": orders["na"], "nb": orders["nb"],
+                                         "nk": orders["nk"]})
+        if not estimate_x0:
+            model.info["x0"] = None
+    model.info["warnings"] = list(issued)
+    return model
+

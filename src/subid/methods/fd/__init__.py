@@ -1,0 +1,1 @@
+"""Identification from frequency-response data (:class:`subid.FRData`): subspace and refinement."""

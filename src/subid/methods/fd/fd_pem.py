@@ -1,0 +1,373 @@
+"""Refinement of a state-space model on frequency-response data.
+
+:func:`fd_pem` (reached through :func:`subid.pem` with an :class:`subid.FRData`)
+minimises the weighted nonlinear least-squares criterion
+
+    V(θ) = 1/2 Σ_k ||W_k ⊙ (G_k - D - C (z_k I - A)^{-1} B)||_F^2
+
+(Pintelon & Schoukens, *System Identification: A Frequency Domain Approach*,
+2nd ed., 2012, Ch. 9; McKelvey, "Frequency domain identification methods",
+Circuits Systems Signal Process. 21(1), 2002; MATLAB ``ssest`` on ``idfrd``
+data), with ``z_k = exp(i w_k dt)`` in discrete time and ``z_k = i w_k`` in
+continuous time. ``W`` is the data's ``weights``; without them ``1 / std``;
+without either, the inverse of the noise level estimated as
+:func:`subid.fd_subspace` estimates it (smoothed residuals of a preliminary
+fit), so that the criterion is the Gaussian likelihood of the noise; pass
+``weights=np.ones(n_freq)`` for the unweighted fit.
+
+Parametrisation. Continuous time is scaled in frequency: with α the geometric
+mean of the smallest and largest positive frequency,
+``(A, B, C) = (α A', sqrt(α) B', sqrt(α) C')`` and the points ``i w_k / α``, so
+that the points straddle 1 and the parameters are of order one. The state
+basis is then made data-driven: the frequency-domain controllability Gramian
+on the measured grid, ``P = Re Σ_k (z_k I - A)^{-1} B B^T (z_k I - A)^{-H}``,
+is brought to the identity, again at the start of every round. The search moves in data-driven local coordinates
+(McKelvey, Helmersson & Ribarits, Automatica 40, 2004; as :func:`subid.pem` in
+the time domain): the orthogonal complement of the ``n^2`` similarity
+directions, so the Jacobian has full rank for a minimal model. The Jacobian is
+analytic and exact: ``∂G_k = C R_k ∂A R_k B + C R_k ∂B + ∂C R_k B + ∂D`` with
+``R_k = (z_k I - A)^{-1}``.
+
+The optimiser is :func:`scipy.optimize.least_squares` (Levenberg-Marquardt;
+trust-region reflective when there are fewer residuals than parameters); a
+trial model that is unstable where the start is stable gets a cost above the
+start's, so the step is rejected. The result never has a cost above the
+start's: the start is returned unchanged when nothing improves.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+
+import numpy as np
+import scipy.linalg
+import scipy.optimize
+
+from subid._validation import same_period
+from subid.delay import frequency_factor, input_delay_of
+from subid.errors import DataError, ModelError, NoiseModelWarning, OptionError
+from subid.frdata import FRData
+from subid.methods.dt._selection import MAX_ORDER
+from subid.methods.fd import _frequency as fq
+from subid.methods.fd._core import noise_variance
+from subid.model.statespace import StateSpace
+
+__all__ = ["fd_pem"]
+
+
+def _check(data, model, max_iterations, tolerance, rounds, feedthrough):
+    if not isinstance(model, StateSpace):
+        raise ModelError(f"pem needs a starting subid.StateSpace, got {type(model).__name__}")
+    if (data.n_inputs, data.n_outputs) != (model.n_inputs, model.n_outputs):
+        raise DataError(f"the frequency data have {data.n_inputs} inputs and "
+                        f"{data.n_outputs} outputs but the model has {model.n_inputs} and "
+                        f"{model.n_outputs}")
+    if (model.dt == 0) != (data.dt == 0) or (data.dt > 0 and not same_period(model.dt,
+                                                                              data.dt)):
+        raise DataError(f"the model has dt={model.dt} but the frequency data have "
+                        f"dt={data.dt} (0 = continuous time); convert the model first "
+                        "(to_discrete / to_continuous)")
+    if isinstance(max_iterations, bool) or not isinstance(max_iterations, int) \
+            or max_iterations < 1:
+        raise OptionError(f"max_iterations must be a positive integer, got {max_iterations!r}")
+    if not (isinstance(tolerance, (int, float)) and 0 < tolerance < 1):
+        raise OptionError(f"tolerance must be in (0, 1), got {tolerance!r}")
+    if isinstance(rounds, bool) or not isinstance(rounds, int) or rounds < 1:
+        raise OptionError(f"rounds must be a positive integer, got {rounds!r}")
+    if feedthrough is not None and not isinstance(feedthrough, (bool, np.bool_)):
+        raise OptionError(f"feedthrough must be True, False or None, got {feedthrough!r}")
+
+
+def _stable(A, continuous: bool) -> bool:
+    lam = np.linalg.eigvals(A)
+    return bool(lam.real.max() < 0) if continuous else bool(np.abs(lam).max() < 1 - 1e-9)
+
+
+def _tangent_complement(A, B, C, with_d: bool) -> np.ndarray:
+    """Orthonormal basis of the complement of the similarity directions (DDLC)."""
+    n, m, p = A.shape[0], B.shape[1], C.shape[0]
+    cols = []
+    for i in range(n):
+        for j in range(n):
+            E = np.zeros((n, n))
+            E[i, j] = 1.0
+            parts = [(E @ A - A @ E).ravel(), (E @ B).ravel(), (-C @ E).ravel()]
+            if with_d:
+                parts.append(np.zeros(p * m))
+            cols.append(np.concatenate(parts))
+    T = np.array(cols).T                                           # (n_par, n^2)
+    U, s, _ = np.linalg.svd(T, full_matrices=True)
+    rank = int(np.sum(s > s[0] * 1e-10)) if s.size and s[0] > 0 else 0
+    return U[:, rank:]
+
+
+def _gramian_basis(A, B, z) -> np.ndarray:
+    """T with ``T P T^T = I`` for the frequency-grid Gramian P (identity if P is singular)."""
+    n = A.shape[0]
+    X = np.linalg.solve(z[:, None, None] * np.eye(n) - A,
+                        np.broadcast_to(B.astype(complex), (z.size,) + B.shape))
+    P = np.einsum("kim,kjm->ij", X, X.conj()).real / z.size
+    try:
+        L = np.linalg.cholesky(P)
+        if np.linalg.cond(L) < 1e10:
+            return scipy.linalg.solve_triangular(L, np.eye(n), lower=True)
+    except np.linalg.LinAlgError:
+        pass
+    return np.eye(n)
+
+
+class _Criterion:
+    """Residuals and exact Jacobian of the weighted response error."""
+
+    def __init__(self, G, z, weights, factor, with_d, D0, continuous):
+        self.G, self.z, self.W, self.F = G, z, weights, factor
+        self.with_d, self.D0, self.continuous = with_d, D0, continuous
+        self.M, self.p, self.m = G.shape
+
+    def unpack(self, theta, n):
+        p, m = self.p, self.m
+        A = theta[:n * n].reshape(n, n)
+        B = theta[n * n:n * n + n * m].reshape(n, m)
+        C = theta[n * n + n * m:n * n + n * m + p * n].reshape(p, n)
+        D = theta[n * n + n * m + p * n:].reshape(p, m) if self.with_d else self.D0
+        return A, B, C, D
+
+    def pack(self, A, B, C, D):
+        parts = [A.ravel(), B.ravel(), C.ravel()] + ([D.ravel()] if self.with_d else [])
+        return np.concatenate(parts)
+
+    def parts(self, A, B, C):
+        n = A.shape[0]
+        R = np.linalg.inv(self.z[:, None, None] * np.eye(n) - A)   # (M, n, n), n small
+        return R @ B, C @ R                                         # (M, n, m), (M, p, n)
+
+    def residual(self, A, B, C, D):
+        RB, _ = self.parts(A, B, C)
+        G_hat = (C @ RB + D) * self.F
+        e = self.W * (self.G - G_hat)
+        return np.concatenate([e.real.ravel(), e.imag.ravel()])
+
+    def jacobian(self, A, B, C):
+        M, p, m = self.M, self.p, self.m
+        n = A.shape[0]
+        RB, CR = self.parts(A, B, C)
+        WF = -(self.W * self.F)                                     # d(residual)/dG_hat
+        JA = np.einsum("kia,kbj->kijab", CR, RB).reshape(M, p, m, n * n)
+        JB = np.einsum("kia,jb->kijab", CR, np.eye(m)).reshape(M, p, m, n * m)
+        JC = np.einsum("ia,kbj->kijab", np.eye(p), RB).reshape(M, p, m, p * n)
+        blocks = [JA, JB, JC]
+        if self.with_d:
+            blocks.append(np.einsum("ia,jb->ijab", np.eye(p), np.eye(m))
+                          .reshape(1, p, m, p * m).repeat(M, axis=0))
+        J = np.concatenate(blocks, axis=3) * WF[..., None]
+        J = J.reshape(M * p * m, -1)
+        return np.vstack([J.real, J.imag])
+
+
+def _round(crit: _Criterion, A, B, C, D, max_nfev, tolerance, start_residual, history,
+           require_stable):
+    n = A.shape[0]
+    theta0 = crit.pack(A, B, C, D)
+    basis = _tangent_complement(A, B, C, crit.with_d)
+
+    def fun(x):
+        Ax, Bx, Cx, Dx = crit.unpack(theta0 + basis @ x, n)
+        if require_stable and not _stable(Ax, crit.continuous):
+            return 2.0 * start_residual
+        with np.errstate(all="ignore"):
+            r = crit.residual(Ax, Bx, Cx, Dx)
+        if not np.isfinite(r).all():
+            return 2.0 * start_residual
+        history.append(0.5 * float(r @ r))
+        return r
+
+    def jac(x):
+        Ax, Bx, Cx, _ = crit.unpack(theta0 + basis @ x, n)
+        with np.errstate(all="ignore"):
+            J = crit.jacobian(Ax, Bx, Cx) @ basis
+        return np.nan_to_num(J, nan=0.0, posinf=0.0, neginf=0.0)
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        # Levenberg-Marquardt (MINPACK) needs at least as many residuals as parameters
+        method = "lm" if 2 * crit.M * crit.p * crit.m >= basis.shape[1] else "trf"
+        res = scipy.optimize.least_squares(fun, np.zeros(basis.shape[1]), jac=jac,
+                                           method=method, x_scale="jac", ftol=tolerance,
+                                           xtol=tolerance, gtol=tolerance, max_nfev=max_nfev)
+    return crit.unpack(theta0 + basis @ res.x, n), res
+
+
+def _criterion_weights(data: FRData):
+    """The weights of the criterion and what they are: the data's ``weights``;
+    else ``1 / std``; else the inverse of the noise level that
+    :func:`subid.methods.fd._core.noise_variance` estimates (the same
+    noise model as :func:`subid.fd_subspace`): with weights proportional to
+    the inverse noise standard deviation the criterion is the Gaussian
+    likelihood (Pintelon & Schoukens 2012, Ch. 9)."""
+    if data.weights is not None:
+        return data.fit_weights(), "the data's weights"
+    if data.std is not None:
+        std = np.maximum(data.std, 1e-12 * max(float(data.std.max()), 1e-300))
+        return 1.0 / std, "1 / std"
+    alpha = fq.frequency_scale(data.w) if data.dt == 0 else None
+    var, record = noise_variance(data, alpha, MAX_ORDER)
+    if record["source"].startswith("constant"):
+        return np.ones(data.response.shape), "none"
+    return 1.0 / np.sqrt(var), "1 / estimated noise level"
+
+
+def fd_pem(data, model, *, max_iterations=100, tolerance=1e-8, rounds=3, feedthrough=None):
+    """Refine ``model`` on frequency-response data by weighted nonlinear least squares.
+
+    Parameters
+    ----------
+    data : FRData
+        The measured response. Its ``weights`` weight the fit; without them
+        ``1 / std``, else the inverse of the estimated noise level (see the
+        module documentation).
+    model : StateSpace
+        Starting model with the data's time base (``dt``), e.g. from
+        :func:`subid.fd_subspace`.
+    max_iterations : int
+        Bound on the criterion evaluations per round.
+    tolerance : float
+        ``ftol = xtol = gtol`` of :func:`scipy.optimize.least_squares`.
+    rounds : int
+        Rounds of local coordinates rebuilt at the current model.
+    feedthrough : bool, optional
+        Estimate D. Default: when the starting D is not identically zero.
+
+    Returns
+    -------
+    StateSpace
+        The refined model in the starting model's state basis, without a noise
+        model (frequency-response data say nothing about it). ``info`` is the
+        start's, updated with ``refined_by`` ('pem'), ``criterion``
+        ('frequency response'), ``weighting`` (which weights), ``start_cost``,
+        ``final_cost`` (the weighted criterion),
+        ``cost_history``, ``stop_reason``, ``n_evaluations``,
+        ``parametrisation``, ``frequency_scale`` and, in discrete time,
+        ``parameter_covariance`` (the asymptotic covariance that
+        :func:`subid.parameter_covariance` and the confidence bounds read).
+
+    Raises
+    ------
+    DataError
+        Channels or time base of data and model differ.
+    ModelError
+        ``model`` is not a StateSpace.
+    OptionError
+        Bad option values.
+    """
+    if not isinstance(data, FRData):
+        raise DataError(f"fd_pem expects a subid.FRData, got {type(data).__name__}")
+    _check(data, model, max_iterations, tolerance, rounds, feedthrough)
+    continuous = data.dt == 0
+    with_d = bool(np.any(model.D)) if feedthrough is None else bool(feedthrough)
+    alpha = fq.frequency_scale(data.w) if continuous else 1.0
+    z = fq.points(data.w, data.dt) / (alpha if continuous else 1.0)
+    delays = input_delay_of(model)
+    factor = np.ones((1, 1, data.n_inputs)) if delays is None or continuous \
+        else frequency_factor(delays, data.w, data.dt)
+    D0 = np.zeros_like(model.D) if not with_d else model.D
+    weights, weighting = _criterion_weights(data)
+    crit = _Criterion(data.response, z, weights, factor, with_d, D0, continuous)
+    s = math.sqrt(alpha)
+    A, B, C = model.A / alpha, model.B / s, model.C / s
+    T = _gramian_basis(A, B, z)
+    Tinv = np.linalg.solve(T, np.eye(A.shape[0]))
+    cur = (T @ A @ Tinv, T @ B, C @ Tinv, D0)
+    r_start = crit.residual(*cur)
+    # the start's own cost (its D even when D is not estimated: then D0 = 0 is the start)
+    start_cost = 0.5 * float(r_start @ r_start)
+    require_stable = _stable(cur[0], continuous)
+    history = [start_cost]
+    best_cost, n_eval = start_cost, 0
+    exact = start_cost <= 1e-30 * max(float(np.sum(np.abs(crit.W * data.response) ** 2)),
+                                      1e-300)
+    stop_reason = "the start fits the data to rounding (noise-free): kept unchanged"
+    if not exact:
+        for _ in range(rounds):
+            # each round in the Gramian-balanced basis of the current model
+            Tr = _gramian_basis(cur[0], cur[1], z)
+            Tr_inv = np.linalg.solve(Tr, np.eye(Tr.shape[0]))
+            cur = (Tr @ cur[0] @ Tr_inv, Tr @ cur[1], cur[2] @ Tr_inv, cur[3])
+            T, Tinv = Tr @ T, Tinv @ Tr_inv
+            new, res = _round(crit, *cur, max_iterations, tolerance, r_start, history,
+                              require_stable)
+            n_eval += int(res.nfev)
+            stop_reason = str(res.message)
+            if not res.cost < best_cost:
+                break
+            gain = (best_cost - res.cost) / max(best_cost, 1e-300)
+            cur, best_cost = new, float(res.cost)
+            if gain < tolerance:
+                break
+    accepted = [start_cost]
+    for h in history[1:] + [best_cost]:
+        if h < accepted[-1]:
+            accepted.append(h)
+    info = dict(model.info)
+    info.update(refined_by="pem", criterion="frequency response", weighting=weighting,
+                start_cost=start_cost,
+                final_cost=min(best_cost, accepted[-1]), cost_history=np.array(accepted),
+                stop_reason=stop_reason, n_evaluations=n_eval,
+                frequency_scale=alpha if continuous else None,
+                parametrisation="data-driven local coordinates (McKelvey et al. 2004) in a "
+                                "basis with unit frequency-grid controllability Gramian"
+                                + (", frequency scaled by alpha" if continuous else ""))
+    if model.K is not None:
+        warnings.warn("pem on frequency-response data refines the deterministic part only; "
+                      "the starting model's noise model (K, noise_cov) is dropped",
+                      NoiseModelWarning, stacklevel=3)
+    if not best_cost < start_cost:
+        if not exact:
+            info["stop_reason"] = f"no improvement on the start ({stop_reason}); start kept"
+        info["final_cost"] = start_cost
+        return StateSpace(model.A, model.B, model.C, D0, model.dt,
+                          input_names=model.input_names, output_names=model.output_names,
+                          info=info, hold=model.hold)
+    A, B, C, D = cur
+    A, B, C = Tinv @ A @ T * alpha, Tinv @ B * s, C @ T * s
+    if not continuous:
+        _attach_covariance(info, crit, A, B, C, D)
+    return StateSpace(A, B, C, D, model.dt, input_names=model.input_names,
+                      output_names=model.output_names, info=info, hold=model.hold)
+
+
+def _attach_covariance(info, crit: "_Criterion", A, B, C, D) -> None:
+    """``info['parameter_covariance']`` of a discrete-time estimate, in the format of
+    :func:`subid.parameter_covariance`: the asymptotic covariance of weighted least
+    squares, ``σ² (J^T J)^-1`` in the local coordinates of the estimate (``J`` the
+    Jacobian of the weighted residuals, real and imaginary parts; ``σ²`` the
+    residual variance ``r^T r / (2 M p m - d)``), mapped to θ = (A, B, C[, D])
+    (Pintelon & Schoukens 2012, Sec. 9.4). From QR of the column-scaled Jacobian;
+    a rank-deficient one (a non-minimal model) gives a note instead."""
+    basis = _tangent_complement(A, B, C, crit.with_d)
+    J = crit.jacobian(A, B, C) @ basis
+    r = crit.residual(A, B, C, D)
+    dof = r.size - basis.shape[1]
+    scale = np.linalg.norm(J, axis=0)
+    if dof <= 0 or not (np.isfinite(scale).all() and scale.min() > 0):
+        info["parameter_covariance_note"] = "no parameter covariance: too few frequencies"
+        return
+    R = np.linalg.qr(J / scale, mode="r")
+    diag = np.abs(np.diag(R))
+    if diag.min() <= 1e-9 * diag.max():
+        info["parameter_covariance_note"] = (
+            "no parameter covariance: the Jacobian at the estimate is rank deficient "
+            "(a non-minimal model or frequencies that do not excite it)")
+        return
+    sigma = math.sqrt(float(r @ r) / dof)
+    inv = scipy.linalg.solve_triangular(R, np.eye(R.shape[0]), check_finite=False)
+    info["parameter_covariance"] = {
+        "parameters": crit.pack(A, B, C, D),
+        "factor": basis @ (inv / scale[:, None]) * sigma,
+        "with_feedthrough": crit.with_d,
+        "with_gain": False,
+        "noise_cov": None,
+        "n_frequencies": crit.M,
+        "method": "asymptotic covariance of weighted least squares on the frequency "
+                  "response, sigma^2 (J^T J)^-1 in data-driven local coordinates",
+    }

@@ -1,0 +1,278 @@
+"""The cheap computations behind the order choice (issue 21.6) against the
+straightforward ones: the same scores, the same models, the same choices.
+
+No timing here (speed is measured in bench/run.py, the selection table)."""
+
+from __future__ import annotations
+
+import warnings
+from functools import partial
+
+import numpy as np
+import pytest
+
+import subid
+from subid import systems
+from subid.evaluation.metrics import fit_percent
+from subid.methods.dt import _regression as regression
+from subid.methods.dt import _scoring
+from subid.methods.dt import _selection as selection
+from subid.methods.dt import _subspace as subspace
+from subid.statistic.hankel import GRAM_MAX_CONDITION, HankelStatistic, factor_condition
+
+
+def _noisy(order=4, n=1500, seed=1, snr=20, nu=2, ny=2):
+    true = systems.random_system(order, nu, ny, seed=seed)
+    return true, systems.simulate_data(true, n, seed=seed + 100, output_snr_db=snr)
+
+
+def _reference_score(model, validation):
+    """What the cross-validation scores: mean fit_percent, clipped, FLOOR on failure."""
+    try:
+        with warnings.catch_warnings(), np.errstate(all="ignore"):
+            warnings.simplefilter("ignore")
+            value = float(np.mean(fit_percent(model, validation)))
+    except subid.errors.SubidError:
+        return selection.FLOOR
+    return max(value, selection.FLOOR) if np.isfinite(value) else selection.FLOOR
+
+
+def _records():
+    """Estimation/validation pairs: MIMO, SISO, merged experiments."""
+    _, mimo = _noisy()
+    _, siso = _noisy(order=3, seed=4, nu=1, ny=1)
+    true, _ = _noisy(seed=7)
+    pieces = [systems.simulate_data(true, 700, seed=s, output_snr_db=25) for s in (1, 2, 3)]
+    merged = subid.merge(pieces)
+    validation = subid.merge([systems.simulate_data(true, 400, seed=s, output_snr_db=25)
+                               for s in (4, 5)])
+    return [(mimo[:1000], mimo[1000:]), (siso[:1000], siso[1000:]), (merged, validation)]
+
+
+def _worst_score_difference(records, orders):
+    worst = 0.0
+    for est, val in records:
+        for n in orders:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                model = subid.moesp(est, n, horizon=8, system_matrices="shift")
+            variants = [model]
+            radius = float(np.abs(model.poles()).max())
+            for target in (0.9999, 1.0005):            # slow and unstable versions
+                variants.append(subid.StateSpace(model.A * (target / radius), model.B,
+                                                 model.C, model.D, model.dt))
+            for m in variants:
+                fast = selection._fit_score(m, val)
+                worst = max(worst, abs(fast - _reference_score(m, val)))
+    return worst
+
+
+@pytest.mark.slow
+def test_fast_score_equals_fit_percent():
+    """simulation_fit (one compiled pass, free response until it decays) gives the
+    mean fit_percent of the model, x0 by least squares: on MIMO, SISO and merged
+    records, at several orders, for stable, slow (radius 0.9999) and unstable models."""
+    assert _worst_score_difference(_records(), (1, 3, 6)) < 1e-8
+
+
+def test_fast_score_equals_fit_percent_on_one_record():
+    """The cheap sibling of the test above: a long validation block (beyond
+    SHORT_RECORD, so that the free response stops where it decays)."""
+    _, data = _noisy(n=3500, seed=2)
+    assert _worst_score_difference([(data[:1000], data[1000:])], (3,)) < 1e-8
+
+
+def test_fast_score_floor_on_overflow():
+    est, val = _records()[0]
+    model = subid.moesp(est, 3, horizon=8, system_matrices="shift")
+    wild = subid.StateSpace(model.A * 3.0, model.B, model.C, model.D, model.dt)
+    assert selection._fit_score(wild, val) == selection.FLOOR == _reference_score(wild, val)
+
+
+def test_scoring_kernel_matches_its_reference():
+    rng = np.random.default_rng(0)
+    A = 0.3 * rng.standard_normal((4, 4))
+    B, C, D = rng.standard_normal((4, 2)), rng.standard_normal((3, 4)), \
+        rng.standard_normal((3, 2))
+    u = rng.standard_normal((200, 2))
+    for got, ref in zip(_scoring.forced_and_free(A, B, C, D, u, 50),
+                        _scoring.forced_and_free_reference(A, B, C, D, u, 50)):
+        np.testing.assert_allclose(got, ref, rtol=1e-12, atol=1e-12)
+    assert _scoring.free_length(A, 10 ** 6) < 4000
+    assert _scoring.free_length(A, 1000) == 1000                # short: all of it
+    assert _scoring.free_length(A * 100, 5000) == 5000          # unstable: the whole record
+
+
+def test_dual_rows_match_the_sensitivity_rows():
+    """The dual recursions give the rows of the sensitivity recursion, hence the same
+    B, D, x0 regression (the QR path of fit_b_d_x0)."""
+    rng = np.random.default_rng(1)
+    A = 0.4 * rng.standard_normal((3, 3))
+    C = rng.standard_normal((2, 3))
+    u = rng.standard_normal((60, 2))
+    V0, M0 = np.zeros((2, 2, 3)), C.copy()
+    rows, V, M = regression.dual_rows(A, C, u, V0, M0, 3)
+    ref = regression.dual_rows_reference(A, C, u, V0, M0, 3)
+    for got, want in zip((rows, V, M), ref):
+        np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-13)
+    S0 = np.zeros((3, 3 + 6))
+    S0[:, :3] = np.eye(3)
+    sens, _ = regression.sensitivity_rows_reference(A, C, u, S0, 3)
+    np.testing.assert_allclose(rows, sens, rtol=1e-12, atol=1e-13)
+    true, data = _noisy(order=5, n=3000, seed=3)
+    weights = np.array([1.0, 3.0])
+    for estimate_x0 in (True, False):
+        dual = regression.fit_b_d_x0_qr(true.A, true.C, data.u, data.y,
+                                        estimate_x0=estimate_x0, output_weights=weights)
+        sens = regression.fit_b_d_x0_qr(true.A, true.C, data.u, data.y,
+                                        estimate_x0=estimate_x0, output_weights=weights,
+                                        kernel=regression.sensitivity_rows)
+        for got, want in zip(dual[:3], sens[:3]):
+            np.testing.assert_allclose(got, want, rtol=1e-10, atol=1e-12)
+        assert dual[3]["residual_rms"] == pytest.approx(sens[3]["residual_rms"], rel=1e-12)
+
+
+def test_overflowing_regression_stops_with_a_nan_factor():
+    true, data = _noisy(order=3, n=5000, seed=5)
+    A = true.A * (1.5 / np.abs(np.linalg.eigvals(true.A)).max())
+    B, D, _, _ = regression.fit_b_d_x0_qr(A, true.C, data.u, data.y)
+    assert not (np.isfinite(B).all() and np.isfinite(D).all())
+
+
+def test_statistic_by_cost():
+    """'auto' keeps the lagged products where the factor is well conditioned (noisy
+    data), and the QR factor where they would lose accuracy (noise-free data)."""
+    _, noisy = _noisy(n=3000)
+    auto = HankelStatistic.from_data(noisy, 20)
+    assert auto.kind == "gram"
+    qr = HankelStatistic.from_data(noisy, 20, kind="qr").factor().L
+    assert factor_condition(qr) <= GRAM_MAX_CONDITION
+    np.testing.assert_allclose(auto.factor().L, qr, atol=1e-11 * np.abs(qr).max())
+    true = systems.random_system(4, 2, 2, seed=1)
+    clean = systems.simulate_data(true, 3000, seed=2)
+    assert HankelStatistic.from_data(clean, 20).kind == "qr"
+    model = subid.moesp(clean, 4, horizon=10)
+    assert subid.markov_error(model, true) < 1e-9
+    auto.update(noisy.u[:50], noisy.y[:50])              # a cached factor follows updates
+    fresh = HankelStatistic(2, 2, 20)
+    fresh.update(noisy.u, noisy.y)
+    fresh.update(noisy.u[:50], noisy.y[:50])
+    np.testing.assert_allclose(auto.factor().L, fresh.factor().L, rtol=1e-12, atol=1e-14)
+
+
+def _moesp_builds():
+    from subid.methods.dt.moesp import _moesp
+    options = dict(weighting="moesp", stability="auto", feedthrough=True, estimate_x0=True,
+                   bd_method="auto")
+    return {name: partial(_moesp, system_matrices=name, **options)
+            for name in ("shift", "states")}
+
+
+def _prepare_fold(statistic="auto", merged=True):
+    """prepare_fold as identify builds it; ``merged=False``: without the attributes
+    that let score_horizon merge the folds' statistics (one statistic per fold)."""
+    def prepare_fold(record, orders, f, factor=None):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            return subspace.prepare(record, orders, f, method="moesp", statistic=statistic,
+                                    factor=factor)
+    if merged:
+        prepare_fold.blocks = 2
+        prepare_fold.statistic = statistic
+    return prepare_fold
+
+
+def test_fold_statistics_merged_from_blocks():
+    """The folds' factors merged from the statistics of four blocks equal the factors
+    of the folds' own statistics; records that are not the four folds of one
+    experiment (merged experiments, other cuts) build their own."""
+    _, data = _noisy(n=1500, seed=3)
+    parts = [(data[a], data[b]) for a, b in selection.folds(data.n_samples)]
+    factors = selection.fold_factors(parts, 8, _prepare_fold())
+    for (train, _), factor in zip(parts, factors):
+        own = HankelStatistic.from_data(train, 16).factor().L
+        np.testing.assert_allclose(factor.L, own, rtol=0, atol=1e-12 * np.abs(own).max())
+    assert selection.fold_factors(parts, 8, _prepare_fold("qr")) == [None] * 4
+    assert selection.fold_factors(parts[::-1], 8, _prepare_fold()) == [None] * 4
+    merged = _records()[2][0]
+    assert selection.fold_factors(selection.experiment_folds(merged), 8,
+                                  _prepare_fold()) == [None] * 4
+
+
+@pytest.mark.slow
+def test_score_horizon_equals_the_straightforward_computation():
+    """score_horizon (one factorisation and SVD per fold for every order, the direct
+    scoring) against a fresh problem per order and fit_percent; and the same scores
+    to ~1e-9 points from the QR statistic (the lagged products' equivalence)."""
+    for data in (_noisy(n=1200)[1], _records()[2][0]):
+        parts = selection.experiment_folds(data) if data.n_experiments > 1 else \
+            [(data[a], data[b]) for a, b in selection.folds(data.n_samples)]
+        builds = _moesp_builds()
+        orders = [1, 2, 3, 4, 5, 6]
+        per_fold, repaired = selection.score_horizon(parts, orders, 8,
+                                                     prepare_fold=_prepare_fold(),
+                                                     builds=builds)
+        for k, (train, validation) in enumerate(parts):
+            for n in orders:
+                for v, build in enumerate(builds.values()):
+                    with warnings.catch_warnings():
+                        warnings.simplefilter("ignore")
+                        model = build(subspace.prepare(train, n, 8, method="moesp"))
+                    # (the fold's own statistic, not the one merged from the blocks)
+                    assert per_fold[(n, v)][k] == pytest.approx(
+                        _reference_score(model, validation), abs=1e-8)
+        by_qr, _ = selection.score_horizon(parts, orders, 8,
+                                           prepare_fold=_prepare_fold("qr"), builds=builds)
+        unmerged, _ = selection.score_horizon(parts, orders, 8,
+                                              prepare_fold=_prepare_fold(merged=False),
+                                              builds=builds)
+        for key, values in per_fold.items():
+            np.testing.assert_allclose(values, by_qr[key], atol=1e-7)
+            np.testing.assert_allclose(values, unmerged[key], atol=1e-8)
+
+
+def test_pinned_calls_make_no_fold_fits(monkeypatch):
+    """With the order and horizon given, a call with one estimator (n4sid, or
+    system_matrices given) is one fit: no cross-validation; with
+    system_matrices='auto' only the two estimators are cross-validated at that
+    order and horizon (as the default call chooses them), not the order."""
+    _, data = _noisy(n=1500)
+    calls = []
+    real = subspace.cross_validate
+
+    def counting(*args, **kwargs):
+        calls.append(1)
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(subspace, "cross_validate", counting)
+    model = subid.n4sid(data, 4, horizon=8)
+    for method in (subid.moesp, subid.ls_subspace):
+        model = method(data, 4, horizon=8, system_matrices="shift")
+        assert model.order == 4 and "system_matrices_selection" not in model.info
+    assert not calls
+    for method in (subid.moesp, subid.ls_subspace):
+        model = method(data, 4, horizon=8)
+        assert model.order == 4 and model.info["horizon"] == 8
+        assert model.info["system_matrices_selection"]["rule"] == "cv"
+        assert "order_selection" not in model.info or \
+            model.info["order_selection"].get("rule") == "given"
+        again = method(data, 4, horizon=8, system_matrices=model.info["system_matrices"])
+        np.testing.assert_array_equal(model.A, again.A)
+    assert len(calls) == 2
+
+
+@pytest.mark.slow
+def test_default_model_reproduced_with_its_estimator():
+    """The default call's model, whichever estimator the cross-validation chose,
+    comes back from its order and horizon (the estimators cross-validated again at
+    them), and from its order, horizon and system_matrices at the cost of one fit."""
+    _, data = _noisy(n=2000, seed=9)
+    model = subid.moesp(data)
+    again = subid.moesp(data, order=model.order, horizon=model.info["horizon"])
+    for name in "ABCD":
+        np.testing.assert_array_equal(getattr(model, name), getattr(again, name))
+    again = subid.moesp(data, order=model.order, horizon=model.info["horizon"],
+                        system_matrices=model.info["system_matrices"])
+    for name in "ABCD":
+        np.testing.assert_array_equal(getattr(model, name), getattr(again, name))
+    assert model.info["system_matrices_selection"]["rule"] == "cv"
