@@ -254,6 +254,8 @@ class Problem:
     sv: np.ndarray
     n_corr: int
     lag: int
+    #: A cross-validation fold's problem (set by ``score_horizon``; unused here).
+    fold: bool = False
 
 
 def _experiment_regressors(basis, e: IOData, s: dict, uniform: bool):
