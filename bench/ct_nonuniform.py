@@ -5,7 +5,11 @@ noise-free by default, on a uniform grid and on a grid with +/-40 % jitter
 of every sampling instant, at L = 400, 4000, 40000. Three timed cases per L,
 interleaved in one process (ratios taken inside the process):
 
-* ``uniform``: the default call on the uniform grid;
+* ``uniform``: the default call on the uniform grid, with ``start='subspace'``
+  (issue 22: by default a uniform grid also tries the converted N4SID models,
+  which a non-uniform grid cannot; and ``refine=True`` on both grids, which
+  ``refine='auto'`` decides per record by cross-validation: the same work on
+  both grids is compared);
 * ``jittered``: the default call on the jittered grid (fused block-modal
   kernels of :mod:`subid.methods.ct._ct_kernels`);
 * ``jittered, tables``: the same with the modal kernels disabled (the
@@ -90,7 +94,8 @@ def main(argv=None):
             for name, (data, ref) in cases.items():
                 tables(ref)
                 try:
-                    dt, models[name] = _cpu(lambda data=data: ct_subspace(data, 4))
+                    dt, models[name] = _cpu(lambda data=data: ct_subspace(
+                        data, 4, start="subspace", refine=True))
                 finally:
                     tables(False)
                 times[name].append(dt)

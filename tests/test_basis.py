@@ -6,8 +6,8 @@ import scipy.linalg
 
 from subid import errors
 from subid.methods.ct import _ct_kernels
+from subid.methods.ct._ct_estimate import _poisson_chain_bank
 from subid.methods.ct.basis import FilterBank, default_basis, laguerre, legendre, takenaka_malmquist
-from subid.methods.ct.ct_subspace import _poisson_chain_bank
 
 BANKS = {
     "tm-real": lambda: takenaka_malmquist([4, 12, 20, 28, 36, 44, 52, 60]),

@@ -75,7 +75,7 @@ def test_option_accepted_by_the_method_still_works(capsys, tmp_path):
 @pytest.mark.parametrize("method, option, message", [
     ("ct", "hold=cubic", "hold must be one of 'foh', 'zoh', None; got 'cubic'"),
     ("ct", "bd_method=guess", "bd_method must be one of 'simulation', 'filtered'"),
-    ("ct", "refine=maybe", "refine must be True or False"),
+    ("ct", "refine=maybe", "refine must be one of 'auto', True, False"),
     ("moesp", "weighting=7", "weighting must be one of"),
     ("n4sid", "refine=newton", "refine must be None, 'simulation' or 'prediction'"),
 ])

@@ -457,12 +457,12 @@ def _convergence_status(model) -> str:
 
 
 def _default_detrend(spec) -> str:
-    """--detrend's default: 'constant' for discrete-time methods (data around an
-    operating point, as MATLAB users detrend), 'none' for continuous-time ones,
-    which model the response from rest in the user's units: removing the
-    record's means biases them (measured: the adaptive identifier's pole error
-    0.98 instead of 5e-5 on the seed-000 system)."""
-    return "none" if spec.time == "continuous" else "constant"
+    """--detrend's default: 'constant' (data around an operating point, as MATLAB users
+    detrend), for the discrete-time and the continuous-time batch methods alike; 'none'
+    for the online continuous-time identifiers, which model the response from rest in
+    the user's units: removing the record's means biases them (measured: the adaptive
+    identifier's pole error 0.98 instead of 5e-5 on the seed-000 system)."""
+    return "none" if spec.time == "continuous" and spec.kind != "batch" else "constant"
 
 
 def _detrend(data, kind):
@@ -549,8 +549,9 @@ def _data_options(fn):
                       default=None,
                       help="Remove the means (constant) or straight lines (linear) of "
                            "every channel before identification. Default: constant for "
-                           "discrete-time methods, none for continuous-time methods (ct, "
-                           "adaptive), which model the response from rest.")(fn)
+                           "the batch methods (discrete and continuous time), none for the "
+                           "online continuous-time ones (adaptive), which model the "
+                           "response from rest.")(fn)
     fn = click.option("--delimiter", default=None, metavar="CHAR",
                       help="Field delimiter of a text file (default: detected).")(fn)
     fn = click.option("--time", "time_column", default=None, metavar="COLUMN",
@@ -663,7 +664,7 @@ def identify(data, inputs, outputs, dt, time_column, delimiter, detrend, method_
     Several DATA files are several experiments of one plant (subid.merge):
     no Hankel column crosses from one file to the next, each file has its own
     initial state and loses its own mean (--detrend constant); the validation
-    part is the end of the last file. Discrete-time batch methods only.
+    part is the end of the last file. Discrete-time batch methods and ct.
     """
     from subid.evaluation import report
     if frequency_response:
@@ -693,10 +694,10 @@ def identify(data, inputs, outputs, dt, time_column, delimiter, detrend, method_
         if stream:
             raise click.UsageError("--stream reads one file; several DATA files are merged as "
                                    "experiments in memory (drop --stream)")
-        if spec.kind != "batch" or spec.time != "discrete":
+        if spec.kind != "batch" or (spec.time != "discrete" and spec.name != "ct"):
             raise click.UsageError(f"several DATA files are merged as experiments for the "
-                                   f"discrete-time batch methods, not for {spec.name}: it "
-                                   "would join them as if contiguous")
+                                   f"discrete-time batch methods and ct, not for {spec.name}: "
+                                   "it would join them as if contiguous")
     data = sources[0] if len(sources) == 1 else " + ".join(sources)
     if stream:
         return _identify_streamed(data, inputs, outputs, dt, time_column, delimiter, detrend,

@@ -114,9 +114,15 @@ def _mean_fit(values):
     return float(np.mean(v)) if np.isfinite(v).all() else float("nan")
 
 
+def _reason(error: str, width: int = 90) -> str:
+    """The first line of an error message, cut to ``width`` characters."""
+    line = str(error).strip().splitlines()[0] if str(error).strip() else "no message"
+    return line if len(line) <= width else line[:width - 1] + "…"
+
+
 def _cell(row) -> str:
     if row["error"]:
-        return "failed"
+        return f"failed: {_reason(row['error'])}"
     mean = _mean_fit(row["fit_val"])
     text = "n/a" if not np.isfinite(mean) else (f"{mean:.3g}" if abs(mean) >= 1e4
                                                 else f"{mean:.1f}")
@@ -136,7 +142,8 @@ def gallery_markdown(rows, *, command: str = GALLERY_COMMAND, seconds=None) -> s
         f"Each record has its means removed, is identified on the first {FRACTION:.0%} of its "
         "samples with the order and horizon chosen automatically (cross-validated simulation "
         "fit on the estimation part, among orders 1..10 and horizons 10 and 20; "
-        "`selection='cv'`; continuous-time methods: their own rule), and is "
+        "`selection='cv'`; `ct_subspace`: the same cross-validation among orders 1..10, "
+        "its model simulated with its hold), and is "
         f"validated on the last {1 - FRACTION:.0%}: the model is simulated from a "
         "least-squares initial state and compared with the measured output.",
         "Fit % = 100 (1 − ‖y − ŷ‖ / ‖y − mean y‖) per output (`subid.fit_percent`); 100 is "
@@ -174,7 +181,8 @@ def gallery_markdown(rows, *, command: str = GALLERY_COMMAND, seconds=None) -> s
             if r is None:
                 continue
             if r["error"]:
-                lines.append(f"| {name} | `{labels[m]}` | — | — | failed: {r['error']} | | |")
+                lines.append(f"| {name} | `{labels[m]}` | — | — | failed: {_reason(r['error'])} "
+                             "| | |")
                 continue
             lines.append(f"| {name} | `{labels[m]}` | {r['order']} | {r['horizon']} | "
                          f"{_fit_text(r['fit_est'])} | {_fit_text(r['fit_val'])} | "
@@ -188,19 +196,21 @@ def gallery_markdown(rows, *, command: str = GALLERY_COMMAND, seconds=None) -> s
     return "\n".join(lines)
 
 
-def _discrete_methods(methods):
-    return [name for name, spec in _methods(methods).items() if spec.time == "discrete"]
+def _gallery_methods(methods):
+    """The discrete-time batch methods and the default continuous-time one (``ct``)."""
+    return [name for name, spec in _methods(methods).items()
+            if spec.time == "discrete" or name == "ct"]
 
 
 def gallery(datasets=None, methods=None, progress=False):
-    """Markdown of the gallery table (discrete-time methods only) and its rows.
+    """Markdown of the gallery table (discrete-time methods and ``ct_subspace``) and its rows.
 
     Parameters
     ----------
     datasets : list of str, optional
         Default: every bundled dataset.
     methods : list of str, optional
-        Default: every available discrete-time batch method.
+        Default: every available discrete-time batch method and ``ct``.
     progress : bool
         Show a progress bar (tqdm) over the datasets.
 
@@ -210,7 +220,7 @@ def gallery(datasets=None, methods=None, progress=False):
     rows : list of dict
     """
     names = datasets or _all_names()
-    methods = _discrete_methods(methods)
+    methods = _gallery_methods(methods)
     rows = []
     for name in _iterate(names, progress, "gallery"):
         r, _, _, _ = evaluate(name, methods)
@@ -376,8 +386,8 @@ def run(out, datasets=None, methods=None, *, frequency_unit="rad/s", progress=Fa
         columns=["samples", "inputs × outputs", *method_cols],
         footer=f"{len(names)} datasets in {seconds:.1f} s. Reproduce with: subid demo "
                f"--out {out}"))
-    discrete = set(_discrete_methods(methods))
-    gallery_rows = [r for r in all_rows if r["method"] in discrete]
+    shown = set(_gallery_methods(methods))
+    gallery_rows = [r for r in all_rows if r["method"] in shown]
     gallery_path = os.path.join(out, "gallery.md")
     write_bytes(gallery_path, gallery_markdown(gallery_rows), what="gallery")
     summary_path = os.path.join(out, "summary.json")

@@ -63,7 +63,7 @@ def paper_system() -> StateSpace:
 
 def simulate(n_samples: int, seed, *, ts: float = TS, jitter: float = 0.0, snr_db=None,
              warmup: float = 10.0, system: StateSpace | None = None,
-             return_state: bool = False):
+             return_state: bool = False, noise_pole: float = 0.0):
     """Sampled data of the paper's experiment.
 
     Parameters
@@ -77,8 +77,8 @@ def simulate(n_samples: int, seed, *, ts: float = TS, jitter: float = 0.0, snr_d
     jitter : float
         Sampling instants ``t_k = k ts + U(-jitter, jitter) ts``.
     snr_db : float, optional
-        White Gaussian output noise, its standard deviation the output's
-        divided by ``10^(snr_db / 20)``.
+        Gaussian output noise, its standard deviation the output's divided
+        by ``10^(snr_db / 20)``.
     warmup : float
         The system starts at rest this long before the first sample (so the
         record starts from a random, non-zero state).
@@ -86,6 +86,9 @@ def simulate(n_samples: int, seed, *, ts: float = TS, jitter: float = 0.0, snr_d
         Default :func:`paper_system`.
     return_state : bool
         Also return the state at every sample.
+    noise_pole : float
+        The output noise is AR(1), ``v_k = noise_pole v_{k-1} + e_k`` in
+        sample steps, started stationary (0: white).
 
     Returns
     -------
@@ -108,7 +111,12 @@ def simulate(n_samples: int, seed, *, ts: float = TS, jitter: float = 0.0, snr_d
     t, u, y, x = t[n_warm:], u[n_warm:], y[n_warm:], x[n_warm:]
     y_noisy = y
     if snr_db is not None:
-        y_noisy = y + rng.standard_normal(y.shape) * y.std(axis=0) * 10 ** (-snr_db / 20)
+        v = rng.standard_normal(y.shape)
+        if noise_pole:
+            v[0] /= np.sqrt(1.0 - noise_pole ** 2)          # stationary start
+            v = scipy.signal.lfilter([1.0], [1.0, -noise_pole], v, axis=0)
+            v *= np.sqrt(1.0 - noise_pole ** 2)              # unit variance
+        y_noisy = y + v * y.std(axis=0) * 10 ** (-snr_db / 20)
     data = IOData(u, y_noisy, t=t)
     return (data, y, x) if return_state else (data, y)
 

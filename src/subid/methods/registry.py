@@ -194,11 +194,12 @@ METHODS: dict[str, MethodSpec] = {
     "ct": MethodSpec(
         "ct", "batch", "subid.methods.ct.ct_subspace", "ct_subspace", "continuous",
         "continuous-time subspace identification (uniform or non-uniform samples)",
-        options=("basis", "poly_order", "estimate_x0", "feedthrough", "hold", "instruments",
+        options=("basis", "poly_order", "estimate_x0", "feedthrough", "hold", "selection",
+                 "start", "offset", "stability", "noise_model", "instruments",
                  "iterations", "tolerance", "refine", "refine_iterations", "startup",
                  "correction", "ac_method", "bd_method", "filtering", "data_equation",
                  "filtered"),
-        capabilities=frozenset({"order_selection", "x0", "hold", "nonuniform"}),
+        capabilities=frozenset({"order_selection", "x0", "hold", "nonuniform", "stability"}),
         aliases=("ct_subspace",)),
     "dt_to_ct": MethodSpec(
         "dt_to_ct", "batch", "subid.methods.ct.ct_subspace", "dt_to_ct", "continuous",

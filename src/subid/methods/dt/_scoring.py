@@ -164,6 +164,7 @@ class Held:
     output and the spread ``sum (y - ȳ_e)^2`` the fit divides by."""
 
     def __init__(self, validation):
+        self.record = validation          # for continuous-time models (fit_percent, their hold)
         y_all = validation.y
         std = column_std(y_all)
         self.weights = 1.0 / np.where(std > 0, std, 1.0)

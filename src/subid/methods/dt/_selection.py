@@ -174,8 +174,23 @@ def _fit_score(model, validation) -> float:
     overflows. ``mean(fit_percent(model, validation))`` to rounding, by one
     compiled pass (:func:`subid.methods.dt._scoring.simulation_fit`)."""
     from subid.methods.dt._scoring import simulation_fit
+    if model.is_continuous:           # continuous time (ct_subspace): simulated with its hold
+        return _fit_score_record(model, getattr(validation, "record", validation))
     fits = simulation_fit(model.A, model.B, model.C, model.D, validation)
     if fits is None:
+        return FLOOR
+    value = float(np.mean(fits))
+    return max(value, FLOOR) if math.isfinite(value) else FLOOR
+
+
+def _fit_score_record(model, validation) -> float:
+    """:func:`_fit_score` by :func:`subid.fit_percent` (any model, its own hold)."""
+    from subid.evaluation.metrics import fit_percent
+    try:
+        with warnings.catch_warnings(), np.errstate(all="ignore"):
+            warnings.simplefilter("ignore")
+            fits = fit_percent(model, validation)
+    except SubidError:
         return FLOOR
     value = float(np.mean(fits))
     return max(value, FLOOR) if math.isfinite(value) else FLOOR
