@@ -176,6 +176,32 @@ def check_finite(arr: np.ndarray, name: str) -> None:
                     + "; remove or interpolate them before identification")
 
 
+#: A signal looks transposed (time on axis 1 instead of axis 0) when it has more
+#: channels than samples and more than this many channels: the layout
+#: channels x samples of SIPPY, python-control and ControlSystemIdentification.jl,
+#: which :func:`check_orientation` refuses instead of transposing it silently. A
+#: record with fewer samples than channels cannot be identified anyway; the bound
+#: keeps short chunks of a record with a few channels (one row of a stream) legal.
+TRANSPOSED_MIN_CHANNELS = 100
+
+
+def check_orientation(arr: np.ndarray, name: str, symbol: str) -> None:
+    """Refuse a (samples x channels) array ``arr`` that looks transposed.
+
+    The rule: ``n_channels > n_samples`` and ``n_channels >`` :data:`TRANSPOSED_MIN_CHANNELS`
+    (e.g. ``u.T`` of shape (2, 5000) for two input channels of 5000 samples). The
+    message says how to pass the array (``symbol.T``); the array is never
+    transposed here.
+    """
+    samples, channels = arr.shape
+    if channels > samples and channels > TRANSPOSED_MIN_CHANNELS:
+        raise DataError(
+            f"{name} has shape {arr.shape}: {samples} sample{'s' if samples != 1 else ''} of "
+            f"{channels} channels, which looks transposed (channels x samples); time must be "
+            f"axis 0, one column per channel, and subid never transposes data itself: pass "
+            f"{symbol}.T, of shape ({channels}, {samples})")
+
+
 def check_time_stamps(t, n_samples: int, name: str = "time stamps t") -> np.ndarray:
     """Validate strictly increasing, finite time stamps of length ``n_samples``."""
     try:

@@ -9,6 +9,7 @@ import numpy as np
 from subid._validation import (
     as_signal,
     check_dt,
+    check_orientation,
     check_time_stamps,
     is_uniform,
     same_period,
@@ -74,7 +75,10 @@ class IOData:
     Parameters
     ----------
     u : array_like, shape (N, n_inputs) or (N,)
-        Input samples. Time is axis 0; a 1-D array is one channel.
+        Input samples. Time is axis 0; a 1-D array is one channel. An array
+        that looks transposed (more channels than samples, and more than
+        100 channels; or time stamps ``t`` as long as its second axis) raises
+        :class:`~subid.errors.DataError`: it is never transposed silently.
     y : array_like, shape (N, n_outputs) or (N,)
         Output samples, same number of rows as ``u``.
     dt : float, optional
@@ -118,6 +122,14 @@ class IOData:
                  copy=True):
         u = as_signal(u, "input u", copy=copy and _writeable(u))
         y = as_signal(y, "output y", copy=copy and _writeable(y))
+        check_orientation(u, "input u", "u")
+        check_orientation(y, "output y", "y")
+        stamps = np.shape(t)[0] if t is not None and np.ndim(t) == 1 else None
+        if stamps is not None and stamps not in (u.shape[0], y.shape[0]) \
+                and stamps in (u.shape[1], y.shape[1]):
+            raise DataError(f"the {stamps} time stamps t match the second axis of the signals "
+                            f"(u {u.shape}, y {y.shape}), not their rows: time must be axis "
+                            "0; pass u.T and y.T")
         if u.shape[0] != y.shape[0]:
             hint = ""
             if u.shape[1] == y.shape[0] or y.shape[1] == u.shape[0]:
