@@ -47,6 +47,7 @@ from subid._validation import same_period
 from subid._version import __version__
 from subid.errors import DataError, OrderError, SubidError
 from subid.io._files import atomic_directory, atomic_write, write_bytes
+from subid.methods.dt._selection import AUTO_ORDER_RULE
 from subid.methods.dt._selection import describe as describe_selection
 from subid.methods.registry import METHODS as _REGISTRY
 from subid.methods.registry import MethodSpec, MethodUnavailableError
@@ -422,6 +423,11 @@ def _progress(total: int, desc: str, enabled: bool, initial: int = 0):
     return progress_bar(total, desc, "sample", enabled=enabled, initial=initial)
 
 
+def _show_warning(message, category, filename, lineno, file=None, line=None):
+    """``warnings.showwarning`` of the command line: one log line, no source path."""
+    log.warning("%s", " ".join(str(message).split()))
+
+
 @contextlib.contextmanager
 def _warnings_to_log():
     """Show library warnings as one-line log messages."""
@@ -599,9 +605,10 @@ def cli(ctx, quiet, verbose, debug):
 @click.option("--method", "method_name", type=click.Choice(list(METHODS)), default="ls",
               show_default=True, help="Identification method (see 'subid methods').")
 @click.option("--order", default="auto", show_default=True, metavar="N|auto|A:B",
-              help="Model order: an integer, 'auto' (largest gap among 1..10), a range "
-                   "'2:8' or a list '2,4,6' of candidates; for arx, armax, oe, bj a list is "
-                   "MATLAB's structure, e.g. '2,2,1' = (na, nb, nk) for arx.")
+              help=f"Model order: an integer, 'auto' (discrete-time batch methods: "
+                   f"{AUTO_ORDER_RULE}), a range '2:8' or a list '2,4,6' of candidates; for "
+                   "arx, armax, oe, bj a list is MATLAB's structure, e.g. '2,2,1' = (na, nb, "
+                   "nk) for arx.")
 @click.option("--horizon", type=click.IntRange(min=2), default=None,
               help="Block rows of the data Hankel matrix (default: chosen by the method).")
 @click.option("--validate", type=click.FloatRange(0, 1, max_open=True), default=0.3,
@@ -1604,7 +1611,9 @@ def main(argv=None) -> int:
     state.argv = args
     try:
         try:
-            rv = cli.main(args=args, prog_name="subid", standalone_mode=False, obj=state)
+            with warnings.catch_warnings():     # restores showwarning afterwards
+                warnings.showwarning = _show_warning
+                rv = cli.main(args=args, prog_name="subid", standalone_mode=False, obj=state)
         except click.exceptions.Exit as exc:
             return exc.exit_code
         except click.UsageError as exc:

@@ -1,6 +1,6 @@
 """Plots for identified models and data. matplotlib is imported lazily.
 
-Install with ``pip install subid[plot]``. Every function returns a
+Install the ``plot`` extra (``pip install ".[plot]"`` in the source folder). Every function returns a
 :class:`matplotlib.figure.Figure` and never shows or saves it: the caller
 decides (``fig.savefig(...)``, or display in a notebook). Without a display
 (no ``DISPLAY`` on Linux) the ``Agg`` backend is selected.
@@ -130,7 +130,9 @@ def _pyplot():
                 matplotlib.use("Agg")
         import matplotlib.pyplot as plt
     except ImportError as exc:  # pragma: no cover - depends on the install
-        raise ImportError("subid.plot needs matplotlib: pip install 'subid[plot]'") from exc
+        from subid._extras import install_hint
+        raise ImportError("subid.plot needs matplotlib: "
+                          + install_hint("plot", "matplotlib")) from exc
     return plt
 
 
