@@ -11,6 +11,7 @@ from subid._validation import (
     check_dt,
     check_orientation,
     check_time_stamps,
+    grid_step,
     is_uniform,
     same_period,
     stamp_resolution,
@@ -86,7 +87,9 @@ class IOData:
         ``dt = 1`` (time counted in samples).
     t : array_like, shape (N,), optional
         Strictly increasing time stamps, uniform or not. Non-uniform time
-        stamps are kept as given.
+        stamps are kept as given. Uniform ones give ``dt``: their mean step,
+        rounded to the decimals the stamps are written with (``0.05``, not
+        ``0.049999999999999996``, for stamps ``0, 0.05, 0.1`` read from a file).
     input_names, output_names : sequence of str, optional
         Channel names (default ``u1, u2, ...`` and ``y1, y2, ...``).
     copy : bool
@@ -145,7 +148,7 @@ class IOData:
             t = check_time_stamps(t, n).view()      # never the caller's array's flags
             steps = np.diff(t)
             if n > 1 and is_uniform(steps, resolution=stamp_resolution(t)):
-                self._dt = float(np.mean(steps))
+                self._dt = grid_step(t, steps)      # to the precision of the stamps
             else:
                 self._dt = None
             self._t = t
