@@ -99,3 +99,63 @@ def test_convert_to_ct_shows_the_warning_on_one_line_without_a_source_path(model
     assert ".py" not in err and "Warning:" not in err
     code, out, err = run(capsys, "--quiet", "convert", model_file, "--to", "ct")
     assert code == 0 and err == ""
+
+
+# -- the demo explains its red flags ---------------------------------------------------
+def _parts(drift: float):
+    """Estimation and validation parts; the validation outputs moved by ``drift`` std."""
+    rng = np.random.default_rng(5)
+    u = rng.standard_normal((300, 1))
+    y = rng.standard_normal((300, 2))
+    est = subid.IOData(u[:200], y[:200], output_names=["a", "b"])
+    val = subid.IOData(u[200:], y[200:] + [drift * y[200:, 0].std(), 0.0],
+                       output_names=["a", "b"])
+    return est, val
+
+
+def _row(**kw):
+    row = dict(dataset="dryer2", method="moesp", function="moesp", order=6, horizon=10,
+               fit_est=np.array([80.0, 90.0]), fit_val=np.array([-7.0, -20.0]), stable=True,
+               seconds=0.1, warnings=[], error=None)
+    row.update(kw)
+    return row
+
+
+def test_demo_diagnosis_names_the_cause_of_every_bad_result_and_what_to_try():
+    from subid.cli.demo import diagnose
+    est, val = _parts(drift=0.0)
+    assert diagnose(_row(fit_val=np.array([30.0, 8.0])), est, val) is None
+    cases = {
+        "failed": (_row(error="ct_subspace: 140 samples are too few for a basis of 8 "
+                               "functions; supply more data or use fewer basis functions",
+                        fit_val=None, fit_est=None, stable=None, order=None),
+                   "--validate 0.2", "summary"),
+        "diverges": (_row(fit_val=np.array([np.nan, 8.0])), "stability=enforce", "compare"),
+        "unstable": (_row(stable=False), "stability=enforce", "poles"),
+        "but not the validation part": (_row(), "--order 1:5", "compare"),
+        "explain little": (_row(fit_est=np.array([10.0, 20.0]), fit_val=np.array([-20.0, 5.0])),
+                           "--refine pem", "residuals"),
+    }
+    for word, (row, hint, section) in cases.items():
+        reason, what, where = diagnose(row, est, val)
+        assert word in reason and hint in what and where == section, (word, reason, what)
+        assert "\n" not in reason + what and len(reason) <= 200
+    # the validation part at another operating point: detrend linearly
+    est, val = _parts(drift=2.0)
+    reason, what, where = diagnose(_row(), est, val)
+    assert "operating point moves" in reason and "a's mean" in reason
+    assert "--detrend linear" in what and where == "data"
+
+
+def test_demo_index_shows_the_reason_beside_the_cell_with_a_link():
+    from subid.evaluation.report import index_page
+    page = index_page([{"name": "dryer2", "href": "dryer2.html", "moesp": "-13.2 (6)",
+                        "notes": {"moesp": ("the operating point moves", "subid identify "
+                                            "dataset:dryer2 --detrend linear",
+                                            "dryer2.html#data")}},
+                       {"name": "dryer", "href": "dryer.html", "moesp": "88.5 (6)"}],
+                      columns=["moesp"])
+    cell = re.search(r"<td>-13\.2 \(6\)<div class=\"why\">(.*?)</div></td>", page).group(1)
+    assert "the operating point moves" in cell and 'href="dryer2.html#data"' in cell
+    assert "--detrend linear" in cell
+    assert "<td>88.5 (6)</td>" in page

@@ -36,6 +36,12 @@ log = logging.getLogger(__name__)
 FRACTION = 0.7
 #: The command that regenerates docs/gallery.md.
 GALLERY_COMMAND = "subid gallery --out docs/gallery.md"
+#: An output whose validation-part mean is this many of its standard deviations away
+#: from the estimation part's has moved to another operating point (:func:`diagnose`).
+DRIFT = 0.5
+#: A mean estimation fit (%) at least this good, with a negative validation fit: the
+#: model explains the data it saw, not the rest.
+GOOD_FIT = 50.0
 
 
 def _methods(methods=None, time_base=None):
@@ -121,6 +127,89 @@ def _cell(row) -> str:
     text = "n/a" if not np.isfinite(mean) else (f"{mean:.3g}" if abs(mean) >= 1e4
                                                 else f"{mean:.1f}")
     return f"{text} ({row['order']}{'' if row['stable'] else ', unstable'})"
+
+
+def _split_message(text: str, limit: int = 160) -> tuple[str, str]:
+    """An error message as (what is wrong, what it says to do): its first sentence or
+    clause up to ``'; '`` (at most ``limit`` characters, on one line) and the rest."""
+    text = " ".join(str(text).split())
+    ends = [k for k in (text.find(". "), text.find("; ")) if k > 0]
+    end = min(ends) if ends else len(text)
+    what, advice = text[:end], text[end + 2:]
+    if len(what) > limit:
+        what = what[:limit - 1].rstrip() + "…"
+    return what, advice
+
+
+def diagnose(row, est, val) -> tuple[str, str, str] | None:
+    """Why a demo result is bad, in one line, what to try, and where the report shows it.
+
+    Parameters
+    ----------
+    row : dict
+        A row of :func:`evaluate`.
+    est, val : IOData
+        The estimation and validation parts it was computed on.
+
+    Returns
+    -------
+    (reason, hint, section) or None
+        None for a result that is neither failed nor negative; ``section`` is
+        the id of the report section that shows the problem.
+
+    Notes
+    -----
+    The checks, in order: an error (its first sentence, and its advice; with too
+    few samples, try a longer estimation part); no finite validation fit (the simulation diverges); an
+    unstable model; a negative mean validation fit where the output means of the
+    validation part lie :data:`DRIFT` standard deviations or more from the
+    estimation part's (the operating point moved: a model of deviations from
+    the estimation means cannot fit, try ``--detrend linear``); a negative
+    validation fit after a good estimation fit (:data:`GOOD_FIT`, the plant or
+    the noise changed, or the model is over-fitted: try lower orders); otherwise
+    the inputs explain little of the outputs (try the one-step predictor,
+    ``--refine pem`` and ``compare --steps 1``).
+    """
+    name, method = row["dataset"], row["method"]
+    command = f"subid identify dataset:{name} --method {method}"
+    if row["error"]:
+        what, advice = _split_message(row["error"])
+        if "too few" in what:        # a longer estimation part
+            hint = f"{command} --validate 0.2 --out {name}_{method}"
+        else:
+            hint = f"{command} --order 1:6 --debug --out {name}_{method}"
+        return f"failed: {what}", (f"{advice}: " if advice else "") + hint, "summary"
+    mean = _mean_fit(row["fit_val"])
+    if mean is None:
+        return None
+    if not np.isfinite(mean):
+        return ("the simulation diverges on the validation part",
+                f"{command} --option stability=enforce --out {name}_{method}", "compare")
+    if not row["stable"]:
+        return ("unstable model: its simulation drifts away",
+                f"{command} --option stability=enforce --out {name}_{method}", "poles")
+    if mean >= 0:
+        return None
+    fits = np.asarray(row["fit_val"], dtype=float)
+    worst = int(np.argmin(fits))
+    output = est.output_names[worst]
+    spread = np.where(val.y.std(axis=0) > 0, val.y.std(axis=0), 1.0)
+    drift = np.abs(val.y.mean(axis=0) - est.y.mean(axis=0)) / spread
+    if drift.max() >= DRIFT:
+        k = int(np.argmax(drift))
+        return (f"the operating point moves: {est.output_names[k]}'s mean on the validation "
+                f"part is {drift[k]:.1f} standard deviations from the estimation part's",
+                f"{command} --detrend linear --out {name}_{method}", "data")
+    fit_est = _mean_fit(row["fit_est"])
+    if fit_est is not None and fit_est >= GOOD_FIT:
+        return (f"fits the estimation part ({fit_est:.0f} %) but not the validation part "
+                f"({output}: {fits[worst]:.0f} %): the plant changed or the order is too high",
+                f"{command} --order 1:{max(1, row['order'] - 1)} --out {name}_{method}",
+                "compare")
+    return (f"the inputs explain little of {output} (estimation fit "
+            f"{_fit_text(row['fit_est'])} %): unmeasured disturbances dominate",
+            f"{command} --refine pem --out {name}_{method}, then subid compare --steps 1",
+            "residuals")
 
 
 def gallery_markdown(rows, *, command: str = GALLERY_COMMAND, seconds=None) -> str:
@@ -264,9 +353,14 @@ def report_dataset(name: str, out: str, methods=None, frequency_unit="rad/s") ->
     path = os.path.join(out, f"{name}.html")
     report.write_html(path, html)
     entry = {"name": name, "href": f"{name}.html", "samples": meta["n_samples"],
-             "inputs × outputs": f"{meta['n_inputs']} × {meta['n_outputs']}"}
+             "inputs × outputs": f"{meta['n_inputs']} × {meta['n_outputs']}", "notes": {}}
     for r in rows:
-        entry[METHODS[r["method"]].attribute] = _cell(r)
+        column = METHODS[r["method"]].attribute
+        entry[column] = _cell(r)
+        why = diagnose(r, est, val)
+        if why is not None:
+            reason, hint, section = why
+            entry["notes"][column] = (reason, hint, f"{name}.html#{section}")
     return {"name": name, "rows": rows, "path": path, "entry": entry,
             "seconds": time.perf_counter() - t0}
 

@@ -61,6 +61,7 @@ figure{margin:.6em 0}figcaption{font-size:.85em;color:#555}
 pre{background:#f7f7f7;border:1px solid #e2e2e2;padding:.6em;overflow-x:auto;font-size:.8em}
 .bad{color:#b00020;font-weight:600}.good{color:#0a7a2f}.note{color:#555;font-size:.9em}
 nav a{margin-right:.9em}.meta{color:#666;font-size:.85em}
+.why{color:#8a4b00;font-size:.8em;text-align:left;max-width:22em;margin-top:.15em}
 """
 
 
@@ -414,7 +415,7 @@ def _spa_estimate(estimation, models):
 def identification_report(models, estimation, validation=None, *, title="subid report",
                           frequency_unit="rad/s", history=None, seconds=None, notes=(),
                           command=None, source=None, errors=None, data=None,
-                          max_lag: int = 25) -> str:
+                          max_lag: int = 25, progress=None) -> str:
     """HTML text of a complete identification report.
 
     Parameters
@@ -447,6 +448,8 @@ def identification_report(models, estimation, validation=None, *, title="subid r
         validation, as split).
     max_lag : int
         Largest lag of the residual correlations.
+    progress : callable, optional
+        Called with each section's id as its work starts (a progress display).
 
     Returns
     -------
@@ -464,6 +467,8 @@ def identification_report(models, estimation, validation=None, *, title="subid r
     check = validation if validation is not None else estimation
     check_name = "validation" if validation is not None else "estimation"
     body, nav = [], []
+    step = progress or (lambda section: None)
+    step("summary")
     results = {label: evaluate(m, estimation, validation) for label, m in models.items()}
 
     # -- summary ---------------------------------------------------------
@@ -518,6 +523,7 @@ def identification_report(models, estimation, validation=None, *, title="subid r
     nav.append(("summary", "summary"))
 
     # -- data overview ---------------------------------------------------
+    step("data")
     whole = data
     split = None
     if whole is None and validation is not None:
@@ -532,6 +538,7 @@ def identification_report(models, estimation, validation=None, *, title="subid r
     nav.append(("data", "data"))
 
     # -- order selection -------------------------------------------------
+    step("order")
     profiled = {label: m for label, m in models.items()
                 if m.info.get("singular_values") is not None
                 or m.info.get("rank_profile") is not None}
@@ -552,6 +559,7 @@ def identification_report(models, estimation, validation=None, *, title="subid r
         nav.append(("order", "order"))
 
     # -- comparison ------------------------------------------------------
+    step("compare")
     body.append(_section("compare", f"Simulated and measured outputs ({check_name} data)",
                          _plot_or_note(lambda: plot.compare(check, models),
                                        f"simulation on the {check_name} data from a "
@@ -560,6 +568,7 @@ def identification_report(models, estimation, validation=None, *, title="subid r
     nav.append(("compare", "compare"))
 
     # -- Bode ------------------------------------------------------------
+    step("bode")
     nyquist = "; dotted: Nyquist frequency" if any(m.dt > 0 for m in models.values()) else ""
     level = 0.95 if any(isinstance(m.info.get("parameter_covariance"), dict)
                         for m in models.values()) else None
@@ -578,6 +587,7 @@ def identification_report(models, estimation, validation=None, *, title="subid r
     nav.append(("step", "step"))
 
     # -- poles -----------------------------------------------------------
+    step("poles")
     pole_tables = "".join(f"<h3>{_e(label)}</h3>{_pole_table(m, hz)}"
                           for label, m in models.items())
     body.append(_section("poles", "Poles", _plot_or_note(
@@ -589,6 +599,7 @@ def identification_report(models, estimation, validation=None, *, title="subid r
 
 
     # -- residuals -------------------------------------------------------
+    step("residuals")
     body.append(_section("residuals", "Residual analysis", _plot_or_note(
         lambda: plot.residuals(models, check, max_lag=max_lag,
                                title=f"residuals on the {check_name} data (99 % bands)"),
@@ -601,6 +612,7 @@ def identification_report(models, estimation, validation=None, *, title="subid r
     nav.append(("residuals", "residuals"))
 
     # -- convergence -----------------------------------------------------
+    step("convergence")
     if history is not None:
         body.append(_section("convergence", "Convergence of the online estimate", _plot_or_note(
             lambda: plot.convergence(history),
@@ -609,6 +621,7 @@ def identification_report(models, estimation, validation=None, *, title="subid r
         nav.append(("convergence", "convergence"))
 
     # -- matrices --------------------------------------------------------
+    step("matrices")
     parts = []
     for label, m in models.items():
         states = [f"x{k + 1}" for k in range(m.order)]
@@ -664,6 +677,11 @@ def _concat(a, b):
     return IOData(u, y, t=t, input_names=a.input_names, output_names=a.output_names)
 
 
+def _cell_note(reason: str, hint: str, link: str) -> str:
+    """The line under a bad value of the index: why, and what to try (linked)."""
+    return (f'<div class="why">{_e(reason)}; <a href="{_e(link)}">try</a>: {_e(hint)}</div>')
+
+
 def index_page(entries, *, title="subid reports", intro="", columns=(), footer="") -> str:
     """HTML index linking several reports.
 
@@ -671,7 +689,10 @@ def index_page(entries, *, title="subid reports", intro="", columns=(), footer="
     ----------
     entries : list of dict
         Each with ``name``, ``href`` (relative link to the report) and one
-        value per column name in ``columns`` (HTML-escaped text).
+        value per column name in ``columns`` (HTML-escaped text); optionally
+        ``notes``, ``{column: (reason, hint, link)}``: a line shown under that
+        cell saying why its value is bad, what to try, and a relative link
+        (say to the report section that shows it).
     title, intro : str
     columns : sequence of str
         Extra table columns.
@@ -685,7 +706,9 @@ def index_page(entries, *, title="subid reports", intro="", columns=(), footer="
         + "</tr>"
     rows = []
     for entry in entries:
-        cells = "".join(f"<td>{_e(entry.get(c, ''))}</td>" for c in columns)
+        notes = entry.get("notes") or {}
+        cells = "".join(f"<td>{_e(entry.get(c, ''))}{_cell_note(*notes[c]) if c in notes else ''}"
+                        "</td>" for c in columns)
         rows.append(f'<tr><td class="l"><a href="{_e(entry["href"])}">{_e(entry["name"])}</a>'
                     f"</td>{cells}</tr>")
     body = []
