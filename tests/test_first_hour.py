@@ -159,3 +159,77 @@ def test_demo_index_shows_the_reason_beside_the_cell_with_a_link():
     assert "the operating point moves" in cell and 'href="dryer2.html#data"' in cell
     assert "--detrend linear" in cell
     assert "<td>88.5 (6)</td>" in page
+
+
+# -- progress on a terminal ------------------------------------------------------------
+def test_steps_bar_names_each_step_on_stderr_and_is_silent_when_disabled(capsys):
+    from subid._progress import Steps
+    with Steps(["read", "identify"], "identify", enabled=True, refresh=0.01) as steps:
+        steps.start("read")
+        steps.start("identify")
+        steps.detail("bode")
+    err = capsys.readouterr().err
+    assert "read" in err and "identify: bode" in err
+    with Steps(["read"], "identify", enabled=False) as steps:
+        steps.start("read")
+        steps.detail("x")
+    assert capsys.readouterr().err == ""
+
+
+@pytest.mark.parametrize("quiet", [False, True])
+def test_identify_shows_its_steps_on_a_terminal_never_with_quiet(quiet, tmp_path, capsys,
+                                                                 monkeypatch):
+    from subid.cli import commands
+    monkeypatch.setattr(commands, "on_terminal", lambda quiet=False: not quiet)
+    code, out, err = run(capsys, *(["--quiet"] if quiet else []), "identify", "dataset:dryer",
+                         "--order", "2", "--horizon", "10", "--no-report",
+                         "--out", tmp_path / "o")
+    assert code == 0
+    if quiet:
+        assert err == "" and out == ""
+    else:
+        for step in ("read", "identify", "evaluate", "write"):
+            assert step in err
+
+
+# -- dt from a time column; measured data on top -----------------------------------------
+def test_dt_from_a_time_column_is_the_grid_step_to_the_precision_of_the_file(tmp_path):
+    rng = np.random.default_rng(3)
+    n = 400
+    t = [f"{0.05 * k:.2f}" for k in range(n)]
+    path = tmp_path / "log.csv"
+    path.write_text("t,u,y\n" + "".join(f"{a},{b:.6f},{c:.6f}\n" for a, b, c in
+                                         zip(t, rng.standard_normal(n), rng.standard_normal(n))))
+    data = subid.read(str(path), inputs=["u"], outputs=["y"], time="t")
+    assert np.mean(np.diff(data.t)) != 0.05          # what the float differences give
+    assert data.dt == 0.05
+    # stamps written with more decimals than the step needs, and computed stamps
+    assert subid.IOData(np.ones(5), np.ones(5), t=[0.0, 0.25, 0.5, 0.75, 1.0]).dt == 0.25
+    computed = 0.1 * np.arange(1000)
+    assert subid.IOData(np.ones(1000), np.ones(1000), t=computed).dt == np.mean(
+        np.diff(computed))
+
+
+def test_compare_draws_the_measured_output_on_top_and_distinguishable():
+    pytest.importorskip("matplotlib")
+    true = subid.systems.random_system(2, 1, 1, seed=4)
+    data = subid.systems.simulate_data(true, 300, seed=5)
+    fig = subid.plot.compare(data, {"true": true})
+    measured, model = fig.axes[0].get_lines()[:2]
+    assert measured.get_label() == "measured"
+    assert measured.get_zorder() > model.get_zorder()
+    assert measured.get_linewidth() < model.get_linewidth()
+    assert measured.get_color() != model.get_color() or model.get_alpha() < 1
+
+
+def test_long_traces_are_drawn_through_their_envelope():
+    from subid.evaluation.plot import MAX_TRACE_POINTS, _envelope
+    n = 100_003
+    t = np.arange(n) * 0.01
+    y = np.sin(t) + np.where(np.arange(n) == 55_555, 9.0, 0.0)    # one spike
+    tt, yy = _envelope(t, y)
+    assert len(yy) <= MAX_TRACE_POINTS and np.all(np.diff(tt) >= 0)
+    assert yy.max() == y.max() and yy.min() == y.min()              # the spike is kept
+    assert set(yy) <= set(y)
+    short_t, short_y = _envelope(t[:100], y[:100])
+    assert short_y is y[:100] or np.array_equal(short_y, y[:100])

@@ -68,6 +68,12 @@ class Steps:
         self._current = name
         self._bar.set_postfix_str(name, refresh=True)
 
+    def finished(self, name: str) -> None:
+        """Count step ``name`` as done (steps run in parallel, finishing in any order)."""
+        if self._bar is not None:
+            self._bar.update(1)
+            self._bar.set_postfix_str(f"{name} done", refresh=True)
+
     def detail(self, text: str) -> None:
         """Name a part of the current step (``report: bode``)."""
         if self._bar is not None:

@@ -23,7 +23,7 @@ import warnings
 import numpy as np
 
 from subid import datasets
-from subid._progress import progress_bar, progress_wrapper
+from subid._progress import Steps, progress_wrapper
 from subid.errors import OptionError, SubidError
 from subid.io._files import write_bytes, write_json
 
@@ -311,10 +311,6 @@ def _all_names():
     return list(datasets.names())
 
 
-def _bar(total, progress, desc):
-    return progress_bar(total, desc, "dataset", enabled=bool(progress))
-
-
 def _iterate(names, progress, desc):
     wrap = progress_wrapper(desc, "dataset", enabled=bool(progress))
     return names if wrap is None else wrap(names)
@@ -425,13 +421,12 @@ def run(out, datasets=None, methods=None, *, frequency_unit="rad/s", progress=Fa
     jobs = _default_jobs(len(names)) if jobs is None else max(1, int(jobs))
     t0 = time.perf_counter()
     results = {}
-    bar = _bar(len(names), progress, "demo")
+    bar = Steps(names, "demo", enabled=bool(progress))    # elapsed time moves on
     try:
         if jobs == 1:
             for name in names:
+                bar.start(name)
                 results[name] = report_dataset(name, out, methods, frequency_unit)
-                if bar is not None:
-                    bar.update(1)
         else:
             import concurrent.futures
             import multiprocessing
@@ -442,11 +437,9 @@ def run(out, datasets=None, methods=None, *, frequency_unit="rad/s", progress=Fa
                            for name in names}
                 for future in concurrent.futures.as_completed(futures):
                     results[futures[future]] = future.result()
-                    if bar is not None:
-                        bar.update(1)
+                    bar.finished(futures[future])
     finally:
-        if bar is not None:
-            bar.close()
+        bar.close()
     all_rows, by_dataset, reports, entries = [], {}, [], []
     for name in names:                                 # the order asked for
         res = results[name]
