@@ -856,7 +856,7 @@ def _write_outputs(out, data, spec, model, result, est, val, seconds, record, *,
         html = report.identification_report(
             {spec.name: model}, est, val, title=title, frequency_unit=frequency_unit,
             seconds={spec.name: seconds}, notes=notes, command=_command_line(), source=data,
-            data=report_data, progress=steps.detail)
+            data=report_data, progress=steps.detail, fits={spec.name: result})
     steps.start("write")
     summary = {
         "data": data, "method": spec.name, "function": spec.attribute, "order": model.order,
@@ -1205,7 +1205,8 @@ def track(data, inputs, outputs, dt, time_column, delimiter, detrend, method_nam
                            f"; final checkpoint {final_ckpt}. Fit % is on the whole record; "
                            f"on its last third (the converged fit): {_fmt_fit(fit_tail)}. "
                            f"Convergence: {status}."],
-            command=_command_line(), source=data, progress=steps.detail)
+            command=_command_line(), source=data, progress=steps.detail,
+            fits={spec.name: result})
     steps.start("write")
     # The final outputs replace the folder as a whole (old run's or new run's,
     # never a mix); the checkpoints written during the run are carried over.

@@ -415,7 +415,7 @@ def _spa_estimate(estimation, models):
 def identification_report(models, estimation, validation=None, *, title="subid report",
                           frequency_unit="rad/s", history=None, seconds=None, notes=(),
                           command=None, source=None, errors=None, data=None,
-                          max_lag: int = 25, progress=None) -> str:
+                          max_lag: int = 25, progress=None, fits=None) -> str:
     """HTML text of a complete identification report.
 
     Parameters
@@ -450,6 +450,9 @@ def identification_report(models, estimation, validation=None, *, title="subid r
         Largest lag of the residual correlations.
     progress : callable, optional
         Called with each section's id as its work starts (a progress display).
+    fits : dict label -> dict, optional
+        The :func:`evaluate` result of a model on ``estimation`` and
+        ``validation``, when the caller has it already (not computed again).
 
     Returns
     -------
@@ -469,7 +472,9 @@ def identification_report(models, estimation, validation=None, *, title="subid r
     body, nav = [], []
     step = progress or (lambda section: None)
     step("summary")
-    results = {label: evaluate(m, estimation, validation) for label, m in models.items()}
+    fits = fits or {}
+    results = {label: fits[label] if label in fits else evaluate(m, estimation, validation)
+               for label, m in models.items()}
 
     # -- summary ---------------------------------------------------------
     ny = estimation.n_outputs
