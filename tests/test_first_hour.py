@@ -233,3 +233,19 @@ def test_long_traces_are_drawn_through_their_envelope():
     assert set(yy) <= set(y)
     short_t, short_y = _envelope(t[:100], y[:100])
     assert short_y is y[:100] or np.array_equal(short_y, y[:100])
+
+
+def test_one_step_x0_from_decayed_free_responses_equals_the_full_regression():
+    # the fast path of predict (free responses only until they decay) against the
+    # regression over every sample (the path without ``data``)
+    from subid.evaluation import prediction
+    true = subid.systems.random_system(3, 1, 2, seed=11)
+    data = subid.systems.simulate_data(true, 3000, seed=12, output_snr_db=20)
+    model = subid.moesp(data, 3, horizon=10)
+    assert model.K is not None
+    fast = prediction._estimate_x0(model, data.u, data.y, 1, data)
+    full = prediction._estimate_x0(model, data.u, data.y, 1)
+    np.testing.assert_allclose(fast[0], full[0], rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(fast[1], full[1], rtol=1e-9, atol=1e-12)
+    y_hat, x0 = subid.predict(model, data, 1, return_x0=True)
+    np.testing.assert_allclose(x0, full[0], rtol=1e-9, atol=1e-12)
