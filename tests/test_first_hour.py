@@ -35,7 +35,7 @@ def test_order_auto_is_described_alike_by_help_readme_cli_docs_and_notebook(caps
     assert code == 0
     rule = _flat(AUTO_ORDER_RULE)
     assert rule in _flat(out)
-    for doc in ("README.md", "docs/cli.md", "examples/quickstart.ipynb"):
+    for doc in ("README.md", "docs/cli.md", "docs/gallery.md", "examples/quickstart.ipynb"):
         assert rule in _flat((ROOT / doc).read_text(encoding="utf-8")), doc
     # the phrase is made from the constants the selection uses
     from subid.methods.dt import _selection

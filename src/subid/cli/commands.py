@@ -697,9 +697,9 @@ def identify(data, inputs, outputs, dt, time_column, delimiter, detrend, method_
                                    refine, frequency_unit, write_report, out, steps)
 
 
-def _steps(write_report, first="read"):
+def _steps(write_report):
     """The progress bar over the steps of ``identify`` (on a terminal only)."""
-    names = [first, "identify", "evaluate", *(["report"] if write_report else []), "write"]
+    names = ["read", "identify", "evaluate", *(["report"] if write_report else []), "write"]
     return Steps(names, "identify", enabled=_state().progress)
 
 

@@ -26,6 +26,7 @@ from subid import datasets
 from subid._progress import Steps, progress_wrapper
 from subid.errors import OptionError, SubidError
 from subid.io._files import write_bytes, write_json
+from subid.methods.dt._selection import AUTO_ORDER_RULE
 
 __all__ = ["evaluate", "report_dataset", "run", "gallery", "gallery_markdown", "GALLERY_COMMAND",
            "FRACTION"]
@@ -223,8 +224,7 @@ def gallery_markdown(rows, *, command: str = GALLERY_COMMAND, seconds=None) -> s
         "# Gallery: the bundled DaISy datasets",
         "",
         f"Each record has its means removed, is identified on the first {FRACTION:.0%} of its "
-        "samples with the order and horizon chosen automatically (cross-validated simulation "
-        "fit on the estimation part, among orders 1..10 and horizons 10 and 20; "
+        f"samples with the order and horizon chosen automatically ({AUTO_ORDER_RULE}; "
         "`selection='cv'`; continuous-time methods: their own rule), and is "
         f"validated on the last {1 - FRACTION:.0%}: the model is simulated from a "
         "least-squares initial state and compared with the measured output.",
