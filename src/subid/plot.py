@@ -20,8 +20,9 @@ from subid.evaluation.plot import (
     residual_correlations,
     residuals,
     simulated_output,
+    step,
 )
 
-__all__ = ["poles", "error_histograms", "bode", "compare", "residuals",
+__all__ = ["poles", "error_histograms", "bode", "step", "compare", "residuals",
            "residual_correlations", "convergence", "data_overview", "frequency_grid",
            "simulated_output", "order_selection", "STYLE", "METHOD_COLORS"]
