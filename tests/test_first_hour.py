@@ -249,3 +249,17 @@ def test_one_step_x0_from_decayed_free_responses_equals_the_full_regression():
     np.testing.assert_allclose(fast[1], full[1], rtol=1e-9, atol=1e-12)
     y_hat, x0 = subid.predict(model, data, 1, return_x0=True)
     np.testing.assert_allclose(x0, full[0], rtol=1e-9, atol=1e-12)
+
+
+def test_spa_covariances_by_direct_products_equal_the_fft_ones(monkeypatch):
+    # the report's spa overlay on long records: few lags by products, many by FFT
+    from subid.evaluation import nonparametric
+    true = subid.systems.random_system(3, 2, 1, seed=21)
+    data = subid.systems.simulate_data(true, 3000, seed=22, output_snr_db=10).detrend()
+    merged = subid.merge([data[:1200], data[1200:]])
+    for record in (data, merged):
+        direct = nonparametric._covariances(record, 30)
+        monkeypatch.setattr(nonparametric, "_DIRECT_LAGS", -1)
+        fft = nonparametric._covariances(record, 30)
+        monkeypatch.undo()
+        np.testing.assert_allclose(direct, fft, rtol=0, atol=1e-12 * np.abs(fft).max())
