@@ -28,8 +28,8 @@ from subid.errors import OptionError, SubidError
 from subid.io._files import write_bytes, write_json
 from subid.methods.dt._selection import AUTO_ORDER_RULE
 
-__all__ = ["evaluate", "report_dataset", "run", "gallery", "gallery_markdown", "GALLERY_COMMAND",
-           "FRACTION"]
+__all__ = ["evaluate", "diagnose", "report_dataset", "run", "gallery", "gallery_markdown",
+           "GALLERY_COMMAND", "FRACTION"]
 
 log = logging.getLogger(__name__)
 
@@ -161,10 +161,11 @@ def diagnose(row, est, val) -> tuple[str, str, str] | None:
     Notes
     -----
     The checks, in order: an error (its first sentence, and its advice; with too
-    few samples, try a longer estimation part); no finite validation fit (the simulation diverges); an
-    unstable model; a negative mean validation fit where the output means of the
-    validation part lie :data:`DRIFT` standard deviations or more from the
-    estimation part's (the operating point moved: a model of deviations from
+    few samples, try a longer estimation part); no finite validation fit (the
+    simulation diverges); an unstable model; a negative mean validation fit where
+    the output means of the validation part lie :data:`DRIFT` standard
+    deviations or more from the estimation part's (the operating point moved: a
+    model of deviations from
     the estimation means cannot fit, try ``--detrend linear``); a negative
     validation fit after a good estimation fit (:data:`GOOD_FIT`, the plant or
     the noise changed, or the model is over-fitted: try lower orders); otherwise

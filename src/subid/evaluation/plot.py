@@ -1,7 +1,8 @@
 """Plots for identified models and data. matplotlib is imported lazily.
 
-Install the ``plot`` extra (``pip install ".[plot]"`` in the source folder). Every function returns a
-:class:`matplotlib.figure.Figure` and never shows or saves it: the caller
+Install the ``plot`` extra (``pip install ".[plot]"`` in the source folder).
+Every function returns a :class:`matplotlib.figure.Figure` and never shows or
+saves it: the caller
 decides (``fig.savefig(...)``, or display in a notebook). Without a display
 (no ``DISPLAY`` on Linux) the ``Agg`` backend is selected.
 

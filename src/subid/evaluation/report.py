@@ -470,8 +470,8 @@ def identification_report(models, estimation, validation=None, *, title="subid r
     check = validation if validation is not None else estimation
     check_name = "validation" if validation is not None else "estimation"
     body, nav = [], []
-    step = progress or (lambda section: None)
-    step("summary")
+    announce = progress or (lambda section: None)
+    announce("summary")
     fits = fits or {}
     results = {label: fits[label] if label in fits else evaluate(m, estimation, validation)
                for label, m in models.items()}
@@ -528,7 +528,7 @@ def identification_report(models, estimation, validation=None, *, title="subid r
     nav.append(("summary", "summary"))
 
     # -- data overview ---------------------------------------------------
-    step("data")
+    announce("data")
     whole = data
     split = None
     if whole is None and validation is not None:
@@ -543,7 +543,7 @@ def identification_report(models, estimation, validation=None, *, title="subid r
     nav.append(("data", "data"))
 
     # -- order selection -------------------------------------------------
-    step("order")
+    announce("order")
     profiled = {label: m for label, m in models.items()
                 if m.info.get("singular_values") is not None
                 or m.info.get("rank_profile") is not None}
@@ -564,7 +564,7 @@ def identification_report(models, estimation, validation=None, *, title="subid r
         nav.append(("order", "order"))
 
     # -- comparison ------------------------------------------------------
-    step("compare")
+    announce("compare")
     body.append(_section("compare", f"Simulated and measured outputs ({check_name} data)",
                          _plot_or_note(lambda: plot.compare(check, models),
                                        f"simulation on the {check_name} data from a "
@@ -573,7 +573,7 @@ def identification_report(models, estimation, validation=None, *, title="subid r
     nav.append(("compare", "compare"))
 
     # -- Bode ------------------------------------------------------------
-    step("bode")
+    announce("bode")
     nyquist = "; dotted: Nyquist frequency" if any(m.dt > 0 for m in models.values()) else ""
     level = 0.95 if any(isinstance(m.info.get("parameter_covariance"), dict)
                         for m in models.values()) else None
@@ -586,13 +586,14 @@ def identification_report(models, estimation, validation=None, *, title="subid r
         f"magnitude and phase; frequency in {'Hz' if hz else 'rad/s'}{nyquist}{band}{overlay}",
         "Bode diagram")))
     nav.append(("bode", "Bode"))
+    announce("step")
     body.append(_section("step", "Step response", _plot_or_note(
         lambda: plot.step(models, confidence=level),
         f"response to a unit step on each input{band}", "step response")))
     nav.append(("step", "step"))
 
     # -- poles -----------------------------------------------------------
-    step("poles")
+    announce("poles")
     pole_tables = "".join(f"<h3>{_e(label)}</h3>{_pole_table(m, hz)}"
                           for label, m in models.items())
     body.append(_section("poles", "Poles", _plot_or_note(
@@ -604,7 +605,7 @@ def identification_report(models, estimation, validation=None, *, title="subid r
 
 
     # -- residuals -------------------------------------------------------
-    step("residuals")
+    announce("residuals")
     body.append(_section("residuals", "Residual analysis", _plot_or_note(
         lambda: plot.residuals(models, check, max_lag=max_lag,
                                title=f"residuals on the {check_name} data (99 % bands)"),
@@ -617,7 +618,7 @@ def identification_report(models, estimation, validation=None, *, title="subid r
     nav.append(("residuals", "residuals"))
 
     # -- convergence -----------------------------------------------------
-    step("convergence")
+    announce("convergence")
     if history is not None:
         body.append(_section("convergence", "Convergence of the online estimate", _plot_or_note(
             lambda: plot.convergence(history),
@@ -626,7 +627,7 @@ def identification_report(models, estimation, validation=None, *, title="subid r
         nav.append(("convergence", "convergence"))
 
     # -- matrices --------------------------------------------------------
-    step("matrices")
+    announce("matrices")
     parts = []
     for label, m in models.items():
         states = [f"x{k + 1}" for k in range(m.order)]
