@@ -263,3 +263,14 @@ def test_spa_covariances_by_direct_products_equal_the_fft_ones(monkeypatch):
         fft = nonparametric._covariances(record, 30)
         monkeypatch.undo()
         np.testing.assert_allclose(direct, fft, rtol=0, atol=1e-12 * np.abs(fft).max())
+
+
+def test_readme_signatures_of_the_online_identifiers_show_dt_and_the_required_arguments():
+    import inspect
+    readme = (ROOT / "README.md").read_text(encoding="utf-8")
+    for cls in (subid.RecursiveSubspace, subid.AdaptiveIdentifier):
+        row = re.search(rf"`{cls.__name__}\(([^`]*)\)`", readme).group(1)
+        shown = {part.split("=")[0].strip(" *") for part in row.split(",")}
+        params = inspect.signature(cls).parameters.values()
+        required = {p.name for p in params if p.default is p.empty}
+        assert required <= shown and "dt" in shown, (cls.__name__, shown)
