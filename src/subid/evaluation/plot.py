@@ -550,6 +550,9 @@ def bode(model_or_models=None, w=None, *, data=None, hz=False, labels=None, phas
     fig, axes = plt.subplots(rows, nu, figsize=(min(3.8 * nu + 1.2, 16) + room,
                                                 1.9 * rows + 0.8),
                              sharex=True, squeeze=False)
+    # one log scale for the shared frequency axis: semilogx on every panel would set it
+    # again on all the shared axes each time (quadratic in the panels: 5 s of a 5x3 grid)
+    axes[0, 0].set_xscale("log")
     reference = None                     # phase of the first model, to align the data's
     for k, (label, m) in enumerate(groups.items()):
         style = dict(color=colors[k], lw=1.2, ls="--" if unstable[label] else "-")
@@ -571,14 +574,14 @@ def bode(model_or_models=None, w=None, *, data=None, hz=False, labels=None, phas
         for i in range(ny):
             for j in range(nu):
                 r = 2 * i if phase else i
-                axes[r, j].semilogx(wk * x_scale, mag[:, i, j], label=shown[k], **style)
+                axes[r, j].plot(wk * x_scale, mag[:, i, j], label=shown[k], **style)
                 if band is not None:
                     lo = np.maximum(band.lower[:, i, j], 1e-3 * band.value[:, i, j])
                     axes[r, j].fill_between(wk * x_scale, 20 * np.log10(lo),
                                             20 * np.log10(band.upper[:, i, j]),
                                             color=colors[k], alpha=0.2, lw=0)
                 if phase:
-                    axes[r + 1, j].semilogx(wk * x_scale, ph[:, i, j], **style)
+                    axes[r + 1, j].plot(wk * x_scale, ph[:, i, j], **style)
     if data is not None:
         _bode_data(axes, data, x_scale, phase, reference)
     for i in range(ny):
@@ -643,7 +646,7 @@ def _bode_data(axes, data, x_scale, phase, reference=None):
     for i in range(data.n_outputs):
         for j in range(data.n_inputs):
             r = 2 * i if phase else i
-            axes[r, j].semilogx(w, mag[:, i, j], ".", color="0.35", ms=3, label="data",
+            axes[r, j].plot(w, mag[:, i, j], ".", color="0.35", ms=3, label="data",
                                 zorder=1)
             if data.std is not None:
                 absG, sd = np.abs(G[:, i, j]), 2 * data.std[keep][:, i, j]
@@ -652,7 +655,7 @@ def _bode_data(axes, data, x_scale, phase, reference=None):
                     hi = 20 * np.log10(np.maximum(absG + sd, 1e-300))
                 axes[r, j].fill_between(w, lo, hi, color="0.8", lw=0, zorder=0)
             if phase:
-                axes[r + 1, j].semilogx(w, ph[:, i, j], ".", color="0.35", ms=3, zorder=1)
+                axes[r + 1, j].plot(w, ph[:, i, j], ".", color="0.35", ms=3, zorder=1)
 
 
 def _has_covariance(model) -> bool:
