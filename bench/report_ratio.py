@@ -87,12 +87,15 @@ def main(argv=None):
     med = {key: statistics.median(r[key] for r in runs)
            for key in ("read", "identify", "evaluate", "report")}
     ratio = statistics.median(r["report"] / r["identify"] for r in runs)
+    load = os.getloadavg()[1]           # the machine's load over the last 5 minutes
     lines = [
         "# Report time against identification time (bench/report_ratio.py)",
         "",
         f"{args.samples} samples (CSV, 2 inputs, 2 outputs), default method "
         f"`{spec.attribute}` (order {runs[-1]['order']}), 70 % estimation; medians of "
-        f"{args.repeat} interleaved repeats after a warm-up run, OPENBLAS_NUM_THREADS=1.",
+        f"{args.repeat} interleaved repeats after a warm-up run, OPENBLAS_NUM_THREADS=1; "
+        f"load average {load:.1f} on {os.cpu_count()} CPUs at the end (on a shared machine "
+        "the seconds scale with the load; the ratio is measured in one process).",
         "",
         "| step | seconds |",
         "|---|---:|",
