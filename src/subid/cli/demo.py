@@ -162,7 +162,8 @@ def diagnose(row, est, val) -> tuple[str, str, str] | None:
     -----
     The checks, in order: an error (its first sentence, and its advice; with too
     few samples, try a longer estimation part); no finite validation fit (the
-    simulation diverges); an unstable model; a negative mean validation fit where
+    simulation diverges); an unstable model (with a good fit: the plant may be
+    unstable itself); a negative mean validation fit where
     the output means of the validation part lie :data:`DRIFT` standard
     deviations or more from the estimation part's (the operating point moved: a
     model of deviations from
@@ -188,6 +189,11 @@ def diagnose(row, est, val) -> tuple[str, str, str] | None:
         return ("the simulation diverges on the validation part",
                 f"{command} --option stability=enforce --out {name}_{method}", "compare")
     if not row["stable"]:
+        if mean >= 0:       # an unstable plant (ballbeam) gives an unstable model that fits
+            return (f"a pole outside the stability region, yet the simulation fits "
+                    f"({mean:.0f} %): the plant itself may be unstable",
+                    f"if it is not, {command} --option stability=enforce --out "
+                    f"{name}_{method}", "poles")
         return ("unstable model: its simulation drifts away",
                 f"{command} --option stability=enforce --out {name}_{method}", "poles")
     if mean >= 0:
