@@ -19,7 +19,7 @@ ROOT = pathlib.Path(__file__).resolve().parents[1]
 
 
 def _flat(text: str) -> str:
-    """Whitespace collapsed, Markdown emphasis and line breaks removed."""
+    """``text`` on one line: whitespace and line breaks collapsed, backticks removed."""
     return " ".join(text.replace("`", "").split())
 
 
