@@ -276,3 +276,18 @@ def test_readme_signatures_of_the_online_identifiers_show_dt_and_the_required_ar
         params = inspect.signature(cls).parameters.values()
         required = {p.name for p in params if p.default is p.empty}
         assert required <= shown and "dt" in shown, (cls.__name__, shown)
+
+
+def test_report_charts_order_scores_only_for_records_over_orders_and_horizons():
+    # the polynomial methods' structure records (na, nb) are not order/horizon scores: the
+    # demo's reports broke on them (KeyError 'horizon')
+    from subid.evaluation.report import _order_scored
+    model = subid.StateSpace([[0.5]], [[1.0]], [[1.0]], [[0.0]], 1.0)
+    model.info["order_selection"] = {"rule": "cv", "candidates": [
+        {"na": 1, "nb": 1, "score": 60.0}], "selected": {"na": 1, "nb": 1, "score": 60.0}}
+    assert not _order_scored(model)
+    model.info["order_selection"] = {"rule": "cv", "candidates": [
+        {"order": 1, "horizon": 10, "score": 60.0}], "selected": {"order": 1, "horizon": 10}}
+    assert _order_scored(model)
+    model.info["order_selection"] = {"rule": "given"}
+    assert not _order_scored(model)

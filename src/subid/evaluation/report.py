@@ -547,9 +547,7 @@ def identification_report(models, estimation, validation=None, *, title="subid r
     profiled = {label: m for label, m in models.items()
                 if m.info.get("singular_values") is not None
                 or m.info.get("rank_profile") is not None}
-    chosen = {label: m for label, m in models.items()
-              if isinstance(m.info.get("order_selection"), dict)
-              and m.info["order_selection"].get("rule") in ("cv", "gap")}
+    chosen = {label: m for label, m in models.items() if _order_scored(m)}
     if profiled:
         scores = _plot_or_note(
             lambda: plot.order_scores(chosen),
@@ -666,6 +664,17 @@ def identification_report(models, estimation, validation=None, *, title="subid r
     body.append(_section("matrices", "Model matrices", "".join(parts)))
     nav.append(("matrices", "matrices"))
     return _page(title, body, nav)
+
+
+def _order_scored(model) -> bool:
+    """Whether ``plot.order_scores`` can chart the model's order selection: a 'cv' or
+    'gap' record over state orders (and horizons for 'cv'), not, say, the ARX
+    structures (na, nb) of the polynomial methods."""
+    record = model.info.get("order_selection")
+    if not isinstance(record, dict) or record.get("rule") not in ("cv", "gap"):
+        return False
+    keys = ("order",) if record["rule"] == "gap" else ("order", "horizon")
+    return all(all(k in c for k in keys) for c in record.get("candidates", []))
 
 
 def _concat(a, b):
