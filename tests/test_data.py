@@ -90,3 +90,50 @@ def test_names_validated():
         subid.IOData(np.zeros(3), np.zeros(3), input_names=["a", "b"])
     with pytest.raises(errors.DataError, match="repeats"):
         subid.IOData(np.zeros((3, 2)), np.zeros(3), input_names=["a", "a"])
+
+
+# -- arrays that look transposed (issue 29) ------------------------------------
+def _transposed_case():
+    rng = np.random.default_rng(29)
+    u = rng.standard_normal((5000, 2))
+    y = rng.standard_normal((5000, 1))
+    return u, y
+
+
+def test_channels_x_samples_arrays_raise_a_data_error_saying_transposed():
+    # SIPPY / python-control layout: IOData(u.T, y.T) with u of shape (5000, 2)
+    u, y = _transposed_case()
+    cases = [((u.T, y.T), {"dt": 0.05}), ((u.T, y), {}), ((u, y.T), {}),
+             ((u.T[:1], y.T), {})]
+    for args, kwargs in cases:
+        with pytest.raises(errors.DataError, match=r"looks transposed.*pass [uy]\.T, of shape "
+                                                   r"\(5000, [12]\)"):
+            subid.IOData(*args, **kwargs)
+    # the method never sees the record: the error comes from the constructor
+    with pytest.raises(errors.DataError, match="looks transposed"):
+        subid.ls_subspace(subid.IOData(u.T, y.T, dt=0.05))
+
+
+def test_time_stamps_along_the_second_axis_say_the_time_axis_is_second():
+    u, y = _transposed_case()
+    t = 0.05 * np.arange(50)
+    with pytest.raises(errors.DataError, match="second axis.*time must be axis 0"):
+        subid.IOData(u[:50].T, y[:50].T, t=t)
+
+
+def test_the_transposed_rule_is_channels_above_samples_and_above_the_bound():
+    from subid._validation import TRANSPOSED_MIN_CHANNELS as bound
+    # at the bound, or fewer channels than samples: a legal record, kept as given
+    for shape in [(1, bound), (bound + 1, bound + 1), (3, 2)]:
+        d = subid.IOData(np.ones(shape), np.ones((shape[0], 1)))
+        assert (d.n_samples, d.n_inputs) == shape
+    with pytest.raises(errors.DataError, match="looks transposed"):
+        subid.IOData(np.ones((bound, bound + 1)), np.ones((bound, 1)))
+    with pytest.raises(errors.DataError, match="looks transposed"):
+        subid.IOData(np.ones((1, bound + 1)), np.ones((1, 1)))
+
+
+def test_no_bundled_dataset_looks_transposed():
+    for name in subid.datasets.names():
+        d = subid.datasets.load(name)
+        assert d.n_samples > max(d.n_inputs, d.n_outputs), name

@@ -509,7 +509,7 @@ def test_mat_v73_is_explained(tmp_path):
     # read with h5py when installed (this one is corrupted); else the extra is named
     match = (r"v73.mat is not a readable MATLAB v7.3 \(HDF5\)" if _has_h5py() else
              r"v73.mat is a MATLAB v7.3 \(HDF5\) file; reading it needs h5py: "
-             r"pip install 'subid\[hdf5\]'.*-v7")
+             r"install the 'hdf5' extra \(pip install \"\.\[hdf5\]\".*-v7")
     with pytest.raises(FileReadError, match=match):
         read(f)
 

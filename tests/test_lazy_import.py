@@ -72,3 +72,47 @@ def test_fresh_interpreter_public_names_are_the_module_objects():
         "print(ct_subspace is m.ct_subspace is sys.modules['subid.methods.ct.ct_subspace'].ct_subspace)\n"
     )
     assert out.strip() == "True"
+
+
+#: Every public module namespace of the package: ``import subid.X`` must work.
+NAMESPACES = ("plot", "distributed", "basis", "interop", "registry", "systems", "datasets",
+              "errors", "delay")
+
+
+def test_every_public_namespace_imports_as_a_module_in_a_fresh_interpreter():
+    # ``import subid.X`` and ``from subid.X import name`` (issue 29: only ``subid.X``
+    # attribute access worked for plot, distributed, basis, interop and registry)
+    lines = ["import subid, types"]
+    for name in NAMESPACES:
+        first = subid._LAZY[name][0]
+        module = importlib.import_module(f"subid.{first}")
+        public = module.__all__[0]
+        lines += [f"import subid.{name}",
+                  f"from subid.{name} import {public}",
+                  f"assert isinstance(subid.{name}, types.ModuleType), {name!r}",
+                  f"assert {public} is subid.{name}.{public}, {name!r}"]
+    lines.append("print('ok')")
+    assert _fresh("\n".join(lines)).strip() == "ok"
+
+
+def test_public_namespaces_reexport_every_public_name_of_their_implementation():
+    # subid.plot re-exports subid.evaluation.plot, ...: the same objects, none missing
+    implementation = {"plot": "evaluation.plot", "distributed": "methods.dt.distributed",
+                      "basis": "methods.ct.basis", "interop": "io.interop",
+                      "registry": "methods.registry"}
+    for name, where in implementation.items():
+        public = importlib.import_module(f"subid.{name}")
+        module = importlib.import_module(f"subid.{where}")
+        assert public.__all__ == module.__all__, name
+        for attribute in module.__all__:
+            assert getattr(public, attribute) is getattr(module, attribute), (name, attribute)
+    assert set(NAMESPACES) == {n for n, (_, attr) in subid._LAZY.items() if attr is None}
+
+
+def test_importing_every_namespace_module_keeps_import_subid_lazy():
+    # import subid alone loads none of the heavy modules, namespaces included in _LAZY
+    out = _fresh("import subid\n"
+                 "assert all(f'subid.{n}' not in sys.modules for n in "
+                 "('plot', 'distributed', 'basis', 'interop', 'registry'))\n"
+                 f"print(','.join(m for m in {HEAVY!r} if m in sys.modules))\n")
+    assert out.strip() == ""

@@ -127,5 +127,5 @@ def test_without_h5py_the_message_names_the_extra(tmp_path, monkeypatch):
     _write(path, {"u": np.ones((5, 1)), "y": np.ones((5, 1))})
     monkeypatch.setitem(sys.modules, "h5py", None)     # import h5py raises ImportError
     for fn in (lambda: subid.read(path), lambda: subid.StateSpace.from_mat(path)):
-        with pytest.raises(errors.FileReadError, match=r"pip install 'subid\[hdf5\]'"):
+        with pytest.raises(errors.FileReadError, match=r"'hdf5' extra \(pip install \"\.\[hdf5\]\""):
             fn()

@@ -539,7 +539,7 @@ def test_control_missing_raises_import_error(monkeypatch):
     sys = StateSpace([[0.5]], [[1.0]], [[1.0]], 0, 1.0)
     with pytest.raises(ImportError, match="pip install control"):
         sys.to_control()
-    with pytest.raises(ImportError, match=r"subid\[control\]"):
+    with pytest.raises(ImportError, match=r"'control' extra \(pip install \"\.\[control\]\""):
         StateSpace.from_control(object())
 
 

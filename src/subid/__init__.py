@@ -21,7 +21,9 @@ everything had been imported eagerly.
 
 import importlib
 
-# public name -> (submodule, attribute); attribute None: the submodule itself
+# public name -> (submodule, attribute); attribute None: the submodule itself. Every
+# public namespace is a module of the package itself (subid/plot.py re-exports
+# subid.evaluation.plot, ...), so that ``import subid.plot`` works as ``subid.plot`` does.
 _LAZY = {
     "IOData": ("data", "IOData"),
     "merge": ("data", "merge"),
@@ -68,14 +70,14 @@ _LAZY = {
     "spa": ("evaluation.nonparametric", "spa"),
     "etfe": ("evaluation.nonparametric", "etfe"),
     "errors": ("errors", None),
-    "registry": ("methods.registry", None),
+    "registry": ("registry", None),
     "systems": ("systems", None),
-    "basis": ("methods.ct.basis", None),
+    "basis": ("basis", None),
     "datasets": ("datasets", None),
-    "interop": ("io.interop", None),
-    "plot": ("evaluation.plot", None),
+    "interop": ("interop", None),
+    "plot": ("plot", None),
     "delay": ("delay", None),
-    "distributed": ("methods.dt.distributed", None),
+    "distributed": ("distributed", None),
 }
 
 __all__ = [

@@ -176,6 +176,32 @@ def check_finite(arr: np.ndarray, name: str) -> None:
                     + "; remove or interpolate them before identification")
 
 
+#: A signal looks transposed (time on axis 1 instead of axis 0) when it has more
+#: channels than samples and more than this many channels: the layout
+#: channels x samples of SIPPY, python-control and ControlSystemIdentification.jl,
+#: which :func:`check_orientation` refuses instead of transposing it silently. A
+#: record with fewer samples than channels cannot be identified anyway; the bound
+#: keeps short chunks of a record with a few channels (one row of a stream) legal.
+TRANSPOSED_MIN_CHANNELS = 100
+
+
+def check_orientation(arr: np.ndarray, name: str, symbol: str) -> None:
+    """Refuse a (samples x channels) array ``arr`` that looks transposed.
+
+    The rule: ``n_channels > n_samples`` and ``n_channels >`` :data:`TRANSPOSED_MIN_CHANNELS`
+    (e.g. ``u.T`` of shape (2, 5000) for two input channels of 5000 samples). The
+    message says how to pass the array (``symbol.T``); the array is never
+    transposed here.
+    """
+    samples, channels = arr.shape
+    if channels > samples and channels > TRANSPOSED_MIN_CHANNELS:
+        raise DataError(
+            f"{name} has shape {arr.shape}: {samples} sample{'s' if samples != 1 else ''} of "
+            f"{channels} channels, which looks transposed (channels x samples); time must be "
+            f"axis 0, one column per channel, and subid never transposes data itself: pass "
+            f"{symbol}.T, of shape ({channels}, {samples})")
+
+
 def check_time_stamps(t, n_samples: int, name: str = "time stamps t") -> np.ndarray:
     """Validate strictly increasing, finite time stamps of length ``n_samples``."""
     try:
@@ -301,6 +327,61 @@ def stamp_resolution(t) -> float:
     if not t.size:
         return 0.0
     return 4.0 * float(np.spacing(max(abs(float(t[0])), abs(float(t[-1])))))
+
+
+#: Most decimals :func:`grid_step` looks for in time stamps (beyond, they carry the
+#: rounding of a computation, not a grid written at a precision).
+MAX_STAMP_DECIMALS = 12
+
+
+def stamp_decimals(t: np.ndarray) -> int | None:
+    """The fewest decimals ``d`` (0..:data:`MAX_STAMP_DECIMALS`) with
+    ``round(t, d) == t`` for every stamp, or None: the precision at which the time
+    stamps were written (``0.05, 0.1, 0.15`` read from a file: 2).
+
+    Parameters
+    ----------
+    t : ndarray, shape (N,)
+
+    Returns
+    -------
+    int or None
+    """
+    head = t[:1000]
+    for d in range(MAX_STAMP_DECIMALS + 1):
+        if np.array_equal(np.round(head, d), head):
+            return d if np.array_equal(np.round(t, d), t) else None
+    return None
+
+
+def grid_step(t: np.ndarray, steps: np.ndarray) -> float:
+    """The sampling period of uniform time stamps ``t``: the mean step, rounded to the
+    decimals the stamps carry (:func:`stamp_decimals`), so that stamps
+    ``0, 0.05, 0.1, ...`` read from a file give ``dt = 0.05``, not the
+    ``0.049999999999999996`` of their float differences. Stamps without such a
+    precision (computed ones, ``0.1 * np.arange(N)``) keep the mean step.
+
+    Parameters
+    ----------
+    t : ndarray, shape (N,)
+        Uniform time stamps.
+    steps : ndarray, shape (N - 1,)
+        ``np.diff(t)``.
+
+    Returns
+    -------
+    float
+    """
+    mean = float(np.mean(steps))
+    decimals = stamp_decimals(t)
+    if decimals is None:
+        return mean
+    rounded = round(mean, decimals)
+    # the rounding must keep the step (a grid of 0.3 s written with 1 decimal, not a
+    # step of 0.25 s written with 1 decimal at the stamps by coincidence), to the
+    # tolerance of a uniform grid and the rounding of the stamps themselves
+    tolerance = UNIFORM_RTOL * mean + stamp_resolution(t)
+    return rounded if rounded > 0 and abs(rounded - mean) <= tolerance else mean
 
 
 def is_uniform(steps, *, resolution: float = 0.0) -> bool:

@@ -9,7 +9,9 @@ import numpy as np
 from subid._validation import (
     as_signal,
     check_dt,
+    check_orientation,
     check_time_stamps,
+    grid_step,
     is_uniform,
     same_period,
     stamp_resolution,
@@ -74,7 +76,10 @@ class IOData:
     Parameters
     ----------
     u : array_like, shape (N, n_inputs) or (N,)
-        Input samples. Time is axis 0; a 1-D array is one channel.
+        Input samples. Time is axis 0; a 1-D array is one channel. An array
+        that looks transposed (more channels than samples, and more than
+        100 channels; or time stamps ``t`` as long as its second axis) raises
+        :class:`~subid.errors.DataError`: it is never transposed silently.
     y : array_like, shape (N, n_outputs) or (N,)
         Output samples, same number of rows as ``u``.
     dt : float, optional
@@ -82,7 +87,9 @@ class IOData:
         ``dt = 1`` (time counted in samples).
     t : array_like, shape (N,), optional
         Strictly increasing time stamps, uniform or not. Non-uniform time
-        stamps are kept as given.
+        stamps are kept as given. Uniform ones give ``dt``: their mean step,
+        rounded to the decimals the stamps are written with (``0.05``, not
+        ``0.049999999999999996``, for stamps ``0, 0.05, 0.1`` read from a file).
     input_names, output_names : sequence of str, optional
         Channel names (default ``u1, u2, ...`` and ``y1, y2, ...``).
     copy : bool
@@ -118,6 +125,14 @@ class IOData:
                  copy=True):
         u = as_signal(u, "input u", copy=copy and _writeable(u))
         y = as_signal(y, "output y", copy=copy and _writeable(y))
+        check_orientation(u, "input u", "u")
+        check_orientation(y, "output y", "y")
+        stamps = np.shape(t)[0] if t is not None and np.ndim(t) == 1 else None
+        if stamps is not None and stamps not in (u.shape[0], y.shape[0]) \
+                and stamps in (u.shape[1], y.shape[1]):
+            raise DataError(f"the {stamps} time stamps t match the second axis of the signals "
+                            f"(u {u.shape}, y {y.shape}), not their rows: time must be axis "
+                            "0; pass u.T and y.T")
         if u.shape[0] != y.shape[0]:
             hint = ""
             if u.shape[1] == y.shape[0] or y.shape[1] == u.shape[0]:
@@ -133,7 +148,7 @@ class IOData:
             t = check_time_stamps(t, n).view()      # never the caller's array's flags
             steps = np.diff(t)
             if n > 1 and is_uniform(steps, resolution=stamp_resolution(t)):
-                self._dt = float(np.mean(steps))
+                self._dt = grid_step(t, steps)      # to the precision of the stamps
             else:
                 self._dt = None
             self._t = t

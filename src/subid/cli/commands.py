@@ -42,11 +42,12 @@ import warnings
 import click
 import numpy as np
 
-from subid._progress import on_terminal, progress_bar
+from subid._progress import Steps, on_terminal, progress_bar
 from subid._validation import same_period
 from subid._version import __version__
 from subid.errors import DataError, OrderError, SubidError
 from subid.io._files import atomic_directory, atomic_write, write_bytes
+from subid.methods.dt._selection import AUTO_ORDER_RULE
 from subid.methods.dt._selection import describe as describe_selection
 from subid.methods.registry import METHODS as _REGISTRY
 from subid.methods.registry import MethodSpec, MethodUnavailableError
@@ -432,6 +433,11 @@ def _progress(total: int, desc: str, enabled: bool, initial: int = 0):
     return progress_bar(total, desc, "sample", enabled=enabled, initial=initial)
 
 
+def _show_warning(message, category, filename, lineno, file=None, line=None):
+    """``warnings.showwarning`` of the command line: one log line, no source path."""
+    log.warning("%s", " ".join(str(message).split()))
+
+
 @contextlib.contextmanager
 def _warnings_to_log():
     """Show library warnings as one-line log messages."""
@@ -612,9 +618,10 @@ def cli(ctx, quiet, verbose, debug):
                    "which chooses the subspace estimator, order, feedthrough and horizon "
                    "and refines by PEM where that validates better (with --stream: ls).")
 @click.option("--order", default="auto", show_default=True, metavar="N|auto|A:B",
-              help="Model order: an integer, 'auto' (chosen from the data), a range "
-                   "'2:8' or a list '2,4,6' of candidates; for arx, armax, oe, bj a list is "
-                   "MATLAB's structure, e.g. '2,2,1' = (na, nb, nk) for arx.")
+              help=f"Model order: an integer, 'auto' (discrete-time batch methods: "
+                   f"{AUTO_ORDER_RULE}), a range '2:8' or a list '2,4,6' of candidates; for "
+                   "arx, armax, oe, bj a list is MATLAB's structure, e.g. '2,2,1' = (na, nb, "
+                   "nk) for arx.")
 @click.option("--horizon", type=click.IntRange(min=2), default=None,
               help="Block rows of the data Hankel matrix (default: chosen by the method).")
 @click.option("--validate", type=click.FloatRange(0, 1, max_open=True), default=0.3,
@@ -666,7 +673,6 @@ def identify(data, inputs, outputs, dt, time_column, delimiter, detrend, method_
     initial state and loses its own mean (--detrend constant); the validation
     part is the end of the last file. Discrete-time batch methods and ct.
     """
-    from subid.evaluation import report
     if frequency_response:
         return _identify_frequency(data, dt, delimiter, order, horizon, validate, options,
                                    frequency_unit, refine, write_report, out,
@@ -703,6 +709,23 @@ def identify(data, inputs, outputs, dt, time_column, delimiter, detrend, method_
         return _identify_streamed(data, inputs, outputs, dt, time_column, delimiter, detrend,
                                   spec, order, horizon, validate, opts, frequency_unit,
                                   write_report, chunk_size, report_samples, out)
+    with _steps(write_report) as steps:
+        return _identify_in_memory(sources, data, inputs, outputs, dt, time_column, delimiter,
+                                   detrend, spec, order, horizon, validate, forgetting, opts,
+                                   refine, frequency_unit, write_report, out, steps)
+
+
+def _steps(write_report):
+    """The progress bar over the steps of ``identify`` (on a terminal only)."""
+    names = ["read", "identify", "evaluate", *(["report"] if write_report else []), "write"]
+    return Steps(names, "identify", enabled=_state().progress)
+
+
+def _identify_in_memory(sources, data, inputs, outputs, dt, time_column, delimiter, detrend,
+                        spec, order, horizon, validate, forgetting, opts, refine,
+                        frequency_unit, write_report, out, steps):
+    from subid.evaluation import report
+    steps.start("read")
     with _about(data):
         if len(sources) == 1:
             record, label, notes = load_data(data, inputs, outputs, dt, time_column, delimiter)
@@ -717,6 +740,7 @@ def identify(data, inputs, outputs, dt, time_column, delimiter, detrend, method_
             est, val = work.split(1 - validate)
         else:
             est, val = work, None
+        steps.start("identify")
         t0 = time.perf_counter()
         with _warnings_to_log():
             if spec.kind == "batch":
@@ -732,6 +756,7 @@ def identify(data, inputs, outputs, dt, time_column, delimiter, detrend, method_
                 from subid.methods.dt.pem import pem
                 model = pem(est, model, focus="prediction" if refine == "pem" else refine)
         seconds = time.perf_counter() - t0
+        steps.start("evaluate")
         result = report.evaluate(model, est, val)
     model.info.setdefault("method", spec.attribute)
     model.info["data"] = _provenance(data, record, work, detrend, est, validate)
@@ -739,7 +764,7 @@ def identify(data, inputs, outputs, dt, time_column, delimiter, detrend, method_
                    title=f"{label}: {spec.attribute}", notes=notes, report_data=work,
                    write_report=write_report, frequency_unit=frequency_unit,
                    outputs=list(est.output_names), n_estimation=est.n_samples,
-                   n_validation=val.n_samples if val is not None else 0)
+                   n_validation=val.n_samples if val is not None else 0, steps=steps)
     return 0
 
 
@@ -836,7 +861,7 @@ def _identify_frequency(data, dt, delimiter, order, horizon, validate, options, 
 
 def _write_outputs(out, data, spec, model, result, est, val, seconds, record, *, title, notes,
                    report_data, write_report, frequency_unit, outputs, n_estimation,
-                   n_validation, **extra):
+                   n_validation, steps, **extra):
     """Write model.json, report.html (optional) and summary.json; print the summary."""
     from subid.evaluation import report
     model_path = os.path.join(out, "model.json")
@@ -845,10 +870,12 @@ def _write_outputs(out, data, spec, model, result, est, val, seconds, record, *,
     files = [model_path, *([report_path] if write_report else []), summary_path]
     html = None
     if write_report:
+        steps.start("report")
         html = report.identification_report(
             {spec.name: model}, est, val, title=title, frequency_unit=frequency_unit,
             seconds={spec.name: seconds}, notes=notes, command=_command_line(), source=data,
-            data=report_data)
+            data=report_data, progress=steps.detail, fits={spec.name: result})
+    steps.start("write")
     summary = {
         "data": data, "method": spec.name, "function": spec.attribute, "order": model.order,
         "horizon": model.info.get("horizon"), "dt": model.dt, "outputs": outputs, **extra,
@@ -866,6 +893,7 @@ def _write_outputs(out, data, spec, model, result, est, val, seconds, record, *,
         if html is not None:
             report.write_html(os.path.join(stage, "report.html"), html)
         _write_json(os.path.join(stage, "summary.json"), summary)
+    steps.close()
     _print_summary(data, record, spec, model, result, est, val, seconds, files)
 
 
@@ -903,14 +931,16 @@ def _identify_streamed(data, inputs, outputs, dt, time_column, delimiter, detren
     pieces = ParsedOnce(lambda: read_chunks(data, inputs, outputs, dt=dt,
                                             chunk_size=chunk_size, delimiter=delimiter))
     try:
-        return _identify_pieces(pieces, data, detrend, spec, order, horizon, validate, opts,
-                                frequency_unit, write_report, chunk_size, report_samples, out)
+        with _steps(write_report) as steps:
+            return _identify_pieces(pieces, data, detrend, spec, order, horizon, validate,
+                                    opts, frequency_unit, write_report, chunk_size,
+                                    report_samples, out, steps)
     finally:
         pieces.close()
 
 
 def _identify_pieces(pieces, data, detrend, spec, order, horizon, validate, opts,
-                     frequency_unit, write_report, chunk_size, report_samples, out):
+                     frequency_unit, write_report, chunk_size, report_samples, out, steps):
     import functools
     import types
 
@@ -919,6 +949,7 @@ def _identify_pieces(pieces, data, detrend, spec, order, horizon, validate, opts
     from subid.evaluation import report
     from subid.methods.dt.stream import SPOOL_GROUPS, attach_second_pass, statistic_depth
     from subid.statistic.hankel import HankelStatistic
+    steps.start("read")
     with _about(data):
         n, total_u, total_y, first = 0, 0.0, 0.0, None
         for piece in pieces:
@@ -943,6 +974,7 @@ def _identify_pieces(pieces, data, detrend, spec, order, horizon, validate, opts
                 part.update(u, y)
             return part
 
+        steps.start("identify")
         t0 = time.perf_counter()
         # pass 2: the statistic of the estimation part, means removed, from the spooled
         # doubles in consecutive stretches on subid's threads (merged exactly)
@@ -964,6 +996,7 @@ def _identify_pieces(pieces, data, detrend, spec, order, horizon, validate, opts
             return IOData(np.vstack([u for u, _ in chunks]), np.vstack([y for _, y in chunks]),
                           dt=first.dt, input_names=first.input_names,
                           output_names=first.output_names)
+        steps.start("evaluate")
         est, val = sample(0, cut), sample(cut, n)
         result = report.evaluate(model, est, val)
     model.info.setdefault("method", spec.attribute)
@@ -981,7 +1014,7 @@ def _identify_pieces(pieces, data, detrend, spec, order, horizon, validate, opts
                    title=f"{os.path.basename(data)}: {spec.attribute}", notes=notes,
                    report_data=est, write_report=write_report, frequency_unit=frequency_unit,
                    outputs=list(first.output_names), n_estimation=stat.n_samples,
-                   n_validation=n - stat.n_samples, streamed=True)
+                   n_validation=n - stat.n_samples, streamed=True, steps=steps)
     return 0
 
 
@@ -1161,6 +1194,10 @@ def track(data, inputs, outputs, dt, time_column, delimiter, detrend, method_nam
         _run_online(spec, tracker, start, _state().progress, chunk=chunk)
         model = _named(ident.model, work)
     seconds = time.perf_counter() - t0
+    steps = Steps(["evaluate", *(["report"] if write_report else []), "write"], "track",
+                  enabled=_state().progress)
+    click.get_current_context().call_on_close(steps.close)     # on errors too
+    steps.start("evaluate")
     final_ckpt = tracker.checkpoint(n) if start < n or resume is None else resume
     model.info.setdefault("method", spec.attribute)
     model.info["data"] = _provenance(data, raw, work, detrend, work, 0.0)
@@ -1177,6 +1214,7 @@ def track(data, inputs, outputs, dt, time_column, delimiter, detrend, method_nam
     result = report.evaluate(model, work)
     html = None
     if write_report:
+        steps.start("report")
         html = report.identification_report(
             {spec.name: model}, work, None, title=f"{label}: {spec.attribute} (online)",
             frequency_unit=frequency_unit, history=history, seconds={spec.name: seconds},
@@ -1185,7 +1223,9 @@ def track(data, inputs, outputs, dt, time_column, delimiter, detrend, method_nam
                            f"; final checkpoint {final_ckpt}. Fit % is on the whole record; "
                            f"on its last third (the converged fit): {_fmt_fit(fit_tail)}. "
                            f"Convergence: {status}."],
-            command=_command_line(), source=data)
+            command=_command_line(), source=data, progress=steps.detail,
+            fits={spec.name: result})
+    steps.start("write")
     # The final outputs replace the folder as a whole (old run's or new run's,
     # never a mix); the checkpoints written during the run are carried over.
     with atomic_directory(out, owned=_only(_TRACK_FILES)) as stage:
@@ -1194,6 +1234,7 @@ def track(data, inputs, outputs, dt, time_column, delimiter, detrend, method_nam
         tracker.save_trace(os.path.join(stage, "history.npz"), n)
         if html is not None:
             report.write_html(os.path.join(stage, "report.html"), html)
+    steps.close()
     files = [model_path, *([report_path] if write_report else []), history_path]
     if not _state().quiet:
         click.echo("\n".join([
@@ -1516,7 +1557,8 @@ def convert(model_path, target, conversion, dt, out):
 @click.option("--datasets", "names", default=None, metavar="NAMES",
               help="Comma-separated subset of the bundled datasets (default: all).")
 @click.option("--methods", default=None, metavar="NAMES",
-              help="Comma-separated batch methods (default: every available one).")
+              help="Comma-separated batch methods (default: every available one but the "
+                   "slow armax, oe and bj).")
 @click.option("--jobs", type=click.IntRange(min=1), default=None,
               help="Datasets processed in parallel processes (default: the CPUs, at most 4).")
 @_FREQ
@@ -1622,7 +1664,9 @@ def main(argv=None) -> int:
     state.argv = args
     try:
         try:
-            rv = cli.main(args=args, prog_name="subid", standalone_mode=False, obj=state)
+            with warnings.catch_warnings():     # restores showwarning afterwards
+                warnings.showwarning = _show_warning
+                rv = cli.main(args=args, prog_name="subid", standalone_mode=False, obj=state)
         except click.exceptions.Exit as exc:
             return exc.exit_code
         except click.UsageError as exc:

@@ -23,12 +23,13 @@ import warnings
 import numpy as np
 
 from subid import datasets
-from subid._progress import progress_bar, progress_wrapper
+from subid._progress import Steps, progress_wrapper
 from subid.errors import OptionError, SubidError
 from subid.io._files import write_bytes, write_json
+from subid.methods.dt._selection import AUTO_ORDER_RULE
 
-__all__ = ["evaluate", "report_dataset", "run", "gallery", "gallery_markdown", "GALLERY_COMMAND",
-           "FRACTION"]
+__all__ = ["evaluate", "diagnose", "report_dataset", "run", "gallery", "gallery_markdown",
+           "GALLERY_COMMAND", "FRACTION"]
 
 log = logging.getLogger(__name__)
 
@@ -36,11 +37,25 @@ log = logging.getLogger(__name__)
 FRACTION = 0.7
 #: The command that regenerates docs/gallery.md.
 GALLERY_COMMAND = "subid gallery --out docs/gallery.md"
+#: An output whose validation-part mean is this many of its standard deviations away
+#: from the estimation part's has moved to another operating point (:func:`diagnose`).
+DRIFT = 0.5
+#: A mean estimation fit (%) at least this good, with a negative validation fit: the
+#: model explains the data it saw, not the rest.
+GOOD_FIT = 50.0
+
+
+#: Batch methods the demo and the gallery leave out unless named (``--methods``): the
+#: polynomial models fitted by prediction-error minimisation, one per output, take
+#: minutes on the multi-output records (bj alone 358 s of the 388 s demo measured after
+#: issue 25), while every other method takes seconds.
+SLOW_METHODS = ("armax", "oe", "bj")
 
 
 def _methods(methods=None, time_base=None):
     from subid.methods.registry import METHODS, available_methods
-    names = available_methods("batch", time_base) if methods is None else list(methods)
+    names = [name for name in available_methods("batch", time_base)
+             if name not in SLOW_METHODS] if methods is None else list(methods)
     out = {}
     for name in names:
         if name not in METHODS or METHODS[name].kind != "batch":
@@ -129,6 +144,96 @@ def _cell(row) -> str:
     return f"{text} ({row['order']}{'' if row['stable'] else ', unstable'})"
 
 
+def _split_message(text: str, limit: int = 160) -> tuple[str, str]:
+    """An error message as (what is wrong, what it says to do): its first sentence or
+    clause up to ``'; '`` (at most ``limit`` characters, on one line) and the rest."""
+    text = " ".join(str(text).split())
+    ends = [k for k in (text.find(". "), text.find("; ")) if k > 0]
+    end = min(ends) if ends else len(text)
+    what, advice = text[:end], text[end + 2:]
+    if len(what) > limit:
+        what = what[:limit - 1].rstrip() + "…"
+    return what, advice
+
+
+def diagnose(row, est, val) -> tuple[str, str, str] | None:
+    """Why a demo result is bad, in one line, what to try, and where the report shows it.
+
+    Parameters
+    ----------
+    row : dict
+        A row of :func:`evaluate`.
+    est, val : IOData
+        The estimation and validation parts it was computed on.
+
+    Returns
+    -------
+    (reason, hint, section) or None
+        None for a result that is neither failed nor negative; ``section`` is
+        the id of the report section that shows the problem.
+
+    Notes
+    -----
+    The checks, in order: an error (its first sentence, and its advice; with too
+    few samples, try a longer estimation part); no finite validation fit (the
+    simulation diverges); an unstable model (with a good fit: the plant may be
+    unstable itself); a negative mean validation fit where
+    the output means of the validation part lie :data:`DRIFT` standard
+    deviations or more from the estimation part's (the operating point moved: a
+    model of deviations from
+    the estimation means cannot fit, try ``--detrend linear``); a negative
+    validation fit after a good estimation fit (:data:`GOOD_FIT`, the plant or
+    the noise changed, or the model is over-fitted: try lower orders); otherwise
+    the inputs explain little of the outputs (try the one-step predictor,
+    ``--refine pem`` and ``compare --steps 1``).
+    """
+    name, method = row["dataset"], row["method"]
+    command = f"subid identify dataset:{name} --method {method}"
+    if row["error"]:
+        what, advice = _split_message(row["error"])
+        if "too few" in what:        # a longer estimation part
+            hint = f"{command} --validate 0.2 --out {name}_{method}"
+        else:
+            hint = f"{command} --order 1:6 --debug --out {name}_{method}"
+        return f"failed: {what}", (f"{advice}: " if advice else "") + hint, "summary"
+    mean = _mean_fit(row["fit_val"])
+    if mean is None:
+        return None
+    if not np.isfinite(mean):
+        return ("the simulation diverges on the validation part",
+                f"{command} --option stability=enforce --out {name}_{method}", "compare")
+    if not row["stable"]:
+        if mean >= 0:       # an unstable plant (ballbeam) gives an unstable model that fits
+            return (f"a pole outside the stability region, yet the simulation fits "
+                    f"({mean:.0f} %): the plant itself may be unstable",
+                    f"if it is not, {command} --option stability=enforce --out "
+                    f"{name}_{method}", "poles")
+        return ("unstable model: its simulation drifts away",
+                f"{command} --option stability=enforce --out {name}_{method}", "poles")
+    if mean >= 0:
+        return None
+    fits = np.asarray(row["fit_val"], dtype=float)
+    worst = int(np.argmin(fits))
+    output = est.output_names[worst]
+    spread = np.where(val.y.std(axis=0) > 0, val.y.std(axis=0), 1.0)
+    drift = np.abs(val.y.mean(axis=0) - est.y.mean(axis=0)) / spread
+    if drift.max() >= DRIFT:
+        k = int(np.argmax(drift))
+        return (f"the operating point moves: {est.output_names[k]}'s mean on the validation "
+                f"part is {drift[k]:.1f} standard deviations from the estimation part's",
+                f"{command} --detrend linear --out {name}_{method}", "data")
+    fit_est = _mean_fit(row["fit_est"])
+    if fit_est is not None and fit_est >= GOOD_FIT:
+        return (f"fits the estimation part ({fit_est:.0f} %) but not the validation part "
+                f"({output}: {fits[worst]:.0f} %): the plant changed or the order is too high",
+                f"{command} --order 1:{max(1, row['order'] - 1)} --out {name}_{method}",
+                "compare")
+    return (f"the inputs explain little of {output} (estimation fit "
+            f"{_fit_text(row['fit_est'])} %): unmeasured disturbances dominate",
+            f"{command} --refine pem --out {name}_{method}, then subid compare --steps 1",
+            "residuals")
+
+
 def gallery_markdown(rows, *, command: str = GALLERY_COMMAND, seconds=None) -> str:
     """The gallery page (Markdown) from the rows of :func:`evaluate`."""
     by_ds: dict[str, dict] = {}
@@ -140,10 +245,9 @@ def gallery_markdown(rows, *, command: str = GALLERY_COMMAND, seconds=None) -> s
         "# Gallery: the bundled DaISy datasets",
         "",
         f"Each record has its means removed, is identified on the first {FRACTION:.0%} of its "
-        "samples with the order and horizon chosen automatically (cross-validated simulation "
-        "fit on the estimation part, among orders 1..10 and horizons 10 and 20; "
-        "`selection='cv'`; `ct_subspace`: the same cross-validation among orders 1..10, "
-        "its model simulated with its hold), and is "
+        f"samples with the order and horizon chosen automatically ({AUTO_ORDER_RULE}; "
+        "`selection='cv'`; `ct_subspace`: the same cross-validation, its model simulated "
+        "with its hold), and is "
         f"validated on the last {1 - FRACTION:.0%}: the model is simulated from a "
         "least-squares initial state and compared with the measured output.",
         "Fit % = 100 (1 − ‖y − ŷ‖ / ‖y − mean y‖) per output (`subid.fit_percent`); 100 is "
@@ -232,10 +336,6 @@ def _all_names():
     return list(datasets.names())
 
 
-def _bar(total, progress, desc):
-    return progress_bar(total, desc, "dataset", enabled=bool(progress))
-
-
 def _iterate(names, progress, desc):
     wrap = progress_wrapper(desc, "dataset", enabled=bool(progress))
     return names if wrap is None else wrap(names)
@@ -274,9 +374,14 @@ def report_dataset(name: str, out: str, methods=None, frequency_unit="rad/s") ->
     path = os.path.join(out, f"{name}.html")
     report.write_html(path, html)
     entry = {"name": name, "href": f"{name}.html", "samples": meta["n_samples"],
-             "inputs × outputs": f"{meta['n_inputs']} × {meta['n_outputs']}"}
+             "inputs × outputs": f"{meta['n_inputs']} × {meta['n_outputs']}", "notes": {}}
     for r in rows:
-        entry[METHODS[r["method"]].attribute] = _cell(r)
+        column = METHODS[r["method"]].attribute
+        entry[column] = _cell(r)
+        why = diagnose(r, est, val)
+        if why is not None:
+            reason, hint, section = why
+            entry["notes"][column] = (reason, hint, f"{name}.html#{section}")
     return {"name": name, "rows": rows, "path": path, "entry": entry,
             "seconds": time.perf_counter() - t0}
 
@@ -341,13 +446,12 @@ def run(out, datasets=None, methods=None, *, frequency_unit="rad/s", progress=Fa
     jobs = _default_jobs(len(names)) if jobs is None else max(1, int(jobs))
     t0 = time.perf_counter()
     results = {}
-    bar = _bar(len(names), progress, "demo")
+    bar = Steps(names, "demo", enabled=bool(progress))    # elapsed time moves on
     try:
         if jobs == 1:
             for name in names:
+                bar.start(name)
                 results[name] = report_dataset(name, out, methods, frequency_unit)
-                if bar is not None:
-                    bar.update(1)
         else:
             import concurrent.futures
             import multiprocessing
@@ -358,11 +462,9 @@ def run(out, datasets=None, methods=None, *, frequency_unit="rad/s", progress=Fa
                            for name in names}
                 for future in concurrent.futures.as_completed(futures):
                     results[futures[future]] = future.result()
-                    if bar is not None:
-                        bar.update(1)
+                    bar.finished(futures[future])
     finally:
-        if bar is not None:
-            bar.close()
+        bar.close()
     all_rows, by_dataset, reports, entries = [], {}, [], []
     for name in names:                                 # the order asked for
         res = results[name]

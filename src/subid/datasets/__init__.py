@@ -52,9 +52,10 @@ _DATASETS: dict[str, dict] = {
         kind="real (lab setup)",
         inputs={0: "voltage"}, outputs={1: "temperature"},
         dt=0.08, dt_known=False,
-        dt_note=("DaISy does not state the sampling time. The data match MATLAB's dryer2 "
-                 "(Feedback PT326 process trainer), whose examples use Ts = 0.08 s, so "
-                 "dt = 0.08 s is very likely but not confirmed by DaISy."),
+        dt_note=("DaISy does not state the sampling time. The record is the Feedback PT326 "
+                 "hair-dryer data that MATLAB ships as the file dryer2.mat (load dryer2; not "
+                 "this package's dataset:dryer2, an industrial dryer), whose examples use "
+                 "Ts = 0.08 s, so dt = 0.08 s is very likely but not confirmed by DaISy."),
         notes="The input takes only the two values 3.41 and 6.41 (binary excitation)."),
     "ballbeam": dict(
         file="ballbeam.dat", shape=(1000, 2),

@@ -1,7 +1,8 @@
 """Plots for identified models and data. matplotlib is imported lazily.
 
-Install with ``pip install subid[plot]``. Every function returns a
-:class:`matplotlib.figure.Figure` and never shows or saves it: the caller
+Install the ``plot`` extra (``pip install ".[plot]"`` in the source folder).
+Every function returns a :class:`matplotlib.figure.Figure` and never shows or
+saves it: the caller
 decides (``fig.savefig(...)``, or display in a notebook). Without a display
 (no ``DISPLAY`` on Linux) the ``Agg`` backend is selected.
 
@@ -130,7 +131,9 @@ def _pyplot():
                 matplotlib.use("Agg")
         import matplotlib.pyplot as plt
     except ImportError as exc:  # pragma: no cover - depends on the install
-        raise ImportError("subid.plot needs matplotlib: pip install 'subid[plot]'") from exc
+        from subid._extras import install_hint
+        raise ImportError("subid.plot needs matplotlib: "
+                          + install_hint("plot", "matplotlib")) from exc
     return plt
 
 
@@ -239,6 +242,33 @@ def predicted_output(model, data, steps):
         fit = 100.0 * (1.0 - np.linalg.norm(data.y - y_hat, axis=0) /
                        np.where(dev > 0, dev, np.nan))
     return y_hat, fit
+
+
+#: Most points a time trace is drawn with. A longer trace is drawn through the minimum
+#: and the maximum of each of ``MAX_TRACE_POINTS // 2`` consecutive blocks of samples,
+#: in time order: the envelope that a line a few thousand pixels wide shows anyway
+#: (a 9-inch figure at 150 dpi is 1350 pixels), so a record of 10^6 samples draws
+#: as fast as one of 4,000 and looks the same. The data are never changed.
+MAX_TRACE_POINTS = 4000
+
+
+def _envelope(t: np.ndarray, values: np.ndarray, max_points: int = MAX_TRACE_POINTS):
+    """``(t, values)`` reduced to :data:`MAX_TRACE_POINTS` points for drawing: the
+    minimum and maximum of each block, in time order (a NaN in a block is kept, so
+    the line breaks where the data are not finite)."""
+    n = values.shape[0]
+    if n <= max_points:
+        return t, values
+    blocks = max_points // 2
+    size = -(-n // blocks)
+    padded = np.concatenate([values, np.full(blocks * size - n, values[-1])])
+    grid = padded.reshape(blocks, size)
+    with np.errstate(invalid="ignore"):
+        low, high = np.argmin(grid, axis=1), np.argmax(grid, axis=1)
+    base = np.arange(blocks) * size
+    index = np.minimum(np.column_stack([base + np.minimum(low, high),
+                                        base + np.maximum(low, high)]).ravel(), n - 1)
+    return t[index], values[index]
 
 
 def _finite(values: np.ndarray) -> np.ndarray:
@@ -520,6 +550,9 @@ def bode(model_or_models=None, w=None, *, data=None, hz=False, labels=None, phas
     fig, axes = plt.subplots(rows, nu, figsize=(min(3.8 * nu + 1.2, 16) + room,
                                                 1.9 * rows + 0.8),
                              sharex=True, squeeze=False)
+    # one log scale for the shared frequency axis: semilogx on every panel would set it
+    # again on all the shared axes each time (quadratic in the panels: 5 s of a 5x3 grid)
+    axes[0, 0].set_xscale("log")
     reference = None                     # phase of the first model, to align the data's
     for k, (label, m) in enumerate(groups.items()):
         style = dict(color=colors[k], lw=1.2, ls="--" if unstable[label] else "-")
@@ -541,14 +574,14 @@ def bode(model_or_models=None, w=None, *, data=None, hz=False, labels=None, phas
         for i in range(ny):
             for j in range(nu):
                 r = 2 * i if phase else i
-                axes[r, j].semilogx(wk * x_scale, mag[:, i, j], label=shown[k], **style)
+                axes[r, j].plot(wk * x_scale, mag[:, i, j], label=shown[k], **style)
                 if band is not None:
                     lo = np.maximum(band.lower[:, i, j], 1e-3 * band.value[:, i, j])
                     axes[r, j].fill_between(wk * x_scale, 20 * np.log10(lo),
                                             20 * np.log10(band.upper[:, i, j]),
                                             color=colors[k], alpha=0.2, lw=0)
                 if phase:
-                    axes[r + 1, j].semilogx(wk * x_scale, ph[:, i, j], **style)
+                    axes[r + 1, j].plot(wk * x_scale, ph[:, i, j], **style)
     if data is not None:
         _bode_data(axes, data, x_scale, phase, reference)
     for i in range(ny):
@@ -571,10 +604,12 @@ def bode(model_or_models=None, w=None, *, data=None, hz=False, labels=None, phas
     for f_nyq in nyquists:
         for ax in axes.ravel():
             ax.axvline(f_nyq * x_scale, color="0.5", lw=0.6, ls=":")
-    if ny * nu > 4:                 # minor log ticks are slow to draw on large grids
-        from matplotlib.ticker import NullLocator
-        for ax in axes.ravel():
-            ax.xaxis.set_minor_locator(NullLocator())
+    # minor log ticks are slow to draw (a Tick object each): none on large grids, only
+    # at 2 and 5 of every decade otherwise (a quarter of the default 2..9)
+    from matplotlib.ticker import LogLocator, NullLocator
+    for ax in axes.ravel():
+        ax.xaxis.set_minor_locator(NullLocator() if ny * nu > 4 else
+                                   LogLocator(base=10.0, subs=(2.0, 5.0)))
     _legend_beside(axes[0, -1])
     if title:
         fig.suptitle(title)
@@ -611,7 +646,7 @@ def _bode_data(axes, data, x_scale, phase, reference=None):
     for i in range(data.n_outputs):
         for j in range(data.n_inputs):
             r = 2 * i if phase else i
-            axes[r, j].semilogx(w, mag[:, i, j], ".", color="0.35", ms=3, label="data",
+            axes[r, j].plot(w, mag[:, i, j], ".", color="0.35", ms=3, label="data",
                                 zorder=1)
             if data.std is not None:
                 absG, sd = np.abs(G[:, i, j]), 2 * data.std[keep][:, i, j]
@@ -620,7 +655,7 @@ def _bode_data(axes, data, x_scale, phase, reference=None):
                     hi = 20 * np.log10(np.maximum(absG + sd, 1e-300))
                 axes[r, j].fill_between(w, lo, hi, color="0.8", lw=0, zorder=0)
             if phase:
-                axes[r + 1, j].semilogx(w, ph[:, i, j], ".", color="0.35", ms=3, zorder=1)
+                axes[r + 1, j].plot(w, ph[:, i, j], ".", color="0.35", ms=3, zorder=1)
 
 
 def _has_covariance(model) -> bool:
@@ -745,12 +780,15 @@ def compare(data, models, *, labels=None, x0="estimate", title=None, clip=True,
     fig, axes = plt.subplots(ny, 1, figsize=(9 + room, 2.3 * ny + 0.7), sharex=True,
                              squeeze=False)
     t = data.t
+    # the measured output is drawn on top (zorder), thin and black; the models under
+    # it, wider and lighter, so that both stay visible where they agree
     for i in range(ny):
-        axes[i, 0].plot(t, data.y[:, i], "k-", lw=1.0, label="measured")
+        axes[i, 0].plot(*_envelope(t, data.y[:, i]), "k-", lw=0.7, zorder=3,
+                        label="measured")
     for k, (label, (y_hat, fit)) in enumerate(fits.items()):
         for i in range(ny):
-            axes[i, 0].plot(t, _finite(y_hat[:, i]), color=colors[k], lw=0.9,
-                            label=f"{label}: fit {_fmt_fit(fit[i])} %")
+            axes[i, 0].plot(*_envelope(t, _finite(y_hat[:, i])), color=colors[k], lw=1.8,
+                            alpha=0.75, zorder=2, label=f"{label}: fit {_fmt_fit(fit[i])} %")
     for i in range(ny):
         ax = axes[i, 0]
         ax.set_ylabel(data.output_names[i])
@@ -801,7 +839,7 @@ def data_overview(data, *, split=None, title=None):
                              squeeze=False)
     t = data.t
     for ax, (name, values, color) in zip(axes[:, 0], channels):
-        ax.plot(t, values, color=color, lw=0.8)
+        ax.plot(*_envelope(t, values), color=color, lw=0.8)
         ax.set_ylabel(name, fontsize=9, rotation=0, ha="right", va="center")
         if split is not None:
             ax.axvspan(split, t[-1], color="0.85", zorder=0)

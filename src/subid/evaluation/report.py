@@ -61,6 +61,7 @@ figure{margin:.6em 0}figcaption{font-size:.85em;color:#555}
 pre{background:#f7f7f7;border:1px solid #e2e2e2;padding:.6em;overflow-x:auto;font-size:.8em}
 .bad{color:#b00020;font-weight:600}.good{color:#0a7a2f}.note{color:#555;font-size:.9em}
 nav a{margin-right:.9em}.meta{color:#666;font-size:.85em}
+.why{color:#8a4b00;font-size:.8em;text-align:left;max-width:22em;margin-top:.15em}
 """
 
 
@@ -414,7 +415,7 @@ def _spa_estimate(estimation, models):
 def identification_report(models, estimation, validation=None, *, title="subid report",
                           frequency_unit="rad/s", history=None, seconds=None, notes=(),
                           command=None, source=None, errors=None, data=None,
-                          max_lag: int = 25) -> str:
+                          max_lag: int = 25, progress=None, fits=None) -> str:
     """HTML text of a complete identification report.
 
     Parameters
@@ -447,6 +448,11 @@ def identification_report(models, estimation, validation=None, *, title="subid r
         validation, as split).
     max_lag : int
         Largest lag of the residual correlations.
+    progress : callable, optional
+        Called with each section's id as its work starts (a progress display).
+    fits : dict label -> dict, optional
+        The :func:`evaluate` result of a model on ``estimation`` and
+        ``validation``, when the caller has it already (not computed again).
 
     Returns
     -------
@@ -464,7 +470,11 @@ def identification_report(models, estimation, validation=None, *, title="subid r
     check = validation if validation is not None else estimation
     check_name = "validation" if validation is not None else "estimation"
     body, nav = [], []
-    results = {label: evaluate(m, estimation, validation) for label, m in models.items()}
+    announce = progress or (lambda section: None)
+    announce("summary")
+    fits = fits or {}
+    results = {label: fits[label] if label in fits else evaluate(m, estimation, validation)
+               for label, m in models.items()}
 
     # -- summary ---------------------------------------------------------
     ny = estimation.n_outputs
@@ -518,6 +528,7 @@ def identification_report(models, estimation, validation=None, *, title="subid r
     nav.append(("summary", "summary"))
 
     # -- data overview ---------------------------------------------------
+    announce("data")
     whole = data
     split = None
     if whole is None and validation is not None:
@@ -532,12 +543,11 @@ def identification_report(models, estimation, validation=None, *, title="subid r
     nav.append(("data", "data"))
 
     # -- order selection -------------------------------------------------
+    announce("order")
     profiled = {label: m for label, m in models.items()
                 if m.info.get("singular_values") is not None
                 or m.info.get("rank_profile") is not None}
-    chosen = {label: m for label, m in models.items()
-              if isinstance(m.info.get("order_selection"), dict)
-              and m.info["order_selection"].get("rule") in ("cv", "gap")}
+    chosen = {label: m for label, m in models.items() if _order_scored(m)}
     if profiled:
         scores = _plot_or_note(
             lambda: plot.order_scores(chosen),
@@ -552,6 +562,7 @@ def identification_report(models, estimation, validation=None, *, title="subid r
         nav.append(("order", "order"))
 
     # -- comparison ------------------------------------------------------
+    announce("compare")
     body.append(_section("compare", f"Simulated and measured outputs ({check_name} data)",
                          _plot_or_note(lambda: plot.compare(check, models),
                                        f"simulation on the {check_name} data from a "
@@ -560,6 +571,7 @@ def identification_report(models, estimation, validation=None, *, title="subid r
     nav.append(("compare", "compare"))
 
     # -- Bode ------------------------------------------------------------
+    announce("bode")
     nyquist = "; dotted: Nyquist frequency" if any(m.dt > 0 for m in models.values()) else ""
     level = 0.95 if any(isinstance(m.info.get("parameter_covariance"), dict)
                         for m in models.values()) else None
@@ -572,12 +584,14 @@ def identification_report(models, estimation, validation=None, *, title="subid r
         f"magnitude and phase; frequency in {'Hz' if hz else 'rad/s'}{nyquist}{band}{overlay}",
         "Bode diagram")))
     nav.append(("bode", "Bode"))
+    announce("step")
     body.append(_section("step", "Step response", _plot_or_note(
         lambda: plot.step(models, confidence=level),
         f"response to a unit step on each input{band}", "step response")))
     nav.append(("step", "step"))
 
     # -- poles -----------------------------------------------------------
+    announce("poles")
     pole_tables = "".join(f"<h3>{_e(label)}</h3>{_pole_table(m, hz)}"
                           for label, m in models.items())
     body.append(_section("poles", "Poles", _plot_or_note(
@@ -589,6 +603,7 @@ def identification_report(models, estimation, validation=None, *, title="subid r
 
 
     # -- residuals -------------------------------------------------------
+    announce("residuals")
     body.append(_section("residuals", "Residual analysis", _plot_or_note(
         lambda: plot.residuals(models, check, max_lag=max_lag,
                                title=f"residuals on the {check_name} data (99 % bands)"),
@@ -601,6 +616,7 @@ def identification_report(models, estimation, validation=None, *, title="subid r
     nav.append(("residuals", "residuals"))
 
     # -- convergence -----------------------------------------------------
+    announce("convergence")
     if history is not None:
         body.append(_section("convergence", "Convergence of the online estimate", _plot_or_note(
             lambda: plot.convergence(history),
@@ -609,6 +625,7 @@ def identification_report(models, estimation, validation=None, *, title="subid r
         nav.append(("convergence", "convergence"))
 
     # -- matrices --------------------------------------------------------
+    announce("matrices")
     parts = []
     for label, m in models.items():
         states = [f"x{k + 1}" for k in range(m.order)]
@@ -649,6 +666,17 @@ def identification_report(models, estimation, validation=None, *, title="subid r
     return _page(title, body, nav)
 
 
+def _order_scored(model) -> bool:
+    """Whether ``plot.order_scores`` can chart the model's order selection: a 'cv' or
+    'gap' record over state orders (and horizons for 'cv'), not, say, the ARX
+    structures (na, nb) of the polynomial methods."""
+    record = model.info.get("order_selection")
+    if not isinstance(record, dict) or record.get("rule") not in ("cv", "gap"):
+        return False
+    keys = ("order",) if record["rule"] == "gap" else ("order", "horizon")
+    return all(all(k in c for k in keys) for c in record.get("candidates", []))
+
+
 def _concat(a, b):
     """The record ``a`` followed by ``b`` (halves of a split)."""
     from subid.data import IOData, merge
@@ -664,6 +692,11 @@ def _concat(a, b):
     return IOData(u, y, t=t, input_names=a.input_names, output_names=a.output_names)
 
 
+def _cell_note(reason: str, hint: str, link: str) -> str:
+    """The line under a bad value of the index: why, and what to try (linked)."""
+    return (f'<div class="why">{_e(reason)}; <a href="{_e(link)}">try</a>: {_e(hint)}</div>')
+
+
 def index_page(entries, *, title="subid reports", intro="", columns=(), footer="") -> str:
     """HTML index linking several reports.
 
@@ -671,7 +704,10 @@ def index_page(entries, *, title="subid reports", intro="", columns=(), footer="
     ----------
     entries : list of dict
         Each with ``name``, ``href`` (relative link to the report) and one
-        value per column name in ``columns`` (HTML-escaped text).
+        value per column name in ``columns`` (HTML-escaped text); optionally
+        ``notes``, ``{column: (reason, hint, link)}``: a line shown under that
+        cell saying why its value is bad, what to try, and a relative link
+        (say to the report section that shows it).
     title, intro : str
     columns : sequence of str
         Extra table columns.
@@ -685,7 +721,9 @@ def index_page(entries, *, title="subid reports", intro="", columns=(), footer="
         + "</tr>"
     rows = []
     for entry in entries:
-        cells = "".join(f"<td>{_e(entry.get(c, ''))}</td>" for c in columns)
+        notes = entry.get("notes") or {}
+        cells = "".join(f"<td>{_e(entry.get(c, ''))}{_cell_note(*notes[c]) if c in notes else ''}"
+                        "</td>" for c in columns)
         rows.append(f'<tr><td class="l"><a href="{_e(entry["href"])}">{_e(entry["name"])}</a>'
                     f"</td>{cells}</tr>")
     body = []

@@ -14,7 +14,7 @@ Supported formats, chosen by the file extension:
 ``.mat``
     MATLAB file up to version 7 (:func:`scipy.io.loadmat`); variables are
     selected by name. Version 7.3 (HDF5) files are read with h5py when it is
-    installed (``pip install 'subid[hdf5]'``).
+    installed (the ``hdf5`` extra: ``pip install ".[hdf5]"`` in the source folder).
 
 Rules for text files
 --------------------
@@ -1317,9 +1317,10 @@ def _mat73_variables(raw: bytes, shown: str, max_bytes: int) -> dict:
     try:
         import h5py
     except ImportError:
+        from subid._extras import install_hint
         raise FileReadError(f"{shown} is a MATLAB v7.3 (HDF5) file; reading it needs h5py: "
-                            "pip install 'subid[hdf5]' (or save it with save(..., '-v7') in "
-                            "MATLAB)", path=shown) from None
+                            f"{install_hint('hdf5', 'h5py')}; or save it with save(..., "
+                            "'-v7') in MATLAB", path=shown) from None
 
     def corrupt(exc):
         return FileReadError(f"{shown} is not a readable MATLAB v7.3 (HDF5) file (corrupted?): "

@@ -396,8 +396,9 @@ def _require_control():
     try:
         import control
     except ImportError:
-        raise ImportError("python-control is not installed: pip install control "
-                          "(or pip install subid[control])") from None
+        from subid._extras import install_hint
+        raise ImportError("python-control is not installed: "
+                          + install_hint("control", "control")) from None
     return control
 
 

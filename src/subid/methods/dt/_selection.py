@@ -100,6 +100,14 @@ FLOOR = -100.0
 #: Samples above which the cross-validation uses only the last part of the record.
 MAX_SELECTION_SAMPLES = 100_000
 SELECTION_RULES = ("cv", "gap")
+#: What ``order=None`` (``--order auto``) does, in one phrase made from the constants
+#: above: the command line's help quotes it, and ``tests/test_docs_agree.py`` checks
+#: that the README and docs/cli.md say the same.
+AUTO_ORDER_RULE = (f"orders 1..{MAX_ORDER} and horizons "
+                   f"{' and '.join(str(h) for h in HORIZON_CANDIDATES)}, or the horizon given, "
+                   "scored by cross-validated simulation fit on the estimation data; the "
+                   "least cross-validated BIC wins, and the search goes on past order "
+                   f"{MAX_ORDER} while the best is among the last orders tried")
 
 
 def experiment_folds(data):

@@ -52,8 +52,9 @@ def _dask():
         import dask
         import dask.array  # noqa: F401
     except ImportError as exc:  # pragma: no cover - depends on the install
-        raise ImportError('subid.methods.dt.distributed needs Dask: pip install "dask[distributed]"') \
-            from exc
+        from subid._extras import install_hint
+        raise ImportError("subid.distributed needs Dask: "
+                          + install_hint("distributed", '"dask[distributed]"')) from exc
     return dask
 
 

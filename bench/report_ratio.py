@@ -1,0 +1,115 @@
+"""Report time against identification time on 10^6 samples (issue 29 item 6).
+
+Run: OPENBLAS_NUM_THREADS=1 PYTHONPATH=src python bench/report_ratio.py [--samples 1000000]
+     [--repeat 3] [--out bench/report_ratio.md]
+
+What ``subid identify FILE.csv --out DIR`` does, step by step, in one process,
+on a 10^6-row CSV (2 inputs, 2 outputs, a 4th-order system at 20 dB SNR):
+read the file (:func:`subid.read`), remove the means, identify with the
+command line's default method on the first 70 %, evaluate (fit % on both
+parts: the summary needs it, with or without a report), then write the report
+(:func:`subid.evaluation.report.identification_report` and the HTML file).
+Repeats are interleaved; the table gives medians and the ratio
+report / identification of each repeat (target: <= 0.5). The first call of
+every step runs once before the timed repeats (numba kernels loaded, matplotlib
+imported).
+"""
+
+import argparse
+import os
+import statistics
+import sys
+import tempfile
+import time
+import warnings
+
+
+def _default_method():
+    """The method ``subid identify`` uses without --method."""
+    from subid.cli.commands import METHODS, identify
+    (option,) = [p for p in identify.params if p.name == "method_name"]
+    return METHODS[option.default]
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--samples", type=int, default=1_000_000)
+    parser.add_argument("--repeat", type=int, default=3)
+    parser.add_argument("--out", default=os.path.join(os.path.dirname(__file__),
+                                                      "report_ratio.md"))
+    args = parser.parse_args(argv)
+    warnings.simplefilter("ignore")
+    import numpy as np
+
+    import subid
+    from subid.evaluation import report
+    spec = _default_method()
+    true = subid.systems.random_system(4, 2, 2, seed=29)
+    record = subid.systems.simulate_data(true, args.samples, seed=30, output_snr_db=20)
+    folder = tempfile.mkdtemp()
+    path = os.path.join(folder, "record.csv")
+    with open(path, "w") as f:   # noqa: SIM115 - a benchmark input, not a subid output
+        f.write("u1,u2,y1,y2\n")
+        np.savetxt(f, np.column_stack([record.u, record.y]), delimiter=",", fmt="%.9g")
+    del record
+
+    def once():
+        times = {}
+        t0 = time.perf_counter()
+        data = subid.read(path, inputs=["u1", "u2"], outputs=["y1", "y2"], dt=0.01)
+        times["read"] = time.perf_counter() - t0
+        work = data.detrend()
+        est, val = work.split(0.7)
+        t0 = time.perf_counter()
+        model = spec.load()(est, order=None)
+        times["identify"] = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        result = report.evaluate(model, est, val)
+        times["evaluate"] = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        html = report.identification_report(
+            {spec.name: model}, est, val, title="bench", seconds={spec.name: 1.0},
+            source=path, data=work, fits={spec.name: result})
+        report.write_html(os.path.join(folder, "report.html"), html)
+        times["report"] = time.perf_counter() - t0
+        times["order"] = model.order
+        return times
+
+    print(f"{args.samples} samples, method {spec.name}: warm-up run", file=sys.stderr)
+    once()
+    runs = []
+    for k in range(args.repeat):
+        runs.append(once())
+        r = runs[-1]
+        print(f"repeat {k + 1}: read {r['read']:.2f} s, identify {r['identify']:.2f} s, "
+              f"evaluate {r['evaluate']:.2f} s, report {r['report']:.2f} s, ratio "
+              f"{r['report'] / r['identify']:.2f}", file=sys.stderr)
+    med = {key: statistics.median(r[key] for r in runs)
+           for key in ("read", "identify", "evaluate", "report")}
+    ratio = statistics.median(r["report"] / r["identify"] for r in runs)
+    load = os.getloadavg()[1]           # the machine's load over the last 5 minutes
+    lines = [
+        "# Report time against identification time (bench/report_ratio.py)",
+        "",
+        f"{args.samples} samples (CSV, 2 inputs, 2 outputs), default method "
+        f"`{spec.attribute}` (order {runs[-1]['order']}), 70 % estimation; medians of "
+        f"{args.repeat} interleaved repeats after a warm-up run, OPENBLAS_NUM_THREADS=1; "
+        f"load average {load:.1f} on {os.cpu_count()} CPUs at the end (on a shared machine "
+        "the seconds scale with the load; the ratio is measured in one process).",
+        "",
+        "| step | seconds |",
+        "|---|---:|",
+        *(f"| {key} | {value:.2f} |" for key, value in med.items()),
+        "",
+        f"Report / identification: **{ratio:.2f}** (median of the per-repeat ratios; "
+        "target <= 0.5).",
+        "",
+    ]
+    text = "\n".join(lines)
+    with open(args.out, "w") as f:   # noqa: SIM115 - the benchmark's table
+        f.write(text)
+    print(text)
+
+
+if __name__ == "__main__":
+    main()
