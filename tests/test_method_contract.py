@@ -113,7 +113,10 @@ def test_the_consumers_read_the_registry():
     assert set(cli.METHODS) == {n for n, s in registry.METHODS.items() if s.command_line}
     assert all(cli.METHODS[n] is registry.METHODS[n] for n in cli.METHODS)
     assert not hasattr(cli, "_accepts") and not hasattr(stream, "METHODS")
-    assert set(demo._methods()) == set(registry.available_methods("batch"))
+    assert set(demo._methods()) == set(registry.available_methods("batch")) - \
+        set(demo.SLOW_METHODS)
+    assert set(demo._methods(registry.available_methods("batch"))) == \
+        set(registry.available_methods("batch"))
     assert stream.streaming_method("ls_subspace") is registry.METHODS["ls"]
     with pytest.raises(errors.OptionError, match="method must be one of"):
         stream.statistic_depth("ct", 3, None, 1)
@@ -179,7 +182,7 @@ def test_bad_input_raises_subid_errors(name, dt_record, ct_record):
         fn(data, -1)
     with pytest.raises(errors.OrderError):
         fn(data, "three")
-    with pytest.raises(TypeError):
+    with pytest.raises(errors.OptionError, match="no option .no_such_option."):
         fn(data, 2, no_such_option=1)
 
 
@@ -199,37 +202,21 @@ def test_bad_option_values_raise_option_error(name, dt_record, ct_record):
 
 
 @pytest.mark.parametrize("name", BATCH)
-def test_options_after_order_are_keyword_only_with_deprecated_positions(name, dt_record,
-                                                                         ct_record):
+def test_options_after_order_are_keyword_only(name, dt_record, ct_record):
+    """``(data, order)`` then keyword-only options: a third positional argument is an
+    OptionError (no release ever took options by position), and so are the
+    pre-release names of renamed options (``input_hold``, ``b_method``)."""
     spec = registry.METHODS[name]
     fn = spec.load()
-    legacy = getattr(fn, "legacy_positional", ())
     data = _record(spec, dt_record, ct_record)
-    if not legacy:
-        with pytest.raises(TypeError):
-            fn(data, 2, None)
-        return
-    first = legacy[0]
-    value = {"horizon": 6, "basis": None, "method": "moesp"}[first]
-    extra = {"hold": "foh"} if name == "dt_to_ct" else {}
-    with pytest.warns(DeprecationWarning, match=f"subid: passing {first}"):
-        old = fn(data, _order(spec), value, **extra)
-    new = _call(spec, data, _order(spec), **{first: value})
-    np.testing.assert_array_equal(old.A, new.A)
-    with pytest.raises(TypeError):
-        fn(data, _order(spec), *([None] * (len(legacy) + 1)))
+    with pytest.raises(subid.errors.OptionError, match="positional"):
+        fn(data, 2, None)
 
 
-def test_renamed_options_still_work_with_a_warning(ct_record):
-    new = subid.ct_subspace(ct_record, 4, hold="zoh", bd_method="filtered", refine=False)
-    with pytest.warns(DeprecationWarning, match="'input_hold' of ct_subspace"):
-        with pytest.warns(DeprecationWarning, match="'b_method' of ct_subspace"):
-            old = subid.ct_subspace(ct_record, 4, input_hold="zoh", b_method="filtered",
-                                    refine=False)
-    np.testing.assert_array_equal(old.A, new.A)
-    assert old.hold == "zoh"
-    with pytest.raises(TypeError, match="both 'input_hold' and 'hold'"):
-        subid.ct_subspace(ct_record, 4, input_hold="zoh", hold="foh")
+def test_pre_release_option_names_are_unknown_options(ct_record):
+    for old in ("input_hold", "b_method"):
+        with pytest.raises(subid.errors.OptionError, match=f"no option '{old}'"):
+            subid.ct_subspace(ct_record, 4, **{old: "zoh"})
 
 
 # ---------------------------------------------------------------------------

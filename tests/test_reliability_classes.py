@@ -278,3 +278,25 @@ def test_dask_names_rows_of_the_record_and_unknown_chunks():
     u = u[u[:, 0] > -100]
     with pytest.raises(errors.DataError, match="chunk sizes of u along time are unknown"):
         distributed.identify(u, da.from_array(data.y, chunks=(1000, 2)), order=3, horizon=5)
+
+
+def test_every_public_callable_refuses_an_unknown_option_with_an_option_error():
+    """An unknown keyword (a typo of an option) is an OptionError naming the options,
+    with the closest one suggested, for every public function and class of subid
+    (``_validation.checked_call``), not Python's TypeError."""
+    import inspect
+    import types
+    varkw = {"identify_file", "identify_stream", "dt_to_ct", "OnlineIdentifier"}
+    checked = 0
+    for name in subid.__all__:
+        obj = getattr(subid, name)
+        if isinstance(obj, types.ModuleType) or name in varkw or (
+                inspect.isclass(obj) and issubclass(obj, BaseException)) or not callable(obj):
+            continue
+        with pytest.raises(errors.OptionError, match="has no option 'horizn'"):
+            obj(horizn=3)
+        checked += 1
+    assert checked >= 40
+    data = subid.systems.simulate_data(subid.systems.seed001_system(), 300, seed=1)
+    with pytest.raises(errors.OptionError, match="did you mean 'horizon'"):
+        subid.moesp(data, 3, horizn=5)

@@ -509,68 +509,23 @@ def check_bool(value, name: str) -> bool:
     raise OptionError(f"{name} must be True or False; got {value!r}"[:300])
 
 
-def legacy_arguments(positional=(), renamed=None):
-    """Decorator: keep old call forms of a method working, with a DeprecationWarning.
-
-    The methods take ``(data, order=None, *, option=...)``: every option is
-    keyword-only, with one name per concept across methods. ``positional``
-    names the options that older releases accepted positionally after
-    ``order`` (in that order); ``renamed`` maps old keyword names to the
-    current ones. Either form still works but warns
-    (``DeprecationWarning``, message starting with ``subid:``). The wrapped
-    function keeps its signature (``inspect.signature`` follows ``__wrapped__``).
-    """
-    import functools
-    import warnings
-    renamed = dict(renamed or {})
-    positional = tuple(positional)
-
-    def decorate(fn):
-        @functools.wraps(fn)
-        def wrapper(data, order=None, *args, **kwargs):
-            name = fn.__name__
-            if args:
-                if len(args) > len(positional):
-                    raise TypeError(f"{name}() takes 2 positional arguments (data, order); "
-                                    "pass the options by keyword")
-                given = positional[:len(args)]
-                warnings.warn(f"subid: passing {', '.join(given)} of {name}() by position is "
-                              f"deprecated; pass them by keyword ({given[0]}=...)",
-                              DeprecationWarning, stacklevel=2)
-                for key, value in zip(given, args):
-                    if key in kwargs:
-                        raise TypeError(f"{name}() got multiple values for argument {key!r}")
-                    kwargs[key] = value
-            for old, new in renamed.items():
-                if old in kwargs:
-                    if new in kwargs:
-                        raise TypeError(f"{name}() got both {old!r} and {new!r}; {old!r} is "
-                                        f"the old name of {new!r}")
-                    warnings.warn(f"subid: the option {old!r} of {name}() is now called "
-                                  f"{new!r}", DeprecationWarning, stacklevel=2)
-                    kwargs[new] = kwargs.pop(old)
-            return fn(data, order, **kwargs)
-        wrapper.legacy_positional = positional
-        wrapper.legacy_renamed = renamed
-        return wrapper
-    return decorate
-
-
 def checked_call(fn):
     """Decorator of a public function (or a class's ``__init__``): a call that does
     not fit its signature raises :class:`OptionError` naming the options it
     takes, instead of Python's ``TypeError``.
 
-    Only the binding of the call is concerned: the ``TypeError`` is converted
-    when it was raised by the call itself (its traceback has no frame inside
-    ``fn``), never when ``fn`` raised it. An unknown keyword gets the closest
+    Only the binding of the call is concerned: a ``TypeError`` is converted
+    when the arguments do not bind to the signature (``inspect.signature``,
+    which follows ``__wrapped__``), never when ``fn`` raised it on arguments
+    that bind. An unknown keyword gets the closest
     option names as a suggestion (``horizn`` -> ``horizon``).
     """
     import difflib
     import functools
     import inspect
 
-    parameters = inspect.signature(fn).parameters
+    signature = inspect.signature(fn)                # follows __wrapped__: the real one
+    parameters = signature.parameters
     options = [p.name for p in parameters.values()
                if p.kind in (p.KEYWORD_ONLY, p.POSITIONAL_OR_KEYWORD) and p.name != "self"]
     name = fn.__qualname__.replace(".__init__", "")
@@ -580,8 +535,11 @@ def checked_call(fn):
         try:
             return fn(*args, **kwargs)
         except TypeError as exc:
-            tb = exc.__traceback__
-            if tb is None or tb.tb_next is not None:     # raised inside fn: not the call
+            try:                                     # the call itself, or raised inside fn?
+                signature.bind(*args, **kwargs)
+            except TypeError:
+                pass
+            else:
                 raise
             unknown = [k for k in kwargs if k not in parameters]
             if unknown:

@@ -8,12 +8,13 @@ import numba
 from threadpoolctl import threadpool_limits
 
 from subid import _threads
-from subid._validation import check_int
+from subid._validation import check_int, checked_call
 
 __all__ = ["thread_limit"]
 
 
 @contextlib.contextmanager
+@checked_call
 def thread_limit(n_threads: int):
     """Limit the threads of BLAS/LAPACK, OpenMP, numba and subid inside a ``with`` block.
 

@@ -11,6 +11,7 @@ from subid._validation import (
     check_dt,
     check_orientation,
     check_time_stamps,
+    checked_call,
     grid_step,
     is_uniform,
     same_period,
@@ -121,6 +122,7 @@ class IOData:
     (100, 2, 1)
     """
 
+    @checked_call
     def __init__(self, u, y, dt=None, t=None, input_names=None, output_names=None, *,
                  copy=True):
         u = as_signal(u, "input u", copy=copy and _writeable(u))
@@ -450,6 +452,7 @@ def _offset_kind(record):
     return "constant" if np.ndim(record.u_offset) == 1 else "linear"
 
 
+@checked_call
 def merge(records, names=None) -> IOData:
     """One record of several experiments (MATLAB ``merge`` of iddata objects).
 

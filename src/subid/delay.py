@@ -27,7 +27,7 @@ import numbers
 import numpy as np
 import scipy.linalg
 
-from subid._validation import check_int
+from subid._validation import check_int, checked_call
 from subid.data import IOData
 from subid.errors import DataError, ModelError, ResourceLimitError, TooFewSamplesError
 
@@ -71,6 +71,7 @@ def _check_delays(input_delay, n_inputs: int, error=DataError) -> np.ndarray:
 # ---------------------------------------------------------------------------
 # estimation
 # ---------------------------------------------------------------------------
+@checked_call
 def estimate_delay(data, max_delay: int = 10, *, na: int = 2, nb: int = 2,
                    return_loss: bool = False):
     """Estimate the delay of every input, in samples (MATLAB ``delayest``).
@@ -176,6 +177,7 @@ def estimate_delay(data, max_delay: int = 10, *, na: int = 2, nb: int = 2,
 # ---------------------------------------------------------------------------
 # delays on data and models
 # ---------------------------------------------------------------------------
+@checked_call
 def delay_inputs(data, input_delay):
     """The record with input ``j`` shifted by ``d_j`` samples.
 
@@ -292,6 +294,7 @@ def frequency_factor(delays: np.ndarray, w: np.ndarray, dt: float) -> np.ndarray
     return np.exp(-1j * np.outer(np.asarray(w, dtype=float) * dt, delays))[:, None, :]
 
 
+@checked_call
 def absorb_delay(model):
     """An equivalent model without input delays: each delayed input passes
     through ``d_j`` extra states (a shift register), so the order grows by

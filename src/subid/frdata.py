@@ -16,7 +16,7 @@ import math
 
 import numpy as np
 
-from subid._validation import UNIFORM_RTOL, check_dt, format_rows
+from subid._validation import UNIFORM_RTOL, check_dt, checked_call, format_rows
 from subid.errors import DataError, OptionError
 
 __all__ = ["FRData"]
@@ -213,6 +213,7 @@ class FRData:
     (5, 1, 1)
     """
 
+    @checked_call
     def __init__(self, w, response, dt=0.0, *, weights=None, std=None, coherence=None,
                  input_names=None, output_names=None):
         self.dt = check_dt(dt, allow_zero=True)

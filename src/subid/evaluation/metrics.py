@@ -6,7 +6,7 @@ import numpy as np
 import scipy.sparse
 import scipy.sparse.csgraph
 
-from subid._validation import check_int, same_period
+from subid._validation import check_int, checked_call, same_period
 from subid.errors import DataError, ModelError
 from subid.evaluation.prediction import _SIM_BLOCK, check_model, predict, simulate_fit
 
@@ -24,6 +24,7 @@ def _check_pair(model, reference):
                          "convert one of them first (to_discrete / to_continuous)")
 
 
+@checked_call
 def markov_error(model, reference, k: int = 10) -> float:
     """Relative Frobenius error of the first ``k`` Markov parameters.
 
@@ -47,6 +48,7 @@ def markov_error(model, reference, k: int = 10) -> float:
     return float(np.linalg.norm(model.markov(k) - m_ref) / norm)
 
 
+@checked_call
 def fit_percent(model, data, x0="estimate", hold=None, steps=np.inf, *,
                 per_experiment: bool = False) -> np.ndarray:
     """NRMSE fit in percent, per output: ``100 (1 - ||y - ŷ|| / ||y - mean(y)||)``.
@@ -158,6 +160,7 @@ def frequency_fit(model, data) -> np.ndarray:
     return 100.0 * (1.0 - err / dev)
 
 
+@checked_call
 def pole_error(model, reference) -> float:
     """Largest pole distance after the best one-to-one matching of poles.
 

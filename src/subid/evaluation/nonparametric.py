@@ -47,7 +47,7 @@ import warnings
 
 import numpy as np
 
-from subid._validation import check_int
+from subid._validation import check_int, checked_call
 from subid.data import IOData
 from subid.errors import DataError, NotExcitingError, ResolutionWarning, TooFewSamplesError
 from subid.frdata import FRData
@@ -125,6 +125,7 @@ def _check_input_spectrum(S_u, w, name):
                                "frequencies or a richer input")
 
 
+@checked_call
 def spa(data, window=None, w=None):
     """Spectral-analysis estimate of the frequency response (MATLAB ``spa``).
 
@@ -234,6 +235,7 @@ def _smooth(P, weights):
     return out
 
 
+@checked_call
 def etfe(data, smoothing=None):
     """Empirical transfer-function estimate (MATLAB ``etfe``), optionally smoothed.
 

@@ -28,7 +28,7 @@ import warnings
 import numpy as np
 import scipy.linalg
 
-from subid._validation import check_int, check_probability, same_period
+from subid._validation import check_int, check_probability, checked_call, same_period
 from subid.data import IOData, column_std
 from subid.delay import effective_input, input_delay_of
 from subid.errors import DataError, ModelError, NoiseModelWarning
@@ -332,6 +332,7 @@ def _estimate_x0(model, u, y, k, data=None):
     return x0, forced + free @ x0
 
 
+@checked_call
 def predict(model, data, steps=1, x0=None, *, return_x0=False):
     """k-step-ahead predicted outputs of a model on a record.
 
@@ -519,6 +520,7 @@ def correlations(e, u, *, max_lag: int = 25, confidence: float = 0.99, ranges=No
             "residual": e, "confidence": confidence}
 
 
+@checked_call
 def residuals(model, data, *, max_lag: int = 25, confidence: float = 0.99, x0=None) -> dict:
     """Residual analysis on the one-step prediction errors (MATLAB's ``resid``).
 

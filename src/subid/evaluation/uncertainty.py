@@ -44,7 +44,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.special
 
-from subid._validation import as_signal, check_int, same_period
+from subid._validation import as_signal, check_int, checked_call, same_period
 from subid.data import IOData
 from subid.delay import apply_to_inputs, input_delay_of
 from subid.errors import DataError, ModelError, OptionError
@@ -193,6 +193,7 @@ class Bounds:
     response: np.ndarray | None = None
 
 
+@checked_call
 def parameter_covariance(model) -> ParameterCovariance:
     """The parameter covariance a model carries (MATLAB ``getcov``).
 
@@ -292,6 +293,7 @@ def _directions(cov):
     return dA, dB, dC, dD
 
 
+@checked_call
 def freqresp_bounds(model, w, level=0.95, *, method="delta", n_samples=1000, seed=0):
     """Confidence bounds of the magnitude of the frequency response (MATLAB
     ``showConfidence`` on a Bode plot).
@@ -387,6 +389,7 @@ def _output_sensitivities(model, cov, u, x0):
     return y, dy
 
 
+@checked_call
 def simulation_bounds(model, u, level=0.95, *, x0=None, method="delta", n_samples=1000,
                       seed=0):
     """Confidence bounds of the simulated output (MATLAB ``sim`` with ``SD``).
@@ -449,6 +452,7 @@ def _band(model, cov, u, x0, z, level, method, n_samples, seed, t):
     return Bounds(t, y, y - z * std, y + z * std, std, float(level), method)
 
 
+@checked_call
 def step_bounds(model, t=None, level=0.95, *, method="delta", n_samples=1000, seed=0):
     """Confidence bounds of the step response (MATLAB ``step`` with
     ``showConfidence``).

@@ -47,7 +47,7 @@ from pathlib import Path
 import numpy as np
 
 from subid import _threads
-from subid._validation import check_dt, same_period, stamp_resolution
+from subid._validation import check_dt, checked_call, same_period, stamp_resolution
 from subid.data import IOData
 from subid.errors import DataError, FileReadError, ModelError, ResourceLimitError
 from subid.io._files import MAX_EXPANDED_BYTES, atomic_write, open_regular, read_regular
@@ -76,6 +76,7 @@ MAX_LINE_CHARS = 4 * 2**20
 # ---------------------------------------------------------------------------
 # public entry point
 # ---------------------------------------------------------------------------
+@checked_call
 def read(path, inputs=None, outputs=None, dt=None, time=None, *, delimiter=None,
          max_bytes=None) -> IOData:
     """Read one input/output record from a file.
@@ -1831,6 +1832,7 @@ def read_inputs(path, inputs, *, time=None, delimiter=None):
     return values[:, :len(cols)], table.channel_names(cols), t
 
 
+@checked_call
 def read_chunks(path, inputs=None, outputs=None, *, dt=None, chunk_size=100_000,
                 delimiter=None):
     """Read a uniformly sampled record piece by piece, with bounded memory.

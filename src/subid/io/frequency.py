@@ -36,7 +36,7 @@ from pathlib import Path
 
 import numpy as np
 
-from subid._validation import check_dt
+from subid._validation import check_dt, checked_call
 from subid.errors import DataError, FileReadError, OptionError
 from subid.frdata import FRData
 from subid.io._files import MAX_EXPANDED_BYTES, atomic_write, read_regular
@@ -261,6 +261,7 @@ def _strings(value):
     return out or None
 
 
+@checked_call
 def read_frd(path, *, dt=None, delimiter=None, max_bytes=None) -> FRData:
     """Read frequency-response data (see the module documentation for the layouts).
 
@@ -307,6 +308,7 @@ def read_frd(path, *, dt=None, delimiter=None, max_bytes=None) -> FRData:
     return _read_arrays(shown, raw, ext, dt, max_bytes)
 
 
+@checked_call
 def write_frd(frdata, path, *, polar: bool = False) -> None:
     """Write frequency-response data to a file that :func:`read_frd` reads back.
 

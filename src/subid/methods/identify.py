@@ -56,7 +56,7 @@ import warnings
 
 import numpy as np
 
-from subid._validation import check_choice
+from subid._validation import check_choice, checked_call
 from subid.data import IOData
 from subid.errors import DataError, ModelError, OptionError, SubidError
 from subid.methods._info import collect_warnings
@@ -201,6 +201,7 @@ def _fold_refinement(data, method, config, focus, scores=None):
     return out
 
 
+@checked_call
 def identify(data, order=None, *, focus="simulation", time_base="auto", horizon=None,
              feedthrough="auto", refine=True) -> StateSpace:
     """Identify the best model the data support: subspace start, order, refinement.

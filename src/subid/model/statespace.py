@@ -47,6 +47,7 @@ from subid._validation import (
     check_dt,
     check_int,
     check_time_stamps,
+    checked_call,
     same_period,
     stamp_resolution,
 )
@@ -498,6 +499,7 @@ class StateSpace:
     [0.0, 0.0, 0.1, 0.14]
     """
 
+    @checked_call
     def __init__(self, A, B, C, D, dt, *, input_names=None, output_names=None, info=None,
                  K=None, noise_cov=None, hold="zoh"):
         A = _as_matrix(A, "A")

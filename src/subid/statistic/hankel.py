@@ -66,7 +66,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.linalg
 
-from subid._validation import as_signal, check_dt, check_int
+from subid._validation import as_signal, check_dt, check_int, checked_call
 from subid.data import IOData
 from subid.errors import DataError, TooFewSamplesError
 from subid.statistic._hankel import HankelFactor, lq_lower
@@ -149,6 +149,7 @@ class HankelStatistic:
     3
     """
 
+    @checked_call
     def __init__(self, n_inputs, n_outputs, depth, *, kind="gram", dt=1.0, input_names=None,
                  output_names=None):
         if kind not in KINDS:

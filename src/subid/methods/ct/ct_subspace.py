@@ -85,7 +85,7 @@ from functools import partial
 
 import numpy as np
 
-from subid._validation import check_bool, check_choice, check_int, legacy_arguments
+from subid._validation import check_bool, check_choice, check_int, checked_call
 from subid.data import IOData
 from subid.errors import (
     DataError,
@@ -565,8 +565,7 @@ def _build_refined(problem: Problem, feedthrough=None, start=None) -> StateSpace
 # ---------------------------------------------------------------------------
 # the method
 # ---------------------------------------------------------------------------
-@legacy_arguments(positional=("basis", "poly_order", "estimate_x0", "feedthrough"),
-                  renamed={"input_hold": "hold", "b_method": "bd_method"})
+@checked_call
 @records_warnings
 def ct_subspace(data, order=None, *, basis=None, poly_order: int = 3, estimate_x0: bool = True,
                 feedthrough="auto", hold="foh", selection: str = "cv", start: str = "auto",
@@ -609,7 +608,6 @@ def ct_subspace(data, order=None, *, basis=None, poly_order: int = 3, estimate_x
         filtered and simulated exactly under this assumption, and the model
         records it (:attr:`StateSpace.hold`; ``'foh'`` for None), so that
         ``simulate``, ``fit_percent`` and the reports use it by default.
-        (Formerly ``input_hold``, still accepted with a DeprecationWarning.)
     selection : {'cv', 'gap'}
         How an order not given is chosen: ``'cv'``, the discrete-time
         methods' cross-validation (:mod:`subid.methods.dt._selection`: four
@@ -690,8 +688,7 @@ def ct_subspace(data, order=None, *, basis=None, poly_order: int = 3, estimate_x
         B (D, x0) by least squares on the raw output samples through the
         exactly discretised model, or from the filtered data equation (15).
         'simulation' falls back to 'filtered' if simulating A overflows
-        (``info['bd_method_used']``). (Formerly ``b_method``, still accepted
-        with a DeprecationWarning.)
+        (``info['bd_method_used']``).
     filtering : {'exact', 'sections'}
         Interpolate each signal once and propagate the whole filter chain
         exactly, or re-interpolate after every section (the paper's S1-S4).
@@ -900,7 +897,7 @@ def ct_subspace(data, order=None, *, basis=None, poly_order: int = 3, estimate_x
 
 
 
-@legacy_arguments(positional=("basis", "poly_order"))
+@checked_call
 def ct_subspace_paper(data, order=None, *, basis=None, poly_order: int = 3) -> StateSpace:
     """The paper's printed algorithm, with its typos corrected (seed 002).
 
@@ -919,7 +916,6 @@ def ct_subspace_paper(data, order=None, *, basis=None, poly_order: int = 3) -> S
                        start="subspace", offset=False, stability="none", noise_model=None)
 
 
-@legacy_arguments(positional=("method", "hold"))
 @records_warnings
 def dt_to_ct(data, order=None, *, method: str = "n4sid", hold: str = "zoh", **options):
     """Baseline: discrete-time subspace identification, then conversion to continuous time.

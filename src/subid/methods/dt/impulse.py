@@ -49,7 +49,7 @@ import numpy as np
 import scipy.linalg
 import scipy.optimize
 
-from subid._validation import check_choice, check_int
+from subid._validation import check_choice, check_int, checked_call
 from subid.data import IOData
 from subid.errors import DataError, NotExcitingError, TooFewSamplesError
 from subid.model.statespace import StateSpace
@@ -255,6 +255,7 @@ def _tune(kernel, n, nu, R1, r, rho2, sigma2, n_rows, g_ls):
     return res.x if res.fun <= best[0] else best[1]
 
 
+@checked_call
 def impulseest(data, n, *, kernel="tc"):
     """Estimate the impulse response (MATLAB ``impulseest``), regularised by a kernel.
 

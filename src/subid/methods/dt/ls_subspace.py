@@ -55,7 +55,7 @@ from subid._validation import (
     check_choice,
     check_seed,
     check_selector,
-    legacy_arguments,
+    checked_call,
 )
 from subid.delay import shift_for_method
 from subid.errors import OptionError, OrderError
@@ -109,7 +109,7 @@ def _condition_1norm(M: np.ndarray) -> float:
     return float(1.0 / rcond) if rcond > 0 else float("inf")
 
 
-@legacy_arguments(positional=("horizon", "instruments", "selector", "seed", "estimate_x0"))
+@checked_call
 def ls_subspace(data, order=None, *, horizon=None, instruments="past", selector=None, seed=0,
                 estimate_x0=True, feedthrough="auto", instrument_weighting=True,
                 power_iterations=8, normalize_outputs=True, selection="cv",

@@ -30,7 +30,7 @@ from functools import partial
 import numpy as np
 import scipy.linalg
 
-from subid._validation import check_bool, check_choice, legacy_arguments
+from subid._validation import check_bool, check_choice, checked_call
 from subid.delay import shift_for_method
 from subid.methods.dt._feedthrough import check_feedthrough
 from subid.methods.dt._feedthrough import resolve as resolve_feedthrough
@@ -56,7 +56,7 @@ from subid.model.statespace import StateSpace
 __all__ = ["moesp"]
 
 
-@legacy_arguments(positional=("horizon",))
+@checked_call
 def moesp(data, order=None, *, horizon=None, weighting="moesp", selection="cv",
           stability="auto", system_matrices="auto", feedthrough="auto", estimate_x0=True,
           bd_method="auto", statistic="auto", refine=None, input_delay=0) -> StateSpace:

@@ -24,7 +24,7 @@ from functools import partial
 import numpy as np
 import scipy.linalg
 
-from subid._validation import check_bool, legacy_arguments
+from subid._validation import check_bool, checked_call
 from subid.data import IOData
 from subid.delay import shift_for_method
 from subid.methods.dt._feedthrough import check_feedthrough
@@ -82,7 +82,7 @@ def _lstsq_rows(regressors: np.ndarray, targets: np.ndarray) -> np.ndarray:
                               check_finite=False)[0].T
 
 
-@legacy_arguments(positional=("horizon",))
+@checked_call
 def n4sid(data, order=None, *, horizon=None, weighting="cva", selection="cv",
           stability="auto", feedthrough="auto", estimate_x0=True,
           statistic="auto", refine=None, input_delay=0) -> StateSpace:

@@ -45,7 +45,7 @@ from functools import partial
 import numpy as np
 import scipy.linalg
 
-from subid._validation import check_bool
+from subid._validation import check_bool, checked_call
 from subid.delay import shift_for_method
 from subid.methods.dt._subspace import (
     choose_order,
@@ -62,6 +62,7 @@ from subid.model.statespace import StateSpace
 __all__ = ["pbsid"]
 
 
+@checked_call
 def pbsid(data, order=None, *, horizon=None, selection="cv", stability="auto",
           feedthrough=True, estimate_x0=True, statistic="auto", refine=None,
           input_delay=0) -> StateSpace:

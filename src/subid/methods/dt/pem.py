@@ -43,7 +43,7 @@ import numpy as np
 import scipy.linalg
 import scipy.optimize
 
-from subid._validation import same_period
+from subid._validation import checked_call, same_period
 from subid.data import IOData
 from subid.delay import delay_inputs, input_delay_of, record_delay
 from subid.errors import DataError, ModelError, NoiseModelWarning, OptionError
@@ -318,6 +318,7 @@ def minimise_prediction_error(predictor, directions, dm, x0, v, y, ranges, W, ma
     return res.x, res
 
 
+@checked_call
 @records_warnings
 def pem(data, model, *, focus="prediction", max_iterations=100, tolerance=1e-8, rounds=3,
         feedthrough=None):

@@ -51,7 +51,7 @@ import math
 import numpy as np
 import scipy.signal
 
-from subid._validation import check_bool, check_choice
+from subid._validation import check_bool, check_choice, checked_call
 from subid.errors import OptionError, SubidError
 from subid.methods._info import collect_warnings
 from subid.methods.dt.pem import (
@@ -429,6 +429,7 @@ def _identify(structure, data, order, selection, estimate_x0, max_iterations, to
 
 
 
+@checked_call
 def armax(data, order=None, *, selection="cv", estimate_x0=True, max_iterations=100,
           tolerance=1e-8):
     """Identify an ARMAX model ``A y = B u + C e`` by prediction-error minimisation.
@@ -489,6 +490,7 @@ def armax(data, order=None, *, selection="cv", estimate_x0=True, max_iterations=
     return _identify("armax", data, order, selection, estimate_x0, max_iterations, tolerance)
 
 
+@checked_call
 def oe(data, order=None, *, selection="cv", estimate_x0=True, max_iterations=100,
        tolerance=1e-8):
     """Identify an output-error model ``y = B/F u + e`` by prediction-error minimisation.
@@ -549,6 +551,7 @@ def oe(data, order=None, *, selection="cv", estimate_x0=True, max_iterations=100
     return _identify("oe", data, order, selection, estimate_x0, max_iterations, tolerance)
 
 
+@checked_call
 def bj(data, order=None, *, selection="cv", estimate_x0=True, max_iterations=100,
        tolerance=1e-8):
     """Identify a Box-Jenkins model ``y = B/F u + C/D e`` by prediction-error minimisation.

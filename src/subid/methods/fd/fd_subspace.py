@@ -70,7 +70,7 @@ import warnings
 
 import numpy as np
 
-from subid._validation import check_bool, check_choice, check_int
+from subid._validation import check_bool, check_choice, check_int, checked_call
 from subid.errors import DataError, OrderError, SubidError, UnstableModelWarning
 from subid.frdata import FRData
 from subid.methods._info import model_info, records_warnings
@@ -183,6 +183,7 @@ def _cross_validate(data: FRData, alpha, noise_var, candidates, horizons, *, fee
     return order, record
 
 
+@checked_call
 @records_warnings
 def fd_subspace(frdata, order=None, *, horizon=None, feedthrough=True, stability="auto",
                 selection="cv") -> StateSpace:

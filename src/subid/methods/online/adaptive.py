@@ -91,6 +91,7 @@ from subid._validation import (
     check_seed,
     check_selector,
     check_time_stamps,
+    checked_call,
 )
 from subid.errors import (
     CheckpointError,
@@ -356,6 +357,7 @@ class AdaptiveIdentifier(OnlineIdentifier):
     _READS = (2, _VERSION)
     _OLD_KINDS = (_OLD_KIND,)
 
+    @checked_call
     def __init__(self, order, n_inputs, n_outputs, horizon=None, filter_poles=-5.0,
                  forgetting=None, bd_forgetting=None, selector=None, seed=0, *, dt=None,
                  hold="foh", method="iv", scale_filters=True, refresh_every=50,

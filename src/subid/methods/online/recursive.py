@@ -59,6 +59,7 @@ from subid._validation import (
     check_seed,
     check_selector,
     check_time_stamps,
+    checked_call,
 )
 from subid.errors import (
     CheckpointError,
@@ -234,6 +235,7 @@ class RecursiveSubspace(OnlineIdentifier):
     _VERSION = 3      # 2: the recursive B, D regression; 3: lagged statistics (forgetting 1)
     _READS = (2, 3)
 
+    @checked_call
     def __init__(self, order, n_inputs, n_outputs, horizon=None, forgetting=1.0,
                  instruments="past", selector=None, seed=0, *, instrument_weighting=True,
                  power_iterations=8, feedthrough=True, dt=1.0, history_size=None,
