@@ -19,8 +19,9 @@ ROOT = pathlib.Path(__file__).resolve().parents[1]
 
 
 def _flat(text: str) -> str:
-    """``text`` on one line: whitespace and line breaks collapsed, backticks removed."""
-    return " ".join(text.replace("`", "").split())
+    """``text`` on one line: whitespace and line breaks collapsed, backticks removed, and
+    words that a help text wrapped at their hyphen ("cross-" / "validated") joined."""
+    return re.sub(r"(\w)- (\w)", r"\1-\2", " ".join(text.replace("`", "").split()))
 
 
 def run(capsys, *args):
