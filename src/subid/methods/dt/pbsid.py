@@ -47,6 +47,8 @@ import scipy.linalg
 
 from subid._validation import check_bool, checked_call
 from subid.delay import shift_for_method
+from subid.methods.dt._feedthrough import check_feedthrough
+from subid.methods.dt._feedthrough import resolve as resolve_feedthrough
 from subid.methods.dt._subspace import (
     choose_order,
     finalize,
@@ -64,7 +66,7 @@ __all__ = ["pbsid"]
 
 @checked_call
 def pbsid(data, order=None, *, horizon=None, selection="cv", stability="auto",
-          feedthrough=True, estimate_x0=True, statistic="auto", refine=None,
+          feedthrough="auto", estimate_x0=True, statistic="auto", refine=None,
           input_delay=0) -> StateSpace:
     """Identify a discrete-time model by predictor-based subspace identification.
 
@@ -91,10 +93,13 @@ def pbsid(data, order=None, *, horizon=None, selection="cv", stability="auto",
     stability : {'auto', 'enforce', 'none'}
         As in :func:`subid.moesp`; B and K are then refitted from the state
         equation.
-    feedthrough : bool
-        Estimate D. In closed loop with a direct feedback ``u(t) = r(t) -
-        F y(t)`` the plant must be strictly proper (D = 0) for any method to
-        be consistent: use ``feedthrough=False`` there.
+    feedthrough : {'auto', True, False}
+        Estimate D (``False``: D = 0). ``'auto'`` (default), as in
+        :func:`subid.n4sid`: D only when the data show a direct term and no
+        feedback (:mod:`subid.methods.dt._feedthrough`; ``info['feedthrough']``).
+        In closed loop with a direct feedback ``u(t) = r(t) - F y(t)`` the plant
+        must be strictly proper (D = 0) for any method to be consistent, which
+        the feedback test detects.
     estimate_x0 : bool
         Estimate the initial state (``info['x0']``) by least squares on the
         output, given the identified model.
@@ -119,7 +124,7 @@ def pbsid(data, order=None, *, horizon=None, selection="cv", stability="auto",
     >>> float(subid.markov_error(model, subid.systems.seed001_system())) < 1e-8
     True
     """
-    check_bool(feedthrough, "feedthrough")
+    feedthrough = check_feedthrough(feedthrough)
     check_bool(estimate_x0, "estimate_x0")
     build = partial(_pbsid, stability=stability, feedthrough=feedthrough,
                     estimate_x0=estimate_x0)
@@ -131,6 +136,7 @@ def pbsid(data, order=None, *, horizon=None, selection="cv", stability="auto",
 
 
 def _pbsid(pb, *, stability, feedthrough, estimate_x0) -> StateSpace:
+    feedthrough, ft_record = resolve_feedthrough(feedthrough, pb)
     i, hf = pb.horizon, pb.factor
     data = pb.data
     ny, nu = hf.n_outputs, hf.n_inputs
@@ -178,4 +184,4 @@ def _pbsid(pb, *, stability, feedthrough, estimate_x0) -> StateSpace:
     _, C, _ = pb.unscale(np.zeros((n, nu)), C, np.zeros((ny, nu)))
     x0 = initial_state(A, B, C, D, data) if estimate_x0 else None
     return finish(pb, A, B, C, D, n, order_selection, singular_values=s, x0=x0,
-                  state_regression_residual=residual, stability=stab)
+                  state_regression_residual=residual, stability=stab, feedthrough=ft_record)
