@@ -172,8 +172,10 @@ def test_regression_equals_batch_default_noise_free(instruments):
     data = systems.simulate_data(true, 800, seed=2, x0=[1.0, 0.0, -1.0])
     rs = subid.RecursiveSubspace(3, 2, 2, horizon=5, instruments=instruments)
     rs.update(data.u, data.y)
+    # the batch call the recursive identifier equals: its D estimated and its B, D by the
+    # output regression (the batch defaults choose the feedthrough and the estimator)
     batch = subid.ls_subspace(data, 3, horizon=5, instruments=instruments,
-                              selector=rs.selector)
+                              selector=rs.selector, feedthrough=True, system_matrices="shift")
     assert batch.info["bd_method"] == "simulation"
     model = rs.model
     assert model.info["bd_method"] == "regression"
@@ -212,8 +214,10 @@ def test_regression_equals_batch_noisy(instruments, samples, lags):
     rs = subid.RecursiveSubspace(3, 2, 2, horizon=5, instruments=instruments, lags=lags)
     for a, b in ((0, 3), (3, 70), (70, 71), (71, 333), (333, samples)):
         rs.update(data.u[a:b], data.y[a:b])
+    # the batch call the recursive identifier equals: its D estimated and its B, D by the
+    # output regression (the batch defaults choose the feedthrough and the estimator)
     batch = subid.ls_subspace(data, 3, horizon=5, instruments=instruments,
-                              selector=rs.selector)
+                              selector=rs.selector, feedthrough=True, system_matrices="shift")
     assert batch.info["bd_method"] == "simulation"
     model = rs.model
     assert model.info["bd_method"] == "regression"

@@ -916,6 +916,7 @@ def ct_subspace_paper(data, order=None, *, basis=None, poly_order: int = 3) -> S
                        start="subspace", offset=False, stability="none", noise_model=None)
 
 
+@checked_call
 @records_warnings
 def dt_to_ct(data, order=None, *, method: str = "n4sid", hold: str = "zoh", **options):
     """Baseline: discrete-time subspace identification, then conversion to continuous time.
