@@ -309,6 +309,21 @@ def bias_z_scores(errors_):
 
 
 @pytest.mark.slow
+def test_output_noise_small_monte_carlo(true):
+    """The cheap sibling of the 50-run check below (8 runs): small error, no gross bias."""
+    gb = true.freqresp(BIAS_W)[:, 0, 0]
+    g = true.freqresp(W)[:, 0, 0]
+    err, worst = [], []
+    for r in range(8):
+        data, _ = simulate(4000, r, snr_db=20)
+        model = ct_subspace(data, 4)
+        err.append(model.freqresp(BIAS_W)[:, 0, 0] - gb)
+        worst.append(np.abs(model.freqresp(W)[:, 0, 0] - g).max())
+    assert np.median(worst) < 0.1
+    assert np.all(bias_z_scores(err) < 3.0), bias_z_scores(err)
+
+
+@pytest.mark.long
 def test_output_noise_monte_carlo_no_bias(true):
     """20 dB output noise, L = 4000, 50 runs (seeds 0-49): the default estimate is unbiased.
 
