@@ -159,6 +159,13 @@ def test_pem_tolerance_and_magnitudes_are_subid_errors():
     huge = subid.IOData(data.u, data.y * 1e299, dt=1.0)
     with pytest.raises(errors.DataError, match="overflow"):
         subid.pem(huge, true)
+    # the same check for every prediction-error search (frequency data, polynomial models)
+    w = np.linspace(0.1, 3.0, 40)
+    frd = subid.FRData(w, true.freqresp(w), 1.0)
+    with pytest.raises(errors.OptionError, match="tolerance"):
+        subid.pem(frd, true, tolerance=1e-300)
+    with pytest.raises(errors.OptionError, match="tolerance"):
+        subid.oe(data, (2, 2, 1), tolerance=1e-300)
 
 
 # -- 5. consistent results -----------------------------------------------------------

@@ -493,6 +493,24 @@ def check_seed(value, name: str = "seed") -> int:
     return int(value)
 
 
+def check_optimiser_options(max_iterations, tolerance, rounds=1) -> None:
+    """The options of every prediction-error search (:func:`subid.pem` on time or
+    frequency data, :func:`subid.armax`, :func:`subid.oe`, :func:`subid.bj`):
+    positive integers ``max_iterations`` and ``rounds``, and a ``tolerance`` in
+    ``[eps, 1)`` (below machine precision scipy's ``least_squares`` refuses it);
+    else :class:`OptionError`."""
+    eps = float(np.finfo(float).eps)
+    if isinstance(max_iterations, bool) or not isinstance(max_iterations, int) \
+            or max_iterations < 1:
+        raise OptionError(f"max_iterations must be a positive integer, got {max_iterations!r}")
+    if isinstance(tolerance, bool) or not isinstance(tolerance, (int, float)) \
+            or not eps <= tolerance < 1:
+        raise OptionError(f"tolerance must be in [{eps:.3g}, 1) (below machine precision no "
+                          f"step can meet it), got {tolerance!r}")
+    if isinstance(rounds, bool) or not isinstance(rounds, int) or rounds < 1:
+        raise OptionError(f"rounds must be a positive integer, got {rounds!r}")
+
+
 def check_probability(value, name: str) -> float:
     """A level strictly between 0 and 1 (confidence levels); else :class:`OptionError`."""
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real) \

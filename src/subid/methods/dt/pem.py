@@ -43,7 +43,7 @@ import numpy as np
 import scipy.linalg
 import scipy.optimize
 
-from subid._validation import checked_call, same_period
+from subid._validation import check_optimiser_options, checked_call, same_period
 from subid.data import IOData
 from subid.delay import delay_inputs, input_delay_of, record_delay
 from subid.errors import DataError, ModelError, NoiseModelWarning, OptionError
@@ -57,8 +57,6 @@ from subid.model.statespace import StateSpace
 __all__ = ["pem"]
 
 FOCUS = ("prediction", "simulation")
-# Smallest tolerance: scipy's least_squares needs one above machine precision.
-_EPS = float(np.finfo(float).eps)
 # A trial predictor with a spectral radius above this is treated as unstable.
 STABILITY_LIMIT = 1.0 - 1e-9
 # Largest Jacobian (N * ny rows, one column per free parameter) pem builds.
@@ -393,15 +391,7 @@ def pem(data, model, *, focus="prediction", max_iterations=100, tolerance=1e-8, 
         return fd_pem(data, model, max_iterations=max_iterations, tolerance=tolerance,
                       rounds=rounds, feedthrough=feedthrough)
     _check_inputs(data, model, focus)
-    if isinstance(max_iterations, bool) or not isinstance(max_iterations, int) \
-            or max_iterations < 1:
-        raise OptionError(f"max_iterations must be a positive integer, got {max_iterations!r}")
-    if isinstance(tolerance, bool) or not isinstance(tolerance, (int, float)) \
-            or not _EPS <= tolerance < 1:
-        raise OptionError(f"tolerance must be in [{_EPS:.3g}, 1) (below machine precision no "
-                          f"step can meet it), got {tolerance!r}")
-    if isinstance(rounds, bool) or not isinstance(rounds, int) or rounds < 1:
-        raise OptionError(f"rounds must be a positive integer, got {rounds!r}")
+    check_optimiser_options(max_iterations, tolerance, rounds)
     if (delays := input_delay_of(model)) is not None:
         # the model's dynamics see u_j[k - d_j]: refine on the record shifted so (the
         # first max(d) samples, whose delayed inputs precede the record, left out, as

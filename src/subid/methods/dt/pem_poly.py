@@ -51,8 +51,8 @@ import math
 import numpy as np
 import scipy.signal
 
-from subid._validation import check_bool, check_choice, checked_call
-from subid.errors import OptionError, SubidError
+from subid._validation import check_bool, check_choice, check_optimiser_options, checked_call
+from subid.errors import SubidError
 from subid.methods._info import collect_warnings
 from subid.methods.dt.pem import (
     _predictor,
@@ -378,12 +378,7 @@ def _stack(records, structure, orders):
 def _identify(structure, data, order, selection, estimate_x0, max_iterations, tolerance):
     check_choice(selection, "selection", SELECTIONS)
     check_bool(estimate_x0, "estimate_x0")
-    if isinstance(max_iterations, bool) or not isinstance(max_iterations, int) \
-            or max_iterations < 1:
-        raise OptionError(f"max_iterations must be a positive integer, got {max_iterations!r}")
-    if isinstance(tolerance, bool) or not (isinstance(tolerance, (int, float))
-                                           and 0 < tolerance < 1):
-        raise OptionError(f"tolerance must be in (0, 1), got {tolerance!r}")
+    check_optimiser_options(max_iterations, tolerance)
     data = check_polynomial_data(data, structure)
     ny, nu = data.n_outputs, data.n_inputs
     with collect_warnings() as issued:

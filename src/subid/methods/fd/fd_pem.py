@@ -44,7 +44,7 @@ import numpy as np
 import scipy.linalg
 import scipy.optimize
 
-from subid._validation import same_period
+from subid._validation import check_optimiser_options, same_period
 from subid.delay import frequency_factor, input_delay_of
 from subid.errors import DataError, ModelError, NoiseModelWarning, OptionError
 from subid.frdata import FRData
@@ -68,13 +68,7 @@ def _check(data, model, max_iterations, tolerance, rounds, feedthrough):
         raise DataError(f"the model has dt={model.dt} but the frequency data have "
                         f"dt={data.dt} (0 = continuous time); convert the model first "
                         "(to_discrete / to_continuous)")
-    if isinstance(max_iterations, bool) or not isinstance(max_iterations, int) \
-            or max_iterations < 1:
-        raise OptionError(f"max_iterations must be a positive integer, got {max_iterations!r}")
-    if not (isinstance(tolerance, (int, float)) and 0 < tolerance < 1):
-        raise OptionError(f"tolerance must be in (0, 1), got {tolerance!r}")
-    if isinstance(rounds, bool) or not isinstance(rounds, int) or rounds < 1:
-        raise OptionError(f"rounds must be a positive integer, got {rounds!r}")
+    check_optimiser_options(max_iterations, tolerance, rounds)
     if feedthrough is not None and not isinstance(feedthrough, (bool, np.bool_)):
         raise OptionError(f"feedthrough must be True, False or None, got {feedthrough!r}")
 
