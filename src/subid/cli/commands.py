@@ -819,21 +819,11 @@ def _identify_frequency(data, dt, delimiter, order, horizon, validate, options, 
         "data": source, "method": "fd_subspace", "function": "fd_subspace",
         "order": model.order, "horizon": model.info.get("horizon"), "dt": model.dt,
         "outputs": list(frd.output_names),
-        "fit_estimation": _nan_to_none(result["fit_estimation"]),
-        "fit_validation": _nan_to_none(result["fit_validation"]),
         "n_estimation": est.n_frequencies,
         "n_validation": 0 if val is None else val.n_frequencies,
-        "stable": bool(result["stable"]),
-        "poles": [[float(z.real), float(z.imag)] for z in result["poles"]],
-        "seconds": seconds, "files": files,
+        **_fit_summary(result), "seconds": seconds, "files": files,
     }
-    with atomic_directory(out, owned=_only(_IDENTIFY_FILES)) as stage:
-        model.save(os.path.join(stage, "model.json"))
-        if html is not None:
-            with atomic_write(os.path.join(stage, "report.html"), "w",
-                              encoding="utf-8") as fh:
-                fh.write(html)
-        _write_json(os.path.join(stage, "summary.json"), summary)
+    _save_run(out, model, html, summary)
     if not _state().quiet:
         timing = "continuous time" if frd.dt == 0 else f"dt = {frd.dt:g}"
         lines = [f"data        {source}: {frd.n_frequencies} frequencies "
@@ -859,6 +849,27 @@ def _identify_frequency(data, dt, delimiter, order, horizon, validate, options, 
     return 0
 
 
+def _fit_summary(result) -> dict:
+    """The fits, stability and poles of an evaluation, for summary.json."""
+    return {"fit_estimation": _nan_to_none(result["fit_estimation"]),
+            "fit_validation": _nan_to_none(result["fit_validation"]),
+            "stable": bool(result["stable"]),
+            "poles": [[float(z.real), float(z.imag)] for z in result["poles"]]}
+
+
+def _save_run(out, model, html, summary) -> None:
+    """model.json, report.html (when there is one) and summary.json into ``out``.
+
+    The folder is replaced as a whole: it holds the previous run's outputs or
+    this run's, never a mix (Ctrl-C or a full disk leave the previous run's)."""
+    from subid.evaluation import report
+    with atomic_directory(out, owned=_only(_IDENTIFY_FILES)) as stage:
+        model.save(os.path.join(stage, "model.json"))
+        if html is not None:
+            report.write_html(os.path.join(stage, "report.html"), html)
+        _write_json(os.path.join(stage, "summary.json"), summary)
+
+
 def _write_outputs(out, data, spec, model, result, est, val, seconds, record, *, title, notes,
                    report_data, write_report, frequency_unit, outputs, n_estimation,
                    n_validation, steps, **extra):
@@ -879,20 +890,10 @@ def _write_outputs(out, data, spec, model, result, est, val, seconds, record, *,
     summary = {
         "data": data, "method": spec.name, "function": spec.attribute, "order": model.order,
         "horizon": model.info.get("horizon"), "dt": model.dt, "outputs": outputs, **extra,
-        "fit_estimation": _nan_to_none(result["fit_estimation"]),
-        "fit_validation": _nan_to_none(result["fit_validation"]),
         "n_estimation": n_estimation, "n_validation": n_validation,
-        "stable": bool(result["stable"]),
-        "poles": [[float(z.real), float(z.imag)] for z in result["poles"]],
-        "seconds": seconds, "files": files,
+        **_fit_summary(result), "seconds": seconds, "files": files,
     }
-    # The folder is replaced as a whole: it holds the previous run's outputs or
-    # this run's, never a mix (Ctrl-C or a full disk leave the previous run's).
-    with atomic_directory(out, owned=_only(_IDENTIFY_FILES)) as stage:
-        model.save(os.path.join(stage, "model.json"))
-        if html is not None:
-            report.write_html(os.path.join(stage, "report.html"), html)
-        _write_json(os.path.join(stage, "summary.json"), summary)
+    _save_run(out, model, html, summary)
     steps.close()
     _print_summary(data, record, spec, model, result, est, val, seconds, files)
 
