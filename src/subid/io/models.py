@@ -1,6 +1,6 @@
 """Model files: the JSON model file of :meth:`StateSpace.save` / :meth:`StateSpace.load`
 (its encoding is :mod:`subid.model._json`) and the MATLAB ``ss`` fields of
-:meth:`StateSpace.to_mat` / :meth:`StateSpace.from_mat` (:mod:`subid.io.formats`).
+:meth:`StateSpace.to_mat` / :meth:`StateSpace.from_mat` (:mod:`subid.io.mat`).
 
 Importing this module registers both formats in :mod:`subid.model.storage`, where the
 model's file methods find them: the model imports nothing of :mod:`subid.io`.
@@ -13,7 +13,7 @@ import os
 from subid.errors import ModelError
 from subid.io._files import atomic_write, read_regular
 from subid.io._schema import parse_json
-from subid.io.formats import read_mat_model, write_mat_model
+from subid.io.mat import read_mat_model, write_mat_model
 from subid.model import storage
 from subid.model._conversions import _without_delay
 from subid.model._json import to_json

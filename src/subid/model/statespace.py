@@ -886,7 +886,7 @@ class StateSpace:
     def from_mat(cls, path, *, dt=None) -> "StateSpace":
         """Read a model from a MATLAB ``.mat`` file (:func:`subid.interop.load_mat`).
 
-        The file is read by :func:`subid.io.formats.mat_variables`, the validated MAT
+        The file is read by :func:`subid.io.mat.mat_variables`, the validated MAT
         loader of :func:`subid.read`.
         """
         return _files.reader("mat")(path, cls, dt=dt)
