@@ -35,7 +35,7 @@ import warnings
 
 import click
 
-from subid.cli import _shared
+import subid.cli._shared as _shared
 
 # Each command registers itself on the group when its module is imported (one module per
 # command, issue 24). The names the command line had here stay importable from here.

@@ -26,7 +26,7 @@ from subid import datasets
 from subid._progress import Steps, progress_wrapper
 from subid.errors import OptionError, SubidError
 from subid.io._files import write_bytes, write_json
-from subid.methods.dt._selection import AUTO_ORDER_RULE
+from subid.methods.describe import AUTO_ORDER_RULE
 
 __all__ = ["evaluate", "diagnose", "report_dataset", "run", "gallery", "gallery_markdown",
            "GALLERY_COMMAND", "FRACTION"]

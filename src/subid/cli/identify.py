@@ -44,8 +44,8 @@ from subid.cli._shared import (
 )
 from subid.errors import DataError
 from subid.io._files import atomic_directory
-from subid.methods.dt._selection import AUTO_ORDER_RULE
-from subid.methods.dt._selection import describe as describe_selection
+from subid.methods.describe import AUTO_ORDER_RULE
+from subid.methods.describe import describe_order_selection as describe_selection
 
 
 # -- identify ----------------------------------------------------------------

@@ -1,5 +1,5 @@
 """Model files: the JSON model file of :meth:`StateSpace.save` / :meth:`StateSpace.load`
-(its encoding is :mod:`subid.model._json`) and the MATLAB ``ss`` fields of
+(its encoding is :mod:`subid.model.codec`) and the MATLAB ``ss`` fields of
 :meth:`StateSpace.to_mat` / :meth:`StateSpace.from_mat` (:mod:`subid.io.mat`).
 
 Importing this module registers both formats in :mod:`subid.model.storage`, where the
@@ -10,13 +10,13 @@ from __future__ import annotations
 
 import os
 
+from subid.delay import absorb_delay, input_delay_of
 from subid.errors import ModelError
 from subid.io._files import atomic_write, read_regular
 from subid.io._schema import parse_json
 from subid.io.mat import read_mat_model, write_mat_model
 from subid.model import storage
-from subid.model._conversions import _without_delay
-from subid.model._json import to_json
+from subid.model.codec import to_json
 
 #: Largest model file :meth:`StateSpace.load` reads (a model is a few matrices).
 MAX_MODEL_BYTES = 256 * 2**20
@@ -61,7 +61,9 @@ def load_model(path, cls):
 
 def _write_mat(model, path) -> None:
     # input delays become extra states: MATLAB's ss fields here carry none
-    write_mat_model(_without_delay(model), path)
+    if input_delay_of(model) is not None:
+        model = absorb_delay(model)
+    write_mat_model(model, path)
 
 
 storage.register("json", reader=load_model, writer=save_model)

@@ -38,9 +38,9 @@ import numpy as np
 from scipy import linalg
 
 import subid.model._conversions as _conversions
-import subid.model._json as _json
 import subid.model._responses as _responses
 import subid.model._simulate as _simulate
+import subid.model.codec as _codec
 import subid.model.storage as _files
 from subid._validation import (
     as_signal,
@@ -779,7 +779,7 @@ class StateSpace:
             ``info`` holds a value that cannot be stored (the message gives
             its location).
         """
-        return _json.to_dict(self)
+        return _codec.to_dict(self)
 
     @classmethod
     def from_dict(cls, d) -> "StateSpace":
@@ -802,7 +802,7 @@ class StateSpace:
             A key is missing, unknown or holds a bad value (the message names
             it), or the matrices are inconsistent.
         """
-        return _json.from_dict(cls, d)
+        return _codec.from_dict(cls, d)
 
     def save(self, path) -> None:
         """Write the model to a JSON file, atomically.
