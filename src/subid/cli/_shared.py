@@ -360,7 +360,7 @@ def _select(names, spec, role, source) -> list[int]:
     if spec is None:
         return list(range(len(names)))
     out = []
-    for token in _names(spec):
+    for token in _names(spec) or []:
         if token in names:
             out.append(names.index(token))
         elif token.isdigit() and int(token) < len(names):

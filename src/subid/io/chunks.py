@@ -178,7 +178,8 @@ def _text_lines(fh, shown: str, consumed: int, chunk_size: int):
     MAX_LINE_CHARS is refused before it is held whole, so memory is bounded
     by the chunk size, whatever the file."""
     block = 1 << 18                  # characters read at a time
-    pending, lines = "", []
+    pending = ""
+    lines: list[str] = []
     while True:
         try:
             text = fh.read(block)
@@ -375,7 +376,7 @@ def _column_indices(spec, role: str, n_columns: int, shown: str) -> list[int]:
               for t in _tokens(spec, role, [])]
     out = []
     for tok in tokens:
-        if not isinstance(tok, numbers.Integral) or not 0 <= tok < n_columns:
+        if not isinstance(tok, numbers.Integral) or not 0 <= int(tok) < n_columns:
             raise FileReadError(f"{shown}: {role} must be 0-based column indices of the "
                                 f"{n_columns}-column array, got {tok!r}", path=shown)
         out.append(int(tok))

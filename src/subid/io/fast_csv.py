@@ -113,7 +113,7 @@ def _parsed_blocks(blocks, delim, ncols: int):
         return
     from concurrent.futures import ThreadPoolExecutor
 
-    pending = collections.deque()
+    pending: collections.deque = collections.deque()
     with ThreadPoolExecutor(threads, thread_name_prefix="subid-parse") as pool:
         try:
             for buf, n_lines in blocks:

@@ -155,8 +155,8 @@ def _read_text(shown: str, raw: bytes, ext: str, delimiter, dt) -> FRData:
 
 
 def _assemble(shown, w, values, columns, dt) -> FRData:
-    pairs = {}
-    coherence = {}
+    pairs: dict = {}
+    coherence: dict = {}
     for (pair, kind), k in columns.items():
         if kind == "coh":
             coherence[pair] = k

@@ -323,9 +323,9 @@ class _Table:
             if values.shape == (len(contents), len(cols)):
                 return values
         except (ValueError, TypeError, IndexError) as exc:
-            found = re.search(r"at row (\d+)", str(exc))
-            if found and int(found.group(1)) < len(contents):
-                hint = int(found.group(1))
+            named = re.search(r"at row (\d+)", str(exc))
+            if named and int(named.group(1)) < len(contents):
+                hint = int(named.group(1))
         order = range(len(contents)) if hint is None else \
             [hint, *range(len(contents))]           # check the row numpy named first
         rows = []
@@ -393,7 +393,7 @@ def _tokens(spec, role: str, names) -> list:
         return [int(spec)]
     if isinstance(spec, (bool, bytes, dict, set, frozenset)) or not hasattr(spec, "__iter__"):
         raise DataError(f"{role} must be a name, an index or a list of them, got {spec!r}")
-    out = []
+    out: list[str | int] = []
     for item in spec:
         if isinstance(item, str):
             out.append(item.strip())

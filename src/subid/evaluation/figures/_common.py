@@ -52,10 +52,11 @@ def _method_of(model) -> str | None:
 def colors_for(entries) -> list[str]:
     """One distinct colour per entry: the method's colour (:data:`METHOD_COLORS`)
     when free, else the first unused one. ``entries``: (label, model or None)."""
-    used, out = set(), []
+    used: set[str] = set()
+    out: list[str] = []
     for label, model in entries:
         method = _method_of(model) if model is not None else None
-        want = METHOD_COLORS.get(method) or METHOD_COLORS.get(str(label))
+        want = (METHOD_COLORS.get(method) if method else None) or METHOD_COLORS.get(str(label))
         if want is None or want in used:
             want = next((c for c in _PALETTE if c not in used and
                          c not in METHOD_COLORS.values()), None) or \

@@ -44,7 +44,7 @@ def convergence(history, *, reference=None, title=None, max_parameters: int = 12
         if params.ndim != 2 or params.shape[0] != sample.size or params.shape[1] == 0:
             params = None
     rows = 2 + (2 if params is not None else 0)
-    names = None
+    names: list | None = None
     shown = 0
     if params is not None:
         names = list(history.get("parameter_names", [])) or \
@@ -74,7 +74,7 @@ def convergence(history, *, reference=None, title=None, max_parameters: int = 12
     axes[1].set_ylabel("pole imag. part")
     if params is not None:
         for k in range(shown):
-            axes[2].plot(sample, params[:, k], lw=0.9, label=names[k] if k < len(names) else None)
+            axes[2].plot(sample, params[:, k], lw=0.9, label=names[k] if names and k < len(names) else None)
         _legend_beside(axes[2], ncol=1 if shown <= 8 else 2)
         axes[2].set_ylabel("parameters")
         final = params[-1]

@@ -155,9 +155,9 @@ def identify_stream(pieces, method: str = "moesp", order=None, horizon=None, *,
         else:
             _check_piece(piece, first, k)
         if e != experiment:
-            stat.new_experiment()
+            stat.new_experiment()  # type: ignore[union-attr]  # made with the first piece
             experiment = e
-        stat.update(piece.u, piece.y)
+        stat.update(piece.u, piece.y)  # type: ignore[union-attr]
     if stat is None:
         raise DataError("the record is empty: no pieces to identify from")
     if options.get("bd_method", "auto") != "projection":
@@ -212,7 +212,7 @@ def attach_second_pass(stat: HankelStatistic, make_chunks=None, *, groups=None
     else:
         regression = OutputRegression(sequential(make_chunks), 1, stat.n_inputs,
                                       stat.n_outputs)
-    stat.output_regression = regression
+    stat.output_regression = regression  # type: ignore[attr-defined]  # read by the B/D pass
     return stat
 
 

@@ -148,7 +148,7 @@ def _cross_validate(data: FRData, alpha, noise_var, candidates, horizons, *, fee
     """Order by cross-validation over interleaved frequency folds; each candidate order
     at its own horizon (``horizons[n]``, as an explicit call with that order uses)."""
     index = np.arange(data.n_frequencies)
-    per_fold = {n: [] for n in candidates}
+    per_fold: dict[int, list] = {n: [] for n in candidates}
     for k in range(FOLDS):
         held = index % FOLDS == k
         train, validation = data[~held], data[held]
