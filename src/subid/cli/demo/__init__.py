@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import logging
 import os
-import sys
 import time
 import warnings
 
@@ -509,9 +508,3 @@ def _jsonable(row: dict) -> dict:
         out[k] = v
     return out
 
-
-if __name__ == "__main__":
-    # ``python -m subid.cli.demo [options]``: the same as ``subid demo [options]``. The
-    # command line sits above this module, which never imports it as a library.
-    from subid.cli.commands import main
-    sys.exit(main(["demo", *sys.argv[1:]]))
