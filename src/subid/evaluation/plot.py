@@ -56,6 +56,9 @@ from subid.evaluation.figures.responses import step as step
 from subid.evaluation.figures.time_domain import compare as compare
 from subid.evaluation.figures.time_domain import data_overview as data_overview
 
+# (order_scores, predicted_output, colors_for and is_unstable, public names of this module
+# when it held the figures, are listed too: the API reference documents __all__.)
 __all__ = ["poles", "error_histograms", "bode", "step", "compare", "residuals",
            "residual_correlations", "convergence", "data_overview", "frequency_grid",
-           "simulated_output", "order_selection", "STYLE", "METHOD_COLORS"]
+           "simulated_output", "order_selection", "STYLE", "METHOD_COLORS",
+           "order_scores", "predicted_output", "colors_for", "is_unstable"]
