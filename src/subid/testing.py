@@ -149,7 +149,7 @@ def noise_free_record(kind: str = "discrete", *, n_experiments: int = 1):
         records = [simulate_data(system, 600 // n_experiments, seed=3 + k)
                    for k in range(n_experiments)]
     else:
-        system = StateSpace(*_CT_SYSTEM, 0.0)
+        system = StateSpace(*_CT_SYSTEM, 0.0, hold="foh")
         records = []
         for k in range(n_experiments):
             rng = np.random.default_rng(k)
@@ -397,7 +397,8 @@ def check_batch_method(method, *, checks=None, full: bool = False) -> dict:
     ``unknown_option``     an unknown option raises OptionError naming it
     ``bad_option_values``  a bad value of a shared option (:data:`BAD_OPTION_VALUES`)
                            raises OptionError naming the option and the value
-    ``bad_data``           an array instead of an IOData raises DataError; a negative or
+    ``bad_data``           the record as an array, not an IOData, raises DataError (which
+                           columns are inputs is not guessed); a negative or
                            non-integer order OrderError; five samples a subid error
     ``noise_free``         the model has the order and time base asked for, and recovers
                            the true system (``exact``: Markov parameters or frequency
@@ -504,9 +505,8 @@ def check_batch_method(method, *, checks=None, full: bool = False) -> dict:
                     f"{spec.name}(..., {option}={bad!r})", names=(option, repr(bad)))
 
     def bad_data():
-        width = data.n_inputs + data.n_outputs
-        _raises(errors.DataError, lambda: call(np.ones((50, width))),
-                f"{spec.name}(array, {order}): an array, not an IOData")
+        _raises(errors.DataError, lambda: call(np.hstack([data.u, data.y])),
+                f"{spec.name}(array, {order}): the record as one array, not an IOData")
         _raises(errors.OrderError, lambda: call(n=-1), f"{spec.name}(data, -1)")
         _raises(errors.OrderError, lambda: call(n="three"), f"{spec.name}(data, 'three')")
         _raises(errors.SubidError, lambda: call(data[:5]),

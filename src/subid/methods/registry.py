@@ -37,8 +37,8 @@ import importlib.util
 from subid.errors import OptionError, SubidError
 from subid.methods._info import CORE_KEYS
 
-__all__ = ["MethodSpec", "CheckParameters", "MethodUnavailableError", "METHODS", "CAPABILITIES",
-           "CORE_KEYS", "find", "available_methods"]
+__all__ = ["MethodSpec", "CheckParameters", "MethodUnavailableError", "METHODS",
+           "CAPABILITIES", "CORE_KEYS", "RECORDS", "EXACTNESS", "find", "available_methods"]
 
 #: Capabilities a method may declare (``MethodSpec.capabilities``):
 #:
