@@ -10,7 +10,6 @@ registry entry (``MethodSpec.checks``), not here.
 
 import warnings
 
-import numpy as np
 import pytest
 
 import subid
