@@ -34,8 +34,10 @@ def test_check_parameters_are_declared_consistently(name):
     checks = BATCH_CHECKS if spec.kind == "batch" else ONLINE_CHECKS
     assert set(params.expected) <= set(checks)
     assert all(isinstance(reason, str) and reason for reason in params.expected.values())
-    # the continuous-time record for the continuous-time methods
-    assert (params.record == "continuous") == (spec.time == "continuous")
+    # a continuous-time record for the continuous-time methods, frequency-response data
+    # for those that identify from it
+    assert (params.record == "discrete") == (spec.time == "discrete")
+    assert (params.record == "frequency") == spec.supports("frequency")
 
 
 def test_check_parameters_refuse_unknown_records_and_claims():

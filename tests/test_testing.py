@@ -214,8 +214,13 @@ def test_noise_free_records():
     ct, system = noise_free_record("continuous")
     # the record is the system's foh response from the record's own initial state
     np.testing.assert_allclose(subid.fit_percent(system, ct), 100.0, atol=1e-6)
-    with pytest.raises(errors.OptionError):
-        noise_free_record("frequency")
+    frd, system = noise_free_record("frequency")
+    assert frd.n_frequencies == 60 and frd.dt == 0.0
+    np.testing.assert_array_equal(frd.response, system.freqresp(frd.w))
+    with pytest.raises(errors.OptionError, match="1 for frequency-response data"):
+        noise_free_record("frequency", n_experiments=2)
+    with pytest.raises(errors.OptionError, match="kind must be"):
+        noise_free_record("bode")
 
 
 # ---------------------------------------------------------------------------

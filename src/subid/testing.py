@@ -36,6 +36,7 @@ import numpy as np
 from subid import errors
 from subid.data import IOData, merge
 from subid.evaluation.metrics import fit_percent, markov_error
+from subid.frdata import FRData
 from subid.methods.online.base import OnlineIdentifier
 from subid.methods.registry import CORE_KEYS, METHODS, CheckParameters, MethodSpec, find
 from subid.model.statespace import StateSpace
@@ -119,20 +120,22 @@ def noise_free_record(kind: str = "discrete", *, n_experiments: int = 1):
 
     Parameters
     ----------
-    kind : {'discrete', 'continuous'}
+    kind : {'discrete', 'continuous', 'frequency'}
         ``'discrete'``: seed 001's system (3 states, 2 inputs, 2 outputs, D != 0), 600
         samples of white Gaussian input, dt = 1. ``'continuous'``: a 2-state, 1-input,
         2-output continuous-time system (D != 0), 300 samples of a Gaussian input held
-        first-order, dt = 0.02 s, from a non-zero initial state.
+        first-order, dt = 0.02 s, from a non-zero initial state. ``'frequency'``: that
+        system's frequency response at 60 frequencies from 0.03 to 30 rad/s.
     n_experiments : int
         1, or 2 for a record of two experiments (:func:`subid.merge`) of half the
-        length each.
+        length each (time records only).
 
     Returns
     -------
-    data : IOData
+    data : IOData or FRData
     system : StateSpace
-        The true system.
+        The true system (the continuous-time one with ``hold='foh'``, the hold of its
+        record).
 
     Examples
     --------
@@ -140,16 +143,21 @@ def noise_free_record(kind: str = "discrete", *, n_experiments: int = 1):
     >>> data.n_samples, system.order, system.dt
     (300, 2, 0.0)
     """
-    if kind not in ("discrete", "continuous"):
-        raise errors.OptionError(f"kind must be 'discrete' or 'continuous'; got {kind!r}")
-    if n_experiments not in (1, 2):
-        raise errors.OptionError(f"n_experiments must be 1 or 2; got {n_experiments!r}")
+    if kind not in ("discrete", "continuous", "frequency"):
+        raise errors.OptionError(f"kind must be 'discrete', 'continuous' or 'frequency'; got "
+                                 f"{kind!r}"[:300])
+    if n_experiments not in (1, 2) or (kind == "frequency" and n_experiments != 1):
+        raise errors.OptionError(f"n_experiments must be 1 or 2 (1 for frequency-response "
+                                 f"data); got {n_experiments!r}"[:300])
     if kind == "discrete":
         system = seed001_system()
         records = [simulate_data(system, 600 // n_experiments, seed=3 + k)
                    for k in range(n_experiments)]
     else:
         system = StateSpace(*_CT_SYSTEM, 0.0, hold="foh")
+        if kind == "frequency":
+            w = np.logspace(np.log10(0.03), np.log10(30.0), 60)
+            return FRData(w, system.freqresp(w)), system
         records = []
         for k in range(n_experiments):
             rng = np.random.default_rng(k)
@@ -298,9 +306,10 @@ def _check_core_info(model, data, spec, what):
     _require(isinstance(info["method"], str), f"{what}: info['method'] is not a str")
     _require(info["order"] == model.order,
              f"{what}: info['order'] is {info['order']!r}, the model's order {model.order}")
-    _require(info["n_samples"] == data.n_samples,
+    samples = getattr(data, "n_samples", None)           # None for frequency-response data
+    _require(info["n_samples"] == samples,
              f"{what}: info['n_samples'] is {info['n_samples']!r}; the record has "
-             f"{data.n_samples}")
+             f"{samples} samples")
     _require(info["hold"] == model.hold,
              f"{what}: info['hold'] is {info['hold']!r}, model.hold {model.hold!r}")
     selection = info["order_selection"]
@@ -505,12 +514,16 @@ def check_batch_method(method, *, checks=None, full: bool = False) -> dict:
                     f"{spec.name}(..., {option}={bad!r})", names=(option, repr(bad)))
 
     def bad_data():
-        _raises(errors.DataError, lambda: call(np.hstack([data.u, data.y])),
-                f"{spec.name}(array, {order}): the record as one array, not an IOData")
+        frequency = isinstance(data, FRData)
+        array = data.response if frequency else np.hstack([data.u, data.y])
+        _raises(errors.DataError, lambda: call(array),
+                f"{spec.name}(array, {order}): the record as one array, not an "
+                f"{type(data).__name__}")
         _raises(errors.OrderError, lambda: call(n=-1), f"{spec.name}(data, -1)")
         _raises(errors.OrderError, lambda: call(n="three"), f"{spec.name}(data, 'three')")
-        _raises(errors.SubidError, lambda: call(data[:5]),
-                f"{spec.name}(data[:5], {order}): five samples")
+        short, what = (data[:1], "one frequency") if frequency else (data[:5], "five samples")
+        _raises(errors.SubidError, lambda: call(short),
+                f"{spec.name}(data[:{len(short)}], {order}): {what}")
 
     def noise_free():
         model = reference()
@@ -523,9 +536,10 @@ def check_batch_method(method, *, checks=None, full: bool = False) -> dict:
         if model.dt:
             _require(model.dt == data.dt, f"{spec.name}: the model's dt {model.dt} is not "
                                           f"the record's {data.dt}")
-        fit = float(np.min(fit_percent(model, data)))
-        _require(fit > 99.99, f"{spec.name}: the model's simulation fits the noise-free "
-                              f"record {fit:.4f} % (expected > 99.99 %)")
+        if isinstance(data, IOData):
+            fit = float(np.min(fit_percent(model, data)))
+            _require(fit > 99.99, f"{spec.name}: the model's simulation fits the noise-free "
+                                  f"record {fit:.4f} % (expected > 99.99 %)")
         if params.exact is None:
             return
         error = _exactness_error(model, system, params.exact)
@@ -566,6 +580,8 @@ def check_batch_method(method, *, checks=None, full: bool = False) -> dict:
         _check_round_trip(reference(), spec.name)
 
     def experiments():
+        if params.record == "frequency":
+            raise _Skip("frequency-response data have no experiments")
         merged, _ = noise_free_record(params.record, n_experiments=2)
         if not spec.supports("experiments"):
             _raises(errors.SubidError, lambda: call(merged),

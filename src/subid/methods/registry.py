@@ -60,17 +60,21 @@ __all__ = ["MethodSpec", "CheckParameters", "MethodUnavailableError", "METHODS",
 #: ``feedthrough``      takes a ``feedthrough`` option (estimate D or not)
 #: ``experiments``      identifies from a record of several experiments (:func:`subid.merge`),
 #:                      with one initial state per experiment in ``info['x0']``
+#: ``frequency``        identifies from frequency-response data (:class:`subid.FRData`), not
+#:                      from time records; the model's time base is the data's
 CAPABILITIES = frozenset({"statistic", "streaming", "order_selection", "horizon", "stability",
                           "input_delay", "weighting", "x0", "refine", "hold", "nonuniform",
-                          "seeded", "polynomial", "feedthrough", "experiments"})
+                          "seeded", "polynomial", "feedthrough", "experiments", "frequency"})
 
 #: The noise-free test records :mod:`subid.testing` builds (``CheckParameters.record``):
 #: ``discrete``    seed 001's system (3 states, 2 inputs, 2 outputs, D != 0), 600 samples of
 #:                 white Gaussian input, dt = 1;
 #: ``continuous``  a 2-state, 1-input, 2-output continuous-time system (D != 0), 300 samples
 #:                 of a Gaussian input held first-order (``hold='foh'``), dt = 0.02 s,
-#:                 starting from a non-zero state.
-RECORDS = ("discrete", "continuous")
+#:                 starting from a non-zero state;
+#: ``frequency``   that continuous-time system's frequency response at 60 frequencies from
+#:                 0.03 to 30 rad/s (:class:`subid.FRData`, dt = 0).
+RECORDS = ("discrete", "continuous", "frequency")
 
 #: What a method claims on a noise-free record (``CheckParameters.exact``):
 #: ``markov``     the first Markov parameters of the true system to ``tolerance``;
@@ -88,7 +92,7 @@ class CheckParameters:
 
     Attributes
     ----------
-    record : {'discrete', 'continuous'}
+    record : {'discrete', 'continuous', 'frequency'}
         The noise-free test record (see :data:`RECORDS`).
     order : int
         The order every check passes (a polynomial method: every degree).
@@ -319,6 +323,15 @@ METHODS: dict[str, MethodSpec] = {
         # its default hold is 'zoh'; the continuous test record is held first-order
         checks=CheckParameters(record="continuous", order=2, options=(("hold", "foh"),),
                                exact="frequency", unrecorded=_DT_UNRECORDED)),
+    "fd": MethodSpec(
+        "fd", "batch", "subid.methods.fd.fd_subspace", "fd_subspace", "continuous",
+        "subspace identification from a frequency response (McKelvey et al. 1996); the "
+        "model's time base is the data's",
+        options=("horizon", "feedthrough", "stability", "selection"),
+        capabilities=frozenset({"frequency", "order_selection", "horizon", "stability",
+                                "feedthrough"}),
+        aliases=("fd_subspace",), command_line=False,
+        checks=CheckParameters(record="frequency", order=2, exact="frequency")),
     "recursive": MethodSpec(
         "recursive", "online", "subid.methods.online.recursive", "RecursiveSubspace", "discrete",
         "online SVD-free subspace identification (seed 001 made recursive), fixed state "
