@@ -169,7 +169,8 @@ class MethodSpec:
     module, attribute : str
         Where the function or class lives; imported on first use.
     time : {'discrete', 'continuous'}
-        Time base of the models it produces.
+        Time base of the models it produces (a ``frequency`` method: that of the
+        data, here the time base of its test record).
     description : str
         One line for ``subid methods``.
     options : tuple of str
