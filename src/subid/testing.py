@@ -381,6 +381,31 @@ def _check_keyword_only(params, leading, what):
                              f"keyword-only; {positional} can be given by position")
 
 
+def _check_unknown_option(construct, what):
+    _raises(errors.OptionError, lambda: construct(no_such_option=1),
+            f"{what}(..., no_such_option=1)", names=("no_such_option",))
+
+
+def _check_bad_option_values(spec, construct, what):
+    """Each shared option the method takes, given its bad value (BAD_OPTION_VALUES)."""
+    tried = [o for o in BAD_OPTION_VALUES if spec.accepts(o)]
+    if not tried:
+        raise _Skip("takes none of the shared options of BAD_OPTION_VALUES")
+    for option in tried:
+        bad = BAD_OPTION_VALUES[option]
+        _raises(errors.OptionError, lambda o=option, b=bad: construct(**{o: b}),
+                f"{what}(..., {option}={bad!r})", names=(option, repr(bad)))
+
+
+def _start(method, kind, names, checks):
+    """(spec, function or class, its CheckParameters, runner, record, true system)."""
+    spec, obj = _resolve(method, kind)
+    label = (f"check_{'batch_method' if kind == 'batch' else 'online_identifier'}"
+             f"({spec.name!r})")
+    data, system = noise_free_record(spec.checks.record)
+    return spec, obj, spec.checks, _Runner(label, names, checks, spec.checks), data, system
+
+
 def _check_option_names(spec, what):
     bad = {o: SYNONYMS[o] for o in spec.options if o in SYNONYMS}
     _require(not bad, f"{what}: options named as other tools name them: " + ", ".join(
@@ -458,11 +483,7 @@ def check_batch_method(method, *, checks=None, full: bool = False) -> dict:
     >>> check_batch_method("n4sid", checks=["noise_free"])
     {'noise_free': 'passed'}
     """
-    spec, fn = _resolve(method, "batch")
-    params = spec.checks
-    label = f"check_batch_method({spec.name!r})"
-    run = _Runner(label, BATCH_CHECKS, checks, params)
-    data, system = noise_free_record(params.record)
+    spec, fn, params, run, data, system = _start(method, "batch", BATCH_CHECKS, checks)
     order, options = params.order, params.call_options
     cache = {}
 
@@ -501,17 +522,10 @@ def check_batch_method(method, *, checks=None, full: bool = False) -> dict:
         _check_option_names(spec, spec.name)
 
     def unknown_option():
-        _raises(errors.OptionError, lambda: call(no_such_option=1),
-                f"{spec.name}(..., no_such_option=1)", names=("no_such_option",))
+        _check_unknown_option(call, spec.name)
 
     def bad_option_values():
-        tried = [o for o in BAD_OPTION_VALUES if spec.accepts(o)]
-        if not tried:
-            raise _Skip("takes none of the shared options of BAD_OPTION_VALUES")
-        for option in tried:
-            bad = BAD_OPTION_VALUES[option]
-            _raises(errors.OptionError, lambda o=option, b=bad: call(**{o: b}),
-                    f"{spec.name}(..., {option}={bad!r})", names=(option, repr(bad)))
+        _check_bad_option_values(spec, call, spec.name)
 
     def bad_data():
         frequency = isinstance(data, FRData)
@@ -687,11 +701,7 @@ def check_online_identifier(cls, *, checks=None) -> dict:
     >>> check_online_identifier("recursive", checks=["chunk_invariance"])
     {'chunk_invariance': 'passed'}
     """
-    spec, klass = _resolve(cls, "online")
-    params = spec.checks
-    label = f"check_online_identifier({spec.name!r})"
-    run = _Runner(label, ONLINE_CHECKS, checks, params)
-    data, system = noise_free_record(params.record)
+    spec, klass, params, run, data, system = _start(cls, "online", ONLINE_CHECKS, checks)
     shape = (params.order, data.n_inputs, data.n_outputs)
     options = params.call_options
     name = klass.__name__
@@ -743,17 +753,10 @@ def check_online_identifier(cls, *, checks=None) -> dict:
         _check_option_names(spec, name)
 
     def unknown_option():
-        _raises(errors.OptionError, lambda: make(no_such_option=1),
-                f"{name}(..., no_such_option=1)", names=("no_such_option",))
+        _check_unknown_option(make, name)
 
     def bad_option_values():
-        tried = [o for o in BAD_OPTION_VALUES if spec.accepts(o)]
-        if not tried:
-            raise _Skip("takes none of the shared options of BAD_OPTION_VALUES")
-        for option in tried:
-            bad = BAD_OPTION_VALUES[option]
-            _raises(errors.OptionError, lambda o=option, b=bad: make(**{o: b}),
-                    f"{name}(..., {option}={bad!r})", names=(option, repr(bad)))
+        _check_bad_option_values(spec, make, name)
 
     def model_before_data():
         _raises(errors.TooFewSamplesError, lambda: make().model,
