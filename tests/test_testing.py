@@ -183,6 +183,15 @@ def test_expected_failures_are_reported_and_must_stay_true():
            "positional): remove it" in failed.failures["keyword_only"]
 
 
+def test_a_stale_unrecorded_declaration_fails():
+    declared = dataclasses.replace(MOESP.checks, unrecorded=MOESP.checks.unrecorded
+                                   + ("weighting",))
+    failed = _failures(dataclasses.replace(MOESP, checks=declared), ["info_defaults"])
+    assert failed.failures["info_defaults"] == (
+        "moesp: info records the options ['weighting'] that the registry declares "
+        "unrecorded: remove them from CheckParameters.unrecorded")
+
+
 def test_all_failures_are_listed_in_one_error():
     failed = _failures(_like_moesp("forgetful"), ["info", "info_defaults", "signature"])
     assert list(failed.failures) == ["info", "info_defaults"]

@@ -442,6 +442,7 @@ def check_batch_method(method, *, checks=None, full: bool = False) -> dict:
                            should (order, samples, hold, condition numbers, warnings)
     ``info_defaults``      every option's value in use is recorded in ``info`` (under its
                            name or :data:`INFO_KEYS`), except the declared ``unrecorded``
+                           (which must not be: a stale declaration fails)
     ``reproducible``       the same call twice gives the same model bit for bit, and (if
                            ``reproduces``) so does ``method(data, order=m.order,
                            horizon=m.info['horizon'])``
@@ -579,6 +580,10 @@ def check_batch_method(method, *, checks=None, full: bool = False) -> dict:
         _require(not absent, f"{spec.name}: info does not record the value in use of the "
                              f"options {absent}: record it (under the option's name), or "
                              f"declare it in CheckParameters.unrecorded")
+        stale = [o for o in params.unrecorded if INFO_KEYS.get(o, o) in model_info]
+        _require(not stale, f"{spec.name}: info records the options {stale} that the "
+                            f"registry declares unrecorded: remove them from "
+                            f"CheckParameters.unrecorded")
 
     def reproducible():
         model = reference()

@@ -109,9 +109,9 @@ class CheckParameters:
         dimension).
     unrecorded : tuple of str
         Options whose value ``model.info`` does not record (a given input such as a
-        statistic or a selector matrix, or a known gap); every other option is recorded
-        under its own name (``selection`` as ``order_selection``, ``estimate_x0`` as
-        ``x0``).
+        statistic, or a known gap); every other option is recorded under its own name
+        (``selection`` as ``order_selection``, ``estimate_x0`` as ``x0``). The check
+        fails when an option declared here is recorded (delete it from here).
     chunks_exact : bool
         Online identifiers: updates in several chunks end bit for bit where one chunk
         ends (False: to rounding, ``rtol=1e-8``).
