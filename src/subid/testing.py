@@ -188,8 +188,9 @@ def _resolve(method, kind):
         return spec, spec.load()
     if isinstance(method, MethodSpec):
         if method.kind != kind:
+            other = "batch_method" if method.kind == "batch" else "online_identifier"
             raise errors.OptionError(f"{method.name} is a {method.kind} method; use "
-                                     f"check_{'batch_method' if method.kind == 'batch' else 'online_identifier'}")
+                                     f"check_{other}")
         return method, method.load()
     for spec in METHODS.values():                   # a registered function or class
         if spec.kind == kind and spec.available() and spec.load() is method:

@@ -116,9 +116,9 @@ class CheckParameters:
         Online identifiers: updates in several chunks end bit for bit where one chunk
         ends (False: to rounding, ``rtol=1e-8``).
     expected_failures : tuple of (str, str) pairs
-        ``(sub-check, reason)``: sub-checks known to fail on this version. The check
-        reports them as expected failures, and fails when one of them passes (then
-        delete the declaration).
+        ``(sub-check, reason)``: sub-checks known to fail on this version (as
+        scikit-learn's ``expected_failed_checks``). The check reports them as expected
+        failures, and fails when one of them passes (then delete the declaration).
     """
 
     record: str = "discrete"
