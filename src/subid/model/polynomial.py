@@ -49,7 +49,8 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["STRUCTURES", "realise", "polynomials_of", "polynomial_record", "describe"]
+__all__ = ["STRUCTURES", "realise", "polynomials_of", "polynomial_record", "describe",
+           "coefficient_slots", "coefficients", "with_coefficients", "realisation_jacobian"]
 
 STRUCTURES = ("arx", "armax", "oe", "bj")
 
@@ -187,6 +188,71 @@ def polynomial_record(structure: str, *, A, B, C, D, F, na, nb, nc, nd, nf, nk) 
             "na": np.asarray(na, dtype=np.int64), "nb": np.asarray(nb, dtype=np.int64),
             "nc": np.asarray(nc, dtype=np.int64), "nd": np.asarray(nd, dtype=np.int64),
             "nf": np.asarray(nf, dtype=np.int64), "nk": np.asarray(nk, dtype=np.int64)}
+
+
+def coefficient_slots(poly: dict) -> list:
+    """The free coefficients of ``poly``: a list of ``(key, index, name)``.
+
+    Output by output ``i``: ``A[i, k]`` lags ``1..na[i, k]`` for every ``k``
+    (the diagonal only for the per-output structures), ``B[i, j]`` lags
+    ``nk..nk+nb-1`` for every input ``j``, ``C[i]`` lags ``1..nc``, ``D[i]``
+    lags ``1..nd``, ``F[i, j]`` lags ``1..nf`` (the order of
+    :mod:`subid.methods.dt.pem_poly`'s coefficient vector, output by output).
+    ``name`` is ``'B[0,1][2]'``: polynomial, channel indices, lag.
+    """
+    na, nb, nk, nf = (np.asarray(poly[k]) for k in ("na", "nb", "nk", "nf"))
+    nc, nd = np.asarray(poly["nc"]), np.asarray(poly["nd"])
+    ny, nu = nb.shape
+    out = []
+    for i in range(ny):
+        out += [("A", (i, k, lag), f"A[{i},{k}][{lag}]") for k in range(ny)
+                for lag in range(1, int(na[i, k]) + 1)]
+        out += [("B", (i, j, lag), f"B[{i},{j}][{lag}]") for j in range(nu)
+                for lag in range(int(nk[i, j]), int(nk[i, j] + nb[i, j]))]
+        out += [("C", (i, lag), f"C[{i}][{lag}]") for lag in range(1, int(nc[i]) + 1)]
+        out += [("D", (i, lag), f"D[{i}][{lag}]") for lag in range(1, int(nd[i]) + 1)]
+        out += [("F", (i, j, lag), f"F[{i},{j}][{lag}]") for j in range(nu)
+                for lag in range(1, int(nf[i, j]) + 1)]
+    return out
+
+
+def coefficients(poly: dict) -> np.ndarray:
+    """The free coefficients of ``poly`` in the order of :func:`coefficient_slots`."""
+    return np.array([np.asarray(poly[key], float)[index]
+                     for key, index, _ in coefficient_slots(poly)], dtype=float)
+
+
+def with_coefficients(poly: dict, values) -> dict:
+    """``poly`` with its free coefficients (:func:`coefficient_slots`) set to ``values``."""
+    slots = coefficient_slots(poly)
+    out = dict(poly)
+    for key in {key for key, _, _ in slots}:
+        out[key] = np.array(poly[key], dtype=float)
+    for (key, index, _), value in zip(slots, np.asarray(values, dtype=float)):
+        out[key][index] = value
+    return out
+
+
+def realisation_jacobian(poly: dict) -> np.ndarray:
+    """``d vec(A, B, C, D, K) / d c`` of :func:`realise` at the coefficients ``c``
+    (:func:`coefficients`), each matrix row-major, shape (P, len(c)).
+
+    The realised matrices are polynomials of degree at most two in the
+    coefficients (entries ``-a_k``, ``b_k - a_k b_0``, ``c_k - a_k``: the
+    observer form of :func:`observer_form`), so the central difference with
+    unit step is their exact derivative.
+    """
+    c = coefficients(poly)
+
+    def flat(values):
+        return np.concatenate([np.asarray(m, float).ravel()
+                               for m in realise(with_coefficients(poly, values))])
+    cols = []
+    for j in range(c.size):
+        e = np.zeros(c.size)
+        e[j] = 1.0
+        cols.append(0.5 * (flat(c + e) - flat(c - e)))
+    return np.array(cols).T if cols else np.zeros((flat(c).size, 0))
 
 
 def polynomials_of(model) -> dict | None:
