@@ -175,6 +175,7 @@ def test_bounds_are_the_delta_method_through_the_transfer_function(fn, order):
     np.testing.assert_allclose(band.value[:, 0, 0], magnitude(cov.coefficients), rtol=1e-10)
 
 
+@pytest.mark.slow
 def test_polynomial_covariance_survives_save_load_and_draws_plots(tmp_path):
     pytest.importorskip("matplotlib")
     import matplotlib
