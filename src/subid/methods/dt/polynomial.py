@@ -44,6 +44,7 @@ from subid.errors import (
 from subid.methods._info import collect_warnings, model_info
 from subid.methods.dt import _subspace
 from subid.methods.dt._checks import check_data
+from subid.methods.dt._poly_covariance import attach_covariance
 from subid.methods.dt._selection import (
     ABSOLUTE_TOLERANCE,
     MAX_ORDER,
@@ -51,7 +52,6 @@ from subid.methods.dt._selection import (
     experiment_folds,
     folds,
 )
-from subid.methods.dt._poly_covariance import attach_covariance
 from subid.model.polynomial import coefficients, polynomial_record, realise
 from subid.model.statespace import StateSpace
 
