@@ -206,3 +206,17 @@ def test_non_minimal_polynomial_model_says_it_has_no_covariance():
     assert "rank deficient" in model.info["parameter_covariance_note"]
     with pytest.raises(ModelError, match="lower orders"):
         subid.freqresp_bounds(model, W)
+
+
+def test_describe_and_the_report_give_the_coefficients_standard_deviations():
+    from subid.evaluation.report import _coefficient_std
+    from subid.model.polynomial import describe
+    model = subid.arx(_record("arx", 6), (2, 2, 1))
+    std = subid.parameter_covariance(model).coefficient_std
+    np.testing.assert_allclose(_coefficient_std(model), std, rtol=1e-12)
+    lines = describe(model.info["polynomials"], ["u"], ["y"], std)
+    a1, a2, b1, b2 = model.info["parameter_covariance"]["coefficients"]
+    assert lines[1] == f"A[y,y] = 1 {a1:+.4g} (±{std[0]:.2g}) q^-1 {a2:+.4g} (±{std[1]:.2g}) q^-2"
+    assert lines[2].startswith(f"B[y,u] = {b1:.4g} (±{std[2]:.2g}) q^-1 {b2:+.4g}")
+    # a state-space model has none
+    assert _coefficient_std(subid.n4sid(_record("arx", 6), 2)) is None

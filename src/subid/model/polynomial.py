@@ -261,9 +261,12 @@ def polynomials_of(model) -> dict | None:
     return poly if isinstance(poly, dict) and "structure" in poly else None
 
 
-def _poly_text(coef) -> str:
+def _poly_text(coef, stds=None) -> str:
+    """``coef`` as ``1 -1.5 q^-1 ...``; ``stds`` ({lag: std}) adds ``(±std)`` to a term."""
     coef = _trim(coef)
-    terms = [f"{c:+.4g}" + ("" if k == 0 else " q^-1" if k == 1 else f" q^-{k}")
+    stds = stds or {}
+    terms = [f"{c:+.4g}" + (f" (±{stds[k]:.2g})" if k in stds else "")
+             + ("" if k == 0 else " q^-1" if k == 1 else f" q^-{k}")
              for k, c in enumerate(coef) if c != 0]
     text = " ".join(terms) if terms else "0"
     return text[1:] if text.startswith("+") else text
@@ -274,29 +277,39 @@ EQUATIONS = {"arx": "A(q) y(t) = B(q) u(t) + e(t)", "armax": "A(q) y(t) = B(q) u
              "oe": "y(t) = B(q)/F(q) u(t) + e(t)", "bj": "y(t) = B(q)/F(q) u(t) + C(q)/D(q) e(t)"}
 
 
-def describe(poly: dict, input_names=None, output_names=None) -> list[str]:
-    """Lines giving every polynomial of ``poly`` (for reports), as MATLAB's ``present``."""
+def describe(poly: dict, input_names=None, output_names=None, std=None) -> list[str]:
+    """Lines giving every polynomial of ``poly`` (for reports), as MATLAB's ``present``;
+    ``std`` (the standard deviation of every coefficient of :func:`coefficient_slots`)
+    adds ``(±std)`` after each estimated coefficient."""
+    spread: dict = {}
+    if std is not None:
+        for (key, index, _), s in zip(coefficient_slots(poly), np.asarray(std, float)):
+            spread.setdefault((key,) + tuple(index[:-1]), {})[index[-1]] = float(s)
     A, B, C, D, F = (np.asarray(poly[k]) for k in ("A", "B", "C", "D", "F"))
     ny, nu = B.shape[0], B.shape[1]
     structure = str(poly["structure"])
     inputs = list(input_names or [f"u{j + 1}" for j in range(nu)])
     outputs = list(output_names or [f"y{i + 1}" for i in range(ny)])
     lines = [f"{structure.upper()} model: {EQUATIONS.get(structure, structure)}"]
+
+    def text(key, *index):
+        return _poly_text({"A": A, "B": B, "C": C, "D": D, "F": F}[key][index],
+                          spread.get((key,) + index))
     for i in range(ny):
         y = outputs[i]
         if structure in ("arx", "armax"):
             for k in range(ny):
                 if k == i or np.any(A[i, k]):
-                    lines.append(f"A[{y},{outputs[k]}] = {_poly_text(A[i, k])}")
+                    lines.append(f"A[{y},{outputs[k]}] = {text('A', i, k)}")
         for j in range(nu):
-            lines.append(f"B[{y},{inputs[j]}] = {_poly_text(B[i, j])}  (nk = "
+            lines.append(f"B[{y},{inputs[j]}] = {text('B', i, j)}  (nk = "
                          f"{int(np.asarray(poly['nk'])[i, j])})")
             if structure in ("oe", "bj"):
-                lines.append(f"F[{y},{inputs[j]}] = {_poly_text(F[i, j])}")
+                lines.append(f"F[{y},{inputs[j]}] = {text('F', i, j)}")
         if structure in ("armax", "bj"):
-            lines.append(f"C[{y}] = {_poly_text(C[i])}")
+            lines.append(f"C[{y}] = {text('C', i)}")
         if structure == "bj":
-            lines.append(f"D[{y}] = {_poly_text(D[i])}")
+            lines.append(f"D[{y}] = {text('D', i)}")
     return lines
 
 
