@@ -165,7 +165,8 @@ class ParameterCovariance:
 
     def model(self, theta) -> StateSpace:
         """The model with parameters ``theta`` (same dt, names, hold and ``info``
-        without the covariance).
+        without the covariance and, for a polynomial model, without the
+        polynomials, which ``theta`` no longer matches).
 
         Parameters
         ----------
@@ -181,7 +182,8 @@ class ParameterCovariance:
                             f"{self.parameters.size} parameters")
         A, B, C, D, K = self.matrices(theta)
         m = self._model
-        info = {k: v for k, v in m.info.items() if k != "parameter_covariance"}
+        info = {k: v for k, v in m.info.items()
+                if k not in ("parameter_covariance", "polynomials")}
         return StateSpace(A, B, C, D, m.dt, input_names=m.input_names,
                           output_names=m.output_names, info=info, K=K,
                           noise_cov=None if K is None else m.noise_cov, hold=m.hold)
