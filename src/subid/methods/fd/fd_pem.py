@@ -261,9 +261,10 @@ def fd_pem(data, model, *, max_iterations=100, tolerance=1e-8, rounds=3, feedthr
     -------
     StateSpace
         The refined model in the state basis of the search (unit
-        frequency-grid controllability Gramian; the start is returned
-        unchanged when nothing improves), without a noise model (frequency-response data say nothing about it). ``info`` is the
-        start's, updated with ``refined_by`` ('pem'), ``criterion``
+        frequency-grid controllability Gramian at the start of its last
+        round; the start is returned unchanged when nothing improves), without
+        a noise model (frequency-response data say nothing about it). ``info``
+        is the start's, updated with ``refined_by`` ('pem'), ``criterion``
         ('frequency response'), ``weighting`` (which weights),
         ``noise_variance_model`` (the estimated ``a``, ``b``, each (ny, nu),
         when the weights were estimated), ``start_cost``,
