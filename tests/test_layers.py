@@ -47,6 +47,8 @@ ALLOWED = {
     "experiments": {"foundation", "data", "systems", "model", "io", "methods", "evaluation",
                     "subid"},
     "warmup": {"foundation", "data", "systems", "statistic", "methods"},
+    # the public contract checks of methods (scikit-learn's check_estimator)
+    "testing": {"foundation", "data", "frdata", "systems", "model", "methods", "evaluation"},
     "subid": {"foundation"},
 }
 
