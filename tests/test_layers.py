@@ -42,8 +42,8 @@ ALLOWED = {
                 "evaluation"},
     "evaluation": {"foundation", "data", "frdata", "delay", "model", "io", "methods",
                    "subid"},                          # report: subid.__version__
-    "cli": {"foundation", "data", "datasets", "statistic", "model", "io", "methods",
-            "evaluation", "subid"},
+    "cli": {"foundation", "data", "datasets", "model", "io", "methods", "evaluation",
+            "subid"},
     "experiments": {"foundation", "data", "systems", "model", "io", "methods", "evaluation",
                     "subid"},
     "warmup": {"foundation", "data", "systems", "statistic", "methods"},

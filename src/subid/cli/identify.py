@@ -42,7 +42,6 @@ from subid.cli._shared import (
     new_online,
     run_batch,
 )
-from subid.errors import DataError
 from subid.io._files import atomic_directory
 from subid.methods.describe import AUTO_ORDER_RULE
 from subid.methods.describe import describe_order_selection as describe_selection
@@ -388,80 +387,38 @@ def _identify_streamed(data, inputs, outputs, dt, time_column, delimiter, detren
 
 def _identify_pieces(pieces, data, detrend, spec, order, horizon, validate, opts,
                      frequency_unit, write_report, chunk_size, report_samples, out, steps):
-    import functools
     import types
 
-    from subid._threads import ordered_map
-    from subid.data import IOData, column_sums
     from subid.evaluation import report
-    from subid.methods.dt.stream import SPOOL_GROUPS, attach_second_pass, statistic_depth
-    from subid.statistic.hankel import HankelStatistic
+    from subid.methods.dt.stream import identify_spooled
+
+    def logged(fit, stat, order, horizon, options):
+        with _warnings_to_log():
+            return fit(stat, order, horizon=horizon, **options)
     steps.start("read")
     with _about(data):
-        n, total_u, total_y, first = 0, 0.0, 0.0, None
-        for piece in pieces:
-            if first is None:
-                first = piece
-            n += piece.n_samples
-            total_u = total_u + column_sums(piece.u)
-            total_y = total_y + column_sums(piece.y)
-        if first is None:
-            raise DataError(f"{data} holds no samples")
-        u_mean = total_u / n if detrend == "constant" else np.zeros(first.n_inputs)
-        y_mean = total_y / n if detrend == "constant" else np.zeros(first.n_outputs)
-        cut = n - int(round(validate * n)) if validate > 0 else n
-        hor, depth = statistic_depth(spec.name, order if isinstance(order, int) else None,
-                                     horizon, first.n_outputs, opts.get("instruments", "past"))
-
-        def statistic(read):
-            part = HankelStatistic(first.n_inputs, first.n_outputs, depth, kind="gram",
-                                   dt=first.dt, input_names=first.input_names,
-                                   output_names=first.output_names)
-            for u, y in read():
-                part.update(u, y)
-            return part
-
-        steps.start("identify")
-        t0 = time.perf_counter()
-        # pass 2: the statistic of the estimation part, means removed, from the spooled
-        # doubles in consecutive stretches on subid's threads (merged exactly)
-        stretches = pieces.groups(SPOOL_GROUPS, stop=cut, offsets=(u_mean, y_mean))
-        stat = functools.reduce(HankelStatistic.merge, ordered_map(statistic, stretches))
-        if opts.get("bd_method", "auto") != "projection":
-            # pass 3 (issue 14): B, D, x0 by the output regression of the in-memory default
-            attach_second_pass(stat, groups=stretches)
-        with _warnings_to_log():
-            model = spec.load()(stat, order, horizon=hor, **opts)
-        seconds = time.perf_counter() - t0
-
-        def sample(start, stop):
-            """The first ``report_samples`` samples of a part, for the fit and the report."""
-            stop = min(stop, start + report_samples)
-            if stop <= start:
-                return None
-            chunks = list(pieces.ranges([(start, stop)], offsets=(u_mean, y_mean))[0]())
-            return IOData(np.vstack([u for u, _ in chunks]), np.vstack([y for _, y in chunks]),
-                          dt=first.dt, input_names=first.input_names,
-                          output_names=first.output_names)
-        steps.start("evaluate")
-        est, val = sample(0, cut), sample(cut, n)
+        run = identify_spooled(pieces, spec.load(), spec.name, order, horizon, detrend=detrend,
+                               validate=validate, report_samples=report_samples, options=opts,
+                               on_step=steps.start, call=logged)
+        model, est, val, first, n = run.model, run.est, run.val, run.first, run.n_samples
+        seconds, u_mean, y_mean = run.seconds, run.u_mean, run.y_mean
         result = report.evaluate(model, est, val)
     model.info.setdefault("method", spec.attribute)
     model.info["data"] = {"source": str(data), "inputs": list(first.input_names),
                           "outputs": list(first.output_names), "detrend": detrend,
-                          "n_estimation": stat.n_samples, "validation_fraction": float(validate),
+                          "n_estimation": run.n_estimation, "validation_fraction": float(validate),
                           "streamed": True, "report_samples": report_samples,
                           "u_offset": u_mean, "y_offset": y_mean}
     notes = [f"Streamed in pieces of {chunk_size} samples: identified from the statistic of "
-             f"{stat.n_samples} samples; fit and figures use the first {report_samples} "
+             f"{run.n_estimation} samples; fit and figures use the first {report_samples} "
              "samples of each part."]
     record = types.SimpleNamespace(dt=first.dt, n_samples=n, n_inputs=first.n_inputs,
                                    n_outputs=first.n_outputs)
     _write_outputs(out, data, spec, model, result, est, val, seconds, record,
                    title=f"{os.path.basename(data)}: {spec.attribute}", notes=notes,
                    report_data=est, write_report=write_report, frequency_unit=frequency_unit,
-                   outputs=list(first.output_names), n_estimation=stat.n_samples,
-                   n_validation=n - stat.n_samples, streamed=True, steps=steps)
+                   outputs=list(first.output_names), n_estimation=run.n_estimation,
+                   n_validation=n - run.n_estimation, streamed=True, steps=steps)
     return 0
 
 
