@@ -546,6 +546,24 @@ def _data_options(fn):
     return fn
 
 
+def _method_run_options(*, horizon: str, forgetting: str, option: str, report: str,
+                        out: str):
+    """``--horizon``, ``--forgetting``, ``--option``, ``--report/--no-report`` and
+    ``--out`` of the commands that run a method (``identify``, ``track``): declared
+    once, with each command's help."""
+    decorators = [
+        click.option("--horizon", type=click.IntRange(min=2), default=None, help=horizon),
+        click.option("--forgetting", type=click.FloatRange(0, min_open=True), default=None,
+                     help=forgetting),
+        click.option("--option", "options", multiple=True, metavar="KEY=VALUE", help=option),
+        click.option("--report/--no-report", "write_report", default=True,
+                     show_default=True, help=report),
+        click.option("--out", required=True, type=click.Path(file_okay=False), help=out),
+    ]
+    return {name: d for name, d in zip(("horizon", "forgetting", "option", "report", "out"),
+                                       decorators)}
+
+
 _FREQ = click.option("--frequency-unit", type=click.Choice(["rad/s", "Hz"], case_sensitive=False),
                      default="rad/s", show_default=True,
                      help="Unit of the Bode frequency axis and of the pole table.")

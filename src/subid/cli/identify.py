@@ -26,6 +26,7 @@ from subid.cli._shared import (
     _fmt_fit,
     _fmt_poles,
     _load_experiments,
+    _method_run_options,
     _named,
     _nan_to_none,
     _only,
@@ -46,8 +47,17 @@ from subid.io._files import atomic_directory
 from subid.methods.describe import AUTO_ORDER_RULE
 from subid.methods.describe import describe_order_selection as describe_selection
 
-
 # -- identify ----------------------------------------------------------------
+_RUN = _method_run_options(
+    horizon="Block rows of the data Hankel matrix (default: chosen by the method).",
+    forgetting="Forgetting of an online method (recursive: factor in (0, 1]; adaptive: "
+               "rate, see its documentation).",
+    option="Extra keyword argument of the method (JSON value), e.g. "
+           "--option instruments=null. Repeatable.",
+    report="Write report.html (skip it for batch jobs that need only the model).",
+    out="Output folder for model.json, report.html and summary.json.")
+
+
 @cli.command(epilog="\b\nExamples:\n"
                     "  subid identify dataset:dryer --method moesp --out dryer_out\n"
                     "  subid identify run1.csv --inputs u1,u2 --outputs y --dt 0.1 \\\n"
@@ -67,25 +77,19 @@ from subid.methods.describe import describe_order_selection as describe_selectio
                    f"{AUTO_ORDER_RULE}), a range '2:8' or a list '2,4,6' of candidates; for "
                    "arx, armax, oe, bj a list is MATLAB's structure, e.g. '2,2,1' = (na, nb, "
                    "nk) for arx.")
-@click.option("--horizon", type=click.IntRange(min=2), default=None,
-              help="Block rows of the data Hankel matrix (default: chosen by the method).")
+@_RUN["horizon"]
 @click.option("--validate", type=click.FloatRange(0, 1, max_open=True), default=0.3,
               show_default=True,
               help="Share of the record, at its end, kept for validation (0: none).")
-@click.option("--forgetting", type=click.FloatRange(0, min_open=True), default=None,
-              help="Forgetting of an online method (recursive: factor in (0, 1]; adaptive: "
-                   "rate, see its documentation).")
-@click.option("--option", "options", multiple=True, metavar="KEY=VALUE",
-              help="Extra keyword argument of the method (JSON value), e.g. "
-                   "--option instruments=null. Repeatable.")
+@_RUN["forgetting"]
+@_RUN["option"]
 @_FREQ
 @click.option("--refine", type=click.Choice(["none", "simulation", "prediction", "pem"]),
               default="none", show_default=True,
               help="Refine the model by prediction-error minimisation (subid.pem) on the "
                    "estimation part with this focus ('pem': 'prediction', deprecated). "
                    "Without --method, subid.identify already decides on its own refinement.")
-@click.option("--report/--no-report", "write_report", default=True, show_default=True,
-              help="Write report.html (skip it for batch jobs that need only the model).")
+@_RUN["report"]
 @click.option("--stream", is_flag=True, default=False,
               help="Read the file in pieces with bounded memory, for files larger than memory "
                    "(ls, moesp, n4sid; uniform sampling). Fit and report use the first "
@@ -95,8 +99,7 @@ from subid.methods.describe import describe_order_selection as describe_selectio
 @click.option("--report-samples", type=click.IntRange(min=100), default=20_000,
               show_default=True, help="Samples of each part kept for the fit and the report "
                                       "with --stream.")
-@click.option("--out", required=True, type=click.Path(file_okay=False),
-              help="Output folder for model.json, report.html and summary.json.")
+@_RUN["out"]
 @click.option("--frequency-response", "frequency_response", is_flag=True, default=False,
               help="DATA is a frequency response (subid.read_frd: columns w or f [Hz] and "
                    "<output>/<input>:re,:im or :db/:mag,:phase; or .mat/.npz); identify it "

@@ -25,6 +25,7 @@ from subid.cli._shared import (
     _detrend,
     _fmt_fit,
     _fmt_poles,
+    _method_run_options,
     _named,
     _only,
     _parse_options,
@@ -42,6 +43,14 @@ from subid.cli._shared import (
 from subid.errors import DataError
 from subid.io._files import atomic_directory
 
+_RUN = _method_run_options(
+    horizon="Horizon of the identifier (default: chosen by the method).",
+    forgetting="recursive: forgetting factor in (0, 1], 1 (default) weighs all samples "
+               "equally; adaptive: forgetting rate (see its documentation).",
+    option="Extra keyword argument of the identifier (JSON value). Repeatable.",
+    report="Write report.html.",
+    out="Output folder: model.json, report.html, history.npz, checkpoints/.")
+
 
 @cli.command(epilog="\b\nExamples:\n"
                     "  subid track dataset:dryer --method recursive --order 4 --out track_out\n"
@@ -56,13 +65,9 @@ from subid.io._files import atomic_directory
               default="recursive", show_default=True, help="Online identification method.")
 @click.option("--order", type=click.IntRange(min=1), default=None,
               help="Model order (required unless resuming).")
-@click.option("--horizon", type=click.IntRange(min=2), default=None,
-              help="Horizon of the identifier (default: chosen by the method).")
-@click.option("--forgetting", type=click.FloatRange(0, min_open=True), default=None,
-              help="recursive: forgetting factor in (0, 1], 1 (default) weighs all samples "
-                   "equally; adaptive: forgetting rate (see its documentation).")
-@click.option("--option", "options", multiple=True, metavar="KEY=VALUE",
-              help="Extra keyword argument of the identifier (JSON value). Repeatable.")
+@_RUN["horizon"]
+@_RUN["forgetting"]
+@_RUN["option"]
 @click.option("--chunk", type=click.IntRange(min=1), default=None,
               help="Samples fed per update (default: 1 % of the record, at most 1000).")
 @click.option("--trace-every", type=click.IntRange(min=0), default=None,
@@ -75,10 +80,8 @@ from subid.io._files import atomic_directory
 @click.option("--resume", type=click.Path(dir_okay=False), default=None, metavar="CHECKPOINT",
               help="Continue from a checkpoint written by an earlier run on the same data.")
 @_FREQ
-@click.option("--report/--no-report", "write_report", default=True, show_default=True,
-              help="Write report.html.")
-@click.option("--out", required=True, type=click.Path(file_okay=False),
-              help="Output folder: model.json, report.html, history.npz, checkpoints/.")
+@_RUN["report"]
+@_RUN["out"]
 @_common
 def track(data, inputs, outputs, dt, time_column, delimiter, detrend, method_name, order,
           horizon, forgetting, options, chunk, trace_every, checkpoint_every, keep_checkpoints,
