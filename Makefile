@@ -49,18 +49,19 @@ gallery: $(STAMP)
 	OPENBLAS_NUM_THREADS=1 $(VENV)/bin/subid gallery --out docs/gallery.md
 
 # The default tier (what CI runs): the static type check of src/ (mypy, configured in
-# pyproject.toml), then every test but the long ones, and the docstring examples.
+# pyproject.toml), then every test but the long ones, and the docstring examples, on one
+# pytest-xdist worker per core (-n auto; each worker single-threaded BLAS).
 test: $(STAMP)
 	$(PY) -m mypy
-	OPENBLAS_NUM_THREADS=1 $(PY) -m pytest -q -m "not long" --doctest-modules src tests
+	OPENBLAS_NUM_THREADS=1 $(PY) -m pytest -q -n auto -m "not long" --doctest-modules src tests
 
 # While working: the default tier without the tests marked slow (under 2 minutes on 2 cores).
 test-fast: $(STAMP)
-	OPENBLAS_NUM_THREADS=1 $(PY) -m pytest -q -m "not long and not slow" --doctest-modules src tests
+	OPENBLAS_NUM_THREADS=1 $(PY) -m pytest -q -n auto -m "not long and not slow" --doctest-modules src tests
 
 # Long profile: every test, hypothesis/fuzzers with large budgets, long runs.
 test-long: $(STAMP)
-	OPENBLAS_NUM_THREADS=1 SUBID_HYPOTHESIS_PROFILE=long $(PY) -m pytest -q --doctest-modules src tests
+	OPENBLAS_NUM_THREADS=1 SUBID_HYPOTHESIS_PROFILE=long $(PY) -m pytest -q -n auto --doctest-modules src tests
 
 bench: $(STAMP)
 	OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 MKL_NUM_THREADS=1 $(PY) bench/run.py --out bench/results.md
