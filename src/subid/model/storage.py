@@ -43,30 +43,10 @@ def _lookup(name: str) -> tuple[Callable, Callable]:
 
 
 def reader(name: str) -> Callable:
-    """The reader registered for the model file format ``name``.
-
-    Parameters
-    ----------
-    name : str
-        ``'json'`` or ``'mat'``.
-
-    Returns
-    -------
-    callable
-    """
+    """The reader registered for the model file format ``name`` (``'json'``, ``'mat'``)."""
     return _lookup(name)[0]
 
 
 def writer(name: str) -> Callable:
-    """The writer registered for the model file format ``name``.
-
-    Parameters
-    ----------
-    name : str
-        ``'json'`` or ``'mat'``.
-
-    Returns
-    -------
-    callable
-    """
+    """The writer registered for the model file format ``name`` (``'json'``, ``'mat'``)."""
     return _lookup(name)[1]
