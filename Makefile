@@ -1,6 +1,7 @@
 # Two set-up commands work on a fresh machine with Python 3.11, make and pip:
 #   make demo   creates .venv, installs, identifies the bundled datasets, writes demo_out/
-#   make test   creates .venv if missing, installs, runs the tests (make test-fast: the quick tier)
+#   make test   creates .venv if missing, installs, type-checks src/ (mypy), runs the tests
+#               (make test-fast: the quick tier)
 #   make docs   creates .venv-docs, builds the documentation site into site/ (warnings are errors)
 PYTHON ?= python3
 VENV := .venv
@@ -47,9 +48,11 @@ demo: $(DEMO_STAMP)
 gallery: $(STAMP)
 	OPENBLAS_NUM_THREADS=1 $(VENV)/bin/subid gallery --out docs/gallery.md
 
-# The default tier (what CI runs): every test but the long ones, and the docstring examples,
-# on one pytest-xdist worker per core (-n auto; each worker single-threaded BLAS).
+# The default tier (what CI runs): the static type check of src/ (mypy, configured in
+# pyproject.toml), then every test but the long ones, and the docstring examples, on one
+# pytest-xdist worker per core (-n auto; each worker single-threaded BLAS).
 test: $(STAMP)
+	$(PY) -m mypy
 	OPENBLAS_NUM_THREADS=1 $(PY) -m pytest -q -n auto -m "not long" --doctest-modules src tests
 
 # While working: the default tier without the tests marked slow (under 2 minutes on 2 cores).
@@ -96,4 +99,4 @@ docs: $(DOCS_STAMP)
 	$(DOCS_VENV)/bin/python docs/check_api.py site
 
 clean:
-	rm -rf $(VENV) $(BENCH_VENV) $(DOCS_VENV) demo_out results site
+	rm -rf $(VENV) $(BENCH_VENV) $(DOCS_VENV) demo_out results site .mypy_cache

@@ -213,7 +213,8 @@ class _Runner:
         self.label, self.names = label, names
         self.selected = set(names if checks is None else checks)
         self.expected = params.expected
-        self.results, self.failures = {}, {}
+        self.results: dict = {}
+        self.failures: dict = {}
 
     def run(self, name, fn):
         if name not in self.selected:

@@ -264,7 +264,7 @@ def _info_table(info: dict) -> str:
             text = ", ".join(_fmt(v, 4) for v in np.asarray(value))
             rows.append(f'<tr><th class="l">{_e(key)}</th><td class="l">{_e(text)}</td></tr>')
         elif key == "order_selection" and isinstance(value, dict):
-            from subid.methods.dt._selection import describe
+            from subid.methods.describe import describe_order_selection as describe
             rows.append(f'<tr><th class="l">{_e(key)}</th><td class="l">{_e(describe(value))}'
                         "</td></tr>")
         elif key == "stability" and isinstance(value, dict):

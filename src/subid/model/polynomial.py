@@ -203,7 +203,7 @@ def coefficient_slots(poly: dict) -> list:
     na, nb, nk, nf = (np.asarray(poly[k]) for k in ("na", "nb", "nk", "nf"))
     nc, nd = np.asarray(poly["nc"]), np.asarray(poly["nd"])
     ny, nu = nb.shape
-    out = []
+    out: list[tuple[str, tuple[int, ...], str]] = []
     for i in range(ny):
         out += [("A", (i, k, lag), f"A[{i},{k}][{lag}]") for k in range(ny)
                 for lag in range(1, int(na[i, k]) + 1)]

@@ -386,7 +386,7 @@ def _attach_covariance(info, crit: "_Criterion", A, B, C, D) -> None:
     if dof <= 0 or not (np.isfinite(scale).all() and scale.min() > 0):
         info["parameter_covariance_note"] = "no parameter covariance: too few frequencies"
         return
-    R = np.linalg.qr(J / scale, mode="r")
+    R = np.asarray(np.linalg.qr(J / scale, mode="r"))     # mode="r": R alone
     diag = np.abs(np.diag(R))
     if diag.min() <= 1e-9 * diag.max():
         info["parameter_covariance_note"] = (

@@ -73,16 +73,16 @@ import numpy as np
 from subid._validation import check_bool, check_choice, check_int, checked_call
 from subid.errors import DataError, OrderError, SubidError, UnstableModelWarning
 from subid.frdata import FRData
+from subid.methods._common import choose_order
+from subid.methods._common import parse_order as _parse_order
 from subid.methods._info import model_info, records_warnings
-from subid.methods.dt._selection import FLOOR, MAX_ORDER, SELECTION_RULES, select
-from subid.methods.dt._subspace import (
+from subid.methods._stability import (
     KEEP_UNSTABLE_RATIO,
     STABILITY,
     STABLE_RADIUS,
-    _parse_order,
-    choose_order,
     reflect_unstable_poles,
 )
+from subid.methods.dt._selection import FLOOR, MAX_ORDER, SELECTION_RULES, select
 from subid.methods.fd import _frequency as fq
 from subid.methods.fd._core import (
     Problem,
@@ -148,7 +148,7 @@ def _cross_validate(data: FRData, alpha, noise_var, candidates, horizons, *, fee
     """Order by cross-validation over interleaved frequency folds; each candidate order
     at its own horizon (``horizons[n]``, as an explicit call with that order uses)."""
     index = np.arange(data.n_frequencies)
-    per_fold = {n: [] for n in candidates}
+    per_fold: dict[int, list] = {n: [] for n in candidates}
     for k in range(FOLDS):
         held = index % FOLDS == k
         train, validation = data[~held], data[held]
