@@ -36,6 +36,7 @@ import warnings
 import click
 
 import subid.cli._shared as _shared
+from subid.cli._interrupt import interrupts
 
 # Each command registers itself on the group when its module is imported (one module per
 # command, issue 24). The names the command line had here stay importable from here.
@@ -94,6 +95,23 @@ def main(argv=None) -> int:
     logger.propagate = False
     state = _State()
     state.argv = args
+    with interrupts() as sigint:
+        try:
+            status = _run(args, state, debug, sigint)
+        finally:
+            logger.removeHandler(handler)
+            _shared._HANDLER, level, propagate = previous
+            logger.setLevel(level)
+            logger.propagate = propagate
+        if status != 130 and sigint.pending:
+            # an interrupt Python dropped (in a finaliser) and the command ended first
+            click.echo("subid: interrupted", err=True)
+            status = 130
+        return status
+
+
+def _run(args, state, debug, sigint) -> int:
+    """Run one command; returns its exit status, errors turned into one line."""
     try:
         try:
             with warnings.catch_warnings():     # restores showwarning afterwards
@@ -108,10 +126,12 @@ def main(argv=None) -> int:
             exc.show()
             return EXIT_USER_ERROR
         except click.exceptions.Abort:
+            sigint.handled()
             click.echo("Aborted!", err=True)
             return 130
         return rv if isinstance(rv, int) else 0
     except KeyboardInterrupt:
+        sigint.handled()
         click.echo("subid: interrupted", err=True)
         return 130
     except MemoryError:
@@ -125,8 +145,3 @@ def main(argv=None) -> int:
             traceback.print_exc()
         click.echo(f"subid: error: {_one_line(exc)}", err=True)
         return EXIT_USER_ERROR
-    finally:
-        logger.removeHandler(handler)
-        _shared._HANDLER, level, propagate = previous
-        logger.setLevel(level)
-        logger.propagate = propagate
