@@ -204,7 +204,7 @@ def _fit_score_record(model, validation) -> float:
     return max(value, FLOOR) if math.isfinite(value) else FLOOR
 
 
-def score_horizon(parts, orders, horizon, *, prepare_fold, builds):
+def score_horizon(parts, orders, horizon, *, prepare_fold, builds, held=None):
     """Fold scores of every candidate order at one horizon.
 
     Per fold, one problem (one statistic, by cost: the lagged products merged from
@@ -231,6 +231,9 @@ def score_horizon(parts, orders, horizon, *, prepare_fold, builds):
         option), the folds' factors are merged from the blocks' statistics and passed
         as ``factor`` (:func:`fold_factors`); without them, each fold builds its own.
     builds : dict ``name -> callable (Problem with a fixed order) -> StateSpace``
+    held : list of :class:`subid.methods.dt._scoring.Held`, optional
+        What the scores need from each validation record (computed here when not
+        given; :func:`cross_validate` computes it once for every horizon).
 
     Returns
     -------
@@ -244,10 +247,11 @@ def score_horizon(parts, orders, horizon, *, prepare_fold, builds):
     per_fold = {(n, v): [] for n in orders for v in range(len(names))}
     repaired = {(n, v): 0 for n in orders for v in range(len(names))}
     factors = fold_factors(parts, horizon, prepare_fold)
-    for (train, validation), factor in zip(parts, factors):
+    if held is None:                      # what every candidate's score needs, once
+        held = [Held(validation) for _, validation in parts]
+    for (train, _), factor, held_out in zip(parts, factors, held):
         problem = prepare_fold(train, orders, horizon, factor=factor) if factor is not None \
             else prepare_fold(train, orders, horizon)
-        held = Held(validation)           # what every candidate's score needs, once
         for n in orders:
             for v, name in enumerate(names):
                 try:
@@ -255,7 +259,7 @@ def score_horizon(parts, orders, horizon, *, prepare_fold, builds):
                         warnings.simplefilter("ignore")
                         model = builds[name](replace(problem, order=n, candidates=[n],
                                                      fold=True))
-                    value = _fit_score(model, held)
+                    value = _fit_score(model, held_out)
                     repaired[(n, v)] += stabilised(model)
                 except SubidError:
                     value = FLOOR
@@ -363,7 +367,9 @@ def cross_validate(data, fixed, candidates, horizon, *, prepare_fold, builds):
     horizons = [horizon] if horizon is not None else feasible_horizons(
         n_train, n_in, n_out, blocks, max(wanted),
         n_experiments=n_exp_train, reveal_all=fixed is not None)
+    from subid.methods.dt._scoring import Held
     names = list(builds)
+    held = [Held(validation) for _, validation in parts]     # once for every horizon
     scores, fold_scores, stabilised_folds = {}, {}, {}
     searched = []              # (orders, horizons) of every block of candidates scored
     ceiling = None
@@ -373,7 +379,7 @@ def cross_validate(data, fixed, candidates, horizon, *, prepare_fold, builds):
             if not orders:
                 continue
             per_fold, repaired = score_horizon(parts, orders, f, prepare_fold=prepare_fold,
-                                               builds=builds)
+                                               builds=builds, held=held)
             for (n, v), values in per_fold.items():
                 fold_scores[(n, f, v)] = values
                 scores[(n, f, v)] = float(np.mean(values))
