@@ -168,18 +168,15 @@ def _error_power(A, B, C, D, u, y, weights, inv_scale, kernel):
         rows, tail, finite = kernel(A, B, C, D, u, y, weights, inv_scale, n_free)
         if not (finite and np.isfinite(rows[:, :, :n]).all()):
             return None
-        if n_free == 0:
+        if n_free == 0:                 # no state (free_length is 0 for n = 0)
             return tail
         flat = rows.reshape(-1, n + 1)
-        if n == 0:
-            x0 = np.zeros(0)
-        else:
-            R = scipy.linalg.qr(flat, mode="r", check_finite=False)[0]
-            # the minimum-norm lstsq of simulate_fit, with its cut-off
-            cut = np.finfo(float).eps * max(N * ny, n)
-            Rn = np.zeros((n, n + 1))
-            Rn[:min(R.shape[0], n)] = R[:n]
-            x0 = np.linalg.lstsq(Rn[:, :n], Rn[:, n], rcond=cut)[0]
+        R = scipy.linalg.qr(flat, mode="r", check_finite=False)[0]
+        # the minimum-norm lstsq of simulate_fit, with its cut-off
+        cut = np.finfo(float).eps * max(N * ny, n)
+        Rn = np.zeros((n, n + 1))
+        Rn[:min(R.shape[0], n)] = R[:n]
+        x0 = np.linalg.lstsq(Rn[:, :n], Rn[:, n], rcond=cut)[0]
         # the weighted residual of the x0 regression, back in the units of the score
         head = (flat[:, n] - flat[:, :n] @ x0).reshape(n_free, ny) * (inv_scale / weights)
         if not np.isfinite(head).all():

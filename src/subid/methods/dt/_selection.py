@@ -70,6 +70,23 @@ The final model is then fitted to the whole record with the chosen order
 and horizon, by the same code path as an explicit call, so that
 ``method(data, order=model.order, horizon=model.info['horizon'])``
 reproduces it exactly.
+
+**Cost.** Shared by the candidates: one statistic per fold and horizon (merged
+from the lagged products of four blocks where exact, :func:`fold_factors`), one
+factorisation and SVD per fold for every order, the feedthrough decision per
+fold (every channel's F-tests from one factorisation per regressor set), the
+validation records' weights and spreads once for every horizon. Per candidate:
+its A and C, one B, D, x0 regression on its training fold (the modal normal
+equations, a pass over the fold) and one compiled simulation of its validation
+block (:mod:`subid.methods.dt._scoring`); an unstable A that ``stability='auto'``
+would not keep is not fitted (:mod:`subid.methods.dt._residual_bound`). The
+regression cannot be shared between orders: each order has its own A, hence its
+own regressors (the impulse responses ``C A^k`` of the model), so the default
+call costs about ``candidates x folds`` passes over the record where a pinned call
+costs one: measured (``bench/run.py --selection-only``, 2x2 order-4 system, 20 dB)
+9-10x the pinned call at 10^3-10^4 samples (where the pinned call cross-validates
+its two estimators), 54x at 10^5 and 13x at 10^6 (the folds use at most
+:data:`MAX_SELECTION_SAMPLES`).
 """
 
 from __future__ import annotations
