@@ -485,7 +485,7 @@ def stable_choice(A_q, Q, n_outputs: int, fit, *, stability: str, data, method: 
     if stability == "auto":
         r_s = fitted_s[3].get("residual_rms")
         if bound_unstable:
-            if r_s is None or not math.isfinite(r_s):     # the unstable model cannot win
+            if r_s is None or math.isnan(r_s):        # the unstable model cannot win
                 record.update(residual_stable=r_s)
                 return A_s, fitted_s, record
             fitted_u = fit(A_q, worse_than=KEEP_UNSTABLE_RATIO * r_s)
