@@ -84,8 +84,8 @@ regression cannot be shared between orders: each order has its own A, hence its
 own regressors (the impulse responses ``C A^k`` of the model), so the default
 call costs about ``candidates x folds`` passes over the record where a pinned call
 costs one: measured (``bench/run.py --selection-only``, 2x2 order-4 system, 20 dB,
-two runs) 8-10x the pinned call at 10^3-10^4 samples (where the pinned call
-cross-validates its two estimators), 46-54x at 10^5 and 13-15x at 10^6 (the folds
+three runs) 8-10x the pinned call at 10^3-10^4 samples (where the pinned call
+cross-validates its two estimators), 46-54x at 10^5 and 11-15x at 10^6 (the folds
 use at most :data:`MAX_SELECTION_SAMPLES`).
 """
 
