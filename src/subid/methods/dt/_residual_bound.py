@@ -92,10 +92,11 @@ def residual_at_least(A, C, u, y, *, feedthrough: bool, estimate_x0: bool,
 
 def relaxed_residual_at_least(A, C, u, y, fraction: float, *, feedthrough: bool,
                               output_weights) -> float:
-    """A lower bound of the ``residual_rms`` of :func:`residual_at_least`'s fit (with or
-    without x0): the residual of the same regression on the last ``fraction`` of the
-    record alone with a free initial state (the QR path), divided by ``sqrt(N ny)``;
-    0 when that regression overflows (no bound)."""
+    """A lower bound of the ``residual_rms`` that :func:`subid.methods.dt._regression.fit_b_d_x0`
+    reports for ``(A, C)`` on ``(u, y)``, with or without x0: the residual of the same
+    regression on the last ``fraction`` of the record alone with a free initial state
+    (the QR path), divided by ``sqrt(N ny)``; 0 when that regression overflows (no
+    bound)."""
     N, ny = y.shape
     T = max(int(math.ceil(fraction * N)), 1)
     rms = fit_b_d_x0_qr(A, C, u[N - T:], y[N - T:], feedthrough=feedthrough, estimate_x0=True,
