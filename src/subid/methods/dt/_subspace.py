@@ -154,7 +154,7 @@ def output_weights(y: np.ndarray) -> np.ndarray:
 
 
 def estimate_b_d(A, C_n, gamma, L11, L_yu, problem: "Problem", *, bd_method: str,
-                 feedthrough: bool, estimate_x0: bool):
+                 feedthrough: bool, estimate_x0: bool, worse_than: float | None = None):
     """B, D (and x0) given A and C: by output regression or by projection.
 
     ``C_n``, ``gamma``, ``L11`` and ``L_yu`` are in the units of the
@@ -168,6 +168,12 @@ def estimate_b_d(A, C_n, gamma, L11, L_yu, problem: "Problem", *, bd_method: str
     projection when simulating overflows or leaves the regression
     numerically singular, or when the data are a :class:`HankelStatistic`
     (no raw samples).
+
+    ``worse_than`` (``bd_method='auto'`` on one raw record): when the residual RMS
+    of the output regression is proven at least this from part of the record
+    (:func:`subid.methods.dt._residual_bound.loses`), no fit: ``(None, None, None,
+    {'bd_method': 'bound', 'residual_at_least': bound})`` (:func:`stable_choice` asks
+    so for the unstable A of a cross-validation fold, which then cannot be kept).
 
     Returns
     -------
@@ -186,6 +192,13 @@ def estimate_b_d(A, C_n, gamma, L11, L_yu, problem: "Problem", *, bd_method: str
     diag = {}
     if estimate_x0 and isinstance(data, IOData) and data.n_experiments > 1:
         check_experiment_lengths(data, A.shape[0])
+    if worse_than is not None and bd_method == "auto" and isinstance(data, IOData) \
+            and data.n_experiments == 1:
+        from subid.methods.dt._residual_bound import loses
+        bound = loses(A, C, data.u, data.y, worse_than, feedthrough=feedthrough,
+                      estimate_x0=estimate_x0, output_weights=problem.weights())
+        if bound is not None:
+            return None, None, None, {"bd_method": "bound", "residual_at_least": bound}
     if bd_method in ("auto", "simulation"):
         with np.errstate(over="ignore", invalid="ignore"):
             if second_pass is not None:
@@ -300,7 +313,7 @@ def cva_factor(y_perp: np.ndarray) -> np.ndarray:
 
 
 def stable_choice(A_q, Q, n_outputs: int, fit, *, stability: str, data, method: str,
-                  refit_unstable=None):
+                  refit_unstable=None, bound_unstable: bool = False):
     """A in the orthonormal basis ``Q``, stable when that is right, with its B, D, x0.
 
     ``fit(A_q)`` returns ``(B, D, x0, diagnostics)`` for a given A (the
@@ -327,6 +340,14 @@ def stable_choice(A_q, Q, n_outputs: int, fit, *, stability: str, data, method: 
     given, B, D, x0 come from it instead (:func:`predictor_b_d`: the
     output-error regression is ill-posed for an unstable A), unless it
     returns None.
+
+    ``bound_unstable`` (the models of the cross-validation folds, whose ``info``
+    is not kept): under ``'auto'`` the unstable A is fitted only when it can be
+    kept: not when the stabilised fit has no residual to compare with, nor when
+    part of the record already proves its residual too large
+    (``fit(A_q, worse_than=...)``, :mod:`subid.methods.dt._residual_bound`). The
+    model is the same as with the full fit; ``record['residual_unstable']`` is then
+    missing (``'residual_unstable_at_least'`` holds the bound).
 
     Returns
     -------
@@ -357,10 +378,20 @@ def stable_choice(A_q, Q, n_outputs: int, fit, *, stability: str, data, method: 
                   spectral_radius_after=float(np.abs(np.linalg.eigvals(A_s)).max()))
     record["how"] += "; B, D, x0 refitted for the stable A"
     if stability == "auto":
-        fitted_u = fit(A_q)
+        r_s = fitted_s[3].get("residual_rms")
+        if bound_unstable:
+            if r_s is None or math.isnan(r_s):        # the unstable model cannot win
+                record.update(residual_stable=r_s)
+                return A_s, fitted_s, record
+            fitted_u = fit(A_q, worse_than=KEEP_UNSTABLE_RATIO * r_s)
+            if fitted_u[3].get("bd_method") == "bound":
+                record.update(residual_unstable_at_least=fitted_u[3]["residual_at_least"],
+                              residual_stable=r_s)
+                return A_s, fitted_s, record
+        else:
+            fitted_u = fit(A_q)
         r_u = fitted_u[3].get("residual_rms") if fitted_u[3].get("bd_method") == "simulation" \
             else None
-        r_s = fitted_s[3].get("residual_rms")
         record.update(residual_unstable=r_u, residual_stable=r_s)
         if r_u is not None and r_s is not None and math.isfinite(r_u) \
                 and r_u < KEEP_UNSTABLE_RATIO * r_s:
