@@ -93,11 +93,10 @@ from subid.errors import (
     NotExcitingError,
     OptionError,
     OrderError,
-    SubidError,
     TooFewSamplesError,
 )
 from subid.methods._info import model_info, records_warnings
-from subid.methods.ct import _ct_fit
+from subid.methods.ct import _ct_discrete, _ct_fit
 from subid.methods.ct._ct_estimate import (
     _correction_count,
     _correction_regressors,
@@ -110,7 +109,7 @@ from subid.methods.ct._ct_estimate import (
     tm_convolution_matrix,
 )
 from subid.methods.ct.basis import MAX_POLY_ORDER, FilterBank, default_basis
-from subid.methods.dt._selection import HORIZON_CANDIDATES, cross_validate
+from subid.methods.dt._selection import cross_validate
 from subid.methods.dt._subspace import choose_order
 from subid.model.statespace import StateSpace
 
@@ -420,79 +419,82 @@ def _subspace_estimate(problem: Problem, n: int, feedthrough: bool):
 
 
 def _discrete_starts(problem: Problem, n: int, horizons=None):
-    """``(A, C)`` of the discrete-time N4SID models of order ``n`` (at ``horizons``, default
-    every horizon of :func:`subid.methods.dt._selection.feasible_horizons`) converted with
-    the hold (MATLAB's route for continuous-time subspace models); none on a non-uniform
-    grid or where the conversion has no real logarithm (a pole on the negative real axis)."""
+    """``(label, continuous model)`` of the discrete-time N4SID models of order ``n`` (at
+    ``horizons``, default every horizon of
+    :func:`subid.methods.dt._selection.feasible_horizons`) converted with the hold
+    (:mod:`subid.methods.ct._ct_discrete`), and ``{horizon: reason}`` for those that have
+    no continuous-time counterpart; none on a non-uniform grid."""
     from subid.methods.dt._selection import feasible_horizons
-    from subid.methods.dt.n4sid import n4sid
-    data = problem.data
+    data, s = problem.data, problem.settings
     if not data.is_uniform:
-        return []
-    hold = "zoh" if problem.settings["input_order"] == 0 else "foh"
-    work = data.detrend() if problem.settings["offset"] else data
+        return [], {}
+    work = data.detrend() if s["offset"] else data
     if horizons is None:
         horizons = feasible_horizons(data.n_samples, data.n_inputs, data.n_outputs, 2, n,
                                      n_experiments=data.n_experiments)
-    out = []
-    for f in horizons:
-        try:
-            with warnings.catch_warnings(), np.errstate(all="ignore"):
-                warnings.simplefilter("ignore")
-                dm = n4sid(work, n, horizon=f, feedthrough=True)
-                cm = dm.with_noise_model(None, None).to_continuous(hold)
-        except SubidError:
-            continue
-        if np.isfinite(cm.A).all() and np.isfinite(cm.C).all():
-            out.append((f"discrete (N4SID, horizon {f})", cm))
-    return out
+    models, failures = _ct_discrete.discrete_models(
+        work, n, horizons, hold=_model_hold(s), feedthrough=s["dt_feedthrough"],
+        stability=s["stability"])
+    return [(f"discrete ({_ct_discrete.label(f)})", cm, note)
+            for f, cm, note in models], failures
 
 
-#: The starts the cross-validation chooses among with ``start='auto'``: the subspace
-#: estimate and the converted N4SID models at the discrete-time horizon candidates.
-START_VARIANTS = ("subspace",) + tuple(f"N4SID, horizon {f}" for f in HORIZON_CANDIDATES)
+def _model_hold(s: dict) -> str:
+    """The hold the model records (``'foh'`` for an interpolated input)."""
+    return "foh" if s["hold"] is None else s["hold"]
+
+
+def _converted(problem: Problem, cm: StateSpace, note=None):
+    """A converted discrete-time model as it is (its B and D are those of the hold, so
+    that it simulates to the discrete-time model's samples), x0 (and offsets) fitted;
+    stability as :func:`subid.methods.ct._ct_fit.stable_choice` handles it, B and D
+    refitted only where it reflects a pole."""
+    s = problem.settings
+    feedthrough = bool(np.any(cm.D != 0))
+    x0, y0 = _given_bd(problem, cm.A, cm.B, cm.C, cm.D)
+    y_hat = _ct_fit.predicted(cm.A, cm.B, cm.C, cm.D, x0, y0, problem.record)
+    as_is = (cm.B, cm.D, x0, y0, {
+        "b_residual_rms": float(np.sqrt(np.mean((problem.record.y - y_hat) ** 2))),
+        "bd_method_used": "converted"})
+    refit = _linear_fit(problem, feedthrough)
+
+    def fit(A, C):
+        return as_is if A is cm.A else refit(A, C)
+
+    A, (B, D, x0, y0, bd), stab = _ct_fit.stable_choice(cm.A, cm.C, fit, problem.record,
+                                                        s["stability"])
+    bd = dict(bd)
+    bd.setdefault("bd_method_used", "simulation")
+    bd = dict(bd, stability=stab, iterations=0)
+    if note:
+        bd["nyquist_modes"] = note
+    return A, B, cm.C, D, x0, y0, bd
 
 
 def _build(problem: Problem, feedthrough=None, start=None) -> StateSpace:
-    """The model of order ``problem.order`` (no refinement) from ``start`` (a
-    :data:`START_VARIANTS` name, or the ``start`` option): the subspace estimate, the
-    converted discrete-time estimates, or for 'auto' the best of them by the estimation
-    residual."""
+    """The model of order ``problem.order`` (no refinement) from ``start``: 'subspace' (the
+    basis-filter estimate), a discrete-time candidate ``'N4SID, horizon f'``, or the
+    ``start`` option ('discrete': the converted N4SID models, 'auto': those and the subspace
+    estimate, the best by the estimation residual). ``feedthrough`` is the subspace
+    estimate's; a converted model has the D of its hold."""
     s = problem.settings
     if feedthrough is None:
         feedthrough = s["feedthrough"] is True
     start = s["start"] if start is None else start
     horizons = None
-    if start.startswith("N4SID"):
-        horizons, start = [int(start.rsplit(" ", 1)[1])], "discrete"
+    if _ct_discrete.horizon_of(start) is not None:
+        horizons, start = [_ct_discrete.horizon_of(start)], "discrete"
     n = problem.order
-    if n > problem.sv.size:
+    if n > problem.sv.size and start != "discrete":
         raise OrderError(f"order {n} exceeds the {problem.sv.size} directions the "
                          "instruments reveal")
-    options = []
+    options, failures = [], {}
     if start in ("auto", "subspace"):
         options.append(("subspace", lambda: _subspace_estimate(problem, n, feedthrough)))
     if start in ("auto", "discrete") and s["bd_method"] == "simulation":
-        for label, cm in _discrete_starts(problem, n, horizons):
-            def converted(cm=cm):
-                limit = _ct_fit.marginal_limit(problem.record)
-                if feedthrough and np.linalg.eigvals(cm.A).real.max() <= limit:
-                    # with a feedthrough the converted model is the discrete-time one
-                    # exactly (B and D of the hold); x0 (and offsets) refitted
-                    x0, y0 = _given_bd(problem, cm.A, cm.B, cm.C, cm.D)
-                    y_hat = _ct_fit.predicted(cm.A, cm.B, cm.C, cm.D, x0, y0, problem.record)
-                    rms = float(np.sqrt(np.mean((problem.record.y - y_hat) ** 2)))
-                    return cm.A, cm.B, cm.C, cm.D, x0, y0, {
-                        "b_residual_rms": rms, "bd_method_used": "converted",
-                        "stability": {"requested": s["stability"], "action": "none"},
-                        "iterations": 0}
-                A, fitted, stab = _ct_fit.stable_choice(cm.A, cm.C,
-                                                        _linear_fit(problem, feedthrough),
-                                                        problem.record, s["stability"])
-                B, D, x0, y0, bd = fitted
-                return A, B, cm.C, D, x0, y0, dict(bd, bd_method_used="simulation",
-                                                   stability=stab, iterations=0)
-            options.append((label, converted))
+        converted, failures = _discrete_starts(problem, n, horizons)
+        options += [(name, partial(_converted, problem, cm, note))
+                    for name, cm, note in converted]
     best = None
     for name, run in options:
         try:
@@ -501,21 +503,22 @@ def _build(problem: Problem, feedthrough=None, start=None) -> StateSpace:
             if start != "auto":
                 raise
             continue
-        if got is None:
-            continue
         score = got[6].get("b_residual_rms", math.inf)
         if best is None or score < best[1]:
             best = (name, score, got)
     if best is None:
         if start == "discrete":
+            why = "; ".join(f"horizon {f}: {r}" for f, r in failures.items())
             raise DataError(f"{s['method']}: start='discrete' needs a uniformly sampled "
-                            "record whose N4SID model converts to continuous time; use "
-                            "start='subspace'")
+                            f"record whose N4SID model of order {n} converts to continuous "
+                            f"time{' (' + why + ')' if why else ''}; use start='subspace'")
         raise ModelError(f"{s['method']}: no model of order {n} could be simulated over the "
                          "record; try a lower order")
     name, _, (A, B, C, D, x0, y0, diag) = best
     diag["start"] = name
-    return _model(problem, n, A, B, C, D, x0, y0, diag, feedthrough)
+    if name != "subspace":
+        feedthrough = bool(np.any(D != 0))
+    return _model(problem, A.shape[0], A, B, C, D, x0, y0, diag, feedthrough)
 
 
 def _model(problem: Problem, n, A, B, C, D, x0, y0, diag, feedthrough) -> StateSpace:
@@ -548,11 +551,21 @@ def _model(problem: Problem, n, A, B, C, D, x0, y0, diag, feedthrough) -> StateS
 
 def _second_wins(data, order, n_functions, prepare_fold, first, second):
     """Whether the cross-validation at ``order`` prefers the build ``second`` to ``first``
-    (``(name, build)`` pairs; ties go to ``first``), and its record."""
+    (``(name, build)`` pairs), and its record: ``second`` must have the lower
+    cross-validated BIC and score significantly better on the folds
+    (:func:`subid.methods.ct._ct_discrete.paired_test`); otherwise ``first``."""
     builds = dict([first, second])
     _, _, variant, record = cross_validate(data, order, None, n_functions,
                                            prepare_fold=prepare_fold, builds=builds)
-    return variant == second[0], record
+    folds = {c.get("system_matrices"): c["folds"] for c in record["candidates"]}
+    test = _ct_discrete.paired_test(folds[second[0]], folds[first[0]])
+    record["paired_test"] = test
+    wins = variant == second[0] and test["significant"]
+    if not wins and variant == second[0]:
+        kept = next(c for c in record["candidates"] if c.get("system_matrices") == first[0])
+        record["selected"] = {k: v for k, v in kept.items()
+                              if k not in ("folds", "stabilised_folds")}
+    return wins, record
 
 
 def _build_refined(problem: Problem, feedthrough=None, start=None) -> StateSpace:
@@ -807,6 +820,7 @@ def ct_subspace(data, order=None, *, basis=None, poly_order: int = 3, estimate_x
                     refine_iterations=refine_iterations, startup=startup, n_corr=n_corr,
                     ac_method=ac_method, bd_method=bd_method, filtering=filtering,
                     data_equation=data_equation, filtered=filtered,
+                    dt_feedthrough=feedthrough if isinstance(feedthrough, bool) else "auto",
                     lag=_lag_for(basis, data.experiments[0].t) if instruments == "past" else 0)
     cv = selection == "cv" and filtered is None
 
@@ -834,48 +848,83 @@ def ct_subspace(data, order=None, *, basis=None, poly_order: int = 3, estimate_x
     prepare_fold.blocks = 1
 
     cv_data = data.detrend() if offset else data
-    if start == "auto" and data.is_uniform and bd_method == "simulation" and default_bank:
-        starts = list(START_VARIANTS)
-    else:
-        starts = ["subspace" if start == "auto" else start]
-    start_selection = None
-    if cv and (fixed is None or len(starts) > 1):
-        # the order and the start, by the discrete-time methods' cross-validation (the
-        # starts compete as its estimators do); D = 0 unless 'auto' finds it below
-        builds = {name: partial(_build, feedthrough=feedthrough is True, start=name)
-                  for name in starts}
-        n, _, chosen, record = cross_validate(cv_data, fixed, None if fixed else candidates, N,
-                                              prepare_fold=prepare_fold, builds=builds)
+    # the discrete-time candidates: on a uniform grid the default N4SID models, converted
+    # with the hold, compete in the same cross-validation (their fold scores are n4sid's
+    # own, _ct_discrete); with start='auto' only with the default basis
+    discrete = cv and data.is_uniform and bd_method == "simulation" and (
+        start == "discrete" or (start == "auto" and default_bank))
+    subspace = start in ("auto", "subspace") or not discrete
+    dt_scores, dm = {}, None
+    if discrete:
+        dm = _ct_discrete.n4sid_default(cv_data, order,
+                                        feedthrough=settings["dt_feedthrough"],
+                                        stability=stability)
+        dt_scores = _ct_discrete.fold_scores(dm)
+        if dm is not None and not dt_scores:         # n4sid ran no cross-validation
+            dt_scores = None
+    order_selection = start_selection = None
+    conversion_notes = []
+    if cv and (fixed is None or discrete):
+        builds = {}
+        if subspace:
+            builds["subspace"] = partial(_build, feedthrough=feedthrough is True,
+                                         start="subspace")
+        if dt_scores is None:                         # scored here instead, at its horizon
+            name = _ct_discrete.label(dm.info["horizon"])
+            builds[name] = partial(_build, start=name)
+            dt_scores = {}
+        ct_record = None
+        if builds:
+            ct_record = cross_validate(cv_data, fixed, None if fixed else candidates, N,
+                                       prepare_fold=prepare_fold, builds=builds)[3]
+        ranking, record, entries = _ct_discrete.merged_selection(
+            ct_record, dt_scores, (ct_record or {}).get("samples_used", cv_data.n_samples),
+            m, p)
+        if fixed is not None:
+            ranking = [c for c in ranking if c[0] == fixed] or ranking
+        model = None
+        whole = _prepare(data, [ranking[0][0]], settings)
+        for n, chosen in ranking:
+            problem = replace(whole, order=n, candidates=[n])
+            if chosen == "subspace":
+                break
+            try:
+                model = _build(problem, start=chosen)
+                break
+            except (ModelError, DataError) as exc:
+                conversion_notes.append(f"order {n}, {chosen}: {exc}")
+        record["selected"] = entries[(n, chosen)]
         if fixed is None:
             order_selection = record
         else:
-            order_selection, start_selection = None, record
-        problem = _prepare(data, [n], settings)
+            start_selection = record
     else:
         problem = _prepare(data, candidates, settings)
         usable = [k for k in candidates if k < problem.sv.size] or [candidates[0]]
         n, order_selection = (fixed, None) if fixed is not None else choose_order(
             None, usable, problem.sv, "singular values")
-        chosen = starts[0] if len(starts) == 1 else "auto"   # by the estimation residual
-    problem = replace(problem, order=n, candidates=[n])
+        # start='auto' without the cross-validation: the best by the estimation residual
+        both = data.is_uniform and bd_method == "simulation" and default_bank
+        chosen = start if start != "auto" else "auto" if both else "subspace"
+        problem = replace(problem, order=n, candidates=[n])
+        model = None
+    if conversion_notes:
+        warnings.warn(f"{method}: the cross-validation preferred discrete-time models that "
+                      "have no continuous-time counterpart under the hold; the next "
+                      f"candidate was used ({'; '.join(conversion_notes)})",
+                      UserWarning, stacklevel=3)
     feedthrough_selection = None
-    if feedthrough == "auto":
-        use_d = False
-        if cv:
+    if model is None:
+        use_d = feedthrough is True
+        if feedthrough == "auto" and cv:
             use_d, feedthrough_selection = _second_wins(
                 cv_data, n, N, prepare_fold, ("D = 0", partial(_build, feedthrough=False,
                                                                start=chosen)),
                 ("D estimated", partial(_build, feedthrough=True, start=chosen)))
-    else:
-        use_d = feedthrough
-    try:
         model = _build(problem, use_d, chosen)
-    except (ModelError, DataError):
-        if chosen == start:
-            raise
-        model = _build(problem, use_d, start)  # the chosen start fails on the whole record
+    use_d = model.info["feedthrough"]
     refine_selection = None
-    if refine == "auto" and cv:
+    if refine == "auto" and cv and n <= (N - 1) * p:
         # kept only where it scores better on the held-out folds (ties: not refined)
         do_refine, refine_selection = _second_wins(
             cv_data, n, N, prepare_fold,
@@ -893,8 +942,9 @@ def ct_subspace(data, order=None, *, basis=None, poly_order: int = 3, estimate_x
         model.info["feedthrough_selection"] = feedthrough_selection
     if start_selection is not None:
         model.info["start_selection"] = start_selection
+    if dm is not None:
+        model.info["discrete_model"] = {"order": dm.order, "horizon": dm.info["horizon"]}
     return model
-
 
 
 @checked_call
