@@ -6,7 +6,7 @@ import pytest
 
 from subid import IOData, StateSpace, merge
 from subid.experiments.seed002 import BIAS_FREQUENCIES, paper_system, simulate
-from subid.methods.ct import _ct_fit
+from subid.methods.ct import _ct_discrete, _ct_fit
 from subid.methods.ct.ct_subspace import ct_subspace
 
 W = np.logspace(-2, 2, 200)
@@ -140,3 +140,63 @@ def test_coloured_noise_monte_carlo_50_runs():
     assert np.all(z < 2.0), z
     _, white, _ = coloured_runs(50, 4000, 0.0)
     assert med < 5.0 * white, (med, white)
+
+
+@pytest.mark.parametrize("hold", ["zoh", "foh"])
+def test_negative_real_poles_convert_with_nyquist_modes(hold):
+    """A discrete-time model with poles on the negative real axis has no continuous-time
+    model of its order; with a mode at the Nyquist frequency for each, its hold
+    discretisation has the same transfer function (and the same samples, x0 aside)."""
+    rng = np.random.default_rng(3)
+    A = np.array([[0.5, 0.3, 0, 0], [-0.3, 0.5, 0, 0], [0, 0, -0.5, 0.2], [0, 0, 0, -0.3]])
+    T = rng.standard_normal((4, 4))
+    dm = StateSpace(np.linalg.solve(T, A @ T), rng.standard_normal((4, 2)),
+                    rng.standard_normal((2, 4)), rng.standard_normal((2, 2)), dt=0.1)
+    cm, note = _ct_discrete.convert(dm, hold)
+    assert cm.order == 6 and "Nyquist" in note and cm.hold == hold
+    assert np.allclose(np.sort(np.abs(cm.poles().imag))[2:], np.pi / 0.1)
+    w = np.linspace(0.1, 31.0, 9)
+    back = cm.to_discrete(0.1, hold)
+    assert np.abs(back.freqresp(w) - dm.freqresp(w)).max() < 1e-10
+    u = rng.standard_normal((300, 2))
+    y = cm.simulate(u, t=np.arange(300) * 0.1, hold=hold)
+    assert np.abs(y - dm.simulate(u))[40:].max() < 1e-8 * np.abs(y).max()
+    # a pole at the origin has no continuous-time counterpart at all
+    none, reason = _ct_discrete.convert(StateSpace(np.diag([0.0, 0.5]), np.ones((2, 1)),
+                                                   np.ones((1, 2)), 0, dt=0.1), hold)
+    assert none is None and "z = 0" in reason
+
+
+def test_paired_test_needs_every_fold_to_agree_or_a_clear_mean():
+    assert _ct_discrete.significantly_better([60, 61, 62, 63], [59, 60, 61, 62])
+    assert not _ct_discrete.significantly_better([70, 60, 62, 59], [60, 61, 62, 60])
+    assert not _ct_discrete.significantly_better([60, 61, 62, 63], [60, 61, 62, 63])
+    record = _ct_discrete.paired_test([71.0, 63.0, 62.6, -100.0], [59.7, 56.2, 62.2, -100.0])
+    assert not record["significant"] and record["mean_difference"] > 0
+
+
+def n4sid_reference_record(seed=4, n_samples=900):
+    """A 2x1 plant with a lightly damped pair, coloured process noise, zero-order hold."""
+    true = StateSpace([[0.0, 1.0, 0.0], [-4.0, -0.4, 0.0], [0.0, 0.0, -0.5]],
+                      [[0.0], [1.0], [0.5]], [[1.0, 0.0, 1.0], [0.0, 1.0, -1.0]], 0, dt=0.0)
+    rng = np.random.default_rng(seed)
+    t = np.arange(n_samples) * 0.1
+    u = np.repeat(rng.standard_normal(n_samples // 3), 3)
+    y = true.simulate(u, t=t, hold="zoh")
+    y = y + 0.1 * y.std(axis=0) * rng.standard_normal(y.shape)
+    return IOData(u, y, t=t)
+
+
+@pytest.mark.slow
+def test_default_is_never_far_below_the_discrete_time_default():
+    """The default N4SID model, converted, competes in the cross-validation: the default
+    ct_subspace model validates within 2 points of the default n4sid model."""
+    import subid
+    data = n4sid_reference_record()
+    est, val = data[:600], data[600:]
+    dm = subid.n4sid(est)
+    cm = ct_subspace(est)
+    assert "discrete_model" in cm.info and cm.info["order_selection"]["rule"] == "cv"
+    kinds = {c["system_matrices"] for c in cm.info["order_selection"]["candidates"]}
+    assert "subspace" in kinds and any(k.startswith("N4SID, horizon") for k in kinds)
+    assert np.mean(subid.fit_percent(cm, val)) >= np.mean(subid.fit_percent(dm, val)) - 2.0

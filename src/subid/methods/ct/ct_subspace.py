@@ -128,6 +128,9 @@ FOLD_CACHE_SAMPLES = 50_000
 #: Instrument iterations of the models fitted to the cross-validation folds.
 FOLD_ITERATIONS = 3
 HOLD_ORDERS = {"zoh": 0, "foh": 1}
+#: ``refine='auto'`` considers the refinement only where its budget
+#: (:func:`subid.methods.ct._ct_fit.refine_steps`) affords this many steps.
+MIN_REFINE_STEPS = 5
 # Relative size of a diagonal entry of the filtered-input factor below which
 # the filtered inputs count as linearly dependent.
 _RANK_TOL = 1e-10
@@ -612,8 +615,11 @@ def ct_subspace(data, order=None, *, basis=None, poly_order: int = 3, estimate_x
         Estimate the initial state ``x(t_0)`` of every experiment with B
         (``info['x0']``).
     feedthrough : {'auto', True, False}
-        Estimate D. ``'auto'``: D = 0 unless the cross-validation (at the
-        chosen order) scores the model with D better (``info['feedthrough']``).
+        Estimate D of the basis-filter estimate. ``'auto'``: D = 0 unless the
+        cross-validation (at the chosen order) scores the model with D
+        significantly better (``info['feedthrough']``). A converted N4SID
+        model has the D of its hold (n4sid's own ``feedthrough='auto'``
+        decides the discrete-time D; True/False are passed to it).
     hold : {'foh', 'zoh', None}
         The input between samples: linear (first-order hold, the paper's
         Section V), constant (zero-order hold), or None when unknown: then it
@@ -628,18 +634,24 @@ def ct_subspace(data, order=None, *, basis=None, poly_order: int = 3, estimate_x
         order within 1 % of the best misfit), or the largest gap of the
         singular values.
     start : {'auto', 'subspace', 'discrete'}
-        Where (A, C) come from before the refinement. ``'subspace'``: the
+        Where the model comes from before the refinement. ``'subspace'``: the
         basis-filter estimate (the paper's, corrected, with model
-        instruments). ``'discrete'``: the discrete-time N4SID model of the
-        same order converted with the hold (MATLAB's route; uniform grids
-        only). ``'auto'``: with the default basis on a uniform grid the
-        subspace estimate and the
-        N4SID models at horizons 10 and 20 compete in the cross-validation
-        with the orders (as the estimators of ``system_matrices='auto'`` do
-        in discrete time; by the estimation residual with
-        ``selection='gap'``); the subspace estimate on a non-uniform grid
-        (``info['start']``); the subspace estimate alone on a non-uniform grid
-        or with a basis or filtered signals given.
+        instruments). ``'discrete'``: the discrete-time N4SID model converted
+        with the hold, its B and D those of the hold, so that it simulates to
+        the N4SID model's samples (MATLAB's route; uniform grids only; a pole
+        on the negative real axis becomes a damped mode at the Nyquist
+        frequency, ``info['nyquist_modes']``). ``'auto'``: with the default
+        basis on a uniform grid both compete in one cross-validation
+        (:mod:`subid.methods.ct._ct_discrete`): the basis-filter estimates at
+        every candidate order, and the default ``n4sid`` call's candidates
+        (every order and horizon it scored, with its own fold scores, orders
+        past 10 included); the N4SID model is the reference, replaced by a
+        basis-filter estimate only when that has the lower cross-validated
+        BIC and scores significantly better on the folds (one-sided paired
+        t-test at 5 %; ``info['order_selection']['basis_filter_test']``). By
+        the estimation residual with ``selection='gap'``; the subspace
+        estimate alone on a non-uniform grid or with a basis or filtered
+        signals given (``info['start']``).
     offset : {'auto', True, False}
         Estimate a constant output offset per experiment (``info['y_offset']``)
         with x0, and project a constant out of the filtered data: the model
@@ -678,11 +690,14 @@ def ct_subspace(data, order=None, *, basis=None, poly_order: int = 3, estimate_x
         then with the noise model. ``info['subspace_model']`` keeps the
         estimate before it. ``'auto'``: the refined and the unrefined model
         compete in the cross-validation at the chosen order and start; the
-        refinement is kept only where it scores better on the held-out folds
-        (``info['refine_selection']``; on the DaISy evaporator record an
+        refinement is kept only where it scores significantly better on the
+        held-out folds (one-sided paired t-test at 5 %;
+        ``info['refine_selection']``; on the DaISy evaporator record an
         output-error fit moved a pole to a time constant of half the record
-        and lowered the validation fit from 60.3 to 34.1 %, on ballbeam it
-        raised it from 80 to 89 %). Without the cross-validation
+        and lowered the validation fit from 60.3 to 34.1 %), and considered
+        only where the work budget affords at least
+        :data:`MIN_REFINE_STEPS` steps (a refinement stopped after one or
+        two steps is no fit to compare). Without the cross-validation
         (``selection='gap'``, ``filtered``): refined when the model comes from
         the subspace start.
     refine_iterations : int
@@ -924,7 +939,15 @@ def ct_subspace(data, order=None, *, basis=None, poly_order: int = 3, estimate_x
         model = _build(problem, use_d, chosen)
     use_d = model.info["feedthrough"]
     refine_selection = None
-    if refine == "auto" and cv and n <= (N - 1) * p:
+    steps = _ct_fit.refine_steps(model.order, problem.record)
+    if refine == "auto" and cv and steps < MIN_REFINE_STEPS:
+        # a refinement stopped by its budget after a step or two is no fit to compare
+        do_refine = False
+        refine_selection = {"rule": "skipped", "description": (
+            f"not refined: the work budget affords {steps} Levenberg-Marquardt step(s) "
+            f"at order {model.order} on {data.n_samples} samples, fewer than "
+            f"{MIN_REFINE_STEPS}; refine=True refines within the budget")}
+    elif refine == "auto" and cv and n <= (N - 1) * p:
         # kept only where it scores better on the held-out folds (ties: not refined)
         do_refine, refine_selection = _second_wins(
             cv_data, n, N, prepare_fold,
