@@ -184,7 +184,7 @@ def discrete_models(data, order: int, horizons, *, hold: str, feedthrough, stabi
             with warnings.catch_warnings(), np.errstate(all="ignore"):
                 warnings.simplefilter("ignore")
                 dm = n4sid(data, order, horizon=f, feedthrough=feedthrough, stability=stability)
-        except SubidError as exc:
+        except (ValueError, np.linalg.LinAlgError) as exc:  # SubidError is a ValueError
             failures[f] = f"N4SID failed ({exc})"
             continue
         cm, note = convert(dm, hold)
@@ -198,14 +198,15 @@ def discrete_models(data, order: int, horizons, *, hold: str, feedthrough, stabi
 def n4sid_default(data, order, *, feedthrough, stability):
     """The :func:`subid.n4sid` model of ``data`` (offsets removed by the caller) with the
     caller's ``order`` argument (None: chosen as n4sid chooses it, past order 10 where
-    the folds ask for it), or None when it fails."""
+    the folds ask for it), and None; or None and the reason it failed (the
+    basis-filter estimates are then the only candidates)."""
     from subid.methods.dt.n4sid import n4sid
     try:
         with warnings.catch_warnings(), np.errstate(all="ignore"):
             warnings.simplefilter("ignore")
-            return n4sid(data, order, feedthrough=feedthrough, stability=stability)
-    except SubidError:
-        return None
+            return n4sid(data, order, feedthrough=feedthrough, stability=stability), None
+    except (ValueError, np.linalg.LinAlgError) as exc:    # SubidError is a ValueError
+        return None, f"{type(exc).__name__}: {exc}"
 
 
 def fold_scores(dmodel) -> dict:

@@ -447,12 +447,21 @@ def _model_hold(s: dict) -> str:
     return "foh" if s["hold"] is None else s["hold"]
 
 
-def _converted(problem: Problem, cm: StateSpace, note=None):
+def _converted(problem: Problem, cm: StateSpace, note=None, refit=None):
     """A converted discrete-time model as it is (its B and D are those of the hold, so
     that it simulates to the discrete-time model's samples), x0 (and offsets) fitted;
     stability as :func:`subid.methods.ct._ct_fit.stable_choice` handles it, B and D
-    refitted only where it reflects a pole."""
+    refitted only where it reflects a pole. ``refit`` (True/False: with or without D):
+    its A and C with B, D, x0 from the output regression (the earlier default start)."""
     s = problem.settings
+    if refit is not None:
+        A, fitted, stab = _ct_fit.stable_choice(cm.A, cm.C, _linear_fit(problem, refit),
+                                                problem.record, s["stability"])
+        B, D, x0, y0, bd = fitted
+        bd = dict(bd, bd_method_used="simulation", stability=stab, iterations=0)
+        if note:
+            bd["nyquist_modes"] = note
+        return A, B, cm.C, D, x0, y0, bd
     feedthrough = bool(np.any(cm.D != 0))
     x0, y0 = _given_bd(problem, cm.A, cm.B, cm.C, cm.D)
     y_hat = _ct_fit.predicted(cm.A, cm.B, cm.C, cm.D, x0, y0, problem.record)
@@ -474,12 +483,13 @@ def _converted(problem: Problem, cm: StateSpace, note=None):
     return A, B, cm.C, D, x0, y0, bd
 
 
-def _build(problem: Problem, feedthrough=None, start=None) -> StateSpace:
+def _build(problem: Problem, feedthrough=None, start=None, refit=False) -> StateSpace:
     """The model of order ``problem.order`` (no refinement) from ``start``: 'subspace' (the
     basis-filter estimate), a discrete-time candidate ``'N4SID, horizon f'``, or the
     ``start`` option ('discrete': the converted N4SID models, 'auto': those and the subspace
     estimate, the best by the estimation residual). ``feedthrough`` is the subspace
-    estimate's; a converted model has the D of its hold."""
+    estimate's; a converted model has the D of its hold, or with ``refit`` its A and C
+    keep B, D (``feedthrough``), x0 refitted by the output regression."""
     s = problem.settings
     if feedthrough is None:
         feedthrough = s["feedthrough"] is True
@@ -496,8 +506,8 @@ def _build(problem: Problem, feedthrough=None, start=None) -> StateSpace:
         options.append(("subspace", lambda: _subspace_estimate(problem, n, feedthrough)))
     if start in ("auto", "discrete") and s["bd_method"] == "simulation":
         converted, failures = _discrete_starts(problem, n, horizons)
-        options += [(name, partial(_converted, problem, cm, note))
-                    for name, cm, note in converted]
+        options += [(name, partial(_converted, problem, cm, note, feedthrough if refit
+                                   else None)) for name, cm, note in converted]
     best = None
     for name, run in options:
         try:
@@ -552,18 +562,19 @@ def _model(problem: Problem, n, A, B, C, D, x0, y0, diag, feedthrough) -> StateS
                       output_names=data.output_names, info=info, hold=info["hold"])
 
 
-def _second_wins(data, order, n_functions, prepare_fold, first, second):
+def _second_wins(data, order, n_functions, prepare_fold, first, second, test=False):
     """Whether the cross-validation at ``order`` prefers the build ``second`` to ``first``
-    (``(name, build)`` pairs), and its record: ``second`` must have the lower
-    cross-validated BIC and score significantly better on the folds
-    (:func:`subid.methods.ct._ct_discrete.paired_test`); otherwise ``first``."""
+    (``(name, build)`` pairs; ties go to ``first``), and its record; with ``test``,
+    ``second`` must also score significantly better on the folds
+    (:func:`subid.methods.ct._ct_discrete.paired_test`)."""
     builds = dict([first, second])
     _, _, variant, record = cross_validate(data, order, None, n_functions,
                                            prepare_fold=prepare_fold, builds=builds)
     folds = {c.get("system_matrices"): c["folds"] for c in record["candidates"]}
-    test = _ct_discrete.paired_test(folds[second[0]], folds[first[0]])
-    record["paired_test"] = test
-    wins = variant == second[0] and test["significant"]
+    wins = variant == second[0]
+    if test:
+        record["paired_test"] = _ct_discrete.paired_test(folds[second[0]], folds[first[0]])
+        wins = wins and record["paired_test"]["significant"]
     if not wins and variant == second[0]:
         kept = next(c for c in record["candidates"] if c.get("system_matrices") == first[0])
         record["selected"] = {k: v for k, v in kept.items()
@@ -571,10 +582,11 @@ def _second_wins(data, order, n_functions, prepare_fold, first, second):
     return wins, record
 
 
-def _build_refined(problem: Problem, feedthrough=None, start=None) -> StateSpace:
+def _build_refined(problem: Problem, feedthrough=None, start=None,
+                   refit=False) -> StateSpace:
     """:func:`_build`, then :func:`subid.methods.ct._ct_fit.refine_model` (a candidate of the
     refinement's choice)."""
-    return _ct_fit.refine_model(_build(problem, feedthrough, start), problem.record,
+    return _ct_fit.refine_model(_build(problem, feedthrough, start, refit), problem.record,
                                 problem.settings)
 
 
@@ -601,7 +613,9 @@ def ct_subspace(data, order=None, *, basis=None, poly_order: int = 3, estimate_x
         (and offset) per experiment, its filters at rest at each start.
     order : int, None, 'auto' or iterable of int
         Model order n. ``None``: chosen among 1..min(10, N p - p) (or the
-        candidates given) by ``selection``.
+        candidates given) by ``selection``; the converted N4SID candidates
+        (``start='auto'``) come at the orders n4sid scores (past 10 where its
+        search goes on), plus one state per Nyquist mode.
     basis : FilterBank, optional
         Basis filter bank (:func:`subid.basis.takenaka_malmquist`,
         :func:`~subid.basis.laguerre`, :func:`~subid.basis.legendre`).
@@ -690,9 +704,8 @@ def ct_subspace(data, order=None, *, basis=None, poly_order: int = 3, estimate_x
         then with the noise model. ``info['subspace_model']`` keeps the
         estimate before it. ``'auto'``: the refined and the unrefined model
         compete in the cross-validation at the chosen order and start; the
-        refinement is kept only where it scores significantly better on the
-        held-out folds (one-sided paired t-test at 5 %;
-        ``info['refine_selection']``; on the DaISy evaporator record an
+        refinement is kept only where it scores better on the held-out folds
+        (``info['refine_selection']``; on the DaISy evaporator record an
         output-error fit moved a pole to a time constant of half the record
         and lowered the validation fit from 60.3 to 34.1 %), and considered
         only where the work budget affords at least
@@ -869,9 +882,9 @@ def ct_subspace(data, order=None, *, basis=None, poly_order: int = 3, estimate_x
     discrete = cv and data.is_uniform and bd_method == "simulation" and (
         start == "discrete" or (start == "auto" and default_bank))
     subspace = start in ("auto", "subspace") or not discrete
-    dt_scores, dm = {}, None
+    dt_scores, dm, dm_failure = {}, None, None
     if discrete:
-        dm = _ct_discrete.n4sid_default(cv_data, order,
+        dm, dm_failure = _ct_discrete.n4sid_default(cv_data, order,
                                         feedthrough=settings["dt_feedthrough"],
                                         stability=stability)
         dt_scores = _ct_discrete.fold_scores(dm)
@@ -923,6 +936,9 @@ def ct_subspace(data, order=None, *, basis=None, poly_order: int = 3, estimate_x
         chosen = start if start != "auto" else "auto" if both else "subspace"
         problem = replace(problem, order=n, candidates=[n])
         model = None
+    if model is not None and model.info.get("nyquist_modes"):
+        warnings.warn(f"{method}: the chosen N4SID model (order {n}): "
+                      f"{model.info['nyquist_modes']}", UserWarning, stacklevel=3)
     if conversion_notes:
         warnings.warn(f"{method}: the cross-validation preferred discrete-time models that "
                       "have no continuous-time counterpart under the hold; the next "
@@ -937,6 +953,16 @@ def ct_subspace(data, order=None, *, basis=None, poly_order: int = 3, estimate_x
                                                                start=chosen)),
                 ("D estimated", partial(_build, feedthrough=True, start=chosen)))
         model = _build(problem, use_d, chosen)
+    refit, bd_selection = False, None
+    if cv and chosen != "subspace" and n <= (N - 1) * p:
+        # the converted model as it is, or its A and C with B, D, x0 from the output
+        # regression (output-error optimal for them; D as the subspace estimate's)
+        refit, bd_selection = _second_wins(
+            cv_data, n, N, prepare_fold, ("converted", partial(_build, start=chosen)),
+            ("B, D refitted", partial(_build, feedthrough=feedthrough is True, start=chosen,
+                                      refit=True)), test=True)
+        if refit:
+            model = _build(problem, feedthrough is True, chosen, refit=True)
     use_d = model.info["feedthrough"]
     refine_selection = None
     steps = _ct_fit.refine_steps(model.order, problem.record)
@@ -951,8 +977,9 @@ def ct_subspace(data, order=None, *, basis=None, poly_order: int = 3, estimate_x
         # kept only where it scores better on the held-out folds (ties: not refined)
         do_refine, refine_selection = _second_wins(
             cv_data, n, N, prepare_fold,
-            ("as estimated", partial(_build, feedthrough=use_d, start=chosen)),
-            ("refined", partial(_build_refined, feedthrough=use_d, start=chosen)))
+            ("as estimated", partial(_build, feedthrough=use_d, start=chosen, refit=refit)),
+            ("refined", partial(_build_refined, feedthrough=use_d, start=chosen,
+                                refit=refit)))
     else:
         do_refine = refine is True or (refine == "auto" and model.info["start"] == "subspace")
     if do_refine:
@@ -963,10 +990,14 @@ def ct_subspace(data, order=None, *, basis=None, poly_order: int = 3, estimate_x
         else {"rule": "given"}
     if feedthrough_selection is not None:
         model.info["feedthrough_selection"] = feedthrough_selection
+    if bd_selection is not None:
+        model.info["bd_selection"] = bd_selection
     if start_selection is not None:
         model.info["start_selection"] = start_selection
     if dm is not None:
         model.info["discrete_model"] = {"order": dm.order, "horizon": dm.info["horizon"]}
+    elif dm_failure is not None:
+        model.info["discrete_model"] = {"failed": dm_failure}
     return model
 
 
