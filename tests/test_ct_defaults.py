@@ -135,12 +135,15 @@ def test_coloured_noise_small_monte_carlo():
 
 @pytest.mark.long
 def test_coloured_noise_monte_carlo_50_runs():
-    """50 runs, L = 4000: no bias at 0.1-5 rad/s (z < 2), and the error against white
-    noise at the same SNR within the ratio the noise spectra set (docs/seed002.md)."""
+    """50 runs, L = 4000: no bias at 0.1-5 rad/s (z < 2), and the error under coloured
+    and white noise within 1.3 times the Cramér-Rao bound on the same records
+    (docs/seed002.md; the bound's ratio is 4.3, so the ratio measured is near it)."""
     z, med, _ = coloured_runs(50, 4000, 0.9)
     assert np.all(z < 2.0), z
     _, white, _ = coloured_runs(50, 4000, 0.0)
-    assert med < 5.0 * white, (med, white)
+    seeds = range(100, 150)
+    assert med < 1.3 * median_bound(4000, seeds, noise_pole=0.9), med
+    assert white < 1.3 * median_bound(4000, seeds, noise_pole=0.0), white
 
 
 @pytest.mark.parametrize("hold", ["zoh", "foh"])
