@@ -21,8 +21,12 @@ basis-filter estimates in one cross-validation:
   (:func:`subid.methods.dt._selection.select`, the rule of the
   discrete-time methods); the discrete-time default is the reference: the
   best basis-filter estimate replaces the best converted model only when it
-  also scores significantly better on the folds (:func:`significantly_better`,
-  a one-sided paired t-test at 5 % over the four folds). The folds of a
+  also scores significantly better on the folds (:func:`significantly_better`:
+  better on every one of the four folds, or by a one-sided paired t-test at
+  5 %). With the order given there is no default N4SID model to protect
+  (n4sid at a forced order can lack the states of the noise: under AR(1)
+  output noise its order-4 models of the seed-002 system scored -43 to 22 %
+  on the folds), and the candidates compete by the criterion alone; The folds of a
   short record are noisy: on the DaISy winding record a basis-filter
   estimate that led the folds' mean by 3.4 points validated 22 points below
   the N4SID model (the paired test keeps the N4SID model there);
@@ -224,18 +228,22 @@ def fold_scores(dmodel) -> dict:
 
 
 def paired_test(alternative, reference) -> dict:
-    """One-sided paired t-test of ``alternative`` against ``reference`` fold scores
-    (Student; ``k - 1`` degrees of freedom over ``k`` folds): the alternative is
-    significantly better when the mean of the differences exceeds the ``1 - LEVEL``
-    quantile times their standard error (all differences equal and positive: better)."""
+    """Paired comparison of ``alternative`` against ``reference`` fold scores: the
+    alternative is significantly better when it is better on every fold (the sign
+    test: 1/16 by chance over four folds) or when the mean of the differences exceeds
+    the ``1 - LEVEL`` quantile of Student's t (``k - 1`` degrees of freedom) times
+    their standard error (one-sided paired t-test). The sign test catches a
+    reference that fails on some folds by far (its differences vary too much for
+    the t-test: a fixed-order N4SID model under coloured noise, whose innovation
+    model lacks the noise's state), the t-test a clear lead in the mean."""
     import scipy.stats
     d = np.asarray(alternative, dtype=float) - np.asarray(reference, dtype=float)
     k = d.size
     mean = float(d.mean()) if k else 0.0
     se = float(d.std(ddof=1) / np.sqrt(k)) if k > 1 else float("inf")
     critical = float(scipy.stats.t.ppf(1.0 - LEVEL, k - 1)) if k > 1 else float("inf")
-    better = mean > 0 and (se == 0 or mean > critical * se)
-    return {"test": f"one-sided paired t-test over the folds, level {LEVEL:g}",
+    better = bool(k and np.all(d > 0)) or (mean > 0 and (se == 0 or mean > critical * se))
+    return {"test": f"better on every fold, or one-sided paired t-test at {LEVEL:g}",
             "mean_difference": mean, "standard_error": se, "critical_t": critical,
             "significant": bool(better)}
 
@@ -246,10 +254,13 @@ def significantly_better(alternative, reference) -> bool:
 
 
 def merged_selection(ct_record, dt_scores: dict, n_samples: int, n_inputs: int,
-                     n_outputs: int):
+                     n_outputs: int, *, reference: bool = True):
     """Join the basis-filter candidates of ``ct_record`` (a cross-validation record of
     :func:`subid.methods.dt._selection.cross_validate`, or None) and the discrete-time
-    candidates ``{(order, horizon): folds}``; rank them by the cross-validated BIC.
+    candidates ``{(order, horizon): folds}``; rank them by the cross-validated BIC. With
+    ``reference`` (the order not given: the discrete-time candidates are the default
+    n4sid call's), the best discrete-time candidate stays first unless the best
+    basis-filter one is :func:`significantly_better`.
 
     Returns ``(ranking, record, entries)``: the candidates ``(order, start name)`` best
     first, the merged ``order_selection`` record (without its ``selected`` entry, which
@@ -268,7 +279,7 @@ def merged_selection(ct_record, dt_scores: dict, n_samples: int, n_inputs: int,
     test = None
     best_ct = next((k for k in keys if k[2] == 0), None)
     best_dt = next((k for k in keys if k[2] == 1), None)
-    if best_ct is not None and best_dt is not None and keys[0] == best_ct:
+    if reference and best_ct is not None and best_dt is not None and keys[0] == best_ct:
         test = dict(paired_test(folds[best_ct], folds[best_dt]),
                     alternative=names[best_ct], alternative_order=best_ct[0],
                     reference=names[best_dt], reference_order=best_dt[0])

@@ -573,10 +573,12 @@ def ct_subspace(data, order=None, *, basis=None, poly_order: int = 3, estimate_x
         (:mod:`subid.methods.ct._ct_discrete`): the basis-filter estimates at
         every candidate order, and the default ``n4sid`` call's candidates
         (every order and horizon it scored, with its own fold scores, orders
-        past 10 included); the N4SID model is the reference, replaced by a
-        basis-filter estimate only when that has the lower cross-validated
-        BIC and scores significantly better on the folds (one-sided paired
-        t-test at 5 %; ``info['order_selection']['basis_filter_test']``). By
+        past 10 included); with the order not given the N4SID model is the
+        reference, replaced by a basis-filter estimate only when that has the
+        lower cross-validated BIC and scores significantly better on the
+        folds (better on every fold, or a one-sided paired t-test at 5 %;
+        ``info['order_selection']['basis_filter_test']``); with the order
+        given, the least criterion wins (``info['start_selection']``). By
         the estimation residual with ``selection='gap'``; the subspace
         estimate alone on a non-uniform grid or with a basis or filtered
         signals given (``info['start']``).
@@ -821,7 +823,7 @@ def ct_subspace(data, order=None, *, basis=None, poly_order: int = 3, estimate_x
                                        prepare_fold=prepare_fold, builds=builds)[3]
         ranking, record, entries = _ct_discrete.merged_selection(
             ct_record, dt_scores, (ct_record or {}).get("samples_used", cv_data.n_samples),
-            m, p)
+            m, p, reference=fixed is None)
         if fixed is not None:
             ranking = [c for c in ranking if c[0] == fixed] or ranking
         model = None
@@ -874,7 +876,7 @@ def ct_subspace(data, order=None, *, basis=None, poly_order: int = 3, estimate_x
         refit, bd_selection = _second_wins(
             cv_data, n, N, prepare_fold, ("converted", partial(_build, start=chosen)),
             ("B, D refitted", partial(_build, feedthrough=feedthrough is True, start=chosen,
-                                      refit=True)), test=True)
+                                      refit=True)), test=fixed is None)
         if refit:
             model = _build(problem, feedthrough is True, chosen, refit=True)
     use_d = model.info["feedthrough"]
