@@ -142,16 +142,21 @@ def with_nyquist_modes(dmodel, hold: str):
     return StateSpace(A, B, C_aug, D, 0.0, hold=hold), q
 
 
-def convert(dmodel, hold: str):
+def convert(dmodel, hold: str, nyquist: bool = True):
     """The continuous-time model of ``dmodel`` under ``hold`` and a note: ``(model,
     None)`` by :meth:`subid.StateSpace.to_continuous`; ``(model, text)`` with a mode at
     the Nyquist frequency for each pole on the negative real axis
-    (:func:`with_nyquist_modes`); ``(None, reason)`` when there is none."""
+    (:func:`with_nyquist_modes`; not with ``nyquist=False``: a given order must stay
+    the order); ``(None, reason)`` when there is none."""
     lam = np.linalg.eigvals(dmodel.A) if dmodel.order else np.zeros(0)
     negative = [z for z in lam if _negative(z.real, z.imag)]
     try:
         with warnings.catch_warnings(), np.errstate(all="ignore"):
             warnings.simplefilter("ignore")
+            if negative and not nyquist:
+                return None, (f"its pole(s) at z = {', '.join(f'{z.real:.3g}' for z in negative)}"
+                              " on the negative real axis have no continuous-time "
+                              "counterpart of the same order")
             if negative:
                 cm, q = with_nyquist_modes(dmodel.with_noise_model(None, None), hold)
                 if cm is None:
@@ -171,7 +176,8 @@ def convert(dmodel, hold: str):
     return StateSpace(cm.A, cm.B, cm.C, cm.D, 0.0, hold=hold), note
 
 
-def discrete_models(data, order: int, horizons, *, hold: str, feedthrough, stability):
+def discrete_models(data, order: int, horizons, *, hold: str, feedthrough, stability,
+                    nyquist: bool = True):
     """The N4SID models of ``order`` at each of ``horizons``, converted with ``hold``.
 
     Returns ``(models, failures)``: ``[(horizon, continuous model, note)]`` (the note of
@@ -179,7 +185,7 @@ def discrete_models(data, order: int, horizons, *, hold: str, feedthrough, stabi
     converted.
     ``feedthrough`` and ``stability`` are passed to :func:`subid.n4sid`
     (``'auto'``: its own F-test decides D), as is ``data`` (offsets already
-    removed by the caller).
+    removed by the caller); ``nyquist`` as in :func:`convert`.
     """
     from subid.methods.dt.n4sid import n4sid
     out, failures = [], {}
@@ -191,7 +197,7 @@ def discrete_models(data, order: int, horizons, *, hold: str, feedthrough, stabi
         except (ValueError, np.linalg.LinAlgError) as exc:  # SubidError is a ValueError
             failures[f] = f"N4SID failed ({exc})"
             continue
-        cm, note = convert(dm, hold)
+        cm, note = convert(dm, hold, nyquist)
         if cm is None:
             failures[f] = note
             continue

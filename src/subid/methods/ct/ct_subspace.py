@@ -351,7 +351,7 @@ def _discrete_starts(problem: Problem, n: int, horizons=None):
                                      n_experiments=data.n_experiments)
     models, failures = _ct_discrete.discrete_models(
         work, n, horizons, hold=_model_hold(s), feedthrough=s["dt_feedthrough"],
-        stability=s["stability"])
+        stability=s["stability"], nyquist=s["nyquist_modes"])
     return [(f"discrete ({_ct_discrete.label(f)})", cm, note)
             for f, cm, note in models], failures
 
@@ -529,7 +529,8 @@ def ct_subspace(data, order=None, *, basis=None, poly_order: int = 3, estimate_x
         Model order n. ``None``: chosen among 1..min(10, N p - p) (or the
         candidates given) by ``selection``; the converted N4SID candidates
         (``start='auto'``) come at the orders n4sid scores (past 10 where its
-        search goes on), plus one state per Nyquist mode.
+        search goes on), plus one state per Nyquist mode; with the order
+        given, only converted models of that order compete.
     basis : FilterBank, optional
         Basis filter bank (:func:`subid.basis.takenaka_malmquist`,
         :func:`~subid.basis.laguerre`, :func:`~subid.basis.legendre`).
@@ -765,6 +766,7 @@ def ct_subspace(data, order=None, *, basis=None, poly_order: int = 3, estimate_x
                     ac_method=ac_method, bd_method=bd_method, filtering=filtering,
                     data_equation=data_equation, filtered=filtered,
                     dt_feedthrough=feedthrough if isinstance(feedthrough, bool) else "auto",
+                    nyquist_modes=fixed is None,
                     lag=_lag_for(basis, data.experiments[0].t) if instruments == "past" else 0)
     cv = selection == "cv" and filtered is None
 
