@@ -23,19 +23,21 @@ basis-filter estimates in one cross-validation:
   best basis-filter estimate replaces the best converted model only when it
   also scores significantly better on the folds (:func:`significantly_better`:
   better on every one of the four folds, or by a one-sided paired t-test at
-  5 %). With the order given there is no default N4SID model to protect
+  5 %): the folds of a short record are noisy, and on the DaISy winding
+  record a basis-filter estimate that led the folds' mean by 3.4 points
+  validated 22 points below the N4SID model (the test keeps the N4SID model
+  there). With the order given there is no default N4SID model to protect
   (n4sid at a forced order can lack the states of the noise: under AR(1)
   output noise its order-4 models of the seed-002 system scored -43 to 22 %
-  on the folds), and the candidates compete by the criterion alone; The folds of a
-  short record are noisy: on the DaISy winding record a basis-filter
-  estimate that led the folds' mean by 3.4 points validated 22 points below
-  the N4SID model (the paired test keeps the N4SID model there);
+  on the folds), and the candidates compete by the criterion alone;
 * a discrete-time model with a pole on the negative real axis has no real
   continuous-time counterpart of the same order; it has one with a damped
   mode at the Nyquist frequency in place of each such pole
   (:func:`with_nyquist_modes`), exact at the samples, which ``ct_subspace``
-  uses with a warning. A pole at ``z = 0`` has none: :func:`convert` says so,
-  and ``ct_subspace`` takes the next candidate with a warning.
+  uses with a warning when the order is not given (with the order given
+  such a model is no candidate). A pole at ``z = 0`` has none:
+  :func:`convert` says so, and ``ct_subspace`` takes the next candidate with
+  a warning.
 
 The default ``ct_subspace`` call is therefore never far below the default
 ``n4sid`` model on a uniform record (the two differ only where the folds
@@ -63,6 +65,7 @@ DISCRETE_PREFIX = "N4SID, horizon "
 
 
 def label(horizon: int) -> str:
+    """The name of the discrete-time candidate at ``horizon``."""
     return f"{DISCRETE_PREFIX}{horizon}"
 
 

@@ -73,6 +73,9 @@ Beyond the paper
   projection). It turns the consistent subspace estimate into the
   least-squares (maximum-likelihood for white Gaussian output noise)
   estimate. ``info['subspace_model']`` keeps the subspace estimate.
+* Discrete-time candidates (``start='auto'``, uniform grids): the default
+  N4SID models converted with the hold compete in the cross-validation
+  with n4sid's own fold scores (:mod:`subid.methods.ct._ct_discrete`).
 """
 
 from __future__ import annotations
@@ -805,6 +808,9 @@ def ct_subspace(data, order=None, *, basis=None, poly_order: int = 3, estimate_x
         dm, dm_failure = _ct_discrete.n4sid_default(cv_data, order,
                                         feedthrough=settings["dt_feedthrough"],
                                         stability=stability)
+        if dm is None and not subspace:
+            raise DataError(f"{method}: start='discrete' needs an N4SID model of the record, "
+                            f"and n4sid failed ({dm_failure}); use start='subspace'")
         dt_scores = _ct_discrete.fold_scores(dm)
         if dm is not None and not dt_scores:         # n4sid ran no cross-validation
             dt_scores = None
