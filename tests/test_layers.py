@@ -72,6 +72,7 @@ PRIVATE_ALLOWED = {
     # (_feedthrough) and pipeline (_subspace) modules, which are being rewritten (one
     # pipeline, one B/D entry point); their shared pieces go to methods/_common.py then.
     ("subid.methods.ct.ct_subspace", "subid.methods.dt._selection"),
+    ("subid.methods.ct._ct_discrete", "subid.methods.dt._selection"),
     ("subid.methods.fd", "subid.methods.dt._selection"),
     ("subid.methods.identify", "subid.methods.dt._selection"),
     ("subid.methods.identify", "subid.methods.dt._feedthrough"),

@@ -117,7 +117,7 @@ def test_warnings_issued_while_identifying_are_in_info(monkeypatch, dt_record, c
             return original(*args, **kwargs)
         return wrapped
     monkeypatch.setattr(_subspace, "check_stability", probe(_subspace.check_stability))
-    monkeypatch.setattr(ct_module, "_estimate_a_c", probe(ct_module._estimate_a_c))
+    monkeypatch.setattr(ct_module, "_prepare", probe(ct_module._prepare))
     monkeypatch.setattr(fd_module, "_build", probe(fd_module._build))
     for name in BATCH:
         with pytest.warns(UserWarning, match="probe warning"):    # still issued to the caller
