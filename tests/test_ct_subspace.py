@@ -395,7 +395,7 @@ def test_info_is_complete_and_storable(true):
     model = ct_subspace(data, 4, basis=takenaka_malmquist([2 + 1j, 2 - 1j, 5, 9, 14, 30, 60, 90]))
     info = model.info
     for key in ("singular_values", "basis_poles", "order", "instruments", "iterations",
-                "ac_residual", "b_regression_condition", "bd_method_used", "x0",
+                "ac_residual", "b_regression_condition", "bd_method", "x0",
                 "subspace_model", "refined", "n_correction_regressors"):
         assert key in info, key
     assert info["basis_poles"][0] == 2 + 1j

@@ -97,12 +97,12 @@ from subid.errors import (
     TooFewSamplesError,
 )
 from subid.methods._info import model_info, records_warnings
+from subid.methods.bd import CT_OPTIONS, INFO_KEY, fit_b_d_x0
 from subid.methods.ct import _ct_fit
 from subid.methods.ct._ct_estimate import (
     _correction_count,
     _correction_regressors,
     _estimate_a_c,
-    _fit_b_filtered,
     _markov_change,
     _subspace_factor,
     data_equation_matrices,
@@ -344,10 +344,19 @@ def _prepare(data: IOData, candidates, s: dict) -> Problem:
 
 
 def _linear_fit(problem: Problem, feedthrough: bool, whiten=None):
+    """``fit(A, C) -> (B, D, x0, y0, diagnostics)`` (None where simulating A overflows):
+    the ``'simulation'`` route of :func:`subid.methods.bd.fit_b_d_x0`."""
     s = problem.settings
-    return lambda A, C: _ct_fit.fit_linear(A, C, problem.record, feedthrough=feedthrough,
-                                           estimate_x0=s["estimate_x0"], offset=s["offset"],
-                                           whiten=whiten)
+
+    def fit(A, C):
+        fitted = fit_b_d_x0(A, C, problem.record, bd_method="simulation",
+                            feedthrough=feedthrough, estimate_x0=s["estimate_x0"],
+                            offset=s["offset"], whiten=whiten)
+        if fitted is None:
+            return None
+        B, D, x0, diag = fitted
+        return B, D, x0, diag.pop("y_offset"), diag
+    return fit
 
 
 def _given_bd(problem: Problem, A, B, C, D):
@@ -372,7 +381,6 @@ def _complete(problem: Problem, Theta, Lf, feedthrough: bool):
     """A, C from ``Theta``; then B, D, x0 (y0): ``(A, B, C, D, x0, y0, diag)``."""
     s = problem.settings
     basis, p = s["basis"], problem.record.n_outputs
-    m, n = problem.record.n_inputs, Theta.shape[1]
     A, C, ac_resid = _estimate_a_c(basis, Theta, p, s["ac_method"])
     diag = {"ac_residual": ac_resid}
     if s["bd_method"] == "simulation":
@@ -380,7 +388,7 @@ def _complete(problem: Problem, Theta, Lf, feedthrough: bool):
             A, fitted, stab = _ct_fit.stable_choice(A, C, _linear_fit(problem, feedthrough),
                                                     problem.record, s["stability"])
             B, D, x0, y0, bd = fitted
-            diag.update(bd, bd_method_used="simulation", stability=stab)
+            diag.update(bd, stability=stab)
             return A, B, C, D, x0, y0, diag
         except ModelError:          # A too unstable to simulate over the record
             pass
@@ -390,9 +398,10 @@ def _complete(problem: Problem, Theta, Lf, feedthrough: bool):
     else:
         def Tfun(Bm, Dm):
             return data_equation_matrices(basis, A, Bm, C, Dm)[1]
-    B, D, bd = _fit_b_filtered(Tfun, Theta, Lf, problem.iU, n, m, p, feedthrough)
+    B, D, _, bd = fit_b_d_x0(A, C, problem.record, bd_method="filtered", feedthrough=feedthrough,
+                             filtered=(Tfun, Theta, Lf, problem.iU))
     x0, y0 = _given_bd(problem, A, B, C, D)
-    diag.update(bd, bd_method_used="filtered", stability={"requested": s["stability"],
+    diag.update(bd, stability={"requested": s["stability"],
                                                          "action": "none (filtered B)"})
     return A, B, C, D, x0, y0, diag
 
@@ -483,15 +492,14 @@ def _build(problem: Problem, feedthrough=None, start=None) -> StateSpace:
                     y_hat = _ct_fit.predicted(cm.A, cm.B, cm.C, cm.D, x0, y0, problem.record)
                     rms = float(np.sqrt(np.mean((problem.record.y - y_hat) ** 2)))
                     return cm.A, cm.B, cm.C, cm.D, x0, y0, {
-                        "b_residual_rms": rms, "bd_method_used": "converted",
+                        "b_residual_rms": rms, INFO_KEY: "converted",
                         "stability": {"requested": s["stability"], "action": "none"},
                         "iterations": 0}
                 A, fitted, stab = _ct_fit.stable_choice(cm.A, cm.C,
                                                         _linear_fit(problem, feedthrough),
                                                         problem.record, s["stability"])
                 B, D, x0, y0, bd = fitted
-                return A, B, cm.C, D, x0, y0, dict(bd, bd_method_used="simulation",
-                                                   stability=stab, iterations=0)
+                return A, B, cm.C, D, x0, y0, dict(bd, stability=stab, iterations=0)
             options.append((label, converted))
     best = None
     for name, run in options:
@@ -534,7 +542,7 @@ def _model(problem: Problem, n, A, B, C, D, x0, y0, diag, feedthrough) -> StateS
         interpolated_input=s["hold"] is None, startup=s["startup"],
         n_correction_regressors=problem.n_corr, instruments=s["instruments"],
         instrument_lag=problem.lag if s["instruments"] == "past" else None,
-        ac_method=s["ac_method"], bd_method=s["bd_method"],
+        ac_method=s["ac_method"],
         filtering=s["filtering"] if s["filtered"] is None else "given",
         data_equation=s["data_equation"], feedthrough=bool(feedthrough),
         offset=s["offset"], y_offset=y0, largest_real_part=float(lam.real.max()), refined=False,
@@ -688,7 +696,8 @@ def ct_subspace(data, order=None, *, basis=None, poly_order: int = 3, estimate_x
         B (D, x0) by least squares on the raw output samples through the
         exactly discretised model, or from the filtered data equation (15).
         'simulation' falls back to 'filtered' if simulating A overflows
-        (``info['bd_method_used']``).
+        (``info['bd_method']`` names the route that ran: also 'converted'
+        for a start converted from discrete time).
     filtering : {'exact', 'sections'}
         Interpolate each signal once and propagate the whole filter chain
         exactly, or re-interpolate after every section (the paper's S1-S4).
@@ -766,7 +775,7 @@ def ct_subspace(data, order=None, *, basis=None, poly_order: int = 3, estimate_x
     check_choice(noise_model, "noise_model", ("ar", None))
     check_choice(instruments, "instruments", ("model", "past", None))
     check_choice(ac_method, "ac_method", ("joint", "paper"))
-    check_choice(bd_method, "bd_method", ("simulation", "filtered"))
+    check_choice(bd_method, "bd_method", CT_OPTIONS)
     check_choice(filtering, "filtering", ("exact", "sections"))
     check_choice(data_equation, "data_equation", ("compact", "paper"))
     iterations = check_int(iterations, "iterations", minimum=0)

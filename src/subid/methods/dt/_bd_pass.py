@@ -228,7 +228,7 @@ class OutputRegression:
     """The B, D, x0 regression of a record held in pieces (see the module docstring).
 
     Attach it to the record's :class:`~subid.HankelStatistic` as
-    ``statistic.output_regression``; :func:`subid.methods.dt._subspace.estimate_b_d` then
+    ``statistic.output_regression``; :func:`subid.methods.bd.fit_b_d_x0` then
     calls it where the in-memory record runs :func:`subid.methods.dt._regression.fit_b_d_x0`.
 
     Parameters
