@@ -35,6 +35,7 @@ import numpy as np
 import scipy.linalg
 
 from subid.methods.dt._regression import (
+    _CHUNK,
     _MODAL_BLOCK,
     MODAL_MAX_NORMAL_CONDITION,
     RESIDUAL_RECOMPUTE,
@@ -63,7 +64,6 @@ CHUNK_BYTES = 32 * 2 ** 20
 def dense_bytes(n, nu, ny, n_samples, *, estimate_x0=True, feedthrough=True):
     """Bytes of the largest array the in-memory engines build: the modal maps
     (``ny (p + 1) d``), the normal matrix and the rows of a QR chunk."""
-    from subid.methods.dt._regression import _CHUNK
     _, _, p = parameter_count(n, nu, ny, estimate_x0, feedthrough)
     d = n * (1 + nu) + nu + ny
     return 8 * max(ny * (p + 1) * d, (p + 1) ** 2, min(_CHUNK, n_samples) * ny * (p + 1))
