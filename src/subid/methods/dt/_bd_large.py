@@ -108,93 +108,101 @@ def fit_experiments(A, C, u, y, starts, *, feedthrough=True, estimate_x0=True,
                            kernel=sensitivity_rows if kernel is None else kernel)
 
 
-def _finish(B, D, x0_rows, diagnostics, n, estimate_x0, path, n_experiments, conditions):
-    x0 = np.stack(x0_rows) if estimate_x0 else np.zeros((n_experiments, n))
-    diagnostics["regression_condition"] = float(max([diagnostics["regression_condition"]]
-                                                    + conditions))
-    diagnostics.update(regression_path=path, experiments=n_experiments)
-    return B, D, x0, diagnostics
+def solve_normal_blocks(blocks, n, nu, ny, *, estimate_x0, feedthrough, n_samples):
+    """B, D, x0 from the normal equations of each experiment, or None (then the QR
+    path must decide).
 
+    ``blocks[e]`` is the augmented normal matrix of experiment e in the layout
+    ``[x0_e; vec B; vec D; y]``. One experiment: solved as it is
+    (:func:`subid.methods.dt._regression.solve_normal_equations`). Several: each
+    x0 block is eliminated (Schur complement ``N_ss - N_sx N_xx^-1 N_xs``,
+    equilibrated Cholesky), the reduced problems summed and solved, then
+    ``x0_e = N_xx^-1 (N_xy - N_xs theta)``. None where an equilibrated x0 block
+    or the reduced matrix has a condition number above
+    :data:`subid.methods.dt._regression.MODAL_MAX_NORMAL_CONDITION` (each is at most
+    the dense matrix's).
 
-def _experiments_modal(A, C, u, y, ranges, weights, *, feedthrough, estimate_x0):
-    n, nu, ny = A.shape[0], u.shape[1], y.shape[1]
-    n_samples = u.shape[0]
-    form = ModalForm.of(A, C)
-    if form is None:
-        return None
-    P = regressor_maps(form, nu, ny, estimate_x0=estimate_x0, feedthrough=feedthrough)
-    nx, _, p = parameter_count(n, nu, ny, estimate_x0, feedthrough)
-    reduced = np.zeros((p - nx + 1, p - nx + 1))
-    total_yy = 0.0
-    blocks, conditions = [], []
-    for a, b in ranges:
-        N = normal_equations(P, piece_moments(form, u[a:b], y[a:b])[0], weights)
-        total_yy += N[-1, -1]
+    Returns
+    -------
+    B, D, x0, thetas, diagnostics
+        ``x0`` of shape (n,) for one experiment, (E, n) for several; ``thetas[e]``
+        the parameter vector ``[x0_e; vec B; vec D]`` of experiment e.
+    """
+    if len(blocks) == 1:
+        solved = solve_normal_equations(blocks[0], n, nu, ny, estimate_x0=estimate_x0,
+                                        feedthrough=feedthrough, n_samples=n_samples)
+        if solved is None:
+            return None
+        B, D, x0, theta, diagnostics = solved
+        return B, D, x0, [theta], diagnostics
+    nx, _, _ = parameter_count(n, nu, ny, estimate_x0, feedthrough)
+    reduced = 0.0
+    eliminated, conditions = [], []
+    for N in blocks:
         if not np.isfinite(N).all():
             return None
-        if nx:
-            # Schur complement of the x0 block: N_ss - N_sx N_xx^-1 N_xs
-            scale = np.sqrt(np.diag(N[:nx, :nx])).copy()
-            scale[scale == 0] = 1.0
-            Ge = N[:nx, :nx] / scale[:, None] / scale[None, :]
-            ev = np.linalg.eigvalsh(Ge)
-            if ev[0] <= 0 or ev[-1] / ev[0] > MODAL_MAX_NORMAL_CONDITION:
-                return None
-            F = scipy.linalg.cho_solve(scipy.linalg.cho_factor(Ge, check_finite=False),
-                                       N[:nx, nx:] / scale[:, None],
-                                       check_finite=False) / scale[:, None]
-            reduced += N[nx:, nx:] - N[nx:, :nx] @ F
-            blocks.append(F)
-            conditions.append(float(np.sqrt(ev[-1] / ev[0])))
-        else:
-            reduced += N
+        if not nx:
+            reduced = reduced + N
+            continue
+        scale = np.sqrt(np.diag(N[:nx, :nx])).copy()
+        scale[scale == 0] = 1.0
+        Ge = N[:nx, :nx] / scale[:, None] / scale[None, :]
+        ev = np.linalg.eigvalsh(Ge)
+        if ev[0] <= 0 or ev[-1] / ev[0] > MODAL_MAX_NORMAL_CONDITION:
+            return None
+        F = scipy.linalg.cho_solve(scipy.linalg.cho_factor(Ge, check_finite=False),
+                                   N[:nx, nx:] / scale[:, None],
+                                   check_finite=False) / scale[:, None]
+        reduced = reduced + (N[nx:, nx:] - N[nx:, :nx] @ F)
+        eliminated.append(F)
+        conditions.append(float(np.sqrt(ev[-1] / ev[0])))
     solved = solve_normal_equations(reduced, n, nu, ny, estimate_x0=False,
                                     feedthrough=feedthrough, n_samples=n_samples)
     if solved is None:
         return None
     B, D, _, theta, diagnostics = solved
-    x0_rows = [F[:, -1] - F[:, :-1] @ theta for F in blocks]
-    fitted = _finish(B, D, x0_rows, diagnostics, n, estimate_x0, "modal", len(ranges),
-                     conditions)
-    if diagnostics["residual_rms"] ** 2 * n_samples * ny < RESIDUAL_RECOMPUTE * total_yy:
-        # nearly exact: the residual sample by sample (the normal equations' is rounding)
-        total = 0.0
-        for e, (a, b) in enumerate(ranges):
-            th = np.concatenate([fitted[2][e] if nx else np.zeros(0), theta])
-            g = np.stack([weights[i] * (P[i, -1] - th @ P[i, :-1]) for i in range(ny)])
-            for _, w, _ in _blocks(form, u[a:b], y[a:b], _MODAL_BLOCK, modal_signals):
-                total += float(np.sum((w @ g.T) ** 2))
-        diagnostics["residual_rms"] = float(np.sqrt(total / (n_samples * ny)))
-    return fitted
+    x0_rows = [F[:, -1] - F[:, :-1] @ theta for F in eliminated]
+    x0 = np.stack(x0_rows) if nx else np.zeros((len(blocks), n))
+    thetas = [np.concatenate([x, theta]) for x in x0_rows] if nx else [theta] * len(blocks)
+    _combine_conditions(diagnostics, conditions, len(blocks))
+    return B, D, x0, thetas, diagnostics
 
 
-def _experiments_qr(A, C, u, y, ranges, output_weights, *, feedthrough, estimate_x0, kernel):
-    n, nu, ny = A.shape[0], u.shape[1], y.shape[1]
-    nx, q, p = parameter_count(n, nu, ny, estimate_x0, feedthrough)
+def solve_factor_blocks(factors, n, nu, ny, *, estimate_x0, feedthrough, n_samples):
+    """B, D, x0 from the triangular factor of each experiment's rows.
+
+    ``factors[e]`` is the factor of experiment e's weighted rows in the layout
+    ``[x0_e; vec B; vec D; y]`` (``(p_e + 1)`` columns; None for an overflow).
+    The rows of each factor that hold its x0 columns are set aside, the others
+    (zero there) accumulated into one factor of ``[vec B; vec D; y]`` by
+    sequential QR; theta from it, then ``R_xx x0_e = r_xy - R_xs theta``
+    (equilibrated as :func:`subid.methods.dt._regression.solve_factor`). The QR
+    of the block-angular stack, without its zeros.
+
+    Returns
+    -------
+    B, D, x0, diagnostics
+        ``x0`` as :func:`solve_normal_blocks`; NaN where a factor overflowed.
+    """
+    nx, _, p = parameter_count(n, nu, ny, estimate_x0, feedthrough)
     width = p - nx + 1
     R = np.zeros((0, width))
     flat = np.empty(2 * width * width)
     tops = []
-    for a, b in ranges:
-        S = np.zeros((n, q))
-        if estimate_x0:
-            S[:, :n] = np.eye(n)
-        R_e, _ = qr_factor(A, C, u[a:b], y[a:b], S, n_x0=nx, feedthrough=feedthrough,
-                           output_weights=output_weights, kernel=kernel)
-        if not np.isfinite(R_e).all():       # overflowed (an unstable A)
+    for R_e in factors:
+        if R_e is None or not np.isfinite(R_e).all():     # overflowed (an unstable A)
             B, D, _, diagnostics = _nan_fit(n, nu, ny, "qr")
-            diagnostics["experiments"] = len(ranges)
-            return B, D, np.full((len(ranges), n), np.nan), diagnostics
+            return B, D, np.full((len(factors), n), np.nan), diagnostics
         if R_e.shape[0] < p + 1:
             R_e = np.vstack([R_e, np.zeros((p + 1 - R_e.shape[0], p + 1))])
         tops.append(R_e[:nx])                 # the rows that hold x0_e: set aside
         R = _qr_append(R, R_e[nx:, nx:], flat)
     B, D, _, theta, diagnostics = solve_factor(R, n, nu, ny, estimate_x0=False,
-                                               feedthrough=feedthrough,
-                                               n_samples=u.shape[0])
+                                               feedthrough=feedthrough, n_samples=n_samples)
     x0_rows, conditions = [], []
     for top in tops:
-        # R_xx x0_e = r_xy - R_xs theta, R_xx upper triangular (equilibrated as solve_factor)
+        if not nx:
+            continue
         Rxx = top[:, :nx]
         rhs = top[:, -1] - top[:, nx:-1] @ theta
         scale = np.linalg.norm(Rxx, axis=0)
@@ -208,7 +216,63 @@ def _experiments_qr(A, C, u, y, ranges, output_weights, *, feedthrough, estimate
             x0_e = scipy.linalg.solve_triangular(Rt, rhs, check_finite=False)
         x0_rows.append(x0_e / scale)
         conditions.append(float(1.0 / rcond) if rcond > 0 else float("inf"))
-    return _finish(B, D, x0_rows, diagnostics, n, estimate_x0, "qr", len(ranges), conditions)
+    x0 = np.stack(x0_rows) if nx else np.zeros((len(tops), n))
+    _combine_conditions(diagnostics, conditions, len(tops))
+    return B, D, x0, diagnostics
+
+
+def _combine_conditions(diagnostics, conditions, n_experiments):
+    diagnostics["regression_condition"] = float(max([diagnostics["regression_condition"]]
+                                                    + conditions))
+    diagnostics["experiments"] = n_experiments
+
+
+def _experiments_modal(A, C, u, y, ranges, weights, *, feedthrough, estimate_x0):
+    n, nu, ny = A.shape[0], u.shape[1], y.shape[1]
+    n_samples = u.shape[0]
+    form = ModalForm.of(A, C)
+    if form is None:
+        return None
+    P = regressor_maps(form, nu, ny, estimate_x0=estimate_x0, feedthrough=feedthrough)
+    blocks = [normal_equations(P, piece_moments(form, u[a:b], y[a:b])[0], weights)
+              for a, b in ranges]
+    solved = solve_normal_blocks(blocks, n, nu, ny, estimate_x0=estimate_x0,
+                                 feedthrough=feedthrough, n_samples=n_samples)
+    if solved is None:
+        return None
+    B, D, x0, thetas, diagnostics = solved
+    diagnostics["regression_path"] = "modal"
+    if diagnostics["residual_rms"] ** 2 * n_samples * ny < \
+            RESIDUAL_RECOMPUTE * sum(N[-1, -1] for N in blocks):
+        # nearly exact: the residual sample by sample (the normal equations' is rounding)
+        total = 0.0
+        for (a, b), th in zip(ranges, thetas):
+            g = np.stack([weights[i] * (P[i, -1] - th @ P[i, :-1]) for i in range(ny)])
+            for _, w, _ in _blocks(form, u[a:b], y[a:b], _MODAL_BLOCK, modal_signals):
+                total += float(np.sum((w @ g.T) ** 2))
+        diagnostics["residual_rms"] = float(np.sqrt(total / (n_samples * ny)))
+    return B, D, x0, diagnostics
+
+
+def _experiments_qr(A, C, u, y, ranges, output_weights, *, feedthrough, estimate_x0, kernel):
+    n, nu, ny = A.shape[0], u.shape[1], y.shape[1]
+    nx, q, _ = parameter_count(n, nu, ny, estimate_x0, feedthrough)
+
+    factors = []
+    for a, b in ranges:
+        S = np.zeros((n, q))
+        if estimate_x0:
+            S[:, :n] = np.eye(n)
+        R_e = qr_factor(A, C, u[a:b], y[a:b], S, n_x0=nx, feedthrough=feedthrough,
+                        output_weights=output_weights, kernel=kernel)[0]
+        if not np.isfinite(R_e).all():      # overflowed (an unstable A)
+            B, D, _, diagnostics = _nan_fit(n, nu, ny, "qr")
+            return B, D, np.full((len(ranges), n), np.nan), diagnostics
+        factors.append(R_e)
+    B, D, x0, diagnostics = solve_factor_blocks(factors, n, nu, ny, estimate_x0=estimate_x0,
+                                                feedthrough=feedthrough, n_samples=u.shape[0])
+    diagnostics["regression_path"] = "qr"
+    return B, D, x0, diagnostics
 
 
 # ---------------------------------------------------------------------------
