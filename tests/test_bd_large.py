@@ -206,9 +206,10 @@ def test_unstable_a_overflows_to_a_rank_deficient_result():
 
 def test_one_vocabulary_and_info_key_across_methods():
     data = subid.systems.simulate_data(subid.systems.seed001_system(), 400, seed=3)
-    for model in (subid.moesp(data, 3), subid.ls_subspace(data, 3),
-                  subid.moesp(data, 3, bd_method="projection")):
-        assert model.info[bd.INFO_KEY] in bd.BD_METHODS
+    for model in (subid.moesp(data, 3), subid.ls_subspace(data, 3), subid.n4sid(data, 3),
+                  subid.moesp(data, 3, bd_method="projection"),
+                  subid.ct_subspace(data, 3, start="subspace", refine=False)):
+        assert model.info[bd.INFO_KEY] in bd.BD_METHODS + bd.INFO_ONLY
     rs = subid.RecursiveSubspace(3, 2, 2, horizon=6)
     rs.update(data.u, data.y)
     assert rs.model.info[bd.INFO_KEY] == "simulation"

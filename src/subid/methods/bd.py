@@ -30,8 +30,12 @@ method (each takes the subset that applies to it) and as ``info['bd_method']``
     ``'simulation'``, and ``'projection'`` where the simulation overflows or
     leaves the regression singular, or there are no raw samples.
 
-``'converted'`` appears in ``info['bd_method']`` only: the continuous-time
-model converted from a discrete-time one keeps the converted B and D.
+Two more values appear in ``info['bd_method']`` only (:data:`INFO_ONLY`), where B
+and D do not come from a regression for a given (A, C): ``'states'``, the
+state-sequence regression that gives A, B, C, D together (N4SID, Van Overschee
+& De Moor 1996, eq. 4.29; PBSID's state equation), and ``'converted'``, the
+continuous-time model converted from a discrete-time one, which keeps the
+converted B and D.
 """
 
 from __future__ import annotations
@@ -46,13 +50,15 @@ from subid.methods.dt._regression import fit_b_d_projection
 from subid.methods.dt._regression import fit_b_d_x0 as _fit_record
 from subid.statistic.hankel import HankelStatistic
 
-__all__ = ["INFO_KEY", "BD_METHODS", "BATCH_OPTIONS", "CT_OPTIONS", "ONLINE_OPTIONS",
+__all__ = ["INFO_KEY", "BD_METHODS", "INFO_ONLY", "BATCH_OPTIONS", "CT_OPTIONS", "ONLINE_OPTIONS",
            "Projection", "fit_b_d_x0", "check_experiment_lengths", "experiment_starts"]
 
 #: The ``model.info`` key that names the route that gave B, D, x0.
 INFO_KEY = "bd_method"
 #: Every route (module docstring).
 BD_METHODS = ("auto", "simulation", "prediction", "projection", "filtered")
+#: Values of ``info['bd_method']`` that are no option (module docstring).
+INFO_ONLY = ("states", "converted")
 #: The ``bd_method`` values of the discrete-time batch methods.
 BATCH_OPTIONS = ("auto", "simulation", "projection")
 #: The ``bd_method`` values of :func:`subid.ct_subspace`.

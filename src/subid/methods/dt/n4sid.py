@@ -27,6 +27,7 @@ import scipy.linalg
 from subid._validation import check_bool, checked_call
 from subid.data import IOData
 from subid.delay import shift_for_method
+from subid.methods.bd import INFO_KEY
 from subid.methods.dt._feedthrough import check_feedthrough
 from subid.methods.dt._feedthrough import resolve as resolve_feedthrough
 from subid.methods.dt._subspace import (
@@ -268,4 +269,4 @@ def state_model(pb, gamma, *, stability, feedthrough, estimate_x0, coefficients=
         check_experiment_lengths(data, n)     # what initial_state would raise
     x0 = initial_state(A, B, C, D, data) if estimate_x0 and not pb.fold else None
     return A, B, C, D, x0, {"state_regression_residual": float(residual), "x0": x0,
-                            "stability": stab}
+                            "stability": stab, INFO_KEY: "states"}
