@@ -198,10 +198,11 @@ def test_unstable_a_overflows_to_a_rank_deficient_result():
     rng = np.random.default_rng(15)
     u = rng.standard_normal((3000, 2))
     y = rng.standard_normal((3000, 2))
-    fitted = _bd_large.fit_channels(A, C, u, y)
-    assert fitted[3]["regression_rank_deficient"]
-    fitted = _bd_large.fit_experiments(A, C, u, y, [0, 1500], path="qr")
-    assert fitted[3]["regression_rank_deficient"]
+    with np.errstate(all="ignore"):
+        fitted = _bd_large.fit_channels(A, C, u, y)
+        assert fitted[3]["regression_rank_deficient"]
+        fitted = _bd_large.fit_experiments(A, C, u, y, [0, 1500], path="qr")
+        assert fitted[3]["regression_rank_deficient"] and fitted[2].shape == (2, 3)
 
 
 def test_one_vocabulary_and_info_key_across_methods():
@@ -216,3 +217,39 @@ def test_one_vocabulary_and_info_key_across_methods():
     assert set(bd.BATCH_OPTIONS + bd.CT_OPTIONS + bd.ONLINE_OPTIONS) <= set(bd.BD_METHODS)
     with pytest.raises(ValueError, match="bd_method"):
         bd.fit_b_d_x0(np.eye(2) * 0.5, np.ones((1, 2)), data, bd_method="regression")
+
+
+@pytest.mark.parametrize("defective", [False, True])
+def test_second_pass_with_experiments_equals_in_memory(defective):
+    """The streamed/Dask second pass (one block per experiment, its x0 eliminated) equals
+    the in-memory regression of the merged record: the modal path, and the QR path of a
+    nearly defective A."""
+    from subid.methods.dt._bd_pass import OutputRegression
+    rng = np.random.default_rng(16)
+    if defective:
+        A = np.array([[0.8, 1.0, 0.0], [0.0, 0.8 + 1e-10, 0.3], [0.0, 0.0, -0.5]])
+    else:
+        A = _system(3, 2, 2, seed=17)[0]
+    C = rng.standard_normal((2, 3))
+    u = rng.standard_normal((900, 2))
+    y = rng.standard_normal((900, 2)) * [1.0, 30.0]
+    weights = 1.0 / y.std(axis=0)
+    borders = [0, 100, 300, 310, 600, 900]          # five pieces
+    experiments = [0, 0, 1, 1, 2]                   # experiments start at 0, 300, 600
+
+    def map_pieces(function, arguments):
+        return [function([(u[a:b], y[a:b])], *args)
+                for (a, b), args in zip(zip(borders[:-1], borders[1:]), arguments)]
+
+    second = OutputRegression(map_pieces, 5, 2, 2, experiments=experiments)
+    B, D, x0, diag = second(A, C)
+    B0, D0, x00, d0 = _bd_large.fit_experiments(A, C, u, y, [0, 300, 600],
+                                                output_weights=weights)
+    assert diag["regression_path"] == d0["regression_path"] == ("qr" if defective else "modal")
+    _close(B, B0, 1e-9)
+    _close(D, D0, 1e-9)
+    _close(x0, x00, 1e-9)
+    assert x0.shape == (3, 3)
+    if not defective:
+        x_given = second.initial_state(A, B0, C, D0)
+        _close(x_given, x00, 1e-8)
