@@ -10,10 +10,10 @@ import pytest
 
 from subid import IOData, StateSpace, errors
 from subid.experiments.seed002 import paper_system, simulate
+from subid.methods.ct._ct_estimate import _fit_b_filtered
 from subid.methods.ct.basis import default_basis, laguerre, legendre, takenaka_malmquist
 from subid.methods.ct.ct_subspace import (
     _estimate_a_c,
-    _fit_b_filtered,
     _subspace_factor,
     ct_subspace,
     ct_subspace_paper,
