@@ -58,7 +58,7 @@ from subid.methods.dt._regression import (
 #: (:func:`dense_bytes`); above it :func:`fit_channels` runs instead.
 DENSE_LIMIT = 256 * 2 ** 20
 #: Bytes of the chunk of sensitivities :func:`fit_channels` holds at a time.
-CHUNK_BYTES = 32 * 2 ** 20
+CHUNK_BYTES = 8 * 2 ** 20
 
 
 def dense_bytes(n, nu, ny, n_samples, *, estimate_x0=True, feedthrough=True):
