@@ -9,7 +9,8 @@ is reported as such. Run it under a memory limit, e.g.::
 Cases: a seeded record of 100 inputs and 100 outputs (3,000 samples, a stable
 system of order 4, noise) through the regression for the true (A, C) and through
 ``ls_subspace``/``moesp`` at order 4 and horizon 5 (``system_matrices='shift'``: no
-cross-validation, whose folds repeat the regression for minutes); 2,000 experiments of 20 samples (2 inputs,
+cross-validation) with ``--methods`` (more than 5 minutes under tracemalloc on a shared
+2-core machine, most of it outside the regression); 2,000 experiments of 20 samples (2 inputs,
 2 outputs, order 3) through the regression with one x0 per experiment.
 """
 
@@ -71,10 +72,11 @@ def main():
     print("|---|---|---|---|")
     A, C, data = _record(4, 100, 100, 3000, seed=1)
     _measure("B, D, x0 regression, 100 x 100, 3,000 samples", lambda: _regression(A, C, data))
-    kw = dict(horizon=5, system_matrices="shift")      # no cross-validation (time)
-    _measure("ls_subspace(order=4, horizon=5), 100 x 100",
-             lambda: subid.ls_subspace(data, 4, **kw))
-    _measure("moesp(order=4, horizon=5), 100 x 100", lambda: subid.moesp(data, 4, **kw))
+    if "--methods" in sys.argv:     # the whole methods too (minutes: see the docstring)
+        kw = dict(horizon=5, system_matrices="shift")      # no cross-validation
+        _measure("ls_subspace(order=4, horizon=5), 100 x 100",
+                 lambda: subid.ls_subspace(data, 4, **kw))
+        _measure("moesp(order=4, horizon=5), 100 x 100", lambda: subid.moesp(data, 4, **kw))
     A, C, one = _record(3, 2, 2, 40000, seed=3)
     merged = subid.merge([one[k:k + 20] for k in range(0, 40000, 20)])
     _measure("B, D, x0 regression, 2,000 experiments of 20 samples",
