@@ -57,7 +57,8 @@ __all__ = ["INFO_KEY", "BD_METHODS", "INFO_ONLY", "BATCH_OPTIONS", "CT_OPTIONS",
 INFO_KEY = "bd_method"
 #: Every route (module docstring).
 BD_METHODS = ("auto", "simulation", "prediction", "projection", "filtered")
-#: Values of ``info['bd_method']`` that are no option (module docstring).
+#: Values of ``info['bd_method']`` that are no option (module docstring); the
+#: diagnostics of a fit skipped by ``worse_than`` say ``'bound'``.
 INFO_ONLY = ("states", "converted")
 #: The ``bd_method`` values of the discrete-time batch methods.
 BATCH_OPTIONS = ("auto", "simulation", "projection")
@@ -85,7 +86,7 @@ class Projection(NamedTuple):
 
 def fit_b_d_x0(A, C, data, *, bd_method="simulation", feedthrough=True, estimate_x0=True,
                output_weights=None, projection=None, noise_gain=None, path="auto",
-               offset=False, whiten=None, filtered=None):
+               offset=False, whiten=None, filtered=None, worse_than=None):
     """B, D and x0 of the model with the given A and C on ``data``, by ``bd_method``.
 
     Parameters
@@ -120,6 +121,12 @@ def fit_b_d_x0(A, C, data, *, bd_method="simulation", feedthrough=True, estimate
         Continuous time: the noise model's whitening of the regression rows.
     filtered : tuple, optional
         Continuous time, ``'filtered'``: ``(Tfun, Theta, Lf, iU)`` of eq. (15).
+    worse_than : float, optional
+        ``'auto'`` on one raw record: when the residual RMS of the output
+        regression is proven at least this from part of the record
+        (:func:`subid.methods.dt._residual_bound.loses`), no fit:
+        ``(None, None, None, {'bd_method': 'bound', 'residual_at_least': bound})``
+        (the unstable A of a cross-validation fold, which then cannot be kept).
 
     Returns
     -------
@@ -158,6 +165,13 @@ def fit_b_d_x0(A, C, data, *, bd_method="simulation", feedthrough=True, estimate
     diag = {}
     if estimate_x0 and isinstance(data, IOData) and data.n_experiments > 1:
         check_experiment_lengths(data, A.shape[0])
+    if worse_than is not None and bd_method == "auto" and isinstance(data, IOData) \
+            and data.n_experiments == 1:
+        from subid.methods.dt._residual_bound import loses
+        bound = loses(A, C, data.u, data.y, worse_than, feedthrough=feedthrough,
+                      estimate_x0=estimate_x0, output_weights=output_weights)
+        if bound is not None:
+            return None, None, None, {INFO_KEY: "bound", "residual_at_least": bound}
     if bd_method in ("auto", "simulation"):
         with np.errstate(over="ignore", invalid="ignore"):
             if second_pass is not None:

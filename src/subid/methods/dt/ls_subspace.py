@@ -333,7 +333,7 @@ def _ls_subspace(pb, *, instruments, selector, seed, estimate_x0, feedthrough,
                                                    stability=stability, data=data,
                                                    method=method,
                                                    refit_unstable=refit if bd_method == "auto"
-                                                   else None)
+                                                   else None, bound_unstable=pb.fold)
     A, B, C, x0 = core.to_selector_basis(B_q, x0_q, A_q=A_q)
     C = C * pb.output_scale[:, None]
     info = core.info(instruments, instrument_weighting, power_iterations)

@@ -198,7 +198,7 @@ def _moesp(pb, *, weighting, stability, feedthrough, estimate_x0, bd_method,
     A, (B, D, x0, reg), stab = stable_choice(A, Q, ny, fit, stability=stability, data=data,
                                              method="moesp",
                                              refit_unstable=refit if bd_method == "auto"
-                                             else None)
+                                             else None, bound_unstable=pb.fold)
     C = C * pb.output_scale[:, None]
     return finish(pb, A, B, C, D, n, order_selection, singular_values=s, weighting=weighting,
                   shift_residual=shift_residual, x0=x0, stability=stab,

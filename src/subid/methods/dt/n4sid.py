@@ -254,7 +254,7 @@ def state_model(pb, gamma, *, stability, feedthrough, estimate_x0, coefficients=
         fit = b_d_fit(pb, C_q, Q, Lr[:a, :a], Lr[a + b:, :a], bd_method="auto",
                       feedthrough=feedthrough, estimate_x0=estimate_x0)
         A_q, fitted, stab = stable_choice(A_unstable, Q, ny, fit, stability=stability,
-                                          data=data, method=pb.method)
+                                          data=data, method=pb.method, bound_unstable=pb.fold)
         if stab["action"] == "enforced":
             # back from the basis Q to that of gamma (x = Rg^{-1} x_q)
             B_q, D, x0_q, extra = fitted
