@@ -11,6 +11,8 @@ Usage (from the repository root)::
 
     PYTHONPATH=src OPENBLAS_NUM_THREADS=1 python bench/bd_identity.py save before.npz
     PYTHONPATH=src OPENBLAS_NUM_THREADS=1 python bench/bd_identity.py compare before.npz
+
+``--quick`` (after the file name): three records and the subspace methods only.
 """
 
 from __future__ import annotations
@@ -32,11 +34,16 @@ from subid.methods.registry import METHODS
 POLYNOMIAL = {"armax", "oe", "bj"}
 
 
+QUICK = "--quick" in sys.argv      # three records, the subspace methods, no ct extras
+
+
 def _cases():
     for name in datasets.names():
+        if QUICK and name not in ("ballbeam", "dryer", "robot_arm"):
+            continue
         data = datasets.load(name)
         for method, spec in METHODS.items():
-            if spec.kind != "batch":
+            if spec.kind != "batch" or (QUICK and method not in ("ls", "moesp", "n4sid")):
                 continue
             if method in POLYNOMIAL and name != "dryer":
                 continue
@@ -80,6 +87,8 @@ def _cases():
             "moesp", order=4))
     except ImportError:
         pass
+    if QUICK:
+        return
     yield "ct/filtered", lambda: subid.ct_subspace(dryer, 4, bd_method="filtered")
     yield "ct/simulation", lambda: subid.ct_subspace(dryer, 4, bd_method="simulation")
     for bd in ("regression", "projection"):
