@@ -79,6 +79,12 @@ PRIVATE_ALLOWED = {
     ("subid.methods.identify", "subid.methods.dt._subspace"),
     ("subid.methods.describe", "subid.methods.dt._selection"),
     ("subid.methods.online", "subid.methods.dt._regression"),
+    # The one B, D, x0 entry point dispatches to its engines (issue 24 item 2).
+    ("subid.methods.bd", "subid.methods.dt._regression"),
+    ("subid.methods.bd", "subid.methods.dt._bd_large"),
+    ("subid.methods.bd", "subid.methods.dt._residual_bound"),
+    ("subid.methods.bd", "subid.methods.ct._ct_fit"),
+    ("subid.methods.bd", "subid.methods.ct._ct_estimate"),
 }
 
 

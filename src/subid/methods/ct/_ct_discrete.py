@@ -52,7 +52,10 @@ import warnings
 import numpy as np
 import scipy.linalg
 
-from subid.errors import SubidError
+from subid._validation import check_choice, checked_call
+from subid.data import IOData
+from subid.errors import DataError, SubidError
+from subid.methods._info import records_warnings
 
 __all__ = ["discrete_models", "n4sid_default", "fold_scores", "merged_selection",
            "significantly_better", "DISCRETE_PREFIX", "LEVEL"]
@@ -317,3 +320,52 @@ def merged_selection(ct_record, dt_scores: dict, n_samples: int, n_inputs: int,
     if test is not None:
         record["basis_filter_test"] = test
     return [(k[0], names[k]) for k in keys], record, {(k[0], names[k]): entry(k) for k in keys}
+
+
+@checked_call
+@records_warnings
+def dt_to_ct(data, order=None, *, method: str = "n4sid", hold: str = "zoh", **options):
+    """Baseline: discrete-time subspace identification, then conversion to continuous time.
+
+    Only possible on a uniform grid. The discrete-time model is identified
+    with a feedthrough term (a first-order hold makes one appear even when
+    the continuous system has none) and converted by
+    :meth:`StateSpace.to_continuous` with the input's hold.
+
+    Parameters
+    ----------
+    data : IOData
+        Uniformly sampled record.
+    order : int or None
+    method : {'n4sid', 'moesp', 'ls'}
+        A discrete-time batch method of :data:`subid.registry.METHODS`
+        (``'ls_subspace'`` is accepted for ``'ls'``).
+    hold : {'zoh', 'foh'}
+        Inter-sample behaviour of the input; the model records it
+        (:attr:`StateSpace.hold`).
+    **options
+        Passed to the discrete-time method (e.g. ``horizon``).
+
+    Returns
+    -------
+    StateSpace
+        Continuous-time model; ``info`` is the discrete method's, plus
+        ``method`` and ``discrete_model_dt``.
+    """
+    from subid.methods.registry import find
+    spec = find(method, kind="batch", time="discrete")
+    check_choice(hold, "hold", ("zoh", "foh"))
+    if not isinstance(data, IOData):
+        raise DataError(f"dt_to_ct expects an IOData record, got {type(data).__name__}")
+    if not data.is_uniform:
+        raise DataError("dt_to_ct needs uniformly sampled data (a discrete-time model has "
+                        "one sampling period); use ct_subspace for non-uniform time stamps")
+    dmodel = spec.load()(data, order, feedthrough=True, **options)
+    cmodel = dmodel.with_noise_model(None, None).to_continuous(hold)   # K has no CT form
+    info = dict(cmodel.info)
+    info.update(method=f"dt_to_ct({spec.attribute}, {hold})", discrete_model_dt=data.dt,
+                hold=hold)
+    from subid.model.statespace import StateSpace
+    return StateSpace(cmodel.A, cmodel.B, cmodel.C, cmodel.D, 0.0,
+                      input_names=data.input_names, output_names=data.output_names, info=info,
+                      hold=hold)

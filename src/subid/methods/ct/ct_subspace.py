@@ -100,6 +100,7 @@ from subid.errors import (
 )
 from subid.methods._common import choose_order
 from subid.methods._info import model_info, records_warnings
+from subid.methods.bd import CT_OPTIONS, INFO_KEY, fit_b_d_x0
 from subid.methods.ct import _ct_discrete, _ct_fit
 from subid.methods.ct._ct_checks import (
     DEFAULT_MAX_ORDER,
@@ -110,11 +111,11 @@ from subid.methods.ct._ct_checks import (
     _lag_for,
     _parse_order,
 )
+from subid.methods.ct._ct_discrete import dt_to_ct
 from subid.methods.ct._ct_estimate import (
     _correction_count,
     _correction_regressors,
     _estimate_a_c,
-    _fit_b_filtered,
     _markov_change,
     _subspace_factor,
     data_equation_matrices,
@@ -263,10 +264,19 @@ def _prepare(data: IOData, candidates, s: dict) -> Problem:
 
 
 def _linear_fit(problem: Problem, feedthrough: bool, whiten=None):
+    """``fit(A, C) -> (B, D, x0, y0, diagnostics)`` (None where simulating A overflows):
+    the ``'simulation'`` route of :func:`subid.methods.bd.fit_b_d_x0`."""
     s = problem.settings
-    return lambda A, C: _ct_fit.fit_linear(A, C, problem.record, feedthrough=feedthrough,
-                                           estimate_x0=s["estimate_x0"], offset=s["offset"],
-                                           whiten=whiten)
+
+    def fit(A, C):
+        fitted = fit_b_d_x0(A, C, problem.record, bd_method="simulation",
+                            feedthrough=feedthrough, estimate_x0=s["estimate_x0"],
+                            offset=s["offset"], whiten=whiten)
+        if fitted is None:
+            return None
+        B, D, x0, diag = fitted
+        return B, D, x0, diag.pop("y_offset"), diag
+    return fit
 
 
 def _given_bd(problem: Problem, A, B, C, D):
@@ -291,7 +301,6 @@ def _complete(problem: Problem, Theta, Lf, feedthrough: bool):
     """A, C from ``Theta``; then B, D, x0 (y0): ``(A, B, C, D, x0, y0, diag)``."""
     s = problem.settings
     basis, p = s["basis"], problem.record.n_outputs
-    m, n = problem.record.n_inputs, Theta.shape[1]
     A, C, ac_resid = _estimate_a_c(basis, Theta, p, s["ac_method"])
     diag = {"ac_residual": ac_resid}
     if s["bd_method"] == "simulation":
@@ -299,7 +308,7 @@ def _complete(problem: Problem, Theta, Lf, feedthrough: bool):
             A, fitted, stab = _ct_fit.stable_choice(A, C, _linear_fit(problem, feedthrough),
                                                     problem.record, s["stability"])
             B, D, x0, y0, bd = fitted
-            diag.update(bd, bd_method_used="simulation", stability=stab)
+            diag.update(bd, stability=stab)
             return A, B, C, D, x0, y0, diag
         except ModelError:          # A too unstable to simulate over the record
             pass
@@ -309,9 +318,10 @@ def _complete(problem: Problem, Theta, Lf, feedthrough: bool):
     else:
         def Tfun(Bm, Dm):
             return data_equation_matrices(basis, A, Bm, C, Dm)[1]
-    B, D, bd = _fit_b_filtered(Tfun, Theta, Lf, problem.iU, n, m, p, feedthrough)
+    B, D, _, bd = fit_b_d_x0(A, C, problem.record, bd_method="filtered", feedthrough=feedthrough,
+                             filtered=(Tfun, Theta, Lf, problem.iU))
     x0, y0 = _given_bd(problem, A, B, C, D)
-    diag.update(bd, bd_method_used="filtered", stability={"requested": s["stability"],
+    diag.update(bd, stability={"requested": s["stability"],
                                                          "action": "none (filtered B)"})
     return A, B, C, D, x0, y0, diag
 
@@ -375,7 +385,7 @@ def _converted(problem: Problem, cm: StateSpace, note=None, refit=None):
         A, fitted, stab = _ct_fit.stable_choice(cm.A, cm.C, _linear_fit(problem, refit),
                                                 problem.record, s["stability"])
         B, D, x0, y0, bd = fitted
-        bd = dict(bd, bd_method_used="simulation", stability=stab, iterations=0)
+        bd = dict(bd, **{INFO_KEY: "simulation"}, stability=stab, iterations=0)
         if note:
             bd["nyquist_modes"] = note
         return A, B, cm.C, D, x0, y0, bd
@@ -384,7 +394,7 @@ def _converted(problem: Problem, cm: StateSpace, note=None, refit=None):
     y_hat = _ct_fit.predicted(cm.A, cm.B, cm.C, cm.D, x0, y0, problem.record)
     as_is = (cm.B, cm.D, x0, y0, {
         "b_residual_rms": float(np.sqrt(np.mean((problem.record.y - y_hat) ** 2))),
-        "bd_method_used": "converted"})
+        INFO_KEY: "converted"})
     refit = _linear_fit(problem, feedthrough)
 
     def fit(A, C):
@@ -393,7 +403,7 @@ def _converted(problem: Problem, cm: StateSpace, note=None, refit=None):
     A, (B, D, x0, y0, bd), stab = _ct_fit.stable_choice(cm.A, cm.C, fit, problem.record,
                                                         s["stability"])
     bd = dict(bd)
-    bd.setdefault("bd_method_used", "simulation")
+    bd.setdefault(INFO_KEY, "simulation")
     bd = dict(bd, stability=stab, iterations=0)
     if note:
         bd["nyquist_modes"] = note
@@ -467,7 +477,7 @@ def _model(problem: Problem, n, A, B, C, D, x0, y0, diag, feedthrough) -> StateS
         interpolated_input=s["hold"] is None, startup=s["startup"],
         n_correction_regressors=problem.n_corr, instruments=s["instruments"],
         instrument_lag=problem.lag if s["instruments"] == "past" else None,
-        ac_method=s["ac_method"], bd_method=s["bd_method"],
+        ac_method=s["ac_method"],
         filtering=s["filtering"] if s["filtered"] is None else "given",
         data_equation=s["data_equation"], feedthrough=bool(feedthrough),
         offset=s["offset"], y_offset=y0, largest_real_part=float(lam.real.max()), refined=False,
@@ -649,7 +659,8 @@ def ct_subspace(data, order=None, *, basis=None, poly_order: int = 3, estimate_x
         B (D, x0) by least squares on the raw output samples through the
         exactly discretised model, or from the filtered data equation (15).
         'simulation' falls back to 'filtered' if simulating A overflows
-        (``info['bd_method_used']``).
+        (``info['bd_method']`` names the route that ran: also 'converted'
+        for a start converted from discrete time).
     filtering : {'exact', 'sections'}
         Interpolate each signal once and propagate the whole filter chain
         exactly, or re-interpolate after every section (the paper's S1-S4).
@@ -727,7 +738,7 @@ def ct_subspace(data, order=None, *, basis=None, poly_order: int = 3, estimate_x
     check_choice(noise_model, "noise_model", ("ar", None))
     check_choice(instruments, "instruments", ("model", "past", None))
     check_choice(ac_method, "ac_method", ("joint", "paper"))
-    check_choice(bd_method, "bd_method", ("simulation", "filtered"))
+    check_choice(bd_method, "bd_method", CT_OPTIONS)
     check_choice(filtering, "filtering", ("exact", "sections"))
     check_choice(data_equation, "data_equation", ("compact", "paper"))
     iterations = check_int(iterations, "iterations", minimum=0)
@@ -942,51 +953,3 @@ def ct_subspace_paper(data, order=None, *, basis=None, poly_order: int = 3) -> S
                        correction=False, refine=False, ac_method="paper", bd_method="filtered",
                        filtering="sections", data_equation="paper", selection="gap",
                        start="subspace", offset=False, stability="none", noise_model=None)
-
-
-@checked_call
-@records_warnings
-def dt_to_ct(data, order=None, *, method: str = "n4sid", hold: str = "zoh", **options):
-    """Baseline: discrete-time subspace identification, then conversion to continuous time.
-
-    Only possible on a uniform grid. The discrete-time model is identified
-    with a feedthrough term (a first-order hold makes one appear even when
-    the continuous system has none) and converted by
-    :meth:`StateSpace.to_continuous` with the input's hold.
-
-    Parameters
-    ----------
-    data : IOData
-        Uniformly sampled record.
-    order : int or None
-    method : {'n4sid', 'moesp', 'ls'}
-        A discrete-time batch method of :data:`subid.registry.METHODS`
-        (``'ls_subspace'`` is accepted for ``'ls'``).
-    hold : {'zoh', 'foh'}
-        Inter-sample behaviour of the input; the model records it
-        (:attr:`StateSpace.hold`).
-    **options
-        Passed to the discrete-time method (e.g. ``horizon``).
-
-    Returns
-    -------
-    StateSpace
-        Continuous-time model; ``info`` is the discrete method's, plus
-        ``method`` and ``discrete_model_dt``.
-    """
-    from subid.methods.registry import find
-    spec = find(method, kind="batch", time="discrete")
-    check_choice(hold, "hold", ("zoh", "foh"))
-    if not isinstance(data, IOData):
-        raise DataError(f"dt_to_ct expects an IOData record, got {type(data).__name__}")
-    if not data.is_uniform:
-        raise DataError("dt_to_ct needs uniformly sampled data (a discrete-time model has "
-                        "one sampling period); use ct_subspace for non-uniform time stamps")
-    dmodel = spec.load()(data, order, feedthrough=True, **options)
-    cmodel = dmodel.with_noise_model(None, None).to_continuous(hold)   # K has no CT form
-    info = dict(cmodel.info)
-    info.update(method=f"dt_to_ct({spec.attribute}, {hold})", discrete_model_dt=data.dt,
-                hold=hold)
-    return StateSpace(cmodel.A, cmodel.B, cmodel.C, cmodel.D, 0.0,
-                      input_names=data.input_names, output_names=data.output_names, info=info,
-                      hold=hold)

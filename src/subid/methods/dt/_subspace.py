@@ -51,8 +51,14 @@ from subid.methods._stability import (  # noqa: F401 (names of this module's API
     stability_request,
     stable_shift_invariance,
 )
+from subid.methods.bd import (  # noqa: F401 (check_experiment_lengths: names of this API)
+    INFO_KEY,
+    Projection,
+    check_experiment_lengths,
+    experiment_starts,
+    fit_b_d_x0,
+)
 from subid.methods.dt._checks import check_data
-from subid.methods.dt._regression import fit_b_d_projection, fit_b_d_x0
 from subid.methods.dt._selection import SELECTION_RULES, cross_validate, default_gap_horizon
 from subid.model.statespace import StateSpace
 from subid.statistic._hankel import HankelFactor
@@ -138,9 +144,6 @@ def shift_invariance(gamma: np.ndarray, n_outputs: int):
     return A, C, float(resid)
 
 
-BD_METHODS = ("auto", "simulation", "projection")
-
-
 def output_weights(y: np.ndarray) -> np.ndarray:
     """Weights of the outputs in the B, D, x0 regression: 1 / standard deviation.
 
@@ -153,136 +156,63 @@ def output_weights(y: np.ndarray) -> np.ndarray:
     return 1.0 / np.where(std > 0, std, 1.0)
 
 
-def estimate_b_d(A, C_n, gamma, L11, L_yu, problem: "Problem", *, bd_method: str,
-                 feedthrough: bool, estimate_x0: bool, worse_than: float | None = None):
-    """B, D (and x0) given A and C: by output regression or by projection.
+def b_d_fit(problem: "Problem", C_n, gamma, L11, L_yu, *, bd_method: str, feedthrough: bool,
+            estimate_x0: bool):
+    """``fit(A) -> (B, D, x0, diagnostics)`` of :func:`stable_choice`: B, D and x0 by
+    :func:`subid.methods.bd.fit_b_d_x0` (``bd_method``) on the problem's data.
 
-    ``C_n``, ``gamma``, ``L11`` and ``L_yu`` are in the units of the
-    normalised channels of ``problem``; B and D come back in the user's
-    units. ``'simulation'`` fits B, D and x0 to the raw output samples
-    through the model (most accurate; it simulates the model over the whole
-    record, which overflows for a clearly unstable A), each output weighted by
-    the inverse of its standard deviation (:func:`output_weights`). ``'projection'``
-    solves the SVD-free projected data equation on the statistic
-    (:func:`fit_b_d_projection`; no x0). ``'auto'`` uses simulation, and
-    projection when simulating overflows or leaves the regression
-    numerically singular, or when the data are a :class:`HankelStatistic`
-    (no raw samples).
-
-    ``worse_than`` (``bd_method='auto'`` on one raw record): when the residual RMS
-    of the output regression is proven at least this from part of the record
-    (:func:`subid.methods.dt._residual_bound.loses`), no fit: ``(None, None, None,
-    {'bd_method': 'bound', 'residual_at_least': bound})`` (:func:`stable_choice` asks
-    so for the unstable A of a cross-validation fold, which then cannot be kept).
-
-    Returns
-    -------
-    B, D, x0 (None when not estimated), diagnostics dict (with ``bd_method``)
+    ``C_n``, ``gamma``, ``L11`` and ``L_yu`` are in the units of the normalised
+    channels of ``problem`` (what the ``'projection'`` route needs); B and D come
+    back in the user's units. The output regression weights each output by the
+    inverse of its standard deviation (:func:`output_weights`). ``fit(A,
+    worse_than=r)``: no fit where the residual RMS is proven at least ``r``
+    (:func:`subid.methods.bd.fit_b_d_x0`, route ``'bound'``).
     """
-    data = problem.data
+    projection = Projection(C_n, gamma, L11, L_yu, problem.unscale)
     C = C_n * problem.output_scale[:, None]
-    radius = float(np.abs(np.linalg.eigvals(A)).max())
-    # a statistic whose record can be read again (subid.methods.dt.stream, subid.methods.dt.distributed)
-    second_pass = getattr(data, "output_regression", None)
-    if isinstance(data, HankelStatistic) and second_pass is None:  # the statistic only
-        if bd_method == "simulation":
-            raise SubidError("bd_method='simulation' fits B and D to the raw output samples; "
-                             "with a statistic only, use bd_method='projection' (or 'auto')")
-        bd_method = "projection"
-    diag = {}
-    if estimate_x0 and isinstance(data, IOData) and data.n_experiments > 1:
-        check_experiment_lengths(data, A.shape[0])
-    if worse_than is not None and bd_method == "auto" and isinstance(data, IOData) \
-            and data.n_experiments == 1:
-        from subid.methods.dt._residual_bound import loses
-        bound = loses(A, C, data.u, data.y, worse_than, feedthrough=feedthrough,
-                      estimate_x0=estimate_x0, output_weights=problem.weights())
-        if bound is not None:
-            return None, None, None, {"bd_method": "bound", "residual_at_least": bound}
-    if bd_method in ("auto", "simulation"):
-        with np.errstate(over="ignore", invalid="ignore"):
-            if second_pass is not None:
-                B, D, x0, diag = second_pass(A, C, feedthrough=feedthrough,
-                                             estimate_x0=estimate_x0)
-            else:
-                B, D, x0, diag = fit_b_d_x0(A, C, data.u, data.y, feedthrough=feedthrough,
-                                            estimate_x0=estimate_x0,
-                                            output_weights=problem.weights(),
-                                            starts=experiment_starts(data))
-        usable = (np.isfinite(B).all() and np.isfinite(D).all()
-                  and not diag["regression_rank_deficient"])
-        if usable:
-            diag.update(bd_method="simulation", spectral_radius=radius)
-            return B, D, (x0 if estimate_x0 else None), diag
-        if bd_method == "simulation":
-            raise SubidError(f"the identified A has spectral radius {radius:.4g}: simulating it "
-                             f"over {data.n_samples} samples overflows or leaves the regression "
-                             "singular; use bd_method='projection' (or 'auto')")
-    B_n, D_n, proj = fit_b_d_projection(A, C_n, gamma, L11, L_yu, feedthrough=feedthrough)
-    B, _, D = problem.unscale(B_n, C_n, D_n)
-    if diag:
-        proj["simulation_regression_condition"] = diag["regression_condition"]
-    proj.update(bd_method="projection", spectral_radius=radius)
-    return B, D, None, proj
+    weights = problem.weights() if isinstance(problem.data, IOData) else None
+
+    def fit(A, worse_than=None):
+        return fit_b_d_x0(A, C, problem.data, bd_method=bd_method, feedthrough=feedthrough,
+                          estimate_x0=estimate_x0, output_weights=weights,
+                          projection=projection, worse_than=worse_than)
+    return fit
 
 
-def predictor_b_d(A, C, B, D, problem, *, feedthrough: bool, estimate_x0: bool):
-    """B, D (and x0) of an unstable A by the prediction-error form, or None.
+def b_d_refit(problem: "Problem", C, *, feedthrough: bool, estimate_x0: bool):
+    """``refit_unstable(A, fitted)`` of :func:`stable_choice`: B, D, x0 of an unstable
+    A by the ``'prediction'`` route of :func:`subid.methods.bd.fit_b_d_x0`, or None.
 
-    For an unstable A the output-error regression of :func:`estimate_b_d` is
-    ill-posed over a long record: the sensitivities ``C A^t`` grow without
-    bound, the regression fits the growth of the last samples and the
-    initial state rather than the input-output behaviour (on the DaISy
-    ballbeam record, MOESP at order 2: validation fit 79.8 %; the same A and
-    C with B, D from the state regression of N4SID: 88.9 %). The innovation
-    form ``x(k+1) = A x(k) + B u(k) + K e(k)``, ``y(k) = C x(k) + D u(k) +
-    e(k)`` has the one-step predictor (Ljung, *System Identification*, 2nd
-    ed., 1999, eq. 4.86, with ``Ā = A - K C``, stable)
-
-        x̂(k+1) = Ā x̂(k) + (B - K D) u(k) + K y(k),   ŷ(k) = C x̂(k) + D u(k),
-
-    which, given A, C and K, is linear in ``B̃ = B - K D``, D and ``x̂(0) = x0``:
-    ``y(k) - y_K(k) = C Ā^k x0 + sum_j C Ā^(k-1-j) B̃ u(j) + D u(k) + e(k)``
-    with ``y_K`` the output of ``(Ā, K, C, 0)`` driven by y. Its regression
-    (the same weighted least squares as :func:`subid.methods.dt._regression.fit_b_d_x0`,
-    on ``(Ā, C)``) is well posed because Ā is stable. K comes from the noise
-    model of the output-error estimate ``(A, B, C, D)``
-    (:func:`subid.methods.dt.noise_model.innovation_model`), and ``B = B̃ + K D``.
-
-    Returns
-    -------
-    (B, D, x0, diagnostics) or None
-        None when there are no raw samples, the factor is too shallow for the
-        noise model, or it gives no stable predictor.
+    For an unstable A the output-error regression is ill-posed over a long
+    record: the sensitivities ``C A^t`` grow without bound, the regression fits
+    the growth of the last samples and the initial state rather than the
+    input-output behaviour (on the DaISy ballbeam record, MOESP at order 2:
+    validation fit 79.8 %; the same A and C with B, D from the state regression
+    of N4SID: 88.9 %). The one-step predictor is well posed because ``A - K C``
+    is stable; K comes from the noise model of the output-error estimate
+    ``fitted = (B, D, ...)`` (:func:`subid.methods.dt.noise_model.innovation_model`).
+    None when there are no raw samples, the factor is too shallow for the
+    noise model, or it gives no stable predictor.
     """
     from subid.methods.dt.noise_model import innovation_model, user_factor
-    from subid.model._simulate import _simulate_discrete
-    data = problem.data
-    if not isinstance(data, IOData):
-        return None
-    try:
-        with np.errstate(all="ignore"):
-            K, _, diag = innovation_model(A, B, C, D, user_factor(problem))
-    except (SubidError, np.linalg.LinAlgError, ValueError):
-        return None
-    if not np.isfinite(K).all() or diag["predictor_spectral_radius"] >= 1.0:
-        return None
-    A_bar = A - K @ C
-    ny = C.shape[0]
-    y_k = _simulate_discrete(A_bar, K, C, np.zeros((ny, ny)), data.y,
-                             np.zeros(A.shape[0]))[0]
-    with np.errstate(all="ignore"):
-        B_t, D_p, x0, reg = fit_b_d_x0(A_bar, C, data.u, data.y - y_k, feedthrough=feedthrough,
-                                       estimate_x0=estimate_x0,
-                                       output_weights=problem.weights())
-    B_p = B_t + K @ D_p
-    if not (np.isfinite(B_p).all() and np.isfinite(D_p).all()) \
-            or reg["regression_rank_deficient"]:
-        return None
-    reg.update(bd_method="prediction", spectral_radius=float(np.abs(np.linalg.eigvals(A)).max()),
-               predictor_spectral_radius=diag["predictor_spectral_radius"],
-               prediction_residual_rms=reg.pop("residual_rms"))
-    return B_p, D_p, (x0 if estimate_x0 else None), reg
+
+    def refit(A, fitted):
+        if not isinstance(problem.data, IOData):
+            return None
+        try:
+            with np.errstate(all="ignore"):
+                K, _, diag = innovation_model(A, fitted[0], C, fitted[1], user_factor(problem))
+        except (SubidError, np.linalg.LinAlgError, ValueError):
+            return None
+        if not np.isfinite(K).all() or diag["predictor_spectral_radius"] >= 1.0:
+            return None
+        refitted = fit_b_d_x0(A, C, problem.data, bd_method="prediction", noise_gain=K,
+                              feedthrough=feedthrough, estimate_x0=estimate_x0,
+                              output_weights=problem.weights())
+        if refitted is not None:
+            refitted[3]["predictor_spectral_radius"] = diag["predictor_spectral_radius"]
+        return refitted
+    return refit
 
 
 WEIGHTINGS = ("moesp", "cva", "n4sid")
@@ -317,7 +247,7 @@ def stable_choice(A_q, Q, n_outputs: int, fit, *, stability: str, data, method: 
     """A in the orthonormal basis ``Q``, stable when that is right, with its B, D, x0.
 
     ``fit(A_q)`` returns ``(B, D, x0, diagnostics)`` for a given A (the
-    output regression of :func:`estimate_b_d`, in the basis of ``Q``).
+    output regression of :func:`b_d_fit`, in the basis of ``Q``).
 
     * ``'none'``, a stable A, or :func:`stability_request` false: A as
       estimated.
@@ -337,7 +267,7 @@ def stable_choice(A_q, Q, n_outputs: int, fit, *, stability: str, data, method: 
       need, is removed.
 
     When the A returned is unstable and ``refit_unstable(A_q, fitted)`` is
-    given, B, D, x0 come from it instead (:func:`predictor_b_d`: the
+    given, B, D, x0 come from it instead (:func:`b_d_refit`: the
     output-error regression is ill-posed for an unstable A), unless it
     returns None.
 
@@ -384,13 +314,13 @@ def stable_choice(A_q, Q, n_outputs: int, fit, *, stability: str, data, method: 
                 record.update(residual_stable=r_s)
                 return A_s, fitted_s, record
             fitted_u = fit(A_q, worse_than=KEEP_UNSTABLE_RATIO * r_s)
-            if fitted_u[3].get("bd_method") == "bound":
+            if fitted_u[3].get(INFO_KEY) == "bound":
                 record.update(residual_unstable_at_least=fitted_u[3]["residual_at_least"],
                               residual_stable=r_s)
                 return A_s, fitted_s, record
         else:
             fitted_u = fit(A_q)
-        r_u = fitted_u[3].get("residual_rms") if fitted_u[3].get("bd_method") == "simulation" \
+        r_u = fitted_u[3].get("residual_rms") if fitted_u[3].get(INFO_KEY) == "simulation" \
             else None
         record.update(residual_unstable=r_u, residual_stable=r_s)
         if r_u is not None and r_s is not None and math.isfinite(r_u) \
@@ -400,33 +330,6 @@ def stable_choice(A_q, Q, n_outputs: int, fit, *, stability: str, data, method: 
                               f"(residual RMS {r_u:.3g} against {r_s:.3g} when stabilised)")
             return A_q, unstable(fitted_u), record
     return A_s, fitted_s, record
-
-
-def check_experiment_lengths(data, order: int) -> None:
-    """:class:`TooFewSamplesError` naming every experiment of ``data`` too short to
-    determine its own initial state (``n_samples * n_outputs < order``
-    equations for ``order`` unknowns), instead of a regression that would be
-    rank deficient and send B, D to another route without x0."""
-    short = [(name, b - a) for name, (a, b) in zip(data.experiment_names,
-                                                     data.experiment_ranges)
-             if (b - a) * data.n_outputs < order]
-    if short:
-        need = -(-order // data.n_outputs)
-        listed = ", ".join(f"{name!r} ({length} sample{'s' if length != 1 else ''})"
-                           for name, length in short[:5])
-        more = f" and {len(short) - 5} more" if len(short) > 5 else ""
-        raise TooFewSamplesError(
-            f"experiment{'s' if len(short) > 1 else ''} {listed}{more} of the merged record "
-            f"{'are' if len(short) > 1 else 'is'} too short to determine an initial state of "
-            f"order {order}: each experiment needs at least {need} samples. Drop "
-            f"{'them' if len(short) > 1 else 'it'} from the merge, or pass estimate_x0=False")
-
-
-def experiment_starts(data):
-    """The first sample of every experiment of a record of several (None otherwise)."""
-    if isinstance(data, IOData) and data.n_experiments > 1:
-        return [a for a, _ in data.experiment_ranges]
-    return None
 
 
 def initial_state(A, B, C, D, data):
