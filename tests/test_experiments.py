@@ -465,3 +465,21 @@ def test_cli_identify_merges_several_files(tmp_path, two_records, capsys):
                  str(tmp_path / "bad2")])
     captured = capsys.readouterr()
     assert code != 0 and "missing.csv" in captured.err and " + " not in captured.err
+
+
+def test_n4sid_enforced_stability_on_several_experiments():
+    # a near-integrator: the fold models of the cross-validation have an unstable A that
+    # 'enforce' stabilises; x0 then has one row per experiment (was a raw ValueError)
+    def record(seed, n_samples=300):
+        rng = np.random.default_rng(seed)
+        u = rng.standard_normal((n_samples, 1))
+        y, x = np.zeros((n_samples, 1)), 0.0
+        for k in range(n_samples):
+            y[k] = x + 0.3 * rng.standard_normal()
+            x = x + 0.1 * u[k, 0]
+        return subid.IOData(u, y, dt=1.0)
+
+    data = subid.merge([record(1), record(2), record(3)])
+    model = subid.n4sid(data, 2, stability="enforce")
+    assert np.all(np.isfinite(model.A)) and np.abs(np.linalg.eigvals(model.A)).max() < 1
+    assert np.shape(model.info["x0"]) == (3, 2)

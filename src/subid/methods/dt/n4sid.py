@@ -261,7 +261,9 @@ def state_model(pb, gamma, *, stability, feedthrough, estimate_x0, coefficients=
             A = scipy.linalg.solve(Rg, A_q @ Rg, check_finite=False)
             B = scipy.linalg.solve(Rg, B_q, check_finite=False)
             C = (C_q @ Rg) * pb.output_scale[:, None]
-            x0 = None if x0_q is None else scipy.linalg.solve(Rg, x0_q, check_finite=False)
+            # x0 has one row per experiment (a vector for one): x = Rg^{-1} x_q row by row
+            x0 = None if x0_q is None else scipy.linalg.solve(
+                Rg, np.asarray(x0_q).T, check_finite=False).T
             return A, B, C, D, x0, {"state_regression_residual": float(residual), "x0": x0,
                                     "stability": stab, **extra}
     B, C, D = pb.unscale(B, C, D)    # from the normalised channels to the user's units
