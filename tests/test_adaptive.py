@@ -11,6 +11,7 @@ from subid.data import IOData
 from subid.errors import CheckpointError, DataError, DataFileNotFoundError, OrderError, SubidError
 from subid.experiments.seed000 import multisine, paper_system, relative_error, simulate
 from subid.methods.online import _adaptive_kernel as K
+from subid.methods.online import _adaptive_reference as R
 from subid.methods.online.adaptive import AdaptiveIdentifier
 from subid.model._simulate import expm_blocks
 from subid.model.statespace import StateSpace
@@ -300,7 +301,7 @@ def test_iv_step_is_two_stage_least_squares(cond_scale):
                np.empty((rows, d)), np.zeros((d, d)), np.empty((d, rows)), np.zeros(1 + 2 * d))
     for _ in range(2):                             # second pass: refinement of the first
         assert K._solve_iv_weighted(C, G, np.tril(Z), X, 1e10, *scratch)
-        excitation = K._ref_solve_iv_weighted(C, Gr, np.tril(Z), Xr, 1e10)
+        excitation = R._ref_solve_iv_weighted(C, Gr, np.tril(Z), Xr, 1e10)
         # the excitation test (issue 23): kernel and reference agree
         assert excitation is not None
         assert abs(scratch[-1][0] - excitation) <= 1e-6 * abs(excitation)
@@ -324,7 +325,7 @@ def test_excitation_is_the_weakest_eigenvalue_share():
         got = K._weakest(np.tril(X), L, delta, np.empty(14), np.empty(14))
         exact = 1.0 / cond / np.trace(X)
         floor = delta / np.trace(X)            # the regularisation's share: resolution
-        assert abs(got - K._ref_weakest(np.tril(X), delta)) <= 1e-6 * (abs(got) + floor)
+        assert abs(got - R._ref_weakest(np.tril(X), delta)) <= 1e-6 * (abs(got) + floor)
         assert exact - 1e-3 * floor <= got <= 1.5 * exact + 10 * floor
         assert (got * 1e10 >= 1.0) == (cond < 1e9)      # the test's verdict
 

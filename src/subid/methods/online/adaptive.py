@@ -105,9 +105,10 @@ from subid.io._checkpoint import load_state, require, save_state
 from subid.methods._info import model_info
 from subid.methods.dt._subspace import conditions_of
 from subid.methods.dt.ls_subspace import random_selector
+from subid.methods.online import _adaptive_filters as _filters
 from subid.methods.online import _adaptive_kernel as _k
+from subid.methods.online._adaptive_reference import reference
 from subid.methods.online.base import OnlineIdentifier, history_dict, one_sample
-from subid.model._simulate import expm_blocks
 from subid.model.statespace import StateSpace
 
 __all__ = ["AdaptiveIdentifier"]
@@ -118,7 +119,6 @@ _VERSION = 3      # 2: instrumental variables (zr, Cz, Gz); 3: t_first, bd_start
 # (bounds the memory of the per-step discretisation tables).
 _BLOCK_UNIQUE = 4096
 _BLOCK_SAMPLES = 16384
-_STEP_CACHE = 64
 # Default instrument filter of method 'iv': the filter poles times this ratio
 # (slower: instruments that remember more of the input's past).
 _INSTRUMENT_POLE_RATIO = 0.25
@@ -140,33 +140,6 @@ _NON_FINITE = ("the chunk drove the identifier to non-finite values (are the sig
                "to moderate magnitudes?); it was rejected and the identifier is unchanged")
 
 
-def _pack_tables(arrays, cache, lay, ipar):
-    """``(cbuf, ibuf, cache)`` of :func:`subid.methods.online._adaptive_kernel.kernel_packed`.
-
-    ``cbuf``: the float ``arrays`` then the Ψ cache (``PsiPhi, PsiG0,
-    PsiG1``) copied into one buffer; ``ibuf``: the counts ``[tables, state
-    arrays, ipar]``, their layout ``clay`` (offset, d0, d1, d2 per array of
-    cbuf), the state layout ``lay``, ``ipar`` and the cache stamps, copied into
-    one int64 buffer. The returned ``cache`` are views of the buffers (the
-    kernel updates the cache there)."""
-    floats = list(arrays) + list(cache[:3])
-    sizes = [a.size for a in floats]
-    cbuf = np.empty(sum(sizes))
-    clay = np.ones((len(floats), 4), dtype=np.int64)
-    views = []
-    off = 0
-    for i, (a, size) in enumerate(zip(floats, sizes)):
-        cbuf[off:off + size] = a.reshape(-1)
-        clay[i, 0] = off
-        clay[i, 1:1 + a.ndim] = a.shape
-        views.append(cbuf[off:off + size].reshape(a.shape))
-        off += size
-    stamps = cache[3]
-    ibuf = np.concatenate([[len(floats), lay.shape[0], ipar.size], clay.reshape(-1),
-                           lay.reshape(-1), ipar, stamps]).astype(np.int64)
-    return cbuf, ibuf, (views[-3], views[-2], views[-1], ibuf[ibuf.size - stamps.size:])
-
-
 def _positive(value, name: str, *, exc=SubidError) -> float:
     if isinstance(value, bool) or not isinstance(value, numbers.Real):
         raise exc(f"{name} must be a positive number, got {value!r}")
@@ -174,48 +147,6 @@ def _positive(value, name: str, *, exc=SubidError) -> float:
     if not (math.isfinite(value) and value > 0):
         raise exc(f"{name} must be a finite positive number, got {value!r}")
     return value
-
-
-def _filter_poles(poles, f, name: str = "filter_poles") -> np.ndarray:
-    """Validate ``filter_poles``: a negative number (repeated f times) or f
-    poles with negative real parts, complex ones in conjugate pairs
-    (``f=None``: any number of poles)."""
-    if isinstance(poles, numbers.Number) and not isinstance(poles, bool):
-        poles = [poles] * f
-    try:
-        arr = np.asarray(poles, dtype=np.complex128).reshape(-1)
-    except (TypeError, ValueError):
-        raise SubidError(f"{name} must be a negative number or {f} poles, "
-                         f"got {poles!r}") from None
-    if f is not None and arr.size != f:
-        raise SubidError(f"{name} has {arr.size} poles but the filter order is the "
-                         f"horizon, {f}; give {f} poles or one negative number")
-    if arr.size == 0:
-        raise SubidError(f"{name} is empty")
-    if not np.all(np.isfinite(arr)):
-        raise SubidError(f"{name} must be finite")
-    if np.any(arr.real >= 0):
-        raise SubidError(f"{name} must have negative real parts (a stable filter), got "
-                         f"{np.round(arr, 6).tolist()}; e.g. {name}=-2.0")
-    if not np.allclose(np.sort_complex(arr), np.sort_complex(arr.conj()), rtol=1e-12, atol=0):
-        raise SubidError(f"complex {name} must come in conjugate pairs")
-    return arr
-
-
-def _companion(poles: np.ndarray, scale: bool):
-    """State-variable filter ``F̂(s) = ω^m / d(s)`` in time-scaled companion
-    form: ``ż = ω (Λ_c(â) z + l w)``, ``z_k = ω^{-k} s^k F̂(s) w``, with
-    ``ω = |d(0)|^{1/m}`` (1 when not ``scale``). Returns (Af, Bf, ω)."""
-    m = poles.size
-    coeffs = np.real(np.poly(poles))                 # [1, a_{m-1}, ..., a_0]
-    omega = float(np.abs(np.prod(poles)) ** (1.0 / m)) if scale else 1.0
-    scaled = coeffs[1:] / omega ** np.arange(1, m + 1)   # â_{m-1}, ..., â_0
-    Lc = np.zeros((m, m))
-    Lc[:-1, 1:] = np.eye(m - 1)
-    Lc[-1, :] = -scaled[::-1]                        # [-â_0, ..., -â_{m-1}]
-    Bf = np.zeros((m, 1))
-    Bf[-1, 0] = omega
-    return omega * Lc, Bf, omega
 
 
 class AdaptiveIdentifier(OnlineIdentifier):
@@ -358,8 +289,8 @@ class AdaptiveIdentifier(OnlineIdentifier):
     _OLD_KINDS = (_OLD_KIND,)
 
     @checked_call
-    def __init__(self, order, n_inputs, n_outputs, horizon=None, filter_poles=-5.0,
-                 forgetting=None, bd_forgetting=None, selector=None, seed=0, *, dt=None,
+    def __init__(self, order, n_inputs, n_outputs, *, horizon=None, filter_poles=-5.0,
+                 forgetting=None, bd_forgetting=None, selector=None, seed=0, dt=None,
                  hold="foh", method="iv", scale_filters=True, refresh_every=50,
                  bd_gate=1e-2, max_condition=1e10, initial_covariance=None,
                  bd_initial_covariance=None, ode_trace_bound=1e8, history_size=0,
@@ -392,11 +323,11 @@ class AdaptiveIdentifier(OnlineIdentifier):
                              f"reveal order {n}: (13) needs (horizon - 1) * n_outputs >= order, "
                              f"i.e. horizon >= {-(-n // ny) + 1}")
         self._n, self._nu, self._ny, self._f = n, nu, ny, f
-        self._poles = _filter_poles(filter_poles, f)
+        self._poles = _filters.filter_poles(filter_poles, f)
         if instrument_poles is None:
             self._ipoles = self._poles * _INSTRUMENT_POLE_RATIO
         else:
-            self._ipoles = _filter_poles(instrument_poles, f if isinstance(
+            self._ipoles = _filters.filter_poles(instrument_poles, f if isinstance(
                 instrument_poles, numbers.Number) else None, "instrument_poles")
         if self._ipoles.size == f and np.allclose(np.sort_complex(self._ipoles),
                                                   np.sort_complex(self._poles)):
@@ -451,9 +382,9 @@ class AdaptiveIdentifier(OnlineIdentifier):
         self._input_names = None if input_names is None else tuple(input_names)
         self._output_names = None if output_names is None else tuple(output_names)
         # filter: d(s) = prod(s - pole); time scale ω = |d(0)|^(1/f)
-        self._Af, self._Bf, self._omega = _companion(self._poles, self._scale)
+        self._Af, self._Bf, self._omega = _filters.companion(self._poles, self._scale)
         # instrument filter (method 'iv'): inputs only, its own poles
-        self._Ai, self._Bi, _ = _companion(self._ipoles, True)
+        self._Ai, self._Bi, _ = _filters.companion(self._ipoles, True)
         # steady states for a constant input (first state only, e_1 * dc)
         self._dcF = float(-np.linalg.solve(self._Af, self._Bf)[0, 0])
         self._dcI = float(-np.linalg.solve(self._Ai, self._Bi)[0, 0])
@@ -473,26 +404,10 @@ class AdaptiveIdentifier(OnlineIdentifier):
         (views, so that a snapshot is one copy), the integer counters and the
         history."""
         n, nu, ny, f = self._n, self._nu, self._ny, self._f
-        d, dp, dth = n + f * nu, f * ny, n + n * nu + ny * nu
+        d, dth = n + f * nu, n + n * nu + ny * nu
         mi = self._ipoles.size
         dz = (f + mi) * nu + n
-        layout = [("fst", (_k.N_FST,)), ("prev_u", (nu,)), ("prev_y", (ny,)),
-                  ("zp", (f, ny)), ("zq", (f, nu)),
-                  ("R", (d, d)),        # information matrix of (8) ('ode': P)
-                  ("G", (dp, d)),       # S - M R: residual form of the cross term
-                  ("M", (dp, d)),
-                  ("Rt", (dth, dth)),   # information matrix of (16) ('ode': Q)
-                  ("g", (1, dth)),      # s_θ - R_θ θ
-                  ("theta", (1, dth)),  # [x̃(t_g); vec B̃; vec D]
-                  ("Am", (n, n)), ("Cm", (ny, n)), ("Bm", (n, nu)), ("Dm", (ny, nu)),
-                  ("Apsi", (n, n)), ("Cpsi", (ny, n)),
-                  ("Psi", (ny, n + n * nu)),   # [Ξ, Ψ]
-                  ("zr", (mi, nu)),     # instrument filter ('iv')
-                  ("xi", (1, n)),       # auxiliary-model instrument ('iv')
-                  ("Cz", (dz, n)),      # IV cross matrix sum w ζ φ^T, first n columns
-                                        # (the others are columns of Zz) ('iv')
-                  ("Gz", (dp, dz)),     # S_ζ - M Cz^T ('iv')
-                  ("Zz", (dz, dz))]     # sum w ζ ζ^T, the IV weighting ('iv')
+        layout = _k.state_layout(n, nu, ny, f, mi)
         self._buf = np.zeros(sum(math.prod(shape) for _, shape in layout))
         st = {}
         off = 0
@@ -767,39 +682,9 @@ class AdaptiveIdentifier(OnlineIdentifier):
 
     def _tables(self, steps: np.ndarray):
         """Discretisation tables for the distinct step lengths ``steps``."""
-        f, mi = self._f, self._ipoles.size
-        K = steps.shape[0]
-        Fphi = np.empty((K, f, f))
-        Fg0 = np.empty((K, f))
-        Fg1 = np.empty((K, f))
-        Iphi = np.zeros((K, mi, mi))
-        Ig0 = np.zeros((K, mi))
-        Ig1 = np.zeros((K, mi))
-        iv = self._method == "iv"
-
-        def blocks(A, B, hs):
-            Ph, G1, G2 = expm_blocks(A, B, hs, self._hold)
-            g0 = G1[:, :, 0] - G2[:, :, 0] if G2 is not None else G1[:, :, 0]
-            g1 = G2[:, :, 0] if G2 is not None else np.zeros_like(g0)
-            return Ph, g0, g1
-
-        missing = [i for i, h in enumerate(steps) if float(h) not in self._step_cache]
-        if missing:
-            F = blocks(self._Af, self._Bf, steps[missing])
-            I = blocks(self._Ai, self._Bi, steps[missing]) if iv else None
-            for j, i in enumerate(missing):
-                entry = (F[0][j], F[1][j], F[2][j]) + (
-                    (I[0][j], I[1][j], I[2][j]) if iv else (Iphi[i], Ig0[i], Ig1[i]))
-                if len(self._step_cache) < _STEP_CACHE:
-                    self._step_cache[float(steps[i])] = entry
-                Fphi[i], Fg0[i], Fg1[i], Iphi[i], Ig0[i], Ig1[i] = entry
-        for i, h in enumerate(steps):
-            entry = self._step_cache.get(float(h))
-            if entry is not None:
-                Fphi[i], Fg0[i], Fg1[i], Iphi[i], Ig0[i], Ig1[i] = entry
-        lamM = np.exp(-self._alpha * steps)
-        lamT = np.exp(-self._beta * steps)
-        return Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, lamM, lamT
+        Ai = self._Ai if self._method == "iv" else None
+        return _filters.discretise(steps, self._Af, self._Bf, Ai, self._Bi, self._ipoles.size,
+                                   self._hold, self._step_cache, self._alpha, self._beta)
 
     def update(self, u, y=None, t=None) -> "AdaptiveIdentifier":
         """Process one sample or a chunk of samples.
@@ -921,11 +806,11 @@ class AdaptiveIdentifier(OnlineIdentifier):
         st = self._st
         par, ipar = self._parameters()
         if self._engine == "numba":     # the arrays as a few buffers (cheaper call)
-            cbuf, ibuf, _ = _pack_tables((steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1,
+            cbuf, ibuf, _ = _k.pack_tables((steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1,
                                           self._H, par), cache, self._lay, ipar)
             return bool(_k.kernel_packed(T, U, Y, idx, cbuf, ibuf, st["ist"], st["hist"],
                                          self._buf))
-        return bool(_k.reference(T, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0,
+        return bool(reference(T, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0,
                                  Ig1, self._H, par, ipar,
                                  *(st[k] for k in self._ORDER), *cache, st["hist"], self._buf))
 
@@ -960,7 +845,7 @@ class AdaptiveIdentifier(OnlineIdentifier):
         if tail is None:    # the arguments after idx never change: built once
             Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, lamM, lamT = tables
             par, ipar = self._parameters()
-            cbuf, ibuf, cache = _pack_tables((steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0,
+            cbuf, ibuf, cache = _k.pack_tables((steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0,
                                               Ig1, self._H, par), cache, self._lay, ipar)
             self._uniform = (steps, tables, cache)      # the Ψ cache in the buffers now
             tail = self._uniform_tail = (cbuf, ibuf, self._st["ist"], self._st["hist"],
