@@ -88,6 +88,9 @@ def test_is_an_online_identifier(case):
     params = ident.get_params()
     assert params["history_size"] == 16 and params["horizon"] in (3, 5)
     twin = type(ident)(**params)
+    # only (order, n_inputs, n_outputs) by position (issue 24, item 6)
+    with pytest.raises(errors.OptionError, match="horizon"):
+        type(ident)(params["order"], params["n_inputs"], params["n_outputs"], params["horizon"])
     a = ident.update(data.u[:600], data.y[:600])
     b = twin.update(data.u[:600], data.y[:600])
     assert a is ident and ident.n_samples == 600

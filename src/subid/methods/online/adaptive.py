@@ -107,6 +107,7 @@ from subid.methods.dt._subspace import conditions_of
 from subid.methods.dt.ls_subspace import random_selector
 from subid.methods.online import _adaptive_filters as _filters
 from subid.methods.online import _adaptive_kernel as _k
+from subid.methods.online._adaptive_kernel import pack_tables, state_layout
 from subid.methods.online._adaptive_reference import reference
 from subid.methods.online.base import OnlineIdentifier, history_dict, one_sample
 from subid.model.statespace import StateSpace
@@ -407,7 +408,7 @@ class AdaptiveIdentifier(OnlineIdentifier):
         d, dth = n + f * nu, n + n * nu + ny * nu
         mi = self._ipoles.size
         dz = (f + mi) * nu + n
-        layout = _k.state_layout(n, nu, ny, f, mi)
+        layout = state_layout(n, nu, ny, f, mi)
         self._buf = np.zeros(sum(math.prod(shape) for _, shape in layout))
         st = {}
         off = 0
@@ -806,8 +807,8 @@ class AdaptiveIdentifier(OnlineIdentifier):
         st = self._st
         par, ipar = self._parameters()
         if self._engine == "numba":     # the arrays as a few buffers (cheaper call)
-            cbuf, ibuf, _ = _k.pack_tables((steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1,
-                                          self._H, par), cache, self._lay, ipar)
+            cbuf, ibuf, _ = pack_tables((steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1,
+                                         self._H, par), cache, self._lay, ipar)
             return bool(_k.kernel_packed(T, U, Y, idx, cbuf, ibuf, st["ist"], st["hist"],
                                          self._buf))
         return bool(reference(T, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0,
@@ -845,8 +846,8 @@ class AdaptiveIdentifier(OnlineIdentifier):
         if tail is None:    # the arguments after idx never change: built once
             Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, lamM, lamT = tables
             par, ipar = self._parameters()
-            cbuf, ibuf, cache = _k.pack_tables((steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0,
-                                              Ig1, self._H, par), cache, self._lay, ipar)
+            cbuf, ibuf, cache = pack_tables((steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0,
+                                             Ig1, self._H, par), cache, self._lay, ipar)
             self._uniform = (steps, tables, cache)      # the Ψ cache in the buffers now
             tail = self._uniform_tail = (cbuf, ibuf, self._st["ist"], self._st["hist"],
                                          self._buf)
