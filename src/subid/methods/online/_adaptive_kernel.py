@@ -80,7 +80,7 @@ N_FST = 9
 def state_layout(n: int, nu: int, ny: int, f: int, mi: int) -> list:
     """The layout table of the float state buffer: ``(name, shape)`` per
     array, in the order of :func:`kernel`'s arguments ``fst`` ... ``Zz``
-    (the index of :func:`kernel_packed`'s ``lay``). Order n, inputs nu,
+    (the index of :func:`kernel_packed`'s ``lay``; ``Ev`` last). Order n, inputs nu,
     outputs ny, filter order f, instrument filter order mi."""
     d, dp, dth = n + f * nu, f * ny, n + n * nu + ny * nu
     dz = (f + mi) * nu + n
@@ -100,7 +100,8 @@ def state_layout(n: int, nu: int, ny: int, f: int, mi: int) -> list:
             ("Cz", (dz, n)),      # IV cross matrix sum w ζ φ^T, first n columns
                                   # (the others are columns of Zz) ('iv')
             ("Gz", (dp, dz)),     # S_ζ - M Cz^T ('iv')
-            ("Zz", (dz, dz))]     # sum w ζ ζ^T, the IV weighting ('iv')
+            ("Zz", (dz, dz)),     # sum w ζ ζ^T, the IV weighting ('iv')
+            ("Ev", (1, ny + 1))]  # Σ λ h (y - Φ θ)^2 per output of (16), then Σ λ h
 
 
 # Part 2 also starts when the residual of (13) is below this value and has
@@ -764,7 +765,7 @@ def _scratch_layout(n, ny, f, mi, dz, d, dp, dth):  # pragma: no cover - compile
 @numba.njit(cache=True, fastmath=_FASTMATH)
 def kernel(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, Hsel, par,
            ipar, ist, fst, prev_u, prev_y, zp, zq, R, G, M, Rt, gt, theta,
-           Am, Cm, Bm, Dm, Apsi, Cpsi, Psi, zr, xi, Cz, Gz, Zz,
+           Am, Cm, Bm, Dm, Apsi, Cpsi, Psi, zr, xi, Cz, Gz, Zz, Ev,
            PsiPhi, PsiG0, PsiG1, pstamp, hist, buf):  # pragma: no cover - compiled
     """Process the samples ``(Tm, U, Y)`` in place (see the module docstring).
 
@@ -1095,6 +1096,10 @@ def kernel(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, Hse
                     for jj in range(nu):
                         s -= U[k, jj] * theta[0, nX + r + ny * jj]
                     ey[r] = w * s
+                    # its power per channel (the output-noise estimate of the
+                    # refinement, see adaptive._refined)
+                    Ev[0, r] = lamT[q] * Ev[0, r] + (0.0 if gap else h * (s * s))
+                Ev[0, ny] = lamT[q] * Ev[0, ny] + (0.0 if gap else h)
                 # R_θ += w Φ^T Φ, g_θ += w Φ^T (y - Φ θ), exploiting u^T ⊗ I
                 for r in range(ny):
                     er = ey[r]
@@ -1238,9 +1243,10 @@ def kernel_packed(Tm, U, Y, idx, cbuf, ibuf, ist, hist, buf):  # pragma: no cove
     Cz = _view2(buf, lay, 20)
     Gz = _view2(buf, lay, 21)
     Zz = _view2(buf, lay, 22)
+    Ev = _view2(buf, lay, 23)
     return kernel(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, Hsel,
                   par, ipar, ist, fst, prev_u, prev_y, zp, zq, R, G, M, Rt, gt, theta,
-                  Am, Cm, Bm, Dm, Apsi, Cpsi, Psi, zr, xi, Cz, Gz, Zz,
+                  Am, Cm, Bm, Dm, Apsi, Cpsi, Psi, zr, xi, Cz, Gz, Zz, Ev,
                   PsiPhi, PsiG0, PsiG1, pstamp, hist, buf)
 
 

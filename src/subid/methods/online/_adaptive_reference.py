@@ -159,7 +159,7 @@ def _ref_refresh(n, nu, ny, omega, alpha, max_cond, gate, settle, ode, iv, T_now
 
 def reference(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, Hsel, par,
               ipar, ist, fst, prev_u, prev_y, zp, zq, R, G, M, Rt, gt, theta,
-              Am, Cm, Bm, Dm, Apsi, Cpsi, Psi, zr, xi, Cz, Gz, Zz,
+              Am, Cm, Bm, Dm, Apsi, Cpsi, Psi, zr, xi, Cz, Gz, Zz, Ev,
               PsiPhi, PsiG0, PsiG1, pstamp, hist, buf):
     """Plain numpy implementation of :func:`kernel` (same arguments).
 
@@ -270,6 +270,9 @@ def reference(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, 
                 else:
                     fst[4] = c2
                 w = 0.0 if gap else h / ((1.0 + np.sum(Phi * Phi)) * fst[4])
+                res = y - Phi @ theta[0]
+                Ev[0, :ny] = lamT[q] * Ev[0, :ny] + (0.0 if gap else h * res * res)
+                Ev[0, ny] = lamT[q] * Ev[0, ny] + (0.0 if gap else h)
                 Rt += w * (Phi.T @ Phi)
                 gt += (Phi.T @ (w * (y - Phi @ theta[0])))[None, :]
             elif not gap:

@@ -107,6 +107,7 @@ from subid.methods.dt._subspace import conditions_of
 from subid.methods.dt.ls_subspace import random_selector
 from subid.methods.online import _adaptive_filters as _filters
 from subid.methods.online import _adaptive_kernel as _k
+from subid.methods.online import _adaptive_refine as _refit_mod
 from subid.methods.online._adaptive_kernel import pack_tables, state_layout
 from subid.methods.online._adaptive_reference import reference
 from subid.methods.online.base import OnlineIdentifier, history_dict, one_sample
@@ -115,7 +116,7 @@ from subid.model.statespace import StateSpace
 __all__ = ["AdaptiveIdentifier"]
 
 _OLD_KIND = "AdaptiveIdentifier"     # the kind of checkpoints before subid.<Class>
-_VERSION = 3      # 2: instrumental variables (zr, Cz, Gz); 3: t_first, bd_startup
+_VERSION = 4      # 2: instrumental variables (zr, Cz, Gz); 3: t_first, bd_startup; 4: Ev
 # Step lengths handled in one kernel call when the time stamps are non-uniform
 # (bounds the memory of the per-step discretisation tables).
 _BLOCK_UNIQUE = 4096
@@ -258,6 +259,17 @@ class AdaptiveIdentifier(OnlineIdentifier):
         (Ã, C̃) (see the module notes). 0 turns it off (the issue-12
         estimator). Default 4 for ``'iv'``, 0 for ``'ls'`` and ``'ode'`` (the
         paper's; ``'ode'`` ignores it).
+    refine : bool, optional
+        Report the structured refit of the regression (8) (issue 23): the 20
+        parameters of the model fitted, from the current estimate, to the
+        instrumental-variable equations of (8), whose rows are weighted by the
+        covariance of their equation error (output-noise power per channel
+        estimated from the prediction error of (16)); computed when
+        :attr:`model` is read, once (B̃, D) are estimated, and only where it
+        lowers the criterion and stays Hurwitz (``info['refined']``). It does
+        not change the recursion (``state``, the history and Ψ use the
+        unrefined estimate). Default True for ``'iv'``, False for ``'ls'`` and
+        ``'ode'`` (the paper's estimators). See ``docs/seed000.md``.
 
     Attributes
     ----------
@@ -286,7 +298,7 @@ class AdaptiveIdentifier(OnlineIdentifier):
     """
 
     _VERSION = _VERSION
-    _READS = (2, _VERSION)
+    _READS = (2, 3, _VERSION)
     _OLD_KINDS = (_OLD_KIND,)
 
     @checked_call
@@ -296,7 +308,7 @@ class AdaptiveIdentifier(OnlineIdentifier):
                  bd_gate=1e-2, max_condition=1e10, initial_covariance=None,
                  bd_initial_covariance=None, ode_trace_bound=1e8, history_size=0,
                  engine="numba", input_names=None, output_names=None,
-                 instrument_poles=None, max_gap=None, bd_startup=None):
+                 instrument_poles=None, max_gap=None, bd_startup=None, refine=None):
         # the settings, stored unchanged (validated below)
         self.order, self.n_inputs, self.n_outputs = order, n_inputs, n_outputs
         self.horizon, self.filter_poles = horizon, filter_poles
@@ -311,7 +323,11 @@ class AdaptiveIdentifier(OnlineIdentifier):
             engine
         self.input_names, self.output_names = input_names, output_names
         self.instrument_poles, self.max_gap = instrument_poles, max_gap
-        self.bd_startup = bd_startup
+        self.bd_startup, self.refine = bd_startup, refine
+        if refine is not None and not isinstance(refine, bool):
+            raise SubidError(f"refine must be True, False or None (default), got {refine!r}")
+        self._refine = (method == "iv") if refine is None else refine
+        self._refit_cache = None      # (samples, refit) of the last model read
         n = check_int(order, "order")
         nu = check_int(n_inputs, "n_inputs")
         ny = check_int(n_outputs, "n_outputs")
@@ -442,7 +458,8 @@ class AdaptiveIdentifier(OnlineIdentifier):
         self._T1 = np.zeros(1)                      # time stamp of a one-sample chunk
 
     _ORDER = ("ist", "fst", "prev_u", "prev_y", "zp", "zq", "R", "G", "M", "Rt", "g",
-              "theta", "Am", "Cm", "Bm", "Dm", "Apsi", "Cpsi", "Psi", "zr", "xi", "Cz", "Gz", "Zz")
+              "theta", "Am", "Cm", "Bm", "Dm", "Apsi", "Cpsi", "Psi", "zr", "xi", "Cz", "Gz", "Zz",
+              "Ev")
 
     # ------------------------------------------------------------ properties
     @property
@@ -514,7 +531,10 @@ class AdaptiveIdentifier(OnlineIdentifier):
         ``cholesky_failed``, ``bound_hits`` (``'ode'``: steps with suspended
         forgetting), ``gaps`` and ``max_gap``, ``selector``, ``excited``
         (the last refresh found (8) persistently exciting), ``bd_elapsed``
-        (time since part 2 started), ``converged`` and ``convergence``
+        (time since part 2 started), ``refine``, ``refined`` (the structured
+        refit of (8) is reported), ``refine_cost_ratio`` (its criterion over
+        that of the unrefined model) and ``noise_std`` (the output-noise
+        estimate it used), ``converged`` and ``convergence``
         (``'converged'`` or the reason it is not: part 2 has not started, or
         the latest (Ã, C̃) failed the gate or the Hurwitz test). A model that
         is not converged also issues a
@@ -561,6 +581,12 @@ class AdaptiveIdentifier(OnlineIdentifier):
             "selector": np.array(self._H),
         }
         info["bd_elapsed"] = (self.t - info["bd_start_time"]) if info["bd_started"] else 0.0
+        refit = self._refit() if self._refine and info["bd_started"] else None
+        info["refine"] = self._refine
+        info["refined"] = refit is not None
+        if refit is not None:
+            info["refine_cost_ratio"] = refit[1]
+            info["noise_std"] = refit[2]
         reason = self._convergence(info)
         info["converged"] = reason is None
         info["convergence"] = "converged" if reason is None else reason
@@ -571,9 +597,31 @@ class AdaptiveIdentifier(OnlineIdentifier):
         info = model_info("seed000_adaptive", order=self._n, horizon=self._f,
                           n_samples=self.n_samples, x0=None, hold=self._hold,
                           conditions=conditions_of(info), warnings=issued, **info)
-        return StateSpace(st["Am"], st["Bm"], st["Cm"], st["Dm"], 0.0,
+        A, B, C, D = st["Am"], st["Bm"], st["Cm"], st["Dm"]
+        if info["refined"]:
+            A, B, C, D = self._refit_cache[1][0]
+        return StateSpace(A, B, C, D, 0.0,
                           input_names=self._input_names, output_names=self._output_names,
                           info=info, hold=self._hold)
+
+    def _refit(self):
+        """The structured refit of (8) (:mod:`._adaptive_refine`) of the current
+        model, cached per sample count: ``((A, B, C, D), cost ratio, noise std)``
+        or None (no noise estimate yet, or the refit failed)."""
+        if self._refit_cache is not None and self._refit_cache[0] == self.n_samples:
+            return self._refit_cache[1]
+        st = self._st
+        ev = st["Ev"][0]
+        out = None
+        if ev[-1] > 0:
+            power = ev[:-1] / ev[-1]
+            fit = _refit_mod.refit((st["Am"], st["Bm"], st["Cm"], st["Dm"]), st["M"], st["Cz"],
+                                   st["Gz"], st["Zz"], self._H, self._omega, self._Af,
+                                   self._Bf, power, self._max_cond)
+            if fit is not None:
+                out = (fit[0], fit[1], np.sqrt(power))
+        self._refit_cache = (self.n_samples, out)
+        return out
 
     def _convergence(self, info: dict):
         """None if the current model passes the convergence criteria, else
@@ -611,20 +659,8 @@ class AdaptiveIdentifier(OnlineIdentifier):
     def toeplitz(self) -> np.ndarray:
         """T_f of (3) for the current estimate, in the filter coordinates
         (``T_f(Ã/ω, B̃/ω, C̃, D)``), shape (f ny, f nu)."""
-        st = self._st
-        f, ny, nu = self._f, self._ny, self._nu
-        A = st["Am"] / self._omega
-        B = st["Bm"] / self._omega
-        blocks = [st["Dm"]]
-        X = B
-        for _ in range(f - 1):
-            blocks.append(st["Cm"] @ X)
-            X = A @ X
-        T = np.zeros((f * ny, f * nu))
-        for i in range(f):
-            for j in range(i + 1):
-                T[i * ny:(i + 1) * ny, j * nu:(j + 1) * nu] = blocks[i - j]
-        return T
+        A, B, C, D = (self._st[k] for k in ("Am", "Bm", "Cm", "Dm"))
+        return _refit_mod.toeplitz(A / self._omega, B / self._omega, C, D, self._f)
 
     @property
     def state(self) -> np.ndarray:
@@ -873,7 +909,7 @@ class AdaptiveIdentifier(OnlineIdentifier):
             "bd_initial_covariance": self._q0, "ode_trace_bound": self._trace_bound,
             "history_size": self._hist_cap, "engine": self._engine,
             "instrument_poles": [[float(p.real), float(p.imag)] for p in self._ipoles],
-            "max_gap": self._max_gap, "bd_startup": self._startup,
+            "max_gap": self._max_gap, "bd_startup": self._startup, "refine": self._refine,
             "input_names": None if self._input_names is None else list(self._input_names),
             "output_names": None if self._output_names is None else list(self._output_names),
             "t_origin": self._t_origin, "k_origin": self._k_origin,
@@ -920,7 +956,9 @@ class AdaptiveIdentifier(OnlineIdentifier):
                       instrument_poles=[complex(re, im) for re, im in s["instrument_poles"]],
                       max_gap=s["max_gap"],
                       # version 2 had no start-up schedule
-                      bd_startup=s.get("bd_startup", 0.0))
+                      bd_startup=s.get("bd_startup", 0.0),
+                      # versions 2 and 3 had no refit of (8)
+                      refine=s.get("refine", False))
             version = s.get("_version", _VERSION)
             t_origin, k_origin = float(s["t_origin"]), int(s["k_origin"])
         except CheckpointError:
@@ -935,6 +973,8 @@ class AdaptiveIdentifier(OnlineIdentifier):
             # then) and no excitation flag (excited until the next refresh)
             arrays = dict(arrays, fst=np.append(arrays["fst"], arrays["fst"][6]),
                           ist=np.append(arrays["ist"], 0))
+        if version < 4 and "Ev" not in arrays:      # no noise estimate before version 4
+            arrays = dict(arrays, Ev=np.zeros_like(obj._st["Ev"]))
         for name, ref in obj._st.items():
             value = require(arrays, path, name, ref.shape, dtype=ref.dtype)
             if value.dtype != ref.dtype:
