@@ -101,7 +101,8 @@ def state_layout(n: int, nu: int, ny: int, f: int, mi: int) -> list:
                                   # (the others are columns of Zz) ('iv')
             ("Gz", (dp, dz)),     # S_ζ - M Cz^T ('iv')
             ("Zz", (dz, dz)),     # sum w ζ ζ^T, the IV weighting ('iv')
-            ("Ev", (1, ny + 1))]  # Σ λ h (y - Φ θ)^2 per output of (16), then Σ λ h
+            ("Ev", (1, 2 * ny + 1))]  # Σ λ h (y - Φ θ)^2 per output of (16), Σ λ h y^2,
+                                      # Σ λ h
 
 
 # Part 2 also starts when the residual of (13) is below this value and has
@@ -1099,7 +1100,9 @@ def kernel(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, Hse
                     # its power per channel (the output-noise estimate of the
                     # refinement, see adaptive._refined)
                     Ev[0, r] = lamT[q] * Ev[0, r] + (0.0 if gap else h * (s * s))
-                Ev[0, ny] = lamT[q] * Ev[0, ny] + (0.0 if gap else h)
+                    Ev[0, ny + r] = lamT[q] * Ev[0, ny + r] + (0.0 if gap else
+                                                              h * (Y[k, r] * Y[k, r]))
+                Ev[0, 2 * ny] = lamT[q] * Ev[0, 2 * ny] + (0.0 if gap else h)
                 # R_θ += w Φ^T Φ, g_θ += w Φ^T (y - Φ θ), exploiting u^T ⊗ I
                 for r in range(ny):
                     er = ey[r]

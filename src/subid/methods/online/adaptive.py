@@ -138,6 +138,9 @@ _IV_BD_RATIO = 1.0
 # Start-up schedule of the (B̃, D) memory ('iv'): β_eff = max(β, κ / age), age =
 # time since part 2 started (measured in docs/seed000.md).
 _DEFAULT_BD_STARTUP = 4.0
+# The refit's noise estimate is floored at this many dB below the output power (noise-free,
+# the prediction error of (16) is rounding, which would set the row weights of (8) at random)
+_SNR_CAP = 80.0
 _NON_FINITE = ("the chunk drove the identifier to non-finite values (are the signals scaled "
                "to moderate magnitudes?); it was rejected and the identifier is unchanged")
 
@@ -610,16 +613,14 @@ class AdaptiveIdentifier(OnlineIdentifier):
         or None (no noise estimate yet, or the refit failed)."""
         if self._refit_cache is not None and self._refit_cache[0] == self.n_samples:
             return self._refit_cache[1]
-        st = self._st
+        st, out = self._st, None
         ev = st["Ev"][0]
-        out = None
-        if ev[-1] > 0:
-            power = ev[:-1] / ev[-1]
+        if ev[-1] > 0:      # output-noise power per channel, at most _SNR_CAP below the output's
+            power = np.maximum(ev[:self._ny], ev[self._ny:-1] * 10 ** (-_SNR_CAP / 10)) / ev[-1]
             fit = _refit_mod.refit((st["Am"], st["Bm"], st["Cm"], st["Dm"]), st["M"], st["Cz"],
                                    st["Gz"], st["Zz"], self._H, self._omega, self._Af,
                                    self._Bf, power, self._max_cond)
-            if fit is not None:
-                out = (fit[0], fit[1], np.sqrt(power))
+            out = None if fit is None else (fit[0], fit[1], np.sqrt(power))
         self._refit_cache = (self.n_samples, out)
         return out
 
