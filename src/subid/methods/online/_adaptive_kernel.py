@@ -1099,10 +1099,11 @@ def kernel(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, Hse
                     ey[r] = w * s
                     # its power per channel (the output-noise estimate of the
                     # refinement, see adaptive._refined)
-                    Ev[0, r] = lamT[q] * Ev[0, r] + (0.0 if gap else h * (s * s))
-                    Ev[0, ny + r] = lamT[q] * Ev[0, ny + r] + (0.0 if gap else
-                                                              h * (Y[k, r] * Y[k, r]))
-                Ev[0, 2 * ny] = lamT[q] * Ev[0, 2 * ny] + (0.0 if gap else h)
+                    # (θ's memory, start-up schedule included: the rows of the
+                    # first seconds, with θ still far off, are forgotten as fast)
+                    Ev[0, r] = lam * Ev[0, r] + (0.0 if gap else h * (s * s))
+                    Ev[0, ny + r] = lam * Ev[0, ny + r] + (0.0 if gap else h * (Y[k, r] * Y[k, r]))
+                Ev[0, 2 * ny] = lam * Ev[0, 2 * ny] + (0.0 if gap else h)
                 # R_θ += w Φ^T Φ, g_θ += w Φ^T (y - Φ θ), exploiting u^T ⊗ I
                 for r in range(ny):
                     er = ey[r]

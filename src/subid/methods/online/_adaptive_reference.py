@@ -271,9 +271,9 @@ def reference(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, 
                     fst[4] = c2
                 w = 0.0 if gap else h / ((1.0 + np.sum(Phi * Phi)) * fst[4])
                 res = y - Phi @ theta[0]
-                Ev[0, :ny] = lamT[q] * Ev[0, :ny] + (0.0 if gap else h * (res * res))
-                Ev[0, ny:2 * ny] = lamT[q] * Ev[0, ny:2 * ny] + (0.0 if gap else h * (y * y))
-                Ev[0, 2 * ny] = lamT[q] * Ev[0, 2 * ny] + (0.0 if gap else h)
+                Ev[0, :ny] = lam * Ev[0, :ny] + (0.0 if gap else h * (res * res))
+                Ev[0, ny:2 * ny] = lam * Ev[0, ny:2 * ny] + (0.0 if gap else h * (y * y))
+                Ev[0, 2 * ny] = lam * Ev[0, 2 * ny] + (0.0 if gap else h)
                 Rt += w * (Phi.T @ Phi)
                 gt += (Phi.T @ (w * (y - Phi @ theta[0])))[None, :]
             elif not gap:
