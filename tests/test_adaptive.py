@@ -185,8 +185,8 @@ def test_scaled_filter_states_are_better_conditioned(clean200):
 def test_error_floor_is_inter_sample_interpolation():
     """Exact for held signals: the remaining error of the recursion is the
     O(h^2) error of interpolating the true output linearly between samples
-    (the recursion's own estimate: refine=False; with the refit, 1.5e-3 at
-    2 ms and 3.9e-5 at 1 ms, see docs/seed000.md)."""
+    (the recursion's own estimate: refine=False; the refit is not used
+    noise-free, see docs/seed000.md)."""
     true = paper_system()
     errs = []
     for h in (2e-3, 1e-3):
@@ -988,7 +988,7 @@ def test_bd_stage_starts_at_40db_white_noise():
 def test_40db_white_noise_ten_realisations():
     """Issue 23 acceptance: 40 dB, white input, 400 s, 10 noise realisations,
     defaults: (B, D) estimated in all 10, median ε_r < 0.05, worst < 0.1
-    (measured with the structured refit of (8): median 0.017, worst 0.063;
+    (measured with the structured refit of (8): median 0.013, worst 0.064;
     without it 0.078 / 0.20)."""
     true = paper_system()
     eps = []

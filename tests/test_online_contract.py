@@ -71,7 +71,7 @@ def _assert_same(a, b, exact):
             # to rounding, amplified by AdaptiveIdentifier's refit of (8) (an
             # iterative fit of the state; the states themselves agree to 1e-10)
             np.testing.assert_allclose(getattr(ma, name), getattr(mb, name), rtol=1e-6,
-                                       atol=1e-9, err_msg=name)
+                                       atol=1e-8, err_msg=name)
     if exact:
         np.testing.assert_array_equal(a.state, b.state)
     else:

@@ -138,9 +138,9 @@ _IV_BD_RATIO = 1.0
 # Start-up schedule of the (B̃, D) memory ('iv'): β_eff = max(β, κ / age), age =
 # time since part 2 started (measured in docs/seed000.md).
 _DEFAULT_BD_STARTUP = 4.0
-# The refit's noise estimate is floored at this many dB below the output power (noise-free,
-# the prediction error of (16) is rounding, which would set the row weights of (8) at random)
-_SNR_CAP = 80.0
+# No refit where the estimated SNR exceeds this on every output (the error left is then the
+# deterministic interpolation error, which the noise weighting does not describe; docs)
+_SNR_SKIP = 70.0
 _NON_FINITE = ("the chunk drove the identifier to non-finite values (are the signals scaled "
                "to moderate magnitudes?); it was rejected and the identifier is unchanged")
 
@@ -330,7 +330,6 @@ class AdaptiveIdentifier(OnlineIdentifier):
         if refine is not None and not isinstance(refine, bool):
             raise SubidError(f"refine must be True, False or None (default), got {refine!r}")
         self._refine = (method == "iv") if refine is None else refine
-        self._refit_cache = None      # (samples, refit) of the last model read
         n = check_int(order, "order")
         nu = check_int(n_inputs, "n_inputs")
         ny = check_int(n_outputs, "n_outputs")
@@ -611,12 +610,13 @@ class AdaptiveIdentifier(OnlineIdentifier):
         """The structured refit of (8) (:mod:`._adaptive_refine`) of the current
         model, cached per sample count: ``((A, B, C, D), cost ratio, noise std)``
         or None (no noise estimate yet, or the refit failed)."""
-        if self._refit_cache is not None and self._refit_cache[0] == self.n_samples:
+        if getattr(self, "_refit_cache", None) and self._refit_cache[0] == self.n_samples:
             return self._refit_cache[1]
         st, out = self._st, None
         ev = st["Ev"][0]
-        if ev[-1] > 0:      # output-noise power per channel, at most _SNR_CAP below the output's
-            power = np.maximum(ev[:self._ny], ev[self._ny:-1] * 10 ** (-_SNR_CAP / 10)) / ev[-1]
+        ny = self._ny
+        if ev[-1] > 0 and np.any(ev[:ny] > ev[ny:-1] * 10 ** (-_SNR_SKIP / 10)):
+            power = np.maximum(ev[:ny], ev[ny:-1] * 10 ** (-_SNR_SKIP / 10)) / ev[-1]
             fit = _refit_mod.refit((st["Am"], st["Bm"], st["Cm"], st["Dm"]), st["M"], st["Cz"],
                                    st["Gz"], st["Zz"], self._H, self._omega, self._Af,
                                    self._Bf, power, self._max_cond)
