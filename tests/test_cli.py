@@ -510,4 +510,4 @@ def test_track_reports_convergence_and_warns(tmp_path, capsys):
                                tmp_path / "dryer")
     assert code == 0 and "converged   yes" in stdout and "on its last third" in stdout
     model = subid.StateSpace.load(tmp_path / "dryer" / "model.json")
-    assert model.info["bd_method"] == "regression" and len(model.info["fit_last_third"]) == 1
+    assert model.info["bd_method"] == "simulation" and len(model.info["fit_last_third"]) == 1

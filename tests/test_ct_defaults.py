@@ -6,7 +6,8 @@ import pytest
 
 from subid import IOData, StateSpace, merge
 from subid.experiments.seed002 import BIAS_FREQUENCIES, paper_system, simulate
-from subid.methods.ct import _ct_fit
+from subid.experiments.seed002_bound import median_bound
+from subid.methods.ct import _ct_discrete, _ct_fit
 from subid.methods.ct.ct_subspace import ct_subspace
 
 W = np.logspace(-2, 2, 200)
@@ -99,8 +100,13 @@ def test_default_order_is_cross_validated_with_the_hold():
     sel = model.info["order_selection"]
     assert sel["rule"] == "cv" and model.order >= 2
     assert max_relative_error(model, true) < 0.1
-    assert {c["order"] for c in sel["candidates"]} == set(range(1, 11))
-    assert isinstance(model.info["feedthrough"], bool) and "feedthrough_selection" in model.info
+    assert {c["order"] for c in sel["candidates"]
+            if c["system_matrices"] == "subspace"} == set(range(1, 11))
+    assert isinstance(model.info["feedthrough"], bool)
+    if model.info["start"] == "subspace":
+        assert "feedthrough_selection" in model.info
+    else:                                   # the converted n4sid model (its own D)
+        assert model.info["discrete_model"]["order"] >= 1
     again = ct_subspace(data.detrend(), model.order, hold="zoh")
     assert np.allclose(again.A, model.A) and np.allclose(again.C, model.C)
 
@@ -134,9 +140,82 @@ def test_coloured_noise_small_monte_carlo():
 
 @pytest.mark.long
 def test_coloured_noise_monte_carlo_50_runs():
-    """50 runs, L = 4000: no bias at 0.1-5 rad/s (z < 2), and the error against white
-    noise at the same SNR within the ratio the noise spectra set (docs/seed002.md)."""
+    """50 runs, L = 4000: no bias at 0.1-5 rad/s (z < 2), and the error under coloured
+    and white noise within 1.3 times the Cramér-Rao bound on the same records
+    (docs/seed002.md; the bound's ratio is 4.3, so the ratio measured is near it)."""
     z, med, _ = coloured_runs(50, 4000, 0.9)
     assert np.all(z < 2.0), z
     _, white, _ = coloured_runs(50, 4000, 0.0)
-    assert med < 5.0 * white, (med, white)
+    seeds = range(100, 150)
+    assert med < 1.3 * median_bound(4000, seeds, noise_pole=0.9), med
+    assert white < 1.3 * median_bound(4000, seeds, noise_pole=0.0), white
+
+
+@pytest.mark.parametrize("hold", ["zoh", "foh"])
+def test_negative_real_poles_convert_with_nyquist_modes(hold):
+    """A discrete-time model with poles on the negative real axis has no continuous-time
+    model of its order; with a mode at the Nyquist frequency for each, its hold
+    discretisation has the same transfer function (and the same samples, x0 aside)."""
+    rng = np.random.default_rng(3)
+    A = np.array([[0.5, 0.3, 0, 0], [-0.3, 0.5, 0, 0], [0, 0, -0.5, 0.2], [0, 0, 0, -0.3]])
+    T = rng.standard_normal((4, 4))
+    dm = StateSpace(np.linalg.solve(T, A @ T), rng.standard_normal((4, 2)),
+                    rng.standard_normal((2, 4)), rng.standard_normal((2, 2)), dt=0.1)
+    cm, note = _ct_discrete.convert(dm, hold)
+    assert cm.order == 6 and "Nyquist" in note and cm.hold == hold
+    assert np.allclose(np.sort(np.abs(cm.poles().imag))[2:], np.pi / 0.1)
+    w = np.linspace(0.1, 31.0, 9)
+    back = cm.to_discrete(0.1, hold)
+    assert np.abs(back.freqresp(w) - dm.freqresp(w)).max() < 1e-10
+    u = rng.standard_normal((300, 2))
+    y = cm.simulate(u, t=np.arange(300) * 0.1, hold=hold)
+    assert np.abs(y - dm.simulate(u))[40:].max() < 1e-8 * np.abs(y).max()
+    # a pole at the origin has no continuous-time counterpart at all
+    none, reason = _ct_discrete.convert(StateSpace(np.diag([0.0, 0.5]), np.ones((2, 1)),
+                                                   np.ones((1, 2)), 0, dt=0.1), hold)
+    assert none is None and "z = 0" in reason
+
+
+def test_paired_test_needs_every_fold_to_agree_or_a_clear_mean():
+    assert _ct_discrete.significantly_better([60, 61, 62, 63], [59, 60, 61, 62])
+    assert not _ct_discrete.significantly_better([70, 60, 62, 59], [60, 61, 62, 60])
+    assert not _ct_discrete.significantly_better([60, 61, 62, 63], [60, 61, 62, 63])
+    record = _ct_discrete.paired_test([71.0, 63.0, 62.6, -100.0], [59.7, 56.2, 62.2, -100.0])
+    assert not record["significant"] and record["mean_difference"] > 0
+
+
+def n4sid_reference_record(seed=4, n_samples=900):
+    """A 2x1 plant with a lightly damped pair, coloured process noise, zero-order hold."""
+    true = StateSpace([[0.0, 1.0, 0.0], [-4.0, -0.4, 0.0], [0.0, 0.0, -0.5]],
+                      [[0.0], [1.0], [0.5]], [[1.0, 0.0, 1.0], [0.0, 1.0, -1.0]], 0, dt=0.0)
+    rng = np.random.default_rng(seed)
+    t = np.arange(n_samples) * 0.1
+    u = np.repeat(rng.standard_normal(n_samples // 3), 3)
+    y = true.simulate(u, t=t, hold="zoh")
+    y = y + 0.1 * y.std(axis=0) * rng.standard_normal(y.shape)
+    return IOData(u, y, t=t)
+
+
+@pytest.mark.slow
+def test_default_is_never_far_below_the_discrete_time_default():
+    """The default N4SID model, converted, competes in the cross-validation: the default
+    ct_subspace model validates within 2 points of the default n4sid model."""
+    import subid
+    data = n4sid_reference_record()
+    est, val = data[:600], data[600:]
+    dm = subid.n4sid(est)
+    cm = ct_subspace(est)
+    assert "discrete_model" in cm.info and cm.info["order_selection"]["rule"] == "cv"
+    kinds = {c["system_matrices"] for c in cm.info["order_selection"]["candidates"]}
+    assert "subspace" in kinds and any(k.startswith("N4SID, horizon") for k in kinds)
+    assert np.mean(subid.fit_percent(cm, val)) >= np.mean(subid.fit_percent(dm, val)) - 2.0
+
+
+def test_cramer_rao_bound_of_coloured_against_white_noise():
+    """What any unbiased estimator can reach (docs/seed002.md): under AR(1) output noise
+    (pole 0.9) the Cramér-Rao median of max |G - G_hat| is about 4.4 times that under
+    white noise of the same variance, so the issue's 1.5x cannot be met at equal SNR."""
+    white = median_bound(4000, range(3), noise_pole=0.0, draws=200)
+    coloured = median_bound(4000, range(3), noise_pole=0.9, draws=200)
+    assert 0.015 < white < 0.03, white
+    assert 3.8 < coloured / white < 5.0, coloured / white

@@ -10,10 +10,10 @@ import pytest
 
 from subid import IOData, StateSpace, errors
 from subid.experiments.seed002 import paper_system, simulate
+from subid.methods.ct._ct_estimate import _fit_b_filtered
 from subid.methods.ct.basis import default_basis, laguerre, legendre, takenaka_malmquist
 from subid.methods.ct.ct_subspace import (
     _estimate_a_c,
-    _fit_b_filtered,
     _subspace_factor,
     ct_subspace,
     ct_subspace_paper,
@@ -395,7 +395,7 @@ def test_info_is_complete_and_storable(true):
     model = ct_subspace(data, 4, basis=takenaka_malmquist([2 + 1j, 2 - 1j, 5, 9, 14, 30, 60, 90]))
     info = model.info
     for key in ("singular_values", "basis_poles", "order", "instruments", "iterations",
-                "ac_residual", "b_regression_condition", "bd_method_used", "x0",
+                "ac_residual", "b_regression_condition", "bd_method", "x0",
                 "subspace_model", "refined", "n_correction_regressors"):
         assert key in info, key
     assert info["basis_poles"][0] == 2 + 1j

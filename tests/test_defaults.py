@@ -190,16 +190,17 @@ def _unstable_closed_loop(seed=3, n_samples=1500):
 
 
 def test_prediction_form_b_d_agrees_with_a_direct_regression():
-    """predictor_b_d solves the predictor regression; checked against regressors built
-    column by column by simulating the predictor (an independent computation)."""
-    from subid.methods.dt._subspace import predictor_b_d, prepare
+    """The 'prediction' route (b_d_refit) solves the predictor regression; checked against
+    regressors built column by column by simulating the predictor (an independent
+    computation)."""
+    from subid.methods.dt._subspace import b_d_refit, prepare
     from subid.methods.dt.noise_model import innovation_model, user_factor
     data = _unstable_closed_loop()
     pb = prepare(data, 2, 10, method="moesp")
     model = subid.moesp(data, 2, horizon=10, stability="none", system_matrices="shift")
     A, C = model.A, model.C
     B0, D0 = np.ones((2, 1)), np.zeros((1, 1))
-    got = predictor_b_d(A, C, B0, D0, pb, feedthrough=True, estimate_x0=True)
+    got = b_d_refit(pb, C, feedthrough=True, estimate_x0=True)(A, (B0, D0, None, {}))
     assert got is not None
     B, D, x0, diag = got
     assert diag["bd_method"] == "prediction" and diag["predictor_spectral_radius"] < 1

@@ -8,7 +8,7 @@ import pytest
 import subid
 from subid.errors import DataError
 from subid.evaluation.metrics import markov_error
-from subid.methods.dt._regression import fit_b_d_x0
+from subid.methods.dt._bd_large import fit_experiments
 from subid.statistic._hankel import hankel_chunk
 
 TRUE = subid.systems.seed001_system()
@@ -135,7 +135,7 @@ def test_regression_with_one_x0_per_experiment_agrees_with_a_direct_solution(pat
     A, C = TRUE.A, TRUE.C
     n, nu, ny = N_STATE, 2, 2
     starts = [a for a, _ in data.experiment_ranges]
-    B, D, x0, diag = fit_b_d_x0(A, C, data.u, noisy_y, starts=starts, path=path)
+    B, D, x0, diag = fit_experiments(A, C, data.u, noisy_y, starts, path=path)
     assert diag["regression_path"] == path and x0.shape == (2, n)
     rows, rhs = [], []
     for e, (a, b) in enumerate(data.experiment_ranges):

@@ -257,7 +257,7 @@ def test_unstable_plant(fn):
 def test_b_d_falls_back_to_projection_when_simulation_overflows(paper_system, paper_data):
     """An identified A with spectral radius ~3 overflows when simulated over
     1000 samples; 'auto' then solves the projected data equation."""
-    from subid.methods.dt._subspace import estimate_b_d, prepare
+    from subid.methods.dt._subspace import b_d_fit, prepare
     f = 5
     pb = prepare(paper_data, 3, f, method="test", blocks_per_horizon=1)
     A = 3.0 * paper_system.A / np.abs(np.linalg.eigvals(paper_system.A)).max()
@@ -266,13 +266,13 @@ def test_b_d_falls_back_to_projection_when_simulation_overflows(paper_system, pa
     hf = pb.factor
     L = hf.retriangularize(hf.u_rows(0, f), hf.y_rows(0, f))
     a = 2 * f
-    B, D, x0, diag = estimate_b_d(A, C, gamma, L[:a, :a], L[a:, :a], pb,
-                                  bd_method="auto", feedthrough=True, estimate_x0=True)
+    B, D, x0, diag = b_d_fit(pb, C, gamma, L[:a, :a], L[a:, :a], bd_method="auto",
+                             feedthrough=True, estimate_x0=True)(A)
     assert diag["bd_method"] == "projection" and x0 is None
     assert np.isfinite(B).all() and np.isfinite(D).all()
     with pytest.raises(subid.errors.SubidError, match="bd_method='projection'"):
-        estimate_b_d(A, C, gamma, L[:a, :a], L[a:, :a], pb, bd_method="simulation",
-                     feedthrough=True, estimate_x0=True)
+        b_d_fit(pb, C, gamma, L[:a, :a], L[a:, :a], bd_method="simulation",
+                feedthrough=True, estimate_x0=True)(A)
 
 
 def test_candidate_orders(paper_data):

@@ -178,7 +178,7 @@ def test_regression_equals_batch_default_noise_free(instruments):
                               selector=rs.selector, feedthrough=True, system_matrices="shift")
     assert batch.info["bd_method"] == "simulation"
     model = rs.model
-    assert model.info["bd_method"] == "regression"
+    assert model.info["bd_method"] == "simulation"
     for name in "ABCD":
         np.testing.assert_allclose(getattr(model, name), getattr(batch, name), atol=1e-8,
                                    err_msg=name)
@@ -220,7 +220,7 @@ def test_regression_equals_batch_noisy(instruments, samples, lags):
                               selector=rs.selector, feedthrough=True, system_matrices="shift")
     assert batch.info["bd_method"] == "simulation"
     model = rs.model
-    assert model.info["bd_method"] == "regression"
+    assert model.info["bd_method"] == "simulation"
     assert model.info["bd_truncation"] < 1e-16
     for name in "ABCD":
         np.testing.assert_allclose(getattr(model, name), getattr(batch, name), atol=1e-8,
@@ -347,7 +347,7 @@ def test_regression_restarts_after_a_switch_and_tracks():
     d2 = systems.simulate_data(s2, 4000, seed=2)
     rs = subid.RecursiveSubspace(3, 2, 2, horizon=5, forgetting=0.995)
     rs.update(d1.u, d1.y)
-    assert rs.model.info["bd_method"] == "regression"
+    assert rs.model.info["bd_method"] == "simulation"
     assert subid.markov_error(rs.model, s1) < 1e-6
     restarts = rs.model.info["bd_restarts"]
     rs.update(d2.u, d2.y)
@@ -364,7 +364,7 @@ def test_regression_not_started_warns():
         model = rs.model
     assert model.info["bd_method"] == "projection" and model.info["bd_fallback"]
     with pytest.raises(errors.SubidError, match="bd_method"):
-        subid.RecursiveSubspace(3, 2, 2, bd_method="simulation")
+        subid.RecursiveSubspace(3, 2, 2, bd_method="regression")
 
 
 @pytest.mark.parametrize("kw", [{}, {"forgetting": 0.99, "refresh_every": 50}])

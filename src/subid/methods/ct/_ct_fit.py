@@ -359,6 +359,16 @@ def similarity_complement(A, C):
     return Uf[:, n * n:]
 
 
+def refine_steps(order: int, rec: Record) -> int:
+    """Levenberg-Marquardt steps :data:`REFINE_BUDGET` affords a refinement of an order-n
+    model on ``rec``: each step evaluates a finite-difference Jacobian (``n p + 1``
+    residuals), each residual simulates ``n (n m + 1)`` state trajectories of
+    ``p`` outputs over the record ('lm' counts steps, not evaluations)."""
+    n, p = order, rec.n_outputs
+    per_evaluation = rec.y.shape[0] * p * (n * (n * rec.n_inputs + 1))
+    return int(REFINE_BUDGET // max(per_evaluation * (n * p + 1), 1))
+
+
 def refine_output_error(A, C, rec: Record, *, feedthrough, estimate_x0, offset, max_iterations,
                         whiten=None, keep_stable=True):
     """(A, C) minimising the (prewhitened) output error, linear parameters eliminated.
@@ -394,9 +404,7 @@ def refine_output_error(A, C, rec: Record, *, feedthrough, estimate_x0, offset, 
 
     zero = np.zeros(Q.shape[1])
     rms0 = float(np.sqrt(np.mean(residual(zero) ** 2)))
-    per_evaluation = y.shape[0] * p * (n * (n * rec.n_inputs + 1))
-    # 'lm' counts the steps, not the k + 1 evaluations of each finite-difference Jacobian
-    budget = max(2, int(REFINE_BUDGET // max(per_evaluation * (Q.shape[1] + 1), 1)))
+    budget = max(2, refine_steps(n, rec))
     max_nfev = min(max_iterations, budget)
     sol = scipy.optimize.least_squares(residual, zero, method="lm", x_scale="jac",
                                        xtol=1e-10, ftol=1e-10, gtol=1e-10, max_nfev=max_nfev)

@@ -73,6 +73,9 @@ Beyond the paper
   projection). It turns the consistent subspace estimate into the
   least-squares (maximum-likelihood for white Gaussian output noise)
   estimate. ``info['subspace_model']`` keeps the subspace estimate.
+* Discrete-time candidates (``start='auto'``, uniform grids): the default
+  N4SID models converted with the hold compete in the cross-validation
+  with n4sid's own fold scores (:mod:`subid.methods.ct._ct_discrete`).
 """
 
 from __future__ import annotations
@@ -93,16 +96,26 @@ from subid.errors import (
     NotExcitingError,
     OptionError,
     OrderError,
-    SubidError,
     TooFewSamplesError,
 )
+from subid.methods._common import choose_order
 from subid.methods._info import model_info, records_warnings
-from subid.methods.ct import _ct_fit
+from subid.methods.bd import CT_OPTIONS, INFO_KEY, fit_b_d_x0
+from subid.methods.ct import _ct_discrete, _ct_fit
+from subid.methods.ct._ct_checks import (
+    DEFAULT_MAX_ORDER,
+    HOLD_ORDERS,
+    _check_data,
+    _check_filtered,
+    _default_size,
+    _lag_for,
+    _parse_order,
+)
+from subid.methods.ct._ct_discrete import dt_to_ct
 from subid.methods.ct._ct_estimate import (
     _correction_count,
     _correction_regressors,
     _estimate_a_c,
-    _fit_b_filtered,
     _markov_change,
     _subspace_factor,
     data_equation_matrices,
@@ -110,8 +123,7 @@ from subid.methods.ct._ct_estimate import (
     tm_convolution_matrix,
 )
 from subid.methods.ct.basis import MAX_POLY_ORDER, FilterBank, default_basis
-from subid.methods.dt._selection import HORIZON_CANDIDATES, cross_validate
-from subid.methods.dt._subspace import choose_order
+from subid.methods.dt._selection import cross_validate
 from subid.model.statespace import StateSpace
 
 __all__ = [
@@ -123,108 +135,16 @@ __all__ = [
     "tm_convolution_matrix",
 ]
 
-DEFAULT_MAX_ORDER = 10
 #: Folds up to this many samples are filtered once per call and reused by the choices.
 FOLD_CACHE_SAMPLES = 50_000
 #: Instrument iterations of the models fitted to the cross-validation folds.
 FOLD_ITERATIONS = 3
-HOLD_ORDERS = {"zoh": 0, "foh": 1}
+#: ``refine='auto'`` considers the refinement only where its budget
+#: (:func:`subid.methods.ct._ct_fit.refine_steps`) affords this many steps.
+MIN_REFINE_STEPS = 5
 # Relative size of a diagonal entry of the filtered-input factor below which
 # the filtered inputs count as linearly dependent.
 _RANK_TOL = 1e-10
-
-
-# ---------------------------------------------------------------------------
-# validation
-# ---------------------------------------------------------------------------
-def _check_data(data, method: str) -> IOData:
-    if not isinstance(data, IOData):
-        raise DataError(f"{method} expects an IOData record, got {type(data).__name__}; "
-                        "wrap arrays as subid.IOData(u, y, t=...) or IOData(u, y, dt=...)")
-    std = np.array([e.y.std(axis=0) for e in data.experiments]).max(axis=0)
-    flat = np.flatnonzero(std <= 1e-14 * np.maximum(np.abs(data.y).max(axis=0), 1e-300))
-    if flat.size:
-        names = ", ".join(data.output_names[k] for k in flat)
-        raise DataError(f"output {names} is constant over the whole record: it carries no "
-                        "information about the dynamics; drop that channel")
-    for e in data.experiments:
-        if e.n_samples < 2:
-            continue
-        # a spacing near the rounding of the time stamps themselves is known to few digits,
-        # and every exact discretisation over it is wrong: say so instead of fitting noise
-        t = e.t
-        h = np.diff(t)
-        resolution = 1e-9 * float(np.abs(t).max())
-        k = int(np.argmin(h))
-        if h[k] <= resolution:
-            raise DataError(f"{method}: the time stamps {t[k]!r} and {t[k + 1]!r} "
-                            f"(rows {k}, {k + 1}) are {h[k]:.3g} apart, below the resolution "
-                            f"of time stamps of magnitude {np.abs(t).max():.3g} (about "
-                            "1e-9 of it): the interval is known to few digits. Subtract the "
-                            "start time, merge the two samples, or resample")
-    return data
-
-
-def _parse_order(order, max_order):
-    """(fixed order or None, candidate orders)."""
-    if order is None or (isinstance(order, str) and order == "auto"):
-        return None, list(range(1, max_order + 1))
-    if isinstance(order, (str, bytes)) or not hasattr(order, "__iter__"):
-        n = check_int(order, "order", minimum=1)
-        if n > max_order:
-            raise OrderError(f"order {n} cannot be revealed with this basis: the filtered "
-                             f"outputs reveal at most {max_order} states (N p - p, at most "
-                             f"{DEFAULT_MAX_ORDER}); use more basis functions")
-        return n, [n]
-    cands = sorted({check_int(k, "candidate order", minimum=1) for k in order})
-    if not cands:
-        raise OrderError("the list of candidate orders is empty")
-    cands = [k for k in cands if k <= max_order]
-    if not cands:
-        raise OrderError(f"every candidate order exceeds {max_order}, the largest this basis "
-                         "reveals; use more basis functions")
-    return None, cands
-
-
-def _check_filtered(filtered, L, N, m, p):
-    try:
-        uf, yf = filtered
-    except (TypeError, ValueError):
-        raise DataError("filtered must be a pair (u_f, y_f) of arrays") from None
-    uf = np.asarray(uf, dtype=float)
-    yf = np.asarray(yf, dtype=float)
-    if uf.shape != (L, N, m) or yf.shape != (L, N, p):
-        raise DataError(f"filtered signals must have shapes {(L, N, m)} and {(L, N, p)} "
-                        f"(samples, basis functions, channels), got {uf.shape} and "
-                        f"{yf.shape}")
-    if not (np.isfinite(uf).all() and np.isfinite(yf).all()):
-        raise DataError("filtered signals contain NaN or infinite values")
-    return uf, yf
-
-
-def _default_size(data: IOData, poly_order, hold, feedthrough, startup, correction,
-                  instruments, selection) -> int:
-    """Number of functions of the default basis: ``max(8, ceil(10 / p) + 1)`` (enough to
-    reveal order 10), fewer when the record (with ``selection='cv'``: its shortest fold,
-    half of it) has too few samples for the data matrix (at least 2)."""
-    m, p, E = data.n_inputs, data.n_outputs, data.n_experiments
-    wanted = max(8, -(-DEFAULT_MAX_ORDER // p) + 1)
-    input_order = poly_order if hold is None or isinstance(hold, str) and hold not in \
-        HOLD_ORDERS else HOLD_ORDERS[hold]
-    corr = 0
-    if correction:
-        i0, j = _correction_count(poly_order, input_order, feedthrough is True)
-        corr = max(0, j - i0 + 1)
-    per = (E if startup else 0) + m + corr * m + p + (m if instruments == "past" else 0)
-    samples = data.n_samples // 2 if selection == "cv" else data.n_samples
-    return int(max(2, min(wanted, (samples - 2 - E) // max(per, 1))))
-
-
-def _lag_for(bank: FilterBank, t: np.ndarray) -> int:
-    """Lag of the 'past' instruments: about two time constants of the slowest filter."""
-    slow = min(abs(z.real) for z in bank.poles)
-    h = (t[-1] - t[0]) / (t.size - 1)
-    return max(1, int(math.ceil(2.0 / (slow * h))))
 
 
 # ---------------------------------------------------------------------------
@@ -344,10 +264,19 @@ def _prepare(data: IOData, candidates, s: dict) -> Problem:
 
 
 def _linear_fit(problem: Problem, feedthrough: bool, whiten=None):
+    """``fit(A, C) -> (B, D, x0, y0, diagnostics)`` (None where simulating A overflows):
+    the ``'simulation'`` route of :func:`subid.methods.bd.fit_b_d_x0`."""
     s = problem.settings
-    return lambda A, C: _ct_fit.fit_linear(A, C, problem.record, feedthrough=feedthrough,
-                                           estimate_x0=s["estimate_x0"], offset=s["offset"],
-                                           whiten=whiten)
+
+    def fit(A, C):
+        fitted = fit_b_d_x0(A, C, problem.record, bd_method="simulation",
+                            feedthrough=feedthrough, estimate_x0=s["estimate_x0"],
+                            offset=s["offset"], whiten=whiten)
+        if fitted is None:
+            return None
+        B, D, x0, diag = fitted
+        return B, D, x0, diag.pop("y_offset"), diag
+    return fit
 
 
 def _given_bd(problem: Problem, A, B, C, D):
@@ -372,7 +301,6 @@ def _complete(problem: Problem, Theta, Lf, feedthrough: bool):
     """A, C from ``Theta``; then B, D, x0 (y0): ``(A, B, C, D, x0, y0, diag)``."""
     s = problem.settings
     basis, p = s["basis"], problem.record.n_outputs
-    m, n = problem.record.n_inputs, Theta.shape[1]
     A, C, ac_resid = _estimate_a_c(basis, Theta, p, s["ac_method"])
     diag = {"ac_residual": ac_resid}
     if s["bd_method"] == "simulation":
@@ -380,7 +308,7 @@ def _complete(problem: Problem, Theta, Lf, feedthrough: bool):
             A, fitted, stab = _ct_fit.stable_choice(A, C, _linear_fit(problem, feedthrough),
                                                     problem.record, s["stability"])
             B, D, x0, y0, bd = fitted
-            diag.update(bd, bd_method_used="simulation", stability=stab)
+            diag.update(bd, stability=stab)
             return A, B, C, D, x0, y0, diag
         except ModelError:          # A too unstable to simulate over the record
             pass
@@ -390,9 +318,10 @@ def _complete(problem: Problem, Theta, Lf, feedthrough: bool):
     else:
         def Tfun(Bm, Dm):
             return data_equation_matrices(basis, A, Bm, C, Dm)[1]
-    B, D, bd = _fit_b_filtered(Tfun, Theta, Lf, problem.iU, n, m, p, feedthrough)
+    B, D, _, bd = fit_b_d_x0(A, C, problem.record, bd_method="filtered", feedthrough=feedthrough,
+                             filtered=(Tfun, Theta, Lf, problem.iU))
     x0, y0 = _given_bd(problem, A, B, C, D)
-    diag.update(bd, bd_method_used="filtered", stability={"requested": s["stability"],
+    diag.update(bd, stability={"requested": s["stability"],
                                                          "action": "none (filtered B)"})
     return A, B, C, D, x0, y0, diag
 
@@ -420,79 +349,92 @@ def _subspace_estimate(problem: Problem, n: int, feedthrough: bool):
 
 
 def _discrete_starts(problem: Problem, n: int, horizons=None):
-    """``(A, C)`` of the discrete-time N4SID models of order ``n`` (at ``horizons``, default
-    every horizon of :func:`subid.methods.dt._selection.feasible_horizons`) converted with
-    the hold (MATLAB's route for continuous-time subspace models); none on a non-uniform
-    grid or where the conversion has no real logarithm (a pole on the negative real axis)."""
+    """``(label, continuous model)`` of the discrete-time N4SID models of order ``n`` (at
+    ``horizons``, default every horizon of
+    :func:`subid.methods.dt._selection.feasible_horizons`) converted with the hold
+    (:mod:`subid.methods.ct._ct_discrete`), and ``{horizon: reason}`` for those that have
+    no continuous-time counterpart; none on a non-uniform grid."""
     from subid.methods.dt._selection import feasible_horizons
-    from subid.methods.dt.n4sid import n4sid
-    data = problem.data
+    data, s = problem.data, problem.settings
     if not data.is_uniform:
-        return []
-    hold = "zoh" if problem.settings["input_order"] == 0 else "foh"
-    work = data.detrend() if problem.settings["offset"] else data
+        return [], {}
+    work = data.detrend() if s["offset"] else data
     if horizons is None:
         horizons = feasible_horizons(data.n_samples, data.n_inputs, data.n_outputs, 2, n,
                                      n_experiments=data.n_experiments)
-    out = []
-    for f in horizons:
-        try:
-            with warnings.catch_warnings(), np.errstate(all="ignore"):
-                warnings.simplefilter("ignore")
-                dm = n4sid(work, n, horizon=f, feedthrough=True)
-                cm = dm.with_noise_model(None, None).to_continuous(hold)
-        except SubidError:
-            continue
-        if np.isfinite(cm.A).all() and np.isfinite(cm.C).all():
-            out.append((f"discrete (N4SID, horizon {f})", cm))
-    return out
+    models, failures = _ct_discrete.discrete_models(
+        work, n, horizons, hold=_model_hold(s), feedthrough=s["dt_feedthrough"],
+        stability=s["stability"], nyquist=s["nyquist_modes"])
+    return [(f"discrete ({_ct_discrete.label(f)})", cm, note)
+            for f, cm, note in models], failures
 
 
-#: The starts the cross-validation chooses among with ``start='auto'``: the subspace
-#: estimate and the converted N4SID models at the discrete-time horizon candidates.
-START_VARIANTS = ("subspace",) + tuple(f"N4SID, horizon {f}" for f in HORIZON_CANDIDATES)
+def _model_hold(s: dict) -> str:
+    """The hold the model records (``'foh'`` for an interpolated input)."""
+    return "foh" if s["hold"] is None else s["hold"]
 
 
-def _build(problem: Problem, feedthrough=None, start=None) -> StateSpace:
-    """The model of order ``problem.order`` (no refinement) from ``start`` (a
-    :data:`START_VARIANTS` name, or the ``start`` option): the subspace estimate, the
-    converted discrete-time estimates, or for 'auto' the best of them by the estimation
-    residual."""
+def _converted(problem: Problem, cm: StateSpace, note=None, refit=None):
+    """A converted discrete-time model as it is (its B and D are those of the hold, so
+    that it simulates to the discrete-time model's samples), x0 (and offsets) fitted;
+    stability as :func:`subid.methods.ct._ct_fit.stable_choice` handles it, B and D
+    refitted only where it reflects a pole. ``refit`` (True/False: with or without D):
+    its A and C with B, D, x0 from the output regression (the earlier default start)."""
+    s = problem.settings
+    if refit is not None:
+        A, fitted, stab = _ct_fit.stable_choice(cm.A, cm.C, _linear_fit(problem, refit),
+                                                problem.record, s["stability"])
+        B, D, x0, y0, bd = fitted
+        bd = dict(bd, **{INFO_KEY: "simulation"}, stability=stab, iterations=0)
+        if note:
+            bd["nyquist_modes"] = note
+        return A, B, cm.C, D, x0, y0, bd
+    feedthrough = bool(np.any(cm.D != 0))
+    x0, y0 = _given_bd(problem, cm.A, cm.B, cm.C, cm.D)
+    y_hat = _ct_fit.predicted(cm.A, cm.B, cm.C, cm.D, x0, y0, problem.record)
+    as_is = (cm.B, cm.D, x0, y0, {
+        "b_residual_rms": float(np.sqrt(np.mean((problem.record.y - y_hat) ** 2))),
+        INFO_KEY: "converted"})
+    refit = _linear_fit(problem, feedthrough)
+
+    def fit(A, C):
+        return as_is if A is cm.A else refit(A, C)
+
+    A, (B, D, x0, y0, bd), stab = _ct_fit.stable_choice(cm.A, cm.C, fit, problem.record,
+                                                        s["stability"])
+    bd = dict(bd)
+    bd.setdefault(INFO_KEY, "simulation")
+    bd = dict(bd, stability=stab, iterations=0)
+    if note:
+        bd["nyquist_modes"] = note
+    return A, B, cm.C, D, x0, y0, bd
+
+
+def _build(problem: Problem, feedthrough=None, start=None, refit=False) -> StateSpace:
+    """The model of order ``problem.order`` (no refinement) from ``start``: 'subspace' (the
+    basis-filter estimate), a discrete-time candidate ``'N4SID, horizon f'``, or the
+    ``start`` option ('discrete': the converted N4SID models, 'auto': those and the subspace
+    estimate, the best by the estimation residual). ``feedthrough`` is the subspace
+    estimate's; a converted model has the D of its hold, or with ``refit`` its A and C
+    keep B, D (``feedthrough``), x0 refitted by the output regression."""
     s = problem.settings
     if feedthrough is None:
         feedthrough = s["feedthrough"] is True
     start = s["start"] if start is None else start
     horizons = None
-    if start.startswith("N4SID"):
-        horizons, start = [int(start.rsplit(" ", 1)[1])], "discrete"
+    if _ct_discrete.horizon_of(start) is not None:
+        horizons, start = [_ct_discrete.horizon_of(start)], "discrete"
     n = problem.order
-    if n > problem.sv.size:
+    if n > problem.sv.size and start != "discrete":
         raise OrderError(f"order {n} exceeds the {problem.sv.size} directions the "
                          "instruments reveal")
-    options = []
+    options, failures = [], {}
     if start in ("auto", "subspace"):
         options.append(("subspace", lambda: _subspace_estimate(problem, n, feedthrough)))
     if start in ("auto", "discrete") and s["bd_method"] == "simulation":
-        for label, cm in _discrete_starts(problem, n, horizons):
-            def converted(cm=cm):
-                limit = _ct_fit.marginal_limit(problem.record)
-                if feedthrough and np.linalg.eigvals(cm.A).real.max() <= limit:
-                    # with a feedthrough the converted model is the discrete-time one
-                    # exactly (B and D of the hold); x0 (and offsets) refitted
-                    x0, y0 = _given_bd(problem, cm.A, cm.B, cm.C, cm.D)
-                    y_hat = _ct_fit.predicted(cm.A, cm.B, cm.C, cm.D, x0, y0, problem.record)
-                    rms = float(np.sqrt(np.mean((problem.record.y - y_hat) ** 2)))
-                    return cm.A, cm.B, cm.C, cm.D, x0, y0, {
-                        "b_residual_rms": rms, "bd_method_used": "converted",
-                        "stability": {"requested": s["stability"], "action": "none"},
-                        "iterations": 0}
-                A, fitted, stab = _ct_fit.stable_choice(cm.A, cm.C,
-                                                        _linear_fit(problem, feedthrough),
-                                                        problem.record, s["stability"])
-                B, D, x0, y0, bd = fitted
-                return A, B, cm.C, D, x0, y0, dict(bd, bd_method_used="simulation",
-                                                   stability=stab, iterations=0)
-            options.append((label, converted))
+        converted, failures = _discrete_starts(problem, n, horizons)
+        options += [(name, partial(_converted, problem, cm, note, feedthrough if refit
+                                   else None)) for name, cm, note in converted]
     best = None
     for name, run in options:
         try:
@@ -501,21 +443,22 @@ def _build(problem: Problem, feedthrough=None, start=None) -> StateSpace:
             if start != "auto":
                 raise
             continue
-        if got is None:
-            continue
         score = got[6].get("b_residual_rms", math.inf)
         if best is None or score < best[1]:
             best = (name, score, got)
     if best is None:
         if start == "discrete":
+            why = "; ".join(f"horizon {f}: {r}" for f, r in failures.items())
             raise DataError(f"{s['method']}: start='discrete' needs a uniformly sampled "
-                            "record whose N4SID model converts to continuous time; use "
-                            "start='subspace'")
+                            f"record whose N4SID model of order {n} converts to continuous "
+                            f"time{' (' + why + ')' if why else ''}; use start='subspace'")
         raise ModelError(f"{s['method']}: no model of order {n} could be simulated over the "
                          "record; try a lower order")
     name, _, (A, B, C, D, x0, y0, diag) = best
     diag["start"] = name
-    return _model(problem, n, A, B, C, D, x0, y0, diag, feedthrough)
+    if name != "subspace":
+        feedthrough = bool(np.any(D != 0))
+    return _model(problem, A.shape[0], A, B, C, D, x0, y0, diag, feedthrough)
 
 
 def _model(problem: Problem, n, A, B, C, D, x0, y0, diag, feedthrough) -> StateSpace:
@@ -534,7 +477,7 @@ def _model(problem: Problem, n, A, B, C, D, x0, y0, diag, feedthrough) -> StateS
         interpolated_input=s["hold"] is None, startup=s["startup"],
         n_correction_regressors=problem.n_corr, instruments=s["instruments"],
         instrument_lag=problem.lag if s["instruments"] == "past" else None,
-        ac_method=s["ac_method"], bd_method=s["bd_method"],
+        ac_method=s["ac_method"],
         filtering=s["filtering"] if s["filtered"] is None else "given",
         data_equation=s["data_equation"], feedthrough=bool(feedthrough),
         offset=s["offset"], y_offset=y0, largest_real_part=float(lam.real.max()), refined=False,
@@ -546,19 +489,31 @@ def _model(problem: Problem, n, A, B, C, D, x0, y0, diag, feedthrough) -> StateS
                       output_names=data.output_names, info=info, hold=info["hold"])
 
 
-def _second_wins(data, order, n_functions, prepare_fold, first, second):
+def _second_wins(data, order, n_functions, prepare_fold, first, second, test=False):
     """Whether the cross-validation at ``order`` prefers the build ``second`` to ``first``
-    (``(name, build)`` pairs; ties go to ``first``), and its record."""
+    (``(name, build)`` pairs; ties go to ``first``), and its record; with ``test``,
+    ``second`` must also score significantly better on the folds
+    (:func:`subid.methods.ct._ct_discrete.paired_test`)."""
     builds = dict([first, second])
     _, _, variant, record = cross_validate(data, order, None, n_functions,
                                            prepare_fold=prepare_fold, builds=builds)
-    return variant == second[0], record
+    folds = {c.get("system_matrices"): c["folds"] for c in record["candidates"]}
+    wins = variant == second[0]
+    if test:
+        record["paired_test"] = _ct_discrete.paired_test(folds[second[0]], folds[first[0]])
+        wins = wins and record["paired_test"]["significant"]
+    if not wins and variant == second[0]:
+        kept = next(c for c in record["candidates"] if c.get("system_matrices") == first[0])
+        record["selected"] = {k: v for k, v in kept.items()
+                              if k not in ("folds", "stabilised_folds")}
+    return wins, record
 
 
-def _build_refined(problem: Problem, feedthrough=None, start=None) -> StateSpace:
+def _build_refined(problem: Problem, feedthrough=None, start=None,
+                   refit=False) -> StateSpace:
     """:func:`_build`, then :func:`subid.methods.ct._ct_fit.refine_model` (a candidate of the
     refinement's choice)."""
-    return _ct_fit.refine_model(_build(problem, feedthrough, start), problem.record,
+    return _ct_fit.refine_model(_build(problem, feedthrough, start, refit), problem.record,
                                 problem.settings)
 
 
@@ -585,7 +540,10 @@ def ct_subspace(data, order=None, *, basis=None, poly_order: int = 3, estimate_x
         (and offset) per experiment, its filters at rest at each start.
     order : int, None, 'auto' or iterable of int
         Model order n. ``None``: chosen among 1..min(10, N p - p) (or the
-        candidates given) by ``selection``.
+        candidates given) by ``selection``; the converted N4SID candidates
+        (``start='auto'``) come at the orders n4sid scores (past 10 where its
+        search goes on), plus one state per Nyquist mode; with the order
+        given, only converted models of that order compete.
     basis : FilterBank, optional
         Basis filter bank (:func:`subid.basis.takenaka_malmquist`,
         :func:`~subid.basis.laguerre`, :func:`~subid.basis.legendre`).
@@ -599,8 +557,11 @@ def ct_subspace(data, order=None, *, basis=None, poly_order: int = 3, estimate_x
         Estimate the initial state ``x(t_0)`` of every experiment with B
         (``info['x0']``).
     feedthrough : {'auto', True, False}
-        Estimate D. ``'auto'``: D = 0 unless the cross-validation (at the
-        chosen order) scores the model with D better (``info['feedthrough']``).
+        Estimate D of the basis-filter estimate. ``'auto'``: D = 0 unless the
+        cross-validation (at the chosen order) scores the model with D
+        significantly better (``info['feedthrough']``). A converted N4SID
+        model has the D of its hold (n4sid's own ``feedthrough='auto'``
+        decides the discrete-time D; True/False are passed to it).
     hold : {'foh', 'zoh', None}
         The input between samples: linear (first-order hold, the paper's
         Section V), constant (zero-order hold), or None when unknown: then it
@@ -615,18 +576,26 @@ def ct_subspace(data, order=None, *, basis=None, poly_order: int = 3, estimate_x
         order within 1 % of the best misfit), or the largest gap of the
         singular values.
     start : {'auto', 'subspace', 'discrete'}
-        Where (A, C) come from before the refinement. ``'subspace'``: the
+        Where the model comes from before the refinement. ``'subspace'``: the
         basis-filter estimate (the paper's, corrected, with model
-        instruments). ``'discrete'``: the discrete-time N4SID model of the
-        same order converted with the hold (MATLAB's route; uniform grids
-        only). ``'auto'``: with the default basis on a uniform grid the
-        subspace estimate and the
-        N4SID models at horizons 10 and 20 compete in the cross-validation
-        with the orders (as the estimators of ``system_matrices='auto'`` do
-        in discrete time; by the estimation residual with
-        ``selection='gap'``); the subspace estimate on a non-uniform grid
-        (``info['start']``); the subspace estimate alone on a non-uniform grid
-        or with a basis or filtered signals given.
+        instruments). ``'discrete'``: the discrete-time N4SID model converted
+        with the hold, its B and D those of the hold, so that it simulates to
+        the N4SID model's samples (MATLAB's route; uniform grids only; a pole
+        on the negative real axis becomes a damped mode at the Nyquist
+        frequency, ``info['nyquist_modes']``). ``'auto'``: with the default
+        basis on a uniform grid both compete in one cross-validation
+        (:mod:`subid.methods.ct._ct_discrete`): the basis-filter estimates at
+        every candidate order, and the default ``n4sid`` call's candidates
+        (every order and horizon it scored, with its own fold scores, orders
+        past 10 included); with the order not given the N4SID model is the
+        reference, replaced by a basis-filter estimate only when that has the
+        lower cross-validated BIC and scores significantly better on the
+        folds (better on every fold, or a one-sided paired t-test at 5 %;
+        ``info['order_selection']['basis_filter_test']``); with the order
+        given, the least criterion wins (``info['start_selection']``). By
+        the estimation residual with ``selection='gap'``; the subspace
+        estimate alone on a non-uniform grid or with a basis or filtered
+        signals given (``info['start']``).
     offset : {'auto', True, False}
         Estimate a constant output offset per experiment (``info['y_offset']``)
         with x0, and project a constant out of the filtered data: the model
@@ -668,8 +637,10 @@ def ct_subspace(data, order=None, *, basis=None, poly_order: int = 3, estimate_x
         refinement is kept only where it scores better on the held-out folds
         (``info['refine_selection']``; on the DaISy evaporator record an
         output-error fit moved a pole to a time constant of half the record
-        and lowered the validation fit from 60.3 to 34.1 %, on ballbeam it
-        raised it from 80 to 89 %). Without the cross-validation
+        and lowered the validation fit from 60.3 to 34.1 %), and considered
+        only where the work budget affords at least
+        :data:`MIN_REFINE_STEPS` steps (a refinement stopped after one or
+        two steps is no fit to compare). Without the cross-validation
         (``selection='gap'``, ``filtered``): refined when the model comes from
         the subspace start.
     refine_iterations : int
@@ -688,7 +659,8 @@ def ct_subspace(data, order=None, *, basis=None, poly_order: int = 3, estimate_x
         B (D, x0) by least squares on the raw output samples through the
         exactly discretised model, or from the filtered data equation (15).
         'simulation' falls back to 'filtered' if simulating A overflows
-        (``info['bd_method_used']``).
+        (``info['bd_method']`` names the route that ran: also 'converted'
+        for a start converted from discrete time).
     filtering : {'exact', 'sections'}
         Interpolate each signal once and propagate the whole filter chain
         exactly, or re-interpolate after every section (the paper's S1-S4).
@@ -766,7 +738,7 @@ def ct_subspace(data, order=None, *, basis=None, poly_order: int = 3, estimate_x
     check_choice(noise_model, "noise_model", ("ar", None))
     check_choice(instruments, "instruments", ("model", "past", None))
     check_choice(ac_method, "ac_method", ("joint", "paper"))
-    check_choice(bd_method, "bd_method", ("simulation", "filtered"))
+    check_choice(bd_method, "bd_method", CT_OPTIONS)
     check_choice(filtering, "filtering", ("exact", "sections"))
     check_choice(data_equation, "data_equation", ("compact", "paper"))
     iterations = check_int(iterations, "iterations", minimum=0)
@@ -807,6 +779,8 @@ def ct_subspace(data, order=None, *, basis=None, poly_order: int = 3, estimate_x
                     refine_iterations=refine_iterations, startup=startup, n_corr=n_corr,
                     ac_method=ac_method, bd_method=bd_method, filtering=filtering,
                     data_equation=data_equation, filtered=filtered,
+                    dt_feedthrough=feedthrough if isinstance(feedthrough, bool) else "auto",
+                    nyquist_modes=fixed is None,
                     lag=_lag_for(basis, data.experiments[0].t) if instruments == "past" else 0)
     cv = selection == "cv" and filtered is None
 
@@ -834,53 +808,113 @@ def ct_subspace(data, order=None, *, basis=None, poly_order: int = 3, estimate_x
     prepare_fold.blocks = 1
 
     cv_data = data.detrend() if offset else data
-    if start == "auto" and data.is_uniform and bd_method == "simulation" and default_bank:
-        starts = list(START_VARIANTS)
-    else:
-        starts = ["subspace" if start == "auto" else start]
-    start_selection = None
-    if cv and (fixed is None or len(starts) > 1):
-        # the order and the start, by the discrete-time methods' cross-validation (the
-        # starts compete as its estimators do); D = 0 unless 'auto' finds it below
-        builds = {name: partial(_build, feedthrough=feedthrough is True, start=name)
-                  for name in starts}
-        n, _, chosen, record = cross_validate(cv_data, fixed, None if fixed else candidates, N,
-                                              prepare_fold=prepare_fold, builds=builds)
+    # the discrete-time candidates: on a uniform grid the default N4SID models, converted
+    # with the hold, compete in the same cross-validation (their fold scores are n4sid's
+    # own, _ct_discrete); with start='auto' only with the default basis
+    discrete = cv and data.is_uniform and bd_method == "simulation" and (
+        start == "discrete" or (start == "auto" and default_bank))
+    subspace = start in ("auto", "subspace") or not discrete
+    dt_scores, dm, dm_failure = {}, None, None
+    if discrete:
+        dm, dm_failure = _ct_discrete.n4sid_default(cv_data, order,
+                                        feedthrough=settings["dt_feedthrough"],
+                                        stability=stability)
+        if dm is None and not subspace:
+            raise DataError(f"{method}: start='discrete' needs an N4SID model of the record, "
+                            f"and n4sid failed ({dm_failure}); use start='subspace'")
+        dt_scores = _ct_discrete.fold_scores(dm)
+        if dm is not None and not dt_scores:         # n4sid ran no cross-validation
+            dt_scores = None
+    order_selection = start_selection = None
+    conversion_notes = []
+    if cv and (fixed is None or discrete):
+        builds = {}
+        if subspace:
+            builds["subspace"] = partial(_build, feedthrough=feedthrough is True,
+                                         start="subspace")
+        if dt_scores is None:                         # scored here instead, at its horizon
+            name = _ct_discrete.label(dm.info["horizon"])
+            builds[name] = partial(_build, start=name)
+            dt_scores = {}
+        ct_record = None
+        if builds:
+            ct_record = cross_validate(cv_data, fixed, None if fixed else candidates, N,
+                                       prepare_fold=prepare_fold, builds=builds)[3]
+        ranking, record, entries = _ct_discrete.merged_selection(
+            ct_record, dt_scores, (ct_record or {}).get("samples_used", cv_data.n_samples),
+            m, p, reference=fixed is None)
+        if fixed is not None:
+            ranking = [c for c in ranking if c[0] == fixed] or ranking
+        model = None
+        whole = _prepare(data, [ranking[0][0]], settings)
+        for n, chosen in ranking:
+            problem = replace(whole, order=n, candidates=[n])
+            if chosen == "subspace":
+                break
+            try:
+                model = _build(problem, start=chosen)
+                break
+            except (ModelError, DataError) as exc:
+                conversion_notes.append(f"order {n}, {chosen}: {exc}")
+        record["selected"] = entries[(n, chosen)]
         if fixed is None:
             order_selection = record
         else:
-            order_selection, start_selection = None, record
-        problem = _prepare(data, [n], settings)
+            start_selection = record
     else:
         problem = _prepare(data, candidates, settings)
         usable = [k for k in candidates if k < problem.sv.size] or [candidates[0]]
         n, order_selection = (fixed, None) if fixed is not None else choose_order(
             None, usable, problem.sv, "singular values")
-        chosen = starts[0] if len(starts) == 1 else "auto"   # by the estimation residual
-    problem = replace(problem, order=n, candidates=[n])
+        # start='auto' without the cross-validation: the best by the estimation residual
+        both = data.is_uniform and bd_method == "simulation" and default_bank
+        chosen = start if start != "auto" else "auto" if both else "subspace"
+        problem = replace(problem, order=n, candidates=[n])
+        model = None
+    if model is not None and model.info.get("nyquist_modes"):
+        warnings.warn(f"{method}: the chosen N4SID model (order {n}): "
+                      f"{model.info['nyquist_modes']}", UserWarning, stacklevel=3)
+    if conversion_notes:
+        warnings.warn(f"{method}: the cross-validation preferred discrete-time models that "
+                      "have no continuous-time counterpart under the hold; the next "
+                      f"candidate was used ({'; '.join(conversion_notes)})",
+                      UserWarning, stacklevel=3)
     feedthrough_selection = None
-    if feedthrough == "auto":
-        use_d = False
-        if cv:
+    if model is None:
+        use_d = feedthrough is True
+        if feedthrough == "auto" and cv:
             use_d, feedthrough_selection = _second_wins(
                 cv_data, n, N, prepare_fold, ("D = 0", partial(_build, feedthrough=False,
                                                                start=chosen)),
                 ("D estimated", partial(_build, feedthrough=True, start=chosen)))
-    else:
-        use_d = feedthrough
-    try:
         model = _build(problem, use_d, chosen)
-    except (ModelError, DataError):
-        if chosen == start:
-            raise
-        model = _build(problem, use_d, start)  # the chosen start fails on the whole record
+    refit, bd_selection = False, None
+    if cv and chosen != "subspace" and n <= (N - 1) * p:
+        # the converted model as it is, or its A and C with B, D, x0 from the output
+        # regression (output-error optimal for them; D as the subspace estimate's)
+        refit, bd_selection = _second_wins(
+            cv_data, n, N, prepare_fold, ("converted", partial(_build, start=chosen)),
+            ("B, D refitted", partial(_build, feedthrough=feedthrough is True, start=chosen,
+                                      refit=True)), test=fixed is None)
+        if refit:
+            model = _build(problem, feedthrough is True, chosen, refit=True)
+    use_d = model.info["feedthrough"]
     refine_selection = None
-    if refine == "auto" and cv:
+    steps = _ct_fit.refine_steps(model.order, problem.record)
+    if refine == "auto" and cv and steps < MIN_REFINE_STEPS:
+        # a refinement stopped by its budget after a step or two is no fit to compare
+        do_refine = False
+        refine_selection = {"rule": "skipped", "description": (
+            f"not refined: the work budget affords {steps} Levenberg-Marquardt step(s) "
+            f"at order {model.order} on {data.n_samples} samples, fewer than "
+            f"{MIN_REFINE_STEPS}; refine=True refines within the budget")}
+    elif refine == "auto" and cv and n <= (N - 1) * p:
         # kept only where it scores better on the held-out folds (ties: not refined)
         do_refine, refine_selection = _second_wins(
             cv_data, n, N, prepare_fold,
-            ("as estimated", partial(_build, feedthrough=use_d, start=chosen)),
-            ("refined", partial(_build_refined, feedthrough=use_d, start=chosen)))
+            ("as estimated", partial(_build, feedthrough=use_d, start=chosen, refit=refit)),
+            ("refined", partial(_build_refined, feedthrough=use_d, start=chosen,
+                                refit=refit)))
     else:
         do_refine = refine is True or (refine == "auto" and model.info["start"] == "subspace")
     if do_refine:
@@ -891,10 +925,15 @@ def ct_subspace(data, order=None, *, basis=None, poly_order: int = 3, estimate_x
         else {"rule": "given"}
     if feedthrough_selection is not None:
         model.info["feedthrough_selection"] = feedthrough_selection
+    if bd_selection is not None:
+        model.info["bd_selection"] = bd_selection
     if start_selection is not None:
         model.info["start_selection"] = start_selection
+    if dm is not None:
+        model.info["discrete_model"] = {"order": dm.order, "horizon": dm.info["horizon"]}
+    elif dm_failure is not None:
+        model.info["discrete_model"] = {"failed": dm_failure}
     return model
-
 
 
 @checked_call
@@ -914,51 +953,3 @@ def ct_subspace_paper(data, order=None, *, basis=None, poly_order: int = 3) -> S
                        correction=False, refine=False, ac_method="paper", bd_method="filtered",
                        filtering="sections", data_equation="paper", selection="gap",
                        start="subspace", offset=False, stability="none", noise_model=None)
-
-
-@checked_call
-@records_warnings
-def dt_to_ct(data, order=None, *, method: str = "n4sid", hold: str = "zoh", **options):
-    """Baseline: discrete-time subspace identification, then conversion to continuous time.
-
-    Only possible on a uniform grid. The discrete-time model is identified
-    with a feedthrough term (a first-order hold makes one appear even when
-    the continuous system has none) and converted by
-    :meth:`StateSpace.to_continuous` with the input's hold.
-
-    Parameters
-    ----------
-    data : IOData
-        Uniformly sampled record.
-    order : int or None
-    method : {'n4sid', 'moesp', 'ls'}
-        A discrete-time batch method of :data:`subid.registry.METHODS`
-        (``'ls_subspace'`` is accepted for ``'ls'``).
-    hold : {'zoh', 'foh'}
-        Inter-sample behaviour of the input; the model records it
-        (:attr:`StateSpace.hold`).
-    **options
-        Passed to the discrete-time method (e.g. ``horizon``).
-
-    Returns
-    -------
-    StateSpace
-        Continuous-time model; ``info`` is the discrete method's, plus
-        ``method`` and ``discrete_model_dt``.
-    """
-    from subid.methods.registry import find
-    spec = find(method, kind="batch", time="discrete")
-    check_choice(hold, "hold", ("zoh", "foh"))
-    if not isinstance(data, IOData):
-        raise DataError(f"dt_to_ct expects an IOData record, got {type(data).__name__}")
-    if not data.is_uniform:
-        raise DataError("dt_to_ct needs uniformly sampled data (a discrete-time model has "
-                        "one sampling period); use ct_subspace for non-uniform time stamps")
-    dmodel = spec.load()(data, order, feedthrough=True, **options)
-    cmodel = dmodel.with_noise_model(None, None).to_continuous(hold)   # K has no CT form
-    info = dict(cmodel.info)
-    info.update(method=f"dt_to_ct({spec.attribute}, {hold})", discrete_model_dt=data.dt,
-                hold=hold)
-    return StateSpace(cmodel.A, cmodel.B, cmodel.C, cmodel.D, 0.0,
-                      input_names=data.input_names, output_names=data.output_names, info=info,
-                      hold=hold)

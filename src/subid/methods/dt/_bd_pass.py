@@ -35,6 +35,7 @@ import scipy.linalg
 
 from subid._threads import ordered_map
 from subid.data import column_sums, minus_columns
+from subid.methods.dt._bd_large import solve_factor_blocks, solve_normal_blocks
 from subid.methods.dt._regression import (
     _MODAL_BLOCK,
     RESIDUAL_RECOMPUTE,
@@ -47,7 +48,6 @@ from subid.methods.dt._regression import (
     regressor_maps,
     sensitivity_rows,
     solve_factor,
-    solve_normal_equations,
 )
 
 __all__ = ["OutputRegression"]
@@ -151,37 +151,27 @@ def _spread_of(parts, ny):
     return spread
 
 
-def _embed_maps(P, experiment, n_experiments, n_x0):
-    """Regressor maps of one experiment's piece in the layout ``[x0_1..x0_E; B; D; y]``
-    (one x0 per experiment, :func:`subid.merge`)."""
-    if n_experiments == 1 or not n_x0:
-        return P
-    ny, rows, d = P.shape
-    out = np.zeros((ny, rows + (n_experiments - 1) * n_x0, d))
-    out[:, experiment * n_x0:(experiment + 1) * n_x0] = P[:, :n_x0]
-    out[:, n_experiments * n_x0:] = P[:, n_x0:]
-    return out
-
-
 def combine_modal(form, parts, n_inputs, n_outputs, *, estimate_x0, feedthrough,
                   experiments=None):
     """Normal equations of the whole record from the pieces' reductions (time order).
 
     ``experiments`` (the experiment of every piece, non-decreasing; default all
     0): at the first piece of an experiment the filters restart from zero and
-    the free signals from ``λ^0``, and its x0 has its own columns.
+    the free signals from ``λ^0``, and its x0 has its own unknowns.
 
-    Returns ``(N, n_samples, maps, weights)`` with ``maps`` the per-piece
+    Returns ``(blocks, n_samples, maps, weights)``: ``blocks[e]`` the normal
+    equations of experiment e in the layout ``[x0_e; vec B; vec D; y]``
+    (:func:`subid.methods.dt._bd_large.solve_normal_blocks` eliminates the x0 of
+    each), ``maps`` the per-piece
     :func:`subid.methods.dt._regression.regressor_maps` (None for an empty piece).
     """
     weights = _spread_of(parts, n_outputs).weights()
     experiments = [0] * len(parts) if experiments is None else list(experiments)
     n_exp = (max(experiments) + 1) if experiments else 1
-    n_x0 = form.n_state if estimate_x0 else 0
     r = np.zeros((form.lam.size, n_inputs), dtype=complex)
     t0 = 0
     total = 0
-    N = 0.0
+    blocks = [0.0] * n_exp
     maps = []
     current = 0
     for part, e in zip(parts, experiments):
@@ -193,13 +183,12 @@ def combine_modal(form, parts, n_inputs, n_outputs, *, estimate_x0, feedthrough,
             continue
         P = regressor_maps(form, n_inputs, n_outputs, estimate_x0=estimate_x0,
                            feedthrough=feedthrough, t0=t0, r_start=r)
-        P = _embed_maps(P, e, n_exp, n_x0)
         maps.append(P)
-        N = N + normal_equations(P, part["moments"], weights)
+        blocks[e] = blocks[e] + normal_equations(P, part["moments"], weights)
         r = next_filter_state(form, r, part["r_end"], part["length"])
         t0 += part["length"]
         total += part["length"]
-    return N, total, maps, weights
+    return blocks, total, maps, weights
 
 
 def residual_piece(chunks, form, g):
@@ -228,7 +217,7 @@ class OutputRegression:
     """The B, D, x0 regression of a record held in pieces (see the module docstring).
 
     Attach it to the record's :class:`~subid.HankelStatistic` as
-    ``statistic.output_regression``; :func:`subid.methods.dt._subspace.estimate_b_d` then
+    ``statistic.output_regression``; :func:`subid.methods.bd.fit_b_d_x0` then
     calls it where the in-memory record runs :func:`subid.methods.dt._regression.fit_b_d_x0`.
 
     Parameters
@@ -266,23 +255,23 @@ class OutputRegression:
         form = ModalForm.of(A, C)
         if form is not None:
             parts = self._map(modal_piece, [(form, nu, ny)] * self.n_pieces)
-            N, n_samples, maps, weights = combine_modal(form, parts, nu, ny,
-                                                        estimate_x0=estimate_x0,
-                                                        feedthrough=feedthrough,
-                                                        experiments=self.experiments)
-            solved = solve_normal_equations(N, n, nu, ny, estimate_x0=estimate_x0,
-                                            feedthrough=feedthrough, n_samples=n_samples,
-                                            n_x0=self.n_experiments * n)
+            blocks, n_samples, maps, weights = combine_modal(form, parts, nu, ny,
+                                                             estimate_x0=estimate_x0,
+                                                             feedthrough=feedthrough,
+                                                             experiments=self.experiments)
+            solved = None if any(np.ndim(N) == 0 for N in blocks) else solve_normal_blocks(
+                blocks, n, nu, ny, estimate_x0=estimate_x0, feedthrough=feedthrough,
+                n_samples=n_samples)
             if solved is not None:
-                B, D, x0, theta, diagnostics = solved
-                x0 = self._shape_x0(x0, n) if estimate_x0 else x0
+                B, D, x0, thetas, diagnostics = solved
                 diagnostics["regression_passes"] = 1
                 if diagnostics["residual_rms"] ** 2 * n_samples * ny < \
-                        RESIDUAL_RECOMPUTE * N[-1, -1]:
+                        RESIDUAL_RECOMPUTE * sum(N[-1, -1] for N in blocks):
                     # nearly exact fit: the residual sample by sample, as in memory
                     gs = [np.zeros((ny, form.signal_count(nu, ny))) if P is None else
-                          np.stack([weights[i] * (P[i, -1] - theta @ P[i, :-1])
-                                    for i in range(ny)]) for P in maps]
+                          np.stack([weights[i] * (P[i, -1] - thetas[e] @ P[i, :-1])
+                                    for i in range(ny)])
+                          for P, e in zip(maps, self.experiments)]
                     total = sum(self._map(residual_piece, [(form, g) for g in gs]))
                     diagnostics["residual_rms"] = float(np.sqrt(total / (n_samples * ny)))
                     diagnostics["regression_passes"] = 2
@@ -301,51 +290,60 @@ class OutputRegression:
         if form is None:
             return None
         parts = self._map(modal_piece, [(form, nu, ny)] * self.n_pieces)
-        N = combine_modal(form, parts, nu, ny, estimate_x0=True, feedthrough=True,
-                          experiments=self.experiments)[0]
-        p = N.shape[0] - 1
-        nx = self.n_experiments * n
+        blocks = combine_modal(form, parts, nu, ny, estimate_x0=True, feedthrough=True,
+                               experiments=self.experiments)[0]
         theta = np.concatenate([np.asarray(B, float).T.ravel(), np.asarray(D, float).T.ravel()])
-        rhs = N[:nx, p] - N[:nx, nx:p] @ theta
-        try:   # the x0 blocks of different experiments do not couple: block diagonal
-            x0 = np.concatenate([scipy.linalg.solve(N[k:k + n, k:k + n], rhs[k:k + n],
-                                                    assume_a="pos", check_finite=False)
-                                 for k in range(0, nx, n)]) if n else np.zeros(0)
-        except (np.linalg.LinAlgError, ValueError):
+        try:   # the x0 of different experiments do not couple: one block each
+            x0 = np.concatenate([scipy.linalg.solve(
+                N[:n, :n], N[:n, -1] - N[:n, n:-1] @ theta, assume_a="pos",
+                check_finite=False) for N in blocks]) if n else np.zeros(0)
+        except (np.linalg.LinAlgError, ValueError, IndexError):
             return None
         return self._shape_x0(x0, n)
 
     def _qr(self, A, C, *, feedthrough, estimate_x0):
         n, nu, ny = A.shape[0], self.n_inputs, self.n_outputs
-        nx, q, _ = parameter_count(n, nu, ny, estimate_x0, feedthrough,
-                                   self.n_experiments * n)
+        nx, q, _ = parameter_count(n, nu, ny, estimate_x0, feedthrough)   # per experiment
         parts = self._map(sensitivity_piece, [(A, C, q, nx)] * self.n_pieces)
         weights = _spread_of(parts, ny).weights()
         starts = []
         current = -1
         with np.errstate(over="ignore", invalid="ignore"):
             for part, e in zip(parts, self.experiments):
-                if e != current:      # an experiment starts: its own x0 columns, B at rest
+                if e != current:      # an experiment starts: its own x0, B at rest
                     S = np.zeros((n, q))
                     if estimate_x0:
-                        S[:, e * n:(e + 1) * n] = np.eye(n)
+                        S[:, :n] = np.eye(n)
                     current = e
                 starts.append(S)
                 S = np.linalg.matrix_power(A, part["length"]) @ S + part["S_end"]
         factors = self._map(qr_piece, [(A, C, s, nx, feedthrough, weights) for s in starts])
-        factors = [R for R in factors if R is not None]
-        with np.errstate(over="ignore", invalid="ignore"):
-            stacked = np.vstack(factors)
-            if np.isfinite(stacked).all():
-                R = scipy.linalg.qr(stacked, mode="r", check_finite=False)[0][:stacked.shape[1]]
-            else:
-                R = np.full((stacked.shape[1], stacked.shape[1]), np.nan)
+        # each experiment's pieces stacked and factorised again (layout [x0_e; B; D; y])
+        per_experiment = [_refactor([R for R, e in zip(factors, self.experiments)
+                                     if R is not None and e == k])
+                          for k in range(self.n_experiments)]
         n_samples = sum(part["length"] for part in parts)
-        B, D, x0, _, diagnostics = solve_factor(R, n, nu, ny, estimate_x0=estimate_x0,
-                                                feedthrough=feedthrough, n_samples=n_samples,
-                                                n_x0=self.n_experiments * n)
+        if self.n_experiments == 1:
+            B, D, x0, _, diagnostics = solve_factor(per_experiment[0], n, nu, ny,
+                                                    estimate_x0=estimate_x0,
+                                                    feedthrough=feedthrough,
+                                                    n_samples=n_samples, n_x0=n)
+        else:       # the x0 of each experiment eliminated (linear in the experiments)
+            B, D, x0, diagnostics = solve_factor_blocks(per_experiment, n, nu, ny,
+                                                        estimate_x0=estimate_x0,
+                                                        feedthrough=feedthrough,
+                                                        n_samples=n_samples)
         diagnostics["regression_passes"] = 2
-        return B, D, (self._shape_x0(x0, n) if estimate_x0 else x0), diagnostics
+        return B, D, x0, diagnostics
+
+
+def _refactor(factors):
+    """Triangular factor of the stacked factors of consecutive pieces (NaN on overflow)."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        stacked = np.vstack(factors)
+        if np.isfinite(stacked).all():
+            return scipy.linalg.qr(stacked, mode="r", check_finite=False)[0][:stacked.shape[1]]
+        return np.full((stacked.shape[1], stacked.shape[1]), np.nan)
 
 
 def threaded(groups):

@@ -161,7 +161,7 @@ def dual_rows(A, C, u, V0, M0, n_x0):  # pragma: no cover - compiled
 
 
 def fit_b_d_x0(A, C, u, y, *, feedthrough=True, estimate_x0=True, output_weights=None,
-               kernel=None, path="auto", starts=None):
+               kernel=None, path="auto"):
     """Least-squares B, D (and x0) for given A, C on the raw output samples.
 
     ``path='auto'`` (default) solves the problem by the modal normal equations
@@ -172,16 +172,12 @@ def fit_b_d_x0(A, C, u, y, *, feedthrough=True, estimate_x0=True, output_weights
     (``'modal'`` raises :class:`ValueError` where it does not apply).
     ``diagnostics['regression_path']`` says which path ran.
 
-    ``starts`` (the first sample of every experiment, :func:`subid.merge`):
-    one initial state per experiment, B and D shared
-    (:func:`fit_b_d_x0_experiments`); x0 then has shape (n_experiments, n).
+    This is the engine of one record in memory; :func:`subid.methods.bd.fit_b_d_x0`
+    (the entry point of every B, D, x0 route) also runs it on several
+    experiments and on many channels (:mod:`subid.methods.dt._bd_large`).
     """
     if path not in ("auto", "qr", "modal"):
         raise ValueError(f"path must be 'auto', 'qr' or 'modal', got {path!r}")
-    if starts is not None and len(starts) > 1:
-        return fit_b_d_x0_experiments(A, C, u, y, starts, feedthrough=feedthrough,
-                                      estimate_x0=estimate_x0, output_weights=output_weights,
-                                      kernel=kernel, path=path)
     if path != "qr":
         fitted = fit_b_d_x0_modal(A, C, u, y, feedthrough=feedthrough,
                                   estimate_x0=estimate_x0, output_weights=output_weights)
@@ -841,90 +837,4 @@ def fit_b_d_x0_modal(A, C, u, y, *, feedthrough=True, estimate_x0=True, output_w
         for _, w, _ in _blocks(form, u, y, block, kernel):
             total += float(np.sum((w @ g.T) ** 2))
         diagnostics["residual_rms"] = float(np.sqrt(total / (N_samples * ny)))
-    return B, D, x0, diagnostics
-
-
-def fit_b_d_x0_experiments(A, C, u, y, starts, *, feedthrough=True, estimate_x0=True,
-                           output_weights=None, kernel=None, path="auto"):
-    """:func:`fit_b_d_x0` on several experiments: one x0 each, B and D shared.
-
-    The output of experiment e (samples ``starts[e]`` to the next start) is
-    ``y(t) = C A^(t - t_e) x0_e + sum_{t_e <= k < t} C A^(t-1-k) B u(k) + D u(t)``:
-    the sensitivity restarts at every experiment, so the rows of experiment e
-    are those of a record of its own, with its x0 columns placed in the
-    block e of ``[x0_1; ...; x0_E; vec B; vec D]``. Its normal equations (modal
-    path) or triangular factor (QR path) are computed alone and embedded in
-    that parameter vector, then summed (stacked and factorised again).
-
-    Returns
-    -------
-    B, D, x0 (shape (n_experiments, n)), diagnostics
-    """
-    u = np.asarray(u, dtype=float)
-    y = np.asarray(y, dtype=float)
-    n = A.shape[0]
-    N_samples, nu = u.shape
-    ny = y.shape[1]
-    E = len(starts)
-    ranges = list(zip(starts, list(starts[1:]) + [N_samples]))
-    nx_e, q_e, p_e = parameter_count(n, nu, ny, estimate_x0, feedthrough)
-    nx = E * nx_e
-    p = nx + p_e - nx_e
-    shared = np.arange(nx, p + 1)
-
-    def columns(e):
-        return np.concatenate([e * nx_e + np.arange(nx_e), shared]).astype(np.int64)
-
-    def finish(solved, path_name):
-        B, D, x0, theta, diagnostics = solved
-        x0 = x0.reshape(E, n) if estimate_x0 else np.zeros((E, n))
-        diagnostics["regression_path"] = path_name
-        diagnostics["experiments"] = E
-        return B, D, x0, theta, diagnostics
-
-    weights = np.ones(ny) if output_weights is None else np.asarray(output_weights, float)
-    if path != "qr":
-        form = ModalForm.of(A, C)
-        if form is not None:
-            P = regressor_maps(form, nu, ny, estimate_x0=estimate_x0, feedthrough=feedthrough)
-            Nbig = np.zeros((p + 1, p + 1))
-            for e, (a, b) in enumerate(ranges):
-                moments, _ = piece_moments(form, u[a:b], y[a:b])
-                c = columns(e)
-                Nbig[np.ix_(c, c)] += normal_equations(P, moments, weights)
-            solved = solve_normal_equations(Nbig, n, nu, ny, estimate_x0=estimate_x0,
-                                            feedthrough=feedthrough, n_samples=N_samples,
-                                            n_x0=nx)
-            if solved is not None:
-                B, D, x0, theta, diagnostics = finish(solved, "modal")
-                if diagnostics["residual_rms"] ** 2 * N_samples * ny < \
-                        RESIDUAL_RECOMPUTE * Nbig[-1, -1]:
-                    total = 0.0
-                    for e, (a, b) in enumerate(ranges):
-                        th = theta[columns(e)[:-1]]
-                        g = np.stack([weights[i] * (P[i, -1] - th @ P[i, :-1])
-                                      for i in range(ny)])
-                        for _, w, _ in _blocks(form, u[a:b], y[a:b], _MODAL_BLOCK,
-                                               modal_signals):
-                            total += float(np.sum((w @ g.T) ** 2))
-                    diagnostics["residual_rms"] = float(np.sqrt(total / (N_samples * ny)))
-                return B, D, x0, diagnostics
-        if path == "modal":
-            raise ValueError("the modal path does not apply: A is unstable or its eigenvector "
-                             "matrix or the normal equations are ill-conditioned")
-    blocks = []
-    for e, (a, b) in enumerate(ranges):
-        S = np.zeros((n, q_e))
-        if estimate_x0:
-            S[:, :n] = np.eye(n)
-        R_e, _ = qr_factor(A, C, u[a:b], y[a:b], S, n_x0=nx_e, feedthrough=feedthrough,
-                           output_weights=output_weights,
-                           kernel=sensitivity_rows if kernel is None else kernel)
-        rows = np.zeros((R_e.shape[0], p + 1))
-        rows[:, columns(e)] = R_e
-        blocks.append(rows)
-    R = scipy.linalg.qr(np.vstack(blocks), mode="r", check_finite=False)[0][: p + 1]
-    B, D, x0, _, diagnostics = finish(
-        solve_factor(R, n, nu, ny, estimate_x0=estimate_x0, feedthrough=feedthrough,
-                     n_samples=N_samples, n_x0=nx), "qr")
     return B, D, x0, diagnostics

@@ -59,17 +59,17 @@ from subid._validation import (
 )
 from subid.delay import shift_for_method
 from subid.errors import OptionError, OrderError
+from subid.methods.bd import BATCH_OPTIONS
 from subid.methods.dt._feedthrough import check_feedthrough
 from subid.methods.dt._feedthrough import resolve as resolve_feedthrough
 from subid.methods.dt._subspace import (
-    BD_METHODS,
+    b_d_fit,
+    b_d_refit,
     check_system_matrices,
     choose_order,
-    estimate_b_d,
     finalize,
     finish,
     identify,
-    predictor_b_d,
     shift_invariance,
     stable_choice,
 )
@@ -199,7 +199,7 @@ def ls_subspace(data, order=None, *, horizon=None, instruments="past", selector=
         overflows or leaves the regression numerically singular (always
         projection when ``data`` is a statistic); for an unstable A that is
         kept, the prediction-error form of the regression with the Kalman
-        gain of the noise model (:func:`subid.methods.dt._subspace.predictor_b_d`),
+        gain of the noise model (:func:`subid.methods.dt._subspace.b_d_refit`),
         which stays well posed where simulating the model does not.
     statistic : {'auto', 'qr', 'gram'}
         How the data are reduced (:mod:`subid.statistic.hankel`): QR factor of the
@@ -257,7 +257,7 @@ def ls_subspace(data, order=None, *, horizon=None, instruments="past", selector=
         check_bool(flag, name)
     if selector is not None and horizon is None:
         horizon = selector_horizon(selector, data)
-    check_choice(bd_method, "bd_method", BD_METHODS)
+    check_choice(bd_method, "bd_method", BATCH_OPTIONS)
     check_seed(seed)
     check_system_matrices(system_matrices)
     if system_matrices == "states" and instruments != "past":
@@ -324,20 +324,16 @@ def _ls_subspace(pb, *, instruments, selector, seed, estimate_x0, feedthrough,
         return finish(pb, A, T @ B_q, C, D, core.order, core.order_selection, **info, **extra,
                       feedthrough=ft_record)
 
-    def fit(A_try):
-        return estimate_b_d(A_try, core.C_q, core.basis, core.L11, core.L_yu, pb,
-                            bd_method=bd_method, feedthrough=feedthrough,
-                            estimate_x0=estimate_x0)
-
-    def refit(A_try, fitted):       # an unstable A: B, D, x0 by the prediction-error form
-        return predictor_b_d(A_try, core.C_q * pb.output_scale[:, None], fitted[0], fitted[1],
-                             pb, feedthrough=feedthrough, estimate_x0=estimate_x0)
-
+    fit = b_d_fit(pb, core.C_q, core.basis, core.L11, core.L_yu, bd_method=bd_method,
+                  feedthrough=feedthrough, estimate_x0=estimate_x0)
+    # an unstable A: B, D, x0 by the one-step predictor
+    refit = b_d_refit(pb, core.C_q * pb.output_scale[:, None], feedthrough=feedthrough,
+                      estimate_x0=estimate_x0)
     A_q, (B_q, D, x0_q, reg), stab = stable_choice(core.A_q, core.basis, data.n_outputs, fit,
                                                    stability=stability, data=data,
                                                    method=method,
                                                    refit_unstable=refit if bd_method == "auto"
-                                                   else None)
+                                                   else None, bound_unstable=pb.fold)
     A, B, C, x0 = core.to_selector_basis(B_q, x0_q, A_q=A_q)
     C = C * pb.output_scale[:, None]
     info = core.info(instruments, instrument_weighting, power_iterations)

@@ -32,20 +32,20 @@ import scipy.linalg
 
 from subid._validation import check_bool, check_choice, checked_call
 from subid.delay import shift_for_method
+from subid.methods.bd import BATCH_OPTIONS
 from subid.methods.dt._feedthrough import check_feedthrough
 from subid.methods.dt._feedthrough import resolve as resolve_feedthrough
 from subid.methods.dt._subspace import (
-    BD_METHODS,
+    b_d_fit,
+    b_d_refit,
     check_system_matrices,
     check_weighting,
     choose_order,
     cva_factor,
-    estimate_b_d,
     finalize,
     finish,
     future_past_factor,
     identify,
-    predictor_b_d,
     shift_invariance,
     stable_choice,
 )
@@ -90,7 +90,7 @@ def moesp(data, order=None, *, horizon=None, weighting="moesp", selection="cv",
         How A, B, C, D follow from the estimated Γ. ``'shift'``: A and C by
         shift invariance, B, D, x0 by least squares on the output (the
         classical MOESP; for an unstable A, B, D, x0 by the prediction-error
-        form, :func:`subid.methods.dt._subspace.predictor_b_d`). ``'states'``: the
+        form, :func:`subid.methods.dt._subspace.b_d_refit`). ``'states'``: the
         state sequence ``X = Γ^† O`` and ``[A B; C D]`` by least squares on
         it, as :func:`subid.n4sid` does (VODM 1996, Sec. 4.3.2).
         ``'auto'`` (default): with ``selection='cv'`` on a record of up to
@@ -131,7 +131,7 @@ def moesp(data, order=None, *, horizon=None, weighting="moesp", selection="cv",
     check_weighting(weighting)
     feedthrough = check_feedthrough(feedthrough)
     check_bool(estimate_x0, "estimate_x0")
-    check_choice(bd_method, "bd_method", BD_METHODS)
+    check_choice(bd_method, "bd_method", BATCH_OPTIONS)
     check_system_matrices(system_matrices)
     options = {"weighting": weighting, "stability": stability, "feedthrough": feedthrough,
                "estimate_x0": estimate_x0, "bd_method": bd_method}
@@ -190,18 +190,15 @@ def _moesp(pb, *, weighting, stability, feedthrough, estimate_x0, bd_method,
     Q = scipy.linalg.qr(gamma, mode="economic", check_finite=False)[0]
     A, C, shift_residual = shift_invariance(Q, ny)
 
-    def fit(A_try):
-        return estimate_b_d(A_try, C, Q, L[:a, :a], L[a + b:, :a], pb, bd_method=bd_method,
-                            feedthrough=feedthrough, estimate_x0=estimate_x0)
-
-    def refit(A_try, fitted):       # an unstable A: B, D, x0 by the prediction-error form
-        return predictor_b_d(A_try, C * pb.output_scale[:, None], fitted[0], fitted[1], pb,
-                             feedthrough=feedthrough, estimate_x0=estimate_x0)
-
+    fit = b_d_fit(pb, C, Q, L[:a, :a], L[a + b:, :a], bd_method=bd_method,
+                  feedthrough=feedthrough, estimate_x0=estimate_x0)
+    # an unstable A: B, D, x0 by the one-step predictor
+    refit = b_d_refit(pb, C * pb.output_scale[:, None], feedthrough=feedthrough,
+                      estimate_x0=estimate_x0)
     A, (B, D, x0, reg), stab = stable_choice(A, Q, ny, fit, stability=stability, data=data,
                                              method="moesp",
                                              refit_unstable=refit if bd_method == "auto"
-                                             else None)
+                                             else None, bound_unstable=pb.fold)
     C = C * pb.output_scale[:, None]
     return finish(pb, A, B, C, D, n, order_selection, singular_values=s, weighting=weighting,
                   shift_residual=shift_residual, x0=x0, stability=stab,

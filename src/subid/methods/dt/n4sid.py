@@ -27,14 +27,15 @@ import scipy.linalg
 from subid._validation import check_bool, checked_call
 from subid.data import IOData
 from subid.delay import shift_for_method
+from subid.methods.bd import INFO_KEY
 from subid.methods.dt._feedthrough import check_feedthrough
 from subid.methods.dt._feedthrough import resolve as resolve_feedthrough
 from subid.methods.dt._subspace import (
+    b_d_fit,
     check_experiment_lengths,
     check_weighting,
     choose_order,
     cva_factor,
-    estimate_b_d,
     finalize,
     finish,
     future_past_factor,
@@ -112,7 +113,7 @@ def n4sid(data, order=None, *, horizon=None, weighting="cva", selection="cv",
     stability : {'auto', 'enforce', 'none'}
         As in :func:`subid.moesp`. When it acts, A and C come from the
         stabilised shift invariance of Γ and B, D, x0 from the output
-        regression (:func:`subid.methods.dt._subspace.estimate_b_d`).
+        regression (:func:`subid.methods.bd.fit_b_d_x0`).
     feedthrough : {'auto', True, False}
         Estimate D (``False``: D = 0 and the state regression omits it).
         ``'auto'`` (default): D only when the data show a direct term and no
@@ -250,13 +251,10 @@ def state_model(pb, gamma, *, stability, feedthrough, estimate_x0, coefficients=
         Lr = future_past_factor(pb)
         a, b = i * nu, i * (nu + ny)
 
-        def fit(A_try):
-            return estimate_b_d(A_try, C_q, Q, Lr[:a, :a], Lr[a + b:, :a], pb,
-                                bd_method="auto", feedthrough=feedthrough,
-                                estimate_x0=estimate_x0)
-
+        fit = b_d_fit(pb, C_q, Q, Lr[:a, :a], Lr[a + b:, :a], bd_method="auto",
+                      feedthrough=feedthrough, estimate_x0=estimate_x0)
         A_q, fitted, stab = stable_choice(A_unstable, Q, ny, fit, stability=stability,
-                                          data=data, method=pb.method)
+                                          data=data, method=pb.method, bound_unstable=pb.fold)
         if stab["action"] == "enforced":
             # back from the basis Q to that of gamma (x = Rg^{-1} x_q)
             B_q, D, x0_q, extra = fitted
@@ -271,4 +269,4 @@ def state_model(pb, gamma, *, stability, feedthrough, estimate_x0, coefficients=
         check_experiment_lengths(data, n)     # what initial_state would raise
     x0 = initial_state(A, B, C, D, data) if estimate_x0 and not pb.fold else None
     return A, B, C, D, x0, {"state_regression_residual": float(residual), "x0": x0,
-                            "stability": stab}
+                            "stability": stab, INFO_KEY: "states"}

@@ -47,6 +47,7 @@ import scipy.linalg
 
 from subid._validation import check_bool, checked_call
 from subid.delay import shift_for_method
+from subid.methods.bd import INFO_KEY
 from subid.methods.dt._feedthrough import check_feedthrough
 from subid.methods.dt._feedthrough import resolve as resolve_feedthrough
 from subid.methods.dt._subspace import (
@@ -170,13 +171,13 @@ def _pbsid(pb, *, stability, feedthrough, estimate_x0) -> StateSpace:
     ABK = _lstsq_rows(np.vstack([x, u_t, e]), x_next)
     A = ABK[:, :n]          # B (and K) again in fit(A), for the A finally kept
     resid = x_next - ABK @ np.vstack([x, u_t, e])
-    residual = float(np.linalg.norm(resid) / max(np.linalg.norm(x_next), 1e-300))
+    residual = float(np.linalg.norm(resid) / max(float(np.linalg.norm(x_next)), 1e-300))
 
     def fit(A_try):
         """B (and D, x0) for a given A from the state equation (K refitted with it)."""
         BK = _lstsq_rows(np.vstack([u_t, e]), x_next - A_try @ x)
         B_n, _, D_n = pb.unscale(BK[:, :nu], C, D)
-        return B_n, D_n, None, {"bd_method": "state regression"}
+        return B_n, D_n, None, {INFO_KEY: "states"}
 
     A, fitted, stab = stable_choice(A, Q, ny, fit, stability=stability, data=data,
                                     method=pb.method)

@@ -17,9 +17,9 @@ on the same data, and the state basis stays the one fixed by Λ whatever the
 data: the property that makes the method usable for tracking and switched
 systems.
 
-B, D and the current state come, by default (``bd_method='regression'``),
+B, D and the current state come, by default (``bd_method='simulation'``),
 from the output-error regression of the batch method
-(:func:`subid.methods.dt._regression.fit_b_d_x0`: ``y(t) = C S(t) [x0; vec B] +
+(:func:`subid.methods.bd.fit_b_d_x0`: ``y(t) = C S(t) [x0; vec B] +
 (u(t)^T ⊗ I) vec D``, ``S(t+1) = A S(t) + [0, u(t)^T ⊗ I]``, outputs weighted
 by 1 / their standard deviation). With forgetting 1 it is evaluated exactly,
 for the current (A, C), from fixed-size lagged statistics of the data
@@ -70,16 +70,17 @@ from subid.errors import (
     TooFewSamplesError,
 )
 from subid.io._checkpoint import load_state, require, save_state
-from subid.methods._info import model_info
-from subid.methods.dt import noise_model
-from subid.methods.dt._regression import fit_b_d_projection, regression_rows, solve_factor
-from subid.methods.dt._subspace import (
+from subid.methods._common import (
     check_excitation,
     conditions_of,
     default_horizon,
     min_samples,
     normalize_channels,
 )
+from subid.methods._info import model_info
+from subid.methods.bd import INFO_KEY, ONLINE_OPTIONS, Projection, fit_b_d_x0
+from subid.methods.dt import noise_model
+from subid.methods.dt._regression import regression_rows, solve_factor
 from subid.methods.dt.ls_subspace import check_options, gamma_from_factor, random_selector
 from subid.methods.online._lagged import LaggedStatistic, end_sensitivity
 from subid.methods.online._lagged import solve as solve_lagged
@@ -186,21 +187,21 @@ class RecursiveSubspace(OnlineIdentifier):
         Samples between snapshots at the start (default 1000).
     input_names, output_names : sequence of str, optional
         Channel names carried by ``model``.
-    bd_method : {'regression', 'projection'}
+    bd_method : {'simulation', 'projection'}
         How B, D (and the state) are estimated: the recursive output-error
         regression (default; see the module notes) or the projected data
         equation on the statistic.
     refresh_every : int, optional
-        ``'regression'``: samples between refreshes of the (A, C) that
+        ``'simulation'``: samples between refreshes of the (A, C) that
         propagate the regression's sensitivity (after refreshes at 50, 100,
         200, ... samples below it, so that the regression starts early). A
         refresh costs about one model computation. Default: a quarter of the
         memory ``1 / (1 - forgetting)``, within [50, 2000].
     restart_tolerance : float
-        ``'regression'``: relative change of (A, C) between two refreshes
+        ``'simulation'``: relative change of (A, C) between two refreshes
         above which the regression restarts (start-up, switches).
     lags : int
-        ``'regression'`` with forgetting 1: lags of the statistics of the
+        ``'simulation'`` with forgetting 1: lags of the statistics of the
         exact regression (memory and work per sample grow with it). Exact
         for any stable A while at most ``lags + 1`` samples have come, else
         up to ``|A^(lags+1)|`` (1e-16 for a spectral radius of 0.965 at the
@@ -232,15 +233,17 @@ class RecursiveSubspace(OnlineIdentifier):
     True
     """
 
-    _VERSION = 3      # 2: the recursive B, D regression; 3: lagged statistics (forgetting 1)
-    _READS = (2, 3)
+    # 2: the recursive B, D regression; 3: lagged statistics (forgetting 1); 4: bd_method
+    # 'regression' named 'simulation' (the vocabulary of subid.methods.bd)
+    _VERSION = 4
+    _READS = (2, 3, 4)
 
     @checked_call
     def __init__(self, order, n_inputs, n_outputs, *, horizon=None, forgetting=1.0,
                  instruments="past", selector=None, seed=0, instrument_weighting=True,
                  power_iterations=8, feedthrough=True, dt=1.0, history_size=None,
                  history_stride=1000, input_names=None, output_names=None,
-                 bd_method="regression", refresh_every=None, restart_tolerance=1.0,
+                 bd_method="simulation", refresh_every=None, restart_tolerance=1.0,
                  lags=1000):
         # the settings, stored unchanged (validated below; the values in use
         # are private: e.g. the default horizon)
@@ -302,8 +305,8 @@ class RecursiveSubspace(OnlineIdentifier):
         self._hist_abcd = np.zeros((0, self._abcd_size()))
         self._hist_t = np.zeros(0)
         self._model = None
-        if bd_method not in ("regression", "projection"):
-            raise SubidError(f"bd_method must be 'regression' or 'projection', got "
+        if bd_method not in ONLINE_OPTIONS:
+            raise SubidError(f"bd_method must be 'simulation' or 'projection', got "
                              f"{bd_method!r}")
         if refresh_every is None:      # a quarter of the memory, within [50, 2000]
             memory = math.inf if self._lam == 1.0 else 1.0 / (1.0 - self._lam)
@@ -328,7 +331,7 @@ class RecursiveSubspace(OnlineIdentifier):
         self._bd_restarts = 0
         self._lags = check_int(lags, "lags", maximum=MAX_DIMENSION)
         # forgetting 1: the exact batch regression from lagged statistics
-        self._exact = self.bd_method == "regression" and self._lam == 1.0
+        self._exact = self.bd_method == "simulation" and self._lam == 1.0
         self._lag = LaggedStatistic(nu, ny, self._lags) if self._exact else None
 
     # -- input ------------------------------------------------------------
@@ -428,7 +431,7 @@ class RecursiveSubspace(OnlineIdentifier):
         # validated: from here on the state changes
         start = 0
         n = u.shape[0]
-        regression = self.bd_method == "regression" and not self._exact
+        regression = self.bd_method == "simulation" and not self._exact
         if self._lag is not None:
             self._lag.update(u, y)
         while start < n:
@@ -656,7 +659,7 @@ class RecursiveSubspace(OnlineIdentifier):
                 B_q, D, x0_q, theta, reg = solved
                 A, B, C, x0 = core.to_selector_basis(B_q, x0_q)
                 C = C * sy[:, None]
-                bd_method, self._theta = "regression", theta
+                bd_method, self._theta = "simulation", theta
                 self._exact_basis = (core.A_q, core.T)
                 reg["x0"] = x0
             if reason is not None:
@@ -664,7 +667,7 @@ class RecursiveSubspace(OnlineIdentifier):
                     "" if solved is not None else
                     "; B and D come from the projected data equation (less accurate)")
                 warnings.warn(issued, NotConvergedWarning, stacklevel=2)
-        elif self.bd_method == "regression":
+        elif self.bd_method == "simulation":
             if not self._bd_started:
                 reason = ("the B, D regression has not started (no refresh with a usable "
                           "model yet)")
@@ -678,7 +681,7 @@ class RecursiveSubspace(OnlineIdentifier):
                 if reg["regression_rank_deficient"] or not np.isfinite(theta).all():
                     reason = "the B, D regression is rank deficient"
                 else:
-                    bd_method, self._theta = "regression", theta
+                    bd_method, self._theta = "simulation", theta
                     reg.update(x0=x0, bd_start_sample=self._bd_start,
                                bd_restarts=self._bd_restarts)
             if reason is not None:
@@ -686,15 +689,17 @@ class RecursiveSubspace(OnlineIdentifier):
                           "equation (less accurate)")
                 warnings.warn(issued, NotConvergedWarning, stacklevel=2)
         if bd_method == "projection":
-            B_q, D, reg2 = fit_b_d_projection(core.A_q, core.C_q, core.basis, core.L11,
-                                              core.L_yu, feedthrough=self._feedthrough)
+            B_q, D, _, reg2 = fit_b_d_x0(
+                core.A_q, core.C_q, None, bd_method="projection", feedthrough=self._feedthrough,
+                projection=Projection(core.C_q, core.basis, core.L11, core.L_yu,
+                                      lambda B_n, C_n, D_n: (B_n, C_n, D_n)))
             A, B, C, _ = core.to_selector_basis(B_q)
             # from the normalised channels to the user's units
             B, C, D = B / su, C * sy[:, None], D * sy[:, None] / su
             reg = {**reg, **reg2}
         extra = {"forgetting": self._lam,
                  "effective_samples": self._weight, "input_condition": input_condition,
-                 "bd_method": bd_method,
+                 INFO_KEY: bd_method,
                  "bd_fallback": reason if bd_method == "projection" else None,
                  "converged": reason is None,
                  "convergence": "converged" if reason is None else reason,
@@ -756,7 +761,7 @@ class RecursiveSubspace(OnlineIdentifier):
         (seed 001, eq. (21)), then propagated through the model to time t.
         """
         model = self.model
-        if model.info["bd_method"] == "regression" and self._exact:
+        if model.info[INFO_KEY] == "simulation" and self._exact:
             A, T = self._exact_basis
             stat = self._lag
             t_end = self._n_samples - 1
@@ -766,7 +771,7 @@ class RecursiveSubspace(OnlineIdentifier):
                 powers[d] = powers[d - 1] @ A
             S = end_sensitivity(stat, A, powers, t_end)
             return T @ (S @ self._theta[:self.order + self.order * self.n_inputs])
-        if model.info["bd_method"] == "regression":
+        if model.info[INFO_KEY] == "simulation":
             k = self.order + self.order * self.n_inputs
             return self._bd_S_last @ self._theta[:k]
         f, ny, nu = self._f, self.n_outputs, self.n_inputs
@@ -843,7 +848,9 @@ class RecursiveSubspace(OnlineIdentifier):
                       dt=s["dt"], history_size=s["history_size"],
                       history_stride=s["history_stride"],
                       input_names=s.get("input_names"), output_names=s.get("output_names"),
-                      bd_method=s["bd_method"], refresh_every=s["refresh_every"],
+                      bd_method=("simulation" if s["_version"] < 4 and
+                                 s["bd_method"] == "regression" else s["bd_method"]),
+                      refresh_every=s["refresh_every"],
                       restart_tolerance=s["restart_tolerance"], lags=s.get("lags", 1000))
             if not s.get("exact", False):
                 # version 2 (or forgetting < 1): the propagated regression
