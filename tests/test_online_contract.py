@@ -68,8 +68,10 @@ def _assert_same(a, b, exact):
         if exact:
             np.testing.assert_array_equal(getattr(ma, name), getattr(mb, name), err_msg=name)
         else:
-            np.testing.assert_allclose(getattr(ma, name), getattr(mb, name), rtol=1e-8,
-                                       atol=1e-9, err_msg=name)
+            # to rounding, amplified by AdaptiveIdentifier's refit of (8) (an
+            # iterative fit of the state; the states themselves agree to 1e-10)
+            np.testing.assert_allclose(getattr(ma, name), getattr(mb, name), rtol=1e-6,
+                                       atol=1e-8, err_msg=name)
     if exact:
         np.testing.assert_array_equal(a.state, b.state)
     else:
@@ -88,6 +90,9 @@ def test_is_an_online_identifier(case):
     params = ident.get_params()
     assert params["history_size"] == 16 and params["horizon"] in (3, 5)
     twin = type(ident)(**params)
+    # only (order, n_inputs, n_outputs) by position (issue 24, item 6)
+    with pytest.raises(errors.OptionError, match="horizon"):
+        type(ident)(params["order"], params["n_inputs"], params["n_outputs"], params["horizon"])
     a = ident.update(data.u[:600], data.y[:600])
     b = twin.update(data.u[:600], data.y[:600])
     assert a is ident and ident.n_samples == 600

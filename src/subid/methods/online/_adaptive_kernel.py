@@ -3,9 +3,11 @@
 Two implementations of the same recursion operate in place on the same state
 arrays:
 
-* :func:`kernel` — the compiled (numba) loop used by the identifier;
-* :func:`reference` — a plain numpy loop written for readability, kept as the
-  reference the tests compare the kernel against (agreement to 1e-12).
+* :func:`kernel` — the compiled (numba) loop used by the identifier (called
+  through :func:`kernel_packed`);
+* :func:`subid.methods.online._adaptive_reference.reference` — a plain numpy
+  loop written for readability, kept as the reference the tests compare the
+  kernel against (agreement to 1e-12).
 
 Everything here trusts its inputs: validation happens in
 :mod:`subid.methods.online.adaptive`. Notation follows the paper (Afri, Bako, Andrieu,
@@ -39,11 +41,8 @@ from __future__ import annotations
 
 import numba
 import numpy as np
-import scipy.linalg
 
-from subid.model._simulate import expm_blocks
-
-__all__ = ["kernel", "reference", "phi_blocks", "IST", "FST"]
+__all__ = ["kernel", "kernel_packed", "pack_tables", "phi_blocks", "state_layout", "IST", "FST"]
 
 # Integer state ``ist`` (int64 array) slots.
 IST = {
@@ -76,6 +75,35 @@ FST = {
     "t_first": 8,         # time of the first sample (the stall rule's clock)
 }
 N_FST = 9
+
+
+def state_layout(n: int, nu: int, ny: int, f: int, mi: int) -> list:
+    """The layout table of the float state buffer: ``(name, shape)`` per
+    array, in the order of :func:`kernel`'s arguments ``fst`` ... ``Zz``
+    (the index of :func:`kernel_packed`'s ``lay``; ``Ev`` last). Order n, inputs nu,
+    outputs ny, filter order f, instrument filter order mi."""
+    d, dp, dth = n + f * nu, f * ny, n + n * nu + ny * nu
+    dz = (f + mi) * nu + n
+    return [("fst", (N_FST,)), ("prev_u", (nu,)), ("prev_y", (ny,)),
+            ("zp", (f, ny)), ("zq", (f, nu)),
+            ("R", (d, d)),        # information matrix of (8) ('ode': P)
+            ("G", (dp, d)),       # S - M R: residual form of the cross term
+            ("M", (dp, d)),
+            ("Rt", (dth, dth)),   # information matrix of (16) ('ode': Q)
+            ("g", (1, dth)),      # s_θ - R_θ θ
+            ("theta", (1, dth)),  # [x̃(t_g); vec B̃; vec D]
+            ("Am", (n, n)), ("Cm", (ny, n)), ("Bm", (n, nu)), ("Dm", (ny, nu)),
+            ("Apsi", (n, n)), ("Cpsi", (ny, n)),
+            ("Psi", (ny, n + n * nu)),   # [Ξ, Ψ]
+            ("zr", (mi, nu)),     # instrument filter ('iv')
+            ("xi", (1, n)),       # auxiliary-model instrument ('iv')
+            ("Cz", (dz, n)),      # IV cross matrix sum w ζ φ^T, first n columns
+                                  # (the others are columns of Zz) ('iv')
+            ("Gz", (dp, dz)),     # S_ζ - M Cz^T ('iv')
+            ("Zz", (dz, dz)),     # sum w ζ ζ^T, the IV weighting ('iv')
+            ("Ev", (1, 2 * ny + 1))]  # Σ λ h (y - Φ θ)^2 per output of (16), Σ λ h y^2,
+                                      # Σ λ h
+
 
 # Part 2 also starts when the residual of (13) is below this value and has
 # stopped halving (converged to its noise floor): no halving during
@@ -684,13 +712,61 @@ def _refresh(n, nu, ny, omega, alpha, max_cond, gate, settle, ode, iv, T_now, is
                 ist[2] = row + 1
 
 
+@numba.njit(cache=True)
+def _scratch_layout(n, ny, f, mi, dz, d, dp, dth):  # pragma: no cover - compiled
+    """The layout table of :func:`kernel`'s scratch buffer: ``(offset, rows,
+    cols)`` per array (1-D arrays have one column), in the order the kernel
+    cuts them (``_view1``/``_view2`` with the same index). Dimensions: order
+    n, outputs ny, filter order f, instrument filter order mi, instruments
+    dz, regressor d of (8), its left-hand side dp, and θ of (16), dth."""
+    shapes = ((dz, 1),          # 0 ζ, the instruments ('iv')
+              (dp, 1),          # 1 weighted residual of (8) ('iv')
+              (mi, 1),          # 2 new instrument-filter state
+              (n, 1),           # 3 new auxiliary-model instrument
+              (dz, dz),         # 4 Cholesky factor of Z
+              (dz, d),          # 5 whitened cross matrix C̃
+              (dp, dz),         # 6 whitened residual G̃
+              (d, d),           # 7 normal matrix of the whitened IV step
+              (dp, d),          # 8 its right-hand side
+              (dz, d),          # 9 the whole cross matrix
+              (dp, 1),          # 10 p̂
+              (d, 1),           # 11 φ̂
+              (d, 1),           # 12 w φ̂
+              (f, 1),           # 13 new filter state
+              (ny, dth),        # 14 Φ of (16) ('ode')
+              (ny, n),          # 15 new Ψ block
+              (d, 1),           # 16 P φ ('ode')
+              (dp, 1),          # 17 residual of (8) ('ode')
+              (dth, ny),        # 18 Q Φ^T ('ode')
+              (ny, 1),          # 19 residual of (16)
+              (n, n),           # 20 e^{Ã h}
+              (n, n),           # 21 G1 of Ψ
+              (n, n),           # 22 G2 of Ψ
+              (dp, 1),          # 23 weighted residual of (8) ('ls')
+              (d, d),           # 24 Cholesky factor of (8)
+              (d, dp),          # 25 its right-hand sides
+              (dth, dth),       # 26 Cholesky factor of (16)
+              (dth, 1),         # 27 its right-hand side
+              (n, n),           # 28 Ã from (13)
+              (5 * n, n),       # 29 phi_blocks' work, (5, n, n)
+              (1 + 2 * d, 1))   # 30 excitation of (8) and its inverse iteration
+    out = np.empty((len(shapes), 3), dtype=np.int64)
+    o = 0
+    for i in range(len(shapes)):
+        out[i, 0] = o
+        out[i, 1] = shapes[i][0]
+        out[i, 2] = shapes[i][1]
+        o += shapes[i][0] * shapes[i][1]
+    return out
+
+
 # ---------------------------------------------------------------------------
 # the compiled loop
 # ---------------------------------------------------------------------------
 @numba.njit(cache=True, fastmath=_FASTMATH)
 def kernel(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, Hsel, par,
            ipar, ist, fst, prev_u, prev_y, zp, zq, R, G, M, Rt, gt, theta,
-           Am, Cm, Bm, Dm, Apsi, Cpsi, Psi, zr, xi, Cz, Gz, Zz,
+           Am, Cm, Bm, Dm, Apsi, Cpsi, Psi, zr, xi, Cz, Gz, Zz, Ev,
            PsiPhi, PsiG0, PsiG1, pstamp, hist, buf):  # pragma: no cover - compiled
     """Process the samples ``(Tm, U, Y)`` in place (see the module docstring).
 
@@ -730,73 +806,23 @@ def kernel(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, Hse
     dz = Cz.shape[0]
     dth = theta.shape[1]
     nX = Psi.shape[1]          # n + n nu: columns of [Ξ, Ψ]
-    # scratch: one allocation per call (a one-sample call pays for one, not 30)
-    sc = np.empty(2 * dz * d + dz * dz + dp * dz + 2 * d * d + 2 * dp * d + dz + 4 * dp
-                  + mi + n + 3 * d + f + 2 * ny * dth + ny * n + ny + 9 * n * n
-                  + dth * dth + dth + 1 + 2 * d)
-    o = 0
-    zeta = sc[o:o + dz]
-    o += dz
-    ez = sc[o:o + dp]
-    o += dp
-    zi = sc[o:o + mi]
-    o += mi
-    zi2 = sc[o:o + n]
-    o += n
-    Lz = sc[o:o + dz * dz].reshape((dz, dz))
-    o += dz * dz
-    Ct = sc[o:o + dz * d].reshape((dz, d))
-    o += dz * d
-    Gt = sc[o:o + dp * dz].reshape((dp, dz))
-    o += dp * dz
-    Nz = sc[o:o + d * d].reshape((d, d))
-    o += d * d
-    Gn = sc[o:o + dp * d].reshape((dp, d))
-    o += dp * d
-    Cf = sc[o:o + dz * d].reshape((dz, d))
-    o += dz * d
-    p = sc[o:o + dp]
-    o += dp
-    phi = sc[o:o + d]
-    o += d
-    wphi = sc[o:o + d]
-    o += d
-    znew = sc[o:o + f]
-    o += f
-    Phi = sc[o:o + ny * dth].reshape((ny, dth))
-    o += ny * dth
+    # scratch: one allocation per call (a one-sample call pays for one, not 30),
+    # carved by its layout table (_scratch_layout, same order)
+    sl = _scratch_layout(n, ny, f, mi, dz, d, dp, dth)
+    sc = np.empty(sl[-1, 0] + sl[-1, 1] * sl[-1, 2])
+    zeta, ez, zi, zi2 = _view1(sc, sl, 0), _view1(sc, sl, 1), _view1(sc, sl, 2), _view1(sc, sl, 3)
+    Lz, Ct, Gt, Nz = _view2(sc, sl, 4), _view2(sc, sl, 5), _view2(sc, sl, 6), _view2(sc, sl, 7)
+    Gn, Cf = _view2(sc, sl, 8), _view2(sc, sl, 9)
+    p, phi, wphi, znew = _view1(sc, sl, 10), _view1(sc, sl, 11), _view1(sc, sl, 12), \
+        _view1(sc, sl, 13)
+    Phi, Pn, g, e = _view2(sc, sl, 14), _view2(sc, sl, 15), _view1(sc, sl, 16), _view1(sc, sl, 17)
     Phi[:, :] = 0.0
-    Pn = sc[o:o + ny * n].reshape((ny, n))
-    o += ny * n
-    g = sc[o:o + d]
-    o += d
-    e = sc[o:o + dp]
-    o += dp
-    Gq = sc[o:o + dth * ny].reshape((dth, ny))
-    o += dth * ny
-    ey = sc[o:o + ny]
-    o += ny
-    Ph = sc[o:o + n * n].reshape((n, n))
-    o += n * n
-    G1h = sc[o:o + n * n].reshape((n, n))
-    o += n * n
-    G2h = sc[o:o + n * n].reshape((n, n))
-    o += n * n
-    ep = sc[o:o + dp]
-    o += dp
-    Ld = sc[o:o + d * d].reshape((d, d))      # Cholesky factors: _chol writes every entry
-    o += d * d
-    Bd = sc[o:o + d * dp].reshape((d, dp))
-    o += d * dp
-    Lt = sc[o:o + dth * dth].reshape((dth, dth))
-    o += dth * dth
-    Bt = sc[o:o + dth].reshape((dth, 1))
-    o += dth
-    Anew = sc[o:o + n * n].reshape((n, n))
-    o += n * n
-    work = sc[o:o + 5 * n * n].reshape((5, n, n))
-    o += 5 * n * n
-    ex = sc[o:o + 1 + 2 * d]        # excitation of (8) and its scratch
+    Gq, ey = _view2(sc, sl, 18), _view1(sc, sl, 19)
+    Ph, G1h, G2h = _view2(sc, sl, 20), _view2(sc, sl, 21), _view2(sc, sl, 22)
+    ep, Ld, Bd = _view1(sc, sl, 23), _view2(sc, sl, 24), _view2(sc, sl, 25)
+    Lt, Bt, Anew = _view2(sc, sl, 26), _view2(sc, sl, 27), _view2(sc, sl, 28)
+    work = _view2(sc, sl, 29).reshape((5, n, n))
+    ex = _view1(sc, sl, 30)         # excitation of (8) and its scratch
     for k in range(N):
         if ist[0] == 0:
             for j in range(nu):
@@ -1071,6 +1097,13 @@ def kernel(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, Hse
                     for jj in range(nu):
                         s -= U[k, jj] * theta[0, nX + r + ny * jj]
                     ey[r] = w * s
+                    # its power per channel (the output-noise estimate of the
+                    # refinement, see adaptive._refined)
+                    # (θ's memory, start-up schedule included: the rows of the
+                    # first seconds, with θ still far off, are forgotten as fast)
+                    Ev[0, r] = lam * Ev[0, r] + (0.0 if gap else h * (s * s))
+                    Ev[0, ny + r] = lam * Ev[0, ny + r] + (0.0 if gap else h * (Y[k, r] * Y[k, r]))
+                Ev[0, 2 * ny] = lam * Ev[0, 2 * ny] + (0.0 if gap else h)
                 # R_θ += w Φ^T Φ, g_θ += w Φ^T (y - Φ θ), exploiting u^T ⊗ I
                 for r in range(ny):
                     er = ey[r]
@@ -1159,141 +1192,6 @@ def _all_finite(buf):  # pragma: no cover - compiled
     return bad == 0
 
 
-# ---------------------------------------------------------------------------
-# plain numpy reference
-# ---------------------------------------------------------------------------
-def _ref_solve(R, G, X, max_cond):
-    """Reference of :func:`_solve_normal`: numpy Cholesky, scipy cho_solve."""
-    Rs = np.tril(R) + np.tril(R, -1).T
-    tr = np.trace(Rs)
-    if not tr > 0:
-        return False
-    delta = tr / max_cond
-    try:
-        L = np.linalg.cholesky(Rs + delta * np.eye(Rs.shape[0]))
-    except np.linalg.LinAlgError:
-        return False
-    step = scipy.linalg.cho_solve((L, True), G.T).T
-    X += step
-    G -= step @ Rs
-    return True
-
-
-def _ref_solve_iv_weighted(C, G, Z, X, max_cond):
-    """Reference of :func:`_solve_iv_weighted`: numpy Cholesky of Z, scipy
-    triangular solves, the normal equations of the whitened problem solved by
-    :func:`_ref_solve`. Returns the excitation of the whitened normal matrix
-    (:func:`_ref_weakest`), None where the kernel returns False."""
-    Zs = np.tril(Z) + np.tril(Z, -1).T
-    tr = np.trace(Zs)
-    if not tr > 0:
-        return None
-    try:
-        L = np.linalg.cholesky(Zs + tr / max_cond * np.eye(Zs.shape[0]))
-    except np.linalg.LinAlgError:
-        return None
-    Ct = scipy.linalg.solve_triangular(L, C, lower=True)
-    Gt = scipy.linalg.solve_triangular(L, G.T, lower=True).T
-    Xold = X.copy()
-    N, Gn = Ct.T @ Ct, Gt @ Ct
-    scale = max_cond * max_cond
-    if not _ref_solve(N, Gn, X, scale):
-        scale = max_cond
-        if not _ref_solve(N, Gn, X, scale):
-            return None
-    G -= (X - Xold) @ C.T
-    return _ref_weakest(N, np.trace(N) / scale)
-
-
-def _ref_weakest(X, delta):
-    """Reference of :func:`_weakest`: the same inverse iteration, scipy's
-    Cholesky solves."""
-    Xs = np.tril(X) + np.tril(X, -1).T
-    d = Xs.shape[0]
-    factor = scipy.linalg.cho_factor(Xs + delta * np.eye(d), lower=True)
-    v = 1.0 + 0.5 * np.sin(np.arange(1.0, d + 1.0))
-    v /= np.linalg.norm(v)
-    nrm = 1.0
-    for _ in range(_EXCITATION_ITERATIONS):
-        v = scipy.linalg.cho_solve(factor, v)
-        nrm = np.linalg.norm(v)
-        v /= nrm
-    return (1.0 / nrm - delta) / np.trace(Xs)
-
-
-def _ref_refresh(n, nu, ny, omega, alpha, max_cond, gate, settle, ode, iv, T_now, ist, fst,
-                 R, G, M, Rt, gt, theta, Am, Cm, Bm, Dm, Apsi, Cpsi, Psi, hist, Cz, Gz, Zz):
-    if not ode:
-        if iv:
-            Zs = np.tril(Zz) + np.tril(Zz, -1).T
-            Cf = np.hstack([Cz, Zs[:, :M.shape[1] - n]])
-            excitation = _ref_solve_iv_weighted(Cf, Gz, Zz, M, max_cond)
-            if excitation is None:
-                ist[7] += 1
-                excitation = 0.0
-        elif not _ref_solve(R, G, M, max_cond):
-            ist[7] += 1
-            excitation = 0.0
-        else:
-            excitation = _ref_weakest(R, np.trace(R) / max_cond)
-        ist[13] = 0 if excitation * max_cond >= 1.0 else 1
-        if ist[9] and not _ref_solve(Rt, gt, theta, max_cond):
-            ist[7] += 1
-    dp = M.shape[0]
-    Up, W = M[:dp - ny, :n], M[ny:, :n]
-    Q, Rq = np.linalg.qr(Up)
-    piv = np.abs(np.diag(Rq))
-    if piv.max() > 0 and np.all(piv > SHIFT_RANK_TOL * piv.max()):
-        X = scipy.linalg.solve_triangular(Rq, Q.T @ W)
-        tot = np.linalg.norm(W)
-        res = np.linalg.norm(W - Up @ X) / tot if tot > 0 else 0.0
-        Am[:] = omega * X
-        Cm[:] = M[:ny, :n]
-    else:
-        res = -1.0
-        ist[5] += 1
-    fst[2] = res
-    if ist[9]:
-        Bm[:] = theta[0, n:n + n * nu].reshape(nu, n).T
-        Dm[:] = theta[0, n + n * nu:].reshape(nu, ny).T
-    level = gate
-    if res >= 0:
-        if res < 0.5 * fst[5]:
-            fst[5], fst[6] = res, T_now
-        elif (not ist[10] and fst[5] <= _STALL_MAX
-              and T_now - fst[6] >= min(1.0 / alpha, max(fst[6] - fst[8], settle))):
-            ist[10] = 1
-        if ist[10]:
-            level = max(gate, _STALL_FACTOR * fst[5])
-    if 0 <= res <= level and ist[13] == 0 and np.all(np.linalg.eigvals(Am).real < 0):
-        Apsi[:] = Am
-        Cpsi[:] = Cm
-        ist[6] += 1
-        ist[11] = 0
-        if not ist[9]:
-            Psi[:] = 0.0
-            Psi[:, :n] = Cm
-            ist[9] = 1
-            fst[1] = T_now
-    else:
-        ist[4] += 1
-        ist[11] = 1
-    ist[1] += 1
-    cap = hist.shape[0]
-    r = ist[1]
-    if cap > 0 and r % ist[3] == 0:
-        if ist[2] == cap:
-            kept = hist[1:cap:2].copy()
-            hist[:kept.shape[0]] = kept
-            ist[2] = kept.shape[0]
-            ist[3] *= 2
-        if r % ist[3] == 0:
-            hist[ist[2]] = np.concatenate([[T_now, ist[0]], Am.ravel(), Bm.ravel(),
-                                           Cm.ravel(), Dm.ravel()])
-            ist[2] += 1
-
-
-
 @numba.njit(cache=True, fastmath=_FASTMATH)
 def kernel_packed(Tm, U, Y, idx, cbuf, ibuf, ist, hist, buf):  # pragma: no cover - compiled
     """:func:`kernel` with its arrays passed as a few buffers.
@@ -1319,9 +1217,7 @@ def kernel_packed(Tm, U, Y, idx, cbuf, ibuf, ist, hist, buf):  # pragma: no cove
     PsiPhi = _view3(cbuf, clay, 11)
     PsiG0 = _view3(cbuf, clay, 12)
     PsiG1 = _view3(cbuf, clay, 13)
-    steps = cbuf[clay[0, 0]:clay[0, 0] + clay[0, 1]]
-    lamM = cbuf[clay[1, 0]:clay[1, 0] + clay[1, 1]]
-    lamT = cbuf[clay[2, 0]:clay[2, 0] + clay[2, 1]]
+    steps, lamM, lamT = _view1(cbuf, clay, 0), _view1(cbuf, clay, 1), _view1(cbuf, clay, 2)
     Fphi = _view3(cbuf, clay, 3)
     Fg0 = _view2(cbuf, clay, 4)
     Fg1 = _view2(cbuf, clay, 5)
@@ -1329,10 +1225,8 @@ def kernel_packed(Tm, U, Y, idx, cbuf, ibuf, ist, hist, buf):  # pragma: no cove
     Ig0 = _view2(cbuf, clay, 7)
     Ig1 = _view2(cbuf, clay, 8)
     Hsel = _view2(cbuf, clay, 9)
-    par = cbuf[clay[10, 0]:clay[10, 0] + clay[10, 1]]
-    fst = buf[lay[0, 0]:lay[0, 0] + lay[0, 1]]
-    prev_u = buf[lay[1, 0]:lay[1, 0] + lay[1, 1]]
-    prev_y = buf[lay[2, 0]:lay[2, 0] + lay[2, 1]]
+    par = _view1(cbuf, clay, 10)
+    fst, prev_u, prev_y = _view1(buf, lay, 0), _view1(buf, lay, 1), _view1(buf, lay, 2)
     zp = _view2(buf, lay, 3)
     zq = _view2(buf, lay, 4)
     R = _view2(buf, lay, 5)
@@ -1353,9 +1247,10 @@ def kernel_packed(Tm, U, Y, idx, cbuf, ibuf, ist, hist, buf):  # pragma: no cove
     Cz = _view2(buf, lay, 20)
     Gz = _view2(buf, lay, 21)
     Zz = _view2(buf, lay, 22)
+    Ev = _view2(buf, lay, 23)
     return kernel(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, Hsel,
                   par, ipar, ist, fst, prev_u, prev_y, zp, zq, R, G, M, Rt, gt, theta,
-                  Am, Cm, Bm, Dm, Apsi, Cpsi, Psi, zr, xi, Cz, Gz, Zz,
+                  Am, Cm, Bm, Dm, Apsi, Cpsi, Psi, zr, xi, Cz, Gz, Zz, Ev,
                   PsiPhi, PsiG0, PsiG1, pstamp, hist, buf)
 
 
@@ -1375,134 +1270,35 @@ def _view2(buf, lay, i):  # pragma: no cover - compiled
     return buf[o:o + lay[i, 1] * lay[i, 2]].reshape((lay[i, 1], lay[i, 2]))
 
 
-def reference(Tm, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, Hsel, par,
-              ipar, ist, fst, prev_u, prev_y, zp, zq, R, G, M, Rt, gt, theta,
-              Am, Cm, Bm, Dm, Apsi, Cpsi, Psi, zr, xi, Cz, Gz, Zz,
-              PsiPhi, PsiG0, PsiG1, pstamp, hist, buf):
-    """Plain numpy implementation of :func:`kernel` (same arguments).
+@numba.njit(cache=True)
+def _view1(buf, lay, i):  # pragma: no cover - compiled
+    """The array ``i`` of a layout table ``lay`` as a 1-D view of ``buf``."""
+    o = lay[i, 0]
+    return buf[o:o + lay[i, 1] * lay[i, 2]]
 
-    Differences of implementation only: the Ψ discretisation uses
-    :func:`subid.model._simulate.expm_blocks` (scipy) instead of the compiled
-    Taylor series, (13) numpy's QR, the normal equations numpy's Cholesky,
-    the stability test eigenvalues, and the whole symmetric matrices are
-    updated (the kernel updates lower triangles).
-    """
-    (omega, alpha, beta, max_cond, trace_bound, gate, max_gap, dcF, dcI, settle,
-     startup) = (float(v) for v in par)
-    K, ode, foh, iv = int(ipar[0]), bool(ipar[1]), bool(ipar[2]), bool(ipar[3])
-    n = Am.shape[0]
-    ny = zp.shape[1]
-    nu = zq.shape[1]
-    for k in range(U.shape[0]):
-        u, y = U[k], Y[k]
-        if ist[0] == 0:
-            prev_u[:], prev_y[:], fst[0], fst[8], ist[0] = u, y, Tm[k], Tm[k], 1
-            continue
-        q = idx[k]
-        h = steps[q]
-        gap = h > max_gap
-        # 1. filters (6a)-(6b); re-initialised at the steady state after a gap
-        if gap:
-            ist[12] += 1
-            fst[7] = Tm[k] + settle
-            zp[:], zq[:], zr[:] = 0.0, 0.0, 0.0
-            zp[0], zq[0], zr[0] = dcF * y, dcF * u, dcI * u
-        else:
-            zp[:] = Fphi[q] @ zp + np.outer(Fg0[q], prev_y) + np.outer(Fg1[q], y)
-            zq[:] = Fphi[q] @ zq + np.outer(Fg0[q], prev_u) + np.outer(Fg1[q], u)
-            if iv:
-                zr[:] = Iphi[q] @ zr + np.outer(Ig0[q], prev_u) + np.outer(Ig1[q], u)
-        # 2. regression (8)
-        p = zp.reshape(-1)
-        phi = np.concatenate([Hsel @ p, zq.reshape(-1)])
-        r2 = 1.0 + phi @ phi
-        if not ode:
-            c2 = fst[3] * lamM[q]
-            if c2 < _RESCALE_BELOW:        # fold the factor in first (long gaps)
-                c2 = c2 if c2 > _FORGOTTEN else 0.0
-                if iv:
-                    Cz *= c2
-                    Gz *= c2
-                    Zz *= c2
-                else:
-                    R *= c2
-                    G *= c2
-                fst[3] = 1.0
-            else:
-                fst[3] = c2
-            w = 0.0 if Tm[k] <= fst[7] else h / (r2 * fst[3])
-            if iv:
-                zeta = np.concatenate([zq.reshape(-1), zr.reshape(-1), xi[0]])
-                Cz += np.outer(w * zeta, phi[:n])
-                Zz += np.outer(w * zeta, zeta)
-                Gz += np.outer(w * (p - M @ phi), zeta)
-            else:
-                R += np.outer(w * phi, phi)
-                G += np.outer(w * (p - M @ phi), phi)
-        elif Tm[k] > fst[7]:
-            g = R @ phi
-            c = h / (r2 + h * (phi @ g))
-            M += np.outer((p - M @ phi) * c, g)
-            grow = h * alpha
-            if np.trace(R) > trace_bound:
-                grow, ist[8] = 0.0, ist[8] + 1
-            R[:] = R + grow * R - c * np.outer(g, g)
-        if ist[9]:
-            # 3. Ξ, Ψ of (15), exact for the held input
-            if pstamp[q] != ist[6]:
-                Ph, G1, G2 = expm_blocks(Apsi, np.eye(n), [h], "foh" if foh else "zoh")
-                PsiPhi[q] = Ph[0]
-                if foh:
-                    PsiG0[q] = Cpsi @ (G1[0] - G2[0])
-                    PsiG1[q] = Cpsi @ G2[0]
-                else:
-                    PsiG0[q] = Cpsi @ G1[0]
-                    PsiG1[q] = 0.0
-                pstamp[q] = ist[6]
-            Psi[:, :n] = Psi[:, :n] @ PsiPhi[q]
-            for jj in range(nu):
-                blk = slice(n + jj * n, n + (jj + 1) * n)
-                Psi[:, blk] = (Psi[:, blk] @ PsiPhi[q] + prev_u[jj] * PsiG0[q]
-                               + u[jj] * PsiG1[q])
-            if gap:     # restart (14): Ψ = 0, Ξ = C̃, x̃(t_g) information dropped
-                Psi[:] = 0.0
-                Psi[:, :n] = Cpsi
-                if not ode:
-                    Rt[:n, :] = 0.0
-                    Rt[:, :n] = 0.0
-                    gt[0, :n] = 0.0
-            if iv:      # auxiliary-model instrument (see the kernel)
-                xi[0] = PsiPhi[q] @ xi[0] + h * (Bm @ zq[0])
-            # regression (16)
-            Phi = np.hstack([Psi, np.kron(u[None, :], np.eye(ny))])
-            if not ode:
-                lam, age = lamT[q], Tm[k] - fst[1]
-                if startup > beta * age:        # start-up schedule of β
-                    lam = np.exp(-startup * h / age)
-                c2 = fst[4] * lam
-                if c2 < _RESCALE_BELOW:
-                    c2 = c2 if c2 > _FORGOTTEN else 0.0
-                    Rt *= c2
-                    gt *= c2
-                    fst[4] = 1.0
-                else:
-                    fst[4] = c2
-                w = 0.0 if gap else h / ((1.0 + np.sum(Phi * Phi)) * fst[4])
-                Rt += w * (Phi.T @ Phi)
-                gt += (Phi.T @ (w * (y - Phi @ theta[0])))[None, :]
-            elif not gap:
-                Gq = Rt @ Phi.T
-                tq = np.trace(Phi @ Gq)
-                c = h / (1.0 + tq + h * tq)
-                theta += (Gq @ ((y - Phi @ theta[0]) * c))[None, :]
-                grow = h * beta
-                if np.trace(Rt) > trace_bound:
-                    grow, ist[8] = 0.0, ist[8] + 1
-                Rt[:] = Rt + grow * Rt - c * (Gq @ Gq.T)
-        prev_u[:], prev_y[:], fst[0] = u, y, Tm[k]
-        ist[0] += 1
-        if (ist[0] - 1) % K == 0:
-            _ref_refresh(n, nu, ny, omega, alpha, max_cond, gate, settle, ode, iv, Tm[k], ist,
-                         fst, R, G, M, Rt, gt, theta, Am, Cm, Bm, Dm, Apsi, Cpsi, Psi, hist, Cz,
-                         Gz, Zz)
-    return bool(np.isfinite(buf).all())
+
+def pack_tables(arrays, cache, lay, ipar):
+    """``(cbuf, ibuf, cache)`` of :func:`kernel_packed`.
+
+    ``cbuf``: the float ``arrays`` then the Ψ cache (``PsiPhi, PsiG0,
+    PsiG1``) copied into one buffer; ``ibuf``: the counts ``[tables, state
+    arrays, ipar]``, their layout ``clay`` (offset, d0, d1, d2 per array of
+    cbuf), the state layout ``lay``, ``ipar`` and the cache stamps, copied into
+    one int64 buffer. The returned ``cache`` are views of the buffers (the
+    kernel updates the cache there)."""
+    floats = list(arrays) + list(cache[:3])
+    sizes = [a.size for a in floats]
+    cbuf = np.empty(sum(sizes))
+    clay = np.ones((len(floats), 4), dtype=np.int64)
+    views = []
+    off = 0
+    for i, (a, size) in enumerate(zip(floats, sizes)):
+        cbuf[off:off + size] = a.reshape(-1)
+        clay[i, 0] = off
+        clay[i, 1:1 + a.ndim] = a.shape
+        views.append(cbuf[off:off + size].reshape(a.shape))
+        off += size
+    stamps = cache[3]
+    ibuf = np.concatenate([[len(floats), lay.shape[0], ipar.size], clay.reshape(-1),
+                           lay.reshape(-1), ipar, stamps]).astype(np.int64)
+    return cbuf, ibuf, (views[-3], views[-2], views[-1], ibuf[ibuf.size - stamps.size:])

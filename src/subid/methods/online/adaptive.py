@@ -105,20 +105,22 @@ from subid.io._checkpoint import load_state, require, save_state
 from subid.methods._common import conditions_of
 from subid.methods._info import model_info
 from subid.methods.dt.ls_subspace import random_selector
+from subid.methods.online import _adaptive_filters as _filters
 from subid.methods.online import _adaptive_kernel as _k
+from subid.methods.online import _adaptive_refine as _refit_mod
+from subid.methods.online._adaptive_kernel import pack_tables, state_layout
+from subid.methods.online._adaptive_reference import reference
 from subid.methods.online.base import OnlineIdentifier, history_dict, one_sample
-from subid.model._simulate import expm_blocks
 from subid.model.statespace import StateSpace
 
 __all__ = ["AdaptiveIdentifier"]
 
 _OLD_KIND = "AdaptiveIdentifier"     # the kind of checkpoints before subid.<Class>
-_VERSION = 3      # 2: instrumental variables (zr, Cz, Gz); 3: t_first, bd_startup
+_VERSION = 4      # 2: instrumental variables (zr, Cz, Gz); 3: t_first, bd_startup; 4: Ev
 # Step lengths handled in one kernel call when the time stamps are non-uniform
 # (bounds the memory of the per-step discretisation tables).
 _BLOCK_UNIQUE = 4096
 _BLOCK_SAMPLES = 16384
-_STEP_CACHE = 64
 # Default instrument filter of method 'iv': the filter poles times this ratio
 # (slower: instruments that remember more of the input's past).
 _INSTRUMENT_POLE_RATIO = 0.25
@@ -136,35 +138,11 @@ _IV_BD_RATIO = 1.0
 # Start-up schedule of the (B̃, D) memory ('iv'): β_eff = max(β, κ / age), age =
 # time since part 2 started (measured in docs/seed000.md).
 _DEFAULT_BD_STARTUP = 4.0
+# No refit where the estimated SNR exceeds this on every output (the error left is then the
+# deterministic interpolation error, which the noise weighting does not describe; docs)
+_SNR_SKIP = 70.0
 _NON_FINITE = ("the chunk drove the identifier to non-finite values (are the signals scaled "
                "to moderate magnitudes?); it was rejected and the identifier is unchanged")
-
-
-def _pack_tables(arrays, cache, lay, ipar):
-    """``(cbuf, ibuf, cache)`` of :func:`subid.methods.online._adaptive_kernel.kernel_packed`.
-
-    ``cbuf``: the float ``arrays`` then the Ψ cache (``PsiPhi, PsiG0,
-    PsiG1``) copied into one buffer; ``ibuf``: the counts ``[tables, state
-    arrays, ipar]``, their layout ``clay`` (offset, d0, d1, d2 per array of
-    cbuf), the state layout ``lay``, ``ipar`` and the cache stamps, copied into
-    one int64 buffer. The returned ``cache`` are views of the buffers (the
-    kernel updates the cache there)."""
-    floats = list(arrays) + list(cache[:3])
-    sizes = [a.size for a in floats]
-    cbuf = np.empty(sum(sizes))
-    clay = np.ones((len(floats), 4), dtype=np.int64)
-    views = []
-    off = 0
-    for i, (a, size) in enumerate(zip(floats, sizes)):
-        cbuf[off:off + size] = a.reshape(-1)
-        clay[i, 0] = off
-        clay[i, 1:1 + a.ndim] = a.shape
-        views.append(cbuf[off:off + size].reshape(a.shape))
-        off += size
-    stamps = cache[3]
-    ibuf = np.concatenate([[len(floats), lay.shape[0], ipar.size], clay.reshape(-1),
-                           lay.reshape(-1), ipar, stamps]).astype(np.int64)
-    return cbuf, ibuf, (views[-3], views[-2], views[-1], ibuf[ibuf.size - stamps.size:])
 
 
 def _positive(value, name: str, *, exc=SubidError) -> float:
@@ -174,48 +152,6 @@ def _positive(value, name: str, *, exc=SubidError) -> float:
     if not (math.isfinite(value) and value > 0):
         raise exc(f"{name} must be a finite positive number, got {value!r}")
     return value
-
-
-def _filter_poles(poles, f, name: str = "filter_poles") -> np.ndarray:
-    """Validate ``filter_poles``: a negative number (repeated f times) or f
-    poles with negative real parts, complex ones in conjugate pairs
-    (``f=None``: any number of poles)."""
-    if isinstance(poles, numbers.Number) and not isinstance(poles, bool):
-        poles = [poles] * f
-    try:
-        arr = np.asarray(poles, dtype=np.complex128).reshape(-1)
-    except (TypeError, ValueError):
-        raise SubidError(f"{name} must be a negative number or {f} poles, "
-                         f"got {poles!r}") from None
-    if f is not None and arr.size != f:
-        raise SubidError(f"{name} has {arr.size} poles but the filter order is the "
-                         f"horizon, {f}; give {f} poles or one negative number")
-    if arr.size == 0:
-        raise SubidError(f"{name} is empty")
-    if not np.all(np.isfinite(arr)):
-        raise SubidError(f"{name} must be finite")
-    if np.any(arr.real >= 0):
-        raise SubidError(f"{name} must have negative real parts (a stable filter), got "
-                         f"{np.round(arr, 6).tolist()}; e.g. {name}=-2.0")
-    if not np.allclose(np.sort_complex(arr), np.sort_complex(arr.conj()), rtol=1e-12, atol=0):
-        raise SubidError(f"complex {name} must come in conjugate pairs")
-    return arr
-
-
-def _companion(poles: np.ndarray, scale: bool):
-    """State-variable filter ``F̂(s) = ω^m / d(s)`` in time-scaled companion
-    form: ``ż = ω (Λ_c(â) z + l w)``, ``z_k = ω^{-k} s^k F̂(s) w``, with
-    ``ω = |d(0)|^{1/m}`` (1 when not ``scale``). Returns (Af, Bf, ω)."""
-    m = poles.size
-    coeffs = np.real(np.poly(poles))                 # [1, a_{m-1}, ..., a_0]
-    omega = float(np.abs(np.prod(poles)) ** (1.0 / m)) if scale else 1.0
-    scaled = coeffs[1:] / omega ** np.arange(1, m + 1)   # â_{m-1}, ..., â_0
-    Lc = np.zeros((m, m))
-    Lc[:-1, 1:] = np.eye(m - 1)
-    Lc[-1, :] = -scaled[::-1]                        # [-â_0, ..., -â_{m-1}]
-    Bf = np.zeros((m, 1))
-    Bf[-1, 0] = omega
-    return omega * Lc, Bf, omega
 
 
 class AdaptiveIdentifier(OnlineIdentifier):
@@ -326,6 +262,17 @@ class AdaptiveIdentifier(OnlineIdentifier):
         (Ã, C̃) (see the module notes). 0 turns it off (the issue-12
         estimator). Default 4 for ``'iv'``, 0 for ``'ls'`` and ``'ode'`` (the
         paper's; ``'ode'`` ignores it).
+    refine : bool, optional
+        Report the structured refit of the regression (8) (issue 23): the 20
+        parameters of the model fitted, from the current estimate, to the
+        instrumental-variable equations of (8), whose rows are weighted by the
+        covariance of their equation error (output-noise power per channel
+        estimated from the prediction error of (16)); computed when
+        :attr:`model` is read, once (B̃, D) are estimated, and only where it
+        lowers the criterion and stays Hurwitz (``info['refined']``). It does
+        not change the recursion (``state``, the history and Ψ use the
+        unrefined estimate). Default True for ``'iv'``, False for ``'ls'`` and
+        ``'ode'`` (the paper's estimators). See ``docs/seed000.md``.
 
     Attributes
     ----------
@@ -354,17 +301,17 @@ class AdaptiveIdentifier(OnlineIdentifier):
     """
 
     _VERSION = _VERSION
-    _READS = (2, _VERSION)
+    _READS = (2, 3, _VERSION)
     _OLD_KINDS = (_OLD_KIND,)
 
     @checked_call
-    def __init__(self, order, n_inputs, n_outputs, horizon=None, filter_poles=-5.0,
-                 forgetting=None, bd_forgetting=None, selector=None, seed=0, *, dt=None,
+    def __init__(self, order, n_inputs, n_outputs, *, horizon=None, filter_poles=-5.0,
+                 forgetting=None, bd_forgetting=None, selector=None, seed=0, dt=None,
                  hold="foh", method="iv", scale_filters=True, refresh_every=50,
                  bd_gate=1e-2, max_condition=1e10, initial_covariance=None,
                  bd_initial_covariance=None, ode_trace_bound=1e8, history_size=0,
                  engine="numba", input_names=None, output_names=None,
-                 instrument_poles=None, max_gap=None, bd_startup=None):
+                 instrument_poles=None, max_gap=None, bd_startup=None, refine=None):
         # the settings, stored unchanged (validated below)
         self.order, self.n_inputs, self.n_outputs = order, n_inputs, n_outputs
         self.horizon, self.filter_poles = horizon, filter_poles
@@ -379,7 +326,10 @@ class AdaptiveIdentifier(OnlineIdentifier):
             engine
         self.input_names, self.output_names = input_names, output_names
         self.instrument_poles, self.max_gap = instrument_poles, max_gap
-        self.bd_startup = bd_startup
+        self.bd_startup, self.refine = bd_startup, refine
+        if refine is not None and not isinstance(refine, bool):
+            raise SubidError(f"refine must be True, False or None (default), got {refine!r}")
+        self._refine = (method == "iv") if refine is None else refine
         n = check_int(order, "order")
         nu = check_int(n_inputs, "n_inputs")
         ny = check_int(n_outputs, "n_outputs")
@@ -392,11 +342,11 @@ class AdaptiveIdentifier(OnlineIdentifier):
                              f"reveal order {n}: (13) needs (horizon - 1) * n_outputs >= order, "
                              f"i.e. horizon >= {-(-n // ny) + 1}")
         self._n, self._nu, self._ny, self._f = n, nu, ny, f
-        self._poles = _filter_poles(filter_poles, f)
+        self._poles = _filters.filter_poles(filter_poles, f)
         if instrument_poles is None:
             self._ipoles = self._poles * _INSTRUMENT_POLE_RATIO
         else:
-            self._ipoles = _filter_poles(instrument_poles, f if isinstance(
+            self._ipoles = _filters.filter_poles(instrument_poles, f if isinstance(
                 instrument_poles, numbers.Number) else None, "instrument_poles")
         if self._ipoles.size == f and np.allclose(np.sort_complex(self._ipoles),
                                                   np.sort_complex(self._poles)):
@@ -451,9 +401,9 @@ class AdaptiveIdentifier(OnlineIdentifier):
         self._input_names = None if input_names is None else tuple(input_names)
         self._output_names = None if output_names is None else tuple(output_names)
         # filter: d(s) = prod(s - pole); time scale ω = |d(0)|^(1/f)
-        self._Af, self._Bf, self._omega = _companion(self._poles, self._scale)
+        self._Af, self._Bf, self._omega = _filters.companion(self._poles, self._scale)
         # instrument filter (method 'iv'): inputs only, its own poles
-        self._Ai, self._Bi, _ = _companion(self._ipoles, True)
+        self._Ai, self._Bi, _ = _filters.companion(self._ipoles, True)
         # steady states for a constant input (first state only, e_1 * dc)
         self._dcF = float(-np.linalg.solve(self._Af, self._Bf)[0, 0])
         self._dcI = float(-np.linalg.solve(self._Ai, self._Bi)[0, 0])
@@ -473,26 +423,10 @@ class AdaptiveIdentifier(OnlineIdentifier):
         (views, so that a snapshot is one copy), the integer counters and the
         history."""
         n, nu, ny, f = self._n, self._nu, self._ny, self._f
-        d, dp, dth = n + f * nu, f * ny, n + n * nu + ny * nu
+        d, dth = n + f * nu, n + n * nu + ny * nu
         mi = self._ipoles.size
         dz = (f + mi) * nu + n
-        layout = [("fst", (_k.N_FST,)), ("prev_u", (nu,)), ("prev_y", (ny,)),
-                  ("zp", (f, ny)), ("zq", (f, nu)),
-                  ("R", (d, d)),        # information matrix of (8) ('ode': P)
-                  ("G", (dp, d)),       # S - M R: residual form of the cross term
-                  ("M", (dp, d)),
-                  ("Rt", (dth, dth)),   # information matrix of (16) ('ode': Q)
-                  ("g", (1, dth)),      # s_θ - R_θ θ
-                  ("theta", (1, dth)),  # [x̃(t_g); vec B̃; vec D]
-                  ("Am", (n, n)), ("Cm", (ny, n)), ("Bm", (n, nu)), ("Dm", (ny, nu)),
-                  ("Apsi", (n, n)), ("Cpsi", (ny, n)),
-                  ("Psi", (ny, n + n * nu)),   # [Ξ, Ψ]
-                  ("zr", (mi, nu)),     # instrument filter ('iv')
-                  ("xi", (1, n)),       # auxiliary-model instrument ('iv')
-                  ("Cz", (dz, n)),      # IV cross matrix sum w ζ φ^T, first n columns
-                                        # (the others are columns of Zz) ('iv')
-                  ("Gz", (dp, dz)),     # S_ζ - M Cz^T ('iv')
-                  ("Zz", (dz, dz))]     # sum w ζ ζ^T, the IV weighting ('iv')
+        layout = state_layout(n, nu, ny, f, mi)
         self._buf = np.zeros(sum(math.prod(shape) for _, shape in layout))
         st = {}
         off = 0
@@ -526,7 +460,8 @@ class AdaptiveIdentifier(OnlineIdentifier):
         self._T1 = np.zeros(1)                      # time stamp of a one-sample chunk
 
     _ORDER = ("ist", "fst", "prev_u", "prev_y", "zp", "zq", "R", "G", "M", "Rt", "g",
-              "theta", "Am", "Cm", "Bm", "Dm", "Apsi", "Cpsi", "Psi", "zr", "xi", "Cz", "Gz", "Zz")
+              "theta", "Am", "Cm", "Bm", "Dm", "Apsi", "Cpsi", "Psi", "zr", "xi", "Cz", "Gz", "Zz",
+              "Ev")
 
     # ------------------------------------------------------------ properties
     @property
@@ -598,7 +533,10 @@ class AdaptiveIdentifier(OnlineIdentifier):
         ``cholesky_failed``, ``bound_hits`` (``'ode'``: steps with suspended
         forgetting), ``gaps`` and ``max_gap``, ``selector``, ``excited``
         (the last refresh found (8) persistently exciting), ``bd_elapsed``
-        (time since part 2 started), ``converged`` and ``convergence``
+        (time since part 2 started), ``refine``, ``refined`` (the structured
+        refit of (8) is reported), ``refine_cost_ratio`` (its criterion over
+        that of the unrefined model) and ``noise_std`` (the output-noise
+        estimate it used), ``converged`` and ``convergence``
         (``'converged'`` or the reason it is not: part 2 has not started, or
         the latest (Ã, C̃) failed the gate or the Hurwitz test). A model that
         is not converged also issues a
@@ -645,6 +583,12 @@ class AdaptiveIdentifier(OnlineIdentifier):
             "selector": np.array(self._H),
         }
         info["bd_elapsed"] = (self.t - info["bd_start_time"]) if info["bd_started"] else 0.0
+        refit = self._refit() if self._refine and info["bd_started"] else None
+        info["refine"] = self._refine
+        info["refined"] = refit is not None
+        if refit is not None:
+            info["refine_cost_ratio"] = refit[1]
+            info["noise_std"] = refit[2]
         reason = self._convergence(info)
         info["converged"] = reason is None
         info["convergence"] = "converged" if reason is None else reason
@@ -655,9 +599,30 @@ class AdaptiveIdentifier(OnlineIdentifier):
         info = model_info("seed000_adaptive", order=self._n, horizon=self._f,
                           n_samples=self.n_samples, x0=None, hold=self._hold,
                           conditions=conditions_of(info), warnings=issued, **info)
-        return StateSpace(st["Am"], st["Bm"], st["Cm"], st["Dm"], 0.0,
+        A, B, C, D = st["Am"], st["Bm"], st["Cm"], st["Dm"]
+        if info["refined"]:
+            A, B, C, D = self._refit_cache[1][0]
+        return StateSpace(A, B, C, D, 0.0,
                           input_names=self._input_names, output_names=self._output_names,
                           info=info, hold=self._hold)
+
+    def _refit(self):
+        """The structured refit of (8) (:mod:`._adaptive_refine`) of the current
+        model, cached per sample count: ``((A, B, C, D), cost ratio, noise std)``
+        or None (no noise estimate yet, or the refit failed)."""
+        if getattr(self, "_refit_cache", None) and self._refit_cache[0] == self.n_samples:
+            return self._refit_cache[1]
+        st, out = self._st, None
+        ev = st["Ev"][0]
+        ny = self._ny
+        if ev[-1] > 0 and np.any(ev[:ny] > ev[ny:-1] * 10 ** (-_SNR_SKIP / 10)):
+            power = np.maximum(ev[:ny], ev[ny:-1] * 10 ** (-_SNR_SKIP / 10)) / ev[-1]
+            fit = _refit_mod.refit((st["Am"], st["Bm"], st["Cm"], st["Dm"]), st["M"], st["Cz"],
+                                   st["Gz"], st["Zz"], self._H, self._omega, self._Af,
+                                   self._Bf, power, self._max_cond)
+            out = None if fit is None else (fit[0], fit[1], np.sqrt(power))
+        self._refit_cache = (self.n_samples, out)
+        return out
 
     def _convergence(self, info: dict):
         """None if the current model passes the convergence criteria, else
@@ -695,20 +660,8 @@ class AdaptiveIdentifier(OnlineIdentifier):
     def toeplitz(self) -> np.ndarray:
         """T_f of (3) for the current estimate, in the filter coordinates
         (``T_f(Ã/ω, B̃/ω, C̃, D)``), shape (f ny, f nu)."""
-        st = self._st
-        f, ny, nu = self._f, self._ny, self._nu
-        A = st["Am"] / self._omega
-        B = st["Bm"] / self._omega
-        blocks = [st["Dm"]]
-        X = B
-        for _ in range(f - 1):
-            blocks.append(st["Cm"] @ X)
-            X = A @ X
-        T = np.zeros((f * ny, f * nu))
-        for i in range(f):
-            for j in range(i + 1):
-                T[i * ny:(i + 1) * ny, j * nu:(j + 1) * nu] = blocks[i - j]
-        return T
+        A, B, C, D = (self._st[k] for k in ("Am", "Bm", "Cm", "Dm"))
+        return _refit_mod.toeplitz(A / self._omega, B / self._omega, C, D, self._f)
 
     @property
     def state(self) -> np.ndarray:
@@ -767,39 +720,9 @@ class AdaptiveIdentifier(OnlineIdentifier):
 
     def _tables(self, steps: np.ndarray):
         """Discretisation tables for the distinct step lengths ``steps``."""
-        f, mi = self._f, self._ipoles.size
-        K = steps.shape[0]
-        Fphi = np.empty((K, f, f))
-        Fg0 = np.empty((K, f))
-        Fg1 = np.empty((K, f))
-        Iphi = np.zeros((K, mi, mi))
-        Ig0 = np.zeros((K, mi))
-        Ig1 = np.zeros((K, mi))
-        iv = self._method == "iv"
-
-        def blocks(A, B, hs):
-            Ph, G1, G2 = expm_blocks(A, B, hs, self._hold)
-            g0 = G1[:, :, 0] - G2[:, :, 0] if G2 is not None else G1[:, :, 0]
-            g1 = G2[:, :, 0] if G2 is not None else np.zeros_like(g0)
-            return Ph, g0, g1
-
-        missing = [i for i, h in enumerate(steps) if float(h) not in self._step_cache]
-        if missing:
-            F = blocks(self._Af, self._Bf, steps[missing])
-            I = blocks(self._Ai, self._Bi, steps[missing]) if iv else None
-            for j, i in enumerate(missing):
-                entry = (F[0][j], F[1][j], F[2][j]) + (
-                    (I[0][j], I[1][j], I[2][j]) if iv else (Iphi[i], Ig0[i], Ig1[i]))
-                if len(self._step_cache) < _STEP_CACHE:
-                    self._step_cache[float(steps[i])] = entry
-                Fphi[i], Fg0[i], Fg1[i], Iphi[i], Ig0[i], Ig1[i] = entry
-        for i, h in enumerate(steps):
-            entry = self._step_cache.get(float(h))
-            if entry is not None:
-                Fphi[i], Fg0[i], Fg1[i], Iphi[i], Ig0[i], Ig1[i] = entry
-        lamM = np.exp(-self._alpha * steps)
-        lamT = np.exp(-self._beta * steps)
-        return Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, lamM, lamT
+        Ai = self._Ai if self._method == "iv" else None
+        return _filters.discretise(steps, self._Af, self._Bf, Ai, self._Bi, self._ipoles.size,
+                                   self._hold, self._step_cache, self._alpha, self._beta)
 
     def update(self, u, y=None, t=None) -> "AdaptiveIdentifier":
         """Process one sample or a chunk of samples.
@@ -921,11 +844,11 @@ class AdaptiveIdentifier(OnlineIdentifier):
         st = self._st
         par, ipar = self._parameters()
         if self._engine == "numba":     # the arrays as a few buffers (cheaper call)
-            cbuf, ibuf, _ = _pack_tables((steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1,
-                                          self._H, par), cache, self._lay, ipar)
+            cbuf, ibuf, _ = pack_tables((steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0, Ig1,
+                                         self._H, par), cache, self._lay, ipar)
             return bool(_k.kernel_packed(T, U, Y, idx, cbuf, ibuf, st["ist"], st["hist"],
                                          self._buf))
-        return bool(_k.reference(T, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0,
+        return bool(reference(T, U, Y, idx, steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0,
                                  Ig1, self._H, par, ipar,
                                  *(st[k] for k in self._ORDER), *cache, st["hist"], self._buf))
 
@@ -960,8 +883,8 @@ class AdaptiveIdentifier(OnlineIdentifier):
         if tail is None:    # the arguments after idx never change: built once
             Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, lamM, lamT = tables
             par, ipar = self._parameters()
-            cbuf, ibuf, cache = _pack_tables((steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0,
-                                              Ig1, self._H, par), cache, self._lay, ipar)
+            cbuf, ibuf, cache = pack_tables((steps, lamM, lamT, Fphi, Fg0, Fg1, Iphi, Ig0,
+                                             Ig1, self._H, par), cache, self._lay, ipar)
             self._uniform = (steps, tables, cache)      # the Ψ cache in the buffers now
             tail = self._uniform_tail = (cbuf, ibuf, self._st["ist"], self._st["hist"],
                                          self._buf)
@@ -987,7 +910,7 @@ class AdaptiveIdentifier(OnlineIdentifier):
             "bd_initial_covariance": self._q0, "ode_trace_bound": self._trace_bound,
             "history_size": self._hist_cap, "engine": self._engine,
             "instrument_poles": [[float(p.real), float(p.imag)] for p in self._ipoles],
-            "max_gap": self._max_gap, "bd_startup": self._startup,
+            "max_gap": self._max_gap, "bd_startup": self._startup, "refine": self._refine,
             "input_names": None if self._input_names is None else list(self._input_names),
             "output_names": None if self._output_names is None else list(self._output_names),
             "t_origin": self._t_origin, "k_origin": self._k_origin,
@@ -1034,7 +957,9 @@ class AdaptiveIdentifier(OnlineIdentifier):
                       instrument_poles=[complex(re, im) for re, im in s["instrument_poles"]],
                       max_gap=s["max_gap"],
                       # version 2 had no start-up schedule
-                      bd_startup=s.get("bd_startup", 0.0))
+                      bd_startup=s.get("bd_startup", 0.0),
+                      # versions 2 and 3 had no refit of (8)
+                      refine=s.get("refine", False))
             version = s.get("_version", _VERSION)
             t_origin, k_origin = float(s["t_origin"]), int(s["k_origin"])
         except CheckpointError:
@@ -1049,6 +974,8 @@ class AdaptiveIdentifier(OnlineIdentifier):
             # then) and no excitation flag (excited until the next refresh)
             arrays = dict(arrays, fst=np.append(arrays["fst"], arrays["fst"][6]),
                           ist=np.append(arrays["ist"], 0))
+        if version < 4 and "Ev" not in arrays:      # no noise estimate before version 4
+            arrays = dict(arrays, Ev=np.zeros_like(obj._st["Ev"]))
         for name, ref in obj._st.items():
             value = require(arrays, path, name, ref.shape, dtype=ref.dtype)
             if value.dtype != ref.dtype:

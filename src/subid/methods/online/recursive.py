@@ -239,8 +239,8 @@ class RecursiveSubspace(OnlineIdentifier):
     _READS = (2, 3, 4)
 
     @checked_call
-    def __init__(self, order, n_inputs, n_outputs, horizon=None, forgetting=1.0,
-                 instruments="past", selector=None, seed=0, *, instrument_weighting=True,
+    def __init__(self, order, n_inputs, n_outputs, *, horizon=None, forgetting=1.0,
+                 instruments="past", selector=None, seed=0, instrument_weighting=True,
                  power_iterations=8, feedthrough=True, dt=1.0, history_size=None,
                  history_stride=1000, input_names=None, output_names=None,
                  bd_method="simulation", refresh_every=None, restart_tolerance=1.0,
