@@ -254,9 +254,6 @@ _DT_UNRECORDED = ("statistic", "refine", "input_delay")
 _DT_CHECKS = CheckParameters(unrecorded=_DT_UNRECORDED)
 _POLY_CHECKS = CheckParameters(reproduces=False)          # order is a structure
 _PEM_CHECKS = CheckParameters(reproduces=False, unrecorded=_POLY_PEM)
-_KEYWORD_ONLY_PENDING = (
-    ("keyword_only", "the options after (order, n_inputs, n_outputs) are still positional "
-                     "on this version (issue 24, item 6 makes them keyword-only)"),)
 
 #: Every registered method, by name.
 METHODS: dict[str, MethodSpec] = {
@@ -343,11 +340,9 @@ METHODS: dict[str, MethodSpec] = {
                  "bd_method", "refresh_every", "restart_tolerance", "lags"),
         capabilities=frozenset({"horizon", "seeded", "feedthrough"}),
         aliases=("RecursiveSubspace",),
-        checks=CheckParameters(chunks_exact=False, expected_failures=_KEYWORD_ONLY_PENDING + (
-            ("bad_option_values", "bd_method='guess' raises SubidError, not OptionError, and "
-                                  "feedthrough='yes' is accepted"),
+        checks=CheckParameters(chunks_exact=False, expected_failures=(
             ("read_only", "reading model (or state) mid-record changes the estimates that "
-                          "follow at rounding (2.7e-15 in B; the cause is not located)")))),
+                          "follow at rounding (2.7e-15 in B; the cause is not located)"),))),
     "adaptive": MethodSpec(
         "adaptive", "online", "subid.methods.online.adaptive", "AdaptiveIdentifier", "continuous",
         "online continuous-time identification",
@@ -355,15 +350,11 @@ METHODS: dict[str, MethodSpec] = {
                  "dt", "hold", "method", "scale_filters", "refresh_every", "bd_gate",
                  "max_condition", "initial_covariance", "bd_initial_covariance",
                  "ode_trace_bound", "history_size", "engine", "input_names", "output_names",
-                 "instrument_poles", "max_gap", "bd_startup"),
+                 "instrument_poles", "max_gap", "bd_startup", "refine"),
         capabilities=frozenset({"horizon", "hold", "nonuniform", "seeded"}),
         aliases=("AdaptiveIdentifier",),
         # an adaptive estimate converges; it is not exact on a finite record
-        checks=CheckParameters(record="continuous", order=2, exact=None,
-                               expected_failures=_KEYWORD_ONLY_PENDING + (
-                                   ("bad_option_values", "hold='cubic' and "
-                                    "method='no_such_method' raise SubidError, not "
-                                    "OptionError"),))),
+        checks=CheckParameters(record="continuous", order=2, exact=None)),
 }
 
 

@@ -87,6 +87,8 @@ import numpy as np
 
 from subid._validation import (
     as_chunk,
+    check_bool,
+    check_choice,
     check_int,
     check_seed,
     check_selector,
@@ -97,6 +99,7 @@ from subid.errors import (
     CheckpointError,
     DataError,
     NotConvergedWarning,
+    OptionError,
     OrderError,
     SubidError,
     TooFewSamplesError,
@@ -327,8 +330,8 @@ class AdaptiveIdentifier(OnlineIdentifier):
         self.input_names, self.output_names = input_names, output_names
         self.instrument_poles, self.max_gap = instrument_poles, max_gap
         self.bd_startup, self.refine = bd_startup, refine
-        if refine is not None and not isinstance(refine, bool):
-            raise SubidError(f"refine must be True, False or None (default), got {refine!r}")
+        if refine is not None:
+            refine = check_bool(refine, "refine")
         self._refine = (method == "iv") if refine is None else refine
         n = check_int(order, "order")
         nu = check_int(n_inputs, "n_inputs")
@@ -368,18 +371,15 @@ class AdaptiveIdentifier(OnlineIdentifier):
         else:
             self._startup = 0.0 if (bd_startup == 0 and not isinstance(bd_startup, bool)) \
                 else _positive(bd_startup, "bd_startup")
-        if hold not in ("foh", "zoh"):
-            raise SubidError(f"hold must be 'foh' or 'zoh', got {hold!r}")
-        if method not in ("iv", "ls", "ode"):
-            raise SubidError(f"method must be 'iv', 'ls' or 'ode', got {method!r}")
-        if engine not in ("numba", "numpy"):
-            raise SubidError(f"engine must be 'numba' or 'numpy', got {engine!r}")
+        check_choice(hold, "hold", ("foh", "zoh"))
+        check_choice(method, "method", ("iv", "ls", "ode"))
+        check_choice(engine, "engine", ("numba", "numpy"))
         self._hold, self._method, self._engine = hold, method, engine
         self._scale = bool(scale_filters)
         self._refresh = check_int(refresh_every, "refresh_every")
         self._max_cond = _positive(max_condition, "max_condition")
         if self._max_cond <= 1:
-            raise SubidError(f"max_condition must exceed 1, got {max_condition!r}")
+            raise OptionError(f"max_condition must exceed 1, got {max_condition!r}")
         default_cov = 1.0 if method == "ode" else 1e12
         self._p0 = default_cov if initial_covariance is None else \
             _positive(initial_covariance, "initial_covariance")
@@ -391,9 +391,7 @@ class AdaptiveIdentifier(OnlineIdentifier):
         self._dt = None if dt is None else _positive(dt, "dt", exc=DataError)
         self._seed = seed
         if selector is None:
-            if isinstance(seed, bool) or not isinstance(seed, numbers.Integral):
-                raise SubidError(f"seed must be an integer, got {seed!r}")
-            H = random_selector(f, ny, seed=int(seed), rows=n)
+            H = random_selector(f, ny, seed=check_seed(seed), rows=n)
         else:
             H = check_selector(selector, f, ny, [n], n, exact=True)
         self._H = np.ascontiguousarray(H)

@@ -54,6 +54,8 @@ from subid._validation import (
     MAX_DIMENSION,
     UNIFORM_RTOL,
     as_chunk,
+    check_bool,
+    check_choice,
     check_dt,
     check_int,
     check_seed,
@@ -65,6 +67,7 @@ from subid.errors import (
     CheckpointError,
     DataError,
     NotConvergedWarning,
+    OptionError,
     OrderError,
     SubidError,
     TooFewSamplesError,
@@ -272,7 +275,7 @@ class RecursiveSubspace(OnlineIdentifier):
         self._lam = float(forgetting)
         self._power_iterations = check_options(instruments, power_iterations)
         self._instrument_weighting = bool(instrument_weighting)
-        self._feedthrough = bool(feedthrough)
+        self._feedthrough = check_bool(feedthrough, "feedthrough")
         self._dt = check_dt(dt)
         self._t_origin, self._k_origin = 0.0, 0     # time of sample k: t0 + (k - k0) dt
         selector = check_selector(selector, self._f, self.n_outputs, [self.order],
@@ -305,9 +308,7 @@ class RecursiveSubspace(OnlineIdentifier):
         self._hist_abcd = np.zeros((0, self._abcd_size()))
         self._hist_t = np.zeros(0)
         self._model = None
-        if bd_method not in ONLINE_OPTIONS:
-            raise SubidError(f"bd_method must be 'simulation' or 'projection', got "
-                             f"{bd_method!r}")
+        check_choice(bd_method, "bd_method", ONLINE_OPTIONS)
         if refresh_every is None:      # a quarter of the memory, within [50, 2000]
             memory = math.inf if self._lam == 1.0 else 1.0 / (1.0 - self._lam)
             refresh_every = int(min(2000, max(_FIRST_REFRESH, memory / 4)))
@@ -315,8 +316,8 @@ class RecursiveSubspace(OnlineIdentifier):
         if isinstance(restart_tolerance, bool) or not isinstance(restart_tolerance,
                                                                  numbers.Real) \
                 or not (math.isfinite(restart_tolerance) and restart_tolerance > 0):
-            raise SubidError(f"restart_tolerance must be a positive number, got "
-                             f"{restart_tolerance!r}")
+            raise OptionError(f"restart_tolerance must be a positive number, got "
+                              f"{restart_tolerance!r}")
         self._restart_tolerance = float(restart_tolerance)
         n, nu, ny = self.order, self.n_inputs, self.n_outputs
         self._nbd = n + n * nu + (ny * nu if self._feedthrough else 0)   # x0, B, D
