@@ -108,10 +108,22 @@ def _parts(name: str, fraction: float):
 def identify_one(name: str, method: str, fraction: float = FRACTION):
     """One method on one dataset with the library defaults: ``(row, model)``.
 
-    The row is that of :func:`evaluate`; ``model`` is None when the method
-    failed (its error is in the row). The fit % on both parts comes from
-    :func:`subid.evaluation.report.evaluate`, the one simulation of each part
-    the report then reuses.
+    Parameters
+    ----------
+    name : str
+        A bundled dataset.
+    method : str
+        A registry name of a batch method.
+    fraction : float
+        Share of the record used for identification.
+
+    Returns
+    -------
+    row : dict
+        The row of :func:`evaluate`; its fit % on both parts (from
+        :func:`subid.evaluation.report.evaluate`) is what the report shows.
+    model : StateSpace or None
+        None when the method failed (its error is in the row).
     """
     from subid.evaluation.report import evaluate as fits
     spec = _methods([method])[method]
