@@ -408,11 +408,11 @@ def write_report(name: str, out: str, rows, models, frequency_unit="rad/s") -> d
     -------
     dict
         ``name``, ``rows``, ``path`` of the report, ``entry`` (the row of the
-        index page) and ``seconds`` (writing the report).
+        index page), ``seconds`` and ``cpu_seconds`` (writing the report).
     """
     from subid.evaluation import report
     from subid.methods.registry import METHODS
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     est, val = _parts(name, FRACTION)
     meta = datasets.info(name)
     notes = [meta["description"], f"Sampling: {meta['dt_note']}", f"Source: {meta['source']}"]
@@ -446,7 +446,7 @@ def write_report(name: str, out: str, rows, models, frequency_unit="rad/s") -> d
             reason, hint, section = why
             entry["notes"][column] = (reason, hint, f"{name}.html#{section}")
     return {"name": name, "rows": rows, "path": path, "entry": entry,
-            "seconds": time.perf_counter() - t0}
+            "seconds": time.perf_counter() - t0, "cpu_seconds": time.process_time() - c0}
 
 
 #: Thread-count variables of the BLAS/OpenMP libraries, set to 1 in the worker
@@ -617,7 +617,7 @@ def run(out, datasets=None, methods=None, *, frequency_unit="rad/s", progress=Fa
         intro=(f"Each record: means removed, identified on the first {FRACTION:.0%} with the "
                f"order chosen automatically, validated on the last {1 - FRACTION:.0%}. "
                "Cells: mean validation fit % over the outputs (order). Click a dataset for "
-               "its report."),
+               "its report." + _left_out(methods)),
         columns=["samples", "inputs × outputs", *method_cols],
         footer=f"{len(names)} datasets in {seconds:.1f} s. Reproduce with: subid demo "
                f"--out {out}"))
@@ -626,10 +626,27 @@ def run(out, datasets=None, methods=None, *, frequency_unit="rad/s", progress=Fa
     gallery_path = os.path.join(out, "gallery.md")
     write_bytes(gallery_path, gallery_markdown(gallery_rows), what="gallery")
     summary_path = os.path.join(out, "summary.json")
-    write_json(summary_path, {"seconds": seconds, "rows": [_jsonable(r) for r in all_rows]},
+    write_json(summary_path, {"seconds": seconds, "jobs": jobs,
+                              "report_cpu_seconds": {name: results[name]["cpu_seconds"]
+                                                     for name in names},
+                              "rows": [_jsonable(r) for r in all_rows]},
                what="summary", indent=1)
     return {"rows": all_rows, "by_dataset": by_dataset, "reports": reports, "index": index,
             "gallery": gallery_path, "summary": summary_path, "seconds": seconds}
+
+
+def _left_out(methods) -> str:
+    """The index's sentence on the methods the default run leaves out, and how to run them."""
+    if methods is not None:
+        return ""
+    from subid.methods.registry import available_methods
+    slow = [m for m in SLOW_METHODS if m in available_methods("batch")]
+    if not slow:
+        return ""
+    every = ",".join(available_methods("batch"))
+    return (f" Left out: {', '.join(slow)} (polynomial models fitted by prediction-error "
+            "minimisation, one per output: minutes on each multi-output record); run them "
+            f"with: subid demo --methods {every}")
 
 
 def _jsonable(row: dict) -> dict:
