@@ -46,10 +46,10 @@ import numpy as np
 import scipy.linalg
 
 from subid._validation import check_bool, checked_call
+from subid.data import IOData
 from subid.delay import shift_for_method
 from subid.methods.dt._feedthrough import check_feedthrough
 from subid.methods.dt._feedthrough import resolve as resolve_feedthrough
-from subid.data import IOData
 from subid.methods.dt._subspace import (
     check_experiment_lengths,
     choose_order,
