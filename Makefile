@@ -1,6 +1,7 @@
 # Two set-up commands work on a fresh machine with Python 3.11, make and pip:
 #   make demo   creates .venv, installs, identifies the bundled datasets, writes demo_out/
-#   make test   creates .venv if missing, installs, runs the tests (make test-fast: the quick tier)
+#   make test   creates .venv if missing, installs, type-checks src/ (mypy), runs the tests
+#               (make test-fast: the quick tier)
 #   make docs   creates .venv-docs, builds the documentation site into site/ (warnings are errors)
 PYTHON ?= python3
 VENV := .venv
@@ -47,17 +48,20 @@ demo: $(DEMO_STAMP)
 gallery: $(STAMP)
 	OPENBLAS_NUM_THREADS=1 $(VENV)/bin/subid gallery --out docs/gallery.md
 
-# The default tier (what CI runs): every test but the long ones, and the docstring examples.
+# The default tier (what CI runs): the static type check of src/ (mypy, configured in
+# pyproject.toml), then every test but the long ones, and the docstring examples, on one
+# pytest-xdist worker per core (-n auto; each worker single-threaded BLAS).
 test: $(STAMP)
-	OPENBLAS_NUM_THREADS=1 $(PY) -m pytest -q -m "not long" --doctest-modules src tests
+	$(PY) -m mypy
+	OPENBLAS_NUM_THREADS=1 $(PY) -m pytest -q -n auto -m "not long" --doctest-modules src tests
 
 # While working: the default tier without the tests marked slow (under 2 minutes on 2 cores).
 test-fast: $(STAMP)
-	OPENBLAS_NUM_THREADS=1 $(PY) -m pytest -q -m "not long and not slow" --doctest-modules src tests
+	OPENBLAS_NUM_THREADS=1 $(PY) -m pytest -q -n auto -m "not long and not slow" --doctest-modules src tests
 
 # Long profile: every test, hypothesis/fuzzers with large budgets, long runs.
 test-long: $(STAMP)
-	OPENBLAS_NUM_THREADS=1 SUBID_HYPOTHESIS_PROFILE=long $(PY) -m pytest -q --doctest-modules src tests
+	OPENBLAS_NUM_THREADS=1 SUBID_HYPOTHESIS_PROFILE=long $(PY) -m pytest -q -n auto --doctest-modules src tests
 
 bench: $(STAMP)
 	OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 MKL_NUM_THREADS=1 $(PY) bench/run.py --out bench/results.md
@@ -95,4 +99,4 @@ docs: $(DOCS_STAMP)
 	$(DOCS_VENV)/bin/python docs/check_api.py site
 
 clean:
-	rm -rf $(VENV) $(BENCH_VENV) $(DOCS_VENV) demo_out results site
+	rm -rf $(VENV) $(BENCH_VENV) $(DOCS_VENV) demo_out results site .mypy_cache

@@ -40,7 +40,7 @@ def noisy(runs: int = 20, level: float = 0.05, *, relative: bool, equal_variance
     w = np.logspace(-2, 2, 200)
     G = system.freqresp(w)
     level_of = np.abs(G) if relative else np.sqrt(np.mean(np.abs(G) ** 2))
-    start, refined, rel_start, rel_refined = [], [], [], []
+    start, refined, rel_start, rel_refined, oracle, rel_oracle = [], [], [], [], [], []
     for seed in range(runs):
         rng = np.random.default_rng(seed)
         noise = level * level_of * (rng.standard_normal(G.shape)
@@ -48,18 +48,27 @@ def noisy(runs: int = 20, level: float = 0.05, *, relative: bool, equal_variance
         data = subid.FRData(w, G + noise, weights=np.ones(w.size) if equal_variance else None)
         model = subid.fd_subspace(data, 4)
         better = subid.pem(data, model)
+        # the reference: pem weighted by the true noise level (maximum likelihood)
+        best = subid.pem(subid.FRData(w, G + noise, std=level * np.broadcast_to(level_of,
+                                                                                G.shape)),
+                         model)
         start.append(max_relative_error(model, system, w))
         refined.append(max_relative_error(better, system, w))
+        oracle.append(max_relative_error(best, system, w))
         rel_start.append(np.sqrt(np.mean(np.abs((model.freqresp(w) - G) / G) ** 2)))
         rel_refined.append(np.sqrt(np.mean(np.abs((better.freqresp(w) - G) / G) ** 2)))
-    start, refined = np.array(start), np.array(refined)
+        rel_oracle.append(np.sqrt(np.mean(np.abs((best.freqresp(w) - G) / G) ** 2)))
+    start, refined, oracle = np.array(start), np.array(refined), np.array(oracle)
     rel_start, rel_refined = np.array(rel_start), np.array(rel_refined)
+    rel_oracle = np.array(rel_oracle)
     print(f"{100 * level:g} % noise {'relative to |G|' if relative else 'of level rms(G)'}"
           f"{', weights=1 (equal variance)' if equal_variance else ''}, {runs} runs, order 4: "
           f"max error fd_subspace median {np.median(start):.4f} (worst {start.max():.4f}), "
           f"after pem {np.median(refined):.4f}, lower in {int((refined < start).sum())}; "
           f"relative RMS error {np.median(rel_start):.4f} -> {np.median(rel_refined):.4f}, "
-          f"lower in {int((rel_refined < rel_start).sum())}")
+          f"lower in {int((rel_refined < rel_start).sum())}; with the true noise level as "
+          f"weights: max error lower in {int((oracle < start).sum())}, relative RMS "
+          f"{np.median(rel_oracle):.4f}")
 
 
 if __name__ == "__main__":

@@ -11,7 +11,10 @@ import numpy as np
 import pytest
 
 import subid
-import subid.io.formats as sio
+import subid.io._common as io_common
+import subid.io.chunks as io_chunks
+import subid.io.fast_csv as io_fast
+import subid.io.text as io_text
 import subid.methods.dt.stream  # noqa: E402  (a submodule: the package imports it lazily)
 from subid import errors
 
@@ -31,21 +34,22 @@ def _engines():
 
 @pytest.fixture(params=_engines())
 def engine(request, monkeypatch):
-    monkeypatch.setattr(sio, "_ENGINE", request.param)
+    monkeypatch.setattr(io_fast, "_ENGINE", request.param)
     return request.param
 
 
 @pytest.fixture
 def small_blocks(monkeypatch):
     """Blocks and heads of a few kilobytes, so small files take many blocks."""
-    monkeypatch.setattr(sio, "_BLOCK_BYTES", 4096)
-    monkeypatch.setattr(sio, "_HEAD_BYTES", 8192)
+    monkeypatch.setattr(io_fast, "_BLOCK_BYTES", 4096)
+    for module in (io_fast, io_chunks):          # the layout probe and the chunk reader
+        monkeypatch.setattr(module, "_HEAD_BYTES", 8192)
 
 
 def _careful(path, inputs, outputs, time=None, delimiter=None):
     """The careful parser alone (the reference)."""
     p = Path(path)
-    return sio._read_text(p, str(p), p.suffix.lower(), inputs, outputs, None, time,
+    return io_text._read_text(p, str(p), p.suffix.lower(), inputs, outputs, None, time,
                           delimiter)
 
 
@@ -156,7 +160,8 @@ def test_bad_rows_get_the_careful_message(tmp_path, engine, small_blocks, row, m
 
 
 def test_long_lines_still_refused_by_the_fast_path(tmp_path, monkeypatch):
-    monkeypatch.setattr(sio, "MAX_LINE_CHARS", 5000)
+    for module in (io_common, io_fast, io_chunks):    # every reader that bounds lines
+        monkeypatch.setattr(module, "MAX_LINE_CHARS", 5000)
     f = tmp_path / "long.csv"
     f.write_text("u,y\n" + "1,2\n" * 3000 + "1," * 3000 + "1\n" + "1,2\n" * 10)
     for fn in (lambda: subid.read(f, "u", "y"), lambda: list(subid.read_chunks(f, "u", "y"))):
@@ -175,8 +180,8 @@ def test_streaming_parses_the_file_once(tmp_path, monkeypatch):
                header="u1,u2,y1,y2", comments="")
     body = f.stat().st_size - len("u1,u2,y1,y2\n")
     seen, spools = [], []
-    original = sio._fast_values
-    monkeypatch.setattr(sio, "_fast_values",
+    original = io_fast._fast_values
+    monkeypatch.setattr(io_fast, "_fast_values",
                         lambda buf, *a: seen.append(len(buf)) or original(buf, *a))
     real_close = subid.methods.dt.stream.ParsedOnce.close
 
@@ -247,8 +252,8 @@ def test_pieces_grow_past_the_first_allocation_and_replay_bit_for_bit(tmp_path, 
     """read_chunks fills each piece block by block (growing it past _PIECE_ROWS, across a
     block the careful parser reads), and ParsedOnce replays the same pieces from its
     spool: the same doubles, names and time stamps as subid.read."""
-    monkeypatch.setattr(sio, "_BLOCK_BYTES", 4096)
-    monkeypatch.setattr(sio, "_PIECE_ROWS", 100)
+    monkeypatch.setattr(io_fast, "_BLOCK_BYTES", 4096)
+    monkeypatch.setattr(io_chunks, "_PIECE_ROWS", 100)
     m = RNG.standard_normal((3000, 3))
     f = tmp_path / "rec.csv"
     lines = [",".join(repr(v) for v in row) for row in m.tolist()]
@@ -279,7 +284,7 @@ def test_stretches_of_the_spool_equal_slices_of_the_record(tmp_path, monkeypatch
     """ParsedOnce.ranges reads any stretch of samples straight from the spool (or, with
     no spool, by parsing again); groups cut the record at piece borders into
     consecutive stretches that cover it exactly."""
-    monkeypatch.setattr(sio, "_BLOCK_BYTES", 4096)
+    monkeypatch.setattr(io_fast, "_BLOCK_BYTES", 4096)
     m = RNG.standard_normal((3000, 3))
     f = tmp_path / "rec.csv"
     f.write_text("a,b,c\n" + "".join(",".join(repr(v) for v in row) + "\n"
@@ -319,7 +324,7 @@ def test_parse_threads_give_the_values_of_one_thread(tmp_path, monkeypatch, thre
     """The blocks parsed ahead on several threads come back in order, bit for bit,
     blocks the fast parser declines included; closing the reader early stops the
     threads."""
-    monkeypatch.setattr(sio, "_BLOCK_BYTES", 4096)
+    monkeypatch.setattr(io_fast, "_BLOCK_BYTES", 4096)
     m = RNG.standard_normal((5000, 3))
     lines = [",".join(repr(v) for v in row) for row in m.tolist()]
     lines.insert(2500, "# a comment: this block goes to the careful parser")

@@ -182,7 +182,7 @@ def test_steps_bar_names_each_step_on_stderr_and_is_silent_when_disabled(capsys)
 @pytest.mark.parametrize("quiet", [False, True])
 def test_identify_shows_its_steps_on_a_terminal_never_with_quiet(quiet, tmp_path, capsys,
                                                                  monkeypatch):
-    from subid.cli import commands
+    from subid.cli import _shared as commands
     monkeypatch.setattr(commands, "on_terminal", lambda quiet=False: not quiet)
     code, out, err = run(capsys, *(["--quiet"] if quiet else []), "identify", "dataset:dryer",
                          "--order", "2", "--horizon", "10", "--no-report",

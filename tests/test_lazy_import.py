@@ -76,7 +76,7 @@ def test_fresh_interpreter_public_names_are_the_module_objects():
 
 #: Every public module namespace of the package: ``import subid.X`` must work.
 NAMESPACES = ("plot", "distributed", "basis", "interop", "registry", "systems", "datasets",
-              "errors", "delay")
+              "errors", "delay", "testing")
 
 
 def test_every_public_namespace_imports_as_a_module_in_a_fresh_interpreter():

@@ -432,7 +432,7 @@ def test_failed_save_keeps_the_old_file(tmp_path, monkeypatch, target):
     def boom(*args, **kwargs):
         raise OSError("disk full")
 
-    monkeypatch.setattr(model_module.os, target, boom)
+    monkeypatch.setattr(os, target, boom)       # the atomic writer (subid.io._files)
     new = StateSpace([[0.25]], [[2.0]], [[1.0]], 0, 1.0)
     with pytest.raises(OSError, match="disk full"):
         new.save(path)

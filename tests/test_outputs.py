@@ -15,6 +15,7 @@ import pytest
 import subid
 from subid import errors, systems
 from subid.cli import commands as cli
+from subid.cli import identify as cli_identify
 from subid.io import _files
 
 
@@ -64,7 +65,7 @@ def test_identify_into_an_old_run_is_old_or_new(tmp_path, csv_file, monkeypatch,
     before = _snapshot(out)
     exc = OSError(errno.ENOSPC, "No space left on device") if failure == "disk full" \
         else KeyboardInterrupt()
-    _fail_on(monkeypatch, cli, "_write_json", exc)
+    _fail_on(monkeypatch, cli_identify, "_write_json", exc)          # the summary
     code = _identify(csv_file, out)
     assert code == (2 if failure == "disk full" else 130)
     assert _snapshot(out) == before

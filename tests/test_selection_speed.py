@@ -94,10 +94,14 @@ def test_scoring_kernel_matches_its_reference():
     A = 0.3 * rng.standard_normal((4, 4))
     B, C, D = rng.standard_normal((4, 2)), rng.standard_normal((3, 4)), \
         rng.standard_normal((3, 2))
-    u = rng.standard_normal((200, 2))
-    for got, ref in zip(_scoring.forced_and_free(A, B, C, D, u, 50),
-                        _scoring.forced_and_free_reference(A, B, C, D, u, 50)):
-        np.testing.assert_allclose(got, ref, rtol=1e-12, atol=1e-12)
+    u, y = rng.standard_normal((200, 2)), rng.standard_normal((200, 3))
+    weights, inv_scale = rng.uniform(0.5, 2.0, 3), rng.uniform(0.5, 2.0, 3)
+    got = _scoring.forced_error(A, B, C, D, u, y, weights, inv_scale, 50)
+    ref = _scoring.forced_error_reference(A, B, C, D, u, y, weights, inv_scale, 50)
+    for g, r in zip(got[:2], ref[:2]):
+        np.testing.assert_allclose(g, r, rtol=1e-12, atol=1e-12)
+    assert got[2] and ref[2]
+    assert not _scoring.forced_error(A * 1e3, B, C, D, u, y, weights, inv_scale, 0)[2]
     assert _scoring.free_length(A, 10 ** 6) < 4000
     assert _scoring.free_length(A, 1000) == 1000                # short: all of it
     assert _scoring.free_length(A * 100, 5000) == 5000          # unstable: the whole record

@@ -14,8 +14,8 @@ import subid
 from subid import _validation, errors
 from subid._validation import UNIFORM_RTOL, as_chunk, check_selector, is_uniform, same_period
 from subid.data import IOData
-from subid.io import formats as io
 from subid.io import interop
+from subid.io import mat as io
 from subid.model.statespace import StateSpace
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]

@@ -6,6 +6,7 @@ Used by the commands (CLI, demo, experiments), never by library numerics.
 from __future__ import annotations
 
 import sys
+import threading
 
 
 def on_terminal(quiet: bool = False) -> bool:
@@ -47,10 +48,9 @@ class Steps:
     def __init__(self, names, desc: str, *, enabled: bool, refresh: float = 0.5):
         self._names = list(names)
         self._bar = progress_bar(len(self._names), desc, "step", enabled=enabled)
-        self._current = None
-        self._done = None
+        self._current: str | None = None
+        self._done: threading.Event | None = None
         if self._bar is not None:
-            import threading
             self._done = threading.Event()
             self._thread = threading.Thread(target=self._redraw, args=(refresh,), daemon=True)
             self._thread.start()
@@ -82,7 +82,8 @@ class Steps:
     def close(self) -> None:
         if self._bar is None:
             return
-        self._done.set()
+        if self._done is not None:
+            self._done.set()
         self._thread.join()
         self._bar.close()
         self._bar = None

@@ -11,7 +11,7 @@ import os
 
 #: At most this many threads of subid's own pools (None: the CPUs this
 #: process may use, at most :data:`MAX_THREADS`). Set by :func:`subid.thread_limit`.
-limit = None
+limit: int | None = None
 MAX_THREADS = 4
 
 

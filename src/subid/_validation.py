@@ -52,7 +52,7 @@ def as_signal(values, name: str, *, allow_empty_columns: bool = False,
         raise DataError(f"{name} holds an integer too large to be a float (beyond "
                         "1.8e308); rescale the data") from None
     if arr.dtype == object:
-        missing = np.flatnonzero(np.vectorize(lambda v: v is None, otypes=[bool])(arr)
+        missing: np.ndarray | list = np.flatnonzero(np.vectorize(lambda v: v is None, otypes=[bool])(arr)
                                  .reshape(arr.shape[0], -1).any(axis=1)) if arr.ndim else []
         if len(missing):
             raise DataError(f"{name} has missing values (None) at row"

@@ -38,7 +38,7 @@ def thread_limit(n_threads: int):
     n_threads = check_int(n_threads, "n_threads")
     previous = numba.get_num_threads()
     own = _threads.limit
-    numba.set_num_threads(min(n_threads, numba.config.NUMBA_NUM_THREADS))
+    numba.set_num_threads(min(n_threads, numba.config.NUMBA_NUM_THREADS))  # type: ignore[attr-defined]  # numba.config sets it at import
     _threads.limit = n_threads
     try:
         with threadpool_limits(limits=n_threads):

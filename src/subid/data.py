@@ -253,7 +253,7 @@ class IOData:
                                 f"{list(self.experiment_names)}")
             index = self.experiment_names.index(index)
         if isinstance(index, bool) or not isinstance(index, numbers.Integral) \
-                or not -self.n_experiments <= index < self.n_experiments:
+                or not -self.n_experiments <= int(index) < self.n_experiments:
             raise DataError(f"experiment index must be an integer in 0..{self.n_experiments - 1}"
                             f" (or a name), got {index!r}")
         index = int(index) % self.n_experiments

@@ -10,13 +10,17 @@ from subid.evaluation.plot import (
     METHOD_COLORS,
     STYLE,
     bode,
+    colors_for,
     compare,
     convergence,
     data_overview,
     error_histograms,
     frequency_grid,
+    is_unstable,
+    order_scores,
     order_selection,
     poles,
+    predicted_output,
     residual_correlations,
     residuals,
     simulated_output,
@@ -25,4 +29,5 @@ from subid.evaluation.plot import (
 
 __all__ = ["poles", "error_histograms", "bode", "step", "compare", "residuals",
            "residual_correlations", "convergence", "data_overview", "frequency_grid",
-           "simulated_output", "order_selection", "STYLE", "METHOD_COLORS"]
+           "simulated_output", "order_selection", "STYLE", "METHOD_COLORS",
+           "order_scores", "predicted_output", "colors_for", "is_unstable"]

@@ -98,8 +98,8 @@ def random_system(order: int, n_inputs: int, n_outputs: int, *, seed, dt: float 
                 blocks.append(np.array([[p]]))
                 poles.append(complex(p))
                 remaining -= 1
-        poles = np.array(poles)
-        gaps = np.abs(poles[:, None] - poles[None, :]) + np.eye(n) * 10
+        p_all = np.array(poles)
+        gaps = np.abs(p_all[:, None] - p_all[None, :]) + np.eye(n) * 10
         if gaps.min() < min_pole_distance:
             continue
         Q = np.linalg.qr(rng.standard_normal((n, n)))[0]

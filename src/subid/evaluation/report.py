@@ -145,6 +145,13 @@ def _fmt_complex(z: complex, digits: int = 5) -> str:
     return f"{z.real:.{digits}g} {sign} {abs(z.imag):.{digits}g}j"
 
 
+def _coefficient_std(model):
+    """The standard deviations of a polynomial model's coefficients (None without them)."""
+    entry = model.info.get("parameter_covariance")
+    factor = entry.get("coefficient_factor") if isinstance(entry, dict) else None
+    return None if factor is None else np.sqrt(np.sum(np.asarray(factor) ** 2, axis=1))
+
+
 def _matrix_table(M, row_labels, col_labels) -> str:
     M = np.asarray(M)
     if M.size == 0:
@@ -257,7 +264,7 @@ def _info_table(info: dict) -> str:
             text = ", ".join(_fmt(v, 4) for v in np.asarray(value))
             rows.append(f'<tr><th class="l">{_e(key)}</th><td class="l">{_e(text)}</td></tr>')
         elif key == "order_selection" and isinstance(value, dict):
-            from subid.methods.dt._selection import describe
+            from subid.methods.describe import describe_order_selection as describe
             rows.append(f'<tr><th class="l">{_e(key)}</th><td class="l">{_e(describe(value))}'
                         "</td></tr>")
         elif key == "stability" and isinstance(value, dict):
@@ -575,7 +582,8 @@ def identification_report(models, estimation, validation=None, *, title="subid r
     nyquist = "; dotted: Nyquist frequency" if any(m.dt > 0 for m in models.values()) else ""
     level = 0.95 if any(isinstance(m.info.get("parameter_covariance"), dict)
                         for m in models.values()) else None
-    band = "; shaded: 95 % confidence band (models refined by pem)" if level else ""
+    band = ("; shaded: 95 % confidence band (models with a parameter covariance: pem and "
+            "the polynomial methods)") if level else ""
     estimate = _spa_estimate(estimation, models)
     overlay = "; grey points: spa estimate of the estimation data (± 2 std shaded)" \
         if estimate is not None else ""
@@ -636,7 +644,7 @@ def identification_report(models, estimation, validation=None, *, title="subid r
         if poly is not None:       # a polynomial model: its polynomials, then the realisation
             block += ["<p>polynomials (in q<sup>-1</sup>; the state-space matrices below "
                       "are their realisation)</p>",
-                      f"<pre>{_e(chr(10).join(describe_polynomials(poly, m.input_names, m.output_names)))}</pre>"]
+                      f"<pre>{_e(chr(10).join(describe_polynomials(poly, m.input_names, m.output_names, _coefficient_std(m))))}</pre>"]
         block += ["<p>A</p>", _matrix_table(m.A, states, states),
                  "<p>B</p>", _matrix_table(m.B, states, m.input_names),
                  "<p>C</p>", _matrix_table(m.C, m.output_names, states),

@@ -1,7 +1,7 @@
 """Parameter covariance of a model and confidence bounds of its responses.
 
-A model refined by :func:`subid.pem` carries the asymptotic covariance of its
-parameters (``info['parameter_covariance']``, written by
+A model refined by :func:`subid.pem` (or returned by a polynomial method, see
+below) carries the asymptotic covariance of its parameters (``info['parameter_covariance']``, written by
 :mod:`subid.methods.dt._covariance`; it survives :meth:`StateSpace.save` /
 :meth:`~StateSpace.load`). The parametrisation is
 
@@ -30,6 +30,22 @@ Bounds (:func:`freqresp_bounds`, :func:`step_bounds`,
 * ``method='sampling'``: ``n_samples`` parameter vectors ``θ + F ξ``,
   ``ξ ~ N(0, I)`` (seeded), and the empirical ``(1 - level)/2`` and
   ``(1 + level)/2`` quantiles of the response.
+
+The polynomial models (:func:`subid.arx`, :func:`subid.armax`,
+:func:`subid.oe`, :func:`subid.bj`) carry the covariance of their
+coefficients (ARX: the least-squares covariance from the QR factor of the
+regressors; ARMAX, OE, BJ: the prediction-error covariance from the
+Jacobian at the optimum, Ljung 1999, Theorem 9.1; both per output with the
+outputs' cross-covariances, :mod:`subid.methods.dt._poly_covariance`),
+mapped to the θ of their state-space realisation by the exact derivative of
+the realisation, so that every bound above applies to them unchanged; the
+delta-method bounds are then those of ``G = B / (A F)`` propagated from the
+coefficient covariance (chain rule). The coefficients' own covariance is
+:attr:`ParameterCovariance.coefficient_covariance` (names as
+``'B[0,1][2]'``: polynomial, output, input, lag). Sampled models
+(``method='sampling'``) perturb θ along the factor, i.e. the realisation
+linearised in the coefficients (exact unless some ``nk = 0``: then the
+observer form's ``b_k - a_k b_0`` is bilinear).
 
 Subspace models (:func:`subid.n4sid`, :func:`subid.moesp`, ...) and
 continuous-time models carry no covariance: asking for bounds raises
@@ -71,6 +87,13 @@ class ParameterCovariance:
         ``F`` with ``Cov(θ) = F F^T``.
     with_feedthrough, with_gain : bool
         Whether ``D`` and ``K`` are parameters.
+    coefficients : ndarray, shape (Q,), optional
+        The free polynomial coefficients of a polynomial model
+        (:func:`subid.model.polynomial.coefficient_slots`).
+    coefficient_factor : ndarray, shape (Q, Q), optional
+        Their covariance factor.
+    coefficient_names : list of str, optional
+        Their names, ``'B[0,1][2]'``: polynomial, output, input, lag.
 
     Attributes
     ----------
@@ -78,9 +101,13 @@ class ParameterCovariance:
     with_feedthrough, with_gain : bool
     names : list of str
         ``'A[0,1]'``-style name of every entry of θ.
+    coefficients, coefficient_factor : ndarray or None
+    coefficient_names : list of str or None
+        The polynomial coefficients' (None for a state-space model).
     """
 
-    def __init__(self, model, parameters, factor, with_feedthrough, with_gain):
+    def __init__(self, model, parameters, factor, with_feedthrough, with_gain, *,
+                 coefficients=None, coefficient_factor=None, coefficient_names=None):
         self._model = model
         self.parameters = np.asarray(parameters, dtype=float)
         self.factor = np.asarray(factor, dtype=float)
@@ -95,6 +122,25 @@ class ParameterCovariance:
         self._shapes = shapes
         self.names = [f"{name}[{i},{j}]" for name, rows, cols in shapes
                       for i in range(rows) for j in range(cols)]
+        self.coefficients = None if coefficients is None else \
+            np.asarray(coefficients, dtype=float)
+        self.coefficient_factor = None if coefficient_factor is None else \
+            np.asarray(coefficient_factor, dtype=float)
+        self.coefficient_names = None if coefficient_names is None else \
+            [str(name) for name in coefficient_names]
+
+    @property
+    def coefficient_covariance(self) -> np.ndarray | None:
+        """Covariance of the polynomial coefficients (None for a state-space model)."""
+        f = self.coefficient_factor
+        return None if f is None else f @ f.T
+
+    @property
+    def coefficient_std(self) -> np.ndarray | None:
+        """Standard deviation of every polynomial coefficient (None for a state-space
+        model)."""
+        f = self.coefficient_factor
+        return None if f is None else np.sqrt(np.einsum("ij,ij->i", f, f))
 
     @property
     def covariance(self) -> np.ndarray:
@@ -119,7 +165,8 @@ class ParameterCovariance:
 
     def model(self, theta) -> StateSpace:
         """The model with parameters ``theta`` (same dt, names, hold and ``info``
-        without the covariance).
+        without the covariance and, for a polynomial model, without the
+        polynomials, which ``theta`` no longer matches).
 
         Parameters
         ----------
@@ -135,7 +182,8 @@ class ParameterCovariance:
                             f"{self.parameters.size} parameters")
         A, B, C, D, K = self.matrices(theta)
         m = self._model
-        info = {k: v for k, v in m.info.items() if k != "parameter_covariance"}
+        info = {k: v for k, v in m.info.items()
+                if k not in ("parameter_covariance", "polynomials")}
         return StateSpace(A, B, C, D, m.dt, input_names=m.input_names,
                           output_names=m.output_names, info=info, K=K,
                           noise_cov=None if K is None else m.noise_cov, hold=m.hold)
@@ -200,7 +248,9 @@ def parameter_covariance(model) -> ParameterCovariance:
     Parameters
     ----------
     model : StateSpace
-        A model returned by :func:`subid.pem` (or loaded from its file).
+        A model returned by :func:`subid.pem` or by a polynomial method
+        (:func:`subid.arx`, :func:`subid.armax`, :func:`subid.oe`,
+        :func:`subid.bj`), or loaded from its file.
 
     Returns
     -------
@@ -223,6 +273,9 @@ def parameter_covariance(model) -> ParameterCovariance:
             f"models estimated by {method} carry no parameter covariance"
             if "refined_by" not in model.info else
             "the model was converted or edited after pem and its covariance was dropped")
+        if isinstance(model.info.get("polynomials"), dict) and note:
+            raise ModelError(f"the model has no parameter covariance ({why}); identify it "
+                             "again with lower orders or on data that excite it more")
         raise ModelError(f"the model has no parameter covariance ({why}); refine it with "
                          "subid.pem(data, model) on its discrete-time form, which attaches "
                          "the asymptotic covariance, and ask for bounds on that model")
@@ -231,7 +284,10 @@ def parameter_covariance(model) -> ParameterCovariance:
                          "bounds on the discrete-time model subid.pem returns")
     try:
         cov = ParameterCovariance(model, entry["parameters"], entry["factor"],
-                                  entry["with_feedthrough"], entry["with_gain"])
+                                  entry["with_feedthrough"], entry["with_gain"],
+                                  coefficients=entry.get("coefficients"),
+                                  coefficient_factor=entry.get("coefficient_factor"),
+                                  coefficient_names=entry.get("coefficient_names"))
     except (KeyError, TypeError, ValueError) as exc:
         raise ModelError(f"info['parameter_covariance'] is malformed ({exc!r}); it must hold "
                          "'parameters', 'factor', 'with_feedthrough' and 'with_gain'") from None
@@ -301,7 +357,8 @@ def freqresp_bounds(model, w, level=0.95, *, method="delta", n_samples=1000, see
     Parameters
     ----------
     model : StateSpace
-        A model with a parameter covariance (:func:`subid.pem`).
+        A model with a parameter covariance (:func:`subid.pem`, the polynomial
+        methods).
     w : array_like, shape (K,)
         Frequencies in rad per time unit.
     level : float
@@ -397,7 +454,8 @@ def simulation_bounds(model, u, level=0.95, *, x0=None, method="delta", n_sample
     Parameters
     ----------
     model : StateSpace
-        A discrete-time model with a parameter covariance (:func:`subid.pem`).
+        A discrete-time model with a parameter covariance (:func:`subid.pem`, the
+        polynomial methods).
     u : array_like, shape (N, n_inputs), or IOData
         Input samples (an IOData record: its inputs).
     level : float
@@ -460,7 +518,8 @@ def step_bounds(model, t=None, level=0.95, *, method="delta", n_samples=1000, se
     Parameters
     ----------
     model : StateSpace
-        A discrete-time model with a parameter covariance (:func:`subid.pem`).
+        A discrete-time model with a parameter covariance (:func:`subid.pem`, the
+        polynomial methods).
     t : float or array_like, optional
         Final time or time stamps (:meth:`StateSpace.step`).
     level : float

@@ -184,7 +184,7 @@ def run(lengths=(400, 4000, 40000), runs: int = 20, runs_large: int = 3, seed: i
     jobs = [(c, L, r) for c in conditions for L in lengths
             for r in range(runs if L < 40000 else runs_large)]
     iterator = jobs if progress is None else progress(jobs)
-    raw = {}
+    raw: dict = {}
     for cond, L, r in iterator:
         data, _ = simulate(L, seed + r, **conditions[cond])
         for name, (fn, nonuniform) in table.items():
@@ -209,7 +209,7 @@ def run(lengths=(400, 4000, 40000), runs: int = 20, runs_large: int = 3, seed: i
     return raw
 
 
-ABLATIONS = {
+ABLATIONS: dict[str, dict | None] = {
     "ours (all corrections; subspace only)": {},
     "- without interpolation-correction regressors": {"correction": False},
     "- without start-up regressors": {"startup": False},
@@ -233,7 +233,7 @@ def ablation(cases=((400, None, "tm"), (4000, 20.0, "default")), runs: int = 20,
     from subid.methods.ct.basis import default_basis
     true = paper_system()
     g_true = true.freqresp(FREQUENCIES)[:, 0, 0]
-    out = {}
+    out: dict = {}
     for case in cases:
         L, snr, which = case
         res = out.setdefault(case, {k: [] for k in ABLATIONS})
@@ -290,7 +290,7 @@ def basis_study(cases=((400, None), (4000, 20.0)), runs: int = 20, seed: int = 0
     """Median max |G - G_hat| of the subspace estimate for the candidate default bases."""
     true = paper_system()
     g_true = true.freqresp(FREQUENCIES)[:, 0, 0]
-    out = {}
+    out: dict = {}
     for L, snr in cases:
         res = out.setdefault((L, snr), {})
         for r in range(runs):

@@ -45,10 +45,11 @@ def save_state(path, kind: str, version: int, arrays: dict, settings: dict) -> N
     payload = {name: np.asarray(value) for name, value in arrays.items()}
     payload[_HEADER] = np.frombuffer(header.encode("utf-8"), dtype=np.uint8)
     with atomic_write(path, "wb", what="checkpoint") as fh:
-        np.savez(fh, **payload)
+        np.savez(fh, **payload)  # type: ignore[arg-type]  # numpy's stub: **kwds may be allow_pickle
 
 
-def load_state(path, kind: str, version: int, *, max_bytes: int = MAX_FILE_BYTES):
+def load_state(path, kind: str | tuple[str, ...] | None,
+               version: int | tuple[int, ...] | None, *, max_bytes: int = MAX_FILE_BYTES):
     """Read a checkpoint written by :func:`save_state`.
 
     The file is opened as a regular file only (a FIFO or a device is
@@ -110,7 +111,7 @@ def load_state(path, kind: str, version: int, *, max_bytes: int = MAX_FILE_BYTES
     if kind is None:
         return arrays, dict(settings, _version=found_version, _kind=found_kind)
     kinds = (kind,) if isinstance(kind, str) else tuple(kind)
-    versions = (version,) if isinstance(version, int) else tuple(version)
+    versions = (version,) if isinstance(version, int) else tuple(version)  # type: ignore[arg-type]  # None only with kind None (returned above)
     if found_kind not in kinds:
         raise error(f"{path} is a checkpoint of {found_kind[:80]!r}, not of {kinds[0]}")
     if found_version not in versions:

@@ -26,7 +26,7 @@ from subid.errors import DataFileNotFoundError, FileReadError, FileWriteError
 try:
     import fcntl
 except ImportError:                  # Windows: no FIFOs to guard against
-    fcntl = None
+    fcntl = None  # type: ignore[assignment]  # tested as `fcntl is None` where used
 
 #: Default largest file a loader reads whole (model JSON, checkpoints, MAT files).
 MAX_FILE_BYTES = 4 * 2**30
@@ -200,7 +200,7 @@ def remove_stale_temporaries(path) -> list[str]:
     """
     path = os.path.abspath(os.fspath(path))
     directory, base = os.path.split(path)
-    removed = []
+    removed: list[str] = []
     try:
         names = os.listdir(directory)
     except OSError:

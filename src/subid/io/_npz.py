@@ -41,7 +41,7 @@ def _read_exact(member, count: int, name: str) -> bytes:
         if not piece:
             raise NpzError(f"member {name} is truncated")
         buf += piece
-    return buf
+    return bytes(buf)
 
 
 def _header(member, name: str):

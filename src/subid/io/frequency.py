@@ -41,7 +41,7 @@ from subid.errors import DataError, FileReadError, OptionError
 from subid.frdata import FRData
 from subid.io._files import MAX_EXPANDED_BYTES, atomic_write, read_regular
 from subid.io._npz import NpzError, load_npz
-from subid.io.formats import mat_variables
+from subid.io.mat import mat_variables
 
 __all__ = ["read_frd", "write_frd"]
 
@@ -155,8 +155,8 @@ def _read_text(shown: str, raw: bytes, ext: str, delimiter, dt) -> FRData:
 
 
 def _assemble(shown, w, values, columns, dt) -> FRData:
-    pairs = {}
-    coherence = {}
+    pairs: dict = {}
+    coherence: dict = {}
     for (pair, kind), k in columns.items():
         if kind == "coh":
             coherence[pair] = k

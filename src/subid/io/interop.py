@@ -32,12 +32,12 @@ only when they are called.
 
 from __future__ import annotations
 
-# The MAT reader and writer live in subid.io.formats, the pandas converters with IOData: the
+# The MAT reader and writer live in subid.io.mat, the pandas converters with IOData: the
 # methods StateSpace.from_mat/to_mat and IOData.from_pandas/to_pandas use them, and this
 # module, above data, io and model, re-exports them.
 from subid.data import iodata_from_pandas, iodata_to_pandas
 from subid.errors import ModelError
-from subid.io.formats import write_mat_model
+from subid.io.mat import write_mat_model
 from subid.model.statespace import StateSpace
 
 __all__ = ["save_mat", "load_mat", "iodata_from_pandas", "iodata_to_pandas"]

@@ -49,7 +49,8 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["STRUCTURES", "realise", "polynomials_of", "polynomial_record", "describe"]
+__all__ = ["STRUCTURES", "realise", "polynomials_of", "polynomial_record", "describe",
+           "coefficient_slots", "coefficients", "with_coefficients", "realisation_jacobian"]
 
 STRUCTURES = ("arx", "armax", "oe", "bj")
 
@@ -189,15 +190,83 @@ def polynomial_record(structure: str, *, A, B, C, D, F, na, nb, nc, nd, nf, nk) 
             "nf": np.asarray(nf, dtype=np.int64), "nk": np.asarray(nk, dtype=np.int64)}
 
 
+def coefficient_slots(poly: dict) -> list:
+    """The free coefficients of ``poly``: a list of ``(key, index, name)``.
+
+    Output by output ``i``: ``A[i, k]`` lags ``1..na[i, k]`` for every ``k``
+    (the diagonal only for the per-output structures), ``B[i, j]`` lags
+    ``nk..nk+nb-1`` for every input ``j``, ``C[i]`` lags ``1..nc``, ``D[i]``
+    lags ``1..nd``, ``F[i, j]`` lags ``1..nf`` (the order of
+    :mod:`subid.methods.dt.pem_poly`'s coefficient vector, output by output).
+    ``name`` is ``'B[0,1][2]'``: polynomial, channel indices, lag.
+    """
+    na, nb, nk, nf = (np.asarray(poly[k]) for k in ("na", "nb", "nk", "nf"))
+    nc, nd = np.asarray(poly["nc"]), np.asarray(poly["nd"])
+    ny, nu = nb.shape
+    out: list[tuple[str, tuple[int, ...], str]] = []
+    for i in range(ny):
+        out += [("A", (i, k, lag), f"A[{i},{k}][{lag}]") for k in range(ny)
+                for lag in range(1, int(na[i, k]) + 1)]
+        out += [("B", (i, j, lag), f"B[{i},{j}][{lag}]") for j in range(nu)
+                for lag in range(int(nk[i, j]), int(nk[i, j] + nb[i, j]))]
+        out += [("C", (i, lag), f"C[{i}][{lag}]") for lag in range(1, int(nc[i]) + 1)]
+        out += [("D", (i, lag), f"D[{i}][{lag}]") for lag in range(1, int(nd[i]) + 1)]
+        out += [("F", (i, j, lag), f"F[{i},{j}][{lag}]") for j in range(nu)
+                for lag in range(1, int(nf[i, j]) + 1)]
+    return out
+
+
+def coefficients(poly: dict) -> np.ndarray:
+    """The free coefficients of ``poly`` in the order of :func:`coefficient_slots`."""
+    return np.array([np.asarray(poly[key], float)[index]
+                     for key, index, _ in coefficient_slots(poly)], dtype=float)
+
+
+def with_coefficients(poly: dict, values) -> dict:
+    """``poly`` with its free coefficients (:func:`coefficient_slots`) set to ``values``."""
+    slots = coefficient_slots(poly)
+    out = dict(poly)
+    for key in {key for key, _, _ in slots}:
+        out[key] = np.array(poly[key], dtype=float)
+    for (key, index, _), value in zip(slots, np.asarray(values, dtype=float)):
+        out[key][index] = value
+    return out
+
+
+def realisation_jacobian(poly: dict) -> np.ndarray:
+    """``d vec(A, B, C, D, K) / d c`` of :func:`realise` at the coefficients ``c``
+    (:func:`coefficients`), each matrix row-major, shape (P, len(c)).
+
+    The realised matrices are polynomials of degree at most two in the
+    coefficients (entries ``-a_k``, ``b_k - a_k b_0``, ``c_k - a_k``: the
+    observer form of :func:`observer_form`), so the central difference with
+    unit step is their exact derivative.
+    """
+    c = coefficients(poly)
+
+    def flat(values):
+        return np.concatenate([np.asarray(m, float).ravel()
+                               for m in realise(with_coefficients(poly, values))])
+    cols = []
+    for j in range(c.size):
+        e = np.zeros(c.size)
+        e[j] = 1.0
+        cols.append(0.5 * (flat(c + e) - flat(c - e)))
+    return np.array(cols).T if cols else np.zeros((flat(c).size, 0))
+
+
 def polynomials_of(model) -> dict | None:
     """The polynomials of a model from a polynomial method (None for any other model)."""
     poly = getattr(model, "info", {}).get("polynomials")
     return poly if isinstance(poly, dict) and "structure" in poly else None
 
 
-def _poly_text(coef) -> str:
+def _poly_text(coef, stds=None) -> str:
+    """``coef`` as ``1 -1.5 q^-1 ...``; ``stds`` ({lag: std}) adds ``(±std)`` to a term."""
     coef = _trim(coef)
-    terms = [f"{c:+.4g}" + ("" if k == 0 else " q^-1" if k == 1 else f" q^-{k}")
+    stds = stds or {}
+    terms = [f"{c:+.4g}" + (f" (±{stds[k]:.2g})" if k in stds else "")
+             + ("" if k == 0 else " q^-1" if k == 1 else f" q^-{k}")
              for k, c in enumerate(coef) if c != 0]
     text = " ".join(terms) if terms else "0"
     return text[1:] if text.startswith("+") else text
@@ -208,29 +277,39 @@ EQUATIONS = {"arx": "A(q) y(t) = B(q) u(t) + e(t)", "armax": "A(q) y(t) = B(q) u
              "oe": "y(t) = B(q)/F(q) u(t) + e(t)", "bj": "y(t) = B(q)/F(q) u(t) + C(q)/D(q) e(t)"}
 
 
-def describe(poly: dict, input_names=None, output_names=None) -> list[str]:
-    """Lines giving every polynomial of ``poly`` (for reports), as MATLAB's ``present``."""
+def describe(poly: dict, input_names=None, output_names=None, std=None) -> list[str]:
+    """Lines giving every polynomial of ``poly`` (for reports), as MATLAB's ``present``;
+    ``std`` (the standard deviation of every coefficient of :func:`coefficient_slots`)
+    adds ``(±std)`` after each estimated coefficient."""
+    spread: dict = {}
+    if std is not None:
+        for (key, index, _), s in zip(coefficient_slots(poly), np.asarray(std, float)):
+            spread.setdefault((key,) + tuple(index[:-1]), {})[index[-1]] = float(s)
     A, B, C, D, F = (np.asarray(poly[k]) for k in ("A", "B", "C", "D", "F"))
     ny, nu = B.shape[0], B.shape[1]
     structure = str(poly["structure"])
     inputs = list(input_names or [f"u{j + 1}" for j in range(nu)])
     outputs = list(output_names or [f"y{i + 1}" for i in range(ny)])
     lines = [f"{structure.upper()} model: {EQUATIONS.get(structure, structure)}"]
+
+    def text(key, *index):
+        return _poly_text({"A": A, "B": B, "C": C, "D": D, "F": F}[key][index],
+                          spread.get((key,) + index))
     for i in range(ny):
         y = outputs[i]
         if structure in ("arx", "armax"):
             for k in range(ny):
                 if k == i or np.any(A[i, k]):
-                    lines.append(f"A[{y},{outputs[k]}] = {_poly_text(A[i, k])}")
+                    lines.append(f"A[{y},{outputs[k]}] = {text('A', i, k)}")
         for j in range(nu):
-            lines.append(f"B[{y},{inputs[j]}] = {_poly_text(B[i, j])}  (nk = "
+            lines.append(f"B[{y},{inputs[j]}] = {text('B', i, j)}  (nk = "
                          f"{int(np.asarray(poly['nk'])[i, j])})")
             if structure in ("oe", "bj"):
-                lines.append(f"F[{y},{inputs[j]}] = {_poly_text(F[i, j])}")
+                lines.append(f"F[{y},{inputs[j]}] = {text('F', i, j)}")
         if structure in ("armax", "bj"):
-            lines.append(f"C[{y}] = {_poly_text(C[i])}")
+            lines.append(f"C[{y}] = {text('C', i)}")
         if structure == "bj":
-            lines.append(f"D[{y}] = {_poly_text(D[i])}")
+            lines.append(f"D[{y}] = {text('D', i)}")
     return lines
 
 

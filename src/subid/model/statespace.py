@@ -31,17 +31,17 @@ The file is strict JSON (no ``NaN`` literals), readable by any JSON parser.
 
 from __future__ import annotations
 
-import json
-import math
 import numbers
-import os
 from collections.abc import Mapping
 
 import numpy as np
 from scipy import linalg
 
+import subid.model._conversions as _conversions
 import subid.model._responses as _responses
 import subid.model._simulate as _simulate
+import subid.model.codec as _codec
+import subid.model.storage as _files
 from subid._validation import (
     as_signal,
     check_dt,
@@ -51,373 +51,28 @@ from subid._validation import (
     same_period,
     stamp_resolution,
 )
-from subid._version import __version__
 from subid.data import IOData
 from subid.delay import effective_input, frequency_factor, input_delay_of
 from subid.errors import DataError, ModelError, OptionError
-from subid.io._files import atomic_write
+from subid.model._checks import (
+    HOLDS,
+    _as_matrix,
+    _check_nonsingular,
+    _is_scalar_zero,
+    _model_dt,
+    _names,
+    _noise_matrices,
+    _plural,
+)
 
 __all__ = ["StateSpace"]
 
-FORMAT_NAME = "subid.StateSpace"
-FORMAT_VERSION = 3
-
-_EPS = np.finfo(np.float64).eps
-# Relative tolerance for time stamps that must match the model's period.
 # Bound on the number of complex entries handled at once by freqresp.
 _FREQ_CHUNK_ENTRIES = 4_000_000
 
-_TAG_ARRAY = "__ndarray__"
-_TAG_COMPLEX = "__complex__"
-_TAG_FLOAT = "__float__"
-_RESERVED_KEYS = (_TAG_ARRAY, _TAG_COMPLEX, _TAG_FLOAT)
-_NONFINITE_NAMES = {"nan": math.nan, "inf": math.inf, "-inf": -math.inf}
-#: Largest model file :meth:`StateSpace.load` reads (a model is a few matrices).
-_MAX_MODEL_BYTES = 256 * 2**20
-
-#: Input holds a model may assume (:attr:`StateSpace.hold`).
-HOLDS = ("zoh", "foh")
-
-_CONVERSION_METHODS = {"zoh": "zoh", "foh": "foh", "bilinear": "bilinear",
-                       "tustin": "bilinear"}
-
-
-# ---------------------------------------------------------------------------
-# validation helpers
-# ---------------------------------------------------------------------------
-def _plural(count: int, word: str, plural: str | None = None) -> str:
-    return f"{count} {word if count == 1 else (plural or word + 's')}"
-
-
-def _as_matrix(value, name: str) -> np.ndarray:
-    """``value`` as a finite float64 2-D read-only copy, or ModelError."""
-    if value is None:
-        raise ModelError(f"{name} is missing (None); pass a 2-D array")
-    try:
-        arr = np.asarray(value)
-    except (TypeError, ValueError) as exc:
-        raise ModelError(f"{name} cannot be read as an array ({exc}); "
-                         "pass a rectangular 2-D array of numbers") from None
-    if arr.dtype == object:
-        try:
-            arr = arr.astype(np.float64)
-        except (TypeError, ValueError):
-            raise ModelError(f"{name} holds values that are not numbers") from None
-    if arr.dtype.kind == "c":
-        raise ModelError(f"{name} is complex; state-space matrices must be real")
-    if arr.dtype.kind not in "biuf":
-        raise ModelError(f"{name} has dtype {arr.dtype}, which is not numeric")
-    if arr.ndim != 2:
-        hint = ""
-        if arr.ndim == 1 and name == "B":
-            hint = " (a single-input B is a column: pass B.reshape(-1, 1))"
-        elif arr.ndim == 1 and name == "C":
-            hint = " (a single-output C is a row: pass C.reshape(1, -1))"
-        elif arr.ndim == 0:
-            hint = " (a 1 x 1 matrix is written [[value]])"
-        raise ModelError(f"{name} must be a 2-D array, got {arr.ndim}-D with shape "
-                         f"{arr.shape}{hint}")
-    arr = np.array(arr, dtype=np.float64, order="C", copy=True)
-    bad = ~np.isfinite(arr)
-    if bad.any():
-        i, j = np.argwhere(bad)[0]
-        count = int(bad.sum())
-        raise ModelError(f"{name} has {count} non-finite entr{'y' if count == 1 else 'ies'} "
-                         f"(NaN or inf), the first at row {i}, column {j}; all "
-                         "matrix entries must be finite")
-    arr.setflags(write=False)
-    return arr
-
-
-def _model_dt(dt, name: str = "dt") -> float:
-    if isinstance(dt, (bool, np.bool_)) or not isinstance(dt, numbers.Real):
-        raise ModelError(f"{name} must be a number (0 for continuous time, the sampling "
-                         f"period for discrete time), got {dt!r}")
-    dt = float(dt)
-    if not math.isfinite(dt) or dt < 0:
-        raise ModelError(f"{name} must be finite and >= 0 (0 = continuous time), got {dt!r}")
-    return dt
-
-
-def _names(names, count: int, prefix: str, which: str) -> tuple[str, ...]:
-    if names is None:
-        return tuple(f"{prefix}{k + 1}" for k in range(count))
-    if isinstance(names, str):
-        names = [names]
-    try:
-        names = tuple(names)
-    except TypeError:
-        raise ModelError(f"{which} names must be a sequence of strings, got {names!r}") from None
-    if not all(isinstance(nm, str) for nm in names):
-        raise ModelError(f"{which} names must be strings, got {list(names)!r}")
-    if len(names) != count:
-        raise ModelError(f"{_plural(len(names), which + ' name')} {list(names)} given but the "
-                         f"model has {_plural(count, which)}")
-    if len(set(names)) != len(names):
-        dup = sorted({nm for nm in names if names.count(nm) > 1})
-        raise ModelError(f"{which} names repeat {dup}; names must be unique")
-    return names
-
-
-def _noise_matrices(K, noise_cov, n: int, p: int):
-    """Validated read-only ``(K, noise_cov)``; each may be None."""
-    if K is not None:
-        K = _as_matrix(K, "K")
-        if K.shape != (n, p):
-            raise ModelError(f"K has shape {K.shape[0]}x{K.shape[1]} but the model has order "
-                             f"{n} and {_plural(p, 'output')}: K must be {n} x {p} "
-                             "(order x n_outputs)")
-    if noise_cov is not None:
-        S = _as_matrix(noise_cov, "noise_cov")
-        if S.shape != (p, p):
-            raise ModelError(f"noise_cov has shape {S.shape[0]}x{S.shape[1]} but the model has "
-                             f"{_plural(p, 'output')}: it must be {p} x {p}")
-        scale = max(float(np.abs(S).max()), 1e-300)
-        if np.abs(S - S.T).max() > 1e-8 * scale:
-            raise ModelError("noise_cov is not symmetric; it must be a covariance matrix")
-        S = 0.5 * (S + S.T)
-        if np.linalg.eigvalsh(S).min() < -1e-8 * scale:
-            raise ModelError("noise_cov has a negative eigenvalue; it must be positive "
-                             "semi-definite (a covariance matrix)")
-        S.setflags(write=False)
-        noise_cov = S
-    return K, noise_cov
-
-
-def _method(method) -> str:
-    if not isinstance(method, str) or method.lower() not in _CONVERSION_METHODS:
-        raise ModelError(f"method must be 'zoh', 'foh' or 'bilinear' (alias 'tustin'), "
-                         f"got {method!r}")
-    return _CONVERSION_METHODS[method.lower()]
-
-
-def _check_nonsingular(M: np.ndarray, what: str, why: str) -> None:
-    """ModelError if ``M`` is singular to working precision."""
-    sv = np.linalg.svd(M, compute_uv=False)
-    if sv.size and not (sv[-1] > M.shape[0] * _EPS * sv[0]):
-        cond = math.inf if sv[-1] == 0 else float(sv[0] / sv[-1])
-        raise ModelError(f"{what} is singular (condition number {cond:.3g}); {why}")
-
-
-# ---------------------------------------------------------------------------
-# info <-> JSON
-# ---------------------------------------------------------------------------
-def _enc_float(x: float):
-    if math.isfinite(x):
-        return x
-    return {_TAG_FLOAT: "nan" if math.isnan(x) else ("inf" if x > 0 else "-inf")}
-
-
-def _nonfinite_to_str(obj):
-    if isinstance(obj, list):
-        return [_nonfinite_to_str(v) for v in obj]
-    if isinstance(obj, float) and not math.isfinite(obj):
-        return "nan" if math.isnan(obj) else ("inf" if obj > 0 else "-inf")
-    return obj
-
-
-def _enc_array(arr: np.ndarray, where: str) -> dict:
-    kind = arr.dtype.kind
-    if kind == "b":
-        data, dtype = arr.tolist(), "bool"
-    elif kind in "iu":
-        data, dtype = arr.tolist(), str(arr.dtype)
-    elif kind in "fc":
-        if kind == "c":
-            dtype = str(arr.dtype)
-            real = np.stack([arr.real, arr.imag], axis=-1).astype(np.float64)
-        else:
-            dtype = str(arr.dtype)
-            real = arr.astype(np.float64)
-        data = real.tolist()
-        if not np.isfinite(real).all():
-            data = _nonfinite_to_str(data)
-    elif kind == "U":
-        data, dtype = arr.tolist(), "str"
-    else:
-        raise ModelError(f"{where} is a numpy array of dtype {arr.dtype}, which cannot be "
-                         "stored in a model file; use numeric, bool or string arrays")
-    return {_TAG_ARRAY: data, "dtype": dtype, "shape": list(arr.shape)}
-
-
-def _encode(obj, where: str):
-    """JSON-ready copy of ``obj`` (see the module docstring for the encoding)."""
-    if obj is None or isinstance(obj, (bool, str)):
-        return obj
-    if isinstance(obj, np.ndarray):
-        return _enc_array(obj, where)
-    if isinstance(obj, np.generic):
-        if obj.dtype.kind not in "biufcU":
-            raise ModelError(f"{where} is a numpy {obj.dtype} scalar, which cannot be "
-                             "stored in a model file")
-        obj = obj.item()
-        if isinstance(obj, (bool, str)):
-            return obj
-    if isinstance(obj, numbers.Integral):
-        return int(obj)
-    if isinstance(obj, numbers.Real):
-        return _enc_float(float(obj))
-    if isinstance(obj, numbers.Complex):
-        c = complex(obj)
-        return {_TAG_COMPLEX: [_enc_float(c.real), _enc_float(c.imag)]}
-    if isinstance(obj, Mapping):
-        out = {}
-        for key, value in obj.items():
-            if not isinstance(key, str):
-                raise ModelError(f"{where} has the key {key!r} of type {type(key).__name__}; "
-                                 "dictionaries stored in a model file need string keys")
-            if key in _RESERVED_KEYS:
-                raise ModelError(f"{where} uses the reserved key {key!r}; rename it")
-            out[key] = _encode(value, f"{where}[{key!r}]")
-        return out
-    if isinstance(obj, (list, tuple)):
-        return [_encode(v, f"{where}[{i}]") for i, v in enumerate(obj)]
-    raise ModelError(f"{where} is a {type(obj).__name__}, which cannot be stored in a model "
-                     "file; use numbers, strings, bools, None, lists, dicts or numpy arrays")
-
-
-def _dec_float(value, where: str) -> float:
-    if isinstance(value, Mapping):
-        if set(value) == {_TAG_FLOAT} and isinstance(value[_TAG_FLOAT], str) \
-                and value[_TAG_FLOAT] in _NONFINITE_NAMES:
-            return _NONFINITE_NAMES[value[_TAG_FLOAT]]
-        raise ModelError(f"{where} is not a valid encoded float: {value!r}")
-    if isinstance(value, bool) or not isinstance(value, numbers.Real):
-        raise ModelError(f"{where} must be a number, got {value!r}")
-    return float(value)
-
-
-def _dec_array(obj: Mapping, where: str) -> np.ndarray:
-    if set(obj) != {_TAG_ARRAY, "dtype", "shape"}:
-        raise ModelError(f"{where} is an encoded array but has the keys {sorted(obj)}; "
-                         f"expected {_TAG_ARRAY!r}, 'dtype' and 'shape'")
-    dtype, shape, data = obj["dtype"], obj["shape"], obj[_TAG_ARRAY]
-    if not isinstance(shape, list) or not all(
-            isinstance(s, int) and not isinstance(s, bool) and s >= 0 for s in shape):
-        raise ModelError(f"{where}: 'shape' must be a list of non-negative integers, "
-                         f"got {shape!r}")
-    try:
-        if dtype == "str":
-            arr = np.array(data, dtype=str)
-        else:
-            dt = np.dtype(dtype)
-            if dt.kind not in "biufc":
-                raise TypeError(f"unsupported dtype {dtype!r}")
-            if dt.kind == "c":
-                pairs = np.array(data, dtype=np.float64)
-                if pairs.ndim == 0 or pairs.shape[-1] != 2:
-                    raise ValueError("complex entries must be [re, im] pairs")
-                arr = np.empty(pairs.shape[:-1], dtype=dt)
-                arr.real = pairs[..., 0]
-                arr.imag = pairs[..., 1]
-            elif dt.kind == "f":
-                arr = np.array(data, dtype=np.float64).astype(dt)
-            else:
-                if not _all_ints(data, bool_ok=dt.kind == "b"):
-                    raise ValueError("entries are not all integers" if dt.kind != "b"
-                                     else "entries are not all booleans")
-                arr = np.array(data, dtype=dt)
-        arr = arr.reshape(shape)
-    except (TypeError, ValueError, OverflowError) as exc:
-        raise ModelError(f"{where} is not a valid encoded {dtype} array of shape {shape} "
-                         f"({exc})") from None
-    return arr
-
-
-def _all_ints(data, *, bool_ok: bool) -> bool:
-    if isinstance(data, list):
-        return all(_all_ints(v, bool_ok=bool_ok) for v in data)
-    if bool_ok:
-        return isinstance(data, bool)
-    return isinstance(data, int) and not isinstance(data, bool)
-
-
-def _decode(obj, where: str):
-    """Inverse of :func:`_encode`."""
-    if obj is None or isinstance(obj, (bool, str, int, float)):
-        return obj
-    if isinstance(obj, Mapping):
-        keys = set(obj)
-        if _TAG_ARRAY in keys:
-            return _dec_array(obj, where)
-        if _TAG_FLOAT in keys:
-            return _dec_float(obj, where)
-        if _TAG_COMPLEX in keys:
-            pair = obj[_TAG_COMPLEX]
-            if keys != {_TAG_COMPLEX} or not isinstance(pair, (list, tuple)) or len(pair) != 2:
-                raise ModelError(f"{where} is not a valid encoded complex number: {obj!r}")
-            return complex(_dec_float(pair[0], where), _dec_float(pair[1], where))
-        out = {}
-        for key, value in obj.items():
-            if not isinstance(key, str):
-                raise ModelError(f"{where} has the non-string key {key!r}")
-            out[key] = _decode(value, f"{where}[{key!r}]")
-        return out
-    if isinstance(obj, (list, tuple)):
-        return [_decode(v, f"{where}[{i}]") for i, v in enumerate(obj)]
-    raise ModelError(f"{where} is a {type(obj).__name__}, which is not a JSON value")
-
-
-def _matrix_from_json(value, key: str) -> np.ndarray:
-    if isinstance(value, np.ndarray):
-        arr = value
-    elif isinstance(value, list):
-        try:
-            arr = np.array(value)
-        except (TypeError, ValueError):
-            raise ModelError(f"key {key!r} is not a rectangular 2-D array of numbers") from None
-    else:
-        raise ModelError(f"key {key!r} must be a list of rows (a 2-D array), got "
-                         f"{type(value).__name__}")
-    if arr.dtype.kind not in "iuf":
-        raise ModelError(f"key {key!r} must hold numbers only, got entries of type "
-                         f"{arr.dtype}")
-    if arr.ndim != 2:
-        raise ModelError(f"key {key!r} must be a list of rows (a 2-D array), got an array "
-                         f"of shape {arr.shape}")
-    return arr
-
-
-def _fmt_json(d: dict) -> str:
-    """Strict JSON text of a model dictionary, one matrix row per line."""
-    parts = []
-    for key, value in d.items():
-        if key in ("A", "B", "C", "D", "K", "noise_cov"):
-            rows = [json.dumps(row, allow_nan=False) for row in value]
-            text = "[\n    " + ",\n    ".join(rows) + "\n  ]" if rows else "[]"
-        elif key == "info":
-            text = json.dumps(value, indent=2, allow_nan=False).replace("\n", "\n  ")
-        else:
-            text = json.dumps(value, allow_nan=False)
-        parts.append(f"  {json.dumps(key)}: {text}")
-    return "{\n" + ",\n".join(parts) + "\n}\n"
-
-
-def _require_control():
-    try:
-        import control
-    except ImportError:
-        from subid._extras import install_hint
-        raise ImportError("python-control is not installed: "
-                          + install_hint("control", "control")) from None
-    return control
-
-
-def _resolve_dt(sys_dt, dt, source: str) -> float:
-    """Sampling period of a foreign system whose dt may be True/None."""
-    if sys_dt is True:
-        if dt is None:
-            raise ModelError(f"the {source} system is discrete-time with an unspecified "
-                             "sampling period (dt=True); pass the period, e.g. dt=0.1")
-        return _model_dt(dt)
-    if sys_dt is None or sys_dt is False:
-        return 0.0 if dt is None else _model_dt(dt)
-    value = _model_dt(sys_dt, name=f"the {source} system's dt")
-    if dt is not None and _model_dt(dt) != value:
-        raise ModelError(f"dt={dt!r} contradicts the {source} system's sampling "
-                         f"period {value!r}")
-    return value
-
+# Files are the concern of subid.io, which sits above this package: the file methods of
+# StateSpace (save, load, to_mat, from_mat) call the readers and writers that
+# subid.io.models registers in subid.model.storage (issue 24: model imports no io).
 
 # ---------------------------------------------------------------------------
 # the model
@@ -1002,24 +657,10 @@ class StateSpace:
             raise ModelError(f"the model is already discrete-time (dt={self._dt!r}); "
                              "convert it with to_continuous() first to resample it")
         dt = check_dt(dt)
-        method = _method(method)
+        method = _conversions._method(method)
         self._drop_noise_model("to_discrete")
-        A, B, C, D = self._A, self._B, self._C, self._D
-        if method == "bilinear":
-            ima = np.eye(self.order) - 0.5 * dt * A
-            _check_nonsingular(ima, "I - dt/2 A",
-                               f"A has an eigenvalue at 2/dt = {2 / dt:g}, where the "
-                               "bilinear transform is undefined")
-            Ad = np.linalg.solve(ima, np.eye(self.order) + 0.5 * dt * A)
-            Bd = np.linalg.solve(ima, dt * B)
-            Cd = np.linalg.solve(ima.T, C.T).T
-            Dd = D + 0.5 * C @ Bd
-        else:
-            Phi, G1, G2 = _simulate.expm_blocks(A, B, [dt], method)
-            Ad, Bd, Cd, Dd = Phi[0], G1[0], C, D
-            if method == "foh":
-                Bd = G1[0] - G2[0] + Phi[0] @ G2[0]
-                Dd = D + C @ G2[0]
+        Ad, Bd, Cd, Dd = _conversions.discretise(self._A, self._B, self._C, self._D, dt,
+                                                 method)
         return self._like(Ad, Bd, Cd, Dd, dt, hold=method if method in HOLDS else None)
 
     def to_continuous(self, method="zoh") -> "StateSpace":
@@ -1053,35 +694,11 @@ class StateSpace:
         """
         if self.is_continuous:
             raise ModelError("the model is already continuous-time (dt=0)")
-        method = _method(method)
+        method = _conversions._method(method)
         self._drop_noise_model("to_continuous")
-        h = self._dt
-        n = self.order
-        Ad, Bd, Cd, Dd = self._A, self._B, self._C, self._D
-        eye = np.eye(n)
-        if method == "bilinear":
-            E = eye + Ad
-            _check_nonsingular(E, "I + A_d", "A_d has an eigenvalue at -1, which the "
-                               "bilinear transform maps to infinity")
-            M = np.linalg.solve(E, 2.0 * eye)          # M = I - h/2 A
-            A = (2.0 / h) * (eye - M)
-            B = M @ Bd / h
-            C = Cd @ M
-            D = Dd - 0.5 * C @ Bd
-            return self._like(A, B, C, D, 0.0)
-        A = _real_logm(Ad) / h
-        Phi, W1, W2 = _simulate.expm_blocks(A, eye, [h], method)
-        if method == "zoh":
-            _check_nonsingular(W1[0], "the hold integral of exp(A t)",
-                               "B cannot be recovered from A_d and B_d")
-            B = np.linalg.solve(W1[0], Bd)
-            return self._like(A, B, Cd, Dd, 0.0, hold="zoh")
-        K = W1[0] - W2[0] + Phi[0] @ W2[0]
-        _check_nonsingular(K, "the first-order-hold input map",
-                           "B cannot be recovered from A_d and B_d")
-        B = np.linalg.solve(K, Bd)
-        D = Dd - Cd @ (W2[0] @ B)
-        return self._like(A, B, Cd, D, 0.0, hold="foh")
+        A, B, C, D, hold = _conversions.continuise(self._A, self._B, self._C, self._D,
+                                                   self._dt, method)
+        return self._like(A, B, C, D, 0.0, hold=hold)
 
     def transform(self, T) -> "StateSpace":
         """Similarity transformation to the state ``z = T x``.
@@ -1162,32 +779,7 @@ class StateSpace:
             ``info`` holds a value that cannot be stored (the message gives
             its location).
         """
-        d = {
-            "format": FORMAT_NAME,
-            "version": 1,
-            "subid_version": __version__,
-            "A": self._A.tolist(),
-            "B": self._B.tolist(),
-            "C": self._C.tolist(),
-            "D": self._D.tolist(),
-            "dt": self._dt,
-            "input_names": list(self.input_names),
-            "output_names": list(self.output_names),
-            "info": _encode(self.info, "info"),
-        }
-        # version 2 adds the optional noise model; a model without one is still
-        # written as version 1, readable by older subid releases
-        if self._K is not None:
-            d["K"] = self._K.tolist()
-            d["version"] = 2
-        if self._noise_cov is not None:
-            d["noise_cov"] = self._noise_cov.tolist()
-            d["version"] = 2
-        # version 3 adds the input hold; a zero-order-hold model omits it
-        if self._hold != "zoh":
-            d["hold"] = self._hold
-            d["version"] = 3
-        return d
+        return _codec.to_dict(self)
 
     @classmethod
     def from_dict(cls, d) -> "StateSpace":
@@ -1210,54 +802,7 @@ class StateSpace:
             A key is missing, unknown or holds a bad value (the message names
             it), or the matrices are inconsistent.
         """
-        if not isinstance(d, Mapping):
-            raise ModelError(f"a model description must be a JSON object (dict), got "
-                             f"{type(d).__name__}")
-        required = ("format", "version", "A", "B", "C", "D", "dt")
-        allowed = set(required) | {"input_names", "output_names", "info", "K", "noise_cov",
-                                   "hold", "subid_version"}
-        missing = [k for k in required if k not in d]
-        if missing:
-            raise ModelError(f"the model description is missing the key"
-                             f"{'s' if len(missing) > 1 else ''} "
-                             f"{', '.join(repr(k) for k in missing)}")
-        unknown = sorted(str(k) for k in d if k not in allowed)
-        if unknown:
-            raise ModelError(f"the model description has unknown key"
-                             f"{'s' if len(unknown) > 1 else ''} {unknown}")
-        if d["format"] != FORMAT_NAME:
-            raise ModelError(f"key 'format' is {d['format']!r}; expected {FORMAT_NAME!r}")
-        version = d["version"]
-        if isinstance(version, bool) or not isinstance(version, int) or version < 1:
-            raise ModelError(f"key 'version' must be a positive integer, got {version!r}")
-        if version > FORMAT_VERSION:
-            raise ModelError(f"key 'version' is {version}: the model was written by a newer "
-                             f"subid (this one reads version {FORMAT_VERSION}); upgrade subid")
-        mats = [_matrix_from_json(d[k], k) for k in ("A", "B", "C", "D")]
-        dt = d["dt"]
-        if isinstance(dt, bool) or not isinstance(dt, numbers.Real) \
-                or not math.isfinite(dt) or dt < 0:
-            raise ModelError(f"key 'dt' must be a finite number >= 0, got {dt!r}")
-        names = {}
-        for key in ("input_names", "output_names"):
-            value = d.get(key)
-            if value is not None and (not isinstance(value, (list, tuple)) or
-                                      not all(isinstance(v, str) for v in value)):
-                raise ModelError(f"key {key!r} must be a list of strings, got {value!r}")
-            names[key] = value
-        info = d.get("info")
-        if info is None:
-            info = {}
-        elif not isinstance(info, Mapping):
-            raise ModelError(f"key 'info' must be an object (dict), got {type(info).__name__}")
-        info = _decode(info, "info")
-        noise = {k: (_matrix_from_json(d[k], k) if d.get(k) is not None else None)
-                 for k in ("K", "noise_cov")}
-        hold = d.get("hold", "zoh")
-        if hold not in HOLDS:
-            raise ModelError(f"key 'hold' must be one of {', '.join(map(repr, HOLDS))}, got "
-                             f"{hold!r}"[:300])
-        return cls(*mats, dt, info=info, **names, **noise, hold=hold)
+        return _codec.from_dict(cls, d)
 
     def save(self, path) -> None:
         """Write the model to a JSON file, atomically.
@@ -1278,9 +823,7 @@ class StateSpace:
         OSError
             The file cannot be written.
         """
-        text = _fmt_json(self.to_dict())
-        with atomic_write(path, "w", encoding="utf-8", what="model file") as fh:
-            fh.write(text)
+        _files.writer("json")(self, path)
 
     @classmethod
     def load(cls, path) -> "StateSpace":
@@ -1306,17 +849,7 @@ class StateSpace:
             deeply, numbers beyond 64 bits or overflowing) or does not
             describe a valid model; the message names the file.
         """
-        from subid.io._files import read_regular
-        from subid.io._schema import parse_json
-        path = os.fsdecode(path) if isinstance(path, bytes) else os.fspath(path)
-        raw = read_regular(path, what="model file", max_bytes=_MAX_MODEL_BYTES)
-        if not raw.strip():
-            raise ModelError(f"model file '{path}' is empty")
-        d = parse_json(raw, f"model file '{path}'", ModelError)
-        try:
-            return cls.from_dict(d)
-        except ModelError as exc:
-            raise ModelError(f"model file '{path}': {exc}") from None
+        return _files.reader("json")(path, cls)
 
     # -- other libraries -------------------------------------------------
     def to_control(self):
@@ -1342,27 +875,21 @@ class StateSpace:
         Input delays (``info['input_delay']``) are exported as extra states
         (:func:`subid.absorb_delay`).
         """
-        control = _require_control()
-        m = _without_delay(self)
-        return control.ss(np.array(m._A), np.array(m._B), np.array(m._C),
-                          np.array(m._D), m._dt, inputs=list(m.input_names),
-                          outputs=list(m.output_names))
+        return _conversions.to_control(self)
 
     def to_mat(self, path) -> None:
         """Write the model as MATLAB ``ss(A, B, C, D, Ts)`` fields (:func:`subid.interop.save_mat`);
         input delays become extra states (:func:`subid.absorb_delay`)."""
-        from subid.io.formats import write_mat_model
-        write_mat_model(_without_delay(self), path)
+        _files.writer("mat")(self, path)
 
     @classmethod
     def from_mat(cls, path, *, dt=None) -> "StateSpace":
         """Read a model from a MATLAB ``.mat`` file (:func:`subid.interop.load_mat`).
 
-        The file is read by :func:`subid.io.formats.mat_variables`, the validated MAT
+        The file is read by :func:`subid.io.mat.mat_variables`, the validated MAT
         loader of :func:`subid.read`.
         """
-        from subid.io.formats import read_mat_model
-        return read_mat_model(path, cls, dt=dt)
+        return _files.reader("mat")(path, cls, dt=dt)
 
     @classmethod
     def from_control(cls, sys, *, dt=None) -> "StateSpace":
@@ -1391,17 +918,7 @@ class StateSpace:
             ``sys`` is not a python-control LTI system, has no states, or its
             sampling period is unspecified and ``dt`` is not given.
         """
-        control = _require_control()
-        if not isinstance(sys, control.StateSpace):
-            if isinstance(sys, control.LTI):
-                sys = control.ss(sys)
-            else:
-                raise ModelError(f"expected a python-control system, got "
-                                 f"{type(sys).__name__}")
-        period = _resolve_dt(sys.dt, dt, "python-control")
-        return cls(np.asarray(sys.A), np.asarray(sys.B), np.asarray(sys.C),
-                   np.asarray(sys.D), period, input_names=list(sys.input_labels),
-                   output_names=list(sys.output_labels))
+        return _conversions.from_control(cls, sys, dt=dt)
 
     def to_scipy(self):
         """Convert to :class:`scipy.signal.StateSpace`.
@@ -1417,12 +934,7 @@ class StateSpace:
         covariance: ``K`` and ``noise_cov`` are not exported. Input delays are
         exported as extra states (:func:`subid.absorb_delay`).
         """
-        from scipy import signal
-        m = _without_delay(self)
-        mats = [np.array(M) for M in (m._A, m._B, m._C, m._D)]
-        if m.is_continuous:
-            return signal.StateSpace(*mats)
-        return signal.StateSpace(*mats, dt=m._dt)
+        return _conversions.to_scipy(self)
 
     @classmethod
     def from_scipy(cls, sys, *, dt=None) -> "StateSpace":
@@ -1447,56 +959,4 @@ class StateSpace:
             ``sys`` is not a scipy LTI system, has no states, or its sampling
             period is unspecified and ``dt`` is not given.
         """
-        from scipy import signal
-        if not isinstance(sys, (signal.lti, signal.dlti)):
-            raise ModelError(f"expected a scipy.signal lti or dlti system, got "
-                             f"{type(sys).__name__}")
-        if not isinstance(sys, signal.StateSpace):
-            sys = sys.to_ss()
-        period = _resolve_dt(sys.dt, dt, "scipy")
-        return cls(sys.A, sys.B, sys.C, sys.D, period)
-
-
-def _is_scalar_zero(value) -> bool:
-    if isinstance(value, (bool, np.bool_)):
-        return False
-    if isinstance(value, np.ndarray):
-        return value.ndim == 0 and value.dtype.kind in "iuf" and value == 0
-    return isinstance(value, (numbers.Number, np.generic)) and value == 0
-
-
-def _real_logm(Ad: np.ndarray) -> np.ndarray:
-    """Principal real logarithm of ``Ad``, or ModelError when none exists."""
-    ev = np.linalg.eigvals(Ad)
-    scale = max(1.0, float(np.abs(ev).max()))
-    tiny = np.abs(ev) <= Ad.shape[0] * _EPS * scale
-    if tiny.any():
-        raise ModelError("A_d is singular (eigenvalue 0): no continuous-time model "
-                         "discretises to it (a pole at z = 0 is an infinitely fast "
-                         "continuous pole); use method='bilinear' instead")
-    negative = (ev.real < 0) & (np.abs(ev.imag) <= 1e-8 * np.abs(ev))
-    if negative.any():
-        raise ModelError(f"A_d has the eigenvalue {ev[negative][0].real:.6g} on the "
-                         "negative real axis, which has no real matrix logarithm: no "
-                         "continuous-time model with this sampling period has this "
-                         "discretisation; use method='bilinear' instead")
-    with np.errstate(all="ignore"):
-        L = linalg.logm(Ad)
-    L = np.asarray(L)
-    if not np.isfinite(L).all():
-        raise ModelError("the matrix logarithm of A_d is not finite; A_d is too close "
-                         "to singular")
-    if np.iscomplexobj(L):
-        if np.abs(L.imag).max() > 1e-8 * max(1.0, float(np.abs(L.real).max())):
-            raise ModelError("A_d has no real matrix logarithm (the principal "
-                             "logarithm is complex)")
-        L = L.real
-    return np.ascontiguousarray(L)
-
-
-def _without_delay(model):
-    """``model`` with its input delays as states, for exports that know no delays."""
-    if input_delay_of(model) is None:
-        return model
-    from subid.delay import absorb_delay
-    return absorb_delay(model)
+        return _conversions.from_scipy(cls, sys, dt=dt)

@@ -365,7 +365,7 @@ class HankelStatistic:
         G = self._open_gram_sum() if self._open_columns() else 0.0
         if self._closed_gram is not None:
             G = G + self._closed_gram
-        return G / K
+        return np.asarray(G / K)
 
     def _open_gram_sum(self) -> np.ndarray:
         """``H H^T`` (not normalised) of the open experiment's Hankel columns."""

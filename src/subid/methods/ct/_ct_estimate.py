@@ -230,7 +230,7 @@ def _estimate_a_c(bank: FilterBank, Theta, p, ac_method):
                                  check_finite=False)[0]
         resid = reg @ sol - rhs.reshape(N * p, n)
         return sol[:n], sol[n:], float(np.linalg.norm(resid)
-                                       / max(np.linalg.norm(rhs), 1e-300))
+                                       / max(float(np.linalg.norm(rhs)), 1e-300))
     # the paper: C eliminated between consecutive equations with g_k != 0 (for real
     # poles these rows are exactly M and R of (12)); the equations with g_k = 0
     # (second state of a complex pair) contain no C and are kept as they are
@@ -245,7 +245,7 @@ def _estimate_a_c(bank: FilterBank, Theta, p, ac_method):
     A = scipy.linalg.lstsq(Mm, Rm, lapack_driver="gelsy", check_finite=False)[0]  # (13)
     k0 = live[0]
     C = (blocks[k0] @ A - rhs[k0]) / g[k0]        # (14): O_0 (A + sigma_0 I) / sqrt(2 sigma_0)
-    resid = np.linalg.norm(Mm @ A - Rm) / max(np.linalg.norm(Rm), 1e-300)
+    resid = np.linalg.norm(Mm @ A - Rm) / max(float(np.linalg.norm(Rm)), 1e-300)
     return A, C, float(resid)
 
 
@@ -288,7 +288,7 @@ def _fit_b_filtered(Tfun, Theta, Lf, iU, n, m, p, feedthrough):
     B = theta[:n * m].reshape(n, m)
     D = theta[n * m:].reshape(p, m) if feedthrough else np.zeros((p, m))
     cond = float(sing[0] / sing[-1]) if sing[-1] > 0 else float("inf")
-    resid = np.linalg.norm(R @ theta - target) / max(np.linalg.norm(target), 1e-300)
+    resid = np.linalg.norm(R @ theta - target) / max(float(np.linalg.norm(target)), 1e-300)
     return B, D, {"b_residual_relative": float(resid), "b_regression_condition": cond}
 
 
@@ -301,7 +301,7 @@ def _markov_change(old, new):
     with np.errstate(over="ignore", invalid="ignore"):
         for _ in range(Ao.shape[0] + 1):
             mo, mn = Co @ Po, Cn @ Pn
-            change = np.linalg.norm(mo - mn) / max(np.linalg.norm(mo), 1e-300)
+            change = np.linalg.norm(mo - mn) / max(float(np.linalg.norm(mo)), 1e-300)
             worst = max(worst, float(change) if np.isfinite(change) else math.inf)
             Po, Pn = Ao @ Po, An @ Pn
     return worst

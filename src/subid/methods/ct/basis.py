@@ -75,7 +75,7 @@ MAX_POLY_ORDER = 7
 def _as_pole(value, where: str) -> complex:
     if isinstance(value, bool) or not isinstance(value, numbers.Number):
         raise ModelError(f"{where} must be a number, got {value!r}")
-    z = complex(value)
+    z = complex(value)  # type: ignore[call-overload]  # a numbers.Number: checked above
     if not (np.isfinite(z.real) and np.isfinite(z.imag)):
         raise ModelError(f"{where} is not finite ({value!r})")
     if z.real <= 0:

@@ -96,6 +96,7 @@ from subid.errors import (
     SubidError,
     TooFewSamplesError,
 )
+from subid.methods._common import choose_order
 from subid.methods._info import model_info, records_warnings
 from subid.methods.ct import _ct_fit
 from subid.methods.ct._ct_estimate import (
@@ -111,7 +112,6 @@ from subid.methods.ct._ct_estimate import (
 )
 from subid.methods.ct.basis import MAX_POLY_ORDER, FilterBank, default_basis
 from subid.methods.dt._selection import HORIZON_CANDIDATES, cross_validate
-from subid.methods.dt._subspace import choose_order
 from subid.model.statespace import StateSpace
 
 __all__ = [

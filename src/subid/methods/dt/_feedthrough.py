@@ -71,39 +71,45 @@ def check_feedthrough(value) -> object:
     return check_choice(value, "feedthrough", FEEDTHROUGH)
 
 
-def _residual_power(L, target, regressors):
-    """Sum of squares (per Hankel column) of ``target`` minus its least-squares fit on
-    ``regressors`` (rows of ``L``), and the numerical rank of the regressors.
+def _residual_powers(L, targets, regressors):
+    """Sums of squares (per Hankel column) of each row ``targets`` of ``L`` minus its
+    least-squares fit on the rows ``regressors``, and the numerical rank of the
+    regressors: one factorisation for every target.
 
     Directions of the regressors below :data:`RANK_TOLERANCE` of the largest are
     dropped (QR with column pivoting): on noise-free records the past outputs add only
     n directions to the past inputs, the rest are rounding, and fitted they would make a
     test "significant" by fitting rounding errors.
     """
-    t = L[target]
+    T = L[targets]
     if regressors.size == 0:
-        return float(t @ t), 0
+        return np.einsum("ij,ij->i", T, T), 0
     R = L[regressors]
-    theta, _, rank, _ = scipy.linalg.lstsq(R.T, t, cond=RANK_TOLERANCE, lapack_driver="gelsy",
+    theta, _, rank, _ = scipy.linalg.lstsq(R.T, T.T, cond=RANK_TOLERANCE, lapack_driver="gelsy",
                                            check_finite=False)
-    r = t - theta @ R
-    return float(r @ r), int(rank)
+    r = T - theta.T @ R
+    return np.einsum("ij,ij->i", r, r), int(rank)
 
 
-def _f_test(L, target, restricted, extra, n_columns):
-    """p-value and F of the test that the ``extra`` rows add nothing to ``restricted``
-    (None when the restricted fit is exact or the extra rows add no direction)."""
-    rss0, rank0 = _residual_power(L, target, restricted)
-    power = float(L[target] @ L[target])
-    if rss0 <= EXACT * max(power, 1e-300):
-        return None, 0.0
-    rss1, rank1 = _residual_power(L, target, np.concatenate([restricted, extra]))
+def _f_tests(L, targets, restricted, extra, n_columns, extended=None):
+    """p-value of the test, for each row of ``targets``, that the ``extra`` rows add
+    nothing to ``restricted`` (None where the restricted fit is exact or the extra
+    rows add no direction). ``extended``: the :func:`_residual_powers` of the targets
+    on ``restricted`` and ``extra`` together, when already computed."""
+    rss0, rank0 = _residual_powers(L, targets, restricted)
+    rss1, rank1 = extended if extended is not None else \
+        _residual_powers(L, targets, np.concatenate([restricted, extra]))
+    power = np.einsum("ij,ij->i", L[targets], L[targets])
     q = rank1 - rank0
     dof = n_columns - rank1
-    if q <= 0 or dof <= 0:
-        return None, 0.0
-    F = max(rss0 - rss1, 0.0) / q / max(rss1 / dof, 1e-300 * rss0)
-    return float(scipy.stats.f.sf(F, q, dof)), float(F)
+    out = []
+    for k in range(len(targets)):
+        if rss0[k] <= EXACT * max(power[k], 1e-300) or q <= 0 or dof <= 0:
+            out.append(None)
+            continue
+        F = max(rss0[k] - rss1[k], 0.0) / q / max(rss1[k] / dof, 1e-300 * rss0[k])
+        out.append(float(scipy.stats.f.sf(F, q, dof)))
+    return out
 
 
 def decide(factor, *, level: float = LEVEL):
@@ -139,20 +145,19 @@ def decide(factor, *, level: float = LEVEL):
                       direct_term="not tested: no input or no lag")
         return False, record
     current_u = factor.u_rows(p, p + 1)
+    current_y = factor.y_rows(p, p + 1)
     past = np.concatenate([past_u, past_y])
     # noise-free: the past and u(k) explain y(k) to rounding; there is no noise for a free D
     # to absorb and its estimate is exact, so D is estimated (whatever the input)
-    exact = True
-    for i in range(ny):
-        target = factor.y_rows(p, p + 1)[i]
-        rss, _ = _residual_power(L, target, np.concatenate([past, current_u]))
-        exact = exact and rss <= NOISE_FREE * max(float(L[target] @ L[target]), 1e-300)
+    on_all = _residual_powers(L, current_y, np.concatenate([past, current_u]))
+    power = np.einsum("ij,ij->i", L[current_y], L[current_y])
+    exact = bool(np.all(on_all[0] <= NOISE_FREE * np.maximum(power, 1e-300)))
     if exact:
         record.update(estimated=True, feedback=None,
                       direct_term="noise-free record: the past and u(k) explain y(k) to "
                                   "rounding; D estimated (exactly)")
         return True, record
-    feedback = [_f_test(L, target, past_u, past_y, K)[0] for target in current_u]
+    feedback = _f_tests(L, current_u, past_u, past_y, K)
     detected = any(v is not None and v < level / nu for v in feedback)
     record["feedback"] = {"p_values": feedback, "detected": bool(detected)}
     if detected:
@@ -160,7 +165,7 @@ def decide(factor, *, level: float = LEVEL):
                       direct_term="not tested: under feedback the lag-0 correlation of u and "
                                   "y cannot be told from a direct term (D = 0, as MATLAB)")
         return False, record
-    direct = [_f_test(L, target, past, current_u, K)[0] for target in factor.y_rows(p, p + 1)]
+    direct = _f_tests(L, current_y, past, current_u, K, extended=on_all)
     exact = all(v is None for v in direct)
     significant = any(v is not None and v < level / ny for v in direct)
     # a record the past explains exactly (noise-free): keep D free, its estimate is exact

@@ -11,7 +11,7 @@ factorisation of ``N ny`` rows, so its cost grew with ``n`` simulations of
 the block per candidate (55 % of the default call at 10^5 samples; minutes
 when a stabilised candidate has a pole at radius 0.9999).
 
-Here the same quantity comes from one compiled pass (:func:`forced_and_free`):
+Here the same quantity comes from one compiled pass (:func:`forced_error`):
 the forced response ``y_f`` and the free response ``F(t) = C A^t`` propagated
 as ``F(t+1) = F(t) A`` (``ny n^2`` flops a sample instead of ``n`` state
 simulations), the latter only while ``A^t`` has not decayed below
@@ -20,8 +20,9 @@ the rows change x0 by less than rounding, as :func:`subid.evaluation.prediction.
 argues). The x0 regression is the same weighted least-squares problem (each
 output weighted by the inverse of its standard deviation over the validation
 record), solved through the triangular factor of ``[F w, (y - y_f) w]`` by
-the same minimum-norm ``lstsq`` with the same cut-off; the fit is then
-``100 (1 - ||y - ŷ|| / ||y - ȳ||)`` per output, pooled over the experiments
+the same minimum-norm ``lstsq`` with the same cut-off. Beyond the decay the
+error ``y - y_f`` is summed in the same pass, so the simulated output is never
+stored; the fit is then ``100 (1 - ||y - ŷ|| / ||y - ȳ||)`` per output, pooled over the experiments
 of a merged record (each with its own x0 and mean), as ``fit_percent`` pools
 them. The scores equal ``fit_percent``'s to rounding
 (``tests/test_selection_speed.py`` compares both on several records).
@@ -70,7 +71,9 @@ def free_length(A: np.ndarray, n_samples: int) -> int:
 
 
 def forced_and_free_reference(A, B, C, D, u, n_free):
-    """Plain-numpy reference of :func:`forced_and_free`."""
+    """Forced response ``y`` (zero initial state) of ``(A, B, C, D)`` to ``u`` and free
+    response ``F[t] = C A^t`` for ``t < n_free`` (plain numpy; the reference behind
+    :func:`forced_error_reference`). Returns ``(y, F)``."""
     N = u.shape[0]
     n, ny = A.shape[0], C.shape[0]
     y = np.empty((N, ny))
@@ -86,15 +89,31 @@ def forced_and_free_reference(A, B, C, D, u, n_free):
     return y, F
 
 
+def forced_error_reference(A, B, C, D, u, y, weights, inv_scale, n_free):
+    """Plain-numpy reference of :func:`forced_error`."""
+    forced, F = forced_and_free_reference(A, B, C, D, u, n_free)
+    n = A.shape[0]
+    rows = np.empty((n_free, y.shape[1], n + 1))
+    rows[:, :, :n] = F * weights[None, :, None]
+    rows[:, :, n] = (y[:n_free] - forced[:n_free]) * weights
+    tail = np.sum(((y[n_free:] - forced[n_free:]) * inv_scale) ** 2, axis=0)
+    return rows, tail, bool(np.isfinite(forced).all())
+
+
 @numba.njit(cache=True, nogil=True)
-def forced_and_free(A, B, C, D, u, n_free):  # pragma: no cover - compiled
-    """Forced response ``y`` (zero initial state) of ``(A, B, C, D)`` to ``u`` and
-    free response ``F[t] = C A^t`` for ``t < n_free``. Returns ``(y, F)``."""
+def forced_error(A, B, C, D, u, y, weights, inv_scale, n_free):  # pragma: no cover - compiled
+    """The simulation error of ``(A, B, C, D)`` on ``(u, y)`` from a zero initial
+    state, in one pass and without storing the simulated output: the weighted
+    rows ``[C A^t w, (y(t) - y_f(t)) w]`` of the x0 regression for ``t < n_free``
+    (``w`` = ``weights``), and ``sum_{t >= n_free} ((y - y_f) inv_scale)^2`` per
+    output, where the free response has decayed. Returns ``(rows, tail, finite)``,
+    ``finite`` false when the forced response overflowed."""
     N, nu = u.shape
     n = A.shape[0]
     ny = C.shape[0]
-    y = np.empty((N, ny))
-    F = np.empty((n_free, ny, n))
+    rows = np.empty((n_free, ny, n + 1))
+    tail = np.zeros(ny)
+    finite = True
     x = np.zeros(n)
     xn = np.empty(n)
     for t in range(N):
@@ -104,7 +123,14 @@ def forced_and_free(A, B, C, D, u, n_free):  # pragma: no cover - compiled
                 s += C[i, j] * x[j]
             for j in range(nu):
                 s += D[i, j] * u[t, j]
-            y[t, i] = s
+            if not np.isfinite(s):
+                finite = False
+            e = y[t, i] - s
+            if t < n_free:
+                rows[t, i, n] = e * weights[i]
+            else:
+                e *= inv_scale[i]
+                tail[i] += e * e
         for i in range(n):
             s = 0.0
             for j in range(n):
@@ -119,7 +145,7 @@ def forced_and_free(A, B, C, D, u, n_free):  # pragma: no cover - compiled
     for t in range(n_free):
         for i in range(ny):
             for j in range(n):
-                F[t, i, j] = M[i, j]
+                rows[t, i, j] = M[i, j] * weights[i]
         for i in range(ny):
             for j in range(n):
                 s = 0.0
@@ -129,32 +155,33 @@ def forced_and_free(A, B, C, D, u, n_free):  # pragma: no cover - compiled
         for i in range(ny):
             for j in range(n):
                 M[i, j] = Mn[i, j]
-    return y, F
+    return rows, tail, finite
 
 
-def _simulated(A, B, C, D, u, y, weights, kernel):
-    """``ŷ`` of one experiment, from the least-squares x0; None on overflow."""
+def _error_power(A, B, C, D, u, y, weights, inv_scale, kernel):
+    """``sum_t ((y - ŷ) inv_scale)^2`` per output of one experiment, ``ŷ`` simulated
+    from the least-squares x0; None when the simulation overflows."""
     N, ny = y.shape
     n = A.shape[0]
     n_free = free_length(A, N)
     with np.errstate(all="ignore"):
-        forced, F = kernel(A, B, C, D, u, n_free)
-        if not (np.isfinite(forced).all() and np.isfinite(F).all()):
+        rows, tail, finite = kernel(A, B, C, D, u, y, weights, inv_scale, n_free)
+        if not (finite and np.isfinite(rows[:, :, :n]).all()):
             return None
-        if n == 0:
-            return forced
-        rows = np.empty((n_free, ny, n + 1))
-        rows[:, :, :n] = F * weights[None, :, None]
-        rows[:, :, n] = (y[:n_free] - forced[:n_free]) * weights
-        R = scipy.linalg.qr(rows.reshape(-1, n + 1), mode="r", check_finite=False)[0]
-    # the minimum-norm lstsq of simulate_fit, with its cut-off
-    cut = np.finfo(float).eps * max(N * ny, n)
-    Rn = np.zeros((n, n + 1))
-    Rn[:min(R.shape[0], n)] = R[:n]
-    x0 = np.linalg.lstsq(Rn[:, :n], Rn[:, n], rcond=cut)[0]
-    out = forced.copy()
-    out[:n_free] += F @ x0
-    return out if np.isfinite(out).all() else None
+        if n_free == 0:                 # no state (free_length is 0 for n = 0)
+            return tail
+        flat = rows.reshape(-1, n + 1)
+        R = scipy.linalg.qr(flat, mode="r", check_finite=False)[0]
+        # the minimum-norm lstsq of simulate_fit, with its cut-off
+        cut = np.finfo(float).eps * max(N * ny, n)
+        Rn = np.zeros((n, n + 1))
+        Rn[:min(R.shape[0], n)] = R[:n]
+        x0 = np.linalg.lstsq(Rn[:, :n], Rn[:, n], rcond=cut)[0]
+        # the weighted residual of the x0 regression, back in the units of the score
+        head = (flat[:, n] - flat[:, :n] @ x0).reshape(n_free, ny) * (inv_scale / weights)
+        if not np.isfinite(head).all():
+            return None
+        return tail + np.sum(head ** 2, axis=0)
 
 
 class Held:
@@ -170,29 +197,31 @@ class Held:
         self.weights = 1.0 / np.where(std > 0, std, 1.0)
         self.scale = np.abs(y_all).max(axis=0)
         self.scale[self.scale == 0] = 1.0
-        self.pieces = [(np.ascontiguousarray(validation.u[a:b], dtype=float), y_all[a:b],
-                        y_all[a:b] / self.scale) for a, b in validation.experiment_ranges]
+        self.pieces = [(np.ascontiguousarray(validation.u[a:b], dtype=float),
+                        np.ascontiguousarray(y_all[a:b], dtype=float))
+                       for a, b in validation.experiment_ranges]
         self.dev2 = np.zeros(y_all.shape[1])
-        for _, _, ys in self.pieces:
+        for _, y in self.pieces:
+            ys = y / self.scale
             self.dev2 += np.sum((ys - ys.mean(axis=0)) ** 2, axis=0)
 
 
-def simulation_fit(A, B, C, D, validation, *, kernel=forced_and_free):
+def simulation_fit(A, B, C, D, validation, *, kernel=forced_error):
     """Simulation fit (%) per output of the discrete model ``(A, B, C, D)`` on
     ``validation`` (an IOData record or its :class:`Held`) with x0 by least
     squares: ``fit_percent(model, validation)`` to rounding (see the module
     documentation), or None when the simulation overflows or an output is
-    constant. ``kernel``: :func:`forced_and_free` or its reference."""
+    constant. ``kernel``: :func:`forced_error` or its reference."""
     held = validation if isinstance(validation, Held) else Held(validation)
     if np.any(held.dev2 == 0):
         return None
     A, B, C, D = (np.ascontiguousarray(M, dtype=float) for M in (A, B, C, D))
     err2 = np.zeros(held.dev2.shape)
-    for u, y, ys in held.pieces:
-        y_hat = _simulated(A, B, C, D, u, y, held.weights, kernel)
-        if y_hat is None:
+    inv_scale = 1.0 / held.scale
+    for u, y in held.pieces:
+        power = _error_power(A, B, C, D, u, y, held.weights, inv_scale, kernel)
+        if power is None:
             return None
-        with np.errstate(all="ignore"):         # a huge error gives an infinite misfit
-            err2 += np.sum((ys - y_hat / held.scale) ** 2, axis=0)
+        err2 += power
     with np.errstate(all="ignore"):
         return 100.0 * (1.0 - np.sqrt(err2) / np.sqrt(held.dev2))

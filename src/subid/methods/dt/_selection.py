@@ -70,6 +70,23 @@ The final model is then fitted to the whole record with the chosen order
 and horizon, by the same code path as an explicit call, so that
 ``method(data, order=model.order, horizon=model.info['horizon'])``
 reproduces it exactly.
+
+**Cost.** Shared by the candidates: one statistic per fold and horizon (merged
+from the lagged products of four blocks where exact, :func:`fold_factors`), one
+factorisation and SVD per fold for every order, the feedthrough decision per
+fold (every channel's F-tests from one factorisation per regressor set), the
+validation records' weights and spreads once for every horizon. Per candidate:
+its A and C, one B, D, x0 regression on its training fold (the modal normal
+equations, a pass over the fold) and one compiled simulation of its validation
+block (:mod:`subid.methods.dt._scoring`); an unstable A that ``stability='auto'``
+would not keep is not fitted (:mod:`subid.methods.dt._residual_bound`). The
+regression cannot be shared between orders: each order has its own A, hence its
+own regressors (the impulse responses ``C A^k`` of the model), so the default
+call costs about ``candidates x folds`` passes over the record where a pinned call
+costs one: measured (``bench/run.py --selection-only``, 2x2 order-4 system, 20 dB,
+three runs) 8-10x the pinned call at 10^3-10^4 samples (where the pinned call
+cross-validates its two estimators), 46-54x at 10^5 and 11-15x at 10^6 (the folds
+use at most :data:`MAX_SELECTION_SAMPLES`).
 """
 
 from __future__ import annotations
@@ -204,7 +221,7 @@ def _fit_score_record(model, validation) -> float:
     return max(value, FLOOR) if math.isfinite(value) else FLOOR
 
 
-def score_horizon(parts, orders, horizon, *, prepare_fold, builds):
+def score_horizon(parts, orders, horizon, *, prepare_fold, builds, held=None):
     """Fold scores of every candidate order at one horizon.
 
     Per fold, one problem (one statistic, by cost: the lagged products merged from
@@ -231,6 +248,9 @@ def score_horizon(parts, orders, horizon, *, prepare_fold, builds):
         option), the folds' factors are merged from the blocks' statistics and passed
         as ``factor`` (:func:`fold_factors`); without them, each fold builds its own.
     builds : dict ``name -> callable (Problem with a fixed order) -> StateSpace``
+    held : list of :class:`subid.methods.dt._scoring.Held`, optional
+        What the scores need from each validation record (computed here when not
+        given; :func:`cross_validate` computes it once for every horizon).
 
     Returns
     -------
@@ -244,10 +264,11 @@ def score_horizon(parts, orders, horizon, *, prepare_fold, builds):
     per_fold = {(n, v): [] for n in orders for v in range(len(names))}
     repaired = {(n, v): 0 for n in orders for v in range(len(names))}
     factors = fold_factors(parts, horizon, prepare_fold)
-    for (train, validation), factor in zip(parts, factors):
+    if held is None:                      # what every candidate's score needs, once
+        held = [Held(validation) for _, validation in parts]
+    for (train, _), factor, held_out in zip(parts, factors, held):
         problem = prepare_fold(train, orders, horizon, factor=factor) if factor is not None \
             else prepare_fold(train, orders, horizon)
-        held = Held(validation)           # what every candidate's score needs, once
         for n in orders:
             for v, name in enumerate(names):
                 try:
@@ -255,7 +276,7 @@ def score_horizon(parts, orders, horizon, *, prepare_fold, builds):
                         warnings.simplefilter("ignore")
                         model = builds[name](replace(problem, order=n, candidates=[n],
                                                      fold=True))
-                    value = _fit_score(model, held)
+                    value = _fit_score(model, held_out)
                     repaired[(n, v)] += stabilised(model)
                 except SubidError:
                     value = FLOOR
@@ -363,7 +384,9 @@ def cross_validate(data, fixed, candidates, horizon, *, prepare_fold, builds):
     horizons = [horizon] if horizon is not None else feasible_horizons(
         n_train, n_in, n_out, blocks, max(wanted),
         n_experiments=n_exp_train, reveal_all=fixed is not None)
+    from subid.methods.dt._scoring import Held
     names = list(builds)
+    held = [Held(validation) for _, validation in parts]     # once for every horizon
     scores, fold_scores, stabilised_folds = {}, {}, {}
     searched = []              # (orders, horizons) of every block of candidates scored
     ceiling = None
@@ -373,7 +396,7 @@ def cross_validate(data, fixed, candidates, horizon, *, prepare_fold, builds):
             if not orders:
                 continue
             per_fold, repaired = score_horizon(parts, orders, f, prepare_fold=prepare_fold,
-                                               builds=builds)
+                                               builds=builds, held=held)
             for (n, v), values in per_fold.items():
                 fold_scores[(n, f, v)] = values
                 scores[(n, f, v)] = float(np.mean(values))

@@ -18,20 +18,31 @@ from subid._validation import check_int
 from subid.data import IOData, column_std
 from subid.errors import (
     DataError,
-    ExcitationWarning,
-    NotExcitingError,
     OptionError,
     OrderError,
     SubidError,
     TooFewSamplesError,
     UnstableModelWarning,
 )
+from subid.methods._common import (  # noqa: F401 (names of this module's API)
+    CONDITION_KEYS,
+    CONDITION_WARN,
+    DEFAULT_HORIZON_UNKNOWN_ORDER,
+    RANK_TOL,
+    check_excitation,
+    choose_order,
+    conditions_of,
+    default_horizon,
+    gap_scores,
+    min_samples,
+    normalize_channels,
+    order_from_gap,
+)
+from subid.methods._common import parse_order as _parse_order
 from subid.methods._info import collect_warnings, model_info
-from subid.methods.dt._checks import check_data
-from subid.methods.dt._regression import fit_b_d_projection, fit_b_d_x0
-from subid.methods.dt._selection import SELECTION_RULES, cross_validate, default_gap_horizon
-from subid.methods.dt._stability import (  # noqa: F401 (names of this module's API)
+from subid.methods._stability import (  # noqa: F401 (names of this module's API)
     GROWTH_LIMIT,
+    KEEP_UNSTABLE_RATIO,
     STABILITY,
     STABLE_RADIUS,
     output_growth,
@@ -40,53 +51,14 @@ from subid.methods.dt._stability import (  # noqa: F401 (names of this module's 
     stability_request,
     stable_shift_invariance,
 )
+from subid.methods.dt._checks import check_data
+from subid.methods.dt._regression import fit_b_d_projection, fit_b_d_x0
+from subid.methods.dt._selection import SELECTION_RULES, cross_validate, default_gap_horizon
 from subid.model.statespace import StateSpace
 from subid.statistic._hankel import HankelFactor
 from subid.statistic.hankel import HankelStatistic
 
-# A diagonal entry of the input block of the Hankel factor below this fraction
-# of the largest one marks a linearly dependent Hankel row.
-RANK_TOL = 1e-10
-# Input-Hankel condition number above which identification warns.
-CONDITION_WARN = 1e7
-DEFAULT_HORIZON_UNKNOWN_ORDER = 10
-
-
 DEFAULT_MAX_ORDER = 10
-
-
-def default_horizon(order: int | None, n_outputs: int, n_inputs: int, n_samples: int,
-                    blocks_per_horizon: int) -> int:
-    """Horizon of the online and streamed identifiers when none is given.
-
-    ``max(5, ceil(order / n_outputs) + 2)`` with a known order; 10 (or the
-    largest horizon the record supports) otherwise. The batch methods choose
-    their horizon from the data instead (:mod:`subid.methods.dt._selection`).
-    """
-    if order is not None:
-        return max(5, math.ceil(order / n_outputs) + 2)
-    horizon = DEFAULT_HORIZON_UNKNOWN_ORDER
-    while horizon > 2 and n_samples < min_samples(horizon * blocks_per_horizon, n_inputs,
-                                                   n_outputs):
-        horizon -= 1
-    return horizon
-
-
-def min_samples(depth: int, n_inputs: int, n_outputs: int) -> int:
-    """Samples needed for a full-rank Hankel factor with ``depth`` block rows."""
-    return depth * (n_inputs + n_outputs) + depth - 1
-
-
-def _parse_order(order):
-    """``(fixed order or None, explicit candidate orders or None)``."""
-    if order is None or (isinstance(order, str) and order == "auto"):
-        return None, None
-    if isinstance(order, (str, bytes)) or not hasattr(order, "__iter__"):
-        return check_int(order, "order", minimum=1), None
-    candidates = sorted({check_int(k, "candidate order", minimum=1) for k in order})
-    if not candidates:
-        raise OrderError("the list of candidate orders is empty")
-    return None, candidates
 
 
 def check_order_horizon(order, horizon, data, *, method: str, blocks_per_horizon: int = 2):
@@ -149,78 +121,6 @@ def data_factor(data: IOData, depth: int, *, method: str, horizon: int,
     return HankelStatistic.from_data(data, depth, kind=statistic).factor()
 
 
-def check_excitation(hf: HankelFactor, input_names, *, method: str) -> float:
-    """Raise :class:`NotExcitingError` if the input Hankel rows are dependent.
-
-    The leading ``depth*nu`` rows of the factor are the factor of the input
-    block-Hankel matrix alone; a negligible diagonal entry marks the first
-    input row that is a combination of the earlier ones.
-
-    Returns
-    -------
-    float
-        Estimated 1-norm condition number of the input block-Hankel factor.
-    """
-    nu, depth = hf.n_inputs, hf.depth
-    Lu = hf.L[: depth * nu, : depth * nu]
-    # Each diagonal entry relative to the norm of its row is the sine of the
-    # angle between that Hankel row and the span of the earlier ones: the
-    # decision does not depend on how the input channels are scaled.
-    norms = np.linalg.norm(Lu, axis=1)
-    scale = norms.max(initial=0.0)
-    d = np.abs(np.diag(Lu)) / np.where(norms > 0, norms, 1.0)
-    dependent = np.flatnonzero((d <= RANK_TOL) | (norms == 0)) if scale > 0 \
-        else np.arange(d.size)
-    if dependent.size:
-        k = int(dependent[0])
-        achieved = k // nu
-        channel = input_names[k % nu]
-        if scale == 0:
-            what = "the input is identically zero"
-        elif achieved == 0:
-            what = f"input {channel} is a combination of the other inputs"
-        else:
-            what = (f"input {channel} at lag {achieved} is a linear combination of earlier "
-                    "input samples")
-        raise NotExcitingError(
-            f"{method}: the input is not sufficiently exciting: {what}. The method needs an "
-            f"input persistently exciting of order {depth} (its block-Hankel matrix with "
-            f"{depth} block rows must have full row rank {depth * nu}); these data are "
-            f"exciting of order {achieved} only. Use a richer input (white noise, PRBS, "
-            "multisine) or a smaller horizon",
-            required_order=depth, achieved_order=achieved)
-    Ln = Lu / norms[:, None]                      # condition of the row-normalised factor
-    rcond = scipy.linalg.lapack.dtrcon(np.ascontiguousarray(Ln.T), norm="1", uplo="U",
-                                       diag="N")[0]
-    cond = 1.0 / rcond if rcond > 0 else math.inf
-    if cond > CONDITION_WARN:
-        warnings.warn(f"{method}: the input block-Hankel matrix is ill-conditioned "
-                      f"(condition ~{cond:.1e}); the input barely excites order {depth} and "
-                      "the model may be unreliable", ExcitationWarning, stacklevel=3)
-    return float(cond)
-
-
-def gap_scores(values, candidates) -> dict:
-    """Gap after each candidate order of a decreasing profile (log10 scale).
-
-    ``values`` are singular values, or the pivots of an SVD-free rank
-    profile; the gap after position ``k`` is
-    ``log10(min(values[:k])) - log10(max(values[k:]))``.
-    """
-    v = np.abs(np.asarray(values, dtype=float))
-    floor = max(v.max(initial=0.0), 1e-300) * np.finfo(float).eps * v.size
-    logv = np.log10(np.maximum(v, floor))
-    return {k: float(logv[:k].min() - logv[k:].max()) for k in candidates if k < v.size}
-
-
-def order_from_gap(values, candidates) -> int:
-    """Order at the largest gap of a decreasing profile (:func:`gap_scores`)."""
-    gaps = gap_scores(values, candidates)
-    if not gaps:
-        return candidates[0]
-    return max(gaps, key=lambda k: (gaps[k], -k))
-
-
 def shift_invariance(gamma: np.ndarray, n_outputs: int):
     """A and C from an extended observability matrix by shift invariance.
 
@@ -254,7 +154,7 @@ def output_weights(y: np.ndarray) -> np.ndarray:
 
 
 def estimate_b_d(A, C_n, gamma, L11, L_yu, problem: "Problem", *, bd_method: str,
-                 feedthrough: bool, estimate_x0: bool):
+                 feedthrough: bool, estimate_x0: bool, worse_than: float | None = None):
     """B, D (and x0) given A and C: by output regression or by projection.
 
     ``C_n``, ``gamma``, ``L11`` and ``L_yu`` are in the units of the
@@ -268,6 +168,12 @@ def estimate_b_d(A, C_n, gamma, L11, L_yu, problem: "Problem", *, bd_method: str
     projection when simulating overflows or leaves the regression
     numerically singular, or when the data are a :class:`HankelStatistic`
     (no raw samples).
+
+    ``worse_than`` (``bd_method='auto'`` on one raw record): when the residual RMS
+    of the output regression is proven at least this from part of the record
+    (:func:`subid.methods.dt._residual_bound.loses`), no fit: ``(None, None, None,
+    {'bd_method': 'bound', 'residual_at_least': bound})`` (:func:`stable_choice` asks
+    so for the unstable A of a cross-validation fold, which then cannot be kept).
 
     Returns
     -------
@@ -286,6 +192,13 @@ def estimate_b_d(A, C_n, gamma, L11, L_yu, problem: "Problem", *, bd_method: str
     diag = {}
     if estimate_x0 and isinstance(data, IOData) and data.n_experiments > 1:
         check_experiment_lengths(data, A.shape[0])
+    if worse_than is not None and bd_method == "auto" and isinstance(data, IOData) \
+            and data.n_experiments == 1:
+        from subid.methods.dt._residual_bound import loses
+        bound = loses(A, C, data.u, data.y, worse_than, feedthrough=feedthrough,
+                      estimate_x0=estimate_x0, output_weights=problem.weights())
+        if bound is not None:
+            return None, None, None, {"bd_method": "bound", "residual_at_least": bound}
     if bd_method in ("auto", "simulation"):
         with np.errstate(over="ignore", invalid="ignore"):
             if second_pass is not None:
@@ -399,13 +312,8 @@ def cva_factor(y_perp: np.ndarray) -> np.ndarray:
     return scipy.linalg.qr(stacked, mode="r", check_finite=False)[0][:m]
 
 
-#: 'auto' keeps an unstable model only when its residual on the estimation data is
-#: below this fraction of the stabilised model's: the data demand the instability.
-KEEP_UNSTABLE_RATIO = 0.9
-
-
 def stable_choice(A_q, Q, n_outputs: int, fit, *, stability: str, data, method: str,
-                  refit_unstable=None):
+                  refit_unstable=None, bound_unstable: bool = False):
     """A in the orthonormal basis ``Q``, stable when that is right, with its B, D, x0.
 
     ``fit(A_q)`` returns ``(B, D, x0, diagnostics)`` for a given A (the
@@ -432,6 +340,14 @@ def stable_choice(A_q, Q, n_outputs: int, fit, *, stability: str, data, method: 
     given, B, D, x0 come from it instead (:func:`predictor_b_d`: the
     output-error regression is ill-posed for an unstable A), unless it
     returns None.
+
+    ``bound_unstable`` (the models of the cross-validation folds, whose ``info``
+    is not kept): under ``'auto'`` the unstable A is fitted only when it can be
+    kept: not when the stabilised fit has no residual to compare with, nor when
+    part of the record already proves its residual too large
+    (``fit(A_q, worse_than=...)``, :mod:`subid.methods.dt._residual_bound`). The
+    model is the same as with the full fit; ``record['residual_unstable']`` is then
+    missing (``'residual_unstable_at_least'`` holds the bound).
 
     Returns
     -------
@@ -462,10 +378,20 @@ def stable_choice(A_q, Q, n_outputs: int, fit, *, stability: str, data, method: 
                   spectral_radius_after=float(np.abs(np.linalg.eigvals(A_s)).max()))
     record["how"] += "; B, D, x0 refitted for the stable A"
     if stability == "auto":
-        fitted_u = fit(A_q)
+        r_s = fitted_s[3].get("residual_rms")
+        if bound_unstable:
+            if r_s is None or math.isnan(r_s):        # the unstable model cannot win
+                record.update(residual_stable=r_s)
+                return A_s, fitted_s, record
+            fitted_u = fit(A_q, worse_than=KEEP_UNSTABLE_RATIO * r_s)
+            if fitted_u[3].get("bd_method") == "bound":
+                record.update(residual_unstable_at_least=fitted_u[3]["residual_at_least"],
+                              residual_stable=r_s)
+                return A_s, fitted_s, record
+        else:
+            fitted_u = fit(A_q)
         r_u = fitted_u[3].get("residual_rms") if fitted_u[3].get("bd_method") == "simulation" \
             else None
-        r_s = fitted_s[3].get("residual_rms")
         record.update(residual_unstable=r_u, residual_stable=r_s)
         if r_u is not None and r_s is not None and math.isfinite(r_u) \
                 and r_u < KEEP_UNSTABLE_RATIO * r_s:
@@ -585,28 +511,6 @@ def future_past_factor(pb) -> np.ndarray:
         hf.u_rows(f, 2 * f), hf.u_rows(0, f), hf.y_rows(0, f), hf.y_rows(f, 2 * f)))
 
 
-def normalize_channels(hf: HankelFactor, outputs: bool):
-    """The factor of the data with every channel divided by its RMS.
-
-    Row ``r`` of ``L`` has norm ``sqrt(mean of the square of Hankel row r)``;
-    the first block row of each signal gives the channel RMS. Scaling rows of
-    ``H`` scales rows of ``L`` (``S H = (S L) Q^T``, still triangular), so this
-    costs nothing and makes the rank decisions of the methods independent of
-    the units of the channels. Outputs are left alone when ``outputs`` is
-    false (seed 001's selector Λ acts on the outputs in the user's units).
-    """
-    nu, ny, s = hf.n_inputs, hf.n_outputs, hf.depth
-    norms = np.linalg.norm(hf.L, axis=1)
-    su = norms[:nu].copy()
-    sy = norms[s * nu:s * nu + ny].copy() if outputs else np.ones(ny)
-    su[su == 0] = 1.0
-    sy[sy == 0] = 1.0
-    row_scale = np.concatenate([np.tile(su, s), np.tile(sy, s)])
-    scaled = HankelFactor(L=hf.L / row_scale[:, None], depth=s, n_inputs=nu, n_outputs=ny,
-                          n_columns=hf.n_columns)
-    return scaled, su, sy
-
-
 STATISTICS = ("auto", "qr", "gram")
 
 
@@ -652,20 +556,6 @@ def prepare(data, order, horizon, *, method: str, blocks_per_horizon: int = 2,
     input_condition = check_excitation(hf, data.input_names, method=method)
     hf, su, sy = normalize_channels(hf, outputs=normalize_outputs)
     return Problem(method, data, fixed, candidates, horizon, hf, input_condition, su, sy)
-
-
-def choose_order(fixed, candidates, profile, source: str):
-    """The fixed order, or the candidate at the largest gap of ``profile``.
-
-    Returns the order and the ``info['order_selection']`` record.
-    """
-    if fixed is not None:
-        return fixed, {"rule": "given"}
-    gaps = gap_scores(profile, candidates)
-    n = order_from_gap(profile, candidates)
-    return n, {"rule": "gap", "description": f"largest gap of the {source} (log10)",
-               "candidates": [{"order": k, "score": g} for k, g in gaps.items()],
-               "selected": {"order": n, "score": gaps.get(n)}}
 
 
 SYSTEM_MATRICES = ("auto", "shift", "states")
@@ -911,17 +801,3 @@ def finish(problem: Problem, A, B, C, D, n: int, order_selection: dict, **info) 
     return StateSpace(A, B, C, D, data.dt, input_names=data.input_names,
                       output_names=data.output_names, info=info)
 
-
-#: Flat ``info`` keys of condition numbers -> their name in ``info['conditions']``.
-CONDITION_KEYS = {"input_condition": "input", "selector_condition": "selector",
-                  "regression_condition": "bd", "b_regression_condition": "bd",
-                  "condition": "ac", "bd_condition": "bd"}
-
-
-def conditions_of(info: dict, **given) -> dict:
-    """``info['conditions']`` from the flat condition keys of ``info`` (and ``given``)."""
-    out = dict(given)
-    for key, name in CONDITION_KEYS.items():
-        if info.get(key) is not None:
-            out.setdefault(name, info[key])
-    return out

@@ -324,10 +324,10 @@ def _ls_subspace(pb, *, instruments, selector, seed, estimate_x0, feedthrough,
         return finish(pb, A, T @ B_q, C, D, core.order, core.order_selection, **info, **extra,
                       feedthrough=ft_record)
 
-    def fit(A_try):
+    def fit(A_try, worse_than=None):
         return estimate_b_d(A_try, core.C_q, core.basis, core.L11, core.L_yu, pb,
                             bd_method=bd_method, feedthrough=feedthrough,
-                            estimate_x0=estimate_x0)
+                            estimate_x0=estimate_x0, worse_than=worse_than)
 
     def refit(A_try, fitted):       # an unstable A: B, D, x0 by the prediction-error form
         return predictor_b_d(A_try, core.C_q * pb.output_scale[:, None], fitted[0], fitted[1],
@@ -337,7 +337,7 @@ def _ls_subspace(pb, *, instruments, selector, seed, estimate_x0, feedthrough,
                                                    stability=stability, data=data,
                                                    method=method,
                                                    refit_unstable=refit if bd_method == "auto"
-                                                   else None)
+                                                   else None, bound_unstable=pb.fold)
     A, B, C, x0 = core.to_selector_basis(B_q, x0_q, A_q=A_q)
     C = C * pb.output_scale[:, None]
     info = core.info(instruments, instrument_weighting, power_iterations)

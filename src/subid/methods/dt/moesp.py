@@ -190,9 +190,10 @@ def _moesp(pb, *, weighting, stability, feedthrough, estimate_x0, bd_method,
     Q = scipy.linalg.qr(gamma, mode="economic", check_finite=False)[0]
     A, C, shift_residual = shift_invariance(Q, ny)
 
-    def fit(A_try):
+    def fit(A_try, worse_than=None):
         return estimate_b_d(A_try, C, Q, L[:a, :a], L[a + b:, :a], pb, bd_method=bd_method,
-                            feedthrough=feedthrough, estimate_x0=estimate_x0)
+                            feedthrough=feedthrough, estimate_x0=estimate_x0,
+                            worse_than=worse_than)
 
     def refit(A_try, fitted):       # an unstable A: B, D, x0 by the prediction-error form
         return predictor_b_d(A_try, C * pb.output_scale[:, None], fitted[0], fitted[1], pb,
@@ -201,7 +202,7 @@ def _moesp(pb, *, weighting, stability, feedthrough, estimate_x0, bd_method,
     A, (B, D, x0, reg), stab = stable_choice(A, Q, ny, fit, stability=stability, data=data,
                                              method="moesp",
                                              refit_unstable=refit if bd_method == "auto"
-                                             else None)
+                                             else None, bound_unstable=pb.fold)
     C = C * pb.output_scale[:, None]
     return finish(pb, A, B, C, D, n, order_selection, singular_values=s, weighting=weighting,
                   shift_residual=shift_residual, x0=x0, stability=stab,

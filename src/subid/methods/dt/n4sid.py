@@ -250,13 +250,13 @@ def state_model(pb, gamma, *, stability, feedthrough, estimate_x0, coefficients=
         Lr = future_past_factor(pb)
         a, b = i * nu, i * (nu + ny)
 
-        def fit(A_try):
+        def fit(A_try, worse_than=None):
             return estimate_b_d(A_try, C_q, Q, Lr[:a, :a], Lr[a + b:, :a], pb,
                                 bd_method="auto", feedthrough=feedthrough,
-                                estimate_x0=estimate_x0)
+                                estimate_x0=estimate_x0, worse_than=worse_than)
 
         A_q, fitted, stab = stable_choice(A_unstable, Q, ny, fit, stability=stability,
-                                          data=data, method=pb.method)
+                                          data=data, method=pb.method, bound_unstable=pb.fold)
         if stab["action"] == "enforced":
             # back from the basis Q to that of gamma (x = Rg^{-1} x_q)
             B_q, D, x0_q, extra = fitted

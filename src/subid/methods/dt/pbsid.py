@@ -179,7 +179,7 @@ def _pbsid(pb, *, stability, feedthrough, estimate_x0) -> StateSpace:
     ABK = _lstsq_rows(np.vstack([x, u_t, e]), x_next)
     A = ABK[:, :n]          # B (and K) again in fit(A), for the A finally kept
     resid = x_next - ABK @ np.vstack([x, u_t, e])
-    residual = float(np.linalg.norm(resid) / max(np.linalg.norm(x_next), 1e-300))
+    residual = float(np.linalg.norm(resid) / max(float(np.linalg.norm(x_next)), 1e-300))
 
     def fit(A_try):
         """B (and D, x0) for a given A from the state equation (K refitted with it)."""

@@ -288,8 +288,8 @@ def minimise_prediction_error(predictor, directions, dm, x0, v, y, ranges, W, ma
         mats_c = [np.ascontiguousarray(a) for a in predictor(z[:dm])]
         dirs = [np.ascontiguousarray(a) for a in directions(z[:dm])]
         x0s = initial(z)
-        if not fit_x0:             # the model directions only
-            dirs = [np.ascontiguousarray(a[:dm]) for a in dirs]
+        if not fit_x0 and blocks is None:     # the model directions only (the block
+            dirs = [np.ascontiguousarray(a[:dm]) for a in dirs]   # kernel needs all rows)
         yhat = np.empty((N, ny))
         J = np.zeros((N, ny, dm + n_x0))
         for e, (a, b) in enumerate(ranges):     # the x0 columns of experiment e only

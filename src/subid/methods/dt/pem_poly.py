@@ -54,11 +54,14 @@ import scipy.signal
 from subid._validation import check_bool, check_choice, check_optimiser_options, checked_call
 from subid.errors import SubidError
 from subid.methods._info import collect_warnings
+from subid.methods.dt._pem_kernel import jacobian
+from subid.methods.dt._poly_covariance import attach_covariance
 from subid.methods.dt.pem import (
     _predictor,
     _radius,
     _simulate_experiments,
     _start_x0,
+    block_jacobian,
     minimise_prediction_error,
 )
 from subid.methods.dt.polynomial import (
@@ -385,6 +388,7 @@ def _identify(structure, data, order, selection, estimate_x0, max_iterations, to
         orders, selection_record = structure_orders(order, structure, data)
         ranges = data.experiment_ranges
         records, fits, resid = [], [], np.empty_like(data.y)
+        designs, n_nuisance = [], []
         for i in range(ny):
             sub = _Output(structure, orders, i, nu)
             first = max(sub.na, sub.lb - 1, max(sub.nf), sub.nc, sub.nd)
@@ -401,10 +405,11 @@ def _identify(structure, data, order, selection, estimate_x0, max_iterations, to
                                          max_iterations=max_iterations, tolerance=tolerance)
             records.append(sub.record(theta))
             fits.append(fit)
-            Ap, Bp, Cp, Dp = sub.predictor(theta)
             v = np.hstack([data.u, data.y[:, i:i + 1]])
-            resid[:, i] = data.y[:, i] - _simulate_experiments(Ap, Bp, Cp, Dp, v, x0,
-                                                               ranges)[0][:, 0]
+            yhat, J = _sensitivities(sub, theta, x0, v, ranges, estimate_x0)
+            resid[:, i] = data.y[:, i] - yhat
+            designs.append(J)
+            n_nuisance.append(J.shape[1] - sub.size)
         poly = _stack(records, structure, orders)
         model = polynomial_model(
             data, poly, method=structure, order_selection=selection_record, residuals=resid,
@@ -416,10 +421,41 @@ def _identify(structure, data, order, selection, estimate_x0, max_iterations, to
             stop_reason=[f["stop_reason"] for f in fits],
             multi_output="one multi-input single-output model per output" if ny > 1
             else None)
+        attach_covariance(model, designs, resid, n_nuisance,
+                          "asymptotic prediction-error covariance lambda (sum psi psi^T)^-1 "
+                          "per output (Ljung 1999, Theorem 9.1), the predictors' initial "
+                          "states eliminated, with the outputs' cross-covariances; mapped "
+                          "to the realisation's matrices")
         if not estimate_x0:
             model.info["x0"] = None
     model.info["warnings"] = list(issued)
     return model
+
+
+def _sensitivities(sub, theta, x0, v, ranges, estimate_x0):
+    """``(ŷ, J)`` of output ``sub`` at ``theta``: the one-step prediction (N,) and its
+    derivatives (N, n_x0 + sub.size), the initial states' columns first (one block
+    per experiment; none when they are not estimated), then the coefficients'."""
+    mats = [np.ascontiguousarray(a) for a in sub.predictor(theta)]
+    dirs = [np.ascontiguousarray(a) for a in sub.directions(theta)]
+    d = sub.size
+    n = mats[0].shape[0]
+    n_x0 = len(ranges) * n if estimate_x0 else 0
+    x0 = np.asarray(x0, dtype=float).reshape(len(ranges), n)
+    blocks = sub.blocks()
+    yhat = np.empty(v.shape[0])
+    J = np.zeros((v.shape[0], n_x0 + d))
+    for e, (a, b) in enumerate(ranges):
+        ve, xe = np.ascontiguousarray(v[a:b]), np.ascontiguousarray(x0[e])
+        if blocks is None:
+            ye, Je = jacobian(*mats, ve, xe, *dirs)
+        else:
+            ye, Je = block_jacobian(mats, ve, xe, dirs, blocks, d)
+        yhat[a:b] = ye[:, 0]
+        J[a:b, n_x0:] = Je[:, 0, :d]
+        if estimate_x0:
+            J[a:b, e * n:(e + 1) * n] = Je[:, 0, d:]
+    return yhat, J
 
 
 

@@ -44,6 +44,7 @@ from subid.errors import (
 from subid.methods._info import collect_warnings, model_info
 from subid.methods.dt import _subspace
 from subid.methods.dt._checks import check_data
+from subid.methods.dt._poly_covariance import attach_covariance
 from subid.methods.dt._selection import (
     ABSOLUTE_TOLERANCE,
     MAX_ORDER,
@@ -51,11 +52,12 @@ from subid.methods.dt._selection import (
     experiment_folds,
     folds,
 )
-from subid.model.polynomial import polynomial_record, realise
+from subid.model.polynomial import coefficients, polynomial_record, realise
 from subid.model.statespace import StateSpace
 
 __all__ = ["arx", "parse_orders", "structure_orders", "fit_arx", "ORDER_NAMES",
-           "polynomial_model", "check_polynomial_data", "regress", "select_structure"]
+           "polynomial_model", "check_polynomial_data", "regress", "lagged",
+           "select_structure"]
 
 #: The orders of each structure, in MATLAB's order.
 ORDER_NAMES = {"arx": ("na", "nb", "nk"), "armax": ("na", "nb", "nc", "nk"),
@@ -159,6 +161,20 @@ def parse_orders(order, structure: str, ny: int, nu: int, nk_default=None) -> di
     return out
 
 
+def lagged(blocks, ranges, first: int):
+    """``(Phi, t)``: the regressor matrix of lagged signals and the sample of each row.
+
+    ``blocks`` is a list of ``(signal, lags)`` (1-D signal, iterable of lags
+    >= 0); the rows are ``t = a + first .. b - 1`` of every experiment
+    ``(a, b)`` of ``ranges``, column ``(s, lag)`` holding ``s[t - lag]``.
+    """
+    cols = [(s, lag) for s, lags in blocks for lag in lags]
+    times = [np.arange(a + first, b) for a, b in ranges if b - a > first]
+    t = np.concatenate(times) if times else np.zeros(0, dtype=np.int64)
+    Phi = np.column_stack([s[t - lag] for s, lag in cols]) if cols else np.zeros((t.size, 0))
+    return Phi, t
+
+
 def regress(target: np.ndarray, blocks, ranges, first: int):
     """Least squares of ``target[t]`` on lagged signals, experiment by experiment.
 
@@ -167,17 +183,8 @@ def regress(target: np.ndarray, blocks, ranges, first: int):
     ``ranges``. Returns ``theta, residual (full length, NaN before first),
     R`` (the triangular factor of the regressors, for rank decisions).
     """
-    cols = [(s, lag) for s, lags in blocks for lag in lags]
-    rows, tgt = [], []
-    for a, b in ranges:
-        if b - a <= first:
-            continue
-        t = np.arange(a + first, b)
-        rows.append(np.column_stack([s[t - lag] for s, lag in cols]) if cols
-                    else np.zeros((t.size, 0)))
-        tgt.append(target[t])
-    Phi = np.vstack(rows)
-    T = np.concatenate(tgt)
+    Phi, times = lagged(blocks, ranges, first)
+    T = target[times]
     R = scipy.linalg.qr(np.column_stack([Phi, T]), mode="r", check_finite=False)[0]
     m = Phi.shape[1]
     R = R[:m + 1, :m + 1]
@@ -187,13 +194,7 @@ def regress(target: np.ndarray, blocks, ranges, first: int):
     theta = scipy.linalg.lstsq(R[:m, :m], R[:m, m], lapack_driver="gelsy", cond=RANK_TOL,
                                check_finite=False)[0] if m else np.zeros(0)
     resid = np.full(target.shape[0], np.nan)
-    at = 0
-    for a, b in ranges:
-        if b - a <= first:
-            continue
-        t = np.arange(a + first, b)
-        resid[t] = T[at:at + t.size] - Phi[at:at + t.size] @ theta
-        at += t.size
+    resid[times] = T - Phi @ theta
     return theta, resid, R[:m, :m]
 
 
@@ -490,8 +491,33 @@ def arx(data, order=None, *, selection="cv", estimate_x0=True):
                                  rank_profile=reg["rank_profile"],
                                  orders={"na": orders["na"], "nb": orders["nb"],
                                          "nk": orders["nk"]})
+        _arx_covariance(model, data, orders)
         if not estimate_x0:
             model.info["x0"] = None
     model.info["warnings"] = list(issued)
     return model
+
+
+def _arx_covariance(model: StateSpace, data: IOData, orders: dict) -> StateSpace:
+    """``info['parameter_covariance']`` of an ARX model: ``Λ``-weighted ``(Φ^T Φ)^-1``
+    per output from the QR factor of each output's regressors (Ljung 1999, eq. 9.20;
+    :mod:`subid.methods.dt._poly_covariance`). The regressor of ``A[i, k]`` at lag
+    ``l`` is ``-y_k(t - l)``, of ``B[i, j]`` at lag ``l`` ``u_j(t - l)``."""
+    ny, nu = data.n_outputs, data.n_inputs
+    na, nb, nk = orders["na"], orders["nb"], orders["nk"]
+    first = _first(orders)
+    designs, times = [], None
+    for i in range(ny):
+        blocks = [(-data.y[:, k], range(1, na[i, k] + 1)) for k in range(ny)]
+        blocks += [(data.u[:, j], range(nk[i, j], nk[i, j] + nb[i, j])) for j in range(nu)]
+        Phi, times = lagged(blocks, data.experiment_ranges, first)
+        designs.append(Phi)
+    residuals = data.y[times] - np.column_stack(
+        [Phi @ c for Phi, c in zip(designs, np.split(coefficients(model.info["polynomials"]),
+                                                       np.cumsum([J.shape[1]
+                                                                  for J in designs])[:-1]))])
+    return attach_covariance(model, designs, residuals, [0] * ny,
+                             "least-squares covariance, per output Lambda_ii (Phi_i^T "
+                             "Phi_i)^-1 with the outputs' cross-covariances (Ljung 1999, "
+                             "eq. 9.20), mapped to the realisation's matrices")
 

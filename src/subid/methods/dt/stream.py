@@ -155,9 +155,9 @@ def identify_stream(pieces, method: str = "moesp", order=None, horizon=None, *,
         else:
             _check_piece(piece, first, k)
         if e != experiment:
-            stat.new_experiment()
+            stat.new_experiment()  # type: ignore[union-attr]  # made with the first piece
             experiment = e
-        stat.update(piece.u, piece.y)
+        stat.update(piece.u, piece.y)  # type: ignore[union-attr]
     if stat is None:
         raise DataError("the record is empty: no pieces to identify from")
     if options.get("bd_method", "auto") != "projection":
@@ -212,7 +212,7 @@ def attach_second_pass(stat: HankelStatistic, make_chunks=None, *, groups=None
     else:
         regression = OutputRegression(sequential(make_chunks), 1, stat.n_inputs,
                                       stat.n_outputs)
-    stat.output_regression = regression
+    stat.output_regression = regression  # type: ignore[attr-defined]  # read by the B/D pass
     return stat
 
 
@@ -246,6 +246,126 @@ def identify_file(path, inputs, outputs, *, dt=None, method: str = "moesp", orde
     finally:
         for f in files:
             f.close()
+
+
+class SpooledFit:
+    """What :func:`identify_spooled` returns: the model, the first samples of the
+    estimation and validation parts (``est``, ``val``: IOData or None), the record's
+    length ``n_samples``, its first piece ``first`` (channel names, dt), the samples
+    of the statistic ``n_estimation``, the offsets removed ``u_mean``, ``y_mean`` and
+    the ``seconds`` the statistic and the method took."""
+
+    def __init__(self, **fields):
+        self.__dict__.update(fields)
+
+
+def identify_spooled(pieces, fit, method: str, order, horizon, *, detrend: str,
+                     validate: float, report_samples: int, options: dict, on_step=None,
+                     call=None):
+    """A streamed identification with its estimation/validation cut, in three passes
+    over a :class:`ParsedOnce` record (what ``subid identify --stream`` runs).
+
+    Pass 1 counts the samples and sums the channels (for the means and the cut at
+    ``1 - validate`` of the record); pass 2 feeds the estimation part, means removed
+    (``detrend='constant'``) or not (``'none'``), to a :class:`HankelStatistic`, in
+    :data:`SPOOL_GROUPS` consecutive stretches reduced on subid's threads and merged
+    exactly; ``fit(stat, order, horizon=..., **options)`` then identifies from it, with
+    the B, D, x0 regression as a third pass (:func:`attach_second_pass`; not with
+    ``bd_method='projection'``), so the model is the in-memory one. Only the first
+    ``report_samples`` samples of each part are read once more (``est``, ``val``).
+
+    Parameters
+    ----------
+    pieces : ParsedOnce
+        The record, parsed once.
+    fit : callable
+        The method's function (``spec.load()`` of a streaming method).
+    method : str
+        Its registry name (for the statistic's depth).
+    order, horizon
+        As given to the method (``horizon`` None: chosen as the statistic allows).
+    detrend : {'constant', 'none'}
+        Whether the means of the record are removed.
+    validate : float
+        Share of the record, at its end, kept for validation.
+    report_samples : int
+        Samples of each part read back for the fit and the report.
+    options : dict
+        Keyword arguments of the method.
+    on_step : callable, optional
+        ``on_step(name)`` when the 'identify' and 'evaluate' steps begin.
+    call : callable, optional
+        ``call(fit, stat, order, horizon, options)`` runs the method (default: the
+        plain call); the command line passes one that logs its warnings.
+
+    Returns
+    -------
+    SpooledFit
+
+    Raises
+    ------
+    DataError
+        The record holds no samples.
+    """
+    import functools
+    import time
+
+    from subid._threads import ordered_map
+    from subid.data import column_sums
+    step = on_step or (lambda name: None)
+    n, first = 0, None
+    total_u: float | np.ndarray = 0.0         # the column sums, from the first piece on
+    total_y: float | np.ndarray = 0.0
+    for piece in pieces:
+        if first is None:
+            first = piece
+        n += piece.n_samples
+        total_u = total_u + column_sums(piece.u)
+        total_y = total_y + column_sums(piece.y)
+    if first is None:
+        raise DataError("the record holds no samples")
+    u_mean = total_u / n if detrend == "constant" else np.zeros(first.n_inputs)
+    y_mean = total_y / n if detrend == "constant" else np.zeros(first.n_outputs)
+    cut = n - int(round(validate * n)) if validate > 0 else n
+    hor, depth = statistic_depth(method, order if isinstance(order, int) else None,
+                                 horizon, first.n_outputs, options.get("instruments", "past"))
+
+    def statistic(read):
+        part = HankelStatistic(first.n_inputs, first.n_outputs, depth, kind="gram",
+                               dt=first.dt, input_names=first.input_names,
+                               output_names=first.output_names)
+        for u, y in read():
+            part.update(u, y)
+        return part
+
+    step("identify")
+    t0 = time.perf_counter()
+    # pass 2: the statistic of the estimation part, means removed, from the spooled
+    # doubles in consecutive stretches on subid's threads (merged exactly)
+    stretches = pieces.groups(SPOOL_GROUPS, stop=cut, offsets=(u_mean, y_mean))
+    stat = functools.reduce(HankelStatistic.merge, ordered_map(statistic, stretches))
+    if options.get("bd_method", "auto") != "projection":
+        # pass 3 (issue 14): B, D, x0 by the output regression of the in-memory default
+        attach_second_pass(stat, groups=stretches)
+    if call is None:
+        model = fit(stat, order, horizon=hor, **options)
+    else:
+        model = call(fit, stat, order, hor, options)
+    seconds = time.perf_counter() - t0
+
+    def sample(start, stop):
+        """The first ``report_samples`` samples of a part, for the fit and the report."""
+        stop = min(stop, start + report_samples)
+        if stop <= start:
+            return None
+        chunks = list(pieces.ranges([(start, stop)], offsets=(u_mean, y_mean))[0]())
+        return IOData(np.vstack([u for u, _ in chunks]), np.vstack([y for _, y in chunks]),
+                      dt=first.dt, input_names=first.input_names,
+                      output_names=first.output_names)
+    step("evaluate")
+    return SpooledFit(model=model, est=sample(0, cut), val=sample(cut, n), n_samples=n,
+                      first=first, n_estimation=stat.n_samples, u_mean=u_mean,
+                      y_mean=y_mean, seconds=seconds)
 
 
 class _Experiments:

@@ -3,8 +3,10 @@
 :func:`subspace`, the projected and noise-weighted SVD of McKelvey, Akçay & Ljung
 (1996, Algorithm 2; see :mod:`subid.methods.fd.fd_subspace`), :func:`system_pair`
 (A, C by shift invariance), :func:`finish` (back to continuous time, B and D by
-least squares) and :func:`noise_variance` (the noise level of the weighting,
-estimated from a preliminary fit when the data do not give it). Stability
+least squares), :func:`noise_variance` (the noise level of the weighting,
+estimated from a preliminary fit when the data do not give it) and
+:func:`variance_model` (the noise variance ``a + b |G|^2`` fitted to a
+model's residuals, the weighting of :func:`subid.pem` on frequency data). Stability
 handling and order selection live in :mod:`subid.methods.fd.fd_subspace`; this
 module imports nothing from the discrete-time methods, so that
 :mod:`subid.methods.fd.fd_pem` (reached from :func:`subid.pem`) can use it.
@@ -17,13 +19,14 @@ import warnings
 
 import numpy as np
 import scipy.linalg
+import scipy.optimize
 
 from subid.errors import DataError, OrderError, SubidError
 from subid.frdata import FRData
 from subid.methods.fd import _frequency as fq
 
 __all__ = ["Problem", "default_horizon", "subspace", "system_pair", "finish",
-           "noise_variance", "NOISE_WINDOW"]
+           "noise_variance", "NOISE_WINDOW", "variance_model", "MIN_NOISE_FREQUENCIES"]
 
 
 def default_horizon(largest_order: int, n_outputs: int) -> int:
@@ -132,6 +135,55 @@ def finish(problem: Problem, A_d, C_d, feedthrough: bool):
 #: Frequencies (at most; odd) of the moving average that smooths the squared residuals
 #: of the preliminary fit into a noise variance (:func:`noise_variance`).
 NOISE_WINDOW = 15
+#: Fewest frequencies from which :func:`variance_model` is fitted (two parameters per
+#: channel pair).
+MIN_NOISE_FREQUENCIES = 20
+#: Iterations of the reweighted least squares of :func:`variance_model`.
+VARIANCE_ITERATIONS = 50
+
+
+def variance_model(G, G_hat):
+    """The noise variance ``a_ij + b_ij |G_hat_ij(w)|^2`` fitted to the residuals of a
+    consistent model, ``(var (M, p, m), (a, b))``.
+
+    Noise model: the measured ``G_k = G0_k + V_k`` with ``V_k`` circular complex
+    Gaussian, independent over frequencies, of variance ``v_k = a + b |G0_k|^2``
+    per channel pair: a floor ``a`` (additive output noise of a flat-spectrum
+    test: equal variance at every frequency) plus a part proportional to the
+    response (``b``: the noise of a spectral estimate, ``var G = |G|^2 (1 -
+    γ²) / (2 n γ²)`` at constant coherence ``γ²``, Ljung 1999, eq. 6.59;
+    a relative calibration error). Then ``|r_k|^2 = |G_k - G_hat_k|^2`` is
+    ``v_k`` times a unit exponential variable, and maximum likelihood over ``a,
+    b >= 0`` (``min Σ ln v_k + |r_k|^2 / v_k``) is the gamma regression with
+    identity link: iteratively reweighted non-negative least squares of
+    ``|r_k|^2`` on ``[1, |G_hat_k|^2]`` with weights ``1 / v_k``
+    (McCullagh & Nelder, *Generalized Linear Models*, 1989, Sec. 2.5 and 8.3).
+    The maximum-likelihood weighting of the response fit is ``1 / sqrt(v)``
+    (Pintelon & Schoukens 2012, Ch. 9).
+    """
+    r = np.abs(G - G_hat) ** 2
+    x = np.abs(G_hat) ** 2
+    M, p, m = r.shape
+    var = np.empty_like(r)
+    coef = np.zeros((p, m, 2))
+    for i in range(p):
+        for j in range(m):
+            ri, xi = r[:, i, j], x[:, i, j]
+            floor = max(float(ri.mean()), 1e-300)
+            ab = np.array([floor, 0.0])
+            X = np.column_stack([np.ones(M), xi])
+            for _ in range(VARIANCE_ITERATIONS):
+                v = np.maximum(X @ ab, 1e-12 * floor)
+                new = scipy.optimize.nnls(X / v[:, None], ri / v)[0]
+                if not np.any(new > 0):
+                    new = np.array([floor, 0.0])
+                done = np.allclose(new, ab, rtol=1e-6, atol=0)
+                ab = new
+                if done:
+                    break
+            coef[i, j] = ab
+            var[:, i, j] = np.maximum(X @ ab, 1e-12 * floor)
+    return var, coef
 
 
 def noise_variance(data: FRData, alpha, order: int, feedthrough: bool = True):

@@ -10,10 +10,25 @@ minimises the weighted nonlinear least-squares criterion
 Circuits Systems Signal Process. 21(1), 2002; MATLAB ``ssest`` on ``idfrd``
 data), with ``z_k = exp(i w_k dt)`` in discrete time and ``z_k = i w_k`` in
 continuous time. ``W`` is the data's ``weights``; without them ``1 / std``;
-without either, the inverse of the noise level estimated as
-:func:`subid.fd_subspace` estimates it (smoothed residuals of a preliminary
-fit), so that the criterion is the Gaussian likelihood of the noise; pass
-``weights=np.ones(n_freq)`` for the unweighted fit.
+without either, ``1 / sqrt(v)`` with the noise variance ``v = a + b |G_hat|^2``
+(per channel pair) fitted by maximum likelihood to the residuals of the
+starting model (:func:`subid.methods.fd._core.variance_model`), so that the
+criterion is the Gaussian likelihood of the noise whether it has equal
+variance at every frequency, is proportional to the response (a spectral
+estimate's) or both; pass ``weights=np.ones(n_freq)`` for the unweighted fit.
+
+Measured (``bench/frequency_acceptance.py``, seed-000 response, 5 % noise, 20
+runs from :func:`subid.fd_subspace` at order 4): under noise proportional to
+``|G|`` the relative RMS error ``|G - G_hat| / |G|`` after pem is 0.0073
+(0.0103 with the former weights, the moving average of the squared residuals
+of a preliminary fit that :func:`subid.fd_subspace` uses; 0.0062 with the true
+noise level as weights). The maximal error ``max |G - G_hat| / max |G|`` sits
+at the low-frequency end, where ``|G|`` and the relative noise are largest;
+pem lowers it in 10 of 20 runs, as many as with the true noise level as
+weights: where the start has a spurious slow pole near the lowest frequency
+(the true system has two close poles, -1.24 and -1.68), the search ends in
+that local minimum. Under noise of equal variance pem lowers it in 17 of 20
+(also with the true level).
 
 Parametrisation. Continuous time is scaled in frequency: with α the geometric
 mean of the smallest and largest positive frequency,
@@ -48,9 +63,8 @@ from subid._validation import check_optimiser_options, same_period
 from subid.delay import frequency_factor, input_delay_of
 from subid.errors import DataError, ModelError, NoiseModelWarning, OptionError
 from subid.frdata import FRData
-from subid.methods.dt._selection import MAX_ORDER
 from subid.methods.fd import _frequency as fq
-from subid.methods.fd._core import noise_variance
+from subid.methods.fd._core import MIN_NOISE_FREQUENCIES, variance_model
 from subid.model.statespace import StateSpace
 
 __all__ = ["fd_pem"]
@@ -192,23 +206,34 @@ def _round(crit: _Criterion, A, B, C, D, max_nfev, tolerance, start_residual, hi
     return crit.unpack(theta0 + basis @ res.x, n), res
 
 
-def _criterion_weights(data: FRData):
-    """The weights of the criterion and what they are: the data's ``weights``;
-    else ``1 / std``; else the inverse of the noise level that
-    :func:`subid.methods.fd._core.noise_variance` estimates (the same
-    noise model as :func:`subid.fd_subspace`): with weights proportional to
-    the inverse noise standard deviation the criterion is the Gaussian
-    likelihood (Pintelon & Schoukens 2012, Ch. 9)."""
+def _criterion_weights(data: FRData, start_response):
+    """The weights of the criterion, what they are and the fitted noise model.
+
+    The data's ``weights``; else ``1 / std``; else ``1 / sqrt(v)`` with the
+    noise variance ``v = a + b |G_hat|^2`` per channel pair fitted by maximum
+    likelihood to the residuals of the starting model ``G - G_hat``
+    (:func:`subid.methods.fd._core.variance_model`): with weights equal to the
+    inverse noise standard deviation the criterion is the Gaussian likelihood
+    (Pintelon & Schoukens 2012, Ch. 9), for noise of equal variance (``b = 0``),
+    proportional to the response (``a = 0``, a spectral estimate's) or both.
+    The start must be a consistent estimate (e.g. :func:`subid.fd_subspace`'s);
+    for another start give ``std`` or ``weights``.
+    """
     if data.weights is not None:
-        return data.fit_weights(), "the data's weights"
+        return data.fit_weights(), "the data's weights", None
     if data.std is not None:
         std = np.maximum(data.std, 1e-12 * max(float(data.std.max()), 1e-300))
-        return 1.0 / std, "1 / std"
-    alpha = fq.frequency_scale(data.w) if data.dt == 0 else None
-    var, record = noise_variance(data, alpha, MAX_ORDER)
-    if record["source"].startswith("constant"):
-        return np.ones(data.response.shape), "none"
-    return 1.0 / np.sqrt(var), "1 / estimated noise level"
+        return 1.0 / std, "1 / std", None
+    G = data.response
+    ones = np.ones(G.shape)
+    if G.shape[0] < MIN_NOISE_FREQUENCIES:
+        return ones, "none (too few frequencies to estimate the noise level)", None
+    if math.sqrt(np.mean(np.abs(G - start_response) ** 2)) \
+            <= 1e-9 * math.sqrt(np.mean(np.abs(G) ** 2)):
+        return ones, "none (the start fits the data to rounding)", None
+    var, coef = variance_model(G, start_response)
+    return 1.0 / np.sqrt(var), ("1 / estimated noise level (a + b |G|^2 per channel pair, "
+                                "fitted to the start's residuals)"), coef
 
 
 def fd_pem(data, model, *, max_iterations=100, tolerance=1e-8, rounds=3, feedthrough=None):
@@ -218,8 +243,8 @@ def fd_pem(data, model, *, max_iterations=100, tolerance=1e-8, rounds=3, feedthr
     ----------
     data : FRData
         The measured response. Its ``weights`` weight the fit; without them
-        ``1 / std``, else the inverse of the estimated noise level (see the
-        module documentation).
+        ``1 / std``, else the inverse of the noise level estimated from the
+        start's residuals (see the module documentation).
     model : StateSpace
         Starting model with the data's time base (``dt``), e.g. from
         :func:`subid.fd_subspace`.
@@ -235,10 +260,14 @@ def fd_pem(data, model, *, max_iterations=100, tolerance=1e-8, rounds=3, feedthr
     Returns
     -------
     StateSpace
-        The refined model in the starting model's state basis, without a noise
-        model (frequency-response data say nothing about it). ``info`` is the
-        start's, updated with ``refined_by`` ('pem'), ``criterion``
-        ('frequency response'), ``weighting`` (which weights), ``start_cost``,
+        The refined model in the state basis of the search (unit
+        frequency-grid controllability Gramian at the start of its last
+        round; the start is returned unchanged when nothing improves), without
+        a noise model (frequency-response data say nothing about it). ``info``
+        is the start's, updated with ``refined_by`` ('pem'), ``criterion``
+        ('frequency response'), ``weighting`` (which weights),
+        ``noise_variance_model`` (the estimated ``a``, ``b``, each (ny, nu),
+        when the weights were estimated), ``start_cost``,
         ``final_cost`` (the weighted criterion),
         ``cost_history``, ``stop_reason``, ``n_evaluations``,
         ``parametrisation``, ``frequency_scale`` and, in discrete time,
@@ -265,10 +294,15 @@ def fd_pem(data, model, *, max_iterations=100, tolerance=1e-8, rounds=3, feedthr
     factor = np.ones((1, 1, data.n_inputs)) if delays is None or continuous \
         else frequency_factor(delays, data.w, data.dt)
     D0 = np.zeros_like(model.D) if not with_d else model.D
-    weights, weighting = _criterion_weights(data)
-    crit = _Criterion(data.response, z, weights, factor, with_d, D0, continuous)
     s = math.sqrt(alpha)
     A, B, C = model.A / alpha, model.B / s, model.C / s
+    plain = _Criterion(data.response, z, np.ones(data.response.shape), factor, with_d, D0,
+                       continuous)
+    r0 = plain.residual(A, B, C, D0)
+    start_response = data.response - (r0[:r0.size // 2]
+                                      + 1j * r0[r0.size // 2:]).reshape(data.response.shape)
+    weights, weighting, noise_coef = _criterion_weights(data, start_response)
+    crit = _Criterion(data.response, z, weights, factor, with_d, D0, continuous)
     T = _gramian_basis(A, B, z)
     Tinv = np.linalg.solve(T, np.eye(A.shape[0]))
     cur = (T @ A @ Tinv, T @ B, C @ Tinv, D0)
@@ -287,7 +321,6 @@ def fd_pem(data, model, *, max_iterations=100, tolerance=1e-8, rounds=3, feedthr
             Tr = _gramian_basis(cur[0], cur[1], z)
             Tr_inv = np.linalg.solve(Tr, np.eye(Tr.shape[0]))
             cur = (Tr @ cur[0] @ Tr_inv, Tr @ cur[1], cur[2] @ Tr_inv, cur[3])
-            T, Tinv = Tr @ T, Tinv @ Tr_inv
             new, res = _round(crit, *cur, max_iterations, tolerance, r_start, history,
                               require_stable)
             n_eval += int(res.nfev)
@@ -303,6 +336,9 @@ def fd_pem(data, model, *, max_iterations=100, tolerance=1e-8, rounds=3, feedthr
         if h < accepted[-1]:
             accepted.append(h)
     info = dict(model.info)
+    info.pop("noise_variance_model", None)
+    if noise_coef is not None:
+        info["noise_variance_model"] = {"a": noise_coef[..., 0], "b": noise_coef[..., 1]}
     info.update(refined_by="pem", criterion="frequency response", weighting=weighting,
                 start_cost=start_cost,
                 final_cost=min(best_cost, accepted[-1]), cost_history=np.array(accepted),
@@ -322,8 +358,12 @@ def fd_pem(data, model, *, max_iterations=100, tolerance=1e-8, rounds=3, feedthr
         return StateSpace(model.A, model.B, model.C, D0, model.dt,
                           input_names=model.input_names, output_names=model.output_names,
                           info=info, hold=model.hold)
+    # the result in the basis of the last round (unit frequency-grid Gramian), not
+    # the start's: the accumulated transformation back to the start's basis can be
+    # ill-conditioned (a pole that moved far, cond 1e7 measured), and applying it
+    # lost the fit (criterion 408 in the balanced basis, 426 after it)
     A, B, C, D = cur
-    A, B, C = Tinv @ A @ T * alpha, Tinv @ B * s, C @ T * s
+    A, B, C = A * alpha, B * s, C * s
     if not continuous:
         _attach_covariance(info, crit, A, B, C, D)
     return StateSpace(A, B, C, D, model.dt, input_names=model.input_names,
@@ -346,7 +386,7 @@ def _attach_covariance(info, crit: "_Criterion", A, B, C, D) -> None:
     if dof <= 0 or not (np.isfinite(scale).all() and scale.min() > 0):
         info["parameter_covariance_note"] = "no parameter covariance: too few frequencies"
         return
-    R = np.linalg.qr(J / scale, mode="r")
+    R = np.asarray(np.linalg.qr(J / scale, mode="r"))     # mode="r": R alone
     diag = np.abs(np.diag(R))
     if diag.min() <= 1e-9 * diag.max():
         info["parameter_covariance_note"] = (

@@ -73,16 +73,16 @@ import numpy as np
 from subid._validation import check_bool, check_choice, check_int, checked_call
 from subid.errors import DataError, OrderError, SubidError, UnstableModelWarning
 from subid.frdata import FRData
+from subid.methods._common import choose_order
+from subid.methods._common import parse_order as _parse_order
 from subid.methods._info import model_info, records_warnings
-from subid.methods.dt._selection import FLOOR, MAX_ORDER, SELECTION_RULES, select
-from subid.methods.dt._subspace import (
+from subid.methods._stability import (
     KEEP_UNSTABLE_RATIO,
     STABILITY,
     STABLE_RADIUS,
-    _parse_order,
-    choose_order,
     reflect_unstable_poles,
 )
+from subid.methods.dt._selection import FLOOR, MAX_ORDER, SELECTION_RULES, select
 from subid.methods.fd import _frequency as fq
 from subid.methods.fd._core import (
     Problem,
@@ -148,7 +148,7 @@ def _cross_validate(data: FRData, alpha, noise_var, candidates, horizons, *, fee
     """Order by cross-validation over interleaved frequency folds; each candidate order
     at its own horizon (``horizons[n]``, as an explicit call with that order uses)."""
     index = np.arange(data.n_frequencies)
-    per_fold = {n: [] for n in candidates}
+    per_fold: dict[int, list] = {n: [] for n in candidates}
     for k in range(FOLDS):
         held = index % FOLDS == k
         train, validation = data[~held], data[held]
@@ -185,13 +185,13 @@ def _cross_validate(data: FRData, alpha, noise_var, candidates, horizons, *, fee
 
 @checked_call
 @records_warnings
-def fd_subspace(frdata, order=None, *, horizon=None, feedthrough=True, stability="auto",
+def fd_subspace(data, order=None, *, horizon=None, feedthrough=True, stability="auto",
                 selection="cv") -> StateSpace:
     """Identify a state-space model from frequency-response data (McKelvey et al. 1996).
 
     Parameters
     ----------
-    frdata : FRData
+    data : FRData
         The measured response. Continuous time (``dt = 0``) gives a
         continuous-time model, discrete time one with the data's ``dt``.
     order : int, iterable of int, 'auto' or None
@@ -228,7 +228,7 @@ def fd_subspace(frdata, order=None, *, horizon=None, feedthrough=True, stability
     Raises
     ------
     DataError
-        ``frdata`` is not an FRData, or holds too few frequencies for the
+        ``data`` is not an FRData, or holds too few frequencies for the
         horizon.
     OrderError
         The order cannot be revealed with the horizon.
@@ -245,14 +245,14 @@ def fd_subspace(frdata, order=None, *, horizon=None, feedthrough=True, stability
     >>> bool(np.abs(model.freqresp(w) - data.response).max() < 1e-8)
     True
     """
-    if not isinstance(frdata, FRData):
-        raise DataError(f"fd_subspace expects a subid.FRData, got {type(frdata).__name__}; "
+    if not isinstance(data, FRData):
+        raise DataError(f"fd_subspace expects a subid.FRData, got {type(data).__name__}; "
                         "wrap a measured response as subid.FRData(w, response, dt)")
     check_bool(feedthrough, "feedthrough")
     check_choice(stability, "stability", STABILITY)
     check_choice(selection, "selection", SELECTION_RULES)
     fixed, candidates = _parse_order(order)
-    p, m, M = frdata.n_outputs, frdata.n_inputs, frdata.n_frequencies
+    p, m, M = data.n_outputs, data.n_inputs, data.n_frequencies
     if horizon is not None:
         horizon = check_int(horizon, "horizon", minimum=2)
 
@@ -279,11 +279,11 @@ def fd_subspace(frdata, order=None, *, horizon=None, feedthrough=True, stability
             raise OrderError("fd_subspace: no candidate order can be revealed with the "
                              f"horizon{' given' if horizon is not None else 's the data allow'}"
                              "; give a larger horizon, more frequencies or lower orders")
-    alpha = None if frdata.dt > 0 else fq.frequency_scale(frdata.w)
+    alpha = None if data.dt > 0 else fq.frequency_scale(data.w)
     largest = fixed if fixed is not None else max(candidates)
-    noise_var, noise_record = noise_variance(frdata, alpha, max(MAX_ORDER, largest),
+    noise_var, noise_record = noise_variance(data, alpha, max(MAX_ORDER, largest),
                                             feedthrough)
-    problem = Problem(frdata, alpha, noise_var)
+    problem = Problem(data, alpha, noise_var)
     if fixed is not None:
         n, record = fixed, {"rule": "given"}
     elif selection == "gap" or len(candidates) == 1 or M < 2 * FOLDS:
@@ -291,12 +291,12 @@ def fd_subspace(frdata, order=None, *, horizon=None, feedthrough=True, stability
         n, record = choose_order(None, candidates, profile, "singular values of the "
                                  "projected frequency data")
     else:
-        n, record = _cross_validate(frdata, alpha, noise_var, candidates,
+        n, record = _cross_validate(data, alpha, noise_var, candidates,
                                     {k: block_rows(k) for k in candidates},
                                     feedthrough=feedthrough, stability=stability)
     q = block_rows(n)
     basis = subspace(problem, q)
-    model, conditions, stab, _ = _build(frdata, problem, basis, n, q, feedthrough=feedthrough,
+    model, conditions, stab, _ = _build(data, problem, basis, n, q, feedthrough=feedthrough,
                                         stability=stability)
     info = model_info("fd_subspace", order=n, order_selection=record, horizon=q,
                       n_samples=None, x0=None, hold="zoh", conditions=conditions,

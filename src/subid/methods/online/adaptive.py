@@ -102,8 +102,8 @@ from subid.errors import (
     TooFewSamplesError,
 )
 from subid.io._checkpoint import load_state, require, save_state
+from subid.methods._common import conditions_of
 from subid.methods._info import model_info
-from subid.methods.dt._subspace import conditions_of
 from subid.methods.dt.ls_subspace import random_selector
 from subid.methods.online import _adaptive_kernel as _k
 from subid.methods.online.base import OnlineIdentifier, history_dict, one_sample

@@ -356,7 +356,7 @@ class Tracker:
                   "fingerprint": np.array(self.fingerprint(k)),
                   "method": np.array(type(self.ident).__name__)}
         with atomic_write(path, "wb", what="convergence trace") as fh:
-            np.savez(fh, **arrays)
+            np.savez(fh, **arrays)  # type: ignore[arg-type]  # numpy's stub: **kwds may be allow_pickle
 
     def load_trace(self, path, k: int) -> None:
         """Continue the snapshots of a checkpoint's trace (up to sample ``k``).

@@ -70,16 +70,16 @@ from subid.errors import (
     TooFewSamplesError,
 )
 from subid.io._checkpoint import load_state, require, save_state
-from subid.methods._info import model_info
-from subid.methods.dt import noise_model
-from subid.methods.dt._regression import fit_b_d_projection, regression_rows, solve_factor
-from subid.methods.dt._subspace import (
+from subid.methods._common import (
     check_excitation,
     conditions_of,
     default_horizon,
     min_samples,
     normalize_channels,
 )
+from subid.methods._info import model_info
+from subid.methods.dt import noise_model
+from subid.methods.dt._regression import fit_b_d_projection, regression_rows, solve_factor
 from subid.methods.dt.ls_subspace import check_options, gamma_from_factor, random_selector
 from subid.methods.online._lagged import LaggedStatistic, end_sensitivity
 from subid.methods.online._lagged import solve as solve_lagged

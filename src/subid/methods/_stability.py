@@ -1,5 +1,5 @@
-"""Stability of a discrete-time subspace estimate: when it must be enforced
-(``stability='auto' | 'enforce' | 'none'``, from the growth of the data) and
+"""Stability of a discrete-time estimate (from time or frequency data): when it must
+be enforced (``stability='auto' | 'enforce' | 'none'``, from the growth of the data) and
 how (regularised shift invariance, or reflection of the unstable poles).
 :func:`subid.methods.dt._subspace.stable_choice` applies them to an estimate."""
 
@@ -15,6 +15,9 @@ from subid.data import IOData
 from subid.errors import OptionError, UnstableModelWarning
 
 STABILITY = ("auto", "enforce", "none")
+#: 'auto' keeps an unstable model only when its residual on the estimation data is
+#: below this fraction of the stabilised model's: the data demand the instability.
+KEEP_UNSTABLE_RATIO = 0.9
 #: Spectral radius of a model whose stability was enforced, at most.
 STABLE_RADIUS = 0.9999
 #: Output growth (RMS of the last tenth over the first) above which data "grow".

@@ -17,7 +17,6 @@ from __future__ import annotations
 import functools
 import logging
 import os
-import sys
 import time
 import warnings
 
@@ -27,7 +26,7 @@ from subid import datasets
 from subid._progress import Steps, progress_wrapper
 from subid.errors import OptionError, SubidError
 from subid.io._files import write_bytes, write_json
-from subid.methods.dt._selection import AUTO_ORDER_RULE
+from subid.methods.describe import AUTO_ORDER_RULE
 
 __all__ = ["evaluate", "identify_one", "diagnose", "report_dataset", "write_report", "run",
            "gallery", "gallery_markdown", "GALLERY_COMMAND", "FRACTION"]
@@ -659,9 +658,3 @@ def _jsonable(row: dict) -> dict:
         out[k] = v
     return out
 
-
-if __name__ == "__main__":
-    # ``python -m subid.cli.demo [options]``: the same as ``subid demo [options]``. The
-    # command line sits above this module, which never imports it as a library.
-    from subid.cli.commands import main
-    sys.exit(main(["demo", *sys.argv[1:]]))

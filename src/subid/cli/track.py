@@ -1,0 +1,209 @@
+"""``subid track``: an online identifier run over a record, with checkpoints, the
+history of its estimates and a report."""
+
+from __future__ import annotations
+
+import os
+import time
+
+import click
+
+from subid._progress import Steps
+from subid.cli._shared import (
+    _FREQ,
+    _TRACK_FILES,
+    METHODS,
+    _about,
+    _carry_over,
+    _check_method_options,
+    _check_out,
+    _command_line,
+    _common,
+    _convergence_status,
+    _data_options,
+    _default_detrend,
+    _detrend,
+    _fmt_fit,
+    _fmt_poles,
+    _method_run_options,
+    _named,
+    _only,
+    _parse_options,
+    _provenance,
+    _reserved_options,
+    _run_online,
+    _state,
+    _warnings_to_log,
+    cli,
+    load_data,
+    load_online,
+    log,
+    new_online,
+)
+from subid.errors import DataError
+from subid.io._files import atomic_directory
+
+_RUN = _method_run_options(
+    horizon="Horizon of the identifier (default: chosen by the method).",
+    forgetting="recursive: forgetting factor in (0, 1], 1 (default) weighs all samples "
+               "equally; adaptive: forgetting rate (see its documentation).",
+    option="Extra keyword argument of the identifier (JSON value). Repeatable.",
+    report="Write report.html.",
+    out="Output folder: model.json, report.html, history.npz, checkpoints/.")
+
+
+@cli.command(epilog="\b\nExamples:\n"
+                    "  subid track dataset:dryer --method recursive --order 4 --out track_out\n"
+                    "  subid track plant.csv --inputs u --outputs y --dt 0.01 --method recursive "
+                    "\\\n      --order 3 --forgetting 0.999 --checkpoint-every 50000 --out run\n"
+                    "  subid track plant.csv --inputs u --outputs y --dt 0.01 --method recursive "
+                    "\\\n      --resume run/checkpoints/checkpoint-0000050000.npz --out run")
+@click.argument("data", metavar="DATA")
+@_data_options
+@click.option("--method", "method_name",
+              type=click.Choice([n for n, s in METHODS.items() if s.kind == "online"]),
+              default="recursive", show_default=True, help="Online identification method.")
+@click.option("--order", type=click.IntRange(min=1), default=None,
+              help="Model order (required unless resuming).")
+@_RUN["horizon"]
+@_RUN["forgetting"]
+@_RUN["option"]
+@click.option("--chunk", type=click.IntRange(min=1), default=None,
+              help="Samples fed per update (default: 1 % of the record, at most 1000).")
+@click.option("--trace-every", type=click.IntRange(min=0), default=None,
+              help="Samples between snapshots of the model for the convergence plot "
+                   "(default: 1 % of the record; 0: only at the end).")
+@click.option("--checkpoint-every", type=click.IntRange(min=0), default=10000,
+              show_default=True, help="Write a checkpoint every K samples (0: only at the end).")
+@click.option("--keep-checkpoints", type=click.IntRange(min=0), default=3, show_default=True,
+              help="Keep the last N periodic checkpoints (0: keep all).")
+@click.option("--resume", type=click.Path(dir_okay=False), default=None, metavar="CHECKPOINT",
+              help="Continue from a checkpoint written by an earlier run on the same data.")
+@_FREQ
+@_RUN["report"]
+@_RUN["out"]
+@_common
+def track(data, inputs, outputs, dt, time_column, delimiter, detrend, method_name, order,
+          horizon, forgetting, options, chunk, trace_every, checkpoint_every, keep_checkpoints,
+          resume, frequency_unit, write_report, out):
+    """Run an online identifier over DATA and write the convergence report.
+
+    Samples are fed in chunks (progress bar on a terminal); the model is
+    snapshot every --trace-every samples for the convergence plot, and the
+    identifier is checkpointed every --checkpoint-every samples (and at the
+    end) so that --resume can continue. Writes model.json (final model),
+    history.npz (snapshots), report.html and checkpoints/.
+    """
+    from subid.evaluation import report
+    spec = METHODS[method_name]
+    spec.load()
+    opts = _parse_options(options)
+    _check_method_options(spec, opts, reserved=_reserved_options(spec, horizon=horizon,
+                                                                 forgetting=forgetting))
+    with _about(data):
+        raw, label, notes = load_data(data, inputs, outputs, dt, time_column, delimiter)
+        detrend = detrend or _default_detrend(spec)
+        work = _detrend(raw, detrend)
+        if spec.time == "discrete" and work.dt is None:
+            raise DataError(f"method {spec.name} needs uniformly sampled data; these time "
+                            "stamps are non-uniform")
+    n = work.n_samples
+    chunk = chunk or max(1, min(1000, n // 100))
+    trace_every = max(1, n // 100) if trace_every is None else trace_every
+    checkpoint_dir = os.path.join(out, "checkpoints")
+    _check_out(out, _TRACK_FILES)
+    os.makedirs(out, exist_ok=True)
+    with _about(resume or data):
+        if resume is not None:
+            ident = load_online(spec, resume)
+            for attr, want in (("n_inputs", work.n_inputs), ("n_outputs", work.n_outputs)):
+                have = getattr(ident, attr, want)
+                if have != want:
+                    raise DataError(f"the checkpoint has {have} {attr[2:]} but the data "
+                                    f"have {want}")
+            start = int(getattr(ident, "n_samples", 0))
+            if start > n:
+                raise DataError(f"the checkpoint has already seen {start} samples but the "
+                                f"record has only {n}")
+            for name, given in (("order", order), ("horizon", horizon),
+                                ("forgetting", forgetting)):
+                have = getattr(ident, name, None)
+                if given is not None and have is not None and given != have:
+                    log.warning("--%s %s ignored: the checkpoint has %s = %s", name, given,
+                                name, have)
+        else:
+            if order is None:
+                raise click.UsageError("--order is required (unless --resume is given)")
+            ident = new_online(spec, order, work.n_inputs, work.n_outputs, horizon=horizon,
+                               forgetting=forgetting, dt=work.dt, options=opts)
+            start = 0
+    from subid.methods.online.base import Tracker
+    tracker = Tracker(ident, work, fingerprint_data=raw, trace_every=trace_every,
+                      checkpoint_every=checkpoint_every, checkpoint_dir=checkpoint_dir,
+                      keep=keep_checkpoints)
+    if resume is not None:
+        with _warnings_to_log():
+            tracker.load_trace(resume[:-4] + ".trace.npz" if resume.endswith(".npz")
+                               else resume + ".trace.npz", start)
+    t0 = time.perf_counter()
+    with _about(data), _warnings_to_log():
+        _run_online(spec, tracker, start, _state().progress, chunk=chunk)
+        model = _named(ident.model, work)
+    seconds = time.perf_counter() - t0
+    steps = Steps(["evaluate", *(["report"] if write_report else []), "write"], "track",
+                  enabled=_state().progress)
+    click.get_current_context().call_on_close(steps.close)     # on errors too
+    steps.start("evaluate")
+    final_ckpt = tracker.checkpoint(n) if start < n or resume is None else resume
+    model.info.setdefault("method", spec.attribute)
+    model.info["data"] = _provenance(data, raw, work, detrend, work, 0.0)
+    history = tracker.history()
+    model_path = os.path.join(out, "model.json")
+    history_path = os.path.join(out, "history.npz")
+    report_path = os.path.join(out, "report.html")
+    # the converged fit: the final model on the last third of the record (the
+    # part an online estimate that has converged should explain)
+    tail = work[2 * n // 3:] if n >= 3 else work
+    fit_tail = report.evaluate(model, tail)["fit_estimation"]
+    status = _convergence_status(model)
+    model.info["fit_last_third"] = None if fit_tail is None else [float(v) for v in fit_tail]
+    result = report.evaluate(model, work)
+    html = None
+    if write_report:
+        steps.start("report")
+        html = report.identification_report(
+            {spec.name: model}, work, None, title=f"{label}: {spec.attribute} (online)",
+            frequency_unit=frequency_unit, history=history, seconds={spec.name: seconds},
+            notes=notes + [f"Samples {start}..{n} processed in this run"
+                           + (f" (resumed from {resume})" if resume else "") +
+                           f"; final checkpoint {final_ckpt}. Fit % is on the whole record; "
+                           f"on its last third (the converged fit): {_fmt_fit(fit_tail)}. "
+                           f"Convergence: {status}."],
+            command=_command_line(), source=data, progress=steps.detail,
+            fits={spec.name: result})
+    steps.start("write")
+    # The final outputs replace the folder as a whole (old run's or new run's,
+    # never a mix); the checkpoints written during the run are carried over.
+    with atomic_directory(out, owned=_only(_TRACK_FILES)) as stage:
+        _carry_over(checkpoint_dir, os.path.join(stage, "checkpoints"))
+        model.save(os.path.join(stage, "model.json"))
+        tracker.save_trace(os.path.join(stage, "history.npz"), n)
+        if html is not None:
+            report.write_html(os.path.join(stage, "report.html"), html)
+    steps.close()
+    files = [model_path, *([report_path] if write_report else []), history_path]
+    if not _state().quiet:
+        click.echo("\n".join([
+            f"data        {data}: {n} samples ({start} already seen, {n - start} processed now)",
+            f"method      {spec.name} ({spec.attribute})",
+            f"order       {model.order}",
+            f"fit %       {_fmt_fit(result['fit_estimation'])} on the whole record, "
+            f"{_fmt_fit(fit_tail)} on its last third ({', '.join(work.output_names)})",
+            f"converged   {status}",
+            f"poles       {_fmt_poles(result['poles'])}",
+            f"stable      {'yes' if result['stable'] else 'NO'}",
+            f"snapshots   {len(history['sample'])}",
+            f"time        {seconds:.2f} s",
+            f"checkpoint  {final_ckpt}",
+            f"wrote       {', '.join(files)}"]))
+    return 0

@@ -1,0 +1,1 @@
+"""The figures of :mod:`subid.evaluation.plot`, one module per family (issue 24)."""

@@ -1,0 +1,242 @@
+"""What the figures of :mod:`subid.evaluation.plot` share: the style and the colour of
+each method, legends beside the axes, matplotlib's lazy import, the arguments every plot
+takes (models with labels, a record), and the simulated outputs they draw."""
+
+from __future__ import annotations
+
+import logging
+
+import numpy as np
+
+from subid.errors import DataError, ModelError
+
+log = logging.getLogger("subid.evaluation.plot")
+
+# Standard normal quantile for a two-sided 99 % band (scipy.special.ndtri(0.995)).
+_Z99 = 2.5758293035489004
+
+#: matplotlib settings of every figure: 150 dpi, 10 pt text (9 pt ticks and legends).
+STYLE = {"figure.dpi": 150, "savefig.dpi": "figure", "font.size": 10,
+         "axes.titlesize": 10, "axes.labelsize": 10, "xtick.labelsize": 9,
+         "ytick.labelsize": 9, "legend.fontsize": 9, "figure.titlesize": 11}
+
+#: Colour of each method (``model.info['method']``) in every figure; a second model
+#: of the same method in one figure takes the next free colour.
+METHOD_COLORS = {"ls_subspace": "C0", "moesp": "C1", "n4sid": "C2", "ct_subspace": "C3",
+                 "ct_subspace_paper": "C4", "RecursiveSubspace": "C5",
+                 "seed000_adaptive": "C6", "dt_to_ct": "C7", "true": "k"}
+_PALETTE = [f"C{k}" for k in range(10)]
+# Width of one legend character at 9 pt, inches (for the room beside the axes).
+_LEGEND_CHAR_IN = 0.068
+
+
+def _styled(fn):
+    """Draw ``fn``'s figure under :data:`STYLE` (fonts are fixed when text is created)."""
+    import functools
+
+    @functools.wraps(fn)
+    def wrapper(*args, **kwargs):
+        _pyplot()
+        import matplotlib
+        with matplotlib.rc_context(STYLE):
+            return fn(*args, **kwargs)
+    return wrapper
+
+
+def _method_of(model) -> str | None:
+    info = getattr(model, "info", None)
+    method = info.get("method") if isinstance(info, dict) else None
+    return str(method) if method else None
+
+
+def colors_for(entries) -> list[str]:
+    """One distinct colour per entry: the method's colour (:data:`METHOD_COLORS`)
+    when free, else the first unused one. ``entries``: (label, model or None)."""
+    used: set[str] = set()
+    out: list[str] = []
+    for label, model in entries:
+        method = _method_of(model) if model is not None else None
+        want = (METHOD_COLORS.get(method) if method else None) or METHOD_COLORS.get(str(label))
+        if want is None or want in used:
+            want = next((c for c in _PALETTE if c not in used and
+                         c not in METHOD_COLORS.values()), None) or \
+                next((c for c in _PALETTE if c not in used), _PALETTE[len(out) % 10])
+        used.add(want)
+        out.append(want)
+    return out
+
+
+def _legend_room(labels, ncol: int = 1) -> float:
+    """Inches needed beside the axes for a legend with these labels."""
+    longest = max((len(str(t)) for t in labels), default=0)
+    return 0.25 + ncol * (0.45 + _LEGEND_CHAR_IN * longest)
+
+
+def _legend_beside(ax, handles=None, labels=None, ncol: int = 1):
+    """Legend to the right of ``ax``, top aligned: it never covers the data."""
+    kwargs = dict(loc="upper left", bbox_to_anchor=(1.02, 1.0), borderaxespad=0.0,
+                  ncol=ncol, frameon=False)
+    if handles is not None:
+        return ax.legend(handles, labels, **kwargs)
+    return ax.legend(**kwargs)
+
+
+def is_unstable(model) -> bool:
+    """True when a pole lies outside the unit circle (discrete time) or in the
+    right half plane (continuous time); marginal poles count as unstable."""
+    p = model.poles()
+    return bool(np.any(np.abs(p) >= 1.0)) if model.dt > 0 else bool(np.any(p.real >= 0.0))
+
+
+def _pyplot():
+    try:
+        import matplotlib
+        if matplotlib.get_backend().lower() not in ("agg", "module://matplotlib_inline.backend_inline"):
+            import os
+            if not os.environ.get("DISPLAY") and os.name != "nt":
+                matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError as exc:  # pragma: no cover - depends on the install
+        from subid._extras import install_hint
+        raise ImportError("subid.plot needs matplotlib: "
+                          + install_hint("plot", "matplotlib")) from exc
+    return plt
+
+
+
+def _model_groups(models, labels=None) -> dict:
+    """``{label: StateSpace}`` from one model, a list or a dict."""
+    from subid.model.statespace import StateSpace
+    if isinstance(models, StateSpace):
+        out = {labels[0] if labels else _default_label(models, 0): models}
+    elif isinstance(models, dict):
+        out = dict(models)
+        if labels is not None:
+            out = dict(zip(labels, out.values()))
+    else:
+        try:
+            items = list(models)
+        except TypeError:
+            raise ModelError(f"expected a StateSpace, a list or a dict of them, got "
+                             f"{type(models).__name__}") from None
+        names = list(labels) if labels is not None else \
+            [_default_label(m, k) for k, m in enumerate(items)]
+        out = {}
+        for name, m in zip(names, items):
+            while name in out:
+                name += "'"
+            out[name] = m
+    if not out:
+        raise ModelError("no model to plot")
+    for label, m in out.items():
+        if not isinstance(m, StateSpace):
+            raise ModelError(f"{label!r} is a {type(m).__name__}, not a subid.StateSpace")
+    return {str(k): v for k, v in out.items()}
+
+
+def _default_label(model, k: int) -> str:
+    method = model.info.get("method") if isinstance(model.info, dict) else None
+    return str(method) if method else f"model {k + 1}"
+
+
+def _check_data(data):
+    from subid.data import IOData
+    if not isinstance(data, IOData):
+        raise DataError(f"data must be an IOData record, got {type(data).__name__}")
+    return data
+
+
+def _time_label(data) -> str:
+    return "time (s)" if data.dt is None or data.dt != 1.0 else "time (samples)"
+
+
+def _layout(fig, axes, *, top: float = 0.45, bottom: float = 0.55, left: float = 0.85,
+            right: float = 0.2, hgap: float = 0.45, wgap: float = 0.7) -> None:
+    """Place the axes grid with fixed margins and gaps in inches.
+
+    Much faster than ``tight_layout`` (which draws the figure once more), and
+    the margins do not depend on the data. ``hgap``/``wgap`` are the spaces
+    between rows/columns (room for the titles and tick labels).
+    """
+    from matplotlib.ticker import MaxNLocator
+    rows, cols = axes.shape
+    w, h = fig.get_size_inches()
+    if getattr(fig, "_suptitle", None) is not None:
+        top += 0.3
+    avail_h = max(h - top - bottom, 0.5)
+    avail_w = max(w - left - right, 0.5)
+    ax_h = max((avail_h - (rows - 1) * hgap) / rows, 0.1)
+    ax_w = max((avail_w - (cols - 1) * wgap) / cols, 0.1)
+    fig.subplots_adjust(left=left / w, right=1 - right / w, bottom=bottom / h, top=1 - top / h,
+                        hspace=hgap / ax_h, wspace=wgap / ax_w)
+    for ax in axes.ravel():
+        if ax.get_yscale() == "linear":
+            ax.yaxis.set_major_locator(MaxNLocator(nbins=4 if ax_h < 1.6 else 6))
+
+
+def simulated_output(model, data, x0="estimate"):
+    """``(y_hat, fit %)`` of ``model`` on ``data``; NaN where the simulation diverges.
+
+    The same simulation as :func:`subid.fit_percent` (least-squares initial
+    state by default), but a model whose simulation overflows gives NaN
+    instead of an exception, so that it can still be listed and drawn.
+    """
+    from subid.evaluation.metrics import simulate_fit
+    with np.errstate(all="ignore"):
+        try:
+            y_hat, _ = simulate_fit(model, data, x0=x0)
+        except ModelError:                 # the simulation of an unstable model overflows
+            y_hat = np.full(data.y.shape, np.nan)
+        y_hat = np.where(np.isfinite(y_hat), y_hat, np.nan)
+        dev = np.linalg.norm(data.y - data.y.mean(axis=0), axis=0)
+        fit = 100.0 * (1.0 - np.linalg.norm(data.y - y_hat, axis=0) /
+                       np.where(dev > 0, dev, np.nan))
+    return y_hat, fit
+
+
+def predicted_output(model, data, steps):
+    """``(y_hat, fit %)`` of the ``steps``-ahead prediction; NaN where it diverges."""
+    from subid.evaluation.prediction import predict
+    try:
+        y_hat = predict(model, data, steps)
+    except DataError:
+        y_hat = np.full(data.y.shape, np.nan)
+    dev = np.linalg.norm(data.y - data.y.mean(axis=0), axis=0)
+    with np.errstate(all="ignore"):
+        fit = 100.0 * (1.0 - np.linalg.norm(data.y - y_hat, axis=0) /
+                       np.where(dev > 0, dev, np.nan))
+    return y_hat, fit
+
+
+#: Most points a time trace is drawn with. A longer trace is drawn through the minimum
+#: and the maximum of each of ``MAX_TRACE_POINTS // 2`` consecutive blocks of samples,
+#: in time order: the envelope that a line a few thousand pixels wide shows anyway
+#: (a 9-inch figure at 150 dpi is 1350 pixels), so a record of 10^6 samples draws
+#: as fast as one of 4,000 and looks the same. The data are never changed.
+MAX_TRACE_POINTS = 4000
+
+
+def _envelope(t: np.ndarray, values: np.ndarray, max_points: int = MAX_TRACE_POINTS):
+    """``(t, values)`` reduced to :data:`MAX_TRACE_POINTS` points for drawing: the
+    minimum and maximum of each block, in time order (a NaN in a block is kept, so
+    the line breaks where the data are not finite)."""
+    n = values.shape[0]
+    if n <= max_points:
+        return t, values
+    blocks = max_points // 2
+    size = -(-n // blocks)
+    padded = np.concatenate([values, np.full(blocks * size - n, values[-1])])
+    grid = padded.reshape(blocks, size)
+    with np.errstate(invalid="ignore"):
+        low, high = np.argmin(grid, axis=1), np.argmax(grid, axis=1)
+    base = np.arange(blocks) * size
+    index = np.minimum(np.column_stack([base + np.minimum(low, high),
+                                        base + np.maximum(low, high)]).ravel(), n - 1)
+    return t[index], values[index]
+
+
+def _finite(values: np.ndarray) -> np.ndarray:
+    """``values`` with non-finite entries replaced by NaN (not drawn)."""
+    out = np.array(values, dtype=float)
+    out[~np.isfinite(out)] = np.nan
+    return out

@@ -1,0 +1,139 @@
+"""Records and fits in time: measured against simulated or predicted outputs
+(:func:`compare`) and the record itself (:func:`data_overview`)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from subid.evaluation.figures._common import (
+    _check_data,
+    _envelope,
+    _finite,
+    _layout,
+    _legend_beside,
+    _legend_room,
+    _model_groups,
+    _pyplot,
+    _styled,
+    _time_label,
+    colors_for,
+    predicted_output,
+    simulated_output,
+)
+
+
+@_styled
+def compare(data, models, *, labels=None, x0="estimate", title=None, clip=True,
+            steps=math.inf):
+    """Measured outputs against the outputs simulated by each model (as MATLAB's ``compare``).
+
+    Parameters
+    ----------
+    data : IOData
+        The record to simulate on (usually the validation part).
+    models : StateSpace, list or dict label -> StateSpace
+    labels : list of str, optional
+    x0 : 'estimate', 'zero' or array
+        Initial state, as in :func:`subid.fit_percent` (default: least
+        squares fit to the data).
+    title : str, optional
+    clip : bool
+        Keep the vertical range near the measured signal, so a diverging
+        simulation does not squash the plot.
+    steps : int or math.inf
+        Draw ``steps``-ahead predictions (:func:`subid.predict`) instead of
+        the simulation.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        One panel per output; legends give the fit % of each model.
+    """
+    plt = _pyplot()
+    data = _check_data(data)
+    groups = _model_groups(models, labels)
+    ny = data.n_outputs
+    colors = colors_for(groups.items())
+    fits = {label: simulated_output(m, data, x0=x0) if steps == math.inf else
+            predicted_output(m, data, steps) for label, m in groups.items()}
+    texts = [f"{label}: fit {_fmt_fit(f[1][i])} %" for label, f in fits.items()
+             for i in range(ny)]
+    room = _legend_room(texts + ["measured"])
+    fig, axes = plt.subplots(ny, 1, figsize=(9 + room, 2.3 * ny + 0.7), sharex=True,
+                             squeeze=False)
+    t = data.t
+    # the measured output is drawn on top (zorder), thin and black; the models under
+    # it, wider and lighter, so that both stay visible where they agree
+    for i in range(ny):
+        axes[i, 0].plot(*_envelope(t, data.y[:, i]), "k-", lw=0.7, zorder=3,
+                        label="measured")
+    for k, (label, (y_hat, fit)) in enumerate(fits.items()):
+        for i in range(ny):
+            axes[i, 0].plot(*_envelope(t, _finite(y_hat[:, i])), color=colors[k], lw=1.8,
+                            alpha=0.75, zorder=2, label=f"{label}: fit {_fmt_fit(fit[i])} %")
+    for i in range(ny):
+        ax = axes[i, 0]
+        ax.set_ylabel(data.output_names[i])
+        _legend_beside(ax)
+        if clip:
+            lo, hi = float(np.min(data.y[:, i])), float(np.max(data.y[:, i]))
+            pad = 0.5 * (hi - lo) if hi > lo else 1.0
+            ax.set_ylim(lo - pad, hi + pad)
+    axes[-1, 0].set_xlabel(_time_label(data))
+    if title:
+        fig.suptitle(title)
+    _layout(fig, axes, hgap=0.2, left=0.85, right=room + 0.1)
+    return fig
+
+
+def _fmt_fit(value) -> str:
+    if not np.isfinite(value):
+        return "n/a"
+    if abs(value) >= 1e4:
+        return f"{value:.3g}"
+    return f"{value:.1f}"
+
+
+@_styled
+def data_overview(data, *, split=None, title=None):
+    """Inputs and outputs of a record against time.
+
+    Parameters
+    ----------
+    data : IOData
+    split : float, optional
+        Time at which the validation part starts; it is shaded and labelled.
+    title : str, optional
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        One panel per channel, inputs first.
+    """
+    plt = _pyplot()
+    data = _check_data(data)
+    # measured data in neutral tones (outputs black as in compare): the palette colours
+    # belong to the methods (METHOD_COLORS)
+    channels = [(f"input\n{n}", data.u[:, k], "0.45") for k, n in enumerate(data.input_names)]
+    channels += [(f"output\n{n}", data.y[:, k], "k") for k, n in enumerate(data.output_names)]
+    rows = len(channels)
+    fig, axes = plt.subplots(rows, 1, figsize=(9, 1.25 * rows + 0.9), sharex=True,
+                             squeeze=False)
+    t = data.t
+    for ax, (name, values, color) in zip(axes[:, 0], channels):
+        ax.plot(*_envelope(t, values), color=color, lw=0.8)
+        ax.set_ylabel(name, fontsize=9, rotation=0, ha="right", va="center")
+        if split is not None:
+            ax.axvspan(split, t[-1], color="0.85", zorder=0)
+    if split is not None:
+        axes[0, 0].text(split, 1.02, " validation", transform=axes[0, 0].get_xaxis_transform(),
+                        fontsize=9, va="bottom")
+        axes[0, 0].text(t[0], 1.02, "estimation", transform=axes[0, 0].get_xaxis_transform(),
+                        fontsize=9, va="bottom")
+    axes[-1, 0].set_xlabel(_time_label(data))
+    if title:
+        fig.suptitle(title)
+    _layout(fig, axes, top=0.35, left=1.6, hgap=0.15)
+    return fig

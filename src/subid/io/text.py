@@ -1,0 +1,446 @@
+"""Delimited text files (``.csv``, ``.tsv``, ``.txt``, ``.dat``): the careful,
+line-by-line reader behind :func:`subid.io.formats.read` (the rules are in that module's
+docstring), which names the line and column of every problem."""
+
+from __future__ import annotations
+
+import csv
+import logging
+import numbers
+import re
+from io import StringIO
+
+import numpy as np
+
+from subid.data import IOData
+from subid.errors import DataError, FileReadError
+from subid.io._common import (
+    _DECIMAL_COMMA_RE,
+    _INT_RE,
+    _SNIFF_LINES,
+    _WHITESPACE,
+    _build,
+    _check_line_lengths,
+    _listing,
+    _read_bytes,
+)
+
+logger = logging.getLogger(__name__)
+
+def _decode(raw: bytes, shown: str) -> str:
+    if raw.startswith((b"\xff\xfe", b"\xfe\xff")):
+        try:
+            text = raw.decode("utf-16")
+        except UnicodeDecodeError as exc:
+            raise FileReadError(f"{shown}: cannot decode UTF-16 text ({exc.reason})",
+                                path=shown) from None
+        _check_line_lengths(text.encode("utf-8", "replace"), shown)
+    else:
+        _check_line_lengths(raw, shown)
+        if b"\x00" in raw[:8192]:
+            raise FileReadError(f"{shown} looks like a binary file, not text (it holds NUL "
+                                "bytes); save the data as plain text (UTF-8) or use .npz/.mat",
+                                path=shown)
+        try:
+            text = raw.decode("utf-8-sig")
+        except UnicodeDecodeError:
+            text = raw.decode("latin-1")
+    if "\r" in text:
+        text = text.replace("\r\n", "\n").replace("\r", "\n")
+    return text
+
+
+def _content(line: str) -> str:
+    """A line without its ``#`` comment and surrounding blanks ('' if nothing is left)."""
+    k = line.find("#")
+    if k >= 0:
+        line = line[:k]
+    return line.strip()
+
+
+def _split(content: str, delim) -> list[str]:
+    if delim is _WHITESPACE:
+        return [f.strip('"') for f in content.split()] if '"' in content else content.split()
+    if '"' in content:
+        try:
+            fields = next(csv.reader([content], delimiter=delim, quotechar='"'))
+        except csv.Error:        # e.g. a quoted field beyond csv's 131,072-character limit
+            fields = _split_quoted(content, delim)
+    else:
+        fields = content.split(delim)
+    return [f.strip() for f in fields]
+
+
+def _split_quoted(content: str, delim: str) -> list[str]:
+    """Split a delimited line with ``"``-quoted fields (``""`` is a quote), without
+    the csv module's field-size limit; the fields are checked as numbers later."""
+    fields, field, quoted, k = [], [], False, 0
+    while k < len(content):
+        ch = content[k]
+        if quoted:
+            if ch == '"':
+                if content.startswith('""', k):
+                    field.append('"')
+                    k += 1
+                else:
+                    quoted = False
+            else:
+                field.append(ch)
+        elif ch == '"':
+            quoted = True
+        elif ch == delim:
+            fields.append("".join(field))
+            field = []
+        else:
+            field.append(ch)
+        k += 1
+    fields.append("".join(field))
+    return fields
+
+
+def _is_number(s: str) -> bool:
+    if "_" in s:
+        return False
+    try:
+        float(s)
+    except ValueError:
+        return False
+    return True
+
+
+def _sniff(sample: list[str], ext: str) -> str | None:
+    """Choose the delimiter from the first non-empty lines."""
+    candidates = (";", "\t", ",") if ext in (".csv", ".tsv") else (";", ",")
+    counts = {c: [ln.count(c) for ln in sample] for c in candidates}
+    for c in candidates:
+        if counts[c][0] > 0 and all(n == counts[c][0] for n in counts[c]):
+            return c
+    # No consistent candidate: take one present on every line (rows of different
+    # lengths are then reported with their line numbers), else whitespace.
+    present = [c for c in candidates if all(counts[c])]
+    if present:
+        return max(present, key=lambda c: counts[c][0])
+    return _WHITESPACE
+
+
+class _Table:
+    """Layout of a text file: delimiter, header, column count, first data line."""
+
+    line_offset = 0                   # lines before ``text`` in the file (chunked reading)
+
+    def __init__(self, shown, text, ext, delimiter):
+        self.shown = shown
+        self.text = text
+        self.lines = text.split("\n")
+        first = None                 # index of the first non-empty, non-comment line
+        sample = []
+        for k, line in enumerate(self.lines):
+            c = _content(line)
+            if c:
+                if first is None:
+                    first = k
+                sample.append(c)
+                if len(sample) >= _SNIFF_LINES:
+                    break
+        if first is None:
+            raise FileReadError(f"file {shown} is empty (it holds no data, only blank or "
+                                "comment lines)", path=shown)
+        self.n_sampled = len(sample)
+        if delimiter is None:
+            self.delim = _sniff(sample, ext)
+        else:
+            self.delim = _WHITESPACE if delimiter == " " else delimiter
+        logger.debug("%s: delimiter %r", shown, self.delim)
+        fields = _split(sample[0], self.delim)
+        self.header = None
+        self.header_line = None
+        if not all(_is_number(f) for f in fields):
+            self.header = fields
+            self.header_line = first + 1
+            self.data_start = first + 1           # 0-based index of the line after the header
+            numeric = [f for f in fields if _is_number(f)]
+            if numeric:
+                logger.warning("%s: line %d is taken as the header but has numeric fields %s",
+                               shown, first + 1, numeric[:5])
+        else:
+            self.data_start = first
+            self._comment_header(first, len(fields))
+        self.first_data = None                    # 1-based line of the first data row
+        for k in range(self.data_start, len(self.lines)):
+            if _content(self.lines[k]):
+                self.first_data = k + 1
+                break
+        if self.first_data is None:
+            raise FileReadError(f"{shown} has a header (line {self.header_line}) but no data "
+                                "rows", path=shown, line=self.header_line)
+        if self.header is not None:
+            self.ncols = len(self.header)
+        else:
+            self.ncols = len(fields)
+
+    def _comment_header(self, first: int, ncols: int) -> None:
+        """Use a comment line right before the data as header (numpy.savetxt style)."""
+        k = first - 1
+        while k >= 0 and not self.lines[k].strip():
+            k -= 1
+        if k < 0:
+            return
+        line = self.lines[k].strip()
+        if not line.startswith("#"):
+            return
+        body = line.lstrip("#").strip()
+        if not body:
+            return
+        for delim in dict.fromkeys((self.delim, ",", ";", "\t", _WHITESPACE)):
+            fields = _split(body, delim)
+            if len(fields) == ncols and not all(_is_number(f) for f in fields):
+                self.header = fields
+                self.header_line = k + 1
+                return
+
+    # -- names ---------------------------------------------------------------
+    def name(self, idx: int) -> str | None:
+        if self.header is None:
+            return None
+        return self.header[idx] or None
+
+    def describe(self, idx: int) -> str:
+        name = self.name(idx)
+        return f"column {idx} ({name!r})" if name is not None else f"column {idx}"
+
+    def channel_names(self, cols) -> list[str]:
+        names = []
+        for idx in cols:
+            name = self.name(idx)
+            if name is None or self.header.count(name) > 1:
+                name = f"col{idx}" if name is None else f"{name}_col{idx}"
+            names.append(name)
+        return names
+
+    def available(self) -> str:
+        if self.header is None:
+            return (f"the file has no header row, so columns are selected by 0-based index: "
+                    f"{self.ncols} column{'s' if self.ncols != 1 else ''}, indices 0 to "
+                    f"{self.ncols - 1}")
+        return "available columns: " + _listing(
+            f"{k} {n!r}" if n else f"{k} (no name)" for k, n in enumerate(self.header))
+
+    # -- column selection ----------------------------------------------------
+    def resolve(self, spec, role: str) -> list[int]:
+        shown = self.shown
+        tokens = _tokens(spec, role, self.header or ())
+        if not tokens:
+            raise FileReadError(f"{shown}: {role} selects no column; {self.available()}",
+                                path=shown)
+        cols = []
+        for tok in tokens:
+            if isinstance(tok, str):
+                if self.header is not None and tok in self.header:
+                    where = [k for k, n in enumerate(self.header) if n == tok]
+                    if len(where) > 1:
+                        raise FileReadError(
+                            f"{shown}: the column name {tok!r} ({role}) appears more than once "
+                            f"in the header (columns {', '.join(map(str, where))}); select it "
+                            "by 0-based index instead", path=shown, line=self.header_line,
+                            column=tok)
+                    idx = where[0]
+                elif _INT_RE.fullmatch(tok):
+                    idx = int(tok)
+                else:
+                    if self.header is None:
+                        msg = (f"{shown}: {role} names the column {tok!r}, but "
+                               f"{self.available()}")
+                    else:
+                        msg = f"{shown}: unknown column name {tok!r} in {role}; {self.available()}"
+                    raise FileReadError(msg, path=shown, column=tok)
+            else:
+                idx = tok
+            if not 0 <= idx < self.ncols:
+                raise FileReadError(
+                    f"{shown}: column index {idx} in {role} is out of range: the file has "
+                    f"{self.ncols} column{'s' if self.ncols != 1 else ''} (indices 0 to "
+                    f"{self.ncols - 1}, counted from 0)", path=shown, column=idx)
+            if idx in cols:
+                raise FileReadError(f"{shown}: {self.describe(idx)} is selected twice in {role}",
+                                    path=shown, column=idx)
+            cols.append(idx)
+        return cols
+
+    # -- values --------------------------------------------------------------
+    def data_lines(self) -> tuple[list[int], list[str]]:
+        """1-based line numbers and contents of the data rows (two parallel lists)."""
+        start = self.data_start
+        lines = self.lines[start:]
+        if "#" in self.text:
+            contents = [_content(line) for line in lines]
+        else:
+            contents = [line.strip() for line in lines]
+        keep = [k for k, c in enumerate(contents) if c]
+        if len(keep) != len(contents):
+            contents = [contents[k] for k in keep]
+        return [k + start + 1 + self.line_offset for k in keep], contents
+
+    def parse(self, cols: list[int]) -> np.ndarray:
+        """Values of the columns ``cols``, shape (rows, len(cols))."""
+        try:
+            values = np.loadtxt(StringIO(self.text), dtype=np.float64,
+                                delimiter=self.delim, comments="#", quotechar='"',
+                                skiprows=self.data_start, ndmin=2)
+        except (ValueError, TypeError, IndexError) as exc:
+            logger.debug("%s: fast parse failed (%s); re-reading line by line", self.shown, exc)
+            return self._parse_slowly(cols)
+        if values.shape[1] != self.ncols:
+            return self._parse_slowly(cols)
+        return np.ascontiguousarray(values[:, cols])
+
+    def _parse_slowly(self, cols: list[int]) -> np.ndarray:
+        """Parse after the fast path failed: check the field count of every row, then
+        convert only the selected columns (so text in other columns is allowed), and
+        locate the first bad cell when a selected one is not a number."""
+        shown, delim, ncols = self.shown, self.delim, self.ncols
+        linenos, contents = self.data_lines()
+        if delim is _WHITESPACE:
+            counts = [len(c.split()) for c in contents]
+        else:
+            counts = [len(_split(c, delim)) if '"' in c else c.count(delim) + 1
+                      for c in contents]
+        bad = next((k for k, n in enumerate(counts) if n != ncols), None)
+        if bad is not None:
+            lineno, found = linenos[bad], counts[bad]
+            ref = (f"the header (line {self.header_line})" if self.header is not None
+                   else f"the first data row (line {self.first_data})")
+            raise FileReadError(
+                f"{shown}, line {lineno}: found {found} field{'s' if found != 1 else ''}, "
+                f"expected {ncols} like {ref}"
+                + (" (is the delimiter right? it was taken to be "
+                   f"{_delim_name(delim)})" if found == 1 or ncols == 1 else ""),
+                path=shown, line=lineno)
+        hint = None
+        try:
+            values = np.loadtxt(StringIO("\n".join(contents)), dtype=np.float64,
+                                delimiter=delim, comments=None, quotechar='"', usecols=cols,
+                                ndmin=2)
+            if values.shape == (len(contents), len(cols)):
+                return values
+        except (ValueError, TypeError, IndexError) as exc:
+            named = re.search(r"at row (\d+)", str(exc))
+            if named and int(named.group(1)) < len(contents):
+                hint = int(named.group(1))
+        order = range(len(contents)) if hint is None else \
+            [hint, *range(len(contents))]           # check the row numpy named first
+        rows = []
+        for k in order:
+            fields = _split(contents[k], delim)
+            row = []
+            for idx in cols:
+                s = fields[idx]
+                try:
+                    if "_" in s:
+                        raise ValueError
+                    row.append(float(s))
+                except ValueError:
+                    raise FileReadError(self._bad_cell(linenos[k], idx, s), path=shown,
+                                        line=linenos[k], column=idx) from None
+            rows.append(row)
+        if hint is not None:
+            rows = rows[1:]
+        return np.array(rows, dtype=np.float64).reshape(len(rows), len(cols))
+
+    def _bad_cell(self, lineno: int, idx: int, s: str) -> str:
+        msg = f"{self.shown}, line {lineno}, {self.describe(idx)}: "
+        if not s:
+            return msg + "the value is missing (empty field)"
+        msg += (f"{s!r} is not a number" if len(s) <= 60 else
+                f"{s[:40]!r}... ({len(s)} characters) is not a number")
+        if _DECIMAL_COMMA_RE.fullmatch(s):
+            msg += " (decimal commas are not supported: use '.' as the decimal separator)"
+        return msg
+
+    def check_finite(self, values: np.ndarray, cols: list[int]) -> None:
+        finite = np.isfinite(values)
+        if finite.all():
+            return
+        bad_rows = np.flatnonzero(~finite.all(axis=1))
+        row = int(bad_rows[0])
+        j = int(np.flatnonzero(~finite[row])[0])
+        idx = cols[j]
+        linenos, contents = self.data_lines()
+        lineno = linenos[row]
+        text = _split(contents[row], self.delim)[idx]
+        n_bad = int((~finite).sum())
+        raise DataError(
+            f"{self.shown}, line {lineno}, {self.describe(idx)}: {text!r} is not a finite "
+            f"number ({n_bad} NaN or infinite value{'s' if n_bad != 1 else ''} in "
+            f"{bad_rows.size} row{'s' if bad_rows.size != 1 else ''} of the selected columns); "
+            "remove or interpolate them before identification")
+
+
+def _delim_name(delim) -> str:
+    return {None: "runs of spaces/TABs", "\t": "TAB", ",": "','", ";": "';'"}.get(
+        delim, repr(delim))
+
+
+def _tokens(spec, role: str, names) -> list:
+    """Split a column/array specification into names (str) and indices (int)."""
+    if isinstance(spec, str):
+        if spec in names:
+            return [spec]
+        parts = [s.strip() for s in spec.split(",")]
+        if any(not s for s in parts):
+            raise DataError(f"{role}={spec!r} holds an empty name")
+        return parts
+    if isinstance(spec, numbers.Integral) and not isinstance(spec, bool):
+        return [int(spec)]
+    if isinstance(spec, (bool, bytes, dict, set, frozenset)) or not hasattr(spec, "__iter__"):
+        raise DataError(f"{role} must be a name, an index or a list of them, got {spec!r}")
+    out: list[str | int] = []
+    for item in spec:
+        if isinstance(item, str):
+            out.append(item.strip())
+        elif isinstance(item, numbers.Integral) and not isinstance(item, bool):
+            out.append(int(item))
+        else:
+            raise DataError(f"{role} must be names or 0-based indices, got the item {item!r}")
+    return out
+
+
+def _roles(table: "_Table", shown: str, inputs, outputs, time):
+    """Column indices of the inputs, outputs and time stamps, checked."""
+    missing = [r for r, v in (("inputs", inputs), ("outputs", outputs)) if v is None]
+    if missing:
+        raise FileReadError(
+            f"{shown}: {' and '.join(missing)} must be given for a text file (subid does not "
+            f"guess which columns are inputs and outputs); {table.available()}", path=shown)
+    in_cols = table.resolve(inputs, "inputs")
+    out_cols = table.resolve(outputs, "outputs")
+    t_cols = []
+    if time is not None:
+        if not isinstance(time, (str, numbers.Integral)) or isinstance(time, bool):
+            raise DataError(f"time must be one column name or index, got {time!r}")
+        t_cols = table.resolve(time, "time")
+        if len(t_cols) != 1:
+            raise FileReadError(f"{shown}: time must name one column, got {time!r}", path=shown)
+    roles = [("an input", in_cols), ("an output", out_cols), ("the time", t_cols)]
+    for a in range(len(roles)):
+        for b in range(a + 1, len(roles)):
+            both = set(roles[a][1]) & set(roles[b][1])
+            if both:
+                idx = min(both)
+                raise FileReadError(f"{shown}: {table.describe(idx)} is used both as "
+                                    f"{roles[a][0]} and as {roles[b][0]}", path=shown, column=idx)
+    return in_cols, out_cols, t_cols
+
+
+def _read_text(p, shown, ext, inputs, outputs, dt, time, delimiter, *, raw=None) -> IOData:
+    text = _decode(_read_bytes(p, shown) if raw is None else raw, shown)
+    table = _Table(shown, text, ext, delimiter)
+    in_cols, out_cols, t_cols = _roles(table, shown, inputs, outputs, time)
+    cols = in_cols + out_cols + t_cols
+    values = table.parse(cols)
+    table.check_finite(values, cols)
+    n_in, n_out = len(in_cols), len(out_cols)
+    u = values[:, :n_in]
+    y = values[:, n_in:n_in + n_out]
+    t = values[:, -1] if t_cols else None
+    return _build(shown, u, y, dt, t, table.channel_names(in_cols),
+                  table.channel_names(out_cols), first_line=table.first_data)

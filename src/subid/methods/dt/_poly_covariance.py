@@ -1,0 +1,156 @@
+"""Parameter covariance of the polynomial models (:func:`subid.arx`, :func:`subid.armax`,
+:func:`subid.oe`, :func:`subid.bj`).
+
+The polynomial methods fit each output ``i`` on its own: its coefficients
+``c_i`` (:func:`subid.model.polynomial.coefficient_slots`) minimise the sum of
+squares of its prediction errors ``e_i = y_i - ŷ_i(c_i)``. Linearised at the
+estimate (exact for ARX, whose predictor is linear in the coefficients),
+
+    ĉ_i - c_i ≈ (J_i^T J_i)^-1 J_i^T e_i,       J_i = dŷ_i/dc_i  (N x d_i),
+
+so that ``Cov(ĉ_i, ĉ_k) = Λ_ik (J_i^T J_i)^-1 J_i^T J_k (J_k^T J_k)^-1`` for
+innovations ``e`` of covariance ``Λ`` (white in time). For one output this is
+Ljung's ``λ (Σ ψ ψ^T)^-1`` (*System Identification*, 2nd ed., 1999, Theorem
+9.1 and eq. 9.17; for ARX, whose ``ψ`` is the regressor ``φ``, the
+least-squares covariance ``σ² (Φ^T Φ)^-1`` of eq. 9.20 / Sec. II.2); with
+several outputs the outputs' estimates are correlated through ``Λ`` (the
+covariance of equation-by-equation least squares, a "sandwich" since it is
+not the multivariable maximum-likelihood estimate).
+
+Computation (no explicit inverse of a data matrix): QR of the column-scaled
+``J_i = Q_i R_i``; nuisance columns (the predictor's initial states) first,
+so that the trailing block ``R22_i`` of ``R_i`` and the trailing columns
+``Q2_i`` of ``Q_i`` carry the coefficients with the initial states
+eliminated: ``ĉ_i - c_i ≈ R22_i^-1 Q2_i^T e_i``. With ``Λ = L L^T`` and
+``e_i = Σ_k L_ik w_k`` (``w`` white, unit variance), the stacked errors are
+``blockdiag(R22_i^-1) M^T w`` with ``M`` the (N ny) x (Σ d_i) matrix of blocks
+``L_ik Q2_i``; QR of ``M`` gives ``M^T M = R_M^T R_M`` and the factor
+``F_c = blockdiag(R22_i^-1) R_M^T`` with ``Cov(ĉ) = F_c F_c^T`` (for one
+output, ``σ R22^-1``). ``Λ_ik = e_i^T e_k / sqrt((N - d_i)(N - d_k))``, the
+residual covariance with each output's degrees of freedom.
+
+The coefficient covariance is mapped to the state-space parameters θ =
+``vec(A, B, C[, D], K)`` of the model's realisation
+(:func:`subid.model.polynomial.realise`), which :func:`subid.freqresp_bounds`,
+:func:`subid.step_bounds` and :func:`subid.simulation_bounds` read: ``F_θ = T
+F_c`` with ``T = dθ/dc``, exact (:func:`subid.model.polynomial.realisation_jacobian`).
+The chain rule makes the delta-method bounds identical to those propagated
+through ``G(e^{jw}) = B / (A F)`` with the coefficient covariance.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.linalg
+
+from subid.methods.dt._covariance import RANK_TOLERANCE
+from subid.model.polynomial import coefficient_slots, coefficients, realisation_jacobian
+
+__all__ = ["coefficient_factor", "attach_covariance"]
+
+
+def _psd_sqrt(lam: np.ndarray) -> np.ndarray:
+    """``L`` with ``L L^T = lam`` for a positive semi-definite ``lam`` (Cholesky when it
+    is definite; a symmetric square root when it is singular, e.g. noise-free data)."""
+    try:
+        return np.linalg.cholesky(lam)
+    except np.linalg.LinAlgError:
+        vals, vecs = np.linalg.eigh(0.5 * (lam + lam.T))
+        return vecs * np.sqrt(np.maximum(vals, 0.0))
+
+
+def coefficient_factor(designs, residuals, n_nuisance):
+    """Square-root factor of the covariance of every output's coefficients.
+
+    Parameters
+    ----------
+    designs : list of ndarray, each (N, n_nuisance[i] + d_i)
+        ``J_i = dŷ_i/d(x0_i, c_i)``, nuisance columns first (for ARX the
+        regressors), on the rows of ``residuals``.
+    residuals : ndarray, shape (N, ny)
+        The prediction errors of the outputs at the estimate.
+    n_nuisance : list of int
+        Leading nuisance columns of each design.
+
+    Returns
+    -------
+    factor : ndarray, shape (sum d_i, sum d_i) or None
+        ``F_c`` with ``Cov(c) = F_c F_c^T`` (coefficients output by output);
+        None when a design is rank deficient (a non-minimal structure or
+        data that do not excite it) or not finite.
+    noise_cov : ndarray, shape (ny, ny)
+        The residual covariance ``Λ`` used.
+    """
+    N, ny = residuals.shape
+    dofs = np.array([max(N - J.shape[1], 1) for J in designs], dtype=float)
+    lam = residuals.T @ residuals / np.sqrt(np.outer(dofs, dofs))
+    q_parts, inverses, scales = [], [], []
+    for J, n1 in zip(designs, n_nuisance):
+        scale = np.sqrt(np.einsum("ij,ij->j", J, J))
+        if J.shape[1] == n1:
+            q_parts.append(np.zeros((N, 0)))
+            inverses.append(np.zeros((0, 0)))
+            scales.append(np.zeros(0))
+            continue
+        if not (np.isfinite(scale).all() and scale.min() > 0):
+            return None, lam
+        Q, R = np.linalg.qr(J / scale)
+        diag = np.abs(np.diag(R))
+        if diag.min() <= RANK_TOLERANCE * diag.max():
+            return None, lam
+        R22 = R[n1:, n1:]
+        q_parts.append(Q[:, n1:])
+        inverses.append(scipy.linalg.solve_triangular(R22, np.eye(R22.shape[0]),
+                                                      check_finite=False))
+        scales.append(scale[n1:])
+    L = _psd_sqrt(lam)
+    # M: row block k (noise component w_k), column block i: L_ik Q2_i
+    M = np.vstack([np.hstack([L[i, k] * q_parts[i] for i in range(ny)]) for k in range(ny)])
+    R_M = np.linalg.qr(M, mode="r")
+    factor = scipy.linalg.block_diag(*inverses) @ R_M.T
+    return factor / np.concatenate(scales)[:, None], lam
+
+
+def attach_covariance(model, designs, residuals, n_nuisance, method: str):
+    """Write ``info['parameter_covariance']`` of the polynomial ``model`` (in place).
+
+    The format of :func:`subid.parameter_covariance` (θ of the realisation,
+    its factor, ``with_feedthrough``, ``with_gain``, ``noise_cov``,
+    ``n_samples``, ``method``) plus the coefficients' own: ``coefficients``,
+    ``coefficient_factor`` and ``coefficient_names``
+    (:func:`subid.model.polynomial.coefficient_slots`). A rank-deficient
+    design gives ``info['parameter_covariance_note']`` instead.
+    """
+    poly = model.info["polynomials"]
+    info = model.info
+    factor_c, lam = coefficient_factor(designs, residuals, n_nuisance)
+    if factor_c is None:
+        info["parameter_covariance_note"] = (
+            "no parameter covariance: the prediction-error Jacobian (for ARX the "
+            "regressors) at the estimate is rank deficient or not finite (a non-minimal "
+            "structure or data that do not excite it)")
+        return model
+    T = realisation_jacobian(poly)
+    n, nu, ny = model.order, model.n_inputs, model.n_outputs
+    sizes = [n * n, n * nu, ny * n, ny * nu, n * ny]
+    bounds = np.concatenate([[0], np.cumsum(sizes)])
+    moves = [bool(np.any(T[bounds[k]:bounds[k + 1]])) for k in range(5)]
+    keep = [True, True, True, moves[3], moves[4]]
+    rows = np.concatenate([np.arange(bounds[k], bounds[k + 1]) for k in range(5) if keep[k]])
+    mats = [model.A, model.B, model.C, model.D,
+            model.K if model.K is not None else np.zeros((n, ny))]
+    theta = np.concatenate([np.asarray(m, float).ravel() for m, k in zip(mats, keep) if k])
+    info["parameter_covariance"] = {
+        "parameters": theta,
+        "factor": T[rows] @ factor_c,
+        "with_feedthrough": moves[3],
+        "with_gain": moves[4],
+        "noise_cov": lam,
+        "n_samples": int(residuals.shape[0]),
+        "coefficients": coefficients(poly),
+        "coefficient_factor": factor_c,
+        "coefficient_names": [name for _, _, name in coefficient_slots(poly)],
+        "method": method,
+    }
+    info.pop("parameter_covariance_note", None)
+    return model

@@ -1,0 +1,124 @@
+"""A lower bound of the residual of the B, D, x0 regression from part of the record.
+
+``stability='auto'`` (:func:`subid.methods.dt._subspace.stable_choice`) fits B,
+D, x0 twice for an unstable A: for the stabilised A, then for the unstable one,
+and keeps the unstable model only when its residual RMS is below
+``KEEP_UNSTABLE_RATIO`` times the stabilised one's. The unstable fit cannot take
+the modal path (its regressors grow), so it is a QR factorisation of the whole
+record's regressor: in the cross-validation of the order it cost 20 % of the
+default call at 10^5 samples and 35 % at 10^6 (issue 21), on fold models whose
+unstable fit nearly always lost.
+
+The least-squares residual over all the samples is at least the least-squares
+residual over any subset of them (the minimum of a sum of non-negative terms is at
+least the minimum of part of the sum), and at least that of any problem with more
+free parameters on that subset. :func:`loses` tries, cheapest first:
+
+1. :func:`relaxed_residual_at_least`: the regression on the last :data:`SHORT`,
+   then :data:`TAIL`, of the record alone, with a free initial state of its own
+   (the model's state at the start of the tail is one such state, so the full
+   fit's residual there is one of the residuals this minimum runs over): the
+   reference QR path (:func:`subid.methods.dt._regression.fit_b_d_x0_qr`) on those
+   samples only;
+2. :func:`residual_at_least`: the rows of the last :data:`TAIL` with the model's own
+   state, from the same dual recursions
+   (:func:`subid.methods.dt._regression.dual_rows`) run over the whole record (a
+   third of the cost of the QR path; a regression that overflows anywhere gives no
+   usable fit either).
+
+When a bound already reaches the threshold, the unstable fit loses whatever the
+other samples hold, and the fold model is the stabilised one, exactly as the full
+fit would have decided.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import scipy.linalg
+
+from subid.methods.dt._regression import dual_rows, fit_b_d_x0_qr, parameter_count
+
+#: Fraction of the record (its end) whose residual bounds the whole record's.
+TAIL = 0.25
+#: The shorter tail tried first (with a free initial state).
+SHORT = 0.05
+#: Rows of the dual recursion run at a time over the head of the record.
+_CHUNK = 8192
+#: The bound must exceed the threshold by this relative margin: the QR residuals of
+#: the nearly collinear regressors of an A with poles near the unit circle carry
+#: rounding errors of up to 2e-4 (relative; measured between the tail's residual with
+#: a free and with its own initial state, which equal in exact arithmetic).
+MARGIN = 1e-3
+
+
+def residual_at_least(A, C, u, y, *, feedthrough: bool, estimate_x0: bool,
+                      output_weights) -> float:
+    """A lower bound of the ``residual_rms`` that :func:`subid.methods.dt._regression.fit_b_d_x0`
+    reports for ``(A, C)`` on the single record ``(u, y)``: the least-squares residual
+    of the rows of its last :data:`TAIL` samples, divided by ``sqrt(N ny)``
+    (``inf`` when the regressors overflow: the full fit cannot be used either)."""
+    A = np.ascontiguousarray(A, dtype=float)
+    C = np.ascontiguousarray(C, dtype=float)
+    N, nu = u.shape
+    n, ny = A.shape[0], y.shape[1]
+    n_x0, q, p = parameter_count(n, nu, ny, estimate_x0, feedthrough)
+    start = N - max(int(math.ceil(TAIL * N)), 1)
+    V, M = np.zeros((ny, nu, n)), C.copy()
+    for a in range(0, start, _CHUNK):           # the dual states at the start of the tail
+        b = min(a + _CHUNK, start)
+        _, V, M = dual_rows(A, C, np.ascontiguousarray(u[a:b], dtype=float), V, M, n_x0)
+        if not (np.isfinite(V).all() and np.isfinite(M).all()):
+            return math.inf                     # overflowed: so does the full regression
+    ut = np.ascontiguousarray(u[start:], dtype=float)
+    rows, _, _ = dual_rows(A, C, ut, V, M, n_x0)
+    T = ut.shape[0]
+    block = np.zeros((T, ny, p + 1))
+    block[:, :, :q] = rows
+    if feedthrough:                             # u(t)^T kron I_ny: column j ny + i is D[i, j]
+        for j in range(nu):
+            for i in range(ny):
+                block[:, i, q + j * ny + i] = ut[:, j]
+    block[:, :, p] = y[start:]
+    block *= np.asarray(output_weights, dtype=float)[None, :, None]
+    flat = block.reshape(T * ny, p + 1)
+    if not np.isfinite(flat).all():
+        return math.inf
+    R = scipy.linalg.qr(flat, mode="r", check_finite=False)[0]
+    resid = abs(R[p, p]) if R.shape[0] > p else 0.0
+    return float(resid / math.sqrt(N * ny))
+
+
+def relaxed_residual_at_least(A, C, u, y, fraction: float, *, feedthrough: bool,
+                              output_weights) -> float:
+    """A lower bound of the ``residual_rms`` that :func:`subid.methods.dt._regression.fit_b_d_x0`
+    reports for ``(A, C)`` on ``(u, y)``, with or without x0: the residual of the same
+    regression on the last ``fraction`` of the record alone with a free initial state
+    (the QR path), divided by ``sqrt(N ny)``; 0 when that regression overflows (no
+    bound)."""
+    N, ny = y.shape
+    T = max(int(math.ceil(fraction * N)), 1)
+    rms = fit_b_d_x0_qr(A, C, u[N - T:], y[N - T:], feedthrough=feedthrough, estimate_x0=True,
+                        output_weights=output_weights)[3]["residual_rms"]
+    return float(rms * math.sqrt(T / N)) if math.isfinite(rms) else 0.0
+
+
+def loses(A, C, u, y, threshold: float, *, feedthrough: bool, estimate_x0: bool,
+          output_weights) -> float | None:
+    """A bound (:func:`relaxed_residual_at_least` on the last :data:`SHORT`, then
+    :data:`TAIL`, then :func:`residual_at_least`) when one proves the residual RMS of
+    the fit of ``(A, C)`` at least ``threshold`` (so that the fit cannot be kept),
+    else None."""
+    if not math.isfinite(threshold) or threshold <= 0:
+        return None
+    need = threshold * (1.0 + MARGIN)
+    with np.errstate(all="ignore"):
+        for fraction in (SHORT, TAIL):
+            bound = relaxed_residual_at_least(A, C, u, y, fraction, feedthrough=feedthrough,
+                                              output_weights=output_weights)
+            if bound >= need:
+                return bound
+        bound = residual_at_least(A, C, u, y, feedthrough=feedthrough, estimate_x0=estimate_x0,
+                                  output_weights=output_weights)
+    return bound if bound >= need else None

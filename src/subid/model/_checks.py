@@ -1,0 +1,132 @@
+"""Validation of a model's matrices, channel names and time base (:class:`StateSpace`'s
+constructor, its conversions and the model files share these checks)."""
+
+from __future__ import annotations
+
+import math
+import numbers
+
+import numpy as np
+
+from subid.errors import ModelError
+
+_EPS = np.finfo(np.float64).eps
+
+#: Input holds a model may assume (:attr:`StateSpace.hold`).
+HOLDS = ("zoh", "foh")
+
+
+def _plural(count: int, word: str, plural: str | None = None) -> str:
+    return f"{count} {word if count == 1 else (plural or word + 's')}"
+
+
+def _as_matrix(value, name: str) -> np.ndarray:
+    """``value`` as a finite float64 2-D read-only copy, or ModelError."""
+    if value is None:
+        raise ModelError(f"{name} is missing (None); pass a 2-D array")
+    try:
+        arr = np.asarray(value)
+    except (TypeError, ValueError) as exc:
+        raise ModelError(f"{name} cannot be read as an array ({exc}); "
+                         "pass a rectangular 2-D array of numbers") from None
+    if arr.dtype == object:
+        try:
+            arr = arr.astype(np.float64)
+        except (TypeError, ValueError):
+            raise ModelError(f"{name} holds values that are not numbers") from None
+    if arr.dtype.kind == "c":
+        raise ModelError(f"{name} is complex; state-space matrices must be real")
+    if arr.dtype.kind not in "biuf":
+        raise ModelError(f"{name} has dtype {arr.dtype}, which is not numeric")
+    if arr.ndim != 2:
+        hint = ""
+        if arr.ndim == 1 and name == "B":
+            hint = " (a single-input B is a column: pass B.reshape(-1, 1))"
+        elif arr.ndim == 1 and name == "C":
+            hint = " (a single-output C is a row: pass C.reshape(1, -1))"
+        elif arr.ndim == 0:
+            hint = " (a 1 x 1 matrix is written [[value]])"
+        raise ModelError(f"{name} must be a 2-D array, got {arr.ndim}-D with shape "
+                         f"{arr.shape}{hint}")
+    arr = np.array(arr, dtype=np.float64, order="C", copy=True)
+    bad = ~np.isfinite(arr)
+    if bad.any():
+        i, j = np.argwhere(bad)[0]
+        count = int(bad.sum())
+        raise ModelError(f"{name} has {count} non-finite entr{'y' if count == 1 else 'ies'} "
+                         f"(NaN or inf), the first at row {i}, column {j}; all "
+                         "matrix entries must be finite")
+    arr.setflags(write=False)
+    return arr
+
+
+def _model_dt(dt, name: str = "dt") -> float:
+    if isinstance(dt, (bool, np.bool_)) or not isinstance(dt, numbers.Real):
+        raise ModelError(f"{name} must be a number (0 for continuous time, the sampling "
+                         f"period for discrete time), got {dt!r}")
+    dt = float(dt)
+    if not math.isfinite(dt) or dt < 0:
+        raise ModelError(f"{name} must be finite and >= 0 (0 = continuous time), got {dt!r}")
+    return dt
+
+
+def _names(names, count: int, prefix: str, which: str) -> tuple[str, ...]:
+    if names is None:
+        return tuple(f"{prefix}{k + 1}" for k in range(count))
+    if isinstance(names, str):
+        names = [names]
+    try:
+        names = tuple(names)
+    except TypeError:
+        raise ModelError(f"{which} names must be a sequence of strings, got {names!r}") from None
+    if not all(isinstance(nm, str) for nm in names):
+        raise ModelError(f"{which} names must be strings, got {list(names)!r}")
+    if len(names) != count:
+        raise ModelError(f"{_plural(len(names), which + ' name')} {list(names)} given but the "
+                         f"model has {_plural(count, which)}")
+    if len(set(names)) != len(names):
+        dup = sorted({nm for nm in names if names.count(nm) > 1})
+        raise ModelError(f"{which} names repeat {dup}; names must be unique")
+    return names
+
+
+def _noise_matrices(K, noise_cov, n: int, p: int):
+    """Validated read-only ``(K, noise_cov)``; each may be None."""
+    if K is not None:
+        K = _as_matrix(K, "K")
+        if K.shape != (n, p):
+            raise ModelError(f"K has shape {K.shape[0]}x{K.shape[1]} but the model has order "
+                             f"{n} and {_plural(p, 'output')}: K must be {n} x {p} "
+                             "(order x n_outputs)")
+    if noise_cov is not None:
+        S = _as_matrix(noise_cov, "noise_cov")
+        if S.shape != (p, p):
+            raise ModelError(f"noise_cov has shape {S.shape[0]}x{S.shape[1]} but the model has "
+                             f"{_plural(p, 'output')}: it must be {p} x {p}")
+        scale = max(float(np.abs(S).max()), 1e-300)
+        if np.abs(S - S.T).max() > 1e-8 * scale:
+            raise ModelError("noise_cov is not symmetric; it must be a covariance matrix")
+        S = 0.5 * (S + S.T)
+        if np.linalg.eigvalsh(S).min() < -1e-8 * scale:
+            raise ModelError("noise_cov has a negative eigenvalue; it must be positive "
+                             "semi-definite (a covariance matrix)")
+        S.setflags(write=False)
+        noise_cov = S
+    return K, noise_cov
+
+
+def _check_nonsingular(M: np.ndarray, what: str, why: str) -> None:
+    """ModelError if ``M`` is singular to working precision."""
+    sv = np.linalg.svd(M, compute_uv=False)
+    if sv.size and not (sv[-1] > M.shape[0] * _EPS * sv[0]):
+        cond = math.inf if sv[-1] == 0 else float(sv[0] / sv[-1])
+        raise ModelError(f"{what} is singular (condition number {cond:.3g}); {why}")
+
+
+
+def _is_scalar_zero(value) -> bool:
+    if isinstance(value, (bool, np.bool_)):
+        return False
+    if isinstance(value, np.ndarray):
+        return value.ndim == 0 and value.dtype.kind in "iuf" and value == 0
+    return isinstance(value, (numbers.Number, np.generic)) and value == 0

@@ -1,0 +1,119 @@
+"""The shortcuts that make the order choice cheaper (issue 21, cost of choosing)
+against the computations they replace: the feedthrough F-tests of every channel
+from one factorisation, and the unstable fold fit skipped when a lower bound of
+its residual proves that it cannot be kept. No timing here (bench/run.py)."""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import replace
+from functools import partial
+
+import numpy as np
+import pytest
+import scipy.linalg
+import scipy.stats
+
+from subid import systems
+from subid.methods.dt import _feedthrough as feedthrough
+from subid.methods.dt import _regression as regression
+from subid.methods.dt import _residual_bound as bound
+from subid.methods.dt import _subspace as subspace
+from subid.methods.dt.moesp import _moesp
+from subid.statistic.hankel import HankelStatistic
+
+
+def _record(order=4, n=3000, seed=1, snr=20, nu=2, ny=2):
+    true = systems.random_system(order, nu, ny, seed=seed)
+    return true, systems.simulate_data(true, n, seed=seed + 100, output_snr_db=snr)
+
+
+def _p_value(L, target, restricted, extra, n_columns):
+    """One channel's F-test, one least-squares fit per regressor set (the former code)."""
+    def rss(rows):
+        t = L[target]
+        theta, _, rank, _ = scipy.linalg.lstsq(L[rows].T, t, cond=feedthrough.RANK_TOLERANCE,
+                                               lapack_driver="gelsy")
+        r = t - theta @ L[rows]
+        return float(r @ r), int(rank)
+    rss0, rank0 = rss(restricted)
+    if rss0 <= feedthrough.EXACT * max(float(L[target] @ L[target]), 1e-300):
+        return None
+    rss1, rank1 = rss(np.concatenate([restricted, extra]))
+    q, dof = rank1 - rank0, n_columns - rank1
+    if q <= 0 or dof <= 0:
+        return None
+    return float(scipy.stats.f.sf(max(rss0 - rss1, 0.0) / q / (rss1 / dof), q, dof))
+
+
+@pytest.mark.parametrize("shape", [(2, 2), (1, 1), (1, 3)])
+def test_feedthrough_tests_equal_one_fit_per_channel(shape):
+    nu, ny = shape
+    _, data = _record(order=3, nu=nu, ny=ny, seed=nu + 3 * ny)
+    factor = HankelStatistic.from_data(data, 12).factor()
+    estimate, record = feedthrough.decide(factor)
+    norms = np.linalg.norm(factor.L, axis=1)
+    L = factor.L / np.where(norms > 0, norms, 1.0)[:, None]
+    p = factor.depth - 1
+    past_u, past_y = factor.u_rows(0, p), factor.y_rows(0, p)
+    current_u, current_y = factor.u_rows(p, p + 1), factor.y_rows(p, p + 1)
+    want = [_p_value(L, t, past_u, past_y, factor.n_columns) for t in current_u]
+    got = record["feedback"]["p_values"]
+    np.testing.assert_allclose(got, want, rtol=1e-10, atol=1e-300)
+    if not record["feedback"]["detected"]:
+        past = np.concatenate([past_u, past_y])
+        want = [_p_value(L, t, past, current_u, factor.n_columns) for t in current_y]
+        np.testing.assert_allclose(record["direct_term"]["p_values"], want, rtol=1e-10,
+                                   atol=1e-300)
+    assert isinstance(estimate, bool)
+
+
+def test_residual_bound_is_a_lower_bound():
+    """The tail's least-squares residual never exceeds the whole record's (the QR
+    path of fit_b_d_x0, the reference for an unstable A); an overflowing regression
+    gives an infinite bound, as the full fit gives a non-finite factor."""
+    true, data = _record(order=4, n=6000, seed=2)
+    radius = float(np.abs(np.linalg.eigvals(true.A)).max())
+    weights = np.array([1.0, 2.5])
+    for target in (0.95, 1.0005, 1.003):
+        A = true.A * (target / radius)
+        for x0, d in ((True, True), (False, False)):
+            full = regression.fit_b_d_x0_qr(A, true.C, data.u, data.y, feedthrough=d,
+                                            estimate_x0=x0, output_weights=weights)[3]
+            low = bound.residual_at_least(A, true.C, data.u, data.y, feedthrough=d,
+                                          estimate_x0=x0, output_weights=weights)
+            assert 0.0 < low <= full["residual_rms"] * (1 + 1e-10)
+            for fraction in (bound.SHORT, bound.TAIL):     # free state at the tail's start
+                relaxed = bound.relaxed_residual_at_least(A, true.C, data.u, data.y, fraction,
+                                                          feedthrough=d,
+                                                          output_weights=weights)
+                assert 0.0 < relaxed <= full["residual_rms"] * (1 + 1e-10)
+                assert relaxed <= low * (1 + bound.MARGIN)
+    A = true.A * (1.5 / radius)
+    assert bound.residual_at_least(A, true.C, data.u, data.y, feedthrough=True,
+                                   estimate_x0=True, output_weights=weights) == np.inf
+    assert not np.isfinite(regression.fit_b_d_x0_qr(A, true.C, data.u, data.y)[0]).all()
+    assert bound.loses(A, true.C, data.u, data.y, 1.0, feedthrough=True, estimate_x0=True,
+                       output_weights=weights) >= 1.0
+    assert bound.loses(true.A, true.C, data.u, data.y, np.nan, feedthrough=True,
+                       estimate_x0=True, output_weights=weights) is None
+
+
+def test_fold_model_skipping_the_unstable_fit_is_the_full_fit_model():
+    """A fold model whose unstable A is proven not to be kept (bound_unstable) is the
+    model the full computation gives, to the last bit; the bound was used."""
+    _, data = _record(order=4, n=4000, seed=1)
+    build = partial(_moesp, weighting="moesp", stability="auto", feedthrough="auto",
+                    estimate_x0=True, bd_method="auto", system_matrices="shift")
+    used = 0
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        problem = subspace.prepare(data[:2700], list(range(1, 11)), 10, method="moesp")
+        for n in range(1, 11):
+            full = build(replace(problem, order=n, candidates=[n]))
+            fold = build(replace(problem, order=n, candidates=[n], fold=True))
+            for name in "ABCD":
+                np.testing.assert_array_equal(getattr(fold, name), getattr(full, name))
+            assert fold.info["stability"]["action"] == full.info["stability"]["action"]
+            used += "residual_unstable_at_least" in fold.info["stability"]
+    assert used >= 1
