@@ -606,8 +606,8 @@ def run(out, datasets=None, methods=None, *, frequency_unit="rad/s", progress=Fa
         for r in res["rows"]:
             if r["error"]:
                 log.warning("%s: %s failed: %s", name, r["method"], r["error"])
-        log.info("%s: identified in %.1f s (summed over the methods), report %.1f s", name,
-                 sum(r["seconds"] for r in res["rows"]), res["seconds"])
+        log.info("%s done: identification %.1f s (summed over the methods)", name,
+                 sum(r["seconds"] for r in res["rows"]))
     seconds = time.perf_counter() - t0
     method_cols = list(dict.fromkeys(METHODS[r["method"]].attribute for r in all_rows))
     index = os.path.join(out, "index.html")
