@@ -1,12 +1,13 @@
 """Report time against identification time on 10^6 samples (issue 29 item 6).
 
 Run: OPENBLAS_NUM_THREADS=1 PYTHONPATH=src python bench/report_ratio.py [--samples 1000000]
-     [--repeat 3] [--out bench/report_ratio.md]
+     [--repeat 3] [--method ls] [--profile FILE.prof] [--out bench/report_ratio.md]
 
 What ``subid identify FILE.csv --out DIR`` does, step by step, in one process,
 on a 10^6-row CSV (2 inputs, 2 outputs, a 4th-order system at 20 dB SNR):
 read the file (:func:`subid.read`), remove the means, identify with the
-command line's default method on the first 70 %, evaluate (fit % on both
+command line's default method (``subid.identify``; ``--method`` another one) on
+the first 70 %, evaluate (fit % on both
 parts: the summary needs it, with or without a report), then write the report
 (:func:`subid.evaluation.report.identification_report` and the HTML file).
 Repeats are interleaved; the table gives medians and the ratio
@@ -26,15 +27,21 @@ import warnings
 
 def _default_method():
     """The method ``subid identify`` uses without --method."""
-    from subid.cli.commands import METHODS, identify
+    from subid.cli.commands import IDENTIFY, METHODS, identify
     (option,) = [p for p in identify.params if p.name == "method_name"]
-    return METHODS[option.default]
+    # no --method: subid.identify (the CLI's IDENTIFY entry)
+    return IDENTIFY if option.default is None else METHODS[option.default]
 
 
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--samples", type=int, default=1_000_000)
     parser.add_argument("--repeat", type=int, default=3)
+    parser.add_argument("--method", default=None,
+                        help="a registry method name (default: what subid identify uses "
+                             "without --method, subid.identify)")
+    parser.add_argument("--profile", default=None, metavar="FILE.prof",
+                        help="profile the report step of the timed repeats (cProfile)")
     parser.add_argument("--out", default=os.path.join(os.path.dirname(__file__),
                                                       "report_ratio.md"))
     args = parser.parse_args(argv)
@@ -43,7 +50,11 @@ def main(argv=None):
 
     import subid
     from subid.evaluation import report
-    spec = _default_method()
+    if args.method is None:
+        spec = _default_method()
+    else:
+        from subid.methods.registry import METHODS
+        spec = METHODS[args.method]
     true = subid.systems.random_system(4, 2, 2, seed=29)
     record = subid.systems.simulate_data(true, args.samples, seed=30, output_snr_db=20)
     folder = tempfile.mkdtemp()
@@ -53,25 +64,36 @@ def main(argv=None):
         np.savetxt(f, np.column_stack([record.u, record.y]), delimiter=",", fmt="%.9g")
     del record
 
-    def once():
+    profiler = None
+    if args.profile:
+        import cProfile
+        profiler = cProfile.Profile()
+
+    def once(profile=False):
         times = {}
         t0 = time.perf_counter()
         data = subid.read(path, inputs=["u1", "u2"], outputs=["y1", "y2"], dt=0.01)
         times["read"] = time.perf_counter() - t0
         work = data.detrend()
         est, val = work.split(0.7)
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         model = spec.load()(est, order=None)
         times["identify"] = time.perf_counter() - t0
+        times["cpu_identify"] = time.process_time() - c0
         t0 = time.perf_counter()
         result = report.evaluate(model, est, val)
         times["evaluate"] = time.perf_counter() - t0
-        t0 = time.perf_counter()
+        if profile:
+            profiler.enable()
+        t0, c0 = time.perf_counter(), time.process_time()
         html = report.identification_report(
             {spec.name: model}, est, val, title="bench", seconds={spec.name: 1.0},
             source=path, data=work, fits={spec.name: result})
         report.write_html(os.path.join(folder, "report.html"), html)
         times["report"] = time.perf_counter() - t0
+        times["cpu_report"] = time.process_time() - c0
+        if profile:
+            profiler.disable()
         times["order"] = model.order
         return times
 
@@ -79,7 +101,7 @@ def main(argv=None):
     once()
     runs = []
     for k in range(args.repeat):
-        runs.append(once())
+        runs.append(once(profiler is not None))
         r = runs[-1]
         print(f"repeat {k + 1}: read {r['read']:.2f} s, identify {r['identify']:.2f} s, "
               f"evaluate {r['evaluate']:.2f} s, report {r['report']:.2f} s, ratio "
@@ -87,6 +109,7 @@ def main(argv=None):
     med = {key: statistics.median(r[key] for r in runs)
            for key in ("read", "identify", "evaluate", "report")}
     ratio = statistics.median(r["report"] / r["identify"] for r in runs)
+    cpu_ratio = statistics.median(r["cpu_report"] / r["cpu_identify"] for r in runs)
     load = os.getloadavg()[1]           # the machine's load over the last 5 minutes
     lines = [
         "# Report time against identification time (bench/report_ratio.py)",
@@ -102,9 +125,14 @@ def main(argv=None):
         *(f"| {key} | {value:.2f} |" for key, value in med.items()),
         "",
         f"Report / identification: **{ratio:.2f}** (median of the per-repeat ratios; "
-        "target <= 0.5).",
+        f"target <= 0.5); in CPU time (time.process_time, less sensitive to the load): "
+        f"{cpu_ratio:.2f}.",
         "",
     ]
+    if profiler is not None:
+        profiler.dump_stats(args.profile)
+        lines += ["(The report step ran under cProfile: its seconds include the profiler's "
+                  "overhead.)", ""]
     text = "\n".join(lines)
     with open(args.out, "w") as f:   # noqa: SIM115 - the benchmark's table
         f.write(text)

@@ -23,7 +23,8 @@ from subid.io._files import atomic_directory, write_bytes
               help="Comma-separated batch methods (default: every available one but the "
                    "slow armax, oe and bj).")
 @click.option("--jobs", type=click.IntRange(min=1), default=None,
-              help="Datasets processed in parallel processes (default: the CPUs, at most 4).")
+              help="Processes working in parallel, one identification or report each "
+                   "(default: the CPUs).")
 @_FREQ
 @_common
 def demo(out, names, methods, jobs, frequency_unit):

@@ -109,9 +109,9 @@ def _free_blocks(model, data, hold, block=_SIM_BLOCK):
     :data:`_FREE_DECAYED` (the rest contributes nothing at rounding level)."""
     N, n, ny = data.n_samples, model.order, model.n_outputs
     if model.dt > 0:
-        stable = bool(np.abs(model.poles()).max(initial=0.0) < 1.0)
-    else:
-        stable = bool(model.poles().real.max(initial=-1.0) < 0.0)
+        yield from _free_blocks_discrete(model.A, model.C, N, block)
+        return
+    stable = bool(model.poles().real.max(initial=-1.0) < 0.0)
     zeros = np.zeros((min(block, N) + 1, model.n_inputs))
     X = np.eye(n)
     for a in range(0, N, block):
@@ -129,6 +129,34 @@ def _free_blocks(model, data, hold, block=_SIM_BLOCK):
         X = Xn
         if stable and np.abs(X).max(initial=0.0) < _FREE_DECAYED:
             return
+
+
+def _free_blocks_discrete(A, C, N, block=_SIM_BLOCK):
+    """:func:`_free_blocks` of a discrete-time model: ``F[t] = C A^t`` by doubling
+    (``C A^{t+m} = (C A^t) A^m`` for ``t < m``, ``A^{2m} = A^m A^m``): log2(block)
+    matrix products per block instead of one simulation per state, the same values
+    to rounding."""
+    n, ny = A.shape[0], C.shape[0]
+    stable = bool(np.abs(np.linalg.eigvals(A)).max(initial=0.0) < 1.0) if n else True
+    X = None                                   # A^a (None: the identity)
+    with np.errstate(over="ignore", invalid="ignore"):
+        for a in range(0, N, block):
+            b = min(a + block, N)
+            length = b - a
+            P = np.empty((length, ny, n))      # C A^t, t < length
+            P[0] = C
+            power, m = A.copy(), 1             # power = A^m
+            while m < length:
+                k = min(m, length - m)
+                P[m:m + k] = P[:k] @ power
+                if k == m and m + k < length:
+                    power = power @ power
+                m += k
+            yield a, b, P if X is None else P @ X
+            step = np.linalg.matrix_power(A, length)
+            X = step if X is None else step @ X
+            if stable and np.abs(X).max(initial=0.0) < _FREE_DECAYED:
+                return
 
 
 def simulate_fit(model, data, x0="estimate", hold=None, *, output_std=None):

@@ -14,6 +14,7 @@ docs/gallery.md``; ``python -m subid.cli.demo --out demo_out`` is an alias of
 
 from __future__ import annotations
 
+import functools
 import logging
 import os
 import time
@@ -27,8 +28,8 @@ from subid.errors import OptionError, SubidError
 from subid.io._files import write_bytes, write_json
 from subid.methods.describe import AUTO_ORDER_RULE
 
-__all__ = ["evaluate", "diagnose", "report_dataset", "run", "gallery", "gallery_markdown",
-           "GALLERY_COMMAND", "FRACTION"]
+__all__ = ["evaluate", "identify_one", "diagnose", "report_dataset", "write_report", "run",
+           "gallery", "gallery_markdown", "GALLERY_COMMAND", "FRACTION"]
 
 log = logging.getLogger(__name__)
 
@@ -82,36 +83,68 @@ def evaluate(name: str, methods=None, fraction: float = FRACTION):
     rows : list of dict
         One per method: ``dataset``, ``method``, ``function``, ``order``,
         ``horizon``, ``fit_est``, ``fit_val`` (arrays per output, from
-        :func:`subid.fit_percent`), ``stable``, ``seconds``, ``warnings``,
-        ``error`` (message, or None).
+        :func:`subid.fit_percent`), ``stable``, ``seconds``, ``cpu_seconds``,
+        ``warnings``, ``error`` (message, or None).
     models : dict method -> StateSpace
     est, val : IOData
     """
-    from subid.evaluation.report import evaluate as fits
-    specs = _methods(methods)
-    data = datasets.load(name).detrend()
-    est, val = data.split(fraction)
     rows, models = [], {}
-    for method, spec in specs.items():
-        t0 = time.perf_counter()
-        try:
-            with warnings.catch_warnings(record=True) as caught:
-                warnings.simplefilter("always")
-                model = spec.load()(est, order=None)
-            seconds = time.perf_counter() - t0
-            r = fits(model, est, val)
-            rows.append(dict(dataset=name, method=method, function=spec.attribute,
-                             order=model.order, horizon=model.info.get("horizon"),
-                             fit_est=r["fit_estimation"], fit_val=r["fit_validation"],
-                             stable=r["stable"], seconds=seconds,
-                             warnings=sorted({str(w.message) for w in caught}), error=None))
+    for method in _methods(methods):
+        row, model = identify_one(name, method, fraction)
+        rows.append(row)
+        if model is not None:
             models[method] = model
-        except SubidError as exc:
-            log.info("%s: %s failed: %s", name, method, exc)
-            rows.append(dict(dataset=name, method=method, function=spec.attribute, order=None,
-                             horizon=None, fit_est=None, fit_val=None, stable=None,
-                             seconds=time.perf_counter() - t0, warnings=[], error=str(exc)))
+    est, val = _parts(name, fraction)
     return rows, models, est, val
+
+
+@functools.lru_cache(maxsize=2)
+def _parts(name: str, fraction: float):
+    """The record ``name`` without its means, split: loaded once per process."""
+    return datasets.load(name).detrend().split(fraction)
+
+
+def identify_one(name: str, method: str, fraction: float = FRACTION):
+    """One method on one dataset with the library defaults: ``(row, model)``.
+
+    Parameters
+    ----------
+    name : str
+        A bundled dataset.
+    method : str
+        A registry name of a batch method.
+    fraction : float
+        Share of the record used for identification.
+
+    Returns
+    -------
+    row : dict
+        The row of :func:`evaluate`; its fit % on both parts (from
+        :func:`subid.evaluation.report.evaluate`) is what the report shows.
+    model : StateSpace or None
+        None when the method failed (its error is in the row).
+    """
+    from subid.evaluation.report import evaluate as fits
+    spec = _methods([method])[method]
+    est, val = _parts(name, fraction)
+    t0, c0 = time.perf_counter(), time.process_time()
+    try:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            model = spec.load()(est, order=None)
+        seconds, cpu = time.perf_counter() - t0, time.process_time() - c0
+        r = fits(model, est, val)
+    except SubidError as exc:
+        log.info("%s: %s failed: %s", name, method, exc)
+        return dict(dataset=name, method=method, function=spec.attribute, order=None,
+                    horizon=None, fit_est=None, fit_val=None, stable=None,
+                    seconds=time.perf_counter() - t0, cpu_seconds=time.process_time() - c0,
+                    warnings=[], error=str(exc)), None
+    return dict(dataset=name, method=method, function=spec.attribute, order=model.order,
+                horizon=model.info.get("horizon"), fit_est=r["fit_estimation"],
+                fit_val=r["fit_validation"], stable=r["stable"], seconds=seconds,
+                cpu_seconds=cpu, warnings=sorted({str(w.message) for w in caught}),
+                error=None), model
 
 
 def _fit_text(values) -> str:
@@ -349,10 +382,37 @@ def report_dataset(name: str, out: str, methods=None, frequency_unit="rad/s") ->
         ``name``, ``rows`` (of :func:`evaluate`), ``path`` of the report,
         ``entry`` (the row of the index page) and ``seconds``.
     """
+    t0 = time.perf_counter()
+    rows, models, _, _ = evaluate(name, methods)
+    result = write_report(name, out, rows, models, frequency_unit)
+    result["seconds"] = time.perf_counter() - t0
+    return result
+
+
+def write_report(name: str, out: str, rows, models, frequency_unit="rad/s") -> dict:
+    """Write the report ``out/NAME.html`` of models already identified.
+
+    Parameters
+    ----------
+    name : str
+        A bundled dataset.
+    out : str
+        Output folder.
+    rows : list of dict
+        The rows of :func:`evaluate` (their fit % is shown, not computed again).
+    models : dict method -> StateSpace
+    frequency_unit : {'rad/s', 'Hz'}
+
+    Returns
+    -------
+    dict
+        ``name``, ``rows``, ``path`` of the report, ``entry`` (the row of the
+        index page), ``seconds`` and ``cpu_seconds`` (writing the report).
+    """
     from subid.evaluation import report
     from subid.methods.registry import METHODS
-    t0 = time.perf_counter()
-    rows, models, est, val = evaluate(name, methods)
+    t0, c0 = time.perf_counter(), time.process_time()
+    est, val = _parts(name, FRACTION)
     meta = datasets.info(name)
     notes = [meta["description"], f"Sampling: {meta['dt_note']}", f"Source: {meta['source']}"]
     if meta["notes"]:
@@ -363,10 +423,13 @@ def report_dataset(name: str, out: str, methods=None, frequency_unit="rad/s") ->
     if models:
         seconds = {r["method"]: r["seconds"] for r in rows if not r["error"]}
         errors = {r["method"]: r["error"] for r in rows if r["error"]}
+        fits = {r["method"]: {"fit_estimation": r["fit_est"], "fit_validation": r["fit_val"],
+                              "stable": r["stable"]} for r in rows if not r["error"]}
         html = report.identification_report(
             models, est, val, title=f"{name}: DaISy dataset",
             frequency_unit=frequency_unit, seconds=seconds, errors=errors, notes=notes,
-            command=f"subid demo --datasets {name} --out {out}", source=f"dataset:{name}")
+            command=f"subid demo --datasets {name} --out {out}", source=f"dataset:{name}",
+            fits=fits)
     else:
         html = report.failure_page(f"{name}: DaISy dataset",
                                    {r["method"]: r["error"] for r in rows})
@@ -382,7 +445,12 @@ def report_dataset(name: str, out: str, methods=None, frequency_unit="rad/s") ->
             reason, hint, section = why
             entry["notes"][column] = (reason, hint, f"{name}.html#{section}")
     return {"name": name, "rows": rows, "path": path, "entry": entry,
-            "seconds": time.perf_counter() - t0}
+            "seconds": time.perf_counter() - t0, "cpu_seconds": time.process_time() - c0}
+
+
+#: Thread-count variables of the BLAS/OpenMP libraries, set to 1 in the worker
+#: processes (one job per core; several BLAS threads per job would compete for them).
+_THREAD_VARIABLES = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
 
 
 def _worker_init():
@@ -393,7 +461,7 @@ def _worker_init():
 
 
 def default_jobs(count: int) -> int:
-    """Parallel jobs for ``count`` datasets: the CPUs available, at most 4."""
+    """Parallel jobs for ``count`` tasks: the CPUs available to this process."""
     return _default_jobs(count)
 
 
@@ -402,7 +470,77 @@ def _default_jobs(count: int) -> int:
         cpus = len(os.sched_getaffinity(0))
     except (AttributeError, OSError):  # pragma: no cover - not Linux
         cpus = os.cpu_count() or 1
-    return max(1, min(cpus, count, 4))
+    return max(1, min(cpus, count))
+
+
+def _expected_cost(name: str, method: str) -> float:
+    """A rough relative cost of ``method`` on dataset ``name``, to start the longest
+    tasks first (longest-processing-time order keeps the pool busy to the end):
+    samples x channels, with ``ct`` (a search over the basis scale, each candidate
+    refined) several times the discrete-time methods (bench/demo_profile.md)."""
+    meta = datasets.info(name)
+    size = meta["n_samples"] * (meta["n_inputs"] + meta["n_outputs"])
+    return size * (_CT_WEIGHT if method.startswith("ct") else 1.0)
+
+
+#: How many times a discrete-time method's cost ``ct`` takes (bench/demo_profile.md).
+_CT_WEIGHT = 4.0
+
+
+class _Environment:
+    """Set environment variables for a block (the spawned workers inherit them)."""
+
+    def __init__(self, **values):
+        self.values, self.saved = values, {}
+
+    def __enter__(self):
+        for key, value in self.values.items():
+            self.saved[key] = os.environ.get(key)
+            os.environ[key] = value
+        return self
+
+    def __exit__(self, *exc):
+        for key, value in self.saved.items():
+            if value is None:
+                os.environ.pop(key, None)
+            else:
+                os.environ[key] = value
+
+
+def _in_pool(names, methods, out, frequency_unit, jobs, bar):
+    """Every (dataset, method) identification as its own task in a pool of ``jobs``
+    processes, longest first; a dataset's report is a task too, submitted when its
+    last method is done. Returns ``{name: write_report result}``."""
+    import concurrent.futures
+    import multiprocessing
+    columns = list(_methods(methods))
+    tasks = sorted(((name, method) for name in names for method in columns),
+                   key=lambda task: _expected_cost(*task), reverse=True)
+    done = {name: {} for name in names}
+    results = {}
+    context = multiprocessing.get_context("spawn")     # no forked BLAS or numba state
+    with _Environment(**{key: "1" for key in _THREAD_VARIABLES}), \
+            concurrent.futures.ProcessPoolExecutor(jobs, mp_context=context,
+                                                   initializer=_worker_init) as pool:
+        pending = {pool.submit(identify_one, name, method): (name, method)
+                   for name, method in tasks}
+        while pending:
+            finished, _ = concurrent.futures.wait(
+                pending, return_when=concurrent.futures.FIRST_COMPLETED)
+            for future in finished:
+                name, method = pending.pop(future)
+                if method is None:                       # a report
+                    results[name] = future.result()
+                    bar.finished(name)
+                    continue
+                done[name][method] = future.result()
+                if len(done[name]) == len(columns):
+                    rows = [done[name][m][0] for m in columns]
+                    models = {m: done[name][m][1] for m in columns
+                              if done[name][m][1] is not None}
+                    pending[pool.submit(write_report, name, out, rows, models,
+                                        frequency_unit)] = (name, None)
+    return results
 
 
 def run(out, datasets=None, methods=None, *, frequency_unit="rad/s", progress=False,
@@ -421,10 +559,12 @@ def run(out, datasets=None, methods=None, *, frequency_unit="rad/s", progress=Fa
     progress : bool
         Progress bar over the datasets.
     jobs : int or None
-        Datasets processed at the same time, in separate (spawned) processes;
-        1 (default) runs everything in this process, None uses the CPUs
-        available (at most 4). With more than 1, a script calling this
-        function needs the usual ``if __name__ == "__main__":`` guard.
+        Processes working at the same time (spawned, one BLAS thread each):
+        every (dataset, method) identification is a task, and so is every
+        dataset's report, the longest first. 1 (default) runs everything in
+        this process, None uses the CPUs available. With more than 1, a
+        script calling this function needs the usual
+        ``if __name__ == "__main__":`` guard.
 
     Returns
     -------
@@ -442,7 +582,8 @@ def run(out, datasets=None, methods=None, *, frequency_unit="rad/s", progress=Fa
                         f"{', '.join(_all_names())}")
     _methods(methods)                                  # unknown names fail before any work
     os.makedirs(out, exist_ok=True)
-    jobs = _default_jobs(len(names)) if jobs is None else max(1, int(jobs))
+    jobs = _default_jobs(len(names) * len(_methods(methods))) if jobs is None \
+        else max(1, int(jobs))
     t0 = time.perf_counter()
     results = {}
     bar = Steps(names, "demo", enabled=bool(progress))    # elapsed time moves on
@@ -452,16 +593,7 @@ def run(out, datasets=None, methods=None, *, frequency_unit="rad/s", progress=Fa
                 bar.start(name)
                 results[name] = report_dataset(name, out, methods, frequency_unit)
         else:
-            import concurrent.futures
-            import multiprocessing
-            context = multiprocessing.get_context("spawn")     # safe with BLAS threads
-            with concurrent.futures.ProcessPoolExecutor(jobs, mp_context=context,
-                                                        initializer=_worker_init) as pool:
-                futures = {pool.submit(report_dataset, name, out, methods, frequency_unit): name
-                           for name in names}
-                for future in concurrent.futures.as_completed(futures):
-                    results[futures[future]] = future.result()
-                    bar.finished(futures[future])
+            results = _in_pool(names, methods, out, frequency_unit, jobs, bar)
     finally:
         bar.close()
     all_rows, by_dataset, reports, entries = [], {}, [], []
@@ -474,7 +606,8 @@ def run(out, datasets=None, methods=None, *, frequency_unit="rad/s", progress=Fa
         for r in res["rows"]:
             if r["error"]:
                 log.warning("%s: %s failed: %s", name, r["method"], r["error"])
-        log.info("%s done in %.1f s", name, res["seconds"])
+        log.info("%s done: identification %.1f s (summed over the methods)", name,
+                 sum(r["seconds"] for r in res["rows"]))
     seconds = time.perf_counter() - t0
     method_cols = list(dict.fromkeys(METHODS[r["method"]].attribute for r in all_rows))
     index = os.path.join(out, "index.html")
@@ -483,7 +616,7 @@ def run(out, datasets=None, methods=None, *, frequency_unit="rad/s", progress=Fa
         intro=(f"Each record: means removed, identified on the first {FRACTION:.0%} with the "
                f"order chosen automatically, validated on the last {1 - FRACTION:.0%}. "
                "Cells: mean validation fit % over the outputs (order). Click a dataset for "
-               "its report."),
+               "its report." + _left_out(methods)),
         columns=["samples", "inputs × outputs", *method_cols],
         footer=f"{len(names)} datasets in {seconds:.1f} s. Reproduce with: subid demo "
                f"--out {out}"))
@@ -492,10 +625,27 @@ def run(out, datasets=None, methods=None, *, frequency_unit="rad/s", progress=Fa
     gallery_path = os.path.join(out, "gallery.md")
     write_bytes(gallery_path, gallery_markdown(gallery_rows), what="gallery")
     summary_path = os.path.join(out, "summary.json")
-    write_json(summary_path, {"seconds": seconds, "rows": [_jsonable(r) for r in all_rows]},
+    write_json(summary_path, {"seconds": seconds, "jobs": jobs,
+                              "report_cpu_seconds": {name: results[name]["cpu_seconds"]
+                                                     for name in names},
+                              "rows": [_jsonable(r) for r in all_rows]},
                what="summary", indent=1)
     return {"rows": all_rows, "by_dataset": by_dataset, "reports": reports, "index": index,
             "gallery": gallery_path, "summary": summary_path, "seconds": seconds}
+
+
+def _left_out(methods) -> str:
+    """The index's sentence on the methods the default run leaves out, and how to run them."""
+    if methods is not None:
+        return ""
+    from subid.methods.registry import available_methods
+    slow = [m for m in SLOW_METHODS if m in available_methods("batch")]
+    if not slow:
+        return ""
+    every = ",".join(available_methods("batch"))
+    return (f" Left out: {', '.join(slow)} (polynomial models fitted by prediction-error "
+            "minimisation, one per output: minutes on each multi-output record); run them "
+            f"with: subid demo --methods {every}")
 
 
 def _jsonable(row: dict) -> dict:

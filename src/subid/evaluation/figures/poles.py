@@ -80,7 +80,10 @@ def poles(models, reference=None, *, labels=None, ax=None, title=None, markersiz
         _legend_beside(axes[-1], list(seen.values()), list(seen))
         if title:
             fig.suptitle(title)
-        fig.tight_layout(rect=(0, 0, 1 - room / fig.get_figwidth(), 1))
+        width = fig.get_figwidth()     # fixed margins: tight_layout draws the figure twice
+        fig.subplots_adjust(left=0.85 / width, right=1 - (room + 0.1) / width,
+                            bottom=0.6 / 5, top=1 - (0.75 if title else 0.45) / 5,
+                            wspace=0.9 / ((width - room - 1.85) / 2))
         return fig
     own = ax is None
     fig = ax.figure if ax is not None else plt.figure(figsize=(5.0 + room, 5))

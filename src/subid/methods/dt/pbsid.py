@@ -46,11 +46,13 @@ import numpy as np
 import scipy.linalg
 
 from subid._validation import check_bool, checked_call
+from subid.data import IOData
 from subid.delay import shift_for_method
 from subid.methods.bd import INFO_KEY
 from subid.methods.dt._feedthrough import check_feedthrough
 from subid.methods.dt._feedthrough import resolve as resolve_feedthrough
 from subid.methods.dt._subspace import (
+    check_experiment_lengths,
     choose_order,
     finalize,
     finish,
@@ -144,17 +146,24 @@ def _pbsid(pb, *, stability, feedthrough, estimate_x0) -> StateSpace:
     wp = hf.rows(hf.u_rows(0, i), hf.y_rows(0, i))
     wp_next = hf.rows(hf.u_rows(1, i + 1), hf.y_rows(1, i + 1))
     n_wp = wp.shape[0]
-    rows = []
-    for k in range(i):                        # step 1: one regression per future step
-        parts = [wp]
-        if k:
-            parts += [hf.rows(hf.u_rows(i, i + k)), hf.rows(hf.y_rows(i, i + k))]
-        if feedthrough:
-            parts.append(hf.rows(hf.u_rows(i + k, i + k + 1)))
-        theta = _lstsq_rows(np.vstack(parts), hf.rows(hf.y_rows(i + k, i + k + 1)))
-        rows.append(theta[:, :n_wp])
-    coef = np.vstack(rows)                    # Γ_f K_p (in the factor's coordinates)
-    U, s, _ = scipy.linalg.svd(coef @ wp, full_matrices=False, check_finite=False)
+
+    def regressions():
+        rows = []
+        for k in range(i):                    # step 1: one regression per future step
+            parts = [wp]
+            if k:
+                parts += [hf.rows(hf.u_rows(i, i + k)), hf.rows(hf.y_rows(i, i + k))]
+            if feedthrough:
+                parts.append(hf.rows(hf.u_rows(i + k, i + k + 1)))
+            theta = _lstsq_rows(np.vstack(parts), hf.rows(hf.y_rows(i + k, i + k + 1)))
+            rows.append(theta[:, :n_wp])
+        coef = np.vstack(rows)                # Γ_f K_p (in the factor's coordinates)
+        U, s, _ = scipy.linalg.svd(coef @ wp, full_matrices=False, check_finite=False)
+        return coef, U, s
+
+    # steps 1 and 2's SVD do not depend on the order: once per problem, shared by the
+    # candidate orders of a cross-validation fold (Problem.cached)
+    coef, U, s = pb.cached(("pbsid regressions", feedthrough), regressions)
     n, order_selection = choose_order(pb.order, pb.candidates, s, "singular values")
     Q = U[:, :n]                              # orthonormal basis of range(Γ_f)
     M = Q.T @ coef                            # x(t) = M z_p(t)
@@ -183,6 +192,9 @@ def _pbsid(pb, *, stability, feedthrough, estimate_x0) -> StateSpace:
                                     method=pb.method)
     B, D = fitted[0], fitted[1]
     _, C, _ = pb.unscale(np.zeros((n, nu)), C, np.zeros((ny, nu)))
-    x0 = initial_state(A, B, C, D, data) if estimate_x0 else None
+    if estimate_x0 and pb.fold and isinstance(data, IOData) and data.n_experiments > 1:
+        check_experiment_lengths(data, n)     # what initial_state would raise
+    # a fold model is scored with an x0 fitted on the held-out data (Problem.fold)
+    x0 = initial_state(A, B, C, D, data) if estimate_x0 and not pb.fold else None
     return finish(pb, A, B, C, D, n, order_selection, singular_values=s, x0=x0,
                   state_regression_residual=residual, stability=stab, feedthrough=ft_record)
