@@ -181,3 +181,12 @@ def conditions_of(info: dict, **given) -> dict:
         if info.get(key) is not None:
             out.setdefault(name, info[key])
     return out
+
+
+def extended_observability(A, C, f: int):
+    """The extended observability matrix ``[C; C A; ...; C A^(f-1)]`` (``f`` block rows)."""
+    blocks, row = [], C
+    for _ in range(f):
+        blocks.append(row)
+        row = row @ A
+    return np.vstack(blocks)

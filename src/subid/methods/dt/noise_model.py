@@ -45,6 +45,7 @@ import scipy.linalg
 
 from subid.data import IOData
 from subid.errors import NoiseModelWarning, OptionError, SubidError
+from subid.methods._common import extended_observability
 from subid.statistic._hankel import HankelFactor
 
 __all__ = ["innovation_model", "attach_noise_model", "check_refine", "REFINE_OPTIONS"]
@@ -65,14 +66,6 @@ def _oblique(hf: HankelFactor, y_rows, u_rows, w_rows) -> np.ndarray:
     reg = np.vstack([Wp, Uf])
     theta = _lstsq(reg.T, Yf.T).T
     return theta[:, :Wp.shape[0]] @ Wp
-
-
-def _observability(A, C, f):
-    blocks, row = [], C
-    for _ in range(f):
-        blocks.append(row)
-        row = row @ A
-    return np.vstack(blocks)
 
 
 def _spectral_radius(M) -> float:
@@ -117,7 +110,7 @@ def innovation_model(A, B, C, D, hf: HankelFactor, past: int | None = None):
                    np.concatenate([hf.u_rows(0, p), hf.y_rows(0, p)]))
     o_p1 = _oblique(hf, hf.y_rows(p + 1, s), hf.u_rows(p + 1, s),
                     np.concatenate([hf.u_rows(0, p + 1), hf.y_rows(0, p + 1)]))
-    gamma = _observability(A, C, f)
+    gamma = extended_observability(A, C, f)
     x_p = _lstsq(gamma, o_p)
     x_p1 = _lstsq(gamma[:-ny], o_p1)
     u_p = hf.L[hf.u_rows(p, p + 1)] if nu else np.zeros((0, hf.L.shape[1]))

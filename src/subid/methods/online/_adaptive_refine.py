@@ -34,6 +34,8 @@ import numpy as np
 import scipy.linalg
 from scipy.optimize import least_squares
 
+from subid.methods._common import extended_observability
+
 __all__ = ["refit", "structured_m", "toeplitz"]
 
 # Largest number of residual evaluations of the Levenberg-Marquardt search.
@@ -41,14 +43,6 @@ _MAX_EVALUATIONS = 4000
 # Its tolerances: tight, so that states equal to rounding (chunked, time-stamped
 # streams) give refits equal to rounding, not to the search's stopping rule.
 _TOLERANCE = 1e-14
-
-
-def _observability(A, C, f):
-    blocks, X = [], C
-    for _ in range(f):
-        blocks.append(X)
-        X = X @ A
-    return np.vstack(blocks)
 
 
 def toeplitz(A, B, C, D, f):
@@ -73,14 +67,14 @@ def structured_m(theta, n, nu, ny, f, H, omega):
     B = theta[n * n:n * n + n * nu].reshape(n, nu)
     C = theta[n * n + n * nu:n * n + n * nu + ny * n].reshape(ny, n)
     D = theta[n * n + n * nu + ny * n:].reshape(ny, nu)
-    T = H @ _observability(A / omega, C, f)
+    T = H @ extended_observability(A / omega, C, f)
     try:
         At = np.linalg.solve(T.T, (T @ A).T).T          # T A T^{-1}
         Ct = np.linalg.solve(T.T, C.T).T                # C T^{-1}
     except np.linalg.LinAlgError:
         return None
     Bt = T @ B
-    O = _observability(At / omega, Ct, f)
+    O = extended_observability(At / omega, Ct, f)
     M = np.hstack([O, (np.eye(f * ny) - O @ H) @ toeplitz(At / omega, Bt / omega, Ct, D, f)])
     return M, (At, Bt, Ct, D)
 
