@@ -250,7 +250,7 @@ _POLY_CAPS = frozenset({"polynomial", "order_selection", "x0", "experiments"})
 # What the contract checks (subid.testing) call each method with and what it claims. The
 # ``unrecorded`` options are those ``model.info`` does not record today: ``statistic``
 # is a given input; the others are gaps that the pipeline's plan is to record.
-_DT_UNRECORDED = ("statistic", "refine", "input_delay")
+_DT_UNRECORDED = ("statistic", "input_delay")
 _DT_CHECKS = CheckParameters(unrecorded=_DT_UNRECORDED)
 _POLY_CHECKS = CheckParameters(reproduces=False)          # order is a structure
 _PEM_CHECKS = CheckParameters(reproduces=False, unrecorded=_POLY_PEM)

@@ -636,6 +636,7 @@ def finalize(model: StateSpace, problem: Problem, *, refine, delays) -> StateSpa
     model = attach_noise_model(model, problem)
     if refine is not None:
         model = refined(problem.data, model, refine)
+    model.info["refine"] = refine          # the value in use, as every option's
     return record_delay(model, delays)
 
 
