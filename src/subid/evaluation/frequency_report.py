@@ -25,6 +25,7 @@ from subid.evaluation.report import (
     _fmt,
     _fmt_fit,
     _info_table,
+    _labelled,
     _matlab_code,
     _matrix_table,
     _page,
@@ -126,10 +127,7 @@ def frequency_report(models, estimation, validation=None, *, title="subid report
         The HTML document (sections: :data:`SECTIONS`).
     """
     from subid.evaluation import plot
-    from subid.model.statespace import StateSpace
-    if isinstance(models, StateSpace):
-        models = {str(models.info.get("method", "model")): models}
-    models = dict(models)
+    models = _labelled(models)
     hz = str(frequency_unit).lower() == "hz"
     seconds = seconds or {}
     body, nav = [], []

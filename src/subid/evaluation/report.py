@@ -283,6 +283,14 @@ def write_html(path, text: str) -> None:
         fh.write(text)
 
 
+def _labelled(models) -> dict:
+    """The models of a report as ``{label: model}``: one model is labelled by its method."""
+    from subid.model.statespace import StateSpace
+    if isinstance(models, StateSpace):
+        return {str(models.info.get("method", "model")): models}
+    return dict(models)
+
+
 def _page(title: str, body: list[str], nav: list[tuple[str, str]] = ()) -> str:
     links = "".join(f'<a href="#{_e(i)}">{_e(t)}</a>' for i, t in nav)
     from subid import __version__ as version
@@ -467,10 +475,7 @@ def identification_report(models, estimation, validation=None, *, title="subid r
         The HTML document (sections: :data:`SECTIONS`).
     """
     from subid.evaluation import plot
-    from subid.model.statespace import StateSpace
-    if isinstance(models, StateSpace):
-        models = {str(models.info.get("method", "model")): models}
-    models = dict(models)
+    models = _labelled(models)
     hz = str(frequency_unit).lower() == "hz"
     seconds = seconds or {}
     errors = errors or {}
