@@ -247,11 +247,8 @@ _POLY_COMMON = ("selection", "estimate_x0")
 _POLY_PEM = ("max_iterations", "tolerance")
 _POLY_CAPS = frozenset({"polynomial", "order_selection", "x0", "experiments"})
 
-# What the contract checks (subid.testing) call each method with and what it claims. The
-# ``unrecorded`` options are those ``model.info`` does not record today: ``statistic``
-# is a given input; the others are gaps that the pipeline's plan is to record.
-_DT_UNRECORDED = ("statistic", "input_delay")
-_DT_CHECKS = CheckParameters(unrecorded=_DT_UNRECORDED)
+# What the contract checks (subid.testing) call each method with and what it claims.
+_DT_CHECKS = CheckParameters()
 _POLY_CHECKS = CheckParameters(reproduces=False)          # order is a structure
 _PEM_CHECKS = CheckParameters(reproduces=False, unrecorded=_POLY_PEM)
 
@@ -263,7 +260,7 @@ METHODS: dict[str, MethodSpec] = {
         options=_DT_COMMON + ("instruments", "selector", "seed", "instrument_weighting",
                               "power_iterations", "normalize_outputs", "system_matrices"),
         capabilities=_DT_CAPS | {"seeded"}, aliases=("ls_subspace",),
-        checks=CheckParameters(unrecorded=_DT_UNRECORDED + ("seed", "normalize_outputs"))),
+        checks=CheckParameters(unrecorded=("seed", "normalize_outputs"))),
     "moesp": MethodSpec(
         "moesp", "batch", "subid.methods.dt.moesp", "moesp", "discrete", "PO-MOESP (Verhaegen)",
         options=_DT_COMMON + ("weighting", "system_matrices"),
@@ -320,7 +317,7 @@ METHODS: dict[str, MethodSpec] = {
         command_line=False,
         # its default hold is 'zoh'; the continuous test record is held first-order
         checks=CheckParameters(record="continuous", order=2, options=(("hold", "foh"),),
-                               exact="frequency", unrecorded=_DT_UNRECORDED)),
+                               exact="frequency")),
     "fd": MethodSpec(
         "fd", "batch", "subid.methods.fd.fd_subspace", "fd_subspace", "continuous",
         "subspace identification from a frequency response (McKelvey et al. 1996); the "
@@ -340,9 +337,7 @@ METHODS: dict[str, MethodSpec] = {
                  "bd_method", "refresh_every", "restart_tolerance", "lags"),
         capabilities=frozenset({"horizon", "seeded", "feedthrough"}),
         aliases=("RecursiveSubspace",),
-        checks=CheckParameters(chunks_exact=False, expected_failures=(
-            ("read_only", "reading model (or state) mid-record changes the estimates that "
-                          "follow at rounding (2.7e-15 in B; the cause is not located)"),))),
+        checks=CheckParameters(chunks_exact=False)),
     "adaptive": MethodSpec(
         "adaptive", "online", "subid.methods.online.adaptive", "AdaptiveIdentifier", "continuous",
         "online continuous-time identification",

@@ -304,7 +304,7 @@ class StateSpace:
 
     def _like(self, A, B, C, D, dt, K=None, noise_cov=None, hold=None) -> "StateSpace":
         info = dict(self.info)
-        if dt != self._dt and "input_delay" in info:
+        if dt != self._dt and info.get("input_delay") is not None:
             import warnings
 
             from subid.errors import DelayWarning

@@ -488,7 +488,7 @@ def identify(data, order, horizon, *, method: str, build, selection: str,
     (:func:`subid.methods.dt._selection.cross_validate`); the model is then built on the
     whole record with that order and horizon, exactly as an explicit call
     would. ``'gap'``, or a statistic without raw samples, takes the largest
-    gap of the method's rank profile. ``finalize(model, problem)`` runs on
+    gap of the method's rank profile. ``finalize(model, problem, statistic=...)`` runs on
     the final model only (not on the cross-validation candidates): the noise
     model and the optional refinement (:func:`subid.methods.dt.noise_model.attach_noise_model`).
 
@@ -574,7 +574,7 @@ def identify(data, order, horizon, *, method: str, build, selection: str,
         if variant_rule is not None:
             model.info["system_matrices_selection"] = variant_rule
         if finalize is not None:
-            model = finalize(model, problem)
+            model = finalize(model, problem, statistic=statistic)
     model.info["warnings"] = list(issued)
     return model
 
@@ -626,17 +626,21 @@ def _unrepaired_choice(record, data, options, builds, chosen):
     return chosen
 
 
-def finalize(model: StateSpace, problem: Problem, *, refine, delays) -> StateSpace:
+def finalize(model: StateSpace, problem: Problem, *, refine, delays,
+             statistic: str = "auto") -> StateSpace:
     """The final model of a DT batch method: its noise model (K and the innovation
     covariance, :func:`subid.methods.dt.noise_model.attach_noise_model`, then the optional
-    refinement, :func:`refined`) and its input delays (:func:`subid.delay.record_delay`). Run
-    once, on the final model."""
+    refinement, :func:`refined`) and its input delays (:func:`subid.delay.record_delay`;
+    ``info['input_delay']`` None without delays), with the ``refine`` and ``statistic``
+    options in use recorded in ``info``. Run once, on the final model."""
     from subid.delay import record_delay
     from subid.methods.dt.noise_model import attach_noise_model
     model = attach_noise_model(model, problem)
     if refine is not None:
         model = refined(problem.data, model, refine)
-    model.info["refine"] = refine          # the value in use, as every option's
+    model.info["refine"] = refine          # the values in use, as every option's
+    model.info["statistic"] = statistic
+    model.info["input_delay"] = None        # no delay; record_delay stores the delays
     return record_delay(model, delays)
 
 

@@ -48,6 +48,8 @@ impulse are ``c_ee(d) = [d = 0]``, ``c_{e,z}(d) = z(d-1)`` (the first samples),
 
 from __future__ import annotations
 
+import copy
+
 import numba
 import numpy as np
 import scipy.fft
@@ -175,7 +177,9 @@ class LaggedStatistic:
                 self.flush()
 
     def flush(self, kernel=lag_update) -> None:
-        """Add the buffered samples to the sums."""
+        """Add the buffered samples to the sums (only when a block is full, or by a
+        reader on its own copy, :meth:`flushed`: the blocks stay at fixed sample
+        indices)."""
         if self.n_pending:
             z = self.pending[:self.n_pending].copy()
             self.n_pending = 0
@@ -218,6 +222,17 @@ class LaggedStatistic:
         self.ring[idx] = z[T - keep:]
         self.count += T
 
+    def flushed(self) -> "LaggedStatistic":
+        """The statistic with its buffered samples added to the sums: itself when none
+        are buffered, else a flushed copy. Readers use it, so that reading (a model, a
+        state) never moves the block borders of the sums, which then would differ at
+        rounding from those of a stream that was not read."""
+        if not self.n_pending:
+            return self
+        out = copy.deepcopy(self)
+        out.flush()
+        return out
+
     def arrays(self) -> dict:
         return {"lag_G0": self.G0, "lag_G": self.G, "lag_ring": self.ring,
                 "lag_head": self.head, "lag_sum_y": self.sum_y, "lag_pending": self.pending}
@@ -225,11 +240,11 @@ class LaggedStatistic:
     def output_weights(self) -> np.ndarray:
         """1 / standard deviation of each output (population), as
         :func:`subid.methods.dt._subspace.output_weights` on the whole record."""
-        self.flush()
-        N = self.count
+        stat = self.flushed()
+        N = stat.count
         nu = self.n_inputs
-        mean = self.sum_y / N
-        var = np.diag(self.G0)[nu:] / N - mean ** 2
+        mean = stat.sum_y / N
+        var = np.diag(stat.G0)[nu:] / N - mean ** 2
         std = np.sqrt(np.maximum(var, 0.0))
         return 1.0 / np.where(std > 0, std, 1.0)
 
@@ -240,9 +255,8 @@ class LaggedStatistic:
         return self.ring[idx]
 
     def normal_equations(self, A, C, weights, *, feedthrough=True):
-        """See :func:`normal_equations`."""
-        self.flush()
-        return normal_equations(self, A, C, weights, feedthrough=feedthrough)
+        """See :func:`normal_equations` (on :meth:`flushed`)."""
+        return normal_equations(self.flushed(), A, C, weights, feedthrough=feedthrough)
 
 
 def _impulse_augmented(stat: LaggedStatistic):

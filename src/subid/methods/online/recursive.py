@@ -736,7 +736,7 @@ class RecursiveSubspace(OnlineIdentifier):
         if radius >= 1.0:
             return (f"the estimated A is not stable (spectral radius {radius:.4g}), so the "
                     "B, D regression is not evaluated"), None
-        stat = self._lag
+        stat = self._lag.flushed()           # reading leaves the statistic as it is
         weights = stat.output_weights()
         Nmat, truncation = stat.normal_equations(A, C, weights, feedthrough=self._feedthrough)
         solved = solve_lagged(Nmat, n, nu, ny, feedthrough=self._feedthrough,
@@ -764,7 +764,7 @@ class RecursiveSubspace(OnlineIdentifier):
         model = self.model
         if model.info[INFO_KEY] == "simulation" and self._exact:
             A, T = self._exact_basis
-            stat = self._lag
+            stat = self._lag.flushed()
             t_end = self._n_samples - 1
             powers = np.empty((min(t_end, self._lags + 1) + 1, self.order, self.order))
             powers[0] = np.eye(self.order)
