@@ -155,8 +155,8 @@ def test_second_pass_over_pieces_equals_in_memory(defective):
 
 def test_second_pass_initial_state_equals_simulate_fit():
     import subid
-    from subid.evaluation.metrics import simulate_fit
     from subid.methods.dt._bd_pass import OutputRegression
+    from subid.model.prediction import simulate_fit
     true = systems.random_system(3, 2, 2, seed=13)
     data = systems.simulate_data(true, 6_000, seed=14, output_snr_db=20, x0=[1.0, -2.0, 0.5])
     model = subid.StateSpace(true.A, true.B * 1.01, true.C, true.D, 1.0)

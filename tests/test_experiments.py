@@ -310,7 +310,7 @@ def test_prediction_and_residuals_per_experiment(two_records):
     # model simulated without x0 are the free responses; with the pairs across the
     # border removed the lag-1 correlation is that of the two pieces alone
     e = data.y - subid.predict(model, data, np.inf, x0="zero")
-    from subid.evaluation.prediction import correlations
+    from subid.evaluation.residuals import correlations
     joint = correlations(e, data.u, max_lag=5, ranges=data.experiment_ranges)
     # lagged products summed inside each experiment only, by hand
     e0 = e - e.mean(axis=0)

@@ -13,7 +13,7 @@ import pytest
 
 import subid
 from subid.cli.commands import main
-from subid.methods.dt._selection import AUTO_ORDER_RULE
+from subid.methods.crossval import AUTO_ORDER_RULE
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 
@@ -39,8 +39,8 @@ def test_order_auto_is_described_alike_by_help_readme_cli_docs_and_notebook(caps
     for doc in ("README.md", "docs/cli.md", "docs/gallery.md", "examples/quickstart.ipynb"):
         assert rule in _flat((ROOT / doc).read_text(encoding="utf-8")), doc
     # the phrase is made from the constants the selection uses
-    from subid.methods.dt import _selection
-    assert f"1..{_selection.MAX_ORDER}" in rule
+    from subid.methods import crossval
+    assert f"1..{crossval.MAX_ORDER}" in rule
     assert "BIC" in rule
     assert "largest gap among" not in _flat(out)
 
@@ -241,7 +241,7 @@ def test_long_traces_are_drawn_through_their_envelope():
 def test_one_step_x0_from_decayed_free_responses_equals_the_full_regression():
     # the fast path of predict (free responses only until they decay) against the
     # regression over every sample (the path without ``data``)
-    from subid.evaluation import prediction
+    from subid.model import prediction
     true = subid.systems.random_system(3, 1, 2, seed=11)
     data = subid.systems.simulate_data(true, 3000, seed=12, output_snr_db=20)
     model = subid.moesp(data, 3, horizon=10)

@@ -13,8 +13,8 @@ import pytest
 import subid
 from subid import errors
 from subid.cli.commands import main
-from subid.evaluation.metrics import simulate_fit
 from subid.experiments.seed002 import simulate as seed002_record
+from subid.model.prediction import simulate_fit
 
 
 @pytest.fixture(scope="module")

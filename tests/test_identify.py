@@ -9,6 +9,7 @@ import scipy.linalg
 import subid
 from subid import systems
 from subid.errors import DataError, OptionError
+from subid.methods import crossval
 from subid.methods.dt import _selection
 from subid.methods.dt._feedthrough import decide
 
@@ -76,11 +77,11 @@ def test_closed_loop_default_start_is_as_good_as_no_feedthrough():
 
 def test_criterion_prices_parameters_and_ignores_rounding():
     """The cheap sibling of the Monte Carlo below (bench/selection.py runs all 40)."""
-    c = _selection.criterion
+    c = crossval.criterion
     # noise-free: every order from the true one up fits to rounding -> the smallest wins
     scores = {(3, 10, 0): [100.0] * 4, (4, 10, 0): [100.0 - 1e-12] * 4,
               (2, 10, 0): [90.0] * 4}
-    assert _selection.select(scores, 1000, 2, 2)[0] == (3, 10, 0)
+    assert crossval.select(scores, 1000, 2, 2)[0] == (3, 10, 0)
     # a higher order must buy its n (nu + ny) parameters: ln N / (2 N ny) of the misfit each
     n_samples, nu, ny = 2000, 2, 2
     price = 4 * np.log(n_samples) / (2 * n_samples * ny)          # one more order

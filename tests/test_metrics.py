@@ -124,11 +124,11 @@ def test_blocked_simulate_fit_equals_one_dense_least_squares(monkeypatch, name, 
     """simulate_fit in blocks (small blocks here, and with the free response kept or
     simulated again) gives the x0 and fitted output of one dense lstsq over the
     whole record, and fit_percent in blocks the direct NRMSE formula."""
-    from subid.evaluation import (
-        metrics,
-        prediction,  # simulate_fit lives in prediction
+    from subid.model import (
+        fit,  # fit_percent
+        prediction,  # simulate_fit
     )
-    monkeypatch.setattr(metrics, "_SIM_BLOCK", 97)
+    monkeypatch.setattr(fit, "_SIM_BLOCK", 97)
     monkeypatch.setattr(prediction, "_SIM_BLOCK", 97)
     monkeypatch.setattr(prediction, "_FREE_KEPT", kept)
     model = _models_for_blocks()[name]
@@ -142,7 +142,7 @@ def test_blocked_simulate_fit_equals_one_dense_least_squares(monkeypatch, name, 
         t = np.cumsum(0.01 * (1 + 0.4 * rng.uniform(-1, 1, N)))
         y = model.simulate(u, t=t, x0=rng.standard_normal(model.order))
         data = subid.IOData(u, y + 0.05 * rng.standard_normal(y.shape), t=t)
-    y_fit, x0 = metrics.simulate_fit(model, data)
+    y_fit, x0 = prediction.simulate_fit(model, data)
     y_ref, x0_ref = _simulate_fit_dense(model, data)
     assert np.abs(x0 - x0_ref).max() <= 1e-9 * max(np.abs(x0_ref).max(), 1.0)
     assert np.abs(y_fit - y_ref).max() <= 1e-10 * np.abs(y_ref).max()

@@ -9,7 +9,7 @@ import pytest
 import subid
 from subid import systems
 from subid.errors import DataError, ModelError, NoiseModelWarning
-from subid.evaluation.prediction import _one_step_states
+from subid.model.prediction import _one_step_states
 
 
 @pytest.fixture(scope="module")

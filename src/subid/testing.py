@@ -35,10 +35,11 @@ import numpy as np
 
 from subid import errors
 from subid.data import IOData, merge
-from subid.evaluation.metrics import fit_percent, markov_error
+from subid.evaluation.metrics import markov_error
 from subid.frdata import FRData
 from subid.methods.online.base import OnlineIdentifier
 from subid.methods.registry import CORE_KEYS, METHODS, CheckParameters, MethodSpec, find
+from subid.model.fit import fit_percent
 from subid.model.statespace import StateSpace
 from subid.systems import seed001_system, simulate_data
 

@@ -50,7 +50,7 @@ def compare(model_paths, data_source, inputs, outputs, dt, time_column, delimite
     compare). Inputs and outputs default to the first model's channel names;
     the sampling period to its dt.
     """
-    from subid.evaluation.metrics import fit_percent
+    from subid.model.fit import fit_percent
     steps = _parse_steps(steps)
     from subid.evaluation import plot, report
     models, paths = {}, {}

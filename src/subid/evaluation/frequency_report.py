@@ -55,7 +55,7 @@ def evaluate_frequency(model, estimation, validation=None) -> dict:
         ``fit_estimation``, ``fit_validation`` (None without validation data),
         ``poles``, ``stable``.
     """
-    from subid.evaluation.metrics import fit_percent
+    from subid.model.fit import fit_percent
     return {"fit_estimation": fit_percent(model, estimation),
             "fit_validation": None if validation is None else fit_percent(model, validation),
             "poles": model.poles(), "stable": model.is_stable()}

@@ -388,8 +388,8 @@ def evaluate(model, estimation, validation=None) -> dict:
         :func:`subid.fit_percent`; ``None`` without validation data; NaN
         where the simulation diverges), ``stable``, ``poles``, ``order``.
     """
-    from subid.evaluation.metrics import fit_percent
     from subid.evaluation.plot import simulated_output
+    from subid.model.fit import fit_percent
 
     def fit(data):
         if data is None:

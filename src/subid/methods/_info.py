@@ -9,7 +9,7 @@ present (None where a method has no such quantity):
 ``order``            model order n
 ``order_selection``  how n was chosen: a record ``{'rule': 'given'}``,
                      ``{'rule': 'gap', ...}`` or ``{'rule': 'cv', ...}``
-                     (:func:`subid.methods.dt._selection.describe` prints it)
+                     (:func:`subid.methods.describe.describe_order_selection` prints it)
 ``horizon``          block rows of the data matrices (number of basis
                      functions for ``ct_subspace``), None when there is none
 ``n_samples``        samples the model was identified from

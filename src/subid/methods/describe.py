@@ -3,13 +3,13 @@ order rule (:data:`AUTO_ORDER_RULE`) and the one-line summary of
 ``info['order_selection']`` (:func:`describe_order_selection`).
 
 The evaluation and command-line layers read these here, not in the private modules of the
-discrete-time pipeline (issue 24).
+discrete-time pipeline (issue 24); the constants of the rule are those of
+:mod:`subid.methods.crossval`.
 """
 
 from __future__ import annotations
 
-from subid.methods.dt._selection import AUTO_ORDER_RULE as AUTO_ORDER_RULE
-from subid.methods.dt._selection import describe as _describe
+from subid.methods.crossval import AUTO_ORDER_RULE as AUTO_ORDER_RULE
 
 __all__ = ["AUTO_ORDER_RULE", "describe_order_selection"]
 
@@ -28,4 +28,16 @@ def describe_order_selection(record) -> str:
         ``'given'``, the cross-validation summary (horizon, system matrices, fit,
         number of candidates) or the rule's description.
     """
-    return _describe(record)
+    if not isinstance(record, dict):
+        return str(record)
+    rule = record.get("rule")
+    if rule == "given":
+        return "given"
+    chosen = record.get("selected", {})
+    if rule == "cv":
+        how = chosen.get("system_matrices")
+        return (f"cross-validated on the estimation data: horizon {chosen.get('horizon')}"
+                + (f", system matrices by {how}" if how else "")
+                + f", fit {chosen.get('score', float('nan')):.1f} % over "
+                f"{len(record.get('candidates', []))} candidates")
+    return str(record.get("description", rule))

@@ -109,7 +109,7 @@ def _selected_folds(model):
 
 
 def _fold_parts(data):
-    from subid.methods.dt._selection import MAX_SELECTION_SAMPLES, experiment_folds, folds
+    from subid.methods.crossval import MAX_SELECTION_SAMPLES, experiment_folds, folds
     used = data
     if data.n_samples > MAX_SELECTION_SAMPLES:
         used = data[data.n_samples - MAX_SELECTION_SAMPLES:]
@@ -119,7 +119,7 @@ def _fold_parts(data):
 
 
 def _score(model, validation, focus) -> float:
-    from subid.evaluation.metrics import fit_percent
+    from subid.model.fit import fit_percent
     steps = np.inf if focus == "simulation" else 1
     try:
         with warnings.catch_warnings(), np.errstate(all="ignore"):

@@ -181,7 +181,7 @@ def simulated_output(model, data, x0="estimate"):
     state by default), but a model whose simulation overflows gives NaN
     instead of an exception, so that it can still be listed and drawn.
     """
-    from subid.evaluation.metrics import simulate_fit
+    from subid.model.prediction import simulate_fit
     with np.errstate(all="ignore"):
         try:
             y_hat, _ = simulate_fit(model, data, x0=x0)
@@ -196,7 +196,7 @@ def simulated_output(model, data, x0="estimate"):
 
 def predicted_output(model, data, steps):
     """``(y_hat, fit %)`` of the ``steps``-ahead prediction; NaN where it diverges."""
-    from subid.evaluation.prediction import predict
+    from subid.model.prediction import predict
     try:
         y_hat = predict(model, data, steps)
     except DataError:

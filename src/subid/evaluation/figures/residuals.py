@@ -70,7 +70,7 @@ def residual_correlations(model, data, *, max_lag: int = 25, confidence: float =
         raise DataError(f"max_lag {max_lag} must be smaller than the {n} samples of the record")
     if getattr(model, "K", None) is not None and model.dt > 0:
         # MATLAB's resid: one-step prediction errors of the innovation form
-        from subid.evaluation.prediction import residuals as _prediction_residuals
+        from subid.evaluation.residuals import residuals as _prediction_residuals
         mode = None if isinstance(x0, str) and x0 == "estimate" else x0
         try:
             return _prediction_residuals(model, data, max_lag=max_lag, confidence=confidence,
@@ -85,7 +85,7 @@ def residual_correlations(model, data, *, max_lag: int = 25, confidence: float =
     # every correlation is normalised per residual channel, so scale each channel to
     # a maximum of 1 first: a diverging simulation's huge (finite) residual cannot overflow
     peak = np.abs(e).max(axis=0)
-    from subid.evaluation.prediction import correlations
+    from subid.evaluation.residuals import correlations
     out = correlations(e / np.where(peak > 0, peak, 1.0), data.u, max_lag=max_lag,
                        confidence=confidence)
     if not (np.isfinite(out["auto"]).all() and np.isfinite(out["cross"]).all()):

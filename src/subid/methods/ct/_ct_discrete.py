@@ -18,7 +18,7 @@ basis-filter estimates in one cross-validation:
   fitting anything again (:func:`fold_scores`);
 * :func:`merged_selection` joins them to the folds' scores of the
   basis-filter estimates and ranks them by the cross-validated BIC
-  (:func:`subid.methods.dt._selection.select`, the rule of the
+  (:func:`subid.methods.crossval.select`, the rule of the
   discrete-time methods); the discrete-time default is the reference: the
   best basis-filter estimate replaces the best converted model only when it
   also scores significantly better on the folds (:func:`significantly_better`:
@@ -277,7 +277,7 @@ def merged_selection(ct_record, dt_scores: dict, n_samples: int, n_inputs: int,
     Returns ``(ranking, record, entries)``: the candidates ``(order, start name)`` best
     first, the merged ``order_selection`` record (without its ``selected`` entry, which
     the caller sets to the candidate it could build) and each candidate's entry."""
-    from subid.methods.dt._selection import select
+    from subid.methods.crossval import select
     folds, names = {}, {}
     for c in (ct_record or {}).get("candidates", []):
         name = c.get("system_matrices", "subspace")

@@ -351,10 +351,10 @@ def _subspace_estimate(problem: Problem, n: int, feedthrough: bool):
 def _discrete_starts(problem: Problem, n: int, horizons=None):
     """``(label, continuous model)`` of the discrete-time N4SID models of order ``n`` (at
     ``horizons``, default every horizon of
-    :func:`subid.methods.dt._selection.feasible_horizons`) converted with the hold
+    :func:`subid.methods.crossval.feasible_horizons`) converted with the hold
     (:mod:`subid.methods.ct._ct_discrete`), and ``{horizon: reason}`` for those that have
     no continuous-time counterpart; none on a non-uniform grid."""
-    from subid.methods.dt._selection import feasible_horizons
+    from subid.methods.crossval import feasible_horizons
     data, s = problem.data, problem.settings
     if not data.is_uniform:
         return [], {}

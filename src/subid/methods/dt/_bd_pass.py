@@ -280,7 +280,7 @@ class OutputRegression:
 
     def initial_state(self, A, B, C, D):
         """Least-squares x0 of the model (A, B, C, D) on the record, outputs weighted
-        by 1 / standard deviation (as :func:`subid.evaluation.metrics.simulate_fit`): the x0 rows
+        by 1 / standard deviation (as :func:`subid.model.prediction.simulate_fit`): the x0 rows
         of the normal equations with B and D fixed. None where the modal path does
         not apply (A unstable or nearly defective)."""
         A = np.ascontiguousarray(A, dtype=float)

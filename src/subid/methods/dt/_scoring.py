@@ -3,7 +3,7 @@
 :func:`subid.methods.dt._selection.score_horizon` scores every fold model by
 its simulation fit on the held-out block with the initial state fitted by
 least squares: the quantity ``mean(fit_percent(model, validation))`` of
-:func:`subid.evaluation.metrics.fit_percent` (x0 ``'estimate'``). That
+:func:`subid.model.fit.fit_percent` (x0 ``'estimate'``). That
 general function simulates the model once for the forced response, then once
 per state for the free responses ``C A^t e_j`` over the whole block (it stops
 only after blocks of 65,536 samples), and reduces the x0 regression by a QR
@@ -16,7 +16,7 @@ the forced response ``y_f`` and the free response ``F(t) = C A^t`` propagated
 as ``F(t+1) = F(t) A`` (``ny n^2`` flops a sample instead of ``n`` state
 simulations), the latter only while ``A^t`` has not decayed below
 :data:`FREE_DECAYED` (:func:`free_length`, by repeated squaring: beyond it
-the rows change x0 by less than rounding, as :func:`subid.evaluation.prediction.simulate_fit`
+the rows change x0 by less than rounding, as :func:`subid.model.prediction.simulate_fit`
 argues). The x0 regression is the same weighted least-squares problem (each
 output weighted by the inverse of its standard deviation over the validation
 record), solved through the triangular factor of ``[F w, (y - y_f) w]`` by
@@ -39,7 +39,7 @@ import scipy.linalg
 from subid.data import column_std
 
 #: ``A^t`` counts as decayed below this (relative to the identity): later free rows
-#: change x0 by less than rounding (:data:`subid.evaluation.prediction._FREE_DECAYED`).
+#: change x0 by less than rounding (:data:`subid.model.prediction._FREE_DECAYED`).
 FREE_DECAYED = 1e-20
 
 

@@ -58,8 +58,9 @@ from subid.methods.bd import (  # noqa: F401 (check_experiment_lengths: names of
     experiment_starts,
     fit_b_d_x0,
 )
+from subid.methods.crossval import SELECTION_RULES
 from subid.methods.dt._checks import check_data
-from subid.methods.dt._selection import SELECTION_RULES, cross_validate, default_gap_horizon
+from subid.methods.dt._selection import cross_validate, default_gap_horizon
 from subid.model.statespace import StateSpace
 from subid.statistic._hankel import HankelFactor
 from subid.statistic.hankel import HankelStatistic
@@ -347,7 +348,7 @@ def initial_state(A, B, C, D, data):
 
 
 def _initial_state_one(A, B, C, D, data, output_std):
-    from subid.evaluation.metrics import simulate_fit  # metrics depends on the model module only
+    from subid.model.prediction import simulate_fit
     # The free response C A^t x0 of a stable A falls below 1e-18 of its start after
     # `decay` samples: beyond them the samples carry no information on x0 (to rounding),
     # so the regression runs on that prefix only (bounded time and memory).

@@ -22,7 +22,7 @@ at the best ``na``, then ``na`` at the best ``nb``: 28 structures, not the
 100 of the full grid); the structure of the least cross-validated BIC is
 chosen, ``2 N ny ln(100 - fit) + p ln N`` with ``p = ny (na ny + nb nu)``
 parameters (the criterion of the subspace defaults,
-:func:`subid.methods.dt._selection.criterion`, for an ARX parametrisation).
+:func:`subid.methods.crossval.criterion`, for an ARX parametrisation).
 """
 
 from __future__ import annotations
@@ -42,16 +42,11 @@ from subid.errors import (
     TooFewSamplesError,
 )
 from subid.methods._info import collect_warnings, model_info
+from subid.methods.crossval import ABSOLUTE_TOLERANCE, MAX_ORDER, experiment_folds, folds
 from subid.methods.dt import _subspace
 from subid.methods.dt._checks import check_data
 from subid.methods.dt._poly_covariance import attach_covariance
-from subid.methods.dt._selection import (
-    ABSOLUTE_TOLERANCE,
-    MAX_ORDER,
-    _fit_score,
-    experiment_folds,
-    folds,
-)
+from subid.methods.dt._selection import _fit_score
 from subid.model.polynomial import coefficients, polynomial_record, realise
 from subid.model.statespace import StateSpace
 

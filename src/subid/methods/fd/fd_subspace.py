@@ -52,13 +52,13 @@ Outputs and inputs are scaled to unit RMS response before the SVD (balanced
 units) and unscaled after.
 
 The order is chosen, when not given, by the cross-validation idea of the
-time-domain methods (:mod:`subid.methods.dt._selection`) with frequency folds:
+time-domain methods (:mod:`subid.methods.crossval`) with frequency folds:
 four folds, each holding out every fourth frequency (interleaved, so that no
 fold has to extrapolate beyond the measured band); each candidate order's fold
 models are scored by :func:`subid.fit_percent` on the held-out frequencies,
 clipped below at ``FLOOR`` and averaged, and the same rule as the time-domain
 methods picks the order: the least cross-validated BIC
-(:func:`subid.methods.dt._selection.select`), with ``2 n_freq n_inputs``
+(:func:`subid.methods.crossval.select`), with ``2 n_freq n_inputs``
 "samples" (each frequency holds ``n_outputs x n_inputs`` complex values: the
 real observations of ``2 n_freq n_inputs`` samples of ``n_outputs`` outputs).
 """
@@ -82,7 +82,7 @@ from subid.methods._stability import (
     STABLE_RADIUS,
     reflect_unstable_poles,
 )
-from subid.methods.dt._selection import FLOOR, MAX_ORDER, SELECTION_RULES, select
+from subid.methods.crossval import FLOOR, MAX_ORDER, SELECTION_RULES, fold_score, select
 from subid.methods.fd import _frequency as fq
 from subid.methods.fd._core import (
     Problem,
@@ -123,17 +123,6 @@ def _model(problem: Problem, basis, n: int, *, feedthrough: bool, stability: str
     return fit_stable + ({"ac": cond_ac}, record)
 
 
-def _fold_score(model, validation: FRData) -> float:
-    from subid.evaluation.metrics import fit_percent  # evaluation sits above methods
-    try:
-        with warnings.catch_warnings(), np.errstate(all="ignore"):
-            warnings.simplefilter("ignore")
-            value = float(np.mean(fit_percent(model, validation)))
-    except SubidError:
-        return FLOOR
-    return max(value, FLOOR) if math.isfinite(value) else FLOOR
-
-
 def _build(data: FRData, problem, basis, n, q, *, feedthrough, stability):
     A, B, C, D, err, cond, conditions, record = _model(problem, basis, n,
                                                         feedthrough=feedthrough,
@@ -163,7 +152,7 @@ def _cross_validate(data: FRData, alpha, noise_var, candidates, horizons, *, fee
                     warnings.simplefilter("ignore")
                     model = _build(train, problem, bases[q], n, q, feedthrough=feedthrough,
                                    stability=stability)[0]
-                per_fold[n].append(_fold_score(model, validation))
+                per_fold[n].append(fold_score(model, validation))
             except SubidError:
                 per_fold[n].append(FLOOR)
     scores = {(n,): float(np.mean(v)) for n, v in per_fold.items()}

@@ -1,0 +1,144 @@
+"""Residual analysis of models in innovation form (MATLAB's ``resid``): the whiteness of the
+one-step prediction errors and their independence from the inputs (Ljung, *System
+Identification*, 2nd ed., 1999, Sec. 16.6). The predictions come from
+:func:`subid.model.prediction.predict`.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+
+import numpy as np
+
+from subid._validation import check_int, check_probability, checked_call
+from subid.errors import DataError, NoiseModelWarning
+from subid.model.prediction import check_model_data, predict
+
+__all__ = ["residuals", "correlations"]
+
+
+def _xcorr(a: np.ndarray, b: np.ndarray, lags: np.ndarray, ranges=None) -> np.ndarray:
+    """``r(tau) = sum_t a(t) b(t - tau) / N`` for each lag (a, b zero-mean).
+
+    ``ranges`` (the experiments' ``(start, stop)``): only pairs inside one
+    experiment count, still divided by the total N."""
+    if ranges is not None and len(ranges) > 1:
+        total = sum(_xcorr(a[s:t], b[s:t], lags) * (t - s) for s, t in ranges)
+        return total / a.size
+    n = a.size
+    out = np.empty(lags.size)
+    for k, tau in enumerate(lags):
+        if tau >= 0:
+            out[k] = a[tau:] @ b[:n - tau] / n if tau < n else 0.0
+        else:
+            out[k] = a[:n + tau] @ b[-tau:] / n if -tau < n else 0.0
+    return out
+
+
+def correlations(e, u, *, max_lag: int = 25, confidence: float = 0.99, ranges=None) -> dict:
+    """Auto-correlation of residuals and their cross-correlation with inputs.
+
+    Parameters
+    ----------
+    e : ndarray, shape (N, ny)
+        Residuals.
+    u : ndarray, shape (N, nu)
+    max_lag : int
+    confidence : float
+        Two-sided level of the bands.
+    ranges : sequence of (start, stop), optional
+        The experiments of a record of several (:attr:`subid.IOData.experiment_ranges`):
+        lagged products never pair samples of two experiments.
+
+    Returns
+    -------
+    dict
+        ``lags`` (0..M), ``auto`` (ny, M+1) normalised auto-correlation,
+        ``auto_bound`` (``z / sqrt(N)``), ``cross_lags`` (-M..M), ``cross``
+        (ny, nu, 2M+1) normalised correlation of ``e_i(t)`` and
+        ``u_j(t - tau)``, ``cross_bound`` (ny, nu) the band
+        ``z sqrt(sum_k r_ee(k) r_uu(k) / N)`` (Ljung, *System Identification*,
+        Sec. 16.6), ``residual`` and ``confidence``.
+    """
+    from scipy.special import ndtri
+    max_lag = check_int(max_lag, "max_lag", minimum=1)
+    confidence = check_probability(confidence, "confidence")
+    n = e.shape[0]
+    if max_lag >= n:
+        raise DataError(f"max_lag {max_lag} must be smaller than the {n} samples of the record")
+    z = float(ndtri(0.5 + confidence / 2))
+    e0 = e - e.mean(axis=0)
+    u0 = u - u.mean(axis=0)
+    lags = np.arange(max_lag + 1)
+    cross_lags = np.arange(-max_lag, max_lag + 1)
+    ny, nu = e.shape[1], u.shape[1]
+    auto = np.zeros((ny, lags.size))
+    cross = np.zeros((ny, nu, cross_lags.size))
+    cross_bound = np.zeros((ny, nu))
+    ree_full = np.zeros((ny, cross_lags.size))
+    for i in range(ny):
+        r = _xcorr(e0[:, i], e0[:, i], cross_lags, ranges)
+        r0 = r[max_lag]
+        ree_full[i] = r / r0 if r0 > 0 else 0.0
+        auto[i] = ree_full[i][max_lag:]
+    for j in range(nu):
+        ru = _xcorr(u0[:, j], u0[:, j], cross_lags, ranges)
+        ru0 = ru[max_lag]
+        ruu = ru / ru0 if ru0 > 0 else np.zeros_like(ru)
+        for i in range(ny):
+            ree0 = e0[:, i] @ e0[:, i] / n
+            denom = math.sqrt(max(ree0 * ru0, 0.0))
+            c = _xcorr(e0[:, i], u0[:, j], cross_lags, ranges)
+            cross[i, j] = c / denom if denom > 0 else 0.0
+            p = float(np.sum(ree_full[i] * ruu))
+            cross_bound[i, j] = z * math.sqrt(max(p, 0.0) / n)
+    return {"lags": lags, "auto": auto, "auto_bound": z / math.sqrt(n),
+            "cross_lags": cross_lags, "cross": cross, "cross_bound": cross_bound,
+            "residual": e, "confidence": confidence}
+
+
+@checked_call
+def residuals(model, data, *, max_lag: int = 25, confidence: float = 0.99, x0=None) -> dict:
+    """Residual analysis on the one-step prediction errors (MATLAB's ``resid``).
+
+    The residuals are ``e = y - ŷ[t|t-1]`` of the Kalman predictor
+    (:func:`predict` with ``steps=1``): for a correct model in innovation form
+    they are white and uncorrelated with past inputs. A model without ``K``
+    uses its simulation errors (with a :class:`~subid.errors.NoiseModelWarning`):
+    those are white only if the disturbances are white measurement noise.
+
+    Parameters
+    ----------
+    model : StateSpace
+    data : IOData
+    max_lag : int
+        Largest lag in samples.
+    confidence : float
+        Level of the bands (0.99: 99 %).
+    x0 : None or array_like
+        As in :func:`predict`.
+
+    Returns
+    -------
+    dict
+        As :func:`correlations`, plus ``kind`` (``'one-step prediction'`` or
+        ``'simulation'``), ``whiteness_ok`` (every auto-correlation at lags
+        1..M inside the band) and ``independence_ok`` (every
+        cross-correlation inside its band).
+    """
+    check_model_data(model, data)
+    kind = "one-step prediction" if (model.K is not None and not model.is_continuous) \
+        else "simulation"
+    e = data.y - predict(model, data, 1 if kind != "simulation" else math.inf, x0)
+    if kind == "simulation":
+        warnings.warn("residuals: the model has no Kalman gain K; these are simulation "
+                      "errors, white only for white measurement noise", NoiseModelWarning,
+                      stacklevel=2)
+    out = correlations(e, data.u, max_lag=max_lag, confidence=confidence,
+                       ranges=data.experiment_ranges)
+    out["kind"] = kind
+    out["whiteness_ok"] = bool(np.all(np.abs(out["auto"][:, 1:]) <= out["auto_bound"]))
+    out["independence_ok"] = bool(np.all(np.abs(out["cross"]) <=
+                                         out["cross_bound"][:, :, None]))
+    return out
