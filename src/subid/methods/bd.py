@@ -48,10 +48,12 @@ from subid.data import IOData
 from subid.errors import SubidError, TooFewSamplesError
 from subid.methods.dt._regression import fit_b_d_projection
 from subid.methods.dt._regression import fit_b_d_x0 as _fit_record
+from subid.methods.dt._regression import regression_rows as regression_rows
 from subid.statistic.hankel import HankelStatistic
 
 __all__ = ["INFO_KEY", "BD_METHODS", "INFO_ONLY", "BATCH_OPTIONS", "CT_OPTIONS", "ONLINE_OPTIONS",
-           "Projection", "fit_b_d_x0", "check_experiment_lengths", "experiment_starts"]
+           "Projection", "Accumulated", "fit_b_d_x0", "regression_rows",
+           "check_experiment_lengths", "experiment_starts"]
 
 #: The ``model.info`` key that names the route that gave B, D, x0.
 INFO_KEY = "bd_method"
@@ -84,6 +86,31 @@ class Projection(NamedTuple):
     unscale: object
 
 
+class Accumulated(NamedTuple):
+    """The ``'simulation'`` regression for a given (A, C) accumulated over a stream
+    (:class:`subid.RecursiveSubspace`), as one of
+
+    * ``kind='factor'``: the upper-triangular factor of the rows ``[Phi(t), y(t)]``
+      of :func:`regression_rows` (reduced by Givens rotations as they arrive, with
+      the forgetting), solved as the QR path of the batch regression;
+    * ``kind='normal'``: the augmented normal matrix ``[Phi, y]^T W [Phi, y]`` of the
+      same rows over the whole stream, from lagged statistics
+      (:mod:`subid.methods.online._lagged`), solved as the modal path.
+
+    The parameters are ``theta = [x0; vec B; vec D]``; B, D and x0 are returned in
+    the basis of the (A, C) the rows were built with.
+    """
+
+    #: ``'factor'`` or ``'normal'``
+    kind: str
+    #: the triangular factor, or the augmented normal matrix
+    matrix: np.ndarray
+    #: inputs of the model
+    n_inputs: int
+    #: samples (an effective count under forgetting)
+    n_samples: float
+
+
 def fit_b_d_x0(A, C, data, *, bd_method="simulation", feedthrough=True, estimate_x0=True,
                output_weights=None, projection=None, noise_gain=None, path="auto",
                offset=False, whiten=None, filtered=None, worse_than=None):
@@ -93,13 +120,14 @@ def fit_b_d_x0(A, C, data, *, bd_method="simulation", feedthrough=True, estimate
     ----------
     A, C : ndarray
         State and output matrices (C in the user's output units).
-    data : IOData, HankelStatistic, continuous-time record or None
+    data : IOData, HankelStatistic, Accumulated, continuous-time record or None
         The raw samples (one or several experiments, :func:`subid.merge`); a
         statistic, with a second pass over its record attached as
         ``output_regression`` (:mod:`subid.methods.dt._bd_pass`) or without
-        one; the record of :mod:`subid.methods.ct._ct_fit` (continuous time);
-        None for ``'projection'`` on a running statistic
-        (:class:`subid.RecursiveSubspace`).
+        one; the ``'simulation'`` regression accumulated over a stream
+        (:class:`Accumulated`, :class:`subid.RecursiveSubspace`); the record of
+        :mod:`subid.methods.ct._ct_fit` (continuous time); None for
+        ``'projection'`` on a running statistic (:class:`subid.RecursiveSubspace`).
     bd_method : {'simulation', 'prediction', 'projection', 'filtered', 'auto'}
         The route (module docstring).
     feedthrough : bool
@@ -132,7 +160,9 @@ def fit_b_d_x0(A, C, data, *, bd_method="simulation", feedthrough=True, estimate
     -------
     B, D, x0, diagnostics
         ``x0`` None when not estimated (one row per experiment for several);
-        ``diagnostics[INFO_KEY]`` names the route that ran. Continuous time:
+        ``diagnostics[INFO_KEY]`` names the route that ran. :class:`Accumulated`:
+        ``diagnostics['theta']`` holds the parameter vector, and the result is None
+        where the normal matrix does not determine it. Continuous time:
         ``diagnostics['y_offset']`` holds the offsets, and the result is None
         where simulating A overflows. ``'prediction'`` returns None where the
         predictor regression is not usable (the caller keeps the output-error fit).
@@ -147,6 +177,11 @@ def fit_b_d_x0(A, C, data, *, bd_method="simulation", feedthrough=True, estimate
         raise ValueError(f"bd_method must be one of {BD_METHODS}, got {bd_method!r}")
     if data is None and bd_method != "projection":
         raise ValueError(f"bd_method={bd_method!r} needs the data")
+    if isinstance(data, Accumulated):
+        if bd_method != "simulation":
+            raise ValueError(f"an accumulated regression is solved by bd_method='simulation', "
+                             f"got {bd_method!r}")
+        return _accumulated(A, C, data, feedthrough=feedthrough, estimate_x0=estimate_x0)
     if data is not None and not isinstance(data, (IOData, HankelStatistic)):
         return _continuous(A, C, data, bd_method=bd_method, feedthrough=feedthrough,
                            estimate_x0=estimate_x0, offset=offset, whiten=whiten,
@@ -199,6 +234,25 @@ def fit_b_d_x0(A, C, data, *, bd_method="simulation", feedthrough=True, estimate
         proj["simulation_regression_condition"] = diag["regression_condition"]
     proj.update({INFO_KEY: "projection", "spectral_radius": radius})
     return B, D, None, proj
+
+
+def _accumulated(A, C, acc: Accumulated, *, feedthrough, estimate_x0):
+    """The ``'simulation'`` regression accumulated over a stream (:class:`Accumulated`)."""
+    from subid.methods.dt._regression import solve_factor, solve_normal_equations
+    n, nu, ny = A.shape[0], acc.n_inputs, C.shape[0]
+    if acc.kind == "factor":
+        B, D, x0, theta, diag = solve_factor(acc.matrix, n, nu, ny, estimate_x0=estimate_x0,
+                                             n_samples=acc.n_samples, feedthrough=feedthrough)
+    else:
+        solved = solve_normal_equations(acc.matrix, n, nu, ny, estimate_x0=estimate_x0,
+                                        feedthrough=feedthrough, n_samples=acc.n_samples,
+                                        max_condition=1e12)
+        if solved is None:
+            return None
+        B, D, x0, theta, diag = solved
+        diag["regression_path"] = "lagged"
+    diag.update({INFO_KEY: "simulation", "theta": theta})
+    return B, D, x0, diag
 
 
 def _raw_samples(A, C, u, y, starts, *, feedthrough, estimate_x0, output_weights, path):

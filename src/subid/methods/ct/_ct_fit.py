@@ -1,4 +1,4 @@
-"""The output regression, stability handling and refinement of :func:`subid.ct_subspace`.
+"""The output regression, stability handling and output-error search of :func:`subid.ct_subspace`.
 
 Everything here works on the raw output samples of one or several
 experiments (:func:`subid.merge`): for given ``(A, C)`` the sampled output
@@ -38,7 +38,6 @@ import scipy.linalg
 import scipy.optimize
 
 from subid.methods.ct import _ct_kernels
-from subid.model.statespace import StateSpace
 
 #: Work (samples x simulated state trajectories x outputs) one refinement may spend on
 #: its residual evaluations (about 20 s at 4e6 per second): the Jacobian is evaluated
@@ -417,69 +416,6 @@ def refine_output_error(A, C, rec: Record, *, feedthrough, estimate_x0, offset, 
     Ar, Cr = split(sol.x)
     diag.update(refined=True, refine_rms_after=rms1)
     return Ar, Cr, diag
-
-
-def refine_model(model, rec: Record, s: dict):
-    """Output-error refinement of a model of :func:`subid.ct_subspace`, prewhitened by an AR
-    noise model of the output error when ``s['noise_model'] == 'ar'`` (Box-Jenkins / RIVC,
-    module notes); ``s`` holds the method's settings."""
-    feedthrough = model.info["feedthrough"]
-    kw = dict(feedthrough=feedthrough, estimate_x0=s["estimate_x0"], offset=s["offset"])
-    A, C = model.A, model.C
-    info = dict(model.info)
-    limit = marginal_limit(rec)
-    unstable = bool(np.linalg.eigvals(A).real.max() > limit)
-    # an unstable estimate kept by stability='auto' (it fit clearly better than its
-    # reflection) is refined from its reflection, stable; the stable refined model
-    # replaces it unless the unstable one still fits clearly better
-    retry = unstable and s["stability"] != "none" and growth(rec) < GROWTH_LIMIT
-    keep = retry or not unstable
-    if retry:
-        A = reflected(A, limit)
-    A, C, diag = refine_output_error(A, C, rec, max_iterations=s["refine_iterations"],
-                                             keep_stable=keep, **kw)
-    if retry:
-        fitted = fit_linear(A, C, rec, **kw)
-        r_u = info.get("b_residual_rms", math.inf)
-        if fitted is None or r_u < KEEP_UNSTABLE_RATIO * fitted[4]["b_residual_rms"]:
-            A, C = model.A, model.C          # the data demand the instability
-            A, C, diag = refine_output_error(
-                A, C, rec, max_iterations=s["refine_iterations"], keep_stable=False, **kw)
-            keep = False
-        else:
-            info["stability"] = dict(info.get("stability") or {}, action="enforced",
-                                     how="refined from the reflected poles: the stable "
-                                         "model fits as well")
-    noise = None
-    if s["noise_model"] == "ar":
-        if not rec.uniform:
-            diag["noise_model"] = None
-            diag["noise_model_note"] = ("not used: an AR model in sample steps needs a "
-                                        "uniform grid")
-        else:
-            fitted = fit_linear(A, C, rec, **kw)
-            if fitted is not None:
-                B, D, x0, y0, _ = fitted
-                resid = rec.y - predicted(A, B, C, D, x0, y0, rec)
-                noise = ar_noise_model(resid, [t.size for t, *_ in rec.parts],
-                                               rec.n_outputs)
-            if noise is not None:
-                A, C, d2 = refine_output_error(
-                    A, C, rec, max_iterations=s["refine_iterations"], whiten=noise.apply,
-                    keep_stable=keep, **kw)
-                diag.update({f"whitened_{k}": v for k, v in d2.items()})
-            diag["noise_model"] = None if noise is None else {
-                "kind": "AR (per output, in sample steps, order by BIC)",
-                "coefficients": [list(map(float, a)) for a in noise.coefficients]}
-    fitted = fit_linear(A, C, rec, whiten=None if noise is None else noise.apply, **kw)
-    if fitted is None:
-        return model
-    B, D, x0, y0, bd = fitted
-    info.update(diag, x0=x0, y_offset=y0, largest_real_part=float(
-        np.linalg.eigvals(A).real.max()), **bd)
-    info["conditions"] = dict(info.get("conditions") or {}, bd=bd["b_regression_condition"])
-    return StateSpace(A, B, C, D, 0.0, input_names=model.input_names,
-                      output_names=model.output_names, info=info, hold=model.hold)
 
 
 def predicted(A, B, C, D, x0, y0, rec):

@@ -101,7 +101,7 @@ from subid.errors import (
 from subid.methods._common import choose_order
 from subid.methods._info import model_info, records_warnings
 from subid.methods.bd import CT_OPTIONS, INFO_KEY, fit_b_d_x0
-from subid.methods.ct import _ct_discrete, _ct_fit
+from subid.methods.ct import _ct_discrete, _ct_fit, _ct_refine
 from subid.methods.ct._ct_checks import (
     DEFAULT_MAX_ORDER,
     HOLD_ORDERS,
@@ -511,9 +511,9 @@ def _second_wins(data, order, n_functions, prepare_fold, first, second, test=Fal
 
 def _build_refined(problem: Problem, feedthrough=None, start=None,
                    refit=False) -> StateSpace:
-    """:func:`_build`, then :func:`subid.methods.ct._ct_fit.refine_model` (a candidate of the
+    """:func:`_build`, then :func:`subid.methods.ct._ct_refine.refine_model` (a candidate of the
     refinement's choice)."""
-    return _ct_fit.refine_model(_build(problem, feedthrough, start, refit), problem.record,
+    return _ct_refine.refine_model(_build(problem, feedthrough, start, refit), problem.record,
                                 problem.settings)
 
 
@@ -918,7 +918,7 @@ def ct_subspace(data, order=None, *, basis=None, poly_order: int = 3, estimate_x
     else:
         do_refine = refine is True or (refine == "auto" and model.info["start"] == "subspace")
     if do_refine:
-        model = _ct_fit.refine_model(model, problem.record, problem.settings)
+        model = _ct_refine.refine_model(model, problem.record, problem.settings)
     if refine_selection is not None:
         model.info["refine_selection"] = refine_selection
     model.info["order_selection"] = order_selection if order_selection is not None \

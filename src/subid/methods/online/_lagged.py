@@ -55,7 +55,7 @@ import numpy as np
 import scipy.fft
 import scipy.linalg
 
-from subid.methods.dt._regression import parameter_count, solve_normal_equations
+from subid.methods.dt._regression import parameter_count
 
 #: Samples are buffered and added in blocks of this many by FFT (O(p^2 log L)
 #: per sample instead of O(L p^2)); a model request adds the rest.
@@ -351,15 +351,3 @@ def end_sensitivity(stat: LaggedStatistic, A, powers, t_end: int) -> np.ndarray:
         acc = np.einsum("lab,l->ab", powers[:lags], u[m - 1 - np.arange(lags), j])
         S[:, n + j * n:n + (j + 1) * n] = acc
     return S
-
-
-def solve(Nmat, n, nu, ny, *, feedthrough, n_samples, max_condition=1e12):
-    """``(B, D, x0, theta, diagnostics)`` from the augmented normal matrix, or
-    None when its equilibrated part has a condition number above
-    ``max_condition`` (the regression does not determine the parameters): the
-    batch solve of the modal path (:func:`subid.methods.dt._regression.solve_normal_equations`)."""
-    solved = solve_normal_equations(Nmat, n, nu, ny, estimate_x0=True, feedthrough=feedthrough,
-                                    n_samples=n_samples, max_condition=max_condition)
-    if solved is not None:
-        solved[4]["regression_path"] = "lagged"
-    return solved

@@ -81,12 +81,17 @@ from subid.methods._common import (
     normalize_channels,
 )
 from subid.methods._info import model_info
-from subid.methods.bd import INFO_KEY, ONLINE_OPTIONS, Projection, fit_b_d_x0
+from subid.methods.bd import (
+    INFO_KEY,
+    ONLINE_OPTIONS,
+    Accumulated,
+    Projection,
+    fit_b_d_x0,
+    regression_rows,
+)
 from subid.methods.dt import noise_model
-from subid.methods.dt._regression import regression_rows, solve_factor
 from subid.methods.dt.ls_subspace import check_options, gamma_from_factor, random_selector
 from subid.methods.online._lagged import LaggedStatistic, end_sensitivity
-from subid.methods.online._lagged import solve as solve_lagged
 from subid.methods.online.base import OnlineIdentifier, history_dict, one_sample
 from subid.model.statespace import StateSpace
 from subid.statistic._hankel import HankelFactor, hankel_chunk
@@ -676,9 +681,11 @@ class RecursiveSubspace(OnlineIdentifier):
                 reason = (f"the B, D regression has {self._bd_rows:.0f} samples, fewer than "
                           f"its {self._nbd} unknowns")
             else:
-                B, D, x0, theta, reg = solve_factor(
-                    self._bd_R, self.order, self.n_inputs, self.n_outputs, estimate_x0=True,
-                    n_samples=max(self._bd_rows, 1.0), feedthrough=self._feedthrough)
+                B, D, x0, reg = fit_b_d_x0(
+                    self._bd_A, self._bd_C,
+                    Accumulated("factor", self._bd_R, self.n_inputs, max(self._bd_rows, 1.0)),
+                    feedthrough=self._feedthrough)
+                theta = reg.pop("theta")
                 if reg["regression_rank_deficient"] or not np.isfinite(theta).all():
                     reason = "the B, D regression is rank deficient"
                 else:
@@ -728,7 +735,7 @@ class RecursiveSubspace(OnlineIdentifier):
         in it. Returns ``(reason, solved)``: ``solved`` is None when the
         regression cannot be evaluated (unstable A, singular), ``reason`` a
         warning text or None."""
-        n, nu, ny = self.order, self.n_inputs, self.n_outputs
+        nu = self.n_inputs
         A, C = core.A_q, core.C_q * sy[:, None]
         if not (np.isfinite(A).all() and np.isfinite(C).all()):
             return "the estimated (A, C) are not finite", None
@@ -739,11 +746,13 @@ class RecursiveSubspace(OnlineIdentifier):
         stat = self._lag.flushed()           # reading leaves the statistic as it is
         weights = stat.output_weights()
         Nmat, truncation = stat.normal_equations(A, C, weights, feedthrough=self._feedthrough)
-        solved = solve_lagged(Nmat, n, nu, ny, feedthrough=self._feedthrough,
-                              n_samples=self._n_samples)
-        if solved is None:
+        fitted = fit_b_d_x0(A, C, Accumulated("normal", Nmat, nu, self._n_samples),
+                            feedthrough=self._feedthrough)
+        if fitted is None:
             return "the B, D regression is rank deficient", None
-        solved[4].update(bd_truncation=truncation, spectral_radius=radius)
+        B, D, x0, diag = fitted
+        solved = (B, D, x0, diag.pop("theta"), diag)
+        diag.update(bd_truncation=truncation, spectral_radius=radius)
         reason = None
         if truncation > _TRUNCATION_WARN:
             reason = (f"the B, D regression resolves {self._lags} lags but A^{self._lags + 1} "
