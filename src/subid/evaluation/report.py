@@ -36,6 +36,7 @@ import numpy as np
 
 from subid.errors import ModelError, SubidError
 from subid.io._files import atomic_write
+from subid.io.interop import operating_point
 from subid.model.polynomial import describe as describe_polynomials
 from subid.model.polynomial import polynomials_of
 
@@ -169,27 +170,6 @@ def _matlab_matrix(M) -> str:
     if M.size == 0:
         return f"zeros({M.shape[0]}, {M.shape[1]})"
     return "[" + "; ".join(" ".join(repr(float(v)) for v in row) for row in M) + "]"
-
-
-def operating_point(model, estimation=None):
-    """``(u0, y0)``: the channel means removed before identification, from
-    ``model.info['data']`` (the command line records them) or the estimation
-    record's ``u_offset``/``y_offset``; None when no constant was removed
-    (no detrending, or a linear trend, which is no fixed operating point)."""
-    info = model.info.get("data") if isinstance(model.info, dict) else None
-    if isinstance(info, dict) and info.get("u_offset") is not None:
-        if info.get("detrend", "constant") != "constant":
-            return None
-        u0, y0 = info.get("u_offset"), info.get("y_offset")
-    elif estimation is not None and getattr(estimation, "u_offset", None) is not None:
-        u0, y0 = estimation.u_offset, estimation.y_offset
-    else:
-        return None
-    u0 = np.asarray(u0, dtype=float)
-    y0 = np.asarray(y0, dtype=float)
-    if u0.ndim != 1 or y0.ndim != 1 or u0.size != model.n_inputs or y0.size != model.n_outputs:
-        return None                      # linear trends: (intercept, slope) rows
-    return u0, y0
 
 
 def _matlab_code(model, point=None) -> str:

@@ -22,6 +22,15 @@ a file holding one struct variable with these fields, such as
 ``save('model.mat', 'S')``, is read too). MATLAB's ``Ts = -1`` (discrete
 time, unspecified period) needs the ``dt`` argument of :func:`load_mat`.
 
+Converted models and Python scripts
+-----------------------------------
+:func:`convert_model` writes a model converted to another time base
+(MATLAB's ``c2d``/``d2c``/``d2d``), as MATLAB ``ss`` fields, as a subid model
+file, or as a Python script that builds the python-control or scipy.signal
+system (:func:`python_source`), with the operating point
+(:func:`operating_point`) a detrended model relates deviations from: the
+library side of ``subid convert``.
+
 pandas
 ------
 :func:`iodata_from_pandas` and :func:`iodata_to_pandas` convert between
@@ -32,15 +41,24 @@ only when they are called.
 
 from __future__ import annotations
 
+import numpy as np
+
+from subid._validation import check_choice, same_period
+
 # The MAT reader and writer live in subid.io.mat, the pandas converters with IOData: the
 # methods StateSpace.from_mat/to_mat and IOData.from_pandas/to_pandas use them, and this
 # module, above data, io and model, re-exports them.
 from subid.data import iodata_from_pandas, iodata_to_pandas
-from subid.errors import ModelError
+from subid.errors import ModelError, OptionError
+from subid.io._files import write_bytes
 from subid.io.mat import write_mat_model
 from subid.model.statespace import StateSpace
 
-__all__ = ["save_mat", "load_mat", "iodata_from_pandas", "iodata_to_pandas"]
+__all__ = ["save_mat", "load_mat", "iodata_from_pandas", "iodata_to_pandas", "convert_model",
+           "python_source", "operating_point", "CONVERT_TARGETS"]
+
+#: What :func:`convert_model` writes (``'discrete'`` with a sampling period).
+CONVERT_TARGETS = ("discrete", "continuous", "mat", "json", "control", "scipy")
 
 
 # ---------------------------------------------------------------------------
@@ -108,3 +126,176 @@ def load_mat(path, *, dt=None) -> StateSpace:
         given.
     """
     return StateSpace.from_mat(path, dt=dt)
+
+
+# ---------------------------------------------------------------------------
+# converted models and Python scripts (subid convert)
+# ---------------------------------------------------------------------------
+_PY_TEMPLATE = '''"""{what} written by subid convert from {source}."""
+import numpy as np
+{import_line}
+
+A = np.array({A!r})
+B = np.array({B!r})
+C = np.array({C!r})
+D = np.array({D!r})
+{build}
+'''
+
+
+def operating_point(model, estimation=None):
+    """The operating point a detrended model relates deviations from.
+
+    Parameters
+    ----------
+    model : StateSpace
+    estimation : IOData, optional
+        The estimation record, whose ``u_offset``/``y_offset`` are used when
+        ``model.info`` does not record the means.
+
+    Returns
+    -------
+    tuple of ndarray or None
+        ``(u0, y0)``: the channel means removed before identification, from
+        ``model.info['data']`` (the command line records them) or the estimation
+        record; None when no constant was removed (no detrending, or a linear
+        trend, which is no fixed operating point).
+    """
+    info = model.info.get("data") if isinstance(model.info, dict) else None
+    if isinstance(info, dict) and info.get("u_offset") is not None:
+        if info.get("detrend", "constant") != "constant":
+            return None
+        u0, y0 = info.get("u_offset"), info.get("y_offset")
+    elif estimation is not None and getattr(estimation, "u_offset", None) is not None:
+        u0, y0 = estimation.u_offset, estimation.y_offset
+    else:
+        return None
+    u0 = np.asarray(u0, dtype=float)
+    y0 = np.asarray(y0, dtype=float)
+    if u0.ndim != 1 or y0.ndim != 1 or u0.size != model.n_inputs or y0.size != model.n_outputs:
+        return None                      # linear trends: (intercept, slope) rows
+    return u0, y0
+
+
+def _operating_point_source(model) -> str:
+    """Python lines stating the operating point (the means removed by --detrend)."""
+    point = operating_point(model)
+    if point is None:
+        return ""
+    u0, y0 = point
+    return ("# The model relates deviations from the operating point, the channel means\n"
+            "# removed before identification: in the data's units y = G(u - u0) + y0.\n"
+            f"u0 = np.array({u0.tolist()!r})  # {', '.join(model.input_names)}\n"
+            f"y0 = np.array({y0.tolist()!r})  # {', '.join(model.output_names)}\n")
+
+
+def python_source(model, target: str = "control", *, source: str = "a subid model") -> str:
+    """A Python script that builds ``model`` as a python-control or scipy.signal system.
+
+    Parameters
+    ----------
+    model : StateSpace
+    target : {'control', 'scipy'}
+        ``control.ss(A, B, C, D, dt, inputs=..., outputs=...)`` or
+        ``scipy.signal.StateSpace(A, B, C, D[, dt=...])``, assigned to ``sys``.
+    source : str
+        Where the model came from (the script's docstring names it).
+
+    Returns
+    -------
+    str
+        The script: the matrices as literal arrays (exact: ``repr`` of the
+        floats), ``sys``, and ``u0``, ``y0`` when the model relates deviations from
+        an operating point (:func:`operating_point`).
+    """
+    target = check_choice(target, "target", ("control", "scipy"))
+    mats = {k: getattr(model, k).tolist() for k in "ABCD"}
+    if target == "control":
+        dt = model.dt
+        build = (f"sys = control.ss(A, B, C, D, {dt!r}, inputs={list(model.input_names)!r}, "
+                 f"outputs={list(model.output_names)!r})")
+        return _PY_TEMPLATE.format(what="python-control model", source=source,
+                                   import_line="import control", build=build, **mats) \
+            + _operating_point_source(model)
+    build = "sys = signal.StateSpace(A, B, C, D)" if model.dt == 0 else \
+        f"sys = signal.StateSpace(A, B, C, D, dt={model.dt!r})"
+    return _PY_TEMPLATE.format(what="scipy.signal model", source=source,
+                               import_line="from scipy import signal", build=build, **mats) \
+        + _operating_point_source(model)
+
+
+def convert_model(model, path, to: str, *, dt=None, method: str = "zoh",
+                  source: str = "a subid model") -> str:
+    """Write ``model`` converted to another time base or format (``subid convert``).
+
+    Parameters
+    ----------
+    model : StateSpace
+    path : str or os.PathLike
+        The file written (atomically).
+    to : {'discrete', 'continuous', 'mat', 'json', 'control', 'scipy'}
+        ``'discrete'``: a model file of the model sampled with period ``dt`` (a
+        continuous model discretised; a discrete one resampled through continuous
+        time, or kept when ``dt`` is its own period); ``'continuous'``: a model
+        file of the continuous-time model; ``'mat'``: MATLAB ``ss`` fields
+        (:func:`save_mat`); ``'json'``: the subid model file; ``'control'``,
+        ``'scipy'``: the Python script of :func:`python_source`.
+    dt : float, optional
+        The sampling period of ``to='discrete'`` (positive, finite).
+    method : {'zoh', 'foh', 'bilinear'}
+        The discretisation method (MATLAB's ``c2d``/``d2c``).
+    source : str
+        Where the model came from (named by the Python scripts).
+
+    Returns
+    -------
+    str
+        What was written, in a few words (with the operating point of a ``.mat``
+        file, which the file does not store).
+
+    Raises
+    ------
+    OptionError
+        ``to``, ``method`` or ``dt`` is not allowed.
+    ImportError
+        ``to='control'`` without python-control (the message names the extra).
+    """
+    if not isinstance(model, StateSpace):
+        raise ModelError(f"convert_model expects a subid.StateSpace, got {type(model).__name__}")
+    to = check_choice(to, "to", CONVERT_TARGETS)
+    method = check_choice(method, "method", ("zoh", "foh", "bilinear"))
+    if to == "discrete":
+        try:
+            period = float(dt)            # type: ignore[arg-type]  # None: refused below
+        except (TypeError, ValueError):
+            period = float("nan")
+        if isinstance(dt, bool) or not (period > 0 and np.isfinite(period)):
+            raise OptionError(f"to='discrete' needs a positive, finite sampling period dt, "
+                              f"got {dt!r}")
+        dt = period
+        if model.dt == 0:
+            result = model.to_discrete(dt, method)
+        elif same_period(dt, model.dt):
+            result = model
+        else:
+            result = model.to_continuous(method).to_discrete(dt, method)
+        result.save(path)
+        return f"discrete-time model, dt = {dt:g} ({method})"
+    if to == "continuous":
+        model.to_continuous(method).save(path)
+        return f"continuous-time model ({method})"
+    if to == "mat":
+        save_mat(model, path)
+        what = "MATLAB ss fields A, B, C, D, Ts, InputName, OutputName"
+        if (point := operating_point(model)) is not None:
+            what += ("; the model is around the operating point u0 = "
+                     f"{np.round(point[0], 6).tolist()}, y0 = "
+                     f"{np.round(point[1], 6).tolist()} (not stored in the .mat file)")
+        return what
+    if to == "json":
+        model.save(path)
+        return "subid model file"
+    if to == "control":
+        model.to_control()          # ImportError with an install hint if missing
+    write_bytes(path, python_source(model, to, source=source), what="script")
+    return "python-control script" if to == "control" else "scipy.signal script"
