@@ -208,7 +208,7 @@ def python_source(model, target: str = "control", *, source: str = "a subid mode
         floats), ``sys``, and ``u0``, ``y0`` when the model relates deviations from
         an operating point (:func:`operating_point`).
     """
-    target = check_choice(target, "target", ("control", "scipy"))
+    check_choice(target, "target", ("control", "scipy"))
     mats = {k: getattr(model, k).tolist() for k in "ABCD"}
     if target == "control":
         dt = model.dt
@@ -262,11 +262,11 @@ def convert_model(model, path, to: str, *, dt=None, method: str = "zoh",
     """
     if not isinstance(model, StateSpace):
         raise ModelError(f"convert_model expects a subid.StateSpace, got {type(model).__name__}")
-    to = check_choice(to, "to", CONVERT_TARGETS)
-    method = check_choice(method, "method", ("zoh", "foh", "bilinear"))
+    check_choice(to, "to", CONVERT_TARGETS)
+    check_choice(method, "method", ("zoh", "foh", "bilinear"))
     if to == "discrete":
         try:
-            period = float(dt)            # type: ignore[arg-type]  # None: refused below
+            period = float(dt)
         except (TypeError, ValueError):
             period = float("nan")
         if isinstance(dt, bool) or not (period > 0 and np.isfinite(period)):
