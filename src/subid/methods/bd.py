@@ -16,7 +16,10 @@ method (each takes the subset that applies to it) and as ``info['bd_method']``
     :mod:`subid.methods.dt._bd_large` (one x0 per experiment, eliminated
     experiment by experiment; many channels with the D rows eliminated),
     :mod:`subid.methods.dt._bd_pass` (a record in pieces: a second pass),
-    :mod:`subid.methods.ct._ct_fit` (continuous time, the hold-exact response).
+    :mod:`subid.methods.ct._ct_fit` (continuous time, the hold-exact response);
+    the regression accumulated over a stream (:class:`Accumulated`, the
+    recursive identifier) is solved by the QR and modal solvers of
+    :mod:`subid.methods.dt._regression`.
 ``'prediction'``
     The same regression on the one-step predictor ``(A - K C, C)`` with the
     noise gain K (Ljung 1999, eq. 4.86): well posed for an unstable A.
