@@ -74,9 +74,9 @@ PRIVATE_ALLOWED = {
     ("subid.methods.ct.ct_subspace", "subid.methods.dt._selection"),
     ("subid.methods.identify", "subid.methods.dt._feedthrough"),
     ("subid.methods.identify", "subid.methods.dt._subspace"),
-    # The lagged statistics of RecursiveSubspace's exact B, D regression solve their
-    # normal equations with the batch engine's solver (_regression); the recursive
-    # identifier itself reaches B, D, x0 through methods.bd.fit_b_d_x0 only.
+    # The lagged statistics of RecursiveSubspace's exact B, D regression build its normal
+    # equations in the batch regression's parameter layout (_regression.parameter_count);
+    # the recursive identifier itself reaches B, D, x0 through methods.bd.fit_b_d_x0 only.
     ("subid.methods.online._lagged", "subid.methods.dt._regression"),
     # The one B, D, x0 entry point dispatches to its engines (issue 24 item 2).
     ("subid.methods.bd", "subid.methods.dt._regression"),
