@@ -23,7 +23,23 @@ F-tests on the rows of the block-Hankel factor the method already holds
    noise is independent of the input), so an F-test of their coefficients
    significant at :data:`LEVEL` (Bonferroni over the inputs) shows feedback.
    Under feedback the lag-zero correlation between u(k) and y(k) cannot be
-   told apart from a direct term: D = 0, as MATLAB does.
+   told apart from a direct term: D = 0, as MATLAB does. This is a property
+   of the data, not of the test: a plant with a direct term under a feedback
+   with a delay, and a plant without one under a feedback without delay, can
+   give the same second-order statistics of (u, y), so every criterion
+   computed from them (held-out simulation or one-step prediction fit, with
+   or without D) ranks the two alike. Measured (issue 21,
+   ``bench/feedthrough_feedback.py``): on the seed-001 plant (D = 0) under
+   u = r + 0.5 y a free D raises the held-out simulation fit by about 1
+   point and the one-step prediction fit by about 2 points on every fold,
+   and PEM from it ends 16x further from the plant; with PEM-refined fold
+   models, what the free D adds to the one-step prediction is the share
+   ``lag0_share`` below, there and on the DaISy winding record alike.
+   ``info['feedthrough']['lag0_share']`` records, per output, the share of
+   the one-step prediction error of the high-order ARX model below that
+   u(k) explains: all a free D can take from the lag-0 correlation. Pass
+   ``feedthrough=True`` when the plant is known to have a direct term and
+   the feedback a delay.
 2. **Direct term**, in open loop: each output y_i(k) is regressed on
    ``u(k-1..k-p), y(k-1..k-p)`` (a high-order ARX model, which approximates
    the one-step predictor of any innovation model, Ljung 1999, Sec. 4.3
@@ -128,7 +144,9 @@ def decide(factor, *, level: float = LEVEL):
     record : dict
         ``info['feedthrough']``: ``requested``, ``estimated``, ``lags``,
         ``feedback`` (per-input p-values, detected or not), ``direct_term``
-        (per-output p-values, or why not tested), ``rule``.
+        (per-output p-values, or why not tested), ``rule``; under feedback
+        ``lag0_share`` (per output, the share of its one-step prediction error
+        that u(k) explains).
     """
     nu, ny, s = factor.n_inputs, factor.n_outputs, factor.depth
     norms = np.linalg.norm(factor.L, axis=1)
@@ -161,9 +179,14 @@ def decide(factor, *, level: float = LEVEL):
     detected = any(v is not None and v < level / nu for v in feedback)
     record["feedback"] = {"p_values": feedback, "detected": bool(detected)}
     if detected:
-        record.update(estimated=False,
+        # the share of each output's one-step prediction error that u(k) explains: all a
+        # feedback without delay can give a free D (subid.methods.identify's allowance)
+        on_past = _residual_powers(L, current_y, past)[0]
+        share = 1.0 - on_all[0] / np.maximum(on_past, 1e-300)
+        record.update(estimated=False, lag0_share=[float(v) for v in np.clip(share, 0, 1)],
                       direct_term="not tested: under feedback the lag-0 correlation of u and "
-                                  "y cannot be told from a direct term (D = 0, as MATLAB)")
+                                  "y cannot be told from a direct term (D = 0, as MATLAB; "
+                                  "lag0_share: what a free D would take)")
         return False, record
     direct = _f_tests(L, current_y, past, current_u, K, extended=on_all)
     exact = all(v is None for v in direct)
