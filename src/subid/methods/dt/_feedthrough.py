@@ -31,10 +31,12 @@ F-tests on the rows of the block-Hankel factor the method already holds
    or without D) ranks the two alike. Measured (issue 21,
    ``bench/feedthrough_feedback.py``): on the seed-001 plant (D = 0) under
    u = r + 0.5 y a free D raises the held-out simulation fit by about 1
-   point and the one-step prediction fit by about 2 points on every fold,
-   and PEM from it ends 16x further from the plant; with PEM-refined fold
-   models, what the free D adds to the one-step prediction is the share
-   ``lag0_share`` below, there and on the DaISy winding record alike.
+   point and the one-step prediction fit of PEM-refined fold models by
+   0.7-0.8 points, and PEM from it ends 14-26x further from the plant; on
+   the DaISy winding record it raises the validation fit by 8 points but
+   validates worse on the folds of the estimation record. What a free D
+   adds to the one-step prediction is the share ``lag0_share`` below, there
+   and on winding alike.
    ``info['feedthrough']['lag0_share']`` records, per output, the share of
    the one-step prediction error of the high-order ARX model below that
    u(k) explains: all a free D can take from the lag-0 correlation. Pass
