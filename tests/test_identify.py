@@ -267,7 +267,8 @@ def test_feedthrough_records_the_lag0_share_under_feedback():
     """Under u = r - F y (r white, unit variance) the innovations are e and r - F e, so
     u(k) explains the share diag(S F' (I + F S F')^-1 F S) / diag(S) of each output's
     one-step prediction error (S = noise_cov): what a free D would take. Seeded; the
-    sampling spread of the share at N = 3000 is about 0.015."""
+    sampling spread of the share at N = 3000 is about 0.015. In open loop with D = 0 the
+    share is rounding-level."""
     true, data = _closed_loop(7)
     record = subid.n4sid(data, 3, horizon=10).info["feedthrough"]
     assert record["feedback"]["detected"] and not record["estimated"]
@@ -276,6 +277,7 @@ def test_feedthrough_records_the_lag0_share_under_feedback():
     explained = S @ F.T @ np.linalg.solve(np.eye(2) + F @ S @ F.T, F @ S)
     np.testing.assert_allclose(record["lag0_share"], np.diag(explained) / np.diag(S),
                                atol=0.03)
-    # open loop: no feedback, no share recorded
+    # open loop, D = 0: u(k) explains nothing of y(k) beyond the past (2 regressors of
+    # 3000 samples: an in-sample share of about 1e-3)
     opened = systems.simulate_innovation_data(true, 3000, seed=7)
-    assert "lag0_share" not in subid.n4sid(opened, 3, horizon=10).info["feedthrough"]
+    assert max(subid.n4sid(opened, 3, horizon=10).info["feedthrough"]["lag0_share"]) < 0.01
