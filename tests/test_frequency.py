@@ -238,11 +238,11 @@ def test_fd_subspace_estimates_the_kind_of_noise(relative):
     # the noise variance a + b |G|^2 that fd_subspace estimates (and weights by):
     # relative noise gives b near 0.05**2 and a = 0 (measured 0.88 to 2.04 times
     # over 20 runs), noise of equal level a near its variance and b = 0 exactly (the
-    # second term is kept only when significant: before, b reached 1.6 times 0.05**2
-    # on equal-level noise in 3 of 10 runs); under relative noise no spurious slow
-    # pole (the slowest pole within 0.95 to 1.14 times the true -0.16 in 20 runs;
-    # with the former equal weighting of the columns and B, D, one between -0.05 and
-    # -1e-8 in 15 of 20 runs)
+    # second term is kept only when significant: before, b came out at 0.46 to 1.6
+    # times 0.05**2 on one channel in 4 of 10 equal-level runs); under relative noise
+    # no spurious slow pole (the slowest pole within 0.95 to 1.14 times the true -0.16
+    # in 20 runs; with the former equal weighting of the columns and B, D, one between
+    # -0.05 and -1e-8 in 15 of 20 runs)
     system = subid.systems.seed000_system()
     G = system.freqresp(W_CT)
     variance = (0.05 * np.sqrt(np.mean(np.abs(G) ** 2))) ** 2
@@ -259,6 +259,19 @@ def test_fd_subspace_estimates_the_kind_of_noise(relative):
         else:
             assert np.all(noise["b"] == 0)
             assert np.all((noise["a"] > 0.7 * variance) & (noise["a"] < 1.4 * variance))
+
+
+def test_fd_subspace_weights_by_a_given_std_as_by_weights():
+    # std weights the columns and the B, D regression as weights = 1/std do (and the
+    # SVD's noise covariance): the same model to rounding
+    G = subid.systems.seed000_system().freqresp(W_CT)
+    measured = _ct_data(0.05, 3).response
+    std = 0.05 * np.abs(G)
+    by_std = subid.fd_subspace(subid.FRData(W_CT, measured, std=std), 4)
+    by_weights = subid.fd_subspace(subid.FRData(W_CT, measured, weights=1 / std), 4)
+    assert by_std.info["noise_model"]["source"] == "std of the data"
+    np.testing.assert_allclose(by_std.freqresp(W_CT), by_weights.freqresp(W_CT),
+                               rtol=0, atol=1e-9 * np.abs(G).max())
 
 
 def test_pem_never_ends_above_its_start():
