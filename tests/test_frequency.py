@@ -216,18 +216,62 @@ def _pem_runs(seeds, relative, **options):
 
 @pytest.mark.long
 def test_pem_lowers_the_error_in_most_runs():
-    # noise of equal level at every frequency: pem lowers the maximal error (17 of 20)
+    # the acceptance run (bench/frequency_acceptance.py): pem lowers the maximal error
+    # in 17 of 20 runs under noise of equal level at every frequency and in 17 of 20
+    # under noise proportional to |G| (10 of 20 when fd_subspace weighted its
+    # columns and B, D equally), and the relative error in 18 of 20
     assert _pem_runs(range(20), relative=False)[0] >= 15
-    # noise proportional to |G|: the subspace start is already as good in the maximal
-    # error (pem lowers it in 10 of 20, as with the true noise level as weights), and
-    # pem lowers the relative error in 20 of 20 (bench/frequency_acceptance.py)
-    assert _pem_runs(range(20), relative=True)[1] >= 15
+    lowered_max, lowered_rms = _pem_runs(range(20), relative=True)
+    assert lowered_max >= 15 and lowered_rms >= 15
 
 
 def test_pem_lowers_the_error_few_runs():
     # the cheap sibling of the acceptance run: 4 runs, 30 evaluations each
     assert _pem_runs(range(4), relative=False, rounds=1, max_iterations=30)[0] >= 3
-    assert _pem_runs(range(4), relative=True, rounds=1, max_iterations=30)[1] >= 3
+    lowered_max, lowered_rms = _pem_runs(range(4), relative=True, rounds=1,
+                                         max_iterations=30)
+    assert lowered_max >= 3 and lowered_rms >= 3
+
+
+@pytest.mark.parametrize("relative", [True, False])
+def test_fd_subspace_estimates_the_kind_of_noise(relative):
+    # the noise variance a + b |G|^2 that fd_subspace estimates (and weights by):
+    # relative noise gives b near 0.05**2 and a = 0 (measured 0.88 to 2.04 times
+    # over 20 runs), noise of equal level a near its variance and b = 0 exactly (the
+    # second term is kept only when significant: before, b came out at 0.46 to 1.6
+    # times 0.05**2 on one channel in 4 of 10 equal-level runs); under relative noise
+    # no spurious slow pole (the slowest pole within 0.95 to 1.14 times the true -0.16
+    # in 20 runs; with the former equal weighting of the columns and B, D, one between
+    # -0.05 and -1e-8 in 15 of 20 runs)
+    system = subid.systems.seed000_system()
+    G = system.freqresp(W_CT)
+    variance = (0.05 * np.sqrt(np.mean(np.abs(G) ** 2))) ** 2
+    slowest_true = np.abs(system.poles().real).min()
+    for seed in range(5):
+        model = subid.fd_subspace(_ct_data(0.05, seed, relative=relative), 4)
+        noise = model.info["noise_model"]
+        assert "estimated" in noise["source"]
+        if relative:
+            assert np.all((noise["b"] > 0.5 * 0.05 ** 2) & (noise["b"] < 2.5 * 0.05 ** 2))
+            assert np.all(noise["a"] < 1e-3 * variance)
+            slowest = np.abs(model.poles().real).min()
+            assert 0.8 * slowest_true < slowest < 1.25 * slowest_true
+        else:
+            assert np.all(noise["b"] == 0)
+            assert np.all((noise["a"] > 0.7 * variance) & (noise["a"] < 1.4 * variance))
+
+
+def test_fd_subspace_weights_by_a_given_std_as_by_weights():
+    # std weights the columns and the B, D regression as weights = 1/std do (and the
+    # SVD's noise covariance): the same model to rounding
+    G = subid.systems.seed000_system().freqresp(W_CT)
+    measured = _ct_data(0.05, 3).response
+    std = 0.05 * np.abs(G)
+    by_std = subid.fd_subspace(subid.FRData(W_CT, measured, std=std), 4)
+    by_weights = subid.fd_subspace(subid.FRData(W_CT, measured, weights=1 / std), 4)
+    assert by_std.info["noise_model"]["source"] == "std of the data"
+    np.testing.assert_allclose(by_std.freqresp(W_CT), by_weights.freqresp(W_CT),
+                               rtol=0, atol=1e-9 * np.abs(G).max())
 
 
 def test_pem_never_ends_above_its_start():
@@ -270,7 +314,14 @@ def test_pem_on_discrete_time_frequency_data():
     start = subid.fd_subspace(data, 3)
     refined = subid.pem(data, start)
     assert refined.dt == 1.0 and refined.info["final_cost"] < refined.info["start_cost"]
-    assert _relative_rms(refined, system, W_DT) < _relative_rms(start, system, W_DT)
+    # the estimated weighting reaches the estimate weighted by the true noise level
+    # (maximum likelihood). The start, weighted by fd_subspace's estimate of the noise,
+    # is close to it already: pem lowers the relative error in 7 of seeds 0..9, not
+    # in this one (0.0061 -> 0.0074, the same with the true level)
+    ideal = subid.pem(subid.FRData(W_DT, data.response, 1.0,
+                                   std=np.sqrt(2) * 0.05 * np.abs(G)), start)
+    assert _relative_rms(refined, system, W_DT) == pytest.approx(
+        _relative_rms(ideal, system, W_DT), rel=0.05)
 
 
 # -- fit, files, plots, CLI ----------------------------------------------------

@@ -262,3 +262,23 @@ def test_refine_names_its_focus(paper_data):
     assert old.info["focus"] == "prediction"
     with pytest.raises(OptionError, match="refine"):
         subid.ls_subspace(paper_data, 3, refine="pem2")
+
+
+def test_feedthrough_records_the_lag0_share_under_feedback():
+    """Under u = r - F y (r white, unit variance) the innovations are e and r - F e, so
+    u(k) explains the share diag(S F' (I + F S F')^-1 F S) / diag(S) of each output's
+    one-step prediction error (S = noise_cov): what a free D would take. Seeded; the
+    sampling spread of the share at N = 3000 is about 0.015. In open loop with D = 0 the
+    share is rounding-level."""
+    true, data = _closed_loop(7)
+    record = subid.n4sid(data, 3, horizon=10).info["feedthrough"]
+    assert record["feedback"]["detected"] and not record["estimated"]
+    S = true.noise_cov
+    F = -0.5 * np.eye(2)
+    explained = S @ F.T @ np.linalg.solve(np.eye(2) + F @ S @ F.T, F @ S)
+    np.testing.assert_allclose(record["lag0_share"], np.diag(explained) / np.diag(S),
+                               atol=0.03)
+    # open loop, D = 0: u(k) explains nothing of y(k) beyond the past (2 regressors of
+    # 3000 samples: an in-sample share of about 1e-3)
+    opened = systems.simulate_innovation_data(true, 3000, seed=7)
+    assert max(subid.n4sid(opened, 3, horizon=10).info["feedthrough"]["lag0_share"]) < 0.01

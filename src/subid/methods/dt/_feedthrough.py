@@ -23,7 +23,25 @@ F-tests on the rows of the block-Hankel factor the method already holds
    noise is independent of the input), so an F-test of their coefficients
    significant at :data:`LEVEL` (Bonferroni over the inputs) shows feedback.
    Under feedback the lag-zero correlation between u(k) and y(k) cannot be
-   told apart from a direct term: D = 0, as MATLAB does.
+   told apart from a direct term: D = 0, as MATLAB does. This is a property
+   of the data, not of the test: a plant with a direct term under a feedback
+   with a delay, and a plant without one under a feedback without delay, can
+   give the same second-order statistics of (u, y), so every criterion
+   computed from them (held-out simulation or one-step prediction fit, with
+   or without D) ranks the two alike. Measured (issue 21,
+   ``bench/feedthrough_feedback.py``): on the seed-001 plant (D = 0) under
+   u = r + 0.5 y a free D raises the held-out simulation fit by about 1
+   point and the one-step prediction fit of PEM-refined fold models by
+   0.7-0.8 points, and PEM from it ends 14-26x further from the plant; on
+   the DaISy winding record it raises the validation fit by 8 points but
+   validates worse on the folds of the estimation record. What a free D
+   adds to the one-step prediction is the share ``lag0_share`` below, there
+   and on winding alike.
+   ``info['feedthrough']['lag0_share']`` records (always), per output, the share of
+   the one-step prediction error of the high-order ARX model below that
+   u(k) explains: all a free D can take from the lag-0 correlation. Pass
+   ``feedthrough=True`` when the plant is known to have a direct term and
+   the feedback a delay.
 2. **Direct term**, in open loop: each output y_i(k) is regressed on
    ``u(k-1..k-p), y(k-1..k-p)`` (a high-order ARX model, which approximates
    the one-step predictor of any innovation model, Ljung 1999, Sec. 4.3
@@ -91,12 +109,14 @@ def _residual_powers(L, targets, regressors):
     return np.einsum("ij,ij->i", r, r), int(rank)
 
 
-def _f_tests(L, targets, restricted, extra, n_columns, extended=None):
+def _f_tests(L, targets, restricted, extra, n_columns, extended=None, reduced=None):
     """p-value of the test, for each row of ``targets``, that the ``extra`` rows add
     nothing to ``restricted`` (None where the restricted fit is exact or the extra
-    rows add no direction). ``extended``: the :func:`_residual_powers` of the targets
-    on ``restricted`` and ``extra`` together, when already computed."""
-    rss0, rank0 = _residual_powers(L, targets, restricted)
+    rows add no direction). ``extended`` and ``reduced``: the :func:`_residual_powers`
+    of the targets on ``restricted`` and ``extra`` together, and on ``restricted``
+    alone, when already computed."""
+    rss0, rank0 = reduced if reduced is not None else \
+        _residual_powers(L, targets, restricted)
     rss1, rank1 = extended if extended is not None else \
         _residual_powers(L, targets, np.concatenate([restricted, extra]))
     power = np.einsum("ij,ij->i", L[targets], L[targets])
@@ -128,7 +148,9 @@ def decide(factor, *, level: float = LEVEL):
     record : dict
         ``info['feedthrough']``: ``requested``, ``estimated``, ``lags``,
         ``feedback`` (per-input p-values, detected or not), ``direct_term``
-        (per-output p-values, or why not tested), ``rule``.
+        (per-output p-values, or why not tested), ``rule``, ``lag0_share``
+        (per output, the share of its one-step prediction error that u(k)
+        explains; not on noise-free records).
     """
     nu, ny, s = factor.n_inputs, factor.n_outputs, factor.depth
     norms = np.linalg.norm(factor.L, axis=1)
@@ -160,12 +182,18 @@ def decide(factor, *, level: float = LEVEL):
     feedback = _f_tests(L, current_u, past_u, past_y, K)
     detected = any(v is not None and v < level / nu for v in feedback)
     record["feedback"] = {"p_values": feedback, "detected": bool(detected)}
+    # the share of each output's one-step prediction error (high-order ARX) that u(k)
+    # explains: what a free D takes from the lag-0 correlation
+    on_past = _residual_powers(L, current_y, past)
+    share = np.clip(1.0 - on_all[0] / np.maximum(on_past[0], 1e-300), 0.0, 1.0)
+    record["lag0_share"] = [float(v) for v in share]
     if detected:
         record.update(estimated=False,
                       direct_term="not tested: under feedback the lag-0 correlation of u and "
-                                  "y cannot be told from a direct term (D = 0, as MATLAB)")
+                                  "y cannot be told from a direct term (D = 0, as MATLAB; "
+                                  "lag0_share: what a free D would take)")
         return False, record
-    direct = _f_tests(L, current_y, past, current_u, K, extended=on_all)
+    direct = _f_tests(L, current_y, past, current_u, K, extended=on_all, reduced=on_past)
     exact = all(v is None for v in direct)
     significant = any(v is not None and v < level / ny for v in direct)
     # a record the past explains exactly (noise-free): keep D free, its estimate is exact

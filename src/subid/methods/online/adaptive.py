@@ -333,6 +333,8 @@ class AdaptiveIdentifier(OnlineIdentifier):
         if refine is not None:
             refine = check_bool(refine, "refine")
         self._refine = (method == "iv") if refine is None else refine
+        # the last structured refit: (sample count, result of _refit)
+        self._refit_cache: tuple | None = None
         n = check_int(order, "order")
         nu = check_int(n_inputs, "n_inputs")
         ny = check_int(n_outputs, "n_outputs")
@@ -599,7 +601,7 @@ class AdaptiveIdentifier(OnlineIdentifier):
                           conditions=conditions_of(info), warnings=issued, **info)
         A, B, C, D = st["Am"], st["Bm"], st["Cm"], st["Dm"]
         if info["refined"]:
-            A, B, C, D = self._refit_cache[1][0]
+            A, B, C, D = refit[0]
         return StateSpace(A, B, C, D, 0.0,
                           input_names=self._input_names, output_names=self._output_names,
                           info=info, hold=self._hold)
@@ -608,7 +610,7 @@ class AdaptiveIdentifier(OnlineIdentifier):
         """The structured refit of (8) (:mod:`._adaptive_refine`) of the current
         model, cached per sample count: ``((A, B, C, D), cost ratio, noise std)``
         or None (no noise estimate yet, or the refit failed)."""
-        if getattr(self, "_refit_cache", None) and self._refit_cache[0] == self.n_samples:
+        if self._refit_cache is not None and self._refit_cache[0] == self.n_samples:
             return self._refit_cache[1]
         st, out = self._st, None
         ev = st["Ev"][0]
