@@ -60,6 +60,7 @@ from subid._validation import check_choice, checked_call
 from subid.data import IOData
 from subid.errors import DataError, ModelError, OptionError, SubidError
 from subid.methods._info import collect_warnings
+from subid.methods.crossval import FLOOR, fold_score
 from subid.model.statespace import StateSpace
 
 __all__ = ["identify"]
@@ -68,8 +69,6 @@ FOCUS = ("simulation", "prediction")
 TIME_BASES = ("auto", "dt", "ct")
 #: The discrete-time estimators compared, by name, with their fixed options.
 ESTIMATORS = ("moesp", "n4sid")
-#: Fit (%) below which a fold score is clipped (one diverging fold cannot hide the others).
-FLOOR = -100.0
 #: Under feedback with ``focus='simulation'``: the (consistent) prediction-error refinement
 #: is kept only when it raises the mean simulation misfit on the folds by at most this
 #: fraction (measured: 3 % on the closed-loop seed-001 runs of issue 21, 32 % on the DaISy
@@ -119,15 +118,8 @@ def _fold_parts(data):
 
 
 def _score(model, validation, focus) -> float:
-    from subid.model.fit import fit_percent
-    steps = np.inf if focus == "simulation" else 1
-    try:
-        with warnings.catch_warnings(), np.errstate(all="ignore"):
-            warnings.simplefilter("ignore")
-            value = float(np.mean(fit_percent(model, validation, steps=steps)))
-    except SubidError:
-        return FLOOR
-    return max(value, FLOOR) if math.isfinite(value) else FLOOR
+    """:func:`subid.methods.crossval.fold_score` by simulation or one-step prediction."""
+    return fold_score(model, validation, steps=np.inf if focus == "simulation" else 1)
 
 
 def _refine(data, model, focus):
