@@ -247,7 +247,6 @@ def ls_subspace(data, order=None, *, horizon=None, instruments="past", selector=
                         bd_method=bd_method)
     if selector is not None and horizon is None:
         horizon = selector_horizon(selector, data)
-    method.validate()
     return run(method, data, order, horizon, selection=selection, statistic=statistic,
                refine=refine, input_delay=input_delay)
 
@@ -281,8 +280,6 @@ class LSSubspace(SubspaceMethod):
                  feedthrough="auto", instrument_weighting=True, power_iterations=8,
                  normalize_outputs=True, stability="auto", system_matrices="auto",
                  bd_method="auto"):
-        # the checks in the order the public function always made them (the selector's
-        # horizon between the flags and bd_method: validate() makes the rest)
         self.power_iterations = check_options(instruments, power_iterations)
         feedthrough = check_feedthrough(feedthrough)
         for name, flag in (("estimate_x0", estimate_x0),
@@ -293,16 +290,12 @@ class LSSubspace(SubspaceMethod):
         self.instrument_weighting = instrument_weighting
         self.normalize_outputs = bool(normalize_outputs)
         self.blocks_per_horizon = 2 if instruments == "past" else 1
-        self.system_matrices_option = system_matrices
+        check_choice(bd_method, "bd_method", BATCH_OPTIONS)
+        check_seed(seed)
+        check_system_matrices(system_matrices)
         self.common_options(feedthrough=feedthrough, estimate_x0=estimate_x0,
                             stability=stability, bd_method=bd_method)
-
-    def validate(self):
-        """The remaining option checks (after the selector's horizon)."""
-        check_choice(self.bd_method, "bd_method", BATCH_OPTIONS)
-        check_seed(self.seed)
-        system_matrices = check_system_matrices(self.system_matrices_option)
-        if system_matrices == "states" and self.instruments != "past":
+        if system_matrices == "states" and instruments != "past":
             raise OptionError("system_matrices='states' needs the past data "
                               "(instruments='past'): the state sequence is the projection "
                               "of the future outputs on them")
