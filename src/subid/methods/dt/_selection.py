@@ -229,8 +229,9 @@ def score_horizon(parts, orders, horizon, *, fitter, estimators, held=None):
     :meth:`subid.HankelStatistic.from_data` otherwise) whose order-independent
     steps (the factorisation, the SVD) every candidate order shares
     (:meth:`subid.methods.dt._subspace.Problem.cached`); the fold
-    models are made by the pipeline of the final model
-    (:class:`subid.methods.dt.pipeline.Pipeline`) and skip the estimation x0 (``Problem.fold``), and each is scored by one
+    models are made by the steps of the final model
+    (:class:`subid.methods.dt.pipeline.Pipeline`) but skip the estimation x0
+    (``Problem.fold``), and each is scored by one
     compiled simulation with the x0 regression on the validation block
     (:mod:`subid.methods.dt._scoring`), whose record-dependent parts are computed
     once per fold. The scores equal those of the straightforward computation (a
