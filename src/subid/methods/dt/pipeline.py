@@ -29,6 +29,7 @@ The cross-validation runs step 3 on its folds through the same :class:`Pipeline`
 
 from __future__ import annotations
 
+import abc
 import warnings
 from dataclasses import dataclass, field
 
@@ -47,7 +48,7 @@ from subid.methods.dt._subspace import (
     prepare,
     stable_choice,
 )
-from subid.methods.dt.plan import make_plan
+from subid.methods.dt.plan import Plan, make_plan
 from subid.model.statespace import StateSpace
 
 
@@ -92,7 +93,7 @@ class States:
     info: dict
 
 
-class SubspaceMethod:
+class SubspaceMethod(abc.ABC):
     """The protocol of a discrete-time batch subspace method (the base class).
 
     A subclass validates its options in its constructor (the shared ones with
@@ -127,12 +128,15 @@ class SubspaceMethod:
         self.stability = stability
         self.bd_method = bd_method
 
+    @abc.abstractmethod
     def decompose(self, problem, feedthrough) -> Subspace:
-        raise NotImplementedError
+        """The order-independent subspace step on ``problem`` (D estimated when
+        ``feedthrough``)."""
 
+    @abc.abstractmethod
     def system_matrices(self, problem, subspace, order, estimator, *, feedthrough, ft_record,
                         plan):
-        raise NotImplementedError
+        """:class:`Shift` or :class:`States` at ``order`` with ``estimator``."""
 
     def output_basis(self, estimate: Shift, A, B, x0):
         """A, B, C (normalised channels) and x0 in the basis the model is returned in."""
@@ -169,7 +173,7 @@ class Pipeline:
     and on the cross-validation folds alike."""
 
     method: SubspaceMethod
-    plan: object
+    plan: Plan
 
     @property
     def blocks_per_horizon(self) -> int:
