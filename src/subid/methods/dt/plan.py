@@ -3,12 +3,17 @@
 :func:`make_plan` runs at the public boundary of :func:`subid.ls_subspace`,
 :func:`subid.moesp`, :func:`subid.n4sid` and :func:`subid.pbsid`, after each
 method has validated its own options (its :class:`subid.methods.dt.pipeline.SubspaceMethod`),
-and before any work: it decides the order candidates, the horizon, the
-selection rule, the estimators of the system matrices, the feedthrough,
-stability, B/D and x0 settings, the refinement and the input delays, and
-whether the order/horizon/estimator choice is cross-validated. The pipeline
-(:func:`subid.methods.dt.pipeline.run`) then only follows the plan, and
-:meth:`Plan.info` gives the entries of ``model.info`` the plan decided.
+and before any work: it decides the order candidates and the horizon (those
+given, or the rule that chooses them), the selection rule, the estimators of the
+system matrices, the feedthrough, stability, B/D and x0 settings, the refinement
+and the input delays, and whether the order/horizon/estimator choice is
+cross-validated. The pipeline (:func:`subid.methods.dt.pipeline.run`) then only
+follows the plan, and :meth:`Plan.info` gives the entries of ``model.info`` the
+plan decided. What needs the data themselves is computed where the plan says: the
+cross-validated choice (:func:`subid.methods.dt._selection.choose`), the horizon of
+the gap rule (:func:`subid.methods.dt._subspace.check_order_horizon`, the smallest
+feasible of ``HORIZON_CANDIDATES``) and ``feedthrough='auto'``
+(:func:`subid.methods.dt._feedthrough.resolve`, once per problem).
 
 The constants behind the defaults stay with the code that owns them: the
 order candidates and horizons of the selection (:mod:`subid.methods.dt._selection`:
