@@ -289,7 +289,7 @@ def test_long_records_skip_the_system_matrix_choice():
     """``system_matrices='auto'`` cross-validates its two estimators on short records
     only: beyond AUTO_VARIANT_MAX_SAMPLES it is 'shift', with no fold fits (an explicit
     order and horizon cost one fit), and a given order still reproduces the model."""
-    from subid.methods.dt._subspace import AUTO_VARIANT_MAX_SAMPLES
+    from subid.methods.dt.plan import AUTO_VARIANT_MAX_SAMPLES
     data = subid.systems.simulate_data(subid.systems.seed001_system(),
                                        AUTO_VARIANT_MAX_SAMPLES + 500, seed=3,
                                        output_snr_db=30)

@@ -19,7 +19,9 @@ from subid.methods.dt import _feedthrough as feedthrough
 from subid.methods.dt import _regression as regression
 from subid.methods.dt import _residual_bound as bound
 from subid.methods.dt import _subspace as subspace
-from subid.methods.dt.moesp import _moesp
+from subid.methods.dt.moesp import Moesp
+from subid.methods.dt.pipeline import Pipeline
+from subid.methods.dt.plan import make_plan
 from subid.statistic.hankel import HankelStatistic
 
 
@@ -103,8 +105,9 @@ def test_fold_model_skipping_the_unstable_fit_is_the_full_fit_model():
     """A fold model whose unstable A is proven not to be kept (bound_unstable) is the
     model the full computation gives, to the last bit; the bound was used."""
     _, data = _record(order=4, n=4000, seed=1)
-    build = partial(_moesp, weighting="moesp", stability="auto", feedthrough="auto",
-                    estimate_x0=True, bd_method="auto", system_matrices="shift")
+    method = Moesp(system_matrices="shift")
+    pipeline = Pipeline(method, make_plan(method, data, None, None, selection="cv")[0])
+    build = partial(pipeline.fit, estimator="shift")
     used = 0
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")

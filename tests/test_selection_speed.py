@@ -6,7 +6,6 @@ No timing here (speed is measured in bench/run.py, the selection table)."""
 from __future__ import annotations
 
 import warnings
-from functools import partial
 
 import numpy as np
 import pytest
@@ -164,26 +163,22 @@ def test_statistic_by_cost():
     np.testing.assert_allclose(auto.factor().L, fresh.factor().L, rtol=1e-12, atol=1e-14)
 
 
-def _moesp_builds():
-    from subid.methods.dt.moesp import _moesp
-    options = dict(weighting="moesp", stability="auto", feedthrough=True, estimate_x0=True,
-                   bd_method="auto")
-    return {name: partial(_moesp, system_matrices=name, **options)
-            for name in ("shift", "states")}
-
-
-def _prepare_fold(statistic="auto", merged=True):
-    """prepare_fold as identify builds it; ``merged=False``: without the attributes
+def _pipeline(data, statistic="auto", merged=True):
+    """MOESP's pipeline as ``subid.moesp(data, feedthrough=True, statistic=statistic)``
+    runs it on the folds (its two estimators); ``merged=False``: without the attributes
     that let score_horizon merge the folds' statistics (one statistic per fold)."""
-    def prepare_fold(record, orders, f, factor=None):
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            return subspace.prepare(record, orders, f, method="moesp", statistic=statistic,
-                                    factor=factor)
+    from subid.methods.dt.moesp import Moesp
+    from subid.methods.dt.pipeline import Pipeline
+    from subid.methods.dt.plan import make_plan
+    method = Moesp(feedthrough=True)
+    plan, _ = make_plan(method, data, None, None, selection="cv", statistic=statistic)
+    pipeline = Pipeline(method, plan)
     if merged:
-        prepare_fold.blocks = 2
-        prepare_fold.statistic = statistic
-    return prepare_fold
+        return pipeline
+
+    class Unmerged:
+        prepare_fold, fit = pipeline.prepare_fold, pipeline.fit
+    return Unmerged()
 
 
 def test_fold_statistics_merged_from_blocks():
@@ -192,15 +187,15 @@ def test_fold_statistics_merged_from_blocks():
     experiment (merged experiments, other cuts) build their own."""
     _, data = _noisy(n=1500, seed=3)
     parts = [(data[a], data[b]) for a, b in selection.folds(data.n_samples)]
-    factors = selection.fold_factors(parts, 8, _prepare_fold())
+    factors = selection.fold_factors(parts, 8, _pipeline(data))
     for (train, _), factor in zip(parts, factors):
         own = HankelStatistic.from_data(train, 16).factor().L
         np.testing.assert_allclose(factor.L, own, rtol=0, atol=1e-12 * np.abs(own).max())
-    assert selection.fold_factors(parts, 8, _prepare_fold("qr")) == [None] * 4
-    assert selection.fold_factors(parts[::-1], 8, _prepare_fold()) == [None] * 4
+    assert selection.fold_factors(parts, 8, _pipeline(data, "qr")) == [None] * 4
+    assert selection.fold_factors(parts[::-1], 8, _pipeline(data)) == [None] * 4
     merged = _records()[2][0]
     assert selection.fold_factors(selection.experiment_folds(merged), 8,
-                                  _prepare_fold()) == [None] * 4
+                                  _pipeline(merged)) == [None] * 4
 
 
 @pytest.mark.slow
@@ -211,25 +206,26 @@ def test_score_horizon_equals_the_straightforward_computation():
     for data in (_noisy(n=1200)[1], _records()[2][0]):
         parts = selection.experiment_folds(data) if data.n_experiments > 1 else \
             [(data[a], data[b]) for a, b in selection.folds(data.n_samples)]
-        builds = _moesp_builds()
+        pipeline = _pipeline(data)
+        estimators = pipeline.plan.estimators
         orders = [1, 2, 3, 4, 5, 6]
-        per_fold, repaired = selection.score_horizon(parts, orders, 8,
-                                                     prepare_fold=_prepare_fold(),
-                                                     builds=builds)
+        per_fold, repaired = selection.score_horizon(parts, orders, 8, fitter=pipeline,
+                                                     estimators=estimators)
         for k, (train, validation) in enumerate(parts):
             for n in orders:
-                for v, build in enumerate(builds.values()):
+                for v, name in enumerate(estimators):
                     with warnings.catch_warnings():
                         warnings.simplefilter("ignore")
-                        model = build(subspace.prepare(train, n, 8, method="moesp"))
+                        model = pipeline.fit(subspace.prepare(train, n, 8, method="moesp"),
+                                             name)
                     # (the fold's own statistic, not the one merged from the blocks)
                     assert per_fold[(n, v)][k] == pytest.approx(
                         _reference_score(model, validation), abs=1e-8)
-        by_qr, _ = selection.score_horizon(parts, orders, 8,
-                                           prepare_fold=_prepare_fold("qr"), builds=builds)
+        by_qr, _ = selection.score_horizon(parts, orders, 8, fitter=_pipeline(data, "qr"),
+                                           estimators=estimators)
         unmerged, _ = selection.score_horizon(parts, orders, 8,
-                                              prepare_fold=_prepare_fold(merged=False),
-                                              builds=builds)
+                                              fitter=_pipeline(data, merged=False),
+                                              estimators=estimators)
         for key, values in per_fold.items():
             np.testing.assert_allclose(values, by_qr[key], atol=1e-7)
             np.testing.assert_allclose(values, unmerged[key], atol=1e-8)
@@ -242,13 +238,13 @@ def test_pinned_calls_make_no_fold_fits(monkeypatch):
     order and horizon (as the default call chooses them), not the order."""
     _, data = _noisy(n=1500)
     calls = []
-    real = subspace.cross_validate
+    real = selection.cross_validate
 
     def counting(*args, **kwargs):
         calls.append(1)
         return real(*args, **kwargs)
 
-    monkeypatch.setattr(subspace, "cross_validate", counting)
+    monkeypatch.setattr(selection, "cross_validate", counting)
     model = subid.n4sid(data, 4, horizon=8)
     for method in (subid.moesp, subid.ls_subspace):
         model = method(data, 4, horizon=8, system_matrices="shift")

@@ -489,6 +489,24 @@ def _model(problem: Problem, n, A, B, C, D, x0, y0, diag, feedthrough) -> StateS
                       output_names=data.output_names, info=info, hold=info["hold"])
 
 
+class _Folds:
+    """What :func:`subid.methods.dt._selection.cross_validate` runs on its folds: the
+    fold's problem (``prepare_fold``) and the model of each build (``builds``, name ->
+    callable); one block row per basis function, no merged statistic."""
+
+    blocks_per_horizon = 1
+    statistic = None
+
+    def __init__(self, prepare_fold, builds):
+        self._prepare, self._builds = prepare_fold, builds
+
+    def prepare_fold(self, record, orders, horizon, factor=None):
+        return self._prepare(record, orders, horizon)
+
+    def fit(self, problem, name):
+        return self._builds[name](problem)
+
+
 def _second_wins(data, order, n_functions, prepare_fold, first, second, test=False):
     """Whether the cross-validation at ``order`` prefers the build ``second`` to ``first``
     (``(name, build)`` pairs; ties go to ``first``), and its record; with ``test``,
@@ -496,7 +514,8 @@ def _second_wins(data, order, n_functions, prepare_fold, first, second, test=Fal
     (:func:`subid.methods.ct._ct_discrete.paired_test`)."""
     builds = dict([first, second])
     _, _, variant, record = cross_validate(data, order, None, n_functions,
-                                           prepare_fold=prepare_fold, builds=builds)
+                                           fitter=_Folds(prepare_fold, builds),
+                                           estimators=list(builds))
     folds = {c.get("system_matrices"): c["folds"] for c in record["candidates"]}
     wins = variant == second[0]
     if test:
@@ -805,7 +824,6 @@ def ct_subspace(data, order=None, *, basis=None, poly_order: int = 3, estimate_x
                 return problem
             fold_cache[key] = problem
         return replace(fold_cache[key], candidates=list(orders))
-    prepare_fold.blocks = 1
 
     cv_data = data.detrend() if offset else data
     # the discrete-time candidates: on a uniform grid the default N4SID models, converted
@@ -839,7 +857,8 @@ def ct_subspace(data, order=None, *, basis=None, poly_order: int = 3, estimate_x
         ct_record = None
         if builds:
             ct_record = cross_validate(cv_data, fixed, None if fixed else candidates, N,
-                                       prepare_fold=prepare_fold, builds=builds)[3]
+                                       fitter=_Folds(prepare_fold, builds),
+                                       estimators=list(builds))[3]
         ranking, record, entries = _ct_discrete.merged_selection(
             ct_record, dt_scores, (ct_record or {}).get("samples_used", cv_data.n_samples),
             m, p, reference=fixed is None)

@@ -61,7 +61,7 @@ method offers two estimators of the system matrices from the same subspace
 with the output regression, or the state sequence), each is a candidate
 too. When the chosen candidate's model refitted to the whole record has to
 be stabilised although not all of its fold models had, the next candidates
-are tried (:func:`subid.methods.dt._subspace._unrepaired_choice`): among
+are tried (:func:`unrepaired_choice`): among
 the candidates whose mean score is within the fold-to-fold standard
 deviation of the choice's, first those none of whose fold models needed it,
 then the others, each by criterion.
@@ -140,7 +140,7 @@ def _fit_score(model, validation) -> float:
     return max(value, FLOOR) if math.isfinite(value) else FLOOR
 
 
-def score_horizon(parts, orders, horizon, *, prepare_fold, builds, held=None):
+def score_horizon(parts, orders, horizon, *, fitter, estimators, held=None):
     """Fold scores of every candidate order at one horizon.
 
     Per fold, one problem (one statistic, by cost: the lagged products merged from
@@ -148,7 +148,9 @@ def score_horizon(parts, orders, horizon, *, prepare_fold, builds, held=None):
     :meth:`subid.HankelStatistic.from_data` otherwise) whose order-independent
     steps (the factorisation, the SVD) every candidate order shares
     (:meth:`subid.methods.dt._subspace.Problem.cached`); the fold
-    models skip the estimation x0 (``Problem.fold``), and each is scored by one
+    models are made by the steps of the final model
+    (:class:`subid.methods.dt.pipeline.Pipeline`) but skip the estimation x0
+    (``Problem.fold``), and each is scored by one
     compiled simulation with the x0 regression on the validation block
     (:mod:`subid.methods.dt._scoring`), whose record-dependent parts are computed
     once per fold. The scores equal those of the straightforward computation (a
@@ -162,11 +164,14 @@ def score_horizon(parts, orders, horizon, *, prepare_fold, builds, held=None):
     orders : list of int
         Candidate orders (all revealable at ``horizon``).
     horizon : int
-    prepare_fold : callable ``(record, candidates, horizon, factor=None) -> Problem``
-        With attributes ``blocks`` (block rows per horizon) and ``statistic`` (the
-        option), the folds' factors are merged from the blocks' statistics and passed
-        as ``factor`` (:func:`fold_factors`); without them, each fold builds its own.
-    builds : dict ``name -> callable (Problem with a fixed order) -> StateSpace``
+    fitter : :class:`subid.methods.dt.pipeline.Pipeline` or alike
+        ``fitter.prepare_fold(record, candidates, horizon, factor=None) -> Problem``
+        and ``fitter.fit(problem with a fixed order, estimator) -> StateSpace``. With
+        the attributes ``blocks_per_horizon`` and ``statistic`` (the option) not None,
+        the folds' factors are merged from the blocks' statistics and passed as
+        ``factor`` (:func:`fold_factors`); otherwise each fold builds its own.
+    estimators : sequence
+        The names of the estimators ``fitter.fit`` takes (``[None]`` for one).
     held : list of :class:`subid.methods.dt._scoring.Held`, optional
         What the scores need from each validation record (computed here when not
         given; :func:`cross_validate` computes it once for every horizon).
@@ -179,22 +184,22 @@ def score_horizon(parts, orders, horizon, *, prepare_fold, builds, held=None):
         How many of the fold models had to be stabilised (:func:`stabilised`).
     """
     from subid.methods.dt._scoring import Held
-    names = list(builds)
+    names = list(estimators)
     per_fold = {(n, v): [] for n in orders for v in range(len(names))}
     repaired = {(n, v): 0 for n in orders for v in range(len(names))}
-    factors = fold_factors(parts, horizon, prepare_fold)
+    factors = fold_factors(parts, horizon, fitter)
     if held is None:                      # what every candidate's score needs, once
         held = [Held(validation) for _, validation in parts]
     for (train, _), factor, held_out in zip(parts, factors, held):
-        problem = prepare_fold(train, orders, horizon, factor=factor) if factor is not None \
-            else prepare_fold(train, orders, horizon)
+        problem = fitter.prepare_fold(train, orders, horizon, factor=factor) \
+            if factor is not None else fitter.prepare_fold(train, orders, horizon)
         for n in orders:
             for v, name in enumerate(names):
                 try:
                     with warnings.catch_warnings():
                         warnings.simplefilter("ignore")
-                        model = builds[name](replace(problem, order=n, candidates=[n],
-                                                     fold=True))
+                        model = fitter.fit(replace(problem, order=n, candidates=[n],
+                                                   fold=True), name)
                     value = _fit_score(model, held_out)
                     repaired[(n, v)] += stabilised(model)
                 except SubidError:
@@ -226,17 +231,17 @@ def _blocks_of_folds(parts):
     return [v1, t0[third:half], t0[half:N - third], v0]
 
 
-def fold_factors(parts, horizon, prepare_fold):
+def fold_factors(parts, horizon, fitter):
     """Hankel factors of the training records of the folds, each merged from the
     lagged-product statistics of the blocks of :func:`_blocks_of_folds` (one pass
     over the record instead of one per fold: 2.3 records), where that statistic is
     the one the fold would use (:meth:`subid.HankelStatistic.exact_factor`); None
     for a fold (or all) where it is not, or when ``parts`` are not the four folds of
-    one experiment: ``prepare_fold`` then builds the factor from the record."""
+    one experiment: ``fitter.prepare_fold`` then builds the factor from the record."""
     from subid.statistic.hankel import QR_MAX_SAMPLES, HankelStatistic
     none = [None] * len(parts)
-    blocks_per_horizon = getattr(prepare_fold, "blocks", None)
-    kind = getattr(prepare_fold, "statistic", None)
+    blocks_per_horizon = getattr(fitter, "blocks_per_horizon", None)
+    kind = getattr(fitter, "statistic", None)
     if blocks_per_horizon is None or kind not in ("auto", "gram"):
         return none
     depth = blocks_per_horizon * horizon
@@ -257,7 +262,7 @@ def fold_factors(parts, horizon, prepare_fold):
     return out
 
 
-def cross_validate(data, fixed, candidates, horizon, *, prepare_fold, builds):
+def cross_validate(data, fixed, candidates, horizon, *, fitter, estimators):
     """Choose ``(order, horizon)`` by contiguous cross-validation (:func:`folds`).
 
     Parameters
@@ -270,8 +275,9 @@ def cross_validate(data, fixed, candidates, horizon, *, prepare_fold, builds):
         Candidate orders (``None``: 1..MAX_ORDER as the horizon allows).
     horizon : int or None
         The horizon when given (only the order is chosen).
-    prepare_fold : callable ``(record, candidates, horizon) -> Problem``
-    builds : dict ``name -> callable (Problem with a fixed order) -> StateSpace``
+    fitter : :class:`subid.methods.dt.pipeline.Pipeline` or alike
+        What makes a fold's problem and model (:func:`score_horizon`).
+    estimators : sequence
         The estimators to choose among (one, named None, when there is no
         choice); on ties the first is preferred.
 
@@ -280,7 +286,7 @@ def cross_validate(data, fixed, candidates, horizon, *, prepare_fold, builds):
     order, horizon, variant, record : int, int, str or None, dict
         ``record`` is stored as ``info['order_selection']``.
     """
-    used = data                       # validated by the caller (subid.methods.dt._subspace.identify)
+    used = data                       # validated by the caller (subid.methods.dt.pipeline.run)
     if data.n_samples > MAX_SELECTION_SAMPLES:
         used = data[data.n_samples - MAX_SELECTION_SAMPLES:]
     if used.n_experiments > 1:        # folds per experiment (none across a border)
@@ -298,13 +304,13 @@ def cross_validate(data, fixed, candidates, horizon, *, prepare_fold, builds):
         wanted = list(candidates)
     else:
         wanted = list(range(1, MAX_ORDER + 1))
-    blocks = prepare_fold.blocks
+    blocks = fitter.blocks_per_horizon
     n_in, n_out = data.n_inputs, data.n_outputs
     horizons = [horizon] if horizon is not None else feasible_horizons(
         n_train, n_in, n_out, blocks, max(wanted),
         n_experiments=n_exp_train, reveal_all=fixed is not None)
     from subid.methods.dt._scoring import Held
-    names = list(builds)
+    names = list(estimators)
     held = [Held(validation) for _, validation in parts]     # once for every horizon
     scores, fold_scores, stabilised_folds = {}, {}, {}
     searched = []              # (orders, horizons) of every block of candidates scored
@@ -314,8 +320,8 @@ def cross_validate(data, fixed, candidates, horizon, *, prepare_fold, builds):
             orders = [n for n in wanted if n <= (f - 1) * n_out]
             if not orders:
                 continue
-            per_fold, repaired = score_horizon(parts, orders, f, prepare_fold=prepare_fold,
-                                               builds=builds, held=held)
+            per_fold, repaired = score_horizon(parts, orders, f, fitter=fitter,
+                                               estimators=estimators, held=held)
             for (n, v), values in per_fold.items():
                 fold_scores[(n, f, v)] = values
                 scores[(n, f, v)] = float(np.mean(values))
@@ -366,7 +372,7 @@ def cross_validate(data, fixed, candidates, horizon, *, prepare_fold, builds):
     }
     if ceiling is not None:
         record["order_ceiling"] = ceiling
-    # the other candidates, the fallbacks of subid.methods.dt._subspace._unrepaired_choice:
+    # the other candidates, the fallbacks of unrepaired_choice:
     # among those whose mean fold score is within the fold-to-fold spread (standard
     # deviation) of the choice's, first those none of whose fold models had to be
     # stabilised (the kind of model the final one must be); then the rest; each by
@@ -424,5 +430,103 @@ def stabilised(model) -> bool:
 
 
 #: Candidates tried, best first, when the final model of the chosen one had to be
-#: stabilised although not all of its fold models had (:func:`subid.methods.dt._subspace.identify`).
+#: stabilised although not all of its fold models had (:func:`unrepaired_choice`).
 MAX_FALLBACKS = 4
+
+
+def choose(data, plan, fitter):
+    """The cross-validated choice of a plan's order, horizon and estimator, and the
+    model of the whole record made with it.
+
+    ``plan`` (:class:`subid.methods.dt.plan.Plan`) gives what is chosen: the order
+    and horizon not given, and the estimator among ``plan.estimators`` when there
+    are several (then also with the order and horizon both given, at them).
+    :func:`cross_validate` scores the candidates on the folds of ``data``; the model
+    is fitted to the whole record (``fitter.prepare``, ``fitter.fit``) with the
+    choice, which :func:`unrepaired_choice` replaces by a runner-up when only the
+    final model had to be stabilised.
+
+    Returns
+    -------
+    problem, model, estimator, estimator_rule
+        ``model.info`` holds ``order_selection`` (or, with the order and horizon
+        given, ``system_matrices_cv``); ``estimator_rule`` is
+        ``info['system_matrices_selection']`` when there was a choice of estimator
+        (None otherwise).
+    """
+    pinned = plan.pinned
+    estimators = list(plan.estimators)
+    candidates = None if plan.candidates is None else list(plan.candidates)
+    try:
+        n, f, estimator, record = cross_validate(data, plan.order, candidates, plan.horizon,
+                                                 fitter=fitter, estimators=estimators)
+    except SubidError:
+        if not pinned:
+            raise
+        # order and horizon given, the folds too short for them: the first estimator
+        n, f, estimator, record = plan.order, plan.horizon, estimators[0], None
+    problem = fitter.prepare(data, n, f)
+    model = fitter.fit(problem, estimator)
+    if record is not None:
+        n, f, estimator, problem, model = unrepaired_choice(
+            record, data, fitter, (n, f, estimator, problem, model))
+    if record is not None and not pinned:
+        model.info["order_selection"] = record
+    rule = None
+    if len(estimators) > 1:
+        rule = {"rule": "cv", "description": (
+            "cross-validated at the given order and horizon "
+            "(info['system_matrices_cv'])" if pinned else
+            "cross-validated with the order and horizon (info['order_selection'])")}
+        if pinned and record is not None:
+            model.info["system_matrices_cv"] = record
+        elif record is None:
+            rule = {"rule": "folds too short", "description": (
+                f"{estimators[0]!r}: the folds are too short for the given order and horizon")}
+    return problem, model, estimator, rule
+
+
+def unrepaired_choice(record, data, fitter, chosen):
+    """The cross-validated choice, or a runner-up when only the choice had to be repaired.
+
+    The cross-validation scores the models fitted to its folds. When the
+    model of the chosen candidate refitted to the whole record comes out
+    unstable and ``stability='auto'`` reflects its poles
+    (:func:`subid.methods.dt._subspace.stable_choice`) while not all of its fold
+    models needed that, the final model is not the kind of model that was scored
+    (on the DaISy evaporator record, MOESP at order 10, horizon 20: two of four fold
+    models stable, the final one with a slow unstable pole, 56 % validation
+    fit once stabilised). The candidates are then tried in the order of their
+    scores (at most :data:`MAX_FALLBACKS`), and the first
+    whose final model needs no repair the folds did not need is taken; if
+    none, the original choice stands. ``record['repaired_choice']`` tells.
+    ``chosen`` is ``(order, horizon, estimator, problem, model)``; so is the result.
+    """
+    n, f, variant, _, model = chosen
+    by_key = {(c["order"], c["horizon"], c.get("system_matrices")): c
+              for c in record["candidates"]}
+
+    def needs_repair(key, m):
+        c = by_key.get(key, {})
+        return stabilised(m) and c.get("stabilised_folds", 0) < len(c.get("folds", ()))
+
+    if not needs_repair((n, f, variant), model):
+        return chosen
+    skipped = [{"order": n, "horizon": f, "system_matrices": variant}]
+    for entry in record.get("ranking", [])[:MAX_FALLBACKS]:
+        key = (entry["order"], entry["horizon"], entry.get("system_matrices"))
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                m = fitter.fit(fitter.prepare(data, key[0], key[1]), key[2])
+        except SubidError:
+            continue
+        if not needs_repair(key, m):
+            record["repaired_choice"] = {"skipped": skipped, "taken": entry}
+            record["selected"] = dict(entry, fallback=True)
+            # the warnings of the model returned, as a direct call gives them
+            pb = fitter.prepare(data, key[0], key[1])
+            return key[0], key[1], key[2], pb, fitter.fit(pb, key[2])
+        skipped.append(entry)
+    record["repaired_choice"] = {"skipped": skipped, "taken": None}
+    return chosen

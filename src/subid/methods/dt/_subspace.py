@@ -1,8 +1,11 @@
 """Steps shared by the discrete-time subspace methods.
 
-Argument checks at the public boundary, the data statistic, the excitation
-check, the order choice from a gap, and the shift-invariance step that gives
-A and C from an extended observability matrix.
+Argument checks at the public boundary, the data statistic and the excitation
+check (:func:`prepare`, :class:`Problem`), the shift-invariance step that gives
+A and C from an extended observability matrix, the B, D, x0 regression and the
+stability rule (:func:`b_d_fit`, :func:`b_d_refit`, :func:`stable_choice`), the
+model and its ``info`` (:func:`finish`), the noise model and refinement
+(:func:`finalize`). :mod:`subid.methods.dt.pipeline` calls them in order.
 """
 
 from __future__ import annotations
@@ -39,7 +42,7 @@ from subid.methods._common import (  # noqa: F401 (names of this module's API)
     order_from_gap,
 )
 from subid.methods._common import parse_order as _parse_order
-from subid.methods._info import collect_warnings, model_info
+from subid.methods._info import model_info
 from subid.methods._stability import (  # noqa: F401 (names of this module's API)
     GROWTH_LIMIT,
     KEEP_UNSTABLE_RATIO,
@@ -58,14 +61,15 @@ from subid.methods.bd import (  # noqa: F401 (check_experiment_lengths: names of
     experiment_starts,
     fit_b_d_x0,
 )
-from subid.methods.crossval import SELECTION_RULES
+from subid.methods.crossval import MAX_ORDER
 from subid.methods.dt._checks import check_data
-from subid.methods.dt._selection import cross_validate, default_gap_horizon
+from subid.methods.dt._selection import default_gap_horizon
 from subid.model.statespace import StateSpace
 from subid.statistic._hankel import HankelFactor
 from subid.statistic.hankel import HankelStatistic
 
-DEFAULT_MAX_ORDER = 10
+#: The largest of the default candidate orders (the selection's).
+DEFAULT_MAX_ORDER = MAX_ORDER
 
 
 def check_order_horizon(order, horizon, data, *, method: str, blocks_per_horizon: int = 2):
@@ -463,12 +467,6 @@ def prepare(data, order, horizon, *, method: str, blocks_per_horizon: int = 2,
 
 
 SYSTEM_MATRICES = ("auto", "shift", "states")
-#: ``system_matrices='auto'`` lets the cross-validation of the order and horizon choose
-#: between its estimators on records up to this many samples; longer records use the
-#: first ('shift'), where both are consistent and their models close. With the order
-#: and horizon both given, 'auto' is the first with no fold fits (one fit); a
-#: one-element candidate list (``order=[4]``) asks for the cross-validated choice.
-AUTO_VARIANT_MAX_SAMPLES = 20_000
 
 
 def check_system_matrices(system_matrices: str) -> str:
@@ -476,155 +474,6 @@ def check_system_matrices(system_matrices: str) -> str:
         raise OptionError(f"system_matrices must be one of {SYSTEM_MATRICES}, got "
                          f"{system_matrices!r}")
     return system_matrices
-
-
-def identify(data, order, horizon, *, method: str, build, selection: str,
-             blocks_per_horizon: int = 2, statistic: str = "auto",
-             normalize_outputs: bool = True, finalize=None, variants=None) -> StateSpace:
-    """Validate, choose the order and horizon, and run ``build``.
-
-    ``build(problem)`` is the method itself on a prepared problem. With
-    ``selection='cv'`` (default) and a raw record, an order or horizon not
-    given is chosen by cross-validation on the record
-    (:func:`subid.methods.dt._selection.cross_validate`); the model is then built on the
-    whole record with that order and horizon, exactly as an explicit call
-    would. ``'gap'``, or a statistic without raw samples, takes the largest
-    gap of the method's rank profile. ``finalize(model, problem, statistic=...)`` runs on
-    the final model only (not on the cross-validation candidates): the noise
-    model and the optional refinement (:func:`subid.methods.dt.noise_model.attach_noise_model`).
-
-    ``variants`` (a dict name -> build, the first the default), when given,
-    are alternative estimators of the system matrices from the same
-    subspace (``system_matrices='auto'`` of :func:`subid.moesp` and
-    :func:`subid.ls_subspace`): with ``selection='cv'`` on a raw record of
-    up to :data:`AUTO_VARIANT_MAX_SAMPLES` samples, the cross-validation of
-    the order or horizon chooses among them too, and with the order and the
-    horizon both given the estimators alone are cross-validated at them (eight
-    fold fits; with one estimator, or ``system_matrices`` given, or beyond
-    :data:`AUTO_VARIANT_MAX_SAMPLES`, an explicit call costs one fit and no
-    fold fit); otherwise the first one is used. ``info['system_matrices']``
-    names the one used, and ``info['system_matrices_selection']`` says why
-    when there was a choice; ``method(data, order=model.order,
-    horizon=model.info['horizon'])`` reproduces a default model.
-    """
-    if selection not in SELECTION_RULES:
-        raise OptionError(f"selection must be one of {SELECTION_RULES}, got {selection!r}")
-    fixed, candidates = _parse_order(order)
-    if horizon is not None:
-        horizon = check_int(horizon, "horizon", minimum=2)
-    options = dict(method=method, blocks_per_horizon=blocks_per_horizon, statistic=statistic,
-                   normalize_outputs=normalize_outputs)
-    with collect_warnings() as issued:
-        builds = variants if variants else {None: build}
-        pinned = fixed is not None and horizon is not None
-        first = next(iter(builds))
-        variant_rule = None
-        if len(builds) > 1 and getattr(data, "n_samples", 0) > AUTO_VARIANT_MAX_SAMPLES:
-            variant_rule = {"rule": "long record", "description": (
-                f"{first!r} beyond {AUTO_VARIANT_MAX_SAMPLES} samples, where both "
-                "estimators are consistent")}
-        if variant_rule is not None:
-            builds = {first: builds[first]}
-        # order and horizon given: no fold fits, except the choice between two
-        # estimators (system_matrices='auto' on a record of at most
-        # AUTO_VARIANT_MAX_SAMPLES), cross-validated at that order and horizon as the
-        # default call cross-validates it, so that method(data, order=m.order,
-        # horizon=m.info['horizon']) reproduces the default model m (issue 21)
-        choose = not pinned or len(builds) > 1
-        if selection == "cv" and isinstance(data, IOData) and choose:
-            check_data(data, method)
-
-            def prepare_fold(record, orders, f, factor=None):
-                with warnings.catch_warnings():
-                    warnings.simplefilter("ignore")
-                    return prepare(record, orders, f, factor=factor, **options)
-            prepare_fold.blocks = blocks_per_horizon
-            prepare_fold.statistic = statistic
-            try:
-                n, f, variant, record = cross_validate(data, fixed, candidates, horizon,
-                                                       prepare_fold=prepare_fold,
-                                                       builds=builds)
-            except SubidError:
-                if not pinned:
-                    raise
-                # order and horizon given, the folds too short for them: the first estimator
-                n, f, variant, record = fixed, horizon, first, None
-            problem = prepare(data, n, f, **options)
-            model = builds[variant](problem)
-            if record is not None:
-                n, f, variant, problem, model = _unrepaired_choice(
-                    record, data, options, builds, (n, f, variant, problem, model))
-            if record is not None and not pinned:
-                model.info["order_selection"] = record
-            if len(builds) > 1:
-                variant_rule = {"rule": "cv", "description": (
-                    "cross-validated at the given order and horizon "
-                    "(info['system_matrices_cv'])" if pinned else
-                    "cross-validated with the order and horizon (info['order_selection'])")}
-                if pinned and record is not None:
-                    model.info["system_matrices_cv"] = record
-                elif record is None:
-                    variant_rule = {"rule": "folds too short", "description": (
-                        f"{first!r}: the folds are too short for the given order and horizon")}
-        else:
-            problem = prepare(data, order, horizon, **options)
-            variant = next(iter(builds))
-            model = builds[variant](problem)
-        if variant is not None:
-            model.info["system_matrices"] = variant
-        if variant_rule is not None:
-            model.info["system_matrices_selection"] = variant_rule
-        if finalize is not None:
-            model = finalize(model, problem, statistic=statistic)
-    model.info["warnings"] = list(issued)
-    return model
-
-
-def _unrepaired_choice(record, data, options, builds, chosen):
-    """The cross-validated choice, or a runner-up when only the choice had to be repaired.
-
-    The cross-validation scores the models fitted to its folds. When the
-    model of the chosen candidate refitted to the whole record comes out
-    unstable and ``stability='auto'`` reflects its poles
-    (:func:`stable_choice`) while not all of its fold models needed that,
-    the final model is not the kind of model that was scored (on the DaISy
-    evaporator record, MOESP at order 10, horizon 20: two of four fold
-    models stable, the final one with a slow unstable pole, 56 % validation
-    fit once stabilised). The candidates are then tried in the order of their
-    scores (at most :data:`subid.methods.dt._selection.MAX_FALLBACKS`), and the first
-    whose final model needs no repair the folds did not need is taken; if
-    none, the original choice stands. ``record['repaired_choice']`` tells.
-    """
-    from subid.methods.dt._selection import MAX_FALLBACKS, stabilised
-    n, f, variant, _, model = chosen
-    by_key = {(c["order"], c["horizon"], c.get("system_matrices")): c
-              for c in record["candidates"]}
-
-    def needs_repair(key, m):
-        c = by_key.get(key, {})
-        return stabilised(m) and c.get("stabilised_folds", 0) < len(c.get("folds", ()))
-
-    if not needs_repair((n, f, variant), model):
-        return chosen
-    skipped = [{"order": n, "horizon": f, "system_matrices": variant}]
-    for entry in record.get("ranking", [])[:MAX_FALLBACKS]:
-        key = (entry["order"], entry["horizon"], entry.get("system_matrices"))
-        try:
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")
-                pb = prepare(data, key[0], key[1], **options)
-                m = builds[key[2]](pb)
-        except SubidError:
-            continue
-        if not needs_repair(key, m):
-            record["repaired_choice"] = {"skipped": skipped, "taken": entry}
-            record["selected"] = dict(entry, fallback=True)
-            # the warnings of the model returned, as a direct call gives them
-            pb = prepare(data, key[0], key[1], **options)
-            return key[0], key[1], key[2], pb, builds[key[2]](pb)
-        skipped.append(entry)
-    record["repaired_choice"] = {"skipped": skipped, "taken": None}
-    return chosen
 
 
 def finalize(model: StateSpace, problem: Problem, *, refine, delays,

@@ -45,7 +45,6 @@ from __future__ import annotations
 import numbers
 import warnings
 from dataclasses import dataclass
-from functools import partial
 
 import numpy as np
 import scipy.linalg
@@ -57,24 +56,16 @@ from subid._validation import (
     check_selector,
     checked_call,
 )
-from subid.delay import shift_for_method
 from subid.errors import OptionError, OrderError
 from subid.methods.bd import BATCH_OPTIONS
 from subid.methods.dt._feedthrough import check_feedthrough
-from subid.methods.dt._feedthrough import resolve as resolve_feedthrough
 from subid.methods.dt._subspace import (
-    b_d_fit,
-    b_d_refit,
     check_system_matrices,
     choose_order,
-    finalize,
-    finish,
-    identify,
     shift_invariance,
-    stable_choice,
 )
 from subid.methods.dt.n4sid import state_model
-from subid.methods.dt.noise_model import check_refine
+from subid.methods.dt.pipeline import Shift, States, Subspace, SubspaceMethod, run
 from subid.model.statespace import StateSpace
 
 __all__ = ["ls_subspace", "random_selector"]
@@ -248,37 +239,16 @@ def ls_subspace(data, order=None, *, horizon=None, instruments="past", selector=
     >>> subid.markov_error(model, true) < 1e-9
     True
     """
-    method = "ls_subspace"
-    power_iterations = check_options(instruments, power_iterations)
-    feedthrough = check_feedthrough(feedthrough)
-    for name, flag in (("estimate_x0", estimate_x0),
-                       ("instrument_weighting", instrument_weighting),
-                       ("normalize_outputs", normalize_outputs)):
-        check_bool(flag, name)
+    method = LSSubspace(instruments=instruments, selector=selector, seed=seed,
+                        estimate_x0=estimate_x0, feedthrough=feedthrough,
+                        instrument_weighting=instrument_weighting,
+                        power_iterations=power_iterations, normalize_outputs=normalize_outputs,
+                        stability=stability, system_matrices=system_matrices,
+                        bd_method=bd_method)
     if selector is not None and horizon is None:
         horizon = selector_horizon(selector, data)
-    check_choice(bd_method, "bd_method", BATCH_OPTIONS)
-    check_seed(seed)
-    check_system_matrices(system_matrices)
-    if system_matrices == "states" and instruments != "past":
-        raise OptionError("system_matrices='states' needs the past data (instruments='past'): "
-                          "the state sequence is the projection of the future outputs on them")
-    options = {"instruments": instruments, "selector": selector, "seed": seed,
-               "estimate_x0": estimate_x0, "feedthrough": feedthrough,
-               "instrument_weighting": instrument_weighting,
-               "power_iterations": power_iterations, "stability": stability,
-               "bd_method": bd_method}
-    names = ("shift", "states") if system_matrices == "auto" and instruments == "past" else \
-        ("shift" if system_matrices == "auto" else system_matrices,)
-    variants = {name: partial(_ls_subspace, system_matrices=name, **options) for name in names}
-    build = next(iter(variants.values()))
-    refine = check_refine(refine, data)
-    data, delays = shift_for_method(data, input_delay)
-    return identify(data, order, horizon, method=method, build=build, variants=variants,
-                    selection=selection,
-                    blocks_per_horizon=2 if instruments == "past" else 1, statistic=statistic,
-                    normalize_outputs=bool(normalize_outputs),
-                    finalize=partial(finalize, refine=refine, delays=delays))
+    return run(method, data, order, horizon, selection=selection, statistic=statistic,
+               refine=refine, input_delay=input_delay)
 
 
 def selector_horizon(selector, data) -> int:
@@ -291,55 +261,85 @@ def selector_horizon(selector, data) -> int:
     return cols // ny
 
 
-def _ls_subspace(pb, *, instruments, selector, seed, estimate_x0, feedthrough,
-                 instrument_weighting, power_iterations, stability, bd_method,
-                 system_matrices="shift") -> StateSpace:
-    method = "ls_subspace"
-    data = pb.data
-    feedthrough, ft_record = resolve_feedthrough(feedthrough, pb)
-    selector = check_selector(selector, pb.horizon, data.n_outputs, pb.candidates, pb.order)
-    # The outputs are normalised by their RMS s (unless normalize_outputs=False), so that
-    # the estimate does not depend on their units; Λ acts on the user's units, so on the normalised data it is
-    # Λ_n = Λ (I ⊗ S): then Λ Γ̄ = Λ_n Γ̄_n = I fixes the same basis. The default random
-    # Λ is drawn for the normalised outputs, and info['selector'] holds it in the
-    # user's units (Λ = Λ_n (I ⊗ S^{-1})), ready to be passed again.
-    column_scale = np.tile(pb.output_scale, pb.horizon)
-    core = gamma_from_factor(pb.factor, pb.horizon, pb.order, pb.candidates,
-                             instruments=instruments, instrument_weighting=instrument_weighting,
-                             selector=None if selector is None else selector * column_scale,
-                             seed=seed, power_iterations=power_iterations, method=method)
+class LSSubspace(SubspaceMethod):
+    """Seed 001's steps (:class:`subid.methods.dt.pipeline.SubspaceMethod`): the SVD-free
+    rank profile, Γ̄ in the basis fixed by Λ, then the system matrices by shift
+    invariance or from the state sequence.
 
-    if system_matrices == "states":
-        # the state step of N4SID on Γ̄ (in the basis Q), then the basis of Λ (T = Λ Q)
-        A_q, B_q, C_q, D, x0_q, extra = state_model(pb, core.basis, stability=stability,
-                                                    feedthrough=feedthrough,
-                                                    estimate_x0=estimate_x0)
-        T = core.T
-        A = scipy.linalg.solve(T.T, (T @ A_q).T, check_finite=False).T        # T A_q T^{-1}
-        C = scipy.linalg.solve(T.T, C_q.T, check_finite=False).T              # C_q T^{-1}
-        x0 = None if x0_q is None else x0_q @ T.T          # T x0_q (one row per experiment)
-        extra["x0"] = x0
-        info = core.info(instruments, instrument_weighting, power_iterations)
+    The outputs are normalised by their RMS s (unless ``normalize_outputs=False``), so
+    that the estimate does not depend on their units; Λ acts on the user's units, so on
+    the normalised data it is Λ_n = Λ (I ⊗ S): then Λ Γ̄ = Λ_n Γ̄_n = I fixes the same
+    basis. The default random Λ is drawn for the normalised outputs, and
+    ``info['selector']`` holds it in the user's units (Λ = Λ_n (I ⊗ S^{-1})), ready to
+    be passed again.
+    """
+
+    name = "ls_subspace"
+
+    def __init__(self, *, instruments="past", selector=None, seed=0, estimate_x0=True,
+                 feedthrough="auto", instrument_weighting=True, power_iterations=8,
+                 normalize_outputs=True, stability="auto", system_matrices="auto",
+                 bd_method="auto"):
+        self.power_iterations = check_options(instruments, power_iterations)
+        feedthrough = check_feedthrough(feedthrough)
+        for name, flag in (("estimate_x0", estimate_x0),
+                           ("instrument_weighting", instrument_weighting),
+                           ("normalize_outputs", normalize_outputs)):
+            check_bool(flag, name)
+        self.instruments, self.selector, self.seed = instruments, selector, seed
+        self.instrument_weighting = instrument_weighting
+        self.normalize_outputs = bool(normalize_outputs)
+        self.blocks_per_horizon = 2 if instruments == "past" else 1
+        check_choice(bd_method, "bd_method", BATCH_OPTIONS)
+        check_seed(seed)
+        check_system_matrices(system_matrices)
+        self.common_options(feedthrough=feedthrough, estimate_x0=estimate_x0,
+                            stability=stability, bd_method=bd_method)
+        if system_matrices == "states" and instruments != "past":
+            raise OptionError("system_matrices='states' needs the past data "
+                              "(instruments='past'): the state sequence is the projection "
+                              "of the future outputs on them")
+        self.estimators = ("shift", "states") \
+            if system_matrices == "auto" and self.instruments == "past" else \
+            ("shift" if system_matrices == "auto" else system_matrices,)
+
+    def decompose(self, pb, feedthrough) -> Subspace:
+        """The weighted instrument correlation W and the SVD-free rank profile of
+        Remark 2 (with the user's Λ in the units of the normalised outputs)."""
+        selector = check_selector(self.selector, pb.horizon, pb.data.n_outputs,
+                                  pb.candidates, pb.order)
+        column_scale = np.tile(pb.output_scale, pb.horizon)
+        stat = ls_statistic(pb.factor, pb.horizon, instruments=self.instruments,
+                            instrument_weighting=self.instrument_weighting,
+                            selector=None if selector is None else selector * column_scale,
+                            seed=self.seed)
+        return Subspace(stat.rank_profile, RANK_PROFILE,
+                        parts={"statistic": stat, "column_scale": column_scale})
+
+    def system_matrices(self, pb, subspace, n, estimator, *, feedthrough, ft_record, plan):
+        """Γ̄ at order n (:func:`ls_gamma`), then A and C by shift invariance
+        (``'shift'``), or the state step of N4SID on Γ̄ (``'states'``)."""
+        stat, column_scale = subspace.parts["statistic"], subspace.parts["column_scale"]
+        core = ls_gamma(stat, n, power_iterations=self.power_iterations, method=self.name)
+        info = core.info(self.instruments, self.instrument_weighting, self.power_iterations)
         info["selector"] = core.selector / column_scale
-        return finish(pb, A, T @ B_q, C, D, core.order, core.order_selection, **info, **extra,
-                      feedthrough=ft_record)
+        if estimator == "states":
+            # the state step of N4SID on Γ̄ (in the basis Q), then the basis of Λ (T = Λ Q)
+            A_q, B_q, C_q, D, x0_q, extra = state_model(pb, core.basis,
+                                                        stability=plan.stability,
+                                                        feedthrough=feedthrough,
+                                                        estimate_x0=plan.estimate_x0)
+            T = core.T
+            A = scipy.linalg.solve(T.T, (T @ A_q).T, check_finite=False).T    # T A_q T^{-1}
+            C = scipy.linalg.solve(T.T, C_q.T, check_finite=False).T          # C_q T^{-1}
+            extra["x0"] = None if x0_q is None else x0_q @ T.T    # T x0_q (rows: experiments)
+            return States(A, T @ B_q, C, D, dict(**info, **extra, feedthrough=ft_record))
+        return Shift(core.A_q, core.C_q, core.basis, core.L11, core.L_yu, info,
+                     parts={"core": core})
 
-    fit = b_d_fit(pb, core.C_q, core.basis, core.L11, core.L_yu, bd_method=bd_method,
-                  feedthrough=feedthrough, estimate_x0=estimate_x0)
-    # an unstable A: B, D, x0 by the one-step predictor
-    refit = b_d_refit(pb, core.C_q * pb.output_scale[:, None], feedthrough=feedthrough,
-                      estimate_x0=estimate_x0)
-    A_q, (B_q, D, x0_q, reg), stab = stable_choice(core.A_q, core.basis, data.n_outputs, fit,
-                                                   stability=stability, data=data,
-                                                   method=method,
-                                                   refit_unstable=refit if bd_method == "auto"
-                                                   else None, bound_unstable=pb.fold)
-    A, B, C, x0 = core.to_selector_basis(B_q, x0_q, A_q=A_q)
-    C = C * pb.output_scale[:, None]
-    info = core.info(instruments, instrument_weighting, power_iterations)
-    info["selector"] = core.selector / column_scale
-    return finish(pb, A, B, C, D, core.order, core.order_selection, **info,
-                  x0=x0, stability=stab, feedthrough=ft_record, **reg)
+    def output_basis(self, estimate, A, B, x0):
+        """From the orthonormal basis Q to the basis fixed by Λ."""
+        return estimate.parts["core"].to_selector_basis(B, x0, A_q=A)
 
 
 def check_options(instruments, power_iterations) -> int:
@@ -391,13 +391,28 @@ class LSCore:
                     shift_residual=self.shift_residual)
 
 
-def gamma_from_factor(hf, f, fixed_order, candidates, *, instruments, instrument_weighting,
-                      selector, seed, power_iterations, method) -> LSCore:
-    """Seed 001 on a Hankel factor: Γ̄ in the basis of Λ, then A and C.
+#: What ``info['order_selection']`` calls the profile of :func:`ls_statistic`.
+RANK_PROFILE = "SVD-free rank profile (seed 001, Remark 2)"
 
-    Shared by :func:`ls_subspace` and :class:`subid.RecursiveSubspace` (which
-    updates the same factor sample by sample).
-    """
+
+@dataclass(frozen=True)
+class LSStatistic:
+    """What seed 001 needs from a Hankel factor before the order is known: the
+    triangular factor ``L`` (``a`` rows of future inputs), the weighted instrument
+    correlation ``W``, ``L_yu``, the square selector and the rank profile."""
+
+    L: np.ndarray
+    a: int
+    W: np.ndarray
+    L_yu: np.ndarray
+    selector: np.ndarray
+    rank_profile: np.ndarray
+    n_outputs: int
+
+
+def ls_statistic(hf, f, *, instruments, instrument_weighting, selector, seed) -> LSStatistic:
+    """Seed 001 on a Hankel factor up to the order: W (eq. 23 or 28) and the SVD-free
+    rank profile of Remark 2 (with a square selector)."""
     nu, ny = hf.n_inputs, hf.n_outputs
     depth = hf.depth
     uf = hf.u_rows(depth - f, depth)
@@ -420,10 +435,14 @@ def gamma_from_factor(hf, f, fixed_order, candidates, *, instruments, instrument
     full = selector if selector is not None else random_selector(f, ny, seed)
     rank_profile = np.abs(np.diag(scipy.linalg.qr((full @ W).T, mode="r",
                                                   check_finite=False)[0]))
-    n, order_selection = choose_order(fixed_order, candidates, rank_profile,
-                                      "SVD-free rank profile (seed 001, Remark 2)")
-    Lam = full[:n]
+    return LSStatistic(L, a, W, L_yu, full, rank_profile, ny)
 
+
+def ls_gamma(stat: LSStatistic, n: int, *, power_iterations, method,
+             order_selection=None) -> LSCore:
+    """Γ̄ at order ``n`` in the basis of Λ (its first n rows), then A and C."""
+    Lam = stat.selector[:n]
+    W = stat.W
     G = _solve_gamma(W, Lam)
     for _ in range(power_iterations):
         basis = scipy.linalg.qr(G, mode="economic", check_finite=False)[0]
@@ -440,7 +459,26 @@ def gamma_from_factor(hf, f, fixed_order, candidates, *, instruments, instrument
     # the result is the same matrix in exact arithmetic, far more accurate when
     # ΛΓ is ill-conditioned).
     Q = scipy.linalg.qr(G, mode="economic", check_finite=False)[0]
-    A_q, C_q, shift_residual = shift_invariance(Q, ny)
-    return LSCore(A_q=A_q, C_q=C_q, basis=Q, T=Lam @ Q, L11=L[:a, :a], L_yu=L_yu, order=n,
-                  order_selection=order_selection, selector=Lam, rank_profile=rank_profile,
-                  selector_condition=selector_condition, shift_residual=shift_residual)
+    A_q, C_q, shift_residual = shift_invariance(Q, stat.n_outputs)
+    a = stat.a
+    return LSCore(A_q=A_q, C_q=C_q, basis=Q, T=Lam @ Q, L11=stat.L[:a, :a], L_yu=stat.L_yu,
+                  order=n, order_selection=order_selection, selector=Lam,
+                  rank_profile=stat.rank_profile, selector_condition=selector_condition,
+                  shift_residual=shift_residual)
+
+
+def gamma_from_factor(hf, f, fixed_order, candidates, *, instruments, instrument_weighting,
+                      selector, seed, power_iterations, method) -> LSCore:
+    """Seed 001 on a Hankel factor: Γ̄ in the basis of Λ, then A and C
+    (:func:`ls_statistic`, the order, :func:`ls_gamma`).
+
+    Used by :class:`subid.RecursiveSubspace` (which updates the same factor sample by
+    sample); :func:`ls_subspace` runs the same steps through the pipeline.
+    """
+    stat = ls_statistic(hf, f, instruments=instruments,
+                        instrument_weighting=instrument_weighting, selector=selector,
+                        seed=seed)
+    n, order_selection = choose_order(fixed_order, candidates, stat.rank_profile,
+                                      RANK_PROFILE)
+    return ls_gamma(stat, n, power_iterations=power_iterations, method=method,
+                    order_selection=order_selection)

@@ -25,32 +25,21 @@ by least squares on the output.
 
 from __future__ import annotations
 
-from functools import partial
-
 import numpy as np
 import scipy.linalg
 
 from subid._validation import check_bool, check_choice, checked_call
-from subid.delay import shift_for_method
 from subid.methods.bd import BATCH_OPTIONS
 from subid.methods.dt._feedthrough import check_feedthrough
-from subid.methods.dt._feedthrough import resolve as resolve_feedthrough
 from subid.methods.dt._subspace import (
-    b_d_fit,
-    b_d_refit,
     check_system_matrices,
     check_weighting,
-    choose_order,
     cva_factor,
-    finalize,
-    finish,
     future_past_factor,
-    identify,
     shift_invariance,
-    stable_choice,
 )
 from subid.methods.dt.n4sid import state_model
-from subid.methods.dt.noise_model import check_refine
+from subid.methods.dt.pipeline import Shift, States, Subspace, SubspaceMethod, run
 from subid.model.statespace import StateSpace
 
 __all__ = ["moesp"]
@@ -128,21 +117,65 @@ def moesp(data, order=None, *, horizon=None, weighting="moesp", selection="cv",
     StateSpace
         Discrete-time model with ``dt = data.dt``.
     """
-    check_weighting(weighting)
-    feedthrough = check_feedthrough(feedthrough)
-    check_bool(estimate_x0, "estimate_x0")
-    check_choice(bd_method, "bd_method", BATCH_OPTIONS)
-    check_system_matrices(system_matrices)
-    options = {"weighting": weighting, "stability": stability, "feedthrough": feedthrough,
-               "estimate_x0": estimate_x0, "bd_method": bd_method}
-    variants = {name: partial(_moesp, system_matrices=name, **options)
-                for name in (("shift", "states") if system_matrices == "auto"
-                             else (system_matrices,))}
-    refine = check_refine(refine, data)
-    data, delays = shift_for_method(data, input_delay)
-    return identify(data, order, horizon, method="moesp", build=next(iter(variants.values())),
-                    variants=variants, selection=selection, statistic=statistic,
-                    finalize=partial(finalize, refine=refine, delays=delays))
+    method = Moesp(weighting=weighting, stability=stability, system_matrices=system_matrices,
+                   feedthrough=feedthrough, estimate_x0=estimate_x0, bd_method=bd_method)
+    return run(method, data, order, horizon, selection=selection, statistic=statistic,
+               refine=refine, input_delay=input_delay)
+
+
+class Moesp(SubspaceMethod):
+    """PO-MOESP's steps (:class:`subid.methods.dt.pipeline.SubspaceMethod`): the SVD of the
+    weighted projection, then Γ and the system matrices by shift invariance or from the
+    state sequence."""
+
+    name = "moesp"
+
+    def __init__(self, *, weighting="moesp", stability="auto", system_matrices="auto",
+                 feedthrough="auto", estimate_x0=True, bd_method="auto"):
+        self.weighting = check_weighting(weighting)
+        feedthrough = check_feedthrough(feedthrough)
+        check_bool(estimate_x0, "estimate_x0")
+        check_choice(bd_method, "bd_method", BATCH_OPTIONS)
+        check_system_matrices(system_matrices)
+        self.common_options(feedthrough=feedthrough, estimate_x0=estimate_x0,
+                            stability=stability, bd_method=bd_method)
+        self.estimators = ("shift", "states") if system_matrices == "auto" \
+            else (system_matrices,)
+
+    def decompose(self, pb, feedthrough) -> Subspace:
+        """The SVD of the weighted projection (once per problem: shared by every order)."""
+        f, nu, ny = pb.horizon, pb.data.n_inputs, pb.data.n_outputs
+        a, b = f * nu, f * (nu + ny)
+        L = future_past_factor(pb)
+
+        def svd():
+            M, W1_inv = weighted_projection(L, a, b, self.weighting)
+            U, s, _ = scipy.linalg.svd(M, full_matrices=False, check_finite=False)
+            return W1_inv, U, s
+
+        W1_inv, U, s = pb.cached(("moesp svd", self.weighting), svd)
+        return Subspace(s, parts={"W1_inv": W1_inv, "U": U, "L": L, "a": a, "b": b})
+
+    def system_matrices(self, pb, subspace, n, estimator, *, feedthrough, ft_record, plan):
+        """Γ = W1^{-1} U_n S_n^{1/2}; A and C by shift invariance in an orthonormal basis
+        of range(Γ) (``'shift'``), or A, B, C, D from the state sequence (``'states'``)."""
+        parts, s = subspace.parts, subspace.profile
+        gamma = parts["U"][:, :n] * np.sqrt(s[:n])
+        if parts["W1_inv"] is not None:
+            gamma = parts["W1_inv"] @ gamma
+        if estimator == "states":
+            A, B, C, D, _, extra = state_model(pb, gamma, stability=plan.stability,
+                                                feedthrough=feedthrough,
+                                                estimate_x0=plan.estimate_x0)
+            return States(A, B, C, D, dict(singular_values=s, weighting=self.weighting,
+                                           feedthrough=ft_record, **extra))
+        # A and C in an orthonormal basis Q of range(Γ) (any basis is valid for MOESP)
+        Q = scipy.linalg.qr(gamma, mode="economic", check_finite=False)[0]
+        A, C, shift_residual = shift_invariance(Q, pb.data.n_outputs)
+        L, a, b = parts["L"], parts["a"], parts["b"]
+        return Shift(A, C, Q, L[:a, :a], L[a + b:, :a],
+                     info=dict(singular_values=s, weighting=self.weighting,
+                               shift_residual=shift_residual))
 
 
 def weighted_projection(L: np.ndarray, a: int, b: int, weighting: str):
@@ -161,45 +194,3 @@ def weighted_projection(L: np.ndarray, a: int, b: int, weighting: str):
     coef = scipy.linalg.lstsq(L[a:a + b, a:a + b].T, L32.T, lapack_driver="gelsy",
                               check_finite=False)[0].T
     return coef @ L[a:a + b, :a + b], None
-
-
-def _moesp(pb, *, weighting, stability, feedthrough, estimate_x0, bd_method,
-           system_matrices="shift") -> StateSpace:
-    data, f = pb.data, pb.horizon
-    ny, nu = data.n_outputs, data.n_inputs
-    feedthrough, ft_record = resolve_feedthrough(feedthrough, pb)
-    a, b = f * nu, f * (nu + ny)
-    L = future_past_factor(pb)
-
-    def decompose():
-        M, W1_inv = weighted_projection(L, a, b, weighting)
-        U, s, _ = scipy.linalg.svd(M, full_matrices=False, check_finite=False)
-        return W1_inv, U, s
-
-    W1_inv, U, s = pb.cached(("moesp svd", weighting), decompose)   # shared by every order
-    n, order_selection = choose_order(pb.order, pb.candidates, s, "singular values")
-    gamma = U[:, :n] * np.sqrt(s[:n])
-    if W1_inv is not None:
-        gamma = W1_inv @ gamma
-    if system_matrices == "states":
-        A, B, C, D, x0, extra = state_model(pb, gamma, stability=stability,
-                                            feedthrough=feedthrough, estimate_x0=estimate_x0)
-        return finish(pb, A, B, C, D, n, order_selection, singular_values=s,
-                      weighting=weighting, feedthrough=ft_record, **extra)
-    # A and C in an orthonormal basis Q of range(Γ) (any basis is valid for MOESP)
-    Q = scipy.linalg.qr(gamma, mode="economic", check_finite=False)[0]
-    A, C, shift_residual = shift_invariance(Q, ny)
-
-    fit = b_d_fit(pb, C, Q, L[:a, :a], L[a + b:, :a], bd_method=bd_method,
-                  feedthrough=feedthrough, estimate_x0=estimate_x0)
-    # an unstable A: B, D, x0 by the one-step predictor
-    refit = b_d_refit(pb, C * pb.output_scale[:, None], feedthrough=feedthrough,
-                      estimate_x0=estimate_x0)
-    A, (B, D, x0, reg), stab = stable_choice(A, Q, ny, fit, stability=stability, data=data,
-                                             method="moesp",
-                                             refit_unstable=refit if bd_method == "auto"
-                                             else None, bound_unstable=pb.fold)
-    C = C * pb.output_scale[:, None]
-    return finish(pb, A, B, C, D, n, order_selection, singular_values=s, weighting=weighting,
-                  shift_residual=shift_residual, x0=x0, stability=stab,
-                  feedthrough=ft_record, **reg)

@@ -19,32 +19,24 @@ and projections of row spaces act on the small coefficient rows because
 
 from __future__ import annotations
 
-from functools import partial
-
 import numpy as np
 import scipy.linalg
 
 from subid._validation import check_bool, checked_call
 from subid.data import IOData
-from subid.delay import shift_for_method
 from subid.methods.bd import INFO_KEY
 from subid.methods.dt._feedthrough import check_feedthrough
-from subid.methods.dt._feedthrough import resolve as resolve_feedthrough
 from subid.methods.dt._subspace import (
     b_d_fit,
     check_experiment_lengths,
     check_weighting,
-    choose_order,
     cva_factor,
-    finalize,
-    finish,
     future_past_factor,
-    identify,
     initial_state,
     stability_request,
     stable_choice,
 )
-from subid.methods.dt.noise_model import check_refine
+from subid.methods.dt.pipeline import States, Subspace, SubspaceMethod, run
 from subid.model.statespace import StateSpace
 
 __all__ = ["n4sid"]
@@ -133,48 +125,64 @@ def n4sid(data, order=None, *, horizon=None, weighting="cva", selection="cv",
     StateSpace
         Discrete-time model with ``dt = data.dt``.
     """
-    check_weighting(weighting)
-    feedthrough = check_feedthrough(feedthrough)
-    check_bool(estimate_x0, "estimate_x0")
-    build = partial(_n4sid, weighting=weighting, stability=stability, feedthrough=feedthrough,
-                    estimate_x0=estimate_x0)
-    refine = check_refine(refine, data)
-    data, delays = shift_for_method(data, input_delay)
-    return identify(data, order, horizon, method="n4sid", build=build, selection=selection,
-                    statistic=statistic,
-                    finalize=partial(finalize, refine=refine, delays=delays))
+    method = N4sid(weighting=weighting, stability=stability, feedthrough=feedthrough,
+                   estimate_x0=estimate_x0)
+    return run(method, data, order, horizon, selection=selection, statistic=statistic,
+               refine=refine, input_delay=input_delay)
 
 
-def _n4sid(pb, *, weighting, stability, feedthrough, estimate_x0) -> StateSpace:
-    i, hf = pb.horizon, pb.factor
-    feedthrough, ft_record = resolve_feedthrough(feedthrough, pb)
-    wp = hf.rows(hf.u_rows(0, i), hf.y_rows(0, i))
-    coef, perp = _projection(pb)
+class N4sid(SubspaceMethod):
+    """N4SID's steps (:class:`subid.methods.dt.pipeline.SubspaceMethod`): the SVD of the
+    weighted oblique projection, then A, B, C, D from the state sequence."""
 
-    def decompose():                 # shared by every candidate order of the problem
-        o_i = coef @ wp
-        W1_inv = None
-        if weighting == "n4sid":
-            M = o_i
-        elif weighting == "moesp":
-            M = o_i @ perp
-        else:
-            R = cva_factor(hf.rows(hf.y_rows(i, 2 * i)) @ perp)
-            M = scipy.linalg.solve_triangular(R.T, o_i @ perp, lower=True, check_finite=False)
-            W1_inv = R.T
-        U, s, _ = scipy.linalg.svd(M, full_matrices=False, check_finite=False)
-        return W1_inv, U, s
+    name = "n4sid"
 
-    W1_inv, U, s = pb.cached(("n4sid svd", weighting), decompose)
-    n, order_selection = choose_order(pb.order, pb.candidates, s, "singular values")
-    gamma = U[:, :n] * np.sqrt(s[:n])
-    if W1_inv is not None:
-        gamma = W1_inv @ gamma
-    A, B, C, D, _, extra = state_model(pb, gamma, stability=stability,
-                                       feedthrough=feedthrough, estimate_x0=estimate_x0,
-                                       coefficients=coef)
-    return finish(pb, A, B, C, D, n, order_selection, singular_values=s, weighting=weighting,
-                  feedthrough=ft_record, **extra)
+    def __init__(self, *, weighting="cva", stability="auto", feedthrough="auto",
+                 estimate_x0=True):
+        self.weighting = check_weighting(weighting)
+        feedthrough = check_feedthrough(feedthrough)
+        check_bool(estimate_x0, "estimate_x0")
+        self.common_options(feedthrough=feedthrough, estimate_x0=estimate_x0,
+                            stability=stability)
+
+    def decompose(self, pb, feedthrough) -> Subspace:
+        """Steps 1 and 2's SVD (module docstring), once per problem: shared by every
+        candidate order."""
+        i, hf = pb.horizon, pb.factor
+        weighting = self.weighting
+        wp = hf.rows(hf.u_rows(0, i), hf.y_rows(0, i))
+        coef, perp = _projection(pb)
+
+        def svd():
+            o_i = coef @ wp
+            W1_inv = None
+            if weighting == "n4sid":
+                M = o_i
+            elif weighting == "moesp":
+                M = o_i @ perp
+            else:
+                R = cva_factor(hf.rows(hf.y_rows(i, 2 * i)) @ perp)
+                M = scipy.linalg.solve_triangular(R.T, o_i @ perp, lower=True,
+                                                  check_finite=False)
+                W1_inv = R.T
+            U, s, _ = scipy.linalg.svd(M, full_matrices=False, check_finite=False)
+            return W1_inv, U, s
+
+        W1_inv, U, s = pb.cached(("n4sid svd", weighting), svd)
+        return Subspace(s, parts={"W1_inv": W1_inv, "U": U, "coef": coef})
+
+    def system_matrices(self, pb, subspace, n, estimator, *, feedthrough, ft_record, plan):
+        """Γ = W1^{-1} U_n S_n^{1/2}, then steps 3 and 4 (:func:`state_model`)."""
+        parts, s = subspace.parts, subspace.profile
+        gamma = parts["U"][:, :n] * np.sqrt(s[:n])
+        if parts["W1_inv"] is not None:
+            gamma = parts["W1_inv"] @ gamma
+        A, B, C, D, _, extra = state_model(pb, gamma, stability=plan.stability,
+                                           feedthrough=feedthrough,
+                                           estimate_x0=plan.estimate_x0,
+                                           coefficients=parts["coef"])
+        return States(A, B, C, D, dict(singular_values=s, weighting=self.weighting,
+                                       feedthrough=ft_record, **extra))
 
 
 def _projection(pb):

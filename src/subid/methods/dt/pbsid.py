@@ -35,33 +35,25 @@ horizon``; all products of data rows are products of the factor's rows):
 With ``stability`` asking for it, an unstable A is stabilised
 (:func:`subid.methods.dt._subspace.stable_choice`) and B, K refitted from
 the same state equation. Order and horizon selection, the noise model and
-the delays come from the shared pipeline (:func:`_subspace.identify`).
+the delays come from the shared pipeline (:mod:`subid.methods.dt.pipeline`).
 """
 
 from __future__ import annotations
-
-from functools import partial
 
 import numpy as np
 import scipy.linalg
 
 from subid._validation import check_bool, checked_call
 from subid.data import IOData
-from subid.delay import shift_for_method
 from subid.methods.bd import INFO_KEY
 from subid.methods.dt._feedthrough import check_feedthrough
-from subid.methods.dt._feedthrough import resolve as resolve_feedthrough
 from subid.methods.dt._subspace import (
     check_experiment_lengths,
-    choose_order,
-    finalize,
-    finish,
-    identify,
     initial_state,
     stable_choice,
 )
 from subid.methods.dt.n4sid import _lstsq_rows
-from subid.methods.dt.noise_model import check_refine
+from subid.methods.dt.pipeline import States, Subspace, SubspaceMethod, run
 from subid.model.statespace import StateSpace
 
 __all__ = ["pbsid"]
@@ -127,74 +119,88 @@ def pbsid(data, order=None, *, horizon=None, selection="cv", stability="auto",
     >>> float(subid.markov_error(model, subid.systems.seed001_system())) < 1e-8
     True
     """
-    feedthrough = check_feedthrough(feedthrough)
-    check_bool(estimate_x0, "estimate_x0")
-    build = partial(_pbsid, stability=stability, feedthrough=feedthrough,
-                    estimate_x0=estimate_x0)
-    check_refine(refine, data)
-    data, delays = shift_for_method(data, input_delay)
-    return identify(data, order, horizon, method="pbsid", build=build, selection=selection,
-                    statistic=statistic,
-                    finalize=partial(finalize, refine=refine, delays=delays))
+    method = PBSID(stability=stability, feedthrough=feedthrough, estimate_x0=estimate_x0)
+    return run(method, data, order, horizon, selection=selection, statistic=statistic,
+               refine=refine, input_delay=input_delay)
 
 
-def _pbsid(pb, *, stability, feedthrough, estimate_x0) -> StateSpace:
-    feedthrough, ft_record = resolve_feedthrough(feedthrough, pb)
-    i, hf = pb.horizon, pb.factor
-    data = pb.data
-    ny, nu = hf.n_outputs, hf.n_inputs
-    wp = hf.rows(hf.u_rows(0, i), hf.y_rows(0, i))
-    wp_next = hf.rows(hf.u_rows(1, i + 1), hf.y_rows(1, i + 1))
-    n_wp = wp.shape[0]
+class PBSID(SubspaceMethod):
+    """PBSID-opt's steps (:class:`subid.methods.dt.pipeline.SubspaceMethod`; module
+    docstring): the regressions and SVD of steps 1 and 2, then step 3 with the
+    stability rule (B, K refitted from the state equation)."""
 
-    def regressions():
-        rows = []
-        for k in range(i):                    # step 1: one regression per future step
-            parts = [wp]
-            if k:
-                parts += [hf.rows(hf.u_rows(i, i + k)), hf.rows(hf.y_rows(i, i + k))]
-            if feedthrough:
-                parts.append(hf.rows(hf.u_rows(i + k, i + k + 1)))
-            theta = _lstsq_rows(np.vstack(parts), hf.rows(hf.y_rows(i + k, i + k + 1)))
-            rows.append(theta[:, :n_wp])
-        coef = np.vstack(rows)                # Γ_f K_p (in the factor's coordinates)
-        U, s, _ = scipy.linalg.svd(coef @ wp, full_matrices=False, check_finite=False)
-        return coef, U, s
+    name = "pbsid"
 
-    # steps 1 and 2's SVD do not depend on the order: once per problem, shared by the
-    # candidate orders of a cross-validation fold (Problem.cached)
-    coef, U, s = pb.cached(("pbsid regressions", feedthrough), regressions)
-    n, order_selection = choose_order(pb.order, pb.candidates, s, "singular values")
-    Q = U[:, :n]                              # orthonormal basis of range(Γ_f)
-    M = Q.T @ coef                            # x(t) = M z_p(t)
-    x, x_next = M @ wp, M @ wp_next
-    u_t = hf.rows(hf.u_rows(i, i + 1))
-    y_t = hf.rows(hf.y_rows(i, i + 1))
-    # step 3: C, D from the output equation, then A, B, K with the innovations as regressors
-    if feedthrough:
-        CD = _lstsq_rows(np.vstack([x, u_t]), y_t)
-        C, D = CD[:, :n], CD[:, n:]
-    else:
-        C, D = _lstsq_rows(x, y_t), np.zeros((ny, nu))
-    e = y_t - C @ x - D @ u_t
-    ABK = _lstsq_rows(np.vstack([x, u_t, e]), x_next)
-    A = ABK[:, :n]          # B (and K) again in fit(A), for the A finally kept
-    resid = x_next - ABK @ np.vstack([x, u_t, e])
-    residual = float(np.linalg.norm(resid) / max(float(np.linalg.norm(x_next)), 1e-300))
+    def __init__(self, *, stability="auto", feedthrough="auto", estimate_x0=True):
+        feedthrough = check_feedthrough(feedthrough)
+        check_bool(estimate_x0, "estimate_x0")
+        self.common_options(feedthrough=feedthrough, estimate_x0=estimate_x0,
+                            stability=stability)
 
-    def fit(A_try):
-        """B (and D, x0) for a given A from the state equation (K refitted with it)."""
-        BK = _lstsq_rows(np.vstack([u_t, e]), x_next - A_try @ x)
-        B_n, _, D_n = pb.unscale(BK[:, :nu], C, D)
-        return B_n, D_n, None, {INFO_KEY: "states"}
+    def decompose(self, pb, feedthrough) -> Subspace:
+        """Steps 1 and 2's SVD: they do not depend on the order, so once per problem,
+        shared by the candidate orders of a cross-validation fold (Problem.cached)."""
+        i, hf = pb.horizon, pb.factor
+        wp = hf.rows(hf.u_rows(0, i), hf.y_rows(0, i))
+        n_wp = wp.shape[0]
 
-    A, fitted, stab = stable_choice(A, Q, ny, fit, stability=stability, data=data,
-                                    method=pb.method)
-    B, D = fitted[0], fitted[1]
-    _, C, _ = pb.unscale(np.zeros((n, nu)), C, np.zeros((ny, nu)))
-    if estimate_x0 and pb.fold and isinstance(data, IOData) and data.n_experiments > 1:
-        check_experiment_lengths(data, n)     # what initial_state would raise
-    # a fold model is scored with an x0 fitted on the held-out data (Problem.fold)
-    x0 = initial_state(A, B, C, D, data) if estimate_x0 and not pb.fold else None
-    return finish(pb, A, B, C, D, n, order_selection, singular_values=s, x0=x0,
-                  state_regression_residual=residual, stability=stab, feedthrough=ft_record)
+        def regressions():
+            rows = []
+            for k in range(i):                    # step 1: one regression per future step
+                parts = [wp]
+                if k:
+                    parts += [hf.rows(hf.u_rows(i, i + k)), hf.rows(hf.y_rows(i, i + k))]
+                if feedthrough:
+                    parts.append(hf.rows(hf.u_rows(i + k, i + k + 1)))
+                theta = _lstsq_rows(np.vstack(parts), hf.rows(hf.y_rows(i + k, i + k + 1)))
+                rows.append(theta[:, :n_wp])
+            coef = np.vstack(rows)                # Γ_f K_p (in the factor's coordinates)
+            U, s, _ = scipy.linalg.svd(coef @ wp, full_matrices=False, check_finite=False)
+            return coef, U, s
+
+        coef, U, s = pb.cached(("pbsid regressions", feedthrough), regressions)
+        return Subspace(s, parts={"coef": coef, "U": U, "wp": wp})
+
+    def system_matrices(self, pb, subspace, n, estimator, *, feedthrough, ft_record, plan):
+        """Step 3 (module docstring), with the stability rule and x0."""
+        i, hf, data = pb.horizon, pb.factor, pb.data
+        ny, nu = hf.n_outputs, hf.n_inputs
+        coef, U, wp, s = (subspace.parts["coef"], subspace.parts["U"], subspace.parts["wp"],
+                          subspace.profile)
+        wp_next = hf.rows(hf.u_rows(1, i + 1), hf.y_rows(1, i + 1))
+        Q = U[:, :n]                              # orthonormal basis of range(Γ_f)
+        M = Q.T @ coef                            # x(t) = M z_p(t)
+        x, x_next = M @ wp, M @ wp_next
+        u_t = hf.rows(hf.u_rows(i, i + 1))
+        y_t = hf.rows(hf.y_rows(i, i + 1))
+        # step 3: C, D from the output equation, then A, B, K with the innovations as
+        # regressors
+        if feedthrough:
+            CD = _lstsq_rows(np.vstack([x, u_t]), y_t)
+            C, D = CD[:, :n], CD[:, n:]
+        else:
+            C, D = _lstsq_rows(x, y_t), np.zeros((ny, nu))
+        e = y_t - C @ x - D @ u_t
+        ABK = _lstsq_rows(np.vstack([x, u_t, e]), x_next)
+        A = ABK[:, :n]          # B (and K) again in fit(A), for the A finally kept
+        resid = x_next - ABK @ np.vstack([x, u_t, e])
+        residual = float(np.linalg.norm(resid) / max(float(np.linalg.norm(x_next)), 1e-300))
+
+        def fit(A_try):
+            """B (and D, x0) for a given A from the state equation (K refitted with it)."""
+            BK = _lstsq_rows(np.vstack([u_t, e]), x_next - A_try @ x)
+            B_n, _, D_n = pb.unscale(BK[:, :nu], C, D)
+            return B_n, D_n, None, {INFO_KEY: "states"}
+
+        A, fitted, stab = stable_choice(A, Q, ny, fit, stability=plan.stability, data=data,
+                                        method=pb.method)
+        B, D = fitted[0], fitted[1]
+        _, C, _ = pb.unscale(np.zeros((n, nu)), C, np.zeros((ny, nu)))
+        if plan.estimate_x0 and pb.fold and isinstance(data, IOData) \
+                and data.n_experiments > 1:
+            check_experiment_lengths(data, n)     # what initial_state would raise
+        # a fold model is scored with an x0 fitted on the held-out data (Problem.fold)
+        x0 = initial_state(A, B, C, D, data) if plan.estimate_x0 and not pb.fold else None
+        return States(A, B, C, D, dict(singular_values=s, x0=x0,
+                                       state_regression_residual=residual, stability=stab,
+                                       feedthrough=ft_record))
