@@ -170,27 +170,55 @@ def _error_power(A, B, C, D, u, y, weights, inv_scale, kernel):
             return None
         if n_free == 0:                 # no state (free_length is 0 for n = 0)
             return tail
-        flat = rows.reshape(-1, n + 1)
-        R = scipy.linalg.qr(flat, mode="r", check_finite=False)[0]
-        # the minimum-norm lstsq of simulate_fit, with its cut-off
-        cut = np.finfo(float).eps * max(N * ny, n)
-        Rn = np.zeros((n, n + 1))
-        Rn[:min(R.shape[0], n)] = R[:n]
-        x0 = np.linalg.lstsq(Rn[:, :n], Rn[:, n], rcond=cut)[0]
-        # the weighted residual of the x0 regression, back in the units of the score
-        head = (flat[:, n] - flat[:, :n] @ x0).reshape(n_free, ny) * (inv_scale / weights)
-        if not np.isfinite(head).all():
+        head = _x0_residual(rows, N, weights, inv_scale)
+        return None if head is None else tail + np.sum(head ** 2, axis=0)
+
+
+def _x0_residual(rows, n_samples, weights, inv_scale):
+    """The residual ``(y - y_f - C A^t x0) inv_scale`` (n_free, ny) of the least-squares
+    x0 of the weighted rows ``[C A^t w, (y - y_f) w]`` (the minimum-norm ``lstsq`` of
+    :func:`subid.evaluation.prediction.simulate_fit`, with its cut-off), or None when
+    it is not finite."""
+    n_free, ny, width = rows.shape
+    n = width - 1
+    flat = rows.reshape(-1, n + 1)
+    R = scipy.linalg.qr(flat, mode="r", check_finite=False)[0]
+    cut = np.finfo(float).eps * max(n_samples * ny, n)
+    Rn = np.zeros((n, n + 1))
+    Rn[:min(R.shape[0], n)] = R[:n]
+    x0 = np.linalg.lstsq(Rn[:, :n], Rn[:, n], rcond=cut)[0]
+    # the weighted residual of the x0 regression, back in the units of the score
+    head = (flat[:, n] - flat[:, :n] @ x0).reshape(n_free, ny) * (inv_scale / weights)
+    return head if np.isfinite(head).all() else None
+
+
+def head_power(A, B, C, D, u, y, weights, inv_scale, kernel, n_samples):
+    """The first ``len(u)`` samples of a record of ``n_samples`` (beyond which the free
+    response has decayed): ``(sum ((y - ŷ) inv_scale)^2, sum (y - y_f)^2)`` per output,
+    ``ŷ`` from the least-squares x0 of these samples, ``y_f`` the forced response; None
+    when the simulation overflows (:mod:`subid.methods.dt._lag_fit`)."""
+    n = A.shape[0]
+    with np.errstate(all="ignore"):
+        rows, _, finite = kernel(A, B, C, D, u, y, weights, inv_scale, u.shape[0])
+        if not (finite and np.isfinite(rows).all()):
             return None
-        return tail + np.sum(head ** 2, axis=0)
+        forced = np.sum((rows[:, :, n] / weights) ** 2, axis=0)
+        head = _x0_residual(rows, n_samples, weights, inv_scale)
+    return None if head is None else (np.sum(head ** 2, axis=0), forced)
 
 
 class Held:
     """What the score of every candidate needs from one validation record, once:
     its pieces (one per experiment), the x0 weights (inverse standard deviation
     over the whole record, as ``fit_percent`` weighs them), the scale of each
-    output and the spread ``sum (y - ȳ_e)^2`` the fit divides by."""
+    output and the spread ``sum (y - ȳ_e)^2`` the fit divides by. With ``lagged``,
+    the lag products of every piece (:class:`subid.methods.dt._lag_fit.LagProducts`,
+    computed at the first score), from which the score of a stable candidate costs
+    no pass over the record."""
 
-    def __init__(self, validation):
+    def __init__(self, validation, *, lagged=False):
+        self.lagged = lagged
+        self._products = None
         self.record = validation          # for continuous-time models (fit_percent, their hold)
         y_all = validation.y
         std = column_std(y_all)
@@ -205,21 +233,36 @@ class Held:
             ys = y / self.scale
             self.dev2 += np.sum((ys - ys.mean(axis=0)) ** 2, axis=0)
 
+    def products(self):
+        """The lag products of every piece (None without ``lagged``)."""
+        if not self.lagged:
+            return [None] * len(self.pieces)
+        if self._products is None:
+            from subid.methods.dt._lag_fit import LagProducts
+            self._products = [LagProducts(u, y) for u, y in self.pieces]
+        return self._products
+
 
 def simulation_fit(A, B, C, D, validation, *, kernel=forced_error):
     """Simulation fit (%) per output of the discrete model ``(A, B, C, D)`` on
     ``validation`` (an IOData record or its :class:`Held`) with x0 by least
     squares: ``fit_percent(model, validation)`` to rounding (see the module
     documentation), or None when the simulation overflows or an output is
-    constant. ``kernel``: :func:`forced_error` or its reference."""
+    constant. ``kernel``: :func:`forced_error` or its reference. A :class:`Held`
+    with lag products scores a stable candidate from them where they apply
+    (:func:`subid.methods.dt._lag_fit.error_power`: the same value to rounding)."""
+    from subid.methods.dt._lag_fit import error_power
     held = validation if isinstance(validation, Held) else Held(validation)
     if np.any(held.dev2 == 0):
         return None
     A, B, C, D = (np.ascontiguousarray(M, dtype=float) for M in (A, B, C, D))
     err2 = np.zeros(held.dev2.shape)
     inv_scale = 1.0 / held.scale
-    for u, y in held.pieces:
-        power = _error_power(A, B, C, D, u, y, held.weights, inv_scale, kernel)
+    for (u, y), lp in zip(held.pieces, held.products()):
+        power = None if lp is None else error_power(A, B, C, D, lp, held.weights, inv_scale,
+                                                    kernel)
+        if power is None:
+            power = _error_power(A, B, C, D, u, y, held.weights, inv_scale, kernel)
         if power is None:
             return None
         err2 += power
