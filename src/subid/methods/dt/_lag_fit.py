@@ -132,57 +132,59 @@ class LagProducts:
         return cls(record.u, record.y, max_lag)
 
 
-def decay_length(A, cap):
-    """The smallest power of two L with ``max |A^L| < LAG_TOLERANCE`` (by repeated
-    squaring), or None when it exceeds ``cap`` (or A is not finite)."""
-    n = A.shape[0]
-    if n == 0:
-        return 1
-    P = np.array(A, dtype=float)
-    L = 1
-    with np.errstate(all="ignore"):
-        while L <= cap:
-            size = np.abs(P).max()
-            if not math.isfinite(size):
-                return None
-            if size < LAG_TOLERANCE:
-                return L
-            P = P @ P
-            L *= 2
-    return None
+#: Largest condition number of the eigenvector matrix of A for the modal evaluation
+#: (its rounding errors grow with it: about 1e-10 relative at this bound).
+MAX_EIGVEC_CONDITION = 1e6
 
 
-def powers(A, L):
-    """``A^0 .. A^L`` stacked (L + 1, n, n), by doubling (one batched product a step)."""
-    n = A.shape[0]
-    out = np.empty((L + 1, n, n))
-    out[0] = np.eye(n)
-    if L >= 1:
-        out[1] = A
-    filled = 2
-    while filled < L + 1:
-        step = out[filled - 1] @ A                  # A^filled
-        k = min(filled, L + 1 - filled)
-        out[filled:filled + k] = out[:k] @ step
-        filled += k
-    return out
+class _Modal:
+    """A stable, diagonalisable A in modal form, ``A = V diag(λ) V^{-1}``, with the
+    Vandermonde rows ``λ^e`` (e = 0..L) that evaluate every lag sum at the poles:
+    ``sum_e c_e A^e = V diag(sum_e c_e λ^e) V^{-1}``, ``O(L n)`` per sequence instead
+    of ``O(L n^3)`` for the powers of A."""
 
+    def __init__(self, lam, V, Wm, L):
+        self.lam, self.V, self.Wm, self.L = lam, V, Wm, L
+        self.vand = np.cumprod(np.vstack([np.ones(lam.size), np.tile(lam, (L, 1))]), axis=0)
+        self.denominator = 1.0 - lam[:, None] * lam[None, :]
 
-class _Candidate:
-    """The powers, Markov rows and Gramian of a stable (A, C) up to lag L."""
+    @classmethod
+    def of(cls, A, max_lag):
+        """The modal form with the lags L where ``ρ(A)^L < LAG_TOLERANCE``, or None
+        (unstable, not finite, ill-conditioned eigenvectors, or L above ``max_lag``)."""
+        if A.shape[0] == 0 or not np.isfinite(A).all():
+            return None
+        lam, V = scipy.linalg.eig(A, check_finite=False)
+        radius = float(np.abs(lam).max())
+        if radius >= 1.0:
+            return None
+        L = 1 if radius == 0.0 else int(math.ceil(math.log(LAG_TOLERANCE) / math.log(radius)))
+        if L > max_lag:
+            return None
+        cond = np.linalg.cond(V)
+        if not math.isfinite(cond) or cond > MAX_EIGVEC_CONDITION:
+            return None
+        return cls(lam, V, np.linalg.solve(V, np.eye(A.shape[0])), max(L, 1))
 
-    def __init__(self, A, C, L, w2):
-        self.L = L
-        self.Pw = powers(A, L)                       # A^t, t = 0..L
-        self.H = np.matmul(C, self.Pw)               # C A^t (L + 1, ny, n)
-        self.HW2 = self.H * w2[None, :, None]
-        n = A.shape[0]
-        self.P = self.HW2.reshape(-1, n).T @ self.H.reshape(-1, n) if n else np.zeros((0, 0))
-        self.P = 0.5 * (self.P + self.P.T)
+    def poly(self, seq, shift=0):
+        """``sum_e seq[e + shift] λ^e`` for e = 0..L - shift: (n, *seq.shape[1:])."""
+        m = seq.shape[0] - shift
+        flat = seq[shift:].reshape(m, -1)
+        return (self.vand[:m].T @ flat).reshape((self.lam.size,) + seq.shape[1:])
 
+    def matrix(self, values):
+        """``V diag(values) V^{-1}`` (real) for values (n, ...): (..., n, n)."""
+        vals = np.moveaxis(values, 0, -1)[..., None, :]
+        return np.real((self.V * vals) @ self.Wm)
 
-def _lag(A, lags_available):
-    return decay_length(A, lags_available) if np.isfinite(A).all() else None
+    def gramian(self, left, right):
+        """``sum_{t>=0} (A^t)^T left^T right A^t`` (left, right: (m, n))."""
+        M = (self.V.T @ left.T) @ (right @ self.V) / self.denominator
+        return np.real(self.Wm.T @ M @ self.Wm)
+
+    def back(self, modal):
+        """``V^{-T} modal`` (real): a sum ``sum_t (A^t)^T v_t`` from its modal terms."""
+        return np.real(self.Wm.T @ modal)
 
 
 def fit_b_d_x0(A, C, lp: LagProducts, output_weights, *, feedthrough=True, estimate_x0=True):
@@ -194,43 +196,48 @@ def fit_b_d_x0(A, C, lp: LagProducts, output_weights, *, feedthrough=True, estim
     C = np.asarray(C, dtype=float)
     n, ny, nu = A.shape[0], C.shape[0], lp.u.shape[1]
     N = lp.n_samples
-    L = _lag(A, lp.max_lag)
-    if L is None or L > lp.max_lag or N < 4 * L or n == 0:
+    md = _Modal.of(A, min(lp.max_lag, N // 4))
+    if md is None:
         return None
+    L = md.L
     w = np.ones(ny) if output_weights is None else np.asarray(output_weights, dtype=float)
     w2 = w * w
-    c = _Candidate(A, C, L, w2)
-    Pw, H, HW2, P = c.Pw, c.H, c.HW2, c.P
-    G, R = lp.G[:L + 1], lp.R[:L + 1]
-    u, y = lp.u, lp.y
-    K = np.matmul(P, Pw)                             # P A^e
-    # B block: Γ(e) kron (A^e)^T P (e >= 0) + Γ(e)^T kron P A^e (e >= 1), index a n + i
-    BB = np.tensordot(G, K, axes=(0, 0)).transpose(0, 3, 1, 2) \
-        + np.tensordot(G[1:], K[1:], axes=(0, 0)).transpose(1, 2, 0, 3)
+    G, R, u, y = lp.G[:L + 1], lp.R[:L + 1], lp.u, lp.y
+    CW2 = C.T * w2[None, :]                          # C^T W^2 (n, ny)
+    P = md.gramian(C * w[:, None], C * w[:, None])
+    P = 0.5 * (P + P.T)
+    Z = md.matrix(md.poly(G))                        # (a, b): sum_e Γ(e)_ab A^e
+    Z1 = md.matrix(md.poly(G, shift=1))              # (a, b): sum_{k>=1} Γ(k)_ab A^(k-1)
+    I = np.eye(n)
+    BB = np.empty((nu, n, nu, n))
+    for a in range(nu):
+        for b in range(nu):
+            BB[a, :, b, :] = Z[a, b].T @ P + P @ (Z[b, a] - G[0][b, a] * I)
     BB = BB.reshape(nu * n, nu * n)
-    urev = u[N - 1:N - 1 - L:-1]                     # u(N-1) .. u(N-L)
-    XN = np.tensordot(urev, Pw[:L], axes=(0, 0))     # (a, i, j): sum_k u_a(N-k) A^(k-1)
+    XN = md.matrix(md.poly(u[N - 1:N - 1 - L:-1]))   # (a): sum_k u_a(N-k) A^(k-1)
     XN = XN.transpose(1, 0, 2).reshape(n, nu * n)
     BB -= XN.T @ P @ XN
-    rB = np.tensordot(R[1:], HW2[:L], axes=([0, 1], [0, 1])).reshape(-1)   # (a, i)
+    VtCW2 = md.V.T @ CW2                             # (n, ny)
+    rho = md.poly(R, shift=1)                        # (l, r, a): sum_k R(k)_ra λ^(k-1)
+    rB = md.back(np.einsum("lr,lra->la", VtCW2, rho)).T.reshape(-1)    # (a, i)
     nx, q, p = parameter_count(n, nu, ny, estimate_x0, feedthrough)
     Naug = np.zeros((p + 1, p + 1))
     Naug[nx:q, nx:q] = BB
     Naug[nx:q, p] = rB
     Naug[p, p] = float(np.sum(w2 * np.diag(lp.Y)))
     if feedthrough:
-        BD = np.tensordot(G[1:], HW2[:L], axes=(0, 0)).transpose(0, 3, 1, 2)  # (a, i, b, r)
+        BD = np.einsum("abji,jr->aibr", Z1, CW2)      # Z1[a, b]^T C^T W^2
         Naug[nx:q, q:p] = BD.reshape(nu * n, nu * ny)
         Naug[q:p, q:p] = np.kron(G[0], np.diag(w2))
         Naug[q:p, p] = (R[0] * w2[:, None]).T.reshape(-1)
     if estimate_x0:
-        S1 = np.tensordot(u[:L], Pw[1:L + 1], axes=(0, 0))   # (a, i, j): sum_s u_a(s) A^(s+1)
+        S1 = md.matrix(md.lam[:, None] * md.poly(u[:L]))   # (a): sum_s u_a(s) A^(s+1)
         Naug[:n, :n] = P
         Naug[:n, nx:q] = np.concatenate([S1[a].T @ P for a in range(nu)], axis=1)
-        Naug[:n, p] = np.tensordot(y[:L + 1], HW2, axes=([0, 1], [0, 1]))
+        Naug[:n, p] = md.back(np.einsum("lr,lr->l", VtCW2, md.poly(y[:L + 1])))
         if feedthrough:
-            x0D = np.tensordot(u[:L + 1], HW2, axes=(0, 0))       # (b, r, i)
-            Naug[:n, q:p] = x0D.transpose(2, 0, 1).reshape(n, nu * ny)
+            S0 = md.matrix(md.poly(u[:L + 1]))             # (b): sum_t u_b(t) A^t
+            Naug[:n, q:p] = np.einsum("bji,jr->ibr", S0, CW2).reshape(n, nu * ny)
     iu = np.triu_indices(p + 1, 1)
     Naug[(iu[1], iu[0])] = Naug[iu]
     solved = solve_normal_equations(Naug, n, nu, ny, estimate_x0=estimate_x0,
@@ -245,43 +252,51 @@ def fit_b_d_x0(A, C, lp: LagProducts, output_weights, *, feedthrough=True, estim
     return B, D, x0, diagnostics
 
 
-def error_power(A, B, C, D, lp: LagProducts, weights, inv_scale, kernel):
+def error_power(A, B, C, D, lp: LagProducts, weights, inv_scale):
     """``sum_t ((y - ŷ) inv_scale)^2`` per output on the record of ``lp``, ``ŷ`` simulated
-    from the least-squares x0 (weights ``weights``), as
+    from the least-squares x0 (each output weighted by ``weights``), as
     :func:`subid.methods.dt._scoring._error_power` computes it by a pass over the
     record; None where the lag products do not apply (the pass must run)."""
-    from subid.methods.dt._scoring import head_power
     A = np.asarray(A, dtype=float)
-    n, ny, nu = A.shape[0], C.shape[0], B.shape[1]
+    n, ny = A.shape[0], C.shape[0]
     N = lp.n_samples
-    L = _lag(A, lp.max_lag)
-    if L is None or L > lp.max_lag or N < 2 * L or n == 0:
+    md = _Modal.of(A, min(lp.max_lag, N // 2))
+    if md is None:
         return None
-    c = _Candidate(A, C, L, np.ones(ny))
-    Pw, H = c.Pw, c.H
-    G, R = lp.G[:L + 1], lp.R[:L + 1]
-    # Markov parameters G_0 = D, G_k = C A^(k-1) B (k = 1..L)
-    M = np.empty((L + 1, ny, nu))
-    M[0] = D
-    M[1:] = np.matmul(H[:L], B)
-    cross = np.einsum("krj,krj->r", R, M)                  # sum_t y_r y_f,r
-    # sum_t y_f y_f^T over the zero-padded record (t >= 0)
-    BG = np.matmul(B, G)                                   # B Γ(e) (L + 1, n, nu)
-    T = np.matmul(np.matmul(Pw, BG), B.T)                  # A^e B Γ(e) B^T
-    S = T.sum(axis=0) + T[1:].sum(axis=0).T   # e >= 1 also as B Γ(e)^T B^T (A^e)^T
-    X = np.tensordot(np.matmul(Pw, S), Pw, axes=([0, 2], [0, 2]))   # sum_b A^b S (A^b)^T
-    SD = np.tensordot(Pw[:L], BG[1:], axes=([0, 2], [0, 1])) @ D.T  # sum_k A^(k-1) B Γ(k) D^T
+    L = md.L
+    G, R, u, y = lp.G[:L + 1], lp.R[:L + 1], lp.u, lp.y
+    CV = C @ md.V                                    # (ny, n)
+    WB = md.Wm @ B                                   # (n, nu)
+    g = md.poly(G)                                   # (l, a, b)
+    g1 = md.poly(G, shift=1)
+    # sum_t y_r y_f,r: sum_k (R(k) G_k^T)_rr with G_0 = D, G_k = C A^(k-1) B
+    cross = np.einsum("rj,rj->r", R[0], D) + np.real(
+        np.einsum("rl,lj,lrj->r", CV, WB, md.poly(R, shift=1)))
+    # sum_t y_f y_f^T over the zero-padded record: C X C^T + C S_D + S_D^T C^T + D Γ(0) D^T
+    U0 = np.real(md.V @ np.einsum("la,lab->lb", WB, g)) @ B.T   # sum_e A^e B Γ(e) B^T
+    S = U0 + (U0 - B @ G[0] @ B.T).T
+    X = np.real(md.V @ ((md.Wm @ S @ md.Wm.T) / md.denominator) @ md.V.T)
+    SD = np.real(md.V @ np.einsum("la,lab->lb", WB, g1)) @ D.T
     F = C @ X @ C.T + C @ SD + SD.T @ C.T + D @ G[0] @ D.T
-    # minus the free response after the record, from x_f(N) = sum_k A^(k-1) B u(N-k)
-    urev = lp.u[N - 1:N - 1 - L:-1]
-    xN = np.einsum("kij,jb,kb->i", Pw[:L], B, urev)
-    after = np.sum((H @ xN) ** 2, axis=0)
-    ff = np.diag(F) - after
-    total = np.diag(lp.Y) - 2.0 * cross + ff               # sum_t (y - y_f)^2 per output
-    if not np.isfinite(total).all() or np.any(total < ROUNDING_GUARD * np.diag(lp.Y)):
-        return None
-    head = head_power(A, B, C, D, lp.u[:L], lp.y[:L], weights, inv_scale, kernel, N)
-    if head is None:
-        return None
-    head_resid, head_forced = head
-    return (total - head_forced) * inv_scale ** 2 + head_resid
+    # minus the free response after the record, from x_f(N) = V ξ
+    xi = np.einsum("la,la->l", WB, md.poly(u[N - 1:N - 1 - L:-1]))
+    after = np.real(np.einsum("rl,lm,rm->r", CV, np.outer(xi, xi) / md.denominator, CV))
+    total = np.diag(lp.Y) - 2.0 * cross + np.diag(F) - after   # sum_t (y - y_f)^2
+    # x0: per output r, β_r = sum_t (A^t)^T c_r^T (y_r - y_f,r)(t), P_r its Gramian
+    mu = md.poly(u[:L + 1])                          # (l, b): sum_t u_b(t) λ^t
+    nu_ = md.lam[:, None] * md.poly(u[:L])           # (l, a): sum_s u_a(s) λ^(s+1)
+    eta = md.poly(y[:L + 1])                         # (l, r): sum_t y_r(t) λ^t
+    VtCt = md.V.T @ C.T                              # (l, r)
+    beta = np.empty((n, ny))
+    Pr = np.empty((ny, n, n))
+    for r in range(ny):
+        Pr[r] = md.gramian(C[r:r + 1], C[r:r + 1])
+        modal = VtCt[:, r] * (eta[:, r] - mu @ D[r]) - (md.V.T @ Pr[r] @ B * nu_).sum(axis=1)
+        beta[:, r] = md.back(modal)
+    w2 = np.asarray(weights, dtype=float) ** 2
+    Pw = np.tensordot(w2, Pr, axes=(0, 0))
+    x0 = np.linalg.lstsq(Pw, beta @ w2, rcond=1e-13)[0]
+    err = total - 2.0 * (x0 @ beta) + np.einsum("i,rij,j->r", x0, Pr, x0)
+    if not np.isfinite(err).all() or np.any(err < ROUNDING_GUARD * np.diag(lp.Y)):
+        return None                  # a nearly exact fit: the pass is exact, this is not
+    return err * inv_scale ** 2

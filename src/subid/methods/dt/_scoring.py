@@ -170,41 +170,18 @@ def _error_power(A, B, C, D, u, y, weights, inv_scale, kernel):
             return None
         if n_free == 0:                 # no state (free_length is 0 for n = 0)
             return tail
-        head = _x0_residual(rows, N, weights, inv_scale)
-        return None if head is None else tail + np.sum(head ** 2, axis=0)
-
-
-def _x0_residual(rows, n_samples, weights, inv_scale):
-    """The residual ``(y - y_f - C A^t x0) inv_scale`` (n_free, ny) of the least-squares
-    x0 of the weighted rows ``[C A^t w, (y - y_f) w]`` (the minimum-norm ``lstsq`` of
-    :func:`subid.evaluation.prediction.simulate_fit`, with its cut-off), or None when
-    it is not finite."""
-    n_free, ny, width = rows.shape
-    n = width - 1
-    flat = rows.reshape(-1, n + 1)
-    R = scipy.linalg.qr(flat, mode="r", check_finite=False)[0]
-    cut = np.finfo(float).eps * max(n_samples * ny, n)
-    Rn = np.zeros((n, n + 1))
-    Rn[:min(R.shape[0], n)] = R[:n]
-    x0 = np.linalg.lstsq(Rn[:, :n], Rn[:, n], rcond=cut)[0]
-    # the weighted residual of the x0 regression, back in the units of the score
-    head = (flat[:, n] - flat[:, :n] @ x0).reshape(n_free, ny) * (inv_scale / weights)
-    return head if np.isfinite(head).all() else None
-
-
-def head_power(A, B, C, D, u, y, weights, inv_scale, kernel, n_samples):
-    """The first ``len(u)`` samples of a record of ``n_samples`` (beyond which the free
-    response has decayed): ``(sum ((y - ŷ) inv_scale)^2, sum (y - y_f)^2)`` per output,
-    ``ŷ`` from the least-squares x0 of these samples, ``y_f`` the forced response; None
-    when the simulation overflows (:mod:`subid.methods.dt._lag_fit`)."""
-    n = A.shape[0]
-    with np.errstate(all="ignore"):
-        rows, _, finite = kernel(A, B, C, D, u, y, weights, inv_scale, u.shape[0])
-        if not (finite and np.isfinite(rows).all()):
+        flat = rows.reshape(-1, n + 1)
+        R = scipy.linalg.qr(flat, mode="r", check_finite=False)[0]
+        # the minimum-norm lstsq of simulate_fit, with its cut-off
+        cut = np.finfo(float).eps * max(N * ny, n)
+        Rn = np.zeros((n, n + 1))
+        Rn[:min(R.shape[0], n)] = R[:n]
+        x0 = np.linalg.lstsq(Rn[:, :n], Rn[:, n], rcond=cut)[0]
+        # the weighted residual of the x0 regression, back in the units of the score
+        head = (flat[:, n] - flat[:, :n] @ x0).reshape(n_free, ny) * (inv_scale / weights)
+        if not np.isfinite(head).all():
             return None
-        forced = np.sum((rows[:, :, n] / weights) ** 2, axis=0)
-        head = _x0_residual(rows, n_samples, weights, inv_scale)
-    return None if head is None else (np.sum(head ** 2, axis=0), forced)
+        return tail + np.sum(head ** 2, axis=0)
 
 
 class Held:
@@ -259,8 +236,7 @@ def simulation_fit(A, B, C, D, validation, *, kernel=forced_error):
     err2 = np.zeros(held.dev2.shape)
     inv_scale = 1.0 / held.scale
     for (u, y), lp in zip(held.pieces, held.products()):
-        power = None if lp is None else error_power(A, B, C, D, lp, held.weights, inv_scale,
-                                                    kernel)
+        power = None if lp is None else error_power(A, B, C, D, lp, held.weights, inv_scale)
         if power is None:
             power = _error_power(A, B, C, D, u, y, held.weights, inv_scale, kernel)
         if power is None:

@@ -221,7 +221,7 @@ def _fit_score_record(model, validation) -> float:
     return max(value, FLOOR) if math.isfinite(value) else FLOOR
 
 
-def score_horizon(parts, orders, horizon, *, prepare_fold, builds, held=None):
+def score_horizon(parts, orders, horizon, *, prepare_fold, builds, held=None, lagged=None):
     """Fold scores of every candidate order at one horizon.
 
     Per fold, one problem (one statistic, by cost: the lagged products merged from
@@ -259,16 +259,24 @@ def score_horizon(parts, orders, horizon, *, prepare_fold, builds, held=None):
     repaired : dict ``(order, estimator index) -> int``
         How many of the fold models had to be stabilised (:func:`stabilised`).
     """
+    from subid.methods.dt._lag_fit import LagProducts
     from subid.methods.dt._scoring import Held
+    from subid.methods.dt._subspace import LAG_PRODUCTS
     names = list(builds)
     per_fold = {(n, v): [] for n in orders for v in range(len(names))}
     repaired = {(n, v): 0 for n in orders for v in range(len(names))}
     factors = fold_factors(parts, horizon, prepare_fold)
     if held is None:                      # what every candidate's score needs, once
-        held = [Held(validation) for _, validation in parts]
-    for (train, _), factor, held_out in zip(parts, factors, held):
+        held = [Held(validation, lagged=True) for _, validation in parts]
+    if lagged is None:
+        lagged = [None] * len(parts)
+    for k, ((train, _), factor, held_out) in enumerate(zip(parts, factors, held)):
         problem = prepare_fold(train, orders, horizon, factor=factor) if factor is not None \
             else prepare_fold(train, orders, horizon)
+        if hasattr(problem, "_cache") and train.n_experiments == 1:
+            if lagged[k] is None:         # once per fold, for every horizon
+                lagged[k] = LagProducts.of_record(train)
+            problem._cache[LAG_PRODUCTS] = lagged[k]    # B, D, x0 of every candidate
         for n in orders:
             for v, name in enumerate(names):
                 try:
@@ -386,7 +394,8 @@ def cross_validate(data, fixed, candidates, horizon, *, prepare_fold, builds):
         n_experiments=n_exp_train, reveal_all=fixed is not None)
     from subid.methods.dt._scoring import Held
     names = list(builds)
-    held = [Held(validation) for _, validation in parts]     # once for every horizon
+    held = [Held(validation, lagged=True) for _, validation in parts]   # once for every horizon
+    lagged = [None] * len(parts)      # the training records' lag products, when first needed
     scores, fold_scores, stabilised_folds = {}, {}, {}
     searched = []              # (orders, horizons) of every block of candidates scored
     ceiling = None
@@ -396,7 +405,7 @@ def cross_validate(data, fixed, candidates, horizon, *, prepare_fold, builds):
             if not orders:
                 continue
             per_fold, repaired = score_horizon(parts, orders, f, prepare_fold=prepare_fold,
-                                               builds=builds, held=held)
+                                               builds=builds, held=held, lagged=lagged)
             for (n, v), values in per_fold.items():
                 fold_scores[(n, f, v)] = values
                 scores[(n, f, v)] = float(np.mean(values))
