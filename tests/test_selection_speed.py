@@ -236,10 +236,10 @@ def test_score_horizon_equals_the_straightforward_computation():
 
 
 def test_pinned_calls_make_no_fold_fits(monkeypatch):
-    """With the order and horizon given, no cross-validation (issue 21): a call with
-    one estimator (n4sid, or system_matrices given) is one fit; with
-    system_matrices='auto' the two estimators' models are compared on the whole
-    record (two fits), and the one chosen comes back when it is given."""
+    """With the order and horizon given, a call with one estimator (n4sid, or
+    system_matrices given) is one fit: no cross-validation; with
+    system_matrices='auto' only the two estimators are cross-validated at that
+    order and horizon (as the default call chooses them), not the order."""
     _, data = _noisy(n=1500)
     calls = []
     real = subspace.cross_validate
@@ -253,25 +253,23 @@ def test_pinned_calls_make_no_fold_fits(monkeypatch):
     for method in (subid.moesp, subid.ls_subspace):
         model = method(data, 4, horizon=8, system_matrices="shift")
         assert model.order == 4 and "system_matrices_selection" not in model.info
+    assert not calls
     for method in (subid.moesp, subid.ls_subspace):
         model = method(data, 4, horizon=8)
         assert model.order == 4 and model.info["horizon"] == 8
-        rule = model.info["system_matrices_selection"]
-        assert rule["rule"] == "fit" and set(rule["fits"]) == {"shift", "states"}
-        assert model.info["system_matrices"] == max(
-            rule["fits"], key=lambda k: (rule["fits"][k], k == "shift"))
+        assert model.info["system_matrices_selection"]["rule"] == "cv"
         assert "order_selection" not in model.info or \
             model.info["order_selection"].get("rule") == "given"
         again = method(data, 4, horizon=8, system_matrices=model.info["system_matrices"])
         np.testing.assert_array_equal(model.A, again.A)
-    assert not calls
+    assert len(calls) == 2
 
 
 @pytest.mark.slow
 def test_default_model_reproduced_with_its_estimator():
-    """The default call's model, whichever estimator was chosen, comes back from its
-    order and horizon (the estimators compared again at them, without fold fits), and
-    from its order, horizon and system_matrices at the cost of one fit."""
+    """The default call's model, whichever estimator the cross-validation chose,
+    comes back from its order and horizon (the estimators cross-validated again at
+    them), and from its order, horizon and system_matrices at the cost of one fit."""
     _, data = _noisy(n=2000, seed=9)
     model = subid.moesp(data)
     again = subid.moesp(data, order=model.order, horizon=model.info["horizon"])
@@ -281,4 +279,4 @@ def test_default_model_reproduced_with_its_estimator():
                         system_matrices=model.info["system_matrices"])
     for name in "ABCD":
         np.testing.assert_array_equal(getattr(model, name), getattr(again, name))
-    assert model.info["system_matrices_selection"]["rule"] == "fit"
+    assert model.info["system_matrices_selection"]["rule"] == "cv"

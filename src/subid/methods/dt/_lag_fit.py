@@ -145,17 +145,7 @@ class _Modal:
 
     def __init__(self, lam, V, Wm, L):
         self.lam, self.V, self.Wm, self.L = lam, V, Wm, L
-        vand = np.empty((lam.size, L + 1), dtype=complex)   # λ^e by doubling
-        vand[:, 0] = 1.0
-        filled, step = 1, lam.copy()                        # step = λ^filled
-        while filled < L + 1:
-            k = min(filled, L + 1 - filled)
-            vand[:, filled:filled + k] = vand[:, :k] * step[:, None]
-            filled += k
-            step = vand[:, filled - 1] * lam if filled < L + 1 else step
-        # real and imaginary parts apart: real matrix products (BLAS) in poly
-        self.vand_re = np.ascontiguousarray(vand.real)
-        self.vand_im = np.ascontiguousarray(vand.imag)
+        self.vand = np.cumprod(np.vstack([np.ones(lam.size), np.tile(lam, (L, 1))]), axis=0)
         self.denominator = 1.0 - lam[:, None] * lam[None, :]
 
     @classmethod
@@ -180,8 +170,7 @@ class _Modal:
         """``sum_e seq[e + shift] λ^e`` for e = 0..L - shift: (n, *seq.shape[1:])."""
         m = seq.shape[0] - shift
         flat = seq[shift:].reshape(m, -1)
-        out = self.vand_re[:, :m] @ flat + 1j * (self.vand_im[:, :m] @ flat)
-        return out.reshape((self.lam.size,) + seq.shape[1:])
+        return (self.vand[:m].T @ flat).reshape((self.lam.size,) + seq.shape[1:])
 
     def matrix(self, values):
         """``V diag(values) V^{-1}`` (real) for values (n, ...): (..., n, n)."""

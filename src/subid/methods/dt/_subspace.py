@@ -476,10 +476,11 @@ def prepare(data, order, horizon, *, method: str, blocks_per_horizon: int = 2,
 
 
 SYSTEM_MATRICES = ("auto", "shift", "states")
-#: ``system_matrices='auto'`` chooses between its estimators on records up to this many
-#: samples (the one whose model fits the record better at the order and horizon used,
-#: :func:`_estimator_by_fit`); longer records use the first ('shift'), where both are
-#: consistent and their models close.
+#: ``system_matrices='auto'`` lets the cross-validation of the order and horizon choose
+#: between its estimators on records up to this many samples; longer records use the
+#: first ('shift'), where both are consistent and their models close. With the order
+#: and horizon both given, 'auto' is the first with no fold fits (one fit); a
+#: one-element candidate list (``order=[4]``) asks for the cross-validated choice.
 AUTO_VARIANT_MAX_SAMPLES = 20_000
 
 
@@ -510,14 +511,14 @@ def identify(data, order, horizon, *, method: str, build, selection: str,
     subspace (``system_matrices='auto'`` of :func:`subid.moesp` and
     :func:`subid.ls_subspace`): with ``selection='cv'`` on a raw record of
     up to :data:`AUTO_VARIANT_MAX_SAMPLES` samples, the cross-validation of
-    the order or horizon scores them too, and at the order and horizon used
-    (chosen or given) the one whose model fits the whole record better is
-    taken (:func:`_estimator_by_fit`: two fits, no fold fit); otherwise the
-    first one is used. With the order and horizon given there are no fold
-    fits. ``info['system_matrices']`` names the one used, and
-    ``info['system_matrices_selection']`` says why when there was a choice;
-    ``method(data, order=model.order, horizon=model.info['horizon'])``
-    reproduces a default model.
+    the order or horizon chooses among them too, and with the order and the
+    horizon both given the estimators alone are cross-validated at them (eight
+    fold fits; with one estimator, or ``system_matrices`` given, or beyond
+    :data:`AUTO_VARIANT_MAX_SAMPLES`, an explicit call costs one fit and no
+    fold fit); otherwise the first one is used. ``info['system_matrices']``
+    names the one used, and ``info['system_matrices_selection']`` says why
+    when there was a choice; ``method(data, order=model.order,
+    horizon=model.info['horizon'])`` reproduces a default model.
     """
     if selection not in SELECTION_RULES:
         raise OptionError(f"selection must be one of {SELECTION_RULES}, got {selection!r}")
@@ -537,13 +538,13 @@ def identify(data, order, horizon, *, method: str, build, selection: str,
                 "estimators are consistent")}
         if variant_rule is not None:
             builds = {first: builds[first]}
-        # order and horizon given: no fold fits (issue 21). Between two estimators
-        # (system_matrices='auto' on a record of at most AUTO_VARIANT_MAX_SAMPLES), the
-        # one whose model fits the whole record better (_estimator_by_fit), at the
-        # given order and horizon as at the chosen ones, so that method(data,
-        # order=m.order, horizon=m.info['horizon']) reproduces the default model m
-        by_fit = selection == "cv" and isinstance(data, IOData) and len(builds) > 1
-        if selection == "cv" and isinstance(data, IOData) and not pinned:
+        # order and horizon given: no fold fits, except the choice between two
+        # estimators (system_matrices='auto' on a record of at most
+        # AUTO_VARIANT_MAX_SAMPLES), cross-validated at that order and horizon as the
+        # default call cross-validates it, so that method(data, order=m.order,
+        # horizon=m.info['horizon']) reproduces the default model m (issue 21)
+        choose = not pinned or len(builds) > 1
+        if selection == "cv" and isinstance(data, IOData) and choose:
             check_data(data, method)
 
             def prepare_fold(record, orders, f, factor=None):
@@ -552,17 +553,36 @@ def identify(data, order, horizon, *, method: str, build, selection: str,
                     return prepare(record, orders, f, factor=factor, **options)
             prepare_fold.blocks = blocks_per_horizon
             prepare_fold.statistic = statistic
-            n, f, variant, record = cross_validate(data, fixed, candidates, horizon,
-                                                   prepare_fold=prepare_fold, builds=builds)
+            try:
+                n, f, variant, record = cross_validate(data, fixed, candidates, horizon,
+                                                       prepare_fold=prepare_fold,
+                                                       builds=builds)
+            except SubidError:
+                if not pinned:
+                    raise
+                # order and horizon given, the folds too short for them: the first estimator
+                n, f, variant, record = fixed, horizon, first, None
             problem = prepare(data, n, f, **options)
-            variant, model, variant_rule = _estimator(problem, builds, by_fit, variant_rule)
-            n, f, variant, problem, model, variant_rule = _unrepaired_choice(
-                record, data, options, builds, by_fit,
-                (n, f, variant, problem, model, variant_rule))
-            model.info["order_selection"] = record
+            model = builds[variant](problem)
+            if record is not None:
+                n, f, variant, problem, model = _unrepaired_choice(
+                    record, data, options, builds, (n, f, variant, problem, model))
+            if record is not None and not pinned:
+                model.info["order_selection"] = record
+            if len(builds) > 1:
+                variant_rule = {"rule": "cv", "description": (
+                    "cross-validated at the given order and horizon "
+                    "(info['system_matrices_cv'])" if pinned else
+                    "cross-validated with the order and horizon (info['order_selection'])")}
+                if pinned and record is not None:
+                    model.info["system_matrices_cv"] = record
+                elif record is None:
+                    variant_rule = {"rule": "folds too short", "description": (
+                        f"{first!r}: the folds are too short for the given order and horizon")}
         else:
             problem = prepare(data, order, horizon, **options)
-            variant, model, variant_rule = _estimator(problem, builds, by_fit, variant_rule)
+            variant = next(iter(builds))
+            model = builds[variant](problem)
         if variant is not None:
             model.info["system_matrices"] = variant
         if variant_rule is not None:
@@ -573,47 +593,7 @@ def identify(data, order, horizon, *, method: str, build, selection: str,
     return model
 
 
-def _estimator(problem, builds, by_fit, rule):
-    """``(name, model, rule)``: the model of the problem by the first estimator, or, with
-    ``by_fit``, by the one of :func:`_estimator_by_fit` (``rule`` its record)."""
-    first = next(iter(builds))
-    if not by_fit:
-        return first, builds[first](problem), rule
-    return _estimator_by_fit(problem, builds)
-
-
-def _estimator_by_fit(problem, builds):
-    """The estimator of the system matrices whose model fits the record better.
-
-    ``system_matrices='auto'`` (:func:`identify`): both estimators give a model of
-    the same order from the same subspace, hence the same number of parameters, and
-    each is scored by its simulation fit on the whole estimation record (x0 by least
-    squares; :func:`subid.methods.dt._scoring.simulation_fit`, mean over outputs).
-    The first wins unless the other's misfit is smaller by more than
-    :data:`subid.methods.dt._selection.ABSOLUTE_TOLERANCE` (ties, e.g. noise-free
-    data, go to the classical estimator). No fold fits: a call with the order and
-    horizon given costs two fits and two simulations, and makes the same choice as
-    the default call at its chosen order and horizon (issue 21).
-    """
-    from subid.methods.dt._scoring import Held
-    from subid.methods.dt._selection import ABSOLUTE_TOLERANCE, _fit_score
-    held = Held(problem.data)
-    fitted, fits = {}, {}
-    for name, build in builds.items():
-        fitted[name] = build(problem)
-        fits[name] = _fit_score(fitted[name], held)
-    names = list(builds)
-    best = names[0]
-    for name in names[1:]:
-        if 100.0 - fits[name] < max(100.0 - fits[best], ABSOLUTE_TOLERANCE) - ABSOLUTE_TOLERANCE:
-            best = name
-    rule = {"rule": "fit", "fits": fits, "description": (
-        "the estimator whose model fits the whole estimation record better (simulation "
-        "fit %, x0 by least squares; the first on ties), at the order and horizon used")}
-    return best, fitted[best], rule
-
-
-def _unrepaired_choice(record, data, options, builds, by_fit, chosen):
+def _unrepaired_choice(record, data, options, builds, chosen):
     """The cross-validated choice, or a runner-up when only the choice had to be repaired.
 
     The cross-validation scores the models fitted to its folds. When the
@@ -627,11 +607,9 @@ def _unrepaired_choice(record, data, options, builds, by_fit, chosen):
     scores (at most :data:`subid.methods.dt._selection.MAX_FALLBACKS`), and the first
     whose final model needs no repair the folds did not need is taken; if
     none, the original choice stands. ``record['repaired_choice']`` tells.
-    Each candidate's model comes from the estimator :func:`_estimator` picks at
-    its order and horizon (an explicit call's choice).
     """
     from subid.methods.dt._selection import MAX_FALLBACKS, stabilised
-    n, f, variant, _, model, _ = chosen
+    n, f, variant, _, model = chosen
     by_key = {(c["order"], c["horizon"], c.get("system_matrices")): c
               for c in record["candidates"]}
 
@@ -642,27 +620,21 @@ def _unrepaired_choice(record, data, options, builds, by_fit, chosen):
     if not needs_repair((n, f, variant), model):
         return chosen
     skipped = [{"order": n, "horizon": f, "system_matrices": variant}]
-    tried = {(n, f)}
     for entry in record.get("ranking", [])[:MAX_FALLBACKS]:
-        if (entry["order"], entry["horizon"]) in tried:
-            continue
-        tried.add((entry["order"], entry["horizon"]))
+        key = (entry["order"], entry["horizon"], entry.get("system_matrices"))
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
-                pb = prepare(data, entry["order"], entry["horizon"], **options)
-                name, m, _ = _estimator(pb, builds, by_fit, None)
+                pb = prepare(data, key[0], key[1], **options)
+                m = builds[key[2]](pb)
         except SubidError:
             continue
-        key = (entry["order"], entry["horizon"], name)
         if not needs_repair(key, m):
-            taken = dict(entry, system_matrices=name) if name is not None else dict(entry)
-            record["repaired_choice"] = {"skipped": skipped, "taken": taken}
-            record["selected"] = dict(taken, fallback=True)
+            record["repaired_choice"] = {"skipped": skipped, "taken": entry}
+            record["selected"] = dict(entry, fallback=True)
             # the warnings of the model returned, as a direct call gives them
             pb = prepare(data, key[0], key[1], **options)
-            name, m, rule = _estimator(pb, builds, by_fit, chosen[5])
-            return key[0], key[1], name, pb, m, rule
+            return key[0], key[1], key[2], pb, builds[key[2]](pb)
         skipped.append(entry)
     record["repaired_choice"] = {"skipped": skipped, "taken": None}
     return chosen
