@@ -81,6 +81,9 @@ from subid.methods.dt._regression import (
 LAG_TOLERANCE = 1e-16
 #: Largest lag L used (the lag products are computed up to min(MAX_LAG, N // 4)).
 MAX_LAG = 4096
+#: Records shorter than this are not reduced to lag products: a pass over them costs
+#: less than the evaluation at the poles (and their lags rarely cover a slow pole).
+MIN_SAMPLES = 4096
 #: An error power below this fraction of the output's power is rounding-limited in
 #: the quadratic form (cancellation): the direct pass computes it instead.
 ROUNDING_GUARD = 1e-6
@@ -126,8 +129,9 @@ class LagProducts:
 
     @classmethod
     def of_record(cls, record, max_lag=MAX_LAG):
-        """The lag products of an IOData record of one experiment, else None."""
-        if getattr(record, "n_experiments", 1) != 1:
+        """The lag products of an IOData record of one experiment of at least
+        :data:`MIN_SAMPLES` samples, else None."""
+        if getattr(record, "n_experiments", 1) != 1 or record.n_samples < MIN_SAMPLES:
             return None
         return cls(record.u, record.y, max_lag)
 
