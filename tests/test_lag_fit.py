@@ -128,3 +128,19 @@ def test_fold_scores_equal_those_of_the_passes(monkeypatch):
     assert with_products.info["horizon"] == without.info["horizon"]
     np.testing.assert_allclose(with_products.A, without.A, rtol=0, atol=1e-12)
     assert _selection.describe(with_products.info["order_selection"])
+
+
+def test_fold_products_merged_from_blocks():
+    """The lag products of every fold's training and validation record, merged from
+    those of the four blocks and their boundaries, equal the record's own."""
+    rng = np.random.default_rng(3)
+    data = subid.IOData(rng.standard_normal((30000, 2)), rng.standard_normal((30000, 2)))
+    parts = [(data[a], data[b]) for a, b in _selection.folds(data.n_samples)]
+    records = [t for t, _ in parts] + [v for _, v in parts]
+    merged = _lag_fit.merged(_selection._blocks_of_folds(parts), records,
+                             _selection.FOLD_BLOCKS + _selection.VALIDATION_BLOCKS)
+    for record, lp in zip(records, merged):
+        own = _lag_fit.LagProducts.of_record(record)
+        assert lp.max_lag == own.max_lag and lp.n_samples == record.n_samples
+        for a, b in ((lp.G, own.G), (lp.R, own.R), (lp.Y, own.Y)):
+            np.testing.assert_allclose(a, b, rtol=0, atol=1e-11 * np.abs(b).max())

@@ -104,6 +104,38 @@ def correlations(u, y, max_lag):
     return np.ascontiguousarray(G), np.ascontiguousarray(R), y.T @ y
 
 
+def merged(blocks, records, groups):
+    """:class:`LagProducts` of ``records``, each the concatenation of the consecutive
+    ``blocks`` (IOData) whose indices ``groups`` lists, from one FFT per block and one
+    per boundary between blocks instead of one per record: the lag sums of a
+    concatenation are those of its blocks plus the products that straddle each
+    boundary (those of the window of K samples either side, minus those within each
+    half). None for a record shorter than :data:`MIN_SAMPLES`; None altogether when a
+    block is shorter than the largest lag needed (a lag could straddle two boundaries)."""
+    lengths = [b.n_samples for b in blocks]
+    caps = [min(MAX_LAG, r.n_samples // 4) for r in records]
+    K = max(caps)
+    if min(lengths) < K:
+        return None
+    sums = [correlations(b.u, b.y, K) for b in blocks]
+    straddle = []
+    for left, right in zip(blocks[:-1], blocks[1:]):
+        lu, ly, ru, ry = left.u[-K:], left.y[-K:], right.u[:K], right.y[:K]
+        whole = correlations(np.vstack([lu, ru]), np.vstack([ly, ry]), K)
+        a, b = correlations(lu, ly, K), correlations(ru, ry, K)
+        straddle.append((whole[0] - a[0] - b[0], whole[1] - a[1] - b[1]))
+    out = []
+    for record, group, cap in zip(records, groups, caps):
+        if record.n_samples < MIN_SAMPLES:
+            out.append(None)
+            continue
+        G = sum(sums[i][0] for i in group) + sum(straddle[i][0] for i in group[:-1])
+        R = sum(sums[i][1] for i in group) + sum(straddle[i][1] for i in group[:-1])
+        Y = sum(sums[i][2] for i in group)
+        out.append(LagProducts.from_sums(record.u, record.y, (G, R, Y), cap))
+    return out
+
+
 def correlations_reference(u, y, max_lag):
     """Plain sums behind :func:`correlations` (the tests compare them)."""
     N, nu = u.shape
@@ -128,6 +160,19 @@ class LagProducts:
         self.G, self.R, self.Y = correlations(self.u, self.y, self.max_lag)
 
     @classmethod
+    def from_sums(cls, u, y, sums, max_lag):
+        """The lag products of the record ``(u, y)`` whose lag sums ``(Γ, R, Y)`` are
+        already known (up to at least ``min(max_lag, N // 4)``)."""
+        out = cls.__new__(cls)
+        out.u = np.ascontiguousarray(u, dtype=float)
+        out.y = np.ascontiguousarray(y, dtype=float)
+        out.n_samples = out.u.shape[0]
+        out.max_lag = max(min(int(max_lag), out.n_samples // 4), 0)
+        G, R, out.Y = sums
+        out.G, out.R = G[:out.max_lag + 1], R[:out.max_lag + 1]
+        return out
+
+    @classmethod
     def of_record(cls, record, max_lag=MAX_LAG):
         """The lag products of an IOData record of one experiment of at least
         :data:`MIN_SAMPLES` samples, else None."""
@@ -139,6 +184,10 @@ class LagProducts:
 #: Largest condition number of the eigenvector matrix of A for the modal evaluation
 #: (its rounding errors grow with it: about 1e-10 relative at this bound).
 MAX_EIGVEC_CONDITION = 1e6
+
+
+#: The last modal form computed (:meth:`_Modal.of`): its key and the form.
+_LAST = [None, None]
 
 
 class _Modal:
@@ -155,7 +204,16 @@ class _Modal:
     @classmethod
     def of(cls, A, max_lag):
         """The modal form with the lags L where ``ρ(A)^L < LAG_TOLERANCE``, or None
-        (unstable, not finite, ill-conditioned eigenvectors, or L above ``max_lag``)."""
+        (unstable, not finite, ill-conditioned eigenvectors, or L above ``max_lag``).
+        The last one computed is kept: a candidate's fit and its score share it."""
+        key = (A.shape, A.tobytes())
+        if _LAST[0] != key:
+            _LAST[:] = [key, cls._of(A)]
+        form = _LAST[1]
+        return form if form is not None and form.L <= max_lag else None
+
+    @classmethod
+    def _of(cls, A):
         if A.shape[0] == 0 or not np.isfinite(A).all():
             return None
         lam, V = scipy.linalg.eig(A, check_finite=False)
@@ -163,7 +221,7 @@ class _Modal:
         if radius >= 1.0:
             return None
         L = 1 if radius == 0.0 else int(math.ceil(math.log(LAG_TOLERANCE) / math.log(radius)))
-        if L > max_lag:
+        if L > MAX_LAG:
             return None
         cond = np.linalg.cond(V)
         if not math.isfinite(cond) or cond > MAX_EIGVEC_CONDITION:

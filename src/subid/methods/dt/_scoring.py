@@ -210,6 +210,10 @@ class Held:
             ys = y / self.scale
             self.dev2 += np.sum((ys - ys.mean(axis=0)) ** 2, axis=0)
 
+    def seed(self, products):
+        """Use these lag products (one per piece; None where not applicable)."""
+        self._products = list(products)
+
     def products(self):
         """The lag products of every piece (None without ``lagged``)."""
         if not self.lagged:

@@ -315,6 +315,12 @@ def _blocks_of_folds(parts):
     return [v1, t0[third:half], t0[half:N - third], v0]
 
 
+#: The blocks of :func:`_blocks_of_folds` whose concatenation is each fold's training
+#: record, and its validation record.
+FOLD_BLOCKS = [(0, 1, 2), (1, 2, 3), (0, 1), (2, 3)]
+VALIDATION_BLOCKS = [(3,), (0,), (2, 3), (0, 1)]
+
+
 def fold_factors(parts, horizon, prepare_fold):
     """Hankel factors of the training records of the folds, each merged from the
     lagged-product statistics of the blocks of :func:`_blocks_of_folds` (one pass
@@ -396,6 +402,15 @@ def cross_validate(data, fixed, candidates, horizon, *, prepare_fold, builds):
     names = list(builds)
     held = [Held(validation, lagged=True) for _, validation in parts]   # once for every horizon
     lagged = [None] * len(parts)      # the training records' lag products, when first needed
+    blocks = _blocks_of_folds(parts)
+    if blocks is not None:            # all of them from one FFT per block (and boundary)
+        from subid.methods.dt._lag_fit import merged
+        records = [train for train, _ in parts] + [validation for _, validation in parts]
+        products = merged(blocks, records, FOLD_BLOCKS + VALIDATION_BLOCKS)
+        if products is not None:
+            lagged = products[:len(parts)]
+            for h, lp in zip(held, products[len(parts):]):
+                h.seed([lp])
     scores, fold_scores, stabilised_folds = {}, {}, {}
     searched = []              # (orders, horizons) of every block of candidates scored
     ceiling = None
