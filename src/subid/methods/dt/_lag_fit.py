@@ -80,7 +80,7 @@ from subid.methods.dt._regression import (
 #: past L lags are dropped: below rounding relative to the data.
 LAG_TOLERANCE = 1e-16
 #: Largest lag L used (the lag products are computed up to min(MAX_LAG, N // 4)).
-MAX_LAG = 4096
+MAX_LAG = 16384
 #: Records shorter than this are not reduced to lag products: a pass over them costs
 #: less than the evaluation at the poles (and their lags rarely cover a slow pole).
 MIN_SAMPLES = 4096
