@@ -13,9 +13,14 @@ so the normal equations need the lag products of the record,
     Γ(e) = sum_s u(s) u(s+e)^T,   R(k) = sum_t y(t) u(t-k)^T,   Y = sum_t y(t) y(t)^T,
 
 (e, k = 0..L), and its first and last L samples. These are computed once per
-record (:class:`LagProducts`, by FFT: ``O(N log N)`` whatever L) and shared by
-every candidate order, horizon and estimator; each candidate then costs
-``O(L n^3)`` flops, independent of N.
+record (:class:`LagProducts`, by FFT: ``O(N log N)`` whatever L; for the folds of
+the cross-validation, once per block and boundary, :func:`merged`) and shared by
+every candidate order, horizon and estimator. Every sum below is a lag sequence
+times powers of A; with ``A = V diag(λ) V^{-1}`` each is evaluated at the poles,
+``sum_e c_e A^e = V diag(sum_e c_e λ^e) V^{-1}`` (:class:`_Modal`), and the infinite
+sums of the Gramians in closed form (``sum_t λ_l^t λ_m^t = 1 / (1 - λ_l λ_m)``), so a
+candidate costs ``O(L n)`` flops per sequence plus ``O(n^3)``, independent of N.
+L is the smallest lag with ``ρ(A)^L`` below :data:`LAG_TOLERANCE` (rounding).
 
 **Training fold** (the regression of :func:`subid.methods.dt._regression.fit_b_d_x0`,
 parameters ``[x0; vec B; vec D]``, each output weighted by ``w_r``, ``W = diag w``).
@@ -47,19 +52,21 @@ the error power ``sum_t (y_r - y_f,r)^2`` of the forced response ``y_f`` (zero i
 state) is ``Y_rr - 2 sum_k (R(k) G_k^T)_rr + (sum_t y_f y_f^T)_rr`` with the Markov
 parameters ``G_0 = D``, ``G_k = C A^(k-1) B``; ``sum_t y_f y_f^T = C X C^T + C S_D +
 S_D^T C^T + D Γ(0) D^T`` minus the free response after the record, where ``S_D =
-sum_{k>=1} A^(k-1) B Γ(k) D^T`` and ``X = sum_b A^b S A^(b)T`` with ``S = sum_{e>=0}
-A^e B Γ(e) B^T + sum_{e>=1} B Γ(e)^T B^T (A^e)^T`` (the same block-Toeplitz sum).
-The least-squares x0 involves the first L samples only: they are simulated by the
-compiled kernel of :mod:`subid.methods.dt._scoring`, and their rows reduced exactly
-as there; the error power of the other samples is the total minus that of the first
-L.
+sum_{k>=1} A^(k-1) B Γ(k) D^T`` and ``X = A X A^T + S`` with ``S = sum_{e>=0} A^e B Γ(e)
+B^T + sum_{e>=1} B Γ(e)^T B^T (A^e)^T`` (the same block-Toeplitz sum). The
+least-squares x0 (outputs weighted) involves the first L samples only: per output,
+``β_r = sum_t (A^t)^T c_r^T (y_r - y_f,r)(t)`` is ``sum_t (A^t)^T c_r^T y_r(t) -
+sum_t (A^t)^T c_r^T D_r u(t) - sum_s (A^(s+1))^T P_r B u(s)`` (``P_r`` the Gramian of
+output r), x0 solves ``(sum_r w_r^2 P_r) x0 = sum_r w_r^2 β_r``, and the error power
+falls by ``2 x0^T β_r - x0^T P_r x0``.
 
 **Where it does not apply** the callers take the per-candidate passes: an unstable
-A, or one whose ``|A^L|`` (max entry, by repeated squaring) stays above
-:data:`LAG_TOLERANCE` for L up to the record's cap (:data:`MAX_LAG`, and a quarter of
-the record); a regression or error power whose value the normal equations leave to
-rounding (nearly exact fits, :data:`ROUNDING_GUARD`), where the direct passes are
-exact; records of several experiments.
+A, one whose eigenvector matrix is ill-conditioned (:data:`MAX_EIGVEC_CONDITION`) or
+whose L exceeds the lags kept (:data:`MAX_LAG`, a quarter of a training record, half
+of a validation record); a regression or error power whose value the normal
+equations leave to rounding (nearly exact fits, :data:`ROUNDING_GUARD`), where the
+passes are exact; records of several experiments or of fewer than
+:data:`MIN_SAMPLES` samples.
 """
 
 from __future__ import annotations

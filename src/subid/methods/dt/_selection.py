@@ -75,18 +75,31 @@ reproduces it exactly.
 from the lagged products of four blocks where exact, :func:`fold_factors`), one
 factorisation and SVD per fold for every order, the feedthrough decision per
 fold (every channel's F-tests from one factorisation per regressor set), the
-validation records' weights and spreads once for every horizon. Per candidate:
-its A and C, one B, D, x0 regression on its training fold (the modal normal
-equations, a pass over the fold) and one compiled simulation of its validation
-block (:mod:`subid.methods.dt._scoring`); an unstable A that ``stability='auto'``
-would not keep is not fitted (:mod:`subid.methods.dt._residual_bound`). The
-regression cannot be shared between orders: each order has its own A, hence its
-own regressors (the impulse responses ``C A^k`` of the model), so the default
-call costs about ``candidates x folds`` passes over the record where a pinned call
-costs one: measured (``bench/run.py --selection-only``, 2x2 order-4 system, 20 dB,
-three runs) 8-10x the pinned call at 10^3-10^4 samples (where the pinned call
-cross-validates its two estimators), 46-54x at 10^5 and 11-15x at 10^6 (the folds
-use at most :data:`MAX_SELECTION_SAMPLES`).
+validation records' weights and spreads once for every horizon, and, on records
+of at least :data:`subid.methods.dt._lag_fit.MIN_SAMPLES` samples, the lag
+products of every training and validation record (``Γ(e) = sum u u^T``, ``R(k) =
+sum y u^T`` up to 16,384 lags; one FFT per block of :func:`_blocks_of_folds` and
+per boundary between blocks, :func:`subid.methods.dt._lag_fit.merged`). Per
+candidate: its A and C, its B, D, x0 regression on its training fold and its
+simulation score on its validation block. For a stable, diagonalisable A whose
+poles decay below rounding within the lags kept, both come from the lag products
+(:mod:`subid.methods.dt._lag_fit`: the normal equations and the error power are
+block-Toeplitz sums of the lag products, evaluated at the poles, with exact terms
+for the first and last L samples): ``O(L n)`` flops per lag sequence, no pass over
+the record, the same B, D, x0 and scores as the passes to about 1e-12 relative
+(``tests/test_lag_fit.py``). Otherwise (an unstable A, a pole too slow for the
+lags, a nearly exact fit whose residual the normal equations would leave to
+rounding, records of several experiments or shorter ones) one pass over the
+training fold (the modal normal equations) and one compiled simulation of the
+validation block (:mod:`subid.methods.dt._scoring`); an unstable A that
+``stability='auto'`` would not keep is not fitted
+(:mod:`subid.methods.dt._residual_bound`). Measured (``bench/run.py
+--selection-only``, 2x2 order-4 system, 20 dB, CPU time, three interleaved runs;
+bench/results.md): the default call costs 7-8x the pinned call at 10^3-10^4
+samples (where the pinned call cross-validates its two estimators), about 18-24x
+at 10^5 (was 46-54x) and 8-9x at 10^6 (was 11-15x): the per-candidate work no
+longer grows with N, but 80-160 candidate models (orders x horizons x folds x
+estimators), each about a millisecond of subspace steps and bookkeeping, remain.
 """
 
 from __future__ import annotations
