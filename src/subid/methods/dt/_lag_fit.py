@@ -83,7 +83,10 @@ from subid.methods.dt._regression import (
     solve_normal_equations,
 )
 
-#: ``|A^L|`` (max entry; A in any basis of a normalised problem) below which the terms
+#: The key of a problem's cache that holds its record's lag products (a
+#: cross-validation fold, :func:`subid.methods.dt._selection.score_horizon`).
+LAG_PRODUCTS = "lag products"
+#: ``ρ(A)^L`` (the spectral radius) below which the terms
 #: past L lags are dropped: below rounding relative to the data.
 LAG_TOLERANCE = 1e-16
 #: Largest lag L used (the lag products are computed up to min(MAX_LAG, N // 4)).
@@ -193,8 +196,8 @@ class LagProducts:
 MAX_EIGVEC_CONDITION = 1e6
 
 
-#: The last modal form computed (:meth:`_Modal.of`): its key and the form.
-_LAST = [None, None]
+#: The last modal form computed (:meth:`_Modal.of`), as one ``(key, form)`` pair.
+_LAST = [None]
 
 
 class _Modal:
@@ -214,9 +217,10 @@ class _Modal:
         (unstable, not finite, ill-conditioned eigenvectors, or L above ``max_lag``).
         The last one computed is kept: a candidate's fit and its score share it."""
         key = (A.shape, A.tobytes())
-        if _LAST[0] != key:
-            _LAST[:] = [key, cls._of(A)]
-        form = _LAST[1]
+        last = _LAST[0]                    # one (key, form) pair: safe across threads
+        if last is None or last[0] != key:
+            last = _LAST[0] = (key, cls._of(A))
+        form = last[1]
         return form if form is not None and form.L <= max_lag else None
 
     @classmethod

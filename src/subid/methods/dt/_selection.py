@@ -272,9 +272,8 @@ def score_horizon(parts, orders, horizon, *, prepare_fold, builds, held=None, la
     repaired : dict ``(order, estimator index) -> int``
         How many of the fold models had to be stabilised (:func:`stabilised`).
     """
-    from subid.methods.dt._lag_fit import LagProducts
+    from subid.methods.dt._lag_fit import LAG_PRODUCTS, LagProducts
     from subid.methods.dt._scoring import Held
-    from subid.methods.dt._subspace import LAG_PRODUCTS
     names = list(builds)
     per_fold = {(n, v): [] for n in orders for v in range(len(names))}
     repaired = {(n, v): 0 for n in orders for v in range(len(names))}

@@ -59,15 +59,13 @@ from subid.methods.bd import (  # noqa: F401 (check_experiment_lengths: names of
     fit_b_d_x0,
 )
 from subid.methods.dt._checks import check_data
+from subid.methods.dt._lag_fit import LAG_PRODUCTS
 from subid.methods.dt._selection import SELECTION_RULES, cross_validate, default_gap_horizon
 from subid.model.statespace import StateSpace
 from subid.statistic._hankel import HankelFactor
 from subid.statistic.hankel import HankelStatistic
 
 DEFAULT_MAX_ORDER = 10
-#: The key of a problem's cache that holds its record's lag products
-#: (:class:`subid.methods.dt._lag_fit.LagProducts`; a cross-validation fold).
-LAG_PRODUCTS = "lag products"
 
 
 def check_order_horizon(order, horizon, data, *, method: str, blocks_per_horizon: int = 2):
