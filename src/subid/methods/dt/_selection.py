@@ -414,11 +414,11 @@ def cross_validate(data, fixed, candidates, horizon, *, prepare_fold, builds):
     names = list(builds)
     held = [Held(validation, lagged=True) for _, validation in parts]   # once for every horizon
     lagged = [None] * len(parts)      # the training records' lag products, when first needed
-    blocks = _blocks_of_folds(parts)
-    if blocks is not None:            # all of them from one FFT per block (and boundary)
+    pieces = _blocks_of_folds(parts)
+    if pieces is not None:            # all of them from one FFT per block (and boundary)
         from subid.methods.dt._lag_fit import merged
         records = [train for train, _ in parts] + [validation for _, validation in parts]
-        products = merged(blocks, records, FOLD_BLOCKS + VALIDATION_BLOCKS)
+        products = merged(pieces, records, FOLD_BLOCKS + VALIDATION_BLOCKS)
         if products is not None:
             lagged = products[:len(parts)]
             for h, lp in zip(held, products[len(parts):]):
