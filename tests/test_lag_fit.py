@@ -144,3 +144,25 @@ def test_fold_products_merged_from_blocks():
         assert lp.max_lag == own.max_lag and lp.n_samples == record.n_samples
         for a, b in ((lp.G, own.G), (lp.R, own.R), (lp.Y, own.Y)):
             np.testing.assert_allclose(a, b, rtol=0, atol=1e-11 * np.abs(b).max())
+
+
+@pytest.mark.slow
+def test_search_past_10_on_a_long_record(monkeypatch):
+    """The search past order 10 with the folds' lag products in use (training folds
+    longer than MIN_SAMPLES): the blocks of the folds are not the block rows of the
+    horizons, and the order found is the true one."""
+    used = []
+    real = _lag_fit.fit_b_d_x0
+
+    def counting(*args, **kwargs):
+        out = real(*args, **kwargs)
+        used.append(out is not None)
+        return out
+
+    monkeypatch.setattr(_lag_fit, "fit_b_d_x0", counting)
+    true = systems.random_system(12, 2, 4, seed=4)
+    data = systems.simulate_data(true, 12000, seed=5, output_snr_db=40)
+    model = subid.moesp(data, system_matrices="shift")
+    assert len(model.info["order_selection"]["searched"]) >= 2
+    assert model.order == 12
+    assert sum(used) > len(used) / 2
