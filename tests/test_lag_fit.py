@@ -166,3 +166,14 @@ def test_search_past_10_on_a_long_record(monkeypatch):
     assert len(model.info["order_selection"]["searched"]) >= 2
     assert model.order == 12
     assert sum(used) > len(used) / 2
+
+
+def test_noise_free_default_call_is_exact_on_a_long_record():
+    """Noise-free data long enough for the lag products: the default call still finds
+    the true order and recovers the system to rounding (the nearly exact fits fall
+    back to the passes, which resolve them)."""
+    true = systems.random_system(4, 2, 2, seed=11)
+    data = systems.simulate_data(true, 10000, seed=12)
+    model = subid.moesp(data)
+    assert model.order == 4
+    assert subid.markov_error(model, true) < 1e-8
