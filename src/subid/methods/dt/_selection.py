@@ -415,8 +415,10 @@ def cross_validate(data, fixed, candidates, horizon, *, prepare_fold, builds):
     names = list(builds)
     held = [Held(validation, lagged=True) for _, validation in parts]   # once for every horizon
     lagged = [None] * len(parts)      # the training records' lag products, when first needed
-    pieces = _blocks_of_folds(parts)
-    if pieces is not None:            # all of them from one FFT per block (and boundary)
+    # all of them from one FFT per block (and boundary), for the discrete-time methods
+    # (whose fold problems take them, subid.methods.dt._subspace.b_d_fit)
+    pieces = _blocks_of_folds(parts) if hasattr(prepare_fold, "statistic") else None
+    if pieces is not None:
         from subid.methods.dt._lag_fit import merged
         records = [train for train, _ in parts] + [validation for _, validation in parts]
         products = merged(pieces, records, FOLD_BLOCKS + VALIDATION_BLOCKS)
