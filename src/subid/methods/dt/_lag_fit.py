@@ -208,7 +208,17 @@ class _Modal:
 
     def __init__(self, lam, V, Wm, L):
         self.lam, self.V, self.Wm, self.L = lam, V, Wm, L
-        self.vand = np.cumprod(np.vstack([np.ones(lam.size), np.tile(lam, (L, 1))]), axis=0)
+        vand = np.empty((lam.size, L + 1), dtype=complex)   # λ^e by doubling
+        vand[:, 0] = 1.0
+        filled, step = 1, lam.copy()                        # step = λ^filled
+        while filled < L + 1:
+            k = min(filled, L + 1 - filled)
+            vand[:, filled:filled + k] = vand[:, :k] * step[:, None]
+            filled += k
+            step = vand[:, filled - 1] * lam
+        # real and imaginary parts apart: real matrix products (BLAS) in poly
+        self.vand_re = np.ascontiguousarray(vand.real)
+        self.vand_im = np.ascontiguousarray(vand.imag)
         self.denominator = 1.0 - lam[:, None] * lam[None, :]
 
     @classmethod
@@ -243,12 +253,15 @@ class _Modal:
         """``sum_e seq[e + shift] λ^e`` for e = 0..L - shift: (n, *seq.shape[1:])."""
         m = seq.shape[0] - shift
         flat = seq[shift:].reshape(m, -1)
-        return (self.vand[:m].T @ flat).reshape((self.lam.size,) + seq.shape[1:])
+        out = self.vand_re[:, :m] @ flat + 1j * (self.vand_im[:, :m] @ flat)
+        return out.reshape((self.lam.size,) + seq.shape[1:])
 
     def matrix(self, values):
         """``V diag(values) V^{-1}`` (real) for values (n, ...): (..., n, n)."""
-        vals = np.moveaxis(values, 0, -1)[..., None, :]
-        return np.real((self.V * vals) @ self.Wm)
+        n = self.lam.size
+        vals = values.reshape(n, -1).T                      # (k, n)
+        out = np.real((self.V[None, :, :] * vals[:, None, :]) @ self.Wm)
+        return out.reshape(values.shape[1:] + (n, n))
 
     def gramian(self, left, right):
         """``sum_{t>=0} (A^t)^T left^T right A^t`` (left, right: (m, n))."""
