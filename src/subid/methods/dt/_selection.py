@@ -95,9 +95,9 @@ validation block (:mod:`subid.methods.dt._scoring`); an unstable A that
 ``stability='auto'`` would not keep is not fitted
 (:mod:`subid.methods.dt._residual_bound`). Measured (``bench/run.py
 --selection-only``, 2x2 order-4 system, 20 dB, CPU time, three runs;
-bench/results.md): the default call costs 7.7-8.2x the pinned call at 10^3 samples
-(records too short for the lag products) and 6.5-8.4x at 10^4 (where the pinned call
-cross-validates its two estimators), 17.6-24.7x at 10^5 (34-46x before) and 8.8-9.9x at
+bench/results.md): the default call costs 7.6-9.1x the pinned call at 10^3 samples
+(records too short for the lag products) and 6.4-7.8x at 10^4 (where the pinned call
+cross-validates its two estimators), 20-24.5x at 10^5 (34-46x before) and 7.3-8.8x at
 10^6 (the folds use at most :data:`MAX_SELECTION_SAMPLES`): the per-candidate work no
 longer grows with N, but 80-160 candidate models (orders x horizons x folds x
 estimators), each about a millisecond of subspace steps and bookkeeping, remain.
