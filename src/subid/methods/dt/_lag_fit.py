@@ -122,6 +122,8 @@ def merged(blocks, records, groups):
     boundary (those of the window of K samples either side, minus those within each
     half). None for a record shorter than :data:`MIN_SAMPLES`; None altogether when a
     block is shorter than the largest lag needed (a lag could straddle two boundaries)."""
+    if all(r.n_samples < MIN_SAMPLES for r in records):
+        return [None] * len(records)
     lengths = [b.n_samples for b in blocks]
     caps = [min(MAX_LAG, r.n_samples // 4) for r in records]
     K = max(caps)
