@@ -188,9 +188,14 @@ class Held:
     """What the score of every candidate needs from one validation record, once:
     its pieces (one per experiment), the x0 weights (inverse standard deviation
     over the whole record, as ``fit_percent`` weighs them), the scale of each
-    output and the spread ``sum (y - ȳ_e)^2`` the fit divides by."""
+    output and the spread ``sum (y - ȳ_e)^2`` the fit divides by. With ``lagged``,
+    the lag products of every piece (:class:`subid.methods.dt._lag_fit.LagProducts`,
+    computed at the first score), from which the score of a stable candidate costs
+    no pass over the record."""
 
-    def __init__(self, validation):
+    def __init__(self, validation, *, lagged=False):
+        self.lagged = lagged
+        self._products = None
         self.record = validation          # for continuous-time models (fit_percent, their hold)
         y_all = validation.y
         std = column_std(y_all)
@@ -205,21 +210,40 @@ class Held:
             ys = y / self.scale
             self.dev2 += np.sum((ys - ys.mean(axis=0)) ** 2, axis=0)
 
+    def seed(self, products):
+        """Use these lag products (one per piece; None where not applicable)."""
+        self._products = list(products)
+
+    def products(self):
+        """The lag products of every piece (None without ``lagged``)."""
+        if not self.lagged:
+            return [None] * len(self.pieces)
+        if self._products is None:
+            from subid.methods.dt._lag_fit import MIN_SAMPLES, LagProducts
+            self._products = [LagProducts(u, y) if u.shape[0] >= MIN_SAMPLES else None
+                              for u, y in self.pieces]
+        return self._products
+
 
 def simulation_fit(A, B, C, D, validation, *, kernel=forced_error):
     """Simulation fit (%) per output of the discrete model ``(A, B, C, D)`` on
     ``validation`` (an IOData record or its :class:`Held`) with x0 by least
     squares: ``fit_percent(model, validation)`` to rounding (see the module
     documentation), or None when the simulation overflows or an output is
-    constant. ``kernel``: :func:`forced_error` or its reference."""
+    constant. ``kernel``: :func:`forced_error` or its reference. A :class:`Held`
+    with lag products scores a stable candidate from them where they apply
+    (:func:`subid.methods.dt._lag_fit.error_power`: the same value to rounding)."""
+    from subid.methods.dt._lag_fit import error_power
     held = validation if isinstance(validation, Held) else Held(validation)
     if np.any(held.dev2 == 0):
         return None
     A, B, C, D = (np.ascontiguousarray(M, dtype=float) for M in (A, B, C, D))
     err2 = np.zeros(held.dev2.shape)
     inv_scale = 1.0 / held.scale
-    for u, y in held.pieces:
-        power = _error_power(A, B, C, D, u, y, held.weights, inv_scale, kernel)
+    for (u, y), lp in zip(held.pieces, held.products()):
+        power = None if lp is None else error_power(A, B, C, D, lp, held.weights, inv_scale)
+        if power is None:
+            power = _error_power(A, B, C, D, u, y, held.weights, inv_scale, kernel)
         if power is None:
             return None
         err2 += power

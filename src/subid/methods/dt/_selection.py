@@ -75,18 +75,32 @@ reproduces it exactly.
 from the lagged products of four blocks where exact, :func:`fold_factors`), one
 factorisation and SVD per fold for every order, the feedthrough decision per
 fold (every channel's F-tests from one factorisation per regressor set), the
-validation records' weights and spreads once for every horizon. Per candidate:
-its A and C, one B, D, x0 regression on its training fold (the modal normal
-equations, a pass over the fold) and one compiled simulation of its validation
-block (:mod:`subid.methods.dt._scoring`); an unstable A that ``stability='auto'``
-would not keep is not fitted (:mod:`subid.methods.dt._residual_bound`). The
-regression cannot be shared between orders: each order has its own A, hence its
-own regressors (the impulse responses ``C A^k`` of the model), so the default
-call costs about ``candidates x folds`` passes over the record where a pinned call
-costs one: measured (``bench/run.py --selection-only``, 2x2 order-4 system, 20 dB,
-three runs) 8-10x the pinned call at 10^3-10^4 samples (where the pinned call
-cross-validates its two estimators), 46-54x at 10^5 and 11-15x at 10^6 (the folds
-use at most :data:`MAX_SELECTION_SAMPLES`).
+validation records' weights and spreads once for every horizon, and, on records
+of at least :data:`subid.methods.dt._lag_fit.MIN_SAMPLES` samples, the lag
+products of every training and validation record (``Γ(e) = sum u u^T``, ``R(k) =
+sum y u^T`` up to 16,384 lags; one FFT per block of :func:`_blocks_of_folds` and
+per boundary between blocks, :func:`subid.methods.dt._lag_fit.merged`). Per
+candidate: its A and C, its B, D, x0 regression on its training fold and its
+simulation score on its validation block. For a stable, diagonalisable A whose
+poles decay below rounding within the lags kept, both come from the lag products
+(:mod:`subid.methods.dt._lag_fit`: the normal equations and the error power are
+block-Toeplitz sums of the lag products, evaluated at the poles, with exact terms
+for the first and last L samples): ``O(L n)`` flops per lag sequence, no pass over
+the record, the same B, D, x0 and scores as the passes to about 1e-12 relative
+(``tests/test_lag_fit.py``). Otherwise (an unstable A, a pole too slow for the
+lags, a nearly exact fit whose residual the normal equations would leave to
+rounding, records of several experiments or shorter ones) one pass over the
+training fold (the modal normal equations) and one compiled simulation of the
+validation block (:mod:`subid.methods.dt._scoring`); an unstable A that
+``stability='auto'`` would not keep is not fitted
+(:mod:`subid.methods.dt._residual_bound`). Measured (``bench/run.py
+--selection-only``, 2x2 order-4 system, 20 dB, CPU time, three runs;
+bench/results.md): the default call costs 7.6-9.1x the pinned call at 10^3 samples
+(records too short for the lag products) and 6.4-7.8x at 10^4 (where the pinned call
+cross-validates its two estimators), 20-24.5x at 10^5 (34-46x before) and 7.3-8.8x at
+10^6 (the folds use at most :data:`MAX_SELECTION_SAMPLES`): the per-candidate work no
+longer grows with N, but 80-160 candidate models (orders x horizons x folds x
+estimators), each about a millisecond of subspace steps and bookkeeping, remain.
 """
 
 from __future__ import annotations
@@ -140,7 +154,7 @@ def _fit_score(model, validation) -> float:
     return max(value, FLOOR) if math.isfinite(value) else FLOOR
 
 
-def score_horizon(parts, orders, horizon, *, fitter, estimators, held=None):
+def score_horizon(parts, orders, horizon, *, fitter, estimators, held=None, lagged=None):
     """Fold scores of every candidate order at one horizon.
 
     Per fold, one problem (one statistic, by cost: the lagged products merged from
@@ -183,16 +197,23 @@ def score_horizon(parts, orders, horizon, *, fitter, estimators, held=None):
     repaired : dict ``(order, estimator index) -> int``
         How many of the fold models had to be stabilised (:func:`stabilised`).
     """
+    from subid.methods.dt._lag_fit import LAG_PRODUCTS, LagProducts
     from subid.methods.dt._scoring import Held
     names = list(estimators)
     per_fold = {(n, v): [] for n in orders for v in range(len(names))}
     repaired = {(n, v): 0 for n in orders for v in range(len(names))}
     factors = fold_factors(parts, horizon, fitter)
     if held is None:                      # what every candidate's score needs, once
-        held = [Held(validation) for _, validation in parts]
-    for (train, _), factor, held_out in zip(parts, factors, held):
+        held = [Held(validation, lagged=True) for _, validation in parts]
+    if lagged is None:
+        lagged = [None] * len(parts)
+    for k, ((train, _), factor, held_out) in enumerate(zip(parts, factors, held)):
         problem = fitter.prepare_fold(train, orders, horizon, factor=factor) \
             if factor is not None else fitter.prepare_fold(train, orders, horizon)
+        if hasattr(problem, "_cache") and train.n_experiments == 1:
+            if lagged[k] is None:         # once per fold, for every horizon
+                lagged[k] = LagProducts.of_record(train)
+            problem._cache[LAG_PRODUCTS] = lagged[k]    # B, D, x0 of every candidate
         for n in orders:
             for v, name in enumerate(names):
                 try:
@@ -229,6 +250,12 @@ def _blocks_of_folds(parts):
             and same(v2, t3) and same(v3, t2)):
         return None
     return [v1, t0[third:half], t0[half:N - third], v0]
+
+
+#: The blocks of :func:`_blocks_of_folds` whose concatenation is each fold's training
+#: record, and its validation record.
+FOLD_BLOCKS = [(0, 1, 2), (1, 2, 3), (0, 1), (2, 3)]
+VALIDATION_BLOCKS = [(3,), (0,), (2, 3), (0, 1)]
 
 
 def fold_factors(parts, horizon, fitter):
@@ -311,7 +338,20 @@ def cross_validate(data, fixed, candidates, horizon, *, fitter, estimators):
         n_experiments=n_exp_train, reveal_all=fixed is not None)
     from subid.methods.dt._scoring import Held
     names = list(estimators)
-    held = [Held(validation) for _, validation in parts]     # once for every horizon
+    held = [Held(validation, lagged=True) for _, validation in parts]   # once for every horizon
+    lagged = [None] * len(parts)      # the training records' lag products, when first needed
+    # all of them from one FFT per block (and boundary), for the discrete-time methods
+    # (whose fold problems take them, subid.methods.dt._subspace.b_d_fit)
+    pieces = _blocks_of_folds(parts) if getattr(fitter, "statistic", None) is not None \
+        else None
+    if pieces is not None:
+        from subid.methods.dt._lag_fit import merged
+        records = [train for train, _ in parts] + [validation for _, validation in parts]
+        products = merged(pieces, records, FOLD_BLOCKS + VALIDATION_BLOCKS)
+        if products is not None:
+            lagged = products[:len(parts)]
+            for h, lp in zip(held, products[len(parts):]):
+                h.seed([lp])
     scores, fold_scores, stabilised_folds = {}, {}, {}
     searched = []              # (orders, horizons) of every block of candidates scored
     ceiling = None
@@ -321,7 +361,8 @@ def cross_validate(data, fixed, candidates, horizon, *, fitter, estimators):
             if not orders:
                 continue
             per_fold, repaired = score_horizon(parts, orders, f, fitter=fitter,
-                                               estimators=estimators, held=held)
+                                               estimators=estimators, held=held,
+                                               lagged=lagged)
             for (n, v), values in per_fold.items():
                 fold_scores[(n, f, v)] = values
                 scores[(n, f, v)] = float(np.mean(values))

@@ -63,6 +63,7 @@ from subid.methods.bd import (  # noqa: F401 (check_experiment_lengths: names of
 )
 from subid.methods.crossval import MAX_ORDER
 from subid.methods.dt._checks import check_data
+from subid.methods.dt._lag_fit import LAG_PRODUCTS
 from subid.methods.dt._selection import default_gap_horizon
 from subid.model.statespace import StateSpace
 from subid.statistic._hankel import HankelFactor
@@ -176,8 +177,19 @@ def b_d_fit(problem: "Problem", C_n, gamma, L11, L_yu, *, bd_method: str, feedth
     projection = Projection(C_n, gamma, L11, L_yu, problem.unscale)
     C = C_n * problem.output_scale[:, None]
     weights = problem.weights() if isinstance(problem.data, IOData) else None
+    # a cross-validation fold: the record's lag products, shared by every candidate
+    # (subid.methods.dt._selection.score_horizon; subid.methods.dt._lag_fit)
+    lagged = problem._cache.get(LAG_PRODUCTS) if bd_method in ("auto", "simulation") else None
 
     def fit(A, worse_than=None):
+        if lagged is not None:
+            from subid.methods.dt._lag_fit import fit_b_d_x0 as lag_fit
+            fitted = lag_fit(A, C, lagged, weights, feedthrough=feedthrough,
+                             estimate_x0=estimate_x0)
+            if fitted is not None:
+                fitted[3].update({INFO_KEY: "simulation",
+                                  "spectral_radius": float(np.abs(np.linalg.eigvals(A)).max())})
+                return fitted[0], fitted[1], fitted[2] if estimate_x0 else None, fitted[3]
         return fit_b_d_x0(A, C, problem.data, bd_method=bd_method, feedthrough=feedthrough,
                           estimate_x0=estimate_x0, output_weights=weights,
                           projection=projection, worse_than=worse_than)

@@ -1,0 +1,390 @@
+"""B, D, x0 and the validation score of a candidate model from lag products.
+
+The cross-validation of the order (:mod:`subid.methods.dt._selection`) fits B,
+D, x0 for every candidate (A, C) on its training fold and scores the model by
+its simulation fit on the validation block. Both are least-squares problems
+whose data enter only through second moments: for a stable A the forced
+response is, up to ``|A^L|``, a FIR of length L,
+
+    y(t) = C A^t x0 + sum_{k=1..L} C A^(k-1) B u(t-k) + D u(t),
+
+so the normal equations need the lag products of the record,
+
+    Γ(e) = sum_s u(s) u(s+e)^T,   R(k) = sum_t y(t) u(t-k)^T,   Y = sum_t y(t) y(t)^T,
+
+(e, k = 0..L), and its first and last L samples. These are computed once per
+record (:class:`LagProducts`, by FFT: ``O(N log N)`` whatever L; for the folds of
+the cross-validation, once per block and boundary, :func:`merged`) and shared by
+every candidate order, horizon and estimator. Every sum below is a lag sequence
+times powers of A; with ``A = V diag(λ) V^{-1}`` each is evaluated at the poles,
+``sum_e c_e A^e = V diag(sum_e c_e λ^e) V^{-1}`` (:class:`_Modal`), and the infinite
+sums of the Gramians in closed form (``sum_t λ_l^t λ_m^t = 1 / (1 - λ_l λ_m)``), so a
+candidate costs ``O(L n)`` flops per sequence plus ``O(n^3)``, independent of N.
+L is the smallest lag with ``ρ(A)^L`` below :data:`LAG_TOLERANCE` (rounding).
+
+**Training fold** (the regression of :func:`subid.methods.dt._regression.fit_b_d_x0`,
+parameters ``[x0; vec B; vec D]``, each output weighted by ``w_r``, ``W = diag w``).
+With the state sensitivity ``X(t) = sum_{k=1..t} u(t-k)^T kron A^(k-1)``,
+``Q = C^T W^2 C`` and ``P = sum_{t>=0} (A^t)^T Q A^t`` (the weighted observability
+Gramian, ``P = A^T P A + Q``):
+
+* ``sum_{t<N} X^T Q X = Γ(0) kron P + sum_{e>=1} [Γ(e) kron (A^e)^T P + Γ(e)^T kron P A^e]
+  - X(N)^T P X(N)``: the sum over every t of the input zero-padded beyond the
+  record is block Toeplitz in the lag products (with ``a = j-1``, ``b = k-1``,
+  ``e = a - b``, the inner sum over b is P); the samples ``t >= N`` of that padded
+  sum are the free response from ``X(N) = sum_{k=1..L} u(N-k)^T kron A^(k-1)``, which
+  the last L samples give exactly;
+* ``sum_t X^T C^T W^2 (u^T kron I) = sum_{k>=1} Γ(k) kron (C A^(k-1))^T W^2`` and
+  ``sum_t X^T C^T W^2 y = sum_{k>=1} vec((C A^(k-1))^T W^2 R(k))``: no edge term
+  (the D and y rows stop at N themselves);
+* the D block ``Γ(0) kron W^2`` and ``vec(W^2 R(0))``;
+* the x0 rows, ``C A^t`` negligible after L samples: ``sum_t (A^t)^T Q A^t = P``,
+  ``sum_t (A^t)^T Q X(t) = sum_s u(s)^T kron (A^(s+1))^T P`` (s < L),
+  ``sum_t (A^t)^T C^T W^2 (u(t)^T kron I)`` and ``sum_t (A^t)^T C^T W^2 y(t)``
+  over the first L samples.
+
+The augmented normal matrix is solved by
+:func:`subid.methods.dt._regression.solve_normal_equations` with the guards of the
+modal path (the same problem it solves by a pass over the record).
+
+**Validation score** (:func:`subid.methods.dt._scoring.simulation_fit`): per output r,
+the error power ``sum_t (y_r - y_f,r)^2`` of the forced response ``y_f`` (zero initial
+state) is ``Y_rr - 2 sum_k (R(k) G_k^T)_rr + (sum_t y_f y_f^T)_rr`` with the Markov
+parameters ``G_0 = D``, ``G_k = C A^(k-1) B``; ``sum_t y_f y_f^T = C X C^T + C S_D +
+S_D^T C^T + D Γ(0) D^T`` minus the free response after the record, where ``S_D =
+sum_{k>=1} A^(k-1) B Γ(k) D^T`` and ``X = A X A^T + S`` with ``S = sum_{e>=0} A^e B Γ(e)
+B^T + sum_{e>=1} B Γ(e)^T B^T (A^e)^T`` (the same block-Toeplitz sum). The
+least-squares x0 (outputs weighted) involves the first L samples only: per output,
+``β_r = sum_t (A^t)^T c_r^T (y_r - y_f,r)(t)`` is ``sum_t (A^t)^T c_r^T y_r(t) -
+sum_t (A^t)^T c_r^T D_r u(t) - sum_s (A^(s+1))^T P_r B u(s)`` (``P_r`` the Gramian of
+output r), x0 solves ``(sum_r w_r^2 P_r) x0 = sum_r w_r^2 β_r``, and the error power
+falls by ``2 x0^T β_r - x0^T P_r x0``.
+
+**Where it does not apply** the callers take the per-candidate passes: an unstable
+A, one whose eigenvector matrix is ill-conditioned (:data:`MAX_EIGVEC_CONDITION`) or
+whose L exceeds the lags kept (:data:`MAX_LAG`, a quarter of a training record, half
+of a validation record); a regression or error power whose value the normal
+equations leave to rounding (nearly exact fits, :data:`ROUNDING_GUARD`), where the
+passes are exact; records of several experiments or of fewer than
+:data:`MIN_SAMPLES` samples.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import scipy.fft
+import scipy.linalg
+
+from subid.methods.dt._regression import (
+    RESIDUAL_RECOMPUTE,
+    parameter_count,
+    solve_normal_equations,
+)
+
+#: The key of a problem's cache that holds its record's lag products (a
+#: cross-validation fold, :func:`subid.methods.dt._selection.score_horizon`).
+LAG_PRODUCTS = "lag products"
+#: ``ρ(A)^L`` (the spectral radius) below which the terms
+#: past L lags are dropped: below rounding relative to the data.
+LAG_TOLERANCE = 1e-16
+#: Largest lag L used (the lag products are computed up to min(MAX_LAG, N // 4)).
+MAX_LAG = 16384
+#: Records shorter than this are not reduced to lag products: a pass over them costs
+#: less than the evaluation at the poles (and their lags rarely cover a slow pole).
+MIN_SAMPLES = 4096
+#: An error power below this fraction of the output's power is rounding-limited in
+#: the quadratic form (cancellation): the direct pass computes it instead.
+ROUNDING_GUARD = 1e-6
+
+
+def correlations(u, y, max_lag):
+    """``(Γ, R, Y)``: ``Γ[e] = sum_s u(s) u(s+e)^T`` (nu, nu), ``R[k] = sum_t y(t) u(t-k)^T``
+    (ny, nu) for lags 0..max_lag (by FFT, the lag 0 terms directly) and ``Y = y^T y``."""
+    N = u.shape[0]
+    nfft = scipy.fft.next_fast_len(N + max_lag + 1, real=True)
+    U = scipy.fft.rfft(u, nfft, axis=0)
+    Uc = np.conj(U)
+    Yf = scipy.fft.rfft(y, nfft, axis=0)
+    G = scipy.fft.irfft(Uc[:, :, None] * U[:, None, :], nfft, axis=0)[:max_lag + 1]
+    R = scipy.fft.irfft(Yf[:, :, None] * Uc[:, None, :], nfft, axis=0)[:max_lag + 1]
+    G[0] = u.T @ u
+    R[0] = y.T @ u
+    return np.ascontiguousarray(G), np.ascontiguousarray(R), y.T @ y
+
+
+def merged(blocks, records, groups):
+    """:class:`LagProducts` of ``records``, each the concatenation of the consecutive
+    ``blocks`` (IOData) whose indices ``groups`` lists, from one FFT per block and one
+    per boundary between blocks instead of one per record: the lag sums of a
+    concatenation are those of its blocks plus the products that straddle each
+    boundary (those of the window of K samples either side, minus those within each
+    half). None for a record shorter than :data:`MIN_SAMPLES`; None altogether when a
+    block is shorter than the largest lag needed (a lag could straddle two boundaries)."""
+    if all(r.n_samples < MIN_SAMPLES for r in records):
+        return [None] * len(records)
+    lengths = [b.n_samples for b in blocks]
+    caps = [min(MAX_LAG, r.n_samples // 4) for r in records]
+    K = max(caps)
+    if min(lengths) < K:
+        return None
+    sums = [correlations(b.u, b.y, K) for b in blocks]
+    straddle = []
+    for left, right in zip(blocks[:-1], blocks[1:]):
+        lu, ly, ru, ry = left.u[-K:], left.y[-K:], right.u[:K], right.y[:K]
+        whole = correlations(np.vstack([lu, ru]), np.vstack([ly, ry]), K)
+        a, b = correlations(lu, ly, K), correlations(ru, ry, K)
+        straddle.append((whole[0] - a[0] - b[0], whole[1] - a[1] - b[1]))
+    out = []
+    for record, group, cap in zip(records, groups, caps):
+        if record.n_samples < MIN_SAMPLES:
+            out.append(None)
+            continue
+        G = sum(sums[i][0] for i in group) + sum(straddle[i][0] for i in group[:-1])
+        R = sum(sums[i][1] for i in group) + sum(straddle[i][1] for i in group[:-1])
+        Y = sum(sums[i][2] for i in group)
+        out.append(LagProducts.from_sums(record.u, record.y, (G, R, Y), cap))
+    return out
+
+
+def correlations_reference(u, y, max_lag):
+    """Plain sums behind :func:`correlations` (the tests compare them)."""
+    N, nu = u.shape
+    ny = y.shape[1]
+    G = np.zeros((max_lag + 1, nu, nu))
+    R = np.zeros((max_lag + 1, ny, nu))
+    for e in range(max_lag + 1):
+        G[e] = u[:N - e].T @ u[e:]
+        R[e] = y[e:].T @ u[:N - e]
+    return G, R, y.T @ y
+
+
+class LagProducts:
+    """The lag products of one record (:func:`correlations`) up to ``max_lag``, and the
+    record itself (its first and last samples enter the edge terms)."""
+
+    def __init__(self, u, y, max_lag=MAX_LAG):
+        self.u = np.ascontiguousarray(u, dtype=float)
+        self.y = np.ascontiguousarray(y, dtype=float)
+        self.n_samples = self.u.shape[0]
+        self.max_lag = max(min(int(max_lag), self.n_samples // 4), 0)
+        self.G, self.R, self.Y = correlations(self.u, self.y, self.max_lag)
+
+    @classmethod
+    def from_sums(cls, u, y, sums, max_lag):
+        """The lag products of the record ``(u, y)`` whose lag sums ``(Γ, R, Y)`` are
+        already known (up to at least ``min(max_lag, N // 4)``)."""
+        out = cls.__new__(cls)
+        out.u = np.ascontiguousarray(u, dtype=float)
+        out.y = np.ascontiguousarray(y, dtype=float)
+        out.n_samples = out.u.shape[0]
+        out.max_lag = max(min(int(max_lag), out.n_samples // 4), 0)
+        G, R, out.Y = sums
+        out.G, out.R = G[:out.max_lag + 1], R[:out.max_lag + 1]
+        return out
+
+    @classmethod
+    def of_record(cls, record, max_lag=MAX_LAG):
+        """The lag products of an IOData record of one experiment of at least
+        :data:`MIN_SAMPLES` samples, else None."""
+        if getattr(record, "n_experiments", 1) != 1 or record.n_samples < MIN_SAMPLES:
+            return None
+        return cls(record.u, record.y, max_lag)
+
+
+#: Largest condition number of the eigenvector matrix of A for the modal evaluation
+#: (its rounding errors grow with it: about 1e-10 relative at this bound).
+MAX_EIGVEC_CONDITION = 1e6
+
+
+#: The last modal form computed (:meth:`_Modal.of`), as one ``(key, form)`` pair.
+_LAST = [None]
+
+
+class _Modal:
+    """A stable, diagonalisable A in modal form, ``A = V diag(λ) V^{-1}``, with the
+    Vandermonde rows ``λ^e`` (e = 0..L) that evaluate every lag sum at the poles:
+    ``sum_e c_e A^e = V diag(sum_e c_e λ^e) V^{-1}``, ``O(L n)`` per sequence instead
+    of ``O(L n^3)`` for the powers of A."""
+
+    def __init__(self, lam, V, Wm, L):
+        self.lam, self.V, self.Wm, self.L = lam, V, Wm, L
+        vand = np.empty((lam.size, L + 1), dtype=complex)   # λ^e by doubling
+        vand[:, 0] = 1.0
+        filled, step = 1, lam.copy()                        # step = λ^filled
+        while filled < L + 1:
+            k = min(filled, L + 1 - filled)
+            vand[:, filled:filled + k] = vand[:, :k] * step[:, None]
+            filled += k
+            step = vand[:, filled - 1] * lam
+        # real and imaginary parts apart: real matrix products (BLAS) in poly
+        self.vand_re = np.ascontiguousarray(vand.real)
+        self.vand_im = np.ascontiguousarray(vand.imag)
+        self.denominator = 1.0 - lam[:, None] * lam[None, :]
+
+    @classmethod
+    def of(cls, A, max_lag):
+        """The modal form with the lags L where ``ρ(A)^L < LAG_TOLERANCE``, or None
+        (unstable, not finite, ill-conditioned eigenvectors, or L above ``max_lag``).
+        The last one computed is kept: a candidate's fit and its score share it."""
+        key = (A.shape, A.tobytes())
+        last = _LAST[0]                    # one (key, form) pair: safe across threads
+        if last is None or last[0] != key:
+            last = _LAST[0] = (key, cls._of(A))
+        form = last[1]
+        return form if form is not None and form.L <= max_lag else None
+
+    @classmethod
+    def _of(cls, A):
+        if A.shape[0] == 0 or not np.isfinite(A).all():
+            return None
+        lam, V = scipy.linalg.eig(A, check_finite=False)
+        radius = float(np.abs(lam).max())
+        if radius >= 1.0:
+            return None
+        L = 1 if radius == 0.0 else int(math.ceil(math.log(LAG_TOLERANCE) / math.log(radius)))
+        if L > MAX_LAG:
+            return None
+        cond = np.linalg.cond(V)
+        if not math.isfinite(cond) or cond > MAX_EIGVEC_CONDITION:
+            return None
+        return cls(lam, V, np.linalg.solve(V, np.eye(A.shape[0])), max(L, 1))
+
+    def poly(self, seq, shift=0):
+        """``sum_e seq[e + shift] λ^e`` for e = 0..L - shift: (n, *seq.shape[1:])."""
+        m = seq.shape[0] - shift
+        flat = seq[shift:].reshape(m, -1)
+        out = self.vand_re[:, :m] @ flat + 1j * (self.vand_im[:, :m] @ flat)
+        return out.reshape((self.lam.size,) + seq.shape[1:])
+
+    def matrix(self, values):
+        """``V diag(values) V^{-1}`` (real) for values (n, ...): (..., n, n)."""
+        n = self.lam.size
+        vals = values.reshape(n, -1).T                      # (k, n)
+        out = np.real((self.V[None, :, :] * vals[:, None, :]) @ self.Wm)
+        return out.reshape(values.shape[1:] + (n, n))
+
+    def gramian(self, left, right):
+        """``sum_{t>=0} (A^t)^T left^T right A^t`` (left, right: (m, n))."""
+        M = (self.V.T @ left.T) @ (right @ self.V) / self.denominator
+        return np.real(self.Wm.T @ M @ self.Wm)
+
+    def back(self, modal):
+        """``V^{-T} modal`` (real): a sum ``sum_t (A^t)^T v_t`` from its modal terms."""
+        return np.real(self.Wm.T @ modal)
+
+
+def fit_b_d_x0(A, C, lp: LagProducts, output_weights, *, feedthrough=True, estimate_x0=True):
+    """B, D, x0 and diagnostics of the output regression of (A, C) on the record of
+    ``lp`` (the problem of :func:`subid.methods.dt._regression.fit_b_d_x0`), from its
+    lag products (module documentation), or None where they do not apply (then the
+    per-candidate pass must run)."""
+    A = np.asarray(A, dtype=float)
+    C = np.asarray(C, dtype=float)
+    n, ny, nu = A.shape[0], C.shape[0], lp.u.shape[1]
+    N = lp.n_samples
+    md = _Modal.of(A, min(lp.max_lag, N // 4))
+    if md is None:
+        return None
+    L = md.L
+    w = np.ones(ny) if output_weights is None else np.asarray(output_weights, dtype=float)
+    w2 = w * w
+    G, R, u, y = lp.G[:L + 1], lp.R[:L + 1], lp.u, lp.y
+    CW2 = C.T * w2[None, :]                          # C^T W^2 (n, ny)
+    P = md.gramian(C * w[:, None], C * w[:, None])
+    P = 0.5 * (P + P.T)
+    Z = md.matrix(md.poly(G))                        # (a, b): sum_e Γ(e)_ab A^e
+    Z1 = md.matrix(md.poly(G, shift=1))              # (a, b): sum_{k>=1} Γ(k)_ab A^(k-1)
+    I = np.eye(n)
+    BB = np.empty((nu, n, nu, n))
+    for a in range(nu):
+        for b in range(nu):
+            BB[a, :, b, :] = Z[a, b].T @ P + P @ (Z[b, a] - G[0][b, a] * I)
+    BB = BB.reshape(nu * n, nu * n)
+    XN = md.matrix(md.poly(u[N - 1:N - 1 - L:-1]))   # (a): sum_k u_a(N-k) A^(k-1)
+    XN = XN.transpose(1, 0, 2).reshape(n, nu * n)
+    BB -= XN.T @ P @ XN
+    VtCW2 = md.V.T @ CW2                             # (n, ny)
+    rho = md.poly(R, shift=1)                        # (l, r, a): sum_k R(k)_ra λ^(k-1)
+    rB = md.back(np.einsum("lr,lra->la", VtCW2, rho)).T.reshape(-1)    # (a, i)
+    nx, q, p = parameter_count(n, nu, ny, estimate_x0, feedthrough)
+    Naug = np.zeros((p + 1, p + 1))
+    Naug[nx:q, nx:q] = BB
+    Naug[nx:q, p] = rB
+    Naug[p, p] = float(np.sum(w2 * np.diag(lp.Y)))
+    if feedthrough:
+        BD = np.einsum("abji,jr->aibr", Z1, CW2)      # Z1[a, b]^T C^T W^2
+        Naug[nx:q, q:p] = BD.reshape(nu * n, nu * ny)
+        Naug[q:p, q:p] = np.kron(G[0], np.diag(w2))
+        Naug[q:p, p] = (R[0] * w2[:, None]).T.reshape(-1)
+    if estimate_x0:
+        S1 = md.matrix(md.lam[:, None] * md.poly(u[:L]))   # (a): sum_s u_a(s) A^(s+1)
+        Naug[:n, :n] = P
+        Naug[:n, nx:q] = np.concatenate([S1[a].T @ P for a in range(nu)], axis=1)
+        Naug[:n, p] = md.back(np.einsum("lr,lr->l", VtCW2, md.poly(y[:L + 1])))
+        if feedthrough:
+            S0 = md.matrix(md.poly(u[:L + 1]))             # (b): sum_t u_b(t) A^t
+            Naug[:n, q:p] = np.einsum("bji,jr->ibr", S0, CW2).reshape(n, nu * ny)
+    iu = np.triu_indices(p + 1, 1)
+    Naug[(iu[1], iu[0])] = Naug[iu]
+    solved = solve_normal_equations(Naug, n, nu, ny, estimate_x0=estimate_x0,
+                                    feedthrough=feedthrough, n_samples=N)
+    if solved is None:
+        return None
+    B, D, x0, _, diagnostics = solved
+    if diagnostics["residual_rms"] ** 2 * N * ny < RESIDUAL_RECOMPUTE * Naug[p, p]:
+        return None                  # a nearly exact fit: the residual is rounding here
+    diagnostics["regression_path"] = "lag products"
+    diagnostics["lags"] = L
+    return B, D, x0, diagnostics
+
+
+def error_power(A, B, C, D, lp: LagProducts, weights, inv_scale):
+    """``sum_t ((y - ŷ) inv_scale)^2`` per output on the record of ``lp``, ``ŷ`` simulated
+    from the least-squares x0 (each output weighted by ``weights``), as
+    :func:`subid.methods.dt._scoring._error_power` computes it by a pass over the
+    record; None where the lag products do not apply (the pass must run)."""
+    A = np.asarray(A, dtype=float)
+    n, ny = A.shape[0], C.shape[0]
+    N = lp.n_samples
+    md = _Modal.of(A, min(lp.max_lag, N // 2))
+    if md is None:
+        return None
+    L = md.L
+    G, R, u, y = lp.G[:L + 1], lp.R[:L + 1], lp.u, lp.y
+    CV = C @ md.V                                    # (ny, n)
+    WB = md.Wm @ B                                   # (n, nu)
+    g = md.poly(G)                                   # (l, a, b)
+    g1 = md.poly(G, shift=1)
+    # sum_t y_r y_f,r: sum_k (R(k) G_k^T)_rr with G_0 = D, G_k = C A^(k-1) B
+    cross = np.einsum("rj,rj->r", R[0], D) + np.real(
+        np.einsum("rl,lj,lrj->r", CV, WB, md.poly(R, shift=1)))
+    # sum_t y_f y_f^T over the zero-padded record: C X C^T + C S_D + S_D^T C^T + D Γ(0) D^T
+    U0 = np.real(md.V @ np.einsum("la,lab->lb", WB, g)) @ B.T   # sum_e A^e B Γ(e) B^T
+    S = U0 + (U0 - B @ G[0] @ B.T).T
+    X = np.real(md.V @ ((md.Wm @ S @ md.Wm.T) / md.denominator) @ md.V.T)
+    SD = np.real(md.V @ np.einsum("la,lab->lb", WB, g1)) @ D.T
+    F = C @ X @ C.T + C @ SD + SD.T @ C.T + D @ G[0] @ D.T
+    # minus the free response after the record, from x_f(N) = V ξ
+    xi = np.einsum("la,la->l", WB, md.poly(u[N - 1:N - 1 - L:-1]))
+    after = np.real(np.einsum("rl,lm,rm->r", CV, np.outer(xi, xi) / md.denominator, CV))
+    total = np.diag(lp.Y) - 2.0 * cross + np.diag(F) - after   # sum_t (y - y_f)^2
+    # x0: per output r, β_r = sum_t (A^t)^T c_r^T (y_r - y_f,r)(t), P_r its Gramian
+    mu = md.poly(u[:L + 1])                          # (l, b): sum_t u_b(t) λ^t
+    nu_ = md.lam[:, None] * md.poly(u[:L])           # (l, a): sum_s u_a(s) λ^(s+1)
+    eta = md.poly(y[:L + 1])                         # (l, r): sum_t y_r(t) λ^t
+    VtCt = md.V.T @ C.T                              # (l, r)
+    beta = np.empty((n, ny))
+    Pr = np.empty((ny, n, n))
+    for r in range(ny):
+        Pr[r] = md.gramian(C[r:r + 1], C[r:r + 1])
+        modal = VtCt[:, r] * (eta[:, r] - mu @ D[r]) - (md.V.T @ Pr[r] @ B * nu_).sum(axis=1)
+        beta[:, r] = md.back(modal)
+    w2 = np.asarray(weights, dtype=float) ** 2
+    Pw = np.tensordot(w2, Pr, axes=(0, 0))
+    x0 = np.linalg.lstsq(Pw, beta @ w2, rcond=1e-13)[0]
+    err = total - 2.0 * (x0 @ beta) + np.einsum("i,rij,j->r", x0, Pr, x0)
+    if not np.isfinite(err).all() or np.any(err < ROUNDING_GUARD * np.diag(lp.Y)):
+        return None                  # a nearly exact fit: the pass is exact, this is not
+    return err * inv_scale ** 2

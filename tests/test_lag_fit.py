@@ -1,0 +1,179 @@
+"""B, D, x0 and the validation score from lag products (subid.methods.dt._lag_fit)
+against the per-candidate passes over the record they replace (issue 21.6)."""
+
+import numpy as np
+import pytest
+import scipy.signal
+
+import subid
+from subid import systems
+from subid.methods.dt import _lag_fit, _regression, _scoring, _selection
+
+
+def _system(n, seed, radius=0.9):
+    """A random stable (A, B, C, D) with 2 inputs, 2 outputs and poles up to ``radius``,
+    in a non-modal basis."""
+    rng = np.random.default_rng(seed)
+    A = np.zeros((n, n))
+    i = 0
+    while i < n:
+        r, phi = rng.uniform(0.3, radius), rng.uniform(0.1, 3.0)
+        if i + 1 < n:
+            A[i:i + 2, i:i + 2] = r * np.array([[np.cos(phi), np.sin(phi)],
+                                                [-np.sin(phi), np.cos(phi)]])
+            i += 2
+        else:
+            A[i, i] = r
+            i += 1
+    T = rng.standard_normal((n, n)) + 3 * np.eye(n)
+    A = np.linalg.solve(T, A @ T)
+    return A, rng.standard_normal((n, 2)), rng.standard_normal((2, n)), \
+        rng.standard_normal((2, 2))
+
+
+def _record(A, B, C, D, N, seed, noise=0.1):
+    rng = np.random.default_rng(seed)
+    u = scipy.signal.lfilter([1.0], [1.0, -0.7], rng.standard_normal((N, 2)), axis=0)
+    x = rng.standard_normal(A.shape[0])
+    y = np.empty((N, C.shape[0]))
+    for t in range(N):
+        y[t] = C @ x + D @ u[t]
+        x = A @ x + B @ u[t]
+    return u, y + noise * rng.standard_normal(y.shape) * y.std(axis=0)
+
+
+def test_correlations_equal_the_plain_sums():
+    rng = np.random.default_rng(0)
+    u, y = rng.standard_normal((700, 2)), rng.standard_normal((700, 3))
+    fast = _lag_fit.correlations(u, y, 150)
+    plain = _lag_fit.correlations_reference(u, y, 150)
+    for a, b in zip(fast, plain):
+        np.testing.assert_allclose(a, b, rtol=0, atol=1e-12 * np.abs(b).max())
+
+
+@pytest.mark.parametrize("n, seed", [(1, 1), (3, 2), (4, 3), (6, 4), (8, 5)])
+def test_regression_equals_the_pass_over_the_record(n, seed):
+    """The normal equations from the lag products give the B, D, x0 and residual of
+    the QR factorisation of the regressor rows (the reference), for every combination
+    of feedthrough and initial state, for a candidate (A, C) that is not the truth."""
+    A, B, C, D = _system(n, seed)
+    u, y = _record(A, B, C, D, 3000, seed)
+    rng = np.random.default_rng(seed + 100)
+    A_c = A + 0.01 * rng.standard_normal(A.shape)
+    C_c = C + 0.01 * rng.standard_normal(C.shape)
+    products = _lag_fit.LagProducts(u, y)
+    weights = 1.0 / y.std(axis=0)
+    for feedthrough in (True, False):
+        for estimate_x0 in (True, False):
+            fast = _lag_fit.fit_b_d_x0(A_c, C_c, products, weights, feedthrough=feedthrough,
+                                       estimate_x0=estimate_x0)
+            ref = _regression.fit_b_d_x0_qr(A_c, C_c, u, y, feedthrough=feedthrough,
+                                            estimate_x0=estimate_x0, output_weights=weights)
+            assert fast is not None and fast[3]["regression_path"] == "lag products"
+            for got, want in zip(fast[:3] if estimate_x0 else fast[:2], ref):
+                np.testing.assert_allclose(got, want, rtol=0, atol=1e-9 * np.abs(want).max())
+            assert fast[3]["residual_rms"] == pytest.approx(ref[3]["residual_rms"], rel=1e-9)
+
+
+@pytest.mark.parametrize("n, seed, radius", [(2, 6, 0.9), (4, 7, 0.9), (8, 8, 0.95),
+                                             (5, 9, 0.99)])
+def test_score_equals_the_simulation(n, seed, radius):
+    """The error power of the validation score (x0 by least squares) from the lag
+    products equals that of the compiled simulation, per output."""
+    A, B, C, D = _system(n, seed, radius)
+    u, y = _record(A, B, C, D, 20000, seed)
+    rng = np.random.default_rng(seed + 200)
+    B_c, D_c = B + 0.05 * rng.standard_normal(B.shape), D + 0.05 * rng.standard_normal(D.shape)
+    weights, inv_scale = 1.0 / y.std(axis=0), 1.0 / np.abs(y).max(axis=0)
+    fast = _lag_fit.error_power(A, B_c, C, D_c, _lag_fit.LagProducts(u, y), weights, inv_scale)
+    ref = _scoring._error_power(A, B_c, C, D_c, u, y, weights, inv_scale,
+                                _scoring.forced_error)
+    assert fast is not None
+    np.testing.assert_allclose(fast, ref, rtol=1e-10)
+
+
+def test_where_the_products_do_not_apply():
+    """No result (the caller runs the pass over the record) for an unstable A, a pole
+    too slow for the lags kept, and a nearly exact fit (the normal equations would
+    leave the residual and the error power to rounding)."""
+    A, B, C, D = _system(4, 10)
+    u, y = _record(A, B, C, D, 2000, 10, noise=0.0)
+    products = _lag_fit.LagProducts(u, y)
+    weights, inv_scale = np.ones(2), np.ones(2)
+    assert _lag_fit.fit_b_d_x0(A, C, products, weights) is None          # noise-free
+    assert _lag_fit.error_power(A, B, C, D, products, weights, inv_scale) is None
+    assert _lag_fit.fit_b_d_x0(1.01 * A / np.abs(np.linalg.eigvals(A)).max(), C, products,
+                               weights) is None                          # unstable
+    slow = 0.9995 * A / np.abs(np.linalg.eigvals(A)).max()               # L > N / 4
+    assert _lag_fit.fit_b_d_x0(slow, C, products, weights) is None
+
+
+def test_fold_scores_equal_those_of_the_passes(monkeypatch):
+    """Every candidate's fold scores of the cross-validation are those of the per-
+    candidate passes (lag products switched off) to 1e-9 points, and the chosen
+    candidate is the same."""
+    true = systems.random_system(4, 2, 2, seed=1)
+    data = systems.simulate_data(true, 6000, seed=2, output_snr_db=20)
+    with_products = subid.moesp(data)
+    monkeypatch.setattr(_lag_fit.LagProducts, "of_record", classmethod(lambda cls, r: None))
+    monkeypatch.setattr(_scoring.Held, "products", lambda self: [None] * len(self.pieces))
+    without = subid.moesp(data)
+    a = with_products.info["order_selection"]["candidates"]
+    b = without.info["order_selection"]["candidates"]
+    assert [(c["order"], c["horizon"], c["system_matrices"]) for c in a] == \
+        [(c["order"], c["horizon"], c["system_matrices"]) for c in b]
+    for ca, cb in zip(a, b):
+        np.testing.assert_allclose(ca["folds"], cb["folds"], rtol=0, atol=1e-9)
+    assert with_products.order == without.order
+    assert with_products.info["horizon"] == without.info["horizon"]
+    np.testing.assert_allclose(with_products.A, without.A, rtol=0, atol=1e-12)
+    assert _selection.describe(with_products.info["order_selection"])
+
+
+def test_fold_products_merged_from_blocks():
+    """The lag products of every fold's training and validation record, merged from
+    those of the four blocks and their boundaries, equal the record's own."""
+    rng = np.random.default_rng(3)
+    data = subid.IOData(rng.standard_normal((30000, 2)), rng.standard_normal((30000, 2)))
+    parts = [(data[a], data[b]) for a, b in _selection.folds(data.n_samples)]
+    records = [t for t, _ in parts] + [v for _, v in parts]
+    merged = _lag_fit.merged(_selection._blocks_of_folds(parts), records,
+                             _selection.FOLD_BLOCKS + _selection.VALIDATION_BLOCKS)
+    for record, lp in zip(records, merged):
+        own = _lag_fit.LagProducts.of_record(record)
+        assert lp.max_lag == own.max_lag and lp.n_samples == record.n_samples
+        for a, b in ((lp.G, own.G), (lp.R, own.R), (lp.Y, own.Y)):
+            np.testing.assert_allclose(a, b, rtol=0, atol=1e-11 * np.abs(b).max())
+
+
+@pytest.mark.slow
+def test_search_past_10_on_a_long_record(monkeypatch):
+    """The search past order 10 with the folds' lag products in use (training folds
+    longer than MIN_SAMPLES): the blocks of the folds are not the block rows of the
+    horizons, and the order found is the true one."""
+    used = []
+    real = _lag_fit.fit_b_d_x0
+
+    def counting(*args, **kwargs):
+        out = real(*args, **kwargs)
+        used.append(out is not None)
+        return out
+
+    monkeypatch.setattr(_lag_fit, "fit_b_d_x0", counting)
+    true = systems.random_system(12, 2, 4, seed=4)
+    data = systems.simulate_data(true, 12000, seed=5, output_snr_db=40)
+    model = subid.moesp(data, system_matrices="shift")
+    assert len(model.info["order_selection"]["searched"]) >= 2
+    assert model.order == 12
+    assert sum(used) > len(used) / 2
+
+
+def test_noise_free_default_call_is_exact_on_a_long_record():
+    """Noise-free data long enough for the lag products: the default call still finds
+    the true order and recovers the system to rounding (the nearly exact fits fall
+    back to the passes, which resolve them)."""
+    true = systems.random_system(4, 2, 2, seed=11)
+    data = systems.simulate_data(true, 10000, seed=12)
+    model = subid.moesp(data)
+    assert model.order == 4
+    assert subid.markov_error(model, true) < 1e-8
