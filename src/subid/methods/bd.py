@@ -222,15 +222,29 @@ def _prediction(A, C, data, K, *, feedthrough, estimate_x0, output_weights, path
     4.86) is linear in ``B̃ = B - K D``, D and ``x̂(0) = x0``:
     ``y(k) - y_K(k) = C Ā^k x0 + sum_j C Ā^(k-1-j) B̃ u(j) + D u(k) + e(k)`` with
     ``y_K`` the output of ``(Ā, K, C, 0)`` driven by y; ``B = B̃ + K D``.
+
+    A record of several experiments (:func:`subid.merge`) has one predictor per
+    experiment: ``y_K`` restarts from zero and ``x̂(0)`` is the experiment's own
+    ``x0`` at every border, as in the output-error route (a single record takes
+    the same path as before, bit for bit).
     """
     from subid.model._simulate import _simulate_discrete
     if not isinstance(data, IOData) or K is None:
         return None
     A_bar = A - K @ C
     ny = C.shape[0]
-    y_k = _simulate_discrete(A_bar, K, C, np.zeros((ny, ny)), data.y, np.zeros(A.shape[0]))[0]
+    starts = experiment_starts(data)
+    if starts is not None and estimate_x0:
+        check_experiment_lengths(data, A.shape[0])
+
+    def predictor_output(y):
+        return _simulate_discrete(A_bar, K, C, np.zeros((ny, ny)), y, np.zeros(A.shape[0]))[0]
+    if starts is None:
+        y_k = predictor_output(data.y)
+    else:
+        y_k = np.concatenate([predictor_output(data.y[a:b]) for a, b in data.experiment_ranges])
     with np.errstate(all="ignore"):
-        B_t, D_p, x0, reg = _raw_samples(A_bar, C, data.u, data.y - y_k, None,
+        B_t, D_p, x0, reg = _raw_samples(A_bar, C, data.u, data.y - y_k, starts,
                                          feedthrough=feedthrough, estimate_x0=estimate_x0,
                                          output_weights=output_weights, path=path)
     B_p = B_t + K @ D_p
