@@ -45,7 +45,7 @@ from typing import NamedTuple
 import numpy as np
 
 from subid.data import IOData
-from subid.errors import SubidError, TooFewSamplesError
+from subid.errors import ResourceLimitError, SubidError, TooFewSamplesError
 from subid.methods.dt._regression import fit_b_d_projection
 from subid.methods.dt._regression import fit_b_d_x0 as _fit_record
 from subid.statistic.hankel import HankelStatistic
@@ -205,13 +205,27 @@ def _raw_samples(A, C, u, y, starts, *, feedthrough, estimate_x0, output_weights
     """The in-memory output-error engines: one record, several experiments, many channels."""
     from subid.methods.dt import _bd_large
     kw = dict(feedthrough=feedthrough, estimate_x0=estimate_x0, output_weights=output_weights)
-    if starts is not None and len(starts) > 1:
-        return _bd_large.fit_experiments(A, C, u, y, starts, path=path, **kw)
-    if path == "auto" and _bd_large.dense_bytes(
-            A.shape[0], u.shape[1], y.shape[1], u.shape[0], estimate_x0=estimate_x0,
-            feedthrough=feedthrough) > _bd_large.DENSE_LIMIT:
-        return _bd_large.fit_channels(A, C, u, y, **kw)
-    return _fit_record(A, C, u, y, path=path, **kw)
+    n, nu, ny = A.shape[0], u.shape[1], y.shape[1]
+    dense = _bd_large.dense_bytes(n, nu, ny, u.shape[0], estimate_x0=estimate_x0,
+                                  feedthrough=feedthrough,
+                                  n_experiments=1 if starts is None else len(starts))
+    if path != "auto" or dense <= _bd_large.DENSE_LIMIT:
+        if starts is not None and len(starts) > 1:
+            return _bd_large.fit_experiments(A, C, u, y, starts, path=path, **kw)
+        return _fit_record(A, C, u, y, path=path, **kw)
+    several = starts is not None and len(starts) > 1
+    need = _bd_large.channel_bytes(n, nu, len(starts) if several else 1,
+                                   estimate_x0=estimate_x0) + _bd_large.CHUNK_BYTES
+    if need > _bd_large.MEMORY_LIMIT:
+        raise ResourceLimitError(
+            f"the B, D, x0 regression of order {n} with {nu} inputs, {ny} outputs"
+            + (f" and {len(starts)} experiments (one initial state each)" if several else "")
+            + f" needs {need / 2**30:.3g} GiB even with the outputs eliminated one by one "
+            f"(limit {_bd_large.MEMORY_LIMIT / 2**30:g} GiB); "
+            + ("merge fewer experiments, pass estimate_x0=False, " if several else "")
+            + "identify fewer channels at a time, or use n4sid (B and D from the state "
+              "sequence, no regression)")
+    return _bd_large.fit_channels(A, C, u, y, starts=starts if several else None, **kw)
 
 
 def _prediction(A, C, data, K, *, feedthrough, estimate_x0, output_weights, path):
