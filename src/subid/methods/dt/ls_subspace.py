@@ -307,7 +307,8 @@ def _ls_subspace(pb, *, instruments, selector, seed, estimate_x0, feedthrough,
     core = gamma_from_factor(pb.factor, pb.horizon, pb.order, pb.candidates,
                              instruments=instruments, instrument_weighting=instrument_weighting,
                              selector=None if selector is None else selector * column_scale,
-                             seed=seed, power_iterations=power_iterations, method=method)
+                             seed=seed, power_iterations=power_iterations, method=method,
+                             cached=pb.cached)
 
     if system_matrices == "states":
         # the state step of N4SID on Γ̄ (in the basis Q), then the basis of Λ (T = Λ Q)
@@ -392,26 +393,32 @@ class LSCore:
 
 
 def gamma_from_factor(hf, f, fixed_order, candidates, *, instruments, instrument_weighting,
-                      selector, seed, power_iterations, method) -> LSCore:
+                      selector, seed, power_iterations, method, cached=None) -> LSCore:
     """Seed 001 on a Hankel factor: Γ̄ in the basis of Λ, then A and C.
 
     Shared by :func:`ls_subspace` and :class:`subid.RecursiveSubspace` (which
-    updates the same factor sample by sample).
+    updates the same factor sample by sample). ``cached``: a problem's
+    :meth:`subid.methods.dt._subspace.Problem.cached`, so that the candidate orders
+    of one problem share the factorisation of its rows.
     """
     nu, ny = hf.n_inputs, hf.n_outputs
     depth = hf.depth
     uf = hf.u_rows(depth - f, depth)
     yf = hf.y_rows(depth - f, depth)
+
+    def factor():
+        if instruments == "past":
+            return hf.retriangularize(uf, np.concatenate([hf.u_rows(0, f), hf.y_rows(0, f)]),
+                                      yf)
+        return hf.retriangularize(uf, yf)
+    L = factor() if cached is None else cached(("ls_subspace factor", instruments), factor)
     if instruments == "past":
-        z = np.concatenate([hf.u_rows(0, f), hf.y_rows(0, f)])
-        L = hf.retriangularize(uf, z, yf)
         a, b = f * nu, f * (nu + ny)
         L22 = L[a:a + b, a:a + b]
         L32 = L[a + b:, a:a + b]
         W = L32 if instrument_weighting else L32 @ L22.T
         L_yu = L[a + b:, :a]
     else:
-        L = hf.retriangularize(uf, yf)
         a = f * nu
         W = L[a:, a:]
         L_yu = L[a:, :a]
