@@ -10,7 +10,7 @@ import pytest
 import scipy.linalg
 
 import subid
-from subid.errors import TooFewSamplesError
+from subid.errors import ResourceLimitError, TooFewSamplesError
 from subid.methods import bd
 from subid.methods.dt._regression import fit_b_d_projection
 
@@ -128,8 +128,7 @@ def test_prediction_route_honours_experiment_borders(seed):
     rng = np.random.default_rng(100 + seed)
     lengths = [int(v) for v in rng.integers(15, 120, size=int(rng.integers(2, 6)))]
     A, B, C, D, data, x0s = _merged_innovation_record(seed, lengths)
-    K = 0.3 * rng.standard_normal((3, 2))
-    K *= 0.5 / max(1e-3, np.abs(np.linalg.eigvals(A - K @ C)).max())
+    K = 0.03 * rng.standard_normal((3, 2))
     assert np.abs(np.linalg.eigvals(A - K @ C)).max() < 1
     B1, D1, x1, diag = bd.fit_b_d_x0(A, C, data, bd_method="prediction", noise_gain=K)
     assert diag["bd_method"] == "prediction"
@@ -160,3 +159,78 @@ def test_prediction_route_names_a_too_short_experiment():
     A, B, C, D, data, _ = _merged_innovation_record(3, [40, 1, 30], n=4, ny=2)
     with pytest.raises(TooFewSamplesError, match="too short"):
         bd.fit_b_d_x0(A, C, data, bd_method="prediction", noise_gain=np.zeros((4, 2)))
+
+
+def test_residual_bound_allocates_nothing_dense_in_the_channels(monkeypatch):
+    """The bound that lets a cross-validation fold skip an unstable fit is a dense QR
+    factor of n + n nu + ny nu columns (at 100 inputs and outputs: 3 GB, issue 28);
+    above the dense limit (here lowered to 1 MiB) it is not tried (the full fit,
+    bounded, decides)."""
+    from subid.methods.dt import _bd_large
+    from subid.methods.dt._residual_bound import loses
+    monkeypatch.setattr(_bd_large, "DENSE_LIMIT", 2 ** 20)
+    A, B, C, D = _system(3, 40, 40, seed=12)
+    A = 1.2 * A / np.abs(np.linalg.eigvals(A)).max()
+    rng = np.random.default_rng(13)
+    u, y = rng.standard_normal((600, 40)), rng.standard_normal((600, 40))
+    tracemalloc.start()
+    try:
+        bound = loses(A, C, u, y, 1e-3, feedthrough=True, estimate_x0=True,
+                      output_weights=np.ones(40))
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert bound is None
+    assert peak < 2 ** 20, peak             # the dense factor alone: (1,724)^2 doubles, 24 MB
+
+
+def test_statistic_beyond_its_memory_budget_is_a_clear_error_before_allocating():
+    tracemalloc.start()
+    try:
+        with pytest.raises(ResourceLimitError, match="smaller horizon"):
+            subid.HankelStatistic(300, 300, depth=40)        # a 24,000-row factor: 4.3 GiB
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 2 ** 20, peak
+    subid.HankelStatistic(100, 100, depth=20)                # 4,000 rows: 128 MB, allowed
+
+
+@pytest.mark.parametrize("method", ["ls_subspace", "moesp"])
+def test_subspace_methods_with_the_channel_routes_forced(method, monkeypatch):
+    """Every B, D route through the channel elimination (the dense limit at zero), in the
+    default call (cross-validated order and horizon, stability 'auto'): exact on a
+    noise-free record with 6 inputs and 5 outputs."""
+    from subid.methods.dt import _bd_large
+    monkeypatch.setattr(_bd_large, "DENSE_LIMIT", 0)
+    A, B, C, D = _system(2, 6, 5, seed=30)
+    rng = np.random.default_rng(31)
+    u = rng.standard_normal((500, 6))
+    true = subid.StateSpace(A, B, C, D, 1.0)
+    data = subid.IOData(u, np.asarray(true.simulate(u)))
+    model = getattr(subid, method)(data, 2, horizon=3, system_matrices="shift",
+                                   feedthrough=True)
+    assert model.info["regression_path"] == "channels"
+    assert subid.markov_error(model, true) < 1e-8
+
+
+@pytest.mark.long
+@pytest.mark.parametrize("method", ["ls_subspace", "moesp"])
+def test_hundred_inputs_and_outputs_default_call_in_bounded_memory(method):
+    """The record of issue 28 (100 inputs, 100 outputs, 3,000 samples): the default
+    call (order and horizon cross-validated) under 1 GiB of traced memory (before:
+    a numpy MemoryError at 3 GB); bench/bd_memory.py --methods times it."""
+    rng = np.random.default_rng(1)
+    A, B, C, D = _system(4, 100, 100, seed=1)
+    u = rng.standard_normal((3000, 100))
+    y = np.asarray(subid.StateSpace(A, B, C, D, 1.0).simulate(u))
+    data = subid.IOData(u, y + 0.1 * rng.standard_normal(y.shape))
+    tracemalloc.start()
+    try:
+        model = getattr(subid, method)(data)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 2 ** 30, peak
+    assert np.isfinite(model.A).all() and np.isfinite(model.B).all()
+    assert model.order == 4

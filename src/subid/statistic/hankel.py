@@ -141,6 +141,12 @@ class HankelStatistic:
         Sampling period of the record.
     input_names, output_names : sequence of str, optional
 
+    Raises
+    ------
+    subid.errors.ResourceLimitError
+        The triangular factor, ``(depth (n_inputs + n_outputs))^2`` doubles, would
+        exceed :data:`FACTOR_BYTES_LIMIT` (2 GiB): raised before anything is allocated.
+
     Examples
     --------
     >>> import subid
