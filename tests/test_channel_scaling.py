@@ -13,14 +13,7 @@ import subid
 from subid.errors import ResourceLimitError, TooFewSamplesError
 from subid.methods import bd
 from subid.methods.dt._regression import fit_b_d_projection
-
-
-def _system(n, nu, ny, seed):
-    rng = np.random.default_rng(seed)
-    Q = np.linalg.qr(rng.standard_normal((n, n)))[0]
-    A = Q @ np.diag(rng.uniform(-0.9, 0.9, n)) @ Q.T
-    return (A, rng.standard_normal((n, nu)), rng.standard_normal((ny, n)),
-            rng.standard_normal((ny, nu)))
+from test_bd_large import _system
 
 
 def _projection_dense(A, C, gamma, L11, L_yu, feedthrough=True):
