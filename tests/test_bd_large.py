@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 import subid
+from subid.errors import ResourceLimitError
 from subid.methods import bd
 from subid.methods.dt import _bd_large
 from subid.methods.dt._regression import fit_b_d_x0_qr
@@ -253,3 +254,50 @@ def test_second_pass_with_experiments_equals_in_memory(defective):
     if not defective:
         x_given = second.initial_state(A, B0, C, D0)
         _close(x_given, x00, 1e-8)
+
+
+@pytest.mark.parametrize("feedthrough", [True, False])
+@pytest.mark.parametrize("estimate_x0", [True, False])
+def test_channels_with_experiments_equal_the_dense_regression(feedthrough, estimate_x0):
+    """The channel elimination on a merged record (one x0 per experiment, the
+    sensitivity restarting at each) against the dense embedded problem."""
+    A, B, C, D = _system(3, 4, 5, seed=21)
+    rng = np.random.default_rng(22)
+    starts = [0, 70, 95, 180]
+    u = rng.standard_normal((260, 4))
+    y = np.vstack([_simulate(A, B, C, D if feedthrough else 0 * D, u[a:b],
+                             rng.standard_normal(3))
+                   for a, b in zip(starts, starts[1:] + [260])])
+    y += 0.1 * rng.standard_normal(y.shape)
+    w = rng.uniform(0.5, 2.0, 5)
+    B0, D0, x0 = _dense(A, C, u, y, starts, w, feedthrough, estimate_x0)
+    B1, D1, x1, diag = _bd_large.fit_channels(A, C, u, y, starts=starts, chunk_bytes=20_000,
+                                              feedthrough=feedthrough, estimate_x0=estimate_x0,
+                                              output_weights=w)
+    assert diag["regression_path"] == "channels" and diag["experiments"] == 4
+    _close(B1, B0)
+    _close(D1, D0)
+    if estimate_x0:
+        _close(x1, x0)
+
+
+def test_merged_record_with_many_channels_takes_the_channel_elimination(monkeypatch):
+    """Above the dense limit, a merged record goes to the channel elimination (exact
+    noise-free); above the memory limit, a ResourceLimitError before allocating."""
+    A, B, C, D = _system(2, 3, 4, seed=23)
+    rng = np.random.default_rng(24)
+    pieces, x0s = [], []
+    for length in (50, 40, 60):
+        u = rng.standard_normal((length, 3))
+        x0s.append(rng.standard_normal(2))
+        pieces.append(subid.IOData(u, _simulate(A, B, C, D, u, x0s[-1])))
+    data = subid.merge(pieces)
+    monkeypatch.setattr(_bd_large, "DENSE_LIMIT", 1000)
+    B1, D1, x1, diag = bd.fit_b_d_x0(A, C, data)
+    assert diag["regression_path"] == "channels" and diag["bd_method"] == "simulation"
+    _close(B1, B, 1e-8)
+    _close(D1, D, 1e-8)
+    _close(x1, np.array(x0s), 1e-8)
+    monkeypatch.setattr(_bd_large, "MEMORY_LIMIT", 1000)
+    with pytest.raises(ResourceLimitError, match="estimate_x0=False"):
+        bd.fit_b_d_x0(A, C, data)

@@ -48,7 +48,7 @@ from typing import NamedTuple
 import numpy as np
 
 from subid.data import IOData
-from subid.errors import SubidError, TooFewSamplesError
+from subid.errors import ResourceLimitError, SubidError, TooFewSamplesError
 from subid.methods.dt._regression import fit_b_d_projection
 from subid.methods.dt._regression import fit_b_d_x0 as _fit_record
 from subid.methods.dt._regression import regression_rows as regression_rows
@@ -262,13 +262,27 @@ def _raw_samples(A, C, u, y, starts, *, feedthrough, estimate_x0, output_weights
     """The in-memory output-error engines: one record, several experiments, many channels."""
     from subid.methods.dt import _bd_large
     kw = dict(feedthrough=feedthrough, estimate_x0=estimate_x0, output_weights=output_weights)
-    if starts is not None and len(starts) > 1:
-        return _bd_large.fit_experiments(A, C, u, y, starts, path=path, **kw)
-    if path == "auto" and _bd_large.dense_bytes(
-            A.shape[0], u.shape[1], y.shape[1], u.shape[0], estimate_x0=estimate_x0,
-            feedthrough=feedthrough) > _bd_large.DENSE_LIMIT:
-        return _bd_large.fit_channels(A, C, u, y, **kw)
-    return _fit_record(A, C, u, y, path=path, **kw)
+    n, nu, ny = A.shape[0], u.shape[1], y.shape[1]
+    dense = _bd_large.dense_bytes(n, nu, ny, u.shape[0], estimate_x0=estimate_x0,
+                                  feedthrough=feedthrough,
+                                  n_experiments=1 if starts is None else len(starts))
+    if path != "auto" or dense <= _bd_large.DENSE_LIMIT:
+        if starts is not None and len(starts) > 1:
+            return _bd_large.fit_experiments(A, C, u, y, starts, path=path, **kw)
+        return _fit_record(A, C, u, y, path=path, **kw)
+    several = starts is not None and len(starts) > 1
+    need = _bd_large.channel_bytes(n, nu, len(starts) if several else 1,
+                                   estimate_x0=estimate_x0) + _bd_large.CHUNK_BYTES
+    if need > _bd_large.MEMORY_LIMIT:
+        raise ResourceLimitError(
+            f"the B, D, x0 regression of order {n} with {nu} inputs, {ny} outputs"
+            + (f" and {len(starts)} experiments (one initial state each)" if several else "")
+            + f" needs {need / 2**30:.3g} GiB even with the outputs eliminated one by one "
+            f"(limit {_bd_large.MEMORY_LIMIT / 2**30:g} GiB); "
+            + ("merge fewer experiments, pass estimate_x0=False, " if several else "")
+            + "identify fewer channels at a time, or use n4sid (B and D from the state "
+              "sequence, no regression)")
+    return _bd_large.fit_channels(A, C, u, y, starts=starts if several else None, **kw)
 
 
 def _prediction(A, C, data, K, *, feedthrough, estimate_x0, output_weights, path):
@@ -279,15 +293,29 @@ def _prediction(A, C, data, K, *, feedthrough, estimate_x0, output_weights, path
     4.86) is linear in ``B̃ = B - K D``, D and ``x̂(0) = x0``:
     ``y(k) - y_K(k) = C Ā^k x0 + sum_j C Ā^(k-1-j) B̃ u(j) + D u(k) + e(k)`` with
     ``y_K`` the output of ``(Ā, K, C, 0)`` driven by y; ``B = B̃ + K D``.
+
+    A record of several experiments (:func:`subid.merge`) has one predictor per
+    experiment: ``y_K`` restarts from zero and ``x̂(0)`` is the experiment's own
+    ``x0`` at every border, as in the output-error route (a single record takes
+    the same path as before, bit for bit).
     """
     from subid.model._simulate import _simulate_discrete
     if not isinstance(data, IOData) or K is None:
         return None
     A_bar = A - K @ C
     ny = C.shape[0]
-    y_k = _simulate_discrete(A_bar, K, C, np.zeros((ny, ny)), data.y, np.zeros(A.shape[0]))[0]
+    starts = experiment_starts(data)
+    if starts is not None and estimate_x0:
+        check_experiment_lengths(data, A.shape[0])
+
+    def predictor_output(y):
+        return _simulate_discrete(A_bar, K, C, np.zeros((ny, ny)), y, np.zeros(A.shape[0]))[0]
+    if starts is None:
+        y_k = predictor_output(data.y)
+    else:
+        y_k = np.concatenate([predictor_output(data.y[a:b]) for a, b in data.experiment_ranges])
     with np.errstate(all="ignore"):
-        B_t, D_p, x0, reg = _raw_samples(A_bar, C, data.u, data.y - y_k, None,
+        B_t, D_p, x0, reg = _raw_samples(A_bar, C, data.u, data.y - y_k, starts,
                                          feedthrough=feedthrough, estimate_x0=estimate_x0,
                                          output_weights=output_weights, path=path)
     B_p = B_t + K @ D_p

@@ -68,7 +68,7 @@ import scipy.linalg
 
 from subid._validation import as_signal, check_dt, check_int, checked_call
 from subid.data import IOData
-from subid.errors import DataError, TooFewSamplesError
+from subid.errors import DataError, ResourceLimitError, TooFewSamplesError
 from subid.statistic._hankel import HankelFactor, lq_lower
 
 __all__ = ["HankelStatistic"]
@@ -82,6 +82,11 @@ QR_MAX_SAMPLES = 200_000
 #: factor at which ``kind='auto'`` keeps the lagged products (see the module documentation).
 GRAM_MAX_CONDITION = 1e4
 KINDS = ("qr", "gram")
+#: Largest triangular factor (``(depth (nu + ny))^2`` doubles) a statistic may need:
+#: beyond it, :class:`HankelStatistic` is a :class:`subid.errors.ResourceLimitError`
+#: on creation, before anything is allocated (the factor grows with the square of the
+#: number of channels times the depth; the methods hold a few arrays of its size).
+FACTOR_BYTES_LIMIT = 2 ** 31
 
 
 def lag_sums(z: np.ndarray, depth: int) -> np.ndarray:
@@ -136,6 +141,12 @@ class HankelStatistic:
         Sampling period of the record.
     input_names, output_names : sequence of str, optional
 
+    Raises
+    ------
+    subid.errors.ResourceLimitError
+        The triangular factor, ``(depth (n_inputs + n_outputs))^2`` doubles, would
+        exceed :data:`FACTOR_BYTES_LIMIT` (2 GiB): raised before anything is allocated.
+
     Examples
     --------
     >>> import subid
@@ -164,8 +175,16 @@ class HankelStatistic:
             tuple(f"u{k + 1}" for k in range(self.n_inputs))
         self.output_names = tuple(output_names) if output_names is not None else \
             tuple(f"y{k + 1}" for k in range(self.n_outputs))
-        self.lagged = np.zeros((self.depth, q, q)) if kind == "gram" else None
         m = self.depth * q
+        if 8.0 * m * m > FACTOR_BYTES_LIMIT:
+            raise ResourceLimitError(
+                f"a Hankel statistic of depth {self.depth} with {self.n_inputs} inputs and "
+                f"{self.n_outputs} outputs has {m} rows: its triangular factor alone takes "
+                f"{8.0 * m * m / 2**30:.3g} GiB (limit {FACTOR_BYTES_LIMIT / 2**30:g} GiB). "
+                f"Use a smaller horizon (depth <= {int((FACTOR_BYTES_LIMIT / 8) ** 0.5) // q}; "
+                "the subspace methods use depth 2 * horizon), or identify fewer channels at "
+                "a time")
+        self.lagged = np.zeros((self.depth, q, q)) if kind == "gram" else None
         self.R = np.zeros((m, m)) if kind == "qr" else None
         self.head = np.zeros((0, q))
         self.tail = np.zeros((0, q))

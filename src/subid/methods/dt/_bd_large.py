@@ -23,7 +23,11 @@ unknowns shared by every block of rows and, per block, unknowns of its own.
   and the D rows are eliminated output by output through ``sum_t u u^T``
   (the same for every output): memory is bounded by the chunk and by the
   ``(n + n nu)``-square reduced problem, not by ``ny nu`` columns times the
-  number of rows.
+  number of rows. A merged record whose per-experiment blocks would be dense
+  (:func:`dense_bytes`) takes the same elimination with one x0 per experiment
+  (``(E n + n nu)``-square); beyond :data:`MEMORY_LIMIT`,
+  :func:`subid.methods.bd.fit_b_d_x0` raises
+  :class:`subid.errors.ResourceLimitError` before allocating.
 
 Both give the least-squares solution of the dense problem (to rounding;
 tests/test_bd_large.py compares them with it).
@@ -61,12 +65,20 @@ DENSE_LIMIT = 256 * 2 ** 20
 CHUNK_BYTES = 8 * 2 ** 20
 
 
-def dense_bytes(n, nu, ny, n_samples, *, estimate_x0=True, feedthrough=True):
+#: Bytes the channel elimination (:func:`fit_channels`) may hold; beyond it the
+#: B, D, x0 regression is a :class:`subid.errors.ResourceLimitError` before allocating.
+MEMORY_LIMIT = 2 ** 30
+
+
+def dense_bytes(n, nu, ny, n_samples, *, estimate_x0=True, feedthrough=True, n_experiments=1):
     """Bytes of the largest array the in-memory engines build: the modal maps
-    (``ny (p + 1) d``), the normal matrix and the rows of a QR chunk."""
+    (``ny (p + 1) d``), the normal matrix and the rows of a QR chunk; with several
+    experiments, the normal matrix or factor that :func:`fit_experiments` keeps for
+    each."""
     _, _, p = parameter_count(n, nu, ny, estimate_x0, feedthrough)
     d = n * (1 + nu) + nu + ny
-    return 8 * max(ny * (p + 1) * d, (p + 1) ** 2, min(_CHUNK, n_samples) * ny * (p + 1))
+    return 8 * max(ny * (p + 1) * d, max(n_experiments, 1) * (p + 1) ** 2,
+                   min(_CHUNK, n_samples) * ny * (p + 1))
 
 
 # ---------------------------------------------------------------------------
@@ -278,8 +290,15 @@ def _experiments_qr(A, C, u, y, ranges, output_weights, *, feedthrough, estimate
 # ---------------------------------------------------------------------------
 # many channels: the D rows eliminated output by output
 # ---------------------------------------------------------------------------
-def fit_channels(A, C, u, y, *, feedthrough=True, estimate_x0=True, output_weights=None,
-                 chunk_bytes=CHUNK_BYTES):
+def channel_bytes(n, nu, n_experiments=1, *, estimate_x0=True):
+    """Bytes of the largest arrays :func:`fit_channels` holds besides its chunk: the
+    normal matrix of ``[x0_1 .. x0_E, vec B]`` and the ``Xi`` array (module docstring)."""
+    q = (n_experiments * n if estimate_x0 else 0) + n * nu
+    return 8 * (2 * q * q + q * n * nu)
+
+
+def fit_channels(A, C, u, y, *, starts=None, feedthrough=True, estimate_x0=True,
+                 output_weights=None, chunk_bytes=CHUNK_BYTES):
     """The regression of :func:`subid.methods.dt._regression.fit_b_d_x0` with
     memory bounded by ``chunk_bytes`` and the ``(n + n nu)``-square reduced
     problem (see the module docstring).
@@ -296,12 +315,17 @@ def fit_channels(A, C, u, y, *, feedthrough=True, estimate_x0=True, output_weigh
     ``X_i = sum_m C[i, m] Xi_m`` with ``Xi_m = sum_t S[m]^T u^T``, so only the
     ``(n + n nu) x n x nu`` array ``Xi`` is accumulated.
 
+    ``starts`` (the first sample of each experiment of a merged record): the
+    sensitivity restarts at every experiment, which has its own x0 (``theta =
+    [x0_1 .. x0_E; vec B]``, :func:`channel_bytes`); each experiment's sums are
+    added into the rows and columns of its x0 and of B.
+
     Returns
     -------
     B, D, x0, diagnostics
         As :func:`subid.methods.dt._regression.fit_b_d_x0_qr` (``regression_path``
         ``'channels'``; the condition is that of the equilibrated reduced
-        normal matrix's square root).
+        normal matrix's square root); ``x0`` of shape (E, n) with ``starts``.
     """
     u = np.asarray(u, dtype=float)
     y = np.asarray(y, dtype=float)
@@ -309,37 +333,54 @@ def fit_channels(A, C, u, y, *, feedthrough=True, estimate_x0=True, output_weigh
     C = np.asarray(C, dtype=float)
     N, nu = u.shape
     n, ny = A.shape[0], y.shape[1]
+    ranges = [(0, N)] if starts is None else \
+        list(zip(starts, list(starts[1:]) + [N]))
+    E = len(ranges)
     w2 = np.ones(ny) if output_weights is None else np.asarray(output_weights, float) ** 2
-    nx, q, _ = parameter_count(n, nu, ny, estimate_x0, False)
+    nx_e, q_e, _ = parameter_count(n, nu, ny, estimate_x0, False)     # one experiment's
+    nx, q, _ = parameter_count(n, nu, ny, estimate_x0, False, n_x0=E * n)
     WC = C * np.sqrt(w2)[:, None]
     # a square root L^T L = C^T W^2 C with min(n, ny) rows
     Lt = WC if ny <= n else np.triu(scipy.linalg.qr(WC, mode="r", check_finite=False)[0][:n])
     CW2 = C.T * w2[None, :]                          # C^T W^2, (n, ny)
-    G = np.zeros((q, q))
+    G = np.zeros((q, q), order="F")      # its upper triangle, by rank-k updates (syrk)
     h = np.zeros(q)
     Xi = np.zeros((q * n, nu))
     U = np.zeros((nu, nu))
     c = np.zeros((nu, ny))
     yy = np.zeros(ny)
-    V = np.zeros((n, nu, n))
-    M = np.eye(n)
-    step = max(1, int(chunk_bytes // (8 * n * max(q, 1) * 2)))
+    step = max(1, int(chunk_bytes // (8 * n * max(q_e, 1) * 2)))
     eye = np.ascontiguousarray(np.eye(n))
-    for start in range(0, N, step):
-        stop = min(start + step, N)
-        uc = np.ascontiguousarray(u[start:stop])
-        yc = y[start:stop]
-        with np.errstate(over="ignore", invalid="ignore"):
-            S, V, M = dual_rows(A, eye, uc, V, M, nx)       # S(t): (T, n, q)
-        if not np.isfinite(S).all():                         # overflowed (an unstable A)
-            return _nan_fit(n, nu, ny, "channels")
-        Z = np.matmul(Lt, S).reshape(-1, q)
-        G += Z.T @ Z
-        h += np.einsum("tmq,tm->q", S, yc @ CW2.T)
-        Xi += S.transpose(0, 2, 1).reshape(stop - start, q * n).T @ uc
-        U += uc.T @ uc
-        c += uc.T @ yc
-        yy += np.einsum("ti,ti->i", yc, yc)
+    for e, (first, end) in enumerate(ranges):
+        # the columns of this experiment's [x0_e; vec B] in theta
+        cols = slice(None) if E == 1 else \
+            np.concatenate([np.arange(e * nx_e, (e + 1) * nx_e), np.arange(nx, q)])
+        Ge = G if E == 1 else np.zeros((q_e, q_e), order="F")
+        he = h if E == 1 else np.zeros(q_e)
+        Xe = Xi if E == 1 else np.zeros((q_e * n, nu))
+        V = np.zeros((n, nu, n))
+        M = np.eye(n)
+        for start in range(first, end, step):
+            stop = min(start + step, end)
+            uc = np.ascontiguousarray(u[start:stop])
+            yc = y[start:stop]
+            with np.errstate(over="ignore", invalid="ignore"):
+                S, V, M = dual_rows(A, eye, uc, V, M, nx_e)     # S(t): (T, n, q_e)
+            if not np.isfinite(S).all():                        # overflowed (an unstable A)
+                return _nan_fit(n, nu, ny, "channels", None if E == 1 else E)
+            Z = np.matmul(Lt, S).reshape(-1, q_e)
+            Ge = _syrk_update(Ge, Z.T, 1.0)                    # += Z^T Z (upper)
+            he += np.einsum("tmq,tm->q", S, yc @ CW2.T)
+            Xe += S.transpose(0, 2, 1).reshape(stop - start, q_e * n).T @ uc
+            U += uc.T @ uc
+            c += uc.T @ yc
+            yy += np.einsum("ti,ti->i", yc, yc)
+        if E == 1:
+            G = Ge
+        else:
+            G[np.ix_(cols, cols)] += Ge
+            h[cols] += he
+            Xi.reshape(q, n * nu)[cols] += Xe.reshape(q_e, n * nu)
     yy_total = float(w2 @ yy)
     rhs_y = yy_total
     if feedthrough:
@@ -349,28 +390,35 @@ def fit_channels(A, C, u, y, *, feedthrough=True, estimate_x0=True, output_weigh
         try:
             Lu = scipy.linalg.cholesky(Ue, lower=True, check_finite=False)
         except np.linalg.LinAlgError:
-            return _nan_fit(n, nu, ny, "channels")
+            return _nan_fit(n, nu, ny, "channels", None if E == 1 else E)
         Xi3 = Xi.reshape(q, n, nu)
+        # sum_i w_i^2 X_i U^-1 X_i^T = sum_{m,m'} (C^T W^2 C)[m, m'] Xi_m U^-1 Xi_m'^T
+        # = sum_k Y_k Y_k^T with Y_k = (sum_m Lt[k, m] Xi_m) U^-1/2: min(n, ny) terms
+        # instead of ny (the square root Lt of C^T W^2 C holds the output weights)
+        r = Lt.shape[0]
         block = max(1, int(chunk_bytes // (8 * q * nu)))
-        for i0 in range(0, ny, block):
-            i1 = min(i0 + block, ny)
-            # Y_i = X_i U^-1/2 (equilibrated), for outputs i0..i1
-            X = np.einsum("qmj,im->iqj", Xi3, C[i0:i1]) / su[None, None, :]
+        for k0 in range(0, r, block):
+            k1 = min(k0 + block, r)
+            X = np.einsum("qmj,km->kqj", Xi3, Lt[k0:k1]) / su[None, None, :]
             Y = scipy.linalg.solve_triangular(Lu, X.reshape(-1, nu).T, lower=True,
-                                              check_finite=False).T.reshape(i1 - i0, q, nu)
-            cy = scipy.linalg.solve_triangular(Lu, c[:, i0:i1] / su[:, None], lower=True,
-                                               check_finite=False)      # (nu, k)
-            Yw = Y * np.sqrt(w2[i0:i1])[:, None, None]
-            Yw2 = Yw.transpose(1, 0, 2).reshape(q, -1)
-            G -= Yw2 @ Yw2.T
-            h -= np.einsum("iqj,ji->q", Y * w2[i0:i1, None, None], cy)
-            rhs_y -= float(np.sum(w2[i0:i1] * np.sum(cy * cy, axis=0)))
+                                              check_finite=False)       # (nu, k q)
+            Y = Y.reshape(nu, k1 - k0, q).transpose(2, 1, 0).reshape(q, -1)
+            G = _syrk_update(G, Y, -1.0)                                 # -= Y Y^T (upper)
+        # sum_i w_i^2 X_i U^-1 c_i = sum_m Xi_m U^-1 (c W^2 C)[:, m]
+        cy = scipy.linalg.solve_triangular(Lu, c / su[:, None], lower=True,
+                                           check_finite=False)          # (nu, ny)
+        g = scipy.linalg.solve_triangular(Lu.T, cy @ (C * w2[:, None]), lower=False,
+                                          check_finite=False) / su[:, None]   # (nu, n)
+        h -= np.einsum("qmj,jm->q", Xi3, g)
+        rhs_y -= float(np.sum(w2 * np.sum(cy * cy, axis=0)))
+    G = np.triu(G) + np.triu(G, 1).T
     Naug = np.zeros((q + 1, q + 1))
     Naug[:q, :q] = G
     Naug[:q, q] = Naug[q, :q] = h
     Naug[q, q] = rhs_y
     solved = solve_normal_equations(Naug, n, nu, ny, estimate_x0=estimate_x0, feedthrough=False,
-                                    n_samples=N, max_condition=1.0 / (np.finfo(float).eps * q))
+                                    n_samples=N, max_condition=1.0 / (np.finfo(float).eps * q),
+                                    n_x0=nx if E > 1 else None)
     deficient = solved is None
     if deficient:
         scale = np.sqrt(np.abs(np.diag(G))).copy()
@@ -384,6 +432,9 @@ def fit_channels(A, C, u, y, *, feedthrough=True, estimate_x0=True, output_weigh
     else:
         B, _, x0, theta, diagnostics = solved
     diagnostics.update(regression_rank_deficient=deficient, regression_path="channels")
+    if E > 1:
+        x0 = x0.reshape(E, n) if estimate_x0 else np.zeros((E, n))
+        diagnostics["experiments"] = E
     D = np.zeros((ny, nu))
     if feedthrough:
         # d_i = U^-1 (c_i - X_i^T theta), X_i^T theta = sum_m C[i, m] Xi_m^T theta
@@ -393,7 +444,15 @@ def fit_channels(A, C, u, y, *, feedthrough=True, estimate_x0=True, output_weigh
     return B, D, x0, diagnostics
 
 
-def _nan_fit(n, nu, ny, path):
-    return (np.full((n, nu), np.nan), np.full((ny, nu), np.nan), np.full(n, np.nan),
+def _syrk_update(G, Y, alpha):
+    """``G + alpha Y Y^T`` in the upper triangle of ``G`` (Fortran order, in place where
+    BLAS allows): half the flops of the full product."""
+    return scipy.linalg.blas.dsyrk(alpha, Y, beta=1.0, c=G, trans=0, lower=0,
+                                   overwrite_c=1)
+
+
+def _nan_fit(n, nu, ny, path, n_experiments=None):
+    x0 = np.full(n if n_experiments is None else (n_experiments, n), np.nan)
+    return (np.full((n, nu), np.nan), np.full((ny, nu), np.nan), x0,
             {"residual_rms": float("nan"), "regression_condition": float("inf"),
              "regression_rank_deficient": True, "regression_path": path})

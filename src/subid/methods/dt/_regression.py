@@ -439,24 +439,29 @@ def fit_b_d_projection(A, C, gamma, L11, L_yu, *, feedthrough=True):
     powers = [C]
     for _ in range(f - 2):
         powers.append(powers[-1] @ A)
-    n_par = n * nu + (ny * nu if feedthrough else 0)
-    Phi = np.zeros((f, r * nu, n_par))
-    eye_u = np.eye(nu)
+    # Input channel k of block column j: Γ^⊥T H_f's column j*nu + k is
+    # GB_j B[:, k] + G_j D[:, k] (GB_j = sum_{i>j} G_i C A^(i-j-1)), so the
+    # regressor of (vec B, vec D) is block diagonal over the inputs, each block
+    # the same Psi = [GB_j, G_j] stacked over j (f r x (n + ny)): one least
+    # squares with nu right-hand sides, [B; D] column by column. The dense
+    # kron(I_nu, Psi) was f r nu x (n nu + ny nu) (issue 28: 20 GB at 100 inputs
+    # and outputs, horizon 5); this is f r (n + ny + nu).
+    n_col = n + (ny if feedthrough else 0)
+    Psi = np.zeros((f, r, n_col))
     for j in range(f):
-        GB = np.zeros((r, n))
+        GB = Psi[j, :, :n]
         for i in range(j + 1, f):
             GB += G[:, i * ny:(i + 1) * ny] @ powers[i - j - 1]
-        Phi[j, :, :n * nu] = np.kron(eye_u, GB)
         if feedthrough:
-            Phi[j, :, n * nu:] = np.kron(eye_u, G[:, j * ny:(j + 1) * ny])
-    rhs = np.concatenate([M[:, j * nu:(j + 1) * nu].reshape(-1, order="F") for j in range(f)])
-    Phi = Phi.reshape(f * r * nu, n_par)
-    theta, _, rank, _ = scipy.linalg.lstsq(Phi, rhs, lapack_driver="gelsy", check_finite=False)
-    B = theta[:n * nu].reshape(nu, n).T
-    D = theta[n * nu:].reshape(nu, ny).T if feedthrough else np.zeros((ny, nu))
-    resid = np.linalg.norm(Phi @ theta - rhs) / max(np.linalg.norm(rhs), 1e-300)
+            Psi[j, :, n:] = G[:, j * ny:(j + 1) * ny]
+    Psi = Psi.reshape(f * r, n_col)
+    rhs = M.reshape(r, f, nu).transpose(1, 0, 2).reshape(f * r, nu)   # row (j, q), column k
+    theta, _, rank, _ = scipy.linalg.lstsq(Psi, rhs, lapack_driver="gelsy", check_finite=False)
+    B = theta[:n]
+    D = theta[n:] if feedthrough else np.zeros((ny, nu))
+    resid = np.linalg.norm(Psi @ theta - rhs) / max(np.linalg.norm(rhs), 1e-300)
     return B, D, {"projection_residual": float(resid),
-                  "regression_rank_deficient": bool(rank < n_par)}
+                  "regression_rank_deficient": bool(rank < n_col)}
 
 
 # ---------------------------------------------------------------------------

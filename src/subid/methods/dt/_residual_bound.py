@@ -112,6 +112,14 @@ def loses(A, C, u, y, threshold: float, *, feedthrough: bool, estimate_x0: bool,
     else None."""
     if not math.isfinite(threshold) or threshold <= 0:
         return None
+    from subid.methods.dt._bd_large import DENSE_LIMIT, dense_bytes
+    n, nu, ny = A.shape[0], u.shape[1], y.shape[1]
+    if dense_bytes(n, nu, ny, max(int(math.ceil(SHORT * u.shape[0])), 1),
+                   estimate_x0=True, feedthrough=feedthrough) > DENSE_LIMIT:
+        # many channels: both bounds are dense QR factors of n + n nu + ny nu columns (at
+        # 100 inputs and outputs, 3 GB: issue 28); no bound, the full fit decides (by the
+        # channel elimination of subid.methods.dt._bd_large, bounded in memory)
+        return None
     need = threshold * (1.0 + MARGIN)
     with np.errstate(all="ignore"):
         for fraction in (SHORT, TAIL):
