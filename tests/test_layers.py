@@ -65,6 +65,9 @@ PRIVATE_ALLOWED = {
     # The simulation kernels of the model (state recursion, matrix exponentials).
     ("subid.evaluation.prediction", "subid.model._simulate"),
     ("subid.methods", "subid.model._simulate"),
+    # The sensitivity recursion of a state-space system (pem's Jacobian, the bands).
+    ("subid.methods.dt", "subid.model._sensitivity"),
+    ("subid.evaluation.uncertainty", "subid.model._sensitivity"),
     # The Hankel factor type of the statistic.
     ("subid.methods", "subid.statistic._hankel"),
     # Issue 24, temporarily: the other time bases and subid.identify still read the

@@ -8,6 +8,7 @@ import math
 import numpy as np
 
 from subid.evaluation.figures._common import (
+    MAX_TRACE_POINTS,
     _check_data,
     _envelope,
     _finite,
@@ -15,6 +16,7 @@ from subid.evaluation.figures._common import (
     _legend_beside,
     _legend_room,
     _model_groups,
+    _note_envelope,
     _pyplot,
     _styled,
     _time_label,
@@ -66,13 +68,16 @@ def compare(data, models, *, labels=None, x0="estimate", title=None, clip=True,
     t = data.t
     # the measured output is drawn on top (zorder), thin and black; the models under
     # it, wider and lighter, so that both stay visible where they agree
+    # (a long trace: its min/max envelope, rasterised in vector output)
+    long = t.size > MAX_TRACE_POINTS
     for i in range(ny):
         axes[i, 0].plot(*_envelope(t, data.y[:, i]), "k-", lw=0.7, zorder=3,
-                        label="measured")
+                        label="measured", rasterized=long)
     for k, (label, (y_hat, fit)) in enumerate(fits.items()):
         for i in range(ny):
             axes[i, 0].plot(*_envelope(t, _finite(y_hat[:, i])), color=colors[k], lw=1.8,
-                            alpha=0.75, zorder=2, label=f"{label}: fit {_fmt_fit(fit[i])} %")
+                            alpha=0.75, zorder=2, label=f"{label}: fit {_fmt_fit(fit[i])} %",
+                            rasterized=long)
     for i in range(ny):
         ax = axes[i, 0]
         ax.set_ylabel(data.output_names[i])
@@ -85,6 +90,7 @@ def compare(data, models, *, labels=None, x0="estimate", title=None, clip=True,
     if title:
         fig.suptitle(title)
     _layout(fig, axes, hgap=0.2, left=0.85, right=room + 0.1)
+    _note_envelope(fig, t.size)
     return fig
 
 
@@ -123,7 +129,8 @@ def data_overview(data, *, split=None, title=None):
                              squeeze=False)
     t = data.t
     for ax, (name, values, color) in zip(axes[:, 0], channels):
-        ax.plot(*_envelope(t, values), color=color, lw=0.8)
+        ax.plot(*_envelope(t, values), color=color, lw=0.8,
+                rasterized=t.size > MAX_TRACE_POINTS)
         ax.set_ylabel(name, fontsize=9, rotation=0, ha="right", va="center")
         if split is not None:
             ax.axvspan(split, t[-1], color="0.85", zorder=0)
@@ -136,4 +143,5 @@ def data_overview(data, *, split=None, title=None):
     if title:
         fig.suptitle(title)
     _layout(fig, axes, top=0.35, left=1.6, hgap=0.15)
+    _note_envelope(fig, t.size)
     return fig

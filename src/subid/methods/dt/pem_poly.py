@@ -54,7 +54,7 @@ import scipy.signal
 from subid._validation import check_bool, check_choice, check_optimiser_options, checked_call
 from subid.errors import SubidError
 from subid.methods._info import collect_warnings
-from subid.methods.dt._pem_kernel import jacobian
+from subid.model._sensitivity import jacobian
 from subid.methods.dt._poly_covariance import attach_covariance
 from subid.methods.dt.pem import (
     _predictor,
