@@ -240,14 +240,55 @@ def _envelope(t: np.ndarray, values: np.ndarray, max_points: int = MAX_TRACE_POI
     return t[index], values[index]
 
 
+_SUPERSCRIPT = str.maketrans("-0123456789", "⁻⁰¹²³⁴⁵⁶⁷⁸⁹")
+
+
+def _decade_label(value, _position=None) -> str:
+    """Tick label of a log axis in plain text (``10⁻²``; other values as ``%g``):
+    matplotlib's default labels are mathtext, parsed by pyparsing at every new label
+    (a third of the drawing time of the order-selection chart)."""
+    if not value > 0 or not np.isfinite(value):
+        return ""
+    exponent = np.log10(value)
+    if abs(exponent - round(exponent)) < 1e-9:
+        return "10" + str(int(round(exponent))).translate(_SUPERSCRIPT)
+    return f"{value:g}"
+
+
+def _plain_log_labels(axis) -> None:
+    """Label the decades of a log ``axis`` (an XAxis or YAxis) in plain text."""
+    from matplotlib.ticker import FuncFormatter
+    axis.set_major_formatter(FuncFormatter(_decade_label))
+
+
+def _draw_trace(ax, t, values, *, color, lw, fill=True, **style):
+    """Draw a time trace on ``ax``: its samples as a line, or, beyond
+    :data:`MAX_TRACE_POINTS`, the band between the minimum and the maximum of each
+    block of :func:`_envelope` (filled, or only outlined with ``fill=False``), its
+    outline ``lw`` wide so that a quiet stretch still shows as a line.
+
+    The band draws what the zig-zag line through the same points covers, an order
+    of magnitude faster (a filled polygon instead of thousands of strokes across
+    the signal's range); it is rasterised in vector output. A block with a
+    non-finite value leaves a gap. Returns the artist."""
+    if values.shape[0] <= MAX_TRACE_POINTS:
+        return ax.plot(t, values, color=color, lw=lw, **style)[0]
+    tt, vv = _envelope(t, values)
+    pairs = vv.reshape(-1, 2)
+    with np.errstate(invalid="ignore"):
+        low, high = pairs.min(axis=1), pairs.max(axis=1)
+    return ax.fill_between(tt[0::2], low, high, facecolor=color if fill else "none",
+                           edgecolor=color, lw=lw, rasterized=True, **style)
+
+
 def _envelope_note(n_samples: int, max_points: int = MAX_TRACE_POINTS) -> str | None:
-    """What a figure says under traces of ``n_samples`` drawn by :func:`_envelope`
+    """What a figure says under traces of ``n_samples`` drawn by :func:`_draw_trace`
     (None when they are drawn sample by sample)."""
     if n_samples <= max_points:
         return None
     size = -(-n_samples // (max_points // 2))
-    return (f"{n_samples:,} samples per trace, drawn as the minimum and maximum of every "
-            f"{size:,} (peaks kept)")
+    return (f"{n_samples:,} samples per trace: band between the minimum and the maximum "
+            f"of every {size:,} (peaks kept)")
 
 
 def _note_envelope(fig, n_samples: int) -> None:
