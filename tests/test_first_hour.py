@@ -262,10 +262,13 @@ def test_spa_covariances_by_direct_products_equal_the_fft_ones(monkeypatch):
     merged = subid.merge([data[:1200], data[1200:]])
     for record in (data, merged):
         direct = nonparametric._covariances(record, 30)
+        monkeypatch.setattr(nonparametric, "_COVARIANCE_BLOCK", 97)    # blocks, short last
+        blocks = nonparametric._covariances(record, 30)
         monkeypatch.setattr(nonparametric, "_DIRECT_LAGS", -1)
         fft = nonparametric._covariances(record, 30)
         monkeypatch.undo()
         np.testing.assert_allclose(direct, fft, rtol=0, atol=1e-12 * np.abs(fft).max())
+        np.testing.assert_allclose(blocks, fft, rtol=0, atol=1e-12 * np.abs(fft).max())
 
 
 def test_readme_signatures_of_the_online_identifiers_show_dt_and_the_required_arguments():
