@@ -325,3 +325,22 @@ def test_log_axes_are_labelled_in_plain_text():
     from subid.evaluation.figures._common import _decade_label
     assert [_decade_label(v) for v in (0.01, 1.0, 1e3, 2.0, 0.0)] == \
         ["10\u207b\u00b2", "10\u2070", "10\u00b3", "2", ""]
+
+
+def test_residual_correlations_from_lag_products_equal_the_direct_sums():
+    from subid.evaluation.prediction import correlations
+    rng = np.random.default_rng(8)
+    e, u = rng.standard_normal((700, 2)), rng.standard_normal((700, 3))
+    ranges = [(0, 300), (300, 700)]
+    for parts in (None, ranges):
+        out = correlations(e, u, max_lag=6, ranges=parts)
+        e0, u0 = e - e.mean(axis=0), u - u.mean(axis=0)
+
+        def r(a, b, tau):          # sum_t a(t) b(t - tau) / N inside each experiment
+            return sum(sum(a[t] * b[t - tau] for t in range(max(s, s + tau), min(f, f + tau)))
+                       for s, f in (parts or [(0, 700)])) / 700
+        auto = [r(e0[:, 1], e0[:, 1], tau) for tau in range(7)]
+        np.testing.assert_allclose(out["auto"][1], np.array(auto) / auto[0], atol=1e-12)
+        cross = [r(e0[:, 0], u0[:, 2], tau) for tau in range(-6, 7)]
+        scale = np.sqrt(e0[:, 0] @ e0[:, 0] / 700 * r(u0[:, 2], u0[:, 2], 0))
+        np.testing.assert_allclose(out["cross"][0, 2], np.array(cross) / scale, atol=1e-12)
