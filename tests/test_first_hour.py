@@ -336,9 +336,9 @@ def test_residual_correlations_from_lag_products_equal_the_direct_sums():
         out = correlations(e, u, max_lag=6, ranges=parts)
         e0, u0 = e - e.mean(axis=0), u - u.mean(axis=0)
 
-        def r(a, b, tau):          # sum_t a(t) b(t - tau) / N inside each experiment
+        def r(a, b, tau, blocks=parts or [(0, 700)]):    # sum_t a(t) b(t - tau) / N
             return sum(sum(a[t] * b[t - tau] for t in range(max(s, s + tau), min(f, f + tau)))
-                       for s, f in (parts or [(0, 700)])) / 700
+                       for s, f in blocks) / 700          # inside each experiment
         auto = [r(e0[:, 1], e0[:, 1], tau) for tau in range(7)]
         np.testing.assert_allclose(out["auto"][1], np.array(auto) / auto[0], atol=1e-12)
         cross = [r(e0[:, 0], u0[:, 2], tau) for tau in range(-6, 7)]

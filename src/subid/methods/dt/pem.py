@@ -50,8 +50,8 @@ from subid.errors import DataError, ModelError, NoiseModelWarning, OptionError
 from subid.methods._info import records_warnings
 from subid.methods.dt._checks import check_data
 from subid.methods.dt._covariance import covariance_factor
-from subid.model._sensitivity import jacobian
 from subid.model import _simulate
+from subid.model._sensitivity import jacobian
 from subid.model.statespace import StateSpace
 
 __all__ = ["pem"]
