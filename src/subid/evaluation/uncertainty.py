@@ -435,7 +435,7 @@ def _magnitude_std(G0, X, Y, dA, dB, dC, dD):
     times the real and imaginary parts), the frequencies in blocks that keep every
     intermediate under :data:`_BLOCK_ENTRIES` entries: the sums of one ``einsum`` per
     term, at BLAS speed (an ``einsum`` over the shared frequency index loops in C
-    without BLAS: 90 % of a report's Bode figure for an ARX model of order 36).
+    without BLAS: 85 % of a report's Bode figure for an ARX model of order 36).
     """
     d, n = dA.shape[:2]
     K, ny, nu = X.shape[0], Y.shape[1], X.shape[2]
@@ -477,7 +477,7 @@ def _output_sensitivities(model, cov, u, x0):
     the factor, (N, ny, d): ``s_j[t+1] = A s_j[t] + dA_j x[t] + dB_j u[t]``,
     ``s_j[0] = 0``, ``dy_j = C s_j + dC_j x + dD_j u``, every direction in one
     compiled pass (:func:`subid.model._sensitivity.jacobian`)."""
-    y, x, ud = _forced(model, u, x0)
+    y, _, ud = _forced(model, u, x0)
     dA, dB, dC, dD = _directions(cov)
     n = model.order
     start = np.zeros(n) if x0 is None else np.asarray(x0, dtype=float).reshape(n)
