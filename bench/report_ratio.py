@@ -71,18 +71,20 @@ def main(argv=None):
 
     def once(profile=False):
         times = {}
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         data = subid.read(path, inputs=["u1", "u2"], outputs=["y1", "y2"], dt=0.01)
         times["read"] = time.perf_counter() - t0
+        times["cpu_read"] = time.process_time() - c0
         work = data.detrend()
         est, val = work.split(0.7)
         t0, c0 = time.perf_counter(), time.process_time()
         model = spec.load()(est, order=None)
         times["identify"] = time.perf_counter() - t0
         times["cpu_identify"] = time.process_time() - c0
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         result = report.evaluate(model, est, val)
         times["evaluate"] = time.perf_counter() - t0
+        times["cpu_evaluate"] = time.process_time() - c0
         if profile:
             profiler.enable()
         t0, c0 = time.perf_counter(), time.process_time()
@@ -106,8 +108,9 @@ def main(argv=None):
         print(f"repeat {k + 1}: read {r['read']:.2f} s, identify {r['identify']:.2f} s, "
               f"evaluate {r['evaluate']:.2f} s, report {r['report']:.2f} s, ratio "
               f"{r['report'] / r['identify']:.2f}", file=sys.stderr)
-    med = {key: statistics.median(r[key] for r in runs)
-           for key in ("read", "identify", "evaluate", "report")}
+    steps = ("read", "identify", "evaluate", "report")
+    med = {key: statistics.median(r[key] for r in runs) for key in steps}
+    cpu = {key: statistics.median(r["cpu_" + key] for r in runs) for key in steps}
     ratio = statistics.median(r["report"] / r["identify"] for r in runs)
     cpu_ratio = statistics.median(r["cpu_report"] / r["cpu_identify"] for r in runs)
     load = os.getloadavg()[1]           # the machine's load over the last 5 minutes
@@ -120,9 +123,9 @@ def main(argv=None):
         f"load average {load:.1f} on {os.cpu_count()} CPUs at the end (on a shared machine "
         "the seconds scale with the load; the ratio is measured in one process).",
         "",
-        "| step | seconds |",
-        "|---|---:|",
-        *(f"| {key} | {value:.2f} |" for key, value in med.items()),
+        "| step | seconds (wall) | CPU seconds |",
+        "|---|---:|---:|",
+        *(f"| {key} | {value:.2f} | {cpu[key]:.2f} |" for key, value in med.items()),
         "",
         f"Report / identification: **{ratio:.2f}** (median of the per-repeat ratios; "
         f"target <= 0.5); in CPU time (time.process_time, less sensitive to the load): "

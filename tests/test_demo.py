@@ -48,3 +48,29 @@ def test_worker_environment_is_restored():
     with demo._Environment(SUBID_TEST_VARIABLE="1"):
         assert os.environ["SUBID_TEST_VARIABLE"] == "1"
     assert os.environ.get("SUBID_TEST_VARIABLE") == before
+
+
+def test_the_pool_counts_every_task_on_the_progress_bar(tmp_path, monkeypatch):
+    """With jobs > 1 the bar has one step per identification and per report, and
+    every one is counted (here a pool of two threads on one small record, two methods:
+    the schedule of the process pool without its start-up)."""
+    counted = []
+
+    class Recorder:
+        def __init__(self, names, desc, *, enabled):
+            self.names = list(names)
+
+        def finished(self, name):
+            counted.append(name)
+
+        def close(self):
+            assert sorted(counted) == sorted(self.names)
+
+    monkeypatch.setattr(demo, "Steps", Recorder)
+    import concurrent.futures
+    monkeypatch.setattr(concurrent.futures, "ProcessPoolExecutor",        # no spawning here
+                        lambda jobs, **_: concurrent.futures.ThreadPoolExecutor(jobs))
+    result = demo.run(str(tmp_path), datasets=["dryer"], methods=["arx", "n4sid"], jobs=2,
+                      progress=True)
+    assert sorted(counted) == ["dryer: arx", "dryer: n4sid", "dryer: report"]
+    assert len(result["reports"]) == 1

@@ -262,10 +262,13 @@ def test_spa_covariances_by_direct_products_equal_the_fft_ones(monkeypatch):
     merged = subid.merge([data[:1200], data[1200:]])
     for record in (data, merged):
         direct = nonparametric._covariances(record, 30)
+        monkeypatch.setattr(nonparametric, "_COVARIANCE_BLOCK", 97)    # blocks, short last
+        blocks = nonparametric._covariances(record, 30)
         monkeypatch.setattr(nonparametric, "_DIRECT_LAGS", -1)
         fft = nonparametric._covariances(record, 30)
         monkeypatch.undo()
         np.testing.assert_allclose(direct, fft, rtol=0, atol=1e-12 * np.abs(fft).max())
+        np.testing.assert_allclose(blocks, fft, rtol=0, atol=1e-12 * np.abs(fft).max())
 
 
 def test_readme_signatures_of_the_online_identifiers_show_dt_and_the_required_arguments():
@@ -292,3 +295,52 @@ def test_report_charts_order_scores_only_for_records_over_orders_and_horizons():
     assert _order_scored(model)
     model.info["order_selection"] = {"rule": "given"}
     assert not _order_scored(model)
+
+
+def test_long_traces_are_drawn_as_their_min_max_band_with_a_note():
+    pytest.importorskip("matplotlib")
+    from subid.evaluation.plot import MAX_TRACE_POINTS
+    n = 50_001
+    t = np.arange(n) * 0.01
+    y = np.sin(t) + np.where(np.arange(n) == 33_333, 9.0, 0.0)     # one spike
+    u = np.cos(0.3 * t)
+    fig = subid.plot.data_overview(subid.IOData(u, y, dt=0.01))
+    band = fig.axes[-1].collections[-1]
+    top = np.concatenate([p.vertices[:, 1] for p in band.get_paths()])
+    assert np.isclose(top.max(), y.max()) and np.isclose(top.min(), y.min())
+    assert len(top) <= 2 * MAX_TRACE_POINTS + 8
+    assert any("samples per trace" in text.get_text() for text in fig.texts)
+    short = subid.plot.data_overview(subid.IOData(u[:500], y[:500], dt=0.01))
+    assert not short.texts and short.axes[-1].get_lines()
+    true = subid.systems.random_system(2, 1, 1, seed=4)
+    data = subid.systems.simulate_data(true, n, seed=5)
+    fig = subid.plot.compare(data, {"true": true})
+    measured, model = fig.axes[0].collections[:2]
+    assert measured.get_label() == "measured" and measured.get_zorder() > model.get_zorder()
+    assert not np.any(np.asarray(measured.get_facecolor()).reshape(-1, 4)[:, 3] > 0)  # outlined
+    assert np.all(np.asarray(model.get_facecolor()).reshape(-1, 4)[:, 3] > 0)         # filled
+
+
+def test_log_axes_are_labelled_in_plain_text():
+    from subid.evaluation.figures._common import _decade_label
+    assert [_decade_label(v) for v in (0.01, 1.0, 1e3, 2.0, 0.0)] == \
+        ["10\u207b\u00b2", "10\u2070", "10\u00b3", "2", ""]
+
+
+def test_residual_correlations_from_lag_products_equal_the_direct_sums():
+    from subid.evaluation.residuals import correlations
+    rng = np.random.default_rng(8)
+    e, u = rng.standard_normal((700, 2)), rng.standard_normal((700, 3))
+    ranges = [(0, 300), (300, 700)]
+    for parts in (None, ranges):
+        out = correlations(e, u, max_lag=6, ranges=parts)
+        e0, u0 = e - e.mean(axis=0), u - u.mean(axis=0)
+
+        def r(a, b, tau, blocks=parts or [(0, 700)]):    # sum_t a(t) b(t - tau) / N
+            return sum(sum(a[t] * b[t - tau] for t in range(max(s, s + tau), min(f, f + tau)))
+                       for s, f in blocks) / 700          # inside each experiment
+        auto = [r(e0[:, 1], e0[:, 1], tau) for tau in range(7)]
+        np.testing.assert_allclose(out["auto"][1], np.array(auto) / auto[0], atol=1e-12)
+        cross = [r(e0[:, 0], u0[:, 2], tau) for tau in range(-6, 7)]
+        scale = np.sqrt(e0[:, 0] @ e0[:, 0] / 700 * r(u0[:, 2], u0[:, 2], 0))
+        np.testing.assert_allclose(out["cross"][0, 2], np.array(cross) / scale, atol=1e-12)

@@ -63,6 +63,9 @@ PRIVATE_ALLOWED = {
     ("subid.methods.online.base", "subid.io._npz"),
     # The simulation kernels of the model (state recursion, matrix exponentials).
     ("subid.methods", "subid.model._simulate"),
+    # The sensitivity recursion of a state-space system (pem's Jacobian, the bands).
+    ("subid.methods.dt", "subid.model._sensitivity"),
+    ("subid.evaluation.uncertainty", "subid.model._sensitivity"),
     # The Hankel factor type of the statistic.
     ("subid.methods", "subid.statistic._hankel"),
     # Issue 24, temporarily: ct_subspace runs its candidates through the discrete-time

@@ -18,7 +18,7 @@ from hypothesis import strategies as st
 import subid
 from subid import systems
 from subid.errors import DataError, ModelError, SubidError
-from subid.methods.dt._pem_kernel import jacobian, jacobian_ref
+from subid.model._sensitivity import jacobian, jacobian_ref
 
 pem_module = importlib.import_module("subid.methods.dt.pem")   # the module (subid.pem is the function)
 

@@ -263,10 +263,10 @@ def test_the_report_shows_the_polynomials():
 
 
 def test_block_jacobian_of_an_output_error_model_equals_the_dense_one():
-    from subid.methods.dt._pem_kernel import jacobian
     from subid.methods.dt.pem import block_jacobian
     from subid.methods.dt.pem_poly import _Output
     from subid.methods.dt.polynomial import parse_orders
+    from subid.model._sensitivity import jacobian
     orders = parse_orders(([[2, 3, 1]], [[2, 1, 3]], [[1, 0, 2]]), "oe", 1, 3)
     sub = _Output("oe", orders, 0, 3)
     rng = np.random.default_rng(3)

@@ -168,3 +168,31 @@ def test_mimo_delta_matches_finite_differences_with_and_without_feedthrough():
                 for f in cov.factor.T]
         np.testing.assert_allclose(band.std, np.sqrt(np.sum(np.array(rows) ** 2, axis=0)),
                                    rtol=1e-5)
+
+
+def test_frequency_blocks_give_the_bounds_of_one_block(monkeypatch):
+    """The magnitude std summed over blocks of frequencies (one frequency at a time
+    here) is the std of one block, and the step band's compiled sensitivities are
+    those of one simulation per direction (the sensitivity equations run by the
+    model's own simulation)."""
+    from subid.evaluation import uncertainty
+    true = subid.systems.seed001_innovation_system()
+    data = subid.systems.simulate_innovation_data(true, 600, seed=7)
+    model = subid.pem(data, subid.n4sid(data, 3))
+    w = np.linspace(0.05, 3.0, 7)
+    whole = subid.freqresp_bounds(model, w)
+    monkeypatch.setattr(uncertainty, "_BLOCK_ENTRIES", 1)
+    np.testing.assert_allclose(subid.freqresp_bounds(model, w).std, whole.std, rtol=1e-12,
+                               atol=1e-14)
+    cov = subid.parameter_covariance(model)
+    u = np.random.default_rng(3).standard_normal((40, model.n_inputs))
+    x0 = np.array([0.3, -0.2, 0.1])
+    y, dy = uncertainty._output_sensitivities(model, cov, u, x0)
+    dA, dB, dC, dD = uncertainty._directions(cov)
+    x = model.simulate(u, x0=x0, return_state=True)[1]
+    state = StateSpace(model.A, np.eye(3), np.eye(3), 0, model.dt)
+    for j in range(dA.shape[0]):
+        s = state.simulate(x @ dA[j].T + u @ dB[j].T)
+        np.testing.assert_allclose(dy[:, :, j], s @ np.asarray(model.C).T + x @ dC[j].T
+                                   + u @ dD[j].T, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(y, model.simulate(u, x0=x0), rtol=1e-12)

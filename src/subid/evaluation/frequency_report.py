@@ -63,9 +63,11 @@ def evaluate_frequency(model, estimation, validation=None) -> dict:
 
 def _error_figure(models, data, hz: bool):
     from subid.evaluation import plot
+    from subid.evaluation.figures._common import _layout, _legend_beside, _legend_room
     plt = plot._pyplot()
     ny, nu = data.n_outputs, data.n_inputs
-    fig, axes = plt.subplots(ny, nu, figsize=(min(3.8 * nu + 1.2, 16), 2.0 * ny + 0.8),
+    room = _legend_room(list(models) + ["|G| (data)", "std (data)"])
+    fig, axes = plt.subplots(ny, nu, figsize=(min(3.8 * nu + 1.2, 16) + room, 2.0 * ny + 0.8),
                              sharex=True, squeeze=False)
     keep = data.w > 0
     w = data.w[keep] / (2 * math.pi if hz else 1.0)
@@ -92,8 +94,8 @@ def _error_figure(models, data, hz: bool):
             ax.grid(True, lw=0.3)
     for j in range(nu):
         axes[-1, j].set_xlabel(f"frequency ({'Hz' if hz else 'rad/s'})")
-    axes[0, -1].legend(fontsize=7, loc="best")
-    fig.tight_layout()
+    _legend_beside(axes[0, -1])          # fixed margins: tight_layout draws the figure twice
+    _layout(fig, axes, hgap=0.5, wgap=0.85, right=room + 0.1)
     return fig
 
 

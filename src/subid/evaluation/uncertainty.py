@@ -25,8 +25,8 @@ Bounds (:func:`freqresp_bounds`, :func:`step_bounds`,
   band is ``r ± z std`` with ``z`` the two-sided normal quantile of
   ``level``. The magnitude ``|G|`` has the sensitivity
   ``Re(conj(G) dG) / |G|``. The sensitivities of a simulated output are
-  exact (the sensitivity equations of the state recursion, run by the
-  model's own simulation).
+  exact (the sensitivity equations of the state recursion, all directions
+  in one compiled pass).
 * ``method='sampling'``: ``n_samples`` parameter vectors ``θ + F ξ``,
   ``ξ ~ N(0, I)`` (seeded), and the empirical ``(1 - level)/2`` and
   ``(1 + level)/2`` quantiles of the response.
@@ -64,6 +64,7 @@ from subid._validation import as_signal, check_int, checked_call, same_period
 from subid.data import IOData
 from subid.delay import apply_to_inputs, input_delay_of
 from subid.errors import DataError, ModelError, OptionError
+from subid.model._sensitivity import jacobian
 from subid.model.statespace import StateSpace
 
 __all__ = ["ParameterCovariance", "Bounds", "parameter_covariance", "freqresp_bounds",
@@ -413,14 +414,55 @@ def freqresp_bounds(model, w, level=0.95, *, method="delta", n_samples=1000, see
                         np.broadcast_to(C.T.astype(complex), (w.size, n, C.shape[0])))
     Y = Y.transpose(0, 2, 1)                               # C (sI - A)^-1
     G0 = C @ X + np.asarray(model.D)                       # without input delays
-    dG = (np.einsum("jin,knm->kjim", dC, X, optimize=True)
-          + np.einsum("kin,jnp,kpm->kjim", Y, dA, X, optimize=True)
-          + np.einsum("kin,jnm->kjim", Y, dB, optimize=True) + dD[None])
-    with np.errstate(divide="ignore", invalid="ignore"):
-        dmag = np.real(np.conj(G0)[:, None] * dG) / np.maximum(np.abs(G0), 1e-300)[:, None]
-    std = np.sqrt(np.sum(dmag ** 2, axis=1))
+    std = _magnitude_std(G0, X, Y, dA, dB, dC, dD)
     return Bounds(w, mag, np.maximum(mag - z * std, 0.0), mag + z * std, std, float(level),
                   method, G)
+
+
+#: Largest number of complex entries of an intermediate array of :func:`_magnitude_std`
+#: (the frequencies are taken in blocks below it).
+_BLOCK_ENTRIES = 2 ** 21
+
+
+def _magnitude_std(G0, X, Y, dA, dB, dC, dD):
+    """The delta-method standard deviation of ``|G(s_k)|`` (K, ny, nu).
+
+    ``dG[k, j] = dC_j X_k + Y_k dA_j X_k + Y_k dB_j + dD_j`` is the derivative of
+    ``G(s_k) = C (s_k I - A)^-1 B + D`` along direction ``j``, with
+    ``X_k = (s_k I - A)^-1 B`` (K, n, nu) and ``Y_k = C (s_k I - A)^-1`` (K, ny, n);
+    ``|G|`` moves by ``Re(conj(G) dG) / |G|`` and ``std = sqrt(sum_j (...)^2)``.
+    The sums run as matrix products over all directions at once (the real directions
+    times the real and imaginary parts), the frequencies in blocks that keep every
+    intermediate under :data:`_BLOCK_ENTRIES` entries: the sums of one ``einsum`` per
+    term, at BLAS speed (an ``einsum`` over the shared frequency index loops in C
+    without BLAS: 85 % of a report's Bode figure for an ARX model of order 36).
+    """
+    d, n = dA.shape[:2]
+    K, ny, nu = X.shape[0], Y.shape[1], X.shape[2]
+    flat_A, flat_C = dA.reshape(d * n, n), dC.reshape(d * ny, n)
+    flat_B = dB.transpose(1, 0, 2).reshape(n, d * nu)
+    std = np.empty((K, ny, nu))
+    step = max(1, _BLOCK_ENTRIES // max(1, d * max(n, ny) * nu))
+
+    def times(real, Z):                    # real (r, n) @ complex (n, c)
+        return real @ Z.real + 1j * (real @ Z.imag)
+
+    for lo in range(0, K, step):
+        hi = min(K, lo + step)
+        k = hi - lo
+        Xs = X[lo:hi].transpose(1, 0, 2).reshape(n, k * nu)
+        AX = times(flat_A, Xs).reshape(d, n, k, nu).transpose(2, 0, 1, 3)    # dA_j X_k
+        dG = Y[lo:hi, None] @ AX
+        dG += times(flat_C, Xs).reshape(d, ny, k, nu).transpose(2, 0, 1, 3)
+        YB = Y[lo:hi].reshape(k * ny, n)
+        dG += (YB.real @ flat_B + 1j * (YB.imag @ flat_B)).reshape(
+            k, ny, d, nu).transpose(0, 2, 1, 3)                               # Y_k dB_j
+        dG += dD[None]
+        G = G0[lo:hi]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            dmag = np.real(np.conj(G)[:, None] * dG) / np.maximum(np.abs(G), 1e-300)[:, None]
+        std[lo:hi] = np.sqrt(np.sum(dmag ** 2, axis=1))
+    return std
 
 
 def _forced(model, u, x0):
@@ -433,16 +475,15 @@ def _forced(model, u, x0):
 def _output_sensitivities(model, cov, u, x0):
     """``(y, dy)``: simulated output (N, ny) and its sensitivities to the columns of
     the factor, (N, ny, d): ``s_j[t+1] = A s_j[t] + dA_j x[t] + dB_j u[t]``,
-    ``s_j[0] = 0``, ``dy_j = C s_j + dC_j x + dD_j u``."""
-    y, x, ud = _forced(model, u, x0)
+    ``s_j[0] = 0``, ``dy_j = C s_j + dC_j x + dD_j u``, every direction in one
+    compiled pass (:func:`subid.model._sensitivity.jacobian`)."""
+    y, _, ud = _forced(model, u, x0)
     dA, dB, dC, dD = _directions(cov)
     n = model.order
-    state = StateSpace(model.A, np.eye(n), np.eye(n), 0, model.dt)
-    C = np.asarray(model.C)
-    dy = np.empty(y.shape + (dA.shape[0],))
-    for j in range(dA.shape[0]):
-        s = state.simulate(x @ dA[j].T + ud @ dB[j].T)
-        dy[:, :, j] = s @ C.T + x @ dC[j].T + ud @ dD[j].T
+    start = np.zeros(n) if x0 is None else np.asarray(x0, dtype=float).reshape(n)
+    arrays = (model.A, model.B, model.C, model.D, ud, start, dA, dB, dC, dD,
+              np.zeros((dA.shape[0], n)))
+    _, dy = jacobian(*(np.ascontiguousarray(a, dtype=float) for a in arrays))
     return y, dy
 
 

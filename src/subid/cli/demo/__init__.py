@@ -531,9 +531,10 @@ def _in_pool(names, methods, out, frequency_unit, jobs, bar):
                 name, method = pending.pop(future)
                 if method is None:                       # a report
                     results[name] = future.result()
-                    bar.finished(name)
+                    bar.finished(f"{name}: report")
                     continue
                 done[name][method] = future.result()
+                bar.finished(f"{name}: {method}")
                 if len(done[name]) == len(columns):
                     rows = [done[name][m][0] for m in columns]
                     models = {m: done[name][m][1] for m in columns
@@ -586,7 +587,11 @@ def run(out, datasets=None, methods=None, *, frequency_unit="rad/s", progress=Fa
         else max(1, int(jobs))
     t0 = time.perf_counter()
     results = {}
-    bar = Steps(names, "demo", enabled=bool(progress))    # elapsed time moves on
+    # one step per dataset in this process; in the pool, one per task (every
+    # identification and every report), so that the bar moves from the start
+    steps = names if jobs == 1 else [f"{name}: {task}" for name in names
+                                     for task in [*_methods(methods), "report"]]
+    bar = Steps(steps, "demo", enabled=bool(progress))    # elapsed time moves on
     try:
         if jobs == 1:
             for name in names:

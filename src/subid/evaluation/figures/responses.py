@@ -13,6 +13,7 @@ from subid.evaluation.figures._common import (
     _legend_beside,
     _legend_room,
     _model_groups,
+    _plain_log_labels,
     _pyplot,
     _styled,
     colors_for,
@@ -144,6 +145,7 @@ def bode(model_or_models=None, w=None, *, data=None, hz=False, labels=None, phas
     # one log scale for the shared frequency axis: semilogx on every panel would set it
     # again on all the shared axes each time (quadratic in the panels: 5 s of a 5x3 grid)
     axes[0, 0].set_xscale("log")
+    _plain_log_labels(axes[0, 0].xaxis)          # shared by every panel
     reference = None                     # phase of the first model, to align the data's
     for k, (label, m) in enumerate(groups.items()):
         style = dict(color=colors[k], lw=1.2, ls="--" if unstable[label] else "-")
@@ -195,11 +197,12 @@ def bode(model_or_models=None, w=None, *, data=None, hz=False, labels=None, phas
     for f_nyq in nyquists:
         for ax in axes.ravel():
             ax.axvline(f_nyq * x_scale, color="0.5", lw=0.6, ls=":")
-    # minor log ticks are slow to draw (a Tick object each): none on large grids, only
-    # at 2 and 5 of every decade otherwise (a quarter of the default 2..9)
+    # minor log ticks are slow to draw (a Tick object each, 40 % of a 2 x 2 diagram):
+    # at 2 and 5 of every decade on a single pair's diagram, none on a grid (the
+    # decades are labelled and gridded)
     from matplotlib.ticker import LogLocator, NullLocator
     for ax in axes.ravel():
-        ax.xaxis.set_minor_locator(NullLocator() if ny * nu > 4 else
+        ax.xaxis.set_minor_locator(NullLocator() if ny * nu > 1 else
                                    LogLocator(base=10.0, subs=(2.0, 5.0)))
     _legend_beside(axes[0, -1])
     if title:

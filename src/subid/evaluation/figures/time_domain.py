@@ -9,12 +9,13 @@ import numpy as np
 
 from subid.evaluation.figures._common import (
     _check_data,
-    _envelope,
+    _draw_trace,
     _finite,
     _layout,
     _legend_beside,
     _legend_room,
     _model_groups,
+    _note_envelope,
     _pyplot,
     _styled,
     _time_label,
@@ -65,14 +66,15 @@ def compare(data, models, *, labels=None, x0="estimate", title=None, clip=True,
                              squeeze=False)
     t = data.t
     # the measured output is drawn on top (zorder), thin and black; the models under
-    # it, wider and lighter, so that both stay visible where they agree
+    # it, wider and lighter, so that both stay visible where they agree (a long
+    # record: the measured band outlined, the models' bands filled, see _draw_trace)
     for i in range(ny):
-        axes[i, 0].plot(*_envelope(t, data.y[:, i]), "k-", lw=0.7, zorder=3,
-                        label="measured")
+        _draw_trace(axes[i, 0], t, data.y[:, i], color="k", lw=0.7, fill=False, zorder=3,
+                    label="measured")
     for k, (label, (y_hat, fit)) in enumerate(fits.items()):
         for i in range(ny):
-            axes[i, 0].plot(*_envelope(t, _finite(y_hat[:, i])), color=colors[k], lw=1.8,
-                            alpha=0.75, zorder=2, label=f"{label}: fit {_fmt_fit(fit[i])} %")
+            _draw_trace(axes[i, 0], t, _finite(y_hat[:, i]), color=colors[k], lw=1.8,
+                        alpha=0.75, zorder=2, label=f"{label}: fit {_fmt_fit(fit[i])} %")
     for i in range(ny):
         ax = axes[i, 0]
         ax.set_ylabel(data.output_names[i])
@@ -85,6 +87,7 @@ def compare(data, models, *, labels=None, x0="estimate", title=None, clip=True,
     if title:
         fig.suptitle(title)
     _layout(fig, axes, hgap=0.2, left=0.85, right=room + 0.1)
+    _note_envelope(fig, t.size)
     return fig
 
 
@@ -123,7 +126,7 @@ def data_overview(data, *, split=None, title=None):
                              squeeze=False)
     t = data.t
     for ax, (name, values, color) in zip(axes[:, 0], channels):
-        ax.plot(*_envelope(t, values), color=color, lw=0.8)
+        _draw_trace(ax, t, values, color=color, lw=0.8)
         ax.set_ylabel(name, fontsize=9, rotation=0, ha="right", va="center")
         if split is not None:
             ax.axvspan(split, t[-1], color="0.85", zorder=0)
@@ -136,4 +139,5 @@ def data_overview(data, *, split=None, title=None):
     if title:
         fig.suptitle(title)
     _layout(fig, axes, top=0.35, left=1.6, hgap=0.15)
+    _note_envelope(fig, t.size)
     return fig

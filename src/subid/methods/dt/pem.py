@@ -26,7 +26,7 @@ sample covariance (a well-conditioned, data-driven basis), and the local
 coordinates are rebuilt at the current model for up to ``rounds`` rounds.
 
 The Jacobian is analytic: the sensitivity equations of the predictor are
-run in a compiled loop (:mod:`subid.methods.dt._pem_kernel`). The optimiser is
+run in a compiled loop (:mod:`subid.model._sensitivity`). The optimiser is
 :func:`scipy.optimize.least_squares` (trust-region reflective). A trial
 model whose predictor (``A - K C``; for focus ``'simulation'``, ``A``) is not
 stable gets a cost larger than the start, so the trust region rejects it:
@@ -50,8 +50,8 @@ from subid.errors import DataError, ModelError, NoiseModelWarning, OptionError
 from subid.methods._info import records_warnings
 from subid.methods.dt._checks import check_data
 from subid.methods.dt._covariance import covariance_factor
-from subid.methods.dt._pem_kernel import jacobian
 from subid.model import _simulate
+from subid.model._sensitivity import jacobian
 from subid.model.statespace import StateSpace
 
 __all__ = ["pem"]
@@ -208,7 +208,7 @@ def _round(model_mats, x0, data, focus, W, layout, max_nfev, tolerance, history,
 
 
 def block_jacobian(mats, v, x0, dirs, blocks, dm):
-    """``(ŷ, J)`` of :func:`subid.methods.dt._pem_kernel.jacobian` for a block-diagonal
+    """``(ŷ, J)`` of :func:`subid.model._sensitivity.jacobian` for a block-diagonal
     predictor, the kernel run on each block with its own coordinates and states.
 
     ``mats = (Ap, Bp, C, Dp)``, ``dirs`` the direction arrays of every
@@ -247,7 +247,7 @@ def minimise_prediction_error(predictor, directions, dm, x0, v, y, ranges, W, ma
     ``(Ap, Bp, C, Dp)`` driven by ``v`` at the model coordinates ``z``;
     ``directions(z)`` its derivatives ``(dAp, dBp, dC, dDp, dx0)`` along the
     ``dm`` coordinates followed by ``n`` rows for the initial state (the
-    arrays of :func:`subid.methods.dt._pem_kernel.jacobian`). ``x0`` holds one
+    arrays of :func:`subid.model._sensitivity.jacobian`). ``x0`` holds one
     initial state per experiment (row), each experiment predicted from its
     own (fixed at ``x0`` when ``fit_x0`` is false: then ``directions`` gives
     the ``dm`` model rows only). A trial whose predictor is unstable or

@@ -54,7 +54,6 @@ import scipy.signal
 from subid._validation import check_bool, check_choice, check_optimiser_options, checked_call
 from subid.errors import SubidError
 from subid.methods._info import collect_warnings
-from subid.methods.dt._pem_kernel import jacobian
 from subid.methods.dt._poly_covariance import attach_covariance
 from subid.methods.dt.pem import (
     _predictor,
@@ -74,6 +73,7 @@ from subid.methods.dt.polynomial import (
     regress,
     structure_orders,
 )
+from subid.model._sensitivity import jacobian
 from subid.model.polynomial import polynomial_record, realise
 
 __all__ = ["armax", "oe", "bj"]

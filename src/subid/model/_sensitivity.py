@@ -1,4 +1,9 @@
-"""Predictor output and its parameter sensitivities (the Jacobian of :func:`subid.pem`).
+"""The output of a state-space system and its sensitivities to directions in its matrices.
+
+Two users: the Jacobian of the prediction error in :func:`subid.pem` and the
+polynomial methods, and the delta-method bands of simulated outputs and step
+responses (:func:`subid.simulation_bounds`, :func:`subid.step_bounds`), all
+directions in one pass instead of one simulation per direction.
 
 The predictor is a discrete-time system driven by the known signal ``v``
 (``v = [u, y]`` for the one-step predictor, ``v = u`` for the simulation):
