@@ -7,6 +7,7 @@ import scipy.signal
 
 import subid
 from subid import systems
+from subid.methods.describe import describe_order_selection
 from subid.methods.dt import _lag_fit, _regression, _scoring, _selection
 
 
@@ -127,7 +128,7 @@ def test_fold_scores_equal_those_of_the_passes(monkeypatch):
     assert with_products.order == without.order
     assert with_products.info["horizon"] == without.info["horizon"]
     np.testing.assert_allclose(with_products.A, without.A, rtol=0, atol=1e-12)
-    assert _selection.describe(with_products.info["order_selection"])
+    assert describe_order_selection(with_products.info["order_selection"])
 
 
 def test_fold_products_merged_from_blocks():
