@@ -48,6 +48,7 @@ from subid.data import IOData
 from subid.delay import delay_inputs, input_delay_of, record_delay
 from subid.errors import DataError, ModelError, NoiseModelWarning, OptionError
 from subid.methods._info import records_warnings
+from subid.methods.dt import _trust_region
 from subid.methods.dt._checks import check_data
 from subid.methods.dt._covariance import covariance_factor
 from subid.methods.dt._pem_kernel import jacobian
@@ -310,9 +311,14 @@ def minimise_prediction_error(predictor, directions, dm, x0, v, y, ranges, W, ma
     z0 = np.zeros(dm + n_x0)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
-        res = scipy.optimize.least_squares(fun, z0, jac=jac, method="trf", x_scale="jac",
-                                           ftol=tolerance, xtol=tolerance, gtol=tolerance,
-                                           max_nfev=max_nfev)
+        if _trust_region.available():
+            res = _trust_region.trust_region_least_squares(
+                fun, jac, z0, ftol=tolerance, xtol=tolerance, gtol=tolerance,
+                max_nfev=max_nfev)
+        else:                           # pragma: no cover - scipy moved its helpers
+            res = scipy.optimize.least_squares(fun, z0, jac=jac, method="trf",
+                                               x_scale="jac", ftol=tolerance, xtol=tolerance,
+                                               gtol=tolerance, max_nfev=max_nfev)
     return res.x, res
 
 
