@@ -285,28 +285,39 @@ def minimise_prediction_error(predictor, directions, dm, x0, v, y, ranges, W, ma
             return np.full(N * ny, penalty)
         return (((y - yhat) @ W.T) * scale).ravel()
 
+    yw = y @ W.T
+
     def jac(z):
-        mats_c = [np.ascontiguousarray(a) for a in predictor(z[:dm])]
-        dirs = [np.ascontiguousarray(a) for a in directions(z[:dm])]
+        # the weighting W is linear in the outputs: run the kernel on the weighted
+        # output matrices (W C, W Dp, W dC, W dDp), which gives W ŷ and W J directly
+        Ap, Bp, Cp, Dp = predictor(z[:dm])
+        mats_c = [np.ascontiguousarray(a) for a in (Ap, Bp, W @ Cp, W @ Dp)]
+        dAp, dBp, dC, dDp, dx0 = directions(z[:dm])
+        dirs = [np.ascontiguousarray(a) for a in (
+            dAp, dBp, np.einsum("ik,jkl->jil", W, dC), np.einsum("ik,jkl->jil", W, dDp), dx0)]
         x0s = initial(z)
         if not fit_x0 and blocks is None:     # the model directions only (the block
             dirs = [np.ascontiguousarray(a[:dm]) for a in dirs]   # kernel needs all rows)
+        one = len(ranges) == 1 and (fit_x0 or blocks is None)
         yhat = np.empty((N, ny))
-        J = np.zeros((N, ny, dm + n_x0))
+        J = None if one else np.zeros((N, ny, dm + n_x0))
         for e, (a, b) in enumerate(ranges):     # the x0 columns of experiment e only
             ve, xe = np.ascontiguousarray(v[a:b]), np.ascontiguousarray(x0s[e])
             if blocks is None:
                 yhat[a:b], Je = jacobian(*mats_c, ve, xe, *dirs)
             else:
                 yhat[a:b], Je = block_jacobian(mats_c, ve, xe, dirs, blocks, dm)
+            if one:                             # the kernel's columns are J's
+                J = Je
+                break
             J[a:b, :, :dm] = Je[:, :, :dm]
             if fit_x0:
                 J[a:b, :, dm + e * n:dm + (e + 1) * n] = Je[:, :, dm:]
-        history.append(0.5 * float(np.sum((((y - yhat) @ W.T) * scale) ** 2)))
-        Jw = -np.einsum("ik,tkd->tid", W, J) * scale
-        if not np.isfinite(Jw).all():
-            Jw = np.nan_to_num(Jw, nan=0.0, posinf=0.0, neginf=0.0)
-        return Jw.reshape(N * ny, -1)
+        history.append(0.5 * float(np.sum(((yw - yhat) * scale) ** 2)))
+        J *= -scale
+        if not np.isfinite(J).all():
+            J = np.nan_to_num(J, nan=0.0, posinf=0.0, neginf=0.0)
+        return J.reshape(N * ny, -1)
 
     z0 = np.zeros(dm + n_x0)
     with warnings.catch_warnings():
