@@ -50,6 +50,7 @@ with warnings.catch_warnings():              # compile the kernels, untimed
     small = subid.datasets.load("dryer")[:300]
     subid.pem(small, subid.moesp(small, 2), focus="simulation")
     subid.pem(small, subid.moesp(small, 2), focus="prediction")
+    subid.identify(small)
 out = {"record": name, "samples": est.n_samples, "source": sys.argv[2]}
 t = time.process_time()
 model = subid.moesp(est)

@@ -26,8 +26,13 @@ sample covariance (a well-conditioned, data-driven basis), and the local
 coordinates are rebuilt at the current model for up to ``rounds`` rounds.
 
 The Jacobian is analytic: the sensitivity equations of the predictor are
-run in a compiled loop (:mod:`subid.methods.dt._pem_kernel`). The optimiser is
-:func:`scipy.optimize.least_squares` (trust-region reflective). A trial
+run in a compiled loop (:mod:`subid.methods.dt._pem_kernel`), on the
+weighted output matrices so that it gives ``W J`` directly. The optimiser is
+the iteration of :func:`scipy.optimize.least_squares` (``method='trf'``, exact
+trust-region solver, ``x_scale='jac'``) run on the ``p x p`` triangular factor
+of the Jacobian instead of the SVD of the whole ``N ny x p`` matrix
+(:mod:`subid.methods.dt._trust_region`): the same iterates to rounding, several
+times cheaper per iteration on long records. A trial
 model whose predictor (``A - K C``; for focus ``'simulation'``, ``A``) is not
 stable gets a cost larger than the start, so the trust region rejects it:
 the result always has a stable predictor, and its cost is never above the
@@ -265,7 +270,9 @@ def minimise_prediction_error(predictor, directions, dm, x0, v, y, ranges, W, ma
     -------
     z, result
         The coordinates reached (``dm`` model coordinates, then the changes of
-        the initial states) and :func:`scipy.optimize.least_squares`'s result.
+        the initial states) and the optimiser's result (``x``, ``cost``,
+        ``nfev``, ``status``, ``message`` as :func:`scipy.optimize.least_squares`
+        gives them; :func:`subid.methods.dt._trust_region.trust_region_least_squares`).
     """
     N, ny = y.shape
     n_exp, n = x0.shape
