@@ -100,3 +100,36 @@ def test_pem_reaches_the_optimum_of_scipy_least_squares(focus, monkeypatch):
     assert subid.markov_error(new, old, k=30) < 1e-5
     hist = new.info["cost_history"]
     assert hist[0] == new.info["start_cost"] and np.all(np.diff(hist) < 0)
+
+
+def test_simulation_focus_equals_an_independent_output_error_fit():
+    """pem(focus='simulation') reaches the optimum of an independent output-error fit:
+    a second-order model in observable canonical form with its initial state, fitted
+    by scipy.optimize.least_squares with finite differences (no pem code involved)."""
+    rng = np.random.default_rng(21)
+    N = 600
+    u = rng.standard_normal(N)
+    a_true, b_true = (-1.2, 0.5), (1.0, 0.4)
+
+    def simulate(theta):
+        a1, a2, b1, b2, x1, x2 = theta
+        x = np.array([x1, x2])
+        out = np.empty(N)
+        for t in range(N):
+            out[t] = x[0]
+            x = np.array([-a1 * x[0] + x[1] + b1 * u[t], -a2 * x[0] + b2 * u[t]])
+        return out
+
+    y = simulate(np.array([*a_true, *b_true, 0.0, 0.0])) + 0.3 * rng.standard_normal(N)
+    data = subid.IOData(u[:, None], y[:, None], dt=1.0)
+    start = subid.n4sid(data, 2, feedthrough=False)
+    refined = subid.pem(data, start, focus="simulation", tolerance=1e-12)
+    e_pem = y - refined.simulate(u[:, None], x0=refined.info["x0"])[:, 0]
+    # the independent fit, started from the pem start's transfer function
+    den = np.real(np.poly(start.A))
+    num = np.real(np.poly(start.A - start.B @ start.C) - den)      # C adj(zI-A) B
+    theta0 = np.array([den[1], den[2], num[1], num[2], 0.0, 0.0])
+    ind = scipy.optimize.least_squares(lambda th: simulate(th) - y, theta0, xtol=1e-14,
+                                       ftol=1e-14, gtol=1e-14, max_nfev=2000)
+    sse_pem, sse_ind = float(e_pem @ e_pem), 2.0 * ind.cost
+    assert abs(sse_pem - sse_ind) <= 1e-10 * sse_ind, (sse_pem, sse_ind)
