@@ -19,7 +19,9 @@ alternate before/after record by record (one process at a time); each process
 first compiles the kernels on a small problem, untimed.
 
 Run: ``OPENBLAS_NUM_THREADS=1 python bench/pem_cost.py [--before REV] [--repeats 1]
-[--records steamgen,dryer]``; writes ``bench/pem_cost.md``.
+[--records steamgen,dryer]``; writes ``bench/pem_cost.md``. ``--optimisers`` appends
+a comparison on steamgen of this library's optimiser with scipy's ``trf`` (exact
+SVD, the former optimiser), ``trf`` with ``tr_solver='lsmr'`` and ``lm`` (MINPACK).
 """
 
 from __future__ import annotations
@@ -93,6 +95,62 @@ print("RESULT " + json.dumps(out))
 '''
 
 
+OPTIMISERS = r'''
+import json, sys, time, warnings
+sys.path.insert(0, sys.argv[2])
+import scipy.optimize
+import subid
+import subid.methods.dt.pem as pem_module
+from subid.methods.dt import _trust_region
+from realdata import split
+
+est, _ = split(sys.argv[1])
+small = subid.datasets.load("dryer")[:300]
+subid.pem(small, subid.moesp(small, 2), focus="simulation")          # compile, untimed
+model = subid.moesp(est)
+original = scipy.optimize.least_squares
+variants = {
+    "compressed Jacobian (this library)": None,
+    "scipy trf, exact (SVD of J)": dict(),
+    "scipy trf, tr_solver='lsmr'": dict(tr_solver="lsmr"),
+    "scipy lm (MINPACK, QR of J)": dict(method="lm"),
+}
+for label, options in variants.items():
+    if options is None:
+        _trust_region.available = lambda: True
+    else:
+        _trust_region.available = lambda: False
+
+        def patched(*args, _o=options, **kwargs):
+            kwargs.update(_o)
+            return original(*args, **kwargs)
+        pem_module.scipy.optimize.least_squares = patched
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        t = time.process_time()
+        r = subid.pem(est, model, focus="simulation")
+        spent = time.process_time() - t
+    pem_module.scipy.optimize.least_squares = original
+    print("RESULT " + json.dumps(dict(label=label, seconds=spent,
+                                      cost=float(r.info["final_cost"]),
+                                      evaluations=int(r.info["n_evaluations"]))), flush=True)
+'''
+
+
+def optimisers(name: str) -> str:
+    """Markdown table: ``pem(est, moesp(est), focus='simulation')`` with each optimiser."""
+    env = dict(os.environ, OPENBLAS_NUM_THREADS="1", PYTHONPATH=str(ROOT / "src"))
+    done = subprocess.run([sys.executable, "-c", OPTIMISERS, name, str(ROOT / "bench")],
+                          env=env, capture_output=True, text=True, check=True)
+    rows = [json.loads(x[len("RESULT "):]) for x in done.stdout.splitlines()
+            if x.startswith("RESULT ")]
+    lines = [f"`pem(est, moesp(est), focus='simulation')` on {name}, one process, CPU s:", "",
+             "| optimiser | CPU s | final cost | evaluations |", "|---|---:|---|---:|"]
+    lines += [f"| {r['label']} | {r['seconds']:.2f} | {r['cost']:.13g} | {r['evaluations']} |"
+              for r in rows]
+    return "\n".join(lines)
+
+
 def export(rev: str, where: Path) -> Path:
     """``src`` of git revision ``rev`` extracted under ``where``."""
     archive = subprocess.run(["git", "-C", str(ROOT), "archive", rev, "src"],
@@ -131,7 +189,15 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=1)
     parser.add_argument("--records", default="steamgen,dryer")
     parser.add_argument("--out", default=str(ROOT / "bench" / "pem_cost.md"))
+    parser.add_argument("--optimisers", action="store_true",
+                        help="only compare the optimisers on steamgen (appended to --out)")
     args = parser.parse_args()
+    if args.optimisers:
+        text = "\n".join(["", "## Optimisers compared", "", optimisers("steamgen"), ""])
+        with open(args.out, "a") as fh:
+            fh.write(text)
+        print(text)
+        return
     results = []
     with tempfile.TemporaryDirectory() as tmp:
         before = export(args.before, Path(tmp))
