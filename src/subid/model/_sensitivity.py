@@ -17,7 +17,7 @@ initial-state direction ``dx0_j``) the sensitivity ``s_j = dx/dθ_j`` obeys
     s_j[t+1] = Ap s_j[t] + dAp_j x[t] + dBp_j v[t],   s_j[0] = dx0_j,
     dŷ[t]/dθ_j = C s_j[t] + dC_j x[t] + dDp_j v[t].
 
-:func:`jacobian` is the compiled loop, :func:`jacobian_ref` a plain numpy
+:func:`jacobian` is the compiled loop (vectorised over the directions), :func:`jacobian_ref` a plain numpy
 implementation kept for the tests.
 """
 
@@ -27,19 +27,19 @@ import numba
 import numpy as np
 
 
-@numba.njit(cache=True)
-def jacobian(Ap, Bp, C, Dp, v, x0, dAp, dBp, dC, dDp, dx0):  # pragma: no cover - compiled
-    """``(ŷ, J)`` with ``J[t, i, j] = dŷ_i[t] / dθ_j``; shapes (N, ny), (N, ny, d)."""
+@numba.njit(cache=True, fastmath={'contract'})
+def _jacobian_t(Ap, Bp, C, Dp, v, x0, dApT, dBpT, dCT, dDpT, S):  # pragma: no cover
+    """:func:`jacobian` on direction arrays with the direction index last (contiguous),
+    so that every inner loop is an axpy over the directions (vectorised)."""
     N, m = v.shape
     n = Ap.shape[0]
     ny = C.shape[0]
-    d = dAp.shape[0]
+    d = S.shape[1]
     yhat = np.empty((N, ny))
     J = np.empty((N, ny, d))
     x = x0.copy()
     xn = np.empty(n)
-    S = dx0.copy()                      # (d, n)
-    Sn = np.empty((d, n))
+    Sn = np.empty((n, d))
     for t in range(N):
         for i in range(ny):
             acc = 0.0
@@ -48,14 +48,19 @@ def jacobian(Ap, Bp, C, Dp, v, x0, dAp, dBp, dC, dDp, dx0):  # pragma: no cover 
             for k in range(m):
                 acc += Dp[i, k] * v[t, k]
             yhat[t, i] = acc
-        for j in range(d):
-            for i in range(ny):
-                acc = 0.0
-                for k in range(n):
-                    acc += C[i, k] * S[j, k] + dC[j, i, k] * x[k]
-                for k in range(m):
-                    acc += dDp[j, i, k] * v[t, k]
-                J[t, i, j] = acc
+            row = J[t, i]
+            for j in range(d):
+                row[j] = 0.0
+            for k in range(n):
+                c, xk = C[i, k], x[k]
+                Sk, dc = S[k], dCT[i, k]
+                for j in range(d):
+                    row[j] += c * Sk[j] + dc[j] * xk
+            for k in range(m):
+                vk = v[t, k]
+                dd = dDpT[i, k]
+                for j in range(d):
+                    row[j] += dd[j] * vk
         for i in range(n):
             acc = 0.0
             for k in range(n):
@@ -63,20 +68,33 @@ def jacobian(Ap, Bp, C, Dp, v, x0, dAp, dBp, dC, dDp, dx0):  # pragma: no cover 
             for k in range(m):
                 acc += Bp[i, k] * v[t, k]
             xn[i] = acc
-        for j in range(d):
-            for i in range(n):
-                acc = 0.0
-                for k in range(n):
-                    acc += Ap[i, k] * S[j, k] + dAp[j, i, k] * x[k]
-                for k in range(m):
-                    acc += dBp[j, i, k] * v[t, k]
-                Sn[j, i] = acc
+            row = Sn[i]
+            for j in range(d):
+                row[j] = 0.0
+            for k in range(n):
+                a, xk = Ap[i, k], x[k]
+                Sk, da = S[k], dApT[i, k]
+                for j in range(d):
+                    row[j] += a * Sk[j] + da[j] * xk
+            for k in range(m):
+                vk = v[t, k]
+                db = dBpT[i, k]
+                for j in range(d):
+                    row[j] += db[j] * vk
         for i in range(n):
             x[i] = xn[i]
-        for j in range(d):
-            for i in range(n):
-                S[j, i] = Sn[j, i]
+        S, Sn = Sn, S
     return yhat, J
+
+
+def jacobian(Ap, Bp, C, Dp, v, x0, dAp, dBp, dC, dDp, dx0):
+    """``(ŷ, J)`` with ``J[t, i, j] = dŷ_i[t] / dθ_j``; shapes (N, ny), (N, ny, d)."""
+    def last(a):
+        return np.ascontiguousarray(np.moveaxis(np.asarray(a, dtype=float), 0, -1))
+    Ap, Bp, C, Dp, v, x0 = (np.ascontiguousarray(a, dtype=float)
+                            for a in (Ap, Bp, C, Dp, v, x0))
+    return _jacobian_t(Ap, Bp, C, Dp, v, x0, last(dAp), last(dBp), last(dC), last(dDp),
+                       last(dx0))
 
 
 def jacobian_ref(Ap, Bp, C, Dp, v, x0, dAp, dBp, dC, dDp, dx0):
