@@ -10,8 +10,8 @@ import subid
 from subid import systems
 from subid.errors import DataError, OptionError
 from subid.methods import crossval
-from subid.methods.dt import _selection
-from subid.methods.dt._feedthrough import decide
+from subid.methods.dt import selection as _selection
+from subid.methods.dt.feedthrough import decide
 
 
 def _closed_loop(seed, n=3000):

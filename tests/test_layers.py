@@ -68,15 +68,6 @@ PRIVATE_ALLOWED = {
     ("subid.evaluation.uncertainty", "subid.model._sensitivity"),
     # The Hankel factor type of the statistic.
     ("subid.methods", "subid.statistic._hankel"),
-    # Issue 24, temporarily: ct_subspace runs its candidates through the discrete-time
-    # cross-validation engine (_selection.cross_validate: fold statistics, scoring loop),
-    # which the cost work of issue 21 is rewriting; the engine moves to
-    # methods/crossval.py (where the folds, the score and the criterion are) after it.
-    # subid.identify still reads the discrete-time feedthrough (_feedthrough) and
-    # pipeline (_subspace) modules, which the one-pipeline work (item 1) is rewriting.
-    ("subid.methods.ct.ct_subspace", "subid.methods.dt._selection"),
-    ("subid.methods.identify", "subid.methods.dt._feedthrough"),
-    ("subid.methods.identify", "subid.methods.dt._subspace"),
     # The lagged statistics of RecursiveSubspace's exact B, D regression build its normal
     # equations in the batch regression's parameter layout (_regression.parameter_count);
     # the recursive identifier itself reaches B, D, x0 through methods.bd.fit_b_d_x0 only.
@@ -127,7 +118,7 @@ def edges() -> dict[str, set[str]]:
 
 def private_owner(module: str) -> str | None:
     """The package a private module belongs to: ``subid.io`` for ``subid.io._files``,
-    ``subid.methods.dt`` for ``subid.methods.dt._selection`` (the subpackages of methods
+    ``subid.methods.dt`` for ``subid.methods.dt._subspace`` (the subpackages of methods
     keep their private modules to themselves); None for a public module or one of the
     package's own utilities (``subid._validation``)."""
     parts = module.split(".")
@@ -170,7 +161,7 @@ def test_node_and_owner():
     assert node("subid.io._files") == "io" and node("subid._validation") == "foundation"
     assert node("subid.plot") == "evaluation" and node("subid") == "subid"
     assert private_owner("subid.io._files") == "subid.io"
-    assert private_owner("subid.methods.dt._selection") == "subid.methods.dt"
+    assert private_owner("subid.methods.dt._subspace") == "subid.methods.dt"
     assert private_owner("subid.methods._common") == "subid.methods"
     assert private_owner("subid.evaluation.figures._common") == "subid.evaluation"
     assert private_owner("subid._validation") is None

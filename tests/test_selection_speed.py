@@ -13,8 +13,7 @@ import pytest
 import subid
 from subid import systems
 from subid.methods.dt import _regression as regression
-from subid.methods.dt import _scoring
-from subid.methods.dt import _selection as selection
+from subid.methods.dt import _scoring, selection
 from subid.methods.dt import _subspace as subspace
 from subid.model.fit import fit_percent
 from subid.statistic.hankel import GRAM_MAX_CONDITION, HankelStatistic, factor_condition

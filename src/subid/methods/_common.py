@@ -32,7 +32,7 @@ def default_horizon(order: int | None, n_outputs: int, n_inputs: int, n_samples:
 
     ``max(5, ceil(order / n_outputs) + 2)`` with a known order; 10 (or the
     largest horizon the record supports) otherwise. The batch methods choose
-    their horizon from the data instead (:mod:`subid.methods.dt._selection`).
+    their horizon from the data instead (:mod:`subid.methods.dt.selection`).
     """
     if order is not None:
         return max(5, math.ceil(order / n_outputs) + 2)

@@ -7,7 +7,7 @@ fold scores (:func:`criterion`, the cross-validated BIC, and :func:`select`), wi
 constants of the automatic order search (:data:`AUTO_ORDER_RULE`).
 
 The discrete-time batch methods search the candidates with them
-(:mod:`subid.methods.dt._selection`, where the rule and its measurements are described);
+(:mod:`subid.methods.dt.selection`, where the rule and its measurements are described);
 the continuous-time, frequency-domain and polynomial methods and :func:`subid.identify`
 import them from here.
 """
@@ -29,7 +29,7 @@ __all__ = ["HORIZON_CANDIDATES", "MAX_ORDER", "ABSOLUTE_TOLERANCE", "FLOOR",
 HORIZON_CANDIDATES = (10, 20)
 #: Largest order of the first block of candidates (1..MAX_ORDER) when the order is to be
 #: chosen; the search goes on past it while the criterion improves
-#: (:func:`subid.methods.dt._selection.next_block`).
+#: (:func:`subid.methods.dt.selection.next_block`).
 MAX_ORDER = 10
 #: Misfit (fit points) below which candidates are equal (rounding level, noise-free data).
 ABSOLUTE_TOLERANCE = 1e-6

@@ -13,10 +13,10 @@ choice is made on the estimation record and recorded in
    (with its two estimators of the system matrices, ``system_matrices='auto'``)
    and :func:`subid.n4sid` (CVA weighting) each choose their order and
    horizon by cross-validation on the estimation record
-   (:mod:`subid.methods.dt._selection`: four contiguous folds, simulation fit,
+   (:mod:`subid.methods.dt.selection`: four contiguous folds, simulation fit,
    the rule aware of the fold-to-fold spread, orders past 10 while the
    criterion improves) and their feedthrough from the data
-   (``feedthrough='auto'``, :mod:`subid.methods.dt._feedthrough`). The
+   (``feedthrough='auto'``, :mod:`subid.methods.dt.feedthrough`). The
    estimator with the better mean fold score of its chosen candidate is taken
    (the two are scored on the same folds by the same fit).
 3. **Refinement.** The chosen configuration (estimator, order, horizon,
@@ -46,7 +46,7 @@ choice is made on the estimation record and recorded in
 The choices cost the subspace cross-validations of two estimators plus four
 fold refinements and one final refinement; the fold refinements use the same
 part of a long record as the cross-validation (its last
-:data:`subid.methods.dt._selection.MAX_SELECTION_SAMPLES` samples).
+:data:`subid.methods.dt.selection.MAX_SELECTION_SAMPLES` samples).
 """
 
 from __future__ import annotations
@@ -135,12 +135,12 @@ def _refine(data, model, focus):
 
 def _feedback(data, model) -> bool:
     """Whether the data show feedback from the outputs to the inputs: the test of
-    ``feedthrough='auto'`` (:func:`subid.methods.dt._feedthrough.decide`), from the
+    ``feedthrough='auto'`` (:func:`subid.methods.dt.feedthrough.decide`), from the
     model's own record when it ran, else on the record's statistic at its horizon."""
     ran = model.info.get("feedthrough", {})
     if ran.get("requested") == "auto":           # the test ran (None: a noise-free record)
         return bool(isinstance(ran.get("feedback"), dict) and ran["feedback"]["detected"])
-    from subid.methods.dt._feedthrough import decide
+    from subid.methods.dt.feedthrough import decide
     from subid.statistic.hankel import HankelStatistic
     depth = 2 * int(model.info["horizon"])
     try:
@@ -222,7 +222,7 @@ def identify(data, order=None, *, focus="simulation", time_base="auto", horizon=
         The subspace horizon (default: chosen with the order).
     feedthrough : {'auto', True, False}
         Direct term D (discrete time): ``'auto'`` estimates it only when the
-        data show one and no feedback (:mod:`subid.methods.dt._feedthrough`).
+        data show one and no feedback (:mod:`subid.methods.dt.feedthrough`).
         Continuous time: passed to :func:`subid.ct_subspace` when a bool.
     refine : bool
         Try the prediction-error refinement (kept only when it validates
@@ -266,8 +266,8 @@ def identify(data, order=None, *, focus="simulation", time_base="auto", horizon=
         return _continuous(data, order, feedthrough, reason=(
             "time_base='ct' requested" if time_base == "ct" else
             "non-uniform time stamps"))
-    from subid.methods.dt._feedthrough import check_feedthrough
-    from subid.methods.dt._subspace import check_data
+    from subid.methods.dt.checks import check_data
+    from subid.methods.dt.feedthrough import check_feedthrough
     feedthrough = check_feedthrough(feedthrough)
     check_data(data, "identify")
     with collect_warnings() as issued:

@@ -11,7 +11,7 @@ simulation fit on every fold, and ``ct_subspace`` lets them compete with its
 basis-filter estimates in one cross-validation:
 
 * the default ``n4sid`` call on the estimation record runs its own
-  cross-validation (:mod:`subid.methods.dt._selection`: the same four folds,
+  cross-validation (:mod:`subid.methods.dt.selection`: the same four folds,
   the same simulation fit with x0 by least squares); its fold scores of
   every (order, horizon) are the fold scores of the converted models, to
   rounding, and are taken from its ``info['order_selection']`` without
@@ -268,7 +268,7 @@ def significantly_better(alternative, reference) -> bool:
 def merged_selection(ct_record, dt_scores: dict, n_samples: int, n_inputs: int,
                      n_outputs: int, *, reference: bool = True):
     """Join the basis-filter candidates of ``ct_record`` (a cross-validation record of
-    :func:`subid.methods.dt._selection.cross_validate`, or None) and the discrete-time
+    :func:`subid.methods.dt.selection.cross_validate`, or None) and the discrete-time
     candidates ``{(order, horizon): folds}``; rank them by the cross-validated BIC. With
     ``reference`` (the order not given: the discrete-time candidates are the default
     n4sid call's), the best discrete-time candidate stays first unless the best

@@ -123,7 +123,7 @@ from subid.methods.ct._ct_estimate import (
     tm_convolution_matrix,
 )
 from subid.methods.ct.basis import MAX_POLY_ORDER, FilterBank, default_basis
-from subid.methods.dt._selection import cross_validate
+from subid.methods.dt.selection import cross_validate
 from subid.model.statespace import StateSpace
 
 __all__ = [
@@ -155,7 +155,7 @@ class Problem:
     """One record's subspace step, shared by every candidate order.
 
     ``order`` and ``candidates`` follow the discrete-time ``Problem``, so that
-    :func:`subid.methods.dt._selection.cross_validate` can run the method on
+    :func:`subid.methods.dt.selection.cross_validate` can run the method on
     its folds; ``horizon`` is the number of basis functions.
     """
 
@@ -490,7 +490,7 @@ def _model(problem: Problem, n, A, B, C, D, x0, y0, diag, feedthrough) -> StateS
 
 
 class _Folds:
-    """What :func:`subid.methods.dt._selection.cross_validate` runs on its folds: the
+    """What :func:`subid.methods.dt.selection.cross_validate` runs on its folds: the
     fold's problem (``prepare_fold``) and the model of each build (``builds``, name ->
     callable); one block row per basis function, no merged statistic."""
 
@@ -590,7 +590,7 @@ def ct_subspace(data, order=None, *, basis=None, poly_order: int = 3, estimate_x
         ``simulate``, ``fit_percent`` and the reports use it by default.
     selection : {'cv', 'gap'}
         How an order not given is chosen: ``'cv'``, the discrete-time
-        methods' cross-validation (:mod:`subid.methods.dt._selection`: four
+        methods' cross-validation (:mod:`subid.methods.dt.selection`: four
         contiguous folds, simulation fit with the model's hold, the smallest
         order within 1 % of the best misfit), or the largest gap of the
         singular values.

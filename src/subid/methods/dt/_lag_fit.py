@@ -1,6 +1,6 @@
 """B, D, x0 and the validation score of a candidate model from lag products.
 
-The cross-validation of the order (:mod:`subid.methods.dt._selection`) fits B,
+The cross-validation of the order (:mod:`subid.methods.dt.selection`) fits B,
 D, x0 for every candidate (A, C) on its training fold and scores the model by
 its simulation fit on the validation block. Both are least-squares problems
 whose data enter only through second moments: for a stable A the forced
@@ -84,7 +84,7 @@ from subid.methods.dt._regression import (
 )
 
 #: The key of a problem's cache that holds its record's lag products (a
-#: cross-validation fold, :func:`subid.methods.dt._selection.score_horizon`).
+#: cross-validation fold, :func:`subid.methods.dt.selection.score_horizon`).
 LAG_PRODUCTS = "lag products"
 #: ``ρ(A)^L`` (the spectral radius) below which the terms
 #: past L lags are dropped: below rounding relative to the data.

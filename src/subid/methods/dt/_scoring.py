@@ -1,6 +1,6 @@
 """The cross-validation score of a candidate model, computed directly.
 
-:func:`subid.methods.dt._selection.score_horizon` scores every fold model by
+:func:`subid.methods.dt.selection.score_horizon` scores every fold model by
 its simulation fit on the held-out block with the initial state fitted by
 least squares: the quantity ``mean(fit_percent(model, validation))`` of
 :func:`subid.model.fit.fit_percent` (x0 ``'estimate'``). That

@@ -62,9 +62,9 @@ from subid.methods.bd import (  # noqa: F401 (check_experiment_lengths: names of
     fit_b_d_x0,
 )
 from subid.methods.crossval import MAX_ORDER
-from subid.methods.dt._checks import check_data
 from subid.methods.dt._lag_fit import LAG_PRODUCTS
-from subid.methods.dt._selection import default_gap_horizon
+from subid.methods.dt.checks import check_data
+from subid.methods.dt.selection import default_gap_horizon
 from subid.model.statespace import StateSpace
 from subid.statistic._hankel import HankelFactor
 from subid.statistic.hankel import HankelStatistic
@@ -178,7 +178,7 @@ def b_d_fit(problem: "Problem", C_n, gamma, L11, L_yu, *, bd_method: str, feedth
     C = C_n * problem.output_scale[:, None]
     weights = problem.weights() if isinstance(problem.data, IOData) else None
     # a cross-validation fold: the record's lag products, shared by every candidate
-    # (subid.methods.dt._selection.score_horizon; subid.methods.dt._lag_fit)
+    # (subid.methods.dt.selection.score_horizon; subid.methods.dt._lag_fit)
     lagged = problem._cache.get(LAG_PRODUCTS) if bd_method in ("auto", "simulation") else None
 
     def fit(A, worse_than=None):
@@ -396,7 +396,7 @@ class Problem:
     input_condition: float
     input_scale: np.ndarray
     output_scale: np.ndarray
-    #: A cross-validation fold model (:func:`subid.methods.dt._selection.score_horizon`):
+    #: A cross-validation fold model (:func:`subid.methods.dt.selection.score_horizon`):
     #: it is scored with an x0 fitted on the held-out data, so the estimation x0 that
     #: costs a simulation of its own (the state-sequence estimate's) is skipped.
     fold: bool = False
@@ -412,7 +412,7 @@ class Problem:
     def cached(self, key, compute):
         """``compute()``, once per problem and ``key``: the steps that do not depend
         on the order (the problems of one fold's candidate orders share this cache,
-        :func:`subid.methods.dt._selection.score_horizon`, so that every order comes
+        :func:`subid.methods.dt.selection.score_horizon`, so that every order comes
         from one factorisation and one SVD). The result must be treated as read-only."""
         if key not in self._cache:
             self._cache[key] = compute()
@@ -440,7 +440,7 @@ def prepare(data, order, horizon, *, method: str, blocks_per_horizon: int = 2,
     """Validate the arguments, build the Hankel factor and check excitation.
 
     ``factor``: the Hankel factor of the record (depth ``blocks_per_horizon *
-    horizon``), when already computed (:func:`subid.methods.dt._selection.score_horizon`
+    horizon``), when already computed (:func:`subid.methods.dt.selection.score_horizon`
     merges the folds' statistics from those of their blocks).
 
     ``data`` is an :class:`IOData` record or a :class:`HankelStatistic`

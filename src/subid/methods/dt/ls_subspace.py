@@ -58,12 +58,12 @@ from subid._validation import (
 )
 from subid.errors import OptionError, OrderError
 from subid.methods.bd import BATCH_OPTIONS
-from subid.methods.dt._feedthrough import check_feedthrough
 from subid.methods.dt._subspace import (
     check_system_matrices,
     choose_order,
     shift_invariance,
 )
+from subid.methods.dt.feedthrough import check_feedthrough
 from subid.methods.dt.n4sid import state_model
 from subid.methods.dt.pipeline import Shift, States, Subspace, SubspaceMethod, run
 from subid.model.statespace import StateSpace
@@ -143,7 +143,7 @@ def ls_subspace(data, order=None, *, horizon=None, instruments="past", selector=
         regression on the Hankel rows) and no feedback (past outputs do not
         help predict the input), as MATLAB estimates no feedthrough unless
         asked: a free D absorbs the correlation of u(k) and the noise in
-        closed loop (:mod:`subid.methods.dt._feedthrough`;
+        closed loop (:mod:`subid.methods.dt.feedthrough`;
         ``info['feedthrough']`` records the tests).
     instrument_weighting : bool
         Whiten the instrument correlation (``W = L32``, PO-MOESP weighting)
@@ -160,7 +160,7 @@ def ls_subspace(data, order=None, *, horizon=None, instruments="past", selector=
     selection : {'cv', 'gap'}
         How an order or horizon not given is chosen: ``'cv'`` by
         cross-validated simulation fit on the estimation data
-        (:mod:`subid.methods.dt._selection`); ``'gap'`` at the largest gap of the
+        (:mod:`subid.methods.dt.selection`); ``'gap'`` at the largest gap of the
         SVD-free rank profile of Remark 2 (``info['rank_profile']``).
         ``info['order_selection']`` holds every candidate with its score.
     stability : {'auto', 'enforce', 'none'}

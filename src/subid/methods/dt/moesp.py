@@ -30,7 +30,6 @@ import scipy.linalg
 
 from subid._validation import check_bool, check_choice, checked_call
 from subid.methods.bd import BATCH_OPTIONS
-from subid.methods.dt._feedthrough import check_feedthrough
 from subid.methods.dt._subspace import (
     check_system_matrices,
     check_weighting,
@@ -38,6 +37,7 @@ from subid.methods.dt._subspace import (
     future_past_factor,
     shift_invariance,
 )
+from subid.methods.dt.feedthrough import check_feedthrough
 from subid.methods.dt.n4sid import state_model
 from subid.methods.dt.pipeline import Shift, States, Subspace, SubspaceMethod, run
 from subid.model.statespace import StateSpace
@@ -68,7 +68,7 @@ def moesp(data, order=None, *, horizon=None, weighting="moesp", selection="cv",
     selection : {'cv', 'gap'}
         How an order or horizon not given is chosen: ``'cv'`` by
         cross-validated simulation fit on the estimation data
-        (:mod:`subid.methods.dt._selection`); ``'gap'`` at the largest gap of the
+        (:mod:`subid.methods.dt.selection`); ``'gap'`` at the largest gap of the
         singular values. ``info['order_selection']`` holds every candidate
         with its score.
     stability : {'auto', 'enforce', 'none'}
@@ -100,7 +100,7 @@ def moesp(data, order=None, *, horizon=None, weighting="moesp", selection="cv",
     feedthrough : {'auto', True, False}
         Estimate D (``False``: D = 0). ``'auto'`` (default): D only when the
         data show a direct term and no feedback
-        (:mod:`subid.methods.dt._feedthrough`; ``info['feedthrough']``).
+        (:mod:`subid.methods.dt.feedthrough`; ``info['feedthrough']``).
     estimate_x0 : bool
         Estimate the initial state with B and D (``info['x0']``).
     bd_method : {'auto', 'simulation', 'projection'}

@@ -25,7 +25,6 @@ import scipy.linalg
 from subid._validation import check_bool, checked_call
 from subid.data import IOData
 from subid.methods.bd import INFO_KEY
-from subid.methods.dt._feedthrough import check_feedthrough
 from subid.methods.dt._subspace import (
     b_d_fit,
     check_experiment_lengths,
@@ -36,6 +35,7 @@ from subid.methods.dt._subspace import (
     stability_request,
     stable_choice,
 )
+from subid.methods.dt.feedthrough import check_feedthrough
 from subid.methods.dt.pipeline import States, Subspace, SubspaceMethod, run
 from subid.model.statespace import StateSpace
 
@@ -109,7 +109,7 @@ def n4sid(data, order=None, *, horizon=None, weighting="cva", selection="cv",
     feedthrough : {'auto', True, False}
         Estimate D (``False``: D = 0 and the state regression omits it).
         ``'auto'`` (default): D only when the data show a direct term and no
-        feedback (:mod:`subid.methods.dt._feedthrough`; ``info['feedthrough']``).
+        feedback (:mod:`subid.methods.dt.feedthrough`; ``info['feedthrough']``).
     estimate_x0 : bool
         Estimate the initial state (``info['x0']``) by least squares on the
         output, given the identified model.

@@ -46,12 +46,12 @@ import scipy.linalg
 from subid._validation import check_bool, checked_call
 from subid.data import IOData
 from subid.methods.bd import INFO_KEY
-from subid.methods.dt._feedthrough import check_feedthrough
 from subid.methods.dt._subspace import (
     check_experiment_lengths,
     initial_state,
     stable_choice,
 )
+from subid.methods.dt.feedthrough import check_feedthrough
 from subid.methods.dt.n4sid import _lstsq_rows
 from subid.methods.dt.pipeline import States, Subspace, SubspaceMethod, run
 from subid.model.statespace import StateSpace
@@ -91,7 +91,7 @@ def pbsid(data, order=None, *, horizon=None, selection="cv", stability="auto",
     feedthrough : {'auto', True, False}
         Estimate D (``False``: D = 0). ``'auto'`` (default), as in
         :func:`subid.n4sid`: D only when the data show a direct term and no
-        feedback (:mod:`subid.methods.dt._feedthrough`; ``info['feedthrough']``).
+        feedback (:mod:`subid.methods.dt.feedthrough`; ``info['feedthrough']``).
         In closed loop with a direct feedback ``u(t) = r(t) - F y(t)`` the plant
         must be strictly proper (D = 0) for any method to be consistent, which
         the feedback test detects.

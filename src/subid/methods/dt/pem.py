@@ -54,8 +54,8 @@ from subid.delay import delay_inputs, input_delay_of, record_delay
 from subid.errors import DataError, ModelError, NoiseModelWarning, OptionError
 from subid.methods._info import records_warnings
 from subid.methods.dt import _trust_region
-from subid.methods.dt._checks import check_data
 from subid.methods.dt._covariance import covariance_factor
+from subid.methods.dt.checks import check_data
 from subid.model import _simulate
 from subid.model._sensitivity import jacobian
 from subid.model.statespace import StateSpace

@@ -6,7 +6,7 @@ holding its validated options, with explicit steps. Its public function makes
 the object, then calls :func:`run`, which
 
 1. makes the :class:`subid.methods.dt.plan.Plan` (every default decided once);
-2. chooses the order, horizon and estimator (:func:`subid.methods.dt._selection.choose`,
+2. chooses the order, horizon and estimator (:func:`subid.methods.dt.selection.choose`,
    the one module that owns that choice, on the folds of the record) or takes
    them from the plan;
 3. on the whole record, :meth:`Pipeline.fit`: the statistic
@@ -37,9 +37,6 @@ import numpy as np
 
 from subid.methods._common import choose_order
 from subid.methods._info import collect_warnings
-from subid.methods.dt._checks import check_data
-from subid.methods.dt._feedthrough import resolve as resolve_feedthrough
-from subid.methods.dt._selection import choose
 from subid.methods.dt._subspace import (
     b_d_fit,
     b_d_refit,
@@ -48,7 +45,10 @@ from subid.methods.dt._subspace import (
     prepare,
     stable_choice,
 )
+from subid.methods.dt.checks import check_data
+from subid.methods.dt.feedthrough import resolve as resolve_feedthrough
 from subid.methods.dt.plan import Plan, make_plan
+from subid.methods.dt.selection import choose
 from subid.model.statespace import StateSpace
 
 
@@ -221,7 +221,7 @@ def run(method: SubspaceMethod, data, order, horizon, *, selection: str,
 
     With ``selection='cv'`` (default) and a raw record, an order or horizon not
     given (and the estimator, where the method offers several) is chosen by
-    cross-validation on the record (:func:`subid.methods.dt._selection.choose`);
+    cross-validation on the record (:func:`subid.methods.dt.selection.choose`);
     the model is then fitted to the whole record with that choice, exactly as an
     explicit call would. ``'gap'``, or a statistic without raw samples, takes the
     largest gap of the method's profile. ``info['system_matrices']`` names the

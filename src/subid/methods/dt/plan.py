@@ -10,16 +10,16 @@ and the input delays, and whether the order/horizon/estimator choice is
 cross-validated. The pipeline (:func:`subid.methods.dt.pipeline.run`) then only
 follows the plan, and :meth:`Plan.info` gives the entries of ``model.info`` the
 plan decided. What needs the data themselves is computed where the plan says: the
-cross-validated choice (:func:`subid.methods.dt._selection.choose`), the horizon of
+cross-validated choice (:func:`subid.methods.dt.selection.choose`), the horizon of
 the gap rule (:func:`subid.methods.dt._subspace.check_order_horizon`, the smallest
 feasible of ``HORIZON_CANDIDATES``) and ``feedthrough='auto'``
-(:func:`subid.methods.dt._feedthrough.resolve`, once per problem).
+(:func:`subid.methods.dt.feedthrough.resolve`, once per problem).
 
 The constants behind the defaults stay with the code that owns them: the
-order candidates and horizons of the selection (:mod:`subid.methods.dt._selection`:
+order candidates and horizons of the selection (:mod:`subid.methods.dt.selection`:
 ``MAX_ORDER``, ``HORIZON_CANDIDATES``, ``SELECTION_RULES``), the estimator
 choice (:data:`AUTO_VARIANT_MAX_SAMPLES`), the feedthrough tests
-(:mod:`subid.methods.dt._feedthrough`), the stability rule
+(:mod:`subid.methods.dt.feedthrough`), the stability rule
 (:mod:`subid.methods._stability`), the refinement
 (:mod:`subid.methods.dt.noise_model`).
 """
@@ -50,14 +50,14 @@ class Plan:
 
     ``order`` and ``candidates`` are the order given (or None) and the candidate
     orders given (None: ``1..MAX_ORDER``, extended by the cross-validation while
-    the criterion improves, :func:`subid.methods.dt._selection.next_block`);
+    the criterion improves, :func:`subid.methods.dt.selection.next_block`);
     ``horizon`` the horizon given (None: chosen, by the cross-validation among
     ``HORIZON_CANDIDATES`` or, for the gap rule, the smallest feasible one).
     ``estimators`` are the estimators of the system matrices the method may use,
     the first the default (``(None,)`` for a method with one);
     ``estimator_rule`` says why the choice was narrowed before the data were
     looked at (a long record), and ``cross_validate`` whether the order, horizon
-    and estimator are chosen by :func:`subid.methods.dt._selection.choose`.
+    and estimator are chosen by :func:`subid.methods.dt.selection.choose`.
     """
 
     method: str

@@ -14,7 +14,7 @@ initial conditions), experiment by experiment for a record of several.
 
 ``orders='auto'`` (or None) chooses ``(na, nb, nk)`` from the estimation
 record, MATLAB's ``arxstruc``/``selstruc`` idea with the selection rule of
-the subspace defaults (:mod:`subid.methods.dt._selection`): ``nk`` per
+the subspace defaults (:mod:`subid.methods.dt.selection`): ``nk`` per
 input from :func:`subid.estimate_delay`, then every ``na, nb`` in 1..10 is
 fitted on the training part of the four contiguous folds and scored by its
 simulation fit on the held-out part (searched along ``na = nb``, then ``nb``
@@ -44,9 +44,9 @@ from subid.errors import (
 from subid.methods._info import collect_warnings, model_info
 from subid.methods.crossval import ABSOLUTE_TOLERANCE, MAX_ORDER, experiment_folds, folds
 from subid.methods.dt import _subspace
-from subid.methods.dt._checks import check_data
 from subid.methods.dt._poly_covariance import attach_covariance
-from subid.methods.dt._selection import _fit_score
+from subid.methods.dt.checks import check_data
+from subid.methods.dt.selection import _fit_score
 from subid.model.polynomial import coefficients, polynomial_record, realise
 from subid.model.statespace import StateSpace
 

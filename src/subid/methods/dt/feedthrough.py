@@ -161,7 +161,7 @@ def decide(factor, *, level: float = LEVEL):
     past_y = factor.y_rows(0, p)
     record = {"requested": "auto", "lags": p, "level": level,
               "rule": "D estimated when the data show a direct term and no feedback "
-                      "(F-tests on the Hankel rows, subid.methods.dt._feedthrough)"}
+                      "(F-tests on the Hankel rows, subid.methods.dt.feedthrough)"}
     if nu == 0 or p < 1:
         record.update(estimated=False, feedback=None,
                       direct_term="not tested: no input or no lag")

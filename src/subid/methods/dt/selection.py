@@ -189,6 +189,11 @@ def score_horizon(parts, orders, horizon, *, fitter, estimators, held=None, lagg
     held : list of :class:`subid.methods.dt._scoring.Held`, optional
         What the scores need from each validation record (computed here when not
         given; :func:`cross_validate` computes it once for every horizon).
+    lagged : list of :class:`subid.methods.dt._lag_fit.LagProducts` or None, optional
+        The lag products of each training record (filled in here where missing and
+        the fold's problem can take them; :func:`cross_validate` passes one list for
+        every horizon): the B, D, x0 fit of every candidate from them
+        (:mod:`subid.methods.dt._lag_fit`).
 
     Returns
     -------
