@@ -8,7 +8,8 @@ import scipy.signal
 import subid
 from subid import systems
 from subid.methods.describe import describe_order_selection
-from subid.methods.dt import _lag_fit, _regression, _scoring, _selection
+from subid.methods.dt import _lag_fit, _regression, _scoring
+from subid.methods.dt import selection as _selection
 
 
 def _system(n, seed, radius=0.9):

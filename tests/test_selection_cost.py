@@ -15,10 +15,10 @@ import scipy.linalg
 import scipy.stats
 
 from subid import systems
-from subid.methods.dt import _feedthrough as feedthrough
 from subid.methods.dt import _regression as regression
 from subid.methods.dt import _residual_bound as bound
 from subid.methods.dt import _subspace as subspace
+from subid.methods.dt import feedthrough
 from subid.methods.dt.moesp import Moesp
 from subid.methods.dt.pipeline import Pipeline
 from subid.methods.dt.plan import make_plan
