@@ -83,7 +83,7 @@ def main():
         A, C, u, y = _record(E, length, defective)
         _measure(f"second pass, {E:,} experiments of {length} samples"
                  f"{' (QR)' if defective else ''}",
-                 lambda: _second_pass(A, C, u, y, E, length), repeat)
+                 lambda a=(A, C, u, y, E, length): _second_pass(*a), repeat)
     pieces = []
     for k in range(E):
         if k:

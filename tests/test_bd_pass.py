@@ -7,9 +7,9 @@ import tracemalloc
 
 import numpy as np
 import pytest
-from test_bd_large import _close, _dense, _simulate, _system
 
 from subid.methods.dt._bd_pass import OutputRegression
+from test_bd_large import _close, _dense, _simulate, _system
 
 DEFECTIVE = np.array([[0.8, 1.0, 0.0], [0.0, 0.8 + 1e-10, 0.3], [0.0, 0.0, -0.5]])
 
