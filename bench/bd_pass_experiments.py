@@ -7,7 +7,8 @@ experiment per piece, as ``identify_stream`` builds it from ``NEW_EXPERIMENT``
 markers: E experiments of 20 samples (2 inputs, 2 outputs, order 3, seeded,
 1 % output noise), for the true (A, C), on the modal path and on the QR path
 (``--qr``: A with a nearly defective pair of eigenvalues). Then, for the largest
-E, ``identify_stream`` end to end (moesp, order 3, horizon 5). Runs on whichever
+E, ``identify_stream`` end to end (moesp, order 3, horizon 5), under tracemalloc
+(which slows the Python parts several times) and without it. Runs on whichever
 subid is on the path (compare two trees by running it twice); prints the
 tracemalloc peak and the wall time (median of ``--repeat``, default 1)::
 
@@ -52,6 +53,17 @@ def _second_pass(A, C, u, y, E, length):
     return OutputRegression(map_pieces, E, 2, 2, experiments=list(range(E)))(A, C)
 
 
+def _pieces(u, y, E, length):
+    """E pieces of ``length`` samples, :data:`NEW_EXPERIMENT` between them."""
+    pieces = []
+    for k in range(E):
+        if k:
+            pieces.append(NEW_EXPERIMENT)
+        pieces.append(subid.IOData(u[k * length:(k + 1) * length],
+                                   y[k * length:(k + 1) * length]))
+    return pieces
+
+
 def _measure(label, run, repeat):
     times, peak = [], 0
     for _ in range(repeat):
@@ -84,14 +96,18 @@ def main():
         _measure(f"second pass, {E:,} experiments of {length} samples"
                  f"{' (QR)' if defective else ''}",
                  lambda a=(A, C, u, y, E, length): _second_pass(*a), repeat)
-    pieces = []
-    for k in range(E):
-        if k:
-            pieces.append(NEW_EXPERIMENT)
-        pieces.append(subid.IOData(u[k * length:(k + 1) * length],
-                                   y[k * length:(k + 1) * length]))
+    pieces = _pieces(u, y, E, length)
     _measure(f"identify_stream(moesp, 3, 5), {E:,} experiments of {length} samples",
              lambda: subid.identify_stream(pieces, "moesp", 3, 5), repeat)
+    print("\nidentify_stream(moesp, 3, 5) without tracemalloc (median of 3):")
+    for E in (500, 1000, 2000):
+        pieces = _pieces(*_record(E, length, defective)[2:], E, length)
+        times = []
+        for _ in range(3):
+            start = time.perf_counter()
+            subid.identify_stream(pieces, "moesp", 3, 5)
+            times.append(time.perf_counter() - start)
+        print(f"- {E:,} experiments: {np.median(times):.2f} s", flush=True)
     return 0
 
 
