@@ -318,10 +318,13 @@ class OutputRegression:
                 starts.append(S)
                 S = np.linalg.matrix_power(A, part["length"]) @ S + part["S_end"]
         factors = self._map(qr_piece, [(A, C, s, nx, feedthrough, weights) for s in starts])
-        # each experiment's pieces stacked and factorised again (layout [x0_e; B; D; y])
-        per_experiment = [_refactor([R for R, e in zip(factors, self.experiments)
-                                     if R is not None and e == k])
-                          for k in range(self.n_experiments)]
+        # each experiment's pieces stacked and factorised again (layout [x0_e; B; D; y]),
+        # in one scan over the pieces (linear in the experiments)
+        grouped = [[] for _ in range(self.n_experiments)]
+        for R, e in zip(factors, self.experiments):
+            if R is not None:
+                grouped[e].append(R)
+        per_experiment = [_refactor(group) for group in grouped]
         n_samples = sum(part["length"] for part in parts)
         if self.n_experiments == 1:
             B, D, x0, _, diagnostics = solve_factor(per_experiment[0], n, nu, ny,
