@@ -40,8 +40,10 @@ import scipy.optimize
 from subid.methods.ct import _ct_kernels
 
 #: Work (samples x simulated state trajectories x outputs) one refinement may spend on
-#: its residual evaluations (about 20 s at 4e6 per second): the Jacobian is evaluated
-#: by finite differences, each evaluation simulating n (n m + 1) trajectories.
+#: its residual evaluations (about 20 s at 4e6 per second), counted as for a Jacobian by
+#: finite differences, each evaluation simulating n (n m + 1) trajectories (the analytic
+#: Jacobian of a uniform grid costs less: the budget, and so which models are refined,
+#: stays that of the finite differences).
 REFINE_BUDGET = 1e8
 #: Largest order of the AR noise model fitted to the output error.
 MAX_AR_ORDER = 10
@@ -391,8 +393,10 @@ def refine_output_error(A, C, rec: Record, *, feedthrough, estimate_x0, offset, 
     Minimises ``||W (y - y_hat(A, C, B, D, x0, y0))||^2`` over (A, C) in local
     coordinates, ``B, D, x0, y0`` eliminated by linear least squares for every
     (A, C) (variable projection); ``W`` is the prewhitening filter (identity
-    without ``whiten``). Levenberg-Marquardt with a finite-difference
-    Jacobian; with ``keep_stable`` a trial point with a pole above
+    without ``whiten``). Levenberg-Marquardt with the analytic Jacobian of
+    :class:`subid.methods.ct._ct_jacobian.VarProProblem` on a uniform grid
+    (``jacobian='analytic'``), else (or with ``jacobian='2-point'``) a
+    finite-difference one; with ``keep_stable`` a trial point with a pole above
     :func:`marginal_limit` gets a large constant residual.
     """
     n, p = A.shape[0], C.shape[0]
@@ -407,12 +411,13 @@ def refine_output_error(A, C, rec: Record, *, feedthrough, estimate_x0, offset, 
         v = base + Q @ theta
         return v[:n * n].reshape(n, n), v[n * n:].reshape(p, n)
 
-    analytic = rec.uniform and jacobian == "analytic"
+    # the Jacobian needs the transpose of the whitening filter (ARNoise.apply_transpose)
+    transpose = getattr(getattr(whiten, "__self__", None), "apply_transpose", None)
+    analytic = rec.uniform and jacobian == "analytic" and (whiten is None or transpose)
     if analytic:
         from subid.methods.ct._ct_jacobian import VarProProblem
         problem = VarProProblem(rec, feedthrough=feedthrough, estimate_x0=estimate_x0,
-                                offset=offset, whiten=whiten, whiten_transpose=(
-                                    None if whiten is None else whiten.__self__.apply_transpose))
+                                offset=offset, whiten=whiten, whiten_transpose=transpose)
         dAs = [Q[:n * n, d].reshape(n, n) for d in range(Q.shape[1])]
         dCs = [Q[n * n:, d].reshape(p, n) for d in range(Q.shape[1])]
     points = {}

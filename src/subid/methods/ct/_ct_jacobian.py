@@ -154,12 +154,12 @@ class VarProProblem:
             with np.errstate(over="ignore", invalid="ignore"):
                 Zb, Px = _ct_kernels.run_sensitivity(A, np.eye(n), t, u, order, uniform=True)
             S = np.concatenate([Zb, Px[..., None]], axis=3)          # (L, n, n, m + 1)
-            x = np.einsum("klaj,aj->kl", Zb, B)
+            x = np.einsum("klaj,aj->kl", Zb, B, optimize=True)
             if x0 is not None:
                 x += Px @ x0[e]
             stencil = u[starts[:, None] + np.arange(P)[None, :]]      # (L-1, P, m)
-            Bu = np.einsum("aj,kqj->kqa", B, stencil)
-            F = np.einsum("dnc,kc->knd", dPhi, x[:-1])
+            Bu = np.einsum("aj,kqj->kqa", B, stencil, optimize=True)
+            F = np.einsum("dnc,kc->knd", dPhi, x[:-1], optimize=True)
             mu_f = np.empty((L, n, 1))
             rho_e = rho[row:row + L]
             _shift(Phi.T, (rho_e[:0:-1] @ C)[:, :, None], mu_f)
@@ -167,14 +167,16 @@ class VarProProblem:
             hW = np.zeros((D, n, m))
             for v in range(W.shape[0]):
                 sel = tab == v
-                F[sel] += np.einsum("dqna,kqa->knd", dW[:, v], Bu[sel])
-                V = np.einsum("kr,kqj->qrj", mu[:-1][sel], stencil[sel])
-                hW += np.einsum("dqra,qrj->daj", dW[:, v], V)
+                F[sel] += np.einsum("dqna,kqa->knd", dW[:, v], Bu[sel], optimize=True)
+                V = np.einsum("kr,kqj->qrj", mu[:-1][sel], stencil[sel], optimize=True)
+                hW += np.einsum("dqra,qrj->daj", dW[:, v], V, optimize=True)
             dX = _shift(Phi, F, np.empty((L, n, D)))
-            G[row:row + L] = np.einsum("dic,kc->kid", dCs, x) + np.einsum("ic,kcd->kid", C, dX)
-            T = np.einsum("ki,klaj->ilaj", rho_e, S)
-            h = np.einsum("dil,ilaj->daj", dCs, T)
-            h += np.einsum("drc,rcaj->daj", dPhi, np.einsum("kr,kcaj->rcaj", mu[:-1], S[:-1]))
+            G[row:row + L] = (np.einsum("dic,kc->kid", dCs, x, optimize=True)
+                              + np.einsum("ic,kcd->kid", C, dX, optimize=True))
+            T = np.einsum("ki,klaj->ilaj", rho_e, S, optimize=True)
+            h = np.einsum("dil,ilaj->daj", dCs, T, optimize=True)
+            h += np.einsum("drc,rcaj->daj", dPhi,
+                           np.einsum("kr,kcaj->rcaj", mu[:-1], S[:-1], optimize=True))
             h[:, :, :m] += hW
             H[:n * m] += h[:, :, :m].reshape(D, n * m).T
             if x0 is not None:
