@@ -44,6 +44,9 @@ from subid.methods.ct._ct_fit import regressors, unpack
 
 __all__ = ["VarProProblem"]
 
+#: Regressor columns below this fraction of the largest column's norm are dropped.
+DEAD_COLUMN = 1e-8
+
 
 @numba.njit(cache=True)
 def shift_loop(Phi, F, out):  # pragma: no cover - compiled
@@ -116,7 +119,14 @@ class VarProProblem:
             return None
         Rw = R if self.whiten is None else self.whiten(R)
         scale = np.linalg.norm(Rw, axis=0)
-        scale[scale == 0] = 1.0
+        # a column at rounding level (the column of a state the model cannot see) gets
+        # a linear parameter of 1e14 that cancels others: (J) would lose every digit;
+        # it is dropped (its parameter 0, its derivative outside the fixed-rank projector)
+        dead = scale <= DEAD_COLUMN * scale.max()
+        if dead.any():
+            Rw = Rw.copy()
+            Rw[:, dead] = 0.0
+        scale[dead] = 1.0
         try:
             Uu, sv, Vt = np.linalg.svd(Rw / scale, full_matrices=False)
         except np.linalg.LinAlgError:
