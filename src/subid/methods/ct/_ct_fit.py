@@ -38,6 +38,7 @@ import scipy.linalg
 import scipy.optimize
 
 from subid.methods.ct import _ct_kernels
+from subid.methods.ct._ct_jacobian import VarProProblem
 
 #: Work (samples x simulated state trajectories x outputs) one refinement may spend on
 #: its residual evaluations (about 20 s at 4e6 per second), counted as for a Jacobian by
@@ -415,8 +416,7 @@ def refine_output_error(A, C, rec: Record, *, feedthrough, estimate_x0, offset, 
     transpose = getattr(getattr(whiten, "__self__", None), "apply_transpose", None)
     analytic = rec.uniform and jacobian == "analytic" and (whiten is None or transpose)
     if analytic:
-        from subid.methods.ct._ct_jacobian import VarProProblem
-        problem = VarProProblem(rec, feedthrough=feedthrough, estimate_x0=estimate_x0,
+        problem = VarProProblem(rec, regressors, unpack, feedthrough=feedthrough, estimate_x0=estimate_x0,
                                 offset=offset, whiten=whiten, whiten_transpose=transpose)
         dAs = [Q[:n * n, d].reshape(n, n) for d in range(Q.shape[1])]
         dCs = [Q[n * n:, d].reshape(p, n) for d in range(Q.shape[1])]

@@ -40,7 +40,6 @@ import numpy as np
 import scipy.linalg
 
 from subid.methods.ct import _ct_kernels
-from subid.methods.ct._ct_fit import regressors, unpack
 
 __all__ = ["VarProProblem"]
 
@@ -97,14 +96,16 @@ def table_derivatives(A, dAs, t, order):
 class VarProProblem:
     """Residual and analytic Jacobian (J) of the refinement's criterion on a uniform grid.
 
-    ``evaluate(A, C)`` returns the (whitened) residual of the least-squares fit of the
+    ``regressors`` and ``unpack`` are those of :mod:`subid.methods.ct._ct_fit` (passed in:
+    that module imports this one). ``evaluate(A, C)`` returns the (whitened) residual of the least-squares fit of the
     linear parameters, or None when ``A`` overflows, and keeps what :meth:`jacobian` needs
     at that point.
     """
 
-    def __init__(self, rec, *, feedthrough, estimate_x0, offset, whiten=None,
-                 whiten_transpose=None):
+    def __init__(self, rec, regressors, unpack, *, feedthrough, estimate_x0, offset,
+                 whiten=None, whiten_transpose=None):
         self.rec = rec
+        self.regressors, self.unpack = regressors, unpack
         self.kw = dict(feedthrough=feedthrough, estimate_x0=estimate_x0, offset=offset)
         self.whiten = whiten
         self.whiten_transpose = whiten_transpose
@@ -113,7 +114,7 @@ class VarProProblem:
         self.point = None
 
     def evaluate(self, A, C):
-        R = regressors(A, C, self.rec, **self.kw)
+        R = self.regressors(A, C, self.rec, **self.kw)
         self.point = None
         if R is None:
             return None
@@ -150,7 +151,7 @@ class VarProProblem:
         n, p, m, E = A.shape[0], C.shape[0], rec.n_inputs, rec.n_experiments
         D = len(dAs)
         dCs = np.asarray(dCs)
-        B, _, x0, _ = unpack(theta, n, m, p, E, **self.kw)
+        B, _, x0, _ = self.unpack(theta, n, m, p, E, **self.kw)
         x0 = None if x0 is None else np.reshape(x0, (E, n))
         rho = resid if self.whiten_transpose is None else self.whiten_transpose(resid)
         rho = rho.reshape(-1, p)
