@@ -416,8 +416,9 @@ def refine_output_error(A, C, rec: Record, *, feedthrough, estimate_x0, offset, 
     transpose = getattr(getattr(whiten, "__self__", None), "apply_transpose", None)
     analytic = rec.uniform and jacobian == "analytic" and (whiten is None or transpose)
     if analytic:
-        problem = VarProProblem(rec, regressors, unpack, feedthrough=feedthrough, estimate_x0=estimate_x0,
-                                offset=offset, whiten=whiten, whiten_transpose=transpose)
+        problem = VarProProblem(rec, regressors, unpack, feedthrough=feedthrough,
+                                estimate_x0=estimate_x0, offset=offset, whiten=whiten,
+                                whiten_transpose=transpose)
         dAs = [Q[:n * n, d].reshape(n, n) for d in range(Q.shape[1])]
         dCs = [Q[n * n:, d].reshape(p, n) for d in range(Q.shape[1])]
     points = {}
