@@ -38,10 +38,13 @@ import scipy.linalg
 import scipy.optimize
 
 from subid.methods.ct import _ct_kernels
+from subid.methods.ct._ct_jacobian import VarProProblem
 
 #: Work (samples x simulated state trajectories x outputs) one refinement may spend on
-#: its residual evaluations (about 20 s at 4e6 per second): the Jacobian is evaluated
-#: by finite differences, each evaluation simulating n (n m + 1) trajectories.
+#: its residual evaluations (about 20 s at 4e6 per second), counted as for a Jacobian by
+#: finite differences, each evaluation simulating n (n m + 1) trajectories (the analytic
+#: Jacobian of a uniform grid costs less: the budget, and so which models are refined,
+#: stays that of the finite differences).
 REFINE_BUDGET = 1e8
 #: Largest order of the AR noise model fitted to the output error.
 MAX_AR_ORDER = 10
@@ -293,6 +296,22 @@ class ARNoise:
             row += L
         return np.concatenate(out).reshape(-1, M.shape[1])
 
+    def apply_transpose(self, v):
+        """The transpose of :meth:`apply` on a whitened signal ``v`` (a vector)."""
+        p, q = self.p, self.order
+        X = v.reshape(-1, p)
+        out = []
+        row = 0
+        for L in self.lengths:
+            w = X[row:row + L - q]
+            o = np.zeros((L, p))
+            for i, a in enumerate(self.coefficients):
+                for j, c in enumerate(a):
+                    o[q - j:L - j, i] += c * w[:, i]
+            out.append(o)
+            row += L - q
+        return np.concatenate(out).reshape(-1)
+
 
 def ar_noise_model(residual, lengths, p, max_order: int = MAX_AR_ORDER):
     """AR model of the output error, order by BIC per output (0..max_order).
@@ -369,14 +388,16 @@ def refine_steps(order: int, rec: Record) -> int:
 
 
 def refine_output_error(A, C, rec: Record, *, feedthrough, estimate_x0, offset, max_iterations,
-                        whiten=None, keep_stable=True):
+                        whiten=None, keep_stable=True, jacobian="analytic"):
     """(A, C) minimising the (prewhitened) output error, linear parameters eliminated.
 
     Minimises ``||W (y - y_hat(A, C, B, D, x0, y0))||^2`` over (A, C) in local
     coordinates, ``B, D, x0, y0`` eliminated by linear least squares for every
     (A, C) (variable projection); ``W`` is the prewhitening filter (identity
-    without ``whiten``). Levenberg-Marquardt with a finite-difference
-    Jacobian; with ``keep_stable`` a trial point with a pole above
+    without ``whiten``). Levenberg-Marquardt with the analytic Jacobian of
+    :class:`subid.methods.ct._ct_jacobian.VarProProblem` on a uniform grid
+    (``jacobian='analytic'``), else (or with ``jacobian='2-point'``) a
+    finite-difference one; with ``keep_stable`` a trial point with a pole above
     :func:`marginal_limit` gets a large constant residual.
     """
     n, p = A.shape[0], C.shape[0]
@@ -391,22 +412,43 @@ def refine_output_error(A, C, rec: Record, *, feedthrough, estimate_x0, offset, 
         v = base + Q @ theta
         return v[:n * n].reshape(n, n), v[n * n:].reshape(p, n)
 
+    # the Jacobian needs the transpose of the whitening filter (ARNoise.apply_transpose)
+    transpose = getattr(getattr(whiten, "__self__", None), "apply_transpose", None)
+    analytic = rec.uniform and jacobian == "analytic" and (whiten is None or transpose)
+    if analytic:
+        problem = VarProProblem(rec, regressors, unpack, feedthrough=feedthrough,
+                                estimate_x0=estimate_x0, offset=offset, whiten=whiten,
+                                whiten_transpose=transpose)
+        dAs = [Q[:n * n, d].reshape(n, n) for d in range(Q.shape[1])]
+        dCs = [Q[n * n:, d].reshape(p, n) for d in range(Q.shape[1])]
+    points = {}
+
     def residual(theta):
         Ai, Ci = split(theta)
         if keep_stable and np.linalg.eigvals(Ai).real.max() > limit:
             return np.full(target.size, penalty)
+        if analytic:
+            r = problem.evaluate(Ai, Ci)
+            points[theta.tobytes()] = (Ai, Ci)
+            return np.full(target.size, penalty) if r is None else r
         R = regressors(Ai, Ci, rec, feedthrough=feedthrough, estimate_x0=estimate_x0,
                        offset=offset)
         if R is None:
             return np.full(target.size, penalty)
         return solve(R, y, whiten)[1]
 
+    def jac(theta):
+        Ai, Ci = points.get(theta.tobytes()) or split(theta)
+        points.clear()
+        return problem.jacobian(Ai, Ci, dAs, dCs)
+
     zero = np.zeros(Q.shape[1])
     rms0 = float(np.sqrt(np.mean(residual(zero) ** 2)))
     budget = max(2, refine_steps(n, rec))
     max_nfev = min(max_iterations, budget)
-    sol = scipy.optimize.least_squares(residual, zero, method="lm", x_scale="jac",
-                                       xtol=1e-10, ftol=1e-10, gtol=1e-10, max_nfev=max_nfev)
+    sol = scipy.optimize.least_squares(residual, zero, jac=jac if analytic else "2-point",
+                                       method="lm", x_scale="jac", xtol=1e-10, ftol=1e-10,
+                                       gtol=1e-10, max_nfev=max_nfev)
     rms1 = float(np.sqrt(np.mean(sol.fun ** 2)))
     diag = {"refine_rms_before": rms0, "refine_evaluations": int(sol.nfev),
             "refine_budget_limited": bool(budget < max_iterations and sol.nfev >= budget)}

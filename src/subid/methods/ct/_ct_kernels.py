@@ -120,7 +120,14 @@ def interval_tables(F: np.ndarray, G: np.ndarray, steps: np.ndarray, nodes: np.n
         ``W[k, q]`` multiplies the stencil sample ``q``.
     """
     N, r = G.shape
-    K, P = nodes.shape
+    M = van_loan_matrix(F, G, steps, nodes.shape[1])
+    return tables_from_exponential(scipy.linalg.expm(M), N, r, nodes)
+
+
+def van_loan_matrix(F: np.ndarray, G: np.ndarray, steps: np.ndarray, P: int) -> np.ndarray:
+    """The block matrices whose exponentials hold the tables of :func:`interval_tables`."""
+    N, r = G.shape
+    K = steps.shape[0]
     size = N + r * P
     M = np.zeros((K, size, size))
     h = steps[:, None, None]
@@ -129,7 +136,14 @@ def interval_tables(F: np.ndarray, G: np.ndarray, steps: np.ndarray, nodes: np.n
     for j in range(P - 1):
         a = N + j * r
         M[:, a:a + r, a + r:a + 2 * r] = np.eye(r)
-    E = scipy.linalg.expm(M)
+    return M
+
+
+def tables_from_exponential(E: np.ndarray, N: int, r: int, nodes: np.ndarray):
+    """``Phi, W`` of :func:`interval_tables` from the exponentials ``E`` of
+    :func:`van_loan_matrix` (a linear map of ``E``: applied to a Frechet derivative
+    of the exponential it gives the derivatives of the tables)."""
+    K, P = nodes.shape
     Phi = np.ascontiguousarray(E[:, :N, :N])
     mono = E[:, :N, N:].reshape(K, N, P, r)                     # int ... r^j / j!
     fact = np.array([math.factorial(j) for j in range(P)], dtype=float)
@@ -141,14 +155,21 @@ def interval_tables(F: np.ndarray, G: np.ndarray, steps: np.ndarray, nodes: np.n
 
 def _uniform_tables(F, G, t, order):
     """Tables for a uniform grid: one entry per distinct stencil offset."""
+    h, nodes, tab, starts = uniform_layout(t, order)
+    Phi, W = interval_tables(F, G, np.full(nodes.shape[0], h), nodes)
+    return Phi, W, tab, starts
+
+
+def uniform_layout(t, order):
+    """Step ``h``, stencil ``nodes`` of every distinct stencil offset, the offset index
+    ``tab`` and the stencil start ``starts`` of every interval of a uniform grid."""
     L = t.shape[0]
     starts = stencil_starts(L, order)
     offsets = starts - np.arange(L - 1)
     uniq, tab = np.unique(offsets, return_inverse=True)
     h = (t[-1] - t[0]) / (L - 1)
     nodes = (uniq[:, None] + np.arange(order + 1)[None, :]).astype(float)
-    Phi, W = interval_tables(F, G, np.full(uniq.size, h), nodes)
-    return Phi, W, tab.astype(np.int64).reshape(-1), starts
+    return h, nodes, tab.astype(np.int64).reshape(-1), starts
 
 
 def _psi(z: np.ndarray, P: int) -> np.ndarray:
