@@ -27,11 +27,37 @@ import numba
 import numpy as np
 
 
+@numba.njit(cache=True, fastmath={'contract'}, inline="always")
+def _affine_row(M, N, x, vt, S, dMT, dNT, i, row):  # pragma: no cover
+    """Row i of ``M x + N v(t)`` (returned) and of its sensitivity
+    ``M S + dM x + dN v(t)`` (written into ``row``, the direction index last): the one
+    step of both the output and the state equation."""
+    n, m, d = x.shape[0], vt.shape[0], row.shape[0]
+    acc = 0.0
+    for k in range(n):
+        acc += M[i, k] * x[k]
+    for k in range(m):
+        acc += N[i, k] * vt[k]
+    for j in range(d):
+        row[j] = 0.0
+    for k in range(n):
+        a, xk = M[i, k], x[k]
+        Sk, da = S[k], dMT[i, k]
+        for j in range(d):
+            row[j] += a * Sk[j] + da[j] * xk
+    for k in range(m):
+        vk = vt[k]
+        db = dNT[i, k]
+        for j in range(d):
+            row[j] += db[j] * vk
+    return acc
+
+
 @numba.njit(cache=True, fastmath={'contract'})
 def _jacobian_t(Ap, Bp, C, Dp, v, x0, dApT, dBpT, dCT, dDpT, S):  # pragma: no cover
     """:func:`jacobian` on direction arrays with the direction index last (contiguous),
     so that every inner loop is an axpy over the directions (vectorised)."""
-    N, m = v.shape
+    N = v.shape[0]
     n = Ap.shape[0]
     ny = C.shape[0]
     d = S.shape[1]
@@ -41,46 +67,11 @@ def _jacobian_t(Ap, Bp, C, Dp, v, x0, dApT, dBpT, dCT, dDpT, S):  # pragma: no c
     xn = np.empty(n)
     Sn = np.empty((n, d))
     for t in range(N):
+        vt = v[t]
         for i in range(ny):
-            acc = 0.0
-            for k in range(n):
-                acc += C[i, k] * x[k]
-            for k in range(m):
-                acc += Dp[i, k] * v[t, k]
-            yhat[t, i] = acc
-            row = J[t, i]
-            for j in range(d):
-                row[j] = 0.0
-            for k in range(n):
-                c, xk = C[i, k], x[k]
-                Sk, dc = S[k], dCT[i, k]
-                for j in range(d):
-                    row[j] += c * Sk[j] + dc[j] * xk
-            for k in range(m):
-                vk = v[t, k]
-                dd = dDpT[i, k]
-                for j in range(d):
-                    row[j] += dd[j] * vk
+            yhat[t, i] = _affine_row(C, Dp, x, vt, S, dCT, dDpT, i, J[t, i])
         for i in range(n):
-            acc = 0.0
-            for k in range(n):
-                acc += Ap[i, k] * x[k]
-            for k in range(m):
-                acc += Bp[i, k] * v[t, k]
-            xn[i] = acc
-            row = Sn[i]
-            for j in range(d):
-                row[j] = 0.0
-            for k in range(n):
-                a, xk = Ap[i, k], x[k]
-                Sk, da = S[k], dApT[i, k]
-                for j in range(d):
-                    row[j] += a * Sk[j] + da[j] * xk
-            for k in range(m):
-                vk = v[t, k]
-                db = dBpT[i, k]
-                for j in range(d):
-                    row[j] += db[j] * vk
+            xn[i] = _affine_row(Ap, Bp, x, vt, S, dApT, dBpT, i, Sn[i])
         for i in range(n):
             x[i] = xn[i]
         S, Sn = Sn, S
