@@ -29,7 +29,8 @@ def bic_order(est, orders=range(1, 11)):
     N, nu, ny = est.n_samples, est.n_inputs, est.n_outputs
     best = None
     for n in orders:
-        model = subid.n4sid(est, n, horizon=10)
+        # horizon 10 (20 where 10 cannot reveal n: one output, n = 10)
+        model = subid.n4sid(est, n, horizon=10 if 9 * ny >= n else 20)
         e = est.y - subid.predict(model, est, 1)
         value = N * np.log(np.linalg.det(e.T @ e / N)) + (n * (nu + 2 * ny) + nu * ny) * np.log(N)
         if best is None or value < best[0]:
