@@ -270,7 +270,8 @@ def _innovation_order(case, column):
 def with_innovation(case, column, how):
     """Today's choice combined with the innovation BIC of the method's own models
     (``column`` 0: Σ from the factor, 1: one-step errors): ``'max'`` the larger of
-    the two orders; ``'tie'`` the least innovation BIC among the orders whose mean fold
+    the two orders; ``'guarded'`` the innovation BIC's order when it is the higher
+    and its mean fold score is not lower; ``'tie'`` the least innovation BIC among the orders whose mean fold
     score is within one paired standard error of today's choice."""
     today = today_rule(case)
     orders = per_order(case)
@@ -279,6 +280,12 @@ def with_innovation(case, column, how):
         return today
     if how == "max":
         return orders.get(max(today["order"], _innovation_order(case, column)), today)
+    if how == "guarded":
+        other = orders.get(_innovation_order(case, column))
+        if other is not None and other["order"] > today["order"] \
+                and np.mean(other["folds"]) >= np.mean(today["folds"]):
+            return other
+        return today
     tied = [today["order"]] + [n for n, c in orders.items() if n != today["order"]
                                and abs(_paired_se(c["folds"], today["folds"])[0])
                                <= _paired_se(c["folds"], today["folds"])[1]]
@@ -310,6 +317,10 @@ RULES = {
         _innovation_order(c, 1), today_rule(c)),
     "max(cv-BIC, innovation BIC one-step)": lambda c: with_innovation(c, 1, "max"),
     "max(cv-BIC, innovation BIC Σ)": lambda c: with_innovation(c, 0, "max"),
+    "innovation BIC one-step if higher and its mean fold score not lower":
+        lambda c: with_innovation(c, 1, "guarded"),
+    "innovation BIC Σ if higher and its mean fold score not lower":
+        lambda c: with_innovation(c, 0, "guarded"),
     "cv-BIC, ties (1 paired SE) to innovation BIC one-step":
         lambda c: with_innovation(c, 1, "tie"),
 }
