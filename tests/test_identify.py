@@ -282,3 +282,73 @@ def test_feedthrough_records_the_lag0_share_under_feedback():
     # 3000 samples: an in-sample share of about 1e-3)
     opened = systems.simulate_innovation_data(true, 3000, seed=7)
     assert max(subid.n4sid(opened, 3, horizon=10).info["feedthrough"]["lag0_share"]) < 0.01
+
+
+# -- the innovation check of the order selection ---------------------------------------------
+
+def test_innovation_bic_equals_an_explicit_kalman_predictor():
+    """:func:`innovation_bic` against the one-step predictor written out (same x0)."""
+    true = systems.random_system(3, 2, 2, seed=1)
+    data = systems.simulate_data(true, 600, seed=2, process_snr_db=20, output_snr_db=20)
+    model = subid.n4sid(data, 3, horizon=10)
+    _, x0 = subid.predict(model, data, 1, return_x0=True)
+    A, B, C, D, K = model.A, model.B, model.C, model.D, model.K
+    x, errors = np.asarray(x0, float), []
+    for u, y in zip(data.u, data.y):
+        e = y - C @ x - D @ u
+        errors.append(e)
+        x = A @ x + B @ u + K @ e
+    E = np.array(errors)
+    N = data.n_samples
+    expected = N * np.log(np.linalg.det(E.T @ E / N)) + (3 * (2 + 4) + 4) * np.log(N)
+    assert _selection.innovation_bic(model, data) == pytest.approx(expected, rel=1e-9)
+    assert _selection.innovation_bic(model.with_noise_model(None, None), data) is None
+
+
+def test_innovation_check_adds_a_mode_the_input_barely_excites():
+    """Seed 34 of bench/selection.py (a 6th-order system): the cross-validated BIC
+    stops at 5 (the sixth mode adds 0.06 points of fold fit, less than its price);
+    the innovation BIC asks for 6 and its fold score is not lower, so 6 is taken; the
+    chosen order, horizon and estimator passed back give the same model."""
+    true = systems.random_system(6, 2, 2, seed=34)
+    data = systems.simulate_data(true, 4000, seed=1034, process_snr_db=20, output_snr_db=20)
+    est = data[:2000]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        model = subid.moesp(est)
+        record = model.info["order_selection"]
+        check = record["innovation_check"]
+        assert check["cross_validated"]["order"] == 5
+        assert check["order"] == 6 and check["taken"] and model.order == 6
+        assert record["selected"]["order"] == 6 and record["selected"]["innovation_check"]
+        again = subid.moesp(est, 6, horizon=model.info["horizon"],
+                            system_matrices=model.info["system_matrices"])
+    np.testing.assert_array_equal(again.A, model.A)
+    assert [o["order"] for o in check["orders"]] == sorted(
+        {c["order"] for c in record["candidates"] if c["horizon"] == model.info["horizon"]})
+
+
+@pytest.mark.parametrize("favoured", ["highest", "lowest"])
+def test_innovation_check_is_vetoed_by_the_fold_scores(monkeypatch, favoured):
+    """With the innovation BIC made to favour the highest (lowest) order, the check
+    takes it exactly when it is higher than the cross-validated choice and its best
+    candidate's mean fold score is not lower (the lowest order is never taken)."""
+    sign = -1.0 if favoured == "highest" else 1.0
+    monkeypatch.setattr(_selection, "innovation_bic", lambda m, d: sign * m.order)
+    true = systems.random_system(3, 1, 2, seed=5)
+    data = systems.simulate_data(true, 800, seed=6, output_snr_db=25)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        model = subid.moesp(data)
+    record = model.info["order_selection"]
+    check = record["innovation_check"]
+    cv = check["cross_validated"]
+    orders = [o["order"] for o in check["orders"]]
+    assert check["order"] == (max(orders) if favoured == "highest" else min(orders))
+    mine = next(c["score"] for c in record["candidates"]
+                if (c["order"], c["horizon"], c.get("system_matrices"))
+                == (cv["order"], cv["horizon"], cv.get("system_matrices")))
+    best_there = max(c["score"] for c in record["candidates"] if c["order"] == check["order"])
+    expected = check["order"] > cv["order"] and best_there >= mine
+    assert check["taken"] == expected
+    assert model.order == (check["order"] if expected else cv["order"])

@@ -595,8 +595,9 @@ def innovation_check(data, record, fitter, chosen):
     record lower by more than 0.4 points of validation fit.
 
     ``chosen`` is ``(order, horizon, estimator)``; so is the result, and
-    ``record['innovation_check']`` records the criterion of every order (``orders``),
-    the order of the least (``order``) and the decision (``taken``, ``reason``) (``record['selected']`` follows it).
+    ``record['innovation_check']`` records the cross-validated choice
+    (``cross_validated``), the criterion of every order (``orders``), the order of
+    the least (``order``) and the decision (``taken``, ``reason``) (``record['selected']`` follows it).
     """
     from subid.methods.dt.noise_model import attach_noise_model
     n, f, estimator = chosen
@@ -607,7 +608,10 @@ def innovation_check(data, record, fitter, chosen):
     orders = sorted({c["order"] for c in record["candidates"] if c["horizon"] == f})
     check = {"rule": "innovation BIC of the models of the chosen horizon and estimator on "
                      "the whole record; its order is taken when higher and its best "
-                     "candidate's mean fold score is not lower", "orders": []}
+                     "candidate's mean fold score is not lower", "orders": [],
+             "cross_validated": dict({"order": n, "horizon": f},
+                                     **({} if estimator is None
+                                        else {"system_matrices": estimator}))}
     record["innovation_check"] = check
     values = {}
     try:
