@@ -8,13 +8,16 @@ cross-validation record (the four fold scores of every candidate order x horizon
 estimator), the validation fit of the model refitted to the whole estimation record at
 every candidate (``method(est, n, horizon=f, system_matrices=...)``), the order of the
 innovation BIC of bench/selection.py, and the innovation BIC of the method's own models
-at the horizon and estimator of today's choice, every order: from the innovation
+at the horizon and estimator of the cross-validated choice (the cross-validated BIC
+alone, before :func:`subid.methods.dt.selection.innovation_check`), every order: from the
+innovation
 covariance the model carries (``noise_cov``, from the Hankel factor) and from its
 one-step prediction errors on the estimation record. ``table`` then applies every
 rule to the same fold scores: how often it finds the true order (Monte Carlo), the
 median validation fit of the model it picks, and on the records the change of
-validation fit against today's rule (the pick is the rule's candidate refitted to the
-whole record; today's fallback of ``unrepaired_choice`` is left out for every rule).
+validation fit against the cross-validated choice (the pick is the rule's candidate
+refitted to the whole record; the fallback of ``unrepaired_choice`` is left out for every
+rule). The rule marked "the default" is what ``order=None`` does since this benchmark.
 
 ``geomean`` reruns the Monte Carlo with the fold score's misfit averaged over the
 outputs geometrically (so that ``2 N ny ln misfit`` is the Gaussian log-likelihood of
@@ -170,7 +173,9 @@ def _params(n, nu, ny):
 
 
 def today_rule(case):
-    """subid's rule (:func:`subid.methods.crossval.select`, the cross-validated BIC)."""
+    """The cross-validated choice (:func:`subid.methods.crossval.select`, the
+    cross-validated BIC), before the innovation check of
+    :func:`subid.methods.dt.selection.innovation_check` (the rule marked "the default")."""
     keyed = {_key(c): c for c in case["candidates"]}
     best = select({k: c["folds"] for k, c in keyed.items()}, case["samples"], case["nu"],
                   case["ny"])[0]
@@ -294,7 +299,7 @@ def with_innovation(case, column, how):
 
 
 RULES = {
-    "cv-BIC, p ln N (today)": today_rule,
+    "cv-BIC, p ln N (the cross-validated choice)": today_rule,
     "cv-IC, 0.5 p ln N": lambda c: cv_ic(c, lambda N: 0.5 * math.log(N)),
     "cv-IC, 0.8 p ln N": lambda c: cv_ic(c, lambda N: 0.8 * math.log(N)),
     "cv-IC, 1.2 p ln N": lambda c: cv_ic(c, lambda N: 1.2 * math.log(N)),
@@ -317,7 +322,7 @@ RULES = {
         _innovation_order(c, 1), today_rule(c)),
     "max(cv-BIC, innovation BIC one-step)": lambda c: with_innovation(c, 1, "max"),
     "max(cv-BIC, innovation BIC Σ)": lambda c: with_innovation(c, 0, "max"),
-    "innovation BIC one-step if higher and its mean fold score not lower":
+    "innovation BIC one-step if higher and its mean fold score not lower (the default)":
         lambda c: with_innovation(c, 1, "guarded"),
     "innovation BIC Σ if higher and its mean fold score not lower":
         lambda c: with_innovation(c, 0, "guarded"),
@@ -357,12 +362,12 @@ def table(path):
         picks = {k: rule(v) for k, v in mc.items()}
         row(name, {k: p["order"] for k, p in picks.items()},
             {k: p["val"] for k, p in picks.items()})
-    lines += ["", "Today's misses (all seeds): the fold scores of today's pick and of the true "
+    lines += ["", "The cross-validated choice's misses (all seeds): the fold scores of today's pick and of the true "
               "order's best candidate, the mean gain of the true order over the pick on the "
               "folds with the standard error of the paired fold differences, the gain the "
               "criterion asks for (the misfit factor exp(-Δp ln N / (2 N ny))), and the "
               "difference of validation fit of the two refitted models.", "",
-              "| seed | true | today | bench BIC | pick's folds | true order's folds | fold gain "
+              "| seed | true | cross-validated | bench BIC | pick's folds | true order's folds | fold gain "
               "(SE) | gain asked | validation: true - pick |", "|---|---|---|---|---|---|---|---|---|"]
     for k, v in mc.items():
         pick, true = today_rule(v), per_order(v).get(v["true"])
@@ -379,8 +384,8 @@ def table(path):
                      f"{asked:+.3f} | {true['val'] - pick['val']:+.3f} |")
     if real:
         names = sorted(real, key=str.lower)
-        lines += ["", "DaISy records (bench/realdata.py's split): validation fit of today's "
-                  "pick (order), and every other rule's change against it in points "
+        lines += ["", "DaISy records (bench/realdata.py's split): validation fit of the "
+                  "cross-validated choice (order), and every other rule's change against it in points "
                   "(order); worst loss in the last column.", "",
                   "| rule | " + " | ".join(names) + " | worst |",
                   "|---|" + "---|" * (len(names) + 1)]

@@ -44,7 +44,9 @@ SELECTION_RULES = ("cv", "gap")
 AUTO_ORDER_RULE = (f"orders 1..{MAX_ORDER} and horizons "
                    f"{' and '.join(str(h) for h in HORIZON_CANDIDATES)}, or the horizon given, "
                    "scored by cross-validated simulation fit on the estimation data; the "
-                   "least cross-validated BIC wins, and the search goes on past order "
+                   "least cross-validated BIC wins (a higher order where the innovation "
+                   "BIC asks for it and its fold score is no lower), and the search goes "
+                   "on past order "
                    f"{MAX_ORDER} while the best is among the last orders tried")
 
 

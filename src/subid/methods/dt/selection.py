@@ -40,21 +40,27 @@ estimation record only:
   On the nine DaISy records of bench/realdata.py (MOESP) the chosen orders
   are those of the former rule but for steamgen (10 against 9, 75.9 %
   against 75.8 % validation fit) and winding (2 against 5, 74.9 % against
-  75.7 %). Over 80 seeds: 56/80, BIC on the innovation models 57/80 (the
-  systems on which either alone is right: 2 against 3). Twenty-one other
-  rules applied to the same fold scores (bench/selection_rules.md: the
+  75.7 %);
+* **the innovation check** (:func:`innovation_check`): the cross-validated BIC
+  sees a mode only through the held-out simulation fit; a mode the input
+  barely excites adds less there than its parameters cost (on those
+  systems: at most 0.06 points, against a price of 0.05-0.12). The models
+  of the chosen horizon and estimator are fitted to the whole record at
+  every order scored there, with their Kalman gains, and the order of the
+  least :func:`innovation_bic` (one-step prediction errors, which see the
+  noise path too) replaces the choice when it is higher and its best
+  candidate's mean fold score is not lower. Over 80 seeds of the same
+  Monte Carlo: true order 57/80 (the cross-validated BIC alone 56, BIC on
+  the fitted innovation models 57), 31/40 on the first 40. Twenty-two
+  other rules applied to the same fold scores (bench/selection_rules.md: the
   penalty scaled by 0.5-2, AIC, Hannan-Quinn, the penalty less the one the
   held-out misfit already carries, the median or pooled variance of the
   folds, per-fold BIC, one-standard-error rules, steps up by one or two
-  standard errors of the paired fold differences, the innovation BIC of the
-  method's own models, alone or with this criterion): none finds the true
-  order more often without losing validation fit on a DaISy record (the
-  larger of this order and the innovation BIC's: 31/40 and 57/80, but 5.0
-  points lost on CD_player_arm with N4SID and 1.5 on glassfurnace with
-  MOESP, whose noise needs more states than their simulation does). The
-  orders missed are modes whose gain on the held-out folds (at most 0.06
-  points) is below the price of their parameters (0.05-0.12 points); they
-  change the validation fit by -0.03 to +0.15 points;
+  standard errors of the paired fold differences, the innovation BIC alone
+  or without the fold-score veto) find the true order less often or lose
+  validation fit on a DaISy record (the larger of the two orders without
+  the veto: 5.0 points on CD_player_arm with N4SID, whose noise needs more
+  states than its simulation does);
 * **orders past 10**: when no order is given, the candidates are 1..10
   first; while the order of the least criterion is one of the last two searched, the
   next block is scored (11..20, then 22..40 in steps of 2, 44..80 in steps
