@@ -276,7 +276,8 @@ def with_innovation(case, column, how):
     """Today's choice combined with the innovation BIC of the method's own models
     (``column`` 0: Σ from the factor, 1: one-step errors): ``'max'`` the larger of
     the two orders; ``'guarded'`` the innovation BIC's order when it is the higher
-    and its mean fold score is not lower; ``'tie'`` the least innovation BIC among the orders whose mean fold
+    and its mean fold score is not lower; ``'among'`` the least innovation BIC among
+    the choice and the higher orders whose mean fold score is not lower; ``'tie'`` the least innovation BIC among the orders whose mean fold
     score is within one paired standard error of today's choice."""
     today = today_rule(case)
     orders = per_order(case)
@@ -285,6 +286,11 @@ def with_innovation(case, column, how):
         return today
     if how == "max":
         return orders.get(max(today["order"], _innovation_order(case, column)), today)
+    if how == "among":
+        allowed = [today["order"]] + [n for n, c in orders.items() if n > today["order"]
+                                      and np.mean(c["folds"]) >= np.mean(today["folds"])]
+        kept = [n for n in allowed if n in table]
+        return orders[min(kept, key=lambda n: (table[n], n))] if kept else today
     if how == "guarded":
         other = orders.get(_innovation_order(case, column))
         if other is not None and other["order"] > today["order"] \
@@ -324,6 +330,8 @@ RULES = {
     "max(cv-BIC, innovation BIC Σ)": lambda c: with_innovation(c, 0, "max"),
     "innovation BIC one-step if higher and its mean fold score not lower (the default)":
         lambda c: with_innovation(c, 1, "guarded"),
+    "least innovation BIC one-step among the choice and the higher orders scoring no lower":
+        lambda c: with_innovation(c, 1, "among"),
     "innovation BIC Σ if higher and its mean fold score not lower":
         lambda c: with_innovation(c, 0, "guarded"),
     "cv-BIC, ties (1 paired SE) to innovation BIC one-step":
