@@ -328,9 +328,10 @@ RULES = {
         _innovation_order(c, 1), today_rule(c)),
     "max(cv-BIC, innovation BIC one-step)": lambda c: with_innovation(c, 1, "max"),
     "max(cv-BIC, innovation BIC Σ)": lambda c: with_innovation(c, 0, "max"),
-    "innovation BIC one-step if higher and its mean fold score not lower (the default)":
+    "innovation BIC one-step if higher and its mean fold score not lower":
         lambda c: with_innovation(c, 1, "guarded"),
-    "least innovation BIC one-step among the choice and the higher orders scoring no lower":
+    "least innovation BIC one-step among the choice and the higher orders scoring no lower "
+    "(the default)":
         lambda c: with_innovation(c, 1, "among"),
     "innovation BIC Σ if higher and its mean fold score not lower":
         lambda c: with_innovation(c, 0, "guarded"),
