@@ -48,7 +48,7 @@ from subid.methods.dt._subspace import (
 from subid.methods.dt.checks import check_data
 from subid.methods.dt.feedthrough import resolve as resolve_feedthrough
 from subid.methods.dt.plan import Plan, make_plan
-from subid.methods.dt.selection import choose
+from subid.methods.dt.selection import choose, estimator_by_fit
 from subid.model.statespace import StateSpace
 
 
@@ -238,8 +238,12 @@ def run(method: SubspaceMethod, data, order, horizon, *, selection: str,
             problem, model, estimator, rule = choose(data, plan, pipeline)
         else:
             problem = pipeline.prepare(data, plan.orders, plan.horizon)
-            estimator, rule = plan.estimators[0], None
-            model = pipeline.fit(problem, estimator)
+            if plan.estimator_choice == "fit":   # order and horizon given: no fold fits
+                estimator, model, rule = estimator_by_fit(data, problem, pipeline,
+                                                          plan.estimators)
+            else:
+                estimator, rule = plan.estimators[0], None
+                model = pipeline.fit(problem, estimator)
         model.info.update(plan.info(estimator, rule))
         model = finalize(model, problem, refine=plan.refine, delays=plan.delays,
                          statistic=plan.statistic)
