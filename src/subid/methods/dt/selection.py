@@ -58,8 +58,17 @@ Horizons that cannot reveal every candidate order compete at the orders
 they can reveal (horizon 10 on a single output: orders 1..9). Where a
 method offers two estimators of the system matrices from the same subspace
 (``system_matrices='auto'`` of MOESP and ``ls_subspace``: shift invariance
-with the output regression, or the state sequence), each is a candidate
-too. When the chosen candidate's model refitted to the whole record has to
+with the output regression, or the state sequence), the candidates are
+scored with the first, and the estimator is chosen at the chosen order and
+horizon by :func:`estimator_by_fit` (both fitted to the whole record, the
+better simulation fit, an unstabilised model first): the rule a call given
+that order and horizon applies without fold fits. Measured against
+cross-validating both estimators with the orders (issue 21; bench/realdata.py,
+the nine DaISy records, validation fit): CD_player_arm +5.3 (ls_subspace)
+and +3.1 (MOESP), exchanger +0.9, dryer -0.6, steamgen -0.7 (ls_subspace)
+and -0.5 (MOESP), evaporator -0.3, the others unchanged; half the
+candidates. A list of candidate orders given (``order=[4]``) scores both
+estimators as candidates instead. When the chosen candidate's model refitted to the whole record has to
 be stabilised although not all of its fold models had, the next candidates
 are tried (:func:`unrepaired_choice`): among
 the candidates whose mean score is within the fold-to-fold standard
@@ -96,11 +105,11 @@ validation block (:mod:`subid.methods.dt._scoring`); an unstable A that
 (:mod:`subid.methods.dt._residual_bound`). Measured (``bench/run.py
 --selection-only``, 2x2 order-4 system, 20 dB, CPU time, three runs;
 bench/results.md): the default call costs 7.6-9.1x the pinned call at 10^3 samples
-(records too short for the lag products) and 6.4-7.8x at 10^4 (where the pinned call
-cross-validates its two estimators), 20-24.5x at 10^5 (34-46x before) and 7.3-8.8x at
+(records too short for the lag products) and 6.4-7.8x at 10^4 (when the pinned call
+cross-validated its two estimators), 20-24.5x at 10^5 (34-46x before) and 7.3-8.8x at
 10^6 (the folds use at most :data:`MAX_SELECTION_SAMPLES`): the per-candidate work no
-longer grows with N, but 80-160 candidate models (orders x horizons x folds x
-estimators), each about a millisecond of subspace steps and bookkeeping, remain.
+longer grows with N, but 80 candidate models (orders x horizons x folds; 160 when
+both estimators were scored), each about a millisecond of subspace steps and bookkeeping, remain.
 """
 
 from __future__ import annotations
