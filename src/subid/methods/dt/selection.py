@@ -68,10 +68,13 @@ the nine DaISy records, validation fit): CD_player_arm +5.3 (ls_subspace)
 and +3.1 (MOESP), exchanger +0.9, dryer -0.6, steamgen -0.7 (ls_subspace)
 and -0.5 (MOESP), evaporator -0.3, the others unchanged; half the
 candidates. A list of candidate orders given (``order=[4]``) scores both
-estimators as candidates instead. When the chosen candidate's model refitted to the whole record has to
-be stabilised although not all of its fold models had, the next candidates
-are tried (:func:`unrepaired_choice`): among
-the candidates whose mean score is within the fold-to-fold standard
+estimators as candidates instead. Also measured: the same rule without the
+preference for an unstabilised model loses 7-8.5 points on evaporator, and
+cross-validating with ``'states'`` then preferring an unstabilised model
+loses 10 on CD_player_arm (its good ``'states'`` model is stabilised). When
+the chosen candidate's model refitted to the whole record has to be
+stabilised although not all of its fold models had, the next candidates are
+tried (:func:`unrepaired_choice`): among the candidates whose mean score is within the fold-to-fold standard
 deviation of the choice's, first those none of whose fold models needed it,
 then the others, each by criterion.
 
@@ -109,7 +112,8 @@ bench/results.md): the default call costs 7.6-9.1x the pinned call at 10^3 sampl
 cross-validated its two estimators), 20-24.5x at 10^5 (34-46x before) and 7.3-8.8x at
 10^6 (the folds use at most :data:`MAX_SELECTION_SAMPLES`): the per-candidate work no
 longer grows with N, but 80 candidate models (orders x horizons x folds; 160 when
-both estimators were scored), each about a millisecond of subspace steps and bookkeeping, remain.
+both estimators were scored), each about a millisecond of subspace steps and
+bookkeeping, remain.
 """
 
 from __future__ import annotations
