@@ -50,9 +50,9 @@ estimation record only:
   the whole record with their Kalman gains, and the order of the least
   :func:`innovation_bic` (one-step prediction errors, which see the noise
   path too) is taken (about 10 % of the default call's CPU time at
-  1e3-1e5 samples). Over 80 seeds of the same
-  Monte Carlo: true order 57/80 (the cross-validated BIC alone 56, BIC on
-  the fitted innovation models 57), 31/40 on the first 40. Twenty-two
+  1e3-1e5 samples). Over 80 seeds of the same Monte Carlo: true order
+  56/80 (the cross-validated BIC alone 54, BIC on the fitted innovation
+  models 57), 31/40 on the first 40 (30 and 31). Twenty-two
   other rules applied to the same fold scores (bench/selection_rules.md: the
   penalty scaled by 0.5-2, AIC, Hannan-Quinn, the penalty less the one the
   held-out misfit already carries, the median or pooled variance of the
@@ -662,10 +662,10 @@ def innovation_check(data, record, fitter, chosen):
     those orders, each with its Kalman gain, and the order of the least
     :func:`innovation_bic` is taken (Schwarz's criterion: consistent, so it does
     not add orders as the record grows). Measured (bench/selection_rules.md, the
-    rule marked "the default"): true order 31/40 and 57/80 instead of 30/40 and
-    56/80 (BIC on the innovation models: 31/40, 57/80), the same median
-    validation fit; on the DaISy records no default lower by more than 0.4
-    points of validation fit (bench/realdata.md).
+    rule marked "the default"; bench/selection.py): true order 31/40 and 56/80
+    instead of 30/40 and 54/80 (BIC on the innovation models: 31/40, 57/80), the
+    same median validation fit; on the DaISy records no default lower by more
+    than 0.5 points of validation fit (bench/realdata.md).
 
     ``chosen`` is ``(order, horizon, estimator)``; so is the result, and
     ``record['innovation_check']`` records the cross-validated choice
