@@ -300,9 +300,17 @@ def test_innovation_bic_equals_an_explicit_kalman_predictor():
         x = A @ x + B @ u + K @ e
     E = np.array(errors)
     N = data.n_samples
-    expected = N * np.log(np.linalg.det(E.T @ E / N)) + (3 * (2 + 4) + 4) * np.log(N)
+    # normalising each output by its spread shifts ln det by sum ln var(y)
+    expected = N * (np.log(np.linalg.det(E.T @ E / N)) - np.sum(np.log(np.var(data.y, axis=0)))) \
+        + (3 * (2 + 4) + 4) * np.log(N)
     assert _selection.innovation_bic(model, data) == pytest.approx(expected, rel=1e-9)
     assert _selection.innovation_bic(model.with_noise_model(None, None), data) is None
+    # noise-free: every order from the true one up predicts to rounding; the floor
+    # leaves the parameters to decide
+    exact = systems.simulate_data(true, 600, seed=2, process_snr_db=None)
+    low, high = (_selection.innovation_bic(subid.n4sid(exact, n, horizon=10), exact)
+                 for n in (3, 5))
+    assert high - low == pytest.approx(2 * (2 + 4) * np.log(600), rel=1e-9)
 
 
 def test_innovation_check_adds_a_mode_the_input_barely_excites():

@@ -147,6 +147,7 @@ import numpy as np
 
 from subid.errors import OrderError, SubidError
 from subid.methods.crossval import (
+    ABSOLUTE_TOLERANCE,
     FLOOR,
     HORIZON_CANDIDATES,
     MAX_ORDER,
@@ -538,7 +539,6 @@ def estimator_by_fit(data, problem, fitter, estimators):
         ``rule`` is ``info['system_matrices_selection']``: ``'fit'``, with each
         estimator's ``fits`` and whether its model was ``stabilised``.
     """
-    from subid.methods.crossval import ABSOLUTE_TOLERANCE
     from subid.methods.dt._scoring import Held
     held = Held(data, lagged=data.n_experiments == 1)
     models, fits, repaired, issued = {}, {}, {}, {}
@@ -625,7 +625,10 @@ def innovation_bic(model, data) -> float | None:
     transient of the stable predictor weighs O(1) against the O(ln N) price of an
     order), the parameters those of A, B, C, D and K up to a similarity (Ljung 1999,
     Sec. 7.3 and 16.4, eq. 16.33); None when the model has no noise model (no stable
-    predictor) or the errors are not finite."""
+    predictor) or the errors are not finite. Each output's errors are divided by
+    its standard deviation (which shifts the criterion of every order alike) and the
+    eigenvalues of their covariance floored at ``(ABSOLUTE_TOLERANCE / 100)^2``, the
+    rounding level below which the cross-validated criterion counts no misfit either."""
     from subid.model.prediction import prediction_errors
     if model.K is None:
         return None
@@ -636,10 +639,17 @@ def innovation_bic(model, data) -> float | None:
     except SubidError:
         return None
     N, nu, ny = errors.shape[0], data.n_inputs, data.n_outputs
-    sign, logdet = np.linalg.slogdet(errors.T @ errors / N)
-    if not (np.all(np.isfinite(errors)) and sign > 0 and math.isfinite(logdet)):
+    if not np.all(np.isfinite(errors)):
         return None
-    return N * logdet + (model.order * (nu + 2 * ny) + nu * ny) * math.log(N)
+    # each output's errors relative to its spread (a constant of ln det for every
+    # order), the covariance's eigenvalues floored at the rounding level of the
+    # cross-validated criterion (ABSOLUTE_TOLERANCE points of misfit): on noise-free
+    # data every order from the true one up predicts to rounding, and the smallest wins
+    spread = np.std(data.y, axis=0)
+    errors = errors / np.where(spread > 0, spread, 1.0)
+    floor = (ABSOLUTE_TOLERANCE / 100.0) ** 2
+    eig = np.maximum(np.linalg.eigvalsh(errors.T @ errors / N), floor)
+    return N * float(np.sum(np.log(eig))) + (model.order * (nu + 2 * ny) + nu * ny) * math.log(N)
 
 
 def innovation_check(data, record, fitter, chosen):
