@@ -32,6 +32,7 @@ Usage::
     OPENBLAS_NUM_THREADS=1 PYTHONPATH=src python bench/selection_rules.py table > bench/selection_rules.md
     OPENBLAS_NUM_THREADS=1 PYTHONPATH=src python bench/selection_rules.py geomean --runs 80
     OPENBLAS_NUM_THREADS=1 PYTHONPATH=src python bench/selection_rules.py refine ballbeam 2,3,6,9
+    OPENBLAS_NUM_THREADS=1 PYTHONPATH=src python bench/selection_rules.py cost
 """
 
 from __future__ import annotations
@@ -473,6 +474,33 @@ def refine_check(args):
     return 0
 
 
+def cost(args):
+    """CPU time of ``moesp(data)`` with and without the innovation check (interleaved,
+    medians of three rounds; 2x2 order-4 system, 20 dB output noise)."""
+    import statistics
+    import time
+
+    import subid.methods.dt.selection as selection
+    check = selection.innovation_check
+    true = subid.systems.random_system(4, 2, 2, seed=3)
+    for n_samples in (1000, 10000, 100000):
+        data = subid.systems.simulate_data(true, n_samples, seed=1, output_snr_db=20)
+        times = {True: [], False: []}
+        for _ in range(3):
+            for on in (True, False):
+                selection.innovation_check = check if on else (lambda d, r, f, c: c)
+                start = time.process_time()
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore")
+                    subid.moesp(data)
+                times[on].append(time.process_time() - start)
+        selection.innovation_check = check
+        with_, without = statistics.median(times[True]), statistics.median(times[False])
+        print(f"N = {n_samples}: with {with_:.3f} s, without {without:.3f} s, "
+              f"ratio {with_ / without:.2f}")
+    return 0
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="cmd", required=True)
@@ -486,6 +514,7 @@ def main(argv=None) -> int:
     g = sub.add_parser("geomean")
     g.add_argument("--runs", type=int, default=80)
     g.add_argument("--first", type=int, default=0)
+    sub.add_parser("cost")
     r = sub.add_parser("refine")
     r.add_argument("record")
     r.add_argument("orders")
@@ -496,6 +525,8 @@ def main(argv=None) -> int:
         return table(args.file)
     if args.cmd == "geomean":
         return geomean(args)
+    if args.cmd == "cost":
+        return cost(args)
     return refine_check(args)
 
 

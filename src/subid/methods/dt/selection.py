@@ -49,8 +49,8 @@ estimation record only:
   not lower, the models of the chosen horizon and estimator are fitted to
   the whole record with their Kalman gains, and the order of the least
   :func:`innovation_bic` (one-step prediction errors, which see the noise
-  path too) is taken (about 10 % of the default call's CPU time at
-  1e3-1e5 samples). Over 80 seeds of the same Monte Carlo: true order
+  path too) is taken (at most about 10 % of the default call's CPU time
+  at 1e3-1e5 samples, ``bench/selection_rules.py cost``). Over 80 seeds of the same Monte Carlo: true order
   56/80 (the cross-validated BIC alone 54, BIC on the fitted innovation
   models 57), 31/40 on the first 40 (30 and 31). Twenty-two
   other rules applied to the same fold scores (bench/selection_rules.md: the
