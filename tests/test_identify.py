@@ -95,7 +95,7 @@ def test_random_systems_true_order_as_often_as_bic():
     """Seeded Monte Carlo (12 of the 40 systems of the issue's acceptance; the whole run
     measured 31/40 for the default, with its innovation check, and for BIC; 56/80 and
     57/80 over 80 seeds): the default finds the true
-    order at least as often as BIC on the fitted innovation models, minus one, and its
+    order at least as often as BIC on the fitted innovation models, and its
     validation fit is not below BIC's model's."""
     hits_cv, hits_bic, fit_cv, fit_bic = 0, 0, [], []
     with warnings.catch_warnings():
@@ -118,7 +118,7 @@ def test_random_systems_true_order_as_often_as_bic():
             hits_bic += best == order
             fit_cv.append(np.mean(subid.fit_percent(model, val)))
             fit_bic.append(np.mean(subid.fit_percent(bic[best][1], val)))
-    assert hits_cv >= hits_bic - 1, (hits_cv, hits_bic)
+    assert hits_cv >= hits_bic, (hits_cv, hits_bic)
     assert np.median(fit_cv) >= np.median(fit_bic) - 0.5, (np.median(fit_cv),
                                                             np.median(fit_bic))
 
