@@ -44,12 +44,13 @@ estimation record only:
 * **the innovation check** (:func:`innovation_check`): the cross-validated BIC
   sees a mode only through the held-out simulation fit; a mode the input
   barely excites adds less there than its parameters cost (on those
-  systems: at most 0.06 points, against a price of 0.05-0.12). Among the
-  choice and the higher orders whose best candidate's mean fold score is
-  not lower, the models of the chosen horizon and estimator are fitted to
-  the whole record with their Kalman gains, and the order of the least
-  :func:`innovation_bic` (one-step prediction errors, which see the noise
-  path too) is taken (at most about 10 % of the default call's CPU time
+  systems: at most 0.06 points, against a price of 0.05-0.12). When a
+  higher order scores as well on the folds, the models of the chosen
+  horizon and estimator are fitted to the whole record at every order with
+  their Kalman gains, and the order of the least :func:`innovation_bic`
+  (one-step prediction errors, which see the noise path too) is taken when
+  it is higher and its mean fold score is not lower (at most about 10 % of
+  the default call's CPU time
   at 1e3-1e5 samples, ``bench/selection_rules.py cost``). Over 80 seeds of the same Monte Carlo: true order
   56/80 (the cross-validated BIC alone 54, BIC on the fitted innovation
   models 57), 31/40 on the first 40 (30 and 31). Twenty-two
@@ -660,18 +661,21 @@ def innovation_check(data, record, fitter, chosen):
     noise does (process noise entering through the plant) adds nothing measurable
     there and is missed (issue 21: on bench/selection.py's systems the orders
     missed add at most 0.06 points of fold fit, less than their parameters cost).
-    The one-step prediction errors of the innovation form see both paths. So the
-    simulation folds first say which orders are admissible: the choice, and the
-    higher orders whose best candidate's mean fold score is not lower (the folds
-    veto an order the noise model wants but the simulation does not: on real
-    records the noise often needs more states than the input path; on the DaISy
-    CD_player_arm record, N4SID, the innovation BIC's order without the veto
-    loses 5 points of validation fit). The models of the chosen horizon and
-    estimator are then fitted to the record (the part the cross-validation used,
-    :data:`MAX_SELECTION_SAMPLES`; B, D, x0 from its lag products where exact) at
-    those orders, each with its Kalman gain, and the order of the least
-    :func:`innovation_bic` is taken (Schwarz's criterion: consistent, so it does
-    not add orders as the record grows). Measured (bench/selection_rules.md, the
+    The one-step prediction errors of the innovation form see both paths. So,
+    when some higher order scores as well on the folds, the models of the chosen
+    horizon and estimator are fitted to the record (the part the
+    cross-validation used, :data:`MAX_SELECTION_SAMPLES`; B, D, x0 from its lag
+    products where exact) at every order scored there, each with its Kalman gain,
+    and the order of the least :func:`innovation_bic` (Schwarz's criterion:
+    consistent, so it does not add orders as the record grows) is taken when it
+    is higher than the choice and its best candidate's mean fold score is not
+    lower. The folds veto an order the noise model wants but the simulation does
+    not (on real records the noise often needs more states than the input path:
+    on the DaISy CD_player_arm record, N4SID, the innovation BIC's order without
+    the veto loses 5 points of validation fit); the order taken is always one a
+    criterion chose on its own (the least innovation BIC among the admissible
+    orders only, a compromise neither chose, lost 6.6 points on exchanger with
+    MOESP's shift-invariance estimate, bench/selection_rules.md). Measured (bench/selection_rules.md, the
     rule marked "the default"; bench/selection.py): true order 31/40 and 56/80
     instead of 30/40 and 54/80 (BIC on the innovation models: 31/40, 57/80), the
     same median validation fit; on the DaISy records no default lower by more
@@ -679,8 +683,8 @@ def innovation_check(data, record, fitter, chosen):
 
     ``chosen`` is ``(order, horizon, estimator)``; so is the result, and
     ``record['innovation_check']`` records the cross-validated choice
-    (``cross_validated``), the criterion of every admissible order (``orders``),
-    the order of the least (``order``) and the decision (``taken``, ``reason``);
+    (``cross_validated``), the criterion of every order (``orders``), the order of
+    the least (``order``) and the decision (``taken``, ``reason``);
     ``record['selected']`` follows it.
     """
     from subid.methods.dt._lag_fit import LAG_PRODUCTS, LagProducts
@@ -698,17 +702,20 @@ def innovation_check(data, record, fitter, chosen):
             best_of[c["order"]] = c
     # the choice and the higher orders the folds do not reject, as far as the chosen
     # horizon reveals them
-    at_f = {c["order"] for c in record["candidates"] if c["horizon"] == f}
-    orders = [n] + sorted(m for m in at_f if m > n and np.mean(best_of[m]["folds"]) >= mine)
-    check = {"rule": "the least innovation BIC (models of the chosen horizon and estimator "
-                     "on the whole record) among the cross-validated choice and the higher "
-                     "orders whose best mean fold score is not lower", "orders": [],
+    at_f = sorted({c["order"] for c in record["candidates"] if c["horizon"] == f})
+    admissible = [m for m in at_f if m > n and np.mean(best_of[m]["folds"]) >= mine]
+    orders = at_f
+    check = {"rule": "the order of the least innovation BIC (models of the chosen horizon "
+                     "and estimator on the whole record, every order scored there) when it "
+                     "is higher than the cross-validated choice and its best mean fold "
+                     "score is not lower", "orders": [],
              "cross_validated": dict({"order": n, "horizon": f},
                                      **({} if estimator is None
                                         else {"system_matrices": estimator}))}
     record["innovation_check"] = check
-    if len(orders) == 1:
-        check.update(order=n, taken=False, reason="no higher order scores as well on the folds")
+    if not admissible:
+        check.update(order=None, taken=False,
+                     reason="no higher order scores as well on the folds")
         return chosen
     values = {}
     try:
@@ -735,14 +742,13 @@ def innovation_check(data, record, fitter, chosen):
         return chosen
     best = min(values, key=lambda k: (values[k], k))
     check["order"] = best
-    if best == n or n not in values:
+    if best not in admissible:
         check.update(taken=False, reason=(
-            "the cross-validated choice has the least innovation BIC" if best == n else
-            "the cross-validated choice has no stable predictor to compare"))
+            "not higher than the cross-validated choice" if best <= n else
+            "its mean fold score is lower than the cross-validated choice's"))
         return chosen
     other = best_of[best]
-    check.update(taken=True, reason="a higher order of no lower mean fold score has the "
-                                    "least innovation BIC")
+    check.update(taken=True, reason="higher, and its mean fold score is not lower")
     # should the final model of the new choice need a repair its folds did not
     # (unrepaired_choice), the cross-validated choice is the first fallback
     key = (other["order"], other["horizon"], other.get("system_matrices"))
