@@ -46,15 +46,16 @@ estimation record only:
   barely excites adds less there than its parameters cost (on those
   systems: at most 0.06 points, against a price of 0.05-0.12). When a
   higher order scores as well on the folds, the models of the chosen
-  horizon and estimator are fitted to the whole record at every order with
+  horizon and estimator are fitted to the record at every order with
   their Kalman gains, and the order of the least :func:`innovation_bic`
   (one-step prediction errors, which see the noise path too) is taken when
-  it is higher and its mean fold score is not lower (at most about 10 % of
-  the default call's CPU time
-  at 1e3-1e5 samples, ``bench/selection_rules.py cost``). Over 80 seeds of the same Monte Carlo: true order
-  56/80 (the cross-validated BIC alone 54, BIC on the fitted innovation
-  models 57), 31/40 on the first 40 (30 and 31). Twenty-two
-  other rules applied to the same fold scores (bench/selection_rules.md: the
+  it is higher and its mean fold score is not lower (1.0-1.2x the default
+  call's CPU time without it at 1e3-1e5 samples, ``bench/selection_rules.py
+  cost``; at most the last :data:`INNOVATION_CHECK_SAMPLES` samples). Over
+  80 seeds of the same Monte Carlo: true order 56/80 (the cross-validated
+  BIC alone 54, BIC on the fitted innovation models 57), 31/40 on the first
+  40 (30 and 31). Twenty-two other rules applied to the same fold scores
+  (bench/selection_rules.md: the
   penalty scaled by 0.5-2, AIC, Hannan-Quinn, the penalty less the one the
   held-out misfit already carries, the median or pooled variance of the
   folds, per-fold BIC, one-standard-error rules, steps up by one or two
@@ -619,6 +620,13 @@ def choose(data, plan, fitter):
     return problem, model, estimator, rule
 
 
+#: Samples (the last ones) on which :func:`innovation_check` fits and compares its models:
+#: up to ten fits of the whole record, some by a pass over it (a pole too slow for the lag
+#: products), doubled the default call's CPU time at 1e5 samples; every record of
+#: bench/selection.py and bench/realdata.py is shorter.
+INNOVATION_CHECK_SAMPLES = 20_000
+
+
 def innovation_bic(model, data) -> float | None:
     """Schwarz's criterion of ``model``'s innovation form on ``data``:
     ``N ln det(E^T E / N) + (n (nu + 2 ny) + nu ny) ln N``, ``E`` its one-step
@@ -663,9 +671,9 @@ def innovation_check(data, record, fitter, chosen):
     missed add at most 0.06 points of fold fit, less than their parameters cost).
     The one-step prediction errors of the innovation form see both paths. So,
     when some higher order scores as well on the folds, the models of the chosen
-    horizon and estimator are fitted to the record (the part the
-    cross-validation used, :data:`MAX_SELECTION_SAMPLES`; B, D, x0 from its lag
-    products where exact) at every order scored there, each with its Kalman gain,
+    horizon and estimator are fitted to the record (its last
+    :data:`INNOVATION_CHECK_SAMPLES` samples; B, D, x0 from its lag products
+    where exact) at every order scored there, each with its Kalman gain,
     and the order of the least :func:`innovation_bic` (Schwarz's criterion:
     consistent, so it does not add orders as the record grows) is taken when it
     is higher than the choice and its best candidate's mean fold score is not
@@ -690,8 +698,8 @@ def innovation_check(data, record, fitter, chosen):
     from subid.methods.dt._lag_fit import LAG_PRODUCTS, LagProducts
     from subid.methods.dt.noise_model import attach_noise_model
     n, f, estimator = chosen
-    used = data[data.n_samples - MAX_SELECTION_SAMPLES:] \
-        if data.n_samples > MAX_SELECTION_SAMPLES else data
+    used = data[data.n_samples - INNOVATION_CHECK_SAMPLES:] \
+        if data.n_samples > INNOVATION_CHECK_SAMPLES else data
     by_key = {(c["order"], c["horizon"], c.get("system_matrices")): c
               for c in record["candidates"]}
     mine = float(np.mean(by_key[(n, f, estimator)]["folds"]))
