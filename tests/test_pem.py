@@ -42,6 +42,29 @@ def test_compiled_jacobian_matches_reference():
     assert np.abs(y1 - y2).max() < 1e-12 and np.abs(J1 - J2).max() < 1e-12
 
 
+def test_initial_state_directions_match_reference():
+    # directions that move x0 alone run in their own loop (free_response), stopped once
+    # decayed: same Jacobian as the reference, in any column order, on a record long
+    # enough for the free response to fall far below the subnormal range
+    rng = np.random.default_rng(2)
+    n, ny, m, N = 3, 2, 2, 3000
+    Ap = 0.5 * rng.standard_normal((n, n)) / np.sqrt(n)
+    Bp, C, Dp = rng.standard_normal((n, m)), rng.standard_normal((ny, n)), \
+        rng.standard_normal((ny, m))
+    v, x0 = rng.standard_normal((N, m)), rng.standard_normal(n)
+    dirs = list(_random_directions(rng, 5, n, ny, m))
+    for j in (1, 3, 4):                       # pure initial-state directions
+        for a in dirs[:4]:
+            a[j] = 0.0
+    y1, J1 = jacobian(Ap, Bp, C, Dp, v, x0, *dirs)
+    y2, J2 = jacobian_ref(Ap, Bp, C, Dp, v, x0, *dirs)
+    assert np.abs(y1 - y2).max() < 1e-12 and np.abs(J1 - J2).max() < 1e-12
+    assert np.all(J1[-1, :, [1, 3, 4]] == 0.0) and np.all(J1[-1, :, [0, 2]] != 0.0)
+    only = [a[[1, 3, 4]] for a in dirs]        # free directions alone
+    y3, J3 = jacobian(Ap, Bp, C, Dp, v, x0, *only)
+    assert np.abs(y3 - y2).max() < 1e-12 and np.abs(J3 - J2[:, :, [1, 3, 4]]).max() < 1e-12
+
+
 def test_jacobian_matches_finite_differences():
     rng = np.random.default_rng(1)
     n, ny, m, N = 3, 2, 3, 40

@@ -19,12 +19,29 @@ initial-state direction ``dx0_j``) the sensitivity ``s_j = dx/dθ_j`` obeys
 
 :func:`jacobian` is the compiled loop (vectorised over the directions), :func:`jacobian_ref` a plain numpy
 implementation kept for the tests.
+
+A direction that moves the initial state alone (``dAp_j, dBp_j, dC_j, dDp_j``
+zero: the initial-state columns of :func:`subid.pem`) has the free response
+``dŷ[t]/dθ_j = C Ap^t dx0_j``, which decays geometrically for a stable
+predictor and, run to the end of a long record, spends most of the loop in
+subnormal floating-point numbers (below 2.2e-308), which the processor
+handles about a hundred times slower than normal ones: on 66,667 samples of
+an order-4 model with 16 model and 4 initial-state directions the loop took
+0.19 s against 0.019 s without those four. :func:`jacobian` therefore runs
+such directions in their own loop (:func:`free_response`), which stops once
+the response has fallen below :data:`FREE_RESPONSE_FLOOR` times its start and
+leaves the rest zero (the entries dropped are below 1e-150 of the column's
+first: zero to rounding in every product the callers form).
 """
 
 from __future__ import annotations
 
 import numba
 import numpy as np
+
+#: A free response (:func:`free_response`) is taken as zero once every entry of its
+#: state has fallen below this fraction of the largest entry of its initial state.
+FREE_RESPONSE_FLOOR = 1e-150
 
 
 @numba.njit(cache=True, fastmath={'contract'}, inline="always")
@@ -78,14 +95,82 @@ def _jacobian_t(Ap, Bp, C, Dp, v, x0, dApT, dBpT, dCT, dDpT, S):  # pragma: no c
     return yhat, J
 
 
+@numba.njit(cache=True, fastmath={'contract'})
+def _free_response_t(Ap, C, S, N, floor):  # pragma: no cover
+    """``C Ap^t S`` for ``t < N`` (shape (N, ny, k)), zero from the first ``t`` at which
+    every entry of ``Ap^t S`` is below ``floor``."""
+    n, k = S.shape
+    ny = C.shape[0]
+    out = np.zeros((N, ny, k))
+    S = S.copy()
+    Sn = np.empty((n, k))
+    for t in range(N):
+        big = 0.0
+        for i in range(n):
+            for j in range(k):
+                big = max(big, abs(S[i, j]))
+        if big < floor:
+            break
+        for i in range(ny):
+            for m in range(n):
+                c = C[i, m]
+                for j in range(k):
+                    out[t, i, j] += c * S[m, j]
+        for i in range(n):
+            for j in range(k):
+                Sn[i, j] = 0.0
+            for m in range(n):
+                a = Ap[i, m]
+                for j in range(k):
+                    Sn[i, j] += a * S[m, j]
+        S, Sn = Sn, S
+    return out
+
+
+def free_response(Ap, C, S0, N):
+    """``C Ap^t S0`` for ``t = 0 .. N-1``, shape (N, ny, k) (``S0`` is (n, k)): the
+    output sensitivity to the initial-state directions ``S0``, set to zero from the
+    first sample at which every entry of ``Ap^t S0`` is below
+    :data:`FREE_RESPONSE_FLOOR` times the largest entry of ``S0`` (module
+    docstring: the loop never enters subnormal numbers)."""
+    S0 = np.ascontiguousarray(S0, dtype=float)
+    floor = FREE_RESPONSE_FLOOR * float(np.abs(S0).max(initial=0.0))
+    return _free_response_t(np.ascontiguousarray(Ap, dtype=float),
+                            np.ascontiguousarray(C, dtype=float), S0, int(N), floor)
+
+
 def jacobian(Ap, Bp, C, Dp, v, x0, dAp, dBp, dC, dDp, dx0):
-    """``(ŷ, J)`` with ``J[t, i, j] = dŷ_i[t] / dθ_j``; shapes (N, ny), (N, ny, d)."""
+    """``(ŷ, J)`` with ``J[t, i, j] = dŷ_i[t] / dθ_j``; shapes (N, ny), (N, ny, d).
+
+    The directions that move the initial state alone get their free response
+    from :func:`free_response` (module docstring); the others run in the
+    compiled loop.
+    """
     def last(a):
         return np.ascontiguousarray(np.moveaxis(np.asarray(a, dtype=float), 0, -1))
     Ap, Bp, C, Dp, v, x0 = (np.ascontiguousarray(a, dtype=float)
                             for a in (Ap, Bp, C, Dp, v, x0))
-    return _jacobian_t(Ap, Bp, C, Dp, v, x0, last(dAp), last(dBp), last(dC), last(dDp),
-                       last(dx0))
+    dAp, dBp, dC, dDp, dx0 = (np.asarray(a, dtype=float) for a in (dAp, dBp, dC, dDp, dx0))
+    d = dAp.shape[0]
+    moves = np.zeros(d, dtype=bool)
+    for a in (dAp, dBp, dC, dDp):
+        moves |= np.any(a.reshape(d, -1) != 0, axis=1)
+    free = np.flatnonzero(~moves)
+    if free.size == 0:
+        return _jacobian_t(Ap, Bp, C, Dp, v, x0, last(dAp), last(dBp), last(dC), last(dDp),
+                           last(dx0))
+    rest = np.flatnonzero(moves)
+    yhat, Jm = _jacobian_t(Ap, Bp, C, Dp, v, x0, last(dAp[rest]), last(dBp[rest]),
+                           last(dC[rest]), last(dDp[rest]), last(dx0[rest]))
+    Jf = free_response(Ap, C, dx0[free].T, v.shape[0])
+    if rest.size == 0:
+        return yhat, Jf
+    if free[0] == rest.size:                  # the free directions last (pem's layout)
+        return yhat, np.concatenate([Jm, Jf], axis=2)
+    J = np.empty((v.shape[0], C.shape[0], d))
+    J[:, :, rest] = Jm
+    J[:, :, free] = Jf
+    return yhat, J
 
 
 def jacobian_ref(Ap, Bp, C, Dp, v, x0, dAp, dBp, dC, dDp, dx0):

@@ -57,7 +57,7 @@ from subid.methods.dt import _trust_region
 from subid.methods.dt._covariance import covariance_factor
 from subid.methods.dt.checks import check_data
 from subid.model import _simulate
-from subid.model._sensitivity import jacobian
+from subid.model._sensitivity import free_response, jacobian
 from subid.model.statespace import StateSpace
 
 __all__ = ["pem"]
@@ -167,12 +167,16 @@ def _directions(layout, basis, A, B, C, D, K, focus):
 
 
 def _start_x0(Ap, Bp, C, Dp, v, y):
-    """Least-squares initial state of the predictor (affine in x0)."""
+    """Least-squares initial state of the predictor (affine in x0): the forced response
+    from a zero state, and the free responses ``C Ap^t e_i``
+    (:func:`subid.model._sensitivity.free_response`, zero once decayed below 1e-150
+    of their start, so the fit uses the samples before that)."""
     n = Ap.shape[0]
     forced = _simulate.simulate_discrete(Ap, Bp, C, Dp, v, np.zeros(n))[0]
-    free = np.stack([_simulate.simulate_discrete(Ap, np.zeros_like(Bp), C, np.zeros_like(Dp),
-                                                 v, e)[0] for e in np.eye(n)], axis=-1)
-    x0 = scipy.linalg.lstsq(free.reshape(-1, n), (y - forced).reshape(-1),
+    free = free_response(Ap, C, np.eye(n), v.shape[0])
+    alive = np.flatnonzero(np.any(free.reshape(free.shape[0], -1) != 0, axis=1))
+    T = int(alive[-1]) + 1 if alive.size else 0
+    x0 = scipy.linalg.lstsq(free[:T].reshape(-1, n), (y[:T] - forced[:T]).reshape(-1),
                             lapack_driver="gelsy", check_finite=False)[0]
     return x0
 
