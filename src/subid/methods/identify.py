@@ -122,13 +122,15 @@ def _score(model, validation, focus) -> float:
     return fold_score(model, validation, steps=np.inf if focus == "simulation" else 1)
 
 
-def _refine(data, model, focus):
-    """``pem(data, model, focus=focus)``, or None when the start cannot be refined so."""
-    from subid.methods.dt.pem import pem
+def _refine(data, model, focus, held_out=False):
+    """``pem(data, model, focus=focus)`` stopped at the statistical precision of its
+    criterion (:func:`subid.methods.dt.pem.refine`; ``held_out``: a fold model, only
+    scored), or None when the start cannot be refined so."""
+    from subid.methods.dt.pem import refine
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            return pem(data, model, focus=focus)
+            return refine(data, model, focus, held_out=held_out)
     except (ModelError, DataError):
         return None
 
@@ -186,7 +188,7 @@ def _fold_refinement(data, method, config, focus, scores=None):
                 out[s][0].append(FLOOR)
                 out[s][1].append(FLOOR)
             continue
-        better = _refine(train, start, focus)
+        better = _refine(train, start, focus, held_out=True)
         for s in scores:
             out[s][0].append(_score(start, validation, s))
             out[s][1].append(out[s][0][-1] if better is None else _score(better, validation, s))
