@@ -340,7 +340,7 @@ def minimise_prediction_error(predictor, directions, dm, x0, v, y, ranges, W, ma
         warnings.simplefilter("ignore", RuntimeWarning)
         res = _trust_region.trust_region_least_squares(
             fun, jac, z0, ftol=tolerance, xtol=tolerance, gtol=tolerance, max_nfev=max_nfev,
-            decrement_tol=decrement_tol)
+            **({"decrement_tol": decrement_tol} if decrement_tol > 0 else {}))
     return res.x, res
 
 
