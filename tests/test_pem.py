@@ -243,3 +243,17 @@ def test_pem_bad_input(paper_system, paper_data):
     unstable = subid.StateSpace(1.2 * np.eye(3), start.B, start.C, start.D, 1.0)
     with pytest.raises(ModelError, match="unstable"):
         subid.pem(paper_data, unstable, focus="simulation")
+
+
+def test_covariance_gram_route_equals_qr_route(monkeypatch):
+    """The parameter covariance from the Cholesky factor of the Gram matrix (the route
+    taken when well conditioned) equals the one from the Householder QR of J."""
+    from subid.methods.dt import _covariance, _trust_region
+    rng = np.random.default_rng(4)
+    J = rng.standard_normal((500, 2, 7)) @ np.diag([1.0, 3.0, 0.2, 1.0, 5.0, 1.0, 0.5])
+    res = rng.standard_normal((500, 2))
+    gram, lam = _covariance.covariance_factor(J, res, 2)
+    monkeypatch.setattr(_trust_region, "GRAM_PIVOT", 2.0)           # forces the QR route
+    qr, lam2 = _covariance.covariance_factor(J, res, 2)
+    assert np.allclose(gram @ gram.T, qr @ qr.T, rtol=1e-10, atol=0)
+    assert np.array_equal(lam, lam2)
