@@ -29,13 +29,18 @@ def _random_directions(rng, d, n, ny, m):
             rng.standard_normal((d, n)))
 
 
+def _random_predictor(rng, n, ny, m, N, gain):
+    """A random stable predictor ``(Ap, Bp, C, Dp)``, its signal ``v`` and ``x0``."""
+    Ap = gain * rng.standard_normal((n, n)) / np.sqrt(n)
+    Bp, C, Dp = rng.standard_normal((n, m)), rng.standard_normal((ny, n)), \
+        rng.standard_normal((ny, m))
+    return Ap, Bp, C, Dp, rng.standard_normal((N, m)), rng.standard_normal(n)
+
+
 def test_compiled_jacobian_matches_reference():
     rng = np.random.default_rng(0)
     n, ny, m, d, N = 3, 2, 4, 5, 60
-    Ap = 0.5 * rng.standard_normal((n, n)) / np.sqrt(n)
-    Bp, C, Dp = rng.standard_normal((n, m)), rng.standard_normal((ny, n)), \
-        rng.standard_normal((ny, m))
-    v, x0 = rng.standard_normal((N, m)), rng.standard_normal(n)
+    Ap, Bp, C, Dp, v, x0 = _random_predictor(rng, n, ny, m, N, 0.5)
     dirs = _random_directions(rng, d, n, ny, m)
     y1, J1 = jacobian(Ap, Bp, C, Dp, v, x0, *dirs)
     y2, J2 = jacobian_ref(Ap, Bp, C, Dp, v, x0, *dirs)
@@ -48,10 +53,7 @@ def test_initial_state_directions_match_reference():
     # enough for the free response to fall far below the subnormal range
     rng = np.random.default_rng(2)
     n, ny, m, N = 3, 2, 2, 3000
-    Ap = 0.5 * rng.standard_normal((n, n)) / np.sqrt(n)
-    Bp, C, Dp = rng.standard_normal((n, m)), rng.standard_normal((ny, n)), \
-        rng.standard_normal((ny, m))
-    v, x0 = rng.standard_normal((N, m)), rng.standard_normal(n)
+    Ap, Bp, C, Dp, v, x0 = _random_predictor(rng, n, ny, m, N, 0.5)
     dirs = list(_random_directions(rng, 5, n, ny, m))
     for j in (1, 3, 4):                       # pure initial-state directions
         for a in dirs[:4]:
@@ -68,10 +70,7 @@ def test_initial_state_directions_match_reference():
 def test_jacobian_matches_finite_differences():
     rng = np.random.default_rng(1)
     n, ny, m, N = 3, 2, 3, 40
-    Ap = 0.4 * rng.standard_normal((n, n)) / np.sqrt(n)
-    Bp, C, Dp = rng.standard_normal((n, m)), rng.standard_normal((ny, n)), \
-        rng.standard_normal((ny, m))
-    v, x0 = rng.standard_normal((N, m)), rng.standard_normal(n)
+    Ap, Bp, C, Dp, v, x0 = _random_predictor(rng, n, ny, m, N, 0.4)
     dirs = _random_directions(rng, 1, n, ny, m)
     _, J = jacobian_ref(Ap, Bp, C, Dp, v, x0, *dirs)
     h = 1e-6
