@@ -119,8 +119,7 @@ def merged(blocks, records, groups):
     ``blocks`` (IOData) whose indices ``groups`` lists, from one FFT per block and one
     per boundary between blocks instead of one per record: the lag sums of a
     concatenation are those of its blocks plus the products that straddle each
-    boundary (those of the window of K samples either side, minus those within each
-    half). None for a record shorter than :data:`MIN_SAMPLES`; None altogether when a
+    boundary (:func:`straddle_correlations` of the K samples either side). None for a record shorter than :data:`MIN_SAMPLES`; None altogether when a
     block is shorter than the largest lag needed (a lag could straddle two boundaries)."""
     if all(r.n_samples < MIN_SAMPLES for r in records):
         return [None] * len(records)
@@ -130,12 +129,8 @@ def merged(blocks, records, groups):
     if min(lengths) < K:
         return None
     sums = [correlations(b.u, b.y, K) for b in blocks]
-    straddle = []
-    for left, right in zip(blocks[:-1], blocks[1:]):
-        lu, ly, ru, ry = left.u[-K:], left.y[-K:], right.u[:K], right.y[:K]
-        whole = correlations(np.vstack([lu, ru]), np.vstack([ly, ry]), K)
-        a, b = correlations(lu, ly, K), correlations(ru, ry, K)
-        straddle.append((whole[0] - a[0] - b[0], whole[1] - a[1] - b[1]))
+    straddle = [straddle_correlations(left.u[-K:], right.u[:K], right.y[:K], K)
+                for left, right in zip(blocks[:-1], blocks[1:])]
     out = []
     for record, group, cap in zip(records, groups, caps):
         if record.n_samples < MIN_SAMPLES:
@@ -146,6 +141,42 @@ def merged(blocks, records, groups):
         Y = sum(sums[i][2] for i in group)
         out.append(LagProducts.from_sums(record.u, record.y, (G, R, Y), cap))
     return out
+
+
+def straddle_correlations(left_u, right_u, right_y, max_lag):
+    """``(Γ, R)`` of the pairs that straddle a boundary: ``Γ[e] = sum u(s) u(s+e)^T`` and
+    ``R[k] = sum_t y(t) u(t-k)^T`` over the pairs with ``s`` (``t - k``) among the samples
+    ``left_u`` just before it and ``s + e`` (``t``) among the samples just after it
+    (``right_u``, ``right_y``), lags 0..max_lag: the cross-correlations of the two
+    sides, each zero-padded to the other's length, by one FFT of each signal (the
+    products of the window across the boundary minus those of its halves took three
+    FFT correlations)."""
+    K = left_u.shape[0]
+    nfft = scipy.fft.next_fast_len(2 * K + max_lag + 1, real=True)
+    # the left samples at 0..K-1 and the right ones at K..2K-1 of one time axis
+    Lc = np.conj(scipy.fft.rfft(left_u, nfft, axis=0))
+    Ru = scipy.fft.rfft(np.vstack([np.zeros_like(right_u), right_u]), nfft, axis=0)
+    Ry = scipy.fft.rfft(np.vstack([np.zeros_like(right_y), right_y]), nfft, axis=0)
+    G = scipy.fft.irfft(Lc[:, :, None] * Ru[:, None, :], nfft, axis=0)[:max_lag + 1]
+    R = scipy.fft.irfft(Ry[:, :, None] * Lc[:, None, :], nfft, axis=0)[:max_lag + 1]
+    G[0] = 0.0                          # no pair at lag 0 straddles the boundary
+    R[0] = 0.0
+    return G, R
+
+
+def straddle_correlations_reference(left_u, right_u, right_y, max_lag):
+    """Plain sums behind :func:`straddle_correlations` (the tests compare them)."""
+    u = np.vstack([left_u, right_u])
+    y = np.vstack([np.zeros((left_u.shape[0], right_y.shape[1])), right_y])
+    K, nu = left_u.shape
+    G = np.zeros((max_lag + 1, nu, nu))
+    R = np.zeros((max_lag + 1, right_y.shape[1], nu))
+    for e in range(1, max_lag + 1):
+        s = np.arange(max(K - e, 0), K)          # s on the left, s + e on the right
+        s = s[s + e < u.shape[0]]
+        G[e] = u[s].T @ u[s + e]
+        R[e] = y[s + e].T @ u[s]
+    return G, R
 
 
 def correlations_reference(u, y, max_lag):
