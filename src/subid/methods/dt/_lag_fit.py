@@ -91,6 +91,9 @@ LAG_PRODUCTS = "lag products"
 LAG_TOLERANCE = 1e-16
 #: Largest lag L used (the lag products are computed up to min(MAX_LAG, N // 4)).
 MAX_LAG = 16384
+#: Lags computed at once (:class:`LagProducts`, :func:`merged`): those of poles of radius
+#: up to 0.991; the others up to MAX_LAG when a candidate first needs them.
+FIRST_LAGS = 4096
 #: Records shorter than this are not reduced to lag products: a pass over them costs
 #: less than the evaluation at the poles (and their lags rarely cover a slow pole).
 MIN_SAMPLES = 4096
@@ -119,8 +122,12 @@ def merged(blocks, records, groups):
     ``blocks`` (IOData) whose indices ``groups`` lists, from one FFT per block and one
     per boundary between blocks instead of one per record: the lag sums of a
     concatenation are those of its blocks plus the products that straddle each
-    boundary (:func:`straddle_correlations` of the K samples either side). None for a record shorter than :data:`MIN_SAMPLES`; None altogether when a
-    block is shorter than the largest lag needed (a lag could straddle two boundaries)."""
+    boundary (:func:`straddle_correlations` of the samples either side). The first
+    :data:`FIRST_LAGS` lags are computed at once, the others (up to each record's
+    ``max_lag``) for all the records together when a candidate first needs them
+    (:meth:`LagProducts.lags`). None for a record shorter than :data:`MIN_SAMPLES`;
+    None altogether when a block is shorter than the largest lag kept (a lag could
+    straddle two boundaries)."""
     if all(r.n_samples < MIN_SAMPLES for r in records):
         return [None] * len(records)
     lengths = [b.n_samples for b in blocks]
@@ -128,18 +135,32 @@ def merged(blocks, records, groups):
     K = max(caps)
     if min(lengths) < K:
         return None
-    sums = [correlations(b.u, b.y, K) for b in blocks]
-    straddle = [straddle_correlations(left.u[-K:], right.u[:K], right.y[:K], K)
-                for left, right in zip(blocks[:-1], blocks[1:])]
-    out = []
-    for record, group, cap in zip(records, groups, caps):
-        if record.n_samples < MIN_SAMPLES:
-            out.append(None)
-            continue
-        G = sum(sums[i][0] for i in group) + sum(straddle[i][0] for i in group[:-1])
-        R = sum(sums[i][1] for i in group) + sum(straddle[i][1] for i in group[:-1])
-        Y = sum(sums[i][2] for i in group)
-        out.append(LagProducts.from_sums(record.u, record.y, (G, R, Y), cap))
+
+    def sums_up_to(lags):
+        sums = [correlations(b.u, b.y, lags) for b in blocks]
+        straddle = [straddle_correlations(left.u[-lags:], right.u[:lags], right.y[:lags], lags)
+                    for left, right in zip(blocks[:-1], blocks[1:])]
+        out = []
+        for group in groups:
+            G = sum(sums[i][0] for i in group) + sum(straddle[i][0] for i in group[:-1])
+            R = sum(sums[i][1] for i in group) + sum(straddle[i][1] for i in group[:-1])
+            Y = sum(sums[i][2] for i in group)
+            out.append((G, R, Y))
+        return out
+
+    first = min(K, FIRST_LAGS)
+    out = [None if record.n_samples < MIN_SAMPLES else
+           LagProducts.from_sums(record.u, record.y, sums, cap)
+           for record, cap, sums in zip(records, caps, sums_up_to(first))]
+    if first < K:
+        def extend():                     # every record's lags up to its max_lag, once
+            for lp, (G, R, _) in zip(out, sums_up_to(K)):
+                if lp is not None:
+                    lp.G, lp.R = G[:lp.max_lag + 1], R[:lp.max_lag + 1]
+                    lp.extend = None
+        for lp in out:
+            if lp is not None and lp.G.shape[0] <= lp.max_lag:
+                lp.extend = extend
     return out
 
 
@@ -193,19 +214,34 @@ def correlations_reference(u, y, max_lag):
 
 class LagProducts:
     """The lag products of one record (:func:`correlations`) up to ``max_lag``, and the
-    record itself (its first and last samples enter the edge terms)."""
+    record itself (its first and last samples enter the edge terms). The first
+    :data:`FIRST_LAGS` lags are computed at once, the others when a candidate's poles
+    first need them (:meth:`lags`)."""
 
     def __init__(self, u, y, max_lag=MAX_LAG):
         self.u = np.ascontiguousarray(u, dtype=float)
         self.y = np.ascontiguousarray(y, dtype=float)
         self.n_samples = self.u.shape[0]
         self.max_lag = max(min(int(max_lag), self.n_samples // 4), 0)
-        self.G, self.R, self.Y = correlations(self.u, self.y, self.max_lag)
+        self.G, self.R, self.Y = correlations(self.u, self.y, min(self.max_lag, FIRST_LAGS))
+        self.extend = self._extend if self.max_lag > FIRST_LAGS else None
+
+    def _extend(self):
+        self.G, self.R, _ = correlations(self.u, self.y, self.max_lag)
+        self.extend = None
+
+    def lags(self, L):
+        """``(Γ, R)`` for the lags 0..L (``L <= max_lag``), computing the lags past those
+        kept so far first where needed."""
+        if L >= self.G.shape[0] and self.extend is not None:
+            self.extend()
+        return self.G[:L + 1], self.R[:L + 1]
 
     @classmethod
     def from_sums(cls, u, y, sums, max_lag):
         """The lag products of the record ``(u, y)`` whose lag sums ``(Γ, R, Y)`` are
-        already known (up to at least ``min(max_lag, N // 4)``)."""
+        known up to ``min(max_lag, N // 4)`` or, with ``extend`` set on the result, up
+        to fewer lags."""
         out = cls.__new__(cls)
         out.u = np.ascontiguousarray(u, dtype=float)
         out.y = np.ascontiguousarray(y, dtype=float)
@@ -213,6 +249,7 @@ class LagProducts:
         out.max_lag = max(min(int(max_lag), out.n_samples // 4), 0)
         G, R, out.Y = sums
         out.G, out.R = G[:out.max_lag + 1], R[:out.max_lag + 1]
+        out.extend = None
         return out
 
     @classmethod
@@ -321,7 +358,7 @@ def fit_b_d_x0(A, C, lp: LagProducts, output_weights, *, feedthrough=True, estim
     L = md.L
     w = np.ones(ny) if output_weights is None else np.asarray(output_weights, dtype=float)
     w2 = w * w
-    G, R, u, y = lp.G[:L + 1], lp.R[:L + 1], lp.u, lp.y
+    (G, R), u, y = lp.lags(L), lp.u, lp.y
     CW2 = C.T * w2[None, :]                          # C^T W^2 (n, ny)
     P = md.gramian(C * w[:, None], C * w[:, None])
     P = 0.5 * (P + P.T)
@@ -383,7 +420,7 @@ def error_power(A, B, C, D, lp: LagProducts, weights, inv_scale):
     if md is None:
         return None
     L = md.L
-    G, R, u, y = lp.G[:L + 1], lp.R[:L + 1], lp.u, lp.y
+    (G, R), u, y = lp.lags(L), lp.u, lp.y
     CV = C @ md.V                                    # (ny, n)
     WB = md.Wm @ B                                   # (n, nu)
     g = md.poly(G)                                   # (l, a, b)
