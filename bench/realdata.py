@@ -193,8 +193,9 @@ def render(sets, results, peers) -> list:
         "1..10, delay 0 or 1, best on the validation data (an oracle too). `oracle`: the "
         "better of the two. A method's default is bold when it is within "
         f"{TOLERANCE:g} points of the oracle, `identify` when it is within 1 point "
-        "(issue 21); `shift`/`states` is the estimate of the system matrices the "
-        "cross-validation chose (`system_matrices='auto'`), `D` a model with a direct term "
+        "(issue 21); `shift`/`states` is the estimate of the system matrices "
+        "`system_matrices='auto'` kept (the better fit to the estimation data at the chosen "
+        "order and horizon), `D` a model with a direct term "
         "(`feedthrough='auto'` found one), `+pem` a refinement `identify` kept.",
         "",
         "| record | SIPPY best (method/order/horizon) | ARX best | oracle | ls_subspace | "

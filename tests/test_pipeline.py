@@ -73,14 +73,21 @@ def test_the_plan_decides_before_any_work():
     the option checks come from make_plan, before the data are factored."""
     data = subid.systems.simulate_data(subid.systems.seed001_system(), 300, seed=1)
     plan, _ = make_plan(Moesp(), data, 4, 8, selection="cv")
-    assert plan.pinned and plan.cross_validate and plan.estimators == ("shift", "states")
+    assert plan.pinned and not plan.cross_validate and plan.estimators == ("shift", "states")
+    assert plan.estimator_choice == "fit"
+    plan, _ = make_plan(Moesp(), data, None, None, selection="cv")
+    assert plan.cross_validate and plan.estimator_choice == "fit"
+    plan, _ = make_plan(Moesp(), data, [4], 8, selection="cv")      # asks for the folds
+    assert plan.cross_validate and plan.estimator_choice == "cv"
     plan, _ = make_plan(Moesp(system_matrices="shift"), data, 4, 8, selection="cv")
     assert not plan.cross_validate and plan.info("shift") == {"system_matrices": "shift"}
+    assert plan.estimator_choice is None
     plan, _ = make_plan(N4sid(), data, [2, 5, 3], None, selection="gap")
     assert not plan.cross_validate and plan.estimators == (None,)
     assert plan.candidates == (2, 3, 5) and plan.orders == [2, 3, 5]
     stat = subid.HankelStatistic.from_data(data, 16)
-    assert not make_plan(Moesp(), stat, None, None, selection="cv")[0].cross_validate
+    plan = make_plan(Moesp(), stat, None, None, selection="cv")[0]
+    assert not plan.cross_validate and plan.estimator_choice is None
     long = subid.systems.simulate_data(subid.systems.seed001_system(),
                                        AUTO_VARIANT_MAX_SAMPLES + 1, seed=1)
     plan, _ = make_plan(Moesp(), long, 4, 8, selection="cv")

@@ -100,7 +100,18 @@ class ModelError(SubidError):
     finite, or a model file cannot be interpreted."""
 
 
-class FileReadError(SubidError):
+class _LocatedError(SubidError):
+    """An error that may name a file and a place in it (``path``, ``line``,
+    ``column``; each None when unknown)."""
+
+    def __init__(self, message: str, *, path=None, line=None, column=None):
+        super().__init__(message)
+        self.path = None if path is None else str(path)
+        self.line = line
+        self.column = column
+
+
+class FileReadError(_LocatedError):
     """A data or model file cannot be read.
 
     Attributes
@@ -113,18 +124,15 @@ class FileReadError(SubidError):
         Column (0-based index or name) of the problem, when it is known.
     """
 
-    def __init__(self, message: str, *, path=None, line=None, column=None):
-        super().__init__(message)
-        self.path = None if path is None else str(path)
-        self.line = line
-        self.column = column
 
-
-class ResourceLimitError(FileReadError):
-    """A file (or a request) declares more data than the caller allowed: a
-    compressed archive that would expand beyond ``max_bytes``, a text line
-    longer than the limit, a size that does not fit in memory. The message
-    names the limit and how to raise it."""
+class ResourceLimitError(_LocatedError):
+    """A file or a request needs more than the caller allowed or than fits:
+    a compressed archive that would expand beyond ``max_bytes``, a text line
+    longer than the limit, a statistic or a regression larger than the
+    memory budget. The message names the limit and how to raise it or to
+    avoid it. When a file is the cause, ``path`` (and ``line``) name it, as
+    for :class:`FileReadError`; otherwise they are None.
+    """
 
 
 class FileWriteError(SubidError, OSError):

@@ -233,7 +233,7 @@ def _head_layout(fh, shown, ext, delimiter):
         return None
     try:
         layout = _Table(shown, text.replace("\r\n", "\n"), ext, delimiter)
-    except (FileReadError, DataError):
+    except (FileReadError, ResourceLimitError, DataError):
         return None
     if not whole and layout.n_sampled < _SNIFF_LINES:
         return None
@@ -256,7 +256,7 @@ def _read_text_fast(shown, ext, inputs, outputs, dt, time, delimiter):
         layout, head, size = found
         try:
             in_cols, out_cols, t_cols = _roles(layout, shown, inputs, outputs, time)
-        except (FileReadError, DataError):
+        except (FileReadError, ResourceLimitError, DataError):
             return None
         offset = _line_start(head, layout.data_start)
         if offset is None:

@@ -100,6 +100,8 @@ def _selected_folds(model):
     if not isinstance(record, dict) or record.get("rule") != "cv":
         return None
     chosen = record.get("selected", {})
+    if chosen.get("system_matrices") not in (None, model.info.get("system_matrices")):
+        return None          # the estimator chosen after the cross-validation (by fit)
     for c in record.get("candidates", []):
         if (c["order"], c["horizon"], c.get("system_matrices")) == \
                 (chosen.get("order"), chosen.get("horizon"), chosen.get("system_matrices")):

@@ -175,10 +175,11 @@ def ls_subspace(data, order=None, *, horizon=None, instruments="past", selector=
         the oblique projection of the future outputs on the past data, and
         ``[A B; C D]`` by least squares on it (:func:`subid.n4sid`'s step,
         QR-based, still SVD-free; the basis is still the one Λ fixes).
-        ``'auto'`` (default): as in :func:`subid.moesp` (the cross-validation
-        of the order or horizon chooses between them on records of up to
-        20,000 samples; ``'shift'`` otherwise, and with the order and horizon
-        both given). ``info['system_matrices']`` names the one used.
+        ``'auto'`` (default): as in :func:`subid.moesp` (on records of up to
+        20,000 samples, the one whose model fits the whole record better at
+        the order and horizon used, given or cross-validated, with no fold
+        fits; ``'shift'`` otherwise). ``info['system_matrices']`` names the
+        one used.
     bd_method : {'auto', 'simulation', 'projection'}
         How B, D (and x0) are found given A and C: least squares on the raw
         output samples through the model (``'simulation'``, most accurate,

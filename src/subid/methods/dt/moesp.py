@@ -83,17 +83,19 @@ def moesp(data, order=None, *, horizon=None, weighting="moesp", selection="cv",
         state sequence ``X = Γ^† O`` and ``[A B; C D]`` by least squares on
         it, as :func:`subid.n4sid` does (VODM 1996, Sec. 4.3.2).
         ``'auto'`` (default): with ``selection='cv'`` on a record of up to
-        20,000 samples, the cross-validation of the order or horizon chooses
-        between them (``'shift'`` on ties, so noise-free data give the
-        classical model); otherwise (longer records, statistics) and
-        whenever the order and horizon are both given, ``'shift'``, with no
-        fold fits (an explicit call costs one fit; ``order=[n]``, a
-        one-element candidate list, cross-validates the estimators at that
-        order). ``info['system_matrices']`` names the one used and
-        ``info['system_matrices_selection']`` why; ``moesp(data,
-        order=m.order, horizon=m.info['horizon'],
-        system_matrices=m.info['system_matrices'])`` reproduces a model
-        ``m``. Neither is better on
+        20,000 samples, both at the order and horizon used (given, or
+        cross-validated with ``'shift'``), and the model with the better
+        simulation fit to the whole record (x0 by least squares; one that
+        needed no stabilisation first; ``'shift'`` on ties, so noise-free data
+        give the classical model), with no fold fits
+        (:func:`subid.methods.dt.selection.estimator_by_fit`); a list of
+        candidate orders (``order=[n]``) cross-validates the estimators with
+        the orders instead; otherwise (longer records, statistics) ``'shift'``.
+        ``info['system_matrices']`` names the one used and
+        ``info['system_matrices_selection']`` why (with both fits);
+        ``moesp(data, order=m.order, horizon=m.info['horizon'])`` reproduces a
+        default model ``m``, and with
+        ``system_matrices=m.info['system_matrices']`` at the cost of one fit. Neither is better on
         every record: on the DaISy evaporator record ``'states'`` reaches
         64 % validation fit against 61 %; on exchanger ``'shift'`` 65 %
         against 58 % (bench/realdata.md).

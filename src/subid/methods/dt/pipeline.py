@@ -6,9 +6,11 @@ holding its validated options, with explicit steps. Its public function makes
 the object, then calls :func:`run`, which
 
 1. makes the :class:`subid.methods.dt.plan.Plan` (every default decided once);
-2. chooses the order, horizon and estimator (:func:`subid.methods.dt.selection.choose`,
+2. chooses the order and horizon (:func:`subid.methods.dt.selection.choose`,
    the one module that owns that choice, on the folds of the record) or takes
-   them from the plan;
+   them from the plan, and the estimator where the method offers several
+   (:func:`subid.methods.dt.selection.estimator_by_fit` at the order and horizon
+   used, no fold fits; by the cross-validation when a list of orders is given);
 3. on the whole record, :meth:`Pipeline.fit`: the statistic
    (:func:`subid.methods.dt._subspace.prepare`), the method's subspace step
    (:meth:`SubspaceMethod.decompose`, whose profile gives the order by the gap
@@ -48,7 +50,7 @@ from subid.methods.dt._subspace import (
 from subid.methods.dt.checks import check_data
 from subid.methods.dt.feedthrough import resolve as resolve_feedthrough
 from subid.methods.dt.plan import Plan, make_plan
-from subid.methods.dt.selection import choose
+from subid.methods.dt.selection import choose, estimator_by_fit
 from subid.model.statespace import StateSpace
 
 
@@ -220,10 +222,12 @@ def run(method: SubspaceMethod, data, order, horizon, *, selection: str,
     noise model and refinement (module docstring).
 
     With ``selection='cv'`` (default) and a raw record, an order or horizon not
-    given (and the estimator, where the method offers several) is chosen by
-    cross-validation on the record (:func:`subid.methods.dt.selection.choose`);
-    the model is then fitted to the whole record with that choice, exactly as an
-    explicit call would. ``'gap'``, or a statistic without raw samples, takes the
+    given is chosen by cross-validation on the record
+    (:func:`subid.methods.dt.selection.choose`); the model is then fitted to the
+    whole record with that choice, exactly as an explicit call would, the
+    estimator (where the method offers several) chosen at that order and horizon
+    by :func:`subid.methods.dt.selection.estimator_by_fit` (with a list of
+    candidate orders, cross-validated with them). ``'gap'``, or a statistic without raw samples, takes the
     largest gap of the method's profile. ``info['system_matrices']`` names the
     estimator used and ``info['system_matrices_selection']`` says why when there
     was a choice; ``method(data, order=model.order, horizon=model.info['horizon'])``
@@ -238,8 +242,12 @@ def run(method: SubspaceMethod, data, order, horizon, *, selection: str,
             problem, model, estimator, rule = choose(data, plan, pipeline)
         else:
             problem = pipeline.prepare(data, plan.orders, plan.horizon)
-            estimator, rule = plan.estimators[0], None
-            model = pipeline.fit(problem, estimator)
+            if plan.estimator_choice == "fit":   # order and horizon given: no fold fits
+                estimator, model, rule = estimator_by_fit(data, problem, pipeline,
+                                                          plan.estimators)
+            else:
+                estimator, rule = plan.estimators[0], None
+                model = pipeline.fit(problem, estimator)
         model.info.update(plan.info(estimator, rule))
         model = finalize(model, problem, refine=plan.refine, delays=plan.delays,
                          statistic=plan.statistic)

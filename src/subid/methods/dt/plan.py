@@ -36,11 +36,12 @@ from subid.methods._common import parse_order
 from subid.methods.crossval import SELECTION_RULES
 from subid.methods.dt.noise_model import check_refine
 
-#: ``system_matrices='auto'`` lets the cross-validation of the order and horizon choose
-#: between its estimators on records up to this many samples; longer records use the
-#: first ('shift'), where both are consistent and their models close. With the order
-#: and horizon both given, 'auto' is the first with no fold fits (one fit); a
-#: one-element candidate list (``order=[4]``) asks for the cross-validated choice.
+#: ``system_matrices='auto'`` chooses between its estimators on records up to this many
+#: samples; longer records use the first ('shift'), where both are consistent and their
+#: models close. The choice is made at the order and horizon used (given, or chosen by
+#: the cross-validation with the first estimator) by the models' fit to the whole record
+#: (:func:`subid.methods.dt.selection.estimator_by_fit`, no fold fits); a list of candidate
+#: orders (``order=[4]``) asks for the estimators to be cross-validated with the orders.
 AUTO_VARIANT_MAX_SAMPLES = 20_000
 
 
@@ -57,7 +58,12 @@ class Plan:
     the first the default (``(None,)`` for a method with one);
     ``estimator_rule`` says why the choice was narrowed before the data were
     looked at (a long record), and ``cross_validate`` whether the order, horizon
-    and estimator are chosen by :func:`subid.methods.dt.selection.choose`.
+    (and, with ``estimator_choice='cv'``, the estimator) are chosen by
+    :func:`subid.methods.dt.selection.choose`. ``estimator_choice`` says how the
+    estimator is chosen among several: ``'fit'`` at the order and horizon used, by
+    :func:`subid.methods.dt.selection.estimator_by_fit` (no fold fits), ``'cv'``
+    with the candidate orders by the cross-validation (a list of candidate orders
+    given), None (one estimator, or no raw samples, or ``selection='gap'``: the first).
     """
 
     method: str
@@ -68,6 +74,7 @@ class Plan:
     estimators: tuple
     estimator_rule: dict | None
     cross_validate: bool
+    estimator_choice: str | None
     blocks_per_horizon: int
     statistic: str
     normalize_outputs: bool
@@ -80,8 +87,7 @@ class Plan:
 
     @property
     def pinned(self) -> bool:
-        """The order and the horizon are both given (no fold fits unless estimators
-        are to be chosen)."""
+        """The order and the horizon are both given (no fold fits)."""
         return self.order is not None and self.horizon is not None
 
     @property
@@ -135,16 +141,20 @@ def make_plan(method, data, order, horizon, *, selection: str, statistic: str = 
             f"{estimators[0]!r} beyond {AUTO_VARIANT_MAX_SAMPLES} samples, where both "
             "estimators are consistent")}
         estimators = estimators[:1]
-    # order and horizon given: no fold fits, except the choice between two estimators
-    # (system_matrices='auto' on a record of at most AUTO_VARIANT_MAX_SAMPLES),
-    # cross-validated at that order and horizon as the default call cross-validates it,
-    # so that method(data, order=m.order, horizon=m.info['horizon']) reproduces the
-    # default model m (issue 21)
-    choose = not (fixed is not None and horizon is not None) or len(estimators) > 1
+    # order and horizon given: no fold fits (issue 21); the estimator of
+    # system_matrices='auto' is chosen at the order and horizon used by the models' fit to
+    # the whole record, the same rule after the default call's cross-validation (made with
+    # the first estimator), so that method(data, order=m.order, horizon=m.info['horizon'])
+    # reproduces the default model m; a list of candidate orders cross-validates them all
+    raw = selection == "cv" and isinstance(data, IOData)
+    estimator_choice = None
+    if len(estimators) > 1 and raw:
+        estimator_choice = "cv" if candidates is not None else "fit"
     plan = Plan(method=method.name, order=fixed,
                 candidates=None if candidates is None else tuple(candidates), horizon=horizon,
                 selection=selection, estimators=estimators, estimator_rule=estimator_rule,
-                cross_validate=selection == "cv" and isinstance(data, IOData) and choose,
+                cross_validate=raw and not (fixed is not None and horizon is not None),
+                estimator_choice=estimator_choice,
                 blocks_per_horizon=method.blocks_per_horizon, statistic=statistic,
                 normalize_outputs=bool(method.normalize_outputs),
                 feedthrough=method.feedthrough, stability=method.stability,
