@@ -102,6 +102,10 @@ def test_residual_bound_is_a_lower_bound():
             low = bound.residual_at_least(A, true.C, data.u, data.y, feedthrough=d,
                                           estimate_x0=x0, output_weights=weights)
             assert 0.0 < low <= full["residual_rms"] * (1 + 1e-10)
+            every = bound.residual_at_least(A, true.C, data.u, data.y, feedthrough=d,
+                                            estimate_x0=x0, output_weights=weights,
+                                            stride=bound.STRIDE)     # a subset of its rows
+            assert 0.0 < every <= low * (1 + bound.MARGIN)
             for fraction in (bound.SHORT, bound.TAIL):     # free state at the tail's start
                 relaxed = bound.relaxed_residual_at_least(A, true.C, data.u, data.y, fraction,
                                                           feedthrough=d,

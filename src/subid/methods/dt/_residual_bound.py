@@ -31,7 +31,9 @@ free parameters on that subset. :func:`loses` tries, cheapest first:
    reference QR path (:func:`subid.methods.dt._regression.fit_b_d_x0_qr`) on those
    samples only;
 3. :func:`residual_at_least`: the rows of the last :data:`TAIL` with the model's own
-   state, from the same dual recursions
+   state (first those of every :data:`STRIDE`-th sample; when A grows by fewer than
+   :data:`SLOW_GROWTH_DECADES` decades over the tail, where 1. and 2. do not prove,
+   this alone), from the same dual recursions
    (:func:`subid.methods.dt._regression.dual_rows`) run over the whole record (a
    third of the cost of the QR path; a regression that overflows anywhere gives no
    usable fit either).
@@ -66,6 +68,10 @@ STRIDE = 4
 STRIDED_MIN_SAMPLES = 2048
 #: A grows by more than this many decades over the SHORT tail: that tail is tried first.
 FAST_GROWTH_DECADES = 30
+#: A grows by fewer than this many decades over the TAIL: the bounds with a free state
+#: at the tail's start are skipped (measured: they did not prove below 16 decades and
+#: did above 27), for 3. on every STRIDE-th sample of the tail first.
+SLOW_GROWTH_DECADES = 20
 #: Rows of the dual recursion run at a time over the head of the record.
 _CHUNK = 8192
 #: The bound must exceed the threshold by this relative margin: the QR residuals of
@@ -76,11 +82,12 @@ MARGIN = 1e-3
 
 
 def residual_at_least(A, C, u, y, *, feedthrough: bool, estimate_x0: bool,
-                      output_weights) -> float:
+                      output_weights, stride: int = 1) -> float:
     """A lower bound of the ``residual_rms`` that :func:`subid.methods.dt._regression.fit_b_d_x0`
     reports for ``(A, C)`` on the single record ``(u, y)``: the least-squares residual
-    of the rows of its last :data:`TAIL` samples, divided by ``sqrt(N ny)``
-    (``inf`` when the regressors overflow: the full fit cannot be used either)."""
+    of the rows of its last :data:`TAIL` samples (of every ``stride``-th of them),
+    divided by ``sqrt(N ny)`` (``inf`` when the regressors overflow: the full fit
+    cannot be used either)."""
     A = np.ascontiguousarray(A, dtype=float)
     C = np.ascontiguousarray(C, dtype=float)
     N, nu = u.shape
@@ -95,6 +102,7 @@ def residual_at_least(A, C, u, y, *, feedthrough: bool, estimate_x0: bool,
             return math.inf                     # overflowed: so does the full regression
     ut = np.ascontiguousarray(u[start:], dtype=float)
     rows, _, _ = dual_rows(A, C, ut, V, M, n_x0)
+    rows, ut = rows[::stride], ut[::stride]
     T = ut.shape[0]
     block = np.zeros((T, ny, p + 1))
     block[:, :, :q] = rows
@@ -102,7 +110,7 @@ def residual_at_least(A, C, u, y, *, feedthrough: bool, estimate_x0: bool,
         for j in range(nu):
             for i in range(ny):
                 block[:, i, q + j * ny + i] = ut[:, j]
-    block[:, :, p] = y[start:]
+    block[:, :, p] = y[start::stride]
     block *= np.asarray(output_weights, dtype=float)[None, :, None]
     flat = block.reshape(T * ny, p + 1)
     if not np.isfinite(flat).all():
@@ -181,17 +189,28 @@ def loses(A, C, u, y, threshold: float, *, feedthrough: bool, estimate_x0: bool,
     # the cheapest bound first: on a contiguous SHORT tail when A grows fast over it
     # (its rows overflow over the whole TAIL), every STRIDE-th sample of the TAIL
     # otherwise (a slowly growing mode shows only over a long window)
-    fast = radius > 1.0 and SHORT * N * math.log10(radius) > FAST_GROWTH_DECADES
+    decades = math.log10(radius) if radius > 1.0 else 0.0
+    fast = SHORT * N * decades > FAST_GROWTH_DECADES
     tries = [("short", SHORT), ("strided", TAIL), ("tail", TAIL)] if fast else \
         [("strided", TAIL), ("short", SHORT), ("tail", TAIL)]
     if TAIL * N < STRIDE * STRIDED_MIN_SAMPLES:     # too few rows to bound much
         tries.remove(("strided", TAIL))
+    elif TAIL * N * decades >= SLOW_GROWTH_DECADES:
+        tries.append(("own strided", TAIL))
+    else:
+        # a mode too slow to show within the tail with a free state there: only the
+        # model's own state (the whole record's growth) bounds it
+        tries = [("own strided", TAIL)]
     with np.errstate(all="ignore"):
         for kind, fraction in tries:
             if kind == "strided":
                 bound = strided_residual_at_least(A, C, u, y, fraction, STRIDE,
                                                   feedthrough=feedthrough,
                                                   output_weights=output_weights)
+            elif kind == "own strided":
+                bound = residual_at_least(A, C, u, y, feedthrough=feedthrough,
+                                          estimate_x0=estimate_x0,
+                                          output_weights=output_weights, stride=STRIDE)
             else:
                 bound = relaxed_residual_at_least(A, C, u, y, fraction, feedthrough=feedthrough,
                                                   output_weights=output_weights)
