@@ -19,9 +19,10 @@ free parameters on that subset. :func:`loses` tries, cheapest first:
    of a subset of the rows of a regression is at most that of all of them): the
    misfit of an unstable A grows over a long window, which a short contiguous tail
    does not show, while the factorisation costs what a tail of ``TAIL / STRIDE``
-   does (issue 21: at 10^6 samples the bounds were 0.25 s of the 0.9 s default call,
-   the :data:`SHORT` tail failing on slightly unstable fold models, spectral radius
-   1.005, and the :data:`TAIL` one then proving it at five times the cost); tried
+   does (issue 21: at 10^6 samples the bounds of 21 unstable fold models took 0.28 s of
+   the 0.9 s default call, the :data:`SHORT` tail failing on the slightly unstable
+   ones, spectral radius 1.005, and the :data:`TAIL` one then proving it at five times
+   the cost; 0.14 s in this order); tried
    after 2. when A grows by more than :data:`FAST_GROWTH_DECADES` decades over the
    short tail (its rows over the whole tail would overflow);
 2. :func:`relaxed_residual_at_least`: the regression on the last :data:`SHORT`,
@@ -169,10 +170,9 @@ def strided_residual_at_least(A, C, u, y, fraction: float, stride: int, *,
 
 def loses(A, C, u, y, threshold: float, *, feedthrough: bool, estimate_x0: bool,
           output_weights) -> float | None:
-    """A bound (:func:`strided_residual_at_least`, :func:`relaxed_residual_at_least`
-    on the last :data:`SHORT`, then :data:`TAIL`, then :func:`residual_at_least`) when one proves the residual RMS of
-    the fit of ``(A, C)`` at least ``threshold`` (so that the fit cannot be kept),
-    else None."""
+    """A bound (those of the module documentation, in the order its spectral radius
+    makes cheapest) when one proves the residual RMS of the fit of ``(A, C)`` at least
+    ``threshold`` (so that the fit cannot be kept), else None."""
     if not math.isfinite(threshold) or threshold <= 0:
         return None
     from subid.methods.dt._bd_large import DENSE_LIMIT, dense_bytes
