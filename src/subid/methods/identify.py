@@ -53,7 +53,7 @@ below 1e-3 of ``d / (2N)``, the expected excess of the criterion at the true
 parameters; Ljung 1999, Theorem 9.1), which keeps the estimate's efficiency to
 0.1 %; the fold models, which are only scored, skip the parameter covariance
 and the re-estimated K. At 1e5 samples (``bench/identify_cost.py``) the
-refinement costs 0.7x the subspace model it starts from.
+refinement costs 0.9x the subspace model it starts from.
 """
 
 from __future__ import annotations
