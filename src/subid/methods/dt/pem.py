@@ -175,7 +175,9 @@ def _start_x0(Ap, Bp, C, Dp, v, y):
     forced = _simulate.simulate_discrete(Ap, Bp, C, Dp, v, np.zeros(n))[0]
     free = free_response(Ap, C, np.eye(n), v.shape[0])
     alive = np.flatnonzero(np.any(free.reshape(free.shape[0], -1) != 0, axis=1))
-    T = int(alive[-1]) + 1 if alive.size else 0
+    if not alive.size:                   # the state never reaches the output
+        return np.zeros(n)
+    T = int(alive[-1]) + 1
     x0 = scipy.linalg.lstsq(free[:T].reshape(-1, n), (y[:T] - forced[:T]).reshape(-1),
                             lapack_driver="gelsy", check_finite=False)[0]
     return x0
