@@ -19,7 +19,7 @@ import zlib
 
 import numpy as np
 
-__all__ = ["png_bytes", "figure_png"]
+__all__ = ["png_bytes"]
 
 _SIGNATURE = b"\x89PNG\r\n\x1a\n"
 
@@ -64,24 +64,3 @@ def png_bytes(rgba: np.ndarray, level: int = 1) -> bytes:
     header = struct.pack(">IIBBBBB", width, height, 8, 2, 0, 0, 0)   # 8-bit RGB
     return (_SIGNATURE + _chunk(b"IHDR", header)
             + _chunk(b"IDAT", zlib.compress(raw.tobytes(), level)) + _chunk(b"IEND", b""))
-
-
-def figure_png(fig, dpi: float | None = None) -> bytes:
-    """Draw ``fig`` on an Agg canvas (whatever its backend) and return its PNG bytes.
-
-    Parameters
-    ----------
-    fig : matplotlib.figure.Figure
-    dpi : float, optional
-        Resolution (default: the figure's).
-
-    Returns
-    -------
-    bytes
-    """
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    if dpi is not None and dpi != fig.dpi:
-        fig.set_dpi(dpi)
-    canvas = FigureCanvasAgg(fig)
-    canvas.draw()
-    return png_bytes(np.asarray(canvas.buffer_rgba()))
