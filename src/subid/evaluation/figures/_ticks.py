@@ -11,10 +11,12 @@ formatter give for its final limits, styled as its first tick, and moves the axi
 label as far from the spine as the tick labels reach (what matplotlib does at each
 draw). The image is the same up to the anti-aliasing of single pixels.
 
-An axis whose ticks this does not reproduce keeps matplotlib's: axes that are not
-rectilinear or fix their aspect ratio (their limits change at draw time), ticks or
-labels on the second side (top, right), an offset or scale factor of the formatter
-(``1e-5``), labelled minor ticks.
+An axis whose ticks this does not reproduce keeps matplotlib's, and so do the axes
+that share its locator: hidden axes, axes that are not rectilinear or fix their
+aspect ratio (their limits change at draw time), ticks, labels or the axis label on
+the second side (top, right), an offset or scale factor of the formatter (``1e-5``),
+labelled minor ticks. Only the report's images use this (``report.figure_html``): the
+figures :mod:`subid.plot` returns keep matplotlib's ticks.
 """
 
 from __future__ import annotations
@@ -39,15 +41,20 @@ def light_ticks(fig, renderer) -> int:
     int
         The number of axes (x or y) replaced.
     """
-    plans = []
+    plans, kept = [], set()
     for ax in fig.axes:
-        if ax.name != "rectilinear" or ax.get_aspect() != "auto" or not ax.get_visible():
-            continue
         for axis in (ax.xaxis, ax.yaxis):
-            plan = _plan(ax, axis)
-            if plan is not None:
+            plan = None
+            if ax.name == "rectilinear" and ax.get_aspect() == "auto" and ax.get_visible() \
+                    and axis.get_visible():
+                plan = _plan(ax, axis)
+            if plan is None:
+                kept.add(id(axis.major))
+            else:
                 plans.append(plan)
-    # the locators of shared axes are shared: replaced once every plan is made
+    # shared axes share their locators (``axis.major``): replaced only when every axis
+    # sharing them is, and after every plan is made
+    plans = [p for p in plans if id(p[1].major) not in kept]
     from matplotlib.ticker import NullLocator
     for ax, axis, artists, _ in plans:
         axis.set_major_locator(NullLocator())
