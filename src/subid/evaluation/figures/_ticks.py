@@ -60,8 +60,10 @@ def light_ticks(fig, renderer) -> int:
         axis.set_major_locator(NullLocator())
         axis.set_minor_locator(NullLocator())
         for artist in artists:
-            ax.add_artist(artist)
-            artist.set_clip_on(artist.get_label() == "_light_grid")
+            if artist.get_label() == "_light_grid":         # clipped to the axes
+                ax.add_artist(artist)
+            else:       # outside the axes: on the figure, without a clip path to set up
+                fig.add_artist(artist, clip=False)
     for ax, axis, artists, _ in plans:
         _move_label(ax, axis, [a for a in artists if a.get_label() == "_light_label"],
                     renderer, fig.dpi)
