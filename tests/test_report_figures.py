@@ -106,3 +106,13 @@ def test_figure_html_embeds_the_drawn_pixels():
     png = base64.b64decode(src.split(",", 1)[1])
     assert np.abs(_decode(png).astype(int) - expected).max() <= 64
     assert f'width="{round(6 * 96)}"' in text and "<figcaption>caption</figcaption>" in text
+
+
+def test_figure_html_closes_a_pyplot_figure():
+    from subid.evaluation.figures._common import _pyplot
+    plt = _pyplot()
+    fig, ax = plt.subplots()
+    ax.plot([0, 1], [1, 0])
+    number = fig.number
+    report.figure_html(fig)
+    assert number not in plt.get_fignums()

@@ -56,7 +56,7 @@ def light_ticks(fig, renderer) -> int:
     # sharing them is, and after every plan is made
     plans = [p for p in plans if id(p[1].major) not in kept]
     from matplotlib.ticker import NullLocator
-    for ax, axis, artists, _ in plans:
+    for ax, axis, artists in plans:
         axis.set_major_locator(NullLocator())
         axis.set_minor_locator(NullLocator())
         for artist in artists:
@@ -64,26 +64,26 @@ def light_ticks(fig, renderer) -> int:
                 ax.add_artist(artist)
             else:       # outside the axes: on the figure, without a clip path to set up
                 fig.add_artist(artist, clip=False)
-    for ax, axis, artists, _ in plans:
+    for ax, axis, artists in plans:
         _move_label(ax, axis, [a for a in artists if a.get_label() == "_light_label"],
                     renderer, fig.dpi)
     return len(plans)
 
 
 def _in_view(axis, locs):
-    """The ``locs`` inside the axis' view interval (as ``Axis._update_ticks`` keeps)."""
+    """Which ``locs`` lie inside the axis' view interval (those ``Axis._update_ticks``
+    draws), as a boolean mask."""
     low, high = sorted(axis.get_view_interval())
     transform = axis.get_transform()
     lo_t, hi_t = transform.transform([low, high])
     with np.errstate(all="ignore"):
         values = transform.transform(np.asarray(locs, dtype=float))
     tol = 1e-10 * abs(hi_t - lo_t)
-    keep = np.isfinite(values) & (values >= lo_t - tol) & (values <= hi_t + tol)
-    return keep
+    return np.isfinite(values) & (values >= lo_t - tol) & (values <= hi_t + tol)
 
 
 def _plan(ax, axis):
-    """``(ax, axis, artists, None)`` drawing the axis' ticks, or None to keep them."""
+    """``(ax, axis, artists)`` drawing the axis' ticks, or None to keep matplotlib's."""
     from matplotlib.collections import LineCollection
     from matplotlib.lines import Line2D
     from matplotlib.text import Text
@@ -96,11 +96,10 @@ def _plan(ax, axis):
     if major.tick2line.get_visible() or major.label2.get_visible():
         return None
     artists = []
-    groups = [(axis.get_major_locator(), axis.major.formatter, major, True)]
+    groups = [(axis.major.formatter, major, True)]
     if not isinstance(axis.get_minor_locator(), NullLocator):
-        groups.append((axis.get_minor_locator(), axis.minor.formatter, axis.minorTicks[0],
-                       False))
-    for locator, formatter, tick, is_major in groups:
+        groups.append((axis.minor.formatter, axis.minorTicks[0], False))
+    for formatter, tick, is_major in groups:
         if tick.tick2line.get_visible() or tick.label2.get_visible():
             return None
         locs = np.asarray(axis.get_majorticklocs() if is_major else axis.get_minorticklocs(),
@@ -143,7 +142,7 @@ def _plan(ax, axis):
                         verticalalignment=text.get_verticalalignment(),
                         transform=text.get_transform(), zorder=zorder,
                         label="_light_label"))
-    return ax, axis, artists, None
+    return ax, axis, artists
 
 
 def _move_label(ax, axis, texts, renderer, dpi) -> None:
