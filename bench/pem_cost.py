@@ -7,8 +7,9 @@ Measured, CPU time (``time.process_time``), one process per (source, record):
 
 * ``moesp(est)``: the default subspace model, and ``pem(est, model,
   focus='simulation')`` started from it (final cost, evaluations);
-* ``identify(est)``: total, and the part spent inside ``pem`` (the four fold
-  refinements and the final one: "refinement"); "subspace" is the rest (order,
+* ``identify(est)``: total, and the part spent inside ``pem`` or
+  ``subid.methods.dt.pem.refine`` (the four fold refinements and the final one:
+  "refinement"); "subspace" is the rest (order,
   horizon, feedthrough and estimator selection, fold start models, scoring).
   The ratio refinement / subspace is the issue's "its refinement <= 2x the
   subspace model it starts from".
@@ -66,22 +67,25 @@ out["pem_final_cost"] = float(refined.info["final_cost"])
 out["pem_evaluations"] = int(refined.info["n_evaluations"])
 out["pem_fit"] = score(refined, val)
 
-inner = pem_module.pem
 spent = [0.0, 0]
 depth = [0]
 
-def timed(*args, **kwargs):
-    depth[0] += 1
-    t0 = time.process_time()
-    try:
-        return inner(*args, **kwargs)
-    finally:
-        depth[0] -= 1
-        if depth[0] == 0:
-            spent[0] += time.process_time() - t0
-            spent[1] += 1
+def timing(inner):
+    def timed(*args, **kwargs):
+        depth[0] += 1
+        t0 = time.process_time()
+        try:
+            return inner(*args, **kwargs)
+        finally:
+            depth[0] -= 1
+            if depth[0] == 0:
+                spent[0] += time.process_time() - t0
+                spent[1] += 1
+    return timed
 
-pem_module.pem = timed
+pem_module.pem = timing(pem_module.pem)
+if hasattr(pem_module, "refine"):            # identify's refinement (pem stopped early)
+    pem_module.refine = timing(pem_module.refine)
 t = time.process_time()
 with warnings.catch_warnings():
     warnings.simplefilter("ignore")
@@ -215,7 +219,8 @@ def main() -> None:
         f"CPU seconds (`time.process_time`), one process per row, rows in the order run; "
         f"machine load average at the end {load[0]:.1f} (2 cores shared).", "",
         table(results), "",
-        "refinement = CPU time inside `subid.pem` during `identify(est)` (four fold "
+        "refinement = CPU time inside `subid.pem` or `subid.methods.dt.pem.refine` (identify's "
+        "refinement, stopped at statistical precision) during `identify(est)` (four fold "
         "refinements and the final one); subspace = the rest of `identify(est)`.", ""])
     Path(args.out).write_text(text)
     print(text)

@@ -208,7 +208,7 @@ def test_identify_keeps_refinement_only_when_it_validates_better(monkeypatch):
     true = systems.seed001_system()
     data = systems.simulate_data(true, 600, seed=2, output_snr_db=30)
 
-    def worse(train, start, focus):
+    def worse(train, start, focus, held_out=False):
         bad = subid.StateSpace(0.5 * start.A, start.B, start.C, start.D, start.dt)
         return bad.with_noise_model(None, None, info=dict(start.info, cost_history=[1.0],
                                                          start_cost=1.0, final_cost=1.0,

@@ -53,6 +53,42 @@ def test_correlations_equal_the_plain_sums():
         np.testing.assert_allclose(a, b, rtol=0, atol=1e-12 * np.abs(b).max())
 
 
+def test_straddle_correlations_equal_the_plain_sums():
+    """The products across a boundary (the two sides' cross-correlations) equal the
+    plain sums, and those of the window across it minus those of its halves."""
+    rng = np.random.default_rng(1)
+    for K, lags in ((60, 60), (50, 80), (300, 120)):
+        lu, ly = rng.standard_normal((K, 2)), rng.standard_normal((K, 3))
+        ru, ry = rng.standard_normal((K, 2)), rng.standard_normal((K, 3))
+        fast = _lag_fit.straddle_correlations(lu, ru, ry, lags)
+        plain = _lag_fit.straddle_correlations_reference(lu, ru, ry, lags)
+        whole = _lag_fit.correlations(np.vstack([lu, ru]), np.vstack([ly, ry]), lags)
+        left, right = _lag_fit.correlations(lu, ly, lags), _lag_fit.correlations(ru, ry, lags)
+        for k in range(2):
+            np.testing.assert_allclose(fast[k], plain[k], rtol=0,
+                                       atol=1e-12 * np.abs(plain[k]).max())
+            np.testing.assert_allclose(whole[k] - left[k] - right[k], plain[k], rtol=0,
+                                       atol=1e-12 * np.abs(plain[k]).max())
+
+
+def test_lags_past_the_first_computed_when_needed():
+    """A record's lags past FIRST_LAGS come when a slow pole needs them: the same
+    products, fit and score as with every lag computed at once."""
+    A, B, C, D = _system(4, 12)
+    slow = 0.995 * A / np.abs(np.linalg.eigvals(A)).max()        # L about 7350
+    u, y = _record(slow, B, C, D, 40000, 12)
+    lazy, whole = _lag_fit.LagProducts(u, y), _lag_fit.LagProducts(u, y)
+    whole.lags(whole.max_lag)
+    assert lazy.G.shape[0] == _lag_fit.FIRST_LAGS + 1 < whole.G.shape[0] == whole.max_lag + 1
+    weights = np.array([1.0, 2.0])
+    got = _lag_fit.fit_b_d_x0(slow, C, lazy, weights)
+    assert got[3]["lags"] > _lag_fit.FIRST_LAGS and lazy.G.shape == whole.G.shape
+    want = _lag_fit.fit_b_d_x0(slow, C, whole, weights)
+    for a, b in zip(got[:3], want[:3]):
+        np.testing.assert_allclose(a, b, rtol=1e-10, atol=1e-12)
+    np.testing.assert_allclose(lazy.G, whole.G, rtol=0, atol=1e-11 * np.abs(whole.G).max())
+
+
 @pytest.mark.parametrize("n, seed", [(1, 1), (3, 2), (4, 3), (6, 4), (8, 5)])
 def test_regression_equals_the_pass_over_the_record(n, seed):
     """The normal equations from the lag products give the B, D, x0 and residual of
@@ -136,7 +172,7 @@ def test_fold_products_merged_from_blocks():
     """The lag products of every fold's training and validation record, merged from
     those of the four blocks and their boundaries, equal the record's own."""
     rng = np.random.default_rng(3)
-    data = subid.IOData(rng.standard_normal((30000, 2)), rng.standard_normal((30000, 2)))
+    data = subid.IOData(rng.standard_normal((60000, 2)), rng.standard_normal((60000, 2)))
     parts = [(data[a], data[b]) for a, b in _selection.folds(data.n_samples)]
     records = [t for t, _ in parts] + [v for _, v in parts]
     merged = _lag_fit.merged(_selection._blocks_of_folds(parts), records,
@@ -144,6 +180,8 @@ def test_fold_products_merged_from_blocks():
     for record, lp in zip(records, merged):
         own = _lag_fit.LagProducts.of_record(record)
         assert lp.max_lag == own.max_lag and lp.n_samples == record.n_samples
+        for products in (lp, own):       # every lag (those past FIRST_LAGS when needed)
+            products.lags(products.max_lag)
         for a, b in ((lp.G, own.G), (lp.R, own.R), (lp.Y, own.Y)):
             np.testing.assert_allclose(a, b, rtol=0, atol=1e-11 * np.abs(b).max())
 

@@ -29,26 +29,48 @@ def _random_directions(rng, d, n, ny, m):
             rng.standard_normal((d, n)))
 
 
+def _random_predictor(rng, n, ny, m, N, gain):
+    """A random stable predictor ``(Ap, Bp, C, Dp)``, its signal ``v`` and ``x0``."""
+    Ap = gain * rng.standard_normal((n, n)) / np.sqrt(n)
+    Bp, C, Dp = rng.standard_normal((n, m)), rng.standard_normal((ny, n)), \
+        rng.standard_normal((ny, m))
+    return Ap, Bp, C, Dp, rng.standard_normal((N, m)), rng.standard_normal(n)
+
+
 def test_compiled_jacobian_matches_reference():
     rng = np.random.default_rng(0)
     n, ny, m, d, N = 3, 2, 4, 5, 60
-    Ap = 0.5 * rng.standard_normal((n, n)) / np.sqrt(n)
-    Bp, C, Dp = rng.standard_normal((n, m)), rng.standard_normal((ny, n)), \
-        rng.standard_normal((ny, m))
-    v, x0 = rng.standard_normal((N, m)), rng.standard_normal(n)
+    Ap, Bp, C, Dp, v, x0 = _random_predictor(rng, n, ny, m, N, 0.5)
     dirs = _random_directions(rng, d, n, ny, m)
     y1, J1 = jacobian(Ap, Bp, C, Dp, v, x0, *dirs)
     y2, J2 = jacobian_ref(Ap, Bp, C, Dp, v, x0, *dirs)
     assert np.abs(y1 - y2).max() < 1e-12 and np.abs(J1 - J2).max() < 1e-12
 
 
+def test_initial_state_directions_match_reference():
+    # directions that move x0 alone run in their own loop (free_response), stopped once
+    # decayed: same Jacobian as the reference, in any column order, on a record long
+    # enough for the free response to fall far below the subnormal range
+    rng = np.random.default_rng(2)
+    n, ny, m, N = 3, 2, 2, 3000
+    Ap, Bp, C, Dp, v, x0 = _random_predictor(rng, n, ny, m, N, 0.5)
+    dirs = list(_random_directions(rng, 5, n, ny, m))
+    for j in (1, 3, 4):                       # pure initial-state directions
+        for a in dirs[:4]:
+            a[j] = 0.0
+    y1, J1 = jacobian(Ap, Bp, C, Dp, v, x0, *dirs)
+    y2, J2 = jacobian_ref(Ap, Bp, C, Dp, v, x0, *dirs)
+    assert np.abs(y1 - y2).max() < 1e-12 and np.abs(J1 - J2).max() < 1e-12
+    assert np.all(J1[-1, :, [1, 3, 4]] == 0.0) and np.all(J1[-1, :, [0, 2]] != 0.0)
+    only = [a[[1, 3, 4]] for a in dirs]        # free directions alone
+    y3, J3 = jacobian(Ap, Bp, C, Dp, v, x0, *only)
+    assert np.abs(y3 - y2).max() < 1e-12 and np.abs(J3 - J2[:, :, [1, 3, 4]]).max() < 1e-12
+
+
 def test_jacobian_matches_finite_differences():
     rng = np.random.default_rng(1)
     n, ny, m, N = 3, 2, 3, 40
-    Ap = 0.4 * rng.standard_normal((n, n)) / np.sqrt(n)
-    Bp, C, Dp = rng.standard_normal((n, m)), rng.standard_normal((ny, n)), \
-        rng.standard_normal((ny, m))
-    v, x0 = rng.standard_normal((N, m)), rng.standard_normal(n)
+    Ap, Bp, C, Dp, v, x0 = _random_predictor(rng, n, ny, m, N, 0.4)
     dirs = _random_directions(rng, 1, n, ny, m)
     _, J = jacobian_ref(Ap, Bp, C, Dp, v, x0, *dirs)
     h = 1e-6
@@ -220,3 +242,17 @@ def test_pem_bad_input(paper_system, paper_data):
     unstable = subid.StateSpace(1.2 * np.eye(3), start.B, start.C, start.D, 1.0)
     with pytest.raises(ModelError, match="unstable"):
         subid.pem(paper_data, unstable, focus="simulation")
+
+
+def test_covariance_gram_route_equals_qr_route(monkeypatch):
+    """The parameter covariance from the Cholesky factor of the Gram matrix (the route
+    taken when well conditioned) equals the one from the Householder QR of J."""
+    from subid.methods.dt import _covariance, _trust_region
+    rng = np.random.default_rng(4)
+    J = rng.standard_normal((500, 2, 7)) @ np.diag([1.0, 3.0, 0.2, 1.0, 5.0, 1.0, 0.5])
+    res = rng.standard_normal((500, 2))
+    gram, lam = _covariance.covariance_factor(J, res, 2)
+    monkeypatch.setattr(_trust_region, "GRAM_PIVOT", 2.0)           # forces the QR route
+    qr, lam2 = _covariance.covariance_factor(J, res, 2)
+    assert np.allclose(gram @ gram.T, qr @ qr.T, rtol=1e-10, atol=0)
+    assert np.array_equal(lam, lam2)

@@ -138,3 +138,39 @@ def test_simulation_focus_equals_an_independent_output_error_fit():
                                        ftol=1e-14, gtol=1e-14, max_nfev=2000)
     sse_pem, sse_ind = float(e_pem @ e_pem), 2.0 * ind.cost
     assert abs(sse_pem - sse_ind) <= 1e-10 * sse_ind, (sse_pem, sse_ind)
+
+
+@pytest.mark.parametrize("focus", ["simulation", "prediction"])
+def test_statistical_stop_keeps_the_estimate(focus):
+    """identify's refinement (pem stopped where the Gauss-Newton decrement is below
+    1e-3 d/(2N), pem.refine) ends within that precision of pem's own optimum, and its
+    distance to that optimum is a small fraction of the estimation error."""
+    true = systems.seed001_innovation_system(feedthrough=False)
+    data = systems.simulate_innovation_data(true, 2000, seed=7)
+    start = subid.n4sid(data, 3, feedthrough=False)
+    full = subid.pem(data, start, focus=focus)
+    quick = pem_module.refine(data, start, focus)
+    d = quick.info["parameter_covariance"]["factor"].shape[1] + 3      # model + x0
+    scale = d / (2.0 * data.n_samples)
+    assert quick.info["final_cost"] <= quick.info["start_cost"]
+    assert quick.info["final_cost"] - full.info["final_cost"] <= \
+        pem_module.statistical_precision(d, data.n_samples, 2 * pem_module.PRECISION)
+    assert quick.info["final_cost"] - full.info["final_cost"] < 1e-2 * scale
+    assert quick.info["n_evaluations"] <= full.info["n_evaluations"]
+    assert subid.markov_error(quick, full) < 0.1 * subid.markov_error(full, true)
+    held = pem_module.refine(data, start, focus, held_out=True)     # only scored
+    assert "parameter_covariance" not in held.info
+    assert np.allclose(held.A, quick.A) and np.allclose(held.C, quick.C)
+
+
+def test_decrement_tolerance_stops_the_iteration():
+    """decrement_tol: status 5 at the first iterate whose Gauss-Newton decrement is
+    below it, with fewer evaluations than scipy's tests need."""
+    fun, jac, x0 = _exponentials(0)
+    full = _trust_region.trust_region_least_squares(fun, jac, x0, ftol=1e-12, xtol=1e-12,
+                                                    gtol=1e-12, max_nfev=200)
+    quick = _trust_region.trust_region_least_squares(fun, jac, x0, ftol=1e-12, xtol=1e-12,
+                                                     gtol=1e-12, max_nfev=200,
+                                                     decrement_tol=1e-6 * full.cost)
+    assert quick.status == 5 and quick.nfev < full.nfev
+    assert 0.0 <= quick.cost - full.cost < 1e-6 * full.cost

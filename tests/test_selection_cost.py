@@ -70,6 +70,23 @@ def test_feedthrough_tests_equal_one_fit_per_channel(shape):
     assert isinstance(estimate, bool)
 
 
+def _strided_rows(A, C, data, fraction, stride, feedthrough_, weights):
+    """The rows of every ``stride``-th sample of the regression on the last ``fraction``
+    of ``data`` with a free initial state at its start, by the plain recursion."""
+    N = data.n_samples
+    start = N - int(np.ceil(fraction * N))
+    u, y = data.u[start:], data.y[start:]
+    rows, _, _ = regression.dual_rows_reference(A, C, u, np.zeros((2, 2, A.shape[0])),
+                                                C.copy(), A.shape[0])
+    out = []
+    for t in range(0, u.shape[0], stride):
+        for i in range(2):
+            d = [u[t, j] * (k == i) for j in range(2) for k in range(2)] if feedthrough_ \
+                else []
+            out.append(np.concatenate([rows[t, i], d, [y[t, i]]]) * weights[i])
+    return np.array(out)
+
+
 def test_residual_bound_is_a_lower_bound():
     """The tail's least-squares residual never exceeds the whole record's (the QR
     path of fit_b_d_x0, the reference for an unstable A); an overflowing regression
@@ -85,12 +102,28 @@ def test_residual_bound_is_a_lower_bound():
             low = bound.residual_at_least(A, true.C, data.u, data.y, feedthrough=d,
                                           estimate_x0=x0, output_weights=weights)
             assert 0.0 < low <= full["residual_rms"] * (1 + 1e-10)
+            every = bound.residual_at_least(A, true.C, data.u, data.y, feedthrough=d,
+                                            estimate_x0=x0, output_weights=weights,
+                                            stride=bound.STRIDE)     # a subset of its rows
+            assert 0.0 < every <= low * (1 + bound.MARGIN)
             for fraction in (bound.SHORT, bound.TAIL):     # free state at the tail's start
                 relaxed = bound.relaxed_residual_at_least(A, true.C, data.u, data.y, fraction,
                                                           feedthrough=d,
                                                           output_weights=weights)
                 assert 0.0 < relaxed <= full["residual_rms"] * (1 + 1e-10)
                 assert relaxed <= low * (1 + bound.MARGIN)
+            # every STRIDE-th row of the relaxed TAIL regression: a subset of its rows
+            strided = bound.strided_residual_at_least(A, true.C, data.u, data.y, bound.TAIL,
+                                                      bound.STRIDE, feedthrough=d,
+                                                      output_weights=weights)
+            relaxed = bound.relaxed_residual_at_least(A, true.C, data.u, data.y, bound.TAIL,
+                                                      feedthrough=d, output_weights=weights)
+            assert 0.0 < strided <= relaxed * (1 + bound.MARGIN)
+            rows = _strided_rows(A, true.C, data, bound.TAIL, bound.STRIDE, d, weights)
+            resid = np.linalg.lstsq(rows[:, :-1], rows[:, -1], rcond=None)[0]
+            resid = np.linalg.norm(rows[:, -1] - rows[:, :-1] @ resid)
+            np.testing.assert_allclose(strided, resid / np.sqrt(data.n_samples * 2),
+                                       rtol=1e-6)
     A = true.A * (1.5 / radius)
     assert bound.residual_at_least(A, true.C, data.u, data.y, feedthrough=True,
                                    estimate_x0=True, output_weights=weights) == np.inf

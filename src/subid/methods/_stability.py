@@ -126,7 +126,7 @@ def output_growth(y: np.ndarray) -> float:
     """Ratio of the RMS of the last tenth of ``y`` to that of its first tenth
     (largest over the channels, after removing each channel's mean)."""
     k = max(y.shape[0] // 10, 1)
-    y = y - y.mean(axis=0)
-    first = np.sqrt(np.mean(y[:k] ** 2, axis=0))
-    last = np.sqrt(np.mean(y[-k:] ** 2, axis=0))
+    mean = y.mean(axis=0)            # only the two tenths are centred (no copy of y)
+    first = np.sqrt(np.mean((y[:k] - mean) ** 2, axis=0))
+    last = np.sqrt(np.mean((y[-k:] - mean) ** 2, axis=0))
     return float(np.max(last / np.maximum(first, 1e-300)))

@@ -46,7 +46,14 @@ choice is made on the estimation record and recorded in
 The choices cost the subspace cross-validations of two estimators plus four
 fold refinements and one final refinement; the fold refinements use the same
 part of a long record as the cross-validation (its last
-:data:`subid.methods.dt.selection.MAX_SELECTION_SAMPLES` samples).
+:data:`subid.methods.dt.selection.MAX_SELECTION_SAMPLES` samples). Every
+refinement is :func:`subid.pem` stopped at the statistical precision of its
+criterion (:func:`subid.methods.dt.pem.refine`: the Gauss-Newton decrement
+below 1e-3 of ``d / (2N)``, the expected excess of the criterion at the true
+parameters; Ljung 1999, Theorem 9.1), which keeps the estimate's efficiency to
+0.1 %; the fold models, which are only scored, skip the parameter covariance
+and the re-estimated K. At 1e5 samples (``bench/identify_cost.py``) the
+refinement costs 0.9x the subspace model it starts from.
 """
 
 from __future__ import annotations
@@ -124,13 +131,15 @@ def _score(model, validation, focus) -> float:
     return fold_score(model, validation, steps=np.inf if focus == "simulation" else 1)
 
 
-def _refine(data, model, focus):
-    """``pem(data, model, focus=focus)``, or None when the start cannot be refined so."""
-    from subid.methods.dt.pem import pem
+def _refine(data, model, focus, held_out=False):
+    """``pem(data, model, focus=focus)`` stopped at the statistical precision of its
+    criterion (:func:`subid.methods.dt.pem.refine`; ``held_out``: a fold model, only
+    scored), or None when the start cannot be refined so."""
+    from subid.methods.dt.pem import refine
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            return pem(data, model, focus=focus)
+            return refine(data, model, focus, held_out=held_out)
     except (ModelError, DataError):
         return None
 
@@ -188,7 +197,7 @@ def _fold_refinement(data, method, config, focus, scores=None):
                 out[s][0].append(FLOOR)
                 out[s][1].append(FLOOR)
             continue
-        better = _refine(train, start, focus)
+        better = _refine(train, start, focus, held_out=True)
         for s in scores:
             out[s][0].append(_score(start, validation, s))
             out[s][1].append(out[s][0][-1] if better is None else _score(better, validation, s))

@@ -19,12 +19,31 @@ initial-state direction ``dx0_j``) the sensitivity ``s_j = dx/dθ_j`` obeys
 
 :func:`jacobian` is the compiled loop (vectorised over the directions), :func:`jacobian_ref` a plain numpy
 implementation kept for the tests.
+
+A direction that moves the initial state alone (``dAp_j, dBp_j, dC_j, dDp_j``
+zero: the initial-state columns of :func:`subid.pem`) has the free response
+``dŷ[t]/dθ_j = C Ap^t dx0_j``, which decays geometrically for a stable
+predictor and, run to the end of a long record, spends most of the loop in
+subnormal floating-point numbers (below 2.2e-308), which the processor
+handles about a hundred times slower than normal ones: on 66,667 samples of
+an order-4 model with 16 model and 4 initial-state directions the loop took
+0.19 s against 0.019 s without those four. When the spectral radius of
+``Ap`` says the free response falls below :data:`FREE_RESPONSE_FLOOR` within
+the record, :func:`jacobian` therefore runs such directions in their own loop
+(:func:`free_response`), which stops once the response has fallen below that
+fraction of its start and leaves the rest zero (the entries dropped are below
+1e-150 of the column's first: zero to rounding in every product the callers
+form); otherwise every direction stays in the one loop.
 """
 
 from __future__ import annotations
 
 import numba
 import numpy as np
+
+#: A free response (:func:`free_response`) is taken as zero once every entry of its
+#: state has fallen below this fraction of the largest entry of its initial state.
+FREE_RESPONSE_FLOOR = 1e-150
 
 
 @numba.njit(cache=True, fastmath={'contract'}, inline="always")
@@ -54,38 +73,131 @@ def _affine_row(M, N, x, vt, S, dMT, dNT, i, row):  # pragma: no cover
 
 
 @numba.njit(cache=True, fastmath={'contract'})
-def _jacobian_t(Ap, Bp, C, Dp, v, x0, dApT, dBpT, dCT, dDpT, S):  # pragma: no cover
+def _jacobian_t(Ap, Bp, C, Dp, v, x0, dApT, dBpT, dCT, dDpT, S, J):  # pragma: no cover
     """:func:`jacobian` on direction arrays with the direction index last (contiguous),
-    so that every inner loop is an axpy over the directions (vectorised)."""
+    so that every inner loop is an axpy over the directions (vectorised); the ``d``
+    directions fill the first ``d`` columns of ``J`` (N, ny, >= d)."""
     N = v.shape[0]
     n = Ap.shape[0]
     ny = C.shape[0]
     d = S.shape[1]
     yhat = np.empty((N, ny))
-    J = np.empty((N, ny, d))
     x = x0.copy()
     xn = np.empty(n)
     Sn = np.empty((n, d))
     for t in range(N):
         vt = v[t]
         for i in range(ny):
-            yhat[t, i] = _affine_row(C, Dp, x, vt, S, dCT, dDpT, i, J[t, i])
+            yhat[t, i] = _affine_row(C, Dp, x, vt, S, dCT, dDpT, i, J[t, i, :d])
         for i in range(n):
             xn[i] = _affine_row(Ap, Bp, x, vt, S, dApT, dBpT, i, Sn[i])
         for i in range(n):
             x[i] = xn[i]
         S, Sn = Sn, S
-    return yhat, J
+    return yhat
+
+
+@numba.njit(cache=True, fastmath={'contract'})
+def _free_response_t(Ap, C, S, floor, out, offset):  # pragma: no cover
+    """``C Ap^t S`` for ``t < N`` into the columns ``offset:offset + k`` of ``out``
+    (N, ny, >= offset + k), zero from the first ``t`` at which every entry of
+    ``Ap^t S`` is below ``floor``."""
+    n, k = S.shape
+    N, ny = out.shape[0], out.shape[1]
+    S = S.copy()
+    Sn = np.empty((n, k))
+    stop = N
+    for t in range(N):
+        big = 0.0
+        for i in range(n):
+            for j in range(k):
+                big = max(big, abs(S[i, j]))
+        if big < floor:
+            stop = t
+            break
+        for i in range(ny):
+            row = out[t, i, offset:offset + k]
+            for j in range(k):
+                row[j] = 0.0
+            for m in range(n):
+                c = C[i, m]
+                Sm = S[m]
+                for j in range(k):
+                    row[j] += c * Sm[j]
+        for i in range(n):
+            for j in range(k):
+                Sn[i, j] = 0.0
+            for m in range(n):
+                a = Ap[i, m]
+                Sm = S[m]
+                for j in range(k):
+                    Sn[i, j] += a * Sm[j]
+        S, Sn = Sn, S
+    for t in range(stop, N):
+        for i in range(ny):
+            for j in range(k):
+                out[t, i, offset + j] = 0.0
+
+
+def _floor(S0) -> float:
+    return FREE_RESPONSE_FLOOR * float(np.abs(S0).max(initial=0.0))
+
+
+def free_response(Ap, C, S0, N):
+    """``C Ap^t S0`` for ``t = 0 .. N-1``, shape (N, ny, k) (``S0`` is (n, k)): the
+    output sensitivity to the initial-state directions ``S0``, set to zero from the
+    first sample at which every entry of ``Ap^t S0`` is below
+    :data:`FREE_RESPONSE_FLOOR` times the largest entry of ``S0`` (module
+    docstring: the loop never enters subnormal numbers)."""
+    S0 = np.ascontiguousarray(S0, dtype=float)
+    C = np.ascontiguousarray(C, dtype=float)
+    out = np.empty((int(N), C.shape[0], S0.shape[1]))
+    _free_response_t(np.ascontiguousarray(Ap, dtype=float), C, S0, _floor(S0), out, 0)
+    return out
+
+
+def _decays(Ap, N) -> bool:
+    """Whether a free response of ``Ap`` falls below :data:`FREE_RESPONSE_FLOOR`
+    within ``N`` samples (spectral radius ``rho`` with ``rho^N`` below it); else the
+    initial-state directions stay in the one loop (no second pass over ``J``)."""
+    if Ap.shape[0] == 0 or not np.isfinite(Ap).all():
+        return False
+    rho = float(np.abs(np.linalg.eigvals(Ap)).max())
+    return rho == 0.0 or N * np.log(rho) < np.log(FREE_RESPONSE_FLOOR)
 
 
 def jacobian(Ap, Bp, C, Dp, v, x0, dAp, dBp, dC, dDp, dx0):
-    """``(ŷ, J)`` with ``J[t, i, j] = dŷ_i[t] / dθ_j``; shapes (N, ny), (N, ny, d)."""
+    """``(ŷ, J)`` with ``J[t, i, j] = dŷ_i[t] / dθ_j``; shapes (N, ny), (N, ny, d).
+
+    The directions that move the initial state alone get their free response
+    (:func:`free_response`, module docstring) when it decays below
+    :data:`FREE_RESPONSE_FLOOR` within the record; the others (all, when it
+    does not) run in the compiled loop.
+    """
     def last(a):
-        return np.ascontiguousarray(np.moveaxis(np.asarray(a, dtype=float), 0, -1))
+        return np.ascontiguousarray(np.moveaxis(a, 0, -1))
     Ap, Bp, C, Dp, v, x0 = (np.ascontiguousarray(a, dtype=float)
                             for a in (Ap, Bp, C, Dp, v, x0))
-    return _jacobian_t(Ap, Bp, C, Dp, v, x0, last(dAp), last(dBp), last(dC), last(dDp),
-                       last(dx0))
+    dAp, dBp, dC, dDp, dx0 = (np.asarray(a, dtype=float) for a in (dAp, dBp, dC, dDp, dx0))
+    d = dAp.shape[0]
+    moves = np.ones(d, dtype=bool)
+    if _decays(Ap, v.shape[0]):
+        moves[:] = False
+        for a in (dAp, dBp, dC, dDp):
+            moves |= np.any(a.reshape(d, -1) != 0, axis=1)
+    order = np.concatenate([np.flatnonzero(moves), np.flatnonzero(~moves)])
+    if not np.array_equal(order, np.arange(d)):   # the free directions last
+        dAp, dBp, dC, dDp, dx0 = (a[order] for a in (dAp, dBp, dC, dDp, dx0))
+    k = int(np.count_nonzero(moves))
+    J = np.empty((v.shape[0], C.shape[0], d))
+    yhat = _jacobian_t(Ap, Bp, C, Dp, v, x0, last(dAp[:k]), last(dBp[:k]), last(dC[:k]),
+                       last(dDp[:k]), last(dx0[:k]), J)
+    if k < d:
+        S0 = np.ascontiguousarray(dx0[k:].T)
+        _free_response_t(Ap, C, S0, _floor(S0), J, k)
+    if not np.array_equal(order, np.arange(d)):
+        J[:, :, order] = J.copy()
+    return yhat, J
 
 
 def jacobian_ref(Ap, Bp, C, Dp, v, x0, dAp, dBp, dC, dDp, dx0):

@@ -174,9 +174,16 @@ def _layout(fig, axes, *, top: float = 0.45, bottom: float = 0.55, left: float =
     ax_w = max((avail_w - (cols - 1) * wgap) / cols, 0.1)
     fig.subplots_adjust(left=left / w, right=1 - right / w, bottom=bottom / h, top=1 - top / h,
                         hspace=hgap / ax_h, wspace=wgap / ax_w)
+    # at most 5 intervals on an x axis narrower than 4 inches (matplotlib's default fits
+    # one per 27 points: 9 ticks, each a Tick of five artists created and drawn, on
+    # every panel of a grid); an integer or fixed locator is kept
+    x_bins = 5 if ax_w < 4.0 else 8
     for ax in axes.ravel():
         if ax.get_yscale() == "linear":
             ax.yaxis.set_major_locator(MaxNLocator(nbins=4 if ax_h < 1.6 else 6))
+        locator = ax.xaxis.get_major_locator()
+        if ax.get_xscale() == "linear" and isinstance(locator, MaxNLocator):
+            locator.set_params(nbins=x_bins)
 
 
 def simulated_output(model, data, x0="estimate"):

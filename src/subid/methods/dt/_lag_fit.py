@@ -91,6 +91,9 @@ LAG_PRODUCTS = "lag products"
 LAG_TOLERANCE = 1e-16
 #: Largest lag L used (the lag products are computed up to min(MAX_LAG, N // 4)).
 MAX_LAG = 16384
+#: Lags computed at once (:class:`LagProducts`, :func:`merged`): those of poles of radius
+#: up to 0.991; the others up to MAX_LAG when a candidate first needs them.
+FIRST_LAGS = 4096
 #: Records shorter than this are not reduced to lag products: a pass over them costs
 #: less than the evaluation at the poles (and their lags rarely cover a slow pole).
 MIN_SAMPLES = 4096
@@ -119,9 +122,12 @@ def merged(blocks, records, groups):
     ``blocks`` (IOData) whose indices ``groups`` lists, from one FFT per block and one
     per boundary between blocks instead of one per record: the lag sums of a
     concatenation are those of its blocks plus the products that straddle each
-    boundary (those of the window of K samples either side, minus those within each
-    half). None for a record shorter than :data:`MIN_SAMPLES`; None altogether when a
-    block is shorter than the largest lag needed (a lag could straddle two boundaries)."""
+    boundary (:func:`straddle_correlations` of the samples either side). The first
+    :data:`FIRST_LAGS` lags are computed at once, the others (up to each record's
+    ``max_lag``) for all the records together when a candidate first needs them
+    (:meth:`LagProducts.lags`). None for a record shorter than :data:`MIN_SAMPLES`;
+    None altogether when a block is shorter than the largest lag kept (a lag could
+    straddle two boundaries)."""
     if all(r.n_samples < MIN_SAMPLES for r in records):
         return [None] * len(records)
     lengths = [b.n_samples for b in blocks]
@@ -129,23 +135,69 @@ def merged(blocks, records, groups):
     K = max(caps)
     if min(lengths) < K:
         return None
-    sums = [correlations(b.u, b.y, K) for b in blocks]
-    straddle = []
-    for left, right in zip(blocks[:-1], blocks[1:]):
-        lu, ly, ru, ry = left.u[-K:], left.y[-K:], right.u[:K], right.y[:K]
-        whole = correlations(np.vstack([lu, ru]), np.vstack([ly, ry]), K)
-        a, b = correlations(lu, ly, K), correlations(ru, ry, K)
-        straddle.append((whole[0] - a[0] - b[0], whole[1] - a[1] - b[1]))
-    out = []
-    for record, group, cap in zip(records, groups, caps):
-        if record.n_samples < MIN_SAMPLES:
-            out.append(None)
-            continue
-        G = sum(sums[i][0] for i in group) + sum(straddle[i][0] for i in group[:-1])
-        R = sum(sums[i][1] for i in group) + sum(straddle[i][1] for i in group[:-1])
-        Y = sum(sums[i][2] for i in group)
-        out.append(LagProducts.from_sums(record.u, record.y, (G, R, Y), cap))
+
+    def sums_up_to(lags):
+        sums = [correlations(b.u, b.y, lags) for b in blocks]
+        straddle = [straddle_correlations(left.u[-lags:], right.u[:lags], right.y[:lags], lags)
+                    for left, right in zip(blocks[:-1], blocks[1:])]
+        out = []
+        for group in groups:
+            G = sum(sums[i][0] for i in group) + sum(straddle[i][0] for i in group[:-1])
+            R = sum(sums[i][1] for i in group) + sum(straddle[i][1] for i in group[:-1])
+            Y = sum(sums[i][2] for i in group)
+            out.append((G, R, Y))
+        return out
+
+    first = min(K, FIRST_LAGS)
+    out = [None if record.n_samples < MIN_SAMPLES else
+           LagProducts.from_sums(record.u, record.y, sums, cap)
+           for record, cap, sums in zip(records, caps, sums_up_to(first))]
+    if first < K:
+        def extend():                     # every record's lags up to its max_lag, once
+            for lp, (G, R, _) in zip(out, sums_up_to(K)):
+                if lp is not None:
+                    lp.G, lp.R = G[:lp.max_lag + 1], R[:lp.max_lag + 1]
+                    lp.extend = None
+        for lp in out:
+            if lp is not None and lp.G.shape[0] <= lp.max_lag:
+                lp.extend = extend
     return out
+
+
+def straddle_correlations(left_u, right_u, right_y, max_lag):
+    """``(Γ, R)`` of the pairs that straddle a boundary: ``Γ[e] = sum u(s) u(s+e)^T`` and
+    ``R[k] = sum_t y(t) u(t-k)^T`` over the pairs with ``s`` (``t - k``) among the samples
+    ``left_u`` just before it and ``s + e`` (``t``) among the samples just after it
+    (``right_u``, ``right_y``), lags 0..max_lag: the cross-correlations of the two
+    sides, each zero-padded to the other's length, by one FFT of each signal (the
+    products of the window across the boundary minus those of its halves took three
+    FFT correlations)."""
+    K = left_u.shape[0]
+    nfft = scipy.fft.next_fast_len(2 * K + max_lag + 1, real=True)
+    # the left samples at 0..K-1 and the right ones at K..2K-1 of one time axis
+    Lc = np.conj(scipy.fft.rfft(left_u, nfft, axis=0))
+    Ru = scipy.fft.rfft(np.vstack([np.zeros_like(right_u), right_u]), nfft, axis=0)
+    Ry = scipy.fft.rfft(np.vstack([np.zeros_like(right_y), right_y]), nfft, axis=0)
+    G = scipy.fft.irfft(Lc[:, :, None] * Ru[:, None, :], nfft, axis=0)[:max_lag + 1]
+    R = scipy.fft.irfft(Ry[:, :, None] * Lc[:, None, :], nfft, axis=0)[:max_lag + 1]
+    G[0] = 0.0                          # no pair at lag 0 straddles the boundary
+    R[0] = 0.0
+    return G, R
+
+
+def straddle_correlations_reference(left_u, right_u, right_y, max_lag):
+    """Plain sums behind :func:`straddle_correlations` (the tests compare them)."""
+    u = np.vstack([left_u, right_u])
+    y = np.vstack([np.zeros((left_u.shape[0], right_y.shape[1])), right_y])
+    K, nu = left_u.shape
+    G = np.zeros((max_lag + 1, nu, nu))
+    R = np.zeros((max_lag + 1, right_y.shape[1], nu))
+    for e in range(1, max_lag + 1):
+        s = np.arange(max(K - e, 0), K)          # s on the left, s + e on the right
+        s = s[s + e < u.shape[0]]
+        G[e] = u[s].T @ u[s + e]
+        R[e] = y[s + e].T @ u[s]
+    return G, R
 
 
 def correlations_reference(u, y, max_lag):
@@ -162,19 +214,34 @@ def correlations_reference(u, y, max_lag):
 
 class LagProducts:
     """The lag products of one record (:func:`correlations`) up to ``max_lag``, and the
-    record itself (its first and last samples enter the edge terms)."""
+    record itself (its first and last samples enter the edge terms). The first
+    :data:`FIRST_LAGS` lags are computed at once, the others when a candidate's poles
+    first need them (:meth:`lags`)."""
 
     def __init__(self, u, y, max_lag=MAX_LAG):
         self.u = np.ascontiguousarray(u, dtype=float)
         self.y = np.ascontiguousarray(y, dtype=float)
         self.n_samples = self.u.shape[0]
         self.max_lag = max(min(int(max_lag), self.n_samples // 4), 0)
-        self.G, self.R, self.Y = correlations(self.u, self.y, self.max_lag)
+        self.G, self.R, self.Y = correlations(self.u, self.y, min(self.max_lag, FIRST_LAGS))
+        self.extend = self._extend if self.max_lag > FIRST_LAGS else None
+
+    def _extend(self):
+        self.G, self.R, _ = correlations(self.u, self.y, self.max_lag)
+        self.extend = None
+
+    def lags(self, L):
+        """``(Γ, R)`` for the lags 0..L (``L <= max_lag``), computing the lags past those
+        kept so far first where needed."""
+        if L >= self.G.shape[0] and self.extend is not None:
+            self.extend()
+        return self.G[:L + 1], self.R[:L + 1]
 
     @classmethod
     def from_sums(cls, u, y, sums, max_lag):
         """The lag products of the record ``(u, y)`` whose lag sums ``(Γ, R, Y)`` are
-        already known (up to at least ``min(max_lag, N // 4)``)."""
+        known up to ``min(max_lag, N // 4)`` or, with ``extend`` set on the result, up
+        to fewer lags."""
         out = cls.__new__(cls)
         out.u = np.ascontiguousarray(u, dtype=float)
         out.y = np.ascontiguousarray(y, dtype=float)
@@ -182,6 +249,7 @@ class LagProducts:
         out.max_lag = max(min(int(max_lag), out.n_samples // 4), 0)
         G, R, out.Y = sums
         out.G, out.R = G[:out.max_lag + 1], R[:out.max_lag + 1]
+        out.extend = None
         return out
 
     @classmethod
@@ -290,7 +358,7 @@ def fit_b_d_x0(A, C, lp: LagProducts, output_weights, *, feedthrough=True, estim
     L = md.L
     w = np.ones(ny) if output_weights is None else np.asarray(output_weights, dtype=float)
     w2 = w * w
-    G, R, u, y = lp.G[:L + 1], lp.R[:L + 1], lp.u, lp.y
+    (G, R), u, y = lp.lags(L), lp.u, lp.y
     CW2 = C.T * w2[None, :]                          # C^T W^2 (n, ny)
     P = md.gramian(C * w[:, None], C * w[:, None])
     P = 0.5 * (P + P.T)
@@ -352,7 +420,7 @@ def error_power(A, B, C, D, lp: LagProducts, weights, inv_scale):
     if md is None:
         return None
     L = md.L
-    G, R, u, y = lp.G[:L + 1], lp.R[:L + 1], lp.u, lp.y
+    (G, R), u, y = lp.lags(L), lp.u, lp.y
     CV = C @ md.V                                    # (ny, n)
     WB = md.Wm @ B                                   # (n, nu)
     g = md.poly(G)                                   # (l, a, b)

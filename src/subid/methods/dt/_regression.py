@@ -140,22 +140,29 @@ def dual_rows(A, C, u, V0, M0, n_x0):  # pragma: no cover - compiled
             for j in range(nu):
                 for m in range(n):
                     rows[t, i, n_x0 + j * n + m] = V[i, j, m]
+        # each sum in the order C u, then k = 0..n-1; the loop over m innermost (the
+        # rows of A contiguous: vectorised, the same sums to the last bit)
         for i in range(ny):
             for j in range(nu):
                 ut = u[t, j]
                 for m in range(n):
-                    acc = C[i, m] * ut
-                    for k in range(n):
-                        acc += V[i, j, k] * A[k, m]
-                    Vn[i, j, m] = acc
+                    Vn[i, j, m] = C[i, m] * ut
+                for k in range(n):
+                    v = V[i, j, k]
+                    for m in range(n):
+                        Vn[i, j, m] += v * A[k, m]
         V, Vn = Vn, V
         if n_x0:
             for i in range(ny):
                 for m in range(n):
-                    acc = 0.0
-                    for k in range(n):
-                        acc += M[i, k] * A[k, m]
-                    Mn[i, m] = acc if abs(acc) >= TINY else 0.0
+                    Mn[i, m] = 0.0
+                for k in range(n):
+                    v = M[i, k]
+                    for m in range(n):
+                        Mn[i, m] += v * A[k, m]
+                for m in range(n):
+                    if abs(Mn[i, m]) < TINY:
+                        Mn[i, m] = 0.0
             M, Mn = Mn, M
     return rows, V, M
 

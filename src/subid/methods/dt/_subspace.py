@@ -158,7 +158,7 @@ def output_weights(y: np.ndarray) -> np.ndarray:
     fit because of its units (a constant output cannot reach here:
     :func:`check_data` rejects it).
     """
-    std = column_std(y)
+    std = column_std(y, block=8192)      # channel by channel from 8192 samples (cheaper)
     return 1.0 / np.where(std > 0, std, 1.0)
 
 

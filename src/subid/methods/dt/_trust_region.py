@@ -41,6 +41,7 @@ MESSAGES = {
     2: "`ftol` termination condition is satisfied.",
     3: "`xtol` termination condition is satisfied.",
     4: "Both `ftol` and `xtol` termination conditions are satisfied.",
+    5: "the Gauss-Newton decrement is below `decrement_tol` (statistical precision).",
 }
 
 
@@ -153,7 +154,8 @@ def compress(J, f):
     return R, qtf, g, norms, "qr"
 
 
-def trust_region_least_squares(fun, jac, x0, *, ftol, xtol, gtol, max_nfev, exact=False):
+def trust_region_least_squares(fun, jac, x0, *, ftol, xtol, gtol, max_nfev, exact=False,
+                               decrement_tol=0.0):
     """Minimise ``0.5 ||fun(x)||^2`` as :func:`scipy.optimize.least_squares` with
     ``method='trf'``, ``tr_solver='exact'``, ``x_scale='jac'`` and no bounds
     does, on the compressed Jacobian (module docstring).
@@ -172,6 +174,12 @@ def trust_region_least_squares(fun, jac, x0, *, ftol, xtol, gtol, max_nfev, exac
         Bound on the evaluations of ``fun``.
     exact : bool
         Take the SVD of the whole Jacobian as scipy does (for the tests).
+    decrement_tol : float
+        Stop (status 5) at an iterate whose Gauss-Newton decrement
+        ``0.5 ||U^T f||^2`` (the decrease of ``0.5 ||f||^2`` the full Gauss-Newton
+        step predicts, ``J = U diag(s) V^T``) is below this; 0 (default): scipy's
+        tests alone. :func:`subid.identify` sets it from the statistical
+        precision of the criterion (:func:`subid.methods.dt.pem.statistical_precision`).
 
     Returns
     -------
@@ -215,6 +223,9 @@ def trust_region_least_squares(fun, jac, x0, *, ftol, xtol, gtol, max_nfev, exac
         U, s, VT = scipy.linalg.svd(R_h, full_matrices=False, check_finite=False)
         V = VT.T
         uf = U.T @ qtf
+        if 0.5 * float(uf @ uf) < decrement_tol:
+            status = 5
+            break
         actual_reduction = -1.0
         while actual_reduction <= 0 and nfev < max_nfev:
             step_h, alpha, _ = trust_region_step(n, m, uf, s, V, Delta, initial_alpha=alpha)

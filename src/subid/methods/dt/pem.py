@@ -57,7 +57,7 @@ from subid.methods.dt import _trust_region
 from subid.methods.dt._covariance import covariance_factor
 from subid.methods.dt.checks import check_data
 from subid.model import _simulate
-from subid.model._sensitivity import jacobian
+from subid.model._sensitivity import free_response, jacobian
 from subid.model.statespace import StateSpace
 
 __all__ = ["pem"]
@@ -167,12 +167,18 @@ def _directions(layout, basis, A, B, C, D, K, focus):
 
 
 def _start_x0(Ap, Bp, C, Dp, v, y):
-    """Least-squares initial state of the predictor (affine in x0)."""
+    """Least-squares initial state of the predictor (affine in x0): the forced response
+    from a zero state, and the free responses ``C Ap^t e_i``
+    (:func:`subid.model._sensitivity.free_response`, zero once decayed below 1e-150
+    of their start, so the fit uses the samples before that)."""
     n = Ap.shape[0]
     forced = _simulate.simulate_discrete(Ap, Bp, C, Dp, v, np.zeros(n))[0]
-    free = np.stack([_simulate.simulate_discrete(Ap, np.zeros_like(Bp), C, np.zeros_like(Dp),
-                                                 v, e)[0] for e in np.eye(n)], axis=-1)
-    x0 = scipy.linalg.lstsq(free.reshape(-1, n), (y - forced).reshape(-1),
+    free = free_response(Ap, C, np.eye(n), v.shape[0])
+    alive = np.flatnonzero(np.any(free.reshape(free.shape[0], -1) != 0, axis=1))
+    if not alive.size:                   # the state never reaches the output
+        return np.zeros(n)
+    T = int(alive[-1]) + 1
+    x0 = scipy.linalg.lstsq(free[:T].reshape(-1, n), (y[:T] - forced[:T]).reshape(-1),
                             lapack_driver="gelsy", check_finite=False)[0]
     return x0
 
@@ -189,7 +195,8 @@ def _radius(M) -> float:
     return float(np.abs(np.linalg.eigvals(M)).max())
 
 
-def _round(model_mats, x0, data, focus, W, layout, max_nfev, tolerance, history, penalty):
+def _round(model_mats, x0, data, focus, W, layout, max_nfev, tolerance, history, penalty,
+           decrement_tol=0.0):
     """One least-squares run in local coordinates at ``model_mats``; ``x0`` has one
     row per experiment (each experiment is predicted from its own initial state)."""
     A0, B0, C0, D0, K0 = model_mats
@@ -209,7 +216,7 @@ def _round(model_mats, x0, data, focus, W, layout, max_nfev, tolerance, history,
 
     z, res = minimise_prediction_error(predictor, directions, dm, x0, v, data.y,
                                        data.experiment_ranges, W, max_nfev, tolerance,
-                                       history, penalty)
+                                       history, penalty, decrement_tol=decrement_tol)
     return mats(z[:dm]), x0 + z[dm:].reshape(x0.shape), res
 
 
@@ -244,7 +251,8 @@ def block_jacobian(mats, v, x0, dirs, blocks, dm):
 
 
 def minimise_prediction_error(predictor, directions, dm, x0, v, y, ranges, W, max_nfev,
-                              tolerance, history, penalty, fit_x0=True, blocks=None):
+                              tolerance, history, penalty, fit_x0=True, blocks=None,
+                              decrement_tol=0.0):
     """Minimise ``1/(2N) sum ||W (y - ŷ)||^2`` over ``dm`` model coordinates and the
     initial states.
 
@@ -264,7 +272,10 @@ def minimise_prediction_error(predictor, directions, dm, x0, v, y, ranges, W, ma
     of ``Bp`` and columns of ``C`` (an output-error model, one block per
     input); the sensitivities are then run block by block
     (:func:`block_jacobian`), which gives the same Jacobian at a fraction of
-    the cost.
+    the cost. ``decrement_tol`` (optional): stop where the Gauss-Newton step
+    predicts a decrease of the criterion below it
+    (:func:`subid.methods.dt._trust_region.trust_region_least_squares`;
+    :func:`statistical_precision`).
 
     Returns
     -------
@@ -330,7 +341,8 @@ def minimise_prediction_error(predictor, directions, dm, x0, v, y, ranges, W, ma
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
         res = _trust_region.trust_region_least_squares(
-            fun, jac, z0, ftol=tolerance, xtol=tolerance, gtol=tolerance, max_nfev=max_nfev)
+            fun, jac, z0, ftol=tolerance, xtol=tolerance, gtol=tolerance, max_nfev=max_nfev,
+            **({"decrement_tol": decrement_tol} if decrement_tol > 0 else {}))
     return res.x, res
 
 
@@ -438,6 +450,48 @@ def pem(data, model, *, focus="prediction", max_iterations=100, tolerance=1e-8, 
     return _with_covariance(refined, model, data, focus, feedthrough)
 
 
+#: :func:`refine`'s stopping point: the Gauss-Newton decrement below this fraction of
+#: the criterion's statistical scale (:func:`statistical_precision`).
+PRECISION = 1e-3
+
+
+def statistical_precision(n_parameters: int, n_samples: int, fraction: float) -> float:
+    """``fraction * d / (2 N)``: a decrease of the criterion the data cannot resolve.
+
+    With the errors whitened by ``W`` (unit covariance at the start), the
+    criterion at the true parameters exceeds its minimum by
+    ``0.5 (θ0 - θ̂)^T V'' (θ0 - θ̂)``, whose expectation is ``d / (2 N)`` for
+    ``d`` parameters, since ``Cov(θ̂) = V''^-1 / N`` (Ljung, *System
+    Identification*, 2nd ed., 1999, Sec. 9.2 and Theorem 9.1). An iterate whose
+    Gauss-Newton decrement (the decrease the full step predicts,
+    ``0.5 (θ - θ̂)^T V'' (θ - θ̂)`` near the minimum) is below ``fraction`` of
+    that scale lies ``sqrt(fraction)`` estimation standard deviations (in the
+    ``V''`` metric) from the minimum, adding ``fraction`` to the mean squared
+    parameter error: with ``fraction = 1e-3`` the estimate keeps its efficiency
+    to 0.1 %. A stopping rule in the scale of the problem (Dennis and Schnabel,
+    *Numerical Methods for Unconstrained Optimization and Nonlinear Equations*,
+    1996, Sec. 7.2), the scale here being the statistical one.
+    """
+    return fraction * n_parameters / (2.0 * n_samples)
+
+
+def refine(data, model, focus, *, held_out=False):
+    """:func:`pem` (default options) on a discrete-time start identified by a subspace
+    method, stopped at the statistical precision of the criterion
+    (:func:`statistical_precision` with :data:`PRECISION`): the refinement of
+    :func:`subid.identify`. ``held_out=True``: a fold model that is only scored
+    (simulation or one-step prediction fit), so neither the parameter covariance
+    nor (``focus='simulation'``) the re-estimated K is computed. Raises as
+    :func:`pem` does."""
+    if input_delay_of(model) is not None or model.is_continuous:
+        return pem(data, model, focus=focus)
+    refined = _pem_dt(data, model, focus, 100, 1e-8, 3, None, precision=PRECISION,
+                      noise_model=not held_out)
+    if held_out:
+        return refined
+    return _with_covariance(refined, model, data, focus, None)
+
+
 def _start_gain(data, model):
     """K of the starting model: its own, the state-sequence estimate, or zero."""
     if model.K is not None and _radius(model.A - model.K @ model.C) < STABILITY_LIMIT:
@@ -458,7 +512,12 @@ def _start_gain(data, model):
                      "was found for it; start from another model")
 
 
-def _pem_dt(data, model, focus, max_iterations, tolerance, rounds, feedthrough):
+def _pem_dt(data, model, focus, max_iterations, tolerance, rounds, feedthrough, *,
+            precision=None, noise_model=True):
+    """:func:`pem` on discrete-time data; ``precision`` (optional) the fraction of the
+    criterion's statistical scale at which the iteration stops
+    (:func:`statistical_precision`); ``noise_model=False``: no K re-estimated after a
+    simulation-focus fit."""
     n, nu, ny = model.order, model.n_inputs, model.n_outputs
     N = data.n_samples
     with_d = bool(np.any(model.D != 0)) if feedthrough is None else bool(feedthrough)
@@ -516,17 +575,22 @@ def _pem_dt(data, model, focus, max_iterations, tolerance, rounds, feedthrough):
     stop_reason = "the start fits the data to rounding (noise-free): kept unchanged"
     n_eval = 0
     best_cost = start_cost
+    decrement_tol = 0.0 if precision is None else \
+        statistical_precision(n_params + (len(ranges) - 1) * n, N, precision)
     if not exact:
         for _ in range(rounds):
             new, new_x0, res = _round(cur, cur_x0, data, focus, W, layout, max_iterations,
-                                      tolerance, history, penalty)
+                                      tolerance, history, penalty, decrement_tol)
             n_eval += int(res.nfev)
             stop_reason = str(res.message)
             if not (res.cost < best_cost):
                 break
             gain = (best_cost - res.cost) / max(best_cost, 1e-300)
             cur, cur_x0, best_cost = new, new_x0, float(res.cost)
-            if gain < tolerance or res.status == 0:
+            # status 5: the Gauss-Newton decrement is below the statistical precision; a
+            # new round's coordinates span the same tangent space, so its first decrement
+            # would be the same
+            if gain < tolerance or res.status in (0, 5):
                 break
     accepted = [start_cost]                  # strictly decreasing costs of accepted iterates
     for h in history[1:] + [best_cost]:
@@ -563,7 +627,7 @@ def _pem_dt(data, model, focus, max_iterations, tolerance, rounds, feedthrough):
     from subid.methods.dt.noise_model import with_factor
     from subid.statistic.hankel import HankelStatistic
     h = max(5, -(-n // ny) + 2)
-    if N >= 2 * h * (nu + ny + 1):
+    if noise_model and N >= 2 * h * (nu + ny + 1):
         return with_factor(refined, HankelStatistic.from_data(data, 2 * h).factor())
     return refined
 

@@ -113,8 +113,9 @@ fold (every channel's F-tests from one factorisation per regressor set), the
 validation records' weights and spreads once for every horizon, and, on records
 of at least :data:`subid.methods.dt._lag_fit.MIN_SAMPLES` samples, the lag
 products of every training and validation record (``Γ(e) = sum u u^T``, ``R(k) =
-sum y u^T`` up to 16,384 lags; one FFT per block of :func:`_blocks_of_folds` and
-per boundary between blocks, :func:`subid.methods.dt._lag_fit.merged`). Per
+sum y u^T`` up to 16,384 lags, the first 4,096 at once and the others when a
+candidate's poles need them; one FFT per block of :func:`_blocks_of_folds` and one
+cross-correlation per boundary between blocks, :func:`subid.methods.dt._lag_fit.merged`). Per
 candidate: its A and C, its B, D, x0 regression on its training fold and its
 simulation score on its validation block. For a stable, diagonalisable A whose
 poles decay below rounding within the lags kept, both come from the lag products
@@ -128,15 +129,22 @@ rounding, records of several experiments or shorter ones) one pass over the
 training fold (the modal normal equations) and one compiled simulation of the
 validation block (:mod:`subid.methods.dt._scoring`); an unstable A that
 ``stability='auto'`` would not keep is not fitted
-(:mod:`subid.methods.dt._residual_bound`). Measured (``bench/run.py
+(:mod:`subid.methods.dt._residual_bound`: a lower bound of its residual from part of
+the rows, the cheapest first by how fast A grows). Measured (``bench/run.py
 --selection-only``, 2x2 order-4 system, 20 dB, CPU time, three runs;
-bench/results.md): the default call costs 7.6-9.1x the pinned call at 10^3 samples
-(records too short for the lag products) and 6.4-7.8x at 10^4 (when the pinned call
-cross-validated its two estimators), 20-24.5x at 10^5 (34-46x before) and 7.3-8.8x at
-10^6 (the folds use at most :data:`MAX_SELECTION_SAMPLES`): the per-candidate work no
-longer grows with N, but 80 candidate models (orders x horizons x folds; 160 when
-both estimators were scored), each about a millisecond of subspace steps and
-bookkeeping, remain.
+bench/results.md; the pinned call fits no fold): the default call costs 20-25x the
+pinned call at 10^3 and 10^4 samples (2.2-3.0x and 0.31-0.36x SIPPY's AIC order
+search), 18.7-20.1x at 10^5 (34-46x before the lag products) and 5.3-6.0x at 10^6 (the
+folds use at most :data:`MAX_SELECTION_SAMPLES`): the per-candidate work no longer
+grows with N, but 80 candidate models (orders x horizons x folds), each about a
+millisecond of subspace steps, regression, score and bookkeeping (Python calls on
+matrices of order 10), remain. Stopping the order search once the criterion has not
+improved for k orders (measured on the candidates' saved scores,
+``bench/selection_identity.py``) would change the choice on DaISy records (k = 3:
+CD_player_arm, powerplant and winding with N4SID; k = 4: CD_player_arm and winding,
+e.g. N4SID on winding order 10 -> 5) while scoring only 15 % (k = 3) or 9 % (k = 4)
+fewer candidates: the criterion of real records has late minima, so the search is not
+cut.
 """
 
 from __future__ import annotations

@@ -1,0 +1,162 @@
+"""Ticks, tick labels and grid lines of a finished figure drawn as a few artists per axis.
+
+matplotlib draws every tick as a ``Tick``: five artists (two marks, a grid line, two
+labels) created, copied from the first tick and laid out at each draw. On the panel
+grids of a report (30 Bode panels of a 5-input, 3-output record) that is most of the
+drawing time (bench/demo_profile.md): the axes, their ticks and their text, not the
+data. :func:`light_ticks` replaces them, on a figure about to be saved, by what they
+draw: per axis one line of tick marks (markers), one collection of grid lines and
+one text per tick label, at the positions and labels the axis' own locator and
+formatter give for its final limits, styled as its first tick, and moves the axis
+label as far from the spine as the tick labels reach (what matplotlib does at each
+draw). The image is the same up to the anti-aliasing of single pixels.
+
+An axis whose ticks this does not reproduce keeps matplotlib's, and so do the axes
+that share its locator: hidden axes, axes that are not rectilinear or fix their
+aspect ratio (their limits change at draw time), ticks, labels or the axis label on
+the second side (top, right), an offset or scale factor of the formatter (``1e-5``),
+labelled minor ticks. Only the report's images use this (``report.figure_html``): the
+figures :mod:`subid.plot` returns keep matplotlib's ticks.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["light_ticks"]
+
+
+def light_ticks(fig, renderer) -> int:
+    """Replace the tick machinery of every axis of ``fig`` that allows it (module doc).
+
+    Parameters
+    ----------
+    fig : matplotlib.figure.Figure
+        A finished figure (limits, labels, layout): called just before it is saved.
+    renderer : matplotlib.backend_bases.RendererBase
+        The renderer it will be drawn with (tick-label extents).
+
+    Returns
+    -------
+    int
+        The number of axes (x or y) replaced.
+    """
+    plans, kept = [], set()
+    for ax in fig.axes:
+        for axis in (ax.xaxis, ax.yaxis):
+            plan = None
+            if ax.name == "rectilinear" and ax.get_aspect() == "auto" and ax.get_visible() \
+                    and axis.get_visible():
+                plan = _plan(ax, axis)
+            if plan is None:
+                kept.add(id(axis.major))
+            else:
+                plans.append(plan)
+    # shared axes share their locators (``axis.major``): replaced only when every axis
+    # sharing them is, and after every plan is made
+    plans = [p for p in plans if id(p[1].major) not in kept]
+    from matplotlib.ticker import NullLocator
+    for ax, axis, artists in plans:
+        axis.set_major_locator(NullLocator())
+        axis.set_minor_locator(NullLocator())
+        for artist in artists:
+            if artist.get_label() == "_light_grid":         # clipped to the axes
+                ax.add_artist(artist)
+            else:       # outside the axes: on the figure, without a clip path to set up
+                fig.add_artist(artist, clip=False)
+    for ax, axis, artists in plans:
+        _move_label(ax, axis, [a for a in artists if a.get_label() == "_light_label"],
+                    renderer, fig.dpi)
+    return len(plans)
+
+
+def _in_view(axis, locs):
+    """Which ``locs`` lie inside the axis' view interval (those ``Axis._update_ticks``
+    draws), as a boolean mask."""
+    low, high = sorted(axis.get_view_interval())
+    transform = axis.get_transform()
+    lo_t, hi_t = transform.transform([low, high])
+    with np.errstate(all="ignore"):
+        values = transform.transform(np.asarray(locs, dtype=float))
+    tol = 1e-10 * abs(hi_t - lo_t)
+    return np.isfinite(values) & (values >= lo_t - tol) & (values <= hi_t + tol)
+
+
+def _plan(ax, axis):
+    """``(ax, axis, artists)`` drawing the axis' ticks, or None to keep matplotlib's."""
+    from matplotlib.collections import LineCollection
+    from matplotlib.lines import Line2D
+    from matplotlib.text import Text
+    from matplotlib.ticker import NullLocator
+    x = axis.axis_name == "x"
+    if axis.get_label_position() != ("bottom" if x else "left"):
+        return None
+    major = axis.majorTicks[0]
+    zorder = axis.get_zorder()
+    if major.tick2line.get_visible() or major.label2.get_visible():
+        return None
+    artists = []
+    groups = [(axis.major.formatter, major, True)]
+    if not isinstance(axis.get_minor_locator(), NullLocator):
+        groups.append((axis.minor.formatter, axis.minorTicks[0], False))
+    for formatter, tick, is_major in groups:
+        if tick.tick2line.get_visible() or tick.label2.get_visible():
+            return None
+        locs = np.asarray(axis.get_majorticklocs() if is_major else axis.get_minorticklocs(),
+                          dtype=float)
+        labels = formatter.format_ticks(locs) if len(locs) else []
+        if callable(getattr(formatter, "get_offset", None)) and formatter.get_offset():
+            return None
+        keep = _in_view(axis, locs) if len(locs) else np.zeros(0, bool)
+        locs, labels = locs[keep], [s for s, k in zip(labels, keep) if k]
+        if not is_major and tick.label1.get_visible() and any(labels):
+            return None
+        if not len(locs):
+            continue
+        zeros = np.zeros(locs.size)
+        frame = ax.get_xaxis_transform() if x else ax.get_yaxis_transform()
+        points = (locs, zeros) if x else (zeros, locs)
+        grid = tick.gridline
+        if grid.get_visible():
+            ends = ([[(v, 0.0), (v, 1.0)] for v in locs] if x else
+                    [[(0.0, v), (1.0, v)] for v in locs])
+            artists.append(LineCollection(
+                ends, colors=[grid.get_color()], linewidths=grid.get_linewidth(),
+                linestyles=grid.get_linestyle(), alpha=grid.get_alpha(), transform=frame,
+                zorder=zorder, label="_light_grid"))
+        mark = tick.tick1line
+        if mark.get_visible():
+            artists.append(Line2D(
+                *points, linestyle="None", marker=mark.get_marker(),
+                markersize=mark.get_markersize(), markeredgewidth=mark.get_markeredgewidth(),
+                color=mark.get_color(), markeredgecolor=mark.get_markeredgecolor(),
+                transform=frame, zorder=zorder, label="_light_mark"))
+        text = tick.label1
+        if text.get_visible():
+            for px, py, s in zip(*points, labels):
+                if s:
+                    artists.append(Text(
+                        px, py, s, fontproperties=text.get_fontproperties(),
+                        color=text.get_color(), rotation=text.get_rotation(),
+                        horizontalalignment=text.get_horizontalalignment(),
+                        verticalalignment=text.get_verticalalignment(),
+                        transform=text.get_transform(), zorder=zorder,
+                        label="_light_label"))
+    return ax, axis, artists
+
+
+def _move_label(ax, axis, texts, renderer, dpi) -> None:
+    """Place the axis label beyond the tick labels, as matplotlib's own layout does."""
+    if not texts or not axis.label.get_text() or not axis.label.get_visible():
+        return
+    boxes = [t.get_window_extent(renderer) for t in texts]
+    if axis.axis_name == "x":
+        edge = ax.spines["bottom"].get_window_extent(renderer).y0 if "bottom" in ax.spines \
+            else ax.get_window_extent(renderer).y0
+        reach = edge - min(b.y0 for b in boxes)
+    else:
+        edge = ax.spines["left"].get_window_extent(renderer).x0 if "left" in ax.spines \
+            else ax.get_window_extent(renderer).x0
+        reach = edge - min(b.x0 for b in boxes)
+    if reach > 0:
+        axis.labelpad += reach * 72.0 / dpi
