@@ -22,6 +22,26 @@ KEEP_UNSTABLE_RATIO = 0.9
 STABLE_RADIUS = 0.9999
 #: Output growth (RMS of the last tenth over the first) above which data "grow".
 GROWTH_LIMIT = 3.0
+#: How many recent spectral radii :func:`spectral_radius` keeps.
+_RADII_KEPT = 4
+#: The last spectral radii computed, as ``((shape, dtype, bytes), radius)`` pairs.
+_RADII: tuple = ()
+
+
+def spectral_radius(A) -> float:
+    """``max |eig(A)|`` of a square float matrix (``numpy.linalg.eigvals``), the last
+    few kept by content: the steps of one candidate model (the stability rule, the B,
+    D, x0 regression, the model's diagnostics) ask it of the same A several times. The
+    same value as computing it afresh (the same routine on the same bytes)."""
+    global _RADII
+    A = np.asarray(A)
+    key = (A.shape, A.dtype.str, A.tobytes())
+    for k, value in _RADII:
+        if k == key:
+            return value
+    value = float(np.abs(np.linalg.eigvals(A)).max())
+    _RADII = ((key, value),) + _RADII[:_RADII_KEPT - 1]    # one assignment: thread-safe
+    return value
 
 
 def stability_request(stability: str, A, data, method: str) -> bool:
@@ -38,7 +58,7 @@ def stability_request(stability: str, A, data, method: str) -> bool:
     """
     if stability not in STABILITY:
         raise OptionError(f"stability must be one of {STABILITY}, got {stability!r}")
-    if stability == "none" or np.abs(np.linalg.eigvals(A)).max() < 1.0:
+    if stability == "none" or spectral_radius(A) < 1.0:
         return False
     growth = record_growth(data) if isinstance(data, IOData) else None
     if stability == "enforce":

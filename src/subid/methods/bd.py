@@ -49,6 +49,7 @@ import numpy as np
 
 from subid.data import IOData
 from subid.errors import ResourceLimitError, SubidError, TooFewSamplesError
+from subid.methods._stability import spectral_radius
 from subid.methods.dt._regression import fit_b_d_projection
 from subid.methods.dt._regression import fit_b_d_x0 as _fit_record
 from subid.methods.dt._regression import regression_rows as regression_rows
@@ -192,7 +193,7 @@ def fit_b_d_x0(A, C, data, *, bd_method="simulation", feedthrough=True, estimate
     if bd_method == "prediction":
         return _prediction(A, C, data, noise_gain, feedthrough=feedthrough,
                            estimate_x0=estimate_x0, output_weights=output_weights, path=path)
-    radius = float(np.abs(np.linalg.eigvals(A)).max())
+    radius = spectral_radius(A)
     # a statistic whose record can be read again (subid.methods.dt.stream, .distributed)
     second_pass = getattr(data, "output_regression", None)
     if isinstance(data, HankelStatistic) and second_pass is None:   # the statistic only
@@ -323,7 +324,7 @@ def _prediction(A, C, data, K, *, feedthrough, estimate_x0, output_weights, path
             or reg["regression_rank_deficient"]:
         return None
     reg.update({INFO_KEY: "prediction",
-                "spectral_radius": float(np.abs(np.linalg.eigvals(A)).max()),
+                "spectral_radius": spectral_radius(A),
                 "prediction_residual_rms": reg.pop("residual_rms")})
     return B_p, D_p, (x0 if estimate_x0 else None), reg
 

@@ -728,31 +728,30 @@ def regressor_maps(form, n_inputs, n_outputs, *, estimate_x0, feedthrough, t0=0,
     if r_start is None:
         r_start = np.zeros((form.lam.size, nu), dtype=complex)
     P = np.zeros((ny, p + 1, form.signal_count(nu, ny)))
-    states = np.arange(n)
-    for i in range(ny):
-        for l in range(form.lam.size):
-            o = form.offsets[l]
-            pair = not form.is_real[l]
-            k = form.coef[i, l]
-            if nx:
-                kap = k * lam_t0[l]
-                P[i, :n, o] += kap.real
-                if pair:
-                    P[i, :n, o + 1] -= kap.imag
-            for j in range(nu):
-                rows = nx + j * n + states
-                kap = k * r_start[l, j]
-                P[i, rows, o] += kap.real
-                col = n + j * n + o
-                P[i, rows, col] = k.real
-                if pair:
-                    P[i, rows, o + 1] -= kap.imag
-                    P[i, rows, col + 1] = -k.imag
-        base = n * (1 + nu)
-        if feedthrough:
-            for j in range(nu):
-                P[i, q + j * ny + i, base + j] = 1.0
-        P[i, p, base + nu + i] = 1.0
+    # every entry is written once (one mode l, input j and state row per column), by
+    # blocks: the real part at the mode's column, minus the imaginary part at the next
+    # one for a pair
+    o, pair = form.offsets, ~form.is_real
+    op = o[pair] + 1
+    coef = form.coef                                    # (ny, m, n)
+    if nx:
+        kap = (coef * lam_t0[None, :, None]).transpose(0, 2, 1)     # (ny, n, m)
+        P[:, :n, o] = kap.real
+        P[:, :n, op] = -kap.imag[:, :, pair]
+    ct = coef.transpose(0, 2, 1)                        # (ny, n, m)
+    for j in range(nu):
+        rows = slice(nx + j * n, nx + (j + 1) * n)
+        kap = (coef * r_start[None, :, j, None]).transpose(0, 2, 1)
+        P[:, rows, o] = kap.real
+        P[:, rows, op] = -kap.imag[:, :, pair]
+        P[:, rows, n + j * n + o] = ct.real
+        P[:, rows, n + j * n + op] = -ct.imag[:, :, pair]
+    base = n * (1 + nu)
+    outputs = np.arange(ny)
+    if feedthrough:
+        for j in range(nu):
+            P[outputs, q + j * ny + outputs, base + j] = 1.0
+    P[outputs, p, base + nu + outputs] = 1.0
     return P
 
 

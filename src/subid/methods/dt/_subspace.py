@@ -51,6 +51,7 @@ from subid.methods._stability import (  # noqa: F401 (names of this module's API
     output_growth,
     record_growth,
     reflect_unstable_poles,
+    spectral_radius,
     stability_request,
     stable_shift_invariance,
 )
@@ -188,7 +189,7 @@ def b_d_fit(problem: "Problem", C_n, gamma, L11, L_yu, *, bd_method: str, feedth
                              estimate_x0=estimate_x0)
             if fitted is not None:
                 fitted[3].update({INFO_KEY: "simulation",
-                                  "spectral_radius": float(np.abs(np.linalg.eigvals(A)).max())})
+                                  "spectral_radius": spectral_radius(A)})
                 return fitted[0], fitted[1], fitted[2] if estimate_x0 else None, fitted[3]
         return fit_b_d_x0(A, C, problem.data, bd_method=bd_method, feedthrough=feedthrough,
                           estimate_x0=estimate_x0, output_weights=weights,
@@ -301,7 +302,7 @@ def stable_choice(A_q, Q, n_outputs: int, fit, *, stability: str, data, method: 
     A_q, (B, D, x0, diagnostics), record
         ``record`` is ``info['stability']``.
     """
-    before = float(np.abs(np.linalg.eigvals(A_q)).max())
+    before = spectral_radius(A_q)
     record = {"requested": stability, "action": "none", "spectral_radius_before": before}
 
     def unstable(fitted):
@@ -322,7 +323,7 @@ def stable_choice(A_q, Q, n_outputs: int, fit, *, stability: str, data, method: 
         how = {"how": "regularised shift invariance (Maciejowski 1995)", "regularization": c}
     fitted_s = fit(A_s)
     record.update(action="enforced", **how,
-                  spectral_radius_after=float(np.abs(np.linalg.eigvals(A_s)).max()))
+                  spectral_radius_after=spectral_radius(A_s))
     record["how"] += "; B, D, x0 refitted for the stable A"
     if stability == "auto":
         r_s = fitted_s[3].get("residual_rms")
@@ -368,7 +369,7 @@ def _initial_state_one(A, B, C, D, data, output_std):
     # The free response C A^t x0 of a stable A falls below 1e-18 of its start after
     # `decay` samples: beyond them the samples carry no information on x0 (to rounding),
     # so the regression runs on that prefix only (bounded time and memory).
-    radius = float(np.abs(np.linalg.eigvals(A)).max()) if A.size else 0.0
+    radius = spectral_radius(A) if A.size else 0.0
     used = data
     if radius < 1.0:
         decay = A.shape[0] + 1 if radius == 0.0 else \
@@ -535,7 +536,7 @@ def check_stability(A, data, method: str) -> dict:
     data do not show the instability: an over-fitted order or noise, unless
     the plant itself is unstable and was measured in closed loop.
     """
-    radius = float(np.abs(np.linalg.eigvals(A)).max())
+    radius = spectral_radius(A)
     diag = {"spectral_radius": radius}
     if radius < 1 or not isinstance(data, IOData):
         return diag
