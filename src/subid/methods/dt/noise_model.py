@@ -68,6 +68,29 @@ def _oblique(hf: HankelFactor, y_rows, u_rows, w_rows) -> np.ndarray:
     return theta[:, :Wp.shape[0]] @ Wp
 
 
+#: The oblique projections of the last factor and past (:func:`_projections`), as one
+#: ``(factor, past, projections)`` triple: the models of every order of one problem
+#: (:func:`subid.methods.dt.selection.innovation_check`) share them.
+_LAST_PROJECTIONS = [None]
+
+
+def _projections(hf: HankelFactor, p: int):
+    """``(O_p, O_{p+1})``: the oblique projections of the future outputs on the past
+    along the future inputs, with ``p`` and ``p + 1`` past block rows. They depend on
+    the factor only, not on the model: those of the last factor (the same object, kept
+    alive by the reference held here) are reused."""
+    last = _LAST_PROJECTIONS[0]
+    if last is not None and last[0] is hf and last[1] == p:
+        return last[2]
+    s = hf.depth
+    o_p = _oblique(hf, hf.y_rows(p, s), hf.u_rows(p, s),
+                   np.concatenate([hf.u_rows(0, p), hf.y_rows(0, p)]))
+    o_p1 = _oblique(hf, hf.y_rows(p + 1, s), hf.u_rows(p + 1, s),
+                    np.concatenate([hf.u_rows(0, p + 1), hf.y_rows(0, p + 1)]))
+    _LAST_PROJECTIONS[0] = (hf, p, (o_p, o_p1))     # one assignment: safe across threads
+    return o_p, o_p1
+
+
 def _spectral_radius(M) -> float:
     return float(np.abs(np.linalg.eigvals(M)).max()) if M.size else 0.0
 
@@ -106,10 +129,7 @@ def innovation_model(A, B, C, D, hf: HankelFactor, past: int | None = None):
         raise SubidError(f"the noise model needs at least one past block row and "
                          f"(future rows - 1) * n_outputs >= order; depth {s} with {p} past "
                          f"rows and order {n} does not allow it")
-    o_p = _oblique(hf, hf.y_rows(p, s), hf.u_rows(p, s),
-                   np.concatenate([hf.u_rows(0, p), hf.y_rows(0, p)]))
-    o_p1 = _oblique(hf, hf.y_rows(p + 1, s), hf.u_rows(p + 1, s),
-                    np.concatenate([hf.u_rows(0, p + 1), hf.y_rows(0, p + 1)]))
+    o_p, o_p1 = _projections(hf, p)
     gamma = extended_observability(A, C, f)
     x_p = _lstsq(gamma, o_p)
     x_p1 = _lstsq(gamma[:-ny], o_p1)
@@ -155,12 +175,16 @@ def innovation_model(A, B, C, D, hf: HankelFactor, past: int | None = None):
 
 def user_factor(problem) -> HankelFactor:
     """The Hankel factor of a :class:`subid.methods.dt._subspace.Problem` in the user's units."""
-    hf = problem.factor
-    s = hf.depth
-    row_scale = np.concatenate([np.tile(problem.input_scale, s),
-                                np.tile(problem.output_scale, s)])
-    return HankelFactor(L=hf.L * row_scale[:, None], depth=s, n_inputs=hf.n_inputs,
-                        n_outputs=hf.n_outputs, n_columns=hf.n_columns)
+    def make():
+        hf = problem.factor
+        s = hf.depth
+        row_scale = np.concatenate([np.tile(problem.input_scale, s),
+                                    np.tile(problem.output_scale, s)])
+        return HankelFactor(L=hf.L * row_scale[:, None], depth=s, n_inputs=hf.n_inputs,
+                            n_outputs=hf.n_outputs, n_columns=hf.n_columns)
+    # once per problem: the models of its orders then share the factor's projections
+    cached = getattr(problem, "cached", None)
+    return make() if cached is None else cached("user factor", make)
 
 
 def _factor_for(model, problem) -> HankelFactor | None:
