@@ -1,0 +1,43 @@
+"""What the candidates of the order selection share is reused exactly (issue 21, item 6)."""
+
+import dataclasses
+
+import numpy as np
+
+from subid import systems
+from subid.methods._stability import spectral_radius
+from subid.methods.dt.noise_model import innovation_model
+from subid.statistic.hankel import HankelStatistic
+
+
+def test_spectral_radius_is_the_fresh_value_whatever_was_asked_before():
+    r = np.random.default_rng(5)
+    mats = [r.standard_normal((k, k)) for k in (1, 3, 3, 6, 10)]
+    mats.append(mats[1].copy())                 # the same values, another array
+    mats.append(mats[1].T)                      # the transpose: another matrix
+    mats.append(np.asfortranarray(mats[3]))     # the same matrix, other memory order
+    for order in (range(len(mats)), reversed(range(len(mats))), [0, 2, 0, 5, 1, 6, 1, 7]):
+        for k in order:
+            assert spectral_radius(mats[k]) == float(np.abs(np.linalg.eigvals(mats[k])).max())
+
+
+def test_innovation_model_same_with_reused_projections():
+    """The second model on one factor reuses its oblique projections: K and the
+    innovation covariance equal those computed on a fresh copy of the factor."""
+    data = systems.simulate_data(systems.random_system(3, 2, 2, seed=4), 1500, seed=6,
+                                 output_snr_db=20)
+    hf = HankelStatistic.from_data(data, 12).factor()
+    r = np.random.default_rng(7)
+    models = []
+    for n in (2, 3, 4):
+        A = r.standard_normal((n, n))
+        A *= 0.8 / np.abs(np.linalg.eigvals(A)).max()
+        models.append((A, r.standard_normal((n, 2)), r.standard_normal((2, n)),
+                       r.standard_normal((2, 2))))
+    for A, B, C, D in models + models[:1]:
+        K, sigma, diag = innovation_model(A, B, C, D, hf)           # shared projections
+        copy = dataclasses.replace(hf, L=hf.L.copy())               # computed afresh
+        K0, sigma0, diag0 = innovation_model(A, B, C, D, copy)
+        np.testing.assert_array_equal(K, K0)
+        np.testing.assert_array_equal(sigma, sigma0)
+        assert diag == diag0
