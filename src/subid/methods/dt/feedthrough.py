@@ -61,6 +61,8 @@ records both tests.
 
 from __future__ import annotations
 
+import copy
+
 import numpy as np
 import scipy.linalg
 import scipy.stats
@@ -204,6 +206,25 @@ def decide(factor, *, level: float = LEVEL):
     return estimate, record
 
 
+#: The last decision of :func:`decided`, as one ``(key, (estimate, record))`` pair.
+_LAST = [None]
+
+
+def decided(factor):
+    """:func:`decide` on ``factor``, the last one kept by content (the factor's shape,
+    bytes and dimensions): the problems of one record and horizon (the order selection's
+    innovation check, then the final model; a fallback candidate) hold equal factors. The
+    record returned is the caller's own copy."""
+    L = np.ascontiguousarray(factor.L)
+    key = (L.shape, L.dtype.str, L.tobytes(), factor.depth, factor.n_inputs,
+           factor.n_outputs, factor.n_columns)
+    last = _LAST[0]
+    if last is None or last[0] != key:
+        last = _LAST[0] = (key, decide(factor))      # one assignment: safe across threads
+    estimate, record = last[1]
+    return estimate, copy.deepcopy(record)
+
+
 def resolve(feedthrough, problem):
     """The feedthrough a build uses on ``problem`` and its ``info['feedthrough']`` record
     (the decision cached on the problem, shared by the candidate orders)."""
@@ -212,6 +233,6 @@ def resolve(feedthrough, problem):
                                    "estimated": bool(feedthrough)}
     cache = problem._cache
     if "feedthrough" not in cache:
-        cache["feedthrough"] = decide(problem.factor)
+        cache["feedthrough"] = decided(problem.factor)
     estimate, record = cache["feedthrough"]
     return estimate, dict(record)
