@@ -41,3 +41,18 @@ def test_innovation_model_same_with_reused_projections():
         np.testing.assert_array_equal(K, K0)
         np.testing.assert_array_equal(sigma, sigma0)
         assert diag == diag0
+
+
+def test_feedthrough_decision_kept_by_content():
+    """Equal factors (another object, the same bytes) give the decision of a fresh
+    call, each caller its own record; another factor is decided afresh."""
+    from subid.methods.dt.feedthrough import decide, decided
+    data = systems.simulate_data(systems.random_system(3, 2, 2, seed=4), 1500, seed=6,
+                                 output_snr_db=20)
+    for depth in (8, 12, 8):
+        hf = HankelStatistic.from_data(data, depth).factor()
+        first = decided(hf)
+        again = decided(dataclasses.replace(hf, L=hf.L.copy()))
+        assert repr(first) == repr(again) == repr(decide(hf))
+        first[1]["feedback"]["detected"] = "changed"        # the caller's own copy
+        assert decided(hf)[1]["feedback"]["detected"] != "changed"
