@@ -433,6 +433,9 @@ def future_past_factor(pb) -> np.ndarray:
 
 
 STATISTICS = ("auto", "qr", "gram")
+#: The key of a problem's cache that holds the Hankel factor of its record as
+#: :func:`prepare` built it (before the channels are normalised).
+RECORD_FACTOR = "record factor"
 
 
 def prepare(data, order, horizon, *, method: str, blocks_per_horizon: int = 2,
@@ -475,8 +478,13 @@ def prepare(data, order, horizon, *, method: str, blocks_per_horizon: int = 2,
         hf = data_factor(data, blocks_per_horizon * horizon, method=method, horizon=horizon,
                          statistic=statistic, factor=factor)
     input_condition = check_excitation(hf, data.input_names, method=method)
+    record_factor = hf
     hf, su, sy = normalize_channels(hf, outputs=normalize_outputs)
-    return Problem(method, data, fixed, candidates, horizon, hf, input_condition, su, sy)
+    problem = Problem(method, data, fixed, candidates, horizon, hf, input_condition, su, sy)
+    # the factor as built from the record (before the channels are normalised): another
+    # problem of the same record and horizon takes it as ``factor``
+    problem._cache[RECORD_FACTOR] = record_factor
+    return problem
 
 
 SYSTEM_MATRICES = ("auto", "shift", "states")

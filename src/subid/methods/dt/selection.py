@@ -619,12 +619,14 @@ def choose(data, plan, fitter):
     candidates = None if plan.candidates is None else list(plan.candidates)
     n, f, estimator, record = cross_validate(data, plan.order, candidates, plan.horizon,
                                              fitter=fitter, estimators=scored)
+    factors = {}                      # horizon -> the record's factor, once built
     if plan.order is None:
-        n, f, estimator = innovation_check(data, record, fitter, (n, f, estimator))
+        n, f, estimator = innovation_check(data, record, fitter, (n, f, estimator),
+                                           factors=factors)
 
     def final(order, horizon, name):
         """``(problem, estimator, model, rule)`` of the whole record at a candidate."""
-        problem = fitter.prepare(data, order, horizon)
+        problem = fitter.prepare(data, order, horizon, factor=factors.get(horizon))
         if plan.estimator_choice == "fit":
             return (problem,) + estimator_by_fit(data, problem, fitter, estimators)
         return problem, name, fitter.fit(problem, name), None
@@ -678,7 +680,7 @@ def innovation_bic(model, data) -> float | None:
     return N * float(np.sum(np.log(eig))) + (model.order * (nu + 2 * ny) + nu * ny) * math.log(N)
 
 
-def innovation_check(data, record, fitter, chosen):
+def innovation_check(data, record, fitter, chosen, *, factors=None):
     """The cross-validated choice, or a higher order the innovation form demands.
 
     The cross-validated BIC sees a mode only through the held-out simulation fit,
@@ -707,12 +709,17 @@ def innovation_check(data, record, fitter, chosen):
     than 0.5 points of validation fit (bench/realdata.md).
 
     ``chosen`` is ``(order, horizon, estimator)``; so is the result, and
+    ``factors`` (a dict), when given, receives the record's Hankel factor at the
+    chosen horizon (``factors[horizon]``, when the check fitted the whole record) for
+    the final model's problem (the same factor :func:`subid.methods.dt._subspace.prepare`
+    would build again);
     ``record['innovation_check']`` records the cross-validated choice
     (``cross_validated``), the criterion of every order (``orders``), the order of
     the least (``order``) and the decision (``taken``, ``reason``);
     ``record['selected']`` follows it.
     """
     from subid.methods.dt._lag_fit import LAG_PRODUCTS, LagProducts
+    from subid.methods.dt._subspace import RECORD_FACTOR
     from subid.methods.dt.noise_model import attach_noise_model
     n, f, estimator = chosen
     used = data[data.n_samples - INNOVATION_CHECK_SAMPLES:] \
@@ -747,6 +754,8 @@ def innovation_check(data, record, fitter, chosen):
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             problem = fitter.prepare(used, orders, f)
+            if factors is not None and used is data:     # the final model's, at f
+                factors[f] = problem._cache.get(RECORD_FACTOR)
             # B, D, x0 of every order from the record's lag products, as on the folds
             # (equal to the pass over the record to about 1e-12 relative)
             lagged = LagProducts.of_record(used) if hasattr(problem, "_cache") else None
