@@ -65,7 +65,7 @@ from subid.methods.bd import (  # noqa: F401 (check_experiment_lengths: names of
 from subid.methods.crossval import MAX_ORDER
 from subid.methods.dt._lag_fit import LAG_PRODUCTS
 from subid.methods.dt.checks import check_data
-from subid.methods.dt.selection import default_gap_horizon
+from subid.methods.dt.selection import RECORD_FACTOR, default_gap_horizon
 from subid.model.statespace import StateSpace
 from subid.statistic._hankel import HankelFactor
 from subid.statistic.hankel import HankelStatistic
@@ -433,9 +433,6 @@ def future_past_factor(pb) -> np.ndarray:
 
 
 STATISTICS = ("auto", "qr", "gram")
-#: The key of a problem's cache that holds the Hankel factor of its record as
-#: :func:`prepare` built it (before the channels are normalised).
-RECORD_FACTOR = "record factor"
 
 
 def prepare(data, order, horizon, *, method: str, blocks_per_horizon: int = 2,

@@ -184,6 +184,10 @@ EXTEND_LAST = 2
 #: An order is tried only when the training fold holds at least this many output samples
 #: per free parameter of the model (n (nu + ny) + nu ny).
 SAMPLES_PER_PARAMETER = 10
+#: The key of a problem's cache that holds the Hankel factor of its record as
+#: :func:`subid.methods.dt._subspace.prepare` built it (before the channels are
+#: normalised): the final model's problem takes the innovation check's.
+RECORD_FACTOR = "record factor"
 
 
 def default_gap_horizon(n_samples, n_inputs, n_outputs, blocks, largest_order, n_experiments=1):
@@ -719,7 +723,6 @@ def innovation_check(data, record, fitter, chosen, *, factors=None):
     ``record['selected']`` follows it.
     """
     from subid.methods.dt._lag_fit import LAG_PRODUCTS, LagProducts
-    from subid.methods.dt._subspace import RECORD_FACTOR
     from subid.methods.dt.noise_model import attach_noise_model
     n, f, estimator = chosen
     used = data[data.n_samples - INNOVATION_CHECK_SAMPLES:] \
