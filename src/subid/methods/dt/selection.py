@@ -141,13 +141,14 @@ millisecond of subspace steps, regression, score and bookkeeping (Python calls o
 matrices of order 10), remain (what one candidate's steps ask several times is
 computed once: the spectral radius of its A, :func:`subid.methods._stability.spectral_radius`;
 the noise model's oblique projections of the factor for every order the innovation
-check fits, :mod:`subid.methods.dt.noise_model`; the feedthrough F-tests of the
-innovation check's factor, equal to the final model's,
-:func:`subid.methods.dt.feedthrough.decided`; and the modal regression's maps are
-filled by blocks, :func:`subid.methods.dt._regression.regressor_maps`: together
-11.5 % and 8.3 % of the default call at 10^3 and 10^4 samples,
-``bench/selection_paired.py``, the same choices and models bit for bit on every
-bundled record, ``bench/selection_identity.py``). Stopping the order search once the criterion has not
+check fits, :mod:`subid.methods.dt.noise_model`; the record's factor and its
+feedthrough F-tests, built by the innovation check and taken by the final model
+(:data:`RECORD_FACTOR`, :func:`subid.methods.dt.feedthrough.decided`); and the modal
+regression's maps are filled by blocks,
+:func:`subid.methods.dt._regression.regressor_maps`: together 10-11 % of the default
+call at 10^3 samples and 8-11 % at 10^4, ``bench/selection_paired.py``, the same
+choices and models bit for bit on every bundled record,
+``bench/selection_identity.py``). Stopping the order search once the criterion has not
 improved for k orders (measured on the candidates' saved scores,
 ``bench/selection_identity.py``) would change the choice on DaISy records (k = 3:
 CD_player_arm, powerplant and winding with N4SID; k = 4: CD_player_arm and winding,
