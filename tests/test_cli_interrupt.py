@@ -14,6 +14,16 @@ pytestmark = pytest.mark.skipif(threading.current_thread() is not threading.main
                                 reason="signal handlers are set from the main thread only")
 
 
+@pytest.fixture(autouse=True)
+def _python_sigint_handler():
+    """Each test starts from Python's own SIGINT handler, whatever a test run before it
+    in the same process (a CLI command run in-process, a pool) left installed."""
+    previous = signal.getsignal(signal.SIGINT)
+    signal.signal(signal.SIGINT, signal.default_int_handler)
+    yield
+    signal.signal(signal.SIGINT, previous)
+
+
 class _InterruptedFinaliser:
     """Receives SIGINT while its finaliser runs: Python reports the KeyboardInterrupt
     as "Exception ignored" and drops it."""
