@@ -71,7 +71,7 @@ def _oblique(hf: HankelFactor, y_rows, u_rows, w_rows) -> np.ndarray:
 #: The oblique projections of the last factor and past (:func:`_projections`), as one
 #: ``(factor, past, projections)`` triple: the models of every order of one problem
 #: (:func:`subid.methods.dt.selection.innovation_check`) share them.
-_LAST_PROJECTIONS = [None]
+_LAST_PROJECTIONS: list = [None]
 
 
 def _projections(hf: HankelFactor, p: int):
