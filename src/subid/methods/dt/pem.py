@@ -346,10 +346,14 @@ def minimise_prediction_error(predictor, directions, dm, x0, v, y, ranges, W, ma
     return res.x, res
 
 
+#: :func:`pem`'s defaults of the iteration, which :func:`refine` uses too.
+MAX_ITERATIONS, TOLERANCE, ROUNDS = 100, 1e-8, 3
+
+
 @checked_call
 @records_warnings
-def pem(data, model, *, focus="prediction", max_iterations=100, tolerance=1e-8, rounds=3,
-        feedthrough=None):
+def pem(data, model, *, focus="prediction", max_iterations=MAX_ITERATIONS, tolerance=TOLERANCE,
+        rounds=ROUNDS, feedthrough=None):
     """Refine a model by prediction-error minimisation (MATLAB ``ssest``/``pem``).
 
     Parameters
@@ -485,8 +489,8 @@ def refine(data, model, focus, *, held_out=False):
     :func:`pem` does."""
     if input_delay_of(model) is not None or model.is_continuous:
         return pem(data, model, focus=focus)
-    refined = _pem_dt(data, model, focus, 100, 1e-8, 3, None, precision=PRECISION,
-                      noise_model=not held_out)
+    refined = _pem_dt(data, model, focus, MAX_ITERATIONS, TOLERANCE, ROUNDS, None,
+                      precision=PRECISION, noise_model=not held_out)
     if held_out:
         return refined
     return _with_covariance(refined, model, data, focus, None)
