@@ -51,6 +51,7 @@ import math
 import numpy as np
 import scipy.linalg
 
+from subid.methods._stability import spectral_radius
 from subid.methods.dt._regression import (
     _with_d_and_y,
     dual_rows,
@@ -184,7 +185,7 @@ def loses(A, C, u, y, threshold: float, *, feedthrough: bool, estimate_x0: bool,
         # channel elimination of subid.methods.dt._bd_large, bounded in memory)
         return None
     need = threshold * (1.0 + MARGIN)
-    radius = float(np.abs(np.linalg.eigvals(A)).max()) if A.size else 0.0
+    radius = spectral_radius(A) if A.size else 0.0     # the one the stability rule took
     N = u.shape[0]
     # the cheapest bound first: on a contiguous SHORT tail when A grows fast over it
     # (its rows overflow over the whole TAIL), every STRIDE-th sample of the TAIL
