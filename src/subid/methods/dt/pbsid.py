@@ -56,7 +56,7 @@ from subid.methods.dt.n4sid import _lstsq_rows
 from subid.methods.dt.pipeline import States, Subspace, SubspaceMethod, run
 from subid.model.statespace import StateSpace
 
-__all__ = ["pbsid"]
+__all__ = ["pbsid", "step_coefficients", "step_coefficients_reference"]
 
 
 @checked_call
@@ -124,6 +124,67 @@ def pbsid(data, order=None, *, horizon=None, selection="cv", stability="auto",
                refine=refine, input_delay=input_delay)
 
 
+#: The nested regressions of :func:`step_coefficients` are solved on one factor when its
+#: smallest diagonal entry is above this fraction of the largest; below, each step by
+#: its own rank-revealing least squares (:func:`step_coefficients_reference`).
+NESTED_CONDITION = 1e-8
+
+
+def step_coefficients_reference(hf, i: int, feedthrough: bool) -> np.ndarray:
+    """Step 1 one regression at a time: the coefficients on ``z_p`` of ``y(t+k)`` on
+    ``[z_p(t); u(t..t+k-1); y(t..t+k-1)]`` (and ``u(t+k)`` with ``feedthrough``),
+    ``k = 0..i-1``, stacked (``Γ_f K_p`` in the coordinates of the factor ``hf``),
+    each by its own minimum-norm least squares (Chiuso 2007, eq. 21)."""
+    wp = hf.rows(hf.u_rows(0, i), hf.y_rows(0, i))
+    rows = []
+    for k in range(i):
+        parts = [wp]
+        if k:
+            parts += [hf.rows(hf.u_rows(i, i + k)), hf.rows(hf.y_rows(i, i + k))]
+        if feedthrough:
+            parts.append(hf.rows(hf.u_rows(i + k, i + k + 1)))
+        theta = _lstsq_rows(np.vstack(parts), hf.rows(hf.y_rows(i + k, i + k + 1)))
+        rows.append(theta[:, :wp.shape[0]])
+    return np.vstack(rows)
+
+
+def step_coefficients(hf, i: int, feedthrough: bool) -> np.ndarray:
+    """:func:`step_coefficients_reference` from one factorisation.
+
+    The regressors of step ``k`` are those of step ``k-1`` and ``z(t+k-1) =
+    [u(t+k-1); y(t+k-1)]``: with the factor's rows ordered ``[z_p; u(t); y(t);
+    u(t+1); y(t+1); ...]``, those of step ``k`` are its first ``r_k`` rows
+    (``r_k = i (nu + ny) + k (nu + ny)``, plus ``nu`` with ``feedthrough``) and
+    its target, ``y(t+k)``, the ``ny`` rows from ``r_k + nu`` (``r_k`` with
+    feedthrough). One LQ factorisation of the reordered rows, ``P L = L' Q'^T``
+    (:meth:`subid.statistic.HankelFactor.retriangularize`), makes every step the
+    triangular system ``θ L'[:r_k, :r_k] = L'[target, :r_k]`` (Ljung 1999, Sec. 10.4:
+    one QR for every nested least-squares problem). The orderings of the
+    regressors within a step differ, which leaves the coefficients on ``z_p``
+    unchanged. When the factor is ill-conditioned (a diagonal entry below
+    :data:`NESTED_CONDITION` of the largest: regressors that nearly repeat each
+    other, where the minimum-norm solution is wanted), the reference computes them.
+    """
+    nu, ny = hf.n_inputs, hf.n_outputs
+    order = [hf.u_rows(0, i), hf.y_rows(0, i)]
+    for k in range(i):
+        order += [hf.u_rows(i + k, i + k + 1), hf.y_rows(i + k, i + k + 1)]
+    Lr = hf.retriangularize(*order)
+    n_wp, block = i * (nu + ny), nu + ny
+    size = n_wp + (i - 1) * block + (nu if feedthrough else 0)
+    diag = np.abs(np.diag(Lr)[:size])
+    if diag.size == 0 or diag.min() <= NESTED_CONDITION * diag.max():
+        return step_coefficients_reference(hf, i, feedthrough)
+    rows = []
+    for k in range(i):
+        r = n_wp + k * block + (nu if feedthrough else 0)
+        target = n_wp + k * block + nu
+        theta = scipy.linalg.solve_triangular(Lr[:r, :r], Lr[target:target + ny, :r].T,
+                                              trans="T", lower=True, check_finite=False).T
+        rows.append(theta[:, :n_wp])
+    return np.vstack(rows)
+
+
 class PBSID(SubspaceMethod):
     """PBSID-opt's steps (:class:`subid.methods.dt.pipeline.SubspaceMethod`; module
     docstring): the regressions and SVD of steps 1 and 2, then step 3 with the
@@ -142,19 +203,9 @@ class PBSID(SubspaceMethod):
         shared by the candidate orders of a cross-validation fold (Problem.cached)."""
         i, hf = pb.horizon, pb.factor
         wp = hf.rows(hf.u_rows(0, i), hf.y_rows(0, i))
-        n_wp = wp.shape[0]
 
         def regressions():
-            rows = []
-            for k in range(i):                    # step 1: one regression per future step
-                parts = [wp]
-                if k:
-                    parts += [hf.rows(hf.u_rows(i, i + k)), hf.rows(hf.y_rows(i, i + k))]
-                if feedthrough:
-                    parts.append(hf.rows(hf.u_rows(i + k, i + k + 1)))
-                theta = _lstsq_rows(np.vstack(parts), hf.rows(hf.y_rows(i + k, i + k + 1)))
-                rows.append(theta[:, :n_wp])
-            coef = np.vstack(rows)                # Γ_f K_p (in the factor's coordinates)
+            coef = step_coefficients(hf, i, feedthrough)   # Γ_f K_p (factor coordinates)
             U, s, _ = scipy.linalg.svd(coef @ wp, full_matrices=False, check_finite=False)
             return coef, U, s
 

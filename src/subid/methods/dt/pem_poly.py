@@ -54,6 +54,7 @@ import scipy.signal
 from subid._validation import check_bool, check_choice, check_optimiser_options, checked_call
 from subid.errors import SubidError
 from subid.methods._info import collect_warnings
+from subid.methods.dt._arx_nested import check_samples
 from subid.methods.dt._poly_covariance import attach_covariance
 from subid.methods.dt.pem import (
     _predictor,
@@ -67,7 +68,6 @@ from subid.methods.dt.polynomial import (
     ORDER_NAMES,
     SELECTIONS,
     _check_input_columns,
-    _check_samples,
     check_polynomial_data,
     polynomial_model,
     regress,
@@ -392,7 +392,7 @@ def _identify(structure, data, order, selection, estimate_x0, max_iterations, to
         for i in range(ny):
             sub = _Output(structure, orders, i, nu)
             first = max(sub.na, sub.lb - 1, max(sub.nf), sub.nc, sub.nd)
-            _check_samples(data, sub.size, first, structure)
+            check_samples(data.experiment_ranges, data.n_samples, sub.size, first, structure)
             blocks = [(data.u[:, j], range(sub.nk[j], sub.nk[j] + sub.nb[j]))
                       for j in range(nu)]
             _, _, R = regress(data.y[:, i], blocks, ranges, first)

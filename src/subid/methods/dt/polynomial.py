@@ -42,11 +42,27 @@ from subid.errors import (
     TooFewSamplesError,
 )
 from subid.methods._info import collect_warnings, model_info
-from subid.methods.crossval import ABSOLUTE_TOLERANCE, MAX_ORDER, experiment_folds, folds
+from subid.methods.crossval import (
+    ABSOLUTE_TOLERANCE,
+    FLOOR,
+    MAX_ORDER,
+    experiment_folds,
+    folds,
+)
 from subid.methods.dt import _subspace
+from subid.methods.dt._arx_nested import (
+    RANK_TOL,
+    NestedARX,
+    channel_scales,
+    check_samples,
+    regression_start,
+    solve_coefficients,
+    unpack,
+)
 from subid.methods.dt._poly_covariance import attach_covariance
+from subid.methods.dt._scoring import Held, simulation_fit
+from subid.methods.dt._sparse_scoring import sparse_forced_error
 from subid.methods.dt.checks import check_data
-from subid.methods.dt.selection import _fit_score
 from subid.model.polynomial import coefficients, polynomial_record, realise
 from subid.model.statespace import StateSpace
 
@@ -58,9 +74,6 @@ __all__ = ["arx", "parse_orders", "structure_orders", "fit_arx", "ORDER_NAMES",
 ORDER_NAMES = {"arx": ("na", "nb", "nk"), "armax": ("na", "nb", "nc", "nk"),
                "oe": ("nb", "nf", "nk"), "bj": ("nb", "nc", "nd", "nf", "nk")}
 SELECTIONS = ("cv",)
-#: A diagonal entry of the input columns of the regression factor below this
-#: fraction of its column's norm marks an input lag that repeats earlier ones.
-RANK_TOL = 1e-10
 
 
 def check_polynomial_data(data, method: str) -> IOData:
@@ -183,27 +196,10 @@ def regress(target: np.ndarray, blocks, ranges, first: int):
     R = scipy.linalg.qr(np.column_stack([Phi, T]), mode="r", check_finite=False)[0]
     m = Phi.shape[1]
     R = R[:m + 1, :m + 1]
-    # columns that repeat the others to RANK_TOL (e.g. past outputs of noise-free data
-    # that the past inputs and fewer past outputs already determine) get no weight:
-    # the minimum-norm solution, not one that cancels huge coefficients
-    theta = scipy.linalg.lstsq(R[:m, :m], R[:m, m], lapack_driver="gelsy", cond=RANK_TOL,
-                               check_finite=False)[0] if m else np.zeros(0)
+    theta = solve_coefficients(R, m)[:, 0]
     resid = np.full(target.shape[0], np.nan)
     resid[times] = T - Phi @ theta
     return theta, resid, R[:m, :m]
-
-
-def _first(orders) -> int:
-    return int(max(orders["na"].max(initial=0), (orders["nk"] + orders["nb"] - 1).max(initial=0),
-                   0))
-
-
-def _check_samples(data, n_params: int, first: int, method: str) -> None:
-    rows = sum(max(b - a - first, 0) for a, b in data.experiment_ranges)
-    if rows < 2 * n_params + 10:
-        raise TooFewSamplesError(f"{method}: these orders need {n_params} coefficients per "
-                                 f"output and at least {2 * n_params + 10 + first} samples; "
-                                 f"the record has {data.n_samples}; use lower orders")
 
 
 def _check_input_columns(R, labels, method: str):
@@ -230,15 +226,12 @@ def fit_arx(data: IOData, orders: dict, *, method: str = "arx", check: bool = Tr
     """
     u, y = data.u, data.y
     ny, nu = y.shape[1], u.shape[1]
-    su = np.sqrt(np.mean(u ** 2, axis=0))
-    sy = np.sqrt(np.mean(y ** 2, axis=0))
-    su = np.where(su > 0, su, 1.0)
-    sy = np.where(sy > 0, sy, 1.0)
+    su, sy = channel_scales(u, y)
     un, yn = u / su, y / sy
     na, nb, nk = orders["na"], orders["nb"], orders["nk"]
-    first = _first(orders)
+    first = regression_start(orders)
     n_params = int(na.sum(axis=1).max() + nb.sum(axis=1).max())
-    _check_samples(data, n_params, first, method)
+    check_samples(data.experiment_ranges, data.n_samples, n_params, first, method)
     A = np.zeros((ny, ny, int(na.max(initial=0)) + 1))
     A[:, :, 0] = np.eye(ny)
     B = np.zeros((ny, nu, int((nk + nb).max(initial=1))))
@@ -256,13 +249,7 @@ def fit_arx(data: IOData, orders: dict, *, method: str = "arx", check: bool = Tr
         profile.append(np.abs(np.diag(R)))
         conds.append(float(np.max(np.abs(np.diag(R))) / max(np.min(np.abs(np.diag(R))),
                                                               1e-300)) if R.size else 1.0)
-        at = 0
-        for j in range(nu):
-            B[i, j, nk[i, j]:nk[i, j] + nb[i, j]] = theta[at:at + nb[i, j]] * sy[i] / su[j]
-            at += nb[i, j]
-        for k in range(ny):
-            A[i, k, 1:na[i, k] + 1] = -theta[at:at + na[i, k]] * sy[i] / sy[k]
-            at += na[i, k]
+        unpack(theta, i, orders, su, sy, A, B)
         resid[:, i] = r * sy[i]
     return A, B, resid, {"rank_profile": np.sort(np.concatenate(profile))[::-1],
                          "regression_condition": max(conds)}
@@ -331,6 +318,11 @@ def select_structure(data: IOData, max_order: int = MAX_ORDER):
     else:
         parts = [(data[a], data[b]) for a, b in folds(data.n_samples)]
     scores = {}
+    # per fold, one QR gives every structure's regression (Ljung 1999, Sec. 10.4;
+    # :mod:`subid.methods.dt._arx_nested`), and the validation block's scoring data
+    # are computed once (what the score of every candidate shares)
+    parts = [(NestedARX(train, nk, max_order, max_order), Held(validation))
+             for train, validation in parts]
 
     def score(na, nb):
         if (na, nb) in scores:
@@ -338,10 +330,10 @@ def select_structure(data: IOData, max_order: int = MAX_ORDER):
         orders = parse_orders((na, nb, np.tile(nk, (ny, 1))), "arx", ny, nu)
         values = []
         try:
-            for train, validation in parts:
-                A, B, _, _ = fit_arx(train, orders, check=False)
+            for nested, held in parts:
+                A, B = nested.fit(orders)
                 Ass, Bss, Css, Dss, _ = realise(_arx_record(A, B, orders))
-                values.append(_fit_score(StateSpace(Ass, Bss, Css, Dss, data.dt), validation))
+                values.append(_sparse_fit_score(Ass, Bss, Css, Dss, held))
         except SubidError:
             return
         scores[(na, nb)] = float(np.mean(values))
@@ -380,6 +372,18 @@ def select_structure(data: IOData, max_order: int = MAX_ORDER):
                              for k, v in sorted(scores.items())],
               "selected": {"na": na, "nb": nb, "nk": nk.tolist(), "score": scores[(na, nb)]}}
     return parse_orders((na, nb, np.tile(nk, (ny, 1))), "arx", ny, nu), record
+
+
+def _sparse_fit_score(A, B, C, D, held) -> float:
+    """The score of :func:`subid.methods.dt.selection._fit_score` (mean simulation fit %,
+    clipped below at ``FLOOR``) of a discrete model whose realisation is mostly
+    zeros, by the same pass over its nonzero entries only
+    (:func:`subid.methods.dt._sparse_scoring.sparse_forced_error`: the same value)."""
+    fits = simulation_fit(A, B, C, D, held, kernel=sparse_forced_error)
+    if fits is None:
+        return FLOOR
+    value = float(np.mean(fits))
+    return max(value, FLOOR) if np.isfinite(value) else FLOOR
 
 
 def _delays(data) -> np.ndarray | None:
@@ -500,7 +504,7 @@ def _arx_covariance(model: StateSpace, data: IOData, orders: dict) -> StateSpace
     ``l`` is ``-y_k(t - l)``, of ``B[i, j]`` at lag ``l`` ``u_j(t - l)``."""
     ny, nu = data.n_outputs, data.n_inputs
     na, nb, nk = orders["na"], orders["nb"], orders["nk"]
-    first = _first(orders)
+    first = regression_start(orders)
     designs, times = [], None
     for i in range(ny):
         blocks = [(-data.y[:, k], range(1, na[i, k] + 1)) for k in range(ny)]
