@@ -10,12 +10,17 @@ the model's matrices, the covariance of its parameters (``F F^T`` of
 signs) and the validation fits the demo reports; ``compare`` runs the calls
 again and reports the largest differences against a saved file, and the CPU
 seconds of each call before and after (one process each: run the two in turn,
-never together, on a shared machine).
+never together, on a shared machine). ``floor`` compares like ``compare``
+but on the estimation records with every input sample multiplied by ``1 + 2e-16
+z`` (z standard normal, seeded): run with the tree that saved the file, it
+shows how far rounding alone moves that tree's models, the scale against which
+a difference of ``compare`` is read.
 
 Usage::
 
     PYTHONPATH=/work/main/src python bench/poly_identity.py save before.pkl
-    PYTHONPATH=src python bench/poly_identity.py compare before.pkl
+    PYTHONPATH=src python bench/poly_identity.py compare before.pkl [RECORD,...]
+    PYTHONPATH=/work/main/src python bench/poly_identity.py floor before.pkl
 """
 
 from __future__ import annotations
@@ -47,9 +52,26 @@ def _covariance(model):
     return F @ F.T
 
 
-def run(names=None, methods=METHODS):
+def _perturb_inputs(demo):
+    """Make ``demo._parts`` return the estimation records with their inputs perturbed by
+    rounding (``floor``)."""
+    import subid
+    original = demo._parts
+    rng = np.random.default_rng(0)
+
+    def parts(name, fraction):
+        est, val = original(name, fraction)
+        u = est.u * (1.0 + 2e-16 * rng.standard_normal(est.u.shape))
+        return subid.IOData(u, est.y, dt=est.dt, input_names=est.input_names,
+                            output_names=est.output_names), val
+    demo._parts = parts
+
+
+def run(names=None, methods=METHODS, perturb=False):
     import subid
     from subid.cli import demo
+    if perturb:
+        _perturb_inputs(demo)
     out = {}
     with warnings.catch_warnings():       # imports and compiled kernels loaded, not timed
         warnings.simplefilter("ignore")
@@ -143,7 +165,7 @@ def main(argv):
         before = pickle.load(fh)
     if names:
         before = {k: v for k, v in before.items() if k[0] in names}
-    return 0 if compare(before, run(names)) else 1
+    return 0 if compare(before, run(names, perturb=what == "floor")) else 1
 
 
 if __name__ == "__main__":
