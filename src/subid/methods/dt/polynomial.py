@@ -19,8 +19,11 @@ input from :func:`subid.estimate_delay`, then every ``na, nb`` in 1..10 is
 fitted on the training part of the four contiguous folds and scored by its
 simulation fit on the held-out part (searched along ``na = nb``, then ``nb``
 at the best ``na``, then ``na`` at the best ``nb``: 28 structures, not the
-100 of the full grid); the structure of the least cross-validated BIC is
-chosen, ``2 N ny ln(100 - fit) + p ln N`` with ``p = ny (na ny + nb nu)``
+100 of the full grid; per fold every structure's least squares comes from one
+QR factorisation of the largest regressor, Ljung 1999, Sec. 10.4,
+:mod:`subid.methods.dt._arx_nested`, and its score from a simulation over the
+nonzero entries of its realisation, :mod:`subid.methods.dt._sparse_scoring`);
+the structure of the least cross-validated BIC is chosen, ``2 N ny ln(100 - fit) + p ln N`` with ``p = ny (na ny + nb nu)``
 parameters (the criterion of the subspace defaults,
 :func:`subid.methods.crossval.criterion`, for an ARX parametrisation).
 """
