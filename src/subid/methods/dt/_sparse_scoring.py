@@ -11,13 +11,15 @@ form of an ARX model of ``ny`` outputs and degree ``p`` (``n = ny p``) has
 The structure search of :func:`subid.arx` scores some thirty such candidates
 per fold, each by this pass.
 
-:func:`sparse_forced_error` is the same pass over the nonzero entries only
-(compressed rows of ``A``, ``B``, ``C``, ``D``; compressed columns of ``A``
-for ``C A^t``), each sum taken in the same order as the dense loop. A skipped
-term is an exact zero product, and adding it leaves a floating-point sum
-unchanged, so the result equals ``forced_error``'s bit for bit whenever the
-state stays finite (``tests/test_arx_nested.py``); a state that overflows marks
-the pass not finite, as the dense loop's ``0 * inf`` does.
+:func:`sparse_forced_error` is the same pass over the nonzero entries of ``A``
+(its compressed rows for the state update, its compressed columns for ``C A^t``;
+``B``, ``C``, ``D`` dense, as the data they multiply are), each sum taken in the
+same order as the dense loop. A skipped term is an exact zero product, and
+adding it leaves a floating-point sum unchanged, so the result equals
+``forced_error``'s bit for bit (``tests/test_arx_nested.py``). A state that
+overflows makes the output sum (over every state, as in the dense loop)
+non-finite at the same sample, so the pass is marked not finite as there; what
+follows is not used.
 """
 
 from __future__ import annotations
@@ -58,7 +60,7 @@ def _compressed(M, by_columns):  # pragma: no cover - compiled
 @numba.njit(cache=True, nogil=True)
 def sparse_forced_error(A, B, C, D, u, y, weights, inv_scale, n_free):  # pragma: no cover
     """:func:`subid.methods.dt._scoring.forced_error` over the nonzero entries of
-    ``A``, ``B``, ``C``, ``D`` (module docstring): the weighted rows ``[C A^t w,
+    ``A`` (module docstring): the weighted rows ``[C A^t w,
     (y(t) - y_f(t)) w]`` of the x0 regression for ``t < n_free``, and ``sum_{t >=
     n_free} ((y - y_f) inv_scale)^2`` per output. Returns ``(rows, tail, finite)``,
     ``finite`` false when the forced response overflowed."""
@@ -66,24 +68,18 @@ def sparse_forced_error(A, B, C, D, u, y, weights, inv_scale, n_free):  # pragma
     n = A.shape[0]
     ny = C.shape[0]
     a_start, a_index, a_value = _compressed(A, False)
-    b_start, b_index, b_value = _compressed(B, False)
-    c_start, c_index, c_value = _compressed(C, False)
-    d_start, d_index, d_value = _compressed(D, False)
     rows = np.empty((n_free, ny, n + 1))
     tail = np.zeros(ny)
     finite = True
     x = np.zeros(n)
     xn = np.empty(n)
     for t in range(N):
-        for j in range(n):          # the dense loop's 0 * x[j] is NaN for an infinite x[j]
-            if not np.isfinite(x[j]):
-                finite = False
-        for i in range(ny):
+        for i in range(ny):        # the dense loop: an infinite state makes s NaN here
             s = 0.0
-            for k in range(c_start[i], c_start[i + 1]):
-                s += c_value[k] * x[c_index[k]]
-            for k in range(d_start[i], d_start[i + 1]):
-                s += d_value[k] * u[t, d_index[k]]
+            for j in range(n):
+                s += C[i, j] * x[j]
+            for j in range(nu):
+                s += D[i, j] * u[t, j]
             if not np.isfinite(s):
                 finite = False
             e = y[t, i] - s
@@ -96,8 +92,8 @@ def sparse_forced_error(A, B, C, D, u, y, weights, inv_scale, n_free):  # pragma
             s = 0.0
             for k in range(a_start[i], a_start[i + 1]):
                 s += a_value[k] * x[a_index[k]]
-            for k in range(b_start[i], b_start[i + 1]):
-                s += b_value[k] * u[t, b_index[k]]
+            for j in range(nu):
+                s += B[i, j] * u[t, j]
             xn[i] = s
         for i in range(n):
             x[i] = xn[i]
@@ -116,7 +112,5 @@ def sparse_forced_error(A, B, C, D, u, y, weights, inv_scale, n_free):  # pragma
                 for k in range(col_start[j], col_start[j + 1]):
                     s += M[i, col_index[k]] * col_value[k]
                 Mn[i, j] = s
-        for i in range(ny):
-            for j in range(n):
-                M[i, j] = Mn[i, j]
+        M, Mn = Mn, M
     return rows, tail, finite
