@@ -12,8 +12,9 @@ one specialisation per kernel serves all data):
 * :class:`subid.AdaptiveIdentifier` (one kernel for every ``method``; the
   uniform and the time-stamped paths share it),
 * :class:`subid.RecursiveSubspace`,
-* the default batch call (:func:`subid.ls_subspace`: the B, D, x0 pass) and the
-  lagged products of long records and streams (:class:`subid.HankelStatistic`),
+* the default batch call (:func:`subid.ls_subspace`: the B, D, x0 pass), the
+  lagged products of long records and streams (:class:`subid.HankelStatistic`)
+  and the scoring pass of :func:`subid.arx`'s structure search,
 * :func:`subid.ct_subspace` on a uniform and on a non-uniform grid.
 
 Run it once after installing (``make test`` / ``make demo`` do)::
@@ -61,6 +62,7 @@ def _recursive():
 def _batch():
     from subid.data import IOData
     from subid.methods.dt.ls_subspace import ls_subspace
+    from subid.methods.dt.polynomial import select_structure
     from subid.statistic.hankel import HankelStatistic
     from subid.systems import seed001_system
 
@@ -69,6 +71,7 @@ def _batch():
     y = seed001_system().simulate(u)
     ls_subspace(IOData(u, y), 4)
     HankelStatistic(2, 2, 4, kind="gram").update(u, y)     # long records, streams
+    select_structure(IOData(u, y), max_order=2)            # arx's structure search
 
 
 def _ct():

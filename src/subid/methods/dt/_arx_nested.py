@@ -89,14 +89,12 @@ def unpack(theta, i: int, orders, su, sy, A, B) -> None:
         at += na[i, k]
 
 
-def _fill(out, signals, ranges, first: int, stop=None):
-    """Rows ``t = a + first .. min(b, a + stop) - 1`` of every experiment ``(a, b)`` of
-    ``signals`` (a list of ``(signal, lag)``: column ``s[t - lag]``) into a new array."""
+def _fill(signals, ranges, first: int, stop=None) -> np.ndarray:
+    """The rows ``t = a + first .. min(b, a + stop) - 1`` of every experiment ``(a, b)``
+    of the columns ``signals`` (a list of ``(signal, lag)``: column ``s[t - lag]``)."""
     spans = [(a + first, b if stop is None else min(b, a + stop)) for a, b in ranges]
     spans = [(lo, hi) for lo, hi in spans if hi > lo]
-    rows = sum(hi - lo for lo, hi in spans)
-    if out is None:
-        out = np.empty((rows, len(signals)))
+    out = np.empty((sum(hi - lo for lo, hi in spans), len(signals)))
     at = 0
     for lo, hi in spans:
         for c, (s, lag) in enumerate(signals):
@@ -131,7 +129,7 @@ class NestedARX:
         self._y = [np.ascontiguousarray(yn[:, k]) for k in range(self.n_outputs)]
         self.start = int(max(self.max_na, int(self.nk.max(initial=0)) + self.max_nb - 1, 0))
         columns = self._columns(np.full(self.n_inputs, self.max_nb), self.max_na)
-        M = _fill(None, columns, self.ranges, self.start)
+        M = _fill(columns, self.ranges, self.start)
         R = scipy.linalg.qr(M, mode="r", check_finite=False)[0] if M.shape[0] else M
         self.R = R[:min(R.shape)]
 
@@ -153,14 +151,28 @@ class NestedARX:
         return np.array(index + [base + k for k in range(self.n_outputs)], dtype=np.intp)
 
     def fit(self, orders, method: str = "arx"):
-        """``(A, B)`` of ``orders`` (a :func:`subid.methods.dt.polynomial.parse_orders`
-        dict whose every output has the same regressors, ``nk`` those of the search):
-        the polynomials of ``fit_arx(data, orders, check=False)`` to rounding.
+        """The polynomials of ``fit_arx(data, orders, check=False)``, to rounding.
+
+        Parameters
+        ----------
+        orders : dict
+            A :func:`subid.methods.dt.polynomial.parse_orders` dict whose every
+            output has the same regressors (``na`` and ``nb`` the same in every
+            row), with the delays of the search and degrees up to its largest.
+        method : str
+            The method named in an error message.
+
+        Returns
+        -------
+        A : ndarray, shape (ny, ny, na + 1)
+        B : ndarray, shape (ny, nu, max(nk + nb))
 
         Raises
         ------
         TooFewSamplesError
             Fewer rows than the structure needs (as ``fit_arx``).
+        ValueError
+            A structure outside the search (a programming error).
         """
         na_all, nb_all, nk = orders["na"], orders["nb"], orders["nk"]
         na, nb = int(na_all[0, 0]), nb_all[0]
@@ -171,7 +183,7 @@ class NestedARX:
         first = regression_start(orders)
         n_params = int(na_all.sum(axis=1).max() + nb_all.sum(axis=1).max())
         check_samples(self.ranges, self.n_samples, n_params, first, method)
-        extra = _fill(None, self._columns(nb, na), self.ranges, first, self.start)
+        extra = _fill(self._columns(nb, na), self.ranges, first, self.start)
         stacked = np.vstack([self.R[:, self._index(nb, na)], extra])
         R = scipy.linalg.qr(stacked, mode="r", check_finite=False)[0]
         m = stacked.shape[1] - ny

@@ -134,7 +134,22 @@ def step_coefficients_reference(hf, i: int, feedthrough: bool) -> np.ndarray:
     """Step 1 one regression at a time: the coefficients on ``z_p`` of ``y(t+k)`` on
     ``[z_p(t); u(t..t+k-1); y(t..t+k-1)]`` (and ``u(t+k)`` with ``feedthrough``),
     ``k = 0..i-1``, stacked (``Γ_f K_p`` in the coordinates of the factor ``hf``),
-    each by its own minimum-norm least squares (Chiuso 2007, eq. 21)."""
+    each by its own minimum-norm least squares (Chiuso 2007, eq. 21).
+
+    Parameters
+    ----------
+    hf : HankelFactor
+        The triangular factor of the block-Hankel data (depth ``2 i``).
+    i : int
+        The horizon (past and future windows).
+    feedthrough : bool
+        Whether ``u(t+k)`` is a regressor of ``y(t+k)`` (D estimated).
+
+    Returns
+    -------
+    ndarray, shape (i ny, i (nu + ny))
+        ``Γ_f K_p`` in the coordinates of ``hf``, row block ``k`` from step ``k``.
+    """
     wp = hf.rows(hf.u_rows(0, i), hf.y_rows(0, i))
     rows = []
     for k in range(i):
@@ -164,6 +179,20 @@ def step_coefficients(hf, i: int, feedthrough: bool) -> np.ndarray:
     unchanged. When the factor is ill-conditioned (a diagonal entry below
     :data:`NESTED_CONDITION` of the largest: regressors that nearly repeat each
     other, where the minimum-norm solution is wanted), the reference computes them.
+
+    Parameters
+    ----------
+    hf : HankelFactor
+        The triangular factor of the block-Hankel data (depth ``2 i``).
+    i : int
+        The horizon (past and future windows).
+    feedthrough : bool
+        Whether ``u(t+k)`` is a regressor of ``y(t+k)`` (D estimated).
+
+    Returns
+    -------
+    ndarray, shape (i ny, i (nu + ny))
+        ``Γ_f K_p`` as :func:`step_coefficients_reference` gives it, to rounding.
     """
     nu, ny = hf.n_inputs, hf.n_outputs
     order = [hf.u_rows(0, i), hf.y_rows(0, i)]
