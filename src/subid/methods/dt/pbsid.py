@@ -179,20 +179,7 @@ def step_coefficients(hf, i: int, feedthrough: bool) -> np.ndarray:
     unchanged. When the factor is ill-conditioned (a diagonal entry below
     :data:`NESTED_CONDITION` of the largest: regressors that nearly repeat each
     other, where the minimum-norm solution is wanted), the reference computes them.
-
-    Parameters
-    ----------
-    hf : HankelFactor
-        The triangular factor of the block-Hankel data (depth ``2 i``).
-    i : int
-        The horizon (past and future windows).
-    feedthrough : bool
-        Whether ``u(t+k)`` is a regressor of ``y(t+k)`` (D estimated).
-
-    Returns
-    -------
-    ndarray, shape (i ny, i (nu + ny))
-        ``Γ_f K_p`` as :func:`step_coefficients_reference` gives it, to rounding.
+    Arguments and result as :func:`step_coefficients_reference`'s (to rounding).
     """
     nu, ny = hf.n_inputs, hf.n_outputs
     order = [hf.u_rows(0, i), hf.y_rows(0, i)]
