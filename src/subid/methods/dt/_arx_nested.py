@@ -5,17 +5,17 @@ fits some thirty structures ``(na, nb)`` with the same delays on each training
 fold. Each fit is the least squares of :func:`subid.methods.dt.polynomial.fit_arx`:
 the regressor ``Φ_s`` of structure ``s`` holds a subset of the columns of the
 regressor ``Φ`` of the largest structure, on the rows ``t >= t_s`` (the first
-sample at which every lag of ``s`` exists). Ljung's order-selection trick
-(*System Identification*, 2nd ed., 1999, Sec. 10.4, the idea of MATLAB's
-``arxstruc``) factors ``[Φ Y] = Q R`` once and reads every sub-structure's
-least squares from ``R``: for a subset ``S`` of the columns,
+sample at which every lag of ``s`` exists). The order-selection trick of least
+squares by QR factorisation (Ljung, *System Identification*, 2nd ed., 1999,
+Ch. 10; the idea of MATLAB's ``arxstruc``) factors ``[Φ Y] = Q R`` once and
+reads every sub-structure's least squares from ``R``: for a subset ``S`` of the columns,
 ``[Φ Y]_S = Q R_S`` with ``Q`` of orthonormal columns, so the triangular factor
 of ``[Φ_S Y]`` is that of the small matrix ``R_S`` (up to the signs of its
 rows, which leave the least-squares solution unchanged). The rows
 ``t_s <= t < t_max`` that the smaller structure uses and the largest cannot
 (at most ``t_max`` per experiment) are appended to ``R_S`` before that small
 factorisation (the QR update of Golub and Van Loan, *Matrix Computations*,
-4th ed., 2013, Sec. 6.5.3, done as one factorisation of the stacked matrix).
+4th ed., 2013, Sec. 6.5, done as one factorisation of the stacked matrix).
 Each structure then costs a factorisation of a ``(m + t_max) x m`` matrix
 instead of a pass over the N samples, and gives the coefficients of
 ``fit_arx`` to rounding (``tests/test_arx_nested.py``).

@@ -7,7 +7,7 @@ and ``ny n^2`` for the free response. The realisations of the polynomial models
 (:func:`subid.model.polynomial.realise`) are mostly zeros: the block observer
 form of an ARX model of ``ny`` outputs and degree ``p`` (``n = ny p``) has
 ``A = [-A_1 I 0 ...; -A_2 0 I ...; ...]`` (``n (ny + 1)`` nonzero entries of
-``n^2``) and ``C = [I 0 ... 0]`` (Kailath, *Linear Systems*, 1980, Sec. 6.4).
+``n^2``) and ``C = [I 0 ... 0]`` (Kailath, *Linear Systems*, 1980, Ch. 6).
 The structure search of :func:`subid.arx` scores some thirty such candidates
 per fold, each by this pass.
 

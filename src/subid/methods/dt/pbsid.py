@@ -173,7 +173,7 @@ def step_coefficients(hf, i: int, feedthrough: bool) -> np.ndarray:
     its target, ``y(t+k)``, the ``ny`` rows from ``r_k + nu`` (``r_k`` with
     feedthrough). One LQ factorisation of the reordered rows, ``P L = L' Q'^T``
     (:meth:`subid.statistic.HankelFactor.retriangularize`), makes every step the
-    triangular system ``θ L'[:r_k, :r_k] = L'[target, :r_k]`` (Ljung 1999, Sec. 10.4:
+    triangular system ``θ L'[:r_k, :r_k] = L'[target, :r_k]`` (Ljung 1999, Ch. 10:
     one QR for every nested least-squares problem). The orderings of the
     regressors within a step differ, which leaves the coefficients on ``z_p``
     unchanged. When the factor is ill-conditioned (a diagonal entry below

@@ -20,7 +20,7 @@ fitted on the training part of the four contiguous folds and scored by its
 simulation fit on the held-out part (searched along ``na = nb``, then ``nb``
 at the best ``na``, then ``na`` at the best ``nb``: 28 structures, not the
 100 of the full grid; per fold every structure's least squares comes from one
-QR factorisation of the largest regressor, Ljung 1999, Sec. 10.4,
+QR factorisation of the largest regressor, Ljung 1999, Ch. 10,
 :mod:`subid.methods.dt._arx_nested`, and its score from a simulation over the
 nonzero entries of its realisation, :mod:`subid.methods.dt._sparse_scoring`);
 the structure of the least cross-validated BIC is chosen, ``2 N ny ln(100 - fit) + p ln N`` with ``p = ny (na ny + nb nu)``
@@ -321,7 +321,7 @@ def select_structure(data: IOData, max_order: int = MAX_ORDER):
     else:
         parts = [(data[a], data[b]) for a, b in folds(data.n_samples)]
     scores = {}
-    # per fold, one QR gives every structure's regression (Ljung 1999, Sec. 10.4;
+    # per fold, one QR gives every structure's regression (Ljung 1999, Ch. 10;
     # :mod:`subid.methods.dt._arx_nested`), and the validation block's scoring data
     # are computed once (what the score of every candidate shares)
     parts = [(NestedARX(train, nk, max_order, max_order), Held(validation))
