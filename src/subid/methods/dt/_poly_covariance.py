@@ -66,7 +66,8 @@ def coefficient_factor(designs, residuals, n_nuisance):
     ----------
     designs : list of ndarray, each (N, n_nuisance[i] + d_i)
         ``J_i = dŷ_i/d(x0_i, c_i)``, nuisance columns first (for ARX the
-        regressors), on the rows of ``residuals``.
+        regressors), on the rows of ``residuals``; the same array object for
+        several outputs is factored once.
     residuals : ndarray, shape (N, ny)
         The prediction errors of the outputs at the estimate.
     n_nuisance : list of int
@@ -85,7 +86,14 @@ def coefficient_factor(designs, residuals, n_nuisance):
     dofs = np.array([max(N - J.shape[1], 1) for J in designs], dtype=float)
     lam = residuals.T @ residuals / np.sqrt(np.outer(dofs, dofs))
     q_parts, inverses, scales = [], [], []
+    done = {}       # a design shared by several outputs (ARX: the same regressors) once
     for J, n1 in zip(designs, n_nuisance):
+        if (id(J), n1) in done:
+            q, inverse, scale = done[(id(J), n1)]
+            q_parts.append(q)
+            inverses.append(inverse)
+            scales.append(scale)
+            continue
         scale = np.sqrt(np.einsum("ij,ij->j", J, J))
         if J.shape[1] == n1:
             q_parts.append(np.zeros((N, 0)))
@@ -103,6 +111,7 @@ def coefficient_factor(designs, residuals, n_nuisance):
         inverses.append(scipy.linalg.solve_triangular(R22, np.eye(R22.shape[0]),
                                                       check_finite=False))
         scales.append(scale[n1:])
+        done[(id(J), n1)] = (q_parts[-1], inverses[-1], scales[-1])
     L = _psd_sqrt(lam)
     # M: row block k (noise component w_k), column block i: L_ik Q2_i
     M = np.vstack([np.hstack([L[i, k] * q_parts[i] for i in range(ny)]) for k in range(ny)])

@@ -510,6 +510,9 @@ def _arx_covariance(model: StateSpace, data: IOData, orders: dict) -> StateSpace
     first = regression_start(orders)
     designs, times = [], None
     for i in range(ny):
+        if i and (na[i] == na[0]).all() and (nb[i] == nb[0]).all() and (nk[i] == nk[0]).all():
+            designs.append(designs[0])      # the same regressors: one array, factored once
+            continue
         blocks = [(-data.y[:, k], range(1, na[i, k] + 1)) for k in range(ny)]
         blocks += [(data.u[:, j], range(nk[i, j], nk[i, j] + nb[i, j])) for j in range(nu)]
         Phi, times = lagged(blocks, data.experiment_ranges, first)
