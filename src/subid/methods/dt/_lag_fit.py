@@ -71,17 +71,13 @@ passes are exact; records of several experiments or of fewer than
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 import scipy.fft
 import scipy.linalg
 
-from subid.methods.dt._regression import (
-    RESIDUAL_RECOMPUTE,
-    parameter_count,
-    solve_normal_equations,
-)
+from subid.methods.dt._lag_kernel import error_power as kernel_error_power
+from subid.methods.dt._lag_kernel import modal_form, normal_matrix
+from subid.methods.dt._regression import RESIDUAL_RECOMPUTE, solve_normal_equations
 
 #: The key of a problem's cache that holds its record's lag products (a
 #: cross-validation fold, :func:`subid.methods.dt.selection.score_horizon`).
@@ -274,22 +270,11 @@ class _Modal:
     """A stable, diagonalisable A in modal form, ``A = V diag(λ) V^{-1}``, with the
     Vandermonde rows ``λ^e`` (e = 0..L) that evaluate every lag sum at the poles:
     ``sum_e c_e A^e = V diag(sum_e c_e λ^e) V^{-1}``, ``O(L n)`` per sequence instead
-    of ``O(L n^3)`` for the powers of A."""
+    of ``O(L n^3)`` for the powers of A (:func:`subid.methods.dt._lag_kernel.modal_form`)."""
 
-    def __init__(self, lam, V, Wm, L):
-        self.lam, self.V, self.Wm, self.L = lam, V, Wm, L
-        vand = np.empty((lam.size, L + 1), dtype=complex)   # λ^e by doubling
-        vand[:, 0] = 1.0
-        filled, step = 1, lam.copy()                        # step = λ^filled
-        while filled < L + 1:
-            k = min(filled, L + 1 - filled)
-            vand[:, filled:filled + k] = vand[:, :k] * step[:, None]
-            filled += k
-            step = vand[:, filled - 1] * lam
-        # real and imaginary parts apart: real matrix products (BLAS) in poly
-        self.vand_re = np.ascontiguousarray(vand.real)
-        self.vand_im = np.ascontiguousarray(vand.imag)
-        self.denominator = 1.0 - lam[:, None] * lam[None, :]
+    def __init__(self, lam, V, Wm, vand):
+        self.lam, self.V, self.Wm, self.vand = lam, V, Wm, vand
+        self.L = vand.shape[1] - 1
 
     @classmethod
     def of(cls, A, max_lag):
@@ -307,40 +292,20 @@ class _Modal:
     def _of(cls, A):
         if A.shape[0] == 0 or not np.isfinite(A).all():
             return None
-        lam, V = scipy.linalg.eig(A, check_finite=False)
-        radius = float(np.abs(lam).max())
-        if radius >= 1.0:
-            return None
-        L = 1 if radius == 0.0 else int(math.ceil(math.log(LAG_TOLERANCE) / math.log(radius)))
-        if L > MAX_LAG:
-            return None
-        cond = np.linalg.cond(V)
-        if not math.isfinite(cond) or cond > MAX_EIGVEC_CONDITION:
-            return None
-        return cls(lam, V, np.linalg.solve(V, np.eye(A.shape[0])), max(L, 1))
+        lam, V = np.linalg.eig(A)
+        status, _, Wm, vand = modal_form(lam.astype(complex), V.astype(complex),
+                                         LAG_TOLERANCE, MAX_LAG, MAX_EIGVEC_CONDITION)
+        return cls(lam.astype(complex), V.astype(complex), Wm, vand) if status == 0 else None
 
-    def poly(self, seq, shift=0):
-        """``sum_e seq[e + shift] λ^e`` for e = 0..L - shift: (n, *seq.shape[1:])."""
-        m = seq.shape[0] - shift
-        flat = seq[shift:].reshape(m, -1)
-        out = self.vand_re[:, :m] @ flat + 1j * (self.vand_im[:, :m] @ flat)
-        return out.reshape((self.lam.size,) + seq.shape[1:])
-
-    def matrix(self, values):
-        """``V diag(values) V^{-1}`` (real) for values (n, ...): (..., n, n)."""
-        n = self.lam.size
-        vals = values.reshape(n, -1).T                      # (k, n)
-        out = np.real((self.V[None, :, :] * vals[:, None, :]) @ self.Wm)
-        return out.reshape(values.shape[1:] + (n, n))
-
-    def gramian(self, left, right):
-        """``sum_{t>=0} (A^t)^T left^T right A^t`` (left, right: (m, n))."""
-        M = (self.V.T @ left.T) @ (right @ self.V) / self.denominator
-        return np.real(self.Wm.T @ M @ self.Wm)
-
-    def back(self, modal):
-        """``V^{-T} modal`` (real): a sum ``sum_t (A^t)^T v_t`` from its modal terms."""
-        return np.real(self.Wm.T @ modal)
+    def arguments(self, lp):
+        """The modal form and the lag products of ``lp`` as the kernels of
+        :mod:`subid.methods.dt._lag_kernel` take them (up to this form's L)."""
+        L = self.L
+        (G, R), u, y = lp.lags(L), lp.u, lp.y
+        return (self.lam, self.V, self.Wm, self.vand, G.reshape(L + 1, -1),
+                R.reshape(L + 1, -1), np.ascontiguousarray(np.diag(lp.Y)),
+                np.ascontiguousarray(u[lp.n_samples - 1:lp.n_samples - 1 - L:-1]),
+                u[:L + 1], y[:L + 1])
 
 
 def fit_b_d_x0(A, C, lp: LagProducts, output_weights, *, feedthrough=True, estimate_x0=True):
@@ -349,53 +314,15 @@ def fit_b_d_x0(A, C, lp: LagProducts, output_weights, *, feedthrough=True, estim
     lag products (module documentation), or None where they do not apply (then the
     per-candidate pass must run)."""
     A = np.asarray(A, dtype=float)
-    C = np.asarray(C, dtype=float)
+    C = np.ascontiguousarray(C, dtype=float)
     n, ny, nu = A.shape[0], C.shape[0], lp.u.shape[1]
     N = lp.n_samples
     md = _Modal.of(A, min(lp.max_lag, N // 4))
     if md is None:
         return None
-    L = md.L
     w = np.ones(ny) if output_weights is None else np.asarray(output_weights, dtype=float)
-    w2 = w * w
-    (G, R), u, y = lp.lags(L), lp.u, lp.y
-    CW2 = C.T * w2[None, :]                          # C^T W^2 (n, ny)
-    P = md.gramian(C * w[:, None], C * w[:, None])
-    P = 0.5 * (P + P.T)
-    Z = md.matrix(md.poly(G))                        # (a, b): sum_e Γ(e)_ab A^e
-    Z1 = md.matrix(md.poly(G, shift=1))              # (a, b): sum_{k>=1} Γ(k)_ab A^(k-1)
-    I = np.eye(n)
-    BB = np.empty((nu, n, nu, n))
-    for a in range(nu):
-        for b in range(nu):
-            BB[a, :, b, :] = Z[a, b].T @ P + P @ (Z[b, a] - G[0][b, a] * I)
-    BB = BB.reshape(nu * n, nu * n)
-    XN = md.matrix(md.poly(u[N - 1:N - 1 - L:-1]))   # (a): sum_k u_a(N-k) A^(k-1)
-    XN = XN.transpose(1, 0, 2).reshape(n, nu * n)
-    BB -= XN.T @ P @ XN
-    VtCW2 = md.V.T @ CW2                             # (n, ny)
-    rho = md.poly(R, shift=1)                        # (l, r, a): sum_k R(k)_ra λ^(k-1)
-    rB = md.back(np.einsum("lr,lra->la", VtCW2, rho)).T.reshape(-1)    # (a, i)
-    nx, q, p = parameter_count(n, nu, ny, estimate_x0, feedthrough)
-    Naug = np.zeros((p + 1, p + 1))
-    Naug[nx:q, nx:q] = BB
-    Naug[nx:q, p] = rB
-    Naug[p, p] = float(np.sum(w2 * np.diag(lp.Y)))
-    if feedthrough:
-        BD = np.einsum("abji,jr->aibr", Z1, CW2)      # Z1[a, b]^T C^T W^2
-        Naug[nx:q, q:p] = BD.reshape(nu * n, nu * ny)
-        Naug[q:p, q:p] = np.kron(G[0], np.diag(w2))
-        Naug[q:p, p] = (R[0] * w2[:, None]).T.reshape(-1)
-    if estimate_x0:
-        S1 = md.matrix(md.lam[:, None] * md.poly(u[:L]))   # (a): sum_s u_a(s) A^(s+1)
-        Naug[:n, :n] = P
-        Naug[:n, nx:q] = np.concatenate([S1[a].T @ P for a in range(nu)], axis=1)
-        Naug[:n, p] = md.back(np.einsum("lr,lr->l", VtCW2, md.poly(y[:L + 1])))
-        if feedthrough:
-            S0 = md.matrix(md.poly(u[:L + 1]))             # (b): sum_t u_b(t) A^t
-            Naug[:n, q:p] = np.einsum("bji,jr->ibr", S0, CW2).reshape(n, nu * ny)
-    iu = np.triu_indices(p + 1, 1)
-    Naug[(iu[1], iu[0])] = Naug[iu]
+    Naug = normal_matrix(*md.arguments(lp), C, w, feedthrough, estimate_x0)
+    p = Naug.shape[0] - 1
     solved = solve_normal_equations(Naug, n, nu, ny, estimate_x0=estimate_x0,
                                     feedthrough=feedthrough, n_samples=N)
     if solved is None:
@@ -404,7 +331,7 @@ def fit_b_d_x0(A, C, lp: LagProducts, output_weights, *, feedthrough=True, estim
     if diagnostics["residual_rms"] ** 2 * N * ny < RESIDUAL_RECOMPUTE * Naug[p, p]:
         return None                  # a nearly exact fit: the residual is rounding here
     diagnostics["regression_path"] = "lag products"
-    diagnostics["lags"] = L
+    diagnostics["lags"] = md.L
     return B, D, x0, diagnostics
 
 
@@ -414,45 +341,12 @@ def error_power(A, B, C, D, lp: LagProducts, weights, inv_scale):
     :func:`subid.methods.dt._scoring._error_power` computes it by a pass over the
     record; None where the lag products do not apply (the pass must run)."""
     A = np.asarray(A, dtype=float)
-    n, ny = A.shape[0], C.shape[0]
     N = lp.n_samples
     md = _Modal.of(A, min(lp.max_lag, N // 2))
     if md is None:
         return None
-    L = md.L
-    (G, R), u, y = lp.lags(L), lp.u, lp.y
-    CV = C @ md.V                                    # (ny, n)
-    WB = md.Wm @ B                                   # (n, nu)
-    g = md.poly(G)                                   # (l, a, b)
-    g1 = md.poly(G, shift=1)
-    # sum_t y_r y_f,r: sum_k (R(k) G_k^T)_rr with G_0 = D, G_k = C A^(k-1) B
-    cross = np.einsum("rj,rj->r", R[0], D) + np.real(
-        np.einsum("rl,lj,lrj->r", CV, WB, md.poly(R, shift=1)))
-    # sum_t y_f y_f^T over the zero-padded record: C X C^T + C S_D + S_D^T C^T + D Γ(0) D^T
-    U0 = np.real(md.V @ np.einsum("la,lab->lb", WB, g)) @ B.T   # sum_e A^e B Γ(e) B^T
-    S = U0 + (U0 - B @ G[0] @ B.T).T
-    X = np.real(md.V @ ((md.Wm @ S @ md.Wm.T) / md.denominator) @ md.V.T)
-    SD = np.real(md.V @ np.einsum("la,lab->lb", WB, g1)) @ D.T
-    F = C @ X @ C.T + C @ SD + SD.T @ C.T + D @ G[0] @ D.T
-    # minus the free response after the record, from x_f(N) = V ξ
-    xi = np.einsum("la,la->l", WB, md.poly(u[N - 1:N - 1 - L:-1]))
-    after = np.real(np.einsum("rl,lm,rm->r", CV, np.outer(xi, xi) / md.denominator, CV))
-    total = np.diag(lp.Y) - 2.0 * cross + np.diag(F) - after   # sum_t (y - y_f)^2
-    # x0: per output r, β_r = sum_t (A^t)^T c_r^T (y_r - y_f,r)(t), P_r its Gramian
-    mu = md.poly(u[:L + 1])                          # (l, b): sum_t u_b(t) λ^t
-    nu_ = md.lam[:, None] * md.poly(u[:L])           # (l, a): sum_s u_a(s) λ^(s+1)
-    eta = md.poly(y[:L + 1])                         # (l, r): sum_t y_r(t) λ^t
-    VtCt = md.V.T @ C.T                              # (l, r)
-    beta = np.empty((n, ny))
-    Pr = np.empty((ny, n, n))
-    for r in range(ny):
-        Pr[r] = md.gramian(C[r:r + 1], C[r:r + 1])
-        modal = VtCt[:, r] * (eta[:, r] - mu @ D[r]) - (md.V.T @ Pr[r] @ B * nu_).sum(axis=1)
-        beta[:, r] = md.back(modal)
-    w2 = np.asarray(weights, dtype=float) ** 2
-    Pw = np.tensordot(w2, Pr, axes=(0, 0))
-    x0 = np.linalg.lstsq(Pw, beta @ w2, rcond=1e-13)[0]
-    err = total - 2.0 * (x0 @ beta) + np.einsum("i,rij,j->r", x0, Pr, x0)
+    err = kernel_error_power(*md.arguments(lp), B, C, D, np.asarray(weights, dtype=float),
+                             1e-13)
     if not np.isfinite(err).all() or np.any(err < ROUNDING_GUARD * np.diag(lp.Y)):
         return None                  # a nearly exact fit: the pass is exact, this is not
     return err * inv_scale ** 2
