@@ -85,14 +85,15 @@ LAG_PRODUCTS = "lag products"
 #: ``ρ(A)^L`` (the spectral radius) below which the terms
 #: past L lags are dropped: below rounding relative to the data.
 LAG_TOLERANCE = 1e-16
-#: Largest lag L used (the lag products are computed up to min(MAX_LAG, N // 4)).
+#: Largest lag L used (the lag products are computed up to min(MAX_LAG, N // 2); a
+#: training record's fit uses up to N // 4 of them, a validation record's score N // 2).
 MAX_LAG = 16384
 #: Lags computed at once (:class:`LagProducts`, :func:`merged`): those of poles of radius
 #: up to 0.991; the others up to MAX_LAG when a candidate first needs them.
 FIRST_LAGS = 4096
 #: Records shorter than this are not reduced to lag products: a pass over them costs
 #: less than the evaluation at the poles (and their lags rarely cover a slow pole).
-MIN_SAMPLES = 4096
+MIN_SAMPLES = 2048
 #: An error power below this fraction of the output's power is rounding-limited in
 #: the quadratic form (cancellation): the direct pass computes it instead.
 ROUNDING_GUARD = 1e-6
@@ -121,15 +122,17 @@ def merged(blocks, records, groups):
     boundary (:func:`straddle_correlations` of the samples either side). The first
     :data:`FIRST_LAGS` lags are computed at once, the others (up to each record's
     ``max_lag``) for all the records together when a candidate first needs them
-    (:meth:`LagProducts.lags`). None for a record shorter than :data:`MIN_SAMPLES`;
-    None altogether when a block is shorter than the largest lag kept (a lag could
-    straddle two boundaries)."""
+    (:meth:`LagProducts.lags`), at most the length of the shortest block (a lag could
+    straddle two boundaries). None for a record shorter than :data:`MIN_SAMPLES`;
+    None altogether when a block is shorter than a quarter of a record."""
     if all(r.n_samples < MIN_SAMPLES for r in records):
         return [None] * len(records)
     lengths = [b.n_samples for b in blocks]
-    caps = [min(MAX_LAG, r.n_samples // 4) for r in records]
+    # no lag past the shortest block (a lag could straddle two boundaries): a training
+    # record's fit takes a quarter of it, which the blocks of the folds cover
+    caps = [min(MAX_LAG, r.n_samples // 2, min(lengths)) for r in records]
     K = max(caps)
-    if min(lengths) < K:
+    if any(min(lengths) < min(MAX_LAG, r.n_samples // 4) for r in records):
         return None
 
     def sums_up_to(lags):
@@ -218,7 +221,7 @@ class LagProducts:
         self.u = np.ascontiguousarray(u, dtype=float)
         self.y = np.ascontiguousarray(y, dtype=float)
         self.n_samples = self.u.shape[0]
-        self.max_lag = max(min(int(max_lag), self.n_samples // 4), 0)
+        self.max_lag = max(min(int(max_lag), self.n_samples // 2), 0)
         self.G, self.R, self.Y = correlations(self.u, self.y, min(self.max_lag, FIRST_LAGS))
         self.extend = self._extend if self.max_lag > FIRST_LAGS else None
 
@@ -236,13 +239,13 @@ class LagProducts:
     @classmethod
     def from_sums(cls, u, y, sums, max_lag):
         """The lag products of the record ``(u, y)`` whose lag sums ``(Γ, R, Y)`` are
-        known up to ``min(max_lag, N // 4)`` or, with ``extend`` set on the result, up
+        known up to ``min(max_lag, N // 2)`` or, with ``extend`` set on the result, up
         to fewer lags."""
         out = cls.__new__(cls)
         out.u = np.ascontiguousarray(u, dtype=float)
         out.y = np.ascontiguousarray(y, dtype=float)
         out.n_samples = out.u.shape[0]
-        out.max_lag = max(min(int(max_lag), out.n_samples // 4), 0)
+        out.max_lag = max(min(int(max_lag), out.n_samples // 2), 0)
         G, R, out.Y = sums
         out.G, out.R = G[:out.max_lag + 1], R[:out.max_lag + 1]
         out.extend = None
