@@ -62,8 +62,9 @@ falls by ``2 x0^T β_r - x0^T P_r x0``.
 
 **Where it does not apply** the callers take the per-candidate passes: an unstable
 A, one whose eigenvector matrix is ill-conditioned (:data:`MAX_EIGVEC_CONDITION`) or
-whose L exceeds the lags kept (:data:`MAX_LAG`, a quarter of a training record, half
-of a validation record); a regression or error power whose value the normal
+whose L exceeds the lags kept (:data:`MAX_LAG`, half of a record: the x0 rows and
+the Gramian P drop the terms past N, below ``ρ(A)^N``; the records of the folds
+merged from blocks, :func:`merged`, no more than the shortest block); a regression or error power whose value the normal
 equations leave to rounding (nearly exact fits, :data:`ROUNDING_GUARD`), where the
 passes are exact; records of several experiments or of fewer than
 :data:`MIN_SAMPLES` samples.
@@ -85,15 +86,16 @@ LAG_PRODUCTS = "lag products"
 #: ``ρ(A)^L`` (the spectral radius) below which the terms
 #: past L lags are dropped: below rounding relative to the data.
 LAG_TOLERANCE = 1e-16
-#: Largest lag L used (the lag products are computed up to min(MAX_LAG, N // 2); a
-#: training record's fit uses up to N // 4 of them, a validation record's score N // 2).
+#: Largest lag L used (the lag products are computed up to min(MAX_LAG, N // 2)).
 MAX_LAG = 16384
 #: Lags computed at once (:class:`LagProducts`, :func:`merged`): those of poles of radius
 #: up to 0.991; the others up to MAX_LAG when a candidate first needs them.
 FIRST_LAGS = 4096
 #: Records shorter than this are not reduced to lag products: a pass over them costs
-#: less than the evaluation at the poles (and their lags rarely cover a slow pole).
-MIN_SAMPLES = 2048
+#: little, and their lags (half the record) rarely cover a pole.
+MIN_SAMPLES = 512
+#: Records shorter than this get lag products of their own (:func:`merged`).
+MERGE_SAMPLES = 4096
 #: An error power below this fraction of the output's power is rounding-limited in
 #: the quadratic form (cancellation): the direct pass computes it instead.
 ROUNDING_GUARD = 1e-6
@@ -123,10 +125,17 @@ def merged(blocks, records, groups):
     :data:`FIRST_LAGS` lags are computed at once, the others (up to each record's
     ``max_lag``) for all the records together when a candidate first needs them
     (:meth:`LagProducts.lags`), at most the length of the shortest block (a lag could
-    straddle two boundaries). None for a record shorter than :data:`MIN_SAMPLES`;
-    None altogether when a block is shorter than a quarter of a record."""
-    if all(r.n_samples < MIN_SAMPLES for r in records):
-        return [None] * len(records)
+    straddle two boundaries). A record shorter than :data:`MERGE_SAMPLES` has its own
+    (one FFT of a short record costs little, and its lags then reach half of it); one
+    shorter than :data:`MIN_SAMPLES`, None. None altogether when a block is shorter than
+    a quarter of a record to merge."""
+    out = [LagProducts(r.u, r.y) if MIN_SAMPLES <= r.n_samples < MERGE_SAMPLES else None
+           for r in records]
+    big = [k for k, r in enumerate(records) if r.n_samples >= MERGE_SAMPLES]
+    if not big:
+        return out
+    records = [records[k] for k in big]
+    groups = [groups[k] for k in big]
     lengths = [b.n_samples for b in blocks]
     # no lag past the shortest block (a lag could straddle two boundaries): a training
     # record's fit takes a quarter of it, which the blocks of the folds cover
@@ -148,18 +157,18 @@ def merged(blocks, records, groups):
         return out
 
     first = min(K, FIRST_LAGS)
-    out = [None if record.n_samples < MIN_SAMPLES else
-           LagProducts.from_sums(record.u, record.y, sums, cap)
-           for record, cap, sums in zip(records, caps, sums_up_to(first))]
+    kept = [LagProducts.from_sums(record.u, record.y, sums, cap)
+            for record, cap, sums in zip(records, caps, sums_up_to(first))]
     if first < K:
         def extend():                     # every record's lags up to its max_lag, once
-            for lp, (G, R, _) in zip(out, sums_up_to(K)):
-                if lp is not None:
-                    lp.G, lp.R = G[:lp.max_lag + 1], R[:lp.max_lag + 1]
-                    lp.extend = None
-        for lp in out:
-            if lp is not None and lp.G.shape[0] <= lp.max_lag:
+            for lp, (G, R, _) in zip(kept, sums_up_to(K)):
+                lp.G, lp.R = G[:lp.max_lag + 1], R[:lp.max_lag + 1]
+                lp.extend = None
+        for lp in kept:
+            if lp.G.shape[0] <= lp.max_lag:
                 lp.extend = extend
+    for k, lp in zip(big, kept):
+        out[k] = lp
     return out
 
 
@@ -320,7 +329,7 @@ def fit_b_d_x0(A, C, lp: LagProducts, output_weights, *, feedthrough=True, estim
     C = np.ascontiguousarray(C, dtype=float)
     n, ny, nu = A.shape[0], C.shape[0], lp.u.shape[1]
     N = lp.n_samples
-    md = _Modal.of(A, min(lp.max_lag, N // 4))
+    md = _Modal.of(A, min(lp.max_lag, N // 2))
     if md is None:
         return None
     w = np.ones(ny) if output_weights is None else np.asarray(output_weights, dtype=float)
