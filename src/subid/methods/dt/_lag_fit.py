@@ -284,9 +284,15 @@ class _Modal:
     ``sum_e c_e A^e = V diag(sum_e c_e λ^e) V^{-1}``, ``O(L n)`` per sequence instead
     of ``O(L n^3)`` for the powers of A (:func:`subid.methods.dt._lag_kernel.modal_form`)."""
 
-    def __init__(self, lam, V, Wm, vand):
-        self.lam, self.V, self.Wm, self.vand = lam, V, Wm, vand
-        self.L = vand.shape[1] - 1
+    def __init__(self, lam, V, Wm, vand_re, vand_im):
+        # the powers' real and imaginary parts apart: real matrix products in the kernels
+        self.lam, self.V, self.Wm, self.vand_re, self.vand_im = lam, V, Wm, vand_re, vand_im
+        self.L = vand_re.shape[1] - 1
+
+    @property
+    def vand(self):
+        """The powers ``λ^e`` (n, L + 1), complex."""
+        return self.vand_re + 1j * self.vand_im
 
     @classmethod
     def of(cls, A, max_lag):
@@ -305,16 +311,17 @@ class _Modal:
         if A.shape[0] == 0 or not np.isfinite(A).all():
             return None
         lam, V = np.linalg.eig(A)
-        status, _, Wm, vand = modal_form(lam.astype(complex), V.astype(complex),
-                                         LAG_TOLERANCE, MAX_LAG, MAX_EIGVEC_CONDITION)
-        return cls(lam.astype(complex), V.astype(complex), Wm, vand) if status == 0 else None
+        lam, V = lam.astype(complex, copy=False), V.astype(complex, copy=False)
+        status, _, Wm, vre, vim = modal_form(lam, V, LAG_TOLERANCE, MAX_LAG,
+                                             MAX_EIGVEC_CONDITION)
+        return cls(lam, V, Wm, vre, vim) if status == 0 else None
 
     def arguments(self, lp):
         """The modal form and the lag products of ``lp`` as the kernels of
         :mod:`subid.methods.dt._lag_kernel` take them (up to this form's L)."""
         L = self.L
         (G, R), u, y = lp.lags(L), lp.u, lp.y
-        return (self.lam, self.V, self.Wm, self.vand, G.reshape(L + 1, -1),
+        return (self.lam, self.V, self.Wm, self.vand_re, self.vand_im, G.reshape(L + 1, -1),
                 R.reshape(L + 1, -1), np.ascontiguousarray(np.diag(lp.Y)),
                 np.ascontiguousarray(u[lp.n_samples - 1:lp.n_samples - 1 - L:-1]),
                 u[:L + 1], y[:L + 1])

@@ -34,67 +34,101 @@ import numpy as np
 
 @numba.njit(cache=True, nogil=True)
 def powers(lam, L):  # pragma: no cover - compiled
-    """``λ^e`` for e = 0..L, (n, L + 1), by doubling: the columns ``[filled, 2 filled)``
-    are the first ``filled`` times ``λ^filled`` (``log2 L`` roundings deep instead of
-    L)."""
+    """``λ^e`` for e = 0..L as its real and imaginary parts, two (n, L + 1) arrays, by
+    doubling: the columns ``[filled, 2 filled)`` are the first ``filled`` times
+    ``λ^filled`` (``log2 L`` roundings deep instead of L)."""
     n = lam.shape[0]
-    vand = np.empty((n, L + 1), dtype=np.complex128)
+    vre = np.empty((n, L + 1))
+    vim = np.empty((n, L + 1))
     for i in range(n):
-        vand[i, 0] = 1.0
-    filled = 1
-    step = lam.copy()
-    while filled < L + 1:
-        k = min(filled, L + 1 - filled)
-        for i in range(n):
-            s = step[i]
+        vre[i, 0] = 1.0
+        vim[i, 0] = 0.0
+        filled = 1
+        sr, si = lam[i].real, lam[i].imag               # λ^filled
+        while filled < L + 1:
+            k = min(filled, L + 1 - filled)
             for j in range(k):
-                vand[i, filled + j] = vand[i, j] * s
-        filled += k
-        for i in range(n):
-            step[i] = vand[i, filled - 1] * lam[i]
-    return vand
+                a, b = vre[i, j], vim[i, j]
+                vre[i, filled + j] = a * sr - b * si
+                vim[i, filled + j] = a * si + b * sr
+            filled += k
+            a, b = vre[i, filled - 1], vim[i, filled - 1]
+            sr, si = a * lam[i].real - b * lam[i].imag, a * lam[i].imag + b * lam[i].real
+    return vre, vim
 
 
 @numba.njit(cache=True, nogil=True)
 def modal_form(lam, V, lag_tolerance, max_lag, max_condition):  # pragma: no cover - compiled
-    """``(status, L, Wm, vand)`` of the modal form of an A with eigenvalues ``lam`` and
-    eigenvectors ``V``: ``status`` 0 when it applies, 1 unstable, 2 L above
+    """``(status, L, Wm, vand_re, vand_im)`` of the modal form of an A with eigenvalues
+    ``lam`` and eigenvectors ``V``: ``status`` 0 when it applies, 1 unstable, 2 L above
     ``max_lag``, 3 eigenvectors ill-conditioned (2-norm condition number above
-    ``max_condition``, or singular). ``Wm = V^{-1}``, ``vand`` the powers
-    (:func:`powers`)."""
+    ``max_condition``, or singular). ``Wm = V^{-1}``, ``vand_re`` and ``vand_im`` the
+    powers (:func:`powers`)."""
     n = lam.shape[0]
     empty_w = np.empty((0, 0), dtype=np.complex128)
+    empty_v = np.empty((0, 0))
     radius = 0.0
     for i in range(n):
         radius = max(radius, abs(lam[i]))
     if radius >= 1.0:
-        return 1, 0, empty_w, empty_w
+        return 1, 0, empty_w, empty_v, empty_v
     if radius == 0.0:
         L = 1
     else:
         L = int(math.ceil(math.log(lag_tolerance) / math.log(radius)))
     if L > max_lag:
-        return 2, L, empty_w, empty_w
+        return 2, L, empty_w, empty_v, empty_v
     cond = np.linalg.cond(V)
     if not (cond <= max_condition):
-        return 3, L, empty_w, empty_w
+        return 3, L, empty_w, empty_v, empty_v
     Wm = np.linalg.solve(V, np.eye(n, dtype=np.complex128))
     L = max(L, 1)
-    return 0, L, Wm, powers(lam, L)
+    vre, vim = powers(lam, L)
+    return 0, L, Wm, vre, vim
 
 
 @numba.njit(cache=True, nogil=True)
-def _poly(vand, seq, shift, rows):  # pragma: no cover - compiled
-    """``sum_e seq[e + shift] λ^e`` for e = 0..rows - 1: (n, entries) complex."""
-    n = vand.shape[0]
-    k = seq.shape[1]
-    out = np.zeros((n, k), dtype=np.complex128)
+def _sums(vand_re, vand_im, G, R, u_tail, u_head, y_head):  # pragma: no cover - compiled
+    """Every lag sequence at the poles, ``sum_e s(e) λ^e``, as two matrix products of the
+    powers (real and imaginary parts) with the sequences side by side (zero-padded to
+    L + 1 terms): ``(g, g1, rho, xt, mu, nuv, eta)`` (n, entries) complex, the sums of
+    ``Γ(e)``, ``Γ(e + 1)``, ``R(e + 1)``, ``u(N - 1 - e)``, ``u(e)``, ``u(e)`` (e < L) and
+    ``y(e)``."""
+    L = vand_re.shape[1] - 1
+    n = vand_re.shape[0]
+    kg, kr, nu, ny = G.shape[1], R.shape[1], u_tail.shape[1], y_head.shape[1]
+    widths = (kg, kg, kr, nu, nu, nu, ny)
+    K = 0
+    for k in widths:
+        K += k
+    M = np.zeros((L + 1, K))
+    for e in range(L + 1):
+        for c in range(kg):
+            M[e, c] = G[e, c]
+        for c in range(nu):
+            M[e, 2 * kg + kr + nu + c] = u_head[e, c]
+        for c in range(ny):
+            M[e, 2 * kg + kr + 3 * nu + c] = y_head[e, c]
+    for e in range(L):
+        for c in range(kg):
+            M[e, kg + c] = G[e + 1, c]
+        for c in range(kr):
+            M[e, 2 * kg + c] = R[e + 1, c]
+        for c in range(nu):
+            M[e, 2 * kg + kr + c] = u_tail[e, c]
+            M[e, 2 * kg + kr + 2 * nu + c] = u_head[e, c]
+    re = vand_re @ M
+    im = vand_im @ M
+    out = np.empty((n, K), dtype=np.complex128)
     for i in range(n):
-        for e in range(rows):
-            v = vand[i, e]
-            for c in range(k):
-                out[i, c] += v * seq[e + shift, c]
-    return out
+        for c in range(K):
+            out[i, c] = re[i, c] + 1j * im[i, c]
+    a = 0
+    parts = []
+    for k in widths:
+        parts.append(np.ascontiguousarray(out[:, a:a + k]))
+        a += k
+    return parts[0], parts[1], parts[2], parts[3], parts[4], parts[5], parts[6]
 
 
 @numba.njit(cache=True, nogil=True)
@@ -141,7 +175,7 @@ def _gramian(lam, Wm, left):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True, nogil=True)
-def normal_matrix(lam, V, Wm, vand, G, R, Y_diag, u_tail, u_head, y_head, C, w,
+def normal_matrix(lam, V, Wm, vand_re, vand_im, G, R, Y_diag, u_tail, u_head, y_head, C, w,
                   feedthrough, estimate_x0):  # pragma: no cover - compiled
     """The augmented normal matrix (p + 1, p + 1) of the weighted regression of
     :func:`subid.methods.dt._lag_fit.fit_b_d_x0` (module documentation there):
@@ -152,7 +186,6 @@ def normal_matrix(lam, V, Wm, vand, G, R, Y_diag, u_tail, u_head, y_head, C, w,
     n = lam.shape[0]
     ny = C.shape[0]
     nu = u_tail.shape[1]
-    L = vand.shape[1] - 1
     w2 = w * w
     nx = n if estimate_x0 else 0
     q = nx + n * nu
@@ -168,7 +201,7 @@ def normal_matrix(lam, V, Wm, vand, G, R, Y_diag, u_tail, u_head, y_head, C, w,
             Cw[j, r] = C[r, j] * w[r]
     P = _gramian(lam, Wm, Vt @ _c(Cw))               # sum_t (A^t)^T C^T W^2 C A^t
     P = 0.5 * (P + np.ascontiguousarray(P.T))
-    gz = _poly(vand, G, 0, L + 1)                    # (l, a nu + b)
+    gz, gz1, rho, xt, s0, s1, eta = _sums(vand_re, vand_im, G, R, u_tail, u_head, y_head)
     # BB[a, :, b, :] = Z[a, b]^T P + P (Z[b, a] - Γ(0)_ba I), Z[a, b] = sum_e Γ(e)_ab A^e
     Z = np.empty((nu, nu, n, n))
     for a in range(nu):
@@ -181,7 +214,6 @@ def normal_matrix(lam, V, Wm, vand, G, R, Y_diag, u_tail, u_head, y_head, C, w,
                 for j in range(n):
                     Naug[nx + a * n + i, nx + b * n + j] = blk[i, j] - P[i, j] * G[0, b * nu + a]
     # minus X(N)^T P X(N), X(N) = [sum_k u_a(N-k) A^(k-1)]_a
-    xt = _poly(vand, u_tail, 0, L)
     XN = np.empty((n, nu * n))
     for a in range(nu):
         XN[:, a * n:(a + 1) * n] = _matrix(V, Wm, np.ascontiguousarray(xt[:, a]))
@@ -191,7 +223,6 @@ def normal_matrix(lam, V, Wm, vand, G, R, Y_diag, u_tail, u_head, y_head, C, w,
             Naug[nx + i, nx + j] -= XPX[i, j]
     # rB[a n + i] = (V^{-T} sum_r (V^T C^T W^2)_lr ρ_lra)_ia, ρ = sum_k R(k) λ^(k-1)
     VtCW2 = Vt @ _c(CW2)                             # (n, ny)
-    rho = _poly(vand, R, 1, L)                       # (l, r nu + a)
     modal = np.zeros((n, nu), dtype=np.complex128)
     for i in range(n):
         for a in range(nu):
@@ -206,7 +237,6 @@ def normal_matrix(lam, V, Wm, vand, G, R, Y_diag, u_tail, u_head, y_head, C, w,
         s += w2[r] * Y_diag[r]
     Naug[p, p] = s
     if feedthrough:
-        gz1 = _poly(vand, G, 1, L)
         for a in range(nu):
             for b in range(nu):
                 Z1 = _matrix(V, Wm, np.ascontiguousarray(gz1[:, a * nu + b]))
@@ -221,7 +251,6 @@ def normal_matrix(lam, V, Wm, vand, G, R, Y_diag, u_tail, u_head, y_head, C, w,
             for r in range(ny):
                 Naug[q + b * ny + r, p] = R[0, r * nu + b] * w2[r]
     if estimate_x0:
-        s1 = _poly(vand, u_head, 0, L)
         for i in range(n):
             for a in range(nu):
                 s1[i, a] *= lam[i]
@@ -234,7 +263,6 @@ def normal_matrix(lam, V, Wm, vand, G, R, Y_diag, u_tail, u_head, y_head, C, w,
             for i in range(n):
                 for j in range(n):
                     Naug[i, nx + a * n + j] = blk[i, j]
-        eta = _poly(vand, y_head, 0, L + 1)          # (l, r)
         mod = np.zeros((n, 1), dtype=np.complex128)
         for i in range(n):
             for r in range(ny):
@@ -243,7 +271,6 @@ def normal_matrix(lam, V, Wm, vand, G, R, Y_diag, u_tail, u_head, y_head, C, w,
         for i in range(n):
             Naug[i, p] = back[i, 0]
         if feedthrough:
-            s0 = _poly(vand, u_head, 0, L + 1)
             for b in range(nu):
                 S0 = _matrix(V, Wm, np.ascontiguousarray(s0[:, b]))
                 blk = np.ascontiguousarray(S0.T) @ CW2                    # (i, r)
@@ -256,9 +283,10 @@ def normal_matrix(lam, V, Wm, vand, G, R, Y_diag, u_tail, u_head, y_head, C, w,
     return Naug
 
 
-def normal_matrix_reference(lam, V, Wm, vand, G, R, Y_diag, u_tail, u_head, y_head, C, w,
-                            feedthrough, estimate_x0):
+def normal_matrix_reference(lam, V, Wm, vand_re, vand_im, G, R, Y_diag, u_tail, u_head, y_head,
+                            C, w, feedthrough, estimate_x0):
     """Plain-numpy reference of :func:`normal_matrix` (the same arguments)."""
+    vand = vand_re + 1j * vand_im
     n, ny, nu = lam.size, C.shape[0], u_tail.shape[1]
     L = vand.shape[1] - 1
     G = G.reshape(-1, nu, nu)
@@ -317,8 +345,8 @@ def normal_matrix_reference(lam, V, Wm, vand, G, R, Y_diag, u_tail, u_head, y_he
 
 
 @numba.njit(cache=True, nogil=True)
-def error_power(lam, V, Wm, vand, G, R, Y_diag, u_tail, u_head, y_head, B, C, D, weights,
-                rcond):  # pragma: no cover - compiled
+def error_power(lam, V, Wm, vand_re, vand_im, G, R, Y_diag, u_tail, u_head, y_head, B, C, D,
+                weights, rcond):  # pragma: no cover - compiled
     """``err[r] = sum_t (y_r - ŷ_r)^2`` per output, the validation error power of
     :func:`subid.methods.dt._lag_fit.error_power` (module documentation there), ``ŷ``
     simulated from the least-squares x0 (outputs weighted by ``weights``, the
@@ -327,15 +355,14 @@ def error_power(lam, V, Wm, vand, G, R, Y_diag, u_tail, u_head, y_head, B, C, D,
     n = lam.shape[0]
     ny = C.shape[0]
     nu = B.shape[1]
-    L = vand.shape[1] - 1
     Vt = np.ascontiguousarray(V.T)
     WmT = np.ascontiguousarray(Wm.T)
     Bc = _c(B)
     CV = _c(C) @ V                                   # (ny, n)
     WB = Wm @ Bc                                     # (n, nu)
-    g = _poly(vand, G, 0, L + 1)                     # (l, a nu + b)
-    g1 = _poly(vand, G, 1, L)
-    rho = _poly(vand, R, 1, L)                       # (l, r nu + j)
+    # (l, a nu + b), (l, r nu + j), (l, a); mu, nuv, eta: sum_t u_b(t) λ^t, sum_s u_a(s)
+    # λ^s (s < L), sum_t y_r(t) λ^t
+    g, g1, rho, xt, mu, nuv, eta = _sums(vand_re, vand_im, G, R, u_tail, u_head, y_head)
     # sum_t y_r y_f,r = sum_k (R(k) G_k^T)_rr, G_0 = D, G_k = C A^(k-1) B
     cross = np.zeros(ny)
     for r in range(ny):
@@ -371,7 +398,6 @@ def error_power(lam, V, Wm, vand, G, R, Y_diag, u_tail, u_head, y_head, B, C, D,
     CSD = C @ SD
     F = C @ X @ Ct + CSD + np.ascontiguousarray(CSD.T) + D @ G0 @ np.ascontiguousarray(D.T)
     # minus the free response after the record, x_f(N) = V ξ
-    xt = _poly(vand, u_tail, 0, L)
     xi = np.zeros(n, dtype=np.complex128)
     for l in range(n):
         for a in range(nu):
@@ -384,9 +410,6 @@ def error_power(lam, V, Wm, vand, G, R, Y_diag, u_tail, u_head, y_head, B, C, D,
                 c += CV[r, l] * (xi[l] * xi[m] / (1.0 - lam[l] * lam[m])) * CV[r, m]
         total[r] = Y_diag[r] - 2.0 * cross[r] + F[r, r] - c.real
     # x0: β_r = sum_t (A^t)^T c_r^T (y_r - y_f,r)(t), P_r its Gramian
-    mu = _poly(vand, u_head, 0, L + 1)               # (l, b): sum_t u_b(t) λ^t
-    nuv = _poly(vand, u_head, 0, L)                  # (l, a): sum_s u_a(s) λ^s
-    eta = _poly(vand, y_head, 0, L + 1)              # (l, r): sum_t y_r(t) λ^t
     beta = np.empty((ny, n))
     Pr = np.empty((ny, n, n))
     for r in range(ny):
@@ -418,9 +441,10 @@ def error_power(lam, V, Wm, vand, G, R, Y_diag, u_tail, u_head, y_head, B, C, D,
     return err
 
 
-def error_power_reference(lam, V, Wm, vand, G, R, Y_diag, u_tail, u_head, y_head, B, C, D,
-                          weights, rcond):
+def error_power_reference(lam, V, Wm, vand_re, vand_im, G, R, Y_diag, u_tail, u_head, y_head,
+                          B, C, D, weights, rcond):
     """Plain-numpy reference of :func:`error_power` (the same arguments)."""
+    vand = vand_re + 1j * vand_im
     n, ny, nu = lam.size, C.shape[0], B.shape[1]
     L = vand.shape[1] - 1
     G = G.reshape(-1, nu, nu)
