@@ -20,7 +20,11 @@ times powers of A; with ``A = V diag(λ) V^{-1}`` each is evaluated at the poles
 ``sum_e c_e A^e = V diag(sum_e c_e λ^e) V^{-1}`` (:class:`_Modal`), and the infinite
 sums of the Gramians in closed form (``sum_t λ_l^t λ_m^t = 1 / (1 - λ_l λ_m)``), so a
 candidate costs ``O(L n)`` flops per sequence plus ``O(n^3)``, independent of N.
-L is the smallest lag with ``ρ(A)^L`` below :data:`LAG_TOLERANCE` (rounding).
+L is the smallest lag with ``ρ(A)^L`` below :data:`LAG_TOLERANCE` (rounding), or
+``N - 1`` on a shorter record (where every lag is kept): the sums past the record
+are then subtracted exactly, by ``A^N = V diag(λ^N) V^{-1}`` (below), so that the
+products give the passes' values for every stable A whatever N (issue 21: the
+records of the folds of 10^3 samples took the passes).
 
 **Training fold** (the regression of :func:`subid.methods.dt._regression.fit_b_d_x0`,
 parameters ``[x0; vec B; vec D]``, each output weighted by ``w_r``, ``W = diag w``).
@@ -32,16 +36,17 @@ Gramian, ``P = A^T P A + Q``):
   - X(N)^T P X(N)``: the sum over every t of the input zero-padded beyond the
   record is block Toeplitz in the lag products (with ``a = j-1``, ``b = k-1``,
   ``e = a - b``, the inner sum over b is P); the samples ``t >= N`` of that padded
-  sum are the free response from ``X(N) = sum_{k=1..L} u(N-k)^T kron A^(k-1)``, which
-  the last L samples give exactly;
+  sum are the free response from ``X(N) = sum_{k=1..L+1} u(N-k)^T kron A^(k-1)``,
+  which the last L + 1 samples give exactly;
 * ``sum_t X^T C^T W^2 (u^T kron I) = sum_{k>=1} Γ(k) kron (C A^(k-1))^T W^2`` and
   ``sum_t X^T C^T W^2 y = sum_{k>=1} vec((C A^(k-1))^T W^2 R(k))``: no edge term
   (the D and y rows stop at N themselves);
 * the D block ``Γ(0) kron W^2`` and ``vec(W^2 R(0))``;
-* the x0 rows, ``C A^t`` negligible after L samples: ``sum_t (A^t)^T Q A^t = P``,
-  ``sum_t (A^t)^T Q X(t) = sum_s u(s)^T kron (A^(s+1))^T P`` (s < L),
+* the x0 rows: ``sum_{t<N} (A^t)^T Q A^t = P - (A^N)^T P A^N``,
+  ``sum_{t<N} (A^t)^T Q X(t) = sum_s u(s)^T kron (A^(s+1))^T P - (A^N)^T P X(N)``
+  (s <= L; the terms ``t >= N`` are the free response from ``X(N)``),
   ``sum_t (A^t)^T C^T W^2 (u(t)^T kron I)`` and ``sum_t (A^t)^T C^T W^2 y(t)``
-  over the first L samples.
+  over the first L + 1 samples.
 
 The augmented normal matrix is solved by
 :func:`subid.methods.dt._regression.solve_normal_equations` with the guards of the
@@ -54,18 +59,19 @@ parameters ``G_0 = D``, ``G_k = C A^(k-1) B``; ``sum_t y_f y_f^T = C X C^T + C S
 S_D^T C^T + D Γ(0) D^T`` minus the free response after the record, where ``S_D =
 sum_{k>=1} A^(k-1) B Γ(k) D^T`` and ``X = A X A^T + S`` with ``S = sum_{e>=0} A^e B Γ(e)
 B^T + sum_{e>=1} B Γ(e)^T B^T (A^e)^T`` (the same block-Toeplitz sum). The
-least-squares x0 (outputs weighted) involves the first L samples only: per output,
-``β_r = sum_t (A^t)^T c_r^T (y_r - y_f,r)(t)`` is ``sum_t (A^t)^T c_r^T y_r(t) -
-sum_t (A^t)^T c_r^T D_r u(t) - sum_s (A^(s+1))^T P_r B u(s)`` (``P_r`` the Gramian of
-output r), x0 solves ``(sum_r w_r^2 P_r) x0 = sum_r w_r^2 β_r``, and the error power
-falls by ``2 x0^T β_r - x0^T P_r x0``.
+least-squares x0 (outputs weighted) involves the first L + 1 samples only: per
+output, ``β_r = sum_{t<N} (A^t)^T c_r^T (y_r - y_f,r)(t)`` is ``sum_t (A^t)^T c_r^T y_r(t)
+- sum_t (A^t)^T c_r^T D_r u(t) - sum_s (A^(s+1))^T P_r B u(s) + (A^N)^T P_r x_f(N)``
+(``P_r`` the Gramian of output r, ``x_f(N)`` the forced state at the end), x0 solves
+``(sum_r w_r^2 P_r') x0 = sum_r w_r^2 β_r`` with ``P_r' = P_r - (A^N)^T P_r A^N`` (the
+sum over t < N), and the error power falls by ``2 x0^T β_r - x0^T P_r' x0``.
 
 **Where it does not apply** the callers take the per-candidate passes: an unstable
 A, one whose eigenvector matrix is ill-conditioned (:data:`MAX_EIGVEC_CONDITION`) or
-whose L exceeds the lags kept (:data:`MAX_LAG`, half of a record: the x0 rows and
-the Gramian P drop the terms past N, below ``ρ(A)^N``; the records of the folds
-merged from blocks, :func:`merged`, no more than the shortest block); a regression or error power whose value the normal
-equations leave to rounding (nearly exact fits, :data:`ROUNDING_GUARD`), where the
+whose L exceeds the lags kept (:data:`MAX_LAG`; those of a record merged from the
+blocks of the folds, :func:`merged`, no further than the shortest block); a
+regression or error power whose value the normal equations leave to rounding
+(nearly exact fits, :data:`ROUNDING_GUARD`), where the
 passes are exact; records of several experiments or of fewer than
 :data:`MIN_SAMPLES` samples.
 """
@@ -77,7 +83,7 @@ import scipy.fft
 import scipy.linalg
 
 from subid.methods.dt._lag_kernel import error_power as kernel_error_power
-from subid.methods.dt._lag_kernel import modal_form, normal_matrix
+from subid.methods.dt._lag_kernel import modal_form, normal_matrix, powers
 from subid.methods.dt._regression import RESIDUAL_RECOMPUTE, solve_normal_equations
 
 #: The key of a problem's cache that holds its record's lag products (a
@@ -86,14 +92,14 @@ LAG_PRODUCTS = "lag products"
 #: ``ρ(A)^L`` (the spectral radius) below which the terms
 #: past L lags are dropped: below rounding relative to the data.
 LAG_TOLERANCE = 1e-16
-#: Largest lag L used (the lag products are computed up to min(MAX_LAG, N // 2)).
+#: Largest lag L used (the lag products are computed up to min(MAX_LAG, N - 1)).
 MAX_LAG = 16384
 #: Lags computed at once (:class:`LagProducts`, :func:`merged`): those of poles of radius
 #: up to 0.991; the others up to MAX_LAG when a candidate first needs them.
 FIRST_LAGS = 4096
-#: Records shorter than this are not reduced to lag products: a pass over them costs
-#: little, and their lags (half the record) rarely cover a pole.
-MIN_SAMPLES = 512
+#: Records shorter than this are not reduced to lag products (a pass over them costs
+#: little).
+MIN_SAMPLES = 256
 #: Records shorter than this get lag products of their own (:func:`merged`).
 MERGE_SAMPLES = 4096
 #: An error power below this fraction of the output's power is rounding-limited in
@@ -126,7 +132,7 @@ def merged(blocks, records, groups):
     ``max_lag``) for all the records together when a candidate first needs them
     (:meth:`LagProducts.lags`), at most the length of the shortest block (a lag could
     straddle two boundaries). A record shorter than :data:`MERGE_SAMPLES` has its own
-    (one FFT of a short record costs little, and its lags then reach half of it); one
+    (one FFT of a short record costs little, and its lags then reach all of it); one
     shorter than :data:`MIN_SAMPLES`, None. None altogether when a block is shorter than
     a quarter of a record to merge."""
     out = [LagProducts(r.u, r.y) if MIN_SAMPLES <= r.n_samples < MERGE_SAMPLES else None
@@ -139,7 +145,7 @@ def merged(blocks, records, groups):
     lengths = [b.n_samples for b in blocks]
     # no lag past the shortest block (a lag could straddle two boundaries): a training
     # record's fit takes a quarter of it, which the blocks of the folds cover
-    caps = [min(MAX_LAG, r.n_samples // 2, min(lengths)) for r in records]
+    caps = [min(MAX_LAG, r.n_samples - 1, min(lengths)) for r in records]
     K = max(caps)
     if any(min(lengths) < min(MAX_LAG, r.n_samples // 4) for r in records):
         return None
@@ -230,7 +236,7 @@ class LagProducts:
         self.u = np.ascontiguousarray(u, dtype=float)
         self.y = np.ascontiguousarray(y, dtype=float)
         self.n_samples = self.u.shape[0]
-        self.max_lag = max(min(int(max_lag), self.n_samples // 2), 0)
+        self.max_lag = max(min(int(max_lag), self.n_samples - 1), 0)
         self.G, self.R, self.Y = correlations(self.u, self.y, min(self.max_lag, FIRST_LAGS))
         self.extend = self._extend if self.max_lag > FIRST_LAGS else None
 
@@ -248,13 +254,13 @@ class LagProducts:
     @classmethod
     def from_sums(cls, u, y, sums, max_lag):
         """The lag products of the record ``(u, y)`` whose lag sums ``(Γ, R, Y)`` are
-        known up to ``min(max_lag, N // 2)`` or, with ``extend`` set on the result, up
+        known up to ``min(max_lag, N - 1)`` or, with ``extend`` set on the result, up
         to fewer lags."""
         out = cls.__new__(cls)
         out.u = np.ascontiguousarray(u, dtype=float)
         out.y = np.ascontiguousarray(y, dtype=float)
         out.n_samples = out.u.shape[0]
-        out.max_lag = max(min(int(max_lag), out.n_samples // 2), 0)
+        out.max_lag = max(min(int(max_lag), out.n_samples - 1), 0)
         G, R, out.Y = sums
         out.G, out.R = G[:out.max_lag + 1], R[:out.max_lag + 1]
         out.extend = None
@@ -279,32 +285,26 @@ _LAST = [None]
 
 
 class _Modal:
-    """A stable, diagonalisable A in modal form, ``A = V diag(λ) V^{-1}``, with the
-    Vandermonde rows ``λ^e`` (e = 0..L) that evaluate every lag sum at the poles:
-    ``sum_e c_e A^e = V diag(sum_e c_e λ^e) V^{-1}``, ``O(L n)`` per sequence instead
-    of ``O(L n^3)`` for the powers of A (:func:`subid.methods.dt._lag_kernel.modal_form`)."""
+    """A stable, diagonalisable A in modal form, ``A = V diag(λ) V^{-1}``, and the
+    lags ``lags`` after which ``ρ(A)^L`` is below :data:`LAG_TOLERANCE`; the powers
+    ``λ^e`` (e = 0..L) evaluate every lag sum at the poles, ``sum_e c_e A^e = V
+    diag(sum_e c_e λ^e) V^{-1}``, ``O(L n)`` per sequence instead of ``O(L n^3)`` for
+    the powers of A (:mod:`subid.methods.dt._lag_kernel`)."""
 
-    def __init__(self, lam, V, Wm, vand_re, vand_im):
-        # the powers' real and imaginary parts apart: real matrix products in the kernels
-        self.lam, self.V, self.Wm, self.vand_re, self.vand_im = lam, V, Wm, vand_re, vand_im
-        self.L = vand_re.shape[1] - 1
-
-    @property
-    def vand(self):
-        """The powers ``λ^e`` (n, L + 1), complex."""
-        return self.vand_re + 1j * self.vand_im
+    def __init__(self, lam, V, Wm, lags):
+        self.lam, self.V, self.Wm, self.lags = lam, V, Wm, lags
+        self._powers = (None, None)
 
     @classmethod
-    def of(cls, A, max_lag):
-        """The modal form with the lags L where ``ρ(A)^L < LAG_TOLERANCE``, or None
-        (unstable, not finite, ill-conditioned eigenvectors, or L above ``max_lag``).
-        The last one computed is kept: a candidate's fit and its score share it."""
+    def of(cls, A):
+        """The modal form of A, or None (unstable, not finite, ill-conditioned
+        eigenvectors). The last one computed is kept: a candidate's fit and its score
+        share it."""
         key = (A.shape, A.tobytes())
         last = _LAST[0]                    # one (key, form) pair: safe across threads
         if last is None or last[0] != key:
             last = _LAST[0] = (key, cls._of(A))
-        form = last[1]
-        return form if form is not None and form.L <= max_lag else None
+        return last[1]
 
     @classmethod
     def _of(cls, A):
@@ -312,19 +312,30 @@ class _Modal:
             return None
         lam, V = np.linalg.eig(A)
         lam, V = lam.astype(complex, copy=False), V.astype(complex, copy=False)
-        status, _, Wm, vre, vim = modal_form(lam, V, LAG_TOLERANCE, MAX_LAG,
-                                             MAX_EIGVEC_CONDITION)
-        return cls(lam, V, Wm, vre, vim) if status == 0 else None
+        status, lags, Wm = modal_form(lam, V, LAG_TOLERANCE, MAX_EIGVEC_CONDITION)
+        return cls(lam, V, Wm, lags) if status == 0 else None
 
-    def arguments(self, lp):
-        """The modal form and the lag products of ``lp`` as the kernels of
-        :mod:`subid.methods.dt._lag_kernel` take them (up to this form's L)."""
-        L = self.L
+    def lags_for(self, lp):
+        """The lags L the sums over the record of ``lp`` take, ``min(lags, N - 1)`` (the
+        corrections by ``A^N`` make them exact for any L < N), or None when ``lp`` does
+        not hold them."""
+        L = min(self.lags, lp.n_samples - 1)
+        return L if 1 <= L <= lp.max_lag else None
+
+    def powers(self, L):
+        """``(Re λ^e, Im λ^e)`` for e = 0..L (the last L asked kept)."""
+        if self._powers[0] != L:
+            self._powers = (L, powers(self.lam, L))
+        return self._powers[1]
+
+    def arguments(self, lp, L):
+        """The modal form and the lag products of ``lp`` (up to L) as the kernels of
+        :mod:`subid.methods.dt._lag_kernel` take them."""
         (G, R), u, y = lp.lags(L), lp.u, lp.y
-        return (self.lam, self.V, self.Wm, self.vand_re, self.vand_im, G.reshape(L + 1, -1),
+        vre, vim = self.powers(L)
+        return (self.lam, self.V, self.Wm, vre, vim, G.reshape(L + 1, -1),
                 R.reshape(L + 1, -1), np.ascontiguousarray(np.diag(lp.Y)),
-                np.ascontiguousarray(u[lp.n_samples - 1:lp.n_samples - 1 - L:-1]),
-                u[:L + 1], y[:L + 1])
+                np.ascontiguousarray(u[::-1][:L + 1]), u[:L + 1], y[:L + 1], lp.n_samples)
 
 
 def fit_b_d_x0(A, C, lp: LagProducts, output_weights, *, feedthrough=True, estimate_x0=True):
@@ -336,11 +347,12 @@ def fit_b_d_x0(A, C, lp: LagProducts, output_weights, *, feedthrough=True, estim
     C = np.ascontiguousarray(C, dtype=float)
     n, ny, nu = A.shape[0], C.shape[0], lp.u.shape[1]
     N = lp.n_samples
-    md = _Modal.of(A, min(lp.max_lag, N // 2))
-    if md is None:
+    md = _Modal.of(A)
+    L = None if md is None else md.lags_for(lp)
+    if L is None:
         return None
     w = np.ones(ny) if output_weights is None else np.asarray(output_weights, dtype=float)
-    Naug = normal_matrix(*md.arguments(lp), C, w, feedthrough, estimate_x0)
+    Naug = normal_matrix(*md.arguments(lp, L), C, w, feedthrough, estimate_x0)
     p = Naug.shape[0] - 1
     solved = solve_normal_equations(Naug, n, nu, ny, estimate_x0=estimate_x0,
                                     feedthrough=feedthrough, n_samples=N)
@@ -350,7 +362,7 @@ def fit_b_d_x0(A, C, lp: LagProducts, output_weights, *, feedthrough=True, estim
     if diagnostics["residual_rms"] ** 2 * N * ny < RESIDUAL_RECOMPUTE * Naug[p, p]:
         return None                  # a nearly exact fit: the residual is rounding here
     diagnostics["regression_path"] = "lag products"
-    diagnostics["lags"] = md.L
+    diagnostics["lags"] = L
     return B, D, x0, diagnostics
 
 
@@ -360,11 +372,11 @@ def error_power(A, B, C, D, lp: LagProducts, weights, inv_scale):
     :func:`subid.methods.dt._scoring._error_power` computes it by a pass over the
     record; None where the lag products do not apply (the pass must run)."""
     A = np.asarray(A, dtype=float)
-    N = lp.n_samples
-    md = _Modal.of(A, min(lp.max_lag, N // 2))
-    if md is None:
+    md = _Modal.of(A)
+    L = None if md is None else md.lags_for(lp)
+    if L is None:
         return None
-    err = kernel_error_power(*md.arguments(lp), B, C, D, np.asarray(weights, dtype=float),
+    err = kernel_error_power(*md.arguments(lp, L), B, C, D, np.asarray(weights, dtype=float),
                              1e-13)
     if not np.isfinite(err).all() or np.any(err < ROUNDING_GUARD * np.diag(lp.Y)):
         return None                  # a nearly exact fit: the pass is exact, this is not

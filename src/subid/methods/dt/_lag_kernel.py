@@ -11,7 +11,7 @@ cross-validation). Here the same sums run as one compiled call per step:
 
 * :func:`modal_form`: the eigenvector matrix's inverse and condition number (the
   guard of ``_lag_fit.MAX_EIGVEC_CONDITION``), the lags L with ``ρ(A)^L`` below
-  ``_lag_fit.LAG_TOLERANCE``, and the powers ``λ^e`` (e = 0..L) by doubling;
+  ``_lag_fit.LAG_TOLERANCE``; :func:`powers`, ``λ^e`` (e = 0..L) by doubling;
 * :func:`normal_matrix`: the augmented normal matrix ``[[N, b], [b^T, y^T W^2 y]]``
   of the weighted regression ``[x0; vec B; vec D]`` (the equations of the
   :mod:`subid.methods.dt._lag_fit` documentation, training fold);
@@ -58,65 +58,53 @@ def powers(lam, L):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True, nogil=True)
-def modal_form(lam, V, lag_tolerance, max_lag, max_condition):  # pragma: no cover - compiled
-    """``(status, L, Wm, vand_re, vand_im)`` of the modal form of an A with eigenvalues
-    ``lam`` and eigenvectors ``V``: ``status`` 0 when it applies, 1 unstable, 2 L above
-    ``max_lag``, 3 eigenvectors ill-conditioned (2-norm condition number above
-    ``max_condition``, or singular). ``Wm = V^{-1}``, ``vand_re`` and ``vand_im`` the
-    powers (:func:`powers`)."""
+def modal_form(lam, V, lag_tolerance, max_condition):  # pragma: no cover - compiled
+    """``(status, L, Wm)`` of the modal form of an A with eigenvalues ``lam`` and
+    eigenvectors ``V``: ``status`` 0 when it applies, 1 unstable, 3 eigenvectors
+    ill-conditioned (2-norm condition number above ``max_condition``, or singular);
+    ``L`` the smallest lag with ``ρ(A)^L`` below ``lag_tolerance`` (at least 1, at
+    most 2^40), ``Wm = V^{-1}``."""
     n = lam.shape[0]
     empty_w = np.empty((0, 0), dtype=np.complex128)
-    empty_v = np.empty((0, 0))
     radius = 0.0
     for i in range(n):
         radius = max(radius, abs(lam[i]))
     if radius >= 1.0:
-        return 1, 0, empty_w, empty_v, empty_v
-    if radius == 0.0:
-        L = 1
-    else:
-        L = int(math.ceil(math.log(lag_tolerance) / math.log(radius)))
-    if L > max_lag:
-        return 2, L, empty_w, empty_v, empty_v
+        return 1, 0, empty_w
+    L = 1
+    if radius > 0.0:
+        L = int(max(min(math.ceil(math.log(lag_tolerance) / math.log(radius)), 2.0 ** 40), 1.0))
     cond = np.linalg.cond(V)
     if not (cond <= max_condition):
-        return 3, L, empty_w, empty_v, empty_v
-    Wm = np.linalg.solve(V, np.eye(n, dtype=np.complex128))
-    L = max(L, 1)
-    vre, vim = powers(lam, L)
-    return 0, L, Wm, vre, vim
+        return 3, L, empty_w
+    return 0, L, np.linalg.solve(V, np.eye(n, dtype=np.complex128))
 
 
 @numba.njit(cache=True, nogil=True)
 def _sums(vand_re, vand_im, G, R, u_tail, u_head, y_head):  # pragma: no cover - compiled
-    """Every lag sequence at the poles, ``sum_e s(e) λ^e``, as two matrix products of the
-    powers (real and imaginary parts) with the sequences side by side (zero-padded to
-    L + 1 terms): ``(g, g1, rho, xt, mu, nuv, eta)`` (n, entries) complex, the sums of
-    ``Γ(e)``, ``Γ(e + 1)``, ``R(e + 1)``, ``u(N - 1 - e)``, ``u(e)``, ``u(e)`` (e < L) and
-    ``y(e)``."""
+    """Every lag sequence at the poles, ``sum_e s(e) λ^e`` (e = 0..L), as two matrix
+    products of the powers (real and imaginary parts) with the sequences side by side
+    (zero-padded to L + 1 terms): ``(g, g1, rho, xt, mu, eta)`` (n, entries) complex, the
+    sums of ``Γ(e)``, ``Γ(e + 1)``, ``R(e + 1)``, ``u(N - 1 - e)``, ``u(e)`` and ``y(e)``."""
     L = vand_re.shape[1] - 1
     n = vand_re.shape[0]
     kg, kr, nu, ny = G.shape[1], R.shape[1], u_tail.shape[1], y_head.shape[1]
-    widths = (kg, kg, kr, nu, nu, nu, ny)
-    K = 0
-    for k in widths:
-        K += k
+    widths = (kg, kg, kr, nu, nu, ny)
+    K = 2 * kg + kr + 2 * nu + ny
     M = np.zeros((L + 1, K))
     for e in range(L + 1):
         for c in range(kg):
             M[e, c] = G[e, c]
         for c in range(nu):
+            M[e, 2 * kg + kr + c] = u_tail[e, c]
             M[e, 2 * kg + kr + nu + c] = u_head[e, c]
         for c in range(ny):
-            M[e, 2 * kg + kr + 3 * nu + c] = y_head[e, c]
+            M[e, 2 * kg + kr + 2 * nu + c] = y_head[e, c]
     for e in range(L):
         for c in range(kg):
             M[e, kg + c] = G[e + 1, c]
         for c in range(kr):
             M[e, 2 * kg + c] = R[e + 1, c]
-        for c in range(nu):
-            M[e, 2 * kg + kr + c] = u_tail[e, c]
-            M[e, 2 * kg + kr + 2 * nu + c] = u_head[e, c]
     re = vand_re @ M
     im = vand_im @ M
     out = np.empty((n, K), dtype=np.complex128)
@@ -128,7 +116,18 @@ def _sums(vand_re, vand_im, G, R, u_tail, u_head, y_head):  # pragma: no cover -
     for k in widths:
         parts.append(np.ascontiguousarray(out[:, a:a + k]))
         a += k
-    return parts[0], parts[1], parts[2], parts[3], parts[4], parts[5], parts[6]
+    return parts[0], parts[1], parts[2], parts[3], parts[4], parts[5]
+
+
+@numba.njit(cache=True, nogil=True)
+def _power_n(V, Wm, lam, vand_re, vand_im, n_samples):  # pragma: no cover - compiled
+    """``A^N`` (real), ``V diag(λ^N) V^{-1}`` with ``λ^N = λ^L λ^(N - L)``."""
+    L = vand_re.shape[1] - 1
+    n = lam.shape[0]
+    lamN = np.empty(n, dtype=np.complex128)
+    for i in range(n):
+        lamN[i] = (vand_re[i, L] + 1j * vand_im[i, L]) * lam[i] ** (n_samples - L)
+    return _matrix(V, Wm, lamN)
 
 
 @numba.njit(cache=True, nogil=True)
@@ -175,14 +174,14 @@ def _gramian(lam, Wm, left):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True, nogil=True)
-def normal_matrix(lam, V, Wm, vand_re, vand_im, G, R, Y_diag, u_tail, u_head, y_head, C, w,
-                  feedthrough, estimate_x0):  # pragma: no cover - compiled
+def normal_matrix(lam, V, Wm, vand_re, vand_im, G, R, Y_diag, u_tail, u_head, y_head,
+                  n_samples, C, w, feedthrough, estimate_x0):  # pragma: no cover - compiled
     """The augmented normal matrix (p + 1, p + 1) of the weighted regression of
     :func:`subid.methods.dt._lag_fit.fit_b_d_x0` (module documentation there):
     ``G`` (L + 1, nu nu) and ``R`` (L + 1, ny nu) the lag products ``Γ(e)`` and
-    ``R(k)`` flattened, ``Y_diag`` the diagonal of ``y^T y``, ``u_tail`` the last L
-    inputs in reverse order, ``u_head`` and ``y_head`` the first L + 1 samples, ``w``
-    the output weights."""
+    ``R(k)`` flattened, ``Y_diag`` the diagonal of ``y^T y``, ``u_tail`` the last L + 1
+    inputs in reverse order, ``u_head`` and ``y_head`` the first L + 1 samples (L < N,
+    ``n_samples``), ``w`` the output weights."""
     n = lam.shape[0]
     ny = C.shape[0]
     nu = u_tail.shape[1]
@@ -201,7 +200,7 @@ def normal_matrix(lam, V, Wm, vand_re, vand_im, G, R, Y_diag, u_tail, u_head, y_
             Cw[j, r] = C[r, j] * w[r]
     P = _gramian(lam, Wm, Vt @ _c(Cw))               # sum_t (A^t)^T C^T W^2 C A^t
     P = 0.5 * (P + np.ascontiguousarray(P.T))
-    gz, gz1, rho, xt, s0, s1, eta = _sums(vand_re, vand_im, G, R, u_tail, u_head, y_head)
+    gz, gz1, rho, xt, s0, eta = _sums(vand_re, vand_im, G, R, u_tail, u_head, y_head)
     # BB[a, :, b, :] = Z[a, b]^T P + P (Z[b, a] - Γ(0)_ba I), Z[a, b] = sum_e Γ(e)_ab A^e
     Z = np.empty((nu, nu, n, n))
     for a in range(nu):
@@ -251,15 +250,22 @@ def normal_matrix(lam, V, Wm, vand_re, vand_im, G, R, Y_diag, u_tail, u_head, y_
             for r in range(ny):
                 Naug[q + b * ny + r, p] = R[0, r * nu + b] * w2[r]
     if estimate_x0:
-        for i in range(n):
-            for a in range(nu):
-                s1[i, a] *= lam[i]
+        # sum_{t<N} (A^t)^T Q A^t = P - (A^N)^T P A^N and sum_{t<N} (A^t)^T Q X(t) =
+        # sum_s u(s)^T kron (A^(s+1))^T P - (A^N)^T P X(N): exact for every L < N
+        AN = _power_n(V, Wm, lam, vand_re, vand_im, n_samples)
+        ANtP = np.ascontiguousarray(AN.T) @ P
+        P0 = P - ANtP @ AN
         for i in range(n):
             for j in range(n):
-                Naug[i, j] = P[i, j]
+                Naug[i, j] = P0[i, j]
+        s1 = np.empty((n, nu), dtype=np.complex128)
+        for i in range(n):
+            for a in range(nu):
+                s1[i, a] = s0[i, a] * lam[i]
         for a in range(nu):
             S1 = _matrix(V, Wm, np.ascontiguousarray(s1[:, a]))
-            blk = np.ascontiguousarray(S1.T) @ P
+            blk = np.ascontiguousarray(S1.T) @ P - ANtP @ np.ascontiguousarray(
+                XN[:, a * n:(a + 1) * n])
             for i in range(n):
                 for j in range(n):
                     Naug[i, nx + a * n + j] = blk[i, j]
@@ -284,7 +290,7 @@ def normal_matrix(lam, V, Wm, vand_re, vand_im, G, R, Y_diag, u_tail, u_head, y_
 
 
 def normal_matrix_reference(lam, V, Wm, vand_re, vand_im, G, R, Y_diag, u_tail, u_head, y_head,
-                            C, w, feedthrough, estimate_x0):
+                            n_samples, C, w, feedthrough, estimate_x0):
     """Plain-numpy reference of :func:`normal_matrix` (the same arguments)."""
     vand = vand_re + 1j * vand_im
     n, ny, nu = lam.size, C.shape[0], u_tail.shape[1]
@@ -315,7 +321,7 @@ def normal_matrix_reference(lam, V, Wm, vand_re, vand_im, G, R, Y_diag, u_tail, 
         for b in range(nu):
             BB[a, :, b, :] = Z[a, b].T @ P + P @ (Z[b, a] - G[0][b, a] * I)
     BB = BB.reshape(nu * n, nu * n)
-    XN = matrix(poly(u_tail, 0, L)).transpose(1, 0, 2).reshape(n, nu * n)
+    XN = matrix(poly(u_tail, 0, L + 1)).transpose(1, 0, 2).reshape(n, nu * n)
     BB -= XN.T @ P @ XN
     VtCW2 = V.T @ CW2
     rho = poly(R, 1, L)
@@ -332,9 +338,11 @@ def normal_matrix_reference(lam, V, Wm, vand_re, vand_im, G, R, Y_diag, u_tail, 
         Naug[q:p, q:p] = np.kron(G[0], np.diag(w2))
         Naug[q:p, p] = (R[0] * w2[:, None]).T.reshape(-1)
     if estimate_x0:
-        S1 = matrix(lam[:, None] * poly(u_head, 0, L))
-        Naug[:n, :n] = P
-        Naug[:n, nx:q] = np.concatenate([S1[a].T @ P for a in range(nu)], axis=1)
+        AN = matrix(lam ** n_samples)                # A^N
+        S1 = matrix(lam[:, None] * poly(u_head, 0, L + 1))
+        Naug[:n, :n] = P - AN.T @ P @ AN
+        Naug[:n, nx:q] = np.concatenate([S1[a].T @ P for a in range(nu)], axis=1) \
+            - AN.T @ P @ XN
         Naug[:n, p] = np.real(Wm.T @ np.einsum("lr,lr->l", VtCW2, poly(y_head, 0, L + 1)))
         if feedthrough:
             S0 = matrix(poly(u_head, 0, L + 1))
@@ -345,8 +353,8 @@ def normal_matrix_reference(lam, V, Wm, vand_re, vand_im, G, R, Y_diag, u_tail, 
 
 
 @numba.njit(cache=True, nogil=True)
-def error_power(lam, V, Wm, vand_re, vand_im, G, R, Y_diag, u_tail, u_head, y_head, B, C, D,
-                weights, rcond):  # pragma: no cover - compiled
+def error_power(lam, V, Wm, vand_re, vand_im, G, R, Y_diag, u_tail, u_head, y_head, n_samples,
+                B, C, D, weights, rcond):  # pragma: no cover - compiled
     """``err[r] = sum_t (y_r - ŷ_r)^2`` per output, the validation error power of
     :func:`subid.methods.dt._lag_fit.error_power` (module documentation there), ``ŷ``
     simulated from the least-squares x0 (outputs weighted by ``weights``, the
@@ -360,9 +368,8 @@ def error_power(lam, V, Wm, vand_re, vand_im, G, R, Y_diag, u_tail, u_head, y_he
     Bc = _c(B)
     CV = _c(C) @ V                                   # (ny, n)
     WB = Wm @ Bc                                     # (n, nu)
-    # (l, a nu + b), (l, r nu + j), (l, a); mu, nuv, eta: sum_t u_b(t) λ^t, sum_s u_a(s)
-    # λ^s (s < L), sum_t y_r(t) λ^t
-    g, g1, rho, xt, mu, nuv, eta = _sums(vand_re, vand_im, G, R, u_tail, u_head, y_head)
+    # (l, a nu + b), (l, r nu + j), (l, a); mu, eta: sum_t u_b(t) λ^t, sum_t y_r(t) λ^t
+    g, g1, rho, xt, mu, eta = _sums(vand_re, vand_im, G, R, u_tail, u_head, y_head)
     # sum_t y_r y_f,r = sum_k (R(k) G_k^T)_rr, G_0 = D, G_k = C A^(k-1) B
     cross = np.zeros(ny)
     for r in range(ny):
@@ -409,15 +416,23 @@ def error_power(lam, V, Wm, vand_re, vand_im, G, R, Y_diag, u_tail, u_head, y_he
             for m in range(n):
                 c += CV[r, l] * (xi[l] * xi[m] / (1.0 - lam[l] * lam[m])) * CV[r, m]
         total[r] = Y_diag[r] - 2.0 * cross[r] + F[r, r] - c.real
-    # x0: β_r = sum_t (A^t)^T c_r^T (y_r - y_f,r)(t), P_r its Gramian
+    # x0: β_r = sum_{t<N} (A^t)^T c_r^T (y_r - y_f,r)(t), P_r its Gramian over t < N:
+    # the sums over every t minus those past the record, (A^N)^T P_r x_f(N) and
+    # (A^N)^T P_r A^N (exact for every L < N)
+    AN = _power_n(V, Wm, lam, vand_re, vand_im, n_samples)
+    ANt = np.ascontiguousarray(AN.T)
+    xN = np.empty((n, 1), dtype=np.complex128)
+    for l in range(n):
+        xN[l, 0] = xi[l]
+    xN = _re(V @ xN)                                 # x_f(N) = V ξ
     beta = np.empty((ny, n))
     Pr = np.empty((ny, n, n))
     for r in range(ny):
         left = np.empty((n, 1), dtype=np.complex128)
         for i in range(n):
             left[i, 0] = CV[r, i]
-        Pr[r] = _gramian(lam, Wm, left)
-        PB = Vt @ _c(Pr[r] @ B)                      # (l, k)
+        Pinf = _gramian(lam, Wm, left)
+        PB = Vt @ _c(Pinf @ B)                       # (l, k)
         mod = np.empty((n, 1), dtype=np.complex128)
         for l in range(n):
             d = eta[l, r]
@@ -425,9 +440,10 @@ def error_power(lam, V, Wm, vand_re, vand_im, G, R, Y_diag, u_tail, u_head, y_he
                 d -= mu[l, b] * D[r, b]
             s = CV[r, l] * d
             for k in range(nu):
-                s -= PB[l, k] * (lam[l] * nuv[l, k])
+                s -= PB[l, k] * (lam[l] * mu[l, k])
             mod[l, 0] = s
-        beta[r] = _re(WmT @ mod)[:, 0]
+        beta[r] = _re(WmT @ mod)[:, 0] + (ANt @ (Pinf @ xN))[:, 0]
+        Pr[r] = Pinf - ANt @ Pinf @ AN
     Pw = np.zeros((n, n))
     bw = np.zeros(n)
     for r in range(ny):
@@ -442,7 +458,7 @@ def error_power(lam, V, Wm, vand_re, vand_im, G, R, Y_diag, u_tail, u_head, y_he
 
 
 def error_power_reference(lam, V, Wm, vand_re, vand_im, G, R, Y_diag, u_tail, u_head, y_head,
-                          B, C, D, weights, rcond):
+                          n_samples, B, C, D, weights, rcond):
     """Plain-numpy reference of :func:`error_power` (the same arguments)."""
     vand = vand_re + 1j * vand_im
     n, ny, nu = lam.size, C.shape[0], B.shape[1]
@@ -465,20 +481,23 @@ def error_power_reference(lam, V, Wm, vand_re, vand_im, G, R, Y_diag, u_tail, u_
     X = np.real(V @ ((Wm @ S @ Wm.T) / den) @ V.T)
     SD = np.real(V @ np.einsum("la,lab->lb", WB, poly(G, 1, L))) @ D.T
     F = C @ X @ C.T + C @ SD + SD.T @ C.T + D @ G[0] @ D.T
-    xi = np.einsum("la,la->l", WB, poly(u_tail, 0, L))
+    xi = np.einsum("la,la->l", WB, poly(u_tail, 0, L + 1))
     after = np.real(np.einsum("rl,lm,rm->r", CV, np.outer(xi, xi) / den, CV))
     total = Y_diag - 2.0 * cross + np.diag(F) - after
     mu = poly(u_head, 0, L + 1)
-    nu_ = lam[:, None] * poly(u_head, 0, L)
+    nu_ = lam[:, None] * mu
     eta = poly(y_head, 0, L + 1)
     VtCt = V.T @ C.T
+    AN = np.real(V @ np.diag(lam ** n_samples) @ Wm)
+    xN = np.real(V @ xi)
     beta = np.empty((n, ny))
     Pr = np.empty((ny, n, n))
     for r in range(ny):
         cr = C[r:r + 1]
-        Pr[r] = np.real(Wm.T @ ((V.T @ cr.T) @ (cr @ V) / den) @ Wm)
-        modal = VtCt[:, r] * (eta[:, r] - mu @ D[r]) - (V.T @ Pr[r] @ B * nu_).sum(axis=1)
-        beta[:, r] = np.real(Wm.T @ modal)
+        Pinf = np.real(Wm.T @ ((V.T @ cr.T) @ (cr @ V) / den) @ Wm)
+        modal = VtCt[:, r] * (eta[:, r] - mu @ D[r]) - (V.T @ Pinf @ B * nu_).sum(axis=1)
+        beta[:, r] = np.real(Wm.T @ modal) + AN.T @ Pinf @ xN
+        Pr[r] = Pinf - AN.T @ Pinf @ AN
     w2 = weights ** 2
     Pw = np.tensordot(w2, Pr, axes=(0, 0))
     x0 = np.linalg.lstsq(Pw, beta @ w2, rcond=rcond)[0]
