@@ -154,8 +154,8 @@ def test_kernels_equal_their_references(n, seed, radius):
             got = _lag_kernel.normal_matrix(*args, C, w, feedthrough, estimate_x0)
             want = _lag_kernel.normal_matrix_reference(*args, C, w, feedthrough, estimate_x0)
             np.testing.assert_allclose(got, want, rtol=0, atol=1e-12 * np.abs(want).max())
-    got = _lag_kernel.error_power(*args, B, C, D, w, 1e-13)
-    want = _lag_kernel.error_power_reference(*args, B, C, D, w, 1e-13)
+    got = _lag_kernel.error_power(*args, B, C, D, w, 1e-13, 1e12)
+    want = _lag_kernel.error_power_reference(*args, B, C, D, w, 1e-13, 1e12)
     np.testing.assert_allclose(got, want, rtol=1e-12)
 
 

@@ -354,12 +354,14 @@ def normal_matrix_reference(lam, V, Wm, vand_re, vand_im, G, R, Y_diag, u_tail, 
 
 @numba.njit(cache=True, nogil=True)
 def error_power(lam, V, Wm, vand_re, vand_im, G, R, Y_diag, u_tail, u_head, y_head, n_samples,
-                B, C, D, weights, rcond):  # pragma: no cover - compiled
+                B, C, D, weights, rcond, max_condition):  # pragma: no cover - compiled
     """``err[r] = sum_t (y_r - ŷ_r)^2`` per output, the validation error power of
     :func:`subid.methods.dt._lag_fit.error_power` (module documentation there), ``ŷ``
     simulated from the least-squares x0 (outputs weighted by ``weights``, the
     minimum-norm solution with cut-off ``rcond``); the arguments as
-    :func:`normal_matrix`'s, with the candidate's B and D."""
+    :func:`normal_matrix`'s, with the candidate's B and D. NaN when the x0 normal
+    matrix has a condition number above ``max_condition`` (its rounding would then
+    reach the score; the pass over the record factorises the rows instead)."""
     n = lam.shape[0]
     ny = C.shape[0]
     nu = B.shape[1]
@@ -450,15 +452,18 @@ def error_power(lam, V, Wm, vand_re, vand_im, G, R, Y_diag, u_tail, u_head, y_he
         w2 = weights[r] * weights[r]
         Pw += w2 * Pr[r]
         bw += w2 * beta[r]
-    x0 = np.linalg.lstsq(Pw, bw, rcond)[0]
     err = np.empty(ny)
+    if not (np.linalg.cond(Pw) <= max_condition):
+        err[:] = np.nan             # x0 from normal equations this ill-conditioned: no value
+        return err
+    x0 = np.linalg.lstsq(Pw, bw, rcond)[0]
     for r in range(ny):
         err[r] = total[r] - 2.0 * np.dot(x0, beta[r]) + np.dot(x0, Pr[r] @ x0)
     return err
 
 
 def error_power_reference(lam, V, Wm, vand_re, vand_im, G, R, Y_diag, u_tail, u_head, y_head,
-                          n_samples, B, C, D, weights, rcond):
+                          n_samples, B, C, D, weights, rcond, max_condition):
     """Plain-numpy reference of :func:`error_power` (the same arguments)."""
     vand = vand_re + 1j * vand_im
     n, ny, nu = lam.size, C.shape[0], B.shape[1]
@@ -500,5 +505,7 @@ def error_power_reference(lam, V, Wm, vand_re, vand_im, G, R, Y_diag, u_tail, u_
         Pr[r] = Pinf - AN.T @ Pinf @ AN
     w2 = weights ** 2
     Pw = np.tensordot(w2, Pr, axes=(0, 0))
+    if not np.linalg.cond(Pw) <= max_condition:
+        return np.full(ny, np.nan)
     x0 = np.linalg.lstsq(Pw, beta @ w2, rcond=rcond)[0]
     return total - 2.0 * (x0 @ beta) + np.einsum("i,rij,j->r", x0, Pr, x0)
