@@ -71,8 +71,10 @@ A, one whose eigenvector matrix is ill-conditioned (:data:`MAX_EIGVEC_CONDITION`
 whose L exceeds the lags kept (:data:`MAX_LAG`; those of a record merged from the
 blocks of the folds, :func:`merged`, no further than the shortest block); a
 regression or error power whose value the normal equations leave to rounding
-(nearly exact fits, :data:`ROUNDING_GUARD`), where the
-passes are exact; records of several experiments or of fewer than
+(nearly exact fits, :data:`ROUNDING_GUARD`), where the passes are exact; a record
+shorter than the decay of A over which ``ρ(A)^N`` exceeds :data:`EDGE_DECAY` (the sums
+past its end would dominate); a score whose x0 Gramian has a condition number above
+:data:`MAX_X0_CONDITION`; records of several experiments or of fewer than
 :data:`MIN_SAMPLES` samples.
 """
 
@@ -143,8 +145,8 @@ def merged(blocks, records, groups):
     records = [records[k] for k in big]
     groups = [groups[k] for k in big]
     lengths = [b.n_samples for b in blocks]
-    # no lag past the shortest block (a lag could straddle two boundaries): a training
-    # record's fit takes a quarter of it, which the blocks of the folds cover
+    # no lag past the shortest block (a lag could straddle two boundaries); blocks
+    # shorter than a quarter of a record: none merged (each fold its own products)
     caps = [min(MAX_LAG, r.n_samples - 1, min(lengths)) for r in records]
     K = max(caps)
     if any(min(lengths) < min(MAX_LAG, r.n_samples // 4) for r in records):
