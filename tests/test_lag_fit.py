@@ -130,6 +130,64 @@ def test_score_equals_the_simulation(n, seed, radius):
     np.testing.assert_allclose(fast, ref, rtol=1e-10)
 
 
+@pytest.mark.parametrize("n, seed, radius", [(1, 21, 0.9), (3, 22, 0.9), (6, 23, 0.97),
+                                             (9, 24, 0.8)])
+def test_kernels_equal_their_references(n, seed, radius):
+    """The compiled normal matrix and error power (subid.methods.dt._lag_kernel) equal
+    their numpy references, and the compiled modal form numpy's eigenvector inverse
+    and powers, for every combination of feedthrough and initial state."""
+    from subid.methods.dt import _lag_kernel
+    A, B, C, D = _system(n, seed, radius)
+    u, y = _record(A, B, C, D, 5000, seed)
+    products = _lag_fit.LagProducts(u, y)
+    form = _lag_fit._Modal._of(A)
+    assert form is not None
+    np.testing.assert_allclose(form.Wm @ form.V, np.eye(n), atol=1e-10)
+    L = form.lags_for(products)
+    vre, vim = form.powers(L)
+    powers = form.lam[:, None] ** np.arange(L + 1)[None, :]
+    np.testing.assert_allclose(vre + 1j * vim, powers, rtol=1e-11, atol=1e-14)
+    args = form.arguments(products, L)
+    w = 1.0 / y.std(axis=0)
+    for feedthrough in (True, False):
+        for estimate_x0 in (True, False):
+            got = _lag_kernel.normal_matrix(*args, C, w, feedthrough, estimate_x0)
+            want = _lag_kernel.normal_matrix_reference(*args, C, w, feedthrough, estimate_x0)
+            np.testing.assert_allclose(got, want, rtol=0, atol=1e-12 * np.abs(want).max())
+    got = _lag_kernel.error_power(*args, B, C, D, w, 1e-13, 1e12)
+    want = _lag_kernel.error_power_reference(*args, B, C, D, w, 1e-13, 1e12)
+    np.testing.assert_allclose(got, want, rtol=1e-12)
+
+
+@pytest.mark.parametrize("n, seed, radius, N", [(2, 31, 0.995, 400), (4, 32, 0.999, 700),
+                                                (6, 33, 0.9, 300)])
+def test_short_record_slow_poles_exact(n, seed, radius, N):
+    """On a record shorter than the decay of A (every lag kept, the sums past the end
+    subtracted by A^N) the fit equals the QR pass and the score the simulation."""
+    A, B, C, D = _system(n, seed, radius)
+    u, y = _record(A, B, C, D, N, seed)
+    rng = np.random.default_rng(seed)
+    A_c = A + 0.002 * rng.standard_normal(A.shape)
+    A_c *= min(1.0, radius / np.abs(np.linalg.eigvals(A_c)).max())
+    C_c = C + 0.01 * rng.standard_normal(C.shape)
+    products = _lag_fit.LagProducts(u, y)
+    assert products.max_lag == N - 1
+    weights = 1.0 / y.std(axis=0)
+    for feedthrough in (True, False):
+        fast = _lag_fit.fit_b_d_x0(A_c, C_c, products, weights, feedthrough=feedthrough)
+        ref = _regression.fit_b_d_x0_qr(A_c, C_c, u, y, feedthrough=feedthrough,
+                                        estimate_x0=True, output_weights=weights)
+        assert fast is not None and fast[3]["lags"] <= N - 1
+        for got, want in zip(fast[:3], ref):
+            np.testing.assert_allclose(got, want, rtol=0, atol=1e-8 * np.abs(want).max())
+        assert fast[3]["residual_rms"] == pytest.approx(ref[3]["residual_rms"], rel=1e-8)
+    inv_scale = 1.0 / np.abs(y).max(axis=0)
+    got = _lag_fit.error_power(A_c, fast[0], C_c, fast[1], products, weights, inv_scale)
+    want = _scoring._error_power(A_c, fast[0], C_c, fast[1], u, y, weights, inv_scale,
+                                 _scoring.forced_error)
+    np.testing.assert_allclose(got, want, rtol=1e-9)
+
+
 def test_where_the_products_do_not_apply():
     """No result (the caller runs the pass over the record) for an unstable A, a pole
     too slow for the lags kept, and a nearly exact fit (the normal equations would
@@ -142,8 +200,9 @@ def test_where_the_products_do_not_apply():
     assert _lag_fit.error_power(A, B, C, D, products, weights, inv_scale) is None
     assert _lag_fit.fit_b_d_x0(1.01 * A / np.abs(np.linalg.eigvals(A)).max(), C, products,
                                weights) is None                          # unstable
-    slow = 0.9995 * A / np.abs(np.linalg.eigvals(A)).max()               # L > N / 4
-    assert _lag_fit.fit_b_d_x0(slow, C, products, weights) is None
+    slow = 0.9995 * A / np.abs(np.linalg.eigvals(A)).max()               # L > max_lag
+    assert _lag_fit.fit_b_d_x0(slow, C, _lag_fit.LagProducts(u, y, max_lag=500),
+                               weights) is None
 
 
 def test_fold_scores_equal_those_of_the_passes(monkeypatch):
@@ -155,6 +214,7 @@ def test_fold_scores_equal_those_of_the_passes(monkeypatch):
     with_products = subid.moesp(data)
     monkeypatch.setattr(_lag_fit.LagProducts, "of_record", classmethod(lambda cls, r: None))
     monkeypatch.setattr(_scoring.Held, "products", lambda self: [None] * len(self.pieces))
+    monkeypatch.setattr(_lag_fit, "merged", lambda *args: None)
     without = subid.moesp(data)
     a = with_products.info["order_selection"]["candidates"]
     b = without.info["order_selection"]["candidates"]
@@ -177,12 +237,16 @@ def test_fold_products_merged_from_blocks():
     records = [t for t, _ in parts] + [v for _, v in parts]
     merged = _lag_fit.merged(_selection._blocks_of_folds(parts), records,
                              _selection.FOLD_BLOCKS + _selection.VALIDATION_BLOCKS)
+    shortest = min(b.n_samples for b in _selection._blocks_of_folds(parts))
     for record, lp in zip(records, merged):
         own = _lag_fit.LagProducts.of_record(record)
-        assert lp.max_lag == own.max_lag and lp.n_samples == record.n_samples
+        # up to half the record, no lag past the shortest block (a fit takes a quarter)
+        assert lp.max_lag == min(own.max_lag, shortest) >= record.n_samples // 4
+        assert lp.n_samples == record.n_samples
         for products in (lp, own):       # every lag (those past FIRST_LAGS when needed)
             products.lags(products.max_lag)
-        for a, b in ((lp.G, own.G), (lp.R, own.R), (lp.Y, own.Y)):
+        k = lp.max_lag + 1
+        for a, b in ((lp.G, own.G[:k]), (lp.R, own.R[:k]), (lp.Y, own.Y)):
             np.testing.assert_allclose(a, b, rtol=0, atol=1e-11 * np.abs(b).max())
 
 

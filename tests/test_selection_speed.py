@@ -9,6 +9,7 @@ import warnings
 
 import numpy as np
 import pytest
+import scipy.linalg
 
 import subid
 from subid import systems
@@ -320,3 +321,16 @@ def test_default_model_reproduced_on_bundled_records(name):
     assert rule["stabilised"] == {"shift": name == "exchanger", "states": False}
     for key in "ABCDK":
         np.testing.assert_array_equal(getattr(model, key), getattr(again, key))
+
+
+def test_direct_lapack_calls_equal_scipy():
+    """The QR basis and the gelsy least squares of the shift invariance, by the LAPACK
+    calls of scipy.linalg without its wrappers, give the same bits."""
+    from subid.methods.dt._subspace import least_squares_gelsy, orthonormal_basis
+    rng = np.random.default_rng(0)
+    for m, n in [(20, 1), (20, 4), (40, 10), (18, 18), (200, 30)]:
+        g = rng.standard_normal((m, n)) @ np.diag(10.0 ** rng.uniform(-8, 2, n))
+        Q = scipy.linalg.qr(g, mode="economic", check_finite=False)[0]
+        assert np.array_equal(orthonormal_basis(g), Q)
+        want = scipy.linalg.lstsq(Q[:-2], Q[2:], lapack_driver="gelsy", check_finite=False)[0]
+        assert np.array_equal(least_squares_gelsy(Q[:-2], Q[2:]), want)

@@ -20,7 +20,11 @@ times powers of A; with ``A = V diag(λ) V^{-1}`` each is evaluated at the poles
 ``sum_e c_e A^e = V diag(sum_e c_e λ^e) V^{-1}`` (:class:`_Modal`), and the infinite
 sums of the Gramians in closed form (``sum_t λ_l^t λ_m^t = 1 / (1 - λ_l λ_m)``), so a
 candidate costs ``O(L n)`` flops per sequence plus ``O(n^3)``, independent of N.
-L is the smallest lag with ``ρ(A)^L`` below :data:`LAG_TOLERANCE` (rounding).
+L is the smallest lag with ``ρ(A)^L`` below :data:`LAG_TOLERANCE` (rounding), or
+``N - 1`` on a shorter record (where every lag is kept): the sums past the record
+are then subtracted exactly, by ``A^N = V diag(λ^N) V^{-1}`` (below), so that the
+products give the passes' values for every stable A whatever N (issue 21: the
+records of the folds of 10^3 samples took the passes).
 
 **Training fold** (the regression of :func:`subid.methods.dt._regression.fit_b_d_x0`,
 parameters ``[x0; vec B; vec D]``, each output weighted by ``w_r``, ``W = diag w``).
@@ -32,16 +36,17 @@ Gramian, ``P = A^T P A + Q``):
   - X(N)^T P X(N)``: the sum over every t of the input zero-padded beyond the
   record is block Toeplitz in the lag products (with ``a = j-1``, ``b = k-1``,
   ``e = a - b``, the inner sum over b is P); the samples ``t >= N`` of that padded
-  sum are the free response from ``X(N) = sum_{k=1..L} u(N-k)^T kron A^(k-1)``, which
-  the last L samples give exactly;
+  sum are the free response from ``X(N) = sum_{k=1..L+1} u(N-k)^T kron A^(k-1)``,
+  which the last L + 1 samples give exactly;
 * ``sum_t X^T C^T W^2 (u^T kron I) = sum_{k>=1} Γ(k) kron (C A^(k-1))^T W^2`` and
   ``sum_t X^T C^T W^2 y = sum_{k>=1} vec((C A^(k-1))^T W^2 R(k))``: no edge term
   (the D and y rows stop at N themselves);
 * the D block ``Γ(0) kron W^2`` and ``vec(W^2 R(0))``;
-* the x0 rows, ``C A^t`` negligible after L samples: ``sum_t (A^t)^T Q A^t = P``,
-  ``sum_t (A^t)^T Q X(t) = sum_s u(s)^T kron (A^(s+1))^T P`` (s < L),
+* the x0 rows: ``sum_{t<N} (A^t)^T Q A^t = P - (A^N)^T P A^N``,
+  ``sum_{t<N} (A^t)^T Q X(t) = sum_s u(s)^T kron (A^(s+1))^T P - (A^N)^T P X(N)``
+  (s <= L; the terms ``t >= N`` are the free response from ``X(N)``),
   ``sum_t (A^t)^T C^T W^2 (u(t)^T kron I)`` and ``sum_t (A^t)^T C^T W^2 y(t)``
-  over the first L samples.
+  over the first L + 1 samples.
 
 The augmented normal matrix is solved by
 :func:`subid.methods.dt._regression.solve_normal_equations` with the guards of the
@@ -54,34 +59,34 @@ parameters ``G_0 = D``, ``G_k = C A^(k-1) B``; ``sum_t y_f y_f^T = C X C^T + C S
 S_D^T C^T + D Γ(0) D^T`` minus the free response after the record, where ``S_D =
 sum_{k>=1} A^(k-1) B Γ(k) D^T`` and ``X = A X A^T + S`` with ``S = sum_{e>=0} A^e B Γ(e)
 B^T + sum_{e>=1} B Γ(e)^T B^T (A^e)^T`` (the same block-Toeplitz sum). The
-least-squares x0 (outputs weighted) involves the first L samples only: per output,
-``β_r = sum_t (A^t)^T c_r^T (y_r - y_f,r)(t)`` is ``sum_t (A^t)^T c_r^T y_r(t) -
-sum_t (A^t)^T c_r^T D_r u(t) - sum_s (A^(s+1))^T P_r B u(s)`` (``P_r`` the Gramian of
-output r), x0 solves ``(sum_r w_r^2 P_r) x0 = sum_r w_r^2 β_r``, and the error power
-falls by ``2 x0^T β_r - x0^T P_r x0``.
+least-squares x0 (outputs weighted) involves the first L + 1 samples only: per
+output, ``β_r = sum_{t<N} (A^t)^T c_r^T (y_r - y_f,r)(t)`` is ``sum_t (A^t)^T c_r^T y_r(t)
+- sum_t (A^t)^T c_r^T D_r u(t) - sum_s (A^(s+1))^T P_r B u(s) + (A^N)^T P_r x_f(N)``
+(``P_r`` the Gramian of output r, ``x_f(N)`` the forced state at the end), x0 solves
+``(sum_r w_r^2 P_r') x0 = sum_r w_r^2 β_r`` with ``P_r' = P_r - (A^N)^T P_r A^N`` (the
+sum over t < N), and the error power falls by ``2 x0^T β_r - x0^T P_r' x0``.
 
 **Where it does not apply** the callers take the per-candidate passes: an unstable
 A, one whose eigenvector matrix is ill-conditioned (:data:`MAX_EIGVEC_CONDITION`) or
-whose L exceeds the lags kept (:data:`MAX_LAG`, a quarter of a training record, half
-of a validation record); a regression or error power whose value the normal
-equations leave to rounding (nearly exact fits, :data:`ROUNDING_GUARD`), where the
-passes are exact; records of several experiments or of fewer than
+whose L exceeds the lags kept (:data:`MAX_LAG`; those of a record merged from the
+blocks of the folds, :func:`merged`, no further than the shortest block); a
+regression or error power whose value the normal equations leave to rounding
+(nearly exact fits, :data:`ROUNDING_GUARD`), where the passes are exact; a record
+shorter than the decay of A over which ``ρ(A)^N`` exceeds :data:`EDGE_DECAY` (the sums
+past its end would dominate); a score whose x0 Gramian has a condition number above
+:data:`MAX_X0_CONDITION`; records of several experiments or of fewer than
 :data:`MIN_SAMPLES` samples.
 """
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 import scipy.fft
 import scipy.linalg
 
-from subid.methods.dt._regression import (
-    RESIDUAL_RECOMPUTE,
-    parameter_count,
-    solve_normal_equations,
-)
+from subid.methods.dt._lag_kernel import error_power as kernel_error_power
+from subid.methods.dt._lag_kernel import modal_form, normal_matrix, powers
+from subid.methods.dt._regression import RESIDUAL_RECOMPUTE, solve_normal_equations
 
 #: The key of a problem's cache that holds its record's lag products (a
 #: cross-validation fold, :func:`subid.methods.dt.selection.score_horizon`).
@@ -89,14 +94,16 @@ LAG_PRODUCTS = "lag products"
 #: ``ρ(A)^L`` (the spectral radius) below which the terms
 #: past L lags are dropped: below rounding relative to the data.
 LAG_TOLERANCE = 1e-16
-#: Largest lag L used (the lag products are computed up to min(MAX_LAG, N // 4)).
+#: Largest lag L used (the lag products are computed up to min(MAX_LAG, N - 1)).
 MAX_LAG = 16384
 #: Lags computed at once (:class:`LagProducts`, :func:`merged`): those of poles of radius
 #: up to 0.991; the others up to MAX_LAG when a candidate first needs them.
 FIRST_LAGS = 4096
-#: Records shorter than this are not reduced to lag products: a pass over them costs
-#: less than the evaluation at the poles (and their lags rarely cover a slow pole).
-MIN_SAMPLES = 4096
+#: Records shorter than this are not reduced to lag products (a pass over them costs
+#: little).
+MIN_SAMPLES = 256
+#: Records shorter than this get lag products of their own (:func:`merged`).
+MERGE_SAMPLES = 4096
 #: An error power below this fraction of the output's power is rounding-limited in
 #: the quadratic form (cancellation): the direct pass computes it instead.
 ROUNDING_GUARD = 1e-6
@@ -125,15 +132,24 @@ def merged(blocks, records, groups):
     boundary (:func:`straddle_correlations` of the samples either side). The first
     :data:`FIRST_LAGS` lags are computed at once, the others (up to each record's
     ``max_lag``) for all the records together when a candidate first needs them
-    (:meth:`LagProducts.lags`). None for a record shorter than :data:`MIN_SAMPLES`;
-    None altogether when a block is shorter than the largest lag kept (a lag could
-    straddle two boundaries)."""
-    if all(r.n_samples < MIN_SAMPLES for r in records):
-        return [None] * len(records)
+    (:meth:`LagProducts.lags`), at most the length of the shortest block (a lag could
+    straddle two boundaries). A record shorter than :data:`MERGE_SAMPLES` has its own
+    (one FFT of a short record costs little, and its lags then reach all of it); one
+    shorter than :data:`MIN_SAMPLES`, None. None altogether when a block is shorter than
+    a quarter of a record to merge."""
+    out = [LagProducts(r.u, r.y) if MIN_SAMPLES <= r.n_samples < MERGE_SAMPLES else None
+           for r in records]
+    big = [k for k, r in enumerate(records) if r.n_samples >= MERGE_SAMPLES]
+    if not big:
+        return out
+    records = [records[k] for k in big]
+    groups = [groups[k] for k in big]
     lengths = [b.n_samples for b in blocks]
-    caps = [min(MAX_LAG, r.n_samples // 4) for r in records]
+    # no lag past the shortest block (a lag could straddle two boundaries); blocks
+    # shorter than a quarter of a record: none merged (each fold its own products)
+    caps = [min(MAX_LAG, r.n_samples - 1, min(lengths)) for r in records]
     K = max(caps)
-    if min(lengths) < K:
+    if any(min(lengths) < min(MAX_LAG, r.n_samples // 4) for r in records):
         return None
 
     def sums_up_to(lags):
@@ -149,18 +165,18 @@ def merged(blocks, records, groups):
         return out
 
     first = min(K, FIRST_LAGS)
-    out = [None if record.n_samples < MIN_SAMPLES else
-           LagProducts.from_sums(record.u, record.y, sums, cap)
-           for record, cap, sums in zip(records, caps, sums_up_to(first))]
+    kept = [LagProducts.from_sums(record.u, record.y, sums, cap)
+            for record, cap, sums in zip(records, caps, sums_up_to(first))]
     if first < K:
         def extend():                     # every record's lags up to its max_lag, once
-            for lp, (G, R, _) in zip(out, sums_up_to(K)):
-                if lp is not None:
-                    lp.G, lp.R = G[:lp.max_lag + 1], R[:lp.max_lag + 1]
-                    lp.extend = None
-        for lp in out:
-            if lp is not None and lp.G.shape[0] <= lp.max_lag:
+            for lp, (G, R, _) in zip(kept, sums_up_to(K)):
+                lp.G, lp.R = G[:lp.max_lag + 1], R[:lp.max_lag + 1]
+                lp.extend = None
+        for lp in kept:
+            if lp.G.shape[0] <= lp.max_lag:
                 lp.extend = extend
+    for k, lp in zip(big, kept):
+        out[k] = lp
     return out
 
 
@@ -222,7 +238,7 @@ class LagProducts:
         self.u = np.ascontiguousarray(u, dtype=float)
         self.y = np.ascontiguousarray(y, dtype=float)
         self.n_samples = self.u.shape[0]
-        self.max_lag = max(min(int(max_lag), self.n_samples // 4), 0)
+        self.max_lag = max(min(int(max_lag), self.n_samples - 1), 0)
         self.G, self.R, self.Y = correlations(self.u, self.y, min(self.max_lag, FIRST_LAGS))
         self.extend = self._extend if self.max_lag > FIRST_LAGS else None
 
@@ -240,13 +256,13 @@ class LagProducts:
     @classmethod
     def from_sums(cls, u, y, sums, max_lag):
         """The lag products of the record ``(u, y)`` whose lag sums ``(Γ, R, Y)`` are
-        known up to ``min(max_lag, N // 4)`` or, with ``extend`` set on the result, up
+        known up to ``min(max_lag, N - 1)`` or, with ``extend`` set on the result, up
         to fewer lags."""
         out = cls.__new__(cls)
         out.u = np.ascontiguousarray(u, dtype=float)
         out.y = np.ascontiguousarray(y, dtype=float)
         out.n_samples = out.u.shape[0]
-        out.max_lag = max(min(int(max_lag), out.n_samples // 4), 0)
+        out.max_lag = max(min(int(max_lag), out.n_samples - 1), 0)
         G, R, out.Y = sums
         out.G, out.R = G[:out.max_lag + 1], R[:out.max_lag + 1]
         out.extend = None
@@ -266,81 +282,79 @@ class LagProducts:
 MAX_EIGVEC_CONDITION = 1e6
 
 
+#: Largest condition number of the weighted x0 Gramian ``sum_r w_r^2 P_r`` of a
+#: validation score: past it the normal equations' rounding reaches the score (on
+#: the DaISy CD_player_arm record, 1e-3 relative at orders 16-17 on blocks of 682
+#: samples) and the pass, which factorises the rows, scores the candidate.
+MAX_X0_CONDITION = 1e6
+#: ``ρ(A)^N`` above which a record of N samples shorter than the decay of A is left to
+#: the passes: the sums past its end, subtracted by ``A^N``, then dominate the sums
+#: over the record and the difference loses digits (measured on the DaISy
+#: CD_player_arm record: 0.06 points of fold score at an order-18 candidate whose
+#: slowest pole had not decayed over the 455 samples of the block).
+EDGE_DECAY = 1e-3
+
+
 #: The last modal form computed (:meth:`_Modal.of`), as one ``(key, form)`` pair.
 _LAST = [None]
 
 
 class _Modal:
-    """A stable, diagonalisable A in modal form, ``A = V diag(λ) V^{-1}``, with the
-    Vandermonde rows ``λ^e`` (e = 0..L) that evaluate every lag sum at the poles:
-    ``sum_e c_e A^e = V diag(sum_e c_e λ^e) V^{-1}``, ``O(L n)`` per sequence instead
-    of ``O(L n^3)`` for the powers of A."""
+    """A stable, diagonalisable A in modal form, ``A = V diag(λ) V^{-1}``, and the
+    lags ``lags`` after which ``ρ(A)^L`` is below :data:`LAG_TOLERANCE`; the powers
+    ``λ^e`` (e = 0..L) evaluate every lag sum at the poles, ``sum_e c_e A^e = V
+    diag(sum_e c_e λ^e) V^{-1}``, ``O(L n)`` per sequence instead of ``O(L n^3)`` for
+    the powers of A (:mod:`subid.methods.dt._lag_kernel`)."""
 
-    def __init__(self, lam, V, Wm, L):
-        self.lam, self.V, self.Wm, self.L = lam, V, Wm, L
-        vand = np.empty((lam.size, L + 1), dtype=complex)   # λ^e by doubling
-        vand[:, 0] = 1.0
-        filled, step = 1, lam.copy()                        # step = λ^filled
-        while filled < L + 1:
-            k = min(filled, L + 1 - filled)
-            vand[:, filled:filled + k] = vand[:, :k] * step[:, None]
-            filled += k
-            step = vand[:, filled - 1] * lam
-        # real and imaginary parts apart: real matrix products (BLAS) in poly
-        self.vand_re = np.ascontiguousarray(vand.real)
-        self.vand_im = np.ascontiguousarray(vand.imag)
-        self.denominator = 1.0 - lam[:, None] * lam[None, :]
+    def __init__(self, lam, V, Wm, lags):
+        self.lam, self.V, self.Wm, self.lags = lam, V, Wm, lags
+        self.radius = float(np.abs(lam).max())
+        self._powers = (None, None)
 
     @classmethod
-    def of(cls, A, max_lag):
-        """The modal form with the lags L where ``ρ(A)^L < LAG_TOLERANCE``, or None
-        (unstable, not finite, ill-conditioned eigenvectors, or L above ``max_lag``).
-        The last one computed is kept: a candidate's fit and its score share it."""
+    def of(cls, A):
+        """The modal form of A, or None (unstable, not finite, ill-conditioned
+        eigenvectors). The last one computed is kept: a candidate's fit and its score
+        share it."""
         key = (A.shape, A.tobytes())
         last = _LAST[0]                    # one (key, form) pair: safe across threads
         if last is None or last[0] != key:
             last = _LAST[0] = (key, cls._of(A))
-        form = last[1]
-        return form if form is not None and form.L <= max_lag else None
+        return last[1]
 
     @classmethod
     def _of(cls, A):
         if A.shape[0] == 0 or not np.isfinite(A).all():
             return None
-        lam, V = scipy.linalg.eig(A, check_finite=False)
-        radius = float(np.abs(lam).max())
-        if radius >= 1.0:
+        lam, V = np.linalg.eig(A)
+        lam, V = lam.astype(complex, copy=False), V.astype(complex, copy=False)
+        status, lags, Wm = modal_form(lam, V, LAG_TOLERANCE, MAX_EIGVEC_CONDITION)
+        return cls(lam, V, Wm, lags) if status == 0 else None
+
+    def lags_for(self, lp):
+        """The lags L the sums over the record of ``lp`` take, ``min(lags, N - 1)`` (the
+        corrections by ``A^N`` make them exact for any L < N), or None when ``lp`` does
+        not hold them or A has not decayed over the record below :data:`EDGE_DECAY`."""
+        N = lp.n_samples
+        if self.lags >= N and self.radius ** N > EDGE_DECAY:
             return None
-        L = 1 if radius == 0.0 else int(math.ceil(math.log(LAG_TOLERANCE) / math.log(radius)))
-        if L > MAX_LAG:
-            return None
-        cond = np.linalg.cond(V)
-        if not math.isfinite(cond) or cond > MAX_EIGVEC_CONDITION:
-            return None
-        return cls(lam, V, np.linalg.solve(V, np.eye(A.shape[0])), max(L, 1))
+        L = min(self.lags, N - 1)
+        return L if 1 <= L <= lp.max_lag else None
 
-    def poly(self, seq, shift=0):
-        """``sum_e seq[e + shift] λ^e`` for e = 0..L - shift: (n, *seq.shape[1:])."""
-        m = seq.shape[0] - shift
-        flat = seq[shift:].reshape(m, -1)
-        out = self.vand_re[:, :m] @ flat + 1j * (self.vand_im[:, :m] @ flat)
-        return out.reshape((self.lam.size,) + seq.shape[1:])
+    def powers(self, L):
+        """``(Re λ^e, Im λ^e)`` for e = 0..L (the last L asked kept)."""
+        if self._powers[0] != L:
+            self._powers = (L, powers(self.lam, L))
+        return self._powers[1]
 
-    def matrix(self, values):
-        """``V diag(values) V^{-1}`` (real) for values (n, ...): (..., n, n)."""
-        n = self.lam.size
-        vals = values.reshape(n, -1).T                      # (k, n)
-        out = np.real((self.V[None, :, :] * vals[:, None, :]) @ self.Wm)
-        return out.reshape(values.shape[1:] + (n, n))
-
-    def gramian(self, left, right):
-        """``sum_{t>=0} (A^t)^T left^T right A^t`` (left, right: (m, n))."""
-        M = (self.V.T @ left.T) @ (right @ self.V) / self.denominator
-        return np.real(self.Wm.T @ M @ self.Wm)
-
-    def back(self, modal):
-        """``V^{-T} modal`` (real): a sum ``sum_t (A^t)^T v_t`` from its modal terms."""
-        return np.real(self.Wm.T @ modal)
+    def arguments(self, lp, L):
+        """The modal form and the lag products of ``lp`` (up to L) as the kernels of
+        :mod:`subid.methods.dt._lag_kernel` take them."""
+        (G, R), u, y = lp.lags(L), lp.u, lp.y
+        vre, vim = self.powers(L)
+        return (self.lam, self.V, self.Wm, vre, vim, G.reshape(L + 1, -1),
+                R.reshape(L + 1, -1), np.ascontiguousarray(np.diag(lp.Y)),
+                np.ascontiguousarray(u[::-1][:L + 1]), u[:L + 1], y[:L + 1], lp.n_samples)
 
 
 def fit_b_d_x0(A, C, lp: LagProducts, output_weights, *, feedthrough=True, estimate_x0=True):
@@ -349,53 +363,16 @@ def fit_b_d_x0(A, C, lp: LagProducts, output_weights, *, feedthrough=True, estim
     lag products (module documentation), or None where they do not apply (then the
     per-candidate pass must run)."""
     A = np.asarray(A, dtype=float)
-    C = np.asarray(C, dtype=float)
+    C = np.ascontiguousarray(C, dtype=float)
     n, ny, nu = A.shape[0], C.shape[0], lp.u.shape[1]
     N = lp.n_samples
-    md = _Modal.of(A, min(lp.max_lag, N // 4))
-    if md is None:
+    md = _Modal.of(A)
+    L = None if md is None else md.lags_for(lp)
+    if L is None:
         return None
-    L = md.L
     w = np.ones(ny) if output_weights is None else np.asarray(output_weights, dtype=float)
-    w2 = w * w
-    (G, R), u, y = lp.lags(L), lp.u, lp.y
-    CW2 = C.T * w2[None, :]                          # C^T W^2 (n, ny)
-    P = md.gramian(C * w[:, None], C * w[:, None])
-    P = 0.5 * (P + P.T)
-    Z = md.matrix(md.poly(G))                        # (a, b): sum_e Γ(e)_ab A^e
-    Z1 = md.matrix(md.poly(G, shift=1))              # (a, b): sum_{k>=1} Γ(k)_ab A^(k-1)
-    I = np.eye(n)
-    BB = np.empty((nu, n, nu, n))
-    for a in range(nu):
-        for b in range(nu):
-            BB[a, :, b, :] = Z[a, b].T @ P + P @ (Z[b, a] - G[0][b, a] * I)
-    BB = BB.reshape(nu * n, nu * n)
-    XN = md.matrix(md.poly(u[N - 1:N - 1 - L:-1]))   # (a): sum_k u_a(N-k) A^(k-1)
-    XN = XN.transpose(1, 0, 2).reshape(n, nu * n)
-    BB -= XN.T @ P @ XN
-    VtCW2 = md.V.T @ CW2                             # (n, ny)
-    rho = md.poly(R, shift=1)                        # (l, r, a): sum_k R(k)_ra λ^(k-1)
-    rB = md.back(np.einsum("lr,lra->la", VtCW2, rho)).T.reshape(-1)    # (a, i)
-    nx, q, p = parameter_count(n, nu, ny, estimate_x0, feedthrough)
-    Naug = np.zeros((p + 1, p + 1))
-    Naug[nx:q, nx:q] = BB
-    Naug[nx:q, p] = rB
-    Naug[p, p] = float(np.sum(w2 * np.diag(lp.Y)))
-    if feedthrough:
-        BD = np.einsum("abji,jr->aibr", Z1, CW2)      # Z1[a, b]^T C^T W^2
-        Naug[nx:q, q:p] = BD.reshape(nu * n, nu * ny)
-        Naug[q:p, q:p] = np.kron(G[0], np.diag(w2))
-        Naug[q:p, p] = (R[0] * w2[:, None]).T.reshape(-1)
-    if estimate_x0:
-        S1 = md.matrix(md.lam[:, None] * md.poly(u[:L]))   # (a): sum_s u_a(s) A^(s+1)
-        Naug[:n, :n] = P
-        Naug[:n, nx:q] = np.concatenate([S1[a].T @ P for a in range(nu)], axis=1)
-        Naug[:n, p] = md.back(np.einsum("lr,lr->l", VtCW2, md.poly(y[:L + 1])))
-        if feedthrough:
-            S0 = md.matrix(md.poly(u[:L + 1]))             # (b): sum_t u_b(t) A^t
-            Naug[:n, q:p] = np.einsum("bji,jr->ibr", S0, CW2).reshape(n, nu * ny)
-    iu = np.triu_indices(p + 1, 1)
-    Naug[(iu[1], iu[0])] = Naug[iu]
+    Naug = normal_matrix(*md.arguments(lp, L), C, w, feedthrough, estimate_x0)
+    p = Naug.shape[0] - 1
     solved = solve_normal_equations(Naug, n, nu, ny, estimate_x0=estimate_x0,
                                     feedthrough=feedthrough, n_samples=N)
     if solved is None:
@@ -414,45 +391,12 @@ def error_power(A, B, C, D, lp: LagProducts, weights, inv_scale):
     :func:`subid.methods.dt._scoring._error_power` computes it by a pass over the
     record; None where the lag products do not apply (the pass must run)."""
     A = np.asarray(A, dtype=float)
-    n, ny = A.shape[0], C.shape[0]
-    N = lp.n_samples
-    md = _Modal.of(A, min(lp.max_lag, N // 2))
-    if md is None:
+    md = _Modal.of(A)
+    L = None if md is None else md.lags_for(lp)
+    if L is None:
         return None
-    L = md.L
-    (G, R), u, y = lp.lags(L), lp.u, lp.y
-    CV = C @ md.V                                    # (ny, n)
-    WB = md.Wm @ B                                   # (n, nu)
-    g = md.poly(G)                                   # (l, a, b)
-    g1 = md.poly(G, shift=1)
-    # sum_t y_r y_f,r: sum_k (R(k) G_k^T)_rr with G_0 = D, G_k = C A^(k-1) B
-    cross = np.einsum("rj,rj->r", R[0], D) + np.real(
-        np.einsum("rl,lj,lrj->r", CV, WB, md.poly(R, shift=1)))
-    # sum_t y_f y_f^T over the zero-padded record: C X C^T + C S_D + S_D^T C^T + D Γ(0) D^T
-    U0 = np.real(md.V @ np.einsum("la,lab->lb", WB, g)) @ B.T   # sum_e A^e B Γ(e) B^T
-    S = U0 + (U0 - B @ G[0] @ B.T).T
-    X = np.real(md.V @ ((md.Wm @ S @ md.Wm.T) / md.denominator) @ md.V.T)
-    SD = np.real(md.V @ np.einsum("la,lab->lb", WB, g1)) @ D.T
-    F = C @ X @ C.T + C @ SD + SD.T @ C.T + D @ G[0] @ D.T
-    # minus the free response after the record, from x_f(N) = V ξ
-    xi = np.einsum("la,la->l", WB, md.poly(u[N - 1:N - 1 - L:-1]))
-    after = np.real(np.einsum("rl,lm,rm->r", CV, np.outer(xi, xi) / md.denominator, CV))
-    total = np.diag(lp.Y) - 2.0 * cross + np.diag(F) - after   # sum_t (y - y_f)^2
-    # x0: per output r, β_r = sum_t (A^t)^T c_r^T (y_r - y_f,r)(t), P_r its Gramian
-    mu = md.poly(u[:L + 1])                          # (l, b): sum_t u_b(t) λ^t
-    nu_ = md.lam[:, None] * md.poly(u[:L])           # (l, a): sum_s u_a(s) λ^(s+1)
-    eta = md.poly(y[:L + 1])                         # (l, r): sum_t y_r(t) λ^t
-    VtCt = md.V.T @ C.T                              # (l, r)
-    beta = np.empty((n, ny))
-    Pr = np.empty((ny, n, n))
-    for r in range(ny):
-        Pr[r] = md.gramian(C[r:r + 1], C[r:r + 1])
-        modal = VtCt[:, r] * (eta[:, r] - mu @ D[r]) - (md.V.T @ Pr[r] @ B * nu_).sum(axis=1)
-        beta[:, r] = md.back(modal)
-    w2 = np.asarray(weights, dtype=float) ** 2
-    Pw = np.tensordot(w2, Pr, axes=(0, 0))
-    x0 = np.linalg.lstsq(Pw, beta @ w2, rcond=1e-13)[0]
-    err = total - 2.0 * (x0 @ beta) + np.einsum("i,rij,j->r", x0, Pr, x0)
+    err = kernel_error_power(*md.arguments(lp, L), B, C, D, np.asarray(weights, dtype=float),
+                             1e-13, MAX_X0_CONDITION)
     if not np.isfinite(err).all() or np.any(err < ROUNDING_GUARD * np.diag(lp.Y)):
         return None                  # a nearly exact fit: the pass is exact, this is not
     return err * inv_scale ** 2

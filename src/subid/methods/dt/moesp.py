@@ -35,6 +35,7 @@ from subid.methods.dt._subspace import (
     check_weighting,
     cva_factor,
     future_past_factor,
+    orthonormal_basis,
     shift_invariance,
 )
 from subid.methods.dt.feedthrough import check_feedthrough
@@ -172,7 +173,7 @@ class Moesp(SubspaceMethod):
             return States(A, B, C, D, dict(singular_values=s, weighting=self.weighting,
                                            feedthrough=ft_record, **extra))
         # A and C in an orthonormal basis Q of range(Γ) (any basis is valid for MOESP)
-        Q = scipy.linalg.qr(gamma, mode="economic", check_finite=False)[0]
+        Q = orthonormal_basis(gamma)
         A, C, shift_residual = shift_invariance(Q, pb.data.n_outputs)
         L, a, b = parts["L"], parts["a"], parts["b"]
         return Shift(A, C, Q, L[:a, :a], L[a + b:, :a],
