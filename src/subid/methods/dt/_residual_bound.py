@@ -68,6 +68,10 @@ STRIDE = 4
 #: The strided bound is tried only when it keeps at least this many samples (on
 #: shorter records it rarely proves anything: measured at 10^4 samples).
 STRIDED_MIN_SAMPLES = 2048
+#: On a record too short for the strided bound, the model's own state on every STRIDE-th
+#: sample of the TAIL is tried first when it keeps at least this many samples (measured:
+#: it proved every unstable fold model at 10^4 samples, none at 10^3).
+OWN_STRIDED_MIN_SAMPLES = 256
 #: A grows by more than this many decades over the SHORT tail: that tail is tried first.
 FAST_GROWTH_DECADES = 30
 #: A grows by fewer than this many decades over the TAIL: the bounds with a free state
@@ -195,13 +199,18 @@ def loses(A, C, u, y, threshold: float, *, feedthrough: bool, estimate_x0: bool,
     tries = [("short", SHORT), ("strided", TAIL), ("tail", TAIL)] if fast else \
         [("strided", TAIL), ("short", SHORT), ("tail", TAIL)]
     if TAIL * N < STRIDE * STRIDED_MIN_SAMPLES:
-        # a short record: too few rows for the free-state strided bound to prove much,
-        # while the model's own state over every STRIDE-th sample of the TAIL costs a
-        # dual recursion over a few thousand samples and a small QR (issue 21: at 10^4
-        # samples it proved every unstable fold model the free-state tails left to the
-        # full one, at a tenth of their cost); it first, the others after it
+        # a short record: too few rows for the free-state strided bound to prove much.
+        # A mode too slow to show within the tail with a free state there (as below):
+        # the model's own state over every STRIDE-th sample of the TAIL first, a dual
+        # recursion over a few thousand samples and a small QR (issue 21: at 10^4
+        # samples it proved the three unstable fold models, 14-15 decades over the
+        # tail, that both free-state tails left to the full bound, at under half their
+        # cost), when it keeps OWN_STRIDED_MIN_SAMPLES samples (at 10^3 it proved
+        # nothing); the free-state tails after it
         tries.remove(("strided", TAIL))
-        tries.insert(0, ("own strided", TAIL))
+        if TAIL * N * decades < SLOW_GROWTH_DECADES \
+                and TAIL * N >= STRIDE * OWN_STRIDED_MIN_SAMPLES:
+            tries.insert(0, ("own strided", TAIL))
     elif TAIL * N * decades >= SLOW_GROWTH_DECADES:
         tries.append(("own strided", TAIL))
     else:
