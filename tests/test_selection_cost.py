@@ -134,6 +134,39 @@ def test_residual_bound_is_a_lower_bound():
                        estimate_x0=True, output_weights=weights) is None
 
 
+def test_residual_bound_decision_on_a_short_record():
+    """On a record too short for the free-state strided bound, a slowly growing A is
+    bounded first by its own state on every STRIDE-th tail sample (the value returned
+    is that bound), and every bound that proves is at most the full fit's residual: the
+    decision (the unstable fit cannot be kept) is the one the full fit makes."""
+    true, data = _record(order=4, n=6000, seed=2)
+    assert bound.TAIL * data.n_samples < bound.STRIDE * bound.STRIDED_MIN_SAMPLES
+    radius = float(np.abs(np.linalg.eigvals(true.A)).max())
+    weights = np.array([1.0, 2.5])
+    first = 0
+    for target in (1.0005, 1.003, 1.02, 1.08):
+        A = true.A * (target / radius)
+        full = regression.fit_b_d_x0_qr(A, true.C, data.u, data.y, feedthrough=True,
+                                        estimate_x0=True, output_weights=weights)[3]
+        own = bound.residual_at_least(A, true.C, data.u, data.y, feedthrough=True,
+                                      estimate_x0=True, output_weights=weights,
+                                      stride=bound.STRIDE)
+        slow = bound.TAIL * data.n_samples * np.log10(target) < bound.SLOW_GROWTH_DECADES
+        first += slow and own >= 0.2 * full["residual_rms"] * (1 + bound.MARGIN)
+        for share in (0.1, 0.2, 0.9, 0.999, 1.01, 1.5):
+            threshold = share * full["residual_rms"]
+            got = bound.loses(A, true.C, data.u, data.y, threshold, feedthrough=True,
+                              estimate_x0=True, output_weights=weights)
+            if got is not None:
+                assert threshold * (1 + bound.MARGIN) <= got
+                assert got <= full["residual_rms"] * (1 + bound.MARGIN)
+            if slow and own >= threshold * (1 + bound.MARGIN):
+                assert got == own                   # the first bound tried
+            if share >= 1.01:
+                assert got is None
+    assert first >= 2
+
+
 def test_fold_model_skipping_the_unstable_fit_is_the_full_fit_model():
     """A fold model whose unstable A is proven not to be kept (bound_unstable) is the
     model the full computation gives, to the last bit; the bound was used."""
