@@ -262,6 +262,7 @@ def score_horizon(parts, orders, horizon, *, fitter, estimators, held=None, lagg
         How many of the fold models had to be stabilised (:func:`stabilised`).
     """
     from subid.methods.dt._lag_fit import LAG_PRODUCTS, LagProducts
+    from subid.methods.dt._regression import scoring_only
     from subid.methods.dt._scoring import Held
     names = list(estimators)
     per_fold = {(n, v): [] for n in orders for v in range(len(names))}
@@ -281,7 +282,7 @@ def score_horizon(parts, orders, horizon, *, fitter, estimators, held=None, lagg
         for n in orders:
             for v, name in enumerate(names):
                 try:
-                    with warnings.catch_warnings():
+                    with warnings.catch_warnings(), scoring_only():
                         warnings.simplefilter("ignore")
                         model = fitter.fit(replace(problem, order=n, candidates=[n],
                                                    fold=True), name)
@@ -724,6 +725,7 @@ def innovation_check(data, record, fitter, chosen, *, factors=None):
     ``record['selected']`` follows it.
     """
     from subid.methods.dt._lag_fit import LAG_PRODUCTS, LagProducts
+    from subid.methods.dt._regression import scoring_only
     from subid.methods.dt.noise_model import attach_noise_model
     n, f, estimator = chosen
     used = data[data.n_samples - INNOVATION_CHECK_SAMPLES:] \
@@ -766,8 +768,9 @@ def innovation_check(data, record, fitter, chosen, *, factors=None):
             if lagged is not None:
                 problem._cache[LAG_PRODUCTS] = lagged
             for order in orders:
-                model = fitter.fit(replace(problem, order=order, candidates=[order]),
-                                   estimator)
+                with scoring_only():          # scored and dropped: the normal equations
+                    model = fitter.fit(replace(problem, order=order, candidates=[order]),
+                                       estimator)
                 value = innovation_bic(attach_noise_model(model, problem), used)
                 if value is not None:
                     values[order] = value
