@@ -25,6 +25,8 @@ import numba
 import numpy as np
 import scipy.linalg
 
+from subid.statistic.hankel import householder_r
+
 _CHUNK = 4096
 TINY = 1e-250
 
@@ -290,18 +292,14 @@ def _with_d_and_y(rows, u, y, p, feedthrough, output_weights):
 def _qr_append(R, rows, flat):
     """Triangular factor of ``[R; rows]``: the two written into one column-major
     work array (from the buffer ``flat``) and factorised in place by LAPACK
-    ``geqrf``, the factorisation ``scipy.linalg.qr(mode='r')`` runs without its
-    copies (as :func:`subid.statistic.hankel._qr_rows`)."""
+    ``geqrt`` (:func:`subid.statistic.hankel.householder_r`)."""
     top, width = R.shape[0], rows.shape[1]
     work = flat[:(top + rows.shape[0]) * width].reshape((top + rows.shape[0], width), order="F")
     work[:top] = R
     work[top:] = rows
-    geqrf = scipy.linalg.lapack.dgeqrf
-    lwork = int(geqrf(work, lwork=-1)[2][0].real)        # the blocked algorithm's workspace
-    qr, _, _, info = geqrf(work, lwork=lwork, overwrite_a=1)
-    if info < 0:
-        raise ValueError(f"QR factorisation failed (LAPACK info {info})")
+    qr = householder_r(work)
     return np.triu(qr[:min(width, qr.shape[0])])
+
 
 
 def qr_factor(A, C, u, y, S, *, n_x0, feedthrough, output_weights=None,
