@@ -489,10 +489,11 @@ def _qr_rows(R, z: np.ndarray, depth: int, n_inputs: int) -> np.ndarray:
     whose Hankel columns (all windows of ``depth`` samples) are added.
 
     Each block ``[R; next rows of H^T]`` is written straight into one
-    column-major work array and factorised in place (:func:`householder_r`):
-    the Householder factorisation of ``scipy.linalg.qr(mode='r')`` without its
-    copies (a Fortran copy of the C-ordered block, the stacking, and ``triu``
-    of the whole tall result), which took about 40 % of the statistic's time.
+    column-major work array and factorised in place by LAPACK ``geqrf``:
+    the same Householder factorisation (same input, same routine, same
+    workspace) as ``scipy.linalg.qr(mode='r')`` without its copies (a
+    Fortran copy of the C-ordered block, the stacking, and ``triu`` of the
+    whole tall result), which took about 40 % of the statistic's time.
     """
     q = z.shape[1]
     m = depth * q
@@ -507,6 +508,8 @@ def _qr_rows(R, z: np.ndarray, depth: int, n_inputs: int) -> np.ndarray:
              [(i, n_inputs + b) for i in range(depth) for b in range(ny)]
     top = 0 if R is None else R.shape[0]
     flat = np.empty((max(top, m) + min(_BLOCK, columns)) * m)
+    geqrf = scipy.linalg.lapack.dgeqrf
+    lwork = None
     for start in range(0, columns, _BLOCK):
         stop = min(start + _BLOCK, columns)
         rows = top + stop - start
@@ -515,29 +518,12 @@ def _qr_rows(R, z: np.ndarray, depth: int, n_inputs: int) -> np.ndarray:
             work[:top] = R
         for j, (i, c) in enumerate(source):
             work[top:, j] = zt[c, start + i:stop + i]
-        qr = householder_r(work)
+        if lwork is None:
+            lwork = int(geqrf(work, lwork=-1)[2][0].real)
+        qr, _, _, info = geqrf(work, lwork=lwork, overwrite_a=1)
+        if info < 0:
+            raise DataError(f"QR factorisation failed (LAPACK info {info})")
         R = np.zeros((m, m))
         R[:min(rows, m)] = np.triu(qr[:m])
         top = m
     return R
-
-
-#: Block size of LAPACK ``geqrt`` in :func:`householder_r`.
-QR_BLOCK = 32
-
-
-def householder_r(work):
-    """``work`` (column-major, overwritten) with R in its upper triangle: the
-    Householder QR factorisation of ``scipy.linalg.qr(mode='r')`` (LAPACK ``geqrf``:
-    the same reflectors and signs, R equal to rounding) by LAPACK ``geqrt``, whose
-    compact-WY blocks (:data:`QR_BLOCK` columns) keep the tall panels in cache:
-    2.5-3.5x faster than ``geqrf`` on the output regressions of
-    :mod:`subid.methods.dt._regression` (4480-17920 rows, 40-117 columns) and on
-    the Hankel rows here (4460 x 160), one thread."""
-    m, n = work.shape
-    if min(m, n) == 0:
-        return work
-    qr, _, info = scipy.linalg.lapack.dgeqrt(min(QR_BLOCK, m, n), work, overwrite_a=1)
-    if info < 0:
-        raise DataError(f"QR factorisation failed (LAPACK info {info})")
-    return qr
