@@ -652,7 +652,7 @@ def choose(data, plan, fitter):
 INNOVATION_CHECK_SAMPLES = 20_000
 
 
-def innovation_bic(model, data) -> float | None:
+def innovation_bic(model, data, spread=None) -> float | None:
     """Schwarz's criterion of ``model``'s innovation form on ``data``:
     ``N ln det(E^T E / N) + (n (nu + 2 ny) + nu ny) ln N``, ``E`` its one-step
     prediction errors from a zero initial state (the conditional likelihood; the
@@ -662,7 +662,9 @@ def innovation_bic(model, data) -> float | None:
     predictor) or the errors are not finite. Each output's errors are divided by
     its standard deviation (which shifts the criterion of every order alike) and the
     eigenvalues of their covariance floored at ``(ABSOLUTE_TOLERANCE / 100)^2``, the
-    rounding level below which the cross-validated criterion counts no misfit either."""
+    rounding level below which the cross-validated criterion counts no misfit either.
+    ``spread``: ``np.std(data.y, axis=0)`` when already computed (the same for every
+    order of :func:`innovation_check`)."""
     from subid.model.prediction import prediction_errors
     if model.K is None:
         return None
@@ -679,7 +681,8 @@ def innovation_bic(model, data) -> float | None:
     # order), the covariance's eigenvalues floored at the rounding level of the
     # cross-validated criterion (ABSOLUTE_TOLERANCE points of misfit): on noise-free
     # data every order from the true one up predicts to rounding, and the smallest wins
-    spread = np.std(data.y, axis=0)
+    if spread is None:
+        spread = np.std(data.y, axis=0)
     errors = errors / np.where(spread > 0, spread, 1.0)
     floor = (ABSOLUTE_TOLERANCE / 100.0) ** 2
     eig = np.maximum(np.linalg.eigvalsh(errors.T @ errors / N), floor)
@@ -767,11 +770,12 @@ def innovation_check(data, record, fitter, chosen, *, factors=None):
             lagged = LagProducts.of_record(used) if hasattr(problem, "_cache") else None
             if lagged is not None:
                 problem._cache[LAG_PRODUCTS] = lagged
+            spread = np.std(used.y, axis=0)
             for order in orders:
                 with scoring_only():          # scored and dropped: the normal equations
                     model = fitter.fit(replace(problem, order=order, candidates=[order]),
                                        estimator)
-                value = innovation_bic(attach_noise_model(model, problem), used)
+                value = innovation_bic(attach_noise_model(model, problem), used, spread)
                 if value is not None:
                     values[order] = value
                     check["orders"].append({"order": order, "criterion": value})
