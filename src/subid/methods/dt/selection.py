@@ -775,7 +775,8 @@ def innovation_check(data, record, fitter, chosen, *, factors=None):
                 with scoring_only():          # scored and dropped: the normal equations
                     model = fitter.fit(replace(problem, order=order, candidates=[order]),
                                        estimator)
-                value = innovation_bic(attach_noise_model(model, problem), used, spread)
+                value = innovation_bic(attach_noise_model(model, problem, doubling=True),
+                                       used, spread)
                 if value is not None:
                     values[order] = value
                     check["orders"].append({"order": order, "criterion": value})
