@@ -213,8 +213,7 @@ def test_householder_r_is_scipy_qr():
     included, to rounding; the output regression's QR factor through it too."""
     import scipy.linalg
 
-    from subid.methods.dt._regression import _qr_append
-    from subid.methods.dt._regression import householder_r
+    from subid.methods.dt._regression import _qr_append, householder_r
     rng = np.random.default_rng(5)
     for rows, cols in ((3000, 67), (40, 40), (20, 33), (1, 5)):
         X = rng.standard_normal((rows, cols))
