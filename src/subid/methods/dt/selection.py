@@ -343,9 +343,12 @@ def fold_factors(parts, horizon, fitter):
     """Hankel factors of the training records of the folds, each merged from the
     lagged-product statistics of the blocks of :func:`_blocks_of_folds` (one pass
     over the record instead of one per fold: 2.3 records), where that statistic is
-    the one the fold would use (:meth:`subid.HankelStatistic.exact_factor`); None
-    for a fold (or all) where it is not, or when ``parts`` are not the four folds of
-    one experiment: ``fitter.prepare_fold`` then builds the factor from the record."""
+    the one the fold would use (:meth:`subid.HankelStatistic.exact_factor`), the QR
+    statistic of the fold's record where it is not (with ``statistic='auto'``, up to
+    :data:`subid.statistic.hankel.QR_MAX_SAMPLES` samples: what the fold would build,
+    without computing its lagged products a second time to find that out); None for
+    every fold when ``parts`` are not the four folds of one experiment:
+    ``fitter.prepare_fold`` then builds the factor from the record."""
     from subid.statistic.hankel import QR_MAX_SAMPLES, HankelStatistic
     none = [None] * len(parts)
     blocks_per_horizon = getattr(fitter, "blocks_per_horizon", None)
@@ -366,7 +369,11 @@ def fold_factors(parts, horizon, fitter):
         elif kind == "gram" or train.n_samples > QR_MAX_SAMPLES:
             out.append(stat.factor())
         else:
-            out.append(stat.exact_factor())
+            # not exact to rounding: the QR statistic of the record, as the fold's
+            # statistic='auto' would build it after computing the lagged products again
+            exact = stat.exact_factor()
+            out.append(exact if exact is not None else
+                       HankelStatistic.from_data(train, depth, kind="qr").factor())
     return out
 
 
