@@ -349,7 +349,7 @@ def fold_factors(parts, horizon, fitter):
     without computing its lagged products a second time to find that out); None for
     every fold when ``parts`` are not the four folds of one experiment:
     ``fitter.prepare_fold`` then builds the factor from the record."""
-    from subid.statistic.hankel import QR_MAX_SAMPLES, HankelStatistic
+    from subid.statistic.hankel import QR_MAX_SAMPLES, HankelStatistic, compact_wy_qr
     none = [None] * len(parts)
     blocks_per_horizon = getattr(fitter, "blocks_per_horizon", None)
     kind = getattr(fitter, "statistic", None)
@@ -372,8 +372,10 @@ def fold_factors(parts, horizon, fitter):
             # not exact to rounding: the QR statistic of the record, as the fold's
             # statistic='auto' would build it after computing the lagged products again
             exact = stat.exact_factor()
-            out.append(exact if exact is not None else
-                       HankelStatistic.from_data(train, depth, kind="qr").factor())
+            if exact is None:
+                with compact_wy_qr():         # scored and dropped: 2.5x faster QR
+                    exact = HankelStatistic.from_data(train, depth, kind="qr").factor()
+            out.append(exact)
     return out
 
 
