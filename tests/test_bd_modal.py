@@ -225,3 +225,21 @@ def test_householder_r_is_scipy_qr():
     got = _qr_append(R0, rows, np.empty(512 * 12))
     want = scipy.linalg.qr(np.vstack([R0, rows]), mode="r")[0][:12]
     assert np.max(np.abs(got - want)) <= 1e-13 * np.max(np.abs(want))
+
+
+def test_cholesky_solve_is_scipys_bit_for_bit():
+    """_cholesky_solve: scipy's cho_factor/cho_solve by the same LAPACK calls, the same
+    bits; a matrix that is not positive definite raises LinAlgError as scipy does."""
+    import scipy.linalg
+
+    from subid.methods.dt._regression import _cholesky_solve
+    rng = np.random.default_rng(12)
+    for p in (1, 5, 30, 117):
+        X = rng.standard_normal((p + 50, p))
+        G = X.T @ X
+        b = rng.standard_normal(p)
+        want = scipy.linalg.cho_solve(scipy.linalg.cho_factor(G, check_finite=False), b,
+                                      check_finite=False)
+        assert np.array_equal(_cholesky_solve(G, b), want)
+    with pytest.raises(np.linalg.LinAlgError):
+        _cholesky_solve(-np.eye(3), np.ones(3))

@@ -816,8 +816,7 @@ def solve_normal_equations(N, n, nu, ny, *, estimate_x0, feedthrough, n_samples,
     ev = np.linalg.eigvalsh(Ge) if p else np.ones(1)
     if ev[0] <= 0 or ev[-1] / ev[0] > max_condition:
         return None
-    theta = scipy.linalg.cho_solve(scipy.linalg.cho_factor(Ge, check_finite=False),
-                                   b / scale, check_finite=False) / scale if p else np.zeros(0)
+    theta = _cholesky_solve(Ge, b / scale) / scale if p else np.zeros(0)
     x0 = theta[:nx] if estimate_x0 else np.zeros(n)
     B = theta[nx:q].reshape(nu, n).T
     D = theta[q:p].reshape(nu, ny).T if feedthrough else np.zeros((ny, nu))
@@ -829,6 +828,20 @@ def solve_normal_equations(N, n, nu, ny, *, estimate_x0, feedthrough, n_samples,
         "regression_path": "modal",
     }
     return B, D, x0, theta, diagnostics
+
+
+def _cholesky_solve(G, rhs):
+    """``scipy.linalg.cho_solve(scipy.linalg.cho_factor(G), rhs)`` for a real ``G``, by
+    the same LAPACK calls (``potrf`` of the upper triangle, ``potrs``) without the
+    wrappers' checks: the same bits, a third of the time of a candidate's solve."""
+    c, info = scipy.linalg.lapack.dpotrf(G, lower=0, overwrite_a=0, clean=0)
+    if info > 0:
+        raise np.linalg.LinAlgError(f"{info}-th leading minor of the array is not positive "
+                                    "definite")
+    x, info = scipy.linalg.lapack.dpotrs(c, rhs, lower=0, overwrite_b=0)
+    if info != 0:
+        raise ValueError(f"illegal value in {-info}th argument of internal potrs")
+    return x
 
 
 #: Relative residual (squared) below which the normal equations' residual is
