@@ -301,8 +301,6 @@ def _qr_append(R, rows, flat):
     return np.triu(qr[:min(width, qr.shape[0])])
 
 
-
-
 def qr_factor(A, C, u, y, S, *, n_x0, feedthrough, output_weights=None,
               kernel=sensitivity_rows, R=None):
     """Triangular factor of the weighted rows ``[Phi(t), y(t)]`` of one piece.
@@ -532,6 +530,8 @@ def scoring_only():
         yield
     finally:
         _NORMAL_CONDITION.reset(token)
+
+
 #: |λ|^t below this is rounding: the free signals stop there.
 FREE_TOLERANCE = 1e-18
 _MODAL_BLOCK = 16384
