@@ -148,7 +148,7 @@ def bode(model_or_models=None, w=None, *, data=None, hz=False, labels=None, phas
     axes[0, 0].set_xscale("log")
     _plain_log_labels(axes[0, 0].xaxis)          # shared by every panel
     reference = None                     # phase of the first model, to align the data's
-    with _autoscale_once(axes):      # the limits once, at the end
+    with _autoscale_once(axes):      # the limits once, after the plotting calls
         for k, (label, m) in enumerate(groups.items()):
             style = dict(color=colors[k], lw=1.2, ls="--" if unstable[label] else "-")
             wk = w if m.dt == 0 else w[w <= math.pi / m.dt * (1 + 1e-12)]
@@ -179,35 +179,36 @@ def bode(model_or_models=None, w=None, *, data=None, hz=False, labels=None, phas
                         axes[r + 1, j].plot(wk * x_scale, ph[:, i, j], **style)
         if data is not None:
             _bode_data(axes, data, x_scale, phase, reference)
-        for i in range(ny):
-            for j in range(nu):
-                r = 2 * i if phase else i
-                axes[r, j].set_title(f"{first.input_names[j]} → {first.output_names[i]}")
-                axes[r, j].set_ylabel("magnitude (dB)")
-                axes[r, j].grid(True, lw=0.3)
-                if phase:
-                    axes[r + 1, j].set_ylabel("phase (deg)")
-                    axes[r + 1, j].grid(True, lw=0.3)
-        # dt = 1 is the period of a record without time information (IOData's default):
-        # frequencies per sample then (numerically the same as per second with dt = 1 s)
-        per_sample = all(m.dt == 1.0 for m in list(groups.values()) + ([data] if data else []))
-        unit = ("cycles/sample" if hz else "rad/sample") if per_sample else ("Hz" if hz else "rad/s")
+    for i in range(ny):
         for j in range(nu):
-            axes[-1, j].set_xlabel(f"frequency ({unit})")
-        # minor log ticks are slow to draw (a Tick object each, 40 % of a 2 x 2 diagram):
-        # at 2 and 5 of every decade on a single pair's diagram, none on a grid (the
-        # decades are labelled and gridded)
-        from matplotlib.ticker import LogLocator, NullLocator
-        for ax in axes.ravel():
-            ax.xaxis.set_minor_locator(NullLocator() if ny * nu > 1 else
-                                       LogLocator(base=10.0, subs=(2.0, 5.0)))
-    # after the autoscale: axvline maps its x to data coordinates through the view (the
-    # limits then), and the Nyquist frequency, the largest drawn, sets the upper limit
+            r = 2 * i if phase else i
+            axes[r, j].set_title(f"{first.input_names[j]} → {first.output_names[i]}")
+            axes[r, j].set_ylabel("magnitude (dB)")
+            axes[r, j].grid(True, lw=0.3)
+            if phase:
+                axes[r + 1, j].set_ylabel("phase (deg)")
+                axes[r + 1, j].grid(True, lw=0.3)
+    # dt = 1 is the period of a record without time information (IOData's default):
+    # frequencies per sample then (numerically the same as per second with dt = 1 s)
+    per_sample = all(m.dt == 1.0 for m in list(groups.values()) + ([data] if data else []))
+    unit = ("cycles/sample" if hz else "rad/sample") if per_sample else ("Hz" if hz else "rad/s")
+    for j in range(nu):
+        axes[-1, j].set_xlabel(f"frequency ({unit})")
+    # after the autoscale is requested: axvline maps its x to data coordinates through
+    # the view (computed then), and the Nyquist frequency, the largest drawn, sets the
+    # upper limit: as when every plotting call autoscaled
     nyquists = sorted({math.pi / m.dt for m in list(groups.values()) + ([data] if data else [])
                        if m.dt > 0})
     for f_nyq in nyquists:
         for ax in axes.ravel():
             ax.axvline(f_nyq * x_scale, color="0.5", lw=0.6, ls=":")
+    # minor log ticks are slow to draw (a Tick object each, 40 % of a 2 x 2 diagram):
+    # at 2 and 5 of every decade on a single pair's diagram, none on a grid (the
+    # decades are labelled and gridded)
+    from matplotlib.ticker import LogLocator, NullLocator
+    for ax in axes.ravel():
+        ax.xaxis.set_minor_locator(NullLocator() if ny * nu > 1 else
+                                   LogLocator(base=10.0, subs=(2.0, 5.0)))
     _legend_beside(axes[0, -1])
     if title:
         fig.suptitle(title)
@@ -305,7 +306,7 @@ def step(model_or_models, t=None, *, labels=None, confidence=None, title=None):
     room = _legend_room(list(groups))
     fig, axes = plt.subplots(ny, nu, figsize=(min(3.8 * nu + 1.2, 16) + room, 2.2 * ny + 0.8),
                              sharex=True, squeeze=False)
-    with _autoscale_once(axes):      # the limits once, at the end
+    with _autoscale_once(axes):      # the limits once, after the plotting calls
         for k, (label, m) in enumerate(groups.items()):
             if confidence is not None and _has_covariance(m):
                 from subid.evaluation.uncertainty import step_bounds
@@ -323,12 +324,12 @@ def step(model_or_models, t=None, *, labels=None, confidence=None, title=None):
                         axes[i, j].fill_between(tk, band.lower[:, i, j], band.upper[:, i, j],
                                                 color=colors[k], alpha=0.2, lw=0,
                                                 step="post" if m.dt > 0 else None)
-        for i in range(ny):
-            for j in range(nu):
-                axes[i, j].set_title(f"{first.input_names[j]} → {first.output_names[i]}")
-                axes[i, j].grid(True, lw=0.3)
+    for i in range(ny):
         for j in range(nu):
-            axes[-1, j].set_xlabel("time")
+            axes[i, j].set_title(f"{first.input_names[j]} → {first.output_names[i]}")
+            axes[i, j].grid(True, lw=0.3)
+    for j in range(nu):
+        axes[-1, j].set_xlabel("time")
     _legend_beside(axes[0, -1])
     if title:
         fig.suptitle(title)
