@@ -15,8 +15,8 @@ pixels moves the outline on the pixel grid without changing its coverage: the ca
 image is drawn at the whole-pixel shift). Each cached value is the one matplotlib's
 renderer computes for the same key, so the pixels are the same
 (tests/test_report_figures.py). Mathematical text, TeX, font features and languages go
-to matplotlib's renderer unchanged, and so does everything when matplotlib lacks the
-internals used here (before 3.11: its renderer then draws as it always did).
+to matplotlib's renderer unchanged; without the internals used here (older matplotlib
+versions) the canvas is matplotlib's own.
 """
 
 from __future__ import annotations
@@ -76,7 +76,7 @@ def _make_classes(agg):
         def draw_text(self, gc, x, y, s, prop, angle, ismath=False, mtext=None):
             features = mtext.get_fontfeatures() if mtext is not None else None
             language = mtext.get_language() if mtext is not None else None
-            if ismath or not fast or features is not None or language is not None:
+            if ismath or features is not None or language is not None:
                 return super().draw_text(gc, x, y, s, prop, angle, ismath, mtext)
             flags = agg.get_hinting_flag()
             key = (s, hash(prop), self.dpi, flags, mpl.rcParams["text.hinting_factor"])
@@ -119,6 +119,9 @@ def _make_classes(agg):
                 self._renderer.draw_text_image(
                     image, left + tx // 64,
                     int(self.height) - (top + ty // 64) + image.shape[0], 0, gc)
+
+    if not fast:                # matplotlib's canvas and renderer, as they are
+        return agg.FigureCanvasAgg
 
     class Canvas(agg.FigureCanvasAgg):
         def get_renderer(self):
