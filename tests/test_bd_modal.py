@@ -176,3 +176,70 @@ def test_second_pass_residual_on_noise_free_pieces():
     assert whole[3]["residual_rms"] < 1e-12
     np.testing.assert_allclose(B, true.B, atol=1e-10)
     np.testing.assert_allclose(x0, np.ones(3), atol=1e-9)
+
+
+def test_scoring_only_takes_normal_equations_the_qr_path_would_have_solved():
+    """Within scoring_only (the fold and innovation-check fits of the order selection),
+    normal matrices of equilibrated condition 1e4..1e8 are solved instead of sent to
+    the QR path: on the DaISy steamgen record (4 inputs, 4 outputs, order 12, where the
+    default guard refuses them) the same B, D, x0 and residual as the QR path to about
+    1e-11 relative; the guard is back in force after the block."""
+    import subid
+    from subid.methods.dt._regression import (
+        MODAL_MAX_NORMAL_CONDITION,
+        SCORING_MAX_NORMAL_CONDITION,
+        scoring_only,
+    )
+    data = subid.datasets.load("steamgen").detrend()[:2000]
+    model = subid.moesp(data, 12, horizon=10)
+    weights = 1.0 / np.std(data.y, axis=0)
+    args = (model.A, model.C, data.u, data.y)
+    assert fit_b_d_x0_modal(*args, output_weights=weights) is None
+    with scoring_only():
+        fast = fit_b_d_x0_modal(*args, output_weights=weights)
+        assert fit_b_d_x0(*args, output_weights=weights)[3]["regression_path"] == "modal"
+    assert fit_b_d_x0_modal(*args, output_weights=weights) is None
+    assert fast is not None
+    condition = fast[3]["regression_condition"] ** 2
+    assert MODAL_MAX_NORMAL_CONDITION < condition <= SCORING_MAX_NORMAL_CONDITION
+    qr = fit_b_d_x0_qr(*args, output_weights=weights)
+    for got, want in zip(fast[:3], qr[:3]):
+        assert _relative(got, want) < 1e-9
+    assert abs(fast[3]["residual_rms"] - qr[3]["residual_rms"]) < 1e-12 * qr[3]["residual_rms"]
+
+
+def test_householder_r_is_scipy_qr():
+    """householder_r (LAPACK geqrt) gives the R of scipy.linalg.qr (geqrf), signs
+    included, to rounding; the output regression's QR factor through it too."""
+    import scipy.linalg
+
+    from subid.methods.dt._regression import _qr_append, householder_r
+    rng = np.random.default_rng(5)
+    for rows, cols in ((3000, 67), (40, 40), (20, 33), (1, 5)):
+        X = rng.standard_normal((rows, cols))
+        want = scipy.linalg.qr(X, mode="r")[0][:min(rows, cols)]
+        got = np.triu(householder_r(np.asfortranarray(X))[:min(rows, cols)])
+        assert np.max(np.abs(got - want)) <= 1e-13 * np.max(np.abs(want))
+    R0 = np.triu(rng.standard_normal((12, 12)))
+    rows = rng.standard_normal((500, 12))
+    got = _qr_append(R0, rows, np.empty(512 * 12))
+    want = scipy.linalg.qr(np.vstack([R0, rows]), mode="r")[0][:12]
+    assert np.max(np.abs(got - want)) <= 1e-13 * np.max(np.abs(want))
+
+
+def test_cholesky_solve_is_scipys_bit_for_bit():
+    """_cholesky_solve: scipy's cho_factor/cho_solve by the same LAPACK calls, the same
+    bits; a matrix that is not positive definite raises LinAlgError as scipy does."""
+    import scipy.linalg
+
+    from subid.methods.dt._regression import _cholesky_solve
+    rng = np.random.default_rng(12)
+    for p in (1, 5, 30, 117):
+        X = rng.standard_normal((p + 50, p))
+        G = X.T @ X
+        b = rng.standard_normal(p)
+        want = scipy.linalg.cho_solve(scipy.linalg.cho_factor(G, check_finite=False), b,
+                                      check_finite=False)
+        assert np.array_equal(_cholesky_solve(G, b), want)
+    with pytest.raises(np.linalg.LinAlgError):
+        _cholesky_solve(-np.eye(3), np.ones(3))

@@ -343,7 +343,7 @@ def test_innovation_check_is_vetoed_by_the_fold_scores(monkeypatch, favoured):
     its best candidate's mean fold score is not lower; it runs only when some higher
     order scores as well on the folds."""
     sign = -1.0 if favoured == "highest" else 1.0
-    monkeypatch.setattr(_selection, "innovation_bic", lambda m, d: sign * m.order)
+    monkeypatch.setattr(_selection, "innovation_bic", lambda m, d, spread=None: sign * m.order)
     true = systems.random_system(3, 1, 2, seed=5)
     data = systems.simulate_data(true, 800, seed=6, output_snr_db=25)
     with warnings.catch_warnings():

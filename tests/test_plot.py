@@ -181,6 +181,28 @@ def test_residuals_figure_layout_and_bands(mimo):
     assert res["cross_bound"][0, 0] == pytest.approx(max(dashed[:2]))
 
 
+
+def test_residuals_figure_limits_cover_stems_and_bands(mimo):
+    """Each panel's data limits (updated once per panel, not at every artist) span its
+    stems, from zero, the dashed bands of every model and the zero line, as the
+    per-call ``vlines`` and ``axhline`` spanned them."""
+    true, data = mimo
+    models = {"a": true, "b": subid.moesp(data, 3)}
+    fig = plot.residuals(models, data, max_lag=15)
+    res = [plot.residual_correlations(m, data, max_lag=15) for m in models.values()]
+    nu = data.n_inputs
+    for i in range(data.n_outputs):
+        for j in range(nu):
+            lim = fig.axes[i * (1 + nu) + 1 + j].dataLim
+            values = np.concatenate([np.append(r["cross"][i, j], [r["cross_bound"][i, j],
+                                                                   -r["cross_bound"][i, j]])
+                                     for r in res] + [[0.0]])
+            assert (lim.y0, lim.y1) == (values.min(), values.max())
+            assert (lim.x0, lim.x1) == (-15 - 0.2, 15 + 0.2)
+        lim = fig.axes[i * (1 + nu)].dataLim
+        values = np.concatenate([r["auto"][i] for r in res] + [[0.0]])
+        assert lim.y1 >= values.max() and lim.y0 <= values.min()
+
 def test_residuals_of_a_diverging_model_raise_a_clear_error():
     rng = np.random.default_rng(0)
     u = rng.standard_normal(3000)

@@ -116,3 +116,29 @@ def test_figure_html_closes_a_pyplot_figure():
     number = fig.number
     report.figure_html(fig)
     assert number not in plt.get_fignums()
+
+
+def _text_figure() -> Figure:
+    fig = Figure(figsize=(4, 3), dpi=150)
+    axes = fig.subplots(1, 2)
+    for k, ax in enumerate(axes):
+        ax.plot([0.0, 1.0 + k], [0.5, -2.0], label=f"model {k} → y{k}")
+        ax.set_title("auto-correlation of e(y1)")
+        ax.set_ylabel("magnitude (dB)")          # rotated
+        ax.legend()
+    fig.text(0.123456, 0.03, "10⁻² at a fraction of a pixel", fontsize=7)
+    fig.text(0.5, 0.5, "rotated 30°", rotation=30)
+    fig.text(0.7, 0.1, "aliased", antialiased=False)
+    fig.text(0.1, 0.9, r"$\alpha^2$ math")               # matplotlib's own path
+    return fig
+
+
+def test_canvas_text_draws_what_matplotlib_draws():
+    from subid.evaluation._canvas import canvas
+    plain = FigureCanvasAgg(_text_figure())
+    plain.draw()
+    expected = np.asarray(plain.buffer_rgba()).copy()
+    for _ in range(2):          # then from the caches filled by the first figure
+        cached = canvas(_text_figure())
+        cached.draw()
+        assert np.array_equal(np.asarray(cached.buffer_rgba()), expected)

@@ -163,3 +163,22 @@ def test_in_place_qr_statistic_is_the_stacked_qr_bit_for_bit(rows, q, nu, depth,
     want = _qr_rows_reference(R0, z, depth, nu, statistic._BLOCK)
     assert got.shape == want.shape
     assert np.array_equal(got, want)
+
+
+
+def test_lq_lower_is_scipy_qr_bit_for_bit():
+    """lq_lower's R rows come from geqrf called as scipy.linalg.qr(mode='r') calls it:
+    the same bits, for wide, tall, square, strided and empty inputs."""
+    import scipy.linalg
+
+    from subid.statistic._hankel import _qr_r_rows, lq_lower
+    rng = np.random.default_rng(8)
+    for r, m in [(40, 40), (30, 80), (80, 30), (1, 5), (5, 1), (0, 5), (5, 0)]:
+        M = rng.standard_normal((r, m))
+        for variant in (M, np.asfortranarray(M), M[:, ::2] if m > 1 else M):
+            want = scipy.linalg.qr(variant.T, mode="r", check_finite=False)[0][:r]
+            got = _qr_r_rows(variant.T, r)
+            assert got.shape == want.shape and np.array_equal(got, want)
+            k = min(variant.shape)
+            L = lq_lower(variant)
+            assert L.shape == (r, r) and np.array_equal(np.abs(L[:, :k]), np.abs(want.T[:, :k]))

@@ -196,3 +196,32 @@ def test_frequency_blocks_give_the_bounds_of_one_block(monkeypatch):
         np.testing.assert_allclose(dy[:, :, j], s @ np.asarray(model.C).T + x @ dC[j].T
                                    + u @ dD[j].T, rtol=1e-9, atol=1e-12)
     np.testing.assert_allclose(y, model.simulate(u, x0=x0), rtol=1e-12)
+
+
+@pytest.mark.parametrize("sparse", [False, True])
+def test_magnitude_std_is_the_definition(sparse):
+    """The delta-method std of |G| (the products restricted to the rows and columns of A
+    and columns of C that the directions move) equals dG summed by its definition."""
+    from subid.evaluation.uncertainty import _magnitude_std
+    rng = np.random.default_rng(7)
+    n, ny, nu, d, K = 6, 2, 3, 5, 4
+    A = 0.3 * rng.standard_normal((n, n))
+    B, C = rng.standard_normal((n, nu)), rng.standard_normal((ny, n))
+    D = rng.standard_normal((ny, nu))
+    dA, dB = rng.standard_normal((d, n, n)), rng.standard_normal((d, n, nu))
+    dC, dD = rng.standard_normal((d, ny, n)), rng.standard_normal((d, ny, nu))
+    if sparse:                # a polynomial realisation: few rows/columns of A move, C fixed
+        dA[:, [0, 2, 3, 5]] = 0.0
+        dA[:, :, 1:] = 0.0
+        dC[:] = 0.0
+    s = np.exp(1j * np.linspace(0.1, 3.0, K))
+    X = np.array([np.linalg.solve(z * np.eye(n) - A, B) for z in s])
+    Y = np.array([C @ np.linalg.inv(z * np.eye(n) - A) for z in s])
+    G = C @ X + D
+    expected = np.empty((K, ny, nu))
+    for k in range(K):
+        dG = [dC[j] @ X[k] + Y[k] @ dA[j] @ X[k] + Y[k] @ dB[j] + dD[j] for j in range(d)]
+        expected[k] = np.sqrt(sum((np.real(np.conj(G[k]) * g) / np.abs(G[k])) ** 2
+                                  for g in dG))
+    np.testing.assert_allclose(_magnitude_std(G, X, Y, dA, dB, dC, dD), expected,
+                               rtol=1e-12)

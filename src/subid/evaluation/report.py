@@ -90,16 +90,16 @@ def figure_html(fig, caption: str = "", *, dpi: int | None = None, alt: str = ""
     -------
     str
     """
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-
+    from subid.evaluation._canvas import canvas as agg_canvas
     from subid.evaluation._png import png_bytes
     from subid.evaluation.figures._ticks import light_ticks
     width = int(round(fig.get_figwidth() * 96))
     if dpi is not None and dpi != fig.dpi:
         fig.set_dpi(dpi)
-    canvas = FigureCanvasAgg(fig)
-    # ticks as a few artists per axis (figures/_ticks.py), and the PNG encoded by _png
-    # (one row filter, zlib level 1: two to three times faster than savefig's, as small)
+    canvas = agg_canvas(fig)
+    # ticks as a few artists per axis (figures/_ticks.py), text laid out and rasterised
+    # once per report (_canvas.py), and the PNG encoded by _png (one row filter, zlib
+    # level 1: two to three times faster than savefig's, as small)
     light_ticks(fig, canvas.get_renderer())
     canvas.draw()
     png = png_bytes(np.asarray(canvas.buffer_rgba()))

@@ -4,6 +4,7 @@ takes (models with labels, a record), and the simulated outputs they draw."""
 
 from __future__ import annotations
 
+import contextlib
 import logging
 
 import numpy as np
@@ -46,6 +47,33 @@ def _styled(fn):
         with matplotlib.rc_context(STYLE):
             return fn(*args, **kwargs)
     return wrapper
+
+
+@contextlib.contextmanager
+def _autoscale_once(axes):
+    """Autoscale ``axes`` (an array of Axes) once, after the plotting calls of the block.
+
+    Each ``plot``, ``fill_between``, ``vlines``... asks for an autoscale, and the next
+    call that adds a collection or reads a limit carries it out, over every axes that
+    shares the axis: on the shared frequency axis of a Bode grid, each band recomputed
+    the limits of all the panels (a quarter of the time to build a 4 x 4 diagram).
+    Within the block autoscaling is off (the data limits still grow with every
+    artist); at its end it is switched back on and requested once, lazily. The
+    limits are those of the last autoscale either way: computed from the final data
+    limits, which do not depend on when they were computed.
+    """
+    flat = list(np.ravel(axes))
+    before = [(ax.get_autoscalex_on(), ax.get_autoscaley_on()) for ax in flat]
+    for ax in flat:
+        ax.set_autoscale_on(False)
+    try:
+        yield
+    finally:
+        for ax, (x_on, y_on) in zip(flat, before):
+            if x_on:
+                ax.autoscale(axis="x")
+            if y_on:
+                ax.autoscale(axis="y")
 
 
 def _method_of(model) -> str | None:

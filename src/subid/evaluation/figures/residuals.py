@@ -152,6 +152,9 @@ def residuals(model, data, *, max_lag: int = 25, confidence: float = 0.99, x0="e
     single = len(results) == 1
     offsets = np.linspace(-0.2, 0.2, len(results)) if not single else [0.0]
     colors = colors_for((label, groups[label]) for label in results)
+    # the artists of ax.vlines and ax.axhline, made directly and the data limits of each
+    # panel updated once (_Panel): those calls recompute the limits at every artist
+    panels = [[_Panel(axes[i, c]) for c in range(cols)] for i in range(ny)]
     for k, (label, res) in enumerate(results.items()):
         color = colors[k]
         dx = offsets[k]
@@ -160,7 +163,7 @@ def residuals(model, data, *, max_lag: int = 25, confidence: float = 0.99, x0="e
             b = res["auto_bound"]
             if k == 0:
                 ax.axhspan(-b, b, color="0.5", alpha=0.18, lw=0, label=f"{pct} band")
-            ax.vlines(res["lags"] + dx, 0, res["auto"][i], color=color, lw=1.1)
+            panels[i][0].stems(res["lags"] + dx, res["auto"][i], color=color, lw=1.1)
             ax.plot(res["lags"] + dx, res["auto"][i], "o", color=color, ms=2.5,
                     label=label)
             for j in range(nu):
@@ -169,14 +172,17 @@ def residuals(model, data, *, max_lag: int = 25, confidence: float = 0.99, x0="e
                 if single:
                     ax.axhspan(-b, b, color="0.5", alpha=0.18, lw=0)
                 else:
-                    ax.axhline(b, color=color, ls="--", lw=0.7)
-                    ax.axhline(-b, color=color, ls="--", lw=0.7)
-                ax.vlines(res["cross_lags"] + dx, 0, res["cross"][i, j], color=color, lw=0.9)
+                    panels[i][1 + j].hline(b, color=color, ls="--", lw=0.7)
+                    panels[i][1 + j].hline(-b, color=color, ls="--", lw=0.7)
+                panels[i][1 + j].stems(res["cross_lags"] + dx, res["cross"][i, j], color=color,
+                                       lw=0.9)
     for i in range(ny):
-        axes[i, 0].axhline(0, color="k", lw=0.4)
+        for panel in panels[i]:
+            panel.hline(0.0, color="k", lw=0.4)
+            panel.finish()
+    for i in range(ny):
         axes[i, 0].set_title(f"auto-correlation of e({data.output_names[i]})")
         for j in range(nu):
-            axes[i, 1 + j].axhline(0, color="k", lw=0.4)
             axes[i, 1 + j].set_title(f"{data.input_names[j]} → e({data.output_names[i]})")
     handles, names = axes[0, 0].get_legend_handles_labels()
     _legend_beside(axes[0, -1], handles, names)
@@ -188,3 +194,40 @@ def residuals(model, data, *, max_lag: int = 25, confidence: float = 0.99, x0="e
     fig.suptitle(heading)
     _layout(fig, axes, top=0.35, hgap=0.6, wgap=0.5, left=0.6, right=room + 0.1)
     return fig
+
+
+class _Panel:
+    """Stems and horizontal lines of one panel, as ``ax.vlines(x, 0, y, color=, lw=)`` and
+    ``ax.axhline(y, ...)`` draw them (the same artists, in the order they are added),
+    with the data limits updated once by :meth:`finish` instead of at every call."""
+
+    def __init__(self, ax):
+        self.ax = ax
+        self.low, self.high = [], []          # x (None for a horizontal line), y extents
+
+    def stems(self, x, y, *, color, lw):
+        from matplotlib.collections import LineCollection
+        x, y = np.asarray(x, dtype=float), np.asarray(y, dtype=float)
+        segments = np.zeros((x.size, 2, 2))
+        segments[:, :, 0] = x[:, None]
+        segments[:, 1, 1] = y
+        self.ax.add_collection(LineCollection(segments, colors=[color], linewidths=[lw]),
+                               autolim=False)
+        if x.size:
+            self.low.append((x.min(), min(0.0, y.min())))
+            self.high.append((x.max(), max(0.0, y.max())))
+
+    def hline(self, y, **style):
+        from matplotlib.lines import Line2D
+        self.ax.add_artist(Line2D([0, 1], [y, y], transform=self.ax.get_yaxis_transform(
+            which="grid"), **style))
+        self.low.append((None, y))
+        self.high.append((None, y))
+
+    def finish(self):
+        points = self.low + self.high
+        xs = [(x, y) for x, y in points if x is not None]
+        if xs:
+            self.ax.update_datalim(xs)
+        self.ax.update_datalim([(0.0, y) for x, y in points if x is None], updatex=False)
+        self.ax.autoscale()

@@ -9,6 +9,7 @@ import numpy as np
 
 from subid.errors import DataError, ModelError
 from subid.evaluation.figures._common import (
+    _autoscale_once,
     _layout,
     _legend_beside,
     _legend_room,
@@ -147,36 +148,37 @@ def bode(model_or_models=None, w=None, *, data=None, hz=False, labels=None, phas
     axes[0, 0].set_xscale("log")
     _plain_log_labels(axes[0, 0].xaxis)          # shared by every panel
     reference = None                     # phase of the first model, to align the data's
-    for k, (label, m) in enumerate(groups.items()):
-        style = dict(color=colors[k], lw=1.2, ls="--" if unstable[label] else "-")
-        wk = w if m.dt == 0 else w[w <= math.pi / m.dt * (1 + 1e-12)]
-        if wk.size == 0:
-            log.warning("bode: model %r has no frequency below its Nyquist frequency in w",
-                        label)
-            continue
-        G = m.freqresp(wk)
-        with np.errstate(divide="ignore"):
-            mag = 20 * np.log10(np.maximum(np.abs(G), 1e-300))
-        ph = np.degrees(np.unwrap(np.angle(G), axis=0))
-        if reference is None:
-            reference = (wk, ph)
-        band = None
-        if confidence is not None and _has_covariance(m):
-            from subid.evaluation.uncertainty import freqresp_bounds
-            band = freqresp_bounds(m, wk, confidence)
-        for i in range(ny):
-            for j in range(nu):
-                r = 2 * i if phase else i
-                axes[r, j].plot(wk * x_scale, mag[:, i, j], label=shown[k], **style)
-                if band is not None:
-                    lo = np.maximum(band.lower[:, i, j], 1e-3 * band.value[:, i, j])
-                    axes[r, j].fill_between(wk * x_scale, 20 * np.log10(lo),
-                                            20 * np.log10(band.upper[:, i, j]),
-                                            color=colors[k], alpha=0.2, lw=0)
-                if phase:
-                    axes[r + 1, j].plot(wk * x_scale, ph[:, i, j], **style)
-    if data is not None:
-        _bode_data(axes, data, x_scale, phase, reference)
+    with _autoscale_once(axes):      # the limits once, after the plotting calls
+        for k, (label, m) in enumerate(groups.items()):
+            style = dict(color=colors[k], lw=1.2, ls="--" if unstable[label] else "-")
+            wk = w if m.dt == 0 else w[w <= math.pi / m.dt * (1 + 1e-12)]
+            if wk.size == 0:
+                log.warning("bode: model %r has no frequency below its Nyquist frequency in w",
+                            label)
+                continue
+            G = m.freqresp(wk)
+            with np.errstate(divide="ignore"):
+                mag = 20 * np.log10(np.maximum(np.abs(G), 1e-300))
+            ph = np.degrees(np.unwrap(np.angle(G), axis=0))
+            if reference is None:
+                reference = (wk, ph)
+            band = None
+            if confidence is not None and _has_covariance(m):
+                from subid.evaluation.uncertainty import freqresp_bounds
+                band = freqresp_bounds(m, wk, confidence)
+            for i in range(ny):
+                for j in range(nu):
+                    r = 2 * i if phase else i
+                    axes[r, j].plot(wk * x_scale, mag[:, i, j], label=shown[k], **style)
+                    if band is not None:
+                        lo = np.maximum(band.lower[:, i, j], 1e-3 * band.value[:, i, j])
+                        axes[r, j].fill_between(wk * x_scale, 20 * np.log10(lo),
+                                                20 * np.log10(band.upper[:, i, j]),
+                                                color=colors[k], alpha=0.2, lw=0)
+                    if phase:
+                        axes[r + 1, j].plot(wk * x_scale, ph[:, i, j], **style)
+        if data is not None:
+            _bode_data(axes, data, x_scale, phase, reference)
     for i in range(ny):
         for j in range(nu):
             r = 2 * i if phase else i
@@ -192,6 +194,9 @@ def bode(model_or_models=None, w=None, *, data=None, hz=False, labels=None, phas
     unit = ("cycles/sample" if hz else "rad/sample") if per_sample else ("Hz" if hz else "rad/s")
     for j in range(nu):
         axes[-1, j].set_xlabel(f"frequency ({unit})")
+    # after the autoscale is requested: axvline maps its x to data coordinates through
+    # the view (computed then), and the Nyquist frequency, the largest drawn, sets the
+    # upper limit: as when every plotting call autoscaled
     nyquists = sorted({math.pi / m.dt for m in list(groups.values()) + ([data] if data else [])
                        if m.dt > 0})
     for f_nyq in nyquists:
@@ -301,23 +306,24 @@ def step(model_or_models, t=None, *, labels=None, confidence=None, title=None):
     room = _legend_room(list(groups))
     fig, axes = plt.subplots(ny, nu, figsize=(min(3.8 * nu + 1.2, 16) + room, 2.2 * ny + 0.8),
                              sharex=True, squeeze=False)
-    for k, (label, m) in enumerate(groups.items()):
-        if confidence is not None and _has_covariance(m):
-            from subid.evaluation.uncertainty import step_bounds
-            band = step_bounds(m, t, confidence)
-            tk, y = band.x, band.value
-        else:
-            band = None
-            tk, y = m.step(t)
-        for i in range(ny):
-            for j in range(nu):
-                draw = axes[i, j].step if m.dt > 0 else axes[i, j].plot
-                kwargs = {"where": "post"} if m.dt > 0 else {}
-                draw(tk, y[:, i, j], color=colors[k], lw=1.2, label=label, **kwargs)
-                if band is not None:
-                    axes[i, j].fill_between(tk, band.lower[:, i, j], band.upper[:, i, j],
-                                            color=colors[k], alpha=0.2, lw=0,
-                                            step="post" if m.dt > 0 else None)
+    with _autoscale_once(axes):      # the limits once, after the plotting calls
+        for k, (label, m) in enumerate(groups.items()):
+            if confidence is not None and _has_covariance(m):
+                from subid.evaluation.uncertainty import step_bounds
+                band = step_bounds(m, t, confidence)
+                tk, y = band.x, band.value
+            else:
+                band = None
+                tk, y = m.step(t)
+            for i in range(ny):
+                for j in range(nu):
+                    draw = axes[i, j].step if m.dt > 0 else axes[i, j].plot
+                    kwargs = {"where": "post"} if m.dt > 0 else {}
+                    draw(tk, y[:, i, j], color=colors[k], lw=1.2, label=label, **kwargs)
+                    if band is not None:
+                        axes[i, j].fill_between(tk, band.lower[:, i, j], band.upper[:, i, j],
+                                                color=colors[k], alpha=0.2, lw=0,
+                                                step="post" if m.dt > 0 else None)
     for i in range(ny):
         for j in range(nu):
             axes[i, j].set_title(f"{first.input_names[j]} → {first.output_names[i]}")

@@ -1,0 +1,73 @@
+"""The Kalman gains of the innovation check by the doubling algorithm against QZ."""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.linalg
+
+import subid
+from subid import systems
+from subid.methods.dt import noise_model
+from subid.methods.dt.noise_model import innovation_model, riccati_by_doubling
+
+
+def _problem(rng, n, ny, radius):
+    A = rng.standard_normal((n, n))
+    A *= radius / np.abs(np.linalg.eigvals(A)).max()
+    C = rng.standard_normal((ny, n))
+    W, E = rng.standard_normal((n, 60)), rng.standard_normal((ny, 60))
+    Q = W @ W.T
+    return A, C, Q + 1e-10 * np.trace(Q) * np.eye(n), E @ E.T, W @ E.T
+
+
+def test_doubling_solves_the_riccati_equation_of_scipy():
+    """riccati_by_doubling gives scipy's stabilising solution (QZ) to about 1e-13 on
+    random equations with cross terms, unstable A included."""
+    rng = np.random.default_rng(21)
+    for _ in range(60):
+        n, ny = int(rng.integers(1, 16)), int(rng.integers(1, 5))
+        A, C, Q, R, S = _problem(rng, n, ny, rng.uniform(0.3, 1.05))
+        want = scipy.linalg.solve_discrete_are(A.T, C.T, Q, R, s=S)
+        got = riccati_by_doubling(A, C, Q, R, S)
+        assert got is not None
+        assert np.abs(got - want).max() <= 1e-10 * np.abs(want).max()
+
+
+def test_doubling_gives_up_where_it_cannot_run():
+    """A singular R (no cross-term elimination) or an iteration that cannot settle:
+    None, and innovation_model then solves by QZ."""
+    rng = np.random.default_rng(3)
+    A, C, Q, R, S = _problem(rng, 4, 2, 0.9)
+    assert riccati_by_doubling(A, C, Q, np.zeros((2, 2)), S) is None
+    assert riccati_by_doubling(A, C, Q, R, S * np.nan) is None
+
+
+def test_innovation_check_criteria_equal_those_of_qz(monkeypatch):
+    """The innovation BIC of every order, with the gains by doubling, equals the one
+    with the gains by QZ to rounding, and the choice is the same."""
+    true = systems.random_system(4, 2, 2, seed=1)
+    data = systems.simulate_data(true, 1000, seed=2, output_snr_db=20)
+    fast = subid.moesp(data)
+    monkeypatch.setattr(noise_model, "riccati_by_doubling", lambda *args: None)
+    slow = subid.moesp(data)
+    check_fast = fast.info["order_selection"]["innovation_check"]
+    check_slow = slow.info["order_selection"]["innovation_check"]
+    assert check_fast["orders"], "the check must have run for this test to compare"
+    assert [e["order"] for e in check_fast["orders"]] == [e["order"] for e in check_slow["orders"]]
+    for a, b in zip(check_fast["orders"], check_slow["orders"]):
+        assert abs(a["criterion"] - b["criterion"]) <= 1e-9 * abs(b["criterion"])
+    assert (fast.order, fast.info["horizon"]) == (slow.order, slow.info["horizon"])
+    np.testing.assert_array_equal(fast.A, slow.A)
+    np.testing.assert_array_equal(fast.K, slow.K)
+
+
+def test_innovation_model_gain_by_doubling():
+    """innovation_model(doubling=True): the gain of the QZ solution to rounding."""
+    true = systems.seed001_system()
+    data = systems.simulate_data(true, 3000, seed=4, output_snr_db=20)
+    model = subid.moesp(data, 3, horizon=10)
+    hf = subid.HankelStatistic.from_data(data, 20).factor()
+    K0, s0, _ = innovation_model(model.A, model.B, model.C, model.D, hf)
+    K1, s1, _ = innovation_model(model.A, model.B, model.C, model.D, hf, doubling=True)
+    np.testing.assert_allclose(K1, K0, rtol=1e-10, atol=1e-12 * np.abs(K0).max())
+    np.testing.assert_allclose(s1, s0, rtol=1e-10)
