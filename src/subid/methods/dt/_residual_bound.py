@@ -34,7 +34,7 @@ free parameters on that subset. :func:`loses` tries, cheapest first:
 3. :func:`residual_at_least`: the rows of the last :data:`TAIL` with the model's own
    state (first those of every :data:`STRIDE`-th sample; when A grows by fewer than
    :data:`SLOW_GROWTH_DECADES` decades over the tail, where 1. and 2. do not prove,
-   this alone), from the same dual recursions
+   this alone, or, on a record too short for 1., this first), from the same dual recursions
    (:func:`subid.methods.dt._regression.dual_rows`) run over the whole record (a
    third of the cost of the QR path; a regression that overflows anywhere gives no
    usable fit either).
@@ -69,8 +69,8 @@ STRIDE = 4
 #: shorter records it rarely proves anything: measured at 10^4 samples).
 STRIDED_MIN_SAMPLES = 2048
 #: On a record too short for the strided bound, the model's own state on every STRIDE-th
-#: sample of the TAIL is tried first when it keeps at least this many samples (measured:
-#: it proved every unstable fold model at 10^4 samples, none at 10^3).
+#: sample of the TAIL is tried first (for a slowly growing A) when it keeps at least this
+#: many samples (measured: it proved every such fold model at 10^4 samples, none at 10^3).
 OWN_STRIDED_MIN_SAMPLES = 256
 #: A grows by more than this many decades over the SHORT tail: that tail is tried first.
 FAST_GROWTH_DECADES = 30
