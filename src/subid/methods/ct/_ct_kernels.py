@@ -63,6 +63,8 @@ import numba
 import numpy as np
 import scipy.linalg
 
+from subid.methods.ct import _ct_sensitivity
+
 __all__ = [
     "stencil_starts",
     "interval_tables",
@@ -72,6 +74,7 @@ __all__ = [
     "sens_loop_ref",
     "run_bank",
     "run_sensitivity",
+    "sensitivity_into",
     "ModalForm",
     "modal_form",
     "modal_loop",
@@ -464,6 +467,10 @@ def run_sensitivity(A, C, t, u, order, *, uniform, use_eig=True, kernel=sens_loo
         rows_b[0] = 0.0
         rows_x[0] = C
         return rows_b, rows_x
+    if uniform and kernel is sens_loop:           # the fused kernel, bit for bit the same
+        out = np.empty((L, ny, n * m + n))
+        sensitivity_into(A, C, t, u, order, uniform=True, out=out, col_b=0, col_x=n * m)
+        return out[:, :, :n * m].reshape(L, ny, n, m), out[:, :, n * m:]
     if uniform:
         Phi, W, tab, starts = _uniform_tables(A, I, t, order)
         kernel(Phi, W, tab, starts, u, C, Z, P0, rows_b, rows_x)
@@ -482,6 +489,32 @@ def run_sensitivity(A, C, t, u, order, *, uniform, use_eig=True, kernel=sens_loo
         rows_b[a:b + 1] = rb
         rows_x[a:b + 1] = rx
     return rows_b, rows_x
+
+
+def sensitivity_into(A, C, t, u, order, *, uniform, out, col_b, col_x=None):
+    """The regressors of :func:`run_sensitivity`, written into ``out`` (L, ny, columns):
+    ``rows_b`` (flattened, column ``col_b + k m + j`` multiplies ``B[k, j]``) and, unless
+    ``col_x`` is None, ``rows_x`` at columns ``col_x .. col_x + n - 1``.
+
+    On a uniform grid the fused kernel
+    :func:`subid.methods.ct._ct_sensitivity.sens_fused` fills ``out`` in place (no
+    intermediate arrays; the same values as :func:`sens_loop` to the last bit); elsewhere
+    the rows of :func:`run_sensitivity` are copied in.
+    """
+    L, m = u.shape
+    n = A.shape[0]
+    if uniform and L > 1:
+        Phi, W, tab, starts = _uniform_tables(A, np.eye(n), t, order)
+        X = _ct_sensitivity.fused_state(n, m, col_x is not None)
+        _ct_sensitivity.sens_fused(Phi, W, tab, starts, np.ascontiguousarray(u, dtype=float),
+                                   np.ascontiguousarray(C, dtype=float), X, out, col_b,
+                                   -1 if col_x is None else col_x)
+        return out
+    rows_b, rows_x = run_sensitivity(A, C, t, u, order, uniform=uniform)
+    out[:, :, col_b:col_b + n * m] = rows_b.reshape(L, C.shape[0], n * m)
+    if col_x is not None:
+        out[:, :, col_x:col_x + n] = rows_x
+    return out
 
 
 # ---------------------------------------------------------------------------
