@@ -83,20 +83,18 @@ from __future__ import annotations
 import math
 import numbers
 import warnings
-from dataclasses import dataclass, field, replace
+from dataclasses import replace
 from functools import partial
 
 import numpy as np
 
 from subid._validation import check_bool, check_choice, check_int, checked_call
-from subid.data import IOData
 from subid.errors import (
     DataError,
     ModelError,
-    NotExcitingError,
     OptionError,
     OrderError,
-    TooFewSamplesError,
+    SubidError,
 )
 from subid.methods._common import choose_order
 from subid.methods._info import model_info, records_warnings
@@ -114,7 +112,6 @@ from subid.methods.ct._ct_checks import (
 from subid.methods.ct._ct_discrete import dt_to_ct
 from subid.methods.ct._ct_estimate import (
     _correction_count,
-    _correction_regressors,
     _estimate_a_c,
     _markov_change,
     _subspace_factor,
@@ -122,6 +119,7 @@ from subid.methods.ct._ct_estimate import (
     observability_matrix,
     tm_convolution_matrix,
 )
+from subid.methods.ct._ct_problem import Problem, prepare
 from subid.methods.ct.basis import MAX_POLY_ORDER, FilterBank, default_basis
 from subid.methods.dt.selection import cross_validate
 from subid.model.statespace import StateSpace
@@ -142,127 +140,6 @@ FOLD_ITERATIONS = 3
 #: ``refine='auto'`` considers the refinement only where its budget
 #: (:func:`subid.methods.ct._ct_fit.refine_steps`) affords this many steps.
 MIN_REFINE_STEPS = 5
-# Relative size of a diagonal entry of the filtered-input factor below which
-# the filtered inputs count as linearly dependent.
-_RANK_TOL = 1e-10
-
-
-# ---------------------------------------------------------------------------
-# the prepared problem: filtered signals, factor and SVD of one record
-# ---------------------------------------------------------------------------
-@dataclass(frozen=True)
-class Problem:
-    """One record's subspace step, shared by every candidate order.
-
-    ``order`` and ``candidates`` follow the discrete-time ``Problem``, so that
-    :func:`subid.methods.dt.selection.cross_validate` can run the method on
-    its folds; ``horizon`` is the number of basis functions.
-    """
-
-    method: str
-    data: IOData
-    order: int | None
-    candidates: list
-    horizon: int
-    settings: dict
-    record: _ct_fit.Record
-    R: np.ndarray = field(repr=False)
-    Y: np.ndarray = field(repr=False)
-    Lf: np.ndarray = field(repr=False)
-    iU: slice
-    Uo: np.ndarray = field(repr=False)
-    sv: np.ndarray
-    n_corr: int
-    lag: int
-    #: A cross-validation fold's problem (set by ``score_horizon``; unused here).
-    fold: bool = False
-
-
-def _experiment_regressors(basis, e: IOData, s: dict, uniform: bool):
-    """Filtered signals and regressors of one experiment (filters at rest at its start)."""
-    t, u, y = e.t, e.u, e.y
-    poly_order, input_order, filtering = s["poly_order"], s["input_order"], s["filtering"]
-    if s["filtered"] is not None:
-        uf, yf = s["filtered"]
-    else:
-        yf = basis.filter(y, t, poly_order=poly_order, chain=filtering)
-        uf = basis.filter(u, t, poly_order=input_order, chain=filtering)
-    L = t.size
-    if s["data_equation"] == "paper":
-        U = basis.paper_input_stack(u, t, poly_order=input_order, chain=filtering).reshape(L, -1)
-    else:
-        U = uf.reshape(L, -1)
-    start = basis.functions(t - t[0]) if s["startup"] else np.zeros((L, 0))
-    corr = np.zeros((L, 0))
-    if s["n_corr"]:
-        corr = _correction_regressors(basis, t, u, poly_order, input_order,
-                                      s["feedthrough"] is True, filtering, uniform)
-    Z = None
-    if s["instruments"] == "past":
-        ufl = uf.reshape(L, -1)
-        Z = np.zeros_like(ufl)
-        Z[s["lag"]:] = ufl[:-s["lag"]]
-    return start, U, corr, Z, yf.reshape(L, -1)
-
-
-def _prepare(data: IOData, candidates, s: dict) -> Problem:
-    """Filter every experiment, factor ``[phi; 1; u_f; r; z; y_f]`` and take the SVD."""
-    basis = s["basis"]
-    N = basis.n_functions
-    m, p = data.n_inputs, data.n_outputs
-    exps = data.experiments
-    E = len(exps)
-    lag = _lag_for(basis, exps[0].t) if s["instruments"] == "past" else 0
-    n_u_rows = (N * (N + 1) // 2 if s["data_equation"] == "paper" else N) * m
-    rows = (N * E if s["startup"] else 0) + (E if s["offset"] else 0) + n_u_rows \
-        + s["n_corr"] + N * p + (N * m if s["instruments"] == "past" else 0)
-    need = max(rows + 1, s["poly_order"] + 1) + lag
-    shortest = min(e.n_samples for e in exps)
-    if data.n_samples < need or shortest <= max(s["poly_order"], lag) + 1:
-        raise TooFewSamplesError(
-            f"{s['method']}: {data.n_samples} samples are too few for a basis of {N} "
-            f"functions with {m} input(s) and {p} output(s): the data matrix has {rows} rows "
-            f"and needs at least {need} samples; supply more data or use fewer basis functions")
-    pieces = [_experiment_regressors(basis, e, s, e.is_uniform) for e in exps]
-    total = data.n_samples
-    blocks = []
-    if s["startup"]:                  # phi(t - t_e) of each experiment, on its own rows
-        S = np.zeros((total, N * E))
-        row = 0
-        for k, (start, *_) in enumerate(pieces):
-            S[row:row + start.shape[0], k * N:(k + 1) * N] = start
-            row += start.shape[0]
-        blocks.append(S)
-    if s["offset"]:                   # a constant per experiment: the filtered output offset
-        ones = np.zeros((total, E))
-        row = 0
-        for k, e in enumerate(exps):
-            ones[row:row + e.n_samples, k] = 1.0
-            row += e.n_samples
-        blocks.append(ones)
-    n_before = sum(b.shape[1] for b in blocks)
-    U = np.vstack([piece[1] for piece in pieces])
-    blocks.append(U)
-    if s["n_corr"]:
-        blocks.append(np.vstack([piece[2] for piece in pieces]))
-    R = np.hstack(blocks)
-    iU = slice(n_before, n_before + U.shape[1])
-    Z = None if s["instruments"] != "past" else np.vstack([piece[3] for piece in pieces])
-    Y = np.vstack([piece[4] for piece in pieces])
-    Lf, W = _subspace_factor(R, Z, Y)
-    dU = np.abs(np.diag(Lf)[iU])
-    if dU.max(initial=0.0) == 0 or (s["data_equation"] == "compact"
-                                    and dU.min() <= _RANK_TOL * dU.max()):
-        raise NotExcitingError(f"{s['method']}: the filtered inputs are linearly dependent: "
-                               "the input does not excite every basis function (is it zero, "
-                               "constant, or are two inputs proportional?); use a richer "
-                               "input (white noise, multisine)")
-    Uo, sv, _ = np.linalg.svd(W, full_matrices=False)
-    return Problem(s["method"], data, None, list(candidates), N, s,
-                   _ct_fit.Record(data, s["input_order"]), R, Y, Lf, iU, Uo, sv, s["n_corr"],
-                   lag)
-
-
 def _linear_fit(problem: Problem, feedthrough: bool, whiten=None):
     """``fit(A, C) -> (B, D, x0, y0, diagnostics)`` (None where simulating A overflows):
     the ``'simulation'`` route of :func:`subid.methods.bd.fit_b_d_x0`."""
@@ -354,10 +231,18 @@ def _discrete_starts(problem: Problem, n: int, horizons=None):
     :func:`subid.methods.crossval.feasible_horizons`) converted with the hold
     (:mod:`subid.methods.ct._ct_discrete`), and ``{horizon: reason}`` for those that have
     no continuous-time counterpart; none on a non-uniform grid."""
+    if not problem.data.is_uniform:
+        return [], {}
+    key = ("discrete starts", n, None if horizons is None else tuple(horizons))
+    if key not in problem.memo:
+        problem.memo[key] = _convert_starts(problem, n, horizons)
+    return problem.memo[key]
+
+
+def _convert_starts(problem: Problem, n: int, horizons):
+    """:func:`_discrete_starts` computed (not looked up)."""
     from subid.methods.crossval import feasible_horizons
     data, s = problem.data, problem.settings
-    if not data.is_uniform:
-        return [], {}
     work = data.detrend() if s["offset"] else data
     if horizons is None:
         horizons = feasible_horizons(data.n_samples, data.n_inputs, data.n_outputs, 2, n,
@@ -416,11 +301,30 @@ def _build(problem: Problem, feedthrough=None, start=None, refit=False) -> State
     ``start`` option ('discrete': the converted N4SID models, 'auto': those and the subspace
     estimate, the best by the estimation residual). ``feedthrough`` is the subspace
     estimate's; a converted model has the D of its hold, or with ``refit`` its A and C
-    keep B, D (``feedthrough``), x0 refitted by the output regression."""
+    keep B, D (``feedthrough``), x0 refitted by the output regression.
+
+    Built once per problem and arguments (``problem.memo``; its error too): the model
+    is the same object every time, not to be modified until the last build of the call.
+    """
     s = problem.settings
     if feedthrough is None:
         feedthrough = s["feedthrough"] is True
     start = s["start"] if start is None else start
+    key = ("build", problem.order, bool(feedthrough), start, bool(refit))
+    if key not in problem.memo:
+        try:
+            problem.memo[key] = (_build_model(problem, feedthrough, start, refit), None)
+        except SubidError as exc:
+            problem.memo[key] = (None, exc)
+    model, error = problem.memo[key]
+    if error is not None:
+        raise error
+    return model
+
+
+def _build_model(problem: Problem, feedthrough: bool, start: str, refit) -> StateSpace:
+    """:func:`_build` computed (not looked up)."""
+    s = problem.settings
     horizons = None
     if _ct_discrete.horizon_of(start) is not None:
         horizons, start = [_ct_discrete.horizon_of(start)], "discrete"
@@ -819,7 +723,7 @@ def ct_subspace(data, order=None, *, basis=None, poly_order: int = 3, estimate_x
         if key not in fold_cache:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
-                problem = _prepare(record, orders, fold_settings)
+                problem = prepare(record, orders, fold_settings)
             if record.n_samples > FOLD_CACHE_SAMPLES:
                 return problem
             fold_cache[key] = problem
@@ -865,7 +769,7 @@ def ct_subspace(data, order=None, *, basis=None, poly_order: int = 3, estimate_x
         if fixed is not None:
             ranking = [c for c in ranking if c[0] == fixed] or ranking
         model = None
-        whole = _prepare(data, [ranking[0][0]], settings)
+        whole = prepare(data, [ranking[0][0]], settings)
         for n, chosen in ranking:
             problem = replace(whole, order=n, candidates=[n])
             if chosen == "subspace":
@@ -881,7 +785,7 @@ def ct_subspace(data, order=None, *, basis=None, poly_order: int = 3, estimate_x
         else:
             start_selection = record
     else:
-        problem = _prepare(data, candidates, settings)
+        problem = prepare(data, candidates, settings)
         usable = [k for k in candidates if k < problem.sv.size] or [candidates[0]]
         n, order_selection = (fixed, None) if fixed is not None else choose_order(
             None, usable, problem.sv, "singular values")
