@@ -129,11 +129,29 @@ def solve(R, y, whiten=None):
         R, target = whiten(R), whiten(target[:, None])[:, 0]
     scale = np.linalg.norm(R, axis=0)
     scale[scale == 0] = 1.0
-    theta, _, _, sing = scipy.linalg.lstsq(R / scale, target, lapack_driver="gelsd",
-                                           check_finite=False)
+    theta, sing = _gelsd(np.divide(R, scale, out=np.empty(R.shape, order="F")), target)
     theta = theta / scale
     cond = float(sing[0] / sing[-1]) if sing.size and sing[-1] > 0 else float("inf")
     return theta, target - R @ theta, cond
+
+
+def _gelsd(a, b):
+    """``scipy.linalg.lstsq(a, b, lapack_driver='gelsd')`` (its solution and singular
+    values, the same LAPACK call) on a Fortran-ordered ``a`` it may overwrite: no copy
+    of the tall regressor. ``b`` is a vector."""
+    m, n = a.shape
+    if m < n or not a.flags.f_contiguous:
+        x, _, _, sing = scipy.linalg.lstsq(a, b, lapack_driver="gelsd", check_finite=False)
+        return x, sing
+    eps = np.finfo(float).eps
+    work, iwork, info = scipy.linalg.lapack.dgelsd_lwork(m, n, 1, eps)
+    if info != 0:                                       # pragma: no cover - LAPACK
+        raise ValueError(f"Internal work array size computation failed: {info}")
+    x, sing, _, info = scipy.linalg.lapack.dgelsd(a, b, int(work), int(iwork), eps,
+                                                  True, False)
+    if info > 0:                                        # pragma: no cover - LAPACK
+        raise np.linalg.LinAlgError("SVD did not converge in Linear Least Squares")
+    return x[:n], sing
 
 
 def unpack(theta, n, m, p, E, *, feedthrough, estimate_x0, offset):
@@ -161,8 +179,8 @@ def fit_linear(A, C, rec: Record, *, feedthrough, estimate_x0, offset, whiten=No
     R = regressors(A, C, rec, feedthrough=feedthrough, estimate_x0=estimate_x0, offset=offset)
     if R is None:
         return None
-    theta, _, cond = solve(R, rec.y, whiten)
-    raw = rec.y.reshape(-1) - R @ theta
+    theta, resid, cond = solve(R, rec.y, whiten)
+    raw = resid if whiten is None else rec.y.reshape(-1) - R @ theta
     B, D, x0, y0 = unpack(theta, A.shape[0], rec.n_inputs, rec.n_outputs, rec.n_experiments,
                           feedthrough=feedthrough, estimate_x0=estimate_x0, offset=offset)
     return B, D, x0, y0, {"b_residual_rms": float(np.sqrt(np.mean(raw ** 2))),
@@ -460,9 +478,13 @@ def refine_output_error(A, C, rec: Record, *, feedthrough, estimate_x0, offset, 
     return Ar, Cr, diag
 
 
-def predicted(A, B, C, D, x0, y0, rec):
-    R = regressors(A, C, rec, feedthrough=True, estimate_x0=x0 is not None,
-                           offset=y0 is not None)
+def predicted(A, B, C, D, x0, y0, rec, R=None):
+    """The model's output at the samples of ``rec`` (stacked experiments), from the
+    regressor of :func:`regressors` (``feedthrough=True``; ``estimate_x0`` and
+    ``offset`` as ``x0`` and ``y0`` are given), computed here unless passed as ``R``."""
+    if R is None:
+        R = regressors(A, C, rec, feedthrough=True, estimate_x0=x0 is not None,
+                       offset=y0 is not None)
     E, n, p = rec.n_experiments, A.shape[0], rec.n_outputs
     theta = [B.reshape(-1)]
     if x0 is not None:

@@ -157,21 +157,25 @@ def _linear_fit(problem: Problem, feedthrough: bool, whiten=None):
 
 
 def _given_bd(problem: Problem, A, B, C, D):
-    """x0 and offsets for a model whose B and D come from the filtered equation (15)."""
+    """x0 and offsets for a model whose B and D are given (from the filtered equation (15)
+    or a converted model), and the regressor of :func:`subid.methods.ct._ct_fit.predicted`
+    for them (None where it is not the one computed here)."""
     s, rec = problem.settings, problem.record
     n, m, p, E = A.shape[0], rec.n_inputs, rec.n_outputs, rec.n_experiments
     if not (s["estimate_x0"] or s["offset"]):
-        return None, None
+        return None, None, None
     R = _ct_fit.regressors(A, C, rec, feedthrough=True, estimate_x0=s["estimate_x0"],
                            offset=s["offset"])
     if R is None:
-        return None, None
+        return None, None, None
     forced = R[:, :n * m] @ B.reshape(-1) + R[:, R.shape[1] - p * m:] @ D.reshape(-1)
     theta = _ct_fit.solve(R[:, n * m:R.shape[1] - p * m], rec.y.reshape(-1) - forced)[0]
     _, _, x0, y0 = _ct_fit.unpack(np.concatenate([np.zeros(n * m), theta]), n, m, p, E,
                                   feedthrough=False, estimate_x0=s["estimate_x0"],
                                   offset=s["offset"])
-    return x0, y0
+    # predicted() regresses on x0 and y0 exactly when they are not None
+    same = (x0 is not None) == s["estimate_x0"] and (y0 is not None) == s["offset"]
+    return x0, y0, R if same else None
 
 
 def _complete(problem: Problem, Theta, Lf, feedthrough: bool):
@@ -197,7 +201,7 @@ def _complete(problem: Problem, Theta, Lf, feedthrough: bool):
             return data_equation_matrices(basis, A, Bm, C, Dm)[1]
     B, D, _, bd = fit_b_d_x0(A, C, problem.record, bd_method="filtered", feedthrough=feedthrough,
                              filtered=(Tfun, Theta, Lf, problem.iU))
-    x0, y0 = _given_bd(problem, A, B, C, D)
+    x0, y0, _ = _given_bd(problem, A, B, C, D)
     diag.update(bd, stability={"requested": s["stability"],
                                                          "action": "none (filtered B)"})
     return A, B, C, D, x0, y0, diag
@@ -275,8 +279,8 @@ def _converted(problem: Problem, cm: StateSpace, note=None, refit=None):
             bd["nyquist_modes"] = note
         return A, B, cm.C, D, x0, y0, bd
     feedthrough = bool(np.any(cm.D != 0))
-    x0, y0 = _given_bd(problem, cm.A, cm.B, cm.C, cm.D)
-    y_hat = _ct_fit.predicted(cm.A, cm.B, cm.C, cm.D, x0, y0, problem.record)
+    x0, y0, R = _given_bd(problem, cm.A, cm.B, cm.C, cm.D)
+    y_hat = _ct_fit.predicted(cm.A, cm.B, cm.C, cm.D, x0, y0, problem.record, R)
     as_is = (cm.B, cm.D, x0, y0, {
         "b_residual_rms": float(np.sqrt(np.mean((problem.record.y - y_hat) ** 2))),
         INFO_KEY: "converted"})
