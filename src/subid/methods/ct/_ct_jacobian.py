@@ -77,10 +77,10 @@ def table_derivatives(A, dAs, t, order):
     (D, U, P, n, n) along the directions ``dAs`` (D, n, n), the offset index ``tab`` and
     the stencil starts of a uniform grid (input matrix ``I``)."""
     n = A.shape[0]
-    h, nodes, tab, starts = _ct_kernels.uniform_layout(t, order)
+    h, nodes, tab, starts, coef = _ct_kernels.uniform_stencil(t, order)
     U = nodes.shape[0]
     M = _ct_kernels.van_loan_matrix(A, np.eye(n), np.full(U, h), nodes.shape[1])
-    Phi, W = _ct_kernels.tables_from_exponential(scipy.linalg.expm(M), n, n, nodes)
+    Phi, W = _ct_kernels.tables_from_exponential(scipy.linalg.expm(M), n, n, nodes, coef)
     dPhi = np.empty((len(dAs), n, n))
     dW = np.empty((len(dAs),) + W.shape)
     dM = np.zeros(M.shape[1:])
@@ -88,7 +88,7 @@ def table_derivatives(A, dAs, t, order):
         dM[:n, :n] = dA * h
         dE = np.stack([scipy.linalg.expm_frechet(M[u], dM, compute_expm=False)
                        for u in range(U)])
-        dP, dW[d] = _ct_kernels.tables_from_exponential(dE, n, n, nodes)
+        dP, dW[d] = _ct_kernels.tables_from_exponential(dE, n, n, nodes, coef)
         dPhi[d] = dP[0]
     return Phi[0], W, dPhi, dW, tab, starts
 

@@ -57,6 +57,7 @@ error.
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numba
@@ -104,7 +105,8 @@ def _lagrange(nodes: np.ndarray) -> np.ndarray:
     return np.linalg.solve(V, np.broadcast_to(np.eye(P), (K, P, P)))
 
 
-def interval_tables(F: np.ndarray, G: np.ndarray, steps: np.ndarray, nodes: np.ndarray):
+def interval_tables(F: np.ndarray, G: np.ndarray, steps: np.ndarray, nodes: np.ndarray,
+                    coef=None):
     """Exact transition and drive matrices for polynomially interpolated input.
 
     Parameters
@@ -115,6 +117,8 @@ def interval_tables(F: np.ndarray, G: np.ndarray, steps: np.ndarray, nodes: np.n
         Interval lengths ``h``.
     nodes : ndarray, shape (K, P)
         Stencil sample times relative to the interval start, divided by ``h``.
+    coef : ndarray, shape (K, P, P), optional
+        ``_lagrange(nodes)``, when already known.
 
     Returns
     -------
@@ -124,7 +128,7 @@ def interval_tables(F: np.ndarray, G: np.ndarray, steps: np.ndarray, nodes: np.n
     """
     N, r = G.shape
     M = van_loan_matrix(F, G, steps, nodes.shape[1])
-    return tables_from_exponential(scipy.linalg.expm(M), N, r, nodes)
+    return tables_from_exponential(scipy.linalg.expm(M), N, r, nodes, coef)
 
 
 def van_loan_matrix(F: np.ndarray, G: np.ndarray, steps: np.ndarray, P: int) -> np.ndarray:
@@ -142,37 +146,53 @@ def van_loan_matrix(F: np.ndarray, G: np.ndarray, steps: np.ndarray, P: int) -> 
     return M
 
 
-def tables_from_exponential(E: np.ndarray, N: int, r: int, nodes: np.ndarray):
+def tables_from_exponential(E: np.ndarray, N: int, r: int, nodes: np.ndarray, coef=None):
     """``Phi, W`` of :func:`interval_tables` from the exponentials ``E`` of
     :func:`van_loan_matrix` (a linear map of ``E``: applied to a Frechet derivative
-    of the exponential it gives the derivatives of the tables)."""
+    of the exponential it gives the derivatives of the tables); ``coef`` is
+    ``_lagrange(nodes)`` when already known."""
     K, P = nodes.shape
     Phi = np.ascontiguousarray(E[:, :N, :N])
     mono = E[:, :N, N:].reshape(K, N, P, r)                     # int ... r^j / j!
     fact = np.array([math.factorial(j) for j in range(P)], dtype=float)
     mono = mono * fact[None, None, :, None]
-    coef = _lagrange(nodes)                                      # (K, P_j, P_q)
+    if coef is None:
+        coef = _lagrange(nodes)                                  # (K, P_j, P_q)
     W = np.einsum("knjr,kjq->kqnr", mono, coef)
     return Phi, np.ascontiguousarray(W)
 
 
 def _uniform_tables(F, G, t, order):
     """Tables for a uniform grid: one entry per distinct stencil offset."""
-    h, nodes, tab, starts = uniform_layout(t, order)
-    Phi, W = interval_tables(F, G, np.full(nodes.shape[0], h), nodes)
+    h, nodes, tab, starts, coef = uniform_stencil(t, order)
+    Phi, W = interval_tables(F, G, np.full(nodes.shape[0], h), nodes, coef)
     return Phi, W, tab, starts
 
 
 def uniform_layout(t, order):
     """Step ``h``, stencil ``nodes`` of every distinct stencil offset, the offset index
     ``tab`` and the stencil start ``starts`` of every interval of a uniform grid."""
-    L = t.shape[0]
+    return uniform_stencil(t, order)[:4]
+
+
+def uniform_stencil(t, order):
+    """:func:`uniform_layout` and the Lagrange coefficients of its ``nodes``
+    (``_lagrange(nodes)``), read-only: they depend only on the number of samples, the
+    ends of the grid and ``order``, and are computed once for each."""
+    return _stencil(t.shape[0], order, float(t[0]), float(t[-1]))
+
+
+@functools.lru_cache(maxsize=32)
+def _stencil(L, order, first, last):
     starts = stencil_starts(L, order)
     offsets = starts - np.arange(L - 1)
     uniq, tab = np.unique(offsets, return_inverse=True)
-    h = (t[-1] - t[0]) / (L - 1)
+    h = (last - first) / (L - 1)
     nodes = (uniq[:, None] + np.arange(order + 1)[None, :]).astype(float)
-    return h, nodes, tab.astype(np.int64).reshape(-1), starts
+    out = (nodes, tab.astype(np.int64).reshape(-1), starts, _lagrange(nodes))
+    for a in out:
+        a.flags.writeable = False
+    return (h,) + out
 
 
 def _psi(z: np.ndarray, P: int) -> np.ndarray:
