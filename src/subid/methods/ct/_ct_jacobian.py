@@ -14,7 +14,7 @@ discretised system on a uniform grid, ``x_{k+1} = Phi x_k + sum_q W_q B u[s_k + 
 (:mod:`subid.methods.ct._ct_kernels`), whose tables are blocks of one matrix exponential
 (Van Loan 1978); their derivatives ``dPhi, dW_q`` along ``dA`` are the same blocks of the
 Frechet derivative of that exponential (``scipy.linalg.expm_frechet``; Al-Mohy and Higham
-2009).
+2009; all directions at once, :func:`subid.methods.ct._ct_frechet.frechet_many`).
 
 * ``dR theta_hat`` is the derivative of the model output at fixed linear parameters:
   ``dy_k = dC x_k + C dx_k``, ``dx_{k+1} = Phi dx_k + dPhi x_k + sum_q dW_q B u[s_k + q]``
@@ -40,6 +40,7 @@ import numpy as np
 import scipy.linalg
 
 from subid.methods.ct import _ct_kernels
+from subid.methods.ct._ct_frechet import frechet_many
 
 __all__ = ["VarProProblem"]
 
@@ -83,12 +84,16 @@ def table_derivatives(A, dAs, t, order):
     Phi, W = _ct_kernels.tables_from_exponential(scipy.linalg.expm(M), n, n, nodes, coef)
     dPhi = np.empty((len(dAs), n, n))
     dW = np.empty((len(dAs),) + W.shape)
-    dM = np.zeros(M.shape[1:])
-    for d, dA in enumerate(dAs):
+    dMs = []
+    for dA in dAs:
+        dM = np.zeros(M.shape[1:])
         dM[:n, :n] = dA * h
-        dE = np.stack([scipy.linalg.expm_frechet(M[u], dM, compute_expm=False)
-                       for u in range(U)])
-        dP, dW[d] = _ct_kernels.tables_from_exponential(dE, n, n, nodes, coef)
+        dMs.append(dM)
+    # every direction's derivative at each M[u]: the parts of M[u] alone computed once
+    dE = [frechet_many(M[u], dMs)[1] for u in range(U)]
+    for d in range(len(dAs)):
+        dP, dW[d] = _ct_kernels.tables_from_exponential(
+            np.stack([dE[u][d] for u in range(U)]), n, n, nodes, coef)
         dPhi[d] = dP[0]
     return Phi[0], W, dPhi, dW, tab, starts
 
