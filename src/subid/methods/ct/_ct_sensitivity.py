@@ -13,10 +13,11 @@ matrix by matrix, each entry a strided dot product. Here the ``m + 1`` state
 matrices sit side by side in one ``n x (n m + n)`` array ``X`` (column
 ``k m + j`` is column ``k`` of ``Z_j``, the last ``n`` columns are ``P``), so
 that every product is a sweep along contiguous rows the compiler vectorises,
-and the rows are written straight into the caller's regressor matrix. Every
-entry is summed in the same order as in ``sens_loop`` (the ``Phi`` or ``C``
-terms by increasing index, then the input terms by increasing ``q``), so the
-two kernels agree to the last bit.
+and the rows are written straight into the caller's regressor matrix. The input
+terms are sweeps too (the drive matrices and the stencil samples spread over the
+columns). Every entry is summed in the same order as in ``sens_loop`` (the ``Phi`` or
+``C`` terms by increasing index, then the input terms by increasing ``q``), so the two
+kernels agree to the last bit.
 """
 
 from __future__ import annotations
@@ -75,6 +76,17 @@ def sens_fused(Phi, W, tab, starts, u, C, X, out, col_b, col_x):  # pragma: no c
     P = W.shape[1]
     acc = np.empty(nc)
     nxt = np.empty((n, nc))
+    # the drive matrices spread over the columns (Wx[e, q, i, k m + j] = W[e, q, i, k]) and
+    # the stencil's input samples likewise (v[q, k m + j] = u[s + q, j]): the input terms
+    # become sweeps along the columns too
+    Wx = np.empty((W.shape[0], P, n, nb))
+    for e in range(W.shape[0]):
+        for q in range(P):
+            for i in range(n):
+                for k in range(n):
+                    for j in range(m):
+                        Wx[e, q, i, k * m + j] = W[e, q, i, k]
+    v = np.empty((P, nb))
     for a in range(K + 1):
         for i in range(ny):
             for c in range(nc):
@@ -91,6 +103,10 @@ def sens_fused(Phi, W, tab, starts, u, C, X, out, col_b, col_x):  # pragma: no c
             break
         e = tab[a]
         s = starts[a]
+        for q in range(P):
+            for k in range(n):
+                for j in range(m):
+                    v[q, k * m + j] = u[s + q, j]
         for i in range(n):
             for c in range(nc):
                 acc[c] = 0.0
@@ -98,13 +114,10 @@ def sens_fused(Phi, W, tab, starts, u, C, X, out, col_b, col_x):  # pragma: no c
                 f = Phi[e, i, l]
                 for c in range(nc):
                     acc[c] += f * X[l, c]
-            for k in range(n):
-                for j in range(m):
-                    v = acc[k * m + j]
-                    for q in range(P):
-                        v += W[e, q, i, k] * u[s + q, j]
-                    nxt[i, k * m + j] = v
-            for c in range(nb, nc):
+            for q in range(P):
+                for c in range(nb):
+                    acc[c] += Wx[e, q, i, c] * v[q, c]
+            for c in range(nc):
                 nxt[i, c] = acc[c]
         for i in range(n):
             for c in range(nc):
