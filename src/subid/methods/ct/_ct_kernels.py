@@ -34,7 +34,9 @@ Kernels
 is ``N x channels``); ``sens_loop`` runs it for the sensitivities of a model
 output to ``B`` and ``x0`` (the regressors of the raw-sample fit of B).
 ``bank_loop_ref`` and ``sens_loop_ref`` are plain numpy references that the
-tests compare the compiled kernels against.
+tests compare the compiled kernels against. On uniform grids the sensitivities come
+from the fused kernel of :mod:`subid.methods.ct._ct_sensitivity` (the same sums in the
+same order as ``sens_loop``, vectorised, written straight into the regressor).
 
 On non-uniform grids the default is the fused block-modal kernel
 ``modal_loop`` (see the notes above :class:`ModalForm`): no per-interval
