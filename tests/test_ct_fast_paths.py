@@ -143,8 +143,8 @@ def test_memoised_builds_give_the_same_model(monkeypatch):
         warnings.simplefilter("ignore")
         fast = ct_module.ct_subspace(data)
     assert counts and max(counts.values()) == 1            # nothing built twice
-    prepare = ct_module.prepare
-    monkeypatch.setattr(ct_module, "prepare", lambda *a: dataclasses.replace(
+    prepare = ct_module._prepare
+    monkeypatch.setattr(ct_module, "_prepare", lambda *a: dataclasses.replace(
         prepare(*a), memo=_Forgetful()))
     counts.clear()
     with warnings.catch_warnings():

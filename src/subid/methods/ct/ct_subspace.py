@@ -119,7 +119,8 @@ from subid.methods.ct._ct_estimate import (
     observability_matrix,
     tm_convolution_matrix,
 )
-from subid.methods.ct._ct_problem import Problem, prepare
+from subid.methods.ct._ct_problem import Problem
+from subid.methods.ct._ct_problem import prepare as _prepare
 from subid.methods.ct.basis import MAX_POLY_ORDER, FilterBank, default_basis
 from subid.methods.dt.selection import cross_validate
 from subid.model.statespace import StateSpace
@@ -727,7 +728,7 @@ def ct_subspace(data, order=None, *, basis=None, poly_order: int = 3, estimate_x
         if key not in fold_cache:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
-                problem = prepare(record, orders, fold_settings)
+                problem = _prepare(record, orders, fold_settings)
             if record.n_samples > FOLD_CACHE_SAMPLES:
                 return problem
             fold_cache[key] = problem
@@ -773,7 +774,7 @@ def ct_subspace(data, order=None, *, basis=None, poly_order: int = 3, estimate_x
         if fixed is not None:
             ranking = [c for c in ranking if c[0] == fixed] or ranking
         model = None
-        whole = prepare(data, [ranking[0][0]], settings)
+        whole = _prepare(data, [ranking[0][0]], settings)
         for n, chosen in ranking:
             problem = replace(whole, order=n, candidates=[n])
             if chosen == "subspace":
@@ -789,7 +790,7 @@ def ct_subspace(data, order=None, *, basis=None, poly_order: int = 3, estimate_x
         else:
             start_selection = record
     else:
-        problem = prepare(data, candidates, settings)
+        problem = _prepare(data, candidates, settings)
         usable = [k for k in candidates if k < problem.sv.size] or [candidates[0]]
         n, order_selection = (fixed, None) if fixed is not None else choose_order(
             None, usable, problem.sv, "singular values")
