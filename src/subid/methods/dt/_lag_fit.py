@@ -347,7 +347,7 @@ class _Modal:
             self._powers = (L, powers(self.lam, L))
         return self._powers[1]
 
-    def arguments(self, lp, L):
+    def arguments(self, lp, L) -> tuple:
         """The modal form and the lag products of ``lp`` (up to L) as the kernels of
         :mod:`subid.methods.dt._lag_kernel` take them."""
         (G, R), u, y = lp.lags(L), lp.u, lp.y
@@ -371,7 +371,7 @@ def fit_b_d_x0(A, C, lp: LagProducts, output_weights, *, feedthrough=True, estim
     if L is None:
         return None
     w = np.ones(ny) if output_weights is None else np.asarray(output_weights, dtype=float)
-    Naug = normal_matrix(*md.arguments(lp, L), C, w, feedthrough, estimate_x0)
+    Naug = normal_matrix(*md.arguments(lp, L) + (C, w, feedthrough, estimate_x0))
     p = Naug.shape[0] - 1
     solved = solve_normal_equations(Naug, n, nu, ny, estimate_x0=estimate_x0,
                                     feedthrough=feedthrough, n_samples=N)
@@ -395,8 +395,8 @@ def error_power(A, B, C, D, lp: LagProducts, weights, inv_scale):
     L = None if md is None else md.lags_for(lp)
     if L is None:
         return None
-    err = kernel_error_power(*md.arguments(lp, L), B, C, D, np.asarray(weights, dtype=float),
-                             1e-13, MAX_X0_CONDITION)
+    err = kernel_error_power(*md.arguments(lp, L) + (B, C, D, np.asarray(weights, dtype=float),
+                                                      1e-13, MAX_X0_CONDITION))
     if not np.isfinite(err).all() or np.any(err < ROUNDING_GUARD * np.diag(lp.Y)):
         return None                  # a nearly exact fit: the pass is exact, this is not
     return err * inv_scale ** 2

@@ -508,7 +508,8 @@ def _arx_covariance(model: StateSpace, data: IOData, orders: dict) -> StateSpace
     ny, nu = data.n_outputs, data.n_inputs
     na, nb, nk = orders["na"], orders["nb"], orders["nk"]
     first = regression_start(orders)
-    designs, times = [], None
+    designs: list[np.ndarray] = []
+    times = None
     for i in range(ny):
         if i and (na[i] == na[0]).all() and (nb[i] == nb[0]).all() and (nk[i] == nk[0]).all():
             designs.append(designs[0])      # the same regressors: one array, factored once
