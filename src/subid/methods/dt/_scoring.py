@@ -98,6 +98,33 @@ def forced_error_reference(A, B, C, D, u, y, weights, inv_scale, n_free):
     return rows, tail, bool(np.isfinite(forced).all())
 
 
+@numba.njit(cache=True, nogil=True, inline="always")
+def output_error(C, D, x, u, y, t, weights, inv_scale, n_free, rows, tail):  # pragma: no cover
+    """One sample of the simulation-error pass of :func:`forced_error` (and of
+    :func:`subid.methods.dt._sparse_scoring.sparse_forced_error`): the error
+    ``y(t) - C x - D u(t)`` of every output, weighted into the last column of
+    ``rows[t]`` while ``t < n_free``, else scaled by ``inv_scale`` and its square
+    added to ``tail``. Returns False when an output's simulated value is not
+    finite (the state overflowed)."""
+    finite = True
+    n = x.shape[0]
+    for i in range(C.shape[0]):
+        s = 0.0
+        for j in range(n):
+            s += C[i, j] * x[j]
+        for j in range(u.shape[1]):
+            s += D[i, j] * u[t, j]
+        if not np.isfinite(s):
+            finite = False
+        e = y[t, i] - s
+        if t < n_free:
+            rows[t, i, n] = e * weights[i]
+        else:
+            e *= inv_scale[i]
+            tail[i] += e * e
+    return finite
+
+
 @numba.njit(cache=True, nogil=True)
 def forced_error(A, B, C, D, u, y, weights, inv_scale, n_free):  # pragma: no cover - compiled
     """The simulation error of ``(A, B, C, D)`` on ``(u, y)`` from a zero initial
@@ -115,20 +142,8 @@ def forced_error(A, B, C, D, u, y, weights, inv_scale, n_free):  # pragma: no co
     x = np.zeros(n)
     xn = np.empty(n)
     for t in range(N):
-        for i in range(ny):
-            s = 0.0
-            for j in range(n):
-                s += C[i, j] * x[j]
-            for j in range(nu):
-                s += D[i, j] * u[t, j]
-            if not np.isfinite(s):
-                finite = False
-            e = y[t, i] - s
-            if t < n_free:
-                rows[t, i, n] = e * weights[i]
-            else:
-                e *= inv_scale[i]
-                tail[i] += e * e
+        if not output_error(C, D, x, u, y, t, weights, inv_scale, n_free, rows, tail):
+            finite = False
         for i in range(n):
             s = 0.0
             for j in range(n):

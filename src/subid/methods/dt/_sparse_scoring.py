@@ -27,6 +27,8 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from subid.methods.dt._scoring import output_error
+
 __all__ = ["sparse_forced_error"]
 
 
@@ -73,21 +75,9 @@ def sparse_forced_error(A, B, C, D, u, y, weights, inv_scale, n_free):  # pragma
     finite = True
     x = np.zeros(n)
     xn = np.empty(n)
-    for t in range(N):
-        for i in range(ny):        # the dense loop: an infinite state makes s NaN here
-            s = 0.0
-            for j in range(n):
-                s += C[i, j] * x[j]
-            for j in range(nu):
-                s += D[i, j] * u[t, j]
-            if not np.isfinite(s):
-                finite = False
-            e = y[t, i] - s
-            if t < n_free:
-                rows[t, i, n] = e * weights[i]
-            else:
-                e *= inv_scale[i]
-                tail[i] += e * e
+    for t in range(N):             # the outputs as the dense loop: an infinite state
+        if not output_error(C, D, x, u, y, t, weights, inv_scale, n_free, rows, tail):
+            finite = False         # makes their sum NaN there
         for i in range(n):
             s = 0.0
             for k in range(a_start[i], a_start[i + 1]):
