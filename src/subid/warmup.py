@@ -12,7 +12,8 @@ one specialisation per kernel serves all data):
 * :class:`subid.AdaptiveIdentifier` (one kernel for every ``method``; the
   uniform and the time-stamped paths share it),
 * :class:`subid.RecursiveSubspace`,
-* the default batch call (:func:`subid.ls_subspace`: the B, D, x0 pass), the
+* the batch calls (:func:`subid.ls_subspace`: the B, D, x0 pass; with its
+  default order search, the fold candidates' lag-product kernels), the
   lagged products of long records and streams (:class:`subid.HankelStatistic`)
   and the scoring pass of :func:`subid.arx`'s structure search,
 * :func:`subid.ct_subspace` on a uniform and on a non-uniform grid.
@@ -70,6 +71,7 @@ def _batch():
     u = rng.standard_normal((400, 2))
     y = seed001_system().simulate(u)
     ls_subspace(IOData(u, y), 4)
+    ls_subspace(IOData(u, y))                              # the order search's candidates
     HankelStatistic(2, 2, 4, kind="gram").update(u, y)     # long records, streams
     select_structure(IOData(u, y), max_order=2)            # arx's structure search
 
