@@ -65,7 +65,7 @@ import copy
 
 import numpy as np
 import scipy.linalg
-import scipy.stats
+import scipy.special
 
 from subid._validation import check_choice
 
@@ -130,8 +130,57 @@ def _f_tests(L, targets, restricted, extra, n_columns, extended=None, reduced=No
             out.append(None)
             continue
         F = max(rss0[k] - rss1[k], 0.0) / q / max(rss1[k] / dof, 1e-300 * rss0[k])
-        out.append(float(scipy.stats.f.sf(F, q, dof)))
+        # the survival function of Fisher's F(q, dof) (what scipy.stats.f.sf computes,
+        # without its argument handling: the same value)
+        out.append(float(scipy.special.fdtrc(q, dof, F)))
     return out
+
+
+#: Largest 1-norm condition estimate (LAPACK ``trcon``) of the triangular factor of the
+#: regressors (rows of unit norm) at which :func:`_nested_powers` trusts it: far below the
+#: ``1 / RANK_TOLERANCE`` at which the pivoted least squares of :func:`_residual_powers`
+#: start dropping directions (its 2-norm condition is at most ``m`` times this estimate,
+#: ``m`` up to a few hundred regressors), so both keep every regressor.
+NESTED_MAX_CONDITION = 1e4
+
+
+def _nested_powers(L, past_u, past_y, current_u, current_y):
+    """The four regressions of :func:`decide` from one factorisation, or None.
+
+    With the rows ordered ``[past u; past y; u(k); y(k)]`` and factorised ``M = T Q^T``
+    (``T`` lower triangular), the residual of row ``j`` on the rows before position
+    ``k`` is ``sum_{c >= k} T[j, c]^2``: every regression of the tests regresses on a
+    prefix of that order (u(k) on the past inputs, and on the whole past; y(k) on the
+    past, and on the past and u(k)). The same residuals as :func:`_residual_powers` to
+    rounding where the regressors have full numerical rank, which is checked (condition
+    estimate at most :data:`NESTED_MAX_CONDITION`); None otherwise (the caller then
+    solves each regression with rank detection). Returns ``{name: (residual powers,
+    rank)}`` for ``'feedback reduced'``, ``'feedback extended'``, ``'on past'``,
+    ``'on all'``."""
+    rows = np.concatenate([past_u, past_y, current_u, current_y])
+    M = L[rows]
+    if M.shape[0] > M.shape[1]:
+        return None
+    T = scipy.linalg.qr(M.T, mode="r", check_finite=False)[0][:M.shape[0]].T
+    n_u, n_past, nu = len(past_u), len(past_u) + len(past_y), len(current_u)
+    regressors = n_past + nu
+    diag = np.abs(np.diag(T)[:regressors])
+    if regressors and not np.all(diag > 0):
+        return None
+    if regressors:
+        Tn = np.ascontiguousarray(T[:regressors, :regressors].T)       # upper triangular
+        rcond = scipy.linalg.lapack.dtrcon(Tn, norm="1", uplo="U", diag="N")[0]
+        if not (rcond > 0 and 1.0 / rcond <= NESTED_MAX_CONDITION):
+            return None
+    sq = T * T
+    tails = np.cumsum(sq[:, ::-1], axis=1)[:, ::-1]      # tails[j, k] = sum_{c >= k} T[j, c]^2
+    tails = np.concatenate([tails, np.zeros((tails.shape[0], 1))], axis=1)
+    u_rows = np.arange(n_past, regressors)
+    y_rows = np.arange(regressors, M.shape[0])
+    return {"feedback reduced": (tails[u_rows, n_u], n_u),
+            "feedback extended": (tails[u_rows, n_past], n_past),
+            "on past": (tails[y_rows, n_past], n_past),
+            "on all": (tails[y_rows, regressors], regressors)}
 
 
 def decide(factor, *, level: float = LEVEL):
@@ -171,9 +220,12 @@ def decide(factor, *, level: float = LEVEL):
     current_u = factor.u_rows(p, p + 1)
     current_y = factor.y_rows(p, p + 1)
     past = np.concatenate([past_u, past_y])
+    # the regressions on nested regressors, from one factorisation where it is exact
+    nested = _nested_powers(L, past_u, past_y, current_u, current_y)
     # noise-free: the past and u(k) explain y(k) to rounding; there is no noise for a free D
     # to absorb and its estimate is exact, so D is estimated (whatever the input)
-    on_all = _residual_powers(L, current_y, np.concatenate([past, current_u]))
+    on_all = nested["on all"] if nested is not None else \
+        _residual_powers(L, current_y, np.concatenate([past, current_u]))
     power = np.einsum("ij,ij->i", L[current_y], L[current_y])
     exact = bool(np.all(on_all[0] <= NOISE_FREE * np.maximum(power, 1e-300)))
     if exact:
@@ -181,12 +233,15 @@ def decide(factor, *, level: float = LEVEL):
                       direct_term="noise-free record: the past and u(k) explain y(k) to "
                                   "rounding; D estimated (exactly)")
         return True, record
-    feedback = _f_tests(L, current_u, past_u, past_y, K)
+    feedback = _f_tests(L, current_u, past_u, past_y, K) if nested is None else \
+        _f_tests(L, current_u, past_u, past_y, K, extended=nested["feedback extended"],
+                 reduced=nested["feedback reduced"])
     detected = any(v is not None and v < level / nu for v in feedback)
     record["feedback"] = {"p_values": feedback, "detected": bool(detected)}
     # the share of each output's one-step prediction error (high-order ARX) that u(k)
     # explains: what a free D takes from the lag-0 correlation
-    on_past = _residual_powers(L, current_y, past)
+    on_past = nested["on past"] if nested is not None else \
+        _residual_powers(L, current_y, past)
     share = np.clip(1.0 - on_all[0] / np.maximum(on_past[0], 1e-300), 0.0, 1.0)
     record["lag0_share"] = [float(v) for v in share]
     if detected:
