@@ -116,6 +116,26 @@ def lag_sums(z: np.ndarray, depth: int) -> np.ndarray:
     return out
 
 
+def straddle(tail: np.ndarray, head: np.ndarray, depth: int) -> np.ndarray:
+    """The lagged products of the pairs that straddle the border between two records:
+    ``out[l] = sum z(t) z(t + l)^T`` over ``t`` in ``tail`` (the last samples of the
+    first record) and ``t + l`` in ``head`` (the first of the second), ``l < depth``.
+
+    What ``lag_sums(border) - lag_sums(tail) - lag_sums(head)`` gives (``border`` the
+    two stacked; equal to rounding, without its cancellation), for every lag at once:
+    ``tail[t]`` pairs with ``head[t + l - len(tail)]``, read from the head padded with
+    zeros where that index leaves it."""
+    n_tail, q = tail.shape
+    n_head = head.shape[0]
+    if n_tail == 0 or n_head == 0:
+        return np.zeros((depth, q, q))
+    padded = np.zeros((n_tail + n_head + depth, q))
+    padded[n_tail:n_tail + n_head] = head
+    # partner of tail[t] at lag l: padded[t + l] (zero unless it falls in the head)
+    index = np.arange(depth)[:, None] + np.arange(n_tail)[None, :]
+    return np.einsum("ta,ltb->lab", tail, padded[index])
+
+
 def lag_sums_uy(u: np.ndarray, y: np.ndarray, depth: int) -> np.ndarray:
     """:func:`lag_sums` of ``z = [u, y]`` without forming ``z``: the compiled
     :func:`subid.statistic._lag_kernel.lag_sums_kernel` (same sums, to rounding;
@@ -326,9 +346,8 @@ class HankelStatistic:
         keep = self.depth - 1
         border = np.vstack([self.tail, later.head])
         if self.kind == "gram":
-            straddle = lag_sums(border, self.depth) - lag_sums(self.tail, self.depth) \
-                - lag_sums(later.head, self.depth)
-            out.lagged = self.lagged + later.lagged + straddle
+            out.lagged = self.lagged + later.lagged + straddle(self.tail, later.head,
+                                                               self.depth)
         else:
             # columns whose window starts in the tail and ends in the head
             m = self.R.shape[0]
