@@ -56,3 +56,50 @@ def test_feedthrough_decision_kept_by_content():
         assert repr(first) == repr(again) == repr(decide(hf))
         first[1]["feedback"]["detected"] = "changed"        # the caller's own copy
         assert decided(hf)[1]["feedback"]["detected"] != "changed"
+
+
+def test_nested_regressions_of_the_feedthrough_tests_equal_one_regression_each():
+    """The four regressions of the feedthrough F-tests from one factorisation give the
+    residual powers and ranks of one rank-revealing least squares each, and the same
+    decision; an ill-conditioned (noise-free) factor goes to the least squares."""
+    from subid.methods.dt import feedthrough as ft
+    checked = 0
+    for seed, snr, depth in [(1, 20, 8), (2, 20, 20), (3, 40, 12), (4, 10, 40), (5, None, 12)]:
+        kw = {} if snr is None else {"output_snr_db": snr}
+        data = systems.simulate_data(systems.random_system(3, 2, 2, seed=seed), 1500, seed=6,
+                                     **kw)
+        hf = HankelStatistic.from_data(data, depth).factor()
+        L = hf.L / np.linalg.norm(hf.L, axis=1)[:, None]
+        p = depth - 1
+        pu, py, cu, cy = hf.u_rows(0, p), hf.y_rows(0, p), hf.u_rows(p, p + 1), \
+            hf.y_rows(p, p + 1)
+        nested = ft._nested_powers(L, pu, py, cu, cy)
+        if snr is None:
+            assert nested is None
+            continue
+        past = np.concatenate([pu, py])
+        reference = {"feedback reduced": ft._residual_powers(L, cu, pu),
+                     "feedback extended": ft._residual_powers(L, cu, past),
+                     "on past": ft._residual_powers(L, cy, past),
+                     "on all": ft._residual_powers(L, cy, np.concatenate([past, cu]))}
+        for key, (rss, rank) in reference.items():
+            assert nested[key][1] == rank
+            np.testing.assert_allclose(nested[key][0], rss, rtol=1e-9)
+        fast = ft.decide(hf)
+        original = ft._nested_powers
+        try:
+            ft._nested_powers = lambda *args: None
+            slow = ft.decide(hf)
+        finally:
+            ft._nested_powers = original
+        assert fast[0] == slow[0]
+        for key in ("feedback", "direct_term"):
+            a, b = fast[1][key], slow[1][key]
+            if isinstance(a, dict):
+                np.testing.assert_allclose(np.array(a["p_values"], dtype=float),
+                                           np.array(b["p_values"], dtype=float), rtol=1e-6,
+                                           atol=1e-300)
+        np.testing.assert_allclose(fast[1]["lag0_share"], slow[1]["lag0_share"], rtol=1e-9,
+                                   atol=1e-15)
+        checked += 1
+    assert checked == 4

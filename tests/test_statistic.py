@@ -182,3 +182,40 @@ def test_lq_lower_is_scipy_qr_bit_for_bit():
             k = min(variant.shape)
             L = lq_lower(variant)
             assert L.shape == (r, r) and np.array_equal(np.abs(L[:, :k]), np.abs(want.T[:, :k]))
+
+
+@pytest.mark.parametrize("n_samples,nu,ny,depth,experiments", [
+    (1000, 2, 2, 20, 1), (300, 1, 3, 7, 1), (50, 3, 1, 20, 1), (30, 2, 1, 20, 1),
+    (600, 2, 2, 10, 3), (25, 1, 1, 12, 1)])
+def test_open_gram_sum_every_lag_at_once_is_the_lag_by_lag_sum_bit_for_bit(
+        n_samples, nu, ny, depth, experiments):
+    r = np.random.default_rng(n_samples + depth)
+    data = subid.IOData(r.standard_normal((n_samples, nu)), r.standard_normal((n_samples, ny)))
+    if experiments > 1:
+        size = n_samples // experiments
+        data = subid.merge([data[k * size:(k + 1) * size] for k in range(experiments)])
+    stat = HankelStatistic.from_data(data, depth, kind="gram")
+    np.testing.assert_array_equal(stat._open_gram_sum(), stat._open_gram_sum_by_lag())
+
+
+@pytest.mark.parametrize("n_tail,n_head,depth,q", [
+    (19, 19, 20, 4), (39, 39, 40, 4), (3, 7, 5, 2), (7, 3, 5, 2), (0, 5, 5, 2), (5, 0, 5, 3),
+    (2, 3, 10, 1)])
+def test_straddling_products_are_the_border_products_less_each_side(n_tail, n_head, depth, q):
+    from subid.statistic.hankel import straddle
+    r = np.random.default_rng(n_tail * 100 + n_head)
+    tail, head = r.standard_normal((n_tail, q)), r.standard_normal((n_head, q))
+    reference = lag_sums(np.vstack([tail, head]), depth) - lag_sums(tail, depth) \
+        - lag_sums(head, depth)
+    np.testing.assert_allclose(straddle(tail, head, depth), reference, rtol=0, atol=1e-13)
+
+
+def test_factor_derived_values_are_kept_per_factor_object():
+    import dataclasses
+    data = systems.simulate_data(systems.random_system(2, 1, 1, seed=3), 400, seed=4)
+    hf = HankelStatistic.from_data(data, 6).factor()
+    calls = []
+    assert hf.derived("k", lambda: calls.append(1) or 7) == 7
+    assert hf.derived("k", lambda: calls.append(1) or 8) == 7 and len(calls) == 1
+    fresh = dataclasses.replace(hf, L=hf.L * 2.0)            # another factor: its own values
+    assert fresh.derived("k", lambda: 9) == 9 and hf == dataclasses.replace(hf)

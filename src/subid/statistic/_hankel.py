@@ -20,7 +20,7 @@ gives the factor of ``P H`` exactly.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.linalg
@@ -47,6 +47,17 @@ class HankelFactor:
     n_inputs: int
     n_outputs: int
     n_columns: int
+    #: What is computed from this factor alone, by key (:meth:`derived`); not an
+    #: argument: a factor made by ``dataclasses.replace`` starts empty.
+    _derived: dict = field(default_factory=dict, init=False, repr=False, compare=False)
+
+    def derived(self, key, compute):
+        """``compute()``, once per factor and ``key``: for what depends on the factor
+        only (the oblique projections of the noise model, which the models of every
+        order on one factor share). The result must be treated as read-only."""
+        if key not in self._derived:
+            self._derived[key] = compute()
+        return self._derived[key]
 
     def u_rows(self, first: int, stop: int) -> np.ndarray:
         """Row indices of input block rows ``first .. stop-1``."""

@@ -69,27 +69,20 @@ def _oblique(hf: HankelFactor, y_rows, u_rows, w_rows) -> np.ndarray:
     return theta[:, :Wp.shape[0]] @ Wp
 
 
-#: The oblique projections of the last factor and past (:func:`_projections`), as one
-#: ``(factor, past, projections)`` triple: the models of every order of one problem
-#: (:func:`subid.methods.dt.selection.innovation_check`) share them.
-_LAST_PROJECTIONS: list = [None]
-
-
 def _projections(hf: HankelFactor, p: int):
     """``(O_p, O_{p+1})``: the oblique projections of the future outputs on the past
     along the future inputs, with ``p`` and ``p + 1`` past block rows. They depend on
-    the factor only, not on the model: those of the last factor (the same object, kept
-    alive by the reference held here) are reused."""
-    last = _LAST_PROJECTIONS[0]
-    if last is not None and last[0] is hf and last[1] == p:
-        return last[2]
-    s = hf.depth
-    o_p = _oblique(hf, hf.y_rows(p, s), hf.u_rows(p, s),
-                   np.concatenate([hf.u_rows(0, p), hf.y_rows(0, p)]))
-    o_p1 = _oblique(hf, hf.y_rows(p + 1, s), hf.u_rows(p + 1, s),
-                    np.concatenate([hf.u_rows(0, p + 1), hf.y_rows(0, p + 1)]))
-    _LAST_PROJECTIONS[0] = (hf, p, (o_p, o_p1))     # one assignment: safe across threads
-    return o_p, o_p1
+    the factor only, not on the model: computed once per factor object and ``p``
+    (:meth:`subid.statistic._hankel.HankelFactor.derived`), for the models of every
+    order fitted on it (:func:`subid.methods.dt.selection.innovation_check`)."""
+    def compute():
+        s = hf.depth
+        o_p = _oblique(hf, hf.y_rows(p, s), hf.u_rows(p, s),
+                       np.concatenate([hf.u_rows(0, p), hf.y_rows(0, p)]))
+        o_p1 = _oblique(hf, hf.y_rows(p + 1, s), hf.u_rows(p + 1, s),
+                        np.concatenate([hf.u_rows(0, p + 1), hf.y_rows(0, p + 1)]))
+        return o_p, o_p1
+    return hf.derived(("oblique projections", p), compute)
 
 
 def _spectral_radius(M) -> float:
@@ -245,6 +238,11 @@ def innovation_model(A, B, C, D, hf: HankelFactor, past: int | None = None, *,
                       "noise_model_past": p}
 
 
+#: The key of a problem's cache (:meth:`subid.methods.dt._subspace.Problem.cached`) that
+#: holds its factor in the user's units (:func:`user_factor`).
+USER_FACTOR = "user factor"
+
+
 def user_factor(problem) -> HankelFactor:
     """The Hankel factor of a :class:`subid.methods.dt._subspace.Problem` in the user's units."""
     def make():
@@ -256,7 +254,7 @@ def user_factor(problem) -> HankelFactor:
                             n_outputs=hf.n_outputs, n_columns=hf.n_columns)
     # once per problem: the models of its orders then share the factor's projections
     cached = getattr(problem, "cached", None)
-    return make() if cached is None else cached("user factor", make)
+    return make() if cached is None else cached(USER_FACTOR, make)
 
 
 def _factor_for(model, problem) -> HankelFactor | None:

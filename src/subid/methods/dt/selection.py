@@ -577,7 +577,7 @@ def stabilised(model) -> bool:
 MAX_FALLBACKS = 4
 
 
-def estimator_by_fit(data, problem, fitter, estimators):
+def estimator_by_fit(data, problem, fitter, estimators, *, held=None):
     """The estimator of the system matrices whose model of the whole record fits it
     better (``system_matrices='auto'``), and its model: no fold fits.
 
@@ -595,6 +595,9 @@ def estimator_by_fit(data, problem, fitter, estimators):
     (ties, e.g. noise-free data, go to the first). The warnings of the model returned
     are issued, the other's not.
 
+    ``held``: the :class:`subid.methods.dt._scoring.Held` of ``data`` with its lag
+    products, when already made (:class:`RecordWork`).
+
     Returns
     -------
     estimator, model, rule
@@ -602,7 +605,8 @@ def estimator_by_fit(data, problem, fitter, estimators):
         estimator's ``fits`` and whether its model was ``stabilised``.
     """
     from subid.methods.dt._scoring import Held
-    held = Held(data, lagged=data.n_experiments == 1)
+    if held is None or held.record is not data:
+        held = Held(data, lagged=data.n_experiments == 1)
     models, fits, repaired, issued = {}, {}, {}, {}
     for name in estimators:
         with warnings.catch_warnings(record=True) as caught:
@@ -662,16 +666,18 @@ def choose(data, plan, fitter):
     candidates = None if plan.candidates is None else list(plan.candidates)
     n, f, estimator, record = cross_validate(data, plan.order, candidates, plan.horizon,
                                              fitter=fitter, estimators=scored)
-    factors = {}                      # horizon -> the record's factor, once built
+    shared = RecordWork()             # what the innovation check computed on the record
     if plan.order is None:
         n, f, estimator = innovation_check(data, record, fitter, (n, f, estimator),
-                                           factors=factors)
+                                           shared=shared)
 
     def final(order, horizon, name):
         """``(problem, estimator, model, rule)`` of the whole record at a candidate."""
-        problem = fitter.prepare(data, order, horizon, factor=factors.get(horizon))
+        problem = fitter.prepare(data, order, horizon, factor=shared.factors.get(horizon))
+        shared.seed(problem)
         if plan.estimator_choice == "fit":
-            return (problem,) + estimator_by_fit(data, problem, fitter, estimators)
+            return (problem,) + estimator_by_fit(data, problem, fitter, estimators,
+                                                 held=shared.held)
         return problem, name, fitter.fit(problem, name), None
 
     n, f, estimator, problem, model, rule = unrepaired_choice(record, final, (n, f, estimator))
@@ -680,6 +686,34 @@ def choose(data, plan, fitter):
         rule = {"rule": "cv", "description": (
             "cross-validated with the order and horizon (info['order_selection'])")}
     return problem, model, estimator, rule
+
+
+class RecordWork:
+    """What :func:`innovation_check` computed on the whole record that the final model's
+    steps would compute again (:func:`choose`): by horizon, the record's Hankel factor
+    (:data:`RECORD_FACTOR`, which :func:`subid.methods.dt._subspace.prepare` takes) and
+    the check's problem (whose factor in the user's units holds the noise model's
+    oblique projections, :func:`subid.methods.dt.noise_model.user_factor`); and the
+    record's :class:`subid.methods.dt._scoring.Held` with its lag products
+    (:func:`estimator_by_fit` scores both estimators with them)."""
+
+    def __init__(self):
+        self.factors = {}
+        self.problems = {}
+        self.held = None
+
+    def seed(self, problem):
+        """Give ``problem`` (of the whole record) the check's factor in the user's units
+        when the two problems hold the same factor and channel scales (then it is the
+        factor the problem would make, bit for bit)."""
+        from subid.methods.dt.noise_model import USER_FACTOR
+        other = self.problems.get(problem.horizon)
+        if other is None or other.data is not problem.data or USER_FACTOR not in other._cache:
+            return
+        if np.array_equal(other.factor.L, problem.factor.L) \
+                and np.array_equal(other.input_scale, problem.input_scale) \
+                and np.array_equal(other.output_scale, problem.output_scale):
+            problem.cached(USER_FACTOR, lambda: other._cache[USER_FACTOR])
 
 
 #: Samples (the last ones) on which :func:`innovation_check` fits and compares its models:
@@ -726,7 +760,7 @@ def innovation_bic(model, data, spread=None) -> float | None:
     return N * float(np.sum(np.log(eig))) + (model.order * (nu + 2 * ny) + nu * ny) * math.log(N)
 
 
-def innovation_check(data, record, fitter, chosen, *, factors=None):
+def innovation_check(data, record, fitter, chosen, *, shared=None):
     """The cross-validated choice, or a higher order the innovation form demands.
 
     The cross-validated BIC sees a mode only through the held-out simulation fit,
@@ -755,10 +789,10 @@ def innovation_check(data, record, fitter, chosen, *, factors=None):
     than 0.5 points of validation fit (bench/realdata.md).
 
     ``chosen`` is ``(order, horizon, estimator)``; so is the result, and
-    ``factors`` (a dict), when given, receives the record's Hankel factor at the
-    chosen horizon (``factors[horizon]``, when the check fitted the whole record) for
-    the final model's problem (the same factor :func:`subid.methods.dt._subspace.prepare`
-    would build again);
+    ``shared`` (a :class:`RecordWork`), when given, receives what the check computed
+    on the whole record (when it fitted the whole record: its Hankel factor at the
+    chosen horizon, the same factor :func:`subid.methods.dt._subspace.prepare` would
+    build again, its problem, and the record's lag products) for the final model;
     ``record['innovation_check']`` records the cross-validated choice
     (``cross_validated``), the criterion of every order (``orders``), the order of
     the least (``order``) and the decision (``taken``, ``reason``);
@@ -766,6 +800,7 @@ def innovation_check(data, record, fitter, chosen, *, factors=None):
     """
     from subid.methods.dt._lag_fit import LAG_PRODUCTS, LagProducts
     from subid.methods.dt._regression import scoring_only
+    from subid.methods.dt._scoring import Held
     from subid.methods.dt.noise_model import attach_noise_model
     n, f, estimator = chosen
     used = data[data.n_samples - INNOVATION_CHECK_SAMPLES:] \
@@ -800,13 +835,20 @@ def innovation_check(data, record, fitter, chosen, *, factors=None):
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             problem = fitter.prepare(used, orders, f)
-            if factors is not None and used is data:     # the final model's, at f
-                factors[f] = problem._cache.get(RECORD_FACTOR)
+            mine_too = shared is not None and used is data and hasattr(problem, "_cache")
+            if mine_too:                  # the final model's, at f
+                shared.factors[f] = problem._cache.get(RECORD_FACTOR)
+                shared.problems[f] = problem
             # B, D, x0 of every order from the record's lag products, as on the folds
-            # (equal to the pass over the record to about 1e-12 relative)
-            lagged = LagProducts.of_record(used) if hasattr(problem, "_cache") else None
+            # (equal to the pass over the record to about 1e-12 relative); those of the
+            # record's Held, which scores the final model's estimators
+            if mine_too and used.n_experiments == 1:
+                shared.held = Held(used, lagged=True)
+                lagged = shared.held.products()[0]
+            else:
+                lagged = LagProducts.of_record(used) if hasattr(problem, "_cache") else None
             if lagged is not None:
-                problem._cache[LAG_PRODUCTS] = lagged
+                problem.cached(LAG_PRODUCTS, lambda: lagged)
             spread = np.std(used.y, axis=0)
             for order in orders:
                 with scoring_only():          # scored and dropped: the normal equations
