@@ -103,3 +103,28 @@ def test_nested_regressions_of_the_feedthrough_tests_equal_one_regression_each()
                                    atol=1e-15)
         checked += 1
     assert checked == 4
+
+
+def test_prediction_power_kernel_equals_its_reference_and_the_prediction_errors():
+    """The compiled sum of the one-step prediction errors' products equals the plain
+    loop and ``prediction_errors(model, data, 1, x0='zero')`` summed (per experiment
+    from a zero state); a diverging predictor gives None."""
+    import subid
+    from subid.methods.dt._innovation_kernel import prediction_power, prediction_power_reference
+    from subid.model.prediction import prediction_errors
+    true = systems.random_system(3, 2, 2, seed=4)
+    data = systems.simulate_data(true, 600, seed=6, output_snr_db=20)
+    model = subid.moesp(data, 3, horizon=6)
+    for record in (data, subid.merge([data[:250], data[250:]])):
+        pieces = [(record.u[a:b], record.y[a:b]) for a, b in record.experiment_ranges]
+        got = prediction_power(model.A, model.B, model.C, model.D, model.K, pieces)
+        ref = prediction_power_reference(model.A, model.B, model.C, model.D, model.K, pieces)
+        errors = prediction_errors(model, record, 1, x0="zero")
+        np.testing.assert_allclose(got, ref, rtol=1e-12)
+        np.testing.assert_allclose(got, errors.T @ errors, rtol=1e-10)
+    K = np.zeros_like(model.K)
+    A = 3.0 * np.eye(3)                           # a predictor that leaves the float range
+    long = systems.simulate_data(true, 2000, seed=7)
+    pieces = [(long.u, long.y)]
+    assert prediction_power(A, model.B, model.C, model.D, K, pieces) is None
+    assert prediction_power_reference(A, model.B, model.C, model.D, K, pieces) is None

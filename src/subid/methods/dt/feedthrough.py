@@ -57,6 +57,14 @@ horizon=model.info['horizon'])`` makes the same decision. An input that
 its own past predicts exactly (a periodic signal) shows no feedback: the
 F-test is then undefined and the direct-term test decides. ``info['feedthrough']``
 records both tests.
+
+Cost: the four regressions of the tests regress on nested sets of rows (the past
+inputs; the past; the past and u(k)), so one QR factorisation of the rows in that order
+gives every residual (:func:`_nested_powers`) where the regressors are well conditioned
+(the residuals of the rank-revealing least squares to rounding, tested); otherwise each
+regression is solved with rank detection (:func:`_residual_powers`). 2.7x (horizon 10)
+to 4.5x (horizon 20) faster on a 2x2 record at 20 dB; the order selection decides it
+per fold and horizon.
 """
 
 from __future__ import annotations
