@@ -364,8 +364,15 @@ def test_innovation_check_is_vetoed_by_the_fold_scores(monkeypatch, favoured):
         assert check["orders"] == [] and not check["taken"]
         assert model.order == cv["order"]
         return
-    assert [o["order"] for o in check["orders"]] == at_f
-    assert check["order"] == (max(at_f) if favoured == "highest" else min(at_f))
-    expected = check["order"] if check["order"] in admissible else cv["order"]
-    assert check["taken"] == (expected != cv["order"])
+    # every admissible order is fitted; the others until one has a lower criterion
+    fitted = [o["order"] for o in check["orders"]]
+    assert set(admissible) <= set(fitted) <= set(at_f) and fitted == sorted(fitted)
+    least = max(at_f) if favoured == "highest" else min(at_f)       # over every order
+    expected = least if least in admissible else cv["order"]
+    assert check["taken"] == (expected != cv["order"]) and model.order == expected
+    assert check["complete"] == (fitted == at_f)
+    if least in admissible:
+        assert check["order"] == least and check["complete"]
+    else:
+        assert check["order"] not in admissible
     assert model.order == expected
