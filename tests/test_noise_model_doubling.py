@@ -71,3 +71,32 @@ def test_innovation_model_gain_by_doubling():
     K1, s1, _ = innovation_model(model.A, model.B, model.C, model.D, hf, doubling=True)
     np.testing.assert_allclose(K1, K0, rtol=1e-10, atol=1e-12 * np.abs(K0).max())
     np.testing.assert_allclose(s1, s0, rtol=1e-10)
+
+
+def test_compiled_doubling_equals_its_numpy_reference():
+    """The compiled doubling loop gives the numpy loop's solution to rounding, and None
+    where it does (a singular step, a diverging iterate, no convergence)."""
+    from subid.methods.dt._innovation_kernel import doubling, doubling_reference
+    from subid.methods.dt.noise_model import DOUBLING_ITERATIONS, DOUBLING_TOLERANCE
+    rng = np.random.default_rng(11)
+    for n, ny, radius in [(1, 1, 0.5), (3, 2, 0.9), (6, 2, 0.99), (10, 3, 1.2), (4, 4, 0.3)]:
+        A, C, Q, R, S = _problem(rng, n, ny, radius)
+        Ri_C = np.linalg.solve(R, C)
+        Ak = (A - S @ Ri_C).T
+        G = C.T @ Ri_C
+        G = 0.5 * (G + G.T)
+        H = Q - S @ np.linalg.solve(R, S.T)
+        H = 0.5 * (H + H.T)
+        got = doubling(Ak, G, H, DOUBLING_ITERATIONS, DOUBLING_TOLERANCE)
+        ref = doubling_reference(Ak, G, H, DOUBLING_ITERATIONS, DOUBLING_TOLERANCE)
+        assert (got is None) == (ref is None)
+        if ref is not None:
+            np.testing.assert_allclose(got, ref, rtol=1e-10, atol=1e-12 * np.abs(ref).max())
+    n = 3
+    singular = -np.eye(n)                 # I + G H = 0 at the first step
+    assert doubling(np.eye(n), np.eye(n), singular, 40, 1e-15) is None
+    assert doubling_reference(np.eye(n), np.eye(n), singular, 40, 1e-15) is None
+    huge = np.full((n, n), 1e300)         # the iterates overflow
+    assert doubling(huge, np.eye(n), np.eye(n), 40, 1e-15) is None
+    assert doubling_reference(huge, np.eye(n), np.eye(n), 40, 1e-15) is None
+    assert doubling(0.9 * np.eye(n), np.eye(n), np.eye(n), 1, 1e-15) is None   # not settled

@@ -16,7 +16,7 @@ one specialisation per kernel serves all data):
   default order search, the fold candidates' lag-product kernels), the
   lagged products of long records and streams (:class:`subid.HankelStatistic`),
   the scoring pass of :func:`subid.arx`'s structure search and the prediction
-  errors of the order search's innovation check,
+  errors and Riccati doubling of the order search's innovation check,
 * :func:`subid.ct_subspace` on a uniform and on a non-uniform grid.
 
 Run it once after installing (``make test`` / ``make demo`` do)::
@@ -75,9 +75,10 @@ def _batch():
     ls_subspace(IOData(u, y))                              # the order search's candidates
     HankelStatistic(2, 2, 4, kind="gram").update(u, y)     # long records, streams
     select_structure(IOData(u, y), max_order=2)            # arx's structure search
-    from subid.methods.dt._innovation_kernel import prediction_power
+    from subid.methods.dt._innovation_kernel import doubling, prediction_power
     prediction_power(np.eye(2) * 0.5, np.ones((2, 2)), np.ones((2, 2)), np.zeros((2, 2)),
                      np.zeros((2, 2)), [(u, y)])          # the order search's innovation check
+    doubling(np.eye(2) * 0.5, np.eye(2), np.eye(2), 40, 1e-15)     # and its Kalman gains
 
 
 def _ct():

@@ -1,5 +1,6 @@
-"""Compiled sum of the one-step prediction errors' products of an innovation model.
+"""Compiled kernels of the order selection's innovation check.
 
+**Prediction errors.**
 The order selection's innovation check (:func:`subid.methods.dt.selection.innovation_bic`)
 needs, for the model of every order, only ``E^T E``, the sum over the record of the
 products of the one-step prediction errors ``e(t) = y(t) - C x̂(t) - D u(t)`` of the
@@ -8,6 +9,12 @@ Kalman predictor ``x̂(t+1) = (A - K C) x̂(t) + (B - K D) u(t) + K y(t)`` from
 :func:`prediction_power` accumulates it in one pass without storing the predicted
 outputs or states; :func:`prediction_power_reference` is the plain loop the tests compare
 it against (and ``subid.prediction_errors``).
+
+**Riccati equation by doubling.** :func:`doubling` runs the iteration of
+:func:`subid.methods.dt.noise_model.riccati_by_doubling` (the structure-preserving doubling
+algorithm) on its prepared matrices in one compiled loop: a dozen small matrix products
+per step, which in numpy cost more in call overhead than in arithmetic (about half of a
+check model's noise model). :func:`doubling_reference` is the numpy loop it replaces.
 """
 
 from __future__ import annotations
@@ -96,3 +103,101 @@ def prediction_power_reference(A, B, C, D, K, pieces):
                 total += np.outer(e, e)
                 x = Ap @ x + Bu @ u[t] + Kc @ y[t]
     return total if np.isfinite(total).all() else None
+
+
+@numba.njit(cache=True)
+def _doubling_kernel(Ak, G, H, iterations, tolerance):  # pragma: no cover - compiled
+    """``(H, status)``: status 0 converged, 1 singular step, 2 not finite, 3 not settled."""
+    n = Ak.shape[0]
+    eye = np.eye(n)
+    rhs = np.empty((n, 2 * n))
+    for _ in range(iterations):
+        rhs[:, :n] = Ak
+        rhs[:, n:] = G
+        M = eye + G @ H
+        # the LU factorisation with partial pivoting of np.linalg.solve, its singular
+        # case reported instead of raised
+        lu = M.copy()
+        perm = np.arange(n)
+        for k in range(n):
+            p = k
+            big = abs(lu[k, k])
+            for i in range(k + 1, n):
+                if abs(lu[i, k]) > big:
+                    big = abs(lu[i, k])
+                    p = i
+            if big == 0.0 or not np.isfinite(big):
+                return H, 1
+            if p != k:
+                for j in range(n):
+                    lu[k, j], lu[p, j] = lu[p, j], lu[k, j]
+                perm[k], perm[p] = perm[p], perm[k]
+            for i in range(k + 1, n):
+                lu[i, k] /= lu[k, k]
+                f = lu[i, k]
+                for j in range(k + 1, n):
+                    lu[i, j] -= f * lu[k, j]
+        solved = np.empty((n, 2 * n))
+        for c in range(2 * n):
+            for i in range(n):
+                s = rhs[perm[i], c]
+                for j in range(i):
+                    s -= lu[i, j] * solved[j, c]
+                solved[i, c] = s
+            for i in range(n - 1, -1, -1):
+                s = solved[i, c]
+                for j in range(i + 1, n):
+                    s -= lu[i, j] * solved[j, c]
+                solved[i, c] = s / lu[i, i]
+        WA = np.ascontiguousarray(solved[:, :n])
+        WG = np.ascontiguousarray(solved[:, n:])
+        AkT = np.ascontiguousarray(Ak.T)
+        H_next = H + AkT @ H @ WA
+        H_next = 0.5 * (H_next + H_next.T)
+        G = G + Ak @ WG @ AkT
+        G = 0.5 * (G + G.T)
+        Ak = Ak @ WA
+        change = np.abs(H_next - H).max()
+        H = H_next
+        if not np.isfinite(change):
+            return H, 2
+        if change <= tolerance * max(np.abs(H).max(), 1e-300):
+            return H, 0
+    return H, 3
+
+
+def doubling(Ak, G, H, iterations, tolerance):
+    """The doubling iteration from ``(A_0, G_0, H_0)``: ``P``, or None when a step is
+    singular, an iterate is not finite or it does not settle within ``iterations``."""
+    c = lambda M: np.ascontiguousarray(M, dtype=np.float64)     # noqa: E731
+    with np.errstate(all="ignore"):
+        P, status = _doubling_kernel(c(Ak), c(G), c(H), int(iterations), float(tolerance))
+    return P if status == 0 else None
+
+
+def doubling_reference(Ak, G, H, iterations, tolerance):
+    """:func:`doubling` by numpy (the reference)."""
+    n = Ak.shape[0]
+    eye = np.eye(n)
+    rhs = np.empty((n, 2 * n))
+    with np.errstate(all="ignore"):
+        for _ in range(iterations):
+            rhs[:, :n] = Ak
+            rhs[:, n:] = G
+            try:
+                solved = np.linalg.solve(eye + G @ H, rhs)
+            except np.linalg.LinAlgError:
+                return None
+            WA, WG = solved[:, :n], solved[:, n:]
+            H_next = H + Ak.T @ H @ WA
+            H_next = 0.5 * (H_next + H_next.T)
+            G = G + Ak @ WG @ Ak.T
+            G = 0.5 * (G + G.T)
+            Ak = Ak @ WA
+            change = float(np.abs(H_next - H).max())
+            H = H_next
+            if not np.isfinite(change):
+                return None
+            if change <= tolerance * max(float(np.abs(H).max()), 1e-300):
+                return H
+    return None

@@ -38,7 +38,6 @@ decomposition of the Riccati solver are used: no SVD, so
 
 from __future__ import annotations
 
-import math
 import warnings
 
 import numpy as np
@@ -117,7 +116,6 @@ def riccati_by_doubling(A, C, Q, R, S):
     (:func:`subid.methods.dt.selection.innovation_check`). None when ``R`` is
     singular, an iterate is not finite or the iteration does not settle within
     :data:`DOUBLING_ITERATIONS` (the caller then solves by QZ)."""
-    n = A.shape[0]
     try:
         Rc = scipy.linalg.cho_factor(R, check_finite=False)
         Ri_C = scipy.linalg.cho_solve(Rc, C, check_finite=False)
@@ -129,28 +127,10 @@ def riccati_by_doubling(A, C, Q, R, S):
     G = 0.5 * (G + G.T)
     H = Q - S @ Ri_St
     H = 0.5 * (H + H.T)
-    eye = np.eye(n)
-    rhs = np.empty((n, 2 * n))
-    for _ in range(DOUBLING_ITERATIONS):
-        rhs[:, :n] = Ak
-        rhs[:, n:] = G
-        try:
-            solved = np.linalg.solve(eye + G @ H, rhs)
-        except np.linalg.LinAlgError:
-            return None
-        WA, WG = solved[:, :n], solved[:, n:]
-        H_next = H + Ak.T @ H @ WA
-        H_next = 0.5 * (H_next + H_next.T)
-        G = G + Ak @ WG @ Ak.T
-        G = 0.5 * (G + G.T)
-        Ak = Ak @ WA
-        change = float(np.abs(H_next - H).max())
-        H = H_next
-        if not math.isfinite(change):         # an iterate overflowed (NaN or inf)
-            return None
-        if change <= DOUBLING_TOLERANCE * max(float(np.abs(H).max()), 1e-300):
-            return H
-    return None
+    # the iteration in one compiled loop (its numpy reference:
+    # subid.methods.dt._innovation_kernel.doubling_reference)
+    from subid.methods.dt._innovation_kernel import doubling
+    return doubling(Ak, G, H, DOUBLING_ITERATIONS, DOUBLING_TOLERANCE)
 
 
 def innovation_model(A, B, C, D, hf: HankelFactor, past: int | None = None, *,
