@@ -73,7 +73,7 @@ def _batch():
     y = seed001_system().simulate(u)
     ls_subspace(IOData(u, y), 4)
     ls_subspace(IOData(u, y))                              # the order search's candidates
-    HankelStatistic(2, 2, 4, kind="gram").update(u, y)     # long records, streams
+    HankelStatistic(2, 2, 4, kind="gram").update(u, y).factor()    # long records, streams
     select_structure(IOData(u, y), max_order=2)            # arx's structure search
     from subid.methods.dt._innovation_kernel import doubling, prediction_power
     prediction_power(np.eye(2) * 0.5, np.ones((2, 2)), np.ones((2, 2)), np.zeros((2, 2)),

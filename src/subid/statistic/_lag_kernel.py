@@ -62,3 +62,52 @@ def lag_sums_kernel(u, y, depth):  # pragma: no cover - compiled
                 for j in range(q):
                     out[lag, i, j] += part[i, lag * q + j]
     return out
+
+
+@numba.njit(cache=True)
+def open_gram_kernel(lagged, head, tail, n_inputs):  # pragma: no cover - compiled
+    """``H H^T`` of the open experiment from its lagged products and edge samples, in
+    the row order ``[U_0..U_{s-1}; Y_0..Y_{s-1}]``: what
+    :meth:`subid.statistic.hankel.HankelStatistic._open_gram_sum_by_lag` computes, with
+    the same additions in the same order (so the same bits). Block ``(i, i + l)`` is
+    ``S_l`` less the products ``z(t) z(t+l)^T`` with ``t < i`` (within the head) and
+    those with ``t >= i + K`` (the tail's ``k >= i``)."""
+    s = lagged.shape[0]
+    q = lagged.shape[1]
+    ny = q - n_inputs
+    m = s * q
+    out = np.zeros((m, m))
+    early = np.zeros((q, q))
+    late = np.zeros((s, q, q))
+    for lag in range(s):
+        n = s - 1 - lag                  # block rows i = 0 .. n take this lag
+        # late[i] = sum_{k = i}^{n-1} tail[k] tail[k + lag]^T, summed from k = n - 1 down
+        for a in range(q):
+            for b in range(q):
+                late[n, a, b] = 0.0
+        for k in range(n - 1, -1, -1):
+            for a in range(q):
+                for b in range(q):
+                    late[k, a, b] = late[k + 1, a, b] + tail[k, a] * tail[k + lag, b] \
+                        if k < n - 1 else tail[k, a] * tail[k + lag, b]
+        for a in range(q):
+            for b in range(q):
+                early[a, b] = 0.0
+        for i in range(n + 1):
+            if i > 0:                    # early = sum_{t < i} head[t] head[t + lag]^T
+                t = i - 1
+                for a in range(q):
+                    for b in range(q):
+                        early[a, b] = early[a, b] + head[t, a] * head[t + lag, b] \
+                            if t > 0 else head[t, a] * head[t + lag, b]
+            j = i + lag
+            for a in range(q):
+                ra = i * n_inputs + a if a < n_inputs else s * n_inputs + i * ny + a - n_inputs
+                for b in range(q):
+                    rb = j * n_inputs + b if b < n_inputs else \
+                        s * n_inputs + j * ny + b - n_inputs
+                    v = lagged[lag, a, b] - early[a, b] - late[i, a, b]
+                    if lag > 0:          # block (i, i + lag), and its mirror below
+                        out[ra, rb] = v
+                    out[rb, ra] = v      # (at lag 0 the mirror is what the reference keeps)
+    return out

@@ -413,38 +413,16 @@ class HankelStatistic:
 
         Block ``(i, i + l)`` is the lagged product ``S_l`` less the ``i`` products at
         the start of the record (``t < i``, all within the head) and the products at its
-        end (``t >= i + K``, all within the tail): every lag and block row at once, the
-        edge products of the head and tail padded with zeros (which add exactly nothing),
-        so the sums are those of :meth:`_open_gram_sum_by_lag` bit for bit."""
+        end (``t >= i + K``, all within the tail): one compiled pass
+        (:func:`subid.statistic._lag_kernel.open_gram_kernel`) that makes the additions of
+        :meth:`_open_gram_sum_by_lag` in the same order, so the same bits."""
+        from subid.statistic._lag_kernel import open_gram_kernel
         s = self.depth
-        q = self.n_inputs + self.n_outputs
-        e = s - 1                              # edge samples kept at each end
-        head, tail = self.head[:e], self.tail[:e]
-        if head.shape[0] < e or tail.shape[0] < e:
-            return self._open_gram_sum_by_lag()
-        lags = np.arange(s)
-        # shifted[l, t] = z(t + l) within the edge, zero past it
-        pad_h = np.vstack([head, np.zeros((s, q))])
-        pad_t = np.vstack([tail, np.zeros((s, q))])
-        index = lags[:, None] + np.arange(e)[None, :]          # (lag, t)
-        early_p = np.einsum("ta,ltb->ltab", head, pad_h[index])    # z(t) z(t+l)^T, t < e
-        late_p = np.einsum("ta,ltb->ltab", tail, pad_t[index])
-        # early[l, i] = sum_{t < i}; late[l, i] = sum_{t >= i} (the tail's t)
-        early = np.zeros((s, s, q, q))
-        early[:, 1:] = np.cumsum(early_p, axis=1)
-        late = np.zeros((s, s, q, q))
-        late[:, :e] = np.cumsum(late_p[:, ::-1], axis=1)[:, ::-1]
-        window = self.lagged[:, None] - early - late           # (lag, block row i)
-        i_idx, l_idx = np.nonzero(lags[None, :] <= (s - 1 - lags)[:, None])
-        Gz = np.zeros((s, q, s, q))
-        w = window[l_idx, i_idx]
-        Gz[i_idx, :, i_idx + l_idx, :] = w
-        Gz[i_idx + l_idx, :, i_idx, :] = w.transpose(0, 2, 1)
-        nu = self.n_inputs
-        idx = np.concatenate([(np.arange(s)[:, None] * q + np.arange(nu)[None, :]).ravel(),
-                              (np.arange(s)[:, None] * q + nu
-                               + np.arange(self.n_outputs)[None, :]).ravel()])
-        return Gz.reshape(s * q, s * q)[np.ix_(idx, idx)]
+        if self.head.shape[0] < s - 1 or self.tail.shape[0] < s - 1:
+            return self._open_gram_sum_by_lag()      # an experiment shorter than the edges
+        c = lambda M: np.ascontiguousarray(M, dtype=np.float64)     # noqa: E731
+        return open_gram_kernel(c(self.lagged), c(self.head[:s - 1]), c(self.tail[:s - 1]),
+                                self.n_inputs)
 
     def _open_gram_sum_by_lag(self) -> np.ndarray:
         """:meth:`_open_gram_sum` lag by lag (the reference; also for an open experiment
