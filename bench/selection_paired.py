@@ -10,7 +10,10 @@ order of the calls each round, and reports the median of the paired ratios
 
 Usage::
 
-    python bench/selection_paired.py /work/main/src src [rounds]
+    python bench/selection_paired.py /work/main/src src [rounds] [sizes]
+
+``sizes``: comma-separated record lengths (default ``1000,10000``); records longer
+than 10^4 samples get a third of the rounds (at least 3).
 """
 
 from __future__ import annotations
@@ -46,12 +49,13 @@ def main(argv):
         sys.modules.update(versions[k][1])
         return versions[k][0]
 
-    for n in (1000, 10000):
+    sizes = [int(v) for v in argv[4].split(",")] if len(argv) > 4 else [1000, 10000]
+    for n in sizes:
         sub = use(0)
         data = sub.systems.simulate_data(sub.systems.random_system(4, 2, 2, seed=1), n, seed=2,
                                          output_snr_db=20)
         t = {(k, c): [] for k in (0, 1) for c in ("default", "pinned")}
-        for r in range(rounds):
+        for r in range(rounds if n <= 10_000 else max(3, rounds // 3)):
             for k in ((0, 1) if r % 2 == 0 else (1, 0)):
                 s = use(k)
                 d = s.IOData(data.u, data.y, dt=data.dt)

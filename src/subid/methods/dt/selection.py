@@ -108,9 +108,13 @@ and horizon, by the same code path as an explicit call, so that
 reproduces it exactly.
 
 **Cost.** Shared by the candidates: one statistic per fold and horizon (merged
-from the lagged products of four blocks where exact, :func:`fold_factors`), one
+from the lagged products of four blocks where exact, :func:`fold_factors`: the
+straddling products of each merge for every lag at once,
+:func:`subid.statistic.hankel.straddle`, and the Gram matrix of the lagged products
+by one compiled pass, :func:`subid.statistic._lag_kernel.open_gram_kernel`), one
 factorisation and SVD per fold for every order, the feedthrough decision per
-fold (every channel's F-tests from one factorisation per regressor set), the
+fold (every channel's F-tests from one QR factorisation of the Hankel rows in nested
+order, :func:`subid.methods.dt.feedthrough._nested_powers`), the
 validation records' weights and spreads once for every horizon, and, on records
 of at least :data:`subid.methods.dt._lag_fit.MIN_SAMPLES` samples, the lag
 products of every training and validation record (``Γ(e) = sum u u^T``, ``R(k) =
@@ -133,10 +137,10 @@ validation block (:mod:`subid.methods.dt._scoring`); an unstable A that
 (:mod:`subid.methods.dt._residual_bound`: a lower bound of its residual from part of
 the rows, the cheapest first by how fast A grows). Measured (``bench/run.py
 --selection-only``, 2x2 order-4 system, 20 dB, CPU time, three runs;
-bench/results.md; the pinned call fits no fold): the default call costs 20-25x the
-pinned call at 10^3 and 10^4 samples (2.2-3.0x and 0.31-0.36x SIPPY's AIC order
-search), 18.7-20.1x at 10^5 (34-46x before the lag products) and 5.3-6.0x at 10^6 (the
-folds use at most :data:`MAX_SELECTION_SAMPLES`): the per-candidate work no longer
+bench/results.md; the pinned call fits no fold): the default call costs 16-24x the
+pinned call at 10^3 samples and 14-17x at 10^4 (1.3-1.9x and 0.17-0.31x SIPPY's AIC
+order search), 13.6-14.6x at 10^5 (34-46x before the lag products) and 4.6-5.3x at
+10^6 (the folds use at most :data:`MAX_SELECTION_SAMPLES`): the per-candidate work no longer
 grows with N, but 80 candidate models (orders x horizons x folds), each about a
 millisecond of subspace steps, regression, score and bookkeeping (Python calls on
 matrices of order 10), remain (what one candidate's steps ask several times is
@@ -156,6 +160,19 @@ CD_player_arm, powerplant and winding with N4SID; k = 4: CD_player_arm and windi
 e.g. N4SID on winding order 10 -> 5) while scoring only 15 % (k = 3) or 9 % (k = 4)
 fewer candidates: the criterion of real records has late minima, so the search is not
 cut.
+
+Outside the candidates (issue 21, ``bench/selection_paired.py``: 0.71x, 0.76x, 0.88x
+and 0.88x the CPU time of the default call before at 10^3, 10^4, 10^5 and 10^6 samples,
+the same choices, models and fold scores on every bundled record,
+``bench/selection_identity.py``): the innovation check fits the admissible orders
+first and the others only until one has a lower criterion (2-7 of 10 orders on the
+2x2 order-4 system of ``bench/run.py``: :func:`innovation_check`), with its Kalman gains
+by a compiled doubling loop and its prediction errors' products summed by a compiled
+pass (:mod:`subid.methods.dt._innovation_kernel`); the oblique projections of the noise
+model are kept on their factor (:meth:`subid.statistic._hankel.HankelFactor.derived`),
+and the check's factor in the user's units, its lag products and the record's
+:class:`subid.methods.dt._scoring.Held` go to the final model (:class:`RecordWork`);
+the folds' blocks are recognised by their memory (:func:`_same_samples`).
 
 **Models that are only scored** (the fold models and the innovation check's): their
 B, D, x0 normal equations (modal or lag products) are solved up to an equilibrated
