@@ -723,14 +723,14 @@ class RecordWork:
         """Give ``problem`` (of the whole record) the check's factor in the user's units
         when the two problems hold the same factor and channel scales (then it is the
         factor the problem would make, bit for bit)."""
-        from subid.methods.dt.noise_model import USER_FACTOR
+        from subid.methods.dt.noise_model import USER_FACTOR, user_factor
         other = self.problems.get(problem.horizon)
-        if other is None or other.data is not problem.data or USER_FACTOR not in other._cache:
+        if other is None or other.data is not problem.data:
             return
         if np.array_equal(other.factor.L, problem.factor.L) \
                 and np.array_equal(other.input_scale, problem.input_scale) \
                 and np.array_equal(other.output_scale, problem.output_scale):
-            problem.cached(USER_FACTOR, lambda: other._cache[USER_FACTOR])
+            problem.cached(USER_FACTOR, lambda: user_factor(other))
 
 
 #: Samples (the last ones) on which :func:`innovation_check` fits and compares its models:
