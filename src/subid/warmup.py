@@ -75,10 +75,12 @@ def _batch():
     ls_subspace(IOData(u, y))                              # the order search's candidates
     HankelStatistic(2, 2, 4, kind="gram").update(u, y).factor()    # long records, streams
     select_structure(IOData(u, y), max_order=2)            # arx's structure search
-    from subid.methods.dt._innovation_kernel import doubling, prediction_power
-    prediction_power(np.eye(2) * 0.5, np.ones((2, 2)), np.ones((2, 2)), np.zeros((2, 2)),
-                     np.zeros((2, 2)), [(u, y)])          # the order search's innovation check
-    doubling(np.eye(2) * 0.5, np.eye(2), np.eye(2), 40, 1e-15)     # and its Kalman gains
+    # the order search's innovation check: its prediction errors and Kalman gains
+    from subid.methods.dt.noise_model import riccati_by_doubling
+    from subid.methods.dt.selection import innovation_bic
+    model = seed001_system()
+    innovation_bic(model.with_noise_model(np.zeros((model.order, 2)), np.eye(2)), IOData(u, y))
+    riccati_by_doubling(0.5 * np.eye(2), np.eye(2), np.eye(2), np.eye(2), np.zeros((2, 2)))
 
 
 def _ct():
