@@ -69,6 +69,7 @@ import contextvars
 import numpy as np
 import scipy.linalg
 
+from subid._kernel_args import frozen
 from subid._validation import as_signal, check_dt, check_int, checked_call
 from subid.data import IOData
 from subid.errors import DataError, ResourceLimitError, TooFewSamplesError
@@ -122,8 +123,7 @@ def lag_sums_uy(u: np.ndarray, y: np.ndarray, depth: int) -> np.ndarray:
     it releases the GIL)."""
     from subid.statistic._lag_kernel import lag_sums_kernel
 
-    return lag_sums_kernel(np.ascontiguousarray(u, dtype=np.float64),
-                           np.ascontiguousarray(y, dtype=np.float64), depth)
+    return lag_sums_kernel(frozen(u), frozen(y), depth)     # one compiled signature
 
 
 class HankelStatistic:
