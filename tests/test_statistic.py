@@ -177,8 +177,10 @@ def test_lq_lower_is_scipy_qr_bit_for_bit():
         M = rng.standard_normal((r, m))
         for variant in (M, np.asfortranarray(M), M[:, ::2] if m > 1 else M):
             want = scipy.linalg.qr(variant.T, mode="r", check_finite=False)[0][:r]
+            kept = variant.copy()
             got = geqrf_r(variant.T, r, overwrite=False)
             assert got.shape == want.shape and np.array_equal(got, want)
+            assert np.array_equal(variant, kept)          # overwrite=False: input untouched
             k = min(variant.shape)
             L = lq_lower(variant)
             assert L.shape == (r, r) and np.array_equal(np.abs(L[:, :k]), np.abs(want.T[:, :k]))
