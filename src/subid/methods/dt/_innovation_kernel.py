@@ -22,6 +22,8 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from subid._kernel_args import frozen
+
 
 @numba.njit(cache=True)
 def _power_kernel(Ap, Bu, K, C, D, u, y):  # pragma: no cover - compiled
@@ -69,8 +71,9 @@ def _power_kernel(Ap, Bu, K, C, D, u, y):  # pragma: no cover - compiled
 
 
 def _predictor(A, B, C, D, K):
-    f = lambda M: np.ascontiguousarray(M, dtype=np.float64)     # noqa: E731
-    return f(A - K @ C), f(B - K @ D), f(K), f(C), f(D)
+    """The predictor's matrices, read-only (one compiled signature,
+    :mod:`subid._kernel_args`)."""
+    return frozen(A - K @ C), frozen(B - K @ D), frozen(K), frozen(C), frozen(D)
 
 
 def prediction_power(A, B, C, D, K, pieces):
@@ -81,9 +84,7 @@ def prediction_power(A, B, C, D, K, pieces):
     total = np.zeros((ny, ny))
     with np.errstate(all="ignore"):
         for u, y in pieces:
-            S, finite = _power_kernel(Ap, Bu, Kc, Cc, Dc,
-                                      np.ascontiguousarray(u, dtype=np.float64),
-                                      np.ascontiguousarray(y, dtype=np.float64))
+            S, finite = _power_kernel(Ap, Bu, Kc, Cc, Dc, frozen(u), frozen(y))
             if not finite:
                 return None
             total += S
@@ -106,8 +107,9 @@ def prediction_power_reference(A, B, C, D, K, pieces):
 
 
 @numba.njit(cache=True)
-def _doubling_kernel(Ak, G, H, iterations, tolerance):  # pragma: no cover - compiled
+def _doubling_kernel(Ak0, G0, H0, iterations, tolerance):  # pragma: no cover - compiled
     """``(H, status)``: status 0 converged, 1 singular step, 2 not finite, 3 not settled."""
+    Ak, G, H = Ak0.copy(), G0.copy(), H0.copy()     # writeable iterates
     n = Ak.shape[0]
     eye = np.eye(n)
     rhs = np.empty((n, 2 * n))
@@ -169,9 +171,9 @@ def _doubling_kernel(Ak, G, H, iterations, tolerance):  # pragma: no cover - com
 def doubling(Ak, G, H, iterations, tolerance):
     """The doubling iteration from ``(A_0, G_0, H_0)``: ``P``, or None when a step is
     singular, an iterate is not finite or it does not settle within ``iterations``."""
-    c = lambda M: np.ascontiguousarray(M, dtype=np.float64)     # noqa: E731
-    with np.errstate(all="ignore"):
-        P, status = _doubling_kernel(c(Ak), c(G), c(H), int(iterations), float(tolerance))
+    with np.errstate(all="ignore"):      # read-only: one compiled signature
+        P, status = _doubling_kernel(frozen(Ak), frozen(G), frozen(H), int(iterations),
+                                     float(tolerance))
     return P if status == 0 else None
 
 
