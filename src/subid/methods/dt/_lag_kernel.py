@@ -509,3 +509,147 @@ def error_power_reference(lam, V, Wm, vand_re, vand_im, G, R, Y_diag, u_tail, u_
         return np.full(ny, np.nan)
     x0 = np.linalg.lstsq(Pw, beta @ w2, rcond=rcond)[0]
     return total - 2.0 * (x0 @ beta) + np.einsum("i,rij,j->r", x0, Pr, x0)
+
+
+@numba.njit(cache=True, nogil=True)
+def solve_equilibrated(Naug, max_condition):  # pragma: no cover - compiled
+    """``(ok, theta, residual)`` of the augmented normal matrix ``[[G, b], [b^T, yy]]``:
+    ``theta = G^{-1} b`` by the Cholesky factor of the equilibrated ``G`` (unit
+    diagonal), ``residual = max(yy - theta^T b, 0)``; ``ok`` false when ``G`` is not
+    finite, not positive definite or its equilibrated condition number exceeds
+    ``max_condition`` (the guard of
+    :func:`subid.methods.dt._regression.solve_normal_equations`, which this computes
+    with a Cholesky factor of the lower instead of the upper triangle)."""
+    p = Naug.shape[0] - 1
+    theta = np.zeros(p)
+    if p == 0:
+        return False, theta, 0.0
+    for i in range(p + 1):
+        for j in range(p + 1):
+            if not np.isfinite(Naug[i, j]):
+                return False, theta, 0.0
+    scale = np.empty(p)
+    for i in range(p):
+        s = math.sqrt(Naug[i, i])
+        scale[i] = 1.0 if s == 0.0 else s
+    Ge = np.empty((p, p))
+    rhs = np.empty(p)
+    for i in range(p):
+        rhs[i] = Naug[i, p] / scale[i]
+        for j in range(p):
+            Ge[i, j] = Naug[i, j] / scale[i] / scale[j]
+    ev = np.linalg.eigvalsh(Ge)
+    if ev[0] <= 0.0 or ev[p - 1] / ev[0] > max_condition:
+        return False, theta, 0.0
+    Lc = np.linalg.cholesky(Ge)
+    z = np.empty(p)
+    for i in range(p):                      # L z = rhs
+        s = rhs[i]
+        for k in range(i):
+            s -= Lc[i, k] * z[k]
+        z[i] = s / Lc[i, i]
+    for i in range(p - 1, -1, -1):          # L^T x = z
+        s = z[i]
+        for k in range(i + 1, p):
+            s -= Lc[k, i] * theta[k]
+        theta[i] = s / Lc[i, i]
+    dot = 0.0
+    for i in range(p):
+        theta[i] /= scale[i]
+        dot += theta[i] * Naug[i, p]
+    return True, theta, max(Naug[p, p] - dot, 0.0)
+
+
+@numba.njit(cache=True, nogil=True)
+def _record_lags(lags, radius, n_samples, max_lag, edge_decay):  # pragma: no cover
+    """The lags L of a record's sums (``_lag_fit._Modal.lags_for``), or -1."""
+    if lags >= n_samples and radius ** n_samples > edge_decay:
+        return -1
+    L = min(lags, n_samples - 1)
+    return L if 1 <= L <= max_lag else -1
+
+
+@numba.njit(cache=True, nogil=True)
+def _heads(u, y, L):  # pragma: no cover - compiled
+    """The last L + 1 inputs in reverse order, the first L + 1 inputs and outputs."""
+    N = u.shape[0]
+    tail = np.empty((L + 1, u.shape[1]))
+    for e in range(L + 1):
+        for c in range(u.shape[1]):
+            tail[e, c] = u[N - 1 - e, c]
+    return tail, np.ascontiguousarray(u[:L + 1]), np.ascontiguousarray(y[:L + 1])
+
+
+@numba.njit(cache=True, nogil=True)
+def candidate_error(lam, V, G_t, R_t, Y_t, u_t, y_t, max_lag_t, G_v, R_v, Y_v, u_v, y_v,
+                    max_lag_v, C, w, weights_v, feedthrough, estimate_x0,
+                    limits):  # pragma: no cover - compiled
+    """One fold candidate ``(A, C)``, ``A = V diag(λ) V^{-1}``, in one call: B, D, x0 of
+    the weighted output regression on its training record from that record's lag
+    products (:func:`modal_form`, :func:`powers`, :func:`normal_matrix`,
+    :func:`solve_equilibrated`), then the error power of its simulation on the
+    validation record from that one's (:func:`error_power`): the steps of
+    :func:`subid.methods.dt._lag_fit.fit_b_d_x0` and
+    :func:`subid.methods.dt._lag_fit.error_power` with their guards
+    (``limits``: :data:`~subid.methods.dt._lag_fit.LAG_TOLERANCE`,
+    :data:`~subid.methods.dt._lag_fit.MAX_EIGVEC_CONDITION`,
+    :data:`~subid.methods.dt._lag_fit.EDGE_DECAY`, the normal matrix's largest
+    condition, :data:`~subid.methods.dt._regression.RESIDUAL_RECOMPUTE`,
+    :data:`~subid.methods.dt._lag_fit.ROUNDING_GUARD`,
+    :data:`~subid.methods.dt._lag_fit.MAX_X0_CONDITION`). ``G_*``, ``R_*`` the lag
+    products computed so far (flattened), ``Y_*`` the diagonal of ``y^T y``,
+    ``max_lag_*`` the records' ``LagProducts.max_lag``.
+
+    Returns ``(status, B, D, err, lags)``: status 0, ``err`` the error power per
+    output; 1, the products do not give the fit; 2 (3), the training (validation)
+    record's lags up to ``lags`` are needed first; 4, B and D are fitted but the
+    products do not give the score."""
+    n = lam.shape[0]
+    ny, nu = C.shape[0], u_t.shape[1]
+    B = np.zeros((n, nu))
+    D = np.zeros((ny, nu))
+    err = np.zeros(ny)
+    status, lags, Wm = modal_form(lam, V, limits[0], limits[1])
+    if status != 0:
+        return 1, B, D, err, 0
+    radius = 0.0
+    for i in range(n):
+        radius = max(radius, abs(lam[i]))
+    L_t = _record_lags(lags, radius, u_t.shape[0], max_lag_t, limits[2])
+    if L_t < 0:
+        return 1, B, D, err, 0
+    if L_t >= G_t.shape[0]:
+        return 2, B, D, err, L_t
+    L_v = _record_lags(lags, radius, u_v.shape[0], max_lag_v, limits[2])
+    if L_v >= G_v.shape[0]:
+        return 3, B, D, err, L_v
+    vre, vim = powers(lam, max(L_t, L_v))
+    tail, head, y_head = _heads(u_t, y_t, L_t)
+    Naug = normal_matrix(lam, V, Wm, np.ascontiguousarray(vre[:, :L_t + 1]),
+                         np.ascontiguousarray(vim[:, :L_t + 1]), G_t[:L_t + 1], R_t[:L_t + 1],
+                         Y_t, tail, head, y_head, u_t.shape[0], C, w, feedthrough,
+                         estimate_x0)
+    ok, theta, resid2 = solve_equilibrated(Naug, limits[3])
+    p = Naug.shape[0] - 1
+    if not ok or resid2 < limits[4] * Naug[p, p]:
+        return 1, B, D, err, 0      # ill-conditioned, or a nearly exact fit (rounding)
+    nx = n if estimate_x0 else 0
+    for a in range(nu):
+        for i in range(n):
+            B[i, a] = theta[nx + a * n + i]
+    if feedthrough:
+        q = nx + n * nu
+        for b in range(nu):
+            for r in range(ny):
+                D[r, b] = theta[q + b * ny + r]
+    if L_v < 0:
+        return 4, B, D, err, 0
+    tail, head, y_head = _heads(u_v, y_v, L_v)
+    err = error_power(lam, V, Wm, np.ascontiguousarray(vre[:, :L_v + 1]),
+                      np.ascontiguousarray(vim[:, :L_v + 1]), G_v[:L_v + 1], R_v[:L_v + 1],
+                      Y_v, tail, head, y_head, u_v.shape[0], B, C, D, weights_v, 1e-13,
+                      limits[6])
+    for r in range(ny):
+        if not np.isfinite(err[r]) or err[r] < limits[5] * Y_v[r]:
+            return 4, B, D, err, 0  # a nearly exact fit: the pass is exact, this is not
+    return 0, B, D, err, 0

@@ -222,10 +222,21 @@ def _fit_score(model, validation) -> float:
     squares), clipped below at :data:`FLOOR`; :data:`FLOOR` when the simulation
     overflows. ``mean(fit_percent(model, validation))`` to rounding, by one
     compiled pass (:func:`subid.methods.dt._scoring.simulation_fit`)."""
-    from subid.methods.dt._scoring import simulation_fit
     if model.is_continuous:           # continuous time (ct_subspace): simulated with its hold
         return fold_score(model, getattr(validation, "record", validation))
-    fits = simulation_fit(model.A, model.B, model.C, model.D, validation)
+    return score_matrices(model.A, model.B, model.C, model.D, validation)
+
+
+def score_matrices(A, B, C, D, validation) -> float:
+    """:func:`_fit_score` of the discrete-time model ``(A, B, C, D)`` (the fold
+    candidates of :meth:`subid.methods.dt.pipeline.Pipeline.fold_score`)."""
+    from subid.methods.dt._scoring import simulation_fit
+    return mean_score(simulation_fit(A, B, C, D, validation))
+
+
+def mean_score(fits) -> float:
+    """The score of a candidate from its fits per output (%, None when its simulation
+    overflowed): their mean, clipped below at :data:`FLOOR`."""
     if fits is None:
         return FLOOR
     value = float(np.mean(fits))
@@ -298,18 +309,24 @@ def score_horizon(parts, orders, horizon, *, fitter, estimators, held=None, lagg
             if lagged[k] is None:         # once per fold, for every horizon
                 lagged[k] = LagProducts.of_record(train)
             problem._cache[LAG_PRODUCTS] = lagged[k]    # B, D, x0 of every candidate
-        for n in orders:
-            for v, name in enumerate(names):
-                try:
-                    with warnings.catch_warnings(), scoring_only():
-                        warnings.simplefilter("ignore")
-                        model = fitter.fit(replace(problem, order=n, candidates=[n],
-                                                   fold=True), name)
-                    value = _fit_score(model, held_out)
-                    repaired[(n, v)] += stabilised(model)
-                except SubidError:
-                    value = FLOOR
-                per_fold[(n, v)].append(value)
+        # the candidates are only scored: without the model objects where the fitter
+        # can (Pipeline.fold_score), else from the models
+        scorer = getattr(fitter, "fold_score", None)
+        with warnings.catch_warnings(), scoring_only():
+            warnings.simplefilter("ignore")
+            for n in orders:
+                at_n = replace(problem, order=n, candidates=[n], fold=True)
+                for v, name in enumerate(names):
+                    try:
+                        if scorer is not None:
+                            value, repair = scorer(at_n, name, held_out)
+                        else:
+                            model = fitter.fit(at_n, name)
+                            value, repair = _fit_score(model, held_out), stabilised(model)
+                        repaired[(n, v)] += repair
+                    except SubidError:
+                        value = FLOOR
+                    per_fold[(n, v)].append(value)
     return per_fold, repaired
 
 
@@ -558,7 +575,12 @@ def next_block(top, n_train, n_inputs, n_outputs, blocks, n_experiments, horizon
 def stabilised(model) -> bool:
     """Whether ``model``'s A was made stable after its estimation (``stability='auto'``
     found it unstable on data that do not grow and reflected its unstable poles)."""
-    stab = model.info.get("stability")
+    return enforced(model.info.get("stability"))
+
+
+def enforced(stab) -> bool:
+    """Whether the stability record ``stab`` (a model's ``info['stability']``) says
+    that ``stability='auto'`` made its A stable (:func:`stabilised`)."""
     return isinstance(stab, dict) and stab.get("action") == "enforced" \
         and stab.get("requested") == "auto"
 
