@@ -84,13 +84,9 @@ import numpy as np
 import scipy.fft
 import scipy.linalg
 
-from subid.methods.dt._lag_kernel import candidate_error, modal_form, normal_matrix, powers
 from subid.methods.dt._lag_kernel import error_power as kernel_error_power
-from subid.methods.dt._regression import (
-    RESIDUAL_RECOMPUTE,
-    normal_condition_limit,
-    solve_normal_equations,
-)
+from subid.methods.dt._lag_kernel import modal_form, normal_matrix, powers
+from subid.methods.dt._regression import RESIDUAL_RECOMPUTE, solve_normal_equations
 
 #: The key of a problem's cache that holds its record's lag products (a
 #: cross-validation fold, :func:`subid.methods.dt.selection.score_horizon`).
@@ -404,54 +400,3 @@ def error_power(A, B, C, D, lp: LagProducts, weights, inv_scale):
     if not np.isfinite(err).all() or np.any(err < ROUNDING_GUARD * np.diag(lp.Y)):
         return None                  # a nearly exact fit: the pass is exact, this is not
     return err * inv_scale ** 2
-
-
-def fit_and_error(A, C, lp: LagProducts, output_weights, held: LagProducts, held_weights, *,
-                  feedthrough=True, estimate_x0=True):
-    """B, D of the output regression of ``(A, C)`` on the record of ``lp``
-    (:func:`fit_b_d_x0`) and the error power of the model's simulation on the record
-    of ``held`` (:func:`error_power`, without ``inv_scale``), from their lag products in
-    one compiled call (:func:`subid.methods.dt._lag_kernel.candidate_error`; the same
-    sums and guards; the equilibrated normal equations solved with the condition limit
-    in force, :func:`subid.methods.dt._regression.normal_condition_limit`).
-
-    Returns ``(B, D, err)``; ``err`` None where the products do not give the score
-    (the pass must score that model); None altogether where they do not give the fit.
-    """
-    A = np.asarray(A, dtype=float)
-    if A.shape[0] == 0 or not np.isfinite(A).all():
-        return None
-    lam, V = np.linalg.eig(A)                    # as _Modal.of computes the modal form
-    lam, V = lam.astype(complex, copy=False), V.astype(complex, copy=False)
-    C = np.ascontiguousarray(C, dtype=float)
-    w = np.ones(C.shape[0]) if output_weights is None else \
-        np.ascontiguousarray(output_weights, dtype=float)
-    limits = np.array([LAG_TOLERANCE, MAX_EIGVEC_CONDITION, EDGE_DECAY,
-                       normal_condition_limit(), RESIDUAL_RECOMPUTE, ROUNDING_GUARD,
-                       MAX_X0_CONDITION])
-    for _ in range(3):                           # at most one extension of each record
-        status, B, D, err, lags = candidate_error(
-            lam, V, lp.G.reshape(lp.G.shape[0], -1), lp.R.reshape(lp.R.shape[0], -1),
-            _diagonal(lp), lp.u, lp.y, lp.max_lag,
-            held.G.reshape(held.G.shape[0], -1), held.R.reshape(held.R.shape[0], -1),
-            _diagonal(held), held.u, held.y, held.max_lag, C, w,
-            np.ascontiguousarray(held_weights, dtype=float), bool(feedthrough),
-            bool(estimate_x0), limits)
-        if status in (2, 3):                     # lags past those computed so far
-            record = lp if status == 2 else held
-            if record.extend is None:
-                return None
-            record.lags(lags)
-            continue
-        break
-    if status == 0:
-        return B, D, err
-    return (B, D, None) if status == 4 else None
-
-
-def _diagonal(lp: LagProducts) -> np.ndarray:
-    """The diagonal of ``y^T y`` of a record's lag products (once per record)."""
-    cached = getattr(lp, "_y_diagonal", None)
-    if cached is None:
-        cached = lp._y_diagonal = np.ascontiguousarray(np.diag(lp.Y))
-    return cached

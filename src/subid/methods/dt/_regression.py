@@ -518,13 +518,6 @@ _NORMAL_CONDITION = contextvars.ContextVar("subid_normal_condition",
                                            default=MODAL_MAX_NORMAL_CONDITION)
 
 
-def normal_condition_limit() -> float:
-    """The largest equilibrated condition number :func:`solve_normal_equations`
-    accepts here (:data:`SCORING_MAX_NORMAL_CONDITION` within :func:`scoring_only`,
-    :data:`MODAL_MAX_NORMAL_CONDITION` otherwise)."""
-    return _NORMAL_CONDITION.get()
-
-
 @contextlib.contextmanager
 def scoring_only():
     """Within the block, :func:`solve_normal_equations` (by default) accepts
@@ -812,7 +805,7 @@ def solve_normal_equations(N, n, nu, ny, *, estimate_x0, feedthrough, n_samples,
     :data:`MODAL_MAX_NORMAL_CONDITION`, :data:`SCORING_MAX_NORMAL_CONDITION` within
     :func:`scoring_only`). ``n_x0`` as in :func:`solve_factor`."""
     if max_condition is None:
-        max_condition = normal_condition_limit()
+        max_condition = _NORMAL_CONDITION.get()
     nx, q, p = parameter_count(n, nu, ny, estimate_x0, feedthrough, n_x0)
     if not np.isfinite(N).all():
         return None

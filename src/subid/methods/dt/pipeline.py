@@ -44,15 +44,14 @@ from subid.methods.dt._subspace import (
     b_d_refit,
     finalize,
     finish,
-    lag_fold_error,
+    lag_fold_score,
     prepare,
     stable_choice,
 )
 from subid.methods.dt.checks import check_data
 from subid.methods.dt.feedthrough import resolve as resolve_feedthrough
 from subid.methods.dt.plan import Plan, make_plan
-from subid.methods.dt.selection import choose, enforced, estimator_by_fit
-from subid.methods.dt.selection import score_matrices
+from subid.methods.dt.selection import choose, enforced, estimator_by_fit, score_matrices
 from subid.model.statespace import StateSpace
 
 
@@ -224,10 +223,10 @@ class Pipeline:
         model object (no ``finish``: ``info``, the stability warning, the
         :class:`subid.StateSpace`), for a candidate that is only scored
         (:func:`subid.methods.dt.selection.score_horizon`). A stable A of shift
-        invariance (whose model :func:`b_d_x0` leaves as estimated) takes its B, D, x0
-        and its score from the lag products of the training and validation records in
-        one compiled call where they apply
-        (:func:`subid.methods.dt._subspace.lag_fold_error`). ``stabilised``: whether
+        invariance (whose model :func:`b_d_x0` leaves as estimated, in any basis: the
+        score does not depend on it) takes its B, D, x0 from the lag products of the
+        training record where they apply, without the stability rule's closures and
+        diagnostics (:func:`subid.methods.dt._subspace.lag_fold_score`). ``stabilised``: whether
         ``stability='auto'`` reflected its unstable poles
         (:func:`subid.methods.dt.selection.stabilised`)."""
         method, plan = self.method, self.plan
@@ -238,7 +237,7 @@ class Pipeline:
         if isinstance(est, States):
             return score_matrices(est.A, est.B, est.C, est.D, held), \
                 enforced(est.info.get("stability"))
-        fast = lag_fold_error(problem, est.A, est.C, held, bd_method=plan.bd_method,
+        fast = lag_fold_score(problem, est.A, est.C, held, bd_method=plan.bd_method,
                               feedthrough=feedthrough, estimate_x0=plan.estimate_x0)
         if fast is not None:              # a stable A: no stability rule to apply
             return fast, False
