@@ -199,6 +199,31 @@ def test_fold_statistics_merged_from_blocks():
                                   _pipeline(merged)) == [None] * 4
 
 
+def test_bounded_condition_gives_the_same_solve():
+    """solve_normal_equations with the condition number bounded from the Cholesky factor
+    (the fold candidates') takes the same decision and gives the same solution, to the
+    bit, as with the eigenvalues, on well- and ill-conditioned normal matrices (the
+    bound at or above the eigenvalue ratio)."""
+    rng = np.random.default_rng(11)
+    decided = set()
+    for k in range(60):
+        X = rng.standard_normal((120, 13))
+        X[:, 3] = X[:, 2] + 10.0 ** -rng.uniform(0, 7) * X[:, 3]     # near collinear
+        N = X.T @ X
+        for limit in (1e4, 1e8):
+            kw = dict(estimate_x0=True, feedthrough=True, n_samples=120, max_condition=limit)
+            exact = regression.solve_normal_equations(N, 2, 2, 2, **kw)
+            bounded = regression.solve_normal_equations(N, 2, 2, 2, bound_condition=True, **kw)
+            assert (exact is None) == (bounded is None)
+            decided.add(exact is None)
+            if exact is not None:
+                for a, b in zip(exact[:4], bounded[:4]):
+                    np.testing.assert_array_equal(a, b)
+                assert bounded[4]["regression_condition"] >= \
+                    exact[4]["regression_condition"] * (1 - 1e-12)
+    assert decided == {True, False}
+
+
 def test_fold_score_equals_the_model_and_its_score():
     """Pipeline.fold_score (a fold candidate scored without its model object; a stable
     A of shift invariance fitted and scored on one modal form) gives the score and the

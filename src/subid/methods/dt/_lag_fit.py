@@ -374,9 +374,10 @@ def fit_b_d_x0(A, C, lp: LagProducts, output_weights, *, feedthrough=True, estim
     return B, D, x0, diagnostics
 
 
-def _modal_fit(md, C, lp, output_weights, feedthrough, estimate_x0):
+def _modal_fit(md, C, lp, output_weights, feedthrough, estimate_x0, bound_condition=False):
     """:func:`fit_b_d_x0` on the modal form ``md``: ``(B, D, x0, diagnostics, L)`` or
-    None."""
+    None (``bound_condition``: as
+    :func:`subid.methods.dt._regression.solve_normal_equations` takes it)."""
     L = md.lags_for(lp)
     if L is None:
         return None
@@ -387,7 +388,8 @@ def _modal_fit(md, C, lp, output_weights, feedthrough, estimate_x0):
     Naug = normal_matrix(*md.arguments(lp, L) + (C, w, feedthrough, estimate_x0))
     p = Naug.shape[0] - 1
     solved = solve_normal_equations(Naug, n, nu, ny, estimate_x0=estimate_x0,
-                                    feedthrough=feedthrough, n_samples=N)
+                                    feedthrough=feedthrough, n_samples=N,
+                                    bound_condition=bound_condition)
     if solved is None:
         return None
     B, D, x0, _, diagnostics = solved
@@ -429,7 +431,7 @@ def fit_and_error(A, C, lp: LagProducts, output_weights, held: LagProducts, held
     A = np.asarray(A, dtype=float)
     md = _Modal._of(A)
     fitted = None if md is None else _modal_fit(md, C, lp, output_weights, feedthrough,
-                                                 estimate_x0)
+                                                 estimate_x0, bound_condition=True)
     if fitted is None:
         return None
     B, D = np.ascontiguousarray(fitted[0]), np.ascontiguousarray(fitted[1])

@@ -269,7 +269,10 @@ def score_horizon(parts, orders, horizon, *, fitter, estimators, held=None, lagg
     horizon : int
     fitter : :class:`subid.methods.dt.pipeline.Pipeline` or alike
         ``fitter.prepare_fold(record, candidates, horizon, factor=None) -> Problem``
-        and ``fitter.fit(problem with a fixed order, estimator) -> StateSpace``. With
+        and ``fitter.fit(problem with a fixed order, estimator) -> StateSpace``, or,
+        where it has it, ``fitter.fold_score(problem with a fixed order, estimator,
+        held) -> (score, stabilised)`` (the same score without the model object,
+        :meth:`subid.methods.dt.pipeline.Pipeline.fold_score`). With
         the attributes ``blocks_per_horizon`` and ``statistic`` (the option) not None,
         the folds' factors are merged from the blocks' statistics and passed as
         ``factor`` (:func:`fold_factors`); otherwise each fold builds its own.
