@@ -10,7 +10,7 @@ order of the calls each round, and reports the median of the paired ratios
 
 Usage::
 
-    python bench/selection_paired.py /work/main/src src [rounds]
+    python bench/selection_paired.py /work/main/src src [rounds] [sizes, e.g. 1000,10000]
 """
 
 from __future__ import annotations
@@ -40,13 +40,14 @@ def main(argv):
     warnings.simplefilter("ignore")
     paths = argv[1:3]
     rounds = int(argv[3]) if len(argv) > 3 else 21
+    sizes = [int(k) for k in argv[4].split(",")] if len(argv) > 4 else [1000, 10000]
     versions = [load(p) for p in paths]
 
     def use(k):
         sys.modules.update(versions[k][1])
         return versions[k][0]
 
-    for n in (1000, 10000):
+    for n in sizes:
         sub = use(0)
         data = sub.systems.simulate_data(sub.systems.random_system(4, 2, 2, seed=1), n, seed=2,
                                          output_snr_db=20)
