@@ -206,7 +206,7 @@ def test_bounded_condition_gives_the_same_solve():
     bound at or above the eigenvalue ratio)."""
     rng = np.random.default_rng(11)
     decided = set()
-    for k in range(60):
+    for _ in range(60):
         X = rng.standard_normal((120, 13))
         X[:, 3] = X[:, 2] + 10.0 ** -rng.uniform(0, 7) * X[:, 3]     # near collinear
         N = X.T @ X

@@ -149,7 +149,30 @@ regression's maps are filled by blocks,
 :func:`subid.methods.dt._regression.regressor_maps`: together 10-11 % of the default
 call at 10^3 samples and 8-11 % at 10^4, ``bench/selection_paired.py``, the same
 choices and models bit for bit on every bundled record,
-``bench/selection_identity.py``). Stopping the order search once the criterion has not
+``bench/selection_identity.py``). A fold candidate is only scored, so no model object
+is made for it (:meth:`subid.methods.dt.pipeline.Pipeline.fold_score`: the steps of
+:meth:`~subid.methods.dt.pipeline.Pipeline.fit` without ``finish``, its ``info``, its
+stability warning and the :class:`subid.StateSpace`); a stable A of shift invariance,
+which no stability rule touches, takes its B, D, x0 and its score on one modal form
+without the rule's closures and diagnostics
+(:func:`subid.methods.dt._subspace.lag_fold_score`,
+:func:`subid.methods.dt._lag_fit.fit_and_error`: the same kernels, the same values),
+its normal equations' condition number bounded from their Cholesky factor, the
+eigenvalues computed only past the limit (the same decision and solution,
+:func:`subid.methods.dt._regression.solve_normal_equations`); the growth of a fold's
+record, which every unstable candidate's stability rule asks, is computed once
+(:func:`subid.methods._stability.record_growth`). Measured (issue 21, branch
+s10-foldbatch, ``bench/selection_paired.py``, 21 paired rounds against the tree
+before, load average 4-5): 0.86x the default call's CPU time at 10^3 samples, 0.91x at
+10^4, 0.95x at 10^5; the same choices, models and fold scores on every bundled record
+(``bench/selection_identity.py``). What a default call at 10^4 samples still spends
+(instrumented, share of the call): the 75 stable fold candidates about 26 % (each the
+eigenvalues and modal form of A, the compiled normal matrix and error power, the
+Cholesky solve and about 40 small numpy calls), the 5 unstable ones about 14 % (their
+residual bounds, :mod:`subid.methods.dt._residual_bound`, each a recursion over the
+fold), the folds' feedthrough F-tests about 12 %, their statistics about 13 %, the
+innovation check about 22 %, the final model and its estimator choice the rest.
+Stopping the order search once the criterion has not
 improved for k orders (measured on the candidates' saved scores,
 ``bench/selection_identity.py``) would change the choice on DaISy records (k = 3:
 CD_player_arm, powerplant and winding with N4SID; k = 4: CD_player_arm and winding,
