@@ -23,6 +23,7 @@ import warnings
 
 import numpy as np
 
+import _identity
 import subid
 from subid import datasets
 from subid.methods.dt import distributed, stream
@@ -148,13 +149,13 @@ def fit_all():
     return results, errors
 
 
-def main(argv):
-    mode, path = argv[1], argv[2]
-    results, errors = fit_all()
-    if mode == "save":
-        np.savez(path, **results, **{f"{k}|error": np.array(v) for k, v in errors.items()})
-        return 0
-    saved = np.load(path)
+def _save(path, fitted):
+    results, errors = fitted
+    np.savez(path, **results, **{f"{k}|error": np.array(v) for k, v in errors.items()})
+
+
+def compare(saved, fitted):
+    results, errors = fitted
     worst = 0.0
     bad = 0
     keys = sorted(set(saved.files) | set(results) | {f"{k}|error" for k in errors})
@@ -180,8 +181,9 @@ def main(argv):
         if diff > 0:
             print(f"{key}: max abs diff {diff:.3g}")
     print(f"{len(keys)} arrays, {bad} mismatched, largest abs difference {worst:.3g}")
-    return 1 if bad or worst > 1e-12 else 0
+    return not bad and worst <= 1e-12
 
 
 if __name__ == "__main__":
-    sys.exit(main(sys.argv))
+    sys.exit(_identity.main(sys.argv, lambda mode: fit_all(), compare, save=_save,
+                            load=np.load))

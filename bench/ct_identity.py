@@ -17,12 +17,13 @@ Usage (the baseline from another tree, e.g. main's)::
 
 from __future__ import annotations
 
-import pickle
 import sys
 import time
 import warnings
 
 import numpy as np
+
+import _identity
 
 
 def _scores(selection):
@@ -103,16 +104,5 @@ def compare(before, after):
     return same and worst_model <= 1e-9
 
 
-def main(argv):
-    what, path, names = argv[1], argv[2], argv[3:] or None
-    if what == "save":
-        with open(path, "wb") as fh:
-            pickle.dump(run(names), fh)
-        return 0
-    with open(path, "rb") as fh:
-        before = pickle.load(fh)
-    return 0 if compare(before, run(names)) else 1
-
-
 if __name__ == "__main__":
-    sys.exit(main(sys.argv))
+    sys.exit(_identity.main(sys.argv, lambda mode: run(sys.argv[3:] or None), compare))

@@ -25,11 +25,12 @@ Usage::
 
 from __future__ import annotations
 
-import pickle
 import sys
 import warnings
 
 import numpy as np
+
+import _identity
 
 METHODS = ("arx", "pbsid")
 
@@ -155,17 +156,12 @@ def compare(before, after):
 
 
 def main(argv):
-    what, path = argv[1], argv[2]
     names = argv[3].split(",") if len(argv) > 3 else None
-    if what == "save":
-        with open(path, "wb") as fh:
-            pickle.dump(run(names), fh)
-        return 0
-    with open(path, "rb") as fh:
-        before = pickle.load(fh)
-    if names:
-        before = {k: v for k, v in before.items() if k[0] in names}
-    return 0 if compare(before, run(names, perturb=what == "floor")) else 1
+
+    def compare_named(before, after):
+        return compare({k: v for k, v in before.items() if not names or k[0] in names}, after)
+    return _identity.main(argv, lambda mode: run(names, perturb=mode == "floor"), compare_named,
+                          modes=("compare", "floor"))
 
 
 if __name__ == "__main__":

@@ -16,12 +16,13 @@ Usage::
 
 from __future__ import annotations
 
-import pickle
 import sys
 import time
 import warnings
 
 import numpy as np
+
+import _identity
 
 METHODS = ("moesp", "ls_subspace", "n4sid")
 
@@ -84,16 +85,5 @@ def compare(before, after):
     return same
 
 
-def main(argv):
-    what, path = argv[1], argv[2]
-    if what == "save":
-        with open(path, "wb") as fh:
-            pickle.dump(run(), fh)
-        return 0
-    with open(path, "rb") as fh:
-        before = pickle.load(fh)
-    return 0 if compare(before, run()) else 1
-
-
 if __name__ == "__main__":
-    sys.exit(main(sys.argv))
+    sys.exit(_identity.main(sys.argv, lambda mode: run(), compare))

@@ -40,8 +40,9 @@ def test_packed_kernel_equals_the_kernel_on_the_views():
     Fphi, Fg0, Fg1, Iphi, Ig0, Ig1, lamM, lamT = tables
     par, ipar = b._parameters()
     st = b._st
+    H = np.array(b._H)      # writeable, as kernel_packed's views: the signature warmup compiles
     K.kernel(T, u[1:], y[1:], np.zeros(299, dtype=np.int64), steps, lamM, lamT, Fphi, Fg0, Fg1,
-             Iphi, Ig0, Ig1, b._H, par, ipar, *(st[k] for k in b._ORDER), *cache, st["hist"],
+             Iphi, Ig0, Ig1, H, par, ipar, *(st[k] for k in b._ORDER), *cache, st["hist"],
              b._buf)
     for x, z in zip(_state(a), _state(b)):
         np.testing.assert_array_equal(x, z)

@@ -5,6 +5,7 @@ import pytest
 import scipy.linalg
 
 from subid import errors
+from subid._kernel_args import read_only
 from subid.methods.ct import _ct_kernels
 from subid.methods.ct._ct_estimate import _poisson_chain_bank
 from subid.methods.ct.basis import FilterBank, default_basis, laguerre, legendre, takenaka_malmquist
@@ -195,8 +196,9 @@ def test_bank_kernel_matches_reference():
     starts = np.clip(np.arange(L - 1) - 1, 0, L - 3).astype(np.int64)
     v = rng.standard_normal((L, 2, 3))
     x0 = rng.standard_normal((4, 3))
-    a = _ct_kernels.bank_loop(Phi, W, tab, starts, v, x0, np.empty((L, 4, 3)))
-    b = _ct_kernels.bank_loop_ref(Phi, W, tab, starts, v, x0, np.empty((L, 4, 3)))
+    args = read_only(Phi, W, tab, starts, v, x0)    # the signature the library compiles
+    a = _ct_kernels.bank_loop(*args, np.empty((L, 4, 3)))
+    b = _ct_kernels.bank_loop_ref(*args, np.empty((L, 4, 3)))
     np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-12)
 
 
@@ -212,7 +214,7 @@ def test_sensitivity_kernel_matches_reference():
     for kernel in (_ct_kernels.sens_loop, _ct_kernels.sens_loop_ref):
         Z, P0 = np.zeros((m, n, n)), np.eye(n)
         rb, rx = np.empty((L, ny, n, m)), np.empty((L, ny, n))
-        kernel(Phi, W, tab, starts, u, C, Z, P0, rb, rx)
+        kernel(*read_only(Phi, W, tab, starts, u, C), Z, P0, rb, rx)
         out.append((rb, rx))
     np.testing.assert_allclose(out[0][0], out[1][0], rtol=1e-12, atol=1e-12)
     np.testing.assert_allclose(out[0][1], out[1][1], rtol=1e-12, atol=1e-12)

@@ -15,6 +15,7 @@ import pytest
 import scipy.linalg
 
 import subid
+from subid._kernel_args import read_only
 from subid.methods.ct import _ct_kernels, _ct_sensitivity
 from subid.methods.ct import ct_subspace as ct_module
 from subid.methods.ct._ct_fit import _gelsd
@@ -40,7 +41,7 @@ def test_fused_sensitivity_matches_reference_and_old_kernel(free):
     for kernel in (_ct_sensitivity.sens_fused, _ct_sensitivity.sens_fused_ref):
         out = np.full((L, ny, width), 7.0)
         X = _ct_sensitivity.fused_state(n, m, free)
-        kernel(Phi, W, tab, starts, u, C, X, out, col_b, col_x)
+        kernel(*read_only(Phi, W, tab, starts, u, C), X, out, col_b, col_x)
         outs.append((out, X))
     np.testing.assert_allclose(outs[0][0], outs[1][0], rtol=1e-12, atol=1e-12)
     np.testing.assert_allclose(outs[0][1], outs[1][1], rtol=1e-12, atol=1e-12)
@@ -50,7 +51,7 @@ def test_fused_sensitivity_matches_reference_and_old_kernel(free):
     # bit for bit the rows of sens_loop (same summation order)
     Z, P0 = np.zeros((m, n, n)), np.eye(n)
     rb, rx = np.empty((L, ny, n, m)), np.empty((L, ny, n))
-    _ct_kernels.sens_loop(Phi, W, tab, starts, u, C, Z, P0, rb, rx)
+    _ct_kernels.sens_loop(*read_only(Phi, W, tab, starts, u, C), Z, P0, rb, rx)
     out = outs[0][0]
     np.testing.assert_array_equal(out[:, :, col_b:col_b + n * m], rb.reshape(L, ny, n * m))
     if free:

@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 from scipy import integrate, linalg, signal
 
+from subid._kernel_args import frozen
 from subid.data import IOData
 from subid.errors import DataError, OptionError
 from subid.model import _simulate
@@ -42,12 +43,14 @@ def test_tv_kernel_matches_reference(use_g1):
     D = rng.standard_normal((p, m))
     u = rng.standard_normal((N, m))
     x0 = rng.standard_normal(n)
+    Phi, G0, G1, C, D, u, x0 = map(frozen, (Phi, G0, G1, C, D, u, x0))   # as the library
+    idx = frozen(idx, np.int64)
     y, x = _simulate.tv_loop(Phi, G0, G1, idx, C, D, u, x0, use_g1)
     y_ref, x_ref = _simulate.tv_loop_ref(Phi, G0, G1, idx, C, D, u, x0, use_g1)
     assert rel_err(y, y_ref) < 1e-12
     assert rel_err(x, x_ref) < 1e-12
     # G1 really is (not) used
-    y2, _ = _simulate.tv_loop(Phi, G0, 2 * G1, idx, C, D, u, x0, use_g1)
+    y2, _ = _simulate.tv_loop(Phi, G0, frozen(2 * G1), idx, C, D, u, x0, use_g1)
     assert np.array_equal(y, y2) != use_g1
 
 

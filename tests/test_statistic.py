@@ -171,14 +171,16 @@ def test_lq_lower_is_scipy_qr_bit_for_bit():
     the same bits, for wide, tall, square, strided and empty inputs."""
     import scipy.linalg
 
-    from subid.statistic._hankel import _qr_r_rows, lq_lower
+    from subid.statistic._hankel import geqrf_r, lq_lower
     rng = np.random.default_rng(8)
     for r, m in [(40, 40), (30, 80), (80, 30), (1, 5), (5, 1), (0, 5), (5, 0)]:
         M = rng.standard_normal((r, m))
         for variant in (M, np.asfortranarray(M), M[:, ::2] if m > 1 else M):
             want = scipy.linalg.qr(variant.T, mode="r", check_finite=False)[0][:r]
-            got = _qr_r_rows(variant.T, r)
+            kept = variant.copy()
+            got = geqrf_r(variant.T, r, overwrite=False)
             assert got.shape == want.shape and np.array_equal(got, want)
+            assert np.array_equal(variant, kept)          # overwrite=False: input untouched
             k = min(variant.shape)
             L = lq_lower(variant)
             assert L.shape == (r, r) and np.array_equal(np.abs(L[:, :k]), np.abs(want.T[:, :k]))

@@ -13,7 +13,9 @@ one specialisation per kernel serves all data):
   uniform and the time-stamped paths share it),
 * :class:`subid.RecursiveSubspace`,
 * the batch calls (:func:`subid.ls_subspace`: the B, D, x0 pass; with its
-  default order search, the fold candidates' lag-product kernels), the
+  default order search, the fold candidates' lag-product kernels;
+  :func:`subid.identify`, the command line's default: the prediction-error
+  refinement's Jacobian), the
   lagged products of long records and streams (:class:`subid.HankelStatistic`)
   and the scoring pass of :func:`subid.arx`'s structure search,
 * :func:`subid.ct_subspace` on a uniform and on a non-uniform grid.
@@ -63,6 +65,7 @@ def _recursive():
 def _batch():
     from subid.data import IOData
     from subid.methods.dt.ls_subspace import ls_subspace
+    from subid.methods.identify import identify
     from subid.methods.dt.polynomial import select_structure
     from subid.statistic.hankel import HankelStatistic
     from subid.systems import seed001_system
@@ -72,6 +75,7 @@ def _batch():
     y = seed001_system().simulate(u)
     ls_subspace(IOData(u, y), 4)
     ls_subspace(IOData(u, y))                              # the order search's candidates
+    identify(IOData(u, y))          # the command line's default: the search, PEM refinement
     HankelStatistic(2, 2, 4, kind="gram").update(u, y)     # long records, streams
     select_structure(IOData(u, y), max_order=2)            # arx's structure search
 

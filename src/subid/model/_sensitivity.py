@@ -41,6 +41,8 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from subid._kernel_args import frozen
+
 #: A free response (:func:`free_response`) is taken as zero once every entry of its
 #: state has fallen below this fraction of the largest entry of its initial state.
 FREE_RESPONSE_FLOOR = 1e-150
@@ -149,10 +151,9 @@ def free_response(Ap, C, S0, N):
     first sample at which every entry of ``Ap^t S0`` is below
     :data:`FREE_RESPONSE_FLOOR` times the largest entry of ``S0`` (module
     docstring: the loop never enters subnormal numbers)."""
-    S0 = np.ascontiguousarray(S0, dtype=float)
-    C = np.ascontiguousarray(C, dtype=float)
+    S0, C = frozen(S0), frozen(C)       # read-only inputs: one compiled signature
     out = np.empty((int(N), C.shape[0], S0.shape[1]))
-    _free_response_t(np.ascontiguousarray(Ap, dtype=float), C, S0, _floor(S0), out, 0)
+    _free_response_t(frozen(Ap), C, S0, _floor(S0), out, 0)
     return out
 
 
@@ -175,9 +176,9 @@ def jacobian(Ap, Bp, C, Dp, v, x0, dAp, dBp, dC, dDp, dx0):
     does not) run in the compiled loop.
     """
     def last(a):
-        return np.ascontiguousarray(np.moveaxis(a, 0, -1))
-    Ap, Bp, C, Dp, v, x0 = (np.ascontiguousarray(a, dtype=float)
-                            for a in (Ap, Bp, C, Dp, v, x0))
+        return frozen(np.moveaxis(a, 0, -1))
+    # read-only inputs: one compiled signature whatever the caller passed
+    Ap, Bp, C, Dp, v, x0 = map(frozen, (Ap, Bp, C, Dp, v, x0))
     dAp, dBp, dC, dDp, dx0 = (np.asarray(a, dtype=float) for a in (dAp, dBp, dC, dDp, dx0))
     d = dAp.shape[0]
     moves = np.ones(d, dtype=bool)
@@ -190,10 +191,11 @@ def jacobian(Ap, Bp, C, Dp, v, x0, dAp, dBp, dC, dDp, dx0):
         dAp, dBp, dC, dDp, dx0 = (a[order] for a in (dAp, dBp, dC, dDp, dx0))
     k = int(np.count_nonzero(moves))
     J = np.empty((v.shape[0], C.shape[0], d))
+    S = np.array(np.moveaxis(dx0[:k], 0, -1), order="C")     # the kernel's state: written
     yhat = _jacobian_t(Ap, Bp, C, Dp, v, x0, last(dAp[:k]), last(dBp[:k]), last(dC[:k]),
-                       last(dDp[:k]), last(dx0[:k]), J)
+                       last(dDp[:k]), S, J)
     if k < d:
-        S0 = np.ascontiguousarray(dx0[k:].T)
+        S0 = frozen(dx0[k:].T)
         _free_response_t(Ap, C, S0, _floor(S0), J, k)
     if not np.array_equal(order, np.arange(d)):
         J[:, :, order] = J.copy()

@@ -28,6 +28,7 @@ import numba
 import numpy as np
 from scipy import linalg
 
+from subid._kernel_args import frozen
 from subid._validation import is_uniform, stamp_resolution
 from subid.errors import ModelError
 
@@ -157,16 +158,6 @@ def tv_loop_ref(Phi, G0, G1, idx, C, D, u, x0, use_g1):
 # ---------------------------------------------------------------------------
 # drivers
 # ---------------------------------------------------------------------------
-def _frozen(a, dtype=np.float64) -> np.ndarray:
-    """A read-only C-contiguous view (or copy) so that every kernel call sees
-    the same numba array type, whatever the caller passed."""
-    a = np.ascontiguousarray(a, dtype=dtype)
-    if a.flags.writeable:
-        a = a.view()
-        a.setflags(write=False)
-    return a
-
-
 def check_overflow(y, x, A, continuous: bool):
     """``(y, x)``, or :class:`~subid.errors.ModelError` when the simulation
     overflowed (the inputs are finite, so a non-finite output means the
@@ -197,9 +188,9 @@ def simulate_discrete(A, B, C, D, u, x0):
 
 def _simulate_discrete(A, B, C, D, u, x0):
     N, (n, m) = u.shape[0], B.shape
-    return tv_loop(_frozen(A[None]), _frozen(B[None]), _frozen(np.zeros((1, n, m))),
-                   _frozen(np.zeros(max(N - 1, 0)), np.int64), _frozen(C), _frozen(D),
-                   _frozen(u), _frozen(x0), False)
+    return tv_loop(frozen(A[None]), frozen(B[None]), frozen(np.zeros((1, n, m))),
+                   frozen(np.zeros(max(N - 1, 0)), np.int64), frozen(C), frozen(D),
+                   frozen(u), frozen(x0), False)
 
 
 def _run_tv(A, B, Cf, Df, steps, u, x0, hold):
@@ -211,9 +202,9 @@ def _run_tv(A, B, Cf, Df, steps, u, x0, hold):
         G0, Gn, use_g1 = G1, G1, False
     else:
         G0, Gn, use_g1 = G1 - G2, G2, True
-    idx = _frozen(inverse.reshape(-1), dtype=np.int64)
-    return tv_loop(_frozen(Phi), _frozen(G0), _frozen(Gn), idx, Cf, Df,
-                   _frozen(u), _frozen(x0), use_g1)
+    idx = frozen(inverse.reshape(-1), dtype=np.int64)
+    return tv_loop(frozen(Phi), frozen(G0), frozen(Gn), idx, Cf, Df,
+                   frozen(u), frozen(x0), use_g1)
 
 
 def simulate_continuous(A, B, C, D, t, u, x0, hold):
@@ -235,7 +226,7 @@ def simulate_continuous(A, B, C, D, t, u, x0, hold):
 def _simulate_continuous(A, B, C, D, t, u, x0, hold):
     N = u.shape[0]
     n, m = B.shape
-    Cf, Df = _frozen(C), _frozen(D)
+    Cf, Df = frozen(C), frozen(D)
     if N == 1:
         return _simulate_discrete(np.eye(n), np.zeros((n, m)), C, D, u, x0)
     steps = np.diff(t)

@@ -76,7 +76,7 @@ def lq_lower(M: np.ndarray) -> np.ndarray:
     ``M`` is (r, m); ``L`` is (r, r) when ``r <= m``. The sign of each
     diagonal entry is made non-negative so the factor is unique.
     """
-    L = _qr_r_rows(M.T, M.shape[0]).T
+    L = geqrf_r(M.T, M.shape[0], overwrite=False).T
     if L.shape[1] < M.shape[0]:
         L = np.hstack([L, np.zeros((M.shape[0], M.shape[0] - L.shape[1]))])
     signs = np.sign(np.diag(L)[: min(L.shape)])
@@ -85,18 +85,21 @@ def lq_lower(M: np.ndarray) -> np.ndarray:
     return L
 
 
-def _qr_r_rows(a: np.ndarray, rows: int) -> np.ndarray:
-    """The first ``rows`` rows of ``scipy.linalg.qr(a, mode='r', check_finite=False)[0]``,
+def geqrf_r(work: np.ndarray, rows: int, *, overwrite: bool) -> np.ndarray:
+    """The first ``rows`` rows of ``scipy.linalg.qr(work, mode='r', check_finite=False)[0]``,
     bit for bit: the same LAPACK ``geqrf`` call (its optimal workspace, queried first)
-    without the wrapper's checks and the ``triu`` of the whole result (called for
-    every fold, horizon and order set: the wrapper was about 40 % of the time)."""
-    if a.size == 0:
-        return scipy.linalg.qr(a, mode="r", check_finite=False)[0][:rows]
-    geqrf, = scipy.linalg.get_lapack_funcs(("geqrf",), (a,))
-    lwork = geqrf(a, lwork=-1)[-2][0].real.astype(np.int_)
-    qr, _, _, info = geqrf(a, lwork=lwork, overwrite_a=0)
+    without the wrapper's checks, copies and the ``triu`` of the whole result (called for
+    every fold, horizon and order set and every block of the QR statistic: the wrapper was
+    about 40 % of the time). With ``overwrite``, a column-major ``work`` is factorised in
+    place (its contents are lost)."""
+    if work.size == 0:
+        return scipy.linalg.qr(work, mode="r", check_finite=False)[0][:rows]
+    geqrf, = scipy.linalg.get_lapack_funcs(("geqrf",), (work,))
+    # the query reads only the shape: overwrite_a spares the copy of ``work``
+    lwork = int(geqrf(work, lwork=-1, overwrite_a=1)[-2][0].real)
+    qr, _, _, info = geqrf(work, lwork=lwork, overwrite_a=int(overwrite))
     if info < 0:
-        raise ValueError(f"illegal value in {-info}th argument of internal geqrf")
+        raise ValueError(f"illegal value in argument {-info} of the internal LAPACK geqrf")
     return np.triu(qr[:rows])
 
 

@@ -69,10 +69,11 @@ import contextvars
 import numpy as np
 import scipy.linalg
 
+from subid._kernel_args import frozen
 from subid._validation import as_signal, check_dt, check_int, checked_call
 from subid.data import IOData
 from subid.errors import DataError, ResourceLimitError, TooFewSamplesError
-from subid.statistic._hankel import HankelFactor, lq_lower
+from subid.statistic._hankel import HankelFactor, geqrf_r, lq_lower
 
 __all__ = ["HankelStatistic"]
 
@@ -122,8 +123,7 @@ def lag_sums_uy(u: np.ndarray, y: np.ndarray, depth: int) -> np.ndarray:
     it releases the GIL)."""
     from subid.statistic._lag_kernel import lag_sums_kernel
 
-    return lag_sums_kernel(np.ascontiguousarray(u, dtype=np.float64),
-                           np.ascontiguousarray(y, dtype=np.float64), depth)
+    return lag_sums_kernel(frozen(u), frozen(y), depth)     # one compiled signature
 
 
 class HankelStatistic:
@@ -492,7 +492,8 @@ def _qr_rows(R, z: np.ndarray, depth: int, n_inputs: int) -> np.ndarray:
     whose Hankel columns (all windows of ``depth`` samples) are added.
 
     Each block ``[R; next rows of H^T]`` is written straight into one
-    column-major work array and factorised in place by LAPACK ``geqrf``:
+    column-major work array and factorised in place by LAPACK ``geqrf``
+    (:func:`subid.statistic._hankel.geqrf_r`):
     the same Householder factorisation (same input, same routine, same
     workspace) as ``scipy.linalg.qr(mode='r')`` without its copies (a
     Fortran copy of the C-ordered block, the stacking, and ``triu`` of the
@@ -511,8 +512,6 @@ def _qr_rows(R, z: np.ndarray, depth: int, n_inputs: int) -> np.ndarray:
              [(i, n_inputs + b) for i in range(depth) for b in range(ny)]
     top = 0 if R is None else R.shape[0]
     flat = np.empty((max(top, m) + min(_BLOCK, columns)) * m)
-    geqrf = scipy.linalg.lapack.dgeqrf
-    lwork = None
     blocked = _COMPACT_WY.get()
     for start in range(0, columns, _BLOCK):
         stop = min(start + _BLOCK, columns)
@@ -522,16 +521,9 @@ def _qr_rows(R, z: np.ndarray, depth: int, n_inputs: int) -> np.ndarray:
             work[:top] = R
         for j, (i, c) in enumerate(source):
             work[top:, j] = zt[c, start + i:stop + i]
-        if blocked:
-            qr = householder_r(work)
-        else:
-            if lwork is None:
-                lwork = int(geqrf(work, lwork=-1)[2][0].real)
-            qr, _, _, info = geqrf(work, lwork=lwork, overwrite_a=1)
-            if info < 0:
-                raise DataError(f"QR factorisation failed (LAPACK info {info})")
         R = np.zeros((m, m))
-        R[:min(rows, m)] = np.triu(qr[:m])
+        R[:min(rows, m)] = np.triu(householder_r(work)[:m]) if blocked \
+            else geqrf_r(work, m, overwrite=True)
         top = m
     return R
 

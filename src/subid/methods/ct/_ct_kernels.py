@@ -66,6 +66,7 @@ import numba
 import numpy as np
 import scipy.linalg
 
+from subid._kernel_args import frozen, read_only
 from subid.methods.ct import _ct_sensitivity
 
 __all__ = [
@@ -364,7 +365,7 @@ def run_bank(F, G, t, v, order, *, uniform, x0=None, use_eig=True, kernel=bank_l
         return out
     if uniform:
         Phi, W, tab, starts = _uniform_tables(F, G, t, order)
-        kernel(Phi, W, tab, starts, v3, start, out)
+        kernel(*read_only(Phi, W, tab, starts, v3, start), out)
         return out
     if fast and use_eig:
         res = modal_bank(np.asarray(F, dtype=float), G, t, v3, order, start)
@@ -375,8 +376,7 @@ def run_bank(F, G, t, v, order, *, uniform, x0=None, use_eig=True, kernel=bank_l
         b = min(a + _CHUNK, L - 1)
         Phi, W, tab = _chunk_tables(F, G, t, order, starts, a, b, use_eig)
         part = np.empty((b - a + 1, N, c))
-        kernel(Phi, W, tab, np.ascontiguousarray(starts[a:b]), v3,
-               np.ascontiguousarray(out[a]) if a else start, part)
+        kernel(*read_only(Phi, W, tab, starts[a:b], v3, out[a] if a else start), part)
         out[a:b + 1] = part
     return out
 
@@ -495,7 +495,7 @@ def run_sensitivity(A, C, t, u, order, *, uniform, use_eig=True, kernel=sens_loo
         return out[:, :, :n * m].reshape(L, ny, n, m), out[:, :, n * m:]
     if uniform:
         Phi, W, tab, starts = _uniform_tables(A, I, t, order)
-        kernel(Phi, W, tab, starts, u, C, Z, P0, rows_b, rows_x)
+        kernel(*read_only(Phi, W, tab, starts, u, C), Z, P0, rows_b, rows_x)
         return rows_b, rows_x
     if fast and use_eig:
         res = modal_sensitivity(np.asarray(A, dtype=float), C, t, u, order)
@@ -507,7 +507,7 @@ def run_sensitivity(A, C, t, u, order, *, uniform, use_eig=True, kernel=sens_loo
         Phi, W, tab = _chunk_tables(A, I, t, order, starts, a, b, use_eig)
         rb = np.empty((b - a + 1, ny, n, m))
         rx = np.empty((b - a + 1, ny, n))
-        kernel(Phi, W, tab, np.ascontiguousarray(starts[a:b]), u, C, Z, P0, rb, rx)
+        kernel(*read_only(Phi, W, tab, starts[a:b], u, C), Z, P0, rb, rx)
         rows_b[a:b + 1] = rb
         rows_x[a:b + 1] = rx
     return rows_b, rows_x
@@ -528,9 +528,8 @@ def sensitivity_into(A, C, t, u, order, *, uniform, out, col_b, col_x=None):
     if uniform and L > 1:
         Phi, W, tab, starts = _uniform_tables(A, np.eye(n), t, order)
         X = _ct_sensitivity.fused_state(n, m, col_x is not None)
-        _ct_sensitivity.sens_fused(Phi, W, tab, starts, np.ascontiguousarray(u, dtype=float),
-                                   np.ascontiguousarray(C, dtype=float), X, out, col_b,
-                                   -1 if col_x is None else col_x)
+        _ct_sensitivity.sens_fused(*read_only(Phi, W, tab, starts), frozen(u), frozen(C), X,
+                                   out, col_b, -1 if col_x is None else col_x)
         return out
     rows_b, rows_x = run_sensitivity(A, C, t, u, order, uniform=uniform)
     out[:, :, col_b:col_b + n * m] = rows_b.reshape(L, C.shape[0], n * m)
@@ -907,7 +906,8 @@ def modal_sensitivity(A, C, t, u, order):
     form = modal_form(A, float(np.max(np.diff(t))), clusters=False)
     if form is None:
         return None
-    drive = np.ascontiguousarray(np.broadcast_to(u.astype(complex)[:, None, :], (L, n, m)))
+    # a writeable copy (one compiled signature; a broadcast of n = 1 would be read-only)
+    drive = np.array(np.broadcast_to(u.astype(complex)[:, None, :], (L, n, m)))
     t = np.array(t, dtype=float)                # writable: one compiled kernel signature
     starts = stencil_starts(L, order)
     zeta = np.empty((L, n, m), dtype=complex)

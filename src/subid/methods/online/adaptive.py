@@ -113,7 +113,7 @@ from subid.methods.online import _adaptive_kernel as _k
 from subid.methods.online import _adaptive_refine as _refit_mod
 from subid.methods.online._adaptive_kernel import pack_tables, state_layout
 from subid.methods.online._adaptive_reference import reference
-from subid.methods.online.base import OnlineIdentifier, history_dict, one_sample
+from subid.methods.online.base import OnlineIdentifier, history_dict, one_sample, writeable
 from subid.model.statespace import StateSpace
 
 __all__ = ["AdaptiveIdentifier"]
@@ -694,8 +694,8 @@ class AdaptiveIdentifier(OnlineIdentifier):
             u, y, t, data = self._unpack(u, y, t)
             if data is not None and t is None and self._dt is None:
                 t = self._next_times(data.n_samples, data.dt)
-        U = as_chunk(u, self._nu, "input u")
-        Y = as_chunk(y, self._ny, "output y")
+        U = writeable(as_chunk(u, self._nu, "input u"))     # one kernel specialisation
+        Y = writeable(as_chunk(y, self._ny, "output y"))
         if U.shape[0] != Y.shape[0]:
             raise DataError(f"input u has {U.shape[0]} samples but output y has {Y.shape[0]}; "
                             "they must have the same length")
@@ -707,7 +707,7 @@ class AdaptiveIdentifier(OnlineIdentifier):
             return U, Y, None
         T = np.asarray(t, dtype=np.float64) if not isinstance(t, numbers.Real) else \
             np.array([float(t)])
-        T = check_time_stamps(T.reshape(-1) if T.ndim == 0 else T, N)
+        T = writeable(check_time_stamps(T.reshape(-1) if T.ndim == 0 else T, N))
         if self.n_samples and not T[0] > self.t:
             raise DataError(f"time stamps t start at {T[0]!r}, not after the last sample "
                             f"processed (t = {self.t!r}); time must increase from chunk to "

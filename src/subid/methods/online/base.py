@@ -52,11 +52,14 @@ _FLOAT64 = np.dtype(np.float64)
 
 def one_sample(values, channels: int):
     """``values`` as a (1, ``channels``) C-contiguous float64 view when it is
-    one finite sample given as a contiguous 1-D float64 ndarray of
+    one finite sample given as a contiguous, writeable 1-D float64 ndarray of
     ``channels`` entries (the common call of a stream); otherwise None, and
     the caller validates ``values`` the general way
     (:func:`subid._validation.as_chunk`, which returns the same array for
-    such a sample and raises the errors).
+    such a sample and raises the errors). A read-only array takes the general
+    way too: the compiled kernels are specialised on the arrays' writeable
+    flag, and the identifiers give them writeable arrays only
+    (:func:`writeable`), so that the kernels compiled at install serve every call.
 
     The caller checks ``type(values) is np.ndarray``. The dtype is compared
     by identity first (the usual float64 descriptor), then by equality (an
@@ -65,12 +68,23 @@ def one_sample(values, channels: int):
     only if the sum is not finite (an overflow).
     """
     dtype = values.dtype
+    flags = values.flags
     if (dtype is _FLOAT64 or dtype == _FLOAT64) and values.shape == (channels,) \
-            and values.flags.c_contiguous:
+            and flags.c_contiguous and flags.writeable:
         entries = values.tolist()
         if math.isfinite(sum(entries)) or all(map(math.isfinite, entries)):
             return values[None]
     return None
+
+
+def writeable(values: np.ndarray) -> np.ndarray:
+    """``values``, or a copy of it when it is read-only (an
+    :class:`~subid.data.IOData` record's arrays are): numba compiles a kernel
+    once per combination of argument types, the writeable flag included, so
+    the identifiers pass their kernels writeable arrays only and the
+    specialisations :mod:`subid.warmup` compiles serve every call instead of
+    a second compilation of tens of seconds on the first read-only chunk."""
+    return values if values.flags.writeable else values.copy()
 
 
 def history_dict(sample, t, A, B, C, D, dt: float) -> dict:
