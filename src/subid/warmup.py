@@ -65,8 +65,8 @@ def _recursive():
 def _batch():
     from subid.data import IOData
     from subid.methods.dt.ls_subspace import ls_subspace
-    from subid.methods.identify import identify
     from subid.methods.dt.polynomial import select_structure
+    from subid.methods.identify import identify
     from subid.statistic.hankel import HankelStatistic
     from subid.systems import seed001_system
 
