@@ -163,8 +163,8 @@ eigenvalues computed only past the limit (the same decision and solution,
 record, which every unstable candidate's stability rule asks, is computed once
 (:func:`subid.methods._stability.record_growth`). Measured (issue 21, branch
 s10-foldbatch, ``bench/selection_paired.py``, 21 paired rounds against the tree
-before, load average 4-5): 0.86x the default call's CPU time at 10^3 samples, 0.91x at
-10^4, 0.95x at 10^5; the same choices, models and fold scores on every bundled record
+before): 0.87x the default call's CPU time at 10^3 samples, 0.91x at 10^4 and 10^5
+(bench/results.md); the same choices, models and fold scores on every bundled record
 (``bench/selection_identity.py``). What a default call at 10^4 samples still spends
 (instrumented, share of the call): the 75 stable fold candidates about 26 % (each the
 eigenvalues and modal form of A, the compiled normal matrix and error power, the
