@@ -164,8 +164,9 @@ record, which every unstable candidate's stability rule asks, is computed once
 (:func:`subid.methods._stability.record_growth`). Measured (issue 21, branch
 s10-foldbatch, ``bench/selection_paired.py``, 21 paired rounds against the tree
 before): 0.87x the default call's CPU time at 10^3 samples, 0.91x at 10^4 and 10^5
-(bench/results.md); the same choices, models and fold scores on every bundled record
-(``bench/selection_identity.py``). What a default call at 10^4 samples still spends
+(bench/results.md); the same choices and models on every bundled record, the same
+fold scores (``ls_subspace``'s to 1e-9 points: scored in the basis of shift invariance,
+not the model's; ``bench/selection_identity.py``). What a default call at 10^4 samples still spends
 (instrumented, share of the call): the 75 stable fold candidates about 26 % (each the
 eigenvalues and modal form of A, the compiled normal matrix and error power, the
 Cholesky solve and about 40 small numpy calls), the 5 unstable ones about 14 % (their
