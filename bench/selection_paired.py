@@ -10,10 +10,7 @@ order of the calls each round, and reports the median of the paired ratios
 
 Usage::
 
-    python bench/selection_paired.py /work/main/src src [rounds] [sizes]
-
-``sizes``: comma-separated record lengths (default ``1000,10000``); records longer
-than 10^4 samples get a third of the rounds (at least 3).
+    python bench/selection_paired.py /work/main/src src [rounds] [sizes, e.g. 1000,10000]
 """
 
 from __future__ import annotations
@@ -43,19 +40,19 @@ def main(argv):
     warnings.simplefilter("ignore")
     paths = argv[1:3]
     rounds = int(argv[3]) if len(argv) > 3 else 21
+    sizes = [int(k) for k in argv[4].split(",")] if len(argv) > 4 else [1000, 10000]
     versions = [load(p) for p in paths]
 
     def use(k):
         sys.modules.update(versions[k][1])
         return versions[k][0]
 
-    sizes = [int(v) for v in argv[4].split(",")] if len(argv) > 4 else [1000, 10000]
     for n in sizes:
         sub = use(0)
         data = sub.systems.simulate_data(sub.systems.random_system(4, 2, 2, seed=1), n, seed=2,
                                          output_snr_db=20)
         t = {(k, c): [] for k in (0, 1) for c in ("default", "pinned")}
-        for r in range(rounds if n <= 10_000 else max(3, rounds // 3)):
+        for r in range(rounds):
             for k in ((0, 1) if r % 2 == 0 else (1, 0)):
                 s = use(k)
                 d = s.IOData(data.u, data.y, dt=data.dt)

@@ -5,7 +5,7 @@ import dataclasses
 import numpy as np
 
 from subid import systems
-from subid.methods._stability import spectral_radius
+from subid.methods._stability import output_growth, record_growth, spectral_radius
 from subid.methods.dt.noise_model import innovation_model
 from subid.statistic.hankel import HankelStatistic
 
@@ -19,6 +19,27 @@ def test_spectral_radius_is_the_fresh_value_whatever_was_asked_before():
     for order in (range(len(mats)), reversed(range(len(mats))), [0, 2, 0, 5, 1, 6, 1, 7]):
         for k in order:
             assert spectral_radius(mats[k]) == float(np.abs(np.linalg.eigvals(mats[k])).max())
+
+
+def test_record_growth_is_the_fresh_value_whatever_was_asked_before():
+    """The growth of a record kept by identity is that record's: equal records (other
+    objects), slices, merged records and records made after others were freed give
+    their own value."""
+    import subid
+    r = np.random.default_rng(3)
+    y = r.standard_normal((2000, 2)) * np.linspace(1, 5, 2000)[:, None]
+    base = subid.IOData(r.standard_normal((2000, 2)), y)
+    records = [base, base[:1000], base[500:], subid.IOData(base.u, base.y),
+               subid.merge([base[:700], base[700:]])]
+    for order in (range(len(records)), reversed(range(len(records))), [0, 1, 0, 4, 2, 0]):
+        for k in order:
+            want = max(output_growth(e.y) for e in records[k].experiments)
+            assert record_growth(records[k]) == want
+    for seed in range(6):                            # new records, old ones freed
+        fresh = subid.IOData(r.standard_normal((300, 1)),
+                             r.standard_normal((300, 1)) * (1 + seed))
+        assert record_growth(fresh) == output_growth(fresh.y)
+        del fresh
 
 
 def test_innovation_model_same_with_reused_projections():

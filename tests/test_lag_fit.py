@@ -205,6 +205,41 @@ def test_where_the_products_do_not_apply():
                                weights) is None
 
 
+@pytest.mark.parametrize("n, seed, radius", [(2, 41, 0.9), (5, 42, 0.97), (8, 43, 0.9)])
+def test_fit_and_error_equals_the_fit_then_the_score(n, seed, radius):
+    """fit_and_error (one modal form for a fold candidate's fit and score) gives the B, D
+    of fit_b_d_x0 and the error power of error_power on the fitted model, to the bit; no
+    fit where fit_b_d_x0 gives none; the fit without a score where error_power gives
+    none."""
+    A, B, C, D = _system(n, seed, radius)
+    u, y = _record(A, B, C, D, 4000, seed)
+    train, held = _lag_fit.LagProducts(u[:3000], y[:3000]), _lag_fit.LagProducts(u[3000:],
+                                                                                  y[3000:])
+    rng = np.random.default_rng(seed)
+    A_c = A + 0.01 * rng.standard_normal(A.shape)
+    weights, held_weights = 1.0 / y[:3000].std(axis=0), 1.0 / y[3000:].std(axis=0)
+    inv_scale = 1.0 / np.abs(y[3000:]).max(axis=0)
+    for feedthrough in (True, False):
+        for estimate_x0 in (True, False):
+            got = _lag_fit.fit_and_error(A_c, C, train, weights, held, held_weights, inv_scale,
+                                         feedthrough=feedthrough, estimate_x0=estimate_x0)
+            want = _lag_fit.fit_b_d_x0(A_c, C, train, weights, feedthrough=feedthrough,
+                                       estimate_x0=estimate_x0)
+            np.testing.assert_array_equal(got[0], want[0])
+            np.testing.assert_array_equal(got[1], want[1])
+            err = _lag_fit.error_power(A_c, np.ascontiguousarray(want[0]), C,
+                                       np.ascontiguousarray(want[1]), held, held_weights,
+                                       inv_scale)
+            np.testing.assert_array_equal(got[2], err)
+    unstable = 1.01 * A / np.abs(np.linalg.eigvals(A)).max()
+    assert _lag_fit.fit_and_error(unstable, C, train, weights, held, held_weights,
+                                  inv_scale) is None
+    short = _lag_fit.LagProducts(u[3000:], y[3000:], max_lag=5)     # L > max_lag
+    B_f, D_f, err = _lag_fit.fit_and_error(A_c, C, train, weights, short, held_weights,
+                                           inv_scale)
+    assert err is None and np.isfinite(B_f).all()        # the pass scores it
+
+
 def test_fold_scores_equal_those_of_the_passes(monkeypatch):
     """Every candidate's fold scores of the cross-validation are those of the per-
     candidate passes (lag products switched off) to 1e-9 points, and the chosen

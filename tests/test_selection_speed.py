@@ -199,6 +199,59 @@ def test_fold_statistics_merged_from_blocks():
                                   _pipeline(merged)) == [None] * 4
 
 
+def test_bounded_condition_gives_the_same_solve():
+    """solve_normal_equations with the condition number bounded from the Cholesky factor
+    (the fold candidates') takes the same decision and gives the same solution, to the
+    bit, as with the eigenvalues, on well- and ill-conditioned normal matrices (the
+    bound at or above the eigenvalue ratio)."""
+    rng = np.random.default_rng(11)
+    decided = set()
+    for _ in range(60):
+        X = rng.standard_normal((120, 13))
+        X[:, 3] = X[:, 2] + 10.0 ** -rng.uniform(0, 7) * X[:, 3]     # near collinear
+        N = X.T @ X
+        for limit in (1e4, 1e8):
+            kw = dict(estimate_x0=True, feedthrough=True, n_samples=120, max_condition=limit)
+            exact = regression.solve_normal_equations(N, 2, 2, 2, **kw)
+            bounded = regression.solve_normal_equations(N, 2, 2, 2, bound_condition=True, **kw)
+            assert (exact is None) == (bounded is None)
+            decided.add(exact is None)
+            if exact is not None:
+                for a, b in zip(exact[:4], bounded[:4]):
+                    np.testing.assert_array_equal(a, b)
+                assert bounded[4]["regression_condition"] >= \
+                    exact[4]["regression_condition"] * (1 - 1e-12)
+    assert decided == {True, False}
+
+
+def test_fold_score_equals_the_model_and_its_score():
+    """Pipeline.fold_score (a fold candidate scored without its model object; a stable
+    A of shift invariance fitted and scored on one modal form) gives the score and the
+    stabilisation of the model Pipeline.fit makes, for every order of a fold (stable,
+    stabilised and unstable candidates) and both estimators."""
+    from dataclasses import replace
+
+    from subid.methods.dt._lag_fit import LAG_PRODUCTS, LagProducts
+    _, data = _noisy(n=2400, seed=5)
+    pipeline = _pipeline(data)
+    train, validation = data[:1600], data[1600:]
+    held = _scoring.Held(validation, lagged=True)
+    problem = pipeline.prepare_fold(train, list(range(1, 11)), 10)
+    problem._cache[LAG_PRODUCTS] = LagProducts.of_record(train)
+    kinds = set()
+    with warnings.catch_warnings(), regression.scoring_only():
+        warnings.simplefilter("ignore")
+        for n in range(1, 11):
+            at_n = replace(problem, order=n, candidates=[n], fold=True)
+            for name in pipeline.plan.estimators:
+                model = pipeline.fit(at_n, name)
+                score, repaired = pipeline.fold_score(at_n, name, held)
+                assert repaired == selection.stabilised(model)
+                assert score == pytest.approx(selection._fit_score(model, held), abs=1e-9)
+                kinds.add((name, repaired))
+    assert ("shift", True) in kinds and ("shift", False) in kinds
+
+
 @pytest.mark.slow
 def test_score_horizon_equals_the_straightforward_computation():
     """score_horizon (one factorisation and SVD per fold for every order, the direct

@@ -363,26 +363,39 @@ def fit_b_d_x0(A, C, lp: LagProducts, output_weights, *, feedthrough=True, estim
     lag products (module documentation), or None where they do not apply (then the
     per-candidate pass must run)."""
     A = np.asarray(A, dtype=float)
-    C = np.ascontiguousarray(C, dtype=float)
-    n, ny, nu = A.shape[0], C.shape[0], lp.u.shape[1]
-    N = lp.n_samples
     md = _Modal.of(A)
-    L = None if md is None else md.lags_for(lp)
+    fitted = None if md is None else _modal_fit(md, C, lp, output_weights, feedthrough,
+                                                 estimate_x0)
+    if fitted is None:
+        return None
+    B, D, x0, diagnostics, L = fitted
+    diagnostics["regression_path"] = "lag products"
+    diagnostics["lags"] = L
+    return B, D, x0, diagnostics
+
+
+def _modal_fit(md, C, lp, output_weights, feedthrough, estimate_x0, bound_condition=False):
+    """:func:`fit_b_d_x0` on the modal form ``md``: ``(B, D, x0, diagnostics, L)`` or
+    None (``bound_condition``: as
+    :func:`subid.methods.dt._regression.solve_normal_equations` takes it)."""
+    L = md.lags_for(lp)
     if L is None:
         return None
+    C = np.ascontiguousarray(C, dtype=float)
+    n, ny, nu = md.lam.shape[0], C.shape[0], lp.u.shape[1]
+    N = lp.n_samples
     w = np.ones(ny) if output_weights is None else np.asarray(output_weights, dtype=float)
     Naug = normal_matrix(*md.arguments(lp, L) + (C, w, feedthrough, estimate_x0))
     p = Naug.shape[0] - 1
     solved = solve_normal_equations(Naug, n, nu, ny, estimate_x0=estimate_x0,
-                                    feedthrough=feedthrough, n_samples=N)
+                                    feedthrough=feedthrough, n_samples=N,
+                                    bound_condition=bound_condition)
     if solved is None:
         return None
     B, D, x0, _, diagnostics = solved
     if diagnostics["residual_rms"] ** 2 * N * ny < RESIDUAL_RECOMPUTE * Naug[p, p]:
         return None                  # a nearly exact fit: the residual is rounding here
-    diagnostics["regression_path"] = "lag products"
-    diagnostics["lags"] = L
-    return B, D, x0, diagnostics
+    return B, D, x0, diagnostics, L
 
 
 def error_power(A, B, C, D, lp: LagProducts, weights, inv_scale):
@@ -392,7 +405,12 @@ def error_power(A, B, C, D, lp: LagProducts, weights, inv_scale):
     record; None where the lag products do not apply (the pass must run)."""
     A = np.asarray(A, dtype=float)
     md = _Modal.of(A)
-    L = None if md is None else md.lags_for(lp)
+    return None if md is None else _modal_error(md, B, C, D, lp, weights, inv_scale)
+
+
+def _modal_error(md, B, C, D, lp, weights, inv_scale):
+    """:func:`error_power` on the modal form ``md`` (B, C, D contiguous floats)."""
+    L = md.lags_for(lp)
     if L is None:
         return None
     err = kernel_error_power(*md.arguments(lp, L) + (B, C, D, np.asarray(weights, dtype=float),
@@ -400,3 +418,22 @@ def error_power(A, B, C, D, lp: LagProducts, weights, inv_scale):
     if not np.isfinite(err).all() or np.any(err < ROUNDING_GUARD * np.diag(lp.Y)):
         return None                  # a nearly exact fit: the pass is exact, this is not
     return err * inv_scale ** 2
+
+
+def fit_and_error(A, C, lp: LagProducts, output_weights, held: LagProducts, held_weights,
+                  inv_scale, *, feedthrough=True, estimate_x0=True):
+    """B and D of :func:`fit_b_d_x0` on the record of ``lp`` and the :func:`error_power`
+    of the model ``(A, B, C, D)`` on the record of ``held``, on one modal form of A
+    computed once (a cross-validation candidate, only scored: no diagnostics, no cache
+    of the form by content). Returns ``(B, D, err)``, ``err`` None where the products
+    do not give the score (the pass must score the model); None where they do not
+    give the fit."""
+    A = np.asarray(A, dtype=float)
+    md = _Modal._of(A)
+    fitted = None if md is None else _modal_fit(md, C, lp, output_weights, feedthrough,
+                                                 estimate_x0, bound_condition=True)
+    if fitted is None:
+        return None
+    B, D = np.ascontiguousarray(fitted[0]), np.ascontiguousarray(fitted[1])
+    C = np.ascontiguousarray(C, dtype=float)
+    return B, D, _modal_error(md, B, C, D, held, held_weights, inv_scale)

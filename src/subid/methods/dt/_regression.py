@@ -798,12 +798,17 @@ def normal_equations(P, moments, weights):
 
 
 def solve_normal_equations(N, n, nu, ny, *, estimate_x0, feedthrough, n_samples,
-                           max_condition=None, n_x0=None):
+                           max_condition=None, n_x0=None, bound_condition=False):
     """B, D, x0 and diagnostics from the (p + 1)-square augmented normal matrix,
     or None when its equilibrated p-square part has a condition number above
     ``max_condition`` (then the QR path must decide; default
     :data:`MODAL_MAX_NORMAL_CONDITION`, :data:`SCORING_MAX_NORMAL_CONDITION` within
-    :func:`scoring_only`). ``n_x0`` as in :func:`solve_factor`."""
+    :func:`scoring_only`). ``n_x0`` as in :func:`solve_factor`. ``bound_condition``
+    (a model only scored): the condition number is first bounded from the Cholesky
+    factor (``||G||_inf ||R^{-1}||_F^2``, a quarter of the cost of the eigenvalues),
+    the eigenvalues computed only when the bound exceeds ``max_condition``: the same
+    decision and solution, ``regression_condition`` then the square root of the
+    bound."""
     if max_condition is None:
         max_condition = _NORMAL_CONDITION.get()
     nx, q, p = parameter_count(n, nu, ny, estimate_x0, feedthrough, n_x0)
@@ -813,31 +818,51 @@ def solve_normal_equations(N, n, nu, ny, *, estimate_x0, feedthrough, n_samples,
     scale = np.sqrt(np.diag(G)).copy()
     scale[scale == 0] = 1.0
     Ge = G / scale[:, None] / scale[None, :]
-    ev = np.linalg.eigvalsh(Ge) if p else np.ones(1)
-    if ev[0] <= 0 or ev[-1] / ev[0] > max_condition:
-        return None
-    theta = _cholesky_solve(Ge, b / scale) / scale if p else np.zeros(0)
+    factor = None
+    if bound_condition and p:
+        # the Cholesky factor Ge = R^T R and an upper bound of the condition number,
+        # ||Ge||_inf ||R^{-1}||_F^2 >= λ_max / λ_min: within the limit, the eigenvalues'
+        # test would accept too (the same decision; the same theta from that factor)
+        factor, info = scipy.linalg.lapack.dpotrf(Ge, lower=0, overwrite_a=0, clean=0)
+        if info == 0:
+            inverse, info = scipy.linalg.lapack.dtrtri(factor, lower=0)
+            bound = float(np.abs(Ge).sum(axis=1).max()) * float(np.sum(np.triu(inverse) ** 2))
+            if info != 0 or not bound <= max_condition:
+                factor = None
+        else:
+            factor = None
+    if factor is None:
+        ev = np.linalg.eigvalsh(Ge) if p else np.ones(1)
+        if ev[0] <= 0 or ev[-1] / ev[0] > max_condition:
+            return None
+        condition = float(np.sqrt(ev[-1] / ev[0]))
+        theta = _cholesky_solve(Ge, b / scale) / scale if p else np.zeros(0)
+    else:
+        condition = float(np.sqrt(bound))
+        theta = _cholesky_solve(Ge, b / scale, factor) / scale
     x0 = theta[:nx] if estimate_x0 else np.zeros(n)
     B = theta[nx:q].reshape(nu, n).T
     D = theta[q:p].reshape(nu, ny).T if feedthrough else np.zeros((ny, nu))
     resid2 = max(yy - theta @ b, 0.0)
     diagnostics = {
         "residual_rms": float(np.sqrt(resid2 / (n_samples * ny))),
-        "regression_condition": float(np.sqrt(ev[-1] / ev[0])),
+        "regression_condition": condition,
         "regression_rank_deficient": False,
         "regression_path": "modal",
     }
     return B, D, x0, theta, diagnostics
 
 
-def _cholesky_solve(G, rhs):
+def _cholesky_solve(G, rhs, c=None):
     """``scipy.linalg.cho_solve(scipy.linalg.cho_factor(G), rhs)`` for a real ``G``, by
     the same LAPACK calls (``potrf`` of the upper triangle, ``potrs``) without the
-    wrappers' checks: the same bits, a third of the time of a candidate's solve."""
-    c, info = scipy.linalg.lapack.dpotrf(G, lower=0, overwrite_a=0, clean=0)
-    if info > 0:
-        raise np.linalg.LinAlgError(f"{info}-th leading minor of the array is not positive "
-                                    "definite")
+    wrappers' checks: the same bits, a third of the time of a candidate's solve.
+    ``c``: that ``potrf`` factor, already computed."""
+    if c is None:
+        c, info = scipy.linalg.lapack.dpotrf(G, lower=0, overwrite_a=0, clean=0)
+        if info > 0:
+            raise np.linalg.LinAlgError(f"{info}-th leading minor of the array is not "
+                                        "positive definite")
     x, info = scipy.linalg.lapack.dpotrs(c, rhs, lower=0, overwrite_b=0)
     if info != 0:
         raise ValueError(f"illegal value in {-info}th argument of internal potrs")

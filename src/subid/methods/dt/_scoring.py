@@ -264,5 +264,14 @@ def simulation_fit(A, B, C, D, validation, *, kernel=forced_error):
         if power is None:
             return None
         err2 += power
+    return fits_of_error(err2, held)
+
+
+def fits_of_error(err2, held):
+    """The simulation fit (%) per output of :func:`simulation_fit` from the error power
+    ``err2`` per output (in the units of ``held.scale``) on the validation record of
+    ``held`` (a :class:`Held`); None when an output of it is constant."""
+    if np.any(held.dev2 == 0):
+        return None
     with np.errstate(all="ignore"):
         return 100.0 * (1.0 - np.sqrt(err2) / np.sqrt(held.dev2))

@@ -250,6 +250,42 @@ def b_d_fit(problem: "Problem", C_n, gamma, L11, L_yu, *, bd_method: str, feedth
     return fit
 
 
+def lag_fold_score(problem: "Problem", A_q, C_n, held, *, bd_method: str, feedthrough: bool,
+                   estimate_x0: bool):
+    """The score (:func:`subid.methods.dt.selection.score_matrices`) on the validation
+    record of ``held`` (:class:`subid.methods.dt._scoring.Held`) of a fold candidate
+    whose A (``A_q``, with ``C_n`` in the units of the normalised channels) is stable,
+    its B, D, x0 from the lag products of ``problem``'s training record: the model
+    :func:`b_d_fit` and :func:`stable_choice` make for a stable A (no stability rule
+    applies), without their closures and diagnostics, and, where the validation
+    record's lag products give it, its error power from the same modal form
+    (:func:`subid.methods.dt._lag_fit.fit_and_error`). None where the products do not
+    give the fit (an unstable A, a pole too slow for the lags, a nearly exact fit, no
+    products): the caller then takes those steps."""
+    from subid.methods.dt._lag_fit import fit_and_error
+    from subid.methods.dt._scoring import fits_of_error
+    from subid.methods.dt.selection import mean_score, score_matrices
+    lagged = problem._cache.get(LAG_PRODUCTS)
+    if lagged is None or bd_method not in ("auto", "simulation") \
+            or not isinstance(problem.data, IOData):
+        return None
+    products = held.products()
+    C = C_n * problem.output_scale[:, None]
+    if len(products) != 1 or products[0] is None:
+        from subid.methods.dt._lag_fit import fit_b_d_x0 as lag_fit
+        fitted = lag_fit(A_q, C, lagged, problem.weights(), feedthrough=feedthrough,
+                         estimate_x0=estimate_x0)
+        return None if fitted is None else score_matrices(A_q, fitted[0], C, fitted[1], held)
+    got = fit_and_error(A_q, C, lagged, problem.weights(), products[0], held.weights,
+                        1.0 / held.scale, feedthrough=feedthrough, estimate_x0=estimate_x0)
+    if got is None:
+        return None
+    B, D, err = got
+    if err is None:                   # the products give the fit, not the score: the pass
+        return score_matrices(A_q, B, C, D, held)
+    return mean_score(fits_of_error(err, held))
+
+
 def b_d_refit(problem: "Problem", C, *, feedthrough: bool, estimate_x0: bool):
     """``refit_unstable(A, fitted)`` of :func:`stable_choice`: B, D, x0 of an unstable
     A by the ``'prediction'`` route of :func:`subid.methods.bd.fit_b_d_x0`, or None.

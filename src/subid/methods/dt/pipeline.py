@@ -44,13 +44,14 @@ from subid.methods.dt._subspace import (
     b_d_refit,
     finalize,
     finish,
+    lag_fold_score,
     prepare,
     stable_choice,
 )
 from subid.methods.dt.checks import check_data
 from subid.methods.dt.feedthrough import resolve as resolve_feedthrough
 from subid.methods.dt.plan import Plan, make_plan
-from subid.methods.dt.selection import choose, estimator_by_fit
+from subid.methods.dt.selection import choose, enforced, estimator_by_fit, score_matrices
 from subid.model.statespace import StateSpace
 
 
@@ -214,6 +215,37 @@ class Pipeline:
         C = C * problem.output_scale[:, None]
         return finish(problem, A, B, C, D, n, order_selection, **est.info, x0=x0,
                       stability=stab, feedthrough=ft_record, **reg)
+
+    def fold_score(self, problem, estimator, held):
+        """``(score, stabilised)`` of the model :meth:`fit` makes on ``problem`` (a
+        cross-validation fold at a fixed order) on the validation record of ``held``
+        (:class:`subid.methods.dt._scoring.Held`): the same steps and matrices without the
+        model object (no ``finish``: ``info``, the stability warning, the
+        :class:`subid.StateSpace`), for a candidate that is only scored
+        (:func:`subid.methods.dt.selection.score_horizon`). A stable A of shift
+        invariance (whose model :func:`b_d_x0` leaves as estimated, in any basis: the
+        score does not depend on it) takes its B, D, x0 from the lag products of the
+        training record where they apply, without the stability rule's closures and
+        diagnostics (:func:`subid.methods.dt._subspace.lag_fold_score`). ``stabilised``: whether
+        ``stability='auto'`` reflected its unstable poles
+        (:func:`subid.methods.dt.selection.stabilised`)."""
+        method, plan = self.method, self.plan
+        feedthrough, ft_record = resolve_feedthrough(plan.feedthrough, problem)
+        subspace = method.decompose(problem, feedthrough)
+        est = method.system_matrices(problem, subspace, problem.order, estimator,
+                                     feedthrough=feedthrough, ft_record=ft_record, plan=plan)
+        if isinstance(est, States):
+            return score_matrices(est.A, est.B, est.C, est.D, held), \
+                enforced(est.info.get("stability"))
+        fast = lag_fold_score(problem, est.A, est.C, held, bd_method=plan.bd_method,
+                              feedthrough=feedthrough, estimate_x0=plan.estimate_x0)
+        if fast is not None:              # a stable A: no stability rule to apply
+            return fast, False
+        A_q, (B_q, D, x0_q, _), stab = b_d_x0(problem, est, feedthrough=feedthrough,
+                                              plan=plan)
+        A, B, C, _ = method.output_basis(est, A_q, B_q, x0_q)
+        return score_matrices(A, B, C * problem.output_scale[:, None], D, held), \
+            enforced(stab)
 
 
 def run(method: SubspaceMethod, data, order, horizon, *, selection: str,

@@ -153,7 +153,31 @@ regression's maps are filled by blocks,
 :func:`subid.methods.dt._regression.regressor_maps`: together 10-11 % of the default
 call at 10^3 samples and 8-11 % at 10^4, ``bench/selection_paired.py``, the same
 choices and models bit for bit on every bundled record,
-``bench/selection_identity.py``). Stopping the order search once the criterion has not
+``bench/selection_identity.py``). A fold candidate is only scored, so no model object
+is made for it (:meth:`subid.methods.dt.pipeline.Pipeline.fold_score`: the steps of
+:meth:`~subid.methods.dt.pipeline.Pipeline.fit` without ``finish``, its ``info``, its
+stability warning and the :class:`subid.StateSpace`); a stable A of shift invariance,
+which no stability rule touches, takes its B, D, x0 and its score on one modal form
+without the rule's closures and diagnostics
+(:func:`subid.methods.dt._subspace.lag_fold_score`,
+:func:`subid.methods.dt._lag_fit.fit_and_error`: the same kernels, the same values),
+its normal equations' condition number bounded from their Cholesky factor, the
+eigenvalues computed only past the limit (the same decision and solution,
+:func:`subid.methods.dt._regression.solve_normal_equations`); the growth of a fold's
+record, which every unstable candidate's stability rule asks, is computed once
+(:func:`subid.methods._stability.record_growth`). Measured (issue 21, branch
+s10-foldbatch, ``bench/selection_paired.py``, 21 paired rounds against the tree
+before): 0.87x the default call's CPU time at 10^3 samples, 0.91x at 10^4 and 10^5
+(bench/results.md); the same choices and models on every bundled record, the same
+fold scores (``ls_subspace``'s to 1e-9 points: scored in the basis of shift invariance,
+not the model's; ``bench/selection_identity.py``). What a default call at 10^4 samples still spends
+(instrumented, share of the call): the 75 stable fold candidates about 26 % (each the
+eigenvalues and modal form of A, the compiled normal matrix and error power, the
+Cholesky solve and about 40 small numpy calls), the 5 unstable ones about 14 % (their
+residual bounds, :mod:`subid.methods.dt._residual_bound`, each a recursion over the
+fold), the folds' feedthrough F-tests about 12 %, their statistics about 13 %, the
+innovation check about 22 %, the final model and its estimator choice the rest.
+Stopping the order search once the criterion has not
 improved for k orders (measured on the candidates' saved scores,
 ``bench/selection_identity.py``) would change the choice on DaISy records (k = 3:
 CD_player_arm, powerplant and winding with N4SID; k = 4: CD_player_arm and winding,
@@ -239,10 +263,21 @@ def _fit_score(model, validation) -> float:
     squares), clipped below at :data:`FLOOR`; :data:`FLOOR` when the simulation
     overflows. ``mean(fit_percent(model, validation))`` to rounding, by one
     compiled pass (:func:`subid.methods.dt._scoring.simulation_fit`)."""
-    from subid.methods.dt._scoring import simulation_fit
     if model.is_continuous:           # continuous time (ct_subspace): simulated with its hold
         return fold_score(model, getattr(validation, "record", validation))
-    fits = simulation_fit(model.A, model.B, model.C, model.D, validation)
+    return score_matrices(model.A, model.B, model.C, model.D, validation)
+
+
+def score_matrices(A, B, C, D, validation) -> float:
+    """:func:`_fit_score` of the discrete-time model ``(A, B, C, D)`` (the fold
+    candidates of :meth:`subid.methods.dt.pipeline.Pipeline.fold_score`)."""
+    from subid.methods.dt._scoring import simulation_fit
+    return mean_score(simulation_fit(A, B, C, D, validation))
+
+
+def mean_score(fits) -> float:
+    """The score of a candidate from its fits per output (%, None when its simulation
+    overflowed): their mean, clipped below at :data:`FLOOR`."""
     if fits is None:
         return FLOOR
     value = float(np.mean(fits))
@@ -275,7 +310,10 @@ def score_horizon(parts, orders, horizon, *, fitter, estimators, held=None, lagg
     horizon : int
     fitter : :class:`subid.methods.dt.pipeline.Pipeline` or alike
         ``fitter.prepare_fold(record, candidates, horizon, factor=None) -> Problem``
-        and ``fitter.fit(problem with a fixed order, estimator) -> StateSpace``. With
+        and ``fitter.fit(problem with a fixed order, estimator) -> StateSpace``, or,
+        where it has it, ``fitter.fold_score(problem with a fixed order, estimator,
+        held) -> (score, stabilised)`` (the same score without the model object,
+        :meth:`subid.methods.dt.pipeline.Pipeline.fold_score`). With
         the attributes ``blocks_per_horizon`` and ``statistic`` (the option) not None,
         the folds' factors are merged from the blocks' statistics and passed as
         ``factor`` (:func:`fold_factors`); otherwise each fold builds its own.
@@ -315,18 +353,24 @@ def score_horizon(parts, orders, horizon, *, fitter, estimators, held=None, lagg
             if lagged[k] is None:         # once per fold, for every horizon
                 lagged[k] = LagProducts.of_record(train)
             problem._cache[LAG_PRODUCTS] = lagged[k]    # B, D, x0 of every candidate
-        for n in orders:
-            for v, name in enumerate(names):
-                try:
-                    with warnings.catch_warnings(), scoring_only():
-                        warnings.simplefilter("ignore")
-                        model = fitter.fit(replace(problem, order=n, candidates=[n],
-                                                   fold=True), name)
-                    value = _fit_score(model, held_out)
-                    repaired[(n, v)] += stabilised(model)
-                except SubidError:
-                    value = FLOOR
-                per_fold[(n, v)].append(value)
+        # the candidates are only scored: without the model objects where the fitter
+        # can (Pipeline.fold_score), else from the models
+        scorer = getattr(fitter, "fold_score", None)
+        with warnings.catch_warnings(), scoring_only():
+            warnings.simplefilter("ignore")
+            for n in orders:
+                at_n = replace(problem, order=n, candidates=[n], fold=True)
+                for v, name in enumerate(names):
+                    try:
+                        if scorer is not None:
+                            value, repair = scorer(at_n, name, held_out)
+                        else:
+                            model = fitter.fit(at_n, name)
+                            value, repair = _fit_score(model, held_out), stabilised(model)
+                        repaired[(n, v)] += repair
+                    except SubidError:
+                        value = FLOOR
+                    per_fold[(n, v)].append(value)
     return per_fold, repaired
 
 
@@ -584,7 +628,12 @@ def next_block(top, n_train, n_inputs, n_outputs, blocks, n_experiments, horizon
 def stabilised(model) -> bool:
     """Whether ``model``'s A was made stable after its estimation (``stability='auto'``
     found it unstable on data that do not grow and reflected its unstable poles)."""
-    stab = model.info.get("stability")
+    return enforced(model.info.get("stability"))
+
+
+def enforced(stab) -> bool:
+    """Whether the stability record ``stab`` (a model's ``info['stability']``) says
+    that ``stability='auto'`` made its A stable (:func:`stabilised`)."""
     return isinstance(stab, dict) and stab.get("action") == "enforced" \
         and stab.get("requested") == "auto"
 
