@@ -594,7 +594,7 @@ def compact_wy_qr():
     but not bit for bit, and the models of ill-conditioned records move by more than
     rounding (N4SID on robot_arm at order 15: 3e-4 relative). For statistics whose
     models are only scored: the cross-validation folds
-    (:func:`subid.methods.dt.selection.fold_factors`). Per thread and task."""
+    (:func:`subid.methods.dt.fold_statistics.fold_factors`). Per thread and task."""
     token = _COMPACT_WY.set(True)
     try:
         yield
