@@ -9,6 +9,7 @@ import pytest
 
 import subid
 from subid import errors, systems
+from subid._kernel_args import frozen, read_only
 from subid.methods.crossval import folds
 from subid.methods.dt import _scoring, pbsid, polynomial, selection
 from subid.methods.dt._arx_nested import NestedARX
@@ -73,10 +74,10 @@ def test_sparse_scoring_pass_is_the_dense_one_bit_for_bit():
              (0.5 * M / max(np.abs(np.linalg.eigvals(M)).max(), 1e-3),
               rng.standard_normal((5, 2)) * (rng.uniform(size=(5, 2)) < 0.5),
               np.eye(2, 5), rng.standard_normal((2, 2)))]
-    u, y = rng.standard_normal((300, 2)), rng.standard_normal((300, 2))
+    u, y = read_only(rng.standard_normal((300, 2)), rng.standard_normal((300, 2)))
     weights, inv_scale = rng.uniform(0.5, 2.0, 2), rng.uniform(0.5, 2.0, 2)
     for A, B, C, D in cases:
-        A, B, C, D = (np.ascontiguousarray(X, dtype=float) for X in (A, B, C, D))
+        A, B, C, D = map(frozen, (A, B, C, D))     # the argument types of the library's calls
         for n_free in (0, 40, 300):
             got = sparse_forced_error(A, B, C, D, u, y, weights, inv_scale, n_free)
             dense = _scoring.forced_error(A, B, C, D, u, y, weights, inv_scale, n_free)
@@ -86,7 +87,7 @@ def test_sparse_scoring_pass_is_the_dense_one_bit_for_bit():
                 np.testing.assert_array_equal(g, d)
                 np.testing.assert_allclose(g, r, rtol=1e-10, atol=1e-10)
             assert got[2] and dense[2] and ref[2]
-        big = 1e3 * A + np.diag(np.full(A.shape[0], 2.0))     # overflows over 300 samples
+        big = frozen(1e3 * A + np.diag(np.full(A.shape[0], 2.0)))   # overflows in 300 samples
         assert not sparse_forced_error(big, B, C, D, u, y, weights, inv_scale, 0)[2]
         assert not _scoring.forced_error(big, B, C, D, u, y, weights, inv_scale, 0)[2]
 

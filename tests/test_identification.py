@@ -9,6 +9,7 @@ import scipy.linalg
 import subid
 from conftest import METHODS
 from subid import systems
+from subid._kernel_args import read_only
 from subid.errors import ExcitationWarning
 from subid.methods.dt._regression import fit_b_d_x0, sensitivity_rows, sensitivity_rows_reference
 from subid.methods.dt.ls_subspace import random_selector
@@ -188,7 +189,7 @@ def test_regression_kernel_matches_reference():
     C = r.standard_normal((2, 4))
     u = r.standard_normal((300, 3))
     S0 = r.standard_normal((4, 4 + 12))
-    rows, S = sensitivity_rows(A, C, u, S0, 4)
+    rows, S = sensitivity_rows(*read_only(A, C, u), S0, 4)     # the library's argument types
     rows_ref, S_ref = sensitivity_rows_reference(A, C, u, S0, 4)
     np.testing.assert_allclose(rows, rows_ref, rtol=1e-12, atol=1e-13)
     np.testing.assert_allclose(S, S_ref, rtol=1e-12, atol=1e-13)

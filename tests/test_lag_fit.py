@@ -7,6 +7,7 @@ import scipy.signal
 
 import subid
 from subid import systems
+from subid._kernel_args import read_only
 from subid.methods.describe import describe_order_selection
 from subid.methods.dt import _lag_fit, _regression, _scoring
 from subid.methods.dt import selection as _selection
@@ -148,7 +149,8 @@ def test_kernels_equal_their_references(n, seed, radius):
     powers = form.lam[:, None] ** np.arange(L + 1)[None, :]
     np.testing.assert_allclose(vre + 1j * vim, powers, rtol=1e-11, atol=1e-14)
     args = form.arguments(products, L)
-    w = 1.0 / y.std(axis=0)
+    C, w = read_only(C, 1.0 / y.std(axis=0))     # the argument types of the library's calls
+    B, D = read_only(B, D)
     for feedthrough in (True, False):
         for estimate_x0 in (True, False):
             got = _lag_kernel.normal_matrix(*args, C, w, feedthrough, estimate_x0)

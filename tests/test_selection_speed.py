@@ -13,6 +13,7 @@ import scipy.linalg
 
 import subid
 from subid import systems
+from subid._kernel_args import frozen, read_only
 from subid.methods.dt import _regression as regression
 from subid.methods.dt import _scoring, selection
 from subid.methods.dt import _subspace as subspace
@@ -96,12 +97,13 @@ def test_scoring_kernel_matches_its_reference():
         rng.standard_normal((3, 2))
     u, y = rng.standard_normal((200, 2)), rng.standard_normal((200, 3))
     weights, inv_scale = rng.uniform(0.5, 2.0, 3), rng.uniform(0.5, 2.0, 3)
+    A, B, C, D, u, y = read_only(A, B, C, D, u, y)      # the library's argument types
     got = _scoring.forced_error(A, B, C, D, u, y, weights, inv_scale, 50)
     ref = _scoring.forced_error_reference(A, B, C, D, u, y, weights, inv_scale, 50)
     for g, r in zip(got[:2], ref[:2]):
         np.testing.assert_allclose(g, r, rtol=1e-12, atol=1e-12)
     assert got[2] and ref[2]
-    assert not _scoring.forced_error(A * 1e3, B, C, D, u, y, weights, inv_scale, 0)[2]
+    assert not _scoring.forced_error(frozen(A * 1e3), B, C, D, u, y, weights, inv_scale, 0)[2]
     assert _scoring.free_length(A, 10 ** 6) < 4000
     assert _scoring.free_length(A, 1000) == 1000                # short: all of it
     assert _scoring.free_length(A * 100, 5000) == 5000          # unstable: the whole record
@@ -115,7 +117,7 @@ def test_dual_rows_match_the_sensitivity_rows():
     C = rng.standard_normal((2, 3))
     u = rng.standard_normal((60, 2))
     V0, M0 = np.zeros((2, 2, 3)), C.copy()
-    rows, V, M = regression.dual_rows(A, C, u, V0, M0, 3)
+    rows, V, M = regression.dual_rows(*read_only(A, C, u), V0, M0, 3)   # the library's types
     ref = regression.dual_rows_reference(A, C, u, V0, M0, 3)
     for got, want in zip((rows, V, M), ref):
         np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-13)

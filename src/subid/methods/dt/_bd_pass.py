@@ -33,6 +33,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.linalg
 
+from subid._kernel_args import frozen
 from subid._threads import ordered_map
 from subid.data import column_sums, minus_columns
 from subid.methods.dt._bd_large import solve_factor_blocks, solve_normal_blocks
@@ -104,9 +105,8 @@ def modal_piece(chunks, form, n_inputs, n_outputs):
         for start in range(0, len(u), _MODAL_BLOCK):
             stop = min(start + _MODAL_BLOCK, len(u))
             tau0 = length + start
-            w, r, e = modal_signals(form.lam, form.is_real, np.ascontiguousarray(u[start:stop]),
-                                    np.ascontiguousarray(y[start:stop]), r, e, tau0,
-                                    form.n_free)
+            w, r, e = modal_signals(form.lam, form.is_real, frozen(u[start:stop]),
+                                    frozen(y[start:stop]), r, e, tau0, form.n_free)
             if tau0 < form.n_free:
                 moments += w.T @ w
             else:
@@ -128,7 +128,7 @@ def sensitivity_piece(chunks, A, C, q, n_x0):
         spread = spread or _Spread(y.shape[1])
         spread.add(y)
         with np.errstate(over="ignore", invalid="ignore"):
-            _, S = sensitivity_rows(A, C, u, S, n_x0)
+            _, S = sensitivity_rows(frozen(A), frozen(C), frozen(u), S, n_x0)
         length += len(u)
     return {"S_end": S, "length": length, "count": spread.count if spread else 0,
             "mean": spread.mean if spread else 0.0, "m2": spread.m2 if spread else 0.0}
@@ -205,9 +205,8 @@ def residual_piece(chunks, form, g):
             r = np.zeros((form.lam.size, u.shape[1]), dtype=complex)
         for start in range(0, len(u), _MODAL_BLOCK):
             stop = min(start + _MODAL_BLOCK, len(u))
-            w, r, e = modal_signals(form.lam, form.is_real, np.ascontiguousarray(u[start:stop]),
-                                    np.ascontiguousarray(y[start:stop]), r, e, length + start,
-                                    form.n_free)
+            w, r, e = modal_signals(form.lam, form.is_real, frozen(u[start:stop]),
+                                    frozen(y[start:stop]), r, e, length + start, form.n_free)
             total += float(np.sum((w @ g.T) ** 2))
         length += len(u)
     return total

@@ -84,6 +84,7 @@ import numpy as np
 import scipy.fft
 import scipy.linalg
 
+from subid._kernel_args import frozen, read_only
 from subid.methods.dt._lag_kernel import error_power as kernel_error_power
 from subid.methods.dt._lag_kernel import modal_form, normal_matrix, powers
 from subid.methods.dt._regression import RESIDUAL_RECOMPUTE, solve_normal_equations
@@ -352,9 +353,10 @@ class _Modal:
         :mod:`subid.methods.dt._lag_kernel` take them."""
         (G, R), u, y = lp.lags(L), lp.u, lp.y
         vre, vim = self.powers(L)
-        return (self.lam, self.V, self.Wm, vre, vim, G.reshape(L + 1, -1),
-                R.reshape(L + 1, -1), np.ascontiguousarray(np.diag(lp.Y)),
-                np.ascontiguousarray(u[::-1][:L + 1]), u[:L + 1], y[:L + 1], lp.n_samples)
+        # read-only C-contiguous arrays: one compiled signature of each kernel
+        return read_only(self.lam, self.V, self.Wm, vre, vim, G.reshape(L + 1, -1),
+                         R.reshape(L + 1, -1), np.diag(lp.Y), u[::-1][:L + 1], u[:L + 1],
+                         y[:L + 1]) + (lp.n_samples,)
 
 
 def fit_b_d_x0(A, C, lp: LagProducts, output_weights, *, feedthrough=True, estimate_x0=True):
@@ -385,7 +387,7 @@ def _modal_fit(md, C, lp, output_weights, feedthrough, estimate_x0, bound_condit
     n, ny, nu = md.lam.shape[0], C.shape[0], lp.u.shape[1]
     N = lp.n_samples
     w = np.ones(ny) if output_weights is None else np.asarray(output_weights, dtype=float)
-    Naug = normal_matrix(*md.arguments(lp, L) + (C, w, feedthrough, estimate_x0))
+    Naug = normal_matrix(*md.arguments(lp, L) + read_only(C, w) + (feedthrough, estimate_x0))
     p = Naug.shape[0] - 1
     solved = solve_normal_equations(Naug, n, nu, ny, estimate_x0=estimate_x0,
                                     feedthrough=feedthrough, n_samples=N,
@@ -413,8 +415,8 @@ def _modal_error(md, B, C, D, lp, weights, inv_scale):
     L = md.lags_for(lp)
     if L is None:
         return None
-    err = kernel_error_power(*md.arguments(lp, L) + (B, C, D, np.asarray(weights, dtype=float),
-                                                      1e-13, MAX_X0_CONDITION))
+    err = kernel_error_power(*md.arguments(lp, L) + read_only(B, C, D)
+                             + (frozen(weights), 1e-13, MAX_X0_CONDITION))
     if not np.isfinite(err).all() or np.any(err < ROUNDING_GUARD * np.diag(lp.Y)):
         return None                  # a nearly exact fit: the pass is exact, this is not
     return err * inv_scale ** 2

@@ -25,6 +25,7 @@ import numba
 import numpy as np
 import scipy.linalg
 
+from subid._kernel_args import frozen
 from subid.statistic.hankel import householder_r
 
 _CHUNK = 4096
@@ -259,16 +260,15 @@ def _dual_qr_factor(A, C, u, y, *, n_x0, feedthrough, output_weights=None,
     n, ny = A.shape[0], y.shape[1]
     q = n_x0 + n * nu
     p = q + (ny * nu if feedthrough else 0)
-    A = np.ascontiguousarray(A, dtype=float)
-    C = np.ascontiguousarray(C, dtype=float)
+    A, C = frozen(A), frozen(C)         # read-only inputs: one compiled signature
     V = np.zeros((ny, nu, n))
-    M = C.copy()
+    M = np.array(C)
     R = np.zeros((0, p + 1))
     flat = np.empty((p + 1 + min(_CHUNK, max(N, 1)) * ny) * (p + 1))
     for start in range(0, N, _CHUNK):
         stop = min(start + _CHUNK, N)
         uc = np.ascontiguousarray(u[start:stop], dtype=float)
-        rows, V, M = kernel(A, C, uc, V, M, n_x0)
+        rows, V, M = kernel(A, C, frozen(uc), V, M, n_x0)
         block = _with_d_and_y(rows, uc, y[start:stop], p, feedthrough, output_weights)
         if not np.isfinite(block).all():    # overflowed (an unstable A): the factor would
             return np.full((p + 1, p + 1), np.nan)     # be NaN; LAPACK is slow on NaN
@@ -347,7 +347,7 @@ def regression_rows(A, C, u, y, S, *, n_x0, feedthrough, output_weights=None,
     q = S.shape[1]
     p = q + (ny * nu if feedthrough else 0)
     uc = np.ascontiguousarray(u)
-    rows, S = kernel(np.ascontiguousarray(A), np.ascontiguousarray(C), uc, S, n_x0)
+    rows, S = kernel(frozen(A), frozen(C), frozen(uc), S, n_x0)
     return _with_d_and_y(rows, uc, y, p, feedthrough, output_weights), S
 
 
@@ -702,8 +702,8 @@ def _blocks(form, u, y, block, kernel):
     e = np.ones(form.lam.size, dtype=complex)
     for start in range(0, T, block):
         stop = min(start + block, T)
-        w, r, e = kernel(form.lam, form.is_real, np.ascontiguousarray(u[start:stop]),
-                         np.ascontiguousarray(y[start:stop]), r, e, start, form.n_free)
+        w, r, e = kernel(form.lam, form.is_real, frozen(u[start:stop]), frozen(y[start:stop]),
+                         r, e, start, form.n_free)
         yield start, w, r
 
 

@@ -36,6 +36,8 @@ import numba
 import numpy as np
 import scipy.linalg
 
+from subid._kernel_args import read_only
+
 #: ``A^t`` counts as decayed below this (relative to the identity): later free rows
 #: change x0 by less than rounding (:data:`subid.model.prediction._FREE_DECAYED`).
 FREE_DECAYED = 1e-20
@@ -178,7 +180,8 @@ def _error_power(A, B, C, D, u, y, weights, inv_scale, kernel):
     n = A.shape[0]
     n_free = free_length(A, N)
     with np.errstate(all="ignore"):
-        rows, tail, finite = kernel(A, B, C, D, u, y, weights, inv_scale, n_free)
+        # read-only inputs: one compiled signature whatever the caller passed
+        rows, tail, finite = kernel(*read_only(A, B, C, D, u, y), weights, inv_scale, n_free)
         if not (finite and np.isfinite(rows[:, :, :n]).all()):
             return None
         if n_free == 0:                 # no state (free_length is 0 for n = 0)
