@@ -136,10 +136,10 @@ validation block (:mod:`subid.methods.dt._scoring`); an unstable A that
 ``stability='auto'`` would not keep is not fitted
 (:mod:`subid.methods.dt._residual_bound`: a lower bound of its residual from part of
 the rows, the cheapest first by how fast A grows). Measured (``bench/run.py
---selection-only``, 2x2 order-4 system, 20 dB, CPU time, three runs;
-bench/results.md; the pinned call fits no fold): the default call costs 16-24x the
-pinned call at 10^3 samples and 14-17x at 10^4 (1.3-1.9x and 0.17-0.31x SIPPY's AIC
-order search), 13.6-14.6x at 10^5 (34-46x before the lag products) and 4.6-5.3x at
+--selection-only``, 2x2 order-4 system, 20 dB, CPU time, two runs;
+bench/results.md; the pinned call fits no fold): the default call costs 14-17x the
+pinned call at 10^3 samples and 13-14x at 10^4 (1.05-1.11x and 0.16-0.18x SIPPY's AIC
+order search), 11-13x at 10^5 (34-46x before the lag products) and 4.5-5.1x at
 10^6 (the folds use at most :data:`MAX_SELECTION_SAMPLES`): the per-candidate work no longer
 grows with N, but 80 candidate models (orders x horizons x folds), each about a
 millisecond of subspace steps, regression, score and bookkeeping (Python calls on
@@ -185,8 +185,8 @@ e.g. N4SID on winding order 10 -> 5) while scoring only 15 % (k = 3) or 9 % (k =
 fewer candidates: the criterion of real records has late minima, so the search is not
 cut.
 
-Outside the candidates (issue 21, ``bench/selection_paired.py``: 0.71x, 0.76x, 0.88x
-and 0.88x the CPU time of the default call before at 10^3, 10^4, 10^5 and 10^6 samples,
+Outside the candidates (issue 21, ``bench/selection_paired.py``: 0.69x, 0.73x, 0.87x
+and 0.91x the CPU time of the default call before at 10^3, 10^4, 10^5 and 10^6 samples,
 the same choices, models and fold scores on every bundled record,
 ``bench/selection_identity.py``): the innovation check fits the admissible orders
 first and the others only until one has a lower criterion (2-7 of 10 orders on the
