@@ -176,7 +176,8 @@ eigenvalues and modal form of A, the compiled normal matrix and error power, the
 Cholesky solve and about 40 small numpy calls), the 5 unstable ones about 14 % (their
 residual bounds, :mod:`subid.methods.dt._residual_bound`, each a recursion over the
 fold), the folds' feedthrough F-tests about 12 %, their statistics about 13 %, the
-innovation check about 22 %, the final model and its estimator choice the rest.
+innovation check about 22 %, the final model and its estimator choice the rest
+(before the work outside the candidates described below).
 Stopping the order search once the criterion has not
 improved for k orders (measured on the candidates' saved scores,
 ``bench/selection_identity.py``) would change the choice on DaISy records (k = 3:
