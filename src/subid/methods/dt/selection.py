@@ -357,10 +357,11 @@ def score_horizon(parts, orders, horizon, *, fitter, estimators, held=None, lagg
     for k, ((train, _), factor, held_out) in enumerate(zip(parts, factors, held)):
         problem = fitter.prepare_fold(train, orders, horizon, factor=factor) \
             if factor is not None else fitter.prepare_fold(train, orders, horizon)
-        if hasattr(problem, "_cache") and train.n_experiments == 1:
+        if hasattr(problem, "cached") and train.n_experiments == 1:
             if lagged[k] is None:         # once per fold, for every horizon
                 lagged[k] = LagProducts.of_record(train)
-            problem._cache[LAG_PRODUCTS] = lagged[k]    # B, D, x0 of every candidate
+            fold_products = lagged[k]
+            problem.cached(LAG_PRODUCTS, lambda: fold_products)   # B, D, x0 of every candidate
         # the candidates are only scored: without the model objects where the fitter
         # can (Pipeline.fold_score), else from the models
         scorer = getattr(fitter, "fold_score", None)
