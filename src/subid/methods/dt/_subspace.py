@@ -508,6 +508,10 @@ class Problem:
             self._cache[key] = compute()
         return self._cache[key]
 
+    def stored(self, key):
+        """What :meth:`cached` (or :func:`prepare`) stored under ``key``, or None."""
+        return self._cache.get(key)
+
     def unscale(self, B_n, C_n, D_n):
         """B, C, D in the user's units from those of the normalised channels."""
         su, sy = self.input_scale, self.output_scale

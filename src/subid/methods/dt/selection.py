@@ -840,9 +840,9 @@ def innovation_check(data, record, fitter, chosen, *, shared=None):
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             problem = fitter.prepare(used, orders, f)
-            mine_too = shared is not None and used is data and hasattr(problem, "_cache")
+            mine_too = shared is not None and used is data and hasattr(problem, "stored")
             if mine_too:                  # the final model's, at f
-                shared.factors[f] = problem._cache.get(RECORD_FACTOR)
+                shared.factors[f] = problem.stored(RECORD_FACTOR)
                 shared.problems[f] = problem
             # B, D, x0 of every order from the record's lag products, as on the folds
             # (equal to the pass over the record to about 1e-12 relative); those of the
