@@ -228,10 +228,16 @@ def simulated_output(model, data, x0="estimate"):
         except ModelError:                 # the simulation of an unstable model overflows
             y_hat = np.full(data.y.shape, np.nan)
         y_hat = np.where(np.isfinite(y_hat), y_hat, np.nan)
-        dev = np.linalg.norm(data.y - data.y.mean(axis=0), axis=0)
-        fit = 100.0 * (1.0 - np.linalg.norm(data.y - y_hat, axis=0) /
-                       np.where(dev > 0, dev, np.nan))
-    return y_hat, fit
+    return y_hat, percent_fit(data, y_hat)
+
+
+def percent_fit(data, y_hat) -> np.ndarray:
+    """Fit % per output of outputs ``y_hat`` computed on ``data``: NaN where they are
+    not finite or the output is constant (a figure's legend, never an error)."""
+    dev = np.linalg.norm(data.y - data.y.mean(axis=0), axis=0)
+    with np.errstate(all="ignore"):
+        return 100.0 * (1.0 - np.linalg.norm(data.y - y_hat, axis=0) /
+                        np.where(dev > 0, dev, np.nan))
 
 
 def predicted_output(model, data, steps):
@@ -241,11 +247,7 @@ def predicted_output(model, data, steps):
         y_hat = predict(model, data, steps)
     except DataError:
         y_hat = np.full(data.y.shape, np.nan)
-    dev = np.linalg.norm(data.y - data.y.mean(axis=0), axis=0)
-    with np.errstate(all="ignore"):
-        fit = 100.0 * (1.0 - np.linalg.norm(data.y - y_hat, axis=0) /
-                       np.where(dev > 0, dev, np.nan))
-    return y_hat, fit
+    return y_hat, percent_fit(data, y_hat)
 
 
 #: Most points a time trace is drawn with. A longer trace is drawn through the minimum

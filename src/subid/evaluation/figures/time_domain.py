@@ -20,6 +20,7 @@ from subid.evaluation.figures._common import (
     _styled,
     _time_label,
     colors_for,
+    percent_fit,
     predicted_output,
     simulated_output,
 )
@@ -27,7 +28,7 @@ from subid.evaluation.figures._common import (
 
 @_styled
 def compare(data, models, *, labels=None, x0="estimate", title=None, clip=True,
-            steps=math.inf):
+            steps=math.inf, simulated=None):
     """Measured outputs against the outputs simulated by each model (as MATLAB's ``compare``).
 
     Parameters
@@ -46,6 +47,11 @@ def compare(data, models, *, labels=None, x0="estimate", title=None, clip=True,
     steps : int or math.inf
         Draw ``steps``-ahead predictions (:func:`subid.predict`) instead of
         the simulation.
+    simulated : dict label -> ndarray, optional
+        Outputs already simulated on ``data`` with ``x0`` (shape (n_samples,
+        n_outputs), NaN where diverging: the ``simulated`` entry of
+        :func:`subid.evaluation.report.evaluate`), drawn and scored instead of
+        simulating those models again (with ``steps=math.inf`` only).
 
     Returns
     -------
@@ -57,7 +63,10 @@ def compare(data, models, *, labels=None, x0="estimate", title=None, clip=True,
     groups = _model_groups(models, labels)
     ny = data.n_outputs
     colors = colors_for(groups.items())
-    fits = {label: simulated_output(m, data, x0=x0) if steps == math.inf else
+    given = simulated if simulated is not None and steps == math.inf else {}
+    fits = {label: (given[label], percent_fit(data, given[label]))
+            if label in given and np.shape(given[label]) == data.y.shape else
+            simulated_output(m, data, x0=x0) if steps == math.inf else
             predicted_output(m, data, steps) for label, m in groups.items()}
     texts = [f"{label}: fit {_fmt_fit(f[1][i])} %" for label, f in fits.items()
              for i in range(ny)]
