@@ -13,11 +13,11 @@ and descent of each string, the layout of each string, and the image of each gly
 each of the 64 x 64 sub-pixel offsets FreeType positions it at (a translation by whole
 pixels moves the outline on the pixel grid without changing its coverage: the cached
 image is drawn at the whole-pixel shift), and the line heights of each font and size
-(which matplotlib otherwise looks up in the font's tables for every text it lays out). Each cached value is the one matplotlib's
-renderer computes for the same key, so the pixels are the same
-(tests/test_report_figures.py). Mathematical text, TeX, font features and languages go
-to matplotlib's renderer unchanged; without the internals used here (older matplotlib
-versions) the canvas is matplotlib's own.
+(which matplotlib otherwise looks up in the font's tables for every text it lays out).
+Each cached value is the one matplotlib's renderer computes for the same key, so the
+pixels are the same (tests/test_report_figures.py). Mathematical text, TeX, font
+features and languages go to matplotlib's renderer unchanged; without the internals
+used here (older matplotlib versions) the canvas is matplotlib's own.
 """
 
 from __future__ import annotations
@@ -74,9 +74,11 @@ _Canvas = None
 
 def _make_classes(agg):
     import matplotlib as mpl
+    from matplotlib.font_manager import fontManager
     from matplotlib.ft2font import FT2Font
     fast = (hasattr(agg, "RenderMode") and hasattr(agg, "get_hinting_flag")
             and hasattr(agg.RendererAgg, "_draw_text_glyphs_and_boxes")
+            and hasattr(fontManager, "_find_fonts_by_props")
             and all(hasattr(FT2Font, name) for name in ("_layout", "_render_glyph",
                                                          "_set_transform")))
 

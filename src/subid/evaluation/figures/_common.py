@@ -254,9 +254,10 @@ def predicted_output(model, data, steps):
 #: and the maximum of each of ``MAX_TRACE_POINTS // 2`` consecutive blocks of samples,
 #: in time order: the envelope that a line a thousand pixels wide shows anyway. 1350
 #: blocks: one per pixel column of a 9-inch figure at 150 dpi, at least one per column
-#: of the narrower axes of the time plots (more only add edges to rasterise: the bands
-#: of a 10^6-sample report drew 40 % slower with 2000), so a record of 10^6 samples
-#: draws as fast as one of 2,700 and looks the same. The data are never changed.
+#: of the narrower axes of the time plots (more only add edges to rasterise: with 2,000
+#: blocks the bands of a 10^6-sample report took 1.3 to 1.6 times as long to draw), so a
+#: record of 10^6 samples draws as fast as one of 2,700 and looks the same. The data are
+#: never changed.
 MAX_TRACE_POINTS = 2700
 
 
