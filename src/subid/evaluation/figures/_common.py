@@ -250,9 +250,9 @@ def predicted_output(model, data, steps):
     return y_hat, percent_fit(data, y_hat)
 
 
-#: Most points a time trace is drawn with. A longer trace is drawn through the minimum
-#: and the maximum of each of ``MAX_TRACE_POINTS // 2`` consecutive blocks of samples,
-#: in time order: the envelope that a line a thousand pixels wide shows anyway. 1350
+#: Most points a time trace is drawn with. A longer trace is drawn as the band between
+#: the minimum and the maximum of each of ``MAX_TRACE_POINTS // 2`` consecutive blocks of
+#: samples: the envelope that a line a thousand pixels wide shows anyway. 1350
 #: blocks: one per pixel column of a 9-inch figure at 150 dpi, at least one per column
 #: of the narrower axes of the time plots (more only add edges to rasterise: with 2,000
 #: blocks the bands of a 10^6-sample report took 1.3 to 1.6 times as long to draw), so a
