@@ -225,17 +225,23 @@ def test_compare_draws_the_measured_output_on_top_and_distinguishable():
     assert measured.get_color() != model.get_color() or model.get_alpha() < 1
 
 
-def test_long_traces_are_drawn_through_their_envelope():
-    from subid.evaluation.plot import MAX_TRACE_POINTS, _envelope
+def test_long_traces_are_drawn_through_their_min_max_blocks():
+    from subid.evaluation.plot import MAX_TRACE_POINTS, _min_max_blocks
     n = 100_003
     t = np.arange(n) * 0.01
     y = np.sin(t) + np.where(np.arange(n) == 55_555, 9.0, 0.0)    # one spike
-    tt, yy = _envelope(t, y)
-    assert len(yy) <= MAX_TRACE_POINTS and np.all(np.diff(tt) >= 0)
-    assert yy.max() == y.max() and yy.min() == y.min()              # the spike is kept
-    assert set(yy) <= set(y)
-    short_t, short_y = _envelope(t[:100], y[:100])
-    assert short_y is y[:100] or np.array_equal(short_y, y[:100])
+    start, low, high = _min_max_blocks(t, y)
+    size = -(-n // (MAX_TRACE_POINTS // 2))
+    assert len(start) == len(low) == len(high) == -(-n // size) <= MAX_TRACE_POINTS // 2
+    np.testing.assert_array_equal(start, t[::size])                   # each block's start
+    for k in (0, 27, len(low) - 1):                                   # the last is shorter
+        np.testing.assert_array_equal([low[k], high[k]], [y[k * size:(k + 1) * size].min(),
+                                                          y[k * size:(k + 1) * size].max()])
+    assert high.max() == y.max() and low.min() == y.min()            # the spike is kept
+    y[70_000] = np.nan                                                # a gap in the band
+    _, low, high = _min_max_blocks(t, y)
+    assert np.isnan(low[70_000 // size]) and np.isnan(high[70_000 // size])
+    assert np.isfinite(np.delete(low, 70_000 // size)).all()
 
 
 def test_one_step_x0_from_decayed_free_responses_equals_the_full_regression():

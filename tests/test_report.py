@@ -218,3 +218,50 @@ def test_report_renders_in_headless_chromium_without_console_errors(dryer_report
     assert len(np.unique(arr.reshape(-1, 3), axis=0)) > 200
     assert (arr[:200].min(axis=2) < 80).mean() > 0.001     # the title is drawn
     assert (arr[600:].min(axis=2) < 250).mean() > 0.05      # figures below the summary
+
+
+def test_evaluate_keeps_the_simulation_that_the_comparison_draws(dryer_models, monkeypatch):
+    import gc
+
+    from subid.evaluation.figures import time_domain
+    from subid.model.fit import output_fit
+    from subid.model.prediction import simulate_fit
+    models, est, val = dryer_models
+    m = models["ls"]
+    r = report.evaluate(m, est, val)
+    np.testing.assert_array_equal(r["simulated"], simulate_fit(m, val)[0])
+    np.testing.assert_array_equal(output_fit(val, r["simulated"]), r["fit_validation"])
+    assert report.evaluate(m, est)["simulated"].shape == est.y.shape    # no validation part
+    fig = subid.plot.compare(val, {"ls": m}, simulated={"ls": r["simulated"]})
+    legend = [t.get_text() for t in fig.axes[0].get_legend().get_texts()]
+    assert f"ls: fit {r['fit_validation'][0]:.1f} %" in legend
+
+    def simulated_again(*args, **kwargs):
+        raise AssertionError("the comparison simulated the model again")
+
+    monkeypatch.setattr(time_domain, "simulated_output", simulated_again)
+    states = []
+    text = report.identification_report({"ls": m}, est, val, fits={"ls": r},
+                                        progress=lambda s: states.append(gc.isenabled()))
+    check_png(parse(text).images["compare"][0])
+    # the collector paused while the report is built, then restored as it was
+    assert states and not any(states) and gc.isenabled()
+
+
+def test_report_leaves_the_garbage_collector_as_it_was(dryer_models):
+    import gc
+    models, est, val = dryer_models
+
+    def stop(section):
+        raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        report.identification_report({"ls": models["ls"]}, est, val, progress=stop)
+    assert gc.isenabled()
+    gc.disable()
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            report.identification_report({"ls": models["ls"]}, est, val, progress=stop)
+        assert not gc.isenabled()
+    finally:
+        gc.enable()

@@ -88,14 +88,37 @@ def test_light_ticks_draw_what_matplotlib_draws(kind):
 
 def test_light_ticks_keep_axes_they_cannot_reproduce():
     fig = Figure(figsize=(3, 3))
-    ax = fig.subplots()
-    ax.plot([0, 1], [0, 1])
-    ax.set_aspect("equal")                     # limits change at draw time
     host = fig.subplots()
     twin = host.twinx()                        # ticks on the right, x hidden and shared
     twin.plot([0, 1], [1, 0])
     assert light_ticks(fig, FigureCanvasAgg(fig).get_renderer()) == 1  # host's y only
     assert host.xaxis.get_major_locator().__class__.__name__ != "NullLocator"
+
+
+def _pole_figure(adjustable: str) -> Figure:
+    fig = Figure(figsize=(6.5, 5), dpi=80)     # wider than tall, as the pole map
+    ax = fig.subplots()
+    theta = np.linspace(0.0, 2 * np.pi, 200)
+    ax.plot(np.cos(theta), np.sin(theta), lw=0.6)
+    ax.plot([0.5, 0.9], [0.3, -0.1], "x")
+    ax.set_aspect("equal", adjustable=adjustable)  # the box or the limits set at draw time
+    ax.set_xlabel("real part")
+    ax.set_ylabel("imaginary part")
+    return fig
+
+
+@pytest.mark.parametrize("adjustable", ["box", "datalim"])
+def test_light_ticks_draw_a_fixed_aspect_axes_as_matplotlib(adjustable):
+    def pixels(light):
+        fig = _pole_figure(adjustable)
+        canvas = FigureCanvasAgg(fig)
+        replaced = light_ticks(fig, canvas.get_renderer()) if light else 0
+        canvas.draw()
+        return np.asarray(canvas.buffer_rgba())[..., :3].astype(int), replaced
+    (before, _), (after, replaced) = pixels(False), pixels(True)
+    assert replaced == 2
+    assert np.abs(before - after).max() <= 64
+    assert np.abs(before - after).mean() < 0.05
 
 
 def test_figure_html_embeds_the_drawn_pixels():
@@ -129,6 +152,7 @@ def _text_figure() -> Figure:
     fig.text(0.123456, 0.03, "10⁻² at a fraction of a pixel", fontsize=7)
     fig.text(0.5, 0.5, "rotated 30°", rotation=30)
     fig.text(0.7, 0.1, "aliased", antialiased=False)
+    fig.text(0.02, 0.5, "input\nu1 (two lines)", fontsize=9, ha="left")   # line gaps
     fig.text(0.1, 0.9, r"$\alpha^2$ math")               # matplotlib's own path
     return fig
 

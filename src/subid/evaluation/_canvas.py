@@ -12,11 +12,12 @@ layouts and two thirds of the glyph images of a 4 x 4 report are repeats.
 and descent of each string, the layout of each string, and the image of each glyph at
 each of the 64 x 64 sub-pixel offsets FreeType positions it at (a translation by whole
 pixels moves the outline on the pixel grid without changing its coverage: the cached
-image is drawn at the whole-pixel shift). Each cached value is the one matplotlib's
-renderer computes for the same key, so the pixels are the same
-(tests/test_report_figures.py). Mathematical text, TeX, font features and languages go
-to matplotlib's renderer unchanged; without the internals used here (older matplotlib
-versions) the canvas is matplotlib's own.
+image is drawn at the whole-pixel shift), and the line heights of each font and size
+(which matplotlib otherwise looks up in the font's tables for every text it lays out).
+Each cached value is the one matplotlib's renderer computes for the same key, so the
+pixels are the same (tests/test_report_figures.py). Mathematical text, TeX, font
+features and languages go to matplotlib's renderer unchanged; without the internals
+used here (older matplotlib versions) the canvas is matplotlib's own.
 """
 
 from __future__ import annotations
@@ -33,6 +34,24 @@ _LIMIT = 20000
 _metrics: dict = {}
 _layouts: dict = {}
 _glyphs: dict = {}
+_heights: dict = {}
+
+
+def _font_heights(prop, dpi):
+    """``(ascent, descent, line gap)`` in pixels of the font of ``prop``, as
+    ``matplotlib.text.Text._get_layout`` computes them (matplotlib 3.11)."""
+    from matplotlib.font_manager import fontManager, get_font
+    font = get_font(fontManager._find_fonts_by_props(prop))
+    for table_name, gap, ascent, descent in (
+            ("OS/2", "sTypoLineGap", "sTypoAscender", "sTypoDescender"),
+            ("hhea", "lineGap", "ascent", "descent")):
+        table = font.get_sfnt_table(table_name)
+        if table is None:
+            continue
+        scale = 1 / font.get_sfnt_table("head")["unitsPerEm"] \
+            * prop.get_size_in_points() * dpi / 72
+        return table[ascent] * scale, -table[descent] * scale, table[gap] * scale
+    return None, None, None
 
 
 def _limited(cache: dict) -> dict:
@@ -55,9 +74,11 @@ _Canvas = None
 
 def _make_classes(agg):
     import matplotlib as mpl
+    from matplotlib.font_manager import fontManager
     from matplotlib.ft2font import FT2Font
     fast = (hasattr(agg, "RenderMode") and hasattr(agg, "get_hinting_flag")
             and hasattr(agg.RendererAgg, "_draw_text_glyphs_and_boxes")
+            and hasattr(fontManager, "_find_fonts_by_props")
             and all(hasattr(FT2Font, name) for name in ("_layout", "_render_glyph",
                                                          "_set_transform")))
 
@@ -71,6 +92,18 @@ def _make_classes(agg):
             if value is None:
                 value = super().get_text_width_height_descent(s, prop, ismath)
                 _limited(_metrics)[key] = value
+            return value
+
+        def _get_font_height_metrics(self, prop):
+            """The ascent, descent and line gap of ``prop``'s font (what
+            ``Text._get_layout`` reads from the font's OS/2 or hhea table for every
+            text at every draw: a font lookup and two table reads), once per font and
+            size (None when the font has neither table: matplotlib then measures)."""
+            key = (hash(prop), self.dpi)
+            value = _heights.get(key)
+            if value is None:
+                value = _font_heights(prop, self.dpi)
+                _limited(_heights)[key] = value
             return value
 
         def draw_text(self, gc, x, y, s, prop, angle, ismath=False, mtext=None):

@@ -92,15 +92,20 @@ _DIRECT_LAGS = 64
 _COVARIANCE_BLOCK = 4096
 
 
-def _lag_products(z: np.ndarray, lags: int) -> np.ndarray:
+def _lag_products(z, lags: int) -> np.ndarray:
     """``P[τ] = Σ_t z[t+τ] z[t]^T`` for τ = 0..lags (zero beyond the record), shape
     (lags + 1, nz, nz): one matrix product per lag and block of :data:`_COVARIANCE_BLOCK`
-    samples, each block read from cache by every lag."""
-    n, nz = z.shape
+    samples, each block read from cache by every lag. ``z``: an array (n, nz), or a tuple
+    of arrays with n rows whose columns side by side make it (each block joined on its
+    own: the record is not copied whole)."""
+    parts = z if isinstance(z, tuple) else (z,)
+    n, nz = parts[0].shape[0], sum(p.shape[1] for p in parts)
     P = np.zeros((lags + 1, nz, nz))
     for t0 in range(0, n, _COVARIANCE_BLOCK):
         t1 = min(n, t0 + _COVARIANCE_BLOCK)
-        segment = z[t0:min(n, t1 + lags)]
+        end = min(n, t1 + lags)
+        segment = parts[0][t0:end] if len(parts) == 1 else \
+            np.hstack([p[t0:end] for p in parts])
         for tau in range(min(lags + 1, n - t0)):
             m = min(t1, n - tau) - t0
             P[tau] += segment[tau:tau + m].T @ segment[:m]
@@ -114,15 +119,16 @@ def _covariances(data, lags):
     nz = data.n_outputs + data.n_inputs
     R = np.zeros((lags + 1, nz, nz))
     for a, b in data.experiment_ranges:
-        z = np.hstack([data.y[a:b], data.u[a:b]])
         if lags <= _DIRECT_LAGS:
             # few lags (the default window is at most 30): one product per lag costs
             # (lags + 1) N nz^2, far below the FFTs of 2N points (6x faster at 7 x 10^5
             # samples, 2 inputs, 2 outputs, 30 lags); same sums to rounding. Taken in
             # blocks of _COVARIANCE_BLOCK samples, so that every lag's product reads the
-            # block from cache, not the whole record from memory (4x faster again)
-            R += _lag_products(z, lags)
+            # block from cache, not the whole record from memory (4x faster again);
+            # z = [y, u] joined block by block
+            R += _lag_products((data.y[a:b], data.u[a:b]), lags)
             continue
+        z = np.hstack([data.y[a:b], data.u[a:b]])
         n_fft = 1 << int(math.ceil(math.log2(2 * (b - a) + 1)))
         Z = np.fft.rfft(z, n_fft, axis=0)
         for i in range(nz):          # one channel at a time: memory n_fft x nz

@@ -38,7 +38,7 @@ from __future__ import annotations
 from subid.evaluation.figures._common import MAX_TRACE_POINTS as MAX_TRACE_POINTS
 from subid.evaluation.figures._common import METHOD_COLORS as METHOD_COLORS
 from subid.evaluation.figures._common import STYLE as STYLE
-from subid.evaluation.figures._common import _envelope, _pyplot  # noqa: F401  (reports, tests)
+from subid.evaluation.figures._common import _min_max_blocks, _pyplot  # noqa: F401  (tests)
 from subid.evaluation.figures._common import colors_for as colors_for
 from subid.evaluation.figures._common import is_unstable as is_unstable
 from subid.evaluation.figures._common import predicted_output as predicted_output

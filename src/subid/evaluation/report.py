@@ -27,6 +27,8 @@ from __future__ import annotations
 
 import base64
 import datetime
+import functools
+import gc
 import html
 import logging
 import math
@@ -375,24 +377,35 @@ def evaluate(model, estimation, validation=None) -> dict:
     dict
         ``fit_estimation`` and ``fit_validation`` (arrays per output, from
         :func:`subid.fit_percent`; ``None`` without validation data; NaN
-        where the simulation diverges), ``stable``, ``poles``, ``order``.
+        where the simulation diverges), ``stable``, ``poles``, ``order``, and
+        ``simulated``: the simulated outputs behind the last fit (on
+        ``validation``, else on ``estimation``; NaN where the simulation
+        diverges), which :func:`identification_report` draws in its comparison
+        instead of simulating the model again.
     """
     from subid.evaluation.plot import simulated_output
-    from subid.model.fit import fit_percent
+    from subid.model.fit import output_fit
+    from subid.model.prediction import simulate_fit
 
     def fit(data):
         if data is None:
-            return None
+            return None, None
         with np.errstate(all="ignore"):
-            try:
-                values = np.asarray(fit_percent(model, data), dtype=float)
+            try:         # fit_percent's simulation and fit, the simulation kept
+                y_hat, _ = simulate_fit(model, data)
+                values = np.asarray(output_fit(data, y_hat), dtype=float)
             except ModelError:                 # the simulation overflows
-                values = simulated_output(model, data)[1]
+                y_hat, values = simulated_output(model, data)
         values[~np.isfinite(values)] = np.nan
-        return values
+        return values, y_hat
 
-    return {"fit_estimation": fit(estimation), "fit_validation": fit(validation),
-            "stable": model.is_stable(), "poles": model.poles(), "order": model.order}
+    fit_estimation, simulated = fit(estimation)
+    fit_validation, simulated_validation = fit(validation)
+    if validation is not None:
+        simulated = simulated_validation
+    return {"fit_estimation": fit_estimation, "fit_validation": fit_validation,
+            "stable": model.is_stable(), "poles": model.poles(), "order": model.order,
+            "simulated": simulated}
 
 
 # ---------------------------------------------------------------------------
@@ -416,6 +429,36 @@ def _spa_estimate(estimation, models):
         return None
 
 
+def _collector_paused(fn):
+    """``fn`` run with Python's cyclic garbage collector paused, as :mod:`timeit` times
+    a statement.
+
+    A report builds and drops tens of thousands of matplotlib objects (artists,
+    transforms, paths: a figure's are reference cycles, freed by the collector only).
+    Their allocations set off collections of the whole heap, which in a process that
+    has identified a model holds every module loaded (numpy, scipy, numba, the
+    methods): 0.1 to 0.25 CPU s of a report's 1.3 s in ``bench/report_ratio.py``,
+    depending on when the full collections fall. With the collector paused they do
+    not run; the report's own garbage is collected once at the end (the youngest
+    generation: the objects made during the report), so the figures' memory is
+    released as before. The pause is the process's for the duration of the call
+    (another thread's cycles wait until it ends); a collector disabled by the
+    caller stays disabled, and an exception restores it as well.
+    """
+    @functools.wraps(fn)
+    def paused(*args, **kwargs):
+        enabled = gc.isenabled()
+        gc.disable()
+        try:
+            return fn(*args, **kwargs)
+        finally:
+            if enabled:
+                gc.enable()
+                gc.collect(0)
+    return paused
+
+
+@_collector_paused
 def identification_report(models, estimation, validation=None, *, title="subid report",
                           frequency_unit="rad/s", history=None, seconds=None, notes=(),
                           command=None, source=None, errors=None, data=None,
@@ -564,8 +607,11 @@ def identification_report(models, estimation, validation=None, *, title="subid r
 
     # -- comparison ------------------------------------------------------
     announce("compare")
+    # the simulations behind the fits (evaluate): not run again for the figure
+    simulated = {label: r["simulated"] for label, r in results.items()
+                 if r.get("simulated") is not None}
     body.append(_section("compare", f"Simulated and measured outputs ({check_name} data)",
-                         _plot_or_note(lambda: plot.compare(check, models),
+                         _plot_or_note(lambda: plot.compare(check, models, simulated=simulated),
                                        f"simulation on the {check_name} data from a "
                                        "least-squares initial state; fit % in the legend",
                                        "comparison")))

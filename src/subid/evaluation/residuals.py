@@ -50,11 +50,14 @@ def correlations(e, u, *, max_lag: int = 25, confidence: float = 0.99, ranges=No
     if max_lag >= n:
         raise DataError(f"max_lag {max_lag} must be smaller than the {n} samples of the record")
     z = float(ndtri(0.5 + confidence / 2))
-    e0 = e - e.mean(axis=0)
-    u0 = u - u.mean(axis=0)
+    ny = e.shape[1]
+    # [e, u], each channel's mean removed (one copy of the record)
+    z_all = np.hstack([e, u])
+    z_all -= z_all.mean(axis=0)
+    e0 = z_all[:, :ny]
     lags = np.arange(max_lag + 1)
     cross_lags = np.arange(-max_lag, max_lag + 1)
-    ny, nu = e.shape[1], u.shape[1]
+    nu = u.shape[1]
     auto = np.zeros((ny, lags.size))
     cross = np.zeros((ny, nu, cross_lags.size))
     cross_bound = np.zeros((ny, nu))
@@ -62,7 +65,6 @@ def correlations(e, u, *, max_lag: int = 25, confidence: float = 0.99, ranges=No
     # every lagged product of z = [e, u] at once (pairs inside one experiment), then
     # r_ab(tau) = sum_t a(t) b(t - tau) / N: P[tau][a, b] for tau >= 0, P[-tau][b, a] below
     from subid.evaluation.nonparametric import _lag_products
-    z_all = np.hstack([e0, u0])
     P = sum(_lag_products(z_all[s:t], max_lag) for s, t in (ranges or [(0, n)])) / n
 
     def xcorr(a, b):

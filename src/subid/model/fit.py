@@ -12,7 +12,7 @@ from subid._validation import checked_call, same_period
 from subid.errors import DataError
 from subid.model.prediction import _SIM_BLOCK, check_model, predict, simulate_fit
 
-__all__ = ["fit_percent", "frequency_fit"]
+__all__ = ["fit_percent", "frequency_fit", "output_fit"]
 
 
 @checked_call
@@ -69,6 +69,27 @@ def fit_percent(model, data, x0="estimate", hold=None, steps=np.inf, *,
         y_hat = predict(check_model(model, "model"), data, steps, x0p)
     else:
         y_hat, _ = simulate_fit(model, data, x0=x0, hold=hold)
+    return output_fit(data, y_hat, per_experiment=per_experiment)
+
+
+def output_fit(data, y_hat, *, per_experiment: bool = False) -> np.ndarray:
+    """The fit % of :func:`fit_percent` for outputs ``y_hat`` already simulated or
+    predicted on ``data`` (its last step: the report's comparison figure draws the
+    simulation that gave the fit, see :func:`subid.evaluation.report.evaluate`).
+
+    Parameters
+    ----------
+    data : IOData
+        The record ``y_hat`` was computed on.
+    y_hat : ndarray, shape (n_samples, n_outputs)
+    per_experiment : bool
+        As in :func:`fit_percent`.
+
+    Returns
+    -------
+    ndarray, shape (n_outputs,), or (n_experiments, n_outputs) with
+    ``per_experiment=True``
+    """
     # Each output is divided by its largest magnitude first: the ratio is
     # scale-invariant, and squaring values near 1e300 would overflow to inf
     # (inf / inf = NaN) where the fit is perfectly defined.

@@ -12,8 +12,9 @@ label as far from the spine as the tick labels reach (what matplotlib does at ea
 draw). The image is the same up to the anti-aliasing of single pixels.
 
 An axis whose ticks this does not reproduce keeps matplotlib's, and so do the axes
-that share its locator: hidden axes, axes that are not rectilinear or fix their
-aspect ratio (their limits change at draw time), ticks, labels or the axis label on
+that share its locator: hidden axes, axes that are not rectilinear or place themselves
+at draw time (an axes locator; a fixed aspect ratio is applied first, as the draw
+will), ticks, labels or the axis label on
 the second side (top, right), an offset or scale factor of the formatter (``1e-5``),
 labelled minor ticks. Only the report's images use this (``report.figure_html``): the
 figures :mod:`subid.plot` returns keep matplotlib's ticks.
@@ -43,10 +44,16 @@ def light_ticks(fig, renderer) -> int:
     """
     plans, kept = [], set()
     for ax in fig.axes:
+        fixed = ax.get_aspect() != "auto" and ax.get_axes_locator() is None
+        if fixed and ax.name == "rectilinear" and ax.get_visible():
+            # the box (or the limits) a fixed aspect ratio gives at draw time, now: the
+            # draw applies it again to the same effect, and the ticks are those of the
+            # final limits and length
+            ax.apply_aspect()
         for axis in (ax.xaxis, ax.yaxis):
             plan = None
-            if ax.name == "rectilinear" and ax.get_aspect() == "auto" and ax.get_visible() \
-                    and axis.get_visible():
+            if ax.name == "rectilinear" and (ax.get_aspect() == "auto" or fixed) \
+                    and ax.get_visible() and axis.get_visible():
                 plan = _plan(ax, axis)
             if plan is None:
                 kept.add(id(axis.major))

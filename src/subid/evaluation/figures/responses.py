@@ -200,8 +200,7 @@ def bode(model_or_models=None, w=None, *, data=None, hz=False, labels=None, phas
     nyquists = sorted({math.pi / m.dt for m in list(groups.values()) + ([data] if data else [])
                        if m.dt > 0})
     for f_nyq in nyquists:
-        for ax in axes.ravel():
-            ax.axvline(f_nyq * x_scale, color="0.5", lw=0.6, ls=":")
+        _shared_vline(axes, f_nyq * x_scale, color="0.5", lw=0.6, ls=":")
     # minor log ticks are slow to draw (a Tick object each, 40 % of a 2 x 2 diagram):
     # at 2 and 5 of every decade on a single pair's diagram, none on a grid (the
     # decades are labelled and gridded)
@@ -214,6 +213,23 @@ def bode(model_or_models=None, w=None, *, data=None, hz=False, labels=None, phas
         fig.suptitle(title)
     _layout(fig, axes, hgap=0.5, wgap=0.85, right=room + 0.1)
     return fig
+
+
+def _shared_vline(axes, x, **style):
+    """``ax.axvline(x, **style)`` on every panel of a grid sharing its x axis.
+
+    What axvline does (a line from bottom to top at ``x``, which joins the data
+    limits, and a new autoscale when ``x`` lies outside the current view), with the
+    view computed once for the grid: each axvline reads the view, which after the
+    previous one's autoscale request is recomputed over every panel sharing the
+    axis (a tenth of the time to build a 4 x 2 Bode diagram)."""
+    from matplotlib.lines import Line2D
+    low, high = axes.flat[0].get_xbound()
+    for ax in axes.ravel():
+        ax.add_line(Line2D([x, x], [0.0, 1.0], transform=ax.get_xaxis_transform(which="grid"),
+                           **style))
+    if (x < low or x > high) and axes.flat[0].get_autoscalex_on():
+        axes.flat[0].autoscale(axis="x")        # requested, for every panel sharing x
 
 
 def _data_grid(data) -> np.ndarray:

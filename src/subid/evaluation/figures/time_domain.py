@@ -8,6 +8,7 @@ import math
 import numpy as np
 
 from subid.evaluation.figures._common import (
+    _autoscale_once,
     _check_data,
     _draw_trace,
     _finite,
@@ -20,6 +21,7 @@ from subid.evaluation.figures._common import (
     _styled,
     _time_label,
     colors_for,
+    percent_fit,
     predicted_output,
     simulated_output,
 )
@@ -27,7 +29,7 @@ from subid.evaluation.figures._common import (
 
 @_styled
 def compare(data, models, *, labels=None, x0="estimate", title=None, clip=True,
-            steps=math.inf):
+            steps=math.inf, simulated=None):
     """Measured outputs against the outputs simulated by each model (as MATLAB's ``compare``).
 
     Parameters
@@ -46,6 +48,11 @@ def compare(data, models, *, labels=None, x0="estimate", title=None, clip=True,
     steps : int or math.inf
         Draw ``steps``-ahead predictions (:func:`subid.predict`) instead of
         the simulation.
+    simulated : dict label -> ndarray, optional
+        Outputs already simulated on ``data`` with ``x0`` (shape (n_samples,
+        n_outputs), NaN where diverging: the ``simulated`` entry of
+        :func:`subid.evaluation.report.evaluate`), drawn and scored instead of
+        simulating those models again (with ``steps=math.inf`` only).
 
     Returns
     -------
@@ -57,7 +64,10 @@ def compare(data, models, *, labels=None, x0="estimate", title=None, clip=True,
     groups = _model_groups(models, labels)
     ny = data.n_outputs
     colors = colors_for(groups.items())
-    fits = {label: simulated_output(m, data, x0=x0) if steps == math.inf else
+    given = simulated if simulated is not None and steps == math.inf else {}
+    fits = {label: (given[label], percent_fit(data, given[label]))
+            if label in given and np.shape(given[label]) == data.y.shape else
+            simulated_output(m, data, x0=x0) if steps == math.inf else
             predicted_output(m, data, steps) for label, m in groups.items()}
     texts = [f"{label}: fit {_fmt_fit(f[1][i])} %" for label, f in fits.items()
              for i in range(ny)]
@@ -68,13 +78,14 @@ def compare(data, models, *, labels=None, x0="estimate", title=None, clip=True,
     # the measured output is drawn on top (zorder), thin and black; the models under
     # it, wider and lighter, so that both stay visible where they agree (a long
     # record: the measured band outlined, the models' bands filled, see _draw_trace)
-    for i in range(ny):
-        _draw_trace(axes[i, 0], t, data.y[:, i], color="k", lw=0.7, fill=False, zorder=3,
-                    label="measured")
-    for k, (label, (y_hat, fit)) in enumerate(fits.items()):
+    with _autoscale_once(axes):      # the limits once, after the plotting calls
         for i in range(ny):
-            _draw_trace(axes[i, 0], t, _finite(y_hat[:, i]), color=colors[k], lw=1.8,
-                        alpha=0.75, zorder=2, label=f"{label}: fit {_fmt_fit(fit[i])} %")
+            _draw_trace(axes[i, 0], t, data.y[:, i], color="k", lw=0.7, fill=False,
+                        zorder=3, label="measured")
+        for k, (label, (y_hat, fit)) in enumerate(fits.items()):
+            for i in range(ny):
+                _draw_trace(axes[i, 0], t, _finite(y_hat[:, i]), color=colors[k], lw=1.8,
+                            alpha=0.75, zorder=2, label=f"{label}: fit {_fmt_fit(fit[i])} %")
     for i in range(ny):
         ax = axes[i, 0]
         ax.set_ylabel(data.output_names[i])
@@ -125,11 +136,12 @@ def data_overview(data, *, split=None, title=None):
     fig, axes = plt.subplots(rows, 1, figsize=(9, 1.25 * rows + 0.9), sharex=True,
                              squeeze=False)
     t = data.t
-    for ax, (name, values, color) in zip(axes[:, 0], channels):
-        _draw_trace(ax, t, values, color=color, lw=0.8)
-        ax.set_ylabel(name, fontsize=9, rotation=0, ha="right", va="center")
-        if split is not None:
-            ax.axvspan(split, t[-1], color="0.85", zorder=0)
+    with _autoscale_once(axes):      # the limits once, after the plotting calls
+        for ax, (name, values, color) in zip(axes[:, 0], channels):
+            _draw_trace(ax, t, values, color=color, lw=0.8)
+            ax.set_ylabel(name, fontsize=9, rotation=0, ha="right", va="center")
+            if split is not None:
+                ax.axvspan(split, t[-1], color="0.85", zorder=0)
     if split is not None:
         axes[0, 0].text(split, 1.02, " validation", transform=axes[0, 0].get_xaxis_transform(),
                         fontsize=9, va="bottom")
