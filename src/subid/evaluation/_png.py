@@ -70,4 +70,4 @@ def png_bytes(rgba: np.ndarray, level: int = 1) -> bytes:
         np.subtract(rgb[1:, :, channel], rgb[:-1, :, channel], out=rows[1:, :, channel])
     header = struct.pack(">IIBBBBB", width, height, 8, 2, 0, 0, 0)   # 8-bit RGB
     return (_SIGNATURE + _chunk(b"IHDR", header)
-            + _chunk(b"IDAT", zlib.compress(raw, level)) + _chunk(b"IEND", b""))
+            + _chunk(b"IDAT", zlib.compress(raw.data, level)) + _chunk(b"IEND", b""))

@@ -360,8 +360,8 @@ def score_horizon(parts, orders, horizon, *, fitter, estimators, held=None, lagg
         if hasattr(problem, "cached") and train.n_experiments == 1:
             if lagged[k] is None:         # once per fold, for every horizon
                 lagged[k] = LagProducts.of_record(train)
-            fold_products = lagged[k]
-            problem.cached(LAG_PRODUCTS, lambda: fold_products)   # B, D, x0 of every candidate
+            # B, D, x0 of every candidate
+            problem.cached(LAG_PRODUCTS, lambda products=lagged[k]: products)
         # the candidates are only scored: without the model objects where the fitter
         # can (Pipeline.fold_score), else from the models
         scorer = getattr(fitter, "fold_score", None)
