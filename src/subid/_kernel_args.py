@@ -22,7 +22,9 @@ __all__ = ["frozen", "read_only"]
 def frozen(values, dtype=np.float64) -> np.ndarray:
     """``values`` as a read-only C-contiguous array of ``dtype`` (a view when no
     conversion is needed: the caller's array itself is left writeable)."""
-    values = np.ascontiguousarray(values, dtype=dtype)
+    if type(values) is not np.ndarray or values.dtype != dtype \
+            or not values.flags.c_contiguous:
+        values = np.ascontiguousarray(values, dtype=dtype)
     if values.flags.writeable:
         values = values.view()
         values.flags.writeable = False
@@ -31,4 +33,4 @@ def frozen(values, dtype=np.float64) -> np.ndarray:
 
 def read_only(*arrays: np.ndarray) -> tuple:
     """:func:`frozen` of each array, keeping its dtype (for a kernel's argument list)."""
-    return tuple(frozen(a, a.dtype) for a in arrays)
+    return tuple([frozen(a, a.dtype) for a in arrays])

@@ -254,6 +254,21 @@ class LagProducts:
             self.extend()
         return self.G[:L + 1], self.R[:L + 1]
 
+    def kernel_arguments(self, L) -> tuple:
+        """The lag products up to L and the record's edges as the kernels of
+        :mod:`subid.methods.dt._lag_kernel` take them (read-only C-contiguous arrays: one
+        compiled signature): slices of arrays made once for all the lags held (the
+        candidates of a fold share them)."""
+        self.lags(L)                                 # the lags past those held, if needed
+        held = self.__dict__.get("_kernel_arguments")
+        if held is None or held[0] is not self.G:
+            K, u = self.G.shape[0], self.u
+            held = self._kernel_arguments = (self.G, read_only(
+                self.G.reshape(K, -1), self.R.reshape(K, -1), u[::-1][:K], u[:K],
+                self.y[:K]), frozen(np.diag(self.Y)))
+        G, R, u_tail, u_head, y_head = (a[:L + 1] for a in held[1])
+        return G, R, held[2], u_tail, u_head, y_head, self.n_samples
+
     @classmethod
     def from_sums(cls, u, y, sums, max_lag):
         """The lag products of the record ``(u, y)`` whose lag sums ``(Γ, R, Y)`` are
@@ -308,7 +323,8 @@ class _Modal:
     the powers of A (:mod:`subid.methods.dt._lag_kernel`)."""
 
     def __init__(self, lam, V, Wm, lags):
-        self.lam, self.V, self.Wm, self.lags = lam, V, Wm, lags
+        self.lam, self.V, self.Wm = read_only(lam, V, Wm)    # as the kernels take them
+        self.lags = lags
         self.radius = float(np.abs(lam).max())
         self._powers = (None, None)
 
@@ -345,18 +361,13 @@ class _Modal:
     def powers(self, L):
         """``(Re λ^e, Im λ^e)`` for e = 0..L (the last L asked kept)."""
         if self._powers[0] != L:
-            self._powers = (L, powers(self.lam, L))
+            self._powers = (L, read_only(*powers(self.lam, L)))
         return self._powers[1]
 
     def arguments(self, lp, L) -> tuple:
         """The modal form and the lag products of ``lp`` (up to L) as the kernels of
         :mod:`subid.methods.dt._lag_kernel` take them."""
-        (G, R), u, y = lp.lags(L), lp.u, lp.y
-        vre, vim = self.powers(L)
-        # read-only C-contiguous arrays: one compiled signature of each kernel
-        return read_only(self.lam, self.V, self.Wm, vre, vim, G.reshape(L + 1, -1),
-                         R.reshape(L + 1, -1), np.diag(lp.Y), u[::-1][:L + 1], u[:L + 1],
-                         y[:L + 1]) + (lp.n_samples,)
+        return (self.lam, self.V, self.Wm) + self.powers(L) + lp.kernel_arguments(L)
 
 
 def fit_b_d_x0(A, C, lp: LagProducts, output_weights, *, feedthrough=True, estimate_x0=True):
