@@ -166,3 +166,92 @@ def test_canvas_text_draws_what_matplotlib_draws():
         cached = canvas(_text_figure())
         cached.draw()
         assert np.array_equal(np.asarray(cached.buffer_rgba()), expected)
+
+
+def _report_figures(small_model_and_data):
+    """Every kind of figure the report draws, built by subid.plot."""
+    import subid
+    from subid.evaluation import plot
+    model, data = small_model_and_data
+    return {"bode": lambda: plot.bode({"m": model}, data=None),
+            "step": lambda: plot.step({"m": model}),
+            "compare": lambda: plot.compare(data, {"m": model}),
+            "overview": lambda: plot.data_overview(data, split=float(data.t[150])),
+            "residuals": lambda: plot.residuals({"m": model}, data),
+            "poles": lambda: plot.poles({"m": [model]}),
+            "orders": lambda: plot.order_selection({"m": model}),
+            # one pair: minor log ticks at 2 and 5 of every decade, made lazily
+            "bode_siso": lambda: plot.bode({"m": subid.systems.random_system(2, 1, 1,
+                                                                              seed=3)})}
+
+
+@pytest.fixture(scope="module")
+def small_model_and_data():
+    import subid
+    true = subid.systems.random_system(3, 2, 2, seed=5)
+    data = subid.systems.simulate_data(true, 300, seed=6, output_snr_db=30)
+    return subid.moesp(data, 3, horizon=5, system_matrices="shift"), data
+
+
+@pytest.mark.parametrize("light", [False, True])
+def test_lazy_tick_axes_draw_what_matplotlib_axes_draw(small_model_and_data, light,
+                                                      monkeypatch):
+    """Figures made of LazyTickAxes (ticks made when first used) draw the pixels the
+    same figures of matplotlib's Axes draw, with matplotlib's ticks (savefig) and with
+    the report's light ticks, and their ticks carry the same settings."""
+    import matplotlib.axes
+
+    from subid.evaluation._canvas import canvas
+    from subid.evaluation.figures import _axes, _common
+    assert _axes.SUPPORTED           # the matplotlib the tests run with has the internals
+    make = _report_figures(small_model_and_data)
+
+    def pixels(build, axes_class):
+        monkeypatch.setattr(_common, "axes_class", lambda: axes_class)
+        fig = build()
+        assert type(fig.axes[0]) is axes_class, [type(ax) for ax in fig.axes]
+        ticks = [(axis.majorTicks[0], axis.minorTicks[0]) for ax in fig.axes
+                 for axis in (ax.xaxis, ax.yaxis)]
+        settings = [[(t.gridline.get_visible(), t.tick1line.get_markersize(),
+                      t.tick1line.get_markeredgewidth(), t.tick1line.get_color(),
+                      t.label1.get_fontsize(), t.label1.get_visible(),
+                      t.tick2line.get_visible(), t.get_clip_box() is not None,
+                      t.gridline.get_clip_box() is not None) for t in pair]
+                    for pair in ticks]
+        if light:
+            c = canvas(fig)
+            light_ticks(fig, c.get_renderer())
+        else:
+            c = FigureCanvasAgg(fig)
+        c.draw()
+        import matplotlib.pyplot as plt
+        plt.close(fig)
+        return np.asarray(c.buffer_rgba()).copy(), settings
+
+    for name, build in make.items():
+        lazy, lazy_settings = pixels(build, _axes.LazyTickAxes)
+        plain, plain_settings = pixels(build, matplotlib.axes.Axes)
+        assert lazy_settings == plain_settings, name
+        assert lazy.shape == plain.shape and np.array_equal(lazy, plain), name
+
+
+def test_lazy_tick_axes_make_ticks_only_when_used_and_pickle():
+    import pickle
+
+    from subid.evaluation.figures._axes import LazyTickAxes
+    fig = Figure()
+    ax = fig.add_subplot(axes_class=LazyTickAxes)
+    made = ax.xaxis.__dict__
+    assert "majorTicks" not in made and "minorTicks" not in made   # none made yet
+    ax.tick_params(axis="x", which="both", labelsize=7, direction="in")
+    ax.grid(True)
+    assert "majorTicks" not in made
+    tick = ax.xaxis.majorTicks[0]          # made on first use, with every setting
+    assert tick.label1.get_fontsize() == 7 and tick.gridline.get_visible()
+    assert tick.get_tickdir() == "in" and tick.gridline.get_clip_box() is not None
+    assert "minorTicks" not in made
+    ax.tick_params(axis="x", labelsize=8)  # applied to the tick made
+    assert tick.label1.get_fontsize() == 8
+    copy = pickle.loads(pickle.dumps(fig))
+    assert type(copy.axes[0]) is LazyTickAxes
+    assert copy.axes[0].xaxis.majorTicks[0].label1.get_fontsize() == 8

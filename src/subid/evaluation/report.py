@@ -74,6 +74,16 @@ def _e(text) -> str:
     return html.escape(str(text), quote=True)
 
 
+#: Resolution of the report's images. Each image is shown at its figure's size in inches,
+#: 96 CSS pixels per inch (``figure_html``): 120 dpi gives 1.25 image pixels per CSS
+#: pixel, sharp on ordinary screens and at 125 % zoom. At the 150 dpi of the figures
+#: :mod:`subid.plot` returns, rasterising and PNG-encoding the 1.56 times as many
+#: pixels cost a report of 10^6 samples 60 to 70 ms more (of about 0.8 CPU s,
+#: bench/report_ratio.md): the report trades them for images a little softer at 2x
+#: zoom or on high-density screens.
+REPORT_DPI = 120
+
+
 def figure_html(fig, caption: str = "", *, dpi: int | None = None, alt: str = "") -> str:
     """A ``<figure>`` holding ``fig`` as an embedded PNG; the figure is closed.
 
@@ -82,7 +92,8 @@ def figure_html(fig, caption: str = "", *, dpi: int | None = None, alt: str = ""
     fig : matplotlib.figure.Figure
     caption : str
     dpi : int, optional
-        Resolution of the PNG (default: the figure's, 150 for :mod:`subid.plot`).
+        Resolution of the PNG (default: the figure's, 150 for :mod:`subid.plot`;
+        the report's sections use :data:`REPORT_DPI`).
         The image is shown at the figure's size in inches (96 CSS px per inch),
         so its 10 pt text reads as 10 pt and stays sharp on high-density screens.
     alt : str
@@ -126,7 +137,7 @@ def _plot_or_note(make, caption: str, what: str) -> str:
     except SubidError as exc:
         log.info("%s not drawn: %s", what, exc)
         return f'<p class="note">{_e(what)} not drawn: {_e(exc)}</p>'
-    return figure_html(fig, caption)
+    return figure_html(fig, caption, dpi=REPORT_DPI)
 
 
 def _fmt(x, digits: int = 6) -> str:

@@ -19,6 +19,7 @@ from subid.evaluation.figures._common import (
     colors_for,
     log,
     simulated_output,
+    subplots,
 )
 
 
@@ -127,7 +128,7 @@ def residuals(model, data, *, max_lag: int = 25, confidence: float = 0.99, x0="e
         The simulation of every model diverges (a model whose simulation
         diverges is left out, with a log message, when others remain).
     """
-    plt = _pyplot()
+    _pyplot()
     data = _check_data(data)
     groups = _model_groups(model)
     results, failed = {}, {}
@@ -146,7 +147,7 @@ def residuals(model, data, *, max_lag: int = 25, confidence: float = 0.99, x0="e
     cols = 1 + nu
     pct = f"{100 * confidence:g} %"
     room = _legend_room(list(results) + [f"{pct} band"])
-    fig, axes = plt.subplots(ny, cols, figsize=(min(3.3 * cols + 0.6, 16) + room,
+    fig, axes = subplots(ny, cols, figsize=(min(3.3 * cols + 0.6, 16) + room,
                                                 2.0 * ny + 1.0),
                              squeeze=False)
     single = len(results) == 1
@@ -192,7 +193,9 @@ def residuals(model, data, *, max_lag: int = 25, confidence: float = 0.99, x0="e
     if failed:
         heading += f"; not drawn (simulation diverges): {', '.join(failed)}"
     fig.suptitle(heading)
-    _layout(fig, axes, top=0.35, hgap=0.6, wgap=0.5, left=0.6, right=room + 0.1)
+    # wgap: room for the cross-correlation panels' tick labels (``−0.015``, ``−0.0015``
+    # on long records), which at 0.5 inch ran into the panel on their left
+    _layout(fig, axes, top=0.35, hgap=0.6, wgap=0.85, left=0.6, right=room + 0.1)
     return fig
 
 
