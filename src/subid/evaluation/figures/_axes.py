@@ -104,6 +104,9 @@ class LazyTickYAxis(_LazyTicks, maxis.YAxis):
 class LazyTickAxes(Axes):
     """matplotlib's Axes with ticks made when first used (module doc)."""
 
+    #: The rcParams of the figure's build, for the ticks made after it (:func:`finish`).
+    _tick_style: dict | None = None
+
     def _init_axis(self):
         if not SUPPORTED:
             return super()._init_axis()
