@@ -318,3 +318,23 @@ def test_noise_free_default_call_is_exact_on_a_long_record():
     model = subid.moesp(data)
     assert model.order == 4
     assert subid.markov_error(model, true) < 1e-8
+
+
+def test_records_of_many_inputs_are_not_reduced_to_lag_products():
+    """Lag products only where they pay (``(L + 1) nu <= 8 N``): every record of up to 8
+    inputs, none of a short record of many (100 inputs, 3,000 samples: the default
+    call's folds held 8.9 GB of them), and the cross-correlations are formed one row
+    at a time (memory ``nfft nu``, not ``nfft nu^2``) with the plain sums' values."""
+    assert _lag_fit.worthwhile(256, 8) and not _lag_fit.worthwhile(255, 1)
+    assert not _lag_fit.worthwhile(3000, 9) and not _lag_fit.worthwhile(3000, 100)
+    assert _lag_fit.worthwhile(300_000, 100)           # 16,385 lags x 100 <= 8 N
+    rng = np.random.default_rng(5)
+    blocks = [subid.IOData(rng.standard_normal((1500, 12)), rng.standard_normal((1500, 2)))
+              for _ in range(2)]
+    whole = subid.IOData(np.vstack([b.u for b in blocks]), np.vstack([b.y for b in blocks]))
+    assert _lag_fit.merged(blocks, [whole], [(0, 1)]) == [None]
+    assert _lag_fit.LagProducts.of_record(whole) is None
+    u, y = rng.standard_normal((400, 12)), rng.standard_normal((400, 3))
+    for fast, plain in zip(_lag_fit.correlations(u, y, 30),
+                           _lag_fit.correlations_reference(u, y, 30)):
+        np.testing.assert_allclose(fast, plain, rtol=0, atol=1e-12 * np.abs(plain).max())

@@ -74,8 +74,9 @@ regression or error power whose value the normal equations leave to rounding
 (nearly exact fits, :data:`ROUNDING_GUARD`), where the passes are exact; a record
 shorter than the decay of A over which ``ρ(A)^N`` exceeds :data:`EDGE_DECAY` (the sums
 past its end would dominate); a score whose x0 Gramian has a condition number above
-:data:`MAX_X0_CONDITION`; records of several experiments or of fewer than
-:data:`MIN_SAMPLES` samples.
+:data:`MAX_X0_CONDITION`; records of several experiments, of fewer than
+:data:`MIN_SAMPLES` samples or of more inputs than lag products pay for
+(:func:`worthwhile`: more than 8 on a short record).
 """
 
 from __future__ import annotations
@@ -105,9 +106,36 @@ FIRST_LAGS = 4096
 MIN_SAMPLES = 256
 #: Records shorter than this get lag products of their own (:func:`merged`).
 MERGE_SAMPLES = 4096
+#: Most input lag products per input sample, ``(L + 1) nu`` against ``N``, for which a
+#: record is reduced to lag products (:func:`worthwhile`): they hold ``(L + 1) nu (nu +
+#: ny)`` floats, and a candidate's quadratic forms cost ``O(L nu^2)`` against the direct
+#: pass's ``O(N (nu + ny))``; past it (many inputs) the direct pass is the cheaper one
+#: and the products would outweigh the record many times (100 inputs, 3,000 samples:
+#: 8.9 GB traced for the default call's folds). At most 8 inputs, every record of
+#: MIN_SAMPLES or more qualifies.
+PRODUCTS_PER_SAMPLE = 8
 #: An error power below this fraction of the output's power is rounding-limited in
 #: the quadratic form (cancellation): the direct pass computes it instead.
 ROUNDING_GUARD = 1e-6
+
+
+def worthwhile(n_samples, n_inputs, max_lag=MAX_LAG) -> bool:
+    """Whether a record of ``n_samples`` samples and ``n_inputs`` inputs is reduced to
+    lag products up to ``min(max_lag, n_samples - 1)``: at least :data:`MIN_SAMPLES`
+    samples and at most :data:`PRODUCTS_PER_SAMPLE` input lag products per input
+    sample."""
+    lags = min(int(max_lag), n_samples - 1) + 1
+    return n_samples >= MIN_SAMPLES and lags * n_inputs <= PRODUCTS_PER_SAMPLE * n_samples
+
+
+def _cross_lags(A, B, nfft, max_lag):
+    """``out[e, i, j]``: the inverse FFT of ``A[:, i] B[:, j]`` at lags 0..max_lag, one
+    row ``i`` at a time (the products of every pair at once would hold ``nfft nu^2``
+    values: 100 times the record at 100 inputs)."""
+    out = np.empty((max_lag + 1, A.shape[1], B.shape[1]))
+    for i in range(A.shape[1]):
+        out[:, i, :] = scipy.fft.irfft(A[:, i:i + 1] * B, nfft, axis=0)[:max_lag + 1]
+    return out
 
 
 def correlations(u, y, max_lag):
@@ -118,11 +146,11 @@ def correlations(u, y, max_lag):
     U = scipy.fft.rfft(u, nfft, axis=0)
     Uc = np.conj(U)
     Yf = scipy.fft.rfft(y, nfft, axis=0)
-    G = scipy.fft.irfft(Uc[:, :, None] * U[:, None, :], nfft, axis=0)[:max_lag + 1]
-    R = scipy.fft.irfft(Yf[:, :, None] * Uc[:, None, :], nfft, axis=0)[:max_lag + 1]
+    G = _cross_lags(Uc, U, nfft, max_lag)
+    R = _cross_lags(Yf, Uc, nfft, max_lag)
     G[0] = u.T @ u
     R[0] = y.T @ u
-    return np.ascontiguousarray(G), np.ascontiguousarray(R), y.T @ y
+    return G, R, y.T @ y
 
 
 def merged(blocks, records, groups):
@@ -138,14 +166,15 @@ def merged(blocks, records, groups):
     (one FFT of a short record costs little, and its lags then reach all of it); one
     shorter than :data:`MIN_SAMPLES`, None. None altogether when a block is shorter than
     a quarter of a record to merge."""
-    out = [LagProducts(r.u, r.y) if MIN_SAMPLES <= r.n_samples < MERGE_SAMPLES else None
-           for r in records]
-    big = [k for k, r in enumerate(records) if r.n_samples >= MERGE_SAMPLES]
+    out = [LagProducts(r.u, r.y) if r.n_samples < MERGE_SAMPLES
+           and worthwhile(r.n_samples, r.n_inputs) else None for r in records]
+    lengths = [b.n_samples for b in blocks]
+    big = [k for k, r in enumerate(records) if r.n_samples >= MERGE_SAMPLES
+           and worthwhile(r.n_samples, r.n_inputs, min(lengths))]
     if not big:
         return out
     records = [records[k] for k in big]
     groups = [groups[k] for k in big]
-    lengths = [b.n_samples for b in blocks]
     # no lag past the shortest block (a lag could straddle two boundaries); blocks
     # shorter than a quarter of a record: none merged (each fold its own products)
     caps = [min(MAX_LAG, r.n_samples - 1, min(lengths)) for r in records]
@@ -195,8 +224,8 @@ def straddle_correlations(left_u, right_u, right_y, max_lag):
     Lc = np.conj(scipy.fft.rfft(left_u, nfft, axis=0))
     Ru = scipy.fft.rfft(np.vstack([np.zeros_like(right_u), right_u]), nfft, axis=0)
     Ry = scipy.fft.rfft(np.vstack([np.zeros_like(right_y), right_y]), nfft, axis=0)
-    G = scipy.fft.irfft(Lc[:, :, None] * Ru[:, None, :], nfft, axis=0)[:max_lag + 1]
-    R = scipy.fft.irfft(Ry[:, :, None] * Lc[:, None, :], nfft, axis=0)[:max_lag + 1]
+    G = _cross_lags(Lc, Ru, nfft, max_lag)
+    R = _cross_lags(Ry, Lc, nfft, max_lag)
     G[0] = 0.0                          # no pair at lag 0 straddles the boundary
     R[0] = 0.0
     return G, R
@@ -289,8 +318,9 @@ class LagProducts:
     @classmethod
     def of_record(cls, record, max_lag=MAX_LAG):
         """The lag products of an IOData record of one experiment of at least
-        :data:`MIN_SAMPLES` samples, else None."""
-        if getattr(record, "n_experiments", 1) != 1 or record.n_samples < MIN_SAMPLES:
+        :data:`MIN_SAMPLES` samples that is :func:`worthwhile`, else None."""
+        if getattr(record, "n_experiments", 1) != 1 or \
+                not worthwhile(record.n_samples, record.n_inputs, max_lag):
             return None
         return cls(record.u, record.y, max_lag)
 

@@ -239,8 +239,8 @@ class Held:
         if not self.lagged:
             return [None] * len(self.pieces)
         if self._products is None:
-            from subid.methods.dt._lag_fit import MIN_SAMPLES, LagProducts
-            self._products = [LagProducts(u, y) if u.shape[0] >= MIN_SAMPLES else None
+            from subid.methods.dt._lag_fit import LagProducts, worthwhile
+            self._products = [LagProducts(u, y) if worthwhile(*u.shape) else None
                               for u, y in self.pieces]
         return self._products
 
