@@ -39,10 +39,11 @@ __all__ = ["LazyTickAxes", "SUPPORTED", "finish"]
 _TICK_LISTS = ("majorTicks", "minorTicks")
 
 #: Whether this matplotlib has the internals the lazy axes rely on (3.8 and later).
-SUPPORTED = (hasattr(maxis.Axis, "_get_tick") and hasattr(Axes, "_init_axis")
-             and hasattr(Spine, "register_axis")
+_LAZY_LIST = getattr(maxis, "_LazyTickList", None)
+SUPPORTED = (_LAZY_LIST is not None and hasattr(maxis.Axis, "_get_tick")
+             and hasattr(Axes, "_init_axis") and hasattr(Spine, "register_axis")
              and "clear" in inspect.signature(maxis.Axis.__init__).parameters
-             and all(isinstance(maxis.Axis.__dict__.get(name), maxis._LazyTickList)
+             and all(isinstance(maxis.Axis.__dict__.get(name), _LAZY_LIST)
                      for name in _TICK_LISTS))
 
 
@@ -83,9 +84,12 @@ class _LazyTicks:
 
     def _get_tick(self, major):
         style = getattr(self.axes, "_tick_style", None)
-        if style is None:
+        # the first tick of a list under the rcParams of the figure's build (finish),
+        # as matplotlib would have made it; the others copy its properties at draw
+        # time (Axis.get_major_ticks), whatever the rcParams then
+        if style is None or self.__dict__.get("majorTicks" if major else "minorTicks"):
             tick = super()._get_tick(major)
-        else:       # the rcParams of the figure's build (finish), as matplotlib's would
+        else:
             with mpl.rc_context(style):
                 tick = super()._get_tick(major)
         if self._tick_clip is not None:
