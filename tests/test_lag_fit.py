@@ -277,14 +277,22 @@ def test_fold_products_merged_from_blocks():
     shortest = min(b.n_samples for b in _selection._blocks_of_folds(parts))
     for record, lp in zip(records, merged):
         own = _lag_fit.LagProducts.of_record(record)
-        # up to half the record, no lag past the shortest block (a fit takes a quarter)
-        assert lp.max_lag == min(own.max_lag, shortest) >= record.n_samples // 4
+        # merged up to half the record, no lag past the shortest block (a fit takes a
+        # quarter); past it, the record's own products
+        assert lp.merged_lags == min(own.max_lag, shortest) >= record.n_samples // 4
+        assert lp.max_lag == own.max_lag
         assert lp.n_samples == record.n_samples
-        for products in (lp, own):       # every lag (those past FIRST_LAGS when needed)
-            products.lags(products.max_lag)
-        k = lp.max_lag + 1
+        own.lags(own.max_lag)            # every lag (those past FIRST_LAGS when needed)
+        lp.lags(lp.merged_lags)
+        k = lp.merged_lags + 1
+        assert lp.G.shape[0] == k        # the merged lags only
         for a, b in ((lp.G, own.G[:k]), (lp.R, own.R[:k]), (lp.Y, own.Y)):
             np.testing.assert_allclose(a, b, rtol=0, atol=1e-11 * np.abs(b).max())
+        if lp.max_lag > lp.merged_lags:  # past them: the record's own
+            G, R = lp.lags(lp.max_lag)
+            assert G.shape[0] == lp.max_lag + 1 and lp.extend is None
+            for a, b in ((G, own.G), (R, own.R)):
+                np.testing.assert_allclose(a, b, rtol=0, atol=1e-11 * np.abs(b).max())
 
 
 @pytest.mark.slow

@@ -134,6 +134,27 @@ def test_residual_bound_is_a_lower_bound():
                        estimate_x0=True, output_weights=weights) is None
 
 
+def test_dual_states_are_those_of_the_rows_recursion():
+    """The compiled state-only recursion (the head of a bound's record) ends in the
+    states of the rows recursion, bit for bit, and in its plain reference's."""
+    true, data = _record(order=4, n=700, seed=4)
+    radius = float(np.abs(np.linalg.eigvals(true.A)).max())
+    rng = np.random.default_rng(5)
+    u = np.ascontiguousarray(data.u)
+    for target, n_x0 in ((0.9, 4), (1.01, 4), (1.01, 0)):
+        A = np.ascontiguousarray(true.A * (target / radius))
+        C = np.ascontiguousarray(true.C)
+        V0, M0 = rng.standard_normal((2, 2, 4)), rng.standard_normal((2, 4))
+        _, V, M = regression.dual_rows(A, C, u, V0, M0, n_x0)
+        Vs, Ms = regression.dual_states(A, C, u, V0, M0, n_x0)
+        np.testing.assert_array_equal(Vs, V)
+        np.testing.assert_array_equal(Ms, M)
+        Vr, Mr = regression.dual_states_reference(A, C, u, V0, M0, n_x0)
+        np.testing.assert_allclose(Vs, Vr, rtol=1e-10, atol=1e-12 * np.abs(Vr).max())
+        if n_x0:                         # M is C A^t only with x0 columns
+            np.testing.assert_allclose(Ms, Mr, rtol=1e-10, atol=1e-12 * np.abs(Mr).max())
+
+
 def test_residual_bound_stops_once_it_proves():
     """With ``enough``, a bound's rows stop at the first chunk of EARLY_CHUNK samples
     after which it reaches ``enough``: the value is the plain least-squares residual of

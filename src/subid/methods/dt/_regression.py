@@ -173,6 +173,51 @@ def dual_rows(A, C, u, V0, M0, n_x0):  # pragma: no cover - compiled
     return rows, V, M
 
 
+def dual_states_reference(A, C, u, V0, M0, n_x0):
+    """The states ``V, M`` of :func:`dual_rows_reference` after the samples of ``u``,
+    without the rows (the plain reference of :func:`dual_states`)."""
+    _, V, M = dual_rows_reference(A, C, u, V0, M0, n_x0)
+    return V, M
+
+
+@numba.njit(cache=True, nogil=True)
+def dual_states(A, C, u, V0, M0, n_x0):  # pragma: no cover - compiled
+    """Compiled kernel: the states ``V, M`` of :func:`dual_rows` after the samples of
+    ``u`` by the same arithmetic, without writing the rows (the head of the record
+    before a residual bound's tail, :mod:`subid.methods.dt._residual_bound`)."""
+    T, nu = u.shape
+    n = A.shape[0]
+    ny = C.shape[0]
+    V = V0.copy()
+    M = M0.copy()
+    Vn = np.empty_like(V)
+    Mn = np.empty_like(M)
+    for t in range(T):
+        for i in range(ny):
+            for j in range(nu):
+                ut = u[t, j]
+                for m in range(n):
+                    Vn[i, j, m] = C[i, m] * ut
+                for k in range(n):
+                    v = V[i, j, k]
+                    for m in range(n):
+                        Vn[i, j, m] += v * A[k, m]
+        V, Vn = Vn, V
+        if n_x0:
+            for i in range(ny):
+                for m in range(n):
+                    Mn[i, m] = 0.0
+                for k in range(n):
+                    v = M[i, k]
+                    for m in range(n):
+                        Mn[i, m] += v * A[k, m]
+                for m in range(n):
+                    if abs(Mn[i, m]) < TINY:
+                        Mn[i, m] = 0.0
+            M, Mn = Mn, M
+    return V, M
+
+
 def fit_b_d_x0(A, C, u, y, *, feedthrough=True, estimate_x0=True, output_weights=None,
                kernel=None, path="auto"):
     """Least-squares B, D (and x0) for given A, C on the raw output samples.

@@ -55,6 +55,7 @@ from subid.methods._stability import spectral_radius
 from subid.methods.dt._regression import (
     _with_d_and_y,
     dual_rows,
+    dual_states,
     parameter_count,
 )
 
@@ -149,7 +150,7 @@ def residual_at_least(A, C, u, y, *, feedthrough: bool, estimate_x0: bool,
     V, M = np.zeros((ny, nu, n)), C.copy()
     for a in range(0, start, _CHUNK):           # the dual states at the start of the tail
         b = min(a + _CHUNK, start)
-        _, V, M = dual_rows(A, C, np.ascontiguousarray(u[a:b], dtype=float), V, M, n_x0)
+        V, M = dual_states(A, C, np.ascontiguousarray(u[a:b], dtype=float), V, M, n_x0)
         if not (np.isfinite(V).all() and np.isfinite(M).all()):
             return math.inf                     # overflowed: so does the full regression
     scale = math.sqrt(N * ny)

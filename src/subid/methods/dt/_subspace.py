@@ -530,12 +530,13 @@ STATISTICS = ("auto", "qr", "gram")
 
 def prepare(data, order, horizon, *, method: str, blocks_per_horizon: int = 2,
             statistic: str = "auto", normalize_outputs: bool = True,
-            factor: HankelFactor | None = None) -> Problem:
+            factor: HankelFactor | None = None, checked: bool = False) -> Problem:
     """Validate the arguments, build the Hankel factor and check excitation.
 
     ``factor``: the Hankel factor of the record (depth ``blocks_per_horizon *
     horizon``), when already computed (:func:`subid.methods.dt.selection.score_horizon`
-    merges the folds' statistics from those of their blocks).
+    merges the folds' statistics from those of their blocks). ``checked``: the record
+    already passed :func:`check_data` (a fold at its second horizon).
 
     ``data`` is an :class:`IOData` record or a :class:`HankelStatistic`
     (identification from the statistic only). ``blocks_per_horizon`` is 2
@@ -562,7 +563,7 @@ def prepare(data, order, horizon, *, method: str, blocks_per_horizon: int = 2,
                                      f"horizon {horizon} needs at least {need}")
         hf = data.factor()
     else:
-        data = check_data(data, method)
+        data = data if checked else check_data(data, method)
         fixed, candidates, horizon = check_order_horizon(
             order, horizon, data, method=method, blocks_per_horizon=blocks_per_horizon)
         hf = data_factor(data, blocks_per_horizon * horizon, method=method, horizon=horizon,

@@ -177,6 +177,9 @@ class Pipeline:
 
     method: SubspaceMethod
     plan: Plan
+    #: The fold records :meth:`prepare_fold` has checked (:func:`subid.methods.dt.checks.check_data`)
+    #: in this call: a fold is checked once for every horizon.
+    checked_folds: list = field(default_factory=list, compare=False, repr=False)
 
     @property
     def blocks_per_horizon(self) -> int:
@@ -186,15 +189,22 @@ class Pipeline:
     def statistic(self) -> str:
         return self.plan.statistic
 
-    def prepare(self, record, orders, horizon, factor=None):
+    def prepare(self, record, orders, horizon, factor=None, *, checked=False):
         """The problem of ``record`` (:func:`subid.methods.dt._subspace.prepare`)."""
-        return prepare(record, orders, horizon, factor=factor, **self.plan.prepare_options())
+        return prepare(record, orders, horizon, factor=factor, checked=checked,
+                       **self.plan.prepare_options())
 
     def prepare_fold(self, record, orders, horizon, factor=None):
-        """:meth:`prepare` on a cross-validation fold (its warnings are not the user's)."""
+        """:meth:`prepare` on a cross-validation fold (its warnings are not the user's),
+        the record's checks made at its first horizon only (the same record: the same
+        outcome; 1.4 ms a fold at 10^5 samples)."""
+        checked = any(r is record for r in self.checked_folds)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            return self.prepare(record, orders, horizon, factor=factor)
+            problem = self.prepare(record, orders, horizon, factor=factor, checked=checked)
+        if not checked:
+            self.checked_folds.append(record)
+        return problem
 
     def fit(self, problem, estimator) -> StateSpace:
         """The model of ``problem`` (its order fixed or chosen by the gap rule) with
