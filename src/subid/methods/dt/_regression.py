@@ -868,10 +868,12 @@ def solve_normal_equations(N, n, nu, ny, *, estimate_x0, feedthrough, n_samples,
         # the Cholesky factor Ge = R^T R and an upper bound of the condition number,
         # ||Ge||_inf ||R^{-1}||_F^2 >= λ_max / λ_min: within the limit, the eigenvalues'
         # test would accept too (the same decision; the same theta from that factor)
-        factor, info = scipy.linalg.lapack.dpotrf(Ge, lower=0, overwrite_a=0, clean=0)
+        # (the strictly lower triangle zeroed by potrf: it stays zero in the inverse,
+        # whose squares then sum to those of its upper triangle without np.triu)
+        factor, info = scipy.linalg.lapack.dpotrf(Ge, lower=0, overwrite_a=0, clean=1)
         if info == 0:
             inverse, info = scipy.linalg.lapack.dtrtri(factor, lower=0)
-            bound = float(np.abs(Ge).sum(axis=1).max()) * float(np.sum(np.triu(inverse) ** 2))
+            bound = float(np.abs(Ge).sum(axis=1).max()) * float(np.sum(inverse ** 2))
             if info != 0 or not bound <= max_condition:
                 factor = None
         else:
