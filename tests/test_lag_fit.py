@@ -161,6 +161,60 @@ def test_kernels_equal_their_references(n, seed, radius):
     np.testing.assert_allclose(got, want, rtol=1e-12)
 
 
+def test_scored_solve_equals_its_lapack_reference():
+    """The compiled solve of a scored candidate's normal equations equals its LAPACK
+    reference (status, bound, solution to rounding) on normal matrices of real
+    regressions, well and badly conditioned, not positive definite and not finite,
+    and solve_normal_equations decides as with the eigenvalues."""
+    from subid.methods.dt import _lag_kernel
+    rng = np.random.default_rng(7)
+    cases = []
+    for p, spread in ((1, 0.0), (12, 0.0), (36, 2.0), (36, 6.0), (20, 9.0)):
+        X = rng.standard_normal((400, p + 1)) * 10.0 ** (spread * rng.random(p + 1))
+        X[:, :p] = X[:, :p] @ np.linalg.qr(rng.standard_normal((p, p)))[0] \
+            * np.logspace(0, -spread, p)
+        cases.append((X.T @ X, p))
+    N, p = cases[1]
+    N = N.copy()
+    N[3, 3] = -1.0                               # not positive definite
+    cases.append((N, p))
+    cases.append((np.full((4, 4), np.nan), 3))   # not finite
+    statuses = set()
+    for N, p in cases:
+        for limit in (1e4, 1e8):
+            got = _lag_kernel.scored_solve(read_only(N)[0], p, limit)
+            want = _lag_kernel.scored_solve_reference(N, p, limit)
+            assert got[0] == want[0]
+            statuses.add(got[0])
+            if got[0] == 0:
+                np.testing.assert_allclose(got[2], want[2], rtol=1e-8)
+                np.testing.assert_allclose(got[1], want[1], rtol=1e-8,
+                                           atol=1e-10 * np.abs(want[1]).max())
+            n, nu, ny = 1, 1, 1
+            if p == 3:                           # x0 (1), B (1), D (1)
+                fast = _regression.solve_normal_equations(
+                    N, n, nu, ny, estimate_x0=True, feedthrough=True, n_samples=400,
+                    max_condition=limit, bound_condition=True)
+                slow = _regression.solve_normal_equations(
+                    N, n, nu, ny, estimate_x0=True, feedthrough=True, n_samples=400,
+                    max_condition=limit)
+                assert (fast is None) == (slow is None)
+    assert statuses == {0, 1, 2}
+    # a real fold regression: B, D, x0 as by the eigenvalues' path
+    A, B, C, D = _system(4, 25, 0.9)
+    u, y = _record(A, B, C, D, 3000, 25)
+    form = _lag_fit._Modal._of(A)
+    products = _lag_fit.LagProducts(u, y)
+    L = form.lags_for(products)
+    C, w = read_only(C, 1.0 / y.std(axis=0))
+    Naug = _lag_kernel.normal_matrix(*form.arguments(products, L), C, w, True, True)
+    kw = dict(estimate_x0=True, feedthrough=True, n_samples=3000, max_condition=1e8)
+    fast = _regression.solve_normal_equations(Naug, 4, 2, 2, bound_condition=True, **kw)
+    slow = _regression.solve_normal_equations(Naug, 4, 2, 2, **kw)
+    for a, b in zip(fast[:4], slow[:4]):
+        np.testing.assert_allclose(a, b, rtol=1e-9, atol=1e-12)
+
+
 @pytest.mark.parametrize("n, seed, radius, N", [(2, 31, 0.995, 400), (4, 32, 0.999, 700),
                                                 (6, 33, 0.9, 300)])
 def test_short_record_slow_poles_exact(n, seed, radius, N):

@@ -26,6 +26,7 @@ import numpy as np
 import scipy.linalg
 
 from subid._kernel_args import frozen
+from subid.methods.dt._lag_kernel import scored_solve
 from subid.statistic.hankel import householder_r
 
 _CHUNK = 4096
@@ -850,43 +851,36 @@ def solve_normal_equations(N, n, nu, ny, *, estimate_x0, feedthrough, n_samples,
     :data:`MODAL_MAX_NORMAL_CONDITION`, :data:`SCORING_MAX_NORMAL_CONDITION` within
     :func:`scoring_only`). ``n_x0`` as in :func:`solve_factor`. ``bound_condition``
     (a model only scored): the condition number is first bounded from the Cholesky
-    factor (``||G||_inf ||R^{-1}||_F^2``, a quarter of the cost of the eigenvalues),
-    the eigenvalues computed only when the bound exceeds ``max_condition``: the same
-    decision and solution, ``regression_condition`` then the square root of the
-    bound."""
+    factor (``||G||_inf ||R^{-1}||_F^2``, a quarter of the cost of the eigenvalues;
+    factor, bound and solution in one compiled call,
+    :func:`subid.methods.dt._lag_kernel.scored_solve`), the eigenvalues computed only
+    when the bound exceeds ``max_condition``: the same decision, the solution equal to
+    rounding, ``regression_condition`` then the square root of the bound."""
     if max_condition is None:
         max_condition = _NORMAL_CONDITION.get()
     nx, q, p = parameter_count(n, nu, ny, estimate_x0, feedthrough, n_x0)
     if not np.isfinite(N).all():
         return None
     G, b, yy = N[:p, :p], N[:p, p], N[p, p]
-    scale = np.sqrt(np.diag(G)).copy()
-    scale[scale == 0] = 1.0
-    Ge = G / scale[:, None] / scale[None, :]
-    factor = None
+    theta = None
     if bound_condition and p:
-        # the Cholesky factor Ge = R^T R and an upper bound of the condition number,
-        # ||Ge||_inf ||R^{-1}||_F^2 >= λ_max / λ_min: within the limit, the eigenvalues'
-        # test would accept too (the same decision; the same theta from that factor)
-        # (the strictly lower triangle zeroed by potrf: it stays zero in the inverse,
-        # whose squares then sum to those of its upper triangle without np.triu)
-        factor, info = scipy.linalg.lapack.dpotrf(Ge, lower=0, overwrite_a=0, clean=1)
-        if info == 0:
-            inverse, info = scipy.linalg.lapack.dtrtri(factor, lower=0)
-            bound = float(np.abs(Ge).sum(axis=1).max()) * float(np.sum(inverse ** 2))
-            if info != 0 or not bound <= max_condition:
-                factor = None
-        else:
-            factor = None
-    if factor is None:
+        # the Cholesky factor Ge = R^T R of the equilibrated matrix and an upper bound of
+        # the condition number, ||Ge||_inf ||R^{-1}||_F^2 >= λ_max / λ_min, in one compiled
+        # call (subid.methods.dt._lag_kernel.scored_solve; its LAPACK reference
+        # scored_solve_reference): within the limit, the eigenvalues' test would accept
+        # too (the same decision; theta from that factor, equal to rounding)
+        status, solved, bound = scored_solve(frozen(N), p, float(max_condition))
+        if status == 0:
+            theta, condition = solved, float(np.sqrt(bound))
+    if theta is None:
+        scale = np.sqrt(np.diag(G)).copy()
+        scale[scale == 0] = 1.0
+        Ge = G / scale[:, None] / scale[None, :]
         ev = np.linalg.eigvalsh(Ge) if p else np.ones(1)
         if ev[0] <= 0 or ev[-1] / ev[0] > max_condition:
             return None
         condition = float(np.sqrt(ev[-1] / ev[0]))
         theta = _cholesky_solve(Ge, b / scale) / scale if p else np.zeros(0)
-    else:
-        condition = float(np.sqrt(bound))
-        theta = _cholesky_solve(Ge, b / scale, factor) / scale
     x0 = theta[:nx] if estimate_x0 else np.zeros(n)
     B = theta[nx:q].reshape(nu, n).T
     D = theta[q:p].reshape(nu, ny).T if feedthrough else np.zeros((ny, nu))
