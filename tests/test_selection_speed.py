@@ -199,6 +199,23 @@ def test_fold_statistics_merged_from_blocks():
     merged = _records()[2][0]
     assert selection.fold_factors(selection.experiment_folds(merged), 8,
                                   _pipeline(merged)) == [None] * 4
+    # the blocks' statistics computed once at the deepest horizon's depth: the factors
+    # of a shallower horizon are those of its own blocks' statistics, bit for bit
+    deepest = {"depth": 2 * 12}
+    for horizon in (8, 12, 5):
+        shared = selection.fold_factors(parts, horizon, _pipeline(data), deepest)
+        own = selection.fold_factors(parts, horizon, _pipeline(data))
+        for a, b in zip(shared, own):
+            assert np.array_equal(a.L, b.L)
+    assert deepest["stats"][0].depth == 24
+    stat = HankelStatistic.from_data(parts[0][0], 24, kind="gram")
+    for depth in (2, 9, 24):
+        shallow = stat._shallower(depth)
+        direct = HankelStatistic.from_data(parts[0][0], depth, kind="gram")
+        for name in ("lagged", "head", "tail"):
+            assert np.array_equal(getattr(shallow, name), getattr(direct, name))
+        assert (shallow.depth, shallow.n_columns) == (direct.depth, direct.n_columns)
+        assert np.array_equal(shallow.factor().L, direct.factor().L)
 
 
 def test_bounded_condition_gives_the_same_solve():

@@ -292,7 +292,8 @@ def mean_score(fits) -> float:
     return max(value, FLOOR) if math.isfinite(value) else FLOOR
 
 
-def score_horizon(parts, orders, horizon, *, fitter, estimators, held=None, lagged=None):
+def score_horizon(parts, orders, horizon, *, fitter, estimators, held=None, lagged=None,
+                  deepest=None):
     """Fold scores of every candidate order at one horizon.
 
     Per fold, one problem (one statistic, by cost: the lagged products merged from
@@ -335,6 +336,9 @@ def score_horizon(parts, orders, horizon, *, fitter, estimators, held=None, lagg
         the fold's problem can take them; :func:`cross_validate` passes one list for
         every horizon): the B, D, x0 fit of every candidate from them
         (:mod:`subid.methods.dt._lag_fit`).
+    deepest : dict, optional
+        The blocks' statistics at the largest depth of the horizons scored
+        (:func:`fold_factors`; :func:`cross_validate` passes one for every horizon).
 
     Returns
     -------
@@ -349,7 +353,7 @@ def score_horizon(parts, orders, horizon, *, fitter, estimators, held=None, lagg
     names = list(estimators)
     per_fold = {(n, v): [] for n in orders for v in range(len(names))}
     repaired = {(n, v): 0 for n in orders for v in range(len(names))}
-    factors = fold_factors(parts, horizon, fitter)
+    factors = fold_factors(parts, horizon, fitter, deepest)
     if held is None:                      # what every candidate's score needs, once
         held = [Held(validation, lagged=True) for _, validation in parts]
     if lagged is None:
@@ -450,13 +454,15 @@ def cross_validate(data, fixed, candidates, horizon, *, fitter, estimators):
     searched = []              # (orders, horizons) of every block of candidates scored
     ceiling = None
     while True:
+        # the blocks' statistics once, at the depth of the largest horizon of this block
+        deepest = {"depth": blocks * max(horizons)} if horizons else None
         for f in horizons:
             orders = [n for n in wanted if n <= (f - 1) * n_out]
             if not orders:
                 continue
             per_fold, repaired = score_horizon(parts, orders, f, fitter=fitter,
                                                estimators=estimators, held=held,
-                                               lagged=lagged)
+                                               lagged=lagged, deepest=deepest)
             for (n, v), values in per_fold.items():
                 fold_scores[(n, f, v)] = values
                 scores[(n, f, v)] = float(np.mean(values))
