@@ -41,7 +41,11 @@ free parameters on that subset. :func:`loses` tries, cheapest first:
 
 When a bound already reaches the threshold, the unstable fit loses whatever the
 other samples hold, and the fold model is the stabilised one, exactly as the full
-fit would have decided.
+fit would have decided. So :func:`loses` factorises a bound's rows by chunks of
+:data:`EARLY_CHUNK` samples and stops once the residual of the rows so far reaches the
+threshold (:func:`_rows_residual`; issue 21: at 10^5 samples the strided bound proved
+20-30 % into its tail, and the unstable fold candidates' cost fell from a third of the
+default call to a sixth).
 """
 
 from __future__ import annotations
