@@ -129,6 +129,36 @@ def dual_rows_reference(A, C, u, V0, M0, n_x0):
 
 
 @numba.njit(cache=True, nogil=True)
+def _dual_step(A, C, ut, V, M, Vn, Mn, n_x0):  # pragma: no cover - compiled
+    """One step of the dual recursions into ``Vn`` and ``Mn``: ``Vn = V A + C^T u(t)``
+    per (output, input), ``Mn = M A`` (entries below :data:`TINY` set to zero) when
+    ``n_x0``."""
+    ny, nu, n = V.shape
+    # each sum in the order C u, then k = 0..n-1; the loop over m innermost (the
+    # rows of A contiguous: vectorised, the same sums to the last bit)
+    for i in range(ny):
+        for j in range(nu):
+            uj = ut[j]
+            for m in range(n):
+                Vn[i, j, m] = C[i, m] * uj
+            for k in range(n):
+                v = V[i, j, k]
+                for m in range(n):
+                    Vn[i, j, m] += v * A[k, m]
+    if n_x0:
+        for i in range(ny):
+            for m in range(n):
+                Mn[i, m] = 0.0
+            for k in range(n):
+                v = M[i, k]
+                for m in range(n):
+                    Mn[i, m] += v * A[k, m]
+            for m in range(n):
+                if abs(Mn[i, m]) < TINY:
+                    Mn[i, m] = 0.0
+
+
+@numba.njit(cache=True, nogil=True)
 def dual_rows(A, C, u, V0, M0, n_x0):  # pragma: no cover - compiled
     """Compiled kernel: same contract as :func:`dual_rows_reference`."""
     T, nu = u.shape
@@ -147,29 +177,9 @@ def dual_rows(A, C, u, V0, M0, n_x0):  # pragma: no cover - compiled
             for j in range(nu):
                 for m in range(n):
                     rows[t, i, n_x0 + j * n + m] = V[i, j, m]
-        # each sum in the order C u, then k = 0..n-1; the loop over m innermost (the
-        # rows of A contiguous: vectorised, the same sums to the last bit)
-        for i in range(ny):
-            for j in range(nu):
-                ut = u[t, j]
-                for m in range(n):
-                    Vn[i, j, m] = C[i, m] * ut
-                for k in range(n):
-                    v = V[i, j, k]
-                    for m in range(n):
-                        Vn[i, j, m] += v * A[k, m]
+        _dual_step(A, C, u[t], V, M, Vn, Mn, n_x0)
         V, Vn = Vn, V
         if n_x0:
-            for i in range(ny):
-                for m in range(n):
-                    Mn[i, m] = 0.0
-                for k in range(n):
-                    v = M[i, k]
-                    for m in range(n):
-                        Mn[i, m] += v * A[k, m]
-                for m in range(n):
-                    if abs(Mn[i, m]) < TINY:
-                        Mn[i, m] = 0.0
             M, Mn = Mn, M
     return rows, V, M
 
@@ -184,37 +194,16 @@ def dual_states_reference(A, C, u, V0, M0, n_x0):
 @numba.njit(cache=True, nogil=True)
 def dual_states(A, C, u, V0, M0, n_x0):  # pragma: no cover - compiled
     """Compiled kernel: the states ``V, M`` of :func:`dual_rows` after the samples of
-    ``u`` by the same arithmetic, without writing the rows (the head of the record
-    before a residual bound's tail, :mod:`subid.methods.dt._residual_bound`)."""
-    T, nu = u.shape
-    n = A.shape[0]
-    ny = C.shape[0]
+    ``u`` by the same steps, without writing the rows (the head of the record before a
+    residual bound's tail, :mod:`subid.methods.dt._residual_bound`)."""
     V = V0.copy()
     M = M0.copy()
     Vn = np.empty_like(V)
     Mn = np.empty_like(M)
-    for t in range(T):
-        for i in range(ny):
-            for j in range(nu):
-                ut = u[t, j]
-                for m in range(n):
-                    Vn[i, j, m] = C[i, m] * ut
-                for k in range(n):
-                    v = V[i, j, k]
-                    for m in range(n):
-                        Vn[i, j, m] += v * A[k, m]
+    for t in range(u.shape[0]):
+        _dual_step(A, C, u[t], V, M, Vn, Mn, n_x0)
         V, Vn = Vn, V
         if n_x0:
-            for i in range(ny):
-                for m in range(n):
-                    Mn[i, m] = 0.0
-                for k in range(n):
-                    v = M[i, k]
-                    for m in range(n):
-                        Mn[i, m] += v * A[k, m]
-                for m in range(n):
-                    if abs(Mn[i, m]) < TINY:
-                        Mn[i, m] = 0.0
             M, Mn = Mn, M
     return V, M
 
