@@ -138,7 +138,7 @@ def data_factor(data: IOData, depth: int, *, method: str, horizon: int,
     return HankelStatistic.from_data(data, depth, kind=statistic).factor()
 
 
-def shift_invariance(gamma: np.ndarray, n_outputs: int):
+def shift_invariance(gamma: np.ndarray, n_outputs: int, *, residual: bool = True):
     """A and C from an extended observability matrix by shift invariance.
 
     ``C = Gamma[0:ny]`` and ``A`` solves ``Gamma[:-ny] A = Gamma[ny:]`` in the
@@ -147,10 +147,14 @@ def shift_invariance(gamma: np.ndarray, n_outputs: int):
     Returns
     -------
     A, C, relative_residual
+        ``relative_residual`` (``info['shift_residual']``) None without ``residual`` (a
+        cross-validation fold's candidate, whose ``info`` is not kept).
     """
     up, down = gamma[:-n_outputs], gamma[n_outputs:]
     A = least_squares_gelsy(up, down)
     C = gamma[:n_outputs].copy()
+    if not residual:
+        return A, C, None
     resid = np.linalg.norm(up @ A - down) / max(np.linalg.norm(down), 1e-300)
     return A, C, float(resid)
 
