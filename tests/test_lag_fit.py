@@ -161,6 +161,30 @@ def test_kernels_equal_their_references(n, seed, radius):
     np.testing.assert_allclose(got, want, rtol=1e-12)
 
 
+def test_eigenvectors_are_those_of_numpy_eig():
+    """The modal form's eigenvalues and eigenvectors (LAPACK's dgeev without numpy's
+    wrapper, the complex pairs built by the compiled kernel) are numpy.linalg.eig's, bit
+    for bit, on real and complex spectra; the kernel equals its plain reference."""
+    from subid.methods.dt import _lag_kernel
+    from subid.methods.dt._lapack import eig_real
+    rng = np.random.default_rng(12)
+    kinds = set()
+    for k in range(120):
+        n = int(rng.integers(1, 13))
+        A = rng.standard_normal((n, n)) * rng.uniform(0.05, 1.0)
+        if k % 3 == 0:
+            A = A + A.T                          # a real spectrum
+        wr, wi, vr = eig_real(read_only(A)[0])
+        lam, V = _lag_kernel.complex_eigenvectors(wr, wi, vr)
+        w, v = np.linalg.eig(A)
+        assert np.array_equal(lam, w.astype(complex))
+        assert np.array_equal(V, v.astype(complex))
+        ref = _lag_kernel.complex_eigenvectors_reference(wr, wi, vr)
+        assert np.array_equal(lam, ref[0]) and np.array_equal(V, ref[1])
+        kinds.add(bool(np.any(wi != 0)))
+    assert kinds == {True, False}
+
+
 def test_scored_solve_equals_its_lapack_reference():
     """The compiled solve of a scored candidate's normal equations equals its LAPACK
     reference (status, bound, solution to rounding) on normal matrices of real

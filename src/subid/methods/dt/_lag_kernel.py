@@ -615,3 +615,44 @@ def scored_solve_reference(N, p, max_condition):
         return 1, np.empty(0), bound
     theta = scipy.linalg.lapack.dpotrs(factor, b / scale, lower=0)[0]
     return 0, theta / scale, bound
+
+
+@numba.njit(cache=True, nogil=True)
+def complex_eigenvectors(wr, wi, vr):  # pragma: no cover - compiled
+    """``(lam, V)`` complex from LAPACK's real storage (``dgeev``'s ``wr``, ``wi``,
+    ``vr``: a conjugate pair's eigenvectors ``vr[:, j] ± i vr[:, j + 1]``), as
+    ``numpy.linalg.eig`` builds them (the same values)."""
+    n = wr.shape[0]
+    lam = np.empty(n, dtype=np.complex128)
+    V = np.empty((n, n), dtype=np.complex128)
+    j = 0
+    while j < n:
+        if wi[j] != 0.0 and j + 1 < n:
+            lam[j] = complex(wr[j], wi[j])
+            lam[j + 1] = complex(wr[j + 1], wi[j + 1])
+            for i in range(n):
+                V[i, j] = complex(vr[i, j], vr[i, j + 1])
+                V[i, j + 1] = complex(vr[i, j], -vr[i, j + 1])
+            j += 2
+        else:
+            lam[j] = complex(wr[j], wi[j])
+            for i in range(n):
+                V[i, j] = complex(vr[i, j], 0.0)
+            j += 1
+    return lam, V
+
+
+def complex_eigenvectors_reference(wr, wi, vr):
+    """Plain reference of :func:`complex_eigenvectors` (numpy's loop)."""
+    n = wr.shape[0]
+    lam = wr + 1j * wi
+    V = vr.astype(complex)
+    j = 0
+    while j < n:
+        if wi[j] != 0 and j + 1 < n:
+            V[:, j] = vr[:, j] + 1j * vr[:, j + 1]
+            V[:, j + 1] = vr[:, j] - 1j * vr[:, j + 1]
+            j += 2
+        else:
+            j += 1
+    return lam, V

@@ -63,3 +63,26 @@ def least_squares_gelsy(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     if info < 0:
         raise ValueError(f"illegal value in argument {-info} of dgelsy")
     return x[:n]
+
+
+def eig_real(A: np.ndarray):
+    """``(wr, wi, vr)``: the eigenvalues (real and imaginary parts) and right eigenvectors
+    (LAPACK's real storage of conjugate pairs) of a finite real square matrix by the
+    ``dgeev`` call of ``numpy.linalg.eig`` (the optimal workspace queried as it queries
+    it), without its wrapper: :func:`subid.methods.dt._lag_kernel.complex_eigenvectors`
+    gives numpy's ``eig(A)`` from them, the same bits (``tests/test_lag_fit.py``).
+    Raises ``numpy.linalg.LinAlgError`` where numpy's ``eig`` does (no convergence)."""
+    n = A.shape[0]
+    lapack = scipy.linalg.lapack
+    key = ("geev", n)
+    if key not in _LWORK:
+        work, info = lapack.dgeev_lwork(n, compute_vl=0)
+        if info != 0:
+            raise ValueError(f"dgeev workspace query failed: {info}")
+        _LWORK[key] = max(int(work.real), 1)
+    wr, wi, _, vr, info = lapack.dgeev(A, compute_vl=0, lwork=_LWORK[key])
+    if info > 0:
+        raise np.linalg.LinAlgError("Eigenvalues did not converge")
+    if info < 0:
+        raise ValueError(f"illegal value in argument {-info} of dgeev")
+    return wr, wi, vr
