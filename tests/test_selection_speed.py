@@ -246,6 +246,20 @@ def test_bounded_condition_gives_the_same_solve():
     assert decided == {True, False}
 
 
+def test_fold_problem_is_the_replaced_problem():
+    """Problem.fold_at is dataclasses.replace(order=, candidates=[order], fold=True): the
+    same fields, the cache shared."""
+    from dataclasses import fields, replace
+    _, data = _noisy(n=1200, seed=6)
+    problem = _pipeline(data).prepare_fold(data[:800], list(range(1, 6)), 8)
+    fast, slow = problem.fold_at(3), replace(problem, order=3, candidates=[3], fold=True)
+    assert type(fast) is type(slow)
+    for f in fields(problem):
+        a, b = getattr(fast, f.name), getattr(slow, f.name)
+        assert a is b or (a == b if not isinstance(a, np.ndarray) else np.array_equal(a, b))
+    assert fast._cache is problem._cache and problem.order is None and not problem.fold
+
+
 def test_fold_score_equals_the_model_and_its_score():
     """Pipeline.fold_score (a fold candidate scored without its model object; a stable
     A of shift invariance fitted and scored on one modal form) gives the score and the

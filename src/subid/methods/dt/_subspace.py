@@ -447,6 +447,16 @@ class Problem:
     fold: bool = False
     _cache: dict = field(default_factory=dict, repr=False, compare=False)
 
+    def fold_at(self, order: int) -> "Problem":
+        """``dataclasses.replace(self, order=order, candidates=[order], fold=True)`` (the
+        same fields, the cache shared) without its checks: the problem of a
+        cross-validation candidate (:func:`subid.methods.dt.selection.score_horizon`, one
+        per order of every fold and horizon)."""
+        out = object.__new__(Problem)
+        out.__dict__.update(self.__dict__)
+        out.__dict__.update(order=order, candidates=[order], fold=True)
+        return out
+
     def weights(self) -> np.ndarray:
         """:func:`output_weights` of the record, computed once per problem."""
         cached = self._cache.get("weights")

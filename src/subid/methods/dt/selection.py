@@ -391,7 +391,8 @@ def score_horizon(parts, orders, horizon, *, fitter, estimators, held=None, lagg
         with warnings.catch_warnings(), scoring_only():
             warnings.simplefilter("ignore")
             for n in orders:
-                at_n = replace(problem, order=n, candidates=[n], fold=True)
+                at_n = problem.fold_at(n) if hasattr(problem, "fold_at") else \
+                    replace(problem, order=n, candidates=[n], fold=True)
                 for v, name in enumerate(names):
                     try:
                         if scorer is not None:
