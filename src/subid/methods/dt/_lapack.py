@@ -1,10 +1,10 @@
-"""Small dense least-squares problems by direct LAPACK calls (without the wrappers of
-:mod:`scipy.linalg`, whose checks cost more than the factorisations on the matrices of
-a candidate model: the order search fits hundreds of them; issue 21).
+"""Small dense LAPACK problems by direct calls (least squares, an orthonormal basis, the
+eigenvectors of a real matrix), without the wrappers of :mod:`scipy.linalg` and
+:mod:`numpy.linalg`, whose checks cost more than the factorisations on the matrices of a
+candidate model: the order search fits hundreds of them (issue 21).
 
-The same LAPACK routines with the same arguments and workspace sizes as the
-:mod:`scipy.linalg` calls they replace, so the same bits
-(``tests/test_selection_speed.py``).
+The same LAPACK routines with the same arguments and workspace sizes as the calls they
+replace, so the same bits (``tests/test_selection_speed.py``, ``tests/test_lag_fit.py``).
 """
 
 from __future__ import annotations

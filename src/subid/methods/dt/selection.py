@@ -200,9 +200,9 @@ and the check's factor in the user's units, its lag products and the record's
 the folds' blocks are recognised by their memory
 (:func:`subid.methods.dt.fold_statistics._same_samples`).
 
-Then (issue 21, ``bench/selection_paired.py``, 21 paired rounds: 0.93-0.96x, 0.90-0.92x,
-0.82x and 0.86x the CPU time of the default call before at 10^3, 10^4, 10^5 and 10^6
-samples; the same choices and models bit for bit on every bundled record,
+Then (issue 21, ``bench/selection_paired.py``, 21 paired rounds: 0.88x, 0.88-0.89x,
+0.76-0.80x and 0.84-0.86x the CPU time of the default call before at 10^3, 10^4, 10^5
+and 10^6 samples; the same choices and models bit for bit on every bundled record,
 ``bench/selection_identity.py``): the residual bounds of the unstable fold candidates
 stop as soon as they prove (:func:`subid.methods.dt._residual_bound.loses`; at 10^5
 samples they had cost a third of the default call); the blocks' lagged products are
@@ -210,8 +210,9 @@ computed once per search block at the deepest horizon's depth (:func:`fold_facto
 a fold's merged lag products reach past the shortest block through its own
 (:func:`subid.methods.dt._lag_fit.merged`); a fold record is checked once for both
 horizons; a scored candidate's normal equations are solved in one compiled call
-(:func:`subid.methods.dt._lag_kernel.scored_solve`) and the noise model's least
-squares without scipy's wrapper (:mod:`subid.methods.dt._lapack`). What a default call
+(:func:`subid.methods.dt._lag_kernel.scored_solve`), and small LAPACK calls (the
+noise model's least squares, a candidate's eigenvectors) go without numpy's and
+scipy's wrappers (:mod:`subid.methods.dt._lapack`, the same bits). What a default call
 at 10^4 samples still spends (about 130 ms against 11 ms pinned; instrumented, share of
 the call): the 75 stable fold candidates about 35 % (each about 0.5 ms: the eigenvalues
 and modal form of its A, the compiled normal matrix and error power, its A and C, some
