@@ -200,13 +200,14 @@ and the check's factor in the user's units, its lag products and the record's
 the folds' blocks are recognised by their memory
 (:func:`subid.methods.dt.fold_statistics._same_samples`).
 
-Then (issue 21, ``bench/selection_paired.py``, 21 paired rounds: 0.88x, 0.88-0.89x,
-0.76-0.80x and 0.84-0.86x the CPU time of the default call before at 10^3, 10^4, 10^5
-and 10^6 samples; the same choices and models bit for bit on every bundled record,
-``bench/selection_identity.py``): the residual bounds of the unstable fold candidates
+Then (issue 21, ``bench/selection_paired.py``, 21 paired rounds: 0.85-0.88x,
+0.86-0.89x, 0.76-0.80x and 0.81-0.86x the CPU time of the default call before at 10^3,
+10^4, 10^5 and 10^6 samples; the same choices and models bit for bit on every bundled
+record, ``bench/selection_identity.py``): the residual bounds of the unstable fold candidates
 stop as soon as they prove (:func:`subid.methods.dt._residual_bound.loses`; at 10^5
 samples they had cost a third of the default call); the blocks' lagged products are
-computed once per search block at the deepest horizon's depth (:func:`fold_factors`);
+computed once per search block at the deepest horizon's depth (:func:`fold_factors`;
+the compiled lag sums four samples per pass, :mod:`subid.statistic._lag_kernel`);
 a fold's merged lag products reach past the shortest block through its own
 (:func:`subid.methods.dt._lag_fit.merged`); a fold record is checked once for both
 horizons; a scored candidate's normal equations are solved in one compiled call
