@@ -161,6 +161,84 @@ def test_kernels_equal_their_references(n, seed, radius):
     np.testing.assert_allclose(got, want, rtol=1e-12)
 
 
+def test_eigenvectors_are_those_of_numpy_eig():
+    """The modal form's eigenvalues and eigenvectors (LAPACK's dgeev without numpy's
+    wrapper, the complex pairs built by the compiled kernel) are numpy.linalg.eig's, bit
+    for bit, on real and complex spectra; the kernel equals its plain reference."""
+    from subid.methods.dt import _lag_kernel
+    from subid.methods.dt._lapack import eig_real
+    rng = np.random.default_rng(12)
+    kinds = set()
+    for k in range(120):
+        n = int(rng.integers(1, 13))
+        A = rng.standard_normal((n, n)) * rng.uniform(0.05, 1.0)
+        if k % 3 == 0:
+            A = A + A.T                          # a real spectrum
+        wr, wi, vr = eig_real(read_only(A)[0])
+        lam, V = _lag_kernel.complex_eigenvectors(wr, wi, vr)
+        w, v = np.linalg.eig(A)
+        assert np.array_equal(lam, w.astype(complex))
+        assert np.array_equal(V, v.astype(complex))
+        ref = _lag_kernel.complex_eigenvectors_reference(wr, wi, vr)
+        assert np.array_equal(lam, ref[0]) and np.array_equal(V, ref[1])
+        kinds.add(bool(np.any(wi != 0)))
+    assert kinds == {True, False}
+
+
+def test_scored_solve_equals_its_lapack_reference():
+    """The compiled solve of a scored candidate's normal equations equals its LAPACK
+    reference (status, bound, solution to rounding) on normal matrices of real
+    regressions, well and badly conditioned, not positive definite and not finite,
+    and solve_normal_equations decides as with the eigenvalues."""
+    from subid.methods.dt import _lag_kernel
+    rng = np.random.default_rng(7)
+    cases = []
+    for p, spread in ((1, 0.0), (12, 0.0), (36, 2.0), (36, 6.0), (20, 9.0)):
+        X = rng.standard_normal((400, p + 1)) * 10.0 ** (spread * rng.random(p + 1))
+        X[:, :p] = X[:, :p] @ np.linalg.qr(rng.standard_normal((p, p)))[0] \
+            * np.logspace(0, -spread, p)
+        cases.append((X.T @ X, p))
+    N, p = cases[1]
+    N = N.copy()
+    N[3, 3] = -1.0                               # not positive definite
+    cases.append((N, p))
+    cases.append((np.full((4, 4), np.nan), 3))   # not finite
+    statuses = set()
+    for N, p in cases:
+        for limit in (1e4, 1e8):
+            got = _lag_kernel.scored_solve(read_only(N)[0], p, limit)
+            want = _lag_kernel.scored_solve_reference(N, p, limit)
+            assert got[0] == want[0]
+            statuses.add(got[0])
+            if got[0] == 0:
+                np.testing.assert_allclose(got[2], want[2], rtol=1e-8)
+                np.testing.assert_allclose(got[1], want[1], rtol=1e-8,
+                                           atol=1e-10 * np.abs(want[1]).max())
+            n, nu, ny = 1, 1, 1
+            if p == 3:                           # x0 (1), B (1), D (1)
+                fast = _regression.solve_normal_equations(
+                    N, n, nu, ny, estimate_x0=True, feedthrough=True, n_samples=400,
+                    max_condition=limit, bound_condition=True)
+                slow = _regression.solve_normal_equations(
+                    N, n, nu, ny, estimate_x0=True, feedthrough=True, n_samples=400,
+                    max_condition=limit)
+                assert (fast is None) == (slow is None)
+    assert statuses == {0, 1, 2}
+    # a real fold regression: B, D, x0 as by the eigenvalues' path
+    A, B, C, D = _system(4, 25, 0.9)
+    u, y = _record(A, B, C, D, 3000, 25)
+    form = _lag_fit._Modal._of(A)
+    products = _lag_fit.LagProducts(u, y)
+    L = form.lags_for(products)
+    C, w = read_only(C, 1.0 / y.std(axis=0))
+    Naug = _lag_kernel.normal_matrix(*form.arguments(products, L), C, w, True, True)
+    kw = dict(estimate_x0=True, feedthrough=True, n_samples=3000, max_condition=1e8)
+    fast = _regression.solve_normal_equations(Naug, 4, 2, 2, bound_condition=True, **kw)
+    slow = _regression.solve_normal_equations(Naug, 4, 2, 2, **kw)
+    for a, b in zip(fast[:4], slow[:4]):
+        np.testing.assert_allclose(a, b, rtol=1e-9, atol=1e-12)
+
+
 @pytest.mark.parametrize("n, seed, radius, N", [(2, 31, 0.995, 400), (4, 32, 0.999, 700),
                                                 (6, 33, 0.9, 300)])
 def test_short_record_slow_poles_exact(n, seed, radius, N):
@@ -210,7 +288,8 @@ def test_where_the_products_do_not_apply():
 @pytest.mark.parametrize("n, seed, radius", [(2, 41, 0.9), (5, 42, 0.97), (8, 43, 0.9)])
 def test_fit_and_error_equals_the_fit_then_the_score(n, seed, radius):
     """fit_and_error (one modal form for a fold candidate's fit and score) gives the B, D
-    of fit_b_d_x0 and the error power of error_power on the fitted model, to the bit; no
+    of fit_b_d_x0 (to rounding: its normal equations solved by the compiled
+    scored_solve) and the error power of error_power on the fitted model, to the bit; no
     fit where fit_b_d_x0 gives none; the fit without a score where error_power gives
     none."""
     A, B, C, D = _system(n, seed, radius)
@@ -227,12 +306,15 @@ def test_fit_and_error_equals_the_fit_then_the_score(n, seed, radius):
                                          feedthrough=feedthrough, estimate_x0=estimate_x0)
             want = _lag_fit.fit_b_d_x0(A_c, C, train, weights, feedthrough=feedthrough,
                                        estimate_x0=estimate_x0)
-            np.testing.assert_array_equal(got[0], want[0])
-            np.testing.assert_array_equal(got[1], want[1])
+            for a, b in zip(got[:2], want[:2]):
+                np.testing.assert_allclose(a, b, rtol=1e-9, atol=1e-12 * np.abs(b).max())
+            err = _lag_fit.error_power(A_c, got[0], C, got[1], held, held_weights,
+                                       inv_scale)
+            np.testing.assert_array_equal(got[2], err)
             err = _lag_fit.error_power(A_c, np.ascontiguousarray(want[0]), C,
                                        np.ascontiguousarray(want[1]), held, held_weights,
                                        inv_scale)
-            np.testing.assert_array_equal(got[2], err)
+            np.testing.assert_allclose(got[2], err, rtol=1e-9)
     unstable = 1.01 * A / np.abs(np.linalg.eigvals(A)).max()
     assert _lag_fit.fit_and_error(unstable, C, train, weights, held, held_weights,
                                   inv_scale) is None
@@ -277,14 +359,22 @@ def test_fold_products_merged_from_blocks():
     shortest = min(b.n_samples for b in _selection._blocks_of_folds(parts))
     for record, lp in zip(records, merged):
         own = _lag_fit.LagProducts.of_record(record)
-        # up to half the record, no lag past the shortest block (a fit takes a quarter)
-        assert lp.max_lag == min(own.max_lag, shortest) >= record.n_samples // 4
+        # merged up to half the record, no lag past the shortest block (a fit takes a
+        # quarter); past it, the record's own products
+        assert lp.merged_lags == min(own.max_lag, shortest) >= record.n_samples // 4
+        assert lp.max_lag == own.max_lag
         assert lp.n_samples == record.n_samples
-        for products in (lp, own):       # every lag (those past FIRST_LAGS when needed)
-            products.lags(products.max_lag)
-        k = lp.max_lag + 1
+        own.lags(own.max_lag)            # every lag (those past FIRST_LAGS when needed)
+        lp.lags(lp.merged_lags)
+        k = lp.merged_lags + 1
+        assert lp.G.shape[0] == k        # the merged lags only
         for a, b in ((lp.G, own.G[:k]), (lp.R, own.R[:k]), (lp.Y, own.Y)):
             np.testing.assert_allclose(a, b, rtol=0, atol=1e-11 * np.abs(b).max())
+        if lp.max_lag > lp.merged_lags:  # past them: the record's own
+            G, R = lp.lags(lp.max_lag)
+            assert G.shape[0] == lp.max_lag + 1 and lp.extend is None
+            for a, b in ((G, own.G), (R, own.R)):
+                np.testing.assert_allclose(a, b, rtol=0, atol=1e-11 * np.abs(b).max())
 
 
 @pytest.mark.slow

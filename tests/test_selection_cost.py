@@ -134,6 +134,75 @@ def test_residual_bound_is_a_lower_bound():
                        estimate_x0=True, output_weights=weights) is None
 
 
+def test_dual_states_are_those_of_the_rows_recursion():
+    """The compiled state-only recursion (the head of a bound's record) ends in the
+    states of the rows recursion, bit for bit, and in its plain reference's."""
+    true, data = _record(order=4, n=700, seed=4)
+    radius = float(np.abs(np.linalg.eigvals(true.A)).max())
+    rng = np.random.default_rng(5)
+    u = np.ascontiguousarray(data.u)
+    for target, n_x0 in ((0.9, 4), (1.01, 4), (1.01, 0)):
+        A = np.ascontiguousarray(true.A * (target / radius))
+        C = np.ascontiguousarray(true.C)
+        V0, M0 = rng.standard_normal((2, 2, 4)), rng.standard_normal((2, 4))
+        _, V, M = regression.dual_rows(A, C, u, V0, M0, n_x0)
+        Vs, Ms = regression.dual_states(A, C, u, V0, M0, n_x0)
+        np.testing.assert_array_equal(Vs, V)
+        np.testing.assert_array_equal(Ms, M)
+        Vr, Mr = regression.dual_states_reference(A, C, u, V0, M0, n_x0)
+        np.testing.assert_allclose(Vs, Vr, rtol=1e-10, atol=1e-12 * np.abs(Vr).max())
+        if n_x0:                         # M is C A^t only with x0 columns
+            np.testing.assert_allclose(Ms, Mr, rtol=1e-10, atol=1e-12 * np.abs(Mr).max())
+
+
+def test_residual_bound_stops_once_it_proves():
+    """With ``enough``, a bound's rows stop at the first chunk of EARLY_CHUNK samples
+    after which it reaches ``enough``: the value is the plain least-squares residual of
+    the rows of those chunks (a subset of the rows: still a lower bound), and where it
+    never reaches ``enough``, the bound over every row."""
+    true, data = _record(order=4, n=20000, seed=2)
+    radius = float(np.abs(np.linalg.eigvals(true.A)).max())
+    weights = np.array([1.0, 2.5])
+    A = true.A * (1.004 / radius)
+    N = data.n_samples
+    full = bound.strided_residual_at_least(A, true.C, data.u, data.y, bound.TAIL,
+                                           bound.STRIDE, feedthrough=True,
+                                           output_weights=weights)
+    rows = _strided_rows(A, true.C, data, bound.TAIL, bound.STRIDE, True, weights)
+    per_chunk = 2 * bound.EARLY_CHUNK // bound.STRIDE      # two outputs
+    prefix = []                                  # the bound after each chunk, plainly
+    for stop in range(per_chunk, rows.shape[0] + per_chunk, per_chunk):
+        part = rows[:stop]
+        theta = np.linalg.lstsq(part[:, :-1], part[:, -1], rcond=None)[0]
+        prefix.append(np.linalg.norm(part[:, -1] - part[:, :-1] @ theta) / np.sqrt(2 * N))
+    assert np.all(np.diff(prefix) >= -1e-12 * full)          # rows only add residual
+    np.testing.assert_allclose(prefix[-1], full, rtol=1e-6)
+    proved = 0
+    for share in (0.05, 0.3, 0.6, 0.9, 1.5):
+        enough = share * full
+        got = bound.strided_residual_at_least(A, true.C, data.u, data.y, bound.TAIL,
+                                              bound.STRIDE, feedthrough=True,
+                                              output_weights=weights, enough=enough)
+        k = next((k for k, v in enumerate(prefix) if v >= enough), len(prefix) - 1)
+        np.testing.assert_allclose(got, prefix[k], rtol=1e-6)
+        assert got <= full * (1 + 1e-8)          # the factor by chunks: rounding
+        proved += got >= enough and k < len(prefix) - 1
+    assert proved >= 2                           # it did stop early
+    # the model's own state and the relaxed bound stop the same way
+    own = bound.residual_at_least(A, true.C, data.u, data.y, feedthrough=True,
+                                  estimate_x0=True, output_weights=weights)
+    early = bound.residual_at_least(A, true.C, data.u, data.y, feedthrough=True,
+                                    estimate_x0=True, output_weights=weights,
+                                    enough=0.3 * own)
+    assert 0.3 * own <= early <= own * (1 + 1e-8)
+    relaxed = bound.relaxed_residual_at_least(A, true.C, data.u, data.y, bound.TAIL,
+                                              feedthrough=True, output_weights=weights)
+    early = bound.relaxed_residual_at_least(A, true.C, data.u, data.y, bound.TAIL,
+                                            feedthrough=True, output_weights=weights,
+                                            enough=0.3 * relaxed)
+    assert 0.3 * relaxed <= early <= relaxed * (1 + 1e-8)
+
+
 def test_residual_bound_decision_on_a_short_record():
     """On a record too short for the free-state strided bound, a slowly growing A is
     bounded first by its own state on every STRIDE-th tail sample (the value returned
@@ -161,7 +230,12 @@ def test_residual_bound_decision_on_a_short_record():
                 assert threshold * (1 + bound.MARGIN) <= got
                 assert got <= full["residual_rms"] * (1 + bound.MARGIN)
             if slow and own >= threshold * (1 + bound.MARGIN):
-                assert got == own                   # the first bound tried
+                # the first bound tried, its rows stopped once it proves
+                first_tried = bound.residual_at_least(
+                    A, true.C, data.u, data.y, feedthrough=True, estimate_x0=True,
+                    output_weights=weights, stride=bound.STRIDE,
+                    enough=threshold * (1 + bound.MARGIN))
+                assert got == first_tried <= own * (1 + 1e-12)
             if share >= 1.01:
                 assert got is None
     assert first >= 2

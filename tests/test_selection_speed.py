@@ -199,12 +199,30 @@ def test_fold_statistics_merged_from_blocks():
     merged = _records()[2][0]
     assert selection.fold_factors(selection.experiment_folds(merged), 8,
                                   _pipeline(merged)) == [None] * 4
+    # the blocks' statistics computed once at the deepest horizon's depth: the factors
+    # of a shallower horizon are those of its own blocks' statistics, bit for bit
+    deepest = {"depth": 2 * 12}
+    for horizon in (8, 12, 5):
+        shared = selection.fold_factors(parts, horizon, _pipeline(data), deepest)
+        own = selection.fold_factors(parts, horizon, _pipeline(data))
+        for a, b in zip(shared, own):
+            assert np.array_equal(a.L, b.L)
+    assert deepest["stats"][0].depth == 24
+    stat = HankelStatistic.from_data(parts[0][0], 24, kind="gram")
+    for depth in (2, 9, 24):
+        shallow = stat._shallower(depth)
+        direct = HankelStatistic.from_data(parts[0][0], depth, kind="gram")
+        for name in ("lagged", "head", "tail"):
+            assert np.array_equal(getattr(shallow, name), getattr(direct, name))
+        assert (shallow.depth, shallow.n_columns) == (direct.depth, direct.n_columns)
+        assert np.array_equal(shallow.factor().L, direct.factor().L)
 
 
 def test_bounded_condition_gives_the_same_solve():
     """solve_normal_equations with the condition number bounded from the Cholesky factor
-    (the fold candidates') takes the same decision and gives the same solution, to the
-    bit, as with the eigenvalues, on well- and ill-conditioned normal matrices (the
+    (the fold candidates') takes the same decision and gives the same solution, to
+    rounding (the compiled scored_solve: at most the condition number times the machine
+    epsilon), as with the eigenvalues, on well- and ill-conditioned normal matrices (the
     bound at or above the eigenvalue ratio)."""
     rng = np.random.default_rng(11)
     decided = set()
@@ -219,11 +237,27 @@ def test_bounded_condition_gives_the_same_solve():
             assert (exact is None) == (bounded is None)
             decided.add(exact is None)
             if exact is not None:
+                tol = 1e-15 * exact[4]["regression_condition"] ** 2
                 for a, b in zip(exact[:4], bounded[:4]):
-                    np.testing.assert_array_equal(a, b)
+                    np.testing.assert_allclose(b, a, rtol=max(tol, 1e-13),
+                                               atol=max(tol, 1e-13) * np.abs(a).max())
                 assert bounded[4]["regression_condition"] >= \
                     exact[4]["regression_condition"] * (1 - 1e-12)
     assert decided == {True, False}
+
+
+def test_fold_problem_is_the_replaced_problem():
+    """Problem.fold_at is dataclasses.replace(order=, candidates=[order], fold=True): the
+    same fields, the cache shared."""
+    from dataclasses import fields, replace
+    _, data = _noisy(n=1200, seed=6)
+    problem = _pipeline(data).prepare_fold(data[:800], list(range(1, 6)), 8)
+    fast, slow = problem.fold_at(3), replace(problem, order=3, candidates=[3], fold=True)
+    assert type(fast) is type(slow)
+    for f in fields(problem):
+        a, b = getattr(fast, f.name), getattr(slow, f.name)
+        assert a is b or (a == b if not isinstance(a, np.ndarray) else np.array_equal(a, b))
+    assert fast._cache is problem._cache and problem.order is None and not problem.fold
 
 
 def test_fold_score_equals_the_model_and_its_score():

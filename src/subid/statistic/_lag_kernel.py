@@ -8,7 +8,10 @@ numbers of the channel-interleaved record, so they accumulate as ``q``
 contiguous multiply-adds (vectorised) into a per-block partial sum. It
 releases the GIL, so it can run beside a parser thread. Measured 1.7x (2x2,
 depth 20) to 4x (1x1) faster than the blocked matrix products, whose tiny
-``q x q`` results leave BLAS memory-bound.
+``q x q`` results leave BLAS memory-bound. Four samples go through each partial sum at
+a time (its additions in the same order, so the same bits: one load and store of it per
+four multiply-adds; issue 21: 1.6-2x faster at 2x2, depth 40, the fold statistics of the
+order search).
 """
 
 from __future__ import annotations
@@ -44,7 +47,28 @@ def lag_sums_kernel(u, y, depth):  # pragma: no cover - compiled
                 z[base + nu + j] = y[t, j]
         part[:, :] = 0.0
         full = max(min(b1, T - depth + 1) - b0, 0)    # rows with every lag inside
-        for t in range(full):
+        # four rows at a time, each entry's additions in the order of the rows (the
+        # same sums, the same bits as one row at a time) with one load and store of
+        # the partial sum per four rows instead of per row
+        four = full - full % 4
+        for t in range(0, four, 4):
+            r0 = t * q
+            r1 = r0 + q
+            r2 = r1 + q
+            r3 = r2 + q
+            for i in range(q):
+                a0 = z[r0 + i]
+                a1 = z[r1 + i]
+                a2 = z[r2 + i]
+                a3 = z[r3 + i]
+                for w in range(width):
+                    acc = part[i, w]
+                    acc += a0 * z[r0 + w]
+                    acc += a1 * z[r1 + w]
+                    acc += a2 * z[r2 + w]
+                    acc += a3 * z[r3 + w]
+                    part[i, w] = acc
+        for t in range(four, full):
             base = t * q
             for i in range(q):
                 a = z[base + i]

@@ -255,6 +255,25 @@ class HankelStatistic:
                 stat._absorb(data.u[a:b], data.y[a:b])
         return stat
 
+    def _shallower(self, depth: int) -> "HankelStatistic":
+        """The ``'gram'`` statistic of the same record (one experiment) at a smaller
+        ``depth``: the first ``depth`` lagged products and the first and last
+        ``depth - 1`` samples of this one, which are those :meth:`from_data` computes at
+        that depth (the same sums in the same order: the same bits)."""
+        if self.kind != "gram" or self.n_experiments != 1 or self._closed_columns \
+                or not 2 <= depth <= self.depth:
+            raise DataError("only a 'gram' statistic of one experiment has a shallower copy, "
+                            f"at a depth from 2 to {self.depth}")
+        out = HankelStatistic.__new__(HankelStatistic)
+        out.__dict__.update(self.__dict__)
+        out.__dict__.pop("_cached_factor", None)
+        keep = depth - 1
+        out.depth = depth
+        out.lagged = self.lagged[:depth].copy()
+        out.head = self.head[:keep].copy()
+        out.tail = self.tail[self.tail.shape[0] - min(keep, self.tail.shape[0]):].copy()
+        return out
+
     # -- experiments ----------------------------------------------------------
     def _open_columns(self) -> int:
         return max(self._open_samples - self.depth + 1, 0)

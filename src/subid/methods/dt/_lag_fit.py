@@ -81,13 +81,16 @@ past its end would dominate); a score whose x0 Gramian has a condition number ab
 
 from __future__ import annotations
 
+from functools import partial
+
 import numpy as np
 import scipy.fft
 import scipy.linalg
 
 from subid._kernel_args import frozen, read_only
+from subid.methods.dt._lag_kernel import complex_eigenvectors, modal_form, normal_matrix, powers
 from subid.methods.dt._lag_kernel import error_power as kernel_error_power
-from subid.methods.dt._lag_kernel import modal_form, normal_matrix, powers
+from subid.methods.dt._lapack import eig_real
 from subid.methods.dt._regression import RESIDUAL_RECOMPUTE, solve_normal_equations
 
 #: The key of a problem's cache that holds its record's lag products (a
@@ -161,8 +164,9 @@ def merged(blocks, records, groups):
     boundary (:func:`straddle_correlations` of the samples either side). The first
     :data:`FIRST_LAGS` lags are computed at once, the others (up to each record's
     ``max_lag``) for all the records together when a candidate first needs them
-    (:meth:`LagProducts.lags`), at most the length of the shortest block (a lag could
-    straddle two boundaries). A record shorter than :data:`MERGE_SAMPLES` has its own
+    (:meth:`LagProducts.lags`), merged up to the length of the shortest block
+    (``merged_lags``: a lag could straddle two boundaries), past it from the record's
+    own products (:func:`correlations`, when a candidate first needs them). A record shorter than :data:`MERGE_SAMPLES` has its own
     (one FFT of a short record costs little, and its lags then reach all of it); one
     shorter than :data:`MIN_SAMPLES`, None. None altogether when a block is shorter than
     a quarter of a record to merge."""
@@ -197,14 +201,26 @@ def merged(blocks, records, groups):
     first = min(K, FIRST_LAGS)
     kept = [LagProducts.from_sums(record.u, record.y, sums, cap)
             for record, cap, sums in zip(records, caps, sums_up_to(first))]
-    if first < K:
-        def extend():                     # every record's lags up to its max_lag, once
-            for lp, (G, R, _) in zip(kept, sums_up_to(K)):
-                lp.G, lp.R = G[:lp.max_lag + 1], R[:lp.max_lag + 1]
-                lp.extend = None
-        for lp in kept:
-            if lp.G.shape[0] <= lp.max_lag:
-                lp.extend = extend
+    pending = [first < K]                 # the merged lags past the first, not yet summed
+
+    def extend(lp, L):
+        if L <= lp.merged_lags and pending[0]:
+            pending[0] = False            # every record's merged lags up to its cap, once
+            for other, (G, R, _) in zip(kept, sums_up_to(K)):
+                if other.G.shape[0] <= other.merged_lags:
+                    other.G, other.R = G[:other.merged_lags + 1], R[:other.merged_lags + 1]
+        if L >= lp.G.shape[0]:
+            # past the shortest block (a pole too slow for the merged lags): the
+            # record's own lag products up to its max_lag, by one FFT of it (the
+            # same sums to rounding; issue 21: at 10^4 samples the stabilised fold
+            # models of poles near 0.98 took a pass over their folds instead)
+            lp.G, lp.R, _ = correlations(lp.u, lp.y, lp.max_lag)
+        lp.extend = partial(extend, lp) if lp.G.shape[0] <= lp.max_lag else None
+
+    for lp in kept:
+        lp.merged_lags = lp.max_lag
+        lp.max_lag = min(MAX_LAG, lp.n_samples - 1)
+        lp.extend = partial(extend, lp) if lp.G.shape[0] <= lp.max_lag else None
     for k, lp in zip(big, kept):
         out[k] = lp
     return out
@@ -272,15 +288,15 @@ class LagProducts:
         self.G, self.R, self.Y = correlations(self.u, self.y, min(self.max_lag, FIRST_LAGS))
         self.extend = self._extend if self.max_lag > FIRST_LAGS else None
 
-    def _extend(self):
+    def _extend(self, L=None):
         self.G, self.R, _ = correlations(self.u, self.y, self.max_lag)
         self.extend = None
 
     def lags(self, L):
         """``(Γ, R)`` for the lags 0..L (``L <= max_lag``), computing the lags past those
-        kept so far first where needed."""
+        kept so far first where needed (``extend(L)``)."""
         if L >= self.G.shape[0] and self.extend is not None:
-            self.extend()
+            self.extend(L)
         return self.G[:L + 1], self.R[:L + 1]
 
     def kernel_arguments(self, L) -> tuple:
@@ -375,8 +391,9 @@ class _Modal:
     def _of(cls, A):
         if A.shape[0] == 0 or not np.isfinite(A).all():
             return None
-        lam, V = np.linalg.eig(A)
-        lam, V = lam.astype(complex, copy=False), V.astype(complex, copy=False)
+        # numpy.linalg.eig(A) as complex arrays, by its LAPACK call without the wrapper
+        # (the same bits; a fifth of a fold candidate's modal step)
+        lam, V = complex_eigenvectors(*eig_real(frozen(A)))
         status, lags, Wm = modal_form(lam, V, LAG_TOLERANCE, MAX_EIGVEC_CONDITION)
         return cls(lam, V, Wm, lags) if status == 0 else None
 

@@ -509,3 +509,150 @@ def error_power_reference(lam, V, Wm, vand_re, vand_im, G, R, Y_diag, u_tail, u_
         return np.full(ny, np.nan)
     x0 = np.linalg.lstsq(Pw, beta @ w2, rcond=rcond)[0]
     return total - 2.0 * (x0 @ beta) + np.einsum("i,rij,j->r", x0, Pr, x0)
+
+
+@numba.njit(cache=True, nogil=True)
+def scored_solve(N, p, max_condition):  # pragma: no cover - compiled
+    """``(status, theta, bound)`` of the augmented normal matrix ``N`` ((p + 1)-square,
+    ``[[G, b], [b^T, yy]]``) of a candidate that is only scored: its columns
+    equilibrated (``Ge = G / s s^T``, ``s = sqrt(diag G)``), the Cholesky factor
+    ``Ge = R^T R``, the bound ``||Ge||_inf ||R^{-1}||_F^2`` of the condition number and,
+    when it is at most ``max_condition``, ``theta = (G^{-1} b)`` through that factor
+    (``status`` 0). ``status`` 1 when the factor or the bound does not settle it (not
+    positive definite, bound above the limit, a diagonal entry not positive: the caller
+    decides by the eigenvalues), 2 when ``N`` is not finite. The steps of
+    :func:`scored_solve_reference` (LAPACK ``potrf``, ``trtri``, ``potrs``) in one
+    compiled call: on the matrices of a candidate (p about 40) their wrappers cost
+    more than the arithmetic."""
+    m = N.shape[0]
+    empty = np.empty(0)
+    for i in range(m):
+        for j in range(m):
+            if not np.isfinite(N[i, j]):
+                return 2, empty, 0.0
+    scale = np.empty(p)
+    for i in range(p):
+        if not N[i, i] >= 0.0:
+            return 1, empty, 0.0
+        s = math.sqrt(N[i, i])
+        scale[i] = s if s != 0.0 else 1.0
+    Ge = np.empty((p, p))
+    for i in range(p):
+        for j in range(p):
+            Ge[i, j] = N[i, j] / scale[i] / scale[j]
+    R = np.zeros((p, p))
+    for j in range(p):
+        s = Ge[j, j]
+        for k in range(j):
+            s -= R[k, j] * R[k, j]
+        if not s > 0.0:
+            return 1, empty, 0.0
+        d = math.sqrt(s)
+        R[j, j] = d
+        for i in range(j + 1, p):
+            t = Ge[j, i]
+            for k in range(j):
+                t -= R[k, j] * R[k, i]
+            R[j, i] = t / d
+    inv2 = 0.0                                   # ||R^{-1}||_F^2, column by column
+    col = np.empty(p)
+    for j in range(p):
+        col[j] = 1.0 / R[j, j]
+        inv2 += col[j] * col[j]
+        for i in range(j - 1, -1, -1):
+            t = 0.0
+            for k in range(i + 1, j + 1):
+                t += R[i, k] * col[k]
+            col[i] = -t / R[i, i]
+            inv2 += col[i] * col[i]
+    norm_inf = 0.0
+    for i in range(p):
+        s = 0.0
+        for j in range(p):
+            s += abs(Ge[i, j])
+        norm_inf = max(norm_inf, s)
+    bound = norm_inf * inv2
+    if not bound <= max_condition:
+        return 1, empty, bound
+    z = np.empty(p)                              # R^T z = b / s, then R x = z
+    for i in range(p):
+        t = N[i, p] / scale[i]
+        for k in range(i):
+            t -= R[k, i] * z[k]
+        z[i] = t / R[i, i]
+    theta = np.empty(p)
+    for i in range(p - 1, -1, -1):
+        t = z[i]
+        for k in range(i + 1, p):
+            t -= R[i, k] * theta[k]
+        theta[i] = t / R[i, i]
+    for i in range(p):
+        theta[i] /= scale[i]
+    return 0, theta, bound
+
+
+def scored_solve_reference(N, p, max_condition):
+    """Plain reference of :func:`scored_solve` by LAPACK (``dpotrf``, ``dtrtri``,
+    ``dpotrs``: the steps of
+    :func:`subid.methods.dt._regression.solve_normal_equations` with
+    ``bound_condition``)."""
+    import scipy.linalg
+    if not np.isfinite(N).all():
+        return 2, np.empty(0), 0.0
+    G, b = N[:p, :p], N[:p, p]
+    diag = np.diag(G)
+    if not np.all(diag >= 0):
+        return 1, np.empty(0), 0.0
+    scale = np.sqrt(diag).copy()
+    scale[scale == 0] = 1.0
+    Ge = G / scale[:, None] / scale[None, :]
+    factor, info = scipy.linalg.lapack.dpotrf(Ge, lower=0, overwrite_a=0, clean=1)
+    if info != 0:
+        return 1, np.empty(0), 0.0
+    inverse, info = scipy.linalg.lapack.dtrtri(factor, lower=0)
+    bound = float(np.abs(Ge).sum(axis=1).max()) * float(np.sum(inverse ** 2))
+    if info != 0 or not bound <= max_condition:
+        return 1, np.empty(0), bound
+    theta = scipy.linalg.lapack.dpotrs(factor, b / scale, lower=0)[0]
+    return 0, theta / scale, bound
+
+
+@numba.njit(cache=True, nogil=True)
+def complex_eigenvectors(wr, wi, vr):  # pragma: no cover - compiled
+    """``(lam, V)`` complex from LAPACK's real storage (``dgeev``'s ``wr``, ``wi``,
+    ``vr``: a conjugate pair's eigenvectors ``vr[:, j] ± i vr[:, j + 1]``), as
+    ``numpy.linalg.eig`` builds them (the same values)."""
+    n = wr.shape[0]
+    lam = np.empty(n, dtype=np.complex128)
+    V = np.empty((n, n), dtype=np.complex128)
+    j = 0
+    while j < n:
+        if wi[j] != 0.0 and j + 1 < n:
+            lam[j] = complex(wr[j], wi[j])
+            lam[j + 1] = complex(wr[j + 1], wi[j + 1])
+            for i in range(n):
+                V[i, j] = complex(vr[i, j], vr[i, j + 1])
+                V[i, j + 1] = complex(vr[i, j], -vr[i, j + 1])
+            j += 2
+        else:
+            lam[j] = complex(wr[j], wi[j])
+            for i in range(n):
+                V[i, j] = complex(vr[i, j], 0.0)
+            j += 1
+    return lam, V
+
+
+def complex_eigenvectors_reference(wr, wi, vr):
+    """Plain reference of :func:`complex_eigenvectors` (numpy's loop)."""
+    n = wr.shape[0]
+    lam = wr + 1j * wi
+    V = vr.astype(complex)
+    j = 0
+    while j < n:
+        if wi[j] != 0 and j + 1 < n:
+            V[:, j] = vr[:, j] + 1j * vr[:, j + 1]
+            V[:, j + 1] = vr[:, j] - 1j * vr[:, j + 1]
+            j += 2
+        else:
+            j += 1
+    return lam, V

@@ -26,6 +26,7 @@ import numpy as np
 import scipy.linalg
 
 from subid._kernel_args import frozen
+from subid.methods.dt._lag_kernel import scored_solve
 from subid.statistic.hankel import householder_r
 
 _CHUNK = 4096
@@ -128,6 +129,36 @@ def dual_rows_reference(A, C, u, V0, M0, n_x0):
 
 
 @numba.njit(cache=True, nogil=True)
+def _dual_step(A, C, ut, V, M, Vn, Mn, n_x0):  # pragma: no cover - compiled
+    """One step of the dual recursions into ``Vn`` and ``Mn``: ``Vn = V A + C^T u(t)``
+    per (output, input), ``Mn = M A`` (entries below :data:`TINY` set to zero) when
+    ``n_x0``."""
+    ny, nu, n = V.shape
+    # each sum in the order C u, then k = 0..n-1; the loop over m innermost (the
+    # rows of A contiguous: vectorised, the same sums to the last bit)
+    for i in range(ny):
+        for j in range(nu):
+            uj = ut[j]
+            for m in range(n):
+                Vn[i, j, m] = C[i, m] * uj
+            for k in range(n):
+                v = V[i, j, k]
+                for m in range(n):
+                    Vn[i, j, m] += v * A[k, m]
+    if n_x0:
+        for i in range(ny):
+            for m in range(n):
+                Mn[i, m] = 0.0
+            for k in range(n):
+                v = M[i, k]
+                for m in range(n):
+                    Mn[i, m] += v * A[k, m]
+            for m in range(n):
+                if abs(Mn[i, m]) < TINY:
+                    Mn[i, m] = 0.0
+
+
+@numba.njit(cache=True, nogil=True)
 def dual_rows(A, C, u, V0, M0, n_x0):  # pragma: no cover - compiled
     """Compiled kernel: same contract as :func:`dual_rows_reference`."""
     T, nu = u.shape
@@ -146,31 +177,35 @@ def dual_rows(A, C, u, V0, M0, n_x0):  # pragma: no cover - compiled
             for j in range(nu):
                 for m in range(n):
                     rows[t, i, n_x0 + j * n + m] = V[i, j, m]
-        # each sum in the order C u, then k = 0..n-1; the loop over m innermost (the
-        # rows of A contiguous: vectorised, the same sums to the last bit)
-        for i in range(ny):
-            for j in range(nu):
-                ut = u[t, j]
-                for m in range(n):
-                    Vn[i, j, m] = C[i, m] * ut
-                for k in range(n):
-                    v = V[i, j, k]
-                    for m in range(n):
-                        Vn[i, j, m] += v * A[k, m]
+        _dual_step(A, C, u[t], V, M, Vn, Mn, n_x0)
         V, Vn = Vn, V
         if n_x0:
-            for i in range(ny):
-                for m in range(n):
-                    Mn[i, m] = 0.0
-                for k in range(n):
-                    v = M[i, k]
-                    for m in range(n):
-                        Mn[i, m] += v * A[k, m]
-                for m in range(n):
-                    if abs(Mn[i, m]) < TINY:
-                        Mn[i, m] = 0.0
             M, Mn = Mn, M
     return rows, V, M
+
+
+def dual_states_reference(A, C, u, V0, M0, n_x0):
+    """The states ``V, M`` of :func:`dual_rows_reference` after the samples of ``u``,
+    without the rows (the plain reference of :func:`dual_states`)."""
+    _, V, M = dual_rows_reference(A, C, u, V0, M0, n_x0)
+    return V, M
+
+
+@numba.njit(cache=True, nogil=True)
+def dual_states(A, C, u, V0, M0, n_x0):  # pragma: no cover - compiled
+    """Compiled kernel: the states ``V, M`` of :func:`dual_rows` after the samples of
+    ``u`` by the same steps, without writing the rows (the head of the record before a
+    residual bound's tail, :mod:`subid.methods.dt._residual_bound`)."""
+    V = V0.copy()
+    M = M0.copy()
+    Vn = np.empty_like(V)
+    Mn = np.empty_like(M)
+    for t in range(u.shape[0]):
+        _dual_step(A, C, u[t], V, M, Vn, Mn, n_x0)
+        V, Vn = Vn, V
+        if n_x0:
+            M, Mn = Mn, M
+    return V, M
 
 
 def fit_b_d_x0(A, C, u, y, *, feedthrough=True, estimate_x0=True, output_weights=None,
@@ -805,41 +840,36 @@ def solve_normal_equations(N, n, nu, ny, *, estimate_x0, feedthrough, n_samples,
     :data:`MODAL_MAX_NORMAL_CONDITION`, :data:`SCORING_MAX_NORMAL_CONDITION` within
     :func:`scoring_only`). ``n_x0`` as in :func:`solve_factor`. ``bound_condition``
     (a model only scored): the condition number is first bounded from the Cholesky
-    factor (``||G||_inf ||R^{-1}||_F^2``, a quarter of the cost of the eigenvalues),
-    the eigenvalues computed only when the bound exceeds ``max_condition``: the same
-    decision and solution, ``regression_condition`` then the square root of the
-    bound."""
+    factor (``||G||_inf ||R^{-1}||_F^2``, a quarter of the cost of the eigenvalues;
+    factor, bound and solution in one compiled call,
+    :func:`subid.methods.dt._lag_kernel.scored_solve`), the eigenvalues computed only
+    when the bound exceeds ``max_condition``: the same decision, the solution equal to
+    rounding, ``regression_condition`` then the square root of the bound."""
     if max_condition is None:
         max_condition = _NORMAL_CONDITION.get()
     nx, q, p = parameter_count(n, nu, ny, estimate_x0, feedthrough, n_x0)
     if not np.isfinite(N).all():
         return None
     G, b, yy = N[:p, :p], N[:p, p], N[p, p]
-    scale = np.sqrt(np.diag(G)).copy()
-    scale[scale == 0] = 1.0
-    Ge = G / scale[:, None] / scale[None, :]
-    factor = None
+    theta = None
     if bound_condition and p:
-        # the Cholesky factor Ge = R^T R and an upper bound of the condition number,
-        # ||Ge||_inf ||R^{-1}||_F^2 >= λ_max / λ_min: within the limit, the eigenvalues'
-        # test would accept too (the same decision; the same theta from that factor)
-        factor, info = scipy.linalg.lapack.dpotrf(Ge, lower=0, overwrite_a=0, clean=0)
-        if info == 0:
-            inverse, info = scipy.linalg.lapack.dtrtri(factor, lower=0)
-            bound = float(np.abs(Ge).sum(axis=1).max()) * float(np.sum(np.triu(inverse) ** 2))
-            if info != 0 or not bound <= max_condition:
-                factor = None
-        else:
-            factor = None
-    if factor is None:
+        # the Cholesky factor Ge = R^T R of the equilibrated matrix and an upper bound of
+        # the condition number, ||Ge||_inf ||R^{-1}||_F^2 >= λ_max / λ_min, in one compiled
+        # call (subid.methods.dt._lag_kernel.scored_solve; its LAPACK reference
+        # scored_solve_reference): within the limit, the eigenvalues' test would accept
+        # too (the same decision; theta from that factor, equal to rounding)
+        status, solved, bound = scored_solve(frozen(N), p, float(max_condition))
+        if status == 0:
+            theta, condition = solved, float(np.sqrt(bound))
+    if theta is None:
+        scale = np.sqrt(np.diag(G)).copy()
+        scale[scale == 0] = 1.0
+        Ge = G / scale[:, None] / scale[None, :]
         ev = np.linalg.eigvalsh(Ge) if p else np.ones(1)
         if ev[0] <= 0 or ev[-1] / ev[0] > max_condition:
             return None
         condition = float(np.sqrt(ev[-1] / ev[0]))
         theta = _cholesky_solve(Ge, b / scale) / scale if p else np.zeros(0)
-    else:
-        condition = float(np.sqrt(bound))
-        theta = _cholesky_solve(Ge, b / scale, factor) / scale
     x0 = theta[:nx] if estimate_x0 else np.zeros(n)
     B = theta[nx:q].reshape(nu, n).T
     D = theta[q:p].reshape(nu, ny).T if feedthrough else np.zeros((ny, nu))

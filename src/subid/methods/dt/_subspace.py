@@ -64,6 +64,10 @@ from subid.methods.bd import (  # noqa: F401 (check_experiment_lengths: names of
 )
 from subid.methods.crossval import MAX_ORDER
 from subid.methods.dt._lag_fit import LAG_PRODUCTS
+from subid.methods.dt._lapack import (  # noqa: F401 (names of this module's API)
+    least_squares_gelsy,
+    orthonormal_basis,
+)
 from subid.methods.dt.checks import check_data
 from subid.methods.dt.selection import RECORD_FACTOR, default_gap_horizon
 from subid.model.statespace import StateSpace
@@ -134,60 +138,7 @@ def data_factor(data: IOData, depth: int, *, method: str, horizon: int,
     return HankelStatistic.from_data(data, depth, kind=statistic).factor()
 
 
-#: Optimal LAPACK workspace sizes by routine and shape (the queries of scipy.linalg).
-_LWORK: dict = {}
-
-
-def orthonormal_basis(gamma: np.ndarray) -> np.ndarray:
-    """``Q`` of the economic QR factorisation of a finite float matrix with at least
-    as many rows as columns: ``scipy.linalg.qr(gamma, mode='economic')[0]`` by the
-    same LAPACK calls (``dgeqrf``, ``dorgqr``, the workspace sizes queried as it queries
-    them) without its wrapper, which cost more than the factorisation on the matrices
-    of a candidate order (the same bits; ``tests/test_selection_speed.py``)."""
-    gamma = np.asarray(gamma, dtype=float)
-    m, n = gamma.shape
-    if n == 0 or m < n:
-        return scipy.linalg.qr(gamma, mode="economic", check_finite=False)[0]
-    lapack = scipy.linalg.lapack
-    key = ("qr", m, n)
-    if key not in _LWORK:
-        qr, tau, work, _ = lapack.dgeqrf(gamma, lwork=-1)
-        lw_qr = int(work[0].real)
-        qr, tau, _, _ = lapack.dgeqrf(gamma, lwork=lw_qr)
-        _LWORK[key] = (lw_qr, int(lapack.dorgqr(qr, tau, lwork=-1)[1][0].real))
-    lw_qr, lw_q = _LWORK[key]
-    qr, tau, _, info = lapack.dgeqrf(gamma, lwork=lw_qr)
-    if info < 0:
-        raise ValueError(f"illegal value in argument {-info} of dgeqrf")
-    Q, _, info = lapack.dorgqr(qr, tau, lwork=lw_q, overwrite_a=1)
-    if info < 0:
-        raise ValueError(f"illegal value in argument {-info} of dorgqr")
-    return Q
-
-
-def least_squares_gelsy(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """``scipy.linalg.lstsq(a, b, lapack_driver='gelsy')[0]`` (``cond`` the machine
-    epsilon) for finite float matrices with at least as many rows as columns and a
-    2-D ``b``, by the same ``dgelsy`` call without the wrapper (the same bits)."""
-    m, n = a.shape
-    if n == 0 or m < n or b.ndim != 2 or m != b.shape[0]:
-        return scipy.linalg.lstsq(a, b, lapack_driver="gelsy", check_finite=False)[0]
-    lapack = scipy.linalg.lapack
-    cond = np.finfo(float).eps
-    key = ("gelsy", m, n, b.shape[1])
-    if key not in _LWORK:
-        work, info = lapack.dgelsy_lwork(m, n, b.shape[1], cond)
-        if info != 0:
-            raise ValueError(f"dgelsy workspace query failed: {info}")
-        _LWORK[key] = int(work.real)
-    jptv = np.zeros((n, 1), dtype=np.int32)
-    _, x, _, _, info = lapack.dgelsy(a, b, jptv, cond, _LWORK[key], False, False)
-    if info < 0:
-        raise ValueError(f"illegal value in argument {-info} of dgelsy")
-    return x[:n]
-
-
-def shift_invariance(gamma: np.ndarray, n_outputs: int):
+def shift_invariance(gamma: np.ndarray, n_outputs: int, *, residual: bool = True):
     """A and C from an extended observability matrix by shift invariance.
 
     ``C = Gamma[0:ny]`` and ``A`` solves ``Gamma[:-ny] A = Gamma[ny:]`` in the
@@ -196,10 +147,14 @@ def shift_invariance(gamma: np.ndarray, n_outputs: int):
     Returns
     -------
     A, C, relative_residual
+        ``relative_residual`` (``info['shift_residual']``) None without ``residual`` (a
+        cross-validation fold's candidate, whose ``info`` is not kept).
     """
     up, down = gamma[:-n_outputs], gamma[n_outputs:]
     A = least_squares_gelsy(up, down)
     C = gamma[:n_outputs].copy()
+    if not residual:
+        return A, C, None
     resid = np.linalg.norm(up @ A - down) / max(np.linalg.norm(down), 1e-300)
     return A, C, float(resid)
 
@@ -492,6 +447,16 @@ class Problem:
     fold: bool = False
     _cache: dict = field(default_factory=dict, repr=False, compare=False)
 
+    def fold_at(self, order: int) -> "Problem":
+        """``dataclasses.replace(self, order=order, candidates=[order], fold=True)`` (the
+        same fields, the cache shared) without its checks: the problem of a
+        cross-validation candidate (:func:`subid.methods.dt.selection.score_horizon`, one
+        per order of every fold and horizon)."""
+        out = object.__new__(Problem)
+        out.__dict__.update(self.__dict__)
+        out.__dict__.update(order=order, candidates=[order], fold=True)
+        return out
+
     def weights(self) -> np.ndarray:
         """:func:`output_weights` of the record, computed once per problem."""
         cached = self._cache.get("weights")
@@ -530,12 +495,13 @@ STATISTICS = ("auto", "qr", "gram")
 
 def prepare(data, order, horizon, *, method: str, blocks_per_horizon: int = 2,
             statistic: str = "auto", normalize_outputs: bool = True,
-            factor: HankelFactor | None = None) -> Problem:
+            factor: HankelFactor | None = None, checked: bool = False) -> Problem:
     """Validate the arguments, build the Hankel factor and check excitation.
 
     ``factor``: the Hankel factor of the record (depth ``blocks_per_horizon *
     horizon``), when already computed (:func:`subid.methods.dt.selection.score_horizon`
-    merges the folds' statistics from those of their blocks).
+    merges the folds' statistics from those of their blocks). ``checked``: the record
+    already passed :func:`check_data` (a fold at its second horizon).
 
     ``data`` is an :class:`IOData` record or a :class:`HankelStatistic`
     (identification from the statistic only). ``blocks_per_horizon`` is 2
@@ -562,7 +528,7 @@ def prepare(data, order, horizon, *, method: str, blocks_per_horizon: int = 2,
                                      f"horizon {horizon} needs at least {need}")
         hf = data.factor()
     else:
-        data = check_data(data, method)
+        data = data if checked else check_data(data, method)
         fixed, candidates, horizon = check_order_horizon(
             order, horizon, data, method=method, blocks_per_horizon=blocks_per_horizon)
         hf = data_factor(data, blocks_per_horizon * horizon, method=method, horizon=horizon,

@@ -76,6 +76,7 @@ import scipy.linalg
 import scipy.special
 
 from subid._validation import check_choice
+from subid.statistic._hankel import geqrf_r
 
 #: The values ``feedthrough`` accepts.
 FEEDTHROUGH = ("auto", True, False)
@@ -169,7 +170,7 @@ def _nested_powers(L, past_u, past_y, current_u, current_y):
     M = L[rows]
     if M.shape[0] > M.shape[1]:
         return None
-    T = scipy.linalg.qr(M.T, mode="r", check_finite=False)[0][:M.shape[0]].T
+    T = geqrf_r(M.T, M.shape[0], overwrite=False).T     # scipy's qr(mode='r'), its bits
     n_u, n_past, nu = len(past_u), len(past_u) + len(past_y), len(current_u)
     regressors = n_past + nu
     diag = np.abs(np.diag(T)[:regressors])
@@ -250,7 +251,8 @@ def decide(factor, *, level: float = LEVEL):
     # explains: what a free D takes from the lag-0 correlation
     on_past = nested["on past"] if nested is not None else \
         _residual_powers(L, current_y, past)
-    share = np.clip(1.0 - on_all[0] / np.maximum(on_past[0], 1e-300), 0.0, 1.0)
+    # np.clip's values (NaN kept) without its dispatch
+    share = np.minimum(np.maximum(1.0 - on_all[0] / np.maximum(on_past[0], 1e-300), 0.0), 1.0)
     record["lag0_share"] = [float(v) for v in share]
     if detected:
         record.update(estimated=False,

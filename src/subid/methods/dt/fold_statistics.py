@@ -50,7 +50,7 @@ FOLD_BLOCKS = [(0, 1, 2), (1, 2, 3), (0, 1), (2, 3)]
 VALIDATION_BLOCKS = [(3,), (0,), (2, 3), (0, 1)]
 
 
-def fold_factors(parts, horizon, fitter):
+def fold_factors(parts, horizon, fitter, deepest=None):
     """Hankel factors of the training records of the folds, each merged from the
     lagged-product statistics of the blocks of :func:`_blocks_of_folds` (one pass
     over the record instead of one per fold: 2.3 records), where that statistic is
@@ -59,7 +59,14 @@ def fold_factors(parts, horizon, fitter):
     :data:`subid.statistic.hankel.QR_MAX_SAMPLES` samples: what the fold would build,
     without computing its lagged products a second time to find that out); None for
     every fold when ``parts`` are not the four folds of one experiment:
-    ``fitter.prepare_fold`` then builds the factor from the record."""
+    ``fitter.prepare_fold`` then builds the factor from the record.
+
+    ``deepest`` (a dict, one per cross-validation, :func:`subid.methods.dt.selection.
+    cross_validate`): ``deepest['depth']`` the largest depth its horizons need; the
+    blocks' statistics are computed once at that depth (kept as ``deepest['stats']``)
+    and those of a smaller depth taken from them
+    (:meth:`subid.HankelStatistic._shallower`: the same bits; one pass over the
+    blocks instead of one per horizon)."""
     from subid.statistic.hankel import QR_MAX_SAMPLES, HankelStatistic, compact_wy_qr
     none = [None] * len(parts)
     blocks_per_horizon = getattr(fitter, "blocks_per_horizon", None)
@@ -70,7 +77,16 @@ def fold_factors(parts, horizon, fitter):
     blocks = _blocks_of_folds(parts)
     if blocks is None or min(b.n_samples for b in blocks) < depth:
         return none
-    stats = [HankelStatistic.from_data(b, depth, kind="gram") for b in blocks]
+    stats = None
+    if deepest is not None and min(b.n_samples for b in blocks) >= deepest.get("depth", 0):
+        kept = deepest.get("stats")
+        if kept is None or kept[0].depth < depth:
+            kept = deepest["stats"] = [
+                HankelStatistic.from_data(b, max(depth, deepest.get("depth", 0)), kind="gram")
+                for b in blocks]
+        stats = [s if s.depth == depth else s._shallower(depth) for s in kept]
+    if stats is None:
+        stats = [HankelStatistic.from_data(b, depth, kind="gram") for b in blocks]
     s12, s34 = stats[0].merge(stats[1]), stats[2].merge(stats[3])
     merged = [s12.merge(stats[2]), stats[1].merge(stats[2]).merge(stats[3]), s12, s34]
     out = []

@@ -61,6 +61,7 @@ from subid.methods.bd import BATCH_OPTIONS
 from subid.methods.dt._subspace import (
     check_system_matrices,
     choose_order,
+    least_squares_gelsy,
     shift_invariance,
 )
 from subid.methods.dt.feedthrough import check_feedthrough
@@ -86,8 +87,7 @@ def random_selector(horizon: int, n_outputs: int, seed=0, rows: int | None = Non
 
 def _solve_gamma(W: np.ndarray, selector: np.ndarray) -> np.ndarray:
     """Least-squares Γ̄ of ``W ≈ Γ̄ (Λ W)``: ``Γ̄ = W (Λ W)^†`` (QR, no SVD)."""
-    return scipy.linalg.lstsq((selector @ W).T, W.T, lapack_driver="gelsy",
-                              check_finite=False)[0].T
+    return least_squares_gelsy((selector @ W).T, W.T).T
 
 
 def _condition_1norm(M: np.ndarray) -> float:

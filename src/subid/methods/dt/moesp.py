@@ -174,7 +174,7 @@ class Moesp(SubspaceMethod):
                                            feedthrough=ft_record, **extra))
         # A and C in an orthonormal basis Q of range(Γ) (any basis is valid for MOESP)
         Q = orthonormal_basis(gamma)
-        A, C, shift_residual = shift_invariance(Q, pb.data.n_outputs)
+        A, C, shift_residual = shift_invariance(Q, pb.data.n_outputs, residual=not pb.fold)
         L, a, b = parts["L"], parts["a"], parts["b"]
         return Shift(A, C, Q, L[:a, :a], L[a + b:, :a],
                      info=dict(singular_values=s, weighting=self.weighting,

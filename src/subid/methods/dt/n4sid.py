@@ -32,6 +32,7 @@ from subid.methods.dt._subspace import (
     cva_factor,
     future_past_factor,
     initial_state,
+    least_squares_gelsy,
     stability_request,
     stable_choice,
 )
@@ -65,14 +66,12 @@ def _oblique_coefficients(a: np.ndarray, b: np.ndarray, c: np.ndarray,
     rows of A, B, C with respect to the common orthonormal rows ``Q^T``.
     """
     del b
-    return scipy.linalg.lstsq((c @ perp).T, (a @ perp).T, lapack_driver="gelsy",
-                              check_finite=False)[0].T
+    return least_squares_gelsy((c @ perp).T, (a @ perp).T).T
 
 
 def _lstsq_rows(regressors: np.ndarray, targets: np.ndarray) -> np.ndarray:
     """Theta minimising ``||targets - Theta regressors||_F`` (rows = variables)."""
-    return scipy.linalg.lstsq(regressors.T, targets.T, lapack_driver="gelsy",
-                              check_finite=False)[0].T
+    return least_squares_gelsy(regressors.T, targets.T).T
 
 
 @checked_call
@@ -230,7 +229,7 @@ def state_model(pb, gamma, *, stability, feedthrough, estimate_x0, coefficients=
     # (as SIPPY and nfoursid do). Van Overschee & De Moor's second projection
     # X_{i+1} = Γ_{i-1}^† O_{i-1} comes from another oblique projection whose finite-data
     # errors differ from those of X_i, and made A diverge on real records (issue 10).
-    K = scipy.linalg.lstsq(gamma, coef, lapack_driver="gelsy", check_finite=False)[0]
+    K = least_squares_gelsy(gamma, coef)
     x_i, x_ip1 = K @ wp, K @ wp_next
     u_ii = L[hf.u_rows(i, i + 1)]
     y_ii = L[hf.y_rows(i, i + 1)]

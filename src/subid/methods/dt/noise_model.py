@@ -46,6 +46,7 @@ import scipy.linalg
 from subid.data import IOData
 from subid.errors import NoiseModelWarning, OptionError, SubidError
 from subid.methods._common import extended_observability
+from subid.methods.dt._lapack import least_squares_gelsy
 from subid.statistic._hankel import HankelFactor
 
 __all__ = ["innovation_model", "attach_noise_model", "check_refine", "REFINE_OPTIONS"]
@@ -54,8 +55,10 @@ REFINE_OPTIONS = (None, "simulation", "prediction")
 
 
 def _lstsq(M, rhs):
-    """Least squares by QR with column pivoting (no SVD)."""
-    return scipy.linalg.lstsq(M, rhs, lapack_driver="gelsy", check_finite=False)[0]
+    """Least squares by QR with column pivoting (no SVD): ``scipy.linalg.lstsq(M, rhs,
+    lapack_driver='gelsy')[0]`` by the same LAPACK call without its wrapper (the same
+    bits, :func:`subid.methods.dt._lapack.least_squares_gelsy`)."""
+    return least_squares_gelsy(M, rhs)
 
 
 def _oblique(hf: HankelFactor, y_rows, u_rows, w_rows) -> np.ndarray:

@@ -200,6 +200,27 @@ and the check's factor in the user's units, its lag products and the record's
 the folds' blocks are recognised by their memory
 (:func:`subid.methods.dt.fold_statistics._same_samples`).
 
+Then (issue 21, ``bench/selection_paired.py``, 21 paired rounds: 0.85-0.88x,
+0.86-0.89x, 0.76-0.80x and 0.81-0.86x the CPU time of the default call before at 10^3,
+10^4, 10^5 and 10^6 samples; the same choices and models bit for bit on every bundled
+record, ``bench/selection_identity.py``): the residual bounds of the unstable fold candidates
+stop as soon as they prove (:func:`subid.methods.dt._residual_bound.loses`; at 10^5
+samples they had cost a third of the default call); the blocks' lagged products are
+computed once per search block at the deepest horizon's depth (:func:`fold_factors`;
+the compiled lag sums four samples per pass, :mod:`subid.statistic._lag_kernel`);
+a fold's merged lag products reach past the shortest block through its own
+(:func:`subid.methods.dt._lag_fit.merged`); a fold record is checked once for both
+horizons; a scored candidate's normal equations are solved in one compiled call
+(:func:`subid.methods.dt._lag_kernel.scored_solve`), and small LAPACK calls (the
+noise model's least squares, a candidate's eigenvectors) go without numpy's and
+scipy's wrappers (:mod:`subid.methods.dt._lapack`, the same bits). What a default call
+at 10^4 samples still spends (about 130 ms against 11 ms pinned; instrumented, share of
+the call): the 75 stable fold candidates about 35 % (each about 0.5 ms: the eigenvalues
+and modal form of its A, the compiled normal matrix and error power, its A and C, some
+40 small numpy calls), the 5 unstable ones about 12 %, the innovation check about 20 %,
+the folds' statistics, lag products, factorisations, SVDs and feedthrough tests about
+25 %, the final model's two estimators (what the pinned call spends) about 5 %.
+
 **Models that are only scored** (the fold models and the innovation check's): their
 B, D, x0 normal equations (modal or lag products) are solved up to an equilibrated
 condition of 1e8 instead of 1e4 (:func:`subid.methods.dt._regression.scoring_only`;
@@ -292,7 +313,8 @@ def mean_score(fits) -> float:
     return max(value, FLOOR) if math.isfinite(value) else FLOOR
 
 
-def score_horizon(parts, orders, horizon, *, fitter, estimators, held=None, lagged=None):
+def score_horizon(parts, orders, horizon, *, fitter, estimators, held=None, lagged=None,
+                  deepest=None):
     """Fold scores of every candidate order at one horizon.
 
     Per fold, one problem (one statistic, by cost: the lagged products merged from
@@ -335,6 +357,9 @@ def score_horizon(parts, orders, horizon, *, fitter, estimators, held=None, lagg
         the fold's problem can take them; :func:`cross_validate` passes one list for
         every horizon): the B, D, x0 fit of every candidate from them
         (:mod:`subid.methods.dt._lag_fit`).
+    deepest : dict, optional
+        The blocks' statistics at the largest depth of the horizons scored
+        (:func:`fold_factors`; :func:`cross_validate` passes one for every horizon).
 
     Returns
     -------
@@ -349,7 +374,7 @@ def score_horizon(parts, orders, horizon, *, fitter, estimators, held=None, lagg
     names = list(estimators)
     per_fold = {(n, v): [] for n in orders for v in range(len(names))}
     repaired = {(n, v): 0 for n in orders for v in range(len(names))}
-    factors = fold_factors(parts, horizon, fitter)
+    factors = fold_factors(parts, horizon, fitter, deepest)
     if held is None:                      # what every candidate's score needs, once
         held = [Held(validation, lagged=True) for _, validation in parts]
     if lagged is None:
@@ -368,7 +393,8 @@ def score_horizon(parts, orders, horizon, *, fitter, estimators, held=None, lagg
         with warnings.catch_warnings(), scoring_only():
             warnings.simplefilter("ignore")
             for n in orders:
-                at_n = replace(problem, order=n, candidates=[n], fold=True)
+                at_n = problem.fold_at(n) if hasattr(problem, "fold_at") else \
+                    replace(problem, order=n, candidates=[n], fold=True)
                 for v, name in enumerate(names):
                     try:
                         if scorer is not None:
@@ -450,13 +476,15 @@ def cross_validate(data, fixed, candidates, horizon, *, fitter, estimators):
     searched = []              # (orders, horizons) of every block of candidates scored
     ceiling = None
     while True:
+        # the blocks' statistics once, at the depth of the largest horizon of this block
+        deepest = {"depth": blocks * max(horizons)} if horizons else None
         for f in horizons:
             orders = [n for n in wanted if n <= (f - 1) * n_out]
             if not orders:
                 continue
             per_fold, repaired = score_horizon(parts, orders, f, fitter=fitter,
                                                estimators=estimators, held=held,
-                                               lagged=lagged)
+                                               lagged=lagged, deepest=deepest)
             for (n, v), values in per_fold.items():
                 fold_scores[(n, f, v)] = values
                 scores[(n, f, v)] = float(np.mean(values))
