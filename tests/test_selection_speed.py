@@ -210,7 +210,7 @@ def test_fold_statistics_merged_from_blocks():
     assert deepest["stats"][0].depth == 24
     stat = HankelStatistic.from_data(parts[0][0], 24, kind="gram")
     for depth in (2, 9, 24):
-        shallow = stat._shallower(depth)
+        shallow = stat.shallower(depth)
         direct = HankelStatistic.from_data(parts[0][0], depth, kind="gram")
         for name in ("lagged", "head", "tail"):
             assert np.array_equal(getattr(shallow, name), getattr(direct, name))

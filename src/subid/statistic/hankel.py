@@ -255,11 +255,28 @@ class HankelStatistic:
                 stat._absorb(data.u[a:b], data.y[a:b])
         return stat
 
-    def _shallower(self, depth: int) -> "HankelStatistic":
-        """The ``'gram'`` statistic of the same record (one experiment) at a smaller
-        ``depth``: the first ``depth`` lagged products and the first and last
-        ``depth - 1`` samples of this one, which are those :meth:`from_data` computes at
-        that depth (the same sums in the same order: the same bits)."""
+    def shallower(self, depth: int) -> "HankelStatistic":
+        """The ``'gram'`` statistic of the same record (one experiment) at a smaller depth.
+
+        Its first ``depth`` lagged products and the first and last ``depth - 1``
+        samples of this one are those :meth:`from_data` computes at that depth (the
+        same sums in the same order: the same bits), so one pass over a record serves
+        every horizon up to this statistic's.
+
+        Parameters
+        ----------
+        depth : int
+            Block rows of the new statistic, from 2 to ``self.depth``.
+
+        Returns
+        -------
+        HankelStatistic
+
+        Raises
+        ------
+        DataError
+            Not a ``'gram'`` statistic of one experiment, or a depth out of range.
+        """
         if self.kind != "gram" or self.n_experiments != 1 or self._closed_columns \
                 or not 2 <= depth <= self.depth:
             raise DataError("only a 'gram' statistic of one experiment has a shallower copy, "

@@ -166,15 +166,16 @@ def merged(blocks, records, groups):
     ``max_lag``) for all the records together when a candidate first needs them
     (:meth:`LagProducts.lags`), merged up to the length of the shortest block
     (``merged_lags``: a lag could straddle two boundaries), past it from the record's
-    own products (:func:`correlations`, when a candidate first needs them). A record shorter than :data:`MERGE_SAMPLES` has its own
-    (one FFT of a short record costs little, and its lags then reach all of it); one
-    shorter than :data:`MIN_SAMPLES`, None. None altogether when a block is shorter than
-    a quarter of a record to merge."""
+    own products (:func:`correlations`, when a candidate first needs them). A record
+    shorter than :data:`MERGE_SAMPLES` has its own (one FFT of a short record costs
+    little, and its lags then reach all of it); one shorter than :data:`MIN_SAMPLES`,
+    or of more inputs than lag products pay for (:func:`worthwhile`), None. None
+    altogether when a block is shorter than a quarter of a record to merge."""
     out = [LagProducts(r.u, r.y) if r.n_samples < MERGE_SAMPLES
            and worthwhile(r.n_samples, r.n_inputs) else None for r in records]
     lengths = [b.n_samples for b in blocks]
     big = [k for k, r in enumerate(records) if r.n_samples >= MERGE_SAMPLES
-           and worthwhile(r.n_samples, r.n_inputs, min(lengths))]
+           and worthwhile(r.n_samples, r.n_inputs)]    # lags up to N - 1 in the end
     if not big:
         return out
     records = [records[k] for k in big]

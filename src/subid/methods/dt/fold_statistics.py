@@ -65,7 +65,7 @@ def fold_factors(parts, horizon, fitter, deepest=None):
     cross_validate`): ``deepest['depth']`` the largest depth its horizons need; the
     blocks' statistics are computed once at that depth (kept as ``deepest['stats']``)
     and those of a smaller depth taken from them
-    (:meth:`subid.HankelStatistic._shallower`: the same bits; one pass over the
+    (:meth:`subid.HankelStatistic.shallower`: the same bits; one pass over the
     blocks instead of one per horizon)."""
     from subid.statistic.hankel import QR_MAX_SAMPLES, HankelStatistic, compact_wy_qr
     none = [None] * len(parts)
@@ -84,7 +84,7 @@ def fold_factors(parts, horizon, fitter, deepest=None):
             kept = deepest["stats"] = [
                 HankelStatistic.from_data(b, max(depth, deepest.get("depth", 0)), kind="gram")
                 for b in blocks]
-        stats = [s if s.depth == depth else s._shallower(depth) for s in kept]
+        stats = [s if s.depth == depth else s.shallower(depth) for s in kept]
     if stats is None:
         stats = [HankelStatistic.from_data(b, depth, kind="gram") for b in blocks]
     s12, s34 = stats[0].merge(stats[1]), stats[2].merge(stats[3])
