@@ -63,11 +63,11 @@ def evaluate_frequency(model, estimation, validation=None) -> dict:
 
 def _error_figure(models, data, hz: bool):
     from subid.evaluation import plot
-    from subid.evaluation.figures._common import _layout, _legend_beside, _legend_room, subplots
-    plot._pyplot()
+    from subid.evaluation.figures._common import _layout, _legend_beside, _legend_room
+    plt = plot._pyplot()
     ny, nu = data.n_outputs, data.n_inputs
     room = _legend_room(list(models) + ["|G| (data)", "std (data)"])
-    fig, axes = subplots(ny, nu, figsize=(min(3.8 * nu + 1.2, 16) + room, 2.0 * ny + 0.8),
+    fig, axes = plt.subplots(ny, nu, figsize=(min(3.8 * nu + 1.2, 16) + room, 2.0 * ny + 0.8),
                              sharex=True, squeeze=False)
     keep = data.w > 0
     w = data.w[keep] / (2 * math.pi if hz else 1.0)

@@ -45,10 +45,7 @@ def _styled(fn):
         _pyplot()
         import matplotlib
         with matplotlib.rc_context(STYLE):
-            fig = fn(*args, **kwargs)
-            from subid.evaluation.figures._axes import finish
-            finish(fig)                 # the ticks made later get STYLE too
-            return fig
+            return fn(*args, **kwargs)
     return wrapper
 
 
@@ -138,20 +135,6 @@ def _pyplot():
                           + install_hint("plot", "matplotlib")) from exc
     return plt
 
-
-def subplots(*args, **kwargs):
-    """``matplotlib.pyplot.subplots`` with the axes of every figure here:
-    :class:`._axes.LazyTickAxes` (ticks made when first used, a quarter of the cost
-    of making each axes)."""
-    plt = _pyplot()
-    kwargs["subplot_kw"] = {"axes_class": axes_class(), **kwargs.get("subplot_kw", {})}
-    return plt.subplots(*args, **kwargs)
-
-
-def axes_class():
-    """The Axes class of every figure here (:class:`._axes.LazyTickAxes`)."""
-    from subid.evaluation.figures._axes import LazyTickAxes
-    return LazyTickAxes
 
 
 def _model_groups(models, labels=None) -> dict:

@@ -5,14 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from subid.errors import DataError
-from subid.evaluation.figures._common import (
-    _layout,
-    _legend_beside,
-    _legend_room,
-    _pyplot,
-    _styled,
-    subplots,
-)
+from subid.evaluation.figures._common import _layout, _legend_beside, _legend_room, _pyplot, _styled
 
 
 @_styled
@@ -37,7 +30,7 @@ def convergence(history, *, reference=None, title=None, max_parameters: int = 12
         Real and imaginary parts of the poles; with parameters, their
         trajectories and their relative distance to the final estimate.
     """
-    _pyplot()
+    plt = _pyplot()
     if not isinstance(history, dict) or "sample" not in history or "poles" not in history:
         raise DataError("history must be a dict with the keys 'sample' and 'poles'")
     sample = np.asarray(history["sample"], dtype=float).reshape(-1)
@@ -60,7 +53,7 @@ def convergence(history, *, reference=None, title=None, max_parameters: int = 12
     legend_texts = [f"pole {k + 1}" for k in range(pol.shape[1])] + ["true poles"] + \
         [str(n) for n in (names or [])[:shown]]
     room = _legend_room(legend_texts)
-    fig, axes = subplots(rows, 1, figsize=(9 + room, 2.2 * rows + 0.6), sharex=True,
+    fig, axes = plt.subplots(rows, 1, figsize=(9 + room, 2.2 * rows + 0.6), sharex=True,
                              squeeze=False)
     axes = axes[:, 0]
     if sample.size == 0:

@@ -17,7 +17,6 @@ from subid.evaluation.figures._common import (
     _pyplot,
     _styled,
     colors_for,
-    subplots,
 )
 
 _PROFILE_KEYS = (("singular_values", "singular value"),
@@ -51,7 +50,7 @@ def order_selection(models, *, labels=None, title=None):
         No model carries a profile (e.g. only online models, or models built
         by hand).
     """
-    _pyplot()
+    plt = _pyplot()
     groups = _model_groups(models, labels)
     profiles = {}
     for label, m in groups.items():
@@ -70,7 +69,7 @@ def order_selection(models, *, labels=None, title=None):
         texts.append(f"{label}: order {n} (gap ×{gap:.3g})" if math.isfinite(gap)
                      else f"{label}: order {n}")
     room = _legend_room(texts)
-    fig, ax = subplots(figsize=(6.5 + room, 3.6))
+    fig, ax = plt.subplots(figsize=(6.5 + room, 3.6))
     colors = colors_for((label, m) for label, (_, _, m) in profiles.items())
     kinds = set()
     for (_label, (v, what, m)), color, text in zip(profiles.items(), colors, texts):
@@ -126,7 +125,7 @@ def order_scores(models, *, labels=None, title=None):
     DataError
         No model carries a selection record (their orders were given).
     """
-    _pyplot()
+    plt = _pyplot()
     groups = _model_groups(models, labels)
     rows = [(label, m) for label, m in groups.items()
             if isinstance(m.info.get("order_selection"), dict)
@@ -135,7 +134,7 @@ def order_scores(models, *, labels=None, title=None):
         raise DataError("none of the models carries an order selection record "
                         "(info['order_selection'] with rule 'cv' or 'gap'): their order was "
                         "given")
-    fig, axes = subplots(len(rows), 1, figsize=(6.5, 2.4 * len(rows) + 0.6),
+    fig, axes = plt.subplots(len(rows), 1, figsize=(6.5, 2.4 * len(rows) + 0.6),
                              squeeze=False)
     for (label, m), ax in zip(rows, axes[:, 0]):
         record = m.info["order_selection"]

@@ -10,7 +10,6 @@ from subid.evaluation.figures._common import (
     _pyplot,
     _styled,
     colors_for,
-    subplots,
 )
 
 
@@ -45,7 +44,7 @@ def poles(models, reference=None, *, labels=None, ax=None, title=None, markersiz
     -------
     matplotlib.figure.Figure
     """
-    _pyplot()
+    plt = _pyplot()
     from subid.model.statespace import StateSpace
     if isinstance(models, StateSpace):
         groups = {"model": [models]}
@@ -64,7 +63,7 @@ def poles(models, reference=None, *, labels=None, ax=None, title=None, markersiz
     legend_labels = list(groups) + (["true"] if reference is not None else [])
     room = _legend_room(legend_labels)
     if ax is None and len(kinds) == 2:
-        fig, axes = subplots(1, 2, figsize=(10.5 + room, 5))
+        fig, axes = plt.subplots(1, 2, figsize=(10.5 + room, 5))
         for sub, discrete in zip(axes, (True, False)):
             part = {k: [m for m in g if (m.dt > 0) == discrete] for k, g in groups.items()}
             ref = reference if reference is not None and (reference.dt > 0) == discrete \
@@ -87,10 +86,8 @@ def poles(models, reference=None, *, labels=None, ax=None, title=None, markersiz
                             wspace=0.9 / ((width - room - 1.85) / 2))
         return fig
     own = ax is None
-    if ax is None:
-        fig, ax = subplots(figsize=(5.0 + room, 5))
-    else:
-        fig = ax.figure
+    fig = ax.figure if ax is not None else plt.figure(figsize=(5.0 + room, 5))
+    ax = ax if ax is not None else fig.add_subplot(111)
     discrete = True if not kinds else kinds.pop()
     _pole_axes(ax, groups, reference, discrete, markersize, marker, alpha, colors,
                legend=not own)
@@ -142,9 +139,9 @@ def error_histograms(errors: dict, *, bins=40, xlabel="relative error", title=No
     -------
     matplotlib.figure.Figure
     """
-    _pyplot()
+    plt = _pyplot()
     k = len(errors)
-    fig, axes = subplots(k, 1, figsize=(8, 1.9 * k + 0.6), sharex=True, squeeze=False)
+    fig, axes = plt.subplots(k, 1, figsize=(8, 1.9 * k + 0.6), sharex=True, squeeze=False)
     all_vals = np.concatenate([np.asarray(v, float) for v in errors.values()])
     lo, hi = all_vals.min(), all_vals.max()
     edges = np.logspace(np.log10(max(lo, 1e-300)), np.log10(max(hi, lo * 1.01)) + 1e-9, bins)

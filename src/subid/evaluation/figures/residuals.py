@@ -19,7 +19,6 @@ from subid.evaluation.figures._common import (
     colors_for,
     log,
     simulated_output,
-    subplots,
 )
 
 
@@ -128,7 +127,7 @@ def residuals(model, data, *, max_lag: int = 25, confidence: float = 0.99, x0="e
         The simulation of every model diverges (a model whose simulation
         diverges is left out, with a log message, when others remain).
     """
-    _pyplot()
+    plt = _pyplot()
     data = _check_data(data)
     groups = _model_groups(model)
     results, failed = {}, {}
@@ -147,7 +146,7 @@ def residuals(model, data, *, max_lag: int = 25, confidence: float = 0.99, x0="e
     cols = 1 + nu
     pct = f"{100 * confidence:g} %"
     room = _legend_room(list(results) + [f"{pct} band"])
-    fig, axes = subplots(ny, cols, figsize=(min(3.3 * cols + 0.6, 16) + room,
+    fig, axes = plt.subplots(ny, cols, figsize=(min(3.3 * cols + 0.6, 16) + room,
                                                 2.0 * ny + 1.0),
                              squeeze=False)
     single = len(results) == 1

@@ -20,7 +20,6 @@ from subid.evaluation.figures._common import (
     colors_for,
     is_unstable,
     log,
-    subplots,
 )
 
 
@@ -105,7 +104,7 @@ def bode(model_or_models=None, w=None, *, data=None, hz=False, labels=None, phas
     >>> fig = subid.plot.bode(subid.fd_subspace(frd), data=frd)      # doctest: +SKIP
     """
     from subid.frdata import FRData
-    _pyplot()
+    plt = _pyplot()
     if isinstance(model_or_models, FRData):
         if data is not None:
             raise DataError("bode: give the frequency data once (as data=)")
@@ -141,7 +140,7 @@ def bode(model_or_models=None, w=None, *, data=None, hz=False, labels=None, phas
     unstable = {label: is_unstable(m) for label, m in groups.items()}
     shown = [label + (" (unstable)" if unstable[label] else "") for label in groups]
     room = _legend_room(shown + (["data"] if data is not None else []))
-    fig, axes = subplots(rows, nu, figsize=(min(3.8 * nu + 1.2, 16) + room,
+    fig, axes = plt.subplots(rows, nu, figsize=(min(3.8 * nu + 1.2, 16) + room,
                                                 1.9 * rows + 0.8),
                              sharex=True, squeeze=False)
     # one log scale for the shared frequency axis: semilogx on every panel would set it
@@ -307,7 +306,7 @@ def step(model_or_models, t=None, *, labels=None, confidence=None, title=None):
     matplotlib.figure.Figure
         One panel per output (rows) and input (columns).
     """
-    _pyplot()
+    plt = _pyplot()
     groups = _model_groups(model_or_models, labels)
     first = next(iter(groups.values()))
     ny, nu = first.n_outputs, first.n_inputs
@@ -321,7 +320,7 @@ def step(model_or_models, t=None, *, labels=None, confidence=None, title=None):
         t = max(float(m.step()[0][-1]) for m in groups.values())
     colors = colors_for(groups.items())
     room = _legend_room(list(groups))
-    fig, axes = subplots(ny, nu, figsize=(min(3.8 * nu + 1.2, 16) + room, 2.2 * ny + 0.8),
+    fig, axes = plt.subplots(ny, nu, figsize=(min(3.8 * nu + 1.2, 16) + room, 2.2 * ny + 0.8),
                              sharex=True, squeeze=False)
     with _autoscale_once(axes):      # the limits once, after the plotting calls
         for k, (label, m) in enumerate(groups.items()):

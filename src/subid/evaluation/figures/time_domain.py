@@ -24,7 +24,6 @@ from subid.evaluation.figures._common import (
     percent_fit,
     predicted_output,
     simulated_output,
-    subplots,
 )
 
 
@@ -60,7 +59,7 @@ def compare(data, models, *, labels=None, x0="estimate", title=None, clip=True,
     matplotlib.figure.Figure
         One panel per output; legends give the fit % of each model.
     """
-    _pyplot()
+    plt = _pyplot()
     data = _check_data(data)
     groups = _model_groups(models, labels)
     ny = data.n_outputs
@@ -73,7 +72,7 @@ def compare(data, models, *, labels=None, x0="estimate", title=None, clip=True,
     texts = [f"{label}: fit {_fmt_fit(f[1][i])} %" for label, f in fits.items()
              for i in range(ny)]
     room = _legend_room(texts + ["measured"])
-    fig, axes = subplots(ny, 1, figsize=(9 + room, 2.3 * ny + 0.7), sharex=True,
+    fig, axes = plt.subplots(ny, 1, figsize=(9 + room, 2.3 * ny + 0.7), sharex=True,
                              squeeze=False)
     t = data.t
     # the measured output is drawn on top (zorder), thin and black; the models under
@@ -127,14 +126,14 @@ def data_overview(data, *, split=None, title=None):
     matplotlib.figure.Figure
         One panel per channel, inputs first.
     """
-    _pyplot()
+    plt = _pyplot()
     data = _check_data(data)
     # measured data in neutral tones (outputs black as in compare): the palette colours
     # belong to the methods (METHOD_COLORS)
     channels = [(f"input\n{n}", data.u[:, k], "0.45") for k, n in enumerate(data.input_names)]
     channels += [(f"output\n{n}", data.y[:, k], "k") for k, n in enumerate(data.output_names)]
     rows = len(channels)
-    fig, axes = subplots(rows, 1, figsize=(9, 1.25 * rows + 0.9), sharex=True,
+    fig, axes = plt.subplots(rows, 1, figsize=(9, 1.25 * rows + 0.9), sharex=True,
                              squeeze=False)
     t = data.t
     with _autoscale_once(axes):      # the limits once, after the plotting calls
