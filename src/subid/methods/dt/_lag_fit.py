@@ -112,9 +112,9 @@ MERGE_SAMPLES = 4096
 #: Most input lag products per input sample, ``(L + 1) nu`` against ``N``, for which a
 #: record is reduced to lag products (:func:`worthwhile`): they hold ``(L + 1) nu (nu +
 #: ny)`` floats, and a candidate's quadratic forms cost ``O(L nu^2)`` against the direct
-#: pass's ``O(N (nu + ny))``; past it (many inputs) the direct pass is the cheaper one
-#: and the products would outweigh the record many times (100 inputs, 3,000 samples:
-#: 8.9 GB traced for the default call's folds). At most 8 inputs, every record of
+#: pass's ``O(N (nu + ny))``: past the bound (many inputs) the products would outweigh
+#: the record many times over in memory (100 inputs, 3,000 samples: 8.9 GB traced for
+#: the default call's folds) and in arithmetic. With at most 8 inputs every record of
 #: MIN_SAMPLES or more qualifies.
 PRODUCTS_PER_SAMPLE = 8
 #: An error power below this fraction of the output's power is rounding-limited in
