@@ -265,3 +265,30 @@ def test_report_leaves_the_garbage_collector_as_it_was(dryer_models):
         assert not gc.isenabled()
     finally:
         gc.enable()
+
+
+def test_figure_fit_is_fit_percent_on_merged_records():
+    """The legends' fit (figures/_common.percent_fit) is subid.fit_percent's: each
+    experiment of a merged record against its own mean; NaN, not an error, for an
+    output that is constant or a simulation that is not finite."""
+    from subid.evaluation.figures._common import percent_fit
+    from subid.model.fit import output_fit
+    true = systems.seed001_system()
+    a = systems.simulate_data(true, 400, seed=1, output_snr_db=20)
+    b = systems.simulate_data(true, 300, seed=2, output_snr_db=20)
+    b = subid.IOData(b.u, b.y + 5.0, dt=b.dt)            # another operating point
+    data = subid.merge([a, b])
+    model = subid.moesp(data, 3, horizon=10)
+    y_hat = subid.model.prediction.simulate_fit(model, data)[0]
+    np.testing.assert_allclose(percent_fit(data, y_hat), subid.fit_percent(model, data),
+                               rtol=1e-12)
+    constant = subid.IOData(a.u, np.column_stack([a.y[:, 0], np.ones(a.n_samples)]), dt=a.dt)
+    guess = np.column_stack([a.y[:, 0] + 0.1, np.zeros(a.n_samples)])
+    fits = percent_fit(constant, guess)
+    assert np.isfinite(fits[0]) and np.isnan(fits[1])
+    with pytest.raises(subid.errors.DataError, match="constant"):
+        output_fit(constant, guess)
+    guess[5, 0] = np.inf
+    assert np.isnan(percent_fit(constant, guess)).all()
+    with pytest.raises(subid.errors.OptionError):
+        output_fit(constant, guess, constant="zero")

@@ -75,8 +75,14 @@ def _batch():
     u = rng.standard_normal((400, 2))
     y = seed001_system().simulate(u)
     ls_subspace(IOData(u, y), 4)
-    ls_subspace(IOData(u, y))                              # the order search's candidates
-    identify(IOData(u, y))          # the command line's default: the search, PEM refinement
+    # measured records are noisy: on a noise-free one (or folds shorter than the
+    # lag-product path's) the order search's scored solve (the fold models' B, D, x0) and
+    # the refinement (nothing to refine) never run
+    u1 = rng.standard_normal((1000, 2))
+    y1 = seed001_system().simulate(u1)
+    noisy = IOData(u1, y1 + 0.1 * rng.standard_normal(y1.shape))
+    ls_subspace(noisy)                                     # the order search's candidates
+    identify(noisy)                 # the command line's default: the search, PEM refinement
     HankelStatistic(2, 2, 4, kind="gram").update(u, y).factor()    # long records, streams
     select_structure(IOData(u, y), max_order=2)            # arx's structure search
     # the order search's innovation check: its prediction errors and Kalman gains

@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from subid._validation import checked_call, same_period
-from subid.errors import DataError
+from subid.errors import DataError, OptionError
 from subid.model.prediction import _SIM_BLOCK, check_model, predict, simulate_fit
 
 __all__ = ["fit_percent", "frequency_fit", "output_fit"]
@@ -72,7 +72,7 @@ def fit_percent(model, data, x0="estimate", hold=None, steps=np.inf, *,
     return output_fit(data, y_hat, per_experiment=per_experiment)
 
 
-def output_fit(data, y_hat, *, per_experiment: bool = False) -> np.ndarray:
+def output_fit(data, y_hat, *, per_experiment: bool = False, constant: str = "raise") -> np.ndarray:
     """The fit % of :func:`fit_percent` for outputs ``y_hat`` already simulated or
     predicted on ``data`` (its last step: the report's comparison figure draws the
     simulation that gave the fit, see :func:`subid.evaluation.report.evaluate`).
@@ -84,12 +84,18 @@ def output_fit(data, y_hat, *, per_experiment: bool = False) -> np.ndarray:
     y_hat : ndarray, shape (n_samples, n_outputs)
     per_experiment : bool
         As in :func:`fit_percent`.
+    constant : {'raise', 'nan'}
+        An output that is constant (in an experiment, with ``per_experiment``)
+        has no fit: ``'raise'`` (default) a :class:`~subid.errors.DataError`,
+        ``'nan'`` NaN for it (a figure's legend).
 
     Returns
     -------
     ndarray, shape (n_outputs,), or (n_experiments, n_outputs) with
     ``per_experiment=True``
     """
+    if constant not in ("raise", "nan"):
+        raise OptionError(f"constant must be 'raise' or 'nan', got {constant!r}")
     # Each output is divided by its largest magnitude first: the ratio is
     # scale-invariant, and squaring values near 1e300 would overflow to inf
     # (inf / inf = NaN) where the fit is perfectly defined.
@@ -115,6 +121,10 @@ def output_fit(data, y_hat, *, per_experiment: bool = False) -> np.ndarray:
     else:
         dev2_used, err2_used = dev2.sum(axis=0), err2.sum(axis=0)
     flat = np.flatnonzero(np.atleast_2d(dev2_used).min(axis=0) == 0)
+    if flat.size and constant == "nan":
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return 100.0 * (1.0 - np.sqrt(err2_used) / np.where(dev2_used > 0,
+                                                                np.sqrt(dev2_used), np.nan))
     if flat.size:
         names = ", ".join(data.output_names[k] for k in flat)
         where = " in an experiment" if per_experiment and data.n_experiments > 1 else ""

@@ -232,12 +232,19 @@ def simulated_output(model, data, x0="estimate"):
 
 
 def percent_fit(data, y_hat) -> np.ndarray:
-    """Fit % per output of outputs ``y_hat`` computed on ``data``: NaN where they are
-    not finite or the output is constant (a figure's legend, never an error)."""
-    dev = np.linalg.norm(data.y - data.y.mean(axis=0), axis=0)
+    """Fit % per output of outputs ``y_hat`` computed on ``data``: the value of
+    :func:`subid.fit_percent` (:func:`subid.model.fit.output_fit`, each experiment of a
+    merged record against its own mean), NaN where ``y_hat`` is not finite or the output
+    is constant (a figure's legend, never an error)."""
+    from subid.model.fit import output_fit
+    y_hat = np.asarray(y_hat, dtype=float)
+    finite = np.isfinite(y_hat).all(axis=0)
+    if not finite.all():
+        y_hat = np.where(finite, y_hat, 0.0)
     with np.errstate(all="ignore"):
-        return 100.0 * (1.0 - np.linalg.norm(data.y - y_hat, axis=0) /
-                        np.where(dev > 0, dev, np.nan))
+        fits = np.asarray(output_fit(data, y_hat, constant="nan"), dtype=float)
+    fits[~finite] = np.nan
+    return fits
 
 
 def predicted_output(model, data, steps):
