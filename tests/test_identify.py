@@ -219,6 +219,41 @@ def test_identify_keeps_refinement_only_when_it_validates_better(monkeypatch):
     assert not ref["kept"] and ref["mean_gain"] < 0 and "refined_by" not in model.info
 
 
+def test_identify_stops_fold_refinements_once_the_simulation_guard_fails(monkeypatch):
+    """Under feedback (prediction refinement, judged also by simulation): once the folds
+    refined so far exceed the simulation-misfit limit whatever the others give, the
+    remaining fold refinements are not run, and the decision is the full computation's."""
+    from subid.methods import identify as module
+    _, data = _closed_loop(103, n=1500)
+    calls = []
+
+    def diverging(train, start, focus, held_out=False):
+        calls.append(held_out)
+        bad = subid.StateSpace(start.A, 50.0 * start.B, start.C, start.D, start.dt)
+        return bad.with_noise_model(start.K, start.noise_cov, info=dict(start.info))
+    monkeypatch.setattr(module, "_refine", diverging)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        model = subid.identify(data, 3, horizon=10)
+    ref = model.info["identify"]["refinement"]
+    assert model.info["identify"]["feedback"] and ref["focus"] == "prediction"
+    assert not ref["kept"] and "refined_by" not in model.info
+    assert len(calls) == len(ref["refined_folds"]) < len(ref["subspace_folds"]) == 4
+    misfit = 100.0 - np.asarray(ref["refined_simulation_folds"])
+    limit = (1 + module.SIMULATION_LOSS) * np.sum(100.0 - np.asarray(
+        ref["subspace_simulation_folds"]))
+    assert misfit.sum() > limit and misfit[:-1].sum() <= limit
+    # the full computation (no early stop) drops the refinement too
+    monkeypatch.setattr(module, "SIMULATION_LOSS", 1e9)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        full = subid.identify(data, 3, horizon=10)
+    assert len(full.info["identify"]["refinement"]["refined_folds"]) == 4
+    assert not full.info["identify"]["refinement"]["kept"]
+    np.testing.assert_array_equal(full.A, model.A)
+    np.testing.assert_array_equal(full.B, model.B)
+
+
 def test_identify_closed_loop_is_consistent():
     true, data = _closed_loop(101)
     with warnings.catch_warnings():
