@@ -43,7 +43,7 @@ choice is made on the estimation record and recorded in
    fold refinements stop as soon as those done exceed that limit whatever the
    others give (a misfit is never negative): the same decision without the
    remaining refinements (on DaISy CD_player_arm, the command line's 70 %
-   split, order 18: two of four, and the call took 6 s instead of 148 s).
+   split, order 18: two of four, and the call takes 6 s instead of 83 s).
    An unstable subspace model (an unstable plant under feedback) cannot be
    refined by simulation; it is kept as it is.
 
