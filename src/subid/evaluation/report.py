@@ -105,6 +105,7 @@ def figure_html(fig, caption: str = "", *, dpi: int | None = None, alt: str = ""
     """
     from subid.evaluation._canvas import canvas as agg_canvas
     from subid.evaluation._png import png_bytes
+    from subid.evaluation.figures._raster import raster_envelopes
     from subid.evaluation.figures._ticks import light_ticks
     width = int(round(fig.get_figwidth() * 96))
     if dpi is not None and dpi != fig.dpi:
@@ -113,6 +114,7 @@ def figure_html(fig, caption: str = "", *, dpi: int | None = None, alt: str = ""
     # ticks as a few artists per axis (figures/_ticks.py), text laid out and rasterised
     # once per report (_canvas.py), and the PNG encoded by _png (one row filter, zlib
     # level 1: two to three times faster than savefig's, as small)
+    raster_envelopes(fig)            # long traces' min/max bands as images (_raster.py)
     light_ticks(fig, canvas.get_renderer())
     canvas.draw()
     png = png_bytes(np.asarray(canvas.buffer_rgba()))
@@ -621,8 +623,20 @@ def identification_report(models, estimation, validation=None, *, title="subid r
     # the simulations behind the fits (evaluate): not run again for the figure
     simulated = {label: r["simulated"] for label, r in results.items()
                  if r.get("simulated") is not None}
+    fit_key = "fit_validation" if validation is not None else "fit_estimation"
+    scored = {label: (simulated[label], np.asarray(results[label][fit_key], dtype=float))
+              for label in models if label in simulated
+              and np.shape(simulated[label]) == check.y.shape
+              and results[label].get(fit_key) is not None}
+
+    def comparison():
+        if len(scored) == len(models):       # the fits of the summary, not computed again
+            from subid.evaluation.figures.time_domain import compare_outputs
+            return compare_outputs(check, models, scored)
+        return plot.compare(check, models, simulated=simulated)
+
     body.append(_section("compare", f"Simulated and measured outputs ({check_name} data)",
-                         _plot_or_note(lambda: plot.compare(check, models, simulated=simulated),
+                         _plot_or_note(comparison,
                                        f"simulation on the {check_name} data from a "
                                        "least-squares initial state; fit % in the legend",
                                        "comparison")))

@@ -276,7 +276,7 @@ def _min_max_blocks(t: np.ndarray, values: np.ndarray, max_points: int = MAX_TRA
     n = values.shape[0]
     size = -(-n // (max_points // 2))
     full = n // size
-    grid = np.ascontiguousarray(values[:full * size]).reshape(full, size)
+    grid = values[:full * size].reshape(full, size)     # a view of a column, not a copy
     with np.errstate(invalid="ignore"):
         low, high = grid.min(axis=1), grid.max(axis=1)
         if full * size < n:
@@ -319,8 +319,12 @@ def _draw_trace(ax, t, values, *, color, lw, fill=True, **style):
     if values.shape[0] <= MAX_TRACE_POINTS:
         return ax.plot(t, values, color=color, lw=lw, **style)[0]
     start, low, high = _min_max_blocks(t, values)
-    return ax.fill_between(start, low, high, facecolor=color if fill else "none",
+    band = ax.fill_between(start, low, high, facecolor=color if fill else "none",
                            edgecolor=color, lw=lw, rasterized=True, **style)
+    # what the report draws as an image instead of the polygon (figures/_raster.py)
+    from subid.evaluation.figures._raster import tag_envelope
+    tag_envelope(band, start, low, high, fill=fill, lw=lw)
+    return band
 
 
 def _envelope_note(n_samples: int, max_points: int = MAX_TRACE_POINTS) -> str | None:

@@ -59,16 +59,44 @@ def compare(data, models, *, labels=None, x0="estimate", title=None, clip=True,
     matplotlib.figure.Figure
         One panel per output; legends give the fit % of each model.
     """
-    plt = _pyplot()
     data = _check_data(data)
     groups = _model_groups(models, labels)
-    ny = data.n_outputs
-    colors = colors_for(groups.items())
     given = simulated if simulated is not None and steps == math.inf else {}
     fits = {label: (given[label], percent_fit(data, given[label]))
             if label in given and np.shape(given[label]) == data.y.shape else
             simulated_output(m, data, x0=x0) if steps == math.inf else
             predicted_output(m, data, steps) for label, m in groups.items()}
+    return compare_outputs(data, groups, fits, title=title, clip=clip)
+
+
+@_styled
+def compare_outputs(data, models, outputs, *, title=None, clip=True):
+    """The figure of :func:`compare` for outputs already computed and scored.
+
+    Parameters
+    ----------
+    data : IOData
+        The record the outputs were computed on.
+    models : dict label -> StateSpace
+        The models (their colours).
+    outputs : dict label -> (ndarray, ndarray)
+        For each label of ``models``: its outputs on ``data`` (shape (n_samples,
+        n_outputs), NaN where diverging) and their fit % per output (the legend). The
+        report passes the simulations and fits of
+        :func:`subid.evaluation.report.evaluate`, computed once.
+    title : str, optional
+    clip : bool
+        As in :func:`compare`.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    plt = _pyplot()
+    groups = models
+    ny = data.n_outputs
+    colors = colors_for(groups.items())
+    fits = {label: outputs[label] for label in groups}
     texts = [f"{label}: fit {_fmt_fit(f[1][i])} %" for label, f in fits.items()
              for i in range(ny)]
     room = _legend_room(texts + ["measured"])
