@@ -593,7 +593,7 @@ def identification_report(models, estimation, validation=None, *, title="subid r
     if whole is None:
         whole = estimation
     if validation is not None:
-        split = float(validation.t[0])
+        split = float(validation[:1].t[0])      # not the whole record's stamps
     body.append(_section("data", "Data", _plot_or_note(
         lambda: plot.data_overview(whole, split=split),
         "inputs (grey) and outputs (black); the validation part is shaded", "data overview")))

@@ -20,6 +20,7 @@ from subid.evaluation.figures._common import (
     _pyplot,
     _styled,
     _time_label,
+    _times,
     colors_for,
     percent_fit,
     predicted_output,
@@ -102,7 +103,7 @@ def compare_outputs(data, models, outputs, *, title=None, clip=True):
     room = _legend_room(texts + ["measured"])
     fig, axes = plt.subplots(ny, 1, figsize=(9 + room, 2.3 * ny + 0.7), sharex=True,
                              squeeze=False)
-    t = data.t
+    t = _times(data)      # the stamps the bands draw, not all of them
     # the measured output is drawn on top (zorder), thin and black; the models under
     # it, wider and lighter, so that both stay visible where they agree (a long
     # record: the measured band outlined, the models' bands filled, see _draw_trace)
@@ -163,7 +164,7 @@ def data_overview(data, *, split=None, title=None):
     rows = len(channels)
     fig, axes = plt.subplots(rows, 1, figsize=(9, 1.25 * rows + 0.9), sharex=True,
                              squeeze=False)
-    t = data.t
+    t = _times(data)      # the stamps the bands draw, not all of them
     with _autoscale_once(axes):      # the limits once, after the plotting calls
         for ax, (name, values, color) in zip(axes[:, 0], channels):
             _draw_trace(ax, t, values, color=color, lw=0.8)
