@@ -101,11 +101,19 @@ def _lag_products(z, lags: int) -> np.ndarray:
     parts = z if isinstance(z, tuple) else (z,)
     n, nz = parts[0].shape[0], sum(p.shape[1] for p in parts)
     P = np.zeros((lags + 1, nz, nz))
+    # several parts: side by side in one buffer, filled block by block (a new array per
+    # block, above glibc's mmap threshold, costs a fresh mapping and its page faults)
+    joined = np.empty((min(n, _COVARIANCE_BLOCK + lags), nz)) if len(parts) > 1 else None
     for t0 in range(0, n, _COVARIANCE_BLOCK):
         t1 = min(n, t0 + _COVARIANCE_BLOCK)
         end = min(n, t1 + lags)
-        segment = parts[0][t0:end] if len(parts) == 1 else \
-            np.hstack([p[t0:end] for p in parts])
+        if joined is None:
+            segment = parts[0][t0:end]
+        else:
+            segment, column = joined[:end - t0], 0
+            for p in parts:
+                segment[:, column:column + p.shape[1]] = p[t0:end]
+                column += p.shape[1]
         m = t1 - t0
         # the lags whose window segment[tau:tau + m] lies inside the segment: one stacked
         # product, window[tau] = segment[tau:tau + m].T (a strided view, no copy; numpy
