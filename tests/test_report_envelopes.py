@@ -81,6 +81,10 @@ def test_bands_of_merged_records_are_left_to_agg():
     _raster.tag_envelope(band, start, start, start + 1, fill=True, lw=1.0)
     assert not hasattr(band, _raster._TAG)
     assert _raster.raster_envelopes(fig) == 1            # the other band only
+    true, data = _record(5000)
+    flipped = subid.plot.compare(data, {"true": true})
+    flipped.axes[0].invert_yaxis()                       # the columns assume increasing axes
+    assert _raster.raster_envelopes(flipped) == 2        # the second panel's two bands only
 
 
 def test_block_starts_of_a_uniform_record_equal_its_time_stamps():

@@ -15,7 +15,7 @@ columns the line's width reaches. Each pixel's coverage is the length of the int
 inside it (anti-aliased vertically, as Agg), and fill and outline are composited as
 Agg composites the two (``1 - (1 - a f)(1 - a e)``, ``a`` the band's alpha). The image
 is the polygon's up to single pixels at the steep flanks, where Agg's polygon covers
-the partial columns a little differently (tests/test_report_figures.py compares them).
+the partial columns a little differently (tests/test_report_envelopes.py compares them).
 
 Only the report's images use this (``report.figure_html``), like ``_ticks.light_ticks``:
 the figures :mod:`subid.plot` returns keep the ``fill_between`` band (vector output).
@@ -59,8 +59,8 @@ def raster_envelopes(fig) -> int:
         tagged = [c for c in ax.collections if getattr(c, _TAG, None) is not None
                   and c.get_visible()]
         if not tagged or ax.name != "rectilinear" or ax.get_xscale() != "linear" \
-                or ax.get_yscale() != "linear":
-            continue
+                or ax.get_yscale() != "linear" or ax.xaxis_inverted() or ax.yaxis_inverted():
+            continue                      # drawn by Agg: the columns assume increasing axes
         ax.get_xlim(), ax.get_ylim()       # the limits now, with the bands' data
         for band in tagged:
             ax.add_artist(_envelope_artist(band))
