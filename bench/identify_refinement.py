@@ -2,17 +2,18 @@
 
 For each bundled DaISy record (estimation part = first 2/3, means removed,
 ``bench/realdata.py``'s ``split``), CPU time (``time.process_time``) of
-``identify(est)`` and of ``identify(est, refine=False)`` (the subspace model:
-both estimators' order searches); the refinement stage is their difference
-(the four fold refinements with their start models and scores, the feedback
-test, and the final refinement when kept); "in refine" is the part spent inside
-``subid.methods.dt.pem.refine``. "before" is the library at ``--before`` (a git
+``identify(est)`` and of its refinement stage (the time inside identify's
+``_feedback``, ``_fold_refinement`` and ``_refine``: the feedback test, the
+four fold refinements with their start models and scores, and the final
+refinement when kept); "in refine" is the part spent inside
+``subid.methods.dt.pem.refine``, "subspace" the rest (both estimators' order
+searches). "before" is the library at ``--before`` (a git
 revision, default ``main``, exported with ``git archive``), "after" this
 checkout's ``src``; one process per (source, record, repeat), alternating
 before/after, each compiling the kernels first on a small record, untimed.
 
-The decisions table runs ``identify(est)`` once per source on every record of
-``--decisions`` and compares ``info['identify']['refinement']['kept']``, the
+The decisions table takes one ``identify(est)`` per source on every record of
+``--decisions`` (the first timed run where there is one) and compares ``info['identify']['refinement']['kept']``, the
 fold scores and the returned model (largest entry-wise difference of A, B, C,
 D, K relative to the largest entry of the matrix).
 
@@ -44,32 +45,40 @@ import subid
 import subid.methods.dt.pem as pem_module
 from realdata import split
 
-name, mode = sys.argv[1], sys.argv[4]
+name = sys.argv[1]
 est, val = split(name)
 warnings.simplefilter("ignore")
 small = subid.datasets.load("dryer")[:300]             # compile the kernels, untimed
 subid.identify(small)
 subid.identify(subid.datasets.load("steamgen")[:600])
 out = {"record": name, "source": sys.argv[2]}
-spent = [0.0]
-inner = pem_module.refine
+import subid.methods.identify as identify_module
+spent = {"in_refine_s": 0.0, "stage_s": 0.0}
+depth = {"in_refine_s": 0, "stage_s": 0}
 
-def timed(*args, **kwargs):
-    t0 = time.process_time()
-    try:
-        return inner(*args, **kwargs)
-    finally:
-        spent[0] += time.process_time() - t0
 
-pem_module.refine = timed
-if mode == "time":
-    t = time.process_time()
-    subid.identify(est, refine=False)
-    out["subspace_s"] = time.process_time() - t
+def timing(module, name, key):
+    inner = getattr(module, name)
+
+    def timed(*args, **kwargs):            # the outermost call of each group only
+        depth[key] += 1
+        t0 = time.process_time()
+        try:
+            return inner(*args, **kwargs)
+        finally:
+            depth[key] -= 1
+            if depth[key] == 0:
+                spent[key] += time.process_time() - t0
+    setattr(module, name, timed)
+
+
+timing(pem_module, "refine", "in_refine_s")
+for name in ("_feedback", "_fold_refinement", "_refine"):     # the refinement stage
+    timing(identify_module, name, "stage_s")
 t = time.process_time()
 model = subid.identify(est)
 out["identify_s"] = time.process_time() - t
-out["in_refine_s"] = spent[0]
+out.update(spent)
 ref = model.info["identify"]["refinement"]
 out["kept"] = bool(ref.get("kept"))
 out["reason"] = ref.get("reason", "")
@@ -91,10 +100,10 @@ def export(rev: str, where: Path) -> Path:
     return where / "src"
 
 
-def run(source: str, src: Path, name: str, mode: str) -> dict:
+def run(source: str, src: Path, name: str) -> dict:
     env = dict(os.environ, OPENBLAS_NUM_THREADS="1", PYTHONPATH=str(src))
-    done = subprocess.run([sys.executable, "-c", WORKER, name, source, str(ROOT / "bench"),
-                           mode], env=env, capture_output=True, text=True, check=True)
+    done = subprocess.run([sys.executable, "-c", WORKER, name, source, str(ROOT / "bench")],
+                          env=env, capture_output=True, text=True, check=True)
     line = [x for x in done.stdout.splitlines() if x.startswith("RESULT ")][-1]
     return json.loads(line[len("RESULT "):])
 
@@ -114,22 +123,26 @@ def relative_difference(a: dict, b: dict) -> float:
 
 
 def cost_table(results: list, records: list) -> str:
-    rows = ["| record | source | identify s | subspace s | refinement stage s | in refine s "
-            "| kept |", "|---|---|---:|---:|---:|---:|---|"]
+    rows = ["| record | source | identify s | refinement stage s | in refine s | subspace "
+            "s | kept |", "|---|---|---:|---:|---:|---:|---|"]
     ratios = []
     for name in records:
-        stage = {}
+        med = {}
         for source in ("before", "after"):
             rs = [r for r in results if r["record"] == name and r["source"] == source]
-            med = {k: statistics.median(r[k] for r in rs)
-                   for k in ("identify_s", "subspace_s", "in_refine_s")}
-            stage[source] = statistics.median(r["identify_s"] - r["subspace_s"] for r in rs)
-            rows.append(f"| {name} | {source} | {med['identify_s']:.2f} | "
-                        f"{med['subspace_s']:.2f} | {stage[source]:.2f} | "
-                        f"{med['in_refine_s']:.2f} | {rs[0]['kept']} |")
-        ratios.append(f"| {name} | {stage['before'] / max(stage['after'], 1e-9):.2f} |")
-    return "\n".join(rows + ["", "| record | refinement stage before / after |",
-                             "|---|---:|"] + ratios)
+            med[source] = {k: statistics.median(r[k] for r in rs)
+                           for k in ("identify_s", "stage_s", "in_refine_s")}
+            m = med[source]
+            rows.append(f"| {name} | {source} | {m['identify_s']:.2f} | {m['stage_s']:.2f} | "
+                        f"{m['in_refine_s']:.2f} | {m['identify_s'] - m['stage_s']:.2f} | "
+                        f"{rs[0]['kept']} |")
+        b, a = med["before"], med["after"]
+        ratios.append(f"| {name} | {b['stage_s'] / max(a['stage_s'], 1e-9):.2f} | "
+                      f"{b['identify_s'] / max(a['identify_s'], 1e-9):.2f} | "
+                      f"{a['stage_s'] / max(a['identify_s'] - a['stage_s'], 1e-9):.2f} |")
+    return "\n".join(rows + ["", "| record | refinement stage before / after | identify "
+                             "before / after | refinement / subspace after |",
+                             "|---|---:|---:|---:|"] + ratios)
 
 
 def decision_table(results: list, records: list) -> str:
@@ -170,13 +183,14 @@ def main() -> None:
         for _ in range(args.repeats):
             for name in records:
                 for source, src in sources.items():
-                    timed.append(run(source, src, name, "time"))
+                    timed.append(run(source, src, name))
                     print(json.dumps({k: v for k, v in timed[-1].items()
                                       if k != "matrices"}), flush=True)
         decided = []
         for name in decisions:
-            for source, src in sources.items():
-                decided.append(run(source, src, name, "decide"))
+            for source, src in sources.items():     # the first timed run, where there is one
+                decided.append(next((r for r in timed if r["record"] == name
+                                     and r["source"] == source), None) or run(source, src, name))
                 print(json.dumps({k: v for k, v in decided[-1].items() if k != "matrices"}),
                       flush=True)
     text = ["# The cost of `subid.identify`'s refinement stage (issue 21)", "",

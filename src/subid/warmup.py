@@ -66,6 +66,7 @@ def _recursive():
 def _batch():
     from subid.data import IOData
     from subid.methods.dt.ls_subspace import ls_subspace
+    from subid.methods.dt.pem import pem
     from subid.methods.dt.polynomial import select_structure
     from subid.methods.identify import identify
     from subid.statistic.hankel import HankelStatistic
@@ -77,6 +78,8 @@ def _batch():
     ls_subspace(IOData(u, y), 4)
     ls_subspace(IOData(u, y))                              # the order search's candidates
     identify(IOData(u, y))          # the command line's default: the search, PEM refinement
+    # a larger model: the blocked form of the sensitivity kernel (model._sensitivity)
+    pem(IOData(u, y), ls_subspace(IOData(u, y), 8), max_iterations=2)
     HankelStatistic(2, 2, 4, kind="gram").update(u, y).factor()    # long records, streams
     select_structure(IOData(u, y), max_order=2)            # arx's structure search
     # the order search's innovation check: its prediction errors and Kalman gains

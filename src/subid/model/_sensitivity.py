@@ -59,6 +59,7 @@ import numba
 import numpy as np
 
 from subid._kernel_args import frozen
+from subid.model._simulate import _simulate_discrete
 
 #: A free response (:func:`free_response`) is taken as zero once every entry of its
 #: state has fallen below this fraction of the largest entry of its initial state.
@@ -148,11 +149,11 @@ BLOCKED_WORK = 1_000
 def _jacobian_blocked(Ap, Bp, C, Dp, v, x0, dAp, dBp, dC, dDp, S, J):
     """:func:`_jacobian_t` in the blocked form (module docstring): the ``d``
     directions (direction index first) fill the first ``d`` columns of ``J``."""
-    from subid.model._simulate import simulate_discrete
     N, m = v.shape
     n, ny, d = Ap.shape[0], C.shape[0], dAp.shape[0]
     width = J.shape[2]
-    yhat, X = simulate_discrete(Ap, Bp, C, Dp, v, x0)
+    with np.errstate(all="ignore"):        # overflow propagates as in the loop form
+        yhat, X = _simulate_discrete(Ap, Bp, C, Dp, v, x0)
     Z = np.hstack([X, v])                                           # (N, n + m)
     # M[k, i, j]: the k-th entry of [x; v] in row i of direction j's forcing (columns of
     # J beyond d get zero forcing here; the caller fills them)
