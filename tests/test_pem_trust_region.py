@@ -165,6 +165,7 @@ def test_statistical_stop_keeps_the_estimate(focus):
         pem_module.statistical_precision(d, data.n_samples,
                                          2 * pem_module.HELD_OUT_PRECISION)
     assert held.info["n_evaluations"] <= quick.info["n_evaluations"]
+    assert held.info["n_evaluations"] <= pem_module.HELD_OUT_EVALUATIONS * pem_module.ROUNDS
 
 
 def test_decrement_tolerance_stops_the_iteration():
