@@ -26,12 +26,11 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import statistics
-import subprocess
-import sys
 import tempfile
 from pathlib import Path
+
+import pem_cost  # bench/: the export of a revision and the worker runner
 
 ROOT = Path(__file__).resolve().parent.parent
 SETS = ["ballbeam", "CD_player_arm", "dryer", "evaporator", "exchanger", "glassfurnace",
@@ -92,20 +91,8 @@ print("RESULT " + json.dumps(out))
 '''
 
 
-def export(rev: str, where: Path) -> Path:
-    """``src`` of git revision ``rev`` extracted under ``where``."""
-    archive = subprocess.run(["git", "-C", str(ROOT), "archive", rev, "src"],
-                             check=True, capture_output=True).stdout
-    subprocess.run(["tar", "-x", "-C", str(where)], input=archive, check=True)
-    return where / "src"
-
-
 def run(source: str, src: Path, name: str) -> dict:
-    env = dict(os.environ, OPENBLAS_NUM_THREADS="1", PYTHONPATH=str(src))
-    done = subprocess.run([sys.executable, "-c", WORKER, name, source, str(ROOT / "bench")],
-                          env=env, capture_output=True, text=True, check=True)
-    line = [x for x in done.stdout.splitlines() if x.startswith("RESULT ")][-1]
-    return json.loads(line[len("RESULT "):])
+    return pem_cost.run(source, src, name, WORKER)
 
 
 def relative_difference(a: dict, b: dict) -> float:
@@ -178,7 +165,7 @@ def main() -> None:
     decisions = SETS if args.decisions == "all" else [r for r in args.decisions.split(",")
                                                        if r]
     with tempfile.TemporaryDirectory() as tmp:
-        sources = {"before": export(args.before, Path(tmp)), "after": ROOT / "src"}
+        sources = {"before": pem_cost.export(args.before, Path(tmp)), "after": ROOT / "src"}
         timed = []
         for _ in range(args.repeats):
             for name in records:
