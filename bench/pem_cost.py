@@ -163,9 +163,11 @@ def export(rev: str, where: Path) -> Path:
     return where / "src"
 
 
-def run(source: str, src: Path, name: str) -> dict:
+def run(source: str, src: Path, name: str, worker: str = WORKER) -> dict:
+    """The ``RESULT`` line of ``worker`` (a script) run on record ``name`` with the
+    library at ``src``, in its own process."""
     env = dict(os.environ, OPENBLAS_NUM_THREADS="1", PYTHONPATH=str(src))
-    done = subprocess.run([sys.executable, "-c", WORKER, name, source, str(ROOT / "bench")],
+    done = subprocess.run([sys.executable, "-c", worker, name, source, str(ROOT / "bench")],
                           env=env, capture_output=True, text=True, check=True)
     line = [x for x in done.stdout.splitlines() if x.startswith("RESULT ")][-1]
     return json.loads(line[len("RESULT "):])

@@ -47,6 +47,30 @@ def test_compiled_jacobian_matches_reference():
     assert np.abs(y1 - y2).max() < 1e-12 and np.abs(J1 - J2).max() < 1e-12
 
 
+@pytest.mark.parametrize("blocked", [False, True])
+def test_both_forms_of_the_jacobian_match_reference(blocked, monkeypatch):
+    """The per-direction loop and the blocked form (forcing by matrix products over
+    blocks of samples, a record length not a multiple of the block) give the reference's
+    Jacobian, with and without initial-state-only directions run apart."""
+    from subid.model import _sensitivity
+    monkeypatch.setattr(_sensitivity, "BLOCKED_WORK", 0 if blocked else 10**12)
+    rng = np.random.default_rng(5)
+    n, ny, m, d, N = 6, 3, 2, 14, 3 * _sensitivity.BLOCK + 7
+    Ap, Bp, C, Dp, v, x0 = _random_predictor(rng, n, ny, m, N, 0.6)
+    dirs = list(_random_directions(rng, d, n, ny, m))
+    y1, J1 = jacobian(Ap, Bp, C, Dp, v, x0, *dirs)
+    y2, J2 = jacobian_ref(Ap, Bp, C, Dp, v, x0, *dirs)
+    assert np.abs(y1 - y2).max() < 1e-12 and np.abs(J1 - J2).max() < 1e-12
+    for j in (2, 9):                          # pure initial-state directions
+        for a in dirs[:4]:
+            a[j] = 0.0
+    long = np.vstack([v] * 40)
+    y1, J1 = jacobian(Ap, Bp, C, Dp, long, x0, *dirs)
+    y2, J2 = jacobian_ref(Ap, Bp, C, Dp, long, x0, *dirs)
+    assert np.abs(y1 - y2).max() < 1e-12 and np.abs(J1 - J2).max() < 1e-12
+    assert np.all(J1[-1, :, [2, 9]] == 0.0)
+
+
 def test_initial_state_directions_match_reference():
     # directions that move x0 alone run in their own loop (free_response), stopped once
     # decayed: same Jacobian as the reference, in any column order, on a record long

@@ -66,6 +66,7 @@ def _recursive():
 def _batch():
     from subid.data import IOData
     from subid.methods.dt.ls_subspace import ls_subspace
+    from subid.methods.dt.pem import pem
     from subid.methods.dt.polynomial import select_structure
     from subid.methods.identify import identify
     from subid.statistic.hankel import HankelStatistic
@@ -91,6 +92,10 @@ def _batch():
     model = seed001_system()
     innovation_bic(model.with_noise_model(np.zeros((model.order, 2)), np.eye(2)), IOData(u, y))
     riccati_by_doubling(0.5 * np.eye(2), np.eye(2), np.eye(2), np.eye(2), np.zeros((2, 2)))
+    # a larger model on a noisy record: the blocked form of the sensitivity kernel
+    # (model._sensitivity; a noise-free start has nothing to refine)
+    noisy8 = IOData(u, y + 0.1 * rng.standard_normal(y.shape))
+    pem(noisy8, ls_subspace(noisy8, 8), max_iterations=2)
 
 
 def _ct():

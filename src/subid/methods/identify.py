@@ -56,8 +56,19 @@ criterion (:func:`subid.methods.dt.pem.refine`: the Gauss-Newton decrement
 below 1e-3 of ``d / (2N)``, the expected excess of the criterion at the true
 parameters; Ljung 1999, Theorem 9.1), which keeps the estimate's efficiency to
 0.1 %; the fold models, which are only scored, skip the parameter covariance
-and the re-estimated K. At 1e5 samples (``bench/identify_cost.py``) the
-refinement costs 0.9x the subspace model it starts from.
+and the re-estimated K, and stop at a quarter of ``d / (2N)`` (within half an
+estimation standard deviation of the fold's minimum) or after 40 evaluations
+per round (:func:`subid.methods.dt.pem.refine` argues both). Each iteration
+costs a Jacobian (:mod:`subid.model._sensitivity`, whose blocked form builds
+the forcing of all directions by matrix products over blocks of samples) and
+its triangular factor (:mod:`subid.methods.dt._trust_region`). At 1e5 samples
+(``bench/identify_cost.py``) the refinement costs 0.9x the subspace model it
+starts from. On the DaISy records with large models, whose fold refinements
+crawl to their evaluation bound (``bench/identify_refinement.md``), the
+refinement stage takes 11.2 s on steamgen (order 20, four inputs and outputs,
+6,400 samples; 64.3 s before these bounds and the blocked kernel; 2.7x its
+subspace model's 4.1 s), 2.8 s on evaporator (10.8 s) and 1.4 s on
+CD_player_arm (7.1 s).
 """
 
 from __future__ import annotations

@@ -20,6 +20,23 @@ initial-state direction ``dx0_j``) the sensitivity ``s_j = dx/dθ_j`` obeys
 :func:`jacobian` is the compiled loop (vectorised over the directions), :func:`jacobian_ref` a plain numpy
 implementation kept for the tests.
 
+Two forms of the loop. The per-direction loop (:func:`_jacobian_t`) reads
+every direction's matrices ``dAp_j, dBp_j, dC_j, dDp_j`` at every sample:
+``d (n + ny)(n + m)`` numbers, 0.9 MB for the 196 directions of an order-20
+model with four inputs and outputs, streamed from the cache at each of the
+``N`` samples (about 4 multiply-adds per nanosecond, memory-bound). The
+forcing terms ``dAp_j x[t] + dBp_j v[t]`` and ``dC_j x[t] + dDp_j v[t]`` do
+not depend on the sensitivities, so the blocked form (:func:`_jacobian_blocked`)
+first simulates the state ``x[t]``, then forms them for a block of samples as
+one matrix product ``[x[t], v[t]] M`` (``M`` the direction matrices stacked,
+``(n + m) x (n + ny) d``: read once per block instead of once per sample),
+and runs only the recursion ``[s[t+1]; dŷ[t] - forcing] = [Ap; C] s[t]``,
+one ``(n + ny) x n`` by ``n x d`` product per sample (:func:`_recursion_t`).
+The same sums in another order (equal to rounding; the tests compare both
+with :func:`jacobian_ref`); 2.5x faster on that model, and used from
+:data:`BLOCKED_WORK` multiply-adds per sample, below which the per-direction
+loop is as fast.
+
 A direction that moves the initial state alone (``dAp_j, dBp_j, dC_j, dDp_j``
 zero: the initial-state columns of :func:`subid.pem`) has the free response
 ``dŷ[t]/dθ_j = C Ap^t dx0_j``, which decays geometrically for a stable
@@ -42,6 +59,7 @@ import numba
 import numpy as np
 
 from subid._kernel_args import frozen
+from subid.model._simulate import _simulate_discrete
 
 #: A free response (:func:`free_response`) is taken as zero once every entry of its
 #: state has fallen below this fraction of the largest entry of its initial state.
@@ -96,6 +114,60 @@ def _jacobian_t(Ap, Bp, C, Dp, v, x0, dApT, dBpT, dCT, dDpT, S, J):  # pragma: n
         for i in range(n):
             x[i] = xn[i]
         S, Sn = Sn, S
+    return yhat
+
+
+@numba.njit(cache=True)
+def _recursion_t(G, S, F, J, t0, T, n):  # pragma: no cover
+    """The recursion of the blocked form for samples ``t0 .. t0 + T - 1``: with
+    ``G = [Ap; C]`` and ``P = G s[t]``, ``J[t, :, :d] += P[n:]`` (``J`` holds the
+    output forcing) and ``s[t+1] = P[:n] + F[t - t0]`` (``F`` the state forcing of
+    the block, ``(T, n, d)``); ``S`` (``s[t0]``, ``(n, d)``) is advanced in place."""
+    d = S.shape[1]
+    ny = G.shape[0] - n
+    P = np.empty((G.shape[0], d))
+    for tt in range(T):
+        np.dot(G, S, P)
+        row = J[t0 + tt]
+        for i in range(ny):
+            for j in range(d):
+                row[i, j] += P[n + i, j]
+        Ft = F[tt]
+        for i in range(n):
+            for j in range(d):
+                S[i, j] = P[i, j] + Ft[i, j]
+
+
+#: Samples per block of the blocked form (its state forcing, ``BLOCK x n x d``, stays
+#: in the cache).
+BLOCK = 32
+#: Multiply-adds per sample of the direction recursion (``d (n + ny)(n + m)``) from
+#: which :func:`jacobian` takes the blocked form (module docstring).
+BLOCKED_WORK = 1_000
+
+
+def _jacobian_blocked(Ap, Bp, C, Dp, v, x0, dAp, dBp, dC, dDp, S, J):
+    """:func:`_jacobian_t` in the blocked form (module docstring): the ``d``
+    directions (direction index first) fill the first ``d`` columns of ``J``."""
+    N, m = v.shape
+    n, ny, d = Ap.shape[0], C.shape[0], dAp.shape[0]
+    width = J.shape[2]
+    with np.errstate(all="ignore"):        # overflow propagates as in the loop form
+        yhat, X = _simulate_discrete(Ap, Bp, C, Dp, v, x0)
+    Z = np.hstack([X, v])                                           # (N, n + m)
+    # M[k, i, j]: the k-th entry of [x; v] in row i of direction j's forcing (columns of
+    # J beyond d get zero forcing here; the caller fills them)
+    Ms = np.ascontiguousarray(np.concatenate([dAp, dBp], axis=2).transpose(2, 1, 0))
+    Mo = np.zeros((n + m, ny, width))
+    Mo[:, :, :d] = np.concatenate([dC, dDp], axis=2).transpose(2, 1, 0)
+    np.matmul(Z, Mo.reshape(n + m, ny * width), out=J.reshape(N, ny * width))
+    G = frozen(np.vstack([Ap, C]))
+    Ms = Ms.reshape(n + m, n * d)
+    F = np.empty((BLOCK, n * d))
+    for t0 in range(0, N, BLOCK):
+        T = min(BLOCK, N - t0)
+        np.matmul(Z[t0:t0 + T], Ms, out=F[:T])
+        _recursion_t(G, S, F.reshape(BLOCK, n, d), J, t0, T, n)
     return yhat
 
 
@@ -192,8 +264,13 @@ def jacobian(Ap, Bp, C, Dp, v, x0, dAp, dBp, dC, dDp, dx0):
     k = int(np.count_nonzero(moves))
     J = np.empty((v.shape[0], C.shape[0], d))
     S = np.array(np.moveaxis(dx0[:k], 0, -1), order="C")     # the kernel's state: written
-    yhat = _jacobian_t(Ap, Bp, C, Dp, v, x0, last(dAp[:k]), last(dBp[:k]), last(dC[:k]),
-                       last(dDp[:k]), S, J)
+    n, ny, m = Ap.shape[0], C.shape[0], v.shape[1]
+    if k * (n + ny) * (n + m) >= BLOCKED_WORK:
+        yhat = _jacobian_blocked(Ap, Bp, C, Dp, v, x0, dAp[:k], dBp[:k], dC[:k], dDp[:k],
+                                 S, J)
+    else:
+        yhat = _jacobian_t(Ap, Bp, C, Dp, v, x0, last(dAp[:k]), last(dBp[:k]),
+                           last(dC[:k]), last(dDp[:k]), S, J)
     if k < d:
         S0 = frozen(dx0[k:].T)
         _free_response_t(Ap, C, S0, _floor(S0), J, k)

@@ -147,8 +147,11 @@ def compress(J, f):
             R = L.T * safe[None, :]                 # J = Q R, R = L^T diag(norms)
             qtf = scipy.linalg.solve_triangular(R, g, trans="T", check_finite=False)
             return R, qtf, g, norms, "gram"
-    Ra = scipy.linalg.qr(np.column_stack([J, f]), mode="r", check_finite=False)[0]
     p = J.shape[1]
+    Jf = np.empty((J.shape[0], p + 1), order="F")       # LAPACK's order: no second copy
+    Jf[:, :p] = J
+    Jf[:, p] = f
+    Ra = scipy.linalg.qr(Jf, mode="r", overwrite_a=True, check_finite=False)[0]
     R = Ra[:p, :p]
     qtf = Ra[:p, p]
     return R, qtf, g, norms, "qr"
