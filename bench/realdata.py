@@ -233,6 +233,15 @@ def render(sets, results, peers) -> list:
     lines += ["", f"Within {TOLERANCE:g} points of the oracle: " + ", ".join(
         f"{k} {met[k]}/{len(sets)}" for k in labels[:5])
         + f"; identify within 1 point of the oracle: {met['identify']}/{len(sets)}.", ""]
+    lines += ["Wall seconds of each default call on the estimation part (this run, one process "
+              "after the numba kernels were loaded by `python -m subid.warmup`; the first "
+              "record's calls include loading them; a shared 2-core machine):", "",
+              "| record | " + " | ".join(labels) + " |",
+              "|---|" + "---:|" * len(labels)]
+    for name in sets:
+        lines.append(f"| {name} | " + " | ".join(
+            f"{results[name][label]['seconds']:.2f}" for label in labels) + " |")
+    lines.append("")
     return lines
 
 
