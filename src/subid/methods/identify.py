@@ -62,8 +62,9 @@ per round (:func:`subid.methods.dt.pem.refine` argues both). Each iteration
 costs a Jacobian (:mod:`subid.model._sensitivity`, whose blocked form builds
 the forcing of all directions by matrix products over blocks of samples) and
 its triangular factor (:mod:`subid.methods.dt._trust_region`). At 1e5 samples
-(``bench/identify_cost.py``) the refinement costs 0.9x the subspace model it
-starts from. On the DaISy records with large models, whose fold refinements
+(``bench/identify_cost.py``, 2x2 order-4 system, 20 dB) the refinement costs
+1.3x the subspace model it starts from (0.43 against 0.34 CPU s; the whole call
+0.10x SIPPY's own order search). On the DaISy records with large models, whose fold refinements
 crawl to their evaluation bound (``bench/identify_refinement.md``), the
 refinement stage takes 11.2 s on steamgen (order 20, four inputs and outputs,
 6,400 samples; 64.3 s before these bounds and the blocked kernel; 2.7x its
