@@ -107,14 +107,18 @@ class _Layout:
         return np.concatenate(parts)
 
     def unpack(self, theta, D0=None):
+        """``A, B, C, D, K`` of the parameter vector ``theta``; of a stack of them, shape
+        ``(k, size)``, the stacks of ``k`` matrices each (D ``D0``, K zero where not
+        free)."""
         n, nu, ny = self.n, self.nu, self.ny
-        o = self.offsets
-        A = theta[o[0]:o[1]].reshape(n, n)
-        B = theta[o[1]:o[2]].reshape(n, nu)
-        C = theta[o[2]:o[3]].reshape(ny, n)
-        D = theta[o[3]:o[4]].reshape(ny, nu) if self.with_d else \
-            (np.zeros((ny, nu)) if D0 is None else D0)
-        K = theta[o[4]:o[5]].reshape(n, ny) if self.with_k else np.zeros((n, ny))
+        o, lead = self.offsets, theta.shape[:-1]
+        A = theta[..., o[0]:o[1]].reshape(lead + (n, n))
+        B = theta[..., o[1]:o[2]].reshape(lead + (n, nu))
+        C = theta[..., o[2]:o[3]].reshape(lead + (ny, n))
+        D = theta[..., o[3]:o[4]].reshape(lead + (ny, nu)) if self.with_d else \
+            (np.zeros(lead + (ny, nu)) if D0 is None else D0)
+        K = theta[..., o[4]:o[5]].reshape(lead + (n, ny)) if self.with_k else \
+            np.zeros(lead + (n, ny))
         return A, B, C, D, K
 
 
@@ -152,14 +156,8 @@ def _directions(layout, basis, A, B, C, D, K, focus):
     dC = np.zeros((d, ny, n))
     dDp = np.zeros((d, ny, m))
     dx0 = np.zeros((d, n))
-    # every model direction at once: basis column j unpacked as layout.unpack does
-    o = layout.offsets
-    cols = basis.T
-    a = cols[:, o[0]:o[1]].reshape(dm, n, n)
-    b = cols[:, o[1]:o[2]].reshape(dm, n, nu)
-    c = cols[:, o[2]:o[3]].reshape(dm, ny, n)
-    dd = cols[:, o[3]:o[4]].reshape(dm, ny, nu) if layout.with_d else np.zeros((dm, ny, nu))
-    k = cols[:, o[4]:o[5]].reshape(dm, n, ny) if layout.with_k else np.zeros((dm, n, ny))
+    # every model direction at once: the columns of basis unpacked as one stack
+    a, b, c, dd, k = layout.unpack(basis.T)
     dC[:dm] = c
     if focus == "prediction":
         dAp[:dm] = a - k @ C - K @ c
