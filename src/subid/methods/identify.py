@@ -396,13 +396,14 @@ def _discrete(data, order, horizon, feedthrough, focus, refine):
                                        scores=(focus,) if guard is None else (focus, guard),
                                        guard=guard)
     base, refined = bases[focus], refineds[focus]
+    refinement.update(subspace_folds=base, refined_folds=refined,
+                      score=("simulation fit (%)" if focus == "simulation"
+                             else "one-step prediction fit (%)") + " on the held-out folds")
     if len(refined) < len(base):
         before = 100.0 - float(np.mean(bases[guard]))
         refinement.update(
-            subspace_folds=base, refined_folds=refined,
             subspace_simulation_folds=bases[guard], refined_simulation_folds=refineds[guard],
-            score="one-step prediction fit (%) on the held-out folds", kept=False,
-            reason=(f"after {len(refined)} of {len(base)} fold refinements the simulation "
+            kept=False, reason=(f"after {len(refined)} of {len(base)} fold refinements the simulation "
                     f"misfit on the folds is above {1 + SIMULATION_LOSS:g} x the subspace "
                     f"models' ({before:.3g}) whatever the other folds give: the subspace "
                     "model is kept as the simulator asked for (the remaining fold "
@@ -411,10 +412,7 @@ def _discrete(data, order, horizon, feedthrough, focus, refine):
     diff = np.subtract(refined, base)
     gain = float(np.mean(diff))
     error = float(np.std(diff, ddof=1)) / math.sqrt(diff.size) if diff.size > 1 else 0.0
-    refinement.update(subspace_folds=base, refined_folds=refined, mean_gain=gain,
-                      standard_error=error,
-                      score=("simulation fit (%)" if focus == "simulation"
-                             else "one-step prediction fit (%)") + " on the held-out folds")
+    refinement.update(mean_gain=gain, standard_error=error)
     if not gain > error:
         refinement.update(kept=False, reason="the refined fold models do not validate better "
                                              "by more than one standard error of the paired "
