@@ -154,8 +154,7 @@ def _draw(artist, renderer) -> None:
         return
     # in pixels (NaN kept: the transform's matrix would spread it to x as well)
     trans = band.get_transform()
-    x = trans.transform(np.column_stack([start, np.zeros(start.size)]))[:, 0]
-    y_low = trans.transform(np.column_stack([start, np.where(finite, low, 0.0)]))[:, 1]
+    x, y_low = trans.transform(np.column_stack([start, np.where(finite, low, 0.0)])).T
     y_high = trans.transform(np.column_stack([start, np.where(finite, high, 0.0)]))[:, 1]
     y_low[~finite] = y_high[~finite] = np.nan
     n_cols = x1 - x0

@@ -94,10 +94,9 @@ def compare_outputs(data, models, outputs, *, title=None, clip=True):
     matplotlib.figure.Figure
     """
     plt = _pyplot()
-    groups = models
     ny = data.n_outputs
-    colors = colors_for(groups.items())
-    fits = {label: outputs[label] for label in groups}
+    colors = colors_for(models.items())
+    fits = {label: outputs[label] for label in models}
     texts = [f"{label}: fit {_fmt_fit(f[1][i])} %" for label, f in fits.items()
              for i in range(ny)]
     room = _legend_room(texts + ["measured"])
