@@ -16,7 +16,7 @@ from test_style import SRC, _imports, _modules
 
 # Top-level private modules every package may use: the package's own utilities.
 FOUNDATION = {"_version", "errors", "_validation", "_repr", "_extras", "_threads", "_progress",
-              "_kernel_args"}
+              "_kernel_args", "_blas"}
 
 # Public aliases at the top of the package (``subid.plot`` is ``subid.evaluation.plot``...).
 ALIASES = {"basis": "methods", "registry": "methods", "distributed": "methods",

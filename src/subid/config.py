@@ -7,7 +7,7 @@ import contextlib
 import numba
 from threadpoolctl import threadpool_limits
 
-from subid import _threads
+from subid import _blas, _threads
 from subid._validation import check_int, checked_call
 
 __all__ = ["thread_limit"]
@@ -17,6 +17,11 @@ __all__ = ["thread_limit"]
 @checked_call
 def thread_limit(n_threads: int):
     """Limit the threads of BLAS/LAPACK, OpenMP, numba and subid inside a ``with`` block.
+
+    Without it, subid's computations run with one BLAS thread (faster on small and
+    medium problems, and many times faster on a machine whose cores are shared;
+    docs/scale.md, Threads); inside it, ``n_threads`` holds for them too: the way to give
+    BLAS more threads (a large QR statistic on an idle many-core machine).
 
     subid's own per-sample kernels are serial; the thread pools that matter
     are BLAS's (QR, matrix products of the data statistic), numba's, and
@@ -40,9 +45,11 @@ def thread_limit(n_threads: int):
     own = _threads.limit
     numba.set_num_threads(min(n_threads, numba.config.NUMBA_NUM_THREADS))  # type: ignore[attr-defined]  # numba.config sets it at import
     _threads.limit = n_threads
+    _blas.chosen(+1)                 # the user's number holds in subid's calls (_blas)
     try:
         with threadpool_limits(limits=n_threads):
             yield
     finally:
+        _blas.chosen(-1)
         numba.set_num_threads(previous)
         _threads.limit = own

@@ -27,6 +27,7 @@ import numbers
 import numpy as np
 import scipy.linalg
 
+from subid._blas import serial_blas
 from subid._validation import check_int, checked_call
 from subid.data import IOData
 from subid.errors import DataError, ModelError, ResourceLimitError, TooFewSamplesError
@@ -71,6 +72,7 @@ def _check_delays(input_delay, n_inputs: int, error=DataError) -> np.ndarray:
 # ---------------------------------------------------------------------------
 # estimation
 # ---------------------------------------------------------------------------
+@serial_blas
 @checked_call
 def estimate_delay(data, max_delay: int = 10, *, na: int = 2, nb: int = 2,
                    return_loss: bool = False):

@@ -36,6 +36,7 @@ import warnings
 import click
 
 import subid.cli._shared as _shared
+from subid import _blas
 from subid.cli._interrupt import interrupts
 
 # Each command registers itself on the group when its module is imported (one module per
@@ -114,7 +115,9 @@ def _run(args, state, debug, sigint) -> int:
     """Run one command; returns its exit status, errors turned into one line."""
     try:
         try:
-            with warnings.catch_warnings():     # restores showwarning afterwards
+            # restores showwarning afterwards; one BLAS thread unless the user chose
+            # (subid._blas: many times faster on a machine whose cores are shared)
+            with warnings.catch_warnings(), _blas.serial():
                 warnings.showwarning = _show_warning
                 rv = cli.main(args=args, prog_name="subid", standalone_mode=False, obj=state)
         except click.exceptions.Exit as exc:

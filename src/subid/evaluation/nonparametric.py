@@ -47,6 +47,7 @@ import warnings
 
 import numpy as np
 
+from subid._blas import serial_blas
 from subid._validation import check_int, checked_call
 from subid.data import IOData
 from subid.errors import DataError, NotExcitingError, ResolutionWarning, TooFewSamplesError
@@ -170,6 +171,7 @@ def _check_input_spectrum(S_u, w, name):
                                "frequencies or a richer input")
 
 
+@serial_blas
 @checked_call
 def spa(data, window=None, w=None):
     """Spectral-analysis estimate of the frequency response (MATLAB ``spa``).
@@ -280,6 +282,7 @@ def _smooth(P, weights):
     return out
 
 
+@serial_blas
 @checked_call
 def etfe(data, smoothing=None):
     """Empirical transfer-function estimate (MATLAB ``etfe``), optionally smoothed.

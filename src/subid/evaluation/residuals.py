@@ -11,6 +11,7 @@ import warnings
 
 import numpy as np
 
+from subid._blas import serial_blas
 from subid._validation import check_int, check_probability, checked_call
 from subid.errors import DataError, NoiseModelWarning
 from subid.model.prediction import check_model_data, predict
@@ -91,6 +92,7 @@ def correlations(e, u, *, max_lag: int = 25, confidence: float = 0.99, ranges=No
             "residual": e, "confidence": confidence}
 
 
+@serial_blas
 @checked_call
 def residuals(model, data, *, max_lag: int = 25, confidence: float = 0.99, x0=None) -> dict:
     """Residual analysis on the one-step prediction errors (MATLAB's ``resid``).

@@ -60,6 +60,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.special
 
+from subid._blas import serial_blas
 from subid._validation import as_signal, check_int, checked_call, same_period
 from subid.data import IOData
 from subid.delay import apply_to_inputs, input_delay_of
@@ -242,6 +243,7 @@ class Bounds:
     response: np.ndarray | None = None
 
 
+@serial_blas
 @checked_call
 def parameter_covariance(model) -> ParameterCovariance:
     """The parameter covariance a model carries (MATLAB ``getcov``).
@@ -350,6 +352,7 @@ def _directions(cov):
     return dA, dB, dC, dD
 
 
+@serial_blas
 @checked_call
 def freqresp_bounds(model, w, level=0.95, *, method="delta", n_samples=1000, seed=0):
     """Confidence bounds of the magnitude of the frequency response (MATLAB
@@ -502,6 +505,7 @@ def _output_sensitivities(model, cov, u, x0):
     return y, dy
 
 
+@serial_blas
 @checked_call
 def simulation_bounds(model, u, level=0.95, *, x0=None, method="delta", n_samples=1000,
                       seed=0):
@@ -566,6 +570,7 @@ def _band(model, cov, u, x0, z, level, method, n_samples, seed, t):
     return Bounds(t, y, y - z * std, y + z * std, std, float(level), method)
 
 
+@serial_blas
 @checked_call
 def step_bounds(model, t=None, level=0.95, *, method="delta", n_samples=1000, seed=0):
     """Confidence bounds of the step response (MATLAB ``step`` with

@@ -79,6 +79,7 @@ import warnings
 
 import numpy as np
 
+from subid._blas import serial_blas
 from subid._validation import check_choice, checked_call
 from subid.data import IOData
 from subid.errors import DataError, ModelError, OptionError, SubidError
@@ -232,6 +233,7 @@ def _fold_refinement(data, method, config, focus, scores=None, guard=None):
     return base, refined
 
 
+@serial_blas
 @checked_call
 def identify(data, order=None, *, focus="simulation", time_base="auto", horizon=None,
              feedthrough="auto", refine=True) -> StateSpace:

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from subid._blas import serial_blas
 from subid._validation import checked_call, same_period
 from subid.errors import DataError, OptionError
 from subid.model.prediction import _SIM_BLOCK, check_model, predict, simulate_fit
@@ -15,6 +16,7 @@ from subid.model.prediction import _SIM_BLOCK, check_model, predict, simulate_fi
 __all__ = ["fit_percent", "frequency_fit", "output_fit"]
 
 
+@serial_blas
 @checked_call
 def fit_percent(model, data, x0="estimate", hold=None, steps=np.inf, *,
                 per_experiment: bool = False) -> np.ndarray:

@@ -29,6 +29,7 @@ import warnings
 import numpy as np
 import scipy.linalg
 
+from subid._blas import serial_blas
 from subid._validation import checked_call, same_period
 from subid.data import IOData, column_std
 from subid.delay import effective_input, input_delay_of
@@ -362,6 +363,7 @@ def _estimate_x0(model, u, y, k, data=None):
     return x0, forced + free @ x0
 
 
+@serial_blas
 @checked_call
 def predict(model, data, steps=1, x0=None, *, return_x0=False):
     """k-step-ahead predicted outputs of a model on a record.

@@ -52,6 +52,7 @@ import warnings
 import numpy as np
 import scipy.linalg
 
+from subid._blas import serial_blas
 from subid._validation import check_choice, checked_call
 from subid.data import IOData
 from subid.errors import DataError, SubidError
@@ -322,6 +323,7 @@ def merged_selection(ct_record, dt_scores: dict, n_samples: int, n_inputs: int,
     return [(k[0], names[k]) for k in keys], record, {(k[0], names[k]): entry(k) for k in keys}
 
 
+@serial_blas
 @checked_call
 @records_warnings
 def dt_to_ct(data, order=None, *, method: str = "n4sid", hold: str = "zoh", **options):

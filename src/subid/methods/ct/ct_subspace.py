@@ -88,6 +88,7 @@ from functools import partial
 
 import numpy as np
 
+from subid._blas import serial_blas
 from subid._validation import check_bool, check_choice, check_int, checked_call
 from subid.errors import (
     DataError,
@@ -448,6 +449,7 @@ def _build_refined(problem: Problem, feedthrough=None, start=None,
 # ---------------------------------------------------------------------------
 # the method
 # ---------------------------------------------------------------------------
+@serial_blas
 @checked_call
 @records_warnings
 def ct_subspace(data, order=None, *, basis=None, poly_order: int = 3, estimate_x0: bool = True,
@@ -864,6 +866,7 @@ def ct_subspace(data, order=None, *, basis=None, poly_order: int = 3, estimate_x
     return model
 
 
+@serial_blas
 @checked_call
 def ct_subspace_paper(data, order=None, *, basis=None, poly_order: int = 3) -> StateSpace:
     """The paper's printed algorithm, with its typos corrected (seed 002).

@@ -49,6 +49,7 @@ import numpy as np
 import scipy.linalg
 import scipy.optimize
 
+from subid._blas import serial_blas
 from subid._validation import check_choice, check_int, checked_call
 from subid.data import IOData
 from subid.errors import DataError, NotExcitingError, TooFewSamplesError
@@ -255,6 +256,7 @@ def _tune(kernel, n, nu, R1, r, rho2, sigma2, n_rows, g_ls):
     return res.x if res.fun <= best[0] else best[1]
 
 
+@serial_blas
 @checked_call
 def impulseest(data, n, *, kernel="tc"):
     """Estimate the impulse response (MATLAB ``impulseest``), regularised by a kernel.

@@ -49,6 +49,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.linalg
 
+from subid._blas import serial_blas
 from subid._validation import (
     check_bool,
     check_choice,
@@ -100,6 +101,7 @@ def _condition_1norm(M: np.ndarray) -> float:
     return float(1.0 / rcond) if rcond > 0 else float("inf")
 
 
+@serial_blas
 @checked_call
 def ls_subspace(data, order=None, *, horizon=None, instruments="past", selector=None, seed=0,
                 estimate_x0=True, feedthrough="auto", instrument_weighting=True,

@@ -28,6 +28,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.linalg
 
+from subid._blas import serial_blas
 from subid._validation import check_bool, check_choice, checked_call
 from subid.methods.bd import BATCH_OPTIONS
 from subid.methods.dt._subspace import (
@@ -46,6 +47,7 @@ from subid.model.statespace import StateSpace
 __all__ = ["moesp"]
 
 
+@serial_blas
 @checked_call
 def moesp(data, order=None, *, horizon=None, weighting="moesp", selection="cv",
           stability="auto", system_matrices="auto", feedthrough="auto", estimate_x0=True,

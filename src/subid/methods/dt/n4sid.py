@@ -22,6 +22,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.linalg
 
+from subid._blas import serial_blas
 from subid._validation import check_bool, checked_call
 from subid.data import IOData
 from subid.methods.bd import INFO_KEY
@@ -74,6 +75,7 @@ def _lstsq_rows(regressors: np.ndarray, targets: np.ndarray) -> np.ndarray:
     return least_squares_gelsy(regressors.T, targets.T).T
 
 
+@serial_blas
 @checked_call
 def n4sid(data, order=None, *, horizon=None, weighting="cva", selection="cv",
           stability="auto", feedthrough="auto", estimate_x0=True,

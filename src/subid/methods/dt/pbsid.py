@@ -43,6 +43,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.linalg
 
+from subid._blas import serial_blas
 from subid._validation import check_bool, checked_call
 from subid.data import IOData
 from subid.methods.bd import INFO_KEY
@@ -59,6 +60,7 @@ from subid.model.statespace import StateSpace
 __all__ = ["pbsid", "step_coefficients", "step_coefficients_reference"]
 
 
+@serial_blas
 @checked_call
 def pbsid(data, order=None, *, horizon=None, selection="cv", stability="auto",
           feedthrough="auto", estimate_x0=True, statistic="auto", refine=None,

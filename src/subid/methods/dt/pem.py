@@ -48,6 +48,7 @@ import numpy as np
 import scipy.linalg
 import scipy.optimize
 
+from subid._blas import serial_blas
 from subid._validation import check_optimiser_options, checked_call, same_period
 from subid.data import IOData
 from subid.delay import delay_inputs, input_delay_of, record_delay
@@ -354,6 +355,7 @@ def minimise_prediction_error(predictor, directions, dm, x0, v, y, ranges, W, ma
 MAX_ITERATIONS, TOLERANCE, ROUNDS = 100, 1e-8, 3
 
 
+@serial_blas
 @checked_call
 @records_warnings
 def pem(data, model, *, focus="prediction", max_iterations=MAX_ITERATIONS, tolerance=TOLERANCE,

@@ -51,6 +51,7 @@ import math
 import numpy as np
 import scipy.signal
 
+from subid._blas import serial_blas
 from subid._validation import check_bool, check_choice, check_optimiser_options, checked_call
 from subid.errors import SubidError
 from subid.methods._info import collect_warnings
@@ -460,6 +461,7 @@ def _sensitivities(sub, theta, x0, v, ranges, estimate_x0):
 
 
 
+@serial_blas
 @checked_call
 def armax(data, order=None, *, selection="cv", estimate_x0=True, max_iterations=100,
           tolerance=1e-8):
@@ -521,6 +523,7 @@ def armax(data, order=None, *, selection="cv", estimate_x0=True, max_iterations=
     return _identify("armax", data, order, selection, estimate_x0, max_iterations, tolerance)
 
 
+@serial_blas
 @checked_call
 def oe(data, order=None, *, selection="cv", estimate_x0=True, max_iterations=100,
        tolerance=1e-8):
@@ -582,6 +585,7 @@ def oe(data, order=None, *, selection="cv", estimate_x0=True, max_iterations=100
     return _identify("oe", data, order, selection, estimate_x0, max_iterations, tolerance)
 
 
+@serial_blas
 @checked_call
 def bj(data, order=None, *, selection="cv", estimate_x0=True, max_iterations=100,
        tolerance=1e-8):

@@ -35,6 +35,7 @@ import numbers
 import numpy as np
 import scipy.linalg
 
+from subid._blas import serial_blas
 from subid._validation import check_bool, check_choice, checked_call
 from subid.data import IOData
 from subid.errors import (
@@ -424,6 +425,7 @@ def structure_orders(order, structure: str, data: IOData):
     return parse_orders(order, structure, ny, nu, nk_default=nk), None
 
 
+@serial_blas
 @checked_call
 def arx(data, order=None, *, selection="cv", estimate_x0=True):
     """Identify an ARX model by least squares (MATLAB ``arx``).

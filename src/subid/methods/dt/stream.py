@@ -30,6 +30,7 @@ import warnings
 
 import numpy as np
 
+from subid._blas import serial_blas
 from subid._validation import same_period
 from subid.data import IOData, minus_columns
 from subid.errors import DataError
@@ -102,6 +103,7 @@ def statistic_depth(method: str, order, horizon, n_outputs: int, instruments="pa
     return horizon, blocks * horizon
 
 
+@serial_blas
 def identify_stream(pieces, method: str = "moesp", order=None, horizon=None, *,
                     statistic: str = "gram", progress=None, reread=None, **options):
     """Identify a model from consecutive pieces of one record.
@@ -216,6 +218,7 @@ def attach_second_pass(stat: HankelStatistic, make_chunks=None, *, groups=None
     return stat
 
 
+@serial_blas
 def identify_file(path, inputs, outputs, *, dt=None, method: str = "moesp", order=None,
                   horizon=None, chunk_size: int = 100_000, statistic: str = "gram",
                   delimiter=None, progress=None, **options):

@@ -77,6 +77,7 @@ import warnings
 
 import numpy as np
 
+from subid._blas import serial_blas
 from subid._validation import check_bool, check_choice, check_int, checked_call
 from subid.errors import DataError, OrderError, SubidError, UnstableModelWarning
 from subid.frdata import FRData
@@ -179,6 +180,7 @@ def _cross_validate(data: FRData, alpha, noise_var, candidates, horizons, *, fee
     return order, record
 
 
+@serial_blas
 @checked_call
 @records_warnings
 def fd_subspace(data, order=None, *, horizon=None, feedthrough=True, stability="auto",
