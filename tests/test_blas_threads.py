@@ -108,3 +108,17 @@ def test_the_command_line_restores_the_pools(no_choice, tmp_path):
                  "y1,y2", "--order", "3", "--no-report", "--out",
                  str(tmp_path / "out")]) == 0
     assert set(_blas_threads()) == {2}
+
+
+def test_a_library_that_refuses_does_not_stop_the_computation(no_choice, monkeypatch):
+    class Refusing:
+        num_threads = 4
+
+        def set_num_threads(self, n):
+            raise RuntimeError("not settable")
+
+    monkeypatch.setattr(_blas, "_controllers", [Refusing()])
+    seen = []
+    model = _probe(seen)()
+    assert model.order == 3
+    assert set(_blas_threads()) == {2}

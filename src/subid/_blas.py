@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import contextlib
 import functools
+import logging
 import os
 import threading
 
@@ -71,11 +72,14 @@ def _enter(apply: bool = True) -> None:
     if not apply or _applied or _chosen or any(os.environ.get(v) for v in CHOICE_VARIABLES):
         return
     _applied = True
-    for lib in _blas_libraries():
-        before = lib.num_threads
-        if before != 1:
-            lib.set_num_threads(1)
-            _restore.append((lib, before))
+    try:
+        for lib in _blas_libraries():
+            before = lib.num_threads
+            if before != 1:
+                lib.set_num_threads(1)
+                _restore.append((lib, before))
+    except Exception as exc:  # noqa: BLE001 - a speed setting: never stops the computation
+        logging.getLogger("subid").debug("BLAS threads left as they are: %s", exc)
 
 
 def _leave() -> None:
