@@ -1,6 +1,7 @@
 """Report time against identification time on 10^6 samples (issue 29 item 6).
 
 Run: OPENBLAS_NUM_THREADS=1 PYTHONPATH=src python bench/report_ratio.py [--samples 1000000]
+     [--cold]
      [--repeat 3] [--method ls] [--profile FILE.prof] [--out bench/report_ratio.md]
 
 What ``subid identify FILE.csv --out DIR`` does, step by step, in one process,
@@ -40,6 +41,10 @@ def main(argv=None):
     parser.add_argument("--method", default=None,
                         help="a registry method name (default: what subid identify uses "
                              "without --method, subid.identify)")
+    parser.add_argument("--cold", action="store_true",
+                        help="one run without the warm-up run: what a fresh process of "
+                             "`subid identify` pays (numba kernels loaded and matplotlib "
+                             "imported inside the timed steps); run it several times")
     parser.add_argument("--profile", default=None, metavar="FILE.prof",
                         help="profile the report step of the timed repeats (cProfile)")
     parser.add_argument("--out", default=os.path.join(os.path.dirname(__file__),
@@ -99,10 +104,11 @@ def main(argv=None):
         times["order"] = model.order
         return times
 
-    print(f"{args.samples} samples, method {spec.name}: warm-up run", file=sys.stderr)
-    once()
+    if not args.cold:
+        print(f"{args.samples} samples, method {spec.name}: warm-up run", file=sys.stderr)
+        once()
     runs = []
-    for k in range(args.repeat):
+    for k in range(1 if args.cold else args.repeat):
         runs.append(once(profiler is not None))
         r = runs[-1]
         print(f"repeat {k + 1}: read {r['read']:.2f} s, identify {r['identify']:.2f} s, "
@@ -118,8 +124,11 @@ def main(argv=None):
         "# Report time against identification time (bench/report_ratio.py)",
         "",
         f"{args.samples} samples (CSV, 2 inputs, 2 outputs), default method "
-        f"`{spec.attribute}` (order {runs[-1]['order']}), 70 % estimation; medians of "
-        f"{args.repeat} interleaved repeats after a warm-up run, OPENBLAS_NUM_THREADS=1; "
+        f"`{spec.attribute}` (order {runs[-1]['order']}), 70 % estimation; "
+        + ("one run in a fresh process (numba kernels loaded and matplotlib imported "
+           "inside the timed steps), " if args.cold else
+           f"medians of {args.repeat} interleaved repeats after a warm-up run, ")
+        + "OPENBLAS_NUM_THREADS=1; "
         f"load average {load:.1f} on {os.cpu_count()} CPUs at the end (on a shared machine "
         "the seconds scale with the load; the ratio is measured in one process).",
         "",
