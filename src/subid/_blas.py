@@ -91,7 +91,10 @@ def _leave() -> None:
         _applied = False
         while _restore:
             lib, before = _restore.pop()
-            lib.set_num_threads(before)
+            try:
+                lib.set_num_threads(before)
+            except Exception as exc:  # noqa: BLE001 - as in _enter
+                logging.getLogger("subid").debug("BLAS threads not restored: %s", exc)
 
 
 @contextlib.contextmanager
