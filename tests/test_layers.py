@@ -43,10 +43,10 @@ ALLOWED = {
     "evaluation": {"foundation", "data", "frdata", "delay", "model", "io", "methods",
                    "subid"},                          # report: subid.__version__
     "cli": {"foundation", "data", "datasets", "model", "io", "methods", "evaluation",
-            "subid"},
+            "warmup", "subid"},
     "experiments": {"foundation", "data", "systems", "model", "io", "methods", "evaluation",
                     "subid"},
-    "warmup": {"foundation", "data", "systems", "statistic", "methods"},
+    "warmup": {"foundation", "data", "systems", "statistic", "model", "methods"},
     # the public contract checks of methods (scikit-learn's check_estimator)
     "testing": {"foundation", "data", "frdata", "systems", "model", "methods", "evaluation"},
     "subid": {"foundation"},
@@ -54,6 +54,10 @@ ALLOWED = {
 
 # (importer prefix, private module): allowed imports of another package's private module.
 PRIVATE_ALLOWED = {
+    # Whether numba's cache holds three kernels of the default calls (warmup.kernels_cached).
+    ("subid.warmup", "subid.model._simulate"),
+    ("subid.warmup", "subid.model._sensitivity"),
+    ("subid.warmup", "subid.methods.dt._lag_kernel"),
     # The atomic writer: every file goes through it (test_style.test_every_writer_is_atomic).
     ("subid.cli", "subid.io._files"),
     ("subid.evaluation.report", "subid.io._files"),

@@ -32,12 +32,13 @@ kernel group.
 from __future__ import annotations
 
 import argparse
+import os
 import time
 import warnings
 
 import numpy as np
 
-__all__ = ["main", "warmup"]
+__all__ = ["main", "warmup", "kernels_cached"]
 
 
 def _adaptive():
@@ -148,6 +149,31 @@ def warmup(groups=None) -> dict:
             _GROUPS[name]()
         out[name] = time.perf_counter() - t0
     return out
+
+
+def kernels_cached() -> bool:
+    """Whether numba's cache holds the kernels of the default calls.
+
+    False when the cache index of one of three kernels every default identification
+    uses (the simulation, the order search's normal equations, the prediction-error
+    refinement's sensitivities) is missing: their first use compiles them, about a
+    minute on a 2-core machine, which :func:`warmup` does ahead. The command line
+    says so before it computes. True when they are there, and when numba's cache
+    cannot be inspected (nothing is then said).
+
+    Returns
+    -------
+    bool
+    """
+    try:
+        from subid.methods.dt._lag_kernel import normal_matrix
+        from subid.model._sensitivity import _recursion_t
+        from subid.model._simulate import tv_loop
+        # numba's own record of where each dispatcher's cache index lives
+        kernels: tuple = (tv_loop, normal_matrix, _recursion_t)
+        return all(os.path.exists(kernel._cache._cache_file._index_path) for kernel in kernels)
+    except Exception:  # noqa: BLE001 - another numba version: say nothing
+        return True
 
 
 def main(argv=None) -> int:

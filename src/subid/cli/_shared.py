@@ -404,6 +404,18 @@ def _fmt_poles(poles, limit: int = 8) -> str:
     return ", ".join(parts)
 
 
+def _note_first_run() -> None:
+    """On a terminal, one line before a command computes when numba's cache lacks the
+    default calls' kernels (:func:`subid.warmup.kernels_cached`): their first use
+    compiles them, about a minute, with nothing else to explain the wait."""
+    if not _state().progress:
+        return
+    from subid.warmup import kernels_cached
+    if not kernels_cached():
+        click.echo("subid: first run: compiling the numerical kernels into numba's cache "
+                   "(about a minute, once; `python -m subid.warmup` does it ahead)", err=True)
+
+
 def _progress(total: int, desc: str, enabled: bool, initial: int = 0):
     return progress_bar(total, desc, "sample", enabled=enabled, initial=initial)
 

@@ -7,7 +7,7 @@ import os
 
 import click
 
-from subid.cli._shared import _FREQ, _common, _echo, _fmt_fit, _names, _state, cli
+from subid.cli._shared import _FREQ, _common, _echo, _fmt_fit, _names, _note_first_run, _state, cli
 from subid.io._files import atomic_directory, write_bytes
 
 
@@ -35,6 +35,7 @@ def demo(out, names, methods, jobs, frequency_unit):
     gallery.md (the table of docs/gallery.md) and summary.json.
     """
     import subid.cli.demo as demo_module
+    _note_first_run()
     # The folder is replaced as a whole when the run completes (a previous demo's
     # folder, or an empty one): an interrupted run leaves the previous one.
     owned = lambda path: not os.listdir(path) or os.path.exists(  # noqa: E731

@@ -29,6 +29,7 @@ from subid.cli._shared import (
     _method_run_options,
     _named,
     _nan_to_none,
+    _note_first_run,
     _only,
     _parse_options,
     _parse_order,
@@ -153,6 +154,7 @@ def identify(data, inputs, outputs, dt, time_column, delimiter, detrend, method_
                                    f"discrete-time batch methods and ct, not for {spec.name}: "
                                    "it would join them as if contiguous")
     data = sources[0] if len(sources) == 1 else " + ".join(sources)
+    _note_first_run()
     if stream:
         return _identify_streamed(data, inputs, outputs, dt, time_column, delimiter, detrend,
                                   spec, order, horizon, validate, opts, frequency_unit,
