@@ -122,3 +122,25 @@ def test_a_library_that_refuses_does_not_stop_the_computation(no_choice, monkeyp
     model = _probe(seen)()
     assert model.order == 3
     assert set(_blas_threads()) == {2}
+
+
+def test_the_online_updates_of_track_run_with_one_thread(no_choice, tmp_path, monkeypatch):
+    from subid.cli import main
+    from subid.methods.online.base import Tracker
+    seen = []
+    run = Tracker.run
+
+    def recorded(self, *args, **kwargs):
+        seen.append(_blas_threads())
+        return run(self, *args, **kwargs)
+
+    monkeypatch.setattr(Tracker, "run", recorded)
+    data = subid.systems.simulate_data(subid.systems.seed001_system(), 400, seed=2)
+    path = tmp_path / "r.csv"
+    np.savetxt(path, np.hstack([data.u, data.y]), delimiter=",",
+               header="u1,u2,y1,y2", comments="")
+    assert main(["--quiet", "track", str(path), "--inputs", "u1,u2", "--outputs", "y1,y2",
+                 "--method", "recursive", "--order", "3", "--no-report", "--out",
+                 str(tmp_path / "out")]) == 0
+    assert seen and set(seen[0]) == {1}
+    assert set(_blas_threads()) == {2}

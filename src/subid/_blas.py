@@ -98,12 +98,13 @@ def _leave() -> None:
 
 
 @contextlib.contextmanager
-def serial():
+def serial(now: bool = False):
     """A block (the command line's command) in which the first computation sets the
     pools to one thread, kept until the block ends (module documentation): the
     libraries are looked up only once a computation runs (``subid --help`` loads no
-    scipy)."""
-    _enter(apply=False)
+    scipy). ``now``: set them at once (a loop of online updates, which are not marked
+    one by one: a single-sample update would pay the setting each time)."""
+    _enter(apply=now)
     try:
         yield
     finally:

@@ -22,6 +22,7 @@ import warnings
 import click
 import numpy as np
 
+from subid import _blas
 from subid._progress import on_terminal, progress_bar
 from subid._version import __version__
 from subid.errors import DataError, OrderError, SubidError
@@ -625,7 +626,8 @@ def _run_online(spec, tracker, start, progress, *, chunk):
     """``tracker.run`` from sample ``start`` with a progress bar on a terminal."""
     bar = _progress(tracker.data.n_samples, f"{spec.name}", progress, initial=start)
     try:
-        tracker.run(start, chunk=chunk, progress=None if bar is None else bar.update)
+        with _blas.serial(now=True):          # one BLAS thread, as every computation
+            tracker.run(start, chunk=chunk, progress=None if bar is None else bar.update)
     finally:
         if bar is not None:
             bar.close()
