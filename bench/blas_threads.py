@@ -34,9 +34,8 @@ def main(argv=None):
     args = parser.parse_args(argv)
     warnings.simplefilter("ignore")
     import subid
-    cd = subid.datasets.load("CD_player_arm")
-    cd = cd[:(2 * cd.n_samples) // 3]
-    cd = subid.IOData(cd.u - cd.u.mean(axis=0), cd.y - cd.y.mean(axis=0), dt=cd.dt)
+    from selection_identity import split  # first 2/3, means removed
+    cd = split("CD_player_arm")
     true = subid.systems.random_system(4, 2, 2, seed=29)
     big = {n: subid.systems.simulate_data(true, n, seed=30, output_snr_db=20)
            for n in (100_000, 1_000_000)}

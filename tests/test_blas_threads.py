@@ -27,6 +27,15 @@ def no_choice(monkeypatch):
         yield
 
 
+def _record_csv(tmp_path, seed):
+    """A 400-sample record of the seed-001 system as a CSV (u1, u2, y1, y2)."""
+    data = subid.systems.simulate_data(subid.systems.seed001_system(), 400, seed=seed)
+    path = tmp_path / "r.csv"
+    np.savetxt(path, np.hstack([data.u, data.y]), delimiter=",",
+               header="u1,u2,y1,y2", comments="")
+    return path
+
+
 def _probe(seen):
     @_blas.serial_blas
     def computation(fail=False):
@@ -100,10 +109,7 @@ def test_the_public_computations_are_marked():
 
 def test_the_command_line_restores_the_pools(no_choice, tmp_path):
     from subid.cli import main
-    data = subid.systems.simulate_data(subid.systems.seed001_system(), 400, seed=1)
-    path = tmp_path / "r.csv"
-    np.savetxt(path, np.hstack([data.u, data.y]), delimiter=",",
-               header="u1,u2,y1,y2", comments="")
+    path = _record_csv(tmp_path, seed=1)
     assert main(["--quiet", "identify", str(path), "--inputs", "u1,u2", "--outputs",
                  "y1,y2", "--order", "3", "--no-report", "--out",
                  str(tmp_path / "out")]) == 0
@@ -135,10 +141,7 @@ def test_the_online_updates_of_track_run_with_one_thread(no_choice, tmp_path, mo
         return run(self, *args, **kwargs)
 
     monkeypatch.setattr(Tracker, "run", recorded)
-    data = subid.systems.simulate_data(subid.systems.seed001_system(), 400, seed=2)
-    path = tmp_path / "r.csv"
-    np.savetxt(path, np.hstack([data.u, data.y]), delimiter=",",
-               header="u1,u2,y1,y2", comments="")
+    path = _record_csv(tmp_path, seed=2)
     assert main(["--quiet", "track", str(path), "--inputs", "u1,u2", "--outputs", "y1,y2",
                  "--method", "recursive", "--order", "3", "--no-report", "--out",
                  str(tmp_path / "out")]) == 0

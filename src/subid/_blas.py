@@ -116,10 +116,7 @@ def serial_blas(fn):
     documentation) unless the user chose the number."""
     @functools.wraps(fn)
     def in_serial(*args, **kwargs):
-        _enter()
-        try:
+        with serial(now=True):
             return fn(*args, **kwargs)
-        finally:
-            _leave()
     in_serial.serial_blas = True     # (tests check the marks)
     return in_serial
