@@ -143,6 +143,14 @@ def test_prediction_power_kernel_equals_its_reference_and_the_prediction_errors(
         errors = prediction_errors(model, record, 1, x0="zero")
         np.testing.assert_allclose(got, ref, rtol=1e-12)
         np.testing.assert_allclose(got, errors.T @ errors, rtol=1e-10)
+        # from given initial states, one per experiment
+        x0 = np.random.default_rng(8).standard_normal((len(pieces), 3))
+        got = prediction_power(model.A, model.B, model.C, model.D, model.K, pieces, x0)
+        ref = prediction_power_reference(model.A, model.B, model.C, model.D, model.K, pieces,
+                                         x0)
+        errors = prediction_errors(model, record, 1, x0=x0 if len(pieces) > 1 else x0[0])
+        np.testing.assert_allclose(got, ref, rtol=1e-12)
+        np.testing.assert_allclose(got, errors.T @ errors, rtol=1e-10)
     K = np.zeros_like(model.K)
     A = 3.0 * np.eye(3)                           # a predictor that leaves the float range
     long = systems.simulate_data(true, 2000, seed=7)

@@ -199,6 +199,32 @@ def test_innovation_variance_within_5_percent(name, true_model, records):
     assert np.all(np.abs(np.diag(model.noise_cov) / np.diag(true_model.noise_cov) - 1) < 0.1)
 
 
+@pytest.mark.parametrize("name", ["moesp", "n4sid", "ls_subspace", "identify"])
+def test_noise_cov_is_the_covariance_of_the_models_own_prediction_errors(name):
+    """``noise_cov`` of a default call on a real record is ``E^T E / N`` of the model's
+    one-step prediction errors (``subid.predict``, initial state by least squares: an
+    independent computation). The Riccati covariance reported before was 4e6x that on
+    DaISy robot_arm and 7e3x on CD_player_arm; a record of two experiments too."""
+    robot = subid.datasets.load("robot_arm")
+    est = robot[:(2 * robot.n_samples) // 3].detrend()
+    for record in (est, subid.merge([est[:300], est[300:]])):
+        model = getattr(subid, name)(record)
+        assert "prediction errors" in model.info["noise_cov_estimate"]
+        e = record.y - subid.predict(model, record, 1)
+        np.testing.assert_allclose(model.noise_cov, e.T @ e / record.n_samples, rtol=1e-6)
+
+
+def test_noise_cov_without_samples_is_the_riccati_covariance(records):
+    """A statistic holds no samples to predict: its model's noise_cov is the Riccati
+    equation's, and says so."""
+    est, _ = records
+    stat = subid.HankelStatistic.from_data(est, 20)
+    model = subid.moesp(stat, 3)
+    assert model.info["noise_cov_estimate"].startswith("C P C^T + R")
+    from_record = subid.moesp(est, 3, horizon=10)
+    assert "prediction errors" in from_record.info["noise_cov_estimate"]
+
+
 def test_biased_estimator_still_gets_a_stable_noise_model(records):
     # eq. (23) without instruments is biased under noise (documented); its noise
     # model absorbs part of the bias but the predictor is still a stable filter

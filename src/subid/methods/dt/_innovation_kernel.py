@@ -5,7 +5,9 @@ The order selection's innovation check (:func:`subid.methods.dt.selection.innova
 needs, for the model of every order, only ``E^T E``, the sum over the record of the
 products of the one-step prediction errors ``e(t) = y(t) - C x̂(t) - D u(t)`` of the
 Kalman predictor ``x̂(t+1) = (A - K C) x̂(t) + (B - K D) u(t) + K y(t)`` from
-``x̂(0) = 0`` (what ``prediction_errors(model, data, 1, x0='zero')`` returns, summed).
+``x̂(0) = 0`` (what ``prediction_errors(model, data, 1, x0='zero')`` returns, summed), or
+from a given initial state (the innovation covariance of a final model,
+:func:`subid.methods.dt.noise_model.with_factor`).
 :func:`prediction_power` accumulates it in one pass without storing the predicted
 outputs or states; :func:`prediction_power_reference` is the plain loop the tests compare
 it against (and ``subid.prediction_errors``).
@@ -26,14 +28,14 @@ from subid._kernel_args import frozen
 
 
 @numba.njit(cache=True)
-def _power_kernel(Ap, Bu, K, C, D, u, y):  # pragma: no cover - compiled
+def _power_kernel(Ap, Bu, K, C, D, u, y, x0):  # pragma: no cover - compiled
     """``(sum_t e(t) e(t)^T, finite)`` of the predictor ``(Ap, [Bu, K], C, [D, 0])``
-    from a zero state over ``(u, y)``."""
+    from the state ``x0`` over ``(u, y)``."""
     N = u.shape[0]
     n = Ap.shape[0]
     nu = u.shape[1]
     ny = y.shape[1]
-    x = np.zeros(n)
+    x = x0.copy()
     xn = np.zeros(n)
     e = np.zeros(ny)
     S = np.zeros((ny, ny))
@@ -76,29 +78,39 @@ def _predictor(A, B, C, D, K):
     return frozen(A - K @ C), frozen(B - K @ D), frozen(K), frozen(C), frozen(D)
 
 
-def prediction_power(A, B, C, D, K, pieces):
-    """``sum e e^T`` over the pieces ``[(u, y), ...]`` (each from a zero state: the
-    experiments of a record), or None when it is not finite (the predictor diverged)."""
+def _initial_states(x0, n, count):
+    """One initial state per piece: zeros, or the rows of ``x0`` (shape (n,) for one
+    piece, (count, n) for several)."""
+    if x0 is None:
+        return [np.zeros(n)] * count
+    return list(np.asarray(x0, dtype=float).reshape(count, n))
+
+
+def prediction_power(A, B, C, D, K, pieces, x0=None):
+    """``sum e e^T`` over the pieces ``[(u, y), ...]`` (the experiments of a record),
+    each predicted from a zero state or from its row of ``x0``; None when it is not
+    finite (the predictor diverged)."""
     Ap, Bu, Kc, Cc, Dc = _predictor(A, B, C, D, K)
     ny = C.shape[0]
     total = np.zeros((ny, ny))
     with np.errstate(all="ignore"):
-        for u, y in pieces:
-            S, finite = _power_kernel(Ap, Bu, Kc, Cc, Dc, frozen(u), frozen(y))
+        for (u, y), start in zip(pieces, _initial_states(x0, A.shape[0], len(pieces))):
+            S, finite = _power_kernel(Ap, Bu, Kc, Cc, Dc, frozen(u), frozen(y),
+                                      frozen(start))
             if not finite:
                 return None
             total += S
     return total if np.isfinite(total).all() else None
 
 
-def prediction_power_reference(A, B, C, D, K, pieces):
+def prediction_power_reference(A, B, C, D, K, pieces, x0=None):
     """:func:`prediction_power` by a plain loop over the samples (the reference)."""
     Ap, Bu, Kc, Cc, Dc = _predictor(A, B, C, D, K)
     ny = C.shape[0]
     total = np.zeros((ny, ny))
     with np.errstate(all="ignore"):
-        for u, y in pieces:
-            x = np.zeros(A.shape[0])
+        for (u, y), start in zip(pieces, _initial_states(x0, A.shape[0], len(pieces))):
+            x = start.copy()
             for t in range(u.shape[0]):
                 e = y[t] - Cc @ x - Dc @ u[t]
                 total += np.outer(e, e)

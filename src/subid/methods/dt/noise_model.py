@@ -28,6 +28,20 @@ Theorem 12):
    56 %). Should the Riccati equation have no stabilising solution, the
    regression ``K = S R^{-1}``, ``Σ = R`` is used.
 
+4. Where the record is at hand (every batch call on an :class:`~subid.IOData`), the
+   innovation covariance reported is the sample covariance of the one-step prediction
+   errors of that predictor on the record, ``noise_cov = E^T E / N`` (the maximum-likelihood
+   estimate of the innovation covariance given the predictor, Ljung, *System
+   Identification*, 2nd ed., 1999, Sec. 7.3), each experiment predicted from an initial
+   state fitted to its first samples: one compiled pass
+   (:func:`subid.methods.dt._innovation_kernel.prediction_power`). ``Σ`` of step 3 is the
+   covariance the predictor would reach were the model and its state sequences exact;
+   with the biased states of a real record it was far off: on the DaISy records (first
+   2/3, default calls) 1.0-5x the covariance of the predictor's own errors, about 7e3x on
+   CD_player_arm (MOESP) and 4e6x on robot_arm (issue 21 follow-up, session 14).
+   ``info['noise_cov_estimate']`` says which was used; without samples (a
+   :class:`~subid.HankelStatistic`, :class:`subid.RecursiveSubspace`) it is ``Σ``.
+
 Everything acts on the triangular factor ``L`` of the block-Hankel data matrix
 (``H = L Q^T``), as the subspace methods do: projections and least squares on
 the rows of ``L`` equal those on the data rows, and ``L L^T`` is the sample
@@ -38,6 +52,7 @@ decomposition of the Riccati solver are used: no SVD, so
 
 from __future__ import annotations
 
+import math
 import warnings
 
 import numpy as np
@@ -221,6 +236,58 @@ def innovation_model(A, B, C, D, hf: HankelFactor, past: int | None = None, *,
                       "noise_model_past": p}
 
 
+#: ``info['noise_cov_estimate']``: how ``noise_cov`` was found.
+FROM_PREDICTION_ERRORS = ("sample covariance of the one-step prediction errors of the "
+                          "Kalman predictor on the estimation record, initial state by least "
+                          "squares (Ljung 1999, Sec. 7.3)")
+NOISE_FREE = "R of the state-sequence residuals (a noise-free record: K = 0)"
+FROM_RICCATI = ("C P C^T + R of the Kalman filter Riccati equation (no samples at hand; "
+                "VODM 1996, Sec. 4.3)")
+
+
+#: The initial state of the predictor is fitted to the prediction errors of the first
+#: samples, as many as its free response takes to decay to this fraction.
+TRANSIENT_DECAY = 1e-16
+
+
+def _predictor_initial_states(model, K, data: IOData, radius: float) -> np.ndarray:
+    """Each experiment's initial predicted state, fitted by least squares to the
+    prediction errors of its first samples (:func:`subid.predict` with ``x0='estimate'``
+    on the samples over which the predictor's free response decays to
+    :data:`TRANSIENT_DECAY`: the later samples do not depend on it)."""
+    from subid.model.prediction import predict
+    n = model.order
+    length = n + 1 if radius <= 0.0 else \
+        n + 1 + math.ceil(math.log(TRANSIENT_DECAY) / math.log(radius))
+    predictor = model.with_noise_model(K, None, info={})
+    states = []
+    for experiment in data.experiments:
+        head = experiment[:min(length, experiment.n_samples)]
+        states.append(predict(predictor, head, 1, return_x0=True)[1])
+    return np.stack(states)
+
+
+def prediction_error_covariance(model, K, data: IOData, radius: float):
+    """``E^T E / N``: the sample covariance of the one-step prediction errors of the
+    predictor ``(A - K C, B - K D, K)`` of ``model`` (spectral radius ``radius`` < 1) on
+    ``data``, each experiment from its initial state fitted by least squares
+    (:func:`_predictor_initial_states`; a zero or simulation initial state leaves a
+    transient that dominates where the predictor is accurate: 20x the covariance on
+    DaISy robot_arm); None when the predictor diverges. The errors' products are summed
+    in one compiled pass (:func:`subid.methods.dt._innovation_kernel.prediction_power`)."""
+    from subid.methods.dt._innovation_kernel import prediction_power
+    pieces = [(data.u[a:b], data.y[a:b]) for a, b in data.experiment_ranges]
+    try:
+        x0 = _predictor_initial_states(model, K, data, radius)
+    except SubidError:               # the prediction of the first samples diverges
+        return None
+    power = prediction_power(model.A, model.B, model.C, model.D, K, pieces, x0)
+    if power is None:
+        return None
+    sigma = power / data.n_samples
+    return 0.5 * (sigma + sigma.T)
+
+
 #: The key of a problem's cache (:meth:`subid.methods.dt._subspace.Problem.cached`) that
 #: holds its factor in the user's units (:func:`user_factor`).
 USER_FACTOR = "user factor"
@@ -291,12 +358,14 @@ def attach_noise_model(model, problem, *, doubling: bool = False):
         The prepared problem it was identified from (its Hankel factor).
     doubling : bool
         The Riccati equation by doubling (:func:`innovation_model`): for models that
-        are only scored (:func:`subid.methods.dt.selection.innovation_check`).
+        are only scored (:func:`subid.methods.dt.selection.innovation_check`, which
+        sums the prediction errors itself: ``noise_cov`` is then the Riccati ``Σ``).
 
     Returns
     -------
     StateSpace
-        ``info['noise_model']`` says how K was found (or why not).
+        ``info['noise_model']`` says how K was found (or why not),
+        ``info['noise_cov_estimate']`` how ``noise_cov`` was.
     """
     hf = _factor_for(model, problem)
     info = dict(model.info)
@@ -306,14 +375,18 @@ def attach_noise_model(model, problem, *, doubling: bool = False):
                                "statistic)")
         model = model.with_noise_model(None, None, info=info)
     else:
-        model = with_factor(model, hf, doubling=doubling)
+        record = problem.data if isinstance(problem.data, IOData) and not doubling else None
+        model = with_factor(model, hf, doubling=doubling, data=record)
     return model
 
 
-def with_factor(model, hf: HankelFactor, past: int | None = None, *, doubling: bool = False):
-    """``model`` with ``K`` and ``noise_cov`` estimated on the factor ``hf``
-    (used by :class:`subid.RecursiveSubspace` on its running factor; ``doubling`` as
-    in :func:`innovation_model`)."""
+def with_factor(model, hf: HankelFactor, past: int | None = None, *, doubling: bool = False,
+                data: IOData | None = None):
+    """``model`` with ``K`` estimated on the factor ``hf`` (used by
+    :class:`subid.RecursiveSubspace` on its running factor; ``doubling`` as in
+    :func:`innovation_model`) and ``noise_cov`` the covariance of its prediction errors
+    on ``data`` (:func:`prediction_error_covariance`; the Riccati ``Σ`` without
+    ``data``)."""
     info = dict(model.info)
     K, sigma, diag = innovation_model(model.A, model.B, model.C, model.D, hf, past,
                                       doubling=doubling)
@@ -327,4 +400,10 @@ def with_factor(model, hf: HankelFactor, past: int | None = None, *, doubling: b
                       "model and predicts by simulation", NoiseModelWarning, stacklevel=3)
         info["noise_model"] = "not estimated: no stable predictor"
         return model.with_noise_model(None, None, info=info)
+    info["noise_cov_estimate"] = NOISE_FREE if noise_free else FROM_RICCATI
+    if data is not None and not noise_free:
+        measured = prediction_error_covariance(model, K, data,
+                                               diag["predictor_spectral_radius"])
+        if measured is not None:
+            sigma, info["noise_cov_estimate"] = measured, FROM_PREDICTION_ERRORS
     return model.with_noise_model(K, sigma, info=info)

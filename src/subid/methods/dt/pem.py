@@ -699,7 +699,7 @@ def _pem_dt(data, model, focus, max_iterations, tolerance, rounds, feedthrough, 
     from subid.statistic.hankel import HankelStatistic
     h = max(5, -(-n // ny) + 2)
     if noise_model and N >= 2 * h * (nu + ny + 1):
-        return with_factor(refined, HankelStatistic.from_data(data, 2 * h).factor())
+        return with_factor(refined, HankelStatistic.from_data(data, 2 * h).factor(), data=data)
     return refined
 
 
