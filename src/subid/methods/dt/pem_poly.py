@@ -38,7 +38,7 @@ coefficients (the observer form has the entries ``-a_k``, ``c_k - a_k``
 and ``b_k - a_k b_0``), so their derivatives are the central differences
 with unit step, exact to rounding. The Jacobian is then run by the compiled
 sensitivity loop of :func:`subid.pem` and the same trust-region search
-(:func:`subid.methods.dt.pem.minimise_prediction_error`), with the
+(:func:`subid.methods.dt._pe_search.minimise_prediction_error`), with the
 predictor's initial state among the parameters. A trial with an unstable
 predictor is rejected; the result never has a larger criterion than its
 start (the start is kept when nothing improves).
@@ -56,8 +56,7 @@ from subid._validation import check_bool, check_choice, check_optimiser_options,
 from subid.errors import SubidError
 from subid.methods._info import collect_warnings
 from subid.methods.dt._arx_nested import check_samples
-from subid.methods.dt._poly_covariance import attach_covariance
-from subid.methods.dt.pem import (
+from subid.methods.dt._pe_search import (
     _predictor,
     _radius,
     _simulate_experiments,
@@ -65,6 +64,7 @@ from subid.methods.dt.pem import (
     block_jacobian,
     minimise_prediction_error,
 )
+from subid.methods.dt._poly_covariance import attach_covariance
 from subid.methods.dt.polynomial import (
     ORDER_NAMES,
     SELECTIONS,

@@ -262,7 +262,7 @@ def fit_arx(data: IOData, orders: dict, *, method: str = "arx", check: bool = Tr
 def predictor_x0(model: StateSpace, data: IOData):
     """Least-squares initial state(s) of the one-step predictor of ``model`` on ``data``
     (one row per experiment; a vector for a single experiment)."""
-    from subid.methods.dt.pem import _predictor, _start_x0
+    from subid.methods.dt._pe_search import _predictor, _start_x0
     K = model.K if model.K is not None else np.zeros((model.order, model.n_outputs))
     Ap, Bp, Cp, Dp = _predictor(model.A, model.B, model.C, model.D, K, "prediction")
     v = np.hstack([data.u, data.y])
