@@ -96,3 +96,14 @@ def test_without_a_stable_predictor_the_model_is_returned_unchanged():
     unstable = true.with_noise_model(-10.0 * true.K, true.noise_cov)     # radius 3.55
     assert np.abs(np.linalg.eigvals(unstable.A - unstable.K @ unstable.C)).max() > 1
     assert refine_gain(data, unstable) is unstable
+
+
+def test_noise_free_records_keep_a_zero_gain():
+    """Noise-free data: the state-sequence noise model says K = 0 and no gain is fitted
+    to the rounding errors (identify's model predicts by its exact deterministic part)."""
+    true = systems.seed001_system()
+    data = systems.simulate_data(true, 600, seed=1)
+    model = subid.identify(data)
+    assert subid.markov_error(model, true) < 1e-10
+    assert not np.any(model.K) and "gain" not in model.info["identify"]
+    assert model.info["noise_model"].startswith("noise-free")

@@ -65,6 +65,10 @@ from subid.methods.dt.noise_model import (
 
 __all__ = ["refine_gain"]
 
+#: Prediction errors whose power is below this fraction of the outputs' are rounding
+#: (a noise-free record, whose K is zero): no gain is fitted to them (the level of
+#: :func:`subid.methods.dt.noise_model.innovation_model`).
+NOISE_FREE = 1e-20
 #: ``info['noise_model']`` of a model whose K :func:`refine_gain` estimated.
 DESCRIPTION = ("prediction-error minimisation over K with A, B, C, D fixed, from the "
                "state-sequence gain (subid.methods.dt.gain)")
@@ -160,9 +164,12 @@ def refine_gain(data, model, *, precision: float = GAIN_PRECISION,
         if model.info.get("noise_cov_estimate") == FROM_PREDICTION_ERRORS \
         and model.noise_cov is not None and data is whole else \
         prediction_error_covariance(model, K0, data, radius)
+    if sigma0 is None or float(np.trace(sigma0)) <= NOISE_FREE * max(
+            float(np.sum(data.y ** 2)) / N, 1e-300):
+        return model                       # noise-free: no innovations, K = 0 stays
     try:
         L0 = np.linalg.cholesky(sigma0)
-    except (np.linalg.LinAlgError, TypeError):   # an output predicted exactly, or none
+    except np.linalg.LinAlgError:            # an output predicted exactly
         return model
     W = scipy.linalg.solve_triangular(L0, np.eye(ny), lower=True)
     start_cost = 0.5 * float(np.trace(W @ sigma0 @ W.T))
