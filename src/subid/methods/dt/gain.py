@@ -128,8 +128,9 @@ def refine_gain(data, model, *, precision: float = GAIN_PRECISION,
     StateSpace
         With the gain reached (the start's when nothing improves), ``noise_cov`` the
         sample covariance of its one-step prediction errors, ``info['noise_model']``
-        :data:`DESCRIPTION` and ``info['gain_refinement']`` (``start_cost``,
-        ``final_cost``, ``n_evaluations``, ``stop_reason``).
+        :data:`DESCRIPTION` and ``info['gain_refinement']`` (``samples``: those the
+        gain was fitted to, ``start_cost``, ``final_cost``, ``n_evaluations``,
+        ``stop_reason``).
     """
     if model.K is None or model.is_continuous:
         return model
