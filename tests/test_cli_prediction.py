@@ -37,6 +37,8 @@ def test_identify_refine_pem_writes_a_refined_model(refined_dir):
     html = (refined_dir / "report.html").read_text(encoding="utf-8")
     assert "Kalman gain" in html and "noise covariance" in html and "idss(" in html
     assert "one-step prediction errors" in html
+    # the report says how the noise covariance was found
+    assert f"e; {model.info['noise_cov_estimate']}" in html.replace("&#x27;", "'")
 
 
 def test_identify_summary_shows_refinement_and_noise_covariance(capsys, tmp_path):

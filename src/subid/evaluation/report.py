@@ -718,8 +718,9 @@ def identification_report(models, estimation, validation=None, *, title="subid r
             block += ["<p>K (Kalman gain of the innovation form x⁺ = A x + B u + K e, "
                       "y = C x + D u + e)</p>", _matrix_table(m.K, states, m.output_names)]
         if m.noise_cov is not None:
-            block += ["<p>noise covariance (of the innovations e)</p>",
-                      _matrix_table(m.noise_cov, m.output_names, m.output_names)]
+            how = m.info.get("noise_cov_estimate")
+            block += [f"<p>noise covariance (of the innovations e{'; ' + _e(how) if how else ''})"
+                      "</p>", _matrix_table(m.noise_cov, m.output_names, m.output_names)]
         x0 = m.info.get("x0")
         if x0 is not None and np.asarray(x0).size == m.order:
             block += ["<p>initial state x0 (estimation data)</p>",
