@@ -107,3 +107,44 @@ def test_noise_free_records_keep_a_zero_gain():
     assert subid.markov_error(model, true) < 1e-10
     assert not np.any(model.K) and "gain" not in model.info["identify"]
     assert model.info["noise_model"].startswith("noise-free")
+
+
+def test_online_noise_cov_is_the_covariance_of_the_prediction_errors_on_its_window(tmp_path):
+    """RecursiveSubspace's noise_cov is E^T E / N of its current model's one-step errors
+    (subid.predict) on the last samples of the stream: the whole of DaISy robot_arm's
+    estimation part (the Riccati covariance was 5e4x that at order 4), and the last
+    NOISE_WINDOW samples of a longer stream; a checkpoint keeps the window."""
+    from subid.methods.online._window import NOISE_WINDOW
+    robot = subid.datasets.load("robot_arm")
+    est = robot[:(2 * robot.n_samples) // 3].detrend()
+    r = subid.RecursiveSubspace(4, 1, 1, dt=est.dt)
+    r.update(est.u, est.y)
+    e = est.y - subid.predict(r.model, est, 1)
+    np.testing.assert_allclose(r.model.noise_cov, e.T @ e / est.n_samples, rtol=1e-6)
+    true = systems.seed001_innovation_system()
+    long = systems.simulate_innovation_data(true, NOISE_WINDOW + 2345, seed=4)
+    s = subid.RecursiveSubspace(3, 2, 2)
+    for a in range(0, long.n_samples, 3000):            # chunks that wrap the window
+        s.update(long.u[a:a + 3000], long.y[a:a + 3000])
+    last = long[long.n_samples - NOISE_WINDOW:]
+    e = last.y - subid.predict(s.model, last, 1)
+    np.testing.assert_allclose(s.model.noise_cov, e.T @ e / NOISE_WINDOW, rtol=1e-9)
+    s.save(tmp_path / "s.npz")
+    back = subid.RecursiveSubspace.load(tmp_path / "s.npz")
+    np.testing.assert_array_equal(back.model.noise_cov, s.model.noise_cov)
+
+
+def test_sample_window_holds_the_last_samples_in_order():
+    """The ring buffer against the plain concatenation, for chunk sizes that wrap it,
+    fill it in one go and arrive one sample at a time."""
+    from subid.methods.online._window import SampleWindow
+    rng = np.random.default_rng(2)
+    window = SampleWindow(2, 1, 50)
+    seen_u, seen_y = np.zeros((0, 2)), np.zeros((0, 1))
+    for k in (3, 1, 1, 47, 20, 1, 120, 7, 49, 1, 50, 13):
+        u, y = rng.standard_normal((k, 2)), rng.standard_normal((k, 1))
+        window.add(u, y)
+        seen_u, seen_y = np.vstack([seen_u, u]), np.vstack([seen_y, y])
+        got_u, got_y = window.ordered()
+        np.testing.assert_array_equal(got_u, seen_u[-50:])
+        np.testing.assert_array_equal(got_y, seen_y[-50:])

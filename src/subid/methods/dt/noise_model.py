@@ -39,8 +39,9 @@ Theorem 12):
    with the biased states of a real record it was far off: on the DaISy records (first
    2/3, default calls) 1.0-5x the covariance of the predictor's own errors, about 7e3x on
    CD_player_arm (MOESP) and 4e6x on robot_arm (issue 21 follow-up, session 14).
-   ``info['noise_cov_estimate']`` says which was used; without samples (a
-   :class:`~subid.HankelStatistic`, :class:`subid.RecursiveSubspace`) it is ``Σ``.
+   ``info['noise_cov_estimate']`` says which was used. :class:`subid.RecursiveSubspace`
+   passes the last samples of its stream (:mod:`subid.methods.online._window`); from a
+   :class:`~subid.HankelStatistic` alone (no samples) it is ``Σ``.
 
 Everything acts on the triangular factor ``L`` of the block-Hankel data matrix
 (``H = L Q^T``), as the subspace methods do: projections and least squares on
