@@ -187,6 +187,10 @@ def test_track_checkpoints_resume_and_convergence_report(tmp_path, capsys):
     data = datasets.load("dryer").detrend()
     rs = subid.RecursiveSubspace(4, 1, 1, dt=0.08).update(data.u, data.y)
     assert final.allclose(rs.model, rtol=1e-9, atol=1e-10)       # chunking changes nothing
+    # the innovation form is kept when the channels are renamed (K and noise_cov were
+    # dropped while info still described them)
+    np.testing.assert_allclose(final.K, rs.model.K, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(final.noise_cov, rs.model.noise_cov, rtol=1e-9)
     fit = subid.fit_percent(final, data)[0]
     assert _summary_value(stdout, "fit %      ") == round(fit, 2)
     p = _check_report(out / "report.html", PLOT_SECTIONS + ("convergence",))

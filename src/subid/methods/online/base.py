@@ -244,9 +244,9 @@ def with_names(model, data):
     if (tuple(model.input_names), tuple(model.output_names)) == \
             (tuple(data.input_names), tuple(data.output_names)):
         return model
-    return StateSpace(model.A, model.B, model.C, model.D, model.dt,
-                      input_names=data.input_names, output_names=data.output_names,
-                      info=model.info, hold=model.hold)
+    return StateSpace(model.A, model.B, model.C, model.D, model.dt, K=model.K,
+                      noise_cov=model.noise_cov, input_names=data.input_names,
+                      output_names=data.output_names, info=model.info, hold=model.hold)
 
 
 class Tracker:
