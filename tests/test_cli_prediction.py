@@ -77,3 +77,20 @@ def test_refine_with_stream_is_refused(capsys, tmp_path):
     code, _, err = run(capsys, "identify", path, "--inputs", "u", "--outputs", "y", "--stream",
                        "--refine", "pem", "--out", tmp_path / "o")
     assert code == 2 and "--refine" in err
+
+
+def test_summary_says_when_the_noise_covariance_had_no_samples(capsys, tmp_path):
+    """In memory the covariance of the model's own prediction errors; streamed (a
+    statistic, no samples kept) the Riccati covariance, and the summary says so."""
+    d = subid.datasets.load("dryer")
+    path = tmp_path / "d.csv"
+    np.savetxt(path, np.column_stack([d.u, d.y]), delimiter=",", header="u,y", comments="")
+    code, streamed, _ = run(capsys, "identify", path, "--inputs", "u", "--outputs", "y",
+                            "--dt", "0.08", "--stream", "--no-report", "--out", tmp_path / "s")
+    assert code == 0
+    assert re.search(r"noise cov\s+[\d.e-]+ \(innovations, with Kalman gain K; from the "
+                     r"Riccati equation, no samples at hand\)", streamed)
+    code, memory, _ = run(capsys, "identify", path, "--inputs", "u", "--outputs", "y",
+                          "--dt", "0.08", "--no-report", "--out", tmp_path / "m")
+    assert code == 0
+    assert re.search(r"noise cov\s+[\d.e-]+ \(innovations, with Kalman gain K\)", memory)
