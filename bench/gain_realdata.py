@@ -53,10 +53,13 @@ def main(argv=None) -> int:
         after = subid.identify(est)
         seconds_after = time.process_time() - t
         p0, p1 = power(before, val), power(after, val)
+        white = ["yes" if subid.residuals(m, val)["whiteness_ok"] else "no"
+                 for m in (before, after)]
         ratio = np.diag(after.noise_cov) / power(after, est)
         step = after.info["identify"].get("gain", {})
         rows.append(f"| {name} | {after.order} | {fmt(p0)} | {fmt(p1)} | {fmt(p1 / p0)} | "
-                    f"{fmt(ratio)} | {step.get('n_evaluations', '-')} | "
+                    f"{fmt(ratio)} | {white[0]} / {white[1]} | "
+                    f"{step.get('n_evaluations', '-')} | "
                     f"{seconds_after - seconds_before:+.2f} |")
         print(rows[-1], flush=True)
     lines = [
@@ -66,11 +69,13 @@ def main(argv=None) -> int:
         "(mean square per output) on the validation third, with the state-sequence K "
         "(the gain step off) and with the prediction-error K; `noise_cov / own` is the "
         "reported innovation covariance (diagonal) over the estimation part's own one-step "
-        "error power; `evaluations` of the gain step; `CPU s` the extra time of the call "
+        "error power; `white` whether the validation residuals pass the whiteness test of "
+        "`subid.residuals` (99 %), state-sequence K / prediction-error K; "
+        "`evaluations` of the gain step; `CPU s` the extra time of the call "
         "(one run each, a shared machine: noise of a few tenths).", "",
         "| record | order | state-sequence K | prediction-error K | ratio | "
-        "noise_cov / own | evaluations | CPU s |",
-        "|---|---:|---|---|---|---|---:|---:|", *rows, ""]
+        "noise_cov / own | white | evaluations | CPU s |",
+        "|---|---:|---|---|---|---|---|---:|---:|", *rows, ""]
     if args.out:
         with open(args.out, "w", encoding="utf-8") as fh:
             fh.write("\n".join(lines))
