@@ -315,7 +315,8 @@ class RecursiveSubspace(OnlineIdentifier):
         self._hist_poles = np.zeros((0, self.order), dtype=complex)
         self._hist_abcd = np.zeros((0, self._abcd_size()))
         self._hist_t = np.zeros(0)
-        self._model = None
+        self._model = None            # the current model, with its noise model
+        self._plain = None            # the same without it (history snapshots)
         check_choice(bd_method, "bd_method", ONLINE_OPTIONS)
         if refresh_every is None:      # a quarter of the memory, within [50, 2000]
             memory = math.inf if self._lam == 1.0 else 1.0 / (1.0 - self._lam)
@@ -575,7 +576,7 @@ class RecursiveSubspace(OnlineIdentifier):
             self._buf_u = np.concatenate((bu[1:], u))
             self._buf_y = np.concatenate((by[1:], y))
             self._n_samples += 1
-            self._model = None
+            self._model = self._plain = None
             return
         all_u = np.concatenate((self._buf_u, u))
         all_y = np.concatenate((self._buf_y, y))
@@ -595,7 +596,7 @@ class RecursiveSubspace(OnlineIdentifier):
         self._buf_u = all_u[-self._keep:].copy()
         self._buf_y = all_y[-self._keep:].copy()
         self._n_samples += u.shape[0]
-        self._model = None
+        self._model = self._plain = None
 
     def _add_columns(self, columns: int) -> None:
         """Count ``columns`` new Hankel columns (and their weight)."""
@@ -608,10 +609,10 @@ class RecursiveSubspace(OnlineIdentifier):
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", NotConvergedWarning)
-                poles = self.model.poles()
+                m = self._deterministic()        # no noise model: A, B, C, D only
+                poles = m.poles()
         except SubidError:
             return
-        m = self._model
         abcd = np.concatenate([m.A.ravel(), m.B.ravel(), m.C.ravel(), m.D.ravel()])
         self._hist_sample = np.append(self._hist_sample, self._n_samples)
         self._hist_t = np.append(self._hist_t, self.t)
@@ -653,8 +654,20 @@ class RecursiveSubspace(OnlineIdentifier):
         NotExcitingError
             The (weighted) input data are not exciting enough.
         """
-        if self._model is not None:
-            return self._model
+        if self._model is None:
+            plain = self._deterministic()
+            # K from the running factor, noise_cov from the current model's prediction
+            # errors on the last samples (the window)
+            self._model = noise_model.with_factor(
+                plain, self.factor(), data=self._window.record(self._dt)) \
+                if self.instruments == "past" else plain
+        return self._model
+
+    def _deterministic(self) -> StateSpace:
+        """The current model without its noise model (what :attr:`model` adds to it,
+        and all a history snapshot records); raises as :attr:`model` does."""
+        if self._plain is not None:
+            return self._plain
         method = "RecursiveSubspace"
         need = min_samples(self._depth, self.n_inputs, self.n_outputs)
         if self._n_samples < need:
@@ -729,13 +742,9 @@ class RecursiveSubspace(OnlineIdentifier):
                           n_samples=self._n_samples, x0=x0, hold="zoh",
                           conditions=conditions_of(extra),
                           warnings=[issued] if issued else [], **extra)
-        self._model = StateSpace(A, B, C, D, self._dt, input_names=self._input_names,
+        self._plain = StateSpace(A, B, C, D, self._dt, input_names=self._input_names,
                                  output_names=self._output_names, info=info)
-        if self.instruments == "past":   # K from the running factor, noise_cov from the
-            # current model's prediction errors on the last samples (the window)
-            self._model = noise_model.with_factor(self._model, hf,
-                                                  data=self._window.record(self._dt))
-        return self._model
+        return self._plain
 
     def _exact_b_d(self, core, sy):
         """Forgetting 1: B, D, x0 of the batch output-error regression for the
