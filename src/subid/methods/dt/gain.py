@@ -155,15 +155,15 @@ def refine_gain(data, model, *, precision: float = GAIN_PRECISION,
     if N > MAX_SELECTION_SAMPLES:            # the gain from the record's last part
         data = data[N - MAX_SELECTION_SAMPLES:]
         N, ranges = data.n_samples, data.experiment_ranges
-    # the start: its initial states by least squares, its errors' covariance (the
-    # model's own noise_cov when the noise model computed it so on these samples)
+    # the start: its initial states by least squares, its errors' covariance (``own``:
+    # the model's noise_cov where the noise model computed it so, on the whole record)
     try:
         x0 = _predictor_initial_states(model, K0, data, radius)
     except SubidError:                      # the start's prediction diverges
         return model
-    sigma0 = np.array(model.noise_cov, dtype=float) \
-        if model.info.get("noise_cov_estimate") == FROM_PREDICTION_ERRORS \
-        and model.noise_cov is not None and data is whole else \
+    own = np.array(model.noise_cov, dtype=float) if model.noise_cov is not None and \
+        model.info.get("noise_cov_estimate") == FROM_PREDICTION_ERRORS else None
+    sigma0 = own if own is not None and data is whole else \
         prediction_error_covariance(model, K0, data, radius)
     if sigma0 is None or float(np.trace(sigma0)) <= NOISE_FREE * max(
             float(np.sum(data.y ** 2)) / N, 1e-300):
@@ -192,16 +192,15 @@ def refine_gain(data, model, *, precision: float = GAIN_PRECISION,
     # (initial states by least squares at the gain; the iteration's own stop at its
     # precision)
     reached = gain(z[:dm])
-    measured = prediction_error_covariance(model, reached, whole, _radius(A - reached @ C)) \
+    reached_radius = _radius(A - reached @ C)
+    measured = prediction_error_covariance(model, reached, whole, reached_radius) \
         if res.cost < start_cost and np.any(z[:dm]) else None
     if measured is not None:
-        K, sigma, radius = reached, measured, _radius(A - reached @ C)
+        K, sigma, radius = reached, measured, reached_radius
         record["final_cost"] = float(res.cost)
     else:
         K = K0
-        sigma = sigma0 if data is whole else \
-            np.array(model.noise_cov, dtype=float) \
-            if model.info.get("noise_cov_estimate") == FROM_PREDICTION_ERRORS else \
+        sigma = own if own is not None else sigma0 if data is whole else \
             prediction_error_covariance(model, K0, whole, radius)
         if sigma is None:                    # the start's errors diverge on the record
             return model
@@ -213,4 +212,4 @@ def refine_gain(data, model, *, precision: float = GAIN_PRECISION,
     info["noise_model"] = DESCRIPTION
     info["noise_cov_estimate"] = FROM_PREDICTION_ERRORS
     info["gain_refinement"] = record
-    return model.with_noise_model(K, 0.5 * (sigma + sigma.T), info=info)
+    return model.with_noise_model(K, sigma, info=info)
