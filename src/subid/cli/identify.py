@@ -468,13 +468,14 @@ def _print_summary(source, record, spec, model, result, est, val, seconds, files
                      f"{model.info['start_cost']:.4g} -> {model.info['final_cost']:.4g}; "
                      f"{model.info['stop_reason']}")
     if model.noise_cov is not None:
-        riccati = str(model.info.get("noise_cov_estimate", "")).startswith("C P C^T")
+        from subid.methods.dt.noise_model import FROM_RICCATI
+        note = ""
+        if model.K is not None:
+            note = " (innovations, with Kalman gain K" + (
+                "; from the Riccati equation, no samples at hand"
+                if model.info.get("noise_cov_estimate") == FROM_RICCATI else "") + ")"
         lines.append("noise cov   " + "; ".join(
-            " ".join(f"{v:.4g}" for v in row) for row in model.noise_cov)
-                     + (" (innovations, with Kalman gain K" if model.K is not None else "")
-                     + ("; from the Riccati equation, no samples at hand" if riccati
-                        and model.K is not None else "")
-                     + (")" if model.K is not None else ""))
+            " ".join(f"{v:.4g}" for v in row) for row in model.noise_cov) + note)
     lines += [
               f"time        {seconds:.2f} s",
               f"wrote       {', '.join(files)}"]
