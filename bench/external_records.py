@@ -5,7 +5,8 @@ means removed, last 1/3 to validate, or a given estimation/validation pair; simu
 fit with x0 by least squares; SIPPY's and least-squares ARX's best orders on the
 validation data as oracles), on files given on the command line: a whitespace-separated
 table (DaISy's ``.dat``) or a CSV, with the columns of the inputs and outputs named
-(0-based column numbers for ``.dat``, header names for CSV)::
+(0-based column numbers for a file without a header, names otherwise), read by
+``subid.read``::
 
     python bench/external_records.py heating_system.dat --inputs 1 --outputs 2 --dt 2
     python bench/external_records.py dataBenchmark.csv --inputs uEst --outputs yEst \\
@@ -19,41 +20,30 @@ measured there come from).
 from __future__ import annotations
 
 import argparse
-import csv
 import warnings
-
-import numpy as np
 
 import subid
 from realdata import arx_grid, subid_defaults
 
 
-def _columns(path, names):
-    if path.endswith(".csv"):
-        with open(path, newline="", encoding="utf-8") as fh:
-            rows = list(csv.reader(fh))
-        header = [h.strip() for h in rows[0]]
-        index = [header.index(n) for n in names]
-        body = [r for r in rows[1:] if len(r) > max(index) and all(r[i].strip() for i in index)]
-        return np.array([[float(r[i]) for i in index] for r in body])
-    table = np.loadtxt(path)
-    return table[:, [int(n) for n in names]]
+def _names(values):
+    """Column names, or 0-based column numbers for a file without a header."""
+    return [int(v) if v.isdigit() else v for v in values]
 
 
 def records(args):
-    u = _columns(args.file, args.inputs)
-    y = _columns(args.file, args.outputs)
+    """The estimation and validation records (``subid.read``), estimation means removed."""
+    est = subid.read(args.file, inputs=_names(args.inputs), outputs=_names(args.outputs),
+                     dt=args.dt)
     if args.validation_inputs:
-        u_val = _columns(args.file, args.validation_inputs)
-        y_val = _columns(args.file, args.validation_outputs)
-        cut = None
+        val = subid.read(args.file, inputs=_names(args.validation_inputs),
+                         outputs=_names(args.validation_outputs), dt=args.dt)
     else:
-        cut = (2 * len(u)) // 3
-        u, u_val, y, y_val = u[:cut], u[cut:], y[:cut], y[cut:]
-    mu, my = u.mean(axis=0), y.mean(axis=0)
-    est = subid.IOData(u - mu, y - my, dt=args.dt)
-    val = subid.IOData(u_val - mu, y_val - my, dt=args.dt)
-    return est, val
+        cut = (2 * est.n_samples) // 3
+        est, val = est[:cut], est[cut:]
+    mu, my = est.u.mean(axis=0), est.y.mean(axis=0)
+    return (subid.IOData(est.u - mu, est.y - my, dt=args.dt),
+            subid.IOData(val.u - mu, val.y - my, dt=args.dt))
 
 
 def main(argv=None) -> int:
