@@ -243,7 +243,8 @@ class RecursiveSubspace(OnlineIdentifier):
     """
 
     # 2: the recursive B, D regression; 3: lagged statistics (forgetting 1); 4: bd_method
-    # 'regression' named 'simulation' (the vocabulary of subid.methods.bd)
+    # 'regression' named 'simulation' (the vocabulary of subid.methods.bd); 5: the window
+    # of the last samples (noise_cov of the current model, subid.methods.online._window)
     _VERSION = 5
     _READS = (2, 3, 4, 5)
 
