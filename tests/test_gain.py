@@ -10,12 +10,10 @@ from subid import systems
 from subid.methods.dt.gain import GAIN_PRECISION, refine_gain
 
 
-def _cost(model, K, data):
-    """The unweighted one-step prediction-error power at gain K, x0 by least squares
-    (subid.predict): an independent computation of the criterion."""
-    m = model.with_noise_model(K, None)
-    e = data.y - subid.predict(m, data, 1)
-    return e
+def _errors(model, K, data):
+    """The one-step prediction errors at gain K, x0 by least squares (subid.predict):
+    an independent computation of the criterion's residuals."""
+    return data.y - subid.predict(model.with_noise_model(K, None), data, 1)
 
 
 def test_refined_gain_is_a_minimum_of_the_prediction_error():
@@ -31,7 +29,7 @@ def test_refined_gain_is_a_minimum_of_the_prediction_error():
     W = np.linalg.inv(np.linalg.cholesky(got.noise_cov))
 
     def residuals(k):
-        return (_cost(start, k.reshape(true.K.shape), data) @ W.T).ravel()
+        return (_errors(start, k.reshape(true.K.shape), data) @ W.T).ravel()
 
     at = 0.5 * np.sum(residuals(got.K.ravel()) ** 2)
     best = scipy.optimize.least_squares(residuals, got.K.ravel(), x_scale="jac")
