@@ -30,8 +30,14 @@ at :data:`GAIN_PRECISION` of the criterion's statistical scale. On a record long
 100,000 samples (``info['gain_refinement']['samples']``; the part the order selection
 and the fold refinements use: a gain has ``n ny`` entries, and a Jacobian of 10^6
 samples cost 0.5 s for an order-4 2x2 model, 1.4 s for the step, as much as the rest of
-``subid.identify``). ``noise_cov`` is then the sample covariance of the errors at the
-gain reached, over the whole record
+``subid.identify``). Closed loop: with A, B, C, D fixed, the prediction errors are a
+filter of ``y - G(q) u = H(q) e`` alone, which does not depend on how the input was
+generated, so the step behaves alike in open and closed loop (the consistency Monte
+Carlo of ``tests/test_gain.py`` run under the feedback ``u = r + 0.5 y`` of issue 21
+gave the same gain errors to 1e-15); the consistency of the deterministic part in
+closed loop is the subspace start's and the refinement's (:mod:`subid.methods.identify`).
+``noise_cov`` is then the sample covariance of the errors at the gain reached, over the
+whole record
 (:func:`subid.methods.dt.noise_model.prediction_error_covariance`). Cost (2x2, order 4,
 20 dB): one Jacobian and one prediction where the state-sequence gain is already at
 that precision (10^5 samples: about 0.08 s; ``identify`` 0.99 against 0.94 CPU s
