@@ -54,6 +54,29 @@ def test_tv_kernel_matches_reference(use_g1):
     assert np.array_equal(y, y2) != use_g1
 
 
+@pytest.mark.parametrize("N", [0, 1, 2, 300])
+def test_lti_kernel_matches_reference_and_table_kernel(N):
+    """The discrete LTI kernel: the reference recursion to rounding, and the
+    time-varying kernel with a one-entry table to the bit (the same sums in the
+    same order)."""
+    rng = np.random.default_rng(N + 7)
+    A, B, C, D = random_system(N + 1, n=5, m=3, p=2)
+    u = rng.standard_normal((N, 3))
+    x0 = rng.standard_normal(5)
+    A, B, C, D, u, x0 = map(frozen, (A, B, C, D, u, x0))      # as the library passes them
+    y, x = _simulate.lti_loop(A, B, C, D, u, x0)
+    assert y.shape == (N, 2) and x.shape == (N, 5)
+    table = (frozen(A[None]), frozen(B[None]), frozen(np.zeros((1, 5, 3))),
+             frozen(np.zeros(max(N - 1, 0)), np.int64), C, D, u, x0, False)
+    y_ref, x_ref = _simulate.tv_loop_ref(*table)
+    y_tv, x_tv = _simulate.tv_loop(*table)
+    if N:
+        assert rel_err(y, y_ref) < 1e-12 and rel_err(x, x_ref) < 1e-12
+        np.testing.assert_array_equal(x[0], x0)
+    np.testing.assert_array_equal(y, y_tv)
+    np.testing.assert_array_equal(x, x_tv)
+
+
 def test_expm_blocks_closed_forms():
     A, B, _, _ = random_system(4, continuous=True)
     steps = np.array([0.05, 0.3, 1.1])

@@ -168,9 +168,9 @@ def kernels_cached() -> bool:
     try:
         from subid.methods.dt._lag_kernel import normal_matrix
         from subid.model._sensitivity import _recursion_t
-        from subid.model._simulate import tv_loop
+        from subid.model._simulate import lti_loop
         # numba's own record of where each dispatcher's cache index lives
-        kernels: tuple = (tv_loop, normal_matrix, _recursion_t)
+        kernels: tuple = (lti_loop, normal_matrix, _recursion_t)
         return all(os.path.exists(kernel._cache._cache_file._index_path) for kernel in kernels)
     except Exception:  # noqa: BLE001 - another numba version: say nothing
         return True
