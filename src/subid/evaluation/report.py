@@ -130,9 +130,12 @@ def figure_html(fig, caption: str = "", *, dpi: int | None = None, alt: str = ""
 
 
 def _plot_or_note(make, caption: str, what: str) -> str:
-    """Figure from ``make()``, or a note saying why it could not be drawn."""
+    """Figure from ``make()``, or a note saying why it could not be drawn. The figure's
+    axes make no tick objects before they are drawn (:mod:`.figures._light_axes`)."""
+    from subid.evaluation.figures._light_axes import report_axes
     try:
-        fig = make()
+        with report_axes():
+            fig = make()
     except ImportError as exc:
         log.warning("%s not drawn: %s", what, exc)
         return f'<p class="note">{_e(what)} not drawn: {_e(exc)}</p>'

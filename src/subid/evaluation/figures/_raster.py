@@ -25,6 +25,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from subid.evaluation.figures._light_axes import rectilinear
+
 __all__ = ["raster_envelopes", "tag_envelope"]
 
 #: Name of the attribute that marks a band of ``_draw_trace`` and holds what it draws.
@@ -58,7 +60,7 @@ def raster_envelopes(fig) -> int:
     for ax in fig.axes:
         tagged = [c for c in ax.collections if getattr(c, _TAG, None) is not None
                   and c.get_visible()]
-        if not tagged or ax.name != "rectilinear" or ax.get_xscale() != "linear" \
+        if not tagged or not rectilinear(ax) or ax.get_xscale() != "linear" \
                 or ax.get_yscale() != "linear" or ax.xaxis_inverted() or ax.yaxis_inverted():
             continue                      # drawn by Agg: the columns assume increasing axes
         ax.get_xlim(), ax.get_ylim()       # the limits now, with the bands' data

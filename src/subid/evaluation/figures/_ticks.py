@@ -42,17 +42,19 @@ def light_ticks(fig, renderer) -> int:
     int
         The number of axes (x or y) replaced.
     """
+    from subid.evaluation.figures._light_axes import rectilinear as is_rectilinear
     plans, kept = [], set()
     for ax in fig.axes:
         fixed = ax.get_aspect() != "auto" and ax.get_axes_locator() is None
-        if fixed and ax.name == "rectilinear" and ax.get_visible():
+        rectilinear = is_rectilinear(ax)
+        if fixed and rectilinear and ax.get_visible():
             # the box (or the limits) a fixed aspect ratio gives at draw time, now: the
             # draw applies it again to the same effect, and the ticks are those of the
             # final limits and length
             ax.apply_aspect()
         for axis in (ax.xaxis, ax.yaxis):
             plan = None
-            if ax.name == "rectilinear" and (ax.get_aspect() == "auto" or fixed) \
+            if rectilinear and (ax.get_aspect() == "auto" or fixed) \
                     and ax.get_visible() and axis.get_visible():
                 plan = _plan(ax, axis)
             if plan is None:
@@ -66,6 +68,8 @@ def light_ticks(fig, renderer) -> int:
     for ax, axis, artists in plans:
         axis.set_major_locator(NullLocator())
         axis.set_minor_locator(NullLocator())
+        # no ticks left to draw, none to make: the draw asks for none
+        axis.majorTicks, axis.minorTicks = [], []
         for artist in artists:
             if artist.get_label() == "_light_grid":         # clipped to the axes
                 ax.add_artist(artist)
@@ -95,19 +99,18 @@ def _plan(ax, axis):
     from matplotlib.lines import Line2D
     from matplotlib.text import Text
     from matplotlib.ticker import NullLocator
+
+    from subid.evaluation.figures._light_axes import tick_style
     x = axis.axis_name == "x"
     if axis.get_label_position() != ("bottom" if x else "left"):
         return None
-    major = axis.majorTicks[0]
     zorder = axis.get_zorder()
-    if major.tick2line.get_visible() or major.label2.get_visible():
-        return None
     artists = []
-    groups = [(axis.major.formatter, major, True)]
+    groups = [(axis.major.formatter, tick_style(ax, axis, True), True)]
     if not isinstance(axis.get_minor_locator(), NullLocator):
-        groups.append((axis.minor.formatter, axis.minorTicks[0], False))
+        groups.append((axis.minor.formatter, tick_style(ax, axis, False), False))
     for formatter, tick, is_major in groups:
-        if tick.tick2line.get_visible() or tick.label2.get_visible():
+        if tick["tick2"] or tick["label2"]:
             return None
         locs = np.asarray(axis.get_majorticklocs() if is_major else axis.get_minorticklocs(),
                           dtype=float)
@@ -116,38 +119,36 @@ def _plan(ax, axis):
             return None
         keep = _in_view(axis, locs) if len(locs) else np.zeros(0, bool)
         locs, labels = locs[keep], [s for s, k in zip(labels, keep) if k]
-        if not is_major and tick.label1.get_visible() and any(labels):
+        if not is_major and tick["label"] and any(labels):
             return None
         if not len(locs):
             continue
         zeros = np.zeros(locs.size)
         frame = ax.get_xaxis_transform() if x else ax.get_yaxis_transform()
         points = (locs, zeros) if x else (zeros, locs)
-        grid = tick.gridline
-        if grid.get_visible():
+        if tick["grid"]:
             ends = ([[(v, 0.0), (v, 1.0)] for v in locs] if x else
                     [[(0.0, v), (1.0, v)] for v in locs])
             artists.append(LineCollection(
-                ends, colors=[grid.get_color()], linewidths=grid.get_linewidth(),
-                linestyles=grid.get_linestyle(), alpha=grid.get_alpha(), transform=frame,
+                ends, colors=[tick["grid_color"]], linewidths=tick["grid_linewidth"],
+                linestyles=tick["grid_linestyle"], alpha=tick["grid_alpha"], transform=frame,
                 zorder=zorder, label="_light_grid"))
-        mark = tick.tick1line
-        if mark.get_visible():
+        if tick["mark"]:
             artists.append(Line2D(
-                *points, linestyle="None", marker=mark.get_marker(),
-                markersize=mark.get_markersize(), markeredgewidth=mark.get_markeredgewidth(),
-                color=mark.get_color(), markeredgecolor=mark.get_markeredgecolor(),
+                *points, linestyle="None", marker=tick["marker"],
+                markersize=tick["markersize"], markeredgewidth=tick["markeredgewidth"],
+                color=tick["color"], markeredgecolor=tick["markeredgecolor"],
                 transform=frame, zorder=zorder, label="_light_mark"))
-        text = tick.label1
-        if text.get_visible():
+        if tick["label"]:
+            # where the tick puts its label: the axes' text transform at the tick's pad
+            place = (ax.get_xaxis_text1_transform if x else ax.get_yaxis_text1_transform)
+            transform = place(tick["pad"])[0]
             for px, py, s in zip(*points, labels):
                 if s:
                     artists.append(Text(
-                        px, py, s, fontproperties=text.get_fontproperties(),
-                        color=text.get_color(), rotation=text.get_rotation(),
-                        horizontalalignment=text.get_horizontalalignment(),
-                        verticalalignment=text.get_verticalalignment(),
-                        transform=text.get_transform(), zorder=zorder,
+                        px, py, s, fontproperties=tick["font"], color=tick["label_color"],
+                        rotation=tick["rotation"], horizontalalignment=tick["ha"],
+                        verticalalignment=tick["va"], transform=transform, zorder=zorder,
                         label="_light_label"))
     return ax, axis, artists
 

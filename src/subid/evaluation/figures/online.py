@@ -6,6 +6,7 @@ import numpy as np
 
 from subid.errors import DataError
 from subid.evaluation.figures._common import _layout, _legend_beside, _legend_room, _pyplot, _styled
+from subid.evaluation.figures._light_axes import subplot_kw
 
 
 @_styled
@@ -54,7 +55,7 @@ def convergence(history, *, reference=None, title=None, max_parameters: int = 12
         [str(n) for n in (names or [])[:shown]]
     room = _legend_room(legend_texts)
     fig, axes = plt.subplots(rows, 1, figsize=(9 + room, 2.2 * rows + 0.6), sharex=True,
-                             squeeze=False)
+                             squeeze=False, subplot_kw=subplot_kw())
     axes = axes[:, 0]
     if sample.size == 0:
         axes[0].text(0.5, 0.5, "no snapshot recorded", ha="center", va="center",

@@ -18,6 +18,7 @@ from subid.evaluation.figures._common import (
     _styled,
     colors_for,
 )
+from subid.evaluation.figures._light_axes import subplot_kw
 
 _PROFILE_KEYS = (("singular_values", "singular value"),
                  ("rank_profile", "rank profile (Cholesky pivot)"))
@@ -69,7 +70,7 @@ def order_selection(models, *, labels=None, title=None):
         texts.append(f"{label}: order {n} (gap ×{gap:.3g})" if math.isfinite(gap)
                      else f"{label}: order {n}")
     room = _legend_room(texts)
-    fig, ax = plt.subplots(figsize=(6.5 + room, 3.6))
+    fig, ax = plt.subplots(figsize=(6.5 + room, 3.6), subplot_kw=subplot_kw())
     colors = colors_for((label, m) for label, (_, _, m) in profiles.items())
     kinds = set()
     for (_label, (v, what, m)), color, text in zip(profiles.items(), colors, texts):
@@ -135,7 +136,7 @@ def order_scores(models, *, labels=None, title=None):
                         "(info['order_selection'] with rule 'cv' or 'gap'): their order was "
                         "given")
     fig, axes = plt.subplots(len(rows), 1, figsize=(6.5, 2.4 * len(rows) + 0.6),
-                             squeeze=False)
+                             squeeze=False, subplot_kw=subplot_kw())
     for (label, m), ax in zip(rows, axes[:, 0]):
         record = m.info["order_selection"]
         candidates = record.get("candidates", [])

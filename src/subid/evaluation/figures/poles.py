@@ -11,6 +11,7 @@ from subid.evaluation.figures._common import (
     _styled,
     colors_for,
 )
+from subid.evaluation.figures._light_axes import subplot_kw
 
 
 @_styled
@@ -63,7 +64,7 @@ def poles(models, reference=None, *, labels=None, ax=None, title=None, markersiz
     legend_labels = list(groups) + (["true"] if reference is not None else [])
     room = _legend_room(legend_labels)
     if ax is None and len(kinds) == 2:
-        fig, axes = plt.subplots(1, 2, figsize=(10.5 + room, 5))
+        fig, axes = plt.subplots(1, 2, figsize=(10.5 + room, 5), subplot_kw=subplot_kw())
         for sub, discrete in zip(axes, (True, False)):
             part = {k: [m for m in g if (m.dt > 0) == discrete] for k, g in groups.items()}
             ref = reference if reference is not None and (reference.dt > 0) == discrete \
@@ -87,7 +88,7 @@ def poles(models, reference=None, *, labels=None, ax=None, title=None, markersiz
         return fig
     own = ax is None
     fig = ax.figure if ax is not None else plt.figure(figsize=(5.0 + room, 5))
-    ax = ax if ax is not None else fig.add_subplot(111)
+    ax = ax if ax is not None else fig.add_subplot(111, **subplot_kw())
     discrete = True if not kinds else kinds.pop()
     _pole_axes(ax, groups, reference, discrete, markersize, marker, alpha, colors,
                legend=not own)
@@ -141,7 +142,8 @@ def error_histograms(errors: dict, *, bins=40, xlabel="relative error", title=No
     """
     plt = _pyplot()
     k = len(errors)
-    fig, axes = plt.subplots(k, 1, figsize=(8, 1.9 * k + 0.6), sharex=True, squeeze=False)
+    fig, axes = plt.subplots(k, 1, figsize=(8, 1.9 * k + 0.6), sharex=True, squeeze=False,
+                             subplot_kw=subplot_kw())
     all_vals = np.concatenate([np.asarray(v, float) for v in errors.values()])
     lo, hi = all_vals.min(), all_vals.max()
     edges = np.logspace(np.log10(max(lo, 1e-300)), np.log10(max(hi, lo * 1.01)) + 1e-9, bins)

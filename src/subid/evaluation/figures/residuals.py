@@ -20,6 +20,7 @@ from subid.evaluation.figures._common import (
     log,
     simulated_output,
 )
+from subid.evaluation.figures._light_axes import subplot_kw
 
 
 def residual_correlations(model, data, *, max_lag: int = 25, confidence: float = 0.99,
@@ -148,7 +149,7 @@ def residuals(model, data, *, max_lag: int = 25, confidence: float = 0.99, x0="e
     room = _legend_room(list(results) + [f"{pct} band"])
     fig, axes = plt.subplots(ny, cols, figsize=(min(3.3 * cols + 0.6, 16) + room,
                                                 2.0 * ny + 1.0),
-                             squeeze=False)
+                             squeeze=False, subplot_kw=subplot_kw())
     single = len(results) == 1
     offsets = np.linspace(-0.2, 0.2, len(results)) if not single else [0.0]
     colors = colors_for((label, groups[label]) for label in results)

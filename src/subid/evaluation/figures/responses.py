@@ -21,6 +21,7 @@ from subid.evaluation.figures._common import (
     is_unstable,
     log,
 )
+from subid.evaluation.figures._light_axes import subplot_kw
 
 
 def frequency_grid(models, n_points: int = 400) -> np.ndarray:
@@ -142,7 +143,7 @@ def bode(model_or_models=None, w=None, *, data=None, hz=False, labels=None, phas
     room = _legend_room(shown + (["data"] if data is not None else []))
     fig, axes = plt.subplots(rows, nu, figsize=(min(3.8 * nu + 1.2, 16) + room,
                                                 1.9 * rows + 0.8),
-                             sharex=True, squeeze=False)
+                             sharex=True, squeeze=False, subplot_kw=subplot_kw())
     # one log scale for the shared frequency axis: semilogx on every panel would set it
     # again on all the shared axes each time (quadratic in the panels: 5 s of a 5x3 grid)
     axes[0, 0].set_xscale("log")
@@ -321,7 +322,7 @@ def step(model_or_models, t=None, *, labels=None, confidence=None, title=None):
     colors = colors_for(groups.items())
     room = _legend_room(list(groups))
     fig, axes = plt.subplots(ny, nu, figsize=(min(3.8 * nu + 1.2, 16) + room, 2.2 * ny + 0.8),
-                             sharex=True, squeeze=False)
+                             sharex=True, squeeze=False, subplot_kw=subplot_kw())
     with _autoscale_once(axes):      # the limits once, after the plotting calls
         for k, (label, m) in enumerate(groups.items()):
             if confidence is not None and _has_covariance(m):

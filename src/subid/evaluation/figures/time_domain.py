@@ -26,6 +26,7 @@ from subid.evaluation.figures._common import (
     predicted_output,
     simulated_output,
 )
+from subid.evaluation.figures._light_axes import subplot_kw
 
 
 @_styled
@@ -101,7 +102,7 @@ def compare_outputs(data, models, outputs, *, title=None, clip=True):
              for i in range(ny)]
     room = _legend_room(texts + ["measured"])
     fig, axes = plt.subplots(ny, 1, figsize=(9 + room, 2.3 * ny + 0.7), sharex=True,
-                             squeeze=False)
+                             squeeze=False, subplot_kw=subplot_kw())
     t = _times(data)      # the stamps the bands draw, not all of them
     # the measured output is drawn on top (zorder), thin and black; the models under
     # it, wider and lighter, so that both stay visible where they agree (a long
@@ -162,7 +163,7 @@ def data_overview(data, *, split=None, title=None):
     channels += [(f"output\n{n}", data.y[:, k], "k") for k, n in enumerate(data.output_names)]
     rows = len(channels)
     fig, axes = plt.subplots(rows, 1, figsize=(9, 1.25 * rows + 0.9), sharex=True,
-                             squeeze=False)
+                             squeeze=False, subplot_kw=subplot_kw())
     t = _times(data)      # the stamps the bands draw, not all of them
     with _autoscale_once(axes):      # the limits once, after the plotting calls
         for ax, (name, values, color) in zip(axes[:, 0], channels):
