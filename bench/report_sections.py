@@ -46,9 +46,12 @@ def main(argv=None):
     draw = report.figure_html
     spa = report._spa_estimate
 
+    from subid.evaluation.figures._light_axes import report_axes
+
     def timed_figure(make, caption, what):
         t0 = time.process_time()
-        fig = make()
+        with report_axes():               # the report's axes, as report._plot_or_note
+            fig = make()
         t1 = time.process_time()
         out = draw(fig, caption, dpi=report.REPORT_DPI)
         parts[what].append((t1 - t0, time.process_time() - t1))
