@@ -22,14 +22,16 @@ import numpy as np
 from subid.errors import SubidError
 
 __all__ = ["HORIZON_CANDIDATES", "MAX_ORDER", "ABSOLUTE_TOLERANCE", "FLOOR",
-           "MAX_SELECTION_SAMPLES", "SELECTION_RULES", "AUTO_ORDER_RULE", "folds",
-           "experiment_folds", "feasible_horizons", "fold_score", "criterion", "select"]
+           "MAX_SELECTION_SAMPLES", "MEMORY", "MAX_HORIZON", "SELECTION_RULES",
+           "AUTO_ORDER_RULE", "folds", "experiment_folds", "feasible_horizons",
+           "output_memory", "longer_horizon", "next_block", "SAMPLES_PER_PARAMETER",
+           "fold_score", "criterion", "select"]
 
 #: Horizons tried when none is given (kept when the data allow them).
 HORIZON_CANDIDATES = (10, 20)
 #: Largest order of the first block of candidates (1..MAX_ORDER) when the order is to be
 #: chosen; the search goes on past it while the criterion improves
-#: (:func:`subid.methods.dt.selection.next_block`).
+#: (:func:`next_block`).
 MAX_ORDER = 10
 #: Misfit (fit points) below which candidates are equal (rounding level, noise-free data).
 ABSOLUTE_TOLERANCE = 1e-6
@@ -37,6 +39,16 @@ ABSOLUTE_TOLERANCE = 1e-6
 FLOOR = -100.0
 #: Samples above which the cross-validation uses only the last part of the record.
 MAX_SELECTION_SAMPLES = 100_000
+#: Past :data:`HORIZON_CANDIDATES`, twice the largest horizon searched is tried while the
+#: outputs' autocorrelation beyond it (:func:`output_memory`) is at least this (the
+#: horizon spans less than the record remembers: oversampled records) and the last
+#: horizon so tried is the chosen one (:func:`longer_horizon`).
+MEMORY = 0.5
+#: Largest horizon the search goes on to (:func:`longer_horizon`).
+MAX_HORIZON = 160
+#: An order is tried only when the training fold holds at least this many output samples
+#: per free parameter of the model (n (nu + ny) + nu ny).
+SAMPLES_PER_PARAMETER = 10
 SELECTION_RULES = ("cv", "gap")
 #: What ``order=None`` (``--order auto``) does, in one phrase made from the constants
 #: above: the command line's help quotes it, and ``tests/test_docs_agree.py`` checks
@@ -47,7 +59,10 @@ AUTO_ORDER_RULE = (f"orders 1..{MAX_ORDER} and horizons "
                    "least cross-validated BIC wins (a higher order where the innovation "
                    "BIC asks for it and its fold score is no lower), and the search goes "
                    "on past order "
-                   f"{MAX_ORDER} while the best is among the last orders tried")
+                   f"{MAX_ORDER} while the best is among the last orders tried, and past "
+                   f"horizon {max(HORIZON_CANDIDATES)}, doubling it while the outputs stay "
+                   "correlated beyond the largest horizon tried and the last doubled one "
+                   "is chosen")
 
 
 def experiment_folds(data):
@@ -107,6 +122,80 @@ def feasible_horizons(n_train: int, n_inputs: int, n_outputs: int, blocks: int,
     while f > 2 and cols(f) < rows(f):
         f -= 1
     return [f]
+
+
+def output_memory(data, lag: int) -> float:
+    """How strongly the outputs of ``data`` remember ``lag`` samples back: per output,
+    the largest ``|ρ(τ)|`` over ``τ = lag .. 2 lag - 1`` (``ρ`` the autocorrelation of
+    the output less its mean, summed within each experiment; the largest over a range
+    of lags, so that an oscillation is judged by its envelope, not by a zero crossing),
+    then the mean over the outputs. Near 1 when a horizon of ``lag`` samples spans a
+    small part of the outputs' correlation time (an oversampled record), near 0 when
+    the outputs forget within it (white noise: ``|ρ| ~ 1/sqrt(N)``)."""
+    y = data.y - data.y.mean(axis=0)
+    power = np.zeros(y.shape[1])
+    lagged = np.zeros((lag, y.shape[1]))
+    for a, b in data.experiment_ranges:
+        piece = y[a:b]
+        power += np.einsum("ti,ti->i", piece, piece)
+        for k, tau in enumerate(range(lag, 2 * lag)):
+            if tau < b - a:
+                lagged[k] += np.einsum("ti,ti->i", piece[tau:], piece[:-tau])
+    rho = np.abs(lagged) / np.where(power > 0, power, 1.0)
+    return float(np.mean(rho.max(axis=0)))
+
+
+def longer_horizon(data, chosen: int, largest: int, n_train: int, n_inputs: int,
+                   n_outputs: int, blocks: int, n_experiments: int = 1):
+    """The next horizon of the search, or None: twice the ``largest`` searched, when the
+    outputs of ``data`` remember beyond it (:func:`output_memory` at least
+    :data:`MEMORY`), the last horizon tried past :data:`HORIZON_CANDIDATES` (if any) is
+    the ``chosen`` one, it is at most :data:`MAX_HORIZON` and the training folds support
+    it (:func:`feasible_horizons`). The first step does not ask the largest candidate to
+    win: on an oversampled record the fit need not grow with the horizon until the
+    horizon spans the dynamics (10 may beat 20, and 160 both by 30 points)."""
+    f = 2 * largest
+    if (largest > max(HORIZON_CANDIDATES) and chosen != largest) or f > MAX_HORIZON \
+            or output_memory(data, largest) < MEMORY:
+        return None
+    rows = blocks * f * (n_inputs + n_outputs)
+    cols = n_train - n_experiments * (blocks * f - 1)
+    return f if cols >= 2 * rows else None
+
+
+def next_block(top, n_train, n_inputs, n_outputs, blocks, n_experiments, horizon=None):
+    """The next block of candidate orders past ``top``, its horizons and the ceiling.
+
+    Orders ``top + step .. 2 top`` in steps of ``step = max(1, top // MAX_ORDER)``
+    (11..20, then 22..40 by 2, 44..80 by 4: ten candidates a block), each
+    within what the data can reveal: a horizon among (10, 20, and the
+    smallest multiple of 10 above ``ceil(n / n_outputs) + 1``) whose
+    training-fold Hankel matrix has at least twice as many columns as rows
+    and that reveals the order (``(f - 1) n_outputs >= n``), or the given
+    horizon; and at least :data:`SAMPLES_PER_PARAMETER` output samples per
+    free parameter. Returns ``(orders, horizons, ceiling)``; no orders when
+    the ceiling is reached.
+    """
+    step = max(1, top // MAX_ORDER)
+    orders = list(range(top + step, 2 * top + 1, step))
+    params = lambda n: n * (n_inputs + n_outputs) + n_inputs * n_outputs   # noqa: E731
+    by_samples = [n for n in orders if SAMPLES_PER_PARAMETER * params(n) <= n_train * n_outputs]
+    rows = lambda f: blocks * f * (n_inputs + n_outputs)   # noqa: E731
+    cols = lambda f: n_train - n_experiments * (blocks * f - 1)   # noqa: E731
+    if horizon is not None:
+        horizons = [horizon]
+    else:
+        need = math.ceil(max(orders) / n_outputs) + 1
+        tried = sorted(set(HORIZON_CANDIDATES) | {10 * math.ceil(need / 10)})
+        horizons = [f for f in tried if cols(f) >= 2 * rows(f)
+                    and (f - 1) * n_outputs >= orders[0]]
+    revealable = max(((f - 1) * n_outputs for f in horizons), default=0)
+    kept = [n for n in by_samples if n <= revealable]
+    ceiling = {"order": max(kept) if kept else top,
+               "limited_by": ("samples per parameter" if len(by_samples) < len(orders)
+                              else "horizons the data allow" if len(kept) < len(orders)
+                              else None)}
+    return kept, horizons, ceiling
 
 
 def fold_score(model, validation, steps=np.inf) -> float:

@@ -51,7 +51,7 @@ class Plan:
 
     ``order`` and ``candidates`` are the order given (or None) and the candidate
     orders given (None: ``1..MAX_ORDER``, extended by the cross-validation while
-    the criterion improves, :func:`subid.methods.dt.selection.next_block`);
+    the criterion improves, :func:`subid.methods.crossval.next_block`);
     ``horizon`` the horizon given (None: chosen, by the cross-validation among
     ``HORIZON_CANDIDATES`` or, for the gap rule, the smallest feasible one).
     ``estimators`` are the estimators of the system matrices the method may use,
