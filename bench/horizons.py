@@ -59,7 +59,7 @@ def main(argv=None):
     today = crossval.MAX_HORIZON
     for dt in (0.1, 0.02, 0.005):
         est, val = record(dt)
-        memory = crossval.output_memory(est, 20)
+        memory = crossval.response_memory(est, 20)
         for method in METHODS:
             crossval.MAX_HORIZON = 20                  # the search of before
             before = run(method, est, val)

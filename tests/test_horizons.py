@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import scipy.signal
 
 import subid
 from subid.methods import crossval
@@ -22,31 +23,36 @@ def _oversampled(dt=0.02, n_samples=20_000, seed=1):
     return subid.IOData(u, y, dt=dt).split(0.7)
 
 
-def test_output_memory_tells_white_from_slow_and_oscillating_outputs():
+def _low_pass(x, pole):
+    return scipy.signal.lfilter([1.0], [1.0, -pole], x)
+
+
+def test_response_memory_measures_the_response_not_the_noise():
     rng = np.random.default_rng(0)
     N = 5000
-    white = subid.IOData(rng.standard_normal((N, 1)), rng.standard_normal((N, 2)))
-    assert crossval.output_memory(white, 20) < 0.1          # |rho| ~ 1/sqrt(N)
-    e = rng.standard_normal(N)
-    slow = np.zeros(N)
-    for t in range(1, N):                                     # AR(1), pole 0.995
-        slow[t] = 0.995 * slow[t - 1] + e[t]
-    assert crossval.output_memory(subid.IOData(e, slow), 20) > 0.8
-    # a lightly damped oscillation of period 40 crosses zero at lags 30, 50, ...: judged
-    # by its envelope over lags 20..39 (|rho(20)| = 1 at the half period)
-    t = np.arange(N)
-    ring = np.cos(2 * np.pi * t / 40) + 0.05 * rng.standard_normal(N)
-    assert crossval.output_memory(subid.IOData(e, ring), 10) > 0.9
-    # several experiments: no product across the border (the same as each alone)
-    one = subid.IOData(e[:2500], slow[:2500])
-    assert crossval.output_memory(subid.merge([one, one]), 20) == \
-        pytest.approx(crossval.output_memory(one, 20), rel=1e-12)
+    u = rng.standard_normal(N)
+    fast = np.convolve(u, [1.0, 0.5, 0.25], mode="full")[:N] + 0.1 * rng.standard_normal(N)
+    assert crossval.response_memory(subid.IOData(u, fast), 20) < 0.15   # over in 3 samples
+    slow = _low_pass(u, 0.995)                     # a time constant of 200 samples
+    assert crossval.response_memory(subid.IOData(u, slow), 20) > 0.8
+    # coloured output noise remembers, but not the response to the input
+    coloured = fast + 5.0 * _low_pass(rng.standard_normal(N), 0.995) / 10.0
+    assert crossval.response_memory(subid.IOData(u, coloured), 20) < 0.5
+    # several experiments: the lagged products summed within each, none across the border
+    first, second = subid.IOData(u[:2500], slow[:2500]), subid.IOData(u[2500:], fast[2500:])
+    both = subid.merge([first, second])
+    yc, uc = both.y[:, 0] - both.y.mean(), both.u[:, 0] - both.u.mean()
+    rho = np.array([sum(yc[a + tau:b] @ uc[a:b - tau] for a, b in ((0, 2500), (2500, N)))
+                    for tau in range(40)]) / np.sqrt((yc @ yc) * (uc @ uc))
+    rho = np.maximum(np.abs(rho) - 3 / np.sqrt(N), 0.0)
+    assert crossval.response_memory(both, 20) == pytest.approx(rho[20:].max() / rho.max(),
+                                                               rel=1e-12)
 
 
 def test_longer_horizon_rules():
     rng = np.random.default_rng(1)
     e = rng.standard_normal(20_000)
-    slow = np.convolve(e, np.ones(400) / 400, mode="same")   # remembers ~400 samples
+    slow = _low_pass(e, 0.998)                                 # responds for ~500 samples
     data = subid.IOData(e, slow)
     args = (20_000, 1, 1, 2)
     assert crossval.longer_horizon(data, 10, 20, *args) == 40    # 10 chosen: still tried
@@ -56,6 +62,9 @@ def test_longer_horizon_rules():
     assert crossval.longer_horizon(data, 20, 20, 300, 1, 1, 2) is None   # too few columns
     white = subid.IOData(e, rng.standard_normal(20_000))
     assert crossval.longer_horizon(white, 20, 20, *args) is None  # forgets within 20
+    with crossval.standard_horizons():                           # ct_subspace's reference
+        assert crossval.longer_horizon(data, 10, 20, *args) is None
+    assert crossval.longer_horizon(data, 10, 20, *args) == 40
 
 
 def test_oversampled_record_gets_a_horizon_that_spans_its_dynamics(monkeypatch):

@@ -217,9 +217,12 @@ def n4sid_default(data, order, *, feedthrough, stability):
     caller's ``order`` argument (None: chosen as n4sid chooses it, past order 10 where
     the folds ask for it), and None; or None and the reason it failed (the
     basis-filter estimates are then the only candidates)."""
+    from subid.methods.crossval import standard_horizons
     from subid.methods.dt.n4sid import n4sid
     try:
-        with warnings.catch_warnings(), np.errstate(all="ignore"):
+        # horizons 10 and 20: the basis-filter estimates are made for fast sampling
+        # (crossval.standard_horizons says what longer ones did to this reference)
+        with warnings.catch_warnings(), np.errstate(all="ignore"), standard_horizons():
             warnings.simplefilter("ignore")
             return n4sid(data, order, feedthrough=feedthrough, stability=stability), None
     except (ValueError, np.linalg.LinAlgError) as exc:    # SubidError is a ValueError

@@ -80,19 +80,18 @@ estimation record only:
 * **horizons past 20**: a horizon of 10 or 20 samples spans a small part of the
   dynamics of an oversampled record (poles near 1), whose subspace is then poorly
   revealed at every order. When no horizon is given, the orders searched are scored
-  again at twice the largest horizon while the outputs stay correlated beyond it
-  (:func:`subid.methods.crossval.output_memory` at least
-  :data:`~subid.methods.crossval.MEMORY`: the record remembers longer than the horizon
-  spans) and the last horizon so added is the chosen one, up to
-  :data:`~subid.methods.crossval.MAX_HORIZON` and as far as the training folds support
-  it (:func:`subid.methods.crossval.longer_horizon`). Measured (a 2x2 order-4 system
-  with time constants of 0.5-5 s, inputs held for 50 samples, 5 % output noise,
-  N = 14,000 to estimate; ``bench/horizons.md``): sampled at 0.02 s, MOESP, N4SID and
-  ``ls_subspace`` 91.6, 59.3 and 89.2 % validation fit before, 95.3 % each after
+  again at twice the largest horizon while the response to the inputs lasts beyond it
+  (:func:`subid.methods.crossval.response_memory` at least
+  :data:`~subid.methods.crossval.MEMORY`) and the last horizon so added is the chosen
+  one, up to :data:`~subid.methods.crossval.MAX_HORIZON` and as far as the training
+  folds support it (:func:`subid.methods.crossval.longer_horizon`). Measured (a 2x2
+  order-4 system with time constants of 0.5-5 s, inputs held for 50 samples, 5 % output
+  noise, N = 14,000 to estimate; ``bench/horizons.md``): sampled at 0.02 s, MOESP, N4SID
+  and ``ls_subspace`` 91.6, 59.3 and 89.2 % validation fit before, 95.3 % each after
   (horizon 80); at 0.005 s 61.8, 52.2 and 62.7 before, 95.4, 94.2 and 95.4 after
-  (horizon 160, 5-14 CPU s: slow poles leave the lag-product shortcuts). On the DaISy
-  records only exchanger's choices change (horizons 40 and 80; bench/realdata.md) and
-  steamgen pays horizon 40 without choosing it (1.2 -> 2.3 CPU s a call).
+  (horizon 160, 6-15 CPU s: slow poles leave the lag-product shortcuts). Every DaISy
+  record keeps its model; steamgen tries horizon 40 without choosing it (1.2 -> 2.6 CPU
+  s a call).
 
 Horizons that cannot reveal every candidate order compete at the orders
 they can reveal (horizon 10 on a single output: orders 1..9). Where a
