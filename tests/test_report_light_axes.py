@@ -123,3 +123,17 @@ def test_tick_styles_are_kept_as_values(record):
     assert _light_axes._STYLES
     for style in _light_axes._STYLES.values():
         assert not any(hasattr(v, "axes") or hasattr(v, "figure") for v in style.values())
+
+
+def test_a_changed_setting_is_a_new_tick_style(record, monkeypatch):
+    """matplotlib settings changed between two reports (tick colour and length): the
+    light axes draw what matplotlib's draw under them, not a style read before."""
+    import matplotlib
+    _images(*record)                                   # styles read under the defaults
+    with matplotlib.rc_context({"xtick.color": "red", "ytick.color": "red",
+                                "xtick.major.size": 6.0}):
+        light = _images(*record)
+        with _stock_axes(monkeypatch):
+            stock = _images(*record)
+    assert [a == b for a, b in zip(light, stock)] == [True] * len(stock)
+    assert light != _images(*record)                   # the setting shows in the images

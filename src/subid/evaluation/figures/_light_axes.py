@@ -13,10 +13,10 @@ The axes of :data:`PROJECTION` (the report's figures, :func:`report_axes`) keep 
 lists lazy through those two calls: the parameters are stored as matplotlib stores
 them for the ticks it makes later (``Axis._major_tick_kw``), and no tick exists until
 one is asked for. ``light_ticks`` then reads the style of the first tick from a tick
-made once per style (:func:`tick_style`) and leaves the replaced axes with empty tick
-lists; an axis it keeps makes its ticks when drawn, under the settings its figure was
-built with (``rc`` of :func:`report_axes`, which the report draws under) and clipped
-to the axes as matplotlib's own. The pixels are those of matplotlib's Axes
+made once per style (:func:`tick_style`: the axis' parameters and the matplotlib
+settings of its figure's build, :data:`_TICK_SETTINGS`) and leaves the replaced axes with
+empty tick lists; an axis it keeps makes its ticks when drawn, under the settings its
+figure was built with and clipped to the axes as matplotlib's own. The pixels are those of matplotlib's Axes
 (tests/test_report_figures.py compares every figure of a report).
 """
 
@@ -31,6 +31,9 @@ __all__ = ["PROJECTION", "rectilinear", "report_axes", "subplot_kw", "tick_style
 PROJECTION = "subid-light"
 
 _ACTIVE = contextvars.ContextVar("subid_light_axes", default=False)
+#: The matplotlib settings a tick is made from (sizes, colours, pads, directions and
+#: label fonts of ``xtick.*``/``ytick.*``, grid lines, fonts, lines and text).
+_TICK_SETTINGS = ("xtick.", "ytick.", "grid.", "font.", "lines.", "text.", "mathtext.")
 #: Styles read from a tick made for them, by axis, tick kind, parameters and settings.
 _STYLES: dict = {}
 #: At most this many styles are kept (a report uses a handful).
@@ -128,11 +131,16 @@ def _register():
 
         name = PROJECTION
 
-        def __init__(self, *args, **kwargs):
-            # the settings the figure is built under (the report draws under them too)
-            from subid.evaluation.figures._style import STYLE
-            self._subid_rc = {key: matplotlib.rcParams[key] for key in STYLE}
-            super().__init__(*args, **kwargs)
+        def __init__(self, fig, *args, **kwargs):
+            # the settings a tick of this axes would be made under: those of the figure's
+            # build, read once per figure (its axes are made together)
+            rc = fig.__dict__.get("_subid_tick_rc")
+            if rc is None:
+                values = {key: value for key, value in dict.items(matplotlib.rcParams)
+                          if key.startswith(_TICK_SETTINGS)}
+                rc = fig._subid_tick_rc = (values, repr(sorted(values.items())))
+            self._subid_rc, self._subid_rc_key = rc
+            super().__init__(fig, *args, **kwargs)
 
         def clear(self):
             super().clear()
@@ -165,9 +173,8 @@ def tick_style(ax, axis, major: bool) -> dict:
     if made:
         return _read(made[0])
     params = axis._major_tick_kw if major else axis._minor_tick_kw
-    rc = getattr(ax, "_subid_rc", None) or {}
-    key = (type(axis).__name__, major, repr(sorted(params.items())),
-           repr(sorted(rc.items())))
+    rc = ax._subid_rc
+    key = (type(axis).__name__, major, repr(sorted(params.items())), ax._subid_rc_key)
     style = _STYLES.get(key)
     if style is None:
         import matplotlib
