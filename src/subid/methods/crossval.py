@@ -180,15 +180,16 @@ def standard_horizons():
 def longer_horizon(data, chosen: int, largest: int, n_train: int, n_inputs: int,
                    n_outputs: int, blocks: int, n_experiments: int = 1):
     """The next horizon of the search, or None: twice the ``largest`` searched, when the
-    response of ``data``'s outputs to its inputs lasts beyond it (:func:`response_memory`
-    at least :data:`MEMORY`), the last horizon tried past :data:`HORIZON_CANDIDATES` (if any) is
-    the ``chosen`` one, it is at most :data:`MAX_HORIZON` and the training folds support
-    it (:func:`feasible_horizons`). The first step does not ask the largest candidate to
-    win: on an oversampled record the fit need not grow with the horizon until the
-    horizon spans the dynamics (10 may beat 20, and 160 both by 30 points)."""
-    f = 2 * largest
+    response of ``data``'s outputs to its inputs lasts beyond it
+    (:func:`response_memory` at least :data:`MEMORY`), the last horizon tried past
+    :data:`HORIZON_CANDIDATES` (if any) is the ``chosen`` one, it is at most
+    :data:`MAX_HORIZON` and the training folds support it (:func:`feasible_horizons`);
+    None within :func:`standard_horizons`. The first step does not ask the largest
+    candidate to win: on an oversampled record the fit need not grow with the horizon
+    until the horizon spans the dynamics (10 may beat 20, and 160 both by 30 points)."""
     if _STANDARD_ONLY.get():
         return None
+    f = 2 * largest
     if (largest > max(HORIZON_CANDIDATES) and chosen != largest) or f > MAX_HORIZON \
             or response_memory(data, largest) < MEMORY:
         return None

@@ -14,10 +14,11 @@ lists lazy through those two calls: the parameters are stored as matplotlib stor
 them for the ticks it makes later (``Axis._major_tick_kw``), and no tick exists until
 one is asked for. ``light_ticks`` then reads the style of the first tick from a tick
 made once per style (:func:`tick_style`: the axis' parameters and the matplotlib
-settings of its figure's build, :data:`_TICK_SETTINGS`) and leaves the replaced axes with
-empty tick lists; an axis it keeps makes its ticks when drawn, under the settings its
-figure was built with and clipped to the axes as matplotlib's own. The pixels are those of matplotlib's Axes
-(tests/test_report_figures.py compares every figure of a report).
+settings of its figure's build, :data:`_TICK_SETTINGS`) and leaves the replaced axes
+with empty tick lists; an axis it keeps makes its ticks when drawn, under the settings
+its figure was built with and clipped to the axes as matplotlib's own. The images are
+those of matplotlib's Axes, byte for byte (tests/test_report_light_axes.py compares
+every image of reports built both ways).
 """
 
 from __future__ import annotations
