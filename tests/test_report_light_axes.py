@@ -137,3 +137,32 @@ def test_a_changed_setting_is_a_new_tick_style(record, monkeypatch):
             stock = _images(*record)
     assert [a == b for a, b in zip(light, stock)] == [True] * len(stock)
     assert light != _images(*record)                   # the setting shows in the images
+
+
+def test_frequency_and_online_reports_draw_the_same_images(monkeypatch):
+    """The other reports built on the same figures: from frequency-response data, and of
+    an online run with its convergence history."""
+    from subid.evaluation.frequency_report import frequency_report
+    from subid.methods.online.base import Tracker
+    true = subid.systems.random_system(3, 2, 2, seed=29)
+    w = np.linspace(0.05, 3.0, 120)
+    frd = subid.FRData(w, true.freqresp(w), dt=true.dt)
+    fitted = subid.fd_subspace(frd, 3)
+    d = subid.systems.simulate_data(true, 1500, seed=30, output_snr_db=20)
+    data = subid.IOData(d.u, d.y, dt=1.0)
+    tracker = Tracker(subid.RecursiveSubspace(3, 2, 2, dt=1.0), data, trace_every=100)
+    tracker.run(chunk=300)
+    history, online = tracker.history(), tracker.ident.model
+
+    def images():
+        pages = [frequency_report({"fd": fitted}, frd),
+                 report.identification_report({"rs": online}, data, history=history)]
+        return [img for page in pages
+                for img in re.findall(r'src="data:image/png;base64,([^"]+)"', page)]
+    light = images()
+    with _stock_axes(monkeypatch):
+        stock = images()
+    assert len(light) == len(stock) >= 6
+    assert any("convergence" in page for page in [report.identification_report(
+        {"rs": online}, data, history=history)])
+    assert [a == b for a, b in zip(light, stock)] == [True] * len(stock)
