@@ -8,7 +8,7 @@ N = 20,000 samples: the first 70 % to estimate, the rest to validate (simulation
 fit %, mean over the outputs, x0 by least squares). Each default call
 (``moesp``, ``n4sid``, ``ls_subspace``, ``identify``) is run with the horizon
 search of before (horizons 10 and 20 only: ``crossval.MAX_HORIZON = 20``) and
-with today's (doubling past 20 while the outputs remember beyond the horizon,
+with today's (doubling past 20 while the response to the inputs lasts beyond the horizon,
 :func:`subid.methods.crossval.longer_horizon`); CPU seconds of each call.
 
 Usage::
@@ -69,7 +69,7 @@ def main(argv=None):
             print(dt, method, before, after, flush=True)
     lines = ["# Default calls on oversampled records (bench/horizons.py)", "",
              __doc__.split("\n\n")[1].replace("\n", " "), "",
-             "| dt (s) | output memory at 20 | method | before: n, f, fit %, CPU s | "
+             "| dt (s) | response memory at 20 | method | before: n, f, fit %, CPU s | "
              "now: n, f, fit %, CPU s |", "|---:|---:|---|---|---|"]
     for dt, memory, method, b, a in rows:
         lines.append(f"| {dt} | {memory:.2f} | {method} | {b[0]}, {b[1]}, {b[2]:.1f}, "
