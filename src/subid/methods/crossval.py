@@ -102,6 +102,22 @@ def folds(n_samples: int):
             (slice(half, n_samples), slice(0, half))]
 
 
+def _hankel_shape(f: int, n_train: int, n_inputs: int, n_outputs: int, blocks: int,
+                  n_experiments: int = 1) -> tuple[int, int]:
+    """``(rows, columns)`` of a training fold's block-Hankel matrix at horizon ``f``
+    (``blocks`` block rows of ``f`` samples; ``n_experiments`` experiments lose
+    ``blocks * f - 1`` columns each)."""
+    return (blocks * f * (n_inputs + n_outputs),
+            n_train - n_experiments * (blocks * f - 1))
+
+
+def _supported(f: int, n_train: int, n_inputs: int, n_outputs: int, blocks: int,
+               n_experiments: int = 1) -> bool:
+    """Whether that matrix has at least twice as many columns as rows."""
+    rows, cols = _hankel_shape(f, n_train, n_inputs, n_outputs, blocks, n_experiments)
+    return cols >= 2 * rows
+
+
 def feasible_horizons(n_train: int, n_inputs: int, n_outputs: int, blocks: int,
                       largest_order: int, candidates=HORIZON_CANDIDATES, n_experiments=1, *,
                       reveal_all: bool = True):
@@ -118,14 +134,16 @@ def feasible_horizons(n_train: int, n_inputs: int, n_outputs: int, blocks: int,
     rows is returned alone. ``n_experiments`` experiments lose
     ``blocks * f - 1`` columns each.
     """
-    rows = lambda f: blocks * f * (n_inputs + n_outputs)   # noqa: E731
-    cols = lambda f: n_train - n_experiments * (blocks * f - 1)   # noqa: E731
+    shape = lambda f: _hankel_shape(f, n_train, n_inputs, n_outputs, blocks,  # noqa: E731
+                                    n_experiments)
     need = min(largest_order, MAX_ORDER) if reveal_all else 1
-    kept = [f for f in candidates if cols(f) >= 2 * rows(f) and (f - 1) * n_outputs >= need]
+    kept = [f for f in candidates
+            if _supported(f, n_train, n_inputs, n_outputs, blocks, n_experiments)
+            and (f - 1) * n_outputs >= need]
     if kept:
         return kept
     f = max(candidates)
-    while f > 2 and cols(f) < rows(f):
+    while f > 2 and shape(f)[1] < shape(f)[0]:
         f -= 1
     return [f]
 
@@ -193,9 +211,7 @@ def longer_horizon(data, chosen: int, largest: int, n_train: int, n_inputs: int,
     if (largest > max(HORIZON_CANDIDATES) and chosen != largest) or f > MAX_HORIZON \
             or response_memory(data, largest) < MEMORY:
         return None
-    rows = blocks * f * (n_inputs + n_outputs)
-    cols = n_train - n_experiments * (blocks * f - 1)
-    return f if cols >= 2 * rows else None
+    return f if _supported(f, n_train, n_inputs, n_outputs, blocks, n_experiments) else None
 
 
 def next_block(top, n_train, n_inputs, n_outputs, blocks, n_experiments, horizon=None):
@@ -215,14 +231,13 @@ def next_block(top, n_train, n_inputs, n_outputs, blocks, n_experiments, horizon
     orders = list(range(top + step, 2 * top + 1, step))
     params = lambda n: n * (n_inputs + n_outputs) + n_inputs * n_outputs   # noqa: E731
     by_samples = [n for n in orders if SAMPLES_PER_PARAMETER * params(n) <= n_train * n_outputs]
-    rows = lambda f: blocks * f * (n_inputs + n_outputs)   # noqa: E731
-    cols = lambda f: n_train - n_experiments * (blocks * f - 1)   # noqa: E731
     if horizon is not None:
         horizons = [horizon]
     else:
         need = math.ceil(max(orders) / n_outputs) + 1
         tried = sorted(set(HORIZON_CANDIDATES) | {10 * math.ceil(need / 10)})
-        horizons = [f for f in tried if cols(f) >= 2 * rows(f)
+        horizons = [f for f in tried
+                    if _supported(f, n_train, n_inputs, n_outputs, blocks, n_experiments)
                     and (f - 1) * n_outputs >= orders[0]]
     revealable = max(((f - 1) * n_outputs for f in horizons), default=0)
     kept = [n for n in by_samples if n <= revealable]
