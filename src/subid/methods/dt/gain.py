@@ -170,7 +170,7 @@ def refine_gain(data, model, *, precision: float = GAIN_PRECISION,
     own = np.array(model.noise_cov, dtype=float) if model.noise_cov is not None and \
         model.info.get("noise_cov_estimate") == FROM_PREDICTION_ERRORS else None
     sigma0 = own if own is not None and data is whole else \
-        prediction_error_covariance(model, K0, data, radius)
+        prediction_error_covariance(model, K0, data, radius, x0)
     if sigma0 is None or float(np.trace(sigma0)) <= NOISE_FREE * max(
             float(np.sum(data.y ** 2)) / N, 1e-300):
         return model                       # noise-free: no innovations, K = 0 stays

@@ -268,20 +268,22 @@ def _predictor_initial_states(model, K, data: IOData, radius: float) -> np.ndarr
     return np.stack(states)
 
 
-def prediction_error_covariance(model, K, data: IOData, radius: float):
+def prediction_error_covariance(model, K, data: IOData, radius: float, x0=None):
     """``E^T E / N``: the sample covariance of the one-step prediction errors of the
     predictor ``(A - K C, B - K D, K)`` of ``model`` (spectral radius ``radius`` < 1) on
     ``data``, each experiment from its initial state fitted by least squares
     (:func:`_predictor_initial_states`; a zero or simulation initial state leaves a
     transient that dominates where the predictor is accurate: 20x the covariance on
-    DaISy robot_arm); None when the predictor diverges. The errors' products are summed
-    in one compiled pass (:func:`subid.methods.dt._innovation_kernel.prediction_power`)."""
+    DaISy robot_arm; ``x0``: those states when the caller has them already); None when
+    the predictor diverges. The errors' products are summed in one compiled pass
+    (:func:`subid.methods.dt._innovation_kernel.prediction_power`)."""
     from subid.methods.dt._innovation_kernel import prediction_power
     pieces = [(data.u[a:b], data.y[a:b]) for a, b in data.experiment_ranges]
-    try:
-        x0 = _predictor_initial_states(model, K, data, radius)
-    except SubidError:               # the prediction of the first samples diverges
-        return None
+    if x0 is None:
+        try:
+            x0 = _predictor_initial_states(model, K, data, radius)
+        except SubidError:           # the prediction of the first samples diverges
+            return None
     power = prediction_power(model.A, model.B, model.C, model.D, K, pieces, x0)
     if power is None:
         return None
