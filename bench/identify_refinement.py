@@ -1,13 +1,15 @@
 """Benchmark (issue 21): the cost of ``subid.identify``'s refinement stage on real records.
 
 For each bundled DaISy record (estimation part = first 2/3, means removed,
-``bench/realdata.py``'s ``split``), CPU time (``time.process_time``) of
+``bench/realdata.py``'s ``split``), CPU time (``time.process_time``, summed over
+threads) and wall time of
 ``identify(est)`` and of its refinement stage (the time inside identify's
 ``_feedback``, ``_fold_refinement`` and ``_refine``: the feedback test, the
 four fold refinements with their start models and scores, and the final
 refinement when kept); "in refine" is the part spent inside
-``subid.methods.dt.pem.refine``, "subspace" the rest (both estimators' order
-searches). "before" is the library at ``--before`` (a git
+``subid.methods.dt.pem.refine`` (the process's CPU time while a call runs: with the
+fold refinements on threads, the calls overlap and it counts the other threads'
+work too), "subspace" the rest (both estimators' order searches). "before" is the library at ``--before`` (a git
 revision, default ``main``, exported with ``git archive``), "after" this
 checkout's ``src``; one process per (source, record, repeat), alternating
 before/after, each compiling the kernels first on a small record, untimed.
@@ -52,7 +54,7 @@ subid.identify(small)
 subid.identify(subid.datasets.load("steamgen")[:600])
 out = {"record": name, "source": sys.argv[2]}
 import subid.methods.identify as identify_module
-spent = {"in_refine_s": 0.0, "stage_s": 0.0}
+spent = {"in_refine_s": 0.0, "stage_s": 0.0, "stage_wall_s": 0.0}
 depth = {"in_refine_s": 0, "stage_s": 0}
 
 
@@ -61,22 +63,25 @@ def timing(module, name, key):
 
     def timed(*args, **kwargs):            # the outermost call of each group only
         depth[key] += 1
-        t0 = time.process_time()
+        t0, w0 = time.process_time(), time.perf_counter()
         try:
             return inner(*args, **kwargs)
         finally:
             depth[key] -= 1
             if depth[key] == 0:
                 spent[key] += time.process_time() - t0
+                if key == "stage_s":
+                    spent["stage_wall_s"] += time.perf_counter() - w0
     setattr(module, name, timed)
 
 
 timing(pem_module, "refine", "in_refine_s")
 for name in ("_feedback", "_fold_refinement", "_refine"):     # the refinement stage
     timing(identify_module, name, "stage_s")
-t = time.process_time()
+t, w = time.process_time(), time.perf_counter()
 model = subid.identify(est)
 out["identify_s"] = time.process_time() - t
+out["identify_wall_s"] = time.perf_counter() - w
 out.update(spent)
 ref = model.info["identify"]["refinement"]
 out["kept"] = bool(ref.get("kept"))
@@ -111,25 +116,31 @@ def relative_difference(a: dict, b: dict) -> float:
 
 def cost_table(results: list, records: list) -> str:
     rows = ["| record | source | identify s | refinement stage s | in refine s | subspace "
-            "s | kept |", "|---|---|---:|---:|---:|---:|---|"]
+            "s | identify wall s | refinement stage wall s | kept |",
+            "|---|---|---:|---:|---:|---:|---:|---:|---|"]
     ratios = []
     for name in records:
         med = {}
         for source in ("before", "after"):
             rs = [r for r in results if r["record"] == name and r["source"] == source]
             med[source] = {k: statistics.median(r[k] for r in rs)
-                           for k in ("identify_s", "stage_s", "in_refine_s")}
+                           for k in ("identify_s", "stage_s", "in_refine_s",
+                                     "identify_wall_s", "stage_wall_s")}
             m = med[source]
             rows.append(f"| {name} | {source} | {m['identify_s']:.2f} | {m['stage_s']:.2f} | "
                         f"{m['in_refine_s']:.2f} | {m['identify_s'] - m['stage_s']:.2f} | "
+                        f"{m['identify_wall_s']:.2f} | {m['stage_wall_s']:.2f} | "
                         f"{rs[0]['kept']} |")
         b, a = med["before"], med["after"]
         ratios.append(f"| {name} | {b['stage_s'] / max(a['stage_s'], 1e-9):.2f} | "
                       f"{b['identify_s'] / max(a['identify_s'], 1e-9):.2f} | "
-                      f"{a['stage_s'] / max(a['identify_s'] - a['stage_s'], 1e-9):.2f} |")
+                      f"{a['stage_s'] / max(a['identify_s'] - a['stage_s'], 1e-9):.2f} | "
+                      f"{b['stage_wall_s'] / max(a['stage_wall_s'], 1e-9):.2f} | "
+                      f"{b['identify_wall_s'] / max(a['identify_wall_s'], 1e-9):.2f} |")
     return "\n".join(rows + ["", "| record | refinement stage before / after | identify "
-                             "before / after | refinement / subspace after |",
-                             "|---|---:|---:|---:|"] + ratios)
+                             "before / after | refinement / subspace after | refinement "
+                             "stage wall before / after | identify wall before / after |",
+                             "|---|---:|---:|---:|---:|---:|"] + ratios)
 
 
 def decision_table(results: list, records: list) -> str:
@@ -182,8 +193,9 @@ def main() -> None:
                       flush=True)
     text = ["# The cost of `subid.identify`'s refinement stage (issue 21)", "",
             f"`python bench/identify_refinement.py --before {args.before} --repeats "
-            f"{args.repeats}`: CPU s, median of {args.repeats} runs per source, one process "
-            "per run, alternating before/after (module docstring).", ""]
+            f"{args.repeats}`: CPU s (summed over threads) and wall s, median of "
+            f"{args.repeats} runs per source, one process per run, alternating before/after "
+            "(module docstring).", ""]
     if records:
         text += [cost_table(timed, records), ""]
     if decisions:

@@ -254,6 +254,74 @@ def test_identify_stops_fold_refinements_once_the_simulation_guard_fails(monkeyp
     np.testing.assert_array_equal(full.B, model.B)
 
 
+@pytest.mark.parametrize("feedback", [False, True])
+def test_fold_refinements_on_threads_equal_one_after_the_other(monkeypatch, feedback):
+    """The fold models made and refined on two threads are those of one thread: the same
+    fold scores to the bit; under feedback (the simulation guard) the same folds done;
+    the process's warning filters as they were."""
+    from subid import _threads
+    from subid.methods import identify as module
+    if feedback:
+        _, data = _closed_loop(104, n=1500)
+        focus, guard = "prediction", "simulation"
+    else:
+        data = systems.simulate_data(systems.seed001_system(), 1500, seed=5, output_snr_db=20)
+        focus, guard = "simulation", None
+    config = {"order": 3, "horizon": 10, "feedthrough": False}
+    scores = (focus,) if guard is None else (focus, guard)
+    monkeypatch.setattr(module, "THREADED_JACOBIAN", 0)
+    if feedback:                  # a limit the second fold crosses: rounds of two folds
+        monkeypatch.setattr(module, "SIMULATION_LOSS", -0.6)
+    filters = list(warnings.filters)
+    done = {}
+    for limit in (1, 2):
+        for where in (_threads, module):          # as many threads as asked, any machine
+            monkeypatch.setattr(where, "available", lambda limit=limit: limit)
+        done[limit] = module._fold_refinement(data, "moesp", config, focus, scores=scores,
+                                              guard=guard)
+        assert warnings.filters == filters
+    assert done[1] == done[2]
+    assert len(done[1][1][focus]) == (2 if feedback else 4)
+
+
+def test_ordered_map_keeps_order_context_and_errors(monkeypatch):
+    """subid's thread map: results in the items' order, each task in a copy of the
+    caller's context variables, a task's exception raised in the caller."""
+    import contextvars
+
+    from subid import _threads
+    monkeypatch.setattr(_threads, "available", lambda: 2)
+    var = contextvars.ContextVar("subid_test_var", default="default")
+    token = var.set("caller's")
+    try:
+        assert _threads.ordered_map(lambda k: (k, var.get()), range(5)) == \
+            [(k, "caller's") for k in range(5)]
+
+        def fails(k):
+            if k == 3:
+                raise ValueError("task 3")
+            return k
+        with pytest.raises(ValueError, match="task 3"):
+            _threads.ordered_map(fails, range(5))
+    finally:
+        var.reset(token)
+
+    def noisy(k):                 # tasks with their own warning blocks, interleaved
+        with warnings.catch_warnings(record=k % 2 == 0):
+            warnings.simplefilter("always")
+            for _ in range(200):
+                warnings.warn(f"task {k}", RuntimeWarning, stacklevel=1)
+        warnings.warn(f"task {k} after its block", RuntimeWarning, stacklevel=1)
+        return k
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        filters = list(warnings.filters)
+        assert _threads.ordered_map(noisy, range(8), quiet=True) == list(range(8))
+        assert warnings.filters == filters
+        warnings.warn("the caller's", UserWarning, stacklevel=1)
+    assert [str(w.message) for w in caught] == ["the caller's"]
+
+
 def test_identify_closed_loop_is_consistent():
     true, data = _closed_loop(101)
     with warnings.catch_warnings():

@@ -25,17 +25,46 @@ def available() -> int:
     return max(1, cpus if limit is None else min(cpus, int(limit)))
 
 
-def ordered_map(function, items) -> list:
+def ordered_map(function, items, *, threads: int | None = None, quiet: bool = False) -> list:
     """``[function(item) for item in items]``, run on :func:`available` threads.
 
     The result does not depend on the number of threads (each item is one
-    task, done by one thread); exceptions are re-raised in the caller.
+    task, done by one thread, in a copy of the caller's :mod:`contextvars`
+    context, as the loop would run it: the settings subid keeps there, such as
+    :func:`subid.statistic.hankel.compact_wy_qr`, hold in the tasks); exceptions
+    are re-raised in the caller.
+
+    Parameters
+    ----------
+    function : callable
+    items : iterable
+    threads : int, optional
+        At most this many threads (and at most :func:`available`); 1 runs the loop in
+        the calling thread.
+    quiet : bool
+        Drop the tasks' warnings. Python's warning filters are the process's (not the
+        thread's): the calling thread sets them to ignore every warning and to record
+        into a list it drops, for the whole map, and restores them after it, so that
+        whatever the tasks' own ``warnings.catch_warnings`` blocks save and restore in
+        between (they interleave across threads) no task's warning reaches the caller's
+        filters, handlers or recorders.
     """
     items = list(items)
-    threads = min(available(), len(items))
+    threads = min(available(), len(items), available() if threads is None else int(threads))
+    if quiet:
+        import warnings
+        with warnings.catch_warnings(record=True):
+            warnings.simplefilter("ignore")
+            return ordered_map(function, items, threads=threads)
     if threads <= 1:
         return [function(item) for item in items]
+    import contextvars
     from concurrent.futures import ThreadPoolExecutor
 
+    context = contextvars.copy_context()
+
+    def task(item):
+        return context.copy().run(function, item)     # one copy per task: no sharing
+
     with ThreadPoolExecutor(threads, thread_name_prefix="subid") as pool:
-        return list(pool.map(function, items))
+        return list(pool.map(task, items))

@@ -75,11 +75,13 @@ its triangular factor (:mod:`subid.methods.dt._trust_region`). At 1e5 samples
 (``bench/identify_cost.py``, 2x2 order-4 system, 20 dB) the refinement costs
 1.3x the subspace model it starts from (0.43 against 0.34 CPU s; the whole call
 0.10x SIPPY's own order search). On the DaISy records with large models, whose fold refinements
-crawl to their evaluation bound (``bench/identify_refinement.md``), the
-refinement stage takes 11.2 s on steamgen (order 20, four inputs and outputs,
-6,400 samples; 64.3 s before these bounds and the blocked kernel; 2.7x its
-subspace model's 4.1 s), 2.8 s on evaporator (10.8 s) and 1.4 s on
-CD_player_arm (7.1 s).
+crawl to their evaluation bound, the refinement stage took 11.2 s of CPU on
+steamgen (order 20, four inputs and outputs, 6,400 samples; 64.3 s before these
+bounds and the blocked kernel), 2.8 s on evaporator (10.8 s) and 1.4 s on
+CD_player_arm (7.1 s). The four folds of a large model are refined on subid's
+threads (:data:`THREADED_JACOBIAN`, :func:`_fold_refinement`; the same fold
+scores): on steamgen the stage takes 8.5 -> 5.5 s wall on 2 cores and the whole
+call 14.4 -> 10.2 s (``bench/identify_refinement.md``).
 """
 
 from __future__ import annotations
@@ -90,6 +92,7 @@ import warnings
 import numpy as np
 
 from subid._blas import serial_blas
+from subid._threads import available, ordered_map
 from subid._validation import check_choice, checked_call
 from subid.data import IOData
 from subid.errors import DataError, ModelError, OptionError, SubidError
@@ -108,6 +111,14 @@ ESTIMATORS = ("moesp", "n4sid")
 #: fraction (measured: 3 % on the closed-loop seed-001 runs of issue 21, 32 % on the DaISy
 #: CD_player_arm record, whose simulation fit it lowered from 75.5 % to 67.5 %).
 SIMULATION_LOSS = 0.10
+#: The fold models are made and refined on subid's threads when a fold's Jacobian (rows
+#: times parameters, K's included) has at least this many entries: below it the steps
+#: that hold the GIL dominate and two threads are no faster than one, or slower. The
+#: fold stage on 2 cores, one thread against two (DaISy records, 2/3 to estimate):
+#: robot_arm (1.1e5 entries) 0.24 -> 0.31 s, glassfurnace (4.8e5) 0.32 -> 0.31 s,
+#: CD_player_arm (8.7e5, under feedback) 0.56 -> 0.77 s; evaporator (2.2e6) 1.44 ->
+#: 1.25 s, steamgen (1.1e7) 8.5 -> 5.8 s.
+THREADED_JACOBIAN = 1_000_000
 
 
 def _estimator(name):
@@ -210,36 +221,65 @@ def _fold_refinement(data, method, config, focus, scores=None, guard=None):
     ``pem(focus=focus)``: ``(subspace, refined)``, each ``{score focus: scores}`` for
     each focus of ``scores`` (default: ``focus`` alone).
 
+    The folds are independent: where a fold's Jacobian is large
+    (:data:`THREADED_JACOBIAN`), their subspace models, then their refinements, are
+    made on subid's threads (:func:`subid._threads.ordered_map`; the Jacobians'
+    compiled kernels, matrix products and QR factorisations release the GIL), the
+    same models as one after the other (on DaISy steamgen, order 20: the same fold
+    scores, 14.8 -> 11.8 s wall for the whole call on 2 cores). Their warnings are
+    not shown (the fold models are only scored).
+
     ``guard`` (a focus of ``scores``, under feedback): the refinements stop as soon as
     those done raise the summed misfit ``100 - score`` by that focus above
     ``1 + SIMULATION_LOSS`` times the subspace models' over all folds: a fold's misfit is
     never negative, so the mean misfit of the refined models exceeds the limit whatever
     the remaining folds give, and :func:`_discrete` would drop the refinement (the same
-    decision, the fold refinements left undone; ``refined`` then holds the folds done)."""
+    decision, the fold refinements left undone; ``refined`` then holds the folds done,
+    in fold order: the folds refined together with the one that crossed the limit, in
+    one round of as many folds as threads, are dropped)."""
     fn = _estimator(method)
     options = dict(config)
     order = options.pop("order")
     scores = (focus,) if scores is None else tuple(scores)
     parts = _fold_parts(data)
-    starts = []
-    for train, _ in parts:
+
+    def start(part):
         try:
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")
-                starts.append(fn(train, order, **options))
+            return fn(part[0], order, **options)
         except SubidError:
-            starts.append(None)
-    base = {s: [FLOOR if start is None else _score(start, validation, s)
-                for start, (_, validation) in zip(starts, parts)] for s in scores}
+            return None
+
+    def refined_model(k):
+        return None if starts[k] is None else _refine(parts[k][0], starts[k], focus,
+                                                      held_out=True)
+
+    nu, ny = data.n_inputs, data.n_outputs
+    jacobian = max(train.n_samples for train, _ in parts) * ny * \
+        (order * (order + nu + 2 * ny) + ny * nu)
+    threads = available() if jacobian >= THREADED_JACOBIAN else 1
+
+    def quietly(function, items):
+        # the fold models are only scored: their warnings dropped
+        return ordered_map(function, items, threads=threads, quiet=True)
+
+    starts = quietly(start, parts)
+    base = {s: [FLOOR if begin is None else _score(begin, validation, s)
+                for begin, (_, validation) in zip(starts, parts)] for s in scores}
     refined = {s: [] for s in scores}
     limit = None if guard is None else \
         (1.0 + SIMULATION_LOSS) * float(np.sum(100.0 - np.asarray(base[guard])))
-    for k, ((train, validation), start) in enumerate(zip(parts, starts)):
-        better = None if start is None else _refine(train, start, focus, held_out=True)
-        for s in scores:
-            refined[s].append(base[s][k] if better is None else _score(better, validation, s))
-        if limit is not None and float(np.sum(100.0 - np.asarray(refined[guard]))) > limit:
-            break
+    # in rounds of as many folds as threads where the guard may stop the refinements
+    # early; all at once otherwise
+    step = len(parts) if limit is None else threads
+    for first in range(0, len(parts), step):
+        folds = range(first, min(first + step, len(parts)))
+        for k, better in zip(folds, quietly(refined_model, folds)):
+            for s in scores:
+                refined[s].append(base[s][k] if better is None
+                                  else _score(better, parts[k][1], s))
+            if limit is not None and \
+                    float(np.sum(100.0 - np.asarray(refined[guard]))) > limit:
+                return base, refined
     return base, refined
 
 

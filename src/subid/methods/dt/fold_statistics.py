@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from subid._threads import ordered_map
+
 
 def _same_samples(a, b) -> bool:
     """Whether two arrays hold the same samples: the same memory viewed alike (the folds
@@ -43,6 +45,28 @@ def _blocks_of_folds(parts):
         return None
     return [v1, t0[third:half], t0[half:N - third], v0]
 
+
+#: The folds of :func:`subid.methods.dt.selection.score_horizon` (and their factors,
+#: :func:`fold_factors`) are scored on subid's threads
+#: (:func:`subid._threads.ordered_map`) when their Hankel factors have at least this many
+#: rows (depth times channels): then the factorisations and fits of a fold, which release
+#: the GIL, outweigh the Python steps of its candidates, which do not. Measured,
+#: ``moesp(data)`` on 2 cores, wall s, one thread against this rule (DaISy records, 2/3
+#: to estimate): steamgen (4x4: 160 and 320 rows at horizons 10 and 20) 2.75 -> 2.37,
+#: evaporator (3x3: 120, 240) 0.99 -> 0.86, CD_player_arm (2x2: 240 rows at horizon 30)
+#: 1.07 -> 1.00; the same time for robot_arm and the 2x2 order-4 system of bench/run.py
+#: (below the rule). Threads at every horizon instead: robot_arm (1x1) 0.25 -> 0.32 s and
+#: that 2x2 system at 10^3 to 10^5 samples 10 % slower. The scores are the same either
+#: way (the folds are independent; tests/test_identify.py).
+THREADED_ROWS = 200
+
+
+def fold_threads(depth, parts) -> int | None:
+    """The ``threads`` of :func:`subid._threads.ordered_map` for the folds ``parts`` (their
+    ``(train, validation)`` records) at Hankel depth ``depth``: subid's threads (None) when
+    the factors have :data:`THREADED_ROWS` rows or more, else 1."""
+    train = parts[0][0]
+    return None if depth * (train.n_inputs + train.n_outputs) >= THREADED_ROWS else 1
 
 #: The blocks of :func:`_blocks_of_folds` whose concatenation is each fold's training
 #: record, and its validation record.
@@ -89,18 +113,20 @@ def fold_factors(parts, horizon, fitter, deepest=None):
         stats = [HankelStatistic.from_data(b, depth, kind="gram") for b in blocks]
     s12, s34 = stats[0].merge(stats[1]), stats[2].merge(stats[3])
     merged = [s12.merge(stats[2]), stats[1].merge(stats[2]).merge(stats[3]), s12, s34]
-    out = []
-    for stat, (train, _) in zip(merged, parts):
+
+    def factor(k):
+        stat, train = merged[k], parts[k][0]
         if stat.n_columns < depth * (train.n_inputs + train.n_outputs):
-            out.append(None)             # too few columns: prepare_fold reports it
-        elif kind == "gram" or train.n_samples > QR_MAX_SAMPLES:
-            out.append(stat.factor())
-        else:
-            # not exact to rounding: the QR statistic of the record, as the fold's
-            # statistic='auto' would build it after computing the lagged products again
-            exact = stat.exact_factor()
-            if exact is None:
-                with compact_wy_qr():         # scored and dropped: 2.5x faster QR
-                    exact = HankelStatistic.from_data(train, depth, kind="qr").factor()
-            out.append(exact)
-    return out
+            return None                  # too few columns: prepare_fold reports it
+        if kind == "gram" or train.n_samples > QR_MAX_SAMPLES:
+            return stat.factor()
+        # not exact to rounding: the QR statistic of the record, as the fold's
+        # statistic='auto' would build it after computing the lagged products again
+        exact = stat.exact_factor()
+        if exact is None:
+            with compact_wy_qr():         # scored and dropped: 2.5x faster QR
+                exact = HankelStatistic.from_data(train, depth, kind="qr").factor()
+        return exact
+    # each fold's factorisation on subid's threads where the factors are large, as the
+    # folds' candidates are scored
+    return ordered_map(factor, range(len(parts)), threads=fold_threads(depth, parts))

@@ -263,6 +263,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from subid._threads import ordered_map
 from subid.errors import OrderError, SubidError
 from subid.methods.crossval import (
     ABSOLUTE_TOLERANCE,
@@ -282,6 +283,7 @@ from subid.methods.dt.fold_statistics import (
     VALIDATION_BLOCKS,
     _blocks_of_folds,
     fold_factors,
+    fold_threads,
 )
 
 #: The search goes on to the next block of orders when the best-scoring order is one of
@@ -342,7 +344,8 @@ def score_horizon(parts, orders, horizon, *, fitter, estimators, held=None, lagg
     (:mod:`subid.methods.dt._scoring`), whose record-dependent parts are computed
     once per fold. The scores equal those of the straightforward computation (a
     fresh problem per order, ``fit_percent``) to rounding
-    (``tests/test_selection_speed.py``).
+    (``tests/test_selection_speed.py``). The folds are scored on subid's threads
+    where their factors are large (:func:`fold_threads`; the same scores).
 
     Parameters
     ----------
@@ -390,9 +393,12 @@ def score_horizon(parts, orders, horizon, *, fitter, estimators, held=None, lagg
     factors = fold_factors(parts, horizon, fitter, deepest)
     if held is None:                      # what every candidate's score needs, once
         held = [Held(validation, lagged=True) for _, validation in parts]
-    if lagged is None:
-        lagged = [None] * len(parts)
-    for k, ((train, _), factor, held_out) in enumerate(zip(parts, factors, held)):
+    lagged = [None] * len(parts) if lagged is None else lagged
+    scorer = getattr(fitter, "fold_score", None)
+
+    def fold(k):
+        """``(score, repaired)`` of every candidate on fold k."""
+        (train, _), factor, held_out, out = parts[k], factors[k], held[k], {}
         problem = fitter.prepare_fold(train, orders, horizon, factor=factor) \
             if factor is not None else fitter.prepare_fold(train, orders, horizon)
         if hasattr(problem, "cached") and train.n_experiments == 1:
@@ -401,24 +407,31 @@ def score_horizon(parts, orders, horizon, *, fitter, estimators, held=None, lagg
             # B, D, x0 of every candidate
             problem.cached(LAG_PRODUCTS, lambda products=lagged[k]: products)
         # the candidates are only scored: without the model objects where the fitter
-        # can (Pipeline.fold_score), else from the models
-        scorer = getattr(fitter, "fold_score", None)
-        with warnings.catch_warnings(), scoring_only():
-            warnings.simplefilter("ignore")
+        # can (Pipeline.fold_score), else from the models (their warnings dropped below)
+        with scoring_only():
             for n in orders:
                 at_n = problem.fold_at(n) if hasattr(problem, "fold_at") else \
                     replace(problem, order=n, candidates=[n], fold=True)
                 for v, name in enumerate(names):
+                    repair = 0
                     try:
                         if scorer is not None:
                             value, repair = scorer(at_n, name, held_out)
                         else:
                             model = fitter.fit(at_n, name)
                             value, repair = _fit_score(model, held_out), stabilised(model)
-                        repaired[(n, v)] += repair
                     except SubidError:
                         value = FLOOR
-                    per_fold[(n, v)].append(value)
+                    out[(n, v)] = (value, repair)
+        return out
+
+    # the folds on subid's threads where their factors are large; warnings dropped
+    depth = (getattr(fitter, "blocks_per_horizon", None) or 2) * horizon
+    for out in ordered_map(fold, range(len(parts)), quiet=True,
+                           threads=fold_threads(depth, parts)):
+        for key, (value, repair) in out.items():
+            per_fold[key].append(value)
+            repaired[key] += repair
     return per_fold, repaired
 
 
