@@ -270,6 +270,7 @@ def test_fold_refinements_on_threads_equal_one_after_the_other(monkeypatch, feed
     config = {"order": 3, "horizon": 10, "feedthrough": False}
     scores = (focus,) if guard is None else (focus, guard)
     monkeypatch.setattr(module, "THREADED_JACOBIAN", 0)
+    monkeypatch.setattr(module, "one_thread", lambda: True)     # whatever BLAS runs here
     if feedback:                  # a limit the second fold crosses: rounds of two folds
         monkeypatch.setattr(module, "SIMULATION_LOSS", -0.6)
     filters = list(warnings.filters)
@@ -282,6 +283,24 @@ def test_fold_refinements_on_threads_equal_one_after_the_other(monkeypatch, feed
         assert warnings.filters == filters
     assert done[1] == done[2]
     assert len(done[1][1][focus]) == (2 if feedback else 4)
+
+
+def test_folds_on_threads_only_while_blas_runs_one_thread():
+    """Two levels of threads would compete for the cores: the folds go on subid's threads
+    only while BLAS runs one thread (subid's default inside its calls)."""
+    from threadpoolctl import threadpool_limits
+
+    from subid import _blas
+    from subid.methods.dt.fold_statistics import THREADED_ROWS, fold_threads
+    parts = [(systems.simulate_data(systems.seed001_system(), 200, seed=1), None)]
+    deep = THREADED_ROWS            # rows = depth x 4 channels: large enough
+    with threadpool_limits(limits=1, user_api="blas"):
+        assert _blas.one_thread()
+        assert fold_threads(deep, parts) is None and fold_threads(1, parts) == 1
+    with threadpool_limits(limits=2, user_api="blas"):
+        if _blas.one_thread():
+            pytest.skip("this BLAS runs one thread only")
+        assert fold_threads(deep, parts) == 1
 
 
 def test_ordered_map_keeps_order_context_and_errors(monkeypatch):

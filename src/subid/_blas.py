@@ -30,7 +30,7 @@ import logging
 import os
 import threading
 
-__all__ = ["serial", "serial_blas", "CHOICE_VARIABLES", "chosen"]
+__all__ = ["serial", "serial_blas", "CHOICE_VARIABLES", "chosen", "one_thread"]
 
 #: Environment variables by which a user sets the number of BLAS/OpenMP threads: with
 #: any of them set, subid leaves the thread pools as they are.
@@ -62,6 +62,19 @@ def _blas_libraries() -> list:
         _controllers = [c for c in ThreadpoolController().lib_controllers
                         if c.user_api == "blas"]
     return _controllers
+
+
+def one_thread() -> bool:
+    """Whether every BLAS library loaded runs one thread now (what :func:`serial_blas`
+    sets unless the user chose otherwise): subid's own threads may then share the cores
+    with work that calls BLAS (the folds of large models,
+    :func:`subid.methods.dt.fold_statistics.fold_threads`) without two levels of
+    threads competing for them."""
+    try:
+        return all(lib.num_threads == 1 for lib in _blas_libraries())
+    except Exception as exc:  # noqa: BLE001 - a speed setting: never stops the computation
+        logging.getLogger("subid").debug("BLAS threads unknown: %s", exc)
+        return False
 
 
 def _enter(apply: bool = True) -> None:

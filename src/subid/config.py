@@ -26,7 +26,8 @@ def thread_limit(n_threads: int):
     subid's own per-sample kernels are serial; the thread pools that matter
     are BLAS's (QR, matrix products of the data statistic), numba's, and
     subid's own (the CSV parser, the passes over a streamed record, the folds
-    of the order selection and of :func:`subid.identify` on large models).
+    of the order selection and of :func:`subid.identify` on large models,
+    which use threads only while BLAS runs one).
 
     Parameters
     ----------

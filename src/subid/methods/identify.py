@@ -91,7 +91,7 @@ import warnings
 
 import numpy as np
 
-from subid._blas import serial_blas
+from subid._blas import one_thread, serial_blas
 from subid._threads import available, ordered_map
 from subid._validation import check_choice, checked_call
 from subid.data import IOData
@@ -222,7 +222,8 @@ def _fold_refinement(data, method, config, focus, scores=None, guard=None):
     each focus of ``scores`` (default: ``focus`` alone).
 
     The folds are independent: where a fold's Jacobian is large
-    (:data:`THREADED_JACOBIAN`), their subspace models, then their refinements, are
+    (:data:`THREADED_JACOBIAN`) and BLAS runs one thread (:func:`subid._blas.one_thread`,
+    the default), their subspace models, then their refinements, are
     made on subid's threads (:func:`subid._threads.ordered_map`; the Jacobians'
     compiled kernels, matrix products and QR factorisations release the GIL), the
     same models as one after the other (on DaISy steamgen, order 20: the same fold
@@ -256,7 +257,7 @@ def _fold_refinement(data, method, config, focus, scores=None, guard=None):
     nu, ny = data.n_inputs, data.n_outputs
     jacobian = max(train.n_samples for train, _ in parts) * ny * \
         (order * (order + nu + 2 * ny) + ny * nu)
-    threads = available() if jacobian >= THREADED_JACOBIAN else 1
+    threads = available() if jacobian >= THREADED_JACOBIAN and one_thread() else 1
 
     def quietly(function, items):
         # the fold models are only scored: their warnings dropped

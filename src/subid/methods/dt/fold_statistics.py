@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from subid._blas import one_thread
 from subid._threads import ordered_map
 
 
@@ -64,9 +65,12 @@ THREADED_ROWS = 200
 def fold_threads(depth, parts) -> int | None:
     """The ``threads`` of :func:`subid._threads.ordered_map` for the folds ``parts`` (their
     ``(train, validation)`` records) at Hankel depth ``depth``: subid's threads (None) when
-    the factors have :data:`THREADED_ROWS` rows or more, else 1."""
+    the factors have :data:`THREADED_ROWS` rows or more and BLAS runs one thread
+    (:func:`subid._blas.one_thread`: the default; a user who gave BLAS more threads has
+    them spent there), else 1."""
     train = parts[0][0]
-    return None if depth * (train.n_inputs + train.n_outputs) >= THREADED_ROWS else 1
+    large = depth * (train.n_inputs + train.n_outputs) >= THREADED_ROWS
+    return None if large and one_thread() else 1
 
 #: The blocks of :func:`_blocks_of_folds` whose concatenation is each fold's training
 #: record, and its validation record.
