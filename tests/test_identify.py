@@ -407,6 +407,38 @@ def test_feedthrough_records_the_lag0_share_under_feedback():
     assert max(subid.n4sid(opened, 3, horizon=10).info["feedthrough"]["lag0_share"]) < 0.01
 
 
+def test_the_feedthrough_decision_in_words(capsys, tmp_path):
+    """describe_feedthrough says whether D was estimated and why; under feedback it names
+    the inputs flagged and the share a free D would take, and how to ask for D (the
+    command line's summary and the report print it)."""
+    from subid.cli.commands import main
+    from subid.methods.describe import describe_feedthrough
+    true, data = _closed_loop(7)
+    record = subid.n4sid(data, 3, horizon=10).info["feedthrough"]
+    text = describe_feedthrough(record, option="OPT", output_names=["a", "b"])
+    shares = ", ".join(f"{100 * v:.0f} % ({n})" for n, v in zip("ab", record["lag0_share"]))
+    flagged = ", ".join(f"u{j + 1}" for j, v in enumerate(record["feedback"]["p_values"])
+                        if v is not None and v < record["level"] / 2)
+    assert flagged and text.startswith(f"D = 0: the data show feedback to {flagged}, ")
+    assert shares in text
+    assert text.endswith("pass OPT if the plant has a direct term and the feedback a delay")
+    opened = systems.simulate_innovation_data(true, 3000, seed=7)
+    assert describe_feedthrough(subid.n4sid(opened, 3, horizon=10).info["feedthrough"]) \
+        .startswith("D = 0: no direct term in the data (F-test, p = ")
+    direct = systems.simulate_innovation_data(systems.seed001_innovation_system(), 3000, seed=7)
+    assert describe_feedthrough(subid.n4sid(direct, 3, horizon=10).info["feedthrough"]) \
+        .startswith("D estimated: the data show a direct term (F-test, p = ")
+    assert describe_feedthrough(subid.n4sid(data, 3, horizon=10, feedthrough=True)
+                                .info["feedthrough"]) == "D estimated (asked)"
+    assert describe_feedthrough(None) is None
+    from subid.evaluation.report import _info_table
+    html = _info_table({"feedthrough": record}, ["p", "q"], ["a", "b"])
+    assert "the data show feedback to p" in html and "(on the command line: --option" in html
+    assert main(["identify", "dataset:dryer", "--method", "n4sid", "--order", "3",
+                 "--no-report", "--out", str(tmp_path)]) == 0
+    assert "\nfeedthrough D = 0: no direct term in the data" in capsys.readouterr().out
+
+
 # -- the innovation check of the order selection ---------------------------------------------
 
 def test_innovation_bic_equals_an_explicit_kalman_predictor():

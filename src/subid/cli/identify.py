@@ -45,7 +45,7 @@ from subid.cli._shared import (
     run_batch,
 )
 from subid.io._files import atomic_directory
-from subid.methods.describe import AUTO_ORDER_RULE
+from subid.methods.describe import AUTO_ORDER_RULE, describe_feedthrough
 from subid.methods.describe import describe_order_selection as describe_selection
 
 # -- identify ----------------------------------------------------------------
@@ -452,6 +452,9 @@ def _print_summary(source, record, spec, model, result, est, val, seconds, files
              f"order       {model.order}"
              + (f" ({describe_selection(model.info['order_selection'])})"
                 if model.info.get("order_selection") else ""),
+             *([f"feedthrough {text}"] if (text := describe_feedthrough(
+                 model.info.get("feedthrough"), option="--option feedthrough=true",
+                 input_names=est.input_names, output_names=est.output_names)) else []),
              f"outputs     {', '.join(est.output_names)}",
              f"fit %       estimation {_fmt_fit(result['fit_estimation'])} "
              f"({est.n_samples} samples)"]

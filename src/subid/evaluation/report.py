@@ -258,7 +258,7 @@ def _pole_table(model, hz: bool) -> str:
     return f"<table><tr>{head}</tr>{''.join(rows)}</table>"
 
 
-def _info_table(info: dict) -> str:
+def _info_table(info: dict, input_names=None, output_names=None) -> str:
     info = {k: v for k, v in info.items() if k != "polynomials"}   # shown as polynomials
     rows = []
     for key in sorted(info):
@@ -274,6 +274,14 @@ def _info_table(info: dict) -> str:
             from subid.methods.describe import describe_order_selection as describe
             rows.append(f'<tr><th class="l">{_e(key)}</th><td class="l">{_e(describe(value))}'
                         "</td></tr>")
+        elif key == "feedthrough" and isinstance(value, dict):
+            from subid.methods.describe import describe_feedthrough
+            text = describe_feedthrough(value, option="feedthrough=True (on the command "
+                                                      "line: --option feedthrough=true)",
+                                        input_names=input_names, output_names=output_names)
+            if text:
+                rows.append(f'<tr><th class="l">{_e(key)}</th><td class="l">{_e(text)}'
+                            "</td></tr>")
         elif key == "stability" and isinstance(value, dict):
             text = value.get("action", "")
             if value.get("how") and text != "none":
@@ -733,7 +741,7 @@ def identification_report(models, estimation, validation=None, *, title="subid r
                                                        for k in range(np.shape(x0)[0])]
             block += ["<p>initial state x0 of every experiment (estimation data)</p>",
                       _matrix_table(np.asarray(x0, dtype=float), list(names), states)]
-        info = _info_table(m.info)
+        info = _info_table(m.info, m.input_names, m.output_names)
         if info:
             block += ["<p>diagnostics (model.info)</p>", info]
         block += ["<p>MATLAB</p>", f"<pre>{_e(_matlab_code(m, operating_point(m, estimation)))}</pre>"]
