@@ -72,6 +72,7 @@ def fold_threads(depth, parts) -> int | None:
     large = depth * (train.n_inputs + train.n_outputs) >= THREADED_ROWS
     return None if large and one_thread() else 1
 
+
 #: The blocks of :func:`_blocks_of_folds` whose concatenation is each fold's training
 #: record, and its validation record.
 FOLD_BLOCKS = [(0, 1, 2), (1, 2, 3), (0, 1), (2, 3)]
