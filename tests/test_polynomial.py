@@ -86,6 +86,38 @@ def test_predictor_derivatives_are_exact():
                                        atol=1e-6)
 
 
+@pytest.mark.parametrize("structure", ["oe", "bj"])
+def test_written_out_derivatives_equal_the_unit_step_differences(structure):
+    """OE and BJ take the predictor's derivatives from the observer form written out
+    (_Output._observer_directions); they equal the exact unit-step central differences of
+    the realisation (degree <= 2 in the coefficients) to rounding, for random orders and
+    delays (nk = 0 included: the b_j[0] terms), one to three inputs."""
+    from subid.methods.dt.pem_poly import _Output
+    rng = np.random.default_rng(1)
+    for nu in (1, 2, 3):
+        for _ in range(8):
+            nc, nd = (int(rng.integers(0, 3)), int(rng.integers(0, 3))) if structure == "bj" \
+                else (0, 0)
+            orders = {"na": np.zeros((1, 1), int), "nb": rng.integers(1, 4, (1, nu)),
+                      "nk": rng.integers(0, 3, (1, nu)), "nf": rng.integers(0, 4, (1, nu)),
+                      "nc": np.array([nc]), "nd": np.array([nd])}
+            sub = _Output(structure, orders, 0, nu)
+            theta = rng.standard_normal(sub.size)
+            written = sub.directions(theta)
+            base, d = sub.predictor(theta), sub.size
+            for j in range(d):
+                e = np.zeros(d)
+                e[j] = 1.0
+                plus, minus = sub.predictor(theta + e), sub.predictor(theta - e)
+                for k in range(4):
+                    np.testing.assert_allclose(written[k][j], 0.5 * (plus[k] - minus[k]),
+                                               rtol=0, atol=1e-12)
+            for k in range(4):            # the x0 rows: none of the matrices move
+                assert written[k].shape == (d + base[0].shape[0],) + base[k].shape
+                assert not written[k][d:].any()
+            np.testing.assert_array_equal(written[4][d:], np.eye(base[0].shape[0]))
+
+
 def test_polynomial_model_works_as_a_state_space(tmp_path):
     data, _ = _record("armax", 800, 4)
     model = subid.armax(data, (2, 2, 2, 1))

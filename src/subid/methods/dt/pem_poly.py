@@ -171,8 +171,13 @@ class _Output:
         """Derivatives of the predictor along every coefficient, then the x0 rows.
 
         The predictor's matrices are polynomials of degree <= 2 in ``theta``
-        (module docstring): the unit-step central difference is exact.
+        (module docstring): the unit-step central difference is exact. For the
+        structures realised input by input (OE, BJ) the derivatives are written out
+        from the observer form instead (:meth:`_observer_directions`: the same
+        arrays, to rounding, without ``2 d`` realisations).
         """
+        if self.structure in ("oe", "bj"):
+            return self._observer_directions(theta)
         base = self.predictor(theta)
         n = base[0].shape[0]
         d = self.size
@@ -186,6 +191,73 @@ class _Output:
         dx0 = np.zeros((d + n, n))
         dx0[d:] = np.eye(n)
         return (*out, dx0)
+
+    def _observer_directions(self, theta):
+        """:meth:`directions` of an OE or BJ output from the realisation written out.
+
+        :func:`subid.model.polynomial.realise` stacks, for input j, the observer form
+        of ``B_j / F_j`` (order ``p_j = max(nf_j, nk_j + nb_j - 1)``: first column of A
+        ``-f_j[1..p_j]``, B ``b_j[1..p_j] - f_j[1..p_j] b_j[0]``, C ``e_1``, D
+        ``b_j[0]``), then that of the noise ``C / D`` (order ``max(nc, nd)``: first
+        column ``-d[1..]``, gain K ``c[1..] - d[1..]``); the predictor is ``(A - K C,
+        [B - K D, K], C, [D, 0])``. Along a coefficient: ``b_j`` at lag ``l >= 1``
+        moves ``B[l - 1, j]``; ``b_j[0]`` moves ``D[0, j]`` and ``B[., j]`` by
+        ``-f_j``; ``f_j`` at lag ``l`` moves ``A[l - 1, 0]`` by -1 and ``B[l - 1, j]`` by
+        ``-b_j[0]`` (rows of the block); ``c`` and ``d`` at lag ``l`` move ``K[l - 1]``
+        by +1 and -1, ``d`` also ``A[l - 1, 0]`` by -1 (rows of the noise block).
+        """
+        A, B, C, D, K = realise(self.record(theta))
+        n, nu, d = A.shape[0], self.nu, self.size
+        dA, dB, dK = np.zeros((d, n, n)), np.zeros((d, n, nu)), np.zeros((d, n))
+        dD = np.zeros((d, nu))
+        at = self.na                        # theta: a (none here), b_j, c, d, f_j
+        b_at = []
+        for j in range(nu):
+            b_at.append(at)
+            at += self.nb[j]
+        c_at, d_at = at, at + self.nc
+        at = d_at + self.nd
+        row = 0
+        for j in range(nu):
+            p = max(self.nf[j], self.nk[j] + self.nb[j] - 1, 0)
+            b = np.zeros(p + 1)
+            f = np.zeros(p + 1)
+            b[self.nk[j]:self.nk[j] + self.nb[j]] = theta[b_at[j]:b_at[j] + self.nb[j]]
+            f[0] = 1.0
+            f[1:self.nf[j] + 1] = theta[at:at + self.nf[j]]
+            for m in range(self.nb[j]):
+                lag, k = self.nk[j] + m, b_at[j] + m
+                if lag == 0:
+                    dD[k, j] = 1.0
+                    dB[k, row:row + p, j] = -f[1:]
+                else:
+                    dB[k, row + lag - 1, j] = 1.0
+            for m in range(self.nf[j]):
+                k = at + m
+                dA[k, row + m, row] = -1.0
+                dB[k, row + m, j] = -b[0]
+            at += self.nf[j]
+            row += p
+        for m in range(self.nc):
+            dK[c_at + m, row + m] = 1.0
+        for m in range(self.nd):
+            dA[d_at + m, row + m, row] = -1.0
+            dK[d_at + m, row + m] = -1.0
+        # the predictor (A - K C, [B - K D, K], C, [D, 0]) along each coefficient
+        Kc = K[:, 0]
+        dAp = dA - dK[:, :, None] * C[0][None, None, :]
+        dBu = dB - dK[:, :, None] * D[0][None, None, :] - Kc[None, :, None] * dD[:, None, :]
+        out_A = np.zeros((d + n, n, n))
+        out_A[:d] = dAp
+        out_B = np.zeros((d + n, n, nu + 1))
+        out_B[:d, :, :nu] = dBu
+        out_B[:d, :, nu] = dK
+        out_C = np.zeros((d + n, 1, n))
+        out_D = np.zeros((d + n, 1, nu + 1))
+        out_D[:d, 0, :nu] = dD
+        dx0 = np.zeros((d + n, n))
+        dx0[d:] = np.eye(n)
+        return out_A, out_B, out_C, out_D, dx0
 
 
 def _cost(sub, theta, v, y, ranges):
