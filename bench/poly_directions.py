@@ -1,18 +1,19 @@
-"""CPU of the ``oe`` and ``bj`` default calls with the predictor's derivatives written out
+"""CPU of the ``armax``, ``oe`` and ``bj`` default calls with the derivatives written out
 against the unit-step central differences they replaced, interleaved in one process.
 
 ``pem_poly._Output.directions`` took the derivatives of the predictor along every
 coefficient from ``2 d`` realisations (exact: the realisation is of degree <= 2 in the
-coefficients); OE and BJ now write them out from the observer form
+coefficients); ARMAX, OE and BJ now write them out from the observer form
 (``_Output._observer_directions``, equal to rounding, tests/test_polynomial.py). The
-reference path is selected by monkeypatching the structure test. Each record: means of
+reference path (the central differences, written here) is put in place by
+monkeypatching ``_Output.directions``. Each record: means of
 the first 2/3 removed, that part estimated, the last 1/3 validated (simulation fit %,
 x0 by least squares, mean over outputs, as bench/realdata.py); CPU seconds
 (``time.process_time``), the two paths alternated ``--repeat`` times, medians; the
 largest entry-wise difference of the two models' A relative to its largest entry.
 
 Run: OPENBLAS_NUM_THREADS=1 PYTHONPATH=src python bench/poly_directions.py [RECORD ...]
-     [--methods oe,bj] [--repeat 2] [--out bench/poly_directions.md]
+     [--methods armax,oe,bj] [--repeat 2] [--out bench/poly_directions.md]
 """
 
 from __future__ import annotations
@@ -29,7 +30,7 @@ RECORDS = ["dryer", "exchanger", "robot_arm", "evaporator", "glassfurnace", "ste
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("records", nargs="*", default=RECORDS)
-    parser.add_argument("--methods", default="oe,bj")
+    parser.add_argument("--methods", default="armax,oe,bj")
     parser.add_argument("--repeat", type=int, default=2)
     parser.add_argument("--out", default=os.path.join(os.path.dirname(__file__),
                                                       "poly_directions.md"))
@@ -42,12 +43,21 @@ def main(argv=None) -> None:
 
     written = pem_poly._Output.directions
 
-    def reference(self, theta):                 # the central differences for every structure
-        structure, self.structure = self.structure, "reference"
-        try:
-            return written(self, theta)
-        finally:
-            self.structure = structure
+    def reference(self, theta):
+        """The unit-step central differences of two realisations per coefficient (the
+        library's computation before the change)."""
+        base = self.predictor(theta)
+        n, d = base[0].shape[0], self.size
+        out = [np.zeros((d + n,) + m.shape) for m in base]
+        for j in range(d):
+            e = np.zeros(d)
+            e[j] = 1.0
+            plus, minus = self.predictor(theta + e), self.predictor(theta - e)
+            for k in range(4):
+                out[k][j] = 0.5 * (plus[k] - minus[k])
+        dx0 = np.zeros((d + n, n))
+        dx0[d:] = np.eye(n)
+        return (*out, dx0)
 
     rows = []
     for name in args.records:
@@ -77,7 +87,8 @@ def main(argv=None) -> None:
                         f"{diff:.1e} |")
             print(rows[-1], flush=True)
     text = "\n".join([
-        "# The predictor's derivatives of OE and BJ written out (bench/poly_directions.py)", "",
+        "# The predictor's derivatives of ARMAX, OE and BJ written out "
+        "(bench/poly_directions.py)", "",
         f"Median CPU seconds of {args.repeat} calls per path, alternated in one process, "
         f"OPENBLAS_NUM_THREADS=1, load average {os.getloadavg()[1]:.1f} at the end. "
         "Reference: the unit-step central differences (module docstring).", "",

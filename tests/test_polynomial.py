@@ -86,9 +86,9 @@ def test_predictor_derivatives_are_exact():
                                        atol=1e-6)
 
 
-@pytest.mark.parametrize("structure", ["oe", "bj"])
+@pytest.mark.parametrize("structure", ["armax", "oe", "bj"])
 def test_written_out_derivatives_equal_the_unit_step_differences(structure):
-    """OE and BJ take the predictor's derivatives from the observer form written out
+    """ARMAX, OE and BJ take the predictor's derivatives from the observer form written out
     (_Output._observer_directions); they equal the exact unit-step central differences of
     the realisation (degree <= 2 in the coefficients) to rounding, for random orders and
     delays (nk = 0 included: the b_j[0] terms), one to three inputs."""
@@ -97,9 +97,12 @@ def test_written_out_derivatives_equal_the_unit_step_differences(structure):
     for nu in (1, 2, 3):
         for _ in range(8):
             nc, nd = (int(rng.integers(0, 3)), int(rng.integers(0, 3))) if structure == "bj" \
-                else (0, 0)
-            orders = {"na": np.zeros((1, 1), int), "nb": rng.integers(1, 4, (1, nu)),
-                      "nk": rng.integers(0, 3, (1, nu)), "nf": rng.integers(0, 4, (1, nu)),
+                else (int(rng.integers(0, 3)), 0) if structure == "armax" else (0, 0)
+            na = int(rng.integers(0, 4)) if structure == "armax" else 0
+            orders = {"na": np.full((1, 1), na), "nb": rng.integers(1, 4, (1, nu)),
+                      "nk": rng.integers(0, 3, (1, nu)),
+                      "nf": rng.integers(0, 4, (1, nu)) if structure != "armax"
+                      else np.zeros((1, nu), int),
                       "nc": np.array([nc]), "nd": np.array([nd])}
             sub = _Output(structure, orders, 0, nu)
             theta = rng.standard_normal(sub.size)

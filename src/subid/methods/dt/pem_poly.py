@@ -168,81 +168,95 @@ class _Output:
         return _predictor(A, B, C, D, K, "prediction")
 
     def directions(self, theta):
-        """Derivatives of the predictor along every coefficient, then the x0 rows.
+        """Derivatives of the predictor along every coefficient, then the x0 rows:
+        ``(dAp, dBp, dC, dDp, dx0)``, each with ``size + n`` leading rows.
 
         The predictor's matrices are polynomials of degree <= 2 in ``theta``
-        (module docstring): the unit-step central difference is exact. For the
-        structures realised input by input (OE, BJ) the derivatives are written out
-        from the observer form instead (:meth:`_observer_directions`: the same
-        arrays, to rounding, without ``2 d`` realisations).
+        (module docstring), so the unit-step central difference of two realisations
+        per coefficient would be exact; the derivatives are written out from the
+        observer form instead (:meth:`_observer_directions`; equal to those
+        differences to rounding, tests/test_polynomial.py).
         """
-        if self.structure in ("oe", "bj"):
-            return self._observer_directions(theta)
-        base = self.predictor(theta)
-        n = base[0].shape[0]
-        d = self.size
-        out = [np.zeros((d + n,) + m.shape) for m in base]
-        for j in range(d):
-            e = np.zeros(d)
-            e[j] = 1.0
-            plus, minus = self.predictor(theta + e), self.predictor(theta - e)
-            for k in range(4):
-                out[k][j] = 0.5 * (plus[k] - minus[k])
-        dx0 = np.zeros((d + n, n))
-        dx0[d:] = np.eye(n)
-        return (*out, dx0)
+        return self._observer_directions(theta)
 
     def _observer_directions(self, theta):
-        """:meth:`directions` of an OE or BJ output from the realisation written out.
+        """:meth:`directions` of an ARMAX, OE or BJ output from the realisation written out.
 
-        :func:`subid.model.polynomial.realise` stacks, for input j, the observer form
-        of ``B_j / F_j`` (order ``p_j = max(nf_j, nk_j + nb_j - 1)``: first column of A
-        ``-f_j[1..p_j]``, B ``b_j[1..p_j] - f_j[1..p_j] b_j[0]``, C ``e_1``, D
-        ``b_j[0]``), then that of the noise ``C / D`` (order ``max(nc, nd)``: first
-        column ``-d[1..]``, gain K ``c[1..] - d[1..]``); the predictor is ``(A - K C,
-        [B - K D, K], C, [D, 0])``. Along a coefficient: ``b_j`` at lag ``l >= 1``
-        moves ``B[l - 1, j]``; ``b_j[0]`` moves ``D[0, j]`` and ``B[., j]`` by
-        ``-f_j``; ``f_j`` at lag ``l`` moves ``A[l - 1, 0]`` by -1 and ``B[l - 1, j]`` by
-        ``-b_j[0]`` (rows of the block); ``c`` and ``d`` at lag ``l`` move ``K[l - 1]``
-        by +1 and -1, ``d`` also ``A[l - 1, 0]`` by -1 (rows of the noise block).
+        :func:`subid.model.polynomial.realise` realises ARMAX in the observer form of
+        ``A^-1 [B_1 .. B_nu, C]`` (order ``p = max(na, nk_j + nb_j - 1, nc)``: first
+        column of A ``-a[1..p]``, B ``b_j[1..p] - a[1..p] b_j[0]``, gain K ``c[1..p] -
+        a[1..p]``, C ``e_1``, D ``b_j[0]``); OE and BJ input by input, the observer form
+        of ``B_j / F_j`` (order ``p_j = max(nf_j, nk_j + nb_j - 1)``: first column
+        ``-f_j[1..p_j]``, B ``b_j[1..p_j] - f_j[1..p_j] b_j[0]``, C ``e_1``, D ``b_j[0]``),
+        then that of the noise ``C / D`` (order ``max(nc, nd)``: first column ``-d[1..]``,
+        K ``c[1..] - d[1..]``). The predictor is ``(A - K C, [B - K D, K], C, [D, 0])``.
+        Along a coefficient, in the rows of its block: ``b_j`` at lag ``l >= 1`` moves
+        ``B[l - 1, j]``; ``b_j[0]`` moves ``D[0, j]`` and ``B[., j]`` by minus the
+        denominator (``a`` or ``f_j``); a denominator coefficient at lag ``l`` moves the
+        first column's ``A[l - 1, 0]`` by -1 and ``B[l - 1, j]`` by ``-b_j[0]`` (ARMAX:
+        every j, and ``K[l - 1]`` by -1); ``c`` at lag ``l`` moves ``K[l - 1]`` by +1;
+        ``d`` at lag ``l`` moves ``K[l - 1]`` by -1 and ``A[l - 1, 0]`` by -1.
         """
         A, B, C, D, K = realise(self.record(theta))
         n, nu, d = A.shape[0], self.nu, self.size
         dA, dB, dK = np.zeros((d, n, n)), np.zeros((d, n, nu)), np.zeros((d, n))
         dD = np.zeros((d, nu))
-        at = self.na                        # theta: a (none here), b_j, c, d, f_j
+        at = self.na                        # theta: a, b_j, c, d, f_j
         b_at = []
         for j in range(nu):
             b_at.append(at)
             at += self.nb[j]
         c_at, d_at = at, at + self.nc
         at = d_at + self.nd
-        row = 0
-        for j in range(nu):
-            p = max(self.nf[j], self.nk[j] + self.nb[j] - 1, 0)
+
+        def numerator(j, p):
             b = np.zeros(p + 1)
-            f = np.zeros(p + 1)
             b[self.nk[j]:self.nk[j] + self.nb[j]] = theta[b_at[j]:b_at[j] + self.nb[j]]
-            f[0] = 1.0
-            f[1:self.nf[j] + 1] = theta[at:at + self.nf[j]]
+            return b
+
+        def b_terms(j, row, p, den):
+            # b_j along its coefficients: D (lag 0, with B by minus the denominator), B
             for m in range(self.nb[j]):
                 lag, k = self.nk[j] + m, b_at[j] + m
                 if lag == 0:
                     dD[k, j] = 1.0
-                    dB[k, row:row + p, j] = -f[1:]
+                    dB[k, row:row + p, j] = -den[1:]
                 else:
                     dB[k, row + lag - 1, j] = 1.0
-            for m in range(self.nf[j]):
-                k = at + m
-                dA[k, row + m, row] = -1.0
-                dB[k, row + m, j] = -b[0]
-            at += self.nf[j]
-            row += p
-        for m in range(self.nc):
-            dK[c_at + m, row + m] = 1.0
-        for m in range(self.nd):
-            dA[d_at + m, row + m, row] = -1.0
-            dK[d_at + m, row + m] = -1.0
+
+        if self.structure == "armax":
+            p = n
+            a = np.zeros(p + 1)
+            a[0] = 1.0
+            a[1:self.na + 1] = theta[:self.na]
+            b0 = [numerator(j, p)[0] for j in range(nu)]
+            for m in range(self.na):
+                dA[m, m, 0] = -1.0
+                dB[m, m, :] = -np.asarray(b0)
+                dK[m, m] = -1.0
+            for j in range(nu):
+                b_terms(j, 0, p, a)
+            for m in range(self.nc):
+                dK[c_at + m, m] = 1.0
+        else:
+            row = 0
+            for j in range(nu):
+                p = max(self.nf[j], self.nk[j] + self.nb[j] - 1, 0)
+                f = np.zeros(p + 1)
+                f[0] = 1.0
+                f[1:self.nf[j] + 1] = theta[at:at + self.nf[j]]
+                b_terms(j, row, p, f)
+                b0 = numerator(j, p)[0]
+                for m in range(self.nf[j]):
+                    dA[at + m, row + m, row] = -1.0
+                    dB[at + m, row + m, j] = -b0
+                at += self.nf[j]
+                row += p
+            for m in range(self.nc):
+                dK[c_at + m, row + m] = 1.0
+            for m in range(self.nd):
+                dA[d_at + m, row + m, row] = -1.0
+                dK[d_at + m, row + m] = -1.0
         # the predictor (A - K C, [B - K D, K], C, [D, 0]) along each coefficient
         Kc = K[:, 0]
         dAp = dA - dK[:, :, None] * C[0][None, None, :]
