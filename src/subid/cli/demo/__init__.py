@@ -454,10 +454,14 @@ _THREAD_VARIABLES = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS
 
 
 def _worker_init():
-    """Worker processes stay silent: the parent reports what they return."""
+    """Worker processes stay silent: the parent reports what they return. Each computes
+    in one thread (subid's own too, :mod:`subid._threads`): the pool's processes already
+    fill the CPUs."""
+    from subid import _threads
     logging.getLogger("subid").addHandler(logging.NullHandler())
     logging.getLogger("subid").propagate = False
     warnings.simplefilter("ignore")
+    _threads.limit = 1
 
 
 def default_jobs(count: int) -> int:
