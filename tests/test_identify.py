@@ -1,5 +1,6 @@
 """subid.identify, feedthrough='auto', the cross-validated BIC and orders past 10 (issue 21)."""
 
+import time
 import warnings
 
 import numpy as np
@@ -316,12 +317,17 @@ def test_ordered_map_keeps_order_context_and_errors(monkeypatch):
         assert _threads.ordered_map(lambda k: (k, var.get()), range(5)) == \
             [(k, "caller's") for k in range(5)]
 
+        started = []
+
         def fails(k):
-            if k == 3:
-                raise ValueError("task 3")
+            started.append(k)
+            if k == 0:
+                raise ValueError("task 0")
+            time.sleep(0.05)
             return k
-        with pytest.raises(ValueError, match="task 3"):
-            _threads.ordered_map(fails, range(5))
+        with pytest.raises(ValueError, match="task 0"):
+            _threads.ordered_map(fails, range(40))
+        assert len(started) < 10      # the tasks not yet started were dropped
     finally:
         var.reset(token)
 

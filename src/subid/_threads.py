@@ -31,8 +31,9 @@ def ordered_map(function, items, *, threads: int | None = None, quiet: bool = Fa
     The result does not depend on the number of threads (each item is one
     task, done by one thread, in a copy of the caller's :mod:`contextvars`
     context, as the loop would run it: the settings subid keeps there, such as
-    :func:`subid.statistic.hankel.compact_wy_qr`, hold in the tasks); exceptions
-    are re-raised in the caller.
+    :func:`subid.statistic.hankel.compact_wy_qr`, hold in the tasks); a task's
+    exception is re-raised in the caller, and on it (or on the user's interrupt)
+    the tasks not yet started are dropped.
 
     Parameters
     ----------
@@ -66,5 +67,7 @@ def ordered_map(function, items, *, threads: int | None = None, quiet: bool = Fa
     def task(item):
         return context.copy().run(function, item)     # one copy per task: no sharing
 
+    # Executor.map cancels the tasks not yet started when its results stop being read (a
+    # task's error, the user's interrupt); those running end (threads cannot be stopped)
     with ThreadPoolExecutor(threads, thread_name_prefix="subid") as pool:
         return list(pool.map(task, items))
