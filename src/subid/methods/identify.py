@@ -119,6 +119,10 @@ SIMULATION_LOSS = 0.10
 #: CD_player_arm (8.7e5, under feedback) 0.56 -> 0.77 s; evaporator (2.2e6) 1.44 ->
 #: 1.25 s, steamgen (1.1e7) 8.5 -> 5.8 s.
 THREADED_JACOBIAN = 1_000_000
+#: ... and at most this many (400 MB of doubles): each fold refinement holds its Jacobian,
+#: so two threads hold two (DaISy steamgen: 300 -> 420 MB peak resident memory with the
+#: fold refinements on two threads); beyond it the folds are refined one after the other.
+THREADED_JACOBIAN_MAX = 50_000_000
 
 
 def _estimator(name):
@@ -221,9 +225,10 @@ def _fold_refinement(data, method, config, focus, scores=None, guard=None):
     ``pem(focus=focus)``: ``(subspace, refined)``, each ``{score focus: scores}`` for
     each focus of ``scores`` (default: ``focus`` alone).
 
-    The folds are independent: where a fold's Jacobian is large
-    (:data:`THREADED_JACOBIAN`) and BLAS runs one thread (:func:`subid._blas.one_thread`,
-    the default), their subspace models, then their refinements, are
+    The folds are independent: where a fold's Jacobian is large but not too large for
+    two in memory (:data:`THREADED_JACOBIAN`, :data:`THREADED_JACOBIAN_MAX`) and BLAS
+    runs one thread (:func:`subid._blas.one_thread`, the default), their subspace
+    models, then their refinements, are
     made on subid's threads (:func:`subid._threads.ordered_map`; the Jacobians'
     compiled kernels, matrix products and QR factorisations release the GIL), the
     same models as one after the other (on DaISy steamgen, order 20: the same fold
@@ -257,7 +262,8 @@ def _fold_refinement(data, method, config, focus, scores=None, guard=None):
     nu, ny = data.n_inputs, data.n_outputs
     jacobian = max(train.n_samples for train, _ in parts) * ny * \
         (order * (order + nu + 2 * ny) + ny * nu)
-    threads = available() if jacobian >= THREADED_JACOBIAN and one_thread() else 1
+    threads = available() if THREADED_JACOBIAN <= jacobian <= THREADED_JACOBIAN_MAX \
+        and one_thread() else 1
 
     def quietly(function, items):
         # the fold models are only scored: their warnings dropped
