@@ -80,8 +80,8 @@ steamgen (order 20, four inputs and outputs, 6,400 samples; 64.3 s before these
 bounds and the blocked kernel), 2.8 s on evaporator (10.8 s) and 1.4 s on
 CD_player_arm (7.1 s). The four folds of a large model are refined on subid's
 threads (:data:`THREADED_JACOBIAN`, :func:`_fold_refinement`; the same fold
-scores): on steamgen the stage takes 8.5 -> 5.5 s wall on 2 cores and the whole
-call 14.4 -> 10.2 s (``bench/identify_refinement.md``).
+scores): on steamgen the stage takes 8.2 -> 5.5 s wall on 2 cores and the whole
+call 13.8 -> 10.3 s (``bench/identify_refinement.md``).
 """
 
 from __future__ import annotations
@@ -117,7 +117,9 @@ SIMULATION_LOSS = 0.10
 #: fold stage on 2 cores, one thread against two (DaISy records, 2/3 to estimate):
 #: robot_arm (1.1e5 entries) 0.24 -> 0.31 s, glassfurnace (4.8e5) 0.32 -> 0.31 s,
 #: CD_player_arm (8.7e5, under feedback) 0.56 -> 0.77 s; evaporator (2.2e6) 1.44 ->
-#: 1.25 s, steamgen (1.1e7) 8.5 -> 5.8 s.
+#: 1.25 s, steamgen (1.1e7) 8.5 -> 5.8 s; the whole ``identify`` of the 2x2 order-4
+#: system of bench/run.py at 1e5 and 1e6 samples (4.6e6 and 6.6e6 entries, the folds'
+#: scores on the threads too) 0.70 -> 0.63 s and 0.84 -> 0.77 s.
 THREADED_JACOBIAN = 1_000_000
 #: ... and at most this many (400 MB of doubles): each fold refinement holds its Jacobian,
 #: so two threads hold two (DaISy steamgen: 300 -> 420 MB peak resident memory with the
@@ -229,10 +231,10 @@ def _fold_refinement(data, method, config, focus, scores=None, guard=None):
     two in memory (:data:`THREADED_JACOBIAN`, :data:`THREADED_JACOBIAN_MAX`) and BLAS
     runs one thread (:func:`subid._blas.one_thread`, the default), their subspace
     models, then their refinements, are
-    made on subid's threads (:func:`subid._threads.ordered_map`; the Jacobians'
-    compiled kernels, matrix products and QR factorisations release the GIL), the
-    same models as one after the other (on DaISy steamgen, order 20: the same fold
-    scores, the fold stage 8.5 -> 5.5 s wall on 2 cores). Their warnings are not
+    made and scored on subid's threads (:func:`subid._threads.ordered_map`; the
+    Jacobians' compiled kernels, matrix products and QR factorisations release the
+    GIL), the same models as one after the other (on DaISy steamgen, order 20: the same
+    fold scores, the fold stage 8.5 -> 5.5 s wall on 2 cores). Their warnings are not
     shown (the fold models are only scored).
 
     ``guard`` (a focus of ``scores``, under feedback): the refinements stop as soon as
@@ -249,15 +251,23 @@ def _fold_refinement(data, method, config, focus, scores=None, guard=None):
     scores = (focus,) if scores is None else tuple(scores)
     parts = _fold_parts(data)
 
-    def start(part):
-        try:
-            return fn(part[0], order, **options)
-        except SubidError:
-            return None
+    def scored(model, validation):
+        return {s: _score(model, validation, s) for s in scores}
 
-    def refined_model(k):
-        return None if starts[k] is None else _refine(parts[k][0], starts[k], focus,
-                                                      held_out=True)
+    def start(part):
+        """The fold's subspace model and its scores (None, FLOOR when it fails)."""
+        try:
+            model = fn(part[0], order, **options)
+        except SubidError:
+            return None, {s: FLOOR for s in scores}
+        return model, scored(model, part[1])
+
+    def refined_scores(k):
+        """The scores of the fold's refined model (its subspace model's when the
+        refinement fails)."""
+        better = None if starts[k] is None else _refine(parts[k][0], starts[k], focus,
+                                                        held_out=True)
+        return base_of[k] if better is None else scored(better, parts[k][1])
 
     nu, ny = data.n_inputs, data.n_outputs
     jacobian = max(train.n_samples for train, _ in parts) * ny * \
@@ -269,9 +279,8 @@ def _fold_refinement(data, method, config, focus, scores=None, guard=None):
         # the fold models are only scored: their warnings dropped
         return ordered_map(function, items, threads=threads, quiet=True)
 
-    starts = quietly(start, parts)
-    base = {s: [FLOOR if begin is None else _score(begin, validation, s)
-                for begin, (_, validation) in zip(starts, parts)] for s in scores}
+    starts, base_of = zip(*quietly(start, parts))
+    base = {s: [b[s] for b in base_of] for s in scores}
     refined = {s: [] for s in scores}
     limit = None if guard is None else \
         (1.0 + SIMULATION_LOSS) * float(np.sum(100.0 - np.asarray(base[guard])))
@@ -280,10 +289,9 @@ def _fold_refinement(data, method, config, focus, scores=None, guard=None):
     step = len(parts) if limit is None else threads
     for first in range(0, len(parts), step):
         folds = range(first, min(first + step, len(parts)))
-        for k, better in zip(folds, quietly(refined_model, folds)):
+        for values in quietly(refined_scores, folds):
             for s in scores:
-                refined[s].append(base[s][k] if better is None
-                                  else _score(better, parts[k][1], s))
+                refined[s].append(values[s])
             if limit is not None and \
                     float(np.sum(100.0 - np.asarray(refined[guard]))) > limit:
                 return base, refined
