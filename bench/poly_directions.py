@@ -4,7 +4,7 @@ against the unit-step central differences they replaced, interleaved in one proc
 ``pem_poly._Output.directions`` took the derivatives of the predictor along every
 coefficient from ``2 d`` realisations (exact: the realisation is of degree <= 2 in the
 coefficients); ARMAX, OE and BJ now write them out from the observer form
-(``_Output._observer_directions``, equal to rounding, tests/test_polynomial.py). The
+(``_Output.directions``, equal to rounding, tests/test_polynomial.py). The
 reference path (the central differences, written here) is put in place by
 monkeypatching ``_Output.directions``. Each record: means of
 the first 2/3 removed, that part estimated, the last 1/3 validated (simulation fit %,

@@ -89,7 +89,7 @@ def test_predictor_derivatives_are_exact():
 @pytest.mark.parametrize("structure", ["armax", "oe", "bj"])
 def test_written_out_derivatives_equal_the_unit_step_differences(structure):
     """ARMAX, OE and BJ take the predictor's derivatives from the observer form written out
-    (_Output._observer_directions); they equal the exact unit-step central differences of
+    (_Output.directions); they equal the exact unit-step central differences of
     the realisation (degree <= 2 in the coefficients) to rounding, for random orders and
     delays (nk = 0 included: the b_j[0] terms), one to three inputs."""
     from subid.methods.dt.pem_poly import _Output

@@ -146,21 +146,37 @@ class _Output:
         parts += [np.asarray(fj, float)[:n] for fj, n in zip(f, self.nf)]
         return np.concatenate(parts)
 
+    def starts(self):
+        """Where each polynomial's coefficients begin in ``theta`` (a, b_j, c, d, f_j):
+        ``(b, c, d, f)``, ``b`` and ``f`` one index per input."""
+        at, b, f = self.na, [], []
+        for n in self.nb:
+            b.append(at)
+            at += n
+        c, d = at, at + self.nc
+        at = d + self.nd
+        for n in self.nf:
+            f.append(at)
+            at += n
+        return b, c, d, f
+
+    def input_order(self, j):
+        """The order of input j's block ``B_j / F_j`` in the OE and BJ realisations."""
+        return max(self.nf[j], self.nk[j] + self.nb[j] - 1, 0)
+
     def blocks(self):
         """``(states, coordinates)`` of each input's block for an output-error model
         (whose predictor is block diagonal, :func:`block_jacobian`); None otherwise."""
         if self.structure != "oe":
             return None
+        b_at, _, _, f_at = self.starts()
         out, at_state = [], 0
-        b_at = self.na
-        f_at = self.na + sum(self.nb) + self.nc + self.nd
         for j in range(self.nu):
-            p = max(self.nf[j], self.nk[j] + self.nb[j] - 1, 0)
-            coords = list(range(b_at, b_at + self.nb[j])) + list(range(f_at, f_at + self.nf[j]))
+            p = self.input_order(j)
+            coords = list(range(b_at[j], b_at[j] + self.nb[j])) + \
+                list(range(f_at[j], f_at[j] + self.nf[j]))
             out.append((np.arange(at_state, at_state + p), np.array(coords, dtype=np.int64)))
             at_state += p
-            b_at += self.nb[j]
-            f_at += self.nf[j]
         return out
 
     def predictor(self, theta):
@@ -171,48 +187,31 @@ class _Output:
         """Derivatives of the predictor along every coefficient, then the x0 rows:
         ``(dAp, dBp, dC, dDp, dx0)``, each with ``size + n`` leading rows.
 
-        The predictor's matrices are polynomials of degree <= 2 in ``theta``
-        (module docstring), so the unit-step central difference of two realisations
-        per coefficient would be exact; the derivatives are written out from the
-        observer form instead (:meth:`_observer_directions`; equal to those
-        differences to rounding, tests/test_polynomial.py).
-        """
-        return self._observer_directions(theta)
-
-    def _observer_directions(self, theta):
-        """:meth:`directions` of an ARMAX, OE or BJ output from the realisation written out.
-
+        The predictor's matrices are polynomials of degree <= 2 in ``theta`` (module
+        docstring), so the unit-step central difference of two realisations per
+        coefficient would be exact; the derivatives are written out from the observer
+        form instead (equal to those differences to rounding, tests/test_polynomial.py).
         :func:`subid.model.polynomial.realise` realises ARMAX in the observer form of
         ``A^-1 [B_1 .. B_nu, C]`` (order ``p = max(na, nk_j + nb_j - 1, nc)``: first
         column of A ``-a[1..p]``, B ``b_j[1..p] - a[1..p] b_j[0]``, gain K ``c[1..p] -
         a[1..p]``, C ``e_1``, D ``b_j[0]``); OE and BJ input by input, the observer form
-        of ``B_j / F_j`` (order ``p_j = max(nf_j, nk_j + nb_j - 1)``: first column
-        ``-f_j[1..p_j]``, B ``b_j[1..p_j] - f_j[1..p_j] b_j[0]``, C ``e_1``, D ``b_j[0]``),
-        then that of the noise ``C / D`` (order ``max(nc, nd)``: first column ``-d[1..]``,
-        K ``c[1..] - d[1..]``). The predictor is ``(A - K C, [B - K D, K], C, [D, 0])``.
-        Along a coefficient, in the rows of its block: ``b_j`` at lag ``l >= 1`` moves
-        ``B[l - 1, j]``; ``b_j[0]`` moves ``D[0, j]`` and ``B[., j]`` by minus the
-        denominator (``a`` or ``f_j``); a denominator coefficient at lag ``l`` moves the
-        first column's ``A[l - 1, 0]`` by -1 and ``B[l - 1, j]`` by ``-b_j[0]`` (ARMAX:
-        every j, and ``K[l - 1]`` by -1); ``c`` at lag ``l`` moves ``K[l - 1]`` by +1;
-        ``d`` at lag ``l`` moves ``K[l - 1]`` by -1 and ``A[l - 1, 0]`` by -1.
+        of ``B_j / F_j`` (order :meth:`input_order`: first column ``-f_j[1..p_j]``, B
+        ``b_j[1..p_j] - f_j[1..p_j] b_j[0]``, C ``e_1``, D ``b_j[0]``), then that of the
+        noise ``C / D`` (order ``max(nc, nd)``: first column ``-d[1..]``, K ``c[1..] -
+        d[1..]``). The predictor is ``(A - K C, [B - K D, K], C, [D, 0])``. Along a
+        coefficient, in the rows of its block: ``b_j`` at lag ``l >= 1`` moves ``B[l - 1,
+        j]``; ``b_j[0]`` moves ``D[0, j]`` and ``B[., j]`` by minus the denominator (``a``
+        or ``f_j``); a denominator coefficient at lag ``l`` moves the first column's
+        ``A[l - 1, 0]`` by -1 and ``B[l - 1, j]`` by ``-b_j[0]`` (ARMAX: every j, and
+        ``K[l - 1]`` by -1); ``c`` at lag ``l`` moves ``K[l - 1]`` by +1; ``d`` at lag ``l``
+        moves ``K[l - 1]`` by -1 and ``A[l - 1, 0]`` by -1.
         """
         A, B, C, D, K = realise(self.record(theta))
         n, nu, d = A.shape[0], self.nu, self.size
         dA, dB, dK = np.zeros((d, n, n)), np.zeros((d, n, nu)), np.zeros((d, n))
         dD = np.zeros((d, nu))
-        at = self.na                        # theta: a, b_j, c, d, f_j
-        b_at = []
-        for j in range(nu):
-            b_at.append(at)
-            at += self.nb[j]
-        c_at, d_at = at, at + self.nc
-        at = d_at + self.nd
-
-        def numerator(j, p):
-            b = np.zeros(p + 1)
-            b[self.nk[j]:self.nk[j] + self.nb[j]] = theta[b_at[j]:b_at[j] + self.nb[j]]
-            return b
+        b_at, c_at, d_at, f_at = self.starts()
+        b0 = [theta[b_at[j]] if self.nk[j] == 0 else 0.0 for j in range(nu)]
 
         def b_terms(j, row, p, den):
             # b_j along its coefficients: D (lag 0, with B by minus the denominator), B
@@ -225,32 +224,28 @@ class _Output:
                     dB[k, row + lag - 1, j] = 1.0
 
         if self.structure == "armax":
-            p = n
-            a = np.zeros(p + 1)
+            a = np.zeros(n + 1)
             a[0] = 1.0
             a[1:self.na + 1] = theta[:self.na]
-            b0 = [numerator(j, p)[0] for j in range(nu)]
             for m in range(self.na):
                 dA[m, m, 0] = -1.0
                 dB[m, m, :] = -np.asarray(b0)
                 dK[m, m] = -1.0
             for j in range(nu):
-                b_terms(j, 0, p, a)
+                b_terms(j, 0, n, a)
             for m in range(self.nc):
                 dK[c_at + m, m] = 1.0
         else:
             row = 0
             for j in range(nu):
-                p = max(self.nf[j], self.nk[j] + self.nb[j] - 1, 0)
+                p = self.input_order(j)
                 f = np.zeros(p + 1)
                 f[0] = 1.0
-                f[1:self.nf[j] + 1] = theta[at:at + self.nf[j]]
+                f[1:self.nf[j] + 1] = theta[f_at[j]:f_at[j] + self.nf[j]]
                 b_terms(j, row, p, f)
-                b0 = numerator(j, p)[0]
                 for m in range(self.nf[j]):
-                    dA[at + m, row + m, row] = -1.0
-                    dB[at + m, row + m, j] = -b0
-                at += self.nf[j]
+                    dA[f_at[j] + m, row + m, row] = -1.0
+                    dB[f_at[j] + m, row + m, j] = -b0[j]
                 row += p
             for m in range(self.nc):
                 dK[c_at + m, row + m] = 1.0
