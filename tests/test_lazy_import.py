@@ -33,6 +33,11 @@ def test_from_import_star_and_dir_list_the_public_names():
     exec("from subid import *", namespace)
     assert set(subid.__all__) <= set(namespace)
     assert set(subid.__all__) <= set(dir(subid))
+    # the package's own helpers (the importlib it loads names with) are not public names
+    assert not [name for name in dir(subid)
+                if not name.startswith("_") and name not in subid.__all__
+                and not isinstance(getattr(subid, name), types.ModuleType)]
+    assert "importlib" not in dir(subid)
     from subid import AdaptiveIdentifier, ls_subspace
     assert AdaptiveIdentifier is subid.methods.online.adaptive.AdaptiveIdentifier
     assert ls_subspace is sys.modules["subid.methods.dt.ls_subspace"].ls_subspace

@@ -208,3 +208,28 @@ def test_writers_replace_regular_files_only_and_keep_links(tmp_path):
         subid.StateSpace(np.eye(1) * 0.5, [[1.0]], [[1.0]], [[0.0]], 1.0).save(link)
     assert os.path.islink(link)
     assert subid.StateSpace.load(real).order == 3
+
+
+def test_identify_and_track_without_out_write_next_to_the_working_folder(tmp_path, csv_file,
+                                                                          monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    args = ["--quiet", "identify", str(csv_file), "--inputs", "u1,u2", "--outputs", "y1,y2",
+            "--dt", "1", "--method", "moesp", "--order", "3", "--horizon", "5", "--no-report"]
+    assert cli.main(args) == 0
+    assert sorted(os.listdir(tmp_path / "run_identify")) == ["model.json", "summary.json"]
+    assert cli.main(args) == 0                      # its own files: replaced, not refused
+    assert cli.main(["--quiet", "track", str(csv_file), "--inputs", "u1,u2", "--outputs",
+                     "y1,y2", "--dt", "1", "--method", "recursive", "--order", "3",
+                     "--no-report"]) == 0
+    assert {"model.json", "history.npz"} <= set(os.listdir(tmp_path / "run_track"))
+    # another run's folder of foreign files is refused, as with --out
+    (tmp_path / "run_identify" / "notes.txt").write_text("mine")
+    assert cli.main(args) == 2
+    assert "run_identify holds files subid did not write" in capsys.readouterr().err
+
+
+def test_default_out_names():
+    from subid.cli._shared import _default_out
+    assert _default_out("data/plant.csv", "identify") == "plant_identify"
+    assert _default_out("dataset:dryer", "track") == "dryer_track"
+    assert _default_out("runs/", "identify") == "runs_identify"

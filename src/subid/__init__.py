@@ -19,7 +19,7 @@ so ``import subid`` does not load numba, scipy.optimize or matplotlib;
 everything had been imported eagerly.
 """
 
-import importlib
+import importlib as _importlib
 
 # public name -> (submodule, attribute); attribute None: the submodule itself. Every
 # public namespace is a module of the package itself (subid/plot.py re-exports
@@ -146,7 +146,7 @@ def __getattr__(name):
         module_name, attribute = _LAZY[name]
     except KeyError:
         raise AttributeError(f"module 'subid' has no attribute {name!r}") from None
-    module = importlib.import_module(f".{module_name}", __name__)
+    module = _importlib.import_module(f".{module_name}", __name__)
     value = module if attribute is None else getattr(module, attribute)
     # A submodule import binds the submodule on the package (``subid.delay``
     # would otherwise shadow nothing); the public name wins, as it did when

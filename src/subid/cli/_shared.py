@@ -487,6 +487,15 @@ def _only(names):
     return lambda path: set(os.listdir(path)) <= names
 
 
+def _default_out(source: str, command: str) -> str:
+    """The ``--out`` folder of a command run without it: ``NAME_COMMAND`` in the current
+    folder, NAME the first DATA's file name without its extension (``plant.csv`` ->
+    ``plant_identify``) or the dataset's name (``dataset:dryer`` -> ``dryer_identify``)."""
+    name = source.split(":", 1)[1] if source.startswith("dataset:") else \
+        os.path.splitext(os.path.basename(os.path.normpath(source)))[0]
+    return f"{name or 'data'}_{command}"
+
+
 def _check_out(out, names) -> None:
     """Refuse, before any work, an --out folder holding files subid did not write."""
     from subid.errors import FileWriteError
@@ -571,7 +580,7 @@ def _method_run_options(*, horizon: str, forgetting: str, option: str, report: s
         click.option("--option", "options", multiple=True, metavar="KEY=VALUE", help=option),
         click.option("--report/--no-report", "write_report", default=True,
                      show_default=True, help=report),
-        click.option("--out", required=True, type=click.Path(file_okay=False), help=out),
+        click.option("--out", default=None, type=click.Path(file_okay=False), help=out),
     ]
     return {name: d for name, d in zip(("horizon", "forgetting", "option", "report", "out"),
                                        decorators)}

@@ -18,6 +18,7 @@ from subid.cli._shared import (
     _about,
     _check_method_options,
     _check_out,
+    _default_out,
     _command_line,
     _common,
     _data_options,
@@ -56,7 +57,9 @@ _RUN = _method_run_options(
     option="Extra keyword argument of the method (JSON value), e.g. "
            "--option instruments=null. Repeatable.",
     report="Write report.html (skip it for batch jobs that need only the model).",
-    out="Output folder for model.json, report.html and summary.json.")
+    out="Output folder for model.json, report.html and summary.json (default: "
+        "NAME_identify in the current folder, NAME the first DATA's file name without its "
+        "extension, or the dataset's name).")
 
 
 @cli.command(epilog="\b\nExamples:\n"
@@ -122,6 +125,8 @@ def identify(data, inputs, outputs, dt, time_column, delimiter, detrend, method_
     initial state and loses its own mean (--detrend constant); the validation
     part is the end of the last file. Discrete-time batch methods and ct.
     """
+    if out is None:
+        out = _default_out(data[0], "identify")
     if frequency_response:
         return _identify_frequency(data, dt, delimiter, order, horizon, validate, options,
                                    frequency_unit, refine, write_report, out,

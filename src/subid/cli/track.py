@@ -17,6 +17,7 @@ from subid.cli._shared import (
     _carry_over,
     _check_method_options,
     _check_out,
+    _default_out,
     _command_line,
     _common,
     _convergence_status,
@@ -49,7 +50,9 @@ _RUN = _method_run_options(
                "equally; adaptive: forgetting rate (see its documentation).",
     option="Extra keyword argument of the identifier (JSON value). Repeatable.",
     report="Write report.html.",
-    out="Output folder: model.json, report.html, history.npz, checkpoints/.")
+    out="Output folder: model.json, report.html, history.npz, checkpoints/ (default: "
+        "NAME_track in the current folder, NAME the DATA file's name without its extension, "
+        "or the dataset's name).")
 
 
 @cli.command(epilog="\b\nExamples:\n"
@@ -95,6 +98,8 @@ def track(data, inputs, outputs, dt, time_column, delimiter, detrend, method_nam
     history.npz (snapshots), report.html and checkpoints/.
     """
     from subid.evaluation import report
+    if out is None:
+        out = _default_out(data, "track")
     spec = METHODS[method_name]
     spec.load()
     opts = _parse_options(options)
