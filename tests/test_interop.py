@@ -141,6 +141,37 @@ def test_pandas_round_trip_uniform_and_nonuniform(pd):
     np.testing.assert_array_equal(back.t, t)
 
 
+def test_iodata_of_pandas_columns_takes_their_names(pd):
+    rng = np.random.default_rng(0)
+    df = pd.DataFrame(rng.standard_normal((50, 3)), columns=["force", "volt", "accel"])
+    rec = subid.IOData(df[["force", "volt"]], df["accel"], dt=0.1)
+    assert (rec.input_names, rec.output_names) == (("force", "volt"), ("accel",))
+    np.testing.assert_array_equal(rec.u, df[["force", "volt"]].to_numpy())
+    # names given win; default labels, unnamed Series and arrays keep u1.., y1..
+    rec = subid.IOData(df[["force", "volt"]], df["accel"], input_names=["a", "b"])
+    assert rec.input_names == ("a", "b")
+    rec = subid.IOData(pd.DataFrame(rng.standard_normal((50, 2))),
+                       df["accel"].rename(None))
+    assert (rec.input_names, rec.output_names) == (("u1", "u2"), ("y1",))
+    with pytest.raises(DataError, match="repeats the channel name"):
+        subid.IOData(df[["force", "force"]], df["accel"])
+
+
+@pytest.mark.parametrize("call", [
+    lambda df: subid.identify(df), lambda df: subid.moesp(df), lambda df: subid.arx(df),
+    lambda df: subid.ct_subspace(df), lambda df: subid.spa(df),
+    lambda df: subid.impulseest(df, 10), lambda df: subid.merge([df]),
+    lambda df: subid.pem(df, subid.StateSpace([[0.5]], [[1.0]], [[1.0]], [[0.0]], 1.0)),
+    lambda df: subid.fit_percent(subid.StateSpace([[0.5]], [[1.0]], [[1.0]], [[0.0]], 1.0),
+                                 df),
+])
+def test_a_dataframe_where_a_record_is_expected_says_how_to_make_one(pd, call):
+    df = pd.DataFrame({"u": np.arange(20.0), "y": np.arange(20.0)})
+    with pytest.raises(DataError, match=r"got DataFrame; make one from its columns: "
+                                        r"subid\.IOData\(df\[input_columns\]"):
+        call(df)
+
+
 def test_pandas_time_column_datetime_index_and_defaults(pd):
     df = pd.DataFrame({"t": [0.0, 0.1, 0.2, 0.3], "u": [1.0, 2, 3, 4], "y": [0.0, 1, 0, 1]})
     rec = iodata_from_pandas(df, "u", "y", time="t")

@@ -37,6 +37,36 @@ def _channel_names(names, count: int, prefix: str, which: str) -> tuple[str, ...
     return names
 
 
+def _pandas_names(values):
+    """The channel names a pandas DataFrame (its column labels) or named Series carries,
+    else None (arrays; a DataFrame's default 0, 1, ... labels; an unnamed Series)."""
+    columns = getattr(values, "columns", None)
+    if columns is not None and type(values).__module__.startswith("pandas"):
+        labels = list(columns)
+        return None if labels == list(range(len(labels))) else [str(c) for c in labels]
+    name = getattr(values, "name", None)
+    if name is not None and type(values).__module__.startswith("pandas") \
+            and getattr(values, "ndim", 0) == 1:
+        return [str(name)]
+    return None
+
+
+def not_a_record(value, who: str, *, time: str = "dt=...") -> DataError:
+    """The :class:`DataError` for ``value`` passed where ``who`` (a function's name, or
+    ``'data'``) expects an :class:`IOData` record, with how to make one: from a pandas
+    DataFrame's columns (which then name the channels), or from arrays (``time``: the
+    keyword the caller's data need, ``'dt=...'`` or ``'t=... or dt=...'``)."""
+    kind = type(value).__name__
+    if kind == "DataFrame":
+        how = ("make one from its columns: subid.IOData(df[input_columns], "
+               f"df[output_columns], {time}) (the column labels name the channels), or "
+               "subid.interop.iodata_from_pandas(df, inputs, outputs, time=...)")
+    else:
+        how = f"wrap arrays as subid.IOData(u, y, {time})"
+    subject = "data must be" if who == "data" else f"{who} expects"
+    return DataError(f"{subject} an IOData record, got {kind}; {how}")
+
+
 def _writeable(values) -> bool:
     """False for a read-only numpy array (kept without a copy by IOData)."""
     return not isinstance(values, np.ndarray) or values.flags.writeable
@@ -92,7 +122,8 @@ class IOData:
         rounded to the decimals the stamps are written with (``0.05``, not
         ``0.049999999999999996``, for stamps ``0, 0.05, 0.1`` read from a file).
     input_names, output_names : sequence of str, optional
-        Channel names (default ``u1, u2, ...`` and ``y1, y2, ...``).
+        Channel names (default: the column labels of a pandas DataFrame, the name of
+        a pandas Series, else ``u1, u2, ...`` and ``y1, y2, ...``).
     copy : bool
         Copy writable arrays (default). ``False`` keeps read-only views of
         float64 C-contiguous arrays instead (see Notes).
@@ -125,6 +156,9 @@ class IOData:
     @checked_call
     def __init__(self, u, y, dt=None, t=None, input_names=None, output_names=None, *,
                  copy=True):
+        # a DataFrame's column labels (a named Series's name) name the channels
+        input_names = _pandas_names(u) if input_names is None else input_names
+        output_names = _pandas_names(y) if output_names is None else output_names
         u = as_signal(u, "input u", copy=copy and _writeable(u))
         y = as_signal(y, "output y", copy=copy and _writeable(y))
         check_orientation(u, "input u", "u")
@@ -509,8 +543,7 @@ def merge(records, names=None) -> IOData:
         raise DataError("merge needs at least one record")
     for k, rec in enumerate(records):
         if not isinstance(rec, IOData):
-            raise DataError(f"merge: item {k} is a {type(rec).__name__}, not an IOData "
-                            "record; wrap arrays as subid.IOData(u, y, dt=...)")
+            raise not_a_record(rec, f"merge (item {k})")
         if not rec.is_uniform:
             raise DataError(f"merge: record {k} has non-uniform time stamps; experiments are "
                             "merged for the discrete-time methods and must be uniformly "
@@ -716,7 +749,7 @@ def iodata_to_pandas(data):
     """
     pd = _require_pandas()
     if not isinstance(data, IOData):
-        raise DataError(f"expected an IOData record, got {type(data).__name__}")
+        raise not_a_record(data, "iodata_to_pandas")
     both = set(data.input_names) & set(data.output_names)
     if both:
         raise DataError(f"the channel name(s) {sorted(both)} are used by an input and an "

@@ -49,7 +49,7 @@ import numpy as np
 
 from subid._blas import serial_blas
 from subid._validation import check_int, checked_call
-from subid.data import IOData
+from subid.data import IOData, not_a_record
 from subid.errors import DataError, NotExcitingError, ResolutionWarning, TooFewSamplesError
 from subid.frdata import FRData
 
@@ -63,8 +63,7 @@ SINGULAR_INPUT = 1e-10
 
 def _check(data, name):
     if not isinstance(data, IOData):
-        raise DataError(f"{name} expects an IOData record, got {type(data).__name__}; "
-                        "wrap arrays as subid.IOData(u, y, dt=...)")
+        raise not_a_record(data, name)
     if not data.is_uniform:
         raise DataError(f"{name} needs uniformly sampled data")
     if data.n_inputs == 0:

@@ -94,7 +94,7 @@ import numpy as np
 from subid._blas import one_thread, serial_blas
 from subid._threads import available, ordered_map
 from subid._validation import check_choice, checked_call
-from subid.data import IOData
+from subid.data import IOData, not_a_record
 from subid.errors import DataError, ModelError, OptionError, SubidError
 from subid.methods._info import collect_warnings
 from subid.methods.crossval import FLOOR, fold_score
@@ -369,8 +369,7 @@ def identify(data, order=None, *, focus="simulation", time_base="auto", horizon=
     if not isinstance(refine, (bool, np.bool_)):
         raise OptionError(f"refine must be True or False; got {refine!r}"[:300])
     if not isinstance(data, IOData):
-        raise DataError(f"identify expects an IOData record, got {type(data).__name__}; wrap "
-                        "arrays as subid.IOData(u, y, dt=...)")
+        raise not_a_record(data, "identify", time="t=... or dt=...")
     if time_base == "ct" or (time_base == "auto" and not data.is_uniform):
         return _continuous(data, order, feedthrough, reason=(
             "time_base='ct' requested" if time_base == "ct" else

@@ -31,7 +31,7 @@ import scipy.linalg
 
 from subid._blas import serial_blas
 from subid._validation import checked_call, same_period
-from subid.data import IOData, column_std
+from subid.data import IOData, column_std, not_a_record
 from subid.delay import effective_input, input_delay_of
 from subid.errors import DataError, ModelError, NoiseModelWarning
 from subid.model import _simulate
@@ -60,8 +60,7 @@ def check_model_data(model, data) -> None:
     """Raise unless ``data`` is an IOData record with the model's channels and sampling."""
     check_model(model, "model")
     if not isinstance(data, IOData):
-        raise DataError(f"data must be an IOData record, got {type(data).__name__}; wrap "
-                        "arrays as subid.IOData(u, y, dt=...)")
+        raise not_a_record(data, "data")
     if (data.n_inputs, data.n_outputs) != (model.n_inputs, model.n_outputs):
         raise DataError(f"data have {data.n_inputs} inputs and {data.n_outputs} outputs but "
                         f"the model has {model.n_inputs} and {model.n_outputs}")

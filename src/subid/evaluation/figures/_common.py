@@ -173,9 +173,9 @@ def _default_label(model, k: int) -> str:
 
 
 def _check_data(data):
-    from subid.data import IOData
+    from subid.data import IOData, not_a_record
     if not isinstance(data, IOData):
-        raise DataError(f"data must be an IOData record, got {type(data).__name__}")
+        raise not_a_record(data, "data", time="t=... or dt=...")
     return data
 
 

@@ -8,7 +8,7 @@ import math
 import numpy as np
 
 from subid._validation import check_int
-from subid.data import IOData
+from subid.data import IOData, not_a_record
 from subid.errors import DataError, OrderError
 from subid.methods.ct._ct_estimate import _correction_count
 from subid.methods.ct.basis import FilterBank
@@ -21,8 +21,7 @@ HOLD_ORDERS = {"zoh": 0, "foh": 1}
 
 def _check_data(data, method: str) -> IOData:
     if not isinstance(data, IOData):
-        raise DataError(f"{method} expects an IOData record, got {type(data).__name__}; "
-                        "wrap arrays as subid.IOData(u, y, t=...) or IOData(u, y, dt=...)")
+        raise not_a_record(data, method, time="t=... or dt=...")
     std = np.array([e.y.std(axis=0) for e in data.experiments]).max(axis=0)
     flat = np.flatnonzero(std <= 1e-14 * np.maximum(np.abs(data.y).max(axis=0), 1e-300))
     if flat.size:

@@ -54,7 +54,7 @@ import scipy.linalg
 
 from subid._blas import serial_blas
 from subid._validation import check_choice, checked_call
-from subid.data import IOData
+from subid.data import IOData, not_a_record
 from subid.errors import DataError, SubidError
 from subid.methods._info import records_warnings
 
@@ -361,7 +361,7 @@ def dt_to_ct(data, order=None, *, method: str = "n4sid", hold: str = "zoh", **op
     spec = find(method, kind="batch", time="discrete")
     check_choice(hold, "hold", ("zoh", "foh"))
     if not isinstance(data, IOData):
-        raise DataError(f"dt_to_ct expects an IOData record, got {type(data).__name__}")
+        raise not_a_record(data, "dt_to_ct")
     if not data.is_uniform:
         raise DataError("dt_to_ct needs uniformly sampled data (a discrete-time model has "
                         "one sampling period); use ct_subspace for non-uniform time stamps")

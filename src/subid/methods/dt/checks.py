@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from subid.data import IOData, column_std, column_sums
+from subid.data import IOData, column_std, column_sums, not_a_record
 from subid.errors import DataError, NotExcitingError
 
 #: Largest magnitude of a channel the methods accept: its square must not overflow.
@@ -16,8 +16,7 @@ HUGE_VALUE = 1e150
 def check_data(data, method: str) -> IOData:
     """The record a discrete-time method may use, or a clear error."""
     if not isinstance(data, IOData):
-        raise DataError(f"{method} expects an IOData record, got {type(data).__name__}; "
-                        "wrap arrays as subid.IOData(u, y, dt=...)")
+        raise not_a_record(data, method)
     if not data.is_uniform:
         raise DataError(f"{method} identifies a discrete-time model and needs uniformly "
                         "sampled data; these time stamps are non-uniform "

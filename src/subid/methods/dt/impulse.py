@@ -51,7 +51,7 @@ import scipy.optimize
 
 from subid._blas import serial_blas
 from subid._validation import check_choice, check_int, checked_call
-from subid.data import IOData
+from subid.data import IOData, not_a_record
 from subid.errors import DataError, NotExcitingError, TooFewSamplesError
 from subid.model.statespace import StateSpace
 
@@ -303,8 +303,7 @@ def impulseest(data, n, *, kernel="tc"):
     True
     """
     if not isinstance(data, IOData):
-        raise DataError(f"impulseest expects an IOData record, got {type(data).__name__}; "
-                        "wrap arrays as subid.IOData(u, y, dt=...)")
+        raise not_a_record(data, "impulseest")
     if not data.is_uniform:
         raise DataError("impulseest needs uniformly sampled data (an FIR model counts lags "
                         "in samples)")

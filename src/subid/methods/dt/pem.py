@@ -50,7 +50,7 @@ import scipy.optimize
 
 from subid._blas import serial_blas
 from subid._validation import check_optimiser_options, checked_call, same_period
-from subid.data import IOData
+from subid.data import IOData, not_a_record
 from subid.delay import delay_inputs, input_delay_of, record_delay
 from subid.errors import DataError, ModelError, NoiseModelWarning, OptionError
 from subid.methods._info import records_warnings
@@ -82,8 +82,7 @@ def _check_inputs(data, model, focus):
     if not isinstance(model, StateSpace):
         raise ModelError(f"pem needs a starting subid.StateSpace, got {type(model).__name__}")
     if not isinstance(data, IOData):
-        raise DataError(f"pem expects an IOData record, got {type(data).__name__}; wrap "
-                        "arrays as subid.IOData(u, y, dt=...)")
+        raise not_a_record(data, "pem")
     if focus not in FOCUS:
         raise OptionError(f"focus must be 'prediction' or 'simulation', got {focus!r}")
     if (data.n_inputs, data.n_outputs) != (model.n_inputs, model.n_outputs):
