@@ -219,7 +219,7 @@ def test_merge_refuses_what_does_not_match(two_records):
         subid.merge(a)
     with pytest.raises(DataError, match="at least one"):
         subid.merge([])
-    with pytest.raises(DataError, match="item 1 is a ndarray"):
+    with pytest.raises(DataError, match=r"item 1\) expects an IOData record, got ndarray"):
         subid.merge([a, b.u])
     with pytest.raises(DataError, match="dt=0.5"):
         subid.merge([a, subid.IOData(b.u, b.y, dt=0.5)])

@@ -658,8 +658,8 @@ def identification_report(models, estimation, validation=None, *, title="subid r
     nyquist = "; dotted: Nyquist frequency" if any(m.dt > 0 for m in models.values()) else ""
     level = 0.95 if any(isinstance(m.info.get("parameter_covariance"), dict)
                         for m in models.values()) else None
-    band = ("; shaded: 95 % confidence band (models with a parameter covariance: pem and "
-            "the polynomial methods)") if level else ""
+    band = ("; shaded: 95 % confidence band (models with a parameter covariance: identify, "
+            "pem and the polynomial methods)") if level else ""
     estimate = _spa_estimate(estimation, models)
     overlay = "; grey points: spa estimate of the estimation data (± 2 std shaded)" \
         if estimate is not None else ""

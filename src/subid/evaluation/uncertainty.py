@@ -251,9 +251,11 @@ def parameter_covariance(model) -> ParameterCovariance:
     Parameters
     ----------
     model : StateSpace
-        A model returned by :func:`subid.pem` or by a polynomial method
-        (:func:`subid.arx`, :func:`subid.armax`, :func:`subid.oe`,
-        :func:`subid.bj`), or loaded from its file.
+        A model returned by :func:`subid.identify` (discrete time; for a model it did
+        not refine, the covariance a prediction-error estimate would have at it), by
+        :func:`subid.pem` or by a polynomial method (:func:`subid.arx`,
+        :func:`subid.armax`, :func:`subid.oe`, :func:`subid.bj`), or loaded from its
+        file.
 
     Returns
     -------

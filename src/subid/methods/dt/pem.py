@@ -68,6 +68,7 @@ from subid.methods.dt._pe_search import (
     statistical_precision,
 )
 from subid.methods.dt.checks import check_data
+from subid.model import _simulate
 from subid.model._sensitivity import jacobian
 from subid.model.statespace import StateSpace
 
@@ -531,59 +532,116 @@ def _pem_dt(data, model, focus, max_iterations, tolerance, rounds, feedthrough, 
 
 
 def _with_covariance(refined, start, data, focus, feedthrough):
-    """``refined`` with ``info['parameter_covariance']``: the asymptotic covariance of
-    its parameters (:mod:`subid.methods.dt._covariance`) from the Jacobian at the
-    estimate, in the local coordinates of the estimate (the initial states are
-    eliminated as nuisance parameters).
+    """``refined`` with the covariance of its parameters (:func:`with_covariance`), D
+    among them when the start had one (``feedthrough=None``) or as asked."""
+    with_d = bool(np.any(start.D != 0)) if feedthrough is None else bool(feedthrough)
+    return with_covariance(refined, data, focus, with_feedthrough=with_d)
+
+
+#: Past this many samples, :func:`with_covariance` with ``max_samples`` reads
+#: :data:`COVARIANCE_WINDOWS` windows of the record that hold this many in all.
+COVARIANCE_WINDOWS = 4
+
+
+def with_covariance(model, data, focus, *, with_feedthrough: bool, max_samples=None):
+    """``model`` with ``info['parameter_covariance']``: the asymptotic covariance of its
+    parameters as a prediction-error estimate (:mod:`subid.methods.dt._covariance`:
+    ``[sum psi Lambda^-1 psi^T]^-1``, Ljung 1999, Theorem 9.1) from the Jacobian at the
+    model, in the local coordinates of the model (the initial states are eliminated as
+    nuisance parameters). ``model`` is returned as it is (without it) when it has no K
+    under ``focus='prediction'`` or no initial state of every experiment in
+    ``info['x0']``; with a note when the Jacobian is rank deficient.
 
     Stored as ``parameters`` (θ, the stacked row-major ``A, B, C`` and, when
-    estimated, ``D`` and ``K``), ``factor`` (``F``, shape (len(θ), d), with
-    ``Cov(θ) = F F^T``: rank d, the DDLC directions, no similarity
-    directions), ``with_feedthrough``, ``with_gain``, ``noise_cov`` (the
-    residual covariance used) and ``method``. The factor is tied to this
-    realisation (:func:`subid.parameter_covariance` checks it).
+    ``with_feedthrough``, ``D`` and, under ``focus='prediction'``, ``K``), ``factor``
+    (``F``, shape (len(θ), d), with ``Cov(θ) = F F^T``: rank d, the DDLC directions,
+    no similarity directions), ``with_feedthrough``, ``with_gain``, ``noise_cov`` (the
+    residual covariance used), ``n_samples``, ``samples_used`` and ``method``. The
+    factor is tied to this realisation (:func:`subid.parameter_covariance` checks it).
+
+    ``max_samples``: a bound on the samples read (None: the whole record). A longer
+    record is read in :data:`COVARIANCE_WINDOWS` windows spread over its experiments,
+    ``max_samples`` in all, each with its own initial state (a nuisance parameter, its
+    value the predictor's state there, from a run of the predictor over the record);
+    the covariance is that of the windows scaled by ``samples_used / n_samples``: the
+    information matrix is a sum over the samples, of which the windows hold that share
+    (the memory and time of the Jacobian are those of ``max_samples`` samples).
     """
-    n, nu, ny = refined.order, refined.n_inputs, refined.n_outputs
-    with_d = bool(np.any(start.D != 0)) if feedthrough is None else bool(feedthrough)
+    n, nu, ny = model.order, model.n_inputs, model.n_outputs
     with_k = focus == "prediction"
-    if with_k and refined.K is None:
-        return refined
-    A, B, C, D = (np.array(m) for m in (refined.A, refined.B, refined.C, refined.D))
-    K = np.array(refined.K) if with_k else np.zeros((n, ny))
-    layout = _Layout(n, nu, ny, with_d, with_k)
+    if with_k and model.K is None:
+        return model
+    A, B, C, D = (np.array(m) for m in (model.A, model.B, model.C, model.D))
+    K = np.array(model.K) if with_k else np.zeros((n, ny))
+    layout = _Layout(n, nu, ny, bool(with_feedthrough), with_k)
     basis = _local_coordinates(layout, A, B, C, D, K)
     dirs = _directions(layout, basis, A, B, C, D, K, focus)
     dm = basis.shape[1]
     ranges = data.experiment_ranges
-    x0 = np.asarray(refined.info.get("x0", np.zeros(n)), dtype=float).reshape(-1, n)
+    x0 = np.asarray(model.info.get("x0", np.zeros(n)), dtype=float).reshape(-1, n)
     if x0.shape[0] != len(ranges):
-        return refined
+        return model
     v = np.hstack([data.u, data.y]) if with_k else data.u
-    mats = [np.ascontiguousarray(a) for a in _predictor(A, B, C, D, K, focus)]
-    dirs = [np.ascontiguousarray(a) for a in dirs]
-    N = data.n_samples
-    J = np.zeros((N, ny, len(ranges) * n + dm))
-    yhat = np.empty((N, ny))
-    for e, (a, b) in enumerate(ranges):       # nuisance x0 columns first
-        yhat[a:b], Je = jacobian(*mats, np.ascontiguousarray(v[a:b]),
-                                 np.ascontiguousarray(x0[e]), *dirs)
-        J[a:b, :, e * n:(e + 1) * n] = Je[:, :, dm:]
-        J[a:b, :, len(ranges) * n:] = Je[:, :, :dm]
-    factor, lam = covariance_factor(J, data.y - yhat, len(ranges) * n)
-    info = refined.info            # a fresh dict of the model pem just built
+    Ap, Bp, Cp, Dp = (np.ascontiguousarray(a) for a in _predictor(A, B, C, D, K, focus))
+    dAp, dBp, dC, dDp, dx0 = (np.ascontiguousarray(a) for a in dirs)
+    pieces = _covariance_pieces((Ap, Bp, Cp, Dp), v, ranges, x0, max_samples)
+    used = sum(b - a for a, b, _ in pieces)
+    k = len(pieces)
+    J = np.zeros((used, ny, k * n + dm))
+    residual = np.empty((used, ny))
+    row = 0
+    for e, (a, b, state) in enumerate(pieces):       # nuisance x0 columns first
+        yhat, Je = jacobian(Ap, Bp, Cp, Dp, np.ascontiguousarray(v[a:b]),
+                            np.ascontiguousarray(state), dAp, dBp, dC, dDp, dx0)
+        rows = slice(row, row + b - a)
+        J[rows, :, e * n:(e + 1) * n] = Je[:, :, dm:]
+        J[rows, :, k * n:] = Je[:, :, :dm]
+        residual[rows] = data.y[a:b] - yhat
+        row += b - a
+    factor, lam = covariance_factor(J, residual, k * n)
+    info = model.info            # a fresh dict of the model the caller built
     if factor is None:
         info["parameter_covariance_note"] = (
             "no parameter covariance: the Jacobian at the estimate is rank deficient "
             "(a non-minimal model or data that do not excite it)")
-        return refined
+        return model
+    N = data.n_samples
     info["parameter_covariance"] = {
         "parameters": layout.pack(A, B, C, D, K),
-        "factor": basis @ factor,
-        "with_feedthrough": with_d,
+        "factor": basis @ factor * math.sqrt(used / N),
+        "with_feedthrough": bool(with_feedthrough),
         "with_gain": with_k,
         "noise_cov": lam,
         "n_samples": N,
+        "samples_used": used,
         "method": "asymptotic prediction-error covariance [sum psi Lambda^-1 psi^T]^-1 "
-                  "(Ljung 1999, Theorem 9.1) in data-driven local coordinates",
+                  "(Ljung 1999, Theorem 9.1) in data-driven local coordinates"
+                  + ("" if used == N else
+                     f", the sum over {used} of the {N} samples scaled to all of them"),
     }
-    return refined
+    return model
+
+
+def _covariance_pieces(mats, v, ranges, x0, max_samples):
+    """``(start, stop, state)`` of the samples :func:`with_covariance` reads: every
+    experiment from its initial state; past ``max_samples`` samples in all,
+    :data:`COVARIANCE_WINDOWS` windows of ``max_samples`` samples in all, shared among
+    the experiments by length and spread evenly over each, each with the predictor's
+    state at its start (the predictor run from the experiment's initial state up to
+    each window, one segment at a time)."""
+    N = ranges[-1][1]
+    if max_samples is None or N <= max_samples:
+        return [(a, b, x0[e]) for e, (a, b) in enumerate(ranges)]
+    pieces = []
+    for e, (a, b) in enumerate(ranges):
+        share = max_samples * (b - a) / N
+        count = max(1, round(COVARIANCE_WINDOWS * (b - a) / N))
+        length = max(1, int(share // count))
+        starts = np.linspace(a, b - length, count).astype(int)
+        state, at = x0[e], a
+        for s in starts:
+            if s > at:       # the state at s: the predictor over [at, s], its last step
+                _, X = _simulate.simulate_discrete(*mats, v[at:s + 1], state)
+                state, at = X[-1], s
+            pieces.append((int(s), int(s) + length, np.array(state)))
+    return pieces
