@@ -106,7 +106,7 @@ def test_step_and_simulation_bounds_match_sampling(refined):
 
 def test_subspace_model_has_no_covariance(refined):
     _, data = refined
-    with pytest.raises(ModelError, match="refine it with subid.pem"):
+    with pytest.raises(ModelError, match="or refine it with subid.pem"):
         subid.freqresp_bounds(subid.n4sid(data, 2), W)
     with pytest.raises(ModelError, match="pem"):
         subid.plot.step(subid.n4sid(data, 2), confidence=0.95)

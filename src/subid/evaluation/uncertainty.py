@@ -281,12 +281,14 @@ def parameter_covariance(model) -> ParameterCovariance:
         if isinstance(model.info.get("polynomials"), dict) and note:
             raise ModelError(f"the model has no parameter covariance ({why}); identify it "
                              "again with lower orders or on data that excite it more")
-        raise ModelError(f"the model has no parameter covariance ({why}); refine it with "
-                         "subid.pem(data, model) on its discrete-time form, which attaches "
-                         "the asymptotic covariance, and ask for bounds on that model")
+        raise ModelError(f"the model has no parameter covariance ({why}); identify it with "
+                         "subid.identify(data), or refine it with subid.pem(data, model) on "
+                         "its discrete-time form: both attach the asymptotic covariance; "
+                         "ask for bounds on that model")
     if model.is_continuous:
         raise ModelError("a continuous-time model carries no parameter covariance; ask for "
-                         "bounds on the discrete-time model subid.pem returns")
+                         "bounds on the discrete-time model subid.identify or subid.pem "
+                         "returns")
     try:
         cov = ParameterCovariance(model, entry["parameters"], entry["factor"],
                                   entry["with_feedthrough"], entry["with_gain"],
