@@ -26,12 +26,17 @@ def refined():
     return subid.pem(data, subid.n4sid(data, 2)), data
 
 
-def _coverage(runs):
+def _pem_of_n4sid(data):
+    return subid.pem(data, subid.n4sid(data, 2))
+
+
+def _coverage(runs, estimate=_pem_of_n4sid):
+    """Share of (run, frequency) pairs whose 95 % bounds of the model ``estimate(data)``
+    hold the true |G| (the output-error records of ``_oe_data``)."""
     G = np.abs(TRUE.freqresp(W))[:, 0, 0]
     hits = []
     for r in range(runs):
-        data = _oe_data(1000 + r)
-        band = subid.freqresp_bounds(subid.pem(data, subid.n4sid(data, 2)), W)
+        band = subid.freqresp_bounds(estimate(_oe_data(1000 + r)), W)
         hits.append((band.lower[:, 0, 0] <= G) & (G <= band.upper[:, 0, 0]))
     return float(np.mean(hits))
 
@@ -136,19 +141,25 @@ def test_continuous_time_pem_drops_the_covariance(refined):
         subid.freqresp_bounds(refined_ct, W)
 
 
-@pytest.mark.slow
-def test_mimo_innovation_model_coverage():
-    # 2 inputs, 2 outputs, order 3, K estimated: 10 runs x 3 frequencies x 4 channel
-    # pairs; 30 runs measured 94.7 %
+def _mimo_coverage(runs, estimate):
+    """The share of (run, frequency, channel pair) whose 95 % bounds of ``estimate(data)``
+    hold the true |G| of the 2x2 seed-001 innovation system (N = 1000)."""
     true = subid.systems.seed001_innovation_system()
     w = np.array([0.2, 0.8, 1.5])
     G = np.abs(true.freqresp(w))
     hits = []
-    for r in range(10):
+    for r in range(runs):
         data = subid.systems.simulate_innovation_data(true, 1000, seed=100 + r)
-        band = subid.freqresp_bounds(subid.pem(data, subid.n4sid(data, 3)), w)
+        band = subid.freqresp_bounds(estimate(data), w)
         hits.append((band.lower <= G) & (G <= band.upper))
-    assert 0.85 <= np.mean(hits) <= 1.0
+    return float(np.mean(hits))
+
+
+@pytest.mark.slow
+def test_mimo_innovation_model_coverage():
+    # 2 inputs, 2 outputs, order 3, K estimated: 10 runs x 3 frequencies x 4 channel
+    # pairs; 30 runs measured 94.7 %
+    assert 0.85 <= _mimo_coverage(10, lambda data: subid.pem(data, subid.n4sid(data, 3))) <= 1.0
 
 
 def test_mimo_delta_matches_finite_differences_with_and_without_feedthrough():
@@ -230,28 +241,22 @@ def test_magnitude_std_is_the_definition(sparse):
 # ---------------------------------------------------------------------------
 # subid.identify: the covariance of a model it does not refine
 # ---------------------------------------------------------------------------
-def _identify_coverage(runs):
-    G = np.abs(TRUE.freqresp(W))[:, 0, 0]
-    hits = []
-    for r in range(runs):
-        data = _oe_data(1000 + r)
-        model = subid.identify(data, 2, refine=False)
-        assert model.info["identify"]["covariance"]["at"] == "the subspace model"
-        band = subid.freqresp_bounds(model, W)
-        hits.append((band.lower[:, 0, 0] <= G) & (G <= band.upper[:, 0, 0]))
-    return float(np.mean(hits))
+def _identify_unrefined(data):
+    model = subid.identify(data, 2, refine=False)
+    assert model.info["identify"]["covariance"]["at"] == "the subspace model"
+    return model
 
 
 @pytest.mark.slow
 def test_identify_subspace_model_bounds_cover_small():
     # 20 runs x 5 frequencies of the output-error system (measured 100 runs: 93.8 %)
-    assert 0.85 <= _identify_coverage(20) <= 1.0
+    assert 0.85 <= _coverage(20, _identify_unrefined) <= 1.0
 
 
 @pytest.mark.long
 def test_identify_subspace_model_bounds_cover():
     # 100 runs: measured 93.8 % (pem's own bounds on the same records: 93.6 %)
-    assert 0.88 <= _identify_coverage(100) <= 0.99
+    assert 0.88 <= _coverage(100, _identify_unrefined) <= 0.99
 
 
 @pytest.mark.long
@@ -259,15 +264,8 @@ def test_identify_subspace_model_bounds_cover_mimo_innovation():
     # the 2x2 seed-001 innovation system, 40 runs x 3 frequencies x 4 channel pairs:
     # measured 89.6 % (the subspace estimate is less efficient than pem's, whose bounds
     # cover 94.7 % in 30 runs of test_mimo_innovation_model_coverage)
-    true = subid.systems.seed001_innovation_system()
-    w = np.array([0.2, 0.8, 1.5])
-    G = np.abs(true.freqresp(w))
-    hits = []
-    for r in range(40):
-        data = subid.systems.simulate_innovation_data(true, 1000, seed=100 + r)
-        band = subid.freqresp_bounds(subid.identify(data, 3, refine=False), w)
-        hits.append((band.lower <= G) & (G <= band.upper))
-    assert 0.85 <= np.mean(hits) <= 1.0
+    assert 0.85 <= _mimo_coverage(40, lambda data: subid.identify(data, 3, refine=False)) \
+        <= 1.0
 
 
 def test_identify_default_model_carries_a_covariance_for_the_bounds():
