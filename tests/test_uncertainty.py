@@ -284,7 +284,8 @@ def test_identify_default_model_carries_a_covariance_for_the_bounds():
     assert np.all(np.isfinite(step.std)) and np.all(step.std[1:] > 0)
 
 
-def test_windowed_covariance_is_the_whole_records_when_it_fits_and_close_otherwise():
+def test_windowed_covariance_is_the_whole_records_when_it_fits_and_close_otherwise(
+        monkeypatch):
     from subid.methods.dt.pem import with_covariance
     true = subid.systems.seed001_innovation_system()
     data = subid.systems.simulate_innovation_data(true, 30000, seed=3)
@@ -308,3 +309,8 @@ def test_windowed_covariance_is_the_whole_records_when_it_fits_and_close_otherwi
     assert windows.info["parameter_covariance"]["n_samples"] == 30000
     # the information of 12,000 of 30,000 samples scaled to all: the same std to 3 %
     np.testing.assert_allclose(subid.freqresp_bounds(windows, w).std, full, rtol=0.03)
+    # the predictor's states at the windows, run in chunks of 1000: the same bits
+    from subid.methods.dt import pem as pem_module
+    monkeypatch.setattr(pem_module, "_PREDICTOR_CHUNK", 1000)
+    np.testing.assert_array_equal(again(12000).info["parameter_covariance"]["factor"],
+                                  windows.info["parameter_covariance"]["factor"])

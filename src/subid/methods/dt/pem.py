@@ -640,8 +640,14 @@ def _covariance_pieces(mats, v, ranges, x0, max_samples):
         starts = np.linspace(a, b - length, count).astype(int)
         state, at = x0[e], a
         for s in starts:
-            if s > at:       # the state at s: the predictor over [at, s], its last step
-                _, X = _simulate.simulate_discrete(*mats, v[at:s + 1], state)
-                state, at = X[-1], s
+            while at < s:    # the state at s: the predictor over [at, s], in chunks
+                step = min(int(s) - at, _PREDICTOR_CHUNK)
+                _, X = _simulate.simulate_discrete(*mats, v[at:at + step + 1], state)
+                state, at = X[-1], at + step
             pieces.append((int(s), int(s) + length, np.array(state)))
     return pieces
+
+
+#: Samples of the predictor run at a time by :func:`_covariance_pieces` (its states
+#: are kept for the chunk only).
+_PREDICTOR_CHUNK = 65536
