@@ -536,3 +536,26 @@ def test_innovation_check_is_vetoed_by_the_fold_scores(monkeypatch, favoured):
     else:
         assert check["order"] not in admissible
     assert model.order == expected
+
+
+def test_a_failed_final_refinement_keeps_the_subspace_model_and_says_why(monkeypatch):
+    """The folds validate the refinement (DaISy dryer, first 2/3), the refinement of the
+    whole record raises: the subspace model is returned, its reason names the error."""
+    from subid.methods.dt import pem as pem_module
+    from subid.errors import DataError
+    real = pem_module.refine
+
+    def fold_only(data, model, focus, *, held_out=False):
+        if not held_out:
+            raise DataError("pem: the Jacobian needs 9.9 GiB (limit 2 GiB)")
+        return real(data, model, focus, held_out=held_out)
+
+    est = subid.datasets.load("dryer").detrend().split(2 / 3)[0]
+    assert subid.identify(est).info["identify"]["refinement"]["kept"]
+    monkeypatch.setattr(pem_module, "refine", fold_only)
+    model = subid.identify(est)
+    ref = model.info["identify"]["refinement"]
+    assert not ref["kept"] and "refined_by" not in model.info
+    assert ref["reason"] == ("the refinement of the whole record failed (DataError: pem: the "
+                             "Jacobian needs 9.9 GiB (limit 2 GiB))")
+    assert model.info["identify"]["covariance"]["at"] == "the subspace model"

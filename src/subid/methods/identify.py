@@ -180,16 +180,19 @@ def _score(model, validation, focus) -> float:
     return fold_score(model, validation, steps=np.inf if focus == "simulation" else 1)
 
 
-def _refine(data, model, focus, held_out=False):
+def _refine(data, model, focus, held_out=False, why=None):
     """``pem(data, model, focus=focus)`` stopped at the statistical precision of its
     criterion (:func:`subid.methods.dt.pem.refine`; ``held_out``: a fold model, only
-    scored), or None when the start cannot be refined so."""
+    scored), or None when the start cannot be refined so (``why``, a list, then receives
+    the error's message)."""
     from subid.methods.dt.pem import refine
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             return refine(data, model, focus, held_out=held_out)
-    except (ModelError, DataError):
+    except (ModelError, DataError) as exc:
+        if why is not None:
+            why.append(f"{type(exc).__name__}: {exc}")
         return None
 
 
@@ -564,9 +567,11 @@ def _discrete(data, order, horizon, feedthrough, focus, refine):
                 f"{before:.3g} to {after:.3g} (more than {100 * SIMULATION_LOSS:g} %): "
                 "the subspace model is kept as the simulator asked for"))
             return model, record
-    final = _refine(data, model, focus)
+    why = []
+    final = _refine(data, model, focus, why=why)
     if final is None:
-        refinement.update(kept=False, reason="the refinement of the whole record failed")
+        refinement.update(kept=False, reason="the refinement of the whole record failed ("
+                          + (why[0] if why else "no result") + ")")
         return model, record
     refinement.update(kept=True, cost_history=[float(c) for c in final.info["cost_history"]],
                       start_cost=final.info["start_cost"], final_cost=final.info["final_cost"],
