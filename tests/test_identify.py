@@ -541,8 +541,8 @@ def test_innovation_check_is_vetoed_by_the_fold_scores(monkeypatch, favoured):
 def test_a_failed_final_refinement_keeps_the_subspace_model_and_says_why(monkeypatch):
     """The folds validate the refinement (DaISy dryer, first 2/3), the refinement of the
     whole record raises: the subspace model is returned, its reason names the error."""
-    from subid.methods.dt import pem as pem_module
     from subid.errors import DataError
+    from subid.methods.dt import pem as pem_module
     real = pem_module.refine
 
     def fold_only(data, model, focus, *, held_out=False):
