@@ -275,8 +275,15 @@ def test_covariance_gram_route_equals_qr_route(monkeypatch):
     rng = np.random.default_rng(4)
     J = rng.standard_normal((500, 2, 7)) @ np.diag([1.0, 3.0, 0.2, 1.0, 5.0, 1.0, 0.5])
     res = rng.standard_normal((500, 2))
-    gram, lam = _covariance.covariance_factor(J, res, 2)
+    gram, lam = _covariance.covariance_factor(J.copy(), res, 2)   # J is overwritten
+    # the columns in another order, put back by the factor's permutation: the same
+    perm = np.array([3, 0, 6, 1, 5, 2, 4])
+    back = np.argsort(perm)
+    permuted, _ = _covariance.covariance_factor(J[:, :, perm].copy(), res, 2, order=back)
+    assert np.allclose(gram @ gram.T, permuted @ permuted.T, rtol=1e-10, atol=0)
     monkeypatch.setattr(_trust_region, "GRAM_PIVOT", 2.0)           # forces the QR route
-    qr, lam2 = _covariance.covariance_factor(J, res, 2)
+    qr, lam2 = _covariance.covariance_factor(J.copy(), res, 2)
     assert np.allclose(gram @ gram.T, qr @ qr.T, rtol=1e-10, atol=0)
     assert np.array_equal(lam, lam2)
+    qr_permuted, _ = _covariance.covariance_factor(J[:, :, perm].copy(), res, 2, order=back)
+    assert np.allclose(qr @ qr.T, qr_permuted @ qr_permuted.T, rtol=1e-10, atol=0)

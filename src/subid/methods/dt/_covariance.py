@@ -36,32 +36,38 @@ __all__ = ["covariance_factor", "RANK_TOLERANCE"]
 RANK_TOLERANCE = 1e-9
 
 
-def _triangular_factor(Js):
-    """``R`` of ``Js = Q R`` (columns of unit norm): the Cholesky factor of the Gram
-    matrix when its pivots are above GRAM_PIVOT, else Householder QR."""
+def _triangular_factor(Js, order):
+    """``R`` of ``Js[:, order] = Q R`` (columns of unit norm): the Cholesky factor of the
+    Gram matrix (of ``Js``, its rows and columns then permuted: no permuted copy of
+    ``Js``) when its pivots are above GRAM_PIVOT, else Householder QR."""
     from subid.methods.dt._trust_region import GRAM_PIVOT
-    G = Js.T @ Js
+    G = (Js.T @ Js)[np.ix_(order, order)]
     try:
         L = np.linalg.cholesky(G)
     except np.linalg.LinAlgError:
         L = None
     if L is not None and np.isfinite(L).all() and np.diag(L).min(initial=1.0) > GRAM_PIVOT:
         return L.T
-    return np.linalg.qr(Js, mode="r")
+    return np.linalg.qr(Js[:, order], mode="r")
 
 
-def covariance_factor(J, residuals, n_nuisance):
+def covariance_factor(J, residuals, n_nuisance, order=None):
     """Square-root factor of the covariance of the non-nuisance parameters.
 
     Parameters
     ----------
-    J : ndarray, shape (N, ny, d)
+    J : ndarray, shape (N, ny, d), C-contiguous
         Sensitivities ``dŷ[t]/dθ`` (not weighted); the first ``n_nuisance``
-        columns are nuisance parameters (eliminated).
+        columns are nuisance parameters (eliminated). Overwritten: whitened and
+        its columns scaled in place (the Jacobian of a long record is the largest
+        array of :func:`subid.pem`; copies of it set the peak memory).
     residuals : ndarray, shape (N, ny)
         Prediction errors at the estimate.
     n_nuisance : int
-        Number of leading nuisance columns.
+        Number of leading nuisance columns (of ``J[..., order]``).
+    order : array of int, optional
+        The columns of ``J`` in the order the factor takes them (the nuisance ones
+        first); None: as they are.
 
     Returns
     -------
@@ -78,13 +84,20 @@ def covariance_factor(J, residuals, n_nuisance):
         L = np.linalg.cholesky(lam)
     except np.linalg.LinAlgError:
         return None, lam
-    Jw = scipy.linalg.solve_triangular(L, J.transpose(1, 0, 2).reshape(ny, -1), lower=True,
-                                       check_finite=False)      # L^-1 ψ_t for every t
-    Jw = Jw.reshape(ny, N, d).transpose(1, 0, 2).reshape(N * ny, d)
+    # L^-1 ψ_t for every t, in place: forward substitution over the outputs, each step
+    # one operation on the (N, d) rows of an output (no copy of J)
+    for i in range(ny):
+        for j in range(i):
+            J[:, i, :] -= L[i, j] * J[:, j, :]
+        J[:, i, :] /= L[i, i]
+    Jw = J.reshape(N * ny, d)                                   # a view (C-contiguous)
     scale = np.sqrt(np.einsum("ij,ij->j", Jw, Jw))
     if not (np.isfinite(scale).all() and scale.min() > 0):
         return None, lam
-    R = _triangular_factor(Jw / scale)
+    Jw /= scale
+    order = np.arange(d) if order is None else np.asarray(order)
+    scale = scale[order]
+    R = _triangular_factor(Jw, order)
     R22 = R[n_nuisance:, n_nuisance:]
     diag = np.abs(np.diag(R22))
     if diag.size == 0 or diag.min() <= RANK_TOLERANCE * diag.max():

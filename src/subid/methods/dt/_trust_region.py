@@ -208,6 +208,9 @@ def trust_region_least_squares(fun, jac, x0, *, ftol, xtol, gtol, max_nfev, exac
         return out
 
     R, qtf, g, norms, _ = factor(J, f)
+    # the compressed factor is all the iteration needs (exact: R is J itself): no second
+    # Jacobian alive while the next one is computed (the largest arrays of subid.pem)
+    del J
     scale_inv = norms.copy()
     scale_inv[scale_inv == 0] = 1.0
     scale = 1.0 / scale_inv
@@ -254,9 +257,8 @@ def trust_region_least_squares(fun, jac, x0, *, ftol, xtol, gtol, max_nfev, exac
             Delta = Delta_new
         if actual_reduction > 0:
             x, f, cost = x_new, f_new, cost_new
-            J = np.asarray(jac(x), dtype=float)
             njev += 1
-            R, qtf, g, norms, _ = factor(J, f)
+            R, qtf, g, norms, _ = factor(np.asarray(jac(x), dtype=float), f)
             scale_inv = np.maximum(norms, scale_inv)
             scale = 1.0 / scale_inv
     if status is None:

@@ -587,18 +587,29 @@ def with_covariance(model, data, focus, *, with_feedthrough: bool, max_samples=N
     pieces = _covariance_pieces((Ap, Bp, Cp, Dp), v, ranges, x0, max_samples)
     used = sum(b - a for a, b, _ in pieces)
     k = len(pieces)
-    J = np.zeros((used, ny, k * n + dm))
-    residual = np.empty((used, ny))
-    row = 0
-    for e, (a, b, state) in enumerate(pieces):       # nuisance x0 columns first
-        yhat, Je = jacobian(Ap, Bp, Cp, Dp, np.ascontiguousarray(v[a:b]),
-                            np.ascontiguousarray(state), dAp, dBp, dC, dDp, dx0)
-        rows = slice(row, row + b - a)
-        J[rows, :, e * n:(e + 1) * n] = Je[:, :, dm:]
-        J[rows, :, k * n:] = Je[:, :, :dm]
-        residual[rows] = data.y[a:b] - yhat
-        row += b - a
-    factor, lam = covariance_factor(J, residual, k * n)
+    if k == 1:
+        # one piece: the kernel's array as it is (model columns, then x0's), the nuisance
+        # x0 columns taken first by a permutation of the factor's Gram matrix (no copy
+        # of the largest array: the Jacobian of the whole record)
+        a, b, state = pieces[0]
+        yhat, J = jacobian(Ap, Bp, Cp, Dp, np.ascontiguousarray(v[a:b]),
+                           np.ascontiguousarray(state), dAp, dBp, dC, dDp, dx0)
+        residual = data.y[a:b] - yhat
+        order = np.r_[dm:dm + n, 0:dm]
+    else:
+        J = np.zeros((used, ny, k * n + dm))
+        residual = np.empty((used, ny))
+        row = 0
+        for e, (a, b, state) in enumerate(pieces):       # nuisance x0 columns first
+            yhat, Je = jacobian(Ap, Bp, Cp, Dp, np.ascontiguousarray(v[a:b]),
+                                np.ascontiguousarray(state), dAp, dBp, dC, dDp, dx0)
+            rows = slice(row, row + b - a)
+            J[rows, :, e * n:(e + 1) * n] = Je[:, :, dm:]
+            J[rows, :, k * n:] = Je[:, :, :dm]
+            residual[rows] = data.y[a:b] - yhat
+            row += b - a
+        order = None
+    factor, lam = covariance_factor(np.ascontiguousarray(J), residual, k * n, order)
     info = model.info            # a fresh dict of the model the caller built
     if factor is None:
         info["parameter_covariance_note"] = (
