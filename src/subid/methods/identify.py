@@ -45,7 +45,11 @@ choice is made on the estimation record and recorded in
    remaining refinements (on DaISy CD_player_arm, the command line's 70 %
    split, order 18: two of four, and the call takes 6 s instead of 83 s).
    An unstable subspace model (an unstable plant under feedback) cannot be
-   refined by simulation; it is kept as it is.
+   refined by simulation; it is kept as it is. Where :func:`subid.pem`'s Jacobian of
+   the whole record would exceed its limit (a long record with a large model), the
+   final refinement runs on the record's last samples that fit
+   (:func:`_final_refinement`), its initial state and covariance then taken from the
+   whole record.
 
 4. **The gain.** Unless a prediction-focus refinement estimated K with the rest, the
    model's K (the state-sequence gain of :mod:`subid.methods.dt.noise_model`) is
@@ -193,6 +197,41 @@ def _refine(data, model, focus, held_out=False, why=None):
     except (ModelError, DataError) as exc:
         if why is not None:
             why.append(f"{type(exc).__name__}: {exc}")
+        return None
+
+
+def _final_refinement(data, model, focus, refinement, why):
+    """The refinement :func:`identify` keeps: of the whole record, or, where
+    :func:`subid.pem`'s Jacobian of the whole record would exceed its limit (a long
+    record with a large model; one experiment), of the record's last
+    :func:`subid.methods.dt.pem.jacobian_samples` samples (the part the folds refined
+    too is its end), its initial state then fitted to the whole record and its
+    parameter covariance computed there (``refinement['samples']`` records the part).
+    None when the refinement fails (``why`` receives the error)."""
+    from subid.methods.dt.pem import initial_states, jacobian_samples, with_covariance
+    room = jacobian_samples(model, focus)
+    if data.n_samples <= room or data.n_experiments > 1 or room < 10 * model.order:
+        return _refine(data, model, focus, why=why)
+    final = _refine(data[data.n_samples - room:], model, focus, why=why)
+    if final is None:
+        return None
+    refinement["samples"] = {"refined": room, "record": data.n_samples,
+                             "why": "pem's Jacobian of the whole record would exceed its "
+                                    "limit (subid.methods.dt.pem.JACOBIAN_BYTES_LIMIT): the "
+                                    "last samples refined, the initial state and the "
+                                    "covariance from the whole record"}
+    covariance_focus = "prediction" if final.info.get("parameter_covariance", {}).get(
+        "with_gain") else "simulation"
+    info = {k: v for k, v in final.info.items() if k != "parameter_covariance"}
+    try:
+        info["x0"] = initial_states(final, data, covariance_focus)[0]
+        whole = final.with_noise_model(final.K, final.noise_cov, info=info)
+        with np.errstate(all="ignore"):
+            return with_covariance(whole, data, covariance_focus,
+                                   with_feedthrough=bool(np.any(model.D != 0)),
+                                   max_samples=COVARIANCE_SAMPLES)
+    except SubidError as exc:
+        why.append(f"{type(exc).__name__}: {exc}")
         return None
 
 
@@ -568,7 +607,7 @@ def _discrete(data, order, horizon, feedthrough, focus, refine):
                 "the subspace model is kept as the simulator asked for"))
             return model, record
     why = []
-    final = _refine(data, model, focus, why=why)
+    final = _final_refinement(data, model, focus, refinement, why)
     if final is None:
         refinement.update(kept=False, reason="the refinement of the whole record failed ("
                           + (why[0] if why else "no result") + ")")

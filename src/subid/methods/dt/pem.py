@@ -387,6 +387,31 @@ def refine(data, model, focus, *, held_out=False):
     return _with_covariance(refined, model, data, focus, None)
 
 
+def jacobian_samples(model, focus, feedthrough=None) -> int:
+    """The most samples :func:`pem` refines ``model`` on: its Jacobian (``N ny`` rows, a
+    column per free parameter and per initial state) within
+    :data:`JACOBIAN_BYTES_LIMIT`. ``feedthrough``: as :func:`pem`'s (None: D free
+    where the model has one)."""
+    n, nu, ny = model.order, model.n_inputs, model.n_outputs
+    with_d = bool(np.any(model.D != 0)) if feedthrough is None else bool(feedthrough)
+    layout = _Layout(n, nu, ny, with_d, focus == "prediction")
+    columns = layout.size - n * n + 2 * n
+    return int(JACOBIAN_BYTES_LIMIT // (8.0 * ny * columns))
+
+
+def initial_states(model, data, focus):
+    """The least-squares initial state of ``model``'s predictor (``focus='prediction'``,
+    the innovation form with its K) or simulation, one row per experiment of ``data``:
+    what :func:`pem` starts from and :func:`with_covariance` reads in ``info['x0']``."""
+    n, ny = model.order, model.n_outputs
+    K = np.array(model.K) if focus == "prediction" else np.zeros((n, ny))
+    Ap, Bp, Cp, Dp = _predictor(np.array(model.A), np.array(model.B), np.array(model.C),
+                                np.array(model.D), K, focus)
+    v = np.hstack([data.u, data.y]) if focus == "prediction" else data.u
+    return np.stack([_start_x0(Ap, Bp, Cp, Dp, v[a:b], data.y[a:b])
+                     for a, b in data.experiment_ranges])
+
+
 def _start_gain(data, model):
     """K of the starting model: its own, the state-sequence estimate, or zero."""
     if model.K is not None and _radius(model.A - model.K @ model.C) < STABILITY_LIMIT:
@@ -423,7 +448,7 @@ def _pem_dt(data, model, focus, max_iterations, tolerance, rounds, feedthrough, 
         raise DataError(f"pem: {N} samples of {ny} output(s) are too few for the "
                         f"{n_params} free parameters of an order-{n} model; supply more data")
     jac_bytes = 8.0 * N * ny * (n_params + n)
-    if jac_bytes > JACOBIAN_BYTES_LIMIT:
+    if N > jacobian_samples(model, focus, feedthrough):
         raise DataError(f"pem: the Jacobian of {N} samples x {ny} output(s) x {n_params} "
                         f"parameters needs {jac_bytes / 2**30:.1f} GiB (limit "
                         f"{JACOBIAN_BYTES_LIMIT / 2**30:.0f} GiB); refine on a shorter part of "
