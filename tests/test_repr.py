@@ -60,6 +60,22 @@ def test_statespace_html_names_order_channels_timing_stability(data):
     assert model._repr_html_().count("<svg") == 1      # the pole map
 
 
+def test_statespace_html_says_the_direct_term_decision_and_the_covariance(data):
+    from subid._repr import describe_feedthrough
+    subspace = subid.ls_subspace(data, 3)
+    text = _parse(subspace._repr_html_())
+    line = describe_feedthrough(subspace.info["feedthrough"], input_names=["u1", "u2"],
+                                output_names=["y1", "y2"])
+    assert "direct term" in text and line in text
+    assert "covariance" not in text                    # a subspace method's own model
+    refined = subid.identify(data, 3, refine=False)
+    text = _parse(refined._repr_html_())
+    assert "confidence bounds available" in text
+    plain = subid.StateSpace([[0.5]], [[1.0]], [[1.0]], [[0.0]], 1.0)
+    text = _parse(plain._repr_html_())
+    assert "direct term" not in text and "covariance" not in text
+
+
 def test_unstable_and_continuous_models_say_so():
     unstable = subid.StateSpace([[1.2]], [[1.0]], [[1.0]], 0, dt=0.5)
     text = _parse(unstable._repr_html_())

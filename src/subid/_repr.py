@@ -1,4 +1,6 @@
-"""Text and HTML summaries of models, records and online identifiers.
+"""Text and HTML summaries of models, records and online identifiers, and the decisions a
+model records in ``info`` in words (:func:`describe_feedthrough`, which the reports and
+the command line read through :mod:`subid.methods.describe`).
 
 Jupyter shows an object through its ``_repr_html_`` method; the classes
 (:class:`~subid.model.StateSpace`, :class:`~subid.data.IOData`,
@@ -156,6 +158,14 @@ def statespace_html(model) -> str:
         if key in info and info[key] is not None:
             vals = np.atleast_1d(np.asarray(info[key], dtype=float))
             rows.append((key.replace("_", " ") + " %", ", ".join(_fmt(v) for v in vals)))
+    direct = describe_feedthrough(info.get("feedthrough"), input_names=model.input_names,
+                                  output_names=model.output_names)
+    if direct is not None:
+        rows.append(("direct term", _esc(direct)))
+    covariance = info.get("parameter_covariance")
+    if isinstance(covariance, dict):
+        rows.append(("covariance", "parameter covariance: confidence bounds available "
+                     "(subid.freqresp_bounds, plot.bode(..., confidence=0.95))"))
     listed = ", ".join(_fmt_complex(complex(p)) for p in poles[:MAX_POLES_LISTED])
     if poles.size > MAX_POLES_LISTED:
         listed += f", … ({poles.size} in all)"
@@ -292,3 +302,68 @@ def adaptive_settings(ident) -> list[tuple[str, object]]:
             ("forgetting", f"{ident._alpha:g} (A, C), {ident._beta:g} (B, D)"),
             ("samples", ident.n_samples),
             ("last time", "–" if last is None else _fmt(last))]
+
+
+# ---------------------------------------------------------------------------
+# decisions in words
+# ---------------------------------------------------------------------------
+def describe_feedthrough(record, *, option: str = "feedthrough=True", input_names=None,
+                         output_names=None) -> str | None:
+    """One line saying whether the model has a direct term D, and why.
+
+    Under ``feedthrough='auto'`` (:mod:`subid.methods.dt.feedthrough`) D is fixed at
+    zero when the data show feedback from the outputs to the inputs, because a direct
+    term and a feedback without delay give the same lag-0 correlation; the line then
+    names the inputs the feedback test flagged and what a free D would take from each
+    output's one-step prediction error (``lag0_share``), and how to ask for D: the
+    decision stays the data's, and the user who knows the plant has the last word.
+
+    Parameters
+    ----------
+    record : dict or None
+        ``model.info['feedthrough']``.
+    option : str
+        How the reader asks for D (``'--option feedthrough=true'`` on the command line).
+    input_names, output_names : list of str, optional
+        Channel names for the line (default ``u1..``, ``y1..``).
+
+    Returns
+    -------
+    str or None
+        None without a record.
+    """
+    if not isinstance(record, dict) or "estimated" not in record:
+        return None
+    estimated = bool(record["estimated"])
+    if record.get("requested") != "auto":
+        return "D estimated (asked)" if estimated else "D = 0 (asked)"
+    direct = record.get("direct_term")
+    feedback = record.get("feedback")
+    if estimated:
+        if isinstance(direct, dict) and direct.get("significant"):
+            p = min((v for v in direct.get("p_values", []) if v is not None), default=None)
+            return "D estimated: the data show a direct term" + (
+                f" (F-test, p = {p:.2g})" if p is not None else "")
+        return "D estimated: " + (str(direct) if isinstance(direct, str)
+                                   else "the past explains the outputs exactly")
+    if isinstance(feedback, dict) and feedback.get("detected"):
+        level = float(record.get("level", 0.01))
+        p_values = feedback.get("p_values", [])
+        names = list(input_names) if input_names is not None else \
+            [f"u{j + 1}" for j in range(len(p_values))]
+        flagged = [names[j] for j, v in enumerate(p_values)
+                   if v is not None and v < level / max(len(p_values), 1)]
+        shares = record.get("lag0_share") or []
+        outs = list(output_names) if output_names is not None else \
+            [f"y{i + 1}" for i in range(len(shares))]
+        share = ", ".join(f"{100 * v:.0f} % ({name})" for name, v in zip(outs, shares))
+        return (f"D = 0: the data show feedback to {', '.join(flagged) or 'the inputs'}, "
+                "under which a direct term cannot be told apart"
+                + (f"; a free D would take {share} of the one-step prediction error"
+                   if share else "")
+                + f"; pass {option} if the plant has a direct term and the feedback a delay")
+    if isinstance(direct, dict):
+        p = min((v for v in direct.get("p_values", []) if v is not None), default=None)
+        return "D = 0: no direct term in the data" + (
+            f" (F-test, p = {p:.2g})" if p is not None else "")
+    return "D = 0" + (f": {direct}" if isinstance(direct, str) else "")
