@@ -208,7 +208,7 @@ def _final_refinement(data, model, focus, refinement, why):
     too is its end), its initial state then fitted to the whole record and its
     parameter covariance computed there (``refinement['samples']`` records the part).
     None when the refinement fails (``why`` receives the error)."""
-    from subid.methods.dt.pem import initial_states, jacobian_samples, with_covariance
+    from subid.methods.dt.pem import initial_states, jacobian_samples
     room = jacobian_samples(model, focus)
     if data.n_samples <= room or data.n_experiments > 1 or room < 10 * model.order:
         return _refine(data, model, focus, why=why)
@@ -220,16 +220,11 @@ def _final_refinement(data, model, focus, refinement, why):
                                     "limit (subid.methods.dt.pem.JACOBIAN_BYTES_LIMIT): the "
                                     "last samples refined, the initial state and the "
                                     "covariance from the whole record"}
-    covariance_focus = "prediction" if final.info.get("parameter_covariance", {}).get(
-        "with_gain") else "simulation"
     info = {k: v for k, v in final.info.items() if k != "parameter_covariance"}
     try:
-        info["x0"] = initial_states(final, data, covariance_focus)[0]
-        whole = final.with_noise_model(final.K, final.noise_cov, info=info)
-        with np.errstate(all="ignore"):
-            return with_covariance(whole, data, covariance_focus,
-                                   with_feedthrough=bool(np.any(model.D != 0)),
-                                   max_samples=COVARIANCE_SAMPLES)
+        info["x0"] = initial_states(final, _delayed(data, final), focus)[0]
+        return _record_covariance(data, final.with_noise_model(final.K, final.noise_cov,
+                                                               info=info), focus, start=model)
     except SubidError as exc:
         why.append(f"{type(exc).__name__}: {exc}")
         return None
@@ -471,16 +466,10 @@ def _subspace_covariance(data, model, record):
     for ``pem`` models there. ``record['covariance']`` says what was done; a model whose
     covariance cannot be computed (an unstable predictor, a rank-deficient Jacobian)
     is returned without it, with the reason."""
-    from subid.delay import delay_inputs, input_delay_of
-    from subid.methods.dt.pem import with_covariance
     focus = "prediction" if model.K is not None else "simulation"
-    used = data if (delays := input_delay_of(model)) is None else delay_inputs(data, delays)[0]
     copy = model.with_noise_model(model.K, model.noise_cov, info=dict(model.info))
     try:
-        with np.errstate(all="ignore"):
-            out = with_covariance(copy, used, focus,
-                                  with_feedthrough=bool(np.any(model.D != 0)),
-                                  max_samples=COVARIANCE_SAMPLES)
+        out = _record_covariance(data, copy, focus, start=model)
     except SubidError as exc:
         out, why = model, f"{type(exc).__name__}: {exc}"
     else:
@@ -495,6 +484,26 @@ def _subspace_covariance(data, model, record):
                  "efficient"} if isinstance(entry, dict) else
         {"at": "the subspace model", "computed": False, "reason": why})
     return out
+
+
+def _delayed(data, model):
+    """``data`` with its inputs shifted by ``model``'s input delays (as :func:`subid.pem`
+    refines such a model), or as it is."""
+    from subid.delay import delay_inputs, input_delay_of
+    delays = input_delay_of(model)
+    return data if delays is None else delay_inputs(data, delays)[0]
+
+
+def _record_covariance(data, model, focus, *, start):
+    """``model`` (its ``info`` the caller's own copy) with the parameter covariance of
+    :func:`subid.methods.dt.pem.with_covariance` over the record (at most
+    :data:`COVARIANCE_SAMPLES` of it read), D among the parameters where ``start`` has
+    one, as :func:`subid.pem` does. Raises SubidError as that does."""
+    from subid.methods.dt.pem import with_covariance
+    with np.errstate(all="ignore"):
+        return with_covariance(model, _delayed(data, model), focus,
+                               with_feedthrough=bool(np.any(start.D != 0)),
+                               max_samples=COVARIANCE_SAMPLES)
 
 
 def _continuous(data, order, feedthrough, *, reason):

@@ -387,14 +387,19 @@ def refine(data, model, focus, *, held_out=False):
     return _with_covariance(refined, model, data, focus, None)
 
 
+def _free_d(model, feedthrough) -> bool:
+    """Whether D is a free parameter: as asked (``feedthrough`` True or False), else
+    (None) where the model has one."""
+    return bool(np.any(model.D != 0)) if feedthrough is None else bool(feedthrough)
+
+
 def jacobian_samples(model, focus, feedthrough=None) -> int:
     """The most samples :func:`pem` refines ``model`` on: its Jacobian (``N ny`` rows, a
     column per free parameter and per initial state) within
     :data:`JACOBIAN_BYTES_LIMIT`. ``feedthrough``: as :func:`pem`'s (None: D free
     where the model has one)."""
     n, nu, ny = model.order, model.n_inputs, model.n_outputs
-    with_d = bool(np.any(model.D != 0)) if feedthrough is None else bool(feedthrough)
-    layout = _Layout(n, nu, ny, with_d, focus == "prediction")
+    layout = _Layout(n, nu, ny, _free_d(model, feedthrough), focus == "prediction")
     columns = layout.size - n * n + 2 * n
     return int(JACOBIAN_BYTES_LIMIT // (8.0 * ny * columns))
 
@@ -440,7 +445,7 @@ def _pem_dt(data, model, focus, max_iterations, tolerance, rounds, feedthrough, 
     simulation-focus fit."""
     n, nu, ny = model.order, model.n_inputs, model.n_outputs
     N = data.n_samples
-    with_d = bool(np.any(model.D != 0)) if feedthrough is None else bool(feedthrough)
+    with_d = _free_d(model, feedthrough)
     with_k = focus == "prediction"
     layout = _Layout(n, nu, ny, with_d, with_k)
     n_params = layout.size - n * n + n
@@ -559,8 +564,7 @@ def _pem_dt(data, model, focus, max_iterations, tolerance, rounds, feedthrough, 
 def _with_covariance(refined, start, data, focus, feedthrough):
     """``refined`` with the covariance of its parameters (:func:`with_covariance`), D
     among them when the start had one (``feedthrough=None``) or as asked."""
-    with_d = bool(np.any(start.D != 0)) if feedthrough is None else bool(feedthrough)
-    return with_covariance(refined, data, focus, with_feedthrough=with_d)
+    return with_covariance(refined, data, focus, with_feedthrough=_free_d(start, feedthrough))
 
 
 #: Past this many samples, :func:`with_covariance` with ``max_samples`` reads
