@@ -350,12 +350,12 @@ def describe_feedthrough(record, *, option: str = "feedthrough=True", input_name
         level = float(record.get("level", 0.01))
         p_values = feedback.get("p_values", [])
         names = list(input_names) if input_names is not None else \
-            [f"u{j + 1}" for j in range(len(p_values))]
+            _default(len(p_values), "u")
         flagged = [names[j] for j, v in enumerate(p_values)
                    if v is not None and v < level / max(len(p_values), 1)]
         shares = record.get("lag0_share") or []
         outs = list(output_names) if output_names is not None else \
-            [f"y{i + 1}" for i in range(len(shares))]
+            _default(len(shares), "y")
         share = ", ".join(f"{100 * v:.0f} % ({name})" for name, v in zip(outs, shares))
         return (f"D = 0: the data show feedback to {', '.join(flagged) or 'the inputs'}, "
                 "under which a direct term cannot be told apart"
