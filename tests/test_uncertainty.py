@@ -30,15 +30,26 @@ def _pem_of_n4sid(data):
     return subid.pem(data, subid.n4sid(data, 2))
 
 
-def _coverage(runs, estimate=_pem_of_n4sid):
-    """Share of (run, frequency) pairs whose 95 % bounds of the model ``estimate(data)``
-    hold the true |G| (the output-error records of ``_oe_data``)."""
-    G = np.abs(TRUE.freqresp(W))[:, 0, 0]
+def _covered(estimate, records, true, w, skipped=None):
+    """Share of (record, frequency, channel pair) whose 95 % bounds of the model
+    ``estimate(data)`` hold the |G| of ``true``. With ``skipped`` (a list), a model that
+    carries no covariance is left out and its record appended there."""
+    G = np.abs(true.freqresp(w))
     hits = []
-    for r in range(runs):
-        band = subid.freqresp_bounds(estimate(_oe_data(1000 + r)), W)
-        hits.append((band.lower[:, 0, 0] <= G) & (G <= band.upper[:, 0, 0]))
+    for data in records:
+        model = estimate(data)
+        if skipped is not None and not isinstance(model.info.get("parameter_covariance"),
+                                                  dict):
+            skipped.append(data)
+            continue
+        band = subid.freqresp_bounds(model, w)
+        hits.append((band.lower <= G) & (G <= band.upper))
     return float(np.mean(hits))
+
+
+def _coverage(runs, estimate=_pem_of_n4sid, skipped=None):
+    """:func:`_covered` on the output-error records of ``_oe_data`` (seeds 1000..)."""
+    return _covered(estimate, (_oe_data(1000 + r) for r in range(runs)), TRUE, W, skipped)
 
 
 @pytest.mark.slow
@@ -141,18 +152,12 @@ def test_continuous_time_pem_drops_the_covariance(refined):
         subid.freqresp_bounds(refined_ct, W)
 
 
-def _mimo_coverage(runs, estimate):
-    """The share of (run, frequency, channel pair) whose 95 % bounds of ``estimate(data)``
-    hold the true |G| of the 2x2 seed-001 innovation system (N = 1000)."""
+def _mimo_coverage(runs, estimate, skipped=None):
+    """:func:`_covered` on the 2x2 seed-001 innovation system (N = 1000, seeds 100..)."""
     true = subid.systems.seed001_innovation_system()
-    w = np.array([0.2, 0.8, 1.5])
-    G = np.abs(true.freqresp(w))
-    hits = []
-    for r in range(runs):
-        data = subid.systems.simulate_innovation_data(true, 1000, seed=100 + r)
-        band = subid.freqresp_bounds(estimate(data), w)
-        hits.append((band.lower <= G) & (G <= band.upper))
-    return float(np.mean(hits))
+    records = (subid.systems.simulate_innovation_data(true, 1000, seed=100 + r)
+               for r in range(runs))
+    return _covered(estimate, records, true, np.array([0.2, 0.8, 1.5]), skipped)
 
 
 @pytest.mark.slow
@@ -249,14 +254,20 @@ def _identify_unrefined(data):
 
 @pytest.mark.slow
 def test_identify_subspace_model_bounds_cover_small():
-    # 20 runs x 5 frequencies of the output-error system (measured 100 runs: 93.8 %)
-    assert 0.85 <= _coverage(20, _identify_unrefined) <= 1.0
+    # 20 runs x 5 frequencies of the output-error system (measured 100 runs: 93.7 %)
+    skipped = []
+    assert 0.85 <= _coverage(20, _identify_unrefined, skipped) <= 1.0
+    assert not skipped
 
 
 @pytest.mark.long
 def test_identify_subspace_model_bounds_cover():
-    # 100 runs: measured 93.8 % (pem's own bounds on the same records: 93.6 %)
-    assert 0.88 <= _coverage(100, _identify_unrefined) <= 0.99
+    # 100 runs: measured 93.7 % (pem's own bounds on the same records: 93.6 %); in 2 runs
+    # (seeds 1041, 1072) the feedback test's 1 % level flags feedback in these open-loop
+    # records and no covariance is attached (test_identify_attaches_no_covariance_...)
+    skipped = []
+    assert 0.88 <= _coverage(100, _identify_unrefined, skipped) <= 0.99
+    assert len(skipped) <= 3
 
 
 @pytest.mark.long
@@ -264,8 +275,10 @@ def test_identify_subspace_model_bounds_cover_mimo_innovation():
     # the 2x2 seed-001 innovation system, 40 runs x 3 frequencies x 4 channel pairs:
     # measured 89.6 % (the subspace estimate is less efficient than pem's, whose bounds
     # cover 94.7 % in 30 runs of test_mimo_innovation_model_coverage)
-    assert 0.85 <= _mimo_coverage(40, lambda data: subid.identify(data, 3, refine=False)) \
-        <= 1.0
+    skipped = []
+    assert 0.85 <= _mimo_coverage(40, lambda data: subid.identify(data, 3, refine=False),
+                                  skipped) <= 1.0
+    assert len(skipped) <= 2
 
 
 def test_identify_default_model_carries_a_covariance_for_the_bounds():
@@ -314,3 +327,33 @@ def test_windowed_covariance_is_the_whole_records_when_it_fits_and_close_otherwi
     monkeypatch.setattr(pem_module, "_PREDICTOR_CHUNK", 1000)
     np.testing.assert_array_equal(again(12000).info["parameter_covariance"]["factor"],
                                   windows.info["parameter_covariance"]["factor"])
+
+
+def _closed_loop_coverage(runs, estimate):
+    """:func:`_covered` on the seed-001 plant under output feedback u = r + 0.5 y (issue
+    21's closed loop, N = 3000, seeds 200..)."""
+    true = subid.systems.seed001_innovation_system(feedthrough=False)
+    records = (subid.systems.simulate_innovation_data(true, 3000, seed=200 + r,
+                                                      feedback=-0.5 * np.eye(2))
+               for r in range(runs))
+    return _covered(estimate, records, true, np.array([0.2, 0.8, 1.5]))
+
+
+def test_identify_attaches_no_covariance_to_a_subspace_model_under_feedback():
+    # MOESP and N4SID are biased in closed loop: bands around their model held the true
+    # |G| in 21 % of the pairs (30 runs of identify(data, 3, refine=False), measured)
+    true = subid.systems.seed001_innovation_system(feedthrough=False)
+    data = subid.systems.simulate_innovation_data(true, 3000, seed=200,
+                                                  feedback=-0.5 * np.eye(2))
+    model = subid.identify(data, 3, refine=False)
+    record = model.info["identify"]["covariance"]
+    assert record["computed"] is False and "feedback" in record["reason"]
+    with pytest.raises(ModelError, match="no parameter covariance"):
+        subid.parameter_covariance(model)
+
+
+@pytest.mark.long
+def test_identify_default_bounds_cover_in_closed_loop():
+    # the default keeps its prediction-error refinement under feedback (every run here):
+    # 30 runs x 3 frequencies x 4 pairs, measured 95.6 %
+    assert 0.88 <= _closed_loop_coverage(30, lambda data: subid.identify(data, 3)) <= 1.0
