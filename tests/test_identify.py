@@ -547,7 +547,7 @@ def test_a_failed_final_refinement_keeps_the_subspace_model_and_says_why(monkeyp
 
     def fold_only(data, model, focus, *, held_out=False):
         if not held_out:
-            raise DataError("pem: the Jacobian needs 9.9 GiB (limit 2 GiB)")
+            raise DataError("pem: the record's predictor overflows")
         return real(data, model, focus, held_out=held_out)
 
     est = subid.datasets.load("dryer").detrend().split(2 / 3)[0]
@@ -557,37 +557,5 @@ def test_a_failed_final_refinement_keeps_the_subspace_model_and_says_why(monkeyp
     ref = model.info["identify"]["refinement"]
     assert not ref["kept"] and "refined_by" not in model.info
     assert ref["reason"] == ("the refinement of the whole record failed (DataError: pem: the "
-                             "Jacobian needs 9.9 GiB (limit 2 GiB))")
+                             "record's predictor overflows)")
     assert model.info["identify"]["covariance"]["at"] == "the subspace model"
-
-
-def test_a_record_too_long_for_pems_jacobian_is_refined_on_its_end(monkeypatch):
-    """Where the Jacobian of the whole record would exceed pem's limit, the last samples
-    that fit are refined, then the initial state and the covariance come from the whole
-    record (DaISy dryer, first 2/3, the limit made to fit 80 % of it)."""
-    from subid.methods.dt import pem as pem_module
-    est = subid.datasets.load("dryer").detrend().split(2 / 3)[0]
-    whole = subid.identify(est)
-    assert whole.info["identify"]["refinement"]["kept"]
-    room = pem_module.jacobian_samples(whole, "simulation")
-    monkeypatch.setattr(pem_module, "JACOBIAN_BYTES_LIMIT",
-                        pem_module.JACOBIAN_BYTES_LIMIT * 0.8 * est.n_samples / room)
-    model = subid.identify(est)
-    ref = model.info["identify"]["refinement"]
-    assert ref["kept"] and ref["samples"]["record"] == est.n_samples
-    assert ref["samples"]["refined"] == pem_module.jacobian_samples(model, "simulation") \
-        < est.n_samples
-    cov = model.info["parameter_covariance"]
-    assert cov["n_samples"] == est.n_samples and not cov["with_gain"]
-    # the refinement of the last samples from the subspace model (whose A, B, C, D the
-    # unrefined call returns), its initial state the whole record's
-    room = ref["samples"]["refined"]
-    start = subid.identify(est, refine=False)
-    tail = pem_module.refine(est[est.n_samples - room:], start, "simulation")
-    for name in "ABCD":
-        np.testing.assert_allclose(getattr(model, name), getattr(tail, name), rtol=1e-9,
-                                   atol=1e-12)
-    np.testing.assert_allclose(np.asarray(model.info["x0"]).ravel(),
-                               pem_module.initial_states(model, est, "simulation")[0])
-    band = subid.freqresp_bounds(model, [0.3, 1.0])
-    assert np.all(np.isfinite(band.std)) and np.all(band.std > 0)

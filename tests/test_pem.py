@@ -71,6 +71,31 @@ def test_both_forms_of_the_jacobian_match_reference(blocked, monkeypatch):
     assert np.all(J1[-1, :, [2, 9]] == 0.0)
 
 
+@pytest.mark.parametrize("blocked", [False, True])
+def test_the_jacobian_continues_from_its_final_state(blocked, monkeypatch):
+    """``final_state=True`` gives the state and sensitivities after the last sample: the
+    record run in pieces (odd and even lengths, each from the last piece's end) gives
+    the whole record's output and Jacobian, with free initial-state directions too, and
+    the reference's final state."""
+    from subid.model import _sensitivity
+    monkeypatch.setattr(_sensitivity, "BLOCKED_WORK", 0 if blocked else 10**12)
+    rng = np.random.default_rng(8)
+    n, ny, m, d, N = 5, 2, 3, 9, 301
+    Ap, Bp, C, Dp, v, x0 = _random_predictor(rng, n, ny, m, N, 0.7)
+    dirs = list(_random_directions(rng, d, n, ny, m))
+    for a in dirs[:4]:
+        a[4] = 0.0                            # a pure initial-state direction
+    y_ref, J_ref, x_ref, S_ref = jacobian_ref(Ap, Bp, C, Dp, v, x0, *dirs, final_state=True)
+    ys, Js, x, S = [], [], x0, dirs[4]
+    for a, b in ((0, 33), (33, 100), (100, 101), (101, N)):
+        y, J, x, S = jacobian(Ap, Bp, C, Dp, v[a:b], x, *dirs[:4], S, final_state=True)
+        ys.append(y)
+        Js.append(J)
+    assert np.abs(np.vstack(ys) - y_ref).max() < 1e-12
+    assert np.abs(np.concatenate(Js) - J_ref).max() < 1e-12
+    assert np.abs(x - x_ref).max() < 1e-12 and np.abs(S - S_ref).max() < 1e-12
+
+
 def test_initial_state_directions_match_reference():
     # directions that move x0 alone run in their own loop (free_response), stopped once
     # decayed: same Jacobian as the reference, in any column order, on a record long
@@ -287,3 +312,74 @@ def test_covariance_gram_route_equals_qr_route(monkeypatch):
     assert np.array_equal(lam, lam2)
     qr_permuted, _ = _covariance.covariance_factor(J[:, :, perm].copy(), res, 2, order=back)
     assert np.allclose(qr @ qr.T, qr_permuted @ qr_permuted.T, rtol=1e-10, atol=0)
+
+
+@pytest.mark.parametrize("pivot", [None, 2.0])
+def test_a_jacobian_given_in_pieces_gives_the_whole_ones_factors(pivot, monkeypatch):
+    """The trust region's factor (R, Q^T f, J^T f, norms) and the covariance factor of a
+    Jacobian summed a piece at a time equal those of the whole Jacobian, on the Gram
+    route and on the QR route (GRAM_PIVOT above 1 forces it); pieces of uneven length,
+    one shorter than the number of columns."""
+    from subid.methods.dt import _covariance, _trust_region
+    if pivot is not None:
+        monkeypatch.setattr(_trust_region, "GRAM_PIVOT", pivot)
+    rng = np.random.default_rng(9)
+    J = rng.standard_normal((431, 2, 7)) @ np.diag([1.0, 3.0, 0.2, 1.0, 5.0, 1.0, 0.5])
+    f = rng.standard_normal(431 * 2)
+    cuts = [0, 3, 120, 121, 300, 431]                   # samples; 3 samples: 6 rows < 7
+    whole = _trust_region.compress(J.reshape(-1, 7), f)
+
+    def rows():
+        for a, b in zip(cuts[:-1], cuts[1:]):
+            yield 2 * a, 2 * b, J[a:b].reshape(-1, 7)
+    pieced = _trust_region.compress_pieces(rows, f, 7)
+    assert whole[4] == pieced[4] == ("gram" if pivot is None else "qr")
+    R1, R2 = whole[0], pieced[0]
+    np.testing.assert_allclose(R1.T @ R1, R2.T @ R2, rtol=1e-10, atol=1e-10)
+    np.testing.assert_allclose(R1.T @ whole[1], R2.T @ pieced[1], rtol=1e-10, atol=1e-10)
+    for a, b in zip(whole[2:4], pieced[2:4]):
+        np.testing.assert_allclose(a, b, rtol=1e-12)
+    res = rng.standard_normal((431, 2))
+    F1, lam1 = _covariance.covariance_factor(J.copy(), res, 2)
+    F2, lam2 = _covariance.covariance_factor_pieces(
+        lambda: (J[a:b].copy() for a, b in zip(cuts[:-1], cuts[1:])), res, 2, 7)
+    np.testing.assert_allclose(F1 @ F1.T, F2 @ F2.T, rtol=1e-10, atol=0)
+    assert np.array_equal(lam1, lam2)
+
+
+@pytest.mark.parametrize("focus", ["prediction", "simulation"])
+def test_pem_with_its_jacobian_in_pieces_gives_the_same_model(focus, monkeypatch):
+    """JACOBIAN_PIECE_BYTES made small enough that a record of two experiments is run in
+    pieces of 701 samples (each continuing from the last's state and sensitivities):
+    the same refined model, initial states and parameter covariance as with the whole
+    Jacobian (to the rounding the sums' order leaves after the iterations)."""
+    from subid.methods.dt import _pe_search
+    true = systems.random_system(3, 2, 2, seed=11)
+    parts = [systems.simulate_data(true, 2500, seed=s, output_snr_db=25,
+                                   process_snr_db=20 if focus == "prediction" else None)
+             for s in (12, 13)]
+    data = subid.merge(parts)
+    start = subid.n4sid(data, 3, feedthrough=False)
+    whole = subid.pem(data, start, focus=focus)
+    width = 3 * (2 + 2) + 6 * (focus == "prediction") + 2 * 3      # > the columns
+    monkeypatch.setattr(_pe_search, "JACOBIAN_PIECE_BYTES", 8 * 2 * width * 701)
+    from subid.methods.dt import _trust_region, pem
+    calls = []
+
+    def counted(module, name):
+        real = getattr(module, name)
+        monkeypatch.setattr(module, name, lambda *a: calls.append(name) or real(*a))
+    counted(_trust_region, "compress_pieces")
+    counted(pem, "covariance_factor_pieces")
+    pieced = subid.pem(data, start, focus=focus)
+    assert calls.count("covariance_factor_pieces") == 1
+    assert calls.count("compress_pieces") >= 2        # every Jacobian of the iterations
+    for name in ("A", "B", "C", "D") + (("K",) if focus == "prediction" else ()):
+        np.testing.assert_allclose(getattr(pieced, name), getattr(whole, name),
+                                   rtol=1e-6, atol=1e-8)
+    np.testing.assert_allclose(pieced.info["x0"], whole.info["x0"], rtol=1e-5, atol=1e-8)
+    assert pieced.info["final_cost"] == pytest.approx(whole.info["final_cost"], rel=1e-9)
+    F1 = whole.info["parameter_covariance"]["factor"]
+    F2 = pieced.info["parameter_covariance"]["factor"]
+    np.testing.assert_allclose(F2 @ F2.T, F1 @ F1.T, rtol=1e-4,
+                               atol=1e-6 * np.abs(F1 @ F1.T).max())

@@ -45,11 +45,7 @@ choice is made on the estimation record and recorded in
    remaining refinements (on DaISy CD_player_arm, the command line's 70 %
    split, order 18: two of four, and the call takes 6 s instead of 83 s).
    An unstable subspace model (an unstable plant under feedback) cannot be
-   refined by simulation; it is kept as it is. Where :func:`subid.pem`'s Jacobian of
-   the whole record would exceed its limit (a long record with a large model), the
-   final refinement runs on the record's last samples that fit
-   (:func:`_final_refinement`), its initial state and covariance then taken from the
-   whole record.
+   refined by simulation; it is kept as it is.
 
 4. **The gain.** Unless a prediction-focus refinement estimated K with the rest, the
    model's K (the state-sequence gain of :mod:`subid.methods.dt.noise_model`) is
@@ -130,10 +126,6 @@ SIMULATION_LOSS = 0.10
 #: system of bench/run.py at 1e5 and 1e6 samples (4.6e6 and 6.6e6 entries, the folds'
 #: scores on the threads too) 0.70 -> 0.63 s and 0.84 -> 0.77 s.
 THREADED_JACOBIAN = 1_000_000
-#: ... and at most this many (400 MB of doubles): each fold refinement holds its Jacobian,
-#: so two threads hold two (DaISy steamgen: 300 -> 420 MB peak resident memory with the
-#: fold refinements on two threads); beyond it the folds are refined one after the other.
-THREADED_JACOBIAN_MAX = 50_000_000
 
 
 def _estimator(name):
@@ -200,36 +192,6 @@ def _refine(data, model, focus, held_out=False, why=None):
         return None
 
 
-def _final_refinement(data, model, focus, refinement, why):
-    """The refinement :func:`identify` keeps: of the whole record, or, where
-    :func:`subid.pem`'s Jacobian of the whole record would exceed its limit (a long
-    record with a large model; one experiment), of the record's last
-    :func:`subid.methods.dt.pem.jacobian_samples` samples (the part the folds refined
-    too is its end), its initial state then fitted to the whole record and its
-    parameter covariance computed there (``refinement['samples']`` records the part).
-    None when the refinement fails (``why`` receives the error)."""
-    from subid.methods.dt.pem import initial_states, jacobian_samples
-    room = jacobian_samples(model, focus)
-    if data.n_samples <= room or data.n_experiments > 1 or room < 10 * model.order:
-        return _refine(data, model, focus, why=why)
-    final = _refine(data[data.n_samples - room:], model, focus, why=why)
-    if final is None:
-        return None
-    refinement["samples"] = {"refined": room, "record": data.n_samples,
-                             "why": "pem's Jacobian of the whole record would exceed its "
-                                    "limit (subid.methods.dt.pem.JACOBIAN_BYTES_LIMIT): the "
-                                    "last samples refined, the initial state and the "
-                                    "covariance from the whole record"}
-    info = {k: v for k, v in final.info.items() if k != "parameter_covariance"}
-    try:
-        info["x0"] = initial_states(final, _delayed(data, final), focus)[0]
-        return _record_covariance(data, final.with_noise_model(final.K, final.noise_cov,
-                                                               info=info), focus, start=model)
-    except SubidError as exc:
-        why.append(f"{type(exc).__name__}: {exc}")
-        return None
-
-
 def _feedback(data, model) -> bool:
     """Whether the data show feedback from the outputs to the inputs: the test of
     ``feedthrough='auto'`` (:func:`subid.methods.dt.feedthrough.decide`), from the
@@ -269,8 +231,9 @@ def _fold_refinement(data, method, config, focus, scores=None, guard=None):
     ``pem(focus=focus)``: ``(subspace, refined)``, each ``{score focus: scores}`` for
     each focus of ``scores`` (default: ``focus`` alone).
 
-    The folds are independent: where a fold's Jacobian is large but not too large for
-    two in memory (:data:`THREADED_JACOBIAN`, :data:`THREADED_JACOBIAN_MAX`) and BLAS
+    The folds are independent: where a fold's Jacobian is large
+    (:data:`THREADED_JACOBIAN`; a refinement holds at most
+    :data:`subid.methods.dt._pe_search.JACOBIAN_PIECE_BYTES` of it at a time) and BLAS
     runs one thread (:func:`subid._blas.one_thread`, the default), their subspace
     models, then their refinements, are
     made and scored on subid's threads (:func:`subid._threads.ordered_map`; the
@@ -314,8 +277,7 @@ def _fold_refinement(data, method, config, focus, scores=None, guard=None):
     nu, ny = data.n_inputs, data.n_outputs
     jacobian = max(train.n_samples for train, _ in parts) * ny * \
         (order * (order + nu + 2 * ny) + ny * nu)
-    threads = available() if THREADED_JACOBIAN <= jacobian <= THREADED_JACOBIAN_MAX \
-        and one_thread() else 1
+    threads = available() if THREADED_JACOBIAN <= jacobian and one_thread() else 1
 
     def quietly(function, items):
         # the fold models are only scored: their warnings dropped
@@ -629,7 +591,7 @@ def _discrete(data, order, horizon, feedthrough, focus, refine):
                 "the subspace model is kept as the simulator asked for"))
             return model, record
     why = []
-    final = _final_refinement(data, model, focus, refinement, why)
+    final = _refine(data, model, focus, why=why)
     if final is None:
         refinement.update(kept=False, reason="the refinement of the whole record failed ("
                           + (why[0] if why else "no result") + ")")

@@ -96,7 +96,8 @@ def _affine_row(M, N, x, vt, S, dMT, dNT, i, row):  # pragma: no cover
 def _jacobian_t(Ap, Bp, C, Dp, v, x0, dApT, dBpT, dCT, dDpT, S, J):  # pragma: no cover
     """:func:`jacobian` on direction arrays with the direction index last (contiguous),
     so that every inner loop is an axpy over the directions (vectorised); the ``d``
-    directions fill the first ``d`` columns of ``J`` (N, ny, >= d)."""
+    directions fill the first ``d`` columns of ``J`` (N, ny, >= d). Returns ``(ŷ,
+    x[N])``; ``S`` (``s[0]``, (n, d)) holds ``s[N]`` on return."""
     N = v.shape[0]
     n = Ap.shape[0]
     ny = C.shape[0]
@@ -104,6 +105,7 @@ def _jacobian_t(Ap, Bp, C, Dp, v, x0, dApT, dBpT, dCT, dDpT, S, J):  # pragma: n
     yhat = np.empty((N, ny))
     x = x0.copy()
     xn = np.empty(n)
+    S_in = S
     Sn = np.empty((n, d))
     for t in range(N):
         vt = v[t]
@@ -114,7 +116,9 @@ def _jacobian_t(Ap, Bp, C, Dp, v, x0, dApT, dBpT, dCT, dDpT, S, J):  # pragma: n
         for i in range(n):
             x[i] = xn[i]
         S, Sn = Sn, S
-    return yhat
+    if N % 2 == 1:                    # the last sensitivities into the caller's array
+        S_in[:, :] = S
+    return yhat, x
 
 
 @numba.njit(cache=True)
@@ -148,7 +152,8 @@ BLOCKED_WORK = 1_000
 
 def _jacobian_blocked(Ap, Bp, C, Dp, v, x0, dAp, dBp, dC, dDp, S, J):
     """:func:`_jacobian_t` in the blocked form (module docstring): the ``d``
-    directions (direction index first) fill the first ``d`` columns of ``J``."""
+    directions (direction index first) fill the first ``d`` columns of ``J``; the same
+    ``(ŷ, x[N])`` and ``S`` advanced to ``s[N]``."""
     N, m = v.shape
     n, ny, d = Ap.shape[0], C.shape[0], dAp.shape[0]
     width = J.shape[2]
@@ -168,14 +173,16 @@ def _jacobian_blocked(Ap, Bp, C, Dp, v, x0, dAp, dBp, dC, dDp, S, J):
         T = min(BLOCK, N - t0)
         np.matmul(Z[t0:t0 + T], Ms, out=F[:T])
         _recursion_t(G, S, F.reshape(BLOCK, n, d), J, t0, T, n)
-    return yhat
+    with np.errstate(all="ignore"):
+        x_end = Ap @ X[-1] + Bp @ v[-1] if N else np.array(x0, dtype=float)
+    return yhat, x_end
 
 
 @numba.njit(cache=True, fastmath={'contract'})
 def _free_response_t(Ap, C, S, floor, out, offset):  # pragma: no cover
     """``C Ap^t S`` for ``t < N`` into the columns ``offset:offset + k`` of ``out``
     (N, ny, >= offset + k), zero from the first ``t`` at which every entry of
-    ``Ap^t S`` is below ``floor``."""
+    ``Ap^t S`` is below ``floor``. Returns ``Ap^N S`` (zero once below ``floor``)."""
     n, k = S.shape
     N, ny = out.shape[0], out.shape[1]
     S = S.copy()
@@ -211,6 +218,9 @@ def _free_response_t(Ap, C, S, floor, out, offset):  # pragma: no cover
         for i in range(ny):
             for j in range(k):
                 out[t, i, offset + j] = 0.0
+    if stop < N:
+        S[:, :] = 0.0
+    return S
 
 
 def _floor(S0) -> float:
@@ -239,13 +249,19 @@ def _decays(Ap, N) -> bool:
     return rho == 0.0 or N * np.log(rho) < np.log(FREE_RESPONSE_FLOOR)
 
 
-def jacobian(Ap, Bp, C, Dp, v, x0, dAp, dBp, dC, dDp, dx0):
+def jacobian(Ap, Bp, C, Dp, v, x0, dAp, dBp, dC, dDp, dx0, *, final_state=False):
     """``(ŷ, J)`` with ``J[t, i, j] = dŷ_i[t] / dθ_j``; shapes (N, ny), (N, ny, d).
 
     The directions that move the initial state alone get their free response
     (:func:`free_response`, module docstring) when it decays below
     :data:`FREE_RESPONSE_FLOOR` within the record; the others (all, when it
     does not) run in the compiled loop.
+
+    ``final_state=True``: ``(ŷ, J, x[N], s[N])``, the state and the sensitivities
+    (shaped as ``dx0``, (d, n)) after the last sample, from which the next samples of
+    the record continue (``x0`` and ``dx0`` of the call on them: the record's Jacobian
+    a piece at a time, :func:`subid.methods.dt._pe_search.minimise_prediction_error`);
+    a free response that fell below the floor continues from zero.
     """
     def last(a):
         return frozen(np.moveaxis(a, 0, -1))
@@ -266,20 +282,25 @@ def jacobian(Ap, Bp, C, Dp, v, x0, dAp, dBp, dC, dDp, dx0):
     S = np.array(np.moveaxis(dx0[:k], 0, -1), order="C")     # the kernel's state: written
     n, ny, m = Ap.shape[0], C.shape[0], v.shape[1]
     if k * (n + ny) * (n + m) >= BLOCKED_WORK:
-        yhat = _jacobian_blocked(Ap, Bp, C, Dp, v, x0, dAp[:k], dBp[:k], dC[:k], dDp[:k],
-                                 S, J)
+        yhat, x_end = _jacobian_blocked(Ap, Bp, C, Dp, v, x0, dAp[:k], dBp[:k], dC[:k],
+                                        dDp[:k], S, J)
     else:
-        yhat = _jacobian_t(Ap, Bp, C, Dp, v, x0, last(dAp[:k]), last(dBp[:k]),
-                           last(dC[:k]), last(dDp[:k]), S, J)
+        yhat, x_end = _jacobian_t(Ap, Bp, C, Dp, v, x0, last(dAp[:k]), last(dBp[:k]),
+                                  last(dC[:k]), last(dDp[:k]), S, J)
+    S_end = np.empty((d, n))
+    S_end[:k] = S.T
     if k < d:
         S0 = frozen(dx0[k:].T)
-        _free_response_t(Ap, C, S0, _floor(S0), J, k)
+        S_end[k:] = _free_response_t(Ap, C, S0, _floor(S0), J, k).T
     if not np.array_equal(order, np.arange(d)):
         J[:, :, order] = J.copy()
+        S_end[order] = S_end.copy()
+    if final_state:
+        return yhat, J, x_end, S_end
     return yhat, J
 
 
-def jacobian_ref(Ap, Bp, C, Dp, v, x0, dAp, dBp, dC, dDp, dx0):
+def jacobian_ref(Ap, Bp, C, Dp, v, x0, dAp, dBp, dC, dDp, dx0, *, final_state=False):
     """Plain numpy reference of :func:`jacobian`."""
     N = v.shape[0]
     d = dAp.shape[0]
@@ -292,4 +313,6 @@ def jacobian_ref(Ap, Bp, C, Dp, v, x0, dAp, dBp, dC, dDp, dx0):
         J[t] = (S @ C.T + np.einsum("jik,k->ji", dC, x) + np.einsum("jik,k->ji", dDp, v[t])).T
         S = S @ Ap.T + np.einsum("jik,k->ji", dAp, x) + np.einsum("jik,k->ji", dBp, v[t])
         x = Ap @ x + Bp @ v[t]
+    if final_state:
+        return yhat, J, x, S
     return yhat, J

@@ -29,7 +29,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.linalg
 
-__all__ = ["covariance_factor", "RANK_TOLERANCE"]
+__all__ = ["covariance_factor", "covariance_factor_pieces", "RANK_TOLERANCE"]
 
 # A diagonal entry of the (column-scaled) R factor below this times the largest
 # one marks a direction the data do not determine: no covariance is returned.
@@ -78,29 +78,80 @@ def covariance_factor(J, residuals, n_nuisance, order=None):
         The residual covariance ``Λ`` used, ``E^T E / (N - d / ny)``.
     """
     N, ny, d = J.shape
-    dof = max(N - d / ny, 1.0)
-    lam = residuals.T @ residuals / dof
-    try:
-        L = np.linalg.cholesky(lam)
-    except np.linalg.LinAlgError:
+    lam, L = _noise_cov(residuals, d)
+    if L is None:
         return None, lam
-    # L^-1 ψ_t for every t, in place: forward substitution over the outputs, each step
-    # one operation on the (N, d) rows of an output (no copy of J)
-    for i in range(ny):
-        for j in range(i):
-            J[:, i, :] -= L[i, j] * J[:, j, :]
-        J[:, i, :] /= L[i, i]
-    Jw = J.reshape(N * ny, d)                                   # a view (C-contiguous)
+    Jw = _whiten(J, L)
     scale = np.sqrt(np.einsum("ij,ij->j", Jw, Jw))
     if not (np.isfinite(scale).all() and scale.min() > 0):
         return None, lam
     Jw /= scale
     order = np.arange(d) if order is None else np.asarray(order)
-    scale = scale[order]
-    R = _triangular_factor(Jw, order)
+    return _marginal(_triangular_factor(Jw, order), scale[order], n_nuisance), lam
+
+
+def covariance_factor_pieces(pieces, residuals, n_nuisance, d):
+    """:func:`covariance_factor` of a Jacobian given a piece at a time (columns in the
+    factor's order, the nuisance ones first): ``pieces()`` yields ``J[start:stop]``
+    (shape (stop - start, ny, d), C-contiguous, overwritten) in order and is called a
+    second time where the Gram route does not apply (the Householder factor of the
+    pieces, each folded into the factor of those before it). ``residuals``: the
+    prediction errors of every sample, shape (N, ny). The same factor to rounding,
+    with one piece of the Jacobian in memory at a time (a long record)."""
+    from subid.methods.dt._trust_region import GRAM_PIVOT
+    lam, L = _noise_cov(residuals, d)
+    if L is None:
+        return None, lam
+    G = np.zeros((d, d))
+    for Jk in pieces():
+        Jw = _whiten(Jk, L)
+        G += Jw.T @ Jw
+    scale = np.sqrt(np.maximum(np.diag(G), 0.0))
+    if not (np.isfinite(G).all() and scale.min() > 0):
+        return None, lam
+    try:
+        C = np.linalg.cholesky(G / scale[:, None] / scale[None, :])
+    except np.linalg.LinAlgError:
+        C = None
+    if C is not None and np.isfinite(C).all() and np.diag(C).min(initial=1.0) > GRAM_PIVOT:
+        return _marginal(C.T, scale, n_nuisance), lam
+    R = np.zeros((0, d))
+    for Jk in pieces():
+        Jw = _whiten(Jk, L) / scale
+        R = np.linalg.qr(np.vstack([R, Jw]), mode="r")
+    return _marginal(R, scale, n_nuisance), lam
+
+
+def _noise_cov(residuals, d):
+    """``(Λ, its Cholesky factor or None)``: the residual covariance
+    ``E^T E / (N - d / ny)``."""
+    N, ny = residuals.shape
+    lam = residuals.T @ residuals / max(N - d / ny, 1.0)
+    try:
+        return lam, np.linalg.cholesky(lam)
+    except np.linalg.LinAlgError:
+        return lam, None
+
+
+def _whiten(J, L):
+    """``L^-1 ψ_t`` for every t, in place (forward substitution over the outputs, each
+    step one operation on the (N, d) rows of an output: no copy of J); returns the
+    rows ``J.reshape(N ny, d)`` (a view)."""
+    N, ny, d = J.shape
+    for i in range(ny):
+        for j in range(i):
+            J[:, i, :] -= L[i, j] * J[:, j, :]
+        J[:, i, :] /= L[i, i]
+    return J.reshape(N * ny, d)
+
+
+def _marginal(R, scale, n_nuisance):
+    """The factor of the non-nuisance parameters' covariance from ``R`` (of the
+    column-scaled, whitened Jacobian, nuisance columns first; ``scale`` its column
+    scales): ``R22^-1`` unscaled, or None when ``R22`` is rank deficient."""
     R22 = R[n_nuisance:, n_nuisance:]
     diag = np.abs(np.diag(R22))
     if diag.size == 0 or diag.min() <= RANK_TOLERANCE * diag.max():
-        return None, lam
+        return None
     inv = scipy.linalg.solve_triangular(R22, np.eye(R22.shape[0]), check_finite=False)
-    return inv / scale[n_nuisance:, None], lam
+    return inv / scale[n_nuisance:, None]

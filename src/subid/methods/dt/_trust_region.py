@@ -15,7 +15,10 @@ vectors of ``J`` are those of ``R``, and ``U^T f = U_R^T (Q^T f)``. So
 Jacobian is well conditioned (every diagonal entry of the scaled factor above
 ``GRAM_PIVOT``, so the normal equations lose at most about 8 of the 16
 digits in the weakest direction), else from a Householder QR of ``J``
-(LAPACK ``geqrf``, no ``Q`` formed). The pieces of the iteration are written
+(LAPACK ``geqrf``, no ``Q`` formed). A Jacobian too large to hold whole is given a
+block of rows at a time (:func:`compress_pieces`: the Gram matrix summed over the
+blocks, or each block folded into the Householder factor of those before it), the
+same factor to rounding. The pieces of the iteration are written
 here from Moré (1977): the step with its Levenberg-Marquardt parameter
 (:func:`trust_region_step`), the radius update (:func:`update_radius`) and
 scipy's termination tests (:func:`termination`); with ``exact=True`` (the SVD
@@ -132,10 +135,10 @@ def termination(dF, F, dx_norm, x_norm, ratio, ftol, xtol):
     return None
 
 
-def compress(J, f):
-    """``(R, Q^T f, J^T f, column norms of J, route)`` for ``J = Q R``."""
-    g = J.T @ f
-    G = J.T @ J
+def _from_gram(G, g):
+    """``(R, Q^T f, J^T f, norms, 'gram')`` from ``G = J^T J`` and ``g = J^T f`` when the
+    Cholesky factor of the column-scaled ``G`` has every pivot above
+    :data:`GRAM_PIVOT`; else ``(None, None, g, norms, None)`` (the QR route)."""
     norms = np.sqrt(np.maximum(np.diag(G), 0.0))
     safe = np.where(norms > 0, norms, 1.0)
     if np.all(norms > 0) and np.isfinite(G).all():
@@ -147,18 +150,52 @@ def compress(J, f):
             R = L.T * safe[None, :]                 # J = Q R, R = L^T diag(norms)
             qtf = scipy.linalg.solve_triangular(R, g, trans="T", check_finite=False)
             return R, qtf, g, norms, "gram"
+    return None, None, g, norms, None
+
+
+def compress(J, f):
+    """``(R, Q^T f, J^T f, column norms of J, route)`` for ``J = Q R``."""
+    out = _from_gram(J.T @ J, J.T @ f)
+    if out[0] is not None:
+        return out
     p = J.shape[1]
     Jf = np.empty((J.shape[0], p + 1), order="F")       # LAPACK's order: no second copy
     Jf[:, :p] = J
     Jf[:, p] = f
     Ra = scipy.linalg.qr(Jf, mode="r", overwrite_a=True, check_finite=False)[0]
-    R = Ra[:p, :p]
-    qtf = Ra[:p, p]
-    return R, qtf, g, norms, "qr"
+    return Ra[:p, :p], Ra[:p, p], out[2], out[3], "qr"
+
+
+def compress_pieces(pieces, f, p):
+    """:func:`compress` of a Jacobian given a block of rows at a time: ``pieces()``
+    yields ``(start, stop, J[start:stop])`` (rows of ``J``, ``p`` columns) in order, and
+    is called a second time only on the QR route. The Gram matrix and ``J^T f`` are
+    summed over the pieces (the same route decision); the QR route folds each piece
+    into the triangular factor of the pieces before it (``[R; J_k] = Q R'``, the
+    Householder factor of the whole ``[J f]`` up to the signs of its rows). Only a
+    piece of ``J`` is held at a time: the memory of :func:`subid.pem` on a long
+    record."""
+    G, g = np.zeros((p, p)), np.zeros(p)
+    for a, b, Jk in pieces():
+        G += Jk.T @ Jk
+        g += Jk.T @ f[a:b]
+    out = _from_gram(G, g)
+    if out[0] is not None:
+        return out
+    Ra = np.zeros((0, p + 1))
+    for a, b, Jk in pieces():
+        stacked = np.empty((Ra.shape[0] + b - a, p + 1), order="F")
+        stacked[:Ra.shape[0]] = Ra
+        stacked[Ra.shape[0]:, :p] = Jk
+        stacked[Ra.shape[0]:, p] = f[a:b]
+        Ra = scipy.linalg.qr(stacked, mode="r", overwrite_a=True, check_finite=False)[0]
+    if Ra.shape[0] <= p:                 # fewer rows than columns: R is trapezoidal
+        Ra = np.vstack([Ra, np.zeros((p + 1 - Ra.shape[0], p + 1))])
+    return Ra[:p, :p], Ra[:p, p], out[2], out[3], "qr"
 
 
 def trust_region_least_squares(fun, jac, x0, *, ftol, xtol, gtol, max_nfev, exact=False,
-                               decrement_tol=0.0):
+                               decrement_tol=0.0, compressed=None):
     """Minimise ``0.5 ||fun(x)||^2`` as :func:`scipy.optimize.least_squares` with
     ``method='trf'``, ``tr_solver='exact'``, ``x_scale='jac'`` and no bounds
     does, on the compressed Jacobian (module docstring).
@@ -183,6 +220,11 @@ def trust_region_least_squares(fun, jac, x0, *, ftol, xtol, gtol, max_nfev, exac
         step predicts, ``J = U diag(s) V^T``) is below this; 0 (default): scipy's
         tests alone. :func:`subid.identify` sets it from the statistical
         precision of the criterion (:func:`subid.methods.dt._pe_search.statistical_precision`).
+    compressed : callable, optional
+        ``compressed(x, f) -> (R, Q^T f, J^T f, column norms of J, route)``, what
+        :func:`compress` gives for the Jacobian at ``x`` and the residual ``f`` there,
+        computed without ``J`` whole (:func:`compress_pieces`); ``jac`` is then not
+        called.
 
     Returns
     -------
@@ -193,24 +235,26 @@ def trust_region_least_squares(fun, jac, x0, *, ftol, xtol, gtol, max_nfev, exac
     x = np.array(x0, dtype=float)
     f = np.asarray(fun(x), dtype=float)
     nfev, njev = 1, 1
-    J = np.asarray(jac(x), dtype=float)
-    m, n = J.shape
+    m, n = f.size, x.size
     cost = 0.5 * float(f @ f)
     routes = []
 
-    def factor(J, f):
-        if exact:
-            g = J.T @ f
-            norms = np.sqrt(np.sum(J ** 2, axis=0))
-            return J, f, g, norms, "svd"
-        out = compress(J, f)
+    def factor(x, f):
+        if compressed is not None:
+            out = compressed(x, f)
+        else:
+            J = np.asarray(jac(x), dtype=float)
+            if exact:
+                g = J.T @ f
+                norms = np.sqrt(np.sum(J ** 2, axis=0))
+                return J, f, g, norms, "svd"
+            out = compress(J, f)
         routes.append(out[4])
         return out
 
-    R, qtf, g, norms, _ = factor(J, f)
     # the compressed factor is all the iteration needs (exact: R is J itself): no second
     # Jacobian alive while the next one is computed (the largest arrays of subid.pem)
-    del J
+    R, qtf, g, norms, _ = factor(x, f)
     scale_inv = norms.copy()
     scale_inv[scale_inv == 0] = 1.0
     scale = 1.0 / scale_inv
@@ -258,7 +302,7 @@ def trust_region_least_squares(fun, jac, x0, *, ftol, xtol, gtol, max_nfev, exac
         if actual_reduction > 0:
             x, f, cost = x_new, f_new, cost_new
             njev += 1
-            R, qtf, g, norms, _ = factor(np.asarray(jac(x), dtype=float), f)
+            R, qtf, g, norms, _ = factor(x, f)
             scale_inv = np.maximum(norms, scale_inv)
             scale = 1.0 / scale_inv
     if status is None:

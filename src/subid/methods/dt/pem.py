@@ -32,7 +32,15 @@ the iteration of :func:`scipy.optimize.least_squares` (``method='trf'``, exact
 trust-region solver, ``x_scale='jac'``) run on the ``p x p`` triangular factor
 of the Jacobian instead of the SVD of the whole ``N ny x p`` matrix
 (:mod:`subid.methods.dt._trust_region`): the same iterates to rounding, several
-times cheaper per iteration on long records. A trial
+times cheaper per iteration on long records. Past
+:data:`~subid.methods.dt._pe_search.JACOBIAN_PIECE_BYTES` (16 MiB) the Jacobian is
+never formed whole: the kernel runs over a piece of the record at a time, each piece
+continuing from the state and sensitivities where the last ended, and only the Gram
+matrix (or, where it is too ill-conditioned, the Householder factor) of the pieces is
+kept (:func:`subid.methods.dt._trust_region.compress_pieces`; the covariance likewise,
+:func:`subid.methods.dt._covariance.covariance_factor_pieces`): the memory of a
+refinement does not grow with the record beyond that of the data and the predicted
+states. A trial
 model whose predictor (``A - K C``; for focus ``'simulation'``, ``A``) is not
 stable gets a cost larger than the start, so the trust region rejects it:
 the result always has a stable predictor, and its cost is never above the
@@ -54,7 +62,8 @@ from subid.data import IOData, not_a_record
 from subid.delay import delay_inputs, input_delay_of, record_delay
 from subid.errors import DataError, ModelError, NoiseModelWarning, OptionError
 from subid.methods._info import records_warnings
-from subid.methods.dt._covariance import covariance_factor
+from subid.methods.dt import _pe_search
+from subid.methods.dt._covariance import covariance_factor, covariance_factor_pieces
 from subid.methods.dt._pe_search import (
     MAX_ITERATIONS,
     ROUNDS,
@@ -75,8 +84,6 @@ from subid.model.statespace import StateSpace
 __all__ = ["pem"]
 
 FOCUS = ("prediction", "simulation")
-# Largest Jacobian (N * ny rows, one column per free parameter) pem builds.
-JACOBIAN_BYTES_LIMIT = 2.0 * 2**30
 
 
 def _check_inputs(data, model, focus):
@@ -393,30 +400,6 @@ def _free_d(model, feedthrough) -> bool:
     return bool(np.any(model.D != 0)) if feedthrough is None else bool(feedthrough)
 
 
-def jacobian_samples(model, focus, feedthrough=None) -> int:
-    """The most samples :func:`pem` refines ``model`` on: its Jacobian (``N ny`` rows, a
-    column per free parameter and per initial state) within
-    :data:`JACOBIAN_BYTES_LIMIT`. ``feedthrough``: as :func:`pem`'s (None: D free
-    where the model has one)."""
-    n, nu, ny = model.order, model.n_inputs, model.n_outputs
-    layout = _Layout(n, nu, ny, _free_d(model, feedthrough), focus == "prediction")
-    columns = layout.size - n * n + 2 * n
-    return int(JACOBIAN_BYTES_LIMIT // (8.0 * ny * columns))
-
-
-def initial_states(model, data, focus):
-    """The least-squares initial state of ``model``'s predictor (``focus='prediction'``,
-    the innovation form with its K) or simulation, one row per experiment of ``data``:
-    what :func:`pem` starts from and :func:`with_covariance` reads in ``info['x0']``."""
-    n, ny = model.order, model.n_outputs
-    K = np.array(model.K) if focus == "prediction" else np.zeros((n, ny))
-    Ap, Bp, Cp, Dp = _predictor(np.array(model.A), np.array(model.B), np.array(model.C),
-                                np.array(model.D), K, focus)
-    v = np.hstack([data.u, data.y]) if focus == "prediction" else data.u
-    return np.stack([_start_x0(Ap, Bp, Cp, Dp, v[a:b], data.y[a:b])
-                     for a, b in data.experiment_ranges])
-
-
 def _start_gain(data, model):
     """K of the starting model: its own, the state-sequence estimate, or zero."""
     if model.K is not None and _radius(model.A - model.K @ model.C) < STABILITY_LIMIT:
@@ -452,12 +435,6 @@ def _pem_dt(data, model, focus, max_iterations, tolerance, rounds, feedthrough, 
     if N * ny <= 2 * n_params:
         raise DataError(f"pem: {N} samples of {ny} output(s) are too few for the "
                         f"{n_params} free parameters of an order-{n} model; supply more data")
-    jac_bytes = 8.0 * N * ny * (n_params + n)
-    if N > jacobian_samples(model, focus, feedthrough):
-        raise DataError(f"pem: the Jacobian of {N} samples x {ny} output(s) x {n_params} "
-                        f"parameters needs {jac_bytes / 2**30:.1f} GiB (limit "
-                        f"{JACOBIAN_BYTES_LIMIT / 2**30:.0f} GiB); refine on a shorter part of "
-                        "the record (e.g. data[:200_000]) and validate on the rest")
     if focus == "prediction":
         K, k_source = _start_gain(data, model)
     else:
@@ -616,29 +593,32 @@ def with_covariance(model, data, focus, *, with_feedthrough: bool, max_samples=N
     pieces = _covariance_pieces((Ap, Bp, Cp, Dp), v, ranges, x0, max_samples)
     used = sum(b - a for a, b, _ in pieces)
     k = len(pieces)
-    if k == 1:
-        # one piece: the kernel's array as it is (model columns, then x0's), the nuisance
-        # x0 columns taken first by a permutation of the factor's Gram matrix (no copy
-        # of the largest array: the Jacobian of the whole record)
-        a, b, state = pieces[0]
-        yhat, J = jacobian(Ap, Bp, Cp, Dp, np.ascontiguousarray(v[a:b]),
-                           np.ascontiguousarray(state), dAp, dBp, dC, dDp, dx0)
-        residual = data.y[a:b] - yhat
-        order = np.r_[dm:dm + n, 0:dm]
+    width = k * n + dm
+    if 8.0 * used * ny * width > _pe_search.JACOBIAN_PIECE_BYTES:
+        # a long record: its Jacobian a piece at a time, each piece of a window (or
+        # experiment) continuing from the state and sensitivities where the last ended
+        chunk = max(1, int(_pe_search.JACOBIAN_PIECE_BYTES // (8 * ny * width)))
+        residual = np.concatenate([
+            data.y[a:b] - _simulate.simulate_discrete(Ap, Bp, Cp, Dp, v[a:b], state)[0]
+            for a, b, state in pieces])
+
+        def jacobian_pieces():
+            for e, (a, b, state) in enumerate(pieces):       # nuisance x0 columns first
+                x, S = np.ascontiguousarray(state), dx0
+                for s in range(a, b, chunk):
+                    t = min(s + chunk, b)
+                    _, Je, x, S = jacobian(Ap, Bp, Cp, Dp, np.ascontiguousarray(v[s:t]), x,
+                                           dAp, dBp, dC, dDp, S, final_state=True)
+                    Jk = np.zeros((t - s, ny, width))
+                    Jk[:, :, e * n:(e + 1) * n] = Je[:, :, dm:]
+                    Jk[:, :, k * n:] = Je[:, :, :dm]
+                    yield Jk
+        factor, lam = covariance_factor_pieces(jacobian_pieces, residual, k * n, width)
     else:
-        J = np.zeros((used, ny, k * n + dm))
-        residual = np.empty((used, ny))
-        row = 0
-        for e, (a, b, state) in enumerate(pieces):       # nuisance x0 columns first
-            yhat, Je = jacobian(Ap, Bp, Cp, Dp, np.ascontiguousarray(v[a:b]),
-                                np.ascontiguousarray(state), dAp, dBp, dC, dDp, dx0)
-            rows = slice(row, row + b - a)
-            J[rows, :, e * n:(e + 1) * n] = Je[:, :, dm:]
-            J[rows, :, k * n:] = Je[:, :, :dm]
-            residual[rows] = data.y[a:b] - yhat
-            row += b - a
-        order = None
-    factor, lam = covariance_factor(np.ascontiguousarray(J), residual, k * n, order)
+        J, residual = _whole_jacobian((Ap, Bp, Cp, Dp), (dAp, dBp, dC, dDp, dx0), v, data.y,
+                                      pieces, dm)
+        factor, lam = covariance_factor(J, residual, k * n,
+                                        None if k > 1 else np.r_[dm:dm + n, 0:dm])
     info = model.info            # a fresh dict of the model the caller built
     if factor is None:
         info["parameter_covariance_note"] = (
@@ -660,6 +640,33 @@ def with_covariance(model, data, focus, *, with_feedthrough: bool, max_samples=N
                      f", the sum over {used} of the {N} samples scaled to all of them"),
     }
     return model
+
+
+def _whole_jacobian(mats, dirs, v, y, pieces, dm):
+    """``(J, residuals)`` of :func:`with_covariance`'s pieces in one array: one piece,
+    the kernel's array as it is (model columns, then x0's: the caller takes the nuisance
+    x0 columns first by a permutation of the factor's Gram matrix, no copy of the
+    largest array); several, the nuisance x0 columns of every piece first."""
+    n = mats[0].shape[0]
+    if len(pieces) == 1:
+        a, b, state = pieces[0]
+        yhat, J = jacobian(*mats, np.ascontiguousarray(v[a:b]), np.ascontiguousarray(state),
+                           *dirs)
+        return J, y[a:b] - yhat
+    k = len(pieces)
+    used = sum(b - a for a, b, _ in pieces)
+    J = np.zeros((used, y.shape[1], k * n + dm))
+    residual = np.empty((used, y.shape[1]))
+    row = 0
+    for e, (a, b, state) in enumerate(pieces):
+        yhat, Je = jacobian(*mats, np.ascontiguousarray(v[a:b]), np.ascontiguousarray(state),
+                            *dirs)
+        rows = slice(row, row + b - a)
+        J[rows, :, e * n:(e + 1) * n] = Je[:, :, dm:]
+        J[rows, :, k * n:] = Je[:, :, :dm]
+        residual[rows] = y[a:b] - yhat
+        row += b - a
+    return J, residual
 
 
 def _covariance_pieces(mats, v, ranges, x0, max_samples):
