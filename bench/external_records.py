@@ -11,6 +11,8 @@ table (DaISy's ``.dat``) or a CSV, with the columns of the inputs and outputs na
     python bench/external_records.py heating_system.dat --inputs 1 --outputs 2 --dt 2
     python bench/external_records.py dataBenchmark.csv --inputs uEst --outputs yEst \\
         --validation-inputs uVal --validation-outputs yVal --dt 4
+    python bench/external_records.py RLC_id.csv --validation-file RLC_val.csv \\
+        --inputs V_IN --outputs I_L --dt 5e-7
 
 SIPPY's grid runs when ``sippy_unipi`` is importable (the benchmark venv). Nothing is
 downloaded: the files are the user's (bench/external_records.md says where the records
@@ -35,7 +37,10 @@ def records(args):
     """The estimation and validation records (``subid.read``), estimation means removed."""
     est = subid.read(args.file, inputs=_names(args.inputs), outputs=_names(args.outputs),
                      dt=args.dt)
-    if args.validation_inputs:
+    if args.validation_file:
+        val = subid.read(args.validation_file, inputs=_names(args.inputs),
+                         outputs=_names(args.outputs), dt=args.dt)
+    elif args.validation_inputs:
         val = subid.read(args.file, inputs=_names(args.validation_inputs),
                          outputs=_names(args.validation_outputs), dt=args.dt)
     else:
@@ -53,6 +58,8 @@ def main(argv=None) -> int:
     parser.add_argument("--outputs", nargs="+", required=True)
     parser.add_argument("--validation-inputs", nargs="+")
     parser.add_argument("--validation-outputs", nargs="+")
+    parser.add_argument("--validation-file",
+                        help="a second file of the same columns to validate on")
     parser.add_argument("--dt", type=float, default=1.0)
     args = parser.parse_args(argv)
     est, val = records(args)
