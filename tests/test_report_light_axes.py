@@ -86,13 +86,14 @@ def test_report_axes_make_no_tick(record, monkeypatch, ticks_made):
     assert len(ticks_made) >= 4 * 20          # matplotlib's: a major and a minor per axis
 
 
-def _offset_figure() -> Figure:
-    """Two panels, one with a formatter offset (its ticks matplotlib's own)."""
+def _kept_axis_figure() -> Figure:
+    """Two panels, one with its y ticks on the right (matplotlib's own)."""
     fig = Figure(figsize=(6, 3), dpi=80)
     axes = fig.subplots(1, 2, subplot_kw=_light_axes.subplot_kw())
     t = np.linspace(0.0, 10.0, 200)
     axes[0].plot(t, np.sin(t))
     axes[1].plot(t, 1e6 + 1e-3 * t)
+    axes[1].yaxis.tick_right()
     for ax in axes:
         ax.grid(True, lw=0.3)
         ax.set_xlabel("time (s)")
@@ -102,7 +103,7 @@ def _offset_figure() -> Figure:
 def test_an_axis_light_ticks_keeps_makes_its_ticks_as_matplotlib(ticks_made):
     def pixels(light):
         with _light_axes.report_axes() if light else contextlib.nullcontext():
-            fig = _offset_figure()
+            fig = _kept_axis_figure()
         assert all(ax.name == (_light_axes.PROJECTION if light else "rectilinear")
                    for ax in fig.axes)
         canvas = FigureCanvasAgg(fig)
@@ -112,7 +113,7 @@ def test_an_axis_light_ticks_keeps_makes_its_ticks_as_matplotlib(ticks_made):
     before, replaced_stock = pixels(False)
     ticks_made.clear()
     after, replaced_light = pixels(True)
-    assert replaced_stock == replaced_light == 3      # the offset axis is kept
+    assert replaced_stock == replaced_light == 3      # the right-hand axis is kept
     assert ticks_made                                 # which made its ticks when drawn
     assert np.array_equal(before, after)
 

@@ -11,12 +11,15 @@ formatter give for its final limits, styled as its first tick, and moves the axi
 label as far from the spine as the tick labels reach (what matplotlib does at each
 draw). The image is the same up to the anti-aliasing of single pixels.
 
-An axis whose ticks this does not reproduce keeps matplotlib's, and so do the axes
-that share its locator: hidden axes, axes that are not rectilinear or place themselves
-at draw time (an axes locator; a fixed aspect ratio is applied first, as the draw
-will), ticks, labels or the axis label on
-the second side (top, right), an offset or scale factor of the formatter (``1e-5``),
-labelled minor ticks. Only the report's images use this (``report.figure_html``): the
+The offset or scale factor of the formatter (``1e6`` under the time axis of a record
+of a million samples, ``1e-5`` beside an output in SI units) is one more text, where
+matplotlib puts it (below the tick labels at the right end of an x axis, above the top
+of a y axis; ``Axis._update_offset_text_position``) and styled as the axis' own. An
+axis whose ticks this does not reproduce keeps matplotlib's, and so do the axes that
+share its locator: hidden axes, axes that are not rectilinear or place themselves at
+draw time (an axes locator; a fixed aspect ratio is applied first, as the draw will),
+ticks, labels or the axis label on the second side (top, right), labelled minor
+ticks. Only the report's images use this (``report.figure_html``): the
 figures :mod:`subid.plot` returns keep matplotlib's ticks.
 """
 
@@ -76,9 +79,27 @@ def light_ticks(fig, renderer) -> int:
             else:       # outside the axes: on the figure, without a clip path to set up
                 fig.add_artist(artist, clip=False)
     for ax, axis, artists in plans:
-        _move_label(ax, axis, [a for a in artists if a.get_label() == "_light_label"],
-                    renderer, fig.dpi)
+        labels = [a for a in artists if a.get_label() == "_light_label"]
+        offsets = [a for a in artists if a.get_label() == "_light_offset"]
+        if offsets:
+            _place_offset(ax, axis, offsets[0], labels, renderer, fig.dpi)
+        _move_label(ax, axis, labels, renderer, fig.dpi)
     return len(plans)
+
+
+def _place_offset(ax, axis, text, labels, renderer, dpi) -> None:
+    """Put the formatter's offset text where ``Axis.draw`` puts the axis' own (which is
+    hidden): below the tick labels (the axes' bottom without any) for an x axis, above
+    the axes for a y axis, ``OFFSETTEXTPAD`` points away."""
+    pad = axis.OFFSETTEXTPAD * dpi / 72.0
+    x = axis.offsetText.get_position()[0]
+    if axis.axis_name == "x":
+        boxes = [t.get_window_extent(renderer) for t in labels]
+        bottom = min(b.y0 for b in boxes) if boxes else ax.bbox.ymin
+        text.set_position((x, bottom - pad))
+    else:
+        text.set_position((x, ax.bbox.ymax + pad))
+    axis.offsetText.set_visible(False)
 
 
 def _in_view(axis, locs):
@@ -115,8 +136,18 @@ def _plan(ax, axis):
         locs = np.asarray(axis.get_majorticklocs() if is_major else axis.get_minorticklocs(),
                           dtype=float)
         labels = formatter.format_ticks(locs) if len(locs) else []
-        if callable(getattr(formatter, "get_offset", None)) and formatter.get_offset():
+        offset = formatter.get_offset() \
+            if callable(getattr(formatter, "get_offset", None)) else ""
+        if offset and not is_major:
             return None
+        if offset and axis.offsetText.get_visible():
+            # the offset text (matplotlib's, hidden), placed by light_ticks
+            source = axis.offsetText
+            artists.append(Text(
+                0.0, 0.0, offset, fontproperties=source.get_fontproperties(),
+                color=source.get_color(), horizontalalignment=source.get_ha(),
+                verticalalignment=source.get_va(), transform=source.get_transform(),
+                zorder=source.get_zorder(), label="_light_offset"))
         keep = _in_view(axis, locs) if len(locs) else np.zeros(0, bool)
         locs, labels = locs[keep], [s for s, k in zip(labels, keep) if k]
         if not is_major and tick["label"] and any(labels):
