@@ -96,6 +96,32 @@ def test_the_jacobian_continues_from_its_final_state(blocked, monkeypatch):
     assert np.abs(x - x_ref).max() < 1e-12 and np.abs(S - S_ref).max() < 1e-12
 
 
+@pytest.mark.parametrize("radius, N", [(0.999, 1000), (0.9, 64), (0.3, 5000)])
+def test_free_response_by_blocks_matches_the_recursion(radius, N):
+    """The free response ``C Ap^t S0`` computed by blocks of FREE_BLOCK samples equals
+    the step-by-step recursion (a slow pole over a record that is not a multiple of the
+    block, one block exactly, and a fast pole whose response is zero past the floor),
+    and so does the state it returns."""
+    from subid.model import _sensitivity
+    rng = np.random.default_rng(3)
+    n, ny, k = 4, 2, 3
+    Q = np.linalg.qr(rng.standard_normal((n, n)))[0]
+    Ap = Q @ np.diag(radius * np.array([1.0, -0.9, 0.7, 0.2])) @ Q.T
+    C, S0 = rng.standard_normal((ny, n)), rng.standard_normal((n, k))
+    ref, S = np.empty((N, ny, k)), S0.copy()
+    for t in range(N):
+        ref[t] = C @ S
+        S = Ap @ S
+    out = np.empty((N, ny, k))
+    end = _sensitivity._free_response_t(Ap, C, S0, _sensitivity._floor(S0), out, 0)
+    scale = np.abs(ref).max()
+    assert np.abs(out - ref).max() <= 1e-12 * scale
+    if radius ** N > 1e-140:
+        assert np.abs(end - S).max() <= 1e-12 * np.abs(S0).max()
+    else:                                    # decayed: zero past the floor
+        assert np.all(out[-1] == 0.0) and np.all(end == 0.0)
+
+
 def test_initial_state_directions_match_reference():
     # directions that move x0 alone run in their own loop (free_response), stopped once
     # decayed: same Jacobian as the reference, in any column order, on a record long

