@@ -292,3 +292,20 @@ def test_figure_fit_is_fit_percent_on_merged_records():
     assert np.isnan(percent_fit(constant, guess)).all()
     with pytest.raises(subid.errors.OptionError):
         output_fit(constant, guess, constant="zero")
+
+
+def test_figures_encoded_aside_give_the_same_report(dryer_models, monkeypatch):
+    """The report's PNGs encoded on its worker thread while the next figures are drawn
+    (report._figures_aside): the same HTML, byte for byte, as encoding each figure in
+    turn (the builder without the worker), and no placeholder left in it."""
+    import re
+    models, est, val = dryer_models
+    kwargs = dict(title="dryer", seconds={"ls": 0.5}, source="dataset:dryer")
+    aside = report.identification_report(models, est, val, **kwargs)
+    in_turn = report.identification_report.__wrapped__.__wrapped__(models, est, val, **kwargs)
+    assert report._ENCODER.get() is None
+    assert "\x00" not in aside and aside.count("data:image/png;base64,") >= 8
+
+    def unstamped(text):
+        return re.sub(r"<p class=\"meta\">[^<]*</p>", "", text)
+    assert unstamped(aside) == unstamped(in_turn)

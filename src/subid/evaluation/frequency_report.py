@@ -22,6 +22,7 @@ import numpy as np
 
 from subid.evaluation.report import (
     _e,
+    _figures_aside,
     _fmt,
     _fmt_fit,
     _info_table,
@@ -99,6 +100,7 @@ def _error_figure(models, data, hz: bool):
     return fig
 
 
+@_figures_aside
 def frequency_report(models, estimation, validation=None, *, title="subid report",
                      frequency_unit="rad/s", seconds=None, notes=(), command=None,
                      source=None) -> str:
