@@ -515,3 +515,15 @@ def test_track_reports_convergence_and_warns(tmp_path, capsys):
     assert code == 0 and "converged   yes" in stdout and "on its last third" in stdout
     model = subid.StateSpace.load(tmp_path / "dryer" / "model.json")
     assert model.info["bd_method"] == "simulation" and len(model.info["fit_last_third"]) == 1
+
+
+def test_a_time_column_not_given_is_named_in_the_one_sampling_warning(dryer_csv, tmp_path,
+                                                                      capsys):
+    """dryer.csv has a column 't': identify without --dt or --time says once, in one
+    line, that time is counted in samples and that --time t would take dt from it."""
+    code, _, stderr = run(capsys, "identify", dryer_csv, "--inputs", "voltage", "--outputs",
+                          "temperature", "--method", "n4sid", "--order", "2", "--no-report",
+                          "--out", tmp_path / "o")
+    lines = [line for line in stderr.splitlines() if "dt = 1" in line]
+    assert code == 0 and len(lines) == 1
+    assert "The column 't' looks like time stamps: add --time t" in lines[0]

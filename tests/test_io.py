@@ -599,3 +599,33 @@ def test_npz_t_and_dt_must_agree(tmp_path):
     g = tmp_path / "ok.npz"
     np.savez(g, u=np.ones(10), y=np.arange(10.0), t=np.arange(10) * 0.2, dt=0.2)
     assert read(g).dt == pytest.approx(0.2)
+
+
+@pytest.mark.parametrize("careful", [False, True])
+@pytest.mark.parametrize("name, warns", [("time", True), ("t", True), ("Time [s]", True),
+                                         ("time_s", True), ("Seconds", True),
+                                         ("temperature", False), ("tension", False)])
+def test_an_unused_time_column_is_named_when_no_sampling_period_is_given(
+        tmp_path, monkeypatch, name, warns, careful):
+    """A record read without dt or time from a file with a column that looks like time
+    stamps: dt = 1 as documented, and a SamplingWarning naming the column (both parsers);
+    none when dt or time is given or the column is not time-like."""
+    import warnings
+
+    from subid.errors import SamplingWarning
+    from subid.io import formats
+    if careful:                                       # the careful parser reads the file
+        monkeypatch.setattr(formats, "_read_text_fast", lambda *args: None)
+    rows = np.column_stack([np.arange(20) * 0.5, RNG.standard_normal((20, 2))])
+    f = _write_table(tmp_path / "run.csv", [name, "u", "y"], rows)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        data = read(f, inputs="u", outputs="y")
+        read(f, inputs="u", outputs="y", dt=0.5)
+        read(f, inputs="u", outputs="y", time=name)
+    assert data.dt == 1.0
+    hints = [w for w in caught if issubclass(w.category, SamplingWarning)]
+    assert len(hints) == int(warns)
+    if warns:
+        assert hints[0].message.column == name and repr(name) in str(hints[0].message)
+        assert hints[0].filename == __file__           # points at the caller's line

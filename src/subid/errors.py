@@ -186,6 +186,17 @@ class DelayWarning(UserWarning):
     operation that changes the sampling; :func:`subid.absorb_delay` keeps them as states."""
 
 
+class SamplingWarning(UserWarning):
+    """A record read without its sampling period (``dt = 1``, time counted in samples)
+    from a file with a column that looks like time stamps (``time``, ``t``,
+    ``Time [s]``...): the message names it and how to use it; ``column`` holds its
+    name."""
+
+    def __init__(self, message: str, column: str | None = None):
+        super().__init__(message)
+        self.column = column
+
+
 class ResolutionWarning(UserWarning):
     """A spectral estimate (:func:`subid.spa`) cannot resolve the response at some
     frequencies with its lag window: the estimated noise spectrum is not positive

@@ -25,7 +25,7 @@ import numpy as np
 from subid import _blas
 from subid._progress import on_terminal, progress_bar
 from subid._version import __version__
-from subid.errors import DataError, OrderError, SubidError
+from subid.errors import DataError, OrderError, SamplingWarning, SubidError
 from subid.io._files import write_bytes
 from subid.methods.registry import METHODS as _REGISTRY
 from subid.methods.registry import MethodSpec
@@ -323,12 +323,23 @@ def load_data(source: str, inputs=None, outputs=None, dt=None, time_column=None,
                           input_names=[data.input_names[k] for k in u_idx],
                           output_names=[data.output_names[k] for k in y_idx])
         return data, meta["name"], notes
-    data = read(source, inputs=inputs, outputs=outputs, dt=dt, time=time_column,
-                delimiter=delimiter)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", SamplingWarning)
+        data = read(source, inputs=inputs, outputs=outputs, dt=dt, time=time_column,
+                    delimiter=delimiter)
+    time_like = None
+    for w in caught:                      # the reader's time-column hint joins the note
+        if isinstance(w.message, SamplingWarning):
+            time_like = w.message.column
+        else:
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
     notes = [f"Data file: {source}"]
     if dt is None and time_column is None and data.dt == 1.0 and not data.has_time_stamps:
         notes.append("No sampling period given (--dt) and no time column (--time): time is "
-                     "counted in samples (dt = 1), frequencies in rad/sample.")
+                     "counted in samples (dt = 1), frequencies in rad/sample."
+                     + ("" if time_like is None else
+                        f" The column {time_like!r} looks like time stamps: add --time "
+                        f"{shlex.quote(time_like)} to take the sampling period from it."))
         log.warning("%s: %s", source, notes[-1])
     return data, os.path.basename(source), notes
 

@@ -14,7 +14,7 @@ from subid import _threads
 from subid.errors import DataError, FileReadError, ResourceLimitError
 from subid.io._common import _SNIFF_LINES, MAX_LINE_CHARS, _build, _reason
 from subid.io._files import open_regular
-from subid.io.text import _roles, _Table
+from subid.io.text import _roles, _Table, warn_unused_time
 
 #: Bytes handed to the fast parser at a time (whole lines; memory stays bounded).
 _BLOCK_BYTES = 1 << 20
@@ -297,8 +297,10 @@ def _read_text_fast(shown, ext, inputs, outputs, dt, time, delimiter):
             t[start:stop] = v[:, -1]
         start = stop
         del v
-    return _build(shown, u, y, dt, t, layout.channel_names(in_cols),
+    data = _build(shown, u, y, dt, t, layout.channel_names(in_cols),
                   layout.channel_names(out_cols), first_line=layout.first_data)
+    warn_unused_time(layout, shown, in_cols + out_cols, dt, time)
+    return data
 
 
 

@@ -8,12 +8,13 @@ import csv
 import logging
 import numbers
 import re
+import warnings
 from io import StringIO
 
 import numpy as np
 
 from subid.data import IOData
-from subid.errors import DataError, FileReadError
+from subid.errors import DataError, FileReadError, SamplingWarning
 from subid.io._common import (
     _DECIMAL_COMMA_RE,
     _INT_RE,
@@ -431,6 +432,40 @@ def _roles(table: "_Table", shown: str, inputs, outputs, time):
     return in_cols, out_cols, t_cols
 
 
+#: First words (lower case) of a column name that :func:`_read_text` takes for time stamps
+#: when it warns that a record read without ``dt`` or ``time`` has such a column.
+_TIME_WORDS = frozenset({"t", "time", "times", "timestamp", "timestamps", "seconds", "second",
+                         "sec", "secs"})
+
+
+def _time_like(table: "_Table", used) -> str | None:
+    """The name of the first column not in ``used`` whose name's first word (up to a
+    space, underscore or bracket: ``Time [s]``, ``time_s``) is one of
+    :data:`_TIME_WORDS`, or None."""
+    for idx, name in enumerate(table.header or ()):
+        if idx in used or not name:
+            continue
+        if re.split(r"[\s_\[\(]", name.strip().lower(), maxsplit=1)[0] in _TIME_WORDS:
+            return name
+    return None
+
+
+def warn_unused_time(table: "_Table", shown: str, used, dt, time) -> None:
+    """A :class:`subid.errors.SamplingWarning` when a record is read without ``dt`` or
+    ``time`` from a file with a column that looks like time stamps (:func:`_time_like`;
+    ``used``: the input and output columns). Both parsers call it once they have read
+    the file."""
+    if dt is not None or time is not None:
+        return
+    name = _time_like(table, set(used))
+    if name is not None:
+        warnings.warn(SamplingWarning(
+            f"{shown}: no sampling period (dt) or time column (time) given, so time is "
+            f"counted in samples (dt = 1); the column {name!r} looks like time stamps: "
+            f"pass time={name!r} to take the sampling period from it", column=name),
+            stacklevel=5)
+
+
 def _read_text(p, shown, ext, inputs, outputs, dt, time, delimiter, *, raw=None) -> IOData:
     text = _decode(_read_bytes(p, shown) if raw is None else raw, shown)
     table = _Table(shown, text, ext, delimiter)
@@ -442,5 +477,7 @@ def _read_text(p, shown, ext, inputs, outputs, dt, time, delimiter, *, raw=None)
     u = values[:, :n_in]
     y = values[:, n_in:n_in + n_out]
     t = values[:, -1] if t_cols else None
-    return _build(shown, u, y, dt, t, table.channel_names(in_cols),
+    data = _build(shown, u, y, dt, t, table.channel_names(in_cols),
                   table.channel_names(out_cols), first_line=table.first_data)
+    warn_unused_time(table, shown, in_cols + out_cols, dt, time)
+    return data
