@@ -314,3 +314,24 @@ def test_block_jacobian_of_an_output_error_model_equals_the_dense_one():
     y_block, J_block = block_jacobian(mats, v, x0, dirs, sub.blocks(), sub.size)
     np.testing.assert_allclose(y_block, y_dense, atol=1e-12)
     np.testing.assert_allclose(J_block, J_dense, atol=1e-12)
+
+
+def test_a_long_regression_by_blocks_equals_the_whole_one(monkeypatch):
+    """regress past REGRESS_BYTES (made small: blocks of 97 rows over two experiments)
+    gives the coefficients, residuals and |diag R| of the one factorisation of the whole
+    regressor matrix."""
+    from subid.methods.dt import polynomial
+    rng = np.random.default_rng(21)
+    u, e = rng.standard_normal((2, 1500))
+    y = np.convolve(u, [0.0, 0.5, 0.3], "full")[:1500] + 0.1 * e
+    y[1:] += 0.6 * y[:-1]
+    blocks = [(u, range(1, 6)), (y, range(1, 4))]
+    ranges = ((0, 700), (700, 1500))
+    whole = polynomial.regress(y, blocks, ranges, 5)
+    monkeypatch.setattr(polynomial, "REGRESS_BYTES", 8 * 9 * 97)
+    pieces = polynomial.regress(y, blocks, ranges, 5)
+    np.testing.assert_allclose(pieces[0], whole[0], rtol=1e-10, atol=1e-12)
+    np.testing.assert_allclose(pieces[1], whole[1], rtol=1e-9, atol=1e-12, equal_nan=True)
+    assert np.isnan(pieces[1][:5]).all() and np.isnan(pieces[1][700:705]).all()
+    np.testing.assert_allclose(np.abs(np.diag(pieces[2])), np.abs(np.diag(whole[2])),
+                               rtol=1e-10)

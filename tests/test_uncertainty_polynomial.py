@@ -220,3 +220,21 @@ def test_describe_and_the_report_give_the_coefficients_standard_deviations():
     assert lines[2].startswith(f"B[y,u] = {b1:.4g} (±{std[2]:.2g}) q^-1 {b2:+.4g}")
     # a state-space model has none
     assert _coefficient_std(subid.n4sid(_record("arx", 6), 2)) is None
+
+
+def test_coefficient_factor_is_the_sandwich_of_the_outputs_least_squares():
+    """coefficient_factor (two outputs, each fitted on its own, nuisance columns first,
+    correlated noise) against an independent computation: the covariance of the
+    outputs' least-squares estimates, Λ_ij (J_i^T J_i)^-1 J_i^T J_j (J_j^T J_j)^-1, at
+    the coefficients' rows and columns."""
+    from subid.methods.dt._poly_covariance import coefficient_factor
+    rng = np.random.default_rng(17)
+    N, n1, d = 400, 2, 3
+    designs = [rng.standard_normal((N, n1 + d)) @ np.diag([1.0, 2.0, 0.3, 1.0, 5.0])
+               for _ in range(2)]
+    residuals = rng.standard_normal((N, 2)) @ np.array([[1.0, 0.6], [0.0, 0.8]])
+    F, lam = coefficient_factor(designs, residuals, [n1, n1])
+    pinv = [np.linalg.solve(J.T @ J, J.T) for J in designs]
+    cov = np.block([[lam[i, j] * (pinv[i] @ pinv[j].T)[n1:, n1:] for j in range(2)]
+                    for i in range(2)])
+    np.testing.assert_allclose(F @ F.T, cov, rtol=1e-9, atol=1e-14)
