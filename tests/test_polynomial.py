@@ -335,3 +335,21 @@ def test_a_long_regression_by_blocks_equals_the_whole_one(monkeypatch):
     assert np.isnan(pieces[1][:5]).all() and np.isnan(pieces[1][700:705]).all()
     np.testing.assert_allclose(np.abs(np.diag(pieces[2])), np.abs(np.diag(whole[2])),
                                rtol=1e-10)
+
+
+def test_arx_chooses_its_structure_on_the_last_selection_samples(monkeypatch):
+    """As the subspace methods' cross-validation, arx's structure search (delays and
+    folds) reads at most the record's last MAX_SELECTION_SAMPLES samples (made 1,500 of
+    4,000 here): the structure select_structure gives on that part, the model fitted to
+    the whole record."""
+    from subid.methods.dt import polynomial
+    data = subid.systems.simulate_data(subid.systems.random_system(3, 1, 1, seed=3), 4000,
+                                       seed=4, output_snr_db=20)
+    tail = polynomial.select_structure(data[2500:])
+    monkeypatch.setattr(polynomial, "MAX_SELECTION_SAMPLES", 1500)
+    model = subid.arx(data)
+    record = model.info["order_selection"]
+    assert record["samples_used"] == 1500 and record["selected"] == tail[1]["selected"]
+    for key in ("na", "nb", "nk"):
+        np.testing.assert_array_equal(model.info["orders"][key], tail[0][key])
+    assert model.info["n_samples"] == 4000

@@ -222,16 +222,20 @@ def test_describe_and_the_report_give_the_coefficients_standard_deviations():
     assert _coefficient_std(subid.n4sid(_record("arx", 6), 2)) is None
 
 
-def test_coefficient_factor_is_the_sandwich_of_the_outputs_least_squares():
+@pytest.mark.parametrize("shared", [False, True])
+def test_coefficient_factor_is_the_sandwich_of_the_outputs_least_squares(shared):
     """coefficient_factor (two outputs, each fitted on its own, nuisance columns first,
-    correlated noise) against an independent computation: the covariance of the
-    outputs' least-squares estimates, Λ_ij (J_i^T J_i)^-1 J_i^T J_j (J_j^T J_j)^-1, at
-    the coefficients' rows and columns."""
+    correlated noise; their own designs, or one for both as ARX's) against an
+    independent computation: the covariance of the outputs' least-squares estimates,
+    Λ_ij (J_i^T J_i)^-1 J_i^T J_j (J_j^T J_j)^-1, at the coefficients' rows and
+    columns."""
     from subid.methods.dt._poly_covariance import coefficient_factor
     rng = np.random.default_rng(17)
     N, n1, d = 400, 2, 3
     designs = [rng.standard_normal((N, n1 + d)) @ np.diag([1.0, 2.0, 0.3, 1.0, 5.0])
                for _ in range(2)]
+    if shared:
+        designs[1] = designs[0]
     residuals = rng.standard_normal((N, 2)) @ np.array([[1.0, 0.6], [0.0, 0.8]])
     F, lam = coefficient_factor(designs, residuals, [n1, n1])
     pinv = [np.linalg.solve(J.T @ J, J.T) for J in designs]

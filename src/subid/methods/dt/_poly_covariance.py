@@ -87,6 +87,9 @@ def coefficient_factor(designs, residuals, n_nuisance):
     lam = residuals.T @ residuals / np.sqrt(np.outer(dofs, dofs))
     q_parts, inverses, scales = [], [], []
     done = {}       # a design shared by several outputs (ARX: the same regressors) once
+    # one design for every output (ARX): Q2_i^T Q2_j = I for every pair, so only R is
+    # formed (the thin Q of a long record's regressors is the largest array here)
+    shared = len({(id(J), n1) for J, n1 in zip(designs, n_nuisance)}) == 1
     for J, n1 in zip(designs, n_nuisance):
         if (id(J), n1) in done:
             q, inverse, scale = done[(id(J), n1)]
@@ -102,30 +105,30 @@ def coefficient_factor(designs, residuals, n_nuisance):
             continue
         if not (np.isfinite(scale).all() and scale.min() > 0):
             return None, lam
-        Q, R = np.linalg.qr(J / scale)
+        if shared:
+            Q, R = None, np.linalg.qr(J / scale, mode="r")
+        else:
+            Q, R = np.linalg.qr(J / scale)
         diag = np.abs(np.diag(R))
         if diag.min() <= RANK_TOLERANCE * diag.max():
             return None, lam
         R22 = R[n1:, n1:]
-        q_parts.append(Q[:, n1:])
+        q_parts.append(None if Q is None else Q[:, n1:])
         inverses.append(scipy.linalg.solve_triangular(R22, np.eye(R22.shape[0]),
                                                       check_finite=False))
         scales.append(scale[n1:])
         done[(id(J), n1)] = (q_parts[-1], inverses[-1], scales[-1])
-    # M: row block k (noise component w_k), column block i: L_ik Q2_i (L L^T = Λ); its
-    # Gram matrix has the blocks Λ_ij Q2_i^T Q2_j, with Q2_i^T Q2_i = I: conditioned as Λ,
-    # so its Cholesky factor is R_M to rounding (up to the signs of its rows, which
-    # F F^T does not see) without M, 2 ny^2 N d numbers (a record of 10^6 samples of
-    # two outputs: 0.86 GB of the covariance step)
-    G = np.block([[lam[i, j] * (q_parts[i].T @ q_parts[j]) for j in range(ny)]
-                  for i in range(ny)])
-    try:
-        R_M = np.linalg.cholesky(G).T
-    except np.linalg.LinAlgError:          # Λ singular (an output predicted exactly)
-        L = _psd_sqrt(lam)
-        M = np.vstack([np.hstack([L[i, k] * q_parts[i] for i in range(ny)])
-                       for k in range(ny)])
-        R_M = np.linalg.qr(M, mode="r")
+    # M: row block k (noise component w_k), column block i: L_ik Q2_i (L L^T = Λ), and
+    # R_M its triangular factor. Its Gram matrix G = R_M^T R_M has the blocks
+    # Λ_ij Q2_i^T Q2_j, Q2_i^T Q2_i = I: conditioned as Λ, so a square root of G (its
+    # Cholesky factor; where Λ is singular, by eigenvalues) serves as R_M^T (the factor
+    # F F^T sees only R_M^T R_M) without M, 2 ny^2 N d numbers (10^6 samples of two
+    # outputs: 0.86 GB of the covariance step)
+    def cross(i, j):
+        """``Q2_i^T Q2_j``."""
+        return np.eye(inverses[i].shape[0]) if shared else q_parts[i].T @ q_parts[j]
+    G = np.block([[lam[i, j] * cross(i, j) for j in range(ny)] for i in range(ny)])
+    R_M = _psd_sqrt(0.5 * (G + G.T)).T
     factor = scipy.linalg.block_diag(*inverses) @ R_M.T
     return factor / np.concatenate(scales)[:, None], lam
 
