@@ -353,3 +353,29 @@ def test_arx_chooses_its_structure_on_the_last_selection_samples(monkeypatch):
     for key in ("na", "nb", "nk"):
         np.testing.assert_array_equal(model.info["orders"][key], tail[0][key])
     assert model.info["n_samples"] == 4000
+
+
+@pytest.mark.parametrize("experiments", [1, 2])
+def test_output_error_search_with_its_jacobian_in_pieces_gives_the_same_model(
+        experiments, monkeypatch):
+    """The block-diagonal Jacobian of an output-error search (one block per input) in
+    pieces of 601 samples, each block's kernel continuing from its own final state and
+    sensitivities: the same oe model (coefficients, cost) as with the whole Jacobian."""
+    from subid.methods.dt import _pe_search, _trust_region
+    true = subid.systems.random_system(3, 2, 1, seed=31)
+    parts = [subid.systems.simulate_data(true, 3000 // experiments, seed=32 + k,
+                                         output_snr_db=25) for k in range(experiments)]
+    data = parts[0] if experiments == 1 else subid.merge(parts)
+    whole = subid.oe(data, 2)
+    monkeypatch.setattr(_pe_search, "JACOBIAN_PIECE_BYTES", 8 * 601 * 11)
+    calls = []
+    real = _trust_region.compress_pieces
+    monkeypatch.setattr(_trust_region, "compress_pieces",
+                        lambda *a: calls.append(1) or real(*a))
+    pieced = subid.oe(data, 2)
+    assert len(calls) >= 2
+    np.testing.assert_allclose(pieced.info["final_cost"], whole.info["final_cost"],
+                               rtol=1e-9)
+    for name in ("B", "F"):
+        np.testing.assert_allclose(pieced.info["polynomials"][name],
+                                   whole.info["polynomials"][name], rtol=1e-6, atol=1e-9)

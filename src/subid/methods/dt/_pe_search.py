@@ -71,7 +71,7 @@ def _radius(M) -> float:
     return float(np.abs(np.linalg.eigvals(M)).max())
 
 
-def block_jacobian(mats, v, x0, dirs, blocks, dm):
+def block_jacobian(mats, v, x0, dirs, blocks, dm, *, final_state=False):
     """``(ŷ, J)`` of :func:`subid.model._sensitivity.jacobian` for a block-diagonal
     predictor, the kernel run on each block with its own coordinates and states.
 
@@ -79,7 +79,10 @@ def block_jacobian(mats, v, x0, dirs, blocks, dm):
     coordinate (``dm`` model coordinates, then one per state for x0),
     ``blocks`` the ``(states, coordinates)`` index arrays (see
     :func:`minimise_prediction_error`). Each block's output is
-    ``C[:, s] x_s``; ``ŷ`` adds them and ``Dp v`` once.
+    ``C[:, s] x_s``; ``ŷ`` adds them and ``Dp v`` once. ``final_state=True``: also the
+    state and the sensitivities (shaped as ``dx0``) after the last sample, each block's
+    own (a block's coordinates move only its states), from which the next samples
+    continue.
     """
     Ap, Bp, C, Dp = mats
     dAp, dBp, dC, dDp, dx0 = dirs
@@ -88,6 +91,7 @@ def block_jacobian(mats, v, x0, dirs, blocks, dm):
     J = np.zeros((N, ny, dm + n))
     yhat = v @ Dp.T
     zero_dp = np.zeros_like(Dp)
+    x_end, S_end = np.zeros(n), np.zeros(np.shape(dx0))
     for states, coords in blocks:
         s = np.asarray(states, dtype=np.int64)
         rows = np.concatenate([np.asarray(coords, dtype=np.int64), dm + s])
@@ -95,9 +99,14 @@ def block_jacobian(mats, v, x0, dirs, blocks, dm):
             Ap[np.ix_(s, s)], Bp[s], C[:, s], zero_dp, v, x0[s],
             dAp[np.ix_(rows, s, s)], dBp[rows][:, s], dC[rows][:, :, s], dDp[rows],
             dx0[np.ix_(rows, s)])]
-        yb, Jb = jacobian(*sub)
+        if final_state:
+            yb, Jb, x_end[s], S_end[np.ix_(rows, s)] = jacobian(*sub, final_state=True)
+        else:
+            yb, Jb = jacobian(*sub)
         yhat += yb
         J[:, :, rows] = Jb
+    if final_state:
+        return yhat, J, x_end, S_end
     return yhat, J
 
 
@@ -185,11 +194,16 @@ def minimise_prediction_error(predictor, directions, dm, x0, v, y, ranges, W, ma
                 x, S = np.ascontiguousarray(x0s[e]), dirs[4]
                 for s in range(a, b, rows):
                     t = min(s + rows, b)
-                    yh, Je, x, S = jacobian(*mats_c, np.ascontiguousarray(v[s:t]), x,
-                                            *dirs[:4], S, final_state=True)
+                    vs = np.ascontiguousarray(v[s:t])
+                    if blocks is None:
+                        yh, Je, x, S = jacobian(*mats_c, vs, x, *dirs[:4], S,
+                                                final_state=True)
+                    else:
+                        yh, Je, x, S = block_jacobian(mats_c, vs, x, dirs[:4] + [S], blocks,
+                                                      dm, final_state=True)
                     if len(passes) == 1:
                         power.append(float(np.sum(((yw[s:t] - yh) * scale) ** 2)))
-                    if len(ranges) == 1:          # the kernel's columns are J's
+                    if len(ranges) == 1 and Je.shape[2] == width:   # J's columns
                         Jk = Je
                     else:                         # the x0 columns of experiment e only
                         Jk = np.zeros((t - s, ny, width))
@@ -228,9 +242,8 @@ def minimise_prediction_error(predictor, directions, dm, x0, v, y, ranges, W, ma
             J = np.nan_to_num(J, nan=0.0, posinf=0.0, neginf=0.0)
         return J.reshape(N * ny, -1)
 
-    # past JACOBIAN_PIECE_BYTES the Jacobian is never whole (a block-diagonal predictor's
-    # kernel, block_jacobian, forms it whole)
-    pieced = blocks is None and 8.0 * N * ny * width > JACOBIAN_PIECE_BYTES
+    # past JACOBIAN_PIECE_BYTES the Jacobian is never whole
+    pieced = 8.0 * N * ny * width > JACOBIAN_PIECE_BYTES
     z0 = np.zeros(width)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
