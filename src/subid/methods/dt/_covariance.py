@@ -40,15 +40,9 @@ def _triangular_factor(Js, order):
     """``R`` of ``Js[:, order] = Q R`` (columns of unit norm): the Cholesky factor of the
     Gram matrix (of ``Js``, its rows and columns then permuted: no permuted copy of
     ``Js``) when its pivots are above GRAM_PIVOT, else Householder QR."""
-    from subid.methods.dt._trust_region import GRAM_PIVOT
-    G = (Js.T @ Js)[np.ix_(order, order)]
-    try:
-        L = np.linalg.cholesky(G)
-    except np.linalg.LinAlgError:
-        L = None
-    if L is not None and np.isfinite(L).all() and np.diag(L).min(initial=1.0) > GRAM_PIVOT:
-        return L.T
-    return np.linalg.qr(Js[:, order], mode="r")
+    from subid.methods.dt._trust_region import gram_factor
+    R = gram_factor((Js.T @ Js)[np.ix_(order, order)])
+    return np.linalg.qr(Js[:, order], mode="r") if R is None else R
 
 
 def covariance_factor(J, residuals, n_nuisance, order=None):
@@ -98,7 +92,7 @@ def covariance_factor_pieces(pieces, residuals, n_nuisance, d):
     pieces, each folded into the factor of those before it). ``residuals``: the
     prediction errors of every sample, shape (N, ny). The same factor to rounding,
     with one piece of the Jacobian in memory at a time (a long record)."""
-    from subid.methods.dt._trust_region import GRAM_PIVOT
+    from subid.methods.dt._trust_region import gram_factor
     lam, L = _noise_cov(residuals, d)
     if L is None:
         return None, lam
@@ -109,12 +103,9 @@ def covariance_factor_pieces(pieces, residuals, n_nuisance, d):
     scale = np.sqrt(np.maximum(np.diag(G), 0.0))
     if not (np.isfinite(G).all() and scale.min() > 0):
         return None, lam
-    try:
-        C = np.linalg.cholesky(G / scale[:, None] / scale[None, :])
-    except np.linalg.LinAlgError:
-        C = None
-    if C is not None and np.isfinite(C).all() and np.diag(C).min(initial=1.0) > GRAM_PIVOT:
-        return _marginal(C.T, scale, n_nuisance), lam
+    R = gram_factor(G / scale[:, None] / scale[None, :])
+    if R is not None:
+        return _marginal(R, scale, n_nuisance), lam
     R = np.zeros((0, d))
     for Jk in pieces():
         Jw = _whiten(Jk, L) / scale

@@ -135,19 +135,33 @@ def termination(dF, F, dx_norm, x_norm, ratio, ftol, xtol):
     return None
 
 
+def gram_factor(Gs):
+    """``R`` (upper triangular, ``Gs = R^T R``) of the Gram matrix ``Gs`` of a Jacobian
+    whose columns have unit norm, by Cholesky, when every pivot is above
+    :data:`GRAM_PIVOT` (the normal equations then lose at most about 8 digits); else
+    None (the caller takes the Householder QR of the Jacobian). The route decision of
+    the optimiser and of the covariance steps
+    (:mod:`subid.methods.dt._covariance`)."""
+    try:
+        L = np.linalg.cholesky(Gs)
+    except np.linalg.LinAlgError:
+        return None
+    if np.isfinite(L).all() and np.diag(L).min(initial=1.0) > GRAM_PIVOT:
+        return L.T
+    return None
+
+
 def _from_gram(G, g):
     """``(R, Q^T f, J^T f, norms, 'gram')`` from ``G = J^T J`` and ``g = J^T f`` when the
     Cholesky factor of the column-scaled ``G`` has every pivot above
-    :data:`GRAM_PIVOT`; else ``(None, None, g, norms, None)`` (the QR route)."""
+    :data:`GRAM_PIVOT` (:func:`gram_factor`); else ``(None, None, g, norms, None)`` (the
+    QR route)."""
     norms = np.sqrt(np.maximum(np.diag(G), 0.0))
     safe = np.where(norms > 0, norms, 1.0)
     if np.all(norms > 0) and np.isfinite(G).all():
-        try:
-            L = np.linalg.cholesky(G / safe[:, None] / safe[None, :])
-        except np.linalg.LinAlgError:
-            L = None
-        if L is not None and np.diag(L).min() > GRAM_PIVOT:
-            R = L.T * safe[None, :]                 # J = Q R, R = L^T diag(norms)
+        Rs = gram_factor(G / safe[:, None] / safe[None, :])
+        if Rs is not None:
+            R = Rs * safe[None, :]                  # J = Q R, R = L^T diag(norms)
             qtf = scipy.linalg.solve_triangular(R, g, trans="T", check_finite=False)
             return R, qtf, g, norms, "gram"
     return None, None, g, norms, None
