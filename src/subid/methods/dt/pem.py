@@ -594,29 +594,18 @@ def with_covariance(model, data, focus, *, with_feedthrough: bool, max_samples=N
     used = sum(b - a for a, b, _ in pieces)
     k = len(pieces)
     width = k * n + dm
+    mats, dirs = (Ap, Bp, Cp, Dp), (dAp, dBp, dC, dDp, dx0)
     if 8.0 * used * ny * width > _pe_search.JACOBIAN_PIECE_BYTES:
-        # a long record: its Jacobian a piece at a time, each piece of a window (or
-        # experiment) continuing from the state and sensitivities where the last ended
+        # a long record: its Jacobian a piece at a time
         chunk = max(1, int(_pe_search.JACOBIAN_PIECE_BYTES // (8 * ny * width)))
         residual = np.concatenate([
             data.y[a:b] - _simulate.simulate_discrete(Ap, Bp, Cp, Dp, v[a:b], state)[0]
             for a, b, state in pieces])
-
-        def jacobian_pieces():
-            for e, (a, b, state) in enumerate(pieces):       # nuisance x0 columns first
-                x, S = np.ascontiguousarray(state), dx0
-                for s in range(a, b, chunk):
-                    t = min(s + chunk, b)
-                    _, Je, x, S = jacobian(Ap, Bp, Cp, Dp, np.ascontiguousarray(v[s:t]), x,
-                                           dAp, dBp, dC, dDp, S, final_state=True)
-                    Jk = np.zeros((t - s, ny, width))
-                    Jk[:, :, e * n:(e + 1) * n] = Je[:, :, dm:]
-                    Jk[:, :, k * n:] = Je[:, :, :dm]
-                    yield Jk
-        factor, lam = covariance_factor_pieces(jacobian_pieces, residual, k * n, width)
+        factor, lam = covariance_factor_pieces(
+            lambda: (Jk for _, _, _, Jk in _covariance_rows(mats, dirs, v, pieces, dm, chunk)),
+            residual, k * n, width)
     else:
-        J, residual = _whole_jacobian((Ap, Bp, Cp, Dp), (dAp, dBp, dC, dDp, dx0), v, data.y,
-                                      pieces, dm)
+        J, residual = _whole_jacobian(mats, dirs, v, data.y, pieces, dm)
         factor, lam = covariance_factor(J, residual, k * n,
                                         None if k > 1 else np.r_[dm:dm + n, 0:dm])
     info = model.info            # a fresh dict of the model the caller built
@@ -642,31 +631,39 @@ def with_covariance(model, data, focus, *, with_feedthrough: bool, max_samples=N
     return model
 
 
+def _covariance_rows(mats, dirs, v, pieces, dm, chunk):
+    """The Jacobian of :func:`with_covariance`'s ``pieces`` (windows or experiments) in
+    blocks of at most ``chunk`` samples, each block continuing from the state and
+    sensitivities where the last ended: ``(start, stop, ŷ, J)`` per block, the nuisance
+    x0 columns of every piece first (``J[:, :, e n:(e + 1) n]`` for piece ``e``), then
+    the ``dm`` model columns."""
+    n, k = mats[0].shape[0], len(pieces)
+    for e, (a, b, state) in enumerate(pieces):
+        x, S = np.ascontiguousarray(state), dirs[4]
+        for s in range(a, b, chunk):
+            t = min(s + chunk, b)
+            yhat, Je, x, S = jacobian(*mats, np.ascontiguousarray(v[s:t]), x, *dirs[:4], S,
+                                      final_state=True)
+            J = np.zeros((t - s, Je.shape[1], k * n + dm))
+            J[:, :, e * n:(e + 1) * n] = Je[:, :, dm:]
+            J[:, :, k * n:] = Je[:, :, :dm]
+            yield s, t, yhat, J
+
+
 def _whole_jacobian(mats, dirs, v, y, pieces, dm):
     """``(J, residuals)`` of :func:`with_covariance`'s pieces in one array: one piece,
     the kernel's array as it is (model columns, then x0's: the caller takes the nuisance
     x0 columns first by a permutation of the factor's Gram matrix, no copy of the
-    largest array); several, the nuisance x0 columns of every piece first."""
-    n = mats[0].shape[0]
+    largest array); several, the blocks of :func:`_covariance_rows` (one per piece)
+    joined."""
     if len(pieces) == 1:
         a, b, state = pieces[0]
         yhat, J = jacobian(*mats, np.ascontiguousarray(v[a:b]), np.ascontiguousarray(state),
                            *dirs)
         return J, y[a:b] - yhat
-    k = len(pieces)
-    used = sum(b - a for a, b, _ in pieces)
-    J = np.zeros((used, y.shape[1], k * n + dm))
-    residual = np.empty((used, y.shape[1]))
-    row = 0
-    for e, (a, b, state) in enumerate(pieces):
-        yhat, Je = jacobian(*mats, np.ascontiguousarray(v[a:b]), np.ascontiguousarray(state),
-                            *dirs)
-        rows = slice(row, row + b - a)
-        J[rows, :, e * n:(e + 1) * n] = Je[:, :, dm:]
-        J[rows, :, k * n:] = Je[:, :, :dm]
-        residual[rows] = y[a:b] - yhat
-        row += b - a
-    return J, residual
+    rows = list(_covariance_rows(mats, dirs, v, pieces, dm, max(b - a for a, b, _ in pieces)))
+    return (np.concatenate([J for _, _, _, J in rows]),
+            np.concatenate([y[s:t] - yhat for s, t, yhat, _ in rows]))
 
 
 def _covariance_pieces(mats, v, ranges, x0, max_samples):
