@@ -178,6 +178,29 @@ def minimise_prediction_error(predictor, directions, dm, x0, v, y, ranges, W, ma
             dirs = [np.ascontiguousarray(a[:dm]) for a in dirs]   # kernel needs all rows)
         return mats_c, dirs
 
+    def kernel(mats_c, dirs, vs, x, S):
+        """``(ŷ, J, x, S)`` of the samples ``vs`` from the state ``x`` and the
+        sensitivities ``S`` (the kernel's columns: the model's, then every state's)."""
+        if blocks is None:
+            return jacobian(*mats_c, vs, x, *dirs[:4], S, final_state=True)
+        return block_jacobian(mats_c, vs, x, dirs[:4] + [S], blocks, dm, final_state=True)
+
+    def columns(Je, e):
+        """The rows of J (``-scale`` times the weighted sensitivities, non-finite entries
+        zero) from the kernel's array of experiment ``e``: its model columns and its
+        initial state's, the other experiments' zero (the kernel's own array where its
+        columns are J's)."""
+        if len(ranges) == 1 and Je.shape[2] == width:
+            J = Je
+        else:
+            J = np.zeros((Je.shape[0], ny, width))
+            J[:, :, :dm] = Je[:, :, :dm]
+            if fit_x0:
+                J[:, :, dm + e * n:dm + (e + 1) * n] = Je[:, :, dm:]
+        J *= -scale
+        return J if np.isfinite(J).all() else \
+            np.nan_to_num(J, nan=0.0, posinf=0.0, neginf=0.0)
+
     def compressed(z, f):
         """The trust region's factor of the Jacobian at ``z`` (``f`` the residual
         there), the Jacobian formed a piece of at most JACOBIAN_PIECE_BYTES at a time,
@@ -194,26 +217,10 @@ def minimise_prediction_error(predictor, directions, dm, x0, v, y, ranges, W, ma
                 x, S = np.ascontiguousarray(x0s[e]), dirs[4]
                 for s in range(a, b, rows):
                     t = min(s + rows, b)
-                    vs = np.ascontiguousarray(v[s:t])
-                    if blocks is None:
-                        yh, Je, x, S = jacobian(*mats_c, vs, x, *dirs[:4], S,
-                                                final_state=True)
-                    else:
-                        yh, Je, x, S = block_jacobian(mats_c, vs, x, dirs[:4] + [S], blocks,
-                                                      dm, final_state=True)
+                    yh, Je, x, S = kernel(mats_c, dirs, np.ascontiguousarray(v[s:t]), x, S)
                     if len(passes) == 1:
                         power.append(float(np.sum(((yw[s:t] - yh) * scale) ** 2)))
-                    if len(ranges) == 1 and Je.shape[2] == width:   # J's columns
-                        Jk = Je
-                    else:                         # the x0 columns of experiment e only
-                        Jk = np.zeros((t - s, ny, width))
-                        Jk[:, :, :dm] = Je[:, :, :dm]
-                        if fit_x0:
-                            Jk[:, :, dm + e * n:dm + (e + 1) * n] = Je[:, :, dm:]
-                    Jk *= -scale
-                    if not np.isfinite(Jk).all():
-                        Jk = np.nan_to_num(Jk, nan=0.0, posinf=0.0, neginf=0.0)
-                    yield s * ny, t * ny, Jk.reshape(-1, width)
+                    yield s * ny, t * ny, columns(Je, e).reshape(-1, width)
         out = _trust_region.compress_pieces(pieces, f, width)
         history.append(0.5 * sum(power))
         return out
@@ -221,25 +228,13 @@ def minimise_prediction_error(predictor, directions, dm, x0, v, y, ranges, W, ma
     def jac(z):
         mats_c, dirs = kernel_arrays(z)
         x0s = initial(z)
-        one = len(ranges) == 1 and (fit_x0 or blocks is None)
-        yhat = np.empty((N, ny))
-        J = None if one else np.zeros((N, ny, dm + n_x0))
-        for e, (a, b) in enumerate(ranges):     # the x0 columns of experiment e only
-            ve, xe = np.ascontiguousarray(v[a:b]), np.ascontiguousarray(x0s[e])
-            if blocks is None:
-                yhat[a:b], Je = jacobian(*mats_c, ve, xe, *dirs)
-            else:
-                yhat[a:b], Je = block_jacobian(mats_c, ve, xe, dirs, blocks, dm)
-            if one:                             # the kernel's columns are J's
-                J = Je
-                break
-            J[a:b, :, :dm] = Je[:, :, :dm]
-            if fit_x0:
-                J[a:b, :, dm + e * n:dm + (e + 1) * n] = Je[:, :, dm:]
+        yhat, parts = np.empty((N, ny)), []
+        for e, (a, b) in enumerate(ranges):
+            yhat[a:b], Je, _, _ = kernel(mats_c, dirs, np.ascontiguousarray(v[a:b]),
+                                         np.ascontiguousarray(x0s[e]), dirs[4])
+            parts.append(columns(Je, e))
         history.append(0.5 * float(np.sum(((yw - yhat) * scale) ** 2)))
-        J *= -scale
-        if not np.isfinite(J).all():
-            J = np.nan_to_num(J, nan=0.0, posinf=0.0, neginf=0.0)
+        J = parts[0] if len(parts) == 1 else np.concatenate(parts)
         return J.reshape(N * ny, -1)
 
     # past JACOBIAN_PIECE_BYTES the Jacobian is never whole
