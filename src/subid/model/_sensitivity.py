@@ -251,9 +251,9 @@ def _floor(S0) -> float:
 def free_response(Ap, C, S0, N):
     """``C Ap^t S0`` for ``t = 0 .. N-1``, shape (N, ny, k) (``S0`` is (n, k)): the
     output sensitivity to the initial-state directions ``S0``, set to zero from the
-    first sample at which every entry of ``Ap^t S0`` is below
-    :data:`FREE_RESPONSE_FLOOR` times the largest entry of ``S0`` (module
-    docstring: the loop never enters subnormal numbers)."""
+    first block of :data:`FREE_BLOCK` samples at whose start every entry of
+    ``Ap^t S0`` is below :data:`FREE_RESPONSE_FLOOR` times the largest entry of ``S0``
+    (module docstring: the loop does not run on in subnormal numbers)."""
     S0, C = frozen(S0), frozen(C)       # read-only inputs: one compiled signature
     out = np.empty((int(N), C.shape[0], S0.shape[1]))
     _free_response_t(frozen(Ap), C, S0, _floor(S0), out, 0)
