@@ -358,13 +358,35 @@ def test_a_jacobian_given_in_pieces_gives_the_whole_ones_factors(pivot, monkeypa
     def rows():
         for a, b in zip(cuts[:-1], cuts[1:]):
             yield 2 * a, 2 * b, J[a:b].reshape(-1, 7)
-    pieced = _trust_region.compress_pieces(rows, f, 7)
+    passes, folded = [], []
+
+    def counted_rows():
+        passes.append(1)
+        yield from rows()
+    real_geqrf = _trust_region.geqrf_r
+    monkeypatch.setattr(_trust_region, "geqrf_r",
+                        lambda w, r, **k: folded.append(w.shape[0]) or real_geqrf(w, r, **k))
+    pieced = _trust_region.compress_pieces(counted_rows, f, 7)
     assert whole[4] == pieced[4] == ("gram" if pivot is None else "qr")
     R1, R2 = whole[0], pieced[0]
     np.testing.assert_allclose(R1.T @ R1, R2.T @ R2, rtol=1e-10, atol=1e-10)
     np.testing.assert_allclose(R1.T @ whole[1], R2.T @ pieced[1], rtol=1e-10, atol=1e-10)
     for a, b in zip(whole[2:4], pieced[2:4]):
         np.testing.assert_allclose(a, b, rtol=1e-12)
+    # the QR route: a second pass over the pieces, each folded under the triangle of
+    # those before it alone (at most 8 rows), not under every row of their R
+    assert len(passes) == (1 if pivot is None else 2)
+    pieces_rows = [2 * (b - a) for a, b in zip(cuts[:-1], cuts[1:])]
+    assert folded == ([] if pivot is None else
+                      [pieces_rows[0]] + [min(8, sum(pieces_rows[:k])) + r
+                                          for k, r in enumerate(pieces_rows) if k])
+    # expecting the QR route (householder=True): one pass, the same factor either way
+    passes.clear()
+    expected = _trust_region.compress_pieces(counted_rows, f, 7, householder=True)
+    assert len(passes) == 1
+    for a, b in zip(pieced[:4], expected[:4]):
+        np.testing.assert_array_equal(a, b)
+    assert expected[4] == pieced[4]
     res = rng.standard_normal((431, 2))
     F1, lam1 = _covariance.covariance_factor(J.copy(), res, 2)
     F2, lam2 = _covariance.covariance_factor_pieces(
@@ -394,7 +416,8 @@ def test_pem_with_its_jacobian_in_pieces_gives_the_same_model(focus, monkeypatch
 
     def counted(module, name):
         real = getattr(module, name)
-        monkeypatch.setattr(module, name, lambda *a: calls.append(name) or real(*a))
+        monkeypatch.setattr(module, name,
+                            lambda *a, **k: calls.append(name) or real(*a, **k))
     counted(_trust_region, "compress_pieces")
     counted(pem, "covariance_factor_pieces")
     pieced = subid.pem(data, start, focus=focus)

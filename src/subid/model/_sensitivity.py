@@ -126,33 +126,43 @@ def _jacobian_t(Ap, Bp, C, Dp, v, x0, dApT, dBpT, dCT, dDpT, S, J):  # pragma: n
     return yhat, x
 
 
-@numba.njit(cache=True)
-def _recursion_t(G, S, F, J, t0, T, n):  # pragma: no cover
-    """The recursion of the blocked form for samples ``t0 .. t0 + T - 1``: with
-    ``G = [Ap; C]`` and ``P = G s[t]``, ``J[t, :, :d] += P[n:]`` (``J`` holds the
-    output forcing) and ``s[t+1] = P[:n] + F[t - t0]`` (``F`` the state forcing of
-    the block, ``(T, n, d)``); ``S`` (``s[t0]``, ``(n, d)``) is advanced in place."""
-    d = S.shape[1]
-    ny = G.shape[0] - n
-    P = np.empty((G.shape[0], d))
-    for tt in range(T):
-        np.dot(G, S, P)
-        row = J[t0 + tt]
-        for i in range(ny):
-            for j in range(d):
-                row[i, j] += P[n + i, j]
-        Ft = F[tt]
-        for i in range(n):
-            for j in range(d):
-                S[i, j] = P[i, j] + Ft[i, j]
-
-
 #: Samples per block of the blocked form (its state forcing, ``BLOCK x n x d``, stays
 #: in the cache).
 BLOCK = 32
 #: Multiply-adds per sample of the direction recursion (``d (n + ny)(n + m)``) from
 #: which :func:`jacobian` takes the blocked form (module docstring).
 BLOCKED_WORK = 1_000
+
+
+@numba.njit(cache=True)
+def _recursion_t(G, S, Z, Ms, J, n):  # pragma: no cover
+    """The recursion of the blocked form over the record, a block of :data:`BLOCK`
+    samples at a time: the block's state forcing ``F = Z[t0:t0 + T] Ms`` (``(T, n d)``,
+    one matrix product), then, with ``G = [Ap; C]`` and ``P = G s[t]``,
+    ``J[t, :, :d] += P[n:]`` (``J`` holds the output forcing) and
+    ``s[t+1] = P[:n] + F[t - t0]``; ``S`` (``s[0]``, ``(n, d)``) is advanced in place
+    to ``s[N]``. One call per record (a call per block cost 6 µs of dispatch each: 40 %
+    of :func:`subid.bj` at 10^5 samples)."""
+    N = Z.shape[0]
+    d = S.shape[1]
+    ny = G.shape[0] - n
+    P = np.empty((G.shape[0], d))
+    F = np.empty((BLOCK, n * d))
+    for t0 in range(0, N, BLOCK):
+        T = min(BLOCK, N - t0)
+        np.dot(Z[t0:t0 + T], Ms, F[:T])
+        for tt in range(T):
+            np.dot(G, S, P)
+            row = J[t0 + tt]
+            for i in range(ny):
+                for j in range(d):
+                    row[i, j] += P[n + i, j]
+            Ft = F[tt]
+            for i in range(n):
+                for j in range(d):
+                    S[i, j] = P[i, j] + Ft[i * d + j]
+
+
 
 
 def _jacobian_blocked(Ap, Bp, C, Dp, v, x0, dAp, dBp, dC, dDp, S, J):
@@ -172,12 +182,7 @@ def _jacobian_blocked(Ap, Bp, C, Dp, v, x0, dAp, dBp, dC, dDp, S, J):
     Mo[:, :, :d] = np.concatenate([dC, dDp], axis=2).transpose(2, 1, 0)
     np.matmul(Z, Mo.reshape(n + m, ny * width), out=J.reshape(N, ny * width))
     G = frozen(np.vstack([Ap, C]))
-    Ms = Ms.reshape(n + m, n * d)
-    F = np.empty((BLOCK, n * d))
-    for t0 in range(0, N, BLOCK):
-        T = min(BLOCK, N - t0)
-        np.matmul(Z[t0:t0 + T], Ms, out=F[:T])
-        _recursion_t(G, S, F.reshape(BLOCK, n, d), J, t0, T, n)
+    _recursion_t(G, S, frozen(Z), frozen(Ms.reshape(n + m, n * d)), J, n)
     with np.errstate(all="ignore"):
         x_end = Ap @ X[-1] + Bp @ v[-1] if N else np.array(x0, dtype=float)
     return yhat, x_end

@@ -30,6 +30,7 @@ import numpy as np
 import scipy.linalg
 
 from subid.errors import TooFewSamplesError
+from subid.statistic.hankel import geqrf_r
 
 __all__ = ["RANK_TOL", "NestedARX", "channel_scales", "regression_start", "check_samples",
            "solve_coefficients", "unpack"]
@@ -130,8 +131,7 @@ class NestedARX:
         self.start = int(max(self.max_na, int(self.nk.max(initial=0)) + self.max_nb - 1, 0))
         columns = self._columns(np.full(self.n_inputs, self.max_nb), self.max_na)
         M = _fill(columns, self.ranges, self.start)
-        R = scipy.linalg.qr(M, mode="r", check_finite=False)[0] if M.shape[0] else M
-        self.R = R[:min(R.shape)]
+        self.R = geqrf_r(M, min(M.shape), overwrite=True) if M.shape[0] else M
 
     def _columns(self, nb, na: int):
         """``(signal, lag)`` of the regressors (every input's lags, then every output's),
@@ -185,8 +185,8 @@ class NestedARX:
         check_samples(self.ranges, self.n_samples, n_params, first, method)
         extra = _fill(self._columns(nb, na), self.ranges, first, self.start)
         stacked = np.vstack([self.R[:, self._index(nb, na)], extra])
-        R = scipy.linalg.qr(stacked, mode="r", check_finite=False)[0]
         m = stacked.shape[1] - ny
+        R = geqrf_r(stacked, min(stacked.shape[0], m + ny), overwrite=False)
         theta = solve_coefficients(R[:m + ny], m)
         A = np.zeros((ny, ny, int(na_all.max(initial=0)) + 1))
         A[:, :, 0] = np.eye(ny)

@@ -201,6 +201,8 @@ def minimise_prediction_error(predictor, directions, dm, x0, v, y, ranges, W, ma
         return J if np.isfinite(J).all() else \
             np.nan_to_num(J, nan=0.0, posinf=0.0, neginf=0.0)
 
+    routes = []                           # the compression of every Jacobian in pieces
+
     def compressed(z, f):
         """The trust region's factor of the Jacobian at ``z`` (``f`` the residual
         there), the Jacobian formed a piece of at most JACOBIAN_PIECE_BYTES at a time,
@@ -221,7 +223,10 @@ def minimise_prediction_error(predictor, directions, dm, x0, v, y, ranges, W, ma
                     if len(passes) == 1:
                         power.append(float(np.sum(((yw[s:t] - yh) * scale) ** 2)))
                     yield s * ny, t * ny, columns(Je, e).reshape(-1, width)
-        out = _trust_region.compress_pieces(pieces, f, width)
+        # the QR route expected where the last Jacobian took it: one pass, not two
+        out = _trust_region.compress_pieces(pieces, f, width,
+                                            householder=routes[-1:] == ["qr"])
+        routes.append(out[4])
         history.append(0.5 * sum(power))
         return out
 

@@ -34,9 +34,9 @@ import math
 
 import numba
 import numpy as np
-import scipy.linalg
 
 from subid._kernel_args import read_only
+from subid.statistic.hankel import geqrf_r
 
 #: ``A^t`` counts as decayed below this (relative to the identity): later free rows
 #: change x0 by less than rounding (:data:`subid.model.prediction._FREE_DECAYED`).
@@ -187,7 +187,7 @@ def _error_power(A, B, C, D, u, y, weights, inv_scale, kernel):
         if n_free == 0:                 # no state (free_length is 0 for n = 0)
             return tail
         flat = rows.reshape(-1, n + 1)
-        R = scipy.linalg.qr(flat, mode="r", check_finite=False)[0]
+        R = geqrf_r(flat, min(flat.shape[0], n + 1), overwrite=False)
         # the minimum-norm lstsq of simulate_fit, with its cut-off
         cut = np.finfo(float).eps * max(N * ny, n)
         Rn = np.zeros((n, n + 1))

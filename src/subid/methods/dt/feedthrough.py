@@ -76,7 +76,7 @@ import scipy.linalg
 import scipy.special
 
 from subid._validation import check_choice
-from subid.statistic._hankel import geqrf_r
+from subid.statistic.hankel import geqrf_r
 
 #: The values ``feedthrough`` accepts.
 FEEDTHROUGH = ("auto", True, False)

@@ -42,7 +42,6 @@ from __future__ import annotations
 import numbers
 
 import numpy as np
-import scipy.linalg
 
 from subid._blas import serial_blas
 from subid._validation import check_bool, check_choice, checked_call
@@ -235,8 +234,7 @@ def regress(target: np.ndarray, blocks, ranges, first: int):
     if t.size <= rows:
         Phi, _ = lagged(blocks, ranges, first)
         T = target[t]
-        R = scipy.linalg.qr(np.column_stack([Phi, T]), mode="r", check_finite=False)[0]
-        R = R[:m + 1, :m + 1]
+        R = geqrf_r(np.column_stack([Phi, T]), m + 1, overwrite=False)[:, :m + 1]
         theta = solve_coefficients(R, m)[:, 0]
         resid[t] = T - Phi @ theta
         return theta, resid, R[:m, :m]
