@@ -1,11 +1,12 @@
 """Time and peak memory of a polynomial method on a long record.
 
-``oe(data, 2)`` (``--call oe``, the default) or ``arx(data)`` (``--call arx``: its
-structure chosen) on 10^6 samples of the 2x2 order-4 system of the other benchmarks
+``oe(data, 2)`` (``--call oe``, the default) or the default call ``arx(data)``,
+``armax(data)`` or ``bj(data)`` (``--call arx|armax|bj``: the structure chosen) on 10^6
+samples of the 2x2 order-4 system of the other benchmarks
 (20 dB output noise), in a fresh process (peak resident memory, ``ru_maxrss``), after
 a call on 3,000 samples that compiles the kernels. Run:
 ``OPENBLAS_NUM_THREADS=1 PYTHONPATH=src python bench/poly_memory.py [--samples N]
-[--call oe|arx]``; prints one line (bench/poly_cost.md holds the figures).
+[--call oe|arx|armax|bj]``; prints one line (bench/poly_cost.md holds the figures).
 """
 
 from __future__ import annotations
@@ -19,19 +20,19 @@ import warnings
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--samples", type=int, default=1_000_000)
-    parser.add_argument("--call", choices=("oe", "arx"), default="oe")
+    parser.add_argument("--call", choices=("oe", "arx", "armax", "bj"), default="oe")
     args = parser.parse_args(argv)
     warnings.simplefilter("ignore")
     import subid
     true = subid.systems.random_system(4, 2, 2, seed=29)
     data = subid.systems.simulate_data(true, args.samples, seed=30, output_snr_db=20)
     def call(record):
-        return subid.oe(record, 2) if args.call == "oe" else subid.arx(record)
+        return subid.oe(record, 2) if args.call == "oe" else getattr(subid, args.call)(record)
     call(data[:3000])
     before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
     t, c = time.perf_counter(), time.process_time()
     call(data)
-    label = "oe(data, 2)" if args.call == "oe" else "arx(data)"
+    label = "oe(data, 2)" if args.call == "oe" else f"{args.call}(data)"
     print(f"{label}, {args.samples} samples: {time.perf_counter() - t:.1f} s wall, "
           f"{time.process_time() - c:.1f} CPU s, peak resident memory "
           f"{resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6:.2f} GB "

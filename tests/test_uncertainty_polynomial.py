@@ -222,14 +222,25 @@ def test_describe_and_the_report_give_the_coefficients_standard_deviations():
     assert _coefficient_std(subid.n4sid(_record("arx", 6), 2)) is None
 
 
+@pytest.mark.parametrize("route", ["gram", "qr", "mixed"])
 @pytest.mark.parametrize("shared", [False, True])
-def test_coefficient_factor_is_the_sandwich_of_the_outputs_least_squares(shared):
+def test_coefficient_factor_is_the_sandwich_of_the_outputs_least_squares(shared, route,
+                                                                          monkeypatch):
     """coefficient_factor (two outputs, each fitted on its own, nuisance columns first,
     correlated noise; their own designs, or one for both as ARX's) against an
     independent computation: the covariance of the outputs' least-squares estimates,
     Λ_ij (J_i^T J_i)^-1 J_i^T J_j (J_j^T J_j)^-1, at the coefficients' rows and
-    columns."""
+    columns. Each design's R from the Cholesky factor of its Gram matrix (no thin Q),
+    from the Householder QR (GRAM_PIVOT above 1 forces it), or one of each."""
+    from subid.methods.dt import _poly_covariance, _trust_region
     from subid.methods.dt._poly_covariance import coefficient_factor
+    if route == "qr":
+        monkeypatch.setattr(_trust_region, "GRAM_PIVOT", 2.0)
+    elif route == "mixed":              # the first design's Gram route only
+        real, calls = _trust_region.gram_factor, []
+        monkeypatch.setattr(_poly_covariance, "gram_factor",
+                            lambda G: real(G) if not calls.append(1) and len(calls) == 1
+                            else None)
     rng = np.random.default_rng(17)
     N, n1, d = 400, 2, 3
     designs = [rng.standard_normal((N, n1 + d)) @ np.diag([1.0, 2.0, 0.3, 1.0, 5.0])

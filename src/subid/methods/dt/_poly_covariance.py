@@ -27,7 +27,12 @@ eliminated: ``ĉ_i - c_i ≈ R22_i^-1 Q2_i^T e_i``. With ``Λ = L L^T`` and
 ``L_ik Q2_i``; QR of ``M`` gives ``M^T M = R_M^T R_M`` and the factor
 ``F_c = blockdiag(R22_i^-1) R_M^T`` with ``Cov(ĉ) = F_c F_c^T`` (for one
 output, ``σ R22^-1``). ``Λ_ik = e_i^T e_k / sqrt((N - d_i)(N - d_k))``, the
-residual covariance with each output's degrees of freedom.
+residual covariance with each output's degrees of freedom. ``R_M`` is taken as a
+square root of ``M^T M``, whose blocks ``Λ_ik Q2_i^T Q2_k`` need no ``M``; and where
+the column-scaled ``J_i^T J_i`` has every Cholesky pivot above
+:data:`subid.methods.dt._trust_region.GRAM_PIVOT` (the optimiser's rule), ``R_i`` is its
+Cholesky factor and ``Q2_i^T Q2_k`` the trailing block of ``R_i^-T J_i^T J_k R_k^-1``
+(``Q_i = J_i R_i^-1``): no thin ``Q`` (``N x d_i`` numbers an output) is formed.
 
 The coefficient covariance is mapped to the state-space parameters θ =
 ``vec(A, B, C[, D], K)`` of the model's realisation
@@ -44,6 +49,7 @@ import numpy as np
 import scipy.linalg
 
 from subid.methods.dt._covariance import RANK_TOLERANCE
+from subid.methods.dt._trust_region import gram_factor
 from subid.model.polynomial import coefficient_slots, coefficients, realisation_jacobian
 
 __all__ = ["coefficient_factor", "attach_covariance"]
@@ -85,39 +91,48 @@ def coefficient_factor(designs, residuals, n_nuisance):
     N, ny = residuals.shape
     dofs = np.array([max(N - J.shape[1], 1) for J in designs], dtype=float)
     lam = residuals.T @ residuals / np.sqrt(np.outer(dofs, dofs))
-    q_parts, inverses, scales = [], [], []
+    q_parts, inverses, scales, grams = [], [], [], []
     done = {}       # a design shared by several outputs (ARX: the same regressors) once
     # one design for every output (ARX): Q2_i^T Q2_j = I for every pair, so only R is
     # formed (the thin Q of a long record's regressors is the largest array here)
     shared = len({(id(J), n1) for J, n1 in zip(designs, n_nuisance)}) == 1
     for J, n1 in zip(designs, n_nuisance):
         if (id(J), n1) in done:
-            q, inverse, scale = done[(id(J), n1)]
+            q, inverse, scale, gram = done[(id(J), n1)]
             q_parts.append(q)
             inverses.append(inverse)
             scales.append(scale)
+            grams.append(gram)
             continue
         scale = np.sqrt(np.einsum("ij,ij->j", J, J))
         if J.shape[1] == n1:
             q_parts.append(np.zeros((N, 0)))
             inverses.append(np.zeros((0, 0)))
             scales.append(np.zeros(0))
+            grams.append(None)
             continue
         if not (np.isfinite(scale).all() and scale.min() > 0):
             return None, lam
-        if shared:
-            Q, R = None, np.linalg.qr(J / scale, mode="r")
-        else:
-            Q, R = np.linalg.qr(J / scale)
+        Js = J / scale
+        # R from the Cholesky factor of the Gram matrix where it is well conditioned
+        # (gram_factor: the optimiser's rule); Q is then never formed, Q2_i^T Q2_j comes
+        # from J_i^T J_j (below). Else the Householder QR with its thin Q.
+        R, Q = gram_factor(Js.T @ Js), None
+        if R is None:
+            if shared:
+                R = np.linalg.qr(Js, mode="r")
+            else:
+                Q, R = np.linalg.qr(Js)
         diag = np.abs(np.diag(R))
         if diag.min() <= RANK_TOLERANCE * diag.max():
             return None, lam
         R22 = R[n1:, n1:]
         q_parts.append(None if Q is None else Q[:, n1:])
+        grams.append((Js, R, n1))
         inverses.append(scipy.linalg.solve_triangular(R22, np.eye(R22.shape[0]),
                                                       check_finite=False))
         scales.append(scale[n1:])
-        done[(id(J), n1)] = (q_parts[-1], inverses[-1], scales[-1])
+        done[(id(J), n1)] = (q_parts[-1], inverses[-1], scales[-1], grams[-1])
     # M: row block k (noise component w_k), column block i: L_ik Q2_i (L L^T = Λ), and
     # R_M its triangular factor. Its Gram matrix G = R_M^T R_M has the blocks
     # Λ_ij Q2_i^T Q2_j, Q2_i^T Q2_i = I: conditioned as Λ, so a square root of G (its
@@ -125,8 +140,17 @@ def coefficient_factor(designs, residuals, n_nuisance):
     # F F^T sees only R_M^T R_M) without M, 2 ny^2 N d numbers (10^6 samples of two
     # outputs: 0.86 GB of the covariance step)
     def cross(i, j):
-        """``Q2_i^T Q2_j``."""
-        return np.eye(inverses[i].shape[0]) if shared else q_parts[i].T @ q_parts[j]
+        """``Q2_i^T Q2_j``: from the thin Q factors, or, where Q was not formed
+        (``J_i = Q_i R_i``), the trailing block of ``R_i^-T J_i^T J_j R_j^-1``."""
+        if shared or i == j:
+            return np.eye(inverses[i].shape[0])
+        if q_parts[i] is not None and q_parts[j] is not None:
+            return q_parts[i].T @ q_parts[j]
+        if grams[i] is None or grams[j] is None:        # an output without coefficients
+            return np.zeros((inverses[i].shape[0], inverses[j].shape[0]))
+        (Ji, Ri, ni), (Jj, Rj, nj) = grams[i], grams[j]
+        C = scipy.linalg.solve_triangular(Ri, Ji.T @ Jj, trans="T", check_finite=False)
+        return scipy.linalg.solve_triangular(Rj, C.T, trans="T", check_finite=False).T[ni:, nj:]
     G = np.block([[lam[i, j] * cross(i, j) for j in range(ny)] for i in range(ny)])
     R_M = _psd_sqrt(0.5 * (G + G.T)).T
     factor = scipy.linalg.block_diag(*inverses) @ R_M.T

@@ -72,6 +72,7 @@ from subid.methods.dt.polynomial import (
     check_polynomial_data,
     polynomial_model,
     regress,
+    regress_start,
     structure_orders,
 )
 from subid.model._sensitivity import jacobian
@@ -312,7 +313,7 @@ def _high_order_arx(sub, u, y, ranges):
     h = _high_order(y.size, sub.nu, max([sub.na, sub.nc, sub.nd] + sub.nf + [sub.lb]))
     k0 = min(sub.nk)
     blocks = [(u[:, j], range(k0, k0 + h)) for j in range(sub.nu)] + [(y, range(1, h + 1))]
-    theta, resid, _ = regress(y, blocks, ranges, h + k0)
+    theta, resid = regress_start(y, blocks, ranges, h + k0)
     b = [np.concatenate([np.zeros(k0), theta[j * h:(j + 1) * h]]) for j in range(sub.nu)]
     a = np.concatenate([[1.0], -theta[sub.nu * h:]])
     return a, b, np.nan_to_num(resid), h
@@ -379,7 +380,7 @@ def _starts(sub, u, y, ranges):
             if not np.isfinite(v).all():
                 continue
             h = _high_order(y.size, 0, max(sub.nc, sub.nd))
-            _, ehat, _ = regress(v, [(v, range(1, h + 1))], ranges, h)
+            _, ehat = regress_start(v, [(v, range(1, h + 1))], ranges, h)
             ehat = np.nan_to_num(ehat)
             d, c, _ = _hannan_rissanen(v, ehat, sub.nd, sub.nc, [], ranges,
                                        h + max(sub.nc, sub.nd))
@@ -538,8 +539,6 @@ def _sensitivities(sub, theta, x0, v, ranges, estimate_x0):
         if estimate_x0:
             J[a:b, e * n:(e + 1) * n] = Je[:, 0, d:]
     return yhat, J
-
-
 
 
 @serial_blas
