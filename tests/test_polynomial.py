@@ -379,3 +379,33 @@ def test_output_error_search_with_its_jacobian_in_pieces_gives_the_same_model(
     for name in ("B", "F"):
         np.testing.assert_allclose(pieced.info["polynomials"][name],
                                    whole.info["polynomials"][name], rtol=1e-6, atol=1e-9)
+
+
+@pytest.mark.parametrize("method", ["arx", "armax", "oe", "bj"])
+def test_the_orders_a_default_call_chose_passed_back_give_its_model(method):
+    """``f(data, model.info['orders'])`` (a dict of the structure's orders) reproduces the
+    default model ``f(data)``, as ``order=model.order, horizon=...`` does for the subspace
+    methods; so does the tuple of those arrays (ARMAX's ``na`` an (ny, ny) array that is
+    zero off its diagonal, as the dict holds it)."""
+    true = subid.systems.random_system(3, 2, 2, seed=41)
+    data = subid.systems.simulate_data(true, 1200, seed=42, output_snr_db=25)
+    f = getattr(subid, method)
+    model = f(data)
+    orders = model.info["orders"]
+    names = subid.methods.dt.polynomial.ORDER_NAMES[method]
+    assert set(orders) == set(names)
+    again = f(data, orders)
+    again_tuple = f(data, tuple(orders[k] for k in names))
+    for other in (again, again_tuple):
+        for name in ("A", "B", "C", "D"):
+            np.testing.assert_array_equal(getattr(other, name), getattr(model, name))
+        assert other.info["order_selection"] == {"rule": "given"}
+
+
+def test_orders_that_do_not_fit_the_structure_are_refused():
+    data = subid.systems.simulate_data(subid.systems.random_system(2, 1, 2, seed=3), 400,
+                                       seed=4, output_snr_db=30)
+    with pytest.raises(subid.errors.OrderError, match="exactly the keys na, nb, nc, nk"):
+        subid.armax(data, {"na": 2, "nb": 2, "nk": 1})
+    with pytest.raises(subid.errors.OrderError, match="couples the outputs"):
+        subid.armax(data, ([[2, 1], [0, 2]], 2, 2, 1))

@@ -555,11 +555,13 @@ def armax(data, order=None, *, selection="cv", estimate_x0=True, max_iterations=
     ----------
     data : IOData
         Uniformly sampled record with at least one input.
-    order : tuple, int, 'auto' or None
+    order : tuple, dict, int, 'auto' or None
         MATLAB's ``(na, nb, nc, nk)``: ``na``, ``nc`` scalars or one per
         output, ``nb``, ``nk`` scalars or (ny, nu) arrays. An integer ``n``:
         ``na = nc = n``, ``nk`` from :func:`subid.estimate_delay`, ``nb = n``
-        (``n + 1`` where ``nk = 0``). None/'auto': see ``selection``.
+        (``n + 1`` where ``nk = 0``). None/'auto': see ``selection``. A
+        dict of them by name (``model.info['orders']``) reproduces the
+        structure of ``model``.
     selection : {'cv'}
         How a structure not given is chosen: the degrees of the ARX
         structure :func:`subid.arx` chooses by cross-validation.
@@ -617,11 +619,12 @@ def oe(data, order=None, *, selection="cv", estimate_x0=True, max_iterations=100
     ----------
     data : IOData
         Uniformly sampled record with at least one input.
-    order : tuple, int, 'auto' or None
+    order : tuple, dict, int, 'auto' or None
         MATLAB's ``(nb, nf, nk)``, each a scalar or a (ny, nu) array. An
         integer ``n``: ``nf = n``, ``nk`` from :func:`subid.estimate_delay`,
         ``nb = n`` (``n + 1`` where ``nk = 0``). None/'auto': see
-        ``selection``.
+        ``selection``. A dict of them by name (``model.info['orders']``)
+        reproduces the structure of ``model``.
     selection : {'cv'}
         How a structure not given is chosen: the degrees of the ARX
         structure :func:`subid.arx` chooses by cross-validation.
@@ -679,12 +682,13 @@ def bj(data, order=None, *, selection="cv", estimate_x0=True, max_iterations=100
     ----------
     data : IOData
         Uniformly sampled record with at least one input.
-    order : tuple, int, 'auto' or None
+    order : tuple, dict, int, 'auto' or None
         MATLAB's ``(nb, nc, nd, nf, nk)``: ``nc``, ``nd`` scalars or one per
         output, ``nb``, ``nf``, ``nk`` scalars or (ny, nu) arrays. An integer
         ``n``: ``nc = nd = nf = n``, ``nk`` from :func:`subid.estimate_delay`,
         ``nb = n`` (``n + 1`` where ``nk = 0``). None/'auto': see
-        ``selection``.
+        ``selection``. A dict of them by name (``model.info['orders']``)
+        reproduces the structure of ``model``.
     selection : {'cv'}
         How a structure not given is chosen: the degrees of the ARX
         structure :func:`subid.arx` chooses by cross-validation.

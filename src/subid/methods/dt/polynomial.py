@@ -40,6 +40,7 @@ before it, so a long record's regression holds one block, not the matrix and its
 from __future__ import annotations
 
 import numbers
+from collections.abc import Mapping
 
 import numpy as np
 import scipy.linalg
@@ -126,12 +127,26 @@ def _order_array(value, shape, name: str, minimum: int, method: str) -> np.ndarr
     return out
 
 
+def _per_output(value, ny: int, structure: str):
+    """``na`` of a model fitted output by output: one degree per output, or the diagonal
+    of an (ny, ny) array of degrees (``model.info['orders']['na']``) whose other entries
+    are zero."""
+    arr = np.asarray(value, dtype=object)
+    if arr.shape != (ny, ny) or ny == 1:
+        return value
+    if any(arr[i, j] != 0 for i in range(ny) for j in range(ny) if i != j):
+        raise OrderError(f"{structure}: na {value!r} couples the outputs, but {structure} "
+                         f"fits one model per output: give na per output, shape ({ny},)")
+    return np.diagonal(arr)
+
+
 def parse_orders(order, structure: str, ny: int, nu: int, nk_default=None) -> dict:
     """The orders of a polynomial structure from MATLAB's tuple or an integer.
 
     ``order`` is the tuple of :data:`ORDER_NAMES` (each a scalar or an array:
-    ``na`` (ny, ny) for ARX, per output otherwise; ``nb``, ``nf``, ``nk``
-    (ny, nu); ``nc``, ``nd`` per output), or an integer ``n``: every
+    ``na`` (ny, ny) for ARX, per output otherwise (or an (ny, ny) array that is zero
+    off its diagonal); ``nb``, ``nf``, ``nk`` (ny, nu); ``nc``, ``nd`` per output), a
+    dict of them by name (``model.info['orders']``), or an integer ``n``: every
     denominator (and ``C``, ``D``) of degree ``n``, ``nk = nk_default``
     (estimated delays) and ``nb = n``, plus one where ``nk = 0`` (a proper
     numerator), with a diagonal ``A`` for ARX (one autoregression per output).
@@ -164,6 +179,11 @@ def parse_orders(order, structure: str, ny: int, nu: int, nk_default=None) -> di
                 out[key] = n * np.eye(ny, dtype=np.int64) if structure == "arx" else \
                     np.diag(np.full(ny, n, np.int64))
         return out
+    if isinstance(order, Mapping):           # model.info['orders'] of a fitted model
+        if set(order) != set(names):
+            raise OrderError(f"{structure}: a dict of orders needs exactly the keys "
+                             f"{', '.join(names)}, got {', '.join(map(str, order)) or 'none'}")
+        order = tuple(order[k] for k in names)
     try:
         items = list(order)
     except TypeError:
@@ -177,7 +197,8 @@ def parse_orders(order, structure: str, ny: int, nu: int, nk_default=None) -> di
             if structure == "arx":
                 out["na"] = _order_array(value, (ny, ny), key, 0, structure)
             else:
-                out["na"] = np.diag(_order_array(value, (ny,), key, 0, structure))
+                out["na"] = np.diag(_order_array(_per_output(value, ny, structure), (ny,),
+                                                 key, 0, structure))
         elif key in ("nc", "nd"):
             out[key] = _order_array(value, (ny,), key, 0, structure)
         else:
@@ -537,7 +558,7 @@ def arx(data, order=None, *, selection="cv", estimate_x0=True):
     data : IOData
         Uniformly sampled record with at least one input (several
         experiments: :func:`subid.merge`; no regression row spans two).
-    order : tuple, int, 'auto' or None
+    order : tuple, dict, int, 'auto' or None
         MATLAB's ``(na, nb, nk)``: ``na`` a scalar or a (ny, ny) array of the
         degrees of the entries of the matrix polynomial ``A(q)`` (a scalar
         means every entry, as in MATLAB), ``nb`` the number of coefficients
@@ -546,6 +567,8 @@ def arx(data, order=None, *, selection="cv", estimate_x0=True):
         (one autoregression per output), ``nk`` from
         :func:`subid.estimate_delay`, ``nb = n`` (``n + 1`` where ``nk = 0``).
         ``None``/``'auto'``: chosen by cross-validation (module docstring).
+        A dict of them by name (``model.info['orders']``) reproduces the
+        structure of ``model``.
     selection : {'cv'}
         The rule of the structure choice (cross-validation, the rule of the
         subspace defaults).
