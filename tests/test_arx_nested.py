@@ -97,10 +97,10 @@ def test_structure_search_scores_equal_a_fresh_fit_per_candidate():
     score on the held-out part, computed from scratch."""
     data = _mimo(600)
     orders, record = polynomial.select_structure(data, max_order=4)
-    nk = np.array(record["selected"]["nk"])
     parts = [(data[a], data[b]) for a, b in folds(data.n_samples)]
+    assert len(record["delays"]["compared"]) >= 2       # each candidate with its delays
     for cand in record["candidates"]:
-        o = _orders(cand["na"], cand["nb"], nk, data.n_outputs)
+        o = _orders(cand["na"], cand["nb"], np.array(cand["nk"]), data.n_outputs)
         values = []
         for train, validation in parts:
             A, B, _, _ = polynomial.fit_arx(train, o, check=False)

@@ -409,3 +409,28 @@ def test_orders_that_do_not_fit_the_structure_are_refused():
         subid.armax(data, {"na": 2, "nb": 2, "nk": 1})
     with pytest.raises(subid.errors.OrderError, match="couples the outputs"):
         subid.armax(data, ([[2, 1], [0, 2]], 2, 2, 1))
+
+
+def test_the_structure_search_compares_the_delays_too(monkeypatch):
+    """An ARX system with one sample of delay whose delay estimate says three (as
+    estimate_delay overstated DaISy steamgen's): the cross-validation compares the
+    estimate with none and one sample on every input and keeps one; the record lists the
+    delays compared, each candidate its own."""
+    from subid.methods.dt import polynomial
+    rng = np.random.default_rng(5)
+    u = rng.standard_normal((3000, 1))
+    e = 0.1 * rng.standard_normal(3000)
+    y = np.zeros(3000)
+    for t in range(2, 3000):
+        y[t] = 1.5 * y[t - 1] - 0.7 * y[t - 2] + u[t - 1, 0] + 0.5 * u[t - 2, 0] + e[t]
+    data = subid.IOData(u, y[:, None], dt=1.0)
+    monkeypatch.setattr(polynomial, "_delays", lambda d: np.array([3]))
+    model = subid.arx(data)
+    record = model.info["order_selection"]
+    assert record["delays"] == {"estimated": [3], "compared": [[3], [0], [1]]}
+    assert record["selected"]["nk"] == [1]
+    assert model.info["orders"]["nk"].tolist() == [[1]]
+    assert {tuple(c["nk"]) for c in record["candidates"]} == {(3,), (0,), (1,)}
+    # an estimate of one sample is compared with none only
+    monkeypatch.setattr(polynomial, "_delays", lambda d: np.array([1]))
+    assert subid.arx(data).info["order_selection"]["delays"]["compared"] == [[1], [0]]
