@@ -182,3 +182,50 @@ def test_decrement_tolerance_stops_the_iteration():
                                                      decrement_tol=1e-6 * full.cost)
     assert quick.status == 5 and quick.nfev < full.nfev
     assert 0.0 <= quick.cost - full.cost < 1e-6 * full.cost
+
+
+def _rosenbrock():
+    def fun(x):
+        return np.array([10.0 * (x[1] - x[0] ** 2), 1.0 - x[0]])
+
+    def jac(x):
+        return np.array([[-20.0 * x[0], 10.0], [-1.0, 0.0]])
+    return fun, jac, np.array([-1.2, 1.0])
+
+
+def test_stall_tolerance_stops_a_crawl_where_the_budget_would_buy_little():
+    """stall_tol: status 6 at the first accepted step after which the decrease per
+    evaluation of the last STALL_STEPS accepted steps, times the evaluations left, is
+    below it; the iterate is the one the plain iteration holds after as many
+    evaluations (the same path, stopped early); never without stall_tol."""
+    fun, jac, x0 = _rosenbrock()
+    options = {"ftol": 1e-15, "xtol": 1e-15, "gtol": 1e-15, "max_nfev": 200}
+    plain = _trust_region.trust_region_least_squares(fun, jac, x0, **options)
+    assert plain.status != 6
+    costs = []
+
+    def counted(x):
+        f = fun(x)
+        costs.append(0.5 * float(f @ f))
+        return f
+    stalled = _trust_region.trust_region_least_squares(counted, jac, x0, stall_tol=1e2,
+                                                       **options)
+    assert stalled.status == 6 and stalled.nfev < plain.nfev
+    assert "stall_tol" in stalled.message
+    again = _trust_region.trust_region_least_squares(fun, jac, x0, **dict(
+        options, max_nfev=stalled.nfev))
+    np.testing.assert_array_equal(stalled.x, again.x)
+    # the rule, recomputed from the evaluations: the accepted steps are the new lows
+    accepted, low = [], costs[0]
+    for k, c in enumerate(costs[1:], start=2):
+        if c < low:
+            accepted.append((low - c, k))
+            low = c
+    steps = _trust_region.STALL_STEPS
+
+    def stops(i):                     # after accepted step i (0-based)
+        recent = accepted[i - steps + 1:i + 1]
+        rate = sum(r for r, _ in recent) / (accepted[i][1] - accepted[i - steps][1])
+        return rate * (options["max_nfev"] - accepted[i][1]) < 1e2
+    first = next(i for i in range(steps, len(accepted)) if stops(i))
+    assert accepted[first][1] == stalled.nfev

@@ -112,7 +112,7 @@ def block_jacobian(mats, v, x0, dirs, blocks, dm, *, final_state=False):
 
 def minimise_prediction_error(predictor, directions, dm, x0, v, y, ranges, W, max_nfev,
                               tolerance, history, penalty, fit_x0=True, blocks=None,
-                              decrement_tol=0.0):
+                              decrement_tol=0.0, stall_tol=0.0):
     """Minimise ``1/(2N) sum ||W (y - ŷ)||^2`` over ``dm`` model coordinates and the
     initial states.
 
@@ -135,7 +135,8 @@ def minimise_prediction_error(predictor, directions, dm, x0, v, y, ranges, W, ma
     the cost. ``decrement_tol`` (optional): stop where the Gauss-Newton step
     predicts a decrease of the criterion below it
     (:func:`subid.methods.dt._trust_region.trust_region_least_squares`;
-    :func:`statistical_precision`).
+    :func:`statistical_precision`); ``stall_tol`` (optional): stop where the evaluations
+    left would, at the rate of the last steps, decrease it by less.
 
     Returns
     -------
@@ -250,6 +251,7 @@ def minimise_prediction_error(predictor, directions, dm, x0, v, y, ranges, W, ma
         res = _trust_region.trust_region_least_squares(
             fun, jac, z0, ftol=tolerance, xtol=tolerance, gtol=tolerance, max_nfev=max_nfev,
             **({"decrement_tol": decrement_tol} if decrement_tol > 0 else {}),
+            **({"stall_tol": stall_tol} if stall_tol > 0 else {}),
             **({"compressed": compressed} if pieced else {}))
     return res.x, res
 

@@ -47,6 +47,8 @@ MESSAGES = {
     3: "`xtol` termination condition is satisfied.",
     4: "Both `ftol` and `xtol` termination conditions are satisfied.",
     5: "the Gauss-Newton decrement is below `decrement_tol` (statistical precision).",
+    6: "the evaluations left would decrease the criterion by less than `stall_tol` "
+       "(statistical precision) at the rate of the last steps.",
 }
 
 
@@ -226,8 +228,13 @@ def compress_pieces(pieces, f, p, *, householder=False):
     return Ra[:p, :p], Ra[:p, p], out[2], out[3], "qr"
 
 
+#: Accepted steps over which :func:`trust_region_least_squares` measures its rate of
+#: progress for ``stall_tol``.
+STALL_STEPS = 5
+
+
 def trust_region_least_squares(fun, jac, x0, *, ftol, xtol, gtol, max_nfev, exact=False,
-                               decrement_tol=0.0, compressed=None):
+                               decrement_tol=0.0, stall_tol=0.0, compressed=None):
     """Minimise ``0.5 ||fun(x)||^2`` as :func:`scipy.optimize.least_squares` with
     ``method='trf'``, ``tr_solver='exact'``, ``x_scale='jac'`` and no bounds
     does, on the compressed Jacobian (module docstring).
@@ -252,6 +259,13 @@ def trust_region_least_squares(fun, jac, x0, *, ftol, xtol, gtol, max_nfev, exac
         step predicts, ``J = U diag(s) V^T``) is below this; 0 (default): scipy's
         tests alone. :func:`subid.identify` sets it from the statistical
         precision of the criterion (:func:`subid.methods.dt._pe_search.statistical_precision`).
+    stall_tol : float
+        Stop (status 6) after an accepted step when the decrease of ``0.5 ||f||^2`` per
+        evaluation over the last :data:`STALL_STEPS` accepted steps, times the
+        evaluations left (``max_nfev - nfev``), is below this: what the rest of the
+        budget would still buy at the current rate (a search crawling along a flat
+        valley, e.g. the near-cancelling noise polynomials of an over-parametrised
+        Box-Jenkins model). 0 (default): never.
     compressed : callable, optional
         ``compressed(x, f) -> (R, Q^T f, J^T f, column norms of J, route)``, what
         :func:`compress` gives for the Jacobian at ``x`` and the residual ``f`` there,
@@ -293,6 +307,7 @@ def trust_region_least_squares(fun, jac, x0, *, ftol, xtol, gtol, max_nfev, exac
     Delta = float(np.linalg.norm(x * scale_inv)) or 1.0
     alpha = 0.0
     status = None
+    progress = []                        # (reduction, evaluations) of the accepted steps
     while True:
         g_norm = float(np.linalg.norm(g, ord=np.inf))
         if g_norm < gtol:
@@ -333,6 +348,12 @@ def trust_region_least_squares(fun, jac, x0, *, ftol, xtol, gtol, max_nfev, exac
             Delta = Delta_new
         if actual_reduction > 0:
             x, f, cost = x_new, f_new, cost_new
+            progress.append((actual_reduction, nfev))
+            if status is None and stall_tol > 0 and len(progress) > STALL_STEPS:
+                recent = progress[-STALL_STEPS:]
+                rate = sum(r for r, _ in recent) / (nfev - progress[-STALL_STEPS - 1][1])
+                if rate * (max_nfev - nfev) < stall_tol:
+                    status = 6
             njev += 1
             R, qtf, g, norms, _ = factor(x, f)
             scale_inv = np.maximum(norms, scale_inv)

@@ -42,6 +42,21 @@ sensitivity loop of :func:`subid.pem` and the same trust-region search
 predictor's initial state among the parameters. A trial with an unstable
 predictor is rejected; the result never has a larger criterion than its
 start (the start is kept when nothing improves).
+
+Stop: scipy's tolerances (``tolerance``), the budget (``max_iterations``
+evaluations), or a stall: once the evaluations left would, at the rate of the last
+five accepted steps, decrease the criterion by less than a tenth of its statistical
+scale ``d / (2N)`` (:data:`STALL_PRECISION`; ``d`` parameters, ``N`` samples, the
+criterion whitened by the start's residual variance: the expected excess of the
+criterion at the true parameters over its minimum, Ljung 1999, Sec. 9.2), the search
+ends where it is (``info['stop_reason']`` says so). An over-parametrised noise model
+(``C`` and ``D`` of a Box-Jenkins model nearly cancelling on white noise) leaves a flat
+valley along which the search crawled to its budget: ``bj(data, (3, 3, 3, 3, 0))`` on
+10^4 samples of a 2 x 2 system stops after 10 evaluations per output instead of 100,
+0.2 s instead of 1.7, the same validation fit to 0.001 points; the DaISy defaults of
+``oe``, ``armax`` and ``bj`` 104 -> 49 CPU s in all, their validation fits within 0.2
+points but steamgen's ``armax`` (74.9 -> 74.3) and glassfurnace's ``oe`` (54.2 ->
+54.8); the Monte Carlo medians of ``tests/test_polynomial.py`` unchanged.
 """
 
 from __future__ import annotations
@@ -63,6 +78,7 @@ from subid.methods.dt._pe_search import (
     _start_x0,
     block_jacobian,
     minimise_prediction_error,
+    statistical_precision,
 )
 from subid.methods.dt._poly_covariance import attach_covariance
 from subid.methods.dt.polynomial import (
@@ -82,6 +98,11 @@ __all__ = ["armax", "oe", "bj"]
 
 #: Largest order of the high-order ARX model behind the starts.
 HIGH_ORDER = 50
+#: A search stops once the evaluations it has left would, at the rate of its last steps,
+#: decrease the criterion by less than this fraction of its statistical scale ``d / (2N)``
+#: (:func:`subid.methods.dt._pe_search.statistical_precision`; the ``stall_tol`` of
+#: :func:`subid.methods.dt._trust_region.trust_region_least_squares`).
+STALL_PRECISION = 0.1
 #: Root radius the start's C, D, F are pulled within.
 START_RADIUS = 0.99
 
@@ -412,11 +433,13 @@ def _fit_output(sub, u, y, ranges, *, estimate_x0, max_iterations, tolerance):
     W = np.array([[1.0 / sigma]])
     history = []
     penalty = math.sqrt(2.0 * (10.0 * 0.5 + 1.0) / y.size)    # cost 10x the start's + 1
+    d = sub.size + (x00.size if estimate_x0 else 0)
+    stall = statistical_precision(d, y.size, STALL_PRECISION)
     z, res = minimise_prediction_error(lambda dz: sub.predictor(theta0 + dz),
                                        lambda dz: sub.directions(theta0 + dz), sub.size, x00, v,
                                        y[:, None], ranges, W, max_iterations, tolerance,
                                        history, penalty, fit_x0=estimate_x0,
-                                       blocks=sub.blocks())
+                                       blocks=sub.blocks(), stall_tol=stall)
     record["n_evaluations"] = int(res.nfev)
     new_cost = float(res.cost) * sigma ** 2
     if new_cost < cost0:
