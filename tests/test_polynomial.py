@@ -459,3 +459,19 @@ def test_a_search_crawling_along_a_flat_valley_stops_before_its_budget(monkeypat
     assert 0.0 <= excess < 0.2 * scale, (excess, scale)
     assert subid.fit_percent(quick, val)[0] == pytest.approx(
         subid.fit_percent(full, val)[0], abs=0.01)
+
+
+def test_an_integer_order_estimates_the_delays_on_the_part_the_search_reads(monkeypatch):
+    """``oe(data, 2)`` takes nk from estimate_delay on at most the record's last
+    MAX_SELECTION_SAMPLES samples, as the structure search does (on 10^6 samples the whole
+    record cost 0.75 GB of regressors); the model is fitted to the whole record."""
+    from subid.methods.dt import polynomial
+    seen = []
+    real = polynomial._delays
+    monkeypatch.setattr(polynomial, "_delays", lambda d: seen.append(d.n_samples) or real(d))
+    monkeypatch.setattr(polynomial, "MAX_SELECTION_SAMPLES", 900)
+    data = subid.systems.simulate_data(subid.systems.random_system(2, 1, 1, seed=7), 2000,
+                                       seed=8, output_snr_db=30)
+    model = subid.oe(data, 2)
+    assert seen == [900]
+    assert model.info["n_samples"] == 2000

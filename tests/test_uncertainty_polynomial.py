@@ -253,3 +253,45 @@ def test_coefficient_factor_is_the_sandwich_of_the_outputs_least_squares(shared,
     cov = np.block([[lam[i, j] * (pinv[i] @ pinv[j].T)[n1:, n1:] for j in range(2)]
                     for i in range(2)])
     np.testing.assert_allclose(F @ F.T, cov, rtol=1e-9, atol=1e-14)
+
+
+@pytest.mark.parametrize("method", ["armax", "oe", "bj"])
+def test_the_covariance_from_gram_blocks_in_pieces_equals_the_whole_designs_one(
+        method, monkeypatch):
+    """armax, oe, bj on two outputs and two experiments, at the fitted model: the
+    coefficient covariance from the designs' Gram blocks summed over pieces of 301
+    samples (every output at the same samples, each kernel continuing where its last
+    piece ended) equals that of the whole designs on the Gram route and on the QR route
+    (GRAM_PIVOT above 1), and the residuals those of the whole designs' predictions."""
+    from subid.methods.dt import _pe_search, _trust_region, pem_poly
+    from subid.methods.dt._poly_covariance import (
+        coefficient_factor,
+        coefficient_factor_from_grams,
+    )
+    true = subid.systems.random_system(3, 2, 2, seed=51)
+    data = subid.merge([subid.systems.simulate_data(true, 1400, seed=s, output_snr_db=25)
+                        for s in (52, 53)])
+    order = {"armax": (2, 2, 2, 1), "oe": (2, 2, 1), "bj": (2, 1, 1, 2, 1)}[method]
+    real, seen = pem_poly._covariance_pass, []
+    monkeypatch.setattr(pem_poly, "_covariance_pass",
+                        lambda fitted, *a: seen.append(fitted) or real(fitted, *a))
+    model = getattr(subid, method)(data, order)
+    (fitted,) = seen
+    monkeypatch.setattr(_pe_search, "JACOBIAN_PIECE_BYTES", 8 * 301 * 30)
+    resid, grams, widths = real(fitted, data, True)
+    designs = [pem_poly._sensitivities(sub, theta, x0, np.hstack([data.u, data.y[:, [i]]]),
+                                       data.experiment_ranges, True)
+               for i, (sub, theta, x0) in enumerate(fitted)]
+    np.testing.assert_allclose(resid, data.y - np.column_stack([d[0] for d in designs]),
+                               rtol=0, atol=1e-12 * np.abs(data.y).max())
+    n1 = [w - sub.size for w, (sub, _, _) in zip(widths, fitted)]
+    F, lam = coefficient_factor_from_grams(grams, widths, resid, n1)
+    F_gram, lam_gram = coefficient_factor([d[1] for d in designs], resid, n1)
+    monkeypatch.setattr(_trust_region, "GRAM_PIVOT", 2.0)
+    F_qr, _ = coefficient_factor([d[1] for d in designs], resid, n1)
+    for other in (F_gram, F_qr):
+        np.testing.assert_allclose(F @ F.T, other @ other.T, rtol=1e-8,
+                                   atol=1e-12 * np.abs(other @ other.T).max())
+    np.testing.assert_array_equal(lam, lam_gram)
+    np.testing.assert_allclose(model.info["parameter_covariance"]["coefficient_factor"], F,
+                               rtol=1e-9, atol=1e-12 * np.abs(F).max())

@@ -52,7 +52,7 @@ from subid.methods.dt._covariance import RANK_TOLERANCE
 from subid.methods.dt._trust_region import gram_factor
 from subid.model.polynomial import coefficient_slots, coefficients, realisation_jacobian
 
-__all__ = ["coefficient_factor", "attach_covariance"]
+__all__ = ["coefficient_factor", "coefficient_factor_from_grams", "attach_covariance"]
 
 
 def _psd_sqrt(lam: np.ndarray) -> np.ndarray:
@@ -89,26 +89,23 @@ def coefficient_factor(designs, residuals, n_nuisance):
         The residual covariance ``Λ`` used.
     """
     N, ny = residuals.shape
-    dofs = np.array([max(N - J.shape[1], 1) for J in designs], dtype=float)
-    lam = residuals.T @ residuals / np.sqrt(np.outer(dofs, dofs))
-    q_parts, inverses, scales, grams = [], [], [], []
+    lam = _noise_covariance(residuals, [J.shape[1] for J in designs])
+    q_parts, parts, grams = [], [], []
     done = {}       # a design shared by several outputs (ARX: the same regressors) once
     # one design for every output (ARX): Q2_i^T Q2_j = I for every pair, so only R is
     # formed (the thin Q of a long record's regressors is the largest array here)
     shared = len({(id(J), n1) for J, n1 in zip(designs, n_nuisance)}) == 1
     for J, n1 in zip(designs, n_nuisance):
         if (id(J), n1) in done:
-            q, inverse, scale, gram = done[(id(J), n1)]
+            q, part, gram = done[(id(J), n1)]
             q_parts.append(q)
-            inverses.append(inverse)
-            scales.append(scale)
+            parts.append(part)
             grams.append(gram)
             continue
         scale = np.sqrt(np.einsum("ij,ij->j", J, J))
         if J.shape[1] == n1:
             q_parts.append(np.zeros((N, 0)))
-            inverses.append(np.zeros((0, 0)))
-            scales.append(np.zeros(0))
+            parts.append(_NO_COEFFICIENTS)
             grams.append(None)
             continue
         if not (np.isfinite(scale).all() and scale.min() > 0):
@@ -123,41 +120,113 @@ def coefficient_factor(designs, residuals, n_nuisance):
                 R = np.linalg.qr(Js, mode="r")
             else:
                 Q, R = np.linalg.qr(Js)
-        diag = np.abs(np.diag(R))
-        if diag.min() <= RANK_TOLERANCE * diag.max():
+        part = _part(R, n1, scale)
+        if part is None:
             return None, lam
-        R22 = R[n1:, n1:]
         q_parts.append(None if Q is None else Q[:, n1:])
+        parts.append(part)
         grams.append((Js, R, n1))
-        inverses.append(scipy.linalg.solve_triangular(R22, np.eye(R22.shape[0]),
-                                                      check_finite=False))
-        scales.append(scale[n1:])
-        done[(id(J), n1)] = (q_parts[-1], inverses[-1], scales[-1], grams[-1])
-    # M: row block k (noise component w_k), column block i: L_ik Q2_i (L L^T = Λ), and
-    # R_M its triangular factor. Its Gram matrix G = R_M^T R_M has the blocks
-    # Λ_ij Q2_i^T Q2_j, Q2_i^T Q2_i = I: conditioned as Λ, so a square root of G (its
-    # Cholesky factor; where Λ is singular, by eigenvalues) serves as R_M^T (the factor
-    # F F^T sees only R_M^T R_M) without M, 2 ny^2 N d numbers (10^6 samples of two
-    # outputs: 0.86 GB of the covariance step)
+        done[(id(J), n1)] = (q_parts[-1], parts[-1], grams[-1])
+
     def cross(i, j):
         """``Q2_i^T Q2_j``: from the thin Q factors, or, where Q was not formed
         (``J_i = Q_i R_i``), the trailing block of ``R_i^-T J_i^T J_j R_j^-1``."""
         if shared or i == j:
-            return np.eye(inverses[i].shape[0])
+            return np.eye(parts[i][0].shape[0])
         if q_parts[i] is not None and q_parts[j] is not None:
             return q_parts[i].T @ q_parts[j]
         if grams[i] is None or grams[j] is None:        # an output without coefficients
-            return np.zeros((inverses[i].shape[0], inverses[j].shape[0]))
+            return np.zeros((parts[i][0].shape[0], parts[j][0].shape[0]))
         (Ji, Ri, ni), (Jj, Rj, nj) = grams[i], grams[j]
-        C = scipy.linalg.solve_triangular(Ri, Ji.T @ Jj, trans="T", check_finite=False)
-        return scipy.linalg.solve_triangular(Rj, C.T, trans="T", check_finite=False).T[ni:, nj:]
+        return _cross(Ri, Ji.T @ Jj, Rj, ni, nj)
+    return _assemble(lam, parts, cross), lam
+
+
+def coefficient_factor_from_grams(grams, widths, residuals, n_nuisance):
+    """:func:`coefficient_factor` from the designs' Gram blocks ``grams[(i, j)] = J_i^T
+    J_j`` (``i <= j``; every pair of outputs with coefficients), summed by the caller
+    over pieces of the record, so that no design is held whole: the Gram route of
+    :func:`coefficient_factor` (the same factor to rounding). ``widths``: the columns of
+    each design. Returns ``(None, Λ)`` where a design's column-scaled Gram matrix fails
+    :func:`subid.methods.dt._trust_region.gram_factor` or is rank deficient: the caller
+    then forms the designs whole for :func:`coefficient_factor` (its QR route)."""
+    lam = _noise_covariance(residuals, widths)
+    parts, factors = [], []
+    for i, (width, n1) in enumerate(zip(widths, n_nuisance)):
+        if width == n1:
+            parts.append(_NO_COEFFICIENTS)
+            factors.append(None)
+            continue
+        G = grams[(i, i)]
+        scale = np.sqrt(np.maximum(np.diag(G), 0.0))
+        if not (np.isfinite(G).all() and scale.min() > 0):
+            return None, lam
+        R = gram_factor(G / scale[:, None] / scale[None, :])
+        part = None if R is None else _part(R, n1, scale)
+        if part is None:
+            return None, lam
+        parts.append(part)
+        factors.append((R, scale, n1))
+
+    def cross(i, j):
+        if i == j:
+            return np.eye(parts[i][0].shape[0])
+        if factors[i] is None or factors[j] is None:
+            return np.zeros((parts[i][0].shape[0], parts[j][0].shape[0]))
+        (Ri, si, ni), (Rj, sj, nj) = factors[i], factors[j]
+        Gij = grams[(i, j)] if i < j else grams[(j, i)].T
+        return _cross(Ri, Gij / si[:, None] / sj[None, :], Rj, ni, nj)
+    return _assemble(lam, parts, cross), lam
+
+
+#: The part (inverse of R22, scales) of an output without coefficients.
+_NO_COEFFICIENTS = (np.zeros((0, 0)), np.zeros(0))
+
+
+def _noise_covariance(residuals, widths):
+    """``Λ_ik = e_i^T e_k / sqrt((N - d_i)(N - d_k))``, each output's degrees of freedom
+    those of its design's ``widths`` columns."""
+    N = residuals.shape[0]
+    dofs = np.array([max(N - w, 1) for w in widths], dtype=float)
+    return residuals.T @ residuals / np.sqrt(np.outer(dofs, dofs))
+
+
+def _part(R, n1, scale):
+    """``(R22^-1, the coefficients' column scales)`` of an output whose scaled design has
+    the triangular factor ``R`` (nuisance columns first), or None when R is rank
+    deficient."""
+    diag = np.abs(np.diag(R))
+    if diag.min() <= RANK_TOLERANCE * diag.max():
+        return None
+    R22 = R[n1:, n1:]
+    return (scipy.linalg.solve_triangular(R22, np.eye(R22.shape[0]), check_finite=False),
+            scale[n1:])
+
+
+def _cross(Ri, Gij, Rj, ni, nj):
+    """The trailing block of ``R_i^-T G_ij R_j^-1`` (``Q2_i^T Q2_j`` for ``J_i = Q_i R_i``
+    with ``G_ij = J_i^T J_j``)."""
+    C = scipy.linalg.solve_triangular(Ri, Gij, trans="T", check_finite=False)
+    return scipy.linalg.solve_triangular(Rj, C.T, trans="T", check_finite=False).T[ni:, nj:]
+
+
+def _assemble(lam, parts, cross):
+    """The factor from each output's ``(R22^-1, scales)`` and ``cross(i, j) = Q2_i^T Q2_j``.
+
+    M: row block k (noise component w_k), column block i: L_ik Q2_i (L L^T = Λ), and R_M
+    its triangular factor. Its Gram matrix G = R_M^T R_M has the blocks Λ_ij Q2_i^T Q2_j,
+    Q2_i^T Q2_i = I: conditioned as Λ, so a square root of G (its Cholesky factor; where Λ
+    is singular, by eigenvalues) serves as R_M^T (the factor F F^T sees only R_M^T R_M)
+    without M, 2 ny^2 N d numbers (10^6 samples of two outputs: 0.86 GB of the covariance
+    step)."""
+    ny = len(parts)
     G = np.block([[lam[i, j] * cross(i, j) for j in range(ny)] for i in range(ny)])
     R_M = _psd_sqrt(0.5 * (G + G.T)).T
-    factor = scipy.linalg.block_diag(*inverses) @ R_M.T
-    return factor / np.concatenate(scales)[:, None], lam
+    factor = scipy.linalg.block_diag(*[p[0] for p in parts]) @ R_M.T
+    return factor / np.concatenate([p[1] for p in parts])[:, None]
 
 
-def attach_covariance(model, designs, residuals, n_nuisance, method: str):
+def attach_covariance(model, designs, residuals, n_nuisance, method: str, *, factor=None):
     """Write ``info['parameter_covariance']`` of the polynomial ``model`` (in place).
 
     The format of :func:`subid.parameter_covariance` (θ of the realisation,
@@ -165,11 +234,14 @@ def attach_covariance(model, designs, residuals, n_nuisance, method: str):
     ``n_samples``, ``method``) plus the coefficients' own: ``coefficients``,
     ``coefficient_factor`` and ``coefficient_names``
     (:func:`subid.model.polynomial.coefficient_slots`). A rank-deficient
-    design gives ``info['parameter_covariance_note']`` instead.
+    design gives ``info['parameter_covariance_note']`` instead. ``factor``: the
+    ``(F_c, Λ)`` of :func:`coefficient_factor_from_grams`, when the caller has it (then
+    ``designs`` and ``n_nuisance`` are not read).
     """
     poly = model.info["polynomials"]
     info = model.info
-    factor_c, lam = coefficient_factor(designs, residuals, n_nuisance)
+    factor_c, lam = coefficient_factor(designs, residuals, n_nuisance) if factor is None \
+        else factor
     if factor_c is None:
         info["parameter_covariance_note"] = (
             "no parameter covariance: the prediction-error Jacobian (for ARX the "

@@ -70,6 +70,7 @@ from subid._blas import serial_blas
 from subid._validation import check_bool, check_choice, check_optimiser_options, checked_call
 from subid.errors import SubidError
 from subid.methods._info import collect_warnings
+from subid.methods.dt import _pe_search
 from subid.methods.dt._arx_nested import check_samples
 from subid.methods.dt._pe_search import (
     _predictor,
@@ -80,7 +81,7 @@ from subid.methods.dt._pe_search import (
     minimise_prediction_error,
     statistical_precision,
 )
-from subid.methods.dt._poly_covariance import attach_covariance
+from subid.methods.dt._poly_covariance import attach_covariance, coefficient_factor_from_grams
 from subid.methods.dt.polynomial import (
     ORDER_NAMES,
     SELECTIONS,
@@ -493,8 +494,7 @@ def _identify(structure, data, order, selection, estimate_x0, max_iterations, to
     with collect_warnings() as issued:
         orders, selection_record = structure_orders(order, structure, data)
         ranges = data.experiment_ranges
-        records, fits, resid = [], [], np.empty_like(data.y)
-        designs, n_nuisance = [], []
+        records, fits, fitted = [], [], []
         for i in range(ny):
             sub = _Output(structure, orders, i, nu)
             first = max(sub.na, sub.lb - 1, max(sub.nf), sub.nc, sub.nd)
@@ -511,11 +511,15 @@ def _identify(structure, data, order, selection, estimate_x0, max_iterations, to
                                          max_iterations=max_iterations, tolerance=tolerance)
             records.append(sub.record(theta))
             fits.append(fit)
-            v = np.hstack([data.u, data.y[:, i:i + 1]])
-            yhat, J = _sensitivities(sub, theta, x0, v, ranges, estimate_x0)
-            resid[:, i] = data.y[:, i] - yhat
-            designs.append(J)
-            n_nuisance.append(J.shape[1] - sub.size)
+            fitted.append((sub, theta, x0))
+        resid, grams, widths = _covariance_pass(fitted, data, estimate_x0)
+        n_nuisance = [w - sub.size for w, (sub, _, _) in zip(widths, fitted)]
+        factor, designs = coefficient_factor_from_grams(grams, widths, resid, n_nuisance), None
+        if factor[0] is None:            # the QR route (or a rank deficiency): designs whole
+            designs = [_sensitivities(sub, theta, x0, np.hstack([data.u, data.y[:, i:i + 1]]),
+                                      ranges, estimate_x0)[1]
+                       for i, (sub, theta, x0) in enumerate(fitted)]
+            factor = None
         poly = _stack(records, structure, orders)
         model = polynomial_model(
             data, poly, method=structure, order_selection=selection_record, residuals=resid,
@@ -531,17 +535,20 @@ def _identify(structure, data, order, selection, estimate_x0, max_iterations, to
                           "asymptotic prediction-error covariance lambda (sum psi psi^T)^-1 "
                           "per output (Ljung 1999, Theorem 9.1), the predictors' initial "
                           "states eliminated, with the outputs' cross-covariances; mapped "
-                          "to the realisation's matrices")
+                          "to the realisation's matrices", factor=factor)
         if not estimate_x0:
             model.info["x0"] = None
     model.info["warnings"] = list(issued)
     return model
 
 
-def _sensitivities(sub, theta, x0, v, ranges, estimate_x0):
-    """``(ŷ, J)`` of output ``sub`` at ``theta``: the one-step prediction (N,) and its
-    derivatives (N, n_x0 + sub.size), the initial states' columns first (one block
-    per experiment; none when they are not estimated), then the coefficients'."""
+def _design_pieces(sub, theta, x0, v, ranges, estimate_x0, rows=None):
+    """``(a, b, ŷ[a:b], J[a:b])`` of output ``sub`` at ``theta``, in order over the
+    record, at most ``rows`` samples a piece (default: one piece per experiment): the
+    one-step prediction and its derivatives, the initial states' columns first (one
+    block per experiment; none when they are not estimated), then the coefficients'.
+    Each piece's kernel continues from the state and sensitivities where the last one
+    ended."""
     mats = [np.ascontiguousarray(a) for a in sub.predictor(theta)]
     dirs = [np.ascontiguousarray(a) for a in sub.directions(theta)]
     d = sub.size
@@ -549,19 +556,54 @@ def _sensitivities(sub, theta, x0, v, ranges, estimate_x0):
     n_x0 = len(ranges) * n if estimate_x0 else 0
     x0 = np.asarray(x0, dtype=float).reshape(len(ranges), n)
     blocks = sub.blocks()
-    yhat = np.empty(v.shape[0])
-    J = np.zeros((v.shape[0], n_x0 + d))
     for e, (a, b) in enumerate(ranges):
-        ve, xe = np.ascontiguousarray(v[a:b]), np.ascontiguousarray(x0[e])
-        if blocks is None:
-            ye, Je = jacobian(*mats, ve, xe, *dirs)
-        else:
-            ye, Je = block_jacobian(mats, ve, xe, dirs, blocks, d)
-        yhat[a:b] = ye[:, 0]
-        J[a:b, n_x0:] = Je[:, 0, :d]
-        if estimate_x0:
-            J[a:b, e * n:(e + 1) * n] = Je[:, 0, d:]
-    return yhat, J
+        x, S = np.ascontiguousarray(x0[e]), dirs[4]
+        for s in range(a, b, max(b - a if rows is None else int(rows), 1)):
+            t = b if rows is None else min(s + int(rows), b)
+            ve = np.ascontiguousarray(v[s:t])
+            if blocks is None:
+                ye, Je, x, S = jacobian(*mats[:4], ve, x, *dirs[:4], S, final_state=True)
+            else:
+                ye, Je, x, S = block_jacobian(mats, ve, x, dirs[:4] + [S], blocks, d,
+                                              final_state=True)
+            J = np.zeros((t - s, n_x0 + d))
+            J[:, n_x0:] = Je[:, 0, :d]
+            if estimate_x0:
+                J[:, e * n:(e + 1) * n] = Je[:, 0, d:]
+            yield s, t, ye[:, 0], J
+
+
+def _sensitivities(sub, theta, x0, v, ranges, estimate_x0):
+    """``(ŷ, J)`` of output ``sub`` at ``theta`` over the whole record
+    (:func:`_design_pieces` joined)."""
+    pieces = list(_design_pieces(sub, theta, x0, v, ranges, estimate_x0))
+    return np.concatenate([p[2] for p in pieces]), np.concatenate([p[3] for p in pieces])
+
+
+def _covariance_pass(fitted, data, estimate_x0):
+    """The residuals (N, ny) of the outputs' fitted predictors and the Gram blocks
+    ``J_i^T J_j`` of their designs (:func:`_design_pieces`), the designs formed a piece
+    of at most :data:`subid.methods.dt._pe_search.JACOBIAN_PIECE_BYTES` per output at a
+    time, every output at the same samples: the covariance of a long record without its
+    designs whole (:func:`subid.methods.dt._poly_covariance.coefficient_factor_from_grams`;
+    at 10^6 samples of a 2 x 2 ``armax`` model they were 0.5 GB). ``fitted``: ``(sub,
+    theta, x0)`` per output. Returns ``(residuals, grams, widths)``."""
+    ranges = data.experiment_ranges
+    ny = data.n_outputs
+    widths = [sub.size + (len(ranges) * sub.predictor(theta)[0].shape[0] if estimate_x0
+                          else 0) for sub, theta, _ in fitted]
+    rows = max(1, int(_pe_search.JACOBIAN_PIECE_BYTES // (8 * max(widths))))
+    resid = np.empty_like(data.y)
+    grams = {(i, j): np.zeros((widths[i], widths[j])) for i in range(ny) for j in range(i, ny)}
+    streams = [_design_pieces(sub, theta, x0, np.hstack([data.u, data.y[:, i:i + 1]]),
+                              ranges, estimate_x0, rows)
+               for i, (sub, theta, x0) in enumerate(fitted)]
+    for pieces in zip(*streams):
+        for i, (a, b, yh, J) in enumerate(pieces):
+            resid[a:b, i] = data.y[a:b, i] - yh
+            for j in range(i, ny):
+                grams[(i, j)] += J.T @ pieces[j][3]
+    return resid, grams, widths
 
 
 @serial_blas
