@@ -129,6 +129,21 @@ def test_estimate_delay_monte_carlo_noisy():
     assert hits >= 0.95 * runs, hits
 
 
+def test_estimate_delay_folds_its_regression_a_block_at_a_time(monkeypatch):
+    """REGRESSION_BYTES small enough for blocks of 83 rows (two experiments, the second
+    shorter than a block): the same losses as the regression factored whole, to
+    rounding, and the same delays."""
+    from subid import delay
+    parts = [_delayed_record([1, 3], n=n, seed=s, snr=10)[1] for n, s in ((700, 1), (60, 2))]
+    data = subid.merge(parts)
+    nk, whole = subid.estimate_delay(data, max_delay=6, return_loss=True)
+    width = 2 * 2 + 2 * (6 + 2) + 2                 # past outputs, input lags, targets
+    monkeypatch.setattr(delay, "REGRESSION_BYTES", 8 * width * 83)
+    nk_blocks, blocks = subid.estimate_delay(data, max_delay=6, return_loss=True)
+    np.testing.assert_allclose(blocks, whole, rtol=1e-10)
+    assert nk_blocks.tolist() == nk.tolist() == [2, 4]
+
+
 def test_models_with_bad_recorded_delay_are_an_error():
     m = _with_delay(subid.systems.seed001_system(), [1])
     with pytest.raises(ModelError, match="2 inputs"):

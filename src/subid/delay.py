@@ -31,11 +31,15 @@ from subid._blas import serial_blas
 from subid._validation import check_int, checked_call
 from subid.data import IOData
 from subid.errors import DataError, ModelError, ResourceLimitError, TooFewSamplesError
+from subid.statistic.hankel import geqrf_r
 
 __all__ = ["estimate_delay", "delay_inputs", "apply_to_inputs", "frequency_factor",
            "absorb_delay", "input_delay_of"]
 
 INFO_KEY = "input_delay"
+#: Past this many bytes of regression rows, :func:`estimate_delay` folds them into its
+#: triangular factor a block at a time.
+REGRESSION_BYTES = 64 * 2**20
 
 
 # ---------------------------------------------------------------------------
@@ -155,8 +159,19 @@ def estimate_delay(data, max_delay: int = 10, *, na: int = 2, nb: int = 2,
         cols += [ue[start - lag:n_e - lag] for lag in range(lags)]    # (rows, nu) each
         return np.hstack(cols + [ye[start:]])
 
-    M = np.vstack([block(u[a:b], y[a:b]) for a, b in ranges])
-    R = scipy.linalg.qr(M, mode="r", check_finite=False)[0][:M.shape[1]]
+    # the triangular factor of the regression, its rows a block at a time past
+    # REGRESSION_BYTES, each block folded into the factor of those before it (the same
+    # factor up to the signs of its rows, which the losses do not see): the memory of a
+    # long record is one block (10^6 samples of a 2 x 2 record held 0.75 GB whole)
+    width = n_cols + ny
+    step = max(2 * width, int(REGRESSION_BYTES // (8 * width)))
+    R = np.zeros((0, width))
+    for a, b in ranges:
+        for s in range(a + start, b, step):
+            t = min(s + step, b)
+            rows_k = block(u[s - start:t], y[s - start:t])
+            R = geqrf_r(np.vstack([R, rows_k]), min(R.shape[0] + t - s, width),
+                        overwrite=True)
     # column index of output/input channels in M
     past_y = list(range(ny * na))
 
