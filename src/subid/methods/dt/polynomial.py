@@ -30,7 +30,7 @@ parameters (the criterion of the subspace defaults,
 defaults, the delays and the folds read at most the record's last
 :data:`~subid.methods.crossval.MAX_SELECTION_SAMPLES` samples (``N`` their number;
 ``info['order_selection']['samples_used']``): ``arx(data)`` on 10^6 samples of a 2 x 2
-system took 22 s, 20 of them in the search (4.7 s now, with the covariance below); the
+system took 22 s, 20 of them in the search (5.0 s now, with the covariance below); the
 model is fitted to the whole record.
 
 The least squares of lagged regressors (:func:`regress`) form them a block of rows at a
