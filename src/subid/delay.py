@@ -31,7 +31,6 @@ from subid._blas import serial_blas
 from subid._validation import check_int, checked_call
 from subid.data import IOData
 from subid.errors import DataError, ModelError, ResourceLimitError, TooFewSamplesError
-from subid.statistic.hankel import geqrf_r
 
 __all__ = ["estimate_delay", "delay_inputs", "apply_to_inputs", "frequency_factor",
            "absorb_delay", "input_delay_of"]
@@ -39,7 +38,7 @@ __all__ = ["estimate_delay", "delay_inputs", "apply_to_inputs", "frequency_facto
 INFO_KEY = "input_delay"
 #: Past this many bytes of regression rows, :func:`estimate_delay` folds them into its
 #: triangular factor a block at a time.
-REGRESSION_BYTES = 64 * 2**20
+REGRESSION_BYTES = 16 * 2**20
 
 
 # ---------------------------------------------------------------------------
@@ -170,8 +169,8 @@ def estimate_delay(data, max_delay: int = 10, *, na: int = 2, nb: int = 2,
         for s in range(a + start, b, step):
             t = min(s + step, b)
             rows_k = block(u[s - start:t], y[s - start:t])
-            R = geqrf_r(np.vstack([R, rows_k]), min(R.shape[0] + t - s, width),
-                        overwrite=True)
+            R = scipy.linalg.qr(np.vstack([R, rows_k]), mode="r", overwrite_a=True,
+                                check_finite=False)[0][:width]
     # column index of output/input channels in M
     past_y = list(range(ny * na))
 
