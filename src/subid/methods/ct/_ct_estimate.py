@@ -211,6 +211,47 @@ def _subspace_factor(R, Z, Y):
     return Lf, W
 
 
+#: Smallest diagonal entry, relative to the instrument's norm, of the triangular factor of
+#: the instruments with the regressors' directions removed, for which
+#: :func:`instrument_block` works by projection; below it, :func:`_subspace_factor`.
+PROJECTION_TOL = 1e-8
+
+
+def range_basis(R):
+    """The thin Q of the Householder QR of the column-scaled ``R``: the directions the
+    first ``n_R`` reflectors of the factor of ``[R Z Y]`` remove from ``Z`` and ``Y``
+    (the same reflectors: they depend on the columns of ``R`` alone), however ill
+    conditioned ``R`` is (the filtered regressors of the default basis have diagonal
+    entries down to 5e-10 of the largest). None when it is not finite."""
+    scale = np.sqrt(np.mean(R ** 2, axis=0))
+    scale[scale == 0] = 1.0
+    Q = np.linalg.qr(R / scale)[0]
+    return Q if np.isfinite(Q).all() else None
+
+
+def instrument_block(basis, Z, Y):
+    """``W`` of :func:`_subspace_factor` ``(R, Z, Y)`` (``Z`` given) from ``basis``
+    (:func:`range_basis` of ``R``), without the factor of the whole ``[R Z Y]``.
+
+    With ``[R Z Y]^T = L Q`` (diagonal of ``L`` non-negative), the block of ``L`` in the
+    rows of ``Y`` and the columns of ``Z`` is ``Y^T Q_Z``, ``Q_Z`` the orthonormal
+    directions of ``Z`` with those of ``R`` removed (``(I - P_R) Z = Q_Z T``, ``T``
+    upper triangular with a positive diagonal): the channels' scaling drops out. So two
+    projections on ``basis`` (the second removes what rounding left of the first) and the
+    QR of the ``N x n`` remainder replace the QR of the ``N x (n_R + n + n_Y)`` matrix
+    (56 + n + 16 columns for the default basis of a 2 x 2 record: about 9 times fewer
+    flops per model-instrument iteration). None when the remainder's columns are
+    numerically dependent (:data:`PROJECTION_TOL`): the caller then factors the whole."""
+    Zp = Z - basis @ (basis.T @ Z)
+    Zp -= basis @ (basis.T @ Zp)
+    Q, T = np.linalg.qr(Zp)
+    diag = np.diag(T)
+    norms = np.sqrt(np.mean(Z ** 2, axis=0)) * math.sqrt(Z.shape[0])
+    if not (np.isfinite(diag).all() and np.all(np.abs(diag) > PROJECTION_TOL * norms)):
+        return None
+    return Y.T @ (Q * np.where(diag < 0, -1.0, 1.0))
+
+
 # ---------------------------------------------------------------------------
 # A, C
 # ---------------------------------------------------------------------------

@@ -117,7 +117,9 @@ from subid.methods.ct._ct_estimate import (
     _markov_change,
     _subspace_factor,
     data_equation_matrices,
+    instrument_block,
     observability_matrix,
+    range_basis,
     tm_convolution_matrix,
 )
 from subid.methods.ct._ct_problem import Problem
@@ -181,7 +183,9 @@ def _given_bd(problem: Problem, A, B, C, D):
 
 
 def _complete(problem: Problem, Theta, Lf, feedthrough: bool):
-    """A, C from ``Theta``; then B, D, x0 (y0): ``(A, B, C, D, x0, y0, diag)``."""
+    """A, C from ``Theta``; then B, D, x0 (y0): ``(A, B, C, D, x0, y0, diag)``. ``Lf``:
+    the factor of :func:`subid.methods.ct._ct_estimate._subspace_factor`, or a function
+    of no arguments that computes it (only the filtered B, eq. (15), reads it)."""
     s = problem.settings
     basis, p = s["basis"], problem.record.n_outputs
     A, C, ac_resid = _estimate_a_c(basis, Theta, p, s["ac_method"])
@@ -202,7 +206,8 @@ def _complete(problem: Problem, Theta, Lf, feedthrough: bool):
         def Tfun(Bm, Dm):
             return data_equation_matrices(basis, A, Bm, C, Dm)[1]
     B, D, _, bd = fit_b_d_x0(A, C, problem.record, bd_method="filtered", feedthrough=feedthrough,
-                             filtered=(Tfun, Theta, Lf, problem.iU))
+                             filtered=(Tfun, Theta, Lf() if callable(Lf) else Lf,
+                                       problem.iU))
     x0, y0, _ = _given_bd(problem, A, B, C, D)
     diag.update(bd, stability={"requested": s["stability"],
                                                          "action": "none (filtered B)"})
@@ -216,11 +221,21 @@ def _subspace_estimate(problem: Problem, n: int, feedthrough: bool):
     A, B, C, D, x0, y0, diag = _complete(problem, Theta, problem.Lf, feedthrough)
     changes = []
     if s["instruments"] == "model":
+        if "range basis" not in problem.memo:      # shared by the orders of the problem
+            problem.memo["range basis"] = range_basis(problem.R)
+        basis = problem.memo["range basis"]
         for _ in range(s["iterations"]):
             Xs = _ct_fit.simulated_states(A, B, x0, problem.record)
             if Xs is None:
                 break
-            Lf, W = _subspace_factor(problem.R, Xs, problem.Y)
+            # W by projection on range(R) (the factor of [R Xs Y] only where the
+            # filtered B needs it), else from that factor
+            W = None if basis is None else instrument_block(basis, Xs, problem.Y)
+            if W is None:
+                Lf, W = _subspace_factor(problem.R, Xs, problem.Y)
+            else:
+                def Lf(Xs=Xs):
+                    return _subspace_factor(problem.R, Xs, problem.Y)[0]
             Uo, s2, _ = np.linalg.svd(W, full_matrices=False)
             previous = (A, B, C)
             A, B, C, D, x0, y0, diag = _complete(problem, Uo[:, :n] * s2[:n], Lf, feedthrough)
