@@ -217,16 +217,26 @@ def _subspace_factor(R, Z, Y):
 PROJECTION_TOL = 1e-8
 
 
+#: Smallest diagonal entry, relative to the largest, of the triangular factor of the
+#: column-scaled regressors for which :func:`range_basis` gives a basis: below it a
+#: direction is rounding, not data, and which one the reflectors take depends on the
+#: order of the operations (the whole factor is then used, as before).
+RANGE_TOL = 1e-13
+
+
 def range_basis(R):
     """The thin Q of the Householder QR of the column-scaled ``R``: the directions the
     first ``n_R`` reflectors of the factor of ``[R Z Y]`` remove from ``Z`` and ``Y``
-    (the same reflectors: they depend on the columns of ``R`` alone), however ill
-    conditioned ``R`` is (the filtered regressors of the default basis have diagonal
-    entries down to 5e-10 of the largest). None when it is not finite."""
+    (the same reflectors: they depend on the columns of ``R`` alone), also where ``R``
+    is ill conditioned (the filtered regressors of the default basis have diagonal
+    entries down to 5e-10 of the largest). None when it is not finite or numerically
+    rank deficient (:data:`RANGE_TOL`)."""
     scale = np.sqrt(np.mean(R ** 2, axis=0))
     scale[scale == 0] = 1.0
-    Q = np.linalg.qr(R / scale)[0]
-    return Q if np.isfinite(Q).all() else None
+    Q, T = np.linalg.qr(R / scale)
+    diag = np.abs(np.diag(T))
+    ok = np.isfinite(Q).all() and diag.size and diag.min() > RANGE_TOL * diag.max()
+    return Q if ok else None
 
 
 def instrument_block(basis, Z, Y):
