@@ -427,7 +427,9 @@ def test_the_structure_search_compares_the_delays_too(monkeypatch):
     monkeypatch.setattr(polynomial, "_delays", lambda d: np.array([3]))
     model = subid.arx(data)
     record = model.info["order_selection"]
-    assert record["delays"] == {"estimated": [3], "compared": [[3], [0], [1]]}
+    assert record["delays"]["estimated"] == [3]
+    assert record["delays"]["compared"] == [[3], [0], [1]]
+    assert record["delays"]["feedback"]["detected"] is False          # open loop
     assert record["selected"]["nk"] == [1]
     assert model.info["orders"]["nk"].tolist() == [[1]]
     assert {tuple(c["nk"]) for c in record["candidates"]} == {(3,), (0,), (1,)}
@@ -475,3 +477,20 @@ def test_an_integer_order_estimates_the_delays_on_the_part_the_search_reads(monk
     model = subid.oe(data, 2)
     assert seen == [900]
     assert model.info["n_samples"] == 2000
+
+
+def test_no_delay_of_zero_is_compared_under_feedback():
+    """Issue 21's closed loop (the seed-001 plant without feedthrough, innovation noise,
+    u = r + 0.5 y): the feedback test of feedthrough='auto' fires, so the structure search
+    does not add a delay of zero to the estimate's (the folds, in the same loop, prefer
+    the lag-0 correlation a feedback without delay gives, as they prefer a free D); in
+    open loop it does."""
+    true = systems.seed001_innovation_system(feedthrough=False)
+    closed = systems.simulate_innovation_data(true, 3000, seed=100, feedback=-0.5 * np.eye(2))
+    delays = subid.arx(closed).info["order_selection"]["delays"]
+    assert delays["feedback"]["detected"]
+    assert [0, 0] not in delays["compared"] and [1, 1] in delays["compared"]
+    open_loop = systems.simulate_innovation_data(true, 3000, seed=100)
+    delays = subid.arx(open_loop).info["order_selection"]["delays"]
+    assert not delays["feedback"]["detected"]
+    assert [0, 0] in delays["compared"]
