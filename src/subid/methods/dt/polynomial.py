@@ -19,9 +19,10 @@ delays ``nk`` compared (per input from :func:`subid.estimate_delay`, one sample
 on every input, and none unless the data show feedback, :data:`DELAY_HYPOTHESES`,
 :func:`select_structure`), every ``na, nb``
 in 1..10 is fitted on the training part of the four contiguous folds and scored
-by its simulation fit on the held-out part (searched along ``na = nb``, then
-``nb`` at the best ``na``, then ``na`` at the best ``nb``: 28 structures per
-delay, not the 100 of the full grid; per fold every structure's least squares comes from one
+by its simulation fit on the held-out part (searched along ``na = nb`` for each
+delay hypothesis, then, at the delays of the least criterion there, ``nb`` at the best
+``na`` and ``na`` at the best ``nb``: 28 structures and 10 for each other hypothesis,
+not the 100 of the full grid; per fold every structure's least squares comes from one
 QR factorisation of the largest regressor, Ljung 1999, Ch. 10,
 :mod:`subid.methods.dt._arx_nested`, and its score from a simulation over the
 nonzero entries of its realisation, :mod:`subid.methods.dt._sparse_scoring`);
@@ -477,9 +478,18 @@ def select_structure(data: IOData, max_order: int = MAX_ORDER):
     held = [Held(validation) for _, validation in parts]
     scores = {}                          # (nk, na, nb) -> mean fold score
 
-    def search(nk):
-        # per fold, one QR gives every structure's regression (Ljung 1999, Ch. 10;
-        # :mod:`subid.methods.dt._arx_nested`)
+    grid = range(1, max_order + 1)
+    N = used.n_samples
+
+    def bic(key):            # the cross-validated BIC of the subspace defaults, ARX parameters
+        misfit = max(100.0 - scores[key], ABSOLUTE_TOLERANCE)
+        params = ny * (key[1] * ny + key[2] * nu)
+        return 2.0 * N * ny * np.log(misfit) + params * np.log(N)
+
+    def scorer(nk):
+        """The function scoring ``(na, nb)`` at the delays ``nk`` into ``scores``: per
+        fold, one QR gives every structure's regression (Ljung 1999, Ch. 10;
+        :mod:`subid.methods.dt._arx_nested`)."""
         nested = [NestedARX(train, nk, max_order, max_order) for train, _ in parts]
         key = tuple(int(v) for v in nk)
 
@@ -496,35 +506,31 @@ def select_structure(data: IOData, max_order: int = MAX_ORDER):
             except SubidError:
                 return
             scores[(key, na, nb)] = float(np.mean(values))
+        return key, score
 
-        def best(pairs):
-            pairs = [p for p in pairs if (key,) + p in scores]
-            return max(pairs, key=lambda p: (scores[(key,) + p], -p[0] - p[1])) \
-                if pairs else None
+    def best(key, pairs):
+        pairs = [p for p in pairs if (key,) + p in scores]
+        return max(pairs, key=lambda p: (scores[(key,) + p], -p[0] - p[1])) if pairs else None
 
-        grid = range(1, max_order + 1)
-        for k in grid:                    # na = nb, then nb at the best na, na at the best nb
+    # every delay hypothesis along na = nb; then, at the delays of the least criterion
+    # there, nb at the best na and na at the best nb (the search of one hypothesis: 28
+    # structures, not 28 for each)
+    scorers = [scorer(nk) for nk in hypotheses]
+    for _, score in scorers:
+        for k in grid:
             score(k, k)
-        top = best([(k, k) for k in grid])
-        if top is not None:
-            for nb in grid:
-                score(top[0], nb)
-            top = best([(top[0], nb) for nb in grid])
-            for na in grid:
-                score(na, top[1])
-
-    for nk in hypotheses:
-        search(nk)
     if not scores:
         raise TooFewSamplesError("arx: the record is too short to compare ARX structures "
                                  "by cross-validation; give the orders (na, nb, nk)")
-    N = used.n_samples
-    rank = {tuple(int(v) for v in nk): r for r, nk in enumerate(hypotheses)}
-
-    def bic(key):            # the cross-validated BIC of the subspace defaults, ARX parameters
-        misfit = max(100.0 - scores[key], ABSOLUTE_TOLERANCE)
-        params = ny * (key[1] * ny + key[2] * nu)
-        return 2.0 * N * ny * np.log(misfit) + params * np.log(N)
+    rank = {key: r for r, (key, _) in enumerate(scorers)}
+    lead = min(scores, key=lambda k: (bic(k), rank[k[0]], k[1] + k[2], k[1]))[0]
+    key, score = scorers[rank[lead]]
+    top = best(key, [(k, k) for k in grid])
+    for nb in grid:
+        score(top[0], nb)
+    top = best(key, [(top[0], nb) for nb in grid])
+    for na in grid:
+        score(na, top[1])
     chosen = min(scores, key=lambda k: (bic(k), rank[k[0]], k[1] + k[2], k[1]))
     key_nk, na, nb = chosen
     nk = np.asarray(key_nk, np.int64)
