@@ -476,7 +476,7 @@ def select_structure(data: IOData, max_order: int = MAX_ORDER):
         parts = [(used[a], used[b]) for a, b in folds(used.n_samples)]
     # the validation blocks' scoring data, computed once (what every candidate shares)
     held = [Held(validation) for _, validation in parts]
-    scores = {}                          # (nk, na, nb) -> mean fold score
+    scores: dict = {}                    # (nk, na, nb) -> mean fold score
 
     grid = range(1, max_order + 1)
     N = used.n_samples
