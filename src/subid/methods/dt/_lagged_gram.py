@@ -4,7 +4,7 @@ regressions of the polynomial searches).
 A regression of ``target[t]`` on lagged signals ``s(t - l)`` (:func:`subid.methods.dt.
 polynomial.regress`) costs, by Householder QR of the ``N x (m + 1)`` matrix ``[Φ T]``,
 ``2 N (m + 1)^2`` flops: for the 50th-order ARX model that starts ``oe``, ``bj`` and
-``armax`` on two inputs (150 columns), 4.5 x 10^10 flops a output at 10^6 samples, two
+``armax`` on two inputs (150 columns), 4.5 x 10^10 flops an output at 10^6 samples, two
 thirds of ``oe(data, 2)``. Its Gram matrix ``[Φ T]^T [Φ T]`` has an entry for every
 pair of columns, ``G[(s1, l1), (s2, l2)] = Σ_t s1(t - l1) s2(t - l2)`` over the rows
 ``t = t0 .. t1 - 1`` of an experiment, and along a diagonal of a block (``l1 - l2``
