@@ -179,13 +179,6 @@ def minimise_prediction_error(predictor, directions, dm, x0, v, y, ranges, W, ma
             dirs = [np.ascontiguousarray(a[:dm]) for a in dirs]   # kernel needs all rows)
         return mats_c, dirs
 
-    def kernel(mats_c, dirs, vs, x, S):
-        """``(ŷ, J, x, S)`` of the samples ``vs`` from the state ``x`` and the
-        sensitivities ``S`` (the kernel's columns: the model's, then every state's)."""
-        if blocks is None:
-            return jacobian(*mats_c, vs, x, *dirs[:4], S, final_state=True)
-        return block_jacobian(mats_c, vs, x, dirs[:4] + [S], blocks, dm, final_state=True)
-
     def columns(Je, e):
         """The rows of J (``-scale`` times the weighted sensitivities, non-finite entries
         zero) from the kernel's array of experiment ``e``: its model columns and its
@@ -216,14 +209,11 @@ def minimise_prediction_error(predictor, directions, dm, x0, v, y, ranges, W, ma
 
         def pieces():                     # a second pass on the QR route only
             passes.append(1)
-            for e, (a, b) in enumerate(ranges):
-                x, S = np.ascontiguousarray(x0s[e]), dirs[4]
-                for s in range(a, b, rows):
-                    t = min(s + rows, b)
-                    yh, Je, x, S = kernel(mats_c, dirs, np.ascontiguousarray(v[s:t]), x, S)
-                    if len(passes) == 1:
-                        power.append(float(np.sum(((yw[s:t] - yh) * scale) ** 2)))
-                    yield s * ny, t * ny, columns(Je, e).reshape(-1, width)
+            for e, s, t, yh, Je in kernel_pieces(mats_c, dirs, v, x0s, ranges, rows,
+                                                  blocks, dm):
+                if len(passes) == 1:
+                    power.append(float(np.sum(((yw[s:t] - yh) * scale) ** 2)))
+                yield s * ny, t * ny, columns(Je, e).reshape(-1, width)
         # the QR route expected where the last Jacobian took it: one pass, not two
         out = _trust_region.compress_pieces(pieces, f, width,
                                             householder=routes[-1:] == ["qr"])
@@ -235,9 +225,8 @@ def minimise_prediction_error(predictor, directions, dm, x0, v, y, ranges, W, ma
         mats_c, dirs = kernel_arrays(z)
         x0s = initial(z)
         yhat, parts = np.empty((N, ny)), []
-        for e, (a, b) in enumerate(ranges):
-            yhat[a:b], Je, _, _ = kernel(mats_c, dirs, np.ascontiguousarray(v[a:b]),
-                                         np.ascontiguousarray(x0s[e]), dirs[4])
+        for e, a, b, yh, Je in kernel_pieces(mats_c, dirs, v, x0s, ranges, None, blocks, dm):
+            yhat[a:b] = yh
             parts.append(columns(Je, e))
         history.append(0.5 * float(np.sum(((yw - yhat) * scale) ** 2)))
         J = parts[0] if len(parts) == 1 else np.concatenate(parts)
@@ -254,6 +243,30 @@ def minimise_prediction_error(predictor, directions, dm, x0, v, y, ranges, W, ma
             **({"stall_tol": stall_tol} if stall_tol > 0 else {}),
             **({"compressed": compressed} if pieced else {}))
     return res.x, res
+
+
+def kernel_pieces(mats, dirs, v, x0s, ranges, rows, blocks, dm):
+    """``(e, start, stop, ŷ, J)`` of the sensitivity kernel over the record, in order:
+    each experiment ``e`` of ``ranges`` from its initial state ``x0s[e]`` and the
+    initial sensitivities ``dirs[4]``, at most ``rows`` samples a piece (None: one piece
+    per experiment), each piece continuing from the state and sensitivities where the
+    last one ended. ``mats = (Ap, Bp, C, Dp)`` and ``dirs`` as
+    :func:`subid.model._sensitivity.jacobian` takes them; ``blocks`` (or None) the
+    block-diagonal layout of :func:`block_jacobian`, ``dm`` its model coordinates. The
+    pieces of :func:`minimise_prediction_error`'s Jacobian and of the polynomial
+    methods' covariance (:mod:`subid.methods.dt.pem_poly`)."""
+    for e, (a, b) in enumerate(ranges):
+        x, S = np.ascontiguousarray(x0s[e]), dirs[4]
+        step = max(b - a if rows is None else int(rows), 1)
+        for start in range(a, b, step):
+            stop = min(start + step, b)
+            vs = np.ascontiguousarray(v[start:stop])
+            if blocks is None:
+                yh, J, x, S = jacobian(*mats, vs, x, *dirs[:4], S, final_state=True)
+            else:
+                yh, J, x, S = block_jacobian(mats, vs, x, dirs[:4] + [S], blocks, dm,
+                                             final_state=True)
+            yield e, start, stop, yh, J
 
 
 def statistical_precision(n_parameters: int, n_samples: int, fraction: float) -> float:

@@ -77,7 +77,7 @@ from subid.methods.dt._pe_search import (
     _radius,
     _simulate_experiments,
     _start_x0,
-    block_jacobian,
+    kernel_pieces,
     minimise_prediction_error,
     statistical_precision,
 )
@@ -92,7 +92,6 @@ from subid.methods.dt.polynomial import (
     regress_start,
     structure_orders,
 )
-from subid.model._sensitivity import jacobian
 from subid.model.polynomial import polynomial_record, realise
 
 __all__ = ["armax", "oe", "bj"]
@@ -555,22 +554,12 @@ def _design_pieces(sub, theta, x0, v, ranges, estimate_x0, rows=None):
     n = mats[0].shape[0]
     n_x0 = len(ranges) * n if estimate_x0 else 0
     x0 = np.asarray(x0, dtype=float).reshape(len(ranges), n)
-    blocks = sub.blocks()
-    for e, (a, b) in enumerate(ranges):
-        x, S = np.ascontiguousarray(x0[e]), dirs[4]
-        for s in range(a, b, max(b - a if rows is None else int(rows), 1)):
-            t = b if rows is None else min(s + int(rows), b)
-            ve = np.ascontiguousarray(v[s:t])
-            if blocks is None:
-                ye, Je, x, S = jacobian(*mats[:4], ve, x, *dirs[:4], S, final_state=True)
-            else:
-                ye, Je, x, S = block_jacobian(mats, ve, x, dirs[:4] + [S], blocks, d,
-                                              final_state=True)
-            J = np.zeros((t - s, n_x0 + d))
-            J[:, n_x0:] = Je[:, 0, :d]
-            if estimate_x0:
-                J[:, e * n:(e + 1) * n] = Je[:, 0, d:]
-            yield s, t, ye[:, 0], J
+    for e, s, t, ye, Je in kernel_pieces(mats, dirs, v, x0, ranges, rows, sub.blocks(), d):
+        J = np.zeros((t - s, n_x0 + d))
+        J[:, n_x0:] = Je[:, 0, :d]
+        if estimate_x0:
+            J[:, e * n:(e + 1) * n] = Je[:, 0, d:]
+        yield s, t, ye[:, 0], J
 
 
 def _sensitivities(sub, theta, x0, v, ranges, estimate_x0):
