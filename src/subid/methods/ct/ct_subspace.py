@@ -182,10 +182,10 @@ def _given_bd(problem: Problem, A, B, C, D):
     return x0, y0, R if same else None
 
 
-def _complete(problem: Problem, Theta, Lf, feedthrough: bool):
-    """A, C from ``Theta``; then B, D, x0 (y0): ``(A, B, C, D, x0, y0, diag)``. ``Lf``:
-    the factor of :func:`subid.methods.ct._ct_estimate._subspace_factor`, or a function
-    of no arguments that computes it (only the filtered B, eq. (15), reads it)."""
+def _complete(problem: Problem, Theta, factor, feedthrough: bool):
+    """A, C from ``Theta``; then B, D, x0 (y0): ``(A, B, C, D, x0, y0, diag)``.
+    ``factor()`` gives the factor of :func:`subid.methods.ct._ct_estimate._subspace_factor`
+    (called only for the filtered B, eq. (15), which reads it)."""
     s = problem.settings
     basis, p = s["basis"], problem.record.n_outputs
     A, C, ac_resid = _estimate_a_c(basis, Theta, p, s["ac_method"])
@@ -206,8 +206,7 @@ def _complete(problem: Problem, Theta, Lf, feedthrough: bool):
         def Tfun(Bm, Dm):
             return data_equation_matrices(basis, A, Bm, C, Dm)[1]
     B, D, _, bd = fit_b_d_x0(A, C, problem.record, bd_method="filtered", feedthrough=feedthrough,
-                             filtered=(Tfun, Theta, Lf() if callable(Lf) else Lf,
-                                       problem.iU))
+                             filtered=(Tfun, Theta, factor(), problem.iU))
     x0, y0, _ = _given_bd(problem, A, B, C, D)
     diag.update(bd, stability={"requested": s["stability"],
                                                          "action": "none (filtered B)"})
@@ -218,7 +217,7 @@ def _subspace_estimate(problem: Problem, n: int, feedthrough: bool):
     """The paper's estimate (corrected), with model instruments iterated."""
     s = problem.settings
     Theta = problem.Uo[:, :n] * problem.sv[:n]
-    A, B, C, D, x0, y0, diag = _complete(problem, Theta, problem.Lf, feedthrough)
+    A, B, C, D, x0, y0, diag = _complete(problem, Theta, lambda: problem.Lf, feedthrough)
     changes = []
     if s["instruments"] == "model":
         if "range basis" not in problem.memo:      # shared by the orders of the problem
@@ -233,12 +232,15 @@ def _subspace_estimate(problem: Problem, n: int, feedthrough: bool):
             W = None if basis is None else instrument_block(basis, Xs, problem.Y)
             if W is None:
                 Lf, W = _subspace_factor(problem.R, Xs, problem.Y)
+
+                def factor(Lf=Lf):
+                    return Lf
             else:
-                def Lf(Xs=Xs):
+                def factor(Xs=Xs):
                     return _subspace_factor(problem.R, Xs, problem.Y)[0]
             Uo, s2, _ = np.linalg.svd(W, full_matrices=False)
             previous = (A, B, C)
-            A, B, C, D, x0, y0, diag = _complete(problem, Uo[:, :n] * s2[:n], Lf, feedthrough)
+            A, B, C, D, x0, y0, diag = _complete(problem, Uo[:, :n] * s2[:n], factor, feedthrough)
             changes.append(_markov_change(previous, (A, B, C)))
             if changes[-1] < s["tolerance"]:
                 break

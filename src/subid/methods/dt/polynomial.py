@@ -523,7 +523,10 @@ def select_structure(data: IOData, max_order: int = MAX_ORDER):
         raise TooFewSamplesError("arx: the record is too short to compare ARX structures "
                                  "by cross-validation; give the orders (na, nb, nk)")
     rank = {key: r for r, (key, _) in enumerate(scorers)}
-    lead = min(scores, key=lambda k: (bic(k), rank[k[0]], k[1] + k[2], k[1]))[0]
+
+    def preference(k):       # the least criterion; ties to the earlier delays, fewer terms
+        return bic(k), rank[k[0]], k[1] + k[2], k[1]
+    lead = min(scores, key=preference)[0]
     key, score = scorers[rank[lead]]
     top = best(key, [(k, k) for k in grid])
     for nb in grid:
@@ -531,7 +534,7 @@ def select_structure(data: IOData, max_order: int = MAX_ORDER):
     top = best(key, [(top[0], nb) for nb in grid])
     for na in grid:
         score(na, top[1])
-    chosen = min(scores, key=lambda k: (bic(k), rank[k[0]], k[1] + k[2], k[1]))
+    chosen = min(scores, key=preference)
     key_nk, na, nb = chosen
     nk = np.asarray(key_nk, np.int64)
     record = {"rule": "cv",
