@@ -579,8 +579,8 @@ def _covariance_pass(fitted, data, estimate_x0):
     theta, x0)`` per output. Returns ``(residuals, grams, widths)``."""
     ranges = data.experiment_ranges
     ny = data.n_outputs
-    widths = [sub.size + (len(ranges) * sub.predictor(theta)[0].shape[0] if estimate_x0
-                          else 0) for sub, theta, _ in fitted]
+    # the coefficients, and the initial states (one per experiment) where estimated
+    widths = [sub.size + (np.size(x0) if estimate_x0 else 0) for sub, _, x0 in fitted]
     rows = max(1, int(_pe_search.JACOBIAN_PIECE_BYTES // (8 * max(widths))))
     resid = np.empty_like(data.y)
     grams = {(i, j): np.zeros((widths[i], widths[j])) for i in range(ny) for j in range(i, ny)}
