@@ -93,3 +93,22 @@ def test_bad_online_option_value_exits_2(capsys, tmp_path):
                                 "--order", "2", "--out", tmp_path / "o", "--option",
                                 "bd_method=guess"))
     assert "bd_method" in line
+
+
+def test_channels_given_space_separated_are_named_as_such(capsys, tmp_path):
+    """``--inputs u1 u2`` makes click read ``u2`` as a second DATA file: the error says
+    that it is not a file and shows the comma-separated form, before anything is read."""
+    import numpy as np
+    path = tmp_path / "plant.csv"
+    rng = np.random.default_rng(0)
+    np.savetxt(path, rng.standard_normal((50, 4)), delimiter=",", header="u1,u2,y1,y2",
+               comments="")
+    line = _one_line_error(*run(capsys, "identify", path, "--inputs", "u1", "u2",
+                                "--outputs", "y1", "y2", "--out", tmp_path / "o"))
+    assert "'u2', 'y2' are not files" in line and "--inputs u1,u2" in line
+    assert "read here: --inputs u1 --outputs y1" in line
+    assert not (tmp_path / "o").exists()
+    # a missing file with an extension keeps the reader's own message
+    line = _one_line_error(*run(capsys, "identify", tmp_path / "none.csv", "--inputs", "u1",
+                                "--outputs", "y1", "--out", tmp_path / "p"))
+    assert "no such file" in line

@@ -293,6 +293,28 @@ def _names(spec) -> list[str] | None:
     return [s.strip() for s in str(spec).split(",") if s.strip()]
 
 
+def check_sources(sources, inputs=None, outputs=None) -> None:
+    """Reject DATA arguments that are not files but look like channel names.
+
+    ``--inputs u1 u2`` gives click ``inputs='u1'`` and a second DATA argument ``'u2'``,
+    which the reader would then report as a file of unsupported extension. A DATA
+    argument that is neither a file nor ``dataset:NAME`` and has no extension, given
+    beside a file that exists, is such a stray channel name: a
+    :class:`subid.errors.DataError` says so and shows the comma-separated form."""
+    stray = [s for s in sources if not s.startswith("dataset:") and not os.path.exists(s)
+             and not os.path.splitext(s)[1]]
+    if not stray or len(stray) == len(sources):
+        return
+    given = " ".join(f"--{role} {value}" for role, value in (("inputs", inputs),
+                                                             ("outputs", outputs))
+                     if value is not None)
+    names = ", ".join(repr(s) for s in stray)
+    raise DataError(f"{names} {'is not a file' if len(stray) == 1 else 'are not files'}: "
+                    "several channels are one comma-separated value, e.g. --inputs u1,u2 "
+                    f"(read here: {given or 'no --inputs or --outputs'}, and "
+                    f"{names} as DATA)")
+
+
 def load_data(source: str, inputs=None, outputs=None, dt=None, time_column=None,
               delimiter=None):
     """The record named on the command line: a file or ``dataset:NAME``.

@@ -40,6 +40,7 @@ from subid.cli._shared import (
     _state,
     _warnings_to_log,
     _write_json,
+    check_sources,
     cli,
     load_data,
     new_online,
@@ -150,6 +151,7 @@ def identify(data, inputs, outputs, dt, time_column, delimiter, detrend, method_
         raise click.UsageError(f"--refine {refine} needs the samples in memory; it does not "
                                "work with --stream")
     sources = list(data)
+    check_sources(sources, inputs, outputs)
     if len(sources) > 1:
         if stream:
             raise click.UsageError("--stream reads one file; several DATA files are merged as "
