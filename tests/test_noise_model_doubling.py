@@ -100,3 +100,27 @@ def test_compiled_doubling_equals_its_numpy_reference():
     assert doubling(huge, np.eye(n), np.eye(n), 40, 1e-15) is None
     assert doubling_reference(huge, np.eye(n), np.eye(n), 40, 1e-15) is None
     assert doubling(0.9 * np.eye(n), np.eye(n), np.eye(n), 1, 1e-15) is None   # not settled
+
+
+def test_gain_of_outputs_in_very_different_units_without_warning():
+    """One output in units 1e8 times the other's: the innovation covariance is badly
+    scaled, not ill-posed. K is found without scipy's ill-conditioning warning, and it is
+    the gain of the record in the original units, rescaled (K' = K S^-1, S the scaling):
+    the same predictor."""
+    import warnings
+    true = systems.random_system(3, 2, 2, seed=1)
+    data = systems.simulate_data(true, 2000, seed=2, output_snr_db=30)
+    scale = np.array([1e8, 1.0])
+    scaled = subid.IOData(data.u, data.y * scale, dt=1)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        m = subid.moesp(scaled, 3, horizon=10)
+    assert m.info["warnings"] == []
+    ref = subid.moesp(data, 3, horizon=10)
+    # the same predictor: K rescaled, and the one-step predictions (x0 weighted by each
+    # output's spread) in the original units
+    assert np.allclose(m.A, ref.A, rtol=0, atol=1e-12)
+    assert np.allclose(m.K * scale[None, :], ref.K, rtol=1e-8, atol=1e-12)
+    p_scaled = subid.predict(m, scaled, 1) / scale
+    p_ref = subid.predict(ref, data, 1)
+    assert np.max(np.abs(p_scaled - p_ref)) < 1e-6 * np.std(data.y)

@@ -329,8 +329,11 @@ def _k_step(model, u, y, x0, k):
     return out
 
 
-def _estimate_x0(model, u, y, k, data=None):
-    """Least-squares initial state of the k-step predictor.
+def _estimate_x0(model, u, y, k, data=None, output_std=None):
+    """Least-squares initial state of the k-step predictor, each output weighted by the
+    inverse of its standard deviation (``output_std``, default that of ``y``), as
+    :func:`simulate_fit` weighs the simulation's: the initial state, and so the
+    prediction, do not depend on the output units.
 
     For ``k = 1`` with a stable predictor ``A - K C`` (and ``data`` given), the
     free responses are computed only until they have decayed below
@@ -340,6 +343,8 @@ def _estimate_x0(model, u, y, k, data=None):
     """
     n = model.order
     forced = _k_step(model, u, y, np.zeros(n), k)
+    std = column_std(y) if output_std is None else np.asarray(output_std, dtype=float)
+    w = 1.0 / np.where(std > 0, std, 1.0)
     if k == 1 and data is not None and n > 0:
         Ap, Bp, C, Dp = _predictor_matrices(model)
         if np.abs(np.linalg.eigvals(Ap)).max() < 1.0:
@@ -348,7 +353,8 @@ def _estimate_x0(model, u, y, k, data=None):
             rows = free.shape[0]
             if not (np.isfinite(forced).all() and np.isfinite(free).all()):
                 return None, forced
-            x0 = scipy.linalg.lstsq(free.reshape(-1, n), (y[:rows] - forced[:rows]).reshape(-1),
+            x0 = scipy.linalg.lstsq((free * w[None, :, None]).reshape(-1, n),
+                                    ((y[:rows] - forced[:rows]) * w).reshape(-1),
                                     lapack_driver="gelsy", check_finite=False)[0]
             y_hat = forced.copy()
             y_hat[:rows] += free @ x0
@@ -357,14 +363,15 @@ def _estimate_x0(model, u, y, k, data=None):
     free = np.stack([_k_step(model, zu, zy, e, k) for e in np.eye(n)], axis=-1)
     if not (np.isfinite(forced).all() and np.isfinite(free).all()):
         return None, forced
-    x0 = scipy.linalg.lstsq(free.reshape(-1, n), (y - forced).reshape(-1),
+    x0 = scipy.linalg.lstsq((free * w[None, :, None]).reshape(-1, n),
+                            ((y - forced) * w).reshape(-1),
                             lapack_driver="gelsy", check_finite=False)[0]
     return x0, forced + free @ x0
 
 
 @serial_blas
 @checked_call
-def predict(model, data, steps=1, x0=None, *, return_x0=False):
+def predict(model, data, steps=1, x0=None, *, return_x0=False, output_std=None):
     """k-step-ahead predicted outputs of a model on a record.
 
     Parameters
@@ -382,12 +389,19 @@ def predict(model, data, steps=1, x0=None, *, return_x0=False):
         ``numpy.inf`` the simulation.
     x0 : None, 'estimate', 'zero', 0 or array_like of shape (n,)
         Initial state ``x̂[0]``; None/'estimate' fits it by least squares to
-        the prediction errors (the predictions are affine in it). A record of
+        the prediction errors (the predictions are affine in it), each output
+        weighted by the inverse of its standard deviation, as the simulation's
+        initial state is (:func:`simulate_fit`): the prediction does not depend
+        on the output units. A record of
         several experiments (:func:`subid.merge`) is predicted experiment by
         experiment, each from its own initial state (an array: shape
         (n_experiments, n); the returned x0 has that shape).
     return_x0 : bool
         Also return the initial state used.
+    output_std : array_like of shape (n_outputs,), optional
+        The spreads that weight the outputs in the initial-state regression,
+        instead of those of ``data.y`` (for ``data`` the head of a longer
+        record whose weights apply).
 
     Returns
     -------
@@ -406,7 +420,7 @@ def predict(model, data, steps=1, x0=None, *, return_x0=False):
     model, data = _check(model, data)
     k = _check_steps(steps)
     if data.n_experiments > 1:          # each experiment from its own initial state
-        parts = [predict(model, e, steps, x0_e, return_x0=True)
+        parts = [predict(model, e, steps, x0_e, return_x0=True, output_std=output_std)
                  for e, x0_e in zip(data.experiments,
                                     experiment_x0(x0, data.n_experiments, model.order))]
         y_hat = np.vstack([p[0] for p in parts])
@@ -421,13 +435,13 @@ def predict(model, data, steps=1, x0=None, *, return_x0=False):
         mode = "estimate" if x0 is None or (isinstance(x0, str) and x0 == "estimate") else x0
         if _is_zero(mode):
             mode = "zero"
-        y_hat, x0v = simulate_fit(model, data, x0=mode)
+        y_hat, x0v = simulate_fit(model, data, x0=mode, output_std=output_std)
         return (y_hat, x0v) if return_x0 else y_hat
     u, y = effective_input(model, data.u), data.y        # the model's input delays
     try:
         with np.errstate(over="ignore", invalid="ignore"):
             if x0 is None or (isinstance(x0, str) and x0 == "estimate"):
-                x0v, y_hat = _estimate_x0(model, u, y, k, data)
+                x0v, y_hat = _estimate_x0(model, u, y, k, data, output_std)
             else:
                 x0v = np.zeros(model.order) if _is_zero(x0) else model._check_x0(x0)
                 y_hat = _k_step(model, u, y, x0v, k)

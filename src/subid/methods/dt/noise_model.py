@@ -59,7 +59,7 @@ import warnings
 import numpy as np
 import scipy.linalg
 
-from subid.data import IOData
+from subid.data import IOData, column_std
 from subid.errors import NoiseModelWarning, OptionError, SubidError
 from subid.methods._common import extended_observability
 from subid.methods.dt._lapack import least_squares_gelsy
@@ -192,10 +192,18 @@ def innovation_model(A, B, C, D, hf: HankelFactor, past: int | None = None, *,
                          f"rows and order {n} does not allow it")
     o_p, o_p1 = _projections(hf, p)
     gamma = extended_observability(A, C, f)
-    x_p = _lstsq(gamma, o_p)
-    x_p1 = _lstsq(gamma[:-ny], o_p1)
     u_p = hf.L[hf.u_rows(p, p + 1)] if nu else np.zeros((0, hf.L.shape[1]))
     y_p = hf.L[hf.y_rows(p, p + 1)]
+    # the state sequences X = Γ^+ O with each output's rows weighted by the inverse of its
+    # size (the norm of its row y(p), which scales with its unit): unweighted, the least
+    # squares favoured the outputs of the largest units, and K changed with the units of
+    # the outputs (6 % on a 2 x 2 record with one output in units 10^8 times smaller);
+    # weighted, K' = K S^-1 for outputs scaled by S, as A, B, C, D transform
+    size = np.linalg.norm(y_p, axis=1)
+    w = 1.0 / np.where(size > 0, size, 1.0)
+    w_f = np.tile(w, f)[:, None]
+    x_p = _lstsq(gamma * w_f, o_p * w_f)
+    x_p1 = _lstsq(gamma[:-ny] * w_f[:-ny], o_p1 * w_f[:-ny])
     E = y_p - C @ x_p - D @ u_p
     W = x_p1 - A @ x_p - B @ u_p
     R = E @ E.T
@@ -221,7 +229,13 @@ def innovation_model(A, B, C, D, hf: HankelFactor, past: int | None = None, *,
                                                     s=S)
         sigma = C @ P @ C.T + R
         sigma = 0.5 * (sigma + sigma.T)
-        K = scipy.linalg.solve(sigma, (A @ P @ C.T + S).T, assume_a="pos").T
+        # K = (A P C^T + S) sigma^-1 with sigma equilibrated by its diagonal: outputs of
+        # very different units (1e8 against 1) make sigma badly scaled, not ill-posed,
+        # and the unscaled solve warned of its condition (the same K in exact arithmetic)
+        d = np.sqrt(np.diag(sigma))
+        d = np.where(d > 0, d, 1.0)
+        K = (scipy.linalg.solve(sigma / np.outer(d, d), (A @ P @ C.T + S).T / d[:, None],
+                                assume_a="pos") / d[:, None]).T
         how = "Kalman filter Riccati equation of the residual covariances (VODM 1996, Sec. 4.3)"
         radius = _spectral_radius(A - K @ C)
         if not (np.isfinite(K).all() and radius < 1.0):
@@ -255,7 +269,8 @@ def _predictor_initial_states(model, K, data: IOData, radius: float) -> np.ndarr
     """Each experiment's initial predicted state, fitted by least squares to the
     prediction errors of its first samples (:func:`subid.predict` with ``x0='estimate'``
     on the samples over which the predictor's free response decays to
-    :data:`TRANSIENT_DECAY`: the later samples do not depend on it)."""
+    :data:`TRANSIENT_DECAY`: the later samples do not depend on it; the outputs weighted
+    by the spreads of the whole experiment, as ``predict`` on it weighs them)."""
     from subid.model.prediction import predict
     n = model.order
     length = n + 1 if radius <= 0.0 else \
@@ -264,7 +279,8 @@ def _predictor_initial_states(model, K, data: IOData, radius: float) -> np.ndarr
     states = []
     for experiment in data.experiments:
         head = experiment[:min(length, experiment.n_samples)]
-        states.append(predict(predictor, head, 1, return_x0=True)[1])
+        states.append(predict(predictor, head, 1, return_x0=True,
+                              output_std=column_std(experiment.y))[1])
     return np.stack(states)
 
 
