@@ -91,3 +91,22 @@ def test_refinement_converges_from_a_non_minimal_start():
     _, _, diag = _ct_fit.refine_output_error(A0, C0, rec, **kw)
     assert diag["refined"]
     assert diag["refine_rms_after"] < 1e-6 * diag["refine_rms_before"]
+
+
+def test_refinement_says_whether_it_converged():
+    """``refine_converged``: scipy's own tests stopped the refinement (a noise-free fit
+    reached), or the evaluations allowed did (one evaluation)."""
+    rng = np.random.default_rng(5)
+    A_true = np.array([[-0.3, 1.0], [-1.0, -0.3]])
+    B_true, C_true = np.array([[0.0], [1.0]]), np.array([[1.0, 0.5]])
+    u = rng.standard_normal((600, 1))
+    base = _ct_fit.Record(IOData(u, np.zeros((600, 1)), dt=0.1), 0)
+    y = _ct_fit.regressors(A_true, C_true, base, feedthrough=False, estimate_x0=False,
+                           offset=False) @ B_true.ravel()
+    rec = _ct_fit.Record(IOData(u + 0.0, y[:, None], dt=0.1), 0)
+    A0 = A_true + 0.05 * np.array([[1.0, 0.0], [0.0, -1.0]])
+    kw = dict(feedthrough=False, estimate_x0=True, offset=False)
+    _, _, done = _ct_fit.refine_output_error(A0, C_true, rec, max_iterations=50, **kw)
+    _, _, cut = _ct_fit.refine_output_error(A0, C_true, rec, max_iterations=2, **kw)
+    assert done["refine_converged"] and done["refine_evaluations"] < 50
+    assert not cut["refine_converged"] and cut["refine_evaluations"] == 2

@@ -137,3 +137,27 @@ def test_no_bundled_dataset_looks_transposed():
     for name in subid.datasets.names():
         d = subid.datasets.load(name)
         assert d.n_samples > max(d.n_inputs, d.n_outputs), name
+
+
+def test_scaled_changes_the_units_of_each_channel_and_keeps_the_rest():
+    rng = np.random.default_rng(0)
+    a = subid.IOData(rng.standard_normal((40, 2)), rng.standard_normal((40, 3)), dt=0.5)
+    b = subid.IOData(rng.standard_normal((30, 2)), rng.standard_normal((30, 3)), dt=0.5)
+    record = subid.merge([a, b]).detrend()
+    t = np.cumsum(rng.uniform(0.5, 1.5, 40))
+    stamped = subid.IOData(a.u, a.y, t=t)
+    np.testing.assert_array_equal(stamped.scaled(outputs=[1.0, 2.0, 3.0]).t, t)
+    fu, fy = np.array([1e-3, 2.0]), np.array([5.0, 1e4, 0.5])
+    out = record.scaled(inputs=fu, outputs=fy)
+    np.testing.assert_array_equal(out.u, record.u * fu)
+    np.testing.assert_array_equal(out.y, record.y * fy)
+    np.testing.assert_array_equal(out.t, record.t)
+    assert out.experiment_ranges == record.experiment_ranges
+    assert out.experiment_names == record.experiment_names
+    assert out.output_names == record.output_names
+    np.testing.assert_array_equal(out.y_offset, record.y_offset * fy)
+    np.testing.assert_array_equal(out.u_offset, record.u_offset * fu)
+    np.testing.assert_array_equal(record.scaled(outputs=fy).u, record.u)
+    for bad in ([1.0, 2.0], [1.0, 0.0, 1.0], [1.0, np.nan, 1.0]):
+        with pytest.raises(errors.DataError, match="3 positive finite factors"):
+            record.scaled(outputs=bad)

@@ -393,6 +393,45 @@ class IOData:
             out.y_offset = np.asarray(self.y_offset)[ks]
         return out
 
+    def scaled(self, *, inputs=None, outputs=None) -> "IOData":
+        """The record in other units: each input and output channel multiplied by a
+        positive factor (``inputs``, ``outputs``: one per channel; None leaves them).
+        Time stamps, experiments, names and the offsets of :meth:`detrend` (scaled
+        alike) are kept.
+
+        Parameters
+        ----------
+        inputs : array_like of shape (n_inputs,), optional
+        outputs : array_like of shape (n_outputs,), optional
+
+        Returns
+        -------
+        IOData
+
+        Examples
+        --------
+        >>> import numpy as np, subid
+        >>> d = subid.IOData(np.ones((3, 1)), np.arange(6.0).reshape(3, 2), dt=0.1)
+        >>> d.scaled(outputs=[1.0, 1e-3]).y[2]
+        array([4.   , 0.005])
+        """
+        factors = []
+        for name, given, count in (("inputs", inputs, self.n_inputs),
+                                   ("outputs", outputs, self.n_outputs)):
+            f = np.ones(count) if given is None else np.asarray(given, dtype=float).ravel()
+            if f.shape != (count,) or not (np.isfinite(f).all() and (f > 0).all()):
+                raise DataError(f"scaled({name}=...) needs {count} positive finite factors, "
+                                f"one per channel; got {given!r}"[:300])
+            factors.append(f)
+        fu, fy = factors
+        out = self._derive(self._u * fu, self._y * fy, t=self._t, dt=self._dt, t0=self._t0,
+                           starts=self._starts, t0s=self._t0s, names=self.experiment_names)
+        if self.u_offset is not None:
+            out.u_offset = np.asarray(self.u_offset) * fu
+        if self.y_offset is not None:
+            out.y_offset = np.asarray(self.y_offset) * fy
+        return out
+
     def split(self, fraction: float = 0.7) -> tuple["IOData", "IOData"]:
         """Split into an estimation part and a validation part.
 

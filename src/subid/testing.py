@@ -44,12 +44,14 @@ from subid.model.statespace import StateSpace
 from subid.systems import seed001_system, simulate_data
 
 __all__ = ["check_batch_method", "check_online_identifier", "ContractError", "BATCH_CHECKS",
-           "ONLINE_CHECKS", "SYNONYMS", "BAD_OPTION_VALUES", "INFO_KEYS", "noise_free_record"]
+           "ONLINE_CHECKS", "SYNONYMS", "BAD_OPTION_VALUES", "INFO_KEYS", "noise_free_record",
+           "scaled_record", "UNITS_TOLERANCE"]
 
 #: The sub-checks of :func:`check_batch_method`, in the order they run.
 BATCH_CHECKS = ("signature", "keyword_only", "option_names", "unknown_option",
                 "bad_option_values", "bad_data", "noise_free", "finite", "info",
-                "info_defaults", "reproducible", "save_load", "experiments", "default_call")
+                "info_defaults", "reproducible", "save_load", "experiments", "units",
+                "default_call")
 
 #: The sub-checks of :func:`check_online_identifier`, in the order they run.
 ONLINE_CHECKS = ("signature", "keyword_only", "option_names", "unknown_option",
@@ -168,6 +170,32 @@ def noise_free_record(kind: str = "discrete", *, n_experiments: int = 1):
             y = system.simulate(u, t=t, hold="foh")
             records.append(IOData(u[warm:], y[warm:], dt=_CT_DT))
     return (records[0] if n_experiments == 1 else merge(records)), system
+
+
+#: Largest difference (fit points, or relative frequency response) the ``units`` check of
+#: :func:`check_batch_method` accepts between a record and the same record in other units.
+UNITS_TOLERANCE = 1e-6
+
+
+def scaled_record(data):
+    """``(noisy, scaled, input_factors, output_factors)``: ``data`` with seeded noise
+    added (5 % of each output's spread; for frequency-response data 2 % of the mean
+    magnitude) and that record in other units, each input multiplied by 10^-3, 40, 7, ...
+    and each output by 2 x 10^4, 0.05, 3, ... in turn (the ``units`` check of
+    :func:`check_batch_method`)."""
+    rng = np.random.default_rng(0)
+    su = np.resize([1e-3, 40.0, 7.0], data.n_inputs)
+    sy = np.resize([2e4, 0.05, 3.0], data.n_outputs)
+    if isinstance(data, FRData):
+        H = data.response
+        noisy_h = H + 0.02 * np.abs(H).mean() * (rng.standard_normal(H.shape)
+                                                 + 1j * rng.standard_normal(H.shape))
+        return (FRData(data.w, noisy_h, data.dt),
+                FRData(data.w, noisy_h * sy[None, :, None] / su[None, None, :], data.dt),
+                su, sy)
+    y = data.y + 0.05 * np.std(data.y, axis=0) * rng.standard_normal(data.y.shape)
+    noisy = IOData(data.u, y, dt=data.dt) if data.is_uniform else IOData(data.u, y, t=data.t)
+    return noisy, noisy.scaled(inputs=su, outputs=sy), su, sy
 
 
 def _exactness_error(model, system, exact) -> float:
@@ -453,6 +481,13 @@ def check_batch_method(method, *, checks=None, full: bool = False) -> dict:
     ``experiments``        a record of two experiments (:func:`subid.merge`) gives the
                            system, with one initial state per experiment; a method that
                            does not declare ``experiments`` refuses such a record
+    ``units``              the record with noise added (seeded) and in other units (each
+                           channel multiplied by a factor, 10^-3 to 2 x 10^4) gives the
+                           same model in those units: the same order, and the same
+                           simulation fit per output (and one-step prediction fit, with a
+                           noise model) to :data:`UNITS_TOLERANCE` points; for
+                           frequency-response data, the same response to that relative
+                           tolerance (:func:`scaled_record`)
     ``default_call``       (``full=True``) ``method(data)``, order chosen: twice the same,
                            and reproduced by ``method(data, order=m.order, horizon=...)``
 
@@ -623,6 +658,28 @@ def check_batch_method(method, *, checks=None, full: bool = False) -> dict:
             _require(error < params.tolerance,
                      f"{spec.name}: relative {params.exact} error {error:.3g} on two "
                      f"noise-free experiments (claimed < {params.tolerance:g})")
+
+    def units():
+        noisy, scaled, su, sy = scaled_record(data)
+        a, b = call(noisy), call(scaled)
+        _require(a.order == b.order, f"{spec.name}: order {a.order} on the noisy record, "
+                                     f"{b.order} on the same record in other units")
+        if isinstance(data, FRData):
+            Ha = a.freqresp(data.w)
+            Hb = b.freqresp(data.w) / sy[None, :, None] * su[None, None, :]
+            error = float(np.abs(Ha - Hb).max() / max(np.abs(Ha).max(), 1e-300))
+            _require(error < UNITS_TOLERANCE, f"{spec.name}: the model of the response in "
+                                              f"other units differs by {error:.3g} (relative)")
+            return
+        steps = (np.inf, 1) if a.K is not None and b.K is not None else (np.inf,)
+        for k in steps:
+            fa, fb = fit_percent(a, noisy, steps=k), fit_percent(b, scaled, steps=k)
+            gap = float(np.max(np.abs(np.asarray(fa) - np.asarray(fb))))
+            what = "simulation" if k == np.inf else "one-step prediction"
+            _require(gap < UNITS_TOLERANCE,
+                     f"{spec.name}: the {what} fit differs by {gap:.3g} points between the "
+                     f"record and the same record in other units ({np.round(fa, 4)} against "
+                     f"{np.round(fb, 4)}): the model depends on the units of the channels")
 
     def default_call():
         if not full:

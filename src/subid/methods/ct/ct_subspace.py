@@ -90,6 +90,7 @@ import numpy as np
 
 from subid._blas import serial_blas
 from subid._validation import check_bool, check_choice, check_int, checked_call
+from subid.data import column_std
 from subid.errors import (
     DataError,
     ModelError,
@@ -594,6 +595,8 @@ def ct_subspace(data, order=None, *, basis=None, poly_order: int = 3, estimate_x
         Bound on Levenberg-Marquardt steps (Jacobian evaluations) per
         refinement; a work budget (:data:`subid.methods.ct._ct_fit.REFINE_BUDGET`)
         lowers it on large problems (``info['refine_budget_limited']``).
+        ``info['refine_converged']`` says whether the refinement stopped on
+        its own tests (step, cost or gradient) rather than on this bound.
     startup : bool
         Use the basis functions ``phi(t - t_0)`` as regressors: they absorb
         the filters' start-up transients and the initial-state response.
@@ -627,7 +630,11 @@ def ct_subspace(data, order=None, *, basis=None, poly_order: int = 3, estimate_x
         ``info`` holds the order selection, the singular values, the basis,
         the options, the start used, the stability handling, residuals and
         condition numbers, ``x0``, ``y_offset``, the instrument iterations,
-        the refinement and the noise model.
+        the refinement and the noise model. Every step runs on the outputs
+        divided by their standard deviations, so the model does not depend on
+        the output units (``subid.testing``'s ``units`` check); the residual RMS
+        values of ``info`` (keys ending in ``_rms``) and the singular values are
+        in those units.
 
     Raises
     ------
@@ -658,6 +665,16 @@ def ct_subspace(data, order=None, *, basis=None, poly_order: int = 3, estimate_x
     method = "ct_subspace"
     data = _check_data(data, method)
     p = data.n_outputs
+    # every step on the outputs in units of their standard deviations: the SVD of the
+    # filtered outputs, the regressions of A, C and of B, D, x0, and the refinement then
+    # weigh the outputs alike whatever their units (unscaled, an output in units 10^4
+    # times smaller moved the poles by 2 %); C, D and the offsets are returned in the
+    # user's units (_in_user_units). Given filtered signals are used as they are.
+    spread = None
+    if filtered is None:
+        spread = column_std(data.y)
+        spread = np.where(spread > 0, spread, 1.0)
+        data = data.scaled(outputs=1.0 / spread)
     default_bank = basis is None and filtered is None
     if basis is None:
         basis = default_basis(data.experiments[0].t,
@@ -880,7 +897,27 @@ def ct_subspace(data, order=None, *, basis=None, poly_order: int = 3, estimate_x
         model.info["discrete_model"] = {"order": dm.order, "horizon": dm.info["horizon"]}
     elif dm_failure is not None:
         model.info["discrete_model"] = {"failed": dm_failure}
-    return model
+    return _in_user_units(model, spread)
+
+
+def _in_user_units(model: StateSpace, spread) -> StateSpace:
+    """``model`` of the outputs divided by ``spread`` (one factor per output; None: as it
+    is) in the user's units: C, D, ``info['y_offset']`` and ``info['subspace_model']``'s
+    C, D multiplied by it (A, B and the state, hence x0, unchanged). The residual RMS
+    values of ``info`` stay in units of each output's standard deviation."""
+    if spread is None:
+        return model
+    info = dict(model.info)
+    if info.get("y_offset") is not None:
+        info["y_offset"] = np.asarray(info["y_offset"]) * spread
+    if isinstance(info.get("subspace_model"), dict):
+        sub = dict(info["subspace_model"])
+        sub["C"] = np.asarray(sub["C"]) * spread[:, None]
+        sub["D"] = np.asarray(sub["D"]) * spread[:, None]
+        info["subspace_model"] = sub
+    return StateSpace(model.A, model.B, model.C * spread[:, None], model.D * spread[:, None],
+                      0.0, input_names=model.input_names, output_names=model.output_names,
+                      info=info, hold=model.hold)
 
 
 @serial_blas
