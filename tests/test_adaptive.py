@@ -1068,3 +1068,26 @@ def test_refit_at_40db_white_noise_one_record():
     assert model.info["refined"]
     assert relative_error(model, true) < 0.05
     np.testing.assert_allclose(model.info["noise_std"], 0.01 * y.std(axis=0), rtol=0.3)
+
+
+def test_channels_far_above_size_one_are_named_in_the_warning():
+    """The paper's normalisation 1 + |phi|^2 fixes a signal size (docs/seed000.md,
+    Units): the contract record with every channel times 1000 never starts the (B, D)
+    stage, and the model's warning names that cause and the cure."""
+    import warnings as _warnings
+
+    from subid.testing import noise_free_record, scaled_record
+    data, _ = noise_free_record("continuous")
+    noisy = scaled_record(data)[0]
+    big = noisy.scaled(inputs=[1e3], outputs=[1e3, 1e3])
+    ident = subid.AdaptiveIdentifier(2, 1, 2, dt=big.dt)
+    ident.update(big.u, big.y)
+    with _warnings.catch_warnings(record=True) as caught:
+        _warnings.simplefilter("always")
+        ident.model
+    text = " ".join(str(w.message) for w in caught)
+    assert "the (B, D) stage has not started" in text
+    assert "not unit-free" in text and "data.scaled" in text
+    small = subid.AdaptiveIdentifier(2, 1, 2, dt=noisy.dt)
+    small.update(noisy.u, noisy.y)
+    assert min(subid.fit_percent(small.model, noisy)) > 90

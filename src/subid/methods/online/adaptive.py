@@ -52,6 +52,7 @@ Numerics (beyond the paper)
 * Normalisation ``r^2 = 1 + |φ|^2`` and ``ρ^2 = 1 + |Φ|_F^2`` (P-free: with
   a P-dependent r, ``d/dt log det R < 1 - α dim φ`` and the information
   cannot outgrow the prior for the paper's α; ``'ode'`` keeps ρ of (20)).
+  The 1 fixes a signal size: the estimates depend on the units (docs/seed000.md).
 * Windup bound: ``M <- (S + δ M̄)(R + δ I)^{-1}``, ``δ = tr(R) /
   max_condition``, M̄ the previous estimate (proximal term): the solved
   matrix has condition at most ``1 + max_condition``, the estimate is held
@@ -321,15 +322,12 @@ class AdaptiveIdentifier(OnlineIdentifier):
         check_seed(seed)
         self.forgetting, self.bd_forgetting, self.seed = forgetting, bd_forgetting, seed
         self.dt, self.hold, self.method, self.scale_filters = dt, hold, method, scale_filters
-        self.refresh_every, self.bd_gate, self.max_condition = refresh_every, bd_gate, \
-            max_condition
-        self.initial_covariance, self.bd_initial_covariance = initial_covariance, \
-            bd_initial_covariance
-        self.ode_trace_bound, self.history_size, self.engine = ode_trace_bound, history_size, \
-            engine
-        self.input_names, self.output_names = input_names, output_names
-        self.instrument_poles, self.max_gap = instrument_poles, max_gap
-        self.bd_startup, self.refine = bd_startup, refine
+        self.refresh_every, self.bd_gate = refresh_every, bd_gate
+        self.max_condition, self.initial_covariance = max_condition, initial_covariance
+        self.bd_initial_covariance, self.ode_trace_bound = bd_initial_covariance, ode_trace_bound
+        self.history_size, self.engine, self.refine = history_size, engine, refine
+        self.input_names, self.output_names, self.max_gap = input_names, output_names, max_gap
+        self.instrument_poles, self.bd_startup = instrument_poles, bd_startup
         if refine is not None:
             refine = check_bool(refine, "refine")
         self._refine = (method == "iv") if refine is None else refine
@@ -634,22 +632,24 @@ class AdaptiveIdentifier(OnlineIdentifier):
         if not self.n_samples:
             return "no samples processed yet"
         res = info["shift_residual"]
+        head = "the (B, D) stage has not started, so B and D are not estimated (zero): "
         if not info["bd_started"] and not info["excited"]:
-            return ("the (B, D) stage has not started, so B and D are not estimated (zero): "
-                    "the input is not persistently exciting (the weakest direction of the "
-                    "regression (8) carries less than 1/max_condition = "
+            return (head + "the input is not persistently exciting (the weakest direction "
+                    f"of the regression (8) carries less than 1/max_condition = "
                     f"{1 / self._max_cond:.3g} of its information; condition "
-                    f"{info['condition']:.3g}), so the data do not determine (A, C). Give an input sufficiently rich of order "
-                    f"horizon + order = {self._f + self._n} (Theorem 1 of the paper), e.g. "
-                    "white noise or a multisine with enough frequencies in the system's band")
+                    f"{info['condition']:.3g}), so the data do not determine (A, C). Give an "
+                    f"input sufficiently rich of order horizon + order = {self._f + self._n} "
+                    "(Theorem 1 of the paper), e.g. white noise or a multisine with enough "
+                    "frequencies in the system's band")
         if not info["bd_started"]:
-            return ("the (B, D) stage has not started, so B and D are not estimated (zero): "
-                    f"the relative residual of the shift equation (13) is {res:.3g} "
+            return (head + f"the relative residual of the shift equation (13) is {res:.3g} "
                     f"(gate {self._gate:g}) or the estimated A is not Hurwitz. Give it more "
                     "data or a richer input" + (
                         "; with output noise use method='iv' (the default), which is "
                         "consistent" if self._method != "iv" else
-                        "; with output noise, a longer memory (smaller forgetting)"))
+                        "; with output noise, a longer memory (smaller forgetting)")
+                    + ". Channels far above size one hold it back too (1 + |phi|^2 is "
+                      "not unit-free): data.scaled(...) or remove their offsets")
         if self._st["ist"][_k.IST["rejected"]]:
             why = (f"shift residual {res:.3g}, or A not Hurwitz" if info["excited"] else
                    "the data are no longer persistently exciting")
