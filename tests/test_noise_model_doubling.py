@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 import scipy.linalg
 
 import subid
@@ -124,3 +125,22 @@ def test_gain_of_outputs_in_very_different_units_without_warning():
     p_scaled = subid.predict(m, scaled, 1) / scale
     p_ref = subid.predict(ref, data, 1)
     assert np.max(np.abs(p_scaled - p_ref)) < 1e-6 * np.std(data.y)
+
+
+def test_predict_output_std_is_validated_and_weighs_the_initial_state():
+    true = systems.random_system(3, 2, 2, seed=1)
+    data = systems.simulate_data(true, 400, seed=2, output_snr_db=20)
+    model = subid.moesp(data, 3, horizon=10)
+    # the predictor's free response has decayed to rounding within the head: its x0,
+    # weighted by the spreads of the whole record, is the record's (as
+    # noise_model._predictor_initial_states relies on); weighted by its own, it is not
+    radius = np.abs(np.linalg.eigvals(model.A - model.K @ model.C)).max()
+    head = data[:int(np.ceil(np.log(1e-16) / np.log(radius))) + 10]
+    whole = subid.predict(model, data, 1, return_x0=True)[1]
+    own = subid.predict(model, head, 1, return_x0=True)[1]
+    given = subid.predict(model, head, 1, return_x0=True, output_std=np.std(data.y, axis=0))[1]
+    np.testing.assert_allclose(given, whole, rtol=1e-9, atol=1e-12)
+    assert not np.allclose(own, whole, rtol=1e-9, atol=1e-12)
+    for bad in ([1.0], [1.0, np.nan], [1.0, -1.0]):
+        with pytest.raises(subid.errors.DataError, match="output_std must hold 2"):
+            subid.predict(model, head, 1, output_std=bad)

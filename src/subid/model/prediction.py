@@ -419,6 +419,12 @@ def predict(model, data, steps=1, x0=None, *, return_x0=False, output_std=None):
     """
     model, data = _check(model, data)
     k = _check_steps(steps)
+    if output_std is not None:
+        output_std = np.asarray(output_std, dtype=float)
+        if output_std.shape != (data.n_outputs,) or not (np.isfinite(output_std).all()
+                                                         and (output_std >= 0).all()):
+            raise DataError(f"output_std must hold {data.n_outputs} finite non-negative "
+                            f"spreads, one per output; got shape {output_std.shape}")
     if data.n_experiments > 1:          # each experiment from its own initial state
         parts = [predict(model, e, steps, x0_e, return_x0=True, output_std=output_std)
                  for e, x0_e in zip(data.experiments,

@@ -903,7 +903,8 @@ def ct_subspace(data, order=None, *, basis=None, poly_order: int = 3, estimate_x
 def _in_user_units(model: StateSpace, spread) -> StateSpace:
     """``model`` of the outputs divided by ``spread`` (one factor per output; None: as it
     is) in the user's units: C, D, ``info['y_offset']`` and ``info['subspace_model']``'s
-    C, D multiplied by it (A, B and the state, hence x0, unchanged). The residual RMS
+    C, D multiplied by it, K and the noise covariance scaled alike (A, B and the state,
+    hence x0, unchanged). The residual RMS
     values of ``info`` stay in units of each output's standard deviation."""
     if spread is None:
         return model
@@ -915,9 +916,11 @@ def _in_user_units(model: StateSpace, spread) -> StateSpace:
         sub["C"] = np.asarray(sub["C"]) * spread[:, None]
         sub["D"] = np.asarray(sub["D"]) * spread[:, None]
         info["subspace_model"] = sub
+    K, cov = model.K, model.noise_cov
     return StateSpace(model.A, model.B, model.C * spread[:, None], model.D * spread[:, None],
                       0.0, input_names=model.input_names, output_names=model.output_names,
-                      info=info, hold=model.hold)
+                      info=info, hold=model.hold, K=None if K is None else K / spread,
+                      noise_cov=None if cov is None else cov * np.outer(spread, spread))
 
 
 @serial_blas
