@@ -54,8 +54,8 @@ estimation record only:
   call's CPU time without it at 1e3-1e5 samples, ``bench/selection_rules.py
   cost``; at most the last :data:`INNOVATION_CHECK_SAMPLES` samples). Over
   80 seeds of the same Monte Carlo: true order 56/80 (the cross-validated
-  BIC alone 54, BIC on the fitted innovation models 57), 31/40 on the first
-  40 (30 and 31). Twenty-two other rules applied to the same fold scores
+  BIC alone 54, BIC on the fitted innovation models 57; 58 since ``predict``
+  weighs the outputs in its initial state), 31/40 on the first 40 (30 and 31). Twenty-two other rules applied to the same fold scores
   (bench/selection_rules.md: the
   penalty scaled by 0.5-2, AIC, Hannan-Quinn, the penalty less the one the
   held-out misfit already carries, the median or pooled variance of the
