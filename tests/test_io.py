@@ -629,3 +629,30 @@ def test_an_unused_time_column_is_named_when_no_sampling_period_is_given(
     if warns:
         assert hints[0].message.column == name and repr(name) in str(hints[0].message)
         assert hints[0].filename == __file__           # points at the caller's line
+
+
+def test_time_column_of_iso_date_times(tmp_path):
+    """A time column of ISO 8601 date-times (a historian's export) gives the stamps in
+    seconds since the first one; with UTC offsets, converted to UTC, so a change of
+    daylight-saving time in between leaves the grid uniform."""
+    f = tmp_path / "log.csv"
+    f.write_text("timestamp,valve,flow\n"
+                 "2024-01-01 00:00:00,0.1,1.0\n2024-01-01 00:00:02,0.2,2.0\n"
+                 "2024-01-01 00:00:04,0.3,3.0\n2024-01-01 00:00:06,0.4,4.0\n")
+    d = read(f, inputs="valve", outputs="flow", time="timestamp")
+    assert d.is_uniform and d.dt == 2.0
+    np.testing.assert_array_equal(d.y[:, 0], [1.0, 2.0, 3.0, 4.0])
+    g = tmp_path / "fractional.csv"
+    g.write_text("t;u;y\n2024-03-31T00:59:59.5+01:00;1;2\n2024-03-31T02:00:00+02:00;3;4\n"
+                 "2024-03-31T02:00:00.5+02:00;5;6\n")
+    d = read(g, inputs="u", outputs="y", time="t")
+    np.testing.assert_allclose(d.t, [0.0, 0.5, 1.0])
+    assert d.dt == 0.5
+    h = tmp_path / "local.csv"
+    h.write_text("t,u,y\n01.01.2024 00:00:00,1,2\n01.01.2024 00:00:02,3,4\n")
+    with pytest.raises(FileReadError, match="ISO 8601 date-times") as info:
+        read(h, inputs="u", outputs="y", time="t")
+    assert info.value.line == 2 and info.value.column == 0
+    # a date-time in a channel column is no number
+    with pytest.raises(FileReadError, match="is not a number"):
+        read(f, inputs="timestamp", outputs="flow")

@@ -28,6 +28,10 @@ Rules for text files
   ``inputs``/``outputs``; line numbers are 1-based, like in a text editor.
 * Cells of columns that are not selected are not converted, so a file may
   hold text columns (dates, comments) besides the numeric ones.
+* The time column holds numbers (seconds, or any time unit) or ISO 8601
+  date-times (``2024-01-01 00:00:02``, ``2024-01-01T00:00:02.5``; with a UTC
+  offset or ``Z``, converted to UTC, so a change of daylight-saving time with
+  its offsets keeps the grid): date-times become seconds since the first one.
 
 Every problem is reported as a :mod:`subid.errors` exception naming the file
 and, for text files, the line and column at fault.
@@ -94,7 +98,8 @@ def read(path, inputs=None, outputs=None, dt=None, time=None, *, delimiter=None,
         in the file is used when neither ``dt`` nor ``time`` is given.
     time : str or int, optional
         Column (text files) or array (``.npz``/``.mat``) holding the time
-        stamps, which may be non-uniform. ``.npz``/``.mat`` files use an
+        stamps, which may be non-uniform; in a text file, numbers or ISO 8601
+        date-times (read as seconds since the first one). ``.npz``/``.mat`` files use an
         array ``t`` by default when it exists and ``dt`` is not given. Give
         ``dt`` or ``time``, not both; with neither, ``dt = 1``.
     delimiter : str, optional

@@ -347,6 +347,25 @@ class _Table:
             rows = rows[1:]
         return np.array(rows, dtype=np.float64).reshape(len(rows), len(cols))
 
+    def date_times(self, idx: int) -> np.ndarray | None:
+        """Column ``idx`` read as ISO 8601 date-times (``2024-01-01 00:00:02``,
+        ``2024-01-01T00:00:02.5``; with a UTC offset or ``Z``, converted to UTC), as
+        seconds since the first one; None when a cell is not such a date-time."""
+        _, contents = self.data_lines()
+        cells = [_split(c, self.delim)[idx].strip().strip('"') for c in contents]
+        if not cells or _is_number(cells[0]):
+            return None
+        with warnings.catch_warnings():
+            # numpy converts a UTC offset to UTC, and warns that it keeps no time zone
+            warnings.simplefilter("ignore", UserWarning)
+            try:
+                stamps = np.array(cells, dtype="datetime64[us]")
+            except ValueError:
+                return None
+        if np.isnat(stamps).any():
+            return None
+        return (stamps - stamps[0]) / np.timedelta64(1, "s")
+
     def _bad_cell(self, lineno: int, idx: int, s: str) -> str:
         msg = f"{self.shown}, line {lineno}, {self.describe(idx)}: "
         if not s:
@@ -471,7 +490,21 @@ def _read_text(p, shown, ext, inputs, outputs, dt, time, delimiter, *, raw=None)
     table = _Table(shown, text, ext, delimiter)
     in_cols, out_cols, t_cols = _roles(table, shown, inputs, outputs, time)
     cols = in_cols + out_cols + t_cols
-    values = table.parse(cols)
+    try:
+        values = table.parse(cols)
+    except FileReadError as exc:
+        # a time column of date-times: the channels as numbers, the stamps as seconds
+        if not (t_cols and exc.column == t_cols[0]):
+            raise
+        stamps = table.date_times(t_cols[0])
+        if stamps is None:
+            raise FileReadError(f"{exc} (time stamps must be numbers or ISO 8601 date-times "
+                                "such as 2024-01-01 00:00:02 or 2024-01-01T00:00:02.5)",
+                                path=shown, line=exc.line, column=exc.column) from None
+        cols = in_cols + out_cols
+        channels = table.parse(cols)
+        table.check_finite(channels, cols)
+        values, cols = np.column_stack([channels, stamps]), cols + t_cols
     table.check_finite(values, cols)
     n_in, n_out = len(in_cols), len(out_cols)
     u = values[:, :n_in]
