@@ -112,3 +112,27 @@ def test_channels_given_space_separated_are_named_as_such(capsys, tmp_path):
     line = _one_line_error(*run(capsys, "identify", tmp_path / "none.csv", "--inputs", "u1",
                                 "--outputs", "y1", "--out", tmp_path / "p"))
     assert "no such file" in line
+
+
+def test_decimal_commas_on_the_command_line(capsys, tmp_path):
+    """A ';'-delimited export with decimal commas: the error names --decimal, and with
+    it the record is identified; --decimal with --stream is refused in one line."""
+    import numpy as np
+    rng = np.random.default_rng(1)
+    u = rng.standard_normal(300)
+    y = np.convolve(u, [0.0, 0.5, 0.3])[:300] + 0.01 * rng.standard_normal(300)
+    path = tmp_path / "export.csv"
+    path.write_text("u;y\n" + "".join(f"{a:.6f};{b:.6f}\n".replace(".", ",")
+                                      for a, b in zip(u, y)))
+    line = _one_line_error(*run(capsys, "identify", path, "--inputs", "u", "--outputs", "y",
+                                "--method", "arx", "--out", tmp_path / "o"))
+    assert "--decimal ," in line
+    code, out, err = run(capsys, "identify", path, "--inputs", "u", "--outputs", "y",
+                         "--decimal", ",", "--method", "arx", "--no-report",
+                         "--out", tmp_path / "p")
+    assert code == 0, err
+    assert "300 samples" in out
+    line = _one_line_error(*run(capsys, "identify", path, "--inputs", "u", "--outputs", "y",
+                                "--decimal", ",", "--stream", "--dt", "1",
+                                "--out", tmp_path / "q"))
+    assert "--decimal , reads records in memory" in line

@@ -656,3 +656,31 @@ def test_time_column_of_iso_date_times(tmp_path):
     # a date-time in a channel column is no number
     with pytest.raises(FileReadError, match="is not a number"):
         read(f, inputs="timestamp", outputs="flow")
+
+
+def test_decimal_commas_on_request(tmp_path):
+    """``decimal=','`` reads a spreadsheet export of many European locales; the header's
+    commas are kept; the delimiter is ';', TAB or spaces (given or found)."""
+    g = tmp_path / "euro.csv"
+    g.write_text("u [V], raw;y\n1,5;2,25\n-0,125;3e-1\n1,0E+2;4\n")
+    with pytest.raises(FileReadError, match="pass decimal=','"):
+        read(g, inputs=0, outputs=1)
+    d = read(g, inputs="u [V], raw", outputs="y", decimal=",")
+    np.testing.assert_array_equal(d.u[:, 0], [1.5, -0.125, 100.0])
+    np.testing.assert_array_equal(d.y[:, 0], [2.25, 0.3, 4.0])
+    assert d.input_names == ("u [V], raw",)
+    tab = tmp_path / "euro.txt"
+    tab.write_text("0,5\t1,25\n0,75\t1,5\n")
+    np.testing.assert_array_equal(read(tab, inputs=0, outputs=1, decimal=",").y[:, 0],
+                                  [1.25, 1.5])
+    spaced = tmp_path / "euro.dat"
+    spaced.write_text("0,5   1,25\n0,75  1,5\n")
+    np.testing.assert_array_equal(read(spaced, inputs=0, outputs=1, decimal=",").u[:, 0],
+                                  [0.5, 0.75])
+    with pytest.raises(DataError, match="another field delimiter than ','"):
+        read(g, inputs=0, outputs=1, decimal=",", delimiter=",")
+    with pytest.raises(DataError, match="decimal must be '.' or ','"):
+        read(g, inputs=0, outputs=1, decimal=";")
+    np.savez(tmp_path / "a.npz", u=np.ones(3), y=np.ones(3))
+    with pytest.raises(DataError, match="decimal applies to text files only"):
+        read(tmp_path / "a.npz", decimal=",")

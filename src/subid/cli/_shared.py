@@ -316,7 +316,7 @@ def check_sources(sources, inputs=None, outputs=None) -> None:
 
 
 def load_data(source: str, inputs=None, outputs=None, dt=None, time_column=None,
-              delimiter=None):
+              delimiter=None, decimal="."):
     """The record named on the command line: a file or ``dataset:NAME``.
 
     Returns
@@ -333,8 +333,9 @@ def load_data(source: str, inputs=None, outputs=None, dt=None, time_column=None,
         name = source.split(":", 1)[1]
         data = datasets.load(name)
         meta = datasets.info(name)
-        if time_column is not None:
-            raise DataError(f"{source}: the bundled datasets are uniformly sampled; --time "
+        if time_column is not None or decimal != ".":
+            raise DataError(f"{source}: the bundled datasets are uniformly sampled arrays; "
+                            f"{'--time' if time_column is not None else '--decimal'} "
                             "does not apply")
         notes = [meta["description"], f"Sampling: {meta['dt_note']}", f"Source: {meta['source']}"]
         if inputs is not None or outputs is not None or dt is not None:
@@ -348,7 +349,7 @@ def load_data(source: str, inputs=None, outputs=None, dt=None, time_column=None,
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", SamplingWarning)
         data = read(source, inputs=inputs, outputs=outputs, dt=dt, time=time_column,
-                    delimiter=delimiter)
+                    delimiter=delimiter, decimal=decimal)
     time_like = None
     for w in caught:                      # the reader's time-column hint joins the note
         if isinstance(w.message, SamplingWarning):
@@ -366,13 +367,14 @@ def load_data(source: str, inputs=None, outputs=None, dt=None, time_column=None,
     return data, os.path.basename(source), notes
 
 
-def _load_experiments(sources, inputs, outputs, dt, time_column, delimiter):
+def _load_experiments(sources, inputs, outputs, dt, time_column, delimiter, decimal="."):
     """Several DATA arguments as one record of several experiments (:func:`subid.merge`)."""
     from subid.data import merge
     loaded = []
     for source in sources:
         try:
-            loaded.append(load_data(source, inputs, outputs, dt, time_column, delimiter))
+            loaded.append(load_data(source, inputs, outputs, dt, time_column, delimiter,
+                                    decimal))
         except SubidError as exc:          # name this file, not the list
             if getattr(exc, "subid_file", None) is None:
                 exc.subid_file = "" if source in str(exc) else source
@@ -588,6 +590,11 @@ def _data_options(fn):
                            "the batch methods (discrete and continuous time), none for the "
                            "online continuous-time ones (adaptive), which model the "
                            "response from rest.")(fn)
+    fn = click.option("--decimal", type=click.Choice([".", ","]), default=".",
+                      show_default=True,
+                      help="Decimal separator of a text file's numbers (',' for a "
+                           "spreadsheet export such as 0,125;1,5: the fields are then "
+                           "delimited by ';', TAB or spaces).")(fn)
     fn = click.option("--delimiter", default=None, metavar="CHAR",
                       help="Field delimiter of a text file (default: detected).")(fn)
     fn = click.option("--time", "time_column", default=None, metavar="COLUMN",

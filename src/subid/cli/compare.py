@@ -41,8 +41,8 @@ from subid.io._files import atomic_write
               help="Prediction horizon: K-step-ahead predictions (subid.predict; the Kalman "
                    "predictor of a model with K) instead of the simulation (inf).")
 @_common
-def compare(model_paths, data_source, inputs, outputs, dt, time_column, delimiter, detrend,
-            out, steps):
+def compare(model_paths, data_source, inputs, outputs, dt, time_column, delimiter, decimal,
+            detrend, out, steps):
     """Fit % of one or more models on DATA, with an overlay plot.
 
     Every model is simulated (or, with --steps K, predicted K steps ahead)
@@ -72,7 +72,7 @@ def compare(model_paths, data_source, inputs, outputs, dt, time_column, delimite
         dt = first.dt
     with _about(data_source):
         record, label, notes = load_data(data_source, inputs, outputs, dt, time_column,
-                                         delimiter)
+                                         delimiter, decimal)
         work = _detrend(record, detrend or "constant")
     fits = {}
     for name, m in models.items():

@@ -111,9 +111,9 @@ _RUN = _method_run_options(
                    "with subid.fd_subspace (--dt: its sampling period, default 0 = continuous "
                    "time; --validate: share of the frequencies held out, interleaved).")
 @_common
-def identify(data, inputs, outputs, dt, time_column, delimiter, detrend, method_name, order,
-             horizon, validate, forgetting, options, frequency_unit, refine, write_report,
-             stream, chunk_size, report_samples, out, frequency_response=False):
+def identify(data, inputs, outputs, dt, time_column, delimiter, decimal, detrend, method_name,
+             order, horizon, validate, forgetting, options, frequency_unit, refine,
+             write_report, stream, chunk_size, report_samples, out, frequency_response=False):
     """Identify a model from DATA; write model.json and report.html.
 
     The record is detrended, split into an estimation part (the first 1 -
@@ -128,6 +128,9 @@ def identify(data, inputs, outputs, dt, time_column, delimiter, detrend, method_
     """
     if out is None:
         out = _default_out(data[0], "identify")
+    if decimal != "." and (frequency_response or stream):
+        raise click.UsageError("--decimal , reads records in memory: it does not work with "
+                               f"{'--frequency-response' if frequency_response else '--stream'}")
     if frequency_response:
         return _identify_frequency(data, dt, delimiter, order, horizon, validate, options,
                                    frequency_unit, refine, write_report, out,
@@ -167,9 +170,10 @@ def identify(data, inputs, outputs, dt, time_column, delimiter, detrend, method_
                                   spec, order, horizon, validate, opts, frequency_unit,
                                   write_report, chunk_size, report_samples, out)
     with _steps(write_report) as steps:
-        return _identify_in_memory(sources, data, inputs, outputs, dt, time_column, delimiter,
-                                   detrend, spec, order, horizon, validate, forgetting, opts,
-                                   refine, frequency_unit, write_report, out, steps)
+        return _identify_in_memory(sources, data, inputs, outputs, dt, time_column,
+                                   (delimiter, decimal), detrend, spec, order, horizon,
+                                   validate, forgetting, opts, refine, frequency_unit,
+                                   write_report, out, steps)
 
 
 def _steps(write_report):
@@ -178,17 +182,19 @@ def _steps(write_report):
     return Steps(names, "identify", enabled=_state().progress)
 
 
-def _identify_in_memory(sources, data, inputs, outputs, dt, time_column, delimiter, detrend,
+def _identify_in_memory(sources, data, inputs, outputs, dt, time_column, text, detrend,
                         spec, order, horizon, validate, forgetting, opts, refine,
                         frequency_unit, write_report, out, steps):
+    """``identify`` on a record read into memory (``text``: the text files' delimiter and
+    decimal separator)."""
     from subid.evaluation import report
     steps.start("read")
     with _about(data):
         if len(sources) == 1:
-            record, label, notes = load_data(data, inputs, outputs, dt, time_column, delimiter)
+            record, label, notes = load_data(data, inputs, outputs, dt, time_column, *text)
         else:
             record, label, notes = _load_experiments(sources, inputs, outputs, dt, time_column,
-                                                     delimiter)
+                                                     *text)
         detrend = detrend or _default_detrend(spec)
         work = _detrend(record, detrend)
         if work is not record:

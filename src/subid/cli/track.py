@@ -86,7 +86,7 @@ _RUN = _method_run_options(
 @_RUN["report"]
 @_RUN["out"]
 @_common
-def track(data, inputs, outputs, dt, time_column, delimiter, detrend, method_name, order,
+def track(data, inputs, outputs, dt, time_column, delimiter, decimal, detrend, method_name, order,
           horizon, forgetting, options, chunk, trace_every, checkpoint_every, keep_checkpoints,
           resume, frequency_unit, write_report, out):
     """Run an online identifier over DATA and write the convergence report.
@@ -106,7 +106,7 @@ def track(data, inputs, outputs, dt, time_column, delimiter, detrend, method_nam
     _check_method_options(spec, opts, reserved=_reserved_options(spec, horizon=horizon,
                                                                  forgetting=forgetting))
     with _about(data):
-        raw, label, notes = load_data(data, inputs, outputs, dt, time_column, delimiter)
+        raw, label, notes = load_data(data, inputs, outputs, dt, time_column, delimiter, decimal)
         detrend = detrend or _default_detrend(spec)
         work = _detrend(raw, detrend)
         if spec.time == "discrete" and work.dt is None:

@@ -28,6 +28,8 @@ Rules for text files
   ``inputs``/``outputs``; line numbers are 1-based, like in a text editor.
 * Cells of columns that are not selected are not converted, so a file may
   hold text columns (dates, comments) besides the numeric ones.
+* Numbers use a decimal point, or a decimal comma with ``decimal=','`` (the
+  fields then delimited by ``;``, TAB or spaces).
 * The time column holds numbers (seconds, or any time unit) or ISO 8601
   date-times (``2024-01-01 00:00:02``, ``2024-01-01T00:00:02.5``; with a UTC
   offset or ``Z``, converted to UTC, so a change of daylight-saving time with
@@ -60,7 +62,7 @@ from subid.io.mat import _load_mat
 from subid.io.mat import mat_variables as mat_variables
 from subid.io.mat import read_mat_model as read_mat_model
 from subid.io.mat import write_mat_model as write_mat_model
-from subid.io.text import _read_text
+from subid.io.text import _read_text, decimal_commas
 
 # The readers of each format live beside this module (issue 24: one concern per module):
 # text.py, fast_csv.py, arrays.py, mat.py, chunks.py; the names imported "as" themselves
@@ -73,7 +75,7 @@ __all__ = ["read", "read_inputs", "SUPPORTED_EXTENSIONS"]
 # ---------------------------------------------------------------------------
 @checked_call
 def read(path, inputs=None, outputs=None, dt=None, time=None, *, delimiter=None,
-         max_bytes=None) -> IOData:
+         decimal=".", max_bytes=None) -> IOData:
     """Read one input/output record from a file.
 
     Parameters
@@ -105,6 +107,11 @@ def read(path, inputs=None, outputs=None, dt=None, time=None, *, delimiter=None,
     delimiter : str, optional
         Field delimiter of a text file, one character. ``" "`` means runs of
         spaces and TABs. Detected among ``,`` ``;`` and TAB when omitted.
+    decimal : {'.', ','}
+        Decimal separator of a text file's numbers: ``','`` for the exports of
+        spreadsheets in many European locales (``0,125;1,5``). The field
+        delimiter must then be another character: the one given, else the
+        first of ``;``, TAB and runs of spaces on the first line.
     max_bytes : int, optional
         Bytes the arrays of a compressed ``.npz``/``.mat`` file may take
         beyond the file's own size (default 1 GiB). A file that would expand
@@ -165,7 +172,14 @@ def read(path, inputs=None, outputs=None, dt=None, time=None, *, delimiter=None,
         if not isinstance(delimiter, str) or len(delimiter) != 1 or delimiter in "\r\n\"#":
             raise DataError(f"delimiter must be one character (not a quote, '#' or a line "
                             f"break), got {delimiter!r}")
+    if decimal not in (".", ","):
+        raise DataError(f"decimal must be '.' or ',', got {decimal!r}")
+    if decimal == "," and ext not in _TEXT_EXTENSIONS:
+        raise DataError(f"{shown}: decimal applies to text files only, not to {ext} files")
     max_bytes = _max_bytes(max_bytes)
+    if ext in _TEXT_EXTENSIONS and decimal == ",":
+        raw, delimiter = decimal_commas(_read_bytes(p, shown), shown, ext, delimiter)
+        return _read_text(p, shown, ext, inputs, outputs, dt, time, delimiter, raw=raw)
     if ext in _TEXT_EXTENSIONS:
         fast = _read_text_fast(shown, ext, inputs, outputs, dt, time, delimiter)
         if fast is not None:

@@ -124,6 +124,30 @@ def _sniff(sample: list[str], ext: str) -> str | None:
     return _WHITESPACE
 
 
+def decimal_commas(raw: bytes, shown: str, ext: str, delimiter) -> tuple[bytes, str]:
+    """``(raw, delimiter)`` of a text file whose numbers have decimal commas
+    (``decimal=','`` of :func:`subid.io.formats.read`), rewritten with decimal points:
+    every comma of the data lines becomes a point. The delimiter is the one given (not
+    ``,``) or the first of ``;``, TAB and runs of spaces found on the first content line.
+    The first content line keeps its commas when it is a header (a field that is not a
+    number, its commas read as points)."""
+    if delimiter == ",":
+        raise DataError(f"{shown}: decimal=',' needs another field delimiter than ','; "
+                        "give delimiter=';' (or TAB, or ' ' for runs of spaces)")
+    lines = _decode(raw, shown).split("\n")
+    first = next((k for k, line in enumerate(lines) if _content(line)), None)
+    if first is None:
+        return raw, delimiter
+    if delimiter is None:
+        head = _content(lines[first])
+        delimiter = ";" if ";" in head else "\t" if "\t" in head else " "
+    fields = _split(_content(lines[first]), _WHITESPACE if delimiter == " " else delimiter)
+    header = any(not _is_number(f.strip().strip('"').replace(",", ".")) for f in fields)
+    text = "\n".join(line if (k == first and header) else line.replace(",", ".")
+                     for k, line in enumerate(lines))
+    return text.encode("utf-8"), delimiter
+
+
 class _Table:
     """Layout of a text file: delimiter, header, column count, first data line."""
 
@@ -373,7 +397,8 @@ class _Table:
         msg += (f"{s!r} is not a number" if len(s) <= 60 else
                 f"{s[:40]!r}... ({len(s)} characters) is not a number")
         if _DECIMAL_COMMA_RE.fullmatch(s):
-            msg += " (decimal commas are not supported: use '.' as the decimal separator)"
+            msg += (" (a decimal comma: pass decimal=',', --decimal , on the command line, "
+                    "with a field delimiter other than ',')")
         return msg
 
     def check_finite(self, values: np.ndarray, cols: list[int]) -> None:
