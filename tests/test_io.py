@@ -684,3 +684,16 @@ def test_decimal_commas_on_request(tmp_path):
     np.savez(tmp_path / "a.npz", u=np.ones(3), y=np.ones(3))
     with pytest.raises(DataError, match="decimal applies to text files only"):
         read(tmp_path / "a.npz", decimal=",")
+
+
+def test_second_header_row_is_named_as_such(tmp_path):
+    f = tmp_path / "units.csv"
+    f.write_text("time,u,y\ns,V,m\n0,1,2\n1,3,4\n")
+    with pytest.raises(FileReadError, match=r"line 2 holds no number at all: a second "
+                                            r"header row, such as the units\? remove it"):
+        read(f, inputs="u", outputs="y", time="time")
+    g = tmp_path / "text.csv"
+    g.write_text("time,u,y\n0,V,2\n")              # a number elsewhere on the line: no hint
+    with pytest.raises(FileReadError) as info:
+        read(g, inputs="u", outputs="y", time="time")
+    assert "second header row" not in str(info.value)

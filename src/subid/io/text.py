@@ -399,6 +399,12 @@ class _Table:
         if _DECIMAL_COMMA_RE.fullmatch(s):
             msg += (" (a decimal comma: pass decimal=',', --decimal , on the command line, "
                     "with a field delimiter other than ',')")
+        elif self.header is not None and lineno == self.first_data:
+            _, contents = self.data_lines()
+            if not any(_is_number(f.strip().strip('"')) for f in _split(contents[0],
+                                                                        self.delim)):
+                msg += (f" (line {lineno} holds no number at all: a second header row, "
+                        "such as the units? remove it)")
         return msg
 
     def check_finite(self, values: np.ndarray, cols: list[int]) -> None:
