@@ -161,3 +161,24 @@ def test_scaled_changes_the_units_of_each_channel_and_keeps_the_rest():
     for bad in ([1.0, 2.0], [1.0, 0.0, 1.0], [1.0, np.nan, 1.0]):
         with pytest.raises(errors.DataError, match="3 positive finite factors"):
             record.scaled(outputs=bad)
+
+
+def test_time_stamps_as_date_times_or_durations():
+    """``t`` of numpy date-times, a pandas DatetimeIndex or durations: seconds from the
+    first stamp, as subid.read and IOData.from_pandas take them."""
+    pd = pytest.importorskip("pandas")
+    rng = np.random.default_rng(0)
+    index = pd.date_range("2024-01-01", periods=50, freq="2s")
+    u, y = rng.standard_normal(50), rng.standard_normal(50)
+    d = subid.IOData(u, y, t=index)
+    assert d.is_uniform and d.dt == 2.0
+    assert subid.IOData(u, y, t=index - index[0]).dt == 2.0
+    t = np.array(["2024-01-01T00:00:00", "2024-01-01T00:00:01.5", "2024-01-01T00:00:04"],
+                 dtype="datetime64[ms]")
+    np.testing.assert_array_equal(subid.IOData(np.ones(3), np.arange(3.0), t=t).t,
+                                  [0.0, 1.5, 4.0])
+    with pytest.raises(errors.DataError, match="missing date-times"):
+        subid.IOData(np.ones(3), np.arange(3.0),
+                     t=np.array(["2024-01-01", "NaT", "2024-01-03"], dtype="datetime64[D]"))
+    with pytest.raises(errors.DataError, match="must be numeric or date-times"):
+        subid.IOData(np.ones(3), np.arange(3.0), t=np.array(["a", "b", "c"]))

@@ -216,8 +216,18 @@ def check_time_stamps(t, n_samples: int, name: str = "time stamps t") -> np.ndar
         except (TypeError, ValueError, OverflowError):
             raise DataError(f"{name} must be numeric, got values that are not numbers "
                             "(or integers beyond the float range)") from None
+    if arr.dtype.kind == "M" and arr.ndim >= 1 and arr.size:
+        # date-times (numpy's datetime64, a pandas DatetimeIndex or Series): seconds since
+        # the first, as subid.read and IOData.from_pandas take them
+        if np.isnat(arr).any():
+            raise DataError(f"{name} holds missing date-times (NaT)")
+        arr = (arr - arr.reshape(-1)[0]) / np.timedelta64(1, "s")
+    elif arr.dtype.kind == "m":
+        if np.isnat(arr).any():
+            raise DataError(f"{name} holds missing durations (NaT)")
+        arr = arr / np.timedelta64(1, "s")
     if arr.dtype.kind not in "iuf":
-        raise DataError(f"{name} must be numeric, got dtype {arr.dtype}")
+        raise DataError(f"{name} must be numeric or date-times, got dtype {arr.dtype}")
     arr = np.ascontiguousarray(arr, dtype=np.float64)
     if arr.ndim == 2 and 1 in arr.shape:
         arr = arr.reshape(-1)

@@ -121,6 +121,8 @@ class IOData:
         stamps are kept as given. Uniform ones give ``dt``: their mean step,
         rounded to the decimals the stamps are written with (``0.05``, not
         ``0.049999999999999996``, for stamps ``0, 0.05, 0.1`` read from a file).
+        Date-times (``numpy.datetime64``, a pandas ``DatetimeIndex``) count in
+        seconds from the first; durations (``timedelta64``) in seconds.
     input_names, output_names : sequence of str, optional
         Channel names (default: the column labels of a pandas DataFrame, the name of
         a pandas Series, else ``u1, u2, ...`` and ``y1, y2, ...``).
