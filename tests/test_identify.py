@@ -559,3 +559,28 @@ def test_a_failed_final_refinement_keeps_the_subspace_model_and_says_why(monkeyp
     assert ref["reason"] == ("the refinement of the whole record failed (DataError: pem: the "
                              "record's predictor overflows)")
     assert model.info["identify"]["covariance"]["at"] == "the subspace model"
+
+
+def test_output_error_criteria_warn_under_feedback():
+    """Closed loop (the seed-001 plant under u = r + 0.5 y): ``oe`` and
+    ``pem(focus='simulation')`` warn that the output-error criterion is biased there and
+    record the feedback test; ``pem``'s prediction focus and the open loop do not warn."""
+    from subid.errors import FeedbackWarning
+    _, closed = _closed_loop(1)
+    start = subid.n4sid(closed, 3, horizon=10)
+    with pytest.warns(FeedbackWarning, match=r"pem\(focus='simulation'\): the data show "
+                                             r"feedback .*\(p = .*focus='prediction' is "
+                                             "consistent"):
+        refined = subid.pem(closed, start, focus="simulation", max_iterations=3)
+    assert refined.info["feedback"]["detected"]
+    with pytest.warns(FeedbackWarning, match="oe: the data show feedback .*bj or armax"):
+        model = subid.oe(closed, 2)
+    assert model.info["feedback"]["detected"]
+    assert any("feedback" in w for w in model.info["warnings"])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", FeedbackWarning)
+        assert "feedback" not in subid.pem(closed, start, max_iterations=3).info
+        opened = systems.simulate_innovation_data(systems.seed001_innovation_system(), 3000,
+                                                  seed=1)
+        assert not subid.oe(opened, 2).info["feedback"]["detected"]
+        assert "feedback" not in subid.armax(closed, 2).info

@@ -181,6 +181,13 @@ class NotConvergedWarning(UserWarning):
     says which (``converged``, ``convergence``)."""
 
 
+class FeedbackWarning(UserWarning):
+    """The data show feedback from the outputs to the inputs (closed loop), and the
+    estimate's criterion is biased there: an output-error (simulation) criterion, whose
+    input is correlated with the noise (Ljung 1999, Sec. 13.4). The message names a
+    consistent alternative."""
+
+
 class DelayWarning(UserWarning):
     """Input delays counted in samples (``info['input_delay']``) are dropped by an
     operation that changes the sampling; :func:`subid.absorb_delay` keeps them as states."""

@@ -199,15 +199,8 @@ def _feedback(data, model) -> bool:
     ran = model.info.get("feedthrough", {})
     if ran.get("requested") == "auto":           # the test ran (None: a noise-free record)
         return bool(isinstance(ran.get("feedback"), dict) and ran["feedback"]["detected"])
-    from subid.methods.dt.feedthrough import decide
-    from subid.statistic.hankel import HankelStatistic
-    depth = 2 * int(model.info["horizon"])
-    try:
-        factor = HankelStatistic.from_data(data, depth).factor()
-    except SubidError:
-        return False
-    feedback = decide(factor)[1].get("feedback")
-    return bool(isinstance(feedback, dict) and feedback["detected"])
+    from subid.methods.dt.feedthrough import feedback_test
+    return bool(feedback_test(data, 2 * int(model.info["horizon"]), last=False)["detected"])
 
 
 def _fold_scores(data, method, config):

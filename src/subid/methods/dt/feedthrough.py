@@ -271,6 +271,38 @@ def decide(factor, *, level: float = LEVEL):
     return estimate, record
 
 
+#: Block rows of the Hankel factor on which :func:`feedback_test` runs by default: the
+#: depth of the subspace defaults' factor at horizon 10, whose feedthrough test this is.
+FEEDBACK_DEPTH = 20
+
+
+def feedback_test(data, depth: int = FEEDBACK_DEPTH, *, last=True) -> dict:
+    """The feedback test of :func:`decide` on ``data``'s Hankel factor of ``depth`` block
+    rows (with ``last``, on at most its last
+    :data:`~subid.methods.crossval.MAX_SELECTION_SAMPLES` samples, as the order searches
+    read): ``{'p_values', 'detected'}``, or ``{'detected': False, 'reason': ...}`` where
+    it cannot run (too short a record; noise-free data, where there is no noise for the
+    loop to correlate with the input)."""
+    from subid.errors import SubidError
+    from subid.methods.crossval import MAX_SELECTION_SAMPLES
+    from subid.statistic.hankel import HankelStatistic
+    part = data[data.n_samples - MAX_SELECTION_SAMPLES:] \
+        if last and data.n_samples > MAX_SELECTION_SAMPLES else data
+    try:
+        factor = HankelStatistic.from_data(part, depth).factor()
+    except SubidError as exc:
+        return {"detected": False, "reason": f"not tested: {exc}"}
+    record = decide(factor)[1].get("feedback")
+    return record if record is not None else {"detected": False,
+                                              "reason": "not tested: noise-free record"}
+
+
+def feedback_message(record) -> str:
+    """``'(p = ...)'``: the smallest p-value of a detected :func:`feedback_test`."""
+    values = [v for v in record.get("p_values", []) if v is not None]
+    return f"(p = {min(values):.2g})" if values else ""
+
+
 #: The last decision of :func:`decided`, as one ``(key, (estimate, record))`` pair.
 _LAST = [None]
 

@@ -60,7 +60,7 @@ from subid._blas import serial_blas
 from subid._validation import check_optimiser_options, checked_call, same_period
 from subid.data import IOData, not_a_record
 from subid.delay import delay_inputs, input_delay_of, record_delay
-from subid.errors import DataError, ModelError, NoiseModelWarning, OptionError
+from subid.errors import DataError, FeedbackWarning, ModelError, NoiseModelWarning, OptionError
 from subid.methods._info import records_warnings
 from subid.methods.dt import _pe_search
 from subid.methods.dt._covariance import covariance_factor, covariance_factor_pieces
@@ -307,8 +307,28 @@ def pem(data, model, *, focus="prediction", max_iterations=MAX_ITERATIONS, toler
         # the covariance belongs to the discrete-time parameters
         info.pop("parameter_covariance", None)
         return ct.with_noise_model(None, None, info=info)
+    feedback = _closed_loop(data) if focus == "simulation" else None
     refined = _pem_dt(data, model, focus, max_iterations, tolerance, rounds, feedthrough)
+    if feedback is not None:
+        refined.info["feedback"] = feedback
     return _with_covariance(refined, model, data, focus, feedthrough)
+
+
+def _closed_loop(data) -> dict:
+    """The feedback test (:func:`subid.methods.dt.feedthrough.feedback_test`) of a
+    ``focus='simulation'`` refinement, with a :class:`subid.errors.FeedbackWarning` when it
+    detects feedback: the output-error criterion is biased in closed loop, its input being
+    correlated with the noise, and the prediction-error one consistent (Ljung 1999, Sec.
+    13.4, the direct approach)."""
+    from subid.methods.dt.feedthrough import feedback_message, feedback_test
+    record = feedback_test(data)
+    if record.get("detected"):
+        warnings.warn("pem(focus='simulation'): the data show feedback from the outputs to "
+                      f"the inputs {feedback_message(record)}: the simulation (output-error) "
+                      "criterion is biased in closed loop, because the input is correlated "
+                      "with the noise; focus='prediction' is consistent there (Ljung 1999, "
+                      "Sec. 13.4)", FeedbackWarning, stacklevel=4)
+    return record
 
 
 #: :func:`refine`'s stopping point: the Gauss-Newton decrement below this fraction of

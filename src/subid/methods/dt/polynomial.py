@@ -82,6 +82,7 @@ from subid.methods.dt._scoring import Held, simulation_fit
 from subid.methods.dt._sparse_scoring import sparse_forced_error
 from subid.methods.dt._trust_region import gram_factor
 from subid.methods.dt.checks import check_data
+from subid.methods.dt.feedthrough import feedback_test
 from subid.model.polynomial import coefficients, polynomial_record, realise
 from subid.model.statespace import StateSpace
 from subid.statistic.hankel import geqrf_r
@@ -431,10 +432,6 @@ def _arx_record(A, B, orders) -> dict:
 #: The delays :func:`select_structure` compares besides :func:`subid.estimate_delay`'s:
 #: none (unless the data show feedback) and one sample on every input.
 DELAY_HYPOTHESES = (0, 1)
-#: Block rows of the Hankel factor on which :func:`_feedback` tests for feedback: the
-#: depth of the subspace defaults' factor at horizon 10, whose feedthrough test
-#: (:mod:`subid.methods.dt.feedthrough`) this is.
-FEEDBACK_DEPTH = 20
 
 
 def select_structure(data: IOData, max_order: int = MAX_ORDER):
@@ -461,7 +458,7 @@ def select_structure(data: IOData, max_order: int = MAX_ORDER):
     # search took 20 of the call's 22 s; the model is then fitted to the whole record
     used = _selection_part(data)
     estimated = _delays(used)
-    feedback = _feedback(used)
+    feedback = feedback_test(used)
     hypotheses = [] if estimated is None else [estimated]
     for delay in DELAY_HYPOTHESES:
         nk = np.full(nu, delay, np.int64)
@@ -569,20 +566,6 @@ def _sparse_fit_score(A, B, C, D, held) -> float:
     return max(value, FLOOR) if np.isfinite(value) else FLOOR
 
 
-def _feedback(data) -> dict:
-    """The feedback test of ``feedthrough='auto'`` (:func:`subid.methods.dt.feedthrough.decide`)
-    on the record's Hankel factor of :data:`FEEDBACK_DEPTH` block rows: ``{'p_values',
-    'detected'}``, or ``{'detected': False, 'reason': ...}`` where it cannot be run (too
-    short a record, noise-free data: no noise for a direct term to absorb)."""
-    from subid.methods.dt.feedthrough import decide
-    from subid.statistic.hankel import HankelStatistic
-    try:
-        factor = HankelStatistic.from_data(data, FEEDBACK_DEPTH).factor()
-    except SubidError as exc:
-        return {"detected": False, "reason": f"not tested: {exc}"}
-    record = decide(factor)[1].get("feedback")
-    return record if record is not None else {"detected": False,
-                                              "reason": "not tested: noise-free record"}
 
 
 def _selection_part(data):
