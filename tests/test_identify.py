@@ -584,3 +584,28 @@ def test_output_error_criteria_warn_under_feedback():
                                                   seed=1)
         assert not subid.oe(opened, 2).info["feedback"]["detected"]
         assert "feedback" not in subid.armax(closed, 2).info
+
+
+def test_offsets_warn_and_do_not_fake_feedback():
+    """An operating point left in the record: one OffsetWarning naming the channel and how
+    to remove it (the model is then worse: checks.warn_offsets gives the figures),
+    and the feedback test, whose regressions have no intercept, sees no feedback in this
+    open-loop record; a record excited from zero (a PRBS between 0 and 1) does not warn."""
+    from subid.errors import FeedbackWarning, OffsetWarning
+    true = systems.random_system(3, 2, 2, seed=4)
+    data = systems.simulate_data(true, 3000, seed=5, output_snr_db=30)
+    raw = subid.IOData(data.u + [5.0, -3.0], data.y + [20.0, 7.0], dt=1)
+    with pytest.warns(OffsetWarning, match=r"output y1 has a mean of 19.89, 5.8 times its "
+                                           r"standard deviation.*data.detrend\(\)"):
+        model = subid.moesp(raw, 3, horizon=10)
+    assert sum("has a mean of" in w for w in model.info["warnings"]) == 1
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", OffsetWarning)
+        warnings.simplefilter("error", FeedbackWarning)
+        assert not subid.oe(raw, 2).info["feedback"]["detected"]
+    rng = np.random.default_rng(3)
+    prbs = (rng.standard_normal((3000, 2)) > 0).astype(float)
+    y = true.simulate(prbs) + 0.01 * rng.standard_normal((3000, 2))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", OffsetWarning)
+        subid.moesp(subid.IOData(prbs, y, dt=1), 3, horizon=10)

@@ -181,6 +181,12 @@ class NotConvergedWarning(UserWarning):
     says which (``converged``, ``convergence``)."""
 
 
+class OffsetWarning(UserWarning):
+    """A channel of the record sits far from zero (an operating point that was not
+    removed): the discrete-time methods identify from the samples as given, and an offset
+    the inputs do not explain costs fit and states. ``data.detrend()`` removes it."""
+
+
 class FeedbackWarning(UserWarning):
     """The data show feedback from the outputs to the inputs (closed loop), and the
     estimate's criterion is biased there: an output-error (simulation) criterion, whose
