@@ -587,10 +587,11 @@ def test_output_error_criteria_warn_under_feedback():
 
 
 def test_offsets_warn_and_do_not_fake_feedback():
-    """An operating point left in the record: one OffsetWarning naming the channel and how
-    to remove it (the model is then worse: checks.warn_offsets gives the figures),
-    and the feedback test, whose regressions have no intercept, sees no feedback in this
-    open-loop record; a record excited from zero (a PRBS between 0 and 1) does not warn."""
+    """An operating point left in the record, which the inputs do not explain: one
+    OffsetWarning naming the channel and how to remove it (the model is then worse:
+    checks.warn_offsets gives the figures), and the feedback test, whose regressions have
+    no intercept, sees no feedback in this open-loop record. Records excited from zero
+    (a PRBS between 0 and 1, a staircase of steps from rest) do not warn."""
     from subid.errors import FeedbackWarning, OffsetWarning
     true = systems.random_system(3, 2, 2, seed=4)
     data = systems.simulate_data(true, 3000, seed=5, output_snr_db=30)
@@ -606,6 +607,14 @@ def test_offsets_warn_and_do_not_fake_feedback():
     rng = np.random.default_rng(3)
     prbs = (rng.standard_normal((3000, 2)) > 0).astype(float)
     y = true.simulate(prbs) + 0.01 * rng.standard_normal((3000, 2))
+    # a staircase of steps from rest: means of 3.3 standard deviations, which the inputs
+    # explain (the intercept of the ARX test is not significant)
+    siso = systems.random_system(2, 1, 1, seed=3)
+    stairs = np.repeat(rng.uniform(0.5, 1.5, 10), 100)[:, None]
+    climb = siso.simulate(stairs) + 0.01 * rng.standard_normal((1000, 1))
     with warnings.catch_warnings():
         warnings.simplefilter("error", OffsetWarning)
         subid.moesp(subid.IOData(prbs, y, dt=1), 3, horizon=10)
+        subid.moesp(subid.IOData(stairs, climb, dt=1), 2, horizon=10)
+    with pytest.warns(OffsetWarning, match="the inputs do not explain the outputs' offsets"):
+        subid.moesp(subid.IOData(stairs, climb + 5.0, dt=1), 2, horizon=10)
