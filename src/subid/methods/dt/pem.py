@@ -316,15 +316,16 @@ def pem(data, model, *, focus="prediction", max_iterations=MAX_ITERATIONS, toler
 
 def _closed_loop(data) -> dict:
     """The feedback test (:func:`subid.methods.dt.feedthrough.feedback_test`) of a
-    ``focus='simulation'`` refinement, with a :class:`subid.errors.FeedbackWarning` when it
-    detects feedback: the output-error criterion is biased in closed loop, its input being
-    correlated with the noise, and the prediction-error one consistent (Ljung 1999, Sec.
-    13.4, the direct approach)."""
-    from subid.methods.dt.feedthrough import feedback_message, feedback_test
+    ``focus='simulation'`` refinement, with a :class:`subid.errors.FeedbackWarning` when
+    it shows feedback at :data:`~subid.methods.dt.feedthrough.WARNING_LEVEL`: the
+    output-error criterion is biased in closed loop, its input being correlated with the
+    noise, and the prediction-error one consistent (Ljung 1999, Sec. 13.4, the direct
+    approach)."""
+    from subid.methods.dt.feedthrough import feedback_test, feedback_warning
     record = feedback_test(data)
-    if record.get("detected"):
+    if (p_value := feedback_warning(record)) is not None:
         warnings.warn("pem(focus='simulation'): the data show feedback from the outputs to "
-                      f"the inputs {feedback_message(record)}: the simulation (output-error) "
+                      f"the inputs {p_value}: the simulation (output-error) "
                       "criterion is biased in closed loop, because the input is correlated "
                       "with the noise; focus='prediction' is consistent there (Ljung 1999, "
                       "Sec. 13.4)", FeedbackWarning, stacklevel=4)

@@ -83,7 +83,7 @@ from subid.methods.dt._pe_search import (
     statistical_precision,
 )
 from subid.methods.dt._poly_covariance import attach_covariance, coefficient_factor_from_grams
-from subid.methods.dt.feedthrough import feedback_message, feedback_test
+from subid.methods.dt.feedthrough import feedback_test, feedback_warning
 from subid.methods.dt.polynomial import (
     ORDER_NAMES,
     SELECTIONS,
@@ -549,8 +549,9 @@ def _identify(structure, data, order, selection, estimate_x0, max_iterations, to
 def _output_error_feedback(structure, data, selection_record):
     """For ``oe``: the feedback test (:func:`subid.methods.dt.feedthrough.feedback_test`,
     the structure search's where it ran), with a :class:`subid.errors.FeedbackWarning`
-    when it detects feedback: the output-error criterion is biased in closed loop, its
-    input being correlated with the noise (Ljung 1999, Sec. 13.4; on the DaISy ballbeam
+    when it shows feedback at :data:`~subid.methods.dt.feedthrough.WARNING_LEVEL`: the
+    output-error criterion is biased in closed loop, its input being correlated with the
+    noise (Ljung 1999, Sec. 13.4; on the DaISy ballbeam
     record, an unstable plant under feedback, ``oe`` validates at 30.7 % against
     ``arx``'s 89.7 %). None for the other structures, whose noise models keep the
     prediction-error estimate consistent there."""
@@ -558,9 +559,9 @@ def _output_error_feedback(structure, data, selection_record):
         return None
     ran = (selection_record or {}).get("delays", {}).get("feedback")
     record = ran if isinstance(ran, dict) else feedback_test(data)
-    if record.get("detected"):
+    if (p_value := feedback_warning(record)) is not None:
         warnings.warn(f"oe: the data show feedback from the outputs to the inputs "
-                      f"{feedback_message(record)}: an output-error model is biased in "
+                      f"{p_value}: an output-error model is biased in "
                       "closed loop, because the input is correlated with the noise (Ljung "
                       "1999, Sec. 13.4); compare it on validation data with bj or armax, "
                       "which are consistent there, or with subid.identify",
