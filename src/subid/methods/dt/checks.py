@@ -112,8 +112,8 @@ def warn_offsets(data: IOData) -> None:
                       "deviation, and the inputs do not explain the outputs' offsets: the methods "
                       "identify from the samples as given, and an operating point costs fit "
                       "and states. "
-                      "Remove the means first (data.detrend(), as subid identify on the "
-                      "command line does)", OffsetWarning, stacklevel=2)
+                      "Remove the means first: data.detrend() (on the command line "
+                      "--detrend constant, the default)", OffsetWarning, stacklevel=2)
 
 
 #: An input whose standard deviation is below this fraction of its mean is lost
