@@ -53,22 +53,26 @@ def check_data(data, method: str) -> IOData:
 OFFSET_STDS = 3.0
 
 
-#: Lags and samples (the last ones) of the ARX regression of :func:`_unexplained_offset`.
-OFFSET_LAGS, OFFSET_SAMPLES = 10, 20_000
+#: Lags and samples (the last ones) of the ARX regression of :func:`_unexplained_offset`,
+#: and its largest number of columns (fewer lags on records of many channels: 100
+#: channels at 10 lags would factor 20,000 x 1,050).
+OFFSET_LAGS, OFFSET_SAMPLES, OFFSET_COLUMNS = 10, 20_000, 200
 #: Significance level of its test of the intercept.
 OFFSET_LEVEL = 1e-3
 
 
 def _unexplained_offset(data: IOData) -> bool:
     """Whether the inputs leave an offset in the outputs unexplained: in the regression of
-    each output on :data:`OFFSET_LAGS` lags of the outputs and the inputs (a high-order ARX
-    model, which approximates any linear predictor, Ljung 1999, Sec. 16.4) and a constant,
-    the constant's F-test is significant at :data:`OFFSET_LEVEL` (last experiment, last
-    :data:`OFFSET_SAMPLES` samples). A record excited from rest (a staircase of steps
-    from zero) has large means that the inputs explain: no warning for it."""
+    each output on :data:`OFFSET_LAGS` lags (fewer past :data:`OFFSET_COLUMNS` columns) of
+    the outputs and the inputs (a high-order ARX model, which approximates any linear
+    predictor, Ljung 1999, Sec. 16.4) and a constant, the constant's F-test is significant
+    at :data:`OFFSET_LEVEL` (last experiment, last :data:`OFFSET_SAMPLES` samples). A
+    record excited from rest (a staircase of steps from zero) has large means that the
+    inputs explain: no warning for it."""
     e = data.experiments[-1]
     u, y = e.u[-OFFSET_SAMPLES:], e.y[-OFFSET_SAMPLES:]
-    N, L = y.shape[0], OFFSET_LAGS
+    N = y.shape[0]
+    L = max(1, min(OFFSET_LAGS, OFFSET_COLUMNS // (u.shape[1] + y.shape[1])))
     if N <= 4 * L * (u.shape[1] + y.shape[1] + 1):
         return False
     cols = [y[L - i:N - i] for i in range(1, L + 1)] + [u[L - i:N - i] for i in range(L + 1)]
