@@ -56,7 +56,8 @@ BATCH_CHECKS = ("signature", "keyword_only", "option_names", "unknown_option",
 #: The sub-checks of :func:`check_online_identifier`, in the order they run.
 ONLINE_CHECKS = ("signature", "keyword_only", "option_names", "unknown_option",
                  "bad_option_values", "model_before_data", "rejected_chunk", "model", "exact",
-                 "reproducible", "chunk_invariance", "read_only", "checkpoint", "save_load")
+                 "reproducible", "chunk_invariance", "read_only", "checkpoint", "save_load",
+                 "units")
 
 #: Spellings that other tools use for a concept subid names once: spelling -> subid's name.
 SYNONYMS = {
@@ -738,6 +739,8 @@ def check_online_identifier(cls, *, checks=None) -> dict:
                            ``OnlineIdentifier.load``) resumes exactly: the loaded and the
                            original identifiers continue bit for bit alike
     ``save_load``          the model survives its JSON file bit for bit
+    ``units``              the noisy record in other units (:func:`scaled_record`): the
+                           same simulation fit per output to :data:`UNITS_TOLERANCE` points
 
     Parameters
     ----------
@@ -861,6 +864,19 @@ def check_online_identifier(cls, *, checks=None) -> dict:
         _time_base(fitted, spec, f"{name}.model")
         _check_finite(fitted, f"{name}.model")
         _check_core_info(fitted, data, spec, f"{name}.model")
+
+    def units():
+        noisy, scaled, _, _ = scaled_record(data)
+        fits = []
+        for record in (noisy, scaled):
+            ident = make()
+            ident.update(record.u, record.y, record.t)
+            fits.append(np.asarray(fit_percent(quiet_model(ident), record)))
+        gap = float(np.max(np.abs(fits[0] - fits[1])))
+        _require(gap < UNITS_TOLERANCE,
+                 f"{name}: the simulation fit differs by {gap:.3g} points between the record "
+                 f"and the same record in other units ({np.round(fits[0], 4)} against "
+                 f"{np.round(fits[1], 4)}): the model depends on the units of the channels")
 
     def exact():
         if params.exact is None:

@@ -349,7 +349,9 @@ METHODS: dict[str, MethodSpec] = {
         capabilities=frozenset({"horizon", "hold", "nonuniform", "seeded"}),
         aliases=("AdaptiveIdentifier",),
         # an adaptive estimate converges; it is not exact on a finite record
-        checks=CheckParameters(record="continuous", order=2, exact=None)),
+        checks=CheckParameters(record="continuous", order=2, exact=None, expected_failures=(
+            ("units", "the paper's normalisation 1 + |phi|^2 fixes a signal size "
+                      "(docs/seed000.md, Units)"),))),
 }
 
 
