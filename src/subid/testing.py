@@ -179,11 +179,32 @@ UNITS_TOLERANCE = 1e-6
 
 
 def scaled_record(data):
-    """``(noisy, scaled, input_factors, output_factors)``: ``data`` with seeded noise
-    added (5 % of each output's spread; for frequency-response data 2 % of the mean
-    magnitude) and that record in other units, each input multiplied by 10^-3, 40, 7, ...
-    and each output by 2 x 10^4, 0.05, 3, ... in turn (the ``units`` check of
-    :func:`check_batch_method`)."""
+    """A record with noise and the same record in other units: the ``units`` checks of
+    :func:`check_batch_method` and :func:`check_online_identifier`.
+
+    Parameters
+    ----------
+    data : IOData or FRData
+        A record (:func:`noise_free_record`).
+
+    Returns
+    -------
+    noisy : IOData or FRData
+        ``data`` with seeded noise added (5 % of each output's spread; for
+        frequency-response data, 2 % of the mean magnitude).
+    scaled : IOData or FRData
+        ``noisy`` in other units: each input multiplied by 10^-3, 40, 7, ... and each
+        output by 2 x 10^4, 0.05, 3, ... in turn.
+    input_factors, output_factors : ndarray
+        Those factors.
+
+    Examples
+    --------
+    >>> data, _ = noise_free_record("discrete")
+    >>> noisy, scaled, su, sy = scaled_record(data)
+    >>> su.tolist(), sy.tolist()
+    ([0.001, 40.0], [20000.0, 0.05])
+    """
     rng = np.random.default_rng(0)
     su = np.resize([1e-3, 40.0, 7.0], data.n_inputs)
     sy = np.resize([2e4, 0.05, 3.0], data.n_outputs)
