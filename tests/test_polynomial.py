@@ -342,11 +342,12 @@ def test_arx_chooses_its_structure_on_the_last_selection_samples(monkeypatch):
     folds) reads at most the record's last MAX_SELECTION_SAMPLES samples (made 1,500 of
     4,000 here): the structure select_structure gives on that part, the model fitted to
     the whole record."""
+    from subid.methods import crossval
     from subid.methods.dt import polynomial
     data = subid.systems.simulate_data(subid.systems.random_system(3, 1, 1, seed=3), 4000,
                                        seed=4, output_snr_db=20)
     tail = polynomial.select_structure(data[2500:])
-    monkeypatch.setattr(polynomial, "MAX_SELECTION_SAMPLES", 1500)
+    monkeypatch.setattr(crossval, "MAX_SELECTION_SAMPLES", 1500)
     model = subid.arx(data)
     record = model.info["order_selection"]
     assert record["samples_used"] == 1500 and record["selected"] == tail[1]["selected"]
@@ -467,11 +468,12 @@ def test_an_integer_order_estimates_the_delays_on_the_part_the_search_reads(monk
     """``oe(data, 2)`` takes nk from estimate_delay on at most the record's last
     MAX_SELECTION_SAMPLES samples, as the structure search does (on 10^6 samples the whole
     record cost 0.75 GB of regressors); the model is fitted to the whole record."""
+    from subid.methods import crossval
     from subid.methods.dt import polynomial
     seen = []
     real = polynomial._delays
     monkeypatch.setattr(polynomial, "_delays", lambda d: seen.append(d.n_samples) or real(d))
-    monkeypatch.setattr(polynomial, "MAX_SELECTION_SAMPLES", 900)
+    monkeypatch.setattr(crossval, "MAX_SELECTION_SAMPLES", 900)
     data = subid.systems.simulate_data(subid.systems.random_system(2, 1, 1, seed=7), 2000,
                                        seed=8, output_snr_db=30)
     model = subid.oe(data, 2)

@@ -220,6 +220,17 @@ def scaled_record(data):
     return noisy, noisy.scaled(inputs=su, outputs=sy), su, sy
 
 
+def _same_fits(fa, fb, what: str, name: str) -> None:
+    """The ``units`` checks' requirement: the ``what`` fits per output of a record and of
+    the same record in other units equal to :data:`UNITS_TOLERANCE` points."""
+    fa, fb = np.asarray(fa), np.asarray(fb)
+    gap = float(np.max(np.abs(fa - fb)))
+    _require(gap < UNITS_TOLERANCE,
+             f"{name}: the {what} fit differs by {gap:.3g} points between the record and "
+             f"the same record in other units ({np.round(fa, 4)} against {np.round(fb, 4)}): "
+             "the model depends on the units of the channels")
+
+
 def _exactness_error(model, system, exact) -> float:
     """The error ``CheckParameters.exact`` bounds: relative Markov or frequency-response error."""
     if exact == "markov":
@@ -695,13 +706,8 @@ def check_batch_method(method, *, checks=None, full: bool = False) -> dict:
             return
         steps = (np.inf, 1) if a.K is not None and b.K is not None else (np.inf,)
         for k in steps:
-            fa, fb = fit_percent(a, noisy, steps=k), fit_percent(b, scaled, steps=k)
-            gap = float(np.max(np.abs(np.asarray(fa) - np.asarray(fb))))
-            what = "simulation" if k == np.inf else "one-step prediction"
-            _require(gap < UNITS_TOLERANCE,
-                     f"{spec.name}: the {what} fit differs by {gap:.3g} points between the "
-                     f"record and the same record in other units ({np.round(fa, 4)} against "
-                     f"{np.round(fb, 4)}): the model depends on the units of the channels")
+            _same_fits(fit_percent(a, noisy, steps=k), fit_percent(b, scaled, steps=k),
+                       "simulation" if k == np.inf else "one-step prediction", spec.name)
 
     def default_call():
         if not full:
@@ -892,12 +898,8 @@ def check_online_identifier(cls, *, checks=None) -> dict:
         for record in (noisy, scaled):
             ident = make()
             ident.update(record.u, record.y, record.t)
-            fits.append(np.asarray(fit_percent(quiet_model(ident), record)))
-        gap = float(np.max(np.abs(fits[0] - fits[1])))
-        _require(gap < UNITS_TOLERANCE,
-                 f"{name}: the simulation fit differs by {gap:.3g} points between the record "
-                 f"and the same record in other units ({np.round(fits[0], 4)} against "
-                 f"{np.round(fits[1], 4)}): the model depends on the units of the channels")
+            fits.append(fit_percent(quiet_model(ident), record))
+        _same_fits(*fits, "simulation", name)
 
     def exact():
         if params.exact is None:

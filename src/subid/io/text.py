@@ -532,10 +532,7 @@ def _read_text(p, shown, ext, inputs, outputs, dt, time, delimiter, *, raw=None)
             raise FileReadError(f"{exc} (time stamps must be numbers or ISO 8601 date-times "
                                 "such as 2024-01-01 00:00:02 or 2024-01-01T00:00:02.5)",
                                 path=shown, line=exc.line, column=exc.column) from None
-        cols = in_cols + out_cols
-        channels = table.parse(cols)
-        table.check_finite(channels, cols)
-        values, cols = np.column_stack([channels, stamps]), cols + t_cols
+        values = np.column_stack([table.parse(in_cols + out_cols), stamps])
     table.check_finite(values, cols)
     n_in, n_out = len(in_cols), len(out_cols)
     u = values[:, :n_in]

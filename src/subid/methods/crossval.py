@@ -27,6 +27,7 @@ __all__ = ["HORIZON_CANDIDATES", "MAX_ORDER", "ABSOLUTE_TOLERANCE", "FLOOR",
            "MAX_SELECTION_SAMPLES", "MEMORY", "MAX_HORIZON", "SELECTION_RULES",
            "AUTO_ORDER_RULE", "folds", "experiment_folds", "feasible_horizons",
            "response_memory", "longer_horizon", "standard_horizons", "next_block",
+           "selection_part",
            "SAMPLES_PER_PARAMETER", "fold_score", "criterion", "select"]
 
 #: Horizons tried when none is given (kept when the data allow them).
@@ -69,6 +70,13 @@ AUTO_ORDER_RULE = (f"orders 1..{MAX_ORDER} and horizons "
                    f"horizon {max(HORIZON_CANDIDATES)}, doubling it while the response to "
                    "the inputs lasts beyond the largest horizon tried and the last doubled "
                    "one is chosen")
+
+
+def selection_part(data):
+    """The record's last :data:`MAX_SELECTION_SAMPLES` samples at most: what the order
+    and structure searches, and the tests they make (delays, feedback), read."""
+    return data[data.n_samples - MAX_SELECTION_SAMPLES:] \
+        if data.n_samples > MAX_SELECTION_SAMPLES else data
 
 
 def experiment_folds(data):

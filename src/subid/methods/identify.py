@@ -65,7 +65,7 @@ choice is made on the estimation record and recorded in
 The choices cost the subspace cross-validations of two estimators plus four
 fold refinements and one final refinement; the fold refinements use the same
 part of a long record as the cross-validation (its last
-:data:`subid.methods.dt.selection.MAX_SELECTION_SAMPLES` samples). Every
+:data:`subid.methods.crossval.MAX_SELECTION_SAMPLES` samples). Every
 refinement is :func:`subid.pem` stopped at the statistical precision of its
 criterion (:func:`subid.methods.dt.pem.refine`: the Gauss-Newton decrement
 below 1e-3 of ``d / (2N)``, the expected excess of the criterion at the true
@@ -162,10 +162,8 @@ def _selected_folds(model):
 
 
 def _fold_parts(data):
-    from subid.methods.crossval import MAX_SELECTION_SAMPLES, experiment_folds, folds
-    used = data
-    if data.n_samples > MAX_SELECTION_SAMPLES:
-        used = data[data.n_samples - MAX_SELECTION_SAMPLES:]
+    from subid.methods.crossval import experiment_folds, folds, selection_part
+    used = selection_part(data)
     if used.n_experiments > 1:
         return experiment_folds(used)
     return [(used[a], used[b]) for a, b in folds(used.n_samples)]

@@ -284,10 +284,9 @@ def feedback_test(data, depth: int = FEEDBACK_DEPTH, *, last=True) -> dict:
     it cannot run (too short a record; noise-free data, where there is no noise for the
     loop to correlate with the input)."""
     from subid.errors import SubidError
-    from subid.methods.crossval import MAX_SELECTION_SAMPLES
+    from subid.methods.crossval import selection_part
     from subid.statistic.hankel import HankelStatistic
-    part = data[data.n_samples - MAX_SELECTION_SAMPLES:] \
-        if last and data.n_samples > MAX_SELECTION_SAMPLES else data
+    part = selection_part(data) if last else data
     if part.u_offset is None:
         # each experiment's means removed: a constant in u and y is no feedback, but the
         # regressions of the test have no intercept, and an operating point left in the

@@ -53,7 +53,7 @@ import scipy.linalg
 
 from subid.delay import delay_inputs, input_delay_of, record_delay
 from subid.errors import SubidError
-from subid.methods.crossval import MAX_SELECTION_SAMPLES
+from subid.methods.crossval import selection_part
 from subid.methods.dt._pe_search import (
     MAX_ITERATIONS,
     STABILITY_LIMIT,
@@ -158,9 +158,8 @@ def refine_gain(data, model, *, precision: float = GAIN_PRECISION,
     if n == 0 or N * ny <= 2 * (dm + len(ranges) * n) or radius >= STABILITY_LIMIT:
         return model
     whole = data
-    if N > MAX_SELECTION_SAMPLES:            # the gain from the record's last part
-        data = data[N - MAX_SELECTION_SAMPLES:]
-        N, ranges = data.n_samples, data.experiment_ranges
+    data = selection_part(data)              # the gain from the record's last part
+    N, ranges = data.n_samples, data.experiment_ranges
     # the start: its initial states by least squares, its errors' covariance (``own``:
     # the model's noise_cov where the noise model computed it so, on the whole record)
     try:

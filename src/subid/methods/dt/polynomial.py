@@ -65,6 +65,7 @@ from subid.methods.crossval import (
     MAX_SELECTION_SAMPLES,
     experiment_folds,
     folds,
+    selection_part,
 )
 from subid.methods.dt import _subspace
 from subid.methods.dt._arx_nested import (
@@ -456,7 +457,7 @@ def select_structure(data: IOData, max_order: int = MAX_ORDER):
     # most, as the subspace methods' cross-validation
     # (subid.methods.dt.selection.cross_validate): on 10^6 samples of a 2x2 system the
     # search took 20 of the call's 22 s; the model is then fitted to the whole record
-    used = _selection_part(data)
+    used = selection_part(data)
     estimated = _delays(used)
     feedback = feedback_test(used)
     hypotheses = [] if estimated is None else [estimated]
@@ -566,15 +567,6 @@ def _sparse_fit_score(A, B, C, D, held) -> float:
     return max(value, FLOOR) if np.isfinite(value) else FLOOR
 
 
-
-
-def _selection_part(data):
-    """The record's last :data:`~subid.methods.crossval.MAX_SELECTION_SAMPLES` samples at
-    most: what the structure search and the delay estimate read."""
-    return data[data.n_samples - MAX_SELECTION_SAMPLES:] \
-        if data.n_samples > MAX_SELECTION_SAMPLES else data
-
-
 def _delays(data) -> np.ndarray | None:
     """``nk`` per input by :func:`subid.estimate_delay` (None when the record is too short)."""
     from subid.delay import estimate_delay
@@ -593,7 +585,7 @@ def structure_orders(order, structure: str, data: IOData):
     degrees ``n = max(na)``, ``nb`` and ``nk`` used for the other structures
     (``(n, nb, n, nk)``, ``(nb, n, nk)``, ``(nb, n, n, n, nk)``). An integer:
     :func:`parse_orders` with the delays of :func:`subid.estimate_delay` on the part of
-    the record the search reads (:func:`_selection_part`).
+    the record the search reads (:func:`subid.methods.crossval.selection_part`).
     A tuple: :func:`parse_orders`.
     """
     ny, nu = data.n_outputs, data.n_inputs
@@ -609,7 +601,7 @@ def structure_orders(order, structure: str, data: IOData):
     integer = isinstance(order, (int, np.integer)) and not isinstance(order, bool)
     # the delays of an integer order from the part of the record the structure search
     # reads (the whole of 10^6 samples cost 0.75 GB in estimate_delay's regressors)
-    nk = _delays(_selection_part(data)) if integer and order >= 1 else None
+    nk = _delays(selection_part(data)) if integer and order >= 1 else None
     return parse_orders(order, structure, ny, nu, nk_default=nk), None
 
 

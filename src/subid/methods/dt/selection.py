@@ -155,7 +155,7 @@ the rows, the cheapest first by how fast A grows). Measured (``bench/run.py
 bench/results.md; the pinned call fits no fold): the default call costs 14-17x the
 pinned call at 10^3 samples and 13-14x at 10^4 (1.05-1.11x and 0.16-0.18x SIPPY's AIC
 order search), 11-13x at 10^5 (34-46x before the lag products) and 4.5-5.1x at
-10^6 (the folds use at most :data:`MAX_SELECTION_SAMPLES`): the per-candidate work no longer
+10^6 (the folds use at most :data:`~subid.methods.crossval.MAX_SELECTION_SAMPLES`): the per-candidate work no longer
 grows with N, but 80 candidate models (orders x horizons x folds), each about a
 millisecond of subspace steps, regression, score and bookkeeping (Python calls on
 matrices of order 10), remain (what one candidate's steps ask several times is
@@ -269,7 +269,6 @@ from subid.methods.crossval import (
     ABSOLUTE_TOLERANCE,
     FLOOR,
     MAX_ORDER,
-    MAX_SELECTION_SAMPLES,
     experiment_folds,
     feasible_horizons,
     fold_score,
@@ -277,6 +276,7 @@ from subid.methods.crossval import (
     longer_horizon,
     next_block,
     select,
+    selection_part,
 )
 from subid.methods.dt.fold_statistics import (
     FOLD_BLOCKS,
@@ -459,9 +459,7 @@ def cross_validate(data, fixed, candidates, horizon, *, fitter, estimators):
     order, horizon, variant, record : int, int, str or None, dict
         ``record`` is stored as ``info['order_selection']``.
     """
-    used = data                       # validated by the caller (subid.methods.dt.pipeline.run)
-    if data.n_samples > MAX_SELECTION_SAMPLES:
-        used = data[data.n_samples - MAX_SELECTION_SAMPLES:]
+    used = selection_part(data)       # validated by the caller (subid.methods.dt.pipeline.run)
     if used.n_experiments > 1:        # folds per experiment (none across a border)
         parts = experiment_folds(used)
         n_train = min(train.n_samples for train, _ in parts)
