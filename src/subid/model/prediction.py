@@ -222,11 +222,7 @@ def simulate_fit(model, data, x0="estimate", hold=None, *, output_std=None):
         forced = simulate(np.zeros(n))
         # each output weighted by 1 / its standard deviation, so that the initial state
         # (and the fit) does not depend on the output units
-        if output_std is None:
-            std = column_std(data.y)
-        else:
-            std = np.asarray(output_std, float)
-        w = 1.0 / np.where(std > 0, std, 1.0)
+        w = _x0_weights(data.y, output_std)
         R = np.zeros((0, n + 1))
         kept, size = [], 0                # free-response blocks, while they stay small
         try:
@@ -329,6 +325,14 @@ def _k_step(model, u, y, x0, k):
     return out
 
 
+def _x0_weights(y, output_std=None) -> np.ndarray:
+    """The weights of the outputs in an initial-state regression: the inverse of each
+    output's standard deviation (``output_std``, default that of ``y``; 1 for a
+    constant output)."""
+    std = column_std(y) if output_std is None else np.asarray(output_std, dtype=float)
+    return 1.0 / np.where(std > 0, std, 1.0)
+
+
 def _estimate_x0(model, u, y, k, data=None, output_std=None):
     """Least-squares initial state of the k-step predictor, each output weighted by the
     inverse of its standard deviation (``output_std``, default that of ``y``), as
@@ -343,8 +347,7 @@ def _estimate_x0(model, u, y, k, data=None, output_std=None):
     """
     n = model.order
     forced = _k_step(model, u, y, np.zeros(n), k)
-    std = column_std(y) if output_std is None else np.asarray(output_std, dtype=float)
-    w = 1.0 / np.where(std > 0, std, 1.0)
+    w = _x0_weights(y, output_std)
     if k == 1 and data is not None and n > 0:
         Ap, Bp, C, Dp = _predictor_matrices(model)
         if np.abs(np.linalg.eigvals(Ap)).max() < 1.0:
