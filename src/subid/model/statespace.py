@@ -712,8 +712,12 @@ class StateSpace:
         -------
         StateSpace
             ``(T A T^-1, T B, C T^-1, D)`` and ``T K``, same dt, names,
-            ``noise_cov`` and a copy of ``info``. Markov parameters, frequency
-            response and predictions are unchanged.
+            ``noise_cov`` and a copy of ``info`` with its state-basis entries
+            transformed too: the initial state(s) ``info['x0']`` become ``T x0``
+            (one row per experiment) and the selector Λ of ``ls_subspace``
+            ``info['selector']`` becomes ``T Λ`` (the state it fixes, ``Λ Γ x``,
+            is then ``z``). Markov parameters, frequency response, predictions
+            and simulations from ``info['x0']`` are unchanged.
 
         Raises
         ------
@@ -730,8 +734,19 @@ class StateSpace:
         # X T^-1 = (T^-T X^T)^T
         A = linalg.lu_solve(lu, (T @ self._A).T, trans=1, check_finite=False).T
         C = linalg.lu_solve(lu, self._C.T, trans=1, check_finite=False).T
-        return self._like(A, T @ self._B, C, self._D, self._dt,
-                          None if self._K is None else T @ self._K, self._noise_cov)
+        out = self._like(A, T @ self._B, C, self._D, self._dt,
+                         None if self._K is None else T @ self._K, self._noise_cov)
+        # the info entries in the state basis follow it (x0: one row per experiment)
+        for key in ("x0", "selector"):
+            value = out.info.get(key)
+            if value is None:
+                continue
+            value = np.asarray(value, dtype=float)
+            if key == "x0" and value.shape[-1:] == (n,):
+                out.info[key] = value @ T.T
+            elif key == "selector" and value.ndim == 2 and value.shape[0] == n:
+                out.info[key] = T @ value
+        return out
 
     def allclose(self, other: "StateSpace", rtol: float = 1e-5, atol: float = 1e-8) -> bool:
         """Whether two models have the same shapes, time base and (to the given
