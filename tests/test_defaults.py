@@ -112,6 +112,25 @@ def test_unstable_plant_keeps_unstable_model():
     assert subid.fit_percent(model, val).mean() > subid.fit_percent(forced, val).mean() + 10
 
 
+@pytest.mark.parametrize("method", [subid.moesp, subid.n4sid, subid.pbsid])
+def test_auto_keeps_an_unstable_pole_the_data_demand(method):
+    """A plant with a pole at 1.01, 400 samples, 1 % output noise (its output grows 1.8x
+    over the record around its mean: below the growth limit, so 'auto' compares both
+    fits): every subspace method keeps the unstable model, whose fit is 99 %. PBSID,
+    whose B and K come from the state equation, compares the simulations of both
+    (before, it always reflected the pole: fit -65 %)."""
+    rng = np.random.default_rng(0)
+    true = subid.StateSpace(np.diag([1.01, 0.5]), [[0.5], [1.0]], [[1.0, 1.0]], [[0.0]], 1.0)
+    u = rng.normal(size=400)
+    y = true.simulate(u)
+    data = subid.IOData(u, y + 0.01 * np.std(y) * rng.normal(size=y.shape))
+    model = method(data, 2)
+    record = model.info["stability"]
+    assert record["action"] == "kept unstable" and not model.is_stable()
+    assert record["residual_unstable"] < 0.1 * record["residual_stable"]
+    assert subid.fit_percent(model, data).mean() > 98
+
+
 def test_enforce_on_growing_data_warns():
     """An unstable plant whose output grows: 'enforce' warns, 'auto' keeps it unstable."""
     A = np.array([[1.005, 0.1], [0.0, 0.8]])

@@ -370,7 +370,7 @@ def stable_choice(A_q, Q, n_outputs: int, fit, *, stability: str, data, method: 
                   spectral_radius_after=spectral_radius(A_s))
     record["how"] += "; B, D, x0 refitted for the stable A"
     if stability == "auto":
-        r_s = fitted_s[3].get("residual_rms")
+        r_s = _simulation_rms(fitted_s[3], stable=True)
         if bound_unstable:
             if r_s is None or math.isnan(r_s):        # the unstable model cannot win
                 record.update(residual_stable=r_s)
@@ -382,8 +382,7 @@ def stable_choice(A_q, Q, n_outputs: int, fit, *, stability: str, data, method: 
                 return A_s, fitted_s, record
         else:
             fitted_u = fit(A_q)
-        r_u = fitted_u[3].get("residual_rms") if fitted_u[3].get(INFO_KEY) == "simulation" \
-            else None
+        r_u = _simulation_rms(fitted_u[3], stable=False)
         record.update(residual_unstable=r_u, residual_stable=r_s)
         if r_u is not None and r_s is not None and math.isfinite(r_u) \
                 and r_u < KEEP_UNSTABLE_RATIO * r_s:
@@ -392,6 +391,34 @@ def stable_choice(A_q, Q, n_outputs: int, fit, *, stability: str, data, method: 
                               f"(residual RMS {r_u:.3g} against {r_s:.3g} when stabilised)")
             return A_q, unstable(fitted_u), record
     return A_s, fitted_s, record
+
+
+def _simulation_rms(diagnostics, *, stable: bool):
+    """The residual RMS of a fit's simulation that :func:`stable_choice` compares: the
+    output regression's own (any route for the stabilised A; the simulation route only
+    for the unstable one, whose prediction route fits another criterion), else the
+    ``simulation_residual_rms`` a state-sequence fit computed
+    (:func:`simulation_residual`; :func:`subid.pbsid`); None without one."""
+    if diagnostics.get("residual_rms") is not None and (
+            stable or diagnostics.get(INFO_KEY) == "simulation"):
+        return diagnostics["residual_rms"]
+    return diagnostics.get("simulation_residual_rms")
+
+
+def simulation_residual(A, B, C, D, data, weights) -> float:
+    """RMS over the samples and outputs of ``weights * (y - ŷ)``, ``ŷ`` the simulation of
+    ``(A, B, C, D)`` on ``data`` from its least-squares initial state(s)
+    (:func:`subid.model.prediction.simulate_fit`): the ``residual_rms`` of the output
+    regression for B, D, x0 given, which :func:`stable_choice` compares between an
+    unstable A and its stabilised one; ``inf`` where the simulation overflows."""
+    from subid.model.prediction import simulate_fit
+    try:
+        with np.errstate(all="ignore"):
+            y_hat = simulate_fit(StateSpace(A, B, C, D, data.dt), data)[0]
+    except SubidError:
+        return math.inf
+    value = float(np.sqrt(np.mean(((data.y - y_hat) * weights) ** 2)))
+    return value if math.isfinite(value) else math.inf
 
 
 def initial_state(A, B, C, D, data):

@@ -50,6 +50,7 @@ from subid.methods.bd import INFO_KEY
 from subid.methods.dt._subspace import (
     check_experiment_lengths,
     initial_state,
+    simulation_residual,
     stable_choice,
 )
 from subid.methods.dt.feedthrough import check_feedthrough
@@ -255,11 +256,21 @@ class PBSID(SubspaceMethod):
         resid = x_next - ABK @ np.vstack([x, u_t, e])
         residual = float(np.linalg.norm(resid) / max(float(np.linalg.norm(x_next)), 1e-300))
 
+        # the stability rule compares the unstable A's simulation with the stabilised one's
+        compare = plan.stability == "auto" and isinstance(data, IOData) and \
+            np.abs(np.linalg.eigvals(A)).max() >= 1.0
+
         def fit(A_try):
-            """B (and D, x0) for a given A from the state equation (K refitted with it)."""
+            """B (and D, x0) for a given A from the state equation (K refitted with it),
+            with the residual RMS of its simulation on the record where the stability
+            rule compares an unstable A with its stabilised one (``'auto'``)."""
             BK = _lstsq_rows(np.vstack([u_t, e]), x_next - A_try @ x)
-            B_n, _, D_n = pb.unscale(BK[:, :nu], C, D)
-            return B_n, D_n, None, {INFO_KEY: "states"}
+            B_n, C_n, D_n = pb.unscale(BK[:, :nu], C, D)
+            diagnostics = {INFO_KEY: "states"}
+            if compare:
+                diagnostics["simulation_residual_rms"] = simulation_residual(
+                    A_try, B_n, C_n, D_n, data, pb.weights())
+            return B_n, D_n, None, diagnostics
 
         A, fitted, stab = stable_choice(A, Q, ny, fit, stability=plan.stability, data=data,
                                         method=pb.method)
