@@ -483,3 +483,32 @@ def test_n4sid_enforced_stability_on_several_experiments():
     model = subid.n4sid(data, 2, stability="enforce")
     assert np.all(np.isfinite(model.A)) and np.abs(np.linalg.eigvals(model.A)).max() < 1
     assert np.shape(model.info["x0"]) == (3, 2)
+
+
+def test_simulate_and_simulation_bounds_restart_at_each_experiment():
+    """StateSpace.simulate and simulation_bounds on a merged record simulate each
+    experiment from its own initial state (zeros, or one row per experiment), as the
+    methods model it; before, both ran the second experiment on from the first one's
+    final state, silently (0.80 off on this record)."""
+    true = subid.systems.random_system(3, 1, 1, seed=7)
+    d1 = subid.systems.simulate_data(true, 400, seed=1)
+    d2 = subid.systems.simulate_data(true, 250, seed=2)
+    merged = subid.merge([d1, d2])
+    model = subid.identify(merged, 3)
+    per = np.vstack([model.simulate(d1.u), model.simulate(d2.u)])
+    np.testing.assert_array_equal(model.simulate(merged), per)
+    x0 = model.info["x0"]
+    assert x0.shape == (2, 3)
+    y, x = model.simulate(merged, x0=x0, return_state=True)
+    np.testing.assert_array_equal(y, np.vstack([model.simulate(d1.u, x0=x0[0]),
+                                                model.simulate(d2.u, x0=x0[1])]))
+    np.testing.assert_array_equal(x[400], x0[1])
+    with pytest.raises(subid.errors.DataError, match="one row per experiment"):
+        model.simulate(merged, x0=x0[0])
+    bounds = subid.simulation_bounds(model, merged, x0=x0)
+    np.testing.assert_allclose(bounds.value, y, atol=1e-12)
+    first = subid.simulation_bounds(model, d1, x0=x0[0])
+    np.testing.assert_allclose(bounds.std[:400], first.std, atol=1e-14)
+    assert bounds.x[400] == 0.0 and bounds.x.shape == (650,)
+    with pytest.raises(subid.errors.DataError, match="one row per experiment"):
+        subid.simulation_bounds(model, merged, x0=x0[0])

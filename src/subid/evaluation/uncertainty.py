@@ -521,11 +521,14 @@ def simulation_bounds(model, u, level=0.95, *, x0=None, method="delta", n_sample
         A discrete-time model with a parameter covariance (:func:`subid.pem`, the
         polynomial methods).
     u : array_like, shape (N, n_inputs), or IOData
-        Input samples (an IOData record: its inputs).
+        Input samples (an IOData record: its inputs; a record of several
+        experiments, :func:`subid.merge`, is simulated experiment by experiment,
+        each from its own initial state).
     level : float
         Confidence level, e.g. 0.95.
     x0 : array_like, shape (n,), optional
-        Initial state (default zeros; treated as known).
+        Initial state (default zeros; treated as known); for a record of several
+        experiments one row per experiment, shape ``(n_experiments, n)``.
     method : {'delta', 'sampling'}
         First-order propagation, or quantiles over sampled parameter vectors.
     n_samples : int
@@ -536,7 +539,8 @@ def simulation_bounds(model, u, level=0.95, *, x0=None, method="delta", n_sample
     Returns
     -------
     Bounds
-        ``x`` = time stamps ``k dt``, ``value`` the simulated output (N, ny).
+        ``x`` = time stamps ``k dt`` (each experiment's from 0), ``value`` the
+        simulated output (N, ny).
 
     Raises
     ------
@@ -554,6 +558,20 @@ def simulation_bounds(model, u, level=0.95, *, x0=None, method="delta", n_sample
         if not same_period(u.dt or 0.0, model.dt):
             raise DataError(f"the record is sampled with dt={u.dt!r} but the model's period "
                             f"is dt={model.dt!r}")
+        if u.n_experiments > 1:
+            k = u.n_experiments
+            rows = [None] * k if x0 is None else np.asarray(x0, dtype=float)
+            if x0 is not None and rows.shape != (k, model.order):
+                raise DataError(f"the record holds {k} experiments (subid.merge): x0 must "
+                                f"have one row per experiment, shape ({k}, {model.order}), "
+                                f"got shape {rows.shape}")
+            parts = [simulation_bounds(model, e, level, x0=r, method=method,
+                                       n_samples=n_samples, seed=seed)
+                     for e, r in zip(u.experiments, rows)]
+            std = None if parts[0].std is None else np.vstack([p.std for p in parts])
+            return Bounds(*(np.concatenate([getattr(p, f) for p in parts])
+                            for f in ("x", "value", "lower", "upper")),
+                          std, float(level), method)
         u = u.u
     u = as_signal(u, "input u", allow_empty_columns=model.n_inputs == 0)
     if u.shape[1] != model.n_inputs:

@@ -346,7 +346,10 @@ class StateSpace:
             it may be omitted; if given it must be uniform with the model's
             period ``dt``.
         x0 : array_like, shape (n,), optional
-            State at the first sample (default zeros).
+            State at the first sample (default zeros). For a record of several
+            experiments (:func:`subid.merge`), one row per experiment, shape
+            ``(n_experiments, n)`` (as ``model.info['x0']`` of a model identified
+            from it).
         hold : {'zoh', 'foh'}, optional
             Continuous time only: the input is constant on ``[t_k, t_{k+1})``
             (``'zoh'``) or linear between ``u[k]`` and ``u[k+1]``
@@ -360,7 +363,9 @@ class StateSpace:
         Returns
         -------
         y : ndarray, shape (N, n_outputs)
-            Output at every sample.
+            Output at every sample. A record of several experiments is simulated
+            experiment by experiment, each from its own initial state (no state
+            carried across a border), the outputs in the record's order.
         x : ndarray, shape (N, n)
             State at every sample (only with ``return_state=True``).
 
@@ -379,6 +384,11 @@ class StateSpace:
             if t is not None:
                 raise DataError("pass either an IOData record or time stamps t, not both: "
                                 "the record carries its own time stamps")
+            if u.n_experiments > 1:
+                parts = [self.simulate(e, x0=x, hold=hold, return_state=True)
+                         for e, x in zip(u.experiments, self._experiment_x0(x0, u))]
+                y, x = np.vstack([p[0] for p in parts]), np.vstack([p[1] for p in parts])
+                return (y, x) if return_state else y
             data = u
             u = data.u
             if self.is_continuous:
@@ -422,6 +432,19 @@ class StateSpace:
             u = effective_input(self, u)                         # info['input_delay']
             y, x = _simulate.simulate_discrete(self._A, self._B, self._C, self._D, u, x0)
         return (y, x) if return_state else y
+
+    def _experiment_x0(self, x0, data) -> list:
+        """The initial state of each experiment of ``data`` (several): zeros, or the
+        rows of an array of shape ``(n_experiments, n)``."""
+        k, n = data.n_experiments, self.order
+        if x0 is None:
+            return [None] * k
+        arr = np.asarray(x0)
+        if arr.shape != (k, n):
+            raise DataError(f"the record holds {k} experiments (subid.merge): x0 must have "
+                            f"one row per experiment, shape ({k}, {n}) (as model.info['x0'] "
+                            f"of a model identified from it), got shape {arr.shape}")
+        return list(arr)
 
     def _check_x0(self, x0) -> np.ndarray:
         n = self.order
