@@ -167,3 +167,26 @@ def test_delays_in_markov_exports_and_conversions():
         warnings.simplefilter("error")
         same = m.transform(np.eye(3) * 2.0)          # same sampling: the delays stay
     assert same.info["input_delay"] == [1, 3]
+
+
+def test_absorb_delay_keeps_the_noise_model_and_the_initial_state():
+    """absorb_delay carries K (zero rows for the registers), noise_cov and info['x0']
+    (zeros for the registers): one-step predictions and the simulation from
+    info['x0'] are those of the delayed model; before, K was dropped and predict
+    silently became a simulation."""
+    true = subid.systems.random_system(2, 2, 1, seed=4, feedthrough=False)
+    rng = np.random.default_rng(5)
+    u = rng.normal(size=(1500, 2))
+    ud = u.copy()
+    ud[3:, 0], ud[:3, 0] = u[:-3, 0], 0.0
+    y = true.simulate(ud)
+    data = subid.IOData(u, y + 0.1 * np.std(y) * rng.normal(size=y.shape))
+    model = subid.moesp(data, 2, input_delay=[3, 0])
+    absorbed = subid.absorb_delay(model)
+    assert absorbed.order == 5 and absorbed.K is not None
+    np.testing.assert_array_equal(absorbed.noise_cov, model.noise_cov)
+    np.testing.assert_allclose(subid.predict(absorbed, data, 1, x0=absorbed.info["x0"]),
+                               subid.predict(model, data, 1, x0=model.info["x0"]),
+                               atol=1e-10)
+    np.testing.assert_allclose(absorbed.simulate(data, x0=absorbed.info["x0"]),
+                               model.simulate(data, x0=model.info["x0"]), atol=1e-10)

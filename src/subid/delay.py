@@ -317,7 +317,9 @@ def absorb_delay(model):
     ``sum(d)``. Use it for tools that know no delays (``.mat``, control,
     scipy exports; Markov parameters).
 
-    Returns the model itself when it has no delays.
+    Returns the model itself when it has no delays. The Kalman gain K (zero rows for
+    the registers), ``noise_cov`` and ``info['x0']`` (zeros for the registers) carry
+    over: one-step predictions are unchanged.
 
     Raises
     ------
@@ -364,7 +366,16 @@ def absorb_delay(model):
         pos += d
     info = {k: v for k, v in model.info.items() if k != INFO_KEY}
     info["absorbed_input_delay"] = delays.tolist()
+    # the innovation form and the initial state(s) carry over: the registers take no
+    # noise (K's rows zero) and start empty (the delayed model's inputs before the
+    # record are zero too), so predictions and simulations from info['x0'] are the same
+    K = None if model.K is None else np.vstack([model.K, np.zeros((extra, p))])
+    x0 = info.get("x0")
+    if x0 is not None and np.shape(x0)[-1:] == (n,):
+        x0 = np.asarray(x0, dtype=float)
+        info["x0"] = np.concatenate([x0, np.zeros(x0.shape[:-1] + (extra,))], axis=-1)
     # type(model): the model's own class (StateSpace), without importing the model
     # module, which builds on this one
     return type(model)(A, B, C, D, model.dt, hold=model.hold, input_names=model.input_names,
-                       output_names=model.output_names, info=info)
+                       output_names=model.output_names, info=info, K=K,
+                       noise_cov=model.noise_cov)
