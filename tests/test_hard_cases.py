@@ -130,3 +130,27 @@ def test_stiff_plant_continuous_time_methods():
     ai = subid.AdaptiveIdentifier(3, 1, 1, dt=1e-3)
     ai.update(data.u, data.y)
     assert _finite(ai.model)
+
+
+@pytest.mark.parametrize("method", [subid.moesp, subid.ls_subspace, subid.n4sid,
+                                    subid.identify])
+def test_records_too_short_for_the_folds_use_the_whole_record(method):
+    """A record whose cross-validation folds are too short for the horizon the order
+    needs (20 samples, order 1; 30 samples, order 2: the folds allow horizon 2 only)
+    takes the order or horizon from the whole record's singular values, says so in
+    info['order_selection']['reason'], and is reproduced by passing the choice back;
+    before, the default call raised an error about a fold's length ("10 samples are too
+    few for horizon 2 ... reduce the horizon") that the user had not chosen."""
+    true = subid.systems.random_system(2, 1, 1, seed=3)
+    for n_samples, order in ((20, 1), (20, None), (30, 2)):
+        data = subid.systems.simulate_data(true, n_samples, seed=1, output_snr_db=40)
+        model = method(data, order)
+        reason = model.info["order_selection"]["reason"]
+        assert f"record ({n_samples} samples) is too short" in reason
+        assert subid.fit_percent(model, data).mean() > 90
+        again = method(data, model.order, horizon=model.info["horizon"])
+        np.testing.assert_allclose(again.freqresp([0.1, 1.0]), model.freqresp([0.1, 1.0]),
+                                   rtol=1e-9, atol=1e-12)
+    tiny = subid.systems.simulate_data(true, 8, seed=1)
+    with pytest.raises(subid.errors.SubidError, match="8 samples"):
+        method(tiny)

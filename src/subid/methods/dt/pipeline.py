@@ -33,10 +33,11 @@ from __future__ import annotations
 
 import abc
 import warnings
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from subid.errors import OrderError, TooFewSamplesError
 from subid.methods._common import choose_order
 from subid.methods._info import collect_warnings
 from subid.methods.dt._subspace import (
@@ -284,10 +285,23 @@ def run(method: SubspaceMethod, data, order, horizon, *, selection: str,
                            statistic=statistic, refine=refine, input_delay=input_delay)
     pipeline = Pipeline(method, plan)
     with collect_warnings() as issued:
+        too_short = None
         if plan.cross_validate:
             check_data(data, plan.method)
-            problem, model, estimator, rule = choose(data, plan, pipeline)
-        else:
+            try:
+                problem, model, estimator, rule = choose(data, plan, pipeline)
+            except (TooFewSamplesError, OrderError) as exc:
+                # the folds (three quarters of the record each) are too short for the
+                # horizon the order needs, the whole record is not: its singular values
+                # decide, as selection='gap' (a record too short for that too raises
+                # the error of the whole record, which names its own length)
+                too_short = (f"the record ({data.n_samples} samples) is too short for the "
+                             f"cross-validation folds ({exc}); the largest gap of the whole "
+                             "record's singular values decides instead")
+                plan = replace(plan, selection="gap", cross_validate=False,
+                               estimator_choice="fit" if len(plan.estimators) > 1 else None)
+                pipeline = Pipeline(method, plan)
+        if not plan.cross_validate:
             problem = pipeline.prepare(data, plan.orders, plan.horizon)
             if plan.estimator_choice == "fit":   # order and horizon given: no fold fits
                 estimator, model, rule = estimator_by_fit(data, problem, pipeline,
@@ -295,6 +309,9 @@ def run(method: SubspaceMethod, data, order, horizon, *, selection: str,
             else:
                 estimator, rule = plan.estimators[0], None
                 model = pipeline.fit(problem, estimator)
+            if too_short is not None:
+                model.info["order_selection"] = dict(model.info["order_selection"],
+                                                     reason=too_short)
         model.info.update(plan.info(estimator, rule))
         model = finalize(model, problem, refine=plan.refine, delays=plan.delays,
                          statistic=plan.statistic)
