@@ -618,3 +618,30 @@ def test_offsets_warn_and_do_not_fake_feedback():
         subid.moesp(subid.IOData(stairs, climb, dt=1), 2, horizon=10)
     with pytest.warns(OffsetWarning, match="the inputs do not explain the outputs' offsets"):
         subid.moesp(subid.IOData(stairs, climb + 5.0, dt=1), 2, horizon=10)
+
+
+def test_keeping_the_biased_subspace_model_under_feedback_warns():
+    """Closed loop u = r - 0.5 y with AR(0.9) output noise: focus='simulation' keeps the
+    subspace model (its simulation fit on the folds beats the consistent prediction-error
+    refinement's) and says, with a FeedbackWarning, that it is biased and which focus
+    gives the plant; focus='prediction' returns the consistent model (Markov error about
+    a tenth) without the warning."""
+    true = subid.systems.random_system(2, 1, 1, seed=12, feedthrough=False)
+    rng = np.random.default_rng(3)
+    N = 3000
+    r, e = rng.normal(size=N), 0.3 * rng.normal(size=N)
+    x, v = np.zeros(2), 0.0
+    u, y = np.zeros((N, 1)), np.zeros((N, 1))
+    for k in range(N):
+        v = 0.9 * v + e[k]
+        y[k] = true.C @ x + v
+        u[k] = r[k] - 0.5 * y[k]
+        x = true.A @ x + true.B @ u[k]
+    data = subid.IOData(u, y)
+    with pytest.warns(subid.errors.FeedbackWarning, match="focus='prediction'"):
+        biased = subid.identify(data, 2)
+    assert biased.info["identify"]["refinement"]["kept"] is False
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", subid.errors.FeedbackWarning)
+        plant = subid.identify(data, 2, focus="prediction")
+    assert subid.markov_error(plant, true) < 0.2 * subid.markov_error(biased, true)

@@ -100,7 +100,7 @@ from subid._blas import one_thread, serial_blas
 from subid._threads import available, ordered_map
 from subid._validation import check_choice, checked_call
 from subid.data import IOData, not_a_record
-from subid.errors import DataError, ModelError, OptionError, SubidError
+from subid.errors import DataError, FeedbackWarning, ModelError, OptionError, SubidError
 from subid.methods._info import collect_warnings
 from subid.methods.crossval import FLOOR, fold_score
 from subid.model.statespace import StateSpace
@@ -188,6 +188,19 @@ def _refine(data, model, focus, held_out=False, why=None):
         if why is not None:
             why.append(f"{type(exc).__name__}: {exc}")
         return None
+
+
+def _warn_biased(what: str) -> None:
+    """The :class:`subid.errors.FeedbackWarning` of a ``focus='simulation'`` call under
+    feedback that keeps the subspace model (biased in closed loop) because the
+    consistent prediction-error refinement ``what`` (how it lost as a simulator)."""
+    warnings.warn("identify: the data show feedback from the outputs to the inputs, and the "
+                  "model returned is the subspace estimate, biased in closed loop: the "
+                  "prediction-error refinement, consistent there, " + what + ", so "
+                  "focus='simulation' kept the subspace model as the better simulator of "
+                  "these data; for the plant itself (control design) use "
+                  "focus='prediction' (info['identify']['refinement'])", FeedbackWarning,
+                  stacklevel=3)
 
 
 def _feedback(data, model) -> bool:
@@ -554,6 +567,8 @@ def _discrete(data, order, horizon, feedthrough, focus, refine):
                              else "one-step prediction fit (%)") + " on the held-out folds")
     if len(refined) < len(base):
         before = 100.0 - float(np.mean(bases[guard]))
+        _warn_biased(f"raised the simulation misfit on {len(refined)} of {len(base)} folds "
+                     f"above {1 + SIMULATION_LOSS:g} x the subspace models' ({before:.3g} %)")
         refinement.update(
             subspace_simulation_folds=bases[guard], refined_simulation_folds=refineds[guard],
             kept=False, reason=(f"after {len(refined)} of {len(base)} fold refinements the simulation "
@@ -576,6 +591,8 @@ def _discrete(data, order, horizon, feedthrough, focus, refine):
         refinement.update(subspace_simulation_folds=base_s, refined_simulation_folds=refined_s)
         before, after = 100.0 - float(np.mean(base_s)), 100.0 - float(np.mean(refined_s))
         if after > (1.0 + SIMULATION_LOSS) * before:
+            _warn_biased(f"raised the simulation misfit on the folds from {before:.3g} to "
+                         f"{after:.3g} %")
             refinement.update(kept=False, reason=(
                 f"the refinement raises the simulation misfit on the folds from "
                 f"{before:.3g} to {after:.3g} (more than {100 * SIMULATION_LOSS:g} %): "
