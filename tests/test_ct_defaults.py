@@ -1,9 +1,12 @@
 """The default ``ct_subspace(data)`` (issue 22): several experiments, offsets and the
 stability handling, the order by cross-validation, coloured output noise."""
 
+import warnings
+
 import numpy as np
 import pytest
 
+import subid
 from subid import IOData, StateSpace, merge
 from subid.experiments.seed002 import BIAS_FREQUENCIES, paper_system, simulate
 from subid.experiments.seed002_bound import median_bound
@@ -219,3 +222,21 @@ def test_cramer_rao_bound_of_coloured_against_white_noise():
     coloured = median_bound(4000, range(3), noise_pole=0.9, draws=200)
     assert 0.015 < white < 0.03, white
     assert 3.8 < coloured / white < 5.0, coloured / white
+
+
+def test_a_state_the_samples_do_not_see_gets_no_initial_state():
+    """A converted N4SID model with a Nyquist mode (a pole of the discrete-time model on
+    the negative real axis: one state more, unseen at the samples) had info['x0'] =
+    -1.3e14 for that state (its rounding-level column equilibrated to unit norm); it is 0
+    now, and the initial state reproduces the fit x0='estimate' gives."""
+    true = subid.systems.random_system(4, 2, 2, seed=31)
+    data = subid.systems.simulate_data(true, 1500, seed=6, process_snr_db=15,
+                                       output_snr_db=20)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        model = subid.ct_subspace(data)
+    assert model.info.get("nyquist_modes")
+    x0 = np.asarray(model.info["x0"])
+    assert np.all(np.abs(x0) < 100), x0
+    np.testing.assert_allclose(subid.fit_percent(model, data, x0=x0),
+                               subid.fit_percent(model, data), atol=1e-6)

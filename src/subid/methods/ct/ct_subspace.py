@@ -161,6 +161,11 @@ def _linear_fit(problem: Problem, feedthrough: bool, whiten=None):
     return fit
 
 
+#: An initial-state column of the regression of :func:`_given_bd` below this fraction of
+#: the largest of its experiment is a state the samples do not see (its x0 is set to 0).
+UNSEEN_STATE = 1e-10
+
+
 def _given_bd(problem: Problem, A, B, C, D):
     """x0 and offsets for a model whose B and D are given (from the filtered equation (15)
     or a converted model), and the regressor of :func:`subid.methods.ct._ct_fit.predicted`
@@ -174,7 +179,17 @@ def _given_bd(problem: Problem, A, B, C, D):
     if R is None:
         return None, None, None
     forced = R[:, :n * m] @ B.reshape(-1) + R[:, R.shape[1] - p * m:] @ D.reshape(-1)
-    theta = _ct_fit.solve(R[:, n * m:R.shape[1] - p * m], rec.y.reshape(-1) - forced)[0]
+    free = R[:, n * m:R.shape[1] - p * m]
+    # a state the samples do not see (the second copy of a Nyquist mode of a converted
+    # model, _ct_discrete.with_nyquist_modes: its response is zero at every sample up to
+    # rounding) has no initial state to fit: its column, rounding equilibrated to unit
+    # norm, got entries of 1e14 (fitting the noise with rounding); left out, its x0 is 0
+    kept = np.ones(free.shape[1], dtype=bool)
+    if s["estimate_x0"] and n:
+        norms = np.linalg.norm(free[:, :n * E], axis=0).reshape(E, n)
+        kept[:n * E] = (norms > UNSEEN_STATE * norms.max(axis=1, keepdims=True)).ravel()
+    theta = np.zeros(free.shape[1])
+    theta[kept] = _ct_fit.solve(free[:, kept], rec.y.reshape(-1) - forced)[0]
     _, _, x0, y0 = _ct_fit.unpack(np.concatenate([np.zeros(n * m), theta]), n, m, p, E,
                                   feedthrough=False, estimate_x0=s["estimate_x0"],
                                   offset=s["offset"])
