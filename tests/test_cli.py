@@ -273,6 +273,34 @@ def test_simulate_writes_the_model_output_in_original_units(identified, dryer_in
         np.testing.assert_allclose(z["y"], model.simulate(raw.u), rtol=1e-13, atol=1e-13)
 
 
+def test_linear_detrending_is_said_everywhere_downstream(dryer_csv, dryer_inputs_csv,
+                                                        tmp_path, capsys):
+    """--detrend linear removes lines, functions of the record's time, not an operating
+    point: simulate with offsets refuses (it fed the raw input to the model of detrended
+    data, and the output was in neither units), with --no-offsets it simulates; the
+    report, the python and MATLAB code say that no operating point applies."""
+    out = tmp_path / "lin"
+    code, _, err = run(capsys, "identify", dryer_csv, "--inputs", "voltage", "--outputs",
+                       "temperature", "--dt", "0.08", "--method", "n4sid", "--order", "2",
+                       "--detrend", "linear", "--out", out, "-q")
+    assert code == 0, err
+    html = (out / "report.html").read_text(encoding="utf-8")
+    assert "No operating point: the model relates deviations from the straight lines" in html
+    assert "% the model relates deviations from the straight lines" in html
+    code, _, err = run(capsys, "simulate", out / "model.json", "--input", dryer_inputs_csv,
+                       "--out", tmp_path / "y.csv")
+    assert code == 2 and "--detrend linear" in err and "--no-offsets" in err
+    assert len(err.strip().splitlines()) == 1
+    code, _, err = run(capsys, "simulate", out / "model.json", "--input", dryer_inputs_csv,
+                       "--no-offsets", "--out", tmp_path / "y.csv")
+    assert code == 0, err
+    code, _, err = run(capsys, "convert", out / "model.json", "--to", "scipy", "--out",
+                       tmp_path / "m.py")
+    assert code == 0, err
+    assert "# The model relates deviations from the straight lines" in \
+        (tmp_path / "m.py").read_text()
+
+
 @pytest.mark.slow
 def test_compare_prints_the_fit_table_and_writes_the_overlay(identified, tmp_path, capsys):
     other = tmp_path / "moesp"

@@ -520,11 +520,14 @@ def require_single_experiment(data, method: str) -> None:
                         "one experiment: data.experiment(k)")
 
 
-def _offset_kind(record):
-    """``None`` (not detrended), ``'constant'`` or ``'linear'`` for a single experiment."""
+def offset_kind(record):
+    """What :meth:`IOData.detrend` removed from ``record``: ``None`` (nothing),
+    ``'constant'`` (means) or ``'linear'`` (straight lines: an intercept and a slope per
+    channel, one pair per experiment when each experiment lost its own)."""
     if record.u_offset is None:
         return None
-    return "constant" if np.ndim(record.u_offset) == 1 else "linear"
+    per_experiment = 1 if record._offsets_per_experiment else 0
+    return "constant" if np.ndim(record.u_offset) == 1 + per_experiment else "linear"
 
 
 @checked_call
@@ -604,7 +607,7 @@ def merge(records, names=None) -> IOData:
                             f"{list(first.input_names)} -> {list(first.output_names)}; "
                             "rename or reorder the channels so that they match")
     experiments = [e for rec in records for e in rec.experiments]
-    kinds = {_offset_kind(e) for e in experiments}
+    kinds = {offset_kind(e) for e in experiments}
     if len(kinds) > 1:
         raise DataError("merge: some records were detrended and others not (or with "
                         "different kinds); detrend all of them the same way, or detrend "

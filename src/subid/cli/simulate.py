@@ -63,6 +63,14 @@ def simulate(model_path, input_path, inputs, time_column, dt, delimiter, offsets
     from subid._validation import check_dt
     with _about(model_path):
         model = load_model(model_path)
+        recorded = model.info.get("data") if isinstance(model.info, dict) else None
+        if offsets and isinstance(recorded, dict) and recorded.get("detrend") == "linear":
+            raise DataError("the model was identified with --detrend linear: the lines removed "
+                            "are functions of the identification record's time, not an "
+                            "operating point to add to another input; use --no-offsets "
+                            "(deviations from the lines, of inputs detrended the same way), "
+                            "or identify with --detrend constant to simulate in the data's "
+                            "units")
     columns = inputs if inputs is not None else ",".join(model.input_names)
     if time_column is not None and dt is not None:
         raise click.UsageError("give either --time or --dt, not both")

@@ -34,12 +34,13 @@ import html
 import logging
 import math
 import re
+import textwrap
 
 import numpy as np
 
 from subid.errors import ModelError, SubidError
 from subid.io._files import atomic_write
-from subid.io.interop import operating_point
+from subid.io.interop import operating_point, removed_lines
 from subid.model.polynomial import describe as describe_polynomials
 from subid.model.polynomial import polynomials_of
 
@@ -246,7 +247,7 @@ def _matlab_matrix(M) -> str:
     return "[" + "; ".join(" ".join(repr(float(v)) for v in row) for row in M) + "]"
 
 
-def _matlab_code(model, point=None) -> str:
+def _matlab_code(model, point=None, lines=None) -> str:
     names_in = ", ".join(f"'{n}'" for n in model.input_names)
     names_out = ", ".join(f"'{n}'" for n in model.output_names)
     code = (f"A = {_matlab_matrix(model.A)};\nB = {_matlab_matrix(model.B)};\n"
@@ -259,6 +260,8 @@ def _matlab_code(model, point=None) -> str:
                  "before identification):\n"
                  f"u0 = {_matlab_matrix(u0[None, :])};\ny0 = {_matlab_matrix(y0[None, :])};\n"
                  "% in the data's units: y = lsim(sys, u - u0, t) + y0")
+    elif lines is not None:
+        code += "\n" + "\n".join(f"% {line}" for line in textwrap.wrap(lines + ".", 86))
     return code
 
 
@@ -639,6 +642,9 @@ def identification_report(models, estimation, validation=None, *, title="subid r
                                           for n, v in zip(estimation.output_names, y0)))
                   + ". In the data's units: y = G(u − u0) + y0 (the MATLAB code below "
                     "includes u0 and y0).</p>")
+    elif first_model is not None and \
+            (lines := removed_lines(first_model, estimation)) is not None:
+        extra += f"<p class=\"note\">No operating point: {_e(lines)}.</p>"
     cmd = f"<p>Reproduce with:</p><pre>{_e(command)}</pre>" if command else ""
     body.append(_section("summary", "Summary", facts + table + fit_note + extra + cmd))
     nav.append(("summary", "summary"))
@@ -792,7 +798,8 @@ def identification_report(models, estimation, validation=None, *, title="subid r
         info = _info_table(m.info, m.input_names, m.output_names)
         if info:
             block += ["<p>diagnostics (model.info)</p>", info]
-        block += ["<p>MATLAB</p>", f"<pre>{_e(_matlab_code(m, operating_point(m, estimation)))}</pre>"]
+        code = _matlab_code(m, operating_point(m, estimation), removed_lines(m, estimation))
+        block += ["<p>MATLAB</p>", f"<pre>{_e(code)}</pre>"]
         parts.append("".join(block))
     body.append(_section("matrices", "Model matrices", "".join(parts)))
     nav.append(("matrices", "matrices"))

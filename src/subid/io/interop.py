@@ -41,6 +41,8 @@ only when they are called.
 
 from __future__ import annotations
 
+import textwrap
+
 import numpy as np
 
 from subid._validation import check_choice, same_period
@@ -48,7 +50,7 @@ from subid._validation import check_choice, same_period
 # The MAT reader and writer live in subid.io.mat, the pandas converters with IOData: the
 # methods StateSpace.from_mat/to_mat and IOData.from_pandas/to_pandas use them, and this
 # module, above data, io and model, re-exports them.
-from subid.data import iodata_from_pandas, iodata_to_pandas
+from subid.data import iodata_from_pandas, iodata_to_pandas, offset_kind
 from subid.errors import ModelError, OptionError
 from subid.io._files import write_bytes
 from subid.io.mat import write_mat_model
@@ -177,11 +179,35 @@ def operating_point(model, estimation=None):
     return u0, y0
 
 
+#: What :func:`removed_lines` says of a model identified from linearly detrended data.
+LINES_NOTE = ("the model relates deviations from the straight lines removed from every "
+              "channel before identification (--detrend linear): those lines are functions "
+              "of the identification record's time, recorded in the model file "
+              "(info['data']), and are not part of this model; with another record, "
+              "detrend it the same way and compare deviations")
+
+
+def removed_lines(model, estimation=None) -> str | None:
+    """:data:`LINES_NOTE` when ``model`` was identified from data whose straight lines
+    were removed (``--detrend linear``, recorded in ``model.info['data']``; or the
+    estimation record's own ``detrend('linear')``), else None: no operating point to add
+    back (:func:`operating_point` is None for them), which every export says."""
+    info = model.info.get("data") if isinstance(model.info, dict) else None
+    if isinstance(info, dict) and info.get("detrend") == "linear":
+        return LINES_NOTE
+    if estimation is not None and offset_kind(estimation) == "linear":
+        return LINES_NOTE
+    return None
+
+
 def _operating_point_source(model) -> str:
-    """Python lines stating the operating point (the means removed by --detrend)."""
+    """Python lines stating the operating point (the means removed by --detrend), or a
+    comment saying that linear trends were removed (:func:`removed_lines`)."""
     point = operating_point(model)
     if point is None:
-        return ""
+        lines = removed_lines(model)
+        return "" if lines is None else \
+            "".join(f"# {line}\n" for line in textwrap.wrap(lines[0].upper() + lines[1:] + ".", 86))
     u0, y0 = point
     return ("# The model relates deviations from the operating point, the channel means\n"
             "# removed before identification: in the data's units y = G(u - u0) + y0.\n"
@@ -291,6 +317,8 @@ def convert_model(model, path, to: str, *, dt=None, method: str = "zoh",
             what += ("; the model is around the operating point u0 = "
                      f"{np.round(point[0], 6).tolist()}, y0 = "
                      f"{np.round(point[1], 6).tolist()} (not stored in the .mat file)")
+        elif (lines := removed_lines(model)) is not None:
+            what += f"; {lines}"
         return what
     if to == "json":
         model.save(path)
