@@ -583,13 +583,17 @@ def check_system_matrices(system_matrices: str) -> str:
 def finalize(model: StateSpace, problem: Problem, *, refine, delays,
              statistic: str = "auto") -> StateSpace:
     """The final model of a DT batch method: its noise model (K and the innovation
-    covariance, :func:`subid.methods.dt.noise_model.attach_noise_model`, then the optional
-    refinement, :func:`refined`) and its input delays (:func:`subid.delay.record_delay`;
+    covariance, :func:`subid.methods.dt.noise_model.attach_noise_model`; a gain that
+    predicts clearly worse than none refitted, :func:`subid.methods.dt.gain.checked_gain`),
+    then the optional refinement, :func:`refined`) and its input delays (:func:`subid.delay.record_delay`;
     ``info['input_delay']`` None without delays), with the ``refine`` and ``statistic``
     options in use recorded in ``info``. Run once, on the final model."""
     from subid.delay import record_delay
+    from subid.methods.dt.gain import checked_gain
     from subid.methods.dt.noise_model import attach_noise_model
     model = attach_noise_model(model, problem)
+    if isinstance(problem.data, IOData):
+        model = checked_gain(problem.data, model)
     if refine is not None:
         model = refined(problem.data, model, refine)
     model.info["refine"] = refine          # the values in use, as every option's
