@@ -81,7 +81,7 @@ _RUN = _method_run_options(
               help=f"Model order: an integer, 'auto' (discrete-time batch methods: "
                    f"{AUTO_ORDER_RULE}), a range '2:8' or a list '2,4,6' of candidates; for "
                    "arx, armax, oe, bj a list is MATLAB's structure, e.g. '2,2,1' = (na, nb, "
-                   "nk) for arx.")
+                   "nk) for arx, and a range is refused.")
 @_RUN["horizon"]
 @click.option("--validate", type=click.FloatRange(0, 1, max_open=True), default=0.3,
               show_default=True,
@@ -142,6 +142,7 @@ def identify(data, inputs, outputs, dt, time_column, delimiter, decimal, detrend
     spec = METHODS[method_name] if method_name is not None else \
         (METHODS["ls"] if stream else IDENTIFY)
     _check_out(out, _IDENTIFY_FILES)
+    _check_structure_order(spec, order)
     order = _parse_order(order)
     opts = _parse_options(options)
     _check_method_options(spec, opts, reserved=_reserved_options(spec, horizon=horizon,
@@ -174,6 +175,33 @@ def identify(data, inputs, outputs, dt, time_column, delimiter, decimal, detrend
                                    (delimiter, decimal), detrend, spec, order, horizon,
                                    validate, forgetting, opts, refine, frequency_unit,
                                    write_report, out, steps)
+
+
+def _check_structure_order(spec, text) -> None:
+    """Refuse a range ``--order A:B`` for a method whose order is a polynomial structure
+    (arx, armax, oe, bj): it takes no candidate orders, and ``_parse_order``'s list
+    would be read as the structure (``2:4`` as na=2, nb=3, nk=4)."""
+    if not spec.supports("polynomial") or ":" not in str(text):
+        return
+    from subid.methods.describe import _STRUCTURE_NAMES
+    names = _STRUCTURE_NAMES.get(spec.name, ("na", "nb", "nk"))
+    example = ",".join("1" if name == "nk" else "2" for name in names)
+    raise click.BadParameter(
+        f"{text!r}: {spec.name} takes no range of candidate orders; give its structure "
+        f"'{','.join(names)}' (e.g. {example}), an integer n (every degree n) or 'auto' "
+        "(the structure chosen by cross-validation)", param_hint="--order")
+
+
+def _order_line(model) -> str:
+    """The summary's order line: the order, a polynomial model's structure, and how the
+    order was chosen (nothing about what does not apply, e.g. a horizon)."""
+    from subid.methods.describe import describe_structure, structure_orders
+    how = describe_selection(model.info["order_selection"]) \
+        if model.info.get("order_selection") else ""
+    structure = describe_structure(structure_orders(model.info))
+    if structure and structure not in how:
+        how = f"{structure}; {how}" if how else structure
+    return f"order       {model.order}" + (f" ({how})" if how else "")
 
 
 def _steps(write_report):
@@ -350,8 +378,11 @@ def _write_outputs(out, data, spec, model, result, est, val, seconds, record, *,
             seconds={spec.name: seconds}, notes=notes, command=_command_line(), source=data,
             data=report_data, progress=steps.detail, fits={spec.name: result})
     steps.start("write")
+    from subid.methods.describe import structure_orders
+    structure = structure_orders(model.info)
     summary = {
         "data": data, "method": spec.name, "function": spec.attribute, "order": model.order,
+        **({"structure": structure} if structure else {}),
         "horizon": model.info.get("horizon"), "dt": model.dt, "outputs": outputs, **extra,
         "n_estimation": n_estimation, "n_validation": n_validation,
         **_fit_summary(result), "seconds": seconds, "files": files,
@@ -462,9 +493,7 @@ def _print_summary(source, record, spec, model, result, est, val, seconds, files
     lines = [f"data        {source}: {record.n_samples} samples, {record.n_inputs} input(s), "
              f"{record.n_outputs} output(s), {timing}",
              f"method      {spec.name} ({spec.attribute})",
-             f"order       {model.order}"
-             + (f" ({describe_selection(model.info['order_selection'])})"
-                if model.info.get("order_selection") else ""),
+             _order_line(model),
              *([f"feedthrough {text}"] if (text := describe_feedthrough(
                  model.info.get("feedthrough"), option="--option feedthrough=true",
                  input_names=est.input_names, output_names=est.output_names)) else []),

@@ -602,7 +602,7 @@ def identification_report(models, estimation, validation=None, *, title="subid r
             '<span class="bad">NO</span>'
         rows.append(
             f'<tr><td class="l">{_e(label)}</td><td class="l">{_e(m.info.get("method", ""))}</td>'
-            f"<td>{m.order}</td><td>{_e(m.info.get('horizon', '—'))}</td>"
+            f"<td>{m.order}</td><td>{_e(_horizon_cell(m))}</td>"
             f"<td>{'continuous' if m.dt == 0 else _fmt(m.dt)}</td>"
             f"<td>{_fmt_fit(r['fit_estimation'])}</td><td>{_fmt_fit(r['fit_validation'])}</td>"
             f"<td>{stable}</td><td>{_fmt(seconds[label], 3) if label in seconds else '—'}</td></tr>")
@@ -797,6 +797,13 @@ def identification_report(models, estimation, validation=None, *, title="subid r
     body.append(_section("matrices", "Model matrices", "".join(parts)))
     nav.append(("matrices", "matrices"))
     return _page(title, body, nav)
+
+
+def _horizon_cell(model) -> str:
+    """The summary table's horizon of a model: '—' where none applies (a polynomial
+    model's ``info['horizon']`` is None)."""
+    horizon = model.info.get("horizon")
+    return "—" if horizon is None else str(horizon)
 
 
 def _order_scored(model) -> bool:

@@ -1,0 +1,105 @@
+"""Defects a user test of the command line found: the order of the polynomial methods
+(a structure, no range of candidates), what the summary says was chosen, the report's
+frequency units, the documentation of the options, hints written in the command line's
+own options, the channel names of ``compare``/``simulate`` and MATLAB's ``Ts``."""
+
+from __future__ import annotations
+
+import json
+import re
+
+import pytest
+
+pytest.importorskip("matplotlib")
+pytest.importorskip("click")
+
+from subid.cli.commands import main  # noqa: E402
+from subid.methods.describe import describe_order_selection, describe_structure  # noqa: E402
+
+
+def run(capsys, *args):
+    code = main([str(a) for a in args])
+    out = capsys.readouterr()
+    return code, out.out, out.err
+
+
+def _order_line(out: str) -> str:
+    return next(line for line in out.splitlines() if line.startswith("order"))
+
+
+# -- 1. the order of a polynomial method is a structure, not a range of candidates ------
+@pytest.mark.parametrize("method, names", [("arx", "na,nb,nk"), ("armax", "na,nb,nc,nk"),
+                                           ("oe", "nb,nf,nk"), ("bj", "nb,nc,nd,nf,nk")])
+def test_a_range_of_orders_for_a_polynomial_method_is_an_error_naming_the_structure(
+        method, names, tmp_path, capsys):
+    code, out, err = run(capsys, "identify", "dataset:dryer", "--method", method,
+                         "--order", "2:4", "--out", tmp_path / "o")
+    assert code == 2 and out == ""
+    assert len(err.strip().splitlines()) == 1
+    assert "no range" in err and f"'{names}'" in err and "'auto'" in err
+    assert not (tmp_path / "o").exists()
+
+
+def test_a_range_still_gives_candidate_orders_to_a_subspace_method(tmp_path, capsys):
+    code, out, err = run(capsys, "identify", "dataset:dryer", "--method", "moesp", "--order",
+                         "3:4", "--no-report", "--out", tmp_path / "o")
+    assert code == 0, err
+    assert _order_line(out).split()[1] in ("3", "4")
+    assert "over" in _order_line(out) and "given" not in _order_line(out)
+
+
+def test_the_summary_of_a_polynomial_model_names_its_structure(tmp_path, capsys):
+    code, out, err = run(capsys, "identify", "dataset:dryer", "--method", "arx", "--order",
+                         "3", "--no-report", "--out", tmp_path / "o")
+    assert code == 0, err
+    line = _order_line(out)
+    assert re.fullmatch(r"order +5 \(na 3, nb 3, nk \d+; given\)", line), line
+    summary = json.loads((tmp_path / "o" / "summary.json").read_text())
+    assert list(summary["structure"]) == ["na", "nb", "nk"]
+    assert summary["structure"]["na"] == [[3]] and summary["structure"]["nb"] == [[3]]
+    # a MATLAB structure is echoed as given
+    code, out, err = run(capsys, "identify", "dataset:dryer", "--method", "oe", "--order",
+                         "2,2,1", "--no-report", "--out", tmp_path / "oe")
+    assert code == 0, err
+    assert "(nb 2, nf 2, nk 1; given)" in _order_line(out)
+
+
+def test_a_chosen_polynomial_structure_shows_no_horizon_anywhere(tmp_path, capsys):
+    code, out, err = run(capsys, "identify", "dataset:dryer", "--method", "arx",
+                         "--out", tmp_path / "o")
+    assert code == 0, err
+    line = _order_line(out)
+    assert "None" not in out and "horizon" not in line
+    assert "cross-validated on the estimation data: na " in line
+    html = (tmp_path / "o" / "report.html").read_text(encoding="utf-8")
+    assert ">None<" not in html and "horizon None" not in html
+    summary = json.loads((tmp_path / "o" / "summary.json").read_text())
+    assert describe_structure(summary["structure"]) in line
+
+
+# -- 2. a given order is said to be given --------------------------------------------
+def test_a_given_order_is_given_and_the_summary_says_what_was_cross_validated(tmp_path,
+                                                                              capsys):
+    code, out, err = run(capsys, "identify", "dataset:dryer", "--method", "moesp", "--order",
+                         "4", "--no-report", "--out", tmp_path / "o")
+    assert code == 0, err
+    line = _order_line(out)
+    assert line.startswith("order       4 (given; horizon cross-validated on the "
+                           "estimation data: horizon "), line
+    record = json.loads((tmp_path / "o" / "model.json").read_text())["info"]["order_selection"]
+    assert record["given"] == ["order"]
+
+
+def test_order_selection_text_omits_what_does_not_apply():
+    polynomial = {"rule": "cv", "candidates": [{}, {}],
+                  "selected": {"na": 2, "nb": 3, "nk": [1], "score": 80.0}}
+    text = describe_order_selection(polynomial)
+    assert text == ("cross-validated on the estimation data: na 2, nb 3, nk 1, fit 80.0 % "
+                    "over 2 candidates")
+    state_space = {"rule": "cv", "given": ["order"],
+                   "candidates": [{"order": 4, "horizon": 10}, {"order": 4, "horizon": 20}],
+                   "selected": {"order": 4, "horizon": 20, "score": 89.0}}
+    assert describe_order_selection(state_space) == (
+        "given; horizon cross-validated on the estimation data: horizon 20, fit 89.0 % "
+        "over 2 candidates")
+
