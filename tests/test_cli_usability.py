@@ -103,3 +103,23 @@ def test_order_selection_text_omits_what_does_not_apply():
         "given; horizon cross-validated on the estimation data: horizon 20, fit 89.0 % "
         "over 2 candidates")
 
+
+# -- 3. the report names one frequency unit: per sample when time is in samples --------
+@pytest.mark.parametrize("extra, unit", [((), "rad/sample"),
+                                         (("--frequency-unit", "Hz"), "cycles/sample"),
+                                         (("--dt", "0.1", "--frequency-unit", "Hz"), "Hz")])
+def test_bode_caption_axis_and_pole_table_name_the_same_unit(extra, unit, tmp_path, capsys):
+    import subid
+    from subid.evaluation.figures._common import frequency_unit
+    code, out, err = run(capsys, "identify", "dataset:CD_player_arm", "--method", "moesp",
+                         "--order", "4", *extra, "--out", tmp_path / "o")
+    assert code == 0, err
+    html = (tmp_path / "o" / "report.html").read_text(encoding="utf-8")
+    captions = set(re.findall(r"frequency in ([a-zA-Z/]+)", html))
+    assert captions == {unit}, captions
+    assert f"natural frequency ({unit})" in html
+    model = subid.StateSpace.load(tmp_path / "o" / "model.json")
+    hz = "Hz" in extra
+    assert frequency_unit([model.dt], hz) == unit
+    figure = subid.plot.bode(model, hz=hz)
+    assert figure.axes[-1].get_xlabel() == f"frequency ({unit})"

@@ -38,6 +38,7 @@ import re
 import numpy as np
 
 from subid.errors import ModelError, SubidError
+from subid.evaluation.figures._common import frequency_unit as unit_of_frequency
 from subid.io._files import atomic_write
 from subid.io.interop import operating_point
 from subid.model.polynomial import describe as describe_polynomials
@@ -280,9 +281,8 @@ def _pole_table(model, hz: bool) -> str:
     # dt = 1: the period of a record without time information (IOData's default), so
     # frequencies per sample and time constants in samples (the same numbers as per
     # second with dt = 1 s)
-    per_sample = model.dt == 1.0
-    unit = ("cycles/sample" if hz else "rad/sample") if per_sample else ("Hz" if hz else "rad/s")
-    time_unit = "samples" if per_sample else "s"
+    unit = unit_of_frequency([model.dt], hz)
+    time_unit = "samples" if model.dt == 1.0 else "s"
     rows = []
     for z in p:
         if model.dt > 0:
@@ -709,11 +709,14 @@ def identification_report(models, estimation, validation=None, *, title="subid r
     band = ("; shaded: 95 % confidence band (models with a parameter covariance: identify, "
             "pem and the polynomial methods)") if level else ""
     estimate = _spa_estimate(estimation, models)
+    # the unit of the axis plot.bode draws (per sample when time is counted in samples)
+    bode_unit = unit_of_frequency([m.dt for m in models.values()]
+                               + ([estimate.dt] if estimate is not None else []), hz)
     overlay = "; grey points: spa estimate of the estimation data (± 2 std shaded)" \
         if estimate is not None else ""
     body.append(_section("bode", "Frequency response (Bode)", _plot_or_note(
         lambda: plot.bode(models, hz=hz, confidence=level, data=estimate),
-        f"magnitude and phase; frequency in {'Hz' if hz else 'rad/s'}{nyquist}{band}{overlay}",
+        f"magnitude and phase; frequency in {bode_unit}{nyquist}{band}{overlay}",
         "Bode diagram")))
     nav.append(("bode", "Bode"))
     announce("step")
