@@ -8,6 +8,7 @@ from __future__ import annotations
 import json
 import re
 
+import numpy as np
 import pytest
 
 pytest.importorskip("matplotlib")
@@ -123,3 +124,60 @@ def test_bode_caption_axis_and_pole_table_name_the_same_unit(extra, unit, tmp_pa
     assert frequency_unit([model.dt], hz) == unit
     figure = subid.plot.bode(model, hz=hz)
     assert figure.axes[-1].get_xlabel() == f"frequency ({unit})"
+
+
+# -- 4. docs/cli.md says what the command line does ----------------------------------
+def _cli_doc() -> str:
+    from pathlib import Path
+    return (Path(__file__).resolve().parents[1] / "docs" / "cli.md").read_text(encoding="utf-8")
+
+
+def test_cli_docs_list_every_method_in_the_table_and_in_the_identify_synopsis():
+    from subid.cli._shared import METHODS
+    from subid.cli.identify import identify
+    doc = _cli_doc()
+    table = re.findall(r"^\| `(\w+)` \| (?:batch|online) \|", doc, re.M)
+    assert table == list(METHODS)
+    section = doc.split("## `subid identify DATA`")[1].split("\n## ")[0]
+    synopsis = re.search(r"\[--method ([\w|]+)\]", section).group(1).split("|")
+    choices = next(p for p in identify.params if p.name == "method_name").type.choices
+    assert synopsis == list(choices)
+
+
+def _named_in(text: str) -> set:
+    return set(re.findall(r"`(\w+)`", text))
+
+
+def test_cli_docs_state_the_detrend_defaults_and_the_methods_taking_several_files():
+    from subid.cli._shared import METHODS, _default_detrend
+    doc = " ".join(_cli_doc().split())
+    defaults = doc.split("The default depends on the method: ")[1].split(";")[0]
+    assert defaults.startswith("`none` for ")
+    assert _named_in(defaults) - {"none"} == \
+        {name for name, spec in METHODS.items() if _default_detrend(spec) == "none"}
+    several = doc.split("Every batch method takes several files (")[1].split(")")[0]
+    assert _named_in(several) == {name for name, spec in METHODS.items()
+                                  if spec.supports("experiments")}
+    refusing = doc.split("the online methods (")[1].split(")")[0]
+    assert _named_in(refusing) == {name for name, spec in METHODS.items()
+                                   if not spec.supports("experiments")}
+
+
+@pytest.mark.parametrize("method", ["arx", "ct"])
+def test_batch_methods_take_several_files_as_experiments(method, tmp_path, capsys):
+    import subid
+    rng = np.random.default_rng(11)
+    paths = []
+    for k in range(2):
+        u = rng.standard_normal((300, 1))
+        y = np.convolve(u[:, 0], [0.0, 0.5, 0.25, 0.125])[:300, None] \
+            + 0.01 * rng.standard_normal((300, 1))
+        paths.append(tmp_path / f"run{k}.csv")
+        np.savetxt(paths[-1], np.hstack([u, y]), delimiter=",", header="u,y", comments="")
+    code, out, err = run(capsys, "identify", *paths, "--inputs", "u", "--outputs", "y",
+                         "--dt", "0.1", "--method", method, "--order", "2", "--no-report",
+                         "--out", tmp_path / "o")
+    assert code == 0, err
+    model = subid.StateSpace.load(tmp_path / "o" / "model.json")
+    assert np.shape(model.info["x0"])[0] == 2          # one initial state per file
+    assert model.info["data"]["detrend"] == "constant"

@@ -51,7 +51,8 @@ IDENTIFY = MethodSpec(
     "the best model the data support: subspace estimator, order and feedthrough chosen, "
     "refined by PEM where that validates better (subid.identify)",
     options=("focus", "time_base", "horizon", "feedthrough", "refine"),
-    capabilities=frozenset({"order_selection", "horizon", "x0", "refine", "nonuniform"}))
+    capabilities=frozenset({"order_selection", "horizon", "x0", "refine", "nonuniform",
+                            "experiments"}))
 
 
 def available_methods(kind: str | None = None, time_base: str | None = None) -> list[str]:

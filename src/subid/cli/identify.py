@@ -97,7 +97,8 @@ _RUN = _method_run_options(
 @_RUN["report"]
 @click.option("--stream", is_flag=True, default=False,
               help="Read the file in pieces with bounded memory, for files larger than memory "
-                   "(ls, moesp, n4sid; uniform sampling). Fit and report use the first "
+                   f"({', '.join(n for n, s in METHODS.items() if s.supports('streaming'))}"
+                   "; uniform sampling). Fit and report use the first "
                    "--report-samples samples of each part.")
 @click.option("--chunk-size", type=click.IntRange(min=1), default=100_000, show_default=True,
               help="Samples per piece with --stream.")
@@ -124,7 +125,7 @@ def identify(data, inputs, outputs, dt, time_column, delimiter, decimal, detrend
     Several DATA files are several experiments of one plant (subid.merge):
     no Hankel column crosses from one file to the next, each file has its own
     initial state and loses its own mean (--detrend constant); the validation
-    part is the end of the last file. Discrete-time batch methods and ct.
+    part is the end of the last file. Batch methods only (not the online ones).
     """
     if out is None:
         out = _default_out(data[0], "identify")
@@ -160,10 +161,11 @@ def identify(data, inputs, outputs, dt, time_column, delimiter, decimal, detrend
         if stream:
             raise click.UsageError("--stream reads one file; several DATA files are merged as "
                                    "experiments in memory (drop --stream)")
-        if spec.kind != "batch" or (spec.time != "discrete" and spec.name != "ct"):
-            raise click.UsageError(f"several DATA files are merged as experiments for the "
-                                   f"discrete-time batch methods and ct, not for {spec.name}: "
-                                   "it would join them as if contiguous")
+        if not spec.supports("experiments"):
+            takers = [n for n, s in METHODS.items() if s.supports("experiments")]
+            raise click.UsageError(f"several DATA files are merged as experiments by the batch "
+                                   f"methods ({', '.join(takers)}), not by {spec.name}, which "
+                                   "would run over them joined as if contiguous: give one file")
     data = sources[0] if len(sources) == 1 else " + ".join(sources)
     _note_first_run()
     if stream:
