@@ -181,3 +181,50 @@ def test_batch_methods_take_several_files_as_experiments(method, tmp_path, capsy
     model = subid.StateSpace.load(tmp_path / "o" / "model.json")
     assert np.shape(model.info["x0"])[0] == 2          # one initial state per file
     assert model.info["data"]["detrend"] == "constant"
+
+
+# -- 5. the command line's hints name its own options --------------------------------
+def test_convert_names_its_method_option_where_the_library_says_method_bilinear(tmp_path,
+                                                                                capsys):
+    import subid
+    from subid.errors import ModelError
+    model = subid.StateSpace([[-0.5]], [[1.0]], [[1.0]], [[0.0]], dt=0.1)
+    with pytest.raises(ModelError, match="use method='bilinear' instead"):   # the API's words
+        model.to_continuous()
+    path = tmp_path / "neg.json"
+    model.save(path)
+    code, out, err = run(capsys, "convert", path, "--to", "ct")
+    assert code == 2 and len(err.strip().splitlines()) == 1
+    assert "use --method bilinear instead" in err and "method='bilinear'" not in err
+    code, out, err = run(capsys, "convert", path, "--to", "ct", "--method", "bilinear")
+    assert code == 0, err
+
+
+def test_track_names_detrend_where_the_library_says_data_scaled(tmp_path, capsys):
+    import subid
+    code, out, err = run(capsys, "track", "dataset:dryer", "--method", "adaptive", "--order",
+                         "3", "--no-report", "--out", tmp_path / "t")
+    assert code == 0, err
+    model = subid.StateSpace.load(tmp_path / "t" / "model.json")
+    assert "data.scaled(...)" in model.info["convergence"]          # the API's words
+    assert "data.scaled" not in out + err
+    assert "remove their offsets with --detrend constant" in err     # the warning
+    assert "remove their offsets with --detrend constant" in out     # the converged line
+
+
+def test_cli_hint_translates_keyword_hints_to_the_commands_flags_and_options():
+    from subid.cli._shared import _State, cli_hint
+    state = _State()
+    state.hint_flags = frozenset({"--horizon", "--method", "--dt", "--time"})
+    state.hint_options = ("horizon", "method", "feedthrough")
+    assert cli_hint("use method='iv' (the default)", state) == \
+        "use --option method=iv (the default)"
+    assert cli_hint("give horizon=20 or more", state) == "give --horizon 20 or more"
+    assert cli_hint("use feedthrough=True", state) == "use --option feedthrough=true"
+    assert cli_hint("pass time='Time [s]'", state) == "pass --time 'Time [s]'"
+    assert cli_hint("use stability='none'", state) == "use stability='none'"   # no such
+    convert = _State()
+    convert.hint_flags = frozenset({"--method", "--to"})
+    assert cli_hint("use method='bilinear' instead", convert) == \
+        "use --method bilinear instead"
+

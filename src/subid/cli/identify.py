@@ -26,6 +26,7 @@ from subid.cli._shared import (
     _detrend,
     _fmt_fit,
     _fmt_poles,
+    _hint_method,
     _load_experiments,
     _method_run_options,
     _named,
@@ -152,6 +153,7 @@ def identify(data, inputs, outputs, dt, time_column, delimiter, decimal, detrend
         raise click.UsageError(f"--forgetting applies to online methods only, not to "
                                f"{spec.name}")
     spec.load()                                     # "not available" before any work
+    _hint_method(spec)
     if stream and refine != "none":
         raise click.UsageError(f"--refine {refine} needs the samples in memory; it does not "
                                "work with --stream")
