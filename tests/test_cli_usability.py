@@ -228,3 +228,51 @@ def test_cli_hint_translates_keyword_hints_to_the_commands_flags_and_options():
     assert cli_hint("use method='bilinear' instead", convert) == \
         "use --method bilinear instead"
 
+
+# -- 6. channels named as the model's in another order are refused ----------------------
+@pytest.fixture(scope="module")
+def plain(tmp_path_factory):
+    """A 2 x 2 record (stable 4th-order system, 1500 samples, dt 0.05, header t,u1,u2,y1,y2)
+    and a moesp model of it with inputs [u1, u2]."""
+    import subid
+    rng = np.random.default_rng(2)
+    poles = [0.95, 0.9, 0.8, 0.6]
+    true = subid.StateSpace(np.diag(poles), rng.standard_normal((4, 2)),
+                            rng.standard_normal((2, 4)), np.zeros((2, 2)), dt=0.05)
+    u = rng.standard_normal((1500, 2))
+    y = true.simulate(u) + 0.01 * rng.standard_normal((1500, 2))
+    folder = tmp_path_factory.mktemp("plain")
+    path = folder / "plain.csv"
+    t = 0.05 * np.arange(1500)
+    np.savetxt(path, np.column_stack([t, u, y]), delimiter=",", header="t,u1,u2,y1,y2",
+               comments="", fmt="%.12g")
+    np.savetxt(folder / "u.csv", np.column_stack([t, u]), delimiter=",", header="t,u1,u2",
+               comments="", fmt="%.12g")
+    model = subid.moesp(subid.read(path, inputs=["u1", "u2"], outputs=["y1", "y2"],
+                                   time="t"), 4)
+    model.save(folder / "model.json")
+    return folder
+
+
+@pytest.mark.parametrize("inputs, outputs, role, fix", [("u2,u1", "y1,y2", "inputs", "u1,u2"),
+                                                        ("u1,u2", "y2,y1", "outputs", "y1,y2")])
+def test_compare_refuses_the_models_channels_in_another_order(plain, inputs, outputs, role,
+                                                              fix, tmp_path, capsys):
+    code, out, err = run(capsys, "compare", plain / "model.json", "--data", plain / "plain.csv",
+                         "--inputs", inputs, "--outputs", outputs, "--out", tmp_path / "c")
+    assert code == 2 and len(err.strip().splitlines()) == 1
+    assert f"--{role} {fix}" in err and "another order" in err
+    code, out, err = run(capsys, "compare", plain / "model.json", "--data", plain / "plain.csv",
+                         "--inputs", "u1,u2", "--outputs", "y1,y2", "--out", tmp_path / "c")
+    assert code == 0, err
+    assert min(float(v) for v in out.splitlines()[2].split()[1:]) > 90
+
+
+def test_simulate_refuses_the_models_inputs_in_another_order(plain, tmp_path, capsys):
+    code, out, err = run(capsys, "simulate", plain / "model.json", "--input", plain / "u.csv",
+                         "--inputs", "u2,u1", "--out", tmp_path / "y.csv")
+    assert code == 2 and "give --inputs u1,u2" in err
+    assert not (tmp_path / "y.csv").exists()
+    code, out, err = run(capsys, "simulate", plain / "model.json", "--input", plain / "u.csv",
+                         "--out", tmp_path / "y.csv")
+    assert code == 0, err

@@ -465,6 +465,32 @@ def _load_experiments(sources, inputs, outputs, dt, time_column, delimiter, deci
     return record, " + ".join(labels), notes
 
 
+def check_channel_order(model_names, data_names, role: str, model: str) -> None:
+    """Refuse channels that are the model's in another order.
+
+    The commands match a record's columns to a model by position: ``--inputs u2,u1``
+    on a model of inputs ``[u1, u2]`` would feed u2 where the model expects u1 and give
+    a meaningless fit. Names that are the same set as the model's, in another order,
+    are a :class:`subid.errors.DataError` naming both orders and the option to give;
+    other names (a record with other channel names) are not checked.
+
+    Parameters
+    ----------
+    model_names, data_names : sequence of str
+    role : {'inputs', 'outputs'}
+        The option that selects them (``--inputs``, ``--outputs``).
+    model : str
+        The model file, for the message.
+    """
+    model_names, data_names = [str(n) for n in model_names], [str(n) for n in data_names]
+    if data_names == model_names or sorted(data_names) != sorted(model_names) \
+            or len(set(model_names)) != len(model_names):
+        return
+    raise DataError(f"--{role} {','.join(data_names)} are the {role} of {model} in another "
+                    f"order (the model's: {','.join(model_names)}); the columns are matched "
+                    f"to the model by position: give --{role} {','.join(model_names)}")
+
+
 def _select(names, spec, role, source) -> list[int]:
     if spec is None:
         return list(range(len(names)))
