@@ -276,3 +276,52 @@ def test_simulate_refuses_the_models_inputs_in_another_order(plain, tmp_path, ca
     code, out, err = run(capsys, "simulate", plain / "model.json", "--input", plain / "u.csv",
                          "--out", tmp_path / "y.csv")
     assert code == 0, err
+
+
+# -- 7. MATLAB's Ts is the sampling period of a .mat/.npz record -----------------------
+def _record(n=400, seed=4):
+    rng = np.random.default_rng(seed)
+    u = rng.standard_normal((n, 1))
+    y = np.convolve(u[:, 0], [0.0, 0.6, 0.3, 0.1])[:n, None] + 0.01 * rng.standard_normal((n, 1))
+    return u, y
+
+
+@pytest.mark.parametrize("ext", [".mat", ".npz"])
+def test_read_takes_matlabs_ts_as_the_sampling_period(ext, tmp_path):
+    import scipy.io
+
+    import subid
+    from subid.errors import FileReadError
+    u, y = _record()
+
+    def save(name, **extra):
+        path = tmp_path / f"{name}{ext}"
+        if ext == ".mat":
+            scipy.io.savemat(path, {"u": u, "y": y, **extra})
+        else:
+            np.savez(path, u=u, y=y, **extra)
+        return path
+    assert subid.read(save("ts", Ts=0.05)).dt == 0.05
+    assert subid.read(save("same", Ts=0.05, dt=0.05)).dt == 0.05
+    assert subid.read(save("unspecified", Ts=-1.0)).dt == 1.0        # MATLAB's Ts = -1
+    assert subid.read(save("ts", Ts=0.05), dt=0.2).dt == 0.2         # the caller's wins
+    with pytest.raises(FileReadError, match=r"'dt' = 0.1 and MATLAB's 'Ts' = 0.05"):
+        subid.read(save("both", Ts=0.05, dt=0.1))
+    t = 0.1 * np.arange(u.shape[0])
+    with pytest.raises(FileReadError, match="both 't' and 'Ts'"):
+        subid.read(save("stamps", Ts=0.05, t=t))
+
+
+def test_identify_a_mat_file_with_ts_uses_it(tmp_path, capsys):
+    import scipy.io
+    u, y = _record()
+    scipy.io.savemat(tmp_path / "d.mat", {"u": u, "y": y, "Ts": 0.05})
+    code, out, err = run(capsys, "identify", tmp_path / "d.mat", "--method", "moesp", "--order",
+                         "3", "--no-report", "--out", tmp_path / "o")
+    assert code == 0, err
+    assert "dt = 0.05" in out and "No sampling period" not in err
+    assert json.loads((tmp_path / "o" / "summary.json").read_text())["dt"] == 0.05
+    scipy.io.savemat(tmp_path / "both.mat", {"u": u, "y": y, "Ts": 0.05, "dt": 0.1})
+    code, out, err = run(capsys, "identify", tmp_path / "both.mat", "--method", "moesp",
+                         "--out", tmp_path / "o2")
+    assert code == 2 and len(err.strip().splitlines()) == 1 and "'Ts'" in err
