@@ -16,6 +16,7 @@ import json
 import logging
 import math
 import os
+import re
 import shlex
 import warnings
 
@@ -51,7 +52,8 @@ IDENTIFY = MethodSpec(
     "the best model the data support: subspace estimator, order and feedthrough chosen, "
     "refined by PEM where that validates better (subid.identify)",
     options=("focus", "time_base", "horizon", "feedthrough", "refine"),
-    capabilities=frozenset({"order_selection", "horizon", "x0", "refine", "nonuniform"}))
+    capabilities=frozenset({"order_selection", "horizon", "x0", "refine", "nonuniform",
+                            "experiments"}))
 
 
 def available_methods(kind: str | None = None, time_base: str | None = None) -> list[str]:
@@ -130,6 +132,10 @@ class _State:
         self.debug = False
         self.verbose = False
         self.argv: list[str] = []
+        # what cli_hint translates library hints to: the running command's flags
+        # ('--method', ...) and the keyword options of its method (--option KEY=VALUE)
+        self.hint_flags: frozenset = frozenset()
+        self.hint_options: tuple = ()
 
     @property
     def progress(self) -> bool:
@@ -185,6 +191,73 @@ def _about(path):
         if getattr(exc, "subid_file", None) is None and str(path) not in str(exc):
             exc.subid_file = str(path)
         raise
+
+
+#: Library advice in Python words, and what the command line says instead.
+_HINT_PHRASES = (
+    ("data.scaled(...) or remove their offsets",
+     "scale the channels in the file, or remove their offsets with --detrend constant"),
+)
+#: ``use method='bilinear'``, ``give horizon=20``...: a verb, then a keyword argument.
+_HINT_KEYWORD = re.compile(r"\b(use|give|pass|set|try|add) ([a-z_]+)="
+                           r"(?:'([^']*)'|\"([^\"]*)\"|([\w.+-]+))")
+#: Keyword arguments that a command takes as its own flag even when the method's
+#: options list them too (``--horizon 20``, not ``--option horizon=20``).
+_OWN_FLAGS = frozenset({"horizon", "forgetting"})
+
+
+def cli_hint(text: str, state: _State | None = None) -> str:
+    """``text`` (a library message) with its hints in the command line's options.
+
+    The library's messages advise in Python (``use method='bilinear' instead``,
+    ``data.scaled(...)``); on the command line the same advice names the running
+    command's flag (``use --method bilinear instead``) or its method's ``--option``
+    (``use --option method=iv``). Keyword arguments neither takes are left as they are.
+
+    Parameters
+    ----------
+    text : str
+    state : _State, optional
+        The command's flags and method options (``hint_flags``, ``hint_options``);
+        default: the current click context's.
+    """
+    if state is None:
+        ctx = click.get_current_context(silent=True)
+        state = ctx.find_root().ensure_object(_State) if ctx is not None else _State()
+    for python, words in _HINT_PHRASES:
+        text = text.replace(python, words)
+
+    def one(match):
+        verb, key = match.group(1), match.group(2)
+        value = next(v for v in match.groups()[2:] if v is not None)
+        flag = "--" + key.replace("_", "-")
+        if flag in state.hint_flags and (key in _OWN_FLAGS or key not in state.hint_options):
+            return f"{verb} {flag} {shlex.quote(value)}"
+        if key in state.hint_options:
+            value = {"True": "true", "False": "false", "None": "null"}.get(value, value)
+            return f"{verb} --option {shlex.quote(f'{key}={value}')}"
+        return match.group(0)
+    return _HINT_KEYWORD.sub(one, text)
+
+
+def _hint_method(spec: MethodSpec) -> None:
+    """Let :func:`cli_hint` name ``spec``'s options as ``--option KEY=VALUE``."""
+    _state().hint_options = tuple(spec.options)
+
+
+class _HintFilter(logging.Filter):
+    """Log records of the command line with their hints in its options (:func:`cli_hint`)."""
+
+    def __init__(self, state: _State):
+        super().__init__()
+        self.state = state
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        text = record.getMessage()
+        hinted = cli_hint(text, self.state)
+        if hinted != text:
+            record.msg, record.args = hinted, ()
+        return True
 
 
 def _one_line(exc: BaseException) -> str:
@@ -392,6 +465,32 @@ def _load_experiments(sources, inputs, outputs, dt, time_column, delimiter, deci
     return record, " + ".join(labels), notes
 
 
+def check_channel_order(model_names, data_names, role: str, model: str) -> None:
+    """Refuse channels that are the model's in another order.
+
+    The commands match a record's columns to a model by position: ``--inputs u2,u1``
+    on a model of inputs ``[u1, u2]`` would feed u2 where the model expects u1 and give
+    a meaningless fit. Names that are the same set as the model's, in another order,
+    are a :class:`subid.errors.DataError` naming both orders and the option to give;
+    other names (a record with other channel names) are not checked.
+
+    Parameters
+    ----------
+    model_names, data_names : sequence of str
+    role : {'inputs', 'outputs'}
+        The option that selects them (``--inputs``, ``--outputs``).
+    model : str
+        The model file, for the message.
+    """
+    model_names, data_names = [str(n) for n in model_names], [str(n) for n in data_names]
+    if data_names == model_names or sorted(data_names) != sorted(model_names) \
+            or len(set(model_names)) != len(model_names):
+        return
+    raise DataError(f"--{role} {','.join(data_names)} are the {role} of {model} in another "
+                    f"order (the model's: {','.join(model_names)}); the columns are matched "
+                    f"to the model by position: give --{role} {','.join(model_names)}")
+
+
 def _select(names, spec, role, source) -> list[int]:
     if spec is None:
         return list(range(len(names)))
@@ -480,7 +579,7 @@ def _convergence_status(model) -> str:
     ``convergence``, which both online identifiers set)."""
     info = model.info
     if info.get("converged") is False:
-        return f"NO: {info.get('convergence')}" + (
+        return f"NO: {cli_hint(str(info.get('convergence')))}" + (
             " (B, D from the projected data equation)" if info.get("bd_fallback") else "")
     return "yes"
 
@@ -651,6 +750,10 @@ def cli(ctx, quiet, verbose, debug):
     a bundled DaISy record (see 'subid methods'). Every command has --help.
     """
     state = ctx.ensure_object(_State)
+    command = cli.get_command(ctx, ctx.invoked_subcommand) if ctx.invoked_subcommand else None
+    if command is not None:          # its flags, for the hints of cli_hint
+        state.hint_flags = frozenset(o for p in command.params for o in p.opts
+                                     if o.startswith("--"))
     state.quiet = state.quiet or quiet
     state.verbose = state.verbose or verbose
     state.debug = state.debug or debug

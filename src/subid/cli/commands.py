@@ -46,12 +46,14 @@ from subid.cli._shared import (  # noqa: F401
     IDENTIFY,
     METHODS,
     MethodSpec,
+    _HintFilter,
     _one_line,
     _show_warning,
     _State,
     _usage_line,
     available_methods,
     cli,
+    cli_hint,
     load_data,
     load_model,
     load_online,
@@ -96,6 +98,7 @@ def main(argv=None) -> int:
     logger.propagate = False
     state = _State()
     state.argv = args
+    handler.addFilter(_HintFilter(state))      # library hints in the command's options
     with interrupts() as sigint:
         try:
             status = _run(args, state, debug, sigint)
@@ -146,5 +149,5 @@ def _run(args, state, debug, sigint) -> int:
     except (SubidError, OSError, ImportError) as exc:
         if debug:
             traceback.print_exc()
-        click.echo(f"subid: error: {_one_line(exc)}", err=True)
+        click.echo(f"subid: error: {cli_hint(_one_line(exc), state)}", err=True)
         return EXIT_USER_ERROR

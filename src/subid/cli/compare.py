@@ -18,6 +18,7 @@ from subid.cli._shared import (
     _parse_steps,
     _state,
     _warnings_to_log,
+    check_channel_order,
     cli,
     load_data,
     load_model,
@@ -74,6 +75,9 @@ def compare(model_paths, data_source, inputs, outputs, dt, time_column, delimite
         record, label, notes = load_data(data_source, inputs, outputs, dt, time_column,
                                          delimiter, decimal)
         work = _detrend(record, detrend or "constant")
+    for name, m in models.items():
+        check_channel_order(m.input_names, record.input_names, "inputs", paths[name])
+        check_channel_order(m.output_names, record.output_names, "outputs", paths[name])
     fits = {}
     for name, m in models.items():
         with _about(paths[name]):

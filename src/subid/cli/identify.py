@@ -26,6 +26,7 @@ from subid.cli._shared import (
     _detrend,
     _fmt_fit,
     _fmt_poles,
+    _hint_method,
     _load_experiments,
     _method_run_options,
     _named,
@@ -81,7 +82,7 @@ _RUN = _method_run_options(
               help=f"Model order: an integer, 'auto' (discrete-time batch methods: "
                    f"{AUTO_ORDER_RULE}), a range '2:8' or a list '2,4,6' of candidates; for "
                    "arx, armax, oe, bj a list is MATLAB's structure, e.g. '2,2,1' = (na, nb, "
-                   "nk) for arx.")
+                   "nk) for arx, and a range is refused.")
 @_RUN["horizon"]
 @click.option("--validate", type=click.FloatRange(0, 1, max_open=True), default=0.3,
               show_default=True,
@@ -97,7 +98,8 @@ _RUN = _method_run_options(
 @_RUN["report"]
 @click.option("--stream", is_flag=True, default=False,
               help="Read the file in pieces with bounded memory, for files larger than memory "
-                   "(ls, moesp, n4sid; uniform sampling). Fit and report use the first "
+                   f"({', '.join(n for n, s in METHODS.items() if s.supports('streaming'))}"
+                   "; uniform sampling). Fit and report use the first "
                    "--report-samples samples of each part.")
 @click.option("--chunk-size", type=click.IntRange(min=1), default=100_000, show_default=True,
               help="Samples per piece with --stream.")
@@ -124,7 +126,7 @@ def identify(data, inputs, outputs, dt, time_column, delimiter, decimal, detrend
     Several DATA files are several experiments of one plant (subid.merge):
     no Hankel column crosses from one file to the next, each file has its own
     initial state and loses its own mean (--detrend constant); the validation
-    part is the end of the last file. Discrete-time batch methods and ct.
+    part is the end of the last file. Batch methods only (not the online ones).
     """
     if out is None:
         out = _default_out(data[0], "identify")
@@ -142,6 +144,7 @@ def identify(data, inputs, outputs, dt, time_column, delimiter, decimal, detrend
     spec = METHODS[method_name] if method_name is not None else \
         (METHODS["ls"] if stream else IDENTIFY)
     _check_out(out, _IDENTIFY_FILES)
+    _check_structure_order(spec, order)
     order = _parse_order(order)
     opts = _parse_options(options)
     _check_method_options(spec, opts, reserved=_reserved_options(spec, horizon=horizon,
@@ -150,6 +153,7 @@ def identify(data, inputs, outputs, dt, time_column, delimiter, decimal, detrend
         raise click.UsageError(f"--forgetting applies to online methods only, not to "
                                f"{spec.name}")
     spec.load()                                     # "not available" before any work
+    _hint_method(spec)
     if stream and refine != "none":
         raise click.UsageError(f"--refine {refine} needs the samples in memory; it does not "
                                "work with --stream")
@@ -159,10 +163,11 @@ def identify(data, inputs, outputs, dt, time_column, delimiter, decimal, detrend
         if stream:
             raise click.UsageError("--stream reads one file; several DATA files are merged as "
                                    "experiments in memory (drop --stream)")
-        if spec.kind != "batch" or (spec.time != "discrete" and spec.name != "ct"):
-            raise click.UsageError(f"several DATA files are merged as experiments for the "
-                                   f"discrete-time batch methods and ct, not for {spec.name}: "
-                                   "it would join them as if contiguous")
+        if not spec.supports("experiments"):
+            takers = [n for n, s in METHODS.items() if s.supports("experiments")]
+            raise click.UsageError(f"several DATA files are merged as experiments by the batch "
+                                   f"methods ({', '.join(takers)}), not by {spec.name}, which "
+                                   "would run over them joined as if contiguous: give one file")
     data = sources[0] if len(sources) == 1 else " + ".join(sources)
     _note_first_run()
     if stream:
@@ -174,6 +179,33 @@ def identify(data, inputs, outputs, dt, time_column, delimiter, decimal, detrend
                                    (delimiter, decimal), detrend, spec, order, horizon,
                                    validate, forgetting, opts, refine, frequency_unit,
                                    write_report, out, steps)
+
+
+def _check_structure_order(spec, text) -> None:
+    """Refuse a range ``--order A:B`` for a method whose order is a polynomial structure
+    (arx, armax, oe, bj): it takes no candidate orders, and ``_parse_order``'s list
+    would be read as the structure (``2:4`` as na=2, nb=3, nk=4)."""
+    if not spec.supports("polynomial") or ":" not in str(text):
+        return
+    from subid.methods.describe import _STRUCTURE_NAMES
+    names = _STRUCTURE_NAMES.get(spec.name, ("na", "nb", "nk"))
+    example = ",".join("1" if name == "nk" else "2" for name in names)
+    raise click.BadParameter(
+        f"{text!r}: {spec.name} takes no range of candidate orders; give its structure "
+        f"'{','.join(names)}' (e.g. {example}), an integer n (every degree n) or 'auto' "
+        "(the structure chosen by cross-validation)", param_hint="--order")
+
+
+def _order_line(model) -> str:
+    """The summary's order line: the order, a polynomial model's structure, and how the
+    order was chosen (nothing about what does not apply, e.g. a horizon)."""
+    from subid.methods.describe import describe_structure, structure_orders
+    how = describe_selection(model.info["order_selection"]) \
+        if model.info.get("order_selection") else ""
+    structure = describe_structure(structure_orders(model.info))
+    if structure and structure not in how:
+        how = f"{structure}; {how}" if how else structure
+    return f"order       {model.order}" + (f" ({how})" if how else "")
 
 
 def _steps(write_report):
@@ -350,8 +382,11 @@ def _write_outputs(out, data, spec, model, result, est, val, seconds, record, *,
             seconds={spec.name: seconds}, notes=notes, command=_command_line(), source=data,
             data=report_data, progress=steps.detail, fits={spec.name: result})
     steps.start("write")
+    from subid.methods.describe import structure_orders
+    structure = structure_orders(model.info)
     summary = {
         "data": data, "method": spec.name, "function": spec.attribute, "order": model.order,
+        **({"structure": structure} if structure else {}),
         "horizon": model.info.get("horizon"), "dt": model.dt, "outputs": outputs, **extra,
         "n_estimation": n_estimation, "n_validation": n_validation,
         **_fit_summary(result), "seconds": seconds, "files": files,
@@ -462,9 +497,7 @@ def _print_summary(source, record, spec, model, result, est, val, seconds, files
     lines = [f"data        {source}: {record.n_samples} samples, {record.n_inputs} input(s), "
              f"{record.n_outputs} output(s), {timing}",
              f"method      {spec.name} ({spec.attribute})",
-             f"order       {model.order}"
-             + (f" ({describe_selection(model.info['order_selection'])})"
-                if model.info.get("order_selection") else ""),
+             _order_line(model),
              *([f"feedthrough {text}"] if (text := describe_feedthrough(
                  model.info.get("feedthrough"), option="--option feedthrough=true",
                  input_names=est.input_names, output_names=est.output_names)) else []),

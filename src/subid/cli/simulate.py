@@ -7,7 +7,7 @@ import os
 import click
 import numpy as np
 
-from subid.cli._shared import _about, _common, _echo, cli, load_model
+from subid.cli._shared import _about, _common, _echo, check_channel_order, cli, load_model
 from subid.errors import DataError
 from subid.io._files import atomic_write
 
@@ -79,6 +79,7 @@ def simulate(model_path, input_path, inputs, time_column, dt, delimiter, offsets
         if u.shape[1] != model.n_inputs:
             raise DataError(f"{u.shape[1]} input column(s) selected but the model has "
                             f"{model.n_inputs} input(s)")
+        check_channel_order(model.input_names, names, "inputs", model_path)
         n = u.shape[0]
         if t is None:
             step = check_dt(dt) if dt is not None else (model.dt if model.dt > 0 else None)

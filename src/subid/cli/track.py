@@ -26,6 +26,7 @@ from subid.cli._shared import (
     _detrend,
     _fmt_fit,
     _fmt_poles,
+    _hint_method,
     _method_run_options,
     _named,
     _only,
@@ -102,6 +103,7 @@ def track(data, inputs, outputs, dt, time_column, delimiter, decimal, detrend, m
         out = _default_out(data, "track")
     spec = METHODS[method_name]
     spec.load()
+    _hint_method(spec)
     opts = _parse_options(options)
     _check_method_options(spec, opts, reserved=_reserved_options(spec, horizon=horizon,
                                                                  forgetting=forgetting))

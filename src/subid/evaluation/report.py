@@ -39,6 +39,7 @@ import textwrap
 import numpy as np
 
 from subid.errors import ModelError, SubidError
+from subid.evaluation.figures._common import frequency_unit as unit_of_frequency
 from subid.io._files import atomic_write
 from subid.io.interop import operating_point, removed_lines
 from subid.model.polynomial import describe as describe_polynomials
@@ -283,9 +284,8 @@ def _pole_table(model, hz: bool) -> str:
     # dt = 1: the period of a record without time information (IOData's default), so
     # frequencies per sample and time constants in samples (the same numbers as per
     # second with dt = 1 s)
-    per_sample = model.dt == 1.0
-    unit = ("cycles/sample" if hz else "rad/sample") if per_sample else ("Hz" if hz else "rad/s")
-    time_unit = "samples" if per_sample else "s"
+    unit = unit_of_frequency([model.dt], hz)
+    time_unit = "samples" if model.dt == 1.0 else "s"
     rows = []
     for z in p:
         if model.dt > 0:
@@ -605,7 +605,7 @@ def identification_report(models, estimation, validation=None, *, title="subid r
             '<span class="bad">NO</span>'
         rows.append(
             f'<tr><td class="l">{_e(label)}</td><td class="l">{_e(m.info.get("method", ""))}</td>'
-            f"<td>{m.order}</td><td>{_e(m.info.get('horizon', '—'))}</td>"
+            f"<td>{m.order}</td><td>{_e(_horizon_cell(m))}</td>"
             f"<td>{'continuous' if m.dt == 0 else _fmt(m.dt)}</td>"
             f"<td>{_fmt_fit(r['fit_estimation'])}</td><td>{_fmt_fit(r['fit_validation'])}</td>"
             f"<td>{stable}</td><td>{_fmt(seconds[label], 3) if label in seconds else '—'}</td></tr>")
@@ -715,11 +715,14 @@ def identification_report(models, estimation, validation=None, *, title="subid r
     band = ("; shaded: 95 % confidence band (models with a parameter covariance: identify, "
             "pem and the polynomial methods)") if level else ""
     estimate = _spa_estimate(estimation, models)
+    # the unit of the axis plot.bode draws (per sample when time is counted in samples)
+    bode_unit = unit_of_frequency([m.dt for m in models.values()]
+                               + ([estimate.dt] if estimate is not None else []), hz)
     overlay = "; grey points: spa estimate of the estimation data (± 2 std shaded)" \
         if estimate is not None else ""
     body.append(_section("bode", "Frequency response (Bode)", _plot_or_note(
         lambda: plot.bode(models, hz=hz, confidence=level, data=estimate),
-        f"magnitude and phase; frequency in {'Hz' if hz else 'rad/s'}{nyquist}{band}{overlay}",
+        f"magnitude and phase; frequency in {bode_unit}{nyquist}{band}{overlay}",
         "Bode diagram")))
     nav.append(("bode", "Bode"))
     announce("step")
@@ -804,6 +807,13 @@ def identification_report(models, estimation, validation=None, *, title="subid r
     body.append(_section("matrices", "Model matrices", "".join(parts)))
     nav.append(("matrices", "matrices"))
     return _page(title, body, nav)
+
+
+def _horizon_cell(model) -> str:
+    """The summary table's horizon of a model: '—' where none applies (a polynomial
+    model's ``info['horizon']`` is None)."""
+    horizon = model.info.get("horizon")
+    return "—" if horizon is None else str(horizon)
 
 
 def _order_scored(model) -> bool:

@@ -140,14 +140,45 @@ def _from_arrays(arrays: dict, shown, ext, inputs, outputs, dt, time) -> IOData:
         t = _numeric(np.asarray(arrays[t_key]), t_key, shown, ext)
         if t.ndim == 2 and 1 in t.shape:
             t = t.reshape(-1)
-        if dt is None and time is None and "dt" in arrays:
-            file_dt = _scalar(arrays["dt"], "dt", shown, ext)
+        period = _file_period(arrays, shown, ext, in_keys + out_keys) \
+            if dt is None and time is None else None
+        if period is not None:
+            name, file_dt = period
             steps = np.diff(np.asarray(t, dtype=np.float64))
             if steps.size and not same_period(steps, file_dt, resolution=stamp_resolution(t)):
-                raise FileReadError(f"{shown}: the file holds both 't' and 'dt' and they "
-                                    f"disagree (dt = {file_dt:g}, t steps from {steps.min():g} "
-                                    f"to {steps.max():g}); pass dt= or time= to choose",
-                                    path=shown)
-    elif dt is None and "dt" in arrays and "dt" not in in_keys + out_keys:
-        dt = _scalar(arrays["dt"], "dt", shown, ext)
+                raise FileReadError(f"{shown}: the file holds both 't' and {name!r} and they "
+                                    f"disagree ({name} = {file_dt:g}, t steps from "
+                                    f"{steps.min():g} to {steps.max():g}); pass dt= or time= "
+                                    "to choose", path=shown)
+    elif dt is None:
+        period = _file_period(arrays, shown, ext, in_keys + out_keys)
+        if period is not None:
+            dt = period[1]
     return _build(shown, u, y, dt, t, in_names, out_names)
+
+
+#: The names of a sampling period stored beside the signals: subid's ``dt``, and
+#: ``Ts``, MATLAB's (``iddata``'s property, as ``save('d.mat', 'u', 'y', 'Ts')`` stores it).
+PERIOD_NAMES = ("dt", "Ts")
+
+
+def _file_period(arrays: dict, shown, ext, channels) -> tuple[str, float] | None:
+    """``(name, period)`` of the sampling period stored in the file, or None.
+
+    ``dt``, or MATLAB's ``Ts`` when there is no ``dt`` (a ``Ts`` of -1, MATLAB's
+    "unspecified", or 0 is no period). Both present with different values is a
+    :class:`~subid.errors.FileReadError`. Arrays used as channels are not periods."""
+    found = {}
+    for name in PERIOD_NAMES:
+        if name not in arrays or name in channels:
+            continue
+        if name == "Ts":
+            raw = _numeric(np.asarray(arrays[name]), name, shown, ext)
+            if raw.size == 1 and float(raw.reshape(-1)[0].real) <= 0:
+                continue                    # MATLAB's unspecified (-1) or continuous (0)
+        found[name] = _scalar(arrays[name], name, shown, ext)
+    if len(found) == 2 and not np.isclose(found["dt"], found["Ts"], rtol=1e-9, atol=0.0):
+        raise FileReadError(f"{shown}: the file holds both 'dt' = {found['dt']:g} and MATLAB's "
+                            f"'Ts' = {found['Ts']:g}, which differ; remove one of them, or "
+                            "pass dt= (on the command line --dt) to choose", path=shown)
+    return next(iter(found.items()), None)

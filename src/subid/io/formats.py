@@ -97,7 +97,9 @@ def read(path, inputs=None, outputs=None, dt=None, time=None, *, delimiter=None,
           1-by-N row vector is one channel). Default ``"u"`` and ``"y"``.
     dt : float, optional
         Sampling period. For ``.npz``/``.mat`` files, a scalar array ``dt``
-        in the file is used when neither ``dt`` nor ``time`` is given.
+        in the file, or else MATLAB's ``Ts`` (``iddata``'s name; -1 or 0 is
+        no period), is used when neither ``dt`` nor ``time`` is given; a file
+        holding both with different values is a ``FileReadError``.
     time : str or int, optional
         Column (text files) or array (``.npz``/``.mat``) holding the time
         stamps, which may be non-uniform; in a text file, numbers or ISO 8601
@@ -138,7 +140,8 @@ def read(path, inputs=None, outputs=None, dt=None, time=None, *, delimiter=None,
         a device, a directory), empty file, unsupported
         extension, a cell that is not a number, rows with different numbers
         of fields, unknown or repeated column/array names, column index out
-        of range, missing ``inputs``/``outputs`` for a text file, corrupted
+        of range, missing ``inputs``/``outputs`` for a text file, ``dt`` and ``Ts``
+        in a ``.npz``/``.mat`` file that differ, corrupted
         ``.npz``/``.mat`` file, MATLAB v7.3 file without h5py installed. The ``path``, ``line`` and
         ``column`` attributes locate the problem when known.
     DataError

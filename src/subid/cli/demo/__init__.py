@@ -320,7 +320,8 @@ def gallery_markdown(rows, *, command: str = GALLERY_COMMAND, seconds=None) -> s
                 lines.append(f"| {name} | `{labels[m]}` | — | — | failed: {_reason(r['error'])} "
                              "| | |")
                 continue
-            lines.append(f"| {name} | `{labels[m]}` | {r['order']} | {r['horizon']} | "
+            horizon = "—" if r["horizon"] is None else r["horizon"]   # polynomial methods
+            lines.append(f"| {name} | `{labels[m]}` | {r['order']} | {horizon} | "
                          f"{_fit_text(r['fit_est'])} | {_fit_text(r['fit_val'])} | "
                          f"{'yes' if r['stable'] else 'NO'} |")
     lines += ["", "Outputs are listed in the order of `subid.datasets.info(name)['output_names']`."

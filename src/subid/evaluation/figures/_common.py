@@ -36,6 +36,38 @@ _PALETTE = [f"C{k}" for k in range(10)]
 _LEGEND_CHAR_IN = 0.068
 
 
+def frequency_unit(dts, hz: bool = False) -> str:
+    """The unit of the frequencies of models or records of sampling periods ``dts``.
+
+    ``dt = 1`` is the period of a record without time information (IOData's default):
+    when every period is 1, time is counted in samples and frequencies per sample (the
+    same numbers as per second with dt = 1 s). The Bode axis, the report's caption of
+    it and the pole table all name the unit from here.
+
+    Parameters
+    ----------
+    dts : iterable of float
+        Sampling periods (0: continuous time).
+    hz : bool
+        Cycles instead of radians.
+
+    Returns
+    -------
+    str
+        ``'rad/sample'`` or ``'cycles/sample'`` when every period is 1, else ``'rad/s'``
+        or ``'Hz'``.
+
+    Examples
+    --------
+    >>> frequency_unit([1.0], hz=True), frequency_unit([1.0, 0.1])
+    ('cycles/sample', 'rad/s')
+    """
+    dts = list(dts)
+    if dts and all(dt == 1.0 for dt in dts):
+        return "cycles/sample" if hz else "rad/sample"
+    return "Hz" if hz else "rad/s"
+
+
 def _styled(fn):
     """Draw ``fn``'s figure under :data:`STYLE` (fonts are fixed when text is created)."""
     import functools

@@ -18,6 +18,7 @@ from subid.evaluation.figures._common import (
     _pyplot,
     _styled,
     colors_for,
+    frequency_unit,
     is_unstable,
     log,
 )
@@ -189,10 +190,8 @@ def bode(model_or_models=None, w=None, *, data=None, hz=False, labels=None, phas
             if phase:
                 axes[r + 1, j].set_ylabel("phase (deg)")
                 axes[r + 1, j].grid(True, lw=0.3)
-    # dt = 1 is the period of a record without time information (IOData's default):
-    # frequencies per sample then (numerically the same as per second with dt = 1 s)
-    per_sample = all(m.dt == 1.0 for m in list(groups.values()) + ([data] if data else []))
-    unit = ("cycles/sample" if hz else "rad/sample") if per_sample else ("Hz" if hz else "rad/s")
+    unit = frequency_unit([m.dt for m in list(groups.values()) + ([data] if data else [])],
+                          hz)
     for j in range(nu):
         axes[-1, j].set_xlabel(f"frequency ({unit})")
     # after the autoscale is requested: axvline maps its x to data coordinates through

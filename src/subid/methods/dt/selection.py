@@ -457,7 +457,7 @@ def cross_validate(data, fixed, candidates, horizon, *, fitter, estimators):
     Returns
     -------
     order, horizon, variant, record : int, int, str or None, dict
-        ``record`` is stored as ``info['order_selection']``.
+        ``record`` is ``info['order_selection']``; ``given``: what the caller fixed.
     """
     used = selection_part(data)       # validated by the caller (subid.methods.dt.pipeline.run)
     if used.n_experiments > 1:        # folds per experiment (none across a border)
@@ -571,6 +571,8 @@ def cross_validate(data, fixed, candidates, horizon, *, fitter, estimators):
     }
     if ceiling is not None:
         record["order_ceiling"] = ceiling
+    if fixed is not None or horizon is not None:      # what the folds did not choose
+        record["given"] = ["order"] * (fixed is not None) + ["horizon"] * (horizon is not None)
     # the other candidates, the fallbacks of unrepaired_choice:
     # among those whose mean fold score is within the fold-to-fold spread (standard
     # deviation) of the choice's, first those none of whose fold models had to be
