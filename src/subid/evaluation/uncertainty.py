@@ -66,6 +66,7 @@ from subid.data import IOData
 from subid.delay import apply_to_inputs, input_delay_of
 from subid.errors import DataError, ModelError, OptionError
 from subid.model._sensitivity import jacobian
+from subid.model.prediction import check_x0
 from subid.model.statespace import StateSpace
 
 __all__ = ["ParameterCovariance", "Bounds", "parameter_covariance", "freqresp_bounds",
@@ -502,7 +503,7 @@ def _output_sensitivities(model, cov, u, x0):
     y, _, ud = _forced(model, u, x0)
     dA, dB, dC, dD = _directions(cov)
     n = model.order
-    start = np.zeros(n) if x0 is None else np.asarray(x0, dtype=float).reshape(n)
+    start = np.zeros(n) if x0 is None else x0
     arrays = (model.A, model.B, model.C, model.D, ud, start, dA, dB, dC, dD,
               np.zeros((dA.shape[0], n)))
     _, dy = jacobian(*(np.ascontiguousarray(a, dtype=float) for a in arrays))
@@ -524,8 +525,10 @@ def simulation_bounds(model, u, level=0.95, *, x0=None, method="delta", n_sample
         Input samples (an IOData record: its inputs).
     level : float
         Confidence level, e.g. 0.95.
-    x0 : array_like, shape (n,), optional
-        Initial state (default zeros; treated as known).
+    x0 : None, 'zero', 0 or array_like of shape (n,), optional
+        Initial state (default zeros; treated as known). There are no
+        outputs to estimate it from: ``'estimate'`` raises a
+        :class:`~subid.errors.DataError`.
     method : {'delta', 'sampling'}
         First-order propagation, or quantiles over sampled parameter vectors.
     n_samples : int
@@ -559,6 +562,8 @@ def simulation_bounds(model, u, level=0.95, *, x0=None, method="delta", n_sample
     if u.shape[1] != model.n_inputs:
         raise DataError(f"input u has {u.shape[1]} channels but the model has "
                         f"{model.n_inputs} inputs")
+    x0 = check_x0(x0, model.order, estimate=False)
+    x0 = np.zeros(model.order) if isinstance(x0, str) else x0
     t = np.arange(u.shape[0]) * model.dt
     return _band(model, cov, u, x0, z, level, method, n_samples, seed, t)
 
