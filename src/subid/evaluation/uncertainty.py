@@ -246,6 +246,35 @@ class Bounds:
 
 @serial_blas
 @checked_call
+def _continuous_origin(model) -> bool:
+    """Whether ``model`` is, or was sampled from, a continuous-time estimate (for which
+    no parameter covariance is computed)."""
+    record = model.info.get("identify")
+    return model.is_continuous or model.info.get("method") == "ct_subspace" or (
+        isinstance(record, dict) and record.get("time_base") == "continuous")
+
+
+def _continuous_message(model) -> str:
+    """The :class:`ModelError` message for a continuous-time model without covariance:
+    how it came to be continuous-time, and the discrete-time path that gives bounds."""
+    info = model.info
+    record = info.get("identify")
+    if isinstance(record, dict) and record.get("time_base") == "continuous":
+        how = (f"subid.identify took its continuous-time path (ct_subspace: "
+               f"{record.get('reason', 'continuous time requested')})")
+    else:
+        how = f"it was estimated in continuous time ({info.get('method', 'unknown method')}"
+        how += f", refined by {info['refined_by']})" if info.get("refined_by") else ")"
+    sampled = "" if model.is_continuous else ", then sampled"
+    return (f"the model has no parameter covariance: {how}{sampled}, and subid computes "
+            "parameter covariances only for discrete-time estimates (subid.identify on "
+            "uniformly sampled data, subid.pem, the polynomial methods). For bounds, "
+            "identify a discrete-time model from uniformly sampled data: subid.identify(data) "
+            "or subid.pem(data, model.to_discrete(dt)) attach the covariance; non-uniformly "
+            "sampled data must first be interpolated onto a uniform grid (e.g. numpy.interp "
+            "per channel), as pem and the discrete-time methods need one")
+
+
 def parameter_covariance(model) -> ParameterCovariance:
     """The parameter covariance a model carries (MATLAB ``getcov``).
 
@@ -265,15 +294,19 @@ def parameter_covariance(model) -> ParameterCovariance:
     Raises
     ------
     ModelError
-        The model has no covariance (a subspace or continuous-time model:
-        refine it with :func:`subid.pem`), or its matrices are not those the
-        covariance was computed for (transformed or converted after ``pem``).
+        The model has no covariance (a subspace model: refine it with
+        :func:`subid.pem`; a continuous-time model, e.g. :func:`subid.identify`
+        on non-uniform data: the message names the discrete-time path), or its
+        matrices are not those the covariance was computed for (transformed or
+        converted after ``pem``).
     """
     if not isinstance(model, StateSpace):
         raise ModelError(f"expected a subid.StateSpace, got {type(model).__name__}")
     entry = model.info.get("parameter_covariance")
     if not isinstance(entry, dict):
         note = model.info.get("parameter_covariance_note")
+        if not note and _continuous_origin(model):
+            raise ModelError(_continuous_message(model))
         method = model.info.get("method", "this method")
         why = note if note else (
             f"models estimated by {method} carry no parameter covariance"
