@@ -182,3 +182,45 @@ def test_time_stamps_as_date_times_or_durations():
                      t=np.array(["2024-01-01", "NaT", "2024-01-03"], dtype="datetime64[D]"))
     with pytest.raises(errors.DataError, match="must be numeric or date-times"):
         subid.IOData(np.ones(3), np.arange(3.0), t=np.array(["a", "b", "c"]))
+
+
+def test_masked_entries_are_missing_values_like_nan():
+    y = np.array([1.0, 2.0, 4.0, 3.0])
+    masked = np.ma.array([1.0, 2.0, 3.0, 5.0], mask=[0, 1, 0, 1])
+    with pytest.raises(errors.DataError, match="input u has 2 masked values at rows 1, 3"):
+        subid.IOData(masked, y)
+    with pytest.raises(errors.DataError, match="output y has 1 masked value at row 0"):
+        subid.IOData(y, np.ma.array(np.ones((4, 2)), mask=[[1, 0], [0, 0], [0, 0], [0, 0]]))
+    with pytest.raises(errors.DataError, match="masked value at row 2"):
+        subid.IOData(y, y, t=np.ma.array([0.0, 1.0, 2.0, 3.0], mask=[0, 0, 1, 0]))
+    # a masked array with nothing masked is its values
+    d = subid.IOData(np.ma.array([1.0, 2.0, 3.0, 5.0]), y)
+    np.testing.assert_array_equal(d.u[:, 0], [1.0, 2.0, 3.0, 5.0])
+
+
+def test_object_arrays_of_strings_are_refused_as_string_arrays_are():
+    pd = pytest.importorskip("pandas")
+    y = np.array([1.0, 2.0, 4.0])
+    with pytest.raises(errors.DataError, match="strings"):
+        subid.IOData(np.array(["1", "2", "3"]), y)
+    strings = r"holds values that are not numbers \(strings\)"
+    with pytest.raises(errors.DataError, match=rf"input u {strings}, e.g. '1' at row 0"):
+        subid.IOData(pd.Series(["1", "2", "3"]), y)
+    with pytest.raises(errors.DataError, match=rf"output y {strings}, e.g. 'x' at row 1"):
+        subid.IOData(y, np.array([[1.0, 2], ["x", 3], [4, 5]], dtype=object))
+    with pytest.raises(errors.DataError, match=rf"time stamps t {strings}"):
+        subid.IOData(y, y, t=pd.Series(["0", "1", "2"]))
+    # object arrays of numbers stay accepted
+    d = subid.IOData(np.array([1, 2.5, np.float32(3)], dtype=object), y)
+    np.testing.assert_array_equal(d.u[:, 0], [1.0, 2.5, 3.0])
+
+
+def test_time_stamps_must_be_one_dimensional():
+    u = y = np.array([1.0, 2.0, 4.0])
+    for t in ([[0, 1, 3]], [[0], [1], [3]]):
+        with pytest.raises(errors.DataError, match=r"one-dimensional .* a column or a row of "
+                                                   r"3 stamps: pass numpy.ravel\(t\)"):
+            subid.IOData(u, y, t=t)
+    with pytest.raises(errors.DataError, match=r"one-dimensional .* got shape \(3, 3\)$"):
+        subid.IOData(u, y, t=np.zeros((3, 3)))
+    np.testing.assert_array_equal(subid.IOData(u, y, t=[0, 1, 3]).t, [0.0, 1.0, 3.0])

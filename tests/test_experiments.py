@@ -242,7 +242,7 @@ def test_merge_refuses_what_does_not_match(two_records):
         data.experiment("nope")
     with pytest.raises(DataError, match="step"):
         data[::2]
-    with pytest.raises(DataError, match=r"x0 must have shape \(2, 3\)"):
+    with pytest.raises(DataError, match=r"x0 must be .* array of shape \(2, 3\)"):
         subid.fit_percent(TRUE, data, x0=np.zeros(3))
 
 

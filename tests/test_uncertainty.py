@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 import subid
-from subid.errors import ModelError, OptionError
+from subid.errors import DataError, ModelError, OptionError
 from subid.model.statespace import StateSpace
 
 # second-order output-error system (poles 0.75 +- 0.37i, |p| = 0.84)
@@ -357,3 +357,34 @@ def test_identify_default_bounds_cover_in_closed_loop():
     # the default keeps its prediction-error refinement under feedback (every run here):
     # 30 runs x 3 frequencies x 4 pairs, measured 95.6 %
     assert 0.88 <= _closed_loop_coverage(30, lambda data: subid.identify(data, 3)) <= 1.0
+
+
+def test_continuous_time_models_name_the_discrete_time_path_to_bounds():
+    # identify on non-uniform data goes to ct_subspace: the message said "models estimated
+    # by identify carry no parameter covariance; identify it with subid.identify(data), or
+    # refine it with subid.pem", circular (pem refuses non-uniform data)
+    true = TRUE.to_continuous()
+    rng = np.random.default_rng(1)
+    t = np.cumsum(rng.uniform(0.5, 1.5, size=800))
+    u = rng.standard_normal(800)
+    y = true.simulate(u, t=t, hold="zoh")[:, 0] + 0.05 * rng.standard_normal(800)
+    irregular = subid.IOData(u, y, t=t)
+    model = subid.identify(irregular, 2)
+    assert model.is_continuous
+    for m in (model, model.to_discrete(1.0)):
+        with pytest.raises(ModelError, match=r"identify took its continuous-time path "
+                                             r"\(ct_subspace: non-uniform time stamps\)") as e:
+            subid.step_bounds(m)
+        assert "interpolated onto a uniform grid" in str(e.value)
+        assert "refine it with subid.pem" not in str(e.value)
+    with pytest.raises(DataError, match="uniformly sampled"):      # what the message says
+        subid.pem(irregular, model.to_discrete(1.0))
+    # ... and the path it names gives bounds
+    grid = np.arange(t[0], t[-1], 1.0)
+    uniform = subid.IOData(np.interp(grid, t, u), np.interp(grid, t, y), dt=1.0)
+    assert subid.step_bounds(subid.identify(uniform, 2)).std is not None
+    ct = subid.ct_subspace(uniform, 2)
+    with pytest.raises(ModelError, match=r"estimated in continuous time \(ct_subspace\)"):
+        subid.parameter_covariance(ct)
+    refined = subid.pem(uniform, ct.to_discrete(1.0))
+    assert subid.step_bounds(refined).std is not None

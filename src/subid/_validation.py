@@ -40,6 +40,9 @@ def as_signal(values, name: str, *, allow_empty_columns: bool = False,
     """
     if values is None:
         raise DataError(f"{name} is missing: pass an array with time on axis 0")
+    if isinstance(values, np.ma.MaskedArray):
+        check_unmasked(values, name)
+        values = values.data                 # no entry is masked: the values themselves
     try:
         arr = np.asarray(values)
     except ValueError as exc:
@@ -58,6 +61,7 @@ def as_signal(values, name: str, *, allow_empty_columns: bool = False,
             raise DataError(f"{name} has missing values (None) at row"
                             f"{'s' if len(missing) != 1 else ''} {format_rows(missing)}; "
                             "fill or remove them before identification")
+        check_object_numbers(arr, name)
         try:
             arr = arr.astype(np.float64)
         except OverflowError:
@@ -157,6 +161,43 @@ def as_chunk(values, channels: int, name: str, *, allow_empty: bool = False,
     return out
 
 
+def check_unmasked(values: np.ma.MaskedArray, name: str) -> None:
+    """Raise :class:`DataError` listing the rows of a masked array with masked entries.
+
+    A masked entry is a missing value, as a NaN is: subid neither drops its row nor
+    reads the value under the mask.
+    """
+    mask = np.ma.getmaskarray(values)
+    if not mask.any():
+        return
+    rows = np.flatnonzero(mask.reshape(mask.shape[0], -1).any(axis=1)) if mask.ndim else [0]
+    count = int(mask.sum())
+    raise DataError(f"{name} has {count} masked value{'s' if count != 1 else ''} at row"
+                    f"{'s' if len(rows) != 1 else ''} {format_rows(rows)}; masked entries "
+                    "are missing values: remove or interpolate them before identification "
+                    "(subid neither drops them nor uses the values under the mask)")
+
+
+def check_object_numbers(arr: np.ndarray, name: str,
+                         hint: str = "pandas.to_numeric, or numpy.asarray(..., dtype=float)"
+                         ) -> None:
+    """Raise :class:`DataError` unless every entry of the object array ``arr`` is a
+    number (an int, a float, a NumPy scalar...): strings such as ``'1.5'`` (a pandas
+    column read as text) are refused, as a NumPy array of strings is, not parsed."""
+    flat = arr.reshape(-1)
+    numeric = np.vectorize(lambda v: isinstance(v, numbers.Number), otypes=[bool])(flat) \
+        if flat.size else np.ones(0, bool)
+    if numeric.all():
+        return
+    first = int(np.flatnonzero(~numeric)[0])
+    value = flat[first]
+    kind = "strings" if isinstance(value, (str, bytes)) else type(value).__name__
+    kind = f"values that are not numbers ({kind})"
+    row = f" at row {first // max(1, flat.size // arr.shape[0])}" if arr.ndim else ""
+    raise DataError(f"{name} holds {kind}, e.g. {value!r}{row}; convert it to numbers "
+                    f"first (e.g. {hint})")
+
+
 def check_finite(arr: np.ndarray, name: str) -> None:
     """Raise :class:`DataError` listing the rows of ``arr`` holding NaN or inf."""
     if np.isfinite(arr).all():
@@ -210,7 +251,17 @@ def check_time_stamps(t, n_samples: int, name: str = "time stamps t") -> np.ndar
         raise DataError(f"{name} cannot be read as a one-dimensional array of numbers "
                         f"({type(exc).__name__}: ragged, or integers beyond the float "
                         "range)") from None
+    if isinstance(t, np.ma.MaskedArray):
+        check_unmasked(t, name)
+        arr = np.asarray(t.data)
+    if arr.ndim != 1:
+        column = (f"; a column or a row of {arr.size} stamps: pass numpy.ravel(t)"
+                  if arr.ndim == 2 and 1 in arr.shape else "")
+        raise DataError(f"{name} must be one-dimensional (one stamp per sample), got shape "
+                        f"{arr.shape}{column}")
     if arr.dtype == object:
+        check_object_numbers(arr, name, "pandas.to_numeric, or pandas.to_datetime for "
+                             "date-times")
         try:
             arr = arr.astype(np.float64)
         except (TypeError, ValueError, OverflowError):
@@ -229,10 +280,6 @@ def check_time_stamps(t, n_samples: int, name: str = "time stamps t") -> np.ndar
     if arr.dtype.kind not in "iuf":
         raise DataError(f"{name} must be numeric or date-times, got dtype {arr.dtype}")
     arr = np.ascontiguousarray(arr, dtype=np.float64)
-    if arr.ndim == 2 and 1 in arr.shape:
-        arr = arr.reshape(-1)
-    if arr.ndim != 1:
-        raise DataError(f"{name} must be one-dimensional, got shape {arr.shape}")
     if arr.shape[0] != n_samples:
         raise DataError(f"{name} has {arr.shape[0]} entries but the signals have "
                         f"{n_samples} samples")

@@ -25,6 +25,7 @@ __all__ = [
     "ResourceLimitError",
     "NotConvergedWarning",
     "DelayWarning",
+    "ConversionWarning",
     "OptionError",
 ]
 
@@ -197,6 +198,14 @@ class FeedbackWarning(UserWarning):
 class DelayWarning(UserWarning):
     """Input delays counted in samples (``info['input_delay']``) are dropped by an
     operation that changes the sampling; :func:`subid.absorb_delay` keeps them as states."""
+
+
+class ConversionWarning(UserWarning):
+    """A discrete-time model has no continuous-time counterpart of its order under the
+    hold (a pole on the negative real axis, or at the origin), and a continuous-time
+    method changed its result because of it: a mode at the Nyquist frequency was added
+    (one state more per such pole), or another candidate model was used. The message
+    says which (:func:`subid.ct_subspace`'s discrete-time starts)."""
 
 
 class SamplingWarning(UserWarning):

@@ -111,8 +111,8 @@ def residuals(model, data, *, max_lag: int = 25, confidence: float = 0.99, x0=No
         Largest lag in samples.
     confidence : float
         Level of the bands (0.99: 99 %).
-    x0 : None or array_like
-        As in :func:`predict`.
+    x0 : None, 'estimate', 'zero', 0 or array_like of shape (n,)
+        As in :func:`predict` (None, the default, estimates it).
 
     Returns
     -------

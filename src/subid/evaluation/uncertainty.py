@@ -66,6 +66,7 @@ from subid.data import IOData
 from subid.delay import apply_to_inputs, input_delay_of
 from subid.errors import DataError, ModelError, OptionError
 from subid.model._sensitivity import jacobian
+from subid.model.prediction import check_x0
 from subid.model.statespace import StateSpace
 
 __all__ = ["ParameterCovariance", "Bounds", "parameter_covariance", "freqresp_bounds",
@@ -245,6 +246,35 @@ class Bounds:
 
 @serial_blas
 @checked_call
+def _continuous_origin(model) -> bool:
+    """Whether ``model`` is, or was sampled from, a continuous-time estimate (for which
+    no parameter covariance is computed)."""
+    record = model.info.get("identify")
+    return model.is_continuous or model.info.get("method") == "ct_subspace" or (
+        isinstance(record, dict) and record.get("time_base") == "continuous")
+
+
+def _continuous_message(model) -> str:
+    """The :class:`ModelError` message for a continuous-time model without covariance:
+    how it came to be continuous-time, and the discrete-time path that gives bounds."""
+    info = model.info
+    record = info.get("identify")
+    if isinstance(record, dict) and record.get("time_base") == "continuous":
+        how = (f"subid.identify took its continuous-time path (ct_subspace: "
+               f"{record.get('reason', 'continuous time requested')})")
+    else:
+        how = f"it was estimated in continuous time ({info.get('method', 'unknown method')}"
+        how += f", refined by {info['refined_by']})" if info.get("refined_by") else ")"
+    sampled = "" if model.is_continuous else ", then sampled"
+    return (f"the model has no parameter covariance: {how}{sampled}, and subid computes "
+            "parameter covariances only for discrete-time estimates (subid.identify on "
+            "uniformly sampled data, subid.pem, the polynomial methods). For bounds, "
+            "identify a discrete-time model from uniformly sampled data: subid.identify(data) "
+            "or subid.pem(data, model.to_discrete(dt)) attach the covariance; non-uniformly "
+            "sampled data must first be interpolated onto a uniform grid (e.g. numpy.interp "
+            "per channel), as pem and the discrete-time methods need one")
+
+
 def parameter_covariance(model) -> ParameterCovariance:
     """The parameter covariance a model carries (MATLAB ``getcov``).
 
@@ -264,15 +294,19 @@ def parameter_covariance(model) -> ParameterCovariance:
     Raises
     ------
     ModelError
-        The model has no covariance (a subspace or continuous-time model:
-        refine it with :func:`subid.pem`), or its matrices are not those the
-        covariance was computed for (transformed or converted after ``pem``).
+        The model has no covariance (a subspace model: refine it with
+        :func:`subid.pem`; a continuous-time model, e.g. :func:`subid.identify`
+        on non-uniform data: the message names the discrete-time path), or its
+        matrices are not those the covariance was computed for (transformed or
+        converted after ``pem``).
     """
     if not isinstance(model, StateSpace):
         raise ModelError(f"expected a subid.StateSpace, got {type(model).__name__}")
     entry = model.info.get("parameter_covariance")
     if not isinstance(entry, dict):
         note = model.info.get("parameter_covariance_note")
+        if not note and _continuous_origin(model):
+            raise ModelError(_continuous_message(model))
         method = model.info.get("method", "this method")
         why = note if note else (
             f"models estimated by {method} carry no parameter covariance"
@@ -502,7 +536,7 @@ def _output_sensitivities(model, cov, u, x0):
     y, _, ud = _forced(model, u, x0)
     dA, dB, dC, dD = _directions(cov)
     n = model.order
-    start = np.zeros(n) if x0 is None else np.asarray(x0, dtype=float).reshape(n)
+    start = np.zeros(n) if x0 is None else x0
     arrays = (model.A, model.B, model.C, model.D, ud, start, dA, dB, dC, dD,
               np.zeros((dA.shape[0], n)))
     _, dy = jacobian(*(np.ascontiguousarray(a, dtype=float) for a in arrays))
@@ -526,9 +560,11 @@ def simulation_bounds(model, u, level=0.95, *, x0=None, method="delta", n_sample
         each from its own initial state).
     level : float
         Confidence level, e.g. 0.95.
-    x0 : array_like, shape (n,), optional
+    x0 : None, 'zero', 0 or array_like of shape (n,), optional
         Initial state (default zeros; treated as known); for a record of several
-        experiments one row per experiment, shape ``(n_experiments, n)``.
+        experiments one row per experiment, shape ``(n_experiments, n)``. There are
+        no outputs to estimate it from: ``'estimate'`` raises a
+        :class:`~subid.errors.DataError`.
     method : {'delta', 'sampling'}
         First-order propagation, or quantiles over sampled parameter vectors.
     n_samples : int
@@ -560,11 +596,8 @@ def simulation_bounds(model, u, level=0.95, *, x0=None, method="delta", n_sample
                             f"is dt={model.dt!r}")
         if u.n_experiments > 1:
             k = u.n_experiments
-            rows = [None] * k if x0 is None else np.asarray(x0, dtype=float)
-            if x0 is not None and rows.shape != (k, model.order):
-                raise DataError(f"the record holds {k} experiments (subid.merge): x0 must "
-                                f"have one row per experiment, shape ({k}, {model.order}), "
-                                f"got shape {rows.shape}")
+            rows = check_x0(x0, model.order, k, estimate=False)
+            rows = [None] * k if isinstance(rows, str) else list(rows)
             parts = [simulation_bounds(model, e, level, x0=r, method=method,
                                        n_samples=n_samples, seed=seed)
                      for e, r in zip(u.experiments, rows)]
@@ -577,6 +610,8 @@ def simulation_bounds(model, u, level=0.95, *, x0=None, method="delta", n_sample
     if u.shape[1] != model.n_inputs:
         raise DataError(f"input u has {u.shape[1]} channels but the model has "
                         f"{model.n_inputs} inputs")
+    x0 = check_x0(x0, model.order, estimate=False)
+    x0 = np.zeros(model.order) if isinstance(x0, str) else x0
     t = np.arange(u.shape[0]) * model.dt
     return _band(model, cov, u, x0, z, level, method, n_samples, seed, t)
 

@@ -33,7 +33,13 @@ def fit_percent(model, data, x0="estimate", hold=None, steps=np.inf, *,
     model : StateSpace
     data : IOData
         Same channels; for a discrete model, the same sampling period.
-    x0 : 'estimate', 'zero' or array
+    x0 : 'estimate', None, 'zero', 0 or array_like of shape (n,)
+        Initial state: 'estimate' or None (default) fits it by least
+        squares, 'zero' or 0 is the zero state, an array gives it (shape
+        (n_experiments, n) for a record of several experiments). Anything
+        else raises a :class:`~subid.errors.DataError` (as in
+        :func:`subid.predict`; one validator,
+        :func:`subid.model.prediction.check_x0`).
     hold : {'zoh', 'foh'}, optional
         Inter-sample behaviour of the input for a continuous-time model.
         Default: the model's :attr:`~subid.StateSpace.hold` (``'foh'`` for a
@@ -67,8 +73,7 @@ def fit_percent(model, data, x0="estimate", hold=None, steps=np.inf, *,
     if isinstance(data, FRData):
         return frequency_fit(model, data)
     if steps is not None and not (isinstance(steps, float) and np.isinf(steps) and steps > 0):
-        x0p = None if isinstance(x0, str) and x0 == "estimate" else x0
-        y_hat = predict(check_model(model, "model"), data, steps, x0p)
+        y_hat = predict(check_model(model, "model"), data, steps, x0)
     else:
         y_hat, _ = simulate_fit(model, data, x0=x0, hold=hold)
     return output_fit(data, y_hat, per_experiment=per_experiment)

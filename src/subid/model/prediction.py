@@ -38,7 +38,7 @@ from subid.model import _simulate
 from subid.model.statespace import StateSpace
 
 __all__ = ["predict", "prediction_errors", "simulate_fit", "check_model", "check_model_data",
-           "experiment_x0"]
+           "check_x0", "experiment_x0"]
 
 # Beyond this many steps the k-step predictor of a model with a stable A uses the
 # closed form ŷ(t|t-k) = y_sim(t) + C A^(k-1) (x̂(t-k+1) - x_sim(t-k+1)) instead of
@@ -195,6 +195,7 @@ def simulate_fit(model, data, x0="estimate", hold=None, *, output_std=None):
                  for e, x0_e in zip(data.experiments,
                                     experiment_x0(x0, data.n_experiments, model.order))]
         return np.vstack([p[0] for p in parts]), np.stack([p[1] for p in parts])
+    x0 = check_x0(x0, model.order)
     n, N, ny = model.order, data.n_samples, model.n_outputs
 
     def overflow():
@@ -248,24 +249,88 @@ def simulate_fit(model, data, x0="estimate", hold=None, *, output_std=None):
         for a, b, F in kept:              # forced + free response from x0_hat
             forced[a:b] += F @ x0_hat
         return forced, x0_hat
-    x0_arr = np.asarray(x0, dtype=float).reshape(-1)
-    if x0_arr.shape != (n,):
-        raise DataError(f"x0 must have {n} entries (the model order), got {x0_arr.size}")
-    return simulate(x0_arr), x0_arr
+    return simulate(x0), x0
+
+
+def check_x0(x0, order: int, n_experiments: int = 1, *, estimate: bool = True):
+    """The initial-state argument ``x0`` of the evaluation functions, checked once.
+
+    The one validator of :func:`predict`, :func:`simulate_fit`,
+    :func:`subid.fit_percent`, :func:`subid.residuals`, the figures and
+    :func:`subid.simulation_bounds`, so that they accept the same values.
+
+    Parameters
+    ----------
+    x0 : None, 'estimate', 'zero', 0 or array_like
+        None or ``'estimate'``: the least-squares initial state (only with
+        ``estimate=True``; otherwise None means zero); ``'zero'`` or the
+        number 0: the zero state; an array: the initial state, of shape
+        ``(order,)`` (a column or row of ``order`` entries is read as that),
+        or ``(n_experiments, order)`` for a record of several experiments.
+    order : int
+        The model order n.
+    n_experiments : int
+        Number of experiments of the record.
+    estimate : bool
+        Whether the caller can estimate the initial state from data.
+
+    Returns
+    -------
+    'estimate', 'zero' or ndarray
+        An array of shape ``(order,)``, or ``(n_experiments, order)`` when
+        ``n_experiments > 1``, of finite floats.
+
+    Raises
+    ------
+    DataError
+        ``x0`` is none of these (the message names what is accepted).
+    """
+    several = n_experiments > 1
+    shape = (n_experiments, order) if several else (order,)
+    modes = "'estimate' (or None), 'zero' (or 0)" if estimate else "None, 'zero' (or 0)"
+    whose = (f"one initial state per experiment of the {n_experiments}" if several
+             else "the initial state, n = the model order")
+    accepted = f"x0 must be {modes} or an array of shape {shape} ({whose})"
+    if x0 is None:
+        return "estimate" if estimate else "zero"
+    if isinstance(x0, str):
+        if x0 == "zero" or (x0 == "estimate" and estimate):
+            return x0
+        raise DataError(f"{accepted}; got the string {x0!r}")
+    if isinstance(x0, (bool, np.bool_)):
+        raise DataError(f"{accepted}; got {x0!r}")
+    if isinstance(x0, numbers.Number) or (isinstance(x0, np.ndarray) and x0.ndim == 0):
+        if isinstance(x0, numbers.Real) or getattr(x0, "dtype", np.dtype(object)).kind in "iuf":
+            if x0 == 0:
+                return "zero"
+        raise DataError(f"{accepted}; got the number {x0!r} (only 0 stands for the zero "
+                        "state)")
+    try:
+        arr = np.asarray(x0)
+    except (TypeError, ValueError):        # ragged nested sequences
+        raise DataError(f"{accepted}; got a {type(x0).__name__} that is not an array"
+                        ) from None
+    if arr.dtype.kind not in "iuf":
+        raise DataError(f"{accepted} of real numbers; got an array of dtype {arr.dtype}")
+    if not several and arr.ndim == 2 and 1 in arr.shape and arr.size == order:
+        arr = arr.reshape(-1)              # a column or a row of the n entries
+    if arr.shape != shape:
+        raise DataError(f"{accepted}; got shape {arr.shape}")
+    arr = np.array(arr, dtype=np.float64)
+    if not np.isfinite(arr).all():
+        raise DataError("initial state x0 has NaN or infinite entries; give finite values "
+                        "or x0='estimate'" if estimate else
+                        "initial state x0 has NaN or infinite entries; give finite values")
+    return arr
 
 
 def experiment_x0(x0, n_experiments: int, order: int) -> list:
-    """``x0`` of :func:`simulate_fit` split per experiment: a string or ``0`` for
-    every experiment, or an array of shape (n_experiments, order)."""
-    if isinstance(x0, str) or (isinstance(x0, (int, float)) and not isinstance(x0, bool)
-                               and x0 == 0) or x0 is None:
+    """``x0`` of :func:`simulate_fit` split per experiment (after :func:`check_x0`): a
+    string for every experiment, or the rows of an array of shape (n_experiments, order)."""
+    x0 = check_x0(x0, order, n_experiments)
+    if isinstance(x0, str):
         return [x0] * n_experiments
-    arr = np.asarray(x0, dtype=float)
-    if arr.shape != (n_experiments, order):
-        raise DataError(f"the record has {n_experiments} experiments: x0 must have shape "
-                        f"({n_experiments}, {order}), one initial state per experiment, "
-                        f"got shape {arr.shape}")
-    return list(arr)
+    return list(x0)
 
 
 def _check(model, data) -> tuple[StateSpace, IOData]:
@@ -428,6 +493,7 @@ def predict(model, data, steps=1, x0=None, *, return_x0=False, output_std=None):
                                                          and (output_std >= 0).all()):
             raise DataError(f"output_std must hold {data.n_outputs} finite non-negative "
                             f"spreads, one per output; got shape {output_std.shape}")
+    x0 = check_x0(x0, model.order, data.n_experiments)
     if data.n_experiments > 1:          # each experiment from its own initial state
         parts = [predict(model, e, steps, x0_e, return_x0=True, output_std=output_std)
                  for e, x0_e in zip(data.experiments,
@@ -441,18 +507,15 @@ def predict(model, data, steps=1, x0=None, *, return_x0=False, output_std=None):
             warnings.warn(f"predict(steps={steps}): {why}, so the prediction is the "
                           "simulation (steps=inf); identify with a discrete-time method "
                           "(or subid.pem) for a noise model", NoiseModelWarning, stacklevel=2)
-        mode = "estimate" if x0 is None or (isinstance(x0, str) and x0 == "estimate") else x0
-        if _is_zero(mode):
-            mode = "zero"
-        y_hat, x0v = simulate_fit(model, data, x0=mode, output_std=output_std)
+        y_hat, x0v = simulate_fit(model, data, x0=x0, output_std=output_std)
         return (y_hat, x0v) if return_x0 else y_hat
     u, y = effective_input(model, data.u), data.y        # the model's input delays
     try:
         with np.errstate(over="ignore", invalid="ignore"):
-            if x0 is None or (isinstance(x0, str) and x0 == "estimate"):
+            if isinstance(x0, str) and x0 == "estimate":
                 x0v, y_hat = _estimate_x0(model, u, y, k, data, output_std)
             else:
-                x0v = np.zeros(model.order) if _is_zero(x0) else model._check_x0(x0)
+                x0v = np.zeros(model.order) if isinstance(x0, str) else x0
                 y_hat = _k_step(model, u, y, x0v, k)
     except ModelError:                   # a simulation inside overflowed
         x0v = y_hat = None
@@ -476,16 +539,6 @@ def _divergence_cause(model, k) -> str:
                 "re-estimate it (subid.pem(data, model)) or compare by simulation (steps=inf)")
     return (f"A is unstable (spectral radius {rho:.4g}) and the {k}-step prediction "
             "propagates it over the horizon; use a shorter horizon (steps) or a stable model")
-
-
-def _is_zero(x0) -> bool:
-    if isinstance(x0, str):
-        if x0 == "zero":
-            return True
-        if x0 == "estimate":
-            return False
-        raise DataError(f"x0 must be None, 'estimate', 'zero' or an array, got {x0!r}")
-    return isinstance(x0, numbers.Number) and not isinstance(x0, bool) and x0 == 0
 
 
 def prediction_errors(model, data, steps=1, x0=None) -> np.ndarray:

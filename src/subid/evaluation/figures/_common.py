@@ -279,11 +279,14 @@ def percent_fit(data, y_hat) -> np.ndarray:
     return fits
 
 
-def predicted_output(model, data, steps):
-    """``(y_hat, fit %)`` of the ``steps``-ahead prediction; NaN where it diverges."""
-    from subid.model.prediction import predict
+def predicted_output(model, data, steps, x0="estimate"):
+    """``(y_hat, fit %)`` of the ``steps``-ahead prediction from ``x0`` (as in
+    :func:`subid.predict`); NaN where it diverges. A malformed ``x0`` raises."""
+    from subid.model.prediction import check_model_data, check_x0, predict
+    check_model_data(model, data)
+    x0 = check_x0(x0, model.order, data.n_experiments)
     try:
-        y_hat = predict(model, data, steps)
+        y_hat = predict(model, data, steps, x0)
     except DataError:
         y_hat = np.full(data.y.shape, np.nan)
     return y_hat, percent_fit(data, y_hat)

@@ -43,7 +43,8 @@ def residual_correlations(model, data, *, max_lag: int = 25, confidence: float =
         Largest lag (in samples).
     confidence : float
         Two-sided level of the bands (0.99: 99 %).
-    x0 : 'estimate', 'zero' or array
+    x0 : 'estimate', None, 'zero', 0 or array
+        Initial state, as in :func:`subid.fit_percent`.
 
     Returns
     -------
@@ -69,13 +70,15 @@ def residual_correlations(model, data, *, max_lag: int = 25, confidence: float =
     n = data.n_samples
     if max_lag >= n:
         raise DataError(f"max_lag {max_lag} must be smaller than the {n} samples of the record")
-    if getattr(model, "K", None) is not None and model.dt > 0:
+    from subid.model.prediction import check_model_data, check_x0
+    check_model_data(model, data)
+    x0 = check_x0(x0, model.order, data.n_experiments)
+    if model.K is not None and model.dt > 0:
         # MATLAB's resid: one-step prediction errors of the innovation form
         from subid.evaluation.residuals import residuals as _prediction_residuals
-        mode = None if isinstance(x0, str) and x0 == "estimate" else x0
         try:
             return _prediction_residuals(model, data, max_lag=max_lag, confidence=confidence,
-                                         x0=mode)
+                                         x0=x0)
         except DataError as exc:
             raise DataError(f"the one-step prediction diverges: {exc}") from None
     y_hat, _ = simulated_output(model, data, x0=x0)
@@ -115,7 +118,8 @@ def residuals(model, data, *, max_lag: int = 25, confidence: float = 0.99, x0="e
         Usually the validation part of the record.
     max_lag : int
     confidence : float
-    x0 : 'estimate', 'zero' or array
+    x0 : 'estimate', None, 'zero', 0 or array
+        Initial state, as in :func:`subid.fit_percent`.
     title : str, optional
 
     Returns

@@ -40,9 +40,9 @@ def compare(data, models, *, labels=None, x0="estimate", title=None, clip=True,
         The record to simulate on (usually the validation part).
     models : StateSpace, list or dict label -> StateSpace
     labels : list of str, optional
-    x0 : 'estimate', 'zero' or array
-        Initial state, as in :func:`subid.fit_percent` (default: least
-        squares fit to the data).
+    x0 : 'estimate', None, 'zero', 0 or array
+        Initial state of the simulations and predictions, as in
+        :func:`subid.fit_percent` (default: least squares fit to the data).
     title : str, optional
     clip : bool
         Keep the vertical range near the measured signal, so a diverging
@@ -67,7 +67,7 @@ def compare(data, models, *, labels=None, x0="estimate", title=None, clip=True,
     fits = {label: (given[label], percent_fit(data, given[label]))
             if label in given and np.shape(given[label]) == data.y.shape else
             simulated_output(m, data, x0=x0) if steps == math.inf else
-            predicted_output(m, data, steps) for label, m in groups.items()}
+            predicted_output(m, data, steps, x0) for label, m in groups.items()}
     return compare_outputs(data, groups, fits, title=title, clip=clip)
 
 

@@ -218,7 +218,7 @@ def reflected(A, limit: float):
     floor = 10.0 * abs(limit)
     if np.linalg.cond(V) > 1e8:
         return A - (lam.real.max() + floor) * np.eye(len(lam))
-    new = lam.copy()
+    new = lam.astype(complex)       # eig returns real eigenvalues when all are real
     new[bad] = -np.maximum(np.abs(lam.real[bad]), floor) + 1j * lam.imag[bad]
     return np.linalg.solve(V.T, (V * new).T).T.real      # V diag(new) V^{-1}
 

@@ -92,6 +92,7 @@ from subid._blas import serial_blas
 from subid._validation import check_bool, check_choice, check_int, checked_call
 from subid.data import column_std
 from subid.errors import (
+    ConversionWarning,
     DataError,
     ModelError,
     OptionError,
@@ -852,12 +853,12 @@ def ct_subspace(data, order=None, *, basis=None, poly_order: int = 3, estimate_x
         model = None
     if model is not None and model.info.get("nyquist_modes"):
         warnings.warn(f"{method}: the chosen N4SID model (order {n}): "
-                      f"{model.info['nyquist_modes']}", UserWarning, stacklevel=3)
+                      f"{model.info['nyquist_modes']}", ConversionWarning, stacklevel=3)
     if conversion_notes:
         warnings.warn(f"{method}: the cross-validation preferred discrete-time models that "
                       "have no continuous-time counterpart under the hold; the next "
                       f"candidate was used ({'; '.join(conversion_notes)})",
-                      UserWarning, stacklevel=3)
+                      ConversionWarning, stacklevel=3)
     feedthrough_selection = None
     if model is None:
         use_d = feedthrough is True

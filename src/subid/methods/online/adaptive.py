@@ -87,13 +87,11 @@ import warnings
 import numpy as np
 
 from subid._validation import (
-    as_chunk,
     check_bool,
     check_choice,
     check_int,
     check_seed,
     check_selector,
-    check_time_stamps,
     checked_call,
 )
 from subid.errors import (
@@ -112,9 +110,10 @@ from subid.methods.dt.ls_subspace import random_selector
 from subid.methods.online import _adaptive_filters as _filters
 from subid.methods.online import _adaptive_kernel as _k
 from subid.methods.online import _adaptive_refine as _refit_mod
+from subid.methods.online._adaptive_chunk import parse_chunk
 from subid.methods.online._adaptive_kernel import pack_tables, state_layout
 from subid.methods.online._adaptive_reference import reference
-from subid.methods.online.base import OnlineIdentifier, history_dict, one_sample, writeable
+from subid.methods.online.base import OnlineIdentifier, history_dict, one_sample
 from subid.model.statespace import StateSpace
 
 __all__ = ["AdaptiveIdentifier"]
@@ -688,36 +687,6 @@ class AdaptiveIdentifier(OnlineIdentifier):
         return history_dict(rows[:, 1], rows[:, 0], dt=0.0, **mats)
 
     # ---------------------------------------------------------------- update
-    def _parse(self, u, y, t):
-        """Validate one chunk; returns (U, Y, T or None) or raises."""
-        if y is None or type(u) is not np.ndarray:
-            u, y, t, data = self._unpack(u, y, t)
-            if data is not None and t is None and self._dt is None:
-                t = self._next_times(data.n_samples, data.dt)
-        U = writeable(as_chunk(u, self._nu, "input u"))     # one kernel specialisation
-        Y = writeable(as_chunk(y, self._ny, "output y"))
-        if U.shape[0] != Y.shape[0]:
-            raise DataError(f"input u has {U.shape[0]} samples but output y has {Y.shape[0]}; "
-                            "they must have the same length")
-        N = U.shape[0]
-        if t is None:
-            if self._dt is None:
-                raise DataError("no time stamps: pass t=... to update() or set dt=... in the "
-                                "AdaptiveIdentifier constructor")
-            return U, Y, None
-        T = np.asarray(t, dtype=np.float64) if not isinstance(t, numbers.Real) else \
-            np.array([float(t)])
-        T = writeable(check_time_stamps(T.reshape(-1) if T.ndim == 0 else T, N))
-        if self.n_samples and not T[0] > self.t:
-            raise DataError(f"time stamps t start at {T[0]!r}, not after the last sample "
-                            f"processed (t = {self.t!r}); time must increase from chunk to "
-                            "chunk")
-        return U, Y, T
-
-    def _next_times(self, N: int, dt: float) -> np.ndarray:
-        k = self.n_samples + np.arange(N)
-        return self._t_origin + dt * (k - self._k_origin)
-
     def _tables(self, steps: np.ndarray):
         """Discretisation tables for the distinct step lengths ``steps``."""
         Ai = self._Ai if self._method == "iv" else None
@@ -740,6 +709,9 @@ class AdaptiveIdentifier(OnlineIdentifier):
         t : array_like, shape (N,), optional
             Time stamps, strictly increasing and after the last sample
             processed. Default: the constructor's ``dt`` after the last one.
+            With the constructor's ``dt``, stamps must be that grid continuing
+            the stream (checked, as by :class:`~subid.RecursiveSubspace`); with
+            ``dt=None`` they may be non-uniform.
 
         Returns
         -------
@@ -749,12 +721,14 @@ class AdaptiveIdentifier(OnlineIdentifier):
         Raises
         ------
         subid.errors.DataError
-            NaN or inf values, wrong shapes, time stamps not increasing, no
-            time information. The identifier is left unchanged.
+            NaN or inf values, wrong shapes, time stamps not increasing or off
+            the ``dt`` grid, no time information. The identifier is left unchanged.
 
         Notes
         -----
-        The result does not depend on how a stream is cut into chunks.
+        The result does not depend on how a stream is cut into chunks. An
+        empty chunk (0 samples, with ``t`` None or empty, as a stream may
+        deliver) is accepted and changes nothing.
         """
         if t is None and self._uniform_tail is not None and type(u) is np.ndarray \
                 and type(y) is np.ndarray:
@@ -766,7 +740,10 @@ class AdaptiveIdentifier(OnlineIdentifier):
             if Y is not None:
                 self._update_one(U, Y)
                 return self
-        U, Y, T = self._parse(u, y, t)
+        chunk = parse_chunk(self, u, y, t)
+        if chunk is None:               # an empty chunk
+            return self
+        U, Y, T = chunk
         N = U.shape[0]
         st = self._st
         S0 = int(st["ist"][0])          # self.n_samples

@@ -42,7 +42,7 @@ import warnings
 
 import numpy as np
 
-from subid._validation import same_period
+from subid._validation import UNIFORM_RTOL, same_period
 from subid.errors import CheckpointError, DataError, NotConvergedWarning, SubidError
 
 __all__ = ["OnlineIdentifier", "Tracker", "history_dict", "markov_parameters", "with_names"]
@@ -85,6 +85,42 @@ def writeable(values: np.ndarray) -> np.ndarray:
     specialisations :mod:`subid.warmup` compiles serve every call instead of
     a second compilation of tens of seconds on the first read-only chunk."""
     return values if values.flags.writeable else values.copy()
+
+
+def check_stream_grid(T: np.ndarray, dt: float, last_t, who: str, remedy: str) -> None:
+    """Raise :class:`DataError` unless the time stamps ``T`` of a chunk (already
+    checked: finite, strictly increasing) are the grid of step ``dt`` of an
+    identifier created with that period, continuing its stream: uniform with
+    step ``dt`` (to :data:`~subid._validation.UNIFORM_RTOL`), and the first
+    ``dt`` after ``last_t``, the time of the last sample received (None before
+    the first: the first chunk may start anywhere). The one check of
+    :class:`~subid.RecursiveSubspace` and :class:`~subid.AdaptiveIdentifier`
+    (with ``dt``).
+
+    Parameters
+    ----------
+    T : ndarray, shape (N,)
+    dt : float
+        The identifier's sampling period.
+    last_t : float or None
+    who : str
+        The identifier and its period, for the messages
+        (``'RecursiveSubspace is discrete-time with dt=0.1'``).
+    remedy : str
+        What to do about stamps off the grid.
+    """
+    N = T.shape[0]
+    tol = UNIFORM_RTOL * dt
+    if N > 1 and np.abs(np.diff(T) - dt).max() > tol * max(1.0, N):
+        raise DataError(f"{who}: the time stamps t are not a uniform grid of step dt (steps "
+                        f"{float(np.diff(T).min())!r} to {float(np.diff(T).max())!r}); "
+                        f"{remedy}")
+    if N and last_t is not None:
+        expect = last_t + dt
+        if abs(T[0] - expect) > tol * max(1.0, abs(expect) / dt):
+            raise DataError(f"time stamps t start at {float(T[0])!r}, but the next sample of the "
+                            f"stream is due at t = {expect!r} ({who}); the stream must be "
+                            f"gap-free and uniformly sampled: {remedy}")
 
 
 def history_dict(sample, t, A, B, C, D, dt: float) -> dict:

@@ -52,7 +52,6 @@ import numpy as np
 
 from subid._validation import (
     MAX_DIMENSION,
-    UNIFORM_RTOL,
     as_chunk,
     check_bool,
     check_choice,
@@ -93,7 +92,12 @@ from subid.methods.dt import noise_model
 from subid.methods.dt.ls_subspace import check_options, gamma_from_factor, random_selector
 from subid.methods.online._lagged import LaggedStatistic, end_sensitivity
 from subid.methods.online._window import SampleWindow, window_size
-from subid.methods.online.base import OnlineIdentifier, history_dict, one_sample
+from subid.methods.online.base import (
+    OnlineIdentifier,
+    check_stream_grid,
+    history_dict,
+    one_sample,
+)
 from subid.model.statespace import StateSpace
 from subid.statistic._hankel import HankelFactor, hankel_chunk
 
@@ -377,18 +381,9 @@ class RecursiveSubspace(OnlineIdentifier):
         dt that continues the stream. Returns the time of its first sample."""
         T = np.asarray(t, dtype=np.float64).reshape(-1)
         T = check_time_stamps(T, N)
-        tol = UNIFORM_RTOL * self._dt
-        if N > 1 and np.abs(np.diff(T) - self._dt).max() > tol * max(1.0, N):
-            raise DataError(f"RecursiveSubspace is discrete-time with dt={self._dt!r}: the time "
-                            f"stamps t are not a uniform grid of step dt (steps "
-                            f"{float(np.diff(T).min())!r} to {float(np.diff(T).max())!r}); "
-                            "resample the data or create the identifier with their dt")
-        if self._n_samples:
-            expect = self.t + self._dt
-            if abs(T[0] - expect) > tol * max(1.0, abs(expect) / self._dt):
-                raise DataError(f"time stamps t start at {T[0]!r}, but the next sample of the "
-                                f"stream is due at t = {expect!r} (dt={self._dt!r}); "
-                                "RecursiveSubspace needs gap-free, uniformly sampled data")
+        check_stream_grid(T, self._dt, self.t, f"RecursiveSubspace is discrete-time with "
+                          f"dt={self._dt!r}", "resample the data or create the identifier "
+                          "with their dt")
         return float(T[0])
 
     def update(self, u, y=None, t=None) -> "RecursiveSubspace":
@@ -420,7 +415,9 @@ class RecursiveSubspace(OnlineIdentifier):
         Notes
         -----
         The result does not depend on how a stream is cut into chunks (to
-        rounding).
+        rounding). An empty chunk (0 samples, with ``t`` None or empty, as a
+        stream may deliver) is accepted and changes nothing, as in
+        :meth:`subid.AdaptiveIdentifier.update`.
         """
         U = Y = None
         if t is None and type(u) is np.ndarray and type(y) is np.ndarray:
@@ -436,6 +433,10 @@ class RecursiveSubspace(OnlineIdentifier):
             y = as_chunk(y, self.n_outputs, "output y", allow_empty=True, copy=True)
         if u.shape[0] != y.shape[0]:
             raise DataError(f"input u has {u.shape[0]} samples but output y has {y.shape[0]}")
+        if u.shape[0] == 0:           # an empty chunk: nothing to do (its t must be empty)
+            if t is not None:
+                check_time_stamps(np.reshape(t, -1) if np.ndim(t) else t, 0)
+            return self
         t0 = None if t is None else self._times(t, u.shape[0])
         if t0 is not None:
             self._t_origin, self._k_origin = t0, self._n_samples
