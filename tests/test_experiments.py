@@ -510,5 +510,5 @@ def test_simulate_and_simulation_bounds_restart_at_each_experiment():
     first = subid.simulation_bounds(model, d1, x0=x0[0])
     np.testing.assert_allclose(bounds.std[:400], first.std, atol=1e-14)
     assert bounds.x[400] == 0.0 and bounds.x.shape == (650,)
-    with pytest.raises(subid.errors.DataError, match="one row per experiment"):
+    with pytest.raises(subid.errors.DataError, match="one initial state per experiment"):
         subid.simulation_bounds(model, merged, x0=x0[0])

@@ -244,8 +244,6 @@ class Bounds:
     response: np.ndarray | None = None
 
 
-@serial_blas
-@checked_call
 def _continuous_origin(model) -> bool:
     """Whether ``model`` is, or was sampled from, a continuous-time estimate (for which
     no parameter covariance is computed)."""
@@ -275,6 +273,8 @@ def _continuous_message(model) -> str:
             "per channel), as pem and the discrete-time methods need one")
 
 
+@serial_blas
+@checked_call
 def parameter_covariance(model) -> ParameterCovariance:
     """The parameter covariance a model carries (MATLAB ``getcov``).
 

@@ -177,7 +177,7 @@ def _file_period(arrays: dict, shown, ext, channels) -> tuple[str, float] | None
             if raw.size == 1 and float(raw.reshape(-1)[0].real) <= 0:
                 continue                    # MATLAB's unspecified (-1) or continuous (0)
         found[name] = _scalar(arrays[name], name, shown, ext)
-    if len(found) == 2 and not np.isclose(found["dt"], found["Ts"], rtol=1e-9, atol=0.0):
+    if len(found) == 2 and not same_period(found["dt"], found["Ts"]):
         raise FileReadError(f"{shown}: the file holds both 'dt' = {found['dt']:g} and MATLAB's "
                             f"'Ts' = {found['Ts']:g}, which differ; remove one of them, or "
                             "pass dt= (on the command line --dt) to choose", path=shown)
