@@ -325,3 +325,17 @@ def test_identify_a_mat_file_with_ts_uses_it(tmp_path, capsys):
     code, out, err = run(capsys, "identify", tmp_path / "both.mat", "--method", "moesp",
                          "--out", tmp_path / "o2")
     assert code == 2 and len(err.strip().splitlines()) == 1 and "'Ts'" in err
+
+
+def test_a_pole_on_the_boundary_to_rounding_is_called_marginal():
+    """Two files detrended each on its own: the per-file offsets left over made the
+    default model absorb them with a pole at 1 - 2e-9, which the summary printed as
+    'poles 1, ...' beside 'stable yes'. The stable line now says it is marginal."""
+    from subid.cli._shared import _fmt_stable
+    assert _fmt_stable({"stable": True, "poles": [1 - 1.9e-9, 0.5]}, False).startswith(
+        "yes (marginally: a pole at |z| = 1 - 1.9e-09")
+    assert _fmt_stable({"stable": True, "poles": [0.999, 0.5]}, False) == "yes"
+    assert _fmt_stable({"stable": False, "poles": [1.01]}, False) == "NO"
+    assert _fmt_stable({"stable": True, "poles": [-1e-12, -3.0]}, True).startswith(
+        "yes (marginally")
+    assert _fmt_stable({"stable": True, "poles": [-0.1 + 2j, -0.1 - 2j]}, True) == "yes"

@@ -522,6 +522,33 @@ def _fmt_fit(values) -> str:
     return " / ".join("n/a" if not np.isfinite(v) else f"{v:.2f}" for v in values)
 
 
+#: A pole this close to the stability boundary (discrete time: |z| above 1 minus it;
+#: continuous time: a real part above minus it times the largest |s|) is marginal: the
+#: summary says so next to "stable yes", whose poles print as 1 (or 0) to 4 digits.
+MARGINAL = 1e-6
+
+
+def _fmt_stable(result, continuous: bool) -> str:
+    """The summary's ``stable`` value: ``yes``, ``NO``, or ``yes (marginally: ...)`` when
+    a pole lies within :data:`MARGINAL` of the boundary (an integrator to rounding: a
+    per-experiment offset the states absorb, e.g.), with its distance."""
+    if not result["stable"]:
+        return "NO"
+    poles = np.asarray(result["poles"], dtype=complex)
+    if poles.size == 0:
+        return "yes"
+    if continuous:
+        margin = float(-poles.real.max())
+        if margin > MARGINAL * max(float(np.abs(poles).max()), 1e-300):
+            return "yes"
+        return (f"yes (marginally: a pole with real part {-margin:.2g}, an integrator to "
+                "rounding)")
+    margin = 1.0 - float(np.abs(poles).max())
+    if margin > MARGINAL:
+        return "yes"
+    return f"yes (marginally: a pole at |z| = 1 - {margin:.2g}, an integrator to rounding)"
+
+
 def _fmt_poles(poles, limit: int = 8) -> str:
     parts = []
     seen = 0

@@ -26,6 +26,7 @@ from subid.cli._shared import (
     _detrend,
     _fmt_fit,
     _fmt_poles,
+    _fmt_stable,
     _hint_method,
     _load_experiments,
     _method_run_options,
@@ -334,7 +335,7 @@ def _identify_frequency(data, dt, delimiter, order, horizon, validate, options, 
                                               f"({val.n_frequencies} frequencies)"
                                               if val is not None else "— (--validate 0)"),
                  f"poles       {_fmt_poles(result['poles'])}",
-                 f"stable      {'yes' if result['stable'] else 'NO'}"]
+                 f"stable      {_fmt_stable(result, frd.dt == 0)}"]
         if model.info.get("refined_by") == "pem":
             lines.append(f"refined     pem (frequency response, weights: "
                          f"{model.info['weighting']}): cost {model.info['start_cost']:.4g} "
@@ -510,7 +511,7 @@ def _print_summary(source, record, spec, model, result, est, val, seconds, files
     else:
         lines.append("            validation — (--validate 0)")
     lines += [f"poles       {_fmt_poles(result['poles'])}",
-              f"stable      {'yes' if result['stable'] else 'NO'}"
+              f"stable      {_fmt_stable(result, model.dt == 0)}"
               + (" (continuous time)" if model.dt == 0 else "")]
     if model.info.get("refined_by") == "pem":
         lines.append(f"refined     pem ({model.info['focus']} focus): cost "
