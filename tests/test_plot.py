@@ -277,3 +277,35 @@ def test_order_scores_chart():
     assert "chosen: n=%d" % models["n4sid gap"].order in labels
     with pytest.raises(subid.errors.DataError, match="order was"):
         plot.order_scores(subid.moesp(est, 2, horizon=10))
+
+
+def test_labels_must_name_every_model_once():
+    """A short or repeated label list dropped models from the figure, silently (zip
+    truncated, a dict overwrote); a single string labelled the model with its first
+    letter."""
+    data = systems.simulate_data(systems.seed001_system(), 800, seed=1, output_snr_db=20)
+    a, b, c = subid.n4sid(data, 3), subid.moesp(data, 3), subid.n4sid(data, 2)
+    with pytest.raises(ModelError, match="1 label.s. for 3 model"):
+        plot.bode([a, b, c], labels=["first"])
+    with pytest.raises(ModelError, match="repeat"):
+        plot.bode({"x": a, "y": b}, labels=["z", "z"])
+    def labels(fig):
+        return [ln.get_label() for ln in fig.axes[0].get_lines()
+                if not ln.get_label().startswith("_")]
+
+    assert labels(plot.bode(a, labels="only")) == ["only"]
+    assert labels(plot.bode([a, b], labels=["p", "q"])) == ["p", "q"]
+
+
+def test_bode_refuses_frequencies_all_above_nyquist_and_keeps_data_bands_readable():
+    """Frequencies all above pi/dt drew an empty figure (a log message and matplotlib's
+    legend warning); and the data's two-sigma band, floored at 1e-12 |G|, stretched the
+    magnitude axis of a noisy spa estimate to -260 dB: its floor is 60 dB below the point
+    now, as the models' bands."""
+    true = systems.seed001_system()
+    with pytest.raises(DataError, match="above the Nyquist frequency"):
+        plot.bode(true, w=[4.0, 5.0])
+    data = systems.simulate_data(true, 300, seed=1, output_snr_db=-5)
+    fig = plot.bode(subid.spa(data))
+    for ax in fig.axes[0::4] + fig.axes[1::4]:          # the magnitude panels
+        assert ax.get_ylim()[0] > -120, ax.get_ylim()

@@ -309,3 +309,18 @@ def test_figures_encoded_aside_give_the_same_report(dryer_models, monkeypatch):
     def unstamped(text):
         return re.sub(r"<p class=\"meta\">[^<]*</p>", "", text)
     assert unstamped(aside) == unstamped(in_turn)
+
+
+def test_report_with_a_validation_record_of_its_own_and_matlab_delays():
+    """A validation record of its own (both records from t = 0, MATLAB's ze/zv of two
+    experiments) failed with 'time stamps t are not increasing at row 600': the data
+    overview draws it after the estimation record now. The MATLAB code of a model with
+    input delays names them ('InputDelay'); it rebuilt a model without them."""
+    true = systems.seed001_system()
+    est = systems.simulate_data(true, 600, seed=1, output_snr_db=20)
+    val = systems.simulate_data(true, 400, seed=2, output_snr_db=20)
+    text = report.identification_report({"n4sid": subid.n4sid(est, 3)}, est, val)
+    assert "data" in parse(text).images
+    delayed = subid.n4sid(est, 3, input_delay=[2, 0])
+    text = report.identification_report({"n4sid": delayed}, est, val)
+    assert "&#x27;InputDelay&#x27;, [2 0]" in text or "'InputDelay', [2 0]" in text

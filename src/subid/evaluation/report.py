@@ -251,10 +251,11 @@ def _matlab_matrix(M) -> str:
 def _matlab_code(model, point=None, lines=None) -> str:
     names_in = ", ".join(f"'{n}'" for n in model.input_names)
     names_out = ", ".join(f"'{n}'" for n in model.output_names)
+    delay = _matlab_delay(model)
     code = (f"A = {_matlab_matrix(model.A)};\nB = {_matlab_matrix(model.B)};\n"
             f"C = {_matlab_matrix(model.C)};\nD = {_matlab_matrix(model.D)};\n"
             f"sys = ss(A, B, C, D, {model.dt!r}, 'InputName', {{{names_in}}}, "
-            f"'OutputName', {{{names_out}}});" + _matlab_noise(model))
+            f"'OutputName', {{{names_out}}}{delay});" + _matlab_noise(model, delay))
     if point is not None:
         u0, y0 = point
         code += ("\n% the model relates deviations from the operating point (the means removed "
@@ -266,7 +267,18 @@ def _matlab_code(model, point=None, lines=None) -> str:
     return code
 
 
-def _matlab_noise(model) -> str:
+def _matlab_delay(model) -> str:
+    """``, 'InputDelay', [...]`` for a model with input delays (``info['input_delay']``,
+    in samples: MATLAB's unit for a discrete-time model), else empty: without it the code
+    would rebuild a model without the delays."""
+    from subid.delay import input_delay_of
+    delays = input_delay_of(model)
+    if delays is None:
+        return ""
+    return ", 'InputDelay', [" + " ".join(str(int(d)) for d in delays) + "]"
+
+
+def _matlab_noise(model, delay: str = "") -> str:
     """The innovation form as MATLAB's idss (System Identification Toolbox)."""
     if model.K is None or model.is_continuous:
         return ""
@@ -276,7 +288,7 @@ def _matlab_noise(model) -> str:
         text += f"\nNoiseVariance = {_matlab_matrix(model.noise_cov)};"
         extra = ", 'NoiseVariance', NoiseVariance"
     return text + (f"\nmodel = idss(A, B, C, D, K, zeros({model.order}, 1), {model.dt!r}"
-                   f"{extra});")
+                   f"{extra}{delay});")
 
 
 def _pole_table(model, hz: bool) -> str:
@@ -653,12 +665,12 @@ def identification_report(models, estimation, validation=None, *, title="subid r
     announce("data")
     whole = data
     split = None
-    if whole is None and validation is not None:
-        whole = _concat(estimation, validation)
-    if whole is None:
-        whole = estimation
     if validation is not None:
         split = float(validation[:1].t[0])      # not the whole record's stamps
+    if whole is None and validation is not None:
+        whole, split = _concat(estimation, validation)
+    if whole is None:
+        whole = estimation
     body.append(_section("data", "Data", _plot_or_note(
         lambda: plot.data_overview(whole, split=split),
         "inputs (grey) and outputs (black); the validation part is shaded", "data overview")))
@@ -828,18 +840,24 @@ def _order_scored(model) -> bool:
 
 
 def _concat(a, b):
-    """The record ``a`` followed by ``b`` (halves of a split)."""
+    """The record ``a`` followed by ``b`` for the data overview, and the time at which
+    ``b`` starts there. Halves of a split keep their stamps; a validation record of its
+    own (MATLAB's ``ze``/``zv`` from two experiments: both from t = 0) is drawn after
+    the estimation record, its stamps shifted to follow it by one step (its own times
+    are in the other figures); records of several experiments are merged."""
     from subid.data import IOData, merge
     if a.n_experiments > 1 or b.n_experiments > 1:    # for the figures only
-        return merge([a, b])
+        return merge([a, b]), float(b[:1].t[0])
     u = np.vstack([a.u, b.u])
     y = np.vstack([a.y, b.y])
-    if a.dt is not None and b.dt is not None and np.isclose(a.dt, b.dt):
-        t = np.concatenate([a.t, b.t])
-        if np.all(np.diff(t) > 0):
-            return IOData(u, y, t=t, input_names=a.input_names, output_names=a.output_names)
-    t = np.concatenate([a.t, b.t])
-    return IOData(u, y, t=t, input_names=a.input_names, output_names=a.output_names)
+    tb = b.t
+    if tb[0] <= a.t[-1]:
+        step = a.dt if a.dt is not None else float(np.median(np.diff(a.t))) \
+            if a.n_samples > 1 else 1.0
+        tb = tb - tb[0] + a.t[-1] + step
+    t = np.concatenate([a.t, tb])
+    return (IOData(u, y, t=t, input_names=a.input_names, output_names=a.output_names),
+            float(tb[0]))
 
 
 def _cell_note(reason: str, hint: str, link: str) -> str:

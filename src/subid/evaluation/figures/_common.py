@@ -170,20 +170,33 @@ def _pyplot():
 
 
 def _model_groups(models, labels=None) -> dict:
-    """``{label: StateSpace}`` from one model, a list or a dict."""
+    """``{label: StateSpace}`` from one model, a list or a dict; ``labels``, when
+    given, one distinct label per model (a :class:`ModelError` otherwise: a label short
+    or repeated dropped models from the figure, silently)."""
     from subid.model.statespace import StateSpace
     if isinstance(models, StateSpace):
-        out = {labels[0] if labels else _default_label(models, 0): models}
+        items = [models]
     elif isinstance(models, dict):
-        out = dict(models)
-        if labels is not None:
-            out = dict(zip(labels, out.values()))
+        items = list(models.values())
     else:
         try:
             items = list(models)
         except TypeError:
             raise ModelError(f"expected a StateSpace, a list or a dict of them, got "
                              f"{type(models).__name__}") from None
+    if labels is not None:
+        labels = [str(v) for v in ([labels] if isinstance(labels, str) else labels)]
+        if len(labels) != len(items):
+            raise ModelError(f"{len(labels)} label(s) for {len(items)} model(s): give one "
+                             "label per model (or none)")
+        if len(set(labels)) != len(labels):
+            repeated = sorted({v for v in labels if labels.count(v) > 1})
+            raise ModelError(f"the labels repeat {repeated}: give every model its own label")
+    if isinstance(models, StateSpace):
+        out = {labels[0] if labels else _default_label(models, 0): models}
+    elif isinstance(models, dict):
+        out = dict(models) if labels is None else dict(zip(labels, items))
+    else:
         names = list(labels) if labels is not None else \
             [_default_label(m, k) for k, m in enumerate(items)]
         out = {}

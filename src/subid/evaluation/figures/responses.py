@@ -136,6 +136,13 @@ def bode(model_or_models=None, w=None, *, data=None, hz=False, labels=None, phas
         w = np.atleast_1d(np.asarray(w, dtype=float))
         if w.ndim != 1 or not np.isfinite(w).all() or (w <= 0).any():
             raise DataError("w must be a 1-D array of positive frequencies in rad/s")
+        nyquist = [math.pi / m.dt for m in groups.values() if m.dt > 0]
+        if data is None and len(nyquist) == len(groups) and \
+                w.min() > max(nyquist) * (1 + 1e-12):
+            raise DataError(f"w: every frequency (from {w.min():.4g} rad/s) is above the "
+                            f"Nyquist frequency of the models (at most {max(nyquist):.4g} "
+                            "rad/s, pi/dt), where a discrete-time response is not drawn; "
+                            "give frequencies below it")
     x_scale = 1 / (2 * math.pi) if hz else 1.0
     rows = 2 * ny if phase else ny
     colors = colors_for(groups.items())
@@ -266,7 +273,10 @@ def _bode_data(axes, data, x_scale, phase, reference=None):
             if data.std is not None:
                 absG, sd = np.abs(G[:, i, j]), 2 * data.std[keep][:, i, j]
                 with np.errstate(divide="ignore"):
-                    lo = 20 * np.log10(np.maximum(absG - sd, 1e-300 + 1e-12 * absG))
+                    # a band reaching zero is drawn to 60 dB below the point (as the
+                    # models' bands): a floor of 1e-12 |G| stretched the axis to -260 dB
+                    # on a noisy spa estimate and flattened the data
+                    lo = 20 * np.log10(np.maximum(absG - sd, 1e-300 + 1e-3 * absG))
                     hi = 20 * np.log10(np.maximum(absG + sd, 1e-300))
                 axes[r, j].fill_between(w, lo, hi, color="0.8", lw=0, zorder=0)
             if phase:
