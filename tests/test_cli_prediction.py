@@ -12,12 +12,7 @@ pytest.importorskip("click")
 
 import subid  # noqa: E402
 from subid.cli.commands import main  # noqa: E402
-
-
-def run(capsys, *args):
-    code = main([str(a) for a in args])
-    out = capsys.readouterr()
-    return code, out.out, out.err
+from test_cli import run  # noqa: E402 (the command line in-process)
 
 
 @pytest.fixture(scope="module")

@@ -14,14 +14,8 @@ import pytest
 pytest.importorskip("matplotlib")
 pytest.importorskip("click")
 
-from subid.cli.commands import main  # noqa: E402
 from subid.methods.describe import describe_order_selection, describe_structure  # noqa: E402
-
-
-def run(capsys, *args):
-    code = main([str(a) for a in args])
-    out = capsys.readouterr()
-    return code, out.out, out.err
+from test_cli import run  # noqa: E402 (the command line in-process)
 
 
 def _order_line(out: str) -> str:
