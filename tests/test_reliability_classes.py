@@ -307,3 +307,32 @@ def test_every_public_callable_refuses_an_unknown_option_with_an_option_error():
     data = subid.systems.simulate_data(subid.systems.seed001_system(), 300, seed=1)
     with pytest.raises(errors.OptionError, match="did you mean 'horizon'"):
         subid.moesp(data, 3, horizn=5)
+
+
+def test_every_error_class_survives_pickling_and_a_dask_cluster():
+    """Every subid.errors exception comes back from pickle, and from dask.distributed's
+    unpickler (tblib), as its own class with its message and attributes: the two that
+    are also OSErrors (FileWriteError, DataFileNotFoundError) came back from a cluster
+    as a bare Exception, which `except FileReadError` did not catch."""
+    import inspect
+    import pickle
+
+    from subid import errors
+    loaders = [pickle]
+    try:
+        from distributed.protocol import pickle as dask_pickle
+        loaders.append(dask_pickle)
+    except ImportError:          # the distributed extra is optional
+        pass
+    classes = [c for _, c in inspect.getmembers(errors, inspect.isclass)
+               if issubclass(c, errors.SubidError)]
+    assert errors.DataFileNotFoundError in classes and errors.FileWriteError in classes
+    for cls in classes:
+        try:
+            error = cls("no such file: x.csv", path="x.csv")
+        except TypeError:
+            error = cls("no such file: x.csv")
+        for loader in loaders:
+            back = loader.loads(loader.dumps(error))
+            assert type(back) is cls and str(back) == str(error)
+            assert back.__dict__ == error.__dict__

@@ -57,6 +57,21 @@ class SubidError(ValueError):
             args = (shorten(args[0]),) + args[1:]
         super().__init__(*args)
 
+    def __reduce__(self):
+        # rebuilt by calling the class (its attributes set after): the default reduction
+        # of an exception that is also an OSError (FileWriteError, DataFileNotFoundError)
+        # is rebuilt by dask.distributed's unpickler (tblib) with ValueError.__new__,
+        # which Python refuses for them, so a cluster's client got a bare Exception
+        return _rebuild, (type(self), self.args, dict(self.__dict__))
+
+
+def _rebuild(cls, args, state):
+    """A :class:`SubidError` of class ``cls`` from its ``args`` and attributes (its
+    reduction, :meth:`SubidError.__reduce__`)."""
+    error = cls(*args)
+    error.__dict__.update(state)
+    return error
+
 
 class DataError(SubidError):
     """Input/output data are unusable: NaN or inf values, mismatched lengths,
