@@ -129,14 +129,17 @@ def as_chunk(values, channels: int, name: str, *, allow_empty: bool = False,
     """
     if type(values) is np.ndarray and values.dtype == np.float64:   # fast path
         out = None
-        if values.ndim == 1 and values.shape[0] == channels and channels > 1 \
-                and all(map(math.isfinite, values.tolist())):
+        if values.ndim == 1 and values.shape[0] == channels and channels > 1:
+            entries = values.tolist()
             # one sample: testing a few Python floats is cheaper than two ufunc calls
-            out = np.ascontiguousarray(values.reshape(1, channels))
+            if all(map(math.isfinite, entries)) and \
+                    -HUGE_VALUE <= min(entries) and max(entries) <= HUGE_VALUE:
+                out = np.ascontiguousarray(values.reshape(1, channels))
         else:
             arr = values.reshape(-1, 1) if values.ndim == 1 and channels == 1 else values
             if arr.ndim == 2 and arr.shape[1] == channels and arr.shape[0] > 0 \
-                    and np.isfinite(arr).all():
+                    and np.isfinite(arr).all() and -HUGE_VALUE <= arr.min() \
+                    and arr.max() <= HUGE_VALUE:
                 out = np.ascontiguousarray(arr)
         if out is not None:
             return out.copy() if copy and np.shares_memory(out, values) else out
@@ -158,7 +161,28 @@ def as_chunk(values, channels: int, name: str, *, allow_empty: bool = False,
                         f" but the identifier has {channels}{hint}")
     if out.shape[0] == 0 and not allow_empty:
         raise DataError(f"{name} has no samples")
+    check_magnitude(out, name)
     return out
+
+
+#: Largest magnitude of a sample the identification accepts: its square must not
+#: overflow (the batch methods' check, :func:`subid.methods.dt.checks.check_data`, and
+#: the online identifiers' chunks, :func:`as_chunk`).
+HUGE_VALUE = 1e150
+
+
+def check_magnitude(values: np.ndarray, name: str) -> None:
+    """Raise :class:`DataError` when a sample of the finite (N, channels) array
+    ``values`` exceeds :data:`HUGE_VALUE` in magnitude, naming the channel and row: its
+    square overflows (a 1e200 in one sample, or ``DBL_MAX`` as a missing-value marker,
+    broke an online identifier's statistic for good, silently)."""
+    if not values.size or (-HUGE_VALUE <= values.min() and values.max() <= HUGE_VALUE):
+        return
+    row, column = np.unravel_index(int(np.argmax(np.abs(values))), values.shape)
+    raise DataError(f"{name} reaches {values[row, column]:.3g} at row {row}, channel "
+                    f"{column}: squares and products of such values overflow double "
+                    "precision; is it a missing-value marker? remove it, or express the "
+                    "channel in other units (divide it by a constant)")
 
 
 def check_unmasked(values: np.ma.MaskedArray, name: str) -> None:

@@ -749,7 +749,8 @@ def check_online_identifier(cls, *, checks=None) -> dict:
     ``bad_option_values``  a bad value of a shared option raises OptionError naming it
     ``model_before_data``  ``model`` raises :class:`~subid.errors.TooFewSamplesError`
                            before any data
-    ``rejected_chunk``     a chunk with a NaN, unequal lengths or the wrong channels raises
+    ``rejected_chunk``     a chunk with a NaN, a sample of 1e200 (its square overflows),
+                           unequal lengths or the wrong channels raises
                            DataError and leaves the state unchanged (the checkpoint file
                            is the same bytes)
     ``model``              after the record: finite, of the order and time base, its core
@@ -867,7 +868,10 @@ def check_online_identifier(cls, *, checks=None) -> dict:
             u, y, t = data.u[200:260], data.y[200:260], data.t[200:260]
             bad_u = u.copy()
             bad_u[17, 0] = np.nan
+            huge_y = y.copy()
+            huge_y[5, 0] = 1e200              # its square overflows (a missing-value marker)
             for what, args in (("a NaN input", (bad_u, y, t)),
+                               ("an output sample of 1e200", (u, huge_y, t)),
                                ("unequal lengths", (u, y[:-1], t)),
                                ("one input channel too many",
                                 (np.hstack([u, u[:, :1]]), y, t)),

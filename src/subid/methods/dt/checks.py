@@ -9,11 +9,9 @@ import warnings
 import numpy as np
 import scipy.special
 
+from subid._validation import HUGE_VALUE
 from subid.data import IOData, column_std, column_sums, not_a_record
 from subid.errors import DataError, NotExcitingError, OffsetWarning
-
-#: Largest magnitude of a channel the methods accept: its square must not overflow.
-HUGE_VALUE = 1e150
 
 
 def check_data(data, method: str) -> IOData:

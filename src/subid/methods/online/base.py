@@ -42,7 +42,7 @@ import warnings
 
 import numpy as np
 
-from subid._validation import UNIFORM_RTOL, same_period
+from subid._validation import HUGE_VALUE, UNIFORM_RTOL, same_period
 from subid.errors import CheckpointError, DataError, NotConvergedWarning, SubidError
 
 __all__ = ["OnlineIdentifier", "Tracker", "history_dict", "markov_parameters", "with_names"]
@@ -72,7 +72,8 @@ def one_sample(values, channels: int):
     if (dtype is _FLOAT64 or dtype == _FLOAT64) and values.shape == (channels,) \
             and flags.c_contiguous and flags.writeable:
         entries = values.tolist()
-        if math.isfinite(sum(entries)) or all(map(math.isfinite, entries)):
+        if (math.isfinite(sum(entries)) or all(map(math.isfinite, entries))) and \
+                -HUGE_VALUE <= min(entries) and max(entries) <= HUGE_VALUE:
             return values[None]
     return None
 
