@@ -322,3 +322,23 @@ def test_long_records_skip_the_system_matrix_choice():
         assert auto.info["system_matrices_selection"]["rule"] == "long record"
         np.testing.assert_array_equal(auto.A, shift.A)
         np.testing.assert_array_equal(auto.B, shift.B)
+
+
+def test_a_plant_diverging_from_rest_is_not_said_to_stay_bounded():
+    """The unstable-model warning said "the measured output does not grow" of a plant
+    diverging in one direction from rest (about its mean, which the late samples
+    dominate, the output grows 1.8x; about zero 19x). It no longer fires there, and
+    still fires for an unstable model of a stationary record (robot_arm, classical
+    N4SID at order 7, stability='none')."""
+    rng = np.random.default_rng(0)
+    true = subid.StateSpace(np.diag([1.01, 0.5]), [[0.5], [1.0]], [[1.0, 1.0]], [[0.0]], 1.0)
+    u = rng.normal(size=400)
+    y = true.simulate(u)
+    data = subid.IOData(u, y + 0.01 * np.std(y) * rng.normal(size=y.shape))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", errors.UnstableModelWarning)
+        model = subid.moesp(data, 2)
+    assert not model.is_stable()
+    est, _ = _split("robot_arm")
+    with pytest.warns(errors.UnstableModelWarning, match="does not grow"):
+        subid.n4sid(est, 7, stability="none", horizon=10, weighting="n4sid")
