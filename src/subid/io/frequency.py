@@ -1,7 +1,9 @@
 """Frequency-response files: :func:`read_frd` and :func:`write_frd`.
 
 Text (``.csv``, ``.tsv``, ``.txt``): one row per frequency, a header naming
-the columns. One frequency column, named ``w`` (also ``omega``, ``rad/s``:
+the columns; lines starting with ``#`` are comments, and one of them may give
+the sampling period, ``# dt = 0.01`` (0: continuous time; :func:`write_frd`
+writes it first). One frequency column, named ``w`` (also ``omega``, ``rad/s``:
 radians per time unit) or ``f``/``freq``/``frequency``/``hz`` (Hz, converted
 with ``w = 2 pi f``), and for each channel pair two columns
 ``<output>/<input>:<quantity>`` (for one input and one output the prefix may
@@ -36,7 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
-from subid._validation import check_dt, checked_call
+from subid._validation import UNIFORM_RTOL, check_dt, checked_call
 from subid.errors import DataError, FileReadError, OptionError
 from subid.frdata import FRData
 from subid.io._files import MAX_EXPANDED_BYTES, atomic_write, read_regular
@@ -105,6 +107,54 @@ def _parse_pair(pair: str, shown: str):
     return out.strip(), inp.strip()
 
 
+_DT_RE = re.compile(r"^#\s*(?:dt|ts)\s*[=:]\s*(?P<value>.*?)\s*$", re.IGNORECASE)
+
+
+def _comment_dt(shown: str, lines) -> tuple[float, int] | None:
+    """``(dt, line)`` of a ``# dt = <period>`` comment line of a text file, or None."""
+    found = None
+    for k, line in enumerate(lines):
+        match = _DT_RE.match(line.strip())
+        if match is None:
+            continue
+        text = match.group("value")
+        try:
+            value = float(text)
+        except ValueError:
+            value = math.nan
+        if not math.isfinite(value) or value < 0:
+            raise FileReadError(f"{shown}: line {k + 1}: {text!r} is not a sampling period; "
+                                "write '# dt = <period>' (0 = continuous time)",
+                                path=shown, line=k + 1)
+        if found is not None and not _same_dt(found[0], value):
+            raise FileReadError(f"{shown}: line {k + 1} says dt = {value:g} but line "
+                                f"{found[1]} says dt = {found[0]:g}; keep one '# dt =' line",
+                                path=shown, line=k + 1)
+        found = found or (value, k + 1)
+    return found
+
+
+def _same_dt(a: float, b: float) -> bool:
+    return a == b or math.isclose(a, b, rel_tol=UNIFORM_RTOL)
+
+
+def _agreed_dt(shown: str, given, stated, where: str = "") -> float:
+    """The sampling period: ``given`` (read_frd's ``dt``) or the file's ``stated`` one.
+
+    ``stated`` is ``(dt, line)`` (line None for a variable of a .mat/.npz file) or
+    None; when both are there they must agree.
+    """
+    if stated is None:
+        return 0.0 if given is None else given
+    value, line = stated
+    if given is not None and not _same_dt(given, value):
+        said = f"line {line}" if line is not None else where
+        raise FileReadError(f"{shown}: dt={given:g} was passed but the file's {said} says "
+                            f"dt = {value:g}{' (continuous time)' if value == 0 else ''}; "
+                            "drop dt= (or correct the file)", path=shown, line=line)
+    return value
+
+
 def _read_text(shown: str, raw: bytes, ext: str, delimiter, dt) -> FRData:
     try:
         text = raw.decode("utf-8-sig")
@@ -113,6 +163,7 @@ def _read_text(shown: str, raw: bytes, ext: str, delimiter, dt) -> FRData:
     lines = [ln for ln in text.splitlines()]
     body = [(k + 1, ln) for k, ln in enumerate(lines) if ln.strip() and not ln.lstrip()
             .startswith("#")]
+    dt = _agreed_dt(shown, dt, _comment_dt(shown, lines))
     if len(body) < 2:
         raise FileReadError(f"{shown}: a frequency-response file needs a header line and at "
                             "least one row", path=shown)
@@ -223,7 +274,7 @@ def _read_arrays(shown: str, raw: bytes, ext: str, dt, max_bytes) -> FRData:
     w = get("w")
     if G is not None and w is not None:
         G = np.asarray(G)
-        file_dt = get("dt")
+        file_dt, dt_name = get("dt"), "dt"
     else:
         G, w = get("ResponseData"), get("Frequency")
         if G is None or w is None:
@@ -238,16 +289,34 @@ def _read_arrays(shown: str, raw: bytes, ext: str, dt, max_bytes) -> FRData:
         unit = get("FrequencyUnit")
         if unit is not None and "hz" in str(unit.reshape(-1)[0] if unit.size else "").lower():
             w = 2 * math.pi * np.asarray(w, dtype=float)
-        file_dt = get("Ts")
+        file_dt, dt_name = get("Ts"), "Ts"
     w = np.asarray(w).reshape(-1)
-    if dt is None:
-        dt = 0.0 if file_dt is None else float(np.asarray(file_dt).reshape(-1)[0])
-        dt = max(dt, 0.0)           # MATLAB's Ts = -1 (unspecified) is not a period
+    dt = _array_dt(shown, dt, file_dt, dt_name)
     std = get("std")
     coherence = get("coherence")
     return FRData(w, G, dt, std=std, coherence=coherence,
                   input_names=_strings(get("input_names", "InputName")),
                   output_names=_strings(get("output_names", "OutputName")))
+
+
+def _array_dt(shown: str, given, file_dt, name: str) -> float:
+    """The sampling period of a .mat/.npz file: its ``dt``/``Ts`` variable and ``given``."""
+    if file_dt is None:
+        return _agreed_dt(shown, given, None)
+    try:
+        value = float(np.asarray(file_dt, dtype=float).reshape(-1)[0])
+    except (TypeError, ValueError, IndexError):
+        raise FileReadError(f"{shown}: variable {name} is not a number", path=shown) from None
+    if value == -1 and name == "Ts":
+        if given is None:
+            raise FileReadError(f"{shown}: Ts = -1 (MATLAB's discrete time with an unspecified "
+                                "sample time); pass the sampling period as dt= (--dt)",
+                                path=shown)
+        return given
+    if not math.isfinite(value) or value < 0:
+        raise FileReadError(f"{shown}: variable {name} = {value:g} is not a sampling period "
+                            "(0 = continuous time)", path=shown)
+    return _agreed_dt(shown, given, (value, None), where=f"variable {name}")
 
 
 def _strings(value):
@@ -272,7 +341,10 @@ def read_frd(path, *, dt=None, delimiter=None, max_bytes=None) -> FRData:
         or ``.npz``.
     dt : float, optional
         Sampling period of a discrete-time response (0: continuous time).
-        Default: the file's ``Ts``/``dt`` variable, else 0.
+        Default: the file's (a text file's ``# dt = <period>`` comment line,
+        a ``.mat``/``.npz`` file's ``Ts``/``dt`` variable), else 0. A value
+        that contradicts the file's is an error; MATLAB's ``Ts = -1``
+        (discrete time, sample time unspecified) needs it.
     delimiter : str, optional
         Field delimiter of a text file (detected among ``,`` ``;`` TAB).
     max_bytes : int, optional
@@ -288,7 +360,8 @@ def read_frd(path, *, dt=None, delimiter=None, max_bytes=None) -> FRData:
         No such file.
     FileReadError
         Unsupported extension, no frequency column, an unknown column, a
-        missing channel pair, a cell that is not a number.
+        missing channel pair, a cell that is not a number, a ``dt`` that
+        contradicts the file's, ``Ts = -1`` without ``dt``.
     DataError
         The values are not valid frequency-response data (see :class:`subid.FRData`).
     """
@@ -304,7 +377,7 @@ def read_frd(path, *, dt=None, delimiter=None, max_bytes=None) -> FRData:
     if not raw:
         raise FileReadError(f"file {shown} is empty", path=shown)
     if ext in _TEXT:
-        return _read_text(shown, raw, ext, delimiter, 0.0 if dt is None else dt)
+        return _read_text(shown, raw, ext, delimiter, dt)
     return _read_arrays(shown, raw, ext, dt, max_bytes)
 
 
@@ -316,7 +389,7 @@ def write_frd(frdata, path, *, polar: bool = False) -> None:
     ----------
     frdata : FRData
     path : str or os.PathLike
-        ``.csv``/``.tsv``/``.txt`` (columns ``w``, ``<output>/<input>:re``,
+        ``.csv``/``.tsv``/``.txt`` (a first line ``# dt = <dt>``, columns ``w``, ``<output>/<input>:re``,
         ``:im``, or ``:db`` and ``:phase`` in degrees with ``polar=True``,
         then ``:std`` and ``<output>:coherence`` when present; 17 significant
         digits), or ``.mat``/``.npz`` (``w``, ``response``, ``dt`` and
@@ -373,6 +446,7 @@ def _write_text(d: FRData, path: str, delim: str, polar: bool) -> None:
         raise DataError("write_frd: a zero response has no finite level in dB; write "
                         "real and imaginary parts (polar=False)")
     with atomic_write(path, "w", encoding="utf-8", what="frequency-response file") as fh:
+        fh.write(f"# dt = {float(d.dt)!r}\n")
         fh.write(delim.join(header) + "\n")
         for row in table:
             fh.write(delim.join(repr(float(v)) for v in row) + "\n")
