@@ -80,3 +80,24 @@ def test_mat_ts_minus_one_needs_dt(tmp_path):
                                 Ts=-2.0))
     with pytest.raises(FileReadError, match="Ts = -2 is not a sampling period"):
         subid.read_frd(path)
+
+
+@pytest.mark.parametrize("name", ["frd.csv", "frd.tsv", "frd.mat", "frd.npz"])
+@pytest.mark.parametrize("per_pair", [False, True])
+def test_round_trip_keeps_weights(tmp_path, name, per_pair):
+    G = np.stack([1 / (1j * W + 1), 2 / (1j * W + 3)], axis=1)[:, :, None]     # 2 x 1
+    weights = np.linspace(1, 2, 20 * 2).reshape(20, 2, 1) if per_pair else np.linspace(1, 2, 20)
+    data = subid.FRData(W, G, weights=weights)
+    subid.write_frd(data, tmp_path / name)
+    back = subid.read_frd(tmp_path / name)
+    assert back.weights.shape == weights.shape and np.array_equal(back.weights, weights)
+
+
+def test_partial_or_mixed_weight_columns_refused(tmp_path):
+    path = tmp_path / "w.csv"
+    path.write_text("w,a/u:re,a/u:im,a/u:weight,b/u:re,b/u:im\n1,1,0,2,1,0\n")
+    with pytest.raises(FileReadError, match="':weight' columns for a/u but not for b/u"):
+        subid.read_frd(path)
+    path.write_text("w,a/u:re,a/u:im,a/u:weight,weight\n1,1,0,2,3\n")
+    with pytest.raises(FileReadError, match="keep one kind"):
+        subid.read_frd(path)

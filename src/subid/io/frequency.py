@@ -16,13 +16,17 @@ be left out), with the quantities
 
 A unit in brackets is understood: ``Magnitude [dB]``, ``Phase (deg)``,
 ``Frequency [Hz]``. Optional ``<output>/<input>:std`` columns are the
-standard deviations and ``<output>:coherence`` the squared coherences.
+standard deviations and ``<output>:coherence`` the squared coherences; the
+weights of the fit (:class:`subid.FRData`'s ``weights``) are one ``weight``
+column (one per frequency) or ``<output>/<input>:weight`` columns (one per
+frequency and pair). Each of these is given for every pair (output) or none.
 
 MATLAB ``.mat`` and NumPy ``.npz``: the variables of MATLAB's ``idfrd``,
 ``ResponseData`` (ny x nu x n_freq) and ``Frequency`` (rad per time unit,
 unless ``FrequencyUnit`` says ``Hz``) with ``Ts`` (0 = continuous time), or
-subid's own ``w``, ``response`` (n_freq x ny x nu) and ``dt``.
-:func:`write_frd` writes both layouts (and ``std``/``coherence``) into a
+subid's own ``w``, ``response`` (n_freq x ny x nu) and ``dt``, with
+optional ``std``, ``coherence`` and ``weights``.
+:func:`write_frd` writes both layouts (and ``std``/``coherence``/``weights``) into a
 ``.mat``/``.npz`` file, and real/imaginary columns (or ``db``/``phase`` with
 ``polar=True``) into a text file.
 """
@@ -56,7 +60,7 @@ _QUANTITIES = {
     "mag": "mag", "abs": "mag", "magnitude": "mag", "gain": "mag",
     "db": "db", "mag_db": "db", "magnitude_db": "db", "gain_db": "db",
     "phase": "deg", "phase_deg": "deg", "phase_rad": "rad",
-    "std": "std", "coherence": "coh",
+    "std": "std", "coherence": "coh", "weight": "weight", "weights": "weight",
 }
 _UNIT_RE = re.compile(r"^(?P<name>.*?)\s*[\[(](?P<unit>[^\])]*)[\])]\s*$")
 
@@ -208,9 +212,13 @@ def _read_text(shown: str, raw: bytes, ext: str, delimiter, dt) -> FRData:
 def _assemble(shown, w, values, columns, dt) -> FRData:
     pairs: dict = {}
     coherence: dict = {}
+    weight_column = None
     for (pair, kind), k in columns.items():
         if kind == "coh":
             coherence[pair] = k
+            continue
+        if kind == "weight" and pair is None:
+            weight_column = k                          # one weight per frequency
             continue
         out, inp = ("y1", "u1") if pair is None else _parse_pair(pair, shown)
         pairs.setdefault((out, inp), {})[kind] = k
@@ -220,9 +228,10 @@ def _assemble(shown, w, values, columns, dt) -> FRData:
     if missing:
         raise FileReadError(f"{shown}: no response columns for {', '.join(missing)}; every "
                             "output/input pair needs its own", path=shown, line=1)
+    _all_pairs_or_none(shown, pairs, "weight")
     n = values.shape[0]
     G = np.empty((n, len(outputs), len(inputs)), dtype=complex)
-    std = None
+    std = weights = None
     for (o, i), kinds in pairs.items():
         a, b = outputs.index(o), inputs.index(i)
         if "re" in kinds and "im" in kinds:
@@ -240,6 +249,16 @@ def _assemble(shown, w, values, columns, dt) -> FRData:
             if std is None:
                 std = np.zeros(G.shape)
             std[:, a, b] = values[:, kinds["std"]]
+        if "weight" in kinds:
+            if weights is None:
+                weights = np.empty(G.shape)
+            weights[:, a, b] = values[:, kinds["weight"]]
+    if weight_column is not None:
+        if weights is not None:
+            raise FileReadError(f"{shown}: a 'weight' column (one weight per frequency) and "
+                                "'<output>/<input>:weight' columns; keep one kind",
+                                path=shown, line=1)
+        weights = values[:, weight_column]
     coh = None
     if coherence:
         coh = np.ones((n, len(outputs)))
@@ -248,7 +267,18 @@ def _assemble(shown, w, values, columns, dt) -> FRData:
             if name not in outputs:
                 raise FileReadError(f"{shown}: coherence of unknown output {name!r}", path=shown)
             coh[:, outputs.index(name)] = values[:, k]
-    return FRData(w, G, dt, std=std, coherence=coh, input_names=inputs, output_names=outputs)
+    return FRData(w, G, dt, weights=weights, std=std, coherence=coh, input_names=inputs,
+                  output_names=outputs)
+
+
+def _all_pairs_or_none(shown, pairs, kind):
+    """Refuse a ``:<kind>`` column given for some output/input pairs only."""
+    have = [f"{o}/{i}" for (o, i), kinds in pairs.items() if kind in kinds]
+    if have and len(have) < len(pairs):
+        lack = [f"{o}/{i}" for (o, i), kinds in pairs.items() if kind not in kinds]
+        raise FileReadError(f"{shown}: ':{kind}' columns for {', '.join(have)[:200]} but not "
+                            f"for {', '.join(lack)[:200]}; give them for every output/input "
+                            "pair or for none", path=shown, line=1)
 
 
 def _read_arrays(shown: str, raw: bytes, ext: str, dt, max_bytes) -> FRData:
@@ -294,7 +324,10 @@ def _read_arrays(shown: str, raw: bytes, ext: str, dt, max_bytes) -> FRData:
     dt = _array_dt(shown, dt, file_dt, dt_name)
     std = get("std")
     coherence = get("coherence")
-    return FRData(w, G, dt, std=std, coherence=coherence,
+    weights = get("weights")
+    if weights is not None and weights.ndim == 2 and weights.shape[1] == 1:
+        weights = weights.reshape(-1)               # a .mat file's column of per-frequency weights
+    return FRData(w, G, dt, weights=weights, std=std, coherence=coherence,
                   input_names=_strings(get("input_names", "InputName")),
                   output_names=_strings(get("output_names", "OutputName")))
 
@@ -391,10 +424,12 @@ def write_frd(frdata, path, *, polar: bool = False) -> None:
     path : str or os.PathLike
         ``.csv``/``.tsv``/``.txt`` (a first line ``# dt = <dt>``, columns ``w``, ``<output>/<input>:re``,
         ``:im``, or ``:db`` and ``:phase`` in degrees with ``polar=True``,
-        then ``:std`` and ``<output>:coherence`` when present; 17 significant
+        then ``:std``, ``:weight`` (or one ``weight`` column for weights per
+        frequency) and ``<output>:coherence`` when present; 17 significant
         digits), or ``.mat``/``.npz`` (``w``, ``response``, ``dt`` and
         MATLAB's ``Frequency``, ``ResponseData``, ``Ts``, names, ``std``,
-        ``coherence``).
+        ``coherence``, ``weights``). Everything :class:`subid.FRData` holds
+        is written.
     polar : bool
         Text files: magnitude in dB and phase in degrees instead of real and
         imaginary parts (rounding then loses the last digits).
@@ -437,6 +472,12 @@ def _write_text(d: FRData, path: str, delim: str, polar: bool) -> None:
             if d.std is not None:
                 header.append(f"{out}/{inp}:std")
                 cols.append(d.std[:, i, j])
+            if d.weights is not None and d.weights.ndim == 3:
+                header.append(f"{out}/{inp}:weight")
+                cols.append(d.weights[:, i, j])
+    if d.weights is not None and d.weights.ndim == 1:
+        header.append("weight")
+        cols.append(d.weights)
     if d.coherence is not None:
         for i, out in enumerate(d.output_names):
             header.append(f"{out}:coherence")
@@ -462,6 +503,8 @@ def _write_arrays(d: FRData, path: str, ext: str) -> None:
                  "Ts": np.array(d.dt)}
     if d.std is not None:
         variables["std"] = d.std
+    if d.weights is not None:
+        variables["weights"] = d.weights
     if d.coherence is not None:
         variables["coherence"] = d.coherence
     if ext == ".mat":
