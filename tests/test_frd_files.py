@@ -101,3 +101,41 @@ def test_partial_or_mixed_weight_columns_refused(tmp_path):
     path.write_text("w,a/u:re,a/u:im,a/u:weight,weight\n1,1,0,2,3\n")
     with pytest.raises(FileReadError, match="keep one kind"):
         subid.read_frd(path)
+
+
+@pytest.mark.parametrize("unit, scale", [
+    ("kHz", 1 / (2 * np.pi * 1e3)), ("MHz", 1 / (2 * np.pi * 1e6)), ("GHz", 1 / (2 * np.pi * 1e9)),
+    ("Hz", 1 / (2 * np.pi)), ("cycles/s", 1 / (2 * np.pi)), ("cycles/TimeUnit", 1 / (2 * np.pi)),
+    ("rpm", 60 / (2 * np.pi)), ("cycles/min", 60 / (2 * np.pi)), ("rad/s", 1.0),
+    ("rad/TimeUnit", 1.0), ("rad/ms", 1e-3), ("rad/min", 60.0), ("rad/hr", 3600.0),
+    ("rad/day", 86400.0), ("rad/week", 604800.0), ("cycles/millisecond", 1e-3 / (2 * np.pi)),
+    ("mHz", 1 / (2 * np.pi * 1e-3)),
+])
+def test_mat_frequency_units(tmp_path, unit, scale):
+    import scipy.io
+    w = np.linspace(0.1, 3.0, 5)
+    path = tmp_path / "u.mat"
+    scipy.io.savemat(path, dict(ResponseData=(1 / (1j * w + 1)).reshape(1, 1, -1),
+                                Frequency=w * scale, FrequencyUnit=unit, Ts=0.0))
+    assert np.allclose(subid.read_frd(path).w, w, rtol=1e-12)
+
+
+def test_mat_frequency_unit_unknown_and_time_unit(tmp_path):
+    import scipy.io
+    w = np.linspace(0.1, 3.0, 5)
+    path = tmp_path / "u.mat"
+    base = dict(ResponseData=(1 / (1j * w + 1)).reshape(1, 1, -1), Ts=0.0)
+    for unit in ("rad/month", "cycles/year", "furlongs", "mhz"):
+        scipy.io.savemat(path, dict(base, Frequency=w, FrequencyUnit=unit))
+        with pytest.raises(FileReadError, match=f"unknown FrequencyUnit '{unit}'; known"):
+            subid.read_frd(path)
+    # TimeUnit: Ts and w are in milliseconds; Hz converts to rad per millisecond
+    scipy.io.savemat(path, dict(base, Frequency=w * 1e3 / (2 * np.pi), FrequencyUnit="Hz",
+                                TimeUnit="milliseconds"))
+    assert np.allclose(subid.read_frd(path).w, w, rtol=1e-12)
+    scipy.io.savemat(path, dict(base, Frequency=w, FrequencyUnit="rad/TimeUnit",
+                                TimeUnit="milliseconds"))
+    assert np.allclose(subid.read_frd(path).w, w, rtol=1e-12)
+    scipy.io.savemat(path, dict(base, Frequency=w, TimeUnit="fortnights"))
+    with pytest.raises(FileReadError, match="unknown TimeUnit 'fortnights'"):
+        subid.read_frd(path)

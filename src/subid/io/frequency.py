@@ -22,8 +22,13 @@ column (one per frequency) or ``<output>/<input>:weight`` columns (one per
 frequency and pair). Each of these is given for every pair (output) or none.
 
 MATLAB ``.mat`` and NumPy ``.npz``: the variables of MATLAB's ``idfrd``,
-``ResponseData`` (ny x nu x n_freq) and ``Frequency`` (rad per time unit,
-unless ``FrequencyUnit`` says ``Hz``) with ``Ts`` (0 = continuous time), or
+``ResponseData`` (ny x nu x n_freq) and ``Frequency`` in ``FrequencyUnit``
+(default ``rad/TimeUnit``; ``Hz``, ``kHz``, ``MHz``, ``GHz``, ``rpm``,
+``rad/s``, ``rad/ms``, ``rad/min``, ``cycles/hr``, ... are converted to rad per
+time unit; an unknown unit, and months or years, which have no fixed length,
+are an error) with ``Ts`` (0 = continuous time; -1, MATLAB's unspecified
+sample time, needs ``dt=``) and ``TimeUnit`` (default seconds: without it, the
+time unit of ``Ts``, and of the data, is taken to be the second), or
 subid's own ``w``, ``response`` (n_freq x ny x nu) and ``dt``, with
 optional ``std``, ``coherence`` and ``weights``.
 :func:`write_frd` writes both layouts (and ``std``/``coherence``/``weights``) into a
@@ -46,6 +51,7 @@ from subid._validation import UNIFORM_RTOL, check_dt, checked_call
 from subid.errors import DataError, FileReadError, OptionError
 from subid.frdata import FRData
 from subid.io._files import MAX_EXPANDED_BYTES, atomic_write, read_regular
+from subid.io._frequency_units import KNOWN_UNITS, frequency_factor, seconds_per
 from subid.io._npz import NpzError, load_npz
 from subid.io.mat import mat_variables
 
@@ -316,9 +322,7 @@ def _read_arrays(shown: str, raw: bytes, ext: str, dt, max_bytes) -> FRData:
             G = np.moveaxis(G, 2, 0)                    # ny x nu x n_freq -> n_freq x ny x nu
         elif G.ndim == 1 or 1 in G.shape:
             G = G.reshape(-1)
-        unit = get("FrequencyUnit")
-        if unit is not None and "hz" in str(unit.reshape(-1)[0] if unit.size else "").lower():
-            w = 2 * math.pi * np.asarray(w, dtype=float)
+        w = _matlab_frequencies(shown, w, get("FrequencyUnit"), get("TimeUnit"))
         file_dt, dt_name = get("Ts"), "Ts"
     w = np.asarray(w).reshape(-1)
     dt = _array_dt(shown, dt, file_dt, dt_name)
@@ -330,6 +334,35 @@ def _read_arrays(shown: str, raw: bytes, ext: str, dt, max_bytes) -> FRData:
     return FRData(w, G, dt, weights=weights, std=std, coherence=coherence,
                   input_names=_strings(get("input_names", "InputName")),
                   output_names=_strings(get("output_names", "OutputName")))
+
+
+def _text_of(value) -> str:
+    """A MATLAB char array (or string) read by scipy.io as a Python string."""
+    flat = np.asarray(value).reshape(-1)
+    return "".join(str(v) for v in flat).strip() if flat.dtype.kind in "US" else \
+        (str(np.asarray(flat[0]).reshape(-1)[0]).strip() if flat.size else "")
+
+
+def _matlab_frequencies(shown: str, w, unit, time_unit):
+    """MATLAB's ``Frequency`` in ``FrequencyUnit`` (and ``TimeUnit``) as rad per time unit."""
+    seconds = 1.0
+    if time_unit is not None and _text_of(time_unit):
+        seconds = seconds_per(_text_of(time_unit))
+        if seconds is None:
+            raise FileReadError(f"{shown}: unknown TimeUnit {_text_of(time_unit)!r}; use "
+                                "seconds, milliseconds, minutes, hours, ... (or convert the "
+                                "model in MATLAB with chgTimeUnit)", path=shown)
+    name = "rad/TimeUnit" if unit is None or not _text_of(unit) else _text_of(unit)
+    factor = frequency_factor(name, seconds)
+    if factor is None:
+        raise FileReadError(f"{shown}: unknown FrequencyUnit {name!r}; known: {KNOWN_UNITS} "
+                            "(or convert in MATLAB with chgFreqUnit(sys, 'rad/s'))",
+                            path=shown)
+    try:
+        w = np.asarray(w, dtype=float)
+    except (TypeError, ValueError):
+        raise FileReadError(f"{shown}: Frequency is not numeric", path=shown) from None
+    return w if factor == 1.0 else w * factor
 
 
 def _array_dt(shown: str, given, file_dt, name: str) -> float:
