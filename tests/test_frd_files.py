@@ -139,3 +139,30 @@ def test_mat_frequency_unit_unknown_and_time_unit(tmp_path):
     scipy.io.savemat(path, dict(base, Frequency=w, TimeUnit="fortnights"))
     with pytest.raises(FileReadError, match="unknown TimeUnit 'fortnights'"):
         subid.read_frd(path)
+
+
+@pytest.mark.parametrize("head, scale", [
+    ("w [Hz]", 2 * np.pi), ("omega (Hz)", 2 * np.pi), ("Frequency [rad/sec]", 1.0),
+    ("Frequency [kHz]", 2 * np.pi * 1e3), ("f [rad/s]", 1.0), ("freq [rpm]", 2 * np.pi / 60),
+    ("Frequency (cycles/min)", 2 * np.pi / 60), ("f_hz [Hz]", 2 * np.pi), ("w", 1.0),
+    ("f", 2 * np.pi), ("Frequency [MHz]", 2 * np.pi * 1e6), ("hz", 2 * np.pi),
+    ("rad/s", 1.0), ("w [rad/TimeUnit]", 1.0),
+])
+def test_csv_frequency_header_unit(tmp_path, head, scale):
+    path = tmp_path / "h.csv"
+    path.write_text(f"{head},mag,phase\n1,1,0\n10,0.5,-45\n")
+    assert np.allclose(subid.read_frd(path).w, [scale, 10 * scale], rtol=1e-12)
+
+
+def test_csv_frequency_header_unit_refused(tmp_path):
+    path = tmp_path / "h.csv"
+    path.write_text("Frequency [furlongs],mag,phase\n1,1,0\n")
+    with pytest.raises(FileReadError, match="frequency column 'Frequency \\[furlongs\\]' has "
+                                            "the unknown unit 'furlongs'; known"):
+        subid.read_frd(path)
+    path.write_text("f_hz [rad/s],mag,phase\n1,1,0\n")
+    with pytest.raises(FileReadError, match="its name says Hz but its unit says rad/s"):
+        subid.read_frd(path)
+    path.write_text("w_rad (kHz),mag,phase\n1,1,0\n")
+    with pytest.raises(FileReadError, match="name says rad per time unit but its unit says kHz"):
+        subid.read_frd(path)

@@ -5,7 +5,13 @@ the columns; lines starting with ``#`` are comments, and one of them may give
 the sampling period, ``# dt = 0.01`` (0: continuous time; :func:`write_frd`
 writes it first). One frequency column, named ``w`` (also ``omega``, ``rad/s``:
 radians per time unit) or ``f``/``freq``/``frequency``/``hz`` (Hz, converted
-with ``w = 2 pi f``), and for each channel pair two columns
+with ``w = 2 pi f``), or any of these with a unit in brackets, which then
+decides: ``w [Hz]`` is in Hz, ``Frequency [kHz]``, ``f (rad/s)``,
+``Frequency [rpm]``, ``freq [cycles/min]`` (the units of MATLAB's
+``FrequencyUnit``; the time unit of the data taken to be the second). A name
+that states a unit itself (``hz``, ``f_hz``, ``w_rad``, ``rad/s``) must
+agree with the unit in brackets, and an unknown unit is an error. For each
+channel pair two columns
 ``<output>/<input>:<quantity>`` (for one input and one output the prefix may
 be left out), with the quantities
 
@@ -14,8 +20,7 @@ be left out), with the quantities
   ``db`` (also ``mag_db``: 20 log10 of it), and ``phase`` (also
   ``phase_deg``: degrees) or ``phase_rad`` (radians).
 
-A unit in brackets is understood: ``Magnitude [dB]``, ``Phase (deg)``,
-``Frequency [Hz]``. Optional ``<output>/<input>:std`` columns are the
+A unit in brackets is understood: ``Magnitude [dB]``, ``Phase (deg)``. Optional ``<output>/<input>:std`` columns are the
 standard deviations and ``<output>:coherence`` the squared coherences; the
 weights of the fit (:class:`subid.FRData`'s ``weights``) are one ``weight``
 column (one per frequency) or ``<output>/<input>:weight`` columns (one per
@@ -59,8 +64,14 @@ __all__ = ["read_frd", "write_frd"]
 
 _TEXT = (".csv", ".tsv", ".txt", ".dat")
 _ARRAYS = (".mat", ".npz")
-_W_NAMES = {"w", "omega", "rad/s", "w_rad", "frequency_rad", "w [rad/s]"}
-_HZ_NAMES = {"f", "freq", "frequency", "hz", "f_hz", "frequency_hz"}
+# name of a frequency column (lower case, unit in brackets removed) -> (factor to rad per
+# time unit without a unit in brackets, whether the name itself states that unit)
+_FREQUENCY_NAMES = {
+    **dict.fromkeys(("w", "omega"), (1.0, False)),
+    **dict.fromkeys(("f", "freq", "frequency"), (2 * math.pi, False)),
+    **dict.fromkeys(("rad/s", "w_rad", "omega_rad", "freq_rad", "frequency_rad"), (1.0, True)),
+    **dict.fromkeys(("hz", "f_hz", "freq_hz", "frequency_hz"), (2 * math.pi, True)),
+}
 _QUANTITIES = {
     "re": "re", "real": "re", "im": "im", "imag": "im", "imaginary": "im",
     "mag": "mag", "abs": "mag", "magnitude": "mag", "gain": "mag",
@@ -81,17 +92,30 @@ def _normalise(name: str) -> tuple[str, str | None]:
 
 
 def _frequency_column(header, shown):
+    """``(index, factor to rad per time unit)`` of the frequency column of ``header``."""
     for k, cell in enumerate(header):
-        base, unit = _normalise(cell)
-        if base in _W_NAMES or (base in _HZ_NAMES and unit in ("rad/s", "rad")):
-            return k, 1.0
-        if base in _HZ_NAMES or base == "hz":
-            if unit in (None, "hz"):
-                return k, 2 * math.pi
-        if base in ("w", "omega") and unit is None:
-            return k, 1.0
+        match = _UNIT_RE.match(cell.strip())
+        base, unit = (match.group("name").strip().lower(), match.group("unit").strip()) \
+            if match else (cell.strip().lower(), None)
+        named = _FREQUENCY_NAMES.get(base)
+        if named is None:
+            continue
+        if unit is None:
+            return k, named[0]
+        factor = frequency_factor(unit)
+        if factor is None:
+            raise FileReadError(f"{shown}: frequency column {cell!r} has the unknown unit "
+                                f"{unit!r}; known: {KNOWN_UNITS}", path=shown, line=1,
+                                column=cell)
+        if named[1] and not math.isclose(factor, named[0], rel_tol=1e-12):
+            raise FileReadError(f"{shown}: frequency column {cell!r}: its name says "
+                                f"{'Hz' if named[0] != 1 else 'rad per time unit'} but its "
+                                f"unit says {unit}; rename the column or correct the unit",
+                                path=shown, line=1, column=cell)
+        return k, factor
     raise FileReadError(f"{shown}: no frequency column; name one 'w' (rad per time unit) or "
-                        f"'f' (Hz). Header: {', '.join(header)[:300]}", path=shown, line=1)
+                        f"'f' (Hz), or give its unit: 'Frequency [kHz]'. Header: "
+                        f"{', '.join(header)[:300]}", path=shown, line=1)
 
 
 def _quantity(cell: str):
