@@ -166,3 +166,36 @@ def test_csv_frequency_header_unit_refused(tmp_path):
     path.write_text("w_rad (kHz),mag,phase\n1,1,0\n")
     with pytest.raises(FileReadError, match="name says rad per time unit but its unit says kHz"):
         subid.read_frd(path)
+
+
+def test_partial_or_conflicting_columns_refused(tmp_path):
+    path = tmp_path / "p.csv"
+    two = "w,a/u:re,a/u:im,b/u:re,b/u:im"
+    path.write_text(f"{two},a/u:std\n1,1,0,1,0,0.1\n")
+    with pytest.raises(FileReadError, match="':std' columns for a/u but not for b/u; give "
+                                            "them for every output/input pair or for none"):
+        subid.read_frd(path)
+    path.write_text(f"{two},b:coherence\n1,1,0,1,0,0.9\n")
+    with pytest.raises(FileReadError, match="':coherence' columns for b but not for a"):
+        subid.read_frd(path)
+    path.write_text(f"{two},coherence\n1,1,0,1,0,0.9\n")
+    with pytest.raises(FileReadError, match="'<output>:coherence'"):
+        subid.read_frd(path)
+    path.write_text("w,re,im,mag,phase\n1,1,0,1,0\n")
+    with pytest.raises(FileReadError, match="y1/u1 has columns 're', 'im', 'mag', 'phase', "
+                                            "two representations"):
+        subid.read_frd(path)
+    path.write_text("w,Magnitude [dB],mag,phase\n1,0,1,0\n")
+    with pytest.raises(FileReadError, match="'mag', 'Magnitude \\[dB\\]'"):
+        subid.read_frd(path)
+    path.write_text("w,mag,phase,phase_rad\n1,1,0,0\n")
+    with pytest.raises(FileReadError, match="'phase', 'phase_rad'"):
+        subid.read_frd(path)
+    path.write_text("# a comment\nw,mag,phase\n1,1,0\n2,-0.5,0\n")
+    with pytest.raises(FileReadError, match="line 4, column 'mag': magnitude -0.5 is "
+                                            "negative") as err:
+        subid.read_frd(path)
+    assert err.value.line == 4
+    path.write_text(f"{two},a:coherence,b:coherence,a/u:std,b/u:std\n1,1,0,1,0,0.9,0.8,0.1,0.2\n")
+    back = subid.read_frd(path)                       # all pairs (outputs): accepted
+    assert np.allclose(back.coherence, [[0.9, 0.8]]) and np.allclose(back.std.ravel(), [0.1, 0.2])

@@ -25,6 +25,8 @@ standard deviations and ``<output>:coherence`` the squared coherences; the
 weights of the fit (:class:`subid.FRData`'s ``weights``) are one ``weight``
 column (one per frequency) or ``<output>/<input>:weight`` columns (one per
 frequency and pair). Each of these is given for every pair (output) or none.
+One pair's response has one representation (re and im, or one magnitude and
+one phase); a magnitude (``mag``) is non-negative.
 
 MATLAB ``.mat`` and NumPy ``.npz``: the variables of MATLAB's ``idfrd``,
 ``ResponseData`` (ny x nu x n_freq) and ``Frequency`` in ``FrequencyUnit``
@@ -236,10 +238,12 @@ def _read_text(shown: str, raw: bytes, ext: str, delimiter, dt) -> FRData:
                 raise FileReadError(f"{shown}: line {line}, column {header[c]!r}: {cell!r} is "
                                     "not a number", path=shown, line=line,
                                     column=header[c]) from None
-    return _assemble(shown, values[:, k_w] * w_factor, values, columns, dt)
+    return _assemble(shown, values[:, k_w] * w_factor, values, columns, dt, header,
+                     [ln for ln, _ in body[1:]])
 
 
-def _assemble(shown, w, values, columns, dt) -> FRData:
+def _assemble(shown, w, values, columns, dt, header, row_lines) -> FRData:
+    """The FRData of a text file's ``values`` (one column per header cell)."""
     pairs: dict = {}
     coherence: dict = {}
     weight_column = None
@@ -258,12 +262,21 @@ def _assemble(shown, w, values, columns, dt) -> FRData:
     if missing:
         raise FileReadError(f"{shown}: no response columns for {', '.join(missing)}; every "
                             "output/input pair needs its own", path=shown, line=1)
-    _all_pairs_or_none(shown, pairs, "weight")
+    for kind in ("std", "weight"):
+        _all_pairs_or_none(shown, pairs, kind)
     n = values.shape[0]
     G = np.empty((n, len(outputs), len(inputs)), dtype=complex)
     std = weights = None
     for (o, i), kinds in pairs.items():
         a, b = outputs.index(o), inputs.index(i)
+        _one_representation(shown, f"{o}/{i}", kinds, header)
+        if "mag" in kinds and (values[:, kinds["mag"]] < 0).any():
+            r = int(np.flatnonzero(values[:, kinds["mag"]] < 0)[0])
+            cell = header[kinds["mag"]]
+            raise FileReadError(f"{shown}: line {row_lines[r]}, column {cell!r}: magnitude "
+                                f"{values[r, kinds['mag']]:g} is negative; a magnitude is an "
+                                "absolute value (put the sign into the phase)",
+                                path=shown, line=row_lines[r], column=cell)
         if "re" in kinds and "im" in kinds:
             G[:, a, b] = values[:, kinds["re"]] + 1j * values[:, kinds["im"]]
         elif ("mag" in kinds or "db" in kinds) and ("deg" in kinds or "rad" in kinds):
@@ -277,7 +290,7 @@ def _assemble(shown, w, values, columns, dt) -> FRData:
                                 f"and a phase; found {sorted(kinds)}", path=shown, line=1)
         if "std" in kinds:
             if std is None:
-                std = np.zeros(G.shape)
+                std = np.empty(G.shape)
             std[:, a, b] = values[:, kinds["std"]]
         if "weight" in kinds:
             if weights is None:
@@ -291,14 +304,36 @@ def _assemble(shown, w, values, columns, dt) -> FRData:
         weights = values[:, weight_column]
     coh = None
     if coherence:
-        coh = np.ones((n, len(outputs)))
+        if None in coherence and len(outputs) > 1:
+            raise FileReadError(f"{shown}: a 'coherence' column without an output; name it "
+                                "'<output>:coherence' (one per output)", path=shown, line=1)
+        coh = np.empty((n, len(outputs)))
         for pair, k in coherence.items():
             name = outputs[0] if pair is None else pair
             if name not in outputs:
                 raise FileReadError(f"{shown}: coherence of unknown output {name!r}", path=shown)
             coh[:, outputs.index(name)] = values[:, k]
+        lack = [o for o in outputs if o not in coherence and not (None in coherence)]
+        if lack:
+            raise FileReadError(f"{shown}: ':coherence' columns for "
+                                f"{', '.join(o for o in outputs if o not in lack)[:200]} but "
+                                f"not for {', '.join(lack)[:200]}; give them for every output "
+                                "or for none", path=shown, line=1)
     return FRData(w, G, dt, weights=weights, std=std, coherence=coh, input_names=inputs,
                   output_names=outputs)
+
+
+def _one_representation(shown, pair, kinds, header):
+    """Refuse two representations of one response (re/im and a polar one, mag and db, ...)."""
+    cart = [k for k in ("re", "im") if k in kinds]
+    polar = [k for k in ("mag", "db", "deg", "rad") if k in kinds]
+    clash = cart + polar if cart and polar else \
+        next((g for g in (["mag", "db"], ["deg", "rad"]) if all(k in kinds for k in g)), None)
+    if clash:
+        cells = ", ".join(repr(header[kinds[k]]) for k in clash)
+        raise FileReadError(f"{shown}: {pair} has columns {cells}, two representations of one "
+                            "response; keep re and im, or one magnitude (mag or db) and one "
+                            "phase (degrees or radians)", path=shown, line=1)
 
 
 def _all_pairs_or_none(shown, pairs, kind):
