@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 import subid
-from subid.errors import FileReadError
+from subid.errors import DataError, FileReadError
 
 W = np.linspace(0.1, 3.0, 20)
 
@@ -199,3 +199,27 @@ def test_partial_or_conflicting_columns_refused(tmp_path):
     path.write_text(f"{two},a:coherence,b:coherence,a/u:std,b/u:std\n1,1,0,1,0,0.9,0.8,0.1,0.2\n")
     back = subid.read_frd(path)                       # all pairs (outputs): accepted
     assert np.allclose(back.coherence, [[0.9, 0.8]]) and np.allclose(back.std.ravel(), [0.1, 0.2])
+
+
+@pytest.mark.parametrize("name", ["frd.csv", "frd.tsv"])
+def test_channel_names_with_delimiter_or_quotes_round_trip(tmp_path, name):
+    G = np.ones((20, 2, 2)) * (1 / (1j * W + 1))[:, None, None]
+    data = subid.FRData(W, G, input_names=["a,b", 'say "hi"'], output_names=["x\ty", "a;b;c;d"])
+    subid.write_frd(data, tmp_path / name)
+    back = subid.read_frd(tmp_path / name)
+    assert back.input_names == data.input_names and back.output_names == data.output_names
+    assert np.array_equal(back.response, data.response)
+    siso = subid.FRData(W, G[:, 0, 0], input_names=["p;q;r;s,t"])     # ';' only inside quotes
+    subid.write_frd(siso, tmp_path / name)
+    assert subid.read_frd(tmp_path / name).input_names == ("p;q;r;s,t",)
+
+
+@pytest.mark.parametrize("outputs, inputs, problem", [
+    (["a/b"], ["u"], "output name 'a/b' holds '/'"), ([" y"], ["u"], "white space"),
+    (["y"], ["u\nv"], "line break"), ([""], ["u"], "is empty")])
+def test_channel_names_a_text_header_cannot_carry(tmp_path, outputs, inputs, problem):
+    data = subid.FRData(W, 1 / (1j * W + 1), input_names=inputs, output_names=outputs)
+    with pytest.raises(DataError, match=problem):
+        subid.write_frd(data, tmp_path / "n.csv")
+    subid.write_frd(data, tmp_path / "n.npz")               # arrays carry any name
+    assert subid.read_frd(tmp_path / "n.npz").output_names == tuple(outputs)

@@ -204,7 +204,7 @@ def _read_text(shown: str, raw: bytes, ext: str, delimiter, dt) -> FRData:
         raise FileReadError(f"{shown}: a frequency-response file needs a header line and at "
                             "least one row", path=shown)
     if delimiter is None:
-        head = body[0][1]
+        head = re.sub(r'"[^"]*"', "", body[0][1])        # a quoted name's characters do not count
         delimiter = "\t" if ext == ".tsv" or ("\t" in head and "," not in head) else \
             ";" if head.count(";") > head.count(",") else ","
     rows = list(csv.reader(io.StringIO("\n".join(ln for _, ln in body)), delimiter=delimiter))
@@ -529,7 +529,9 @@ def write_frd(frdata, path, *, polar: bool = False) -> None:
     Raises
     ------
     DataError
-        ``frdata`` is not an FRData.
+        ``frdata`` is not an FRData; for a text file, a channel name the header
+        cannot carry (empty, white space at an end, a line break, an output
+        name with ``/``). Names holding the delimiter or quotes are quoted.
     OptionError
         Unsupported extension.
     FileWriteError
@@ -548,7 +550,22 @@ def write_frd(frdata, path, *, polar: bool = False) -> None:
                           ".tsv, .txt, .mat or .npz")
 
 
+def _check_text_names(d: FRData) -> None:
+    """Refuse channel names that a text file's header cannot carry back unchanged."""
+    for which, names in (("output", d.output_names), ("input", d.input_names)):
+        for name in names:
+            problem = ("is empty" if not name.strip() else
+                       "starts or ends with white space" if name != name.strip() else
+                       "holds a line break" if "\n" in name or "\r" in name else
+                       "holds '/', which separates output and input in the header"
+                       if which == "output" and "/" in name else None)
+            if problem:
+                raise DataError(f"write_frd: {which} name {name!r} {problem}; rename the "
+                                "channel (or write a .mat/.npz file)")
+
+
 def _write_text(d: FRData, path: str, delim: str, polar: bool) -> None:
+    _check_text_names(d)
     header = ["w"]
     cols = [d.w]
     for i, out in enumerate(d.output_names):
@@ -580,7 +597,7 @@ def _write_text(d: FRData, path: str, delim: str, polar: bool) -> None:
                         "real and imaginary parts (polar=False)")
     with atomic_write(path, "w", encoding="utf-8", what="frequency-response file") as fh:
         fh.write(f"# dt = {float(d.dt)!r}\n")
-        fh.write(delim.join(header) + "\n")
+        csv.writer(fh, delimiter=delim, lineterminator="\n").writerow(header)  # quoted as needed
         for row in table:
             fh.write(delim.join(repr(float(v)) for v in row) + "\n")
 
