@@ -111,8 +111,9 @@ _RUN = _method_run_options(
 @click.option("--frequency-response", "frequency_response", is_flag=True, default=False,
               help="DATA is a frequency response (subid.read_frd: columns w or f [Hz] and "
                    "<output>/<input>:re,:im or :db/:mag,:phase; or .mat/.npz); identify it "
-                   "with subid.fd_subspace (--dt: its sampling period, default 0 = continuous "
-                   "time; --validate: share of the frequencies held out, interleaved).")
+                   "with subid.fd_subspace (--dt: its sampling period, default the file's "
+                   "'# dt =' line or Ts, else 0 = continuous time; --validate: share of the "
+                   "frequencies held out, interleaved).")
 @_common
 def identify(data, inputs, outputs, dt, time_column, delimiter, decimal, detrend, method_name,
              order, horizon, validate, forgetting, options, frequency_unit, refine,

@@ -1,0 +1,225 @@
+"""Frequency-response files (read_frd, write_frd): what a round trip keeps, units, refusals.
+
+Reproducers of the session-21 user test: a text round trip kept no sampling period,
+MATLAB frequency units other than Hz and rad/s were misread, a unit in a CSV frequency
+header was ignored, partial MIMO columns were filled silently, channel names holding the
+delimiter made a file read_frd rejects.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import subid
+from subid.errors import DataError, FileReadError
+
+W = np.linspace(0.1, 3.0, 20)
+
+
+def _dt_data(**kw):
+    return subid.FRData(W, 0.5 / (np.exp(1j * W) - 0.5), dt=1.0, **kw)
+
+
+@pytest.mark.parametrize("name", ["frd.csv", "frd.tsv", "frd.txt", "frd.mat", "frd.npz"])
+def test_round_trip_keeps_dt(tmp_path, name):
+    path = tmp_path / name
+    subid.write_frd(_dt_data(), path)
+    back = subid.read_frd(path)
+    assert back.dt == 1.0
+    assert subid.read_frd(path, dt=1.0).dt == 1.0
+    with pytest.raises(FileReadError, match=r"dt=0\.5 was passed but .* says dt = 1"):
+        subid.read_frd(path, dt=0.5)
+
+
+def test_text_dt_comment_line(tmp_path):
+    path = tmp_path / "frd.csv"
+    subid.write_frd(_dt_data(), path)
+    assert path.read_text().splitlines()[0] == "# dt = 1.0"
+    continuous = tmp_path / "ct.csv"
+    subid.write_frd(subid.FRData(W, 1 / (1j * W + 1)), continuous)
+    assert subid.read_frd(continuous).dt == 0.0
+    with pytest.raises(FileReadError, match="continuous time"):
+        subid.read_frd(continuous, dt=0.1)
+    path.write_text("# measured 2024\n#Ts: 0.01\nw,re,im\n1,1,0\n")
+    assert subid.read_frd(path).dt == 0.01
+    path.write_text("# dt = 1 ms\nw,re,im\n1,1,0\n")
+    with pytest.raises(FileReadError, match="line 1: '1 ms' is not a sampling period"):
+        subid.read_frd(path)
+    path.write_text("# dt = 0.1\n# dt = 0.2\nw,re,im\n1,1,0\n")
+    with pytest.raises(FileReadError, match="keep one"):
+        subid.read_frd(path)
+    path.write_text("w,re,im\n1,1,0\n")                     # no dt line: dt= or 0
+    assert subid.read_frd(path).dt == 0.0 and subid.read_frd(path, dt=0.5).dt == 0.5
+
+
+def test_cli_frequency_response_reads_dt_line(tmp_path):
+    from click.testing import CliRunner
+
+    from subid.cli.commands import cli
+    system = subid.systems.seed001_system()
+    w = np.linspace(0.01, 3.0, 120)
+    path = tmp_path / "frf.csv"
+    subid.write_frd(subid.FRData(w, system.freqresp(w), dt=system.dt), path)
+    out = tmp_path / "out"
+    result = CliRunner().invoke(cli, ["identify", str(path), "--frequency-response", "--order",
+                                      str(system.A.shape[0]), "--no-report", "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    assert subid.StateSpace.load(out / "model.json").dt == system.dt
+
+
+def test_mat_ts_minus_one_needs_dt(tmp_path):
+    import scipy.io
+    path = tmp_path / "ts.mat"
+    scipy.io.savemat(path, dict(ResponseData=np.ones((1, 1, 3)), Frequency=[0.1, 0.2, 0.3],
+                                Ts=-1.0))
+    with pytest.raises(FileReadError, match=r"Ts = -1 .* pass the sampling period as dt="):
+        subid.read_frd(path)
+    assert subid.read_frd(path, dt=0.5).dt == 0.5
+    scipy.io.savemat(path, dict(ResponseData=np.ones((1, 1, 3)), Frequency=[0.1, 0.2, 0.3],
+                                Ts=-2.0))
+    with pytest.raises(FileReadError, match="Ts = -2 is not a sampling period"):
+        subid.read_frd(path)
+
+
+@pytest.mark.parametrize("name", ["frd.csv", "frd.tsv", "frd.mat", "frd.npz"])
+@pytest.mark.parametrize("per_pair", [False, True])
+def test_round_trip_keeps_weights(tmp_path, name, per_pair):
+    G = np.stack([1 / (1j * W + 1), 2 / (1j * W + 3)], axis=1)[:, :, None]     # 2 x 1
+    weights = np.linspace(1, 2, 20 * 2).reshape(20, 2, 1) if per_pair else np.linspace(1, 2, 20)
+    data = subid.FRData(W, G, weights=weights)
+    subid.write_frd(data, tmp_path / name)
+    back = subid.read_frd(tmp_path / name)
+    assert back.weights.shape == weights.shape and np.array_equal(back.weights, weights)
+
+
+def test_partial_or_mixed_weight_columns_refused(tmp_path):
+    path = tmp_path / "w.csv"
+    path.write_text("w,a/u:re,a/u:im,a/u:weight,b/u:re,b/u:im\n1,1,0,2,1,0\n")
+    with pytest.raises(FileReadError, match="':weight' columns for a/u but not for b/u"):
+        subid.read_frd(path)
+    path.write_text("w,a/u:re,a/u:im,a/u:weight,weight\n1,1,0,2,3\n")
+    with pytest.raises(FileReadError, match="keep one kind"):
+        subid.read_frd(path)
+
+
+@pytest.mark.parametrize("unit, scale", [
+    ("kHz", 1 / (2 * np.pi * 1e3)), ("MHz", 1 / (2 * np.pi * 1e6)), ("GHz", 1 / (2 * np.pi * 1e9)),
+    ("Hz", 1 / (2 * np.pi)), ("cycles/s", 1 / (2 * np.pi)), ("cycles/TimeUnit", 1 / (2 * np.pi)),
+    ("rpm", 60 / (2 * np.pi)), ("cycles/min", 60 / (2 * np.pi)), ("rad/s", 1.0),
+    ("rad/TimeUnit", 1.0), ("rad/ms", 1e-3), ("rad/min", 60.0), ("rad/hr", 3600.0),
+    ("rad/day", 86400.0), ("rad/week", 604800.0), ("cycles/millisecond", 1e-3 / (2 * np.pi)),
+    ("mHz", 1 / (2 * np.pi * 1e-3)),
+])
+def test_mat_frequency_units(tmp_path, unit, scale):
+    import scipy.io
+    w = np.linspace(0.1, 3.0, 5)
+    path = tmp_path / "u.mat"
+    scipy.io.savemat(path, dict(ResponseData=(1 / (1j * w + 1)).reshape(1, 1, -1),
+                                Frequency=w * scale, FrequencyUnit=unit, Ts=0.0))
+    assert np.allclose(subid.read_frd(path).w, w, rtol=1e-12)
+
+
+def test_mat_frequency_unit_unknown_and_time_unit(tmp_path):
+    import scipy.io
+    w = np.linspace(0.1, 3.0, 5)
+    path = tmp_path / "u.mat"
+    base = dict(ResponseData=(1 / (1j * w + 1)).reshape(1, 1, -1), Ts=0.0)
+    for unit in ("rad/month", "cycles/year", "furlongs", "mhz"):
+        scipy.io.savemat(path, dict(base, Frequency=w, FrequencyUnit=unit))
+        with pytest.raises(FileReadError, match=f"unknown FrequencyUnit '{unit}'; known"):
+            subid.read_frd(path)
+    # TimeUnit: Ts and w are in milliseconds; Hz converts to rad per millisecond
+    scipy.io.savemat(path, dict(base, Frequency=w * 1e3 / (2 * np.pi), FrequencyUnit="Hz",
+                                TimeUnit="milliseconds"))
+    assert np.allclose(subid.read_frd(path).w, w, rtol=1e-12)
+    scipy.io.savemat(path, dict(base, Frequency=w, FrequencyUnit="rad/TimeUnit",
+                                TimeUnit="milliseconds"))
+    assert np.allclose(subid.read_frd(path).w, w, rtol=1e-12)
+    scipy.io.savemat(path, dict(base, Frequency=w, TimeUnit="fortnights"))
+    with pytest.raises(FileReadError, match="unknown TimeUnit 'fortnights'"):
+        subid.read_frd(path)
+
+
+@pytest.mark.parametrize("head, scale", [
+    ("w [Hz]", 2 * np.pi), ("omega (Hz)", 2 * np.pi), ("Frequency [rad/sec]", 1.0),
+    ("Frequency [kHz]", 2 * np.pi * 1e3), ("f [rad/s]", 1.0), ("freq [rpm]", 2 * np.pi / 60),
+    ("Frequency (cycles/min)", 2 * np.pi / 60), ("f_hz [Hz]", 2 * np.pi), ("w", 1.0),
+    ("f", 2 * np.pi), ("Frequency [MHz]", 2 * np.pi * 1e6), ("hz", 2 * np.pi),
+    ("rad/s", 1.0), ("w [rad/TimeUnit]", 1.0),
+])
+def test_csv_frequency_header_unit(tmp_path, head, scale):
+    path = tmp_path / "h.csv"
+    path.write_text(f"{head},mag,phase\n1,1,0\n10,0.5,-45\n")
+    assert np.allclose(subid.read_frd(path).w, [scale, 10 * scale], rtol=1e-12)
+
+
+def test_csv_frequency_header_unit_refused(tmp_path):
+    path = tmp_path / "h.csv"
+    path.write_text("Frequency [furlongs],mag,phase\n1,1,0\n")
+    with pytest.raises(FileReadError, match="frequency column 'Frequency \\[furlongs\\]' has "
+                                            "the unknown unit 'furlongs'; known"):
+        subid.read_frd(path)
+    path.write_text("f_hz [rad/s],mag,phase\n1,1,0\n")
+    with pytest.raises(FileReadError, match="its name says Hz but its unit says rad/s"):
+        subid.read_frd(path)
+    path.write_text("w_rad (kHz),mag,phase\n1,1,0\n")
+    with pytest.raises(FileReadError, match="name says rad per time unit but its unit says kHz"):
+        subid.read_frd(path)
+
+
+def test_partial_or_conflicting_columns_refused(tmp_path):
+    path = tmp_path / "p.csv"
+    two = "w,a/u:re,a/u:im,b/u:re,b/u:im"
+    path.write_text(f"{two},a/u:std\n1,1,0,1,0,0.1\n")
+    with pytest.raises(FileReadError, match="':std' columns for a/u but not for b/u; give "
+                                            "them for every output/input pair or for none"):
+        subid.read_frd(path)
+    path.write_text(f"{two},b:coherence\n1,1,0,1,0,0.9\n")
+    with pytest.raises(FileReadError, match="':coherence' columns for b but not for a"):
+        subid.read_frd(path)
+    path.write_text(f"{two},coherence\n1,1,0,1,0,0.9\n")
+    with pytest.raises(FileReadError, match="'<output>:coherence'"):
+        subid.read_frd(path)
+    path.write_text("w,re,im,mag,phase\n1,1,0,1,0\n")
+    with pytest.raises(FileReadError, match="y1/u1 has columns 're', 'im', 'mag', 'phase', "
+                                            "two representations"):
+        subid.read_frd(path)
+    path.write_text("w,Magnitude [dB],mag,phase\n1,0,1,0\n")
+    with pytest.raises(FileReadError, match="'mag', 'Magnitude \\[dB\\]'"):
+        subid.read_frd(path)
+    path.write_text("w,mag,phase,phase_rad\n1,1,0,0\n")
+    with pytest.raises(FileReadError, match="'phase', 'phase_rad'"):
+        subid.read_frd(path)
+    path.write_text("# a comment\nw,mag,phase\n1,1,0\n2,-0.5,0\n")
+    with pytest.raises(FileReadError, match="line 4, column 'mag': magnitude -0.5 is "
+                                            "negative") as err:
+        subid.read_frd(path)
+    assert err.value.line == 4
+    path.write_text(f"{two},a:coherence,b:coherence,a/u:std,b/u:std\n1,1,0,1,0,0.9,0.8,0.1,0.2\n")
+    back = subid.read_frd(path)                       # all pairs (outputs): accepted
+    assert np.allclose(back.coherence, [[0.9, 0.8]]) and np.allclose(back.std.ravel(), [0.1, 0.2])
+
+
+@pytest.mark.parametrize("name", ["frd.csv", "frd.tsv"])
+def test_channel_names_with_delimiter_or_quotes_round_trip(tmp_path, name):
+    G = np.ones((20, 2, 2)) * (1 / (1j * W + 1))[:, None, None]
+    data = subid.FRData(W, G, input_names=["a,b", 'say "hi"'], output_names=["x\ty", "a;b;c;d"])
+    subid.write_frd(data, tmp_path / name)
+    back = subid.read_frd(tmp_path / name)
+    assert back.input_names == data.input_names and back.output_names == data.output_names
+    assert np.array_equal(back.response, data.response)
+    siso = subid.FRData(W, G[:, 0, 0], input_names=["p;q;r;s,t"])     # ';' only inside quotes
+    subid.write_frd(siso, tmp_path / name)
+    assert subid.read_frd(tmp_path / name).input_names == ("p;q;r;s,t",)
+
+
+@pytest.mark.parametrize("outputs, inputs, problem", [
+    (["a/b"], ["u"], "output name 'a/b' holds '/'"), ([" y"], ["u"], "white space"),
+    (["y"], ["u\nv"], "line break"), ([""], ["u"], "is empty")])
+def test_channel_names_a_text_header_cannot_carry(tmp_path, outputs, inputs, problem):
+    data = subid.FRData(W, 1 / (1j * W + 1), input_names=inputs, output_names=outputs)
+    with pytest.raises(DataError, match=problem):
+        subid.write_frd(data, tmp_path / "n.csv")
+    subid.write_frd(data, tmp_path / "n.npz")               # arrays carry any name
+    assert subid.read_frd(tmp_path / "n.npz").output_names == tuple(outputs)
