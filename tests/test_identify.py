@@ -645,3 +645,29 @@ def test_keeping_the_biased_subspace_model_under_feedback_warns():
         warnings.simplefilter("error", subid.errors.FeedbackWarning)
         plant = subid.identify(data, 2, focus="prediction")
     assert subid.markov_error(plant, true) < 0.2 * subid.markov_error(biased, true)
+
+
+def test_the_continuous_time_path_honours_or_refuses_every_option():
+    """identify(time_base='ct') (or non-uniform data) forwarded only feedthrough:
+    refine=False was refined anyway, horizon=7 became 11 and focus='prediction' was
+    ignored, silently, and zero-order-hold data were fitted as first-order hold. refine
+    and hold are passed to ct_subspace now (a noise-free zoh record exact), horizon and
+    focus='prediction' refused; hold on the discrete-time path refused."""
+    A = np.array([[0.0, 1.0], [-4.0, -1.2]])
+    true = subid.StateSpace(A, [[0.0], [1.0]], [[1.0, 0.0]], [[0.0]], dt=0)
+    rng = np.random.default_rng(0)
+    u = rng.standard_normal(600)
+    t = np.arange(600) * 0.05
+    data = subid.IOData(u, true.simulate(u, t=t, hold="zoh"), dt=0.05)
+    model = subid.identify(data, 2, time_base="ct", hold="zoh", refine=False)
+    assert model.dt == 0 and model.hold == "zoh"
+    assert model.info["identify"]["options"] == {"refine": False, "hold": "zoh"}
+    assert not model.info["refined"]
+    w = np.logspace(-1, 1, 20)
+    np.testing.assert_allclose(model.freqresp(w), true.freqresp(w), rtol=1e-8, atol=1e-10)
+    with pytest.raises(subid.errors.OptionError, match="no subspace horizon"):
+        subid.identify(data, 2, time_base="ct", horizon=7)
+    with pytest.raises(subid.errors.OptionError, match="simulation .output. error only"):
+        subid.identify(data, 2, time_base="ct", focus="prediction")
+    with pytest.raises(subid.errors.OptionError, match="continuous-time path"):
+        subid.identify(data, 2, hold="zoh")

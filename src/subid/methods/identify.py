@@ -309,7 +309,7 @@ def _fold_refinement(data, method, config, focus, scores=None, guard=None):
 @serial_blas
 @checked_call
 def identify(data, order=None, *, focus="simulation", time_base="auto", horizon=None,
-             feedthrough="auto", refine=True) -> StateSpace:
+             feedthrough="auto", refine=True, hold=None) -> StateSpace:
     """Identify the best model the data support: subspace start, order, refinement.
 
     Parameters
@@ -334,14 +334,21 @@ def identify(data, order=None, *, focus="simulation", time_base="auto", horizon=
         continuous time always; ``'dt'``: discrete time (non-uniform data are
         then an error).
     horizon : int, optional
-        The subspace horizon (default: chosen with the order).
+        The subspace horizon (default: chosen with the order). Discrete time
+        only: the continuous-time path has none (an ``OptionError``).
     feedthrough : {'auto', True, False}
         Direct term D (discrete time): ``'auto'`` estimates it only when the
         data show one and no feedback (:mod:`subid.methods.dt.feedthrough`).
         Continuous time: passed to :func:`subid.ct_subspace` when a bool.
     refine : bool
         Try the prediction-error refinement (kept only when it validates
-        better on the folds); ``False``: the subspace model.
+        better on the folds); ``False``: the subspace model. Continuous time:
+        ``ct_subspace``'s ``refine='auto'`` (its output-error refinement, kept
+        where it scores better on the folds) or ``refine=False``.
+    hold : {None, 'foh', 'zoh'}
+        Continuous time only: how the input moves between samples
+        (:func:`subid.ct_subspace`'s ``hold``; None: its default, ``'foh'``).
+        A discrete-time model needs none (an ``OptionError`` when given there).
 
     Returns
     -------
@@ -381,10 +388,25 @@ def identify(data, order=None, *, focus="simulation", time_base="auto", horizon=
         raise OptionError(f"refine must be True or False; got {refine!r}"[:300])
     if not isinstance(data, IOData):
         raise not_a_record(data, "identify", time="t=... or dt=...")
+    if hold is not None:
+        check_choice(hold, "hold", ("foh", "zoh"))
     if time_base == "ct" or (time_base == "auto" and not data.is_uniform):
-        return _continuous(data, order, feedthrough, reason=(
-            "time_base='ct' requested" if time_base == "ct" else
-            "non-uniform time stamps"))
+        reason = "time_base='ct' requested" if time_base == "ct" else "non-uniform time stamps"
+        # the options the continuous-time path cannot honour are errors, not ignored
+        if horizon is not None:
+            raise OptionError(f"horizon={horizon!r}: the continuous-time path ({reason}) has "
+                              "no subspace horizon (ct_subspace's basis filters take its "
+                              "place); leave horizon out, or call subid.ct_subspace(data, "
+                              "basis=...) for another basis")
+        if focus != "simulation":
+            raise OptionError(f"focus={focus!r}: the continuous-time path ({reason}) refines "
+                              "the simulation (output) error only; leave focus out, or "
+                              "resample uniformly for time_base='dt'")
+        return _continuous(data, order, feedthrough, bool(refine), hold, reason=reason)
+    if hold is not None:
+        raise OptionError(f"hold={hold!r} applies to the continuous-time path (time_base='ct' "
+                          "or non-uniform time stamps); a discrete-time model, exact at the "
+                          "samples, needs none: leave hold out")
     from subid.methods.dt.checks import check_data
     from subid.methods.dt.feedthrough import check_feedthrough
     feedthrough = check_feedthrough(feedthrough)
@@ -485,17 +507,22 @@ def _record_covariance(data, model, focus, *, start):
                                max_samples=COVARIANCE_SAMPLES)
 
 
-def _continuous(data, order, feedthrough, *, reason):
+def _continuous(data, order, feedthrough, refine, hold, *, reason):
     from subid.methods.ct.ct_subspace import ct_subspace
     options = {} if feedthrough == "auto" else {"feedthrough": bool(feedthrough)}
+    if not refine:
+        options["refine"] = False
+    if hold is not None:
+        options["hold"] = hold
     model = ct_subspace(data, order, **options)
     info = dict(model.info)
     info["subspace_method"] = info.get("method")
     info["method"] = "identify"
     info["identify"] = {"time_base": "continuous", "reason": reason,
-                        "estimator": "ct_subspace",
+                        "estimator": "ct_subspace", "options": dict(options),
                         "description": "continuous-time path: subid.ct_subspace with its "
-                                       "own defaults"}
+                                       "own defaults, and the options given (refine=False, "
+                                       "hold, feedthrough)"}
     return StateSpace(model.A, model.B, model.C, model.D, model.dt, K=model.K,
                       noise_cov=model.noise_cov, input_names=model.input_names,
                       output_names=model.output_names, info=info, hold=model.hold)
