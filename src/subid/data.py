@@ -589,9 +589,10 @@ def merge(records, names=None) -> IOData:
         if not isinstance(rec, IOData):
             raise not_a_record(rec, f"merge (item {k})")
         if not rec.is_uniform:
-            raise DataError(f"merge: record {k} has non-uniform time stamps; experiments are "
-                            "merged for the discrete-time methods and must be uniformly "
-                            "sampled")
+            raise DataError(f"merge: record {k} has non-uniform time stamps; merged "
+                            "experiments must be uniformly sampled: interpolate it onto a "
+                            "uniform grid first (numpy.interp per channel), or identify it "
+                            "alone (subid.ct_subspace takes one non-uniform record)")
     first = records[0]
     for k, rec in enumerate(records[1:], start=1):
         if not same_period(rec.dt, first.dt):
