@@ -453,3 +453,21 @@ def test_a_refined_polynomial_model_keeps_no_stale_polynomials():
                                   start.info["polynomials"]["A"])
     assert not np.allclose(np.sort_complex(refined.poles()), np.sort_complex(start.poles()))
     assert subid.freqresp_bounds(refined, [0.1, 1.0]).std is not None
+
+
+@pytest.mark.parametrize("u_unit,y_unit", [(1e-2, 1e2), (1e2, 1e-2), (1e3, 1.0)])
+def test_pem_reaches_a_noise_free_model_in_any_units(u_unit, y_unit):
+    """The same start in other units: the iteration runs on unit-spread channels, so a
+    noise-free record is fitted exactly whatever the units (inputs 100x smaller and
+    outputs 100x larger stopped on ftol at a Markov error of 0.04 before)."""
+    true = subid.systems.seed001_system()
+    data = subid.systems.simulate_data(true, 800, seed=1)
+    scaled = data.scaled(inputs=[u_unit, u_unit], outputs=[y_unit, y_unit])
+    A0 = true.A * (1 + 0.03 * np.random.default_rng(3).standard_normal((3, 3)))
+    start = subid.StateSpace(A0, true.B * 1.05 / u_unit, true.C * y_unit,
+                             true.D * y_unit / u_unit, 1.0, K=np.zeros((3, 2)),
+                             noise_cov=np.eye(2) * y_unit ** 2)
+    in_units = subid.StateSpace(true.A, true.B / u_unit, true.C * y_unit,
+                                true.D * y_unit / u_unit, 1.0)
+    refined = subid.pem(scaled, start)
+    assert subid.markov_error(refined, in_units) < 1e-9
