@@ -129,6 +129,38 @@ def test_errors_name_global_line(tmp_path, record):
         list(subid.read_chunks(path, "u1", "y1", chunk_size=0))
 
 
+
+@pytest.mark.parametrize("chunk", [64, 1000])
+def test_npy_nan_names_file_row_and_column(tmp_path, chunk):
+    """A NaN of a .npy stream is reported at its row in the file, not in the piece."""
+    z = np.random.default_rng(0).standard_normal((20_000, 4))
+    z[15_000, 2] = np.nan
+    path = tmp_path / "nan.npy"
+    np.save(path, z)
+    with pytest.raises(errors.DataError, match=r"nan\.npy, row 15000 \(0-based\), column 2: NaN"):
+        list(subid.read_chunks(path, [0, 1], [2, 3], chunk_size=chunk))
+    z[15_000, 2] = 0.0
+    z[19_999, 0] = -np.inf
+    np.save(path, z)
+    with pytest.raises(errors.DataError, match=r"row 19999 \(0-based\), column 0: -inf"):
+        subid.identify_file(path, [0, 1], [2, 3], order=2, horizon=5, chunk_size=chunk)
+
+
+def test_parquet_null_names_file_row_and_column(tmp_path):
+    pa = pytest.importorskip("pyarrow", reason="pyarrow is not installed")
+    import pyarrow.parquet as pq
+    z = np.random.default_rng(0).standard_normal((300, 4))
+    missing = np.zeros(300, bool)
+    missing[100:105] = True
+    table = pa.table({"u1": z[:, 0], "u2": z[:, 1], "y1": pa.array(z[:, 2], mask=missing),
+                      "y2": z[:, 3]})
+    path = tmp_path / "nulls.parquet"
+    pq.write_table(table, path)
+    with pytest.raises(errors.DataError,
+                       match=r"nulls\.parquet, row 100 \(0-based\), column 'y1': null or NaN"):
+        list(subid.read_chunks(path, "u1,u2", "y1,y2", chunk_size=64))
+
+
 _MEMORY_SCRIPT = textwrap.dedent("""
     import sys, tracemalloc
     import subid

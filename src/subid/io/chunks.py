@@ -124,7 +124,8 @@ def read_chunks(path, inputs=None, outputs=None, *, dt=None, chunk_size=100_000,
     ------
     IOData
         Consecutive pieces; their time stamps continue from piece to piece.
-        Errors name the file, the (global) line and the column.
+        Errors name the file, the place in the file (the line of a text file,
+        the 0-based row of a ``.npy`` or Parquet file) and the column.
 
     Examples
     --------
@@ -414,9 +415,34 @@ def _npy_pieces(p, shown, inputs, outputs, chunk_size):
     out_cols = _column_indices(outputs, "outputs", arr.shape[1], shown)
     in_names = [f"col{k}" for k in in_cols]
     out_names = [f"col{k}" for k in out_cols]
+    labels = [f"column {k}" for k in in_cols + out_cols]
     for a in range(0, arr.shape[0], chunk_size):
         block = np.asarray(arr[a:a + chunk_size], dtype=np.float64)
-        yield block[:, in_cols], block[:, out_cols], in_names, out_names
+        u, y = block[:, in_cols], block[:, out_cols]
+        _check_rows_finite(np.hstack([u, y]), a, shown, labels, "NaN")
+        yield u, y, in_names, out_names
+
+
+def _check_rows_finite(values: np.ndarray, first: int, shown: str, labels, nan: str) -> None:
+    """Refuse NaN or infinite ``values`` (rows ``first`` on of the file ``shown``;
+    columns named by ``labels``), naming the file, the row in the file and the
+    column, as the text reader does with lines (``nan`` says what a NaN is
+    called: ``'NaN'``, or ``'null or NaN'`` for Parquet)."""
+    finite = np.isfinite(values)
+    if finite.all():
+        return
+    bad_rows = np.flatnonzero(~finite.all(axis=1))
+    row = int(bad_rows[0])
+    j = int(np.flatnonzero(~finite[row])[0])
+    value = values[row, j]
+    text = nan if np.isnan(value) else ("inf" if value > 0 else "-inf")
+    n_bad = int((~finite).sum())
+    last = first + values.shape[0] - 1
+    raise DataError(
+        f"{shown}, row {first + row} (0-based), {labels[j]}: {text} is not a finite number "
+        f"({n_bad} NaN or infinite value{'s' if n_bad != 1 else ''} in {bad_rows.size} "
+        f"row{'s' if bad_rows.size != 1 else ''} of the selected columns among rows "
+        f"{first}-{last}); remove or interpolate them before identification")
 
 
 def _parquet_pieces(p, shown, inputs, outputs, chunk_size):
@@ -446,6 +472,7 @@ def _parquet_pieces(p, shown, inputs, outputs, chunk_size):
             cols.append(name)
         chosen.append(cols)
     in_names, out_names = chosen
+    labels = [f"column {name!r}" for name in in_names + out_names]
     batches = pf.iter_batches(batch_size=chunk_size, columns=in_names + out_names)
     start = 0
     while True:
@@ -458,5 +485,6 @@ def _parquet_pieces(p, shown, inputs, outputs, chunk_size):
         except Exception as exc:       # pyarrow's own errors (OSError, ArrowInvalid...)
             raise FileReadError(f"{shown}: cannot read the Parquet data after row {start} "
                                 f"({_reason(exc)})", path=shown) from None
+        _check_rows_finite(block, start, shown, labels, "null or NaN")
         start += block.shape[0]
         yield block[:, :len(in_names)], block[:, len(in_names):], in_names, out_names
