@@ -3,6 +3,7 @@ history of its estimates and a report."""
 
 from __future__ import annotations
 
+import contextlib
 import os
 import time
 
@@ -39,11 +40,10 @@ from subid.cli._shared import (
     _warnings_to_log,
     cli,
     load_data,
-    load_online,
     log,
     new_online,
 )
-from subid.errors import DataError
+from subid.errors import CheckpointError, DataError
 from subid.io._files import atomic_directory
 
 _RUN = _method_run_options(
@@ -67,7 +67,8 @@ _RUN = _method_run_options(
 @_data_options
 @click.option("--method", "method_name",
               type=click.Choice([n for n, s in METHODS.items() if s.kind == "online"]),
-              default="recursive", show_default=True, help="Online identification method.")
+              default=None, help="Online identification method (default: recursive; with "
+                                 "--resume, the checkpoint's).")
 @click.option("--order", type=click.IntRange(min=1), default=None,
               help="Model order (required unless resuming).")
 @_RUN["horizon"]
@@ -102,7 +103,11 @@ def track(data, inputs, outputs, dt, time_column, delimiter, decimal, detrend, m
     from subid.evaluation import report
     if out is None:
         out = _default_out(data, "track")
-    spec = METHODS[method_name]
+    resumed = None
+    if resume is not None:
+        with _about(resume):
+            resumed, method_name = _resume_method(resume, method_name)
+    spec = METHODS[method_name or "recursive"]
     spec.load()
     _hint_method(spec)
     opts = _parse_options(options)
@@ -123,7 +128,7 @@ def track(data, inputs, outputs, dt, time_column, delimiter, decimal, detrend, m
     os.makedirs(out, exist_ok=True)
     with _about(resume or data):
         if resume is not None:
-            ident = load_online(spec, resume)
+            ident = resumed
             for attr, want in (("n_inputs", work.n_inputs), ("n_outputs", work.n_outputs)):
                 have = getattr(ident, attr, want)
                 if have != want:
@@ -215,3 +220,28 @@ def track(data, inputs, outputs, dt, time_column, delimiter, decimal, detrend, m
             f"checkpoint  {final_ckpt}",
             f"wrote       {', '.join(files)}"]))
     return 0
+
+
+def _resume_method(path, method_name):
+    """The identifier of the checkpoint ``path`` and the name of its method; ``--method``
+    (``method_name``, None when not given) must agree with the checkpoint."""
+    from subid.methods.online.base import OnlineIdentifier
+    from subid.methods.registry import MethodUnavailableError
+    classes = {}
+    for name, spec in METHODS.items():
+        if spec.kind == "online":
+            with contextlib.suppress(MethodUnavailableError):     # imported: load() finds it
+                classes[name] = spec.load()
+    ident = OnlineIdentifier.load(path)
+    found = next((name for name, cls in classes.items() if type(ident) is cls), None)
+    kind = f"subid.{type(ident).__name__}"
+    if found is None:
+        raise CheckpointError(f"{path} is a checkpoint of {kind}, which subid track does not "
+                              "run; continue it in Python (subid.OnlineIdentifier.load)",
+                              path=path)
+    if method_name not in (None, found):
+        raise CheckpointError(f"{path} is a checkpoint of {kind} (--method {found}), not of "
+                              f"subid.{METHODS[method_name].attribute} (--method "
+                              f"{method_name}); give --method {found} or leave --method out",
+                              path=path)
+    return ident, found
