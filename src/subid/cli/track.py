@@ -8,6 +8,7 @@ import os
 import time
 
 import click
+import numpy as np
 
 from subid._progress import Steps
 from subid.cli._shared import (
@@ -113,10 +114,14 @@ def track(data, inputs, outputs, dt, time_column, delimiter, decimal, detrend, m
     opts = _parse_options(options)
     _check_method_options(spec, opts, reserved=_reserved_options(spec, horizon=horizon,
                                                                  forgetting=forgetting))
+    from subid.methods.online.base import Tracker
+    # the offsets the checkpoint's run removed (None: unknown), removed again
+    offsets = None if resume is None else Tracker.stored_offsets(Tracker.trace_path(resume))
     with _about(data):
         raw, label, notes = load_data(data, inputs, outputs, dt, time_column, delimiter, decimal)
-        detrend = detrend or _default_detrend(spec)
-        work = _detrend(raw, detrend)
+        detrend = detrend or _stored_detrend(offsets) or _default_detrend(spec)
+        work = _detrend(raw, detrend) if resume is None else \
+            _resumed_detrend(raw, detrend, offsets)
         if spec.time == "discrete" and work.dt is None:
             raise DataError(f"method {spec.name} needs uniformly sampled data; these time "
                             "stamps are non-uniform")
@@ -150,14 +155,12 @@ def track(data, inputs, outputs, dt, time_column, delimiter, decimal, detrend, m
             ident = new_online(spec, order, work.n_inputs, work.n_outputs, horizon=horizon,
                                forgetting=forgetting, dt=work.dt, options=opts)
             start = 0
-    from subid.methods.online.base import Tracker
     tracker = Tracker(ident, work, fingerprint_data=raw, trace_every=trace_every,
                       checkpoint_every=checkpoint_every, checkpoint_dir=checkpoint_dir,
                       keep=keep_checkpoints)
     if resume is not None:
         with _warnings_to_log():
-            tracker.load_trace(resume[:-4] + ".trace.npz" if resume.endswith(".npz")
-                               else resume + ".trace.npz", start)
+            tracker.load_trace(Tracker.trace_path(resume), start)
     t0 = time.perf_counter()
     with _about(data), _warnings_to_log():
         _run_online(spec, tracker, start, _state().progress, chunk=chunk)
@@ -245,3 +248,41 @@ def _resume_method(path, method_name):
                               f"{method_name}); give --method {found} or leave --method out",
                               path=path)
     return ident, found
+
+
+def _stored_detrend(offsets) -> str | None:
+    """The --detrend of the run whose trace stored ``offsets`` (None: unknown)."""
+    if offsets is None:
+        return None
+    return "none" if offsets[0].size == 0 else "constant" if offsets[0].ndim == 1 else "linear"
+
+
+def _resumed_detrend(raw, detrend, offsets):
+    """``raw`` detrended for a resumed run: less the means the checkpoint's run removed
+    (stored beside the checkpoint), so that the samples the identifier has seen and the
+    new ones lose the same means, as in an uninterrupted run, even when the record grew.
+    A one-line warning when that cannot be done."""
+    before = _stored_detrend(offsets)
+    if detrend == "constant" and before == "constant" and \
+            offsets[0].shape == (raw.n_inputs,) and offsets[1].shape == (raw.n_outputs,):
+        return raw._less_offsets(*offsets)
+    if before is not None and before != detrend:
+        log.warning("--detrend %s: the run that wrote the checkpoint used --detrend %s, so the "
+                    "samples it has seen and the new ones are detrended differently (leave "
+                    "--detrend out to continue as it did)", detrend, before)
+    elif detrend == "constant":
+        log.warning("--detrend constant: the checkpoint does not hold the means of its run "
+                    "(an earlier version of subid, or no convergence trace beside it); if the "
+                    "record grew, its samples lost other means than the new ones (use "
+                    "--detrend none for a growing record)")
+    elif detrend == "linear":
+        work = _detrend(raw, detrend)
+        if before == "linear" and offsets[0].shape == work.u_offset.shape and \
+                np.array_equal(offsets[0], work.u_offset) and \
+                offsets[1].shape == work.y_offset.shape and np.array_equal(offsets[1], work.y_offset):
+            return work                    # the same record: the same trend
+        log.warning("--detrend linear: the samples the checkpoint has seen lost the trend of "
+                    "its run's record, the new ones this record's; if the record grew they "
+                    "differ (use --detrend none for a growing record)")
+        return work
+    return _detrend(raw, detrend)
