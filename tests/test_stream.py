@@ -84,6 +84,19 @@ def test_identify_stream_one_shot_iterator_warns(record):
     assert model.info["bd_method"] == "projection"
 
 
+
+def test_identify_stream_non_uniform_piece_named_first_or_later(record):
+    _, data = record
+    pieces = [data[a:a + 5000] for a in range(0, 15_000, 5000)]
+    t = np.cumsum(np.r_[0.0, np.random.default_rng(0).uniform(0.5, 1.5, 999)])
+    odd = subid.IOData(data.u[:1000], data.y[:1000], t=t)
+    assert odd.dt is None
+    for at, position in ((0, 0), (3, 3)):
+        bad = pieces[:at] + [odd] + pieces[at:]
+        with pytest.raises(errors.DataError, match=rf"piece {position} is sampled with dt = None"
+                                                   r".*resample them first"):
+            subid.identify_stream(bad, "moesp", 3, 10)
+
 def test_npy_memory_mapped(tmp_path, record):
     true, data = record
     path = tmp_path / "rec.npy"
