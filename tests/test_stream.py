@@ -3,6 +3,7 @@
 import subprocess
 import sys
 import textwrap
+import warnings
 
 import numpy as np
 import pytest
@@ -173,6 +174,35 @@ def test_parquet_null_names_file_row_and_column(tmp_path):
                        match=r"nulls\.parquet, row 100 \(0-based\), column 'y1': null or NaN"):
         list(subid.read_chunks(path, "u1,u2", "y1,y2", chunk_size=64))
 
+
+
+def test_time_column_without_dt_warns_and_names_dt(tmp_path, record, capsys):
+    """read_chunks takes no time column: read without dt, a column named like time
+    stamps is worth the warning read() gives (and the command line names --dt)."""
+    _, data = record
+    path = tmp_path / "timed.csv"
+    np.savetxt(path, np.column_stack([np.arange(3000) * 0.5, data.u[:3000], data.y[:3000]]),
+               delimiter=",", header="t,u1,u2,y1,y2", comments="")
+    with pytest.warns(errors.SamplingWarning, match="the column 't' looks like time stamps: "
+                                                    "pass its sampling period as dt"):
+        pieces = list(subid.read_chunks(path, "u1,u2", "y1,y2", chunk_size=1000))
+    assert pieces[0].dt == 1.0
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", errors.SamplingWarning)
+        list(subid.read_chunks(path, "u1,u2", "y1,y2", dt=0.5))
+    from subid.cli import commands as cli
+    code = cli.main(["identify", str(path), "--inputs", "u1,u2", "--outputs", "y1,y2",
+                     "--method", "moesp", "--order", "3", "--stream", "--no-report",
+                     "--out", str(tmp_path / "out")])
+    err = capsys.readouterr().err
+    assert code == 0, err
+    assert "time is counted in samples" in err and "The column 't' looks like time stamps" \
+        in err and "add --dt" in err, err
+    code = cli.main(["identify", str(path), "--inputs", "u1,u2", "--outputs", "y1,y2",
+                     "--method", "moesp", "--order", "3", "--stream", "--no-report", "--dt",
+                     "0.5", "--out", str(tmp_path / "out2")])
+    err = capsys.readouterr().err
+    assert code == 0 and "WARNING" not in err, err
 
 _MEMORY_SCRIPT = textwrap.dedent("""
     import sys, tracemalloc
