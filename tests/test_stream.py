@@ -3,6 +3,7 @@
 import subprocess
 import sys
 import textwrap
+import warnings
 
 import numpy as np
 import pytest
@@ -84,6 +85,19 @@ def test_identify_stream_one_shot_iterator_warns(record):
     assert model.info["bd_method"] == "projection"
 
 
+
+def test_identify_stream_non_uniform_piece_named_first_or_later(record):
+    _, data = record
+    pieces = [data[a:a + 5000] for a in range(0, 15_000, 5000)]
+    t = np.cumsum(np.r_[0.0, np.random.default_rng(0).uniform(0.5, 1.5, 999)])
+    odd = subid.IOData(data.u[:1000], data.y[:1000], t=t)
+    assert odd.dt is None
+    for at, position in ((0, 0), (3, 3)):
+        bad = pieces[:at] + [odd] + pieces[at:]
+        with pytest.raises(errors.DataError, match=rf"piece {position} is sampled with dt = None"
+                                                   r".*resample them first"):
+            subid.identify_stream(bad, "moesp", 3, 10)
+
 def test_npy_memory_mapped(tmp_path, record):
     true, data = record
     path = tmp_path / "rec.npy"
@@ -128,6 +142,67 @@ def test_errors_name_global_line(tmp_path, record):
     with pytest.raises(errors.DataError, match="chunk_size"):
         list(subid.read_chunks(path, "u1", "y1", chunk_size=0))
 
+
+
+@pytest.mark.parametrize("chunk", [64, 1000])
+def test_npy_nan_names_file_row_and_column(tmp_path, chunk):
+    """A NaN of a .npy stream is reported at its row in the file, not in the piece."""
+    z = np.random.default_rng(0).standard_normal((20_000, 4))
+    z[15_000, 2] = np.nan
+    path = tmp_path / "nan.npy"
+    np.save(path, z)
+    with pytest.raises(errors.DataError, match=r"nan\.npy, row 15000 \(0-based\), column 2: NaN"):
+        list(subid.read_chunks(path, [0, 1], [2, 3], chunk_size=chunk))
+    z[15_000, 2] = 0.0
+    z[19_999, 0] = -np.inf
+    np.save(path, z)
+    with pytest.raises(errors.DataError, match=r"row 19999 \(0-based\), column 0: -inf"):
+        subid.identify_file(path, [0, 1], [2, 3], order=2, horizon=5, chunk_size=chunk)
+
+
+def test_parquet_null_names_file_row_and_column(tmp_path):
+    pa = pytest.importorskip("pyarrow", reason="pyarrow is not installed")
+    import pyarrow.parquet as pq
+    z = np.random.default_rng(0).standard_normal((300, 4))
+    missing = np.zeros(300, bool)
+    missing[100:105] = True
+    table = pa.table({"u1": z[:, 0], "u2": z[:, 1], "y1": pa.array(z[:, 2], mask=missing),
+                      "y2": z[:, 3]})
+    path = tmp_path / "nulls.parquet"
+    pq.write_table(table, path)
+    with pytest.raises(errors.DataError,
+                       match=r"nulls\.parquet, row 100 \(0-based\), column 'y1': null or NaN"):
+        list(subid.read_chunks(path, "u1,u2", "y1,y2", chunk_size=64))
+
+
+
+def test_time_column_without_dt_warns_and_names_dt(tmp_path, record, capsys):
+    """read_chunks takes no time column: read without dt, a column named like time
+    stamps is worth the warning read() gives (and the command line names --dt)."""
+    _, data = record
+    path = tmp_path / "timed.csv"
+    np.savetxt(path, np.column_stack([np.arange(3000) * 0.5, data.u[:3000], data.y[:3000]]),
+               delimiter=",", header="t,u1,u2,y1,y2", comments="")
+    with pytest.warns(errors.SamplingWarning, match="the column 't' looks like time stamps: "
+                                                    "pass its sampling period as dt"):
+        pieces = list(subid.read_chunks(path, "u1,u2", "y1,y2", chunk_size=1000))
+    assert pieces[0].dt == 1.0
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", errors.SamplingWarning)
+        list(subid.read_chunks(path, "u1,u2", "y1,y2", dt=0.5))
+    from subid.cli import commands as cli
+    code = cli.main(["identify", str(path), "--inputs", "u1,u2", "--outputs", "y1,y2",
+                     "--method", "moesp", "--order", "3", "--stream", "--no-report",
+                     "--out", str(tmp_path / "out")])
+    err = capsys.readouterr().err
+    assert code == 0, err
+    assert "time is counted in samples" in err and "The column 't' looks like time stamps" \
+        in err and "add --dt" in err, err
+    code = cli.main(["identify", str(path), "--inputs", "u1,u2", "--outputs", "y1,y2",
+                     "--method", "moesp", "--order", "3", "--stream", "--no-report", "--dt",
+                     "0.5", "--out", str(tmp_path / "out2")])
+    err = capsys.readouterr().err
+    assert code == 0 and "WARNING" not in err, err
 
 _MEMORY_SCRIPT = textwrap.dedent("""
     import sys, tracemalloc

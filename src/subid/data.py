@@ -492,9 +492,8 @@ class IOData:
                             "experiments; a linear trend is fitted per experiment "
                             "(per_experiment=True)")
         if kind == "constant":
-            u_off, y_off = self._u.mean(axis=0), self._y.mean(axis=0)
-            u, y = self._u - u_off, self._y - y_off
-        elif kind == "linear":
+            return self._less_offsets(self._u.mean(axis=0), self._y.mean(axis=0))
+        if kind == "linear":
             t = self.t - self.t[0]
             basis = np.column_stack([np.ones_like(t), t])
             coef, *_ = np.linalg.lstsq(basis, np.hstack([self._u, self._y]), rcond=None)
@@ -503,6 +502,14 @@ class IOData:
             u_off, y_off = coef[:, :self.n_inputs], coef[:, self.n_inputs:]
         else:
             raise DataError(f"detrend kind must be 'constant' or 'linear', got {kind!r}")
+        return self._with_offsets(u, y, u_off, y_off)
+
+    def _less_offsets(self, u_off, y_off) -> "IOData":
+        """The record less the constant offsets ``u_off``, ``y_off`` (its means, or
+        those another run removed: ``subid track --resume``), kept as its offsets."""
+        return self._with_offsets(self._u - u_off, self._y - y_off, u_off, y_off)
+
+    def _with_offsets(self, u, y, u_off, y_off) -> "IOData":
         out = self._derive(u, y, t=self._t, dt=self._dt, t0=self._t0, starts=self._starts,
                            t0s=self._t0s, names=self.experiment_names)
         out.u_offset, out.y_offset = u_off, y_off

@@ -45,6 +45,7 @@ from subid.cli._shared import (
     check_sources,
     cli,
     load_data,
+    log,
     new_online,
     run_batch,
 )
@@ -428,20 +429,59 @@ def _identify_streamed(data, inputs, outputs, dt, time_column, delimiter, detren
         raise click.UsageError("--stream removes means (--detrend constant) or nothing "
                                "(--detrend none); a linear trend needs the whole record")
     from subid.methods.dt.stream import ParsedOnce
+    notes: list[str] = []
+
+    def make():
+        return read_chunks(data, inputs, outputs, dt=dt, chunk_size=chunk_size,
+                           delimiter=delimiter)
     # the file is parsed once; the later passes read the parsed doubles back
-    pieces = ParsedOnce(lambda: read_chunks(data, inputs, outputs, dt=dt,
-                                            chunk_size=chunk_size, delimiter=delimiter))
+    pieces = ParsedOnce(make if dt is not None else _sampling_noted(make, data, notes))
     try:
         with _steps(write_report) as steps:
             return _identify_pieces(pieces, data, detrend, spec, order, horizon, validate,
                                     opts, frequency_unit, write_report, chunk_size,
-                                    report_samples, out, steps)
+                                    report_samples, out, steps, notes)
     finally:
         pieces.close()
 
 
+def _sampling_noted(make, data, notes: list):
+    """``make`` (the pieces of ``identify --stream`` without ``--dt``) that, on the first
+    piece, warns as the in-memory path does and adds the note to ``notes``: time is
+    counted in samples, and the column that looks like time stamps (read_chunks'
+    :class:`SamplingWarning`), if any, with ``--dt`` to give its period (``--time`` is
+    refused under --stream)."""
+    import warnings
+
+    from subid.errors import SamplingWarning
+
+    def noted():
+        pieces = iter(make())
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", SamplingWarning)
+            first = next(pieces, None)
+        column = None
+        for w in caught:
+            if isinstance(w.message, SamplingWarning):
+                column = w.message.column
+            else:
+                warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+        if not notes:                # once, if the file is parsed again
+            notes.append("No sampling period given (--dt): time is counted in samples "
+                         "(dt = 1), frequencies in rad/sample." + ("" if column is None else
+                         f" The column {column!r} looks like time stamps; --stream reads "
+                         "uniformly sampled files without --time: add --dt with their "
+                         "sampling period."))
+            log.warning("%s: %s", data, notes[-1])
+        if first is not None:
+            yield first
+            yield from pieces
+    return noted
+
+
 def _identify_pieces(pieces, data, detrend, spec, order, horizon, validate, opts,
-                     frequency_unit, write_report, chunk_size, report_samples, out, steps):
+                     frequency_unit, write_report, chunk_size, report_samples, out, steps,
+                     notes=()):
     import types
 
     from subid.evaluation import report
@@ -464,9 +504,9 @@ def _identify_pieces(pieces, data, detrend, spec, order, horizon, validate, opts
                           "n_estimation": run.n_estimation, "validation_fraction": float(validate),
                           "streamed": True, "report_samples": report_samples,
                           "u_offset": u_mean, "y_offset": y_mean}
-    notes = [f"Streamed in pieces of {chunk_size} samples: identified from the statistic of "
-             f"{run.n_estimation} samples; fit and figures use the first {report_samples} "
-             "samples of each part."]
+    notes = [*notes, f"Streamed in pieces of {chunk_size} samples: identified from the "
+             f"statistic of {run.n_estimation} samples; fit and figures use the first "
+             f"{report_samples} samples of each part."]
     record = types.SimpleNamespace(dt=first.dt, n_samples=n, n_inputs=first.n_inputs,
                                    n_outputs=first.n_outputs)
     _write_outputs(out, data, spec, model, result, est, val, seconds, record,

@@ -3,10 +3,12 @@ history of its estimates and a report."""
 
 from __future__ import annotations
 
+import contextlib
 import os
 import time
 
 import click
+import numpy as np
 
 from subid._progress import Steps
 from subid.cli._shared import (
@@ -39,11 +41,10 @@ from subid.cli._shared import (
     _warnings_to_log,
     cli,
     load_data,
-    load_online,
     log,
     new_online,
 )
-from subid.errors import DataError
+from subid.errors import CheckpointError, DataError
 from subid.io._files import atomic_directory
 
 _RUN = _method_run_options(
@@ -67,7 +68,8 @@ _RUN = _method_run_options(
 @_data_options
 @click.option("--method", "method_name",
               type=click.Choice([n for n, s in METHODS.items() if s.kind == "online"]),
-              default="recursive", show_default=True, help="Online identification method.")
+              default=None, help="Online identification method (default: recursive; with "
+                                 "--resume, the checkpoint's).")
 @click.option("--order", type=click.IntRange(min=1), default=None,
               help="Model order (required unless resuming).")
 @_RUN["horizon"]
@@ -102,16 +104,24 @@ def track(data, inputs, outputs, dt, time_column, delimiter, decimal, detrend, m
     from subid.evaluation import report
     if out is None:
         out = _default_out(data, "track")
-    spec = METHODS[method_name]
+    resumed = None
+    if resume is not None:
+        with _about(resume):
+            resumed, method_name = _resume_method(resume, method_name)
+    spec = METHODS[method_name or "recursive"]
     spec.load()
     _hint_method(spec)
     opts = _parse_options(options)
     _check_method_options(spec, opts, reserved=_reserved_options(spec, horizon=horizon,
                                                                  forgetting=forgetting))
+    from subid.methods.online.base import Tracker
+    # the offsets the checkpoint's run removed (None: unknown), removed again
+    offsets = None if resume is None else Tracker.stored_offsets(Tracker.trace_path(resume))
     with _about(data):
         raw, label, notes = load_data(data, inputs, outputs, dt, time_column, delimiter, decimal)
-        detrend = detrend or _default_detrend(spec)
-        work = _detrend(raw, detrend)
+        detrend = detrend or _stored_detrend(offsets) or _default_detrend(spec)
+        work = _detrend(raw, detrend) if resume is None else \
+            _resumed_detrend(raw, detrend, offsets)
         if spec.time == "discrete" and work.dt is None:
             raise DataError(f"method {spec.name} needs uniformly sampled data; these time "
                             "stamps are non-uniform")
@@ -123,7 +133,7 @@ def track(data, inputs, outputs, dt, time_column, delimiter, decimal, detrend, m
     os.makedirs(out, exist_ok=True)
     with _about(resume or data):
         if resume is not None:
-            ident = load_online(spec, resume)
+            ident = resumed
             for attr, want in (("n_inputs", work.n_inputs), ("n_outputs", work.n_outputs)):
                 have = getattr(ident, attr, want)
                 if have != want:
@@ -145,14 +155,12 @@ def track(data, inputs, outputs, dt, time_column, delimiter, decimal, detrend, m
             ident = new_online(spec, order, work.n_inputs, work.n_outputs, horizon=horizon,
                                forgetting=forgetting, dt=work.dt, options=opts)
             start = 0
-    from subid.methods.online.base import Tracker
     tracker = Tracker(ident, work, fingerprint_data=raw, trace_every=trace_every,
                       checkpoint_every=checkpoint_every, checkpoint_dir=checkpoint_dir,
                       keep=keep_checkpoints)
     if resume is not None:
         with _warnings_to_log():
-            tracker.load_trace(resume[:-4] + ".trace.npz" if resume.endswith(".npz")
-                               else resume + ".trace.npz", start)
+            tracker.load_trace(Tracker.trace_path(resume), start)
     t0 = time.perf_counter()
     with _about(data), _warnings_to_log():
         _run_online(spec, tracker, start, _state().progress, chunk=chunk)
@@ -215,3 +223,66 @@ def track(data, inputs, outputs, dt, time_column, delimiter, decimal, detrend, m
             f"checkpoint  {final_ckpt}",
             f"wrote       {', '.join(files)}"]))
     return 0
+
+
+def _resume_method(path, method_name):
+    """The identifier of the checkpoint ``path`` and the name of its method; ``--method``
+    (``method_name``, None when not given) must agree with the checkpoint."""
+    from subid.methods.online.base import OnlineIdentifier
+    from subid.methods.registry import MethodUnavailableError
+    classes = {}
+    for name, spec in METHODS.items():
+        if spec.kind == "online":
+            with contextlib.suppress(MethodUnavailableError):     # imported: load() finds it
+                classes[name] = spec.load()
+    ident = OnlineIdentifier.load(path)
+    found = next((name for name, cls in classes.items() if type(ident) is cls), None)
+    kind = f"subid.{type(ident).__name__}"
+    if found is None:
+        raise CheckpointError(f"{path} is a checkpoint of {kind}, which subid track does not "
+                              "run; continue it in Python (subid.OnlineIdentifier.load)",
+                              path=path)
+    if method_name not in (None, found):
+        raise CheckpointError(f"{path} is a checkpoint of {kind} (--method {found}), not of "
+                              f"subid.{METHODS[method_name].attribute} (--method "
+                              f"{method_name}); give --method {found} or leave --method out",
+                              path=path)
+    return ident, found
+
+
+def _stored_detrend(offsets) -> str | None:
+    """The --detrend of the run whose trace stored ``offsets`` (None: unknown)."""
+    if offsets is None:
+        return None
+    return "none" if offsets[0].size == 0 else "constant" if offsets[0].ndim == 1 else "linear"
+
+
+def _resumed_detrend(raw, detrend, offsets):
+    """``raw`` detrended for a resumed run: less the means the checkpoint's run removed
+    (stored beside the checkpoint), so that the samples the identifier has seen and the
+    new ones lose the same means, as in an uninterrupted run, even when the record grew.
+    A one-line warning when that cannot be done."""
+    before = _stored_detrend(offsets)
+    if detrend == "constant" and before == "constant" and \
+            offsets[0].shape == (raw.n_inputs,) and offsets[1].shape == (raw.n_outputs,):
+        return raw._less_offsets(*offsets)
+    if before is not None and before != detrend:
+        log.warning("--detrend %s: the run that wrote the checkpoint used --detrend %s, so the "
+                    "samples it has seen and the new ones are detrended differently (leave "
+                    "--detrend out to continue as it did)", detrend, before)
+    elif detrend == "constant":
+        log.warning("--detrend constant: the checkpoint does not hold the means of its run "
+                    "(an earlier version of subid, or no convergence trace beside it); if the "
+                    "record grew, its samples lost other means than the new ones (use "
+                    "--detrend none for a growing record)")
+    elif detrend == "linear":
+        work = _detrend(raw, detrend)
+        if before == "linear" and offsets[0].shape == work.u_offset.shape and \
+                np.array_equal(offsets[0], work.u_offset) and \
+                offsets[1].shape == work.y_offset.shape and np.array_equal(offsets[1], work.y_offset):
+            return work                    # the same record: the same trend
+        log.warning("--detrend linear: the samples the checkpoint has seen lost the trend of "
+                    "its run's record, the new ones this record's; if the record grew they "
+                    "differ (use --detrend none for a growing record)")
+        return work
+    return _detrend(raw, detrend)

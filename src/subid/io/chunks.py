@@ -5,13 +5,14 @@ from __future__ import annotations
 
 import numbers
 import os
+import warnings
 from pathlib import Path
 
 import numpy as np
 
 from subid._validation import check_dt, checked_call
 from subid.data import IOData
-from subid.errors import DataError, FileReadError, ResourceLimitError
+from subid.errors import DataError, FileReadError, ResourceLimitError, SamplingWarning
 from subid.io._common import (
     _INT_RE,
     MAX_LINE_CHARS,
@@ -27,7 +28,7 @@ from subid.io._npz import NpzError
 from subid.io.arrays import _array_names, _load_npz, _stack
 from subid.io.fast_csv import _HEAD_BYTES, _blocks, _line_start, _lone_cr, _parsed_blocks
 from subid.io.mat import _load_mat
-from subid.io.text import _decode, _roles, _Table, _tokens
+from subid.io.text import _decode, _roles, _Table, _tokens, time_like_name
 
 STREAM_EXTENSIONS = (".csv", ".tsv", ".txt", ".dat", ".npy", ".parquet")
 
@@ -124,7 +125,8 @@ def read_chunks(path, inputs=None, outputs=None, *, dt=None, chunk_size=100_000,
     ------
     IOData
         Consecutive pieces; their time stamps continue from piece to piece.
-        Errors name the file, the (global) line and the column.
+        Errors name the file, the place in the file (the line of a text file,
+        the 0-based row of a ``.npy`` or Parquet file) and the column.
 
     Examples
     --------
@@ -143,6 +145,7 @@ def read_chunks(path, inputs=None, outputs=None, *, dt=None, chunk_size=100_000,
     >>> import shutil; shutil.rmtree(os.path.dirname(path))
     """
     shown, p = _as_path(path)
+    hint = dt is None                # a column named like time stamps is then worth a warning
     dt = 1.0 if dt is None else check_dt(dt)
     if isinstance(chunk_size, bool) or not isinstance(chunk_size, numbers.Integral) \
             or chunk_size < 1:
@@ -156,10 +159,23 @@ def read_chunks(path, inputs=None, outputs=None, *, dt=None, chunk_size=100_000,
     if ext == ".npy":
         pieces = _npy_pieces(p, shown, inputs, outputs, chunk_size)
     elif ext == ".parquet":
-        pieces = _parquet_pieces(p, shown, inputs, outputs, chunk_size)
+        pieces = _parquet_pieces(p, shown, inputs, outputs, chunk_size, hint)
     else:
-        pieces = _text_pieces(p, shown, ext, inputs, outputs, chunk_size, delimiter)
+        pieces = _text_pieces(p, shown, ext, inputs, outputs, chunk_size, delimiter, hint)
     return _as_records(pieces, dt)
+
+
+def _hint_time(shown: str, names, used) -> None:
+    """A :class:`~subid.errors.SamplingWarning` when a stream read without ``dt``
+    has a column named like time stamps (``names``; ``used``: the indices of the
+    inputs and outputs): read_chunks takes no time column, its period is ``dt``."""
+    name = time_like_name(names, set(used))
+    if name is not None:
+        warnings.warn(SamplingWarning(
+            f"{shown}: no sampling period (dt) given, so time is counted in samples (dt = 1); "
+            f"the column {name!r} looks like time stamps: pass its sampling period as dt "
+            "(read_chunks reads uniformly sampled records, without a time column)",
+            column=name), stacklevel=4)
 
 
 def _as_records(pieces, dt):
@@ -217,7 +233,7 @@ def _text_lines(fh, shown: str, consumed: int, chunk_size: int):
                 lines = []
 
 
-def _text_pieces(p, shown, ext, inputs, outputs, chunk_size, delimiter):
+def _text_pieces(p, shown, ext, inputs, outputs, chunk_size, delimiter, hint=False):
     import io as _io
     fh, _ = open_regular(shown, what="data file", max_bytes=None)
     with fh:
@@ -242,6 +258,8 @@ def _text_pieces(p, shown, ext, inputs, outputs, chunk_size, delimiter):
         cols = in_cols + out_cols
         in_names, out_names = layout.channel_names(in_cols), layout.channel_names(out_cols)
         n_in = len(in_cols)
+        if hint:
+            _hint_time(shown, layout.header or (), cols)
         fh.seek(0)
         if utf16:
             encoding = "utf-16"
@@ -414,12 +432,37 @@ def _npy_pieces(p, shown, inputs, outputs, chunk_size):
     out_cols = _column_indices(outputs, "outputs", arr.shape[1], shown)
     in_names = [f"col{k}" for k in in_cols]
     out_names = [f"col{k}" for k in out_cols]
+    labels = [f"column {k}" for k in in_cols + out_cols]
     for a in range(0, arr.shape[0], chunk_size):
         block = np.asarray(arr[a:a + chunk_size], dtype=np.float64)
-        yield block[:, in_cols], block[:, out_cols], in_names, out_names
+        u, y = block[:, in_cols], block[:, out_cols]
+        _check_rows_finite(np.hstack([u, y]), a, shown, labels, "NaN")
+        yield u, y, in_names, out_names
 
 
-def _parquet_pieces(p, shown, inputs, outputs, chunk_size):
+def _check_rows_finite(values: np.ndarray, first: int, shown: str, labels, nan: str) -> None:
+    """Refuse NaN or infinite ``values`` (rows ``first`` on of the file ``shown``;
+    columns named by ``labels``), naming the file, the row in the file and the
+    column, as the text reader does with lines (``nan`` says what a NaN is
+    called: ``'NaN'``, or ``'null or NaN'`` for Parquet)."""
+    finite = np.isfinite(values)
+    if finite.all():
+        return
+    bad_rows = np.flatnonzero(~finite.all(axis=1))
+    row = int(bad_rows[0])
+    j = int(np.flatnonzero(~finite[row])[0])
+    value = values[row, j]
+    text = nan if np.isnan(value) else ("inf" if value > 0 else "-inf")
+    n_bad = int((~finite).sum())
+    last = first + values.shape[0] - 1
+    raise DataError(
+        f"{shown}, row {first + row} (0-based), {labels[j]}: {text} is not a finite number "
+        f"({n_bad} NaN or infinite value{'s' if n_bad != 1 else ''} in {bad_rows.size} "
+        f"row{'s' if bad_rows.size != 1 else ''} of the selected columns among rows "
+        f"{first}-{last}); remove or interpolate them before identification")
+
+
+def _parquet_pieces(p, shown, inputs, outputs, chunk_size, hint=False):
     try:
         import pyarrow.parquet as pq
     except ImportError:
@@ -446,6 +489,9 @@ def _parquet_pieces(p, shown, inputs, outputs, chunk_size):
             cols.append(name)
         chosen.append(cols)
     in_names, out_names = chosen
+    labels = [f"column {name!r}" for name in in_names + out_names]
+    if hint:
+        _hint_time(shown, names, [names.index(name) for name in in_names + out_names])
     batches = pf.iter_batches(batch_size=chunk_size, columns=in_names + out_names)
     start = 0
     while True:
@@ -458,5 +504,6 @@ def _parquet_pieces(p, shown, inputs, outputs, chunk_size):
         except Exception as exc:       # pyarrow's own errors (OSError, ArrowInvalid...)
             raise FileReadError(f"{shown}: cannot read the Parquet data after row {start} "
                                 f"({_reason(exc)})", path=shown) from None
+        _check_rows_finite(block, start, shown, labels, "null or NaN")
         start += block.shape[0]
         yield block[:, :len(in_names)], block[:, len(in_names):], in_names, out_names

@@ -492,7 +492,13 @@ def _time_like(table: "_Table", used) -> str | None:
     """The name of the first column not in ``used`` whose name's first word (up to a
     space, underscore or bracket: ``Time [s]``, ``time_s``) is one of
     :data:`_TIME_WORDS`, or None."""
-    for idx, name in enumerate(table.header or ()):
+    return time_like_name(table.header or (), used)
+
+
+def time_like_name(names, used) -> str | None:
+    """The first of the column ``names`` whose index is not in ``used`` and that
+    looks like time stamps (:func:`_time_like`), or None."""
+    for idx, name in enumerate(names):
         if idx in used or not name:
             continue
         if re.split(r"[\s_\[\(]", name.strip().lower(), maxsplit=1)[0] in _TIME_WORDS:

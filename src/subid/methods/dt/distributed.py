@@ -76,7 +76,9 @@ def _block_statistic(u_block, y_block, depth, kind, start=0):
 
 def _file_statistic(path, inputs, outputs, depth, kind, chunk_size, delimiter):
     stat = None
-    for piece in read_chunks(path, inputs, outputs, chunk_size=chunk_size, delimiter=delimiter):
+    # dt: set on the merged statistic (_finish); 1.0 here, without read_chunks' hint
+    for piece in read_chunks(path, inputs, outputs, dt=1.0, chunk_size=chunk_size,
+                             delimiter=delimiter):
         if stat is None:
             stat = HankelStatistic(piece.n_inputs, piece.n_outputs, depth, kind=kind,
                                    input_names=piece.input_names,
@@ -105,8 +107,8 @@ def _apply_block(function, u_block, y_block, *arguments):
 
 
 def _apply_file(function, path, inputs, outputs, chunk_size, delimiter, *arguments):
-    chunks = ((p.u, p.y) for p in read_chunks(path, inputs, outputs, chunk_size=chunk_size,
-                                               delimiter=delimiter))
+    chunks = ((p.u, p.y) for p in read_chunks(path, inputs, outputs, dt=1.0,
+                                               chunk_size=chunk_size, delimiter=delimiter))
     return function(chunks, *arguments)
 
 
@@ -245,7 +247,7 @@ def identify_files(paths, inputs, outputs, method: str = "moesp", *, dt: float =
     paths = [str(p) for p in paths]
     if not paths:
         raise DataError("identify_files needs at least one file")
-    first = next(iter(read_chunks(paths[0], inputs, outputs, chunk_size=16)), None)
+    first = next(iter(read_chunks(paths[0], inputs, outputs, dt=1.0, chunk_size=16)), None)
     if first is None:
         raise DataError(f"{paths[0]} holds no samples")
     horizon, depth = statistic_depth(method, order, horizon, first.n_outputs,

@@ -148,6 +148,7 @@ def identify_stream(pieces, method: str = "moesp", order=None, horizon=None, *,
     stat, first, experiment = None, None, 0
     for k, (e, piece) in enumerate(_segments(pieces if progress is None else progress(pieces))):
         if first is None:
+            _check_uniform(piece, k)
             first = piece
             horizon, depth = statistic_depth(method, order, horizon, first.n_outputs,
                                              options.get("instruments", "past"))
@@ -184,6 +185,14 @@ def identify_stream(pieces, method: str = "moesp", order=None, horizon=None, *,
                 experiments=list(range(stat.n_experiments)))
     log.info("identifying from the statistic of %d samples", stat.n_samples)
     return streaming_method(method).load()(stat, order, horizon=horizon, **options)
+
+
+def _check_uniform(piece, k: int) -> None:
+    """The first piece must be uniformly sampled (the statistic needs one period)."""
+    if piece.dt is None:
+        raise DataError(f"piece {k} is sampled with dt = None (non-uniform time stamps): the "
+                        "pieces of one record must share one uniform sampling period "
+                        "(resample them first)")
 
 
 def _check_piece(piece, first, k: int) -> None:

@@ -406,8 +406,35 @@ class Tracker:
                   "parameter_names": np.array(hist.get("parameter_names", []), dtype=str),
                   "fingerprint": np.array(self.fingerprint(k)),
                   "method": np.array(type(self.ident).__name__)}
+        # the offsets removed from the record fed (none: shape (0,)), for a resumed
+        # run to remove the same ones (absent in the traces of earlier versions)
+        for name in ("u_offset", "y_offset"):
+            value = getattr(self.data, name, None)
+            arrays[name] = np.zeros(0) if value is None else np.asarray(value, dtype=float)
         with atomic_write(path, "wb", what="convergence trace") as fh:
             np.savez(fh, **arrays)  # type: ignore[arg-type]  # numpy's stub: **kwds may be allow_pickle
+
+    @staticmethod
+    def trace_path(checkpoint) -> str:
+        """The convergence trace written beside the checkpoint ``checkpoint``."""
+        checkpoint = os.fspath(checkpoint)
+        return (checkpoint[:-4] if checkpoint.endswith(".npz") else checkpoint) + ".trace.npz"
+
+    @staticmethod
+    def stored_offsets(path):
+        """``(u_offset, y_offset)`` removed from the record of the run that wrote the
+        trace ``path`` (arrays of shape (0,) when it removed none), or None when the
+        trace is missing, unreadable or older than these fields."""
+        from subid.io._files import open_regular
+        from subid.io._npz import load_npz
+        try:
+            fh, size = open_regular(path, what="convergence trace")
+            with fh:
+                z = load_npz(fh, size=size)
+            offsets = tuple(np.asarray(z[name], dtype=float) for name in ("u_offset", "y_offset"))
+        except Exception:            # noqa: BLE001 - missing, unreadable, older: unknown offsets
+            return None
+        return offsets if all(np.isfinite(o).all() for o in offsets) else None
 
     def load_trace(self, path, k: int) -> None:
         """Continue the snapshots of a checkpoint's trace (up to sample ``k``).
