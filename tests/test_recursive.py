@@ -1,5 +1,7 @@
 """RecursiveSubspace: seed 001 made recursive."""
 
+import warnings
+
 import numpy as np
 import pytest
 
@@ -405,3 +407,23 @@ def test_lagged_statistic_one_sample_updates_equal_chunks():
     assert one.n_samples == whole.n_samples == n
     for name, value in one.arrays().items():
         np.testing.assert_array_equal(value, whole.arrays()[name], err_msg=name)
+
+
+def test_a_normal_matrix_that_lost_its_positive_diagonal_falls_back():
+    """An output with an offset and a trend left in (means of the first half removed):
+    the B, D normal matrix accumulated from lag products lost its positive diagonal to
+    rounding after 5,500 samples, and `model` ended in numpy's "Eigenvalues did not
+    converge" (a traceback through `subid track`). That matrix is now refused like an
+    ill-conditioned one, and the projected data equation gives B and D."""
+    data = subid.systems.simulate_data(subid.systems.seed001_system(), 8000, seed=3,
+                                       output_snr_db=30)
+    y = data.y + np.array([5.0, -3.0]) + np.linspace(0, 2, 8000)[:, None]
+    y = y - y[:4000].mean(axis=0)
+    u = data.u - data.u[:4000].mean(axis=0)
+    ident = subid.RecursiveSubspace(3, 2, 2, dt=0.01)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", subid.errors.NotConvergedWarning)
+        for k in range(0, 8000, 500):
+            ident.update(u[k:k + 500], y[k:k + 500])
+            model = ident.model
+            assert all(np.isfinite(m).all() for m in (model.A, model.B, model.C, model.D))

@@ -862,7 +862,14 @@ def solve_normal_equations(N, n, nu, ny, *, estimate_x0, feedthrough, n_samples,
         if status == 0:
             theta, condition = solved, float(np.sqrt(bound))
     if theta is None:
-        scale = np.sqrt(np.diag(G)).copy()
+        diagonal = np.diag(G)
+        if (diagonal < 0).any():
+            # a normal matrix accumulated from lag products (an online identifier's,
+            # subid.methods.bd._accumulated) that lost its positive diagonal to rounding:
+            # no Gram matrix of real regressors; the caller takes the other path (its
+            # eigenvalues, of a matrix with NaN scales, did not converge: a traceback)
+            return None
+        scale = np.sqrt(diagonal).copy()
         scale[scale == 0] = 1.0
         Ge = G / scale[:, None] / scale[None, :]
         ev = np.linalg.eigvalsh(Ge) if p else np.ones(1)
