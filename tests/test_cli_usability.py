@@ -333,3 +333,23 @@ def test_a_pole_on_the_boundary_to_rounding_is_called_marginal():
     assert _fmt_stable({"stable": True, "poles": [-1e-12, -3.0]}, True).startswith(
         "yes (marginally")
     assert _fmt_stable({"stable": True, "poles": [-0.1 + 2j, -0.1 - 2j]}, True) == "yes"
+
+
+def test_a_diverging_fit_prints_short_and_draws_without_numpy_warnings():
+    """An unstable online model on a record: its fit of -3.6e147 % was printed with 150
+    digits, and drawing its simulated trace overflowed a float32 cast (numpy's warning,
+    twice, on the command line)."""
+    import warnings
+
+    import matplotlib
+    matplotlib.use("Agg")
+    import subid
+    from subid.cli._shared import _fmt_fit
+    assert _fmt_fit([-3.649e147, 89.456]) == "-3.65e+147 / 89.46"
+    from subid.evaluation.report import identification_report
+    unstable = subid.StateSpace([[1.05]], [[1.0]], [[1.0]], [[0.0]], 1.0)
+    rng = np.random.default_rng(0)
+    data = subid.IOData(rng.standard_normal(3000), rng.standard_normal(3000), dt=1.0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        identification_report({"online": unstable}, data)

@@ -517,9 +517,12 @@ def load_model(path, dt=None):
 
 
 def _fmt_fit(values) -> str:
+    """Fit % per output: two decimals; a diverging simulation's (an unstable model: fits
+    of -3.6e147 % were printed with their 150 digits) in three significant digits."""
     if values is None:
         return "—"
-    return " / ".join("n/a" if not np.isfinite(v) else f"{v:.2f}" for v in values)
+    return " / ".join("n/a" if not np.isfinite(v) else f"{v:.3g}" if abs(v) >= 1e4
+                      else f"{v:.2f}" for v in values)
 
 
 #: A pole this close to the stability boundary (discrete time: |z| above 1 minus it;

@@ -136,8 +136,12 @@ def _widen(low, high, radius: float):
 def _coverage(rows, low, high):
     """Coverage (0..1, float32) of each pixel row (bottom edges ``rows``, a column) by
     the interval ``[low, high]`` of each column (NaN: empty)."""
-    low = np.nan_to_num(low.astype(np.float32), nan=-1.0)
-    high = np.nan_to_num(high.astype(np.float32), nan=-2.0)
+    # pixel rows far outside the image (a diverging simulation: 1e147) clipped to just
+    # beyond it before the float32 cast, which overflowed (numpy's warning reached the
+    # command line twice); coverage is the same for any row past the image
+    edge = float(rows[0, 0]) - 2.0, float(rows[-1, 0]) + 3.0
+    low = np.nan_to_num(np.clip(low, *edge).astype(np.float32), nan=-1.0)
+    high = np.nan_to_num(np.clip(high, *edge).astype(np.float32), nan=-2.0)
     cover = np.minimum(high, rows + np.float32(1.0))
     cover -= np.maximum(low, rows)
     return np.clip(cover, 0.0, 1.0, out=cover)
