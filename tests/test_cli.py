@@ -335,6 +335,10 @@ def test_convert_to_every_target(identified, tmp_path, capsys):
                "bilinear")[0] == 0
     assert subid.StateSpace.load(tmp_path / "m_ct_dt0.08.json").allclose(model, atol=1e-10)
     assert run(capsys, "convert", base, "--to", "mat")[0] == 0
+    # the way back does not replace the JSON model beside it unasked (its info would go)
+    code, _, stderr = run(capsys, "convert", tmp_path / "m.mat", "--to", "json")
+    assert code == 2 and "exists" in stderr and "--out" in stderr
+    assert run(capsys, "convert", base, "--to", "mat")[0] == 2      # m.mat exists now
     assert load_mat(tmp_path / "m.mat").allclose(model, rtol=0, atol=0)
     assert run(capsys, "convert", tmp_path / "m.mat", "--to", "json", "--out",
                tmp_path / "back.json")[0] == 0

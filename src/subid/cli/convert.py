@@ -29,7 +29,9 @@ from subid.cli._shared import _about, _common, _echo, _state, cli, load_model
 @click.option("--dt", type=float, default=None,
               help="Sampling period for a .mat model whose Ts is -1 (unspecified).")
 @click.option("--out", default=None, metavar="FILE",
-              help="Output file (default: next to MODEL, named after the target).")
+              help="Output file (default: next to MODEL, named after the target; a model "
+                   "file of that name already there, .json or .mat, is not replaced "
+                   "unless named here).")
 @_common
 def convert(model_path, target, conversion, dt, out):
     """Convert MODEL (subid JSON or MATLAB .mat) to another time base or format."""
@@ -55,6 +57,13 @@ def convert(model_path, target, conversion, dt, out):
         to, path = t, out or f"{stem}.{t}"
         if t == "json" and os.path.abspath(path) == os.path.abspath(model_path):
             raise click.UsageError(f"{model_path} is already a JSON model; give --out")
+        if out is None and os.path.exists(path):
+            # the default name is another model file of the same stem: the model.json of
+            # `subid identify` (its info: operating point, diagnostics) beside the .mat
+            # converted from it, or a MATLAB file beside the JSON; not replaced unasked
+            raise click.UsageError(f"{path} exists (the default output of --to {t} for "
+                                   f"{model_path}); give --out FILE to write elsewhere, or "
+                                   f"--out {path} to replace it")
     elif t in ("control", "scipy"):
         to, path = t, out or f"{stem}_{t}.py"
     else:
