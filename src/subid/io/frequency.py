@@ -406,11 +406,12 @@ def _matlab_frequencies(shown: str, w, unit, time_unit):
     """MATLAB's ``Frequency`` in ``FrequencyUnit`` (and ``TimeUnit``) as rad per time unit."""
     seconds = 1.0
     if time_unit is not None and _text_of(time_unit):
-        seconds = seconds_per(_text_of(time_unit))
-        if seconds is None:
+        known = seconds_per(_text_of(time_unit))
+        if known is None:
             raise FileReadError(f"{shown}: unknown TimeUnit {_text_of(time_unit)!r}; use "
                                 "seconds, milliseconds, minutes, hours, ... (or convert the "
                                 "model in MATLAB with chgTimeUnit)", path=shown)
+        seconds = known
     name = "rad/TimeUnit" if unit is None or not _text_of(unit) else _text_of(unit)
     factor = frequency_factor(name, seconds)
     if factor is None:
