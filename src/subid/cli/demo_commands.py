@@ -28,7 +28,10 @@ from subid.io._files import atomic_directory, write_bytes
 @_FREQ
 @_common
 def demo(out, names, methods, jobs, frequency_unit):
-    """Identify the bundled DaISy datasets with every available method.
+    """Identify the bundled DaISy datasets with the batch methods (fast ones by default).
+
+    By default every one but the slow polynomial armax, oe and bj (--methods
+    names them to run them too).
 
     Each record: means removed, identified on the first 70 %, fit % on the
     last 30 %. Writes one HTML report per dataset, index.html linking them,
@@ -74,7 +77,10 @@ def demo(out, names, methods, jobs, frequency_unit):
               help="Comma-separated subset of the bundled datasets (default: all).")
 @_common
 def gallery(out, names):
-    """Write the gallery table: fit % of every discrete-time method on every dataset."""
+    """Write the gallery table: fit % of the demo's default methods on every dataset.
+
+    The discrete-time batch methods but armax, oe and bj, and ct_subspace.
+    """
     import subid.cli.demo as demo_module
     text, rows = demo_module.gallery(datasets=_names(names), progress=_state().progress)
     directory = os.path.dirname(os.path.abspath(out))

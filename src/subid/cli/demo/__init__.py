@@ -1,7 +1,8 @@
 """The job behind ``subid demo`` (and ``make demo``): the bundled DaISy datasets.
 
 For each bundled dataset: remove the means, identify on the first 70 % of
-the record with every available batch method (order chosen automatically),
+the record with every available batch method but the slow polynomial ``armax``,
+``oe`` and ``bj`` (order chosen automatically),
 and measure the simulation fit on the last 30 %. :func:`run` writes one HTML
 report per dataset (:mod:`subid.evaluation.report`), ``index.html`` linking them all,
 ``gallery.md`` (the table of ``docs/gallery.md``) and ``summary.json``.
@@ -74,7 +75,7 @@ def evaluate(name: str, methods=None, fraction: float = FRACTION):
         A bundled dataset (:func:`subid.datasets.names`).
     methods : list of str, optional
         Registry names (:data:`subid.registry.METHODS`) of batch methods; default
-        every available one.
+        every available one but ``armax``, ``oe`` and ``bj`` (:data:`SLOW_METHODS`).
     fraction : float
         Share of the record used for identification.
 
@@ -347,7 +348,8 @@ def gallery(datasets=None, methods=None, progress=False):
     datasets : list of str, optional
         Default: every bundled dataset.
     methods : list of str, optional
-        Default: every available discrete-time batch method and ``ct``.
+        Default: every available discrete-time batch method but ``armax``, ``oe``
+        and ``bj``, and ``ct``.
     progress : bool
         Show a progress bar (tqdm) over the datasets.
 
@@ -560,7 +562,8 @@ def run(out, datasets=None, methods=None, *, frequency_unit="rad/s", progress=Fa
     datasets : list of str, optional
         Default: every bundled dataset.
     methods : list of str, optional
-        Batch methods of the registry; default every available one.
+        Batch methods of the registry; default every available one but ``armax``,
+        ``oe`` and ``bj`` (:data:`SLOW_METHODS`).
     frequency_unit : {'rad/s', 'Hz'}
     progress : bool
         Progress bar over the datasets.

@@ -67,7 +67,8 @@ Beyond the paper
   of the model simulated from the input alone replace ``y_f``'s own rows in
   the SVD (iterated). They are functions of the input only, uncorrelated with
   output noise of any colour, so range(O) is consistent.
-* Output-error refinement (``refine=True``): Levenberg-Marquardt on the raw
+* Output-error refinement (``refine=True``; the default ``'auto'`` keeps it
+  where the cross-validation folds prefer it): Levenberg-Marquardt on the raw
   output samples over (A, C) in local coordinates transversal to the state
   basis, with B, D, x0 eliminated by linear least squares (variable
   projection). It turns the consistent subspace estimate into the
