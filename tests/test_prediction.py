@@ -286,3 +286,24 @@ def test_simulation_residuals_of_coloured_noise_are_not_white(true_model, record
     with pytest.warns(NoiseModelWarning):
         res = subid.residuals(deterministic, fresh, max_lag=20)
     assert res["kind"] == "simulation" and not res["whiteness_ok"]
+
+
+def test_free_responses_of_a_predictor_whose_powers_grow_are_accurate():
+    """A stable predictor whose powers first grow (a near-integrator with a large Kalman
+    gain, as identify's refined model of DaISy robot_arm, ||A^k|| up to 2e5): its free
+    responses by repeated squaring lost the small late powers to the rounding of the
+    large ones, and predict's one-step errors came out 4x the covariance a plain
+    recursion from the same initial state gives. Built here: rotated Jordan blocks
+    (powers up to 2e8, then decaying to 2e-3); squaring gave inf."""
+    from subid.model.prediction import _free_blocks_discrete
+    rng = np.random.default_rng(0)
+    Q, _ = np.linalg.qr(rng.standard_normal((4, 4)))
+    J = np.array([[0.95, 2e3, 0, 0], [0, 0.95, 2e3, 0], [0, 0, 0.9, 0], [0, 0, 0, 0.5]])
+    A, C = Q @ J @ Q.T, rng.standard_normal((1, 4))
+    sequential = [C]
+    for _ in range(999):
+        sequential.append(sequential[-1] @ A)
+    sequential = np.array(sequential)
+    free = np.concatenate([F for _, _, F in _free_blocks_discrete(A, C, 1000)])
+    np.testing.assert_allclose(free[600:], sequential[600:], rtol=1e-9,
+                               atol=1e-9 * np.abs(sequential[600:]).max())
