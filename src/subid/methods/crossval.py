@@ -14,8 +14,6 @@ import them from here.
 
 from __future__ import annotations
 
-import contextlib
-import contextvars
 import math
 import warnings
 
@@ -26,7 +24,7 @@ from subid.errors import SubidError
 __all__ = ["HORIZON_CANDIDATES", "MAX_ORDER", "ABSOLUTE_TOLERANCE", "FLOOR",
            "MAX_SELECTION_SAMPLES", "MEMORY", "MAX_HORIZON", "SELECTION_RULES",
            "AUTO_ORDER_RULE", "folds", "experiment_folds", "feasible_horizons",
-           "response_memory", "longer_horizon", "standard_horizons", "next_block",
+           "response_memory", "longer_horizon", "next_block",
            "selection_part",
            "SAMPLES_PER_PARAMETER", "fold_score", "criterion", "select"]
 
@@ -184,25 +182,6 @@ def response_memory(data, lag: int) -> float:
     return float(rho[lag:].max(axis=0).sum() / peak) if peak > 0 else 0.0
 
 
-_STANDARD_ONLY = contextvars.ContextVar("subid_standard_horizons", default=False)
-
-
-@contextlib.contextmanager
-def standard_horizons():
-    """Within the block (this thread or task) the search stays at
-    :data:`HORIZON_CANDIDATES` (:func:`longer_horizon` tries none past them): the
-    discrete-time reference of :func:`subid.ct_subspace`, whose basis-filter estimates
-    are made for fast sampling (with longer horizons its N4SID reference won the folds
-    of 5 of 50 runs of tests/test_ct_defaults.py's coloured-noise Monte Carlo and biased
-    the frequency response there: z = 2.1 at 2 rad/s, median largest error 0.080 against
-    0.072)."""
-    token = _STANDARD_ONLY.set(True)
-    try:
-        yield
-    finally:
-        _STANDARD_ONLY.reset(token)
-
-
 def longer_horizon(data, chosen: int, largest: int, n_train: int, n_inputs: int,
                    n_outputs: int, blocks: int, n_experiments: int = 1):
     """The next horizon of the search, or None: twice the ``largest`` searched, when the
@@ -210,11 +189,9 @@ def longer_horizon(data, chosen: int, largest: int, n_train: int, n_inputs: int,
     (:func:`response_memory` at least :data:`MEMORY`), the last horizon tried past
     :data:`HORIZON_CANDIDATES` (if any) is the ``chosen`` one, it is at most
     :data:`MAX_HORIZON` and the training folds support it (:func:`feasible_horizons`);
-    None within :func:`standard_horizons`. The first step does not ask the largest
+    The first step does not ask the largest
     candidate to win: on an oversampled record the fit need not grow with the horizon
     until the horizon spans the dynamics (10 may beat 20, and 160 both by 30 points)."""
-    if _STANDARD_ONLY.get():
-        return None
     f = 2 * largest
     if (largest > max(HORIZON_CANDIDATES) and chosen != largest) or f > MAX_HORIZON \
             or response_memory(data, largest) < MEMORY:
