@@ -120,3 +120,16 @@ def _reason(exc: BaseException) -> str:
     if len(text) > 160:
         text = text[:160] + "..."
     return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
+
+
+def first_non_finite(values: np.ndarray):
+    """Where the (rows, columns) array ``values`` holds NaN or inf: ``None`` when it is
+    finite, else ``(row, column, count, rows)``: the first such cell (its row, then its
+    column), the number of such values and the number of rows holding them (the
+    readers' messages name the first and count the rest)."""
+    finite = np.isfinite(values)
+    if finite.all():
+        return None
+    bad_rows = np.flatnonzero(~finite.all(axis=1))
+    row = int(bad_rows[0])
+    return row, int(np.flatnonzero(~finite[row])[0]), int((~finite).sum()), bad_rows.size

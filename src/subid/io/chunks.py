@@ -22,6 +22,7 @@ from subid.io._common import (
     _listing,
     _read_bytes,
     _reason,
+    first_non_finite,
 )
 from subid.io._files import open_regular
 from subid.io._npz import NpzError
@@ -445,20 +446,17 @@ def _check_rows_finite(values: np.ndarray, first: int, shown: str, labels, nan: 
     columns named by ``labels``), naming the file, the row in the file and the
     column, as the text reader does with lines (``nan`` says what a NaN is
     called: ``'NaN'``, or ``'null or NaN'`` for Parquet)."""
-    finite = np.isfinite(values)
-    if finite.all():
+    found = first_non_finite(values)
+    if found is None:
         return
-    bad_rows = np.flatnonzero(~finite.all(axis=1))
-    row = int(bad_rows[0])
-    j = int(np.flatnonzero(~finite[row])[0])
+    row, j, n_bad, n_rows = found
     value = values[row, j]
     text = nan if np.isnan(value) else ("inf" if value > 0 else "-inf")
-    n_bad = int((~finite).sum())
     last = first + values.shape[0] - 1
     raise DataError(
         f"{shown}, row {first + row} (0-based), {labels[j]}: {text} is not a finite number "
-        f"({n_bad} NaN or infinite value{'s' if n_bad != 1 else ''} in {bad_rows.size} "
-        f"row{'s' if bad_rows.size != 1 else ''} of the selected columns among rows "
+        f"({n_bad} NaN or infinite value{'s' if n_bad != 1 else ''} in {n_rows} "
+        f"row{'s' if n_rows != 1 else ''} of the selected columns among rows "
         f"{first}-{last}); remove or interpolate them before identification")
 
 

@@ -24,6 +24,7 @@ from subid.io._common import (
     _check_line_lengths,
     _listing,
     _read_bytes,
+    first_non_finite,
 )
 
 logger = logging.getLogger(__name__)
@@ -408,21 +409,18 @@ class _Table:
         return msg
 
     def check_finite(self, values: np.ndarray, cols: list[int]) -> None:
-        finite = np.isfinite(values)
-        if finite.all():
+        found = first_non_finite(values)
+        if found is None:
             return
-        bad_rows = np.flatnonzero(~finite.all(axis=1))
-        row = int(bad_rows[0])
-        j = int(np.flatnonzero(~finite[row])[0])
+        row, j, n_bad, n_rows = found
         idx = cols[j]
         linenos, contents = self.data_lines()
         lineno = linenos[row]
         text = _split(contents[row], self.delim)[idx]
-        n_bad = int((~finite).sum())
         raise DataError(
             f"{self.shown}, line {lineno}, {self.describe(idx)}: {text!r} is not a finite "
             f"number ({n_bad} NaN or infinite value{'s' if n_bad != 1 else ''} in "
-            f"{bad_rows.size} row{'s' if bad_rows.size != 1 else ''} of the selected columns); "
+            f"{n_rows} row{'s' if n_rows != 1 else ''} of the selected columns); "
             "remove or interpolate them before identification")
 
 
