@@ -133,3 +133,19 @@ def test_ct_spacing_below_time_stamp_resolution_is_named():
     data = subid.IOData(u, ct.simulate(u, t=t - t[0]), t=t)
     with pytest.raises(subid.errors.DataError, match="rows 199, 200.*Subtract the start time"):
         subid.ct_subspace(data, 2)
+
+
+def test_fit_percent_from_a_non_zero_initial_state_is_scale_invariant():
+    """The initial-state regression weighs the outputs by 1/std: above 1e153 the
+    spread overflowed to inf, the weights became 0 and x0 silently 0 (the fit of a record
+    starting away from rest fell from 96.9 to the x0 = 0 fit). subid.data.column_std
+    rescales such channels first."""
+    true = subid.systems.random_system(3, 2, 2, seed=1)
+    data = subid.systems.simulate_data(true, 1000, seed=1, output_snr_db=30,
+                                       x0=np.array([5.0, -3.0, 2.0]))[50:]
+    model = subid.moesp(data, 3)
+    reference = subid.fit_percent(model, data)
+    for s in (1e153, 1e300):
+        scaled = subid.StateSpace(model.A, model.B, model.C * s, model.D * s, model.dt)
+        np.testing.assert_allclose(subid.fit_percent(scaled, data.scaled(outputs=[s, s])),
+                                   reference, atol=1e-9)
