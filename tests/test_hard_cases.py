@@ -154,3 +154,19 @@ def test_records_too_short_for_the_folds_use_the_whole_record(method):
     tiny = subid.systems.simulate_data(true, 8, seed=1)
     with pytest.raises(subid.errors.SubidError, match="8 samples"):
         method(tiny)
+
+
+def test_a_step_late_in_the_record_is_not_called_a_zero_input():
+    """A step at sample 700 of 1400: the first cross-validation fold's input is all
+    zero, and the default call raised "the input is identically zero ... needs order 20"
+    about the whole record. The folds are then skipped for the whole record's singular
+    values (info['order_selection']['reason']); the step response is fitted."""
+    true = systems.random_system(3, 1, 1, seed=40, pole_radius=(0.5, 0.9))
+    u = np.zeros(1400)
+    u[700:] = 1.0
+    y = true.simulate(u).reshape(-1) + 0.01 * np.random.default_rng(0).standard_normal(1400)
+    data = subid.IOData(u, y)
+    for method in (subid.moesp, subid.identify):
+        model = method(data)
+        assert "poorly excited" in model.info["order_selection"]["reason"]
+        assert subid.fit_percent(model, data).mean() > 95

@@ -37,7 +37,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from subid.errors import OrderError, TooFewSamplesError
+from subid.errors import NotExcitingError, OrderError, TooFewSamplesError
 from subid.methods._common import choose_order
 from subid.methods._info import collect_warnings
 from subid.methods.dt._subspace import (
@@ -290,14 +290,17 @@ def run(method: SubspaceMethod, data, order, horizon, *, selection: str,
             check_data(data, plan.method)
             try:
                 problem, model, estimator, rule = choose(data, plan, pipeline)
-            except (TooFewSamplesError, OrderError) as exc:
+            except (TooFewSamplesError, OrderError, NotExcitingError) as exc:
                 # the folds (three quarters of the record each) are too short for the
-                # horizon the order needs, the whole record is not: its singular values
-                # decide, as selection='gap' (a record too short for that too raises
-                # the error of the whole record, which names its own length)
-                too_short = (f"the record ({data.n_samples} samples) is too short for the "
-                             f"cross-validation folds ({exc}); the largest gap of the whole "
-                             "record's singular values decides instead")
+                # horizon the order needs, or a fold's inputs do not excite it (a step
+                # late in the record: the first fold's input is zero), the whole record
+                # is not: its singular values decide, as selection='gap' (a record too
+                # short or too poorly excited for that too raises the error of the whole
+                # record, which names its own length and excitation)
+                too_short = (f"the record ({data.n_samples} samples) is too short or too "
+                             f"poorly excited for the cross-validation folds ({exc}); the "
+                             "largest gap of the whole record's singular values decides "
+                             "instead")
                 plan = replace(plan, selection="gap", cross_validate=False,
                                estimator_choice="fit" if len(plan.estimators) > 1 else None)
                 pipeline = Pipeline(method, plan)
