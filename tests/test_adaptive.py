@@ -1091,3 +1091,11 @@ def test_channels_far_above_size_one_are_named_in_the_warning():
     small = subid.AdaptiveIdentifier(2, 1, 2, dt=noisy.dt)
     small.update(noisy.u, noisy.y)
     assert min(subid.fit_percent(small.model, noisy)) > 90
+    # the input alone in other units fails the excitation test instead: the same cure
+    loud = subid.AdaptiveIdentifier(2, 1, 2, dt=noisy.dt)
+    loud.update(noisy.scaled(inputs=[1e3]).u, noisy.y)
+    with _warnings.catch_warnings(record=True) as caught:
+        _warnings.simplefilter("always")
+        loud.model
+    text = " ".join(str(w.message) for w in caught)
+    assert "not unit-free" in text and "data.scaled" in text

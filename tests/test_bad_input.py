@@ -157,8 +157,15 @@ def test_bad_selector():
 def test_wrong_delimiter_is_named(tmp_path):
     path = tmp_path / "semi.csv"
     path.write_text("u;y\n1;2\n3;4\n5;6\n")
-    with pytest.raises(errors.FileReadError, match="delimiter"):
+    # the hint itself (the temporary folder's name holds "delimiter" too)
+    with pytest.raises(errors.FileReadError, match="is the delimiter right.*delimiter=';'"):
         subid.read(path, inputs=0, outputs=1, delimiter=",")
+    with pytest.raises(errors.FileReadError, match="is the delimiter right"):
+        subid.read(path, inputs="u", outputs="y", delimiter=",")
+    bars = tmp_path / "bars.csv"
+    bars.write_text("u|y\n1|2\n3|4\n5|6\n")
+    with pytest.raises(errors.FileReadError, match="delimiter='\\|'"):
+        subid.read(bars, inputs="u", outputs="y")
 
 
 def test_unstable_model_from_stable_data_warns():

@@ -275,3 +275,23 @@ def test_checkpoints_of_the_previous_format_still_load(name):
     for key in "ABCD":
         np.testing.assert_allclose(getattr(model, key), want[key], rtol=1e-9, atol=1e-10,
                                    err_msg=key)
+
+
+def test_a_plain_subclass_of_an_identifier_restores_through_the_base_class(tmp_path):
+    """OnlineIdentifier.load found only classes defining load themselves: a plain
+    subclass of RecursiveSubspace (inheriting load) saved a checkpoint that
+    OnlineIdentifier.load (and so check_online_identifier's checkpoint sub-check)
+    refused as 'no online identifier of this version of subid'."""
+    import numpy as np
+
+    import subid
+
+    class Plain(subid.RecursiveSubspace):
+        pass
+
+    data = subid.systems.simulate_data(subid.systems.seed001_system(), 400, seed=1)
+    ident = Plain(3, 2, 2, horizon=5).update(data.u, data.y)
+    ident.save(tmp_path / "plain.npz")
+    back = subid.OnlineIdentifier.load(tmp_path / "plain.npz")
+    assert type(back) is Plain
+    np.testing.assert_array_equal(back.model.A, ident.model.A)

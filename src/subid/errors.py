@@ -26,6 +26,9 @@ __all__ = [
     "NotConvergedWarning",
     "DelayWarning",
     "ConversionWarning",
+    "OffsetWarning",
+    "FeedbackWarning",
+    "SamplingWarning",
     "OptionError",
 ]
 

@@ -526,9 +526,12 @@ def check_batch_method(method, *, checks=None, full: bool = False) -> dict:
 
     Parameters
     ----------
-    method : str, MethodSpec or callable
+    method : str, MethodSpec or registered function
         A registry name (``'moesp'``), a :class:`~subid.registry.MethodSpec` (a method not
-        registered yet), or a registered function.
+        registered yet: its module and function importable), or a registered function
+        (an unregistered callable is an ``OptionError``). The ``keyword_only`` and
+        ``unknown_option`` sub-checks expect subid's boundary: an unknown or positional
+        option raises :class:`~subid.errors.OptionError`, not Python's ``TypeError``.
     checks : iterable of str, optional
         Run only these sub-checks (default all).
     full : bool

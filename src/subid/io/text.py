@@ -247,9 +247,24 @@ class _Table:
         if self.header is None:
             return (f"the file has no header row, so columns are selected by 0-based index: "
                     f"{self.ncols} column{'s' if self.ncols != 1 else ''}, indices 0 to "
-                    f"{self.ncols - 1}")
+                    f"{self.ncols - 1}{self.delimiter_hint()}")
         return "available columns: " + _listing(
-            f"{k} {n!r}" if n else f"{k} (no name)" for k, n in enumerate(self.header))
+            f"{k} {n!r}" if n else f"{k} (no name)" for k, n in enumerate(self.header)) \
+            + self.delimiter_hint()
+
+    def delimiter_hint(self) -> str:
+        """When the file was split into one column but its first line holds another
+        usual delimiter: ``' (is the delimiter right? ...)'`` naming it, else ``''``."""
+        if self.ncols != 1 or not self.lines:
+            return ""
+        first = self.lines[0]
+        for other in (";", ",", "\t", "|"):
+            if other != self.delim and other in first:
+                name = _delim_name(other)
+                return (f" (is the delimiter right? it was taken to be "
+                        f"{_delim_name(self.delim)}, and the first line holds {name}: pass "
+                        f"delimiter={other!r}, on the command line --delimiter {other!r})")
+        return ""
 
     # -- column selection ----------------------------------------------------
     def resolve(self, spec, role: str) -> list[int]:
@@ -285,7 +300,8 @@ class _Table:
                 raise FileReadError(
                     f"{shown}: column index {idx} in {role} is out of range: the file has "
                     f"{self.ncols} column{'s' if self.ncols != 1 else ''} (indices 0 to "
-                    f"{self.ncols - 1}, counted from 0)", path=shown, column=idx)
+                    f"{self.ncols - 1}, counted from 0){self.delimiter_hint()}", path=shown,
+                    column=idx)
             if idx in cols:
                 raise FileReadError(f"{shown}: {self.describe(idx)} is selected twice in {role}",
                                     path=shown, column=idx)
@@ -398,8 +414,8 @@ class _Table:
         msg += (f"{s!r} is not a number" if len(s) <= 60 else
                 f"{s[:40]!r}... ({len(s)} characters) is not a number")
         if _DECIMAL_COMMA_RE.fullmatch(s):
-            msg += (" (a decimal comma: pass decimal=',', --decimal , on the command line, "
-                    "with a field delimiter other than ',')")
+            # the command line rewrites decimal=',' as its --decimal , (cli_hint)
+            msg += " (a decimal comma: pass decimal=',' and a field delimiter other than ',')"
         elif self.header is not None and lineno == self.first_data:
             _, contents = self.data_lines()
             if not any(_is_number(f.strip().strip('"')) for f in _split(contents[0],

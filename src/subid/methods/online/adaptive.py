@@ -157,6 +157,13 @@ def _positive(value, name: str, *, exc=SubidError) -> float:
     return value
 
 
+#: The end of both not-converged reasons: the regressions' normalisation 1 + |phi|^2 fixes
+#: a signal size, so channels far from size one (an input in other units: fits of -1.8 %
+#: where the same record gives 95 %) look like a poor input too.
+_UNITS_CURE = (". Channels far above size one hold it back too (1 + |phi|^2 is not "
+               "unit-free): data.scaled(...) or remove their offsets")
+
+
 class AdaptiveIdentifier(OnlineIdentifier):
     """Online identification of a continuous-time state-space model (seed 000).
 
@@ -639,7 +646,7 @@ class AdaptiveIdentifier(OnlineIdentifier):
                     f"{info['condition']:.3g}), so the data do not determine (A, C). Give an "
                     f"input sufficiently rich of order horizon + order = {self._f + self._n} "
                     "(Theorem 1 of the paper), e.g. white noise or a multisine with enough "
-                    "frequencies in the system's band")
+                    "frequencies in the system's band" + _UNITS_CURE)
         if not info["bd_started"]:
             return (head + f"the relative residual of the shift equation (13) is {res:.3g} "
                     f"(gate {self._gate:g}) or the estimated A is not Hurwitz. Give it more "
@@ -647,8 +654,7 @@ class AdaptiveIdentifier(OnlineIdentifier):
                         "; with output noise use method='iv' (the default), which is "
                         "consistent" if self._method != "iv" else
                         "; with output noise, a longer memory (smaller forgetting)")
-                    + ". Channels far above size one hold it back too (1 + |phi|^2 is "
-                      "not unit-free): data.scaled(...) or remove their offsets")
+                    + _UNITS_CURE)
         if self._st["ist"][_k.IST["rejected"]]:
             why = (f"shift residual {res:.3g}, or A not Hurwitz" if info["excited"] else
                    "the data are no longer persistently exciting")

@@ -229,7 +229,10 @@ class OnlineIdentifier(abc.ABC):
                 continue
             seen.add(sub)
             pending.extend(sub.__subclasses__())
-            if "load" in vars(sub) and found in sub._kinds():
+            # a class with a load of its own or inherited from an identifier (not this
+            # dispatcher): a plain subclass of RecursiveSubspace reads its checkpoints
+            if getattr(sub.load, "__func__", None) is not OnlineIdentifier.load.__func__ \
+                    and found in sub._kinds():
                 return sub.load(path)
         raise CheckpointError(f"{path} is a checkpoint of {found[:80]!r}, which no online "
                               f"identifier of this version of subid reads", path=path)
