@@ -58,7 +58,7 @@ def test_fit_percent_is_scale_invariant(exponent):
     """fit_percent returned NaN for outputs near 1e300 (inf / inf)."""
     m = systems.seed001_system()
     data = systems.simulate_data(m, 200, seed=0, output_snr_db=20)
-    from subid.evaluation.metrics import fit_percent     # not an attribute before import
+    from subid.evaluation.metrics import fit_percent  # not an attribute before import
     ref = fit_percent(m, data, x0="zero")
     scale = 10.0 ** exponent
     scaled = subid.IOData(data.u, data.y * scale, dt=data.dt)
