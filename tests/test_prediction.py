@@ -307,3 +307,19 @@ def test_free_responses_of_a_predictor_whose_powers_grow_are_accurate():
     free = np.concatenate([F for _, _, F in _free_blocks_discrete(A, C, 1000)])
     np.testing.assert_allclose(free[600:], sequential[600:], rtol=1e-9,
                                atol=1e-9 * np.abs(sequential[600:]).max())
+
+
+def test_an_unstable_predictor_is_refused_before_it_overflows():
+    """A - K C with spectral radius 2.5 on 300 samples: predict returned values of 1e101,
+    fit_percent -1e102 % and residuals a whiteness verdict, silently; the error naming
+    the unstable predictor came only once the values overflowed (2000 samples)."""
+    model = subid.StateSpace([[0.5]], [[1.0]], [[1.0]], [[0.0]], 1.0, K=[[3.0]],
+                             noise_cov=[[1.0]])
+    rng = np.random.default_rng(0)
+    data = subid.IOData(rng.standard_normal(300), rng.standard_normal(300))
+    for call in (lambda: subid.predict(model, data, 1),
+                 lambda: subid.fit_percent(model, data, steps=1),
+                 lambda: subid.residuals(model, data)):
+        with pytest.raises(subid.errors.DataError, match="Kalman predictor A - K C is unstable"):
+            call()
+    assert np.isfinite(subid.fit_percent(model, data)).all()        # the simulation is fine

@@ -531,6 +531,15 @@ def predict(model, data, steps=1, x0=None, *, return_x0=False, output_std=None):
         y_hat, x0v = simulate_fit(model, data, x0=x0, output_std=output_std)
         return (y_hat, x0v) if return_x0 else y_hat
     u, y = effective_input(model, data.u), data.y        # the model's input delays
+    if k != math.inf and model.order:
+        with np.errstate(all="ignore"):
+            Ap = model.A - model.K @ model.C
+            rho_p = float(np.abs(np.linalg.eigvals(Ap)).max()) if np.isfinite(Ap).all() \
+                else math.inf
+        if rho_p >= 1.0:
+            # refused before it overflows: a short record gave finite values of 1e101 and
+            # fits of -1e102 % without a word (the error came only past the overflow)
+            raise DataError(f"the {k}-step prediction diverges: {_divergence_cause(model, k)}")
     try:
         with np.errstate(over="ignore", invalid="ignore"):
             if isinstance(x0, str) and x0 == "estimate":
