@@ -117,9 +117,10 @@ def ls_subspace(data, order=None, *, horizon=None, instruments="past", selector=
         (:class:`subid.HankelStatistic`, depth ``2*horizon`` with instruments,
         ``horizon`` without): identification then uses the statistic only.
     order : int, None, 'auto' or iterable of int
-        Model order n. ``None`` (or ``'auto'``) chooses it among 1..10 (as
-        far as the horizon allows) by ``selection``; an iterable gives the
-        candidate orders.
+        Model order n. ``None`` (or ``'auto'``) chooses it by ``selection``:
+        among 1..10 (as far as the horizon allows) and on past 10 while the best
+        is among the last orders tried (:mod:`subid.methods.dt.selection`); an
+        iterable gives the candidate orders.
     horizon : int, optional
         Future horizon f (block rows of Y); the instruments use f past block
         rows too. Default: implied by ``selector`` when one is given; else

@@ -79,8 +79,9 @@ def pbsid(data, order=None, *, horizon=None, selection="cv", stability="auto",
         Uniformly sampled input/output record, or its statistic (depth
         ``2*horizon``; :class:`subid.HankelStatistic`).
     order : int, None, 'auto' or iterable of int
-        Model order; ``None`` (or ``'auto'``) chooses it among 1..10 by
-        ``selection``; an iterable gives the candidate orders.
+        Model order; ``None`` (or ``'auto'``) chooses it by ``selection``: among
+        1..10 and on past 10 while the best is among the last orders tried
+        (:mod:`subid.methods.dt.selection`); an iterable gives the candidate orders.
     horizon : int, optional
         Past window ``p`` and future window ``f`` (``p = f``). Default: chosen
         with the order among 10 and 20 (as far as the record allows) by
