@@ -231,7 +231,8 @@ class OnlineIdentifier(abc.ABC):
             pending.extend(sub.__subclasses__())
             # a class with a load of its own or inherited from an identifier (not this
             # dispatcher): a plain subclass of RecursiveSubspace reads its checkpoints
-            if getattr(sub.load, "__func__", None) is not OnlineIdentifier.load.__func__ \
+            dispatcher = getattr(OnlineIdentifier.load, "__func__", None)
+            if getattr(sub.load, "__func__", None) is not dispatcher \
                     and found in sub._kinds():
                 return sub.load(path)
         raise CheckpointError(f"{path} is a checkpoint of {found[:80]!r}, which no online "
