@@ -503,7 +503,7 @@ def test_simulate_and_simulation_bounds_restart_at_each_experiment():
     np.testing.assert_array_equal(y, np.vstack([model.simulate(d1.u, x0=x0[0]),
                                                 model.simulate(d2.u, x0=x0[1])]))
     np.testing.assert_array_equal(x[400], x0[1])
-    with pytest.raises(subid.errors.DataError, match="one row per experiment"):
+    with pytest.raises(subid.errors.DataError, match="one initial state per experiment"):
         model.simulate(merged, x0=x0[0])
     bounds = subid.simulation_bounds(model, merged, x0=x0)
     np.testing.assert_allclose(bounds.value, y, atol=1e-12)

@@ -8,7 +8,7 @@ import numbers
 
 import numpy as np
 
-from subid.errors import ModelError
+from subid.errors import DataError, ModelError
 
 _EPS = np.finfo(np.float64).eps
 
@@ -130,3 +130,75 @@ def _is_scalar_zero(value) -> bool:
     if isinstance(value, np.ndarray):
         return value.ndim == 0 and value.dtype.kind in "iuf" and value == 0
     return isinstance(value, (numbers.Number, np.generic)) and value == 0
+
+
+def check_x0(x0, order: int, n_experiments: int = 1, *, estimate: bool = True):
+    """The initial-state argument ``x0`` of the evaluation functions, checked once.
+
+    The one validator of :func:`predict`, :func:`simulate_fit`,
+    :func:`subid.fit_percent`, :func:`subid.residuals`, the figures and
+    :func:`subid.simulation_bounds`, so that they accept the same values.
+
+    Parameters
+    ----------
+    x0 : None, 'estimate', 'zero', 0 or array_like
+        None or ``'estimate'``: the least-squares initial state (only with
+        ``estimate=True``; otherwise None means zero); ``'zero'`` or the
+        number 0: the zero state; an array: the initial state, of shape
+        ``(order,)`` (a column or row of ``order`` entries is read as that),
+        or ``(n_experiments, order)`` for a record of several experiments.
+    order : int
+        The model order n.
+    n_experiments : int
+        Number of experiments of the record.
+    estimate : bool
+        Whether the caller can estimate the initial state from data.
+
+    Returns
+    -------
+    'estimate', 'zero' or ndarray
+        An array of shape ``(order,)``, or ``(n_experiments, order)`` when
+        ``n_experiments > 1``, of finite floats.
+
+    Raises
+    ------
+    DataError
+        ``x0`` is none of these (the message names what is accepted).
+    """
+    several = n_experiments > 1
+    shape = (n_experiments, order) if several else (order,)
+    modes = "'estimate' (or None), 'zero' (or 0)" if estimate else "None, 'zero' (or 0)"
+    whose = (f"one initial state per experiment of the {n_experiments}" if several
+             else "the initial state, n = the model order")
+    accepted = f"x0 must be {modes} or an array of shape {shape} ({whose})"
+    if x0 is None:
+        return "estimate" if estimate else "zero"
+    if isinstance(x0, str):
+        if x0 == "zero" or (x0 == "estimate" and estimate):
+            return x0
+        raise DataError(f"{accepted}; got the string {x0!r}")
+    if isinstance(x0, (bool, np.bool_)):
+        raise DataError(f"{accepted}; got {x0!r}")
+    if isinstance(x0, numbers.Number) or (isinstance(x0, np.ndarray) and x0.ndim == 0):
+        if isinstance(x0, numbers.Real) or getattr(x0, "dtype", np.dtype(object)).kind in "iuf":
+            if x0 == 0:
+                return "zero"
+        raise DataError(f"{accepted}; got the number {x0!r} (only 0 stands for the zero "
+                        "state)")
+    try:
+        arr = np.asarray(x0)
+    except (TypeError, ValueError):        # ragged nested sequences
+        raise DataError(f"{accepted}; got a {type(x0).__name__} that is not an array"
+                        ) from None
+    if arr.dtype.kind not in "iuf":
+        raise DataError(f"{accepted} of real numbers; got an array of dtype {arr.dtype}")
+    if not several and arr.ndim == 2 and 1 in arr.shape and arr.size == order:
+        arr = arr.reshape(-1)              # a column or a row of the n entries
+    if arr.shape != shape:
+        raise DataError(f"{accepted}; got shape {arr.shape}")
+    arr = np.array(arr, dtype=np.float64)
+    if not np.isfinite(arr).all():
+        raise DataError("initial state x0 has NaN or infinite entries; give finite values "
+                        "or x0='estimate'" if estimate else
+                        "initial state x0 has NaN or infinite entries; give finite values")
+    return arr

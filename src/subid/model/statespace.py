@@ -63,6 +63,7 @@ from subid.model._checks import (
     _names,
     _noise_matrices,
     _plural,
+    check_x0,
 )
 
 __all__ = ["StateSpace"]
@@ -385,8 +386,11 @@ class StateSpace:
                 raise DataError("pass either an IOData record or time stamps t, not both: "
                                 "the record carries its own time stamps")
             if u.n_experiments > 1:
+                # zeros, or one row per experiment (the evaluation functions' validator)
+                rows = check_x0(x0, self.order, u.n_experiments, estimate=False)
+                rows = [None] * u.n_experiments if isinstance(rows, str) else list(rows)
                 parts = [self.simulate(e, x0=x, hold=hold, return_state=True)
-                         for e, x in zip(u.experiments, self._experiment_x0(x0, u))]
+                         for e, x in zip(u.experiments, rows)]
                 y, x = np.vstack([p[0] for p in parts]), np.vstack([p[1] for p in parts])
                 return (y, x) if return_state else y
             data = u
@@ -432,19 +436,6 @@ class StateSpace:
             u = effective_input(self, u)                         # info['input_delay']
             y, x = _simulate.simulate_discrete(self._A, self._B, self._C, self._D, u, x0)
         return (y, x) if return_state else y
-
-    def _experiment_x0(self, x0, data) -> list:
-        """The initial state of each experiment of ``data`` (several): zeros, or the
-        rows of an array of shape ``(n_experiments, n)``."""
-        k, n = data.n_experiments, self.order
-        if x0 is None:
-            return [None] * k
-        arr = np.asarray(x0)
-        if arr.shape != (k, n):
-            raise DataError(f"the record holds {k} experiments (subid.merge): x0 must have "
-                            f"one row per experiment, shape ({k}, {n}) (as model.info['x0'] "
-                            f"of a model identified from it), got shape {arr.shape}")
-        return list(arr)
 
     def _check_x0(self, x0) -> np.ndarray:
         n = self.order
