@@ -111,6 +111,13 @@ def column_std(y: np.ndarray, block: int = 65536) -> np.ndarray:
     return std
 
 
+
+def column_spread(y: np.ndarray, block: int = 65536) -> np.ndarray:
+    """:func:`column_std` with a constant channel's 0 taken as 1: the scale by which the
+    methods divide (or weigh) each channel so that its units do not matter."""
+    std = column_std(y, block)
+    return np.where(std > 0, std, 1.0)
+
 class IOData:
     """A record of sampled inputs and outputs.
 

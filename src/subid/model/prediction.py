@@ -31,7 +31,7 @@ import scipy.linalg
 
 from subid._blas import serial_blas
 from subid._validation import checked_call, same_period
-from subid.data import IOData, column_std, not_a_record
+from subid.data import IOData, column_spread, column_std, not_a_record
 from subid.delay import effective_input, input_delay_of
 from subid.errors import DataError, ModelError, NoiseModelWarning
 from subid.model import _simulate
@@ -153,7 +153,6 @@ def _free_blocks_discrete(A, C, N, block=_SIM_BLOCK):
     # powers 2e5 times A's size before they decay) loses the small late powers to the
     # rounding of the large ones (predictions 1e-3 off on DaISy robot_arm's refined
     # model, 4x the one-step error covariance): then the powers one by one
-    limit = TRANSIENT_GROWTH
     sequential = False
     with np.errstate(over="ignore", invalid="ignore"):
         for a in range(0, N, block):
@@ -167,7 +166,7 @@ def _free_blocks_discrete(A, C, N, block=_SIM_BLOCK):
                 P[m:m + k] = P[:k] @ power
                 if k == m and m + k < length:
                     power = power @ power
-                    sequential = not np.abs(power).max() <= limit
+                    sequential = not np.abs(power).max() <= TRANSIENT_GROWTH
                 m += k
             if sequential:
                 step = np.eye(n)
@@ -344,7 +343,9 @@ def _x0_weights(y, output_std=None) -> np.ndarray:
     """The weights of the outputs in an initial-state regression: the inverse of each
     output's standard deviation (``output_std``, default that of ``y``; 1 for a
     constant output)."""
-    std = column_std(y) if output_std is None else np.asarray(output_std, dtype=float)
+    if output_std is None:
+        return 1.0 / column_spread(y)
+    std = np.asarray(output_std, dtype=float)
     return 1.0 / np.where(std > 0, std, 1.0)
 
 

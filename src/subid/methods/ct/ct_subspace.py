@@ -91,7 +91,7 @@ import numpy as np
 
 from subid._blas import serial_blas
 from subid._validation import check_bool, check_choice, check_int, checked_call
-from subid.data import column_std
+from subid.data import column_spread
 from subid.errors import (
     ConversionWarning,
     DataError,
@@ -689,8 +689,7 @@ def ct_subspace(data, order=None, *, basis=None, poly_order: int = 3, estimate_x
     # user's units (_in_user_units). Given filtered signals are used as they are.
     spread = None
     if filtered is None:
-        spread = column_std(data.y)
-        spread = np.where(spread > 0, spread, 1.0)
+        spread = column_spread(data.y)
         data = data.scaled(outputs=1.0 / spread)
     default_bank = basis is None and filtered is None
     if basis is None:

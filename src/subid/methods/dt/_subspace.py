@@ -18,7 +18,7 @@ import numpy as np
 import scipy.linalg
 
 from subid._validation import check_int
-from subid.data import IOData, column_std
+from subid.data import IOData, column_spread, column_std
 from subid.errors import (
     DataError,
     OptionError,
@@ -167,8 +167,7 @@ def output_weights(y: np.ndarray) -> np.ndarray:
     fit because of its units (a constant output cannot reach here:
     :func:`check_data` rejects it).
     """
-    std = column_std(y, block=8192)      # channel by channel from 8192 samples (cheaper)
-    return 1.0 / np.where(std > 0, std, 1.0)
+    return 1.0 / column_spread(y, block=8192)    # channel by channel, 8192 samples a block
 
 
 def b_d_fit(problem: "Problem", C_n, gamma, L11, L_yu, *, bd_method: str, feedthrough: bool,

@@ -58,7 +58,7 @@ import scipy.optimize
 
 from subid._blas import serial_blas
 from subid._validation import check_optimiser_options, checked_call, same_period
-from subid.data import IOData, column_std, not_a_record
+from subid.data import IOData, column_spread, not_a_record
 from subid.delay import delay_inputs, input_delay_of, record_delay
 from subid.errors import DataError, FeedbackWarning, ModelError, NoiseModelWarning, OptionError
 from subid.methods._info import records_warnings
@@ -471,7 +471,7 @@ def _pem_dt(data, model, focus, max_iterations, tolerance, rounds, feedthrough, 
     stopped on ``ftol`` at a whitened cost of 0.018 with a Markov error of 0.04 where the
     same start in the record's own units reached 1e-23 and 9e-14 (issue 21's units
     contract; a prediction focus)."""
-    su, sy = _spreads(data.u), _spreads(data.y)
+    su, sy = column_spread(data.u), column_spread(data.y)
     if np.all(su == 1.0) and np.all(sy == 1.0):
         return _pem_dt_scaled(data, model, focus, max_iterations, tolerance, rounds,
                               feedthrough, precision=precision, noise_model=noise_model)
@@ -479,27 +479,21 @@ def _pem_dt(data, model, focus, max_iterations, tolerance, rounds, feedthrough, 
                              _in_channel_units(model, su, sy), focus, max_iterations,
                              tolerance, rounds, feedthrough, precision=precision,
                              noise_model=noise_model)
-    return _in_channel_units(refined, 1.0 / su, 1.0 / sy, info=refined.info)
+    return _in_channel_units(refined, 1.0 / su, 1.0 / sy)
 
 
-def _spreads(signal) -> np.ndarray:
-    """The standard deviation of each channel (1 for a constant one)."""
-    std = column_std(signal)
-    return np.where(std > 0, std, 1.0)
-
-
-def _in_channel_units(model, su, sy, *, info=None):
+def _in_channel_units(model, su, sy):
     """``model`` for the channels ``u / su`` and ``y / sy``: ``B diag(su)``,
     ``diag(1/sy) C``, ``diag(1/sy) D diag(su)``, ``K diag(sy)``, the innovation
-    covariance ``diag(1/sy) Σ diag(1/sy)``; A and the state (x0) unchanged. With
-    ``1/su``, ``1/sy``: back. ``info``: the result's (default the model's own)."""
+    covariance ``diag(1/sy) Σ diag(1/sy)``; A, the state (x0) and ``info`` unchanged.
+    With ``1/su``, ``1/sy``: back."""
     K = None if model.K is None else model.K * sy[None, :]
     S = None if model.noise_cov is None else \
         np.asarray(model.noise_cov) / np.outer(sy, sy)
     return StateSpace(model.A, model.B * su[None, :], model.C / sy[:, None],
                       model.D * su[None, :] / sy[:, None], model.dt, K=K, noise_cov=S,
                       input_names=model.input_names, output_names=model.output_names,
-                      info=dict(model.info if info is None else info), hold=model.hold)
+                      info=dict(model.info), hold=model.hold)
 
 
 def _pem_dt_scaled(data, model, focus, max_iterations, tolerance, rounds, feedthrough, *,
