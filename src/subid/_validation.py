@@ -171,18 +171,23 @@ def as_chunk(values, channels: int, name: str, *, allow_empty: bool = False,
 HUGE_VALUE = 1e150
 
 
-def check_magnitude(values: np.ndarray, name: str) -> None:
+def check_magnitude(values: np.ndarray, name: str, channels=None) -> None:
     """Raise :class:`DataError` when a sample of the finite (N, channels) array
-    ``values`` exceeds :data:`HUGE_VALUE` in magnitude, naming the channel and row: its
-    square overflows (a 1e200 in one sample, or ``DBL_MAX`` as a missing-value marker,
-    broke an online identifier's statistic for good, silently)."""
+    ``values`` exceeds :data:`HUGE_VALUE` in magnitude, naming the channel (by its name
+    in ``channels`` when given) and row: its square overflows (a 1e200 in one sample, or
+    ``DBL_MAX`` as a missing-value marker, broke an online identifier's statistic for
+    good, silently). The batch methods' check too
+    (:func:`subid.methods.dt.checks.check_data`); two whole-array reductions when the
+    values are within range."""
     if not values.size or (-HUGE_VALUE <= values.min() and values.max() <= HUGE_VALUE):
         return
     row, column = np.unravel_index(int(np.argmax(np.abs(values))), values.shape)
-    raise DataError(f"{name} reaches {values[row, column]:.3g} at row {row}, channel "
-                    f"{column}: squares and products of such values overflow double "
-                    "precision; is it a missing-value marker? remove it, or express the "
-                    "channel in other units (divide it by a constant)")
+    which = f"{name} {channels[column]}" if channels is not None else name
+    where = f"row {row}" if channels is not None else f"row {row}, channel {column}"
+    raise DataError(f"{which} reaches {values[row, column]:.3g} at {where}: squares and "
+                    "products of such values overflow double precision; is it a "
+                    "missing-value marker? remove it, or express the channel in other units "
+                    "(divide it by a constant) and scale the model back")
 
 
 def check_unmasked(values: np.ma.MaskedArray, name: str) -> None:

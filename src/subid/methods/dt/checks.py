@@ -9,7 +9,7 @@ import warnings
 import numpy as np
 import scipy.special
 
-from subid._validation import HUGE_VALUE
+from subid._validation import check_magnitude
 from subid.data import IOData, column_std, column_sums, not_a_record
 from subid.errors import DataError, NotExcitingError, OffsetWarning
 
@@ -22,19 +22,8 @@ def check_data(data, method: str) -> IOData:
         raise DataError(f"{method} identifies a discrete-time model and needs uniformly "
                         "sampled data; these time stamps are non-uniform "
                         "(use a continuous-time method for them)")
-    for name, signal, names in (("input", data.u, data.input_names),
-                                ("output", data.y, data.output_names)):
-        if not signal.size or max(abs(float(signal.max())), abs(float(signal.min()))) \
-                <= HUGE_VALUE:       # whole-array reductions: cheap on long records
-            continue
-        peak = np.abs(signal).max(axis=0)
-        huge = np.flatnonzero(peak > HUGE_VALUE)
-        if huge.size:
-            k = int(huge[0])
-            raise DataError(f"{name} {names[k]} reaches {peak[k]:.3g}: squares and products "
-                            "of such values overflow double precision in the identification; "
-                            "express the channel in other units (divide it by a constant) "
-                            "and scale the model back")
+    check_magnitude(data.u, "input", data.input_names)
+    check_magnitude(data.y, "output", data.output_names)
     check_offsets(data.u, data.input_names, method)
     warn_offsets(data)
     flat = [k for k, column in enumerate(data.y.T) if column.max() == column.min()]
