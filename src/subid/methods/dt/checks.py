@@ -89,10 +89,10 @@ def warn_offsets(data: IOData) -> None:
     deviations: ``moesp`` chose order 4 and validated at 59.5 / 70.2 %, against 96.8 /
     96.9 % detrended, and the feedback test fired on this open-loop record; a staircase of
     steps from rest (means 3.3 standard deviations) validates alike raw and detrended. On
-    DaISy records (``moesp``, first 2/3 to estimate): steamgen warns, 72.9 % raw against
-    76.3 % detrended; exchanger warns, 64.7 % raw against 62.3 % (hence "compare", not
-    "remove"); dryer does not warn (its offsets pass the intercept test), 86.8 % raw
-    against 89.6 %."""
+    DaISy records (``moesp``, first 2/3 to estimate; re-measured in session 21): steamgen
+    warns, 72.9 % raw against 76.0 % detrended; exchanger warns, 64.6 % raw against 57.4 %
+    (hence "compare", not "remove"); dryer does not warn (its offsets pass the intercept
+    test), 86.8 % raw against 89.6 % (session 20)."""
     worst = None
     # the last OFFSET_MOMENT_SAMPLES samples at most (12 ms of every check of a 2 x 2
     # record of 10^6 samples otherwise, against a pinned call of 130 ms)
