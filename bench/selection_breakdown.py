@@ -27,7 +27,7 @@ import warnings
 def main(argv):
     warnings.simplefilter("ignore")
     import subid
-    from subid.methods.dt import _lag_fit, pipeline
+    from subid.methods.dt import _lag_fit, choice, pipeline
     from subid.methods.dt import selection as sel
     from subid.methods.dt.moesp import Moesp
 
@@ -58,8 +58,8 @@ def main(argv):
     timed(_lag_fit, "merged", "lag products of the folds (merged FFTs)")
     timed(sel, "fold_factors", "fold statistics (fold_factors)")
     timed(pipeline.Pipeline, "prepare_fold", "fold problems (prepare_fold)")
-    timed(sel, "innovation_check", "innovation check")
-    timed(sel, "unrepaired_choice", "final model (both estimators)")
+    timed(choice, "innovation_check", "innovation check")
+    timed(choice, "unrepaired_choice", "final model (both estimators)")
     timed(Moesp, "decompose")
     timed(pipeline, "resolve_feedthrough")
     b_d_x0, fold_score = pipeline.b_d_x0, pipeline.Pipeline.fold_score

@@ -9,7 +9,7 @@ estimator), the validation fit of the model refitted to the whole estimation rec
 every candidate (``method(est, n, horizon=f, system_matrices=...)``), the order of the
 innovation BIC of bench/selection.py, and the innovation BIC of the method's own models
 at the horizon and estimator of the cross-validated choice (the cross-validated BIC
-alone, before :func:`subid.methods.dt.selection.innovation_check`), every order: from the
+alone, before :func:`subid.methods.dt.choice.innovation_check`), every order: from the
 innovation
 covariance the model carries (``noise_cov``, from the Hankel factor) and from its
 one-step prediction errors on the estimation record. ``table`` then applies every
@@ -176,7 +176,7 @@ def _params(n, nu, ny):
 def today_rule(case):
     """The cross-validated choice (:func:`subid.methods.crossval.select`, the
     cross-validated BIC), before the innovation check of
-    :func:`subid.methods.dt.selection.innovation_check` (the rule marked "the default")."""
+    :func:`subid.methods.dt.choice.innovation_check` (the rule marked "the default")."""
     keyed = {_key(c): c for c in case["candidates"]}
     best = select({k: c["folds"] for k, c in keyed.items()}, case["samples"], case["nu"],
                   case["ny"])[0]
@@ -480,21 +480,21 @@ def cost(args):
     import statistics
     import time
 
-    import subid.methods.dt.selection as selection
-    check = selection.innovation_check
+    import subid.methods.dt.choice as choice
+    check = choice.innovation_check
     true = subid.systems.random_system(4, 2, 2, seed=3)
     for n_samples in (1000, 10000, 100000):
         data = subid.systems.simulate_data(true, n_samples, seed=1, output_snr_db=20)
         times = {True: [], False: []}
         for _ in range(3):
             for on in (True, False):
-                selection.innovation_check = check if on else (lambda d, r, f, c: c)
+                choice.innovation_check = check if on else (lambda d, r, f, c: c)
                 start = time.process_time()
                 with warnings.catch_warnings():
                     warnings.simplefilter("ignore")
                     subid.moesp(data)
                 times[on].append(time.process_time() - start)
-        selection.innovation_check = check
+        choice.innovation_check = check
         with_, without = statistics.median(times[True]), statistics.median(times[False])
         print(f"N = {n_samples}: with {with_:.3f} s, without {without:.3f} s, "
               f"ratio {with_ / without:.2f}")

@@ -11,6 +11,7 @@ import subid
 from subid import systems
 from subid.errors import DataError, OptionError
 from subid.methods import crossval
+from subid.methods.dt import choice as _choice
 from subid.methods.dt import selection as _selection
 from subid.methods.dt.feedthrough import decide
 
@@ -463,12 +464,12 @@ def test_innovation_bic_equals_an_explicit_kalman_predictor():
     # normalising each output by its spread shifts ln det by sum ln var(y)
     expected = N * (np.log(np.linalg.det(E.T @ E / N)) - np.sum(np.log(np.var(data.y, axis=0)))) \
         + (3 * (2 + 4) + 4) * np.log(N)
-    assert _selection.innovation_bic(model, data) == pytest.approx(expected, rel=1e-9)
-    assert _selection.innovation_bic(model.with_noise_model(None, None), data) is None
+    assert _choice.innovation_bic(model, data) == pytest.approx(expected, rel=1e-9)
+    assert _choice.innovation_bic(model.with_noise_model(None, None), data) is None
     # noise-free: every order from the true one up predicts to rounding; the floor
     # leaves the parameters to decide
     exact = systems.simulate_data(true, 600, seed=2, process_snr_db=None)
-    low, high = (_selection.innovation_bic(subid.n4sid(exact, n, horizon=10), exact)
+    low, high = (_choice.innovation_bic(subid.n4sid(exact, n, horizon=10), exact)
                  for n in (3, 5))
     assert high - low == pytest.approx(2 * (2 + 4) * np.log(600), rel=1e-9)
 
@@ -503,7 +504,7 @@ def test_innovation_check_is_vetoed_by_the_fold_scores(monkeypatch, favoured):
     its best candidate's mean fold score is not lower; it runs only when some higher
     order scores as well on the folds."""
     sign = -1.0 if favoured == "highest" else 1.0
-    monkeypatch.setattr(_selection, "innovation_bic", lambda m, d, spread=None: sign * m.order)
+    monkeypatch.setattr(_choice, "innovation_bic", lambda m, d, spread=None: sign * m.order)
     true = systems.random_system(3, 1, 2, seed=5)
     data = systems.simulate_data(true, 800, seed=6, output_snr_db=25)
     with warnings.catch_warnings():

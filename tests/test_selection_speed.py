@@ -15,7 +15,7 @@ import subid
 from subid import systems
 from subid._kernel_args import frozen, read_only
 from subid.methods.dt import _regression as regression
-from subid.methods.dt import _scoring, selection
+from subid.methods.dt import _scoring, choice, selection
 from subid.methods.dt import _subspace as subspace
 from subid.methods.dt.pipeline import Pipeline
 from subid.model.fit import fit_percent
@@ -341,7 +341,7 @@ def test_pinned_calls_make_no_fold_fits(monkeypatch):
         fold_fits.append(1)
         return real_fold(self, *args, **kwargs)
 
-    monkeypatch.setattr(selection, "cross_validate", counting)
+    monkeypatch.setattr(choice, "cross_validate", counting)
     monkeypatch.setattr(Pipeline, "prepare_fold", counting_fold)
     model = subid.n4sid(data, 4, horizon=8)
     for method in (subid.moesp, subid.ls_subspace):

@@ -88,8 +88,8 @@ def _batch():
     HankelStatistic(2, 2, 4, kind="gram").update(u, y).factor()    # long records, streams
     select_structure(IOData(u, y), max_order=2)            # arx's structure search
     # the order search's innovation check: its prediction errors and Kalman gains
+    from subid.methods.dt.choice import innovation_bic
     from subid.methods.dt.noise_model import riccati_by_doubling
-    from subid.methods.dt.selection import innovation_bic
     model = seed001_system()
     innovation_bic(model.with_noise_model(np.zeros((model.order, 2)), np.eye(2)), IOData(u, y))
     riccati_by_doubling(0.5 * np.eye(2), np.eye(2), np.eye(2), np.eye(2), np.zeros((2, 2)))

@@ -1,7 +1,7 @@
 """Compiled kernels of the order selection's innovation check.
 
 **Prediction errors.**
-The order selection's innovation check (:func:`subid.methods.dt.selection.innovation_bic`)
+The order selection's innovation check (:func:`subid.methods.dt.choice.innovation_bic`)
 needs, for the model of every order, only ``E^T E``, the sum over the record of the
 products of the one-step prediction errors ``e(t) = y(t) - C x̂(t) - D u(t)`` of the
 Kalman predictor ``x̂(t+1) = (A - K C) x̂(t) + (B - K D) u(t) + K y(t)`` from

@@ -92,7 +92,7 @@ def _projections(hf: HankelFactor, p: int):
     along the future inputs, with ``p`` and ``p + 1`` past block rows. They depend on
     the factor only, not on the model: computed once per factor object and ``p``
     (:meth:`subid.statistic._hankel.HankelFactor.derived`), for the models of every
-    order fitted on it (:func:`subid.methods.dt.selection.innovation_check`)."""
+    order fitted on it (:func:`subid.methods.dt.choice.innovation_check`)."""
     def compute():
         s = hf.depth
         o_p = _oblique(hf, hf.y_rows(p, s), hf.u_rows(p, s),
@@ -132,7 +132,7 @@ def riccati_by_doubling(A, C, Q, R, S):
     1e-10, unstable A included). A few small products per iteration instead of the QZ
     decomposition of a ``2 n + ny`` pencil and its checks (about 4x faster at n = 10,
     seven iterations): used where the gain is only scored
-    (:func:`subid.methods.dt.selection.innovation_check`). None when ``R`` is
+    (:func:`subid.methods.dt.choice.innovation_check`). None when ``R`` is
     singular, an iterate is not finite or the iteration does not settle within
     :data:`DOUBLING_ITERATIONS` (the caller then solves by QZ)."""
     try:
@@ -377,7 +377,7 @@ def attach_noise_model(model, problem, *, doubling: bool = False):
         The prepared problem it was identified from (its Hankel factor).
     doubling : bool
         The Riccati equation by doubling (:func:`innovation_model`): for models that
-        are only scored (:func:`subid.methods.dt.selection.innovation_check`, which
+        are only scored (:func:`subid.methods.dt.choice.innovation_check`, which
         sums the prediction errors itself: ``noise_cov`` is then the Riccati ``Σ``).
 
     Returns

@@ -6,7 +6,7 @@ holding its validated options, with explicit steps. Its public function makes
 the object, then calls :func:`run`, which
 
 1. makes the :class:`subid.methods.dt.plan.Plan` (every default decided once);
-2. chooses the order and horizon (:func:`subid.methods.dt.selection.choose`,
+2. chooses the order and horizon (:func:`subid.methods.dt.choice.choose`,
    the one module that owns that choice, on the folds of the record) or takes
    them from the plan, and the estimator where the method offers several
    (:func:`subid.methods.dt.selection.estimator_by_fit` at the order and horizon
@@ -50,9 +50,10 @@ from subid.methods.dt._subspace import (
     stable_choice,
 )
 from subid.methods.dt.checks import check_data
+from subid.methods.dt.choice import choose
 from subid.methods.dt.feedthrough import resolve as resolve_feedthrough
 from subid.methods.dt.plan import Plan, make_plan
-from subid.methods.dt.selection import choose, enforced, estimator_by_fit, score_matrices
+from subid.methods.dt.selection import enforced, estimator_by_fit, score_matrices
 from subid.model.statespace import StateSpace
 
 
@@ -271,7 +272,7 @@ def run(method: SubspaceMethod, data, order, horizon, *, selection: str,
 
     With ``selection='cv'`` (default) and a raw record, an order or horizon not
     given is chosen by cross-validation on the record
-    (:func:`subid.methods.dt.selection.choose`); the model is then fitted to the
+    (:func:`subid.methods.dt.choice.choose`); the model is then fitted to the
     whole record with that choice, exactly as an explicit call would, the
     estimator (where the method offers several) chosen at that order and horizon
     by :func:`subid.methods.dt.selection.estimator_by_fit` (with a list of

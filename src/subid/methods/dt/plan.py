@@ -10,7 +10,7 @@ and the input delays, and whether the order/horizon/estimator choice is
 cross-validated. The pipeline (:func:`subid.methods.dt.pipeline.run`) then only
 follows the plan, and :meth:`Plan.info` gives the entries of ``model.info`` the
 plan decided. What needs the data themselves is computed where the plan says: the
-cross-validated choice (:func:`subid.methods.dt.selection.choose`), the horizon of
+cross-validated choice (:func:`subid.methods.dt.choice.choose`), the horizon of
 the gap rule (:func:`subid.methods.dt._subspace.check_order_horizon`, the smallest
 feasible of ``HORIZON_CANDIDATES``) and ``feedthrough='auto'``
 (:func:`subid.methods.dt.feedthrough.resolve`, once per problem).
@@ -59,7 +59,7 @@ class Plan:
     ``estimator_rule`` says why the choice was narrowed before the data were
     looked at (a long record), and ``cross_validate`` whether the order, horizon
     (and, with ``estimator_choice='cv'``, the estimator) are chosen by
-    :func:`subid.methods.dt.selection.choose`. ``estimator_choice`` says how the
+    :func:`subid.methods.dt.choice.choose`. ``estimator_choice`` says how the
     estimator is chosen among several: ``'fit'`` at the order and horizon used, by
     :func:`subid.methods.dt.selection.estimator_by_fit` (no fold fits), ``'cv'``
     with the candidate orders by the cross-validation (a list of candidate orders
