@@ -23,6 +23,27 @@ def _closed_loop(seed, n=3000):
 
 # -- feedthrough='auto' -----------------------------------------------------------------
 
+def test_feedthrough_dropped_under_a_false_feedback_alarm_is_warned_of():
+    """An open-loop record of the seed-001 plant (D != 0) on which the feedback test
+    raises a false alarm (p = 1.4e-4, as 1 % of open-loop records do): D = 0, but u(k)
+    explains 99-100 % of the one-step errors, so moesp and identify warn (FeedbackWarning)
+    and say to pass feedthrough=True; genuine closed loops (shares up to 0.37) do not."""
+    from subid.errors import FeedbackWarning
+    data = systems.simulate_data(systems.seed001_system(), 700, seed=37, output_snr_db=30)
+    with pytest.warns(FeedbackWarning, match="pass feedthrough=True"):
+        model = subid.moesp(data, 3, horizon=10)
+    assert model.info["feedthrough"]["feedback"]["detected"] and np.all(model.D == 0)
+    assert max(model.info["feedthrough"]["lag0_share"]) > 0.99
+    with pytest.warns(FeedbackWarning, match="identify: feedthrough='auto' set D = 0"):
+        subid.identify(data, 3, refine=False)
+    for seed in (1, 2):
+        _, closed = _closed_loop(seed)
+        with warnings.catch_warnings():
+            warnings.simplefilter("error", FeedbackWarning)
+            model = subid.n4sid(closed, 3, horizon=10)
+        assert model.info["feedthrough"]["feedback"]["detected"]
+
+
 def test_feedthrough_auto_sees_feedback_and_direct_terms():
     """Closed loop: feedback detected, D = 0; open loop: D estimated exactly when the
     plant has one (a test that fails if either F-test is wrong)."""

@@ -37,7 +37,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from subid.errors import NotExcitingError, OrderError, TooFewSamplesError
+from subid.errors import FeedbackWarning, NotExcitingError, OrderError, TooFewSamplesError
 from subid.methods._common import choose_order
 from subid.methods._info import collect_warnings
 from subid.methods.dt._subspace import (
@@ -51,6 +51,7 @@ from subid.methods.dt._subspace import (
 )
 from subid.methods.dt.checks import check_data
 from subid.methods.dt.choice import choose
+from subid.methods.dt.feedthrough import dropped_direct_term
 from subid.methods.dt.feedthrough import resolve as resolve_feedthrough
 from subid.methods.dt.plan import Plan, make_plan
 from subid.methods.dt.selection import enforced, estimator_by_fit, score_matrices
@@ -219,6 +220,8 @@ class Pipeline:
         :func:`subid.methods.dt._subspace.finish`."""
         method, plan = self.method, self.plan
         feedthrough, ft_record = resolve_feedthrough(plan.feedthrough, problem)
+        if (message := dropped_direct_term(ft_record)) is not None:
+            warnings.warn(message, FeedbackWarning, stacklevel=2)
         subspace = method.decompose(problem, feedthrough)
         n, order_selection = choose_order(problem.order, problem.candidates,
                                           subspace.profile, subspace.source)
