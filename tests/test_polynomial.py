@@ -223,6 +223,38 @@ def _bj_against_arx(runs):
 
 
 @pytest.mark.slow
+def _oversampled(n_samples):
+    """A 2nd-order plant (time constants 1 and 0.5 s, relative degree 2) sampled at
+    1 kHz: poles at 0.999 and 0.998, 40 dB output noise; ``(true, estimation,
+    validation)``."""
+    Ad, Bd, Cd, Dd, _ = scipy.signal.cont2discrete(
+        (np.diag([-1.0, -2.0]), np.ones((2, 1)), np.array([[1.0, -1.0]]), np.zeros((1, 1))),
+        0.001)
+    true = subid.StateSpace(Ad, Bd, Cd, Dd, 0.001)
+    est, val = systems.simulate_data(true, n_samples, seed=6, output_snr_db=40).split(0.7)
+    return true, est, val
+
+
+def test_oe_finds_the_poles_of_an_oversampled_plant():
+    """The starts' roots were pulled within 0.99, which put these poles at a double pole
+    0.99: the search ended on the stability boundary (a pole at 1) at 10^3 times the
+    optimum's criterion, 10.6 % validation fit; now at the level of pem from MOESP. The
+    default structure is the integer order MOESP chooses, with nk from estimate_delay."""
+    _, est, val = _oversampled(3000)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        model = subid.oe(est, (2, 2, 1))
+        assert subid.fit_percent(model, val)[0] > 95.0
+        assert model.info["starts_searched"][0] >= 2
+        assert np.all(np.abs(model.poles()) < 0.9995)
+        default = subid.oe(est)
+        n = subid.moesp(est).order
+    record = default.info["order_selection"]
+    assert record["rule"] == "subspace" and record["order"] == n
+    np.testing.assert_array_equal(default.info["orders"]["nf"], [[n]])
+    assert subid.fit_percent(default, val)[0] > 95.0
+
+
 def test_bj_beats_arx_on_box_jenkins_data_small():
     e_arx, e_bj = _bj_against_arx(4)
     assert e_bj <= 0.7 * e_arx, (e_arx, e_bj)
