@@ -59,3 +59,9 @@ def test_a_model_with_absorbed_delays_says_why_and_to_refit(refined):
     assert absorbed.order == refined.order + 3
     with pytest.raises(ModelError, match=r"absorb_delay adds a state.*subid\.pem\(data, model\)"):
         subid.parameter_covariance(absorbed)
+
+
+def test_step_bounds_of_a_huge_final_time_name_the_memory(refined):
+    from subid.errors import ResourceLimitError
+    with pytest.raises(ResourceLimitError, match="GiB"):
+        subid.step_bounds(refined, 1e9)

@@ -482,7 +482,7 @@ def check_channel_order(model_names, data_names, role: str, model: str) -> None:
     model : str
         The model file, for the message.
     """
-    from subid.model._checks import reordered
+    from subid.model.prediction import reordered
     model_names, data_names = [str(n) for n in model_names], [str(n) for n in data_names]
     if not reordered(model_names, data_names):
         return
