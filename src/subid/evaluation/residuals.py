@@ -214,19 +214,23 @@ def portmanteau(e, u, *, max_lag: int = 25, confidence: float = 0.99, ranges=Non
         return np.block([[r_u(k + b - a) for b in range(max_lag + 1)]
                          for a in range(max_lag + 1)])
 
-    phis = {k: r_phi(k) for k in range(0, window + 1)}
+    rs, rees = [], []
+    for i in range(ny):
+        Pe = _lagged(np.column_stack([e0[:, i] / scale[i], us]), ranges, max_lag)
+        # r_i: Σ_t u_j(t - τ) ε_i(t) / N, ordered as φ (lag-major, then input)
+        rs.append(np.concatenate([Pe[tau][0, 1:] for tau in range(max_lag + 1)]))
+        rees.append(Pe[:window + 1, 0, 0])
+    phi = r_phi(0)
+    covs = [ree[0] * phi for ree in rees]
+    for k in range(1, window + 1):                   # one R_φ(k) at a time
+        phi = r_phi(k)
+        phi = phi + phi.T
+        weight = 1.0 - k / (window + 1)
+        for i in range(ny):
+            covs[i] += weight * rees[i][k] * phi
     stats, dofs, ps = np.zeros(ny), np.zeros(ny, dtype=int), np.ones(ny)
     for i in range(ny):
-        ei = e0[:, i] / scale[i]
-        Pe = _lagged(np.column_stack([ei, us]), ranges, max_lag)
-        # r_i: Σ_t u_j(t - τ) ε_i(t) / N, ordered as φ (lag-major, then input)
-        r = np.concatenate([Pe[tau][0, 1:] for tau in range(max_lag + 1)])
-        ree = Pe[:window + 1, 0, 0]
-        cov = ree[0] * phis[0]
-        for k in range(1, window + 1):
-            weight = 1.0 - k / (window + 1)
-            cov = cov + weight * ree[k] * (phis[k] + phis[k].T)
-        stats[i], dofs[i] = _quadratic(r, cov)
+        stats[i], dofs[i] = _quadratic(rs[i], covs[i])
         stats[i] *= n
         ps[i] = float(chi2.sf(stats[i], dofs[i])) if dofs[i] else 1.0
     level = alpha / ny
