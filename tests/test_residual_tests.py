@@ -101,3 +101,15 @@ def test_huge_values_are_refused_with_a_message_to_rescale():
     data = subid.systems.simulate_innovation_data(true, 300, seed=4)
     with pytest.raises(DataError, match="overflow.*divide it by a constant"):
         subid.residuals(true, subid.IOData(data.u * 1e200, data.y * 1e200, dt=1.0))
+
+
+def test_the_figure_refuses_huge_values_with_the_same_message():
+    import matplotlib
+    matplotlib.use("Agg")
+    true = subid.systems.seed001_innovation_system()
+    data = subid.systems.simulate_data(true.with_noise_model(None, None), 300, seed=4)
+    huge = subid.IOData(data.u * 1e200, data.y * 1e200, dt=1.0)
+    for model in (true, true.with_noise_model(None, None)):
+        with pytest.raises(DataError, match="overflow") as err:
+            subid.plot.residuals(model, huge)
+        assert "diverges" not in str(err.value)
