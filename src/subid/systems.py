@@ -2,16 +2,44 @@
 
 from __future__ import annotations
 
+import math
+import numbers
+
 import numpy as np
 import scipy.linalg
 
-from subid._validation import check_int, check_seed
+from subid._validation import check_bool, check_dt, check_int, check_seed
 from subid.data import IOData
-from subid.errors import SubidError
+from subid.errors import ModelError, OptionError, SubidError
 from subid.model.statespace import StateSpace
 
 __all__ = ["seed000_system", "seed001_system", "random_system", "simulate_data",
            "seed001_innovation_system", "simulate_innovation_data"]
+
+
+def _real(value, name: str, *, low: float = -math.inf, high: float = math.inf,
+          low_open: bool = False, what: str = "") -> float:
+    """``value`` as a finite float in [low, high] (``(low, high]`` with ``low_open``);
+    else :class:`OptionError` naming it."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real) \
+            or not math.isfinite(float(value)) or not low <= float(value) <= high \
+            or (low_open and float(value) == low):
+        bound = ("" if low == -math.inf else f" {'>' if low_open else '>='} {low:g}") + \
+            ("" if high == math.inf else f"{' and' if low > -math.inf else ''} <= {high:g}")
+        raise OptionError(f"{name} must be a finite number{bound}{what}; got {value!r}"[:300])
+    return float(value)
+
+
+def _check_system(system, name: str = "system") -> StateSpace:
+    if not isinstance(system, StateSpace):
+        raise ModelError(f"{name} must be a subid.StateSpace, got {type(system).__name__}"
+                         + (" (load a model file with subid.load)"
+                            if isinstance(system, str) else ""))
+    return system
+
+
+def _check_snr(value, name: str):
+    return None if value is None else _real(value, name, what=" (dB), or None for no noise")
 
 
 def seed000_system() -> StateSpace:
@@ -47,6 +75,11 @@ def seed001_innovation_system(process_std: float = 0.3, measurement_std: float =
     ``A - K C`` is stable. ``feedthrough=False`` sets ``D = 0`` (closed-loop
     experiments).
     """
+    process_std = _real(process_std, "process_std", low=0.0)
+    measurement_std = _real(measurement_std, "measurement_std", low=0.0, low_open=True,
+                            what=" (the innovation covariance must be positive definite)")
+    dt = check_dt(dt)
+    feedthrough = check_bool(feedthrough, "feedthrough")
     base = seed001_system(dt)
     A, C = base.A, base.C
     n, ny = A.shape[0], C.shape[0]
@@ -81,7 +114,11 @@ def random_system(order: int, n_inputs: int, n_outputs: int, *, seed, dt: float 
     nu = check_int(n_inputs, "n_inputs")
     ny = check_int(n_outputs, "n_outputs")
     rng = np.random.default_rng(check_seed(seed))
-    r_lo, r_hi = pole_radius
+    r_lo, r_hi = _pole_radius(pole_radius)
+    dt = check_dt(dt)
+    feedthrough = check_bool(feedthrough, "feedthrough")
+    min_hsv_ratio = _real(min_hsv_ratio, "min_hsv_ratio", low=0.0, high=1.0)
+    min_pole_distance = _real(min_pole_distance, "min_pole_distance", low=0.0, high=2.0)
     for _ in range(1000):
         blocks, poles = [], []
         remaining = n
@@ -115,6 +152,21 @@ def random_system(order: int, n_inputs: int, n_outputs: int, *, seed, dt: float 
                      "relax min_hsv_ratio or min_pole_distance")
 
 
+def _pole_radius(pole_radius) -> tuple[float, float]:
+    """``(low, high)`` of :func:`random_system`: ``0 <= low <= high < 1``."""
+    message = ("pole_radius must be a pair (low, high) of pole magnitudes with "
+               "0 <= low <= high < 1 (random_system draws stable systems); got "
+               f"{pole_radius!r}"[:300])
+    try:
+        low, high = pole_radius
+        low, high = _real(low, "pole_radius"), _real(high, "pole_radius")
+    except (TypeError, ValueError):
+        raise OptionError(message) from None
+    if not 0.0 <= low <= high < 1.0:
+        raise OptionError(message)
+    return low, high
+
+
 def simulate_data(system: StateSpace, n_samples: int, *, seed, process_snr_db=None,
                   output_snr_db=None, x0=None, input_std: float = 1.0) -> IOData:
     """Simulate a discrete-time system driven by white Gaussian input.
@@ -136,9 +188,13 @@ def simulate_data(system: StateSpace, n_samples: int, *, seed, process_snr_db=No
     input_std : float
         Standard deviation of the input.
     """
+    _check_system(system)
     if system.dt <= 0:
         raise SubidError("simulate_data needs a discrete-time system; discretise it first")
     n_samples = check_int(n_samples, "n_samples")
+    process_snr_db = _check_snr(process_snr_db, "process_snr_db")
+    output_snr_db = _check_snr(output_snr_db, "output_snr_db")
+    input_std = _real(input_std, "input_std", low=0.0, low_open=True)
     rng = np.random.default_rng(check_seed(seed))
     u = input_std * rng.standard_normal((n_samples, system.n_inputs))
     y, x = system.simulate(u, x0=x0, return_state=True)
@@ -182,17 +238,30 @@ def simulate_innovation_data(system: StateSpace, n_samples: int, *, seed, noise_
     IOData
         ``u`` is the plant input (not the reference).
     """
+    _check_system(system)
     if system.dt <= 0 or system.K is None:
         raise SubidError("simulate_innovation_data needs a discrete-time system with a "
                          "Kalman gain K")
     n_samples = check_int(n_samples, "n_samples")
-    sigma = system.noise_cov if noise_cov is None else np.asarray(noise_cov, dtype=float)
+    input_std = _real(input_std, "input_std", low=0.0, low_open=True)
+    ny, nu = system.n_outputs, system.n_inputs
+    sigma = system.noise_cov if noise_cov is None else _matrix(noise_cov, "noise_cov", ny, ny)
     if sigma is None:
         raise SubidError("give noise_cov (the system has none)")
+    try:
+        factor = np.linalg.cholesky(sigma)
+    except np.linalg.LinAlgError:
+        factor = None
+    if factor is None or not np.allclose(sigma, sigma.T, rtol=1e-10,
+                                         atol=1e-12 * np.abs(sigma).max()):
+        raise OptionError("noise_cov must be a symmetric positive definite matrix (the "
+                          "covariance of the innovations); its eigenvalues are "
+                          f"{np.round(np.linalg.eigvals(sigma).real, 6).tolist()}"[:300])
+    if feedback is not None:
+        feedback = _matrix(feedback, "feedback", nu, ny, reshape=True)
     rng = np.random.default_rng(check_seed(seed))
-    ny, nu = system.n_outputs, system.n_inputs
     r = input_std * rng.standard_normal((n_samples, nu))
-    e = rng.standard_normal((n_samples, ny)) @ np.linalg.cholesky(sigma).T
+    e = rng.standard_normal((n_samples, ny)) @ factor.T
     A, B, C, D, K = system.A, system.B, system.C, system.D, system.K
     if feedback is None:
         aug = StateSpace(A, np.hstack([B, K]), C, np.hstack([D, np.eye(ny)]), system.dt)
@@ -208,3 +277,20 @@ def simulate_innovation_data(system: StateSpace, n_samples: int, *, seed, noise_
     y = aug.simulate(np.hstack([r, e]), x0=x0)
     u = r - y @ F.T
     return IOData(u, y, dt=system.dt)
+
+
+def _matrix(value, name: str, rows: int, cols: int, *, reshape: bool = False) -> np.ndarray:
+    """``value`` as a finite float (rows, cols) matrix (any array of rows*cols entries
+    with ``reshape``); else :class:`OptionError` naming the shape expected."""
+    try:
+        arr = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise OptionError(f"{name} must be a numeric {rows} x {cols} matrix, got "
+                          f"{type(value).__name__}") from None
+    if reshape and arr.size == rows * cols:
+        arr = arr.reshape(rows, cols)
+    if arr.shape != (rows, cols) or not np.isfinite(arr).all():
+        raise OptionError(f"{name} must be a finite {rows} x {cols} matrix, got shape "
+                          f"{arr.shape}" + ("" if np.isfinite(arr).all() else
+                                            " with non-finite entries"))
+    return arr

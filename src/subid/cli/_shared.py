@@ -482,9 +482,9 @@ def check_channel_order(model_names, data_names, role: str, model: str) -> None:
     model : str
         The model file, for the message.
     """
+    from subid.model.prediction import reordered
     model_names, data_names = [str(n) for n in model_names], [str(n) for n in data_names]
-    if data_names == model_names or sorted(data_names) != sorted(model_names) \
-            or len(set(model_names)) != len(model_names):
+    if not reordered(model_names, data_names):
         return
     raise DataError(f"--{role} {','.join(data_names)} are the {role} of {model} in another "
                     f"order (the model's: {','.join(model_names)}); the columns are matched "

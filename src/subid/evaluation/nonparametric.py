@@ -155,6 +155,23 @@ def _covariances(data, lags):
     return R / data.n_samples
 
 
+def _unit_scaled(data, name):
+    """``(scaled, back)``: ``data`` with each channel multiplied by the power of two that
+    brings its largest magnitude into [0.5, 1) (exact: no digit changes), and the factors
+    ``back[i, j]`` that turn a response of the scaled record into one of ``data``
+    (``G = G_scaled * back``). The spectra are then computed from numbers of order one:
+    at 1e200 their squares overflowed (NaN responses, reported as "FRData: response has
+    NaN values"), at 1e-300 they underflowed ("input spectrum singular")."""
+    peaks = [np.abs(x).max(axis=0) if x.shape[0] else np.ones(x.shape[1])
+             for x in (data.u, data.y)]
+    fu, fy = (np.ldexp(1.0, -np.frexp(np.where(p > 0, p, 1.0))[1]) for p in peaks)
+    if not (np.isfinite(fu).all() and np.isfinite(fy).all()):
+        raise DataError(f"{name}: a channel's values are all below 1e-307 in magnitude "
+                        "(subnormal numbers); express it in other units (multiply it by a "
+                        "constant) and scale the result back")
+    return data.scaled(inputs=fu, outputs=fy), fu[None, :] / fy[:, None]
+
+
 def _solve_right(S_yu, S_u):
     """``S_yu S_u^-1`` for every frequency (Hermitian ``S_u``)."""
     return np.conj(np.linalg.solve(S_u, np.conj(S_yu).transpose(0, 2, 1))).transpose(0, 2, 1)
@@ -214,6 +231,7 @@ def spa(data, window=None, w=None):
     True
     """
     _check(data, "spa")
+    data, back = _unit_scaled(data, "spa")
     N = data.n_samples
     if window is None:
         window = default_window_size(N)
@@ -256,7 +274,8 @@ def spa(data, window=None, w=None):
     inv_u = np.real(np.diagonal(np.linalg.solve(Phi_u, eye), axis1=1, axis2=2))  # [Φ_u^-1]_jj
     c_w = lag_w[0] ** 2 + 2 * np.sum(lag_w[1:] ** 2)
     std = np.sqrt(c_w / N * Phi_v[:, :, None] * np.maximum(inv_u, 0.0)[:, None, :])
-    return FRData(w, G, dt, std=std, coherence=coherence, input_names=data.input_names,
+    return FRData(w, G * back, dt, std=std * back, coherence=coherence,
+                  input_names=data.input_names,
                   output_names=data.output_names)
 
 
@@ -325,6 +344,7 @@ def etfe(data, smoothing=None):
     True
     """
     _check(data, "etfe")
+    data, back = _unit_scaled(data, "etfe")
     Y, U = _spectra(data)
     n_exp, L, nu = U.shape
     if L < 4:
@@ -341,7 +361,7 @@ def etfe(data, smoothing=None):
         S_u = np.einsum("ekj,ekl->kjl", Uk, np.conj(Uk))
         S_yu = np.einsum("eki,ekl->kil", Yk, np.conj(Uk))
         _check_input_spectrum(S_u, w, "etfe")
-        return FRData(w, _solve_right(S_yu, S_u), dt, **names)
+        return FRData(w, _solve_right(S_yu, S_u) * back, dt, **names)
     M = check_int(smoothing, "smoothing", minimum=1)
     if 2 * M + 1 > L:
         raise TooFewSamplesError(f"etfe: the smoothing window (2 x {M} + 1 bins) is wider "
@@ -370,4 +390,4 @@ def etfe(data, smoothing=None):
                                  .conj().transpose(0, 2, 1), axis1=1, axis2=2))
     std = np.sqrt(phi_v[:, :, None] * np.maximum(spread, 0.0)[:, None, :])
     coherence = np.clip(1.0 - resid / power, 0.0, 1.0)
-    return FRData(w, G, dt, std=std, coherence=coherence, **names)
+    return FRData(w, G * back, dt, std=std * back, coherence=coherence, **names)

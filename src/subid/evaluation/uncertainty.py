@@ -273,6 +273,16 @@ def _continuous_message(model) -> str:
             "per channel), as pem and the discrete-time methods need one")
 
 
+def _identify_reason(model) -> str | None:
+    """Why :func:`subid.identify` attached no covariance to ``model``
+    (``info['identify']['covariance']['reason']``), or None when it did not record one."""
+    record = model.info.get("identify")
+    entry = record.get("covariance") if isinstance(record, dict) else None
+    if isinstance(entry, dict) and entry.get("computed") is False and entry.get("reason"):
+        return str(entry["reason"])
+    return None
+
+
 @serial_blas
 @checked_call
 def parameter_covariance(model) -> ParameterCovariance:
@@ -307,6 +317,13 @@ def parameter_covariance(model) -> ParameterCovariance:
         note = model.info.get("parameter_covariance_note")
         if not note and _continuous_origin(model):
             raise ModelError(_continuous_message(model))
+        reason = _identify_reason(model)
+        if reason is not None:
+            advice = "" if "subid.pem" in reason else (
+                "; refine it with subid.pem(data, model), which attaches the covariance, "
+                "and ask for bounds on that model")
+            raise ModelError(f"the model has no parameter covariance: subid.identify attached "
+                             f"none because {reason}{advice}")
         method = model.info.get("method", "this method")
         why = note if note else (
             f"models estimated by {method} carry no parameter covariance"
@@ -336,20 +353,31 @@ def parameter_covariance(model) -> ParameterCovariance:
     if cov.parameters.shape != (expected,) or cov.factor.ndim != 2 \
             or cov.factor.shape[0] != expected:
         raise ModelError(f"info['parameter_covariance'] has {cov.parameters.size} parameters "
-                         f"(factor {cov.factor.shape}) but the model has {expected}")
+                         f"(factor {cov.factor.shape}) but the model has {expected} (order "
+                         f"{model.order}): the covariance belongs to the model before its "
+                         "order changed (subid.absorb_delay adds a state per delay sample; a "
+                         "reduction or conversion changes the matrices) and does not carry "
+                         "over. Ask for bounds on the model pem returned, or refit this one "
+                         "with subid.pem(data, model), which attaches its own covariance")
     own = [np.asarray(model.A), np.asarray(model.B), np.asarray(model.C)]
     if cov.with_feedthrough:
         own.append(np.asarray(model.D))
     if cov.with_gain:
         if model.K is None:
-            raise ModelError("the covariance includes K but the model has no Kalman gain")
+            raise ModelError("the covariance was computed for the model with its Kalman gain "
+                             "K, which this model no longer has (with_noise_model(None, None) "
+                             "removes it; to_continuous and to_discrete drop it), so it does "
+                             "not apply: ask for bounds on the model pem returned, or refit "
+                             "this one with subid.pem(data, model, focus='simulation'), which "
+                             "attaches the covariance of a model without K")
         own.append(np.asarray(model.K))
     own = np.concatenate([m.ravel() for m in own])
     if not np.allclose(own, cov.parameters, rtol=REALISATION_RTOL,
                        atol=REALISATION_RTOL * max(np.abs(own).max(), 1e-300)):
         raise ModelError("info['parameter_covariance'] belongs to other matrices than the "
                          "model's (it was transformed, converted or edited after pem); "
-                         "ask for bounds on the model pem returned")
+                         "ask for bounds on the model pem returned, or refit this one with "
+                         "subid.pem(data, model), which attaches its own covariance")
     return cov
 
 

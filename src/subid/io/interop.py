@@ -51,7 +51,7 @@ from subid._validation import check_choice, same_period
 # methods StateSpace.from_mat/to_mat and IOData.from_pandas/to_pandas use them, and this
 # module, above data, io and model, re-exports them.
 from subid.data import iodata_from_pandas, iodata_to_pandas, offset_kind
-from subid.errors import ModelError, OptionError
+from subid.errors import DataError, ModelError, OptionError
 from subid.io._files import write_bytes
 from subid.io.mat import write_mat_model
 from subid.model.statespace import StateSpace
@@ -145,6 +145,15 @@ D = np.array({D!r})
 '''
 
 
+def _check_model(model, where: str) -> None:
+    """Raise :class:`ModelError` unless ``model`` is a :class:`StateSpace`."""
+    from subid.model.statespace import StateSpace
+    if not isinstance(model, StateSpace):
+        raise ModelError(f"{where}: model must be a subid.StateSpace, got "
+                         f"{type(model).__name__}" + (" (load a model file with subid.load)"
+                                                      if isinstance(model, str) else ""))
+
+
 def operating_point(model, estimation=None):
     """The operating point a detrended model relates deviations from.
 
@@ -163,6 +172,11 @@ def operating_point(model, estimation=None):
         record; None when no constant was removed (no detrending, or a linear
         trend, which is no fixed operating point).
     """
+    _check_model(model, "operating_point")
+    from subid.data import IOData
+    if estimation is not None and not isinstance(estimation, IOData):
+        raise DataError(f"operating_point: estimation must be the estimation record (a "
+                        f"subid.IOData) or None, got {type(estimation).__name__}")
     info = model.info.get("data") if isinstance(model.info, dict) else None
     if isinstance(info, dict) and info.get("u_offset") is not None:
         if info.get("detrend", "constant") != "constant":
@@ -234,6 +248,7 @@ def python_source(model, target: str = "control", *, source: str = "a subid mode
         floats), ``sys``, and ``u0``, ``y0`` when the model relates deviations from
         an operating point (:func:`operating_point`).
     """
+    _check_model(model, "python_source")
     check_choice(target, "target", ("control", "scipy"))
     mats = {k: getattr(model, k).tolist() for k in "ABCD"}
     if target == "control":

@@ -23,7 +23,7 @@ import numbers
 import numpy as np
 
 from subid._validation import check_time_stamps
-from subid.errors import DataError
+from subid.errors import DataError, ResourceLimitError
 
 __all__ = ["response_times", "step_response", "impulse_response"]
 
@@ -31,6 +31,10 @@ __all__ = ["response_times", "step_response", "impulse_response"]
 CT_POINTS = 500
 # Bounds of the automatic horizon in samples (discrete time).
 MIN_SAMPLES, MAX_SAMPLES = 20, 20_000
+#: Most samples of a discrete-time response asked for by its final time: beyond, a
+#: :class:`~subid.errors.ResourceLimitError` names the memory (``step(1e9)`` with
+#: ``dt = 1`` ran into a MemoryError of 93 GiB in ``step_bounds``).
+MAX_RESPONSE_SAMPLES = 10_000_000
 
 
 def _default_final_time(model) -> float:
@@ -77,7 +81,16 @@ def response_times(model, t=None) -> np.ndarray:
         if not (math.isfinite(final) and final > 0):
             raise DataError(f"the final time t must be a positive number, got {t!r}")
         if model.dt > 0:
-            n = int(math.floor(final / model.dt * (1 + 1e-12))) + 1
+            samples = final / model.dt * (1 + 1e-12)
+            if samples >= MAX_RESPONSE_SAMPLES:
+                need = 8.0 * (samples + 1) * model.n_inputs * (model.n_outputs + 1)
+                raise ResourceLimitError(
+                    f"the final time t = {final:g} is {samples:.4g} samples of dt = "
+                    f"{model.dt:g}: the response alone needs {need / 2**30:.3g} GiB (its "
+                    f"bounds several times that); at most {MAX_RESPONSE_SAMPLES} samples "
+                    "are computed: give a shorter final time (the default is the settling "
+                    "time)")
+            n = int(math.floor(samples)) + 1
             return np.arange(max(n, 2)) * model.dt
         return np.linspace(0.0, final, CT_POINTS)
     arr = np.asarray(t)

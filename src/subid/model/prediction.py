@@ -35,10 +35,11 @@ from subid.data import IOData, column_spread, column_std, not_a_record
 from subid.delay import effective_input, input_delay_of
 from subid.errors import DataError, ModelError, NoiseModelWarning
 from subid.model import _simulate
-from subid.model._checks import check_x0
+from subid.model._checks import check_channel_order, check_x0, reordered
 from subid.model.statespace import StateSpace
 
 __all__ = ["predict", "prediction_errors", "simulate_fit", "check_model", "check_model_data",
+           "reordered",
            "check_x0", "experiment_x0"]
 
 # Beyond this many steps the k-step predictor of a model with a stable A uses the
@@ -65,6 +66,7 @@ def check_model_data(model, data) -> None:
     if (data.n_inputs, data.n_outputs) != (model.n_inputs, model.n_outputs):
         raise DataError(f"data have {data.n_inputs} inputs and {data.n_outputs} outputs but "
                         f"the model has {model.n_inputs} and {model.n_outputs}")
+    check_channel_order(model, data)
     if model.dt > 0:
         if not data.is_uniform or not same_period(data.dt, model.dt):
             raise DataError(f"the model is discrete with dt={model.dt} but the data are "

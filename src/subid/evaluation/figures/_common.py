@@ -117,6 +117,15 @@ def _method_of(model) -> str | None:
 def colors_for(entries) -> list[str]:
     """One distinct colour per entry: the method's colour (:data:`METHOD_COLORS`)
     when free, else the first unused one. ``entries``: (label, model or None)."""
+    from subid.errors import OptionError
+    try:
+        entries = [tuple(entry) for entry in entries]
+    except TypeError:
+        raise OptionError(f"colors_for takes (label, model) pairs, e.g. "
+                          f"colors_for(models.items()); got {type(entries).__name__}") from None
+    if any(len(entry) != 2 for entry in entries):
+        raise OptionError("colors_for takes (label, model) pairs (model None for a label "
+                          "without one), e.g. colors_for(models.items())")
     used: set[str] = set()
     out: list[str] = []
     for label, model in entries:
@@ -149,6 +158,9 @@ def _legend_beside(ax, handles=None, labels=None, ncol: int = 1):
 def is_unstable(model) -> bool:
     """True when a pole lies outside the unit circle (discrete time) or in the
     right half plane (continuous time); marginal poles count as unstable."""
+    from subid.model.statespace import StateSpace
+    if not isinstance(model, StateSpace):
+        raise ModelError(f"is_unstable needs a subid.StateSpace, got {type(model).__name__}")
     p = model.poles()
     return bool(np.any(np.abs(p) >= 1.0)) if model.dt > 0 else bool(np.any(p.real >= 0.0))
 
@@ -184,6 +196,14 @@ def _model_groups(models, labels=None) -> dict:
         except TypeError:
             raise ModelError(f"expected a StateSpace, a list or a dict of them, got "
                              f"{type(models).__name__}") from None
+    if isinstance(models, str):
+        raise ModelError(f"expected a StateSpace, a list or a dict of them, got the string "
+                         f"{models!r}"[:300] + ": load a model file with subid.load first")
+    for k, m in enumerate(items):
+        if not isinstance(m, StateSpace):
+            raise ModelError(f"model {k + 1} is a {type(m).__name__}, not a subid.StateSpace"
+                             + (" (load a model file with subid.load)"
+                                if isinstance(m, str) else ""))
     if labels is not None:
         labels = [str(v) for v in ([labels] if isinstance(labels, str) else labels)]
         if len(labels) != len(items):
@@ -295,9 +315,10 @@ def percent_fit(data, y_hat) -> np.ndarray:
 def predicted_output(model, data, steps, x0="estimate"):
     """``(y_hat, fit %)`` of the ``steps``-ahead prediction from ``x0`` (as in
     :func:`subid.predict`); NaN where it diverges. A malformed ``x0`` raises."""
-    from subid.model.prediction import check_model_data, check_x0, predict
+    from subid.model.prediction import _check_steps, check_model_data, check_x0, predict
     check_model_data(model, data)
     x0 = check_x0(x0, model.order, data.n_experiments)
+    steps = _check_steps(steps)                     # as predict: refused, not all NaN
     try:
         y_hat = predict(model, data, steps, x0)
     except DataError:

@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+import numbers
+
 import numpy as np
 
+from subid.errors import DataError, ModelError, OptionError
 from subid.evaluation.figures._common import (
     _legend_beside,
     _legend_room,
@@ -53,9 +56,23 @@ def poles(models, reference=None, *, labels=None, ax=None, title=None, markersiz
         groups = {str(k): list(v) if not isinstance(v, StateSpace) else [v]
                   for k, v in models.items()}
     else:
-        groups = {"models": list(models)}
+        try:
+            if isinstance(models, str):
+                raise TypeError
+            groups = {"models": list(models)}
+        except TypeError:
+            raise ModelError(f"poles: expected a StateSpace, a list or a dict of them, got "
+                             f"{type(models).__name__}") from None
     if labels is not None:
         groups = dict(zip(labels, groups.values()))
+    for label, group in groups.items():
+        for m in group:
+            if not isinstance(m, StateSpace):
+                raise ModelError(f"poles: {label!r} holds a {type(m).__name__}, not a "
+                                 "subid.StateSpace")
+    if reference is not None and not isinstance(reference, StateSpace):
+        raise ModelError(f"poles: reference must be a subid.StateSpace, got "
+                         f"{type(reference).__name__}")
     kinds = {m.dt > 0 for group in groups.values() for m in group}
     if reference is not None:
         kinds.add(reference.dt > 0)
@@ -141,6 +158,10 @@ def error_histograms(errors: dict, *, bins=40, xlabel="relative error", title=No
     matplotlib.figure.Figure
     """
     plt = _pyplot()
+    errors = _check_errors(errors)
+    if isinstance(bins, (bool, np.bool_)) or not isinstance(bins, numbers.Integral) \
+            or not 2 <= int(bins) <= 100_000:
+        raise OptionError(f"bins must be an integer from 2 to 100000, got {bins!r}"[:300])
     k = len(errors)
     fig, axes = plt.subplots(k, 1, figsize=(8, 1.9 * k + 0.6), sharex=True, squeeze=False,
                              subplot_kw=subplot_kw())
@@ -162,3 +183,27 @@ def error_histograms(errors: dict, *, bins=40, xlabel="relative error", title=No
         fig.suptitle(title)
     fig.tight_layout()
     return fig
+
+
+def _check_errors(errors) -> dict:
+    """The errors of :func:`error_histograms` as ``{label: float array}``; else
+    :class:`DataError` (drawn on a log axis: each must be positive and finite)."""
+    if not isinstance(errors, dict) or not errors:
+        raise DataError("error_histograms takes a non-empty dict label -> array of errors, "
+                        f"got {type(errors).__name__}"
+                        + (" (empty)" if isinstance(errors, dict) else ""))
+    out = {}
+    for label, values in errors.items():
+        try:
+            arr = np.asarray(values, dtype=float).ravel()
+        except (TypeError, ValueError):
+            raise DataError(f"errors[{label!r}] is not an array of numbers") from None
+        if arr.size == 0:
+            raise DataError(f"errors[{label!r}] is empty")
+        bad = ~np.isfinite(arr) | (arr <= 0)
+        if bad.any():
+            raise DataError(f"errors[{label!r}] has {int(bad.sum())} value(s) that are not "
+                            f"finite and positive (e.g. {float(arr[bad][0])!r}); the histogram has "
+                            "a logarithmic axis: pass magnitudes of errors, without NaN")
+        out[label] = arr
+    return out

@@ -70,8 +70,12 @@ def residual_correlations(model, data, *, max_lag: int = 25, confidence: float =
     n = data.n_samples
     if max_lag >= n:
         raise DataError(f"max_lag {max_lag} must be smaller than the {n} samples of the record")
+    from subid._validation import check_magnitude
     from subid.model.prediction import check_model_data, check_x0
     check_model_data(model, data)
+    # before the prediction: its DataErrors read as "diverges" (a model left out)
+    check_magnitude(data.u, "input", data.input_names)
+    check_magnitude(data.y, "output", data.output_names)
     x0 = check_x0(x0, model.order, data.n_experiments)
     if model.K is not None and model.dt > 0:
         # MATLAB's resid: one-step prediction errors of the innovation form

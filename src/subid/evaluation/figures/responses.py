@@ -7,6 +7,7 @@ import math
 
 import numpy as np
 
+from subid._validation import check_int, same_period
 from subid.errors import DataError, ModelError
 from subid.evaluation.figures._common import (
     _autoscale_once,
@@ -43,6 +44,7 @@ def frequency_grid(models, n_points: int = 400) -> np.ndarray:
     ndarray, shape (n_points,)
     """
     groups = _model_groups(models)
+    n_points = check_int(n_points, "n_points", minimum=2, maximum=10_000_000)
     hi_candidates, pole_speeds = [], []
     for m in groups.values():
         p = m.poles()
@@ -126,6 +128,13 @@ def bode(model_or_models=None, w=None, *, data=None, hz=False, labels=None, phas
     if data is not None and (data.n_outputs, data.n_inputs) != (ny, nu):
         raise DataError(f"the frequency data have {data.n_inputs} inputs and "
                         f"{data.n_outputs} outputs but the models have {nu} and {ny}")
+    if data is not None:
+        for label, m in groups.items():              # as fit_percent and pem refuse them
+            if m.dt != data.dt and not same_period(m.dt, data.dt):
+                raise DataError(f"model {label!r} has dt={m.dt} but the frequency data have "
+                                f"dt={data.dt} (0 = continuous time): their responses are "
+                                "not comparable; convert the model (to_discrete / "
+                                "to_continuous) to the data's time base")
     if nu == 0:
         raise ModelError("the model has no inputs: there is no frequency response to draw")
     if confidence is not None:
@@ -133,9 +142,15 @@ def bode(model_or_models=None, w=None, *, data=None, hz=False, labels=None, phas
     if w is None:
         w = frequency_grid(groups) if data is None else _data_grid(data)
     else:
-        w = np.atleast_1d(np.asarray(w, dtype=float))
-        if w.ndim != 1 or not np.isfinite(w).all() or (w <= 0).any():
-            raise DataError("w must be a 1-D array of positive frequencies in rad/s")
+        try:
+            w = np.atleast_1d(np.asarray(w, dtype=float))
+        except (TypeError, ValueError):
+            raise DataError(f"w must be a 1-D array of positive frequencies in rad/s, got "
+                            f"{w!r}"[:300]) from None
+        if w.ndim != 1 or w.size == 0 or not np.isfinite(w).all() or (w <= 0).any():
+            raise DataError("w must be a non-empty 1-D array of positive, finite frequencies "
+                            f"in rad/s (got shape {w.shape}); leave it out for a grid suited "
+                            "to the models")
         nyquist = [math.pi / m.dt for m in groups.values() if m.dt > 0]
         if data is None and len(nyquist) == len(groups) and \
                 w.min() > max(nyquist) * (1 + 1e-12):
@@ -288,9 +303,18 @@ def _has_covariance(model) -> bool:
 
 
 def _require_covariance(groups) -> None:
+    """Refuse bands when no model has a covariance; warn naming the models drawn without
+    one when only some have it (their bands were left out silently)."""
     if not any(_has_covariance(m) for m in groups.values()):
         raise ModelError("confidence bands need a model with a parameter covariance; none of "
                          f"{list(groups)} has one: refine a model with subid.pem(data, model)")
+    missing = [label for label, m in groups.items() if not _has_covariance(m)]
+    if missing:
+        import warnings
+        warnings.warn(f"no confidence band for {', '.join(repr(v) for v in missing)}: "
+                      f"{'it has' if len(missing) == 1 else 'they have'} no parameter "
+                      "covariance (a subspace model); refine with subid.pem(data, model) "
+                      "for one", UserWarning, stacklevel=4)
 
 
 @_styled
@@ -361,3 +385,4 @@ def step(model_or_models, t=None, *, labels=None, confidence=None, title=None):
         fig.suptitle(title)
     _layout(fig, axes, hgap=0.5, wgap=0.85, right=room + 0.1)
     return fig
+

@@ -4,9 +4,11 @@
 from __future__ import annotations
 
 import math
+import numbers
 
 import numpy as np
 
+from subid.errors import DataError, OptionError
 from subid.evaluation.figures._common import (
     _autoscale_once,
     _check_data,
@@ -61,14 +63,37 @@ def compare(data, models, *, labels=None, x0="estimate", title=None, clip=True,
     matplotlib.figure.Figure
         One panel per output; legends give the fit % of each model.
     """
+    from subid.model.prediction import _check_steps
     data = _check_data(data)
     groups = _model_groups(models, labels)
+    steps = _check_steps(steps)                      # as subid.predict takes it
+    _check_simulated(simulated, groups, data, steps)
     given = simulated if simulated is not None and steps == math.inf else {}
     fits = {label: (given[label], percent_fit(data, given[label]))
             if label in given and np.shape(given[label]) == data.y.shape else
             simulated_output(m, data, x0=x0) if steps == math.inf else
             predicted_output(m, data, steps, x0) for label, m in groups.items()}
     return compare_outputs(data, groups, fits, title=title, clip=clip)
+
+
+def _check_simulated(simulated, groups, data, steps) -> None:
+    """Refuse a ``simulated`` argument of :func:`compare` that would be ignored or drawn
+    wrong: not a dict, labels of no model, arrays of another shape, or given with
+    predictions (``steps`` finite)."""
+    if simulated is None:
+        return
+    if not isinstance(simulated, dict):
+        raise DataError(f"simulated must be a dict label -> simulated outputs (shape "
+                        f"{data.y.shape}), got {type(simulated).__name__}")
+    if steps != math.inf:
+        raise DataError("simulated holds simulations; with steps (predictions) leave it out")
+    for label, values in simulated.items():
+        if label not in groups:
+            raise DataError(f"simulated has the label {label!r}, which is not one of the "
+                            f"models {list(groups)}")
+        if np.shape(values) != data.y.shape:
+            raise DataError(f"simulated[{label!r}] has shape {np.shape(values)}; the "
+                            f"outputs of the record have shape {data.y.shape}")
 
 
 @_styled
@@ -157,6 +182,13 @@ def data_overview(data, *, split=None, title=None):
     """
     plt = _pyplot()
     data = _check_data(data)
+    if split is not None:
+        t0, t1 = float(data.t[0]), float(data.t[-1])
+        if isinstance(split, (bool, np.bool_)) or not isinstance(split, numbers.Real) \
+                or not t0 <= float(split) <= t1:
+            raise OptionError(f"split is the time at which the validation part starts, a "
+                              f"number from {t0:g} to {t1:g} (the record's first and last "
+                              f"time stamps); got {split!r}"[:300])
     # measured data in neutral tones (outputs black as in compare): the palette colours
     # belong to the methods (METHOD_COLORS)
     channels = [(f"input\n{n}", data.u[:, k], "0.45") for k, n in enumerate(data.input_names)]

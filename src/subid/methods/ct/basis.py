@@ -70,6 +70,27 @@ __all__ = [
 _CONJ_RTOL = 1e-10
 # Largest polynomial degree accepted for the local interpolation.
 MAX_POLY_ORDER = 7
+#: Most basis functions a :class:`FilterBank` takes: its chain's transition matrix is
+#: N x N (2 MB at 500, built in about a second; seed 002 uses 8 functions). Beyond, an
+#: :class:`~subid.errors.OrderError` says how much memory it would need, where a
+#: MemoryError (7 TiB at 10^6) came after minutes before.
+MAX_BASIS_FUNCTIONS = 500
+
+
+def _check_size(n: int, name: str = "n") -> None:
+    """Raise :class:`OrderError` when ``n`` basis functions exceed
+    :data:`MAX_BASIS_FUNCTIONS`, naming the memory their transition matrix needs."""
+    if n > MAX_BASIS_FUNCTIONS:
+        need = 8.0 * n * n
+        units = ["B", "KiB", "MiB", "GiB", "TiB", "PiB", "EiB"]
+        k = 0
+        while need >= 1024 and k < len(units) - 1:
+            need /= 1024
+            k += 1
+        raise OrderError(f"{n} basis functions ({name}): their {n} x {n} transition matrix "
+                         f"needs {need:.3g} {units[k]} (and time quadratic in {n}); at most "
+                         f"{MAX_BASIS_FUNCTIONS} are accepted (seed 002 uses 8; "
+                         "ct_subspace's default basis 8)")
 
 
 def _as_pole(value, where: str) -> complex:
@@ -143,7 +164,9 @@ class FilterBank:
 
     def __init__(self, poles, name: str = "takenaka-malmquist"):
         if isinstance(poles, (str, bytes)) or not hasattr(poles, "__iter__"):
-            raise ModelError(f"basis poles must be a sequence of numbers, got {poles!r}")
+            raise ModelError(f"basis poles must be a sequence of numbers, got {poles!r}"[:300])
+        poles = list(poles)
+        _check_size(len(poles), "the number of basis poles")
         zs = [_as_pole(p, f"basis pole {i}") for i, p in enumerate(poles)]
         if not zs:
             raise ModelError("the basis needs at least one pole")
@@ -402,13 +425,17 @@ def takenaka_malmquist(poles) -> FilterBank:
     >>> takenaka_malmquist([4, 12, 20]).n_functions
     3
     """
+    if isinstance(poles, (str, bytes)) or not hasattr(poles, "__iter__"):
+        raise ModelError(f"takenaka_malmquist needs a sequence of poles (numbers with "
+                         f"positive real parts, e.g. [4, 12, 20]), got {poles!r}"[:300])
     return FilterBank(list(poles), "takenaka-malmquist")
 
 
 def _check_count(n, name="n") -> int:
     if isinstance(n, bool) or not isinstance(n, numbers.Integral) or n < 1:
         raise OrderError(f"{name} (number of basis functions) must be a positive integer, "
-                         f"got {n!r}")
+                         f"got {n!r}"[:300])
+    _check_size(int(n), name)
     return int(n)
 
 
@@ -462,7 +489,11 @@ def default_basis(t, n: int = 8) -> FilterBank:
         Number of basis functions.
     """
     n = _check_count(n)
-    t = np.asarray(t, dtype=float).reshape(-1)
+    try:
+        t = np.asarray(t, dtype=float).reshape(-1)
+    except (TypeError, ValueError):
+        raise DataError(f"default_basis needs the record's time stamps (an increasing array "
+                        f"of numbers, e.g. data.t), got {type(t).__name__}") from None
     if t.size < 2 or not np.all(np.isfinite(t)) or not np.all(np.diff(t) > 0):
         raise DataError("default_basis needs at least two strictly increasing time stamps")
     T = float(t[-1] - t[0])
