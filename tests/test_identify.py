@@ -693,3 +693,19 @@ def test_the_continuous_time_path_honours_or_refuses_every_option():
         subid.identify(data, 2, time_base="ct", focus="prediction")
     with pytest.raises(subid.errors.OptionError, match="continuous-time path"):
         subid.identify(data, 2, hold="zoh")
+
+
+def test_a_negative_cross_validated_fit_is_warned_of():
+    """DaISy powerplant: pbsid's order search chose a model whose folds score -22 %
+    (it validated at -188 %), silently; now a PoorFitWarning, from identify too. A record
+    the models describe (dryer) gives none."""
+    from subid.errors import PoorFitWarning
+    plant, _ = subid.datasets.load("powerplant").detrend().split(0.7)
+    with pytest.warns(PoorFitWarning, match="worse than their means"):
+        model = subid.pbsid(plant)
+    assert model.info["order_selection"]["selected"]["score"] < 0
+    with pytest.warns(PoorFitWarning):
+        subid.identify(plant, refine=False)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", PoorFitWarning)
+        subid.moesp(subid.datasets.load("dryer").detrend())

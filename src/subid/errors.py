@@ -28,6 +28,7 @@ __all__ = [
     "ConversionWarning",
     "OffsetWarning",
     "FeedbackWarning",
+    "PoorFitWarning",
     "SamplingWarning",
     "OptionError",
 ]
@@ -211,6 +212,12 @@ class FeedbackWarning(UserWarning):
     estimate's criterion is biased there: an output-error (simulation) criterion, whose
     input is correlated with the noise (Ljung 1999, Sec. 13.4). The message names a
     consistent alternative."""
+
+
+class PoorFitWarning(UserWarning):
+    """The model an order search chose simulates its held-out folds worse than their
+    means (a negative cross-validated fit): no candidate describes the data. The message
+    names what usually causes it (drifts or offsets, feedback, nonlinearity)."""
 
 
 class DelayWarning(UserWarning):

@@ -413,9 +413,12 @@ def identify(data, order=None, *, focus="simulation", time_base="auto", horizon=
     check_data(data, "identify")
     with collect_warnings() as issued:
         model, record = _discrete(data, order, horizon, feedthrough, focus, bool(refine))
+        from subid.methods.dt.choice import warn_poor_fit
         from subid.methods.dt.feedthrough import dropped_direct_term
         if (message := dropped_direct_term(model.info.get("feedthrough"))) is not None:
             warnings.warn("identify: " + message, FeedbackWarning, stacklevel=2)
+        if isinstance(model.info.get("order_selection"), dict):
+            warn_poor_fit(model.info["order_selection"], stacklevel=2)
         if refine and "gain_refinement" not in model.info and model.info.get("focus") != \
                 "prediction":
             # K of the subspace model re-estimated by prediction error (subid.pem's

@@ -76,6 +76,7 @@ def choose(data, plan, fitter):
 
     n, f, estimator, problem, model, rule = unrepaired_choice(record, final, (n, f, estimator))
     model.info["order_selection"] = record
+    warn_poor_fit(record)
     if plan.estimator_choice == "cv":
         rule = {"rule": "cv", "description": (
             "cross-validated with the order and horizon (info['order_selection'])")}
@@ -364,3 +365,21 @@ def unrepaired_choice(record, final, chosen):
         skipped.append(made)
     record["repaired_choice"] = {"skipped": skipped, "taken": None}
     return n, f, name, problem, model, rule
+
+
+def warn_poor_fit(record, stacklevel: int = 4) -> None:
+    """A :class:`subid.errors.PoorFitWarning` when the chosen candidate's mean fold score
+    is negative (DaISy powerplant: ``pbsid(data)`` chose order 4 at -22 % on the folds
+    and validated at -188 %, silently)."""
+    score = (record.get("selected") or {}).get("score")
+    if score is None or not np.isfinite(score) or score >= 0.0:
+        return
+    from subid.errors import PoorFitWarning
+    chosen = record["selected"]
+    warnings.warn(
+        f"the chosen model (order {chosen.get('order')}, horizon {chosen.get('horizon')}) "
+        f"simulates the held-out folds worse than their means (cross-validated fit "
+        f"{score:.1f} %, info['order_selection']): no candidate describes these data; "
+        "look for drifts or offsets (data.detrend('linear')), feedback (feedthrough=True, "
+        "or arx/armax/pbsid, consistent in closed loop) or a nonlinearity before using it",
+        PoorFitWarning, stacklevel=stacklevel)
