@@ -29,7 +29,7 @@ from subid.io._npz import NpzError
 from subid.io.arrays import _array_names, _load_npz, _stack
 from subid.io.fast_csv import _HEAD_BYTES, _blocks, _line_start, _lone_cr, _parsed_blocks
 from subid.io.mat import _load_mat
-from subid.io.text import _decode, _roles, _Table, _tokens, time_like_name
+from subid.io.text import _content, _decode, _roles, _Table, _tokens, time_like_name
 
 STREAM_EXTENSIONS = (".csv", ".tsv", ".txt", ".dat", ".npy", ".parquet")
 
@@ -295,7 +295,7 @@ def _text_pieces(p, shown, ext, inputs, outputs, chunk_size, delimiter, hint=Fal
             for lines in _text_lines(text, shown, consumed, chunk_size):
                 piece = _piece(layout, lines, consumed)
                 consumed += len(lines)
-                if not any(line.strip() and not line.lstrip().startswith("#") for line in lines):
+                if not any(_content(line) for line in lines):
                     continue
                 values = piece.parse(cols)
                 piece.check_finite(values, cols)
@@ -330,7 +330,7 @@ def _careful_block(layout, buf: bytes, encoding: str, consumed: int, cols, shown
     lines = text.split("\n")
     if lines and lines[-1] == "":
         lines.pop()
-    if not any(line.strip() and not line.lstrip().startswith("#") for line in lines):
+    if not any(_content(line) for line in lines):
         return np.empty((0, len(cols))), len(lines)
     piece = _piece(layout, lines, consumed)
     values = piece.parse(cols)

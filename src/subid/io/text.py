@@ -52,12 +52,29 @@ def _decode(raw: bytes, shown: str) -> str:
     return text
 
 
+#: Spreadsheet error and missing-value markers (Excel, LibreOffice, Google Sheets): a line
+#: starting with one of them is a data row with a missing value, not a ``#`` comment.
+MISSING_MARKERS = frozenset({
+    "#N/A", "#NA", "#VALUE!", "#REF!", "#DIV/0!", "#NUM!", "#NAME?", "#NULL!", "#SPILL!",
+    "#CALC!", "#FIELD!", "#BLOCKED!", "#CONNECT!", "#BUSY!", "#UNKNOWN!", "#ERROR!",
+    "#GETTING_DATA"})
+_FIRST_CELL_RE = re.compile(r'[^,;\t "]*')
+
+
+def is_comment(line: str) -> bool:
+    """True when ``line`` is a comment line: its first non-blank character is ``#`` and
+    its first cell is not a spreadsheet marker (:data:`MISSING_MARKERS`, such as Excel's
+    ``#N/A``). A ``#`` elsewhere on a line is part of a field (a header name such as
+    ``Valve #1``), never the start of a comment."""
+    s = line.lstrip()
+    if not s.startswith("#"):
+        return False
+    return _FIRST_CELL_RE.match(s).group().upper() not in MISSING_MARKERS
+
+
 def _content(line: str) -> str:
-    """A line without its ``#`` comment and surrounding blanks ('' if nothing is left)."""
-    k = line.find("#")
-    if k >= 0:
-        line = line[:k]
-    return line.strip()
+    """A line without surrounding blanks ('' for a blank or comment line)."""
+    return "" if is_comment(line) else line.strip()
 
 
 def _split(content: str, delim) -> list[str]:
@@ -108,6 +125,31 @@ def _is_number(s: str) -> bool:
     except ValueError:
         return False
     return True
+
+
+_DATE_TIME_RE = re.compile(r"\d{4}-\d{2}-\d{2}(?:[T ]\d{2}:\d{2}(?::\d{2}(?:\.\d+)?)?)?"
+                           r"(?:Z|[+-]\d{2}:?\d{2})?")
+
+
+def _is_date_time(s: str) -> bool:
+    """True when ``s`` is an ISO 8601 date or date-time (``2024-01-01 00:00:02``)."""
+    if not _DATE_TIME_RE.fullmatch(s):
+        return False
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)       # a UTC offset: no time zone kept
+        try:
+            np.datetime64(s.rstrip("Z") if s.endswith("Z") else s, "us")
+        except ValueError:
+            return False
+    return True
+
+
+def _is_value(field: str) -> bool:
+    """True when a field of the first line is a value, not a column name: a number, an
+    ISO 8601 date-time or a spreadsheet missing-value marker (``#N/A``); a line of such
+    fields is the first data row, not a header."""
+    f = field.strip('"').strip()
+    return _is_number(f) or f.upper() in MISSING_MARKERS or _is_date_time(f)
 
 
 def _sniff(sample: list[str], ext: str) -> str | None:
@@ -180,7 +222,7 @@ class _Table:
         fields = _split(sample[0], self.delim)
         self.header = None
         self.header_line = None
-        if not all(_is_number(f) for f in fields):
+        if not all(_is_value(f) for f in fields):
             self.header = fields
             self.header_line = first + 1
             self.data_start = first + 1           # 0-based index of the line after the header
@@ -212,7 +254,7 @@ class _Table:
         if k < 0:
             return
         line = self.lines[k].strip()
-        if not line.startswith("#"):
+        if not is_comment(line):
             return
         body = line.lstrip("#").strip()
         if not body:
@@ -305,8 +347,23 @@ class _Table:
             if idx in cols:
                 raise FileReadError(f"{shown}: {self.describe(idx)} is selected twice in {role}",
                                     path=shown, column=idx)
+            if self.header is not None and not (isinstance(tok, str) and tok in self.header) \
+                    and _is_value(self.header[idx]):
+                self._ambiguous_header(idx, role)
             cols.append(idx)
         return cols
+
+    def _ambiguous_header(self, idx: int, role: str):
+        """FileReadError: column ``idx``, selected by index, has a value (a number, a
+        date-time) in the line taken as the header, which may be the first data row."""
+        names = [f for f in self.header if not _is_value(f)]
+        raise FileReadError(
+            f"{self.shown}: line {self.header_line} was taken as the header (it holds "
+            f"{names[0]!r}, which is not a number), but its cell in column {idx}, selected "
+            f"by index in {role}, is the value {self.header[idx]!r}: if line "
+            f"{self.header_line} is the first data row, add a header line of column names "
+            "before it; if it is the header, select the columns by name (subid does not "
+            "guess)", path=self.shown, line=self.header_line, column=idx)
 
     # -- values --------------------------------------------------------------
     def data_lines(self) -> tuple[list[int], list[str]]:
@@ -326,7 +383,7 @@ class _Table:
         """Values of the columns ``cols``, shape (rows, len(cols))."""
         try:
             values = np.loadtxt(StringIO(self.text), dtype=np.float64,
-                                delimiter=self.delim, comments="#", quotechar='"',
+                                delimiter=self.delim, comments=None, quotechar='"',
                                 skiprows=self.data_start, ndmin=2)
         except (ValueError, TypeError, IndexError) as exc:
             logger.debug("%s: fast parse failed (%s); re-reading line by line", self.shown, exc)
@@ -413,7 +470,10 @@ class _Table:
             return msg + "the value is missing (empty field)"
         msg += (f"{s!r} is not a number" if len(s) <= 60 else
                 f"{s[:40]!r}... ({len(s)} characters) is not a number")
-        if _DECIMAL_COMMA_RE.fullmatch(s):
+        if s.strip('"').upper() in MISSING_MARKERS or s.upper() in ("NA", "N/A", "NULL"):
+            msg += (" (a missing-value marker: subid does not drop or fill samples; "
+                    "interpolate the gap, or split the record there and merge the parts)")
+        elif _DECIMAL_COMMA_RE.fullmatch(s):
             # the command line rewrites decimal=',' as its --decimal , (cli_hint)
             msg += " (a decimal comma: pass decimal=',' and a field delimiter other than ',')"
         elif self.header is not None and lineno == self.first_data:

@@ -1,0 +1,68 @@
+"""Text files: ``#`` lines, spreadsheet markers, header detection, delimiters and the
+chunked reader against :func:`subid.read`."""
+
+import numpy as np
+import pytest
+
+import subid
+from subid.errors import FileReadError
+
+
+def test_excel_missing_marker_row_is_reported_not_dropped(tmp_path):
+    f = tmp_path / "na.csv"
+    f.write_text("u,y\n#N/A,2\n3,4\n5,6\n7,8\n")
+    with pytest.raises(FileReadError) as info:
+        subid.read(f, inputs="u", outputs="y")
+    assert "line 2, column 0 ('u'): '#N/A' is not a number (a missing-value marker" \
+        in str(info.value)
+    assert (info.value.line, info.value.column) == (2, 0)
+    # a header-less file starting with the marker: a data row, not a comment or header
+    f.write_text("#N/A,2\n3,4\n")
+    with pytest.raises(FileReadError, match="line 1, column 0: '#N/A' is not a number"):
+        subid.read(f, inputs=0, outputs=1)
+    # in the chunked reader too
+    f.write_text("u,y\n1,2\n#DIV/0!,2\n3,4\n")
+    with pytest.raises(FileReadError, match="line 3, column 0 \\('u'\\): '#DIV/0!'"):
+        list(subid.read_chunks(f, inputs="u", outputs="y", chunk_size=2))
+
+
+def test_hash_inside_a_field_is_not_a_comment(tmp_path):
+    f = tmp_path / "valves.csv"
+    f.write_text("t,Valve #1,Flow #1\n0,1,2\n0.1,3,4\n")
+    d = subid.read(f, inputs="Valve #1", outputs=2, time=0)
+    assert d.input_names == ("Valve #1",) and d.output_names == ("Flow #1",)
+    np.testing.assert_array_equal(d.y[:, 0], [2, 4])
+    f.write_text("t,u,y\n0,1,2\n0.1,#N/A,4\n")
+    with pytest.raises(FileReadError, match="line 3, column 1 \\('u'\\): '#N/A' is not a "
+                                            "number"):
+        subid.read(f, inputs="u", outputs="y", time="t")
+
+
+def test_whole_comment_lines_are_still_skipped(tmp_path):
+    f = tmp_path / "c.csv"
+    f.write_text("# recorded by hand\nu,y\n1,2\n# pause\n3,4\n")
+    d = subid.read(f, inputs="u", outputs="y")
+    np.testing.assert_array_equal(d.u[:, 0], [1, 3])
+    pieces = list(subid.read_chunks(f, inputs="u", outputs="y", chunk_size=1))
+    assert [p.u[0, 0] for p in pieces] == [1, 3]
+
+
+def test_date_time_first_row_is_data_not_header(tmp_path):
+    f = tmp_path / "log.csv"
+    f.write_text("2024-01-01 00:00:00,1.0,2.0\n2024-01-01 00:00:01,3.0,4.0\n"
+                 "2024-01-01 00:00:02,5.0,6.0\n2024-01-01 00:00:03,7.0,8.0\n")
+    d = subid.read(f, inputs=1, outputs=2, time=0)
+    assert d.n_samples == 4
+    np.testing.assert_array_equal(d.u[:, 0], [1, 3, 5, 7])
+    assert d.dt == 1.0
+
+
+def test_would_be_header_with_numbers_selected_by_index_is_refused(tmp_path):
+    f = tmp_path / "status.csv"
+    f.write_text("ok,1.0,2.0\nok,3.0,4.0\nok,5,6\n")
+    with pytest.raises(FileReadError, match="line 1 was taken as the header .* column 1, "
+                                            "selected by index in inputs, is the value '1.0'"):
+        subid.read(f, inputs=1, outputs=2)
+    # a real header selected by name is fine
+    f.write_text("status,1,2\nok,3.0,4.0\nok,5,6\n")
+    assert subid.read(f, inputs="1", outputs="2").n_samples == 2
