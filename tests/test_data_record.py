@@ -79,3 +79,22 @@ def test_bad_arguments_raise_subid_errors():
     f32 = subid.IOData(np.ones(3), np.ones(3), dt=np.float32(0.1))
     with pytest.raises(DataError, match="dt=0.10000000149011612 but record 0 with dt=0.1;"):
         subid.merge([d, f32])
+
+
+def test_stamps_written_at_limited_precision_are_uniform():
+    n = 600
+    u, y = np.sin(np.arange(n) * 0.1), np.cos(np.arange(n) * 0.07)
+    ms = subid.IOData(u, y, t=np.round(np.arange(n) / 30, 3))       # 30 Hz logged in ms
+    assert ms.is_uniform and abs(ms.dt - 1 / 30) < 1e-5
+    single = subid.IOData(u, y, t=(np.arange(n) * 0.01).astype(np.float32))
+    assert single.is_uniform and abs(single.dt - 0.01) < 1e-8
+    assert subid.moesp(subid.IOData(np.random.default_rng(0).standard_normal(n), y,
+                                    t=np.round(np.arange(n) / 30, 3)), 2).dt == ms.dt
+    # a missing sample is not rounding: integer stamps with a gap stay non-uniform
+    gap = np.delete(np.arange(n + 1.0), 300)
+    assert not subid.IOData(u, y, t=gap).is_uniform
+    # nor is a jitter beyond the written precision
+    jitter = np.round(np.arange(n) / 30 + 0.004 * (np.arange(n) % 2), 3)
+    assert not subid.IOData(u, y, t=jitter).is_uniform
+    with pytest.raises(DataError, match="dt=\\.\\.\\."):
+        subid.moesp(subid.IOData(u, y, t=jitter), 2)

@@ -399,6 +399,18 @@ def check_dt(dt, *, allow_zero: bool = False, name: str = "dt") -> float:
 UNIFORM_RTOL = 1e-9
 
 
+def _double_resolution(t: np.ndarray) -> float:
+    """Four units in the last place of the largest ``|t|`` of the (sorted) stamps."""
+    if not t.size:
+        return 0.0
+    return 4.0 * float(np.spacing(max(abs(float(t[0])), abs(float(t[-1])))))
+
+
+#: Largest written precision of time stamps, as a share of their mean step, that
+#: :func:`stamp_resolution` allows for: beyond, a missing sample could hide in it.
+MAX_WRITTEN_RESOLUTION = 0.1
+
+
 def stamp_resolution(t) -> float:
     """How far apart two steps of the time stamps ``t`` can be through rounding alone.
 
@@ -408,11 +420,42 @@ def stamp_resolution(t) -> float:
     by up to two. Epoch seconds (``|t|`` ~ 1.7e9, unit 2.4e-7 s) sampled at
     1 kHz have steps that differ by ~2e-7 s, 2e-4 of the period: uniform
     sampling all the same. Four units of the largest ``|t|`` (a margin of 2).
+
+    Stamps written at a limited precision carry that rounding too: ``d`` decimals
+    (:func:`stamp_decimals`; 30 Hz stamps logged in milliseconds have steps of 0.033
+    and 0.034 s) or single precision (stamps that are float32 numbers). Their
+    resolution, ``10**-d`` or two float32 units, is added when it is at most
+    :data:`MAX_WRITTEN_RESOLUTION` of the mean step (so a missing sample, a step of
+    twice the period, is never within it) and every stamp lies within it of the
+    straight line from the first stamp to the last (a uniform grid, rounded).
     """
     t = np.asarray(t, dtype=np.float64)
-    if not t.size:
-        return 0.0
-    return 4.0 * float(np.spacing(max(abs(float(t[0])), abs(float(t[-1])))))
+    base = _double_resolution(t)
+    if t.size < 3:
+        return base
+    mean = (float(t[-1]) - float(t[0])) / (t.size - 1)
+    decimals = stamp_decimals(t)
+    if decimals is not None:
+        written = 10.0 ** -decimals
+    elif _single_precision(t):
+        written = 2.0 * float(np.spacing(np.float32(max(abs(float(t[0])),
+                                                            abs(float(t[-1]))))))
+    else:
+        return base
+    if not 0 < written <= MAX_WRITTEN_RESOLUTION * mean:
+        return base
+    grid = float(t[0]) + mean * np.arange(t.size)
+    if float(np.max(np.abs(t - grid))) > written + base:
+        return base
+    return base + written
+
+
+def _single_precision(t: np.ndarray) -> bool:
+    """True when every stamp is a float32 number (stamps stored in single precision)."""
+    head = t[:1000]
+    if not np.array_equal(head.astype(np.float32).astype(np.float64), head):
+        return False
+    return bool(np.array_equal(t.astype(np.float32).astype(np.float64), t))
 
 
 #: Most decimals :func:`grid_step` looks for in time stamps (beyond, they carry the
@@ -466,7 +509,7 @@ def grid_step(t: np.ndarray, steps: np.ndarray) -> float:
     # the rounding must keep the step (a grid of 0.3 s written with 1 decimal, not a
     # step of 0.25 s written with 1 decimal at the stamps by coincidence), to the
     # tolerance of a uniform grid and the rounding of the stamps themselves
-    tolerance = UNIFORM_RTOL * mean + stamp_resolution(t)
+    tolerance = UNIFORM_RTOL * mean + _double_resolution(t)
     return rounded if rounded > 0 and abs(rounded - mean) <= tolerance else mean
 
 

@@ -151,6 +151,9 @@ class IOData:
         stamps are kept as given. Uniform ones give ``dt``: their mean step,
         rounded to the decimals the stamps are written with (``0.05``, not
         ``0.049999999999999996``, for stamps ``0, 0.05, 0.1`` read from a file).
+        Stamps written at a limited precision (30 Hz logged in milliseconds,
+        float32) are uniform when they lie within it of a uniform grid
+        (:func:`subid._validation.stamp_resolution`); ``dt`` is then their mean step.
         Date-times (``numpy.datetime64``, a pandas ``DatetimeIndex``) count in
         seconds from the first; durations (``timedelta64``) in seconds.
     input_names, output_names : sequence of str, optional
