@@ -66,3 +66,25 @@ def test_would_be_header_with_numbers_selected_by_index_is_refused(tmp_path):
     # a real header selected by name is fine
     f.write_text("status,1,2\nok,3.0,4.0\nok,5,6\n")
     assert subid.read(f, inputs="1", outputs="2").n_samples == 2
+
+
+@pytest.mark.parametrize("ext", [".txt", ".dat"])
+def test_tab_delimited_txt_keeps_names_with_spaces(tmp_path, ext):
+    f = tmp_path / f"excel{ext}"
+    f.write_text("Time [s]\tInput [V]\tOutput [m]\n0\t1\t2\n0.1\t3\t4\n0.2\t5\t6\n")
+    d = subid.read(f, inputs="Input [V]", outputs="Output [m]", time="Time [s]")
+    np.testing.assert_array_equal(d.u[:, 0], [1, 3, 5])
+    # an empty cell is a missing value, not a shorter row
+    f.write_text("t\tu\ty\n0\t1\t2\n0.1\t\t4\n0.2\t5\t6\n")
+    with pytest.raises(FileReadError, match="line 3, column 1 \\('u'\\): the value is missing"):
+        subid.read(f, inputs="u", outputs="y", time="t")
+    # DaISy style (runs of spaces, a trailing TAB) is still whitespace-delimited
+    f.write_text("".join(f"  {k:.7e}  {2 * k:.7e}\t\n" for k in range(5)))
+    np.testing.assert_array_equal(subid.read(f, inputs=0, outputs=1).y[:, 0], 2 * np.arange(5))
+
+
+def test_tab_hint_when_names_are_split(tmp_path):
+    f = tmp_path / "mixed.txt"
+    f.write_text("Time [s]\tInput [V]\tOutput [m]\n0\t1\t2\n0.1 5\t3\t4\n")
+    with pytest.raises(FileReadError, match="pass delimiter='\\\\t'"):
+        subid.read(f, inputs="Input [V]", outputs="Output [m]")

@@ -6,9 +6,12 @@ Supported formats, chosen by the file extension:
     Delimited text. The delimiter is detected among ``,`` ``;`` and TAB
     unless ``delimiter`` is given.
 ``.txt``, ``.dat``
-    Text with comma- or semicolon-separated fields, or fields separated by
-    runs of spaces and TABs (the DaISy / MATLAB ``save -ascii`` style, trailing
-    TABs and exponents such as ``1.0000000e+000`` included).
+    Text with comma-, semicolon- or TAB-separated fields (TAB when every line
+    has the same number of TABs and no data field holds spaces between values:
+    a spreadsheet's "Text (Tab delimited)", its names with spaces kept), or
+    fields separated by runs of spaces and TABs (the DaISy / MATLAB
+    ``save -ascii`` style, trailing TABs and exponents such as
+    ``1.0000000e+000`` included).
 ``.npz``
     NumPy archive (:func:`numpy.savez`); arrays are selected by key.
 ``.mat``

@@ -155,6 +155,8 @@ def _is_value(field: str) -> bool:
 def _sniff(sample: list[str], ext: str) -> str | None:
     """Choose the delimiter from the first non-empty lines."""
     candidates = (";", "\t", ",") if ext in (".csv", ".tsv") else (";", ",")
+    if ext not in (".csv", ".tsv") and _tab_table(sample):
+        return "\t"
     counts = {c: [ln.count(c) for ln in sample] for c in candidates}
     for c in candidates:
         if counts[c][0] > 0 and all(n == counts[c][0] for n in counts[c]):
@@ -165,6 +167,18 @@ def _sniff(sample: list[str], ext: str) -> str | None:
     if present:
         return max(present, key=lambda c: counts[c][0])
     return _WHITESPACE
+
+
+def _tab_table(sample: list[str]) -> bool:
+    """True when the (stripped) first lines of a ``.txt``/``.dat`` file are a table of
+    TAB-delimited fields (a spreadsheet's "Text (Tab delimited)" export): the same
+    number of TABs on every line, and no field of a data line holding two values apart
+    by spaces (the DaISy / ``save -ascii`` style separates columns by runs of spaces and
+    TABs alike)."""
+    tabs = sample[0].count("\t")
+    if not tabs or any(ln.count("\t") != tabs for ln in sample):
+        return False
+    return not any(len(f.split()) > 1 for ln in sample[1:] for f in ln.split("\t"))
 
 
 def decimal_commas(raw: bytes, shown: str, ext: str, delimiter) -> tuple[bytes, str]:
@@ -297,9 +311,15 @@ class _Table:
     def delimiter_hint(self) -> str:
         """When the file was split into one column but its first line holds another
         usual delimiter: ``' (is the delimiter right? ...)'`` naming it, else ``''``."""
-        if self.ncols != 1 or not self.lines:
+        if not self.lines:
             return ""
         first = self.lines[0]
+        if self.delim is _WHITESPACE and "\t" in first.strip() and " " in first.strip():
+            return (" (is the delimiter right? it was taken to be runs of spaces/TABs, "
+                    "which splits names with spaces, and the first line holds TAB: pass "
+                    "delimiter='\\t', on the command line --delimiter $'\\t')")
+        if self.ncols != 1:
+            return ""
         for other in (";", ",", "\t", "|"):
             if other != self.delim and other in first:
                 name = _delim_name(other)
