@@ -88,3 +88,28 @@ def test_tab_hint_when_names_are_split(tmp_path):
     f.write_text("Time [s]\tInput [V]\tOutput [m]\n0\t1\t2\n0.1 5\t3\t4\n")
     with pytest.raises(FileReadError, match="pass delimiter='\\\\t'"):
         subid.read(f, inputs="Input [V]", outputs="Output [m]")
+
+
+def test_read_chunks_reads_a_header_and_row_beyond_one_mib(tmp_path):
+    f = tmp_path / "wide.csv"
+    n = 120_000                                   # header and each row ~0.5-0.8 MiB
+    with open(f, "w") as fh:
+        fh.write(",".join(f"c{k}" for k in range(n)) + "\n")
+        for r in range(5):
+            fh.write(",".join(str(r) for _ in range(n)) + "\n")
+    assert subid.read(f, inputs="c0", outputs="c1").n_samples == 5
+    pieces = list(subid.read_chunks(f, "c0", "c1"))
+    np.testing.assert_array_equal(np.vstack([p.u for p in pieces])[:, 0], np.arange(5))
+
+
+def test_read_chunks_reads_latin1_past_the_head_as_read_does(tmp_path):
+    f = tmp_path / "notes.csv"
+    rows = "".join(f"{k},{2 * k},ok\n" for k in range(150_000))       # > 1 MiB of ASCII
+    f.write_bytes(b"u,y,note\n" + rows.encode() + b"7,8,caf\xe9\n")
+    whole = subid.read(f, "u", "y")
+    pieces = list(subid.read_chunks(f, "u", "y", chunk_size=100_000))
+    np.testing.assert_array_equal(np.vstack([p.y for p in pieces]), whole.y)
+    # a UTF-8 head (a name beyond ASCII) then a Latin-1 byte: the exact line is named
+    f.write_bytes("u,y\u00e9,note\n".encode() + rows.encode() + b"7,8,caf\xe9\n")
+    with pytest.raises(FileReadError, match="line 150002: the file is not UTF-8 text"):
+        list(subid.read_chunks(f, "u", "y\u00e9"))

@@ -238,23 +238,27 @@ def _text_pieces(p, shown, ext, inputs, outputs, chunk_size, delimiter, hint=Fal
     import io as _io
     fh, _ = open_regular(shown, what="data file", max_bytes=None)
     with fh:
-        try:
-            head = fh.read(_HEAD_BYTES)
-        except OSError as exc:
-            raise FileReadError(f"{shown}: cannot read the file ({_reason(exc)})",
-                                path=shown) from None
-        if not head:
-            raise FileReadError(f"file {shown} is empty", path=shown)
+        raw = b""
+        while True:             # the head: whole lines, up to the first data row at least
+            try:
+                more = fh.read(_HEAD_BYTES)
+            except OSError as exc:
+                raise FileReadError(f"{shown}: cannot read the file ({_reason(exc)})",
+                                    path=shown) from None
+            raw += more
+            if not raw:
+                raise FileReadError(f"file {shown} is empty", path=shown)
+            head, whole = _whole_lines(raw, len(more) < _HEAD_BYTES)
+            try:
+                layout = _Table(shown, _decode(head, shown), ext, delimiter)
+                break
+            except FileReadError:
+                # no data row in the head yet (a header and a first row of over 1 MiB):
+                # read on, as read() does; a line too long is refused as it is there
+                if whole or len(raw) > 2 * MAX_LINE_CHARS * 4:
+                    raise
         utf16 = head.startswith((b"\xff\xfe", b"\xfe\xff"))
-        if len(head) == _HEAD_BYTES:
-            newline = "\n".encode("utf-16-le" if head.startswith(b"\xff\xfe") else "utf-16-be") \
-                if utf16 else b"\n"
-            cut = head.rfind(newline)
-            while utf16 and cut > 0 and (cut - 2) % 2:     # a UTF-16 code unit boundary
-                cut = head.rfind(newline, 0, cut)
-            if cut > 0:
-                head = head[: cut + len(newline)]
-        layout = _Table(shown, _decode(head, shown), ext, delimiter)
+        layout.ascii_head = head.isascii()
         in_cols, out_cols, _ = _roles(layout, shown, inputs, outputs, None)
         cols = in_cols + out_cols
         in_names, out_names = layout.channel_names(in_cols), layout.channel_names(out_cols)
@@ -304,6 +308,20 @@ def _text_pieces(p, shown, ext, inputs, outputs, chunk_size, delimiter, hint=Fal
             text.detach()
 
 
+def _whole_lines(raw: bytes, whole: bool) -> tuple[bytes, bool]:
+    """``(the complete lines of raw, whole)``: all of ``raw`` when it is the whole file
+    (``whole``), else up to its last line break (UTF-16 code units kept whole)."""
+    if whole:
+        return raw, True
+    utf16 = raw.startswith((b"\xff\xfe", b"\xfe\xff"))
+    newline = "\n".encode("utf-16-le" if raw.startswith(b"\xff\xfe") else "utf-16-be") \
+        if utf16 else b"\n"
+    cut = raw.rfind(newline)
+    while utf16 and cut > 0 and (cut - 2) % 2:          # a UTF-16 code unit boundary
+        cut = raw.rfind(newline, 0, cut)
+    return (raw[: cut + len(newline)] if cut > 0 else raw), False
+
+
 def _piece(layout, lines, consumed: int):
     """A table of ``lines`` (line ``consumed + 1`` of the file on) with the layout
     (delimiter, columns, names) of ``layout``, for the careful parser."""
@@ -323,8 +341,16 @@ def _careful_block(layout, buf: bytes, encoding: str, consumed: int, cols, shown
     try:
         text = buf.decode(encoding)
     except UnicodeDecodeError as exc:
-        raise FileReadError(f"{shown}: the file is not UTF-8 text after line {consumed} "
-                            f"({exc.reason})", path=shown, line=consumed) from None
+        if layout.ascii_head:
+            # read() decodes a file that is not UTF-8 as Latin-1; the lines before were
+            # ASCII, the same in both, so this block is Latin-1 as read() reads it
+            text = buf.decode("latin-1")
+        else:
+            line = consumed + buf[:exc.start].count(b"\n") + 1
+            raise FileReadError(f"{shown}, line {line}: the file is not UTF-8 text "
+                                f"({exc.reason}), though its first lines are (with "
+                                "characters beyond ASCII): save it as UTF-8 (or all of it "
+                                "as Latin-1)", path=shown, line=line) from None
     if "\r" in text:
         text = text.replace("\r\n", "\n").replace("\r", "\n")
     lines = text.split("\n")

@@ -209,6 +209,7 @@ class _Table:
     """Layout of a text file: delimiter, header, column count, first data line."""
 
     line_offset = 0                   # lines before ``text`` in the file (chunked reading)
+    ascii_head = True                 # the head of the file is ASCII (chunked reading)
 
     def __init__(self, shown, text, ext, delimiter):
         self.shown = shown
