@@ -1,6 +1,8 @@
 """IOData: the caller's time stamps, scaled records, detrending twice, slices of
 detrended records and the refusals of bad arguments."""
 
+import warnings
+
 import numpy as np
 import pytest
 
@@ -98,3 +100,59 @@ def test_stamps_written_at_limited_precision_are_uniform():
     assert not subid.IOData(u, y, t=jitter).is_uniform
     with pytest.raises(DataError, match="dt=\\.\\.\\."):
         subid.moesp(subid.IOData(u, y, t=jitter), 2)
+
+
+def test_date_time_objects_and_time_zones_as_time_stamps():
+    pd = pytest.importorskip("pandas")
+    import datetime
+    u = [1.0, 2.0, 3.0]
+    # across the change to summer time: UTC keeps the 1 s grid
+    stamps = pd.date_range("2024-03-31 01:59:59", periods=3, freq="1s", tz="Europe/Paris")
+    for t in (stamps, pd.Series(stamps), list(stamps)):
+        d = subid.IOData(u, u, t=t)
+        assert d.dt == 1.0
+        np.testing.assert_array_equal(d.t, [0.0, 1.0, 2.0])
+    naive = [datetime.datetime(2024, 1, 1, 0, 0, 0, 500_000 * k) for k in range(2)] + \
+        [datetime.datetime(2024, 1, 1, 0, 0, 1)]
+    assert subid.IOData(u, u, t=naive).dt == 0.5
+    zone = datetime.timezone(datetime.timedelta(hours=2))
+    with pytest.raises(DataError, match="mixes date-times with and without a time zone"):
+        subid.IOData(u, u, t=[naive[0], naive[1].replace(tzinfo=zone), naive[2]])
+
+
+def test_npz_with_date_time_stamps(tmp_path):
+    f = tmp_path / "dt.npz"
+    np.savez(f, u=[1.0, 2, 3], y=[1.0, 2, 3],
+             t=np.datetime64("2024-01-01") + np.arange(3) * np.timedelta64(250, "ms"))
+    d = subid.read(f)
+    assert d.dt == 0.25
+    np.testing.assert_array_equal(d.t, [0.0, 0.25, 0.5])
+
+
+def test_merge_takes_a_one_sample_record_with_a_stamp():
+    a = subid.IOData([1.0, 2, 3], [1.0, 2, 3], dt=0.5)
+    one = subid.IOData([1.0], [1.0], t=[5.0])
+    assert subid.merge([one, a]).dt == 0.5
+    assert subid.merge([a, one]).experiment_ranges == ((0, 3), (3, 4))
+    with pytest.raises(DataError, match="no sampling period"):
+        subid.merge([one, one])
+
+
+def test_pandas_indexes_are_not_ignored():
+    pd = pytest.importorskip("pandas")
+    from subid.errors import SamplingWarning
+    df = pd.DataFrame({"u": [1.0, 2, 3], "y": [4.0, 5, 6]},
+                      index=pd.date_range("2024", periods=3, freq="10ms"))
+    with pytest.warns(SamplingWarning, match="pass t=u.index"):
+        assert subid.IOData(df[["u"]], df["y"]).dt == 1.0
+    assert subid.IOData(df[["u"]], df["y"], t=df.index).dt == 0.01
+    with pytest.raises(DataError, match="different indexes \\(row 0"):
+        subid.IOData(df["u"], df["y"].iloc[::-1])
+    with pytest.raises(DataError, match="different indexes"):
+        subid.IOData(df["u"], df["y"].reset_index(drop=True))
+    plain = df.reset_index(drop=True)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")                 # a default or filtered index: quiet
+        assert subid.IOData(plain.u, plain.y).dt == 1.0
+        kept = plain[plain.u > 1]
+        assert subid.IOData(kept.u, kept.y).n_samples == 2

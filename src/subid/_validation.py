@@ -273,7 +273,14 @@ def check_orientation(arr: np.ndarray, name: str, symbol: str) -> None:
 
 
 def check_time_stamps(t, n_samples: int, name: str = "time stamps t") -> np.ndarray:
-    """Validate strictly increasing, finite time stamps of length ``n_samples``."""
+    """Validate strictly increasing, finite time stamps of length ``n_samples``.
+
+    Numbers, or date-times (numpy ``datetime64``, a pandas ``DatetimeIndex`` or
+    Series with or without a time zone, ``datetime.datetime`` objects and pandas
+    ``Timestamp``s; time-zone aware ones converted to UTC) counted in seconds from the
+    first, or durations (``timedelta64``) in seconds."""
+    if getattr(getattr(t, "dtype", None), "tz", None) is not None:
+        t = np.asarray(t, dtype="datetime64[ns]")      # pandas, time-zone aware: UTC
     try:
         arr = np.asarray(t)
     except (ValueError, OverflowError) as exc:
@@ -288,6 +295,8 @@ def check_time_stamps(t, n_samples: int, name: str = "time stamps t") -> np.ndar
                   if arr.ndim == 2 and 1 in arr.shape else "")
         raise DataError(f"{name} must be one-dimensional (one stamp per sample), got shape "
                         f"{arr.shape}{column}")
+    if arr.dtype == object and arr.ndim == 1:
+        arr = _date_time_objects(arr, name)
     if arr.dtype == object:
         check_object_numbers(arr, name, "pandas.to_numeric, or pandas.to_datetime for "
                              "date-times")
@@ -321,6 +330,27 @@ def check_time_stamps(t, n_samples: int, name: str = "time stamps t") -> np.ndar
                         f"{format_rows(bad + 1)} (t[k] <= t[k-1]); time stamps must "
                         "be strictly increasing")
     return arr
+
+
+def _date_time_objects(arr: np.ndarray, name: str) -> np.ndarray:
+    """An object array of ``datetime.datetime`` objects (pandas ``Timestamp``s too) as
+    ``datetime64[ns]`` (time-zone aware ones in UTC); any other array unchanged."""
+    import datetime
+
+    if not arr.size or not all(isinstance(v, datetime.datetime) for v in arr):
+        return arr
+    aware = [v.utcoffset() is not None for v in arr]
+    if any(aware) and not all(aware):
+        k = aware.index(not aware[0])
+        raise DataError(f"{name} mixes date-times with and without a time zone (row 0: "
+                        f"{arr[0]!s}, row {k}: {arr[k]!s}); give all of them a time zone, "
+                        "or none")
+    out = np.empty(arr.size, dtype="datetime64[ns]")
+    for k, v in enumerate(arr):
+        if aware[k]:
+            v = v.astimezone(datetime.timezone.utc).replace(tzinfo=None)
+        out[k] = v.to_datetime64() if hasattr(v, "to_datetime64") else np.datetime64(v, "ns")
+    return out
 
 
 def check_selector(selector, horizon: int, n_outputs: int, candidates, fixed_order, *,

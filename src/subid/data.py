@@ -56,6 +56,37 @@ def _pandas_names(values):
     return None
 
 
+def _check_pandas_index(u, y, *, timed: bool) -> None:
+    """Refuse pandas inputs and outputs whose indexes differ (samples are paired by
+    position, so rows of different times would be paired); warn (SamplingWarning) when
+    a time-like index (date-times, durations, floats) is left out because neither ``t``
+    nor ``dt`` is given (time is then counted in samples)."""
+    indexes = [(who, getattr(v, "index", None)) for who, v in (("u", u), ("y", y))
+               if type(v).__module__.startswith("pandas")]
+    indexes = [(who, index) for who, index in indexes if index is not None]
+    if len(indexes) == 2 and not indexes[0][1].equals(indexes[1][1]):
+        a, b = indexes[0][1], indexes[1][1]
+        k = next((k for k in range(min(len(a), len(b))) if a[k] != b[k]), min(len(a), len(b)))
+        where = (f"row {k}: {a[k]!r} against {b[k]!r}" if k < min(len(a), len(b)) else
+                 f"{len(a)} against {len(b)} rows")
+        raise DataError(f"u and y are pandas objects with different indexes ({where}); "
+                        "IOData pairs samples by position, not by label: align them first "
+                        "(u, y = u.align(y, join='inner', axis=0)), or pass u.to_numpy() and "
+                        "y.to_numpy() if the positions match")
+    if timed or not indexes:
+        return
+    who, index = indexes[0]
+    kind = getattr(index, "inferred_type", "")
+    if kind.startswith(("datetime", "timedelta")) or kind == "floating":
+        import warnings
+
+        from subid.errors import SamplingWarning
+        warnings.warn(SamplingWarning(
+            f"{who} has a time-like index ({type(index).__name__}) but no time stamps (t) "
+            "or sampling period (dt) were given, so time is counted in samples (dt = 1): "
+            f"pass t={who}.index to take the time from it, or dt="), stacklevel=4)
+
+
 def not_a_record(value, who: str, *, time: str = "dt=...") -> DataError:
     """The :class:`DataError` for ``value`` passed where ``who`` (a function's name, or
     ``'data'``) expects an :class:`IOData` record, with how to make one: from a pandas
@@ -142,7 +173,10 @@ class IOData:
         100 channels; or time stamps ``t`` as long as its second axis) raises
         :class:`~subid.errors.DataError`: it is never transposed silently.
     y : array_like, shape (N, n_outputs) or (N,)
-        Output samples, same number of rows as ``u``.
+        Output samples, same number of rows as ``u``. Pandas ``u`` and ``y`` must
+        have the same index (samples are paired by position); a time-like index
+        (date-times, durations, floats) given neither ``t`` nor ``dt`` gives a
+        :class:`~subid.errors.SamplingWarning`.
     dt : float, optional
         Uniform sampling period. Give either ``dt`` or ``t``; with neither,
         ``dt = 1`` (time counted in samples).
@@ -154,8 +188,9 @@ class IOData:
         Stamps written at a limited precision (30 Hz logged in milliseconds,
         float32) are uniform when they lie within it of a uniform grid
         (:func:`subid._validation.stamp_resolution`); ``dt`` is then their mean step.
-        Date-times (``numpy.datetime64``, a pandas ``DatetimeIndex``) count in
-        seconds from the first; durations (``timedelta64``) in seconds.
+        Date-times (``numpy.datetime64``, a pandas ``DatetimeIndex``, ``datetime``
+        objects; time-zone aware ones in UTC) count in seconds from the first;
+        durations (``timedelta64``) in seconds.
     input_names, output_names : sequence of str, optional
         Channel names (default: the column labels of a pandas DataFrame, the name of
         a pandas Series, else ``u1, u2, ...`` and ``y1, y2, ...``).
@@ -193,6 +228,7 @@ class IOData:
                  copy=True):
         # a DataFrame's column labels (a named Series's name) name the channels
         copy = check_bool(copy, "copy")
+        _check_pandas_index(u, y, timed=dt is not None or t is not None)
         input_names = _pandas_names(u) if input_names is None else input_names
         output_names = _pandas_names(y) if output_names is None else output_names
         u = as_signal(u, "input u", copy=copy and _writeable(u))
@@ -692,16 +728,22 @@ def merge(records, names=None) -> IOData:
     for k, rec in enumerate(records):
         if not isinstance(rec, IOData):
             raise not_a_record(rec, f"merge (item {k})")
-        if not rec.is_uniform:
+        if not rec.is_uniform and rec.n_samples > 1:    # one stamp: any period fits
             raise DataError(f"merge: record {k} has non-uniform time stamps; merged "
                             "experiments must be uniformly sampled: interpolate it onto a "
                             "uniform grid first (numpy.interp per channel), or identify it "
                             "alone (subid.ct_subspace takes one non-uniform record)")
     first = records[0]
+    timed = [k for k, rec in enumerate(records) if rec.dt is not None]
+    if not timed:
+        raise DataError("merge: every record is one sample with a time stamp, which gives "
+                        "no sampling period; build them with dt=")
+    ref = timed[0]
+    period = records[ref].dt
     for k, rec in enumerate(records[1:], start=1):
-        if not same_period(rec.dt, first.dt):
+        if rec.dt is not None and not same_period(rec.dt, period):
             raise DataError(f"merge: record {k} is sampled with dt={float(rec.dt)!r} but "
-                            f"record 0 with dt={float(first.dt)!r}; resample one of them "
+                            f"record {ref} with dt={float(period)!r}; resample one of them "
                             "first")
         if (rec.n_inputs, rec.n_outputs) != (first.n_inputs, first.n_outputs):
             raise DataError(f"merge: record {k} has {rec.n_inputs} inputs and {rec.n_outputs} "
@@ -736,7 +778,7 @@ def merge(records, names=None) -> IOData:
         raise DataError(f"merge: the experiment names repeat: {names}")
     lengths = [e.n_samples for e in experiments]
     out = first._derive(np.vstack([e.u for e in experiments]),
-                        np.vstack([e.y for e in experiments]), dt=first.dt,
+                        np.vstack([e.y for e in experiments]), dt=period,
                         t0=experiments[0]._t0s[0], starts=np.cumsum([0] + lengths[:-1]),
                         t0s=[e.t[0] for e in experiments], names=names)
     if kinds != {None}:
