@@ -205,3 +205,10 @@ def test_estimate_delay_refuses_a_constant_input(level):
     d = subid.systems.simulate_data(subid.systems.seed001_system(), 300, seed=3)
     with pytest.raises(NotExcitingError, match="input 'u1' is constant"):
         subid.estimate_delay(subid.IOData(np.full(300, level), d.y[:, 0]))
+
+
+def test_absorb_delay_refuses_a_record():
+    d = subid.IOData(np.arange(5.0), np.arange(5.0))
+    with pytest.raises(ModelError, match="absorb_delay takes a subid.StateSpace model, got "
+                                         "IOData"):
+        subid.absorb_delay(d)

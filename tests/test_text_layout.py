@@ -113,3 +113,14 @@ def test_read_chunks_reads_latin1_past_the_head_as_read_does(tmp_path):
     f.write_bytes("u,y\u00e9,note\n".encode() + rows.encode() + b"7,8,caf\xe9\n")
     with pytest.raises(FileReadError, match="line 150002: the file is not UTF-8 text"):
         list(subid.read_chunks(f, "u", "y\u00e9"))
+
+
+def test_read_chunks_npy_refuses_a_column_as_input_and_output(tmp_path):
+    f = tmp_path / "a.npy"
+    np.save(f, np.arange(20.0).reshape(10, 2))
+    with pytest.raises(FileReadError, match="column 0 is used both as an input and as an "
+                                            "output"):
+        next(iter(subid.read_chunks(f, [0], [0])))
+    with pytest.raises(FileReadError, match="column 1 is selected twice in inputs"):
+        next(iter(subid.read_chunks(f, [1, 1], [0])))
+    assert next(iter(subid.read_chunks(f, [1], [0]))).n_samples == 10

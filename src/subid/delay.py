@@ -360,6 +360,9 @@ def absorb_delay(model):
         before anything is allocated; the delayed model itself simulates,
         predicts and gives its frequency response without absorbing.
     """
+    if not all(hasattr(model, name) for name in ("A", "B", "C", "D", "info", "dt")):
+        raise ModelError(f"absorb_delay takes a subid.StateSpace model, got "
+                         f"{type(model).__name__}")
     delays = input_delay_of(model)
     if delays is None:
         return model

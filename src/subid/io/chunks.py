@@ -416,6 +416,20 @@ def _frozen(a: np.ndarray) -> np.ndarray:
     return a
 
 
+def _distinct(shown: str, in_cols, out_cols, what: str) -> None:
+    """FileReadError when a column is selected twice, or as an input and an output
+    (as the text reader refuses it)."""
+    for role, cols in (("inputs", in_cols), ("outputs", out_cols)):
+        twice = [c for k, c in enumerate(cols) if c in cols[:k]]
+        if twice:
+            raise FileReadError(f"{shown}: {what} {twice[0]!r} is selected twice in {role}",
+                                path=shown, column=twice[0])
+    both = [c for c in in_cols if c in out_cols]
+    if both:
+        raise FileReadError(f"{shown}: {what} {both[0]!r} is used both as an input and as "
+                            "an output", path=shown, column=both[0])
+
+
 def _column_indices(spec, role: str, n_columns: int, shown: str) -> list[int]:
     tokens = [int(t) if isinstance(t, str) and _INT_RE.fullmatch(t) else t
               for t in _tokens(spec, role, [])]
@@ -457,6 +471,7 @@ def _npy_pieces(p, shown, inputs, outputs, chunk_size):
                             path=shown)
     in_cols = _column_indices(inputs, "inputs", arr.shape[1], shown)
     out_cols = _column_indices(outputs, "outputs", arr.shape[1], shown)
+    _distinct(shown, in_cols, out_cols, "column")
     in_names = [f"col{k}" for k in in_cols]
     out_names = [f"col{k}" for k in out_cols]
     labels = [f"column {k}" for k in in_cols + out_cols]
@@ -513,6 +528,7 @@ def _parquet_pieces(p, shown, inputs, outputs, chunk_size, hint=False):
             cols.append(name)
         chosen.append(cols)
     in_names, out_names = chosen
+    _distinct(shown, in_names, out_names, "column")
     labels = [f"column {name!r}" for name in in_names + out_names]
     if hint:
         _hint_time(shown, names, [names.index(name) for name in in_names + out_names])
