@@ -61,9 +61,9 @@ def _check_pandas_index(u, y, *, timed: bool) -> None:
     position, so rows of different times would be paired); warn (SamplingWarning) when
     a time-like index (date-times, durations, floats) is left out because neither ``t``
     nor ``dt`` is given (time is then counted in samples)."""
-    indexes = [(who, getattr(v, "index", None)) for who, v in (("u", u), ("y", y))
-               if type(v).__module__.startswith("pandas")]
-    indexes = [(who, index) for who, index in indexes if index is not None]
+    indexes = [(who, v.index) for who, v in (("u", u), ("y", y))
+               if type(v).__module__.startswith("pandas")
+               and getattr(v, "index", None) is not None]
     if len(indexes) == 2 and not indexes[0][1].equals(indexes[1][1]):
         a, b = indexes[0][1], indexes[1][1]
         k = next((k for k in range(min(len(a), len(b))) if a[k] != b[k]), min(len(a), len(b)))

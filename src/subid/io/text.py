@@ -69,7 +69,8 @@ def is_comment(line: str) -> bool:
     s = line.lstrip()
     if not s.startswith("#"):
         return False
-    return _FIRST_CELL_RE.match(s).group().upper() not in MISSING_MARKERS
+    first = _FIRST_CELL_RE.match(s)
+    return first is None or first.group().upper() not in MISSING_MARKERS
 
 
 def _content(line: str) -> str:
