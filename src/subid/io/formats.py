@@ -7,11 +7,11 @@ Supported formats, chosen by the file extension:
     unless ``delimiter`` is given.
 ``.txt``, ``.dat``
     Text with comma-, semicolon- or TAB-separated fields (TAB when every line
-    has the same number of TABs and no data field holds spaces between values:
-    a spreadsheet's "Text (Tab delimited)", its names with spaces kept), or
-    fields separated by runs of spaces and TABs (the DaISy / MATLAB
-    ``save -ascii`` style, trailing TABs and exponents such as
-    ``1.0000000e+000`` included).
+    has the same number of TABs, no data field holds spaces between values,
+    and a field is empty or has spaces: a spreadsheet's "Text (Tab delimited)"
+    with names such as ``Input [V]``), or fields separated by runs of spaces
+    and TABs (the DaISy / MATLAB ``save -ascii`` style, trailing TABs and
+    exponents such as ``1.0000000e+000`` included).
 ``.npz``
     NumPy archive (:func:`numpy.savez`); arrays are selected by key.
 ``.mat``

@@ -173,13 +173,16 @@ def _sniff(sample: list[str], ext: str) -> str | None:
 def _tab_table(sample: list[str]) -> bool:
     """True when the (stripped) first lines of a ``.txt``/``.dat`` file are a table of
     TAB-delimited fields (a spreadsheet's "Text (Tab delimited)" export): the same
-    number of TABs on every line, and no field of a data line holding two values apart
-    by spaces (the DaISy / ``save -ascii`` style separates columns by runs of spaces and
-    TABs alike)."""
+    number of TABs on every line, no field of a data line holding two values apart by
+    spaces (the DaISy / ``save -ascii`` style separates columns by runs of spaces and
+    TABs alike), and TABs splitting a line otherwise than runs of blanks do (a name
+    with spaces, an empty cell): else runs of blanks stay the delimiter, as before."""
     tabs = sample[0].count("\t")
     if not tabs or any(ln.count("\t") != tabs for ln in sample):
         return False
-    return not any(len(f.split()) > 1 for ln in sample[1:] for f in ln.split("\t"))
+    if any(len(f.split()) > 1 for ln in sample[1:] for f in ln.split("\t")):
+        return False
+    return any([f.strip() for f in ln.split("\t")] != ln.split() for ln in sample)
 
 
 def decimal_commas(raw: bytes, shown: str, ext: str, delimiter) -> tuple[bytes, str]:
