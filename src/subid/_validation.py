@@ -464,7 +464,10 @@ def stamp_resolution(t) -> float:
     if t.size < 3:
         return base
     mean = (float(t[-1]) - float(t[0])) / (t.size - 1)
-    decimals = stamp_decimals(t)
+    decimals = stamp_decimals(t[:1000])
+    if decimals is not None and 10.0 ** -decimals > MAX_WRITTEN_RESOLUTION * mean:
+        return base                      # too coarse to matter (0.5 s steps: 1 decimal)
+    decimals = stamp_decimals(t) if decimals is not None else None
     if decimals is not None:
         written = 10.0 ** -decimals
     elif _single_precision(t):
