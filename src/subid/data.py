@@ -768,7 +768,9 @@ def merge(records, names=None) -> IOData:
         if len(set(names)) != len(names):
             names = [f"exp{k + 1}" for k in range(len(experiments))]
     else:
-        if isinstance(names, str) or not hasattr(names, "__iter__"):
+        if isinstance(names, str):
+            names = [names]
+        if not hasattr(names, "__iter__"):
             raise DataError(f"merge: names must be a list of strings, one per experiment, "
                             f"got {names!r}"[:300])
         names = [str(n) for n in names]

@@ -315,11 +315,15 @@ class _Table:
 
     def delimiter_hint(self) -> str:
         """When the file was split into one column but its first line holds another
-        usual delimiter: ``' (is the delimiter right? ...)'`` naming it, else ``''``."""
+        usual delimiter, or split at blanks a first line whose TAB-delimited fields hold
+        spaces (names such as ``Input [V]``): ``' (is the delimiter right? ...)'``
+        naming it, else ``''``."""
         if not self.lines:
             return ""
         first = self.lines[0]
-        if self.delim is _WHITESPACE and "\t" in first.strip() and " " in first.strip():
+        parts = first.strip().split("\t")
+        if self.delim is _WHITESPACE and len(parts) > 1 and \
+                any(len(f.split()) > 1 for f in parts):
             return (" (is the delimiter right? it was taken to be runs of spaces/TABs, "
                     "which splits names with spaces, and the first line holds TAB: pass "
                     "delimiter='\\t', on the command line --delimiter $'\\t')")
