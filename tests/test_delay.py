@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 import subid
-from subid.errors import DataError, ModelError, TooFewSamplesError
+from subid.errors import DataError, ModelError, NotExcitingError, TooFewSamplesError
 
 
 def _with_delay(model, delays):
@@ -190,3 +190,25 @@ def test_absorb_delay_keeps_the_noise_model_and_the_initial_state():
                                atol=1e-10)
     np.testing.assert_allclose(absorbed.simulate(data, x0=absorbed.info["x0"]),
                                model.simulate(data, x0=model.info["x0"]), atol=1e-10)
+
+
+@pytest.mark.parametrize("su,sy", [(1.0, 1e155), (1.0, 1e-20), (1e20, 1.0), (1e-20, 1e300),
+                                   (1e155, 1e-155)])
+def test_estimate_delay_does_not_depend_on_units(su, sy):
+    dryer = subid.datasets.load("dryer")
+    assert subid.estimate_delay(dryer).tolist() == [3]
+    assert subid.estimate_delay(subid.IOData(dryer.u * su, dryer.y * sy)).tolist() == [3]
+
+
+@pytest.mark.parametrize("level", [0.0, 1.0])
+def test_estimate_delay_refuses_a_constant_input(level):
+    d = subid.systems.simulate_data(subid.systems.seed001_system(), 300, seed=3)
+    with pytest.raises(NotExcitingError, match="input 'u1' is constant"):
+        subid.estimate_delay(subid.IOData(np.full(300, level), d.y[:, 0]))
+
+
+def test_absorb_delay_refuses_a_record():
+    d = subid.IOData(np.arange(5.0), np.arange(5.0))
+    with pytest.raises(ModelError, match="absorb_delay takes a subid.StateSpace model, got "
+                                         "IOData"):
+        subid.absorb_delay(d)

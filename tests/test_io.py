@@ -71,9 +71,11 @@ def test_integer_like_header_names_win_over_indices(tmp_path):
     data = read(f, inputs="0", outputs="1")
     np.testing.assert_array_equal(data.u[:, 0], m[:, 2])
     np.testing.assert_array_equal(data.y[:, 0], m[:, 1])
-    # "2" is not a header name, so it is an index
-    data = read(f, inputs="2", outputs="x")
-    np.testing.assert_array_equal(data.u[:, 0], m[:, 2])
+    # "2" is not a header name, so it is an index; but column 2's header cell is the
+    # number "0": line 1 may be a data row (with a text cell "x"), so it is refused
+    with pytest.raises(FileReadError, match="line 1 was taken as the header .* column 2, "
+                                            "selected by index in inputs, is the value '0'"):
+        read(f, inputs="2", outputs="x")
 
 
 def test_csv_without_header_by_index(tmp_path):

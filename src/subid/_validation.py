@@ -273,7 +273,14 @@ def check_orientation(arr: np.ndarray, name: str, symbol: str) -> None:
 
 
 def check_time_stamps(t, n_samples: int, name: str = "time stamps t") -> np.ndarray:
-    """Validate strictly increasing, finite time stamps of length ``n_samples``."""
+    """Validate strictly increasing, finite time stamps of length ``n_samples``.
+
+    Numbers, or date-times (numpy ``datetime64``, a pandas ``DatetimeIndex`` or
+    Series with or without a time zone, ``datetime.datetime`` objects and pandas
+    ``Timestamp``s; time-zone aware ones converted to UTC) counted in seconds from the
+    first, or durations (``timedelta64``) in seconds."""
+    if getattr(getattr(t, "dtype", None), "tz", None) is not None:
+        t = np.asarray(t, dtype="datetime64[ns]")      # pandas, time-zone aware: UTC
     try:
         arr = np.asarray(t)
     except (ValueError, OverflowError) as exc:
@@ -288,6 +295,8 @@ def check_time_stamps(t, n_samples: int, name: str = "time stamps t") -> np.ndar
                   if arr.ndim == 2 and 1 in arr.shape else "")
         raise DataError(f"{name} must be one-dimensional (one stamp per sample), got shape "
                         f"{arr.shape}{column}")
+    if arr.dtype == object and arr.ndim == 1:
+        arr = _date_time_objects(arr, name)
     if arr.dtype == object:
         check_object_numbers(arr, name, "pandas.to_numeric, or pandas.to_datetime for "
                              "date-times")
@@ -321,6 +330,27 @@ def check_time_stamps(t, n_samples: int, name: str = "time stamps t") -> np.ndar
                         f"{format_rows(bad + 1)} (t[k] <= t[k-1]); time stamps must "
                         "be strictly increasing")
     return arr
+
+
+def _date_time_objects(arr: np.ndarray, name: str) -> np.ndarray:
+    """An object array of ``datetime.datetime`` objects (pandas ``Timestamp``s too) as
+    ``datetime64[ns]`` (time-zone aware ones in UTC); any other array unchanged."""
+    import datetime
+
+    if not arr.size or not all(isinstance(v, datetime.datetime) for v in arr):
+        return arr
+    aware = [v.utcoffset() is not None for v in arr]
+    if any(aware) and not all(aware):
+        k = aware.index(not aware[0])
+        raise DataError(f"{name} mixes date-times with and without a time zone (row 0: "
+                        f"{arr[0]!s}, row {k}: {arr[k]!s}); give all of them a time zone, "
+                        "or none")
+    out = np.empty(arr.size, dtype="datetime64[ns]")
+    for k, v in enumerate(arr):
+        if aware[k]:
+            v = v.astimezone(datetime.timezone.utc).replace(tzinfo=None)
+        out[k] = v.to_datetime64() if hasattr(v, "to_datetime64") else np.datetime64(v, "ns")
+    return out
 
 
 def check_selector(selector, horizon: int, n_outputs: int, candidates, fixed_order, *,
@@ -399,6 +429,18 @@ def check_dt(dt, *, allow_zero: bool = False, name: str = "dt") -> float:
 UNIFORM_RTOL = 1e-9
 
 
+def _double_resolution(t: np.ndarray) -> float:
+    """Four units in the last place of the largest ``|t|`` of the (sorted) stamps."""
+    if not t.size:
+        return 0.0
+    return 4.0 * float(np.spacing(max(abs(float(t[0])), abs(float(t[-1])))))
+
+
+#: Largest written precision of time stamps, as a share of their mean step, that
+#: :func:`stamp_resolution` allows for: beyond, a missing sample could hide in it.
+MAX_WRITTEN_RESOLUTION = 0.1
+
+
 def stamp_resolution(t) -> float:
     """How far apart two steps of the time stamps ``t`` can be through rounding alone.
 
@@ -408,11 +450,45 @@ def stamp_resolution(t) -> float:
     by up to two. Epoch seconds (``|t|`` ~ 1.7e9, unit 2.4e-7 s) sampled at
     1 kHz have steps that differ by ~2e-7 s, 2e-4 of the period: uniform
     sampling all the same. Four units of the largest ``|t|`` (a margin of 2).
+
+    Stamps written at a limited precision carry that rounding too: ``d`` decimals
+    (:func:`stamp_decimals`; 30 Hz stamps logged in milliseconds have steps of 0.033
+    and 0.034 s) or single precision (stamps that are float32 numbers). Their
+    resolution, ``10**-d`` or two float32 units, is added when it is at most
+    :data:`MAX_WRITTEN_RESOLUTION` of the mean step (so a missing sample, a step of
+    twice the period, is never within it) and every stamp lies within it of the
+    straight line from the first stamp to the last (a uniform grid, rounded).
     """
     t = np.asarray(t, dtype=np.float64)
-    if not t.size:
-        return 0.0
-    return 4.0 * float(np.spacing(max(abs(float(t[0])), abs(float(t[-1])))))
+    base = _double_resolution(t)
+    if t.size < 3:
+        return base
+    mean = (float(t[-1]) - float(t[0])) / (t.size - 1)
+    decimals = stamp_decimals(t[:1000])
+    if decimals is not None and 10.0 ** -decimals > MAX_WRITTEN_RESOLUTION * mean:
+        return base                      # too coarse to matter (0.5 s steps: 1 decimal)
+    decimals = stamp_decimals(t) if decimals is not None else None
+    if decimals is not None:
+        written = 10.0 ** -decimals
+    elif _single_precision(t):
+        written = 2.0 * float(np.spacing(np.float32(max(abs(float(t[0])),
+                                                            abs(float(t[-1]))))))
+    else:
+        return base
+    if not 0 < written <= MAX_WRITTEN_RESOLUTION * mean:
+        return base
+    grid = float(t[0]) + mean * np.arange(t.size)
+    if float(np.max(np.abs(t - grid))) > written + base:
+        return base
+    return base + written
+
+
+def _single_precision(t: np.ndarray) -> bool:
+    """True when every stamp is a float32 number (stamps stored in single precision)."""
+    head = t[:1000]
+    if not np.array_equal(head.astype(np.float32).astype(np.float64), head):
+        return False
+    return bool(np.array_equal(t.astype(np.float32).astype(np.float64), t))
 
 
 #: Most decimals :func:`grid_step` looks for in time stamps (beyond, they carry the
@@ -466,7 +542,7 @@ def grid_step(t: np.ndarray, steps: np.ndarray) -> float:
     # the rounding must keep the step (a grid of 0.3 s written with 1 decimal, not a
     # step of 0.25 s written with 1 decimal at the stamps by coincidence), to the
     # tolerance of a uniform grid and the rounding of the stamps themselves
-    tolerance = UNIFORM_RTOL * mean + stamp_resolution(t)
+    tolerance = UNIFORM_RTOL * mean + _double_resolution(t)
     return rounded if rounded > 0 and abs(rounded - mean) <= tolerance else mean
 
 

@@ -8,6 +8,7 @@ import numpy as np
 
 from subid._validation import (
     as_signal,
+    check_bool,
     check_dt,
     check_orientation,
     check_time_stamps,
@@ -27,7 +28,11 @@ def _channel_names(names, count: int, prefix: str, which: str) -> tuple[str, ...
         return tuple(f"{prefix}{k + 1}" for k in range(count))
     if isinstance(names, str):
         names = [names]
-    names = tuple(str(n) for n in names)
+    try:
+        names = tuple(str(n) for n in names)
+    except TypeError:
+        raise DataError(f"{which} names must be a list of strings, one per channel, got "
+                        f"{names!r}"[:300]) from None
     if len(names) != count:
         raise DataError(f"{which} has {len(names)} name{'s' if len(names) != 1 else ''} "
                         f"{list(names)} but {count} channel{'s' if count != 1 else ''}")
@@ -51,6 +56,37 @@ def _pandas_names(values):
     return None
 
 
+def _check_pandas_index(u, y, *, timed: bool) -> None:
+    """Refuse pandas inputs and outputs whose indexes differ (samples are paired by
+    position, so rows of different times would be paired); warn (SamplingWarning) when
+    a time-like index (date-times, durations, floats) is left out because neither ``t``
+    nor ``dt`` is given (time is then counted in samples)."""
+    indexes = [(who, v.index) for who, v in (("u", u), ("y", y))
+               if type(v).__module__.startswith("pandas")
+               and getattr(v, "index", None) is not None]
+    if len(indexes) == 2 and not indexes[0][1].equals(indexes[1][1]):
+        a, b = indexes[0][1], indexes[1][1]
+        k = next((k for k in range(min(len(a), len(b))) if a[k] != b[k]), min(len(a), len(b)))
+        where = (f"row {k}: {a[k]!r} against {b[k]!r}" if k < min(len(a), len(b)) else
+                 f"{len(a)} against {len(b)} rows")
+        raise DataError(f"u and y are pandas objects with different indexes ({where}); "
+                        "IOData pairs samples by position, not by label: align them first "
+                        "(u, y = u.align(y, join='inner', axis=0)), or pass u.to_numpy() and "
+                        "y.to_numpy() if the positions match")
+    if timed or not indexes:
+        return
+    who, index = indexes[0]
+    kind = getattr(index, "inferred_type", "")
+    if kind.startswith(("datetime", "timedelta")) or kind == "floating":
+        import warnings
+
+        from subid.errors import SamplingWarning
+        warnings.warn(SamplingWarning(
+            f"{who} has a time-like index ({type(index).__name__}) but no time stamps (t) "
+            "or sampling period (dt) were given, so time is counted in samples (dt = 1): "
+            f"pass t={who}.index to take the time from it, or dt="), stacklevel=4)
+
+
 def not_a_record(value, who: str, *, time: str = "dt=...") -> DataError:
     """The :class:`DataError` for ``value`` passed where ``who`` (a function's name, or
     ``'data'``) expects an :class:`IOData` record, with how to make one: from a pandas
@@ -70,6 +106,14 @@ def not_a_record(value, who: str, *, time: str = "dt=...") -> DataError:
 def _writeable(values) -> bool:
     """False for a read-only numpy array (kept without a copy by IOData)."""
     return not isinstance(values, np.ndarray) or values.flags.writeable
+
+
+def _shares_memory(a: np.ndarray, values) -> bool:
+    """True when ``a`` may share memory with the caller's ``values`` (any array-like)."""
+    try:
+        return bool(np.shares_memory(a, np.asarray(values)))
+    except (TypeError, ValueError):
+        return True
 
 
 def column_sums(a: np.ndarray) -> np.ndarray:
@@ -129,7 +173,10 @@ class IOData:
         100 channels; or time stamps ``t`` as long as its second axis) raises
         :class:`~subid.errors.DataError`: it is never transposed silently.
     y : array_like, shape (N, n_outputs) or (N,)
-        Output samples, same number of rows as ``u``.
+        Output samples, same number of rows as ``u``. Pandas ``u`` and ``y`` must
+        have the same index (samples are paired by position); a time-like index
+        (date-times, durations, floats) given neither ``t`` nor ``dt`` gives a
+        :class:`~subid.errors.SamplingWarning`.
     dt : float, optional
         Uniform sampling period. Give either ``dt`` or ``t``; with neither,
         ``dt = 1`` (time counted in samples).
@@ -138,8 +185,12 @@ class IOData:
         stamps are kept as given. Uniform ones give ``dt``: their mean step,
         rounded to the decimals the stamps are written with (``0.05``, not
         ``0.049999999999999996``, for stamps ``0, 0.05, 0.1`` read from a file).
-        Date-times (``numpy.datetime64``, a pandas ``DatetimeIndex``) count in
-        seconds from the first; durations (``timedelta64``) in seconds.
+        Stamps written at a limited precision (30 Hz logged in milliseconds,
+        float32) are uniform when they lie within it of a uniform grid
+        (:func:`subid._validation.stamp_resolution`); ``dt`` is then their mean step.
+        Date-times (``numpy.datetime64``, a pandas ``DatetimeIndex``, ``datetime``
+        objects; time-zone aware ones in UTC) count in seconds from the first;
+        durations (``timedelta64``) in seconds.
     input_names, output_names : sequence of str, optional
         Channel names (default: the column labels of a pandas DataFrame, the name of
         a pandas Series, else ``u1, u2, ...`` and ``y1, y2, ...``).
@@ -176,6 +227,8 @@ class IOData:
     def __init__(self, u, y, dt=None, t=None, input_names=None, output_names=None, *,
                  copy=True):
         # a DataFrame's column labels (a named Series's name) name the channels
+        copy = check_bool(copy, "copy")
+        _check_pandas_index(u, y, timed=dt is not None or t is not None)
         input_names = _pandas_names(u) if input_names is None else input_names
         output_names = _pandas_names(y) if output_names is None else output_names
         u = as_signal(u, "input u", copy=copy and _writeable(u))
@@ -200,7 +253,10 @@ class IOData:
         if dt is not None and t is not None:
             raise DataError("give either the sampling period dt or the time stamps t, not both")
         if t is not None:
+            given = t
             t = check_time_stamps(t, n).view()      # never the caller's array's flags
+            if copy and _writeable(given) and _shares_memory(t, given):
+                t = t.copy()                        # the caller may change theirs later
             steps = np.diff(t)
             if n > 1 and is_uniform(steps, resolution=stamp_resolution(t)):
                 self._dt = grid_step(t, steps)      # to the precision of the stamps
@@ -306,10 +362,10 @@ class IOData:
                                 f"{list(self.experiment_names)}")
             index = self.experiment_names.index(index)
         if isinstance(index, bool) or not isinstance(index, numbers.Integral) \
-                or not -self.n_experiments <= int(index) < self.n_experiments:
+                or not 0 <= int(index) < self.n_experiments:
             raise DataError(f"experiment index must be an integer in 0..{self.n_experiments - 1}"
                             f" (or a name), got {index!r}")
-        index = int(index) % self.n_experiments
+        index = int(index)
         if self.n_experiments == 1:
             return self
         a, b = self.experiment_ranges[index]
@@ -372,7 +428,11 @@ class IOData:
         if not isinstance(index, slice):
             raise DataError("IOData is indexed by a slice of samples, e.g. data[100:500]; "
                             f"got {type(index).__name__}")
-        start, stop, step = index.indices(self.n_samples)
+        try:
+            start, stop, step = index.indices(self.n_samples)
+        except (TypeError, ValueError):              # a float bound, a step of 0
+            raise DataError(f"IOData slices take integer sample indices and a positive step "
+                            f"(e.g. data[100:500], data[::2]); got {index}") from None
         if step <= 0:
             raise DataError("IOData slices must go forward in time (positive step)")
         rows = range(start, stop, step)
@@ -383,10 +443,26 @@ class IOData:
             return self._slice_experiments(start, stop, step)
         if self._t is not None:
             t = np.ascontiguousarray(self._t[sl])
-            return self._derive(self._u[sl], self._y[sl], t=t, dt=self._dt * step
-                                if self._dt is not None else None, t0=float(t[0]))
-        return self._derive(self._u[sl], self._y[sl], dt=self._dt * step,
-                            t0=self._t0 + start * self._dt)
+            out = self._derive(self._u[sl], self._y[sl], t=t, dt=self._dt * step
+                               if self._dt is not None else None, t0=float(t[0]))
+        else:
+            out = self._derive(self._u[sl], self._y[sl], dt=self._dt * step,
+                               t0=self._t0 + start * self._dt)
+        return out._moved_lines(out._t0 - self._t0)
+
+    def _moved_lines(self, shift) -> "IOData":
+        """This record (a slice) with the lines removed by ``detrend('linear')``, whose
+        intercepts were ``shift`` seconds before its first stamp (one shift per
+        experiment for lines removed per experiment), moved to that first stamp: the
+        intercepts of a record are at its first stamp (each experiment's)."""
+        if offset_kind(self) != "linear":
+            return self
+        shift = np.reshape(shift, np.shape(shift) + (1,))
+        for name in ("u_offset", "y_offset"):
+            lines = np.array(getattr(self, name), dtype=float)
+            lines[..., 0, :] += shift * lines[..., 1, :]
+            setattr(self, name, lines)
+        return self
 
     def _slice_experiments(self, start: int, stop: int, step: int) -> "IOData":
         """Samples ``start:stop`` of a record of several experiments: the borders
@@ -410,6 +486,9 @@ class IOData:
         if self._offsets_per_experiment:
             out.u_offset = np.asarray(self.u_offset)[ks]
             out.y_offset = np.asarray(self.y_offset)[ks]
+            out._moved_lines(np.array(t0s) - np.array(self._t0s)[ks])
+        else:
+            out._moved_lines(t0s[0] - self._t0)
         return out
 
     def scaled(self, *, inputs=None, outputs=None) -> "IOData":
@@ -437,18 +516,34 @@ class IOData:
         factors = []
         for name, given, count in (("inputs", inputs, self.n_inputs),
                                    ("outputs", outputs, self.n_outputs)):
-            f = np.ones(count) if given is None else np.asarray(given, dtype=float).ravel()
+            try:
+                f = np.ones(count) if given is None else \
+                    np.asarray(given, dtype=float).ravel()
+            except (TypeError, ValueError, OverflowError):
+                f = np.full(0, np.nan)                      # refused below
             if f.shape != (count,) or not (np.isfinite(f).all() and (f > 0).all()):
-                raise DataError(f"scaled({name}=...) needs {count} positive finite factors, "
+                raise DataError(f"scaled({name}=...) needs {count} positive finite "
+                                f"factor{'s' if count != 1 else ''}, "
                                 f"one per channel; got {given!r}"[:300])
             factors.append(f)
         fu, fy = factors
-        out = self._derive(self._u * fu, self._y * fy, t=self._t, dt=self._dt, t0=self._t0,
-                           starts=self._starts, t0s=self._t0s, names=self.experiment_names)
-        if self.u_offset is not None:
-            out.u_offset = np.asarray(self.u_offset) * fu
-        if self.y_offset is not None:
-            out.y_offset = np.asarray(self.y_offset) * fy
+        with np.errstate(over="ignore"):
+            u, y = self._u * fu, self._y * fy
+            u_off = None if self.u_offset is None else np.asarray(self.u_offset) * fu
+            y_off = None if self.y_offset is None else np.asarray(self.y_offset) * fy
+        for name, values, names, f in (("inputs", (u, u_off), self.input_names, fu),
+                                       ("outputs", (y, y_off), self.output_names, fy)):
+            over = [np.flatnonzero(~np.isfinite(v).reshape(-1, len(names)).all(axis=0))
+                    for v in values if v is not None]
+            if any(k.size for k in over):
+                k = int(np.concatenate(over).min())
+                raise DataError(f"scaled({name}=...): the factor {f[k]:.6g} of channel "
+                                f"{names[k]!r} takes its values (or the offsets removed by "
+                                "detrend) beyond the double-precision range (1.8e308); use "
+                                "a smaller factor")
+        out = self._derive(u, y, t=self._t, dt=self._dt, t0=self._t0, starts=self._starts,
+                           t0s=self._t0s, names=self.experiment_names)
+        out.u_offset, out.y_offset = u_off, y_off
         return out
 
     def split(self, fraction: float = 0.7) -> tuple["IOData", "IOData"]:
@@ -478,7 +573,10 @@ class IOData:
 
         The removed offsets are kept in ``u_offset`` and ``y_offset`` (the
         channel means for ``'constant'``; the (intercept, slope) rows for
-        ``'linear'``, as functions of the time stamps).
+        ``'linear'``, as functions of the time from the record's first stamp; a
+        slice's intercepts are moved to its own first stamp). Detrending a detrended
+        record again adds what it removes to these offsets, so the operating point is
+        kept (a constant and a line add up to a line).
 
         A record of several experiments (:func:`subid.merge`) is detrended
         experiment by experiment, as MATLAB's ``detrend`` does: each
@@ -490,13 +588,11 @@ class IOData:
         all the samples instead: one operating point for every experiment,
         with offsets of shape ``(n_channels,)``.
         """
+        per_experiment = check_bool(per_experiment, "per_experiment")
         if self.n_experiments > 1 and per_experiment:
             if kind not in ("constant", "linear"):
                 raise DataError(f"detrend kind must be 'constant' or 'linear', got {kind!r}")
-            if self.u_offset is not None:
-                raise DataError("this record was detrended already; detrend the original "
-                                "records (or their merge) once")
-            parts = [e.detrend(kind) for e in self.experiments]
+            parts = [e.detrend(kind) for e in self.experiments]     # offsets accumulate
             out = self._derive(np.vstack([p.u for p in parts]), np.vstack([p.y for p in parts]),
                                dt=self._dt, t0=self._t0, starts=self._starts, t0s=self._t0s,
                                names=self.experiment_names)
@@ -527,11 +623,31 @@ class IOData:
         return self._with_offsets(self._u - u_off, self._y - y_off, u_off, y_off)
 
     def _with_offsets(self, u, y, u_off, y_off) -> "IOData":
+        """The record ``u``, ``y`` less the offsets ``u_off``, ``y_off``, added to those
+        removed before (a detrended record detrended again keeps its operating point:
+        a constant on top of a line, or a line on top of a constant, is a line)."""
         out = self._derive(u, y, t=self._t, dt=self._dt, t0=self._t0, starts=self._starts,
                            t0s=self._t0s, names=self.experiment_names)
+        per = self._offsets_per_experiment
+        if self.u_offset is not None:
+            u_off = _summed_offsets(self.u_offset, u_off, per)
+            y_off = _summed_offsets(self.y_offset, y_off, per)
         out.u_offset, out.y_offset = u_off, y_off
-        out._offsets_per_experiment = False
+        out._offsets_per_experiment = per and self.u_offset is not None
         return out
+
+
+def _summed_offsets(old, new, per_experiment: bool) -> np.ndarray:
+    """Offsets ``old`` (of :meth:`IOData.detrend`; one leading row per experiment when
+    ``per_experiment``) plus ``new`` (one record's: a constant row, or (intercept, slope)
+    rows): a line when either is one."""
+    old, new = np.asarray(old, dtype=float), np.asarray(new, dtype=float)
+    if old.ndim == 2 + per_experiment or new.ndim == 2:
+        def line(c):
+            return np.stack([c, np.zeros_like(c)], axis=-2)
+        old = old if old.ndim == 2 + per_experiment else line(old)
+        new = new if new.ndim == 2 else line(new)
+    return old + new
 
 
 def require_single_experiment(data, method: str) -> None:
@@ -612,16 +728,23 @@ def merge(records, names=None) -> IOData:
     for k, rec in enumerate(records):
         if not isinstance(rec, IOData):
             raise not_a_record(rec, f"merge (item {k})")
-        if not rec.is_uniform:
+        if not rec.is_uniform and rec.n_samples > 1:    # one stamp: any period fits
             raise DataError(f"merge: record {k} has non-uniform time stamps; merged "
                             "experiments must be uniformly sampled: interpolate it onto a "
                             "uniform grid first (numpy.interp per channel), or identify it "
                             "alone (subid.ct_subspace takes one non-uniform record)")
     first = records[0]
+    timed = [k for k, rec in enumerate(records) if rec.dt is not None]
+    if not timed:
+        raise DataError("merge: every record is one sample with a time stamp, which gives "
+                        "no sampling period; build them with dt=")
+    ref = timed[0]
+    period = records[ref].dt
     for k, rec in enumerate(records[1:], start=1):
-        if not same_period(rec.dt, first.dt):
-            raise DataError(f"merge: record {k} is sampled with dt={rec.dt:g} but record 0 "
-                            f"with dt={first.dt:g}; resample one of them first")
+        if rec.dt is not None and not same_period(rec.dt, period):
+            raise DataError(f"merge: record {k} is sampled with dt={float(rec.dt)!r} but "
+                            f"record {ref} with dt={float(period)!r}; resample one of them "
+                            "first")
         if (rec.n_inputs, rec.n_outputs) != (first.n_inputs, first.n_outputs):
             raise DataError(f"merge: record {k} has {rec.n_inputs} inputs and {rec.n_outputs} "
                             f"outputs but record 0 has {first.n_inputs} and "
@@ -645,6 +768,11 @@ def merge(records, names=None) -> IOData:
         if len(set(names)) != len(names):
             names = [f"exp{k + 1}" for k in range(len(experiments))]
     else:
+        if isinstance(names, str):
+            names = [names]
+        if not hasattr(names, "__iter__"):
+            raise DataError(f"merge: names must be a list of strings, one per experiment, "
+                            f"got {names!r}"[:300])
         names = [str(n) for n in names]
         if len(names) != len(experiments):
             raise DataError(f"merge: {len(names)} names for {len(experiments)} experiments")
@@ -652,7 +780,7 @@ def merge(records, names=None) -> IOData:
         raise DataError(f"merge: the experiment names repeat: {names}")
     lengths = [e.n_samples for e in experiments]
     out = first._derive(np.vstack([e.u for e in experiments]),
-                        np.vstack([e.y for e in experiments]), dt=first.dt,
+                        np.vstack([e.y for e in experiments]), dt=period,
                         t0=experiments[0]._t0s[0], starts=np.cumsum([0] + lengths[:-1]),
                         t0s=[e.t[0] for e in experiments], names=names)
     if kinds != {None}:

@@ -29,8 +29,14 @@ import scipy.linalg
 
 from subid._blas import serial_blas
 from subid._validation import check_int, checked_call
-from subid.data import IOData
-from subid.errors import DataError, ModelError, ResourceLimitError, TooFewSamplesError
+from subid.data import IOData, column_std
+from subid.errors import (
+    DataError,
+    ModelError,
+    NotExcitingError,
+    ResourceLimitError,
+    TooFewSamplesError,
+)
 
 __all__ = ["estimate_delay", "delay_inputs", "apply_to_inputs", "frequency_factor",
            "absorb_delay", "input_delay_of"]
@@ -98,7 +104,9 @@ def estimate_delay(data, max_delay: int = 10, *, na: int = 2, nb: int = 2,
     Parameters
     ----------
     data : IOData
-        Uniformly sampled record with at least one input. Means are removed.
+        Uniformly sampled record with at least one input. Means are removed and
+        every channel is divided by its standard deviation, so the units of the
+        channels do not change the answer.
     max_delay : int
         Largest delay tried, in samples.
     na : int
@@ -119,7 +127,10 @@ def estimate_delay(data, max_delay: int = 10, *, na: int = 2, nb: int = 2,
     Raises
     ------
     DataError
-        Not an IOData record, no inputs, non-uniform sampling, bad options.
+        Not an IOData record, no inputs, non-uniform sampling, bad options, a
+        constant output.
+    NotExcitingError
+        A constant input (zero included): its delay cannot be seen.
     TooFewSamplesError
         Fewer samples than the regression needs.
     """
@@ -133,12 +144,19 @@ def estimate_delay(data, max_delay: int = 10, *, na: int = 2, nb: int = 2,
     max_delay = check_int(max_delay, "max_delay", minimum=0)
     na = check_int(na, "na", minimum=0)
     nb = check_int(nb, "nb", minimum=1)
-    u = data.u - data.u.mean(axis=0)
-    y = data.y - data.y.mean(axis=0)
-    scale = y.std(axis=0)
-    if (scale == 0).any():
-        raise DataError("an output is constant: there is no response to find a delay in")
-    y = y / scale
+    # every channel to unit variance, so that units do not change the answer
+    u, u_spread = _standardised(data.u)
+    y, y_spread = _standardised(data.y)
+    if (y_spread == 0).any():
+        k = int(np.flatnonzero(y_spread == 0)[0])
+        raise DataError(f"estimate_delay: output {data.output_names[k]!r} is constant: there "
+                        "is no response to find a delay in")
+    if (u_spread == 0).any():
+        k = int(np.flatnonzero(u_spread == 0)[0])
+        raise NotExcitingError(f"estimate_delay: input {data.input_names[k]!r} is constant, "
+                               "so no delay of its effect can be seen; estimate the delay "
+                               "from a record where it varies (a step or a random signal), "
+                               "or leave that input out", required_order=1, achieved_order=0)
     N, nu = u.shape
     ny = y.shape[1]
     lags = max_delay + nb                   # input lags 0..lags-1
@@ -188,6 +206,19 @@ def estimate_delay(data, max_delay: int = 10, *, na: int = 2, nb: int = 2,
             losses[j, nk] = float(np.sum((Ry - RS @ coef) ** 2))
     delays = np.argmin(losses, axis=1).astype(np.int64)
     return (delays, losses) if return_loss else delays
+
+
+def _standardised(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(x less its column means, divided by their spreads; the spreads)``, one per
+    column of the (samples x channels) ``x`` (0 for a constant column, left as 0s).
+    Each column is first divided by its largest magnitude, so that values near the
+    double-precision limit do not overflow (a spread of 1e155 squares to inf)."""
+    peak = np.abs(x).max(axis=0)
+    x = x / np.where(peak > 0, peak, 1.0)
+    x = x - x.mean(axis=0)
+    std = column_std(x)
+    spread = std * peak
+    return x / np.where(std > 0, std, 1.0), spread
 
 
 # ---------------------------------------------------------------------------
@@ -329,6 +360,9 @@ def absorb_delay(model):
         before anything is allocated; the delayed model itself simulates,
         predicts and gives its frequency response without absorbing.
     """
+    if not all(hasattr(model, name) for name in ("A", "B", "C", "D", "info", "dt")):
+        raise ModelError(f"absorb_delay takes a subid.StateSpace model, got "
+                         f"{type(model).__name__}")
     delays = input_delay_of(model)
     if delays is None:
         return model

@@ -81,7 +81,7 @@ def _header(member, name: str):
         raise NpzError(f"member {name} has an invalid dtype {descr!r}"[:200]) from None
     if dtype.hasobject:
         raise NpzError("it holds object (pickled) arrays, which are not loaded for safety")
-    if dtype.kind not in "biufcUS" or dtype.itemsize == 0 and dtype.kind not in "US":
+    if dtype.kind not in "biufcUSMm" or dtype.itemsize == 0 and dtype.kind not in "US":
         raise NpzError(f"member {name} has the unsupported dtype {dtype}")
     return shape, fortran, dtype, 8 + size_bytes + length
 

@@ -98,6 +98,18 @@ def _stack(keys, arrays, shown, ext, role):
     return values, names
 
 
+def _seconds(t: np.ndarray, key: str, shown: str) -> np.ndarray:
+    """Date-times (``datetime64``: seconds from the first) or durations (``timedelta64``)
+    of an archive's time array as float seconds."""
+    if np.isnat(t).any():
+        row = int(np.flatnonzero(np.isnat(t))[0])
+        raise FileReadError(f"{shown}: the time array {key!r} holds a missing date-time "
+                            f"(NaT) at row {row}", path=shown, column=key)
+    if t.dtype.kind == "M":
+        t = t - t[0]
+    return t / np.timedelta64(1, "s")
+
+
 def _scalar(arr, key, shown, ext) -> float:
     arr = _numeric(np.asarray(arr), key, shown, ext)
     if arr.size != 1:
@@ -137,9 +149,12 @@ def _from_arrays(arrays: dict, shown, ext, inputs, outputs, dt, time) -> IOData:
     y, out_names = _stack(out_keys, arrays, shown, ext, "output")
     t = None
     if t_key is not None:
-        t = _numeric(np.asarray(arrays[t_key]), t_key, shown, ext)
+        t = np.asarray(arrays[t_key])
         if t.ndim == 2 and 1 in t.shape:
             t = t.reshape(-1)
+        if t.dtype.kind in "Mm" and t.ndim == 1 and t.size:
+            t = _seconds(t, t_key, shown)
+        t = _numeric(t, t_key, shown, ext)
         period = _file_period(arrays, shown, ext, in_keys + out_keys) \
             if dt is None and time is None else None
         if period is not None:

@@ -29,7 +29,7 @@ from subid.io._npz import NpzError
 from subid.io.arrays import _array_names, _load_npz, _stack
 from subid.io.fast_csv import _HEAD_BYTES, _blocks, _line_start, _lone_cr, _parsed_blocks
 from subid.io.mat import _load_mat
-from subid.io.text import _decode, _roles, _Table, _tokens, time_like_name
+from subid.io.text import _content, _decode, _roles, _Table, _tokens, time_like_name
 
 STREAM_EXTENSIONS = (".csv", ".tsv", ".txt", ".dat", ".npy", ".parquet")
 
@@ -238,23 +238,27 @@ def _text_pieces(p, shown, ext, inputs, outputs, chunk_size, delimiter, hint=Fal
     import io as _io
     fh, _ = open_regular(shown, what="data file", max_bytes=None)
     with fh:
-        try:
-            head = fh.read(_HEAD_BYTES)
-        except OSError as exc:
-            raise FileReadError(f"{shown}: cannot read the file ({_reason(exc)})",
-                                path=shown) from None
-        if not head:
-            raise FileReadError(f"file {shown} is empty", path=shown)
+        raw = b""
+        while True:             # the head: whole lines, up to the first data row at least
+            try:
+                more = fh.read(_HEAD_BYTES)
+            except OSError as exc:
+                raise FileReadError(f"{shown}: cannot read the file ({_reason(exc)})",
+                                    path=shown) from None
+            raw += more
+            if not raw:
+                raise FileReadError(f"file {shown} is empty", path=shown)
+            head, whole = _whole_lines(raw, len(more) < _HEAD_BYTES)
+            try:
+                layout = _Table(shown, _decode(head, shown), ext, delimiter)
+                break
+            except FileReadError:
+                # no data row in the head yet (a header and a first row of over 1 MiB):
+                # read on, as read() does; a line too long is refused as it is there
+                if whole or len(raw) > 2 * MAX_LINE_CHARS * 4:
+                    raise
         utf16 = head.startswith((b"\xff\xfe", b"\xfe\xff"))
-        if len(head) == _HEAD_BYTES:
-            newline = "\n".encode("utf-16-le" if head.startswith(b"\xff\xfe") else "utf-16-be") \
-                if utf16 else b"\n"
-            cut = head.rfind(newline)
-            while utf16 and cut > 0 and (cut - 2) % 2:     # a UTF-16 code unit boundary
-                cut = head.rfind(newline, 0, cut)
-            if cut > 0:
-                head = head[: cut + len(newline)]
-        layout = _Table(shown, _decode(head, shown), ext, delimiter)
+        layout.ascii_head = head.isascii()
         in_cols, out_cols, _ = _roles(layout, shown, inputs, outputs, None)
         cols = in_cols + out_cols
         in_names, out_names = layout.channel_names(in_cols), layout.channel_names(out_cols)
@@ -295,13 +299,27 @@ def _text_pieces(p, shown, ext, inputs, outputs, chunk_size, delimiter, hint=Fal
             for lines in _text_lines(text, shown, consumed, chunk_size):
                 piece = _piece(layout, lines, consumed)
                 consumed += len(lines)
-                if not any(line.strip() and not line.lstrip().startswith("#") for line in lines):
+                if not any(_content(line) for line in lines):
                     continue
                 values = piece.parse(cols)
                 piece.check_finite(values, cols)
                 yield values[:, :n_in], values[:, n_in:], in_names, out_names
         finally:
             text.detach()
+
+
+def _whole_lines(raw: bytes, whole: bool) -> tuple[bytes, bool]:
+    """``(the complete lines of raw, whole)``: all of ``raw`` when it is the whole file
+    (``whole``), else up to its last line break (UTF-16 code units kept whole)."""
+    if whole:
+        return raw, True
+    utf16 = raw.startswith((b"\xff\xfe", b"\xfe\xff"))
+    newline = "\n".encode("utf-16-le" if raw.startswith(b"\xff\xfe") else "utf-16-be") \
+        if utf16 else b"\n"
+    cut = raw.rfind(newline)
+    while utf16 and cut > 0 and (cut - 2) % 2:          # a UTF-16 code unit boundary
+        cut = raw.rfind(newline, 0, cut)
+    return (raw[: cut + len(newline)] if cut > 0 else raw), False
 
 
 def _piece(layout, lines, consumed: int):
@@ -323,14 +341,22 @@ def _careful_block(layout, buf: bytes, encoding: str, consumed: int, cols, shown
     try:
         text = buf.decode(encoding)
     except UnicodeDecodeError as exc:
-        raise FileReadError(f"{shown}: the file is not UTF-8 text after line {consumed} "
-                            f"({exc.reason})", path=shown, line=consumed) from None
+        if layout.ascii_head:
+            # read() decodes a file that is not UTF-8 as Latin-1; the lines before were
+            # ASCII, the same in both, so this block is Latin-1 as read() reads it
+            text = buf.decode("latin-1")
+        else:
+            line = consumed + buf[:exc.start].count(b"\n") + 1
+            raise FileReadError(f"{shown}, line {line}: the file is not UTF-8 text "
+                                f"({exc.reason}), though its first lines are (with "
+                                "characters beyond ASCII): save it as UTF-8 (or all of it "
+                                "as Latin-1)", path=shown, line=line) from None
     if "\r" in text:
         text = text.replace("\r\n", "\n").replace("\r", "\n")
     lines = text.split("\n")
     if lines and lines[-1] == "":
         lines.pop()
-    if not any(line.strip() and not line.lstrip().startswith("#") for line in lines):
+    if not any(_content(line) for line in lines):
         return np.empty((0, len(cols))), len(lines)
     piece = _piece(layout, lines, consumed)
     values = piece.parse(cols)
@@ -390,6 +416,20 @@ def _frozen(a: np.ndarray) -> np.ndarray:
     return a
 
 
+def _distinct(shown: str, in_cols, out_cols, what: str) -> None:
+    """FileReadError when a column is selected twice, or as an input and an output
+    (as the text reader refuses it)."""
+    for role, cols in (("inputs", in_cols), ("outputs", out_cols)):
+        twice = [c for k, c in enumerate(cols) if c in cols[:k]]
+        if twice:
+            raise FileReadError(f"{shown}: {what} {twice[0]!r} is selected twice in {role}",
+                                path=shown, column=twice[0])
+    both = [c for c in in_cols if c in out_cols]
+    if both:
+        raise FileReadError(f"{shown}: {what} {both[0]!r} is used both as an input and as "
+                            "an output", path=shown, column=both[0])
+
+
 def _column_indices(spec, role: str, n_columns: int, shown: str) -> list[int]:
     tokens = [int(t) if isinstance(t, str) and _INT_RE.fullmatch(t) else t
               for t in _tokens(spec, role, [])]
@@ -431,6 +471,7 @@ def _npy_pieces(p, shown, inputs, outputs, chunk_size):
                             path=shown)
     in_cols = _column_indices(inputs, "inputs", arr.shape[1], shown)
     out_cols = _column_indices(outputs, "outputs", arr.shape[1], shown)
+    _distinct(shown, in_cols, out_cols, "column")
     in_names = [f"col{k}" for k in in_cols]
     out_names = [f"col{k}" for k in out_cols]
     labels = [f"column {k}" for k in in_cols + out_cols]
@@ -487,6 +528,7 @@ def _parquet_pieces(p, shown, inputs, outputs, chunk_size, hint=False):
             cols.append(name)
         chosen.append(cols)
     in_names, out_names = chosen
+    _distinct(shown, in_names, out_names, "column")
     labels = [f"column {name!r}" for name in in_names + out_names]
     if hint:
         _hint_time(shown, names, [names.index(name) for name in in_names + out_names])

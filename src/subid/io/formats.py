@@ -6,9 +6,12 @@ Supported formats, chosen by the file extension:
     Delimited text. The delimiter is detected among ``,`` ``;`` and TAB
     unless ``delimiter`` is given.
 ``.txt``, ``.dat``
-    Text with comma- or semicolon-separated fields, or fields separated by
-    runs of spaces and TABs (the DaISy / MATLAB ``save -ascii`` style, trailing
-    TABs and exponents such as ``1.0000000e+000`` included).
+    Text with comma-, semicolon- or TAB-separated fields (TAB when every line
+    has the same number of TABs, no data field holds spaces between values,
+    and a field is empty or has spaces: a spreadsheet's "Text (Tab delimited)"
+    with names such as ``Input [V]``), or fields separated by runs of spaces
+    and TABs (the DaISy / MATLAB ``save -ascii`` style, trailing TABs and
+    exponents such as ``1.0000000e+000`` included).
 ``.npz``
     NumPy archive (:func:`numpy.savez`); arrays are selected by key.
 ``.mat``
@@ -19,9 +22,14 @@ Supported formats, chosen by the file extension:
 Rules for text files
 --------------------
 * A header row is recognised when the first non-empty line holds a field
-  that is not a number; columns can then be selected by header name. Without
-  a header, columns are selected by 0-based index only. A ``#`` starts a
-  comment up to the end of the line; a header written as a comment line right
+  that is not a value (a number, an ISO 8601 date-time or a spreadsheet marker
+  such as ``#N/A``); columns can then be selected by header name. Without
+  a header, columns are selected by 0-based index only. A column selected by
+  index whose header cell is a value is refused (is that line a header or the
+  first data row?). A line whose first non-blank character is ``#`` is a
+  comment, unless it starts with a spreadsheet marker (``#N/A``, ``#VALUE!``,
+  ...: a data row with a missing value, reported as such); a ``#`` elsewhere
+  is part of a field (``Valve #1``). A header written as a comment line right
   before the data (``numpy.savetxt(..., header="t,u,y")``) is recognised too.
 * Inputs and outputs are never guessed: both must be given.
 * Column numbers in error messages are 0-based, like the indices accepted by

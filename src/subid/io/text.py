@@ -52,12 +52,30 @@ def _decode(raw: bytes, shown: str) -> str:
     return text
 
 
+#: Spreadsheet error and missing-value markers (Excel, LibreOffice, Google Sheets): a line
+#: starting with one of them is a data row with a missing value, not a ``#`` comment.
+MISSING_MARKERS = frozenset({
+    "#N/A", "#NA", "#VALUE!", "#REF!", "#DIV/0!", "#NUM!", "#NAME?", "#NULL!", "#SPILL!",
+    "#CALC!", "#FIELD!", "#BLOCKED!", "#CONNECT!", "#BUSY!", "#UNKNOWN!", "#ERROR!",
+    "#GETTING_DATA"})
+_FIRST_CELL_RE = re.compile(r'[^,;\t "]*')
+
+
+def is_comment(line: str) -> bool:
+    """True when ``line`` is a comment line: its first non-blank character is ``#`` and
+    its first cell is not a spreadsheet marker (:data:`MISSING_MARKERS`, such as Excel's
+    ``#N/A``). A ``#`` elsewhere on a line is part of a field (a header name such as
+    ``Valve #1``), never the start of a comment."""
+    s = line.lstrip()
+    if not s.startswith("#"):
+        return False
+    first = _FIRST_CELL_RE.match(s)
+    return first is None or first.group().upper() not in MISSING_MARKERS
+
+
 def _content(line: str) -> str:
-    """A line without its ``#`` comment and surrounding blanks ('' if nothing is left)."""
-    k = line.find("#")
-    if k >= 0:
-        line = line[:k]
-    return line.strip()
+    """A line without surrounding blanks ('' for a blank or comment line)."""
+    return "" if is_comment(line) else line.strip()
 
 
 def _split(content: str, delim) -> list[str]:
@@ -110,9 +128,36 @@ def _is_number(s: str) -> bool:
     return True
 
 
+_DATE_TIME_RE = re.compile(r"\d{4}-\d{2}-\d{2}(?:[T ]\d{2}:\d{2}(?::\d{2}(?:\.\d+)?)?)?"
+                           r"(?:Z|[+-]\d{2}:?\d{2})?")
+
+
+def _is_date_time(s: str) -> bool:
+    """True when ``s`` is an ISO 8601 date or date-time (``2024-01-01 00:00:02``)."""
+    if not _DATE_TIME_RE.fullmatch(s):
+        return False
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)       # a UTC offset: no time zone kept
+        try:
+            np.datetime64(s.rstrip("Z") if s.endswith("Z") else s, "us")
+        except ValueError:
+            return False
+    return True
+
+
+def _is_value(field: str) -> bool:
+    """True when a field of the first line is a value, not a column name: a number, an
+    ISO 8601 date-time or a spreadsheet missing-value marker (``#N/A``); a line of such
+    fields is the first data row, not a header."""
+    f = field.strip('"').strip()
+    return _is_number(f) or f.upper() in MISSING_MARKERS or _is_date_time(f)
+
+
 def _sniff(sample: list[str], ext: str) -> str | None:
     """Choose the delimiter from the first non-empty lines."""
     candidates = (";", "\t", ",") if ext in (".csv", ".tsv") else (";", ",")
+    if ext not in (".csv", ".tsv") and _tab_table(sample):
+        return "\t"
     counts = {c: [ln.count(c) for ln in sample] for c in candidates}
     for c in candidates:
         if counts[c][0] > 0 and all(n == counts[c][0] for n in counts[c]):
@@ -123,6 +168,21 @@ def _sniff(sample: list[str], ext: str) -> str | None:
     if present:
         return max(present, key=lambda c: counts[c][0])
     return _WHITESPACE
+
+
+def _tab_table(sample: list[str]) -> bool:
+    """True when the (stripped) first lines of a ``.txt``/``.dat`` file are a table of
+    TAB-delimited fields (a spreadsheet's "Text (Tab delimited)" export): the same
+    number of TABs on every line, no field of a data line holding two values apart by
+    spaces (the DaISy / ``save -ascii`` style separates columns by runs of spaces and
+    TABs alike), and TABs splitting a line otherwise than runs of blanks do (a name
+    with spaces, an empty cell): else runs of blanks stay the delimiter, as before."""
+    tabs = sample[0].count("\t")
+    if not tabs or any(ln.count("\t") != tabs for ln in sample):
+        return False
+    if any(len(f.split()) > 1 for ln in sample[1:] for f in ln.split("\t")):
+        return False
+    return any([f.strip() for f in ln.split("\t")] != ln.split() for ln in sample)
 
 
 def decimal_commas(raw: bytes, shown: str, ext: str, delimiter) -> tuple[bytes, str]:
@@ -153,6 +213,7 @@ class _Table:
     """Layout of a text file: delimiter, header, column count, first data line."""
 
     line_offset = 0                   # lines before ``text`` in the file (chunked reading)
+    ascii_head = True                 # the head of the file is ASCII (chunked reading)
 
     def __init__(self, shown, text, ext, delimiter):
         self.shown = shown
@@ -180,7 +241,7 @@ class _Table:
         fields = _split(sample[0], self.delim)
         self.header = None
         self.header_line = None
-        if not all(_is_number(f) for f in fields):
+        if not all(_is_value(f) for f in fields):
             self.header = fields
             self.header_line = first + 1
             self.data_start = first + 1           # 0-based index of the line after the header
@@ -212,7 +273,7 @@ class _Table:
         if k < 0:
             return
         line = self.lines[k].strip()
-        if not line.startswith("#"):
+        if not is_comment(line):
             return
         body = line.lstrip("#").strip()
         if not body:
@@ -254,10 +315,20 @@ class _Table:
 
     def delimiter_hint(self) -> str:
         """When the file was split into one column but its first line holds another
-        usual delimiter: ``' (is the delimiter right? ...)'`` naming it, else ``''``."""
-        if self.ncols != 1 or not self.lines:
+        usual delimiter, or split at blanks a first line whose TAB-delimited fields hold
+        spaces (names such as ``Input [V]``): ``' (is the delimiter right? ...)'``
+        naming it, else ``''``."""
+        if not self.lines:
             return ""
         first = self.lines[0]
+        parts = first.strip().split("\t")
+        if self.delim is _WHITESPACE and len(parts) > 1 and \
+                any(len(f.split()) > 1 for f in parts):
+            return (" (is the delimiter right? it was taken to be runs of spaces/TABs, "
+                    "which splits names with spaces, and the first line holds TAB: pass "
+                    "delimiter='\\t', on the command line --delimiter $'\\t')")
+        if self.ncols != 1:
+            return ""
         for other in (";", ",", "\t", "|"):
             if other != self.delim and other in first:
                 name = _delim_name(other)
@@ -305,8 +376,23 @@ class _Table:
             if idx in cols:
                 raise FileReadError(f"{shown}: {self.describe(idx)} is selected twice in {role}",
                                     path=shown, column=idx)
+            if self.header is not None and not (isinstance(tok, str) and tok in self.header) \
+                    and _is_value(self.header[idx]):
+                self._ambiguous_header(idx, role)
             cols.append(idx)
         return cols
+
+    def _ambiguous_header(self, idx: int, role: str):
+        """FileReadError: column ``idx``, selected by index, has a value (a number, a
+        date-time) in the line taken as the header, which may be the first data row."""
+        names = [f for f in self.header if not _is_value(f)]
+        raise FileReadError(
+            f"{self.shown}: line {self.header_line} was taken as the header (it holds "
+            f"{names[0]!r}, which is not a number), but its cell in column {idx}, selected "
+            f"by index in {role}, is the value {self.header[idx]!r}: if line "
+            f"{self.header_line} is the first data row, add a header line of column names "
+            "before it; if it is the header, select the columns by name (subid does not "
+            "guess)", path=self.shown, line=self.header_line, column=idx)
 
     # -- values --------------------------------------------------------------
     def data_lines(self) -> tuple[list[int], list[str]]:
@@ -326,7 +412,7 @@ class _Table:
         """Values of the columns ``cols``, shape (rows, len(cols))."""
         try:
             values = np.loadtxt(StringIO(self.text), dtype=np.float64,
-                                delimiter=self.delim, comments="#", quotechar='"',
+                                delimiter=self.delim, comments=None, quotechar='"',
                                 skiprows=self.data_start, ndmin=2)
         except (ValueError, TypeError, IndexError) as exc:
             logger.debug("%s: fast parse failed (%s); re-reading line by line", self.shown, exc)
@@ -413,7 +499,10 @@ class _Table:
             return msg + "the value is missing (empty field)"
         msg += (f"{s!r} is not a number" if len(s) <= 60 else
                 f"{s[:40]!r}... ({len(s)} characters) is not a number")
-        if _DECIMAL_COMMA_RE.fullmatch(s):
+        if s.strip('"').upper() in MISSING_MARKERS or s.upper() in ("NA", "N/A", "NULL"):
+            msg += (" (a missing-value marker: subid does not drop or fill samples; "
+                    "interpolate the gap, or split the record there and merge the parts)")
+        elif _DECIMAL_COMMA_RE.fullmatch(s):
             # the command line rewrites decimal=',' as its --decimal , (cli_hint)
             msg += " (a decimal comma: pass decimal=',' and a field delimiter other than ',')"
         elif self.header is not None and lineno == self.first_data:

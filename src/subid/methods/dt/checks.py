@@ -21,7 +21,9 @@ def check_data(data, method: str) -> IOData:
     if not data.is_uniform:
         raise DataError(f"{method} identifies a discrete-time model and needs uniformly "
                         "sampled data; these time stamps are non-uniform "
-                        "(use a continuous-time method for them)")
+                        "(use a continuous-time method for them; if the samples are "
+                        "uniform and only their stamps jitter, build the record with the "
+                        "sampling period: subid.IOData(u, y, dt=...))")
     check_magnitude(data.u, "input", data.input_names)
     check_magnitude(data.y, "output", data.output_names)
     check_offsets(data.u, data.input_names, method)
