@@ -36,12 +36,24 @@ def _require_control():
 
 
 def _resolve_dt(sys_dt, dt, source: str) -> float:
-    """Sampling period of a foreign system whose dt may be True/None."""
+    """Sampling period of a foreign system whose dt may be True/None.
+
+    ``dt=None`` is continuous time for scipy (its ``lti``) but an unspecified time
+    base for python-control, which ``dt`` may then fix."""
     if sys_dt is True:
         if dt is None:
             raise ModelError(f"the {source} system is discrete-time with an unspecified "
                              "sampling period (dt=True); pass the period, e.g. dt=0.1")
         return _model_dt(dt)
+    continuous = sys_dt is None if source == "scipy" else (
+        sys_dt is not None and sys_dt is not False and sys_dt == 0)
+    if continuous:
+        if dt is not None:
+            reader = "from_scipy" if source == "scipy" else "from_control"
+            raise ModelError(f"the {source} system is continuous-time, so dt={dt!r} would "
+                             "read its matrices as discrete-time ones; convert it without "
+                             f"dt and sample it: StateSpace.{reader}(sys).to_discrete({dt!r})")
+        return 0.0
     if sys_dt is None or sys_dt is False:
         return 0.0 if dt is None else _model_dt(dt)
     value = _model_dt(sys_dt, name=f"the {source} system's dt")
@@ -66,7 +78,14 @@ def discretise(A, B, C, D, dt: float, method: str):
         Cd = np.linalg.solve(ima.T, C.T).T
         Dd = D + 0.5 * C @ Bd
     else:
-        Phi, G1, G2 = _simulate.expm_blocks(A, B, [dt], method)
+        with np.errstate(over="ignore", invalid="ignore"):
+            Phi, G1, G2 = _simulate.expm_blocks(A, B, [dt], method)
+        if not all(np.isfinite(M).all() for M in (Phi, G1, G2) if M is not None):
+            fast = float(np.linalg.eigvals(A).real.max())
+            raise ModelError(f"sampling with dt={dt!r} overflows: the model's fastest "
+                             f"unstable mode grows as exp({fast:.6g} t), beyond the floating "
+                             f"point range after one period (exp({fast * dt:.6g})); the "
+                             "sampling period is too long for this model, use a shorter dt")
         Ad, Bd, Cd, Dd = Phi[0], G1[0], C, D
         if method == "foh":
             Bd = G1[0] - G2[0] + Phi[0] @ G2[0]
@@ -105,9 +124,118 @@ def continuise(Ad, Bd, Cd, Dd, h: float, method: str):
     return A, B, Cd, D, "foh"
 
 
+#: ``info`` entries that describe one realisation on one time base: the polynomials of a
+#: polynomial method (in ``q^-1``), their degrees and the parameter covariance of the
+#: matrices. A change of time base or of the realisation's meaning leaves them stale.
+REALISATION_KEYS = ("polynomials", "orders", "parameter_covariance")
+#: ``info`` entries in the state basis, which only a zero-order-hold conversion keeps: its
+#: sampled state is the continuous state at the samples; a first-order hold's is
+#: ``x - Gamma2 u`` (it depends on the input at the first sample), a bilinear one's
+#: another combination of ``x`` and ``u``.
+STATE_KEYS = ("x0", "selector")
+
+
+def drop_info(info: dict, reasons: dict, *, note: bool = True) -> dict:
+    """``info`` without the keys of ``reasons``, each one it held named with its reason in
+    ``info['dropped']`` (and, for the covariance with ``note``,
+    ``info['parameter_covariance_note']``, which :func:`subid.parameter_covariance`
+    reports)."""
+    out = dict(info)
+    dropped = dict(out.get("dropped") or {})
+    for key, reason in reasons.items():
+        if out.pop(key, None) is not None:
+            dropped[key] = reason
+            if key == "parameter_covariance" and note:
+                out["parameter_covariance_note"] = f"the covariance was dropped: {reason}"
+    if dropped:
+        out["dropped"] = dropped
+    return out
+
+
+def gain_info(info: dict, old_K, new_K) -> dict:
+    """``info`` for a model whose Kalman gain ``old_K`` became ``new_K``
+    (:meth:`StateSpace.with_noise_model`): without a parameter covariance that includes
+    the gain, unless the gain is the same."""
+    cov = info.get("parameter_covariance")
+    same = old_K is not None and new_K is not None and np.array_equal(old_K, new_K)
+    if isinstance(cov, dict) and cov.get("with_gain") and not same:
+        return drop_info(info, {"parameter_covariance": (
+            "with_noise_model() replaced the Kalman gain it includes")})
+    return dict(info)
+
+
+def converted_info(info: dict, what: str, method: str) -> dict:
+    """``info`` for the result of ``what`` (``'to_discrete'``, ``'to_continuous'``) with
+    ``method``: without the entries it no longer matches (:data:`REALISATION_KEYS`; the
+    state-basis ones unless ``method`` is 'zoh')."""
+    reason = f"{what}(method={method!r}) changed the time base of the model"
+    reasons = dict.fromkeys(REALISATION_KEYS, reason)
+    if method != "zoh":
+        reasons.update(dict.fromkeys(STATE_KEYS, (
+            f"{what}(method={method!r}): the state of the converted model is not the "
+            "original state (it mixes in the input at the first sample); estimate the "
+            "initial state on data (subid.fit_percent's x0='estimate')")))
+    # no covariance note: subid.parameter_covariance explains a converted model itself
+    return drop_info(info, reasons, note=False)
+
+
+def transformed_info(info: dict, T: np.ndarray, Tinv: np.ndarray, shape) -> dict:
+    """``info`` in the state basis ``z = T x`` (:meth:`StateSpace.transform`): the initial
+    state(s), ``ls_subspace``'s selector and the parameter covariance follow it.
+
+    ``shape`` is ``(n, n_inputs, n_outputs)``. The parameters (the row-major ``A, B, C``
+    and ``D``, ``K`` when estimated) map linearly, ``vec(X M Y) = (X kron Y^T) vec(M)``
+    row-major, so the covariance factor maps with the same matrix (exact)."""
+    n, nu, ny = shape
+    out = dict(info)
+    value = out.get("x0")
+    if value is not None and np.shape(value)[-1:] == (n,):
+        out["x0"] = np.asarray(value, dtype=float) @ T.T
+    value = out.get("selector")
+    if value is not None and np.ndim(value) == 2 and np.shape(value)[0] == n:
+        out["selector"] = T @ np.asarray(value, dtype=float)
+    entry = out.get("parameter_covariance")
+    if isinstance(entry, dict) and "factor" in entry and "parameters" in entry:
+        blocks = [np.kron(T, Tinv.T), np.kron(T, np.eye(nu)), np.kron(np.eye(ny), Tinv.T)]
+        if entry.get("with_feedthrough"):
+            blocks.append(np.eye(ny * nu))
+        if entry.get("with_gain"):
+            blocks.append(np.kron(T, np.eye(ny)))
+        M = linalg.block_diag(*blocks)
+        params = np.asarray(entry["parameters"], dtype=float)
+        factor = np.asarray(entry["factor"], dtype=float)
+        if params.shape == (M.shape[0],) and factor.ndim == 2 \
+                and factor.shape[0] == M.shape[0]:
+            out["parameter_covariance"] = {**entry, "parameters": M @ params,
+                                           "factor": M @ factor}
+        else:
+            out = drop_info(out, {"parameter_covariance": (
+                "transform() could not map it (its parameters do not match the model's "
+                "matrices); refine the model with subid.pem for a covariance")})
+    return out
+
+
+def _warn_hold(model, target: str) -> None:
+    """ConversionWarning: ``target`` has no slot for the model's first-order hold."""
+    if model.hold != "zoh":
+        import warnings
+
+        from subid.errors import ConversionWarning
+        what = ("its simulation and sampling there will read it as a zero-order hold; "
+                "sample it with its hold first (model.to_discrete(dt))"
+                if model.is_continuous else
+                "a conversion back to continuous time there will assume a zero-order hold; "
+                "convert with model.to_continuous() (which uses the hold) instead")
+        warnings.warn(f"the model assumes a first-order hold (hold={model.hold!r}), which a "
+                      f"{target} system cannot carry: {what}, or set hold='foh' again on "
+                      "the way back (StateSpace(..., hold='foh'))",
+                      ConversionWarning, stacklevel=4)
+
+
 def to_control(model):
     """python-control system of ``model`` (:meth:`StateSpace.to_control`)."""
     control = _require_control()
+    _warn_hold(model, "python-control")
     m = _without_delay(model)
     return control.ss(np.array(m._A), np.array(m._B), np.array(m._C),
                       np.array(m._D), m._dt, inputs=list(m.input_names),
@@ -118,11 +246,20 @@ def from_control(cls, sys, dt=None):
     """``cls`` from a python-control system (:meth:`StateSpace.from_control`)."""
     control = _require_control()
     if not isinstance(sys, control.StateSpace):
-        if isinstance(sys, control.LTI):
-            sys = control.ss(sys)
-        else:
+        if not isinstance(sys, control.LTI):
             raise ModelError(f"expected a python-control system, got "
                              f"{type(sys).__name__}")
+        try:
+            sys = control.ss(sys)
+        except NotImplementedError as exc:   # control.exception.ControlMIMONotImplemented
+            raise ModelError(f"python-control cannot turn this {type(sys).__name__} into "
+                             f"a state-space system ({exc}); a MIMO transfer function "
+                             "needs slycot (pip install slycot): convert it with "
+                             "control.ss(sys) there and pass the state-space system") from None
+    if np.asarray(sys.A).shape[0] == 0:
+        raise ModelError("the python-control system is a static gain (no states), which a "
+                         "subid model cannot hold (order >= 1); use its gain matrix sys.D "
+                         "directly")
     period = _resolve_dt(sys.dt, dt, "python-control")
     return cls(np.asarray(sys.A), np.asarray(sys.B), np.asarray(sys.C),
                np.asarray(sys.D), period, input_names=list(sys.input_labels),
@@ -132,6 +269,7 @@ def from_control(cls, sys, dt=None):
 def to_scipy(model):
     """:class:`scipy.signal.StateSpace` of ``model`` (:meth:`StateSpace.to_scipy`)."""
     from scipy import signal
+    _warn_hold(model, "scipy.signal")
     m = _without_delay(model)
     mats = [np.array(M) for M in (m._A, m._B, m._C, m._D)]
     if m.is_continuous:
@@ -149,6 +287,29 @@ def from_scipy(cls, sys, dt=None):
         sys = sys.to_ss()
     period = _resolve_dt(sys.dt, dt, "scipy")
     return cls(sys.A, sys.B, sys.C, sys.D, period)
+
+
+def drop_noise_model(model, what: str) -> None:
+    """Warn that ``what`` (a conversion of ``model``) drops its noise model."""
+    if model.K is not None or model.noise_cov is not None:
+        import warnings
+
+        from subid.errors import NoiseModelWarning
+        warnings.warn(f"{what}: the Kalman gain K and the innovation covariance are "
+                      "dropped (an innovation model is tied to its sampling period and "
+                      "has no exact counterpart under this conversion); re-estimate "
+                      "them on data (subid.pem) if needed", NoiseModelWarning,
+                      stacklevel=3)
+
+
+def raise_pole_hit(model, w, s):
+    """ModelError: a frequency of :meth:`StateSpace.freqresp` falls on a pole."""
+    poles = np.linalg.eigvals(model.A)
+    dist = np.abs(s[:, None] - poles[None, :])
+    i, j = np.unravel_index(np.argmin(dist), dist.shape)
+    where = "s = j w" if model.is_continuous else "z = exp(j w dt)"
+    raise ModelError(f"the frequency w={float(w[i])!r} rad/s falls on the pole {poles[j]:.6g} "
+                     f"({where}): the frequency response is infinite there")
 
 
 def _real_logm(Ad: np.ndarray) -> np.ndarray:
