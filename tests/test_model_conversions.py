@@ -283,3 +283,25 @@ def test_convert_model_defaults_to_the_models_hold(tmp_path):
     d = StateSpace.load(tmp_path / "d.json")
     assert "(foh)" in text and d.hold == "foh"
     assert d.allclose(_foh_model().to_discrete(0.2, "foh"), rtol=0, atol=0)
+
+
+def test_negative_eigenvalues_in_pairs_have_a_real_logarithm():
+    """A_d = -0.5 I is exp(L h) for the real L = log(0.5)/h I + pi/h J (a mode at the
+    Nyquist frequency); it was refused as having no real logarithm. A single negative
+    eigenvalue still has none."""
+    h = 0.1
+    rng = np.random.default_rng(0)
+    S = rng.standard_normal((4, 4))
+    for diag in ([-0.5, -0.5], [-0.5, -0.5, 0.3, 0.8], [-0.5, -0.5, -0.2, -0.2]):
+        k = len(diag)
+        Ad = S[:k, :k] @ np.diag(diag) @ np.linalg.inv(S[:k, :k])
+        d = StateSpace(Ad, rng.standard_normal((k, 2)), np.ones((1, k)), 0, h)
+        for method in ("zoh", "foh"):
+            back = d.to_continuous(method).to_discrete(h, method)
+            assert back.allclose(d, rtol=1e-9, atol=1e-9)
+    c = StateSpace(-0.5 * np.eye(2), np.eye(2), np.eye(2), 0, h).to_continuous()
+    np.testing.assert_allclose(np.sort_complex(c.poles()),
+                               np.log(0.5) / h + np.array([-1j, 1j]) * np.pi / h)
+    odd = StateSpace(np.diag([-0.5, -0.5, -0.2]), np.ones((3, 1)), np.ones((1, 3)), 0, h)
+    with pytest.raises(ModelError, match=r"-0\.5, -0\.5, -0\.2 on the negative real"):
+        odd.to_continuous()

@@ -6,6 +6,8 @@ The functions return matrices; the class builds the model (names, ``info``, hold
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from scipy import linalg
 
@@ -313,7 +315,12 @@ def raise_pole_hit(model, w, s):
 
 
 def _real_logm(Ad: np.ndarray) -> np.ndarray:
-    """Principal real logarithm of ``Ad``, or ModelError when none exists."""
+    """Principal real logarithm of ``Ad``, or ModelError when none exists.
+
+    Eigenvalues on the negative real axis have a real logarithm only in pairs (Culver
+    1966: their Jordan blocks pair up); ``Ad`` with semisimple negative eigenvalues of
+    even multiplicity (e.g. ``-0.5 I``) gets the one whose pairs are ``log|z| +- i pi``
+    (modes at the Nyquist frequency), see :func:`_negative_pairs_logm`."""
     ev = np.linalg.eigvals(Ad)
     scale = max(1.0, float(np.abs(ev).max()))
     tiny = np.abs(ev) <= Ad.shape[0] * _EPS * scale
@@ -323,10 +330,15 @@ def _real_logm(Ad: np.ndarray) -> np.ndarray:
                          "continuous pole); use method='bilinear' instead")
     negative = (ev.real < 0) & (np.abs(ev.imag) <= 1e-8 * np.abs(ev))
     if negative.any():
-        raise ModelError(f"A_d has the eigenvalue {ev[negative][0].real:.6g} on the "
-                         "negative real axis, which has no real matrix logarithm: no "
-                         "continuous-time model with this sampling period has this "
-                         "discretisation; use method='bilinear' instead")
+        L = _negative_pairs_logm(Ad)
+        if L is None:
+            values = ", ".join(f"{v:.6g}" for v in np.sort(ev[negative].real))
+            raise ModelError(f"A_d has the eigenvalues {values} on the negative real "
+                             "axis, which have no real matrix logarithm (one without an "
+                             "equal partner, or not diagonalisable): no "
+                             "continuous-time model with this sampling period has this "
+                             "discretisation; use method='bilinear' instead")
+        return L
     with np.errstate(all="ignore"):
         L = linalg.logm(Ad)
     L = np.asarray(L)
@@ -339,6 +351,64 @@ def _real_logm(Ad: np.ndarray) -> np.ndarray:
                              "logarithm is complex)")
         L = L.real
     return np.ascontiguousarray(L)
+
+
+def _negative_pairs_logm(Ad: np.ndarray):
+    """A real logarithm of ``Ad`` whose eigenvalues on the negative real axis are
+    semisimple and come in pairs; None otherwise.
+
+    The real Schur form puts the negative eigenvalues first and a Sylvester equation
+    decouples them from the others (principal logarithm). On the invariant plane of each
+    pair (two real eigenvectors of ``z``, or ``Re v, Im v`` of a pair ``rho e^{+-i theta}``
+    split off the axis by rounding) ``Ad`` acts as ``rho R(theta)`` (``theta = pi`` for
+    the real pair), whose logarithm is ``log(rho) I + theta J`` (``J`` the rotation by 90
+    degrees). The result is checked: ``expm(L) = Ad`` to 1e-8."""
+    n = Ad.shape[0]
+    with np.errstate(all="ignore"):
+        try:
+            T, Z, k = linalg.schur(Ad, output="real", sort=lambda re, im: bool(
+                re < 0 and abs(im) <= 1e-8 * abs(complex(re, im))))
+        except (linalg.LinAlgError, ValueError):
+            return None
+    if k == 0 or k % 2:
+        return None
+    T11, T12, T22 = T[:k, :k], T[:k, k:], T[k:, k:]
+    try:
+        X = linalg.solve_sylvester(T11, -T22, -T12) if k < n else np.zeros((k, 0))
+        w, V = np.linalg.eig(T11)
+    except (linalg.LinAlgError, ValueError):
+        return None
+    planes = [(V[:, i].real, V[:, i].imag, abs(w[i]), math.atan2(w[i].imag, w[i].real))
+              for i in np.flatnonzero(w.imag > 0)]
+    real = np.flatnonzero(w.imag == 0)
+    real = real[np.argsort(w[real].real)]
+    if real.size % 2 or 2 * len(planes) + real.size != k:
+        return None
+    for a, b in zip(real[::2], real[1::2]):
+        if abs(w[a] - w[b]) > 1e-6 * abs(w[a]):
+            return None                        # an unpaired negative eigenvalue
+        planes.append((V[:, a].real, V[:, b].real, 0.5 * abs(w[a] + w[b]), math.pi))
+    basis = np.column_stack([v for x, y, _, _ in planes for v in (x, y)])
+    if np.linalg.cond(basis) > 1e8:
+        return None                            # not diagonalisable: no pairs
+    M = linalg.block_diag(*[[[math.log(rho), theta], [-theta, math.log(rho)]]
+                            for _, _, rho, theta in planes])
+    L11 = basis @ np.linalg.solve(basis.T, M.T).T
+    with np.errstate(all="ignore"):
+        L22 = np.asarray(linalg.logm(T22)) if k < n else np.zeros((0, 0))
+    if np.iscomplexobj(L22):
+        if L22.size and np.abs(L22.imag).max() > 1e-8 * max(1.0, np.abs(L22.real).max()):
+            return None
+        L22 = L22.real
+    S = np.eye(n)
+    S[:k, k:] = X                               # T = S blockdiag(T11, T22) S^-1
+    Sinv = np.eye(n)
+    Sinv[:k, k:] = -X
+    L = Z @ S @ linalg.block_diag(L11, L22) @ Sinv @ Z.T
+    with np.errstate(all="ignore"):
+        ok = np.isfinite(L).all() and np.allclose(linalg.expm(L), Ad, rtol=1e-8,
+                                                  atol=1e-8 * np.abs(Ad).max())
+    return np.ascontiguousarray(L) if ok else None
 
 
 def _without_delay(model):

@@ -697,8 +697,9 @@ class StateSpace:
         ------
         ModelError
             The model is already continuous-time; ``A_d`` is singular or has an
-            eigenvalue on the negative real axis (no real matrix logarithm,
-            ``'zoh'``/``'foh'``); ``A_d`` has an eigenvalue at -1
+            eigenvalue on the negative real axis without an equal partner (no
+            real logarithm, ``'zoh'``/``'foh'``; a pair gives a mode at the
+            Nyquist frequency); ``A_d`` has an eigenvalue at -1
             (``'bilinear'``).
         """
         if self.is_continuous:
