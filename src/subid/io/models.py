@@ -58,8 +58,8 @@ def load_model(path, cls):
     path = os.fsdecode(path) if isinstance(path, bytes) else os.fspath(path)
     try:
         size = os.stat(path).st_size
-    except OSError:
-        size = 0                                   # read_regular says what is wrong
+    except (OSError, ValueError):                  # read_regular says what is wrong
+        size = 0
     if size > MAX_MODEL_BYTES:
         raise FileReadError(f"{path} is {size} bytes, more than the {MAX_MODEL_BYTES} bytes "
                             "of the largest model file StateSpace.load reads (save writes "
