@@ -128,10 +128,16 @@ def test_subspace_model_has_no_covariance(refined):
         subid.plot.step(subid.n4sid(data, 2), confidence=0.95)
 
 
-def test_transformed_model_is_refused(refined):
+def test_edited_model_is_refused_and_transformed_model_keeps_its_bounds(refined):
+    """transform() maps the covariance with the matrices (session 22; it was refused as
+    'other matrices'); matrices edited by hand under the old covariance are refused."""
     model, _ = refined
+    edited = StateSpace(model.A * 1.01, model.B, model.C, model.D, model.dt, K=model.K,
+                        noise_cov=model.noise_cov, info=model.info)
     with pytest.raises(ModelError, match="other matrices"):
-        subid.freqresp_bounds(model.transform(np.array([[2.0, 0.0], [0.0, 1.0]])), W)
+        subid.freqresp_bounds(edited, W)
+    same = subid.freqresp_bounds(model.transform(np.array([[2.0, 0.0], [0.0, 1.0]])), W)
+    np.testing.assert_allclose(same.std, subid.freqresp_bounds(model, W).std, rtol=1e-7)
 
 
 def test_bad_options(refined):

@@ -350,7 +350,9 @@ def absorb_delay(model):
 
     Returns the model itself when it has no delays. The Kalman gain K (zero rows for
     the registers), ``noise_cov`` and ``info['x0']`` (zeros for the registers) carry
-    over: one-step predictions are unchanged.
+    over: one-step predictions are unchanged. The polynomials of a polynomial method,
+    their degrees and the parameter covariance no longer describe the matrices: they are
+    dropped, each named in ``info['dropped']``.
 
     Raises
     ------
@@ -400,6 +402,19 @@ def absorb_delay(model):
         pos += d
     info = {k: v for k, v in model.info.items() if k != INFO_KEY}
     info["absorbed_input_delay"] = delays.tolist()
+    # the polynomials (their nk), their degrees and the covariance of the matrices describe
+    # the model before absorption: dropped, each named in info['dropped'] (as the model's
+    # conversions do, subid.model._conversions.drop_info)
+    dropped = dict(info.get("dropped") or {})
+    for key in ("polynomials", "orders", "parameter_covariance"):
+        if info.pop(key, None) is not None:
+            dropped[key] = "absorb_delay() turned the input delays into states"
+    if "parameter_covariance" in dropped:
+        info["parameter_covariance_note"] = (
+            "the covariance was dropped: absorb_delay() turned the input delays into states "
+            "(ask for bounds on the model with info['input_delay'])")
+    if dropped:
+        info["dropped"] = dropped
     # the innovation form and the initial state(s) carry over: the registers take no
     # noise (K's rows zero) and start empty (the delayed model's inputs before the
     # record are zero too), so predictions and simulations from info['x0'] are the same

@@ -222,7 +222,9 @@ class PoorFitWarning(UserWarning):
 
 class DelayWarning(UserWarning):
     """Input delays counted in samples (``info['input_delay']``) are dropped by an
-    operation that changes the sampling; :func:`subid.absorb_delay` keeps them as states."""
+    operation that changes the time base (:meth:`subid.StateSpace.to_continuous`: dead
+    time has no finite-dimensional continuous-time state-space form); the message says
+    what keeps or approximates them."""
 
 
 class ConversionWarning(UserWarning):
@@ -230,7 +232,10 @@ class ConversionWarning(UserWarning):
     hold (a pole on the negative real axis, or at the origin), and a continuous-time
     method changed its result because of it: a mode at the Nyquist frequency was added
     (one state more per such pole), or another candidate model was used. The message
-    says which (:func:`subid.ct_subspace`'s discrete-time starts)."""
+    says which (:func:`subid.ct_subspace`'s discrete-time starts). Also: a model that
+    assumes a first-order hold (``hold='foh'``) is exported to a system without an input
+    hold (:meth:`subid.StateSpace.to_control`, :meth:`~subid.StateSpace.to_scipy`), which
+    read as a zero-order hold."""
 
 
 class SamplingWarning(UserWarning):

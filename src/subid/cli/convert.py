@@ -25,7 +25,8 @@ from subid.cli._shared import _about, _common, _echo, _state, cli, load_model
                    "file; control / scipy: a Python script building the python-control / "
                    "scipy.signal system.")
 @click.option("--method", "conversion", type=click.Choice(["zoh", "foh", "bilinear"]),
-              default="zoh", show_default=True, help="Discretisation method (c2d / d2c).")
+              default=None, help="Discretisation method (c2d / d2c); default: the "
+              "model's hold (zoh, or foh for a model identified with a first-order hold).")
 @click.option("--dt", type=float, default=None,
               help="Sampling period for a .mat model whose Ts is -1 (unspecified).")
 @click.option("--out", default=None, metavar="FILE",

@@ -307,8 +307,9 @@ def parameter_covariance(model) -> ParameterCovariance:
         The model has no covariance (a subspace model: refine it with
         :func:`subid.pem`; a continuous-time model, e.g. :func:`subid.identify`
         on non-uniform data: the message names the discrete-time path), or its
-        matrices are not those the covariance was computed for (transformed or
-        converted after ``pem``).
+        matrices are not those the covariance was computed for (edited after
+        ``pem``; :meth:`StateSpace.transform` maps the covariance, conversions and
+        :func:`subid.absorb_delay` drop it).
     """
     if not isinstance(model, StateSpace):
         raise ModelError(f"expected a subid.StateSpace, got {type(model).__name__}")
@@ -375,9 +376,9 @@ def parameter_covariance(model) -> ParameterCovariance:
     if not np.allclose(own, cov.parameters, rtol=REALISATION_RTOL,
                        atol=REALISATION_RTOL * max(np.abs(own).max(), 1e-300)):
         raise ModelError("info['parameter_covariance'] belongs to other matrices than the "
-                         "model's (it was transformed, converted or edited after pem); "
-                         "ask for bounds on the model pem returned, or refit this one with "
-                         "subid.pem(data, model), which attaches its own covariance")
+                         "model's (its matrices were converted or edited after pem); ask for bounds on "
+                         "the model pem returned, or refine this one with "
+                         "subid.pem(data, model)")
     return cov
 
 

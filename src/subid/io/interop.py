@@ -265,7 +265,7 @@ def python_source(model, target: str = "control", *, source: str = "a subid mode
         + _operating_point_source(model)
 
 
-def convert_model(model, path, to: str, *, dt=None, method: str = "zoh",
+def convert_model(model, path, to: str, *, dt=None, method: str | None = None,
                   source: str = "a subid model") -> str:
     """Write ``model`` converted to another time base or format (``subid convert``).
 
@@ -283,8 +283,9 @@ def convert_model(model, path, to: str, *, dt=None, method: str = "zoh",
         ``'scipy'``: the Python script of :func:`python_source`.
     dt : float, optional
         The sampling period of ``to='discrete'`` (positive, finite).
-    method : {'zoh', 'foh', 'bilinear'}
-        The discretisation method (MATLAB's ``c2d``/``d2c``).
+    method : {None, 'zoh', 'foh', 'bilinear'}
+        The discretisation method (MATLAB's ``c2d``/``d2c``); None: the model's
+        :attr:`~subid.StateSpace.hold`.
     source : str
         Where the model came from (named by the Python scripts).
 
@@ -304,6 +305,7 @@ def convert_model(model, path, to: str, *, dt=None, method: str = "zoh",
     if not isinstance(model, StateSpace):
         raise ModelError(f"convert_model expects a subid.StateSpace, got {type(model).__name__}")
     check_choice(to, "to", CONVERT_TARGETS)
+    method = model.hold if method is None else method
     check_choice(method, "method", ("zoh", "foh", "bilinear"))
     if to == "discrete":
         try:

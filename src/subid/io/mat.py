@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from subid._validation import same_period
+from subid.delay import absorb_delay, input_delay_of
 from subid.errors import FileReadError, ModelError, ResourceLimitError
 from subid.io._common import _HDF5_SIGNATURE, _max_bytes, _reason
 from subid.io._files import atomic_write, read_regular
@@ -63,11 +64,16 @@ def write_mat_model(model, path) -> None:
     Parameters
     ----------
     model : StateSpace
-        The model (read through its public attributes).
+        The model (read through its public attributes). Its input delays become
+        extra states (:func:`subid.absorb_delay`, which drops the polynomials whose
+        ``nk`` they were); the ``idpoly`` fields are written for a discrete-time
+        polynomial model only (the polynomials are in ``q^-1``).
     path : str or os.PathLike
         The ``.mat`` file.
     """
     import scipy.io
+    if input_delay_of(model) is not None:     # MATLAB's ss fields here carry no delays
+        model = absorb_delay(model)
     path = os.fspath(path)
     names_in = np.empty((1, model.n_inputs), dtype=object)
     names_in[0, :] = list(model.input_names)
@@ -82,7 +88,7 @@ def write_mat_model(model, path) -> None:
     if model.hold != "zoh":                      # the input hold it assumes (subid only)
         variables["subid_hold"] = model.hold
     poly = (model.info or {}).get("polynomials")
-    if isinstance(poly, dict) and "structure" in poly:    # MATLAB idpoly fields
+    if isinstance(poly, dict) and "structure" in poly and not model.is_continuous:
         for key in ("A", "B", "C", "D"):          # the realisation under subid's names
             variables[f"subid_ss_{key}"] = variables.pop(key)
         variables.update(_idpoly_fields(poly))

@@ -10,13 +10,12 @@ from __future__ import annotations
 
 import os
 
-from subid.delay import absorb_delay, input_delay_of
-from subid.errors import ModelError
+from subid.errors import FileReadError, ModelError
 from subid.io._files import atomic_write, read_regular
 from subid.io._schema import parse_json
 from subid.io.mat import read_mat_model, write_mat_model
 from subid.model import storage
-from subid.model.codec import to_json
+from subid.model.codec import to_json, to_json_value
 
 #: Largest model file :meth:`StateSpace.load` reads (a model is a few matrices).
 MAX_MODEL_BYTES = 256 * 2**20
@@ -31,6 +30,14 @@ def save_model(model, path) -> None:
     path : str or os.PathLike
     """
     text = to_json(model)
+    size = len(text.encode("utf-8"))
+    if size > MAX_MODEL_BYTES:
+        info = model.info
+        bulky = sorted(info, key=lambda k: -len(to_json_value(info[k])))[:3]
+        raise ModelError(f"the model file would be {size} bytes, more than the "
+                         f"{MAX_MODEL_BYTES} bytes StateSpace.load reads; nothing was "
+                         f"written. Remove bulky entries from model.info (the largest: "
+                         f"{', '.join(map(repr, bulky))}) and save again")
     with atomic_write(path, "w", encoding="utf-8", what="model file") as fh:
         fh.write(text)
 
@@ -49,6 +56,14 @@ def load_model(path, cls):
     StateSpace
     """
     path = os.fsdecode(path) if isinstance(path, bytes) else os.fspath(path)
+    try:
+        size = os.stat(path).st_size
+    except (OSError, ValueError):                  # read_regular says what is wrong
+        size = 0
+    if size > MAX_MODEL_BYTES:
+        raise FileReadError(f"{path} is {size} bytes, more than the {MAX_MODEL_BYTES} bytes "
+                            "of the largest model file StateSpace.load reads (save writes "
+                            "none larger): it is not a subid model file", path=path)
     raw = read_regular(path, what="model file", max_bytes=MAX_MODEL_BYTES)
     if not raw.strip():
         raise ModelError(f"model file '{path}' is empty")
@@ -59,12 +74,5 @@ def load_model(path, cls):
         raise ModelError(f"model file '{path}': {exc}") from None
 
 
-def _write_mat(model, path) -> None:
-    # input delays become extra states: MATLAB's ss fields here carry none
-    if input_delay_of(model) is not None:
-        model = absorb_delay(model)
-    write_mat_model(model, path)
-
-
 storage.register("json", reader=load_model, writer=save_model)
-storage.register("mat", reader=read_mat_model, writer=_write_mat)
+storage.register("mat", reader=read_mat_model, writer=write_mat_model)

@@ -151,3 +151,31 @@ def records_warnings(fn):
         model.info["warnings"] = list(issued)
         return model
     return wrapper
+
+
+def continuous_x0(info: dict, cmodel, xi0, data) -> dict:
+    """``info`` of ``cmodel`` (converted to continuous time by ``to_continuous``) with
+    its initial state(s) ``x0`` again: ``to_continuous('foh')`` drops the discrete-time
+    model's ``xi0``, whose state is ``x - Gamma2 u`` (:func:`subid.model._simulate.foh_state`),
+    and only ``data`` give ``u`` at each experiment's first sample. Unchanged when
+    ``cmodel`` assumes a zero-order hold (its ``x0`` is kept) or ``xi0`` is None."""
+    if cmodel.hold != "foh" or xi0 is None:
+        return info
+    import numpy as np
+
+    from subid.model._simulate import foh_state
+    xi0 = np.asarray(xi0, dtype=float)
+    firsts = data.u[[a for a, _ in data.experiment_ranges]]
+    x0 = foh_state(cmodel.A, cmodel.B, data.dt, xi0, firsts if xi0.ndim == 2 else firsts[0])
+    out = {}                       # x0 back in its place among the core keys
+    for key, value in info.items():
+        out[key] = value
+        if key == "n_samples":
+            out["x0"] = x0
+    out["x0"] = x0
+    dropped = {k: v for k, v in (out.get("dropped") or {}).items() if k != "x0"}
+    if dropped:
+        out["dropped"] = dropped
+    else:
+        out.pop("dropped", None)
+    return out

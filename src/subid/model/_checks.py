@@ -233,3 +233,22 @@ def check_channel_order(model, data) -> None:
                 "by position, so the result would be meaningless: put the record's columns "
                 f"in the model's order (data.{symbol}[:, {order}], with the names in that "
                 "order), or rename them if they are other channels")
+
+
+def _initial_state(x0, n: int) -> np.ndarray:
+    """The initial state ``x0`` of :meth:`StateSpace.simulate` (one experiment) as a
+    float64 vector of length ``n`` (zeros for None), or DataError."""
+    if x0 is None:
+        return np.zeros(n)
+    arr = np.asarray(x0)
+    if arr.dtype.kind not in "biuf":
+        raise DataError(f"initial state x0 must be real numbers, got dtype {arr.dtype}")
+    if arr.ndim == 2 and 1 in arr.shape:
+        arr = arr.reshape(-1)
+    if arr.shape != (n,):
+        raise DataError(f"initial state x0 has shape {arr.shape} but the model order is "
+                        f"{n}: x0 must have shape ({n},)")
+    arr = np.asarray(arr, dtype=np.float64)
+    if not np.isfinite(arr).all():
+        raise DataError("initial state x0 has NaN or infinite entries")
+    return arr

@@ -23,6 +23,7 @@ import numbers
 import numpy as np
 
 from subid._validation import check_time_stamps
+from subid.delay import input_delay_of
 from subid.errors import DataError, ResourceLimitError
 
 __all__ = ["response_times", "step_response", "impulse_response"]
@@ -39,7 +40,12 @@ MAX_RESPONSE_SAMPLES = 10_000_000
 
 def _default_final_time(model) -> float:
     """About the 0.1 % settling time of the slowest stable mode (a fixed number of
-    samples / time constants for unstable or integrating models)."""
+    samples / time constants for unstable or integrating models).
+
+    Discrete time: at least ``order + 1`` samples (poles at 0, e.g. an FIR model's
+    shift register, settle after ``order`` samples, which no pole magnitude tells),
+    plus the largest input delay (``info['input_delay']``), after which the response
+    only starts."""
     poles = model.poles()
     if model.dt > 0:
         r = float(np.abs(poles).max())
@@ -49,7 +55,9 @@ def _default_final_time(model) -> float:
             k = math.ceil(math.log(1e-3) / math.log(r))
         else:
             k = 100
-        return min(max(k, MIN_SAMPLES), MAX_SAMPLES) * model.dt
+        k = min(max(k, MIN_SAMPLES, model.order + 1), max(MAX_SAMPLES, model.order + 1))
+        delays = input_delay_of(model)
+        return (k + (0 if delays is None else int(delays.max()))) * model.dt
     re = poles.real
     speed = float(np.abs(poles).max())
     slow = float(-re.max()) if re.max() < 0 else 0.0

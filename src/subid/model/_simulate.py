@@ -287,3 +287,15 @@ def _simulate_continuous(A, B, C, D, t, u, x0, hold):
         x[a:b + 1] = xc
         xk = xc[-1]
     return y, x
+
+
+def foh_state(A: np.ndarray, B: np.ndarray, h: float, xi, u0) -> np.ndarray:
+    """The continuous-time state ``x = xi + Gamma2 u`` at a sample, from the state ``xi`` of
+    the model sampled with a first-order hold (:meth:`StateSpace.to_discrete` with 'foh',
+    whose state is ``xi = x - Gamma2 u``) and the input ``u0`` there.
+
+    ``xi`` is one state (n,) or one per experiment (E, n), ``u0`` then (m,) or (E, m).
+    ``Gamma2`` is that of :func:`expm_blocks` for the period ``h``.
+    """
+    G2 = expm_blocks(np.asarray(A, dtype=float), np.asarray(B, dtype=float), [h], "foh")[2][0]
+    return np.asarray(xi, dtype=float) + np.asarray(u0, dtype=float) @ G2.T

@@ -27,6 +27,8 @@ _TAG_COMPLEX = "__complex__"
 _TAG_FLOAT = "__float__"
 _RESERVED_KEYS = (_TAG_ARRAY, _TAG_COMPLEX, _TAG_FLOAT)
 _NONFINITE_NAMES = {"nan": math.nan, "inf": math.inf, "-inf": -math.inf}
+# Integers a model file holds: the JSON readers of subid.io._schema refuse others.
+_INT_MIN, _INT_MAX = -2**63, 2**63 - 1
 
 
 def _enc_float(x: float):
@@ -304,6 +306,38 @@ def from_dict(cls, d):
     return cls(*mats, dt, info=info, **names, **noise, hold=hold)
 
 
+def to_json_value(value) -> str:
+    """JSON text of one ``info`` value (its size in a model file)."""
+    return json.dumps(_encode(value, "info"), allow_nan=False)
+
+
+def _check_file_ints(obj, where: str) -> None:
+    """ModelError for an integer of the encoded ``obj`` beyond 64 bits, which the JSON
+    readers of model files (:mod:`subid.io._schema`) refuse: saved, it could not be
+    loaded (a dictionary keeps such integers, :meth:`StateSpace.to_dict`)."""
+    stack = [(obj, where)]
+    while stack:
+        value, at = stack.pop()
+        if isinstance(value, dict):
+            if _TAG_ARRAY in value:          # an array: named by its own key
+                stack.append((value[_TAG_ARRAY], f"{at} (an array)"))
+            else:
+                stack.extend((v, f"{at}[{k!r}]") for k, v in value.items())
+        elif isinstance(value, list):
+            stack.extend((v, at if at.endswith("(an array)") else f"{at}[{i}]")
+                         for i, v in enumerate(value))
+        elif isinstance(value, int) and not isinstance(value, bool) \
+                and not _INT_MIN <= value <= _INT_MAX:
+            raise ModelError(f"{at} holds the integer {value}, beyond the 64-bit signed "
+                             "range of a model file (load would refuse it); nothing was "
+                             "written. Store it as a string (str(value)) or a float")
+
+
 def to_json(model) -> str:
-    """Strict JSON text of ``model``, one matrix row per line."""
-    return _fmt_json(to_dict(model))
+    """Strict JSON text of ``model``, one matrix row per line.
+
+    Raises ModelError for an ``info`` integer beyond 64 bits (:func:`_check_file_ints`).
+    """
+    d = to_dict(model)
+    _check_file_ints(d["info"], "info")
+    return _fmt_json(d)

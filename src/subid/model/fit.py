@@ -73,7 +73,7 @@ def fit_percent(model, data, x0="estimate", hold=None, steps=np.inf, *,
     if isinstance(data, FRData):
         return frequency_fit(model, data)
     if steps is not None and not (isinstance(steps, float) and np.isinf(steps) and steps > 0):
-        y_hat = predict(check_model(model, "model"), data, steps, x0)
+        y_hat = predict(check_model(model, "model"), data, steps, x0, hold=hold)
     else:
         y_hat, _ = simulate_fit(model, data, x0=x0, hold=hold)
     return output_fit(data, y_hat, per_experiment=per_experiment)

@@ -33,9 +33,9 @@ from subid._blas import serial_blas
 from subid._validation import checked_call, same_period
 from subid.data import IOData, column_spread, column_std, not_a_record
 from subid.delay import effective_input, input_delay_of
-from subid.errors import DataError, ModelError, NoiseModelWarning
+from subid.errors import DataError, ModelError, NoiseModelWarning, OptionError
 from subid.model import _simulate
-from subid.model._checks import check_channel_order, check_x0, reordered
+from subid.model._checks import HOLDS, check_channel_order, check_x0, reordered
 from subid.model.statespace import StateSpace
 
 __all__ = ["predict", "prediction_errors", "simulate_fit", "check_model", "check_model_data",
@@ -392,7 +392,7 @@ def _estimate_x0(model, u, y, k, data=None, output_std=None):
 
 @serial_blas
 @checked_call
-def predict(model, data, steps=1, x0=None, *, return_x0=False, output_std=None):
+def predict(model, data, steps=1, x0=None, *, return_x0=False, output_std=None, hold=None):
     """k-step-ahead predicted outputs of a model on a record.
 
     Parameters
@@ -423,6 +423,10 @@ def predict(model, data, steps=1, x0=None, *, return_x0=False, output_std=None):
         The spreads that weight the outputs in the initial-state regression,
         instead of those of ``data.y`` (for ``data`` the head of a longer
         record whose weights apply).
+    hold : {'zoh', 'foh'}, optional
+        For a continuous-time model, whose prediction is the simulation: the
+        input between samples (default the model's
+        :attr:`~subid.StateSpace.hold`). A discrete-time model ignores it.
 
     Returns
     -------
@@ -440,6 +444,8 @@ def predict(model, data, steps=1, x0=None, *, return_x0=False, output_std=None):
     """
     model, data = _check(model, data)
     k = _check_steps(steps)
+    if hold is not None and (not isinstance(hold, str) or hold not in HOLDS):
+        raise OptionError(f"hold must be 'zoh' or 'foh', got {hold!r}"[:300])
     if output_std is not None:
         output_std = np.asarray(output_std, dtype=float)
         if output_std.shape != (data.n_outputs,) or not (np.isfinite(output_std).all()
@@ -448,7 +454,8 @@ def predict(model, data, steps=1, x0=None, *, return_x0=False, output_std=None):
                             f"spreads, one per output; got shape {output_std.shape}")
     x0 = check_x0(x0, model.order, data.n_experiments)
     if data.n_experiments > 1:          # each experiment from its own initial state
-        parts = [predict(model, e, steps, x0_e, return_x0=True, output_std=output_std)
+        parts = [predict(model, e, steps, x0_e, return_x0=True, output_std=output_std,
+                         hold=hold)
                  for e, x0_e in zip(data.experiments,
                                     experiment_x0(x0, data.n_experiments, model.order))]
         y_hat = np.vstack([p[0] for p in parts])
@@ -460,7 +467,7 @@ def predict(model, data, steps=1, x0=None, *, return_x0=False, output_std=None):
             warnings.warn(f"predict(steps={steps}): {why}, so the prediction is the "
                           "simulation (steps=inf); identify with a discrete-time method "
                           "(or subid.pem) for a noise model", NoiseModelWarning, stacklevel=2)
-        y_hat, x0v = simulate_fit(model, data, x0=x0, output_std=output_std)
+        y_hat, x0v = simulate_fit(model, data, x0=x0, hold=hold, output_std=output_std)
         return (y_hat, x0v) if return_x0 else y_hat
     u, y = effective_input(model, data.u), data.y        # the model's input delays
     if k != math.inf and model.order:

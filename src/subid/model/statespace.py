@@ -58,6 +58,7 @@ from subid.model._checks import (
     HOLDS,
     _as_matrix,
     _check_nonsingular,
+    _initial_state,
     _is_scalar_zero,
     _model_dt,
     _names,
@@ -120,8 +121,8 @@ class StateSpace:
         the residuals and the reports use it unless told otherwise; it is
         set by the method that identified the model (``ct_subspace``
         assumes ``'foh'``), kept by copies, :meth:`transform`, model files
-        and ``.mat`` files, and set by :meth:`to_continuous` /
-        :meth:`to_discrete` to the hold of the conversion.
+        and ``.mat`` files, the default method of :meth:`to_continuous` /
+        :meth:`to_discrete`, which set it to the hold of the conversion.
 
     Attributes
     ----------
@@ -199,6 +200,11 @@ class StateSpace:
         elif not isinstance(info, Mapping):
             raise ModelError(f"info must be a dict, got {type(info).__name__}")
         self.info = dict(info)
+        if self._dt == 0 and input_delay_of(self) is not None:
+            raise ModelError(f"info['input_delay'] = {self.info['input_delay']!r} gives input "
+                             "delays in samples, which only a discrete-time model has "
+                             "(dt > 0); remove the entry from info for a continuous-time "
+                             "model, or sample the model (to_discrete) and set it there")
         self._K, self._noise_cov = _noise_matrices(K, noise_cov, n, p)
         if not isinstance(hold, str) or hold not in HOLDS:
             raise ModelError(f"hold must be one of {', '.join(map(repr, HOLDS))}; got "
@@ -237,16 +243,20 @@ class StateSpace:
         K : array_like, shape (n, n_outputs), optional
         noise_cov : array_like, shape (n_outputs, n_outputs), optional
         info : dict, optional
-            Replaces ``info`` (default: a copy of this model's).
+            Replaces ``info`` (default: a copy of this model's, without a parameter
+            covariance that includes the Kalman gain replaced here, named in
+            ``info['dropped']``).
 
         Returns
         -------
         StateSpace
         """
-        return StateSpace(self._A, self._B, self._C, self._D, self._dt,
-                          input_names=self.input_names, output_names=self.output_names,
-                          info=dict(self.info) if info is None else info, K=K,
-                          noise_cov=noise_cov, hold=self._hold)
+        out = StateSpace(self._A, self._B, self._C, self._D, self._dt,
+                         input_names=self.input_names, output_names=self.output_names,
+                         info=info, K=K, noise_cov=noise_cov, hold=self._hold)
+        if info is None:
+            out.info = _conversions.gain_info(self.info, self._K, out._K)
+        return out
     @property
     def A(self) -> np.ndarray:
         """State matrix, shape (n, n), read-only."""
@@ -303,33 +313,30 @@ class StateSpace:
         from subid._repr import statespace_html
         return statespace_html(self)
 
-    def _like(self, A, B, C, D, dt, K=None, noise_cov=None, hold=None) -> "StateSpace":
-        info = dict(self.info)
-        if dt != self._dt and info.get("input_delay") is not None:
+    def _like(self, A, B, C, D, dt, K=None, noise_cov=None, hold=None,
+              info=None) -> "StateSpace":
+        info = dict(self.info if info is None else info)
+        if dt != self._dt and (delays := input_delay_of(self)) is not None:
             import warnings
 
             from subid.errors import DelayWarning
-            info.pop("input_delay")
-            warnings.warn("the input delays (counted in samples) are dropped by this change "
-                          f"of sampling (dt {self._dt} -> {dt}); call subid.absorb_delay(model) "
-                          "first to keep them as states", DelayWarning, stacklevel=3)
+            info = _conversions.drop_info(info, {"input_delay": (
+                f"to_continuous(): the delays {delays.tolist()} samples of dt={self._dt!r} "
+                "have no continuous-time state-space form")})
+            warnings.warn(f"to_continuous drops the input delays {delays.tolist()} (samples "
+                          f"of dt={self._dt!r}; info['dropped'] names them): dead time has no "
+                          "finite-dimensional continuous-time state-space form, and its "
+                          "states (subid.absorb_delay) have poles at z = 0, which no matrix "
+                          "logarithm maps. Keep the discrete-time model to keep the delay, or "
+                          "approximate it by rational states with "
+                          "subid.absorb_delay(model).to_continuous('bilinear')",
+                          DelayWarning, stacklevel=3)
         hold = self._hold if hold is None else hold
         if "hold" in info:
             info["hold"] = hold
         return StateSpace(A, B, C, D, dt, input_names=self.input_names,
                           output_names=self.output_names, info=info, K=K,
                           noise_cov=noise_cov, hold=hold)
-
-    def _drop_noise_model(self, what: str) -> None:
-        if self._K is not None or self._noise_cov is not None:
-            import warnings
-
-            from subid.errors import NoiseModelWarning
-            warnings.warn(f"{what}: the Kalman gain K and the innovation covariance are "
-                          "dropped (an innovation model is tied to its sampling period and "
-                          "has no exact counterpart under this conversion); re-estimate "
-                          "them on data (subid.pem) if needed", NoiseModelWarning,
-                          stacklevel=3)
 
     # -- simulation ------------------------------------------------------
     def simulate(self, u, t=None, x0=None, *, hold=None, return_state=False):
@@ -415,7 +422,7 @@ class StateSpace:
                             f"{_plural(self.n_inputs, 'input')}{hint}")
         if N == 0:
             raise DataError("input u has no samples")
-        x0 = self._check_x0(x0)
+        x0 = _initial_state(x0, self.order)
         if self.is_continuous:
             if t is None:
                 raise DataError("a continuous-time model (dt=0) needs the time stamps t of "
@@ -436,23 +443,6 @@ class StateSpace:
             u = effective_input(self, u)                         # info['input_delay']
             y, x = _simulate.simulate_discrete(self._A, self._B, self._C, self._D, u, x0)
         return (y, x) if return_state else y
-
-    def _check_x0(self, x0) -> np.ndarray:
-        n = self.order
-        if x0 is None:
-            return np.zeros(n)
-        arr = np.asarray(x0)
-        if arr.dtype.kind not in "biuf":
-            raise DataError(f"initial state x0 must be real numbers, got dtype {arr.dtype}")
-        if arr.ndim == 2 and 1 in arr.shape:
-            arr = arr.reshape(-1)
-        if arr.shape != (n,):
-            raise DataError(f"initial state x0 has shape {arr.shape} but the model order is "
-                            f"{n}: x0 must have shape ({n},)")
-        arr = np.asarray(arr, dtype=np.float64)
-        if not np.isfinite(arr).all():
-            raise DataError("initial state x0 has NaN or infinite entries")
-        return arr
 
     # -- analysis --------------------------------------------------------
     def markov(self, k: int) -> np.ndarray:
@@ -564,19 +554,11 @@ class StateSpace:
             except np.linalg.LinAlgError:
                 X = None
             if X is None or not np.isfinite(X).all():
-                self._raise_pole_hit(w[a:a + chunk], sc)
+                _conversions.raise_pole_hit(self, w[a:a + chunk], sc)
             G[a:a + chunk] = self._C @ X + self._D
         if not self.is_continuous and (delays := input_delay_of(self)) is not None:
             G *= frequency_factor(delays, w, self._dt)       # info['input_delay']
         return G
-
-    def _raise_pole_hit(self, w, s):
-        poles = np.linalg.eigvals(self._A)
-        dist = np.abs(s[:, None] - poles[None, :])
-        i, j = np.unravel_index(np.argmin(dist), dist.shape)
-        where = "s = j w" if self.is_continuous else "z = exp(j w dt)"
-        raise ModelError(f"the frequency w={float(w[i])!r} rad/s falls on the pole {poles[j]:.6g} "
-                         f"({where}): the frequency response is infinite there")
 
     def step(self, t=None):
         """Step response (MATLAB ``step``): every input in turn held at 1 from
@@ -638,22 +620,28 @@ class StateSpace:
         return _responses.impulse_response(self, t)
 
     # -- conversions -----------------------------------------------------
-    def to_discrete(self, dt, method="zoh") -> "StateSpace":
+    def to_discrete(self, dt, method=None) -> "StateSpace":
         """Discretise a continuous-time model.
 
         Parameters
         ----------
         dt : float
             Sampling period, > 0.
-        method : {'zoh', 'foh', 'bilinear'}
+        method : {None, 'zoh', 'foh', 'bilinear'}
             Zero-order hold, first-order hold (triangle hold) or the bilinear
             (Tustin) transform (alias ``'tustin'``); the same formulas as
-            :func:`scipy.signal.cont2discrete`.
+            :func:`scipy.signal.cont2discrete`. None (default): the model's
+            :attr:`hold` (``'foh'`` for a ``ct_subspace`` model).
 
         Returns
         -------
         StateSpace
-            Discrete-time model with the same names and a copy of ``info``.
+            Discrete-time model with the same names and a copy of ``info``
+            without the entries it no longer matches, each named with its
+            reason in ``info['dropped']``: the polynomials, their degrees and
+            the parameter covariance; for ``'foh'`` and ``'bilinear'`` also the
+            initial state ``info['x0']`` (the sampled state is then not the
+            continuous one: ``x - Gamma2 u`` for the first-order hold).
             A Kalman gain ``K`` and ``noise_cov`` are not carried over (with a
             :class:`~subid.errors.NoiseModelWarning`): a continuous-time
             innovation model has no exact sampled counterpart without the
@@ -662,8 +650,9 @@ class StateSpace:
         Raises
         ------
         ModelError
-            The model is already discrete-time, the method is unknown, or
-            (bilinear) ``I - dt/2 A`` is singular.
+            The model is already discrete-time, the method is unknown,
+            (bilinear) ``I - dt/2 A`` is singular, or (holds) ``dt`` is too
+            long for an unstable mode (``exp(A dt)`` overflows).
         DataError
             ``dt`` is not a positive number.
         """
@@ -671,13 +660,14 @@ class StateSpace:
             raise ModelError(f"the model is already discrete-time (dt={self._dt!r}); "
                              "convert it with to_continuous() first to resample it")
         dt = check_dt(dt)
-        method = _conversions._method(method)
-        self._drop_noise_model("to_discrete")
+        method = _conversions._method(self._hold if method is None else method)
         Ad, Bd, Cd, Dd = _conversions.discretise(self._A, self._B, self._C, self._D, dt,
                                                  method)
-        return self._like(Ad, Bd, Cd, Dd, dt, hold=method if method in HOLDS else None)
+        _conversions.drop_noise_model(self, "to_discrete")
+        return self._like(Ad, Bd, Cd, Dd, dt, hold=method if method in HOLDS else None,
+                          info=_conversions.converted_info(self.info, "to_discrete", method))
 
-    def to_continuous(self, method="zoh") -> "StateSpace":
+    def to_continuous(self, method=None) -> "StateSpace":
         """Continuous-time model whose discretisation is this model.
 
         Exact inverse of :meth:`to_discrete` with the same ``method``: the
@@ -687,13 +677,18 @@ class StateSpace:
 
         Parameters
         ----------
-        method : {'zoh', 'foh', 'bilinear'}
+        method : {None, 'zoh', 'foh', 'bilinear'}
+            None (default): the model's :attr:`hold`.
 
         Returns
         -------
         StateSpace
             Continuous-time model (``dt == 0``) with the same names and a copy
-            of ``info``. ``K`` and ``noise_cov`` are dropped (with a
+            of ``info`` without the entries it no longer matches (as for
+            :meth:`to_discrete`). Input delays are dropped (with a
+            :class:`~subid.errors.DelayWarning`): dead time has no
+            finite-dimensional continuous-time state-space form. ``K`` and
+            ``noise_cov`` are dropped (with a
             :class:`~subid.errors.NoiseModelWarning`): a sampled innovation
             model (white innovations at the sampling instants) has no
             continuous-time counterpart.
@@ -702,17 +697,19 @@ class StateSpace:
         ------
         ModelError
             The model is already continuous-time; ``A_d`` is singular or has an
-            eigenvalue on the negative real axis (no real matrix logarithm,
-            ``'zoh'``/``'foh'``); ``A_d`` has an eigenvalue at -1
+            eigenvalue on the negative real axis without an equal partner (no
+            real logarithm, ``'zoh'``/``'foh'``; a pair gives a mode at the
+            Nyquist frequency); ``A_d`` has an eigenvalue at -1
             (``'bilinear'``).
         """
         if self.is_continuous:
             raise ModelError("the model is already continuous-time (dt=0)")
-        method = _conversions._method(method)
-        self._drop_noise_model("to_continuous")
+        method = _conversions._method(self._hold if method is None else method)
         A, B, C, D, hold = _conversions.continuise(self._A, self._B, self._C, self._D,
                                                    self._dt, method)
-        return self._like(A, B, C, D, 0.0, hold=hold)
+        _conversions.drop_noise_model(self, "to_continuous")
+        return self._like(A, B, C, D, 0.0, hold=hold,
+                          info=_conversions.converted_info(self.info, "to_continuous", method))
 
     def transform(self, T) -> "StateSpace":
         """Similarity transformation to the state ``z = T x``.
@@ -728,10 +725,13 @@ class StateSpace:
             ``(T A T^-1, T B, C T^-1, D)`` and ``T K``, same dt, names,
             ``noise_cov`` and a copy of ``info`` with its state-basis entries
             transformed too: the initial state(s) ``info['x0']`` become ``T x0``
-            (one row per experiment) and the selector Λ of ``ls_subspace``
+            (one row per experiment), the selector Λ of ``ls_subspace``
             ``info['selector']`` becomes ``T Λ`` (the state it fixes, ``Λ Γ x``,
-            is then ``z``). Markov parameters, frequency response, predictions
-            and simulations from ``info['x0']`` are unchanged.
+            is then ``z``), and the parameter covariance maps with the
+            (linear) change of the matrices, so that the bounds of
+            :mod:`subid.evaluation.uncertainty` are unchanged. Markov
+            parameters, frequency response, predictions and simulations from
+            ``info['x0']`` are unchanged.
 
         Raises
         ------
@@ -748,19 +748,12 @@ class StateSpace:
         # X T^-1 = (T^-T X^T)^T
         A = linalg.lu_solve(lu, (T @ self._A).T, trans=1, check_finite=False).T
         C = linalg.lu_solve(lu, self._C.T, trans=1, check_finite=False).T
-        out = self._like(A, T @ self._B, C, self._D, self._dt,
-                         None if self._K is None else T @ self._K, self._noise_cov)
-        # the info entries in the state basis follow it (x0: one row per experiment)
-        for key in ("x0", "selector"):
-            value = out.info.get(key)
-            if value is None:
-                continue
-            value = np.asarray(value, dtype=float)
-            if key == "x0" and value.shape[-1:] == (n,):
-                out.info[key] = value @ T.T
-            elif key == "selector" and value.ndim == 2 and value.shape[0] == n:
-                out.info[key] = T @ value
-        return out
+        Tinv = linalg.lu_solve(lu, np.eye(n), check_finite=False)
+        info = _conversions.transformed_info(self.info, T, Tinv,
+                                             (n, self.n_inputs, self.n_outputs))
+        return self._like(A, T @ self._B, C, self._D, self._dt,
+                          None if self._K is None else T @ self._K, self._noise_cov,
+                          info=info)
 
     def allclose(self, other: "StateSpace", rtol: float = 1e-5, atol: float = 1e-8) -> bool:
         """Whether two models have the same shapes, time base and (to the given
@@ -848,7 +841,9 @@ class StateSpace:
         Raises
         ------
         ModelError
-            ``info`` holds a value that cannot be stored (nothing is written).
+            ``info`` holds a value that cannot be stored (an integer beyond 64
+            bits too), or the file would exceed the 256 MB :meth:`load` reads
+            (nothing is written).
         OSError
             The file cannot be written.
         """
@@ -902,7 +897,9 @@ class StateSpace:
         export the predictor or the noise channels yourself, e.g.
         ``ss(A, [B K], C, [D I], dt)`` with the innovations as extra inputs.
         Input delays (``info['input_delay']``) are exported as extra states
-        (:func:`subid.absorb_delay`).
+        (:func:`subid.absorb_delay`). A first-order hold (:attr:`hold`) has no
+        slot either: exporting a ``'foh'`` model warns
+        (:class:`~subid.errors.ConversionWarning`).
         """
         return _conversions.to_control(self)
 
@@ -944,8 +941,11 @@ class StateSpace:
         ImportError
             python-control is not installed.
         ModelError
-            ``sys`` is not a python-control LTI system, has no states, or its
-            sampling period is unspecified and ``dt`` is not given.
+            ``sys`` is not a python-control LTI system, is a static gain (no
+            states), is a MIMO transfer function python-control cannot realise
+            (without slycot), its sampling period is unspecified and ``dt`` is
+            not given, or ``dt`` is given for a continuous-time system
+            (``sys.dt == 0``; sample the result with :meth:`to_discrete`).
         """
         return _conversions.from_control(cls, sys, dt=dt)
 
@@ -961,7 +961,8 @@ class StateSpace:
         -----
         ``scipy.signal.StateSpace`` has no slot for a Kalman gain or a noise
         covariance: ``K`` and ``noise_cov`` are not exported. Input delays are
-        exported as extra states (:func:`subid.absorb_delay`).
+        exported as extra states (:func:`subid.absorb_delay`). A ``'foh'`` model
+        warns (:class:`~subid.errors.ConversionWarning`): scipy has no hold.
         """
         return _conversions.to_scipy(self)
 
@@ -976,7 +977,9 @@ class StateSpace:
             ``sys.to_ss()``.
         dt : float, optional
             Sampling period for a discrete system created with scipy's
-            default ``dt=True`` (unspecified period).
+            default ``dt=True`` (unspecified period). A continuous-time
+            system (``lti``, ``sys.dt`` None) refuses it: sample the result
+            instead, ``StateSpace.from_scipy(sys).to_discrete(dt)``.
 
         Returns
         -------
@@ -985,7 +988,8 @@ class StateSpace:
         Raises
         ------
         ModelError
-            ``sys`` is not a scipy LTI system, has no states, or its sampling
-            period is unspecified and ``dt`` is not given.
+            ``sys`` is not a scipy LTI system, has no states, its sampling
+            period is unspecified and ``dt`` is not given, or ``dt`` is given
+            for a continuous-time system.
         """
         return _conversions.from_scipy(cls, sys, dt=dt)

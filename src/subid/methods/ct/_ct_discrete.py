@@ -56,7 +56,7 @@ from subid._blas import serial_blas
 from subid._validation import check_choice, checked_call
 from subid.data import IOData, not_a_record
 from subid.errors import DataError, SubidError
-from subid.methods._info import records_warnings
+from subid.methods._info import continuous_x0, records_warnings
 
 __all__ = ["discrete_models", "n4sid_default", "fold_scores", "merged_selection",
            "significantly_better", "DISCRETE_PREFIX", "LEVEL"]
@@ -372,7 +372,7 @@ def dt_to_ct(data, order=None, *, method: str = "n4sid", hold: str = "zoh", **op
                         "one sampling period); use ct_subspace for non-uniform time stamps")
     dmodel = spec.load()(data, order, feedthrough=True, **options)
     cmodel = dmodel.with_noise_model(None, None).to_continuous(hold)   # K has no CT form
-    info = dict(cmodel.info)
+    info = continuous_x0(dict(cmodel.info), cmodel, dmodel.info.get("x0"), data)
     info.update(method=f"dt_to_ct({spec.attribute}, {hold})", discrete_model_dt=data.dt,
                 hold=hold)
     from subid.model.statespace import StateSpace

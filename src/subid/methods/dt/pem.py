@@ -61,7 +61,7 @@ from subid._validation import check_optimiser_options, checked_call, same_period
 from subid.data import IOData, column_spread, not_a_record
 from subid.delay import delay_inputs, input_delay_of, record_delay
 from subid.errors import DataError, FeedbackWarning, ModelError, NoiseModelWarning, OptionError
-from subid.methods._info import records_warnings
+from subid.methods._info import continuous_x0, records_warnings
 from subid.methods.dt import _pe_search
 from subid.methods.dt._covariance import covariance_factor, covariance_factor_pieces
 from subid.methods.dt._pe_search import (
@@ -301,7 +301,7 @@ def pem(data, model, *, focus="prediction", max_iterations=MAX_ITERATIONS, toler
                           max_iterations=max_iterations, tolerance=tolerance, rounds=rounds,
                           feedthrough=feedthrough)
             ct = refined.to_continuous(model.hold)
-        info = dict(ct.info)
+        info = continuous_x0(dict(ct.info), ct, refined.info.get("x0"), data)
         kind = "zero" if model.hold == "zoh" else "first"
         info["pem_through"] = f"{kind}-order-hold discretisation with dt={data.dt}"
         # the covariance belongs to the discrete-time parameters
