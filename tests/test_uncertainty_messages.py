@@ -45,7 +45,8 @@ def test_a_model_whose_gain_was_removed_says_why_and_to_refit(refined):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         bare = refined.with_noise_model(None, None)
-    with pytest.raises(ModelError, match=r"no longer has.*with_noise_model.*subid\.pem"):
+    with pytest.raises(ModelError,
+                       match=r"with_noise_model\(\) replaced the Kalman gain.*subid\.pem"):
         subid.parameter_covariance(bare)
 
 
@@ -57,7 +58,8 @@ def test_a_model_with_absorbed_delays_says_why_and_to_refit(refined):
         warnings.simplefilter("ignore")
         absorbed = subid.absorb_delay(delayed)
     assert absorbed.order == refined.order + 3
-    with pytest.raises(ModelError, match=r"absorb_delay adds a state.*subid\.pem\(data, model\)"):
+    with pytest.raises(ModelError, match=r"absorb_delay\(\) turned the input delays into "
+                                         r"states.*subid\.pem\(data, model\)"):
         subid.parameter_covariance(absorbed)
 
 
