@@ -34,7 +34,7 @@ def _one_line_error(code, stdout, stderr):
     (["--option", "estimate_x0=3"], "estimate_x0 must be True or False; got 3"),
     (["--option", "selection=[1]"], "selection must be one of"),
     (["--option", "bd_method=guess"], "bd_method must be one of"),
-    (["--option", "power_iterations=-1"], "power_iterations must be an integer >= 0"),
+    (["--option", "power_iterations=-1"], "power_iterations must be an integer from 0 to 100"),
     (["--frobnicate"], "No such option '--frobnicate'"),
     (["--order", "x"], "use an integer, 'auto'"),
 ])

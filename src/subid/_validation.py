@@ -190,6 +190,39 @@ def check_magnitude(values: np.ndarray, name: str, channels=None) -> None:
                     "(divide it by a constant) and scale the model back")
 
 
+#: Smallest largest magnitude of a channel the identification accepts (the mirror of
+#: :data:`HUGE_VALUE`): products of such values underflow double precision (1e-160
+#: squared is below the smallest double), and the methods' factorizations return
+#: zeros or fail on them.
+TINY_VALUE = 1e-150
+
+
+def check_tiny(values: np.ndarray, name: str, channels=None) -> None:
+    """Raise :class:`DataError` when a channel of the finite (N, channels) array
+    ``values`` is not all zeros but never exceeds :data:`TINY_VALUE` in magnitude,
+    naming the channel and asking for other units: its squares underflow (``moesp`` on
+    outputs of 1e-300 returned C = 0 silently, ``ls_subspace`` on 1e-160 failed in
+    LAPACK). An all-zero channel is left to the excitation and constant-output checks.
+    The batch methods' check (:func:`subid.methods.dt.checks.check_data`)."""
+    if not values.size:
+        return
+    # the first rows settle most channels; the others column by column (numpy's axis-0
+    # reductions of a C-ordered array of few columns are slow: 0.16 s on 10^6 x 2)
+    peak = np.abs(values[:64]).max(axis=0)
+    for j in np.flatnonzero(peak < TINY_VALUE):
+        column = values[:, j]
+        peak[j] = max(float(column.max()), -float(column.min()))
+    small = np.flatnonzero((peak > 0) & (peak < TINY_VALUE))
+    if not small.size:
+        return
+    k = int(small[0])
+    which = f"{name} {channels[k]}" if channels is not None else f"{name} channel {k}"
+    raise DataError(f"{which} never exceeds {peak[k]:.3g} in magnitude: squares and "
+                    "products of such values underflow double precision. Express the "
+                    "channel in other units (multiply it by a constant, e.g. "
+                    "data.scaled(inputs=..., outputs=...)) and scale the model back")
+
+
 def check_unmasked(values: np.ma.MaskedArray, name: str) -> None:
     """Raise :class:`DataError` listing the rows of a masked array with masked entries.
 
@@ -687,6 +720,18 @@ def check_bool(value, name: str) -> bool:
     if isinstance(value, (bool, np.bool_)):
         return bool(value)
     raise OptionError(f"{name} must be True or False; got {value!r}"[:300])
+
+
+def name_caller(exc: Exception, callee: str, caller: str) -> Exception:
+    """``exc`` with a message that starts ``'callee: '`` (the function that raised it)
+    starting ``'caller: '`` instead: the function the user called, which ran
+    ``callee`` for them (:func:`subid.identify` its estimators,
+    :func:`subid.ct_subspace_paper` :func:`subid.ct_subspace`). Class and attributes
+    are kept; re-raise it."""
+    text = exc.args[0] if exc.args and isinstance(exc.args[0], str) else ""
+    if text.startswith(f"{callee}:"):
+        exc.args = (f"{caller}:{text[len(callee) + 1:]}",) + exc.args[1:]
+    return exc
 
 
 def checked_call(fn):

@@ -16,13 +16,22 @@ import os
 
 import numpy as np
 
-from subid.errors import CheckpointError
+from subid.errors import CheckpointError, OptionError
 from subid.io._files import MAX_FILE_BYTES, atomic_write, open_regular
 from subid.io._npz import NpzError, load_npz
 from subid.io._schema import check_array, parse_json
 
 _HEADER = "__header__"
 _HEADER_DEPTH = 6                # header object > settings > a list of lists of scalars
+
+
+def _checkpoint_path(path, action: str) -> str:
+    """``path`` as a str, or :class:`OptionError` when it is no file name (None, a number:
+    os.fspath's TypeError before)."""
+    if not isinstance(path, (str, bytes, os.PathLike)):
+        raise OptionError(f"the checkpoint to {action} must be a file name (a str or an "
+                          f"os.PathLike such as pathlib.Path), got {path!r}"[:300])
+    return os.fsdecode(path) if isinstance(path, bytes) else os.fspath(path)
 
 
 def save_state(path, kind: str, version: int, arrays: dict, settings: dict) -> None:
@@ -40,7 +49,7 @@ def save_state(path, kind: str, version: int, arrays: dict, settings: dict) -> N
     settings : dict
         JSON-serialisable scalars and lists.
     """
-    path = os.fspath(path)
+    path = _checkpoint_path(path, "save")
     header = json.dumps({"kind": kind, "version": version, "settings": settings})
     payload = {name: np.asarray(value) for name, value in arrays.items()}
     payload[_HEADER] = np.frombuffer(header.encode("utf-8"), dtype=np.uint8)
@@ -80,7 +89,7 @@ def load_state(path, kind: str | tuple[str, ...] | None,
         kind of object, another version, arrays or header fields of the
         wrong type.
     """
-    path = os.fspath(path) if not isinstance(path, bytes) else os.fsdecode(path)
+    path = _checkpoint_path(path, "load")
     error = functools.partial(CheckpointError, path=path)
     fh, size = open_regular(path, what="checkpoint", max_bytes=max_bytes, error=CheckpointError)
     with fh:

@@ -52,11 +52,15 @@ def parse_order(order):
     """``(fixed order or None, explicit candidate orders or None)``."""
     if order is None or (isinstance(order, str) and order == "auto"):
         return None, None
+    if isinstance(order, dict):
+        raise OrderError(f"order must be an integer, 'auto' (or None), or a list of "
+                         f"candidate orders; got {order!r}"[:300])
     if isinstance(order, (str, bytes)) or not hasattr(order, "__iter__"):
         return check_int(order, "order", minimum=1), None
     candidates = sorted({check_int(k, "candidate order", minimum=1) for k in order})
     if not candidates:
-        raise OrderError("the list of candidate orders is empty")
+        raise OrderError("order is an empty list of candidate orders: give at least one "
+                         "order, an integer, or 'auto'")
     return None, candidates
 
 

@@ -98,7 +98,7 @@ import numpy as np
 
 from subid._blas import one_thread, serial_blas
 from subid._threads import available, ordered_map
-from subid._validation import check_choice, checked_call
+from subid._validation import check_choice, checked_call, name_caller
 from subid.data import IOData, not_a_record
 from subid.errors import DataError, FeedbackWarning, ModelError, OptionError, SubidError
 from subid.methods._info import collect_warnings
@@ -547,8 +547,12 @@ def _discrete(data, order, horizon, feedthrough, focus, refine):
         except SubidError as exc:
             errors[name] = f"{type(exc).__name__}: {exc}"
     if not fits:
-        # every estimator failed: raise the first estimator's error again, with its warnings
-        _estimator(ESTIMATORS[0])(data, order, horizon=horizon, feedthrough=feedthrough)
+        # every estimator failed: raise the first estimator's error again, with its
+        # warnings, naming identify (the function the user called)
+        try:
+            _estimator(ESTIMATORS[0])(data, order, horizon=horizon, feedthrough=feedthrough)
+        except SubidError as exc:
+            raise name_caller(exc, ESTIMATORS[0], "identify") from None
     scores = {}
     for name, model in fits.items():
         config = _configuration(model)

@@ -70,8 +70,16 @@ import numpy as np
 import scipy.linalg
 
 from subid._kernel_args import frozen
-from subid._validation import as_signal, check_dt, check_int, checked_call
-from subid.data import IOData
+from subid._validation import (
+    as_signal,
+    check_dt,
+    check_int,
+    check_magnitude,
+    check_tiny,
+    checked_call,
+    same_period,
+)
+from subid.data import IOData, not_a_record
 from subid.errors import DataError, ResourceLimitError, TooFewSamplesError
 from subid.statistic._hankel import HankelFactor, geqrf_r, lq_lower
 
@@ -232,8 +240,14 @@ class HankelStatistic:
         statistic returned is then already computed). A record of several experiments (:func:`subid.merge`)
         gives the statistic of their Hankel columns only (none across a border).
         """
+        if not isinstance(data, IOData):
+            raise not_a_record(data, "HankelStatistic.from_data")
         if not data.is_uniform:
             raise DataError("HankelStatistic needs uniformly sampled data")
+        for role, values, names in (("input", data.u, data.input_names),
+                                    ("output", data.y, data.output_names)):
+            check_magnitude(values, role, names)     # squares overflow, or underflow
+            check_tiny(values, role, names)
         if kind == "auto":
             stat = cls.from_data(data, depth, "gram")
             if data.n_samples > QR_MAX_SAMPLES:
@@ -328,6 +342,8 @@ class HankelStatistic:
                             f"statistic was created for {self.n_inputs} and {self.n_outputs}")
         if u.shape[0] != y.shape[0]:
             raise DataError(f"input u has {u.shape[0]} samples but output y has {y.shape[0]}")
+        check_magnitude(u, "input", self.input_names)   # squares must not overflow
+        check_magnitude(y, "output", self.output_names)
         return self._absorb(u, y)
 
     def _absorb(self, u: np.ndarray, y: np.ndarray) -> "HankelStatistic":
@@ -365,10 +381,18 @@ class HankelStatistic:
         one), not the continuation of this record: no products straddle the
         border (:func:`subid.merge`).
         """
+        if not isinstance(later, HankelStatistic):
+            raise DataError(f"merge takes another HankelStatistic, got "
+                            f"{type(later).__name__}")
         if (later.n_inputs, later.n_outputs, later.depth, later.kind) != \
                 (self.n_inputs, self.n_outputs, self.depth, self.kind):
             raise DataError("statistics with different channels, depth or kind cannot be "
                             "merged")
+        if not same_period(later.dt, self.dt):
+            raise DataError(f"statistics sampled at dt={self.dt:g} and dt={later.dt:g} "
+                            "cannot be merged: their lagged products are of different "
+                            "sampling periods. Resample one record to the other's period "
+                            "first, or identify from each statistic separately")
         if new_experiment:
             return self._merge_experiments(later)
         if later.n_experiments > 1:

@@ -47,6 +47,7 @@ fails), and better where the folds show it.
 
 from __future__ import annotations
 
+import inspect
 import warnings
 
 import numpy as np
@@ -55,7 +56,7 @@ import scipy.linalg
 from subid._blas import serial_blas
 from subid._validation import check_choice, checked_call
 from subid.data import IOData, not_a_record
-from subid.errors import DataError, SubidError
+from subid.errors import DataError, OptionError, SubidError
 from subid.methods._info import continuous_x0, records_warnings
 
 __all__ = ["discrete_models", "n4sid_default", "fold_scores", "merged_selection",
@@ -370,7 +371,17 @@ def dt_to_ct(data, order=None, *, method: str = "n4sid", hold: str = "zoh", **op
     if not data.is_uniform:
         raise DataError("dt_to_ct needs uniformly sampled data (a discrete-time model has "
                         "one sampling period); use ct_subspace for non-uniform time stamps")
-    dmodel = spec.load()(data, order, feedthrough=True, **options)
+    fit = spec.load()
+    accepted = [name for name in inspect.signature(fit).parameters
+                if name not in ("data", "order", "feedthrough")]
+    for name in options:
+        if name not in accepted:
+            why = " (the discrete-time model always has a feedthrough term here)" \
+                if name == "feedthrough" else ""
+            raise OptionError(f"dt_to_ct() has no option {name!r}{why}: its options are "
+                              f"data, order, method, hold and those of the discrete-time "
+                              f"method {spec.attribute} ({', '.join(accepted)})"[:600])
+    dmodel = fit(data, order, feedthrough=True, **options)
     cmodel = dmodel.with_noise_model(None, None).to_continuous(hold)   # K has no CT form
     info = continuous_x0(dict(cmodel.info), cmodel, dmodel.info.get("x0"), data)
     info.update(method=f"dt_to_ct({spec.attribute}, {hold})", discrete_model_dt=data.dt,

@@ -90,7 +90,7 @@ from functools import partial
 import numpy as np
 
 from subid._blas import serial_blas
-from subid._validation import check_bool, check_choice, check_int, checked_call
+from subid._validation import check_bool, check_choice, check_int, checked_call, name_caller
 from subid.data import column_spread
 from subid.errors import (
     ConversionWarning,
@@ -647,17 +647,19 @@ def ct_subspace(data, order=None, *, basis=None, poly_order: int = 3, estimate_x
         ``info`` holds the order selection, the singular values, the basis,
         the options, the start used, the stability handling, residuals and
         condition numbers, ``x0``, ``y_offset``, the instrument iterations,
-        the refinement and the noise model. Every step runs on the outputs
-        divided by their standard deviations, so the model does not depend on
-        the output units (``subid.testing``'s ``units`` check); the residual RMS
+        the refinement and the noise model. Every step runs on the inputs and
+        outputs divided by their standard deviations, so the model does not
+        depend on their units (``subid.testing``'s ``units`` check); the residual RMS
         values of ``info`` (keys ending in ``_rms``) and the singular values are
         in those units.
 
     Raises
     ------
     DataError
-        ``data`` is not an IOData, an output is constant, ``filtered`` is
-        malformed.
+        ``data`` is not an IOData, an output is constant, a channel's magnitudes
+        overflow or underflow in squares (beyond 1e150, or never above 1e-150),
+        the mean sampling step is outside 1e-12 to 1e12 time units, ``filtered``
+        is malformed.
     TooFewSamplesError
         Fewer samples than the data matrix has rows.
     NotExcitingError
@@ -681,27 +683,33 @@ def ct_subspace(data, order=None, *, basis=None, poly_order: int = 3, estimate_x
     """
     method = "ct_subspace"
     data = _check_data(data, method)
+    # before the default basis, which reads them
+    poly_order = check_int(poly_order, "poly_order", minimum=0)
+    if poly_order > MAX_POLY_ORDER:
+        raise OrderError(f"poly_order must be at most {MAX_POLY_ORDER}, got {poly_order}")
+    check_choice(data_equation, "data_equation", ("compact", "paper"))
     p = data.n_outputs
     # every step on the outputs in units of their standard deviations: the SVD of the
     # filtered outputs, the regressions of A, C and of B, D, x0, and the refinement then
     # weigh the outputs alike whatever their units (unscaled, an output in units 10^4
     # times smaller moved the poles by 2 %); C, D and the offsets are returned in the
     # user's units (_in_user_units). Given filtered signals are used as they are.
-    spread = None
+    spread = input_spread = None
     if filtered is None:
-        spread = column_spread(data.y)
-        data = data.scaled(outputs=1.0 / spread)
+        # the inputs too (B and D are scaled back): the regressors of B, D and x0 are the
+        # simulated responses to the inputs, refused beyond 1e100 (an input of 1e100 met
+        # a matmul error deep inside)
+        spread, input_spread = column_spread(data.y), column_spread(data.u)
+        data = data.scaled(inputs=1.0 / input_spread, outputs=1.0 / spread)
     default_bank = basis is None and filtered is None
     if basis is None:
         basis = default_basis(data.experiments[0].t,
                               _default_size(data, poly_order, hold, feedthrough, startup,
-                                            correction, instruments, selection))
+                                            correction, instruments, selection,
+                                            data_equation))
     elif not isinstance(basis, FilterBank):
         raise ModelError(f"basis must be a subid.basis.FilterBank (takenaka_malmquist, "
                          f"laguerre, legendre), got {type(basis).__name__}")
-    poly_order = check_int(poly_order, "poly_order", minimum=0)
-    if poly_order > MAX_POLY_ORDER:
-        raise OrderError(f"poly_order must be at most {MAX_POLY_ORDER}, got {poly_order}")
     check_choice(refine, "refine", ("auto", True, False))
     for name, flag in (("estimate_x0", estimate_x0), ("startup", startup),
                        ("correction", correction)):
@@ -720,7 +728,6 @@ def ct_subspace(data, order=None, *, basis=None, poly_order: int = 3, estimate_x
     check_choice(ac_method, "ac_method", ("joint", "paper"))
     check_choice(bd_method, "bd_method", CT_OPTIONS)
     check_choice(filtering, "filtering", ("exact", "sections"))
-    check_choice(data_equation, "data_equation", ("compact", "paper"))
     iterations = check_int(iterations, "iterations", minimum=0)
     refine_iterations = check_int(refine_iterations, "refine_iterations", minimum=1)
     if isinstance(tolerance, bool) or not isinstance(tolerance, numbers.Real) \
@@ -913,14 +920,15 @@ def ct_subspace(data, order=None, *, basis=None, poly_order: int = 3, estimate_x
         model.info["discrete_model"] = {"order": dm.order, "horizon": dm.info["horizon"]}
     elif dm_failure is not None:
         model.info["discrete_model"] = {"failed": dm_failure}
-    return _in_user_units(model, spread)
+    return _in_user_units(model, spread, input_spread)
 
 
-def _in_user_units(model: StateSpace, spread) -> StateSpace:
-    """``model`` of the outputs divided by ``spread`` (one factor per output; None: as it
-    is) in the user's units: C, D, ``info['y_offset']`` and ``info['subspace_model']``'s
-    C, D multiplied by it, K and the noise covariance scaled alike (A, B and the state,
-    hence x0, unchanged). The residual RMS
+def _in_user_units(model: StateSpace, spread, input_spread) -> StateSpace:
+    """``model`` of the outputs divided by ``spread`` and the inputs by ``input_spread``
+    (one factor per channel; None: as it is) in the user's units: C, D,
+    ``info['y_offset']`` and ``info['subspace_model']``'s C, D multiplied by ``spread``
+    (row by row), B and D divided by ``input_spread`` (column by column), K and the noise
+    covariance scaled alike (A and the state, hence x0, unchanged). The residual RMS
     values of ``info`` stay in units of each output's standard deviation."""
     if spread is None:
         return model
@@ -930,10 +938,13 @@ def _in_user_units(model: StateSpace, spread) -> StateSpace:
     if isinstance(info.get("subspace_model"), dict):
         sub = dict(info["subspace_model"])
         sub["C"] = np.asarray(sub["C"]) * spread[:, None]
-        sub["D"] = np.asarray(sub["D"]) * spread[:, None]
+        sub["D"] = np.asarray(sub["D"]) * spread[:, None] / input_spread[None, :]
+        if sub.get("B") is not None:
+            sub["B"] = np.asarray(sub["B"]) / input_spread[None, :]
         info["subspace_model"] = sub
     K, cov = model.K, model.noise_cov
-    return StateSpace(model.A, model.B, model.C * spread[:, None], model.D * spread[:, None],
+    return StateSpace(model.A, model.B / input_spread[None, :], model.C * spread[:, None],
+                      model.D * spread[:, None] / input_spread[None, :],
                       0.0, input_names=model.input_names, output_names=model.output_names,
                       info=info, hold=model.hold, K=None if K is None else K / spread,
                       noise_cov=None if cov is None else cov * np.outer(spread, spread))
@@ -952,8 +963,12 @@ def ct_subspace_paper(data, order=None, *, basis=None, poly_order: int = 3) -> S
     at the largest singular-value gap. For comparison with :func:`ct_subspace`;
     real poles only.
     """
-    return ct_subspace(data, order, basis=basis, poly_order=poly_order, estimate_x0=False,
-                       feedthrough=False, hold=None, instruments=None, startup=False,
-                       correction=False, refine=False, ac_method="paper", bd_method="filtered",
-                       filtering="sections", data_equation="paper", selection="gap",
-                       start="subspace", offset=False, stability="none", noise_model=None)
+    try:
+        return ct_subspace(data, order, basis=basis, poly_order=poly_order, estimate_x0=False,
+                           feedthrough=False, hold=None, instruments=None, startup=False,
+                           correction=False, refine=False, ac_method="paper",
+                           bd_method="filtered", filtering="sections", data_equation="paper",
+                           selection="gap", start="subspace", offset=False, stability="none",
+                           noise_model=None)
+    except SubidError as exc:           # the messages name the function the user called
+        raise name_caller(exc, "ct_subspace", "ct_subspace_paper") from None

@@ -1,6 +1,6 @@
 """The checks of a record every discrete-time method (and :func:`subid.pem`) makes
 at its boundary: an IOData record, uniformly sampled, magnitudes whose squares do
-not overflow, inputs not lost against their offsets, no constant output."""
+not overflow or underflow, inputs not lost against their offsets, no constant output."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import warnings
 import numpy as np
 import scipy.special
 
-from subid._validation import check_magnitude
+from subid._validation import check_magnitude, check_tiny
 from subid.data import IOData, column_std, column_sums, not_a_record
 from subid.errors import DataError, NotExcitingError, OffsetWarning
 
@@ -24,16 +24,26 @@ def check_data(data, method: str) -> IOData:
                         "(use a continuous-time method for them; if the samples are "
                         "uniform and only their stamps jitter, build the record with the "
                         "sampling period: subid.IOData(u, y, dt=...))")
-    check_magnitude(data.u, "input", data.input_names)
-    check_magnitude(data.y, "output", data.output_names)
+    check_channels(data)
     check_offsets(data.u, data.input_names, method)
     warn_offsets(data)
+    return data
+
+
+def check_channels(data: IOData) -> None:
+    """The checks of the samples every method makes (:func:`check_data`, and
+    :func:`subid.impulseest`, :func:`subid.ct_subspace`): no magnitude whose square
+    overflows or underflows (:func:`subid._validation.check_magnitude`,
+    :func:`subid._validation.check_tiny`), no constant output; else :class:`DataError`."""
+    check_magnitude(data.u, "input", data.input_names)
+    check_magnitude(data.y, "output", data.output_names)
+    check_tiny(data.u, "input", data.input_names)
+    check_tiny(data.y, "output", data.output_names)
     flat = [k for k, column in enumerate(data.y.T) if column.max() == column.min()]
     if flat:
         names = ", ".join(data.output_names[k] for k in flat)
         raise DataError(f"output {names} is constant over the whole record: it carries no "
                         "information about the dynamics; drop that channel")
-    return data
 
 
 #: A channel whose mean exceeds this many standard deviations sits at an operating point

@@ -37,7 +37,7 @@ import time
 
 import numpy as np
 
-from subid.errors import DataError, SubidError
+from subid.errors import DataError, OptionError, SubidError
 from subid.io.formats import read_chunks
 from subid.methods.dt._bd_pass import OutputRegression
 from subid.methods.dt.stream import statistic_depth, streaming_method
@@ -45,6 +45,19 @@ from subid.methods.registry import find
 from subid.statistic.hankel import HankelStatistic
 
 __all__ = ["identify", "identify_files", "fan_out", "identify_many", "summary_markdown"]
+
+
+def _check_client(client) -> None:
+    """``client`` is None or a Dask client (anything with ``compute``, ``gather`` and
+    ``map``); else :class:`OptionError` (an address string met an AttributeError deep
+    inside)."""
+    if client is None or all(callable(getattr(client, name, None))
+                             for name in ("compute", "gather", "map")):
+        return
+    hint = f" (connect to it first: dask.distributed.Client({client!r}))" \
+        if isinstance(client, str) else ""
+    raise OptionError(f"client must be a dask.distributed.Client or None, got "
+                      f"{type(client).__name__} {client!r}{hint}"[:400])
 
 
 def _dask():
@@ -196,6 +209,7 @@ def identify(u, y, method: str = "moesp", *, dt: float = 1.0, order=None, horizo
         regression, as a second pass over the chunks (``bd_method='projection'``
         keeps the statistic-only B and D and one pass).
     """
+    _check_client(client)
     dask = _dask()
     u, y = _as_dask_pair(u, y)
     horizon, depth = statistic_depth(method, order, horizon, y.shape[1],
@@ -243,6 +257,7 @@ def identify_files(paths, inputs, outputs, method: str = "moesp", *, dt: float =
     **method_options
         As in :func:`identify`.
     """
+    _check_client(client)
     dask = _dask()
     paths = [str(p) for p in paths]
     if not paths:
@@ -294,6 +309,7 @@ def fan_out(function, items, *, client=None, progress=None):
     list
         ``function(item)`` in the order of ``items``.
     """
+    _check_client(client)
     dask = _dask()
     items = list(items)
     if client is None:

@@ -53,6 +53,7 @@ from subid._blas import serial_blas
 from subid._validation import check_choice, check_int, checked_call
 from subid.data import IOData, not_a_record
 from subid.errors import DataError, NotExcitingError, TooFewSamplesError
+from subid.methods.dt.checks import check_channels
 from subid.model.statespace import StateSpace
 
 __all__ = ["impulseest", "ImpulseEstimate", "kernel_matrix"]
@@ -281,7 +282,9 @@ def impulseest(data, n, *, kernel="tc"):
     Raises
     ------
     DataError
-        Not a uniformly sampled IOData record, or no inputs.
+        Not a uniformly sampled IOData record, no inputs, a constant output, or a
+        channel whose magnitudes overflow or underflow in squares (beyond 1e150, or
+        never above 1e-150).
     TooFewSamplesError
         Fewer than ``n nu + 10`` usable rows (the noise variance is estimated
         from the least-squares fit).
@@ -309,6 +312,7 @@ def impulseest(data, n, *, kernel="tc"):
                         "in samples)")
     if data.n_inputs == 0:
         raise DataError("impulseest needs at least one input")
+    check_channels(data)
     n = check_int(n, "n", minimum=2)
     if kernel is not None:
         kernel = check_choice(kernel, "kernel", KERNELS)

@@ -57,7 +57,7 @@ import scipy.linalg
 import scipy.optimize
 
 from subid._blas import serial_blas
-from subid._validation import check_optimiser_options, checked_call, same_period
+from subid._validation import check_choice, check_optimiser_options, checked_call, same_period
 from subid.data import IOData, column_spread, not_a_record
 from subid.delay import delay_inputs, input_delay_of, record_delay
 from subid.errors import DataError, FeedbackWarning, ModelError, NoiseModelWarning, OptionError
@@ -264,8 +264,8 @@ def pem(data, model, *, focus="prediction", max_iterations=MAX_ITERATIONS, toler
     ModelError
         ``model`` is not a StateSpace, or its predictor is unstable and no
         stable start can be found.
-    SubidError
-        Bad option values.
+    OptionError
+        Bad option values (``feedthrough`` other than None, True or False...).
 
     Examples
     --------
@@ -277,6 +277,7 @@ def pem(data, model, *, focus="prediction", max_iterations=MAX_ITERATIONS, toler
     True
     """
     from subid.frdata import FRData
+    check_choice(feedthrough, "feedthrough", (None, True, False))
     if isinstance(data, FRData):     # frequency-response data: subid.methods.fd.fd_pem
         from subid.methods.fd.fd_pem import fd_pem
         return fd_pem(data, model, max_iterations=max_iterations, tolerance=tolerance,

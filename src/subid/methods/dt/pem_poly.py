@@ -253,7 +253,8 @@ class _Output:
         dA, dB, dK = np.zeros((d, n, n)), np.zeros((d, n, nu)), np.zeros((d, n))
         dD = np.zeros((d, nu))
         b_at, c_at, d_at, f_at = self.starts()
-        b0 = [theta[b_at[j]] if self.nk[j] == 0 else 0.0 for j in range(nu)]
+        b0 = [theta[b_at[j]] if self.nk[j] == 0 and self.nb[j] > 0 else 0.0
+              for j in range(nu)]
 
         def b_terms(j, row, p, den):
             # b_j along its coefficients: D (lag 0, with B by minus the denominator), B

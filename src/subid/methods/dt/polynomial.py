@@ -209,6 +209,13 @@ def parse_orders(order, structure: str, ny: int, nu: int, nk_default=None) -> di
         else:
             out[key] = _order_array(value, (ny, nu), key, 1 if key == "nb" and
                                     structure in ("oe", "bj") else 0, structure)
+    delayed = (out["nb"] > 0) & (out["nb"] + out["nk"] >= 2)
+    if not (out["na"].any() or out["nc"].any() or out["nd"].any() or out["nf"].any()
+            or delayed.any()):
+        raise OrderError(f"{structure}: the orders {order!r} ({', '.join(names)}) give a "
+                         "model without dynamics (no state: no denominator, noise model or "
+                         "delayed input term); give a positive degree to a denominator or "
+                         "nb + nk >= 2 for an input"[:400])
     return out
 
 

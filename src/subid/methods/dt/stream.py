@@ -31,9 +31,9 @@ import warnings
 import numpy as np
 
 from subid._blas import serial_blas
-from subid._validation import same_period
+from subid._validation import check_int, same_period
 from subid.data import IOData, minus_columns
-from subid.errors import DataError
+from subid.errors import DataError, OptionError
 from subid.io.formats import read_chunks
 from subid.methods.dt._bd_pass import OutputRegression, sequential, threaded
 from subid.methods.dt._subspace import default_horizon
@@ -100,6 +100,8 @@ def statistic_depth(method: str, order, horizon, n_outputs: int, instruments="pa
     if horizon is None:
         fixed = order if isinstance(order, int) else None
         horizon = default_horizon(fixed, n_outputs, 1, 10**18, blocks)
+    else:
+        horizon = check_int(horizon, "horizon", minimum=2)
     return horizon, blocks * horizon
 
 
@@ -145,6 +147,17 @@ def identify_stream(pieces, method: str = "moesp", order=None, horizon=None, *,
         ``info['n_samples']`` is the length of the whole record; with several
         experiments ``info['x0']`` has one row per experiment.
     """
+    try:
+        iter(pieces)
+    except TypeError:
+        raise DataError(f"identify_stream expects an iterable of IOData pieces (a list, a "
+                        f"generator, subid.read_chunks(...)), got {type(pieces).__name__}"
+                        ) from None
+    for name, value in (("progress", progress), ("reread", reread)):
+        if value is not None and not callable(value):
+            raise OptionError(f"{name} must be a function (progress: wraps the iterator of "
+                              "pieces, e.g. tqdm.tqdm; reread: returns the pieces again) or "
+                              f"None, got {value!r}"[:300])
     stat, first, experiment = None, None, 0
     for k, (e, piece) in enumerate(_segments(pieces if progress is None else progress(pieces))):
         if first is None:

@@ -53,8 +53,12 @@ def parse_chunk(ident, u, y, t):
             raise DataError("no time stamps: pass t=... to update() or set dt=... in the "
                             "AdaptiveIdentifier constructor")
         return U, Y, None
-    T = np.asarray(t, dtype=np.float64) if not isinstance(t, numbers.Real) else \
-        np.array([float(t)])
+    try:
+        T = np.asarray(t, dtype=np.float64) if not isinstance(t, numbers.Real) else \
+            np.array([float(t)])
+    except (TypeError, ValueError, OverflowError):
+        raise DataError(f"time stamps t must be numbers (a number, or an array of {N}), got "
+                        f"{type(t).__name__} {t!r}"[:300]) from None
     T = writeable(check_time_stamps(T.reshape(-1) if T.ndim == 0 else T, N))
     if ident.n_samples and not T[0] > ident.t:
         raise DataError(f"time stamps t start at {float(T[0])!r}, not after the last sample "

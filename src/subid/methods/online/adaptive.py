@@ -113,7 +113,12 @@ from subid.methods.online import _adaptive_refine as _refit_mod
 from subid.methods.online._adaptive_chunk import parse_chunk
 from subid.methods.online._adaptive_kernel import pack_tables, state_layout
 from subid.methods.online._adaptive_reference import reference
-from subid.methods.online.base import OnlineIdentifier, history_dict, one_sample
+from subid.methods.online.base import (
+    OnlineIdentifier,
+    check_state_bytes,
+    history_dict,
+    one_sample,
+)
 from subid.model.statespace import StateSpace
 
 __all__ = ["AdaptiveIdentifier"]
@@ -381,7 +386,7 @@ class AdaptiveIdentifier(OnlineIdentifier):
         check_choice(method, "method", ("iv", "ls", "ode"))
         check_choice(engine, "engine", ("numba", "numpy"))
         self._hold, self._method, self._engine = hold, method, engine
-        self._scale = bool(scale_filters)
+        self._scale = check_bool(scale_filters, "scale_filters")
         self._refresh = check_int(refresh_every, "refresh_every")
         self._max_cond = _positive(max_condition, "max_condition")
         if self._max_cond <= 1:
@@ -396,6 +401,16 @@ class AdaptiveIdentifier(OnlineIdentifier):
         self._hist_cap = check_int(history_size, "history_size", minimum=0)
         self._dt = None if dt is None else _positive(dt, "dt", exc=DataError)
         self._seed = seed
+        # before anything of the order's size is allocated (the filters' companion
+        # matrices too): the state of _alloc and the history
+        layout = state_layout(n, nu, ny, f, self._ipoles.size)
+        check_state_bytes(8.0 * (sum(math.prod(shape) for _, shape in layout)
+                                 + self._hist_cap * (2 + n * n + n * nu + ny * n + ny * nu)
+                                 + 2 * f * f),
+                          "AdaptiveIdentifier",
+                          f"order {n} with {nu} input(s), {ny} output(s), horizon {f} and "
+                          f"history_size {self._hist_cap}",
+                          "use a smaller order, horizon or history_size, or fewer channels")
         if selector is None:
             H = random_selector(f, ny, seed=check_seed(seed), rows=n)
         else:

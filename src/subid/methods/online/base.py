@@ -43,11 +43,35 @@ import warnings
 import numpy as np
 
 from subid._validation import HUGE_VALUE, UNIFORM_RTOL, same_period
-from subid.errors import CheckpointError, DataError, NotConvergedWarning, SubidError
+from subid.errors import (
+    CheckpointError,
+    DataError,
+    NotConvergedWarning,
+    ResourceLimitError,
+    SubidError,
+)
 
 __all__ = ["OnlineIdentifier", "Tracker", "history_dict", "markov_parameters", "with_names"]
 
 _FLOAT64 = np.dtype(np.float64)
+
+
+#: Largest state an online identifier may allocate (the memory of its statistics and
+#: history, in bytes): beyond it the constructor raises
+#: :class:`subid.errors.ResourceLimitError` before allocating (as
+#: :data:`subid.statistic.hankel.FACTOR_BYTES_LIMIT` for a Hankel statistic).
+STATE_BYTES_LIMIT = 2 ** 31
+
+
+def check_state_bytes(nbytes: float, who: str, what: str, hint: str) -> None:
+    """Raise :class:`ResourceLimitError` when an identifier's state of ``nbytes``
+    bytes (``what``: its sizes) exceeds :data:`STATE_BYTES_LIMIT`; ``hint`` says
+    which settings to reduce."""
+    if nbytes > STATE_BYTES_LIMIT:
+        raise ResourceLimitError(
+            f"{who}: {what} need {nbytes / 2**30:.3g} GiB of memory (limit "
+            f"{STATE_BYTES_LIMIT / 2**30:g} GiB), more than an online identifier may "
+            f"allocate; {hint}")
 
 
 def one_sample(values, channels: int):

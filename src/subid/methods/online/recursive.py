@@ -94,6 +94,7 @@ from subid.methods.online._lagged import LaggedStatistic, end_sensitivity
 from subid.methods.online._window import SampleWindow, window_size
 from subid.methods.online.base import (
     OnlineIdentifier,
+    check_state_bytes,
     check_stream_grid,
     history_dict,
     one_sample,
@@ -285,7 +286,17 @@ class RecursiveSubspace(OnlineIdentifier):
             raise SubidError(f"forgetting must be a number in (0, 1], got {forgetting!r}")
         self._lam = float(forgetting)
         self._power_iterations = check_options(instruments, power_iterations)
-        self._instrument_weighting = bool(instrument_weighting)
+        # before anything of the order's size is allocated (the selector too)
+        n, nu, ny = self.order, self.n_inputs, self.n_outputs
+        m = (2 * self._f if instruments == "past" else self._f) * (nu + ny)
+        nbd = n + n * nu + ny * nu                  # the B, D regression, at most
+        check_state_bytes(8.0 * (m * m + (nbd + 1) ** 2 + 2 * n * (n + n * nu)
+                                 + self._f * ny * n),
+                          "RecursiveSubspace",
+                          f"order {n} with {nu} input(s), {ny} output(s) and horizon "
+                          f"{self._f} (a statistic of {m} rows)",
+                          "use a smaller order or horizon, or fewer channels")
+        self._instrument_weighting = check_bool(instrument_weighting, "instrument_weighting")
         self._feedthrough = check_bool(feedthrough, "feedthrough")
         self._dt = check_dt(dt)
         self._t_origin, self._k_origin = 0.0, 0     # time of sample k: t0 + (k - k0) dt
