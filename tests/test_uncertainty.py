@@ -289,8 +289,9 @@ def test_identify_default_model_carries_a_covariance_for_the_bounds():
     record = model.info["identify"]
     if record["refinement"]["kept"]:
         assert "covariance" not in record           # pem's own
-    else:
-        assert record["covariance"]["focus"] == "prediction" and cov.with_gain
+    else:       # the output-error sandwich (identify's focus='simulation')
+        assert record["covariance"]["focus"] == "simulation" and not cov.with_gain
+        assert "sandwich" in model.info["parameter_covariance"]["method"]
     band = subid.freqresp_bounds(model, W)
     assert np.all(band.std > 0) and np.all(np.isfinite(band.std))
     step = subid.step_bounds(model, 10)
