@@ -58,12 +58,21 @@ def _dense(J, residuals, n1, segments, lag):
     return Rinv @ Z.T @ T @ Z @ Rinv
 
 
+@pytest.mark.parametrize("route", ["gram", "householder"])
+@pytest.mark.parametrize("lag", [3, 7, 60])      # the window term by term, and by FFT
 @pytest.mark.parametrize("ny", [1, 2])
-def test_the_sandwich_is_the_textbook_formula_whole_and_in_pieces(ny):
+def test_the_sandwich_is_the_textbook_formula_whole_and_in_pieces(ny, lag, route,
+                                                                  monkeypatch):
     """covariance_factor and covariance_factor_pieces with sandwich: R^-1 Q R^-1 of the
-    dense formula (two segments, the pieces cut across their boundary), to rounding."""
+    dense formula (two segments, the pieces cut across their boundary), to rounding, on
+    the Gram route (the pieces' meat in the Gram matrix's pass) and the Householder one
+    (GRAM_PIVOT above 1: the projected Jacobian's rows in a second pass)."""
+    if route == "householder":
+        from subid.methods.dt import _trust_region
+        monkeypatch.setattr(_trust_region, "GRAM_PIVOT", 2.0)
+    assert 7 <= _sandwich._DIRECT_LAGS < 60
     rng = np.random.default_rng(5)
-    N, d, n1, lag = 180, 6, 2, 7
+    N, d, n1 = 180, 6, 2
     J, res = _jacobian(N, ny, d, n1, rng), _coloured(N, ny, rng)
     segments = [(0, 70), (70, N)]
     expected = _dense(J, res, n1, segments, lag)

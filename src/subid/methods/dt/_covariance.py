@@ -121,20 +121,37 @@ def covariance_factor_pieces(pieces, residuals, n_nuisance, d, *, sandwich=None,
     pieces, each folded into the factor of those before it). ``residuals``: the
     prediction errors of every sample, shape (N, ny). The same factor to rounding,
     with one piece of the Jacobian in memory at a time (a long record). ``sandwich``,
-    ``segments``: as for :func:`covariance_factor` (the sandwich reads the pieces once
-    more, each filtered with the last ``M`` rows of the one before)."""
+    ``segments``: as for :func:`covariance_factor`; the meat ``J^T T J`` of every column
+    is formed in the Gram matrix's pass (each piece filtered with the last ``M`` rows of
+    the one before), the nuisance columns projected out after it (on the Householder
+    route, where the Gram matrix is ill-conditioned, from the pieces once more)."""
     from subid.methods.dt._trust_region import gram_factor
     lam, L = _noise_cov(residuals, d)
     if L is None:
         return None, lam
+    ny = residuals.shape[1]
+    # the sandwich's meat of every column (J^T T J) in the Gram matrix's pass: on the
+    # Gram route its nuisance-projected block is R^-T (J^T T J) R^-1's trailing block
+    full = None if sandwich is None else \
+        _sandwich.LaggedMeat(*_sandwich_kernel(residuals, L, d, segments, sandwich), d)
     G = np.zeros((d, d))
     for Jk in pieces():
         Jw = _whiten(Jk, L)
         G += Jw.T @ Jw
+        if full is not None:
+            full.add(Jw.reshape(-1, ny, d))
     scale = np.sqrt(np.maximum(np.diag(G), 0.0))
     if not (np.isfinite(G).all() and scale.min() > 0):
         return None, lam
     R = gram_factor(G / scale[:, None] / scale[None, :])
+    if R is not None and full is not None:
+        base = _marginal(R, scale, n_nuisance)
+        if base is None:
+            return None, lam
+        X = scipy.linalg.solve_triangular(R, full.value() / scale[:, None] / scale[None, :],
+                                          trans="T", check_finite=False)
+        meat = scipy.linalg.solve_triangular(R, X.T, trans="T", check_finite=False).T
+        return base @ _sandwich.psd_sqrt(meat[n_nuisance:, n_nuisance:]), lam
     if R is None:
         R = np.zeros((0, d))
         for Jk in pieces():
@@ -195,20 +212,27 @@ def _sandwich_marginal(R, scale, n_nuisance, rows, residuals, L, segments, recor
     base = _marginal(R, scale, n_nuisance)
     if base is None:
         return None
-    N, ny = residuals.shape
+    ny = residuals.shape[1]
     d = R.shape[1]
-    segments = [(0, N)] if segments is None else list(segments)
-    dof = max(N - d / ny, 1.0)
-    Ew = scipy.linalg.solve_triangular(L, residuals.T, lower=True, check_finite=False).T
-    fixed = record.get("lag")
-    top = min(_sandwich.MAX_LAG, max(1, N // 10)) if fixed is None else int(fixed)
-    r = _sandwich.autocovariance(Ew, segments, top, dof)
-    lag = _sandwich.choose_lag(r, N) if fixed is None else int(fixed)
-    kernel = _sandwich.bartlett(lag)[:, None, None] * r[:lag + 1]
     width = d - n_nuisance
-    meat = _sandwich.LaggedMeat(kernel, segments, width)
+    meat = _sandwich.LaggedMeat(*_sandwich_kernel(residuals, L, d, segments, record), width)
     for block in rows():
         Z = scipy.linalg.solve_triangular(R, block.T, trans="T", check_finite=False)
         meat.add(np.ascontiguousarray(Z[n_nuisance:].T).reshape(-1, ny, width))
-    record["lag"] = lag
     return base @ _sandwich.psd_sqrt(meat.value())
+
+
+def _sandwich_kernel(residuals, L, d, segments, record):
+    """``(k, segments)``: the Bartlett-windowed autocovariance ``k(τ) = w(τ) r(τ)`` of the
+    whitened residuals ``L^-1 e`` (``r(0) = I``: the divisor that of ``Λ``), ``τ = 0..M``
+    with ``M = record['lag']`` if given, else chosen from them (written to ``record``),
+    and the segments (default: one)."""
+    N, ny = residuals.shape
+    segments = [(0, N)] if segments is None else list(segments)
+    Ew = scipy.linalg.solve_triangular(L, residuals.T, lower=True, check_finite=False).T
+    fixed = record.get("lag")
+    top = min(_sandwich.MAX_LAG, max(1, N // 10)) if fixed is None else int(fixed)
+    r = _sandwich.autocovariance(Ew, segments, top, max(N - d / ny, 1.0))
+    lag = _sandwich.choose_lag(r, N) if fixed is None else int(fixed)
+    record["lag"] = lag
+    return _sandwich.bartlett(lag)[:, None, None] * r[:lag + 1], segments

@@ -26,9 +26,10 @@ lag ``M`` is chosen where the residual autocorrelation has died out by the autom
 windowing rule of Madras and Sokal (1988, *J. Stat. Phys.* 50, 109-186): the least ``M``
 with ``M >= c τ_int(M)``, ``τ_int(M) = 1 + 2 Σ_{τ=1}^{M} |ρ(τ)|`` (``c = 5``, absolute
 values so that an oscillating autocorrelation is not cancelled, each less the level
-``sqrt(ny / N)`` of the estimate of a zero one), at most ``N / 10`` and :data:`MAX_LAG`. White residuals give ``M ≈ 7`` at ``N = 1000`` (the sandwich is then
-the classic covariance up to a little estimation noise), a disturbance with a pole of
-modulus 0.84 ``M ≈ 60``.
+``sqrt(ny / N)`` of the estimate of a zero one), at most ``N / 10`` and
+:data:`MAX_LAG`. White residuals give ``M = 5-6`` at ``N = 1000`` (the sandwich is then
+the classic covariance up to a little estimation noise), an AR(1) disturbance with pole
+0.84 ``M ≈ 60`` (34-100 over 20 seeds).
 
 ``Q`` is formed as ``Ψ^T (K ⋆ Ψ)``: each column of the Jacobian filtered by the windowed
 autocovariance ``k(τ) = w(τ) r̂(τ)``, never the ``N x N`` Toeplitz matrix. With ``S =
@@ -40,15 +41,19 @@ parameters (initial states) are eliminated exactly: ``Z`` is the Jacobian with t
 columns projected out, taken in the orthonormal coordinates of the classic factor
 (``Z = Q2``, the trailing columns of ``Ψ R^-1``), so that the meat ``Q2^T T Q2`` is the
 identity for white residuals and the factor ``R22^-1 S_M`` (``S_M S_M^T`` the meat)
-reduces to the classic ``R22^-1``.
+reduces to the classic ``R22^-1``. A Jacobian formed in pieces whose Gram matrix is well
+conditioned gets the meat ``Ψ^T T Ψ`` of all its columns in the Gram matrix's pass, the
+projection ``(R^-T Ψ^T T Ψ R^-1)`` trailing block after it (the same matrix).
+
+Short windows (``M <=`` :data:`_DIRECT_LAGS`) are applied term by term, longer ones by
+FFT in blocks of rows: the meat costs ``O(N d min(M, log N))`` beside the Jacobian (a
+2 x 2 order-4 model, 2e5 samples: 3.3 s against 0.7 s for the classic covariance).
 """
 
 from __future__ import annotations
 
 import numpy as np
 import scipy.fft
-import scipy.linalg
-import scipy.signal
 
 __all__ = ["MAX_LAG", "WINDOW_FACTOR", "autocovariance", "choose_lag", "bartlett",
            "LaggedMeat", "psd_sqrt", "describe"]
@@ -56,6 +61,10 @@ __all__ = ["MAX_LAG", "WINDOW_FACTOR", "autocovariance", "choose_lag", "bartlett
 #: The largest lag of the residual autocovariance the sandwich reads (the filtering
 #: costs ``O(N d M)``).
 MAX_LAG = 250
+
+#: Windows up to this many lags are applied term by term (``M`` multiply-adds of the
+#: Jacobian), longer ones by FFT.
+_DIRECT_LAGS = 8
 
 #: ``c`` of the automatic window ``M >= c τ_int(M)`` (Madras and Sokal 1988).
 WINDOW_FACTOR = 5.0
@@ -147,8 +156,8 @@ class LaggedMeat:
     def add(self, Z):
         """Rows ``Z`` (shape (rows, ny, width)) following those added before."""
         while Z.shape[0]:
-            if self.pos in self.starts or self.tail is None:
-                self.tail = Z[:0]
+            if self.pos in self.starts:
+                self.tail = None
             stop = next(b for b in self.stops if b > self.pos)
             part, Z = Z[:stop - self.pos], Z[stop - self.pos:]
             self._add(part)
@@ -156,23 +165,50 @@ class LaggedMeat:
 
     def _add(self, part):
         n, ny, width = part.shape
-        k = self.kernel
-        H = 0.5 * np.einsum("ij,tjd->tid", k[0], part)
-        M = self.lag
-        if M >= 1:
-            X = np.concatenate([self.tail, part])
-            h = self.tail.shape[0]
-            # H(t) += sum_{tau>=1} k(tau) X(t - tau): a causal FIR filter per (i, j) pair
-            for i in range(ny):
-                for j in range(ny):
-                    taps = np.concatenate([[0.0], k[1:, i, j]])
-                    if not np.any(taps):
-                        continue
-                    y = scipy.signal.oaconvolve(X[:, j, :], taps[:, None], mode="full",
-                                                axes=0)
-                    H[:, i, :] += y[h:h + n]
-            self.tail = np.array(X[-M:] if X.shape[0] > M else X)
-        self.S += part.reshape(n * ny, width).T @ H.reshape(n * ny, width)
+        P = np.ascontiguousarray(part.transpose(1, 0, 2))       # (ny, n, width)
+        H = 0.5 * np.einsum("ij,jtd->itd", self.kernel[0], P)
+        if self.lag >= 1:
+            X = P if self.tail is None or self.tail.shape[1] == 0 else \
+                np.concatenate([self.tail, P], axis=1)
+            h = X.shape[1] - n
+            H += self._filtered(X, h, n)
+            self.tail = np.array(X[:, -self.lag:])
+        for i in range(ny):
+            self.S += P[i].T @ H[i]
+
+    def _filtered(self, X, h, n):
+        """``Σ_{τ=1}^{M} k(τ) X(t - τ)`` for the rows ``t = h .. h + n - 1`` of ``X``
+        (shape (ny, rows, width); rows before 0 taken as zero): term by term for short
+        windows, else by FFT in blocks of rows (overlap-save, ``M`` rows of history a
+        block)."""
+        k, M = self.kernel, self.lag
+        ny, _, width = X.shape
+        out = np.zeros((ny, n, width))
+        if M <= _DIRECT_LAGS:
+            for tau in range(1, M + 1):
+                lo = max(0, tau - h)          # the first row with a source row
+                if lo >= n:
+                    break
+                for i in range(ny):
+                    for j in range(ny):
+                        if k[tau, i, j] != 0.0:
+                            out[i, lo:] += k[tau, i, j] * X[j, h - tau + lo:h - tau + n]
+            return out
+        taps = k.copy()
+        taps[0] = 0.0
+        block = max(8 * M, 8192)
+        spectra = {}
+        for s in range(0, n, block):
+            e = min(s + block, n)
+            a = max(0, h + s - M)
+            seg = X[:, a:h + e]
+            nfft = scipy.fft.next_fast_len(seg.shape[1] + M + 1, real=True)
+            if nfft not in spectra:
+                spectra[nfft] = scipy.fft.rfft(taps, nfft, axis=0)
+            Y = scipy.fft.irfft(np.einsum("fij,jfd->ifd", spectra[nfft],
+                                          scipy.fft.rfft(seg, nfft, axis=1)), nfft, axis=1)
+            out[:, s:e] = Y[:, h + s - a:h + e - a]
+        return out
 
     def value(self):
         """``Q = S + S^T``."""
