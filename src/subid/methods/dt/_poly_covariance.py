@@ -34,6 +34,13 @@ the column-scaled ``J_i^T J_i`` has every Cholesky pivot above
 Cholesky factor and ``Q2_i^T Q2_k`` the trailing block of ``R_i^-T J_i^T J_k R_k^-1``
 (``Q_i = J_i R_i^-1``): no thin ``Q`` (``N x d_i`` numbers an output) is formed.
 
+For :func:`subid.oe` (output error: the noise model is 1, the disturbance need not be
+white) :func:`sandwich_coefficient_factor` replaces ``Λ_ik Q2_i^T Q2_k`` by ``Q2_i^T
+T_ik Q2_k``, ``T_ik(t, s) = w(t - s) r_ik(t - s)`` the Bartlett-windowed
+cross-covariance of the residuals of outputs ``i`` and ``k``: the sandwich covariance
+``R^-1 Q R^-1`` of Ljung (1999, Sec. 9.3, eqs. 9.40-9.42) with the window of Newey and
+West (1987) (:mod:`subid.methods.dt._sandwich`), the classic one for white residuals.
+
 The coefficient covariance is mapped to the state-space parameters θ =
 ``vec(A, B, C[, D], K)`` of the model's realisation
 (:func:`subid.model.polynomial.realise`), which :func:`subid.freqresp_bounds`,
@@ -48,11 +55,13 @@ from __future__ import annotations
 import numpy as np
 import scipy.linalg
 
+from subid.methods.dt import _sandwich
 from subid.methods.dt._covariance import RANK_TOLERANCE
 from subid.methods.dt._trust_region import gram_factor
 from subid.model.polynomial import coefficient_slots, coefficients, realisation_jacobian
 
-__all__ = ["coefficient_factor", "coefficient_factor_from_grams", "attach_covariance"]
+__all__ = ["coefficient_factor", "coefficient_factor_from_grams", "sandwich_coefficient_factor",
+           "attach_covariance"]
 
 
 def _psd_sqrt(lam: np.ndarray) -> np.ndarray:
@@ -221,9 +230,97 @@ def _assemble(lam, parts, cross):
     step)."""
     ny = len(parts)
     G = np.block([[lam[i, j] * cross(i, j) for j in range(ny)] for i in range(ny)])
+    return _factor_of_meat(G, parts)
+
+
+def _factor_of_meat(G, parts):
+    """``blockdiag(R22_i^-1) R_M^T`` unscaled, ``R_M^T R_M = G`` (the meat in the
+    outputs' orthonormal coordinates ``Q2_i``)."""
     R_M = _psd_sqrt(0.5 * (G + G.T)).T
     factor = scipy.linalg.block_diag(*[p[0] for p in parts]) @ R_M.T
     return factor / np.concatenate([p[1] for p in parts])[:, None]
+
+
+def sandwich_coefficient_factor(pieces, grams, widths, residuals, n_nuisance, segments,
+                                record):
+    """:func:`coefficient_factor_from_grams` for output-error fits under coloured
+    disturbances: the sandwich ``R^-1 Q R^-1`` (module docstring;
+    :mod:`subid.methods.dt._sandwich`).
+
+    Parameters
+    ----------
+    pieces : callable
+        ``pieces()`` yields, in order over the record, a list of every output's design
+        rows ``J_i[a:b]`` (nuisance columns first; the same rows for every output).
+        Read once for the meat (twice where a Gram matrix fails
+        :func:`subid.methods.dt._trust_region.gram_factor`: its Householder factor).
+    grams, widths, residuals, n_nuisance
+        As for :func:`coefficient_factor_from_grams` (only the diagonal Gram blocks
+        are read).
+    segments : list of (int, int)
+        The experiments' ``(start, stop)`` samples (no correlation across them).
+    record : dict
+        ``'lag'``: the Bartlett window's ``M`` if given (0: the residuals taken white,
+        :func:`coefficient_factor`'s factor), else chosen from the residuals
+        (:func:`subid.methods.dt._sandwich.choose_lag`); written back with the ``M``
+        used.
+
+    Returns
+    -------
+    factor : ndarray or None
+        ``F_c`` with ``Cov(c) = F_c F_c^T``; None as :func:`coefficient_factor`.
+    noise_cov : ndarray, shape (ny, ny)
+        ``Λ``, as there.
+    """
+    lam = _noise_covariance(residuals, widths)
+    N, ny = residuals.shape
+    factors = []
+    for i, (width, n1) in enumerate(zip(widths, n_nuisance)):
+        if width == n1:
+            factors.append(None)
+            continue
+        G = grams[(i, i)]
+        scale = np.sqrt(np.maximum(np.diag(G), 0.0))
+        if not (np.isfinite(G).all() and scale.min() > 0):
+            return None, lam
+        factors.append([gram_factor(G / scale[:, None] / scale[None, :]), scale, n1])
+    if any(f is not None and f[0] is None for f in factors):      # the Householder route
+        folded = [np.zeros((0, w)) for w in widths]
+        for blocks in pieces():
+            for i, f in enumerate(factors):
+                if f is not None and f[0] is None:
+                    folded[i] = np.linalg.qr(np.vstack([folded[i], blocks[i] / f[1]]),
+                                             mode="r")
+        for i, f in enumerate(factors):
+            if f is not None and f[0] is None:
+                f[0] = folded[i]
+    parts = []
+    for f in factors:
+        part = _NO_COEFFICIENTS if f is None else _part(f[0], f[2], f[1])
+        if part is None:
+            return None, lam
+        parts.append(part)
+    dofs = np.array([max(N - w, 1) for w in widths], dtype=float)
+    fixed = record.get("lag")
+    top = min(_sandwich.MAX_LAG, max(1, N // 10)) if fixed is None else int(fixed)
+    r = _sandwich.autocovariance(residuals, segments, top, np.sqrt(np.outer(dofs, dofs)))
+    lag = _sandwich.choose_lag(r, N) if fixed is None else int(fixed)
+    sizes = [p[0].shape[0] for p in parts]
+    offsets = np.concatenate([[0], np.cumsum(sizes)])
+    meat = _sandwich.LaggedMeat(_sandwich.bartlett(lag)[:, None, None] * r[:lag + 1],
+                                segments, int(offsets[-1]))
+    for blocks in pieces():
+        Z = np.zeros((blocks[0].shape[0], ny, int(offsets[-1])))
+        for i, f in enumerate(factors):
+            if f is None:
+                continue
+            R, scale, n1 = f
+            Zi = scipy.linalg.solve_triangular(R, (blocks[i] / scale).T, trans="T",
+                                               check_finite=False)
+            Z[:, i, offsets[i]:offsets[i + 1]] = Zi[n1:].T
+        meat.add(Z)
+    record["lag"] = lag
+    return _factor_of_meat(meat.value(), parts), lam
 
 
 def attach_covariance(model, designs, residuals, n_nuisance, method: str, *, factor=None):

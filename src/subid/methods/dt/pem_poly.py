@@ -93,7 +93,12 @@ from subid.methods.dt._pe_search import (
     minimise_prediction_error,
     statistical_precision,
 )
-from subid.methods.dt._poly_covariance import attach_covariance, coefficient_factor_from_grams
+from subid.methods.dt._poly_covariance import (
+    attach_covariance,
+    coefficient_factor_from_grams,
+    sandwich_coefficient_factor,
+)
+from subid.methods.dt._sandwich import describe as describe_sandwich
 from subid.methods.dt.feedthrough import feedback_test, feedback_warning
 from subid.methods.dt.polynomial import (
     ORDER_NAMES,
@@ -584,8 +589,19 @@ def _identify(structure, data, order, selection, estimate_x0, max_iterations, to
             fitted.append((sub, theta, x0))
         resid, grams, widths = _covariance_pass(fitted, data, estimate_x0)
         n_nuisance = [w - sub.size for w, (sub, _, _) in zip(widths, fitted)]
-        factor, designs = coefficient_factor_from_grams(grams, widths, resid, n_nuisance), None
-        if factor[0] is None:            # the QR route (or a rank deficiency): designs whole
+        method = ("asymptotic prediction-error covariance lambda (sum psi psi^T)^-1 per "
+                  "output (Ljung 1999, Theorem 9.1)")
+        if structure == "oe":          # output error: the disturbance need not be white
+            lag = {}
+            factor, designs = sandwich_coefficient_factor(
+                lambda: _design_blocks(fitted, data, estimate_x0), grams, widths, resid,
+                n_nuisance, data.experiment_ranges, lag), None
+            method = "asymptotic output-error covariance per output, " + \
+                describe_sandwich(lag.get("lag", 0))
+        else:
+            factor, designs = coefficient_factor_from_grams(grams, widths, resid,
+                                                            n_nuisance), None
+        if factor[0] is None and structure != "oe":      # the QR route: designs whole
             designs = [_sensitivities(sub, theta, x0, np.hstack([data.u, data.y[:, i:i + 1]]),
                                       ranges, estimate_x0)[1]
                        for i, (sub, theta, x0) in enumerate(fitted)]
@@ -603,10 +619,9 @@ def _identify(structure, data, order, selection, estimate_x0, max_iterations, to
             multi_output="one multi-input single-output model per output" if ny > 1
             else None)
         attach_covariance(model, designs, resid, n_nuisance,
-                          "asymptotic prediction-error covariance lambda (sum psi psi^T)^-1 "
-                          "per output (Ljung 1999, Theorem 9.1), the predictors' initial "
-                          "states eliminated, with the outputs' cross-covariances; mapped "
-                          "to the realisation's matrices", factor=factor)
+                          method + ", the predictors' initial states eliminated, with the "
+                          "outputs' cross-covariances; mapped to the realisation's "
+                          "matrices", factor=factor)
         if not estimate_x0:
             model.info["x0"] = None
         if feedback is not None:
@@ -664,6 +679,18 @@ def _sensitivities(sub, theta, x0, v, ranges, estimate_x0):
     (:func:`_design_pieces` joined)."""
     pieces = list(_design_pieces(sub, theta, x0, v, ranges, estimate_x0))
     return np.concatenate([p[2] for p in pieces]), np.concatenate([p[3] for p in pieces])
+
+
+def _design_blocks(fitted, data, estimate_x0):
+    """Every output's design rows (:func:`_design_pieces`), the same samples at a time
+    (those of :func:`_covariance_pass`), in order over the record: a list per block."""
+    widths = [sub.size + (np.size(x0) if estimate_x0 else 0) for sub, _, x0 in fitted]
+    rows = max(1, int(_pe_search.JACOBIAN_PIECE_BYTES // (8 * max(widths))))
+    streams = [_design_pieces(sub, theta, x0, np.hstack([data.u, data.y[:, i:i + 1]]),
+                              data.experiment_ranges, estimate_x0, rows)
+               for i, (sub, theta, x0) in enumerate(fitted)]
+    for pieces in zip(*streams):
+        yield [p[3] for p in pieces]
 
 
 def _covariance_pass(fitted, data, estimate_x0):
