@@ -7,7 +7,7 @@ import math
 
 import numpy as np
 
-from subid._validation import check_int, same_period
+from subid._validation import check_int
 from subid.errors import DataError, ModelError
 from subid.evaluation.figures._common import (
     _autoscale_once,
@@ -128,13 +128,6 @@ def bode(model_or_models=None, w=None, *, data=None, hz=False, labels=None, phas
     if data is not None and (data.n_outputs, data.n_inputs) != (ny, nu):
         raise DataError(f"the frequency data have {data.n_inputs} inputs and "
                         f"{data.n_outputs} outputs but the models have {nu} and {ny}")
-    if data is not None:
-        for label, m in groups.items():              # as fit_percent and pem refuse them
-            if m.dt != data.dt and not same_period(m.dt, data.dt):
-                raise DataError(f"model {label!r} has dt={m.dt} but the frequency data have "
-                                f"dt={data.dt} (0 = continuous time): their responses are "
-                                "not comparable; convert the model (to_discrete / "
-                                "to_continuous) to the data's time base")
     if nu == 0:
         raise ModelError("the model has no inputs: there is no frequency response to draw")
     if confidence is not None:
