@@ -151,6 +151,16 @@ def coefficient_factor(designs, residuals, n_nuisance):
     return _assemble(lam, parts, cross), lam
 
 
+
+def _scaled_gram_factor(G):
+    """``(R, scale)``: the Cholesky factor (:func:`gram_factor`, None when its pivots are
+    too small) of the Gram matrix ``G`` with its columns scaled to unit norm, and the
+    scales; None when ``G`` is not finite or has a zero column."""
+    scale = np.sqrt(np.maximum(np.diag(G), 0.0))
+    if not (np.isfinite(G).all() and scale.min() > 0):
+        return None
+    return gram_factor(G / scale[:, None] / scale[None, :]), scale
+
 def coefficient_factor_from_grams(grams, widths, residuals, n_nuisance):
     """:func:`coefficient_factor` from the designs' Gram blocks ``grams[(i, j)] = J_i^T
     J_j`` (``i <= j``; every pair of outputs with coefficients), summed by the caller
@@ -166,11 +176,10 @@ def coefficient_factor_from_grams(grams, widths, residuals, n_nuisance):
             parts.append(_NO_COEFFICIENTS)
             factors.append(None)
             continue
-        G = grams[(i, i)]
-        scale = np.sqrt(np.maximum(np.diag(G), 0.0))
-        if not (np.isfinite(G).all() and scale.min() > 0):
+        scaled = _scaled_gram_factor(grams[(i, i)])
+        if scaled is None:
             return None, lam
-        R = gram_factor(G / scale[:, None] / scale[None, :])
+        R, scale = scaled
         part = None if R is None else _part(R, n1, scale)
         if part is None:
             return None, lam
@@ -279,11 +288,10 @@ def sandwich_coefficient_factor(pieces, grams, widths, residuals, n_nuisance, se
         if width == n1:
             factors.append(None)
             continue
-        G = grams[(i, i)]
-        scale = np.sqrt(np.maximum(np.diag(G), 0.0))
-        if not (np.isfinite(G).all() and scale.min() > 0):
+        scaled = _scaled_gram_factor(grams[(i, i)])
+        if scaled is None:
             return None, lam
-        factors.append([gram_factor(G / scale[:, None] / scale[None, :]), scale, n1])
+        factors.append([*scaled, n1])
     if any(f is not None and f[0] is None for f in factors):      # the Householder route
         folded = [np.zeros((0, w)) for w in widths]
         for blocks in pieces():
