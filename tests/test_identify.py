@@ -709,3 +709,14 @@ def test_a_negative_cross_validated_fit_is_warned_of():
     with warnings.catch_warnings():
         warnings.simplefilter("error", PoorFitWarning)
         subid.moesp(subid.datasets.load("dryer").detrend())
+
+
+def test_the_feedback_warning_describes_the_misfit_over_the_folds():
+    """DaISy winding (feedback): the prediction-error refinement is given up once the
+    simulation misfit over the folds cannot stay under 1.1x the subspace models'; the
+    warning said "on 3 of 4 folds", which read as a per-fold count (one fold improved)."""
+    from subid.errors import FeedbackWarning
+    est, _ = subid.datasets.load("winding").detrend().split(2 / 3)
+    with pytest.warns(FeedbackWarning, match=r"misfit over the folds above 1\.1 x .* after "
+                                             r"\d of 4 fold refinements"):
+        subid.identify(est)

@@ -617,8 +617,10 @@ def _discrete(data, order, horizon, feedthrough, focus, refine):
                              else "one-step prediction fit (%)") + " on the held-out folds")
     if len(refined) < len(base):
         before = 100.0 - float(np.mean(bases[guard]))
-        _warn_biased(f"raised the simulation misfit on {len(refined)} of {len(base)} folds "
-                     f"above {1 + SIMULATION_LOSS:g} x the subspace models' ({before:.3g} %)")
+        _warn_biased(f"raised the simulation misfit over the folds above "
+                     f"{1 + SIMULATION_LOSS:g} x the subspace models' ({before:.3g} %) "
+                     f"after {len(refined)} of {len(base)} fold refinements, whatever the "
+                     "others give")
         refinement.update(
             subspace_simulation_folds=bases[guard], refined_simulation_folds=refineds[guard],
             kept=False, reason=(f"after {len(refined)} of {len(base)} fold refinements the simulation "
