@@ -647,8 +647,10 @@ def _output_error_feedback(structure, data, selection_record):
         warnings.warn(f"oe: the data show feedback from the outputs to the inputs "
                       f"{p_value}: an output-error model is biased in "
                       "closed loop, because the input is correlated with the noise (Ljung "
-                      "1999, Sec. 13.4); compare it on validation data with bj or armax, "
-                      "which are consistent there, or with subid.identify",
+                      "1999, Sec. 13.4); compare it on validation data with armax or arx, "
+                      "which are consistent there (bj too, but like oe it keeps its plant "
+                      "B/F stable: not for an unstable plant in the loop), or with "
+                      "subid.identify",
                       FeedbackWarning, stacklevel=4)
     return record
 
