@@ -93,16 +93,6 @@ def test_round_trip_keeps_weights(tmp_path, name, per_pair):
     assert back.weights.shape == weights.shape and np.array_equal(back.weights, weights)
 
 
-def test_partial_or_mixed_weight_columns_refused(tmp_path):
-    path = tmp_path / "w.csv"
-    path.write_text("w,a/u:re,a/u:im,a/u:weight,b/u:re,b/u:im\n1,1,0,2,1,0\n")
-    with pytest.raises(FileReadError, match="':weight' columns for a/u but not for b/u"):
-        subid.read_frd(path)
-    path.write_text("w,a/u:re,a/u:im,a/u:weight,weight\n1,1,0,2,3\n")
-    with pytest.raises(FileReadError, match="keep one kind"):
-        subid.read_frd(path)
-
-
 @pytest.mark.parametrize("unit, scale", [
     ("kHz", 1 / (2 * np.pi * 1e3)), ("MHz", 1 / (2 * np.pi * 1e6)), ("GHz", 1 / (2 * np.pi * 1e9)),
     ("Hz", 1 / (2 * np.pi)), ("cycles/s", 1 / (2 * np.pi)), ("cycles/TimeUnit", 1 / (2 * np.pi)),
@@ -154,49 +144,43 @@ def test_csv_frequency_header_unit(tmp_path, head, scale):
     assert np.allclose(subid.read_frd(path).w, [scale, 10 * scale], rtol=1e-12)
 
 
-def test_csv_frequency_header_unit_refused(tmp_path):
-    path = tmp_path / "h.csv"
-    path.write_text("Frequency [furlongs],mag,phase\n1,1,0\n")
-    with pytest.raises(FileReadError, match="frequency column 'Frequency \\[furlongs\\]' has "
-                                            "the unknown unit 'furlongs'; known"):
-        subid.read_frd(path)
-    path.write_text("f_hz [rad/s],mag,phase\n1,1,0\n")
-    with pytest.raises(FileReadError, match="its name says Hz but its unit says rad/s"):
-        subid.read_frd(path)
-    path.write_text("w_rad (kHz),mag,phase\n1,1,0\n")
-    with pytest.raises(FileReadError, match="name says rad per time unit but its unit says kHz"):
-        subid.read_frd(path)
+_TWO = "w,a/u:re,a/u:im,b/u:re,b/u:im"
 
 
-def test_partial_or_conflicting_columns_refused(tmp_path):
+@pytest.mark.parametrize("text, match", [
+    ("Frequency [furlongs],mag,phase\n1,1,0\n",
+     "frequency column 'Frequency \\[furlongs\\]' has the unknown unit 'furlongs'; known"),
+    ("f_hz [rad/s],mag,phase\n1,1,0\n", "its name says Hz but its unit says rad/s"),
+    ("w_rad (kHz),mag,phase\n1,1,0\n", "name says rad per time unit but its unit says kHz"),
+    (f"{_TWO},a/u:std\n1,1,0,1,0,0.1\n",
+     "':std' columns for a/u but not for b/u; give them for every output/input pair or for "
+     "none"),
+    (f"{_TWO},b:coherence\n1,1,0,1,0,0.9\n", "':coherence' columns for b but not for a"),
+    (f"{_TWO},coherence\n1,1,0,1,0,0.9\n", "'<output>:coherence'"),
+    ("w,re,im,mag,phase\n1,1,0,1,0\n",
+     "y1/u1 has columns 're', 'im', 'mag', 'phase', two representations"),
+    ("w,Magnitude [dB],mag,phase\n1,0,1,0\n", "'mag', 'Magnitude \\[dB\\]'"),
+    ("w,mag,phase,phase_rad\n1,1,0,0\n", "'phase', 'phase_rad'"),
+    ("w,a/u:re,a/u:im,a/u:weight,b/u:re,b/u:im\n1,1,0,2,1,0\n",
+     "':weight' columns for a/u but not for b/u"),
+    ("w,a/u:re,a/u:im,a/u:weight,weight\n1,1,0,2,3\n", "keep one kind"),
+])
+def test_unknown_units_and_partial_or_conflicting_columns_refused(tmp_path, text, match):
     path = tmp_path / "p.csv"
-    two = "w,a/u:re,a/u:im,b/u:re,b/u:im"
-    path.write_text(f"{two},a/u:std\n1,1,0,1,0,0.1\n")
-    with pytest.raises(FileReadError, match="':std' columns for a/u but not for b/u; give "
-                                            "them for every output/input pair or for none"):
+    path.write_text(text)
+    with pytest.raises(FileReadError, match=match):
         subid.read_frd(path)
-    path.write_text(f"{two},b:coherence\n1,1,0,1,0,0.9\n")
-    with pytest.raises(FileReadError, match="':coherence' columns for b but not for a"):
-        subid.read_frd(path)
-    path.write_text(f"{two},coherence\n1,1,0,1,0,0.9\n")
-    with pytest.raises(FileReadError, match="'<output>:coherence'"):
-        subid.read_frd(path)
-    path.write_text("w,re,im,mag,phase\n1,1,0,1,0\n")
-    with pytest.raises(FileReadError, match="y1/u1 has columns 're', 'im', 'mag', 'phase', "
-                                            "two representations"):
-        subid.read_frd(path)
-    path.write_text("w,Magnitude [dB],mag,phase\n1,0,1,0\n")
-    with pytest.raises(FileReadError, match="'mag', 'Magnitude \\[dB\\]'"):
-        subid.read_frd(path)
-    path.write_text("w,mag,phase,phase_rad\n1,1,0,0\n")
-    with pytest.raises(FileReadError, match="'phase', 'phase_rad'"):
-        subid.read_frd(path)
+
+
+def test_negative_magnitude_named_by_line_and_complete_extras_accepted(tmp_path):
+    path = tmp_path / "p.csv"
     path.write_text("# a comment\nw,mag,phase\n1,1,0\n2,-0.5,0\n")
     with pytest.raises(FileReadError, match="line 4, column 'mag': magnitude -0.5 is "
                                             "negative") as err:
         subid.read_frd(path)
     assert err.value.line == 4
-    path.write_text(f"{two},a:coherence,b:coherence,a/u:std,b/u:std\n1,1,0,1,0,0.9,0.8,0.1,0.2\n")
+    path.write_text(f"{_TWO},a:coherence,b:coherence,a/u:std,b/u:std\n"
+                    "1,1,0,1,0,0.9,0.8,0.1,0.2\n")
     back = subid.read_frd(path)                       # all pairs (outputs): accepted
     assert np.allclose(back.coherence, [[0.9, 0.8]]) and np.allclose(back.std.ravel(), [0.1, 0.2])
 
