@@ -597,10 +597,10 @@ def output_error_order(data):
     predictor needs its own degrees: on an oversampled plant (a 2nd-order system at
     1 kHz) it chose ``na = 1, nb = 10``, and ``oe`` with those degrees validated at
     -33.8 % against 97.8 % at ``n = 2`` (the order MOESP chooses there). On the DaISy
-    records (bench/realdata.md) this rule gives ``oe`` the same validation fit or a
-    better one (CD_player_arm 79.5 -> 83.0 %, glassfurnace 54.1 -> 54.9 %) but on
-    ballbeam (an unstable plant under feedback, where ``oe`` is biased and warns:
-    29.0 -> 19.4 %). ``record`` is ``info['order_selection']``: the rule, the order
+    records (bench/realdata.md, with the searches from every start) ``oe``'s default
+    validates within 3 points of the oracle on 8 of 9 records instead of 6 (exchanger
+    56.2 -> 61.3 %, CD_player_arm 79.7 -> 81.7 %), worse only on ballbeam (an unstable
+    plant under feedback, where ``oe`` is biased and warns: 30.7 -> 8.0 %). ``record`` is ``info['order_selection']``: the rule, the order
     and MOESP's own selection record (``'subspace'``)."""
     from subid.methods.dt.moesp import moesp
     try:
@@ -630,13 +630,14 @@ def structure_orders(order, structure: str, data: IOData):
     (:func:`subid.methods.crossval.selection_part`). A tuple: :func:`parse_orders`.
     """
     ny, nu = data.n_outputs, data.n_inputs
-    subspace = None
-    if (order is None or (isinstance(order, str) and order == "auto")) and structure == "oe":
-        n, subspace = output_error_order(data)
-        if n is not None:
-            nk = _delays(selection_part(data))
-            return parse_orders(n, structure, ny, nu, nk_default=nk), subspace
-    if order is None or (isinstance(order, str) and order == "auto"):
+    auto = order is None or (isinstance(order, str) and order == "auto")
+    record = None
+    if auto and structure == "oe":
+        n, record = output_error_order(data)
+        if n is not None:             # the integer order n, its delays as below
+            order, auto = n, False
+    if auto:
+        subspace = record             # oe: why output_error_order found no order
         orders, record = select_structure(data)
         if structure == "arx":
             return orders, record
@@ -644,14 +645,14 @@ def structure_orders(order, structure: str, data: IOData):
         given = {"armax": (n, nb, n, nk), "oe": (nb, n, nk), "bj": (nb, n, n, n, nk)}[structure]
         record = dict(record, description=f"the degrees of the cross-validated ARX structure "
                                           f"(n = {n}, nb, nk): " + record["description"])
-        if structure == "oe":          # output_error_order found no order
+        if subspace is not None:
             record["subspace"] = subspace
         return parse_orders(given, structure, ny, nu), record
     integer = isinstance(order, (int, np.integer)) and not isinstance(order, bool)
     # the delays of an integer order from the part of the record the structure search
     # reads (the whole of 10^6 samples cost 0.75 GB in estimate_delay's regressors)
     nk = _delays(selection_part(data)) if integer and order >= 1 else None
-    return parse_orders(order, structure, ny, nu, nk_default=nk), None
+    return parse_orders(order, structure, ny, nu, nk_default=nk), record
 
 
 @serial_blas
