@@ -92,18 +92,21 @@ _DIRECT_LAGS = 64
 _COVARIANCE_BLOCK = 4096
 
 
-def _lag_products(z, lags: int) -> np.ndarray:
+def _lag_products(z, lags: int, scale=None) -> np.ndarray:
     """``P[τ] = Σ_t z[t+τ] z[t]^T`` for τ = 0..lags (zero beyond the record), shape
     (lags + 1, nz, nz): one matrix product per lag and block of :data:`_COVARIANCE_BLOCK`
     samples, each block read from cache by every lag. ``z``: an array (n, nz), or a tuple
     of arrays with n rows whose columns side by side make it (each block joined on its
-    own: the record is not copied whole)."""
+    own: the record is not copied whole). ``scale`` (nz,): factors each column is
+    multiplied by, block by block (the products of ``z * scale`` without a scaled copy
+    of the record)."""
     parts = z if isinstance(z, tuple) else (z,)
     n, nz = parts[0].shape[0], sum(p.shape[1] for p in parts)
     P = np.zeros((lags + 1, nz, nz))
     # several parts: side by side in one buffer, filled block by block (a new array per
     # block, above glibc's mmap threshold, costs a fresh mapping and its page faults)
-    joined = np.empty((min(n, _COVARIANCE_BLOCK + lags), nz)) if len(parts) > 1 else None
+    joined = np.empty((min(n, _COVARIANCE_BLOCK + lags), nz)) \
+        if len(parts) > 1 or scale is not None else None
     for t0 in range(0, n, _COVARIANCE_BLOCK):
         t1 = min(n, t0 + _COVARIANCE_BLOCK)
         end = min(n, t1 + lags)
@@ -114,6 +117,8 @@ def _lag_products(z, lags: int) -> np.ndarray:
             for p in parts:
                 segment[:, column:column + p.shape[1]] = p[t0:end]
                 column += p.shape[1]
+            if scale is not None:
+                segment *= scale
         m = t1 - t0
         # the lags whose window segment[tau:tau + m] lies inside the segment: one stacked
         # product, window[tau] = segment[tau:tau + m].T (a strided view, no copy; numpy
@@ -131,8 +136,9 @@ def _lag_products(z, lags: int) -> np.ndarray:
     return P
 
 
-def _covariances(data, lags):
-    """``R_z(τ) = 1/N Σ_t z[t+τ] z[t]^T`` for ``z = [y, u]``, τ = 0..lags, summed over
+def _covariances(data, lags, scale=None):
+    """``R_z(τ) = 1/N Σ_t z[t+τ] z[t]^T`` for ``z = [y, u] * scale`` (``scale``: a
+    factor per channel, outputs first; none by default), τ = 0..lags, summed over
     experiments (one product per lag for at most :data:`_DIRECT_LAGS` lags, else by
     FFT). Shape (lags + 1, nz, nz)."""
     nz = data.n_outputs + data.n_inputs
@@ -145,9 +151,11 @@ def _covariances(data, lags):
             # blocks of _COVARIANCE_BLOCK samples, so that every lag's product reads the
             # block from cache, not the whole record from memory (4x faster again);
             # z = [y, u] joined block by block
-            R += _lag_products((data.y[a:b], data.u[a:b]), lags)
+            R += _lag_products((data.y[a:b], data.u[a:b]), lags, scale)
             continue
         z = np.hstack([data.y[a:b], data.u[a:b]])
+        if scale is not None:
+            z *= scale
         n_fft = 1 << int(math.ceil(math.log2(2 * (b - a) + 1)))
         Z = np.fft.rfft(z, n_fft, axis=0)
         for i in range(nz):          # one channel at a time: memory n_fft x nz
@@ -162,6 +170,12 @@ def _unit_scaled(data, name):
     (``G = G_scaled * back``). The spectra are then computed from numbers of order one:
     at 1e200 their squares overflowed (NaN responses, reported as "FRData: response has
     NaN values"), at 1e-300 they underflowed ("input spectrum singular")."""
+    fu, fy = _unit_factors(data, name)
+    return data.scaled(inputs=fu, outputs=fy), fu[None, :] / fy[:, None]
+
+
+def _unit_factors(data, name):
+    """``(fu, fy)``: the factors of :func:`_unit_scaled`, per input and per output."""
     peaks = [np.abs(x).max(axis=0) if x.shape[0] else np.ones(x.shape[1])
              for x in (data.u, data.y)]
     fu, fy = (np.ldexp(1.0, -np.frexp(np.where(p > 0, p, 1.0))[1]) for p in peaks)
@@ -169,7 +183,7 @@ def _unit_scaled(data, name):
         raise DataError(f"{name}: a channel's values are all below 1e-307 in magnitude "
                         "(subnormal numbers); express it in other units (multiply it by a "
                         "constant) and scale the result back")
-    return data.scaled(inputs=fu, outputs=fy), fu[None, :] / fy[:, None]
+    return fu, fy
 
 
 def _solve_right(S_yu, S_u):
@@ -231,7 +245,10 @@ def spa(data, window=None, w=None):
     True
     """
     _check(data, "spa")
-    data, back = _unit_scaled(data, "spa")
+    # the spectra of the channels scaled as by _unit_scaled (exact powers of two), applied
+    # to the lagged products block by block rather than to a copy of the record
+    fu, fy = _unit_factors(data, "spa")
+    back = fu[None, :] / fy[:, None]
     N = data.n_samples
     if window is None:
         window = default_window_size(N)
@@ -247,7 +264,7 @@ def spa(data, window=None, w=None):
         w = np.arange(1, N_FREQUENCIES + 1) / N_FREQUENCIES * math.pi / dt
     w = FRData(w, np.zeros(np.size(w)), dt).w           # validated frequencies
     ny, nu = data.n_outputs, data.n_inputs
-    R = _covariances(data, window)
+    R = _covariances(data, window, np.concatenate([fy, fu]))
     tau = np.arange(window + 1)
     lag_w = 0.5 * (1 + np.cos(math.pi * tau / window))
     # Φ(ω) = W(0) R(0) + Σ_{τ>=1} W(τ) (R(τ) e^{-iωτ} + R(τ)^T e^{iωτ})

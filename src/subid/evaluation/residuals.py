@@ -49,30 +49,45 @@ def correlations(e, u, *, max_lag: int = 25, confidence: float = 0.99, ranges=No
         ``z sqrt(sum_k r_ee(k) r_uu(k) / N)`` (Ljung, *System Identification*,
         Sec. 16.6), ``residual`` and ``confidence``.
     """
-    from scipy.special import ndtri
     max_lag = check_int(max_lag, "max_lag", minimum=1)
     confidence = check_probability(confidence, "confidence")
     n = e.shape[0]
     if max_lag >= n:
         raise DataError(f"max_lag {max_lag} must be smaller than the {n} samples of the record")
+    return _correlations_of(_products(e, u, ranges, max_lag), e, confidence)
+
+
+def _products(e, u, ranges, lags: int):
+    """``(scale, P)`` of ``z = [e, u]``: each channel's mean removed (over the whole
+    record) and divided by its largest magnitude ``scale`` (the statistics below are
+    invariant to a channel's scale; a large residual cannot overflow), and
+    ``P[τ] = Σ_t z(t+τ) z(t)^T / N`` for τ = 0..lags, pairs inside one experiment:
+    what :func:`correlations` and :func:`portmanteau` read, computed once for both by
+    :func:`residuals` (one pass over the record instead of five)."""
+    z = np.hstack([e, u])
+    z -= z.mean(axis=0)
+    scale = np.abs(z).max(axis=0)
+    scale[scale == 0] = 1.0
+    z /= scale
+    return scale, _lagged(z, ranges, lags)
+
+
+def _correlations_of(products, e, confidence) -> dict:
+    """:func:`correlations` from :func:`_products` (at least ``max_lag`` lags)."""
+    from scipy.special import ndtri
+    _, P = products
+    n, ny = e.shape
+    nu = P.shape[1] - ny
+    max_lag = P.shape[0] - 1
     z = float(ndtri(0.5 + confidence / 2))
-    ny = e.shape[1]
-    # [e, u], each channel's mean removed (one copy of the record)
-    z_all = np.hstack([e, u])
-    z_all -= z_all.mean(axis=0)
-    e0 = z_all[:, :ny]
     lags = np.arange(max_lag + 1)
     cross_lags = np.arange(-max_lag, max_lag + 1)
-    nu = u.shape[1]
     auto = np.zeros((ny, lags.size))
     cross = np.zeros((ny, nu, cross_lags.size))
     cross_bound = np.zeros((ny, nu))
     ree_full = np.zeros((ny, cross_lags.size))
-    # every lagged product of z = [e, u] at once (pairs inside one experiment), then
-    # r_ab(tau) = sum_t a(t) b(t - tau) / N: P[tau][a, b] for tau >= 0, P[-tau][b, a] below
-    from subid.evaluation.nonparametric import _lag_products
-    P = sum(_lag_products(z_all[s:t], max_lag) for s, t in (ranges or [(0, n)])) / n
 
+    # r_ab(tau) = sum_t a(t) b(t - tau) / N: P[tau][a, b] for tau >= 0, P[-tau][b, a] below
     def xcorr(a, b):
         return np.concatenate([P[:0:-1, b, a], P[:, a, b]])
 
@@ -86,8 +101,7 @@ def correlations(e, u, *, max_lag: int = 25, confidence: float = 0.99, ranges=No
         ru0 = ru[max_lag]
         ruu = ru / ru0 if ru0 > 0 else np.zeros_like(ru)
         for i in range(ny):
-            ree0 = e0[:, i] @ e0[:, i] / n
-            denom = math.sqrt(max(ree0 * ru0, 0.0))
+            denom = math.sqrt(max(P[0, i, i] * ru0, 0.0))
             c = xcorr(i, ny + j)
             cross[i, j] = c / denom if denom > 0 else 0.0
             p = float(np.sum(ree_full[i] * ruu))
@@ -174,16 +188,22 @@ def portmanteau(e, u, *, max_lag: int = 25, confidence: float = 0.99, ranges=Non
     Identification: Theory for the User*, 2nd ed., Sec. 16.6. Newey, W. K. & West,
     K. D. (1987). *Econometrica* 55(3), 703-708.
     """
-    from scipy.stats import chi2
-    n, ny = e.shape
-    nu = u.shape[1]
+    window = 0 if white else max_lag
+    reach = min(max_lag + window, e.shape[0] - 1)
+    return _portmanteau_of(_products(e, u, ranges, reach), e.shape[0], e.shape[1],
+                           max_lag=max_lag, confidence=confidence, white=white)
+
+
+def _portmanteau_of(products, n: int, ny: int, *, max_lag: int, confidence: float,
+                    white: bool) -> dict:
+    """:func:`portmanteau` from :func:`_products` (``max_lag`` lags, twice as many for
+    ``white=False``, at most ``n - 1``)."""
+    from scipy.special import chdtrc  # chi2.sf(x, dof) without importing scipy.stats
+    _, P = products
+    nu = P.shape[1] - ny
     alpha = 1.0 - confidence
-    e0 = e - e.mean(axis=0)
-    u0 = u - u.mean(axis=0)
-    # whiteness (Hosking 1980; Ljung & Box 1978 weights)
-    scale = np.abs(e0).max(axis=0)
-    scale[scale == 0] = 1.0
-    C = _lagged(e0 / scale, ranges, max_lag)          # per-channel scaling: Q is invariant
+    # whiteness (Hosking 1980; Ljung & Box 1978 weights); per-channel scaling: Q is invariant
+    C = P[:max_lag + 1, :ny, :ny]
     w, v = np.linalg.eigh(C[0])
     keep = w > max(w.max(initial=0.0), 0.0) * ny * np.finfo(float).eps * 10
     rank = int(keep.sum())
@@ -194,16 +214,13 @@ def portmanteau(e, u, *, max_lag: int = 25, confidence: float = 0.99, ranges=Non
             q += float(np.sum((root.T @ C[k] @ root) ** 2)) / (n - k)
         q *= n * n
     dof_w = rank * rank * max_lag
-    p_w = float(chi2.sf(q, dof_w)) if dof_w else 1.0
+    p_w = float(chdtrc(dof_w, q)) if dof_w else 1.0
     whiteness = {"statistic": q, "dof": dof_w, "p_value": p_w, "ok": bool(p_w >= alpha),
                  "test": "multivariate portmanteau (Hosking 1980), chi-square"}
     # independence (Ljung 1999, eqs. (16.68)-(16.69)), per output, Bonferroni
-    uscale = np.abs(u0).max(axis=0)
-    uscale[uscale == 0] = 1.0
-    us = u0 / uscale
     window = 0 if white else max_lag
-    reach = min(max_lag + window, n - 1)
-    Pu = _lagged(us, ranges, reach)                   # R_u(m) = E u(t) u(t-m)^T
+    reach = P.shape[0] - 1
+    Pu = P[:, ny:, ny:]                               # R_u(m) = E u(t) u(t-m)^T
 
     def r_u(m):
         if abs(m) > reach:
@@ -214,12 +231,9 @@ def portmanteau(e, u, *, max_lag: int = 25, confidence: float = 0.99, ranges=Non
         return np.block([[r_u(k + b - a) for b in range(max_lag + 1)]
                          for a in range(max_lag + 1)])
 
-    rs, rees = [], []
-    for i in range(ny):
-        Pe = _lagged(np.column_stack([e0[:, i] / scale[i], us]), ranges, max_lag)
-        # r_i: Σ_t u_j(t - τ) ε_i(t) / N, ordered as φ (lag-major, then input)
-        rs.append(np.concatenate([Pe[tau][0, 1:] for tau in range(max_lag + 1)]))
-        rees.append(Pe[:window + 1, 0, 0])
+    # r_i: Σ_t u_j(t - τ) ε_i(t) / N, ordered as φ (lag-major, then input)
+    rs = [P[:max_lag + 1, i, ny:].reshape(-1) for i in range(ny)]
+    rees = [P[:window + 1, i, i] for i in range(ny)]
     phi = r_phi(0)
     covs = [ree[0] * phi for ree in rees]
     for k in range(1, window + 1):                   # one R_φ(k) at a time
@@ -232,7 +246,7 @@ def portmanteau(e, u, *, max_lag: int = 25, confidence: float = 0.99, ranges=Non
     for i in range(ny):
         stats[i], dofs[i] = _quadratic(rs[i], covs[i])
         stats[i] *= n
-        ps[i] = float(chi2.sf(stats[i], dofs[i])) if dofs[i] else 1.0
+        ps[i] = float(chdtrc(dofs[i], stats[i])) if dofs[i] else 1.0
     level = alpha / ny
     independence = {"statistic": stats, "dof": dofs, "p_value": ps, "level": level,
                     "ok": bool(np.all(ps >= level)),
@@ -292,11 +306,19 @@ def residuals(model, data, *, max_lag: int = 25, confidence: float = 0.99, x0=No
         warnings.warn("residuals: the model has no Kalman gain K; these are simulation "
                       "errors, white only for white measurement noise", NoiseModelWarning,
                       stacklevel=2)
-    out = correlations(e, data.u, max_lag=max_lag, confidence=confidence,
-                       ranges=data.experiment_ranges)
+    max_lag = check_int(max_lag, "max_lag", minimum=1)
+    confidence = check_probability(confidence, "confidence")
+    n = e.shape[0]
+    if max_lag >= n:
+        raise DataError(f"max_lag {max_lag} must be smaller than the {n} samples of the record")
+    white = kind != "simulation"
+    # the lagged products once, for the correlations and the tests
+    products = _products(e, data.u, data.experiment_ranges,
+                         min(max_lag * (1 if white else 2), n - 1))
+    out = _correlations_of((products[0], products[1][:max_lag + 1]), e, confidence)
     out["kind"] = kind
-    tests = portmanteau(e, data.u, max_lag=max_lag, confidence=confidence,
-                        ranges=data.experiment_ranges, white=kind != "simulation")
+    tests = _portmanteau_of(products, n, e.shape[1], max_lag=max_lag, confidence=confidence,
+                            white=white)
     out.update(tests)
     out["whiteness_ok"] = tests["whiteness"]["ok"]
     out["independence_ok"] = tests["independence"]["ok"]
