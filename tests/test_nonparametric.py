@@ -273,3 +273,62 @@ def test_blocked_factor_equals_the_whole_qr(monkeypatch):
     rows, blocked = impulse._factor(data, 10)
     assert rows == Phi.shape[0]
     np.testing.assert_allclose(np.abs(blocked), np.abs(whole), atol=1e-10)
+
+
+def _second_order_plant():
+    A = np.array([[1.5, -0.7], [1.0, 0.0]])
+    return subid.StateSpace(A, np.array([[1.0], [0.0]]), np.array([[1.0, 0.5]]),
+                            np.zeros((1, 1)), 1.0)
+
+
+def test_impulseest_std_covers_the_response_under_coloured_noise():
+    # process noise through the plant (coloured output disturbance), TC kernel, 40 lags,
+    # 100 runs of 1000 samples: the white-noise posterior covered 78.8 % of the 4000
+    # coefficients by ĝ ± 1.96 std; with the sandwich 89.8 %. White measurement noise:
+    # 96.6 % either way
+    true = _second_order_plant()
+    n = 40
+    g = true.impulse(n - 1)[1][:n, 0, 0]
+    covered = {}
+    for noise, options in (("coloured", dict(process_snr_db=0, output_snr_db=30)),
+                           ("white", dict(output_snr_db=10))):
+        inside = []
+        for run in range(100):
+            data = subid.systems.simulate_data(true, 1000, seed=100 + run, **options)
+            est = subid.impulseest(data, n)
+            inside.append(np.abs(est.coefficients[:, 0, 0] - g) <= 1.96 * est.std[:, 0, 0])
+        covered[noise] = float(np.mean(inside))
+    assert covered["coloured"] >= 0.86
+    assert 0.93 <= covered["white"] <= 0.99
+
+
+@pytest.mark.parametrize("kernel", [None, "tc"])
+def test_impulseest_std_equals_the_sandwich_formed_in_full(kernel):
+    # Cov = M Φ^T K Φ M + M σ^4 P^-1 M (M = (Φ^T Φ + σ^2 P^-1)^-1; least squares: M Φ^T K
+    # Φ M with M = (Φ^T Φ)^-1), K the N x N Toeplitz matrix of the Bartlett-windowed
+    # residual autocovariance, against impulseest's O(m^3) form
+    from subid.methods.dt import _sandwich, impulse
+    data = subid.systems.simulate_data(_second_order_plant(), 400, seed=7, process_snr_db=3,
+                                       output_snr_db=30)
+    n = 12
+    est = subid.impulseest(data, n, kernel=kernel)
+    Phi, Y = impulse._regressors(data, n)
+    rows = Phi.shape[0]
+    g = est.coefficients[:, 0, 0]
+    e = Y[:, 0] - Phi @ g
+    lag = est.info["std"]["lag_window"][0]
+    r = _sandwich.autocovariance(e[:, None], [(0, rows)], lag, rows - n)[:, 0, 0]
+    k = _sandwich.bartlett(lag) * r
+    tau = np.abs(np.subtract.outer(np.arange(rows), np.arange(rows)))
+    K = np.where(tau <= lag, k[np.minimum(tau, lag)], 0.0)
+    sigma2 = est.noise_variance[0]
+    if kernel is None:
+        M = np.linalg.inv(Phi.T @ Phi)
+        cov = M @ Phi.T @ K @ Phi @ M
+    else:
+        h = est.hyperparameters[0]
+        P = kernel_matrix("tc", n, h["scale"][0], h["decay"][0])
+        Pinv = np.linalg.inv(P)
+        M = np.linalg.inv(Phi.T @ Phi + sigma2 * Pinv)
+        cov = M @ Phi.T @ K @ Phi @ M + sigma2 ** 2 * M @ Pinv @ M
+    np.testing.assert_allclose(est.std[:, 0, 0], np.sqrt(np.diag(cov)), rtol=1e-6)
