@@ -33,7 +33,7 @@ import contextlib
 import warnings as _warnings
 
 __all__ = ["CORE_KEYS", "model_info", "collect_warnings", "selection_record",
-           "missing_core_keys"]
+           "missing_core_keys", "continuous_x0", "delayed_x0"]
 
 CORE_KEYS = ("method", "order", "order_selection", "horizon", "n_samples", "x0", "hold",
              "conditions", "warnings")
@@ -179,3 +179,28 @@ def continuous_x0(info: dict, cmodel, xi0, data) -> dict:
     else:
         out.pop("dropped", None)
     return out
+
+
+def delayed_x0(model, data, *, prediction: bool):
+    """``model`` (input delays recorded, :func:`subid.delay.record_delay`) with
+    ``info['x0']`` the initial state at the first sample of ``data``, the record the
+    caller gave before :func:`subid.delay.delay_inputs` shifted it.
+
+    A method given ``input_delay=`` fits the shifted record, whose first sample is sample
+    ``max(d)`` of ``data``: its ``x0`` was the state there, while every function that
+    takes an ``x0`` (simulation, prediction, ``fit_percent``) starts at sample 0 (a user's
+    ``fit_percent(m, data, x0=m.info['x0'])`` fitted 85.5 % against 99.6 %). It is
+    estimated again on ``data`` as ``x0='estimate'`` does, with the delay line's inputs
+    before the record (:func:`subid.model.prediction.simulate_fit`; the one-step
+    predictor's, :func:`subid.predict`, for a ``prediction`` fit). Unchanged when the
+    model has no ``x0`` (None) or no delays."""
+    from subid.delay import input_delay_of
+    from subid.model.prediction import predict, simulate_fit
+    if model.info.get("x0") is None or input_delay_of(model) is None or model.is_continuous:
+        return model
+    if prediction and model.K is not None:
+        x0 = predict(model, data, 1, "estimate", return_x0=True)[1]
+    else:
+        x0 = simulate_fit(model, data, "estimate")[1]
+    model.info["x0"] = x0
+    return model

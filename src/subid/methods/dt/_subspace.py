@@ -580,14 +580,17 @@ def check_system_matrices(system_matrices: str) -> str:
 
 
 def finalize(model: StateSpace, problem: Problem, *, refine, delays,
-             statistic: str = "auto") -> StateSpace:
+             statistic: str = "auto", record=None) -> StateSpace:
     """The final model of a DT batch method: its noise model (K and the innovation
     covariance, :func:`subid.methods.dt.noise_model.attach_noise_model`; a gain that
     predicts clearly worse than none refitted, :func:`subid.methods.dt.gain.checked_gain`),
     then the optional refinement, :func:`refined`) and its input delays (:func:`subid.delay.record_delay`;
     ``info['input_delay']`` None without delays), with the ``refine`` and ``statistic``
-    options in use recorded in ``info``. Run once, on the final model."""
+    options in use recorded in ``info``; with delays, ``info['x0']`` is the state at the
+    first sample of ``record`` (the caller's record before the shift,
+    :func:`subid.methods._info.delayed_x0`). Run once, on the final model."""
     from subid.delay import record_delay
+    from subid.methods._info import delayed_x0
     from subid.methods.dt.gain import checked_gain
     from subid.methods.dt.noise_model import attach_noise_model
     model = attach_noise_model(model, problem)
@@ -598,7 +601,10 @@ def finalize(model: StateSpace, problem: Problem, *, refine, delays,
     model.info["refine"] = refine          # the values in use, as every option's
     model.info["statistic"] = statistic
     model.info["input_delay"] = None        # no delay; record_delay stores the delays
-    return record_delay(model, delays)
+    model = record_delay(model, delays)
+    if delays is not None and isinstance(record, IOData):
+        model = delayed_x0(model, record, prediction=refine == "prediction")
+    return model
 
 
 def refined(data, model: StateSpace, focus: str) -> StateSpace:

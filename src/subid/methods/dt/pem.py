@@ -61,7 +61,7 @@ from subid._validation import check_choice, check_optimiser_options, checked_cal
 from subid.data import IOData, column_spread, not_a_record
 from subid.delay import delay_inputs, input_delay_of, record_delay
 from subid.errors import DataError, FeedbackWarning, ModelError, NoiseModelWarning, OptionError
-from subid.methods._info import continuous_x0, records_warnings
+from subid.methods._info import continuous_x0, delayed_x0, records_warnings
 from subid.methods.dt import _pe_search
 from subid.methods.dt._covariance import covariance_factor, covariance_factor_pieces
 from subid.methods.dt._pe_search import (
@@ -295,9 +295,11 @@ def pem(data, model, *, focus="prediction", max_iterations=MAX_ITERATIONS, toler
         inner = model.with_noise_model(model.K, model.noise_cov,
                                        info={k: v for k, v in model.info.items()
                                              if k != "input_delay"})
-        return record_delay(pem(shifted, inner, focus=focus, max_iterations=max_iterations,
-                                tolerance=tolerance, rounds=rounds, feedthrough=feedthrough),
-                            delays)
+        refined = record_delay(pem(shifted, inner, focus=focus, max_iterations=max_iterations,
+                                   tolerance=tolerance, rounds=rounds,
+                                   feedthrough=feedthrough), delays)
+        # its x0 at the first sample of the caller's record, not of the shifted one
+        return delayed_x0(refined, data, prediction=focus == "prediction")
     if model.is_continuous:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", NoiseModelWarning)

@@ -285,6 +285,7 @@ def run(method: SubspaceMethod, data, order, horizon, *, selection: str,
     was a choice; ``method(data, order=model.order, horizon=model.info['horizon'])``
     reproduces a default model.
     """
+    record = data                     # before the input delays shift it
     plan, data = make_plan(method, data, order, horizon, selection=selection,
                            statistic=statistic, refine=refine, input_delay=input_delay)
     pipeline = Pipeline(method, plan)
@@ -321,6 +322,6 @@ def run(method: SubspaceMethod, data, order, horizon, *, selection: str,
                                                      reason=too_short)
         model.info.update(plan.info(estimator, rule))
         model = finalize(model, problem, refine=plan.refine, delays=plan.delays,
-                         statistic=plan.statistic)
+                         statistic=plan.statistic, record=record)
     model.info["warnings"] = list(issued)
     return model
