@@ -332,3 +332,17 @@ def test_impulseest_std_equals_the_sandwich_formed_in_full(kernel):
         M = np.linalg.inv(Phi.T @ Phi + sigma2 * Pinv)
         cov = M @ Phi.T @ K @ Phi @ M + sigma2 ** 2 * M @ Pinv @ M
     np.testing.assert_allclose(est.std[:, 0, 0], np.sqrt(np.diag(cov)), rtol=1e-6)
+
+
+@pytest.mark.parametrize("L, n, lags", [(300, 7, 20), (30, 9, 21), (12, 6, 6)])
+def test_lagged_grams_equal_the_regressor_products(L, n, lags):
+    # G(τ) = Σ_t φ(t) φ(t - τ)^T from the inputs' lagged products (prefix and suffix
+    # corrections), against the products of the regressor rows themselves
+    from subid.methods.dt import impulse
+    u = np.random.default_rng(L).standard_normal((L, 2))
+    Phi, _ = impulse._regressors(subid.IOData(u, np.zeros((L, 1))), n)
+    grams = list(impulse._lagged_grams(u, n, lags))
+    assert len(grams) == min(lags, L - n) + 1
+    for tau, G in enumerate(grams):
+        np.testing.assert_allclose(G, Phi[tau:].T @ Phi[:Phi.shape[0] - tau],
+                                   rtol=1e-12, atol=1e-12 * L)

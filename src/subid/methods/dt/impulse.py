@@ -409,15 +409,12 @@ def _coloured_meats(data, n, coef, rows, m):
     """Per output, ``(Q, M)``: the meat ``Q = Σ_t Σ_s φ(t) k(t - s) φ(s)^T`` of the
     sandwich, ``k(τ) = w(τ) r(τ)`` the residual autocovariance of the estimate ``coef``
     under the Bartlett window of :func:`subid.methods.dt._sandwich.choose_lag`'s ``M``
-    (no products across experiments). Two passes over the regressor rows, a block at a
-    time: the residuals, then the filtered products."""
-    from subid.methods.dt._sandwich import (
-        MAX_LAG,
-        LaggedMeat,
-        autocovariance,
-        bartlett,
-        choose_lag,
-    )
+    (no products across experiments): ``Q = k(0) G(0) + Σ_{τ=1..M} k(τ) (G(τ) +
+    G(τ)^T)``, ``G(τ) = Σ_t φ(t) φ(t - τ)^T`` over the rows of one experiment
+    (:func:`_lagged_grams`, from the inputs' lagged products: ``O(N nu^2 (M + 2n))``
+    instead of the ``O(N m^2)`` of ``Φ^T`` times the filtered ``Φ``). One pass over the
+    regressor rows, a block at a time, for the residuals."""
+    from subid.methods.dt._sandwich import MAX_LAG, autocovariance, bartlett, choose_lag
     ny = coef.shape[1]
     block = max(QR_BLOCK_ENTRIES // (m + ny), 4 * (m + ny))
     e = np.empty((rows, ny))
@@ -426,13 +423,63 @@ def _coloured_meats(data, n, coef, rows, m):
         e[start:start + Phi.shape[0]] = Y - Phi @ coef
     bounds = np.cumsum([0] + [max(b - a - n + 1, 0) for a, b in data.experiment_ranges])
     segments = [(int(a), int(b)) for a, b in zip(bounds[:-1], bounds[1:]) if b > a]
-    out = []
+    kernels, lags = [], []
     for i in range(ny):
         r = autocovariance(e[:, i:i + 1], segments, min(MAX_LAG, rows - 1), rows - m)
-        lag = choose_lag(r, rows)
-        meat = LaggedMeat(bartlett(lag)[:, None, None] * r[:lag + 1], segments, m)
-        for start in range(0, rows, block):
-            Phi, _ = _regressors(data, n, start, start + block)
-            meat.add(Phi[:, None, :])
-        out.append((meat.value(), lag))
-    return out
+        lags.append(choose_lag(r, rows))
+        kernels.append(bartlett(lags[-1]) * r[:lags[-1] + 1, 0, 0])
+    meats = [np.zeros((m, m)) for _ in range(ny)]
+    for a, b in data.experiment_ranges:
+        if b - a < n:
+            continue
+        for tau, G in enumerate(_lagged_grams(data.u[a:b], n, max(lags))):
+            for Q, k in zip(meats, kernels):
+                if tau < k.size:
+                    Q += k[tau] * G if tau == 0 else k[tau] * (G + G.T)
+    return list(zip(meats, lags))
+
+
+def _lagged_grams(u, n: int, max_lag: int):
+    """``G(τ) = Σ_t φ(t) φ(t - τ)^T`` for ``τ = 0..max_lag`` (fewer when the record has
+    fewer rows), ``φ(t)`` the regressor row of one experiment's input ``u`` (shape
+    ``(L, nu)``; rows ``t = n-1..L-1``, column ``j n + a`` holding ``u_j(t - a)``), the
+    sum over the rows with ``t - τ`` a row too.
+
+    Entry ``((j, a), (l, b))`` is ``Σ_{t'=A}^{E-1} u_j(t') u_l(t' - s)`` with ``s = τ + b
+    - a``, ``A = n - 1 + τ - a``, ``E = L - a``: the sum over the whole record of the
+    lagged products at lag ``s`` less a prefix (``t' < A``, at most ``n + M`` terms) and
+    a suffix (``t' >= E``, fewer than ``n``), so that the record is read once per lag
+    ``s`` (``-(n-1)..M+n-1``), not once per pair of columns. Yields one ``G(τ)`` (shape
+    ``(n nu, n nu)``) at a time."""
+    L, nu = u.shape
+    top = min(max_lag, L - n)                 # G(τ) needs rows t and t - τ
+    S = top + 2 * n - 1                       # lags s = -(n-1) .. top + n - 1
+    shifts = np.arange(S) - (n - 1)
+    head = min(n + top, L)                    # prefix points A = 0 .. n - 1 + top
+    tail0 = L - n + 1                         # suffix points E = L - n + 1 .. L
+    total = np.empty((nu, nu, S))             # Σ over t' of u_j(t') u_l(t' - s)
+    for k, s in enumerate(shifts):
+        total[:, :, k] = u[s:].T @ u[:L - s] if s >= 0 else u[:L + s].T @ u[-s:]
+
+    def products(t):
+        """``u_j(t') u_l(t' - s)`` for the samples ``t`` (zero where ``t' - s`` falls
+        outside the record): shape (nu, nu, S, len(t))."""
+        src = t[None, :] - shifts[:, None]                        # (S, len(t))
+        ok = (src >= 0) & (src < L)
+        lagged = np.where(ok[..., None], u[np.clip(src, 0, L - 1)], 0.0)   # (S, T, nu)
+        return np.einsum("tj,stl->jlst", u[t], lagged)
+
+    pre = np.zeros((nu, nu, S, head + 1))     # pre[..., x] = Σ_{t' < x}
+    pre[..., 1:] = np.cumsum(products(np.arange(head)), axis=-1)
+    suf = np.zeros((nu, nu, S, n))            # suf[..., x - tail0] = Σ_{t' >= x}
+    if n > 1:
+        suf[..., :n - 1] = np.cumsum(products(np.arange(tail0, L))[..., ::-1],
+                                     axis=-1)[..., ::-1]
+    lag_of = np.arange(n)
+    E = np.broadcast_to((n - 1 - lag_of)[:, None], (n, n))          # E - tail0, by a
+    for tau in range(top + 1):
+        s_idx = tau + lag_of[None, :] - lag_of[:, None] + n - 1      # (a, b)
+        A = np.broadcast_to((n - 1 + tau - lag_of)[:, None], (n, n))
+        G = total[:, :, s_idx] - pre[:, :, s_idx, A] - suf[:, :, s_idx, E]   # (j, l, a, b)
+        # rows j n + a, columns l n + b
+        yield G.transpose(0, 2, 1, 3).reshape(nu * n, nu * n)
