@@ -58,10 +58,10 @@ def correlations(e, u, *, max_lag: int = 25, confidence: float = 0.99, ranges=No
 
 
 def _products(e, u, ranges, lags: int):
-    """``(scale, P)`` of ``z = [e, u]``: each channel's mean removed (over the whole
-    record) and divided by its largest magnitude ``scale`` (the statistics below are
-    invariant to a channel's scale; a large residual cannot overflow), and
-    ``P[τ] = Σ_t z(t+τ) z(t)^T / N`` for τ = 0..lags, pairs inside one experiment:
+    """``P[τ] = Σ_t z(t+τ) z(t)^T / N`` for τ = 0..lags, pairs inside one experiment,
+    of ``z = [e, u]`` with each channel's mean removed (over the whole record) and
+    divided by its largest magnitude (the statistics below are invariant to a channel's
+    scale; a large residual cannot overflow):
     what :func:`correlations` and :func:`portmanteau` read, computed once for both by
     :func:`residuals` (one pass over the record instead of five)."""
     z = np.hstack([e, u])
@@ -69,13 +69,13 @@ def _products(e, u, ranges, lags: int):
     scale = np.abs(z).max(axis=0)
     scale[scale == 0] = 1.0
     z /= scale
-    return scale, _lagged(z, ranges, lags)
+    return _lagged(z, ranges, lags)
 
 
-def _correlations_of(products, e, confidence) -> dict:
-    """:func:`correlations` from :func:`_products` (at least ``max_lag`` lags)."""
+def _correlations_of(P, e, confidence) -> dict:
+    """:func:`correlations` from the lagged products ``P`` of :func:`_products` (its
+    lags the ``max_lag``)."""
     from scipy.special import ndtri
-    _, P = products
     n, ny = e.shape
     nu = P.shape[1] - ny
     max_lag = P.shape[0] - 1
@@ -194,12 +194,11 @@ def portmanteau(e, u, *, max_lag: int = 25, confidence: float = 0.99, ranges=Non
                            max_lag=max_lag, confidence=confidence, white=white)
 
 
-def _portmanteau_of(products, n: int, ny: int, *, max_lag: int, confidence: float,
+def _portmanteau_of(P, n: int, ny: int, *, max_lag: int, confidence: float,
                     white: bool) -> dict:
-    """:func:`portmanteau` from :func:`_products` (``max_lag`` lags, twice as many for
-    ``white=False``, at most ``n - 1``)."""
+    """:func:`portmanteau` from the lagged products ``P`` of :func:`_products`
+    (``max_lag`` lags, twice as many for ``white=False``, at most ``n - 1``)."""
     from scipy.special import chdtrc  # chi2.sf(x, dof) without importing scipy.stats
-    _, P = products
     nu = P.shape[1] - ny
     alpha = 1.0 - confidence
     # whiteness (Hosking 1980; Ljung & Box 1978 weights); per-channel scaling: Q is invariant
@@ -315,7 +314,7 @@ def residuals(model, data, *, max_lag: int = 25, confidence: float = 0.99, x0=No
     # the lagged products once, for the correlations and the tests
     products = _products(e, data.u, data.experiment_ranges,
                          min(max_lag * (1 if white else 2), n - 1))
-    out = _correlations_of((products[0], products[1][:max_lag + 1]), e, confidence)
+    out = _correlations_of(products[:max_lag + 1], e, confidence)
     out["kind"] = kind
     tests = _portmanteau_of(products, n, e.shape[1], max_lag=max_lag, confidence=confidence,
                             white=white)
