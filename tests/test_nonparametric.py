@@ -346,3 +346,24 @@ def test_lagged_grams_equal_the_regressor_products(L, n, lags):
     for tau, G in enumerate(grams):
         np.testing.assert_allclose(G, Phi[tau:].T @ Phi[:Phi.shape[0] - tau],
                                    rtol=1e-12, atol=1e-12 * L)
+
+
+def test_impulseest_warns_when_the_data_do_not_determine_the_response():
+    # at about -11 dB (process noise, 400 samples) the marginal likelihood of this record
+    # shrinks the TC prior's scale to 3e-5: the estimate is zero with a std of 0.003
+    # while the true response reaches 2.3; its effective parameters (0.00001) say so
+    from subid.errors import PoorFitWarning
+    true = _second_order_plant()
+    data = subid.systems.simulate_data(true, 400, seed=8013, process_snr_db=0,
+                                       output_snr_db=30)
+    with pytest.warns(PoorFitWarning, match="determine less than 1"):
+        est = subid.impulseest(data, 60)
+    assert est.info["effective_parameters"][0] < 1e-3
+    # the neighbouring seed's record determines about ten, silently; least squares all 60
+    data = subid.systems.simulate_data(true, 400, seed=8012, process_snr_db=0,
+                                       output_snr_db=30)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", PoorFitWarning)
+        est = subid.impulseest(data, 60)
+        assert subid.impulseest(data, 60, kernel=None).info["effective_parameters"] == [60.0]
+    assert 5 < est.info["effective_parameters"][0] < 20

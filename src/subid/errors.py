@@ -215,9 +215,11 @@ class FeedbackWarning(UserWarning):
 
 
 class PoorFitWarning(UserWarning):
-    """The model an order search chose simulates its held-out folds worse than their
-    means (a negative cross-validated fit): no candidate describes the data. The message
-    names what usually causes it (drifts or offsets, feedback, nonlinearity)."""
+    """The data do not support the model returned: the model an order search chose
+    simulates its held-out folds worse than their means (a negative cross-validated fit:
+    no candidate describes the data; the message names what usually causes it: drifts
+    or offsets, feedback, nonlinearity), or a regularised impulse response whose
+    parameters the data barely determine (:func:`subid.impulseest`)."""
 
 
 class DelayWarning(UserWarning):
