@@ -367,3 +367,28 @@ def test_impulseest_warns_when_the_data_do_not_determine_the_response():
         est = subid.impulseest(data, 60)
         assert subid.impulseest(data, 60, kernel=None).info["effective_parameters"] == [60.0]
     assert 5 < est.info["effective_parameters"][0] < 20
+
+
+@pytest.mark.parametrize("kernel", ["tc", "dc", "ss"])
+def test_marginal_likelihood_gradient_matches_finite_differences(kernel):
+    # the analytic gradient the hyperparameter search uses, against central differences
+    from subid.methods.dt import impulse
+    data = subid.systems.simulate_data(subid.systems.random_system(3, 2, 1, seed=2), 300,
+                                       seed=1, output_snr_db=10)
+    n, nu = 15, 2
+    rows, R = impulse._factor(data, n)
+    m = n * nu
+    R1, r, rho2 = R[:m, :m], R[:m, m], float(np.sum(R[m:, m] ** 2))
+    sigma2 = rho2 / (rows - m)
+    eta = np.random.default_rng(0).standard_normal(nu * (3 if kernel == "dc" else 2)) * 0.5
+
+    def f(e):
+        return impulse._objective(impulse._prior(kernel, n, *impulse._unpack(kernel, e, nu)),
+                                  R1, r, rho2, sigma2, rows)[0]
+
+    value, gradient = impulse._objective_gradient(kernel, n, nu, eta, R1, r, rho2, sigma2, rows)
+    assert value == f(eta)
+    step = 1e-5
+    central = np.array([(f(eta + step * e) - f(eta - step * e)) / (2 * step)
+                        for e in np.eye(eta.size)])
+    np.testing.assert_allclose(gradient, central, rtol=1e-6, atol=1e-6 * np.abs(central).max())

@@ -269,6 +269,10 @@ def _tune(kernel, n, nu, R1, r, rho2, sigma2, n_rows, g_ls):
                            n_rows)[0]
         return value if math.isfinite(value) else 1e300
 
+    def f_and_gradient(eta):
+        value, gradient = _objective_gradient(kernel, n, nu, eta, R1, r, rho2, sigma2, n_rows)
+        return (value, gradient) if math.isfinite(value) else (1e300, np.zeros_like(eta))
+
     best = None
     energy = np.array([np.mean(g_ls[j * n:(j + 1) * n] ** 2) for j in range(nu)])
     for lam in DECAY_GRID:
@@ -282,8 +286,59 @@ def _tune(kernel, n, nu, R1, r, rho2, sigma2, n_rows, g_ls):
             value = f(eta.ravel())
             if best is None or value < best[0]:
                 best = (value, eta.ravel())
-    res = scipy.optimize.minimize(f, best[1], method="L-BFGS-B")
+    res = scipy.optimize.minimize(f_and_gradient, best[1], jac=True, method="L-BFGS-B")
     return res.x if res.fun <= best[0] else best[1]
+
+
+def _objective_gradient(kernel, n, nu, eta, R1, r, rho2, sigma2, n_rows):
+    """:func:`_objective` at the search vector ``eta`` and its gradient.
+
+    With ``H = σ² I + R1 P R1^T``, ``d(r^T H^-1 r + log det H) = tr((W - a a^T) dP)``,
+    ``W = R1^T H^-1 R1``, ``a = R1^T H^-1 r`` (``d log det H = tr(H^-1 dH)``, ``d H^-1 =
+    -H^-1 dH H^-1``); ``P`` is block diagonal by input, so each input's hyperparameters
+    see their own block. One evaluation costs about three of the objective's Cholesky
+    factorisations, against ``1 + 2 nu`` (``1 + 3 nu`` for DC) objectives for a
+    finite-difference gradient (which the search used before: 10 inputs, 21 of them)."""
+    scale, decay, corr = _unpack(kernel, eta, nu)
+    value, L = _objective(_prior(kernel, n, scale, decay, corr), R1, r, rho2, sigma2, n_rows)
+    if L is None:
+        return math.inf, np.zeros_like(eta)
+    X = scipy.linalg.solve_triangular(L, R1, lower=True, check_finite=False)   # L^-1 R1
+    z = scipy.linalg.solve_triangular(L, r, lower=True, check_finite=False)
+    a = X.T @ z
+    G = X.T @ X - np.outer(a, a)
+    per = 3 if kernel == "dc" else 2
+    gradient = np.empty((nu, per))
+    for j in range(nu):
+        block = G[j * n:(j + 1) * n, j * n:(j + 1) * n]
+        for k, dK in enumerate(_kernel_derivatives(kernel, n, scale[j], decay[j], corr[j])):
+            gradient[j, k] = float(np.sum(block * dK))
+    return value, gradient.ravel()
+
+
+def _kernel_derivatives(kernel, n, scale, decay, correlation):
+    """The derivatives of :func:`kernel_matrix` with respect to the search coordinates of
+    :func:`_unpack`: ``log c``, the logit of ``λ`` over :data:`DECAY_BOUNDS` and, for
+    DC, ``atanh(ρ / 0.999)``."""
+    K = kernel_matrix(kernel, n, scale, decay, correlation)
+    k = np.arange(1, n + 1, dtype=float)
+    mx = np.maximum(k[:, None], k[None, :])
+    lo, hi = DECAY_BOUNDS
+    dlam = (decay - lo) * (hi - decay) / (hi - lo)      # dλ / d(logit)
+    if kernel == "tc":
+        d_decay = K * mx / decay
+    elif kernel == "dc":
+        d_decay = K * (k[:, None] + k[None, :]) / (2 * decay)
+    else:
+        s = k[:, None] + k[None, :] + mx
+        d_decay = scale * (s * decay ** (s - 1) / 2 - 3 * mx * decay ** (3 * mx - 1) / 6)
+    out = [K, d_decay * dlam]
+    if kernel == "dc":
+        dist = np.abs(k[:, None] - k[None, :])
+        d_corr = np.where(dist > 0, scale * dist * correlation ** np.maximum(dist - 1, 0)
+                          * decay ** ((k[:, None] + k[None, :]) / 2), 0.0)
+        out.append(d_corr * (0.999 - correlation ** 2 / 0.999))   # dρ / d(atanh(ρ/0.999))
+    return out
 
 
 @serial_blas
