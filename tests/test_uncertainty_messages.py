@@ -50,7 +50,9 @@ def test_a_model_whose_gain_was_removed_says_why_and_to_refit(refined):
         subid.parameter_covariance(bare)
 
 
-def test_a_model_with_absorbed_delays_says_why_and_to_refit(refined):
+def test_a_model_with_absorbed_delays_keeps_its_bounds(refined):
+    # absorb_delay maps the covariance to the shift-register model (it was dropped, with a
+    # message saying to refit): the same bands as the delayed model's
     delayed = subid.StateSpace(refined.A, refined.B, refined.C, refined.D, 1.0,
                                K=refined.K, noise_cov=refined.noise_cov,
                                info=dict(refined.info, input_delay=[3]))
@@ -58,9 +60,9 @@ def test_a_model_with_absorbed_delays_says_why_and_to_refit(refined):
         warnings.simplefilter("ignore")
         absorbed = subid.absorb_delay(delayed)
     assert absorbed.order == refined.order + 3
-    with pytest.raises(ModelError, match=r"absorb_delay\(\) turned the input delays into "
-                                         r"states.*subid\.pem\(data, model\)"):
-        subid.parameter_covariance(absorbed)
+    w = np.linspace(0.1, 3.0, 4)
+    np.testing.assert_allclose(subid.freqresp_bounds(absorbed, w).std,
+                               subid.freqresp_bounds(delayed, w).std, rtol=1e-9)
 
 
 def test_step_bounds_of_a_huge_final_time_name_the_memory(refined):

@@ -308,6 +308,82 @@ def record_delay(model, delays):
 ABSORB_BYTES_LIMIT = 2.0**30
 
 
+def _registers(A, B, C, D, delays, zero, one):
+    """The matrices of :func:`absorb_delay` built from ``A, B, C, D`` (any dtype):
+    ``zero`` where the absorbed model has a structural zero, ``one`` at the shift
+    registers' unit entries. Input ``j`` delayed by ``d_j`` passes through ``d_j``
+    states, the first holding ``u_j[k-1]``, the last ``u_j[k-d_j]``, which enters as
+    ``B[:, j]`` and ``D[:, j]`` did."""
+    n, m = B.shape
+    p = C.shape[0]
+    N = n + int(np.sum(delays))
+    dtype = np.result_type(A, B, C, D, np.asarray(zero), np.asarray(one))
+    Ab, Bb = np.full((N, N), zero, dtype=dtype), np.full((N, m), zero, dtype=dtype)
+    Cb, Db = np.full((p, N), zero, dtype=dtype), np.full((p, m), zero, dtype=dtype)
+    Ab[:n, :n] = A
+    Cb[:, :n] = C
+    pos = n
+    for j, d in enumerate(delays):
+        if d == 0:
+            Bb[:n, j] = B[:, j]
+            Db[:, j] = D[:, j]
+            continue
+        first, last = pos, pos + d - 1
+        Bb[first, j] = one
+        for r in range(first + 1, last + 1):
+            Ab[r, r - 1] = one
+        Ab[:n, last] = B[:, j]
+        Cb[:, last] = D[:, j]
+        pos += d
+    return Ab, Bb, Cb, Db
+
+
+def _absorbed_covariance(entry, model, delays):
+    """``info['parameter_covariance']`` of :func:`absorb_delay`'s model, or None when
+    ``entry`` does not fit ``model``'s matrices. The absorbed matrices' entries are
+    either the delayed model's (moved: a delayed input's ``B`` column into ``A``, its
+    ``D`` column into ``C``) or structural constants, so the packed parameters
+    (``A, B, C`` row-major, then ``D`` and ``K`` where they are parameters) map by a
+    selection matrix ``T``, ``θ' = T θ + c``, and the covariance factor by ``T``: the
+    same covariance, exactly. The polynomial coefficients' covariance is left out (the
+    polynomials are dropped)."""
+    n, m, p = model.order, model.n_inputs, model.n_outputs
+    with_d, with_k = bool(entry.get("with_feedthrough")), bool(entry.get("with_gain"))
+    shapes = [(n, n), (n, m), (p, n)] + ([(p, m)] if with_d else []) + \
+        ([(n, p)] if with_k else [])
+    sizes = [a * b for a, b in shapes]
+    try:
+        params = np.asarray(entry["parameters"], dtype=float)
+        factor = np.asarray(entry["factor"], dtype=float)
+    except (KeyError, TypeError, ValueError):
+        return None
+    if params.shape != (sum(sizes),) or factor.ndim != 2 or factor.shape[0] != sum(sizes) \
+            or (with_k and model.K is None):
+        return None
+    offsets = np.cumsum([0] + sizes)
+    index = [np.arange(a, b).reshape(shape)
+             for a, b, shape in zip(offsets[:-1], offsets[1:], shapes)]
+    fixed_d = np.full((p, m), -1)                # D not among the parameters: constants
+    Ai, Bi, Ci, Di = _registers(index[0], index[1], index[2], index[3] if with_d else fixed_d,
+                                delays, -1, -1)
+    blocks = [Ai, Bi, Ci] + ([Di] if with_d else [])
+    if with_k:
+        blocks.append(np.vstack([index[-1], np.full((int(np.sum(delays)), p), -1)]))
+    rows = np.concatenate([b.ravel() for b in blocks])
+    T = np.zeros((rows.size, params.size))
+    moved = rows >= 0
+    T[np.flatnonzero(moved), rows[moved]] = 1.0
+    A, B, C, D = _registers(model.A, model.B, model.C, model.D, delays, 0.0, 1.0)
+    values = [A, B, C] + ([D] if with_d else [])
+    if with_k:
+        values.append(np.vstack([model.K, np.zeros((int(np.sum(delays)), p))]))
+    out = {k: v for k, v in entry.items()
+           if k not in ("coefficients", "coefficient_factor", "coefficient_names")}
+    out["parameters"] = np.concatenate([v.ravel() for v in values])
+    out["factor"] = T @ factor
+    return out
+
+
 def effective_input(model, u: np.ndarray) -> np.ndarray:
     """The input samples as ``model``'s state equations see them.
 
@@ -350,8 +426,9 @@ def absorb_delay(model):
 
     Returns the model itself when it has no delays. The Kalman gain K (zero rows for
     the registers), ``noise_cov`` and ``info['x0']`` (zeros for the registers) carry
-    over: one-step predictions are unchanged. The polynomials of a polynomial method,
-    their degrees and the parameter covariance no longer describe the matrices: they are
+    over: one-step predictions are unchanged. The parameter covariance is mapped
+    exactly (:func:`_absorbed_covariance`: the same bounds). The polynomials of a
+    polynomial method and their degrees no longer describe the matrices: they are
     dropped, each named in ``info['dropped']``.
 
     Raises
@@ -381,38 +458,27 @@ def absorb_delay(model):
             f"{ABSORB_BYTES_LIMIT / 2**30:g} GiB). Keep the delay in the model "
             "(info['input_delay'] is honoured by simulate, predict and freqresp) or export "
             "it as a delay (e.g. MATLAB's InputDelay) instead of as states")
-    A = np.zeros((N, N))
-    B = np.zeros((N, m))
-    C = np.zeros((p, N))
-    D = np.zeros((p, m))
-    A[:n, :n] = model.A
-    C[:, :n] = model.C
-    pos = n
-    for j, d in enumerate(delays):
-        if d == 0:
-            B[:n, j] = model.B[:, j]
-            D[:, j] = model.D[:, j]
-            continue
-        first, last = pos, pos + d - 1      # register: first holds u[k-1], last u[k-d]
-        B[first, j] = 1.0
-        for r in range(first + 1, last + 1):
-            A[r, r - 1] = 1.0
-        A[:n, last] = model.B[:, j]
-        C[:, last] = model.D[:, j]
-        pos += d
+    A, B, C, D = _registers(model.A, model.B, model.C, model.D, delays, 0.0, 1.0)
     info = {k: v for k, v in model.info.items() if k != INFO_KEY}
     info["absorbed_input_delay"] = delays.tolist()
     # the polynomials (their nk), their degrees and the covariance of the matrices describe
     # the model before absorption: dropped, each named in info['dropped'] (as the model's
     # conversions do, subid.model._conversions.drop_info)
     dropped = dict(info.get("dropped") or {})
-    for key in ("polynomials", "orders", "parameter_covariance"):
+    for key in ("polynomials", "orders"):
         if info.pop(key, None) is not None:
             dropped[key] = "absorb_delay() turned the input delays into states"
-    if "parameter_covariance" in dropped:
-        info["parameter_covariance_note"] = (
-            "the covariance was dropped: absorb_delay() turned the input delays into states "
-            "(ask for bounds on the model with info['input_delay'])")
+    entry = info.pop("parameter_covariance", None)
+    if isinstance(entry, dict):
+        mapped = _absorbed_covariance(entry, model, delays)
+        if mapped is not None:
+            info["parameter_covariance"] = mapped
+        else:
+            dropped["parameter_covariance"] = "absorb_delay() could not map it (its " \
+                "parameters do not match the model's matrices)"
+            info["parameter_covariance_note"] = (
+                "the covariance was dropped: absorb_delay() could not map it (ask for bounds "
+                "on the model with info['input_delay'])")
     if dropped:
         info["dropped"] = dropped
     # the innovation form and the initial state(s) carry over: the registers take no

@@ -308,8 +308,8 @@ def parameter_covariance(model) -> ParameterCovariance:
         :func:`subid.pem`; a continuous-time model, e.g. :func:`subid.identify`
         on non-uniform data: the message names the discrete-time path), or its
         matrices are not those the covariance was computed for (edited after
-        ``pem``; :meth:`StateSpace.transform` maps the covariance, conversions and
-        :func:`subid.absorb_delay` drop it).
+        ``pem``; :meth:`StateSpace.transform` and :func:`subid.absorb_delay` map the
+        covariance, conversions drop it).
     """
     if not isinstance(model, StateSpace):
         raise ModelError(f"expected a subid.StateSpace, got {type(model).__name__}")
