@@ -1099,3 +1099,22 @@ def test_channels_far_above_size_one_are_named_in_the_warning():
         loud.model
     text = " ".join(str(w.message) for w in caught)
     assert "not unit-free" in text and "data.scaled" in text
+
+
+def test_model_before_the_first_refresh_is_an_error_not_a_zero_model():
+    # the contract of the online identifiers (docs/api/online.md): no all-zero model. Up
+    # to the first refresh (refresh_every = 50 samples) A, B, C, D were all zero and the
+    # model was returned with a warning only; after it, (A, C) with B = D = 0 and the
+    # warning that says the (B, D) stage has not started
+    t = np.arange(200) * DT
+    u = multisine(t, 2, seed=0)
+    y = paper_system().simulate(u, t=t, hold="foh")
+    for n in (1, 49, 50):
+        ident = paper_ident().update(u[:n], y[:n])
+        with pytest.raises(subid.errors.TooFewSamplesError, match="no estimate of"):
+            ident.model
+    ident = paper_ident().update(u[:51], y[:51])
+    with pytest.warns(subid.errors.NotConvergedWarning, match="has not started"):
+        model = ident.model
+    assert model.info["refreshes"] == 1 and np.any(model.A) and np.any(model.C)
+    assert not np.any(model.B) and not model.info["bd_started"]

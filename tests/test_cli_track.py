@@ -104,3 +104,29 @@ def test_resume_keeps_the_checkpoints_detrend(grown, tmp_path, capsys):
     _, _, stderr = _track(capsys, folder / "short.csv", tmp_path / "mixed", "--resume", ckpt,
                           "--detrend", "constant")
     assert "the run that wrote the checkpoint used --detrend none" in stderr
+
+
+def test_resume_refuses_another_sampling_period_before_reading_on(grown, tmp_path, capsys):
+    # it fed the whole rest of the record and wrote a checkpoint, then failed at the end
+    folder, _ = grown
+    _track(capsys, folder / "short.csv", tmp_path / "first", "--order", "3",
+           "--checkpoint-every", "2000")
+    ckpt = tmp_path / "first" / "checkpoints" / "checkpoint-0000002000.npz"
+    code, stdout, stderr = run(capsys, "track", folder / "long.csv", "--inputs", "u1,u2",
+                               "--outputs", "y1,y2", "--dt", "0.02", "--no-report",
+                               "--resume", ckpt, "--out", tmp_path / "resumed")
+    assert code == 2 and len(stderr.strip().splitlines()) == 1, stderr
+    assert "made with dt = 0.01 but the data are sampled with dt = 0.02" in stderr
+    assert "pass --dt 0.01" in stderr
+    assert not (tmp_path / "resumed").exists()
+
+
+def test_a_refused_track_leaves_no_output_folder(grown, tmp_path, capsys):
+    folder, _ = grown
+    for extra in ((), ("--order", "3", "--horizon", "2"), ("--order", "3", "--option",
+                                                            "lags=abc")):
+        out = tmp_path / f"refused{len(extra)}"
+        code, _, stderr = run(capsys, "track", folder / "short.csv", "--inputs", "u1,u2",
+                              "--outputs", "y1,y2", "--dt", "0.01", "--no-report", *extra,
+                              "--out", out)
+        assert code == 2 and not out.exists(), stderr

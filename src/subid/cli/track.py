@@ -130,7 +130,6 @@ def track(data, inputs, outputs, dt, time_column, delimiter, decimal, detrend, m
     trace_every = max(1, n // 100) if trace_every is None else trace_every
     checkpoint_dir = os.path.join(out, "checkpoints")
     _check_out(out, _TRACK_FILES)
-    os.makedirs(out, exist_ok=True)
     with _about(resume or data):
         if resume is not None:
             ident = resumed
@@ -139,6 +138,14 @@ def track(data, inputs, outputs, dt, time_column, delimiter, decimal, detrend, m
                 if have != want:
                     raise DataError(f"the checkpoint has {have} {attr[2:]} but the data "
                                     f"have {want}")
+            have, want = getattr(ident, "dt", None), work.dt
+            if have is not None and want is not None and \
+                    abs(have - want) > 1e-9 * max(abs(have), abs(want)):
+                # before the rest of the record is fed (it failed only at the end, after
+                # a pass over the record and a checkpoint written)
+                raise DataError(f"the checkpoint was made with dt = {have:g} but the data are "
+                                f"sampled with dt = {want:g}: pass --dt {have:g} (or the "
+                                "time column of the checkpoint's run)")
             start = int(getattr(ident, "n_samples", 0))
             if start > n:
                 raise DataError(f"the checkpoint has already seen {start} samples but the "
@@ -155,6 +162,7 @@ def track(data, inputs, outputs, dt, time_column, delimiter, decimal, detrend, m
             ident = new_online(spec, order, work.n_inputs, work.n_outputs, horizon=horizon,
                                forgetting=forgetting, dt=work.dt, options=opts)
             start = 0
+    os.makedirs(out, exist_ok=True)           # after the checks: a refused run leaves nothing
     tracker = Tracker(ident, work, fingerprint_data=raw, trace_every=trace_every,
                       checkpoint_every=checkpoint_every, checkpoint_dir=checkpoint_dir,
                       keep=keep_checkpoints)

@@ -16,7 +16,8 @@ time, seed 000). Every online identifier:
 * has ``n_samples``, ``t`` (time of the latest sample, None before the
   first), ``order``, ``n_inputs``, ``n_outputs``, the current ``model``
   (before enough data: :class:`~subid.errors.TooFewSamplesError`, never a zero
-  model), ``state`` (at the latest sample) and ``history``, a bounded dict
+  model; a model whose estimate is incomplete or not converged comes with a
+  :class:`~subid.errors.NotConvergedWarning` saying why), ``state`` (at the latest sample) and ``history``, a bounded dict
   of snapshots in one format that :func:`subid.plot.convergence` reads:
   ``sample`` (k,), ``t`` (k,), ``poles`` (k, order) complex and ``A``, ``B``,
   ``C``, ``D`` (k, ...) of the model at each snapshot;
