@@ -3,8 +3,10 @@
 The fused sensitivity kernel against its numpy reference and, to the last bit, against
 the kernel it replaces; the Frechet derivatives of many directions against
 ``scipy.linalg.expm_frechet``; the least-squares call without a copy against
-``scipy.linalg.lstsq``; the cached stencil against a fresh one; and the models of
-``ct_subspace`` with its memo of builds against those without it.
+``scipy.linalg.lstsq``; the cached stencil against a fresh one; the models of
+``ct_subspace`` with its memo of builds against those without it; and, to the last bit,
+the memory-lean factor, range basis and column scales against the joined computations
+(with blocks of a few rows), and the regressors filtered again against the held ones.
 """
 
 import dataclasses
@@ -184,3 +186,67 @@ def test_the_instrument_block_by_projection_is_the_factor_block(dependence):
     assert _ct_estimate.instrument_block(basis, inside, Y) is None
     R[:, -1] = 2.0 * R[:, -2]
     assert _ct_estimate.range_basis(R) is None
+
+
+@pytest.mark.parametrize("widths", [(2,), (3, 1), (5, 2, 4)])
+def test_the_blocked_column_rms_is_numpys_to_the_last_bit(monkeypatch, widths):
+    """column_rms (running sums over blocks of rows, no joined matrix or square) equals
+    ``sqrt(mean(hstack(parts) ** 2, axis=0))`` bit for bit, also with blocks of a few
+    rows that do not divide the record, on row-major and column-major parts."""
+    from subid.methods.ct import _ct_estimate
+    rng = np.random.default_rng(5)
+    parts = [rng.standard_normal((1003, w)) * 10.0 ** rng.uniform(-3, 3, w) for w in widths]
+    parts[-1] = np.asfortranarray(parts[-1])
+    expected = np.sqrt(np.mean(np.hstack(parts) ** 2, axis=0))
+    for rows in (7, 64, 5000):
+        monkeypatch.setattr(_ct_estimate, "BLOCK_ROWS", rows)
+        np.testing.assert_array_equal(_ct_estimate.column_rms(parts), expected)
+
+
+def test_the_factor_and_range_basis_in_place_are_the_joined_ones(monkeypatch):
+    """_subspace_factor (scaled into one column-major array that the QR overwrites) and
+    range_basis (geqrf and orgqr in place, Q returned row-major) give, bit for bit, what
+    the joined computations gave: ``lq_lower`` of the scaled copy of ``[R Z Y]`` and
+    ``numpy.linalg.qr`` of the scaled ``R``; with blocks of 5 rows."""
+    from subid.methods.ct import _ct_estimate
+    from subid.statistic._hankel import lq_lower
+    monkeypatch.setattr(_ct_estimate, "BLOCK_ROWS", 5)
+    rng = np.random.default_rng(8)
+    N = 700
+    R = rng.standard_normal((N, 9)) @ np.diag(np.logspace(0, 4, 9))
+    R[:, -1] = R[:, -2] + 1e-6 * rng.standard_normal(N)
+    Z = rng.standard_normal((N, 3)) + 0.5 * R[:, :3]
+    Y = rng.standard_normal((N, 4)) + Z[:, :1]
+    for instruments in (None, Z):
+        M = np.hstack([R, Y] if instruments is None else [R, instruments, Y])
+        scale = np.sqrt(np.mean(M ** 2, axis=0))
+        Lf0 = lq_lower((M / scale).T) * scale[:, None]
+        Lf, _ = _ct_estimate._subspace_factor(R, instruments, Y)
+        np.testing.assert_array_equal(Lf, Lf0)
+    scale = np.sqrt(np.mean(R ** 2, axis=0))
+    Q0 = np.linalg.qr(R / scale)[0]
+    Q = _ct_estimate.range_basis(R)
+    assert Q.flags.c_contiguous
+    np.testing.assert_array_equal(Q, Q0)
+
+
+def test_released_regressors_are_filtered_again_to_the_same_bits(monkeypatch):
+    """The problem lets its regressors go once the range basis is formed; asked again
+    (the fallbacks), they are filtered again: the same array, bit for bit, and held."""
+    data = subid.datasets.load("dryer").detrend()[:600]
+    captured = {}
+    prepare = ct_module._prepare
+
+    def keep(*args):
+        captured["problem"] = problem = prepare(*args)
+        return problem
+
+    monkeypatch.setattr(ct_module, "_prepare", keep)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        ct_module.ct_subspace(data, 2, selection="gap", refine=False)
+    problem = captured["problem"]
+    assert "range basis" in problem.memo and "R" not in problem.held   # let go
+    R = problem.regressors()
+    assert problem.held["R"] is R
+    np.testing.assert_array_equal(R, prepare(problem.data, [2], problem.settings).held["R"])

@@ -81,13 +81,15 @@ class HankelFactor:
         return lq_lower(self.rows(*blocks))
 
 
-def lq_lower(M: np.ndarray) -> np.ndarray:
+def lq_lower(M: np.ndarray, *, overwrite: bool = False) -> np.ndarray:
     """Lower-triangular ``L`` of the LQ factorisation ``M = L Q^T``.
 
     ``M`` is (r, m); ``L`` is (r, r) when ``r <= m``. The sign of each
-    diagonal entry is made non-negative so the factor is unique.
+    diagonal entry is made non-negative so the factor is unique. With
+    ``overwrite``, a row-major ``M`` is factorised in place (:func:`geqrf_r`;
+    its contents are lost), bit for bit the same factor.
     """
-    L = geqrf_r(M.T, M.shape[0], overwrite=False).T
+    L = geqrf_r(M.T, M.shape[0], overwrite=overwrite).T
     if L.shape[1] < M.shape[0]:
         L = np.hstack([L, np.zeros((M.shape[0], M.shape[0] - L.shape[1]))])
     signs = np.sign(np.diag(L)[: min(L.shape)])

@@ -116,7 +116,7 @@ def _correction_count(poly_order: int, input_order: int, feedthrough: bool):
 
 
 def _correction_regressors(bank: FilterBank, t, u, poly_order, input_order, feedthrough,
-                           filtering, uniform):
+                           filtering, uniform, out=None):
     """Filtered interpolation errors of ``H_i u`` (beyond the paper).
 
     ``y = G u`` with ``G(s) = D + CB/s + CAB/s^2 + ...``. An input
@@ -142,30 +142,45 @@ def _correction_regressors(bank: FilterBank, t, u, poly_order, input_order, feed
     the regressors then carry slow, state-like components, and projecting
     them out costs variance under noise (docs/seed002.md, ablation).
 
+    Parameters
+    ----------
+    out : ndarray, shape (L, k), optional
+        Where to write the regressors (a block of the caller's data matrix: no
+        intermediate copies of the record).
+
     Returns
     -------
     ndarray, shape (L, k)
+        ``out`` when given.
     """
     L, m = u.shape
     i0, j = _correction_count(poly_order, input_order, feedthrough)
     if j < i0:
-        return np.zeros((L, 0))
+        return np.zeros((L, 0)) if out is None else out
     F, g = bank.realization()
     N = F.shape[0]
-    cols = []
+    if out is None:
+        out = np.empty((L, (j - i0 + 1) * N * m))
+    col = 0
+
+    def put(exact, approx):             # exact - approx into the next N m columns
+        nonlocal col
+        block = out[:, col:col + N * m].view()
+        block.shape = (L, N, m)         # a view (raises rather than copy)
+        np.subtract(exact, approx, out=block)
+        col += N * m
+
     if i0 == 0:
-        exact = _ct_kernels.run_bank(F, g, t, u, input_order, uniform=uniform)
-        approx = bank.filter(u, t, poly_order=poly_order, chain=filtering)
-        cols.append((exact - approx).reshape(L, -1))
+        put(_ct_kernels.run_bank(F, g, t, u, input_order, uniform=uniform),
+            bank.filter(u, t, poly_order=poly_order, chain=filtering))
     k = j
     if k >= 1:
         Fa, Ga = _poisson_chain_bank(bank, k)
         Z = _ct_kernels.run_bank(Fa, Ga, t, u, input_order, uniform=uniform)   # (L, size, m)
         for i in range(k):
-            exact = Z[:, k + i * N:k + (i + 1) * N, :]
-            approx = bank.filter(Z[:, i, :], t, poly_order=poly_order, chain=filtering)
-            cols.append((exact - approx).reshape(L, -1))
-    return np.hstack(cols)
+            put(Z[:, k + i * N:k + (i + 1) * N, :],
+                bank.filter(Z[:, i, :], t, poly_order=poly_order, chain=filtering))
+    return out
 
 
 def _poisson_chain_bank(bank, k: int):
@@ -193,22 +208,106 @@ def _poisson_chain_bank(bank, k: int):
     return Fa, Ga
 
 
+#: Rows per block of :func:`column_rms` (the working memory beside the record's matrices).
+BLOCK_ROWS = 8192
+
+
+def column_rms(parts):
+    """``sqrt(mean(M ** 2, axis=0))`` of ``M = hstack(parts)``, bit for bit, without
+    forming ``M`` or its square (each as large as the record's filtered signals): the
+    column scaling of the LQ factorisation of step 1 (Lemma 3, eq. (8)) and of
+    :func:`range_basis`.
+
+    Parameters
+    ----------
+    parts : list of ndarray, shapes (L, k_i)
+        The column blocks of ``M``.
+
+    Returns
+    -------
+    ndarray, shape (sum k_i,)
+
+    NumPy sums a row-major matrix down its columns one row after the other (a
+    reduction across the rows, not along the contiguous axis, so not pairwise):
+    blocks of :data:`BLOCK_ROWS` rows added to the running sums, which lead each
+    block, give the same sums (``tests/test_ct_fast_paths.py``).
+    """
+    L = parts[0].shape[0]
+    k = sum(P.shape[1] for P in parts)
+    if k < 2 or L <= BLOCK_ROWS or all(P.flags.f_contiguous for P in parts):
+        # column-major (NumPy joins column-major parts so) or a single column: summed
+        # along the contiguous axis, pairwise; as it is
+        return np.sqrt(np.mean(np.hstack(parts) ** 2, axis=0))
+    total = np.zeros((1, k))
+    for a in range(0, L, BLOCK_ROWS):
+        square = np.hstack([P[a:a + BLOCK_ROWS] for P in parts]) ** 2
+        total = np.add.reduce(np.vstack([total, square]), axis=0, keepdims=True)
+    return np.sqrt(total[0] / L)
+
+
+def _scaled_copy(parts, scale):
+    """``hstack(parts) / scale`` in one column-major array (what LAPACK factorises in
+    place, :func:`_subspace_factor`, :func:`householder_q`), written part by part: the
+    same quotients as the joined matrix's."""
+    work = np.empty((parts[0].shape[0], scale.size), order="F")
+    col = 0
+    for P in parts:
+        w = P.shape[1]
+        np.divide(P, scale[col:col + w], out=work[:, col:col + w])
+        col += w
+    return work
+
+
 def _subspace_factor(R, Z, Y):
     """LQ factor of the signals ``[R, Z, Y]`` (columns) and the block revealing range(O).
 
     Returns the factor ``Lf`` (``[R Z Y]^T = Lf Q``) and ``W``: the block of
     ``Y`` on the instrument directions (``Y Pi_R^perp Z^T`` up to a right
     factor) when ``Z`` is given, else on its own directions (``Y Pi_R^perp``).
+    The columns are scaled to unit RMS (:func:`column_rms`) into one column-major
+    array that the Householder QR overwrites: besides the signals, one copy of
+    them, not three (``[R Z Y]``, its scaled copy and LAPACK's column-major copy).
     """
-    M = np.hstack([R, Y] if Z is None else [R, Z, Y])
-    scale = np.sqrt(np.mean(M ** 2, axis=0))
+    parts = [R, Y] if Z is None else [R, Z, Y]
+    scale = column_rms(parts)
     scale[scale == 0] = 1.0
-    Lf = lq_lower((M / scale).T) * scale[:, None]
+    work = _scaled_copy(parts, scale)
+    Lf = lq_lower(work.T, overwrite=True) * scale[:, None]
+    del work
     nR = R.shape[1]
     nZ = 0 if Z is None else Z.shape[1]
-    iY = slice(nR + nZ, M.shape[1])
+    iY = slice(nR + nZ, scale.size)
     W = Lf[iY, nR:nR + nZ] if nZ else Lf[iY, iY]
     return Lf, W
+
+
+def householder_q(work):
+    """``numpy.linalg.qr(work)`` (the thin Q and the triangular factor) by the same
+    LAPACK routines (``geqrf``, then ``orgqr``), ``work`` (column-major, at least as
+    many rows as columns) overwritten by Q: no copies of it (``numpy.linalg.qr`` makes
+    three and returns a fourth). The Q of :func:`range_basis` (the directions of the
+    regressors that step 1, Lemma 3, projects out).
+
+    Returns
+    -------
+    Q : ndarray, shape (m, n)
+        Column-major (``work`` itself) on the LAPACK route.
+    T : ndarray, shape (n, n)
+    """
+    m, n = work.shape
+    if n == 0 or m < n or not work.flags.f_contiguous:
+        return np.linalg.qr(work)
+    geqrf, orgqr = scipy.linalg.get_lapack_funcs(("geqrf", "orgqr"), (work,))
+    lwork = int(geqrf(work, lwork=-1, overwrite_a=1)[-2][0].real)
+    qr, tau, _, info = geqrf(work, lwork=lwork, overwrite_a=1)
+    if info < 0:
+        raise ValueError(f"illegal value in argument {-info} of the internal LAPACK geqrf")
+    T = np.triu(qr[:n])
+    lwork = int(orgqr(qr, tau, lwork=-1, overwrite_a=1)[1][0].real)
+    Q, _, info = orgqr(qr, tau, lwork=lwork, overwrite_a=1)
+    if info < 0:
+        raise ValueError(f"illegal value in argument {-info} of the internal LAPACK orgqr")
+    return Q, T
 
 
 #: Smallest diagonal entry, relative to the instrument's norm, of the triangular factor of
@@ -230,13 +329,24 @@ def range_basis(R):
     (the same reflectors: they depend on the columns of ``R`` alone), also where ``R``
     is ill conditioned (the filtered regressors of the default basis have diagonal
     entries down to 5e-10 of the largest). None when it is not finite or numerically
-    rank deficient (:data:`RANGE_TOL`)."""
-    scale = np.sqrt(np.mean(R ** 2, axis=0))
+    rank deficient (:data:`RANGE_TOL`).
+
+    The QR overwrites one scaled copy of ``R`` (:func:`householder_q`; bit for bit
+    ``numpy.linalg.qr(R / scale)``), and ``R`` is let go as soon as it is copied: a
+    caller that passes its only reference (:meth:`subid.methods.ct._ct_problem.Problem.
+    take_regressors`) holds at most two arrays of its size at once (the factor and Q
+    copied in row-major order, the order of the products that use it, whose rounding
+    BLAS may make depend on it).
+    """
+    scale = column_rms([R])
     scale[scale == 0] = 1.0
-    Q, T = np.linalg.qr(R / scale)
+    work = _scaled_copy([R], scale)
+    del R
+    Q, T = householder_q(work)
+    del work
     diag = np.abs(np.diag(T))
     ok = np.isfinite(Q).all() and diag.size and diag.min() > RANGE_TOL * diag.max()
-    return Q if ok else None
+    return np.ascontiguousarray(Q) if ok else None
 
 
 def instrument_block(basis, Z, Y):

@@ -239,7 +239,8 @@ def _subspace_estimate(problem: Problem, n: int, feedthrough: bool):
     changes = []
     if s["instruments"] == "model":
         if "range basis" not in problem.memo:      # shared by the orders of the problem
-            problem.memo["range basis"] = range_basis(problem.R)
+            # the basis replaces the regressors (filtered again only by the fallbacks)
+            problem.memo["range basis"] = range_basis(problem.take_regressors())
         basis = problem.memo["range basis"]
         for _ in range(s["iterations"]):
             Xs = _ct_fit.simulated_states(A, B, x0, problem.record)
@@ -249,13 +250,13 @@ def _subspace_estimate(problem: Problem, n: int, feedthrough: bool):
             # filtered B needs it), else from that factor
             W = None if basis is None else instrument_block(basis, Xs, problem.Y)
             if W is None:
-                Lf, W = _subspace_factor(problem.R, Xs, problem.Y)
+                Lf, W = _subspace_factor(problem.regressors(), Xs, problem.Y)
 
                 def factor(Lf=Lf):
                     return Lf
             else:
                 def factor(Xs=Xs):
-                    return _subspace_factor(problem.R, Xs, problem.Y)[0]
+                    return _subspace_factor(problem.regressors(), Xs, problem.Y)[0]
             Uo, s2, _ = np.linalg.svd(W, full_matrices=False)
             previous = (A, B, C)
             A, B, C, D, x0, y0, diag = _complete(problem, Uo[:, :n] * s2[:n], factor, feedthrough)
