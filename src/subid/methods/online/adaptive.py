@@ -558,31 +558,21 @@ class AdaptiveIdentifier(OnlineIdentifier):
         estimate it used), ``converged`` and ``convergence``
         (``'converged'`` or the reason it is not: part 2 has not started, or
         the latest (Ã, C̃) failed the gate or the Hurwitz test). A model that
-        is not converged also issues a
-        :class:`~subid.errors.NotConvergedWarning`.
-
-        Before the (B̃, D) stage has started, the model is the estimate of (Ã, C̃)
-        with B = D = 0, returned with its ``convergence`` reason and the warning (the
-        diagnostics say why the stage has not started).
+        is not converged also issues a :class:`~subid.errors.NotConvergedWarning`
+        (before the (B̃, D) stage starts: (Ã, C̃) with B = D = 0).
 
         Raises
         ------
         TooFewSamplesError
-            Before the first refresh of the (Ã, C̃) estimate (``refresh_every``
-            samples): there is no estimate, not a zero model.
+            Before the first refresh (``refresh_every`` samples): no estimate yet.
         """
-        if self.n_samples == 0:
-            raise TooFewSamplesError("AdaptiveIdentifier has received no samples yet: there is "
-                                     "no estimate (call update(u, y, t) first)")
-        st = self._st
-        ist = st["ist"]
-        if int(ist[_k.IST["refreshes"]]) == 0:
-            # A, B, C, D were never estimated: all zero (a 50-sample identifier returned
-            # that zero model, with only a warning)
-            raise TooFewSamplesError(
-                f"AdaptiveIdentifier has received {self.n_samples} samples and refreshes its "
-                f"estimate every {self._refresh} (refresh_every): there is no estimate of "
-                "(A, C) yet; give it more samples")
+        st, ist = self._st, self._st["ist"]
+        if int(ist[_k.IST["refreshes"]]) == 0:      # never estimated: all zero, not a model
+            raise TooFewSamplesError("AdaptiveIdentifier has " + (
+                f"received {self.n_samples} samples and refreshes its estimate every "
+                f"{self._refresh} (refresh_every): no estimate of (A, C) yet; give it more "
+                "samples" if self.n_samples else "received no samples yet: there is no "
+                "estimate (call update(u, y, t) first)"))
         cond, bd_cond = self.information_condition()
         ls = self._method != "ode"
         info = {
