@@ -130,3 +130,17 @@ def test_a_refused_track_leaves_no_output_folder(grown, tmp_path, capsys):
                               "--outputs", "y1,y2", "--dt", "0.01", "--no-report", *extra,
                               "--out", out)
         assert code == 2 and not out.exists(), stderr
+
+
+def test_track_does_not_repeat_the_warnings_of_its_snapshots(tmp_path, capsys):
+    # the intermediate models of the convergence plot warned each time (noise-free data:
+    # "no stable Kalman predictor was found" five times, each with its own spectral radius)
+    data = subid.systems.simulate_data(subid.systems.seed001_system(), 20000, seed=1)
+    path = tmp_path / "plant.csv"
+    np.savetxt(path, np.column_stack([data.u, data.y]), delimiter=",",
+               header="u1,u2,y1,y2", comments="")
+    code, stdout, stderr = run(capsys, "track", path, "--inputs", "u1,u2", "--outputs",
+                               "y1,y2", "--dt", "0.01", "--order", "3", "--no-report",
+                               "--out", tmp_path / "out")
+    assert code == 0, stderr
+    assert (stdout + stderr).count("Kalman predictor") <= 1

@@ -47,7 +47,6 @@ from subid._validation import HUGE_VALUE, UNIFORM_RTOL, same_period
 from subid.errors import (
     CheckpointError,
     DataError,
-    NotConvergedWarning,
     ResourceLimitError,
     SubidError,
 )
@@ -395,8 +394,12 @@ class Tracker:
         """Record the model's poles and Markov parameters at sample ``k`` (no
         snapshot while the identifier has no model yet)."""
         try:
-            with warnings.catch_warnings():       # intermediate models: the final one warns
-                warnings.simplefilter("ignore", NotConvergedWarning)
+            # intermediate models, for the convergence plot: their warnings (not converged,
+            # no stable Kalman predictor yet...) are dropped; the final model's are shown
+            # (a noise-free `subid track` printed five predictor warnings differing only
+            # in the spectral radius of each snapshot)
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
                 model = with_names(self.ident.model, self.data)
             poles = model.poles()
             values, names = markov_parameters(model, self.dt_hint)
