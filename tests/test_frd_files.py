@@ -164,12 +164,35 @@ _TWO = "w,a/u:re,a/u:im,b/u:re,b/u:im"
     ("w,a/u:re,a/u:im,a/u:weight,b/u:re,b/u:im\n1,1,0,2,1,0\n",
      "':weight' columns for a/u but not for b/u"),
     ("w,a/u:re,a/u:im,a/u:weight,weight\n1,1,0,2,3\n", "keep one kind"),
+    # magnitude and phase units: an unknown one was read as linear or as degrees
+    ("f,Magnitude [dB],Phase [r]\n1,0,0\n",
+     "column 'Phase \\[r\\]' has the unknown unit 'r'; a phase is in deg or rad"),
+    ("f,Magnitude [dB],Phase [grad]\n1,0,0\n", "unknown unit 'grad'"),
+    ("f,Gain [V],Phase [deg]\n1,1,0\n",
+     "unknown unit 'v'; a magnitude is linear \\(no unit, abs\\) or in dB"),
 ])
 def test_unknown_units_and_partial_or_conflicting_columns_refused(tmp_path, text, match):
     path = tmp_path / "p.csv"
     path.write_text(text)
     with pytest.raises(FileReadError, match=match):
         subid.read_frd(path)
+
+
+@pytest.mark.parametrize("mag, phase, in_db, in_rad", [
+    ("Gain [dBV]", "Phase [deg]", True, False), ("Magnitude [dB re 1 V/V]", "Phase [°]", True,
+                                                 False),
+    ("Magnitude [dB]", "Phase [rads]", True, True), ("Magnitude (abs)", "Phase (radians)",
+                                                     False, True),
+])
+def test_magnitude_and_phase_units(tmp_path, mag, phase, in_db, in_rad):
+    # a 40 dB amplifier with a pole at 2 kHz, as an analyser exports it
+    f = np.geomspace(10, 1e4, 20)
+    g = 100 / (1 + 1j * f / 2000)
+    path = tmp_path / "amp.csv"
+    np.savetxt(path, np.column_stack([f, 20 * np.log10(np.abs(g)) if in_db else np.abs(g),
+                                      np.angle(g) if in_rad else np.degrees(np.angle(g))]),
+               delimiter=",", header=f"Frequency [Hz],{mag},{phase}", comments="")
+    np.testing.assert_allclose(subid.read_frd(path).response[:, 0, 0], g, rtol=1e-12)
 
 
 def test_negative_magnitude_named_by_line_and_complete_extras_accepted(tmp_path):

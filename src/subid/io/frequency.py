@@ -120,15 +120,34 @@ def _frequency_column(header, shown):
                         f"{', '.join(header)[:300]}", path=shown, line=1)
 
 
-def _quantity(cell: str):
-    """``(pair or None, quantity)`` of a response column, or None."""
+#: Units in brackets of a magnitude column (``'db...'``: any decibel unit, ``dB re 1 V/V``,
+#: ``dBV``) and of a phase column; any other unit there is an error (read as linear
+#: magnitude or as degrees, ``Phase [rads]`` was off by a factor 57).
+_MAGNITUDE_UNITS = {"": "mag", "abs": "mag", "lin": "mag", "linear": "mag", "v/v": "mag",
+                    "1": "mag", "-": "mag"}
+_PHASE_UNITS = {"deg": "phase_deg", "degree": "phase_deg", "degrees": "phase_deg",
+                "°": "phase_deg", "rad": "phase_rad", "rads": "phase_rad",
+                "radian": "phase_rad", "radians": "phase_rad"}
+
+
+def _quantity(cell: str, shown: str = ""):
+    """``(pair or None, quantity)`` of a response column, or None; a magnitude or phase
+    column whose unit in brackets is unknown is a :class:`FileReadError`."""
     text = cell.strip()
     pair, _, qty = text.rpartition(":")
     base, unit = _normalise(qty)
-    if unit is not None:
-        base = {"db": "db", "deg": "phase_deg", "degrees": "phase_deg", "rad": "phase_rad",
-                "radians": "phase_rad"}.get(unit, base) if base in ("mag", "magnitude", "gain",
-                                                                    "phase") else base
+    if unit is not None and base in ("mag", "magnitude", "gain", "phase"):
+        known = _PHASE_UNITS if base == "phase" else _MAGNITUDE_UNITS
+        if base != "phase" and unit.replace(" ", "").startswith("db"):
+            base = "db"
+        elif unit in known:
+            base = known[unit]
+        else:
+            raise FileReadError(
+                f"{shown}: column {cell!r} has the unknown unit {unit!r}; a "
+                + ("phase is in deg or rad" if base == "phase" else
+                   "magnitude is linear (no unit, abs) or in dB (any 'dB...' unit)"),
+                path=shown or None, line=1, column=cell)
     kind = _QUANTITIES.get(base)
     if kind is None:
         return None
@@ -214,7 +233,7 @@ def _read_text(shown: str, raw: bytes, ext: str, delimiter, dt) -> FRData:
     for k, cell in enumerate(header):
         if k == k_w:
             continue
-        found = _quantity(cell)
+        found = _quantity(cell, shown)
         if found is None:
             raise FileReadError(f"{shown}: column {cell!r} is neither the frequency nor a "
                                 "response column ('<output>/<input>:re', ':im', ':mag', ':db', "
