@@ -230,3 +230,21 @@ def test_channel_names_a_text_header_cannot_carry(tmp_path, outputs, inputs, pro
         subid.write_frd(data, tmp_path / "n.csv")
     subid.write_frd(data, tmp_path / "n.npz")               # arrays carry any name
     assert subid.read_frd(tmp_path / "n.npz").output_names == tuple(outputs)
+
+
+def test_a_zero_std_is_refused_where_it_sets_the_weights():
+    # floored, three zero-std frequencies of 100 got 1e12 times the others' weight (a
+    # relative error of 0.37); all zero ended in a raw LAPACK error
+    from subid.errors import DataError
+    true = subid.systems.random_system(2, 1, 1, seed=3)
+    w = np.linspace(0.05, 3.0, 100)
+    G = true.freqresp(w)
+    std = np.full(G.shape, 0.01)
+    std[[0, 40, 80]] = 0.0
+    data = subid.FRData(w, G, 1.0, std=std)
+    for call in (lambda: subid.fd_subspace(data, 2), lambda: subid.pem(data, true)):
+        with pytest.raises(DataError, match="std is zero at 3 of 100 frequencies"):
+            call()
+    # weights given: the std does not weight, and the fit goes on
+    model = subid.fd_subspace(subid.FRData(w, G, 1.0, std=std, weights=np.ones(100)), 2)
+    assert np.abs(model.freqresp(w) - G).max() < 1e-8

@@ -66,7 +66,7 @@ from subid.delay import frequency_factor, input_delay_of
 from subid.errors import DataError, ModelError, NoiseModelWarning, OptionError
 from subid.frdata import FRData
 from subid.methods.fd import _frequency as fq
-from subid.methods.fd._core import MIN_NOISE_FREQUENCIES, variance_model
+from subid.methods.fd._core import MIN_NOISE_FREQUENCIES, check_std, variance_model
 from subid.model.statespace import StateSpace
 
 __all__ = ["fd_pem"]
@@ -85,6 +85,7 @@ def _check(data, model, max_iterations, tolerance, rounds, feedthrough):
                         f"dt={data.dt} (0 = continuous time); convert the model first "
                         "(to_discrete / to_continuous)")
     check_optimiser_options(max_iterations, tolerance, rounds)
+    check_std(data, "pem")
     if feedthrough is not None and not isinstance(feedthrough, (bool, np.bool_)):
         raise OptionError(f"feedthrough must be True, False or None, got {feedthrough!r}")
 

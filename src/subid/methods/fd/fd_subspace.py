@@ -94,6 +94,7 @@ from subid.methods.crossval import FLOOR, MAX_ORDER, SELECTION_RULES, fold_score
 from subid.methods.fd import _frequency as fq
 from subid.methods.fd._core import (
     Problem,
+    check_std,
     default_horizon,
     finish,
     noise_variance,
@@ -249,6 +250,7 @@ def fd_subspace(data, order=None, *, horizon=None, feedthrough=True, stability="
     check_bool(feedthrough, "feedthrough")
     check_choice(stability, "stability", STABILITY)
     check_choice(selection, "selection", SELECTION_RULES)
+    check_std(data, "fd_subspace")
     fixed, candidates = _parse_order(order)
     p, m, M = data.n_outputs, data.n_inputs, data.n_frequencies
     if horizon is not None:
