@@ -248,3 +248,15 @@ def test_a_zero_std_is_refused_where_it_sets_the_weights():
     # weights given: the std does not weight, and the fit goes on
     model = subid.fd_subspace(subid.FRData(w, G, 1.0, std=std, weights=np.ones(100)), 2)
     assert np.abs(model.freqresp(w) - G).max() < 1e-8
+
+
+def test_pem_on_frequency_data_refuses_a_jacobian_past_its_limit():
+    # 8 x 8 at order 16 on 10^4 frequencies: a raw numpy MemoryError mid-search before
+    from subid.errors import ResourceLimitError
+    rng = np.random.default_rng(0)
+    w = np.linspace(0.001, 3.1, 10_000)
+    response = rng.standard_normal((w.size, 8, 8)) + 1j * rng.standard_normal((w.size, 8, 8))
+    start = subid.StateSpace(0.5 * np.eye(16), np.ones((16, 8)), np.ones((8, 16)),
+                             np.zeros((8, 8)), 1.0)
+    with pytest.raises(ResourceLimitError, match="forms a Jacobian of 2.44 GiB \\(limit 2 GiB\\)"):
+        subid.pem(subid.FRData(w, response, 1.0), start)
