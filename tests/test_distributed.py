@@ -140,3 +140,27 @@ def test_seed001_monte_carlo_through_dask_is_reproducible(client):
     remote = seed001.run(runs=4, n_samples=400, client=client)
     for name in seed001.METHODS:
         np.testing.assert_array_equal(local[0][name], remote[0][name])
+
+
+def test_files_whose_columns_by_position_name_other_channels_are_refused(client, record,
+                                                                         tmp_path):
+    # columns chosen by position ("0,1", "2,3") in files whose headers order the channels
+    # differently mixed outputs into inputs silently (validation fit 6 % against 90 %);
+    # subid.merge refuses the same records in memory
+    _, data = record
+    first, second = tmp_path / "a.csv", tmp_path / "b.csv"
+    np.savetxt(first, np.hstack([data.u[:20_000], data.y[:20_000]]), delimiter=",",
+               header="u1,u2,y1,y2", comments="")
+    np.savetxt(second, np.hstack([data.y[20_000:], data.u[20_000:]]), delimiter=",",
+               header="y1,y2,u1,u2", comments="")
+    match = r"has channels \['y1', 'y2'\] -> \['u1', 'u2'\] but .*file 1.* has \['u1'"
+    with pytest.raises(subid.errors.DataError, match=match):
+        subid.identify_file([first, second], "0,1", "2,3", dt=1.0, method="moesp", order=3,
+                            horizon=5)
+    with pytest.raises(subid.errors.DataError, match=match):
+        sd.identify_files([first, second], "0,1", "2,3", "moesp", order=3, horizon=5,
+                          client=client)
+    # by name, the files agree: the same model either way
+    by_name = subid.identify_file([first, second], "u1,u2", "y1,y2", dt=1.0, method="moesp",
+                                  order=3, horizon=5)
+    assert by_name.input_names == ("u1", "u2")

@@ -671,6 +671,20 @@ def offset_kind(record):
 
 
 @checked_call
+def check_same_channels(record, first, what: str, reference: str) -> None:
+    """:class:`~subid.errors.DataError` unless ``record`` has the channels of ``first``
+    (names and order; any objects with ``input_names`` and ``output_names``): the
+    records of one identification (:func:`merge`, the files of
+    :func:`subid.identify_file` and :func:`subid.distributed.identify_files`), whose
+    columns chosen by position would else mix outputs into inputs silently."""
+    if tuple(record.input_names) != tuple(first.input_names) or \
+            tuple(record.output_names) != tuple(first.output_names):
+        raise DataError(f"{what} has channels {list(record.input_names)} -> "
+                        f"{list(record.output_names)} but {reference} has "
+                        f"{list(first.input_names)} -> {list(first.output_names)}; "
+                        "rename or reorder the channels so that they match")
+
+
 def merge(records, names=None) -> IOData:
     """One record of several experiments (MATLAB ``merge`` of iddata objects).
 
@@ -749,11 +763,7 @@ def merge(records, names=None) -> IOData:
             raise DataError(f"merge: record {k} has {rec.n_inputs} inputs and {rec.n_outputs} "
                             f"outputs but record 0 has {first.n_inputs} and "
                             f"{first.n_outputs}")
-        if rec.input_names != first.input_names or rec.output_names != first.output_names:
-            raise DataError(f"merge: record {k} has channels {list(rec.input_names)} -> "
-                            f"{list(rec.output_names)} but record 0 has "
-                            f"{list(first.input_names)} -> {list(first.output_names)}; "
-                            "rename or reorder the channels so that they match")
+        check_same_channels(rec, first, f"merge: record {k}", "record 0")
     experiments = [e for rec in records for e in rec.experiments]
     kinds = {offset_kind(e) for e in experiments}
     if len(kinds) > 1:

@@ -265,6 +265,11 @@ def identify_files(paths, inputs, outputs, method: str = "moesp", *, dt: float =
     first = next(iter(read_chunks(paths[0], inputs, outputs, dt=1.0, chunk_size=16)), None)
     if first is None:
         raise DataError(f"{paths[0]} holds no samples")
+    from subid.data import check_same_channels
+    for k, p in enumerate(paths[1:], start=2):    # columns by position: the same names
+        head = next(iter(read_chunks(p, inputs, outputs, dt=1.0, chunk_size=16)), None)
+        if head is not None:
+            check_same_channels(head, first, f"{p} (file {k})", f"{paths[0]} (file 1)")
     horizon, depth = statistic_depth(method, order, horizon, first.n_outputs,
                                      method_options.get("instruments", "past"))
     parts = [dask.delayed(_file_statistic)(p, inputs, outputs, depth, statistic, chunk_size,

@@ -400,10 +400,18 @@ class _Experiments:
         self.records = records
 
     def __iter__(self):
+        from subid.data import check_same_channels
+        first = None
         for k, record in enumerate(self.records):
             if k:
                 yield NEW_EXPERIMENT
-            yield from record
+            for i, piece in enumerate(record):
+                if i == 0 and piece is not NEW_EXPERIMENT:
+                    if first is None:
+                        first = piece
+                    elif k:               # columns by position: the same names, as merge
+                        check_same_channels(piece, first, f"file {k + 1}", "file 1")
+                yield piece
 
 
 class ParsedOnce:
