@@ -29,7 +29,8 @@ import time
 import numpy as np
 
 import subid
-import subid.io.formats as sio
+import subid.io.fast_csv as sio
+import subid.io.text as stext
 
 
 def _interleaved(steps, repeat):
@@ -142,7 +143,7 @@ def main():
     if args.careful:
         from pathlib import Path
         steps["subid.read, careful parser (before)"] = (
-            lambda: sio._read_text(Path(path), path, ".csv", "u1,u2", "y1,y2", None, None,
+            lambda: stext._read_text(Path(path), path, ".csv", "u1,u2", "y1,y2", None, None,
                                    None), 1)
     steps["read_chunks, one pass"] = (
         lambda: sum(p.n_samples for p in subid.read_chunks(path, "u1,u2", "y1,y2")), None)
