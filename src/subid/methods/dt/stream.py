@@ -197,7 +197,43 @@ def identify_stream(pieces, method: str = "moesp", order=None, horizon=None, *,
                 map_pieces, stat.n_experiments, stat.n_inputs, stat.n_outputs,
                 experiments=list(range(stat.n_experiments)))
     log.info("identifying from the statistic of %d samples", stat.n_samples)
-    return streaming_method(method).load()(stat, order, horizon=horizon, **options)
+    fit = streaming_method(method).load()
+    selection = None
+    if order is None and reread is not None and stat.n_experiments == 1:
+        order, selection = _order_on_tail(
+            fit, lambda: ((p.u, p.y) for _, p in _segments(reread())), first, stat.n_samples,
+            horizon, options)
+    model = fit(stat, order, horizon=horizon, **options)
+    if selection is not None:
+        model.info["order_selection"] = selection
+    return model
+
+
+def _order_on_tail(fit, read_pairs, first, n_samples: int, horizon: int, options: dict):
+    """``(order, record)``: the order ``fit`` (the method's function) chooses by its
+    in-memory default, cross-validation, on the last :data:`MAX_SELECTION_SAMPLES`
+    samples of a streamed record (what the in-memory order search reads too,
+    :func:`subid.methods.crossval.selection_part`), at the statistic's ``horizon``.
+    ``read_pairs()`` gives the ``(u, y)`` arrays of those samples or of the whole record
+    (the samples before the last ones are skipped). A statistic alone only has the
+    largest singular-value gap, which chose order 2 for 4th-order 2 x 2 systems at 20 dB
+    on four of six seeds (validation fit 84-89 % against 90 % in memory)."""
+    from subid.methods.crossval import MAX_SELECTION_SAMPLES
+    start = max(0, n_samples - MAX_SELECTION_SAMPLES)
+    us, ys, pos = [], [], 0
+    for u, y in read_pairs():
+        a, pos = pos, pos + u.shape[0]
+        if pos > start:
+            us.append(u[max(start - a, 0):])
+            ys.append(y[max(start - a, 0):])
+    tail = IOData(np.vstack(us)[-(n_samples - start):], np.vstack(ys)[-(n_samples - start):],
+                  dt=first.dt, input_names=first.input_names,
+                  output_names=first.output_names)
+    chosen = fit(tail, None, horizon=horizon, **options)
+    record = dict(chosen.info["order_selection"])
+    record["streamed"] = (f"chosen on the last {tail.n_samples} samples of the record (as in "
+                          f"memory), at the statistic's horizon {horizon}")
+    return chosen.order, record
 
 
 def _check_uniform(piece, k: int) -> None:
@@ -372,10 +408,19 @@ def identify_spooled(pieces, fit, method: str, order, horizon, *, detrend: str,
     if options.get("bd_method", "auto") != "projection":
         # pass 3 (issue 14): B, D, x0 by the output regression of the in-memory default
         attach_second_pass(stat, groups=stretches)
+    selection = None
+    if order is None:             # the in-memory rule on the last samples of the part
+        from subid.methods.crossval import MAX_SELECTION_SAMPLES
+        tail = pieces.ranges([(max(0, cut - MAX_SELECTION_SAMPLES), cut)],
+                             offsets=(u_mean, y_mean))[0]
+        order, selection = _order_on_tail(fit, tail, first, min(cut, MAX_SELECTION_SAMPLES),
+                                          hor, options)
     if call is None:
         model = fit(stat, order, horizon=hor, **options)
     else:
         model = call(fit, stat, order, hor, options)
+    if selection is not None:
+        model.info["order_selection"] = selection
     seconds = time.perf_counter() - t0
 
     def sample(start, stop):
