@@ -555,9 +555,10 @@ def _print_summary(source, record, spec, model, result, est, val, seconds, files
               f"stable      {_fmt_stable(result, model.dt == 0)}"
               + (" (continuous time)" if model.dt == 0 else "")]
     if model.info.get("refined_by") == "pem":
+        start, final = model.info["start_cost"], model.info["final_cost"]
+        change = f" ({100 * (final - start) / start:+.2g} %)" if start else ""
         lines.append(f"refined     pem ({model.info['focus']} focus): cost "
-                     f"{model.info['start_cost']:.4g} -> {model.info['final_cost']:.4g}; "
-                     f"{model.info['stop_reason']}")
+                     f"{start:.4g} -> {final:.4g}{change}; {model.info['stop_reason']}")
     if model.noise_cov is not None:
         from subid.methods.dt.noise_model import FROM_RICCATI
         note = ""
