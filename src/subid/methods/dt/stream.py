@@ -209,13 +209,15 @@ def identify_stream(pieces, method: str = "moesp", order=None, horizon=None, *,
     return model
 
 
-def _order_on_tail(fit, read_pairs, first, n_samples: int, horizon: int, options: dict):
+def _order_on_tail(fit, read_pairs, first, n_samples: int, horizon: int, options: dict,
+                   call=None):
     """``(order, record)``: the order ``fit`` (the method's function) chooses by its
     in-memory default, cross-validation, on the last :data:`MAX_SELECTION_SAMPLES`
     samples of a streamed record (what the in-memory order search reads too,
     :func:`subid.methods.crossval.selection_part`), at the statistic's ``horizon``.
     ``read_pairs()`` gives the ``(u, y)`` arrays of those samples or of the whole record
-    (the samples before the last ones are skipped). A statistic alone only has the
+    (the samples before the last ones are skipped); ``call`` as in
+    :func:`identify_spooled` (the command line logs the warnings). A statistic alone only has the
     largest singular-value gap, which chose order 2 for 4th-order 2 x 2 systems at 20 dB
     on four of six seeds (validation fit 84-89 % against 90 % in memory)."""
     from subid.methods.crossval import MAX_SELECTION_SAMPLES
@@ -229,7 +231,8 @@ def _order_on_tail(fit, read_pairs, first, n_samples: int, horizon: int, options
     tail = IOData(np.vstack(us)[-(n_samples - start):], np.vstack(ys)[-(n_samples - start):],
                   dt=first.dt, input_names=first.input_names,
                   output_names=first.output_names)
-    chosen = fit(tail, None, horizon=horizon, **options)
+    chosen = fit(tail, None, horizon=horizon, **options) if call is None else \
+        call(fit, tail, None, horizon, options)
     record = dict(chosen.info["order_selection"])
     record["streamed"] = (f"chosen on the last {tail.n_samples} samples of the record (as in "
                           f"memory), at the statistic's horizon {horizon}")
@@ -414,7 +417,7 @@ def identify_spooled(pieces, fit, method: str, order, horizon, *, detrend: str,
         tail = pieces.ranges([(max(0, cut - MAX_SELECTION_SAMPLES), cut)],
                              offsets=(u_mean, y_mean))[0]
         order, selection = _order_on_tail(fit, tail, first, min(cut, MAX_SELECTION_SAMPLES),
-                                          hor, options)
+                                          hor, options, call)
     if call is None:
         model = fit(stat, order, horizon=hor, **options)
     else:
