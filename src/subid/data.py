@@ -670,7 +670,6 @@ def offset_kind(record):
     return "constant" if np.ndim(record.u_offset) == 1 + per_experiment else "linear"
 
 
-@checked_call
 def check_same_channels(record, first, what: str, reference: str) -> None:
     """:class:`~subid.errors.DataError` unless ``record`` has the channels of ``first``
     (names and order; any objects with ``input_names`` and ``output_names``): the
@@ -685,6 +684,7 @@ def check_same_channels(record, first, what: str, reference: str) -> None:
                         "rename or reorder the channels so that they match")
 
 
+@checked_call
 def merge(records, names=None) -> IOData:
     """One record of several experiments (MATLAB ``merge`` of iddata objects).
 
