@@ -309,3 +309,16 @@ def test_bode_refuses_frequencies_all_above_nyquist_and_keeps_data_bands_readabl
     fig = plot.bode(subid.spa(data))
     for ax in fig.axes[0::4] + fig.axes[1::4]:          # the magnitude panels
         assert ax.get_ylim()[0] > -120, ax.get_ylim()
+
+
+def test_bode_bands_of_a_continuous_time_model_say_that_it_carries_none():
+    # the message said to refine with subid.pem, which a continuous-time model refined by
+    # pem already was: continuous-time models carry no covariance
+    from subid.errors import ModelError
+    ct = subid.systems.seed000_system()
+    w = np.logspace(-1, 1, 50)
+    data = subid.FRData(w, ct.freqresp(w) * (1 + 0.01 * np.random.default_rng(0)
+                                             .standard_normal((50, 2, 2))))
+    refined = subid.pem(data, subid.fd_subspace(data, 4))
+    with pytest.raises(ModelError, match="continuous-time models carry none"):
+        plot.bode(refined, confidence=0.95, data=data)

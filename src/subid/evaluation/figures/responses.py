@@ -299,6 +299,13 @@ def _require_covariance(groups) -> None:
     """Refuse bands when no model has a covariance; warn naming the models drawn without
     one when only some have it (their bands were left out silently)."""
     if not any(_has_covariance(m) for m in groups.values()):
+        if all(m.is_continuous for m in groups.values()):
+            # pem refines a continuous-time model too, but attaches no covariance to it
+            raise ModelError(
+                "confidence bands need a model with a parameter covariance; continuous-time "
+                f"models carry none ({list(groups)}), refined by pem or not: draw the bands "
+                "of a discrete-time model (subid.identify(data), or pem on discrete-time "
+                "data)")
         raise ModelError("confidence bands need a model with a parameter covariance; none of "
                          f"{list(groups)} has one: refine a model with subid.pem(data, model)")
     missing = [label for label, m in groups.items() if not _has_covariance(m)]
