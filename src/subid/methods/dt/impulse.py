@@ -71,6 +71,7 @@ from subid._blas import serial_blas
 from subid._validation import check_choice, check_int, checked_call
 from subid.data import IOData, not_a_record
 from subid.errors import DataError, NotExcitingError, PoorFitWarning, TooFewSamplesError
+from subid.methods.dt._lag_fit import correlations
 from subid.methods.dt.checks import check_channels
 from subid.model.statespace import StateSpace
 
@@ -539,9 +540,11 @@ def _lagged_grams(u, n: int, max_lag: int):
     shifts = np.arange(S) - (n - 1)
     head = min(n + top, L)                    # prefix points A = 0 .. n - 1 + top
     tail0 = L - n + 1                         # suffix points E = L - n + 1 .. L
-    total = np.empty((nu, nu, S))             # Σ over t' of u_j(t') u_l(t' - s)
-    for k, s in enumerate(shifts):
-        total[:, :, k] = u[s:].T @ u[:L - s] if s >= 0 else u[:L + s].T @ u[-s:]
+    # Σ over t' of u_j(t') u_l(t' - s): the input's lag products Γ(e) = Σ u(t) u(t+e)^T
+    # (subid.methods.dt._lag_fit.correlations, by FFT), Γ(s)^T for s >= 0, Γ(-s) below
+    gamma = correlations(u, u[:, :0], max(top + n - 1, n - 1))[0]
+    total = np.concatenate([gamma[n - 1:0:-1], gamma[:top + n].transpose(0, 2, 1)])
+    total = total.transpose(1, 2, 0)          # (j, l, s + n - 1)
 
     def products(t):
         """``u_j(t') u_l(t' - s)`` for the samples ``t`` (zero where ``t' - s`` falls
