@@ -49,12 +49,23 @@ def correlations(e, u, *, max_lag: int = 25, confidence: float = 0.99, ranges=No
         ``z sqrt(sum_k r_ee(k) r_uu(k) / N)`` (Ljung, *System Identification*,
         Sec. 16.6), ``residual`` and ``confidence``.
     """
+    max_lag, confidence = _checked(max_lag, confidence, e.shape[0])
+    return _correlations_of(_products(e, u, ranges, max_lag), e, confidence)
+
+
+def _checked(max_lag, confidence, n: int):
+    """``(max_lag, confidence)`` checked for a record of ``n`` samples."""
     max_lag = check_int(max_lag, "max_lag", minimum=1)
     confidence = check_probability(confidence, "confidence")
-    n = e.shape[0]
     if max_lag >= n:
         raise DataError(f"max_lag {max_lag} must be smaller than the {n} samples of the record")
-    return _correlations_of(_products(e, u, ranges, max_lag), e, confidence)
+    return max_lag, confidence
+
+
+def _reach(max_lag: int, n: int, white: bool) -> int:
+    """The lags of the products :func:`portmanteau` reads: ``max_lag``, and as many more
+    for the Bartlett window of coloured (simulation) errors; at most ``n - 1``."""
+    return min(max_lag * (1 if white else 2), n - 1)
 
 
 def _products(e, u, ranges, lags: int):
@@ -188,8 +199,7 @@ def portmanteau(e, u, *, max_lag: int = 25, confidence: float = 0.99, ranges=Non
     Identification: Theory for the User*, 2nd ed., Sec. 16.6. Newey, W. K. & West,
     K. D. (1987). *Econometrica* 55(3), 703-708.
     """
-    window = 0 if white else max_lag
-    reach = min(max_lag + window, e.shape[0] - 1)
+    reach = _reach(max_lag, e.shape[0], white)
     return _portmanteau_of(_products(e, u, ranges, reach), e.shape[0], e.shape[1],
                            max_lag=max_lag, confidence=confidence, white=white)
 
@@ -305,15 +315,11 @@ def residuals(model, data, *, max_lag: int = 25, confidence: float = 0.99, x0=No
         warnings.warn("residuals: the model has no Kalman gain K; these are simulation "
                       "errors, white only for white measurement noise", NoiseModelWarning,
                       stacklevel=2)
-    max_lag = check_int(max_lag, "max_lag", minimum=1)
-    confidence = check_probability(confidence, "confidence")
     n = e.shape[0]
-    if max_lag >= n:
-        raise DataError(f"max_lag {max_lag} must be smaller than the {n} samples of the record")
+    max_lag, confidence = _checked(max_lag, confidence, n)
     white = kind != "simulation"
     # the lagged products once, for the correlations and the tests
-    products = _products(e, data.u, data.experiment_ranges,
-                         min(max_lag * (1 if white else 2), n - 1))
+    products = _products(e, data.u, data.experiment_ranges, _reach(max_lag, n, white))
     out = _correlations_of(products[:max_lag + 1], e, confidence)
     out["kind"] = kind
     tests = _portmanteau_of(products, n, e.shape[1], max_lag=max_lag, confidence=confidence,
