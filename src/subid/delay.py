@@ -338,9 +338,10 @@ def _registers(A, B, C, D, delays, zero, one):
     return Ab, Bb, Cb, Db
 
 
-def _absorbed_covariance(entry, model, delays):
-    """``info['parameter_covariance']`` of :func:`absorb_delay`'s model, or None when
-    ``entry`` does not fit ``model``'s matrices. The absorbed matrices' entries are
+def _absorbed_covariance(entry, model, delays, absorbed):
+    """``info['parameter_covariance']`` of :func:`absorb_delay`'s model, whose matrices
+    are ``absorbed = (A, B, C, D, K)``, or None when ``entry`` does not fit ``model``'s
+    matrices. The absorbed matrices' entries are
     either the delayed model's (moved: a delayed input's ``B`` column into ``A``, its
     ``D`` column into ``C``) or structural constants, so the packed parameters
     (``A, B, C`` row-major, then ``D`` and ``K`` where they are parameters) map by a
@@ -373,10 +374,8 @@ def _absorbed_covariance(entry, model, delays):
     T = np.zeros((rows.size, params.size))
     moved = rows >= 0
     T[np.flatnonzero(moved), rows[moved]] = 1.0
-    A, B, C, D = _registers(model.A, model.B, model.C, model.D, delays, 0.0, 1.0)
-    values = [A, B, C] + ([D] if with_d else [])
-    if with_k:
-        values.append(np.vstack([model.K, np.zeros((int(np.sum(delays)), p))]))
+    A, B, C, D, K = absorbed
+    values = [A, B, C] + ([D] if with_d else []) + ([K] if with_k else [])
     out = {k: v for k, v in entry.items()
            if k not in ("coefficients", "coefficient_factor", "coefficient_names")}
     out["parameters"] = np.concatenate([v.ravel() for v in values])
@@ -459,18 +458,20 @@ def absorb_delay(model):
             "(info['input_delay'] is honoured by simulate, predict and freqresp) or export "
             "it as a delay (e.g. MATLAB's InputDelay) instead of as states")
     A, B, C, D = _registers(model.A, model.B, model.C, model.D, delays, 0.0, 1.0)
+    # the registers take no noise: K's rows zero
+    K = None if model.K is None else np.vstack([model.K, np.zeros((extra, p))])
     info = {k: v for k, v in model.info.items() if k != INFO_KEY}
     info["absorbed_input_delay"] = delays.tolist()
-    # the polynomials (their nk), their degrees and the covariance of the matrices describe
-    # the model before absorption: dropped, each named in info['dropped'] (as the model's
-    # conversions do, subid.model._conversions.drop_info)
+    # the polynomials (their nk) and their degrees describe the model before absorption:
+    # dropped, each named in info['dropped'] (as the model's conversions do,
+    # subid.model._conversions.drop_info); the covariance is mapped
     dropped = dict(info.get("dropped") or {})
     for key in ("polynomials", "orders"):
         if info.pop(key, None) is not None:
             dropped[key] = "absorb_delay() turned the input delays into states"
     entry = info.pop("parameter_covariance", None)
     if isinstance(entry, dict):
-        mapped = _absorbed_covariance(entry, model, delays)
+        mapped = _absorbed_covariance(entry, model, delays, (A, B, C, D, K))
         if mapped is not None:
             info["parameter_covariance"] = mapped
         else:
@@ -481,10 +482,9 @@ def absorb_delay(model):
                 "on the model with info['input_delay'])")
     if dropped:
         info["dropped"] = dropped
-    # the innovation form and the initial state(s) carry over: the registers take no
-    # noise (K's rows zero) and start empty (the delayed model's inputs before the
-    # record are zero too), so predictions and simulations from info['x0'] are the same
-    K = None if model.K is None else np.vstack([model.K, np.zeros((extra, p))])
+    # the innovation form and the initial state(s) carry over: the registers start empty
+    # (the delayed model's inputs before the record are zero too), so predictions and
+    # simulations from info['x0'] are the same
     x0 = info.get("x0")
     if x0 is not None and np.shape(x0)[-1:] == (n,):
         x0 = np.asarray(x0, dtype=float)
