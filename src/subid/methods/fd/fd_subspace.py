@@ -141,10 +141,11 @@ def _build(data: FRData, problem, basis, n, q, *, feedthrough, stability):
                       output_names=data.output_names), conditions, record, err
 
 
-def _cross_validate(data: FRData, alpha, noise_var, candidates, horizons, *, feedthrough,
-                    stability):
-    """Order by cross-validation over interleaved frequency folds; each candidate order
-    at its own horizon (``horizons[n]``, as an explicit call with that order uses)."""
+def _fold_scores(data: FRData, alpha, noise_var, candidates, horizons, *, feedthrough,
+                 stability) -> dict:
+    """``{order: [fold fit, ...]}``: each candidate order, at its own horizon
+    (``horizons[n]``, as an explicit call with that order uses), fitted on the training
+    frequencies of every interleaved fold and scored on the held-out ones."""
     index = np.arange(data.n_frequencies)
     per_fold: dict[int, list] = {n: [] for n in candidates}
     for k in range(FOLDS):
@@ -164,8 +165,15 @@ def _cross_validate(data: FRData, alpha, noise_var, candidates, horizons, *, fee
                 per_fold[n].append(fold_score(model, validation))
             except SubidError:
                 per_fold[n].append(FLOOR)
+    return per_fold
+
+
+def _cross_validated(data: FRData, per_fold: dict, horizons):
+    """``(order, record)``: the least cross-validated BIC over the fold scores
+    :func:`_fold_scores` gave (candidates in increasing order)."""
+    candidates = sorted(per_fold)
     scores = {(n,): float(np.mean(v)) for n, v in per_fold.items()}
-    (order,), crit = select({(n,): v for n, v in per_fold.items()},
+    (order,), crit = select({(n,): per_fold[n] for n in candidates},
                             2 * data.n_frequencies * data.n_inputs, data.n_inputs,
                             data.n_outputs)
     record = {
@@ -292,21 +300,22 @@ def fd_subspace(data, order=None, *, horizon=None, feedthrough=True, stability="
         n, record = choose_order(None, candidates, profile, "singular values of the "
                                  "projected frequency data")
     else:
-        n, record = _cross_validate(data, alpha, noise_var, candidates,
-                                    {k: block_rows(k) for k in candidates},
-                                    feedthrough=feedthrough, stability=stability)
-        # orders past 10, as the time-domain search: another block of candidates while
-        # the choice is the largest tried and the frequencies reveal more (a 12-state
-        # structure got order 10 and a fit of 46 %, silently)
-        while extendable and n == max(candidates):
+        horizons = {k: block_rows(k) for k in candidates}
+        per_fold = _fold_scores(data, alpha, noise_var, candidates, horizons,
+                                feedthrough=feedthrough, stability=stability)
+        n, record = _cross_validated(data, per_fold, horizons)
+        # orders past 10, as the time-domain search: another block of candidates (only
+        # those scored) while the choice is the largest tried and the frequencies reveal
+        # more (a 12-state structure got order 10 and a fit of 46 %, silently)
+        while extendable and n == max(per_fold):
             more = [k for k in range(n + 1, n + MAX_ORDER + 1) if revealable(k)
                     and k * (m + p) + p * m < M * m * p]
             if not more:
                 break
-            candidates = candidates + more
-            n, record = _cross_validate(data, alpha, noise_var, candidates,
-                                        {k: block_rows(k) for k in candidates},
-                                        feedthrough=feedthrough, stability=stability)
+            horizons.update({k: block_rows(k) for k in more})
+            per_fold.update(_fold_scores(data, alpha, noise_var, more, horizons,
+                                         feedthrough=feedthrough, stability=stability))
+            n, record = _cross_validated(data, per_fold, horizons)
         if n > MAX_ORDER:         # the noise model of an explicit call with this order
             noise_var, noise_record = noise_variance(data, alpha, n, feedthrough)
             problem = Problem(data, alpha, noise_var)
