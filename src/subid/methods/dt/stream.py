@@ -200,13 +200,25 @@ def identify_stream(pieces, method: str = "moesp", order=None, horizon=None, *,
     fit = streaming_method(method).load()
     selection = None
     if order is None and reread is not None and stat.n_experiments == 1:
-        order, selection = _order_on_tail(
-            fit, lambda: ((p.u, p.y) for _, p in _segments(reread())), first, stat.n_samples,
-            horizon, options)
+        if isinstance(pieces, ParsedOnce):    # a spooled file: read its last samples only
+            read, count = _spooled_tail(pieces, stat.n_samples)
+        else:
+            read, count = (lambda: ((p.u, p.y) for _, p in _segments(reread()))), \
+                stat.n_samples
+        order, selection = _order_on_tail(fit, read, first, count, horizon, options)
     model = fit(stat, order, horizon=horizon, **options)
     if selection is not None:
         model.info["order_selection"] = selection
     return model
+
+
+def _spooled_tail(pieces, stop: int, offsets=None):
+    """``(read, count)``: the reader (:meth:`ParsedOnce.ranges`) of the last
+    :data:`MAX_SELECTION_SAMPLES` samples before ``stop`` of a spooled record, and their
+    count (what :func:`_order_on_tail` reads)."""
+    from subid.methods.crossval import MAX_SELECTION_SAMPLES
+    start = max(0, stop - MAX_SELECTION_SAMPLES)
+    return pieces.ranges([(start, stop)], offsets=offsets)[0], stop - start
 
 
 def _order_on_tail(fit, read_pairs, first, n_samples: int, horizon: int, options: dict,
@@ -413,11 +425,8 @@ def identify_spooled(pieces, fit, method: str, order, horizon, *, detrend: str,
         attach_second_pass(stat, groups=stretches)
     selection = None
     if order is None:             # the in-memory rule on the last samples of the part
-        from subid.methods.crossval import MAX_SELECTION_SAMPLES
-        tail = pieces.ranges([(max(0, cut - MAX_SELECTION_SAMPLES), cut)],
-                             offsets=(u_mean, y_mean))[0]
-        order, selection = _order_on_tail(fit, tail, first, min(cut, MAX_SELECTION_SAMPLES),
-                                          hor, options, call)
+        read, count = _spooled_tail(pieces, cut, offsets=(u_mean, y_mean))
+        order, selection = _order_on_tail(fit, read, first, count, hor, options, call)
     if call is None:
         model = fit(stat, order, horizon=hor, **options)
     else:
