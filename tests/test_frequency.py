@@ -421,6 +421,28 @@ def test_cli_identify_frequency_response(tmp_path):
     assert bad.exit_code == 2 and "--inputs" in bad.output
 
 
+@pytest.mark.parametrize("refine", [None, "none", "simulation", "prediction"])
+def test_cli_frequency_response_refines_by_default(tmp_path, refine):
+    # as subid.identify does a frequency response: pem on it unless --refine none;
+    # --refine prediction has no noise model to predict with
+    from click.testing import CliRunner
+
+    from subid.cli.commands import cli
+    path = tmp_path / "frf.csv"
+    subid.write_frd(_ct_data(0.01, 2), path)
+    out = tmp_path / "out"
+    args = ["identify", str(path), "--frequency-response", "--order", "4", "--no-report",
+            "--out", str(out)] + ([] if refine is None else ["--refine", refine])
+    result = CliRunner().invoke(cli, args)
+    if refine == "prediction":
+        assert result.exit_code == 2 and "no noise model" in result.output
+        assert not out.exists()
+        return
+    assert result.exit_code == 0, result.output
+    model = subid.StateSpace.load(out / "model.json")
+    assert (model.info.get("refined_by") == "pem") == (refine != "none")
+
+
 @pytest.mark.slow
 def test_frequency_report_page():
     pytest.importorskip("matplotlib")

@@ -96,7 +96,9 @@ _RUN = _method_run_options(
               default="none", show_default=True,
               help="Refine the model by prediction-error minimisation (subid.pem) on the "
                    "estimation part with this focus ('pem': 'prediction', deprecated). "
-                   "Without --method, subid.identify already decides on its own refinement.")
+                   "Without --method, subid.identify already decides on its own refinement; "
+                   "with --frequency-response the model is refined by pem on the response "
+                   "(as subid.identify does) unless --refine none.")
 @_RUN["report"]
 @click.option("--stream", is_flag=True, default=False,
               help="Read the file in pieces with bounded memory, for files larger than memory "
@@ -282,6 +284,14 @@ def _identify_frequency(data, dt, delimiter, order, horizon, validate, options, 
     if len(data) != 1:
         raise click.UsageError("--frequency-response reads one DATA file")
     source = data[0]
+    if refine == "prediction":
+        raise click.UsageError("--refine prediction: a frequency response holds no noise "
+                               "model to predict with; --frequency-response refines the "
+                               "response by pem unless --refine none")
+    # by default refined, as subid.identify does a frequency response (the subspace
+    # model alone fitted a lightly damped structure at 23-96 %, refined 99.3-99.8 %)
+    refine_pem = refine != "none" or \
+        ctx.get_parameter_source("refine") is click.core.ParameterSource.DEFAULT
     _check_out(out, _IDENTIFY_FILES)
     order = _parse_order(order)
     opts = _parse_options(options)
@@ -299,7 +309,7 @@ def _identify_frequency(data, dt, delimiter, order, horizon, validate, options, 
             if horizon is not None:
                 kwargs["horizon"] = horizon
             model = subid.fd_subspace(est, order, **kwargs)
-            if refine == "pem":
+            if refine_pem:
                 model = subid.pem(est, model)
         seconds = time.perf_counter() - t0
         result = evaluate_frequency(model, est, val)

@@ -6,6 +6,10 @@ the structure and a start, prediction-error minimisation refines it. Every
 choice is made on the estimation record and recorded in
 ``model.info['identify']``:
 
+0. **Frequency-response data** (:class:`subid.FRData`) go to
+   :func:`subid.fd_subspace` (the order chosen on frequency folds, the model in
+   the data's time base), refined by :func:`subid.pem`'s weighted least squares
+   on the response (:func:`_frequency`).
 1. **Time base.** A non-uniformly sampled record, or ``time_base='ct'``, goes
    to :func:`subid.ct_subspace` (continuous time, its own defaults); the rest
    of this page is the discrete-time path.
@@ -322,10 +326,12 @@ def identify(data, order=None, *, focus="simulation", time_base="auto", horizon=
 
     Parameters
     ----------
-    data : IOData
+    data : IOData or FRData
         The estimation record (uniformly sampled for discrete time; a record of
         several experiments, :func:`subid.merge`, is handled experiment by
         experiment). Remove the means (or trends) first, as for every method.
+        A frequency response (:class:`subid.FRData`) is identified by
+        :func:`subid.fd_subspace` and :func:`subid.pem` (:func:`_frequency`).
     order : int, None, 'auto' or iterable of int
         Model order; ``None`` (default) lets the cross-validation choose it
         (orders past 10 while the criterion improves); an iterable gives the
@@ -394,6 +400,10 @@ def identify(data, order=None, *, focus="simulation", time_base="auto", horizon=
     check_choice(time_base, "time_base", TIME_BASES)
     if not isinstance(refine, (bool, np.bool_)):
         raise OptionError(f"refine must be True or False; got {refine!r}"[:300])
+    from subid.frdata import FRData
+    if isinstance(data, FRData):
+        return _frequency(data, order, focus=focus, time_base=time_base, horizon=horizon,
+                          feedthrough=feedthrough, refine=bool(refine), hold=hold)
     if not isinstance(data, IOData):
         raise not_a_record(data, "identify", time="t=... or dt=...")
     if hold is not None:
@@ -530,6 +540,64 @@ def _record_covariance(data, model, focus, *, start):
         return with_covariance(model, _delayed(data, model), focus,
                                with_feedthrough=bool(np.any(start.D != 0)),
                                max_samples=COVARIANCE_SAMPLES)
+
+
+def _frequency(data, order, *, focus, time_base, horizon, feedthrough, refine, hold):
+    """:func:`identify` on a frequency response: :func:`subid.fd_subspace` (McKelvey,
+    Akçay & Ljung 1996; the order chosen on interleaved frequency folds), then
+    :func:`subid.pem` (weighted nonlinear least squares on the response, the weights the
+    inverse noise level, given or estimated: the maximum-likelihood criterion; Pintelon &
+    Schoukens 2012, Ch. 9), which never ends above its start, so its result is kept.
+
+    The subspace step alone is a poor model where the noise weighting and the
+    structure disagree: on a lightly damped 2x2 continuous-time structure (four modes,
+    damping 0.002-0.02, 400 frequencies over two decades, 1 % noise proportional to
+    |G|, seeds 0-9) ``fd_subspace(data)`` fitted the true response at 23.5 / 85.4 /
+    96.2 % (least / median / most) and this at 99.28 / 99.56 / 99.76 %, for a median
+    2.5 CPU s (``tests/test_identify_frequency.py``)."""
+    from subid.methods.dt.feedthrough import check_feedthrough
+    from subid.methods.dt.pem import pem
+    from subid.methods.fd.fd_subspace import fd_subspace
+    feedthrough = check_feedthrough(feedthrough)
+    continuous = data.dt == 0
+    kind = "continuous" if continuous else "discrete"
+    if time_base == ("dt" if continuous else "ct"):
+        raise OptionError(f"time_base={time_base!r}: the frequency response is {kind}-time "
+                          f"(dt = {data.dt:g}) and the model takes the data's time base; "
+                          "leave time_base out, or build the FRData with the dt wanted")
+    if focus != "simulation":
+        raise OptionError(f"focus={focus!r}: a frequency response holds the input-output "
+                          "part only, no noise model to predict with; leave focus out")
+    if hold is not None:
+        raise OptionError(f"hold={hold!r}: a frequency response needs no input hold; "
+                          "leave hold out")
+    options = {} if horizon is None else {"horizon": horizon}
+    if feedthrough != "auto":
+        options["feedthrough"] = bool(feedthrough)
+    model = fd_subspace(data, order, **options)
+    record = {"time_base": kind, "data": "frequency response", "estimator": "fd_subspace",
+              "options": dict(options),
+              "feedthrough": ("D estimated (fd_subspace's default: the response at the "
+                              "highest frequencies shows a direct term)"
+                              if feedthrough == "auto" else f"given: {feedthrough}")}
+    if refine:
+        model = pem(data, model)
+        info = model.info
+        record["refinement"] = {
+            "kept": True, "criterion": "weighted least squares on the response",
+            "weighting": info.get("weighting"), "start_cost": info.get("start_cost"),
+            "final_cost": info.get("final_cost"), "cost_history": info.get("cost_history"),
+            "n_evaluations": info.get("n_evaluations"),
+            "rule": "pem on the response never ends above its start: its result is kept"}
+    else:
+        record["refinement"] = {"kept": False, "reason": "refine=False"}
+    info = dict(model.info)
+    info["subspace_method"] = "fd_subspace"
+    info["method"] = "identify"
+    info["identify"] = record
+    return StateSpace(model.A, model.B, model.C, model.D, model.dt,
+                      input_names=model.input_names, output_names=model.output_names,
+                      info=info, hold=model.hold)
 
 
 def _continuous(data, order, feedthrough, refine, hold, *, reason):
