@@ -383,7 +383,7 @@ def identify(data, order=None, *, focus="simulation", time_base="auto", horizon=
     Raises
     ------
     DataError
-        Not an IOData record; non-uniform data with ``time_base='dt'``.
+        Neither an IOData record nor an FRData; non-uniform data with ``time_base='dt'``.
     OptionError
         Bad option values.
 
