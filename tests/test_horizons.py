@@ -79,3 +79,38 @@ def test_oversampled_record_gets_a_horizon_that_spans_its_dynamics(monkeypatch):
     # the chosen order and horizon passed back give the same model
     again = subid.n4sid(est, model.order, horizon=model.info["horizon"])
     np.testing.assert_allclose(again.A, model.A, rtol=1e-10, atol=1e-12)
+
+
+def _multisine(n_sines, n_samples=1500, seed=0):
+    """A SISO order-4 plant under a multisine of ``n_sines`` sines (persistently
+    exciting of order 2 x n_sines), noise-free; (estimation, validation)."""
+    plant = subid.systems.random_system(4, 1, 1, seed=31, pole_radius=(0.7, 0.97))
+    k = np.arange(n_samples)
+    phases = np.random.default_rng(seed).uniform(0, 2 * np.pi, n_sines)
+    u = np.sin(np.outer(k, np.linspace(0.02, 1.5, n_sines)) + phases).sum(axis=1)
+    return subid.IOData(u, plant.simulate(u)).split(2 / 3), plant
+
+
+@pytest.mark.parametrize("n_sines, horizon", [(12, 10), (5, 5)])
+def test_the_chosen_horizon_is_one_the_input_excites(n_sines, horizon):
+    # a multisine of 12 sines excites order 24 (31 on 1000 samples' rounding): horizon
+    # 20's 40 block rows raised NotExcitingError from every default call, horizon 10
+    # identifies the plant; 5 sines (order 10) leave horizon 5
+    (est, val), plant = _multisine(n_sines)
+    for method in (subid.moesp, subid.n4sid, subid.ls_subspace, subid.identify):
+        with pytest.warns(subid.errors.ExcitationWarning) if n_sines == 12 and \
+                method is not subid.identify else _no_check():
+            model = method(est)
+        assert model.info["horizon"] == horizon
+        assert min(subid.fit_percent(model, val)) > 99.9
+        if method is not subid.identify:
+            limited = model.info["order_selection"]["horizon_limited"]
+            assert limited["horizon"] == horizon and limited["achieved_excitation"] < 40
+    # a horizon given is honoured, or refused
+    with pytest.raises(subid.errors.NotExcitingError, match="exciting of order"):
+        subid.moesp(est, horizon=20)
+
+
+def _no_check():
+    import contextlib
+    return contextlib.nullcontext()

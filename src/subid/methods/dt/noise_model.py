@@ -232,8 +232,8 @@ def innovation_model(A, B, C, D, hf: HankelFactor, past: int | None = None, *,
         # K = (A P C^T + S) sigma^-1 with sigma equilibrated by its diagonal: outputs of
         # very different units (1e8 against 1) make sigma badly scaled, not ill-posed,
         # and the unscaled solve warned of its condition (the same K in exact arithmetic)
-        d = np.sqrt(np.diag(sigma))
-        d = np.where(d > 0, d, 1.0)
+        diagonal = np.diag(sigma)        # a negative one (noise-free data): no scaling
+        d = np.sqrt(np.where(diagonal > 0, diagonal, 1.0))
         K = (scipy.linalg.solve(sigma / np.outer(d, d), (A @ P @ C.T + S).T / d[:, None],
                                 assume_a="pos") / d[:, None]).T
         how = "Kalman filter Riccati equation of the residual covariances (VODM 1996, Sec. 4.3)"

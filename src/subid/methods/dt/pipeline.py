@@ -268,6 +268,30 @@ class Pipeline:
             enforced(stab)
 
 
+def excited_horizon(exc: NotExcitingError, plan: Plan, n_outputs: int) -> dict | None:
+    """The horizon the choice falls back to when the input cannot support the candidate
+    horizons (``exc``, raised by a fold or the whole record at the depth ``blocks x f``
+    of a candidate ``f``), as a record for ``info['order_selection']['horizon_limited']``;
+    None when the horizon was given, or the input supports no horizon that reveals the
+    order given (the smallest candidate; order 1 when none is given)."""
+    # the largest of HORIZON_CANDIDATES whose block rows the input excites
+    # (blocks x f <= achieved), else achieved // blocks
+    from subid.methods.crossval import HORIZON_CANDIDATES
+    achieved = exc.achieved_order
+    if plan.horizon is not None or achieved is None or exc.required_order is None \
+            or achieved >= exc.required_order:
+        return None
+    blocks = plan.blocks_per_horizon
+    fitting = [f for f in HORIZON_CANDIDATES if blocks * f <= achieved]
+    f = max(fitting) if fitting else achieved // blocks
+    lowest = plan.order if plan.order is not None else min(plan.candidates or (1,))
+    if f < 2 or (f - 1) * n_outputs < lowest:
+        return None
+    return {"horizon": f, "achieved_excitation": achieved,
+            "reason": f"the input is persistently exciting of order {achieved} only (a "
+                      f"horizon f needs {blocks} f): horizon {f}, the largest it supports"}
+
+
 def run(method: SubspaceMethod, data, order, horizon, *, selection: str,
         statistic: str = "auto", refine=None, input_delay=0) -> StateSpace:
     """The model of ``method`` on ``data``: the plan, the choice, the fit, the
@@ -290,11 +314,24 @@ def run(method: SubspaceMethod, data, order, horizon, *, selection: str,
                            statistic=statistic, refine=refine, input_delay=input_delay)
     pipeline = Pipeline(method, plan)
     with collect_warnings() as issued:
-        too_short = None
+        too_short = limited = None
         if plan.cross_validate:
             check_data(data, plan.method)
             try:
-                problem, model, estimator, rule = choose(data, plan, pipeline)
+                try:
+                    problem, model, estimator, rule = choose(data, plan, pipeline)
+                except NotExcitingError as exc:
+                    # the horizons the input cannot support left out (a multisine of 12
+                    # sines, exciting of order 31, cannot take horizon 20's 40 block rows)
+                    limited = excited_horizon(exc, plan, data.n_outputs)
+                    if limited is None:
+                        raise
+                    plan = replace(plan, horizon=limited["horizon"],
+                                   cross_validate=plan.order is None)
+                    pipeline = Pipeline(method, plan)
+                    if not plan.cross_validate:
+                        raise
+                    problem, model, estimator, rule = choose(data, plan, pipeline)
             except (TooFewSamplesError, OrderError, NotExcitingError) as exc:
                 # the folds (three quarters of the record each) are too short for the
                 # horizon the order needs, or a fold's inputs do not excite it (a step
@@ -306,9 +343,13 @@ def run(method: SubspaceMethod, data, order, horizon, *, selection: str,
                              f"poorly excited for the cross-validation folds ({exc}); the "
                              "largest gap of the whole record's singular values decides "
                              "instead")
-                plan = replace(plan, selection="gap", cross_validate=False,
-                               estimator_choice="fit" if len(plan.estimators) > 1 else None)
-                pipeline = Pipeline(method, plan)
+                if not (limited is not None and plan.order is not None):
+                    plan = replace(plan, selection="gap", cross_validate=False,
+                                   estimator_choice="fit" if len(plan.estimators) > 1
+                                   else None)
+                    pipeline = Pipeline(method, plan)
+                else:                     # the order given, the horizon now fixed: no folds
+                    too_short = None
         if not plan.cross_validate:
             problem = pipeline.prepare(data, plan.orders, plan.horizon)
             if plan.estimator_choice == "fit":   # order and horizon given: no fold fits
@@ -320,6 +361,9 @@ def run(method: SubspaceMethod, data, order, horizon, *, selection: str,
             if too_short is not None:
                 model.info["order_selection"] = dict(model.info["order_selection"],
                                                      reason=too_short)
+        if limited is not None:
+            model.info["order_selection"] = dict(model.info["order_selection"],
+                                                 horizon_limited=limited)
         model.info.update(plan.info(estimator, rule))
         model = finalize(model, problem, refine=plan.refine, delays=plan.delays,
                          statistic=plan.statistic, record=record)
