@@ -144,7 +144,11 @@ def test_enforce_on_growing_data_warns():
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         model = subid.moesp(data, 2, horizon=10)
-    assert model.info["stability"]["action"] == "none"
+    # compared with its stabilised model, which cannot follow the growth (session 24:
+    # growing data no longer skip the comparison)
+    assert model.info["stability"]["action"] == "kept unstable"
+    assert model.info["stability"]["residual_unstable"] < \
+        1e-6 * model.info["stability"]["residual_stable"]
     assert subid.markov_error(model, true) < 1e-6
 
 
@@ -342,3 +346,32 @@ def test_a_plant_diverging_from_rest_is_not_said_to_stay_bounded():
     est, _ = _split("robot_arm")
     with pytest.warns(errors.UnstableModelWarning, match="does not grow"):
         subid.n4sid(est, 7, stability="none", horizon=10, weighting="n4sid")
+
+
+@pytest.mark.parametrize("n_samples, seed, before", [(400, 5, 73.4), (400, 6, 39.9),
+                                                     (1000, 5, 69.0)])
+def test_a_response_building_up_from_rest_gets_a_stable_model(n_samples, seed, before):
+    # two modes at 1 and 1.15 rad/s, damping 0.01, dt 0.2 s, 10 % output noise, from
+    # rest: the estimation output grows 4.9-10x as the response builds up, and growing
+    # data kept their unstable models without comparing them with the stabilised ones
+    # (validation fit `before`); now the comparison is made and the stable model kept
+    import scipy.signal
+    den = np.polymul([1, 0.02, 1.0], [1, 0.023, 1.15 ** 2])
+    A, B, C, D = scipy.signal.cont2discrete(scipy.signal.tf2ss([0.5, 0.3, 1.0], den), 0.2,
+                                            method="zoh")[:4]
+    true = subid.StateSpace(A, B, C, D, 0.2)
+    rng = np.random.default_rng(seed)
+    u = rng.standard_normal(n_samples)
+    y = true.simulate(u[:, None]).ravel()
+    data = subid.IOData(u, y + 0.1 * y.std() * rng.standard_normal(n_samples), dt=0.2)
+    k = round(2 * n_samples / 3)
+    est = subid.IOData(data.u[:k] - data.u[:k].mean(0), data.y[:k] - data.y[:k].mean(0),
+                       dt=0.2)
+    val = subid.IOData(data.u[k:] - data.u[:k].mean(0), data.y[k:] - data.y[:k].mean(0),
+                       dt=0.2)
+    assert subid.methods._stability.record_growth(est) > 3
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        model = subid.identify(est)
+    assert model.is_stable()
+    assert subid.fit_percent(model, val)[0] > before
