@@ -22,7 +22,11 @@ choice is made on the estimation record and recorded in
    criterion improves) and their feedthrough from the data
    (``feedthrough='auto'``, :mod:`subid.methods.dt.feedthrough`). The
    estimator with the better mean fold score of its chosen candidate is taken
-   (the two are scored on the same folds by the same fit).
+   (the two are scored on the same folds by the same fit). Where
+   :func:`subid.estimate_delay` finds an input delay beyond the one sample of a
+   strictly proper response (:func:`_dead_time`), both estimators are also run
+   with those delays (``input_delay=``) and compete on the same footing: a dead
+   time as long as the horizon is otherwise invisible to them.
 3. **Refinement.** The chosen configuration (estimator, order, horizon,
    feedthrough) is fitted on the training part of every fold, refined there by
    :func:`subid.pem` with ``focus``, and both are scored on the held-out part:
@@ -155,7 +159,49 @@ def _configuration(model) -> dict:
                                                                      np.any(model.D != 0)))}
     if model.info.get("system_matrices") is not None:
         out["system_matrices"] = model.info["system_matrices"]
+    if model.info.get("input_delay") is not None:
+        out["input_delay"] = [int(d) for d in model.info["input_delay"]]
     return out
+
+
+#: Largest delay :func:`_dead_time` tries, in samples (MATLAB's ``delayest`` searches 20
+#: from its lowest delay), fewer where the record is short (ten samples a column).
+DEAD_TIME_SEARCH = 50
+#: Samples (the last ones of the last experiment) :func:`_dead_time` reads at most.
+DEAD_TIME_SAMPLES = 5_000
+
+
+def _dead_time(data):
+    """``(delays, record)``: the input delays :func:`subid.estimate_delay` (ARX losses over
+    the candidate delays, MATLAB's ``delayest``) finds beyond the one sample of a strictly
+    proper response, or None where no input has one; ``record`` says what was looked for.
+
+    A dead time as long as the subspace horizon leaves the default models nothing to
+    see: a SISO plant with 20-40 samples of dead time, 1000 samples, fitted by
+    ``identify`` without it at 4-37 %, with it (``moesp(data, input_delay=30)``) at
+    88-90 % (session 24's exploratory test). The delays found are a candidate that
+    :func:`_discrete` cross-validates against none, not a decision."""
+    from subid.delay import estimate_delay
+    part = data.experiments[-1]
+    part = part[part.n_samples - DEAD_TIME_SAMPLES:] if part.n_samples > DEAD_TIME_SAMPLES \
+        else part
+    # a regression of na = nb = 2 with every lag of every input up to the largest delay
+    # tried: at least ten samples per column
+    largest = min(DEAD_TIME_SEARCH,
+                  part.n_samples // (10 * part.n_inputs) - 2 * part.n_outputs - 2)
+    record = {"rule": "subid.estimate_delay (na = nb = 2) on the last "
+                      f"{part.n_samples} samples, delays 0..{max(largest, 0)}: each input's "
+                      "delay beyond one sample, cross-validated against none",
+              "searched": max(largest, 0)}
+    if largest < 2:
+        return None, dict(record, found=None, reason="too few samples to look for a delay")
+    try:
+        nk = estimate_delay(part, largest)
+    except SubidError as exc:
+        return None, dict(record, found=None, reason=f"{type(exc).__name__}: {exc}")
+    extra = np.maximum(np.asarray(nk, dtype=int) - 1, 0)
+    record["found"] = [int(d) for d in extra]
+    return ([int(d) for d in extra] if extra.any() else None), record
 
 
 def _selected_folds(model):
@@ -625,14 +671,21 @@ def _discrete(data, order, horizon, feedthrough, focus, refine):
     record = {"time_base": "discrete", "focus": focus, "estimators": []}
     fits = {}
     errors = {}
-    for name in ESTIMATORS:
+    delays, record["dead_time"] = _dead_time(data)
+    # every estimator without input delays, and with the dead time found (a candidate)
+    candidates = [(name, None) for name in ESTIMATORS] + \
+        ([(name, delays) for name in ESTIMATORS] if delays is not None else [])
+    for name, delay in candidates:
+        label = name if delay is None else f"{name}, input_delay={delay}"
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
-                fits[name] = _estimator(name)(data, order, horizon=horizon,
-                                              feedthrough=feedthrough)
+                fits[label] = _estimator(name)(data, order, horizon=horizon,
+                                               feedthrough=feedthrough,
+                                               **({} if delay is None else
+                                                  {"input_delay": delay}))
         except SubidError as exc:
-            errors[name] = f"{type(exc).__name__}: {exc}"
+            errors[label] = f"{type(exc).__name__}: {exc}"
     if not fits:
         # every estimator failed: raise the first estimator's error again, with its
         # warnings, naming identify (the function the user called)
@@ -641,23 +694,26 @@ def _discrete(data, order, horizon, feedthrough, focus, refine):
         except SubidError as exc:
             raise name_caller(exc, ESTIMATORS[0], "identify") from None
     scores = {}
-    for name, model in fits.items():
+    for label, model in fits.items():
+        name = label.split(",")[0]
         config = _configuration(model)
         folds = _selected_folds(model)
         if folds is None:                      # order and horizon given: score them here
             folds = _fold_scores(data, name, config) if len(fits) > 1 else []
-        scores[name] = float(np.mean(folds)) if folds else math.nan
+        scores[label] = float(np.mean(folds)) if folds else math.nan
         record["estimators"].append({"estimator": name, **config, "folds": folds,
-                                     "score": scores[name]})
-    for name, message in errors.items():
-        record["estimators"].append({"estimator": name, "error": message})
-    # the better mean fold score; on ties (or no scores) the first estimator
-    chosen = max(fits, key=lambda k: (scores[k] if math.isfinite(scores[k]) else -math.inf,
-                                      -ESTIMATORS.index(k)))
+                                     "score": scores[label]})
+    for label, message in errors.items():
+        record["estimators"].append({"estimator": label.split(",")[0], "error": message})
+    # the better mean fold score; on ties (or no scores) the first estimator, undelayed
+    order_of = list(fits)
+    label = max(fits, key=lambda k: (scores[k] if math.isfinite(scores[k]) else -math.inf,
+                                     -order_of.index(k)))
+    chosen = label.split(",")[0]
     record["estimator"] = chosen
-    record["rule"] = ("the estimator whose chosen candidate has the better mean simulation fit "
-                      "over the four cross-validation folds")
-    model = fits[chosen]
+    record["rule"] = ("the estimator (and input delays) whose chosen candidate has the "
+                      "better mean simulation fit over the four cross-validation folds")
+    model = fits[label]
     config = _configuration(model)
     refinement = {"focus": focus, "tried": refine}
     record["refinement"] = refinement
