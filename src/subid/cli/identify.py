@@ -95,7 +95,8 @@ _RUN = _method_run_options(
 @click.option("--refine", type=click.Choice(["none", "simulation", "prediction", "pem"]),
               default="none", show_default=True,
               help="Refine the model by prediction-error minimisation (subid.pem) on the "
-                   "estimation part with this focus ('pem': 'prediction', deprecated). "
+                   "estimation part with this focus ('pem', deprecated: pem's default, "
+                   "'prediction', or 'simulation' for a continuous-time model). "
                    "Without --method, subid.identify already decides on its own refinement; "
                    "with --frequency-response the model is refined by pem on the response "
                    "(as subid.identify does) unless --refine none.")
@@ -254,7 +255,9 @@ def _identify_in_memory(sources, data, inputs, outputs, dt, time_column, text, d
                 model = _named(ident.model, est)
             if refine != "none":
                 from subid.methods.dt.pem import pem
-                model = pem(est, model, focus="prediction" if refine == "pem" else refine)
+                # 'pem' (deprecated): pem's own default focus, 'prediction' for a
+                # discrete-time model, 'simulation' for a continuous-time one
+                model = pem(est, model, focus=None if refine == "pem" else refine)
         seconds = time.perf_counter() - t0
         steps.start("evaluate")
         result = report.evaluate(model, est, val)

@@ -208,7 +208,7 @@ def _round(model_mats, x0, data, focus, W, layout, max_nfev, tolerance, history,
 @serial_blas
 @checked_call
 @records_warnings
-def pem(data, model, *, focus="prediction", max_iterations=MAX_ITERATIONS, tolerance=TOLERANCE,
+def pem(data, model, *, focus=None, max_iterations=MAX_ITERATIONS, tolerance=TOLERANCE,
         rounds=ROUNDS, feedthrough=None):
     """Refine a model by prediction-error minimisation (MATLAB ``ssest``/``pem``).
 
@@ -228,12 +228,17 @@ def pem(data, model, *, focus="prediction", max_iterations=MAX_ITERATIONS, toler
         discretisation with its own input hold (:attr:`StateSpace.hold`) and
         converted back (its noise model is then dropped). Without ``K`` the gain is first estimated
         (:mod:`subid.methods.dt.noise_model`), or taken as zero when that fails.
-    focus : {'prediction', 'simulation'}
+    focus : {None, 'prediction', 'simulation'}
         Minimise one-step prediction errors of the innovation form (A, B, C,
         D, K estimated; statistically efficient for Gaussian innovations), or
         simulation errors (output-error model; K is re-estimated afterwards:
         the state-sequence gain, then the prediction-error gain with A, B, C, D
-        fixed, :mod:`subid.methods.dt.gain`).
+        fixed, :mod:`subid.methods.dt.gain`). None (default): ``'prediction'``
+        for a discrete-time model, ``'simulation'`` for a continuous-time one,
+        whose noise model is dropped (``'prediction'`` is refused there: an
+        innovation form fitted and then discarded moved the deterministic part
+        away from the plant, validation fit 98.9 -> -90.0 % on the seed-002
+        system at 20 dB, where ``'simulation'`` kept 98.7 %).
     max_iterations : int
         Bound on the criterion evaluations per round (``max_nfev``).
     tolerance : float
@@ -281,10 +286,22 @@ def pem(data, model, *, focus="prediction", max_iterations=MAX_ITERATIONS, toler
     """
     from subid.frdata import FRData
     check_choice(feedthrough, "feedthrough", (None, True, False))
+    check_choice(focus, "focus", (None, *FOCUS))
     if isinstance(data, FRData):     # frequency-response data: subid.methods.fd.fd_pem
         from subid.methods.fd.fd_pem import fd_pem
         return fd_pem(data, model, max_iterations=max_iterations, tolerance=tolerance,
                       rounds=rounds, feedthrough=feedthrough)
+    if isinstance(model, StateSpace) and model.is_continuous:
+        if focus == "prediction":
+            raise OptionError("focus='prediction' on a continuous-time model: its noise "
+                              "model is dropped after the refinement, and the innovation "
+                              "form fitted on the way moves the deterministic part away "
+                              "from the plant; leave focus out (the simulation error), or "
+                              "refine model.to_discrete(data.dt) for a discrete-time "
+                              "innovation model")
+        focus = "simulation"
+    elif focus is None:
+        focus = "prediction"
     _check_inputs(data, model, focus)
     check_optimiser_options(max_iterations, tolerance, rounds)
     if (delays := input_delay_of(model)) is not None:
@@ -306,7 +323,14 @@ def pem(data, model, *, focus="prediction", max_iterations=MAX_ITERATIONS, toler
             refined = pem(data, model.to_discrete(data.dt, model.hold), focus=focus,
                           max_iterations=max_iterations, tolerance=tolerance, rounds=rounds,
                           feedthrough=feedthrough)
-            ct = refined.to_continuous(model.hold)
+            try:
+                ct = refined.to_continuous(model.hold)
+            except ModelError as exc:
+                raise ModelError(
+                    "pem: the refined discretisation has no continuous-time counterpart "
+                    f"with a {model.hold} input ({exc}); the start is probably far from "
+                    "the data (check its fit), or refine the discrete-time model "
+                    "model.to_discrete(data.dt) instead") from None
         info = continuous_x0(dict(ct.info), ct, refined.info.get("x0"), data)
         kind = "zero" if model.hold == "zoh" else "first"
         info["pem_through"] = f"{kind}-order-hold discretisation with dt={data.dt}"
