@@ -195,6 +195,25 @@ def marginal_limit(rec: Record) -> float:
     return -1.0 / (MARGINAL_RECORDS * max(rec.length, 1e-300))
 
 
+#: A stabilised model whose residual RMS is below this fraction of the outputs' leaves
+#: nothing for an unstable estimate to explain (:func:`stable_choice`): noise-free,
+#: non-uniformly sampled seed-002 data (400 samples, 40 % jitter) kept an order-10
+#: estimate with a pole at +3.7 for a residual of 1.7e-7 against the stabilised model's
+#: 1.1e-6 (output RMS 0.16): frequency-response error 0.13, against 0.015 for the
+#: stable model.
+EXACT_FIT = 1e-4
+
+
+def _output_rms(rec: Record) -> float:
+    """RMS of the centred outputs over every part of the record."""
+    total, count = 0.0, 0
+    for _, _, y, _ in rec.parts:
+        z = y - y.mean(axis=0)
+        total += float(np.sum(z ** 2))
+        count += z.size
+    return math.sqrt(total / max(count, 1))
+
+
 def growth(rec: Record) -> float:
     """Largest ratio of the RMS of the last tenth of an output to its first tenth."""
     out = 0.0
@@ -228,12 +247,13 @@ def stable_choice(A, C, fit, rec: Record, stability: str):
 
     ``fit(A, C) -> (B, D, x0, y0, diag) or None``. ``'none'``: A as estimated.
     ``'enforce'``: poles above :func:`marginal_limit` reflected
-    (:func:`reflected`), B, D, x0 refitted. ``'auto'``: the same when the
-    output does not grow (:func:`growth` below :data:`GROWTH_LIMIT`), and the
+    (:func:`reflected`), B, D, x0 refitted. ``'auto'``: the same, and the
     estimate is kept only when its residual is below
     :data:`KEEP_UNSTABLE_RATIO` times the reflected model's, as in discrete
     time: a pole at the origin or a slow unstable pole that a record does not
-    need is removed.
+    need is removed; an estimate that cannot even be simulated over the record
+    (overflow) is never kept. ``record['output_growth']`` (:func:`growth`) is
+    reported, no longer a reason to skip the comparison.
 
     Returns
     -------
@@ -249,13 +269,10 @@ def stable_choice(A, C, fit, rec: Record, stability: str):
         if fitted is None:
             raise_overflow()
         return A, fitted, record
-    g = growth(rec)
-    record["output_growth"] = g
-    if stability == "auto" and g >= GROWTH_LIMIT:
-        if fitted is None:
-            raise_overflow()
-        record["action"] = "kept unstable: the output grows over the record"
-        return A, fitted, record
+    # growing data are compared too (session 24): noise-free, non-uniformly sampled
+    # responses of the stable seed-002 plant grow from rest, and skipping the comparison
+    # there let estimates with poles at +654 and +2976 rad/s through
+    record["output_growth"] = growth(rec)
     A_s = reflected(A, limit)
     fitted_s = fit(A_s, C)
     record.update(action="enforced",
@@ -265,7 +282,7 @@ def stable_choice(A, C, fit, rec: Record, stability: str):
     if stability == "auto" and fitted is not None and fitted_s is not None:
         r_u, r_s = fitted[4]["b_residual_rms"], fitted_s[4]["b_residual_rms"]
         record.update(residual_unstable=r_u, residual_stable=r_s)
-        if r_u < KEEP_UNSTABLE_RATIO * r_s:
+        if r_u < KEEP_UNSTABLE_RATIO * r_s and r_s > EXACT_FIT * _output_rms(rec):
             record.update(action="kept unstable",
                           how=f"the estimate fits the data clearly better (residual RMS "
                               f"{r_u:.3g} against {r_s:.3g} when stabilised)")

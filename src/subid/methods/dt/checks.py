@@ -143,7 +143,8 @@ TREND_SHARE = 0.25
 def warn_trends(data: IOData) -> None:
     """An :class:`subid.errors.OffsetWarning` when an output's straight-line trend takes
     at least :data:`TREND_SHARE` of its variance (over the last
-    :data:`OFFSET_MOMENT_SAMPLES` samples; naming the largest) and the inputs do not
+    :data:`OFFSET_MOMENT_SAMPLES` samples of the last experiment; naming the largest) and
+    the inputs do not
     explain it (:func:`_unexplained_offset` with the trend). A drift the methods take as
     given must be a state: an unstable or integrating mode. Measured (session 24's
     exploratory test): a SISO order-3 record (20 dB, 1500 samples) with a sensor drift of
@@ -152,8 +153,8 @@ def warn_trends(data: IOData) -> None:
     (0.002 per sample, share 0.07: 88.3 and 89.6 %, no warning). Among the DaISy records
     (2/3 to estimate, means removed) only dryer2's and powerplant's outputs reach the
     share (0.70, 0.78; 0.05-0.19 for powerplant's), with inputs that trend too."""
-    tail = slice(max(data.n_samples - OFFSET_MOMENT_SAMPLES, 0), None)
-    y = data.y[tail]
+    last = data.experiments[-1]        # a line across experiments means nothing
+    y = last.y[max(last.n_samples - OFFSET_MOMENT_SAMPLES, 0):]
     if y.shape[0] < 3:
         return
     k = np.linspace(-1.0, 1.0, y.shape[0])
