@@ -485,3 +485,21 @@ def test_noise_free_non_uniform_data_of_a_stable_plant_give_a_stable_model(lengt
     assert model.is_stable()
     assert model.info["stability"]["action"] in ("enforced", "none")
     assert min(subid.fit_percent(model, data)) > 99
+
+
+def test_epoch_time_stamps_are_accepted():
+    # seconds since 1970 (1.7e9) with 5 ms steps, jittered: the intervals are known to
+    # 2.4e-7 s (the stamps' rounding unit); the former bound, 1e-9 of the magnitude (1.7 s),
+    # refused them. Intervals within 1,000 rounding units are still refused.
+    import subid
+    true = paper_system()
+    data, _ = simulate(2000, 4, jitter=0.3)
+    epoch = IOData(data.u, data.y, t=data.t + 1.7e9)
+    model = subid.ct_subspace(epoch, 4)
+    w = np.logspace(-2, 2, 100)
+    G = true.freqresp(w)
+    assert np.abs(model.freqresp(w) - G).max() < 1e-3 * np.abs(G).max()
+    t = 1.7e9 + np.cumsum(np.full(200, 100 * np.spacing(1.7e9)))
+    rng = np.random.default_rng(0)
+    with pytest.raises(errors.DataError, match="below the resolution"):
+        subid.ct_subspace(IOData(rng.standard_normal(200), rng.standard_normal(200), t=t), 2)
