@@ -89,13 +89,18 @@ def _unexplained_offset(data: IOData, *, trend: bool = False) -> np.ndarray | No
     if not d > 1e-10 * np.sqrt(N - L):      # the term lies in the span of the lags
         return None
     proj = Q.T @ y[L:]
-    rss1 = np.sum(y[L:] ** 2, axis=0) - np.sum(proj ** 2, axis=0)
+    total = np.sum(y[L:] ** 2, axis=0)
+    rss1 = total - np.sum(proj ** 2, axis=0)
+    # the lags explain an output to rounding (noise-free data, an unstable plant's
+    # growth included): nothing is left for the constant or the trend, whose F-ratio
+    # would divide rounding by rounding
+    exact = rss1 <= 1e-12 * total
     gain = proj[-1] ** 2                    # what the last term takes off the residual
     dof = N - L - X.shape[1]
     with np.errstate(divide="ignore", invalid="ignore"):
         F = gain / (np.maximum(rss1, 0.0) / dof)
     p_values = scipy.special.fdtrc(1, dof, F)
-    return np.nan_to_num(p_values, nan=1.0) < OFFSET_LEVEL
+    return (np.nan_to_num(p_values, nan=1.0) < OFFSET_LEVEL) & ~exact
 
 
 def warn_offsets(data: IOData) -> None:
