@@ -810,7 +810,13 @@ def ct_subspace(data, order=None, *, basis=None, poly_order: int = 3, estimate_x
                 break
             except (ModelError, DataError) as exc:
                 conversion_notes.append(f"order {n}, {chosen}: {exc}")
-        record["selected"] = entries[(n, chosen)]
+        if model is None and chosen != "subspace" and subspace:
+            # every discrete-time start ranked failed to convert (an N4SID model at the
+            # horizon a barely exciting input allows, with a pole on the negative real
+            # axis): the subspace start, which the ranking did not reach
+            n, chosen = ranking[-1][0], "subspace"
+            problem = replace(whole, order=n, candidates=[n])
+        record["selected"] = entries.get((n, chosen), record.get("selected"))
         if fixed is None:
             order_selection = record
         else:
