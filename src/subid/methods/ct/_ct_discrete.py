@@ -314,6 +314,15 @@ def merged_selection(ct_record, dt_scores: dict, n_samples: int, n_inputs: int,
                     reference=names[best_dt], reference_order=best_dt[0])
         if not test["significant"]:            # the reference first, then the rest
             keys = [best_dt] + [k for k in keys if k != best_dt]
+    elif not reference and best_ct is not None and best_dt is not None \
+            and keys[0] == best_dt:
+        # the order given (no order choice to guard): the basis-filter estimate stays
+        # first unless the converted N4SID model is significantly better on the folds
+        test = dict(paired_test(folds[best_dt], folds[best_ct]),
+                    alternative=names[best_dt], alternative_order=best_dt[0],
+                    reference=names[best_ct], reference_order=best_ct[0])
+        if not test["significant"]:
+            keys = [best_ct] + [k for k in keys if k != best_ct]
 
     def entry(k):
         return {"order": k[0], "horizon": k[1], "score": float(np.mean(folds[k])),
