@@ -527,3 +527,25 @@ def test_an_automatic_direct_term_is_fitted_as_a_given_one():
         np.testing.assert_allclose(auto.freqresp(w), given.freqresp(w), rtol=0,
                                    atol=1e-9 * np.abs(G).max())
     assert np.abs(auto.freqresp(w) - G).max() < 1e-3 * np.abs(G).max()
+
+
+@pytest.mark.parametrize("jitter", [False, True])
+def test_a_record_too_short_for_the_folds_is_identified_from_the_whole(jitter):
+    # 20 samples of a first-order plant: the folds (10 samples) are too short for the
+    # basis, and the default call raised "10 samples are too few" although the whole
+    # record identifies the plant exactly (selection='gap' did); now the whole record's
+    # singular values decide and the fold comparisons keep their first build
+    import subid
+    true = StateSpace([[-1.0]], [[2.0]], [[1.0]], [[0.0]], 0)
+    t = np.arange(20) * 0.1
+    if jitter:
+        t = t + np.random.default_rng(1).uniform(-0.03, 0.03, 20)
+    u = np.random.default_rng(1).standard_normal(20)
+    data = IOData(u, true.simulate(u, t=t, hold="foh"), t=t)
+    w = np.logspace(-1, 1, 20)
+    for order in (None, 1):
+        model = subid.ct_subspace(data, order)
+        assert model.order == 1
+        assert np.abs(model.freqresp(w) - true.freqresp(w)).max() < 1e-8
+    assert "too short for the cross-validation folds" in \
+        subid.ct_subspace(data).info["order_selection"]["reason"]

@@ -4,6 +4,7 @@ fitter (:class:`_Folds`) and the comparison (:func:`_second_wins`)."""
 
 from __future__ import annotations
 
+from subid.errors import TooFewSamplesError
 from subid.methods.ct import _ct_discrete
 from subid.methods.dt.selection import cross_validate
 
@@ -30,13 +31,19 @@ class _Folds:
 
 def _second_wins(data, order, n_functions, prepare_fold, first, second, test=False):
     """Whether the cross-validation at ``order`` prefers the build ``second`` to ``first``
-    (``(name, build)`` pairs; ties go to ``first``), and its record; with ``test``,
+    (``(name, build)`` pairs; ties go to ``first``; None when the record is too short
+    for the folds), and its record; with ``test``,
     ``second`` must also score significantly better on the folds
     (:func:`subid.methods.ct._ct_discrete.paired_test`)."""
     builds = dict([first, second])
-    _, _, variant, record = cross_validate(data, order, None, n_functions,
-                                           fitter=_Folds(prepare_fold, builds),
-                                           estimators=list(builds))
+    try:
+        _, _, variant, record = cross_validate(data, order, None, n_functions,
+                                               fitter=_Folds(prepare_fold, builds),
+                                               estimators=list(builds))
+    except TooFewSamplesError as exc:          # folds too short for the basis: no choice
+        return None, {"rule": "skipped", "description": (
+            f"not cross-validated: the record ({data.n_samples} samples) is too short for "
+            f"the cross-validation folds ({exc}); the choice without folds")}
     folds = {c.get("system_matrices"): c["folds"] for c in record["candidates"]}
     wins = variant == second[0]
     if test:

@@ -99,6 +99,7 @@ from subid.errors import (
     OptionError,
     OrderError,
     SubidError,
+    TooFewSamplesError,
 )
 from subid.methods._common import choose_order
 from subid.methods._info import model_info, records_warnings
@@ -778,7 +779,7 @@ def ct_subspace(data, order=None, *, basis=None, poly_order: int = 3, estimate_x
         dt_scores = _ct_discrete.fold_scores(dm)
         if dm is not None and not dt_scores:         # n4sid ran no cross-validation
             dt_scores = None
-    order_selection = start_selection = None
+    order_selection = start_selection = folds_too_short = None
     conversion_notes = []
     if cv and (fixed is None or discrete):
         builds = {}
@@ -791,9 +792,20 @@ def ct_subspace(data, order=None, *, basis=None, poly_order: int = 3, estimate_x
             dt_scores = {}
         ct_record = None
         if builds:
-            ct_record = cross_validate(cv_data, fixed, None if fixed else candidates, N,
-                                       fitter=_Folds(prepare_fold, builds),
-                                       estimators=list(builds))[3]
+            try:
+                ct_record = cross_validate(cv_data, fixed, None if fixed else candidates, N,
+                                           fitter=_Folds(prepare_fold, builds),
+                                           estimators=list(builds))[3]
+            except TooFewSamplesError as exc:
+                # folds too short for the basis (a record of 20 samples: folds of 10),
+                # the whole record is not: its singular values decide, as selection='gap'
+                # (the discrete-time methods do the same)
+                folds_too_short = (f"the record ({data.n_samples} samples) is too short "
+                                   f"for the cross-validation folds ({exc}); the largest "
+                                   "gap of the whole record's singular values decides "
+                                   "instead")
+                cv = False
+    if cv and (fixed is None or discrete):
         ranking, record, entries = _ct_discrete.merged_selection(
             ct_record, dt_scores, (ct_record or {}).get("samples_used", cv_data.n_samples),
             m, p, reference=fixed is None)
@@ -831,6 +843,8 @@ def ct_subspace(data, order=None, *, basis=None, poly_order: int = 3, estimate_x
         chosen = start if start != "auto" else "auto" if both else "subspace"
         problem = replace(problem, order=n, candidates=[n])
         model = None
+        if folds_too_short is not None and order_selection is not None:
+            order_selection = dict(order_selection, reason=folds_too_short)
     if model is not None and model.info.get("nyquist_modes"):
         warnings.warn(f"{method}: the chosen N4SID model (order {n}): "
                       f"{model.info['nyquist_modes']}", ConversionWarning, stacklevel=3)
@@ -864,6 +878,7 @@ def ct_subspace(data, order=None, *, basis=None, poly_order: int = 3, estimate_x
                 cv_data, n, N, prepare_fold, ("D = 0", partial(_build, feedthrough=False,
                                                                start=chosen)),
                 ("D estimated", estimated_d))
+            use_d = bool(use_d)                       # None (folds too short): D = 0
             if use_d and corrections(True) != problem.n_corr:
                 # the correction regressors a direct term needs, as feedthrough=True
                 # prepares them: without them the D chosen here came with the D = 0
@@ -901,6 +916,8 @@ def ct_subspace(data, order=None, *, basis=None, poly_order: int = 3, estimate_x
             ("as estimated", partial(_build, feedthrough=use_d, start=chosen, refit=refit)),
             ("refined", partial(_build_refined, feedthrough=use_d, start=chosen,
                                 refit=refit)))
+        if do_refine is None:                         # folds too short: as without them
+            do_refine = model.info["start"] == "subspace"
     else:
         do_refine = refine is True or (refine == "auto" and model.info["start"] == "subspace")
     if do_refine:
