@@ -173,10 +173,11 @@ def warn_trends(data: IOData) -> None:
     if unexplained is None or not np.any(unexplained & (share >= TREND_SHARE)):
         return
     j = int(np.argmax(np.where(unexplained, share, -1.0)))
-    per_sample = slope[j] * 2.0 / max(y.shape[0] - 1, 1) / max(data.dt, 1e-300) \
-        if data.dt > 0 else slope[j]
+    dt = data.dt or 0.0                   # uniform here (check_data)
+    per_sample = slope[j] * 2.0 / max(y.shape[0] - 1, 1)
+    per_time = per_sample / dt if dt > 0 else per_sample
     warnings.warn(f"output {data.output_names[j]} drifts: a straight-line trend "
-                  f"({per_sample:.4g} per time unit) takes {100 * share[j]:.0f} % of its "
+                  f"({per_time:.4g} per time unit) takes {100 * share[j]:.0f} % of its "
                   "variance, and the inputs do not explain it: the methods identify from "
                   "the samples as given, so the model needs an unstable or integrating mode "
                   "to follow it. Compare with it removed: data.detrend('linear') (on the "
