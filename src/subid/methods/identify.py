@@ -164,9 +164,6 @@ def _configuration(model) -> dict:
     return out
 
 
-#: Largest delay :func:`_dead_time` tries, in samples (MATLAB's ``delayest`` searches 20
-#: from its lowest delay), fewer where the record is short (ten samples a column).
-DEAD_TIME_SEARCH = 50
 #: Samples (the last ones of the last experiment) :func:`_dead_time` reads at most.
 DEAD_TIME_SAMPLES = 5_000
 #: The delayed candidates are tried only when an input's delay beyond one sample is at
@@ -188,14 +185,11 @@ def _dead_time(data):
     ``identify`` without it at 4-37 %, with it (``moesp(data, input_delay=30)``) at
     88-90 % (session 24's exploratory test). The delays found are a candidate that
     :func:`_discrete` cross-validates against none, not a decision."""
-    from subid.delay import estimate_delay
+    from subid.delay import delay_search_limit, estimate_delay
     part = data.experiments[-1]
     part = part[part.n_samples - DEAD_TIME_SAMPLES:] if part.n_samples > DEAD_TIME_SAMPLES \
         else part
-    # a regression of na = nb = 2 with every lag of every input up to the largest delay
-    # tried: at least ten samples per column
-    largest = min(DEAD_TIME_SEARCH,
-                  part.n_samples // (10 * part.n_inputs) - 2 * part.n_outputs - 2)
+    largest = delay_search_limit(part.n_samples, part.n_inputs, part.n_outputs)
     record = {"rule": "subid.estimate_delay (na = nb = 2) on the last "
                       f"{part.n_samples} samples, delays 0..{max(largest, 0)}: each input's "
                       f"delay beyond one sample, cross-validated against none when one is "
