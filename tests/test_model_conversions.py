@@ -323,3 +323,17 @@ def test_negative_eigenvalues_in_pairs_have_a_real_logarithm():
     odd = StateSpace(np.diag([-0.5, -0.5, -0.2]), np.ones((3, 1)), np.ones((1, 3)), 0, h)
     with pytest.raises(ModelError, match=r"-0\.5, -0\.5, -0\.2 on the negative real"):
         odd.to_continuous()
+
+
+def test_a_bilinear_discretisation_converts_back_by_default():
+    # to_discrete(dt, 'bilinear') left the model's hold at 'zoh', so to_continuous()
+    # inverted a zero-order hold instead: 7.4e-3 off; it now inverts the bilinear map
+    import subid
+    ct = subid.systems.seed000_system()
+    dt_model = ct.to_discrete(0.05, "bilinear")
+    assert dt_model.info["discretisation"] == "bilinear"
+    w = np.logspace(-2, 2, 50)
+    back = dt_model.to_continuous()
+    assert np.abs(back.freqresp(w) - ct.freqresp(w)).max() < 1e-10
+    # an explicit method still wins
+    assert not np.allclose(dt_model.to_continuous("zoh").A, back.A)

@@ -664,8 +664,11 @@ class StateSpace:
         Ad, Bd, Cd, Dd = _conversions.discretise(self._A, self._B, self._C, self._D, dt,
                                                  method)
         _conversions.drop_noise_model(self, "to_discrete")
+        info = _conversions.converted_info(self.info, "to_discrete", method)
+        if method not in HOLDS:     # to_continuous()'s default (the hold: 7e-3 off)
+            info["discretisation"] = method
         return self._like(Ad, Bd, Cd, Dd, dt, hold=method if method in HOLDS else None,
-                          info=_conversions.converted_info(self.info, "to_discrete", method))
+                          info=info)
 
     def to_continuous(self, method=None) -> "StateSpace":
         """Continuous-time model whose discretisation is this model.
@@ -678,7 +681,8 @@ class StateSpace:
         Parameters
         ----------
         method : {None, 'zoh', 'foh', 'bilinear'}
-            None (default): the model's :attr:`hold`.
+            None (default): ``'bilinear'`` for a model :meth:`to_discrete` made so
+            (``info['discretisation']``), else the model's :attr:`hold`.
 
         Returns
         -------
@@ -704,7 +708,7 @@ class StateSpace:
         """
         if self.is_continuous:
             raise ModelError("the model is already continuous-time (dt=0)")
-        method = _conversions._method(self._hold if method is None else method)
+        method = _conversions._method(method or self.info.get("discretisation") or self._hold)
         A, B, C, D, hold = _conversions.continuise(self._A, self._B, self._C, self._D,
                                                    self._dt, method)
         _conversions.drop_noise_model(self, "to_continuous")
