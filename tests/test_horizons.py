@@ -114,3 +114,20 @@ def test_the_chosen_horizon_is_one_the_input_excites(n_sines, horizon):
 def _no_check():
     import contextlib
     return contextlib.nullcontext()
+
+
+def test_a_step_test_is_identified_at_the_horizon_it_excites():
+    # a single step, noise-free: exciting of order 21 on 400 samples (rounding), the
+    # folds of order 1 or 2; the default calls raised NotExcitingError for horizon 20's
+    # 40 block rows, while n4sid(data, 2) gave the plant to 8e-15
+    plant = subid.StateSpace([[0.0, 1.0], [-3.0, -2.0]], [[0.0], [1.0]], [[3.0, 0.0]],
+                             [[0.0]], 0).to_discrete(0.05)
+    u = np.ones((400, 1))
+    u[:20] = 0.0
+    data = subid.IOData(u, plant.simulate(u), dt=0.05)
+    model = subid.identify(data)
+    assert model.order == 2
+    w = np.logspace(-1, 1, 20)
+    assert np.abs(model.freqresp(w) - plant.freqresp(w)).max() < 1e-8
+    moesp = subid.moesp(data)
+    assert moesp.info["order_selection"]["horizon_limited"]["horizon"] == 10

@@ -351,7 +351,18 @@ def run(method: SubspaceMethod, data, order, horizon, *, selection: str,
                 else:                     # the order given, the horizon now fixed: no folds
                     too_short = None
         if not plan.cross_validate:
-            problem = pipeline.prepare(data, plan.orders, plan.horizon)
+            try:
+                problem = pipeline.prepare(data, plan.orders, plan.horizon)
+            except NotExcitingError as exc:
+                # the whole record's excitation (a fold's may have been lower): the
+                # horizon it supports, when none was given (a step: exciting of order 21)
+                if limited is not None or (again := excited_horizon(
+                        exc, plan, data.n_outputs)) is None:
+                    raise
+                limited = again
+                plan = replace(plan, horizon=limited["horizon"])
+                pipeline = Pipeline(method, plan)
+                problem = pipeline.prepare(data, plan.orders, plan.horizon)
             if plan.estimator_choice == "fit":   # order and horizon given: no fold fits
                 estimator, model, rule = estimator_by_fit(data, problem, pipeline,
                                                           plan.estimators)
