@@ -181,10 +181,10 @@ def _dead_time(data):
     proper response, or None where no input has one; ``record`` says what was looked for.
 
     Tried only where one is at least :data:`DEAD_TIME_MIN`. A dead time as long as the
-    subspace horizon leaves the default models nothing to see: a SISO plant with 20-40 samples of dead time, 1000 samples, fitted by
-    ``identify`` without it at 4-37 %, with it (``moesp(data, input_delay=30)``) at
-    88-90 % (session 24's exploratory test). The delays found are a candidate that
-    :func:`_discrete` cross-validates against none, not a decision."""
+    subspace horizon leaves the default models nothing to see: SISO plants behind 20-40
+    samples of dead time (1000 samples) were fitted by ``identify`` without it at
+    2.9-37 %, with it at 87-90.5 % (session 24's exploratory test). The delays found are
+    a candidate that :func:`_discrete` cross-validates against none, not a decision."""
     from subid.delay import delay_search_limit, estimate_delay
     part = data.experiments[-1]
     part = part[part.n_samples - DEAD_TIME_SAMPLES:] if part.n_samples > DEAD_TIME_SAMPLES \
