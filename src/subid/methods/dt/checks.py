@@ -14,8 +14,11 @@ from subid.data import IOData, column_std, column_sums, not_a_record
 from subid.errors import DataError, NotExcitingError, OffsetWarning
 
 
-def check_data(data, method: str) -> IOData:
-    """The record a discrete-time method may use, or a clear error."""
+def check_data(data, method: str, *, warn: bool = True) -> IOData:
+    """The record a discrete-time method may use, or a clear error; ``warn``: also the
+    warnings about its operating point and drift (:func:`warn_offsets`,
+    :func:`warn_trends`), which a cross-validation fold, whose warnings are not shown,
+    skips (they cost 2.3 ms a fold at 10^5 samples)."""
     if not isinstance(data, IOData):
         raise not_a_record(data, method)
     if not data.is_uniform:
@@ -26,8 +29,9 @@ def check_data(data, method: str) -> IOData:
                         "sampling period: subid.IOData(u, y, dt=...))")
     check_channels(data)
     check_offsets(data.u, data.input_names, method)
-    warn_offsets(data)
-    warn_trends(data)
+    if warn:
+        warn_offsets(data)
+        warn_trends(data)
     return data
 
 

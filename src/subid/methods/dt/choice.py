@@ -67,7 +67,9 @@ def choose(data, plan, fitter):
 
     def final(order, horizon, name):
         """``(problem, estimator, model, rule)`` of the whole record at a candidate."""
-        problem = fitter.prepare(data, order, horizon, factor=shared.factors.get(horizon))
+        # (the record was checked by the caller, pipeline.run, before the folds)
+        problem = fitter.prepare(data, order, horizon, factor=shared.factors.get(horizon),
+                                 checked=True)
         shared.seed(problem)
         if plan.estimator_choice == "fit":
             return (problem,) + estimator_by_fit(data, problem, fitter, estimators,
@@ -237,7 +239,7 @@ def innovation_check(data, record, fitter, chosen, *, shared=None):
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            problem = fitter.prepare(used, orders, f)
+            problem = fitter.prepare(used, orders, f, checked=True)   # run() checked it
             mine_too = shared is not None and used is data and hasattr(problem, "stored")
             if mine_too:                  # the final model's, at f
                 shared.factors[f] = problem.stored(RECORD_FACTOR)

@@ -206,8 +206,9 @@ class Pipeline:
         weights = next((w for r, w in self.checked_folds if r is record), None)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            problem = self.prepare(record, orders, horizon, factor=factor,
-                                   checked=weights is not None)
+            if weights is None:           # the checks that raise; no warnings to show
+                check_data(record, self.plan.method, warn=False)
+            problem = self.prepare(record, orders, horizon, factor=factor, checked=True)
         if weights is None:
             self.checked_folds.append((record, problem.weights()))
         else:
