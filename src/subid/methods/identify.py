@@ -173,14 +173,6 @@ DEAD_TIME_SAMPLES = 5_000
 #: glassfurnace and steamgen: tried, they changed one fit by 0.1 point (evaporator) and
 #: made identify 1.6-2.6x dearer there.
 DEAD_TIME_MIN = 5
-#: ... and only when the ARX loss with the delay (:func:`subid.estimate_delay`'s, na = nb =
-#: 2) is below this fraction of the loss without it (``nk = 1``): a dead time leaves the
-#: undelayed regression nothing to explain. Measured loss ratios (without / with): real
-#: dead times of 3-40 samples 5.8-14.1, DaISy dryer's 5.2; the spurious delays the
-#: low-order ARX finds in lightly damped structures of 10-30 states (6, 13, 14 samples)
-#: and on the other DaISy records 1.00-1.08. Without it a 30-state structure ran every
-#: candidate twice (identify 12.7 -> 28 s at 4,200 samples) for nothing.
-DEAD_TIME_LOSS = 0.5
 
 
 def _dead_time(data):
@@ -188,12 +180,15 @@ def _dead_time(data):
     the candidate delays, MATLAB's ``delayest``) finds beyond the one sample of a strictly
     proper response, or None where no input has one; ``record`` says what was looked for.
 
-    Tried only where one is at least :data:`DEAD_TIME_MIN`. A dead time as long as the
+    Tried only where one is at least :data:`DEAD_TIME_MIN` and its ARX loss at most
+    :data:`subid.delay.DELAY_LOSS_SHARE` of the undelayed one's (without that check a
+    30-state structure ran every candidate twice for a spurious delay: 12.7 -> 28 s at
+    4,200 samples). A dead time as long as the
     subspace horizon leaves the default models nothing to see: SISO plants behind 20-40
     samples of dead time (1000 samples) were fitted by ``identify`` without it at
     2.9-37 %, with it at 87-90.5 % (session 24's exploratory test). The delays found are
     a candidate that :func:`_discrete` cross-validates against none, not a decision."""
-    from subid.delay import delay_search_limit, estimate_delay
+    from subid.delay import DELAY_LOSS_SHARE, delay_search_limit, estimate_delay
     part = data.experiments[-1]
     part = part[part.n_samples - DEAD_TIME_SAMPLES:] if part.n_samples > DEAD_TIME_SAMPLES \
         else part
@@ -201,7 +196,7 @@ def _dead_time(data):
     record = {"rule": "subid.estimate_delay (na = nb = 2) on the last "
                       f"{part.n_samples} samples, delays 0..{max(largest, 0)}: each input's "
                       f"delay beyond one sample where its ARX loss is at most "
-                      f"{DEAD_TIME_LOSS:g} of the undelayed one's, cross-validated against "
+                      f"{DELAY_LOSS_SHARE:g} of the undelayed one's, cross-validated against "
                       f"none when one is at least {DEAD_TIME_MIN}",
               "searched": max(largest, 0)}
     if largest < 2:
@@ -214,7 +209,7 @@ def _dead_time(data):
     # the loss with each input's delay over the loss without one (nk = 1)
     share = np.array([loss[j, nk[j]] / loss[j, 1] if nk[j] >= 2 and loss[j, 1] > 0 else 1.0
                       for j in range(nk.size)])
-    extra = np.where(share <= DEAD_TIME_LOSS, np.maximum(nk - 1, 0), 0)
+    extra = np.where(share <= DELAY_LOSS_SHARE, np.maximum(nk - 1, 0), 0)
     record.update(found=[int(d) for d in np.maximum(nk - 1, 0)],
                   loss_share=[float(x) for x in share],
                   kept=[int(d) for d in extra])
