@@ -38,9 +38,9 @@ from subid.errors import (
     TooFewSamplesError,
 )
 
-__all__ = ["estimate_delay", "delay_search_limit", "DELAY_LOSS_SHARE", "delay_inputs",
-           "apply_to_inputs",
-           "frequency_factor", "absorb_delay", "input_delay_of"]
+__all__ = ["estimate_delay", "delay_search_limit", "wide_delay_search", "DELAY_LOSS_SHARE",
+           "delay_inputs", "apply_to_inputs", "frequency_factor", "absorb_delay",
+           "input_delay_of"]
 
 INFO_KEY = "input_delay"
 #: Past this many bytes of regression rows, :func:`estimate_delay` folds them into its
@@ -103,6 +103,39 @@ def delay_search_limit(n_samples: int, n_inputs: int, n_outputs: int) -> int:
     ``nk = 28`` on an oversampled plant (relative degree 2 at 1 kHz, true 1-2), and
     ``oe``'s default then validated at 78.9 % against 95 %+."""
     return min(DELAY_SEARCH, n_samples // (10 * n_inputs) - 2 * n_outputs - 2)
+
+
+#: Samples (the last ones of the last experiment) :func:`wide_delay_search` reads at most.
+WIDE_SEARCH_SAMPLES = 5_000
+
+
+def wide_delay_search(data) -> dict:
+    """The wide automatic delay search of :func:`subid.identify` (its dead time) and of the
+    polynomial defaults (their long delays): :func:`estimate_delay` up to
+    :func:`delay_search_limit` on the last :data:`WIDE_SEARCH_SAMPLES` samples of the
+    last experiment.
+
+    Returns ``{'samples', 'searched', 'nk', 'loss_share'}``: ``nk`` per input, and
+    ``loss_share`` the ARX loss at that ``nk`` over the loss at ``nk = 1`` (1 where ``nk
+    <= 1``); a delay is confirmed where its share is at most :data:`DELAY_LOSS_SHARE`.
+    When the record is too short to look, or the search fails, ``{'samples',
+    'searched', 'reason'}``."""
+    from subid.errors import SubidError
+    part = data.experiments[-1]
+    if part.n_samples > WIDE_SEARCH_SAMPLES:
+        part = part[part.n_samples - WIDE_SEARCH_SAMPLES:]
+    largest = delay_search_limit(part.n_samples, part.n_inputs, part.n_outputs)
+    out = {"samples": part.n_samples, "searched": max(largest, 0)}
+    if largest < 2:
+        return dict(out, reason="too few samples to look for a delay")
+    try:
+        nk, loss = estimate_delay(part, largest, return_loss=True)
+    except SubidError as exc:
+        return dict(out, reason=f"{type(exc).__name__}: {exc}")
+    nk = np.asarray(nk, dtype=int)
+    share = np.array([loss[j, nk[j]] / loss[j, 1] if nk[j] >= 2 and loss[j, 1] > 0 else 1.0
+                      for j in range(nk.size)])
+    return dict(out, nk=nk, loss_share=share)
 
 
 @serial_blas

@@ -164,8 +164,6 @@ def _configuration(model) -> dict:
     return out
 
 
-#: Samples (the last ones of the last experiment) :func:`_dead_time` reads at most.
-DEAD_TIME_SAMPLES = 5_000
 #: The delayed candidates are tried only when an input's delay beyond one sample is at
 #: least this: a shorter one costs the subspace model a few states, which its order
 #: search finds, while the delayed candidates double the search's cost. On the DaISy
@@ -188,27 +186,17 @@ def _dead_time(data):
     samples of dead time (1000 samples) were fitted by ``identify`` without it at
     2.9-37 %, with it at 87-90.5 % (session 24's exploratory test). The delays found are
     a candidate that :func:`_discrete` cross-validates against none, not a decision."""
-    from subid.delay import DELAY_LOSS_SHARE, delay_search_limit, estimate_delay
-    part = data.experiments[-1]
-    part = part[part.n_samples - DEAD_TIME_SAMPLES:] if part.n_samples > DEAD_TIME_SAMPLES \
-        else part
-    largest = delay_search_limit(part.n_samples, part.n_inputs, part.n_outputs)
+    from subid.delay import DELAY_LOSS_SHARE, wide_delay_search
+    search = wide_delay_search(data)
     record = {"rule": "subid.estimate_delay (na = nb = 2) on the last "
-                      f"{part.n_samples} samples, delays 0..{max(largest, 0)}: each input's "
-                      f"delay beyond one sample where its ARX loss is at most "
+                      f"{search['samples']} samples, delays 0..{search['searched']}: each "
+                      f"input's delay beyond one sample where its ARX loss is at most "
                       f"{DELAY_LOSS_SHARE:g} of the undelayed one's, cross-validated against "
                       f"none when one is at least {DEAD_TIME_MIN}",
-              "searched": max(largest, 0)}
-    if largest < 2:
-        return None, dict(record, found=None, reason="too few samples to look for a delay")
-    try:
-        nk, loss = estimate_delay(part, largest, return_loss=True)
-    except SubidError as exc:
-        return None, dict(record, found=None, reason=f"{type(exc).__name__}: {exc}")
-    nk = np.asarray(nk, dtype=int)
-    # the loss with each input's delay over the loss without one (nk = 1)
-    share = np.array([loss[j, nk[j]] / loss[j, 1] if nk[j] >= 2 and loss[j, 1] > 0 else 1.0
-                      for j in range(nk.size)])
+              "searched": search["searched"]}
+    if "nk" not in search:
+        return None, dict(record, found=None, reason=search["reason"])
+    nk, share = search["nk"], search["loss_share"]
     extra = np.where(share <= DELAY_LOSS_SHARE, np.maximum(nk - 1, 0), 0)
     record.update(found=[int(d) for d in np.maximum(nk - 1, 0)],
                   loss_share=[float(x) for x in share],

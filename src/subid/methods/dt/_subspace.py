@@ -320,7 +320,8 @@ def stable_choice(A_q, Q, n_outputs: int, fit, *, stability: str, data, method: 
       57.9 % unstable, 96.7 % reflected, 7.0 % regularised), because the
       regularisation moves every pole and parks the unstable ones at the
       unit circle, where they drift.
-    * ``'auto'``: both are fitted; the unstable A is kept only when it explains the estimation data clearly better (its
+    * ``'auto'``: both are fitted; the unstable A is kept only when it explains
+      the estimation data clearly better (its
       residual RMS below :data:`KEEP_UNSTABLE_RATIO` times the stable one's):
       an unstable plant in closed loop (e.g. a ball on a beam) keeps its
       unstable model, while a spurious unstable mode, which the data do not
@@ -368,13 +369,12 @@ def stable_choice(A_q, Q, n_outputs: int, fit, *, stability: str, data, method: 
                   spectral_radius_after=spectral_radius(A_s))
     record["how"] += "; B, D, x0 refitted for the stable A"
     if stability == "auto":
-        ratio = KEEP_UNSTABLE_RATIO
         r_s = _simulation_rms(fitted_s[3], stable=True)
         if bound_unstable:
             if r_s is None or math.isnan(r_s):        # the unstable model cannot win
                 record.update(residual_stable=r_s)
                 return A_s, fitted_s, record
-            fitted_u = fit(A_q, worse_than=ratio * r_s)
+            fitted_u = fit(A_q, worse_than=KEEP_UNSTABLE_RATIO * r_s)
             if fitted_u[3].get(INFO_KEY) == "bound":
                 record.update(residual_unstable_at_least=fitted_u[3]["residual_at_least"],
                               residual_stable=r_s)
@@ -384,7 +384,7 @@ def stable_choice(A_q, Q, n_outputs: int, fit, *, stability: str, data, method: 
         r_u = _simulation_rms(fitted_u[3], stable=False)
         record.update(residual_unstable=r_u, residual_stable=r_s)
         if r_u is not None and r_s is not None and math.isfinite(r_u) \
-                and r_u < ratio * r_s:
+                and r_u < KEEP_UNSTABLE_RATIO * r_s:
             record.update(action="kept unstable",
                           how=f"the unstable model fits the estimation data clearly better "
                               f"(residual RMS {r_u:.3g} against {r_s:.3g} when stabilised)")

@@ -156,9 +156,8 @@ TREND_SAMPLES = 20_000
 def warn_trends(data: IOData) -> None:
     """An :class:`subid.errors.OffsetWarning` when an output's straight-line trend takes
     at least :data:`TREND_SHARE` of its variance (over the last :data:`TREND_SAMPLES`
-    samples of the last experiment; naming the largest) and
-    the inputs do not
-    explain it (:func:`_unexplained_offset` with the trend). A drift the methods take as
+    samples of the last experiment; naming the largest) and the inputs do not explain it
+    (:func:`_unexplained_offset` with the trend). A drift the methods take as
     given must be a state: an unstable or integrating mode. Measured (session 24's
     exploratory test): a SISO order-3 record (20 dB, 1500 samples) with a sensor drift of
     0.01 per sample (trend share 0.66): ``identify`` validated at 52.3 and 63.5 % with

@@ -344,7 +344,7 @@ def run(method: SubspaceMethod, data, order, horizon, *, selection: str,
                              f"poorly excited for the cross-validation folds ({exc}); the "
                              "largest gap of the whole record's singular values decides "
                              "instead")
-                if not (limited is not None and plan.order is not None):
+                if limited is None or plan.order is None:
                     plan = replace(plan, selection="gap", cross_validate=False,
                                    estimator_choice="fit" if len(plan.estimators) > 1
                                    else None)

@@ -575,38 +575,25 @@ def _sparse_fit_score(A, B, C, D, held) -> float:
     return max(value, FLOOR) if np.isfinite(value) else FLOOR
 
 
-#: Samples (the last ones of the last experiment) the wide delay search of :func:`_delays`
-#: reads at most.
-WIDE_DELAY_SAMPLES = 5_000
-
-
 def _delays(data) -> np.ndarray | None:
     """``nk`` per input by :func:`subid.estimate_delay` (None when the record is too short):
-    up to 10 samples, and beyond where a wide search (up to
-    :func:`subid.delay.delay_search_limit`, on the last :data:`WIDE_DELAY_SAMPLES`
-    samples) finds a delay whose ARX loss is at most
+    up to 10 samples, and beyond where the wide search
+    (:func:`subid.delay.wide_delay_search`) finds a delay whose ARX loss is at most
     :data:`subid.delay.DELAY_LOSS_SHARE` of the undelayed one's. Behind 20 samples of
     dead time (1000 samples) the narrow search alone gave ``arx``'s default 3.0 % and
     ``oe``'s 81.7 % of validation fit; 90.1 and 90.3 % with the wide one."""
-    from subid.delay import DELAY_LOSS_SHARE, delay_search_limit, estimate_delay
+    from subid.delay import DELAY_LOSS_SHARE, estimate_delay, wide_delay_search
     ny, nu = data.n_outputs, data.n_inputs
     max_delay = int(min(10, max(data.n_samples // (20 * (nu + ny + 1)) - 3, 0)))
     try:
         nk = np.asarray(estimate_delay(data, max_delay=max_delay), np.int64)
     except SubidError:
         return None
-    last = data.experiments[-1]
-    tail = last[last.n_samples - WIDE_DELAY_SAMPLES:] \
-        if last.n_samples > WIDE_DELAY_SAMPLES else last
-    wide = delay_search_limit(tail.n_samples, nu, ny)
-    if wide > max_delay:
-        try:
-            far, loss = estimate_delay(tail, max_delay=wide, return_loss=True)
-        except SubidError:
-            return nk
-        for j in range(nu):
-            if far[j] > max_delay and loss[j, far[j]] <= DELAY_LOSS_SHARE * loss[j, 1]:
-                nk[j] = far[j]
+    search = wide_delay_search(data)
+    if "nk" in search:
+        far, share = search["nk"], search["loss_share"]
+        confirmed = (far > max_delay) & (share <= DELAY_LOSS_SHARE)
+        nk[confirmed] = far[confirmed]
     return nk
 
 
