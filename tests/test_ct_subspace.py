@@ -471,8 +471,10 @@ def test_jittered_mimo_fast_kernels_give_the_reference_model(hold, monkeypatch):
     assert max_relative_error(fast, system) < 1e-5          # the estimator on 800 samples
 
 
-@pytest.mark.parametrize("length, jitter, seed", [(1000, 0.1, 0), (1000, 0.1, 5),
-                                                  (400, 0.4, 0)])
+@pytest.mark.parametrize("length, jitter, seed", [
+    pytest.param(1000, 0.1, 0, marks=pytest.mark.long),     # 5-6 s each: the long tier
+    pytest.param(1000, 0.1, 5, marks=pytest.mark.long),
+    (400, 0.4, 0)])
 def test_noise_free_non_uniform_data_of_a_stable_plant_give_a_stable_model(length, jitter,
                                                                             seed):
     # the seed-002 plant from rest: its output grows over the record, and growing data
